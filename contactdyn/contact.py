@@ -1,0 +1,151 @@
+"""A contact interface: a robot frame meeting an environment point, one model per direction.
+
+Along the normal a :class:`~contactdyn.chain.Chain` (rigid when empty); along the
+tangential directions nothing (``free``), Coulomb friction, or a chain per direction that
+bonds at touch (case 1's horizontal deformations). A contact's *mode* says whether it
+touches and, with friction, whether it sticks or in which direction it slides; the
+mode only changes at located events (see :mod:`contactdyn.simulate`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .chain import Chain, NodeKind, build_chain
+from .scene import ContactSpec
+
+__all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics"]
+
+
+@dataclass(frozen=True)
+class ContactMode:
+    """What a contact is doing during a smooth phase."""
+
+    touching: bool = False
+    stuck: bool = False
+    #: sliding direction in tangent coordinates, fixed for the phase (1-D: ±1);
+    #: 2-D sliding uses the state's own slip direction, this is only its reference.
+    slip: tuple[float, ...] = ()
+    #: anchor offsets of the tangential chains [m], captured at touch
+    offsets: tuple[float, ...] = ()
+
+    def with_(self, **changes) -> ContactMode:
+        return replace(self, **changes)
+
+
+@dataclass
+class Kinematics:
+    """Tip and environment point kinematics of one contact at one state (world frame)."""
+
+    p_tip: np.ndarray  #: [m]
+    v_tip: np.ndarray  #: [m/s]
+    J: np.ndarray  #: (3, nv)
+    drift: np.ndarray  #: J̇q̇ [m/s²]
+    p_env: np.ndarray  #: [m]
+    v_env: np.ndarray  #: [m/s]
+
+
+@dataclass
+class ChainPlan:
+    """How to evaluate one chain in one touching state (compiled once per state)."""
+
+    solid: list[int]
+    aliases: list[tuple[int, int]]  #: (free node, node it follows)
+    junctions: list[tuple[int, list[int], int]]  #: (node, active neighbour stages, state index or -1)
+    free_ends: list[tuple[int, int]]  #: (free node, node it rests on)
+    active: list[int]  #: stages carrying force
+    bond: bool
+    interface_stage: int  #: stage whose force is the interface force (-1: bond or none)
+
+
+def _plan(chain: Chain, touching: bool, junction_state: int) -> ChainPlan:
+    nodes, stages = chain.nodes, chain.stages
+    solid = [i for i, n in enumerate(nodes) if n.kind != NodeKind.FREE]
+    aliases: list[tuple[int, int]] = []
+    junction_nodes: list[int] = []
+    es, rs = chain.env_surface, chain.robot_surface
+    if touching:
+        e_free, r_free = nodes[es].kind == NodeKind.FREE, nodes[rs].kind == NodeKind.FREE
+        if e_free and not r_free:
+            aliases.append((es, rs))
+        elif r_free and not e_free:
+            aliases.append((rs, es))
+        elif e_free and r_free:
+            junction_nodes.append(es)
+            aliases.append((rs, es))
+    aliased = {a for a, _ in aliases}
+    interior = [i for i, n in enumerate(nodes)
+                if n.kind == NodeKind.FREE and len(chain.stages_of(i)) == 2 and i not in aliased]
+    junction_nodes += [i for i in interior if i not in junction_nodes]
+    # a node is "loaded" when its position is determined by something other than its stage
+    loaded = set(solid) | aliased | set(junction_nodes)
+    free_ends = []
+    for i, n in enumerate(nodes):
+        if n.kind == NodeKind.FREE and i not in loaded:
+            (s,) = chain.stages_of(i)
+            other = stages[s].lower if stages[s].upper == i else stages[s].upper
+            free_ends.append((i, other))
+    free_set = {i for i, _ in free_ends}
+    active = [k for k, s in enumerate(stages) if s.lower not in free_set and s.upper not in free_set]
+    junctions = [(j, [k for k in chain.stages_of(j) if k in active], junction_state if j in (es, rs) else nodes[j].state)
+                 for j in junction_nodes]
+    bond = touching and chain.bonded_when_touching
+    interface_stage = -1
+    if touching and not bond:  # the stage that meets the other side carries the interface force
+        if nodes[es].kind == NodeKind.FREE:
+            interface_stage = next(k for k, s in enumerate(stages) if s.upper == es)
+        else:
+            interface_stage = next(k for k, s in enumerate(stages) if s.lower == rs)
+    return ChainPlan(solid, aliases, junctions, free_ends, active, bond, interface_stage)
+
+
+@dataclass
+class DirectionalChain:
+    """A chain placed along a world direction u of a contact."""
+
+    chain: Chain
+    u: np.ndarray
+    label: str  #: "n", "t1", "t2"
+    junction_state: int = -1  #: state slot of the interface junction (when touching), set by the system
+    plans: dict[bool, ChainPlan] = field(default_factory=dict)
+
+    def plan(self, touching: bool) -> ChainPlan:
+        if touching not in self.plans:
+            self.plans[touching] = _plan(self.chain, touching, self.junction_state)
+        return self.plans[touching]
+
+
+class Contact:
+    """Runtime of one contact interface; the system gives it coordinates and state slots."""
+
+    def __init__(self, spec: ContactSpec, fid: int, body_index: int, body_axis: np.ndarray):
+        self.spec = spec
+        self.name = spec.name
+        self.fid = fid
+        self.body_index = body_index  #: generalized coordinate of the body (-1: ground)
+        self.body_axis = body_axis  #: unit direction of the body's travel (zero for ground)
+        where = f"contact.{spec.name}"
+        self.normal = DirectionalChain(build_chain(spec.normal_chain, f"{where}.normal"), spec.normal, "n")
+        self.tangent_chains: list[DirectionalChain] = []
+        if spec.tangent_chain is not None:
+            for i, t in enumerate(spec.tangents):
+                self.tangent_chains.append(
+                    DirectionalChain(build_chain(spec.tangent_chain, f"{where}.tangent"), t, f"t{i + 1}")
+                )
+        self.friction = spec.friction
+        self.tangents = spec.tangents
+
+    @property
+    def chains(self) -> list[DirectionalChain]:
+        return [self.normal, *self.tangent_chains]
+
+    def initial_mode(self, kin: Kinematics) -> ContactMode:
+        """Touching at the start if bonded or if the normal gap is not positive."""
+        return ContactMode(touching=self.spec.bonded, offsets=tuple(0.0 for _ in self.tangent_chains))
+
+    # ---- kinematics helpers along a direction ---------------------------------------
+    def anchor_coef(self, u: np.ndarray) -> float:
+        """∂(u·p_env)/∂(body coordinate) [-]."""
+        return float(u @ self.body_axis)

@@ -1,0 +1,107 @@
+"""PD control in joint space or task space, with optional feedforward and force set-point.
+
+Task space: f = K_p P (x_d − x) + K_d P (ẋ_d − ẋ) − Σ F_d n, τ = Jᵀ f [+ feedforward],
+where P projects on the position-controlled axes and F_d n presses along each contact
+normal n with the force set-point F_d (benchmark B1's law). Joint space:
+τ = K_p (q_d − q) + K_d (q̇_d − q̇) [+ feedforward]. Feedforward: ``none``, ``gravity``
+(the uncompensated gravity load g(q)) or ``bias`` (h(q, q̇)).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import FEEDFORWARD, ControlInput, Controller, register
+
+__all__ = ["TaskPD", "JointPD"]
+
+
+def _gains(reader, name: str, default: float, unit: str) -> np.ndarray:
+    raw = reader.raw(name, default)
+    if isinstance(raw, list):
+        return reader.vector(name, unit=unit)
+    return np.array([reader.float(name, default, lo=0.0, unit=unit)])
+
+
+def _feedforward(inp: ControlInput, kind: str) -> np.ndarray | float:
+    if kind == "bias":
+        return inp.h
+    if kind == "gravity":
+        return inp.gravity
+    return 0.0
+
+
+@dataclass(frozen=True)
+class TaskPDConfig:
+    kp: np.ndarray  #: [N/m], scalar or one per axis
+    kd: np.ndarray  #: [N·s/m]
+    axes: np.ndarray  #: (k, 3) position-controlled directions (orthonormal)
+    feedforward: str
+    kind: str = "task_pd"
+
+
+@register
+class TaskPD(Controller):
+    name = "task_pd"
+
+    @staticmethod
+    def read(r) -> TaskPDConfig:
+        axes_raw = r.raw("axes", [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        if not isinstance(axes_raw, list) or not axes_raw:
+            raise r.error("axes", "a list of direction vectors", axes_raw)
+        axes = np.array([np.asarray(a, float) / np.linalg.norm(a) for a in axes_raw])
+        kp, kd = _gains(r, "kp", 2000.0, "N/m"), _gains(r, "kd", 100.0, "N·s/m")
+        for name, g in (("kp", kp), ("kd", kd)):
+            if len(g) not in (1, len(axes)):
+                raise r.error(name, f"one gain or one per axis ({len(axes)})", g.tolist())
+        return TaskPDConfig(kp, kd, axes, r.str("feedforward", "none", choices=FEEDFORWARD))
+
+    def __init__(self, config: TaskPDConfig, nv: int):
+        super().__init__(config, nv)
+        self.needs_gravity = config.feedforward == "gravity"
+        a = config.axes
+        self._kp = (a.T * np.broadcast_to(config.kp, len(a))) @ a  # Σ kp_i a_i a_iᵀ [N/m]
+        self._kd = (a.T * np.broadcast_to(config.kd, len(a))) @ a
+
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
+        f = np.zeros(3)
+        if inp.x_d is not None:
+            f += self._kp @ (inp.x_d - inp.p_tip) + self._kd @ (inp.v_d - inp.v_tip)
+        for contact, (F_d, _) in inp.force_d.items():
+            f -= F_d * inp.normals[contact]
+        return inp.J.T @ f + _feedforward(inp, self.config.feedforward), None
+
+
+@dataclass(frozen=True)
+class JointPDConfig:
+    kp: np.ndarray  #: [N·m/rad or N/m]
+    kd: np.ndarray  #: [N·m·s/rad or N·s/m]
+    feedforward: str
+    kind: str = "joint_pd"
+
+
+@register
+class JointPD(Controller):
+    name = "joint_pd"
+
+    @staticmethod
+    def read(r) -> JointPDConfig:
+        return JointPDConfig(_gains(r, "kp", 100.0, "N·m/rad"), _gains(r, "kd", 10.0, "N·m·s/rad"),
+                             r.str("feedforward", "none", choices=FEEDFORWARD))
+
+    def __init__(self, config: JointPDConfig, nv: int):
+        super().__init__(config, nv)
+        self.needs_gravity = config.feedforward == "gravity"
+        for name in ("kp", "kd"):
+            if len(getattr(config, name)) not in (1, nv):
+                from ..errors import SceneError
+
+                raise SceneError(f"controller.{name}", f"one gain or {nv} (one per joint)", getattr(config, name))
+
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
+        tau = np.zeros(self.nv)
+        if inp.x_d is not None:
+            tau += self.config.kp * (inp.x_d - inp.q) + self.config.kd * (inp.v_d - inp.v)
+        return tau + _feedforward(inp, self.config.feedforward), None

@@ -1,0 +1,30 @@
+"""The package's own exceptions: each message says what was expected and what was found."""
+
+from __future__ import annotations
+
+__all__ = ["ContactdynError", "RobotError", "SceneError", "SimulationError"]
+
+
+class ContactdynError(Exception):
+    """Base class of every error contactdyn raises on purpose."""
+
+
+class RobotError(ContactdynError):
+    """A robot description (URDF, example-robot-data name, frame, joint) is unusable."""
+
+
+class SceneError(ContactdynError):
+    """A scene file or override is invalid.
+
+    The message names the file, the key path (e.g. ``contact.tip.normal.k``), what was
+    expected and what was found.
+    """
+
+    def __init__(self, key: str, expected: str, found: object, file: str | None = None):
+        self.file, self.key, self.expected, self.found = file, key, expected, found
+        where = f"{file}: " if file else ""
+        super().__init__(f"{where}{key}: expected {expected}, found {found!r}")
+
+
+class SimulationError(ContactdynError):
+    """A run could not continue (solver failure, blow-up, event storm); says when and why."""

@@ -1,0 +1,482 @@
+"""Scenes: a TOML file validated into typed, frozen objects.
+
+A scene composes a robot, environment bodies (a fixed ground is always there; active
+1-DOF bodies such as a cart are named under ``[body.<name>]``), contact interfaces
+(``[contact.<name>]``), a controller with task phases (``[[phase]]``) and solver
+settings. Every value is checked; an error names the file, the key path, what was
+expected and what was found. Overrides by key path (``contact.tip.normal.k=1e4``) apply
+to the raw document before validation, from Python or the command line.
+"""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .config import Reader
+from .errors import SceneError
+from .trajectory import PROFILES, Move, Ramp
+
+__all__ = [
+    "Scene", "RobotSpec", "BodySpec", "ContactSpec", "ChainSpec", "Stage", "Mass", "FrictionSpec",
+    "PhaseSpec", "ReferenceSpec", "SolverSpec", "load_scene", "parse_scene", "apply_overrides",
+    "parse_override", "sims_dir", "find_scene",
+]
+
+NORMAL_MODELS = ("rigid", "a", "b", "c", "chain")
+TANGENT_MODELS = ("free", "friction", "chain")
+STAGE_LAWS = ("linear", "hunt_crossley")
+
+
+# ---- contact-zone elements -------------------------------------------------------------
+@dataclass(frozen=True)
+class Stage:
+    """A Kelvin–Voigt deformation stage: F = k x + b ẋ (linear) or k xⁿ + b xⁿ ẋ (Hunt–Crossley)."""
+
+    k: float  #: stiffness [N/m] (Hunt–Crossley: [N/mⁿ])
+    b: float  #: damping [N·s/m] (Hunt–Crossley: [N·s/mⁿ⁺¹])
+    law: str = "linear"
+    exponent: float = 1.5  #: n, Hunt–Crossley only
+
+
+@dataclass(frozen=True)
+class Mass:
+    """An equivalent mass of the contact zone [kg], moving along the chain's direction."""
+
+    m: float
+
+
+Element = Stage | Mass
+
+
+@dataclass(frozen=True)
+class ChainSpec:
+    """Deformation chain along one direction.
+
+    ``environment`` lists elements from the environment body out to the contact surface;
+    ``robot`` lists them from the robot's tip frame out to the contact surface. Both empty
+    is a rigid contact.
+    """
+
+    environment: tuple[Element, ...] = ()
+    robot: tuple[Element, ...] = ()
+
+    @property
+    def rigid(self) -> bool:
+        return not self.environment and not self.robot
+
+
+@dataclass(frozen=True)
+class FrictionSpec:
+    """Coulomb friction with optional viscous term: |F_f| ≤ μ_s F sticking, μ_k F + c|v| sliding."""
+
+    mu_s: float  #: static coefficient [-]
+    mu_k: float  #: kinetic coefficient [-]
+    viscous: float = 0.0  #: viscous coefficient c [N·s/m]
+
+
+@dataclass(frozen=True)
+class ContactSpec:
+    name: str
+    frame: str  #: robot frame whose origin touches
+    body: str  #: "ground" or the name of an active body
+    point: np.ndarray  #: [m] a point of the undeformed surface (world, body at coordinate 0)
+    normal: np.ndarray  #: unit outward surface normal (points from environment to robot)
+    tangents: np.ndarray  #: (k, 3) unit tangential directions, k = 0, 1 or 2
+    normal_chain: ChainSpec
+    tangent_model: str  #: "free", "friction" or "chain"
+    friction: FrictionSpec | None
+    tangent_chain: ChainSpec | None  #: chain used along each tangent (bonded at touch)
+    bonded: bool  #: never separates (e.g. benchmark B1)
+
+
+@dataclass(frozen=True)
+class BodySpec:
+    """An active 1-DOF environment body (a cart) translating along ``axis``."""
+
+    name: str
+    mass: float  #: [kg]
+    axis: np.ndarray  #: unit direction of travel (world)
+    position0: float  #: [m] initial coordinate
+    velocity0: float  #: [m/s] initial velocity
+    servo_velocity: float | None  #: ideal velocity servo set-point [m/s], None: no drive
+    servo_gain: float  #: [N·s/m]
+    drive: dict[str, Any] = field(default_factory=dict)  #: raw drive table (see drives)
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    source: str  #: URDF path, name in urdf/, or example-robot-data name
+    tip: str
+    active_joints: tuple[str, ...] | None
+    locked: dict[str, float]
+    gravity: np.ndarray  #: [m/s²]
+    gravity_compensation: float  #: fraction in [0, 1]
+    q0: np.ndarray | None  #: [rad or m]
+    v0: np.ndarray | None  #: [rad/s or m/s]
+    tip0: np.ndarray | None  #: [m] initial tip position, solved by inverse kinematics from q0/q_seed
+    q_seed: np.ndarray | None
+    drive: dict[str, Any] = field(default_factory=dict)  #: raw drive table (see drives)
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    space: str  #: "task" (tip position) or "joint"
+    start: np.ndarray | None  #: None: continue from the previous phase, or from the state
+    moves: tuple[Move, ...]
+
+
+@dataclass(frozen=True)
+class ForceSpec:
+    contact: str
+    ramp: Ramp
+
+
+@dataclass(frozen=True)
+class PhaseSpec:
+    name: str
+    until: float | str  #: end time [s] from the scene start, or "touch:<contact>"
+    controller: Any  #: a controller config (see contactdyn.controllers)
+    reference: ReferenceSpec | None
+    forces: tuple[ForceSpec, ...]
+
+
+@dataclass(frozen=True)
+class SolverSpec:
+    method: str = "DOP853"
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    max_step: float = math.inf  #: [s]
+    output_rate: float = 1000.0  #: [Hz] samples in the Result
+    record_energy: bool = False  #: integrate drive work and damper dissipation
+    max_events: int = 10000  #: guard against event storms (whole run)
+    storm_window: float = 1e-9  #: [s] events closer than this count towards a storm
+    storm_count: int = 50  #: that many events inside the window stop the run
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    description: str
+    duration: float  #: [s]
+    robot: RobotSpec
+    bodies: dict[str, BodySpec]
+    contacts: dict[str, ContactSpec]
+    phases: tuple[PhaseSpec, ...]
+    solver: SolverSpec
+    file: str | None
+    document: dict[str, Any]  #: the raw document after overrides (saved with results)
+
+
+# ---- locating scenes ---------------------------------------------------------------------
+def sims_dir() -> Path:
+    """The project's ``sims/`` folder, from a checkout or an installed wheel."""
+    packaged = Path(__file__).parent / "data" / "sims"
+    return packaged if packaged.is_dir() else Path(__file__).parent.parent / "sims"
+
+
+def find_scene(name: str | Path) -> Path:
+    """A scene path, or a scene name in ``sims/`` (with or without ``.toml``)."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    for candidate in (sims_dir() / f"{name}.toml", sims_dir() / str(name)):
+        if candidate.is_file():
+            return candidate
+    known = sorted(p.stem for p in sims_dir().glob("*.toml"))
+    close = difflib.get_close_matches(str(name), known, n=3)
+    hint = f"; did you mean {', '.join(close)}?" if close else ""
+    raise SceneError("scene", f"a scene file or one of {known}{hint}", str(name))
+
+
+# ---- overrides ---------------------------------------------------------------------------
+def parse_override(text: str) -> tuple[str, Any]:
+    """``key.path=value`` with the value read as TOML (``1e4``, ``true``, ``[1, 2]``) or a string."""
+    if "=" not in text:
+        raise SceneError("--set", "key.path=value", text)
+    key, value = (part.strip() for part in text.split("=", 1))
+    try:
+        parsed = tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError:
+        parsed = value
+    return key, parsed
+
+
+def apply_overrides(document: dict[str, Any], overrides: dict[str, Any], file: str | None = None) -> dict[str, Any]:
+    """A copy of ``document`` with each ``key.path`` set; array items as ``phase.1.until``."""
+    doc = copy.deepcopy(document)
+    for key, value in overrides.items():
+        parts = key.split(".")
+        node: Any = doc
+        for i, part in enumerate(parts[:-1]):
+            here = ".".join(parts[: i + 1])
+            if isinstance(node, list):
+                if not part.isdigit() or int(part) >= len(node):
+                    raise SceneError(here, f"an index < {len(node)}", part, file)
+                node = node[int(part)]
+            elif isinstance(node, dict):
+                node = node.setdefault(part, {})
+            else:
+                raise SceneError(here, "a table", node, file)
+        last = parts[-1]
+        if isinstance(node, list):
+            if not last.isdigit() or int(last) >= len(node):
+                raise SceneError(key, f"an index < {len(node)}", last, file)
+            node[int(last)] = value
+        elif isinstance(node, dict):
+            node[last] = value
+        else:
+            raise SceneError(key, "a table to set a key in", node, file)
+    return doc
+
+
+# ---- loading -----------------------------------------------------------------------------
+def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
+    """Read, override and validate a scene file (a path or a name in ``sims/``)."""
+    path = find_scene(path)
+    try:
+        document = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError("<file>", "valid TOML", str(exc), str(path)) from None
+    except OSError as exc:
+        raise SceneError("<file>", "a readable file", exc.strerror, str(path)) from None
+    return parse_scene(document, overrides, file=str(path))
+
+
+def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = None, file: str | None = None) -> Scene:
+    """Validate a scene document (a dict as TOML gives it)."""
+    document = apply_overrides(document, overrides or {}, file)
+    top = Reader(document, "", file)
+    name = top.str("name", Path(file).stem if file else "scene")
+    description = top.str("description", "")
+    duration = top.float("duration", lo=0.0, lo_open=True, unit="s")
+    robot = _read_robot(top.sub("robot"))
+    bodies = {n: _read_body(n, r) for n, r in top.named_tables("body").items()}
+    if "ground" in bodies:
+        raise top.error("body.ground", "a body name other than 'ground' (the fixed ground always exists)", "ground")
+    contacts = {n: _read_contact(n, r, bodies) for n, r in top.named_tables("contact").items()}
+    solver = _read_solver(top.sub("solver", {}))
+    default_controller = top.sub("controller", {})
+    phases = tuple(_read_phase(r, default_controller, contacts, duration) for r in top.tables("phase"))
+    if not phases:
+        phases = (_read_phase(Reader({"name": "main"}, "phase[0]", file), default_controller, contacts, duration),)
+    top.finish()
+    return Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document)
+
+
+def _read_robot(r: Reader) -> RobotSpec:
+    active = r.raw("active_joints", None)
+    if active is not None and (not isinstance(active, list) or not all(isinstance(a, str) for a in active)):
+        raise r.error("active_joints", "a list of joint names", active)
+    locked_r = r.sub("locked", {})
+    locked = {k: locked_r.float(k, unit="rad or m") for k in locked_r.data}
+    q0 = r.vector("q0", None) if r.has("q0") else None
+    spec = RobotSpec(
+        source=r.str("urdf"),
+        tip=r.str("tip", "tip"),
+        active_joints=tuple(active) if active is not None else None,
+        locked=locked,
+        gravity=r.vector("gravity", [0.0, 0.0, -9.81], size=3, unit="m/s²"),
+        gravity_compensation=r.float("gravity_compensation", 0.0, lo=0.0, hi=1.0),
+        q0=q0,
+        v0=r.vector("v0", None) if r.has("v0") else None,
+        tip0=r.vector("tip0", None, size=3, unit="m") if r.has("tip0") else None,
+        q_seed=r.vector("q_seed", None) if r.has("q_seed") else None,
+        drive=dict(r.raw("drive", {})),
+    )
+    r.finish()
+    return spec
+
+
+def _read_body(name: str, r: Reader) -> BodySpec:
+    servo = r.sub("servo", {})
+    spec = BodySpec(
+        name=name,
+        mass=r.float("mass", lo=0.0, lo_open=True, unit="kg"),
+        axis=r.vector("axis", [1.0, 0.0, 0.0], size=3, unit_norm=True),
+        position0=r.float("position0", 0.0, unit="m"),
+        velocity0=r.float("velocity0", 0.0, unit="m/s"),
+        servo_velocity=servo.float("velocity", None, unit="m/s") if servo.has("velocity") else None,
+        servo_gain=servo.float("gain", 1e3, lo=0.0, unit="N·s/m"),
+        drive=dict(r.raw("drive", {})),
+    )
+    servo.finish()
+    r.finish()
+    return spec
+
+
+def _read_elements(r: Reader, name: str) -> tuple[Element, ...]:
+    raw = r.raw(name, [])
+    if not isinstance(raw, list):
+        raise r.error(name, "a list of elements like {k = 1e4, b = 10} or {m = 10}", raw)
+    out: list[Element] = []
+    for i, item in enumerate(raw):
+        e = Reader(item, f"{r.key(name)}[{i}]", r.file)
+        if e.has("m"):
+            out.append(Mass(e.float("m", lo=0.0, lo_open=True, unit="kg")))
+        else:
+            out.append(_read_stage(e))
+        e.finish()
+    return tuple(out)
+
+
+def _read_stage(e: Reader, k: str = "k", b: str = "b") -> Stage:
+    law = e.str("law", "linear", choices=STAGE_LAWS)
+    return Stage(
+        k=e.float(k, lo=0.0, lo_open=True, unit="N/m"),
+        b=e.float(b, 0.0, lo=0.0, unit="N·s/m"),
+        law=law,
+        exponent=e.float("exponent", 1.5, lo=1.0, hi=3.0) if law == "hunt_crossley" else 1.5,
+    )
+
+
+def _read_chain(r: Reader) -> ChainSpec:
+    """A direction's model: rigid, Part I's (a), (b), (c), or an explicit chain."""
+    model = r.str("model", "chain" if (r.has("environment") or r.has("robot")) else "rigid", choices=NORMAL_MODELS)
+    if model == "rigid":
+        return ChainSpec()
+    if model == "c":  # massless Kelvin–Voigt
+        return ChainSpec(environment=(_read_stage(r),))
+    if model == "b":  # ground —[k, b]— m′, struck by the tip
+        return ChainSpec(environment=(_read_stage(r), Mass(r.float("m", lo=0.0, lo_open=True, unit="kg"))))
+    if model == "a":  # ground —[k″, b″]— m′ —[k′, b′]— tip
+        inner = _read_stage(r, "k_int", "b_int")
+        mass = Mass(r.float("m", lo=0.0, lo_open=True, unit="kg"))
+        return ChainSpec(environment=(inner, mass, _read_stage(r, "k_ext", "b_ext")))
+    chain = ChainSpec(_read_elements(r, "environment"), _read_elements(r, "robot"))
+    return chain
+
+
+def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec]) -> ContactSpec:
+    body = r.str("body", "ground", choices=["ground", *bodies])
+    normal_r = r.sub("normal")
+    normal = normal_r.vector("direction", size=3, unit_norm=True)
+    normal_chain = _read_chain(normal_r)
+    normal_r.finish()
+    tangent_r = r.sub("tangent", {})
+    model = tangent_r.str("model", "free", choices=TANGENT_MODELS)
+    if tangent_r.has("directions"):
+        raw = tangent_r.raw("directions")
+        if not isinstance(raw, list) or not 1 <= len(raw) <= 2:
+            raise tangent_r.error("directions", "a list of 1 or 2 direction vectors", raw)
+        tangents = np.array([Reader({"d": d}, tangent_r.key("directions"), r.file).vector("d", size=3, unit_norm=True)
+                             for d in raw])
+        if np.any(np.abs(tangents @ normal) > 1e-9) or (len(tangents) == 2 and abs(tangents[0] @ tangents[1]) > 1e-9):
+            raise tangent_r.error("directions", "directions orthogonal to the normal and to each other",
+                                  raw)
+    elif model != "free":
+        raise tangent_r.error("directions", "1 or 2 tangential directions (required with friction or chain)", None)
+    else:
+        tangents = np.zeros((0, 3))
+    friction = tangent_chain = None
+    if model == "friction":
+        mu_k = tangent_r.float("mu_k", None, lo=0.0) if tangent_r.has("mu_k") else None
+        mu = tangent_r.float("mu", None, lo=0.0) if tangent_r.has("mu") else None
+        mu_s = tangent_r.float("mu_s", None, lo=0.0) if tangent_r.has("mu_s") else None
+        if mu is None and mu_k is None:
+            raise tangent_r.error("mu", "a friction coefficient (mu, or mu_s and mu_k)", None)
+        mu_k = mu_k if mu_k is not None else mu
+        mu_s = mu_s if mu_s is not None else (mu if mu is not None else mu_k)
+        if mu_s < mu_k:
+            raise tangent_r.error("mu_s", f"a static coefficient >= mu_k = {mu_k}", mu_s)
+        friction = FrictionSpec(mu_s, mu_k, tangent_r.float("viscous", 0.0, lo=0.0, unit="N·s/m"))
+    elif model == "chain":
+        tangent_chain = _read_chain(tangent_r)
+        if tangent_chain.rigid:
+            raise tangent_r.error("environment", "a deformation chain (a rigid tangential bond is a stick)", [])
+    tangent_r.finish()
+    spec = ContactSpec(
+        name=name,
+        frame=r.str("frame", "tip"),
+        body=body,
+        point=r.vector("point", size=3, unit="m"),
+        normal=normal,
+        tangents=tangents,
+        normal_chain=normal_chain,
+        tangent_model=model,
+        friction=friction,
+        tangent_chain=tangent_chain,
+        bonded=r.bool("bonded", False),
+    )
+    r.finish()
+    return spec
+
+
+def _read_solver(r: Reader) -> SolverSpec:
+    from .integrators import METHODS
+
+    spec = SolverSpec(
+        method=r.str("method", SolverSpec.method, choices=METHODS),
+        rtol=r.float("rtol", SolverSpec.rtol, lo=1e-14, hi=1e-1),
+        atol=r.float("atol", SolverSpec.atol, lo=1e-16, hi=1.0),
+        max_step=r.float("max_step", math.inf, lo=0.0, lo_open=True, unit="s"),
+        output_rate=r.float("output_rate", SolverSpec.output_rate, lo=0.0, lo_open=True, hi=1e7, unit="Hz"),
+        record_energy=r.bool("record_energy", False),
+        max_events=r.int("max_events", SolverSpec.max_events, lo=1),
+        storm_window=r.float("storm_window", SolverSpec.storm_window, lo=0.0, unit="s"),
+        storm_count=r.int("storm_count", SolverSpec.storm_count, lo=2),
+    )
+    r.finish()
+    return spec
+
+
+def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, ContactSpec], duration: float) -> PhaseSpec:
+    from .controllers import read_controller
+
+    name = r.str("name", "main")
+    until_raw = r.raw("until", duration)
+    if isinstance(until_raw, str):
+        kind, _, target = until_raw.partition(":")
+        if kind != "touch" or target not in contacts:
+            raise r.error("until", f"a time [s] or 'touch:<contact>' with a contact in {sorted(contacts)}", until_raw)
+        until: float | str = until_raw
+    else:
+        until = r.float("until", duration, lo=0.0, unit="s")
+    merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
+        else r.raw("controller")
+    controller = read_controller(Reader(merged, r.key("controller"), r.file))
+    reference = _read_reference(r.sub("reference")) if r.has("reference") else None
+    forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
+    r.finish()
+    return PhaseSpec(name, until, controller, reference, forces)
+
+
+def _read_reference(r: Reader) -> ReferenceSpec:
+    space = r.str("space", "task", choices=["task", "joint"])
+    start = r.vector("start", None) if r.has("start") else None
+    moves = []
+    for m in r.tables("moves"):
+        kind = m.str("kind", "trapezoid", choices=PROFILES)
+        duration = m.float("duration", lo=0.0, lo_open=True, unit="s")
+        if kind == "velocity_ramp":
+            delta = m.vector("velocity", unit="m/s or rad/s") * duration
+        else:
+            delta = m.vector("delta", unit="m or rad")
+        moves.append(Move(delta, m.float("start", 0.0, lo=0.0, unit="s"), duration, kind,
+                          m.float("accel_fraction", 0.1, lo=0.0, lo_open=True, hi=0.5)))
+        m.finish()
+    sizes = {len(mv.delta) for mv in moves} | ({len(start)} if start is not None else set())
+    if len(sizes) > 1:
+        raise r.error("moves", "start and every move of the same dimension", sorted(sizes))
+    r.finish()
+    return ReferenceSpec(space, start, tuple(moves))
+
+
+def _read_force(r: Reader, contacts: dict[str, ContactSpec]) -> ForceSpec:
+    contact = r.str("contact", next(iter(contacts), ""), choices=list(contacts))
+    ramp = Ramp(
+        value=r.float("value", unit="N"),
+        start=r.float("start", 0.0, lo=0.0, unit="s"),
+        duration=r.float("duration", 0.1, lo=0.0, lo_open=True, unit="s"),
+        kind=r.str("kind", "linear", choices=["linear", "exponential", "step"]),
+        initial=r.float("initial", 0.0, unit="N"),
+    )
+    r.finish()
+    return ForceSpec(contact, ramp)

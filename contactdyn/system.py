@@ -1,0 +1,615 @@
+"""The system: robot + the parts a scene names, its state layout and its right-hand side.
+
+State x = [Q, Q̇, y]. Q holds the second-order coordinates: the robot's active joints,
+one coordinate per active environment body (a cart) and one per equivalent mass of a
+deformation chain; y holds first-order states: massless chain junctions, controller
+integrators and, on request, the energy audit. A part the scene does not name has no
+slot and costs nothing.
+
+In every mode the unknowns (Q̈ and the forces of active constraint rows: bonds, rigid
+contacts, sticking friction) come from one linear system
+
+    [ M  −Cᵀ ] [Q̈]   [ f  ]
+    [ G   0  ] [λ ] = [ −γ ]
+
+where G Q̈ + γ = 0 are the acceleration-level constraints and C their force columns (a
+row's own direction, tilted by sliding friction −μ d). The plastic impact map solves
+the same matrix with velocity jumps (momentum law): M ΔQ̇ = Cᵀ Λ, G Q̇⁺ = 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .chain import NodeKind
+from .contact import Contact, ContactMode, DirectionalChain, Kinematics
+from .controllers import CONTROLLERS, ControlInput, Controller
+from .errors import RobotError, SceneError, SimulationError
+from .robot import Robot
+from .scene import PhaseSpec, Scene
+from .trajectory import Ramp, Reference
+
+__all__ = ["System", "Phase", "Evaluation", "Impact"]
+
+try:  # numpy's gufunc without the Python wrapper: ~4x cheaper on tiny systems
+    from numpy.linalg import _umath_linalg
+
+    _fast_solve = _umath_linalg.solve1
+except (ImportError, AttributeError):  # pragma: no cover
+    _fast_solve = np.linalg.solve
+
+
+def solve_linear(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Solve A z = b; on a singular A fall back to the minimum-norm least-squares z."""
+    with np.errstate(all="ignore"):
+        z = _fast_solve(A, b)
+    if np.all(np.isfinite(z)) and np.linalg.norm(A @ z - b) <= 1e-9 * (1.0 + np.linalg.norm(b)):
+        return z, True
+    return np.linalg.lstsq(A, b, rcond=1e-12)[0], False
+
+
+@dataclass
+class Phase:
+    """A task phase at run time: its controller, reference and force set-points (absolute times)."""
+
+    spec: PhaseSpec
+    index: int
+    t_start: float  #: [s]
+    controller: Controller
+    z_slice: slice
+    reference: Reference | None = None
+    forces: dict[str, Ramp] = field(default_factory=dict)
+
+
+@dataclass
+class Impact:
+    """A plastic impact at touch: impulses [N·s] and velocities before and after."""
+
+    t: float
+    contact: str
+    normal_impulse: float  #: FΔt
+    friction_impulse: np.ndarray  #: F_fΔt per tangent
+    jammed: bool
+    energy_loss: float  #: [J]
+    v_before: np.ndarray
+    v_after: np.ndarray
+
+
+@dataclass
+class Evaluation:
+    """Everything the right-hand side computes at one (t, x) in one mode."""
+
+    xdot: np.ndarray
+    lam: np.ndarray  #: forces of the active rows [N]
+    row_meta: list[tuple[str, str, int]]  #: (contact, "n" or "t", tangent index) per row
+    normal_force: dict[str, float]  #: interface force per contact [N], > 0 pressing
+    friction: dict[str, np.ndarray]  #: friction force per contact, tangent coordinates [N]
+    slip: dict[str, np.ndarray]  #: slip velocity per contact, tangent coordinates [m/s]
+    gap: dict[str, float]  #: normal gap [m] (0 while touching)
+    stages: dict[str, tuple[float, float, float]]  #: label -> (x [m], ẋ [m/s], F [N])
+    interface: dict[str, float]  #: tangential chain interface forces per "contact.t1" [N]
+    tau: np.ndarray  #: joint torques [N·m or N]
+    body_force: np.ndarray  #: drive force on each active body [N]
+    p_tip: np.ndarray  #: controlled tip position [m]
+    x_d: np.ndarray | None  #: reference
+    force_d: dict[str, float]
+    regular: bool = True  #: False when the linear solve fell back to least squares
+
+
+class System:
+    """Build from a scene; evaluate; map impacts."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        rs = scene.robot
+        try:
+            self.robot = Robot.load(rs.source, active_joints=list(rs.active_joints) if rs.active_joints else None,
+                                    locked=rs.locked, gravity=tuple(rs.gravity),
+                                    gravity_compensation=rs.gravity_compensation)
+            self.tip_fid = self.robot.frame_id(rs.tip)
+        except RobotError as exc:
+            raise SceneError("robot", "a loadable robot", str(exc), scene.file) from None
+        nv = self.nv = self.robot.nv
+        # ---- generalized coordinates ----
+        diag: list[float] = []
+        self.body_names = list(scene.bodies)
+        self.body_index = {name: nv + i for i, name in enumerate(self.body_names)}
+        diag += [b.mass for b in scene.bodies.values()]
+        self.contacts: list[Contact] = []
+        for spec in scene.contacts.values():
+            try:
+                fid = self.robot.frame_id(spec.frame)
+            except RobotError as exc:
+                raise SceneError(f"contact.{spec.name}.frame", "a frame of the robot", str(exc), scene.file) from None
+            idx = self.body_index.get(spec.body, -1)
+            axis = scene.bodies[spec.body].axis if spec.body in scene.bodies else np.zeros(3)
+            self.contacts.append(Contact(spec, fid, idx, axis))
+        self.mass_labels: list[str] = []
+        n_first = 0
+        for c in self.contacts:
+            for dc in c.chains:
+                for node in dc.chain.nodes:
+                    if node.kind == NodeKind.MASS:
+                        node.coord = nv + len(diag)
+                        diag.append(node.mass)
+                        self.mass_labels.append(f"{c.name}.{dc.label}.m{len(self.mass_labels) + 1}")
+                for i, node in enumerate(dc.chain.nodes):
+                    if node.kind == NodeKind.FREE and len(dc.chain.stages_of(i)) == 2:
+                        node.state = n_first
+                        n_first += 1
+                if dc.chain.junction_when_touching:
+                    dc.junction_state = n_first
+                    n_first += 1
+        self.nQ = nv + len(diag)
+        self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg]
+        self.n_junctions = n_first
+        # ---- controller states, energy audit ----
+        self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
+        self.z_slices = []
+        for ctl in self.controllers:
+            self.z_slices.append(slice(n_first, n_first + ctl.n_states))
+            n_first += ctl.n_states
+        self.energy_slot = n_first if scene.solver.record_energy else -1
+        n_first += 2 if scene.solver.record_energy else 0
+        self.ny = n_first
+        self.n = 2 * self.nQ + self.ny
+        self._M = np.zeros((self.nQ, self.nQ))
+        self._M[nv:, nv:] = np.diag(self.M_rest)
+        self.servo = [(self.body_index[n], b.servo_velocity, b.servo_gain)
+                      for n, b in scene.bodies.items() if b.servo_velocity is not None]
+        self.stage_labels = [f"{c.name}.{dc.label}.{s.label}" for c in self.contacts for dc in c.chains
+                             for s in dc.chain.stages]
+        self.has_rows_possible = any(dc.chain.bonded_when_touching for c in self.contacts for dc in c.chains) or any(
+            c.friction is not None for c in self.contacts)
+
+    # ---- initial state ------------------------------------------------------------------
+    def initial_state(self) -> tuple[np.ndarray, list[ContactMode]]:
+        rs, robot = self.scene.robot, self.robot
+        if rs.q0 is not None and len(rs.q0) != robot.nq:
+            raise SceneError("robot.q0", f"{robot.nq} joint values for joints {robot.joint_names}", rs.q0.tolist(),
+                             self.scene.file)
+        q = rs.q0.copy() if rs.q0 is not None else (rs.q_seed.copy() if rs.q_seed is not None else
+                                                    np.zeros(robot.nq))
+        if rs.tip0 is not None:
+            try:
+                q = robot.inverse_kinematics(rs.tip, rs.tip0, q)
+            except RobotError as exc:
+                raise SceneError("robot.tip0", "a reachable tip position", str(exc), self.scene.file) from None
+        v = rs.v0.copy() if rs.v0 is not None else np.zeros(robot.nv)
+        if len(v) != robot.nv:
+            raise SceneError("robot.v0", f"{robot.nv} joint velocities", rs.v0.tolist(), self.scene.file)
+        x = np.zeros(self.n)
+        nQ, nv = self.nQ, self.nv
+        x[:nv], x[nQ:nQ + nv] = q, v
+        for name, b in self.scene.bodies.items():
+            x[self.body_index[name]], x[nQ + self.body_index[name]] = b.position0, b.velocity0
+        robot.update(q, v)
+        modes = []
+        for c in self.contacts:
+            kin = self.kinematics(c, x)
+            touching = c.spec.bonded or bool(c.normal.u @ (kin.p_tip - kin.p_env) <= 1e-12 and
+                                             c.normal.chain.env_surface == 0 and c.normal.chain.robot_surface == 1)
+            # masses start at rest where their chain puts them undeformed (zero rest lengths)
+            for dc in c.chains:
+                s_tip, s_anc = float(dc.u @ kin.p_tip), float(dc.u @ kin.p_env)
+                v_tip, v_anc = float(dc.u @ kin.v_tip), float(dc.u @ kin.v_env)
+                for node in dc.chain.nodes:
+                    if node.kind == NodeKind.MASS:
+                        on_robot = node.side == "robot"
+                        x[node.coord] = s_tip if on_robot else s_anc
+                        x[nQ + node.coord] = v_tip if on_robot else v_anc
+                    if node.state >= 0:
+                        x[2 * nQ + node.state] = s_tip if node.side == "robot" else s_anc
+                if dc.junction_state >= 0:
+                    x[2 * nQ + dc.junction_state] = s_anc
+            if c.spec.bonded:
+                touching = True
+            modes.append(ContactMode(touching=touching, offsets=tuple(0.0 for _ in c.tangent_chains),
+                                     slip=self._initial_slip(c, kin)))
+        return x, modes
+
+    def _initial_slip(self, c: Contact, kin: Kinematics) -> tuple[float, ...]:
+        if c.friction is None:
+            return ()
+        vt = c.tangents @ (kin.v_tip - kin.v_env)
+        norm = float(np.linalg.norm(vt))
+        if norm == 0.0:
+            return tuple(np.eye(len(vt))[0]) if len(vt) else ()
+        return tuple(np.sign(vt)) if len(vt) == 1 else tuple(vt / norm)
+
+    # ---- phases ---------------------------------------------------------------------------
+    def start_phase(self, index: int, t: float, x: np.ndarray, previous: Phase | None) -> Phase:
+        spec = self.scene.phases[index]
+        controller = self.controllers[index]
+        reference = None
+        if spec.reference is not None:
+            ref = spec.reference
+            if ref.start is not None:
+                start = ref.start.copy()
+            elif previous is not None and previous.reference is not None and \
+                    previous.spec.reference is not None and previous.spec.reference.space == ref.space:
+                start = previous.reference.at(t)[0]
+            else:
+                q = x[: self.nv]
+                start = self.robot.frame_position(q, self.tip_fid) if ref.space == "task" else q.copy()
+            dims = 3 if ref.space == "task" else self.nv
+            if len(start) != dims:
+                raise SceneError(f"phase[{index}].reference", f"{dims}-vectors in {ref.space} space",
+                                 len(start), self.scene.file)
+            moves = tuple(type(m)(m.delta, m.start + t, m.duration, m.kind, m.accel_fraction) for m in ref.moves)
+            for m in moves:
+                if len(m.delta) != dims:
+                    raise SceneError(f"phase[{index}].reference.moves", f"{dims}-vectors", len(m.delta),
+                                     self.scene.file)
+            reference = Reference(start, moves)
+        forces = {f.contact: Ramp(f.ramp.value, f.ramp.start + t, f.ramp.duration, f.ramp.kind, f.ramp.initial)
+                  for f in spec.forces}
+        phase = Phase(spec, index, t, controller, self.z_slices[index], reference, forces)
+        return phase
+
+    # ---- kinematics ----------------------------------------------------------------------
+    def kinematics(self, c: Contact, x: np.ndarray) -> Kinematics:
+        """Contact kinematics at x; requires ``robot.update`` at x's (q, q̇) first."""
+        ft = self.robot.frame_terms(c.fid)
+        nQ = self.nQ
+        if c.body_index >= 0:
+            p_env = c.spec.point + c.body_axis * x[c.body_index]
+            v_env = c.body_axis * x[nQ + c.body_index]
+        else:
+            p_env, v_env = c.spec.point, np.zeros(3)
+        return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env)
+
+    def _row(self, c: Contact, u: np.ndarray, kin: Kinematics) -> np.ndarray:
+        """Generalized row of the relative tip–environment motion along u."""
+        row = np.zeros(self.nQ)
+        row[: self.nv] = u @ kin.J
+        if c.body_index >= 0:
+            row[c.body_index] -= u @ c.body_axis
+        return row
+
+    # ---- one chain ---------------------------------------------------------------------
+    def _chain(self, c: Contact, dc: DirectionalChain, touching: bool, offset: float, kin: Kinematics,
+               x: np.ndarray, f: np.ndarray, ydot: np.ndarray, ev: Evaluation | None, full: bool):
+        """Apply a chain's stage forces; return (tip force along u [N], bond row or None, γ, interface F, gap)."""
+        nQ, chain, u = self.nQ, dc.chain, dc.u
+        plan = dc.plan(touching)
+        nodes, stages = chain.nodes, chain.stages
+        npos = len(nodes)
+        pos = [0.0] * npos
+        vel = [0.0] * npos
+        s_tip, v_tip = float(u @ kin.p_tip), float(u @ kin.v_tip)
+        s_anc, v_anc = float(u @ kin.p_env) + offset, float(u @ kin.v_env)
+        for i in plan.solid:
+            kind = nodes[i].kind
+            if kind == NodeKind.TIP:
+                pos[i], vel[i] = s_tip, v_tip
+            elif kind == NodeKind.ANCHOR:
+                pos[i], vel[i] = s_anc, v_anc
+            else:
+                pos[i], vel[i] = x[nodes[i].coord], x[nQ + nodes[i].coord]
+        junction_nodes = {j for j, _, _ in plan.junctions}
+        for a, b in plan.aliases:
+            if b not in junction_nodes:
+                pos[a], vel[a] = pos[b], vel[b]
+        y = x[2 * nQ:]
+        for j, active, slot in plan.junctions:
+            num = den = kk = ks = 0.0
+            for k in active:
+                s = stages[k]
+                if s.upper == j:  # stage below pushes j up
+                    num += s.k * (pos[s.lower] - (y[slot] if slot >= 0 else 0.0)) + s.b * vel[s.lower]
+                    ks += s.k * pos[s.lower]
+                else:  # stage above pushes j down
+                    num -= s.k * ((y[slot] if slot >= 0 else 0.0) - pos[s.upper]) - s.b * vel[s.upper]
+                    ks += s.k * pos[s.upper]
+                den += s.b
+                kk += s.k
+            if den > 0.0 and slot >= 0:
+                pos[j], vel[j] = y[slot], num / den
+                ydot[slot] = vel[j]
+            else:  # undamped junction: algebraic force balance
+                pos[j] = ks / kk if kk > 0 else 0.0
+                vel[j] = sum(stages[k].k * vel[stages[k].lower if stages[k].upper == j else stages[k].upper]
+                             for k in active) / kk if kk > 0 else 0.0
+        for a, b in plan.aliases:
+            if b in junction_nodes:
+                pos[a], vel[a] = pos[b], vel[b]
+        for a, b in plan.free_ends:
+            pos[a], vel[a] = pos[b], vel[b]
+        alias_of = dict(plan.aliases)
+        tip_F = anchor_F = 0.0
+        interface_F = 0.0
+        for k in plan.active:
+            s = stages[k]
+            xs = pos[s.lower] - pos[s.upper]
+            xd = vel[s.lower] - vel[s.upper]
+            F = s.force(xs, xd)
+            if k == plan.interface_stage:
+                interface_F = F
+            for node, sign in ((s.upper, 1.0), (s.lower, -1.0)):
+                target = alias_of.get(node, node)
+                kind = nodes[target].kind
+                if kind == NodeKind.TIP:
+                    tip_F += sign * F
+                elif kind == NodeKind.ANCHOR:
+                    anchor_F += sign * F
+                elif kind == NodeKind.MASS:
+                    f[nodes[target].coord] += sign * F
+            if self.energy_slot >= 0:
+                ydot[self.energy_slot + 1] += (F - s.force(xs, 0.0)) * xd  # damper power [W]
+            if full and ev is not None:
+                ev.stages[f"{c.name}.{dc.label}.{s.label}"] = (xs, xd, F)
+        if full and ev is not None:
+            for k in range(len(stages)):
+                label = f"{c.name}.{dc.label}.{stages[k].label}"
+                if label not in ev.stages:
+                    ev.stages[label] = (0.0, 0.0, 0.0)
+        if c.body_index >= 0 and anchor_F != 0.0:
+            f[c.body_index] += anchor_F * float(u @ c.body_axis)
+        row = None
+        gamma = 0.0
+        if plan.bond:
+            row = np.zeros(nQ)
+            for node, sign in ((chain.robot_surface, 1.0), (chain.env_surface, -1.0)):
+                kind = nodes[node].kind
+                if kind == NodeKind.TIP:
+                    row[: self.nv] += sign * (u @ kin.J)
+                    gamma += sign * float(u @ kin.drift)
+                elif kind == NodeKind.ANCHOR:
+                    if c.body_index >= 0:
+                        row[c.body_index] += sign * float(u @ c.body_axis)
+                else:
+                    row[nodes[node].coord] += sign
+        gap = 0.0 if touching else pos[chain.robot_surface] - pos[chain.env_surface]
+        return tip_F, row, gamma, interface_F, gap
+
+    # ---- the right-hand side -----------------------------------------------------------
+    def evaluate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
+                 full: bool = False) -> Evaluation:
+        nQ, nv = self.nQ, self.nv
+        q, v = x[:nv], x[nQ:nQ + nv]
+        robot = self.robot
+        robot.update(q, v)
+        f = np.zeros(nQ)
+        f[:nv] = -robot.h
+        ydot = np.zeros(self.ny)
+        rows: list[np.ndarray] = []
+        cols: list[np.ndarray] = []
+        gammas: list[float] = []
+        meta: list[tuple[str, str, int]] = []
+        ev = Evaluation(np.empty(0), np.empty(0), meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),
+                        np.empty(0), None, {})
+        tip_force_total = np.zeros(3)
+        kins: list[Kinematics] = []
+        pending_friction: list[tuple[Contact, np.ndarray, float, np.ndarray]] = []
+        for c, mode in zip(self.contacts, modes, strict=True):
+            kin = self.kinematics(c, x)
+            kins.append(kin)
+            tip_force = np.zeros(3)
+            # normal
+            tip_F, row, gamma, F_n, gap = self._chain(c, c.normal, mode.touching, 0.0, kin, x, f, ydot, ev, full)
+            tip_force += tip_F * c.normal.u
+            ev.gap[c.name] = gap
+            # tangential chains (bonded while the normal touches)
+            for i, dc in enumerate(c.tangent_chains):
+                tF, trow, tgamma, tint, _ = self._chain(c, dc, mode.touching, mode.offsets[i], kin, x, f, ydot, ev,
+                                                        full)
+                tip_force += tF * dc.u
+                ev.interface[f"{c.name}.{dc.label}"] = tint
+                if trow is not None:
+                    rows.append(trow)
+                    cols.append(trow)
+                    gammas.append(tgamma)
+                    meta.append((c.name, dc.label, i))
+            # friction
+            col = row
+            if c.friction is not None and len(c.tangents):
+                T = c.tangents
+                vt = T @ (kin.v_tip - kin.v_env)
+                ev.slip[c.name] = vt
+                if mode.touching and mode.stuck:
+                    for i in range(len(T)):
+                        trow = self._row(c, T[i], kin)
+                        rows.append(trow)
+                        cols.append(trow)
+                        gammas.append(float(T[i] @ kin.drift))
+                        meta.append((c.name, "t", i))
+                elif mode.touching:
+                    d = self._slip_direction(vt, mode)
+                    visc = -c.friction.viscous * vt
+                    if row is not None:  # normal force is an unknown: tilt its column
+                        col = row.copy()
+                        for i in range(len(T)):
+                            col -= c.friction.mu_k * d[i] * self._row(c, T[i], kin)
+                        pending_friction.append((c, d, 0.0, visc))
+                    else:
+                        ff = -c.friction.mu_k * max(F_n, 0.0) * d + visc
+                        pending_friction.append((c, d, F_n, visc))
+                        ev.friction[c.name] = ff
+                    for i in range(len(T)):
+                        f += visc[i] * self._row(c, T[i], kin)
+                        if row is None:
+                            f += (-c.friction.mu_k * max(F_n, 0.0) * d[i]) * self._row(c, T[i], kin)
+                    if self.energy_slot >= 0:
+                        ydot[self.energy_slot + 1] += float(c.friction.viscous * vt @ vt)
+                else:
+                    ev.friction[c.name] = np.zeros(len(T))
+            if row is not None:
+                rows.append(row)
+                cols.append(col)
+                gammas.append(gamma)
+                meta.append((c.name, "n", 0))
+            ev.normal_force[c.name] = F_n
+            tip_force_total_c = tip_force
+            if np.any(tip_force_total_c):
+                f[:nv] += kin.J.T @ tip_force_total_c
+            tip_force_total += tip_force
+        # controller
+        ft = robot.frame_terms(self.tip_fid) if not self.contacts or self.contacts[0].fid != self.tip_fid else None
+        if ft is not None:
+            p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
+        else:
+            k0 = kins[0]
+            p_tip, v_tip, J, drift = k0.p_tip, k0.v_tip, k0.J, k0.drift
+        x_d = v_d = a_d = None
+        if phase.reference is not None:
+            x_d, v_d, a_d = phase.reference.at(t)
+        force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
+        ctl = phase.controller
+        z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
+        inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
+                           p_tip, v_tip, J, drift, x_d, v_d, a_d, dict(ev.normal_force), force_d,
+                           {c.name: c.normal.u for c in self.contacts}, z)
+        tau, zdot = ctl.command(inp)
+        f[:nv] += tau
+        if zdot is not None:
+            ydot[phase.z_slice] = zdot
+        body_force = np.zeros(len(self.body_names))
+        for idx, v_ref, gain in self.servo:
+            F = gain * (v_ref - x[nQ + idx])
+            f[idx] += F
+            body_force[idx - nv] = F
+        # solve
+        M = self._M
+        M[:nv, :nv] = robot.H
+        regular = True
+        if rows:
+            nr = len(rows)
+            A = np.zeros((nQ + nr, nQ + nr))
+            A[:nQ, :nQ] = M
+            A[:nQ, nQ:] = -np.array(cols).T
+            A[nQ:, :nQ] = np.array(rows)
+            b = np.concatenate([f, -np.asarray(gammas)])
+            z_all, regular = solve_linear(A, b)
+            qdd, lam = z_all[:nQ], z_all[nQ:]
+        else:
+            qdd = np.empty(nQ)
+            qdd[:nv], regular = solve_linear(M[:nv, :nv], f[:nv])
+            qdd[nv:] = f[nv:] / self.M_rest if nQ > nv else f[nv:]
+            lam = np.empty(0)
+        if self.energy_slot >= 0:
+            ydot[self.energy_slot] = float(tau @ v) + float(body_force @ x[nQ + nv: nQ + nv + len(body_force)])
+        xdot = np.concatenate([x[nQ:2 * nQ], qdd, ydot])
+        ev.xdot, ev.lam, ev.tau, ev.body_force, ev.p_tip, ev.x_d = xdot, lam, tau, body_force, p_tip, x_d
+        ev.force_d = {k: val[0] for k, val in force_d.items()}
+        ev.regular = regular
+        for (name, kind, i), value in zip(meta, lam, strict=True):
+            if kind == "n":
+                ev.normal_force[name] = float(value)
+            elif kind == "t":
+                ev.friction.setdefault(name, np.zeros(len(self._contact(name).tangents)))[i] = value
+            else:
+                ev.interface[f"{name}.{kind}"] = float(value)
+        for c, d, F_n, visc in pending_friction:
+            if c.name not in ev.friction:
+                ev.friction[c.name] = -c.friction.mu_k * max(ev.normal_force[c.name], 0.0) * d + visc
+        if self.energy_slot >= 0:
+            for c, d, _, visc in pending_friction:
+                ydot[self.energy_slot + 1] += float(c.friction.mu_k * max(ev.normal_force[c.name], 0.0)
+                                                    * (d @ ev.slip[c.name]))
+            xdot[2 * nQ + self.energy_slot + 1] = ydot[self.energy_slot + 1]
+        return ev
+
+    def _contact(self, name: str) -> Contact:
+        return next(c for c in self.contacts if c.name == name)
+
+    @staticmethod
+    def _slip_direction(vt: np.ndarray, mode: ContactMode) -> np.ndarray:
+        if len(vt) == 1:
+            return np.asarray(mode.slip, float)
+        norm = float(np.linalg.norm(vt))
+        return vt / norm if norm > 1e-300 else np.asarray(mode.slip, float)
+
+    def rhs(self, modes: list[ContactMode], phase: Phase):
+        """The function solve_ivp integrates in one mode and phase."""
+
+        def f(t: float, x: np.ndarray) -> np.ndarray:
+            return self.evaluate(t, x, modes, phase).xdot
+
+        return f
+
+    # ---- plastic impact ----------------------------------------------------------------
+    def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact) -> tuple[np.ndarray, Impact]:
+        """Velocity jump when ``contact`` touches (its mode already says touching).
+
+        First assume the tip slides in its pre-impact slip direction (friction impulse
+        −μ_k d FΔt); if the tangential velocity after impact points against d, the
+        impact jams: zero tangential velocity, friction impulse an unknown (eqs 27–31).
+        """
+        nQ, nv = self.nQ, self.nv
+        q, v = x[:nv], x[nQ:nQ + nv]
+        self.robot.update(q, v)
+        qd_minus = x[nQ:2 * nQ].copy()
+        M = self._M.copy()
+        M[:nv, :nv] = self.robot.H
+        rows, cols, meta = self._impact_rows(x, modes, contact, jam=False)
+        z, _ = self._impact_solve(M, rows, cols, qd_minus)
+        jammed = False
+        i_c = self.contacts.index(contact)
+        kin = self.kinematics(contact, x)
+        friction_impulse = np.zeros(len(contact.tangents))
+        if contact.friction is not None and len(contact.tangents) and not modes[i_c].stuck:
+            d = np.asarray(modes[i_c].slip, float)
+            vt_after = contact.tangents @ (kin.J @ z[:nv] - contact.body_axis *
+                                          (z[contact.body_index] if contact.body_index >= 0 else 0.0))
+            lam_n = z[nQ + [m[1] for m in meta].index("n")]
+            friction_impulse = -contact.friction.mu_k * lam_n * d
+            if float(vt_after @ d) < 0.0:  # sliding assumption contradicted: jam
+                jammed = True
+                rows, cols, meta = self._impact_rows(x, modes, contact, jam=True)
+                z, _ = self._impact_solve(M, rows, cols, qd_minus)
+                friction_impulse = np.array([z[nQ + k] for k, m in enumerate(meta) if m[0] == contact.name
+                                             and m[1] == "t"])
+        qd_plus = z[:nQ]
+        lam_n = float(z[nQ + [m[1] if m[0] == contact.name else "" for m in meta].index("n")])
+        x_new = x.copy()
+        x_new[nQ:2 * nQ] = qd_plus
+        energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
+        return x_new, Impact(t, contact.name, lam_n, friction_impulse, jammed, energy_loss, qd_minus, qd_plus)
+
+    def _impact_rows(self, x, modes, contact, jam):
+        """Constraint rows holding after the impact: every active bond and stick, plus the new contact."""
+        rows, cols, meta = [], [], []
+        for c, mode in zip(self.contacts, modes, strict=True):
+            if not mode.touching:
+                continue
+            kin = self.kinematics(c, x)
+            dummy_f, dummy_y = np.zeros(self.nQ), np.zeros(self.ny)
+            _, row, _, _, _ = self._chain(c, c.normal, True, 0.0, kin, x, dummy_f, dummy_y, None, False)
+            stick = c.friction is not None and len(c.tangents) and (mode.stuck or (jam and c is contact))
+            if row is not None:
+                col = row
+                if c.friction is not None and len(c.tangents) and not stick and c is contact:
+                    d = np.asarray(mode.slip, float)
+                    col = row - sum(c.friction.mu_k * d[i] * self._row(c, c.tangents[i], kin)
+                                    for i in range(len(c.tangents)))
+                rows.append(row)
+                cols.append(col)
+                meta.append((c.name, "n", 0))
+            if stick and row is not None:
+                for i, t_dir in enumerate(c.tangents):
+                    r = self._row(c, t_dir, kin)
+                    rows.append(r)
+                    cols.append(r)
+                    meta.append((c.name, "t", i))
+            for i, dc in enumerate(c.tangent_chains):
+                _, trow, _, _, _ = self._chain(c, dc, True, mode.offsets[i], kin, x, dummy_f, dummy_y, None, False)
+                if trow is not None:
+                    rows.append(trow)
+                    cols.append(trow)
+                    meta.append((c.name, dc.label, i))
+        return rows, cols, meta
+
+    def _impact_solve(self, M, rows, cols, qd_minus):
+        nQ, nr = self.nQ, len(rows)
+        A = np.zeros((nQ + nr, nQ + nr))
+        A[:nQ, :nQ] = M
+        A[:nQ, nQ:] = -np.array(cols).T
+        A[nQ:, :nQ] = np.array(rows)
+        b = np.concatenate([M @ qd_minus, np.zeros(nr)])
+        z, regular = solve_linear(A, b)
+        if not np.all(np.isfinite(z)):
+            raise SimulationError("impact map: the momentum-law system has no finite solution")
+        return z, regular

@@ -1,0 +1,120 @@
+"""Reference trajectories: motion profiles, straight moves and force ramps.
+
+A :class:`Move` displaces a reference by a vector along a normalised profile
+σ(τ) ∈ [0, 1]; a reference is its start point plus the sum of its moves, so a straight
+Cartesian line is one move and case 1's "accelerate horizontally, descend vertically"
+is two overlapping moves. A :class:`Ramp` shapes a force set-point. SI units.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Move", "Ramp", "Reference", "profile"]
+
+PROFILES = ("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step")
+
+
+def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, float, float]:
+    """Normalised profile σ, dσ/dτ, d²σ/dτ² at τ ∈ [0, 1] (clamped outside).
+
+    ``trapezoid``: velocity rises over ``accel_fraction`` of the move, holds, falls.
+    ``triangle``: the trapezoid with ``accel_fraction = 0.5``.
+    ``constant_velocity``: σ = τ. ``step``: σ = 1 from τ = 0.
+    ``velocity_ramp``: velocity rises linearly over the move and then holds: σ = τ²/2
+    for τ ≤ 1, then τ − 1/2 (the move's displacement is then a velocity × duration).
+    """
+    if kind == "velocity_ramp":
+        if tau < 0.0:
+            return 0.0, 0.0, 0.0
+        if tau <= 1.0:
+            return 0.5 * tau * tau, tau, 1.0
+        return tau - 0.5, 1.0, 0.0
+    if tau < 0.0:  # at τ = 0 and τ = 1 the profile takes its right-hand limit
+        return 0.0, 0.0, 0.0
+    if tau >= 1.0:
+        return 1.0, 0.0, 0.0
+    if kind == "constant_velocity":
+        return tau, 1.0, 0.0
+    if kind == "step":
+        return 1.0, 0.0, 0.0
+    a = 0.5 if kind == "triangle" else accel_fraction
+    vmax = 1.0 / (1.0 - a)  # peak of dσ/dτ so that σ(1) = 1
+    acc = vmax / a
+    if tau < a:
+        return 0.5 * acc * tau * tau, acc * tau, acc
+    if tau <= 1.0 - a:
+        return 0.5 * acc * a * a + vmax * (tau - a), vmax, 0.0
+    r = 1.0 - tau
+    return 1.0 - 0.5 * acc * r * r, acc * r, -acc
+
+
+@dataclass(frozen=True)
+class Move:
+    """Displace the reference by ``delta`` over [start, start + duration] along a profile.
+
+    For ``velocity_ramp`` ``delta`` is the final velocity [m/s or rad/s] times the ramp
+    duration, i.e. give ``velocity`` and the move keeps that velocity after the ramp.
+    """
+
+    delta: np.ndarray  #: displacement [m or rad], or velocity × duration for velocity_ramp
+    start: float  #: [s]
+    duration: float  #: [s], > 0
+    kind: str = "trapezoid"
+    accel_fraction: float = 0.1  #: fraction of the duration spent accelerating (trapezoid)
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        s, ds, dds = profile(self.kind, (t - self.start) / self.duration, self.accel_fraction)
+        return self.delta * s, self.delta * (ds / self.duration), self.delta * (dds / self.duration**2)
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Start point plus moves: position, velocity and acceleration at time t."""
+
+    start: np.ndarray
+    moves: tuple[Move, ...] = field(default_factory=tuple)
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        x = self.start.copy()
+        v = np.zeros_like(x)
+        a = np.zeros_like(x)
+        for move in self.moves:
+            dx, dv, da = move.at(t)
+            x += dx
+            v += dv
+            a += da
+        return x, v, a
+
+
+@dataclass(frozen=True)
+class Ramp:
+    """A force set-point [N]: ``value`` reached from ``initial`` starting at ``start``.
+
+    ``linear``: straight over ``duration``; ``exponential``: 1 − exp(−(t − start)/duration);
+    ``step``: at once.
+    """
+
+    value: float
+    start: float = 0.0
+    duration: float = 0.1
+    kind: str = "linear"
+    initial: float = 0.0
+
+    def at(self, t: float) -> tuple[float, float]:
+        """Set-point and its rate [N, N/s] at time t."""
+        span = self.value - self.initial
+        tau = t - self.start
+        if tau < 0.0:
+            return self.initial, 0.0
+        if self.kind == "step":
+            return self.value, 0.0
+        if self.kind == "exponential":
+            e = math.exp(-tau / self.duration)
+            return self.initial + span * (1.0 - e), span * e / self.duration
+        if tau >= self.duration:
+            return self.value, 0.0
+        return self.initial + span * tau / self.duration, span / self.duration
