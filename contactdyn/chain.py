@@ -97,8 +97,9 @@ def build_chain(spec: ChainSpec, where: str) -> Chain:
 
     def walk(elements: tuple, start: int, side: str) -> int:
         current = start
+        n_stages = 0
         for i, element in enumerate(elements):
-            label = f"{side[:3]}{i + 1}"
+            label = f"{side[:3]}{n_stages + 1}"  # stages counted from the body / tip, masses skipped
             if isinstance(element, Mass):
                 if nodes[current].kind != NodeKind.FREE:
                     raise SceneError(f"{where}.{side}[{i}]", "a stage {k, b} between a mass and the body, tip or "
@@ -110,6 +111,7 @@ def build_chain(spec: ChainSpec, where: str) -> Chain:
                 new = len(nodes) - 1
                 lower, upper = (current, new) if side == "environment" else (new, current)
                 stages.append(ChainStage(lower, upper, element.k, element.b, element.law, element.exponent, side, label))
+                n_stages += 1
                 current = new
         return current
 

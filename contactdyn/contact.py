@@ -89,8 +89,12 @@ def _plan(chain: Chain, touching: bool, junction_state: int) -> ChainPlan:
             free_ends.append((i, other))
     free_set = {i for i, _ in free_ends}
     active = [k for k, s in enumerate(stages) if s.lower not in free_set and s.upper not in free_set]
-    junctions = [(j, [k for k in chain.stages_of(j) if k in active], junction_state if j in (es, rs) else nodes[j].state)
-                 for j in junction_nodes]
+    def neighbours(j: int) -> list[int]:
+        """Stages meeting at junction j; the interface junction also carries the robot side's stage."""
+        around = chain.stages_of(j) + (chain.stages_of(rs) if touching and j == es and (rs, es) in aliases else [])
+        return [k for k in around if k in active]
+
+    junctions = [(j, neighbours(j), junction_state if j in (es, rs) else nodes[j].state) for j in junction_nodes]
     bond = touching and chain.bonded_when_touching
     interface_stage = -1
     if touching and not bond:  # the stage that meets the other side carries the interface force

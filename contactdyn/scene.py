@@ -137,6 +137,14 @@ class ReferenceSpec:
 class ForceSpec:
     contact: str
     ramp: Ramp
+    #: "n" presses along the normal; "t1"/"t2" push along −(that tangent), i.e. the force set-point
+    #: compresses the tangential chain (case 1's horizontal force F1)
+    direction: str = "n"
+
+    @property
+    def key(self) -> str:
+        """Set-point name: the contact for the normal, ``<contact>.t1`` for a tangent."""
+        return self.contact if self.direction == "n" else f"{self.contact}.{self.direction}"
 
 
 @dataclass(frozen=True)
@@ -478,5 +486,9 @@ def _read_force(r: Reader, contacts: dict[str, ContactSpec]) -> ForceSpec:
         kind=r.str("kind", "linear", choices=["linear", "exponential", "step"]),
         initial=r.float("initial", 0.0, unit="N"),
     )
+    direction = r.str("direction", "n", choices=["n", "t1", "t2"])
+    if direction != "n" and int(direction[1]) > len(contacts[contact].tangents):
+        raise r.error("direction", f"'n' or one of contact {contact!r}'s {len(contacts[contact].tangents)} "
+                      "tangent directions (t1, t2)", direction)
     r.finish()
-    return ForceSpec(contact, ramp)
+    return ForceSpec(contact, ramp, direction)

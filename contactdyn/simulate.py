@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from .chain import NodeKind
 from .contact import ContactMode
 from .errors import SimulationError
 from .result import Result
@@ -259,14 +260,18 @@ class _Run:
         kin = system.kinematics(c, x)
         x = x.copy()
         offsets = []
-        for dc in c.tangent_chains:
-            # shift the environment side rigidly so the two surface nodes meet undeformed
+        for k, dc in enumerate(c.tangent_chains):
+            # shift the environment side rigidly so the two surface nodes meet undeformed; on a
+            # re-touch the anchor already carries the previous touch's offset (and its masses too)
+            old = modes[i].offsets[k] if k < len(modes[i].offsets) else 0.0
             s_tip = float(dc.u @ kin.p_tip)
-            s_env = float(dc.u @ kin.p_env)
+            s_env = float(dc.u @ kin.p_env) + old
             robot_side = [n for n in dc.chain.nodes if n.side == "robot" and n.coord >= 0]
+            env_side = [n for n in dc.chain.nodes if n.side == "environment" and n.coord >= 0]
             s_r = x[robot_side[-1].coord] if robot_side else s_tip
-            delta = s_r - s_env
-            offsets.append(delta)
+            s_e = x[env_side[-1].coord] if env_side else s_env  # the environment's surface node
+            delta = s_r - s_e
+            offsets.append(old + delta)
             for node in dc.chain.nodes:
                 if node.side == "environment" and node.coord >= 0:
                     x[node.coord] += delta
@@ -275,14 +280,34 @@ class _Run:
             if dc.junction_state >= 0:
                 x[2 * nQ + dc.junction_state] = s_r
         if c.normal.junction_state >= 0:
-            robot_masses = [n for n in c.normal.chain.nodes if n.side == "robot" and n.coord >= 0]
-            x[2 * nQ + c.normal.junction_state] = x[robot_masses[-1].coord] if robot_masses else \
-                float(c.normal.u @ kin.p_tip)
+            x[2 * nQ + c.normal.junction_state] = self._junction_at_rest(c.normal, kin, x)
         vt = c.tangents @ (kin.v_tip - kin.v_env) if len(c.tangents) else np.zeros(0)
         slip = modes[i].slip
         if len(vt) and float(np.linalg.norm(vt)) > 0.0:
             slip = self._direction(vt)
         return modes[i].with_(touching=True, stuck=False, slip=slip, offsets=tuple(offsets)), x
+
+    def _junction_at_rest(self, dc, kin, x) -> float:
+        """[m] where the two interface stages' springs balance: they start with equal forces.
+
+        On a first touch both surfaces are at one point (zero compressions). On a re-touch after a
+        separation at zero force with the stages still compressed (their dampers held them), the
+        surfaces overlap by those compressions; splitting the overlap by stiffness starts both
+        stages where they left off, instead of loading one of them with all of it.
+        """
+        chain, nQ = dc.chain, self.system.nQ
+
+        def position(node: int) -> float:
+            n = chain.nodes[node]
+            if n.coord >= 0:
+                return float(x[n.coord])
+            if n.state >= 0:
+                return float(x[2 * nQ + n.state])
+            return float(dc.u @ (kin.p_tip if n.kind == NodeKind.TIP else kin.p_env))
+
+        (e,) = [s for s in chain.stages if s.upper == chain.env_surface]
+        (r,) = [s for s in chain.stages if s.lower == chain.robot_surface]
+        return (e.k * position(e.lower) + r.k * position(r.upper)) / (e.k + r.k)
 
     def _consistent(self, t, x, modes, phase) -> list[ContactMode]:
         """Fix modes the state contradicts (pulling contacts, unholdable sticks, resting slides)."""
@@ -390,6 +415,10 @@ def _channels(system: System, rows) -> dict[str, np.ndarray]:
             ch[f"{p}.stuck"] = np.array([float(r[3][i].stuck) for r in rows])
         for dc in c.tangent_chains:
             ch[f"{p}.{dc.label}.F"] = np.array([e.interface.get(f"{c.name}.{dc.label}", 0.0) for e in evs])
+        for i in range(len(c.tangents)):
+            key = f"{c.name}.t{i + 1}"
+            if any(key in e.force_d for e in evs):
+                ch[f"{p}.t{i + 1}.F_d"] = np.array([e.force_d.get(key, np.nan) for e in evs])
     for label in system.stage_labels:
         vals = np.array([e.stages.get(label, (0.0, 0.0, 0.0)) for e in evs])
         ch[f"stage.{label}.x"], ch[f"stage.{label}.xdot"], ch[f"stage.{label}.F"] = vals.T

@@ -161,6 +161,9 @@ class System:
                       for n, b in scene.bodies.items() if b.servo_velocity is not None]
         self.stage_labels = [f"{c.name}.{dc.label}.{s.label}" for c in self.contacts for dc in c.chains
                              for s in dc.chain.stages]
+        #: unit direction of each force set-point key (see ForceSpec.key): the robot pushes along −u
+        self.force_directions = {c.name: c.normal.u for c in self.contacts}
+        self.force_directions.update({f"{c.name}.t{i + 1}": t for c in self.contacts for i, t in enumerate(c.tangents)})
         self.has_rows_possible = any(dc.chain.bonded_when_touching for c in self.contacts for dc in c.chains) or any(
             c.friction is not None for c in self.contacts)
 
@@ -244,7 +247,7 @@ class System:
                     raise SceneError(f"phase[{index}].reference.moves", f"{dims}-vectors", len(m.delta),
                                      self.scene.file)
             reference = Reference(start, moves)
-        forces = {f.contact: Ramp(f.ramp.value, f.ramp.start + t, f.ramp.duration, f.ramp.kind, f.ramp.initial)
+        forces = {f.key: Ramp(f.ramp.value, f.ramp.start + t, f.ramp.duration, f.ramp.kind, f.ramp.initial)
                   for f in spec.forces}
         phase = Phase(spec, index, t, controller, self.z_slices[index], reference, forces)
         return phase
@@ -460,8 +463,8 @@ class System:
         ctl = phase.controller
         z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
         inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
-                           p_tip, v_tip, J, drift, x_d, v_d, a_d, dict(ev.normal_force), force_d,
-                           {c.name: c.normal.u for c in self.contacts}, z)
+                           p_tip, v_tip, J, drift, x_d, v_d, a_d, {**ev.normal_force, **ev.interface}, force_d,
+                           self.force_directions, z)
         tau, zdot = ctl.command(inp)
         f[:nv] += tau
         if zdot is not None:

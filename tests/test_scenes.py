@@ -17,11 +17,13 @@ from contactdyn.scene import load_scene, sims_dir
 SCENES = sorted(p.stem for p in sims_dir().glob("*.toml"))
 
 #: [s] smoke-run length per scene: past the first contact (and its impact) where there is one
-SMOKE_DURATION = {"b1": 0.3, "case2_writer_b": 1.2, "case2_writer_rigid": 1.2}
+SMOKE_DURATION = {"b1": 0.3, "case1_cart": 1.2, "case2_writer_b": 1.2, "case2_writer_rigid": 1.2, "case3_a": 1.6,
+                  "case3_b": 1.6, "case3_b_varied": 1.6}
+CASE_SCENES = ("case1_cart", "case2_writer_b", "case2_writer_rigid", "case3_a", "case3_b", "case3_b_varied")
 
 
 def test_sims_folder_holds_the_case_scenes():
-    for name in ("case2_writer_b", "case2_writer_rigid"):
+    for name in CASE_SCENES:
         assert name in SCENES
 
 
@@ -70,3 +72,76 @@ def test_case_scene_comments_cite_their_choices():
         text = (sims_dir() / f"{name}.toml").read_text()
         assert "sec." in text and "our choice" in text, name
         assert not math.isnan(load_scene(name).duration)
+
+
+# ---- case 1: the cart --------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def cart_run():
+    return simulate("case1_cart", {"solver.output_rate": 2000.0})
+
+
+def test_cart_stages_are_named_from_body_and_tip(cart_run):
+    """Stages count from the body (env1 = x″_e, env2 = x′_e) and from the tip (rob1, rob2), masses skipped."""
+    for d in ("n", "t1"):
+        assert {k.split(".")[3] for k in cart_run.channels if k.startswith(f"stage.tip.{d}.")} == \
+            {"env1", "env2", "rob1", "rob2"}
+
+
+def test_cart_interface_junction_balances_both_sides(cart_run):
+    """Regression: the massless point where the two external stages meet carried only the cart
+    side's stage, so the interface force was 0 at every touch (touch/separate storm). It must
+    balance: x′_e's force = x′_r's force = the contact force, in both directions."""
+    touching = cart_run["contact.tip.touching"] > 0
+    for d, F in (("n", "contact.tip.F_n"), ("t1", "contact.tip.t1.F")):
+        F_e, F_r = cart_run[f"stage.tip.{d}.env2.F"][touching], cart_run[f"stage.tip.{d}.rob2.F"][touching]
+        np.testing.assert_allclose(F_e, F_r, rtol=0, atol=1e-9 * np.abs(F_e).max())
+        np.testing.assert_allclose(cart_run[F][touching], F_e, rtol=0, atol=1e-9 * np.abs(F_e).max())
+
+
+def test_cart_chains_meet_undeformed_at_every_touch(cart_run):
+    """Regression: on a re-touch the tangential chain was re-anchored without its previous
+    offset, starting at 0.12 m compression (1250 N). At each touch the interface stages start
+    (nearly) undeformed: |x| ≤ relative speed × one output interval."""
+    touches = [e["t"] for e in cart_run.events if e["kind"] == "touch"]
+    assert len(touches) >= 1
+    for t_touch in touches:
+        k = int(np.searchsorted(cart_run.t, t_touch))
+        for d in ("n", "t1"):
+            for stage in ("env2", "rob2"):
+                assert abs(cart_run[f"stage.tip.{d}.{stage}.x"][k]) < 1e-4, (t_touch, d, stage)
+
+
+def test_cart_forces_reach_their_set_points_and_the_cart_keeps_v0(cart_run):
+    end = cart_run.t > cart_run.t[-1] - 0.5
+    for F, F_d in (("contact.tip.F_n", "contact.tip.F_d"), ("contact.tip.t1.F", "contact.tip.t1.F_d")):
+        np.testing.assert_allclose(cart_run[F][end], cart_run[F_d][end], rtol=0.05)  # [N] within 5 N of 100 N
+    v = cart_run["body.cart.v"]
+    np.testing.assert_allclose(v, 0.25, rtol=0.01)  # the servo's 2 mm/s droop under a 100 N push is < 1 %
+
+
+def test_force_direction_must_name_a_tangent_the_contact_has():
+    from contactdyn.errors import SceneError
+
+    with pytest.raises(SceneError, match=r"phase\[1\].force\[1\].direction.*'n' or one of contact 'tip'"):
+        load_scene("case1_cart", {"phase.1.force.1.direction": "t2"})
+
+
+# ---- case 3: the decoupled vertical axis (item 2) ------------------------------------------
+@pytest.mark.parametrize("gravity", [[0.0, 0.0, 0.0], [0.0, 0.0, -9.81]], ids=["paper_no_gravity", "gravity"])
+def test_cylindrical_full_model_gives_the_reduced_axis_motion(gravity):
+    """Eqs 47-49: H13 = H23 = 0 and h3 has no q1/q2 terms, so the vertical axis moves the same in
+    the full 3-DOF model, even while q1 and q2 move, as in the model reduced to q3 (both runs
+    with tight tolerances; they differ only by integration error)."""
+    tight = {"duration": 1.7, "solver.output_rate": 500.0, "solver.rtol": 1e-12, "solver.atol": 1e-14,
+             "robot.gravity": gravity}
+    reduced = simulate("case3_b", tight)
+    full = simulate("case3_b", {**tight, "robot.active_joints": ["q1", "q2", "q3"], "robot.q0": [0.3, 0.2, 0.0],
+                                "robot.v0": [0.5, -0.1, 0.0]})
+    assert np.ptp(full["q"][:, 0]) > 0.5 and np.ptp(full["q"][:, 1]) > 0.05  # the other axes really move
+    assert len(reduced.impacts) == len(full.impacts) >= 1
+    np.testing.assert_allclose(full["q"][:, 2], reduced["q"][:, 0], rtol=0, atol=1e-8)  # [m]
+    np.testing.assert_allclose(full["tip"][:, 2], reduced["tip"][:, 2], rtol=0, atol=1e-8)  # [m]
+    F_red = reduced["contact.tip.F_n"]
+    np.testing.assert_allclose(full["contact.tip.F_n"], F_red, rtol=0, atol=1e-8 * np.abs(F_red).max())  # [N]
+    for a, b in zip(full.impacts, reduced.impacts, strict=True):
+        assert a["normal_impulse"] == pytest.approx(b["normal_impulse"], rel=1e-8)

@@ -32,9 +32,12 @@ class ControlInput:
     x_d: np.ndarray | None  #: reference position (task [m] or joint), None when the phase has none
     v_d: np.ndarray | None
     a_d: np.ndarray | None
-    forces: dict[str, float]  #: measured normal contact force per contact [N], > 0 pressing
-    force_d: dict[str, tuple[float, float]]  #: force set-point and its rate per contact [N, N/s]
-    normals: dict[str, np.ndarray]  #: contact normals (unit, world)
+    #: measured contact force [N], > 0 pressing: normal per contact name, tangential chain per "<contact>.t1"
+    forces: dict[str, float]
+    #: force set-point and its rate [N, N/s]: per contact (normal) or "<contact>.t1" (tangential)
+    force_d: dict[str, tuple[float, float]]
+    #: unit direction of every set-point key (contact normals, "<contact>.t1" tangents); the robot pushes along −u
+    normals: dict[str, np.ndarray]
     z: np.ndarray  #: controller states
 
 
