@@ -79,7 +79,7 @@ def _build_model(path: Path, package_dirs: list[str]) -> tuple[pin.Model, pin.Ge
         os.dup2(err.fileno(), 2)
         try:
             model = pin.buildModelFromUrdf(str(path))
-            visual = pin.buildGeomFromUrdf(model, str(path), pin.GeometryType.VISUAL, package_dirs)
+            visual = pin.buildGeomFromUrdf(model, str(path), pin.GeometryType.VISUAL, package_dirs=package_dirs)
             failure = None
         except (ValueError, RuntimeError) as exc:
             failure = exc
@@ -113,7 +113,8 @@ def _check_physics(model: pin.Model, path: Path) -> None:
         sl = slice(model.idx_qs[jid], model.idx_qs[jid] + model.nqs[jid])
         if np.any(lower[sl] > upper[sl]):
             raise RobotError(
-                f"{path}: joint {model.names[jid]!r}: lower limit {lower[sl].tolist()} > upper limit {upper[sl].tolist()}"
+                f"{path}: joint {model.names[jid]!r}: lower limit {lower[sl].tolist()} > "
+                f"upper limit {upper[sl].tolist()}"
             )
     if not any(inertia.mass > 0.0 for inertia in model.inertias[1:]):
         raise RobotError(f"{path}: every body has zero mass: nothing to simulate")

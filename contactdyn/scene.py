@@ -159,6 +159,7 @@ class SolverSpec:
     max_events: int = 10000  #: guard against event storms (whole run)
     storm_window: float = 1e-9  #: [s] events closer than this count towards a storm
     storm_count: int = 50  #: that many events inside the window stop the run
+    stabilization: float = 20.0  #: [1/s] Baumgarte rate ω of bonds, rigid contacts and sticks (0: none)
 
 
 @dataclass(frozen=True)
@@ -422,6 +423,7 @@ def _read_solver(r: Reader) -> SolverSpec:
         max_events=r.int("max_events", SolverSpec.max_events, lo=1),
         storm_window=r.float("storm_window", SolverSpec.storm_window, lo=0.0, unit="s"),
         storm_count=r.int("storm_count", SolverSpec.storm_count, lo=2),
+        stabilization=r.float("stabilization", SolverSpec.stabilization, lo=0.0, unit="1/s"),
     )
     r.finish()
     return spec
