@@ -128,6 +128,8 @@ class FrameTerms:
     velocity: np.ndarray  #: ṗ = J q̇ [m/s], shape (3,)
     jacobian: np.ndarray  #: J = ∂p/∂q, linear rows [m/rad or m/m], shape (3, nv)
     drift: np.ndarray  #: J̇ q̇ [m/s²], shape (3,)
+    rotation: np.ndarray  #: frame orientation in the world, shape (3, 3)
+    angular_jacobian: np.ndarray  #: ω = J_ω q̇ [rad/s per joint unit], shape (3, nv)
 
 
 class Robot:
@@ -217,11 +219,14 @@ class Robot:
         """Position, velocity, Jacobian and J̇q̇ of frame ``fid`` at the last update."""
         model, data = self.model, self.data
         placement = pin.updateFramePlacement(model, data, fid)
+        J6 = pin.getFrameJacobian(model, data, fid, _LWA)
         return FrameTerms(
             position=placement.translation.copy(),
             velocity=pin.getFrameVelocity(model, data, fid, _LWA).linear,
-            jacobian=pin.getFrameJacobian(model, data, fid, _LWA)[:3],
+            jacobian=J6[:3],
             drift=pin.getFrameClassicalAcceleration(model, data, fid, _LWA).linear,
+            rotation=placement.rotation.copy(),
+            angular_jacobian=J6[3:],
         )
 
     # ---- convenience (allocating) ------------------------------------------------------

@@ -40,3 +40,18 @@ def test_force_ramps():
     assert lin.at(2.0) == (100.0, 0.0)
     exp = Ramp(100.0, start=0.0, duration=0.2, kind="exponential")
     assert exp.at(0.2)[0] == pytest.approx(100.0 * (1 - np.exp(-1.0)))
+
+
+def test_circle_move_stays_on_its_circle_with_consistent_derivatives():
+    center = np.array([0.05, 0.0, 0.0])
+    move = Move(center, start=0.0, duration=2.0, kind="circle", accel_fraction=0.2, normal=np.array([0, 0, 1.0]))
+    ts = np.linspace(0.0, 2.0, 4001)
+    xs = np.array([move.at(t)[0] for t in ts])
+    vs = np.array([move.at(t)[1] for t in ts])
+    assert np.allclose(np.linalg.norm(xs - center, axis=1), 0.05, atol=1e-15)
+    assert np.allclose(xs[-1], 0.0, atol=1e-15)  # one full turn back to the start
+    assert np.max(np.abs(np.gradient(xs, ts, axis=0)[1:-1] - vs[1:-1])) < 1e-4
+    acc_fd = np.gradient(vs, ts, axis=0)
+    acc = np.array([move.at(t)[2] for t in ts])
+    smooth = (np.abs(ts - 0.4) > 2e-3) & (np.abs(ts - 1.6) > 2e-3) & (ts > 0) & (ts < 2)  # angle-acceleration jumps
+    assert np.max(np.abs(acc_fd - acc)[smooth]) < 5e-3
