@@ -235,6 +235,8 @@ class FrameTerms(NamedTuple):
     velocity: np.ndarray  #: ṗ = J q̇ [m/s], shape (3,)
     jacobian: np.ndarray  #: J = ∂p/∂q, linear rows [m/rad or m/m], shape (3, nv)
     drift: np.ndarray  #: J̇ q̇ [m/s²], shape (3,)
+    rotation: np.ndarray  #: frame orientation in the world, shape (3, 3)
+    angular_jacobian: np.ndarray  #: ω = J_ω q̇ [rad/s per joint unit], shape (3, nv)
 
 
 class Robot:
@@ -351,11 +353,14 @@ class Robot:
         """Position, velocity, Jacobian and J̇q̇ of frame ``fid`` at the last update (new arrays)."""
         model, data = self.model, self.data
         placement = pin.updateFramePlacement(model, data, fid)
+        J6 = pin.getFrameJacobian(model, data, fid, _LWA).reshape(6, self.nv)  # eigenpy gives (6,) for nv = 1
         return FrameTerms(
             placement.translation,  # placement is already a copy of data.oMf[fid]
             pin.getFrameVelocity(model, data, fid, _LWA).linear,
-            pin.getFrameJacobian(model, data, fid, _LWA)[:3].reshape(3, self.nv),  # eigenpy gives (6,) for nv = 1
+            J6[:3],
             pin.getFrameClassicalAcceleration(model, data, fid, _LWA).linear,
+            placement.rotation,
+            J6[3:],
         )
 
     # ---- convenience (allocating, own data) ---------------------------------------------

@@ -172,6 +172,8 @@ def test_frame_terms_match_convenience(name, frame):
     np.testing.assert_allclose(ft.jacobian, J6[:3], rtol=0, atol=1e-14)
     np.testing.assert_allclose(ft.velocity, J6[:3] @ v, rtol=0, atol=1e-12)
     np.testing.assert_allclose(ft.drift, r.frame_drift(q, v, frame)[:3], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ft.rotation, r.frame_placement(q, frame).rotation, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(ft.angular_jacobian, J6[3:], rtol=0, atol=1e-14)
     # the returned arrays are the caller's: the next update does not change them
     kept = [x.copy() for x in ft]
     r.update(q2, v2)
@@ -223,7 +225,8 @@ def test_cylindrical3_reduced_to_vertical_axis_case3():
             np.testing.assert_allclose(red.h, [-M3 * G], rtol=0, atol=1e-10)
             full.update(np.array([q1, q2, q3]), np.array([0.0, 0.0, v3]))
             a, b = red.frame_terms(fid), full.frame_terms(fid_full)
-            assert a.jacobian.shape == (3, 1) and red.frame_jacobian(np.array([q3]), fid).shape == (6, 1)
+            assert a.jacobian.shape == a.angular_jacobian.shape == (3, 1)
+            assert red.frame_jacobian(np.array([q3]), fid).shape == (6, 1)
             assert red.H.shape == (1, 1) and red.h.shape == (1,)
             np.testing.assert_allclose(a.position, b.position, rtol=0, atol=1e-12)
             np.testing.assert_allclose(a.velocity, b.velocity, rtol=0, atol=1e-12)
