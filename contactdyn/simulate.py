@@ -45,7 +45,7 @@ FORCE_TOL = 1e-9  #: [N] relative tolerance of the consistency checks
 #: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
 #: zero at the start misses a re-touch that lifts and returns within one step, and the tip then
 #: passed through the surface unseen (case 2's writer, just after its impact).
-TOUCH_TOL = 1e-12
+TOUCH_TOL = 1e-13  # well above rounding of positions (~1e-16 m per metre)
 
 
 @dataclass
@@ -222,7 +222,8 @@ class _Run:
                 x, imp = system.impact(t, x, modes, c)
                 self.impacts.append({"t": t, "contact": c.name, "normal_impulse": imp.normal_impulse,
                                      "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
-                                     "energy_loss": imp.energy_loss})
+                                     "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
+                                     "v_after": imp.v_after.tolist()})
                 if imp.jammed:
                     modes[i] = modes[i].with_(stuck=True)
             if phase.spec.until == f"touch:{c.name}":
@@ -231,6 +232,7 @@ class _Run:
                 if phase.index < len(self.scene.phases):
                     self._log(t, "phase", phase.spec.name, check_storm=False)
         elif event.kind == "separate":
+            x = system.separate(t, x, modes, phase, c)
             modes[i] = modes[i].with_(touching=False, stuck=False)
         elif event.kind == "stop":
             modes[i] = modes[i].with_(stuck=True)
@@ -322,6 +324,7 @@ class _Run:
                     continue
                 F_n = ev.normal_force[c.name]
                 if not c.spec.bonded and F_n < -FORCE_TOL * (1.0 + abs(F_n)):
+                    x[:] = system.separate(t, x, modes, phase, c)
                     modes[i] = mode.with_(touching=False, stuck=False)
                     self._log(t, "separate", c.name)
                     changed = True

@@ -39,6 +39,8 @@ class ControlInput:
     #: unit direction of every set-point key (contact normals, "<contact>.t1" tangents); the robot pushes along −u
     normals: dict[str, np.ndarray]
     z: np.ndarray  #: controller states
+    R_tip: np.ndarray | None = None  #: tip frame orientation (3, 3)
+    J_ang: np.ndarray | None = None  #: tip angular Jacobian (3, nv)
 
 
 class Controller:
