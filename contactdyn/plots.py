@@ -50,6 +50,7 @@ class Line:
     y: np.ndarray  #: in the panel's unit
     label: str
     style: str = "-"
+    color: str | None = None  #: matplotlib colour; None: the next in the cycle
 
 
 @dataclass(frozen=True)
@@ -234,20 +235,23 @@ def _tip_motion(result: Result) -> list[Panel] | None:
         lines_a.append(Line(t, tip[:, k], f"tip {'xyz'[k]}"))
         if ref is not None:
             lines_a.append(Line(t, ref[:, k], f"reference {'xyz'[k]}_d", "--"))
-    panels = [Panel("tip position along the surface [m]", tuple(lines_a), "(a) along the surface")] if lines_a else []
-    if surface is not None:
+    panels = [Panel("tip position [m]", tuple(lines_a), "(a) along the surface")] if lines_a else []
+    if surface is not None:  # Fig. 14(b): in contact the tip's height is the surface's deformation
         point, n = surface
-        height = MM * ((tip - point) @ n)
-        lines_b = [Line(t, height, "tip height n·(p − p_s); < 0: surface deformation")]
+        t_touch = _touch_time(result)
+        shown = t >= t_touch if t_touch is not None else np.ones_like(t, bool)
+        height = np.where(shown, MM * ((tip - point) @ n), np.nan)
+        lines_b = [Line(t, height, "tip height n·(p − p_s)")]
         if ref is not None:
-            lines_b.append(Line(t, MM * ((ref - point) @ n), "reference", "--"))
-        panels.append(Panel("tip height above the surface [mm]", tuple(lines_b), "(b) across the surface"))
+            lines_b.append(Line(t, np.where(shown, MM * ((ref - point) @ n), np.nan), "reference", "--"))
+        when = "from the first touch; < 0: surface deformation" if t_touch is not None else "whole run"
+        panels.append(Panel("tip height [mm]", tuple(lines_b), f"(b) across the surface, {when}"))
     else:
         k = int(np.argmax(np.abs(normal)))
         lines_b = [Line(t, tip[:, k], f"tip {'xyz'[k]}")]
         if ref is not None:
             lines_b.append(Line(t, ref[:, k], f"reference {'xyz'[k]}_d", "--"))
-        panels.append(Panel(f"tip {'xyz'[k]} [m]", tuple(lines_b), "(b) across the surface"))
+        panels.append(Panel(f"tip {'xyz'[k]} [m]", tuple(lines_b), "(b) across the surface (normal direction)"))
     return panels
 
 
@@ -267,7 +271,9 @@ def _friction(result: Result) -> list[Panel] | None:
         lines_b = [Line(t, F_f[:, i], f"F_f ({names[i]})") for i in range(F_f.shape[1])]
         if mu is not None:
             bound = float(mu) * np.maximum(result[f"contact.{c}.F_n"], 0.0)
-            lines_b += [Line(t, bound, f"±μF, μ = {float(mu):g}", ":"), Line(t, -bound, "", ":")]
+            lines_b += [Line(t, bound, f"±μF, μ = {float(mu):g}", ":", "0.4"), Line(t, -bound, "", ":", "0.4")]
+        touching = result.channels.get(f"contact.{c}.touching", np.ones_like(t))[:, None] > 0.5
+        v = np.where(touching, v, np.nan)  # slip exists only in contact
         lines_c = [Line(t, v[:, i], f"v_slip ({names[i]})") for i in range(v.shape[1])]
         return [Panel("contact force F [N]", tuple(lines_a), f"(a) pressure, contact {c}"),
                 Panel("friction force F_f [N]", tuple(lines_b), "(b) friction"),
@@ -359,7 +365,7 @@ def _draw(spec: FigureSpec, panels: list[Panel], result: Result):
     events = [e for e in result.events if e.get("kind") in EVENT_STYLE]
     for ax, panel in zip(axes, panels, strict=True):
         for line in panel.lines:
-            ax.plot(line.t, line.y, line.style, label=line.label or None, linewidth=1.2)
+            ax.plot(line.t, line.y, line.style, label=line.label or None, linewidth=1.2, color=line.color)
         seen: set[str] = set()
         for e in events:
             color, name = EVENT_STYLE[e["kind"]]

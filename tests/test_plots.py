@@ -160,6 +160,10 @@ def test_command_options_and_errors(tmp_path):
     assert plot_command(argparse.Namespace(run=str(tmp_path / "syn.json"), out=str(tmp_path / "figs"),
                                            format="svg")) == 0
     assert {p.suffix for p in (tmp_path / "figs").iterdir()} == {".svg"}
+    # the command line passes formats as a list (--format png,svg split by the parser)
+    assert plot_command(argparse.Namespace(run=str(tmp_path / "syn"), out=str(tmp_path / "figs2"),
+                                           format=["png"])) == 0
+    assert {p.suffix for p in (tmp_path / "figs2").iterdir()} == {".png"}
     with pytest.raises(ContactdynError, match="expected a comma-separated list of png, svg, found pdf"):
         plot_result(run, tmp_path, "pdf")
     with pytest.raises(ContactdynError, match="not a saved run"):
