@@ -56,14 +56,17 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
     views = contact_views(scene, tips, disp, L, GROUPS["environment"]) if scene else []
     legend = [f"run {result.meta.get('name', '?')}: {duration:g} s at {speed:g} × real time "
               f"({len(idx)} frames of {len(t_all)} samples)"]
+    scales = {"size": L, "stage_length": STAGE_LENGTH * L}
     if views:
         add_environment(writer, views, disp, L)
         S, chain_notes = add_gauges(writer, views, ch, L, GROUPS["chains"], label_rotation)
         notes += chain_notes
+        scales["magnification"] = S
         if any(not v.spec.normal_chain.rigid or v.spec.tangent_chain is not None for v in views):
             legend.append(f"deformation chains: gauges beside the surface, compressions magnified ×{S:g}, "
                           f"{STAGE_LENGTH * L:.3g} m per stage at rest")
         per = add_forces(writer, views, ch, L, GROUPS["forces"])
+        scales["arrow"] = 0.1 * L / per
         legend.append(f"force arrows (on the robot, ending at the contact point): {0.1 * L:.3g} m = {per:g} N "
                       "(red normal, green tangential)")
         v0 = views[0]
@@ -83,7 +86,7 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
     for name in bodies:
         if not any(v.spec.body == name for v in views):
             notes.append(f"body {name!r} carries no contact surface: not drawn")
-    return ViewerScene(writer.finish(), duration, float(speed), legend, notes, dict(GROUPS))
+    return ViewerScene(writer.finish(), duration, float(speed), legend, notes, dict(GROUPS), scales)
 
 
 def _scene_of(result: Result) -> Scene | None:

@@ -37,6 +37,8 @@ class ViewerScene:
     legend: list[str]  #: scales and events, one line each
     notes: list[str] = field(default_factory=list)  #: what could not be drawn, and why
     groups: dict[str, str] = field(default_factory=dict)  #: part name -> meshcat path (robot, environment, ...)
+    #: drawing scales: ``size`` L [m], ``stage_length`` ℓ [m], ``magnification`` S [-], ``arrow`` [m/N]
+    scales: dict[str, float] = field(default_factory=dict)
 
     def packed(self) -> list[bytes]:
         """The commands as the msgpack messages meshcat's JavaScript decodes."""
