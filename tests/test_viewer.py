@@ -96,9 +96,9 @@ def test_robot_visuals_follow_the_simulated_tip(b1_run):
     robot = Robot.load(result.meta["robot"])
     names = [g.name for g in robot.visual_model.geometryObjects]
     assert len(names) == 4
-    for name in names:  # every visual has an object
-        assert commands_at(scene, f"/meshcat/robot/{name}/{'box' if name.startswith('base') else ''}") or any(
-            c["path"].startswith(f"/meshcat/robot/{name}/") and c["type"] == "set_object" for c in scene.commands)
+    drawn = {c["path"].split("/")[3] for c in scene.commands if c["type"] == "set_object"
+             and c["path"].startswith("/meshcat/robot/")}
+    assert drawn == set(names) and not scene.notes  # every visual has an object
     tip = clip(scene, "/meshcat/robot/tip_0")
     np.testing.assert_allclose(values(tip["position"]), result["tip"], atol=1e-12)
     np.testing.assert_allclose([k["time"] for k in tip["position"]["keys"]], result["t"])
