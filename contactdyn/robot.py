@@ -220,7 +220,7 @@ class Robot:
         return FrameTerms(
             position=placement.translation.copy(),
             velocity=pin.getFrameVelocity(model, data, fid, _LWA).linear,
-            jacobian=pin.getFrameJacobian(model, data, fid, _LWA)[:3],
+            jacobian=pin.getFrameJacobian(model, data, fid, _LWA)[:3].reshape(3, -1),  # nv = 1: pin gives 1-D
             drift=pin.getFrameClassicalAcceleration(model, data, fid, _LWA).linear,
         )
 
@@ -248,7 +248,7 @@ class Robot:
     def frame_jacobian(self, q: np.ndarray, frame: str | int) -> np.ndarray:
         """World-aligned 6×nv Jacobian (linear rows first) of the frame's origin."""
         fid = frame if isinstance(frame, int) else self.frame_id(frame)
-        return pin.computeFrameJacobian(self.model, self.data, np.asarray(q, float), fid, _LWA).copy()
+        return pin.computeFrameJacobian(self.model, self.data, np.asarray(q, float), fid, _LWA).reshape(6, -1).copy()
 
     def frame_drift(self, q: np.ndarray, v: np.ndarray, frame: str | int) -> np.ndarray:
         """J̇q̇ (classical, world-aligned), linear then angular, shape (6,)."""

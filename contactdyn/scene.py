@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from .config import Reader
+from .drives import DriveTable, read_drive_table
 from .errors import SceneError
 from .trajectory import PROFILES, Move, Ramp
 
@@ -108,7 +109,7 @@ class BodySpec:
     velocity0: float  #: [m/s] initial velocity
     servo_velocity: float | None  #: ideal velocity servo set-point [m/s], None: no drive
     servo_gain: float  #: [N·s/m]
-    drive: dict[str, Any] = field(default_factory=dict)  #: raw drive table (see drives)
+    drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.drives)
 
 
 @dataclass(frozen=True)
@@ -123,7 +124,7 @@ class RobotSpec:
     v0: np.ndarray | None  #: [rad/s or m/s]
     tip0: np.ndarray | None  #: [m] initial tip position, solved by inverse kinematics from q0/q_seed
     q_seed: np.ndarray | None
-    drive: dict[str, Any] = field(default_factory=dict)  #: raw drive table (see drives)
+    drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.drives)
 
 
 @dataclass(frozen=True)
@@ -290,7 +291,7 @@ def _read_robot(r: Reader) -> RobotSpec:
         v0=r.vector("v0", None) if r.has("v0") else None,
         tip0=r.vector("tip0", None, size=3, unit="m") if r.has("tip0") else None,
         q_seed=r.vector("q_seed", None) if r.has("q_seed") else None,
-        drive=dict(r.raw("drive", {})),
+        drive=read_drive_table(r.sub("drive", {}), per_joint=True),
     )
     r.finish()
     return spec
@@ -306,7 +307,7 @@ def _read_body(name: str, r: Reader) -> BodySpec:
         velocity0=r.float("velocity0", 0.0, unit="m/s"),
         servo_velocity=servo.float("velocity", None, unit="m/s") if servo.has("velocity") else None,
         servo_gain=servo.float("gain", 1e3, lo=0.0, unit="N·s/m"),
-        drive=dict(r.raw("drive", {})),
+        drive=read_drive_table(r.sub("drive", {}), per_joint=False),
     )
     servo.finish()
     r.finish()

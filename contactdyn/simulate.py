@@ -31,6 +31,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .contact import ContactMode
+from .drives import drive_channels
 from .errors import SimulationError
 from .result import Result
 from .scene import Scene, load_scene
@@ -387,6 +388,7 @@ def _channels(system: System, rows) -> dict[str, np.ndarray]:
                     ch[f"mass.{label}.x"] = xs[:, node.coord]
                     ch[f"mass.{label}.v"] = xs[:, nQ + node.coord]
                     k += 1
+    ch.update(drive_channels(system, xs, evs))
     if system.energy_slot >= 0:
         ch["energy.work"] = xs[:, 2 * nQ + system.energy_slot]
         ch["energy.dissipated"] = xs[:, 2 * nQ + system.energy_slot + 1]

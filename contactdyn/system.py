@@ -15,17 +15,25 @@ contacts, sticking friction) come from one linear system
 where G Q̈ + γ = 0 are the acceleration-level constraints and C their force columns (a
 row's own direction, tilted by sliding friction −μ d). The plastic impact map solves
 the same matrix with velocity jumps (momentum law): M ΔQ̇ = Cᵀ Λ, G Q̇⁺ = 0.
+
+Drives (:mod:`contactdyn.drives`) turn the controller's command into generalized forces:
+rigid gears add their reflected rotor inertia to M's diagonal, elastic transmissions add
+a motor angle to Q (after the chain masses). A controller that reads measured forces is
+affine in them, τ = τ₀ + B λ; its columns B are folded into the matrix (−Cᵀ − B), so the
+force it measures is the one the solve returns (see :mod:`contactdyn.controllers.base`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .chain import NodeKind
 from .contact import Contact, ContactMode, DirectionalChain, Kinematics
 from .controllers import CONTROLLERS, ControlInput, Controller
+from .controllers.base import BindContext
+from .drives import Drives
 from .errors import RobotError, SceneError, SimulationError
 from .robot import Robot
 from .scene import PhaseSpec, Scene
@@ -96,6 +104,8 @@ class Evaluation:
     x_d: np.ndarray | None  #: reference
     force_d: dict[str, float]
     regular: bool = True  #: False when the linear solve fell back to least squares
+    tau_cmd: np.ndarray | None = None  #: the controller's command per joint [N·m or N; V for voltage controllers]
+    u: np.ndarray | None = None  #: motor voltage per drive (joints, then bodies) [V], NaN for ideal drives
 
 
 class System:
@@ -147,11 +157,20 @@ class System:
                     es_state = chain.nodes[chain.env_surface].state
                     dc.junction_state = es_state if es_state >= 0 else n_first
                     n_first += 0 if es_state >= 0 else 1
+        # ---- drives: elastic transmissions add motor angles after the chain masses ----
+        self.drives = self._build_drives(nv + len(diag))
+        diag += self.drives.motor_inertias
         self.nQ = nv + len(diag)
-        self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg]
+        self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg, kg·m² for motors]
+        self.M_rest[: len(self.body_names)] += self.drives.reflected[nv:]  # rotor inertia through a wheel
+        self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
+        self._D_ctl = self.drives.model_reflected[:nv]  #: the same in the controller's rigid model
         self.n_junctions = n_first
         # ---- controller states, energy audit ----
         self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
+        for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
+            ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.motorized[:nv].copy(),
+                                 f"phase[{i}].controller"))
         self.z_slices = []
         for ctl in self.controllers:
             self.z_slices.append(slice(n_first, n_first + ctl.n_states))
@@ -169,6 +188,16 @@ class System:
                              for s in dc.chain.stages]
         self.has_rows_possible = any(dc.chain.bonded_when_touching for c in self.contacts for dc in c.chains) or any(
             c.friction is not None for c in self.contacts)
+
+    def _build_drives(self, first_motor_coord: int) -> Drives:
+        names = list(self.robot.joint_names)
+        specs = self.scene.robot.drive.expand(self.nv, names)
+        coords = list(range(self.nv))
+        for name, b in self.scene.bodies.items():
+            specs += b.drive.expand(1, [name])
+            coords.append(self.body_index[name])
+            names.append(name)
+        return Drives(specs, coords, names, first_motor_coord)
 
     # ---- initial state ------------------------------------------------------------------
     def initial_state(self) -> tuple[np.ndarray, list[ContactMode]]:
@@ -191,6 +220,7 @@ class System:
         x[:nv], x[nQ:nQ + nv] = q, v
         for name, b in self.scene.bodies.items():
             x[self.body_index[name]], x[nQ + self.body_index[name]] = b.position0, b.velocity0
+        self.drives.initial(x, nQ)
         robot.update(q, v)
         modes = []
         for c in self.contacts:
@@ -470,40 +500,36 @@ class System:
         force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
         ctl = phase.controller
         z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
-        inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
+        drives = self.drives
+        inp = ControlInput(t, q, v, robot.H + np.diag(self._D_ctl) if drives.any_motor else robot.H, robot.h,
+                           robot.gravity_torque(q) if ctl.needs_gravity else None,
                            p_tip, v_tip, J, drift, x_d, v_d, a_d, dict(ev.normal_force), force_d,
-                           {c.name: c.normal.u for c in self.contacts}, z)
+                           {c.name: c.normal.u for c in self.contacts}, z,
+                           tau_contact=f[:nv] + robot.h,
+                           surfaces={c.name: (k.p_env, k.v_env) for c, k in zip(self.contacts, kins, strict=True)},
+                           touching={c.name: m.touching for c, m in zip(self.contacts, modes, strict=True)})
         tau, zdot = ctl.command(inp)
-        f[:nv] += tau
+        cmd = np.zeros(len(drives.specs))  # per drive: joints, then bodies
+        cmd[:nv] = tau
+        for idx, v_ref, gain in self.servo:
+            cmd[idx] = gain * (v_ref - x[nQ + idx])  # body coordinate idx = drive idx
+        vmask = drives.motorized & (np.arange(len(cmd)) < nv) if ctl.outputs == "voltage" else None
+        # drives, folded measured forces, solve
+        if ctl.uses_forces and rows:
+            out, qdd, lam, regular, cmd, zdot = self._solve_folded(inp, ctl, cmd, zdot, f, rows, cols, gammas,
+                                                                    meta, x, vmask)
+        else:
+            out = drives.apply(cmd, x, nQ, f, voltage=vmask)
+            qdd, lam, regular = self._solve(f, rows, cols, gammas, None)
         if zdot is not None:
             ydot[phase.z_slice] = zdot
-        body_force = np.zeros(len(self.body_names))
-        for idx, v_ref, gain in self.servo:
-            F = gain * (v_ref - x[nQ + idx])
-            f[idx] += F
-            body_force[idx - nv] = F
-        # solve
-        M = self._M
-        M[:nv, :nv] = robot.H
-        regular = True
-        if rows:
-            nr = len(rows)
-            A = np.zeros((nQ + nr, nQ + nr))
-            A[:nQ, :nQ] = M
-            A[:nQ, nQ:] = -np.array(cols).T
-            A[nQ:, :nQ] = np.array(rows)
-            b = np.concatenate([f, -np.asarray(gammas)])
-            z_all, regular = solve_linear(A, b)
-            qdd, lam = z_all[:nQ], z_all[nQ:]
-        else:
-            qdd = np.empty(nQ)
-            qdd[:nv], regular = solve_linear(M[:nv, :nv], f[:nv])
-            qdd[nv:] = f[nv:] / self.M_rest if nQ > nv else f[nv:]
-            lam = np.empty(0)
         if self.energy_slot >= 0:
-            ydot[self.energy_slot] = float(tau @ v) + float(body_force @ x[nQ + nv: nQ + nv + len(body_force)])
+            ydot[self.energy_slot] = out.power
+            ydot[self.energy_slot + 1] += out.dissipation
         xdot = np.concatenate([x[nQ:2 * nQ], qdd, ydot])
-        ev.xdot, ev.lam, ev.tau, ev.body_force, ev.p_tip, ev.x_d = xdot, lam, tau, body_force, p_tip, x_d
+        ev.xdot, ev.lam, ev.tau, ev.body_force, ev.p_tip, ev.x_d = xdot, lam, out.applied[:nv], out.applied[nv:], \
+            p_tip, x_d
+        ev.tau_cmd, ev.u = cmd[:nv], out.u
         ev.force_d = {k: val[0] for k, val in force_d.items()}
         ev.regular = regular
         for (name, kind, i), value in zip(meta, lam, strict=True):
@@ -522,6 +548,72 @@ class System:
                                                     * (d @ ev.slip[c.name]))
             xdot[2 * nQ + self.energy_slot + 1] = ydot[self.energy_slot + 1]
         return ev
+
+    def _solve(self, f: np.ndarray, rows: list, cols: list, gammas: list, fold: np.ndarray | None
+               ) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Q̈ and the row forces λ of [[M, −Cᵀ − fold], [G, 0]] [Q̈; λ] = [f; −γ]."""
+        nQ, nv = self.nQ, self.nv
+        M = self._M
+        M[:nv, :nv] = self.robot.H + np.diag(self._D) if self.drives.any_motor else self.robot.H
+        if rows:
+            nr = len(rows)
+            A = np.zeros((nQ + nr, nQ + nr))
+            A[:nQ, :nQ] = M
+            A[:nQ, nQ:] = -np.array(cols).T
+            if fold is not None:
+                A[:nQ, nQ:] -= fold
+            A[nQ:, :nQ] = np.array(rows)
+            b = np.concatenate([f, -np.asarray(gammas)])
+            z_all, regular = solve_linear(A, b)
+            return z_all[:nQ], z_all[nQ:], regular
+        qdd = np.empty(nQ)
+        qdd[:nv], regular = solve_linear(M[:nv, :nv], f[:nv])
+        qdd[nv:] = f[nv:] / self.M_rest if nQ > nv else f[nv:]
+        return qdd, np.empty(0), regular
+
+    def _solve_folded(self, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zdot, f: np.ndarray, rows, cols,
+                      gammas, meta, x: np.ndarray, vmask):
+        """Solve with a force-reading controller whose measured forces include unknown row forces λ.
+
+        The controller is probed with a unit force on each row (its generalized column on the
+        joints, and +1 N on the contact's normal force for a normal row): B_j = τ(e_j) − τ₀.
+        B folds into the matrix for drives whose voltage does not clip; a clipped drive gives
+        a force independent of λ. The clipping pattern is re-checked with the solved λ.
+        A row whose force acts on the robot alone (rigid contact or stick on the fixed ground)
+        stays out of the measured joint force: cancelling it would leave it undetermined.
+        """
+        nQ, nv, drives = self.nQ, self.nv, self.drives
+        nr = len(rows)
+        B = np.zeros((nv, nr))
+        Dz = np.zeros((len(zdot), nr)) if zdot is not None else None
+        for j, (name, kind, _) in enumerate(meta):
+            fed_back = bool(np.any(cols[j][nv:]))
+            if kind != "n" and not fed_back:
+                continue
+            forces = inp.forces if kind != "n" else {**inp.forces, name: inp.forces[name] + 1.0}
+            tau_c = inp.tau_contact + cols[j][:nv] if fed_back else inp.tau_contact
+            tau_j, zdot_j = ctl.command(replace(inp, forces=forces, tau_contact=tau_c))
+            B[:, j] = tau_j - cmd[:nv]
+            if Dz is not None:
+                Dz[:, j] = zdot_j - zdot
+        sat_cmd = cmd
+        full = cmd.copy()
+        for _ in range(nv + 2):
+            fk = f.copy()
+            out = drives.apply(cmd, x, nQ, fk, voltage=vmask, sat_cmd=sat_cmd)
+            fold = np.zeros((nQ, nr))
+            for i in range(nv):
+                if not out.saturated[i]:
+                    fold[drives.targets[i]] += drives.gains[i] * B[i]
+            qdd, lam, regular = self._solve(fk, rows, cols, gammas, fold)
+            full = cmd.copy()
+            full[:nv] += B @ lam
+            check = drives.apply(full, x, nQ, np.zeros(nQ), voltage=vmask)
+            if np.array_equal(check.saturated, out.saturated):
+                break
+            sat_cmd = full
+        f[:] = fk
+        return check, qdd, lam, regular, full, (zdot + Dz @ lam if Dz is not None else None)
 
     def separate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, contact: Contact
                  ) -> np.ndarray:
@@ -567,7 +659,7 @@ class System:
         self.robot.update(q, v)
         qd_minus = x[nQ:2 * nQ].copy()
         M = self._M.copy()
-        M[:nv, :nv] = self.robot.H
+        M[:nv, :nv] = self.robot.H + np.diag(self._D)  # rigid gears: the rotors take part in the impact
         rows, cols, meta = self._impact_rows(x, modes, contact, jam=False)
         z, _ = self._impact_solve(M, rows, cols, qd_minus)
         jammed = False
