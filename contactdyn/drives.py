@@ -33,10 +33,13 @@ gear with N* = N and rotor inertia J + I′ + I″/N².
 
 Commands: a controller asks for a generalized force τ_d on each coordinate (the rigid model:
 the force of the motor through its gear, rotor inertia on the controller's side of the
-model). A motor inverts eq. 51 at the measured motor speed θ̇,
-u = R τ_d / (n_t C_M) + C_E θ̇, clips it to ±u_max, and the clipped voltage is what acts.
-Unclipped, the rigid drive then delivers exactly τ_d; the elastic one delivers M = τ_d / n_t
-at the motor, which a controller that ignores the elasticity takes for the joint torque.
+model). The drive inverts eq. 51 in the rigid model, u = R τ_d / (n_t C_M) + C_E n_s Q̇,
+clips it to ±u_max, and the clipped voltage is what acts. Unclipped, a rigid drive then
+delivers exactly τ_d. An elastic one delivers M = τ_d / n_t + (C_M C_E / R)(n_s Q̇ − θ̇) at
+the motor: the controller ignores the elasticity, so it knows the speed of its coordinate
+only, and the back-EMF keeps damping the twist rate. (Inverting at the measured θ̇ instead
+would cancel the back-EMF damping, nearly all the damping the torsional mode has: case 3's
+transmission would keep ζ ≈ 1e-4 of its 0.14, and a stiff PD approach then goes unstable.)
 """
 
 from __future__ import annotations
@@ -67,7 +70,8 @@ _PARAMS = {
     "torque": {},
     "dc_motor": {**_MOTOR, "N_star": ("-", 0.0, True, "N")},
     "elastic": {**_MOTOR, "c": ("N·m/rad", 0.0, True, None), "d": ("N·m·s/rad", 0.0, False, 0.0),
-                "I1": ("kg·m²", 0.0, False, 0.0), "I2": ("kg·m²", 0.0, False, 0.0)},
+                "I1": ("kg·m²", 0.0, False, 0.0), "I2": ("kg·m²", 0.0, False, 0.0),
+                "twist_damping": ("N·m·s/rad", 0.0, False, 0.0)},
 }
 
 
@@ -88,6 +92,8 @@ class DriveSpec:
     d: float = 0.0  #: tube damping [N·m·s/rad] (elastic)
     I1: float = 0.0  #: I′, wave generator inertia on the motor shaft [kg·m²] (elastic)
     I2: float = 0.0  #: I″, flexspline inertia on the output side [kg·m²] (elastic, enters as I″/N²)
+    #: g, active damping of the twist rate on the motor side, M −= g (θ̇ − n_s Q̇) [N·m·s/rad] (elastic; 0: none)
+    twist_damping: float = 0.0
 
     @property
     def motorized(self) -> bool:
@@ -241,7 +247,8 @@ class Drives:
         self.targets = np.where(self.motor_coords >= 0, self.motor_coords, self.coords)
         self.gains = np.array([1.0 / s.n_torque if s.kind == "elastic" else 1.0 for s in specs])
         self._consts = [(DRIVE_KINDS.index(s.kind), int(self.coords[i]), int(self.motor_coords[i]), s.n_speed,
-                         s.n_torque, s.R, s.C_M, s.C_E, s.u_max, s.N, s.r, s.c, s.d) for i, s in enumerate(specs)]
+                         s.n_torque, s.R, s.C_M, s.C_E, s.u_max, s.N, s.r, s.c, s.d, s.twist_damping)
+                        for i, s in enumerate(specs)]
 
     def omega(self, i: int, x: np.ndarray, nQ: int) -> float:
         """Motor speed θ̇ of drive i [rad/s]."""
@@ -274,7 +281,7 @@ class Drives:
         saturated = np.zeros(n, bool)
         power = dissipation = 0.0
         sat_cmd = cmd if sat_cmd is None else sat_cmd
-        for i, (kind, c, m, ns, nt, R, C_M, C_E, u_max, N, r, k, d) in enumerate(self._consts):
+        for i, (kind, c, m, ns, nt, R, C_M, C_E, u_max, N, r, k, d, g) in enumerate(self._consts):
             qd = x[nQ + c]
             if kind == 0:  # ideal torque source
                 applied[i] = cmd[i]
@@ -282,15 +289,17 @@ class Drives:
                 power += cmd[i] * qd
                 continue
             w = x[nQ + m] if m >= 0 else ns * qd  # motor speed [rad/s]
+            w_model = ns * qd  # the rigid model's motor speed, from the coordinate's own speed
+            M_fast = -g * (w - w_model) if m >= 0 else 0.0  # composite control: damp the twist rate [N·m]
             if voltage is not None and voltage[i]:
                 ui = cmd[i]
-            else:
-                ui = R * sat_cmd[i] / (nt * C_M) + C_E * w  # eq. 51 inverted
+            else:  # eq. 51 inverted at the rigid model's speed
+                ui = R * (sat_cmd[i] / nt + M_fast) / C_M + C_E * w_model
             saturated[i] = abs(ui) > u_max
             if saturated[i]:
                 ui = math.copysign(u_max, ui)
             elif sat_cmd is not cmd and not (voltage is not None and voltage[i]):
-                ui = R * cmd[i] / (nt * C_M) + C_E * w
+                ui = R * (cmd[i] / nt + M_fast) / C_M + C_E * w_model
             u[i] = ui
             M = C_M / R * (ui - C_E * w)  # eq. 51 [N·m]
             if m < 0:  # rigid gear
@@ -298,9 +307,8 @@ class Drives:
                 f[c] += applied[i]
                 power += applied[i] * qd
             else:  # elastic transmission, eqs 53-54
-                twist = x[m] / N - x[c] / r  # [rad]
                 twist_rate = x[nQ + m] / N - qd / r
-                T = k * twist + d * twist_rate  # tube torque [N·m]
+                T = k * (x[m] / N - x[c] / r) + d * twist_rate  # tube torque [N·m]
                 f[m] += M - T / N
                 applied[i] = T / r
                 f[c] += applied[i]
