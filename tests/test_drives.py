@@ -282,3 +282,26 @@ def test_mixed_drives_per_joint():
     r = simulate(parse_scene(doc))
     assert np.isnan(r["u"][:, 0]).all() and np.isfinite(r["u"][:, 1]).all()
     assert "drive.q3.theta" in r.channels and "drive.q2.theta" not in r.channels
+
+
+def test_stiff_pd_approach_through_the_elastic_transmission_tracks_like_the_rigid_gear():
+    """Case 3's approach: a PD that ignores the elasticity. The drive inverts eq. 51 at the link's speed, so
+    the back-EMF keeps damping the twist (inverting at the measured θ̇ would cancel it: this diverged)."""
+    ref = {"space": "joint", "start": [0.0],
+           "moves": [{"kind": "trapezoid", "delta": [1.0], "duration": 1.0, "accel_fraction": 0.2}]}
+    errors = {}
+    for kind in ("dc_motor", "elastic"):
+        drive = {"kind": kind, **CASE3, **(TUBE if kind == "elastic" else {})}
+        doc = axis_doc(drive, q0=0.0, duration=1.0, controller={"kind": "joint_pd", "kp": 3e4, "kd": 3e3},
+                       solver={"rtol": 1e-8, "atol": 1e-10, "output_rate": 200.0})
+        doc["phase"] = [{"name": "approach", "reference": ref}]
+        r = simulate(parse_scene(doc))
+        errors[kind] = np.max(np.abs(r["q"][:, 0] - r["q"][0, 0] - _trapezoid(r.t)))
+    assert errors["dc_motor"] == pytest.approx(0.027, rel=0.05)  # [m] the PD's own lag
+    assert errors["elastic"] == pytest.approx(errors["dc_motor"], rel=0.05)
+
+
+def _trapezoid(t: np.ndarray) -> np.ndarray:
+    from contactdyn.trajectory import profile
+
+    return np.array([profile("trapezoid", tk, 0.2)[0] for tk in t])
