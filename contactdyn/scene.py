@@ -107,8 +107,8 @@ class BodySpec:
     axis: np.ndarray  #: unit direction of travel (world)
     position0: float  #: [m] initial coordinate
     velocity0: float  #: [m/s] initial velocity
-    servo_velocity: float | None  #: ideal velocity servo set-point [m/s], None: no drive
-    servo_gain: float  #: [N·s/m]
+    servo_velocity: float | None  #: velocity servo set-point [m/s], None: no drive force
+    servo_gain: float  #: [N·s/m], F = gain (v_ref − v), realised by the body's drive
     drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.drives)
 
 
