@@ -165,6 +165,7 @@ class System:
         self.M_rest[: len(self.body_names)] += self.drives.reflected[nv:]  # rotor inertia through a wheel
         self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
         self._D_ctl = self.drives.model_reflected[:nv]  #: the same in the controller's rigid model
+        self._joint_motors = self.drives.motorized & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
         self.n_junctions = n_first
         # ---- controller states, energy audit ----
         self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
@@ -513,7 +514,7 @@ class System:
         cmd[:nv] = tau
         for idx, v_ref, gain in self.servo:
             cmd[idx] = gain * (v_ref - x[nQ + idx])  # body coordinate idx = drive idx
-        vmask = drives.motorized & (np.arange(len(cmd)) < nv) if ctl.outputs == "voltage" else None
+        vmask = self._joint_motors if ctl.outputs == "voltage" else None
         # drives, folded measured forces, solve
         if ctl.uses_forces and rows:
             out, qdd, lam, regular, cmd, zdot = self._solve_folded(inp, ctl, cmd, zdot, f, rows, cols, gammas,
