@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .chain import Chain, NodeKind, build_chain
+from .robot import FrameTerms
 from .scene import ContactSpec
 
 __all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics"]
@@ -45,6 +46,7 @@ class Kinematics:
     drift: np.ndarray  #: J̇q̇ [m/s²]
     p_env: np.ndarray  #: [m]
     v_env: np.ndarray  #: [m/s]
+    frame: FrameTerms | None = None  #: the tip frame's full terms (orientation, angular Jacobian)
 
 
 @dataclass

@@ -458,12 +458,17 @@ def _read_reference(r: Reader) -> ReferenceSpec:
     for m in r.tables("moves"):
         kind = m.str("kind", "trapezoid", choices=PROFILES)
         duration = m.float("duration", lo=0.0, lo_open=True, unit="s")
+        normal, turns = None, 1.0
         if kind == "velocity_ramp":
             delta = m.vector("velocity", unit="m/s or rad/s") * duration
+        elif kind == "circle":
+            delta = m.vector("center", size=3, unit="m")
+            normal = m.vector("normal", [0.0, 0.0, 1.0], size=3, unit_norm=True)
+            turns = m.float("turns", 1.0)
         else:
             delta = m.vector("delta", unit="m or rad")
         moves.append(Move(delta, m.float("start", 0.0, lo=0.0, unit="s"), duration, kind,
-                          m.float("accel_fraction", 0.1, lo=0.0, lo_open=True, hi=0.5)))
+                          m.float("accel_fraction", 0.1, lo=0.0, lo_open=True, hi=0.5), normal, turns))
         m.finish()
     sizes = {len(mv.delta) for mv in moves} | ({len(start)} if start is not None else set())
     if len(sizes) > 1:

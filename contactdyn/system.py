@@ -276,7 +276,7 @@ class System:
             if len(start) != dims:
                 raise SceneError(f"phase[{index}].reference", f"{dims}-vectors in {ref.space} space",
                                  len(start), self.scene.file)
-            moves = tuple(type(m)(m.delta, m.start + t, m.duration, m.kind, m.accel_fraction) for m in ref.moves)
+            moves = tuple(replace(m, start=m.start + t) for m in ref.moves)
             for m in moves:
                 if len(m.delta) != dims:
                     raise SceneError(f"phase[{index}].reference.moves", f"{dims}-vectors", len(m.delta),
@@ -297,7 +297,7 @@ class System:
             v_env = c.body_axis * x[nQ + c.body_index]
         else:
             p_env, v_env = c.spec.point, np.zeros(3)
-        return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env)
+        return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env, ft)
 
     def _row(self, c: Contact, u: np.ndarray, kin: Kinematics) -> np.ndarray:
         """Generalized row of the relative tip–environment motion along u."""
@@ -489,12 +489,10 @@ class System:
                 f[:nv] += kin.J.T @ tip_force_total_c
             tip_force_total += tip_force
         # controller
-        ft = robot.frame_terms(self.tip_fid) if not self.contacts or self.contacts[0].fid != self.tip_fid else None
-        if ft is not None:
-            p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
-        else:
-            k0 = kins[0]
-            p_tip, v_tip, J, drift = k0.p_tip, k0.v_tip, k0.J, k0.drift
+        ft = next((k.frame for c, k in zip(self.contacts, kins, strict=True) if c.fid == self.tip_fid), None)
+        if ft is None:
+            ft = robot.frame_terms(self.tip_fid)
+        p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
         x_d = v_d = a_d = None
         if phase.reference is not None:
             x_d, v_d, a_d = phase.reference.at(t)
@@ -505,8 +503,8 @@ class System:
         inp = ControlInput(t, q, v, robot.H + np.diag(self._D_ctl) if drives.any_motor else robot.H, robot.h,
                            robot.gravity_torque(q) if ctl.needs_gravity else None,
                            p_tip, v_tip, J, drift, x_d, v_d, a_d, dict(ev.normal_force), force_d,
-                           {c.name: c.normal.u for c in self.contacts}, z,
-                           tau_contact=f[:nv] + robot.h,
+                           {c.name: c.normal.u for c in self.contacts}, z, R_tip=ft.rotation,
+                           J_ang=ft.angular_jacobian, tau_contact=f[:nv] + robot.h,
                            surfaces={c.name: (k.p_env, k.v_env) for c, k in zip(self.contacts, kins, strict=True)},
                            touching={c.name: m.touching for c, m in zip(self.contacts, modes, strict=True)})
         tau, zdot = ctl.command(inp)
