@@ -245,6 +245,9 @@ class Drives:
         self.model_reflected = np.array([s.reflected_inertia for s in specs])
         #: where a commanded force lands and with what gain (folding of measured forces)
         self.targets = np.where(self.motor_coords >= 0, self.motor_coords, self.coords)
+        if not np.array_equal(self.coords, np.arange(len(specs))):
+            raise ValueError("drives: coordinates must be the system's first ones, in order")
+        self._no_u, self._no_sat = np.full(len(specs), np.nan), np.zeros(len(specs), bool)  # shared, read-only
         self.gains = np.array([1.0 / s.n_torque if s.kind == "elastic" else 1.0 for s in specs])
         self._consts = [(DRIVE_KINDS.index(s.kind), int(self.coords[i]), int(self.motor_coords[i]), s.n_speed,
                          s.n_torque, s.R, s.C_M, s.C_E, s.u_max, s.N, s.r, s.c, s.d, s.twist_damping)
@@ -272,10 +275,9 @@ class Drives:
         command there while ``cmd`` lacks the part it folds into its linear solve.
         """
         n = len(self.specs)
-        if not self.any_motor:  # ideal sources only
-            f[self.coords] += cmd
-            return DriveOutput(cmd.copy(), np.full(n, np.nan), np.zeros(n, bool), float(cmd @ x[nQ + self.coords]),
-                               0.0)
+        if not self.any_motor:  # ideal sources only; the coordinates are 0 .. n−1 (joints, then bodies)
+            f[:n] += cmd
+            return DriveOutput(cmd, self._no_u, self._no_sat, float(cmd @ x[nQ:nQ + n]), 0.0)
         applied = np.empty(n)
         u = np.full(n, np.nan)
         saturated = np.zeros(n, bool)

@@ -504,9 +504,11 @@ class System:
                            robot.gravity_torque(q) if ctl.needs_gravity else None,
                            p_tip, v_tip, J, drift, x_d, v_d, a_d, dict(ev.normal_force), force_d,
                            {c.name: c.normal.u for c in self.contacts}, z, R_tip=ft.rotation,
-                           J_ang=ft.angular_jacobian, tau_contact=f[:nv] + robot.h,
-                           surfaces={c.name: (k.p_env, k.v_env) for c, k in zip(self.contacts, kins, strict=True)},
-                           touching={c.name: m.touching for c, m in zip(self.contacts, modes, strict=True)})
+                           J_ang=ft.angular_jacobian)
+        if ctl.uses_forces:
+            inp.tau_contact = f[:nv] + robot.h
+            inp.surfaces = {c.name: (k.p_env, k.v_env) for c, k in zip(self.contacts, kins, strict=True)}
+            inp.touching = {c.name: m.touching for c, m in zip(self.contacts, modes, strict=True)}
         tau, zdot = ctl.command(inp)
         cmd = np.zeros(len(drives.specs))  # per drive: joints, then bodies
         cmd[:nv] = tau
