@@ -159,6 +159,8 @@ class SolverSpec:
     max_events: int = 10000  #: guard against event storms (whole run)
     storm_window: float = 1e-9  #: [s] events closer than this count towards a storm
     storm_count: int = 50  #: that many events inside the window stop the run
+    #: [m/s] slip-speed band of the stick/slip guard: a slide stops when |v_t| falls to it
+    stick_velocity: float = 1e-9
 
 
 @dataclass(frozen=True)
@@ -422,6 +424,7 @@ def _read_solver(r: Reader) -> SolverSpec:
         max_events=r.int("max_events", SolverSpec.max_events, lo=1),
         storm_window=r.float("storm_window", SolverSpec.storm_window, lo=0.0, unit="s"),
         storm_count=r.int("storm_count", SolverSpec.storm_count, lo=2),
+        stick_velocity=r.float("stick_velocity", SolverSpec.stick_velocity, lo=0.0, lo_open=True, hi=1.0, unit="m/s"),
     )
     r.finish()
     return spec

@@ -5,17 +5,32 @@ phase are fixed and ``solve_ivp`` integrates with error control. Events are zero
 functions of the state, located by ``solve_ivp`` on its dense output:
 
 - ``touch``: a contact's normal gap reaches zero (then the impact map, where touching
-  makes velocities jump);
+  makes velocities jump; with friction it slides or jams, see ``System.impact``);
 - ``separate``: a touching contact's normal force reaches zero;
-- ``stop``: a sliding contact's slip velocity reaches zero along its sliding direction
-  (then stick if the friction needed stays within μ_s F, else slide the other way);
-- ``slip``: a sticking contact's friction reaches μ_s F (slide where the force points);
-- ``turn``: 2-D sliding turned 60° from its reference direction (reference refreshed;
-  not a mode change);
+- ``stop``: a sliding contact's slip speed |v_t| falls to the stick band v_ε
+  (``solver.stick_velocity``); then it sticks if the friction needed to hold it stays
+  within μ_s F, else it slides on where that force pushes;
+- ``slip``: a sticking contact's friction reaches the cone, |F_f| = μ_s F; it slides
+  from rest in the direction the holding force pushes (−F_f);
 - phase ends (a time, or ``touch:<contact>``).
 
-Guards: more than ``storm_count`` events within ``storm_window`` seconds, or more than
-``max_events`` in the run, stop with a :class:`SimulationError` naming the events.
+Coulomb friction is never smoothed: sliding is F_f = −μ_k F d (+ viscous −c v_t) with d
+the slip direction, sticking is a constraint row whose force is an unknown.
+
+Stick/slip guard (the band v_ε, default 1e-9 m/s). A slip that starts from rest keeps
+the direction chosen at break-away until |v_t| > v_ε, and no ``stop`` is declared
+before |v_t| has risen above v_ε; a slide stops when |v_t| falls back to v_ε, and the
+residual slip is then removed by the smallest kinetic-energy-norm velocity change that
+keeps every constraint (``System.project_velocity``). So a stick → slip → stick cycle
+needs the slip speed to cross v_ε: no zero-length slides and no event storm at the
+cone's edge (a push that holds exactly at μ F, or chatter around it, slides at v ≈ 0
+with |F_f| = μ_k F instead of switching at every step). Its error, per stop: the stop
+is located v_ε/|a_t| early, a velocity jump ≤ v_ε, a position error ≤ v_ε²/(2|a_t|).
+Mode decisions at rest compare |F_f| with μ_s F with a relative slack of 1e-10.
+
+Guards against what the band cannot prevent: more than ``storm_count`` events within
+``storm_window`` seconds, or more than ``max_events`` in the run, stop with a
+:class:`SimulationError` naming the events.
 """
 
 from __future__ import annotations
@@ -34,12 +49,11 @@ from .contact import ContactMode
 from .errors import SimulationError
 from .result import Result
 from .scene import Scene, load_scene
-from .system import Evaluation, Phase, System
+from .system import CONE_TOL, FORCE_ABS_TOL, Evaluation, Phase, System
 
 __all__ = ["simulate"]
 
-STOP_TOL = 1e-12  #: [m/s] slip speed below which an impact leaves the contact to the stick test
-FORCE_TOL = 1e-9  #: [N] relative tolerance of the consistency checks
+FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
 
 
 @dataclass
@@ -86,16 +100,13 @@ def _events(system: System, modes: list[ContactMode], phase: Phase) -> list:
             out.append(_event(lambda t, x, n=name: cache(t, x).normal_force[n], "separate", name))
         if c.friction is None or not len(c.tangents):
             continue
-        fr = c.friction
+        fr, band = c.friction, system.slip_band
         if mode.stuck:
             out.append(_event(lambda t, x, n=name, mu=fr.mu_s: mu * cache(t, x).normal_force[n]
                               - float(np.linalg.norm(cache(t, x).friction[n])), "slip", name))
         else:
-            ref = np.asarray(mode.slip, float)
-            out.append(_event(lambda t, x, n=name, r=ref: float(cache(t, x).slip[n] @ r), "stop", name))
-            if len(ref) == 2:
-                out.append(_event(lambda t, x, n=name, r=ref: float(cache(t, x).slip[n] @ r)
-                                  - 0.5 * float(np.linalg.norm(cache(t, x).slip[n])), "turn", name))
+            out.append(_event(lambda t, x, n=name, b=band: float(np.linalg.norm(cache(t, x).slip[n])) - b,
+                              "stop", name))
     return out
 
 
@@ -130,7 +141,7 @@ class _Run:
         phase = system.start_phase(0, 0.0, x, None)
         x = self._init_controller(phase, 0.0, x, modes)
         t = 0.0
-        modes = self._consistent(t, x, modes, phase)
+        x, modes = self._consistent(t, x, modes, phase)
         while t < T:
             until = phase.spec.until
             t_end = min(T, until) if isinstance(until, float) else T
@@ -197,15 +208,22 @@ class _Run:
         c = system.contacts[i]
         modes = list(modes)
         self._log(t, event.kind, c.name)
+        rest: set[int] = set()  #: contacts to decide at rest (a stop)
+        released: set[int] = set()  #: contacts that broke away at this event
         if event.kind == "touch":
             modes[i], x = self._touch(t, x, modes, i)
             if c.normal.chain.bonded_when_touching:
                 x, imp = system.impact(t, x, modes, c)
                 self.impacts.append({"t": t, "contact": c.name, "normal_impulse": imp.normal_impulse,
                                      "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
-                                     "energy_loss": imp.energy_loss})
+                                     "energy_loss": imp.energy_loss, "slip_before": imp.slip_before.tolist(),
+                                     "slip_after": imp.slip_after.tolist()})
                 if imp.jammed:
                     modes[i] = modes[i].with_(stuck=True)
+                elif c.friction is not None and len(c.tangents):
+                    after = imp.slip_after if np.linalg.norm(imp.slip_after) > system.slip_band else imp.direction
+                    if np.any(after):
+                        modes[i] = modes[i].with_(slip=self._direction(after))
             if phase.spec.until == f"touch:{c.name}":
                 phase = self.system.start_phase(phase.index + 1, t, x, phase) \
                     if phase.index + 1 < len(self.scene.phases) else phase
@@ -214,15 +232,12 @@ class _Run:
         elif event.kind == "separate":
             modes[i] = modes[i].with_(touching=False, stuck=False)
         elif event.kind == "stop":
-            modes[i] = modes[i].with_(stuck=True)
-        elif event.kind == "slip":
+            rest.add(i)
+        elif event.kind == "slip":  # the cone is reached: slide from rest where the holding force pushes
             ev = system.evaluate(t, x, modes, phase)
-            F_f = ev.friction[c.name]
-            modes[i] = modes[i].with_(stuck=False, slip=self._direction(-F_f))
-        elif event.kind == "turn":
-            ev = system.evaluate(t, x, modes, phase)
-            modes[i] = modes[i].with_(slip=self._direction(ev.slip[c.name]))
-        modes = self._consistent(t, x, modes, phase)
+            modes[i] = modes[i].with_(stuck=False, slip=self._direction(-ev.friction[c.name]))
+            released.add(i)
+        x, modes = self._consistent(t, x, modes, phase, rest, released)
         return x, modes, phase
 
     @staticmethod
@@ -260,15 +275,25 @@ class _Run:
             robot_masses = [n for n in c.normal.chain.nodes if n.side == "robot" and n.coord >= 0]
             x[2 * nQ + c.normal.junction_state] = x[robot_masses[-1].coord] if robot_masses else \
                 float(c.normal.u @ kin.p_tip)
-        vt = c.tangents @ (kin.v_tip - kin.v_env) if len(c.tangents) else np.zeros(0)
+        vt = system.slip_velocity(c, kin) if len(c.tangents) else np.zeros(0)
         slip = modes[i].slip
-        if len(vt) and float(np.linalg.norm(vt)) > 0.0:
+        if len(vt) and float(np.linalg.norm(vt)) > system.slip_band:
             slip = self._direction(vt)
         return modes[i].with_(touching=True, stuck=False, slip=slip, offsets=tuple(offsets)), x
 
-    def _consistent(self, t, x, modes, phase) -> list[ContactMode]:
-        """Fix modes the state contradicts (pulling contacts, unholdable sticks, resting slides)."""
+    def _consistent(self, t, x, modes, phase, rest=frozenset(), released=frozenset()):
+        """Fix the modes the state contradicts; return (x, modes).
+
+        Pulling contacts separate; a stick whose friction is outside the cone
+        |F_f| ≤ μ_s F slides (from rest, where −F_f points); a slide at rest (|v_t| within
+        the stick band, or a contact in ``rest``: it just stopped) sticks if the friction
+        needed to hold it is within the cone, else slides where that force pushes; in
+        both cases its residual slip is projected away. Contacts in ``released`` (they
+        broke away at a located ``slip`` event) are not stuck again at the same instant.
+        """
         system = self.system
+        released = set(released)
+        rest = set(rest)
         for _ in range(4 * len(modes) + 2):
             changed = False
             ev = system.evaluate(t, x, modes, phase)
@@ -285,32 +310,37 @@ class _Run:
                     break
                 if c.friction is None or not len(c.tangents):
                     continue
+                mu_s = c.friction.mu_s
                 if mode.stuck:
                     F_f = ev.friction[c.name]
-                    if float(np.linalg.norm(F_f)) > c.friction.mu_s * max(F_n, 0.0) * (1 + 1e-12) + FORCE_TOL:
+                    if not _in_cone(F_f, F_n, mu_s):
                         modes[i] = mode.with_(stuck=False, slip=self._direction(-F_f))
                         self._log(t, "slip", c.name)
+                        released.add(i)
                         changed = True
                         break
-                elif float(np.linalg.norm(ev.slip[c.name])) <= STOP_TOL:
-                    trial = list(modes)
-                    trial[i] = mode.with_(stuck=True)
-                    ev2 = system.evaluate(t, x, trial, phase)
-                    F_f = ev2.friction[c.name]
-                    if float(np.linalg.norm(F_f)) <= c.friction.mu_s * max(ev2.normal_force[c.name], 0.0) + FORCE_TOL:
-                        modes[i] = trial[i]
-                        self._log(t, "stick", c.name)
-                    else:
-                        direction = self._direction(-F_f)
-                        if direction != mode.slip:
-                            modes[i] = mode.with_(slip=direction)
-                            self._log(t, "reverse", c.name)
-                        else:
-                            continue
-                    changed = True
-                    break
+                    continue
+                if i in released or (i not in rest and float(np.linalg.norm(ev.slip[c.name])) > system.slip_band):
+                    continue
+                # at rest: stick if the cone can hold it, else slide where the holding force pushes
+                rest.discard(i)
+                trial = list(modes)
+                trial[i] = mode.with_(stuck=True)
+                x = system.project_velocity(x, trial)
+                ev2 = system.evaluate(t, x, trial, phase)
+                F_f = ev2.friction[c.name]
+                if _in_cone(F_f, ev2.normal_force[c.name], mu_s):
+                    modes[i] = trial[i]
+                    self._log(t, "stick", c.name)
+                else:
+                    modes[i] = mode.with_(slip=self._direction(-F_f))
+                    released.add(i)
+                    if modes[i].slip != mode.slip:
+                        self._log(t, "reverse", c.name)
+                changed = True
+                break
             if not changed:
-                return modes
+                return x, modes
         raise SimulationError(f"{self.scene.name}: no consistent contact mode at t = {t:.9g} s "
                               f"(modes tried: {modes})")
 
@@ -338,6 +368,11 @@ class _Run:
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _in_cone(F_f: np.ndarray, F_n: float, mu_s: float) -> bool:
+    """|F_f| ≤ μ_s F within round-off (a pulling contact holds nothing)."""
+    return float(np.linalg.norm(F_f)) <= mu_s * max(F_n, 0.0) * (1.0 + CONE_TOL) + FORCE_ABS_TOL
 
 
 def _channels(system: System, rows) -> dict[str, np.ndarray]:

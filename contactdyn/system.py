@@ -33,6 +33,9 @@ from .trajectory import Ramp, Reference
 
 __all__ = ["System", "Phase", "Evaluation", "Impact"]
 
+CONE_TOL = 1e-10  #: relative slack of the friction-cone tests |F_f| ≤ μ_s F (round-off of the solves)
+FORCE_ABS_TOL = 1e-12  #: [N] absolute slack of the same tests
+
 try:  # numpy's gufunc without the Python wrapper: ~4x cheaper on tiny systems
     from numpy.linalg import _umath_linalg
 
@@ -73,8 +76,11 @@ class Impact:
     friction_impulse: np.ndarray  #: F_fΔt per tangent
     jammed: bool
     energy_loss: float  #: [J]
-    v_before: np.ndarray
-    v_after: np.ndarray
+    v_before: np.ndarray  #: Q̇⁻
+    v_after: np.ndarray  #: Q̇⁺
+    slip_before: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
+    slip_after: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
+    direction: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: sliding direction d (0: none)
 
 
 @dataclass
@@ -161,6 +167,7 @@ class System:
                       for n, b in scene.bodies.items() if b.servo_velocity is not None]
         self.stage_labels = [f"{c.name}.{dc.label}.{s.label}" for c in self.contacts for dc in c.chains
                              for s in dc.chain.stages]
+        self.slip_band = scene.solver.stick_velocity  #: [m/s] stick/slip guard band (see simulate)
         self.has_rows_possible = any(dc.chain.bonded_when_touching for c in self.contacts for dc in c.chains) or any(
             c.friction is not None for c in self.contacts)
 
@@ -407,7 +414,7 @@ class System:
             col = row
             if c.friction is not None and len(c.tangents):
                 T = c.tangents
-                vt = T @ (kin.v_tip - kin.v_env)
+                vt = self.slip_velocity(c, kin)
                 ev.slip[c.name] = vt
                 if mode.touching and mode.stuck:
                     for i in range(len(T)):
@@ -515,12 +522,25 @@ class System:
     def _contact(self, name: str) -> Contact:
         return next(c for c in self.contacts if c.name == name)
 
-    @staticmethod
-    def _slip_direction(vt: np.ndarray, mode: ContactMode) -> np.ndarray:
-        if len(vt) == 1:
-            return np.asarray(mode.slip, float)
+    def _slip_direction(self, vt: np.ndarray, mode: ContactMode) -> np.ndarray:
+        """Unit sliding direction d in tangent coordinates (1-D: ±1).
+
+        The slip velocity's own direction v_t/|v_t| (eqs 21–24; 1-D sgn, eqs 43–44) once
+        |v_t| exceeds the stick band ``solver.stick_velocity``; inside the band (a slide
+        that has just started from rest) the direction chosen at break-away, ``mode.slip``.
+        Never a smoothed sgn.
+        """
         norm = float(np.linalg.norm(vt))
-        return vt / norm if norm > 1e-300 else np.asarray(mode.slip, float)
+        if norm > self.slip_band:
+            return vt / norm
+        return np.asarray(mode.slip, float)
+
+    def slip_velocity(self, c: Contact, kin: Kinematics, qd: np.ndarray | None = None) -> np.ndarray:
+        """Tangential tip–environment velocity [m/s] in tangent coordinates (at Q̇ = qd if given)."""
+        if qd is None:
+            return c.tangents @ (kin.v_tip - kin.v_env)
+        v_env = c.body_axis * qd[c.body_index] if c.body_index >= 0 else np.zeros(3)
+        return c.tangents @ (kin.J @ qd[: self.nv] - v_env)
 
     def rhs(self, modes: list[ContactMode], phase: Phase):
         """The function solve_ivp integrates in one mode and phase."""
@@ -534,9 +554,14 @@ class System:
     def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact) -> tuple[np.ndarray, Impact]:
         """Velocity jump when ``contact`` touches (its mode already says touching).
 
-        First assume the tip slides in its pre-impact slip direction (friction impulse
-        −μ_k d FΔt); if the tangential velocity after impact points against d, the
-        impact jams: zero tangential velocity, friction impulse an unknown (eqs 27–31).
+        Momentum law over Δt → 0 (eqs 27–31, 35–38): M(Q̇⁺ − Q̇⁻) = Cᵀ Λ with every bond,
+        stick and the new contact holding at velocity level, G Q̇⁺ = 0. With friction the
+        tip first slides in its pre-impact slip direction d (friction impulse −μ_k FΔt d,
+        the normal column tilted as in eq. 27). If the tangential velocity after the
+        impact points against d the assumption is wrong and the impact jams (eqs 30–31):
+        zero tangential velocity, friction impulse F_fΔt an unknown. A tip that arrives
+        without slip (|v_t| within the stick band) is tried jammed first; if holding it
+        needs more than μ_s FΔt it slides where that impulse pushes.
         """
         nQ, nv = self.nQ, self.nv
         q, v = x[:nv], x[nQ:nQ + nv]
@@ -544,51 +569,89 @@ class System:
         qd_minus = x[nQ:2 * nQ].copy()
         M = self._M.copy()
         M[:nv, :nv] = self.robot.H
-        rows, cols, meta = self._impact_rows(x, modes, contact, jam=False)
-        z, _ = self._impact_solve(M, rows, cols, qd_minus)
-        jammed = False
         i_c = self.contacts.index(contact)
         kin = self.kinematics(contact, x)
-        friction_impulse = np.zeros(len(contact.tangents))
-        if contact.friction is not None and len(contact.tangents) and not modes[i_c].stuck:
-            d = np.asarray(modes[i_c].slip, float)
-            vt_after = contact.tangents @ (kin.J @ z[:nv] - contact.body_axis *
-                                          (z[contact.body_index] if contact.body_index >= 0 else 0.0))
-            lam_n = z[nQ + [m[1] for m in meta].index("n")]
-            friction_impulse = -contact.friction.mu_k * lam_n * d
-            if float(vt_after @ d) < 0.0:  # sliding assumption contradicted: jam
+        fr, k = contact.friction, len(contact.tangents)
+        vt_minus = self.slip_velocity(contact, kin, qd_minus) if k else np.zeros(0)
+
+        def solve(slide=None, jam=False):
+            rows, cols, meta = self._velocity_rows(x, modes, slide=(contact, slide) if slide is not None else None,
+                                                   jam=contact if jam else None)
+            z, _ = self._impact_solve(M, rows, cols, qd_minus)
+            lam = {m: z[nQ + j] for j, m in enumerate(meta)}
+            P_n = float(lam[(contact.name, "n", 0)])
+            P_t = np.array([lam.get((contact.name, "t", i), 0.0) for i in range(k)])
+            return z[:nQ], P_n, P_t
+
+        jammed = False
+        d = np.zeros(k)
+        if fr is None or not k or modes[i_c].stuck:
+            qd_plus, P_n, P_t = solve()
+        else:
+            speed = float(np.linalg.norm(vt_minus))
+            if speed > self.slip_band:
+                d = vt_minus / speed
+                qd_plus, P_n, _ = solve(slide=d)
+                P_t = -fr.mu_k * P_n * d
+                jammed = float(self.slip_velocity(contact, kin, qd_plus) @ d) < 0.0
+            else:
                 jammed = True
-                rows, cols, meta = self._impact_rows(x, modes, contact, jam=True)
-                z, _ = self._impact_solve(M, rows, cols, qd_minus)
-                friction_impulse = np.array([z[nQ + k] for k, m in enumerate(meta) if m[0] == contact.name
-                                             and m[1] == "t"])
-        qd_plus = z[:nQ]
-        lam_n = float(z[nQ + [m[1] if m[0] == contact.name else "" for m in meta].index("n")])
+            if jammed:
+                qd_plus, P_n, P_t = solve(jam=True)
+                if float(np.linalg.norm(P_t)) > fr.mu_s * P_n * (1.0 + CONE_TOL) + FORCE_ABS_TOL:
+                    # holding needs more than the cone gives: slide where the impulse pushes
+                    d = -P_t / float(np.linalg.norm(P_t))
+                    qd_plus, P_n, _ = solve(slide=d)
+                    P_t = -fr.mu_k * P_n * d
+                    jammed = False
         x_new = x.copy()
         x_new[nQ:2 * nQ] = qd_plus
         energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
-        return x_new, Impact(t, contact.name, lam_n, friction_impulse, jammed, energy_loss, qd_minus, qd_plus)
+        vt_plus = self.slip_velocity(contact, kin, qd_plus) if k else np.zeros(0)
+        return x_new, Impact(t, contact.name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d)
 
-    def _impact_rows(self, x, modes, contact, jam):
-        """Constraint rows holding after the impact: every active bond and stick, plus the new contact."""
+    def project_velocity(self, x: np.ndarray, modes: list[ContactMode]) -> np.ndarray:
+        """x with Q̇ moved onto every active velocity constraint (bonds, rigid contacts, sticks).
+
+        The smallest change in the kinetic-energy norm, M ΔQ̇ = Gᵀ Λ, G Q̇⁺ = 0: an impulse
+        that removes what the constraints forbid (used when a slide stops inside the stick
+        band, where the residual slip is at most ``solver.stick_velocity``).
+        """
+        nQ, nv = self.nQ, self.nv
+        self.robot.update(x[:nv], x[nQ:nQ + nv])
+        rows, cols, _ = self._velocity_rows(x, modes)
+        if not rows:
+            return x
+        M = self._M.copy()
+        M[:nv, :nv] = self.robot.H
+        z, _ = self._impact_solve(M, rows, cols, x[nQ:2 * nQ])
+        x_new = x.copy()
+        x_new[nQ:2 * nQ] = z[:nQ]
+        return x_new
+
+    def _velocity_rows(self, x, modes, slide: tuple[Contact, np.ndarray] | None = None, jam: Contact | None = None):
+        """Velocity constraints of the touching contacts: bond rows, sticks, tangential chain bonds.
+
+        ``slide = (contact, d)`` tilts that contact's normal column by the sliding friction
+        −μ_k d; ``jam`` adds stick rows for a contact that is not (yet) stuck.
+        """
         rows, cols, meta = [], [], []
+        dummy_f, dummy_y = np.zeros(self.nQ), np.zeros(self.ny)
         for c, mode in zip(self.contacts, modes, strict=True):
             if not mode.touching:
                 continue
             kin = self.kinematics(c, x)
-            dummy_f, dummy_y = np.zeros(self.nQ), np.zeros(self.ny)
             _, row, _, _, _ = self._chain(c, c.normal, True, 0.0, kin, x, dummy_f, dummy_y, None, False)
-            stick = c.friction is not None and len(c.tangents) and (mode.stuck or (jam and c is contact))
             if row is not None:
                 col = row
-                if c.friction is not None and len(c.tangents) and not stick and c is contact:
-                    d = np.asarray(mode.slip, float)
+                if slide is not None and slide[0] is c:
+                    d = slide[1]
                     col = row - sum(c.friction.mu_k * d[i] * self._row(c, c.tangents[i], kin)
                                     for i in range(len(c.tangents)))
                 rows.append(row)
                 cols.append(col)
                 meta.append((c.name, "n", 0))
-            if stick and row is not None:
+            if c.friction is not None and len(c.tangents) and (mode.stuck or jam is c):
                 for i, t_dir in enumerate(c.tangents):
                     r = self._row(c, t_dir, kin)
                     rows.append(r)
