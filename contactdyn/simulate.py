@@ -7,9 +7,12 @@ functions of the state, located by ``solve_ivp`` on its dense output:
 - ``touch``: a contact's normal gap reaches zero (then the impact map, where touching
   makes velocities jump; with friction it slides or jams, see ``System.impact``);
 - ``separate``: a touching contact's normal force reaches zero;
-- ``stop``: a sliding contact's slip speed |v_t| falls to the stick band v_ε
-  (``solver.stick_velocity``); then it sticks if the friction needed to hold it stays
-  within μ_s F, else it slides on where that force pushes;
+- ``stop``: a sliding contact's slip velocity along its sliding direction r falls to
+  the stick band v_ε (``solver.stick_velocity``); then it sticks if the friction needed
+  to hold it stays within μ_s F, else it slides on where that force pushes
+  (``reverse``: the same decision for a slip from rest that runs backwards past −v_ε);
+- ``turn`` (2-D): the slip velocity turned 60° away from r; r is refreshed (no mode
+  change; it keeps ``stop`` meaningful and the friction force continuous in a segment);
 - ``slip``: a sticking contact's friction reaches the cone, |F_f| = μ_s F; it slides
   from rest in the direction the holding force pushes (−F_f);
 - phase ends (a time, or ``touch:<contact>``).
@@ -18,8 +21,8 @@ Coulomb friction is never smoothed: sliding is F_f = −μ_k F d (+ viscous −c
 the slip direction, sticking is a constraint row whose force is an unknown.
 
 Stick/slip guard (the band v_ε, default 1e-9 m/s). A slip that starts from rest keeps
-the direction chosen at break-away until |v_t| > v_ε, and no ``stop`` is declared
-before |v_t| has risen above v_ε; a slide stops when |v_t| falls back to v_ε, and the
+the direction chosen at break-away until v_t·r > v_ε, and no ``stop`` is declared
+before it has risen above v_ε; a slide stops when v_t·r falls back to v_ε, and the
 residual slip is then removed by the smallest kinetic-energy-norm velocity change that
 keeps every constraint (``System.project_velocity``). So a stick → slip → stick cycle
 needs the slip speed to cross v_ε: no zero-length slides and no event storm at the
@@ -104,9 +107,13 @@ def _events(system: System, modes: list[ContactMode], phase: Phase) -> list:
         if mode.stuck:
             out.append(_event(lambda t, x, n=name, mu=fr.mu_s: mu * cache(t, x).normal_force[n]
                               - float(np.linalg.norm(cache(t, x).friction[n])), "slip", name))
-        else:
-            out.append(_event(lambda t, x, n=name, b=band: float(np.linalg.norm(cache(t, x).slip[n])) - b,
-                              "stop", name))
+            continue
+        r = np.asarray(mode.slip, float)
+        out.append(_event(lambda t, x, n=name, r=r, b=band: float(cache(t, x).slip[n] @ r) - b, "stop", name))
+        out.append(_event(lambda t, x, n=name, r=r, b=band: float(cache(t, x).slip[n] @ r) + b, "reverse", name))
+        if len(r) == 2:
+            out.append(_event(lambda t, x, n=name, r=r, b=band: float(cache(t, x).slip[n] @ r)
+                              - 0.5 * float(np.linalg.norm(cache(t, x).slip[n])) + b, "turn", name))
     return out
 
 
@@ -231,8 +238,11 @@ class _Run:
                     self._log(t, "phase", phase.spec.name, check_storm=False)
         elif event.kind == "separate":
             modes[i] = modes[i].with_(touching=False, stuck=False)
-        elif event.kind == "stop":
+        elif event.kind in ("stop", "reverse"):
             rest.add(i)
+        elif event.kind == "turn":  # 2-D: the slip turned 60° from the reference; refresh it
+            ev = system.evaluate(t, x, modes, phase)
+            modes[i] = modes[i].with_(slip=self._direction(ev.slip[c.name]))
         elif event.kind == "slip":  # the cone is reached: slide from rest where the holding force pushes
             ev = system.evaluate(t, x, modes, phase)
             modes[i] = modes[i].with_(stuck=False, slip=self._direction(-ev.friction[c.name]))
@@ -320,7 +330,13 @@ class _Run:
                         changed = True
                         break
                     continue
-                if i in released or (i not in rest and float(np.linalg.norm(ev.slip[c.name])) > system.slip_band):
+                if i in released:
+                    continue
+                vt = ev.slip[c.name]
+                speed = float(np.linalg.norm(vt))
+                if i not in rest and speed > system.slip_band:
+                    if float(vt @ np.asarray(mode.slip)) < 0.5 * speed:  # moving, but not along r: refresh r
+                        modes[i] = mode.with_(slip=self._direction(vt))
                     continue
                 # at rest: stick if the cone can hold it, else slide where the holding force pushes
                 rest.discard(i)

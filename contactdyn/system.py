@@ -3,8 +3,10 @@
 State x = [Q, Q̇, y]. Q holds the second-order coordinates: the robot's active joints,
 one coordinate per active environment body (a cart) and one per equivalent mass of a
 deformation chain; y holds first-order states: massless chain junctions, controller
-integrators and, on request, the energy audit. A part the scene does not name has no
-slot and costs nothing.
+integrators, on request the energy audit, and the impulses ∫F dt, ∫F_f dt of each
+friction contact (their error control makes the step size follow the contact forces
+that the stick/slip events watch, even while a stuck robot's state does not move).
+A part the scene does not name has no slot and costs nothing.
 
 In every mode the unknowns (Q̈ and the forces of active constraint rows: bonds, rigid
 contacts, sticking friction) come from one linear system
@@ -159,6 +161,12 @@ class System:
             n_first += ctl.n_states
         self.energy_slot = n_first if scene.solver.record_energy else -1
         n_first += 2 if scene.solver.record_energy else 0
+        # contact impulses [N·s] of friction contacts: normal, then one per tangent
+        self.impulse_slots: dict[str, int] = {}
+        for c in self.contacts:
+            if c.friction is not None and len(c.tangents):
+                self.impulse_slots[c.name] = n_first
+                n_first += 1 + len(c.tangents)
         self.ny = n_first
         self.n = 2 * self.nQ + self.ny
         self._M = np.zeros((self.nQ, self.nQ))
@@ -517,6 +525,11 @@ class System:
                 ydot[self.energy_slot + 1] += float(c.friction.mu_k * max(ev.normal_force[c.name], 0.0)
                                                     * (d @ ev.slip[c.name]))
             xdot[2 * nQ + self.energy_slot + 1] = ydot[self.energy_slot + 1]
+        for name, slot in self.impulse_slots.items():
+            if name in ev.friction:
+                i0 = 2 * nQ + slot
+                xdot[i0] = ev.normal_force[name]
+                xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
         return ev
 
     def _contact(self, name: str) -> Contact:
@@ -525,15 +538,19 @@ class System:
     def _slip_direction(self, vt: np.ndarray, mode: ContactMode) -> np.ndarray:
         """Unit sliding direction d in tangent coordinates (1-D: ±1).
 
-        The slip velocity's own direction v_t/|v_t| (eqs 21–24; 1-D sgn, eqs 43–44) once
-        |v_t| exceeds the stick band ``solver.stick_velocity``; inside the band (a slide
-        that has just started from rest) the direction chosen at break-away, ``mode.slip``.
-        Never a smoothed sgn.
+        The slip velocity's own direction v_t/|v_t| (eqs 21–24; 1-D: sgn, eqs 43–44)
+        while it points ahead of the mode's reference r (v_t·r > v_ε, the stick band);
+        otherwise r itself. The segment ends at a ``stop`` event where v_t·r falls to v_ε,
+        and 2-D ``turn`` events keep r within 60° of v_t, so the second branch only serves
+        a slip just started from rest (|v_t| ≤ v_ε) and the integrator's trial stages past
+        a stop: the force stays continuous across the stop instead of flipping there,
+        which would make the step size collapse. Never a smoothed sgn.
         """
-        norm = float(np.linalg.norm(vt))
-        if norm > self.slip_band:
-            return vt / norm
-        return np.asarray(mode.slip, float)
+        r = np.asarray(mode.slip, float)
+        ahead = float(vt @ r)
+        if ahead > self.slip_band:
+            return r if len(vt) == 1 else vt / float(np.linalg.norm(vt))
+        return r
 
     def slip_velocity(self, c: Contact, kin: Kinematics, qd: np.ndarray | None = None) -> np.ndarray:
         """Tangential tip–environment velocity [m/s] in tangent coordinates (at Q̇ = qd if given)."""
