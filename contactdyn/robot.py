@@ -79,7 +79,7 @@ def _build_model(path: Path, package_dirs: list[str]) -> tuple[pin.Model, pin.Ge
         os.dup2(err.fileno(), 2)
         try:
             model = pin.buildModelFromUrdf(str(path))
-            visual = pin.buildGeomFromUrdf(model, str(path), pin.GeometryType.VISUAL, package_dirs)
+            visual = pin.buildGeomFromUrdf(model, str(path), pin.GeometryType.VISUAL, package_dirs=package_dirs)
             failure = None
         except (ValueError, RuntimeError) as exc:
             failure = exc
@@ -113,7 +113,8 @@ def _check_physics(model: pin.Model, path: Path) -> None:
         sl = slice(model.idx_qs[jid], model.idx_qs[jid] + model.nqs[jid])
         if np.any(lower[sl] > upper[sl]):
             raise RobotError(
-                f"{path}: joint {model.names[jid]!r}: lower limit {lower[sl].tolist()} > upper limit {upper[sl].tolist()}"
+                f"{path}: joint {model.names[jid]!r}: lower limit {lower[sl].tolist()} > "
+                f"upper limit {upper[sl].tolist()}"
             )
     if not any(inertia.mass > 0.0 for inertia in model.inertias[1:]):
         raise RobotError(f"{path}: every body has zero mass: nothing to simulate")
@@ -127,6 +128,8 @@ class FrameTerms:
     velocity: np.ndarray  #: ṗ = J q̇ [m/s], shape (3,)
     jacobian: np.ndarray  #: J = ∂p/∂q, linear rows [m/rad or m/m], shape (3, nv)
     drift: np.ndarray  #: J̇ q̇ [m/s²], shape (3,)
+    rotation: np.ndarray  #: frame orientation in the world, shape (3, 3)
+    angular_jacobian: np.ndarray  #: ω = J_ω q̇ [rad/s per joint unit], shape (3, nv)
 
 
 class Robot:
@@ -216,11 +219,14 @@ class Robot:
         """Position, velocity, Jacobian and J̇q̇ of frame ``fid`` at the last update."""
         model, data = self.model, self.data
         placement = pin.updateFramePlacement(model, data, fid)
+        J6 = pin.getFrameJacobian(model, data, fid, _LWA)
         return FrameTerms(
             position=placement.translation.copy(),
             velocity=pin.getFrameVelocity(model, data, fid, _LWA).linear,
-            jacobian=pin.getFrameJacobian(model, data, fid, _LWA)[:3],
+            jacobian=J6[:3],
             drift=pin.getFrameClassicalAcceleration(model, data, fid, _LWA).linear,
+            rotation=placement.rotation.copy(),
+            angular_jacobian=J6[3:],
         )
 
     # ---- convenience (allocating) ------------------------------------------------------

@@ -72,6 +72,9 @@ def test_point_mass_urdfs_are_a_free_mass(name, nv):
     assert ft.position[rows] == pytest.approx(q, abs=1e-15)
     assert ft.jacobian[rows] == pytest.approx(np.eye(nv), abs=1e-15)
     assert ft.drift == pytest.approx(np.zeros(3), abs=1e-15)
+    model = robot.model
+    assert np.all(model.lowerPositionLimit < model.upperPositionLimit)
+    assert [model.inertias[i].mass for i in range(1, model.njoints)] == [0.0] * (nv - 1) + [M]  # massless carriages
 
 
 # ---- stick, then break away -----------------------------------------------------------------
