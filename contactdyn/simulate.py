@@ -57,6 +57,10 @@ from .system import CONE_TOL, FORCE_ABS_TOL, Evaluation, Phase, System
 __all__ = ["simulate"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
+#: events after which the next segment starts with the step size the solver had reached (friction
+#: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
+RESUME_STEP = ("stop", "reverse", "slip", "turn")
+SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
 
 
 @dataclass
@@ -91,9 +95,52 @@ def _event(fn, kind: str, contact: str):
     return fn
 
 
-def _events(system: System, modes: list[ContactMode], phase: Phase) -> list:
+class _SlipWatch:
+    """The ``slip`` event of a stuck contact, g = μ_s F − |F_f|, which also sees inside a step.
+
+    ``solve_ivp`` tests events only at step ends, and a stuck robot's state may hardly move:
+    the friction a push needs can leave the cone and come back within one step unseen. The
+    right-hand side reports g at every Runge–Kutta stage (:meth:`sample`); if a stage inside
+    the step just taken saw g < 0 while the step end did not, the event reports a crossing,
+    and while ``solve_ivp`` locates it on the dense output, g is held negative from that
+    stage's time on, so the root found is the first crossing. A false alarm (a stage state
+    off the final solution) is caught by the handler, which keeps the stick.
+    """
+
+    terminal = True
+    direction = -1
+
+    def __init__(self, cache: _Cache, name: str, mu_s: float):
+        self.cache, self.contact, self.mu_s = cache, name, mu_s
+        self.kind = "slip"
+        self.t_end = -math.inf  #: last step end seen [s]
+        self.latch = math.inf  #: from this time on g is held negative [s]
+        self.samples: list[tuple[float, float]] = []  #: (t, g) at the stages since the last step end
+
+    def g(self, ev: Evaluation) -> float:
+        return self.mu_s * ev.normal_force[self.contact] - float(np.linalg.norm(ev.friction[self.contact]))
+
+    def sample(self, t: float, ev: Evaluation) -> None:
+        self.samples.append((t, self.g(ev)))
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        g = self.g(self.cache(t, x))
+        if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
+            t_old, self.t_end = self.t_end, t
+            hidden = [ts for ts, gs in self.samples if t_old < ts < t and gs < 0.0]
+            self.samples = [(ts, gs) for ts, gs in self.samples if ts > t]
+            if g > 0.0 and hidden:
+                self.latch = min(hidden)
+                return -1.0
+            return g
+        return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
+
+
+def _events(system: System, modes: list[ContactMode], phase: Phase):
+    """The event functions of one segment, and the right-hand side that feeds their stage watches."""
     cache = _Cache(system, modes, phase)
-    out = []
+    out: list = []
+    watches: list[_SlipWatch] = []
     for c, mode in zip(system.contacts, modes, strict=True):
         name = c.name
         if not mode.touching:
@@ -105,8 +152,8 @@ def _events(system: System, modes: list[ContactMode], phase: Phase) -> list:
             continue
         fr, band = c.friction, system.slip_band
         if mode.stuck:
-            out.append(_event(lambda t, x, n=name, mu=fr.mu_s: mu * cache(t, x).normal_force[n]
-                              - float(np.linalg.norm(cache(t, x).friction[n])), "slip", name))
+            watches.append(_SlipWatch(cache, name, fr.mu_s))
+            out.append(watches[-1])
             continue
         r = np.asarray(mode.slip, float)
         out.append(_event(lambda t, x, n=name, r=r, b=band: float(cache(t, x).slip[n] @ r) - b, "stop", name))
@@ -114,7 +161,16 @@ def _events(system: System, modes: list[ContactMode], phase: Phase) -> list:
         if len(r) == 2:
             out.append(_event(lambda t, x, n=name, r=r, b=band: float(cache(t, x).slip[n] @ r)
                               - 0.5 * float(np.linalg.norm(cache(t, x).slip[n])) + b, "turn", name))
-    return out
+    if not watches:
+        return out, system.rhs(modes, phase)
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        ev = system.evaluate(t, x, modes, phase)
+        for w in watches:
+            w.sample(t, ev)
+        return ev.xdot
+
+    return out, rhs
 
 
 def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None) -> Result:
@@ -139,7 +195,9 @@ class _Run:
         self.events: list[dict[str, Any]] = []
         self.impacts: list[dict[str, Any]] = []
         self.recent: deque[float] = deque(maxlen=self.solver.storm_count)
-        self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0}
+        self.next_step: float | None = None  #: [s] first step of the next segment (None: solver's choice)
+        self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0,
+                      "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
 
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:
@@ -155,10 +213,11 @@ class _Run:
             if t_end <= t:
                 phase = self._next_phase(phase, t, x)
                 continue
-            events = _events(system, modes, phase)
-            sol = solve_ivp(system.rhs(modes, phase), (t, t_end), x, method=self.solver.method,
+            events, rhs = _events(system, modes, phase)
+            h0 = min(self.next_step, t_end - t) if self.next_step else None
+            sol = solve_ivp(rhs, (t, t_end), x, method=self.solver.method,
                             rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
-                            events=events or None, dense_output=True)
+                            events=events or None, dense_output=True, first_step=h0)
             self.stats["rhs_evals"] += sol.nfev
             self.stats["steps"] += len(sol.t) - 1
             if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
@@ -166,8 +225,11 @@ class _Run:
             self.segments.append(_Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol))
             self.stats["segments"] += 1
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
+            self.next_step = None
             if sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
+                if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
+                    self.next_step = float(sol.t[-2] - sol.t[-3])
                 x, modes, phase = self._handle(t, x, modes, phase, fired[0])
             elif t < T:
                 phase = self._next_phase(phase, t, x)
@@ -247,8 +309,13 @@ class _Run:
             modes[i] = modes[i].with_(slip=self._direction(ev.slip[c.name]))
         elif event.kind == "slip":  # the cone is reached: slide from rest where the holding force pushes
             ev = system.evaluate(t, x, modes, phase)
-            modes[i] = modes[i].with_(stuck=False, slip=self._direction(-ev.friction[c.name]))
-            released.add(i)
+            self.stats["slips_seen_inside_a_step"] += int(event.latch < math.inf)
+            if event.g(ev) <= SLIP_ALARM * c.friction.mu_s * max(ev.normal_force[c.name], 0.0):
+                modes[i] = modes[i].with_(stuck=False, slip=self._direction(-ev.friction[c.name]))
+                released.add(i)
+            else:  # a stage saw the cone left, the located point does not: a false alarm, still stuck
+                self.events[-1]["kind"] = "slip_check"
+                self.stats["slip_false_alarms"] += 1
         x, modes = self._consistent(t, x, modes, phase, rest, released)
         return x, modes, phase
 
@@ -354,8 +421,7 @@ class _Run:
                 else:
                     modes[i] = mode.with_(slip=self._direction(-F_f))
                     released.add(i)
-                    if modes[i].slip != mode.slip:
-                        self._log(t, "reverse", c.name)
+                    self._log(t, "slip", c.name)
                 changed = True
                 break
             if not changed:

@@ -4,9 +4,8 @@ State x = [Q, Q̇, y]. Q holds the second-order coordinates: the robot's active 
 one coordinate per active environment body (a cart) and one per equivalent mass of a
 deformation chain; y holds first-order states: massless chain junctions, controller
 integrators, on request the energy audit, and the impulses ∫F dt, ∫F_f dt of each
-friction contact (their error control makes the step size follow the contact forces
-that the stick/slip events watch, even while a stuck robot's state does not move).
-A part the scene does not name has no slot and costs nothing.
+friction contact (see ``impulse_slots``). A part the scene does not name has no slot and
+costs nothing.
 
 In every mode the unknowns (Q̈ and the forces of active constraint rows: bonds, rigid
 contacts, sticking friction) come from one linear system
@@ -166,7 +165,9 @@ class System:
             n_first += ctl.n_states
         self.energy_slot = n_first if scene.solver.record_energy else -1
         n_first += 2 if scene.solver.record_energy else 0
-        # contact impulses [N·s] of friction contacts: normal, then one per tangent
+        #: per friction contact, the impulses ∫F dt, ∫F_f dt [N·s] (normal, then one per tangent). A stuck
+        #: robot's state may not move at all; their error control keeps the step size following the
+        #: contact forces that the ``slip`` event watches (see simulate), instead of growing without bound.
         self.impulse_slots: dict[str, int] = {}
         for c in self.contacts:
             if c.friction is not None and len(c.tangents):

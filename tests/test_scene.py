@@ -87,7 +87,7 @@ def test_a_scene_models_only_what_it_needs():
     """State = robot joints + what the scene names: no cart, no chain masses, no motor angles here.
 
     B1's contact has friction along one tangent: its impulses ∫F dt, ∫F_f dt are 2 first-order
-    states (they let the step size follow the forces the stick/slip events watch).
+    states (the step size follows the forces the stick/slip events watch; System.impulse_slots).
     """
     rigid = System(load_scene("b1", {"contact.tip.normal": {"direction": [0, 1, 0], "model": "rigid"}}))
     assert rigid.nQ == rigid.nv == 2 and rigid.ny == 2 and rigid.n == 6
