@@ -21,7 +21,8 @@ Coulomb friction is never smoothed: sliding is F_f = −μ_k F d (+ viscous −c
 the slip direction, sticking is a constraint row whose force is an unknown.
 
 Stick/slip guard (the band v_ε, default 1e-9 m/s). A slip that starts from rest keeps
-the direction chosen at break-away until v_t·r > v_ε, and no ``stop`` is declared
+the direction chosen at break-away (2-D: the consistent one, below) until v_t·r > v_ε,
+and no ``stop`` is declared
 before it has risen above v_ε; a slide stops when v_t·r falls back to v_ε, and the
 residual slip is then removed by the smallest kinetic-energy-norm velocity change that
 keeps every constraint (``System.project_velocity``). So a stick → slip → stick cycle
@@ -30,6 +31,17 @@ cone's edge (a push that holds exactly at μ F, or chatter around it, slides at 
 with |F_f| = μ_k F instead of switching at every step). Its error, per stop: the stop
 is located v_ε/|a_t| early, a velocity jump ≤ v_ε, a position error ≤ v_ε²/(2|a_t|).
 Mode decisions at rest compare |F_f| with μ_s F with a relative slack of 1e-10.
+
+Three more guards keep the events exact and the cost bounded. A stuck contact's state
+may not move at all, so ``solve_ivp`` (which tests events at step ends only) could step
+over a whole excursion out of the cone: the friction impulses are integrated (their error
+control makes the step follow the forces) and the ``slip`` event also looks at the
+Runge–Kutta stages inside each step (:class:`_SlipWatch`). A 2-D slip from rest starts
+along the consistent direction (where it accelerates, ``System._launch_directions``), and
+its segment is integrated by LSODA: near v_t = 0 the direction of 2-D friction relaxes at
+a rate ∝ 1/|v_t|, stiff for an explicit method (the scene's method takes over at the next
+event, or if LSODA fails). After a friction event the next segment starts with the step
+size the solver had reached.
 
 Guards against what the band cannot prevent: more than ``storm_count`` events within
 ``storm_window`` seconds, or more than ``max_events`` in the run, stop with a
@@ -50,6 +62,7 @@ from scipy.integrate import solve_ivp
 
 from .contact import ContactMode
 from .errors import SimulationError
+from .integrators import IMPLICIT
 from .result import Result
 from .scene import Scene, load_scene
 from .system import CONE_TOL, FORCE_ABS_TOL, Evaluation, Phase, System
@@ -60,6 +73,7 @@ FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts s
 #: events after which the next segment starts with the step size the solver had reached (friction
 #: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
 RESUME_STEP = ("stop", "reverse", "slip", "turn")
+LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest (see _Run._method)
 SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
 
 
@@ -86,6 +100,25 @@ class _Cache:
             self.value = self.system.evaluate(t, x, self.modes, self.phase)
             self.key = key
         return self.value  # type: ignore[return-value]
+
+
+class _SlipCache:
+    """Slip velocities [m/s] of the sliding contacts at (t, x): kinematics only, no linear solve."""
+
+    def __init__(self, system: System, names: list[str]):
+        self.system = system
+        self.contacts = [c for c in system.contacts if c.name in names]
+        self.key: tuple[float, bytes] | None = None
+        self.value: dict[str, np.ndarray] = {}
+
+    def __call__(self, t: float, x: np.ndarray) -> dict[str, np.ndarray]:
+        key = (t, x.tobytes())
+        if key != self.key:
+            system, nQ, nv = self.system, self.system.nQ, self.system.nv
+            system.robot.update(x[:nv], x[nQ:nQ + nv])
+            self.value = {c.name: system.slip_velocity(c, system.kinematics(c, x)) for c in self.contacts}
+            self.key = key
+        return self.value
 
 
 def _event(fn, kind: str, contact: str):
@@ -139,6 +172,8 @@ class _SlipWatch:
 def _events(system: System, modes: list[ContactMode], phase: Phase):
     """The event functions of one segment, and the right-hand side that feeds their stage watches."""
     cache = _Cache(system, modes, phase)
+    slip = _SlipCache(system, [c.name for c, m in zip(system.contacts, modes, strict=True)
+                               if m.touching and not m.stuck and c.friction is not None and len(c.tangents)])
     out: list = []
     watches: list[_SlipWatch] = []
     for c, mode in zip(system.contacts, modes, strict=True):
@@ -156,11 +191,11 @@ def _events(system: System, modes: list[ContactMode], phase: Phase):
             out.append(watches[-1])
             continue
         r = np.asarray(mode.slip, float)
-        out.append(_event(lambda t, x, n=name, r=r, b=band: float(cache(t, x).slip[n] @ r) - b, "stop", name))
-        out.append(_event(lambda t, x, n=name, r=r, b=band: float(cache(t, x).slip[n] @ r) + b, "reverse", name))
+        out.append(_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r) - b, "stop", name))
+        out.append(_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r) + b, "reverse", name))
         if len(r) == 2:
-            out.append(_event(lambda t, x, n=name, r=r, b=band: float(cache(t, x).slip[n] @ r)
-                              - 0.5 * float(np.linalg.norm(cache(t, x).slip[n])) + b, "turn", name))
+            out.append(_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r)
+                              - 0.5 * float(np.linalg.norm(slip(t, x)[n])) + b, "turn", name))
     if not watches:
         return out, system.rhs(modes, phase)
 
@@ -213,11 +248,15 @@ class _Run:
             if t_end <= t:
                 phase = self._next_phase(phase, t, x)
                 continue
-            events, rhs = _events(system, modes, phase)
             h0 = min(self.next_step, t_end - t) if self.next_step else None
-            sol = solve_ivp(rhs, (t, t_end), x, method=self.solver.method,
-                            rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
-                            events=events or None, dense_output=True, first_step=h0)
+            for method in dict.fromkeys((self._method(modes), self.solver.method)):
+                events, rhs = _events(system, modes, phase)
+                sol = solve_ivp(rhs, (t, t_end), x, method=method,
+                                rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
+                                events=events or None, dense_output=True, first_step=h0)
+                if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
+                    break
+                self.stats["rhs_evals"] += sol.nfev  # a failed launch method: retry with the scene's
             self.stats["rhs_evals"] += sol.nfev
             self.stats["steps"] += len(sol.t) - 1
             if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
@@ -234,6 +273,19 @@ class _Run:
             elif t < T:
                 phase = self._next_phase(phase, t, x)
         return self._result(time.perf_counter() - wall0)
+
+    def _method(self, modes: list[ContactMode]) -> str:
+        """The scene's method, but a stiff-capable one while a 2-D slip launches from rest.
+
+        Near v_t = 0 the direction of 2-D Coulomb friction relaxes at a rate ∝ μ F/(m |v_t|)
+        (m: the arm's smallest tangential inertia): stiff for an explicit method until the
+        slip has grown, worst when the push is just at the cone (thousands of tiny steps).
+        LSODA switches to BDF while that lasts; the segment ends at the next event.
+        """
+        method = self.solver.method
+        if method not in IMPLICIT and any(m.from_rest and len(m.slip) == 2 and not m.stuck for m in modes):
+            return LAUNCH_METHOD
+        return method
 
     def _init_controller(self, phase: Phase, t: float, x: np.ndarray, modes) -> np.ndarray:
         if phase.controller.n_states:
@@ -304,14 +356,15 @@ class _Run:
             modes[i] = modes[i].with_(touching=False, stuck=False)
         elif event.kind in ("stop", "reverse"):
             rest.add(i)
-        elif event.kind == "turn":  # 2-D: the slip turned 60° from the reference; refresh it
+        elif event.kind == "turn":  # 2-D: the slip turned 60° from the reference; refresh it (no mode change)
             ev = system.evaluate(t, x, modes, phase)
-            modes[i] = modes[i].with_(slip=self._direction(ev.slip[c.name]))
+            modes[i] = modes[i].with_(slip=self._direction(ev.slip[c.name]), from_rest=False)
+            return x, modes, phase
         elif event.kind == "slip":  # the cone is reached: slide from rest where the holding force pushes
             ev = system.evaluate(t, x, modes, phase)
             self.stats["slips_seen_inside_a_step"] += int(event.latch < math.inf)
             if event.g(ev) <= SLIP_ALARM * c.friction.mu_s * max(ev.normal_force[c.name], 0.0):
-                modes[i] = modes[i].with_(stuck=False, slip=self._direction(-ev.friction[c.name]))
+                modes[i] = modes[i].with_(stuck=False, slip=self._direction(-ev.friction[c.name]), from_rest=True)
                 released.add(i)
             else:  # a stage saw the cone left, the located point does not: a false alarm, still stuck
                 self.events[-1]["kind"] = "slip_check"
@@ -394,7 +447,7 @@ class _Run:
                 if mode.stuck:
                     F_f = ev.friction[c.name]
                     if not _in_cone(F_f, F_n, mu_s):
-                        modes[i] = mode.with_(stuck=False, slip=self._direction(-F_f))
+                        modes[i] = mode.with_(stuck=False, slip=self._direction(-F_f), from_rest=True)
                         self._log(t, "slip", c.name)
                         released.add(i)
                         changed = True
@@ -406,7 +459,7 @@ class _Run:
                 speed = float(np.linalg.norm(vt))
                 if i not in rest and speed > system.slip_band:
                     if float(vt @ np.asarray(mode.slip)) < 0.5 * speed:  # moving, but not along r: refresh r
-                        modes[i] = mode.with_(slip=self._direction(vt))
+                        modes[i] = mode.with_(slip=self._direction(vt), from_rest=False)
                     continue
                 # at rest: stick if the cone can hold it, else slide where the holding force pushes
                 rest.discard(i)
@@ -419,7 +472,7 @@ class _Run:
                     modes[i] = trial[i]
                     self._log(t, "stick", c.name)
                 else:
-                    modes[i] = mode.with_(slip=self._direction(-F_f))
+                    modes[i] = mode.with_(slip=self._direction(-F_f), from_rest=True)
                     released.add(i)
                     self._log(t, "slip", c.name)
                 changed = True

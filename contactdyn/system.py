@@ -20,6 +20,7 @@ the same matrix with velocity jumps (momentum law): M ΔQ̇ = Cᵀ Λ, G Q̇⁺ 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -398,6 +399,8 @@ class System:
         nQ, nv = self.nQ, self.nv
         q, v = x[:nv], x[nQ:nQ + nv]
         robot = self.robot
+        if any(m.from_rest and len(m.slip) == 2 for m in modes):
+            modes = self._launch_directions(t, x, modes, phase)
         robot.update(q, v)
         f = np.zeros(nQ)
         f[:nv] = -robot.h
@@ -436,31 +439,33 @@ class System:
                 T = c.tangents
                 vt = self.slip_velocity(c, kin)
                 ev.slip[c.name] = vt
+                if mode.touching:
+                    R_T = np.zeros((len(T), nQ))  # generalized rows of the tangential slip
+                    R_T[:, :nv] = T @ kin.J
+                    if c.body_index >= 0:
+                        R_T[:, c.body_index] -= T @ c.body_axis
                 if mode.touching and mode.stuck:
                     for i in range(len(T)):
-                        trow = self._row(c, T[i], kin)
-                        rows.append(trow)
-                        cols.append(trow)
+                        rows.append(R_T[i])
+                        cols.append(R_T[i])
                         gammas.append(float(T[i] @ kin.drift) + self.stabilization * float(vt[i]))
                         meta.append((c.name, "t", i))
                 elif mode.touching:
+                    fr = c.friction
                     d = self._slip_direction(vt, mode)
-                    visc = -c.friction.viscous * vt
-                    if row is not None:  # normal force is an unknown: tilt its column
-                        col = row.copy()
-                        for i in range(len(T)):
-                            col -= c.friction.mu_k * d[i] * self._row(c, T[i], kin)
+                    visc = -fr.viscous * vt if fr.viscous else np.zeros(len(T))
+                    if row is not None:  # normal force is an unknown: tilt its column by −μ_k d
+                        col = row - fr.mu_k * (d @ R_T)
                         pending_friction.append((c, d, 0.0, visc))
+                        if fr.viscous:
+                            f += visc @ R_T
                     else:
-                        ff = -c.friction.mu_k * max(F_n, 0.0) * d + visc
+                        ff = -fr.mu_k * max(F_n, 0.0) * d + visc
                         pending_friction.append((c, d, F_n, visc))
                         ev.friction[c.name] = ff
-                    for i in range(len(T)):
-                        f += visc[i] * self._row(c, T[i], kin)
-                        if row is None:
-                            f += (-c.friction.mu_k * max(F_n, 0.0) * d[i]) * self._row(c, T[i], kin)
+                        f += ff @ R_T
                     if self.energy_slot >= 0:
-                        ydot[self.energy_slot + 1] += float(c.friction.viscous * vt @ vt)
+                        ydot[self.energy_slot + 1] += float(fr.viscous * vt @ vt)
                 else:
                     ev.friction[c.name] = np.zeros(len(T))
             if row is not None:
@@ -571,10 +576,64 @@ class System:
         which would make the step size collapse. Never a smoothed sgn.
         """
         r = np.asarray(mode.slip, float)
-        ahead = float(vt @ r)
-        if ahead > self.slip_band:
-            return r if len(vt) == 1 else vt / float(np.linalg.norm(vt))
+        if float(vt @ r) > self.slip_band:
+            return r if len(vt) == 1 else vt / math.sqrt(float(vt @ vt))
         return r
+
+    def slip_acceleration(self, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:
+        """Tangential tip–environment acceleration [m/s²] in tangent coordinates at (x, ẋ)."""
+        nQ, nv = self.nQ, self.nv
+        self.robot.update(x[:nv], x[nQ:nQ + nv])
+        kin = self.kinematics(c, x)
+        qdd = xdot[nQ:2 * nQ]
+        a_env = c.body_axis * qdd[c.body_index] if c.body_index >= 0 else np.zeros(3)
+        return c.tangents @ (kin.J @ qdd[:nv] + kin.drift - a_env)
+
+    def _launch_directions(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
+                           ) -> list[ContactMode]:
+        """Modes whose 2-D slides from rest, still inside the stick band, slide the consistent way.
+
+        A slip from rest starts where it accelerates: d with a_t(d) = λ d, λ ≥ 0, a_t the
+        tangential acceleration when friction is −μ_k F d. With an anisotropic arm (tangential
+        mobility differing by direction) this is not the direction of the holding force, and
+        a slide that started along that one would swing round at |v_t| ≈ v_ε, where the
+        direction dynamics are stiff (rate ∝ 1/|v_t|). Newton on the angle (at most 4
+        iterations, two evaluations each); the reference r if it does not converge.
+        """
+        nQ, nv = self.nQ, self.nv
+        self.robot.update(x[:nv], x[nQ:nQ + nv])
+        out = list(modes)
+        for i, (c, mode) in enumerate(zip(self.contacts, modes, strict=True)):
+            if not (mode.from_rest and len(mode.slip) == 2 and mode.touching and not mode.stuck):
+                continue
+            r = np.asarray(mode.slip, float)
+            if float(self.slip_velocity(c, self.kinematics(c, x)) @ r) > self.slip_band:
+                out[i] = mode.with_(from_rest=False)  # launched: the slip's own direction from here on
+                continue
+            theta = float(np.arctan2(r[1], r[0]))
+            best = r
+            for _ in range(4):
+                phi, d, ahead = self._launch_cross(t, x, out, i, phase, theta)
+                if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):
+                    best = d
+                    break
+                dphi = (self._launch_cross(t, x, out, i, phase, theta + 1e-7)[0] - phi) / 1e-7
+                if not dphi < 0.0:  # a stable direction turns the acceleration back onto d
+                    break
+                theta -= float(np.clip(phi / dphi, -0.5, 0.5))
+            out[i] = mode.with_(slip=tuple(best), from_rest=False)
+        self.robot.update(x[:nv], x[nQ:nQ + nv])
+        return out
+
+    def _launch_cross(self, t: float, x: np.ndarray, modes: list[ContactMode], i: int, phase: Phase,
+                      theta: float) -> tuple[float, np.ndarray, float]:
+        """Sliding contact i along d = (cos θ, sin θ): (d × a_t, d, a_t · d) [m/s²]."""
+        c = self.contacts[i]
+        d = np.array([np.cos(theta), np.sin(theta)])
+        trial = list(modes)
+        trial[i] = modes[i].with_(slip=tuple(d), from_rest=False)
+        a = self.slip_acceleration(c, x, self.evaluate(t, x, trial, phase).xdot)
+        return float(d[0] * a[1] - d[1] * a[0]), d, float(a @ d)
 
     def slip_velocity(self, c: Contact, kin: Kinematics, qd: np.ndarray | None = None) -> np.ndarray:
         """Tangential tip–environment velocity [m/s] in tangent coordinates (at Q̇ = qd if given)."""
