@@ -161,6 +161,8 @@ class SolverSpec:
     storm_window: float = 1e-9  #: [s] events closer than this count towards a storm
     storm_count: int = 50  #: that many events inside the window stop the run
     stabilization: float = 20.0  #: [1/s] Baumgarte rate ω of bonds, rigid contacts and sticks (0: none)
+    #: [m/s] slip-speed band of the stick/slip guard: a slide stops when |v_t| falls to it
+    stick_velocity: float = 1e-9
 
 
 @dataclass(frozen=True)
@@ -425,6 +427,7 @@ def _read_solver(r: Reader) -> SolverSpec:
         storm_window=r.float("storm_window", SolverSpec.storm_window, lo=0.0, unit="s"),
         storm_count=r.int("storm_count", SolverSpec.storm_count, lo=2),
         stabilization=r.float("stabilization", SolverSpec.stabilization, lo=0.0, unit="1/s"),
+        stick_velocity=r.float("stick_velocity", SolverSpec.stick_velocity, lo=0.0, lo_open=True, hi=1.0, unit="m/s"),
     )
     r.finish()
     return spec
