@@ -28,7 +28,7 @@ def test_sims_folder_holds_the_case_scenes():
 
 
 #: scenes on main that wait for another branch (remove an entry when its branch lands)
-PENDING = {"case2_writer5dof": "needs the friction branch's 2-D start-up (event storm of turn/reverse at t = 0)"}
+PENDING: dict[str, str] = {}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=PENDING[n], strict=False))
