@@ -17,9 +17,11 @@ from contactdyn.scene import load_scene, sims_dir
 SCENES = sorted(p.stem for p in sims_dir().glob("*.toml"))
 
 #: [s] smoke-run length per scene: past the first contact (and its impact) where there is one
-SMOKE_DURATION = {"b1": 0.3, "case1_cart": 1.2, "case2_writer_b": 1.2, "case2_writer_rigid": 1.2, "case3_a": 1.6,
-                  "case3_b": 1.6, "case3_b_varied": 1.6}
-CASE_SCENES = ("case1_cart", "case2_writer_b", "case2_writer_rigid", "case3_a", "case3_b", "case3_b_varied")
+SMOKE_DURATION = {"b1": 0.3, "case1_cart": 1.2, "case2_writer_b": 1.2, "case2_writer_rigid": 1.2}
+SMOKE_DURATION.update({f"case3_{env}_{law}": 1.6 for env in "ab" for law in ("position", "force")})
+SMOKE_DURATION["case3_b_force_varied"] = 1.6
+CASE3 = ("case3_b_position", "case3_a_position", "case3_b_force", "case3_a_force", "case3_b_force_varied")
+CASE_SCENES = ("case1_cart", "case2_writer_b", "case2_writer_rigid", "case2_writer5dof", *CASE3)
 
 
 def test_sims_folder_holds_the_case_scenes():
@@ -40,7 +42,7 @@ def test_scene_loads_and_smoke_runs(name):
     result = simulate(name, {"duration": duration, "solver.output_rate": 200.0})
     assert result.t[-1] == pytest.approx(duration)
     for channel, values in result.channels.items():
-        if channel.endswith(".F_d"):  # NaN where the phase has no force set-point
+        if channel.endswith(".F_d") or channel == "tip_ref":  # NaN where a phase has no set-point / reference
             continue
         assert np.all(np.isfinite(values)), f"{name}: channel {channel} has non-finite values"
 
@@ -150,12 +152,14 @@ def test_force_direction_must_name_a_tangent_the_contact_has():
 def test_cylindrical_full_model_gives_the_reduced_axis_motion(gravity):
     """Eqs 47-49: H13 = H23 = 0 and h3 has no q1/q2 terms, so the vertical axis moves the same in
     the full 3-DOF model, even while q1 and q2 move, as in the model reduced to q3 (both runs
-    with tight tolerances; they differ only by integration error)."""
+    with tight tolerances; they differ only by integration error). q3 keeps its elastic drive,
+    q1 and q2 get ideal ones; the approach, the impact and A7's contact phase are all compared."""
     tight = {"duration": 1.7, "solver.output_rate": 500.0, "solver.rtol": 1e-12, "solver.atol": 1e-14,
              "robot.gravity": gravity}
-    reduced = simulate("case3_b", tight)
-    full = simulate("case3_b", {**tight, "robot.active_joints": ["q1", "q2", "q3"], "robot.q0": [0.3, 0.2, 0.0],
-                                "robot.v0": [0.5, -0.1, 0.0]})
+    reduced = simulate("case3_b_position", tight)
+    full = simulate("case3_b_position", {**tight, "robot.active_joints": ["q1", "q2", "q3"],
+                                         "robot.q0": [0.3, 0.2, 0.0], "robot.v0": [0.5, -0.1, 0.0],
+                                         "robot.drive.kind": ["torque", "torque", "elastic"]})
     assert np.ptp(full["q"][:, 0]) > 0.5 and np.ptp(full["q"][:, 1]) > 0.05  # the other axes really move
     assert len(reduced.impacts) == len(full.impacts) >= 1
     np.testing.assert_allclose(full["q"][:, 2], reduced["q"][:, 0], rtol=0, atol=1e-8)  # [m]
@@ -164,3 +168,34 @@ def test_cylindrical_full_model_gives_the_reduced_axis_motion(gravity):
     np.testing.assert_allclose(full["contact.tip.F_n"], F_red, rtol=0, atol=1e-8 * np.abs(F_red).max())  # [N]
     for a, b in zip(full.impacts, reduced.impacts, strict=True):
         assert a["normal_impulse"] == pytest.approx(b["normal_impulse"], rel=1e-8)
+
+
+@pytest.fixture(scope="module")
+def case3_runs():
+    return {name: simulate(name, {"solver.output_rate": 500.0}) for name in CASE3}
+
+
+@pytest.mark.parametrize("name", CASE3[:4])
+def test_case3_force_follows_its_ramp_to_100_N(case3_runs, name):
+    """Figs. 17-19 (nominal): both laws, both surfaces bring the force to its 100 N set-point through
+    the elastic transmission: within 3 N over the last 0.5 s of the 3 s run (the impact on model
+    (b), or the continuous touch on model (a), overshoots first)."""
+    r = case3_runs[name]
+    last = r.t > r.t[-1] - 0.5
+    np.testing.assert_allclose(r["contact.tip.F_n"][last], 100.0, atol=3.0)  # [N]
+    assert np.all(r["contact.tip.F_d"][last] == 100.0)
+    assert np.abs(r["u"]).max() > 1.0 and "drive.q3.theta" in r.channels  # through the motor and the tube
+    assert len(r.impacts) == (2 if "_b_" in name else 0)  # model (b): impact and a bounce; (a): continuous
+
+
+def test_case3_force_law_position_tracking_degrades_with_the_varied_surface(case3_runs):
+    """Fig. 19: the force law believing k = 1e5 N/m holds the nominal surface at its 1 mm depth;
+    on the varied surface (m' = 5 kg, k = 1e3 N/m, b = 0) the tip keeps sinking (tens of mm, not
+    settled) and the force lags far behind its set-point."""
+    nominal, varied = case3_runs["case3_b_force"], case3_runs["case3_b_force_varied"]
+    last = nominal.t > nominal.t[-1] - 1.0
+    depth_nominal = 0.2 - nominal["tip"][last, 2]  # [m] below the undeformed surface
+    depth_varied = 0.2 - varied["tip"][last, 2]
+    np.testing.assert_allclose(depth_nominal, 100.0 / 1e5, rtol=0.01)  # F_d / k = 1 mm, settled
+    assert depth_varied.min() > 10 * 100.0 / 1e5 and np.ptp(depth_varied) > 5e-3  # > 10 mm, still moving 5 mm/s
+    assert np.abs(varied["contact.tip.F_n"][last] - 100.0).min() > 50.0  # [N]
