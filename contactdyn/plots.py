@@ -269,6 +269,8 @@ def _friction(result: Result) -> list[Panel] | None:
         mu = _scene_contact(result, c).get("tangent", {}).get("mu_k", _scene_contact(result, c).get("tangent", {})
                                                                .get("mu"))
         lines_b = [Line(t, F_f[:, i], f"F_f ({names[i]})") for i in range(F_f.shape[1])]
+        if F_f.shape[1] == 2:  # 2-D friction: the cone bounds the magnitude
+            lines_b.append(Line(t, np.linalg.norm(F_f, axis=1), "|F_f|", "-", "k"))
         if mu is not None:
             bound = float(mu) * np.maximum(result[f"contact.{c}.F_n"], 0.0)
             lines_b += [Line(t, bound, f"±μF, μ = {float(mu):g}", ":", "0.4"), Line(t, -bound, "", ":", "0.4")]
@@ -320,6 +322,15 @@ def _force_position_errors(result: Result) -> list[Panel] | None:
                       (_moving(result["tip"][after, k]) or _moving(result["tip_ref"][after, k])))
         if lines:
             panels.append(Panel("position error e [mm]", lines, "position error in contact"))
+            return panels
+    surface = _surface(result)  # a pure force law has no reference: show where the tip went
+    if surface is not None and "tip" in result.channels:
+        point, n = surface
+        t_touch = _touch_time(result)
+        after = t >= t_touch if t_touch is not None else np.ones_like(t, bool)
+        depth = np.where(after, MM * ((point - result["tip"]) @ n), np.nan)
+        panels.append(Panel("tip depth [mm]", (Line(t, depth, "depth n·(p_s − p) below the undeformed surface"),),
+                            "tip position in contact (no position reference)"))
     return panels
 
 

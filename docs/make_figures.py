@@ -18,13 +18,16 @@ RUNS = ROOT / "runs"
 
 #: scene -> the figures reproduction.md shows (PNG only, each < 200 kB)
 SHOWN = {
-    "case1_cart": ["fig10b_body_velocity", "fig11_deformations_horizontal", "fig12_deformations_vertical",
-                   "fig13_contact_forces", "fig14_tip_motion"],
+    "case1_cart": ["fig10_voltages", "fig10b_body_velocity", "fig11_deformations_horizontal",
+                   "fig12_deformations_vertical", "fig13_contact_forces"],
     "case2_writer_b": ["fig14_tip_motion", "fig15_forces_friction", "fig16_tracking_errors"],
     "case2_writer_rigid": ["fig15_forces_friction"],
-    "case3_b": ["fig16_tracking_errors", "fig17_force_position_errors"],
-    "case3_a": ["fig17_force_position_errors"],
-    "case3_b_varied": ["fig17_force_position_errors"],
+    "case2_writer5dof": ["fig15_forces_friction"],
+    "case3_b_position": ["fig10_voltages", "fig16_tracking_errors", "fig17_force_position_errors"],
+    "case3_a_position": ["fig17_force_position_errors"],
+    "case3_b_force": ["fig17_force_position_errors"],
+    "case3_a_force": ["fig17_force_position_errors"],
+    "case3_b_force_varied": ["fig17_force_position_errors"],
 }
 
 

@@ -186,3 +186,15 @@ def test_a_run_without_any_plottable_channel_says_so(tmp_path, capsys):
 
 
 FIGURES_BY_NAME = {f.name: f for f in FIGURES}
+
+
+def test_a_pure_force_law_run_shows_the_tip_depth_instead_of_a_position_error():
+    run = synthetic_run()
+    del run.channels["tip_ref"]
+    run.scene["contact"]["tip"]["point"] = [0.3, 0.0, -0.1]
+    panels = FIGURES_BY_NAME["fig17_force_position_errors"].build(run)
+    assert [p.ylabel for p in panels] == ["force error F − F_d [N]"] * 2 + ["tip depth [mm]"]  # normal, tangent
+    depth = panels[-1].lines[0].y
+    touching = run.t >= 1.0
+    assert np.all(np.isnan(depth[~touching]))
+    np.testing.assert_allclose(depth[touching], 1e3 * 1e-3 * (run.t[touching] - 1.0), atol=1e-9)  # 1 mm/s sinking
