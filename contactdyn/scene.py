@@ -86,7 +86,7 @@ class FrictionSpec:
 @dataclass(frozen=True)
 class ContactSpec:
     name: str
-    frame: str  #: robot frame whose origin touches
+    frame: str  #: robot frame whose origin touches (default: the robot's tip frame, ``robot.tip``)
     body: str  #: "ground" or the name of an active body
     point: np.ndarray  #: [m] a point of the undeformed surface (world, body at coordinate 0)
     normal: np.ndarray  #: unit outward surface normal (points from environment to robot)
@@ -273,7 +273,7 @@ def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = Non
     bodies = {n: _read_body(n, r) for n, r in top.named_tables("body").items()}
     if "ground" in bodies:
         raise top.error("body.ground", "a body name other than 'ground' (the fixed ground always exists)", "ground")
-    contacts = {n: _read_contact(n, r, bodies) for n, r in top.named_tables("contact").items()}
+    contacts = {n: _read_contact(n, r, bodies, robot.tip) for n, r in top.named_tables("contact").items()}
     solver = _read_solver(top.sub("solver", {}))
     default_controller = top.sub("controller", {})
     phases = tuple(_read_phase(r, default_controller, contacts, duration) for r in top.tables("phase"))
@@ -366,7 +366,7 @@ def _read_chain(r: Reader) -> ChainSpec:
     return chain
 
 
-def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec]) -> ContactSpec:
+def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = "tip") -> ContactSpec:
     body = r.str("body", "ground", choices=["ground", *bodies])
     normal_r = r.sub("normal")
     normal = normal_r.vector("direction", size=3, unit_norm=True)
@@ -406,7 +406,7 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec]) -> ContactS
     tangent_r.finish()
     spec = ContactSpec(
         name=name,
-        frame=r.str("frame", "tip"),
+        frame=r.str("frame", tip),  # default: the robot's tip frame (one line swaps robots)
         body=body,
         point=r.vector("point", size=3, unit="m"),
         normal=normal,
