@@ -132,6 +132,10 @@ class ReferenceSpec:
     space: str  #: "task" (tip position) or "joint"
     start: np.ndarray | None  #: None: continue from the previous phase, or from the state
     moves: tuple[Move, ...]
+    #: active body the reference rides on ("ground": the world). Then x_d(t) = o(t) + start + Σ moves with
+    #: o = axis · (body coordinate) the body's origin, and its velocity and acceleration join v_d and a_d
+    #: (the paper's task coordinates relative to the cart, eq. 5); ``start`` is relative to o
+    body: str = "ground"
 
 
 @dataclass(frozen=True)
@@ -276,9 +280,10 @@ def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = Non
     contacts = {n: _read_contact(n, r, bodies, robot.tip) for n, r in top.named_tables("contact").items()}
     solver = _read_solver(top.sub("solver", {}))
     default_controller = top.sub("controller", {})
-    phases = tuple(_read_phase(r, default_controller, contacts, duration) for r in top.tables("phase"))
+    phases = tuple(_read_phase(r, default_controller, contacts, duration, bodies) for r in top.tables("phase"))
     if not phases:
-        phases = (_read_phase(Reader({"name": "main"}, "phase[0]", file), default_controller, contacts, duration),)
+        phases = (_read_phase(Reader({"name": "main"}, "phase[0]", file), default_controller, contacts, duration,
+                              bodies),)
     top.finish()
     return Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document)
 
@@ -441,7 +446,8 @@ def _read_solver(r: Reader) -> SolverSpec:
     return spec
 
 
-def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, ContactSpec], duration: float) -> PhaseSpec:
+def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, ContactSpec], duration: float,
+                bodies: dict[str, BodySpec] | None = None) -> PhaseSpec:
     from .controllers import read_controller
 
     name = r.str("name", "main")
@@ -456,14 +462,17 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
     merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
         else r.raw("controller")
     controller = read_controller(Reader(merged, r.key("controller"), r.file))
-    reference = _read_reference(r.sub("reference")) if r.has("reference") else None
+    reference = _read_reference(r.sub("reference"), bodies or {}) if r.has("reference") else None
     forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
     r.finish()
     return PhaseSpec(name, until, controller, reference, forces)
 
 
-def _read_reference(r: Reader) -> ReferenceSpec:
+def _read_reference(r: Reader, bodies: dict[str, BodySpec]) -> ReferenceSpec:
     space = r.str("space", "task", choices=["task", "joint"])
+    body = r.str("body", "ground", choices=["ground", *bodies])
+    if body != "ground" and space != "task":
+        raise r.error("body", "'ground' for a joint-space reference (only a task reference rides on a body)", body)
     start = r.vector("start", None) if r.has("start") else None
     moves = []
     for m in r.tables("moves"):
@@ -484,8 +493,10 @@ def _read_reference(r: Reader) -> ReferenceSpec:
     sizes = {len(mv.delta) for mv in moves} | ({len(start)} if start is not None else set())
     if len(sizes) > 1:
         raise r.error("moves", "start and every move of the same dimension", sorted(sizes))
+    if body != "ground" and sizes - {3}:
+        raise r.error("moves", "3-vectors (a task reference on a body)", sorted(sizes))
     r.finish()
-    return ReferenceSpec(space, start, tuple(moves))
+    return ReferenceSpec(space, start, tuple(moves), body)
 
 
 def _read_force(r: Reader, contacts: dict[str, ContactSpec]) -> ForceSpec:

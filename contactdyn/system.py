@@ -74,6 +74,9 @@ class Phase:
     z_slice: slice
     reference: Reference | None = None
     forces: dict[str, Ramp] = field(default_factory=dict)
+    #: (body coordinate, unit axis) when the reference rides on an active body (``reference.body``):
+    #: x_d = axis · Q_b + reference (see :meth:`System.reference_at`)
+    carrier: tuple[int, np.ndarray] | None = None
 
 
 @dataclass
@@ -281,17 +284,22 @@ class System:
     def start_phase(self, index: int, t: float, x: np.ndarray, previous: Phase | None) -> Phase:
         spec = self.scene.phases[index]
         controller = self.controllers[index]
-        reference = None
+        reference = carrier = None
         if spec.reference is not None:
             ref = spec.reference
+            if ref.body != "ground":
+                carrier = (self.body_index[ref.body], self.scene.bodies[ref.body].axis)
             if ref.start is not None:
                 start = ref.start.copy()
-            elif previous is not None and previous.reference is not None and \
-                    previous.spec.reference is not None and previous.spec.reference.space == ref.space:
-                start = previous.reference.at(t)[0]
-            else:
-                q = x[: self.nv]
-                start = self.robot.frame_position(q, self.tip_fid) if ref.space == "task" else q.copy()
+            else:  # continue where the previous reference, or the tip, is (absolute), relative to the carrier
+                if previous is not None and previous.reference is not None and \
+                        previous.spec.reference is not None and previous.spec.reference.space == ref.space:
+                    start = self.reference_at(previous, t, x)[0]
+                else:
+                    q = x[: self.nv]
+                    start = self.robot.frame_position(q, self.tip_fid) if ref.space == "task" else q.copy()
+                if carrier is not None:
+                    start = start - carrier[1] * x[carrier[0]]
             dims = 3 if ref.space == "task" else self.nv
             if len(start) != dims:
                 raise SceneError(f"phase[{index}].reference", f"{dims}-vectors in {ref.space} space",
@@ -304,8 +312,23 @@ class System:
             reference = Reference(start, moves)
         forces = {f.key: Ramp(f.ramp.value, f.ramp.start + t, f.ramp.duration, f.ramp.kind, f.ramp.initial)
                   for f in spec.forces}
-        phase = Phase(spec, index, t, controller, self.z_slices[index], reference, forces)
+        phase = Phase(spec, index, t, controller, self.z_slices[index], reference, forces, carrier)
         return phase
+
+    def reference_at(self, phase: Phase, t: float, x: np.ndarray):
+        """The phase's reference (x_d, v_d, a_d) at (t, x), or Nones.
+
+        A reference carried by a body adds the body's origin o = axis · Q_b and its velocity to
+        x_d and v_d. Its acceleration axis · Q̈_b is an unknown of the linear system: ``evaluate``
+        adds it to a_d there (folded, like measured forces), not here.
+        """
+        if phase.reference is None:
+            return None, None, None
+        x_d, v_d, a_d = phase.reference.at(t)
+        if phase.carrier is not None:
+            i, axis = phase.carrier
+            x_d, v_d = x_d + axis * x[i], v_d + axis * x[self.nQ + i]
+        return x_d, v_d, a_d
 
     # ---- kinematics ----------------------------------------------------------------------
     def kinematics(self, c: Contact, x: np.ndarray) -> Kinematics:
@@ -517,9 +540,7 @@ class System:
         if ft is None:
             ft = robot.frame_terms(self.tip_fid)
         p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
-        x_d = v_d = a_d = None
-        if phase.reference is not None:
-            x_d, v_d, a_d = phase.reference.at(t)
+        x_d, v_d, a_d = self.reference_at(phase, t, x)
         force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
         ctl = phase.controller
         z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
@@ -531,17 +552,26 @@ class System:
         if ctl.uses_forces:
             inp.tau_contact = f[:nv] + robot.h
             inp.surfaces = {c.name: (k.p_env, k.v_env) for c, k in zip(self.contacts, kins, strict=True)}
+            for c, k, m in zip(self.contacts, kins, modes, strict=True):  # tangential chains: their anchors
+                for i, dc in enumerate(c.tangent_chains):
+                    inp.surfaces[f"{c.name}.{dc.label}"] = (k.p_env + dc.u * m.offsets[i], k.v_env)
             inp.touching = {c.name: m.touching for c, m in zip(self.contacts, modes, strict=True)}
         tau, zdot = ctl.command(inp)
+        carried = None  # a reference on a body: the command's part proportional to the body's acceleration
+        if phase.carrier is not None and x_d is not None:
+            i_b, axis = phase.carrier
+            tau_b, zdot_b = ctl.command(replace(inp, a_d=a_d + axis))
+            if np.any(tau_b != tau):
+                carried = (i_b, tau_b - tau, None if zdot is None else zdot_b - zdot)
         cmd = np.zeros(len(drives.specs))  # per drive: joints, then bodies
         cmd[:nv] = tau
         for idx, v_ref, gain in self.servo:
             cmd[idx] = gain * (v_ref - x[nQ + idx])  # body coordinate idx = drive idx
         vmask = self._joint_motors if ctl.outputs == "voltage" else None
         # drives, folded measured forces, solve
-        if ctl.uses_forces and rows:
+        if (ctl.uses_forces and rows) or carried is not None:
             out, qdd, lam, regular, cmd, zdot = self._solve_folded(inp, ctl, cmd, zdot, f, rows, cols, gammas,
-                                                                    meta, x, vmask)
+                                                                    meta, x, vmask, carried)
         else:
             out = drives.apply(cmd, x, nQ, f, voltage=vmask)
             qdd, lam, regular = self._solve(f, rows, cols, gammas, None)
@@ -578,21 +608,22 @@ class System:
                 xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
         return ev
 
-    def _solve(self, f: np.ndarray, rows: list, cols: list, gammas: list, fold: np.ndarray | None
-               ) -> tuple[np.ndarray, np.ndarray, bool]:
-        """Q̈ and the row forces λ of [[M, −Cᵀ − fold], [G, 0]] [Q̈; λ] = [f; −γ]."""
+    def _solve(self, f: np.ndarray, rows: list, cols: list, gammas: list, fold: np.ndarray | None,
+               fold_q: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Q̈ and the row forces λ of [[M − fold_q, −Cᵀ − fold], [G, 0]] [Q̈; λ] = [f; −γ]."""
         nQ, nv = self.nQ, self.nv
         M = self._M
         M[:nv, :nv] = self.robot.H + np.diag(self._D) if self.drives.any_motor else self.robot.H
-        if rows:
+        if rows or fold_q is not None:
             nr = len(rows)
             A = np.zeros((nQ + nr, nQ + nr))
-            A[:nQ, :nQ] = M
-            A[:nQ, nQ:] = -np.array(cols).T
-            if fold is not None:
-                A[:nQ, nQ:] -= fold
-            A[nQ:, :nQ] = np.array(rows)
-            b = np.concatenate([f, -np.asarray(gammas)])
+            A[:nQ, :nQ] = M if fold_q is None else M - fold_q
+            if nr:
+                A[:nQ, nQ:] = -np.array(cols).T
+                if fold is not None:
+                    A[:nQ, nQ:] -= fold
+                A[nQ:, :nQ] = np.array(rows)
+            b = np.concatenate([f, -np.asarray(gammas, float)])
             z_all, regular = solve_linear(A, b)
             return z_all[:nQ], z_all[nQ:], regular
         qdd = np.empty(nQ)
@@ -601,7 +632,7 @@ class System:
         return qdd, np.empty(0), regular
 
     def _solve_folded(self, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zdot, f: np.ndarray, rows, cols,
-                      gammas, meta, x: np.ndarray, vmask):
+                      gammas, meta, x: np.ndarray, vmask, carried=None):
         """Solve with a force-reading controller whose measured forces include unknown row forces λ.
 
         The controller is probed with a unit force on each row (its generalized column on the
@@ -610,12 +641,18 @@ class System:
         a force independent of λ. The clipping pattern is re-checked with the solved λ.
         A row whose force acts on the robot alone (rigid contact or stick on the fixed ground)
         stays out of the measured joint force: cancelling it would leave it undetermined.
+
+        ``carried = (i_b, b, d)``: a reference carried by body coordinate i_b makes the command
+        affine in that body's acceleration too, τ += b Q̈_b, ż += d Q̈_b; b folds into the matrix's
+        column i_b the same way (the reference's acceleration is then exact, not lagged).
         """
         nQ, nv, drives = self.nQ, self.nv, self.drives
         nr = len(rows)
         B = np.zeros((nv, nr))
         Dz = np.zeros((len(zdot), nr)) if zdot is not None else None
         for j, (name, kind, _) in enumerate(meta):
+            if not ctl.uses_forces:
+                break
             fed_back = bool(np.any(cols[j][nv:]))
             if kind != "n" and not fed_back:
                 continue
@@ -631,18 +668,27 @@ class System:
             fk = f.copy()
             out = drives.apply(cmd, x, nQ, fk, voltage=vmask, sat_cmd=sat_cmd)
             fold = np.zeros((nQ, nr))
+            fold_q = np.zeros((nQ, nQ)) if carried is not None else None
             for i in range(nv):
                 if not out.saturated[i]:
                     fold[drives.targets[i]] += drives.gains[i] * B[i]
-            qdd, lam, regular = self._solve(fk, rows, cols, gammas, fold)
+                    if carried is not None:
+                        fold_q[drives.targets[i], carried[0]] += drives.gains[i] * carried[1][i]
+            qdd, lam, regular = self._solve(fk, rows, cols, gammas, fold, fold_q)
             full = cmd.copy()
             full[:nv] += B @ lam
+            if carried is not None:
+                full[:nv] += carried[1] * qdd[carried[0]]
             check = drives.apply(full, x, nQ, np.zeros(nQ), voltage=vmask)
             if np.array_equal(check.saturated, out.saturated):
                 break
             sat_cmd = full
         f[:] = fk
-        return check, qdd, lam, regular, full, (zdot + Dz @ lam if Dz is not None else None)
+        if Dz is not None:
+            zdot = zdot + Dz @ lam
+            if carried is not None and carried[2] is not None:
+                zdot = zdot + carried[2] * qdd[carried[0]]
+        return check, qdd, lam, regular, full, zdot
 
     def separate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, contact: Contact
                  ) -> np.ndarray:

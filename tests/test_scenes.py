@@ -133,18 +133,21 @@ def test_cart_chains_meet_undeformed_at_every_touch(cart_run):
 
 
 def test_cart_forces_reach_their_set_points_and_the_cart_keeps_v0(cart_run):
-    """F2 follows its exponential ramp to 100 N (A7's depth reference uses the cart's real top);
-    F1 comes out 10-15 % short: its reference is an open-loop world-frame one (v0 plus F1_d/k ahead
-    of where the approach ended), so the servo's 0.8 % speed droop and the re-touch at 1.06 s shift
-    its anchor (the paper's coordinates are relative to the cart; ours are not yet). The cart's
-    motor keeps v0 within 1 %."""
+    """F1 and F2 follow their exponential ramps to 100 N (sec. 5.1): over the last second (1 s after
+    the ramps' five time constants) both average 100 N within 0.5 % and every sample stays within 5 %
+    (the internal masses ring, Figs. 11-12). The push's reference is relative to the cart (eq. 5) and,
+    while touching, F/k beyond the chains' anchors; with a world-frame reference F1 came out at 87 N.
+    The cart keeps v0: the servo yields 100 N / 5e4 N·s/m = 2 mm/s (0.8 %)."""
     last = cart_run.t > cart_run.t[-1] - 1.0
-    assert cart_run["contact.tip.F_n"][last].mean() == pytest.approx(100.0, rel=0.01)  # [N]
-    np.testing.assert_allclose(cart_run["contact.tip.F_n"][last], 100.0, rtol=0.05)
-    assert 80.0 < cart_run["contact.tip.t1.F"][last].mean() < 100.0  # [N]
+    for channel in ("contact.tip.F_n", "contact.tip.t1.F"):  # F2, F1 [N]
+        assert cart_run[channel][last].mean() == pytest.approx(100.0, rel=0.005), channel
+        np.testing.assert_allclose(cart_run[channel][last], 100.0, rtol=0.05, err_msg=channel)
     np.testing.assert_allclose(cart_run["contact.tip.t1.F_d"][last], 100.0, rtol=0.01)  # 99.3 % 1 s into the ramp
-    np.testing.assert_allclose(cart_run["body.cart.v"], 0.25, rtol=0.01)  # [m/s] the servo's droop is < 1 %
+    np.testing.assert_allclose(cart_run["body.cart.v"], 0.25, rtol=0.01)  # [m/s]
     assert np.abs(cart_run["body.cart.u"]).max() > 1.0  # the cart's motor does it [V]
+    push = cart_run.t > 1.0
+    on_cart = cart_run["tip_ref"][push, 0] - cart_run["body.cart.x"][push]  # [m] the reference rides on the cart
+    np.testing.assert_allclose(on_cart, on_cart[-1], atol=0.041)  # only the 40 mm F1_d/k move relative to it
 
 
 def test_cart_internal_deformations_oscillate_while_external_ones_settle(cart_run):

@@ -53,7 +53,8 @@ class ControlInput:
     #: measured generalized contact force on the joints, Σ_c J_cᵀ F_c, friction included [N·m or N];
     #: without forces of constraints on the robot alone (rigid contact or stick on the fixed ground)
     tau_contact: np.ndarray | None = None
-    #: per contact: a point of the undeformed surface [m] and its velocity [m/s] (world)
+    #: per contact: a point of the undeformed surface [m] and its velocity [m/s] (world); per "<contact>.t1":
+    #: the tangential chain's anchor (where it is undeformed since the latest touch) and its velocity
     surfaces: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     touching: dict[str, bool] = field(default_factory=dict)  #: contact modes
 

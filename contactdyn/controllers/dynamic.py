@@ -7,7 +7,9 @@ space: η = x − x_d (tip), a* = ẍ_d + P, q̈* = J⁺(a* − J̇q̇) − (I �
 τ_c decouples the robot from its contacts: with an exact model the error obeys P whatever
 the environment does. Option ``force_reference``: along a contact normal with a force
 set-point the position reference becomes the depth the nominal environment needs for F_d,
-s_d = F_d / k (the position-based way to press).
+s_d = F_d / k (the position-based way to press); along a tangent with a set-point (a
+tangential chain, case 1's F1) it becomes F_d / k beyond the chain's anchor, the point
+where that chain was undeformed at the latest touch.
 
 ``force_dynamic`` (A10): along each contact normal with a force set-point the nominal
 environment F = m s̈ + b ṡ + k s (s the penetration [m]) turns the force target
@@ -167,6 +169,23 @@ def _contact_checks(context: BindContext, names: list[str], need_exact: bool, no
     return out
 
 
+def _tangent_nominal(context: BindContext, force, nominal) -> NominalEnvironment:
+    """The nominal stiffness along a tangential set-point: ``nominal``, or the tangential chain's series k."""
+    scene, key = context.scene, context.key
+    spec = scene.contacts[force.contact]
+    if spec.tangent_chain is None:
+        raise SceneError(f"phase[{context.index}].force", f"a tangential set-point on a contact with a tangential "
+                         f"chain (force_reference presses it F_d/k beyond its anchor); contact {force.contact!r} has",
+                         f"tangent.model = {spec.tangent_model!r}", scene.file)
+    if nominal is not None:
+        return nominal
+    env, _ = nominal_from_chain(spec.tangent_chain)
+    if env is None:
+        raise SceneError(f"{key}.nominal", f"a nominal environment {{k}} for the tangential chain of contact "
+                         f"{force.contact!r} (it has no linear series stiffness)", None, scene.file)
+    return env
+
+
 # ---- A7 -----------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PositionDynamicConfig:
@@ -208,8 +227,11 @@ class PositionDynamic(Controller):
             if cfg.space != "task":
                 raise SceneError(f"{key}.force_reference", "task space (the reference moves along contact normals)",
                                  "joint space", file)
-            self.envs = _contact_checks(context, [f.contact for f in context.phase.forces], False, cfg.nominal,
-                                        "force_reference")
+            forces = context.phase.forces
+            normals = _contact_checks(context, [f.contact for f in forces if f.direction == "n"], False,
+                                      cfg.nominal, "force_reference")
+            self.envs = {f.key: normals[f.contact] if f.direction == "n" else
+                         _tangent_nominal(context, f, cfg.nominal) for f in forces}
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         cfg = self.config
@@ -230,10 +252,12 @@ class PositionDynamic(Controller):
         return inp.H @ qdd + inp.h - inp.tau_contact, None
 
     def _pressing_reference(self, inp: ControlInput):
-        """Along each touching contact normal: depth F_d/k below the undeformed surface."""
+        """Along each touching contact's set-point direction n (normal or tangent): F_d/k beyond the
+        undeformed surface or tangential anchor, along −n. The surface's acceleration along n and
+        F̈_d/k are left out (a_d's component along n is 0)."""
         x_d, v_d, a_d = inp.x_d.copy(), inp.v_d.copy(), inp.a_d.copy()
         for name, env in self.envs.items():
-            if not inp.touching.get(name) or name not in inp.force_d:
+            if not inp.touching.get(name.partition(".")[0]) or name not in inp.force_d:
                 continue
             n = inp.normals[name]
             p_s, v_s = inp.surfaces[name]
