@@ -78,3 +78,15 @@ def test_a_carried_reference_continues_where_the_previous_phase_left():
 def test_a_bad_carrier_names_the_key(reference, match):
     with pytest.raises(SceneError, match=match):
         parse_scene(doc([{"name": "main", "reference": reference}], {"kind": "task_pd"}))
+
+
+def test_a_tangential_force_reference_needs_a_tangential_chain():
+    """force_reference presses F_d/k beyond a tangential chain's anchor; a friction tangent has none."""
+    p0 = tip0()
+    d = doc([{"name": "main", "reference": {"start": p0.tolist()}, "force": [{"contact": "c", "direction": "t1",
+                                                                               "value": 10.0}]}],
+            {"kind": "position_dynamic", "force_reference": True})
+    d["contact"] = {"c": {"point": p0.tolist(), "normal": {"direction": [0, 0, 1], "model": "c", "k": 1e4},
+                          "tangent": {"model": "friction", "directions": [[1, 0, 0]], "mu": 0.3}}}
+    with pytest.raises(SceneError, match=r"phase\[0\]\.force.*tangential chain.*'friction'"):
+        simulate(parse_scene(d))
