@@ -36,7 +36,7 @@ from .result import Result
 from .scene import Scene, load_scene
 from .system import Evaluation, Phase, System
 
-__all__ = ["simulate"]
+__all__ = ["simulate", "run_system", "prepare"]
 
 STOP_TOL = 1e-12  #: [m/s] slip speed below which an impact leaves the contact to the stick test
 FORCE_TOL = 1e-9  #: [N] relative tolerance of the consistency checks
@@ -110,6 +110,21 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None)
     wall0 = time.perf_counter()
     system = System(scene)
     return _Run(system).run(wall0)
+
+
+def prepare(scene: Scene) -> tuple[System, list[ContactMode], Phase, np.ndarray]:
+    """The system, consistent initial modes, first phase and initial state of a scene (for benchmarks)."""
+    system = System(scene)
+    run = _Run(system)
+    x, modes = system.initial_state()
+    phase = system.start_phase(0, 0.0, x, None)
+    x = run._init_controller(phase, 0.0, x, modes)
+    return system, run._consistent(0.0, x, modes, phase), phase, x
+
+
+def run_system(system: System) -> Result:
+    """Simulate an already built system (its wall time excludes loading the scene and robot)."""
+    return _Run(system).run(time.perf_counter())
 
 
 class _Run:
