@@ -33,6 +33,7 @@ from scipy.integrate import solve_ivp
 from .contact import ContactMode
 from .errors import SimulationError
 from .result import Result
+from .rhsplan import ModePlan, Samples
 from .scene import Scene, load_scene
 from .system import Evaluation, Phase, System
 
@@ -49,6 +50,7 @@ class _Segment:
     modes: list[ContactMode]
     phase: Phase
     sol: Any
+    plan: ModePlan
 
 
 class _Cache:
@@ -74,7 +76,10 @@ def _event(fn, kind: str, contact: str):
     return fn
 
 
-def _events(system: System, modes: list[ContactMode], phase: Phase) -> list:
+def _events(system: System, modes: list[ContactMode], phase: Phase, plan: ModePlan | None = None) -> list:
+    """Event functions of one mode; they read the compiled plan's values when there is one."""
+    if plan is not None:
+        return _plan_events(system, modes, plan)
     cache = _Cache(system, modes, phase)
     out = []
     for c, mode in zip(system.contacts, modes, strict=True):
@@ -96,6 +101,32 @@ def _events(system: System, modes: list[ContactMode], phase: Phase) -> list:
             if len(ref) == 2:
                 out.append(_event(lambda t, x, n=name, r=ref: float(cache(t, x).slip[n] @ r)
                                   - 0.5 * float(np.linalg.norm(cache(t, x).slip[n])), "turn", name))
+    return out
+
+
+def _plan_events(system: System, modes: list[ContactMode], plan: ModePlan) -> list:
+    """The same event functions as :func:`_events`, on the plan's values."""
+    out = []
+    for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
+        name = c.name
+        if not mode.touching:
+            out.append(_event(lambda t, x, i=ci: plan.gap(i, t, x), "touch", name))
+            continue
+        if not c.spec.bonded:
+            out.append(_event(lambda t, x, i=ci: plan.normal_force(i, t, x), "separate", name))
+        if c.friction is None or not len(c.tangents):
+            continue
+        fr = c.friction
+        if mode.stuck:
+            out.append(_event(lambda t, x, i=ci, mu=fr.mu_s: mu * plan.normal_force(i, t, x)
+                              - math.sqrt(float(np.dot(plan.stick_force(i, t, x), plan.stick_force(i, t, x)))),
+                              "slip", name))
+        else:
+            ref = np.asarray(mode.slip, float)
+            out.append(_event(lambda t, x, i=ci, r=ref: float(plan.slip(i, t, x) @ r), "stop", name))
+            if len(ref) == 2:
+                out.append(_event(lambda t, x, i=ci, r=ref: float(plan.slip(i, t, x) @ r)
+                                  - 0.5 * float(np.linalg.norm(plan.slip(i, t, x))), "turn", name))
     return out
 
 
@@ -137,6 +168,18 @@ class _Run:
         self.impacts: list[dict[str, Any]] = []
         self.recent: deque[float] = deque(maxlen=self.solver.storm_count)
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0}
+        self.plans: dict[tuple, ModePlan] = {}
+        self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
+
+    def _plan(self, modes: list[ContactMode], phase: Phase) -> ModePlan:
+        """The compiled right-hand side of (modes, phase), built once and kept."""
+        key = (tuple(modes), id(phase))
+        plan = self.plans.get(key)
+        if plan is None:
+            plan = self.plans[key] = ModePlan(self.system, modes, phase)
+        if not plan.ok:
+            self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
+        return plan
 
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:
@@ -152,15 +195,18 @@ class _Run:
             if t_end <= t:
                 phase = self._next_phase(phase, t, x)
                 continue
-            events = _events(system, modes, phase)
-            sol = solve_ivp(system.rhs(modes, phase), (t, t_end), x, method=self.solver.method,
-                            rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
-                            events=events or None, dense_output=True)
+            plan = self._plan(modes, phase)
+            fun = plan.rhs if plan.ok else system.rhs(modes, phase)
+            events = _events(system, modes, phase, plan if plan.ok else None)
+            with np.errstate(invalid="ignore", divide="ignore"):  # a singular solve is caught by the plan
+                sol = solve_ivp(fun, (t, t_end), x, method=self.solver.method,
+                                rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
+                                events=events or None, dense_output=True)
             self.stats["rhs_evals"] += sol.nfev
             self.stats["steps"] += len(sol.t) - 1
             if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
                 raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s: {sol.message}")
-            self.segments.append(_Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol))
+            self.segments.append(_Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
             self.stats["segments"] += 1
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
             if sol.status == 1:
@@ -335,61 +381,66 @@ class _Run:
         T = scene.duration
         n_out = int(round(T * self.solver.output_rate))
         grid = np.linspace(0.0, T, n_out + 1) if n_out > 0 else np.array([0.0, T])
-        rows: list[tuple[float, np.ndarray, Evaluation, list[ContactMode]]] = []
-        seg_i = 0
-        for t in grid:
-            while seg_i + 1 < len(self.segments) and (self.segments[seg_i].t1 < t or
-                                                     (self.segments[seg_i].t1 == t and
-                                                      self.segments[seg_i + 1].t1 > t)):
-                seg_i += 1
-            seg = self.segments[seg_i]
-            x = seg.sol(t)
-            ev = system.evaluate(t, x, seg.modes, seg.phase, full=True)
-            rows.append((t, x, ev, seg.modes))
-        channels = _channels(system, rows)
+        # the segment of each sample: the first ending at or after it; at an event time, the one after
+        t1 = np.array([seg.t1 for seg in self.segments])
+        idx = np.minimum(np.searchsorted(t1, grid, side="left"), len(t1) - 1)
+        nxt = np.minimum(idx + 1, len(t1) - 1)
+        idx = np.where((t1[idx] == grid) & (nxt > idx) & (t1[nxt] > grid), nxt, idx)
+        xs = np.empty((len(grid), system.n))
+        parts: list[Samples] = []
+        modes_of: list[list[ContactMode]] = []
+        for i in np.unique(idx):
+            seg = self.segments[i]
+            sel = np.flatnonzero(idx == i)
+            ts = grid[sel]
+            X = np.atleast_2d(seg.sol(ts).T) if len(ts) > 1 else seg.sol(ts[0])[None, :]
+            xs[sel] = X
+            if seg.plan.ok:
+                parts.append(seg.plan.samples(ts, X))
+                self.stats["singular_solves"] += seg.plan.singular
+            else:
+                part = Samples(len(ts), system)
+                for k, (t, x) in enumerate(zip(ts, X, strict=True)):
+                    part.fill(k, system.evaluate(t, x, seg.modes, seg.phase, full=True))
+                parts.append(part)
+            modes_of += [seg.modes] * len(sel)
+        samples = Samples.concatenate(parts, system)
+        channels = _channels(system, grid, xs, samples, modes_of)
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
-                     method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol)
+                     method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
+                     compiled_modes=sum(p.ok for p in self.plans.values()),
+                     fallback_modes={k: v for k, v in self.fallbacks.items()})
         meta = {"joints": system.robot.joint_names, "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
 
 
-def _channels(system: System, rows) -> dict[str, np.ndarray]:
+def _channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
+              modes_of: list[list[ContactMode]]) -> dict[str, np.ndarray]:
     nQ, nv = system.nQ, system.nv
-    xs = np.array([r[1] for r in rows])
-    evs = [r[2] for r in rows]
-    ch: dict[str, np.ndarray] = {
-        "t": np.array([r[0] for r in rows]),
-        "q": xs[:, :nv],
-        "v": xs[:, nQ:nQ + nv],
-        "tau": np.array([e.tau for e in evs]),
-        "tip": np.array([e.p_tip for e in evs]),
-    }
-    if any(e.x_d is not None and len(e.x_d) == 3 for e in evs):
-        ch["tip_ref"] = np.array([e.x_d if e.x_d is not None and len(e.x_d) == 3 else np.full(3, np.nan)
-                                  for e in evs])
+    ch: dict[str, np.ndarray] = {"t": t, "q": xs[:, :nv], "v": xs[:, nQ:nQ + nv], "tau": smp.tau, "tip": smp.tip}
+    if smp.has_x_d:
+        ch["tip_ref"] = smp.x_d
     for k, name in enumerate(system.body_names):
         idx = system.body_index[name]
         ch[f"body.{name}.x"] = xs[:, idx]
         ch[f"body.{name}.v"] = xs[:, nQ + idx]
-        ch[f"body.{name}.force"] = np.array([e.body_force[k] for e in evs])
+        ch[f"body.{name}.force"] = smp.body_force[:, k]
     for i, c in enumerate(system.contacts):
         p = f"contact.{c.name}"
-        ch[f"{p}.F_n"] = np.array([e.normal_force[c.name] for e in evs])
-        ch[f"{p}.gap"] = np.array([e.gap[c.name] for e in evs])
-        ch[f"{p}.touching"] = np.array([float(r[3][i].touching) for r in rows])
-        ch[f"{p}.F_d"] = np.array([e.force_d.get(c.name, np.nan) for e in evs])
+        ch[f"{p}.F_n"] = smp.F_n[c.name]
+        ch[f"{p}.gap"] = smp.gap[c.name]
+        ch[f"{p}.touching"] = np.array([float(m[i].touching) for m in modes_of])
+        ch[f"{p}.F_d"] = smp.F_d[c.name]
         if c.friction is not None and len(c.tangents):
-            k = len(c.tangents)
-            ch[f"{p}.F_f"] = np.array([e.friction.get(c.name, np.zeros(k)) for e in evs])
-            ch[f"{p}.v_slip"] = np.array([e.slip.get(c.name, np.zeros(k)) for e in evs])
-            ch[f"{p}.stuck"] = np.array([float(r[3][i].stuck) for r in rows])
+            ch[f"{p}.F_f"] = smp.F_f[c.name]
+            ch[f"{p}.v_slip"] = smp.v_slip[c.name]
+            ch[f"{p}.stuck"] = np.array([float(m[i].stuck) for m in modes_of])
         for dc in c.tangent_chains:
-            ch[f"{p}.{dc.label}.F"] = np.array([e.interface.get(f"{c.name}.{dc.label}", 0.0) for e in evs])
+            ch[f"{p}.{dc.label}.F"] = smp.iface[f"{c.name}.{dc.label}"]
     for label in system.stage_labels:
-        vals = np.array([e.stages.get(label, (0.0, 0.0, 0.0)) for e in evs])
-        ch[f"stage.{label}.x"], ch[f"stage.{label}.xdot"], ch[f"stage.{label}.F"] = vals.T
+        ch[f"stage.{label}.x"], ch[f"stage.{label}.xdot"], ch[f"stage.{label}.F"] = smp.stages[label].T
     k = 0
     for c in system.contacts:
         for dc in c.chains:

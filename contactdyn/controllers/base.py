@@ -56,6 +56,15 @@ class Controller:
         """Joint torques and the rates of the controller's states."""
         raise NotImplementedError
 
+    def tip_force_law(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(K_p, K_d) [N/m, N·s/m] (3×3) when the command is exactly τ = Jᵀ(K_p (x_d − p) + K_d (ẋ_d − ṗ)
+        − Σ F_d n) with the phase's task reference and force set-points; None otherwise.
+
+        The compiled right-hand side (:mod:`contactdyn.rhsplan`) folds such a law into its
+        affine map instead of calling :meth:`command`.
+        """
+        return None
+
 
 CONTROLLERS: dict[str, type] = {}
 

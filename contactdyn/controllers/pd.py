@@ -73,6 +73,9 @@ class TaskPD(Controller):
             f -= F_d * inp.normals[contact]
         return inp.J.T @ f + _feedforward(inp, self.config.feedforward), None
 
+    def tip_force_law(self) -> tuple[np.ndarray, np.ndarray] | None:
+        return (self._kp, self._kd) if self.config.feedforward == "none" else None
+
 
 @dataclass(frozen=True)
 class JointPDConfig:
