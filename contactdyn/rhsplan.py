@@ -43,6 +43,16 @@ except (ImportError, AttributeError):  # pragma: no cover
     _solve1 = np.linalg.solve
 
 CHECK_RTOL = 1e-9  #: agreement a plan must show with System.evaluate when it is built
+ROW_CHUNK = 128  #: rows per matrix product in the output pass (small enough to keep OpenBLAS on one thread)
+
+
+def _rows_times(X: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """X @ B in chunks of rows: a multi-threaded BLAS product of this size costs more than it saves
+    (and much more on a busy machine)."""
+    out = np.empty((X.shape[0], B.shape[1]))
+    for i in range(0, X.shape[0], ROW_CHUNK):
+        np.matmul(X[i:i + ROW_CHUNK], B, out=out[i:i + ROW_CHUNK])
+    return out
 
 
 class Samples:
@@ -119,6 +129,7 @@ class ModePlan:
     def __init__(self, system, modes: list[ContactMode], phase):
         self.system, self.modes, self.phase = system, list(modes), phase
         self.ok, self.reason = False, ""
+        self.ring: list[tuple] = [(None, None, None, None)] * 4  #: the last four calls' (t, x, z, o)
         reason = self._unsupported()
         if reason:
             self.reason = reason
@@ -162,7 +173,7 @@ class ModePlan:
         if self.affine_ctl:
             self.kp, self.kd = law
             if phase.reference is not None:
-                if len(phase.reference.start) != 3:
+                if len(phase.reference.start) != 3 or any(m.kind == "circle" for m in phase.reference.moves):
                     self.affine_ctl = False
                 else:
                     for m in phase.reference.moves:
@@ -233,7 +244,7 @@ class ModePlan:
                         const = np.zeros(nQ)
                         if c.body_index >= 0:
                             const[c.body_index] -= T[i] @ c.body_axis
-                        rows.append(("stick", ci, i, const, float(T[i] @ d0)))
+                        rows.append(("stick", ci, i, const, float(T[i] @ d0) + s.stabilization * float(vt[i])))
                 elif mode.touching:
                     visc = -c.friction.viscous * vt
                     o[self.o_visc[c.name]] = visc
@@ -265,24 +276,31 @@ class ModePlan:
             o[sl] = ev.stages.get(label, (0.0, 0.0, 0.0))
         return o, rows
 
+    def _probe_all(self, e: np.ndarray) -> np.ndarray:
+        """o at e followed by the rows' γ (their state-dependent part: Baumgarte terms) with J̇q̇ = 0."""
+        o, rows = self._probe(e)
+        return np.concatenate([o, [row[4] for row in rows]])
+
     def _measure(self) -> None:
         ne = self.ne
         e0 = np.zeros(ne)
         e0[-1] = 1.0
-        w0, _ = self._probe(e0)
-        W = np.empty((self.no, ne))
+        w0 = self._probe_all(e0)
+        W = np.empty((len(w0), ne))
         W[:, -1] = w0
         for k in range(ne - 1):
             e = e0.copy()
             e[k] = 1.0
-            W[:, k] = self._probe(e)[0] - w0
+            W[:, k] = self._probe_all(e) - w0
         rng = np.random.default_rng(1)
         for _ in range(2):  # affine? (a Hunt–Crossley stage is not)
             e = np.append(rng.normal(size=ne - 1), 1.0)
-            o, _ = self._probe(e)
+            o = self._probe_all(e)
             if not np.allclose(W @ e, o, rtol=1e-9, atol=1e-9 * (1.0 + np.abs(o).max())):
                 self.reason = "non-linear stage law (e.g. Hunt–Crossley)"
                 return
+        self.o_gam = slice(self.no, len(w0))  # γ's state part, one per constraint row
+        self.no = len(w0)
         self.W = W
         self.ok = True
 
@@ -295,8 +313,8 @@ class ModePlan:
         _, rows0 = self._probe(e0)
         probes = [self._probe(e0, np.eye(3)[k])[1] for k in range(3)]
         self.rows = []
-        for r, (kind, ci, i, const, _) in enumerate(rows0):
-            a = np.array([probes[k][r][4] for k in range(3)])
+        for r, (kind, ci, i, const, gamma0) in enumerate(rows0):
+            a = np.array([probes[k][r][4] - gamma0 for k in range(3)])
             c = s.contacts[ci]
             self.rows.append(SimpleNamespace(kind=kind, contact=ci, index=i, a=a, const=np.array(const, float),
                                              frame=self.frame_of[c.fid], label=c.tangent_chains[i].label
@@ -382,6 +400,7 @@ class ModePlan:
             phi[k] = 1.0
             P[:, k] = self._assemble(phi) - y0
         self.P = P
+        self.PT = np.ascontiguousarray(P.T)
         self.coulomb_terms = []
         for ci in self.coulomb:
             c = s.contacts[ci]
@@ -409,6 +428,7 @@ class ModePlan:
         A[:nv, :nv] += H
         b[:nv] = -phi[self.i_h:self.i_h + nv]
         b[nv:nQ] = o[self.o_f]
+        b[nQ:nQ + nr] = -o[self.o_gam]
         for f in range(len(self.fids)):
             J = phi[self.i_J[f]:self.i_J[f] + 3 * nv].reshape(3, nv)
             dr = phi[self.i_dr[f]:self.i_dr[f] + 3]
@@ -421,7 +441,7 @@ class ModePlan:
 
     # ---- the right-hand side ------------------------------------------------------------
     def _make_rhs(self):
-        s, phase = self.system, self.phase
+        s = self.system
         model, data = s.robot.model, s.robot.data
         n, nQ, nv, nr, m = s.n, s.nQ, s.nv, self.nr, self.m
         m2 = m * m
@@ -449,25 +469,34 @@ class ModePlan:
         cat = np.concatenate
         isfinite = math.isfinite
         plan = self
+        ring = self.ring
         A0 = self.A0
         w0 = nQ + nr
 
-        def phi_at(t, x):
-            """φ at (t, x) (Pinocchio's data left at x)."""
+        def time_terms(t, out=tv):
+            """The time terms of e at t (and the trailing 1), written into ``out``."""
+            for slot, kind, start, duration, af in time_moves:
+                sg, dsg, _ = profile(kind, (t - start) / duration, af)
+                out[slot] = sg
+                out[slot + 1] = dsg / duration
+            for slot, at in time_ramps:
+                out[slot] = at(t)[0]
+            return out
+
+        self.time_terms = time_terms
+
+        def phi_at(t, x, tv=None):
+            """φ at (t, x) (Pinocchio's data left at x); ``tv``: time terms already computed."""
             q = x[:nv]
             v = x[nQ:nQ + nv]
             compute(model, data, q, v)
-            for slot, kind, start, duration, af in time_moves:
-                sg, dsg, _ = profile(kind, (t - start) / duration, af)
-                tv[slot] = sg
-                tv[slot + 1] = dsg / duration
-            for slot, at in time_ramps:
-                tv[slot] = at(t)[0]
+            if tv is None:
+                tv = time_terms(t)
             if single:
-                J = jacobian(model, data, fid0, lwa)[:3]
+                J = jacobian(model, data, fid0, lwa).reshape(6, nv)[:3]
                 return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
                             placement(model, data, fid0).translation, J.dot(v), tv))
-            Js = [jacobian(model, data, fid, lwa)[:3] for fid in fids]
+            Js = [jacobian(model, data, fid, lwa).reshape(6, nv)[:3] for fid in fids]
             pv = []
             for fid, J in zip(fids, Js, strict=True):
                 pv += [placement(model, data, fid).translation, J.dot(v)]
@@ -487,12 +516,12 @@ class ModePlan:
             for slot, at in time_ramps:
                 tv[slot] = at(t)[0]
             if single:
-                J = jacobian(model, data, fid0, lwa)[:3]
+                J = jacobian(model, data, fid0, lwa).reshape(6, nv)[:3]
                 Js = (J,)
                 phi = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
                            placement(model, data, fid0).translation, J.dot(v), tv))
             else:
-                Js = [jacobian(model, data, fid, lwa)[:3] for fid in fids]
+                Js = [jacobian(model, data, fid, lwa).reshape(6, nv)[:3] for fid in fids]
                 pv = []
                 for fid, J in zip(fids, Js, strict=True):
                     pv += [placement(model, data, fid).translation, J.dot(v)]
@@ -527,7 +556,10 @@ class ModePlan:
                     xd[z_slice] = zdot
             else:
                 xd = cat((x[nQ:2 * nQ], z[:nQ]))
-            plan.last = (t, x, z, y[m2 + m:])
+            ring[0] = ring[1]
+            ring[1] = ring[2]
+            ring[2] = ring[3]
+            ring[3] = (t, x, z, y[m2 + m:])
             return xd
 
         return rhs
@@ -538,7 +570,11 @@ class ModePlan:
         return np.linalg.lstsq(A, b, rcond=1e-12)[0]
 
     singular = 0  #: calls that needed the least-squares fallback
-    last: tuple = (None, None, None, None)
+
+    @property
+    def last(self) -> tuple:
+        """(t, x, z, o) of the latest call."""
+        return self.ring[3]
 
     def _controller_call(self):
         """Per-call ControlInput for a controller without an affine tip-force law."""
@@ -554,6 +590,7 @@ class ModePlan:
         zs = phase.z_slice
 
         i_e, i_dr = self.i_e, self.i_dr[tf]
+        model, data, fid, nv = robot.model, robot.data, self.fids[tf], s.nv
 
         def call(t, x, q, v, Js, phi, o):
             e = phi[i_e:]
@@ -562,10 +599,12 @@ class ModePlan:
                 x_d, v_d, a_d = phase.reference.at(t)
             force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
             forces = {name: float(o[i_fint + i]) for i, name in enumerate(names)}
+            R_tip = pin.updateFramePlacement(model, data, fid).rotation
+            J_ang = pin.getFrameJacobian(model, data, fid, _LWA).reshape(6, nv)[3:]
             inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
-                               e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d, forces,
-                               force_d, normals,
-                               x[2 * nQ + zs.start: 2 * nQ + zs.stop])
+                               e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d,
+                               forces,
+                               force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang)
             return ctl.command(inp)
 
         return call
@@ -586,19 +625,25 @@ class ModePlan:
         tau = np.zeros((N, nv))
         if generic:
             ctl_call = self._controller_call()
+        ntv = self.ne - self.e_frame[-1] - 6
+        TV = np.empty((N, ntv))
+        TV[:, -1] = 1.0
         for k in range(N):
-            Phi[k] = phi = self.phi_at(ts[k], X[k])
+            self.time_terms(ts[k], TV[k])
+        phi_at = self.phi_at
+        for k in range(N):
+            Phi[k] = phi = phi_at(ts[k], X[k], TV[k])
             if generic:
                 x = X[k]
                 Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in self.i_J]
                 tau[k] = ctl_call(ts[k], x, x[:nv], x[nQ:nQ + nv], Js, phi, self.W.dot(phi[self.i_e:]))[0]
-        Y = Phi @ self.P.T
+        Y = _rows_times(Phi, self.PT)
         A = Y[:, :m2].reshape(N, m, m)
         B = Y[:, m2:m2 + m]
         O = Y[:, m2 + m:]
         J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in self.i_J]
         w0 = nQ + nr
-        for ci, i_fn, mu, T, consts, j, dT, dC in self.coulomb_terms:
+        for ci, i_fn, mu, T, consts, j, _, _ in self.coulomb_terms:
             Fp = np.maximum(O[:, i_fn], 0.0)
             D = self._directions(ci, O)
             B[:, w0 + 3 * j:w0 + 3 * j + 3] -= (mu * Fp)[:, None] * (D @ T)
@@ -617,7 +662,12 @@ class ModePlan:
             S.tau[:] = np.einsum("kiv,ki->kv", J_all[self.tip_frame], O[:, self.o_gctl])
         else:
             S.tau[:] = tau
-        if phase.reference is not None:
+        if phase.reference is not None and self.affine_ctl:  # x_d = start + Σ δ_m σ_m, σ_m in φ's time terms
+            S.x_d[:] = phase.reference.start
+            for slot, m_ in self.time_moves:
+                S.x_d += Phi[:, self.i_e + slot, None] * m_.delta
+            S.has_x_d = True
+        elif phase.reference is not None:
             x_d = np.array([phase.reference.at(t)[0] for t in ts])
             if x_d.shape[1] == 3:
                 S.x_d[:] = x_d
@@ -630,8 +680,9 @@ class ModePlan:
             S.F_n[name][:] = F_n
             S.gap[name][:] = O[:, self.o_gap.start + ci]
             if name in phase.forces:
-                ramp = phase.forces[name]
-                S.F_d[name][:] = [ramp.at(t)[0] for t in ts]
+                slot = next((sl for sl, _, i in self.time_ramps if i == ci), None)
+                S.F_d[name][:] = Phi[:, self.i_e + slot] if slot is not None else \
+                    [phase.forces[name].at(t)[0] for t in ts]
             if c.friction is not None and len(c.tangents):
                 S.v_slip[name][:] = O[:, self.o_vt[name]]
                 if mode.touching and mode.stuck:
@@ -675,11 +726,11 @@ class ModePlan:
     # ---- values the event functions read ----------------------------------------------
     def values(self, t: float, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(z = [Q̈, λ, w], o) at (t, x): the last call's when it was at this very state."""
-        lt, lx, z, o = self.last
-        if lx is not x or lt != t:
-            self.rhs(t, x)
-            _, _, z, o = self.last
-        return z, o
+        for lt, lx, z, o in reversed(self.ring):  # DOP853's dense output calls come after the step's last
+            if lx is x and lt == t:
+                return z, o
+        self.rhs(t, x)
+        return self.ring[3][2], self.ring[3][3]
 
     def gap(self, ci: int, t: float, x: np.ndarray) -> float:
         """Normal gap of contact ci [m]."""
@@ -715,5 +766,5 @@ class ModePlan:
                 self.ok = False
                 self.reason = f"disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g}"
                 return
-        self.last = (None, None, None, None)
+        self.ring[:] = [(None, None, None, None)] * 4
         self.singular = 0

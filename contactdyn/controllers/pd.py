@@ -96,7 +96,9 @@ class TaskPD(Controller):
         return tau, None
 
     def tip_force_law(self) -> tuple[np.ndarray, np.ndarray] | None:
-        return (self._kp, self._kd) if self.config.feedforward == "none" else None
+        cfg = self.config
+        plain = cfg.feedforward == "none" and cfg.tool_axis is None and not cfg.kd_joint
+        return (self._kp, self._kd) if plain else None
 
 
 @dataclass(frozen=True)
