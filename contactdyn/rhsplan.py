@@ -564,9 +564,18 @@ class ModePlan:
 
         return rhs
 
+    def kkt_condition(self, t: float, x: np.ndarray) -> float:
+        """2-norm condition number of the contact system [[M, −Cᵀ], [G, 0]] at (t, x) (no w rows)."""
+        y = self.P.dot(self.phi_at(t, x))
+        m, k = self.m, self.system.nQ + self.nr
+        A = y[:m * m].reshape(m, m)[:k, :k]
+        return float(np.linalg.cond(A)) if k else 1.0
+
     def _singular(self, A: np.ndarray, b: np.ndarray) -> np.ndarray:
         """Least-squares fallback of a singular KKT matrix (a rigid contact at a singular pose)."""
         self.singular += 1
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):  # a wild trial state: let the solver reject it
+            return np.full(len(b), np.nan)
         return np.linalg.lstsq(A, b, rcond=1e-12)[0]
 
     singular = 0  #: calls that needed the least-squares fallback

@@ -31,7 +31,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .contact import ContactMode
-from .errors import SimulationError
+from .errors import SceneError, SimulationError
+from .integrators import (EXPLICIT, FIXED, STABILITY_RADIUS, FiniteDifferenceJacobian, choose_method,
+                          jacobian_eigenvalues, solver_class)
 from .result import Result
 from .rhsplan import ModePlan, Samples
 from .scene import Scene, load_scene
@@ -167,6 +169,9 @@ class _Run:
         self.events: list[dict[str, Any]] = []
         self.impacts: list[dict[str, Any]] = []
         self.recent: deque[float] = deque(maxlen=self.solver.storm_count)
+        if self.solver.method in FIXED and not math.isfinite(self.solver.max_step):
+            raise SceneError("solver.max_step", f"the step [s] of the fixed-step method {self.solver.method}",
+                             "no max_step", self.scene.file)
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0}
         self.plans: dict[tuple, ModePlan] = {}
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
@@ -198,14 +203,17 @@ class _Run:
             plan = self._plan(modes, phase)
             fun = plan.rhs if plan.ok else system.rhs(modes, phase)
             events = _events(system, modes, phase, plan if plan.ok else None)
+            method = self._method(fun, t, x, t_end - t)
+            jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
             with np.errstate(invalid="ignore", divide="ignore"):  # a singular solve is caught by the plan
-                sol = solve_ivp(fun, (t, t_end), x, method=self.solver.method,
+                sol = solve_ivp(fun, (t, t_end), x, method=solver_class(method),
                                 rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
-                                events=events or None, dense_output=True)
-            self.stats["rhs_evals"] += sol.nfev
+                                events=events or None, dense_output=True, **({"jac": jac} if jac else {}))
+            self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
             self.stats["steps"] += len(sol.t) - 1
             if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
-                raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s: {sol.message}")
+                raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s "
+                                      f"({method}): {sol.message}{self._diagnose(sol, plan, fun, method)}")
             self.segments.append(_Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
             self.stats["segments"] += 1
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
@@ -215,6 +223,35 @@ class _Run:
             elif t < T:
                 phase = self._next_phase(phase, t, x)
         return self._result(time.perf_counter() - wall0)
+
+    def _method(self, fun, t: float, x: np.ndarray, span: float) -> str:
+        """The segment's integrator: the scene's, or with ``auto`` DOP853 unless the segment is stiff."""
+        method = self.solver.method
+        if method == "auto":
+            method, lam = choose_method(fun, t, x, span)
+            self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
+        by = self.stats.setdefault("segments_by_method", {})
+        by[method] = by.get(method, 0) + 1
+        return method
+
+    def _diagnose(self, sol, plan, fun, method: str) -> str:
+        """Why a segment failed, as far as the state at the failure says."""
+        t, x = float(sol.t[-1]), sol.y[:, -1]
+        if not np.all(np.isfinite(x)):
+            return "; the state is not finite"
+        notes = []
+        if plan.ok:
+            cond = plan.kkt_condition(t, x)
+            if cond > 1e12:
+                return "; " + (f"the constraint rows of the touching contacts are linearly dependent (condition "
+                             f"number of the contact system {cond:.2g}): a rigid or sticking contact at a singular "
+                             "pose of the arm; give the contact a compliant normal model or avoid the pose")
+        lam = jacobian_eigenvalues(fun, t, x)
+        if len(lam) and method in EXPLICIT:
+            fast = float(np.abs(lam).max())
+            notes.append(f"fastest mode |λ| = {fast:.3g} 1/s (an explicit method needs steps below "
+                         f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = \"Radau\" or \"auto\"")
+        return "; " + "; ".join(notes) if notes else ""
 
     def _init_controller(self, phase: Phase, t: float, x: np.ndarray, modes) -> np.ndarray:
         if phase.controller.n_states:
