@@ -32,8 +32,15 @@ from scipy.integrate import solve_ivp
 
 from .contact import ContactMode
 from .errors import SceneError, SimulationError
-from .integrators import (EXPLICIT, FIXED, STABILITY_RADIUS, FiniteDifferenceJacobian, choose_method,
-                          jacobian_eigenvalues, solver_class)
+from .integrators import (
+    EXPLICIT,
+    FIXED,
+    STABILITY_RADIUS,
+    FiniteDifferenceJacobian,
+    choose_method,
+    jacobian_eigenvalues,
+    solver_class,
+)
 from .result import Result
 from .rhsplan import ModePlan, Samples
 from .scene import Scene, load_scene
@@ -250,7 +257,8 @@ class _Run:
         if len(lam) and method in EXPLICIT:
             fast = float(np.abs(lam).max())
             notes.append(f"fastest mode |λ| = {fast:.3g} 1/s (an explicit method needs steps below "
-                         f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = \"Radau\" or \"auto\"")
+                         f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = "
+                         "\"Radau\" or \"auto\"")
         return "; " + "; ".join(notes) if notes else ""
 
     def _init_controller(self, phase: Phase, t: float, x: np.ndarray, modes) -> np.ndarray:
