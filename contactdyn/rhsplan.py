@@ -67,7 +67,8 @@ class Samples:
         self.body_force = np.zeros((n, nb))
         self.F_n = {c.name: np.zeros(n) for c in system.contacts}
         self.gap = {c.name: np.zeros(n) for c in system.contacts}
-        self.F_d = {c.name: np.full(n, np.nan) for c in system.contacts}
+        self.F_d = {key: np.full(n, np.nan) for key in system.force_directions}  #: per set-point key
+        self.has_F_d = {key: False for key in system.force_directions}
         self.F_f = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}
         self.v_slip = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}
         self.iface = {f"{c.name}.{dc.label}": np.zeros(n) for c in system.contacts for dc in c.tangent_chains}
@@ -79,6 +80,7 @@ class Samples:
         for name in ("tau", "tip", "x_d", "body_force"):
             setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
         out.has_x_d = any(p.has_x_d for p in parts)
+        out.has_F_d = {key: any(p.has_F_d[key] for p in parts) for key in out.has_F_d}
         for name in ("F_n", "gap", "F_d", "F_f", "v_slip", "iface", "stages"):
             d = getattr(out, name)
             for key in d:
@@ -93,10 +95,12 @@ class Samples:
             self.x_d[k] = ev.x_d
             self.has_x_d = True
         self.body_force[k] = ev.body_force
+        for key, value in ev.force_d.items():
+            self.F_d[key][k] = value
+            self.has_F_d[key] = True
         for name in self.F_n:
             self.F_n[name][k] = ev.normal_force[name]
             self.gap[name][k] = ev.gap[name]
-            self.F_d[name][k] = ev.force_d.get(name, np.nan)
             if name in ev.friction:
                 self.F_f[name][k] = ev.friction[name]
             if name in ev.slip:
@@ -147,9 +151,16 @@ class ModePlan:
         s = self.system
         if s.energy_slot >= 0:
             return "energy audit (solver.record_energy)"
+        drives = getattr(s, "drives", None)
+        if drives is not None and drives.any_motor:
+            return "motors (drive models)"
         expected_nQ = s.nv + len(s.body_names) + len(s.mass_labels)
         if s.nQ != expected_nQ:
             return f"coordinates the plan does not know ({s.nQ - expected_nQ} beyond robot, bodies, masses)"
+        if getattr(self.phase.controller, "uses_forces", False):
+            return "a controller reading measured forces (folded into the linear solve)"
+        if any(getattr(m, "from_rest", False) and len(m.slip) == 2 and not m.stuck for m in self.modes):
+            return "a 2-D slip launching from rest (its direction is solved per call)"
         return ""
 
     # ---- layout of e and o --------------------------------------------------------------
@@ -179,9 +190,8 @@ class ModePlan:
                     for m in phase.reference.moves:
                         self.time_moves.append((ne, m))
                         ne += 2
-            names = [c.name for c in s.contacts]
-            for name, ramp in phase.forces.items():
-                self.time_ramps.append((ne, ramp, names.index(name)))
+            for key, ramp in phase.forces.items():
+                self.time_ramps.append((ne, ramp, key))
                 ne += 1
         self.ne = ne + 1  # the constant 1 last
         out = _Outputs()
@@ -265,8 +275,8 @@ class ModePlan:
                 g_ctl += self.kp @ (ref.start - e[k:k + 3]) - self.kd @ e[k + 3:k + 6]
                 for slot, m in self.time_moves:
                     g_ctl += (self.kp @ m.delta) * e[slot] + (self.kd @ m.delta) * e[slot + 1]
-            for slot, _, ci in self.time_ramps:
-                g_ctl -= e[slot] * s.contacts[ci].normal.u
+            for slot, _, key in self.time_ramps:
+                g_ctl -= e[slot] * s.force_directions[key]
             g[self.tip_frame] += g_ctl
             o[self.o_gctl] = g_ctl
         o[self.o_f] = f[nv:]
@@ -347,12 +357,9 @@ class ModePlan:
         return c.tangents, consts
 
     def _direction(self, ci: int, o: np.ndarray) -> np.ndarray:
+        """The sliding direction d of contact ci at outputs o (System._slip_direction's rule)."""
         c, mode = self.system.contacts[ci], self.modes[ci]
-        if len(c.tangents) == 1:
-            return np.asarray(mode.slip, float)
-        vt = o[self.o_vt[c.name]]
-        norm = math.sqrt(float(vt @ vt))
-        return vt / norm if norm > 1e-300 else np.asarray(mode.slip, float)
+        return self.system._slip_direction(o[self.o_vt[c.name]], mode)
 
     # ---- compiled arrays ----------------------------------------------------------------
     def _build(self) -> None:
@@ -470,6 +477,7 @@ class ModePlan:
         isfinite = math.isfinite
         plan = self
         ring = self.ring
+        impulses = self._impulse_terms()
         A0 = self.A0
         w0 = nQ + nr
 
@@ -554,6 +562,18 @@ class ModePlan:
                 xd = cat((x[nQ:2 * nQ], z[:nQ], y[o_y]))
                 if zdot is not None:
                     xd[z_slice] = zdot
+                for i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci in impulses:
+                    F_n = z[k_n] if from_z else y[k_n]
+                    xd[i0] = F_n
+                    if stick is not None:
+                        xd[i0 + 1:i0 + 1 + len(stick)] = z[stick]
+                    elif sliding:
+                        Fp = F_n if F_n > 0.0 else 0.0
+                        if d0 is not None:  # 1-D
+                            xd[i0 + 1] = -mu * Fp * d0 + y[k_visc]
+                        else:
+                            d = plan._direction(ci, y[m2 + m:])
+                            xd[i0 + 1:i0 + 1 + len(d)] = -mu * Fp * d + y[k_visc:k_visc + len(d)]
             else:
                 xd = cat((x[nQ:2 * nQ], z[:nQ]))
             ring[0] = ring[1]
@@ -563,6 +583,25 @@ class ModePlan:
             return xd
 
         return rhs
+
+    def _impulse_terms(self) -> list[tuple]:
+        """Where the impulse states' rates (∫F dt, ∫F_f dt per friction contact) come from, per contact."""
+        s = self.system
+        nQ, m = s.nQ, self.m
+        off = m * m + m  # o's start in y
+        out = []
+        for name, slot in getattr(s, "impulse_slots", {}).items():
+            ci = next(i for i, c in enumerate(s.contacts) if c.name == name)
+            c, mode = s.contacts[ci], self.modes[ci]
+            r = self.normal_row.get(ci)
+            from_z, k_n = (True, nQ + r) if r is not None else (False, off + self.o_Fint.start + ci)
+            stick = np.array(self.stick_rows[ci]) if mode.touching and mode.stuck else None
+            sliding = mode.touching and not mode.stuck
+            one_d = len(c.tangents) == 1
+            d0 = float(mode.slip[0]) if one_d and sliding else None
+            k_visc = off + self.o_visc[name].start
+            out.append((2 * nQ + slot, from_z, k_n, sliding, c.friction.mu_k, d0, k_visc, stick, ci))
+        return out
 
     def kkt_condition(self, t: float, x: np.ndarray) -> float:
         """2-norm condition number of the contact system [[M, −Cᵀ], [G, 0]] at (t, x) (no w rows)."""
@@ -590,9 +629,10 @@ class ModePlan:
         s, phase = self.system, self.phase
         robot = s.robot
         ctl = phase.controller
-        normals = {c.name: c.normal.u for c in s.contacts}
+        normals = s.force_directions
         names = [c.name for c in s.contacts]
         i_fint = self.o_Fint.start
+        ifaces = [(key, sl.start) for key, sl in self.o_iface.items()]
         tf = self.tip_frame
         kt = self.e_frame[tf]
         nQ = s.nQ
@@ -608,6 +648,7 @@ class ModePlan:
                 x_d, v_d, a_d = phase.reference.at(t)
             force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
             forces = {name: float(o[i_fint + i]) for i, name in enumerate(names)}
+            forces.update({key: float(o[k]) for key, k in ifaces})
             R_tip = pin.updateFramePlacement(model, data, fid).rotation
             J_ang = pin.getFrameJacobian(model, data, fid, _LWA).reshape(6, nv)[3:]
             inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
@@ -682,16 +723,17 @@ class ModePlan:
                 S.x_d[:] = x_d
                 S.has_x_d = True
         S.body_force[:] = O[:, self.o_body]
+        slots = {key: slot for slot, _, key in self.time_ramps}
+        for key, ramp in phase.forces.items():
+            S.F_d[key][:] = Phi[:, self.i_e + slots[key]] if key in slots else [ramp.at(t)[0] for t in ts]
+            S.has_F_d[key] = True
         for ci, (c, mode) in enumerate(zip(s.contacts, self.modes, strict=True)):
             name = c.name
             r = self.normal_row.get(ci)
             F_n = Z[:, nQ + r] if r is not None else O[:, self.o_Fint.start + ci]
             S.F_n[name][:] = F_n
             S.gap[name][:] = O[:, self.o_gap.start + ci]
-            if name in phase.forces:
-                slot = next((sl for sl, _, i in self.time_ramps if i == ci), None)
-                S.F_d[name][:] = Phi[:, self.i_e + slot] if slot is not None else \
-                    [phase.forces[name].at(t)[0] for t in ts]
+
             if c.friction is not None and len(c.tangents):
                 S.v_slip[name][:] = O[:, self.o_vt[name]]
                 if mode.touching and mode.stuck:
@@ -709,16 +751,16 @@ class ModePlan:
         return S
 
     def _directions(self, ci: int, O: np.ndarray) -> np.ndarray:
-        """Sliding directions (N, k) of contact ci at the samples' outputs O."""
+        """Sliding directions (N, k) of contact ci at the samples' outputs O (System._slip_direction's rule:
+        v_t/|v_t| while v_t·r exceeds the stick band, else the mode's reference r; 1-D: r)."""
         c, mode = self.system.contacts[ci], self.modes[ci]
-        d = np.asarray(mode.slip, float)
+        r = np.asarray(mode.slip, float)
         if len(c.tangents) == 1:
-            return np.broadcast_to(d, (len(O), 1))
+            return np.broadcast_to(r, (len(O), 1))
         vt = O[:, self.o_vt[c.name]]
-        norm = np.sqrt((vt * vt).sum(axis=1))
-        out = np.broadcast_to(d, vt.shape).copy()
-        ok = norm > 1e-300
-        out[ok] = vt[ok] / norm[ok, None]
+        out = np.broadcast_to(r, vt.shape).copy()
+        ahead = vt @ r > self.system.slip_band
+        out[ahead] = vt[ahead] / np.sqrt((vt[ahead] ** 2).sum(axis=1))[:, None]
         return out
 
     def _solve_all(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:

@@ -40,6 +40,7 @@ from contactdyn.workprecision import (
 )
 
 ROOT = Path(__file__).resolve().parent.parent
+DECLINED = ("motors", "a controller reading measured forces", "a 2-D slip launching", "energy audit")
 SCENES = sorted(str(p) for p in (ROOT / "sims").glob("*.toml")) + \
     sorted(str(p) for p in (ROOT / "benchmarks" / "hard").glob("*.toml"))
 
@@ -75,7 +76,9 @@ def test_plan_agrees_with_evaluate(path):
     for variant in _mode_variants(system, modes):
         variant = list(variant)
         plan = ModePlan(system, variant, phase)
-        assert plan.ok, plan.reason
+        if not plan.ok:  # declining is fine for what the plan documents it leaves to System.evaluate
+            assert plan.reason.startswith(DECLINED), plan.reason
+            continue
         states = [x0 + 1e-3 * rng.normal(size=system.n) for _ in range(3)]
         ts = np.array([0.01, 0.05, 0.09])
         samples = plan.samples(ts, np.array(states))
