@@ -181,8 +181,9 @@ class ModePlan:
         self.affine_ctl = law is not None
         self.time_moves: list[tuple] = []  # (slot, move)
         self.time_ramps: list[tuple] = []  # (slot, ramp, contact index)
+        self.feedforward, self.kd_joint = "none", 0.0
         if self.affine_ctl:
-            self.kp, self.kd = law
+            self.kp, self.kd, self.feedforward, self.kd_joint = law.kp, law.kd, law.feedforward, law.kd_joint
             if phase.reference is not None:
                 if len(phase.reference.start) != 3 or any(m.kind == "circle" for m in phase.reference.moves):
                     self.affine_ctl = False
@@ -395,7 +396,8 @@ class ModePlan:
         self.i_J = [nv * nv + 3 * nv * f for f in range(nf)]
         self.i_dr = [nv * nv + 3 * nv * nf + 3 * f for f in range(nf)]
         self.i_h = nv * nv + 3 * nv * nf + 3 * nf
-        self.i_e = self.i_h + nv
+        self.with_g = self.feedforward == "gravity"  # then φ carries g(q) after h
+        self.i_e = self.i_h + nv * (2 if self.with_g else 1)
         n_phi = self.i_e + self.ne
         phi0 = np.zeros(n_phi)
         phi0[-1] = 1.0
@@ -433,7 +435,7 @@ class ModePlan:
         A = self.A0.copy()
         b = np.zeros(m)
         A[:nv, :nv] += H
-        b[:nv] = -phi[self.i_h:self.i_h + nv]
+        b[:nv] = -phi[self.i_h:self.i_h + nv] + self._feedforward_torque(phi, e)
         b[nv:nQ] = o[self.o_f]
         b[nQ:nQ + nr] = -o[self.o_gam]
         for f in range(len(self.fids)):
@@ -445,6 +447,16 @@ class ModePlan:
             b[nQ:nQ + nr] -= self.Qr[f] @ dr
             b[nQ + nr + 3 * f:nQ + nr + 3 * f + 3] = o[self.o_g.start + 3 * f:self.o_g.start + 3 * f + 3]
         return np.concatenate([A.ravel(), b, o])
+
+    def _feedforward_torque(self, phi: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """The task PD law's joint-space terms: feedforward g(q) or h(q, q̇), and −k_dj q̇."""
+        nv, nQ = self.system.nv, self.system.nQ
+        tau = -self.kd_joint * e[nQ:nQ + nv]
+        if self.feedforward == "gravity":
+            tau = tau + phi[self.i_h + nv:self.i_h + 2 * nv]
+        elif self.feedforward == "bias":
+            tau = tau + phi[self.i_h:self.i_h + nv]
+        return tau
 
     # ---- the right-hand side ------------------------------------------------------------
     def _make_rhs(self):
@@ -477,6 +489,10 @@ class ModePlan:
         isfinite = math.isfinite
         plan = self
         ring = self.ring
+        with_g = self.with_g
+
+        def g_part():
+            return (data.g,) if with_g else ()
         impulses = self._impulse_terms()
         A0 = self.A0
         w0 = nQ + nr
@@ -500,7 +516,7 @@ class ModePlan:
             compute(model, data, q, v)
             if tv is None:
                 tv = time_terms(t)
-            if single:
+            if single and not with_g:
                 J = jacobian(model, data, fid0, lwa).reshape(6, nv)[:3]
                 return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
                             placement(model, data, fid0).translation, J.dot(v), tv))
@@ -509,7 +525,7 @@ class ModePlan:
             for fid, J in zip(fids, Js, strict=True):
                 pv += [placement(model, data, fid).translation, J.dot(v)]
             return cat([data.M.ravel("K"), *[J.ravel() for J in Js],
-                        *[accel(model, data, fid, lwa).linear for fid in fids], data.nle, x, *pv, tv])
+                        *[accel(model, data, fid, lwa).linear for fid in fids], data.nle, *g_part(), x, *pv, tv])
 
         self.phi_at = phi_at
 
@@ -523,7 +539,7 @@ class ModePlan:
                 tv[slot + 1] = dsg / duration
             for slot, at in time_ramps:
                 tv[slot] = at(t)[0]
-            if single:
+            if single and not with_g:
                 J = jacobian(model, data, fid0, lwa).reshape(6, nv)[:3]
                 Js = (J,)
                 phi = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
@@ -534,7 +550,7 @@ class ModePlan:
                 for fid, J in zip(fids, Js, strict=True):
                     pv += [placement(model, data, fid).translation, J.dot(v)]
                 phi = cat([data.M.ravel("K"), *[J.ravel() for J in Js],
-                           *[accel(model, data, fid, lwa).linear for fid in fids], data.nle, x, *pv, tv])
+                           *[accel(model, data, fid, lwa).linear for fid in fids], data.nle, *g_part(), x, *pv, tv])
             y = P.dot(phi)
             A = y[:m2].reshape(m, m)
             b = y[m2:m2 + m]
@@ -710,6 +726,8 @@ class ModePlan:
         S.tip[:] = Phi[:, kt:kt + 3]
         if self.affine_ctl:
             S.tau[:] = np.einsum("kiv,ki->kv", J_all[self.tip_frame], O[:, self.o_gctl])
+            S.tau += np.array([self._feedforward_torque(phi, phi[self.i_e:]) for phi in Phi]) \
+                if self.feedforward != "none" or self.kd_joint else 0.0
         else:
             S.tau[:] = tau
         if phase.reference is not None and self.affine_ctl:  # x_d = start + Σ δ_m σ_m, σ_m in φ's time terms

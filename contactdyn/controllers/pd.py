@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import FEEDFORWARD, ControlInput, Controller, register
+from .base import FEEDFORWARD, ControlInput, Controller, TipForceLaw, register
 
 __all__ = ["TaskPD", "JointPD"]
 
@@ -95,10 +95,11 @@ class TaskPD(Controller):
             tau = tau - cfg.kd_joint * inp.v
         return tau, None
 
-    def tip_force_law(self) -> tuple[np.ndarray, np.ndarray] | None:
+    def tip_force_law(self) -> TipForceLaw | None:
         cfg = self.config
-        plain = cfg.feedforward == "none" and cfg.tool_axis is None and not cfg.kd_joint
-        return (self._kp, self._kd) if plain else None
+        if cfg.tool_axis is not None:  # the tool-axis moment is not affine in the state
+            return None
+        return TipForceLaw(self._kp, self._kd, cfg.feedforward, float(cfg.kd_joint))
 
 
 @dataclass(frozen=True)
