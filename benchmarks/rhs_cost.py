@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
 
+from contactdyn.rhsplan import ModePlan  # noqa: E402
 from contactdyn.scene import load_scene  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
@@ -44,7 +45,8 @@ def _batches(fn, states, calls: int, clock) -> list[float]:
 def measure(scene_name: str, calls: int = 20000) -> dict:
     """Median cost [s] of one rhs call and of one full evaluate on a scene's first mode."""
     system, modes, phase, x0 = prepare(load_scene(scene_name))
-    f = system.rhs(modes, phase)
+    plan = ModePlan(system, modes, phase)
+    f = plan.rhs if plan.ok else system.rhs(modes, phase)
     # states along a short stretch of the real trajectory (first mode only)
     from scipy.integrate import solve_ivp
 
@@ -59,7 +61,8 @@ def measure(scene_name: str, calls: int = 20000) -> dict:
     full = _batches(lambda t, x: system.evaluate(t, x, modes, phase), states, max(calls // 10, BATCHES),
                     time.perf_counter)
     q = statistics.quantiles(wall, n=10)
-    return {"scene": scene_name, "n_states": system.n, "rhs_median_us": statistics.median(wall) * 1e6,
+    return {"scene": scene_name, "n_states": system.n, "path": "compiled" if plan.ok else f"evaluate ({plan.reason})",
+            "rhs_median_us": statistics.median(wall) * 1e6,
             "rhs_p10_us": q[0] * 1e6, "rhs_p90_us": q[-1] * 1e6, "rhs_cpu_median_us": statistics.median(cpu) * 1e6,
             "evaluate_median_us": statistics.median(full) * 1e6}
 

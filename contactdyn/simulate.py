@@ -79,10 +79,11 @@ from .integrators import (
     FIXED,
     IMPLICIT,
     STABILITY_RADIUS,
+    STEP_BUDGET,
     FiniteDifferenceJacobian,
-    choose_method,
     jacobian_eigenvalues,
     solver_class,
+    stability_bound,
 )
 from .result import Result
 from .rhsplan import ModePlan, Samples
@@ -195,6 +196,32 @@ class _SlipWatch:
                 return -1.0
             return g
         return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
+
+
+class _StepBudget:
+    """``auto``'s budget: a terminal event at the end of DOP853's ``budget``-th step (see integrators).
+
+    ``solve_ivp`` calls events once per step end with increasing t (and, while locating a
+    root, inside the last step): the function is +1 before the step end where the budget
+    ran out and −1 from there on, so the segment ends exactly there.
+    """
+
+    terminal = True
+    direction = -1
+    kind = "budget"
+    contact = ""
+
+    def __init__(self, budget: int):
+        self.budget, self.count = budget, 0
+        self.t_end, self.t_fire = -math.inf, math.inf
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        if t > self.t_end:
+            self.t_end = t
+            self.count += 1
+            if self.count > self.budget and self.t_fire == math.inf:
+                self.t_fire = t
+        return -1.0 if t >= self.t_fire else 1.0
 
 
 def _events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
@@ -329,6 +356,7 @@ class _Run:
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0,
                       "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
         self.plans: dict[tuple, ModePlan] = {}
+        self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
 
     def _plan(self, modes: list[ContactMode], phase: Phase) -> ModePlan:
@@ -358,11 +386,13 @@ class _Run:
             h0 = min(self.next_step, t_end - t) if self.next_step else None
             plan = self._plan(modes, phase)
             fun = plan.rhs if plan.ok else system.rhs(modes, phase)
-            scene_method = self._auto(fun, t, x, t_end - t)
+            scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or "DOP853")
             for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
                 events, rhs = _events(system, modes, phase, t, x, plan if plan.ok else None)
+                if self.solver.method == "auto" and method == "DOP853" and self.auto_state is None:
+                    events = [*events, _StepBudget(STEP_BUDGET)]
                 jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
-                with np.errstate(invalid="ignore", divide="ignore"):  # a singular solve is caught by the plan
+                with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
                     sol = solve_ivp(rhs, (t, t_end), x, method=solver_class(method),
                                     rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
                                     events=events or None, dense_output=True, first_step=h0,
@@ -382,20 +412,29 @@ class _Run:
             self.next_step = None
             if sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
+                if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
+                    self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
+                    continue
+                self.auto_state = None
                 if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
                     self.next_step = float(sol.t[-2] - sol.t[-3])
                 x, modes, phase = self._handle(t, x, modes, phase, fired[0])
             elif t < T:
+                self.auto_state = None
                 phase = self._next_phase(phase, t, x)
         return self._result(time.perf_counter() - wall0)
 
-    def _auto(self, fun, t: float, x: np.ndarray, span: float) -> str:
-        """The scene's method; with ``auto`` DOP853, or Radau when the segment is stiff."""
-        if self.solver.method != "auto":
-            return self.solver.method
-        method, lam = choose_method(fun, t, x, span)
+    def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
+        """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
+        stability-bound by a decaying mode, else DOP853 without a budget (see integrators)."""
+        stiff, lam = stability_bound(fun, t, x, h, span)
+        self.stats["rhs_evals"] += len(x) + 1
         self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
-        return method
+        self.auto_state = "Radau" if stiff else "DOP853"
+        if stiff:
+            self.stats["auto_switches"] = self.stats.get("auto_switches", 0) + 1
+        else:
+            self.next_step = h
 
     def _diagnose(self, sol, plan: ModePlan, fun, method: str) -> str:
         """Why a segment failed, as far as the state at the failure says."""

@@ -59,16 +59,16 @@ def test_near_rigid_contact_uses_radau_automatically():
     """1e10 N/m over 2 s: an explicit method would need ~2e4 steps for stability alone."""
     res = _run("stiff", **{"contact.tip.normal.k": 1e10, "contact.tip.normal.b": 3.0e5, "solver.output_rate": 50.0,
                            "solver.rtol": 1e-6, "solver.atol": 1e-8})
-    assert set(res.stats["segments_by_method"]) == {"Radau"}
-    assert res.stats["stiffness"] == pytest.approx(np.sqrt(1e10 / 2.26), rel=0.1)  # critically damped mode
+    assert "Radau" in res.stats["segments_by_method"] and res.stats["auto_switches"] == 1
+    assert res.stats["stiffness"] > 3e4  # [1/s] the contact mode, critically damped at sqrt(k / m_y) = 6.6e4
     assert _finite(res)
 
 
 def test_fast_internal_mode_against_a_tight_reference():
-    """A 1e-3 kg equivalent mass (2.2 kHz mode): Radau by ``auto`` over 1 s, error bounded."""
+    """A 1e-3 kg equivalent mass (2.2 kHz mode): ``auto`` switches to Radau, error bounded."""
     opts = {"duration": 1.0, "solver.output_rate": 100.0}
     res = _run("fast_mass", **opts)
-    assert set(res.stats["segments_by_method"]) == {"Radau"}
+    assert "Radau" in res.stats["segments_by_method"]
     assert _finite(res)
     ref = _tight("fast_mass", 1e-9, **opts)
     e_f, e_x = errors(res, ref)
