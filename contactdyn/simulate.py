@@ -86,7 +86,7 @@ from .integrators import (
     stability_bound,
 )
 from .result import Result
-from .rhsplan import ModePlan, Samples
+from .rhsplan import ModePlan, Samples, cached_plan
 from .scene import Scene, load_scene
 from .system import CONE_TOL, FORCE_ABS_TOL, Evaluation, Phase, System
 
@@ -360,11 +360,11 @@ class _Run:
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
 
     def _plan(self, modes: list[ContactMode], phase: Phase) -> ModePlan:
-        """The compiled right-hand side of (modes, phase), built once and kept."""
+        """The compiled right-hand side of (modes, phase), built once per system and kept."""
         key = (tuple(modes), id(phase))
         plan = self.plans.get(key)
         if plan is None:
-            plan = self.plans[key] = ModePlan(self.system, modes, phase)
+            plan = self.plans[key] = cached_plan(self.system, modes, phase)
         if not plan.ok:
             self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
         return plan
