@@ -534,8 +534,11 @@ class ModePlan:
             compute(model, data, q, v)
             if tv is None:
                 tv = time_terms(t)
-            if single and not with_g:
+            if single:
                 J = jacobian(model, data, fid0, lwa).reshape(6, nv)[:3]
+                if with_g:
+                    return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, data.g,
+                                x, placement(model, data, fid0).translation, J.dot(v), tv))
                 return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
                             placement(model, data, fid0).translation, J.dot(v), tv))
             Js = [jacobian(model, data, fid, lwa).reshape(6, nv)[:3] for fid in fids]
@@ -557,11 +560,15 @@ class ModePlan:
                 tv[slot + 1] = dsg / duration
             for slot, at in time_ramps:
                 tv[slot] = at(t)[0]
-            if single and not with_g:
+            if single:
                 J = jacobian(model, data, fid0, lwa).reshape(6, nv)[:3]
                 Js = (J,)
-                phi = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
-                           placement(model, data, fid0).translation, J.dot(v), tv))
+                if with_g:
+                    phi = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, data.g,
+                               x, placement(model, data, fid0).translation, J.dot(v), tv))
+                else:
+                    phi = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
+                               placement(model, data, fid0).translation, J.dot(v), tv))
             else:
                 Js = [jacobian(model, data, fid, lwa).reshape(6, nv)[:3] for fid in fids]
                 pv = []
@@ -747,8 +754,12 @@ class ModePlan:
         S.tip[:] = Phi[:, kt:kt + 3]
         if self.affine_ctl:
             S.tau[:] = np.einsum("kiv,ki->kv", J_all[self.tip_frame], O[:, self.o_gctl])
-            S.tau += np.array([self._feedforward_torque(phi, phi[self.i_e:]) for phi in Phi]) \
-                if self.feedforward != "none" or self.kd_joint else 0.0
+            if self.feedforward == "gravity":
+                S.tau += Phi[:, self.i_h + nv:self.i_h + 2 * nv]
+            elif self.feedforward == "bias":
+                S.tau += Phi[:, self.i_h:self.i_h + nv]
+            if self.kd_joint:
+                S.tau -= self.kd_joint * X[:, nQ:nQ + nv]
         else:
             S.tau[:] = tau
         if phase.reference is not None and self.affine_ctl:  # x_d = start + Σ δ_m σ_m, σ_m in φ's time terms

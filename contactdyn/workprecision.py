@@ -39,7 +39,7 @@ from .scene import Scene, load_scene, parse_override
 from .simulate import run_system
 from .system import System
 
-__all__ = ["WorkPoint", "Reference", "bench", "bench_command", "errors", "recommend", "reference_run",
+__all__ = ["WorkPoint", "Reference", "bench", "bench_command", "errors", "recommend", "reference_run", "replot",
            "OTHER_SIMULATORS", "compare_with_others"]
 
 SKIP = 0.05  #: [s] force errors are taken from this time on (B1.md's metric)
@@ -285,7 +285,7 @@ def plot(points: list[WorkPoint], path: Path, title: str, others: list[tuple[str
     for ax in axes:
         ax.set_ylabel("wall time of the run [s]")
         ax.grid(True, which="both", alpha=0.3)
-    axes[0].legend(fontsize=7)
+    axes[0].legend(fontsize=7, loc="upper right")
     fig.suptitle(title)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -332,6 +332,17 @@ def write_report(name: str, ref: Reference, points: list[WorkPoint], build_ms: f
     (out / f"{name}.md").write_text("\n".join(md) + "\n")
     plot(points, out / f"{name}.png", f"{name}: wall time against error", others, ref)
     return doc
+
+
+def replot(json_path: str | Path, png_path: str | Path | None = None) -> Path:
+    """Draw a report's plot again from its NAME.json (no runs)."""
+    doc = json.loads(Path(json_path).read_text())
+    fields = set(WorkPoint.__dataclass_fields__)
+    points = [WorkPoint(**{k: v for k, v in p.items() if k in fields}) for p in doc["points"]]
+    path = Path(png_path) if png_path else Path(json_path).with_suffix(".png")
+    name = doc["scene"]
+    plot(points, path, f"{name}: wall time against error", OTHER_SIMULATORS.get(name, []), None)
+    return path
 
 
 # ---- the CLI entry -----------------------------------------------------------------------
