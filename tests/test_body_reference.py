@@ -56,16 +56,19 @@ def test_position_law_on_an_accelerating_cart_makes_the_relative_error_obey_P(dr
 
 def test_a_carried_reference_continues_where_the_previous_phase_left():
     """Without a start, the carried reference starts at the previous reference's absolute position
-    (no jump), then rides on the cart: a PD holds the tip on the cart to within its lag."""
+    (no jump), then rides on the cart, also after the last phase's end (it runs on to the scene's
+    duration): a PD holds the tip on the cart to within its lag."""
     p0 = tip0()
     pd = {"kind": "task_pd", "kp": 2e4, "kd": 400.0, "axes": [[1, 0, 0], [0, 0, 1]], "feedforward": "gravity"}
     phases = [{"name": "hold", "until": 0.1, "reference": {"start": p0.tolist()}},
-              {"name": "ride", "reference": {"body": "cart"}}]
+              {"name": "ride", "until": 0.4, "reference": {"body": "cart"}}]
     r = simulate(parse_scene(doc(phases, pd, duration=0.6)))
     k = int(np.searchsorted(r.t, 0.1))
     np.testing.assert_allclose(r["tip_ref"][k - 1], p0, atol=1e-12)
     np.testing.assert_allclose(r["tip_ref"][k + 1], p0 + AXIS * (r["body.cart.x"][k + 1] - r["body.cart.x"][k]),
                                atol=1e-12)  # continuous, carried from the cart's position at the switch
+    on_cart = r["tip_ref"][k + 1:] - np.outer(r["body.cart.x"][k + 1:], AXIS)
+    np.testing.assert_allclose(on_cart, on_cart[0] + 0 * on_cart, atol=1e-12)  # fixed on the cart, to the end
     moved = r["body.cart.x"][-1] - r["body.cart.x"][k]
     assert moved > 0.08  # [m]
     np.testing.assert_allclose(r["tip"][-1], p0 + AXIS * moved, atol=2e-3)  # [m] the PD's lag at 0.2 m/s
