@@ -247,6 +247,8 @@ def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Sce
         raise SceneError("<file>", "valid TOML", str(exc), str(path)) from None
     except OSError as exc:
         raise SceneError("<file>", "a readable file", exc.strerror, str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise SceneError("<file>", "UTF-8 text", str(exc), str(path)) from None
     return parse_scene(document, overrides, file=str(path))
 
 
@@ -289,7 +291,7 @@ def _read_robot(r: Reader) -> RobotSpec:
         v0=r.vector("v0", None) if r.has("v0") else None,
         tip0=r.vector("tip0", None, size=3, unit="m") if r.has("tip0") else None,
         q_seed=r.vector("q_seed", None) if r.has("q_seed") else None,
-        drive=dict(r.raw("drive", {})),
+        drive=dict(r.sub("drive", {}).data),
     )
     r.finish()
     return spec
@@ -305,7 +307,7 @@ def _read_body(name: str, r: Reader) -> BodySpec:
         velocity0=r.float("velocity0", 0.0, unit="m/s"),
         servo_velocity=servo.float("velocity", None, unit="m/s") if servo.has("velocity") else None,
         servo_gain=servo.float("gain", 1e3, lo=0.0, unit="N·s/m"),
-        drive=dict(r.raw("drive", {})),
+        drive=dict(r.sub("drive", {}).data),
     )
     servo.finish()
     r.finish()
@@ -366,8 +368,9 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec]) -> ContactS
         raw = tangent_r.raw("directions")
         if not isinstance(raw, list) or not 1 <= len(raw) <= 2:
             raise tangent_r.error("directions", "a list of 1 or 2 direction vectors", raw)
-        tangents = np.array([Reader({"d": d}, tangent_r.key("directions"), r.file).vector("d", size=3, unit_norm=True)
-                             for d in raw])
+        tangents = np.array([Reader({str(i): d}, tangent_r.key("directions"), r.file).vector(str(i), size=3,
+                                                                                             unit_norm=True)
+                             for i, d in enumerate(raw)])
         if np.any(np.abs(tangents @ normal) > 1e-9) or (len(tangents) == 2 and abs(tangents[0] @ tangents[1]) > 1e-9):
             raise tangent_r.error("directions", "directions orthogonal to the normal and to each other",
                                   raw)
