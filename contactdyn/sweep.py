@@ -16,7 +16,8 @@ Every file is written atomically; the summary is rewritten after each chunk of r
 interrupted sweep loses at most the runs in progress, and re-running the same command
 skips the runs whose files exist. A run that fails (a bad parameter combination, a solver
 failure, a blow-up) is a row with status ``failed`` (a :class:`ContactdynError` or a
-numerical failure such as ``LinAlgError``) or ``crashed`` (any other exception, i.e. a bug) and its message; the other runs go on.
+numerical failure such as ``LinAlgError``) or ``crashed`` (any other exception, i.e. a
+bug) and its message; the other runs go on.
 Apart from the wall time (``wall_s`` in the summary, ``stats.wall_s`` and
 ``stats.real_time_factor`` in each ``<id>.json``) the outputs are bit-identical for the
 same inputs.
@@ -395,7 +396,8 @@ def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, schedul
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    ctx = multiprocessing.get_context("forkserver")  # no fork of a threaded parent; workers fork from a preloaded server
+    # no fork of a (possibly threaded) parent: workers fork from a server that preloaded the package
+    ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(["contactdyn.sweep", "contactdyn.simulate"])
     pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
     try:

@@ -104,3 +104,20 @@ def test_overrides_validate_or_raise_scene_error(overrides):
 def test_skeleton_documents(doc):
     with pytest.raises(SceneError):
         parse_scene(doc, file=FILE)
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@given(mutated())
+def test_valid_mutants_build_a_system_or_raise_the_packages_errors(doc):
+    """What parse_scene accepts, System must build or reject with SceneError/RobotError (URDF-level checks)."""
+    from contactdyn.errors import RobotError
+    from contactdyn.system import System
+
+    try:
+        scene = parse_scene(doc, file=FILE)
+    except SceneError:
+        return
+    try:
+        System(scene)
+    except (SceneError, RobotError):
+        pass
