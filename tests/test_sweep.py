@@ -250,3 +250,15 @@ def test_unreachable_scheduler_is_bad_input(capsys, tmp_path, monkeypatch):
     code = main(["sweep", "b1", *FAST, "--out", str(tmp_path / "s"), "--scheduler", "tcp://127.0.0.1:9"])
     err = capsys.readouterr().err
     assert code == EXIT_USAGE and "--scheduler" in err and "Traceback" not in err
+
+
+def test_retry_failed_runs_the_failed_runs_again(capsys, tmp_path):
+    out = tmp_path / "s"
+    args = ["sweep", "b1", *FAST, "--grid", "contact.tip.normal.b=1.0,-1.0", "--out", str(out), "--workers", "0"]
+    assert main([*args, "--json"]) == EXIT_FAILED
+    assert json.loads(capsys.readouterr().out)["skipped"] == 0
+    assert main([*args, "--json"]) == EXIT_FAILED
+    assert json.loads(capsys.readouterr().out)["skipped"] == 2  # the failure is a result too
+    assert main([*args, "--json", "--retry-failed"]) == EXIT_FAILED
+    report = json.loads(capsys.readouterr().out)
+    assert report["skipped"] == 1 and report["counts"] == {"ok": 1, "failed": 1, "crashed": 0}

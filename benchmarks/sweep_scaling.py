@@ -1,0 +1,141 @@
+"""Scaling of a sweep: 1 vs 2 workers on a process pool and on a Dask LocalCluster, and their per-run overhead.
+
+    python benchmarks/sweep_scaling.py [--runs 200] [--repeats 3] [--duration 0.1] [--no-dask]
+
+A sweep of RUNS short B1 runs (``duration`` seconds at 200 Hz output, contact stiffness
+log-spaced over 5e4..2e5 N/m) is timed end to end (``run_sweep``: results and summary
+written to a temporary folder) in five ways: in this process (no pool: the baseline),
+a process pool of 1 and of 2 workers, a Dask ``LocalCluster`` of 1 and of 2 worker
+processes (cluster start-up timed separately, not in the sweep time). Each is repeated
+REPEATS times; the median and the range are reported.
+
+- speed-up = time with 1 worker / time with 2 workers (the goal: >= 1.7 on 2 cores);
+- per-run overhead = (time with 1 worker − time in this process) / RUNS: what the pool or
+  Dask costs per run, start-up of the workers (imports) included; the start-up alone is
+  estimated from a 1-run sweep the same way.
+
+Writes benchmarks/out/sweep_scaling.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from contactdyn.sweep import make_sweep, run_sweep  # noqa: E402
+
+OUT = Path(__file__).resolve().parent / "out" / "sweep_scaling.json"
+
+
+def _sweep(runs: int, duration: float):
+    return make_sweep("b1", sets=[f"duration={duration}", "solver.output_rate=200"],
+                      ranges=[f"contact.tip.normal.k=5e4:2e5:{runs}:log"])
+
+
+def _time(sweep, **kw) -> tuple[float, dict]:
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        report = run_sweep(sweep, tmp, check=False, **kw)
+        return time.perf_counter() - t0, report.counts
+
+
+def _stats(times: list[float]) -> dict:
+    return {"median_s": statistics.median(times), "min_s": min(times), "max_s": max(times), "all_s": times}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=200)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--duration", type=float, default=0.1, help="simulated seconds per run")
+    ap.add_argument("--no-dask", action="store_true")
+    args = ap.parse_args()
+
+    big, one = _sweep(args.runs, args.duration), _sweep(1, args.duration)
+    modes: dict[str, dict] = {"inline": {"workers": 0}, "pool1": {"workers": 1}, "pool2": {"workers": 2}}
+    clusters: dict[str, object] = {}
+    cluster_start: dict[str, float] = {}
+    if not args.no_dask:
+        import logging
+
+        from distributed import LocalCluster
+
+        logging.getLogger("distributed").setLevel(logging.ERROR)
+
+        for n in (1, 2):
+            t0 = time.perf_counter()
+            clusters[f"dask{n}"] = LocalCluster(n_workers=n, processes=True, threads_per_worker=1,
+                                                dashboard_address=None)
+            cluster_start[f"dask{n}"] = time.perf_counter() - t0
+            modes[f"dask{n}"] = {"scheduler": clusters[f"dask{n}"].scheduler_address}
+    _time(one, workers=0)  # warm this process up (imports, first URDF parse) before the baseline is timed
+    load0 = os.getloadavg()
+    times: dict[str, list[float]] = {m: [] for m in modes}
+    single: dict[str, list[float]] = {m: [] for m in modes}
+    counts = {}
+    try:
+        for r in range(args.repeats):  # interleaved, so slow drifts of the machine hit every mode alike
+            for mode, kw in modes.items():
+                t, counts[mode] = _time(big, **kw)
+                times[mode].append(t)
+                single[mode].append(_time(one, **kw)[0])
+                print(f"repeat {r + 1}/{args.repeats} {mode:>6}: {t:7.2f} s for {args.runs} runs", flush=True)
+    finally:
+        for c in clusters.values():
+            c.close()
+    load1 = os.getloadavg()
+
+    med = {m: statistics.median(v) for m, v in times.items()}
+    med1 = {m: statistics.median(v) for m, v in single.items()}
+    n = args.runs
+    report = {
+        "runs": n, "repeats": args.repeats, "duration_s": args.duration, "cpu_count": os.cpu_count(),
+        "loadavg_before": load0, "loadavg_after": load1, "python": platform.python_version(),
+        "statuses": counts,
+        "sweep": {m: _stats(v) for m, v in times.items()},
+        "one_run_sweep": {m: _stats(v) for m, v in single.items()},
+        "dask_cluster_start_s": cluster_start,
+        "per_run_inline_s": med["inline"] / n,
+        "speedup_pool": med["pool1"] / med["pool2"],
+        "speedup_pool_range": [min(times["pool1"]) / max(times["pool2"]), max(times["pool1"]) / min(times["pool2"])],
+        "overhead_per_run_s": {}, "startup_s": {},
+    }
+    for m in [m for m in modes if m.endswith("1")]:
+        report["overhead_per_run_s"][m] = (med[m] - med["inline"]) / n
+        report["startup_s"][m] = med1[m] - med1["inline"]
+    if "dask2" in med:
+        report["speedup_dask"] = med["dask1"] / med["dask2"]
+        report["speedup_dask_range"] = [min(times["dask1"]) / max(times["dask2"]),
+                                        max(times["dask1"]) / min(times["dask2"])]
+    OUT.parent.mkdir(exist_ok=True)
+    OUT.write_text(json.dumps(report, indent=1))
+
+    print(f"\n{n} runs of b1 ({args.duration} s simulated each), median of {args.repeats} "
+          f"(load average {load0[0]:.1f} -> {load1[0]:.1f} on {os.cpu_count()} cores)")
+    print(f"{'mode':>8} {'median [s]':>11} {'range [s]':>17} {'per run [ms]':>13}")
+    for m, v in times.items():
+        print(f"{m:>8} {med[m]:11.2f} {min(v):8.2f}-{max(v):<8.2f} {1e3 * med[m] / n:13.2f}")
+    print(f"speed-up 2 vs 1 workers: pool {report['speedup_pool']:.2f} (range {report['speedup_pool_range'][0]:.2f}-"
+          f"{report['speedup_pool_range'][1]:.2f})", end="")
+    if "speedup_dask" in report:
+        print(f", Dask {report['speedup_dask']:.2f} (range {report['speedup_dask_range'][0]:.2f}-"
+              f"{report['speedup_dask_range'][1]:.2f})", end="")
+    print()
+    for m, o in report["overhead_per_run_s"].items():
+        print(f"overhead per run, {m}: {1e3 * o:.2f} ms (start-up of a 1-run sweep: {report['startup_s'][m]:.2f} s)")
+    if cluster_start:
+        print("Dask LocalCluster start: " + ", ".join(f"{m} {t:.2f} s" for m, t in cluster_start.items()))
+    print(f"wrote {OUT}")
+
+
+if __name__ == "__main__":
+    main()
