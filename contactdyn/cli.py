@@ -36,22 +36,24 @@ def _out(args: argparse.Namespace, text: str) -> None:
 
 
 def _emit_json(obj: Any) -> None:
-    print(json.dumps(obj, indent=1, default=_jsonable, allow_nan=False))
+    print(json.dumps(_plain(obj), indent=1, allow_nan=False))
 
 
-def _jsonable(obj: Any) -> Any:
+def _plain(obj: Any) -> Any:
+    """JSON-ready: numpy to Python, NaN and infinities (undefined metrics) to null."""
     import numpy as np
 
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple | np.ndarray):
+        return [_plain(v) for v in obj]
     if isinstance(obj, np.generic):
-        return obj.item()
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if obj is None or isinstance(obj, str | int | float | bool):
+        return obj
     return str(obj)
-
-
-def _finite(d: dict[str, Any]) -> dict[str, Any]:
-    """JSON has no NaN: undefined metrics become null."""
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
 
 # ---- list ------------------------------------------------------------------------------------
@@ -128,7 +130,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     saved = str(result.save(args.out)) if args.out else None
     if args.json:
         _emit_json({"scene": scene.name, "file": scene.file, "status": "ok", "out": saved,
-                    "metrics": _finite(metrics(result)), "stats": _finite(result.stats), "impacts": result.impacts})
+                    "metrics": metrics(result), "stats": result.stats, "impacts": result.impacts})
     else:
         s = result.stats
         _out(args, f"{result.meta['name']}: {result.meta['duration']:g} s simulated in {s['wall_s']:.3f} s "

@@ -28,10 +28,18 @@ import numpy as np
 
 from .result import Result
 
-__all__ = ["metrics", "CONTACT_METRICS"]
+__all__ = ["metrics", "is_metric", "CONTACT_METRICS", "RUN_METRICS"]
 
 #: metric suffixes under ``contact.<name>.``
 CONTACT_METRICS = ("F_peak", "F_final", "impacts", "impulse_n", "impulse_n_first", "impulse_t", "force_rms")
+#: metrics of the whole run
+RUN_METRICS = ("tracking_rms", "max_deformation", "events")
+
+
+def is_metric(name: str) -> bool:
+    """Whether a column name is one of the metrics (not a scene key)."""
+    parts = name.split(".")
+    return name in RUN_METRICS or (len(parts) == 3 and parts[0] == "contact" and parts[2] in CONTACT_METRICS)
 
 
 def metrics(result: Result) -> dict[str, float]:

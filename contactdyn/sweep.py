@@ -308,17 +308,39 @@ def result_row(rid: str, result) -> dict[str, Any]:
             "wall_s": float(result.stats.get("wall_s", math.nan)), **metrics(result)}
 
 
-def _done_row(runs_dir: Path, rid: str) -> dict[str, Any] | None:
-    """The row of a finished run rebuilt from its files, or None if it has not finished."""
+def _done_row(runs_dir: Path, rid: str, cache: dict[str, dict[str, Any]]) -> dict[str, Any] | None:
+    """The row of a finished run (from the last summary, else from its files); None if it must run."""
     from .result import load_result
 
     failed = runs_dir / f"{rid}.failed.json"
-    if failed.is_file():
-        doc = json.loads(failed.read_text())
-        return {k: doc[k] for k in ("run_id", "status", "error", "wall_s")}
-    if (runs_dir / f"{rid}.npz").is_file() and (runs_dir / f"{rid}.json").is_file():
+    finished = failed.is_file() or ((runs_dir / f"{rid}.npz").is_file() and (runs_dir / f"{rid}.json").is_file())
+    if not finished:
+        return None
+    if rid in cache:
+        return cache[rid]
+    try:
+        if failed.is_file():
+            doc = json.loads(failed.read_text())
+            return {k: doc[k] for k in SUMMARY_FIXED}
         return result_row(rid, load_result(runs_dir / rid))
-    return None
+    except (OSError, ValueError, KeyError, ContactdynError):  # damaged by hand (never by us): run it again
+        return None
+
+
+def _cached_rows(out: Path) -> dict[str, dict[str, Any]]:
+    """Rows of the last summary by run id, to resume without reloading every result."""
+    import pandas as pd
+
+    from .metrics import is_metric
+
+    try:
+        frame = pd.read_parquet(out / "summary.parquet")
+    except (OSError, ValueError, ImportError):
+        return {}
+    cols = [c for c in frame.columns if c in SUMMARY_FIXED or is_metric(c)]
+    if not set(SUMMARY_FIXED) <= set(cols):
+        return {}
+    return {r["run_id"]: r for r in frame[cols].to_dict("records")}
 
 
 @dataclass
@@ -354,10 +376,11 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
     cases = sweep.cases()
     _write_manifest(out, sweep, cases)
     rows: dict[str, dict[str, Any]] = {}
+    cache = _cached_rows(out)
     for rid, _, _ in cases:
         if retry_failed and (runs_dir / f"{rid}.failed.json").is_file():
             (runs_dir / f"{rid}.failed.json").unlink()
-        row = _done_row(runs_dir, rid)
+        row = _done_row(runs_dir, rid, cache)
         if row is not None:
             rows[rid] = row
     todo = [(rid, overrides) for rid, _, overrides in cases if rid not in rows]
@@ -399,7 +422,7 @@ def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, schedul
     # no fork of a (possibly threaded) parent: workers fork from a server that preloaded the package
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(["contactdyn.sweep", "contactdyn.simulate"])
-    pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
+    pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_worker_init)
     try:
         futures = [pool.submit(run_chunk, *args, c) for c in chunks]
         for fut in as_completed(futures):
@@ -407,8 +430,19 @@ def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, schedul
     except BrokenProcessPool as exc:
         raise ContactdynError(f"a worker process died ({exc}); the finished runs are saved, "
                               "run the same command again to resume") from None
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    except BaseException:  # interrupted: stop the workers now (their results so far are whole files)
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _worker_init() -> None:
+    """Ctrl-C reaches the whole process group: only the parent handles it (it stops the workers)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _execute_dask(scheduler: str, args: tuple, chunks: list):

@@ -262,3 +262,40 @@ def test_retry_failed_runs_the_failed_runs_again(capsys, tmp_path):
     assert main([*args, "--json", "--retry-failed"]) == EXIT_FAILED
     report = json.loads(capsys.readouterr().out)
     assert report["skipped"] == 1 and report["counts"] == {"ok": 1, "failed": 1, "crashed": 0}
+
+
+def test_resume_reads_the_summary_and_reruns_damaged_results(capsys, tmp_path, monkeypatch):
+    out, fresh = tmp_path / "s", tmp_path / "fresh"
+    args = ["sweep", "b1", *FAST, *GRID, "--workers", "0", "--quiet"]
+    assert main([*args, "--out", str(out)]) == EXIT_OK
+    assert main([*args, "--out", str(fresh)]) == EXIT_OK
+    result_mod = sys.modules["contactdyn.result"]
+    with monkeypatch.context() as m:  # finished runs listed in the summary are not reloaded
+        m.setattr(result_mod, "load_result", lambda *a: pytest.fail("reloaded a result"))
+        assert main([*args, "--out", str(out), "--json"]) == EXIT_OK
+        assert json.loads(capsys.readouterr().out)["skipped"] == 4
+    _same_outputs(out, fresh)
+    (out / "summary.parquet").unlink()  # the summary lost, one result damaged by hand
+    victim = sorted((out / "runs").glob("*.npz"))[0]
+    victim.write_bytes(b"not a zip file")
+    assert main([*args, "--out", str(out), "--json"]) == EXIT_OK
+    assert json.loads(capsys.readouterr().out)["skipped"] == 3
+    _same_outputs(out, fresh)
+
+
+def test_ctrl_c_stops_pool_workers_without_tracebacks_and_resumes(capsys, tmp_path):
+    out = tmp_path / "s"
+    args = ["sweep", "b1", *FAST, "--range", "contact.tip.normal.k=5e4:2e5:60:log", "--workers", "2", "--chunk", "5",
+            "--quiet", "--out", str(out)]
+    env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
+    proc = subprocess.Popen([sys.executable, "-m", "contactdyn.cli", *args], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and len(list((out / "runs").glob("*.npz"))) < 2 and proc.poll() is None:
+        time.sleep(0.005)
+    os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "run the same command again to resume" in err
+    assert main(args) == EXIT_OK
+    assert len(_summary(out)) == 60 and (_summary(out).status == "ok").all()
