@@ -80,11 +80,13 @@ class Chain:
     @property
     def bonded_when_touching(self) -> bool:
         """Touching makes a constraint row (and an impact): both surface nodes are solid."""
-        return self.nodes[self.env_surface].kind != NodeKind.FREE and self.nodes[self.robot_surface].kind != NodeKind.FREE
+        nodes = self.nodes
+        return nodes[self.env_surface].kind != NodeKind.FREE and nodes[self.robot_surface].kind != NodeKind.FREE
 
     @property
     def junction_when_touching(self) -> bool:
-        return self.nodes[self.env_surface].kind == NodeKind.FREE and self.nodes[self.robot_surface].kind == NodeKind.FREE
+        nodes = self.nodes
+        return nodes[self.env_surface].kind == NodeKind.FREE and nodes[self.robot_surface].kind == NodeKind.FREE
 
     def stages_of(self, node: int) -> list[int]:
         return [i for i, s in enumerate(self.stages) if node in (s.lower, s.upper)]
@@ -97,8 +99,8 @@ def build_chain(spec: ChainSpec, where: str) -> Chain:
 
     def walk(elements: tuple, start: int, side: str) -> int:
         current = start
+        n_stages = 0
         for i, element in enumerate(elements):
-            label = f"{side[:3]}{i + 1}"
             if isinstance(element, Mass):
                 if nodes[current].kind != NodeKind.FREE:
                     raise SceneError(f"{where}.{side}[{i}]", "a stage {k, b} between a mass and the body, tip or "
@@ -109,7 +111,10 @@ def build_chain(spec: ChainSpec, where: str) -> Chain:
                 nodes.append(ChainNode(NodeKind.FREE, side=side))
                 new = len(nodes) - 1
                 lower, upper = (current, new) if side == "environment" else (new, current)
-                stages.append(ChainStage(lower, upper, element.k, element.b, element.law, element.exponent, side, label))
+                n_stages += 1
+                label = f"{side[:3]}{n_stages}"  # env1, env2 ... from the body; rob1 ... from the tip
+                stages.append(ChainStage(lower, upper, element.k, element.b, element.law, element.exponent, side,
+                                         label))
                 current = new
         return current
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .chain import Chain, NodeKind, build_chain
+from .robot import FrameTerms
 from .scene import ContactSpec
 
 __all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics"]
@@ -45,6 +46,7 @@ class Kinematics:
     drift: np.ndarray  #: J̇q̇ [m/s²]
     p_env: np.ndarray  #: [m]
     v_env: np.ndarray  #: [m/s]
+    frame: FrameTerms | None = None  #: the tip frame's full terms (orientation, angular Jacobian)
 
 
 @dataclass
@@ -53,7 +55,8 @@ class ChainPlan:
 
     solid: list[int]
     aliases: list[tuple[int, int]]  #: (free node, node it follows)
-    junctions: list[tuple[int, list[int], int]]  #: (node, active neighbour stages, state index or -1)
+    #: (node, active neighbour stages, state index or -1, nodes merged into it)
+    junctions: list[tuple[int, list[int], int, frozenset[int]]]
     free_ends: list[tuple[int, int]]  #: (free node, node it rests on)
     active: list[int]  #: stages carrying force
     bond: bool
@@ -79,6 +82,9 @@ def _plan(chain: Chain, touching: bool, junction_state: int) -> ChainPlan:
     interior = [i for i, n in enumerate(nodes)
                 if n.kind == NodeKind.FREE and len(chain.stages_of(i)) == 2 and i not in aliased]
     junction_nodes += [i for i in interior if i not in junction_nodes]
+    if not touching:  # damped surface ends relax on their own: k x + b ẋ = 0
+        junction_nodes += [i for i in (es, rs) if nodes[i].kind == NodeKind.FREE and nodes[i].state >= 0
+                           and i not in junction_nodes]
     # a node is "loaded" when its position is determined by something other than its stage
     loaded = set(solid) | aliased | set(junction_nodes)
     free_ends = []
@@ -89,8 +95,12 @@ def _plan(chain: Chain, touching: bool, junction_state: int) -> ChainPlan:
             free_ends.append((i, other))
     free_set = {i for i, _ in free_ends}
     active = [k for k, s in enumerate(stages) if s.lower not in free_set and s.upper not in free_set]
-    junctions = [(j, [k for k in chain.stages_of(j) if k in active], junction_state if j in (es, rs) else nodes[j].state)
-                 for j in junction_nodes]
+    junctions = []
+    for j in junction_nodes:
+        group = {j} | {a for a, b in aliases if b == j}  # the interface junction is both surface nodes
+        stages_j = sorted({k for n in group for k in chain.stages_of(n) if k in active})
+        slot = junction_state if touching and j in (es, rs) else nodes[j].state
+        junctions.append((j, stages_j, slot, frozenset(group)))
     bond = touching and chain.bonded_when_touching
     interface_stage = -1
     if touching and not bond:  # the stage that meets the other side carries the interface force
@@ -110,6 +120,7 @@ class DirectionalChain:
     label: str  #: "n", "t1", "t2"
     junction_state: int = -1  #: state slot of the interface junction (when touching), set by the system
     plans: dict[bool, ChainPlan] = field(default_factory=dict)
+    last_positions: list[float] = field(default_factory=list)  #: node positions at the last evaluation [m]
 
     def plan(self, touching: bool) -> ChainPlan:
         if touching not in self.plans:

@@ -159,6 +159,7 @@ class SolverSpec:
     max_events: int = 10000  #: guard against event storms (whole run)
     storm_window: float = 1e-9  #: [s] events closer than this count towards a storm
     storm_count: int = 50  #: that many events inside the window stop the run
+    stabilization: float = 20.0  #: [1/s] Baumgarte rate ω of bonds, rigid contacts and sticks (0: none)
 
 
 @dataclass(frozen=True)
@@ -425,6 +426,7 @@ def _read_solver(r: Reader) -> SolverSpec:
         max_events=r.int("max_events", SolverSpec.max_events, lo=1),
         storm_window=r.float("storm_window", SolverSpec.storm_window, lo=0.0, unit="s"),
         storm_count=r.int("storm_count", SolverSpec.storm_count, lo=2),
+        stabilization=r.float("stabilization", SolverSpec.stabilization, lo=0.0, unit="1/s"),
     )
     r.finish()
     return spec
@@ -458,12 +460,17 @@ def _read_reference(r: Reader) -> ReferenceSpec:
     for m in r.tables("moves"):
         kind = m.str("kind", "trapezoid", choices=PROFILES)
         duration = m.float("duration", lo=0.0, lo_open=True, unit="s")
+        normal, turns = None, 1.0
         if kind == "velocity_ramp":
             delta = m.vector("velocity", unit="m/s or rad/s") * duration
+        elif kind == "circle":
+            delta = m.vector("center", size=3, unit="m")
+            normal = m.vector("normal", [0.0, 0.0, 1.0], size=3, unit_norm=True)
+            turns = m.float("turns", 1.0)
         else:
             delta = m.vector("delta", unit="m or rad")
         moves.append(Move(delta, m.float("start", 0.0, lo=0.0, unit="s"), duration, kind,
-                          m.float("accel_fraction", 0.1, lo=0.0, lo_open=True, hi=0.5)))
+                          m.float("accel_fraction", 0.1, lo=0.0, lo_open=True, hi=0.5), normal, turns))
         m.finish()
     sizes = {len(mv.delta) for mv in moves} | ({len(start)} if start is not None else set())
     if len(sizes) > 1:

@@ -203,7 +203,8 @@ class _Run:
                 x, imp = system.impact(t, x, modes, c)
                 self.impacts.append({"t": t, "contact": c.name, "normal_impulse": imp.normal_impulse,
                                      "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
-                                     "energy_loss": imp.energy_loss})
+                                     "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
+                                     "v_after": imp.v_after.tolist()})
                 if imp.jammed:
                     modes[i] = modes[i].with_(stuck=True)
             if phase.spec.until == f"touch:{c.name}":
@@ -212,6 +213,7 @@ class _Run:
                 if phase.index < len(self.scene.phases):
                     self._log(t, "phase", phase.spec.name, check_storm=False)
         elif event.kind == "separate":
+            x = system.separate(t, x, modes, phase, c)
             modes[i] = modes[i].with_(touching=False, stuck=False)
         elif event.kind == "stop":
             modes[i] = modes[i].with_(stuck=True)
@@ -279,6 +281,7 @@ class _Run:
                     continue
                 F_n = ev.normal_force[c.name]
                 if not c.spec.bonded and F_n < -FORCE_TOL * (1.0 + abs(F_n)):
+                    x[:] = system.separate(t, x, modes, phase, c)
                     modes[i] = mode.with_(touching=False, stuck=False)
                     self._log(t, "separate", c.name)
                     changed = True

@@ -19,7 +19,7 @@ the same matrix with velocity jumps (momentum law): M ΔQ̇ = Cᵀ Λ, G Q̇⁺ 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -135,13 +135,18 @@ class System:
                         node.coord = nv + len(diag)
                         diag.append(node.mass)
                         self.mass_labels.append(f"{c.name}.{dc.label}.m{len(self.mass_labels) + 1}")
-                for i, node in enumerate(dc.chain.nodes):
-                    if node.kind == NodeKind.FREE and len(dc.chain.stages_of(i)) == 2:
-                        node.state = n_first
+                chain = dc.chain
+                for i, node in enumerate(chain.nodes):
+                    stages_i = [chain.stages[k] for k in chain.stages_of(i)]
+                    relaxes = i in (chain.env_surface, chain.robot_surface) and len(stages_i) == 1 and \
+                        stages_i[0].b > 0.0 and stages_i[0].law == "linear"
+                    if node.kind == NodeKind.FREE and (len(stages_i) == 2 or relaxes):
+                        node.state = n_first  # a junction, or a damped surface end relaxing after separation
                         n_first += 1
-                if dc.chain.junction_when_touching:
-                    dc.junction_state = n_first
-                    n_first += 1
+                if chain.junction_when_touching:
+                    es_state = chain.nodes[chain.env_surface].state
+                    dc.junction_state = es_state if es_state >= 0 else n_first
+                    n_first += 0 if es_state >= 0 else 1
         self.nQ = nv + len(diag)
         self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg]
         self.n_junctions = n_first
@@ -155,6 +160,7 @@ class System:
         n_first += 2 if scene.solver.record_energy else 0
         self.ny = n_first
         self.n = 2 * self.nQ + self.ny
+        self.stabilization = scene.solver.stabilization  #: Baumgarte rate ω of constraint rows [1/s]
         self._M = np.zeros((self.nQ, self.nQ))
         self._M[nv:, nv:] = np.diag(self.M_rest)
         self.servo = [(self.body_index[n], b.servo_velocity, b.servo_gain)
@@ -189,8 +195,11 @@ class System:
         modes = []
         for c in self.contacts:
             kin = self.kinematics(c, x)
-            touching = c.spec.bonded or bool(c.normal.u @ (kin.p_tip - kin.p_env) <= 1e-12 and
-                                             c.normal.chain.env_surface == 0 and c.normal.chain.robot_surface == 1)
+            gap0 = float(c.normal.u @ (kin.p_tip - kin.p_env))  # chains start undeformed
+            if gap0 < -1e-9 and not c.spec.bonded:
+                raise SceneError(f"contact.{c.name}", "a start with the tip on or above the surface (gap >= 0)",
+                                 f"gap {gap0:.6g} m", self.scene.file)
+            touching = c.spec.bonded or gap0 <= 1e-12
             # masses start at rest where their chain puts them undeformed (zero rest lengths)
             for dc in c.chains:
                 s_tip, s_anc = float(dc.u @ kin.p_tip), float(dc.u @ kin.p_env)
@@ -204,8 +213,6 @@ class System:
                         x[2 * nQ + node.state] = s_tip if node.side == "robot" else s_anc
                 if dc.junction_state >= 0:
                     x[2 * nQ + dc.junction_state] = s_anc
-            if c.spec.bonded:
-                touching = True
             modes.append(ContactMode(touching=touching, offsets=tuple(0.0 for _ in c.tangent_chains),
                                      slip=self._initial_slip(c, kin)))
         return x, modes
@@ -238,7 +245,7 @@ class System:
             if len(start) != dims:
                 raise SceneError(f"phase[{index}].reference", f"{dims}-vectors in {ref.space} space",
                                  len(start), self.scene.file)
-            moves = tuple(type(m)(m.delta, m.start + t, m.duration, m.kind, m.accel_fraction) for m in ref.moves)
+            moves = tuple(replace(m, start=m.start + t) for m in ref.moves)
             for m in moves:
                 if len(m.delta) != dims:
                     raise SceneError(f"phase[{index}].reference.moves", f"{dims}-vectors", len(m.delta),
@@ -259,7 +266,7 @@ class System:
             v_env = c.body_axis * x[nQ + c.body_index]
         else:
             p_env, v_env = c.spec.point, np.zeros(3)
-        return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env)
+        return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env, ft)
 
     def _row(self, c: Contact, u: np.ndarray, kin: Kinematics) -> np.ndarray:
         """Generalized row of the relative tip–environment motion along u."""
@@ -289,16 +296,16 @@ class System:
                 pos[i], vel[i] = s_anc, v_anc
             else:
                 pos[i], vel[i] = x[nodes[i].coord], x[nQ + nodes[i].coord]
-        junction_nodes = {j for j, _, _ in plan.junctions}
+        junction_nodes = {j for j, _, _, _ in plan.junctions}
         for a, b in plan.aliases:
             if b not in junction_nodes:
                 pos[a], vel[a] = pos[b], vel[b]
         y = x[2 * nQ:]
-        for j, active, slot in plan.junctions:
+        for j, active, slot, group in plan.junctions:
             num = den = kk = ks = 0.0
             for k in active:
                 s = stages[k]
-                if s.upper == j:  # stage below pushes j up
+                if s.upper in group:  # stage below pushes j up
                     num += s.k * (pos[s.lower] - (y[slot] if slot >= 0 else 0.0)) + s.b * vel[s.lower]
                     ks += s.k * pos[s.lower]
                 else:  # stage above pushes j down
@@ -311,13 +318,14 @@ class System:
                 ydot[slot] = vel[j]
             else:  # undamped junction: algebraic force balance
                 pos[j] = ks / kk if kk > 0 else 0.0
-                vel[j] = sum(stages[k].k * vel[stages[k].lower if stages[k].upper == j else stages[k].upper]
+                vel[j] = sum(stages[k].k * vel[stages[k].lower if stages[k].upper in group else stages[k].upper]
                              for k in active) / kk if kk > 0 else 0.0
         for a, b in plan.aliases:
             if b in junction_nodes:
                 pos[a], vel[a] = pos[b], vel[b]
         for a, b in plan.free_ends:
             pos[a], vel[a] = pos[b], vel[b]
+        dc.last_positions = pos
         alias_of = dict(plan.aliases)
         tip_F = anchor_F = 0.0
         interface_F = 0.0
@@ -362,8 +370,11 @@ class System:
                         row[c.body_index] += sign * float(u @ c.body_axis)
                 else:
                     row[nodes[node].coord] += sign
-        gap = 0.0 if touching else pos[chain.robot_surface] - pos[chain.env_surface]
-        return tip_F, row, gamma, interface_F, gap
+        gap = pos[chain.robot_surface] - pos[chain.env_surface]
+        if plan.bond:  # Baumgarte: the violation e obeys ë + 2ω ė + ω² e = 0, zero on the exact manifold
+            w = self.stabilization
+            gamma += 2.0 * w * (vel[chain.robot_surface] - vel[chain.env_surface]) + w * w * gap
+        return tip_F, row, gamma, interface_F, (0.0 if touching else gap)
 
     # ---- the right-hand side -----------------------------------------------------------
     def evaluate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
@@ -414,7 +425,7 @@ class System:
                         trow = self._row(c, T[i], kin)
                         rows.append(trow)
                         cols.append(trow)
-                        gammas.append(float(T[i] @ kin.drift))
+                        gammas.append(float(T[i] @ kin.drift) + self.stabilization * float(vt[i]))
                         meta.append((c.name, "t", i))
                 elif mode.touching:
                     d = self._slip_direction(vt, mode)
@@ -447,12 +458,10 @@ class System:
                 f[:nv] += kin.J.T @ tip_force_total_c
             tip_force_total += tip_force
         # controller
-        ft = robot.frame_terms(self.tip_fid) if not self.contacts or self.contacts[0].fid != self.tip_fid else None
-        if ft is not None:
-            p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
-        else:
-            k0 = kins[0]
-            p_tip, v_tip, J, drift = k0.p_tip, k0.v_tip, k0.J, k0.drift
+        ft = next((k.frame for c, k in zip(self.contacts, kins, strict=True) if c.fid == self.tip_fid), None)
+        if ft is None:
+            ft = robot.frame_terms(self.tip_fid)
+        p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
         x_d = v_d = a_d = None
         if phase.reference is not None:
             x_d, v_d, a_d = phase.reference.at(t)
@@ -461,7 +470,8 @@ class System:
         z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
         inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
                            p_tip, v_tip, J, drift, x_d, v_d, a_d, dict(ev.normal_force), force_d,
-                           {c.name: c.normal.u for c in self.contacts}, z)
+                           {c.name: c.normal.u for c in self.contacts}, z, R_tip=ft.rotation,
+                           J_ang=ft.angular_jacobian)
         tau, zdot = ctl.command(inp)
         f[:nv] += tau
         if zdot is not None:
@@ -502,15 +512,28 @@ class System:
                 ev.friction.setdefault(name, np.zeros(len(self._contact(name).tangents)))[i] = value
             else:
                 ev.interface[f"{name}.{kind}"] = float(value)
-        for c, d, F_n, visc in pending_friction:
+        for c, d, _, visc in pending_friction:
             if c.name not in ev.friction:
                 ev.friction[c.name] = -c.friction.mu_k * max(ev.normal_force[c.name], 0.0) * d + visc
         if self.energy_slot >= 0:
-            for c, d, _, visc in pending_friction:
+            for c, d, _, _ in pending_friction:
                 ydot[self.energy_slot + 1] += float(c.friction.mu_k * max(ev.normal_force[c.name], 0.0)
                                                     * (d @ ev.slip[c.name]))
             xdot[2 * nQ + self.energy_slot + 1] = ydot[self.energy_slot + 1]
         return ev
+
+    def separate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, contact: Contact
+                 ) -> np.ndarray:
+        """State at separation: damped surface ends start relaxing from where they are (modes: still touching)."""
+        self.evaluate(t, x, modes, phase)
+        x = x.copy()
+        for dc in contact.chains:
+            chain = dc.chain
+            for node_i in (chain.env_surface, chain.robot_surface):
+                slot = chain.nodes[node_i].state
+                if chain.nodes[node_i].kind == NodeKind.FREE and slot >= 0:
+                    x[2 * self.nQ + slot] = dc.last_positions[node_i]
+        return x
 
     def _contact(self, name: str) -> Contact:
         return next(c for c in self.contacts if c.name == name)

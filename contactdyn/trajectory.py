@@ -15,7 +15,7 @@ import numpy as np
 
 __all__ = ["Move", "Ramp", "Reference", "profile"]
 
-PROFILES = ("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step")
+PROFILES = ("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step", "circle")
 
 
 def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, float, float]:
@@ -58,6 +58,8 @@ class Move:
 
     For ``velocity_ramp`` ``delta`` is the final velocity [m/s or rad/s] times the ramp
     duration, i.e. give ``velocity`` and the move keeps that velocity after the ramp.
+    For ``circle`` ``delta`` is the vector from the start point to the circle's centre;
+    the point turns ``turns`` times about ``normal`` along a trapezoidal angle profile.
     """
 
     delta: np.ndarray  #: displacement [m or rad], or velocity × duration for velocity_ramp
@@ -65,10 +67,24 @@ class Move:
     duration: float  #: [s], > 0
     kind: str = "trapezoid"
     accel_fraction: float = 0.1  #: fraction of the duration spent accelerating (trapezoid)
+    normal: np.ndarray | None = None  #: circle only: rotation axis (unit)
+    turns: float = 1.0  #: circle only: number of turns (negative: clockwise about normal)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self.kind == "circle":
+            return self._circle(t)
         s, ds, dds = profile(self.kind, (t - self.start) / self.duration, self.accel_fraction)
         return self.delta * s, self.delta * (ds / self.duration), self.delta * (dds / self.duration**2)
+
+    def _circle(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        s, ds, dds = profile("trapezoid", (t - self.start) / self.duration, self.accel_fraction)
+        span = 2.0 * math.pi * self.turns
+        th, dth, ddth = span * s, span * ds / self.duration, span * dds / self.duration**2
+        n, c = self.normal, self.delta
+        # r(θ) = R(n, θ) c (centre to start rotated); the point is start + c − r(θ)
+        r = c * math.cos(th) + np.cross(n, c) * math.sin(th) + n * (n @ c) * (1.0 - math.cos(th))
+        nr = np.cross(n, r)
+        return c - r, -nr * dth, -nr * ddth - np.cross(n, nr) * dth * dth
 
 
 @dataclass(frozen=True)

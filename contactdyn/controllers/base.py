@@ -36,6 +36,8 @@ class ControlInput:
     force_d: dict[str, tuple[float, float]]  #: force set-point and its rate per contact [N, N/s]
     normals: dict[str, np.ndarray]  #: contact normals (unit, world)
     z: np.ndarray  #: controller states
+    R_tip: np.ndarray | None = None  #: tip frame orientation (3, 3)
+    J_ang: np.ndarray | None = None  #: tip angular Jacobian (3, nv)
 
 
 class Controller:

@@ -2,7 +2,10 @@
 
 Task space: f = K_p P (x_d − x) + K_d P (ẋ_d − ẋ) − Σ F_d n, τ = Jᵀ f [+ feedforward],
 where P projects on the position-controlled axes and F_d n presses along each contact
-normal n with the force set-point F_d (benchmark B1's law). Joint space:
+normal n with the force set-point F_d (benchmark B1's law). Optionally the task PD also
+holds a tool axis a (e.g. a pencil, the tip frame's local ``tool_axis``) along a world
+direction d: moment m = K_o (a × d) − D_o ω⊥, τ += J_ωᵀ m, ω⊥ the angular velocity
+without its roll about a (a 5-DOF robot cannot control that roll). Joint space:
 τ = K_p (q_d − q) + K_d (q̇_d − q̇) [+ feedforward]. Feedforward: ``none``, ``gravity``
 (the uncompensated gravity load g(q)) or ``bias`` (h(q, q̇)).
 """
@@ -39,6 +42,11 @@ class TaskPDConfig:
     kd: np.ndarray  #: [N·s/m]
     axes: np.ndarray  #: (k, 3) position-controlled directions (orthonormal)
     feedforward: str
+    tool_axis: np.ndarray | None = None  #: tool direction in the tip frame (None: orientation free)
+    tool_target: np.ndarray | None = None  #: desired tool direction in the world (unit)
+    ko: float = 50.0  #: orientation stiffness [N·m/rad]
+    do: float = 2.0  #: orientation damping [N·m·s/rad]
+    kd_joint: float = 0.0  #: joint damping for redundant robots [N·m·s/rad]
     kind: str = "task_pd"
 
 
@@ -57,7 +65,12 @@ class TaskPD(Controller):
         for name, g in (("kp", kp), ("kd", kd)):
             if len(g) not in (1, len(axes)):
                 raise r.error(name, f"one gain or one per axis ({len(axes)})", g.tolist())
-        return TaskPDConfig(kp, kd, axes, r.str("feedforward", "none", choices=FEEDFORWARD))
+        tool_axis = r.vector("tool_axis", None, size=3, unit_norm=True) if r.has("tool_axis") else None
+        tool_target = r.vector("tool_target", [0.0, 0.0, -1.0], size=3, unit_norm=True) if tool_axis is not None \
+            else None
+        return TaskPDConfig(kp, kd, axes, r.str("feedforward", "none", choices=FEEDFORWARD), tool_axis, tool_target,
+                            r.float("ko", 50.0, lo=0.0, unit="N·m/rad"), r.float("do", 2.0, lo=0.0, unit="N·m·s/rad"),
+                            r.float("kd_joint", 0.0, lo=0.0, unit="N·m·s/rad"))
 
     def __init__(self, config: TaskPDConfig, nv: int):
         super().__init__(config, nv)
@@ -72,7 +85,16 @@ class TaskPD(Controller):
             f += self._kp @ (inp.x_d - inp.p_tip) + self._kd @ (inp.v_d - inp.v_tip)
         for contact, (F_d, _) in inp.force_d.items():
             f -= F_d * inp.normals[contact]
-        return inp.J.T @ f + _feedforward(inp, self.config.feedforward), None
+        tau = inp.J.T @ f + _feedforward(inp, self.config.feedforward)
+        cfg = self.config
+        if cfg.tool_axis is not None:
+            a = inp.R_tip @ cfg.tool_axis  # current tool direction (world)
+            omega = inp.J_ang @ inp.v
+            omega_perp = omega - (omega @ a) * a
+            tau = tau + inp.J_ang.T @ (cfg.ko * np.cross(a, cfg.tool_target) - cfg.do * omega_perp)
+        if cfg.kd_joint:
+            tau = tau - cfg.kd_joint * inp.v
+        return tau, None
 
 
 @dataclass(frozen=True)

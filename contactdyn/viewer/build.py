@@ -1,0 +1,156 @@
+"""Build a run's meshcat scene headless: the robot, the environment, chains, forces, impacts."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import ContactdynError
+from ..result import Result
+from ..robot import Robot
+from ..scene import Scene, parse_scene
+from .contact_visuals import STAGE_LENGTH, add_environment, add_forces, add_gauges, add_impacts, contact_views
+from .robot_visuals import add_robot, geometry_placements
+from .shapes import add_label
+from .writer import ROOT, SceneWriter, ViewerScene
+
+__all__ = ["build_scene", "MAX_FRAMES"]
+
+MAX_FRAMES = 2000  #: animation keys per track at most (the run's samples are thinned to this)
+IMPACT_HOLD = 0.25  #: [s of playback] an impact marker stays large this long
+GROUPS = {"robot": f"{ROOT}/robot", "environment": f"{ROOT}/environment", "chains": f"{ROOT}/chains",
+          "forces": f"{ROOT}/forces", "labels": f"{ROOT}/labels"}
+
+
+def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES) -> ViewerScene:
+    """The meshcat commands drawing ``result``, played at ``speed`` × real time; no server, no browser."""
+    if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
+        raise ContactdynError(f"view: speed must be a number > 0 (1 = real time), found {speed!r}")
+    scene = _scene_of(result)
+    robot = _robot_of(result, scene)
+    t_all, q_all = np.asarray(result["t"], float), np.asarray(result["q"], float).reshape(len(result["t"]), -1)
+    if q_all.shape[1] != robot.nq:
+        raise ContactdynError(f"run {result.meta.get('name', '?')}: channel q has {q_all.shape[1]} columns but "
+                              f"robot {robot.source} has {robot.nq} active joints {robot.joint_names}")
+    idx = _frames(len(t_all), max_frames)
+    times, q = t_all[idx], q_all[idx]
+    duration = float(times[-1] - times[0]) if len(times) > 1 else 0.0
+    writer = SceneWriter(times, speed)
+    notes = add_robot(writer, robot, q, GROUPS["robot"])
+
+    def ch(name: str) -> np.ndarray | None:
+        return np.asarray(result.channels[name])[idx] if name in result.channels else None
+
+    contacts = list(scene.contacts.values()) if scene else []
+    bodies = scene.bodies if scene else {}
+    tips = {c.name: _frame_positions(robot, q, c.frame) for c in contacts}
+    disp = {name: np.outer(ch(f"body.{name}.x") if f"body.{name}.x" in result.channels else np.zeros(len(idx)),
+                           b.axis) for name, b in bodies.items()}
+    points = [geometry_placements(robot, q[:: max(1, len(q) // 50)])[:, :, :3, 3].reshape(-1, 3),
+              *tips.values(), *(c.point[None] for c in contacts)]
+    cloud = np.concatenate(points) if points else np.zeros((1, 3))
+    L = max(float(np.max(np.linalg.norm(cloud, axis=1))), 0.1)  # [m] scene size
+    label_rotation = _camera(writer, cloud, L)
+
+    views = contact_views(scene, tips, disp, L, GROUPS["environment"]) if scene else []
+    legend = [f"run {result.meta.get('name', '?')}: {duration:g} s at {speed:g} × real time "
+              f"({len(idx)} frames of {len(t_all)} samples)"]
+    scales = {"size": L, "stage_length": STAGE_LENGTH * L}
+    if views:
+        add_environment(writer, views, disp, L)
+        S, chain_notes = add_gauges(writer, views, ch, L, GROUPS["chains"], label_rotation)
+        notes += chain_notes
+        scales["magnification"] = S
+        if any(not v.spec.normal_chain.rigid or v.spec.tangent_chain is not None for v in views):
+            legend.append(f"deformation chains: gauges beside the surface, compressions magnified ×{S:g}, "
+                          f"{STAGE_LENGTH * L:.3g} m per stage at rest")
+        per = add_forces(writer, views, ch, L, GROUPS["forces"])
+        scales["arrow"] = 0.1 * L / per
+        legend.append(f"force arrows (on the robot, ending at the contact point): {0.1 * L:.3g} m = {per:g} N "
+                      "(red normal, green tangential)")
+        v0 = views[0]
+        add_label(writer, f"{GROUPS['labels']}/forces", f"arrows: {0.1 * L:.2g} m = {per:g} N", 0.03 * L,
+                  label_rotation, v0.spec.point + (v0.range1[1] + 0.3 * L) * v0.e1)
+
+        def tips_at(name: str, t: float) -> tuple[np.ndarray, np.ndarray]:
+            qt = np.array([np.interp(t, t_all, q_all[:, j]) for j in range(q_all.shape[1])])
+            spec = scene.contacts[name]
+            d = np.zeros(3)
+            if spec.body in bodies and f"body.{spec.body}.x" in result.channels:
+                d = np.interp(t, t_all, result[f"body.{spec.body}.x"]) * bodies[spec.body].axis
+            return robot.frame_position(qt, spec.frame), d
+
+        legend += add_impacts(writer, views, result.impacts, tips_at, L, IMPACT_HOLD * speed, float(times[-1]),
+                              GROUPS["environment"])
+    for name in bodies:
+        if not any(v.spec.body == name for v in views):
+            notes.append(f"body {name!r} carries no contact surface: not drawn")
+    return ViewerScene(writer.finish(), duration, float(speed), legend, notes, dict(GROUPS), scales)
+
+
+def _scene_of(result: Result) -> Scene | None:
+    if not result.scene:
+        return None
+    try:
+        return parse_scene(result.scene)
+    except ContactdynError as exc:
+        raise ContactdynError(f"run {result.meta.get('name', '?')}: its scene document no longer validates, "
+                              f"cannot draw it: {exc}") from None
+
+
+def _robot_of(result: Result, scene: Scene | None) -> Robot:
+    """The run's robot: from the scene's ``robot.urdf`` (a name resolves example-robot-data's
+    ``package://`` meshes), else from the URDF path saved in ``meta['robot']``."""
+    sources = [s for s in (scene.robot.source if scene else None, result.meta.get("robot")) if s]
+    if not sources:
+        raise ContactdynError("run has no robot: neither a scene document nor meta['robot']")
+    active = list(scene.robot.active_joints) if scene and scene.robot.active_joints else None
+    locked = dict(scene.robot.locked) if scene else None
+    first: ContactdynError | None = None
+    for source in dict.fromkeys(sources):
+        try:
+            return Robot.load(source, active_joints=active, locked=locked)
+        except ContactdynError as exc:
+            first = first or exc
+    raise first
+
+
+def _frames(n: int, max_frames: int) -> np.ndarray:
+    """Sample indices: every k-th so at most ``max_frames`` remain, always with the last."""
+    stride = max(1, math.ceil(n / max(max_frames, 2)))
+    idx = np.arange(0, n, stride)
+    return idx if idx[-1] == n - 1 else np.append(idx, n - 1)
+
+
+def _frame_positions(robot: Robot, q: np.ndarray, frame: str) -> np.ndarray:
+    fid = robot.frame_id(frame)
+    return np.array([robot.frame_position(qk, fid) for qk in q])
+
+
+def _camera(writer: SceneWriter, cloud: np.ndarray, L: float) -> np.ndarray:
+    """Centre the scene horizontally on the view target and place the camera; return a label rotation."""
+    lo, hi = cloud.min(axis=0), cloud.max(axis=0)
+    shift = -0.5 * (lo + hi)
+    shift[2] = 0.0  # keep the grid at z = 0
+    writer.transform(ROOT, _translation(shift))
+    centred = cloud + shift
+    radius = max(float(np.max(np.linalg.norm(centred, axis=1))), 0.1)
+    spread = np.linalg.svd(centred - centred.mean(axis=0), full_matrices=False)
+    normal = spread[2][-1] if spread[1][-1] < 0.05 * spread[1][0] else np.array([0.6, -0.6, 0.5])
+    if normal @ np.array([0.1, -1.0, 1.0]) < 0:
+        normal = -normal
+    tilt = np.array([0.0, -1.0, 0.0]) if abs(normal[2]) > 0.9 else np.array([0.0, 0.0, 1.0])
+    direction = normal / np.linalg.norm(normal) + 0.3 * tilt
+    direction /= np.linalg.norm(direction)
+    eye = 2.2 * radius * direction
+    writer.prop("/Cameras/default/rotated/<object>", "position", [float(eye[0]), float(eye[2]), float(-eye[1])])
+    x = np.cross([0.0, 0.0, 1.0], direction)
+    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    return np.column_stack([x, np.cross(direction, x), direction])
+
+
+def _translation(p: np.ndarray) -> np.ndarray:
+    H = np.eye(4)
+    H[:3, 3] = p
+    return H

@@ -1,0 +1,94 @@
+"""Scene validation: every bad value names the file, the key path, what was expected and found."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from contactdyn import SceneError, load_scene, parse_scene, simulate
+from contactdyn.scene import apply_overrides, parse_override
+from contactdyn.system import System
+
+
+def b1_doc() -> dict:
+    import tomllib
+
+    from contactdyn.scene import sims_dir
+
+    return tomllib.loads((sims_dir() / "b1.toml").read_text())
+
+
+@pytest.mark.parametrize(
+    ("override", "key", "expected"),
+    [
+        ({"contact.tip.normal.k": -1.0}, "contact.tip.normal.k", "> 0"),
+        ({"contact.tip.normal.m": math.nan}, "contact.tip.normal.m", "finite"),
+        ({"contact.tip.normal.kk": 1.0}, "contact.tip.normal.kk", "did you mean 'k'"),
+        ({"contact.tip.tangent.mu": "high"}, "contact.tip.tangent.mu", "a number"),
+        ({"contact.tip.normal.model": "bb"}, "contact.tip.normal.model", "did you mean 'b'"),
+        ({"duration": 0.0}, "duration", "> 0"),
+        ({"robot.q0": [0.1]}, "robot.q0", "2 joint values"),
+        ({"robot.gravity_compensation": 1.5}, "robot.gravity_compensation", "<= 1"),
+        ({"contact.tip.body": "cart"}, "contact.tip.body", "one of ['ground']"),
+        ({"solver.method": "euler"}, "solver.method", "one of"),
+        ({"phase.0.until": "touch:nope"}, "phase[0].until", "touch:<contact>"),
+        ({"contact.tip.tangent.mu_s": 0.1}, "contact.tip.tangent.mu_s", ">= mu_k"),
+    ],
+)
+def test_bad_values_name_key_expected_and_found(override, key, expected):
+    with pytest.raises(SceneError) as err:
+        scene = load_scene("b1", override)
+        System(scene).initial_state()
+    message = str(err.value)
+    assert "b1.toml" in message and key in message and expected in message
+
+
+def test_unknown_top_level_key_suggests_the_closest():
+    with pytest.raises(SceneError, match=r"duraton.*did you mean 'duration'"):
+        parse_scene({**b1_doc(), "duraton": 1.0}, file="x.toml")
+
+
+def test_malformed_toml_names_the_file(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("duration = = 1\n")
+    with pytest.raises(SceneError, match="bad.toml.*valid TOML"):
+        load_scene(bad)
+
+
+def test_unknown_scene_name_lists_close_matches():
+    with pytest.raises(SceneError, match="did you mean b1"):
+        load_scene("b11")
+
+
+def test_unknown_robot_is_a_scene_error():
+    with pytest.raises(SceneError, match="robot.*ur55.*did you mean"):
+        System(load_scene("b1", {"robot.urdf": "ur55"}))
+
+
+def test_overrides_parse_toml_values_and_index_arrays():
+    assert parse_override("contact.tip.normal.k=1e4") == ("contact.tip.normal.k", 1e4)
+    assert parse_override("robot.q0=[0.1, 0.2]") == ("robot.q0", [0.1, 0.2])
+    assert parse_override("solver.method=RK45") == ("solver.method", "RK45")
+    doc = apply_overrides(b1_doc(), {"phase.0.force.0.value": 50.0})
+    assert doc["phase"][0]["force"][0]["value"] == 50.0
+    with pytest.raises(SceneError, match="phase.7"):
+        apply_overrides(b1_doc(), {"phase.7.until": 1.0})
+
+
+def test_override_changes_the_physics():
+    soft = simulate("b1", {"duration": 0.1, "contact.tip.normal.k": 1e4, "solver.output_rate": 100.0})
+    stiff = simulate("b1", {"duration": 0.1, "solver.output_rate": 100.0})
+    assert soft.scene["contact"]["tip"]["normal"]["k"] == 1e4
+    assert abs(soft["contact.tip.F_n"][-1] - stiff["contact.tip.F_n"][-1]) > 1.0
+
+
+def test_a_scene_models_only_what_it_needs():
+    """State = robot joints + what the scene names: no cart, no chain masses, no motor angles here."""
+    rigid = System(load_scene("b1", {"contact.tip.normal": {"direction": [0, 1, 0], "model": "rigid"}}))
+    assert rigid.nQ == rigid.nv == 2 and rigid.ny == 0 and rigid.n == 4
+    model_b = System(load_scene("b1"))
+    assert model_b.nQ == 3 and model_b.ny == 0  # + the surface's equivalent mass
+    model_c = System(load_scene("b1", {"contact.tip.normal": {"direction": [0, 1, 0], "model": "c", "k": 1e5,
+                                                               "b": 1.0}}))
+    assert model_c.nQ == 2 and model_c.ny == 1  # + the damped surface end, relaxing after separation

@@ -1,0 +1,57 @@
+"""Reference profiles: continuity, end points, derivatives by finite differences."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from contactdyn.trajectory import Move, Ramp, Reference, profile
+
+
+@pytest.mark.parametrize("kind", ["trapezoid", "triangle", "constant_velocity"])
+def test_profiles_go_from_0_to_1_with_consistent_derivatives(kind):
+    taus = np.linspace(0.0, 1.0, 2001)
+    s = np.array([profile(kind, t, 0.2)[0] for t in taus])
+    ds = np.array([profile(kind, t, 0.2)[1] for t in taus])
+    assert s[0] == pytest.approx(0.0, abs=1e-15) and s[-1] == pytest.approx(1.0, abs=1e-15)
+    assert np.all(np.diff(s) >= -1e-15)  # monotone
+    fd = np.gradient(s, taus)
+    assert np.max(np.abs(fd[1:-1] - ds[1:-1])) < 2e-3 * max(1.0, ds.max())
+
+
+def test_trapezoid_peak_velocity_and_triangle():
+    # accel over 10 % of the move: peak dσ/dτ = 1 / (1 − 0.1)
+    assert max(profile("trapezoid", t, 0.1)[1] for t in np.linspace(0, 1, 1001)) == pytest.approx(1 / 0.9)
+    assert profile("triangle", 0.5)[1] == pytest.approx(2.0)
+
+
+def test_velocity_ramp_reaches_and_keeps_its_velocity():
+    move = Move(np.array([0.25 * 0.5, 0.0, 0.0]), start=0.0, duration=0.5, kind="velocity_ramp")
+    ref = Reference(np.zeros(3), (move,))
+    x, v, a = ref.at(2.0)
+    assert v[0] == pytest.approx(0.25) and a[0] == 0.0
+    assert x[0] == pytest.approx(0.25 * 2.0 - 0.25 * 0.25)  # ramp lost half its duration × v
+
+
+def test_force_ramps():
+    lin = Ramp(100.0, start=1.0, duration=0.1)
+    assert lin.at(0.5) == (0.0, 0.0)
+    assert lin.at(1.05)[0] == pytest.approx(50.0) and lin.at(1.05)[1] == pytest.approx(1000.0)
+    assert lin.at(2.0) == (100.0, 0.0)
+    exp = Ramp(100.0, start=0.0, duration=0.2, kind="exponential")
+    assert exp.at(0.2)[0] == pytest.approx(100.0 * (1 - np.exp(-1.0)))
+
+
+def test_circle_move_stays_on_its_circle_with_consistent_derivatives():
+    center = np.array([0.05, 0.0, 0.0])
+    move = Move(center, start=0.0, duration=2.0, kind="circle", accel_fraction=0.2, normal=np.array([0, 0, 1.0]))
+    ts = np.linspace(0.0, 2.0, 4001)
+    xs = np.array([move.at(t)[0] for t in ts])
+    vs = np.array([move.at(t)[1] for t in ts])
+    assert np.allclose(np.linalg.norm(xs - center, axis=1), 0.05, atol=1e-15)
+    assert np.allclose(xs[-1], 0.0, atol=1e-15)  # one full turn back to the start
+    assert np.max(np.abs(np.gradient(xs, ts, axis=0)[1:-1] - vs[1:-1])) < 1e-4
+    acc_fd = np.gradient(vs, ts, axis=0)
+    acc = np.array([move.at(t)[2] for t in ts])
+    smooth = (np.abs(ts - 0.4) > 2e-3) & (np.abs(ts - 1.6) > 2e-3) & (ts > 0) & (ts < 2)  # angle-acceleration jumps
+    assert np.max(np.abs(acc_fd - acc)[smooth]) < 5e-3

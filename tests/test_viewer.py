@@ -1,0 +1,282 @@
+"""The meshcat viewer without a browser: scene contents against the run, HTML export, live server."""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import re
+import socket
+import urllib.request
+
+import numpy as np
+import pytest
+import umsgpack
+
+import contactdyn
+from contactdyn import ContactdynError, Result, Robot, load_result
+from contactdyn.viewer import LiveViewer, build_scene, export_html, view_command
+from contactdyn.viewer.shapes import nice_ceil, nice_floor
+
+# A cart-mounted surface with a mass in its chain: the tip strikes it (a plastic impact at
+# touch) and slides with friction while the servo-driven cart moves along x.
+CART_SCENE = """
+name = "cart_touch"
+duration = 0.1
+[solver]
+output_rate = 200.0
+[robot]
+urdf = "planar2r_b1"
+gravity = [0.0, 0.0, 0.0]
+tip0 = [0.45, -0.145, 0.0]
+q_seed = [0.3, -1.3]
+[body.cart]
+mass = 20.0
+axis = [1.0, 0.0, 0.0]
+servo.velocity = 0.2
+servo.gain = 1000.0
+[contact.tip]
+frame = "tip"
+body = "cart"
+point = [0.0, -0.15, 0.0]
+normal.direction = [0.0, 1.0, 0.0]
+normal.model = "chain"
+normal.environment = [{k = 1e5, b = 50.0}, {m = 2.0}]
+tangent.model = "friction"
+tangent.directions = [[1.0, 0.0, 0.0]]
+tangent.mu = 0.3
+[controller]
+kind = "task_pd"
+kp = 2000.0
+kd = 100.0
+[[phase]]
+name = "press"
+[phase.reference]
+start = [0.45, -0.17, 0.0]
+"""
+
+
+@pytest.fixture(scope="module")
+def b1_run(tmp_path_factory):
+    """B1, 0.2 s at 100 Hz, saved and loaded back as `contactdyn view` reads it."""
+    path = contactdyn.simulate("b1", {"duration": 0.2, "solver.output_rate": 100}).save(
+        tmp_path_factory.mktemp("b1") / "run")
+    return path, load_result(path)
+
+
+@pytest.fixture(scope="module")
+def cart_run(tmp_path_factory):
+    scene = tmp_path_factory.mktemp("cart") / "cart.toml"
+    scene.write_text(CART_SCENE)
+    return contactdyn.simulate(scene)
+
+
+def commands_at(scene, path: str) -> list[dict]:
+    return [c for c in scene.commands if c["path"] == path]
+
+
+def clip(scene, path: str) -> dict[str, dict]:
+    """The animation tracks of the node at ``path``, by property."""
+    animation = scene.commands[-1]
+    for a in animation["animations"]:
+        if a["path"] == path:
+            return {t["name"][1:]: t for t in a["clip"]["tracks"]}
+    return {}
+
+
+def values(track: dict) -> np.ndarray:
+    return np.array([k["value"] for k in track["keys"]])
+
+
+def test_robot_visuals_follow_the_simulated_tip(b1_run):
+    """The tip's marker sphere, placed by the viewer from q, sits on the simulated tip channel."""
+    _, result = b1_run
+    scene = build_scene(result)
+    assert scene.commands[-1]["type"] == "set_animation"
+    robot = Robot.load(result.meta["robot"])
+    names = [g.name for g in robot.visual_model.geometryObjects]
+    assert len(names) == 4
+    drawn = {c["path"].split("/")[3] for c in scene.commands if c["type"] == "set_object"
+             and c["path"].startswith("/meshcat/robot/")}
+    assert drawn == set(names) and not scene.notes  # every visual has an object
+    tip = clip(scene, "/meshcat/robot/tip_0")
+    np.testing.assert_allclose(values(tip["position"]), result["tip"], atol=1e-12)
+    np.testing.assert_allclose([k["time"] for k in tip["position"]["keys"]], result["t"])
+    # the base never moves: a static transform, no track
+    assert not clip(scene, "/meshcat/robot/base_0")
+    assert commands_at(scene, "/meshcat/robot/base_0")[0]["type"] == "set_transform"
+    # the links' orientations are the simulated ones: link 1 turns by q1 about z
+    quat = values(clip(scene, "/meshcat/robot/link1_0")["quaternion"])  # [x, y, z, w]
+    angle = 2 * np.arctan2(quat[:, 2], quat[:, 3])
+    np.testing.assert_allclose(np.unwrap(angle), result["q"][:, 0], atol=1e-12)
+
+
+def test_playback_speed_and_thinned_frames(b1_run):
+    _, result = b1_run
+    fast = build_scene(result, speed=2.0, max_frames=5)
+    animation = fast.commands[-1]
+    assert all(a["clip"]["fps"] == 2.0 for a in animation["animations"])  # keys [s] / fps = 0.5 × real time
+    times = [k["time"] for k in clip(fast, "/meshcat/robot/tip_0")["position"]["keys"]]
+    assert len(times) <= 6 and times[0] == 0.0 and times[-1] == pytest.approx(result["t"][-1])
+    assert fast.duration == pytest.approx(0.2) and fast.speed == 2.0
+
+
+def test_chain_gauge_magnifies_the_compression(b1_run):
+    """B1's chain ground —[k, b]— m: the mass node stands ℓ − S·x above the anchor."""
+    _, result = b1_run
+    scene = build_scene(result)
+    x = result["stage.tip.n.env1.x"]
+    S = float(re.search(r"magnified ×([0-9.e+]+)", " ".join(scene.legend)).group(1))
+    assert S == scene.scales["magnification"]
+    objects = {c["path"]: c["object"] for c in scene.commands if c["type"] == "set_object"}
+    nodes = [p for p in objects if "/chains/tip_n/node" in p]
+    assert len(nodes) == 2  # the mass (the surface node) and the tip
+    mass = next(p for p in nodes if objects[p]["geometries"][0]["type"] == "BoxGeometry")
+    mass_y = values(clip(scene, mass)["position"])[:, 1]
+    length = values(clip(scene, "/meshcat/chains/tip_n/env1")["scale"])[:, 1]
+    np.testing.assert_allclose(mass_y, length, atol=1e-12)  # the coil spans anchor → mass
+    rest = mass_y + S * x
+    np.testing.assert_allclose(rest, rest[0], atol=1e-12)  # y = ℓ − S·x with one ℓ
+    ell = rest[0]
+    assert ell == pytest.approx(scene.scales["stage_length"], rel=1e-12)
+    # S is the largest 1-2-5 number keeping every compression within 60 % of ℓ
+    assert S == nice_floor(S) and S * np.max(np.abs(x)) <= 0.6 * ell * (1 + 1e-12)
+    assert nice_ceil(1.01 * S) * np.max(np.abs(x)) > 0.6 * ell
+
+
+def test_force_arrows_end_at_the_tip_with_the_stated_scale(b1_run):
+    _, result = b1_run
+    scene = build_scene(result)
+    line = next(s for s in scene.legend if s.startswith("force arrows"))
+    metres, newtons = map(float, re.search(r": ([0-9.e+-]+) m = ([0-9.e+-]+) N", line).groups())
+    assert metres / newtons == pytest.approx(scene.scales["arrow"], rel=1e-2)  # the legend rounds to 3 digits
+    L = scene.scales["size"]
+    metres, newtons = 0.1 * L, 0.1 * L / scene.scales["arrow"]
+    arrow = clip(scene, "/meshcat/forces/tip_normal")
+    origin = values(arrow["position"])
+    shaft = values(clip(scene, "/meshcat/forces/tip_normal/shaft")["scale"])[:, 1]
+    head = clip(scene, "/meshcat/forces/tip_normal/head")
+    head_tip = values(head["position"])[:, 1] + values(head["scale"])[:, 1] * 4 * 0.006 * L  # cone height 4 radii
+    F_n = result["contact.tip.F_n"]
+    tip = result["tip"]
+    # the arrow's origin is the tip minus the force vector, scaled: F_n along +y (the normal)
+    np.testing.assert_allclose(tip - origin, np.outer(F_n * metres / newtons, [0.0, 1.0, 0.0]), atol=1e-9)
+    np.testing.assert_allclose(head_tip, F_n * metres / newtons, atol=1e-9)  # the head touches the tip
+    big = F_n > 0.5 * F_n.max()
+    assert np.all(shaft[big] > 0) and np.all(shaft[big] < F_n[big] * metres / newtons)
+    assert newtons == nice_ceil(newtons)
+
+
+def test_cart_moves_impact_marked_and_friction_drawn(cart_run):
+    result = cart_run
+    assert len(result.impacts) == 1
+    scene = build_scene(result)
+    cart = clip(scene, "/meshcat/environment/cart")
+    np.testing.assert_allclose(values(cart["position"])[:, 0], result["body.cart.x"], atol=1e-12)
+    assert np.ptp(result["body.cart.x"]) > 1e-3
+    marker = clip(scene, "/meshcat/environment/cart/impact0")["scale"]
+    t_imp = result.impacts[0]["t"]
+    times, size = np.array([k["time"] for k in marker["keys"]]), values(marker)[:, 0]
+    assert np.all(np.diff(times) > 0)
+    assert np.interp(0.5 * t_imp, times, size) < 1e-3 and np.interp(t_imp, times, size) == 1.0
+    assert any("impact on tip at t = " in s for s in scene.legend)
+    friction = clip(scene, "/meshcat/forces/tip_tangent")
+    assert friction and values(clip(scene, "/meshcat/forces/tip_tangent/shaft")["scale"])[:, 1].max() > 1e-3
+    # the impact marker sits where the tip was at impact, in the cart's frame
+    place = commands_at(scene, "/meshcat/environment/cart/impact0")
+    p = np.array(place[-1]["matrix"]).reshape(4, 4).T[:3, 3]
+    tip_x = np.interp(t_imp, result["t"], result["tip"][:, 0]) - np.interp(t_imp, result["t"], result["body.cart.x"])
+    assert p[0] == pytest.approx(tip_x, abs=2e-3) and p[1] == pytest.approx(-0.15, abs=1e-3)
+
+
+def test_locked_joints_and_example_robot_meshes():
+    """A reduced robot (locked joints) and example-robot-data meshes: dae keeps its colors, stl is colored."""
+    t = np.linspace(0.0, 0.1, 3)
+    locked = Result({"t": t, "q": np.outer(t, [1.0])}, scene={}, meta={"robot": "cylindrical3", "name": "c3"})
+    with pytest.raises(ContactdynError, match="channel q has 1 columns but robot .* has 3 active joints"):
+        build_scene(locked)
+    doc = {"duration": 0.1, "robot": {"urdf": "cylindrical3", "active_joints": ["q3"]},
+           "controller": {"kind": "task_pd"}}
+    scene = build_scene(Result({"t": t, "q": np.outer(t, [1.0])}, scene=doc, meta={"name": "c3"}))
+    assert scene.commands[-1]["animations"]
+    ur5 = Robot.load("ur5")
+    q = np.zeros((2, ur5.nq))
+    q[1, 0] = 1.0
+    scene = build_scene(Result({"t": np.array([0.0, 1.0]), "q": q}, meta={"robot": "ur5", "name": "ur5"}))
+    meshes = [c["object"]["object"] for c in scene.commands if c["type"] == "set_object"
+              and c["object"]["object"]["type"] == "_meshfile_object"]
+    assert len(meshes) == ur5.visual_model.ngeoms and all(m["format"] == "dae" for m in meshes)
+    so100 = Robot.load("so100")
+    scene = build_scene(Result({"t": np.array([0.0, 1.0]), "q": np.zeros((2, so100.nq))},
+                               meta={"robot": "so100", "name": "so100"}))
+    stl = [c["object"]["geometries"][0] for c in scene.commands if c["type"] == "set_object"
+           and c["object"].get("geometries") and c["object"]["geometries"][0].get("format") == "stl"]
+    assert len(stl) == so100.visual_model.ngeoms
+    assert isinstance(stl[0]["data"], umsgpack.Ext) and len(stl[0]["data"].data) > 1000
+
+
+def test_export_html_is_self_contained_and_replays_the_commands(b1_run, tmp_path):
+    _, result = b1_run
+    scene = build_scene(result)
+    out = export_html(scene, tmp_path / "b1.html")
+    text = out.read_text()
+    assert "MeshCat.Viewer" in text and "<script src" not in text  # meshcat's JavaScript is inline
+    array = re.search(r"const commands = \[(.*?)\];", text, re.S).group(1)
+    decoded = [umsgpack.unpackb(base64.b64decode(json.loads(s))) for s in array.split(",\n")]
+    assert [c["type"] for c in decoded] == [c["type"] for c in scene.commands]
+    assert decoded[-1]["animations"][0]["path"] == scene.commands[-1]["animations"][0]["path"]
+    assert "magnified ×" in text  # the legend overlay
+    again = export_html(result, tmp_path / "again.html", speed=0.5)
+    assert '"speed": 0.5' in again.read_text()
+
+
+def test_view_command_exports_and_reports_bad_input(b1_run, tmp_path, capsys):
+    path, _ = b1_run
+    args = argparse.Namespace(run=str(path), html=str(tmp_path / "v.html"), port=None, speed=1.0)
+    assert view_command(args) == 0
+    assert (tmp_path / "v.html").stat().st_size > 100_000
+    assert "wrote" in capsys.readouterr().out
+    with pytest.raises(ContactdynError, match="not a saved run"):
+        view_command(argparse.Namespace(run=str(tmp_path / "nothing"), html=None, port=None, speed=1.0))
+    with pytest.raises(ContactdynError, match="speed must be a number > 0"):
+        view_command(argparse.Namespace(run=str(path), html=str(tmp_path / "w.html"), port=None, speed=0.0))
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.timeout(60)
+def test_live_server_holds_the_scene(b1_run):
+    """The server serves meshcat's page and keeps our commands for browsers that connect later."""
+    _, result = b1_run
+    scene = build_scene(result)
+    with LiveViewer(port=free_port(), zmq_url=f"tcp://127.0.0.1:{free_port()}") as live:
+        live.show(scene)
+        page = urllib.request.urlopen(live.url, timeout=10).read().decode()
+        assert "MeshCat.Viewer" in page
+        live.socket.send(b"get_scene")
+        static = live.socket.recv().decode()
+        kinds = {kind: [c["path"] for c in scene.commands if c["type"] == kind] for kind in
+                 ("set_object", "set_transform", "set_property")}
+        expected = len(set(kinds["set_object"])) + len(set(kinds["set_transform"])) + len(kinds["set_property"]) + 1
+        assert static.count("fetch(\"data:") == expected  # each node's object, transform, properties; the animation
+        proc = live.proc
+    assert proc.poll() is not None  # closed with the context
+
+
+@pytest.mark.timeout(60)
+def test_live_server_port_in_use_is_a_clear_error():
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(ContactdynError, match="meshcat server did not start: exit code 1: .*(in use|Errno)"):
+            LiveViewer(port=port)
+
+
+def test_nice_numbers():
+    assert [nice_floor(x) for x in (0.7, 1.0, 3.3, 19.2, 0.049)] == [0.5, 1.0, 2.0, 10.0, 0.02]
+    assert [nice_ceil(x) for x in (0.7, 1.0, 3.3, 19.2, 0.049)] == [1.0, 1.0, 5.0, 20.0, 0.05]

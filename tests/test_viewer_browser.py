@@ -1,0 +1,162 @@
+"""The viewer in a real browser (Debian's chromium via Playwright): exported HTML and the live page.
+
+Each test seeks meshcat's animation to two times, takes screenshots (kept in the test's
+temporary directory), and checks that the page ran without JavaScript errors and that
+the robot's pixels differ between the two times. The robot's pixels are those that
+change when everything but the robot is hidden, against a frame with the robot hidden too.
+"""
+
+from __future__ import annotations
+
+import os
+import selectors
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import contactdyn
+from contactdyn.viewer import export_html
+
+CHROMIUM = "/usr/bin/chromium"
+# headless=True adds --headless; Playwright gives each browser its own temporary profile (--user-data-dir)
+FLAGS = ["--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--use-angle=swiftshader",
+         "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run"]
+TIMES = (0.05, 0.95)  #: [s] the two animation times compared; B1's tip slides 0.135 m between them
+MIN_ROBOT_PIXELS = 2000  #: the robot covers far more of an 800 × 600 frame
+OTHERS = ["/meshcat/environment", "/meshcat/chains", "/meshcat/forces", "/meshcat/labels", "/Grid", "/Axes"]
+
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(180)]
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"{CHROMIUM} missing: install Debian's chromium (.ci/run does)")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=FLAGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture(scope="module")
+def b1_run(tmp_path_factory):
+    result = contactdyn.simulate("b1", {"duration": 1.0, "solver.output_rate": 50})
+    return result, result.save(tmp_path_factory.mktemp("run") / "b1")
+
+
+def open_page(browser, url: str, ready: str, errors: list[str]):
+    page = browser.new_page(viewport={"width": 800, "height": 600})
+    page.on("pageerror", lambda exc: errors.append(f"page error: {exc}"))
+
+    def console(msg):
+        if msg.type == "error" and not msg.location.get("url", "").endswith("/favicon.ico"):
+            errors.append(f"console error: {msg.text} at {msg.location}")
+
+    page.on("console", console)
+    page.goto(url)
+    page.wait_for_function(ready, timeout=60_000)
+    return page
+
+
+def show(page, paths: list[str], visible: bool) -> None:
+    for path in paths:
+        page.evaluate("([path, visible]) => viewer.handle_command("
+                      "{type: 'set_property', path: path, property: 'visible', value: visible})", [path, visible])
+
+
+def frame(page, t: float, path: Path) -> np.ndarray:
+    """Seek the animation to t [s of playback], render, screenshot to ``path``; RGB array."""
+    from PIL import Image
+
+    page.evaluate("t => { viewer.animator.pause(); viewer.animator.seek(t); viewer.render(); }", t)
+    page.screenshot(path=str(path))
+    return np.asarray(Image.open(path).convert("RGB"), dtype=np.int16)
+
+
+def check_robot_moves(page, shots: Path, name: str) -> None:
+    full = [frame(page, t, shots / f"{name}_full_{t:g}.png") for t in TIMES]
+    assert np.any(full[0] != full[1])
+    show(page, OTHERS, False)
+    robot = [frame(page, t, shots / f"{name}_robot_{t:g}.png") for t in TIMES]
+    show(page, ["/meshcat/robot"], False)
+    empty = frame(page, TIMES[0], shots / f"{name}_background.png")
+    masks = [np.abs(r - empty).sum(axis=2) > 30 for r in robot]
+    counts = [int(m.sum()) for m in masks]
+    assert min(counts) > MIN_ROBOT_PIXELS, f"robot barely visible: {counts} pixels (screenshots in {shots})"
+    moved = int((masks[0] ^ masks[1]).sum())
+    assert moved > 0.05 * max(counts), f"robot pixels barely differ: {moved} of {counts} (screenshots in {shots})"
+
+
+def test_exported_html_plays_offline(browser, b1_run, tmp_path):
+    result, _ = b1_run
+    html = export_html(result, tmp_path / "b1.html")
+    errors: list[str] = []
+    page = open_page(browser, html.as_uri(), "window.contactdyn && window.contactdyn.ready === true", errors)
+    try:
+        assert page.evaluate("viewer.animator.duration") == pytest.approx(1.0)
+        check_robot_moves(page, tmp_path, "html")
+    finally:
+        page.close()
+    assert not errors, errors
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def read_url(proc: subprocess.Popen, timeout: float) -> str:
+    """The URL `view` prints, read from its stdout within ``timeout`` seconds."""
+    seen = b""
+    deadline = time.monotonic() + timeout
+    with selectors.DefaultSelector() as sel:
+        sel.register(proc.stdout.fileno(), selectors.EVENT_READ)
+        while b"open http" not in seen or not seen.split(b"open ", 1)[1].count(b"\n"):
+            left = deadline - time.monotonic()
+            if left <= 0 or proc.poll() is not None:
+                raise AssertionError(f"`view` printed no URL within {timeout} s: {seen.decode(errors='replace')}")
+            if sel.select(min(left, 0.5)):
+                chunk = os.read(proc.stdout.fileno(), 4096)
+                if not chunk:
+                    continue
+                seen += chunk
+    return seen.split(b"open ", 1)[1].split(b"\n", 1)[0].decode().strip()
+
+
+def test_live_page_plays(browser, b1_run, tmp_path):
+    _, saved = b1_run
+    port = free_port()
+    code = ("import argparse, sys\nfrom contactdyn.viewer import view_command\n"
+            f"sys.exit(view_command(argparse.Namespace(run={str(saved)!r}, html=None, port={port}, speed=1.0)))")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            start_new_session=True)  # its own process group: the server child ends with it
+    try:
+        url = read_url(proc, 60.0)
+        assert url == f"http://127.0.0.1:{port}/static/"
+        errors: list[str] = []
+        page = open_page(browser, url, "window.viewer && viewer.animator.duration > 0", errors)
+        try:
+            check_robot_moves(page, tmp_path, "live")
+        finally:
+            page.close()
+        assert not errors, errors
+        proc.send_signal(signal.SIGTERM)  # `view` closes its server and exits 0
+        assert proc.wait(timeout=20) == 0
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+        else:
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)  # anything left in its group
+            except ProcessLookupError:
+                pass
+        proc.stdout.close()
