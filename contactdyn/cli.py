@@ -195,10 +195,21 @@ def _lazy(module: str, function: str):
 
 def _delegate(module: str, function: str):
     def handler(args: argparse.Namespace) -> int:
+        if getattr(args, "run", None) is not None:
+            _check_saved_run(args.run)
         fn = _lazy(module, function)
         return EXIT_FAILED if fn is None else int(fn(args) or EXIT_OK)
 
     return handler
+
+
+def _check_saved_run(run: str) -> None:
+    from pathlib import Path
+
+    npz = Path(run).with_suffix(".npz")
+    if not (npz.is_file() and npz.with_suffix(".json").is_file()):
+        raise SceneError("RUN", f"a saved run ({npz.name} and {npz.with_suffix('.json').name}, "
+                         "as `contactdyn run SCENE --out NAME` writes)", run)
 
 
 # ---- parser ----------------------------------------------------------------------------------

@@ -134,16 +134,23 @@ def _fake_module(monkeypatch, name, **functions):
     return calls
 
 
-def test_plot_view_bench_dispatch_with_their_arguments(capsys, monkeypatch):
+@pytest.fixture(scope="module")
+def saved_run(tmp_path_factory) -> str:
+    path = tmp_path_factory.mktemp("runs") / "b1"
+    assert main(["run", "b1", *FAST, "--quiet", "--out", str(path)]) == EXIT_OK
+    return str(path)
+
+
+def test_plot_view_bench_dispatch_with_their_arguments(capsys, monkeypatch, saved_run):
     calls = _fake_module(monkeypatch, "plots", plot_command=0)
-    assert main(["plot", "runs/b1", "--out", "figs", "--format", "png,svg"]) == EXIT_OK
+    assert main(["plot", saved_run, "--out", "figs", "--format", "png,svg"]) == EXIT_OK
     (_, (args,)), = calls
-    assert (args.run, args.out, args.format) == ("runs/b1", "figs", ["png", "svg"])
+    assert (args.run, args.out, args.format) == (saved_run, "figs", ["png", "svg"])
 
     calls = _fake_module(monkeypatch, "viewer", view_command=0)
-    assert main(["view", "runs/b1", "--html", "b1.html", "--port", "7001", "--speed", "0.5"]) == EXIT_OK
+    assert main(["view", saved_run, "--html", "b1.html", "--port", "7001", "--speed", "0.5"]) == EXIT_OK
     (_, (args,)), = calls
-    assert (args.run, args.html, args.port, args.speed) == ("runs/b1", "b1.html", 7001, 0.5)
+    assert (args.run, args.html, args.port, args.speed) == (saved_run, "b1.html", 7001, 0.5)
 
     calls = _fake_module(monkeypatch, "workprecision", bench_command=3)
     assert main(["bench", "b1", "--methods", "DOP853,RK45", "--rtols", "1e-4,1e-6", "--repeats", "2",
@@ -160,9 +167,16 @@ def test_run_view_hands_the_result_to_the_viewer(capsys, monkeypatch):
     assert np.all(np.isfinite(result["contact.tip.F_n"])) and args.view
 
 
-@pytest.mark.parametrize("argv", [["plot", "runs/b1"], ["view", "runs/b1"], ["bench", "b1"],
+@pytest.mark.parametrize("command", ["plot", "view"])
+def test_plot_and_view_of_a_missing_run_is_bad_input(capsys, tmp_path, command):
+    code, _, err = _run(capsys, [command, str(tmp_path / "nothing")])
+    assert code == EXIT_USAGE and "RUN: expected a saved run (nothing.npz and nothing.json" in err
+
+
+@pytest.mark.parametrize("argv", [["plot", "SAVED"], ["view", "SAVED"], ["bench", "b1"],
                                   ["run", "b1", *FAST, "--view", "--quiet"]])
-def test_missing_module_is_one_line_and_exit_1(capsys, monkeypatch, argv):
+def test_missing_module_is_one_line_and_exit_1(capsys, monkeypatch, saved_run, argv):
+    argv = [saved_run if a == "SAVED" else a for a in argv]
     for name in ("plots", "viewer", "workprecision"):
         monkeypatch.setitem(sys.modules, f"contactdyn.{name}", None)  # import raises ImportError
     code, _, err = _run(capsys, argv)
