@@ -273,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="examples:\n"
                "  contactdyn sweep b1 --grid contact.tip.normal.k=1e4,1e5,1e6 --range controller.kp=500:5000:4 "
                "--out sweeps/b1 --csv\n"
-               "  contactdyn sweep b1 --range tangent.mu=0.1:0.8:8 --set duration=0.5 --workers 2\n"
+               "  contactdyn sweep b1 --range contact.tip.tangent.mu=0.1:0.8:8 --set duration=0.5 --workers 2\n"
                "  contactdyn sweep --file mysweep.toml --scheduler tcp://10.0.0.5:8786\n"
                "exit codes: 0 all runs ok, 1 some run failed (recorded in the summary), 2 bad input")
     sw.add_argument("scene", nargs="?", help="scene file or name in sims/ (or `scene` in the sweep file)")

@@ -16,11 +16,11 @@ import pandas as pd
 import pytest
 
 import contactdyn
-from contactdyn import sweep as sweep_mod
 from contactdyn.cli import EXIT_FAILED, EXIT_OK, EXIT_USAGE, main
 from contactdyn.errors import SceneError, SimulationError
 from contactdyn.metrics import metrics
 from contactdyn.result import load_result
+from contactdyn.sweep import execute as sweep_exec
 from contactdyn.sweep import make_sweep, parse_grid, parse_range, run_id
 
 # 30 ms of b1: short of the first stick (t ~ 0.047 s), where some gains end in a stick/slip event storm
@@ -169,7 +169,7 @@ def test_non_finite_channels_make_a_failed_row():
     result = contactdyn.simulate("b1", {"duration": 0.05, "solver.output_rate": 200})
     result.channels["q"] = result.channels["q"].copy()
     result.channels["q"][3, 0] = np.inf
-    row = sweep_mod.result_row("x", result)
+    row = sweep_exec.result_row("x", result)
     assert row["status"] == "failed" and row["error"] == "non-finite values in q"
 
 
@@ -249,7 +249,7 @@ def test_dask_local_cluster_runs_chunks(capsys, tmp_path):
 
 def test_unreachable_scheduler_is_bad_input(capsys, tmp_path, monkeypatch):
     pytest.importorskip("distributed")
-    monkeypatch.setattr(sweep_mod, "SCHEDULER_TIMEOUT", 0.5)
+    monkeypatch.setattr(sweep_exec, "SCHEDULER_TIMEOUT", 0.5)
     code = main(["sweep", "b1", *FAST, "--out", str(tmp_path / "s"), "--scheduler", "tcp://127.0.0.1:9"])
     err = capsys.readouterr().err
     assert code == EXIT_USAGE and "--scheduler" in err and "Traceback" not in err
