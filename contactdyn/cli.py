@@ -184,13 +184,17 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 def _lazy(module: str, function: str):
     import importlib
 
+    name = f"{__package__}.{module}"
     try:
-        mod = importlib.import_module(f"{__package__}.{module}")
-        fn = getattr(mod, function)
+        return getattr(importlib.import_module(name), function)
+    except ModuleNotFoundError as exc:
+        if exc.name not in (name, None):  # the module exists but needs something missing
+            print(f"contactdyn: error: {module} cannot be used here: {exc}", file=sys.stderr)
+            return None
     except (ImportError, AttributeError):
-        print(f"contactdyn: error: {module}.{function} is not available yet in this version", file=sys.stderr)
-        return None
-    return fn
+        pass
+    print(f"contactdyn: error: {module}.{function} is not available yet in this version", file=sys.stderr)
+    return None
 
 
 def _delegate(module: str, function: str):
@@ -341,8 +345,8 @@ def main(argv: list[str] | None = None) -> int:
     except NUMERICAL as exc:  # a blow-up numpy noticed before the simulator did: the run failed
         return _fail(args, f"the run blew up: {type(exc).__name__}: {exc}", EXIT_FAILED)
     except KeyboardInterrupt:
-        print("contactdyn: interrupted (finished runs are saved; run the same command again to resume)",
-              file=sys.stderr)
+        hint = " (finished runs are saved; run the same command again to resume)" if args.command == "sweep" else ""
+        print(f"contactdyn: interrupted{hint}", file=sys.stderr)
         return EXIT_INTERRUPTED
 
 
