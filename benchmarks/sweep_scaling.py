@@ -7,7 +7,9 @@ log-spaced over 5e4..2e5 N/m) is timed end to end (``run_sweep``: results and su
 written to a temporary folder) in five ways: in this process (no pool: the baseline),
 a process pool of 1 and of 2 workers, a Dask ``LocalCluster`` of 1 and of 2 worker
 processes (cluster start-up timed separately, not in the sweep time). Each is repeated
-REPEATS times; the median and the range are reported.
+REPEATS times; the median and the range are reported, with how busy the whole machine
+was meanwhile (from /proc/stat: a sweep on one worker of an otherwise idle 2-core machine
+keeps it about 50 % busy; more means someone else was computing too).
 
 - speed-up = time with 1 worker / time with 2 workers (the goal: >= 1.7 on 2 cores);
 - per-run overhead = (time with 1 worker − time in this process) / RUNS: what the pool or
@@ -41,11 +43,25 @@ def _sweep(runs: int, duration: float):
                       ranges=[f"contact.tip.normal.k=5e4:2e5:{runs}:log"])
 
 
-def _time(sweep, **kw) -> tuple[float, dict]:
+def _cpu_jiffies() -> tuple[int, int]:
+    """(busy, total) CPU time of the whole machine from /proc/stat (0, 0 where there is none)."""
+    try:
+        fields = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    except (OSError, ValueError):
+        return 0, 0
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
+    return sum(fields) - idle, sum(fields)
+
+
+def _time(sweep, **kw) -> tuple[float, dict, float]:
+    """Wall time [s], statuses, and the machine's busy fraction meanwhile (all cores, anyone's work)."""
     with tempfile.TemporaryDirectory() as tmp:
+        busy0, total0 = _cpu_jiffies()
         t0 = time.perf_counter()
         report = run_sweep(sweep, tmp, check=False, **kw)
-        return time.perf_counter() - t0, report.counts
+        wall = time.perf_counter() - t0
+        busy1, total1 = _cpu_jiffies()
+        return wall, report.counts, (busy1 - busy0) / max(total1 - total0, 1)
 
 
 def _stats(times: list[float]) -> dict:
@@ -78,17 +94,21 @@ def main() -> None:
             cluster_start[f"dask{n}"] = time.perf_counter() - t0
             modes[f"dask{n}"] = {"scheduler": clusters[f"dask{n}"].scheduler_address}
     _time(one, workers=0)  # warm this process up (imports, first URDF parse) before the baseline is timed
+    first_pool = _time(one, workers=1)[0]  # starts the fork server (once per process: not charged to a mode)
     load0 = os.getloadavg()
     times: dict[str, list[float]] = {m: [] for m in modes}
     single: dict[str, list[float]] = {m: [] for m in modes}
+    busy: dict[str, list[float]] = {m: [] for m in modes}
     counts = {}
     try:
         for r in range(args.repeats):  # interleaved, so slow drifts of the machine hit every mode alike
             for mode, kw in modes.items():
-                t, counts[mode] = _time(big, **kw)
+                t, counts[mode], b = _time(big, **kw)
                 times[mode].append(t)
+                busy[mode].append(b)
                 single[mode].append(_time(one, **kw)[0])
-                print(f"repeat {r + 1}/{args.repeats} {mode:>6}: {t:7.2f} s for {args.runs} runs", flush=True)
+                print(f"repeat {r + 1}/{args.repeats} {mode:>6}: {t:7.2f} s for {args.runs} runs, "
+                      f"machine busy {100 * b:3.0f} %", flush=True)
     finally:
         for c in clusters.values():
             c.close()
@@ -101,9 +121,11 @@ def main() -> None:
         "runs": n, "repeats": args.repeats, "duration_s": args.duration, "cpu_count": os.cpu_count(),
         "loadavg_before": load0, "loadavg_after": load1, "python": platform.python_version(),
         "statuses": counts,
+        "machine_busy_fraction": busy,
         "sweep": {m: _stats(v) for m, v in times.items()},
         "one_run_sweep": {m: _stats(v) for m, v in single.items()},
         "dask_cluster_start_s": cluster_start,
+        "first_pool_1_run_sweep_s": first_pool,  #: includes starting the fork server (imports the package)
         "per_run_inline_s": med["inline"] / n,
         "speedup_pool": med["pool1"] / med["pool2"],
         "speedup_pool_range": [min(times["pool1"]) / max(times["pool2"]), max(times["pool1"]) / min(times["pool2"])],
@@ -121,9 +143,12 @@ def main() -> None:
 
     print(f"\n{n} runs of b1 ({args.duration} s simulated each), median of {args.repeats} "
           f"(load average {load0[0]:.1f} -> {load1[0]:.1f} on {os.cpu_count()} cores)")
-    print(f"{'mode':>8} {'median [s]':>11} {'range [s]':>17} {'per run [ms]':>13}")
+    print(f"{'mode':>8} {'median [s]':>11} {'range [s]':>17} {'per run [ms]':>13} {'machine busy':>13}")
     for m, v in times.items():
-        print(f"{m:>8} {med[m]:11.2f} {min(v):8.2f}-{max(v):<8.2f} {1e3 * med[m] / n:13.2f}")
+        print(f"{m:>8} {med[m]:11.2f} {min(v):8.2f}-{max(v):<8.2f} {1e3 * med[m] / n:13.2f} "
+              f"{100 * statistics.median(busy[m]):12.0f}%")
+    print(f"(machine busy: all cores, anyone's work; a quiet {os.cpu_count()}-core machine shows about "
+          f"{100 / (os.cpu_count() or 1):.0f}% for one worker, 100% for two)")
     print(f"speed-up 2 vs 1 workers: pool {report['speedup_pool']:.2f} (range {report['speedup_pool_range'][0]:.2f}-"
           f"{report['speedup_pool_range'][1]:.2f})", end="")
     if "speedup_dask" in report:
