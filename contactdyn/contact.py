@@ -31,6 +31,9 @@ class ContactMode:
     slip: tuple[float, ...] = ()
     #: anchor offsets of the tangential chains [m], captured at touch
     offsets: tuple[float, ...] = ()
+    #: the slide started from rest (2-D: until the slip leaves the stick band its direction is
+    #: the consistent one, where the slip accelerates, rather than the fixed reference)
+    from_rest: bool = False
 
     def with_(self, **changes) -> ContactMode:
         return replace(self, **changes)

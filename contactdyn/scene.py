@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from .config import Reader
+from .drives import DriveTable, read_drive_table
 from .errors import SceneError
 from .trajectory import PROFILES, Move, Ramp
 
@@ -106,9 +107,9 @@ class BodySpec:
     axis: np.ndarray  #: unit direction of travel (world)
     position0: float  #: [m] initial coordinate
     velocity0: float  #: [m/s] initial velocity
-    servo_velocity: float | None  #: ideal velocity servo set-point [m/s], None: no drive
-    servo_gain: float  #: [N·s/m]
-    drive: dict[str, Any] = field(default_factory=dict)  #: raw drive table (see drives)
+    servo_velocity: float | None  #: velocity servo set-point [m/s], None: no drive force
+    servo_gain: float  #: [N·s/m], F = gain (v_ref − v), realised by the body's drive
+    drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.drives)
 
 
 @dataclass(frozen=True)
@@ -123,7 +124,7 @@ class RobotSpec:
     v0: np.ndarray | None  #: [rad/s or m/s]
     tip0: np.ndarray | None  #: [m] initial tip position, solved by inverse kinematics from q0/q_seed
     q_seed: np.ndarray | None
-    drive: dict[str, Any] = field(default_factory=dict)  #: raw drive table (see drives)
+    drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.drives)
 
 
 @dataclass(frozen=True)
@@ -137,6 +138,14 @@ class ReferenceSpec:
 class ForceSpec:
     contact: str
     ramp: Ramp
+    #: "n" presses along the normal; "t1"/"t2" push along −(that tangent), i.e. the force set-point
+    #: compresses the tangential chain (case 1's horizontal force F1)
+    direction: str = "n"
+
+    @property
+    def key(self) -> str:
+        """Set-point name: the contact for the normal, ``<contact>.t1`` for a tangent."""
+        return self.contact if self.direction == "n" else f"{self.contact}.{self.direction}"
 
 
 @dataclass(frozen=True)
@@ -160,6 +169,8 @@ class SolverSpec:
     storm_window: float = 1e-9  #: [s] events closer than this count towards a storm
     storm_count: int = 50  #: that many events inside the window stop the run
     stabilization: float = 20.0  #: [1/s] Baumgarte rate ω of bonds, rigid contacts and sticks (0: none)
+    #: [m/s] slip-speed band of the stick/slip guard: a slide stops when |v_t| falls to it
+    stick_velocity: float = 1e-9
 
 
 @dataclass(frozen=True)
@@ -292,7 +303,7 @@ def _read_robot(r: Reader) -> RobotSpec:
         v0=r.vector("v0", None) if r.has("v0") else None,
         tip0=r.vector("tip0", None, size=3, unit="m") if r.has("tip0") else None,
         q_seed=r.vector("q_seed", None) if r.has("q_seed") else None,
-        drive=dict(r.sub("drive", {}).data),
+        drive=read_drive_table(r.sub("drive", {}), per_joint=True),
     )
     r.finish()
     return spec
@@ -308,7 +319,7 @@ def _read_body(name: str, r: Reader) -> BodySpec:
         velocity0=r.float("velocity0", 0.0, unit="m/s"),
         servo_velocity=servo.float("velocity", None, unit="m/s") if servo.has("velocity") else None,
         servo_gain=servo.float("gain", 1e3, lo=0.0, unit="N·s/m"),
-        drive=dict(r.sub("drive", {}).data),
+        drive=read_drive_table(r.sub("drive", {}), per_joint=False),
     )
     servo.finish()
     r.finish()
@@ -427,6 +438,7 @@ def _read_solver(r: Reader) -> SolverSpec:
         storm_window=r.float("storm_window", SolverSpec.storm_window, lo=0.0, unit="s"),
         storm_count=r.int("storm_count", SolverSpec.storm_count, lo=2),
         stabilization=r.float("stabilization", SolverSpec.stabilization, lo=0.0, unit="1/s"),
+        stick_velocity=r.float("stick_velocity", SolverSpec.stick_velocity, lo=0.0, lo_open=True, hi=1.0, unit="m/s"),
     )
     r.finish()
     return spec
@@ -488,5 +500,9 @@ def _read_force(r: Reader, contacts: dict[str, ContactSpec]) -> ForceSpec:
         kind=r.str("kind", "linear", choices=["linear", "exponential", "step"]),
         initial=r.float("initial", 0.0, unit="N"),
     )
+    direction = r.str("direction", "n", choices=["n", "t1", "t2"])
+    if direction != "n" and int(direction[1]) > len(contacts[contact].tangents):
+        raise r.error("direction", f"'n' or one of contact {contact!r}'s {len(contacts[contact].tangents)} "
+                      "tangent directions (t1, t2)", direction)
     r.finish()
-    return ForceSpec(contact, ramp)
+    return ForceSpec(contact, ramp, direction)

@@ -5,17 +5,47 @@ phase are fixed and ``solve_ivp`` integrates with error control. Events are zero
 functions of the state, located by ``solve_ivp`` on its dense output:
 
 - ``touch``: a contact's normal gap reaches zero (then the impact map, where touching
-  makes velocities jump);
+  makes velocities jump; with friction it slides or jams, see ``System.impact``);
 - ``separate``: a touching contact's normal force reaches zero;
-- ``stop``: a sliding contact's slip velocity reaches zero along its sliding direction
-  (then stick if the friction needed stays within μ_s F, else slide the other way);
-- ``slip``: a sticking contact's friction reaches μ_s F (slide where the force points);
-- ``turn``: 2-D sliding turned 60° from its reference direction (reference refreshed;
-  not a mode change);
+- ``stop``: a sliding contact's slip velocity along its sliding direction r falls to
+  the stick band v_ε (``solver.stick_velocity``); then it sticks if the friction needed
+  to hold it stays within μ_s F, else it slides on where that force pushes
+  (``reverse``: the same decision for a slip from rest that runs backwards past −v_ε);
+- ``turn`` (2-D): the slip velocity turned 60° away from r; r is refreshed (no mode
+  change; it keeps ``stop`` meaningful and the friction force continuous in a segment);
+- ``slip``: a sticking contact's friction reaches the cone, |F_f| = μ_s F; it slides
+  from rest in the direction the holding force pushes (−F_f);
 - phase ends (a time, or ``touch:<contact>``).
 
-Guards: more than ``storm_count`` events within ``storm_window`` seconds, or more than
-``max_events`` in the run, stop with a :class:`SimulationError` naming the events.
+Coulomb friction is never smoothed: sliding is F_f = −μ_k F d (+ viscous −c v_t) with d
+the slip direction, sticking is a constraint row whose force is an unknown.
+
+Stick/slip guard (the band v_ε, default 1e-9 m/s). A slip that starts from rest keeps
+the direction chosen at break-away (2-D: the consistent one, below) until v_t·r > v_ε,
+and no ``stop`` is declared
+before it has risen above v_ε; a slide stops when v_t·r falls back to v_ε, and the
+residual slip is then removed by the smallest kinetic-energy-norm velocity change that
+keeps every constraint (``System.project_velocity``). So a stick → slip → stick cycle
+needs the slip speed to cross v_ε: no zero-length slides and no event storm at the
+cone's edge (a push that holds exactly at μ F, or chatter around it, slides at v ≈ 0
+with |F_f| = μ_k F instead of switching at every step). Its error, per stop: the stop
+is located v_ε/|a_t| early, a velocity jump ≤ v_ε, a position error ≤ v_ε²/(2|a_t|).
+Mode decisions at rest compare |F_f| with μ_s F with a relative slack of 1e-10.
+
+Three more guards keep the events exact and the cost bounded. A stuck contact's state
+may not move at all, so ``solve_ivp`` (which tests events at step ends only) could step
+over a whole excursion out of the cone: the friction impulses are integrated (their error
+control makes the step follow the forces) and the ``slip`` event also looks at the
+Runge–Kutta stages inside each step (:class:`_SlipWatch`). A 2-D slip from rest starts
+along the consistent direction (where it accelerates, ``System._launch_directions``), and
+its segment is integrated by LSODA: near v_t = 0 the direction of 2-D friction relaxes at
+a rate ∝ 1/|v_t|, stiff for an explicit method (the scene's method takes over at the next
+event, or if LSODA fails). After a friction event the next segment starts with the step
+size the solver had reached.
+
+Guards against what the band cannot prevent: more than ``storm_count`` events within
+``storm_window`` seconds, or more than ``max_events`` in the run, stop with a
+:class:`SimulationError` naming the events.
 """
 
 from __future__ import annotations
@@ -30,16 +60,28 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from .chain import NodeKind
 from .contact import ContactMode
+from .drives import drive_channels
 from .errors import SimulationError
+from .integrators import IMPLICIT
 from .result import Result
 from .scene import Scene, load_scene
-from .system import Evaluation, Phase, System
+from .system import CONE_TOL, FORCE_ABS_TOL, Evaluation, Phase, System
 
 __all__ = ["simulate"]
 
-STOP_TOL = 1e-12  #: [m/s] slip speed below which an impact leaves the contact to the stick test
-FORCE_TOL = 1e-9  #: [N] relative tolerance of the consistency checks
+FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
+#: events after which the next segment starts with the step size the solver had reached (friction
+#: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
+RESUME_STEP = ("stop", "reverse", "slip", "turn")
+LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest (see _Run._method)
+SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
+#: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
+#: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
+#: zero at the start misses a re-touch that lifts and returns within one step, and the tip then
+#: passed through the surface unseen (case 2's writer, just after its impact).
+TOUCH_TOL = 1e-13  # well above rounding of positions (~1e-16 m per metre)
 
 
 @dataclass
@@ -67,6 +109,25 @@ class _Cache:
         return self.value  # type: ignore[return-value]
 
 
+class _SlipCache:
+    """Slip velocities [m/s] of the sliding contacts at (t, x): kinematics only, no linear solve."""
+
+    def __init__(self, system: System, names: list[str]):
+        self.system = system
+        self.contacts = [c for c in system.contacts if c.name in names]
+        self.key: tuple[float, bytes] | None = None
+        self.value: dict[str, np.ndarray] = {}
+
+    def __call__(self, t: float, x: np.ndarray) -> dict[str, np.ndarray]:
+        key = (t, x.tobytes())
+        if key != self.key:
+            system, nQ, nv = self.system, self.system.nQ, self.system.nv
+            system.robot.update(x[:nv], x[nQ:nQ + nv])
+            self.value = {c.name: system.slip_velocity(c, system.kinematics(c, x)) for c in self.contacts}
+            self.key = key
+        return self.value
+
+
 def _event(fn, kind: str, contact: str):
     fn.terminal = True
     fn.direction = -1
@@ -74,29 +135,85 @@ def _event(fn, kind: str, contact: str):
     return fn
 
 
-def _events(system: System, modes: list[ContactMode], phase: Phase) -> list:
+class _SlipWatch:
+    """The ``slip`` event of a stuck contact, g = μ_s F − |F_f|, which also sees inside a step.
+
+    ``solve_ivp`` tests events only at step ends, and a stuck robot's state may hardly move:
+    the friction a push needs can leave the cone and come back within one step unseen. The
+    right-hand side reports g at every Runge–Kutta stage (:meth:`sample`); if a stage inside
+    the step just taken saw g < 0 while the step end did not, the event reports a crossing,
+    and while ``solve_ivp`` locates it on the dense output, g is held negative from that
+    stage's time on, so the root found is the first crossing. A false alarm (a stage state
+    off the final solution) is caught by the handler, which keeps the stick.
+    """
+
+    terminal = True
+    direction = -1
+
+    def __init__(self, cache: _Cache, name: str, mu_s: float):
+        self.cache, self.contact, self.mu_s = cache, name, mu_s
+        self.kind = "slip"
+        self.t_end = -math.inf  #: last step end seen [s]
+        self.latch = math.inf  #: from this time on g is held negative [s]
+        self.samples: list[tuple[float, float]] = []  #: (t, g) at the stages since the last step end
+
+    def g(self, ev: Evaluation) -> float:
+        return self.mu_s * ev.normal_force[self.contact] - float(np.linalg.norm(ev.friction[self.contact]))
+
+    def sample(self, t: float, ev: Evaluation) -> None:
+        self.samples.append((t, self.g(ev)))
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        g = self.g(self.cache(t, x))
+        if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
+            t_old, self.t_end = self.t_end, t
+            hidden = [ts for ts, gs in self.samples if t_old < ts < t and gs < 0.0]
+            self.samples = [(ts, gs) for ts, gs in self.samples if ts > t]
+            if g > 0.0 and hidden:
+                self.latch = min(hidden)
+                return -1.0
+            return g
+        return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
+
+
+def _events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray):
+    """The event functions of one segment, and the right-hand side that feeds their stage watches."""
     cache = _Cache(system, modes, phase)
-    out = []
+    slip = _SlipCache(system, [c.name for c, m in zip(system.contacts, modes, strict=True)
+                               if m.touching and not m.stuck and c.friction is not None and len(c.tangents)])
+    out: list = []
+    watches: list[_SlipWatch] = []
     for c, mode in zip(system.contacts, modes, strict=True):
         name = c.name
         if not mode.touching:
-            out.append(_event(lambda t, x, n=name: cache(t, x).gap[n], "touch", name))
+            floor = min(cache(t0, x0).gap[name], 0.0) - TOUCH_TOL  # [m] never zero at the start
+            out.append(_event(lambda t, x, n=name, g0=floor: cache(t, x).gap[n] - g0, "touch", name))
             continue
         if not c.spec.bonded:
             out.append(_event(lambda t, x, n=name: cache(t, x).normal_force[n], "separate", name))
         if c.friction is None or not len(c.tangents):
             continue
-        fr = c.friction
+        fr, band = c.friction, system.slip_band
         if mode.stuck:
-            out.append(_event(lambda t, x, n=name, mu=fr.mu_s: mu * cache(t, x).normal_force[n]
-                              - float(np.linalg.norm(cache(t, x).friction[n])), "slip", name))
-        else:
-            ref = np.asarray(mode.slip, float)
-            out.append(_event(lambda t, x, n=name, r=ref: float(cache(t, x).slip[n] @ r), "stop", name))
-            if len(ref) == 2:
-                out.append(_event(lambda t, x, n=name, r=ref: float(cache(t, x).slip[n] @ r)
-                                  - 0.5 * float(np.linalg.norm(cache(t, x).slip[n])), "turn", name))
-    return out
+            watches.append(_SlipWatch(cache, name, fr.mu_s))
+            out.append(watches[-1])
+            continue
+        r = np.asarray(mode.slip, float)
+        out.append(_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r) - b, "stop", name))
+        out.append(_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r) + b, "reverse", name))
+        if len(r) == 2:
+            out.append(_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r)
+                              - 0.5 * float(np.linalg.norm(slip(t, x)[n])) + b, "turn", name))
+    if not watches:
+        return out, system.rhs(modes, phase)
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        ev = system.evaluate(t, x, modes, phase)
+        for w in watches:
+            w.sample(t, ev)
+        return ev.xdot
+
+    return out, rhs
 
 
 def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None) -> Result:
@@ -121,7 +238,9 @@ class _Run:
         self.events: list[dict[str, Any]] = []
         self.impacts: list[dict[str, Any]] = []
         self.recent: deque[float] = deque(maxlen=self.solver.storm_count)
-        self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0}
+        self.next_step: float | None = None  #: [s] first step of the next segment (None: solver's choice)
+        self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0,
+                      "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
 
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:
@@ -130,17 +249,22 @@ class _Run:
         phase = system.start_phase(0, 0.0, x, None)
         x = self._init_controller(phase, 0.0, x, modes)
         t = 0.0
-        modes = self._consistent(t, x, modes, phase)
+        x, modes = self._consistent(t, x, modes, phase)
         while t < T:
             until = phase.spec.until
             t_end = min(T, until) if isinstance(until, float) else T
             if t_end <= t:
                 phase = self._next_phase(phase, t, x)
                 continue
-            events = _events(system, modes, phase)
-            sol = solve_ivp(system.rhs(modes, phase), (t, t_end), x, method=self.solver.method,
-                            rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
-                            events=events or None, dense_output=True)
+            h0 = min(self.next_step, t_end - t) if self.next_step else None
+            for method in dict.fromkeys((self._method(modes), self.solver.method)):
+                events, rhs = _events(system, modes, phase, t, x)
+                sol = solve_ivp(rhs, (t, t_end), x, method=method,
+                                rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
+                                events=events or None, dense_output=True, first_step=h0)
+                if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
+                    break
+                self.stats["rhs_evals"] += sol.nfev  # a failed launch method: retry with the scene's
             self.stats["rhs_evals"] += sol.nfev
             self.stats["steps"] += len(sol.t) - 1
             if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
@@ -148,12 +272,28 @@ class _Run:
             self.segments.append(_Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol))
             self.stats["segments"] += 1
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
+            self.next_step = None
             if sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
+                if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
+                    self.next_step = float(sol.t[-2] - sol.t[-3])
                 x, modes, phase = self._handle(t, x, modes, phase, fired[0])
             elif t < T:
                 phase = self._next_phase(phase, t, x)
         return self._result(time.perf_counter() - wall0)
+
+    def _method(self, modes: list[ContactMode]) -> str:
+        """The scene's method, but a stiff-capable one while a 2-D slip launches from rest.
+
+        Near v_t = 0 the direction of 2-D Coulomb friction relaxes at a rate ∝ μ F/(m |v_t|)
+        (m: the arm's smallest tangential inertia): stiff for an explicit method until the
+        slip has grown, worst when the push is just at the cone (thousands of tiny steps).
+        LSODA switches to BDF while that lasts; the segment ends at the next event.
+        """
+        method = self.solver.method
+        if method not in IMPLICIT and any(m.from_rest and len(m.slip) == 2 and not m.stuck for m in modes):
+            return LAUNCH_METHOD
+        return method
 
     def _init_controller(self, phase: Phase, t: float, x: np.ndarray, modes) -> np.ndarray:
         if phase.controller.n_states:
@@ -197,6 +337,8 @@ class _Run:
         c = system.contacts[i]
         modes = list(modes)
         self._log(t, event.kind, c.name)
+        rest: set[int] = set()  #: contacts to decide at rest (a stop)
+        released: set[int] = set()  #: contacts that broke away at this event
         if event.kind == "touch":
             modes[i], x = self._touch(t, x, modes, i)
             if c.normal.chain.bonded_when_touching:
@@ -204,9 +346,14 @@ class _Run:
                 self.impacts.append({"t": t, "contact": c.name, "normal_impulse": imp.normal_impulse,
                                      "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
                                      "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
-                                     "v_after": imp.v_after.tolist()})
+                                     "v_after": imp.v_after.tolist(), "slip_before": imp.slip_before.tolist(),
+                                     "slip_after": imp.slip_after.tolist()})
                 if imp.jammed:
                     modes[i] = modes[i].with_(stuck=True)
+                elif c.friction is not None and len(c.tangents):
+                    after = imp.slip_after if np.linalg.norm(imp.slip_after) > system.slip_band else imp.direction
+                    if np.any(after):
+                        modes[i] = modes[i].with_(slip=self._direction(after))
             if phase.spec.until == f"touch:{c.name}":
                 phase = self.system.start_phase(phase.index + 1, t, x, phase) \
                     if phase.index + 1 < len(self.scene.phases) else phase
@@ -215,16 +362,22 @@ class _Run:
         elif event.kind == "separate":
             x = system.separate(t, x, modes, phase, c)
             modes[i] = modes[i].with_(touching=False, stuck=False)
-        elif event.kind == "stop":
-            modes[i] = modes[i].with_(stuck=True)
-        elif event.kind == "slip":
+        elif event.kind in ("stop", "reverse"):
+            rest.add(i)
+        elif event.kind == "turn":  # 2-D: the slip turned 60° from the reference; refresh it (no mode change)
             ev = system.evaluate(t, x, modes, phase)
-            F_f = ev.friction[c.name]
-            modes[i] = modes[i].with_(stuck=False, slip=self._direction(-F_f))
-        elif event.kind == "turn":
+            modes[i] = modes[i].with_(slip=self._direction(ev.slip[c.name]), from_rest=False)
+            return x, modes, phase
+        elif event.kind == "slip":  # the cone is reached: slide from rest where the holding force pushes
             ev = system.evaluate(t, x, modes, phase)
-            modes[i] = modes[i].with_(slip=self._direction(ev.slip[c.name]))
-        modes = self._consistent(t, x, modes, phase)
+            self.stats["slips_seen_inside_a_step"] += int(event.latch < math.inf)
+            if event.g(ev) <= SLIP_ALARM * c.friction.mu_s * max(ev.normal_force[c.name], 0.0):
+                modes[i] = modes[i].with_(stuck=False, slip=self._direction(-ev.friction[c.name]), from_rest=True)
+                released.add(i)
+            else:  # a stage saw the cone left, the located point does not: a false alarm, still stuck
+                self.events[-1]["kind"] = "slip_check"
+                self.stats["slip_false_alarms"] += 1
+        x, modes = self._consistent(t, x, modes, phase, rest, released)
         return x, modes, phase
 
     @staticmethod
@@ -243,14 +396,18 @@ class _Run:
         kin = system.kinematics(c, x)
         x = x.copy()
         offsets = []
-        for dc in c.tangent_chains:
-            # shift the environment side rigidly so the two surface nodes meet undeformed
+        for k, dc in enumerate(c.tangent_chains):
+            # shift the environment side rigidly so the two surface nodes meet undeformed; on a
+            # re-touch the anchor already carries the previous touch's offset (and its masses too)
+            old = modes[i].offsets[k] if k < len(modes[i].offsets) else 0.0
             s_tip = float(dc.u @ kin.p_tip)
-            s_env = float(dc.u @ kin.p_env)
+            s_env = float(dc.u @ kin.p_env) + old
             robot_side = [n for n in dc.chain.nodes if n.side == "robot" and n.coord >= 0]
+            env_side = [n for n in dc.chain.nodes if n.side == "environment" and n.coord >= 0]
             s_r = x[robot_side[-1].coord] if robot_side else s_tip
-            delta = s_r - s_env
-            offsets.append(delta)
+            s_e = x[env_side[-1].coord] if env_side else s_env  # the environment's surface node
+            delta = s_r - s_e
+            offsets.append(old + delta)
             for node in dc.chain.nodes:
                 if node.side == "environment" and node.coord >= 0:
                     x[node.coord] += delta
@@ -259,18 +416,51 @@ class _Run:
             if dc.junction_state >= 0:
                 x[2 * nQ + dc.junction_state] = s_r
         if c.normal.junction_state >= 0:
-            robot_masses = [n for n in c.normal.chain.nodes if n.side == "robot" and n.coord >= 0]
-            x[2 * nQ + c.normal.junction_state] = x[robot_masses[-1].coord] if robot_masses else \
-                float(c.normal.u @ kin.p_tip)
-        vt = c.tangents @ (kin.v_tip - kin.v_env) if len(c.tangents) else np.zeros(0)
+            x[2 * nQ + c.normal.junction_state] = self._junction_at_rest(c.normal, kin, x)
+        vt = system.slip_velocity(c, kin) if len(c.tangents) else np.zeros(0)
         slip = modes[i].slip
-        if len(vt) and float(np.linalg.norm(vt)) > 0.0:
+        if len(vt) and float(np.linalg.norm(vt)) > system.slip_band:
             slip = self._direction(vt)
         return modes[i].with_(touching=True, stuck=False, slip=slip, offsets=tuple(offsets)), x
 
-    def _consistent(self, t, x, modes, phase) -> list[ContactMode]:
-        """Fix modes the state contradicts (pulling contacts, unholdable sticks, resting slides)."""
+    def _junction_at_rest(self, dc, kin, x) -> float:
+        """[m] where the two surfaces meet: the interface junction's starting position.
+
+        Damped surface ends have states (they relax after a separation): they meet where they
+        are, the touch point. Undamped ends follow their stages at once; there the junction
+        starts where the two interface stages' springs balance (zero compressions on a first
+        touch; on a re-touch both stages share the overlap instead of one taking all of it).
+        """
+        chain, nQ = dc.chain, self.system.nQ
+        ends = [chain.nodes[chain.env_surface].state, chain.nodes[chain.robot_surface].state]
+        if min(ends) >= 0:
+            return 0.5 * float(x[2 * nQ + ends[0]] + x[2 * nQ + ends[1]])
+
+        def position(node: int) -> float:
+            n = chain.nodes[node]
+            if n.coord >= 0:
+                return float(x[n.coord])
+            if n.state >= 0:
+                return float(x[2 * nQ + n.state])
+            return float(dc.u @ (kin.p_tip if n.kind == NodeKind.TIP else kin.p_env))
+
+        (e,) = [s for s in chain.stages if s.upper == chain.env_surface]
+        (r,) = [s for s in chain.stages if s.lower == chain.robot_surface]
+        return (e.k * position(e.lower) + r.k * position(r.upper)) / (e.k + r.k)
+
+    def _consistent(self, t, x, modes, phase, rest=frozenset(), released=frozenset()):
+        """Fix the modes the state contradicts; return (x, modes).
+
+        Pulling contacts separate; a stick whose friction is outside the cone
+        |F_f| ≤ μ_s F slides (from rest, where −F_f points); a slide at rest (|v_t| within
+        the stick band, or a contact in ``rest``: it just stopped) sticks if the friction
+        needed to hold it is within the cone, else slides where that force pushes; in
+        both cases its residual slip is projected away. Contacts in ``released`` (they
+        broke away at a located ``slip`` event) are not stuck again at the same instant.
+        """
         system = self.system
+        released = set(released)
+        rest = set(rest)
         for _ in range(4 * len(modes) + 2):
             changed = False
             ev = system.evaluate(t, x, modes, phase)
@@ -288,32 +478,42 @@ class _Run:
                     break
                 if c.friction is None or not len(c.tangents):
                     continue
+                mu_s = c.friction.mu_s
                 if mode.stuck:
                     F_f = ev.friction[c.name]
-                    if float(np.linalg.norm(F_f)) > c.friction.mu_s * max(F_n, 0.0) * (1 + 1e-12) + FORCE_TOL:
-                        modes[i] = mode.with_(stuck=False, slip=self._direction(-F_f))
+                    if not _in_cone(F_f, F_n, mu_s):
+                        modes[i] = mode.with_(stuck=False, slip=self._direction(-F_f), from_rest=True)
                         self._log(t, "slip", c.name)
+                        released.add(i)
                         changed = True
                         break
-                elif float(np.linalg.norm(ev.slip[c.name])) <= STOP_TOL:
-                    trial = list(modes)
-                    trial[i] = mode.with_(stuck=True)
-                    ev2 = system.evaluate(t, x, trial, phase)
-                    F_f = ev2.friction[c.name]
-                    if float(np.linalg.norm(F_f)) <= c.friction.mu_s * max(ev2.normal_force[c.name], 0.0) + FORCE_TOL:
-                        modes[i] = trial[i]
-                        self._log(t, "stick", c.name)
-                    else:
-                        direction = self._direction(-F_f)
-                        if direction != mode.slip:
-                            modes[i] = mode.with_(slip=direction)
-                            self._log(t, "reverse", c.name)
-                        else:
-                            continue
-                    changed = True
-                    break
+                    continue
+                if i in released:
+                    continue
+                vt = ev.slip[c.name]
+                speed = float(np.linalg.norm(vt))
+                if i not in rest and speed > system.slip_band:
+                    if float(vt @ np.asarray(mode.slip)) < 0.5 * speed:  # moving, but not along r: refresh r
+                        modes[i] = mode.with_(slip=self._direction(vt), from_rest=False)
+                    continue
+                # at rest: stick if the cone can hold it, else slide where the holding force pushes
+                rest.discard(i)
+                trial = list(modes)
+                trial[i] = mode.with_(stuck=True)
+                x = system.project_velocity(x, trial)
+                ev2 = system.evaluate(t, x, trial, phase)
+                F_f = ev2.friction[c.name]
+                if _in_cone(F_f, ev2.normal_force[c.name], mu_s):
+                    modes[i] = trial[i]
+                    self._log(t, "stick", c.name)
+                else:
+                    modes[i] = mode.with_(slip=self._direction(-F_f), from_rest=True)
+                    released.add(i)
+                    self._log(t, "slip", c.name)
+                changed = True
+                break
             if not changed:
-                return modes
+                return x, modes
         raise SimulationError(f"{self.scene.name}: no consistent contact mode at t = {t:.9g} s "
                               f"(modes tried: {modes})")
 
@@ -341,6 +541,11 @@ class _Run:
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _in_cone(F_f: np.ndarray, F_n: float, mu_s: float) -> bool:
+    """|F_f| ≤ μ_s F within round-off (a pulling contact holds nothing)."""
+    return float(np.linalg.norm(F_f)) <= mu_s * max(F_n, 0.0) * (1.0 + CONE_TOL) + FORCE_ABS_TOL
 
 
 def _channels(system: System, rows) -> dict[str, np.ndarray]:
@@ -375,6 +580,10 @@ def _channels(system: System, rows) -> dict[str, np.ndarray]:
             ch[f"{p}.stuck"] = np.array([float(r[3][i].stuck) for r in rows])
         for dc in c.tangent_chains:
             ch[f"{p}.{dc.label}.F"] = np.array([e.interface.get(f"{c.name}.{dc.label}", 0.0) for e in evs])
+        for i in range(len(c.tangents)):
+            key = f"{c.name}.t{i + 1}"
+            if any(key in e.force_d for e in evs):
+                ch[f"{p}.t{i + 1}.F_d"] = np.array([e.force_d.get(key, np.nan) for e in evs])
     for label in system.stage_labels:
         vals = np.array([e.stages.get(label, (0.0, 0.0, 0.0)) for e in evs])
         ch[f"stage.{label}.x"], ch[f"stage.{label}.xdot"], ch[f"stage.{label}.F"] = vals.T
@@ -387,6 +596,7 @@ def _channels(system: System, rows) -> dict[str, np.ndarray]:
                     ch[f"mass.{label}.x"] = xs[:, node.coord]
                     ch[f"mass.{label}.v"] = xs[:, nQ + node.coord]
                     k += 1
+    ch.update(drive_channels(system, xs, evs))
     if system.energy_slot >= 0:
         ch["energy.work"] = xs[:, 2 * nQ + system.energy_slot]
         ch["energy.dissipated"] = xs[:, 2 * nQ + system.energy_slot + 1]

@@ -3,8 +3,9 @@
 State x = [Q, Q̇, y]. Q holds the second-order coordinates: the robot's active joints,
 one coordinate per active environment body (a cart) and one per equivalent mass of a
 deformation chain; y holds first-order states: massless chain junctions, controller
-integrators and, on request, the energy audit. A part the scene does not name has no
-slot and costs nothing.
+integrators, on request the energy audit, and the impulses ∫F dt, ∫F_f dt of each
+friction contact (see ``impulse_slots``). A part the scene does not name has no slot and
+costs nothing.
 
 In every mode the unknowns (Q̈ and the forces of active constraint rows: bonds, rigid
 contacts, sticking friction) come from one linear system
@@ -15,10 +16,17 @@ contacts, sticking friction) come from one linear system
 where G Q̈ + γ = 0 are the acceleration-level constraints and C their force columns (a
 row's own direction, tilted by sliding friction −μ d). The plastic impact map solves
 the same matrix with velocity jumps (momentum law): M ΔQ̇ = Cᵀ Λ, G Q̇⁺ = 0.
+
+Drives (:mod:`contactdyn.drives`) turn the controller's command into generalized forces:
+rigid gears add their reflected rotor inertia to M's diagonal, elastic transmissions add
+a motor angle to Q (after the chain masses). A controller that reads measured forces is
+affine in them, τ = τ₀ + B λ; its columns B are folded into the matrix (−Cᵀ − B), so the
+force it measures is the one the solve returns (see :mod:`contactdyn.controllers.base`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -26,12 +34,17 @@ import numpy as np
 from .chain import NodeKind
 from .contact import Contact, ContactMode, DirectionalChain, Kinematics
 from .controllers import CONTROLLERS, ControlInput, Controller
+from .controllers.base import BindContext
+from .drives import Drives
 from .errors import RobotError, SceneError, SimulationError
 from .robot import Robot
 from .scene import PhaseSpec, Scene
 from .trajectory import Ramp, Reference
 
 __all__ = ["System", "Phase", "Evaluation", "Impact"]
+
+CONE_TOL = 1e-10  #: relative slack of the friction-cone tests |F_f| ≤ μ_s F (round-off of the solves)
+FORCE_ABS_TOL = 1e-12  #: [N] absolute slack of the same tests
 
 try:  # numpy's gufunc without the Python wrapper: ~4x cheaper on tiny systems
     from numpy.linalg import _umath_linalg
@@ -73,8 +86,11 @@ class Impact:
     friction_impulse: np.ndarray  #: F_fΔt per tangent
     jammed: bool
     energy_loss: float  #: [J]
-    v_before: np.ndarray
-    v_after: np.ndarray
+    v_before: np.ndarray  #: Q̇⁻
+    v_after: np.ndarray  #: Q̇⁺
+    slip_before: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
+    slip_after: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
+    direction: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: sliding direction d (0: none)
 
 
 @dataclass
@@ -96,6 +112,8 @@ class Evaluation:
     x_d: np.ndarray | None  #: reference
     force_d: dict[str, float]
     regular: bool = True  #: False when the linear solve fell back to least squares
+    tau_cmd: np.ndarray | None = None  #: the controller's command per joint [N·m or N; V for voltage controllers]
+    u: np.ndarray | None = None  #: motor voltage per drive (joints, then bodies) [V], NaN for ideal drives
 
 
 class System:
@@ -147,17 +165,35 @@ class System:
                     es_state = chain.nodes[chain.env_surface].state
                     dc.junction_state = es_state if es_state >= 0 else n_first
                     n_first += 0 if es_state >= 0 else 1
+        # ---- drives: elastic transmissions add motor angles after the chain masses ----
+        self.drives = self._build_drives(nv + len(diag))
+        diag += self.drives.motor_inertias
         self.nQ = nv + len(diag)
-        self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg]
+        self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg, kg·m² for motors]
+        self.M_rest[: len(self.body_names)] += self.drives.reflected[nv:]  # rotor inertia through a wheel
+        self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
+        self._D_ctl = self.drives.model_reflected[:nv]  #: the same in the controller's rigid model
+        self._joint_motors = self.drives.motorized & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
         self.n_junctions = n_first
         # ---- controller states, energy audit ----
         self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
+        for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
+            ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.motorized[:nv].copy(),
+                                 f"phase[{i}].controller"))
         self.z_slices = []
         for ctl in self.controllers:
             self.z_slices.append(slice(n_first, n_first + ctl.n_states))
             n_first += ctl.n_states
         self.energy_slot = n_first if scene.solver.record_energy else -1
         n_first += 2 if scene.solver.record_energy else 0
+        #: per friction contact, the impulses ∫F dt, ∫F_f dt [N·s] (normal, then one per tangent). A stuck
+        #: robot's state may not move at all; their error control keeps the step size following the
+        #: contact forces that the ``slip`` event watches (see simulate), instead of growing without bound.
+        self.impulse_slots: dict[str, int] = {}
+        for c in self.contacts:
+            if c.friction is not None and len(c.tangents):
+                self.impulse_slots[c.name] = n_first
+                n_first += 1 + len(c.tangents)
         self.ny = n_first
         self.n = 2 * self.nQ + self.ny
         self.stabilization = scene.solver.stabilization  #: Baumgarte rate ω of constraint rows [1/s]
@@ -167,8 +203,22 @@ class System:
                       for n, b in scene.bodies.items() if b.servo_velocity is not None]
         self.stage_labels = [f"{c.name}.{dc.label}.{s.label}" for c in self.contacts for dc in c.chains
                              for s in dc.chain.stages]
+        #: unit direction of each force set-point key (see ForceSpec.key): the robot pushes along −u
+        self.force_directions = {c.name: c.normal.u for c in self.contacts}
+        self.force_directions.update({f"{c.name}.t{i + 1}": t for c in self.contacts for i, t in enumerate(c.tangents)})
+        self.slip_band = scene.solver.stick_velocity  #: [m/s] stick/slip guard band (see simulate)
         self.has_rows_possible = any(dc.chain.bonded_when_touching for c in self.contacts for dc in c.chains) or any(
             c.friction is not None for c in self.contacts)
+
+    def _build_drives(self, first_motor_coord: int) -> Drives:
+        names = list(self.robot.joint_names)
+        specs = self.scene.robot.drive.expand(self.nv, names)
+        coords = list(range(self.nv))
+        for name, b in self.scene.bodies.items():
+            specs += b.drive.expand(1, [name])
+            coords.append(self.body_index[name])
+            names.append(name)
+        return Drives(specs, coords, names, first_motor_coord)
 
     # ---- initial state ------------------------------------------------------------------
     def initial_state(self) -> tuple[np.ndarray, list[ContactMode]]:
@@ -191,6 +241,7 @@ class System:
         x[:nv], x[nQ:nQ + nv] = q, v
         for name, b in self.scene.bodies.items():
             x[self.body_index[name]], x[nQ + self.body_index[name]] = b.position0, b.velocity0
+        self.drives.initial(x, nQ)
         robot.update(q, v)
         modes = []
         for c in self.contacts:
@@ -251,7 +302,7 @@ class System:
                     raise SceneError(f"phase[{index}].reference.moves", f"{dims}-vectors", len(m.delta),
                                      self.scene.file)
             reference = Reference(start, moves)
-        forces = {f.contact: Ramp(f.ramp.value, f.ramp.start + t, f.ramp.duration, f.ramp.kind, f.ramp.initial)
+        forces = {f.key: Ramp(f.ramp.value, f.ramp.start + t, f.ramp.duration, f.ramp.kind, f.ramp.initial)
                   for f in spec.forces}
         phase = Phase(spec, index, t, controller, self.z_slices[index], reference, forces)
         return phase
@@ -382,6 +433,8 @@ class System:
         nQ, nv = self.nQ, self.nv
         q, v = x[:nv], x[nQ:nQ + nv]
         robot = self.robot
+        if any(m.from_rest and len(m.slip) == 2 for m in modes):
+            modes = self._launch_directions(t, x, modes, phase)
         robot.update(q, v)
         f = np.zeros(nQ)
         f[:nv] = -robot.h
@@ -418,33 +471,35 @@ class System:
             col = row
             if c.friction is not None and len(c.tangents):
                 T = c.tangents
-                vt = T @ (kin.v_tip - kin.v_env)
+                vt = self.slip_velocity(c, kin)
                 ev.slip[c.name] = vt
+                if mode.touching:
+                    R_T = np.zeros((len(T), nQ))  # generalized rows of the tangential slip
+                    R_T[:, :nv] = T @ kin.J
+                    if c.body_index >= 0:
+                        R_T[:, c.body_index] -= T @ c.body_axis
                 if mode.touching and mode.stuck:
                     for i in range(len(T)):
-                        trow = self._row(c, T[i], kin)
-                        rows.append(trow)
-                        cols.append(trow)
+                        rows.append(R_T[i])
+                        cols.append(R_T[i])
                         gammas.append(float(T[i] @ kin.drift) + self.stabilization * float(vt[i]))
                         meta.append((c.name, "t", i))
                 elif mode.touching:
+                    fr = c.friction
                     d = self._slip_direction(vt, mode)
-                    visc = -c.friction.viscous * vt
-                    if row is not None:  # normal force is an unknown: tilt its column
-                        col = row.copy()
-                        for i in range(len(T)):
-                            col -= c.friction.mu_k * d[i] * self._row(c, T[i], kin)
+                    visc = -fr.viscous * vt if fr.viscous else np.zeros(len(T))
+                    if row is not None:  # normal force is an unknown: tilt its column by −μ_k d
+                        col = row - fr.mu_k * (d @ R_T)
                         pending_friction.append((c, d, 0.0, visc))
+                        if fr.viscous:
+                            f += visc @ R_T
                     else:
-                        ff = -c.friction.mu_k * max(F_n, 0.0) * d + visc
+                        ff = -fr.mu_k * max(F_n, 0.0) * d + visc
                         pending_friction.append((c, d, F_n, visc))
                         ev.friction[c.name] = ff
-                    for i in range(len(T)):
-                        f += visc[i] * self._row(c, T[i], kin)
-                        if row is None:
-                            f += (-c.friction.mu_k * max(F_n, 0.0) * d[i]) * self._row(c, T[i], kin)
+                        f += ff @ R_T
                     if self.energy_slot >= 0:
-                        ydot[self.energy_slot + 1] += float(c.friction.viscous * vt @ vt)
+                        ydot[self.energy_slot + 1] += float(fr.viscous * vt @ vt)
                 else:
                     ev.friction[c.name] = np.zeros(len(T))
             if row is not None:
@@ -468,41 +523,37 @@ class System:
         force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
         ctl = phase.controller
         z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
-        inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
-                           p_tip, v_tip, J, drift, x_d, v_d, a_d, dict(ev.normal_force), force_d,
-                           {c.name: c.normal.u for c in self.contacts}, z, R_tip=ft.rotation,
-                           J_ang=ft.angular_jacobian)
+        drives = self.drives
+        inp = ControlInput(t, q, v, robot.H + np.diag(self._D_ctl) if drives.any_motor else robot.H, robot.h,
+                           robot.gravity_torque(q) if ctl.needs_gravity else None,
+                           p_tip, v_tip, J, drift, x_d, v_d, a_d, {**ev.normal_force, **ev.interface}, force_d,
+                           self.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian)
+        if ctl.uses_forces:
+            inp.tau_contact = f[:nv] + robot.h
+            inp.surfaces = {c.name: (k.p_env, k.v_env) for c, k in zip(self.contacts, kins, strict=True)}
+            inp.touching = {c.name: m.touching for c, m in zip(self.contacts, modes, strict=True)}
         tau, zdot = ctl.command(inp)
-        f[:nv] += tau
+        cmd = np.zeros(len(drives.specs))  # per drive: joints, then bodies
+        cmd[:nv] = tau
+        for idx, v_ref, gain in self.servo:
+            cmd[idx] = gain * (v_ref - x[nQ + idx])  # body coordinate idx = drive idx
+        vmask = self._joint_motors if ctl.outputs == "voltage" else None
+        # drives, folded measured forces, solve
+        if ctl.uses_forces and rows:
+            out, qdd, lam, regular, cmd, zdot = self._solve_folded(inp, ctl, cmd, zdot, f, rows, cols, gammas,
+                                                                    meta, x, vmask)
+        else:
+            out = drives.apply(cmd, x, nQ, f, voltage=vmask)
+            qdd, lam, regular = self._solve(f, rows, cols, gammas, None)
         if zdot is not None:
             ydot[phase.z_slice] = zdot
-        body_force = np.zeros(len(self.body_names))
-        for idx, v_ref, gain in self.servo:
-            F = gain * (v_ref - x[nQ + idx])
-            f[idx] += F
-            body_force[idx - nv] = F
-        # solve
-        M = self._M
-        M[:nv, :nv] = robot.H
-        regular = True
-        if rows:
-            nr = len(rows)
-            A = np.zeros((nQ + nr, nQ + nr))
-            A[:nQ, :nQ] = M
-            A[:nQ, nQ:] = -np.array(cols).T
-            A[nQ:, :nQ] = np.array(rows)
-            b = np.concatenate([f, -np.asarray(gammas)])
-            z_all, regular = solve_linear(A, b)
-            qdd, lam = z_all[:nQ], z_all[nQ:]
-        else:
-            qdd = np.empty(nQ)
-            qdd[:nv], regular = solve_linear(M[:nv, :nv], f[:nv])
-            qdd[nv:] = f[nv:] / self.M_rest if nQ > nv else f[nv:]
-            lam = np.empty(0)
         if self.energy_slot >= 0:
-            ydot[self.energy_slot] = float(tau @ v) + float(body_force @ x[nQ + nv: nQ + nv + len(body_force)])
+            ydot[self.energy_slot] = out.power
+            ydot[self.energy_slot + 1] += out.dissipation
         xdot = np.concatenate([x[nQ:2 * nQ], qdd, ydot])
-        ev.xdot, ev.lam, ev.tau, ev.body_force, ev.p_tip, ev.x_d = xdot, lam, tau, body_force, p_tip, x_d
+        ev.xdot, ev.lam, ev.tau, ev.body_force, ev.p_tip, ev.x_d = xdot, lam, out.applied[:nv], out.applied[nv:], \
+            p_tip, x_d
+        ev.tau_cmd, ev.u = cmd[:nv], out.u
         ev.force_d = {k: val[0] for k, val in force_d.items()}
         ev.regular = regular
         for (name, kind, i), value in zip(meta, lam, strict=True):
@@ -520,7 +571,78 @@ class System:
                 ydot[self.energy_slot + 1] += float(c.friction.mu_k * max(ev.normal_force[c.name], 0.0)
                                                     * (d @ ev.slip[c.name]))
             xdot[2 * nQ + self.energy_slot + 1] = ydot[self.energy_slot + 1]
+        for name, slot in self.impulse_slots.items():
+            if name in ev.friction:
+                i0 = 2 * nQ + slot
+                xdot[i0] = ev.normal_force[name]
+                xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
         return ev
+
+    def _solve(self, f: np.ndarray, rows: list, cols: list, gammas: list, fold: np.ndarray | None
+               ) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Q̈ and the row forces λ of [[M, −Cᵀ − fold], [G, 0]] [Q̈; λ] = [f; −γ]."""
+        nQ, nv = self.nQ, self.nv
+        M = self._M
+        M[:nv, :nv] = self.robot.H + np.diag(self._D) if self.drives.any_motor else self.robot.H
+        if rows:
+            nr = len(rows)
+            A = np.zeros((nQ + nr, nQ + nr))
+            A[:nQ, :nQ] = M
+            A[:nQ, nQ:] = -np.array(cols).T
+            if fold is not None:
+                A[:nQ, nQ:] -= fold
+            A[nQ:, :nQ] = np.array(rows)
+            b = np.concatenate([f, -np.asarray(gammas)])
+            z_all, regular = solve_linear(A, b)
+            return z_all[:nQ], z_all[nQ:], regular
+        qdd = np.empty(nQ)
+        qdd[:nv], regular = solve_linear(M[:nv, :nv], f[:nv])
+        qdd[nv:] = f[nv:] / self.M_rest if nQ > nv else f[nv:]
+        return qdd, np.empty(0), regular
+
+    def _solve_folded(self, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zdot, f: np.ndarray, rows, cols,
+                      gammas, meta, x: np.ndarray, vmask):
+        """Solve with a force-reading controller whose measured forces include unknown row forces λ.
+
+        The controller is probed with a unit force on each row (its generalized column on the
+        joints, and +1 N on the contact's normal force for a normal row): B_j = τ(e_j) − τ₀.
+        B folds into the matrix for drives whose voltage does not clip; a clipped drive gives
+        a force independent of λ. The clipping pattern is re-checked with the solved λ.
+        A row whose force acts on the robot alone (rigid contact or stick on the fixed ground)
+        stays out of the measured joint force: cancelling it would leave it undetermined.
+        """
+        nQ, nv, drives = self.nQ, self.nv, self.drives
+        nr = len(rows)
+        B = np.zeros((nv, nr))
+        Dz = np.zeros((len(zdot), nr)) if zdot is not None else None
+        for j, (name, kind, _) in enumerate(meta):
+            fed_back = bool(np.any(cols[j][nv:]))
+            if kind != "n" and not fed_back:
+                continue
+            forces = inp.forces if kind != "n" else {**inp.forces, name: inp.forces[name] + 1.0}
+            tau_c = inp.tau_contact + cols[j][:nv] if fed_back else inp.tau_contact
+            tau_j, zdot_j = ctl.command(replace(inp, forces=forces, tau_contact=tau_c))
+            B[:, j] = tau_j - cmd[:nv]
+            if Dz is not None:
+                Dz[:, j] = zdot_j - zdot
+        sat_cmd = cmd
+        full = cmd.copy()
+        for _ in range(nv + 2):
+            fk = f.copy()
+            out = drives.apply(cmd, x, nQ, fk, voltage=vmask, sat_cmd=sat_cmd)
+            fold = np.zeros((nQ, nr))
+            for i in range(nv):
+                if not out.saturated[i]:
+                    fold[drives.targets[i]] += drives.gains[i] * B[i]
+            qdd, lam, regular = self._solve(fk, rows, cols, gammas, fold)
+            full = cmd.copy()
+            full[:nv] += B @ lam
+            check = drives.apply(full, x, nQ, np.zeros(nQ), voltage=vmask)
+            if np.array_equal(check.saturated, out.saturated):
+                break
+            sat_cmd = full
+        f[:] = fk
+        return check, qdd, lam, regular, full, (zdot + Dz @ lam if Dz is not None else None)
 
     def separate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, contact: Contact
                  ) -> np.ndarray:
@@ -538,12 +660,83 @@ class System:
     def _contact(self, name: str) -> Contact:
         return next(c for c in self.contacts if c.name == name)
 
-    @staticmethod
-    def _slip_direction(vt: np.ndarray, mode: ContactMode) -> np.ndarray:
-        if len(vt) == 1:
-            return np.asarray(mode.slip, float)
-        norm = float(np.linalg.norm(vt))
-        return vt / norm if norm > 1e-300 else np.asarray(mode.slip, float)
+    def _slip_direction(self, vt: np.ndarray, mode: ContactMode) -> np.ndarray:
+        """Unit sliding direction d in tangent coordinates (1-D: ±1).
+
+        The slip velocity's own direction v_t/|v_t| (eqs 21–24; 1-D: sgn, eqs 43–44)
+        while it points ahead of the mode's reference r (v_t·r > v_ε, the stick band);
+        otherwise r itself. The segment ends at a ``stop`` event where v_t·r falls to v_ε,
+        and 2-D ``turn`` events keep r within 60° of v_t, so the second branch only serves
+        a slip just started from rest (|v_t| ≤ v_ε) and the integrator's trial stages past
+        a stop: the force stays continuous across the stop instead of flipping there,
+        which would make the step size collapse. Never a smoothed sgn.
+        """
+        r = np.asarray(mode.slip, float)
+        if float(vt @ r) > self.slip_band:
+            return r if len(vt) == 1 else vt / math.sqrt(float(vt @ vt))
+        return r
+
+    def slip_acceleration(self, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:
+        """Tangential tip–environment acceleration [m/s²] in tangent coordinates at (x, ẋ)."""
+        nQ, nv = self.nQ, self.nv
+        self.robot.update(x[:nv], x[nQ:nQ + nv])
+        kin = self.kinematics(c, x)
+        qdd = xdot[nQ:2 * nQ]
+        a_env = c.body_axis * qdd[c.body_index] if c.body_index >= 0 else np.zeros(3)
+        return c.tangents @ (kin.J @ qdd[:nv] + kin.drift - a_env)
+
+    def _launch_directions(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
+                           ) -> list[ContactMode]:
+        """Modes whose 2-D slides from rest, still inside the stick band, slide the consistent way.
+
+        A slip from rest starts where it accelerates: d with a_t(d) = λ d, λ ≥ 0, a_t the
+        tangential acceleration when friction is −μ_k F d. With an anisotropic arm (tangential
+        mobility differing by direction) this is not the direction of the holding force, and
+        a slide that started along that one would swing round at |v_t| ≈ v_ε, where the
+        direction dynamics are stiff (rate ∝ 1/|v_t|). Newton on the angle (at most 4
+        iterations, two evaluations each); the reference r if it does not converge.
+        """
+        nQ, nv = self.nQ, self.nv
+        self.robot.update(x[:nv], x[nQ:nQ + nv])
+        out = list(modes)
+        for i, (c, mode) in enumerate(zip(self.contacts, modes, strict=True)):
+            if not (mode.from_rest and len(mode.slip) == 2 and mode.touching and not mode.stuck):
+                continue
+            r = np.asarray(mode.slip, float)
+            if float(self.slip_velocity(c, self.kinematics(c, x)) @ r) > self.slip_band:
+                out[i] = mode.with_(from_rest=False)  # launched: the slip's own direction from here on
+                continue
+            theta = float(np.arctan2(r[1], r[0]))
+            best = r
+            for _ in range(4):
+                phi, d, ahead = self._launch_cross(t, x, out, i, phase, theta)
+                if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):
+                    best = d
+                    break
+                dphi = (self._launch_cross(t, x, out, i, phase, theta + 1e-7)[0] - phi) / 1e-7
+                if not dphi < 0.0:  # a stable direction turns the acceleration back onto d
+                    break
+                theta -= float(np.clip(phi / dphi, -0.5, 0.5))
+            out[i] = mode.with_(slip=tuple(best), from_rest=False)
+        self.robot.update(x[:nv], x[nQ:nQ + nv])
+        return out
+
+    def _launch_cross(self, t: float, x: np.ndarray, modes: list[ContactMode], i: int, phase: Phase,
+                      theta: float) -> tuple[float, np.ndarray, float]:
+        """Sliding contact i along d = (cos θ, sin θ): (d × a_t, d, a_t · d) [m/s²]."""
+        c = self.contacts[i]
+        d = np.array([np.cos(theta), np.sin(theta)])
+        trial = list(modes)
+        trial[i] = modes[i].with_(slip=tuple(d), from_rest=False)
+        a = self.slip_acceleration(c, x, self.evaluate(t, x, trial, phase).xdot)
+        return float(d[0] * a[1] - d[1] * a[0]), d, float(a @ d)
+
+    def slip_velocity(self, c: Contact, kin: Kinematics, qd: np.ndarray | None = None) -> np.ndarray:
+        """Tangential tip–environment velocity [m/s] in tangent coordinates (at Q̇ = qd if given)."""
+        if qd is None:
+            return c.tangents @ (kin.v_tip - kin.v_env)
+        v_env = c.body_axis * qd[c.body_index] if c.body_index >= 0 else np.zeros(3)
+        return c.tangents @ (kin.J @ qd[: self.nv] - v_env)
 
     def rhs(self, modes: list[ContactMode], phase: Phase):
         """The function solve_ivp integrates in one mode and phase."""
@@ -557,61 +750,108 @@ class System:
     def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact) -> tuple[np.ndarray, Impact]:
         """Velocity jump when ``contact`` touches (its mode already says touching).
 
-        First assume the tip slides in its pre-impact slip direction (friction impulse
-        −μ_k d FΔt); if the tangential velocity after impact points against d, the
-        impact jams: zero tangential velocity, friction impulse an unknown (eqs 27–31).
+        Momentum law over Δt → 0 (eqs 27–31, 35–38): M(Q̇⁺ − Q̇⁻) = Cᵀ Λ with every bond,
+        stick and the new contact holding at velocity level, G Q̇⁺ = 0. With friction the
+        tip first slides in its pre-impact slip direction d (friction impulse −μ_k FΔt d,
+        the normal column tilted as in eq. 27). If the tangential velocity after the
+        impact points against d the assumption is wrong and the impact jams (eqs 30–31):
+        zero tangential velocity, friction impulse F_fΔt an unknown. A tip that arrives
+        without slip (|v_t| within the stick band) is tried jammed first; if holding it
+        needs more than μ_s FΔt it slides where that impulse pushes.
         """
         nQ, nv = self.nQ, self.nv
         q, v = x[:nv], x[nQ:nQ + nv]
         self.robot.update(q, v)
         qd_minus = x[nQ:2 * nQ].copy()
-        M = self._M.copy()
-        M[:nv, :nv] = self.robot.H
-        rows, cols, meta = self._impact_rows(x, modes, contact, jam=False)
-        z, _ = self._impact_solve(M, rows, cols, qd_minus)
-        jammed = False
+        M = self.mass_matrix()
         i_c = self.contacts.index(contact)
         kin = self.kinematics(contact, x)
-        friction_impulse = np.zeros(len(contact.tangents))
-        if contact.friction is not None and len(contact.tangents) and not modes[i_c].stuck:
-            d = np.asarray(modes[i_c].slip, float)
-            vt_after = contact.tangents @ (kin.J @ z[:nv] - contact.body_axis *
-                                          (z[contact.body_index] if contact.body_index >= 0 else 0.0))
-            lam_n = z[nQ + [m[1] for m in meta].index("n")]
-            friction_impulse = -contact.friction.mu_k * lam_n * d
-            if float(vt_after @ d) < 0.0:  # sliding assumption contradicted: jam
+        fr, k = contact.friction, len(contact.tangents)
+        vt_minus = self.slip_velocity(contact, kin, qd_minus) if k else np.zeros(0)
+
+        def solve(slide=None, jam=False):
+            rows, cols, meta = self._velocity_rows(x, modes, slide=(contact, slide) if slide is not None else None,
+                                                   jam=contact if jam else None)
+            z, _ = self._impact_solve(M, rows, cols, qd_minus)
+            lam = {m: z[nQ + j] for j, m in enumerate(meta)}
+            P_n = float(lam[(contact.name, "n", 0)])
+            P_t = np.array([lam.get((contact.name, "t", i), 0.0) for i in range(k)])
+            return z[:nQ], P_n, P_t
+
+        jammed = False
+        d = np.zeros(k)
+        if fr is None or not k or modes[i_c].stuck:
+            qd_plus, P_n, P_t = solve()
+        else:
+            speed = float(np.linalg.norm(vt_minus))
+            if speed > self.slip_band:
+                d = vt_minus / speed
+                qd_plus, P_n, _ = solve(slide=d)
+                P_t = -fr.mu_k * P_n * d
+                jammed = float(self.slip_velocity(contact, kin, qd_plus) @ d) < 0.0
+            else:
                 jammed = True
-                rows, cols, meta = self._impact_rows(x, modes, contact, jam=True)
-                z, _ = self._impact_solve(M, rows, cols, qd_minus)
-                friction_impulse = np.array([z[nQ + k] for k, m in enumerate(meta) if m[0] == contact.name
-                                             and m[1] == "t"])
-        qd_plus = z[:nQ]
-        lam_n = float(z[nQ + [m[1] if m[0] == contact.name else "" for m in meta].index("n")])
+            if jammed:
+                qd_plus, P_n, P_t = solve(jam=True)
+                if float(np.linalg.norm(P_t)) > fr.mu_s * P_n * (1.0 + CONE_TOL) + FORCE_ABS_TOL:
+                    # holding needs more than the cone gives: slide where the impulse pushes
+                    d = -P_t / float(np.linalg.norm(P_t))
+                    qd_plus, P_n, _ = solve(slide=d)
+                    P_t = -fr.mu_k * P_n * d
+                    jammed = False
         x_new = x.copy()
         x_new[nQ:2 * nQ] = qd_plus
         energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
-        return x_new, Impact(t, contact.name, lam_n, friction_impulse, jammed, energy_loss, qd_minus, qd_plus)
+        vt_plus = self.slip_velocity(contact, kin, qd_plus) if k else np.zeros(0)
+        return x_new, Impact(t, contact.name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d)
 
-    def _impact_rows(self, x, modes, contact, jam):
-        """Constraint rows holding after the impact: every active bond and stick, plus the new contact."""
+    def mass_matrix(self) -> np.ndarray:
+        """M at the last ``robot.update``, a copy: H plus rigid gears' rotor inertias, then the other coordinates."""
+        M = self._M.copy()
+        M[:self.nv, :self.nv] = self.robot.H + np.diag(self._D)
+        return M
+
+    def project_velocity(self, x: np.ndarray, modes: list[ContactMode]) -> np.ndarray:
+        """x with Q̇ moved onto every active velocity constraint (bonds, rigid contacts, sticks).
+
+        The smallest change in the kinetic-energy norm, M ΔQ̇ = Gᵀ Λ, G Q̇⁺ = 0: an impulse
+        that removes what the constraints forbid (used when a slide stops inside the stick
+        band, where the residual slip is at most ``solver.stick_velocity``).
+        """
+        nQ, nv = self.nQ, self.nv
+        self.robot.update(x[:nv], x[nQ:nQ + nv])
+        rows, cols, _ = self._velocity_rows(x, modes)
+        if not rows:
+            return x
+        M = self.mass_matrix()
+        z, _ = self._impact_solve(M, rows, cols, x[nQ:2 * nQ])
+        x_new = x.copy()
+        x_new[nQ:2 * nQ] = z[:nQ]
+        return x_new
+
+    def _velocity_rows(self, x, modes, slide: tuple[Contact, np.ndarray] | None = None, jam: Contact | None = None):
+        """Velocity constraints of the touching contacts: bond rows, sticks, tangential chain bonds.
+
+        ``slide = (contact, d)`` tilts that contact's normal column by the sliding friction
+        −μ_k d; ``jam`` adds stick rows for a contact that is not (yet) stuck.
+        """
         rows, cols, meta = [], [], []
+        dummy_f, dummy_y = np.zeros(self.nQ), np.zeros(self.ny)
         for c, mode in zip(self.contacts, modes, strict=True):
             if not mode.touching:
                 continue
             kin = self.kinematics(c, x)
-            dummy_f, dummy_y = np.zeros(self.nQ), np.zeros(self.ny)
             _, row, _, _, _ = self._chain(c, c.normal, True, 0.0, kin, x, dummy_f, dummy_y, None, False)
-            stick = c.friction is not None and len(c.tangents) and (mode.stuck or (jam and c is contact))
             if row is not None:
                 col = row
-                if c.friction is not None and len(c.tangents) and not stick and c is contact:
-                    d = np.asarray(mode.slip, float)
+                if slide is not None and slide[0] is c:
+                    d = slide[1]
                     col = row - sum(c.friction.mu_k * d[i] * self._row(c, c.tangents[i], kin)
                                     for i in range(len(c.tangents)))
                 rows.append(row)
                 cols.append(col)
                 meta.append((c.name, "n", 0))
-            if stick and row is not None:
+            if c.friction is not None and len(c.tangents) and (mode.stuck or jam is c):
                 for i, t_dir in enumerate(c.tangents):
                     r = self._row(c, t_dir, kin)
                     rows.append(r)

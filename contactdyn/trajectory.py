@@ -15,7 +15,7 @@ import numpy as np
 
 __all__ = ["Move", "Ramp", "Reference", "profile"]
 
-PROFILES = ("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step", "circle")
+PROFILES = ("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step", "circle", "exponential")
 
 
 def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, float, float]:
@@ -26,7 +26,14 @@ def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, 
     ``constant_velocity``: σ = τ. ``step``: σ = 1 from τ = 0.
     ``velocity_ramp``: velocity rises linearly over the move and then holds: σ = τ²/2
     for τ ≤ 1, then τ − 1/2 (the move's displacement is then a velocity × duration).
+    ``exponential``: σ = 1 − e^(−τ), the duration being the time constant (never clamped;
+    case 1's position-based push follows its exponential force ramps this way).
     """
+    if kind == "exponential":
+        if tau < 0.0:
+            return 0.0, 0.0, 0.0
+        e = math.exp(-tau)
+        return 1.0 - e, e, -e
     if kind == "velocity_ramp":
         if tau < 0.0:
             return 0.0, 0.0, 0.0

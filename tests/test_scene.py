@@ -84,11 +84,18 @@ def test_override_changes_the_physics():
 
 
 def test_a_scene_models_only_what_it_needs():
-    """State = robot joints + what the scene names: no cart, no chain masses, no motor angles here."""
+    """State = robot joints + what the scene names: no cart, no chain masses, no motor angles here.
+
+    B1's contact has friction along one tangent: its impulses ∫F dt, ∫F_f dt are 2 first-order
+    states (the step size follows the forces the stick/slip events watch; System.impulse_slots).
+    """
     rigid = System(load_scene("b1", {"contact.tip.normal": {"direction": [0, 1, 0], "model": "rigid"}}))
-    assert rigid.nQ == rigid.nv == 2 and rigid.ny == 0 and rigid.n == 4
+    assert rigid.nQ == rigid.nv == 2 and rigid.ny == 2 and rigid.n == 6
+    frictionless = System(load_scene("b1", {"contact.tip.normal": {"direction": [0, 1, 0], "model": "rigid"},
+                                            "contact.tip.tangent": {"model": "free"}}))
+    assert frictionless.ny == 0 and frictionless.n == 4
     model_b = System(load_scene("b1"))
-    assert model_b.nQ == 3 and model_b.ny == 0  # + the surface's equivalent mass
+    assert model_b.nQ == 3 and model_b.ny == 2  # + the surface's equivalent mass
     model_c = System(load_scene("b1", {"contact.tip.normal": {"direction": [0, 1, 0], "model": "c", "k": 1e5,
                                                                "b": 1.0}}))
-    assert model_c.nQ == 2 and model_c.ny == 1  # + the damped surface end, relaxing after separation
+    assert model_c.nQ == 2 and model_c.ny == 3  # + the damped surface end, relaxing after separation

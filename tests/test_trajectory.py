@@ -55,3 +55,20 @@ def test_circle_move_stays_on_its_circle_with_consistent_derivatives():
     acc = np.array([move.at(t)[2] for t in ts])
     smooth = (np.abs(ts - 0.4) > 2e-3) & (np.abs(ts - 1.6) > 2e-3) & (ts > 0) & (ts < 2)  # angle-acceleration jumps
     assert np.max(np.abs(acc_fd - acc)[smooth]) < 5e-3
+
+
+def test_exponential_move_follows_the_exponential_force_ramp():
+    """Case 1's position-based push: the displacement rises like its force set-point, 1 − e^(−t/T)."""
+    move = Move(np.array([0.04, 0.0, -0.04]), start=1.0, duration=0.2, kind="exponential")
+    ramp = Ramp(100.0, start=1.0, duration=0.2, kind="exponential")
+    for t in (0.5, 1.0, 1.1, 1.7, 5.0):
+        x, v, a = move.at(t)
+        F, dF = ramp.at(t)
+        assert x[0] == pytest.approx(0.04 * F / 100.0, abs=1e-15) and x[2] == pytest.approx(-x[0])
+        assert v[0] == pytest.approx(0.04 * dF / 100.0, abs=1e-15)
+    ts = np.linspace(1.0, 2.0, 2001)
+    xs = np.array([move.at(t)[0][0] for t in ts])
+    vs = np.array([move.at(t)[1][0] for t in ts])
+    accs = np.array([move.at(t)[2][0] for t in ts])
+    assert np.max(np.abs(np.gradient(xs, ts)[1:-1] - vs[1:-1])) < 1e-5
+    assert np.max(np.abs(np.gradient(vs, ts)[1:-1] - accs[1:-1])) < 1e-3

@@ -1,6 +1,6 @@
 """Controllers, registered by name (``kind`` in a scene's controller table)."""
 
-from . import pd  # noqa: F401  (registers task_pd, joint_pd)
-from .base import CONTROLLERS, ControlInput, Controller, read_controller, register
+from . import dynamic, force, pd, voltage  # noqa: F401  (register position_dynamic, task_force, task_pd, ...)
+from .base import CONTROLLERS, BindContext, ControlInput, Controller, read_controller, register
 
-__all__ = ["CONTROLLERS", "ControlInput", "Controller", "read_controller", "register"]
+__all__ = ["CONTROLLERS", "BindContext", "ControlInput", "Controller", "read_controller", "register"]

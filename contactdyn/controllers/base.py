@@ -3,16 +3,25 @@
 A controller never reaches into the integrator. It receives a :class:`ControlInput`
 (state, tip kinematics, model terms, references and measured contact forces) and returns
 joint torques [N·m or N] and the rates of its own states (integrators), if it has any.
+Where a joint has a motor the system turns the torque into a voltage by inverting the
+motor model (see :mod:`contactdyn.drives`); a controller with ``outputs = "voltage"``
+returns voltages [V] instead.
+
+Measured forces. Deformable contacts give their force as a function of the state. A bond
+(model b, rigid contact) or a stick has an unknown force that only the system's linear
+solve knows; a controller that reads forces (``uses_forces = True``) must then be affine
+in them (τ = τ₀ + B F, ż = ż₀ + D F) and the system folds B into its linear system, so
+the force it measures is the exact one at the same instant (no delay, no iteration).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 
-__all__ = ["ControlInput", "Controller", "CONTROLLERS", "register", "read_controller", "FEEDFORWARD"]
+__all__ = ["ControlInput", "Controller", "BindContext", "CONTROLLERS", "register", "read_controller", "FEEDFORWARD"]
 
 FEEDFORWARD = ("none", "gravity", "bias")
 
@@ -22,7 +31,7 @@ class ControlInput:
     t: float  #: scene time [s]
     q: np.ndarray  #: joint positions [rad or m]
     v: np.ndarray  #: joint velocities
-    H: np.ndarray  #: inertia matrix (true model)
+    H: np.ndarray  #: inertia matrix of the rigid model, reflected rotor inertias included
     h: np.ndarray  #: Coriolis, centrifugal and uncompensated gravity
     gravity: np.ndarray | None  #: uncompensated gravity load g(q), when the controller asked for it
     p_tip: np.ndarray  #: tip position [m]
@@ -32,12 +41,33 @@ class ControlInput:
     x_d: np.ndarray | None  #: reference position (task [m] or joint), None when the phase has none
     v_d: np.ndarray | None
     a_d: np.ndarray | None
-    forces: dict[str, float]  #: measured normal contact force per contact [N], > 0 pressing
-    force_d: dict[str, tuple[float, float]]  #: force set-point and its rate per contact [N, N/s]
-    normals: dict[str, np.ndarray]  #: contact normals (unit, world)
+    #: measured contact force [N], > 0 pressing: normal per contact name, tangential chain per "<contact>.t1"
+    forces: dict[str, float]
+    #: force set-point and its rate [N, N/s]: per contact (normal) or "<contact>.t1" (tangential)
+    force_d: dict[str, tuple[float, float]]
+    #: unit direction of every set-point key (contact normals, "<contact>.t1" tangents); the robot pushes along −u
+    normals: dict[str, np.ndarray]
     z: np.ndarray  #: controller states
     R_tip: np.ndarray | None = None  #: tip frame orientation (3, 3)
     J_ang: np.ndarray | None = None  #: tip angular Jacobian (3, nv)
+    #: measured generalized contact force on the joints, Σ_c J_cᵀ F_c, friction included [N·m or N];
+    #: without forces of constraints on the robot alone (rigid contact or stick on the fixed ground)
+    tau_contact: np.ndarray | None = None
+    #: per contact: a point of the undeformed surface [m] and its velocity [m/s] (world)
+    surfaces: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    touching: dict[str, bool] = field(default_factory=dict)  #: contact modes
+
+
+@dataclass(frozen=True)
+class BindContext:
+    """What a controller may check or resolve once the system exists (before any run)."""
+
+    scene: Any  #: the Scene
+    phase: Any  #: the PhaseSpec this controller runs
+    index: int  #: phase index
+    joint_names: list[str]
+    motorized: np.ndarray  #: bool per joint: the joint has a motor (accepts voltages)
+    key: str  #: key path of the controller table, for errors (e.g. "phase[1].controller")
 
 
 class Controller:
@@ -46,10 +76,15 @@ class Controller:
     name: ClassVar[str] = ""
     n_states: int = 0
     needs_gravity: bool = False
+    uses_forces: bool = False  #: reads measured forces (then it must be affine in them)
+    outputs: str = "torque"  #: "torque" (generalized forces) or "voltage" (motor voltages [V])
 
     def __init__(self, config: Any, nv: int):
         self.config = config
         self.nv = nv
+
+    def bind(self, context: BindContext) -> None:
+        """Check the scene and resolve defaults (may set ``n_states``); raise SceneError on misuse."""
 
     def initial_states(self, inp: ControlInput) -> np.ndarray:
         return np.zeros(self.n_states)

@@ -1,10 +1,10 @@
 """PD control in joint space or task space, with optional feedforward and force set-point.
 
 Task space: f = K_p P (x_d − x) + K_d P (ẋ_d − ẋ) − Σ F_d n, τ = Jᵀ f [+ feedforward],
-where P projects on the position-controlled axes and F_d n presses along each contact
-normal n with the force set-point F_d (benchmark B1's law). Optionally the task PD also
-holds a tool axis a (e.g. a pencil, the tip frame's local ``tool_axis``) along a world
-direction d: moment m = K_o (a × d) − D_o ω⊥, τ += J_ωᵀ m, ω⊥ the angular velocity
+where P projects on the position-controlled axes and F_d n presses with each force set-point F_d
+along its direction n: a contact normal (benchmark B1's law) or a tangent (case 1's F1). Optionally
+the task PD also holds a tool axis a (e.g. a pencil, the tip frame's local ``tool_axis``) along a
+world direction d: moment m = K_o (a × d) − D_o ω⊥, τ += J_ωᵀ m, ω⊥ the angular velocity
 without its roll about a (a 5-DOF robot cannot control that roll). Joint space:
 τ = K_p (q_d − q) + K_d (q̇_d − q̇) [+ feedforward]. Feedforward: ``none``, ``gravity``
 (the uncompensated gravity load g(q)) or ``bias`` (h(q, q̇)).

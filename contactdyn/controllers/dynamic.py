@@ -1,0 +1,337 @@
+"""Dynamic control (the paper's Appendix): computed torque with a prescribed error transient.
+
+``position_dynamic`` (A7): τ = H(q) q̈* + h(q, q̇) − τ_c, where τ_c = Σ J_cᵀ F_c is the
+measured contact force on the joints and q̈* makes the tracking error η obey the desired
+transient η̈ = P(η, η̇) = −K_p η − K_v η̇. Joint space: η = q − q_d, q̈* = q̈_d + P. Task
+space: η = x − x_d (tip), a* = ẍ_d + P, q̈* = J⁺(a* − J̇q̇) − (I − J⁺J) k_null q̇. Cancelling
+τ_c decouples the robot from its contacts: with an exact model the error obeys P whatever
+the environment does. Option ``force_reference``: along a contact normal with a force
+set-point the position reference becomes the depth the nominal environment needs for F_d,
+s_d = F_d / k (the position-based way to press).
+
+``force_dynamic`` (A10): along each contact normal with a force set-point the nominal
+environment F = m s̈ + b ṡ + k s (s the penetration [m]) turns the force target
+F* = F_d + ∫Q(μ) dt, Q(μ) = −K_F μ, μ = F − F_d, into the penetration acceleration
+s̈* = (F* − b ṡ − k s) / m, the tip acceleration −s̈* n; then computed torque as in A7.
+With an exact model F = F*, so μ = ∫Q(μ) dt, i.e. μ̇ = −K_F μ. A massless nominal model
+(m = 0, b > 0) has relative degree one: s̈* = (Ḟ_d − K_F μ − k ṡ) / b gives μ̇ = −K_F μ
+directly. The other task directions are damped (a* = −K_v ẋ). While a contact does not
+touch, its normal is treated like the other directions and its integral is frozen.
+
+``hybrid``: A7 along ``axes`` (default: every direction orthogonal to the force normals)
+tracking a task-space reference, A10 along the normals: the position/force split of case 2.
+
+Gains are physical: K_p [1/s²] and K_v [1/s] of the error transient (defaults 400 and 40:
+ω = 20 rad/s, critically damped), K_F [1/s] the force error rate (default 20: time constant
+50 ms), k_null [1/s] the null-space joint damping of redundant robots (default 10). The
+``nominal`` table {k [N/m], b [N·s/m], m [kg]} is the environment the controller believes
+(default: the scene's own contact model when it is (b) or (c); (a) and chains need one).
+
+Measured forces the system cannot know before its linear solve (bonds) enter exactly: these
+laws are affine in them (see :mod:`contactdyn.controllers.base`). Forces of constraints that
+hold the robot alone (a rigid contact on the fixed ground, sticking on it) are not in τ_c:
+cancelling them would leave them undetermined.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SceneError
+from ..scene import Mass, Stage
+from .base import BindContext, ControlInput, Controller, register
+
+__all__ = ["NominalEnvironment", "PositionDynamic", "ForceDynamic", "Hybrid", "nominal_from_chain"]
+
+KP, KV, KF, K_NULL = 400.0, 40.0, 20.0, 10.0  #: default gains [1/s², 1/s, 1/s, 1/s]
+
+
+@dataclass(frozen=True)
+class NominalEnvironment:
+    """The environment model a controller believes, along a contact normal: F = m s̈ + b ṡ + k s."""
+
+    k: float  #: [N/m]
+    b: float = 0.0  #: [N·s/m]
+    m: float = 0.0  #: equivalent mass riding with the tip [kg]
+
+
+def nominal_from_chain(chain) -> tuple[NominalEnvironment | None, bool]:
+    """The single-mass equivalent of a contact's normal chain and whether it is exact.
+
+    Model (c) and (b) are exact; other linear chains give their static series stiffness
+    only (exact for a position-based reference, not for A10); rigid or nonlinear: None.
+    """
+    env, rob = chain.environment, chain.robot
+    if not rob and len(env) == 1 and isinstance(env[0], Stage) and env[0].law == "linear":
+        return NominalEnvironment(env[0].k, env[0].b, 0.0), True
+    if not rob and len(env) == 2 and isinstance(env[0], Stage) and isinstance(env[1], Mass) and \
+            env[0].law == "linear":
+        return NominalEnvironment(env[0].k, env[0].b, env[1].m), True
+    stages = [e for e in (*env, *rob) if isinstance(e, Stage)]
+    if not stages or any(s.law != "linear" for s in stages):
+        return None, False
+    return NominalEnvironment(1.0 / sum(1.0 / s.k for s in stages)), False
+
+
+# ---- reading ------------------------------------------------------------------------------
+def _gain(r, name: str, default: float, unit: str) -> np.ndarray:
+    if isinstance(r.raw(name, default), list):
+        g = r.vector(name, unit=unit)
+        if np.any(g < 0.0):
+            raise r.error(name, f"gains >= 0 [{unit}]", g.tolist())
+        return g
+    return np.array([r.float(name, default, lo=0.0, unit=unit)])
+
+
+def _nominal(r, need_dynamics: bool) -> NominalEnvironment | None:
+    if not r.has("nominal"):
+        return None
+    n = r.sub("nominal")
+    env = NominalEnvironment(n.float("k", lo=0.0, unit="N/m"), n.float("b", 0.0, lo=0.0, unit="N·s/m"),
+                             n.float("m", 0.0, lo=0.0, unit="kg"))
+    n.finish()
+    if need_dynamics and env.m == 0.0 and env.b == 0.0:
+        raise n.error("m", "m > 0 or b > 0 (A10 turns force into motion through the model's mass or damping)",
+                      0.0)
+    return env
+
+
+def _axes(r) -> np.ndarray | None:
+    if not r.has("axes"):
+        return None
+    raw = r.raw("axes")
+    if not isinstance(raw, list) or not raw or not all(isinstance(a, list) for a in raw):
+        raise r.error("axes", "a list of direction vectors", raw)
+    from ..config import Reader
+
+    axes = np.array([Reader({"a": a}, r.key("axes"), r.file).vector("a", size=3, unit_norm=True) for a in raw])
+    if np.max(np.abs(axes @ axes.T - np.eye(len(axes)))) > 1e-9:
+        raise r.error("axes", "mutually orthogonal directions", raw)
+    return axes
+
+
+# ---- shared task-space pieces ---------------------------------------------------------------
+def _check_gain_size(g: np.ndarray, sizes: tuple[int, ...], key: str, file) -> None:
+    if len(g) not in sizes:
+        raise SceneError(key, f"one gain or {' or '.join(str(s) for s in sizes[1:])} (one per axis or joint)",
+                         g.tolist(), file)
+
+
+class _Pinv:
+    """J⁺ of the last Jacobian (the force probes call the law again at the same state)."""
+
+    def __init__(self):
+        self.key: bytes = b""
+        self.value = np.zeros((0, 0))
+
+    def __call__(self, J: np.ndarray) -> np.ndarray:
+        key = J.tobytes()
+        if key != self.key:
+            u, s, vt = np.linalg.svd(J, full_matrices=False)
+            keep = s > 1e-10 * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, bool)
+            self.value = (vt[keep].T / s[keep]) @ u[:, keep].T
+            self.key = key
+        return self.value
+
+
+def joint_acceleration(inp: ControlInput, a: np.ndarray, k_null: float, pinv=None) -> np.ndarray:
+    """q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for a desired tip acceleration a [m/s²]."""
+    J = inp.J
+    Jp = pinv(J) if pinv is not None else np.linalg.pinv(J, rcond=1e-10)
+    qdd = Jp @ (a - inp.drift)
+    if k_null > 0.0 and J.shape[1] > 3:
+        qdd -= (np.eye(J.shape[1]) - Jp @ J) @ (k_null * inp.v)
+    return qdd
+
+
+def _contact_checks(context: BindContext, names: list[str], need_exact: bool, nominal, what: str
+                    ) -> dict[str, NominalEnvironment]:
+    """Resolve each force-controlled contact's nominal environment; the contact must be at the tip frame."""
+    scene, key = context.scene, context.key
+    out = {}
+    for name in names:
+        spec = scene.contacts[name]
+        if spec.frame != scene.robot.tip:
+            raise SceneError(f"contact.{name}.frame", f"the controlled tip frame {scene.robot.tip!r} ({what} "
+                             "uses the tip Jacobian)", spec.frame, scene.file)
+        if nominal is not None:
+            out[name] = nominal
+            continue
+        env, exact = nominal_from_chain(spec.normal_chain)
+        if env is None or (need_exact and not exact):
+            raise SceneError(f"{key}.nominal", f"a nominal environment {{k, b, m}} for contact {name!r} ({what} "
+                             "needs one: its normal model has no exact single-mass equivalent)", None, scene.file)
+        out[name] = env
+    return out
+
+
+# ---- A7 -----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PositionDynamicConfig:
+    space: str  #: "joint" or "task"
+    kp: np.ndarray  #: [1/s²], one, or per joint / per world axis
+    kv: np.ndarray  #: [1/s]
+    k_null: float  #: [1/s]
+    force_reference: bool
+    nominal: NominalEnvironment | None
+    kind: str = "position_dynamic"
+
+
+@register
+class PositionDynamic(Controller):
+    name = "position_dynamic"
+    uses_forces = True
+
+    @staticmethod
+    def read(r) -> PositionDynamicConfig:
+        return PositionDynamicConfig(
+            space=r.str("space", "task", choices=["joint", "task"]),
+            kp=_gain(r, "kp", KP, "1/s²"), kv=_gain(r, "kv", KV, "1/s"),
+            k_null=r.float("k_null", K_NULL, lo=0.0, unit="1/s"),
+            force_reference=r.bool("force_reference", False),
+            nominal=_nominal(r, need_dynamics=False))
+
+    def bind(self, context: BindContext) -> None:
+        self._pinv = _Pinv()
+        cfg, key, file = self.config, context.key, context.scene.file
+        dims = self.nv if cfg.space == "joint" else 3
+        for name in ("kp", "kv"):
+            _check_gain_size(getattr(cfg, name), (1, dims), f"{key}.{name}", file)
+        ref = context.phase.reference
+        if ref is not None and ref.space != cfg.space:
+            raise SceneError(f"phase[{context.index}].reference.space", f"{cfg.space!r} (the controller's space)",
+                             ref.space, file)
+        self.envs: dict[str, NominalEnvironment] = {}
+        if cfg.force_reference:
+            if cfg.space != "task":
+                raise SceneError(f"{key}.force_reference", "task space (the reference moves along contact normals)",
+                                 "joint space", file)
+            self.envs = _contact_checks(context, [f.contact for f in context.phase.forces], False, cfg.nominal,
+                                        "force_reference")
+
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
+        cfg = self.config
+        if cfg.space == "joint":
+            if inp.x_d is None:
+                qdd = -cfg.kv * inp.v
+            else:
+                qdd = inp.a_d - cfg.kp * (inp.q - inp.x_d) - cfg.kv * (inp.v - inp.v_d)
+        else:
+            if inp.x_d is None:
+                a = -cfg.kv * inp.v_tip
+            else:
+                x_d, v_d, a_d = inp.x_d, inp.v_d, inp.a_d
+                if self.envs:
+                    x_d, v_d, a_d = self._pressing_reference(inp)
+                a = a_d - cfg.kp * (inp.p_tip - x_d) - cfg.kv * (inp.v_tip - v_d)
+            qdd = joint_acceleration(inp, a, cfg.k_null, self._pinv)
+        return inp.H @ qdd + inp.h - inp.tau_contact, None
+
+    def _pressing_reference(self, inp: ControlInput):
+        """Along each touching contact normal: depth F_d/k below the undeformed surface."""
+        x_d, v_d, a_d = inp.x_d.copy(), inp.v_d.copy(), inp.a_d.copy()
+        for name, env in self.envs.items():
+            if not inp.touching.get(name) or name not in inp.force_d:
+                continue
+            n = inp.normals[name]
+            p_s, v_s = inp.surfaces[name]
+            F_d, dF_d = inp.force_d[name]
+            x_d += n * (n @ p_s - F_d / env.k - n @ x_d)
+            v_d += n * (n @ v_s - dF_d / env.k - n @ v_d)
+            a_d -= n * (n @ a_d)
+        return x_d, v_d, a_d
+
+
+# ---- A10 and hybrid ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ForceDynamicConfig:
+    kp: np.ndarray  #: [1/s²] position transient (hybrid) — one, or per world axis
+    kv: np.ndarray  #: [1/s] position transient / damping of the free directions
+    kf: float  #: [1/s] force error rate, Q(μ) = −K_F μ
+    k_null: float  #: [1/s]
+    axes: np.ndarray | None  #: (k, 3) position-controlled directions (hybrid), None: complement of the normals
+    nominal: NominalEnvironment | None
+    kind: str = "force_dynamic"
+
+
+@register
+class ForceDynamic(Controller):
+    name = "force_dynamic"
+    uses_forces = True
+    tracks_position = False
+
+    @classmethod
+    def read(cls, r) -> ForceDynamicConfig:
+        return ForceDynamicConfig(
+            kp=_gain(r, "kp", KP, "1/s²") if cls.tracks_position else np.array([KP]),
+            kv=_gain(r, "kv", KV, "1/s"),
+            kf=r.float("kf", KF, lo=0.0, lo_open=True, unit="1/s"),
+            k_null=r.float("k_null", K_NULL, lo=0.0, unit="1/s"),
+            axes=_axes(r) if cls.tracks_position else None,
+            nominal=_nominal(r, need_dynamics=True), kind=cls.name)
+
+    def bind(self, context: BindContext) -> None:
+        self._pinv = _Pinv()
+        cfg, key, file, phase = self.config, context.key, context.scene.file, context.phase
+        for name in ("kp", "kv"):
+            _check_gain_size(getattr(cfg, name), (1, 3), f"{key}.{name}", file)
+        names = [f.contact for f in phase.forces]
+        if not names:
+            raise SceneError(f"phase[{context.index}].force", f"a force set-point ({self.name} controls force "
+                             "along contact normals)", [], file)
+        ref = phase.reference
+        if self.tracks_position and (ref is None or ref.space != "task"):
+            raise SceneError(f"phase[{context.index}].reference", "a task-space reference (hybrid tracks "
+                             "position along its axes)", None if ref is None else ref.space, file)
+        if not self.tracks_position and ref is not None:
+            raise SceneError(f"phase[{context.index}].reference", "no reference (force_dynamic is a pure force "
+                             "law; use hybrid to track position along other directions)", ref.space, file)
+        self.envs = _contact_checks(context, names, True, cfg.nominal, self.name)
+        self.names = names
+        self.n_states = len(names)  # ∫Q(μ) dt per force-controlled contact [N]
+        normals = np.array([context.scene.contacts[n].normal for n in names])
+        if cfg.axes is not None:
+            if np.max(np.abs(cfg.axes @ normals.T)) > 1e-9:
+                raise SceneError(f"{key}.axes", "directions orthogonal to the force-controlled normals "
+                                 f"{normals.tolist()}", cfg.axes.tolist(), file)
+            axes = cfg.axes
+        else:  # the orthogonal complement of the normals
+            _, sv, vt = np.linalg.svd(normals)
+            axes = vt[int(np.sum(sv > 1e-9)):]
+        self.P = axes.T @ axes  #: projector on the position-controlled directions
+
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray]:
+        cfg = self.config
+        P = self.P.copy()
+        a_force = np.zeros(3)
+        zdot = np.zeros(self.n_states)
+        for i, name in enumerate(self.names):
+            n = inp.normals[name]
+            if not inp.touching.get(name):
+                P += np.outer(n, n)  # not touching yet: like a free direction, integral frozen
+                continue
+            env = self.envs[name]
+            p_s, v_s = inp.surfaces[name]
+            s, sd = n @ (p_s - inp.p_tip), n @ (v_s - inp.v_tip)  # penetration [m], its rate [m/s]
+            F_d, dF_d = inp.force_d[name]
+            mu = inp.forces[name] - F_d  # force error [N]
+            if env.m > 0.0:
+                sdd = (F_d + inp.z[i] - env.b * sd - env.k * s) / env.m
+            else:
+                sdd = (dF_d - cfg.kf * mu - env.k * sd) / env.b
+            a_force -= sdd * n
+            zdot[i] = -cfg.kf * mu
+        if self.tracks_position:
+            a_pos = inp.a_d - cfg.kp * (inp.p_tip - inp.x_d) - cfg.kv * (inp.v_tip - inp.v_d)
+        else:
+            a_pos = -cfg.kv * inp.v_tip
+        qdd = joint_acceleration(inp, P @ a_pos + a_force, cfg.k_null, self._pinv)
+        return inp.H @ qdd + inp.h - inp.tau_contact, zdot
+
+
+@register
+class Hybrid(ForceDynamic):
+    name = "hybrid"
+    tracks_position = True
