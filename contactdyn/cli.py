@@ -307,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
                           epilog="example:\n  contactdyn plot runs/b1 --out figs --format png,svg")
     plot.add_argument("run", help="saved run (RUN.npz + RUN.json)")
     plot.add_argument("--out", metavar="DIR", help="output folder")
-    plot.add_argument("--format", type=_csv_list, default=["png"], help="comma-separated formats, e.g. png,svg")
+    plot.add_argument("--format", type=_csv_list, help="comma-separated formats (default png,svg)")
     plot.set_defaults(func=_delegate("plots", "plot_command"))
 
     bench = sub.add_parser("bench", help="work-precision benchmark of the integrators on a scene",
