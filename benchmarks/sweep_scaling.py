@@ -6,15 +6,16 @@ A sweep of RUNS short B1 runs (``duration`` seconds at 200 Hz output, contact st
 log-spaced over 5e4..2e5 N/m) is timed end to end (``run_sweep``: results and summary
 written to a temporary folder) in five ways: in this process (no pool: the baseline),
 a process pool of 1 and of 2 workers, a Dask ``LocalCluster`` of 1 and of 2 worker
-processes (cluster start-up timed separately, not in the sweep time). Each is repeated
-REPEATS times; the median and the range are reported, with how busy the whole machine
-was meanwhile (from /proc/stat: a sweep on one worker of an otherwise idle 2-core machine
+processes. Each is repeated REPEATS times; the median and the range are reported, with how
+busy the whole machine was meanwhile (from /proc/stat: a sweep on one worker of an otherwise idle 2-core machine
 keeps it about 50 % busy; more means someone else was computing too).
 
 - speed-up = time with 1 worker / time with 2 workers (the goal: >= 1.7 on 2 cores);
 - per-run overhead = (time with 1 worker − time in this process) / RUNS: what the pool or
-  Dask costs per run, start-up of the workers (imports) included; the start-up alone is
-  estimated from a 1-run sweep the same way.
+  Dask costs per run. Start-up is reported apart: the pool's workers fork from a server
+  that imported the package once per process (started before timing); each Dask
+  measurement starts a fresh cluster (not timed), whose workers import the package during
+  a 1-run sweep (timed: "start-up of a 1-run sweep", minus the same sweep in this process).
 
 Writes benchmarks/out/sweep_scaling.json.
 """
@@ -64,6 +65,18 @@ def _time(sweep, **kw) -> tuple[float, dict, float]:
         return wall, report.counts, (busy1 - busy0) / max(total1 - total0, 1)
 
 
+def _time_dask(big, one, n_workers: int) -> tuple[float, dict, float, float, float]:
+    """Start a LocalCluster, run the 1-run sweep (workers import the package), time the big one, close."""
+    from distributed import LocalCluster
+
+    t0 = time.perf_counter()
+    with LocalCluster(n_workers=n_workers, processes=True, threads_per_worker=1, dashboard_address=None) as cluster:
+        start = time.perf_counter() - t0
+        t1 = _time(one, scheduler=cluster.scheduler_address)[0]
+        t, counts, busy = _time(big, scheduler=cluster.scheduler_address)
+    return t, counts, busy, t1, start
+
+
 def _stats(times: list[float]) -> dict:
     return {"median_s": statistics.median(times), "min_s": min(times), "max_s": max(times), "all_s": times}
 
@@ -78,21 +91,13 @@ def main() -> None:
 
     big, one = _sweep(args.runs, args.duration), _sweep(1, args.duration)
     modes: dict[str, dict] = {"inline": {"workers": 0}, "pool1": {"workers": 1}, "pool2": {"workers": 2}}
-    clusters: dict[str, object] = {}
-    cluster_start: dict[str, float] = {}
+    cluster_start: dict[str, list[float]] = {}
     if not args.no_dask:
         import logging
 
-        from distributed import LocalCluster
-
         logging.getLogger("distributed").setLevel(logging.ERROR)
-
-        for n in (1, 2):
-            t0 = time.perf_counter()
-            clusters[f"dask{n}"] = LocalCluster(n_workers=n, processes=True, threads_per_worker=1,
-                                                dashboard_address=None)
-            cluster_start[f"dask{n}"] = time.perf_counter() - t0
-            modes[f"dask{n}"] = {"scheduler": clusters[f"dask{n}"].scheduler_address}
+        modes.update({"dask1": {"dask_workers": 1}, "dask2": {"dask_workers": 2}})
+        cluster_start = {"dask1": [], "dask2": []}
     _time(one, workers=0)  # warm this process up (imports, first URDF parse) before the baseline is timed
     first_pool = _time(one, workers=1)[0]  # starts the fork server (once per process: not charged to a mode)
     load0 = os.getloadavg()
@@ -100,18 +105,19 @@ def main() -> None:
     single: dict[str, list[float]] = {m: [] for m in modes}
     busy: dict[str, list[float]] = {m: [] for m in modes}
     counts = {}
-    try:
-        for r in range(args.repeats):  # interleaved, so slow drifts of the machine hit every mode alike
-            for mode, kw in modes.items():
+    for r in range(args.repeats):  # interleaved, so slow drifts of the machine hit every mode alike
+        for mode, kw in modes.items():
+            if "dask_workers" in kw:  # a fresh cluster per measurement, so idle clusters never compete
+                t, counts[mode], b, t1, start = _time_dask(big, one, kw["dask_workers"])
+                cluster_start[mode].append(start)
+            else:
                 t, counts[mode], b = _time(big, **kw)
-                times[mode].append(t)
-                busy[mode].append(b)
-                single[mode].append(_time(one, **kw)[0])
-                print(f"repeat {r + 1}/{args.repeats} {mode:>6}: {t:7.2f} s for {args.runs} runs, "
-                      f"machine busy {100 * b:3.0f} %", flush=True)
-    finally:
-        for c in clusters.values():
-            c.close()
+                t1 = _time(one, **kw)[0]
+            times[mode].append(t)
+            busy[mode].append(b)
+            single[mode].append(t1)
+            print(f"repeat {r + 1}/{args.repeats} {mode:>6}: {t:7.2f} s for {args.runs} runs, "
+                  f"machine busy {100 * b:3.0f} %", flush=True)
     load1 = os.getloadavg()
 
     med = {m: statistics.median(v) for m, v in times.items()}
@@ -124,7 +130,7 @@ def main() -> None:
         "machine_busy_fraction": busy,
         "sweep": {m: _stats(v) for m, v in times.items()},
         "one_run_sweep": {m: _stats(v) for m, v in single.items()},
-        "dask_cluster_start_s": cluster_start,
+        "dask_cluster_start_s": cluster_start,  #: not in any sweep time
         "first_pool_1_run_sweep_s": first_pool,  #: includes starting the fork server (imports the package)
         "per_run_inline_s": med["inline"] / n,
         "speedup_pool": med["pool1"] / med["pool2"],
@@ -158,7 +164,8 @@ def main() -> None:
     for m, o in report["overhead_per_run_s"].items():
         print(f"overhead per run, {m}: {1e3 * o:.2f} ms (start-up of a 1-run sweep: {report['startup_s'][m]:.2f} s)")
     if cluster_start:
-        print("Dask LocalCluster start: " + ", ".join(f"{m} {t:.2f} s" for m, t in cluster_start.items()))
+        print("Dask LocalCluster start (not in the sweep times): "
+              + ", ".join(f"{m} {statistics.median(t):.2f} s" for m, t in cluster_start.items()))
     print(f"wrote {OUT}")
 
 
