@@ -46,6 +46,16 @@ size the solver had reached.
 Guards against what the band cannot prevent: more than ``storm_count`` events within
 ``storm_window`` seconds, or more than ``max_events`` in the run, stop with a
 :class:`SimulationError` naming the events.
+
+Cost. Each (modes, phase) is compiled once into a :class:`~contactdyn.rhsplan.ModePlan`
+(the right-hand side as one affine map and one small solve, ~8 µs per call for B1 against
+~50 µs for :meth:`System.evaluate`); the event functions read its values, and the output
+samples are computed all at once per segment. A plan that cannot represent the system
+(motors, force-reading controllers, a 2-D slip launching from rest, the energy audit)
+falls back to :meth:`System.evaluate`; ``Result.stats["fallback_modes"]`` says why.
+``solver.method = "auto"`` picks DOP853, or Radau for a stiff segment
+(:mod:`contactdyn.integrators`); ``RK4`` takes fixed steps of ``solver.max_step``. An
+integration failure reports what the state says: a singular contact system or stiffness.
 """
 
 from __future__ import annotations
@@ -63,13 +73,24 @@ from scipy.integrate import solve_ivp
 from .chain import NodeKind
 from .contact import ContactMode
 from .drives import drive_channels
-from .errors import SimulationError
-from .integrators import IMPLICIT
+from .errors import SceneError, SimulationError
+from .integrators import (
+    EXPLICIT,
+    FIXED,
+    IMPLICIT,
+    STABILITY_RADIUS,
+    STEP_BUDGET,
+    FiniteDifferenceJacobian,
+    jacobian_eigenvalues,
+    solver_class,
+    stability_bound,
+)
 from .result import Result
+from .rhsplan import ModePlan, Samples, cached_plan
 from .scene import Scene, load_scene
 from .system import CONE_TOL, FORCE_ABS_TOL, Evaluation, Phase, System
 
-__all__ = ["simulate"]
+__all__ = ["simulate", "run_system", "prepare"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
 #: events after which the next segment starts with the step size the solver had reached (friction
@@ -91,6 +112,7 @@ class _Segment:
     modes: list[ContactMode]
     phase: Phase
     sol: Any
+    plan: ModePlan
 
 
 class _Cache:
@@ -150,8 +172,8 @@ class _SlipWatch:
     terminal = True
     direction = -1
 
-    def __init__(self, cache: _Cache, name: str, mu_s: float):
-        self.cache, self.contact, self.mu_s = cache, name, mu_s
+    def __init__(self, value, name: str, mu_s: float):
+        self.value, self.contact, self.mu_s = value, name, mu_s  # value(t, x): g at a state
         self.kind = "slip"
         self.t_end = -math.inf  #: last step end seen [s]
         self.latch = math.inf  #: from this time on g is held negative [s]
@@ -160,11 +182,11 @@ class _SlipWatch:
     def g(self, ev: Evaluation) -> float:
         return self.mu_s * ev.normal_force[self.contact] - float(np.linalg.norm(ev.friction[self.contact]))
 
-    def sample(self, t: float, ev: Evaluation) -> None:
-        self.samples.append((t, self.g(ev)))
+    def sample(self, t: float, g: float) -> None:
+        self.samples.append((t, g))
 
     def __call__(self, t: float, x: np.ndarray) -> float:
-        g = self.g(self.cache(t, x))
+        g = self.value(t, x)
         if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
             t_old, self.t_end = self.t_end, t
             hidden = [ts for ts, gs in self.samples if t_old < ts < t and gs < 0.0]
@@ -176,8 +198,37 @@ class _SlipWatch:
         return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
 
 
-def _events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray):
+class _StepBudget:
+    """``auto``'s budget: a terminal event at the end of DOP853's ``budget``-th step (see integrators).
+
+    ``solve_ivp`` calls events once per step end with increasing t (and, while locating a
+    root, inside the last step): the function is +1 before the step end where the budget
+    ran out and −1 from there on, so the segment ends exactly there.
+    """
+
+    terminal = True
+    direction = -1
+    kind = "budget"
+    contact = ""
+
+    def __init__(self, budget: int):
+        self.budget, self.count = budget, 0
+        self.t_end, self.t_fire = -math.inf, math.inf
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        if t > self.t_end:
+            self.t_end = t
+            self.count += 1
+            if self.count > self.budget and self.t_fire == math.inf:
+                self.t_fire = t
+        return -1.0 if t >= self.t_fire else 1.0
+
+
+def _events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
+            plan: ModePlan | None = None):
     """The event functions of one segment, and the right-hand side that feeds their stage watches."""
+    if plan is not None:
+        return _plan_events(system, modes, plan, t0, x0)
     cache = _Cache(system, modes, phase)
     slip = _SlipCache(system, [c.name for c, m in zip(system.contacts, modes, strict=True)
                                if m.touching and not m.stuck and c.friction is not None and len(c.tangents)])
@@ -195,7 +246,9 @@ def _events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x
             continue
         fr, band = c.friction, system.slip_band
         if mode.stuck:
-            watches.append(_SlipWatch(cache, name, fr.mu_s))
+            watch = _SlipWatch(None, name, fr.mu_s)
+            watch.value = lambda t, x, w=watch: w.g(cache(t, x))
+            watches.append(watch)
             out.append(watches[-1])
             continue
         r = np.asarray(mode.slip, float)
@@ -210,8 +263,50 @@ def _events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         ev = system.evaluate(t, x, modes, phase)
         for w in watches:
-            w.sample(t, ev)
+            w.sample(t, w.g(ev))
         return ev.xdot
+
+    return out, rhs
+
+
+def _plan_events(system: System, modes: list[ContactMode], plan: ModePlan, t0: float, x0: np.ndarray):
+    """:func:`_events` on a compiled plan's values (same functions, same order)."""
+    out: list = []
+    watches: list[_SlipWatch] = []
+    for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
+        name = c.name
+        if not mode.touching:
+            floor = min(plan.gap(ci, t0, x0), 0.0) - TOUCH_TOL
+            out.append(_event(lambda t, x, i=ci, g0=floor: plan.gap(i, t, x) - g0, "touch", name))
+            continue
+        if not c.spec.bonded:
+            out.append(_event(lambda t, x, i=ci: plan.normal_force(i, t, x), "separate", name))
+        if c.friction is None or not len(c.tangents):
+            continue
+        fr, band = c.friction, system.slip_band
+        if mode.stuck:
+            def value(t, x, i=ci, mu=fr.mu_s):
+                F_f = plan.stick_force(i, t, x)
+                return mu * plan.normal_force(i, t, x) - math.sqrt(float(F_f @ F_f))
+
+            watches.append(_SlipWatch(value, name, fr.mu_s))
+            out.append(watches[-1])
+            continue
+        r = np.asarray(mode.slip, float)
+        out.append(_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r) - b, "stop", name))
+        out.append(_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r) + b, "reverse", name))
+        if len(r) == 2:
+            out.append(_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r)
+                              - 0.5 * float(np.linalg.norm(plan.slip(i, t, x))) + b, "turn", name))
+    if not watches:
+        return out, plan.rhs
+    fun = plan.rhs
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        xd = fun(t, x)
+        for w in watches:
+            w.sample(t, w.value(t, x))  # the plan's last call: no second solve
+        return xd
 
     return out, rhs
 
@@ -229,6 +324,22 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None)
     return _Run(system).run(wall0)
 
 
+def prepare(scene: Scene) -> tuple[System, list[ContactMode], Phase, np.ndarray]:
+    """The system, consistent initial modes, first phase and initial state of a scene (for benchmarks)."""
+    system = System(scene)
+    run = _Run(system)
+    x, modes = system.initial_state()
+    phase = system.start_phase(0, 0.0, x, None)
+    x = run._init_controller(phase, 0.0, x, modes)
+    x, modes = run._consistent(0.0, x, modes, phase)
+    return system, modes, phase, x
+
+
+def run_system(system: System) -> Result:
+    """Simulate an already built system (its wall time excludes loading the scene and robot)."""
+    return _Run(system).run(time.perf_counter())
+
+
 class _Run:
     def __init__(self, system: System):
         self.system = system
@@ -239,8 +350,24 @@ class _Run:
         self.impacts: list[dict[str, Any]] = []
         self.recent: deque[float] = deque(maxlen=self.solver.storm_count)
         self.next_step: float | None = None  #: [s] first step of the next segment (None: solver's choice)
+        if self.solver.method in FIXED and not math.isfinite(self.solver.max_step):
+            raise SceneError("solver.max_step", f"the step [s] of the fixed-step method {self.solver.method}",
+                             "no max_step", self.scene.file)
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0,
                       "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
+        self.plans: dict[tuple, ModePlan] = {}
+        self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
+        self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
+
+    def _plan(self, modes: list[ContactMode], phase: Phase) -> ModePlan:
+        """The compiled right-hand side of (modes, phase), built once per system and kept."""
+        key = (tuple(modes), id(phase))
+        plan = self.plans.get(key)
+        if plan is None:
+            plan = self.plans[key] = cached_plan(self.system, modes, phase)
+        if not plan.ok:
+            self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
+        return plan
 
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:
@@ -257,40 +384,84 @@ class _Run:
                 phase = self._next_phase(phase, t, x)
                 continue
             h0 = min(self.next_step, t_end - t) if self.next_step else None
-            for method in dict.fromkeys((self._method(modes), self.solver.method)):
-                events, rhs = _events(system, modes, phase, t, x)
-                sol = solve_ivp(rhs, (t, t_end), x, method=method,
-                                rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
-                                events=events or None, dense_output=True, first_step=h0)
+            plan = self._plan(modes, phase)
+            fun = plan.rhs if plan.ok else system.rhs(modes, phase)
+            scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or "DOP853")
+            for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
+                events, rhs = _events(system, modes, phase, t, x, plan if plan.ok else None)
+                if self.solver.method == "auto" and method == "DOP853" and self.auto_state is None:
+                    events = [*events, _StepBudget(STEP_BUDGET)]
+                jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
+                with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
+                    sol = solve_ivp(rhs, (t, t_end), x, method=solver_class(method),
+                                    rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
+                                    events=events or None, dense_output=True, first_step=h0,
+                                    **({"jac": jac} if jac else {}))
+                self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
                 if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
-                    break
-                self.stats["rhs_evals"] += sol.nfev  # a failed launch method: retry with the scene's
-            self.stats["rhs_evals"] += sol.nfev
+                    break  # else a failed launch method: retry with the scene's
+            by = self.stats.setdefault("segments_by_method", {})
+            by[method] = by.get(method, 0) + 1
             self.stats["steps"] += len(sol.t) - 1
             if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
-                raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s: {sol.message}")
-            self.segments.append(_Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol))
+                raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s "
+                                      f"({method}): {sol.message}{self._diagnose(sol, plan, fun, method)}")
+            self.segments.append(_Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
             self.stats["segments"] += 1
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
             self.next_step = None
             if sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
+                if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
+                    self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
+                    continue
+                self.auto_state = None
                 if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
                     self.next_step = float(sol.t[-2] - sol.t[-3])
                 x, modes, phase = self._handle(t, x, modes, phase, fired[0])
             elif t < T:
+                self.auto_state = None
                 phase = self._next_phase(phase, t, x)
         return self._result(time.perf_counter() - wall0)
 
-    def _method(self, modes: list[ContactMode]) -> str:
-        """The scene's method, but a stiff-capable one while a 2-D slip launches from rest.
+    def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
+        """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
+        stability-bound by a decaying mode, else DOP853 without a budget (see integrators)."""
+        stiff, lam = stability_bound(fun, t, x, h, span)
+        self.stats["rhs_evals"] += len(x) + 1
+        self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
+        self.auto_state = "Radau" if stiff else "DOP853"
+        if stiff:
+            self.stats["auto_switches"] = self.stats.get("auto_switches", 0) + 1
+        else:
+            self.next_step = h
+
+    def _diagnose(self, sol, plan: ModePlan, fun, method: str) -> str:
+        """Why a segment failed, as far as the state at the failure says."""
+        t, x = float(sol.t[-1]), sol.y[:, -1]
+        if not np.all(np.isfinite(x)):
+            return "; the state is not finite"
+        if plan.ok:
+            cond = plan.kkt_condition(t, x)
+            if cond > 1e12:
+                return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
+                        f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "
+                        "arm; give the contact a compliant normal model or avoid the pose")
+        lam = jacobian_eigenvalues(fun, t, x)
+        if len(lam) and method in EXPLICIT:
+            fast = float(np.abs(lam).max())
+            return (f"; fastest mode |λ| = {fast:.3g} 1/s (an explicit method needs steps below "
+                    f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = \"Radau\" or \"auto\"")
+        return ""
+
+    def _method(self, modes: list[ContactMode], method: str) -> str:
+        """The segment's method, but a stiff-capable one while a 2-D slip launches from rest.
 
         Near v_t = 0 the direction of 2-D Coulomb friction relaxes at a rate ∝ μ F/(m |v_t|)
         (m: the arm's smallest tangential inertia): stiff for an explicit method until the
         slip has grown, worst when the push is just at the cone (thousands of tiny steps).
         LSODA switches to BDF while that lasts; the segment ends at the next event.
         """
-        method = self.solver.method
         if method not in IMPLICIT and any(m.from_rest and len(m.slip) == 2 and not m.stuck for m in modes):
             return LAUNCH_METHOD
         return method
@@ -523,20 +694,41 @@ class _Run:
         T = scene.duration
         n_out = int(round(T * self.solver.output_rate))
         grid = np.linspace(0.0, T, n_out + 1) if n_out > 0 else np.array([0.0, T])
-        rows: list[tuple[float, np.ndarray, Evaluation, list[ContactMode]]] = []
-        seg_i = 0
-        for t in grid:
-            while seg_i + 1 < len(self.segments) and (self.segments[seg_i].t1 < t or
-                                                     (self.segments[seg_i].t1 == t and
-                                                      self.segments[seg_i + 1].t1 > t)):
-                seg_i += 1
-            seg = self.segments[seg_i]
-            x = seg.sol(t)
-            ev = system.evaluate(t, x, seg.modes, seg.phase, full=True)
-            rows.append((t, x, ev, seg.modes))
-        channels = _channels(system, rows)
+        # the segment of each sample: the first ending at or after it; at an event time, the one after
+        t1 = np.array([seg.t1 for seg in self.segments])
+        idx = np.minimum(np.searchsorted(t1, grid, side="left"), len(t1) - 1)
+        nxt = np.minimum(idx + 1, len(t1) - 1)
+        idx = np.where((t1[idx] == grid) & (nxt > idx) & (t1[nxt] > grid), nxt, idx)
+        xs = np.empty((len(grid), system.n))
+        parts: list[Samples] = []
+        modes_of: list[list[ContactMode]] = []
+        evs: list[Evaluation | None] = []
+        for i in np.unique(idx):
+            seg = self.segments[i]
+            sel = np.flatnonzero(idx == i)
+            ts = grid[sel]
+            X = np.atleast_2d(seg.sol(ts).T) if len(ts) > 1 else seg.sol(ts[0])[None, :]
+            xs[sel] = X
+            if seg.plan.ok:
+                parts.append(seg.plan.samples(ts, X))
+                self.stats["singular_solves"] += seg.plan.singular
+                evs += [None] * len(ts)
+            else:
+                part = Samples(len(ts), system)
+                for k, (t, x) in enumerate(zip(ts, X, strict=True)):
+                    ev = system.evaluate(t, x, seg.modes, seg.phase, full=True)
+                    part.fill(k, ev)
+                    evs.append(ev)
+                parts.append(part)
+            modes_of += [seg.modes] * len(sel)
+        samples = Samples.concatenate(parts, system)
+        channels = _channels(system, grid, xs, samples, modes_of)
+        if system.drives.any_motor:  # (plans decline motors: every sample has its Evaluation)
+            channels.update(drive_channels(system, xs, evs))
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
-                     method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol)
+                     method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
+                     compiled_modes=sum(p.ok for p in self.plans.values()),
+                     fallback_modes=dict(self.fallbacks))
         meta = {"joints": system.robot.joint_names, "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
@@ -548,45 +740,35 @@ def _in_cone(F_f: np.ndarray, F_n: float, mu_s: float) -> bool:
     return float(np.linalg.norm(F_f)) <= mu_s * max(F_n, 0.0) * (1.0 + CONE_TOL) + FORCE_ABS_TOL
 
 
-def _channels(system: System, rows) -> dict[str, np.ndarray]:
+def _channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
+              modes_of: list[list[ContactMode]]) -> dict[str, np.ndarray]:
     nQ, nv = system.nQ, system.nv
-    xs = np.array([r[1] for r in rows])
-    evs = [r[2] for r in rows]
-    ch: dict[str, np.ndarray] = {
-        "t": np.array([r[0] for r in rows]),
-        "q": xs[:, :nv],
-        "v": xs[:, nQ:nQ + nv],
-        "tau": np.array([e.tau for e in evs]),
-        "tip": np.array([e.p_tip for e in evs]),
-    }
-    if any(e.x_d is not None and len(e.x_d) == 3 for e in evs):
-        ch["tip_ref"] = np.array([e.x_d if e.x_d is not None and len(e.x_d) == 3 else np.full(3, np.nan)
-                                  for e in evs])
+    ch: dict[str, np.ndarray] = {"t": t, "q": xs[:, :nv], "v": xs[:, nQ:nQ + nv], "tau": smp.tau, "tip": smp.tip}
+    if smp.has_x_d:
+        ch["tip_ref"] = smp.x_d
     for k, name in enumerate(system.body_names):
         idx = system.body_index[name]
         ch[f"body.{name}.x"] = xs[:, idx]
         ch[f"body.{name}.v"] = xs[:, nQ + idx]
-        ch[f"body.{name}.force"] = np.array([e.body_force[k] for e in evs])
+        ch[f"body.{name}.force"] = smp.body_force[:, k]
     for i, c in enumerate(system.contacts):
         p = f"contact.{c.name}"
-        ch[f"{p}.F_n"] = np.array([e.normal_force[c.name] for e in evs])
-        ch[f"{p}.gap"] = np.array([e.gap[c.name] for e in evs])
-        ch[f"{p}.touching"] = np.array([float(r[3][i].touching) for r in rows])
-        ch[f"{p}.F_d"] = np.array([e.force_d.get(c.name, np.nan) for e in evs])
+        ch[f"{p}.F_n"] = smp.F_n[c.name]
+        ch[f"{p}.gap"] = smp.gap[c.name]
+        ch[f"{p}.touching"] = np.array([float(m[i].touching) for m in modes_of])
+        ch[f"{p}.F_d"] = smp.F_d[c.name]
         if c.friction is not None and len(c.tangents):
-            k = len(c.tangents)
-            ch[f"{p}.F_f"] = np.array([e.friction.get(c.name, np.zeros(k)) for e in evs])
-            ch[f"{p}.v_slip"] = np.array([e.slip.get(c.name, np.zeros(k)) for e in evs])
-            ch[f"{p}.stuck"] = np.array([float(r[3][i].stuck) for r in rows])
+            ch[f"{p}.F_f"] = smp.F_f[c.name]
+            ch[f"{p}.v_slip"] = smp.v_slip[c.name]
+            ch[f"{p}.stuck"] = np.array([float(m[i].stuck) for m in modes_of])
         for dc in c.tangent_chains:
-            ch[f"{p}.{dc.label}.F"] = np.array([e.interface.get(f"{c.name}.{dc.label}", 0.0) for e in evs])
-        for i in range(len(c.tangents)):
-            key = f"{c.name}.t{i + 1}"
-            if any(key in e.force_d for e in evs):
-                ch[f"{p}.t{i + 1}.F_d"] = np.array([e.force_d.get(key, np.nan) for e in evs])
+            ch[f"{p}.{dc.label}.F"] = smp.iface[f"{c.name}.{dc.label}"]
+        for k in range(len(c.tangents)):
+            key = f"{c.name}.t{k + 1}"
+            if smp.has_F_d.get(key):
+                ch[f"{p}.t{k + 1}.F_d"] = smp.F_d[key]
     for label in system.stage_labels:
-        vals = np.array([e.stages.get(label, (0.0, 0.0, 0.0)) for e in evs])
-        ch[f"stage.{label}.x"], ch[f"stage.{label}.xdot"], ch[f"stage.{label}.F"] = vals.T
+        ch[f"stage.{label}.x"], ch[f"stage.{label}.xdot"], ch[f"stage.{label}.F"] = smp.stages[label].T
     k = 0
     for c in system.contacts:
         for dc in c.chains:
@@ -596,7 +778,6 @@ def _channels(system: System, rows) -> dict[str, np.ndarray]:
                     ch[f"mass.{label}.x"] = xs[:, node.coord]
                     ch[f"mass.{label}.v"] = xs[:, nQ + node.coord]
                     k += 1
-    ch.update(drive_channels(system, xs, evs))
     if system.energy_slot >= 0:
         ch["energy.work"] = xs[:, 2 * nQ + system.energy_slot]
         ch["energy.dissipated"] = xs[:, 2 * nQ + system.energy_slot + 1]

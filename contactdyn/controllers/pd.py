@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import FEEDFORWARD, ControlInput, Controller, register
+from .base import FEEDFORWARD, ControlInput, Controller, TipForceLaw, register
 
 __all__ = ["TaskPD", "JointPD"]
 
@@ -95,6 +95,12 @@ class TaskPD(Controller):
         if cfg.kd_joint:
             tau = tau - cfg.kd_joint * inp.v
         return tau, None
+
+    def tip_force_law(self) -> TipForceLaw | None:
+        cfg = self.config
+        if cfg.tool_axis is not None:  # the tool-axis moment is not affine in the state
+            return None
+        return TipForceLaw(self._kp, self._kd, cfg.feedforward, float(cfg.kd_joint))
 
 
 @dataclass(frozen=True)

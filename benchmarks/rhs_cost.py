@@ -1,0 +1,91 @@
+"""Cost of one right-hand-side evaluation (the function the integrator calls).
+
+    python benchmarks/rhs_cost.py [SCENE ...] [--calls 20000] [--out FILE.csv]
+
+Default scene: b1 (2 DOF + one deformable frictional contact: a bonded model-(b) surface
+mass and sliding Coulomb friction), the budget case (≤ 10 µs median). Each scene is
+built, its initial modes made consistent, and the integrator's function called on the
+states of a short run (so the timing covers real states, not one cached point). Reports
+the median and the 10th/90th percentiles over batches of calls, wall and CPU time, and
+the cost of the full ``System.evaluate`` (all diagnostics) for comparison.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import numpy as np  # noqa: E402
+
+from contactdyn.rhsplan import ModePlan  # noqa: E402
+from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.simulate import prepare  # noqa: E402
+
+BATCHES = 41  #: batches per measurement (median over batches)
+
+
+def _batches(fn, states, calls: int, clock) -> list[float]:
+    per_batch = max(calls // BATCHES, 1)
+    out = []
+    n = len(states)
+    for b in range(BATCHES):
+        t, x = states[b % n]
+        t0 = clock()
+        for _ in range(per_batch):
+            fn(t, x)
+        out.append((clock() - t0) / per_batch)
+    return out
+
+
+def measure(scene_name: str, calls: int = 20000) -> dict:
+    """Median cost [s] of one rhs call and of one full evaluate on a scene's first mode."""
+    system, modes, phase, x0 = prepare(load_scene(scene_name))
+    plan = ModePlan(system, modes, phase)
+    f = plan.rhs if plan.ok else system.rhs(modes, phase)
+    # states along a short stretch of the real trajectory (first mode only)
+    from scipy.integrate import solve_ivp
+
+    sol = solve_ivp(f, (phase.t_start, phase.t_start + 0.01), x0, method="DOP853", rtol=1e-8, atol=1e-10)
+    states = [(float(t), sol.y[:, i].copy()) for i, t in enumerate(sol.t)]
+    for t, x in states[:50]:  # the lean path must agree with the full evaluation
+        ref = system.evaluate(t, x, modes, phase).xdot
+        if not np.allclose(f(t, x), ref, rtol=1e-10, atol=1e-10 * (1 + np.abs(ref).max())):
+            raise SystemExit(f"{scene_name}: rhs disagrees with System.evaluate at t = {t}")
+    wall = _batches(f, states, calls, time.perf_counter)
+    cpu = _batches(f, states, calls, time.process_time)
+    full = _batches(lambda t, x: system.evaluate(t, x, modes, phase), states, max(calls // 10, BATCHES),
+                    time.perf_counter)
+    q = statistics.quantiles(wall, n=10)
+    return {"scene": scene_name, "n_states": system.n, "path": "compiled" if plan.ok else f"evaluate ({plan.reason})",
+            "rhs_median_us": statistics.median(wall) * 1e6,
+            "rhs_p10_us": q[0] * 1e6, "rhs_p90_us": q[-1] * 1e6, "rhs_cpu_median_us": statistics.median(cpu) * 1e6,
+            "evaluate_median_us": statistics.median(full) * 1e6}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenes", nargs="*", default=["b1"])
+    p.add_argument("--calls", type=int, default=20000)
+    p.add_argument("--out", help="CSV file to write")
+    args = p.parse_args(argv)
+    rows = [measure(s, args.calls) for s in args.scenes]
+    cols = list(rows[0])
+    print(" | ".join(cols))
+    for r in rows:
+        print(" | ".join(f"{r[c]:.2f}" if isinstance(r[c], float) else str(r[c]) for c in cols))
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        with open(args.out, "w") as fh:
+            fh.write(",".join(cols) + "\n")
+            for r in rows:
+                fh.write(",".join(str(r[c]) for c in cols) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,239 @@
+"""A compiled plan's output: the Result channels' values at many states at once.
+
+The integrator needs only derivatives; a Result needs, at every output sample, the
+forces, torques, gaps, slip velocities and stage deformations. :func:`plan_samples`
+computes them for all samples of a segment together: one Pinocchio pass per sample
+(H, J, J̇q̇, h, the tip position), then φ, the map P φ, the friction terms, the KKT
+solves and the read-out as array operations. :class:`Samples` holds the result (and is
+filled from :class:`~contactdyn.system.Evaluation` objects where a mode runs on
+``System.evaluate``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+__all__ = ["Samples", "plan_samples", "slip_directions"]
+
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+ROW_CHUNK = 128  #: rows per matrix product in the output pass (small enough to keep OpenBLAS on one thread)
+
+
+def _rows_times(X: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """X @ B in chunks of rows: a multi-threaded BLAS product of this size costs more than it saves
+    (and much more on a busy machine)."""
+    out = np.empty((X.shape[0], B.shape[1]))
+    for i in range(0, X.shape[0], ROW_CHUNK):
+        np.matmul(X[i:i + ROW_CHUNK], B, out=out[i:i + ROW_CHUNK])
+    return out
+
+
+class Samples:
+    """Per-sample diagnostics of one segment, as arrays (what Result channels are made of)."""
+
+    def __init__(self, n: int, system):
+        nv, nb = system.nv, len(system.body_names)
+        self.tau = np.zeros((n, nv))
+        self.tip = np.zeros((n, 3))
+        self.x_d = np.full((n, 3), np.nan)
+        self.has_x_d = False
+        self.body_force = np.zeros((n, nb))
+        self.F_n = {c.name: np.zeros(n) for c in system.contacts}
+        self.gap = {c.name: np.zeros(n) for c in system.contacts}
+        self.F_d = {key: np.full(n, np.nan) for key in system.force_directions}  #: per set-point key
+        self.has_F_d = {key: False for key in system.force_directions}
+        self.F_f = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}
+        self.v_slip = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}
+        self.iface = {f"{c.name}.{dc.label}": np.zeros(n) for c in system.contacts for dc in c.tangent_chains}
+        self.stages = {label: np.zeros((n, 3)) for label in system.stage_labels}
+
+    @classmethod
+    def concatenate(cls, parts: list[Samples], system) -> Samples:
+        out = cls(0, system)
+        for name in ("tau", "tip", "x_d", "body_force"):
+            setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
+        out.has_x_d = any(p.has_x_d for p in parts)
+        out.has_F_d = {key: any(p.has_F_d[key] for p in parts) for key in out.has_F_d}
+        for name in ("F_n", "gap", "F_d", "F_f", "v_slip", "iface", "stages"):
+            d = getattr(out, name)
+            for key in d:
+                d[key] = np.concatenate([getattr(p, name)[key] for p in parts])
+        return out
+
+    def fill(self, k: int, ev) -> None:
+        """Row k from a full :class:`~contactdyn.system.Evaluation`."""
+        self.tau[k] = ev.tau
+        self.tip[k] = ev.p_tip
+        if ev.x_d is not None and len(ev.x_d) == 3:
+            self.x_d[k] = ev.x_d
+            self.has_x_d = True
+        self.body_force[k] = ev.body_force
+        for key, value in ev.force_d.items():
+            self.F_d[key][k] = value
+            self.has_F_d[key] = True
+        for name in self.F_n:
+            self.F_n[name][k] = ev.normal_force[name]
+            self.gap[name][k] = ev.gap[name]
+            if name in ev.friction:
+                self.F_f[name][k] = ev.friction[name]
+            if name in ev.slip:
+                self.v_slip[name][k] = ev.slip[name]
+        for key in self.iface:
+            self.iface[key][k] = ev.interface.get(key, 0.0)
+        for label in self.stages:
+            self.stages[label][k] = ev.stages.get(label, (0.0, 0.0, 0.0))
+
+
+def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
+    """Diagnostics at the states X[k] (times ts[k]) of this mode: one Pinocchio pass per
+    sample, then the assembly, solve and read-out for all samples at once."""
+    s, phase = plan.system, plan.phase
+    N = len(ts)
+    S = Samples(N, s)
+    if N == 0:
+        return S
+    nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
+    m2 = m * m
+    Phi = np.empty((N, plan.P.shape[1]))
+    generic = not plan.affine_ctl
+    tau = np.zeros((N, nv))
+    if generic:
+        ctl_call = plan._controller_call()
+    ntv = plan.ne - plan.e_frame[-1] - 6
+    TV = np.empty((N, ntv))
+    TV[:, -1] = 1.0
+    for k in range(N):
+        plan.time_terms(ts[k], TV[k])
+    if generic or len(plan.fids) > 1:
+        phi_at = plan.phi_at
+        for k in range(N):
+            Phi[k] = phi = phi_at(ts[k], X[k], TV[k])
+            if generic:
+                x = X[k]
+                Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+                tau[k] = ctl_call(ts[k], x, x[:nv], x[nQ:nQ + nv], Js, phi, plan.W.dot(phi[plan.i_e:]))[0]
+    else:
+        _phi_batch(plan, X, TV, Phi)
+    Y = _rows_times(Phi, plan.PT)
+    A = Y[:, :m2].reshape(N, m, m)
+    B = Y[:, m2:m2 + m]
+    O = Y[:, m2 + m:]
+    J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
+    w0 = nQ + nr
+    for ci, i_fn, mu, T, consts, j, _, _ in plan.coulomb_terms:
+        Fp = np.maximum(O[:, i_fn], 0.0)
+        D = slip_directions(plan, ci, O)
+        B[:, w0 + 3 * j:w0 + 3 * j + 3] -= (mu * Fp)[:, None] * (D @ T)
+        if nQ > nv:
+            B[:, nv:nQ] -= (mu * Fp)[:, None] * (D @ consts)
+    for r, ci, mu, T, consts, j in plan.dyn_tilt:
+        D = slip_directions(plan, ci, O)
+        A[:, :nv, nQ + r] += mu * np.einsum("kiv,ki->kv", J_all[j], D @ T)
+        A[:, nv:nQ, nQ + r] = plan.A0[nv:nQ, nQ + r] + mu * (D @ consts)
+    B[:, :nv] += tau
+    Z = _solve_all(plan, A, B)
+    # ---- read-out (the same quantities System.evaluate reports)
+    kt = plan.i_e + plan.e_frame[plan.tip_frame]
+    S.tip[:] = Phi[:, kt:kt + 3]
+    if plan.affine_ctl:
+        S.tau[:] = np.einsum("kiv,ki->kv", J_all[plan.tip_frame], O[:, plan.o_gctl])
+        if plan.feedforward == "gravity":
+            S.tau += Phi[:, plan.i_h + nv:plan.i_h + 2 * nv]
+        elif plan.feedforward == "bias":
+            S.tau += Phi[:, plan.i_h:plan.i_h + nv]
+        if plan.kd_joint:
+            S.tau -= plan.kd_joint * X[:, nQ:nQ + nv]
+    else:
+        S.tau[:] = tau
+    if phase.reference is not None and plan.affine_ctl:  # x_d = start + Σ δ_m σ_m, σ_m in φ's time terms
+        S.x_d[:] = phase.reference.start
+        for slot, m_ in plan.time_moves:
+            S.x_d += Phi[:, plan.i_e + slot, None] * m_.delta
+        S.has_x_d = True
+    elif phase.reference is not None:
+        x_d = np.array([phase.reference.at(t)[0] for t in ts])
+        if x_d.shape[1] == 3:
+            S.x_d[:] = x_d
+            S.has_x_d = True
+    S.body_force[:] = O[:, plan.o_body]
+    slots = {key: slot for slot, _, key in plan.time_ramps}
+    for key, ramp in phase.forces.items():
+        S.F_d[key][:] = Phi[:, plan.i_e + slots[key]] if key in slots else [ramp.at(t)[0] for t in ts]
+        S.has_F_d[key] = True
+    for ci, (c, mode) in enumerate(zip(s.contacts, plan.modes, strict=True)):
+        name = c.name
+        r = plan.normal_row.get(ci)
+        F_n = Z[:, nQ + r] if r is not None else O[:, plan.o_Fint.start + ci]
+        S.F_n[name][:] = F_n
+        S.gap[name][:] = O[:, plan.o_gap.start + ci]
+
+        if c.friction is not None and len(c.tangents):
+            S.v_slip[name][:] = O[:, plan.o_vt[name]]
+            if mode.touching and mode.stuck:
+                S.F_f[name][:] = Z[:, plan.stick_rows[ci]]
+            elif mode.touching:
+                D = slip_directions(plan, ci, O)
+                S.F_f[name][:] = -c.friction.mu_k * np.maximum(F_n, 0.0)[:, None] * D + O[:, plan.o_visc[name]]
+        for i, dc in enumerate(c.tangent_chains):
+            key = f"{name}.{dc.label}"
+            rows = [nQ + r for r, row in enumerate(plan.rows) if row.kind == "chain" and row.contact == ci
+                    and row.index == i]
+            S.iface[key][:] = Z[:, rows[0]] if rows else O[:, plan.o_iface[key]]
+    for label, sl in plan.o_stage.items():
+        S.stages[label][:] = O[:, sl]
+    return S
+
+def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
+    """Φ for one robot frame: Pinocchio per sample (H, J, J̇q̇, h, [g], p), the rest in batch."""
+    s = plan.system
+    model, data = s.robot.model, s.robot.data
+    nv, nQ, n = s.nv, s.nQ, s.n
+    fid = plan.fids[0]
+    i_e = plan.i_e
+    compute, placement = pin.computeAllTerms, pin.updateFramePlacement
+    jacobian, accel = pin.getFrameJacobian, pin.getFrameClassicalAcceleration
+    cat = np.concatenate
+    with_g = plan.with_g
+    raw = np.empty((len(X), i_e + 3))
+    for k in range(len(X)):
+        x = X[k]
+        compute(model, data, x[:nv], x[nQ:nQ + nv])
+        J = jacobian(model, data, fid, _LWA).reshape(6, nv)[:3]
+        if with_g:
+            raw[k] = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid, _LWA).linear, data.nle, data.g,
+                          placement(model, data, fid).translation))
+        else:
+            raw[k] = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid, _LWA).linear, data.nle,
+                          placement(model, data, fid).translation))
+    Phi[:, :i_e] = raw[:, :i_e]
+    Phi[:, i_e:i_e + n] = X
+    Phi[:, i_e + n:i_e + n + 3] = raw[:, i_e:]
+    J_all = raw[:, plan.i_J[0]:plan.i_J[0] + 3 * nv].reshape(len(X), 3, nv)
+    Phi[:, i_e + n + 3:i_e + n + 6] = np.einsum("kiv,kv->ki", J_all, X[:, nQ:nQ + nv])
+    Phi[:, i_e + n + 6:] = TV
+
+def slip_directions(plan, ci: int, O: np.ndarray) -> np.ndarray:
+    """Sliding directions (N, k) of contact ci at the samples' outputs O (System._slip_direction's rule:
+    v_t/|v_t| while v_t·r exceeds the stick band, else the mode's reference r; 1-D: r)."""
+    c, mode = plan.system.contacts[ci], plan.modes[ci]
+    r = np.asarray(mode.slip, float)
+    if len(c.tangents) == 1:
+        return np.broadcast_to(r, (len(O), 1))
+    vt = O[:, plan.o_vt[c.name]]
+    out = np.broadcast_to(r, vt.shape).copy()
+    ahead = vt @ r > plan.system.slip_band
+    out[ahead] = vt[ahead] / np.sqrt((vt[ahead] ** 2).sum(axis=1))[:, None]
+    return out
+
+def _solve_all(plan, A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    with np.errstate(all="ignore"):
+        try:
+            Z = np.linalg.solve(A, B[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            Z = np.full(B.shape, np.nan)
+    bad = ~np.all(np.isfinite(Z), axis=1)
+    for k in np.flatnonzero(bad):
+        Z[k] = plan._singular(A[k], B[k])
+    return Z
+

@@ -1,0 +1,213 @@
+"""Speed against error: the compiled right-hand side, the integrators, the bench.
+
+- the compiled plan (contactdyn.rhsplan) computes the same derivatives, event values and
+  output samples as System.evaluate, in every mode of every scene in sims/ and
+  benchmarks/hard/ (the plan is measured from the system's own code; this checks the
+  measurement and the parts it writes out itself: friction, rows, the task PD law);
+- B1 at its default settings against the hand-written closed-form model
+  (benchmarks/b1_reference.py, rtol 1e-13);
+- the fixed-step RK4 converges at order 4; ``auto`` picks Radau only for stiff scenes;
+- the bench: reference self-check, errors falling with the tolerance, report files,
+  the comparison with other simulators, the CLI entry.
+No assertion on wall time (the machine is shared).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contactdyn.contact import ContactMode
+from contactdyn.errors import SceneError
+from contactdyn.integrators import FiniteDifferenceJacobian, jacobian_eigenvalues, stability_bound
+from contactdyn.rhsplan import ModePlan, Samples
+from contactdyn.scene import load_scene
+from contactdyn.simulate import prepare, simulate
+from contactdyn.workprecision import (
+    WorkPoint,
+    bench,
+    bench_command,
+    compare_with_others,
+    errors,
+    recommend,
+    write_report,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+DECLINED = ("motors", "a controller reading measured forces", "a 2-D slip launching", "energy audit")
+SCENES = sorted(str(p) for p in (ROOT / "sims").glob("*.toml")) + \
+    sorted(str(p) for p in (ROOT / "benchmarks" / "hard").glob("*.toml"))
+
+
+def _b1_reference():
+    spec = importlib.util.spec_from_file_location("b1_reference", ROOT / "benchmarks" / "b1_reference.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _mode_variants(system, modes):
+    """Every touching/stuck/slip-direction combination of the scene's contacts (at most 16)."""
+    per_contact = []
+    for c, m in zip(system.contacts, modes, strict=True):
+        k = len(c.tangents)
+        slips = [m.slip] if not k else ([(1.0,), (-1.0,)] if k == 1 else [(0.6, 0.8), (-1.0, 0.0)])
+        opts = []
+        for touching, stuck in ((True, False), (True, True), (False, False)):
+            if stuck and c.friction is None:
+                continue
+            for slip in slips:
+                opts.append(ContactMode(touching, stuck, tuple(slip), m.offsets))
+        per_contact.append(opts)
+    return list(itertools.islice(itertools.product(*per_contact), 16))
+
+
+@pytest.mark.parametrize("path", SCENES, ids=lambda p: Path(p).stem)
+def test_plan_agrees_with_evaluate(path):
+    """Derivatives, event values and output samples of the plan equal System.evaluate's (rtol 1e-9)."""
+    system, modes, phase, x0 = prepare(load_scene(path, {"duration": 0.1}))
+    rng = np.random.default_rng(3)
+    for variant in _mode_variants(system, modes):
+        variant = list(variant)
+        plan = ModePlan(system, variant, phase)
+        if not plan.ok:  # declining is fine for what the plan documents it leaves to System.evaluate
+            assert plan.reason.startswith(DECLINED), plan.reason
+            continue
+        states = [x0 + 1e-3 * rng.normal(size=system.n) for _ in range(3)]
+        ts = np.array([0.01, 0.05, 0.09])
+        samples = plan.samples(ts, np.array(states))
+        ref_samples = Samples(len(ts), system)
+        for k, (t, x) in enumerate(zip(ts, states, strict=True)):
+            ev = system.evaluate(t, x, variant, phase, full=True)
+            ref_samples.fill(k, ev)
+            got = plan.rhs(t, x)
+            scale = 1.0 + np.abs(ev.xdot).max()
+            assert np.abs(got - ev.xdot).max() <= 1e-9 * scale
+            for ci, c in enumerate(system.contacts):
+                F = ev.normal_force[c.name]
+                assert plan.normal_force(ci, t, x) == pytest.approx(F, rel=1e-9, abs=1e-9 * scale)
+                if not variant[ci].touching:
+                    assert plan.gap(ci, t, x) == pytest.approx(ev.gap[c.name], rel=1e-9, abs=1e-12)
+                if c.name in ev.slip:
+                    np.testing.assert_allclose(plan.slip(ci, t, x), ev.slip[c.name], rtol=1e-9, atol=1e-12)
+                if variant[ci].touching and variant[ci].stuck:
+                    np.testing.assert_allclose(plan.stick_force(ci, t, x), ev.friction[c.name], rtol=1e-8,
+                                               atol=1e-9 * scale)
+        for name in ("tau", "tip", "body_force"):
+            np.testing.assert_allclose(getattr(samples, name), getattr(ref_samples, name), rtol=1e-8, atol=1e-8)
+        for field in ("F_n", "gap", "F_d", "F_f", "v_slip", "iface", "stages"):
+            for key, val in getattr(ref_samples, field).items():
+                np.testing.assert_allclose(getattr(samples, field)[key], val, rtol=1e-8, atol=1e-8,
+                                           err_msg=f"{field}[{key}]")
+
+
+def test_b1_default_against_closed_form():
+    """B1 at its default settings: F_n within 1e-5 N, x_tip within 1e-9 m of the hand-written model."""
+    b1 = _b1_reference()
+    ref = b1.reference()
+    res = simulate("b1")
+    assert res.stats["compiled_modes"] >= 1 and not res.stats["fallback_modes"]
+    assert len(res.t) == 2001
+    e_f, e_x = b1.errors({"F_n": res["contact.tip.F_n"], "x_tip": res["tip"][:, 0]}, ref)
+    assert e_f < 1e-5
+    assert e_x < 1e-9
+    # and the reference is itself converged far below that
+    assert b1.self_check()[0] < 1e-8
+
+
+def test_rk4_fixed_step_converges_at_fourth_order():
+    ref = simulate("b1", {"duration": 0.2, "solver.rtol": 1e-12, "solver.atol": 1e-14})
+    errs = []
+    for h in (4e-3, 2e-3):
+        res = simulate("b1", {"duration": 0.2, "solver.method": "RK4", "solver.max_step": h})
+        assert res.stats["steps"] == round(0.2 / h)
+        errs.append(errors(res, ref)[1])
+    assert 10.0 < errs[0] / errs[1] < 24.0  # 2^4 = 16
+
+
+def test_fixed_step_needs_a_step():
+    with pytest.raises(SceneError, match="solver.max_step"):
+        simulate("b1", {"duration": 0.01, "solver.method": "RK4"})
+
+
+def test_jacobian_eigenvalues_and_the_stiffness_rule():
+    A = np.array([[0.0, 1.0], [-1e8, -2e4]])  # critically damped, λ = −1e4 (double)
+    x = np.array([0.1, 0.2])
+    lam = jacobian_eigenvalues(lambda t, x: A @ x, 0.0, x)
+    np.testing.assert_allclose(np.sort(lam.real), [-1e4, -1e4], rtol=1e-3)
+    # DOP853 held at h|λ| ≈ 1.5 by a decaying mode: stiff; the same mode at an accuracy-bound h: not
+    assert stability_bound(lambda t, x: A @ x, 0.0, x, 1.5e-4, 2.0)[0]
+    assert not stability_bound(lambda t, x: A @ x, 0.0, x, 1e-6, 2.0)[0]
+    B = np.array([[0.0, 1.0], [-1e8, 0.0]])  # as fast but undamped: it must be resolved anyway
+    assert not stability_bound(lambda t, x: B @ x, 0.0, x, 1.5e-4, 2.0)[0]
+
+
+def test_finite_difference_jacobian_with_an_inert_state():
+    """A state nothing depends on gives a zero column, not an overflowing step (scipy's num_jac does)."""
+    jac = FiniteDifferenceJacobian(lambda t, x: np.array([x[1], -x[0], 0.0]))
+    J = jac(0.0, np.array([1.0, 2.0, 3.0]))
+    np.testing.assert_allclose(J, [[0, 1, 0], [-1, 0, 0], [0, 0, 0]], atol=1e-6)
+    assert jac.calls == 4
+
+
+def test_auto_picks_radau_for_a_near_rigid_contact_only():
+    stiff = simulate(str(ROOT / "benchmarks" / "hard" / "stiff.toml"), {"solver.output_rate": 50.0})
+    assert stiff.stats["segments_by_method"] == {"DOP853": 1, "Radau": 1}  # switched after the step budget
+    assert stiff.stats["auto_switches"] == 1
+    assert stiff.stats["stiffness"] > 5e3  # [1/s] the contact mode, ω = sqrt(k / m_y) = 6.6e3
+    short = simulate(str(ROOT / "benchmarks" / "hard" / "stiff.toml"), {"duration": 0.02})
+    assert set(short.stats["segments_by_method"]) == {"DOP853"}  # 0.02 s: ~20 stability-bound steps only
+    b1 = simulate("b1", {"duration": 0.02, "solver.method": "auto"})
+    assert set(b1.stats["segments_by_method"]) == {"DOP853"}
+
+
+def test_bench_errors_fall_with_the_tolerance(tmp_path):
+    ref, points, build_ms = bench("b1", {"duration": 0.3, "solver.output_rate": 200.0}, methods=("DOP853",),
+                                  rtols=(1e-4, 1e-7), repeats=1)
+    assert ref.force_error < 1e-7  # the reference against half its tolerance
+    loose, tight = points
+    assert loose.status == tight.status == "ok"
+    assert tight.force_error < loose.force_error / 30.0
+    assert tight.position_error < loose.position_error / 30.0
+    assert tight.rhs_evals > loose.rhs_evals > 0 and build_ms > 0
+    doc = write_report("b1_short", ref, points, build_ms, tmp_path)
+    for ext in ("csv", "json", "md", "png"):
+        assert (tmp_path / f"b1_short.{ext}").stat().st_size > 0
+    assert json.loads((tmp_path / "b1_short.json").read_text())["points"][1]["rtol"] == 1e-7
+    assert doc["recommended"] in (None, loose.label, tight.label)
+
+
+def test_recommend_and_compare_with_others():
+    pts = [WorkPoint("DOP853", 1e-3, 1e-5, None, wall_ms=20.0, force_error=0.5),
+           WorkPoint("DOP853", 1e-6, 1e-8, None, wall_ms=50.0, force_error=1e-4),
+           WorkPoint("RK45", 1e-6, 1e-8, None, wall_ms=40.0, force_error=1e-3),
+           WorkPoint("RK23", 1e-3, 1e-5, None, status="failed")]
+    assert recommend(pts, peak_force=100.0, relative=1e-5).label == "RK45 rtol=1e-06"
+    assert recommend(pts, peak_force=100.0, relative=1e-9) is None
+    rows = compare_with_others(pts, [("A", 1.0, 0.03), ("B", 0.01, 1.2), ("C", 1e-5, 10.0)])
+    assert rows[0]["ours"] == "DOP853 rtol=0.001" and rows[0]["ahead"] and rows[0]["factor_ok"] is None
+    assert rows[1]["ours"] == "RK45 rtol=1e-06" and rows[1]["speedup"] == pytest.approx(30.0)
+    assert rows[1]["factor_ok"] is True
+    assert rows[2]["ours"] == "none" and not rows[2]["ahead"]
+
+
+def test_bench_command_writes_the_report(tmp_path, capsys):
+    args = argparse.Namespace(scene="b1", methods="DOP853,RK4=2e-3", rtols="1e-5", repeats=1, out=str(tmp_path),
+                              set=["duration=0.1", "solver.output_rate=100"])
+    assert bench_command(args) == 0
+    text = (tmp_path / "b1.md").read_text()
+    assert "DOP853 rtol=1e-05" in text and "RK4 h=0.002" in text and "MuJoCo" in text
+    assert "vs MuJoCo 4.0 Euler dt=1e-3" in capsys.readouterr().out
+
+
+def test_bench_command_rejects_unknown_methods(tmp_path):
+    args = argparse.Namespace(scene="b1", methods="Euler", rtols=None, repeats=1, out=str(tmp_path),
+                              set=["duration=0.05"])
+    with pytest.raises(SceneError, match="--methods"):
+        bench_command(args)
