@@ -61,7 +61,7 @@ def _catalog() -> dict[str, Any]:
     import tomllib
 
     from .controllers import CONTROLLERS
-    from .integrators import IMPLICIT, METHODS
+    from .integrators import FIXED, IMPLICIT, METHODS
     from .robot import EXAMPLE_ROBOTS, urdf_dir
     from .scene import NORMAL_MODELS, TANGENT_MODELS, sims_dir
 
@@ -89,8 +89,17 @@ def _catalog() -> dict[str, Any]:
         "models": {"normal": [{"name": m, "description": normal.get(m, "")} for m in NORMAL_MODELS],
                    "tangent": [{"name": m, "description": tangent.get(m, "")} for m in TANGENT_MODELS]},
         "controllers": controllers,
-        "integrators": [{"name": m, "implicit": m in IMPLICIT} for m in METHODS],
+        "integrators": [{"name": m, "implicit": m in IMPLICIT, "description": _integrator(m, IMPLICIT, FIXED)}
+                        for m in METHODS],
     }
+
+
+def _integrator(name: str, implicit: tuple[str, ...], fixed: tuple[str, ...]) -> str:
+    if name == "auto":
+        return "DOP853, switching to Radau where a decaying stiff mode holds the step (default choice)"
+    if name in fixed:
+        return "fixed-step explicit Runge-Kutta, step solver.max_step, no error control"
+    return "implicit, for stiff scenes" if name in implicit else "explicit Runge-Kutta with error control"
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
@@ -106,9 +115,6 @@ def _cmd_list(args: argparse.Namespace) -> int:
                 print(f"  {kind} (contact.<c>.{kind}.model):")
                 for m in catalog[s][kind]:
                     print(f"    {m['name']:<8} {m['description']}")
-        elif s == "integrators":
-            for m in catalog[s]:
-                print(f"  {m['name']:<8} {'implicit (stiff scenes)' if m['implicit'] else 'explicit Runge-Kutta'}")
         elif s == "robots":
             for r in catalog[s]:
                 print(f"  {r['name']:<16} {r['source']}")
@@ -231,16 +237,6 @@ def _csv_list(text: str) -> list[str]:
     return [s.strip() for s in text.split(",") if s.strip()]
 
 
-def _float_list(text: str) -> list[float]:
-    try:
-        values = [float(s) for s in _csv_list(text)]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, found {text!r}") from None
-    if not values or not all(math.isfinite(v) and v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f"expected positive finite numbers, found {text!r}")
-    return values
-
-
 def build_parser() -> argparse.ArgumentParser:
     fmt = argparse.RawDescriptionHelpFormatter
     parser = _Parser(prog="contactdyn", description=__doc__, formatter_class=fmt)
@@ -315,8 +311,9 @@ def build_parser() -> argparse.ArgumentParser:
                            epilog="example:\n  contactdyn bench b1 --methods DOP853,RK45 --rtols 1e-4,1e-6,1e-8 "
                                   "--repeats 3 --out bench/b1")
     bench.add_argument("scene", help="scene file or name in sims/")
-    bench.add_argument("--methods", type=_csv_list, help="comma-separated integrators (see `contactdyn list`)")
-    bench.add_argument("--rtols", type=_float_list, help="comma-separated relative tolerances")
+    bench.add_argument("--methods", help="comma-separated integrators (see `contactdyn list`); RK4=1e-3/1e-4 gives "
+                                         "RK4's fixed steps")
+    bench.add_argument("--rtols", help="comma-separated relative tolerances")
     bench.add_argument("--repeats", type=int, default=3, help="timing repeats per point")
     bench.add_argument("--out", metavar="DIR", help="output folder")
     _set_option(bench)

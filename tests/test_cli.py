@@ -49,7 +49,7 @@ def test_list_text_and_json(capsys):
     assert [m["name"] for m in doc["models"]["normal"]] == ["rigid", "a", "b", "c", "chain"]
     assert [m["name"] for m in doc["models"]["tangent"]] == ["free", "friction", "chain"]
     assert {"task_pd", "joint_pd"} <= {c["name"] for c in doc["controllers"]}
-    assert {"name": "BDF", "implicit": True} in doc["integrators"]
+    assert {"name": "BDF", "implicit": True, "description": "implicit, for stiff scenes"} in doc["integrators"]
     code, out, _ = _run(capsys, ["list", "integrators", "--json"])
     assert list(json.loads(out)) == ["integrators"]
 
@@ -76,7 +76,7 @@ def test_run_text_json_quiet_and_out(capsys, tmp_path):
     (["run", "b1", "--set", "duration=nan"], ["duration", "finite"]),
     (["run", "b1", "--set", "duration=-inf"], ["duration", "finite"]),
     (["run", "b1", "--set", "contact.tip.tangent.mu=-0.1"], ["contact.tip.tangent.mu", ">= 0"]),
-    (["run", "b1", "--set", "solver.method=RK46"], ["solver.method", "did you mean 'RK45'"]),
+    (["run", "b1", "--set", "solver.method=DOP85"], ["solver.method", "did you mean 'DOP853'"]),
     (["run", "b1", "--set", "robot.q0=[1.0]"], ["robot.q0", "2 joint values"]),
     (["run", "b1", "--set", "robot.urdf=ur55"], ["robot", "did you mean ur5"]),
     (["run", "b1", "--set", "duration"], ["--set", "key.path=value"]),
@@ -157,7 +157,7 @@ def test_plot_view_bench_dispatch_with_their_arguments(capsys, monkeypatch, save
                  "--out", "wp", "--set", "duration=0.1"]) == 3
     (_, (args,)), = calls
     assert (args.scene, args.methods, args.rtols, args.repeats, args.out, args.set) == \
-        ("b1", ["DOP853", "RK45"], [1e-4, 1e-6], 2, "wp", ["duration=0.1"])
+        ("b1", "DOP853,RK45", "1e-4,1e-6", 2, "wp", ["duration=0.1"])
 
 
 def test_run_view_hands_the_result_to_the_viewer(capsys, monkeypatch):
