@@ -2,7 +2,8 @@
 
 Exit codes: 0 ok; 1 a run failed (a sweep: at least one run failed, all are recorded);
 2 bad input (unknown key, wrong type or value, unknown scene or robot, unreadable or
-malformed file, command-line misuse); 130 interrupted (a sweep resumes when run again).
+malformed file, an output path that cannot be written, command-line misuse);
+130 interrupted (a sweep resumes when run again).
 """
 
 from __future__ import annotations
@@ -341,6 +342,9 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(args, exc, EXIT_FAILED)
     except NUMERICAL as exc:  # a blow-up numpy noticed before the simulator did: the run failed
         return _fail(args, f"the run blew up: {type(exc).__name__}: {exc}", EXIT_FAILED)
+    except OSError as exc:  # an output path that cannot be written (a file where a folder must go, ...)
+        where = exc.filename if exc.filename is not None else "?"
+        return _fail(args, f"{where}: {exc.strerror or exc}", EXIT_USAGE)
     except KeyboardInterrupt:
         hint = " (finished runs are saved; run the same command again to resume)" if args.command == "sweep" else ""
         print(f"contactdyn: interrupted{hint}", file=sys.stderr)

@@ -107,6 +107,15 @@ def test_bad_files_name_the_file(capsys, tmp_path):
         assert code == EXIT_USAGE and str(path) in err and word in err
 
 
+def test_unwritable_output_is_bad_input(capsys, tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    for argv in (["run", "b1", *FAST, "--out", str(blocker / "run")],
+                 ["sweep", "b1", *FAST, "--workers", "0", "--out", str(blocker)]):
+        code, _, err = _run(capsys, argv)
+        assert code == EXIT_USAGE and str(blocker) in err
+
+
 def test_json_mode_reports_errors_on_stdout_too(capsys):
     code, out, err = _run(capsys, ["run", "b1", "--json", "--set", "duration=0"])
     assert code == EXIT_USAGE
