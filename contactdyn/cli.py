@@ -1,58 +1,362 @@
-"""The ``contactdyn`` command line: thin dispatch to plain functions."""
+"""The ``contactdyn`` command line: thin dispatch to plain functions.
+
+Exit codes: 0 ok; 1 a run failed (a sweep: at least one run failed, all are recorded);
+2 bad input (unknown key, wrong type or value, unknown scene or robot, unreadable or
+malformed file, an output path that cannot be written, command-line misuse);
+130 interrupted (a sweep resumes when run again).
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import sys
+from typing import Any
 
-from .errors import ContactdynError
+from .errors import ContactdynError, RobotError, SceneError
 
-__all__ = ["main"]
+__all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
-EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+LIST_SECTIONS = ("scenes", "robots", "models", "controllers", "integrators")
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    from .scene import parse_override
-    from .simulate import simulate
+class _Usage(Exception):
+    """Command-line misuse found by argparse (exit 2, one line, no traceback)."""
 
-    overrides = dict(parse_override(s) for s in args.set)
-    result = simulate(args.scene, overrides)
-    s = result.stats
-    print(f"{result.meta['name']}: {result.meta['duration']:g} s simulated in {s['wall_s']:.3f} s "
-          f"(real-time factor {s['real_time_factor']:.1f}), {s['steps']} steps, {s['rhs_evals']} rhs evaluations, "
-          f"{s['events']} events, {len(result.impacts)} impacts")
-    for name in result.meta["contacts"]:
-        F = result[f"contact.{name}.F_n"]
-        print(f"  contact {name}: normal force peak {F.max():.4g} N, final {F[-1]:.4g} N")
-    for imp in result.impacts:
-        print(f"  impact t = {imp['t']:.6g} s on {imp['contact']}: FΔt = {imp['normal_impulse']:.6g} N·s, "
-              f"F_fΔt = {imp['friction_impulse']} N·s, jammed = {imp['jammed']}")
-    if args.out:
-        path = result.save(args.out)
-        print(f"  saved {path} and {path.with_suffix('.json')}")
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # noqa: D102 (argparse hook)
+        raise _Usage(f"{self.prog}: {message}")
+
+
+def _out(args: argparse.Namespace, text: str) -> None:
+    if not getattr(args, "quiet", False) and not getattr(args, "json", False):
+        print(text)
+
+
+def _emit_json(obj: Any) -> None:
+    print(json.dumps(_plain(obj), indent=1, allow_nan=False))
+
+
+def _plain(obj: Any) -> Any:
+    """JSON-ready: numpy to Python, NaN and infinities (undefined metrics) to null."""
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple | np.ndarray):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if obj is None or isinstance(obj, str | int | float | bool):
+        return obj
+    return str(obj)
+
+
+# ---- list ------------------------------------------------------------------------------------
+def _catalog() -> dict[str, Any]:
+    import tomllib
+
+    from .controllers import CONTROLLERS
+    from .integrators import FIXED, IMPLICIT, METHODS
+    from .robot import EXAMPLE_ROBOTS, urdf_dir
+    from .scene import NORMAL_MODELS, TANGENT_MODELS, sims_dir
+
+    scenes = []
+    for path in sorted(sims_dir().glob("*.toml")):
+        try:
+            description = tomllib.loads(path.read_text()).get("description", "")
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            description = f"(unreadable: {exc})"
+        scenes.append({"name": path.stem, "file": str(path), "description": str(description)})
+    robots = [{"name": p.stem, "source": "urdf/", "file": str(p)} for p in sorted(urdf_dir().glob("*.urdf"))]
+    robots += [{"name": n, "source": "example-robot-data", "file": EXAMPLE_ROBOTS[n]} for n in sorted(EXAMPLE_ROBOTS)]
+    normal = {"rigid": "constraint, impact at touch", "a": "ground -[k'', b'']- m' -[k', b']- tip (continuous)",
+              "b": "ground -[k, b]- m', struck by the tip (impact at touch)", "c": "massless Kelvin-Voigt stage k, b",
+              "chain": "explicit stages {k, b} and masses {m}, environment and robot side"}
+    tangent = {"free": "no tangential force", "friction": "Coulomb stick/slip (mu or mu_s, mu_k; viscous)",
+               "chain": "tangential deformation chain, bonded at touch"}
+    controllers = []
+    for name in sorted(CONTROLLERS):
+        doc = (CONTROLLERS[name].__doc__ or "").strip().splitlines()
+        controllers.append({"name": name, "description": doc[0] if doc else ""})
+    return {
+        "scenes": scenes,
+        "robots": robots,
+        "models": {"normal": [{"name": m, "description": normal.get(m, "")} for m in NORMAL_MODELS],
+                   "tangent": [{"name": m, "description": tangent.get(m, "")} for m in TANGENT_MODELS]},
+        "controllers": controllers,
+        "integrators": [{"name": m, "implicit": m in IMPLICIT, "description": _integrator(m, IMPLICIT, FIXED)}
+                        for m in METHODS],
+    }
+
+
+def _integrator(name: str, implicit: tuple[str, ...], fixed: tuple[str, ...]) -> str:
+    if name == "auto":
+        return "DOP853, switching to Radau where a decaying stiff mode holds the step (default choice)"
+    if name in fixed:
+        return "fixed-step explicit Runge-Kutta, step solver.max_step, no error control"
+    return "implicit, for stiff scenes" if name in implicit else "explicit Runge-Kutta with error control"
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    catalog = _catalog()
+    sections = [args.what] if args.what else list(LIST_SECTIONS)
+    if args.json:
+        _emit_json({s: catalog[s] for s in sections})
+        return EXIT_OK
+    for s in sections:
+        print(f"{s}:")
+        if s == "models":
+            for kind in ("normal", "tangent"):
+                print(f"  {kind} (contact.<c>.{kind}.model):")
+                for m in catalog[s][kind]:
+                    print(f"    {m['name']:<8} {m['description']}")
+        elif s == "robots":
+            for r in catalog[s]:
+                print(f"  {r['name']:<16} {r['source']}")
+        else:
+            for item in catalog[s]:
+                print(f"  {item['name']:<16} {item['description']}")
     return EXIT_OK
 
 
+# ---- run -------------------------------------------------------------------------------------
+def _cmd_run(args: argparse.Namespace) -> int:
+    from .metrics import metrics
+    from .scene import load_scene, parse_override
+    from .simulate import simulate
+
+    overrides = dict(parse_override(s) for s in args.set)
+    scene = load_scene(args.scene, overrides)
+    result = simulate(scene)
+    saved = str(result.save(args.out)) if args.out else None
+    if args.json:
+        _emit_json({"scene": scene.name, "file": scene.file, "status": "ok", "out": saved,
+                    "metrics": metrics(result), "stats": result.stats, "impacts": result.impacts})
+    else:
+        s = result.stats
+        _out(args, f"{result.meta['name']}: {result.meta['duration']:g} s simulated in {s['wall_s']:.3f} s "
+                   f"(real-time factor {s['real_time_factor']:.1f}), {s['steps']} steps, {s['rhs_evals']} rhs "
+                   f"evaluations, {s['events']} events, {len(result.impacts)} impacts")
+        for name in result.meta["contacts"]:
+            F = result[f"contact.{name}.F_n"]
+            _out(args, f"  contact {name}: normal force peak {F.max():.4g} N, final {F[-1]:.4g} N")
+        for imp in result.impacts:
+            _out(args, f"  impact t = {imp['t']:.6g} s on {imp['contact']}: FΔt = {imp['normal_impulse']:.6g} N·s, "
+                       f"F_fΔt = {imp['friction_impulse']} N·s, jammed = {imp['jammed']}")
+        if saved:
+            _out(args, f"  saved {saved} and {saved[:-4]}.json")
+    if args.view:
+        view_result = _lazy("viewer", "view_result")
+        if view_result is None:
+            return EXIT_FAILED
+        return view_result(result, args) or EXIT_OK
+    return EXIT_OK
+
+
+# ---- sweep -----------------------------------------------------------------------------------
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    from .sweep import make_sweep, run_sweep
+
+    sweep = make_sweep(args.scene, args.set, args.grid, args.range, args.file)
+    out = args.out or f"sweeps/{sweep.name}"
+    if args.workers is not None and args.workers < 0:
+        raise SceneError("--workers", "an integer >= 0 (0: run in this process)", args.workers)
+    if args.chunk is not None and args.chunk < 1:
+        raise SceneError("--chunk", "an integer >= 1", args.chunk)
+    n = len(sweep.cases())
+    where = f"Dask scheduler {args.scheduler}" if args.scheduler else (
+        "this process" if args.workers == 0 else f"{args.workers or 'all'} local workers")
+    _out(args, f"sweep {sweep.name}: {n} runs on {where} -> {out}")
+    report = run_sweep(sweep, out, workers=args.workers, scheduler=args.scheduler, chunk=args.chunk, csv=args.csv,
+                       retry_failed=args.retry_failed, progress=not (args.quiet or args.json))
+    bad = report.counts["failed"] + report.counts["crashed"]
+    if args.json:
+        _emit_json(report.as_dict())
+    else:
+        _out(args, f"  {report.counts['ok']} ok, {report.counts['failed']} failed, {report.counts['crashed']} crashed"
+                   f" ({report.skipped} already done) in {report.wall_s:.2f} s; summary {report.summary}")
+    if bad and not args.json:
+        print(f"contactdyn: {bad} of {report.total} runs failed; see the status and error columns of "
+              f"{report.summary}", file=sys.stderr)
+    return EXIT_FAILED if bad else EXIT_OK
+
+
+# ---- plot, view, bench: other modules, imported when used ---------------------------------------
+def _lazy(module: str, function: str):
+    import importlib
+
+    name = f"{__package__}.{module}"
+    try:
+        return getattr(importlib.import_module(name), function)
+    except ModuleNotFoundError as exc:
+        if exc.name not in (name, None):  # the module exists but needs something missing
+            print(f"contactdyn: error: {module} cannot be used here: {exc}", file=sys.stderr)
+            return None
+    except (ImportError, AttributeError):
+        pass
+    print(f"contactdyn: error: {module}.{function} is not available yet in this version", file=sys.stderr)
+    return None
+
+
+def _delegate(module: str, function: str):
+    def handler(args: argparse.Namespace) -> int:
+        if getattr(args, "run", None) is not None:
+            _check_saved_run(args.run)
+        fn = _lazy(module, function)
+        return EXIT_FAILED if fn is None else int(fn(args) or EXIT_OK)
+
+    return handler
+
+
+def _check_saved_run(run: str) -> None:
+    from pathlib import Path
+
+    npz = Path(run).with_suffix(".npz")
+    if not (npz.is_file() and npz.with_suffix(".json").is_file()):
+        raise SceneError("RUN", f"a saved run ({npz.name} and {npz.with_suffix('.json').name}, "
+                         "as `contactdyn run SCENE --out NAME` writes)", run)
+
+
+# ---- parser ----------------------------------------------------------------------------------
+def _scripting(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", "-q", action="store_true", help="print nothing but errors")
+    p.add_argument("--json", action="store_true", help="print one JSON document on stdout (for scripts)")
+
+
+def _set_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene key, value read as TOML (repeatable), e.g. contact.tip.normal.k=1e4")
+
+
+def _csv_list(text: str) -> list[str]:
+    return [s.strip() for s in text.split(",") if s.strip()]
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="contactdyn", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="simulate a scene", epilog="example: contactdyn run b1 --set solver.rtol=1e-6")
+    fmt = argparse.RawDescriptionHelpFormatter
+    parser = _Parser(prog="contactdyn", description=__doc__, formatter_class=fmt)
+    from . import __version__
+
+    parser.add_argument("--version", action="version", version=f"contactdyn {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+
+    ls = sub.add_parser("list", help="list scenes, robots, contact models, controllers, integrators",
+                        description="List what a scene can name.", formatter_class=fmt,
+                        epilog="examples:\n  contactdyn list\n  contactdyn list robots --json")
+    ls.add_argument("what", nargs="?", choices=LIST_SECTIONS, help="one section only")
+    _scripting(ls)
+    ls.set_defaults(func=_cmd_list)
+
+    run = sub.add_parser("run", help="simulate a scene", description="Simulate one scene and print its key figures.",
+                         formatter_class=fmt,
+                         epilog="examples:\n  contactdyn run b1 --set solver.rtol=1e-6 --out runs/b1\n"
+                                "  contactdyn run sims/b1.toml --set duration=0.5 --json")
     run.add_argument("scene", help="scene file or name in sims/")
-    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key")
+    _set_option(run)
     run.add_argument("--out", help="save the run as OUT.npz + OUT.json")
+    run.add_argument("--view", action="store_true", help="show the run in the meshcat viewer afterwards")
+    run.add_argument("--html", help="with --view: write a self-contained HTML player instead of serving")
+    run.add_argument("--port", type=int, help="with --view: meshcat server port")
+    run.add_argument("--speed", type=float, default=1.0, help="with --view: playback speed factor")
+    _scripting(run)
     run.set_defaults(func=_cmd_run)
+
+    sw = sub.add_parser(
+        "sweep", help="run a scene over a grid of parameters (process pool or Dask)", formatter_class=fmt,
+        description="Run every combination of the axes; results in OUT/runs/, one summary row per run in "
+                    "OUT/summary.parquet. Re-running the same command resumes (finished runs are skipped).",
+        epilog="examples:\n"
+               "  contactdyn sweep b1 --grid contact.tip.normal.k=1e4,1e5,1e6 --range controller.kp=500:5000:4 "
+               "--out sweeps/b1 --csv\n"
+               "  contactdyn sweep b1 --range contact.tip.tangent.mu=0.1:0.8:8 --set duration=0.5 --workers 2\n"
+               "  contactdyn sweep --file mysweep.toml --scheduler tcp://10.0.0.5:8786\n"
+               "exit codes: 0 all runs ok, 1 some run failed (recorded in the summary), 2 bad input")
+    sw.add_argument("scene", nargs="?", help="scene file or name in sims/ (or `scene` in the sweep file)")
+    _set_option(sw)
+    sw.add_argument("--grid", action="append", default=[], metavar="KEY=V1,V2,...", help="an axis of given values")
+    sw.add_argument("--range", action="append", default=[], metavar="KEY=LO:HI:N[:log]",
+                    help="an axis of N values from LO to HI, linear or log spaced")
+    sw.add_argument("--file", help="a sweep file (TOML: scene, [set], [grid], [range], [[run]])")
+    sw.add_argument("--out", help="output folder (default sweeps/<scene name>)")
+    sw.add_argument("--workers", type=int, help="local worker processes (default: all cores; 0: this process)")
+    sw.add_argument("--scheduler", metavar="ADDRESS", help="run on this Dask distributed scheduler instead")
+    sw.add_argument("--chunk", type=int, help="runs per task sent to a worker (default: about 4 tasks per worker)")
+    sw.add_argument("--csv", action="store_true", help="also write OUT/summary.csv")
+    sw.add_argument("--retry-failed", action="store_true", help="run the failed runs again on resume")
+    _scripting(sw)
+    sw.set_defaults(func=_cmd_sweep)
+
+    view = sub.add_parser("view", help="show a saved run in the meshcat viewer", formatter_class=fmt,
+                          epilog="examples:\n  contactdyn view runs/b1\n  contactdyn view runs/b1 --html b1.html")
+    view.add_argument("run", help="saved run (RUN.npz + RUN.json)")
+    view.add_argument("--html", metavar="FILE", help="write a self-contained HTML player instead of serving")
+    view.add_argument("--port", type=int, help="meshcat server port")
+    view.add_argument("--speed", type=float, default=1.0, help="playback speed factor")
+    view.set_defaults(func=_delegate("viewer", "view_command"))
+
+    plot = sub.add_parser("plot", help="paper-style figures of a saved run", formatter_class=fmt,
+                          epilog="example:\n  contactdyn plot runs/b1 --out figs --format png,svg")
+    plot.add_argument("run", help="saved run (RUN.npz + RUN.json)")
+    plot.add_argument("--out", metavar="DIR", help="output folder")
+    plot.add_argument("--format", type=_csv_list, help="comma-separated formats (default png,svg)")
+    plot.set_defaults(func=_delegate("plots", "plot_command"))
+
+    bench = sub.add_parser("bench", help="work-precision benchmark of the integrators on a scene",
+                           formatter_class=fmt,
+                           epilog="example:\n  contactdyn bench b1 --methods DOP853,RK45 --rtols 1e-4,1e-6,1e-8 "
+                                  "--repeats 3 --out bench/b1")
+    bench.add_argument("scene", help="scene file or name in sims/")
+    bench.add_argument("--methods", help="comma-separated integrators (see `contactdyn list`); RK4=1e-3/1e-4 gives "
+                                         "RK4's fixed steps")
+    bench.add_argument("--rtols", help="comma-separated relative tolerances")
+    bench.add_argument("--repeats", type=int, default=3, help="timing repeats per point")
+    bench.add_argument("--out", metavar="DIR", help="output folder")
+    _set_option(bench)
+    bench.set_defaults(func=_delegate("workprecision", "bench_command"))
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line; return the exit code (never raises for bad input)."""
+    from .sweep import NUMERICAL
+
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except _Usage as exc:
+        print(f"{exc}\n(see contactdyn --help)", file=sys.stderr)
+        return EXIT_USAGE
+    except SystemExit as exc:  # --help, --version
+        return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
     try:
         return args.func(args)
+    except (SceneError, RobotError) as exc:
+        return _fail(args, exc, EXIT_USAGE)
     except ContactdynError as exc:
-        print(f"contactdyn: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE if type(exc).__name__ in ("SceneError", "RobotError") else EXIT_FAILED
+        return _fail(args, exc, EXIT_FAILED)
+    except NUMERICAL as exc:  # a blow-up numpy noticed before the simulator did: the run failed
+        return _fail(args, f"the run blew up: {type(exc).__name__}: {exc}", EXIT_FAILED)
+    except OSError as exc:  # an output path that cannot be written (a file where a folder must go, ...)
+        where = exc.filename if exc.filename is not None else "?"
+        return _fail(args, f"{where}: {exc.strerror or exc}", EXIT_USAGE)
+    except KeyboardInterrupt:
+        hint = " (finished runs are saved; run the same command again to resume)" if args.command == "sweep" else ""
+        print(f"contactdyn: interrupted{hint}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+def _fail(args: argparse.Namespace, exc: Exception | str, code: int) -> int:
+    print(f"contactdyn: error: {exc}", file=sys.stderr)
+    if getattr(args, "json", False):
+        _emit_json({"status": "bad input" if code == EXIT_USAGE else "failed", "error": str(exc),
+                    "exit_code": code})
+    return code
 
 
 if __name__ == "__main__":

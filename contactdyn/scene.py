@@ -263,6 +263,8 @@ def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Sce
         raise SceneError("<file>", "valid TOML", str(exc), str(path)) from None
     except OSError as exc:
         raise SceneError("<file>", "a readable file", exc.strerror, str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise SceneError("<file>", "UTF-8 text", str(exc), str(path)) from None
     return parse_scene(document, overrides, file=str(path))
 
 
@@ -383,8 +385,9 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
         raw = tangent_r.raw("directions")
         if not isinstance(raw, list) or not 1 <= len(raw) <= 2:
             raise tangent_r.error("directions", "a list of 1 or 2 direction vectors", raw)
-        tangents = np.array([Reader({"d": d}, tangent_r.key("directions"), r.file).vector("d", size=3, unit_norm=True)
-                             for d in raw])
+        tangents = np.array([Reader({str(i): d}, tangent_r.key("directions"), r.file).vector(str(i), size=3,
+                                                                                             unit_norm=True)
+                             for i, d in enumerate(raw)])
         if np.any(np.abs(tangents @ normal) > 1e-9) or (len(tangents) == 2 and abs(tangents[0] @ tangents[1]) > 1e-9):
             raise tangent_r.error("directions", "directions orthogonal to the normal and to each other",
                                   raw)

@@ -330,7 +330,6 @@ def prepare(scene: Scene) -> tuple[System, list[ContactMode], Phase, np.ndarray]
     run = _Run(system)
     x, modes = system.initial_state()
     phase = system.start_phase(0, 0.0, x, None)
-    x = run._init_controller(phase, 0.0, x, modes)
     x, modes = run._consistent(0.0, x, modes, phase)
     return system, modes, phase, x
 
@@ -371,10 +370,19 @@ class _Run:
 
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:
+        """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
+        try:
+            return self._run(wall0)
+        except (np.linalg.LinAlgError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
+            t = self.segments[-1].t1 if self.segments else 0.0
+            raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
+                                  f"({type(exc).__name__}: {exc}); check the scene's magnitudes "
+                                  "(initial velocities, gains, stiffness)") from None
+
+    def _run(self, wall0: float) -> Result:
         system, T = self.system, self.scene.duration
         x, modes = system.initial_state()
         phase = system.start_phase(0, 0.0, x, None)
-        x = self._init_controller(phase, 0.0, x, modes)
         t = 0.0
         x, modes = self._consistent(t, x, modes, phase)
         while t < T:
@@ -465,16 +473,6 @@ class _Run:
         if method not in IMPLICIT and any(m.from_rest and len(m.slip) == 2 and not m.stuck for m in modes):
             return LAUNCH_METHOD
         return method
-
-    def _init_controller(self, phase: Phase, t: float, x: np.ndarray, modes) -> np.ndarray:
-        if phase.controller.n_states:
-            ev = self.system.evaluate(t, x, modes, phase)
-            from .controllers.base import ControlInput  # noqa: F401
-
-            x = x.copy()
-            x[2 * self.system.nQ + phase.z_slice.start: 2 * self.system.nQ + phase.z_slice.stop] = \
-                phase.controller.initial_states(ev)  # type: ignore[arg-type]
-        return x
 
     def _next_phase(self, phase: Phase, t: float, x: np.ndarray) -> Phase:
         nxt = phase.index + 1

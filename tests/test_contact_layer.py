@@ -194,3 +194,13 @@ def test_error_falls_with_tolerance_at_first_order_in_rtol():
 def test_a_tip_starting_inside_the_surface_is_a_clear_error():
     with pytest.raises(SceneError, match="contact.tip.*gap"):
         simulate(axis_scene({"model": "c", "k": 1e5, "b": 1.0}, q0=1.1, v0=0.0, duration=0.1))
+
+
+def test_hunt_crossley_stage_settles_at_its_static_deflection_and_never_pulls():
+    k, n, F = 1e7, 1.5, 100.0  # [N/m^1.5], exponent, push [N]
+    stage = {"k": k, "b": 1e9, "law": "hunt_crossley", "exponent": n}  # b x^n ẋ: near-critical damping here
+    r = simulate(axis_scene({"model": "chain", "environment": [stage]}, q0=1.0, v0=0.0, duration=0.5, push=F,
+                            solver={"rtol": 1e-10, "atol": 1e-13}))
+    assert r["q"][-1, 0] - 1.0 == pytest.approx((F / k) ** (1.0 / n), rel=1e-6)  # k xⁿ = F
+    assert r["contact.tip.F_n"][-1] == pytest.approx(F, rel=1e-6)
+    assert r["contact.tip.F_n"].min() >= 0.0

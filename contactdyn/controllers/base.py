@@ -97,8 +97,6 @@ class Controller:
     def bind(self, context: BindContext) -> None:
         """Check the scene and resolve defaults (may set ``n_states``); raise SceneError on misuse."""
 
-    def initial_states(self, inp: ControlInput) -> np.ndarray:
-        return np.zeros(self.n_states)
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray | None]:
         """Joint torques and the rates of the controller's states."""

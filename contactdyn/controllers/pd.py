@@ -59,7 +59,8 @@ class TaskPD(Controller):
         axes_raw = r.raw("axes", [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
         if not isinstance(axes_raw, list) or not axes_raw:
             raise r.error("axes", "a list of direction vectors", axes_raw)
-        axes = np.array([np.asarray(a, float) / np.linalg.norm(a) for a in axes_raw])
+        axes = np.array([type(r)({str(i): a}, r.key("axes"), r.file).vector(str(i), size=3, unit_norm=True)
+                         for i, a in enumerate(axes_raw)])
         kp, kd = _gains(r, "kp", 2000.0, "N/m"), _gains(r, "kd", 100.0, "N·s/m")
         for name, g in (("kp", kp), ("kd", kd)):
             if len(g) not in (1, len(axes)):

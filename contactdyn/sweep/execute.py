@@ -1,0 +1,185 @@
+"""Running a sweep: chunks of runs in this process, on a local process pool, or on a Dask cluster."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import ContactdynError, SceneError
+from ..scene import parse_scene
+from .plan import Sweep, check_sweep
+from .store import STATUSES, atomic_write, cached_rows, done_row, result_row, write_manifest, write_summary
+
+__all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk"]
+
+#: numerical failures a blow-up raises from numpy inside a run (a failed run, not a bug)
+NUMERICAL: tuple[type[Exception], ...] = (np.linalg.LinAlgError, FloatingPointError, OverflowError)
+CHUNKS_PER_WORKER = 4  #: aim for this many chunks per worker (load balance vs per-chunk cost)
+MAX_CHUNK = 32  #: runs per chunk at most, so the summary is refreshed often
+SCHEDULER_TIMEOUT = 10.0  #: [s] to connect to a Dask scheduler
+
+
+def run_chunk(document: dict[str, Any], file: str | None, runs_dir: str, tasks: list[tuple[str, dict[str, Any]]]
+              ) -> list[dict[str, Any]]:
+    """Run ``tasks`` [(id, overrides)] one after the other; write each result; return their rows.
+
+    Runs in a worker process (pool or Dask); results go straight to ``runs_dir`` (which
+    Dask workers must see: a shared file system).
+    """
+    return [_run_one(document, file, Path(runs_dir), rid, overrides) for rid, overrides in tasks]
+
+
+def _run_one(document: dict[str, Any], file: str | None, runs_dir: Path, rid: str, overrides: dict[str, Any]
+             ) -> dict[str, Any]:
+    from ..simulate import simulate
+
+    wall0 = time.perf_counter()
+    try:
+        result = simulate(parse_scene(document, overrides, file))
+    except (ContactdynError, *NUMERICAL) as exc:
+        status, error = "failed", f"{type(exc).__name__}: {exc}"
+    except Exception as exc:  # noqa: BLE001 (a bug or an uncaught blow-up: recorded, the sweep goes on)
+        status, error = "crashed", f"{type(exc).__name__}: {exc}"
+    else:
+        result.save(runs_dir / rid)
+        return result_row(rid, result)
+    row = {"run_id": rid, "status": status, "error": error, "wall_s": time.perf_counter() - wall0}
+    atomic_write(runs_dir / f"{rid}.failed.json", json.dumps({**row, "overrides": overrides}, indent=1,
+                                                              default=str).encode())
+    return row
+
+
+@dataclass
+class SweepReport:
+    out: Path
+    total: int  #: runs in the sweep
+    skipped: int  #: already finished before this call (resumed)
+    counts: dict[str, int]  #: runs per status
+    wall_s: float  #: [s] wall time of this call
+    summary: Path
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"out": str(self.out), "total": self.total, "skipped": self.skipped, "counts": self.counts,
+                "wall_s": self.wall_s, "summary": str(self.summary)}
+
+
+def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, scheduler: str | None = None,
+              chunk: int | None = None, csv: bool = False, retry_failed: bool = False, progress: bool = False,
+              check: bool = True) -> SweepReport:
+    """Run every case not finished yet; write results and the summary under ``out``.
+
+    ``workers``: local processes (None: all cores, 0: this process); ``scheduler``: a Dask
+    scheduler address instead (chunks of ``chunk`` runs are the tasks either way).
+    """
+    wall0 = time.perf_counter()
+    out = Path(out)
+    runs_dir = out / "runs"
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer; the real files are whole or absent
+        stale.unlink(missing_ok=True)
+    if check:
+        check_sweep(sweep)
+    cases = sweep.cases()
+    write_manifest(out, sweep, cases)
+    rows: dict[str, dict[str, Any]] = {}
+    cache = cached_rows(out)
+    for rid, _, _ in cases:
+        if retry_failed and (runs_dir / f"{rid}.failed.json").is_file():
+            (runs_dir / f"{rid}.failed.json").unlink()
+        row = done_row(runs_dir, rid, cache)
+        if row is not None:
+            rows[rid] = row
+    todo = [(rid, overrides) for rid, _, overrides in cases if rid not in rows]
+    skipped = len(rows)
+    params = {rid: p for rid, p, _ in cases}
+    summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
+    n_workers = (os.cpu_count() or 1) if workers is None else max(0, workers)
+    size = chunk or max(1, min(MAX_CHUNK, math.ceil(len(todo) / (CHUNKS_PER_WORKER * max(1, n_workers)))))
+    chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
+    bar = _progress(len(cases), skipped, progress)
+    try:
+        for chunk_rows in _execute(sweep, runs_dir, chunks, n_workers, scheduler):
+            rows.update((r["run_id"], r) for r in chunk_rows)
+            summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
+            bar.update(len(chunk_rows))
+            bar.set_postfix(failed=sum(r["status"] != "ok" for r in rows.values()), refresh=False)
+    finally:
+        bar.close()
+    counts = {s: sum(r["status"] == s for r in rows.values()) for s in STATUSES}
+    return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary)
+
+
+def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, scheduler: str | None):
+    """Yield each chunk's rows as it completes."""
+    if not chunks:
+        return
+    args = (sweep.document, sweep.file, str(runs_dir))
+    if scheduler:
+        yield from _execute_dask(scheduler, args, chunks)
+        return
+    if n_workers == 0:  # in this process, one chunk after the other
+        for c in chunks:
+            yield run_chunk(*args, c)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    # no fork of a (possibly threaded) parent: workers fork from a server that preloaded the package
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["contactdyn.sweep", "contactdyn.simulate"])
+    pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_worker_init)
+    try:
+        futures = [pool.submit(run_chunk, *args, c) for c in chunks]
+        for fut in as_completed(futures):
+            yield fut.result()
+    except BrokenProcessPool as exc:
+        raise ContactdynError(f"a worker process died ({exc}); the finished runs are saved, "
+                              "run the same command again to resume") from None
+    except BaseException:  # interrupted: stop the workers now (their results so far are whole files)
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _worker_init() -> None:
+    """Ctrl-C reaches the whole process group: only the parent handles it (it stops the workers)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _execute_dask(scheduler: str, args: tuple, chunks: list):
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise SceneError("--scheduler", "dask.distributed installed (pip install 'dask[distributed]')",
+                         scheduler) from None
+    try:
+        client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise SceneError("--scheduler", "the address of a running Dask scheduler", f"{scheduler} ({exc})") from None
+    with client:
+        futures = [client.submit(run_chunk, *args, c, pure=False) for c in chunks]
+        try:
+            for fut in as_completed(futures):
+                yield fut.result()
+        finally:
+            client.cancel(futures)
+
+
+def _progress(total: int, initial: int, enabled: bool):
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, unit="run", file=sys.stderr, disable=not enabled, dynamic_ncols=True,
+                desc="sweep")
