@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -65,16 +66,27 @@ def load_result(path: str | os.PathLike) -> Result:
     return Result(channels, doc["events"], doc["impacts"], doc["stats"], doc["scene"], doc.get("meta", {}))
 
 
-def _atomic(path: Path, write) -> None:
+def atomic_path(path: Path, write: Callable[[str], None]) -> None:
+    """Call ``write(tmp)`` on a temporary file beside ``path``, then rename it onto ``path``."""
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
     try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
+        write(tmp)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def _atomic(path: Path, write: Callable[[Any], None]) -> None:
+    """Atomic write through a binary file object."""
+
+    def to_file(tmp: str) -> None:
+        with open(tmp, "wb") as f:
+            write(f)
+
+    atomic_path(path, to_file)
 
 
 def _jsonable(obj: Any) -> Any:

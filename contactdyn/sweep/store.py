@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import ContactdynError, SceneError
+from ..result import atomic_path
 from .plan import Sweep
 
 __all__ = ["STATUSES", "SUMMARY_FIXED", "result_row", "done_row", "cached_rows", "write_manifest", "write_summary",
@@ -126,15 +124,3 @@ def atomic_write(path: Path, data: bytes) -> None:
             f.write(data)
 
     atomic_path(path, write)
-
-
-def atomic_path(path: Path, write: Callable[[str], None]) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
