@@ -51,6 +51,20 @@ CHECK_RTOL = 1e-9  #: agreement a plan must show with System.evaluate when it is
 _PLANS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  #: system -> {key: ModePlan}
 
 
+def affine_map(f, n: int) -> np.ndarray:
+    """Matrix A with f(e) = A e for an affine f of e = [e₁ … e₍ₙ₋₁₎, 1], read off by unit probes."""
+    e0 = np.zeros(n)
+    e0[-1] = 1.0
+    f0 = np.asarray(f(e0))
+    A = np.empty((len(f0), n))
+    A[:, -1] = f0
+    for k in range(n - 1):
+        e = e0.copy()
+        e[k] = 1.0
+        A[:, k] = np.asarray(f(e)) - f0
+    return A
+
+
 def cached_plan(system, modes: list[ContactMode], phase) -> ModePlan:
     """The plan of (modes, phase), compiled once per system: a repeated run of the same system
     (benchmarks, sweeps) reuses it. The key is the modes and the phase's content (index, start,
@@ -250,15 +264,8 @@ class ModePlan:
 
     def _measure(self) -> None:
         ne = self.ne
-        e0 = np.zeros(ne)
-        e0[-1] = 1.0
-        w0 = self._probe_all(e0)
-        W = np.empty((len(w0), ne))
-        W[:, -1] = w0
-        for k in range(ne - 1):
-            e = e0.copy()
-            e[k] = 1.0
-            W[:, k] = self._probe_all(e) - w0
+        W = affine_map(self._probe_all, ne)
+        w0 = W[:, -1]
         rng = np.random.default_rng(1)
         for _ in range(2):  # affine? (a Hunt–Crossley stage is not)
             e = np.append(rng.normal(size=ne - 1), 1.0)
@@ -354,16 +361,7 @@ class ModePlan:
         self.i_h = nv * nv + 3 * nv * nf + 3 * nf
         self.with_g = self.feedforward == "gravity"  # then φ carries g(q) after h
         self.i_e = self.i_h + nv * (2 if self.with_g else 1)
-        n_phi = self.i_e + self.ne
-        phi0 = np.zeros(n_phi)
-        phi0[-1] = 1.0
-        y0 = self._assemble(phi0)
-        P = np.empty((len(y0), n_phi))
-        P[:, -1] = y0
-        for k in range(n_phi - 1):
-            phi = phi0.copy()
-            phi[k] = 1.0
-            P[:, k] = self._assemble(phi) - y0
+        P = affine_map(self._assemble, self.i_e + self.ne)
         self.P = P
         self.PT = np.ascontiguousarray(P.T)
         self.coulomb_terms = []
