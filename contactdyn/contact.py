@@ -154,12 +154,3 @@ class Contact:
     @property
     def chains(self) -> list[DirectionalChain]:
         return [self.normal, *self.tangent_chains]
-
-    def initial_mode(self, kin: Kinematics) -> ContactMode:
-        """Touching at the start if bonded or if the normal gap is not positive."""
-        return ContactMode(touching=self.spec.bonded, offsets=tuple(0.0 for _ in self.tangent_chains))
-
-    # ---- kinematics helpers along a direction ---------------------------------------
-    def anchor_coef(self, u: np.ndarray) -> float:
-        """∂(u·p_env)/∂(body coordinate) [-]."""
-        return float(u @ self.body_axis)

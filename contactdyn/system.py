@@ -210,8 +210,6 @@ class System:
         self.force_directions = {c.name: c.normal.u for c in self.contacts}
         self.force_directions.update({f"{c.name}.t{i + 1}": t for c in self.contacts for i, t in enumerate(c.tangents)})
         self.slip_band = scene.solver.stick_velocity  #: [m/s] stick/slip guard band (see simulate)
-        self.has_rows_possible = any(dc.chain.bonded_when_touching for c in self.contacts for dc in c.chains) or any(
-            c.friction is not None for c in self.contacts)
 
     def _build_drives(self, first_motor_coord: int) -> Drives:
         names = list(self.robot.joint_names)
