@@ -466,7 +466,6 @@ class System:
         meta: list[tuple[str, str, int]] = []
         ev = Evaluation(np.empty(0), np.empty(0), meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),
                         np.empty(0), None, {})
-        tip_force_total = np.zeros(3)
         kins: list[Kinematics] = []
         pending_friction: list[tuple[Contact, np.ndarray, float, np.ndarray]] = []
         for c, mode in zip(self.contacts, modes, strict=True):
@@ -529,10 +528,8 @@ class System:
                 gammas.append(gamma)
                 meta.append((c.name, "n", 0))
             ev.normal_force[c.name] = F_n
-            tip_force_total_c = tip_force
-            if np.any(tip_force_total_c):
-                f[:nv] += kin.J.T @ tip_force_total_c
-            tip_force_total += tip_force
+            if np.any(tip_force):
+                f[:nv] += kin.J.T @ tip_force
         # controller
         ft = next((k.frame for c, k in zip(self.contacts, kins, strict=True) if c.fid == self.tip_fid), None)
         if ft is None:
