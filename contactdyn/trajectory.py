@@ -98,7 +98,7 @@ class Move:
 class Reference:
     """Start point plus moves: position, velocity and acceleration at time t."""
 
-    start: np.ndarray
+    start: np.ndarray  #: [m] (task space) or [rad or m] (joint space)
     moves: tuple[Move, ...] = field(default_factory=tuple)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -121,11 +121,11 @@ class Ramp:
     ``step``: at once.
     """
 
-    value: float
-    start: float = 0.0
-    duration: float = 0.1
+    value: float  #: final set-point [N]
+    start: float = 0.0  #: [s]
+    duration: float = 0.1  #: rise time (linear) or time constant (exponential) [s], > 0
     kind: str = "linear"
-    initial: float = 0.0
+    initial: float = 0.0  #: set-point before ``start`` [N]
 
     def at(self, t: float) -> tuple[float, float]:
         """Set-point and its rate [N, N/s] at time t."""
