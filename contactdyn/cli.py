@@ -263,6 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--view", action="store_true", help="show the run in the meshcat viewer afterwards")
     run.add_argument("--html", help="with --view: write a self-contained HTML player instead of serving")
     run.add_argument("--port", type=int, help="with --view: meshcat server port")
+    run.add_argument("--host", help="with --view: listen on this address (default 127.0.0.1, this machine only)")
     run.add_argument("--speed", type=float, default=1.0, help="with --view: playback speed factor")
     _scripting(run)
     run.set_defaults(func=_cmd_run)
@@ -297,6 +298,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("run", help="saved run (RUN.npz + RUN.json)")
     view.add_argument("--html", metavar="FILE", help="write a self-contained HTML player instead of serving")
     view.add_argument("--port", type=int, help="meshcat server port")
+    view.add_argument("--host", help="listen on this address (default 127.0.0.1, this machine only)")
     view.add_argument("--speed", type=float, default=1.0, help="playback speed factor")
     view.set_defaults(func=_delegate("viewer", "view_command"))
 
