@@ -14,7 +14,7 @@ import math
 import sys
 from typing import Any
 
-from .errors import ContactdynError, RobotError, SceneError
+from .errors import ContactdynError, RobotError, RunFileError, SceneError
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
@@ -150,7 +150,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             _out(args, f"  impact t = {imp['t']:.6g} s on {imp['contact']}: FΔt = {imp['normal_impulse']:.6g} N·s, "
                        f"F_fΔt = {imp['friction_impulse']} N·s, jammed = {imp['jammed']}")
         if saved:
-            _out(args, f"  saved {saved} and {saved[:-4]}.json")
+            _out(args, f"  saved {saved} and {saved.removesuffix('.npz')}.json")
     if args.view:
         view_result = _lazy("viewer", "view_result")
         if view_result is None:
@@ -215,12 +215,10 @@ def _delegate(module: str, function: str):
 
 
 def _check_saved_run(run: str) -> None:
-    from pathlib import Path
+    from .result import missing_run_message, run_files
 
-    npz = Path(run).with_suffix(".npz")
-    if not (npz.is_file() and npz.with_suffix(".json").is_file()):
-        raise SceneError("RUN", f"a saved run ({npz.name} and {npz.with_suffix('.json').name}, "
-                         "as `contactdyn run SCENE --out NAME` writes)", run)
+    if not all(f.is_file() for f in run_files(run)):
+        raise RunFileError(missing_run_message(run))
 
 
 # ---- parser ----------------------------------------------------------------------------------
@@ -338,7 +336,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
     try:
         return args.func(args)
-    except (SceneError, RobotError) as exc:
+    except (SceneError, RobotError, RunFileError) as exc:
         return _fail(args, exc, EXIT_USAGE)
     except ContactdynError as exc:
         return _fail(args, exc, EXIT_FAILED)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["ContactdynError", "RobotError", "SceneError", "SimulationError"]
+__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "SimulationError"]
 
 
 class ContactdynError(Exception):
@@ -28,3 +28,7 @@ class SceneError(ContactdynError):
 
 class SimulationError(ContactdynError):
     """A run could not continue (solver failure, blow-up, event storm); says when and why."""
+
+
+class RunFileError(ContactdynError):
+    """A saved run (NAME.npz + NAME.json) is missing, damaged or not one of ours; names the file."""

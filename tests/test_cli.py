@@ -179,7 +179,7 @@ def test_run_view_hands_the_result_to_the_viewer(capsys, monkeypatch):
 @pytest.mark.parametrize("command", ["plot", "view"])
 def test_plot_and_view_of_a_missing_run_is_bad_input(capsys, tmp_path, command):
     code, _, err = _run(capsys, [command, str(tmp_path / "nothing")])
-    assert code == EXIT_USAGE and "RUN: expected a saved run (nothing.npz and nothing.json" in err
+    assert code == EXIT_USAGE and "not a saved run (need nothing.npz and nothing.json" in err
 
 
 @pytest.mark.parametrize("argv", [["plot", "SAVED"], ["view", "SAVED"], ["bench", "b1"],
