@@ -55,7 +55,8 @@ def test_a_full_disk_names_the_file(tmp_path):
 def test_a_huge_declared_channel_is_refused_before_reading(tmp_path):
     small().save(tmp_path / "r")
     header = "{'descr': '<f8', 'fortran_order': False, 'shape': (2147483648,), }"
-    raw = b"\x93NUMPY\x01\x00" + len(header.ljust(117) + "\n").to_bytes(2, "little") + (header.ljust(117) + "\n").encode()
+    padded = (header.ljust(117) + "\n").encode()
+    raw = b"\x93NUMPY\x01\x00" + len(padded).to_bytes(2, "little") + padded
     with zipfile.ZipFile(tmp_path / "r.npz", "w") as z:
         z.writestr("t.npy", raw)  # 16 GiB declared in a 128-byte member
     with pytest.raises(RunFileError, match="declares 2147483648 values in a 128-byte member"):
