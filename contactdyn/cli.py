@@ -33,7 +33,12 @@ class _Parser(argparse.ArgumentParser):
 
 def _out(args: argparse.Namespace, text: str) -> None:
     if not getattr(args, "quiet", False) and not getattr(args, "json", False):
-        print(text)
+        print(_printable(text))
+
+
+def _printable(text: str) -> str:
+    """Control characters (terminal escape codes from a scene name, say) shown as escapes, not obeyed."""
+    return "".join(c if c.isprintable() or c == "\n" else repr(c)[1:-1] for c in text)
 
 
 def _emit_json(obj: Any) -> None:
@@ -352,7 +357,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _fail(args: argparse.Namespace, exc: Exception | str, code: int) -> int:
-    print(f"contactdyn: error: {exc}", file=sys.stderr)
+    print(_printable(f"contactdyn: error: {exc}"), file=sys.stderr)
     if getattr(args, "json", False):
         _emit_json({"status": "bad input" if code == EXIT_USAGE else "failed", "error": str(exc),
                     "exit_code": code})

@@ -23,7 +23,15 @@ class SceneError(ContactdynError):
     def __init__(self, key: str, expected: str, found: object, file: str | None = None):
         self.file, self.key, self.expected, self.found = file, key, expected, found
         where = f"{file}: " if file else ""
-        super().__init__(f"{where}{key}: expected {expected}, found {found!r}")
+        super().__init__(f"{where}{key}: expected {expected}, found {abbreviate(found)}")
+
+
+def abbreviate(value: object, limit: int = 200) -> str:
+    """``repr(value)`` cut to about ``limit`` characters (head ... tail, with the full length)."""
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit - 40]} ... {text[-20:]} ({len(text)} characters)"
 
 
 class SimulationError(ContactdynError):

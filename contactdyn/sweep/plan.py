@@ -6,7 +6,6 @@ import hashlib
 import itertools
 import json
 import math
-import tomllib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Reader
+from ..config import Reader, read_toml
 from ..errors import SceneError
 from ..scene import find_scene, parse_override, parse_scene
 
@@ -127,12 +126,7 @@ def load_sweep_file(path: str | Path) -> tuple[str | None, dict[str, Any], dict[
     """Read a sweep file: (scene, fixed overrides, axes, explicit runs); errors name file and key."""
     path = Path(path)
     file = str(path)
-    try:
-        doc = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError("<file>", "valid TOML", str(exc), file) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError("<file>", "a readable sweep file", getattr(exc, "strerror", None) or str(exc), file) from None
+    doc = read_toml(path, "sweep file")
     top = Reader(doc, "", file)
     scene = top.str("scene", None) if top.has("scene") else None
     if scene is not None and not Path(scene).is_absolute() and (path.parent / scene).is_file():
@@ -183,13 +177,7 @@ def make_sweep(scene: str | Path | None, sets: Iterable[str] = (), grids: Iterab
     axes.update(dict(parse_grid(s) for s in grids))
     axes.update(dict(parse_range(s) for s in ranges))
     path = find_scene(scene)
-    try:
-        document = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError("<file>", "valid TOML", str(exc), str(path)) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError("<file>", "a readable scene file", getattr(exc, "strerror", None) or str(exc),
-                         str(path)) from None
+    document = read_toml(path)
     return Sweep(document, str(path), fixed, axes, runs)
 
 
