@@ -20,6 +20,9 @@ from ..scene import find_scene, parse_override, parse_scene
 __all__ = ["Sweep", "run_id", "parse_grid", "parse_range", "load_sweep_file", "make_sweep", "check_sweep"]
 
 
+MAX_RUNS = 100_000  #: runs in one sweep at most (each is files on disk and a summary row)
+
+
 @dataclass
 class Sweep:
     """A base scene document, fixed overrides and the varied axes (key -> values)."""
@@ -39,6 +42,10 @@ class Sweep:
         """(run id, varied parameters, all overrides) per run, sorted by id; duplicates merged."""
         out: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {}
         keys = list(self.axes)
+        count = max(1, len(self.runs)) * math.prod(len(v) for v in self.axes.values())
+        if count > MAX_RUNS:
+            raise SceneError("--grid/--range", f"a sweep of at most {MAX_RUNS} runs (the product of the axes' "
+                             "lengths and the explicit runs)", f"{count} runs", self.file)
         for explicit in self.runs or [{}]:
             for values in itertools.product(*(self.axes[k] for k in keys)):
                 params = {**explicit, **dict(zip(keys, values, strict=True))}
@@ -94,8 +101,8 @@ def parse_range(text: str) -> tuple[str, list[float]]:
 def _spaced(where: str, lo: float, hi: float, n: int, log: bool, file: str | None = None) -> list[float]:
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise SceneError(where, "finite lo and hi", [lo, hi], file)
-    if n < 1:
-        raise SceneError(where, "n >= 1 values", n, file)
+    if not 1 <= n <= MAX_RUNS:
+        raise SceneError(where, f"1 <= n <= {MAX_RUNS} values", n, file)
     if log and (lo <= 0 or hi <= 0):
         raise SceneError(where, "lo > 0 and hi > 0 for log spacing", [lo, hi], file)
     values = np.geomspace(lo, hi, n) if log else np.linspace(lo, hi, n)
