@@ -18,7 +18,7 @@ MAX_DURATION = 1e4  #: [s] simulated at most
 MAX_SAMPLES = 10**7  #: output samples (duration × output_rate) at most
 MAX_STEPS = 10**7  #: integration steps implied by duration / max_step at most
 MAX_MOVES = 64  #: moves of one reference (each adds a kink and a term to every evaluation: cost ~ moves²)
-BYTES_PER_SAMPLE = 8 * 64 * 3  #: [B] float64 × channel columns (a generous count) × working copies
+BYTES_PER_SAMPLE = 8 * 64 * 2  #: [B] float64 × channel columns (a generous count) × (channels + their saved copy)
 
 
 def check_budget(scene) -> None:
