@@ -23,6 +23,8 @@ class SceneError(ContactdynError):
     def __init__(self, key: str, expected: str, found: object, file: str | None = None):
         self.file, self.key, self.expected, self.found = file, key, expected, found
         where = f"{file}: " if file else ""
+        if len(expected) > 300:
+            expected = f"{expected[:260]} ... {expected[-20:]}"
         super().__init__(f"{where}{key}: expected {expected}, found {abbreviate(found)}")
 
 

@@ -25,10 +25,13 @@ from pathlib import Path
 
 from .errors import RobotError
 
-__all__ = ["MAX_URDF_BYTES", "MAX_URDF_LINKS", "check_urdf_tree", "isolated_build"]
+__all__ = ["MAX_URDF_BYTES", "MAX_URDF_LINKS", "MAX_URDF_MOVING_JOINTS", "check_urdf_tree", "isolated_build"]
 
 MAX_URDF_BYTES = 16 * 2**20  #: a URDF larger than this is refused (the largest shipped robot is 0.2 MB)
 MAX_URDF_LINKS = 400  #: links at most (example-robot-data's largest, tiago_dual, has 130)
+#: moving (non-fixed) joints at most: Pinocchio's data holds second-order tensors of nv³ numbers
+#: (~1.8 GB at 400 joints); example-robot-data's largest, tiago_dual, has 101
+MAX_URDF_MOVING_JOINTS = 128
 PROBE_TIMEOUT = 120.0  #: [s] for the probe child to finish one builder call
 
 _probed: dict[tuple[str, str], None] = {}  #: (content hash, builder name) that a child survived
@@ -70,6 +73,9 @@ def check_urdf_tree(path: Path) -> ET.Element:
                              f"and {name!r}: the joints must form a tree")
         parent_of[child] = (name, parent)
     _unique(path, "joint", names)
+    moving = sum(joint.get("type") != "fixed" for joint in root.findall("joint"))
+    if moving > MAX_URDF_MOVING_JOINTS:
+        raise RobotError(f"{path}: {moving} moving joints; at most {MAX_URDF_MOVING_JOINTS} are supported")
     roots = [link for link in links if link not in parent_of]
     if len(roots) != 1:
         found = f"{len(roots)} ({', '.join(map(repr, roots[:5]))})" if roots else "none (every link has a parent)"

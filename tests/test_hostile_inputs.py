@@ -217,6 +217,7 @@ def urdf_cases(tmp: Path) -> list[Case]:
         "joint_without_parent": ('<robot name="r"><link name="a"/><joint name="j" type="fixed"><child link="a"/>'
                                  "</joint></robot>", "missing <parent"),
         "thousand_links": (_urdf(chain, [f"l{i}" for i in range(1000)]), "1000 links; at most 400"),
+        "129_moving_joints": (_urdf(chain[:129], [f"l{i}" for i in range(130)]), "129 moving joints; at most 128"),
         "huge": (good.replace("<robot", "<!--" + "x" * (17 * 2**20) + "--><robot", 1), "at most 16 MB is read"),
         "malformed": (good[: len(good) // 2], "malformed XML"),
         "empty": ("", "malformed XML"),

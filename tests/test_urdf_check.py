@@ -10,7 +10,7 @@ import pytest
 
 from contactdyn.errors import RobotError
 from contactdyn.robot import Robot
-from contactdyn.urdf_check import MAX_URDF_LINKS, check_urdf_tree, isolated_build
+from contactdyn.urdf_check import MAX_URDF_LINKS, MAX_URDF_MOVING_JOINTS, check_urdf_tree, isolated_build
 
 INERTIAL = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
 
@@ -60,6 +60,16 @@ def test_too_many_links(tmp_path):
     path = urdf(tmp_path, [(f"j{i}", f"l{i}", f"l{i + 1}") for i in range(n - 1)], links)
     with pytest.raises(RobotError, match=f"{n} links; at most {MAX_URDF_LINKS}"):
         check_urdf_tree(path)
+
+
+def test_too_many_moving_joints(tmp_path):
+    n = MAX_URDF_MOVING_JOINTS + 1
+    path = urdf(tmp_path, [(f"j{i}", f"l{i}", f"l{i + 1}") for i in range(n)], [f"l{i}" for i in range(n + 1)])
+    with pytest.raises(RobotError, match=f"{n} moving joints; at most {MAX_URDF_MOVING_JOINTS}"):
+        check_urdf_tree(path)
+    fixed = urdf(tmp_path, [(f"j{i}", f"l{i}", f"l{i + 1}") for i in range(n)], [f"l{i}" for i in range(n + 1)],
+                 kind="fixed")
+    assert check_urdf_tree(fixed).tag == "robot"  # fixed joints cost nothing
 
 
 def test_not_a_robot(tmp_path):
