@@ -224,8 +224,10 @@ def urdf_cases(tmp: Path) -> list[Case]:
         "binary": (bytes(range(256)) * 8, "malformed XML"),
         "not_a_robot": ("<html><body/></html>", "expected a <robot> element"),
         "xxe": ('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]>'
-                '<robot name="r"><link name="&x;"/></robot>', "robot"),
-        "billion_laughs": (laughs, "robot"),
+                '<robot name="r"><link name="&x;"/></robot>', "reference to external entity"),
+        "xxe_content": ('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]>'
+                        '<robot name="r"><link name="a">&x;</link></robot>', "undefined entity"),
+        "billion_laughs": (laughs, "amplification"),
         "negative_mass": (good.replace('<mass value="3.0"/>', '<mass value="-3.0"/>', 1), "mass must be >= 0"),
         "nan_mass": (good.replace('<mass value="3.0"/>', '<mass value="nan"/>', 1), "mass must be >= 0"),
         "text_mass": (good.replace('<mass value="3.0"/>', '<mass value="heavy"/>', 1), "must be a number"),
