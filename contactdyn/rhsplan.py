@@ -8,7 +8,7 @@ robot's own terms (H, h, J, J̇q̇) is *affine* in a short vector
 
 chain stage forces and junction rates, slip velocities, gaps, servo forces, viscous
 friction and the plain task-space PD law. A :class:`ModePlan` measures that affine map
-``o = W e`` once, by probing the system's own code (:meth:`System._chain` & co.) at unit
+``o = W e`` once, by probing the system's own code (:func:`~contactdyn.chain_forces.chain_forces` & co.) at unit
 vectors, so it is the same model by construction; the constraint rows are ``a·J`` plus
 constants, collected once. A call then costs Pinocchio's terms, one product ``W e``,
 one product for the rows and one small linear solve. What is not affine stays explicit:
@@ -30,8 +30,10 @@ from types import SimpleNamespace
 import numpy as np
 import pinocchio as pin
 
+from .chain_forces import chain_forces
 from .contact import ContactMode, Kinematics
 from .controllers import ControlInput
+from .friction import slip_direction
 from .samples import Samples, plan_samples, slip_directions
 from .trajectory import profile
 
@@ -206,12 +208,13 @@ class ModePlan:
             else:
                 p_env, v_env = c.spec.point, np.zeros(3)
             kin = Kinematics(p_tip, v_tip, J0, d0, p_env, v_env)
-            tip_F, row, gamma, F_int, gap = s._chain(c, c.normal, mode.touching, 0.0, kin, x, f, ydot, ev, True)
+            tip_F, row, gamma, F_int, gap = chain_forces(s, c, c.normal, mode.touching, 0.0, kin, x, f, ydot, ev, True)
             g[j] += tip_F * c.normal.u
             o[self.o_Fint.start + ci] = F_int
             o[self.o_gap.start + ci] = gap
             for i, dc in enumerate(c.tangent_chains):
-                tF, trow, tgamma, tint, _ = s._chain(c, dc, mode.touching, mode.offsets[i], kin, x, f, ydot, ev, True)
+                tF, trow, tgamma, tint, _ = chain_forces(s, c, dc, mode.touching, mode.offsets[i], kin, x, f, ydot,
+                                                         ev, True)
                 g[j] += tF * dc.u
                 o[self.o_iface[f"{c.name}.{dc.label}"]] = tint
                 if trow is not None:
@@ -321,9 +324,9 @@ class ModePlan:
         return c.tangents, consts
 
     def _direction(self, ci: int, o: np.ndarray) -> np.ndarray:
-        """The sliding direction d of contact ci at outputs o (System._slip_direction's rule)."""
+        """The sliding direction d of contact ci at outputs o (:func:`~contactdyn.friction.slip_direction`'s rule)."""
         c, mode = self.system.contacts[ci], self.modes[ci]
-        return self.system._slip_direction(o[self.o_vt[c.name]], mode)
+        return slip_direction(self.system, o[self.o_vt[c.name]], mode)
 
     # ---- compiled arrays ----------------------------------------------------------------
     def _build(self) -> None:

@@ -5,7 +5,7 @@ forces, torques, gaps, slip velocities and stage deformations. :func:`plan_sampl
 computes them for all samples of a segment together: one Pinocchio pass per sample
 (H, J, J̇q̇, h, the tip position), then φ, the map P φ, the friction terms, the KKT
 solves and the read-out as array operations. :class:`Samples` holds the result (and is
-filled from :class:`~contactdyn.system.Evaluation` objects where a mode runs on
+filled from :class:`~contactdyn.dynamics.Evaluation` objects where a mode runs on
 ``System.evaluate``).
 """
 
@@ -62,7 +62,7 @@ class Samples:
         return out
 
     def fill(self, k: int, ev) -> None:
-        """Row k from a full :class:`~contactdyn.system.Evaluation`."""
+        """Row k from a full :class:`~contactdyn.dynamics.Evaluation`."""
         self.tau[k] = ev.tau
         self.tip[k] = ev.p_tip
         if ev.x_d is not None and len(ev.x_d) == 3:
@@ -214,7 +214,7 @@ def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
     Phi[:, i_e + n + 6:] = TV
 
 def slip_directions(plan, ci: int, O: np.ndarray) -> np.ndarray:
-    """Sliding directions (N, k) of contact ci at the samples' outputs O (System._slip_direction's rule:
+    """Sliding directions (N, k) of contact ci at the samples' outputs O (friction.slip_direction's rule:
     v_t/|v_t| while v_t·r exceeds the stick band, else the mode's reference r; 1-D: r)."""
     c, mode = plan.system.contacts[ci], plan.modes[ci]
     r = np.asarray(mode.slip, float)

@@ -74,6 +74,7 @@ from .chain import NodeKind
 from .contact import ContactMode
 from .drives import drive_channels
 from .errors import SceneError, SimulationError
+from .friction import CONE_TOL, FORCE_ABS_TOL
 from .integrators import (
     EXPLICIT,
     FIXED,
@@ -88,7 +89,7 @@ from .integrators import (
 from .result import Result
 from .rhsplan import ModePlan, Samples, cached_plan
 from .scene import Scene, load_scene
-from .system import CONE_TOL, FORCE_ABS_TOL, Evaluation, Phase, System
+from .system import Evaluation, Phase, System
 
 __all__ = ["simulate", "run_system", "prepare"]
 
