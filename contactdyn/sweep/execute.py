@@ -164,7 +164,7 @@ def _execute_pool(args: tuple, chunks: list, n_workers: int):
         raise
     pool.shutdown(wait=True)
     if broken:
-        yield from run_isolated(ctx, args, broken, n_workers)
+        yield from run_isolated(ctx, run_chunk, args, broken, n_workers)
 
 
 def _execute_dask(scheduler: str, args: tuple, chunks: list):

@@ -20,7 +20,7 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from multiprocessing.connection import wait
 from pathlib import Path
 from typing import Any
@@ -87,17 +87,17 @@ def signal_text(exitcode: int | None) -> str:
     return f"exited with code {exitcode}"
 
 
-def _isolated_run(document: dict[str, Any], file: str | None, runs_dir: str, rid: str, overrides: dict[str, Any],
-                  sweep_pid: int) -> None:
-    from .execute import run_chunk
-
+def _isolated_run(run_chunk: Callable, document: dict[str, Any], file: str | None, runs_dir: str, rid: str,
+                  overrides: dict[str, Any], sweep_pid: int) -> None:
     worker_init(sweep_pid)
     run_chunk(document, file, runs_dir, [(rid, overrides)])
 
 
-def run_isolated(ctx, args: tuple, tasks: list[tuple[str, dict[str, Any]]], n_workers: int
+def run_isolated(ctx, run_chunk: Callable, args: tuple, tasks: list[tuple[str, dict[str, Any]]], n_workers: int
                  ) -> Iterator[list[dict[str, Any]]]:
     """Run each task [(id, overrides)] without files in a process of its own, ``n_workers`` at a time.
+
+    ``run_chunk`` is :func:`contactdyn.sweep.execute.run_chunk` (passed in: no import back).
 
     Yields one row per run: the run's own (from its files) or, if its process died, a failed
     row naming the signal.
@@ -113,8 +113,8 @@ def run_isolated(ctx, args: tuple, tasks: list[tuple[str, dict[str, Any]]], n_wo
                 if row is not None:  # finished before its chunk's worker died
                     yield [row]
                     continue
-                proc = ctx.Process(target=_isolated_run, args=(document, file, runs_dir, rid, overrides, os.getpid()),
-                                   daemon=True)
+                proc = ctx.Process(target=_isolated_run, daemon=True,
+                                   args=(run_chunk, document, file, runs_dir, rid, overrides, os.getpid()))
                 proc.start()
                 running[proc.sentinel] = (proc, rid, overrides, time.perf_counter())
             for sentinel in wait(list(running)):
