@@ -18,7 +18,7 @@ from ..scene import parse_scene
 from .plan import Sweep, check_sweep
 from .store import STATUSES, atomic_write, cached_rows, done_row, result_row, write_manifest, write_summary
 
-__all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk"]
+__all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk", "process_pool", "stop_pool"]
 
 #: numerical failures a blow-up raises from numpy inside a run (a failed run, not a bug)
 NUMERICAL: tuple[type[Exception], ...] = (np.linalg.LinAlgError, FloatingPointError, OverflowError)
@@ -129,14 +129,10 @@ def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, schedul
         for c in chunks:
             yield run_chunk(*args, c)
         return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    # no fork of a (possibly threaded) parent: workers fork from a server that preloaded the package
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["contactdyn.sweep", "contactdyn.simulate"])
-    pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_worker_init)
+    pool = process_pool(n_workers)
     try:
         futures = [pool.submit(run_chunk, *args, c) for c in chunks]
         for fut in as_completed(futures):
@@ -145,11 +141,30 @@ def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, schedul
         raise ContactdynError(f"a worker process died ({exc}); the finished runs are saved, "
                               "run the same command again to resume") from None
     except BaseException:  # interrupted: stop the workers now (their results so far are whole files)
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
-            proc.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
+        stop_pool(pool)
         raise
     pool.shutdown(wait=True)
+
+
+def process_pool(n_workers: int, preload: tuple[str, ...] = ("contactdyn.sweep", "contactdyn.simulate")):
+    """A local pool of ``n_workers`` processes for runs (sweeps, the fit's Jacobian columns).
+
+    No fork of a (possibly threaded) parent: workers fork from a server that preloaded
+    ``preload``; they ignore Ctrl-C (the parent stops them with :func:`stop_pool`).
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(list(preload))
+    return ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_worker_init)
+
+
+def stop_pool(pool) -> None:
+    """Stop a pool's workers now (interrupted or failed), dropping the queued tasks."""
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        proc.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
 
 
 def _worker_init() -> None:
