@@ -98,8 +98,7 @@ def estimates(params: list[Parameter], z: np.ndarray, J: np.ndarray, residuals: 
         value = p.value(float(z[i]))
         if p.log:
             se = value * sd[i]
-            low, high = (p.value(z[i] - q * sd[i]), p.value(z[i] + q * sd[i])) if math.isfinite(sd[i]) else (
-                0.0, math.inf)
+            low, high = (_exp(z[i] - q * sd[i]), _exp(z[i] + q * sd[i])) if math.isfinite(sd[i]) else (0.0, math.inf)
         else:
             se = sd[i]
             low, high = value - q * sd[i], value + q * sd[i]
@@ -107,6 +106,11 @@ def estimates(params: list[Parameter], z: np.ndarray, J: np.ndarray, residuals: 
         out.append(Estimate(p.key, value, p.start, float(se), float(low), float(high), p.log, (p.low, p.high),
                             bool(at_bound[i]), tuple(warnings)))
     return out, corr, chi2_red, dof
+
+
+def _exp(x: float) -> float:
+    """exp without overflow (a huge interval is infinite)."""
+    return math.exp(x) if x < 700.0 else math.inf
 
 
 def _warnings(params: list[Parameter], i: int, value: float, low: float, high: float, corr: np.ndarray,
