@@ -217,4 +217,11 @@ def test_bounds_in_the_wrong_order(capsys, tmp_path, log):
 def test_data_outside_the_scene_duration(capsys, tmp_path, log):
     code = main(["fit", "b1", "--set", "duration=0.05", "--data", str(log), "--params", MU])
     err = capsys.readouterr().err
-    assert code == 2 and "contact.tip.F_n" in err and "duration [0, 0.05] s" in err
+    assert code == 2 and "contact.tip.F_n" in err and "duration [0, 0.05] s" in err and "t = 0.051 s" in err
+
+
+def test_times_must_increase(capsys, tmp_path):
+    path = tmp_path / "back.csv"
+    path.write_text("t,contact.tip.F_n\n0.0,100\n0.002,101\n0.001,99\n")
+    _bad(capsys, tmp_path, ["--data", str(path), "--params", MU], "t: expected strictly increasing",
+         "0.001 after 0.002 in row 4")

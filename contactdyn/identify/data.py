@@ -107,7 +107,7 @@ def read_csv(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     back = np.flatnonzero(np.diff(t) <= 0)
     if back.size:
         raise SceneError("t", "strictly increasing times [s]",
-                         f"{t[back[0] + 1]!r} after {t[back[0]]!r} in row {back[0] + 3}", file)
+                         f"{t[back[0] + 1]:.9g} after {t[back[0]]:.9g} in row {back[0] + 3}", file)
     return t, {h: values[:, j] for j, h in enumerate(header) if h != "t"}
 
 
@@ -174,4 +174,4 @@ def _check_times(t: np.ndarray, raw: dict[str, np.ndarray], duration: float, fil
         if outside.size:
             i = outside[0]
             raise SceneError(name, f"samples within the scene's duration [0, {duration:g}] s "
-                             "(shorten the log or set duration)", f"t = {t[i]!r} s in row {i + 2}", file)
+                             "(shorten the log or set duration)", f"t = {t[i]:.9g} s in row {i + 2}", file)

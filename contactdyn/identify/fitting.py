@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ContactdynError
+from ..errors import ContactdynError, SceneError
 from ..scene import Scene, load_scene, parse_scene
 from .data import Measurements, measurements
 from .model import Failure, FitModel, FitSettings, check_columns, read_channel
@@ -60,8 +60,6 @@ def fit(scene: Scene | str | Path, data: str | Path | Measurements, params: str 
     the first 1/2^(stages−1) of the log, each next one twice as much). Bad input raises
     SceneError naming the key or column.
     """
-    from ..errors import SceneError
-
     wall0 = time.perf_counter()
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)

@@ -135,8 +135,3 @@ class FitModel:
             else:
                 residuals.append(self.weighted(out))
         return residuals
-
-    def predictions(self, z: np.ndarray) -> list[np.ndarray] | str:
-        """The run's values at the data times (for the report), or its error."""
-        self.runs += 1
-        return predict(self.document, self.file, {**self.fixed, **self.values(z)}, self.targets())
