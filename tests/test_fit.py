@@ -127,9 +127,11 @@ def test_sparse_log_with_gaps(tmp_path):
         row[1] = ""  # F_n missing there
     with data.open("w", newline="") as f:
         csv.writer(f).writerows(rows)
-    res = contactdyn.fit("b1", data, MU, overrides={"duration": 0.2}, stages=1)
+    res = contactdyn.fit("b1", data, f"{MU}=0.1:1", overrides={"duration": 0.2}, stages=1, starts=3)
     assert [c.samples for c in res.channels] == [len(rows) - 1 - 10, len(rows) - 1]
     assert res.values[MU] == pytest.approx(0.3, rel=0.02)
+    assert len(res.starts) == 3 and res.starts[0].start[MU] == 0.4  # the scene's value, then random ones
+    assert 2 * min(s.cost for s in res.starts) == pytest.approx(res.chi2_red * res.dof)  # the best one won
 
 
 # ---- a run failing inside the fit (a model whose runs fail in a region) --------------------------

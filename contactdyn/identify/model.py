@@ -105,7 +105,9 @@ class FitModel:
         if math.isfinite(spacing):
             rate = min(max(rate, 1.0 / spacing), MAX_OUTPUT_RATE)
         fixed = {"solver.rtol": self.settings.rtol, "solver.atol": self.settings.atol, "solver.output_rate": rate}
-        return fixed if self.duration is None else {**fixed, "duration": self.duration}
+        if self.duration is None:
+            return fixed
+        return {**fixed, "duration": math.ceil(self.duration * rate - 1e-9) / rate}  # whole output steps
 
     def values(self, z: np.ndarray) -> dict[str, float]:
         return {p.key: p.value(float(zi)) for p, zi in zip(self.params, z, strict=True)}
