@@ -22,6 +22,7 @@ import numpy as np
 
 from .config import Reader
 from .drives import DriveTable, read_drive_table
+from .elements import STAGE_LAWS, ChainSpec, Element, Mass, Stage
 from .errors import SceneError
 from .trajectory import PROFILES, Move, Ramp
 
@@ -33,47 +34,6 @@ __all__ = [
 
 NORMAL_MODELS = ("rigid", "a", "b", "c", "chain")
 TANGENT_MODELS = ("free", "friction", "chain")
-STAGE_LAWS = ("linear", "hunt_crossley")
-
-
-# ---- contact-zone elements -------------------------------------------------------------
-@dataclass(frozen=True)
-class Stage:
-    """A Kelvin–Voigt deformation stage: F = k x + b ẋ (linear) or k xⁿ + b xⁿ ẋ (Hunt–Crossley)."""
-
-    k: float  #: stiffness [N/m] (Hunt–Crossley: [N/mⁿ])
-    b: float  #: damping [N·s/m] (Hunt–Crossley: [N·s/mⁿ⁺¹])
-    law: str = "linear"
-    exponent: float = 1.5  #: n, Hunt–Crossley only
-
-
-@dataclass(frozen=True)
-class Mass:
-    """An equivalent mass of the contact zone [kg], moving along the chain's direction."""
-
-    m: float
-
-
-Element = Stage | Mass
-
-
-@dataclass(frozen=True)
-class ChainSpec:
-    """Deformation chain along one direction.
-
-    ``environment`` lists elements from the environment body out to the contact surface;
-    ``robot`` lists them from the robot's tip frame out to the contact surface. Both empty
-    is a rigid contact.
-    """
-
-    environment: tuple[Element, ...] = ()
-    robot: tuple[Element, ...] = ()
-
-    @property
-    def rigid(self) -> bool:
-        return not self.environment and not self.robot
-
-
 @dataclass(frozen=True)
 class FrictionSpec:
     """Coulomb friction with optional viscous term: |F_f| ≤ μ_s F sticking, μ_k F + c|v| sliding."""
