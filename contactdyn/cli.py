@@ -104,6 +104,10 @@ def _integrator(name: str, implicit: tuple[str, ...], fixed: tuple[str, ...]) ->
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
+    if args.what == "keys" or args.prefix:
+        from .keys import list_keys
+
+        return list_keys(args)
     catalog = _catalog()
     sections = [args.what] if args.what else list(LIST_SECTIONS)
     if args.json:
@@ -248,8 +252,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     ls = sub.add_parser("list", help="list scenes, robots, contact models, controllers, integrators",
                         description="List what a scene can name.", formatter_class=fmt,
-                        epilog="examples:\n  contactdyn list\n  contactdyn list robots --json")
-    ls.add_argument("what", nargs="?", choices=LIST_SECTIONS, help="one section only")
+                        epilog="examples:\n  contactdyn list\n  contactdyn list robots --json\n"
+                               "  contactdyn list keys contact   (the scene keys, as docs/scenes.md)")
+    ls.add_argument("what", nargs="?", choices=(*LIST_SECTIONS, "keys"), help="one section only")
+    ls.add_argument("prefix", nargs="?", help="with keys: only the keys starting with it (e.g. contact, phase[].force)")
     _scripting(ls)
     ls.set_defaults(func=_cmd_list)
 
