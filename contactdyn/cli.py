@@ -137,6 +137,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     overrides = dict(parse_override(s) for s in args.set)
     scene = load_scene(args.scene, overrides)
+    _out(args, f"scene {scene.name}: {scene.file}")
     result = simulate(scene)
     saved = str(result.save(args.out)) if args.out else None
     if args.json:

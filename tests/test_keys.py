@@ -109,3 +109,35 @@ def test_list_keys_prints_the_reference(capsys):
                      "allowed": ">= 1e-14, <= 0.1", "meaning": "relative tolerance"}]
     assert main(["list", "keys", "nosuch"]) == EXIT_USAGE
     assert "scene key" in capsys.readouterr().err
+
+
+# ---- which file runs -------------------------------------------------------------------------
+def test_a_scene_name_is_found_in_the_working_directory_sims_first(tmp_path, monkeypatch, capsys):
+    (tmp_path / "sims").mkdir()
+    local = tmp_path / "sims" / "b1.toml"
+    local.write_text((sims_dir() / "b1.toml").read_text().replace("duration = 2.0", "duration = 0.01"))
+    monkeypatch.chdir(tmp_path)
+    assert load_scene("b1").duration == 0.01 and Path(load_scene("b1").file) == local
+    assert main(["run", "b1", "--set", "solver.output_rate=200"]) == EXIT_OK
+    assert f"scene b1: {local}" in capsys.readouterr().out
+    monkeypatch.chdir(ROOT / "tests")  # no sims/ here: the installed copy
+    assert load_scene("b1").duration == 2.0
+
+
+def test_a_relative_urdf_path_resolves_against_the_scene_file(tmp_path, monkeypatch):
+    from contactdyn.robot import urdf_dir
+
+    (tmp_path / "robots").mkdir()
+    (tmp_path / "robots" / "arm.urdf").write_text((urdf_dir() / "planar2r_b1.urdf").read_text())
+    text = (sims_dir() / "b1.toml").read_text().replace('urdf = "planar2r_b1"', 'urdf = "robots/arm.urdf"')
+    (tmp_path / "scenes").mkdir()
+    (tmp_path / "scenes" / "mine.toml").write_text(text.replace('"robots/', '"../robots/'))
+    monkeypatch.chdir(ROOT)  # elsewhere: the working directory does not matter
+    scene = load_scene(tmp_path / "scenes" / "mine.toml")
+    assert scene.robot.source == str(tmp_path / "robots" / "arm.urdf")
+    bad = tmp_path / "scenes" / "bad.toml"
+    bad.write_text(text)  # robots/arm.urdf beside the scene does not exist: named where it was looked for
+    with pytest.raises(SceneError, match="scenes/robots/arm.urdf"):
+        from contactdyn.system import System
+
+        System(load_scene(bad))
