@@ -138,10 +138,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
     overrides = dict(parse_override(s) for s in args.set)
     scene = load_scene(args.scene, overrides)
     _out(args, f"scene {scene.name}: {scene.file}")
-    result = simulate(scene)
+    result = _simulate_quietly(simulate, scene)
+    if not args.quiet and not args.json:
+        for note in result.meta.get("warnings", []):
+            print(f"contactdyn: warning: {note}", file=sys.stderr)
     saved = str(result.save(args.out)) if args.out else None
     if args.json:
         _emit_json({"scene": scene.name, "file": scene.file, "status": "ok", "out": saved,
+                    "warnings": result.meta.get("warnings", []),
                     "metrics": metrics(result), "stats": result.stats, "impacts": result.impacts})
     else:
         s = result.stats
@@ -162,6 +166,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
             return EXIT_FAILED
         return view_result(result, args) or EXIT_OK
     return EXIT_OK
+
+
+def _simulate_quietly(simulate, scene):
+    """Simulate without Python's own warning lines (the command prints the sanity warnings itself)."""
+    import warnings
+
+    from .sanity import SanityWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SanityWarning)
+        return simulate(scene)
 
 
 # ---- sweep -----------------------------------------------------------------------------------
