@@ -314,6 +314,21 @@ def build_parser() -> argparse.ArgumentParser:
     _scripting(sw)
     sw.set_defaults(func=_cmd_sweep)
 
+    new = sub.add_parser("new", help="write a commented starter scene (press, then slide)", formatter_class=fmt,
+                         description="Write sims/NAME.toml: the robot's tip approaches a table, presses 20 N and "
+                                     "slides 10 cm. It runs as written; edit it from there.",
+                         epilog="examples:\n  contactdyn new mine && contactdyn run mine\n"
+                                "  contactdyn new press_ur5 --robot ur5 --contact c --friction")
+    new.add_argument("name", help="scene name (written to sims/NAME.toml in the working directory)")
+    new.add_argument("--robot", default="writer2r", help="robot: a name in urdf/, of example-robot-data, or a path "
+                                                        "(default writer2r)")
+    new.add_argument("--tip", help="tip frame (default: known for writer2r, planar2r_b1, writer5dof, ur5; else tip)")
+    new.add_argument("--contact", default="b", choices=("b", "a", "c", "rigid"), help="normal contact model")
+    new.add_argument("--friction", action="store_true", help="Coulomb friction along the slide (mu = 0.3)")
+    new.add_argument("--out", metavar="FILE", help="write here instead of sims/NAME.toml")
+    new.add_argument("--force", action="store_true", help="overwrite an existing file")
+    new.set_defaults(func=_delegate("starter", "new_command"))
+
     view = sub.add_parser("view", help="show a saved run in the meshcat viewer", formatter_class=fmt,
                           epilog="examples:\n  contactdyn view runs/b1\n  contactdyn view runs/b1 --html b1.html")
     view.add_argument("run", help="saved run (RUN.npz + RUN.json)")
