@@ -12,6 +12,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 from .errors import ContactdynError, RobotError, SceneError
@@ -184,7 +185,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from .sweep import make_sweep, run_sweep
 
     sweep = make_sweep(args.scene, args.set, args.grid, args.range, args.file)
-    out = args.out or f"sweeps/{sweep.name}"
+    out = str(Path(args.out or f"sweeps/{sweep.name}").absolute())  # workers may run elsewhere (Dask)
+    if (args.plot is None) != (args.over is None):
+        raise SceneError("--plot/--over", "both: --plot METRIC --over PARAMETER", args.plot or args.over)
+    if args.over is not None and args.over not in sweep.parameter_keys():
+        raise SceneError("--over", f"a swept parameter ({', '.join(sweep.parameter_keys()) or 'none'})", args.over)
     if args.workers is not None and args.workers < 0:
         raise SceneError("--workers", "an integer >= 0 (0: run in this process)", args.workers)
     if args.chunk is not None and args.chunk < 1:
@@ -201,9 +206,14 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     else:
         _out(args, f"  {report.counts['ok']} ok, {report.counts['failed']} failed, {report.counts['crashed']} crashed"
                    f" ({report.skipped} already done) in {report.wall_s:.2f} s; summary {report.summary}")
+    from .sweep.report import failure_lines, failures, plot_over
+
     if bad and not args.json:
-        print(f"contactdyn: {bad} of {report.total} runs failed; see the status and error columns of "
-              f"{report.summary}", file=sys.stderr)
+        print(f"contactdyn: {bad} of {report.total} runs failed:", file=sys.stderr)
+        print("\n".join(failure_lines(failures(report.summary, sweep.parameter_keys()))), file=sys.stderr)
+    if args.plot:
+        figure = plot_over(report.summary, args.plot, args.over, sweep.parameter_keys(), report.out)
+        _out(args, f"  plot {figure}")
     return EXIT_FAILED if bad else EXIT_OK
 
 
@@ -298,6 +308,8 @@ def build_parser() -> argparse.ArgumentParser:
                "--out sweeps/b1 --csv\n"
                "  contactdyn sweep b1 --range contact.tip.tangent.mu=0.1:0.8:8 --set duration=0.5 --workers 2\n"
                "  contactdyn sweep --file mysweep.toml --scheduler tcp://10.0.0.5:8786\n"
+               "  contactdyn sweep b1 --range contact.tip.normal.k=1e4:1e6:5:log --plot contact.tip.F_peak "
+               "--over contact.tip.normal.k\n"
                "exit codes: 0 all runs ok, 1 some run failed (recorded in the summary), 2 bad input")
     sw.add_argument("scene", nargs="?", help="scene file or name in sims/ (or `scene` in the sweep file)")
     _set_option(sw)
@@ -311,6 +323,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--chunk", type=int, help="runs per task sent to a worker (default: about 4 tasks per worker)")
     sw.add_argument("--csv", action="store_true", help="also write OUT/summary.csv")
     sw.add_argument("--retry-failed", action="store_true", help="run the failed runs again on resume")
+    sw.add_argument("--plot", metavar="METRIC", help="draw this metric of the summary (e.g. contact.tip.F_final) ...")
+    sw.add_argument("--over", metavar="KEY", help="... against this swept parameter: OUT/plot_METRIC_over_KEY.png")
     _scripting(sw)
     sw.set_defaults(func=_cmd_sweep)
 

@@ -80,7 +80,7 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
     scheduler address instead (chunks of ``chunk`` runs are the tasks either way).
     """
     wall0 = time.perf_counter()
-    out = Path(out)
+    out = Path(out).absolute()  # the workers' working directory may differ (Dask)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
     for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer; the real files are whole or absent
