@@ -30,7 +30,7 @@ MAX_FRAMES = 2000  #: animation keys per track at most (the run's samples are th
 IMPACT_HOLD = 0.25  #: [s of playback] an impact marker stays large this long
 GROUPS = {"robot": f"{ROOT}/robot", "environment": f"{ROOT}/environment", "chains": f"{ROOT}/chains",
           "forces": f"{ROOT}/forces", "tool": f"{ROOT}/tool", "labels": f"{ROOT}/labels"}
-ARROW_UNIT = 0.15  #: drawn length of one arrow scale step, in view radii (the typical force spans ~3 steps)
+ARROW_UNIT = 0.2  #: drawn length of one arrow scale step, in view radii (the typical force spans ~3 steps)
 
 
 def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES) -> ViewerScene:

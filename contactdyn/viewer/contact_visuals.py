@@ -29,6 +29,7 @@ MARGIN = 0.15  #: surface plate beyond the tip's travel [L]
 COLORS = {"surface": 0x9a9a9a, "cart": 0xd98c1f, "env": 0x7a4a1a, "robot": 0x1f4fa0, "mass": 0x555555,
           "normal": 0xd62728, "friction": 0x2ca02c, "impact": 0xff2020, "tool": 0xd000d0, "trace": 0xff8c00}
 ARROW_RADIUS = 0.15  #: arrow shaft radius, in scale steps (the head is 4 radii long, 2.5 wide)
+PERCENTILE = 90  #: [%] the force an arrow scale is fitted to (impact peaks may draw longer)
 SHARED_SCALE = 1.5  #: tangential forces this many times smaller than the normal ones get their own arrow scale
 TOOL_RADIUS = 0.03  #: the tool ball's radius, in view radii
 
@@ -179,7 +180,7 @@ def add_forces(writer: SceneWriter, views: list[ContactView], ch: Channel, unit:
     """Arrows of the normal and tangential force on the robot, ending at each contact point.
 
     ``unit`` [m] is the drawn length of one scale step. Return the newtons per step of the normal
-    and the tangential arrows: each the 1-2-5 number putting the 95th percentile of its force at
+    and the tangential arrows: each the 1-2-5 number putting the :data:`PERCENTILE` of its force at
     ≤ 3 steps (peaks such as impacts may draw longer), the tangential one on its own scale when
     its forces are below 1/:data:`SHARED_SCALE` of the normal ones (else both share the normal scale).
     """
@@ -199,14 +200,15 @@ def add_forces(writer: SceneWriter, views: list[ContactView], ch: Channel, unit:
                 tangential += np.outer(F_t, t)
         if F_f is not None or v.spec.tangent_chain is not None:
             forces.append(("tangent", f"{name}_tangent", v, tangential, COLORS["friction"]))
-    typical = {kind: max((float(np.percentile(np.linalg.norm(F, axis=1), 95)) for k, _, _, F, _ in forces
+    typical = {kind: max((float(np.percentile(np.linalg.norm(F, axis=1), PERCENTILE)) for k, _, _, F, _ in forces
                           if k == kind), default=0.0) for kind in ("normal", "tangent")}
     per = {kind: nice_ceil(f / 3.0) if f > 0 else 1.0 for kind, f in typical.items()}  # [N] per step
     if typical["normal"] > 0 and typical["tangent"] >= typical["normal"] / SHARED_SCALE:
         per["tangent"] = per["normal"]
     for kind, name, v, F, color in forces:  # the force on the robot, its head at the contact point
         vectors = F * (unit / per[kind])
-        add_arrow(writer, f"{root}/{name}", v.tip - vectors, vectors, ARROW_RADIUS * unit, color)
+        add_arrow(writer, f"{root}/{name}", v.tip - vectors, vectors, ARROW_RADIUS * unit, color,
+                  order=ON_TOP + (2 if kind == "normal" else 1))  # the normal over the tangential
     return per
 
 
@@ -215,7 +217,7 @@ def add_tool(writer: SceneWriter, tips: dict[str, np.ndarray], size: float, root
     for name, tip in tips.items():
         path = f"{root}/{name}"
         writer.object(f"{path}/ball", mg.Sphere(TOOL_RADIUS * size), on_top_material(COLORS["tool"]))
-        writer.prop(f"{path}/ball", "renderOrder", ON_TOP + 1)
+        writer.prop(f"{path}/ball", "renderOrder", ON_TOP + 3)
         writer.placement(f"{path}/ball", _translations(tip))
         points = np.asarray(tip, np.float32).T
         writer.object(f"{path}/trace", mg.Line(mg.PointsGeometry(points), mg.LineBasicMaterial(color=COLORS["trace"])))

@@ -74,15 +74,15 @@ def rotation_from_y(direction: np.ndarray) -> np.ndarray:
 
 
 def add_arrow(writer: SceneWriter, path: str, origins: np.ndarray, vectors: np.ndarray, radius: float,
-              color: int) -> None:
+              color: int, order: int = ON_TOP) -> None:
     """An arrow from each origin [m] along each vector [m] (already scaled from force)."""
     material = on_top_material(color)
     head_h, head_r = 4.0 * radius, 2.5 * radius
     writer.object(f"{path}/shaft/body", mg.Cylinder(1.0, radius), material)
-    writer.prop(f"{path}/shaft/body", "renderOrder", ON_TOP)
+    writer.prop(f"{path}/shaft/body", "renderOrder", order)
     writer.transform(f"{path}/shaft/body", _translation(0.0, 0.5, 0.0))
     writer.object(f"{path}/head/cone", Cone(head_h, head_r), material)
-    writer.prop(f"{path}/head/cone", "renderOrder", ON_TOP)
+    writer.prop(f"{path}/head/cone", "renderOrder", order)
     writer.transform(f"{path}/head/cone", _translation(0.0, 0.5 * head_h, 0.0))
     lengths = np.linalg.norm(vectors, axis=1)
     rot = np.empty((len(vectors), 3, 3))
