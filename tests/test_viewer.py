@@ -185,27 +185,56 @@ def test_tool_ball_and_trace_follow_the_tip(b1_run):
     np.testing.assert_allclose(points, result["tip"], atol=1e-6)  # float32
 
 
+def _in_view(scene, points: np.ndarray, margin: float = 1.0) -> np.ndarray:
+    """Whether world points, as drawn (the scene is shifted), fall inside the default camera's frustum."""
+    from contactdyn.viewer.camera import ASPECT, FOV
+
+    eye = next(c for c in scene.commands if c["type"] == "set_property" and c["path"].startswith("/Cameras"))["value"]
+    eye = np.array([eye[0], -eye[2], eye[1]])  # meshcat's y-up frame -> world
+    d = eye / np.linalg.norm(eye)
+    right = np.cross([0.0, 0.0, 1.0], d)
+    right /= np.linalg.norm(right)
+    up = np.cross(d, right)
+    shift = np.array(commands_at(scene, "/meshcat")[0]["matrix"]).reshape(4, 4).T[:3, 3]
+    rel = np.atleast_2d(points) + shift - eye
+    depth = -rel @ d
+    t = np.tan(FOV / 2) / margin
+    return (depth > 0) & (np.abs(rel @ up) < t * depth) & (np.abs(rel @ right) < ASPECT * t * depth)
+
+
 def test_default_camera_looks_along_the_surface_from_the_robot_side(b1_run):
     """B1: normal +y, slide x: the camera looks along ±z (the surface's second tangent), raised towards +y."""
-    from contactdyn.viewer.camera import ASPECT, ELEVATION, FOV
+    from contactdyn.viewer.camera import ELEVATION
 
     _, result = b1_run
     scene = build_scene(result)
     eye = next(c for c in scene.commands if c["type"] == "set_property" and c["path"].startswith("/Cameras"))["value"]
-    eye = np.array([eye[0], -eye[2], eye[1]])  # meshcat's y-up frame -> world
+    eye = np.array([eye[0], -eye[2], eye[1]])
     d = eye / np.linalg.norm(eye)
     assert abs(d[0]) < 1e-12 and abs(abs(d[2]) - np.cos(ELEVATION)) < 1e-12
     assert abs(abs(d[1]) - np.sin(ELEVATION)) < 1e-12
-    shift = np.array(commands_at(scene, "/meshcat")[0]["matrix"]).reshape(4, 4).T[:3, 3]
     right = np.cross([0.0, 0.0, 1.0], d)
-    right /= np.linalg.norm(right)
-    up = np.cross(d, right)
+    up = np.cross(d, right / np.linalg.norm(right))
     assert up @ [0.0, 1.0, 0.0] > 0.9  # the normal points up the screen
-    rel = result["tip"] + shift - eye  # the tip as drawn, from the camera: inside the view frustum
-    depth = -rel @ d
-    assert np.all(depth > 0)
-    assert np.all(np.abs(rel @ up) / depth < np.tan(FOV / 2) / 1.5)
-    assert np.all(np.abs(rel @ right) / depth < ASPECT * np.tan(FOV / 2) / 1.5)
+    assert _in_view(scene, result["tip"], margin=1.5).all()
+
+
+SIMS = sorted(p.stem for p in contactdyn.scene.sims_dir().glob("*.toml"))
+
+
+@pytest.mark.parametrize("name", SIMS)
+def test_every_scene_shows_its_tool_and_arrows_in_the_default_view(name):
+    """The tool's path and each arrow's both ends lie inside the default view, away from its edges."""
+    result = contactdyn.simulate(name, {"duration": 0.3, "solver.output_rate": 50})
+    scene = build_scene(result)
+    for c in result.meta["contacts"]:
+        tool = values(clip(scene, f"/meshcat/tool/{c}/ball")["position"])
+        assert _in_view(scene, tool, margin=1.2).all(), f"{name}: the tool leaves the view"
+        for kind in ("normal", "tangent"):
+            arrow = clip(scene, f"/meshcat/forces/{c}_{kind}")
+            if arrow:
+                tails = values(arrow["position"])
+                assert _in_view(scene, tails, margin=1.05).all(), f"{name}: the {kind} arrow leaves the view"
 
 
 def test_cart_moves_impact_marked_and_friction_drawn(cart_run):
