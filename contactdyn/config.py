@@ -265,10 +265,17 @@ def _unit(unit: str) -> str:
 
 
 def _fields(pattern: str) -> str:
-    """`` with fields a (required), b, ...`` from the scene reference, for errors about a table."""
-    if _RECORDING is not None:  # building the reference itself
-        return ""
-    from .keys import table_fields
-
+    """`` with fields a (required), b, ...`` for errors about a table (from the scene reference)."""
     fields = table_fields(pattern)
     return f" with fields {fields}" if fields else ""
+
+
+def table_fields(path: str) -> str:
+    """The fields of the table at ``path`` (``phase[0].force[1]``, ``contact.tip.normal``), required ones first."""
+    from .keyfields import TABLE_FIELDS
+
+    path = re.sub(r"\.\d+(?=\.|$)", "[]", re.sub(r"\[\d+\]", "[]", path))
+    for table, fields in TABLE_FIELDS.items():
+        if re.fullmatch(re.sub(r"<\w+>", r"[^.\\[]+", re.escape(table)), path):
+            return fields
+    return ""

@@ -12,7 +12,7 @@ import pytest
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
 from contactdyn.config import recording
 from contactdyn.errors import SceneError
-from contactdyn.keys import _display, markdown, reference, table_fields
+from contactdyn.keys import _display, keyfields_source, markdown, reference, table_fields
 from contactdyn.scene import load_scene, parse_scene, sims_dir
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -23,9 +23,10 @@ READ_METHODS = {"float", "int", "bool", "str", "vector", "raw", "has", "sub", "t
 KEY_HELPERS = {"_gain": slice(1, 2), "_gains": slice(1, 2), "_read_stage": slice(1, 3), "_read_elements": slice(1, 2)}
 
 
-def test_docs_scenes_md_is_generated_from_the_reader():
-    assert (ROOT / "docs" / "scenes.md").read_text() == markdown(), \
-        "docs/scenes.md is stale: python -m contactdyn.keys > docs/scenes.md"
+def test_docs_scenes_md_and_keyfields_are_generated_from_the_reader():
+    assert (ROOT / "docs" / "scenes.md").read_text() == markdown(), "docs/scenes.md is stale: python -m contactdyn.keys"
+    assert (ROOT / "contactdyn" / "keyfields.py").read_text() == keyfields_source(), \
+        "contactdyn/keyfields.py is stale: python -m contactdyn.keys"
 
 
 def test_every_row_has_a_meaning_type_and_resolved_choices():
