@@ -20,7 +20,7 @@ from .contact_visuals import (
     add_tool,
     contact_views,
 )
-from .robot_visuals import add_robot, geometry_placements
+from .robot_visuals import add_robot, geometry_spheres
 from .shapes import add_label
 from .writer import ROOT, SceneWriter, ViewerScene
 
@@ -57,15 +57,16 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
     tips = {c.name: _frame_positions(robot, q, c.frame) for c in contacts}
     disp = {name: np.outer(ch(f"body.{name}.x") if f"body.{name}.x" in result.channels else np.zeros(len(idx)),
                            b.axis) for name, b in bodies.items()}
-    body = geometry_placements(robot, q[:: max(1, len(q) // 50)])[:, :, :3, 3].reshape(-1, 3)
+    body, body_radii = geometry_spheres(robot, q[:: max(1, len(q) // 50)])
     points = [body, *tips.values(), *(c.point[None] for c in contacts)]
     cloud = np.concatenate(points) if points else np.zeros((1, 3))
+    radii = np.concatenate([body_radii, np.zeros(len(cloud) - len(body))])  # [m] what reaches beyond each point
     L = max(float(np.max(np.linalg.norm(cloud, axis=1))), 0.1)  # [m] scene size
 
     views = contact_views(scene, tips, disp, L, GROUPS["environment"]) if scene else []
     v0 = views[0] if views else None
-    label_rotation, V = frame_view(writer, cloud, v0.u if v0 else None, v0.e1 if v0 else None,
-                                   body.mean(axis=0) - v0.tip.mean(axis=0) if v0 else None)
+    label_rotation, V = frame_view(writer, cloud, radii, v0.u if v0 else None, v0.e1 if v0 else None,
+                                   body.mean(axis=0) - v0.tip.mean(axis=0) if v0 and len(body) else None)
     add_tool(writer, tips, V, GROUPS["tool"])
     legend = [f"run {result.meta.get('name', '?')}: {duration:g} s at {speed:g} × real time "
               f"({len(idx)} frames of {len(t_all)} samples)"]

@@ -22,17 +22,19 @@ __all__ = ["frame_view", "FOV", "ELEVATION", "ASPECT"]
 FOV = math.radians(75.0)  #: meshcat's vertical field of view
 ASPECT = 4.0 / 3.0  #: width / height assumed when fitting the frame
 ELEVATION = math.radians(20.0)  #: camera raised above the surface plane, towards the normal
-MARGIN = 1.6  #: the framed region fills 1/MARGIN of the view (meshes reach beyond their origins)
+MARGIN = 1.15  #: the framed region (bounding spheres of the meshes included) fills 1/MARGIN of the view
 
 
-def frame_view(writer: SceneWriter, cloud: np.ndarray, normal: np.ndarray | None, slide: np.ndarray | None,
-               robot_side: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+def frame_view(writer: SceneWriter, cloud: np.ndarray, radii: np.ndarray, normal: np.ndarray | None,
+               slide: np.ndarray | None, robot_side: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """Shift the scene and place the camera; return (label rotation facing the camera, view radius [m]).
+
+    ``cloud`` (N, 3) [m]: points to see, each with a sphere of ``radii`` (N,) [m] around it (a mesh's bounds).
 
     ``robot_side`` [m]: where the robot's bulk is relative to the contact point; the camera goes to
     the other side of the surface's tangent plane so the arm does not hide the contact.
     """
-    lo, hi = cloud.min(axis=0), cloud.max(axis=0)
+    lo, hi = (cloud - radii[:, None]).min(axis=0), (cloud + radii[:, None]).max(axis=0)
     centre = 0.5 * (lo + hi)
     writer.transform(ROOT, _translation(-centre))
     writer.transform("/Grid", _translation(np.array([0.0, 0.0, -centre[2]])))  # the floor stays at z = 0
@@ -42,11 +44,11 @@ def frame_view(writer: SceneWriter, cloud: np.ndarray, normal: np.ndarray | None
     right /= np.linalg.norm(right)
     screen_up = np.cross(direction, right)
     rel = cloud - centre
-    half_w = float(np.max(np.abs(rel @ right)))
-    half_h = float(np.max(np.abs(rel @ screen_up)))
-    # each point inside the view: d - (its depth towards the camera) >= MARGIN * (its offset) / tan(FOV/2)
-    offset = np.maximum(np.abs(rel @ screen_up), np.abs(rel @ right) / ASPECT)
-    distance = float(np.max(MARGIN * np.maximum(offset, 0.05) / math.tan(0.5 * FOV) + rel @ direction))
+    half_w = float(np.max(np.abs(rel @ right) + radii))
+    half_h = float(np.max(np.abs(rel @ screen_up) + radii))
+    # each sphere inside the view: d - (its depth towards the camera) >= MARGIN * (its offset) / tan(FOV/2)
+    offset = np.maximum(np.abs(rel @ screen_up), np.abs(rel @ right) / ASPECT) + radii
+    distance = float(np.max(MARGIN * np.maximum(offset, 0.05) / math.tan(0.5 * FOV) + rel @ direction + radii))
     eye = distance * direction
     writer.prop("/Cameras/default/rotated/<object>", "position", [float(eye[0]), float(eye[2]), float(-eye[1])])
     radius = max(half_w, half_h, 0.05)
