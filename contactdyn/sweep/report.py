@@ -85,9 +85,9 @@ def plot_over(summary: Path, y: str, x: str, keys: list[str], out: Path) -> Path
 
 
 def _unit(metric: str) -> str:
-    units = {"F_peak": "N", "F_final": "N", "impulse_n": "N·s", "impulse_n_first": "N·s", "impulse_t": "N·s",
-             "force_rms": "N", "tracking_rms": "m", "max_deformation": "m", "wall_s": "s"}
-    return units.get(metric.rpartition(".")[2], "")
+    from ..metrics import UNITS
+
+    return {**UNITS, "wall_s": "s"}.get(metric.rpartition(".")[2], "")
 
 
 def _safe(name: str) -> str:
