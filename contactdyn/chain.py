@@ -56,6 +56,15 @@ class ChainStage:
     side: str = "environment"
     label: str = ""  #: e.g. "env1" (from the anchor) or "rob1" (from the tip)
 
+    @property
+    def fast_path_gap(self) -> str:
+        """Why the compiled right-hand side cannot run this stage ("" when it can; see contactdyn.fastpath).
+
+        The plan reads stage forces off :func:`~contactdyn.chain_forces.chain_forces` by unit
+        probes, which holds for a law affine in (x, ẋ): the linear one.
+        """
+        return "" if self.law == "linear" else "non-linear stage law (e.g. Hunt–Crossley)"
+
     def force(self, x: float, xdot: float) -> float:
         """Compressive force [N] at compression x [m] and rate ẋ [m/s]."""
         if self.law == "linear":
