@@ -17,7 +17,6 @@ from .stage_laws import STAGE_LAWS
 __all__ = ["STAGE_LAWS", "Stage", "Mass", "Element", "ChainSpec"]
 
 
-
 @dataclass(frozen=True)
 class Stage:
     """A Kelvin–Voigt deformation stage: F = k x + b ẋ (linear) or k xⁿ + b xⁿ ẋ (Hunt–Crossley)."""
