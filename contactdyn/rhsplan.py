@@ -27,6 +27,7 @@ holds the plan itself, what it declines, the values the events read, and its sel
 
 from __future__ import annotations
 
+import math
 import pickle
 import weakref
 
@@ -156,6 +157,11 @@ class ModePlan(ProbedModel, CompiledKKT):
     def slip(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
         """Slip velocity of contact ci in its tangent coordinates [m/s]."""
         return self.values(t, x)[1][self.o_vt[self.system.contacts[ci].name]]
+
+    def cone_margin(self, ci: int, mu_s: float, t: float, x: np.ndarray) -> float:
+        """μ_s F − |F_f| [N] of a sticking contact ci: the ``slip`` event's function."""
+        F_f = self.stick_force(ci, t, x)
+        return mu_s * self.normal_force(ci, t, x) - math.sqrt(float(F_f @ F_f))
 
     def stick_force(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
         """Friction force of a sticking contact ci in tangent coordinates [N]."""
