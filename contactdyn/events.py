@@ -77,19 +77,28 @@ class EventLog:
 
 
 class EvaluationCache:
-    """Evaluations shared by the event functions of one step (they see the same states)."""
+    """The latest evaluations at (t, x), shared by the right-hand side and the event functions.
+
+    Four, like the plan's ring: DOP853 evaluates the step's end state (FSAL), then three more
+    stages for its dense output, then the event functions at the step's end.
+    """
+
+    SIZE = 4
 
     def __init__(self, system: System, modes: list[ContactMode], phase: Phase):
         self.system, self.modes, self.phase = system, modes, phase
-        self.key: tuple[float, bytes] | None = None
-        self.value: Evaluation | None = None
+        self.ring: list[tuple[tuple[float, bytes], Evaluation]] = []
 
     def __call__(self, t: float, x: np.ndarray) -> Evaluation:
         key = (t, x.tobytes())
-        if key != self.key:
-            self.value = self.system.evaluate(t, x, self.modes, self.phase)
-            self.key = key
-        return self.value  # type: ignore[return-value]
+        for k, value in reversed(self.ring):
+            if k == key:
+                return value
+        value = self.system.evaluate(t, x, self.modes, self.phase)
+        self.ring.append((key, value))
+        if len(self.ring) > self.SIZE:
+            del self.ring[0]
+        return value
 
 
 class SlipCache:
