@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from .config import Reader
+from .budget import check_budget
+from .config import MAX_DEPTH, Reader, check_depth, read_toml
 from .drives import DriveTable, read_drive_table
 from .elements import STAGE_LAWS, ChainSpec, Element, Mass, Stage
 from .errors import SceneError
@@ -182,6 +183,8 @@ def parse_override(text: str) -> tuple[str, Any]:
         parsed = tomllib.loads(f"v = {value}")["v"]
     except tomllib.TOMLDecodeError:
         parsed = value
+    except RecursionError:
+        raise SceneError(f"--set {key}", f"a value nested at most {MAX_DEPTH} deep", "deeper") from None
     return key, parsed
 
 
@@ -217,19 +220,12 @@ def apply_overrides(document: dict[str, Any], overrides: dict[str, Any], file: s
 def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
     """Read, override and validate a scene file (a path or a name in ``sims/``)."""
     path = find_scene(path)
-    try:
-        document = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError("<file>", "valid TOML", str(exc), str(path)) from None
-    except OSError as exc:
-        raise SceneError("<file>", "a readable file", exc.strerror, str(path)) from None
-    except UnicodeDecodeError as exc:
-        raise SceneError("<file>", "UTF-8 text", str(exc), str(path)) from None
-    return parse_scene(document, overrides, file=str(path))
+    return parse_scene(read_toml(path), overrides, file=str(path))
 
 
 def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = None, file: str | None = None) -> Scene:
     """Validate a scene document (a dict as TOML gives it)."""
+    check_depth([document, overrides], "<document>", file)
     document = apply_overrides(document, overrides or {}, file)
     top = Reader(document, "", file)
     name = top.str("name", Path(file).stem if file else "scene")
@@ -247,7 +243,9 @@ def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = Non
         phases = (_read_phase(Reader({"name": "main"}, "phase[0]", file), default_controller, contacts, duration,
                               bodies),)
     top.finish()
-    return Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document)
+    scene = Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document)
+    check_budget(scene)
+    return scene
 
 
 def _read_robot(r: Reader) -> RobotSpec:
