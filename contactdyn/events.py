@@ -20,8 +20,9 @@ What happens at each event is decided in :mod:`contactdyn.transitions`. The stor
 (:class:`EventLog`): more than ``storm_count`` events within ``storm_window`` seconds, or
 more than ``max_events`` in the run, stop with a :class:`SimulationError` naming them.
 
-The functions read either :meth:`System.evaluate` (:func:`segment_events`) or, when the
-mode is compiled, the plan's values at the same states (same functions, same order).
+The event functions are written once (:func:`segment_events`) against a source of values:
+the compiled plan's (its last calls', no second solve) or, when the mode is not compiled,
+:meth:`System.evaluate`'s through a small cache shared with the right-hand side.
 """
 
 from __future__ import annotations
