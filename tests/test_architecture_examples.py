@@ -46,7 +46,7 @@ def axis_scene(duration: float, *, normal: dict | None = None, controller: dict 
         "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.999],
                   "v0": [v0], **({"drive": drive} if drive else {})},
         "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], **(normal or {})}}},
-        "controller": controller or {"kind": "task_pd", "kp": 0.0, "kd": 0.0},
+        "controller": controller or {"kind": "task_pd", "kp": 0.0, "kd": 0.0, "axes": [[1.0, 0.0, 0.0]]},
     }
     if push is not None:
         doc["phase"] = [{"name": "push", "force": [{"contact": "tip", "value": push, "kind": "step"}]}]
