@@ -17,11 +17,12 @@ from contactdyn.scene import load_scene, sims_dir
 SCENES = sorted(p.stem for p in sims_dir().glob("*.toml"))
 
 #: [s] smoke-run length per scene: past the first contact (and its impact) where there is one
-SMOKE_DURATION = {"b1": 0.3, "case1_cart": 1.2, "case2_writer_b": 1.2, "case2_writer_rigid": 1.2}
+SMOKE_DURATION = {"b1": 0.3, "case1_cart": 1.2, "case2_writer_b": 1.2, "case2_writer_rigid": 1.2,
+                  "case2_writer_motors": 1.2}
 SMOKE_DURATION.update({f"case3_{env}_{law}": 1.6 for env in "ab" for law in ("position", "force")})
 SMOKE_DURATION["case3_b_force_varied"] = 1.6
 CASE3 = ("case3_b_position", "case3_a_position", "case3_b_force", "case3_a_force", "case3_b_force_varied")
-CASE_SCENES = ("case1_cart", "case2_writer_b", "case2_writer_rigid", "case2_writer5dof", *CASE3)
+CASE_SCENES = ("case1_cart", "case2_writer_b", "case2_writer_rigid", "case2_writer_motors", "case2_writer5dof", *CASE3)
 
 
 def test_sims_folder_holds_the_case_scenes():
