@@ -26,7 +26,8 @@ import numpy as np
 from .scene import Scene, load_scene, parse_scene
 from .simulate import prepare
 
-__all__ = ["BAUMGARTE", "Linearization", "ContactLoop", "contact_phase_scene", "growth_rate", "stability_map"]
+__all__ = ["BAUMGARTE", "Linearization", "ContactLoop", "contact_phase_scene", "growth_rate", "stability_map",
+           "simulated_growth"]
 
 BAUMGARTE = 1000.0  #: [1/s] constraint stabilisation rate during linearisation (its poles are dropped)
 _FD_STEP = 1e-6  #: relative central-difference step
@@ -153,3 +154,18 @@ def stability_map(loop: ContactLoop, x_gain: tuple[str, np.ndarray], y_gain: tup
             x = lin.x
             out[i, j] = lin.dominant
     return out
+
+
+def simulated_growth(scene: Scene, t_fit: float, hi: float = 95.0) -> tuple[float, complex]:
+    """The force error's growth rate [1/s] in a run of ``scene`` (see :func:`contact_phase_scene`), fitted
+    from ``t_fit`` [s] (after the faster modes died out) while the envelope is below ``hi`` [N] (before
+    any lift-off), and the dominant pole of the same scene's linearisation, for comparison."""
+    from .simulate import simulate
+
+    dom = ContactLoop(scene).linearize().dominant
+    r = simulate(scene)
+    name = next(iter(scene.contacts))
+    err = r[f"contact.{name}.F_n"] - r[f"contact.{name}.F_d"]  # [N]
+    sel = r.t > t_fit
+    period = 2.0 * np.pi / abs(dom.imag) if abs(dom.imag) > 1e-6 else 0.05
+    return growth_rate(r.t[sel], err[sel], period, 1e-6, hi), dom

@@ -1,7 +1,8 @@
 """Case 3's stability maps: A7 over (K_p, K_v), A10 over (K_F, K_v), two readings of H, surfaces (a) and (b).
 
 White circles: the scenes' gains (A7: K_p = 100, K_v = 20; A10: K_F = 3, K_v = 40, which has no
-effect along case 3's single, force-controlled direction); stars: the most stable grid point.
+effect along case 3's single, force-controlled direction); stars: the most stable (or least
+unstable) grid point.
 A10's panels use the law as written (cancel = "target") except the last column, which cancels the
 measured force as the scenes do. Each point is the dominant pole of the contact phase linearised
 about its 100 N equilibrium (``contactdyn.stability``: finite differences of the simulator's own
@@ -67,7 +68,7 @@ def panels() -> list[dict]:
 def draw(ax, p: dict, poles: np.ndarray):
     (xn, xs), (_, ys) = p["x"], p["y"]
     re = poles.real
-    lim = 20.0
+    lim = 10.0  # [1/s] colour range
     mesh = ax.pcolormesh(xs, ys, np.clip(re, -lim, lim), cmap="RdBu_r", vmin=-lim, vmax=lim, shading="auto")
     if re.min() < 0.0 < re.max():
         ax.contour(xs, ys, re, levels=[0.0], colors="k", linewidths=1.2)

@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from contactdyn import simulate
 from contactdyn.scene import parse_scene
-from contactdyn.stability import ContactLoop, contact_phase_scene, growth_rate
+from contactdyn.stability import ContactLoop, contact_phase_scene, simulated_growth
 
 
 def rigid_case3_b_a7(kp: float, kv: float) -> ContactLoop:
@@ -51,12 +50,7 @@ def growth_in_run(kp: float, kv: float, duration: float, t_fit: float) -> tuple[
     rest, F_d ramping), fitted after t_fit where the dominant mode has taken over."""
     over = {"phase.0.controller.kp": kp, "phase.0.controller.kv": kv, "solver.rtol": 1e-9, "solver.atol": 1e-11,
             "solver.output_rate": 1000.0, "duration": duration}
-    scene = contact_phase_scene("case3_b_position", [1.0], over)
-    dom = ContactLoop(scene).linearize().dominant
-    r = simulate(scene)
-    err = r["contact.tip.F_n"] - r["contact.tip.F_d"]  # [N]
-    sel = r.t > t_fit
-    return growth_rate(r.t[sel], err[sel], 2.0 * np.pi / abs(dom.imag), 1e-6, 95.0), dom
+    return simulated_growth(contact_phase_scene("case3_b_position", [1.0], over), t_fit)
 
 
 def test_simulation_grows_at_the_unstable_side_of_the_boundary():
