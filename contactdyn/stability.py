@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .scene import Scene, load_scene, parse_scene
-from .simulate import prepare
+from .simulate import prepare, simulate
 
 __all__ = ["BAUMGARTE", "Linearization", "ContactLoop", "contact_phase_scene", "growth_rate", "stability_map",
            "simulated_growth"]
@@ -160,8 +160,6 @@ def simulated_growth(scene: Scene, t_fit: float, hi: float = 95.0) -> tuple[floa
     """The force error's growth rate [1/s] in a run of ``scene`` (see :func:`contact_phase_scene`), fitted
     from ``t_fit`` [s] (after the faster modes died out) while the envelope is below ``hi`` [N] (before
     any lift-off), and the dominant pole of the same scene's linearisation, for comparison."""
-    from .simulate import simulate
-
     dom = ContactLoop(scene).linearize().dominant
     r = simulate(scene)
     name = next(iter(scene.contacts))
