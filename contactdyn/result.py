@@ -28,6 +28,8 @@ __all__ = ["Result", "load_result", "run_files", "atomic_path"]
 
 MAX_RUN_BYTES = 2**31  #: [B] channels a saved run may declare (a run at the sample bound is far below)
 MAX_SIDECAR_BYTES = 2**28  #: [B] size of a run's .json sidecar
+#: channels under these prefixes are one number per sample (but contact.<c>.F_f and .v_slip)
+SCALAR_PREFIXES = ("contact.", "stage.", "mass.", "body.", "energy.")
 
 
 @dataclass
@@ -105,14 +107,32 @@ def _read_channels(npz: Path) -> dict[str, np.ndarray]:
         raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError, RuntimeError, NotImplementedError) as exc:
         raise RunFileError(f"{npz}: not a readable run archive ({type(exc).__name__}: {_short(exc)})") from None
+    _check_shapes(npz, channels)
+    return channels
+
+
+def _check_shapes(npz: Path, channels: dict[str, np.ndarray]) -> None:
+    """Time samples finite and increasing; every channel one row per sample, of its documented shape."""
     t = channels.get("t")
     if t is None or t.ndim != 1 or t.size == 0:
         raise RunFileError(f"{npz}: no time channel t (a 1-D array of samples)")
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0.0):
+        raise RunFileError(f"{npz}: the time channel t is not finite and non-decreasing")
+    n = t.size
     for name, value in channels.items():
-        if value.ndim not in (1, 2) or value.shape[0] != t.size:
-            raise RunFileError(f"{npz}: channel {_short(name)} has shape {value.shape}, expected ({t.size},) or "
-                               f"({t.size}, n): one row per sample of t")
-    return channels
+        if name in ("tip", "tip_ref"):
+            expected = f"({n}, 3)"
+            ok = value.shape == (n, 3)
+        elif name.startswith(SCALAR_PREFIXES) and not name.endswith((".F_f", ".v_slip")):
+            expected, ok = f"({n},)", value.shape == (n,)
+        else:
+            expected, ok = f"({n},) or ({n}, k)", value.ndim in (1, 2) and value.shape[0] == n
+        if not ok:
+            raise RunFileError(f"{npz}: channel {_short(name)} has shape {value.shape}, expected {expected}: "
+                               "one row per sample of t")
+    joints = {channels[k].reshape(n, -1).shape[1] for k in ("q", "v") if k in channels}
+    if len(joints) > 1:
+        raise RunFileError(f"{npz}: channels q and v have different numbers of joints")
 
 
 def _read_array(member, size: int, npz: Path, name: str) -> np.ndarray:
@@ -154,7 +174,32 @@ def _read_sidecar(sidecar: Path) -> dict[str, Any]:
         for i, item in enumerate(doc[key]):
             if not (isinstance(item, dict) and isinstance(item.get("t"), int | float)):
                 raise RunFileError(f"{sidecar}: {key}[{i}] must be an object with a time t, found {_short(item)}")
+            _check_fields(sidecar, f"{key}[{i}]", item, SIDECAR_FIELDS)
+    _check_fields(sidecar, "meta", doc["meta"], SIDECAR_FIELDS)
+    for key in ("contact", "body"):  # the tables plots read from the scene document
+        table = doc["scene"].get(key, {})
+        if not (isinstance(table, dict) and all(isinstance(v, dict) for v in table.values())):
+            raise RunFileError(f"{sidecar}: scene.{key} must be a table of tables, found {_short(table)}")
     return doc
+
+
+def _check_fields(sidecar: Path, where: str, doc: dict[str, Any], fields: dict[str, Callable[[Any], bool]]) -> None:
+    for key, valid in fields.items():
+        if key in doc and not valid(doc[key]):
+            raise RunFileError(f"{sidecar}: {where}.{key} has the wrong type: {_short(doc[key])}")
+
+
+def _texts(value: Any) -> bool:
+    return isinstance(value, list) and all(isinstance(v, str) for v in value)
+
+
+#: fields of the sidecar's meta, events and impacts that readers use, and what each must be
+SIDECAR_FIELDS: dict[str, Callable[[Any], bool]] = {
+    "joints": _texts, "contacts": _texts, "bodies": _texts,
+    "name": lambda v: isinstance(v, str), "robot": lambda v: isinstance(v, str), "tip": lambda v: isinstance(v, str),
+    "kind": lambda v: isinstance(v, str), "contact": lambda v: isinstance(v, str),
+    "duration": lambda v: isinstance(v, int | float) and not isinstance(v, bool),
+}
 
 
 def _short(value: object, limit: int = 80) -> str:

@@ -293,6 +293,13 @@ def run_file_cases(tmp: Path) -> list[Case]:
                           "channel 't' is in an unknown .npy format version"),
         "bad_npy_header": (lambda p: zipfile.ZipFile(p, "w").writestr("t.npy", _npy_header((3,))[:20]), sidecar,
                            "not a readable run archive"),
+        "t_nan": (lambda p: channels_npz(p, t=t * np.nan), sidecar, "t is not finite and non-decreasing"),
+        "t_decreasing": (lambda p: channels_npz(p, t=t[::-1].copy()), sidecar, "not finite and non-decreasing"),
+        "force_2d": (lambda p: channels_npz(p, t=t, **{"contact.tip.F_n": np.ones((3, 4))}), sidecar,
+                     "channel 'contact.tip.F_n' has shape (3, 4), expected (3,)"),
+        "tip_2_columns": (lambda p: channels_npz(p, t=t, tip=np.ones((3, 2))), sidecar, "expected (3, 3)"),
+        "q_v_disagree": (lambda p: channels_npz(p, t=t, q=np.ones((3, 5)), v=np.ones((3, 2))), sidecar,
+                         "channels q and v have different numbers of joints"),
         "json_garbage": (npz, "{not json", "not a run's JSON sidecar (JSONDecodeError"),
         "json_list": (npz, "[1, 2, 3]", "expected a JSON object, found list"),
         "json_no_events": (npz, json.dumps({k: v for k, v in doc.items() if k != "events"}),
@@ -302,6 +309,14 @@ def run_file_cases(tmp: Path) -> list[Case]:
                                  "events[0] must be an object with a time t"),
         "json_impact_text_t": (npz, json.dumps({**doc, "impacts": [{"t": "soon"}]}), "impacts[0] must be an object"),
         "json_meta_list": (npz, json.dumps({**doc, "meta": [1]}), "'meta' must be a JSON object"),
+        "json_meta_joints_number": (npz, json.dumps({**doc, "meta": {**doc["meta"], "joints": 5}}),
+                                    "meta.joints has the wrong type: 5"),
+        "json_event_kind_list": (npz, json.dumps({**doc, "events": [{"t": 0.0, "kind": ["x"]}]}),
+                                 "events[0].kind has the wrong type"),
+        "json_impact_contact_list": (npz, json.dumps({**doc, "impacts": [{"t": 0.0, "contact": ["x"]}]}),
+                                     "impacts[0].contact has the wrong type"),
+        "json_scene_contact_number": (npz, json.dumps({**doc, "scene": {**doc["scene"], "contact": 5}}),
+                                      "scene.contact must be a table of tables, found 5"),
         "json_deep": (npz, "[" * 100000 + "]" * 100000, "not a run's JSON sidecar (RecursionError"),
         "json_binary": (npz, "\udcff\udcfe".encode("utf-8", "surrogateescape").decode("latin-1"),
                         "not a run's JSON sidecar"),
@@ -326,7 +341,23 @@ def run_file_cases(tmp: Path) -> list[Case]:
     (tmp / "dir.json").write_text(sidecar)
     (tmp / "cyc.npz").write_bytes(npz)
     (tmp / "cyc.json").write_text(cycle_scene())
+    channels_npz(tmp / "no_q.npz", t=t)
+    (tmp / "no_q.json").write_text(sidecar)
+    channels_npz(tmp / "q_5.npz", t=t, q=np.ones((3, 5)))
+    (tmp / "q_5.json").write_text(sidecar)
+    bad = dict(np.load(good.with_name("good.npz")))
+    channels_npz(tmp / "q_nan.npz", **{**bad, "q": np.full_like(bad["q"], np.nan)})
+    (tmp / "q_nan.json").write_text(sidecar)
+    channels_npz(tmp / "ff_5.npz", **{**bad, "contact.tip.F_f": np.ones((len(bad["t"]), 5))})
+    (tmp / "ff_5.json").write_text(sidecar)
     cases += [
+        ("run/view/q_nan", ["view", str(tmp / "q_nan"), "--html", str(tmp / "v.html")], 2,
+         "channel q holds non-finite values"),
+        ("run/view/friction_columns", ["view", str(tmp / "ff_5"), "--html", str(tmp / "v.html")], 2,
+         "channel contact.tip.F_f has 5 columns but the scene gives contact 'tip' 1 tangents"),
+        ("run/view/no_q", ["view", str(tmp / "no_q"), "--html", str(tmp / "v.html")], 2, "no joint channel q"),
+        ("run/view/q_for_another_robot", ["view", str(tmp / "q_5"), "--html", str(tmp / "v.html")], 2,
+         "channel q has 5 columns but robot"),
         ("run/plot/missing", ["plot", str(tmp / "nothing")], 2, "not a saved run (need nothing.npz and nothing.json"),
         ("run/view/missing", ["view", str(tmp / "nothing.npz")], 2, "not a saved run"),
         ("run/plot/huge_sidecar", ["plot", str(tmp / "sparse")], 2, "more than a run's sidecar"),
