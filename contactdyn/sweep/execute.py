@@ -140,13 +140,10 @@ def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, schedul
 
 def _execute_pool(args: tuple, chunks: list, n_workers: int):
     """Chunks on a process pool; the runs of chunks whose worker died go again, each in its own process."""
-    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    # no fork of a (possibly threaded) parent: workers fork from a server that preloaded the package
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["contactdyn.sweep", "contactdyn.simulate"])
+    ctx = _forkserver()
     pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=worker_init,
                                initargs=(os.getpid(),))
     broken: list = []
@@ -167,9 +164,18 @@ def _execute_pool(args: tuple, chunks: list, n_workers: int):
         yield from run_isolated(ctx, run_chunk, args, broken, n_workers)
 
 
+def _forkserver():
+    """No fork of a (possibly threaded) parent: workers fork from a server that preloaded the package."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["contactdyn.sweep", "contactdyn.simulate"])
+    return ctx
+
+
 def _execute_dask(scheduler: str, args: tuple, chunks: list):
     try:
-        from distributed import Client, as_completed
+        from distributed import Client, KilledWorker, as_completed
     except ImportError:
         raise SceneError("--scheduler", "dask.distributed installed (pip install 'dask[distributed]')",
                          scheduler) from None
@@ -177,13 +183,21 @@ def _execute_dask(scheduler: str, args: tuple, chunks: list):
         client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
         raise SceneError("--scheduler", "the address of a running Dask scheduler", f"{scheduler} ({exc})") from None
+    broken: list = []
     with client:
-        futures = [client.submit(run_chunk, *args, c, pure=False) for c in chunks]
+        futures = {client.submit(run_chunk, *args, c, pure=False): c for c in chunks}
         try:
-            for fut in as_completed(futures):
-                yield fut.result()
+            for fut in as_completed(list(futures)):
+                try:
+                    rows = fut.result()
+                except KilledWorker:  # its workers died: which run killed them is unknown
+                    broken.extend(futures[fut])
+                    continue
+                yield rows
         finally:
-            client.cancel(futures)
+            client.cancel(list(futures))
+    if broken:  # each suspect alone in a local process, to record the culprit with its signal
+        yield from run_isolated(_forkserver(), run_chunk, args, broken, os.cpu_count() or 1)
 
 
 def _progress(total: int, initial: int, enabled: bool):
