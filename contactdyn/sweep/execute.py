@@ -80,21 +80,36 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
     out = Path(out)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
-    lock = lock_out(out)
-    try:
-        return _run_locked(sweep, out, runs_dir, wall0, workers, scheduler, chunk, csv, retry_failed, progress, check)
-    finally:
-        lock.close()
+    with lock_out(out):  # released when the sweep ends, however it ends
+        for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer (we hold the lock: no writer is live)
+            stale.unlink(missing_ok=True)
+        if check:
+            check_sweep(sweep)
+        cases = sweep.cases()
+        write_manifest(out, sweep, cases)
+        rows = _finished_rows(out, runs_dir, cases, retry_failed)
+        todo = [(rid, overrides) for rid, _, overrides in cases if rid not in rows]
+        skipped = len(rows)
+        params = {rid: p for rid, p, _ in cases}
+        summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
+        n_workers = (os.cpu_count() or 1) if workers is None else max(0, workers)
+        size = chunk or max(1, min(MAX_CHUNK, math.ceil(len(todo) / (CHUNKS_PER_WORKER * max(1, n_workers)))))
+        chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
+        bar = _progress(len(cases), skipped, progress)
+        try:
+            for chunk_rows in _execute(sweep, runs_dir, chunks, n_workers, scheduler):
+                rows.update((r["run_id"], r) for r in chunk_rows)
+                summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
+                bar.update(len(chunk_rows))
+                bar.set_postfix(failed=sum(r["status"] != "ok" for r in rows.values()), refresh=False)
+        finally:
+            bar.close()
+    counts = {s: sum(r["status"] == s for r in rows.values()) for s in STATUSES}
+    return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary)
 
 
-def _run_locked(sweep: Sweep, out: Path, runs_dir: Path, wall0: float, workers, scheduler, chunk, csv, retry_failed,
-                progress, check) -> SweepReport:
-    for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer (we hold the lock: no writer is live)
-        stale.unlink(missing_ok=True)
-    if check:
-        check_sweep(sweep)
-    cases = sweep.cases()
-    write_manifest(out, sweep, cases)
+def _finished_rows(out: Path, runs_dir: Path, cases: list, retry_failed: bool) -> dict[str, dict[str, Any]]:
+    """Rows of the runs finished before this call (failed ones forgotten with ``retry_failed``)."""
     rows: dict[str, dict[str, Any]] = {}
     cache = cached_rows(out)
     for rid, _, _ in cases:
@@ -103,24 +118,7 @@ def _run_locked(sweep: Sweep, out: Path, runs_dir: Path, wall0: float, workers, 
         row = done_row(runs_dir, rid, cache)
         if row is not None:
             rows[rid] = row
-    todo = [(rid, overrides) for rid, _, overrides in cases if rid not in rows]
-    skipped = len(rows)
-    params = {rid: p for rid, p, _ in cases}
-    summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
-    n_workers = (os.cpu_count() or 1) if workers is None else max(0, workers)
-    size = chunk or max(1, min(MAX_CHUNK, math.ceil(len(todo) / (CHUNKS_PER_WORKER * max(1, n_workers)))))
-    chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
-    bar = _progress(len(cases), skipped, progress)
-    try:
-        for chunk_rows in _execute(sweep, runs_dir, chunks, n_workers, scheduler):
-            rows.update((r["run_id"], r) for r in chunk_rows)
-            summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
-            bar.update(len(chunk_rows))
-            bar.set_postfix(failed=sum(r["status"] != "ok" for r in rows.values()), refresh=False)
-    finally:
-        bar.close()
-    counts = {s: sum(r["status"] == s for r in rows.values()) for s in STATUSES}
-    return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary)
+    return rows
 
 
 def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, scheduler: str | None):
