@@ -77,14 +77,14 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
     scheduler address instead (chunks of ``chunk`` runs are the tasks either way).
     """
     wall0 = time.perf_counter()
+    if check:  # bad input touches no file
+        check_sweep(sweep)
     out = Path(out)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
     with lock_out(out):  # released when the sweep ends, however it ends
         for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer (we hold the lock: no writer is live)
             stale.unlink(missing_ok=True)
-        if check:
-            check_sweep(sweep)
         cases = sweep.cases()
         write_manifest(out, sweep, cases)
         rows = _finished_rows(out, runs_dir, cases, retry_failed)
