@@ -324,7 +324,34 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", metavar="DIR", help="output folder")
     _set_option(bench)
     bench.set_defaults(func=_delegate("workprecision", "bench_command"))
+    _fit_parser(sub, fmt)
     return parser
+
+
+def _fit_parser(sub, fmt) -> None:
+    fit = sub.add_parser("fit", help="fit scene parameters (k, b, m', mu, ...) to a measured log", formatter_class=fmt,
+                         description="Identify the environment: least squares on full runs of the scene, with "
+                                     "standard errors, 95 % intervals and correlations (contactdyn/identify/).",
+                         epilog="example:\n  contactdyn fit b1 --data log.csv --params contact.tip.normal.k,"
+                                "contact.tip.normal.m,contact.tip.tangent.mu=0.05:2 --out fit --save-scene fitted.toml")
+    fit.add_argument("scene", help="scene file or name in sims/ (it supplies robot, controller, references)")
+    fit.add_argument("--data", required=True, metavar="LOG.csv", help="column t [s] and columns named like channels")
+    fit.add_argument("--params", required=True, action="append", metavar="KEY[=LOW:HIGH],...",
+                     help="scene keys to fit; positive ones on a log scale")
+    _set_option(fit)
+    fit.add_argument("--noise", action="append", default=[], metavar="COLUMN=SIGMA",
+                     help="noise level of a column (default: estimated from the data)")
+    fit.add_argument("--starts", type=int, default=1, help="solver starts (the scene's values, then random)")
+    fit.add_argument("--seed", type=int, default=0, help="seed of the random starts")
+    fit.add_argument("--workers", type=int, default=0, help="processes for the Jacobian's runs (0: this one)")
+    fit.add_argument("--stages", type=int, default=6, help="continuation: first fit 1/2^(STAGES-1) of the log, "
+                                                          "then double the window (1: the whole log at once)")
+    fit.add_argument("--rtol", type=float, default=1e-10, help="relative tolerance of every fit run")
+    fit.add_argument("--atol", type=float, default=1e-12, help="absolute tolerance of every fit run")
+    fit.add_argument("--out", metavar="DIR", help="write fit.json, fit.md and fit.png here")
+    fit.add_argument("--save-scene", metavar="FILE.toml", help="write the scene with the fitted values")
+    _scripting(fit)
+    fit.set_defaults(func=_delegate("identify", "fit_command"))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -18,7 +18,7 @@ from .plan import Sweep, check_sweep
 from .store import STATUSES, cached_rows, done_row, lock_out, record_failure, result_row, write_manifest, write_summary
 from .workers import run_isolated, worker_init
 
-__all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk"]
+__all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk", "process_pool", "stop_pool"]
 
 #: numerical failures a blow-up raises from numpy inside a run (a failed run, not a bug)
 NUMERICAL: tuple[type[Exception], ...] = (np.linalg.LinAlgError, FloatingPointError, OverflowError)
@@ -138,12 +138,10 @@ def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, schedul
 
 def _execute_pool(args: tuple, chunks: list, n_workers: int):
     """Chunks on a process pool; the runs of chunks whose worker died go again, each in its own process."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    ctx = _forkserver()
-    pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=worker_init,
-                               initargs=(os.getpid(),))
+    pool = process_pool(n_workers)
     broken: list = []
     try:
         futures = {pool.submit(run_chunk, *args, c): c for c in chunks}
@@ -153,21 +151,39 @@ def _execute_pool(args: tuple, chunks: list, n_workers: int):
                 continue
             yield fut.result()
     except BaseException:  # interrupted: stop the workers now (their results so far are whole files)
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
-            proc.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
+        stop_pool(pool)
         raise
     pool.shutdown(wait=True)
     if broken:
-        yield from run_isolated(ctx, run_chunk, args, broken, n_workers)
+        yield from run_isolated(_forkserver(), run_chunk, args, broken, n_workers)
 
 
-def _forkserver():
-    """No fork of a (possibly threaded) parent: workers fork from a server that preloaded the package."""
+def process_pool(n_workers: int, preload: tuple[str, ...] = ("contactdyn.sweep", "contactdyn.simulate")):
+    """A local pool of ``n_workers`` processes for runs (sweeps, the fit's Jacobian columns).
+
+    No fork of a (possibly threaded) parent: workers fork from a server that preloaded
+    ``preload``; they end with this process and ignore Ctrl-C (:func:`.workers.worker_init`;
+    the parent stops them with :func:`stop_pool`).
+    """
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(max_workers=n_workers, mp_context=_forkserver(preload), initializer=worker_init,
+                               initargs=(os.getpid(),))
+
+
+def stop_pool(pool) -> None:
+    """Stop a pool's workers now (interrupted or failed), dropping the queued tasks."""
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        proc.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _forkserver(preload: tuple[str, ...] = ("contactdyn.sweep", "contactdyn.simulate")):
+    """The forkserver context, preloading ``preload`` (workers fork from it, not from this process)."""
     import multiprocessing
 
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["contactdyn.sweep", "contactdyn.simulate"])
+    ctx.set_forkserver_preload(list(preload))
     return ctx
 
 
