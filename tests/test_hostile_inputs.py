@@ -207,6 +207,8 @@ def urdf_cases(tmp: Path) -> list[Case]:
                            "cycle through links b -> c -> b"),
         "long_cycle": (_urdf([("j1", "base", "a"), ("j2", "x", "y"), ("j3", "y", "z"), ("j4", "z", "x")],
                              ["base", "a", "x", "y", "z"]), "the joints form a cycle"),
+        "long_names": (_urdf([("j" * 10**5, "base", "a" * 10**5), ("j2", "a" * 10**5, "a" * 10**5)],
+                             ["base", "a" * 10**5]), "(100002 characters) is its own parent"),
         "no_root": (_urdf([("j1", "a", "b"), ("j2", "b", "a")], ["a", "b"]), "found none"),
         "two_roots": (_urdf([("j1", "base", "a")], ["base", "a", "b"]), "expected one root link"),
         "undefined_parent": (_urdf([("j1", "nowhere", "a")], ["a"]), "parent link 'nowhere' is not defined"),
