@@ -230,6 +230,8 @@ def urdf_cases(tmp: Path) -> list[Case]:
         "xxe_content": ('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]>'
                         '<robot name="r"><link name="a">&x;</link></robot>', "undefined entity"),
         "billion_laughs": (laughs, "amplification"),
+        "long_link_negative_mass": (good.replace('"link1"', '"' + "L" * 10**5 + '"').replace(
+            '<mass value="3.0"/>', '<mass value="-3.0"/>', 1), "characters)"),
         "negative_mass": (good.replace('<mass value="3.0"/>', '<mass value="-3.0"/>', 1), "mass must be >= 0"),
         "nan_mass": (good.replace('<mass value="3.0"/>', '<mass value="nan"/>', 1), "mass must be >= 0"),
         "text_mass": (good.replace('<mass value="3.0"/>', '<mass value="heavy"/>', 1), "must be a number"),
