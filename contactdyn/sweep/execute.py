@@ -79,7 +79,7 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
     wall0 = time.perf_counter()
     if check:  # bad input touches no file
         check_sweep(sweep)
-    out = Path(out)
+    out = Path(out).absolute()  # the workers' working directory may differ (Dask)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
     with lock_out(out):  # released when the sweep ends, however it ends
