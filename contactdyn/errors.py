@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["ContactdynError", "RobotError", "SceneError", "SimulationError"]
+__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "UnknownKeyError", "SimulationError"]
 
 
 class ContactdynError(Exception):
@@ -23,8 +23,32 @@ class SceneError(ContactdynError):
     def __init__(self, key: str, expected: str, found: object, file: str | None = None):
         self.file, self.key, self.expected, self.found = file, key, expected, found
         where = f"{file}: " if file else ""
-        super().__init__(f"{where}{key}: expected {expected}, found {found!r}")
+        if len(expected) > 300:
+            expected = f"{expected[:260]} ... {expected[-20:]}"
+        super().__init__(f"{where}{key}: expected {expected}, found {abbreviate(found)}")
+
+
+def abbreviate(value: object, limit: int = 200) -> str:
+    """``repr(value)`` cut to about ``limit`` characters (head ... tail, with the full length)."""
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit - 40]} ... {text[-20:]} ({len(text)} characters)"
+
+
+class UnknownKeyError(SceneError):
+    """A key no reader knows: ``contact.tip.normal.kk: unknown key; did you mean 'k'? (known here: b, k, m)``."""
+
+    def __init__(self, key: str, known: list[str], suggestion: str | None, file: str | None = None):
+        super().__init__(key, f"a known key ({', '.join(known) or 'none'})", "an unknown key", file)
+        hint = f"; did you mean {suggestion!r}?" if suggestion else ""
+        where = f"{file}: " if file else ""
+        self.args = (f"{where}{key}: unknown key{hint} (known here: {', '.join(known) or 'none'})",)
 
 
 class SimulationError(ContactdynError):
     """A run could not continue (solver failure, blow-up, event storm); says when and why."""
+
+
+class RunFileError(ContactdynError):
+    """A saved run (NAME.npz + NAME.json) is missing, damaged or not one of ours; names the file."""

@@ -160,8 +160,9 @@ class HybridRun:
         by[method] = by.get(method, 0) + 1
         self.stats["steps"] += len(sol.t) - 1
         if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
+            why = sol.message if sol.status < 0 else "the state is not finite"  # never "successfully ..."
             raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s "
-                                  f"({method}): {sol.message}{self._diagnose(sol, plan, fun, method)}")
+                                  f"({method}): {why}{self._diagnose(sol, plan, fun, method)}")
         self.segments.append(Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
         self.stats["segments"] += 1
         return sol, events, fun
@@ -181,8 +182,8 @@ class HybridRun:
     def _diagnose(self, sol, plan: ModePlan, fun, method: str) -> str:
         """Why a segment failed, as far as the state at the failure says."""
         t, x = float(sol.t[-1]), sol.y[:, -1]
-        if not np.all(np.isfinite(x)):
-            return "; the state is not finite"
+        if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
+            return ""
         if plan.ok:
             cond = plan.kkt_condition(t, x)
             if cond > 1e12:

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ContactdynError
-from .result import Result, load_result
+from .result import Result, load_result, run_files
 
 __all__ = ["FIGURES", "FORMATS", "plot_result", "plot_command", "figure_names"]
 
@@ -94,10 +94,17 @@ def _direction(result: Result, contact: str, label: str) -> np.ndarray | None:
 
 
 def _is_vertical(result: Result, contact: str, label: str) -> bool:
+    """Along gravity (|cos| > VERTICAL_COS); without gravity (B1's horizontal plane) or a scene
+    document, the paper's reading: the normal is "vertical", the tangents "horizontal"."""
     u = _direction(result, contact, label)
-    if u is None:  # no scene document: the normal is taken as vertical, tangents as horizontal
+    robot = result.scene.get("robot", {}) if isinstance(result.scene, dict) else {}
+    try:
+        g = np.asarray(robot.get("gravity", [0.0, 0.0, -9.81]) if isinstance(robot, dict) else [], float)
+    except (TypeError, ValueError):
+        g = np.zeros(0)
+    if u is None or g.shape != (3,) or np.linalg.norm(g) == 0.0:
         return label == "n"
-    return abs(u[2]) > VERTICAL_COS
+    return abs(u @ g) / np.linalg.norm(g) > VERTICAL_COS
 
 
 def _direction_name(result: Result, contact: str, label: str) -> str:
@@ -433,8 +440,8 @@ def plot_command(args: argparse.Namespace) -> int:
     """
     run = Path(args.run)
     result = load_result(run)
-    out = Path(args.out) if getattr(args, "out", None) else run.with_suffix("").parent / \
-        f"{run.with_suffix('').name}_figures"
+    stem = run_files(run)[0].with_suffix("")
+    out = Path(args.out) if getattr(args, "out", None) else stem.parent / f"{stem.name}_figures"
     written = plot_result(result, out, getattr(args, "format", None) or ",".join(FORMATS))
     if not written:
         print(f"{run}: no figure applies to this run's channels")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -13,8 +14,8 @@ from ..errors import ContactdynError, SceneError
 from ..result import atomic_path
 from .plan import Sweep
 
-__all__ = ["STATUSES", "SUMMARY_FIXED", "result_row", "done_row", "cached_rows", "write_manifest", "write_summary",
-           "atomic_write"]
+__all__ = ["STATUSES", "SUMMARY_FIXED", "result_row", "record_failure", "done_row", "cached_rows", "write_manifest",
+           "write_summary", "atomic_write", "lock_out"]
 
 STATUSES = ("ok", "failed", "crashed")
 SUMMARY_FIXED = ("run_id", "status", "error", "wall_s")  #: columns before the metrics (after the parameters)
@@ -29,6 +30,39 @@ def result_row(rid: str, result) -> dict[str, Any]:
     error = f"non-finite values in {', '.join(bad)}" if bad else ""
     return {"run_id": rid, "status": "failed" if bad else "ok", "error": error,
             "wall_s": float(result.stats.get("wall_s", math.nan)), **metrics(result)}
+
+
+def record_failure(runs_dir: Path, rid: str, overrides: dict[str, Any], status: str, error: str, wall_s: float
+                   ) -> dict[str, Any]:
+    """Write ``<id>.failed.json`` (the error and the overrides) and return the run's summary row."""
+    row = {"run_id": rid, "status": status, "error": error, "wall_s": wall_s}
+    atomic_write(runs_dir / f"{rid}.failed.json", json.dumps({**row, "overrides": overrides}, indent=1,
+                                                              default=str).encode())
+    return row
+
+
+def lock_out(out: Path):
+    """Hold ``OUT/.sweep.lock`` for this sweep (released when the process ends, however it ends).
+
+    A second sweep into the same folder is refused: it would rewrite the summary and could
+    run the same cases twice. Returns the open lock file; keep it until the sweep is done.
+    """
+    import fcntl
+
+    lock = open(out / ".sweep.lock", "a+")  # noqa: SIM115 (held for the whole sweep)
+    try:
+        fcntl.flock(lock.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock.seek(0)
+        holder = lock.read().strip() or "?"
+        lock.close()
+        raise SceneError("--out", "a folder no other sweep is writing to (wait for it, or choose another --out)",
+                         f"{out} (sweep process {holder} is running into it)") from None
+    lock.seek(0)
+    lock.truncate()
+    lock.write(str(os.getpid()))
+    lock.flush()
+    return lock
 
 
 def done_row(runs_dir: Path, rid: str, cache: dict[str, dict[str, Any]]) -> dict[str, Any] | None:
@@ -85,10 +119,10 @@ def write_manifest(out: Path, sweep: Sweep, cases: list) -> None:
 
 def write_summary(out: Path, rows: dict[str, dict[str, Any]], params: dict[str, dict[str, Any]],
                    keys: list[str], csv: bool) -> Path:
-    """summary.parquet (and .csv) of the finished runs, sorted by run id, written atomically."""
+    """summary.parquet (and .csv) of the finished runs, sorted by the swept parameters, written atomically."""
     import pandas as pd
 
-    ids = sorted(rows)
+    ids = sorted(rows, key=lambda i: (_parameter_order(params[i], keys), i))
     metric_cols = sorted({k for r in rows.values() for k in r} - set(SUMMARY_FIXED))
     data: dict[str, Any] = {"run_id": ids}
     for key in keys:
@@ -104,6 +138,20 @@ def write_summary(out: Path, rows: dict[str, dict[str, Any]], params: dict[str, 
     if csv:
         atomic_path(out / "summary.csv", lambda tmp: frame.to_csv(tmp, index=False))
     return path
+
+
+def _parameter_order(params: dict[str, Any], keys: list[str]) -> tuple:
+    """Sort key of a run: its parameter values in the order of ``keys`` (numbers, then strings, then the rest)."""
+    order = []
+    for key in keys:
+        v = params.get(key)
+        if isinstance(v, int | float) and not isinstance(v, bool):
+            order.append((0, float(v), ""))
+        elif isinstance(v, str | bool):
+            order.append((1, 0.0, str(v)))
+        else:
+            order.append((2 if v is not None else 3, 0.0, json.dumps(v, sort_keys=True)))
+    return tuple(order)
 
 
 def _column(values: list[Any]) -> Any:
