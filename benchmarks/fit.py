@@ -1,6 +1,7 @@
 """Validation of ``contactdyn fit`` on benchmark B1 (issue 17, item 4).
 
     PYTHONPATH=. python benchmarks/fit.py [--realisations 20] [--workers 0] [--out benchmarks/out/fit.json]
+    PYTHONPATH=. python benchmarks/fit.py --pool 3     # the pool's speed-up on one fit (fit_pool.json)
 
 Truth: B1 with k = 1.3e5 N/m, m′ = 8 kg, μ = 0.35 (the scene has 1e5, 10, 0.4), simulated
 at rtol 1e-11; 1 % Gaussian noise = σ of 1 % of each channel's RMS value (F_n ≈ 100 N:
@@ -97,15 +98,37 @@ def _print_fit(title: str, fit: dict) -> None:
               f"{'' if e['determined'] else '  (not determined: ' + e['warnings'][0] + ')'}")
 
 
+def pool_ratio(log: Path, repeats: int, workers: int) -> dict:
+    """Wall time of the same fit in this process and on ``workers`` pool processes, interleaved; medians."""
+    walls: dict[int, list[float]] = {0: [], workers: []}
+    for _ in range(repeats):
+        for w in walls:
+            t0 = time.perf_counter()
+            contactdyn.fit("b1", log, f"{K},{M},{MU}", workers=w)
+            walls[w].append(time.perf_counter() - t0)
+    here, pooled = statistics.median(walls[0]), statistics.median(walls[workers])
+    print(f"pool: {workers} workers {pooled:.1f} s, this process {here:.1f} s (medians of {repeats}, interleaved): "
+          f"speed-up {here / pooled:.2f}; load average {os.getloadavg()[0]:.1f}")
+    return {"workers": workers, "wall_s": walls, "speedup": here / pooled, "load_average": os.getloadavg()[0]}
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--realisations", type=int, default=20)
     p.add_argument("--workers", type=int, default=0)
     p.add_argument("--out", default="benchmarks/out/fit.json")
     p.add_argument("--tmp", default="benchmarks/out/fit_logs")
+    p.add_argument("--pool", type=int, default=0, metavar="REPEATS",
+                   help="only time one fit in this process against 2 pool workers, REPEATS times each")
     args = p.parse_args(argv)
     tmp = Path(args.tmp)
     tmp.mkdir(parents=True, exist_ok=True)
+    if args.pool:
+        log = tmp / "b1_seed0.csv"
+        write_log(simulated_channels(), 0, log)
+        out = Path(args.out).with_name("fit_pool.json")
+        out.write_text(json.dumps(pool_ratio(log, args.pool, 2), indent=1))
+        return 0
     three = [K, M, MU]
     report: dict = {"truth": TRUTH, "noise": "1 % of each channel's RMS", "workers": args.workers}
 
