@@ -122,15 +122,16 @@ class DenseSolution:
             out = np.repeat(st.y0[:, None], len(tt), axis=1)
             return out[:, 0] if np.ndim(t) == 0 else out
         idx = np.minimum(np.searchsorted(self.ends, tt, side="left"), len(self.ends) - 1)
-        st.build(np.unique(idx))
-        t_old = np.array(st.t)[idx]
-        s = ((tt - t_old) / (np.array(st.t)[idx + 1] - t_old))[:, None]
-        F = np.array([st.coef[int(i)] for i in idx])
+        steps, at = np.unique(idx, return_inverse=True)  # per step, then per sample
+        st.build(steps)
+        ends = np.array(st.t)
+        s = ((tt - ends[idx]) / (ends[idx + 1] - ends[idx]))[:, None]
+        F = np.array([st.coef[int(i)] for i in steps])[at]
         y = np.zeros((len(tt), st.n))
         for k, row in enumerate(range(F.shape[1] - 1, -1, -1)):  # Horner, as scipy's Dop853DenseOutput
             y += F[:, row]
             y *= s if k % 2 == 0 else 1.0 - s
-        y += np.array([st.y_old(int(i)) for i in idx])
+        y += np.array([st.y_old(int(i)) for i in steps])[at]
         return y[0] if np.ndim(t) == 0 else y.T
 
 
@@ -201,6 +202,13 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     hits: list[tuple[float, int]] = []  # (root, event) of the step where an event fired
 
     def solout(t, y):
+        try:
+            return step_end(t, y)
+        except BaseException as exc:  # as in f: the core cannot carry an exception
+            failure.append(exc)
+            return -1
+
+    def step_end(t, y):
         if failure:
             return -1
         if steps.f0 is None:  # the call at t0: k1 = f(t0, y0)

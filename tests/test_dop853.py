@@ -98,3 +98,13 @@ def test_failure_is_reported_not_hidden():
     got = solve(lambda t, y: np.array([np.nan if t > 0.1 else 1.0]), (0.0, 1.0), [0.0], rtol=1e-8, atol=1e-10)
     assert got.status == -1 and "step size" in got.message
     assert got.t[-1] < 0.2
+
+
+def test_exception_in_an_event_propagates():
+    def g(t, y):
+        if t > 0.5:
+            raise KeyError("contact 'tip'")
+        return 1.0
+
+    with pytest.raises(KeyError, match="tip"):
+        solve(oscillator, (0.0, 2.0), [1.0, 0.0], rtol=1e-8, atol=1e-10, events=[g])
