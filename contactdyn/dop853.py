@@ -113,6 +113,12 @@ class DenseSolution:
         self.steps = steps
         self.t_min, self.t_max = steps.t[0], t_end
         self.ends = np.array(steps.t[1:])
+        self.calls_counted = steps.calls  #: interpolant calls already in the Solution's nfev
+
+    @property
+    def late_calls(self) -> int:
+        """Right-hand-side calls made for interpolants after the run returned (output sampling)."""
+        return self.steps.calls - self.calls_counted
 
     def __call__(self, t) -> np.ndarray:
         """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t)))."""
@@ -182,7 +188,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     iwork[3] = -1  # no stiffness detection
     steps = _Steps(fun, n, [t0], y0.copy())
     blk = slice(_WORK0, _WORK0 + 10 * n)
-    last = [None, None]  # (t, x) of the latest call: at a step end, the FSAL call at (t_new, y_new)
+    last = [None, None, 0]  # (t, x) of the latest call (at a step end: the FSAL call at t_new, y_new), calls
     failure: list[BaseException] = []
     nan = np.full(n, np.nan)
 
@@ -190,6 +196,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
         if failure:
             return nan
         last[0], last[1] = t, x
+        last[2] += 1
         try:
             return fun(t, x)
         except BaseException as exc:  # raised again after the core returns (it cannot carry it)
@@ -241,7 +248,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     _, _, ierr = _dop.dopri853(f, t0, y0, t_end, rtol, atol, solout, 1, work, iwork, MAX_STEPS, -1)
     if failure:
         raise failure[0]
-    nfev = int(iwork[16]) + steps.calls
+    nfev = last[2] + steps.calls
     t_stop = steps.t[-1]
     if ierr == 1:
         steps.t[-1] = t_stop = t_end  # the core's last step ends at t0 + Σh, within rounding of t_end

@@ -108,3 +108,19 @@ def test_exception_in_an_event_propagates():
 
     with pytest.raises(KeyError, match="tip"):
         solve(oscillator, (0.0, 2.0), [1.0, 0.0], rtol=1e-8, atol=1e-10, events=[g])
+
+
+def test_interpolants_cost_three_calls_per_step_and_only_where_asked():
+    calls = []
+
+    def counted(t, y):
+        calls.append(t)
+        return oscillator(t, y)
+
+    got = solve(counted, (0.0, 10.0), [1.0, 0.0], rtol=1e-8, atol=1e-10)
+    assert got.nfev == len(calls)  # the core's count and ours agree
+    n_steps = len(got.t) - 1
+    got.sol(np.array([0.5 * (got.t[0] + got.t[1])]))  # one step's interpolant
+    assert got.sol.late_calls == 3
+    got.sol(np.linspace(0.0, 10.0, 1001))  # all steps: 3 calls each, the first not again
+    assert got.sol.late_calls == 3 * n_steps == len(calls) - got.nfev
