@@ -31,6 +31,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import RobotError
+from .urdf_check import check_urdf_tree, isolated_build
 
 __all__ = ["Robot", "FrameTerms", "EXAMPLE_ROBOTS", "urdf_dir", "resolve_robot_path"]
 
@@ -114,13 +115,6 @@ def _urdf_call(path: Path, build: Callable[[], object]) -> object:
     except ET.ParseError as exc:
         detail = f"malformed XML: {exc} (urdfdom: {detail})"
     raise RobotError(f"{path}: not a valid URDF: {detail}")
-
-
-def _read_links(path: Path) -> ET.Element:
-    try:
-        return ET.parse(path).getroot()
-    except ET.ParseError as exc:  # urdfdom accepted it, Python's parser does not
-        raise RobotError(f"{path}: malformed XML: {exc}") from None
 
 
 def _number(element: ET.Element | None, key: str, where: str) -> float:
@@ -221,8 +215,11 @@ def _lock_reference(model: pin.Model, names: list[str], locked: dict[str, float]
 
 def _build_visual(path: Path, package_dirs: list[str], full: pin.Model, lock_ids: list[int],
                   q_ref: np.ndarray) -> pin.GeometryModel:
-    visual = _urdf_call(path, lambda: pin.buildGeomFromUrdf(full, str(path), pin.GeometryType.VISUAL,
-                                                            package_dirs=package_dirs))
+    def build() -> pin.GeometryModel:
+        return pin.buildGeomFromUrdf(full, str(path), pin.GeometryType.VISUAL, package_dirs=package_dirs)
+
+    isolated_build(path, "buildGeomFromUrdf", build)
+    visual = _urdf_call(path, build)
     if lock_ids:
         visual = pin.buildReducedModel(full, visual, lock_ids, q_ref)[1]
     return visual
@@ -291,8 +288,9 @@ class Robot:
         if not 0.0 <= gravity_compensation <= 1.0:
             raise RobotError(f"gravity_compensation must be in [0, 1], found {gravity_compensation}")
         path, package_dirs = resolve_robot_path(source)
+        root = check_urdf_tree(path)  # before Pinocchio: a non-tree URDF crashes it
+        isolated_build(path, "buildModelFromUrdf", lambda: pin.buildModelFromUrdf(str(path)))
         full: pin.Model = _urdf_call(path, lambda: pin.buildModelFromUrdf(str(path)))
-        root = _read_links(path)
         _check_links(root, path)
         _check_meshes(root, path, package_dirs)
         _check_limits(full, path)

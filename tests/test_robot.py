@@ -373,7 +373,7 @@ def test_revolute_without_limits_gives_urdfdom_reason(tmp_path):
 
 def test_undefined_parent_link(tmp_path):
     path = write(tmp_path, GOOD.substitute(DEFAULTS).replace('<parent link="link1"/>', '<parent link="linkX"/>'))
-    load_error(path, str(path), "parent link [linkX] of joint [q2] not found")
+    load_error(path, str(path), "joint 'q2': parent link 'linkX' is not defined")
 
 
 @pytest.mark.parametrize("mass", ["-1.0", "-1e-9"])
