@@ -167,6 +167,105 @@ def _active(g_old: float, g_new: float, direction: float) -> bool:
     return (up and direction > 0) or (down and direction < 0) or ((up or down) and direction == 0)
 
 
+class _EventWatch:
+    """The events' values at the step ends, and their roots (``solve_ivp``'s rules)."""
+
+    def __init__(self, events: Sequence[Callable], t0: float, y0: np.ndarray):
+        self.events = list(events)
+        self.g = [float(e(t0, y0)) for e in self.events]
+        self.direction = [float(getattr(e, "direction", 0.0)) for e in self.events]
+        self.terminal = [bool(getattr(e, "terminal", False)) for e in self.events]
+        self.hits: list[tuple[float, int]] = []  #: (root [s], event), in time order
+
+    def stop(self, steps: _Steps, t: float, x: np.ndarray) -> bool:
+        """At the step end (t, x): record the roots in the step; True at a terminal one (hits ends with it)."""
+        g_new = [float(e(t, x)) for e in self.events]
+        fired = [i for i, (a, b, d) in enumerate(zip(self.g, g_new, self.direction, strict=True)) if _active(a, b, d)]
+        self.g = g_new
+        if not fired:
+            return False
+        dense, t_old = DenseSolution(steps, t), steps.t[-2]
+        for i in fired:  # as solve_ivp: brentq on the step's interpolant
+            root = brentq(lambda s, e=self.events[i]: e(s, dense(s)), t_old, t, xtol=4 * _EPS, rtol=4 * _EPS)
+            self.hits.append((root, i))
+        self.hits.sort()
+        first = next((k for k, (_, i) in enumerate(self.hits) if self.terminal[i]), None)
+        if first is None:
+            return False
+        del self.hits[first + 1:]
+        return True
+
+    def t_events(self) -> list[np.ndarray]:
+        return [np.array([r for r, k in self.hits if k == i]) for i in range(len(self.events))]
+
+
+class _Core:
+    """One call of scipy's compiled DOP853: its workspace, and the two callbacks it makes."""
+
+    def __init__(self, fun: Callable, t0: float, y0: np.ndarray, events: _EventWatch):
+        n = len(y0)
+        self.fun, self.n, self.watch = fun, n, events
+        self.work = np.zeros(11 * n + 21)  # Hairer's layout: 20 parameters, then k1…k10, y1
+        self.iwork = np.zeros(21, dtype=np.int32)
+        self.steps = _Steps(fun, n, [t0], y0.copy())
+        self.last_t, self.last_x, self.calls = None, None, 0  # the latest call: at a step end, the FSAL one
+        self.failure: list[BaseException] = []
+        self.nan = np.full(n, np.nan)
+
+    def run(self, t_end: float, rtol: float, atol: float, max_step: float, first_step: float | None) -> int:
+        work = self.work
+        work[1], work[2], work[3] = SAFETY, SHRINK, GROW
+        work[4] = -1.0  # no Lund stabilisation (beta = 0)
+        work[5] = max_step if np.isfinite(max_step) else 0.0
+        work[6] = first_step or 0.0
+        self.iwork[3] = -1  # no stiffness detection
+        y0 = self.steps.y0
+        _, _, ierr = _dop.dopri853(self.f, self.steps.t[0], y0, t_end, rtol, atol, self.solout, 1, work,
+                                   self.iwork, MAX_STEPS, -1)
+        if self.failure:
+            raise self.failure[0]
+        return int(ierr)
+
+    def f(self, t: float, x: np.ndarray) -> np.ndarray:
+        """The right-hand side as the core calls it."""
+        if self.failure:
+            return self.nan
+        x = x.copy()  # the core passes a view of its workspace: nothing may keep that past the run
+        self.last_t, self.last_x = t, x
+        self.calls += 1
+        try:
+            return self.fun(t, x)
+        except BaseException as exc:  # raised again after the core returns (it cannot carry it)
+            self.failure.append(exc)
+            return self.nan
+
+    def solout(self, t: float, y: np.ndarray) -> int:
+        """After each accepted step: keep its stages, test the events; −1 stops the core."""
+        try:
+            return self._step_end(t)
+        except BaseException as exc:  # as in f
+            self.failure.append(exc)
+            return -1
+
+    def _step_end(self, t: float) -> int:
+        steps, n = self.steps, self.n
+        if self.failure:
+            return -1
+        if steps.f0 is None:  # the call at t0: k1 = f(t0, y0)
+            steps.f0 = self.work[_WORK0:_WORK0 + n].copy()
+            return 0
+        steps.t.append(t)
+        steps.blocks.append(self.work[_WORK0:_WORK0 + 10 * n].reshape(10, n).copy())
+        if not self.watch.events:
+            return 0
+        # the FSAL call's own array (the same values): the compiled plan has its results cached
+        x = self.last_x if self.last_t == t else steps.blocks[-1][_Y_NEW]
+        if self.watch.stop(steps, t, x):
+            steps.build(np.array([len(steps.t) - 2]))
+            return -1
+        return 0
+
+
 def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, float], y0: np.ndarray, *,
           rtol: float, atol: float, max_step: float = np.inf, first_step: float | None = None,
           events: Sequence[Callable] | None = None) -> Solution:
@@ -177,85 +276,16 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     """
     t0, t_end = float(t_span[0]), float(t_span[1])
     y0 = np.array(y0, float)
-    n = len(y0)
-    events = list(events or [])
-    work = np.zeros(11 * n + 21)
-    work[1], work[2], work[3] = SAFETY, SHRINK, GROW
-    work[4] = -1.0  # no Lund stabilisation (beta = 0)
-    work[5] = max_step if np.isfinite(max_step) else 0.0
-    work[6] = first_step or 0.0
-    iwork = np.zeros(21, dtype=np.int32)
-    iwork[3] = -1  # no stiffness detection
-    steps = _Steps(fun, n, [t0], y0.copy())
-    blk = slice(_WORK0, _WORK0 + 10 * n)
-    last = [None, None, 0]  # (t, x) of the latest call (at a step end: the FSAL call at t_new, y_new), calls
-    failure: list[BaseException] = []
-    nan = np.full(n, np.nan)
-
-    def f(t, x):
-        if failure:
-            return nan
-        last[0], last[1] = t, x
-        last[2] += 1
-        try:
-            return fun(t, x)
-        except BaseException as exc:  # raised again after the core returns (it cannot carry it)
-            failure.append(exc)
-            return nan
-
-    g = [float(e(t0, y0)) for e in events]
-    directions = [float(getattr(e, "direction", 0.0)) for e in events]
-    terminal = [bool(getattr(e, "terminal", False)) for e in events]
-    hits: list[tuple[float, int]] = []  # (root, event) of the step where an event fired
-
-    def solout(t, y):
-        try:
-            return step_end(t, y)
-        except BaseException as exc:  # as in f: the core cannot carry an exception
-            failure.append(exc)
-            return -1
-
-    def step_end(t, y):
-        if failure:
-            return -1
-        if steps.f0 is None:  # the call at t0: k1 = f(t0, y0)
-            steps.f0 = work[_WORK0:_WORK0 + n].copy()
-            return 0
-        steps.t.append(t)
-        steps.blocks.append(work[blk].reshape(10, n).copy())
-        if not events:
-            return 0
-        x = last[1] if last[0] == t else steps.blocks[-1][_Y_NEW]  # the FSAL call's own array: its values are cached
-        g_new = [float(e(t, x)) for e in events]
-        fired = [i for i in range(len(events)) if _active(g[i], g_new[i], directions[i])]
-        g[:] = g_new
-        if not fired:
-            return 0
-        i_step = len(steps.t) - 2
-        dense = DenseSolution(steps, t)
-        t_old = steps.t[-2]
-        for i in fired:
-            root = brentq(lambda s, e=events[i]: e(s, dense(s)), t_old, t, xtol=4 * _EPS, rtol=4 * _EPS)
-            hits.append((root, i))
-        hits.sort()
-        first_terminal = next((k for k, (_, i) in enumerate(hits) if terminal[i]), None)
-        if first_terminal is None:
-            return 0
-        del hits[first_terminal + 1:]
-        steps.build(np.array([i_step]))
-        return -1
-
-    _, _, ierr = _dop.dopri853(f, t0, y0, t_end, rtol, atol, solout, 1, work, iwork, MAX_STEPS, -1)
-    if failure:
-        raise failure[0]
-    nfev = last[2] + steps.calls
+    watch = _EventWatch(events or [], t0, y0)
+    core = _Core(fun, t0, y0, watch)
+    ierr = core.run(t_end, rtol, atol, max_step, first_step)
+    steps = core.steps
     t_stop = steps.t[-1]
     if ierr == 1:
         steps.t[-1] = t_stop = t_end  # the core's last step ends at t0 + Σh, within rounding of t_end
-    t_events = [np.array([r for r, k in hits if k == i]) for i in range(len(events))]
     status, message = 0, "The solver successfully reached the end of the integration interval."
-    if ierr == 2 and hits and terminal[hits[-1][1]]:
-        status, message, t_stop = 1, "A termination event occurred.", hits[-1][0]
+    if ierr == 2 and watch.hits and watch.terminal[watch.hits[-1][1]]:
+        status, message, t_stop = 1, "A termination event occurred.", watch.hits[-1][0]
     elif ierr < 0:
         status, message = -1, f"DOP853 (compiled): {_MESSAGES.get(ierr, f'error {ierr}')} at t = {t_stop:.9g} s"
     dense = DenseSolution(steps, t_stop)
@@ -264,4 +294,5 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     if status == 1:
         ts[-1] = t_stop
         ys[:, -1] = dense(t_stop)
-    return Solution(ts, ys, dense, t_events, status, message, nfev, int(iwork[18]), int(iwork[19]))
+    return Solution(ts, ys, dense, watch.t_events(), status, message, core.calls + steps.calls,
+                    int(core.iwork[18]), int(core.iwork[19]))

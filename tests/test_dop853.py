@@ -124,3 +124,21 @@ def test_interpolants_cost_three_calls_per_step_and_only_where_asked():
     assert got.sol.late_calls == 3
     got.sol(np.linspace(0.0, 10.0, 1001))  # all steps: 3 calls each, the first not again
     assert got.sol.late_calls == 3 * n_steps == len(calls) - got.nfev
+
+
+@pytest.mark.parametrize("scene, duration, force_tol", [
+    ("b1", 0.5, 1e-5),  # smooth sliding: measured 1.4e-6 N apart, each ~2e-6 N from the reference
+    ("case2_writer_b", 1.5, 1e-4),  # touch, impact, stick, slip, separation: measured 5e-6 N apart
+])
+def test_scenes_agree_with_solve_ivp(scene, duration, force_tol):
+    """A whole hybrid run on DOP853C: the same events at the same times, channels within the error."""
+    from contactdyn import simulate
+
+    ref = simulate(scene, {"duration": duration})
+    got = simulate(scene, {"duration": duration, "solver.method": "DOP853C"})
+    assert [(e["kind"], e["name"]) for e in got.events] == [(e["kind"], e["name"]) for e in ref.events]
+    assert max((abs(a["t"] - b["t"]) for a, b in zip(got.events, ref.events, strict=True)), default=0.0) < 1e-7
+    for name in (c for c in ref.channels if c.endswith(".F_n")):
+        assert float(np.abs(got[name] - ref[name]).max()) < force_tol
+    assert float(np.abs(got["tip"] - ref["tip"]).max()) < 1e-8
+    assert got.stats["segments_by_method"] == {"DOP853C": ref.stats["segments_by_method"]["DOP853"]}
