@@ -7,6 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from contactdyn.dop853 import solve
+from contactdyn.errors import SceneError
 
 
 def oscillator(t, y):
@@ -142,3 +143,11 @@ def test_scenes_agree_with_solve_ivp(scene, duration, force_tol):
         assert float(np.abs(got[name] - ref[name]).max()) < force_tol
     assert float(np.abs(got["tip"] - ref["tip"]).max()) < 1e-8
     assert got.stats["segments_by_method"] == {"DOP853C": ref.stats["segments_by_method"]["DOP853"]}
+
+
+def test_a_scipy_without_the_compiled_core_is_named(monkeypatch):
+    import contactdyn.dop853 as dop
+
+    monkeypatch.setattr(dop, "_CORE", None)
+    with pytest.raises(SceneError, match="solver.method.*DOP853C.*scipy"):
+        solve(oscillator, (0.0, 1.0), [1.0, 0.0], rtol=1e-8, atol=1e-10)
