@@ -81,13 +81,16 @@ class Rows:
 
 
 def record_row_forces(system, ev, rows: Rows, lam: np.ndarray) -> None:
-    """Put each row's solved force where its kind says: normal force, stick friction or chain interface."""
+    """Put each row's solved force where its kind says: normal force, stick friction or chain interface.
+
+    Kinds without a home here (none yet) keep their force in ``ev.lam`` beside ``ev.row_meta`` only.
+    """
     for (name, kind, i), value in zip(rows.meta, lam, strict=True):
         if kind == "n":
             ev.normal_force[name] = float(value)
         elif kind == "t":
             ev.friction.setdefault(name, np.zeros(len(system.contact(name).tangents)))[i] = value
-        else:
+        elif kind[:1] == "t" and kind[1:].isdigit():  # a tangential chain's bond ("t1", "t2")
             ev.interface[f"{name}.{kind}"] = float(value)
 
 

@@ -223,7 +223,8 @@ class HybridRun:
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
                      compiled_modes=sum(p.ok for p in self.plans.values()),
-                     fallback_modes=dict(self.fallbacks))
+                     fallback_modes=dict(self.fallbacks),
+                     fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
         meta = {"joints": system.robot.joint_names, "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
