@@ -2,7 +2,7 @@
 
 ``solve_ivp``'s DOP853 is written in Python: every step pays for its stage
 combinations, error norm, step control, dense output and event bookkeeping in NumPy
-calls (65 µs per step with an empty right-hand side, against 4.3 µs here; ~75 µs on B1
+calls (65 µs per step with an empty right-hand side, against 8 µs here; ~75 µs on B1
 against ~100 µs of right-hand side; docs/performance.md). Here the steps are
 taken by scipy's compiled DOP853 (``scipy.integrate._dop.dopri853``, the C translation of
 Hairer's code behind ``scipy.integrate.ode("dop853")``), and Python sees each accepted
