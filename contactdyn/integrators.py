@@ -1,4 +1,7 @@
-"""Integrators for the smooth phases: scipy's ``solve_ivp`` methods by name, ``auto``, ``RK4``.
+"""Integrators for the smooth phases: scipy's ``solve_ivp`` methods by name, ``auto``, ``RK4``, ``DOP853C``.
+
+``DOP853C`` is DOP853 stepped by scipy's compiled core (:mod:`contactdyn.dop853`): the same
+method and step control, a fraction of ``solve_ivp``'s per-step cost.
 
 ``RK4`` is the classical fixed-step Runge–Kutta method (4 calls per step) with step
 ``solver.max_step`` [s] (required), cubic Hermite dense output and scipy's event location:
@@ -27,14 +30,17 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from scipy.integrate import DenseOutput, OdeSolver
+from scipy.integrate import DenseOutput, OdeSolver, solve_ivp
+
+from . import dop853
 
 __all__ = ["METHODS", "IMPLICIT", "EXPLICIT", "FIXED", "stability_bound", "jacobian_eigenvalues",
-           "FiniteDifferenceJacobian", "RK4", "solver_class"]
+           "FiniteDifferenceJacobian", "RK4", "solver_class", "integrate"]
 
 #: ``auto``, explicit Runge–Kutta methods and the implicit ones for stiff scenes
-METHODS = ("auto", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA", "RK4")
-EXPLICIT = ("DOP853", "RK45", "RK23", "RK4")
+METHODS = ("auto", "DOP853", "DOP853C", "RK45", "RK23", "Radau", "BDF", "LSODA", "RK4")
+EXPLICIT = ("DOP853", "DOP853C", "RK45", "RK23", "RK4")
+COMPILED = ("DOP853C",)  #: run by contactdyn.dop853 rather than solve_ivp
 FIXED = ("RK4",)  #: fixed-step methods: the step is solver.max_step
 IMPLICIT = ("Radau", "BDF", "LSODA")
 
@@ -196,3 +202,13 @@ class RK4(OdeSolver):
 def solver_class(method: str):
     """What ``solve_ivp`` takes as ``method`` for a method name."""
     return RK4 if method == "RK4" else method
+
+
+def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, rtol: float, atol: float,
+              max_step: float = np.inf, events=None, first_step: float | None = None, jac=None):
+    """One smooth segment by the named method, with dense output and events (``solve_ivp``'s result fields)."""
+    if method in COMPILED:
+        return dop853.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
+                            first_step=first_step)
+    return solve_ivp(fun, t_span, y0, method=solver_class(method), rtol=rtol, atol=atol, max_step=max_step,
+                     events=events or None, dense_output=True, first_step=first_step, **({"jac": jac} if jac else {}))
