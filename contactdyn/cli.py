@@ -20,6 +20,7 @@ __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE", "EXIT
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 LIST_SECTIONS = ("scenes", "robots", "models", "controllers", "integrators")
+LIST_MORE = ("frames",)  #: sections listed only by name: ``list frames ROBOT``
 
 
 class _Usage(Exception):
@@ -63,7 +64,7 @@ def _catalog() -> dict[str, Any]:
 
     from .controllers import CONTROLLERS
     from .integrators import FIXED, IMPLICIT, METHODS
-    from .robot import EXAMPLE_ROBOTS, urdf_dir
+    from .robot_list import robot_entries
     from .scene import NORMAL_MODELS, TANGENT_MODELS, sims_dir
 
     scenes = []
@@ -73,8 +74,7 @@ def _catalog() -> dict[str, Any]:
         except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
             description = f"(unreadable: {exc})"
         scenes.append({"name": path.stem, "file": str(path), "description": str(description)})
-    robots = [{"name": p.stem, "source": "urdf/", "file": str(p)} for p in sorted(urdf_dir().glob("*.urdf"))]
-    robots += [{"name": n, "source": "example-robot-data", "file": EXAMPLE_ROBOTS[n]} for n in sorted(EXAMPLE_ROBOTS)]
+    robots = robot_entries()
     normal = {"rigid": "constraint, impact at touch", "a": "ground -[k'', b'']- m' -[k', b']- tip (continuous)",
               "b": "ground -[k, b]- m', struck by the tip (impact at touch)", "c": "massless Kelvin-Voigt stage k, b",
               "chain": "explicit stages {k, b} and masses {m}, environment and robot side"}
@@ -104,6 +104,10 @@ def _integrator(name: str, implicit: tuple[str, ...], fixed: tuple[str, ...]) ->
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
+    if args.what == "frames":
+        from .robot_list import frames_command
+
+        return frames_command(args)
     catalog = _catalog()
     sections = [args.what] if args.what else list(LIST_SECTIONS)
     if args.json:
@@ -117,8 +121,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
                 for m in catalog[s][kind]:
                     print(f"    {m['name']:<8} {m['description']}")
         elif s == "robots":
-            for r in catalog[s]:
-                print(f"  {r['name']:<16} {r['source']}")
+            from .robot_list import print_robots
+
+            print_robots(catalog[s])
         else:
             for item in catalog[s]:
                 print(f"  {item['name']:<16} {item['description']}")
@@ -248,8 +253,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     ls = sub.add_parser("list", help="list scenes, robots, contact models, controllers, integrators",
                         description="List what a scene can name.", formatter_class=fmt,
-                        epilog="examples:\n  contactdyn list\n  contactdyn list robots --json")
-    ls.add_argument("what", nargs="?", choices=LIST_SECTIONS, help="one section only")
+                        epilog="examples:\n  contactdyn list\n  contactdyn list robots --json\n"
+                               "  contactdyn list frames panda")
+    ls.add_argument("what", nargs="?", choices=LIST_SECTIONS + LIST_MORE, help="one section only")
+    ls.add_argument("robot", nargs="?", help="with 'frames': the robot whose kinematic tree to print")
     _scripting(ls)
     ls.set_defaults(func=_cmd_list)
 

@@ -16,7 +16,7 @@ import difflib
 import functools
 import os
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -26,6 +26,9 @@ from .frames import chain_joints, find_frame
 from .robot_catalog import example_robots, urdf_dir
 from .urdf_model import UrdfModel, build_urdf_model, lock_joints, urdf_call
 from .urdf_source import resolve_robot_path
+
+if TYPE_CHECKING:
+    from .scene import RobotSpec
 
 __all__ = ["Robot", "FrameTerms", "EXAMPLE_ROBOTS", "urdf_dir", "resolve_robot_path"]
 
@@ -179,6 +182,19 @@ class Robot:
         robot.notes = list(urdf.notes)
         robot.unbounded = [n for n in urdf.unbounded if n in robot.joint_names]
         return robot
+
+    @classmethod
+    def from_spec(cls, spec: RobotSpec) -> Robot:
+        """The robot a scene's ``[robot]`` table names (what the simulation and the viewer load)."""
+        active = list(spec.active_joints) if spec.active_joints else None
+        return cls.load(spec.source, tip=spec.tip, active_joints=active, locked=spec.locked,
+                        gravity=tuple(spec.gravity), gravity_compensation=spec.gravity_compensation,
+                        inertia=spec.inertia)
+
+    def describe(self) -> dict:
+        """Which joints move and which are locked where, and the inertia notes (stored with a run)."""
+        return {"joints": list(self.joint_names), "locked": dict(self.locked), "unbounded": list(self.unbounded),
+                "inertia_notes": list(self.notes)}
 
     @property
     def visual_model(self) -> pin.GeometryModel:

@@ -725,7 +725,7 @@ class _Run:
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
                      compiled_modes=sum(p.ok for p in self.plans.values()),
                      fallback_modes=dict(self.fallbacks))
-        meta = {"joints": system.robot.joint_names, "contacts": [c.name for c in system.contacts],
+        meta = {**system.robot.describe(), "posture": system.posture, "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)

@@ -37,6 +37,7 @@ from .controllers import CONTROLLERS, ControlInput, Controller
 from .controllers.base import BindContext
 from .drives import Drives
 from .errors import RobotError, SceneError, SimulationError
+from .posture import start_posture
 from .robot import Robot
 from .scene import PhaseSpec, Scene
 from .trajectory import Ramp, Reference
@@ -124,11 +125,10 @@ class System:
 
     def __init__(self, scene: Scene):
         self.scene = scene
+        self.posture: dict = {}  #: how the start posture was found (see contactdyn.posture.start_posture)
         rs = scene.robot
         try:
-            self.robot = Robot.load(rs.source, active_joints=list(rs.active_joints) if rs.active_joints else None,
-                                    locked=rs.locked, gravity=tuple(rs.gravity),
-                                    gravity_compensation=rs.gravity_compensation)
+            self.robot = Robot.from_spec(rs)
             self.tip_fid = self.robot.frame_id(rs.tip)
         except RobotError as exc:
             raise SceneError("robot", "a loadable robot", str(exc), scene.file) from None
@@ -224,16 +224,7 @@ class System:
     # ---- initial state ------------------------------------------------------------------
     def initial_state(self) -> tuple[np.ndarray, list[ContactMode]]:
         rs, robot = self.scene.robot, self.robot
-        if rs.q0 is not None and len(rs.q0) != robot.nq:
-            raise SceneError("robot.q0", f"{robot.nq} joint values for joints {robot.joint_names}", rs.q0.tolist(),
-                             self.scene.file)
-        q = rs.q0.copy() if rs.q0 is not None else (rs.q_seed.copy() if rs.q_seed is not None else
-                                                    np.zeros(robot.nq))
-        if rs.tip0 is not None:
-            try:
-                q = robot.inverse_kinematics(rs.tip, rs.tip0, q)
-            except RobotError as exc:
-                raise SceneError("robot.tip0", "a reachable tip position", str(exc), self.scene.file) from None
+        q, self.posture = start_posture(robot, rs, self.scene.phases[0].controller, self.scene.file)
         v = rs.v0.copy() if rs.v0 is not None else np.zeros(robot.nv)
         if len(v) != robot.nv:
             raise SceneError("robot.v0", f"{robot.nv} joint velocities", rs.v0.tolist(), self.scene.file)

@@ -1,0 +1,67 @@
+"""``contactdyn list robots`` and ``contactdyn list frames ROBOT``: what a scene's ``robot.urdf``
+and ``robot.tip`` can name."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import pinocchio as pin
+
+from .errors import ContactdynError
+from .frames import frame_tree
+from .robot_catalog import example_robots, urdf_dir
+from .urdf_model import build_urdf_model
+
+__all__ = ["robot_entries", "frames_command", "end_effectors"]
+
+
+def end_effectors(model: pin.Model) -> list[str]:
+    """Body frames with no frame below them: the tips a scene would usually name."""
+    parents = {f.parentFrame for i, f in enumerate(model.frames) if i}
+    return [f.name for i, f in enumerate(model.frames)
+            if f.type == pin.FrameType.BODY and i not in parents and f.parentJoint > 0]
+
+
+def _entry(name: str, source: str, file: str) -> dict:
+    entry = {"name": name, "source": source, "file": file}
+    try:
+        model = build_urdf_model(file, inertia="trust").model
+    except ContactdynError as exc:
+        return {**entry, "dof": None, "end_effectors": [], "error": str(exc)}
+    return {**entry, "dof": model.nv, "end_effectors": end_effectors(model)}
+
+
+def robot_entries() -> list[dict]:
+    """Every robot known by name: the project's ``urdf/`` files, then example-robot-data's."""
+    entries = [_entry(p.stem, "urdf/", str(p)) for p in sorted(urdf_dir().glob("*.urdf"))]
+    entries += [_entry(n, "example-robot-data", str(f)) for n, f in example_robots().items()]
+    return entries
+
+
+def print_robots(entries: list[dict]) -> None:
+    for r in entries:
+        if r["dof"] is None:
+            print(f"  {r['name']:<36} unusable: {r['error']}")
+            continue
+        tips = r["end_effectors"]
+        shown = ", ".join(tips[:4]) + (f" (+{len(tips) - 4} more)" if len(tips) > 4 else "")
+        print(f"  {r['name']:<36} {r['dof']:>3} DOF  {r['source']:<18}  tips: {shown}")
+
+
+def frames_command(args: argparse.Namespace) -> int:
+    """Print the kinematic tree of ``args.robot`` with frame types (JSON: the frames as a list)."""
+    if not args.robot:
+        raise ContactdynError("list frames: name a robot (contactdyn list frames ROBOT)")
+    urdf = build_urdf_model(args.robot, inertia="trust")
+    model = urdf.model
+    if args.json:
+        frames = [{"name": f.name, "type": str(f.type).rsplit(".", 1)[-1], "parent": model.frames[f.parentFrame].name,
+                   "joint": model.names[f.parentJoint]} for f in model.frames]
+        print(json.dumps({"robot": str(urdf.path), "dof": model.nv, "end_effectors": end_effectors(model),
+                          "frames": frames}, indent=1))
+        return 0
+    print(f"{urdf.path}: {model.nv} DOF; tips (body frames at the leaves): {', '.join(end_effectors(model))}")
+    for line in frame_tree(model, set(urdf.unbounded)):
+        print(f"  {line}")
+    return 0
