@@ -139,6 +139,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     overrides = dict(parse_override(s) for s in args.set)
     scene = load_scene(args.scene, overrides)
     result = simulate(scene)
+    if not args.quiet:
+        from .robot_list import run_warnings
+
+        for warning in run_warnings(result.meta):
+            print(f"contactdyn: warning: {warning}", file=sys.stderr)
     saved = str(result.save(args.out)) if args.out else None
     if args.json:
         _emit_json({"scene": scene.name, "file": scene.file, "status": "ok", "out": saved,
@@ -148,6 +153,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         _out(args, f"{result.meta['name']}: {result.meta['duration']:g} s simulated in {s['wall_s']:.3f} s "
                    f"(real-time factor {s['real_time_factor']:.1f}), {s['steps']} steps, {s['rhs_evals']} rhs "
                    f"evaluations, {s['events']} events, {len(result.impacts)} impacts")
+        if args.verbose:
+            from .robot_list import run_details
+
+            for line in run_details(result.meta):
+                _out(args, line)
         for name in result.meta["contacts"]:
             F = result[f"contact.{name}.F_n"]
             _out(args, f"  contact {name}: normal force peak {F.max():.4g} N, final {F[-1]:.4g} N")
@@ -267,6 +277,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("scene", help="scene file or name in sims/")
     _set_option(run)
     run.add_argument("--out", help="save the run as OUT.npz + OUT.json")
+    run.add_argument("--verbose", "-v", action="store_true",
+                     help="also print the active and locked joints and how the start posture was found")
     run.add_argument("--view", action="store_true", help="show the run in the meshcat viewer afterwards")
     run.add_argument("--html", help="with --view: write a self-contained HTML player instead of serving")
     run.add_argument("--port", type=int, help="with --view: meshcat server port")

@@ -2,8 +2,10 @@
 the tool direction.
 
 Inverse kinematics by damped Gauss–Newton steps projected into the joint limits, from several
-seeds: the scene's ``robot.q_seed`` first (a hint: when it converges its solution is kept, so a
-scene can choose e.g. an elbow-up posture), then the middle of the limits and random
+seeds: the scene's ``robot.q_seed`` first (a hint: when it converges to a posture at least
+SEED_MARGIN of each joint's half-range away from its limits, that posture is kept, so a scene can
+choose e.g. an elbow-up posture; a seed meant for another arm of the same DOF count may not
+suit), then the middle of the limits and random
 postures within them (a fixed random seed: the result is deterministic). Among the solutions
 the one farthest from the limits and from singularities wins: the largest product of the
 smallest normalized limit margin and the smallest singular value of the task Jacobian.
@@ -12,6 +14,7 @@ A task no seed reaches stops with one line saying by how much the best attempt m
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
@@ -30,6 +33,8 @@ N_SEEDS = 24  #: seeds tried besides the scene's q_seed
 MAX_ITERATIONS = 300
 DAMPING = 1e-6  #: λ of the damped least-squares step [m, rad]
 MAX_STEP = 0.5  #: largest joint step per iteration [rad or m]
+STALL_WINDOW = 10  #: iterations that must shrink the task error by 1 %, else the descent ends
+SEED_MARGIN = 0.1  #: a seed's solution closer to a limit than this (fraction of the half-range) is not kept
 _SPAN = np.pi  #: half-range used for unbounded joints [rad]
 
 
@@ -78,11 +83,15 @@ def _descend(robot: Robot, fid: int, task: PostureTask, q: np.ndarray) -> tuple[
     """Projected damped Gauss–Newton from q; returns (q, position error [m], direction error [rad])."""
     lo, hi = robot.lower, robot.upper
     q = np.clip(q, lo, hi)
+    history: list[float] = []
     for _ in range(MAX_ITERATIONS):
         e, J, angle = _residual(robot, fid, task, q)
         dist = float(np.linalg.norm(e[:3]))
         if dist < POSITION_TOL and angle < DIRECTION_TOL:
             break
+        history.append(float(np.linalg.norm(e)))
+        if len(history) > STALL_WINDOW and history[-1] > 0.99 * history[-1 - STALL_WINDOW]:
+            break  # stuck against the limits or at a closest point
         step = np.linalg.lstsq(np.vstack([J, DAMPING * np.eye(len(q))]), np.r_[e, np.zeros(len(q))], rcond=None)[0]
         size = np.abs(step).max()
         q = np.clip(q + step * min(1.0, MAX_STEP / max(size, 1e-300)), lo, hi)
@@ -120,14 +129,14 @@ def solve_posture(robot: Robot, task: PostureTask, seed: np.ndarray | None = Non
             continue
         margin, sigma = _quality(robot, fid, task, q)
         found = Posture(q, dist, angle, margin, sigma, seed is not None and k == 0)
-        if found.from_seed:
+        if found.from_seed and margin >= SEED_MARGIN:
             return found
         if best is None or margin * sigma > best.limit_margin * best.sigma_min:
             best = found
     if best is None:
         what = "position" if task.tool_axis is None else "position and tool direction"
         raise RobotError(
-            f"{robot.source}: frame {task.frame!r} cannot reach the task's {what} within the joint limits: "
+            f"{Path(robot.source).name}: frame {task.frame!r} cannot reach the task's {what} within the joint limits: "
             f"the best of {len(seeds)} attempts misses by {closest[0]:.3g} m"
             + (f" and {closest[1]:.3g} rad" if task.tool_axis is not None else "")
             + f" (target {np.round(task.position, 6).tolist()} m)")

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from .errors import RobotError
 
-__all__ = ["SHORT_NAMES", "example_robot_data_share", "example_robots", "urdf_dir"]
+__all__ = ["SHORT_NAMES", "TOOL_FRAMES", "example_robot_data_share", "example_robots", "urdf_dir"]
 
 #: short names of the usual robots -> URDF relative to example-robot-data's ``robots`` folder
 SHORT_NAMES: dict[str, str] = {
@@ -39,6 +39,20 @@ SHORT_NAMES: dict[str, str] = {
     "icub": "icub_description/robots/icub.urdf",
     "go2": "go2_description/urdf/go2.urdf",
     "g1": "g1_description/urdf/g1_29dof_rev_1_0.urdf",
+}
+
+
+#: the tool frame of the usual arms (a scene's ``robot.tip``): +z is the tool's axis on each
+TOOL_FRAMES: dict[str, str] = {
+    "panda": "panda_hand_tcp",
+    "ur3": "tool0",
+    "ur5": "tool0",
+    "ur10": "tool0",
+    "xarm7": "link_eef",
+    "z1": "gripperStator",
+    "kinova": "j2s6s200_end_effector",
+    "talos_arm": "gripper_left_base_link",
+    "so100": "gripper",
 }
 
 

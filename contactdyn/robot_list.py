@@ -65,3 +65,26 @@ def frames_command(args: argparse.Namespace) -> int:
     for line in frame_tree(model, set(urdf.unbounded)):
         print(f"  {line}")
     return 0
+
+
+def run_warnings(meta: dict) -> list[str]:
+    """Console warnings of a run about its robot: inertia repairs or trusts, limit violations."""
+    return [f"inertia: {note}" for note in meta.get("inertia_notes", [])] + list(meta.get("limit_warnings", []))
+
+
+def run_details(meta: dict) -> list[str]:
+    """``run --verbose``: which joints move, which are locked where, how the start posture was found."""
+    lines = [f"  robot {meta.get('robot')}, tip {meta.get('tip')}",
+             f"  active joints ({len(meta.get('joints', []))}): {', '.join(meta.get('joints', []))}"]
+    locked = meta.get("locked", {})
+    if locked:
+        lines.append(f"  locked joints ({len(locked)}): "
+                     + ", ".join(f"{name} = {value:.4g}" for name, value in locked.items()))
+    if meta.get("unbounded"):
+        lines.append(f"  unbounded joints (continuous): {', '.join(meta['unbounded'])}")
+    posture = meta.get("posture") or {}
+    if posture:
+        extra = ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+                          for k, v in posture.items() if k != "how")
+        lines.append(f"  start posture: {posture['how']}" + (f" ({extra})" if extra else ""))
+    return lines

@@ -490,13 +490,15 @@ class _Run:
         self.recent.append(t)
         if self.stats["events"] > self.solver.max_events:
             raise SimulationError(f"{self.scene.name}: more than {self.solver.max_events} events by t = {t:.9g} s "
-                                  f"(last: {kind} on {name}); raise solver.max_events if this is expected")
+                                  f"(last: {kind} on {name}); " + (_start_storm_cause(self.events, name) or
+                                                                   "raise solver.max_events if this is expected"))
         if len(self.recent) == self.recent.maxlen and self.recent[-1] - self.recent[0] <= self.solver.storm_window:
             kinds = ", ".join(f"{e['kind']}:{e['name']}" for e in self.events[-5:])
             raise SimulationError(
                 f"{self.scene.name}: event storm: {self.recent.maxlen} events within "
-                f"{self.recent[-1] - self.recent[0]:.3g} s at t = {t:.9g} s (last: {kinds}); the contact chatters "
-                "(grazing or inconsistent stick/slip); see solver.storm_count / storm_window")
+                f"{self.recent[-1] - self.recent[0]:.3g} s at t = {t:.9g} s (last: {kinds}); " +
+                (_start_storm_cause(self.events, name) or "the contact chatters (grazing or inconsistent "
+                                                          "stick/slip); see solver.storm_count / storm_window"))
 
     def _handle(self, t, x, modes, phase, event):
         system = self.system
@@ -729,6 +731,21 @@ class _Run:
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+START_STORM = 1e-3  #: [s] a storm whose contact events began this early started with the run
+
+
+def _start_storm_cause(events: list[dict], contact: str) -> str | None:
+    """The likely cause when the events flooding the run are on one contact since t ≈ 0, else None."""
+    on_contact = [e for e in events if e["kind"] != "phase"]
+    if not on_contact or on_contact[0]["t"] > START_STORM or \
+            sum(e["name"] == contact for e in on_contact) < 0.9 * len(on_contact):
+        return None
+    return (f"the events on contact {contact!r} began at t = {on_contact[0]['t']:.3g} s, with the run: the start "
+            "posture does not suit the contact (initial penetration, the tip on the surface while moving or "
+            "pulling away, a posture near a singularity); check robot.tip0, robot.q0 / q_seed and the contact's "
+            "point, and `contactdyn run --verbose` for the posture found")
 
 
 def _in_cone(F_f: np.ndarray, F_n: float, mu_s: float) -> bool:
