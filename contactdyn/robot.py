@@ -90,7 +90,12 @@ def _active_names(urdf: UrdfModel, tip: str | None, active_joints: list[str] | N
 
 
 def _build_visual(path, model: pin.Model, xml: str) -> pin.GeometryModel:
-    return urdf_call(path, lambda: pin.buildGeomFromUrdfString(model, xml, pin.GeometryType.VISUAL))
+    try:
+        return pin.buildGeomFromUrdfString(model, xml, pin.GeometryType.VISUAL)
+    except (ValueError, RuntimeError) as exc:  # the mesh loader's multi-line report: keep its message line
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        detail = next((ln for ln in lines if ln.startswith("message:")), lines[0] if lines else "?")
+        raise RobotError(f"{path}: a visual mesh cannot be loaded: {detail}") from None
 
 
 class FrameTerms(NamedTuple):

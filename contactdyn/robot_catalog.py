@@ -1,9 +1,10 @@
 """Robots known by name: the project's ``urdf/`` folder and every URDF example-robot-data ships.
 
 Names are derived from the installed package: each URDF under its ``robots`` folder is known by
-its file stem (``talos_left_arm``, ``ur5_gripper``), a stem shared by two packages by
-``<package>/<stem>`` (``anymal_c_simple_description/anymal``), and the usual arms by the short
-names of :data:`SHORT_NAMES` (``panda``, ``ur5``, ``talos_arm``...).
+its file stem (``talos_left_arm``, ``ur5_gripper``), a stem shared by two files or taken by a
+short name by ``<package>/<stem>`` (``anymal_c_simple_description/anymal``,
+``ur_description/ur3``), and the usual arms by the short names of :data:`SHORT_NAMES`
+(``panda``, ``ur5``, ``talos_arm``...).
 """
 
 from __future__ import annotations
@@ -91,6 +92,6 @@ def example_robots() -> dict[str, Path]:
     stems = Counter(f.stem for f in files)
     names = {name: robots / rel for name, rel in SHORT_NAMES.items() if (robots / rel).is_file()}
     for f in files:
-        name = f.stem if stems[f.stem] == 1 else f"{f.relative_to(robots).parts[0]}/{f.stem}"
-        names.setdefault(name, f)
+        unique = stems[f.stem] == 1 and names.get(f.stem, f) == f
+        names.setdefault(f.stem if unique else f"{f.relative_to(robots).parts[0]}/{f.stem}", f)
     return names
