@@ -70,7 +70,7 @@ def cached_plan(system, modes: list[ContactMode], phase) -> ModePlan:
     (benchmarks, sweeps) reuses it. The key is the modes and the phase's content (index, start,
     reference, set-points), not the Phase object, which every run makes anew."""
     content = pickle.dumps((phase.index, phase.t_start, phase.spec.name, phase.reference, phase.forces,
-                            getattr(phase, "carrier", None)))
+                            getattr(phase, "carrier", None), getattr(phase, "limits", ())))
     key = (tuple(modes), content)
     plans = _PLANS.setdefault(system, {})
     plan = plans.get(key)
@@ -131,6 +131,8 @@ class ModePlan:
             return "a 2-D slip launching from rest (its direction is solved per call)"
         if getattr(self.phase, "carrier", None) is not None:
             return "a reference carried by a body (its acceleration is folded into the linear solve)"
+        if getattr(self.phase, "limits", ()):
+            return "a joint pressing on its position limit (contactdyn.limits)"
         return ""
 
     # ---- layout of e and o --------------------------------------------------------------

@@ -85,6 +85,7 @@ from .integrators import (
     solver_class,
     stability_bound,
 )
+from .limits import LIMIT_EVENTS, limit_channels, rate_limit_report
 from .result import Result
 from .rhsplan import ModePlan, Samples, cached_plan
 from .scene import Scene, load_scene
@@ -257,6 +258,7 @@ def _events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x
         if len(r) == 2:
             out.append(_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r)
                               - 0.5 * float(np.linalg.norm(slip(t, x)[n])) + b, "turn", name))
+    out += system.limits.events(phase.limits, x0, lambda t, x: cache(t, x).limit_torque)
     if not watches:
         return out, system.rhs(modes, phase)
 
@@ -298,6 +300,7 @@ def _plan_events(system: System, modes: list[ContactMode], plan: ModePlan, t0: f
         if len(r) == 2:
             out.append(_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r)
                               - 0.5 * float(np.linalg.norm(plan.slip(i, t, x))) + b, "turn", name))
+    out += system.limits.events((), x0)  # (a plan has no joint pressing on a limit)
     if not watches:
         return out, plan.rhs
     fun = plan.rhs
@@ -426,7 +429,8 @@ class _Run:
                 self.auto_state = None
                 if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
                     self.next_step = float(sol.t[-2] - sol.t[-3])
-                x, modes, phase = self._handle(t, x, modes, phase, fired[0])
+                handle = self._limit if fired[0].kind in LIMIT_EVENTS else self._handle
+                x, modes, phase = handle(t, x, modes, phase, fired[0])
             elif t < T:
                 self.auto_state = None
                 phase = self._next_phase(phase, t, x)
@@ -511,7 +515,7 @@ class _Run:
         if event.kind == "touch":
             modes[i], x = self._touch(t, x, modes, i)
             if c.normal.chain.bonded_when_touching:
-                x, imp = system.impact(t, x, modes, c)
+                x, imp = system.impact(t, x, modes, c, phase.limits)
                 self.impacts.append({"t": t, "contact": c.name, "normal_impulse": imp.normal_impulse,
                                      "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
                                      "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
@@ -547,6 +551,18 @@ class _Run:
                 self.events[-1]["kind"] = "slip_check"
                 self.stats["slip_false_alarms"] += 1
         x, modes = self._consistent(t, x, modes, phase, rest, released)
+        return x, modes, phase
+
+    def _limit(self, t, x, modes, phase, event):
+        """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (contactdyn.limits)."""
+        limits = self.system.limits
+        x, phase, info = limits.switch(self.system, t, x, modes, phase, event)
+        self._log(t, event.kind, event.contact, **info)
+        x, modes = self._consistent(t, x, list(modes), phase)
+        while pulling := limits.pulling(phase, self.system.evaluate(t, x, modes, phase)):
+            phase = replace(phase, limits=tuple(p for p in phase.limits if p != pulling[0]))
+            self._log(t, "release", limits.by_index[pulling[0][0]].name)
+            x, modes = self._consistent(t, x, modes, phase)
         return x, modes, phase
 
     @staticmethod
@@ -669,7 +685,7 @@ class _Run:
                 rest.discard(i)
                 trial = list(modes)
                 trial[i] = mode.with_(stuck=True)
-                x = system.project_velocity(x, trial)
+                x = system.project_velocity(x, trial, phase.limits)
                 ev2 = system.evaluate(t, x, trial, phase)
                 F_f = ev2.friction[c.name]
                 if _in_cone(F_f, ev2.normal_force[c.name], mu_s):
@@ -700,6 +716,7 @@ class _Run:
         xs = np.empty((len(grid), system.n))
         parts: list[Samples] = []
         modes_of: list[list[ContactMode]] = []
+        phases_of: list[Phase] = []
         evs: list[Evaluation | None] = []
         for i in np.unique(idx):
             seg = self.segments[i]
@@ -719,15 +736,20 @@ class _Run:
                     evs.append(ev)
                 parts.append(part)
             modes_of += [seg.modes] * len(sel)
+            phases_of += [seg.phase] * len(sel)
         samples = Samples.concatenate(parts, system)
         channels = _channels(system, grid, xs, samples, modes_of)
+        if system.limits.limits:
+            channels.update(limit_channels(system, phases_of, evs))
+        rate_stats, rate_warnings = rate_limit_report(system.robot, grid, channels["v"], channels["tau"])
         if system.drives.any_motor:  # (plans decline motors: every sample has its Evaluation)
             channels.update(drive_channels(system, xs, evs))
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
                      compiled_modes=sum(p.ok for p in self.plans.values()),
-                     fallback_modes=dict(self.fallbacks))
-        meta = {**system.robot.describe(), "posture": system.posture, "contacts": [c.name for c in system.contacts],
+                     fallback_modes=dict(self.fallbacks), limits=rate_stats)
+        meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
+                "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)

@@ -37,6 +37,7 @@ from .controllers import CONTROLLERS, ControlInput, Controller
 from .controllers.base import BindContext
 from .drives import Drives
 from .errors import RobotError, SceneError, SimulationError
+from .limits import JointLimits
 from .posture import start_posture
 from .robot import Robot
 from .scene import PhaseSpec, Scene
@@ -78,6 +79,8 @@ class Phase:
     #: (body coordinate, unit axis) when the reference rides on an active body (``reference.body``):
     #: x_d = axis · Q_b + reference (see :meth:`System.reference_at`)
     carrier: tuple[int, np.ndarray] | None = None
+    #: joints pressing on a position limit: (coordinate, +1 lower / −1 upper), see contactdyn.limits
+    limits: tuple[tuple[int, int], ...] = ()
 
 
 @dataclass
@@ -118,6 +121,7 @@ class Evaluation:
     regular: bool = True  #: False when the linear solve fell back to least squares
     tau_cmd: np.ndarray | None = None  #: the controller's command per joint [N·m or N; V for voltage controllers]
     u: np.ndarray | None = None  #: motor voltage per drive (joints, then bodies) [V], NaN for ideal drives
+    limit_torque: dict[int, float] = field(default_factory=dict)  #: joint -> limit torque [N·m or N] (pressing)
 
 
 class System:
@@ -129,6 +133,7 @@ class System:
         rs = scene.robot
         try:
             self.robot = Robot.from_spec(rs)
+            self.limits = JointLimits(self.robot, rs.joint_limits == "enforce")
             self.tip_fid = self.robot.frame_id(rs.tip)
         except RobotError as exc:
             raise SceneError("robot", "a loadable robot", str(exc), scene.file) from None
@@ -301,7 +306,8 @@ class System:
             reference = Reference(start, moves)
         forces = {f.key: Ramp(f.ramp.value, f.ramp.start + t, f.ramp.duration, f.ramp.kind, f.ramp.initial)
                   for f in spec.forces}
-        phase = Phase(spec, index, t, controller, self.z_slices[index], reference, forces, carrier)
+        phase = Phase(spec, index, t, controller, self.z_slices[index], reference, forces, carrier,
+                      previous.limits if previous is not None else ())
         return phase
 
     def reference_at(self, phase: Phase, t: float, x: np.ndarray):
@@ -521,6 +527,12 @@ class System:
             ev.normal_force[c.name] = F_n
             if np.any(tip_force):
                 f[:nv] += kin.J.T @ tip_force
+        if phase.limits:  # joints pressing on a position limit (contactdyn.limits)
+            l_rows, l_gammas, l_meta = self.limits.rows(phase.limits, x, nQ, self.stabilization)
+            rows += l_rows
+            cols += l_rows
+            gammas += l_gammas
+            meta += l_meta
         # controller
         ft = next((k.frame for c, k in zip(self.contacts, kins, strict=True) if c.fid == self.tip_fid), None)
         if ft is None:
@@ -577,6 +589,8 @@ class System:
                 ev.normal_force[name] = float(value)
             elif kind == "t":
                 ev.friction.setdefault(name, np.zeros(len(self._contact(name).tangents)))[i] = value
+            elif kind == "limit":
+                ev.limit_torque[i] = float(value)
             else:
                 ev.interface[f"{name}.{kind}"] = float(value)
         for c, d, _, visc in pending_friction:
@@ -779,7 +793,8 @@ class System:
         return f
 
     # ---- plastic impact ----------------------------------------------------------------
-    def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact) -> tuple[np.ndarray, Impact]:
+    def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact,
+               limits: tuple = ()) -> tuple[np.ndarray, Impact]:
         """Velocity jump when ``contact`` touches (its mode already says touching).
 
         Momentum law over Δt → 0 (eqs 27–31, 35–38): M(Q̇⁺ − Q̇⁻) = Cᵀ Λ with every bond,
@@ -803,7 +818,7 @@ class System:
 
         def solve(slide=None, jam=False):
             rows, cols, meta = self._velocity_rows(x, modes, slide=(contact, slide) if slide is not None else None,
-                                                   jam=contact if jam else None)
+                                                   jam=contact if jam else None, limits=limits)
             z, _ = self._impact_solve(M, rows, cols, qd_minus)
             lam = {m: z[nQ + j] for j, m in enumerate(meta)}
             P_n = float(lam[(contact.name, "n", 0)])
@@ -843,7 +858,7 @@ class System:
         M[:self.nv, :self.nv] = self.robot.H + np.diag(self._D)
         return M
 
-    def project_velocity(self, x: np.ndarray, modes: list[ContactMode]) -> np.ndarray:
+    def project_velocity(self, x: np.ndarray, modes: list[ContactMode], limits: tuple = ()) -> np.ndarray:
         """x with Q̇ moved onto every active velocity constraint (bonds, rigid contacts, sticks).
 
         The smallest change in the kinetic-energy norm, M ΔQ̇ = Gᵀ Λ, G Q̇⁺ = 0: an impulse
@@ -852,7 +867,7 @@ class System:
         """
         nQ, nv = self.nQ, self.nv
         self.robot.update(x[:nv], x[nQ:nQ + nv])
-        rows, cols, _ = self._velocity_rows(x, modes)
+        rows, cols, _ = self._velocity_rows(x, modes, limits=limits)
         if not rows:
             return x
         M = self.mass_matrix()
@@ -861,8 +876,10 @@ class System:
         x_new[nQ:2 * nQ] = z[:nQ]
         return x_new
 
-    def _velocity_rows(self, x, modes, slide: tuple[Contact, np.ndarray] | None = None, jam: Contact | None = None):
-        """Velocity constraints of the touching contacts: bond rows, sticks, tangential chain bonds.
+    def _velocity_rows(self, x, modes, slide: tuple[Contact, np.ndarray] | None = None, jam: Contact | None = None,
+                       limits: tuple = ()):
+        """Velocity constraints of the touching contacts (bond rows, sticks, tangential chain bonds) and
+        of the joints pressing on ``limits`` (see contactdyn.limits).
 
         ``slide = (contact, d)`` tilts that contact's normal column by the sliding friction
         −μ_k d; ``jam`` adds stick rows for a contact that is not (yet) stuck.
@@ -895,7 +912,8 @@ class System:
                     rows.append(trow)
                     cols.append(trow)
                     meta.append((c.name, dc.label, i))
-        return rows, cols, meta
+        l_rows, _, l_meta = self.limits.rows(limits, x, self.nQ, 0.0)
+        return rows + l_rows, cols + l_rows, meta + l_meta
 
     def _impact_solve(self, M, rows, cols, qd_minus):
         nQ, nr = self.nQ, len(rows)
