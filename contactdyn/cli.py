@@ -164,6 +164,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for imp in result.impacts:
             _out(args, f"  impact t = {imp['t']:.6g} s on {imp['contact']}: FΔt = {imp['normal_impulse']:.6g} N·s, "
                        f"F_fΔt = {imp['friction_impulse']} N·s, jammed = {imp['jammed']}")
+        for e in result.events:
+            if e["kind"] in ("limit", "release"):
+                what = f"stops at its {e['side']} limit, impulse {e['impulse']:.6g}" if e["kind"] == "limit" else \
+                    "leaves its limit"
+                _out(args, f"  joint limit t = {e['t']:.6g} s: {e['name']} {what}")
         if saved:
             _out(args, f"  saved {saved} and {saved[:-4]}.json")
     if args.view:

@@ -90,3 +90,34 @@ def test_start_outside_the_limits_is_a_clear_error(tmp_path):
     with pytest.raises(SceneError, match=r"robot.q0: expected a start posture within the joint limits \(joint 'swing' "
                                          r"in \[1, 3\]"):
         simulate(pendulum(tmp_path, q0=[0.5]))
+
+
+# ---- an arm that runs into a limit mid-task: sims/panda_joint_limit.toml ---------------------------
+UPPER4 = -0.0698  #: [rad] the Panda's joint 4 upper limit (example-robot-data)
+
+
+@pytest.fixture(scope="module")
+def panda_run():
+    return simulate("panda_joint_limit", {"duration": 1.8})
+
+
+def test_arm_stops_at_the_limit_presses_and_is_released(panda_run):
+    r = panda_run
+    kinds = [(e["kind"], e["name"]) for e in r.events if e["kind"] != "phase"]
+    assert kinds == [("limit", "panda_joint4"), ("release", "panda_joint4")]
+    hit, release = (e["t"] for e in r.events if e["kind"] in ("limit", "release"))
+    assert 0.5 < hit < 1.0 < 1.5 < release  # hit on the way out, released on the way back
+    q4 = r["q"][:, 3]
+    assert q4.max() <= UPPER4 + 1e-9  # [rad] never past the limit (event overshoot 1e-13, Baumgarte)
+    pressing = (r.t > hit) & (r.t < release)
+    np.testing.assert_allclose(q4[pressing], UPPER4, atol=1e-9)
+    assert np.all(r["limit.side"][pressing, 3] == -1.0) and np.all(r["limit.side"][~pressing, 3] == 0.0)
+    torque = r["limit.torque"][pressing, 3]
+    assert np.all(torque <= 1e-9) and torque.min() < -50.0  # [N·m] an upper limit only pushes down, hard here
+    assert abs(torque[-1]) < 0.05 * abs(torque.min())  # it fades to zero at the release
+    assert q4[r.t > release + 0.05].max() < UPPER4 - 1e-3  # and the joint leaves the limit
+
+
+def test_without_enforcement_the_joint_passes_its_limit():
+    r = simulate("panda_joint_limit", {"duration": 1.0, "robot.joint_limits": "ignore"})
+    assert r["q"][:, 3].max() > 0.2 and not [e for e in r.events if e["kind"] == "limit"]
