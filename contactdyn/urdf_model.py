@@ -5,9 +5,9 @@ links' inertia data (:mod:`contactdyn.inertia`), resolve every visual mesh to an
 file, turn ``continuous`` joints into unbounded revolute joints (one coordinate, the angle
 [rad], instead of Pinocchio's (cos θ, sin θ) pair), and let Pinocchio build the model from the
 rewritten XML. A joint whose limits say lower = upper (double_pendulum's 0, 0) is taken as
-unbounded too: no limits given. Checks of the XML tree belong between parsing and building (:func:`_read_xml`'s
-caller), before Pinocchio sees the file. Pinocchio accepts lower > upper limits silently: that
-is checked here too.
+unbounded too: no limits given. Checks of the XML tree belong between parsing and building
+(in :func:`build_urdf_model`), before Pinocchio sees the file. Pinocchio accepts lower > upper
+limits silently: that is checked here too.
 """
 
 from __future__ import annotations
@@ -119,6 +119,7 @@ def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfM
         raise RobotError(f"robot.inertia must be one of {list(INERTIA_MODES)}, found {inertia!r}")
     path, package_dirs = resolve_robot_path(source)
     root = _read_xml(path)
+    # checks of the XML tree (one root, no cycles...) belong here, before Pinocchio reads anything
     notes = check_inertias(root, path, inertia)
     _resolve_meshes(root, path, package_dirs)
     unbounded = _unbind_continuous(root)
