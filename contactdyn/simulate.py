@@ -430,7 +430,7 @@ class _Run:
                 if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
                     self.next_step = float(sol.t[-2] - sol.t[-3])
                 handle = self._limit if fired[0].kind in LIMIT_EVENTS else self._handle
-                x, modes, phase = handle(t, x, modes, phase, fired[0])
+                x, modes, phase = self._release_pulling(t, *handle(t, x, modes, phase, fired[0]))
             elif t < T:
                 self.auto_state = None
                 phase = self._next_phase(phase, t, x)
@@ -555,11 +555,15 @@ class _Run:
 
     def _limit(self, t, x, modes, phase, event):
         """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (contactdyn.limits)."""
-        limits = self.system.limits
-        x, phase, info = limits.switch(self.system, t, x, modes, phase, event)
+        x, phase, info = self.system.limits.switch(self.system, t, x, modes, phase, event)
         self._log(t, event.kind, event.contact, **info)
         x, modes = self._consistent(t, x, list(modes), phase)
-        while pulling := limits.pulling(phase, self.system.evaluate(t, x, modes, phase)):
+        return x, modes, phase
+
+    def _release_pulling(self, t, x, modes, phase):
+        """Release, one at a time, the joints whose limit torque pulls after an event."""
+        limits = self.system.limits
+        while phase.limits and (pulling := limits.pulling(phase, self.system.evaluate(t, x, modes, phase))):
             phase = replace(phase, limits=tuple(p for p in phase.limits if p != pulling[0]))
             self._log(t, "release", limits.by_index[pulling[0][0]].name)
             x, modes = self._consistent(t, x, modes, phase)
