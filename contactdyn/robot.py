@@ -292,22 +292,6 @@ class Robot:
         """Potential energy of the uncompensated gravity [J]."""
         return float(pin.computePotentialEnergy(self.model, self._aux, np.asarray(q, float)))
 
-    def inverse_kinematics(self, frame: str, target: np.ndarray, q0: np.ndarray, *, tol: float = 1e-12) -> np.ndarray:
-        """Joint values putting the frame's origin at ``target`` [m] (Gauss-Newton from q0)."""
-        fid = self.frame_id(frame)
-        q = np.asarray(q0, float).copy()
-        target = np.asarray(target, float)
-        for _ in range(200):
-            err = target - self.frame_position(q, fid)
-            if np.linalg.norm(err) < tol:
-                return q
-            J = self.frame_jacobian(q, fid)[:3]
-            q += np.linalg.lstsq(J, err, rcond=None)[0]
-        raise RobotError(
-            f"{self.source}: frame {frame!r} cannot reach {target.tolist()} from q0 = {np.asarray(q0).tolist()} "
-            f"(closest distance {np.linalg.norm(err):.3g} m): unreachable pose"
-        )
-
 
 def _suggest(name: str, names: list[str]) -> str:
     close = difflib.get_close_matches(name, names, n=3)
