@@ -23,8 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 
+from .elements import ChainSpec, Mass, Stage
 from .errors import SceneError
-from .scene import ChainSpec, Mass, Stage
 
 __all__ = ["NodeKind", "ChainNode", "ChainStage", "Chain", "build_chain"]
 

@@ -14,7 +14,7 @@ import math
 import sys
 from typing import Any
 
-from .errors import ContactdynError, RobotError, SceneError
+from .errors import ContactdynError, RobotError, RunFileError, SceneError
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
@@ -34,7 +34,12 @@ class _Parser(argparse.ArgumentParser):
 
 def _out(args: argparse.Namespace, text: str) -> None:
     if not getattr(args, "quiet", False) and not getattr(args, "json", False):
-        print(text)
+        print(_printable(text))
+
+
+def _printable(text: str) -> str:
+    """Control characters (terminal escape codes from a scene name, say) shown as escapes, not obeyed."""
+    return "".join(c if c.isprintable() or c == "\n" else repr(c)[1:-1] for c in text)
 
 
 def _emit_json(obj: Any) -> None:
@@ -170,7 +175,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                     "leaves its limit"
                 _out(args, f"  joint limit t = {e['t']:.6g} s: {e['name']} {what}")
         if saved:
-            _out(args, f"  saved {saved} and {saved[:-4]}.json")
+            _out(args, f"  saved {saved} and {saved.removesuffix('.npz')}.json")
     if args.view:
         view_result = _lazy("viewer", "view_result")
         if view_result is None:
@@ -235,12 +240,10 @@ def _delegate(module: str, function: str):
 
 
 def _check_saved_run(run: str) -> None:
-    from pathlib import Path
+    from .result import missing_run_message, run_files
 
-    npz = Path(run).with_suffix(".npz")
-    if not (npz.is_file() and npz.with_suffix(".json").is_file()):
-        raise SceneError("RUN", f"a saved run ({npz.name} and {npz.with_suffix('.json').name}, "
-                         "as `contactdyn run SCENE --out NAME` writes)", run)
+    if not all(f.is_file() for f in run_files(run)):
+        raise RunFileError(missing_run_message(run))
 
 
 # ---- parser ----------------------------------------------------------------------------------
@@ -287,6 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--view", action="store_true", help="show the run in the meshcat viewer afterwards")
     run.add_argument("--html", help="with --view: write a self-contained HTML player instead of serving")
     run.add_argument("--port", type=int, help="with --view: meshcat server port")
+    run.add_argument("--host", help="with --view: listen on this address (default 127.0.0.1, this machine only)")
     run.add_argument("--speed", type=float, default=1.0, help="with --view: playback speed factor")
     _scripting(run)
     run.set_defaults(func=_cmd_run)
@@ -321,6 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("run", help="saved run (RUN.npz + RUN.json)")
     view.add_argument("--html", metavar="FILE", help="write a self-contained HTML player instead of serving")
     view.add_argument("--port", type=int, help="meshcat server port")
+    view.add_argument("--host", help="listen on this address (default 127.0.0.1, this machine only)")
     view.add_argument("--speed", type=float, default=1.0, help="playback speed factor")
     view.set_defaults(func=_delegate("viewer", "view_command"))
 
@@ -343,7 +348,34 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", metavar="DIR", help="output folder")
     _set_option(bench)
     bench.set_defaults(func=_delegate("workprecision", "bench_command"))
+    _fit_parser(sub, fmt)
     return parser
+
+
+def _fit_parser(sub, fmt) -> None:
+    fit = sub.add_parser("fit", help="fit scene parameters (k, b, m', mu, ...) to a measured log", formatter_class=fmt,
+                         description="Identify the environment: least squares on full runs of the scene, with "
+                                     "standard errors, 95 % intervals and correlations (contactdyn/identify/).",
+                         epilog="example:\n  contactdyn fit b1 --data log.csv --params contact.tip.normal.k,"
+                                "contact.tip.normal.m,contact.tip.tangent.mu=0.05:2 --out fit --save-scene fitted.toml")
+    fit.add_argument("scene", help="scene file or name in sims/ (it supplies robot, controller, references)")
+    fit.add_argument("--data", required=True, metavar="LOG.csv", help="column t [s] and columns named like channels")
+    fit.add_argument("--params", required=True, action="append", metavar="KEY[=LOW:HIGH],...",
+                     help="scene keys to fit; positive ones on a log scale")
+    _set_option(fit)
+    fit.add_argument("--noise", action="append", default=[], metavar="COLUMN=SIGMA",
+                     help="noise level of a column (default: estimated from the data)")
+    fit.add_argument("--starts", type=int, default=1, help="solver starts (the scene's values, then random)")
+    fit.add_argument("--seed", type=int, default=0, help="seed of the random starts")
+    fit.add_argument("--workers", type=int, default=0, help="processes for the Jacobian's runs (0: this one)")
+    fit.add_argument("--stages", type=int, default=6, help="continuation: first fit 1/2^(STAGES-1) of the log, "
+                                                          "then double the window (1: the whole log at once)")
+    fit.add_argument("--rtol", type=float, default=1e-10, help="relative tolerance of every fit run")
+    fit.add_argument("--atol", type=float, default=1e-12, help="absolute tolerance of every fit run")
+    fit.add_argument("--out", metavar="DIR", help="write fit.json, fit.md and fit.png here")
+    fit.add_argument("--save-scene", metavar="FILE.toml", help="write the scene with the fitted values")
+    _scripting(fit)
+    fit.set_defaults(func=_delegate("identify", "fit_command"))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -360,7 +392,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
     try:
         return args.func(args)
-    except (SceneError, RobotError) as exc:
+    except (SceneError, RobotError, RunFileError) as exc:
         return _fail(args, exc, EXIT_USAGE)
     except ContactdynError as exc:
         return _fail(args, exc, EXIT_FAILED)
@@ -376,7 +408,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _fail(args: argparse.Namespace, exc: Exception | str, code: int) -> int:
-    print(f"contactdyn: error: {exc}", file=sys.stderr)
+    print(_printable(f"contactdyn: error: {exc}"), file=sys.stderr)
     if getattr(args, "json", False):
         _emit_json({"status": "bad input" if code == EXIT_USAGE else "failed", "error": str(exc),
                     "exit_code": code})

@@ -9,16 +9,52 @@ from __future__ import annotations
 
 import difflib
 import math
+import tomllib
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .errors import SceneError
 
-__all__ = ["Reader", "MISSING"]
+__all__ = ["Reader", "MISSING", "MAX_DEPTH", "MAX_MAGNITUDE", "MAX_TOML_BYTES", "read_toml", "check_depth"]
 
 MISSING: Any = object()
+MAX_MAGNITUDE = 1e12  #: |number| at most where a key sets no bound of its own: larger is a typo, not physics
+MAX_DEPTH = 32  #: nesting of tables and arrays at most (a scene uses 5)
+MAX_TOML_BYTES = 16 * 2**20  #: a scene or sweep file larger than this is refused
+
+
+def read_toml(path: Path, what: str = "scene file") -> dict[str, Any]:
+    """Read a TOML file; every failure (unreadable, too large, invalid, too deep) is a SceneError naming it."""
+    file = str(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_TOML_BYTES:
+            raise SceneError("<file>", f"a {what} of at most {MAX_TOML_BYTES // 2**20} MB", f"{size} bytes", file)
+        document = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError("<file>", "valid TOML", str(exc), file) from None
+    except RecursionError:
+        raise SceneError("<file>", f"tables and arrays nested at most {MAX_DEPTH} deep", "deeper", file) from None
+    except OSError as exc:
+        raise SceneError("<file>", f"a readable {what}", exc.strerror or str(exc), file) from None
+    except UnicodeDecodeError as exc:
+        raise SceneError("<file>", "UTF-8 text", str(exc), file) from None
+    check_depth(document, "<file>", file)
+    return document
+
+
+def check_depth(value: Any, where: str, file: str | None = None) -> None:
+    """Refuse values nested deeper than MAX_DEPTH (copies, hashes and messages recurse through them)."""
+    level = [value]
+    for _ in range(MAX_DEPTH + 1):
+        level = [v for item in level if isinstance(item, dict | list)
+                 for v in (item.values() if isinstance(item, dict) else item)]
+        if not level:
+            return
+    raise SceneError(where, f"tables and arrays nested at most {MAX_DEPTH} deep", "deeper", file)
 
 
 class Reader:
@@ -74,8 +110,11 @@ class Reader:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.error(name, f"a number{_unit(unit)}", value)
         value = float(value)
-        if math.isnan(value) or (math.isinf(value) and not (hi is None and value > 0)):
+        unbounded = default is not MISSING and default == math.inf  # inf means "no bound" here
+        if math.isnan(value) or (math.isinf(value) and not (unbounded and value > 0)):
             raise self.error(name, f"a finite number{_unit(unit)}", value)
+        if hi is None and math.isfinite(value) and abs(value) > MAX_MAGNITUDE:
+            raise self.error(name, f"a number of magnitude <= {MAX_MAGNITUDE:g}{_unit(unit)}", value)
         if lo is not None and (value < lo or (lo_open and value == lo)):
             op = ">" if lo_open else ">="
             raise self.error(name, f"a number {op} {lo:g}{_unit(unit)}", value)
@@ -121,6 +160,8 @@ class Reader:
         arr = np.asarray(value, dtype=float)
         if not np.all(np.isfinite(arr)):
             raise self.error(name, "finite numbers" + _unit(unit), value)
+        if np.any(np.abs(arr) > MAX_MAGNITUDE):
+            raise self.error(name, f"numbers of magnitude <= {MAX_MAGNITUDE:g}{_unit(unit)}", value)
         if unit_norm:
             norm = float(np.linalg.norm(arr))
             if norm < 1e-12:

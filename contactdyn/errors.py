@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["ContactdynError", "RobotError", "SceneError", "SimulationError"]
+__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "SimulationError"]
 
 
 class ContactdynError(Exception):
@@ -23,8 +23,22 @@ class SceneError(ContactdynError):
     def __init__(self, key: str, expected: str, found: object, file: str | None = None):
         self.file, self.key, self.expected, self.found = file, key, expected, found
         where = f"{file}: " if file else ""
-        super().__init__(f"{where}{key}: expected {expected}, found {found!r}")
+        if len(expected) > 300:
+            expected = f"{expected[:260]} ... {expected[-20:]}"
+        super().__init__(f"{where}{key}: expected {expected}, found {abbreviate(found)}")
+
+
+def abbreviate(value: object, limit: int = 200) -> str:
+    """``repr(value)`` cut to about ``limit`` characters (head ... tail, with the full length)."""
+    text = repr(value)
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit - 40]} ... {text[-20:]} ({len(text)} characters)"
 
 
 class SimulationError(ContactdynError):
     """A run could not continue (solver failure, blow-up, event storm); says when and why."""
+
+
+class RunFileError(ContactdynError):
+    """A saved run (NAME.npz + NAME.json) is missing, damaged or not one of ours; names the file."""

@@ -40,6 +40,8 @@ IMPLICIT = ("Radau", "BDF", "LSODA")
 
 STABILITY_RADIUS = 6.0  #: DOP853's stability region reaches about |hλ| ≈ 6 along the negative real axis [-]
 STEP_BUDGET = 1000  #: DOP853 steps in a segment before ``auto`` checks for stiffness
+RK4_RADIUS = 2.78  #: RK4 is stable for real hλ in [-2.78, 0] [-]
+RK4_GROWTH = 1.001  #: a decaying mode amplified by more than this per step is an instability [-]
 STABILITY_BAND = (0.5, 8.0)  #: h|λ| in this band: the step is stability-bound (measured 1.4–1.6 on stiff scenes)
 DECAY_SPAN = 20.0  #: a mode "decays within the span" when −Re λ · T is at least this [-]
 
@@ -117,8 +119,33 @@ class _HermiteOutput(DenseOutput):
                 + np.outer(self.h * self.f, h11))
 
 
+def rk4_amplification(z: np.ndarray) -> np.ndarray:
+    """|R(z)|: RK4's growth per step of a mode e^{λt} with z = hλ (R = 1 + z + z²/2 + z³/6 + z⁴/24)."""
+    return np.abs(1 + z * (1 + z / 2 * (1 + z / 3 * (1 + z / 4))))
+
+
+def fixed_step_instability(fun: Callable[[float, np.ndarray], np.ndarray], t: float, x: np.ndarray,
+                           h: float) -> str | None:
+    """Why RK4's step h [s] cannot work from (t, x), or None: a mode that does not grow (Re λ ≤ 0)
+    but that the step amplifies by more than RK4_GROWTH per step. Names its period 2π/|λ| [s]."""
+    lam = jacobian_eigenvalues(fun, t, x)
+    bad = lam[(lam.real <= 0.0) & (rk4_amplification(h * lam) > RK4_GROWTH)] if len(lam) else lam
+    if not len(bad):
+        return None
+    fast = bad[np.argmax(np.abs(bad))]
+    size = float(abs(fast))
+    return (f"the step {h:.3g} s is too large for the stiffest mode (|λ| = {size:.3g} 1/s, period "
+            f"{2 * math.pi / size:.3g} s): RK4 amplifies it {float(rk4_amplification(h * fast)):.3g}× per step "
+            f"where it decays; take solver.max_step below {RK4_RADIUS / size:.2g} s or an adaptive method")
+
+
 class RK4(OdeSolver):
-    """Classical 4th-order Runge–Kutta with a fixed step ``max_step`` [s] (the last step is cut to t_bound)."""
+    """Classical 4th-order Runge–Kutta with a fixed step ``max_step`` [s] (the last step is cut to t_bound).
+
+    Before its first step it checks the step against the system's modes at the start
+    (:func:`fixed_step_instability`) and stops with that reason rather than run a blow-up;
+    a step that leaves the finite numbers stops it too.
+    """
 
     def __init__(self, fun, t0, y0, t_bound, max_step=np.inf, vectorized=False, rtol=None, atol=None,
                  first_step=None, **extraneous):
@@ -130,9 +157,12 @@ class RK4(OdeSolver):
         self.k = 0  #: steps taken (t_k = t0 + k h, no accumulated rounding)
         self.f = self.fun(self.t, self.y)
         self.y_old = self.f_old = None
+        self.unstable = fixed_step_instability(self.fun, t0, np.asarray(y0, float), self.h)
 
     def _step_impl(self):
         t, y, f, h = self.t, self.y, self.f, self.h
+        if self.unstable:
+            return False, self.unstable
         t_new = self.t0 + (self.k + 1) * h
         if self.direction * (t_new - self.t_bound) > 0 or abs(t_new - self.t_bound) < 1e-12 * h:
             t_new = self.t_bound
@@ -141,6 +171,9 @@ class RK4(OdeSolver):
         k3 = self.fun(t + 0.5 * h, y + 0.5 * h * k2)
         k4 = self.fun(t + h, y + h * k3)
         y_new = y + (h / 6.0) * (f + 2.0 * k2 + 2.0 * k3 + k4)
+        if not np.all(np.isfinite(y_new)):
+            return False, (f"the state left the finite numbers in the step from t = {t:.6g} s "
+                           f"(step {h:.3g} s): too large a step, or a scene that blows up")
         self.y_old, self.f_old = y, f
         self.t, self.y = t_new, y_new
         self.f = self.fun(t_new, y_new)

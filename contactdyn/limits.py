@@ -82,18 +82,15 @@ class JointLimits:
         return out
 
     # ---- constraint rows -----------------------------------------------------------------
-    def rows(self, pressing, x: np.ndarray, nQ: int, omega: float):
-        """(rows, gammas, meta) of the pressing joints: eᵢ Q̈ + γ = 0, γ = 2ω q̇ᵢ + ω² (qᵢ − limit)."""
-        rows, gammas, meta = [], [], []
+    def add_rows(self, pressing, x: np.ndarray, nQ: int, rows, omega: float) -> None:
+        """A row per pressing joint into ``rows`` (contactdyn.constraints.Rows): eᵢ Q̈ + γ = 0 with
+        γ = 2ω q̇ᵢ + ω² (qᵢ − limit), ω [1/s] the Baumgarte rate (0 at velocity level)."""
         for i, side in pressing:
             lim = self.by_index[i]
             row = np.zeros(nQ)
             row[i] = 1.0
             gap = float(x[i]) - (lim.lower if side > 0 else lim.upper)
-            rows.append(row)
-            gammas.append(2.0 * omega * float(x[nQ + i]) + omega * omega * gap)
-            meta.append((lim.name, "limit", i))
-        return rows, gammas, meta
+            rows.add(row, 2.0 * omega * float(x[nQ + i]) + omega * omega * gap, (lim.name, "limit", i))
 
     # ---- switching -------------------------------------------------------------------------
     def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event) -> tuple:

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ContactdynError
-from .result import Result, load_result
+from .result import Result, load_result, run_files
 
 __all__ = ["FIGURES", "FORMATS", "plot_result", "plot_command", "figure_names"]
 
@@ -433,8 +433,8 @@ def plot_command(args: argparse.Namespace) -> int:
     """
     run = Path(args.run)
     result = load_result(run)
-    out = Path(args.out) if getattr(args, "out", None) else run.with_suffix("").parent / \
-        f"{run.with_suffix('').name}_figures"
+    stem = run_files(run)[0].with_suffix("")
+    out = Path(args.out) if getattr(args, "out", None) else stem.parent / f"{stem.name}_figures"
     written = plot_result(result, out, getattr(args, "format", None) or ",".join(FORMATS))
     if not written:
         print(f"{run}: no figure applies to this run's channels")

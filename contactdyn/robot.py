@@ -24,7 +24,8 @@ import pinocchio as pin
 from .errors import RobotError
 from .frames import chain_joints, find_frame
 from .robot_catalog import example_robots, urdf_dir
-from .urdf_model import UrdfModel, build_urdf_model, lock_joints, urdf_call
+from .urdf_check import isolated_build
+from .urdf_model import UrdfModel, build_isolated, build_urdf_model, lock_joints, xml_label
 from .urdf_source import resolve_robot_path
 
 if TYPE_CHECKING:
@@ -90,8 +91,12 @@ def _active_names(urdf: UrdfModel, tip: str | None, active_joints: list[str] | N
 
 
 def _build_visual(path, model: pin.Model, xml: str) -> pin.GeometryModel:
-    try:
+    def build() -> pin.GeometryModel:
         return pin.buildGeomFromUrdfString(model, xml, pin.GeometryType.VISUAL)
+
+    isolated_build(path, xml_label("buildGeomFromUrdfString", xml), build)
+    try:
+        return build()
     except (ValueError, RuntimeError) as exc:  # the mesh loader's multi-line report: keep its message line
         lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
         detail = next((ln for ln in lines if ln.startswith("message:")), lines[0] if lines else "?")
@@ -179,7 +184,8 @@ class Robot:
         lock_names = [full.names[j] for j in range(1, full.njoints) if full.names[j] not in active]
         values = _lock_values(full, lock_names, locked, path)
         xml = lock_joints(urdf, values) if values else urdf.xml
-        model = urdf_call(path, lambda: pin.buildModelFromXML(xml)) if values else full
+        model = build_isolated(path, xml_label("buildModelFromXML", xml), lambda: pin.buildModelFromXML(xml)) \
+            if values else full
         _copy_limits(full, model, active)
         model.gravity.linear = (1.0 - gravity_compensation) * np.asarray(gravity, dtype=float)
         visual = functools.partial(_build_visual, path, model, xml)

@@ -5,7 +5,7 @@ forces, torques, gaps, slip velocities and stage deformations. :func:`plan_sampl
 computes them for all samples of a segment together: one Pinocchio pass per sample
 (H, J, J̇q̇, h, the tip position), then φ, the map P φ, the friction terms, the KKT
 solves and the read-out as array operations. :class:`Samples` holds the result (and is
-filled from :class:`~contactdyn.system.Evaluation` objects where a mode runs on
+filled from :class:`~contactdyn.dynamics.Evaluation` objects where a mode runs on
 ``System.evaluate``).
 """
 
@@ -62,7 +62,7 @@ class Samples:
         return out
 
     def fill(self, k: int, ev) -> None:
-        """Row k from a full :class:`~contactdyn.system.Evaluation`."""
+        """Row k from a full :class:`~contactdyn.dynamics.Evaluation`."""
         self.tau[k] = ev.tau
         self.tip[k] = ev.p_tip
         if ev.x_d is not None and len(ev.x_d) == 3:
@@ -88,11 +88,19 @@ class Samples:
 def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     """Diagnostics at the states X[k] (times ts[k]) of this mode: one Pinocchio pass per
     sample, then the assembly, solve and read-out for all samples at once."""
-    s, phase = plan.system, plan.phase
     N = len(ts)
-    S = Samples(N, s)
+    S = Samples(N, plan.system)
     if N == 0:
         return S
+    Phi, O, Z, J_all, tau = _solve_samples(plan, ts, X)
+    _read_out(plan, S, ts, X, Phi, O, Z, J_all, tau)
+    return S
+
+
+def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
+    """φ, the outputs o and the solution z at every sample, all at once: (Φ, O, Z, Jacobians, τ of a generic law)."""
+    s = plan.system
+    N = len(ts)
     nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
     m2 = m * m
     Phi = np.empty((N, plan.P.shape[1]))
@@ -133,7 +141,14 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
         A[:, nv:nQ, nQ + r] = plan.A0[nv:nQ, nQ + r] + mu * (D @ consts)
     B[:, :nv] += tau
     Z = _solve_all(plan, A, B)
-    # ---- read-out (the same quantities System.evaluate reports)
+    return Phi, O, Z, J_all, tau
+
+
+def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, O: np.ndarray, Z: np.ndarray,
+              J_all: list, tau: np.ndarray) -> None:
+    """Fill S with the same quantities System.evaluate reports, from the solved samples."""
+    s, phase = plan.system, plan.phase
+    nQ, nv = s.nQ, s.nv
     kt = plan.i_e + plan.e_frame[plan.tip_frame]
     S.tip[:] = Phi[:, kt:kt + 3]
     if plan.affine_ctl:
@@ -182,7 +197,7 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
             S.iface[key][:] = Z[:, rows[0]] if rows else O[:, plan.o_iface[key]]
     for label, sl in plan.o_stage.items():
         S.stages[label][:] = O[:, sl]
-    return S
+
 
 def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
     """Φ for one robot frame: Pinocchio per sample (H, J, J̇q̇, h, [g], p), the rest in batch."""
@@ -214,7 +229,7 @@ def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
     Phi[:, i_e + n + 6:] = TV
 
 def slip_directions(plan, ci: int, O: np.ndarray) -> np.ndarray:
-    """Sliding directions (N, k) of contact ci at the samples' outputs O (System._slip_direction's rule:
+    """Sliding directions (N, k) of contact ci at the samples' outputs O (friction.slip_direction's rule:
     v_t/|v_t| while v_t·r exceeds the stick band, else the mode's reference r; 1-D: r)."""
     c, mode = plan.system.contacts[ci], plan.modes[ci]
     r = np.asarray(mode.slip, float)

@@ -20,8 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from .config import Reader
+from .budget import check_budget
+from .config import MAX_DEPTH, Reader, check_depth, read_toml
 from .drives import DriveTable, read_drive_table
+from .elements import STAGE_LAWS, ChainSpec, Element, Mass, Stage
 from .errors import SceneError
 from .trajectory import PROFILES, Move, Ramp
 
@@ -33,47 +35,6 @@ __all__ = [
 
 NORMAL_MODELS = ("rigid", "a", "b", "c", "chain")
 TANGENT_MODELS = ("free", "friction", "chain")
-STAGE_LAWS = ("linear", "hunt_crossley")
-
-
-# ---- contact-zone elements -------------------------------------------------------------
-@dataclass(frozen=True)
-class Stage:
-    """A Kelvin–Voigt deformation stage: F = k x + b ẋ (linear) or k xⁿ + b xⁿ ẋ (Hunt–Crossley)."""
-
-    k: float  #: stiffness [N/m] (Hunt–Crossley: [N/mⁿ])
-    b: float  #: damping [N·s/m] (Hunt–Crossley: [N·s/mⁿ⁺¹])
-    law: str = "linear"
-    exponent: float = 1.5  #: n, Hunt–Crossley only
-
-
-@dataclass(frozen=True)
-class Mass:
-    """An equivalent mass of the contact zone [kg], moving along the chain's direction."""
-
-    m: float
-
-
-Element = Stage | Mass
-
-
-@dataclass(frozen=True)
-class ChainSpec:
-    """Deformation chain along one direction.
-
-    ``environment`` lists elements from the environment body out to the contact surface;
-    ``robot`` lists them from the robot's tip frame out to the contact surface. Both empty
-    is a rigid contact.
-    """
-
-    environment: tuple[Element, ...] = ()
-    robot: tuple[Element, ...] = ()
-
-    @property
-    def rigid(self) -> bool:
-        return not self.environment and not self.robot
-
-
 @dataclass(frozen=True)
 class FrictionSpec:
     """Coulomb friction with optional viscous term: |F_f| ≤ μ_s F sticking, μ_k F + c|v| sliding."""
@@ -224,6 +185,8 @@ def parse_override(text: str) -> tuple[str, Any]:
         parsed = tomllib.loads(f"v = {value}")["v"]
     except tomllib.TOMLDecodeError:
         parsed = value
+    except RecursionError:
+        raise SceneError(f"--set {key}", f"a value nested at most {MAX_DEPTH} deep", "deeper") from None
     return key, parsed
 
 
@@ -259,19 +222,12 @@ def apply_overrides(document: dict[str, Any], overrides: dict[str, Any], file: s
 def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
     """Read, override and validate a scene file (a path or a name in ``sims/``)."""
     path = find_scene(path)
-    try:
-        document = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError("<file>", "valid TOML", str(exc), str(path)) from None
-    except OSError as exc:
-        raise SceneError("<file>", "a readable file", exc.strerror, str(path)) from None
-    except UnicodeDecodeError as exc:
-        raise SceneError("<file>", "UTF-8 text", str(exc), str(path)) from None
-    return parse_scene(document, overrides, file=str(path))
+    return parse_scene(read_toml(path), overrides, file=str(path))
 
 
 def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = None, file: str | None = None) -> Scene:
     """Validate a scene document (a dict as TOML gives it)."""
+    check_depth([document, overrides], "<document>", file)
     document = apply_overrides(document, overrides or {}, file)
     top = Reader(document, "", file)
     name = top.str("name", Path(file).stem if file else "scene")
@@ -289,7 +245,9 @@ def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = Non
         phases = (_read_phase(Reader({"name": "main"}, "phase[0]", file), default_controller, contacts, duration,
                               bodies),)
     top.finish()
-    return Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document)
+    scene = Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document)
+    check_budget(scene)
+    return scene
 
 
 def _read_robot(r: Reader) -> RobotSpec:

@@ -5,13 +5,14 @@ links' inertia data (:mod:`contactdyn.inertia`), resolve every visual mesh to an
 file, turn ``continuous`` joints into unbounded revolute joints (one coordinate, the angle
 [rad], instead of Pinocchio's (cos θ, sin θ) pair), and let Pinocchio build the model from the
 rewritten XML. A joint whose limits say lower = upper (double_pendulum's 0, 0) is taken as
-unbounded too: no limits given. Checks of the XML tree belong between parsing and building
-(in :func:`build_urdf_model`), before Pinocchio sees the file. Pinocchio accepts lower > upper
-limits silently: that is checked here too.
+unbounded too: no limits given. The XML tree is checked before Pinocchio sees the file, and
+every Pinocchio builder runs first in a forked probe (:mod:`contactdyn.urdf_check`). Pinocchio
+accepts lower > upper limits silently: that is checked here too.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import sys
 import tempfile
@@ -25,9 +26,10 @@ import pinocchio as pin
 
 from .errors import RobotError
 from .inertia import INERTIA_MODES, check_inertias
+from .urdf_check import check_urdf_tree, isolated_build
 from .urdf_source import resolve_robot_path, resolve_uri
 
-__all__ = ["UrdfModel", "build_urdf_model", "lock_joints", "urdf_call"]
+__all__ = ["UrdfModel", "build_isolated", "build_urdf_model", "lock_joints", "urdf_call", "xml_label"]
 
 _UNBOUNDED = 1e9  # [rad] placeholder limits of a continuous joint in the rewritten XML; set to ±inf after
 
@@ -67,13 +69,17 @@ def urdf_call(path: Path, build: Callable[[], object]) -> object:
     raise RobotError(f"{path}: not a valid URDF: {detail}")
 
 
-def _read_xml(path: Path) -> ET.Element:
-    try:
-        return ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise RobotError(f"{path}: malformed XML: {exc}") from None
-    except OSError as exc:
-        raise RobotError(f"{path}: cannot read the URDF: {exc.strerror or exc}") from None
+def build_isolated(path: Path, label: str, build: Callable[[], object]) -> object:
+    """Run a Pinocchio builder on (a rewrite of) ``path``: first in a forked probe (a crash there is a
+    RobotError, see contactdyn.urdf_check; once per ``label``, which names the XML's content), then here,
+    with urdfdom's reason on failure."""
+    isolated_build(path, label, build)
+    return urdf_call(path, build)
+
+
+def xml_label(builder: str, xml: str) -> str:
+    """A probe label naming the builder and the rewritten XML's content."""
+    return f"{builder} {hashlib.sha256(xml.encode()).hexdigest()[:16]}"
 
 
 def _resolve_meshes(root: ET.Element, path: Path, package_dirs: list[str]) -> None:
@@ -118,13 +124,12 @@ def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfM
     if inertia not in INERTIA_MODES:
         raise RobotError(f"robot.inertia must be one of {list(INERTIA_MODES)}, found {inertia!r}")
     path, package_dirs = resolve_robot_path(source)
-    root = _read_xml(path)
-    # checks of the XML tree (one root, no cycles...) belong here, before Pinocchio reads anything
+    root = check_urdf_tree(path)  # one root, no cycle...: before Pinocchio reads anything (it crashes)
     notes = check_inertias(root, path, inertia)
     _resolve_meshes(root, path, package_dirs)
     unbounded = _unbind_continuous(root)
     xml = ET.tostring(root, encoding="unicode")
-    model: pin.Model = urdf_call(path, lambda: pin.buildModelFromXML(xml))
+    model: pin.Model = build_isolated(path, xml_label("buildModelFromXML", xml), lambda: pin.buildModelFromXML(xml))
     lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
     for jid in range(1, model.njoints):  # lower = upper (double_pendulum's 0, 0) means "no limits given"
         i = model.idx_qs[jid]

@@ -285,6 +285,9 @@ def test_example_robot_data_loads(name):
     if name in ("iris_simple", "quadrotor_base"):
         load_error(name, "no active joint")
         return
+    if name == "ur_description/ur3":  # a xacro-made file without links or a robot name: not a URDF
+        load_error(name, "expected one root link")
+        return
     if name == "romeo":  # its finger links carry no inertial
         load_error(name, "move no mass or inertia")
         return
@@ -394,7 +397,7 @@ def test_revolute_without_limits_gives_urdfdom_reason(tmp_path):
 
 def test_undefined_parent_link(tmp_path):
     path = write(tmp_path, GOOD.substitute(DEFAULTS).replace('<parent link="link1"/>', '<parent link="linkX"/>'))
-    load_error(path, str(path), "parent link [linkX] of joint [q2] not found")
+    load_error(path, str(path), "joint 'q2': parent link 'linkX' is not defined")
 
 
 @pytest.mark.parametrize("mass", ["-1.0", "-1e-9"])

@@ -13,11 +13,11 @@ import pytest
 from contactdyn import Robot, RobotError
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
 from contactdyn.errors import SceneError
+from contactdyn.events import start_storm_cause
 from contactdyn.inertia import nearest_valid_moments
 from contactdyn.posture import PostureTask, solve_posture
 from contactdyn.robot_catalog import example_robot_data_share, example_robots
 from contactdyn.scene import parse_scene
-from contactdyn.simulate import _start_storm_cause
 from contactdyn.system import System
 
 LINK = """<link name="{name}"><inertial><mass value="1"/><inertia ixx="{ixx}" iyy="0.01" izz="{izz}" ixy="0" ixz="0"
@@ -215,7 +215,7 @@ def test_start_posture_outside_the_limits_is_bad_input(tmp_path):
 def test_event_storm_at_the_start_names_the_posture():
     events = [{"t": 0.0, "kind": "phase", "name": "main"}] + [{"t": 1e-12 * k, "kind": k % 2 and "touch" or "separate",
                                                               "name": "pen"} for k in range(60)]
-    cause = _start_storm_cause(events, "pen")
+    cause = start_storm_cause(events, "pen")
     assert "contact 'pen' began at t = 0 s" in cause and "robot.tip0" in cause and "initial penetration" in cause
     late = [{"t": 0.5 + 1e-12 * k, "kind": "touch", "name": "pen"} for k in range(60)]
-    assert _start_storm_cause(late, "pen") is None
+    assert start_storm_cause(late, "pen") is None

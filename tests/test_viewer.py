@@ -280,3 +280,56 @@ def test_live_server_port_in_use_is_a_clear_error():
 def test_nice_numbers():
     assert [nice_floor(x) for x in (0.7, 1.0, 3.3, 19.2, 0.049)] == [0.5, 1.0, 2.0, 10.0, 0.02]
     assert [nice_ceil(x) for x in (0.7, 1.0, 3.3, 19.2, 0.049)] == [1.0, 1.0, 5.0, 20.0, 0.05]
+
+
+def listening(pid: int) -> set[tuple[str, int]]:
+    """(address, port) of every TCP socket in LISTEN state that process ``pid`` holds, from /proc."""
+    import ipaddress
+    import os
+    from pathlib import Path
+
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        target = os.readlink(fd)
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    found = set()
+    for table in ("tcp", "tcp6"):
+        for line in Path(f"/proc/net/{table}").read_text().splitlines()[1:]:
+            fields = line.split()
+            if fields[3] != "0A" or fields[9] not in inodes:  # 0A: TCP_LISTEN
+                continue
+            addr, port = fields[1].split(":")
+            raw = bytes.fromhex(addr)
+            raw = b"".join(raw[i:i + 4][::-1] for i in range(0, len(raw), 4))  # host-order 32-bit words
+            found.add((str(ipaddress.ip_address(raw)), int(port, 16)))
+    return found
+
+
+@pytest.mark.timeout(60)
+def test_live_server_listens_on_loopback_only():
+    with LiveViewer() as live:
+        addresses = listening(live.proc.pid)
+        web_port = int(live.url.split(":")[2].split("/")[0])
+        zmq_port = int(live.zmq_url.rsplit(":", 1)[1])
+    assert {port for _, port in addresses} == {web_port, zmq_port}
+    assert {addr for addr, _ in addresses} == {"127.0.0.1"}
+
+
+@pytest.mark.timeout(60)
+def test_view_on_another_host_warns(b1_run, capsys, monkeypatch):
+    import contactdyn.viewer as viewer
+
+    class Stop(Exception):
+        pass
+
+    def probe(**kwargs):
+        with LiveViewer(**kwargs) as live:
+            hosts = {addr for addr, _ in listening(live.proc.pid)}
+        assert hosts == {"127.0.0.2"}
+        raise Stop
+
+    monkeypatch.setattr(viewer, "LiveViewer", probe)
+    with pytest.raises(Stop):
+        viewer.view_result(b1_run[1], argparse.Namespace(html=None, port=None, speed=1.0, host="127.0.0.2"))
+    assert "warning: the viewer listens on 127.0.0.2" in capsys.readouterr().err

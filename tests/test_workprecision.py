@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from contactdyn.contact import ContactMode
-from contactdyn.errors import SceneError
+from contactdyn.errors import SceneError, SimulationError
 from contactdyn.integrators import FiniteDifferenceJacobian, jacobian_eigenvalues, stability_bound
 from contactdyn.rhsplan import ModePlan, Samples
 from contactdyn.scene import load_scene
@@ -211,3 +211,24 @@ def test_bench_command_rejects_unknown_methods(tmp_path):
                               set=["duration=0.05"])
     with pytest.raises(SceneError, match="--methods"):
         bench_command(args)
+
+
+def test_rk4_step_beyond_the_stiffest_mode_stops_with_the_cause():
+    """b1's stiffest mode: |λ| ≈ 92 1/s; h = 0.5 s amplifies it ~1e5× per step (it once exited 0 at 8.8e23 N)."""
+    with pytest.raises(SimulationError) as info:
+        simulate("b1", {"duration": 0.5, "solver.method": "RK4", "solver.max_step": 0.5})
+    message = str(info.value)
+    assert "too large for the stiffest mode" in message and "period 0.0686 s" in message
+    assert "successfully" not in message
+    assert simulate("b1", {"duration": 0.05, "solver.method": "RK4", "solver.max_step": 0.01}).stats["steps"] == 5
+
+
+def test_rk4_amplification_matches_the_closed_form():
+    from contactdyn.integrators import RK4_RADIUS, rk4_amplification
+
+    assert RK4_RADIUS < 2.7852935  # the stated bound is inside the real stability interval [-2.7852935, 0]
+    got = rk4_amplification(np.array([0.0, -1.0, -2.7852935, -3.0, 2.8j]))
+    assert got[0] == 1.0 and got[1] == pytest.approx(1 - 1 + 1 / 2 - 1 / 6 + 1 / 24, rel=1e-15)
+    assert got[2] == pytest.approx(1.0, abs=1e-6)  # the edge of the stability interval on the real axis
+    assert got[3] == pytest.approx(1 - 3 + 9 / 2 - 27 / 6 + 81 / 24, rel=1e-15) and got[3] > 1
+    assert got[4] < 1.0  # inside the stability region along the imaginary axis (|z| < 2.83)

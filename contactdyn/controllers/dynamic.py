@@ -41,8 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..elements import Mass, Stage
 from ..errors import SceneError
-from ..scene import Mass, Stage
 from .base import BindContext, ControlInput, Controller, register
 
 __all__ = ["NominalEnvironment", "PositionDynamic", "ForceDynamic", "Hybrid", "nominal_from_chain"]

@@ -38,9 +38,10 @@ Modules: :mod:`.plan` (what runs: axes, sweep files, run ids), :mod:`.execute` (
 process, a process pool, Dask; chunks of runs), :mod:`.store` (the files).
 """
 
-from .execute import NUMERICAL, SweepReport, run_chunk, run_sweep
+from .execute import NUMERICAL, SweepReport, process_pool, run_chunk, run_sweep, stop_pool
 from .plan import Sweep, check_sweep, load_sweep_file, make_sweep, parse_grid, parse_range, run_id
 from .store import STATUSES, result_row
 
 __all__ = ["Sweep", "SweepReport", "parse_grid", "parse_range", "load_sweep_file", "make_sweep", "check_sweep",
-           "run_id", "run_sweep", "run_chunk", "result_row", "NUMERICAL", "STATUSES"]
+           "run_id", "run_sweep", "run_chunk", "result_row", "NUMERICAL", "STATUSES", "process_pool",
+           "stop_pool"]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -16,9 +15,10 @@ import numpy as np
 from ..errors import ContactdynError, SceneError
 from ..scene import parse_scene
 from .plan import Sweep, check_sweep
-from .store import STATUSES, atomic_write, cached_rows, done_row, result_row, write_manifest, write_summary
+from .store import STATUSES, cached_rows, done_row, lock_out, record_failure, result_row, write_manifest, write_summary
+from .workers import run_isolated, worker_init
 
-__all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk"]
+__all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk", "process_pool", "stop_pool"]
 
 #: numerical failures a blow-up raises from numpy inside a run (a failed run, not a bug)
 NUMERICAL: tuple[type[Exception], ...] = (np.linalg.LinAlgError, FloatingPointError, OverflowError)
@@ -51,10 +51,7 @@ def _run_one(document: dict[str, Any], file: str | None, runs_dir: Path, rid: st
     else:
         result.save(runs_dir / rid)
         return result_row(rid, result)
-    row = {"run_id": rid, "status": status, "error": error, "wall_s": time.perf_counter() - wall0}
-    atomic_write(runs_dir / f"{rid}.failed.json", json.dumps({**row, "overrides": overrides}, indent=1,
-                                                              default=str).encode())
-    return row
+    return record_failure(runs_dir, rid, overrides, status, error, time.perf_counter() - wall0)
 
 
 @dataclass
@@ -83,7 +80,16 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
     out = Path(out)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
-    for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer; the real files are whole or absent
+    lock = lock_out(out)
+    try:
+        return _run_locked(sweep, out, runs_dir, wall0, workers, scheduler, chunk, csv, retry_failed, progress, check)
+    finally:
+        lock.close()
+
+
+def _run_locked(sweep: Sweep, out: Path, runs_dir: Path, wall0: float, workers, scheduler, chunk, csv, retry_failed,
+                progress, check) -> SweepReport:
+    for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer (we hold the lock: no writer is live)
         stale.unlink(missing_ok=True)
     if check:
         check_sweep(sweep)
@@ -129,34 +135,54 @@ def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, schedul
         for c in chunks:
             yield run_chunk(*args, c)
         return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    yield from _execute_pool(args, chunks, n_workers)
+
+
+def _execute_pool(args: tuple, chunks: list, n_workers: int):
+    """Chunks on a process pool; the runs of chunks whose worker died go again, each in its own process."""
+    from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    # no fork of a (possibly threaded) parent: workers fork from a server that preloaded the package
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["contactdyn.sweep", "contactdyn.simulate"])
-    pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=_worker_init)
+    pool = process_pool(n_workers)
+    broken: list = []
     try:
-        futures = [pool.submit(run_chunk, *args, c) for c in chunks]
+        futures = {pool.submit(run_chunk, *args, c): c for c in chunks}
         for fut in as_completed(futures):
+            if isinstance(fut.exception(), BrokenProcessPool):  # a worker died: which run killed it is unknown
+                broken.extend(futures[fut])
+                continue
             yield fut.result()
-    except BrokenProcessPool as exc:
-        raise ContactdynError(f"a worker process died ({exc}); the finished runs are saved, "
-                              "run the same command again to resume") from None
     except BaseException:  # interrupted: stop the workers now (their results so far are whole files)
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
-            proc.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
+        stop_pool(pool)
         raise
     pool.shutdown(wait=True)
+    if broken:
+        import multiprocessing
+
+        yield from run_isolated(multiprocessing.get_context("forkserver"), run_chunk, args, broken, n_workers)
 
 
-def _worker_init() -> None:
-    """Ctrl-C reaches the whole process group: only the parent handles it (it stops the workers)."""
-    import signal
+def process_pool(n_workers: int, preload: tuple[str, ...] = ("contactdyn.sweep", "contactdyn.simulate")):
+    """A local pool of ``n_workers`` processes for runs (sweeps, the fit's Jacobian columns).
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    No fork of a (possibly threaded) parent: workers fork from a server that preloaded
+    ``preload``; they end with this process and ignore Ctrl-C (:func:`.workers.worker_init`;
+    the parent stops them with :func:`stop_pool`).
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(list(preload))
+    return ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=worker_init,
+                               initargs=(os.getpid(),))
+
+
+def stop_pool(pool) -> None:
+    """Stop a pool's workers now (interrupted or failed), dropping the queued tasks."""
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        proc.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
 
 
 def _execute_dask(scheduler: str, args: tuple, chunks: list):

@@ -6,7 +6,6 @@ import hashlib
 import itertools
 import json
 import math
-import tomllib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,11 +13,14 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Reader
+from ..config import Reader, read_toml
 from ..errors import SceneError
 from ..scene import find_scene, parse_override, parse_scene
 
 __all__ = ["Sweep", "run_id", "parse_grid", "parse_range", "load_sweep_file", "make_sweep", "check_sweep"]
+
+
+MAX_RUNS = 100_000  #: runs in one sweep at most (each is files on disk and a summary row)
 
 
 @dataclass
@@ -40,6 +42,10 @@ class Sweep:
         """(run id, varied parameters, all overrides) per run, sorted by id; duplicates merged."""
         out: dict[str, tuple[str, dict[str, Any], dict[str, Any]]] = {}
         keys = list(self.axes)
+        count = max(1, len(self.runs)) * math.prod(len(v) for v in self.axes.values())
+        if count > MAX_RUNS:
+            raise SceneError("--grid/--range", f"a sweep of at most {MAX_RUNS} runs (the product of the axes' "
+                             "lengths and the explicit runs)", f"{count} runs", self.file)
         for explicit in self.runs or [{}]:
             for values in itertools.product(*(self.axes[k] for k in keys)):
                 params = {**explicit, **dict(zip(keys, values, strict=True))}
@@ -95,8 +101,8 @@ def parse_range(text: str) -> tuple[str, list[float]]:
 def _spaced(where: str, lo: float, hi: float, n: int, log: bool, file: str | None = None) -> list[float]:
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise SceneError(where, "finite lo and hi", [lo, hi], file)
-    if n < 1:
-        raise SceneError(where, "n >= 1 values", n, file)
+    if not 1 <= n <= MAX_RUNS:
+        raise SceneError(where, f"1 <= n <= {MAX_RUNS} values", n, file)
     if log and (lo <= 0 or hi <= 0):
         raise SceneError(where, "lo > 0 and hi > 0 for log spacing", [lo, hi], file)
     values = np.geomspace(lo, hi, n) if log else np.linspace(lo, hi, n)
@@ -127,12 +133,7 @@ def load_sweep_file(path: str | Path) -> tuple[str | None, dict[str, Any], dict[
     """Read a sweep file: (scene, fixed overrides, axes, explicit runs); errors name file and key."""
     path = Path(path)
     file = str(path)
-    try:
-        doc = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError("<file>", "valid TOML", str(exc), file) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError("<file>", "a readable sweep file", getattr(exc, "strerror", None) or str(exc), file) from None
+    doc = read_toml(path, "sweep file")
     top = Reader(doc, "", file)
     scene = top.str("scene", None) if top.has("scene") else None
     if scene is not None and not Path(scene).is_absolute() and (path.parent / scene).is_file():
@@ -183,13 +184,7 @@ def make_sweep(scene: str | Path | None, sets: Iterable[str] = (), grids: Iterab
     axes.update(dict(parse_grid(s) for s in grids))
     axes.update(dict(parse_range(s) for s in ranges))
     path = find_scene(scene)
-    try:
-        document = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError("<file>", "valid TOML", str(exc), str(path)) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError("<file>", "a readable scene file", getattr(exc, "strerror", None) or str(exc),
-                         str(path)) from None
+    document = read_toml(path)
     return Sweep(document, str(path), fixed, axes, runs)
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -13,8 +14,8 @@ from ..errors import ContactdynError, SceneError
 from ..result import atomic_path
 from .plan import Sweep
 
-__all__ = ["STATUSES", "SUMMARY_FIXED", "result_row", "done_row", "cached_rows", "write_manifest", "write_summary",
-           "atomic_write"]
+__all__ = ["STATUSES", "SUMMARY_FIXED", "result_row", "record_failure", "done_row", "cached_rows", "write_manifest",
+           "write_summary", "atomic_write", "lock_out"]
 
 STATUSES = ("ok", "failed", "crashed")
 SUMMARY_FIXED = ("run_id", "status", "error", "wall_s")  #: columns before the metrics (after the parameters)
@@ -29,6 +30,39 @@ def result_row(rid: str, result) -> dict[str, Any]:
     error = f"non-finite values in {', '.join(bad)}" if bad else ""
     return {"run_id": rid, "status": "failed" if bad else "ok", "error": error,
             "wall_s": float(result.stats.get("wall_s", math.nan)), **metrics(result)}
+
+
+def record_failure(runs_dir: Path, rid: str, overrides: dict[str, Any], status: str, error: str, wall_s: float
+                   ) -> dict[str, Any]:
+    """Write ``<id>.failed.json`` (the error and the overrides) and return the run's summary row."""
+    row = {"run_id": rid, "status": status, "error": error, "wall_s": wall_s}
+    atomic_write(runs_dir / f"{rid}.failed.json", json.dumps({**row, "overrides": overrides}, indent=1,
+                                                              default=str).encode())
+    return row
+
+
+def lock_out(out: Path):
+    """Hold ``OUT/.sweep.lock`` for this sweep (released when the process ends, however it ends).
+
+    A second sweep into the same folder is refused: it would rewrite the summary and could
+    run the same cases twice. Returns the open lock file; keep it until the sweep is done.
+    """
+    import fcntl
+
+    lock = open(out / ".sweep.lock", "a+")  # noqa: SIM115 (held for the whole sweep)
+    try:
+        fcntl.flock(lock.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock.seek(0)
+        holder = lock.read().strip() or "?"
+        lock.close()
+        raise SceneError("--out", "a folder no other sweep is writing to (wait for it, or choose another --out)",
+                         f"{out} (sweep process {holder} is running into it)") from None
+    lock.seek(0)
+    lock.truncate()
+    lock.write(str(os.getpid()))
+    lock.flush()
+    return lock
 
 
 def done_row(runs_dir: Path, rid: str, cache: dict[str, dict[str, Any]]) -> dict[str, Any] | None:

@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import argparse
 import signal
+import sys
 import threading
 
 from ..result import Result, load_result
 from .build import build_scene
 from .export import export_html
-from .live import LiveViewer
+from .live import LOOPBACK, LiveViewer
 from .writer import ViewerScene
 
 __all__ = ["build_scene", "export_html", "view_result", "view_command", "LiveViewer", "ViewerScene"]
@@ -38,7 +39,10 @@ def view_result(result: Result, args: argparse.Namespace) -> int:
         print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB): open it in a browser, no server needed")
         _print_legend(scene)
         return 0
-    with LiveViewer(port=getattr(args, "port", None)) as live:
+    host = getattr(args, "host", None) or LOOPBACK
+    if host != LOOPBACK:
+        print(f"warning: the viewer listens on {host}: whoever can reach that address sees this run", file=sys.stderr)
+    with LiveViewer(port=getattr(args, "port", None), host=host) as live:
         live.show(scene)
         print(f"meshcat: open {live.url}", flush=True)
         _print_legend(scene)

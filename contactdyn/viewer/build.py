@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..errors import ContactdynError
+from ..errors import ContactdynError, RunFileError
 from ..result import Result
 from ..robot import Robot
 from ..scene import Scene, parse_scene
@@ -96,7 +96,7 @@ def _scene_of(result: Result) -> Scene | None:
     try:
         return parse_scene(result.scene)
     except ContactdynError as exc:
-        raise ContactdynError(f"run {result.meta.get('name', '?')}: its scene document no longer validates, "
+        raise RunFileError(f"run {result.meta.get('name', '?')}: its scene document no longer validates, "
                               f"cannot draw it: {exc}") from None
 
 
@@ -105,7 +105,7 @@ def _robot_of(result: Result, scene: Scene | None) -> Robot:
     ``package://`` meshes), else from the URDF path saved in ``meta['robot']``."""
     sources = [s for s in (scene.robot.source if scene else None, result.meta.get("robot")) if s]
     if not sources:
-        raise ContactdynError("run has no robot: neither a scene document nor meta['robot']")
+        raise RunFileError("run has no robot: neither a scene document nor meta['robot']")
     first: ContactdynError | None = None
     for source in dict.fromkeys(sources):
         try:

@@ -3,6 +3,10 @@
 The server is meshcat's own ``ZMQWebSocketBridge`` in a child process (it keeps the scene
 tree and replays it to every browser that connects); we talk to it over a zmq REQ
 socket with timeouts, so nothing here can hang on a dead server.
+
+It listens on ``host`` only (default 127.0.0.1, this machine), for HTTP and websocket alike
+as for zmq: meshcat 0.3.2 passes its ``host`` to the zmq socket but lets tornado listen
+on every interface, which the server script below corrects.
 """
 
 from __future__ import annotations
@@ -20,16 +24,26 @@ import zmq
 from ..errors import ContactdynError
 from .writer import ViewerScene
 
-__all__ = ["LiveViewer"]
+__all__ = ["LiveViewer", "LOOPBACK"]
 
 START_TIMEOUT = 20.0  #: [s] for the server to print its URLs
 REPLY_TIMEOUT = 20.0  #: [s] for the server to acknowledge one command
 
+LOOPBACK = "127.0.0.1"
+
 _SERVER = """
 import os, sys
 from meshcat.servers.zmqserver import ZMQWebSocketBridge
+
+class Bridge(ZMQWebSocketBridge):
+    def make_app(self):  # HTTP and websocket on self.host only (meshcat's own listens on all interfaces)
+        app = super().make_app()
+        listen = app.listen
+        app.listen = lambda port, **kwargs: listen(port, address=self.host, **kwargs)
+        return app
+
 port = int(sys.argv[2]) if sys.argv[2] else None
-bridge = ZMQWebSocketBridge(zmq_url=sys.argv[1] or None, host=sys.argv[3], port=port)
+bridge = Bridge(zmq_url=sys.argv[1] or None, host=sys.argv[3], port=port)
 print("zmq_url=" + bridge.zmq_url, flush=True)
 print("web_url=" + bridge.web_url, flush=True)
 sys.stdout = open(os.devnull, "w")
@@ -40,7 +54,7 @@ bridge.run()
 class LiveViewer:
     """meshcat server child process + a client socket. Use as a context manager."""
 
-    def __init__(self, port: int | None = None, zmq_url: str | None = None, host: str = "127.0.0.1"):
+    def __init__(self, port: int | None = None, zmq_url: str | None = None, host: str = LOOPBACK):
         self._stderr = tempfile.TemporaryFile()
         args = [sys.executable, "-u", "-c", _SERVER, zmq_url or "", str(port) if port else "", host]
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=self._stderr, stdin=subprocess.DEVNULL)

@@ -1,0 +1,132 @@
+"""A run's output: the integrated segments sampled on the output grid, as named channels.
+
+The hybrid loop (:mod:`contactdyn.hybrid`) leaves a list of :class:`Segment` s, each a
+smooth phase with its dense output. The output grid has ``solver.output_rate`` [Hz]
+samples over the duration; at an event time the sample belongs to the segment after the
+event. A compiled segment gives its samples' diagnostics all at once
+(:meth:`~contactdyn.rhsplan.ModePlan.samples`); another evaluates each sample fully.
+Channel names and units are documented in the README (``q`` [rad or m], ``contact.<c>.F_n``
+[N], ``stage.<label>.x`` [m]…).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .contact import ContactMode
+from .drives import drive_channels
+from .dynamics import Evaluation
+from .limits import limit_channels
+from .phases import Phase
+from .rhsplan import ModePlan
+from .samples import Samples
+from .system import System
+
+__all__ = ["Segment", "output_grid", "sample_segments", "channels"]
+
+
+@dataclass
+class Segment:
+    """One smooth phase of a run: [t0, t1] [s], its modes and task phase, dense output, compiled plan."""
+
+    t0: float
+    t1: float
+    modes: list[ContactMode]
+    phase: Phase
+    sol: Any
+    plan: ModePlan
+
+
+def output_grid(duration: float, rate: float) -> np.ndarray:
+    """Output times [s]: ``rate`` [Hz] samples over [0, duration], at least the two ends."""
+    n_out = int(round(duration * rate))
+    return np.linspace(0.0, duration, n_out + 1) if n_out > 0 else np.array([0.0, duration])
+
+
+def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, stats: dict[str, Any]
+                    ) -> dict[str, np.ndarray]:
+    """The channels of a run at the times ``grid`` (adds the plans' singular solves to ``stats``)."""
+    # the segment of each sample: the first ending at or after it; at an event time, the one after
+    t1 = np.array([seg.t1 for seg in segments])
+    idx = np.minimum(np.searchsorted(t1, grid, side="left"), len(t1) - 1)
+    nxt = np.minimum(idx + 1, len(t1) - 1)
+    idx = np.where((t1[idx] == grid) & (nxt > idx) & (t1[nxt] > grid), nxt, idx)
+    xs = np.empty((len(grid), system.n))
+    parts: list[Samples] = []
+    modes_of: list[list[ContactMode]] = []
+    phases_of: list[Phase] = []
+    evs: list[Evaluation | None] = []
+    for i in np.unique(idx):
+        seg = segments[i]
+        sel = np.flatnonzero(idx == i)
+        ts = grid[sel]
+        X = np.atleast_2d(seg.sol(ts).T) if len(ts) > 1 else seg.sol(ts[0])[None, :]
+        xs[sel] = X
+        if seg.plan.ok:
+            parts.append(seg.plan.samples(ts, X))
+            stats["singular_solves"] += seg.plan.singular
+            evs += [None] * len(ts)
+        else:
+            part = Samples(len(ts), system)
+            for k, (t, x) in enumerate(zip(ts, X, strict=True)):
+                ev = system.evaluate(t, x, seg.modes, seg.phase, full=True)
+                part.fill(k, ev)
+                evs.append(ev)
+            parts.append(part)
+        modes_of += [seg.modes] * len(sel)
+        phases_of += [seg.phase] * len(sel)
+    samples = Samples.concatenate(parts, system)
+    out = channels(system, grid, xs, samples, modes_of)
+    if system.limits.limits:
+        out.update(limit_channels(system, phases_of, evs))
+    if system.drives.any_motor:  # (plans decline motors: every sample has its Evaluation)
+        out.update(drive_channels(system, xs, evs))
+    return out
+
+
+def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
+             modes_of: list[list[ContactMode]]) -> dict[str, np.ndarray]:
+    """The Result's named channels at the output times t [s] (names documented in the README)."""
+    nQ, nv = system.nQ, system.nv
+    ch: dict[str, np.ndarray] = {"t": t, "q": xs[:, :nv], "v": xs[:, nQ:nQ + nv], "tau": smp.tau, "tip": smp.tip}
+    if smp.has_x_d:
+        ch["tip_ref"] = smp.x_d
+    for k, name in enumerate(system.body_names):
+        idx = system.body_index[name]
+        ch[f"body.{name}.x"] = xs[:, idx]
+        ch[f"body.{name}.v"] = xs[:, nQ + idx]
+        ch[f"body.{name}.force"] = smp.body_force[:, k]
+    for i, c in enumerate(system.contacts):
+        p = f"contact.{c.name}"
+        ch[f"{p}.F_n"] = smp.F_n[c.name]
+        ch[f"{p}.gap"] = smp.gap[c.name]
+        ch[f"{p}.touching"] = np.array([float(m[i].touching) for m in modes_of])
+        ch[f"{p}.F_d"] = smp.F_d[c.name]
+        if c.friction is not None and len(c.tangents):
+            ch[f"{p}.F_f"] = smp.F_f[c.name]
+            ch[f"{p}.v_slip"] = smp.v_slip[c.name]
+            ch[f"{p}.stuck"] = np.array([float(m[i].stuck) for m in modes_of])
+        for dc in c.tangent_chains:
+            ch[f"{p}.{dc.label}.F"] = smp.iface[f"{c.name}.{dc.label}"]
+        for k in range(len(c.tangents)):
+            key = f"{c.name}.t{k + 1}"
+            if smp.has_F_d.get(key):
+                ch[f"{p}.t{k + 1}.F_d"] = smp.F_d[key]
+    for label in system.stage_labels:
+        ch[f"stage.{label}.x"], ch[f"stage.{label}.xdot"], ch[f"stage.{label}.F"] = smp.stages[label].T
+    k = 0
+    for c in system.contacts:
+        for dc in c.chains:
+            for node in dc.chain.nodes:
+                if node.coord >= 0:
+                    label = system.mass_labels[k]
+                    ch[f"mass.{label}.x"] = xs[:, node.coord]
+                    ch[f"mass.{label}.v"] = xs[:, nQ + node.coord]
+                    k += 1
+    if system.energy_slot >= 0:
+        ch["energy.work"] = xs[:, 2 * nQ + system.energy_slot]
+        ch["energy.dissipated"] = xs[:, 2 * nQ + system.energy_slot + 1]
+    return ch

@@ -1,0 +1,292 @@
+"""The events of a smooth phase: touch, separate, stop, reverse, turn, slip; the storm guard.
+
+Within a smooth phase the modes (touching, sticking, sliding direction) and the task
+phase are fixed. Events are zeros of functions of the state, located by ``solve_ivp``
+on its dense output; each is terminal and fires when its function falls through zero:
+
+- ``touch``: a free contact's normal gap [m] reaches zero (then the impact map,
+  :mod:`contactdyn.impact`). The function is gap − (min(0, gap at the segment start) −
+  ``TOUCH_TOL``): never zero at the start, so a re-touch right after a separation is seen;
+- ``separate``: a touching, unbonded contact's normal force F [N] reaches zero;
+- ``stop``: a sliding contact's slip velocity along its sliding reference r falls to the
+  stick band, v_t·r = v_ε [m/s] (``solver.stick_velocity``);
+- ``reverse``: a slip from rest runs backwards past −v_ε (v_t·r = −v_ε);
+- ``turn`` (2-D): the slip velocity turned 60° away from r, v_t·r − ½|v_t| + v_ε = 0
+  (r is refreshed, no mode change);
+- ``slip``: a sticking contact's friction reaches the cone, g = μ_s F − |F_f| = 0
+  (:class:`SlipWatch`, which also sees inside a step).
+
+What happens at each event is decided in :mod:`contactdyn.transitions`. The storm guard
+(:class:`EventLog`): more than ``storm_count`` events within ``storm_window`` seconds, or
+more than ``max_events`` in the run, stop with a :class:`SimulationError` naming them.
+
+The functions read either :meth:`System.evaluate` (:func:`segment_events`) or, when the
+mode is compiled, the plan's values at the same states (same functions, same order).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from .contact import ContactMode
+from .dynamics import Evaluation
+from .errors import SimulationError
+from .friction import slip_velocity
+from .phases import Phase
+from .rhsplan import ModePlan
+from .system import System
+
+__all__ = ["TOUCH_TOL", "terminal_event", "EvaluationCache", "SlipCache", "SlipWatch", "StepBudget",
+           "segment_events", "EventLog", "start_storm_cause"]
+
+#: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
+#: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
+#: zero at the start misses a re-touch that lifts and returns within one step, and the tip then
+#: passed through the surface unseen (case 2's writer, just after its impact).
+TOUCH_TOL = 1e-13  # well above rounding of positions (~1e-16 m per metre)
+
+
+class EventLog:
+    """The run's event list, with the storm guard: too many events, or too many too close together."""
+
+    def __init__(self, scene_name: str, solver, stats: dict[str, Any]):
+        self.scene_name, self.solver, self.stats = scene_name, solver, stats
+        self.events: list[dict[str, Any]] = []
+        self.recent: deque[float] = deque(maxlen=solver.storm_count)  #: times [s] of the latest events
+
+    def log(self, t: float, kind: str, name: str, check_storm: bool = True, **info) -> None:
+        """Record an event at t [s]; with ``check_storm`` count it and stop a storm."""
+        self.events.append({"t": t, "kind": kind, "name": name, **info})
+        if not check_storm:
+            return
+        self.stats["events"] += 1
+        self.recent.append(t)
+        if self.stats["events"] > self.solver.max_events:
+            raise SimulationError(f"{self.scene_name}: more than {self.solver.max_events} events by t = {t:.9g} s "
+                                  f"(last: {kind} on {name}); " + (start_storm_cause(self.events, name) or
+                                                                   "raise solver.max_events if this is expected"))
+        if len(self.recent) == self.recent.maxlen and self.recent[-1] - self.recent[0] <= self.solver.storm_window:
+            kinds = ", ".join(f"{e['kind']}:{e['name']}" for e in self.events[-5:])
+            raise SimulationError(
+                f"{self.scene_name}: event storm: {self.recent.maxlen} events within "
+                f"{self.recent[-1] - self.recent[0]:.3g} s at t = {t:.9g} s (last: {kinds}); " +
+                (start_storm_cause(self.events, name) or "the contact chatters (grazing or inconsistent "
+                                                          "stick/slip); see solver.storm_count / storm_window"))
+
+
+START_STORM = 1e-3  #: [s] a storm whose contact events began this early started with the run
+
+
+def start_storm_cause(events: list[dict], contact: str) -> str | None:
+    """The likely cause when the events flooding the run are on one contact since t ≈ 0, else None."""
+    on_contact = [e for e in events if e["kind"] != "phase"]
+    if not on_contact or on_contact[0]["t"] > START_STORM or \
+            sum(e["name"] == contact for e in on_contact) < 0.9 * len(on_contact):
+        return None
+    return (f"the events on contact {contact!r} began at t = {on_contact[0]['t']:.3g} s, with the run: the start "
+            "posture does not suit the contact (initial penetration, the tip on the surface while moving or "
+            "pulling away, a posture near a singularity); check robot.tip0, robot.q0 / q_seed and the contact's "
+            "point, and `contactdyn run --verbose` for the posture found")
+
+
+class EvaluationCache:
+    """Evaluations shared by the event functions of one step (they see the same states)."""
+
+    def __init__(self, system: System, modes: list[ContactMode], phase: Phase):
+        self.system, self.modes, self.phase = system, modes, phase
+        self.key: tuple[float, bytes] | None = None
+        self.value: Evaluation | None = None
+
+    def __call__(self, t: float, x: np.ndarray) -> Evaluation:
+        key = (t, x.tobytes())
+        if key != self.key:
+            self.value = self.system.evaluate(t, x, self.modes, self.phase)
+            self.key = key
+        return self.value  # type: ignore[return-value]
+
+
+class SlipCache:
+    """Slip velocities [m/s] of the sliding contacts at (t, x): kinematics only, no linear solve."""
+
+    def __init__(self, system: System, names: list[str]):
+        self.system = system
+        self.contacts = [c for c in system.contacts if c.name in names]
+        self.key: tuple[float, bytes] | None = None
+        self.value: dict[str, np.ndarray] = {}
+
+    def __call__(self, t: float, x: np.ndarray) -> dict[str, np.ndarray]:
+        key = (t, x.tobytes())
+        if key != self.key:
+            system, nQ, nv = self.system, self.system.nQ, self.system.nv
+            system.robot.update(x[:nv], x[nQ:nQ + nv])
+            self.value = {c.name: slip_velocity(system, c, system.kinematics(c, x)) for c in self.contacts}
+            self.key = key
+        return self.value
+
+
+def terminal_event(fn, kind: str, contact: str):
+    """Mark ``fn`` a terminal event of ``kind`` on ``contact`` that fires when it falls through zero."""
+    fn.terminal = True
+    fn.direction = -1
+    fn.kind, fn.contact = kind, contact
+    return fn
+
+
+class SlipWatch:
+    """The ``slip`` event of a stuck contact, g = μ_s F − |F_f|, which also sees inside a step.
+
+    ``solve_ivp`` tests events only at step ends, and a stuck robot's state may hardly move:
+    the friction a push needs can leave the cone and come back within one step unseen. The
+    right-hand side reports g at every Runge–Kutta stage (:meth:`sample`); if a stage inside
+    the step just taken saw g < 0 while the step end did not, the event reports a crossing,
+    and while ``solve_ivp`` locates it on the dense output, g is held negative from that
+    stage's time on, so the root found is the first crossing. A false alarm (a stage state
+    off the final solution) is caught by the handler, which keeps the stick.
+    """
+
+    terminal = True
+    direction = -1
+
+    def __init__(self, value, name: str, mu_s: float):
+        self.value, self.contact, self.mu_s = value, name, mu_s  # value(t, x): g at a state
+        self.kind = "slip"
+        self.t_end = -math.inf  #: last step end seen [s]
+        self.latch = math.inf  #: from this time on g is held negative [s]
+        self.samples: list[tuple[float, float]] = []  #: (t, g) at the stages since the last step end
+
+    def g(self, ev: Evaluation) -> float:
+        return self.mu_s * ev.normal_force[self.contact] - float(np.linalg.norm(ev.friction[self.contact]))
+
+    def sample(self, t: float, g: float) -> None:
+        self.samples.append((t, g))
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        g = self.value(t, x)
+        if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
+            t_old, self.t_end = self.t_end, t
+            hidden = [ts for ts, gs in self.samples if t_old < ts < t and gs < 0.0]
+            self.samples = [(ts, gs) for ts, gs in self.samples if ts > t]
+            if g > 0.0 and hidden:
+                self.latch = min(hidden)
+                return -1.0
+            return g
+        return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
+
+
+class StepBudget:
+    """``auto``'s budget: a terminal event at the end of DOP853's ``budget``-th step (:mod:`contactdyn.integrators`).
+
+    ``solve_ivp`` calls events once per step end with increasing t (and, while locating a
+    root, inside the last step): the function is +1 before the step end where the budget
+    ran out and −1 from there on, so the segment ends exactly there.
+    """
+
+    terminal = True
+    direction = -1
+    kind = "budget"
+    contact = ""
+
+    def __init__(self, budget: int):
+        self.budget, self.count = budget, 0
+        self.t_end, self.t_fire = -math.inf, math.inf
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        if t > self.t_end:
+            self.t_end = t
+            self.count += 1
+            if self.count > self.budget and self.t_fire == math.inf:
+                self.t_fire = t
+        return -1.0 if t >= self.t_fire else 1.0
+
+
+def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
+                   plan: ModePlan | None = None):
+    """The event functions of one segment, and the right-hand side that feeds their stage watches."""
+    if plan is not None:
+        return _plan_events(system, modes, plan, t0, x0)
+    cache = EvaluationCache(system, modes, phase)
+    slip = SlipCache(system, [c.name for c, m in zip(system.contacts, modes, strict=True)
+                               if m.touching and not m.stuck and c.friction is not None and len(c.tangents)])
+    out: list = []
+    watches: list[SlipWatch] = []
+    for c, mode in zip(system.contacts, modes, strict=True):
+        name = c.name
+        if not mode.touching:
+            floor = min(cache(t0, x0).gap[name], 0.0) - TOUCH_TOL  # [m] never zero at the start
+            out.append(terminal_event(lambda t, x, n=name, g0=floor: cache(t, x).gap[n] - g0, "touch", name))
+            continue
+        if not c.spec.bonded:
+            out.append(terminal_event(lambda t, x, n=name: cache(t, x).normal_force[n], "separate", name))
+        if c.friction is None or not len(c.tangents):
+            continue
+        fr, band = c.friction, system.slip_band
+        if mode.stuck:
+            watch = SlipWatch(None, name, fr.mu_s)
+            watch.value = lambda t, x, w=watch: w.g(cache(t, x))
+            watches.append(watch)
+            out.append(watches[-1])
+            continue
+        r = np.asarray(mode.slip, float)
+        out.append(terminal_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r) - b, "stop", name))
+        out.append(terminal_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r) + b, "reverse", name))
+        if len(r) == 2:
+            out.append(terminal_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r)
+                              - 0.5 * float(np.linalg.norm(slip(t, x)[n])) + b, "turn", name))
+    out += system.limits.events(phase.limits, x0, lambda t, x: cache(t, x).limit_torque)
+    if not watches:
+        return out, system.rhs(modes, phase)
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        ev = system.evaluate(t, x, modes, phase)
+        for w in watches:
+            w.sample(t, w.g(ev))
+        return ev.xdot
+
+    return out, rhs
+
+
+def _plan_events(system: System, modes: list[ContactMode], plan: ModePlan, t0: float, x0: np.ndarray):
+    """:func:`segment_events` on a compiled plan's values (same functions, same order)."""
+    out: list = []
+    watches: list[SlipWatch] = []
+    for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
+        name = c.name
+        if not mode.touching:
+            floor = min(plan.gap(ci, t0, x0), 0.0) - TOUCH_TOL
+            out.append(terminal_event(lambda t, x, i=ci, g0=floor: plan.gap(i, t, x) - g0, "touch", name))
+            continue
+        if not c.spec.bonded:
+            out.append(terminal_event(lambda t, x, i=ci: plan.normal_force(i, t, x), "separate", name))
+        if c.friction is None or not len(c.tangents):
+            continue
+        fr, band = c.friction, system.slip_band
+        if mode.stuck:
+            def value(t, x, i=ci, mu=fr.mu_s):
+                F_f = plan.stick_force(i, t, x)
+                return mu * plan.normal_force(i, t, x) - math.sqrt(float(F_f @ F_f))
+
+            watches.append(SlipWatch(value, name, fr.mu_s))
+            out.append(watches[-1])
+            continue
+        r = np.asarray(mode.slip, float)
+        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r) - b, "stop", name))
+        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r) + b, "reverse", name))
+        if len(r) == 2:
+            out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r)
+                              - 0.5 * float(np.linalg.norm(plan.slip(i, t, x))) + b, "turn", name))
+    out += system.limits.events((), x0)  # (a plan has no joint pressing on a limit: plans decline those)
+    if not watches:
+        return out, plan.rhs
+    fun = plan.rhs
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        xd = fun(t, x)
+        for w in watches:
+            w.sample(t, w.value(t, x))  # the plan's last call: no second solve
+        return xd
+
+    return out, rhs

@@ -1,0 +1,234 @@
+"""The hybrid loop: smooth phase, event, mode transition (impact map), next smooth phase.
+
+A contact task (Part II's description) alternates smooth motions, in which the contact
+modes and the task phase are fixed, and instants at which they change. The loop:
+
+1. integrate the smooth phase from (t, x) with error control (``solve_ivp``; the method
+   from :mod:`contactdyn.integrators`) on the mode's right-hand side — the compiled plan
+   (:mod:`contactdyn.rhsplan`) where it represents the mode, else
+   :meth:`System.evaluate` — with the mode's events (:mod:`contactdyn.events`);
+2. at the first event, apply the transition (:mod:`contactdyn.transitions`): an impact,
+   a separation, a stick or a slip; or, at a phase's end, start the next phase;
+3. repeat until the duration; then sample the segments into channels
+   (:mod:`contactdyn.channels`).
+
+Integrator choice per segment: the scene's ``solver.method``; ``auto`` runs DOP853 with a
+step budget and switches to Radau for a segment whose steps are stability-bound; a 2-D
+slip launching from rest runs on LSODA (its direction relaxes at a rate ∝ 1/|v_t|, stiff
+for an explicit method) until the next event. After a friction event the next segment
+starts with the step size the solver had reached. An integration failure reports what the
+state says: a singular contact system or stiffness.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .channels import Segment, output_grid, sample_segments
+from .contact import ContactMode
+from .errors import SceneError, SimulationError
+from .events import EventLog, StepBudget, segment_events
+from .integrators import (
+    EXPLICIT,
+    FIXED,
+    IMPLICIT,
+    STABILITY_RADIUS,
+    STEP_BUDGET,
+    FiniteDifferenceJacobian,
+    jacobian_eigenvalues,
+    solver_class,
+    stability_bound,
+)
+from .limits import rate_limit_report
+from .phases import Phase
+from .result import Result
+from .rhsplan import ModePlan, cached_plan
+from .system import System
+from .transitions import Transitions
+
+__all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
+
+#: events after which the next segment starts with the step size the solver had reached (friction
+#: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
+RESUME_STEP = ("stop", "reverse", "slip", "turn")
+LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest (see HybridRun._method)
+
+
+class HybridRun:
+    """One run of a system: the loop, its counters, its segments and events."""
+
+    def __init__(self, system: System):
+        self.system = system
+        self.scene = system.scene
+        self.solver = system.scene.solver
+        self.segments: list[Segment] = []
+        self.impacts: list[dict[str, Any]] = []
+        self.next_step: float | None = None  #: [s] first step of the next segment (None: solver's choice)
+        if self.solver.method in FIXED and not math.isfinite(self.solver.max_step):
+            raise SceneError("solver.max_step", f"the step [s] of the fixed-step method {self.solver.method}",
+                             "no max_step", self.scene.file)
+        self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0,
+                      "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
+        self.log = EventLog(self.scene.name, self.solver, self.stats)
+        self.events = self.log.events
+        self.transitions = Transitions(system, self.log, self.stats, self.impacts)
+        self.plans: dict[tuple, ModePlan] = {}
+        self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
+        self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
+
+    def _plan(self, modes: list[ContactMode], phase: Phase) -> ModePlan:
+        """The compiled right-hand side of (modes, phase), built once per system and kept."""
+        key = (tuple(modes), id(phase))
+        plan = self.plans.get(key)
+        if plan is None:
+            plan = self.plans[key] = cached_plan(self.system, modes, phase)
+        if not plan.ok:
+            self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
+        return plan
+
+    def start(self) -> tuple[np.ndarray, list[ContactMode], Phase]:
+        """Initial state, consistent modes and the first phase at t = 0."""
+        x, modes = self.system.initial_state()
+        phase = self.system.start_phase(0, 0.0, x, None)
+        x, modes = self.transitions.consistent(0.0, x, modes, phase)
+        return x, modes, phase
+
+    # ---- main loop -------------------------------------------------------------------
+    def run(self, wall0: float) -> Result:
+        """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
+        try:
+            return self._run(wall0)
+        except (np.linalg.LinAlgError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
+            t = self.segments[-1].t1 if self.segments else 0.0
+            raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
+                                  f"({type(exc).__name__}: {exc}); check the scene's magnitudes "
+                                  "(initial velocities, gains, stiffness)") from None
+
+    def _run(self, wall0: float) -> Result:
+        T = self.scene.duration
+        x, modes, phase = self.start()
+        t = 0.0
+        while t < T:
+            until = phase.spec.until
+            t_end = min(T, until) if isinstance(until, float) else T
+            if t_end <= t:
+                phase = self._next_phase(phase, t, x)
+                continue
+            sol, events, fun = self._segment(t, t_end, x, modes, phase)
+            t, x = float(sol.t[-1]), sol.y[:, -1].copy()
+            self.next_step = None
+            if sol.status == 1:
+                fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
+                if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
+                    self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
+                    continue
+                self.auto_state = None
+                if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
+                    self.next_step = float(sol.t[-2] - sol.t[-3])
+                x, modes, phase = self.transitions.handle(t, x, modes, phase, fired[0])
+            elif t < T:
+                self.auto_state = None
+                phase = self._next_phase(phase, t, x)
+        return self._result(time.perf_counter() - wall0)
+
+    def _segment(self, t: float, t_end: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
+        """Integrate one smooth phase from t towards t_end [s]: (solution, its events, its right-hand side)."""
+        system = self.system
+        h0 = min(self.next_step, t_end - t) if self.next_step else None
+        plan = self._plan(modes, phase)
+        fun = plan.rhs if plan.ok else system.rhs(modes, phase)
+        scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or "DOP853")
+        for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
+            events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
+            if self.solver.method == "auto" and method == "DOP853" and self.auto_state is None:
+                events = [*events, StepBudget(STEP_BUDGET)]
+            jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
+                sol = solve_ivp(rhs, (t, t_end), x, method=solver_class(method),
+                                rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
+                                events=events or None, dense_output=True, first_step=h0,
+                                **({"jac": jac} if jac else {}))
+            self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
+            if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
+                break  # else a failed launch method: retry with the scene's
+        by = self.stats.setdefault("segments_by_method", {})
+        by[method] = by.get(method, 0) + 1
+        self.stats["steps"] += len(sol.t) - 1
+        if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
+            why = sol.message if sol.status < 0 else "the state is not finite"  # never "successfully ..."
+            raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s "
+                                  f"({method}): {why}{self._diagnose(sol, plan, fun, method)}")
+        self.segments.append(Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
+        self.stats["segments"] += 1
+        return sol, events, fun
+
+    def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
+        """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
+        stability-bound by a decaying mode, else DOP853 without a budget (see integrators)."""
+        stiff, lam = stability_bound(fun, t, x, h, span)
+        self.stats["rhs_evals"] += len(x) + 1
+        self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
+        self.auto_state = "Radau" if stiff else "DOP853"
+        if stiff:
+            self.stats["auto_switches"] = self.stats.get("auto_switches", 0) + 1
+        else:
+            self.next_step = h
+
+    def _diagnose(self, sol, plan: ModePlan, fun, method: str) -> str:
+        """Why a segment failed, as far as the state at the failure says."""
+        t, x = float(sol.t[-1]), sol.y[:, -1]
+        if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
+            return ""
+        if plan.ok:
+            cond = plan.kkt_condition(t, x)
+            if cond > 1e12:
+                return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
+                        f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "
+                        "arm; give the contact a compliant normal model or avoid the pose")
+        lam = jacobian_eigenvalues(fun, t, x)
+        if len(lam) and method in EXPLICIT:
+            fast = float(np.abs(lam).max())
+            return (f"; fastest mode |λ| = {fast:.3g} 1/s (an explicit method needs steps below "
+                    f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = \"Radau\" or \"auto\"")
+        return ""
+
+    def _method(self, modes: list[ContactMode], method: str) -> str:
+        """The segment's method, but a stiff-capable one while a 2-D slip launches from rest.
+
+        Near v_t = 0 the direction of 2-D Coulomb friction relaxes at a rate ∝ μ F/(m |v_t|)
+        (m: the arm's smallest tangential inertia): stiff for an explicit method until the
+        slip has grown, worst when the push is just at the cone (thousands of tiny steps).
+        LSODA switches to BDF while that lasts; the segment ends at the next event.
+        """
+        if method not in IMPLICIT and any(m.from_rest and len(m.slip) == 2 and not m.stuck for m in modes):
+            return LAUNCH_METHOD
+        return method
+
+    def _next_phase(self, phase: Phase, t: float, x: np.ndarray) -> Phase:
+        nxt = phase.index + 1
+        if nxt >= len(self.scene.phases):
+            return replace(phase, spec=replace(phase.spec, until=math.inf))  # the last phase runs on
+        self.log.log(t, "phase", self.scene.phases[nxt].name, check_storm=False)
+        return self.system.start_phase(nxt, t, x, phase)
+
+    # ---- output ---------------------------------------------------------------------
+    def _result(self, wall: float) -> Result:
+        system, scene = self.system, self.scene
+        T = scene.duration
+        channels = sample_segments(system, self.segments, output_grid(T, self.solver.output_rate), self.stats)
+        rate_stats, rate_warnings = rate_limit_report(system.robot, channels["t"], channels["v"], channels["tau"])
+        stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
+                     method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
+                     compiled_modes=sum(p.ok for p in self.plans.values()),
+                     fallback_modes=dict(self.fallbacks), limits=rate_stats)
+        meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
+                "contacts": [c.name for c in system.contacts],
+                "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
+                "name": scene.name, "duration": T}
+        return Result(channels, self.events, self.impacts, stats, scene.document, meta)

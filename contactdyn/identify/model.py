@@ -1,0 +1,139 @@
+"""The fitted model: full simulations at given parameter values, read at the measured times.
+
+Every evaluation is a whole event-driven run of the scene (``simulate``) with the fit's
+parameters and solver settings set as overrides; a channel is read at the data's sample
+times by linear interpolation of the run's output grid (the fit runs at an output rate at
+least the data's sampling rate, so a log sampled on the same grid is read exactly).
+Runs go to a process pool (``workers`` > 0) or run in this process.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import ContactdynError, SceneError
+from .data import Measurements
+from .params import Parameter
+
+__all__ = ["FitModel", "FitSettings", "Failure", "predict", "check_columns"]
+
+MAX_OUTPUT_RATE = 1e5  #: [Hz] cap of the fit runs' output rate
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    rtol: float = 1e-10  #: relative tolerance of every fit run (well below a 1e-3 noise level)
+    atol: float = 1e-12  #: absolute tolerance of every fit run
+    workers: int = 0  #: pool processes for the Jacobian's runs (0: this process)
+
+
+@dataclass(frozen=True)
+class Failure:
+    """A run that failed inside the fit: its parameter values and the error."""
+
+    values: dict[str, float]
+    error: str
+
+
+def predict(document: dict[str, Any], file: str | None, overrides: dict[str, Any],
+            targets: list[tuple[str, int | None, np.ndarray]]) -> list[np.ndarray] | str:
+    """Simulate with ``overrides``; each (channel, index, times) read at its times, or the error text.
+
+    Runs in a pool worker: only plain data goes in and out.
+    """
+    from ..scene import parse_scene
+    from ..simulate import simulate
+    from ..sweep import NUMERICAL
+
+    try:
+        result = simulate(parse_scene(document, overrides, file))
+    except (ContactdynError, *NUMERICAL) as exc:
+        return f"{type(exc).__name__}: {exc}"
+    return [read_channel(result.channels, channel, index, t) for channel, index, t in targets]
+
+
+def read_channel(channels: dict[str, np.ndarray], channel: str, index: int | None, t: np.ndarray) -> np.ndarray:
+    values = channels[channel] if index is None else channels[channel][:, index]
+    return np.interp(t, channels["t"], values)
+
+
+def check_columns(channels: dict[str, np.ndarray], data: Measurements) -> None:
+    """Each column must name a scalar channel or a component of a vector channel of the run."""
+    import difflib
+
+    for col in data.columns:
+        if col.channel not in channels:
+            close = difflib.get_close_matches(col.channel, list(channels), n=3)
+            hint = f" (close: {', '.join(close)})" if close else ""
+            raise SceneError(col.name, f"a channel of the run{hint}; channels: {', '.join(sorted(channels))}",
+                             "no such channel", data.file)
+        shape = channels[col.channel].shape
+        if col.index is None and len(shape) > 1:
+            raise SceneError(col.name, f"a component {col.channel}[0] ... {col.channel}[{shape[1] - 1}] "
+                             "of this vector channel", col.name, data.file)
+        if col.index is not None and (len(shape) == 1 or col.index >= shape[1]):
+            size = "a scalar channel (no [i])" if len(shape) == 1 else f"an index < {shape[1]}"
+            raise SceneError(col.name, size, col.index, data.file)
+
+
+@dataclass
+class FitModel:
+    """Weighted residuals r = (run − data)/σ per column, from runs at solver coordinates z."""
+
+    document: dict[str, Any]
+    file: str | None
+    params: list[Parameter]
+    data: Measurements
+    settings: FitSettings
+    pool: Any = None  #: a concurrent.futures executor, or None (this process)
+    duration: float | None = None  #: [s] simulate only this long (a continuation stage; None: the scene's)
+    runs: int = 0  #: simulations started
+    run_wall_s: float = 0.0  #: [s] wall time spent waiting for runs
+    failures: list[Failure] = field(default_factory=list)
+
+    @property
+    def fixed(self) -> dict[str, Any]:
+        """Overrides every fit run gets: tight tolerances and an output grid at least the data's rate."""
+        solver = self.document.get("solver", {})
+        rate = float(solver.get("output_rate", 1000.0)) if isinstance(solver, dict) else 1000.0
+        spacing = self.data.sample_spacing()
+        if math.isfinite(spacing):
+            rate = min(max(rate, 1.0 / spacing), MAX_OUTPUT_RATE)
+        fixed = {"solver.rtol": self.settings.rtol, "solver.atol": self.settings.atol, "solver.output_rate": rate}
+        if self.duration is None:
+            return fixed
+        return {**fixed, "duration": math.ceil(self.duration * rate - 1e-9) / rate}  # whole output steps
+
+    def values(self, z: np.ndarray) -> dict[str, float]:
+        return {p.key: p.value(float(zi)) for p, zi in zip(self.params, z, strict=True)}
+
+    def targets(self) -> list[tuple[str, int | None, np.ndarray]]:
+        return [(c.channel, c.index, c.t) for c in self.data.columns]
+
+    def weighted(self, predictions: list[np.ndarray]) -> np.ndarray:
+        return np.concatenate([(p - c.y) / c.sigma for p, c in zip(predictions, self.data.columns, strict=True)])
+
+    def evaluate(self, points: list[np.ndarray]) -> list[np.ndarray | None]:
+        """Weighted residuals at each point (None where the run failed; the failure is recorded)."""
+        fixed, targets = self.fixed, self.targets()
+        jobs = [(self.document, self.file, {**fixed, **self.values(z)}, targets) for z in points]
+        wall0 = time.perf_counter()
+        if self.pool is None:
+            outs = [predict(*job) for job in jobs]
+        else:
+            outs = [f.result() for f in [self.pool.submit(predict, *job) for job in jobs]]
+        self.run_wall_s += time.perf_counter() - wall0
+        self.runs += len(jobs)
+        residuals: list[np.ndarray | None] = []
+        for z, out in zip(points, outs, strict=True):
+            if isinstance(out, str):
+                self.failures.append(Failure(self.values(z), out))
+                residuals.append(None)
+            else:
+                residuals.append(self.weighted(out))
+        return residuals

@@ -1,0 +1,129 @@
+"""The impact map: plastic impacts at touch, sliding or jamming, and velocity projection.
+
+When a contact whose touching makes a constraint row (rigid, or a chain whose surface
+nodes are both solid) touches, velocities jump. Over Δt → 0 the momentum law
+(eqs 27–31, 35–38) gives
+
+    M (Q̇⁺ − Q̇⁻) = Cᵀ Λ,   G Q̇⁺ = 0
+
+with every bond, stick and the new contact held at velocity level (Λ the impulses
+[N·s], M and the rows as in :mod:`contactdyn.constraints`). With friction:
+
+- sliding impact (eqs 27–29): the tip slides in its pre-impact slip direction d, the
+  friction impulse is −μ_k FΔt d, folded into the normal column as at acceleration level;
+- jamming (eqs 30–31): if the tangential velocity after the impact points against d the
+  sliding assumption is wrong: zero tangential velocity, F_fΔt an unknown; if holding it
+  needs more than μ_s FΔt (eqs 35–38) the tip slides where that impulse pushes.
+
+The energy lost [J] is ½ Q̇⁻ᵀ M Q̇⁻ − ½ Q̇⁺ᵀ M Q̇⁺ ≥ 0. :func:`project_velocity` is the same
+law without a new contact: the smallest kinetic-energy-norm change that keeps every
+active constraint (used when a slide stops inside the stick band).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .constraints import impulse_solve, velocity_rows
+from .contact import Contact, ContactMode
+from .friction import CONE_TOL, FORCE_ABS_TOL, slip_velocity
+
+__all__ = ["Impact", "impact", "project_velocity"]
+
+
+@dataclass
+class Impact:
+    """A plastic impact at touch: impulses [N·s] and velocities before and after."""
+
+    t: float
+    contact: str
+    normal_impulse: float  #: FΔt
+    friction_impulse: np.ndarray  #: F_fΔt per tangent
+    jammed: bool
+    energy_loss: float  #: [J]
+    v_before: np.ndarray  #: Q̇⁻
+    v_after: np.ndarray  #: Q̇⁺
+    slip_before: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
+    slip_after: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
+    direction: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: sliding direction d (0: none)
+
+
+def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact,
+           limits: tuple = ()) -> tuple[np.ndarray, Impact]:
+    """Velocity jump when ``contact`` touches (its mode already says touching).
+
+    Momentum law over Δt → 0 (eqs 27–31, 35–38): M(Q̇⁺ − Q̇⁻) = Cᵀ Λ with every bond,
+    stick and the new contact holding at velocity level, G Q̇⁺ = 0. With friction the
+    tip first slides in its pre-impact slip direction d (friction impulse −μ_k FΔt d,
+    the normal column tilted as in eq. 27). If the tangential velocity after the
+    impact points against d the assumption is wrong and the impact jams (eqs 30–31):
+    zero tangential velocity, friction impulse F_fΔt an unknown. A tip that arrives
+    without slip (|v_t| within the stick band) is tried jammed first; if holding it
+    needs more than μ_s FΔt it slides where that impulse pushes.
+    """
+    nQ, nv = system.nQ, system.nv
+    q, v = x[:nv], x[nQ:nQ + nv]
+    system.robot.update(q, v)
+    qd_minus = x[nQ:2 * nQ].copy()
+    M = system.mass_matrix()
+    i_c = system.contacts.index(contact)
+    kin = system.kinematics(contact, x)
+    fr, k = contact.friction, len(contact.tangents)
+    vt_minus = slip_velocity(system, contact, kin, qd_minus) if k else np.zeros(0)
+
+    def solve(slide=None, jam=False):
+        rows = velocity_rows(system, x, modes, slide=(contact, slide) if slide is not None else None,
+                             jam=contact if jam else None, limits=limits)
+        z, _ = impulse_solve(system, M, rows, qd_minus)
+        lam = {m: z[nQ + j] for j, m in enumerate(rows.meta)}
+        P_n = float(lam[(contact.name, "n", 0)])
+        P_t = np.array([lam.get((contact.name, "t", i), 0.0) for i in range(k)])
+        return z[:nQ], P_n, P_t
+
+    jammed = False
+    d = np.zeros(k)
+    if fr is None or not k or modes[i_c].stuck:
+        qd_plus, P_n, P_t = solve()
+    else:
+        speed = float(np.linalg.norm(vt_minus))
+        if speed > system.slip_band:
+            d = vt_minus / speed
+            qd_plus, P_n, _ = solve(slide=d)
+            P_t = -fr.mu_k * P_n * d
+            jammed = float(slip_velocity(system, contact, kin, qd_plus) @ d) < 0.0
+        else:
+            jammed = True
+        if jammed:
+            qd_plus, P_n, P_t = solve(jam=True)
+            if float(np.linalg.norm(P_t)) > fr.mu_s * P_n * (1.0 + CONE_TOL) + FORCE_ABS_TOL:
+                # holding needs more than the cone gives: slide where the impulse pushes
+                d = -P_t / float(np.linalg.norm(P_t))
+                qd_plus, P_n, _ = solve(slide=d)
+                P_t = -fr.mu_k * P_n * d
+                jammed = False
+    x_new = x.copy()
+    x_new[nQ:2 * nQ] = qd_plus
+    energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
+    vt_plus = slip_velocity(system, contact, kin, qd_plus) if k else np.zeros(0)
+    return x_new, Impact(t, contact.name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d)
+
+
+def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tuple = ()) -> np.ndarray:
+    """x with Q̇ moved onto every active velocity constraint (bonds, rigid contacts, sticks).
+
+    The smallest change in the kinetic-energy norm, M ΔQ̇ = Gᵀ Λ, G Q̇⁺ = 0: an impulse
+    that removes what the constraints forbid (used when a slide stops inside the stick
+    band, where the residual slip is at most ``solver.stick_velocity``).
+    """
+    nQ, nv = system.nQ, system.nv
+    system.robot.update(x[:nv], x[nQ:nQ + nv])
+    rows = velocity_rows(system, x, modes, limits=limits)
+    if not rows:
+        return x
+    M = system.mass_matrix()
+    z, _ = impulse_solve(system, M, rows, x[nQ:2 * nQ])
+    x_new = x.copy()
+    x_new[nQ:2 * nQ] = z[:nQ]
+    return x_new

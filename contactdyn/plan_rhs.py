@@ -1,0 +1,240 @@
+"""The compiled right-hand side's call: Pinocchio's terms, one product, one small solve.
+
+Per call at (t, x) in the mode a :class:`~contactdyn.rhsplan.ModePlan` was built for:
+
+1. φ = [H, J_f, J̇q̇_f (per frame f), h, (g), e] from Pinocchio (``computeAllTerms``) and
+   the time terms of the reference and force ramps;
+2. y = P φ = [A, b, o]: the KKT matrix, its right-hand side and the affine outputs o
+   (:mod:`contactdyn.plan_kkt`, :mod:`contactdyn.plan_probe`);
+3. what is not affine: Coulomb friction −μ max(F, 0) d with 2-D directions d, the column
+   tilt of 2-D sliding, a controller without an affine tip-force law;
+4. z = A⁻¹ b = [Q̈, λ, w]; ẋ = [Q̇, Q̈, ẏ] with the impulse states' rates ∫F, ∫F_f.
+
+The last four calls' (t, x, z, o) stay in ``plan.ring`` so the event functions read them
+without a second solve.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+from .controllers import ControlInput
+from .trajectory import profile
+
+__all__ = ["make_rhs", "controller_call", "impulse_terms", "LWA"]
+
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+try:  # numpy's gufunc without the Python wrapper (see constraints.solve_linear)
+    from numpy.linalg import _umath_linalg
+
+    _solve1 = _umath_linalg.solve1
+except (ImportError, AttributeError):  # pragma: no cover
+    _solve1 = np.linalg.solve
+
+
+def make_rhs(plan):
+    """Build ``plan.time_terms``, ``plan.phi_at`` and return the right-hand side f(t, x) of the plan's mode."""
+    s = plan.system
+    nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
+    m2 = m * m
+    P = plan.P
+    o_y = slice(m2 + m + plan.o_y.start, m2 + m + plan.o_y.stop)
+    with_y = s.n > 2 * nQ
+    coulomb = [(m2 + m + i_fn, mu, T, consts, j, dT, dC, ci) for ci, i_fn, mu, T, consts, j, dT, dC
+               in plan.coulomb_terms]
+    dyn_tilt = plan.dyn_tilt
+    generic_ctl = not plan.affine_ctl
+    ctl_call = controller_call(plan) if generic_ctl else None
+    z_slice = plan.z_slice
+    solve = _solve1
+    cat = np.concatenate
+    isfinite = math.isfinite
+    ring = plan.ring
+    A0 = plan.A0
+    w0 = nQ + nr
+    time_terms, tv = _time_terms(plan)
+    phi_and_jacobians = _phi_function(plan, time_terms)
+    impulse_rates = _impulse_rates(plan)
+    plan.time_terms = time_terms
+    plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0]
+
+    def rhs(t, x):
+        phi, Js = phi_and_jacobians(t, x, time_terms(t, tv))
+        y = P.dot(phi)
+        A = y[:m2].reshape(m, m)
+        b = y[m2:m2 + m]
+        for i_fn, mu, T, consts, j, dT, dC, ci in coulomb:
+            F_n = y[i_fn]
+            if F_n > 0.0:
+                if dT is None:
+                    d = plan._direction(ci, y[m2 + m:])
+                    dT, dC = d.dot(T), d.dot(consts)
+                b[w0 + 3 * j:w0 + 3 * j + 3] -= (mu * F_n) * dT
+                if nQ > nv:
+                    b[nv:nQ] -= (mu * F_n) * dC
+        for r, ci, mu, T, consts, j in dyn_tilt:
+            d = plan._direction(ci, y[m2 + m:])
+            A[:nv, nQ + r] += mu * Js[j].T.dot(d.dot(T))
+            A[nv:nQ, nQ + r] = A0[nv:nQ, nQ + r] + mu * d.dot(consts)
+        zdot = None
+        if generic_ctl:
+            tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, y[m2 + m:])
+            b[:nv] += tau
+        z = solve(A, b)
+        if not isfinite(z.dot(z)):
+            z = plan._singular(A, b)
+        if with_y:
+            xd = cat((x[nQ:2 * nQ], z[:nQ], y[o_y]))
+            if zdot is not None:
+                xd[z_slice] = zdot
+            impulse_rates(xd, z, y)
+        else:
+            xd = cat((x[nQ:2 * nQ], z[:nQ]))
+        ring[0] = ring[1]
+        ring[1] = ring[2]
+        ring[2] = ring[3]
+        ring[3] = (t, x, z, y[m2 + m:])
+        return xd
+
+    return rhs
+
+
+def _time_terms(plan):
+    """(time_terms(t, out), its default buffer): the reference's and ramps' time terms of e, and the trailing 1."""
+    tv = np.zeros(plan.ne - plan.e_frame[-1] - 6)  # time terms and the trailing 1
+    tv[-1] = 1.0
+    base = plan.e_frame[-1] + 6
+    time_moves = [(slot - base, m_.kind, m_.start, m_.duration, m_.accel_fraction) for slot, m_ in plan.time_moves]
+    time_ramps = [(slot - base, ramp.at) for slot, ramp, _ in plan.time_ramps]
+
+    def time_terms(t, out=tv):
+        """The time terms of e at t (and the trailing 1), written into ``out``."""
+        for slot, kind, start, duration, af in time_moves:
+            sg, dsg, _ = profile(kind, (t - start) / duration, af)
+            out[slot] = sg
+            out[slot + 1] = dsg / duration
+        for slot, at in time_ramps:
+            out[slot] = at(t)[0]
+        return out
+
+    return time_terms, tv
+
+
+def _phi_function(plan, time_terms):
+    """phi(t, x, tv) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x."""
+    s = plan.system
+    model, data = s.robot.model, s.robot.data
+    nQ, nv = s.nQ, s.nv
+    fids = plan.fids
+    single = len(fids) == 1
+    fid0 = fids[0]
+    compute = pin.computeAllTerms
+    placement, jacobian, accel = pin.updateFramePlacement, pin.getFrameJacobian, pin.getFrameClassicalAcceleration
+    lwa = LWA
+    cat = np.concatenate
+    with_g = plan.with_g
+
+    def phi(t, x, tv=None):
+        q = x[:nv]
+        v = x[nQ:nQ + nv]
+        compute(model, data, q, v)
+        if tv is None:
+            tv = time_terms(t)
+        if single:
+            J = jacobian(model, data, fid0, lwa).reshape(6, nv)[:3]
+            if with_g:
+                return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, data.g,
+                            x, placement(model, data, fid0).translation, J.dot(v), tv)), (J,)
+            return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
+                        placement(model, data, fid0).translation, J.dot(v), tv)), (J,)
+        Js = [jacobian(model, data, fid, lwa).reshape(6, nv)[:3] for fid in fids]
+        pv = []
+        for fid, J in zip(fids, Js, strict=True):
+            pv += [placement(model, data, fid).translation, J.dot(v)]
+        g_part = (data.g,) if with_g else ()
+        return cat([data.M.ravel("K"), *[J.ravel() for J in Js],
+                    *[accel(model, data, fid, lwa).linear for fid in fids], data.nle, *g_part, x, *pv, tv]), Js
+
+    return phi
+
+
+def _impulse_rates(plan):
+    """rates(ẋ, z, y): write the impulse states' rates (∫F dt, ∫F_f dt per friction contact) into ẋ."""
+    impulses = impulse_terms(plan)
+    m = plan.m
+    off = m * m + m
+
+    def rates(xd, z, y):
+        for i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci in impulses:
+            F_n = z[k_n] if from_z else y[k_n]
+            xd[i0] = F_n
+            if stick is not None:
+                xd[i0 + 1:i0 + 1 + len(stick)] = z[stick]
+            elif sliding:
+                Fp = F_n if F_n > 0.0 else 0.0
+                if d0 is not None:  # 1-D
+                    xd[i0 + 1] = -mu * Fp * d0 + y[k_visc]
+                else:
+                    d = plan._direction(ci, y[off:])
+                    xd[i0 + 1:i0 + 1 + len(d)] = -mu * Fp * d + y[k_visc:k_visc + len(d)]
+
+    return rates
+
+
+def impulse_terms(plan) -> list[tuple]:
+    """Where the impulse states' rates (∫F dt, ∫F_f dt per friction contact) come from, per contact."""
+    s = plan.system
+    nQ, m = s.nQ, plan.m
+    off = m * m + m  # o's start in y
+    out = []
+    for name, slot in getattr(s, "impulse_slots", {}).items():
+        ci = next(i for i, c in enumerate(s.contacts) if c.name == name)
+        c, mode = s.contacts[ci], plan.modes[ci]
+        r = plan.normal_row.get(ci)
+        from_z, k_n = (True, nQ + r) if r is not None else (False, off + plan.o_Fint.start + ci)
+        stick = np.array(plan.stick_rows[ci]) if mode.touching and mode.stuck else None
+        sliding = mode.touching and not mode.stuck
+        one_d = len(c.tangents) == 1
+        d0 = float(mode.slip[0]) if one_d and sliding else None
+        k_visc = off + plan.o_visc[name].start
+        out.append((2 * nQ + slot, from_z, k_n, sliding, c.friction.mu_k, d0, k_visc, stick, ci))
+    return out
+
+
+def controller_call(plan):
+    """Per-call ControlInput for a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o)."""
+    s, phase = plan.system, plan.phase
+    robot = s.robot
+    ctl = phase.controller
+    normals = s.force_directions
+    names = [c.name for c in s.contacts]
+    i_fint = plan.o_Fint.start
+    ifaces = [(key, sl.start) for key, sl in plan.o_iface.items()]
+    tf = plan.tip_frame
+    kt = plan.e_frame[tf]
+    nQ = s.nQ
+    zs = phase.z_slice
+
+    i_e, i_dr = plan.i_e, plan.i_dr[tf]
+    model, data, fid, nv = robot.model, robot.data, plan.fids[tf], s.nv
+
+    def call(t, x, q, v, Js, phi, o):
+        e = phi[i_e:]
+        x_d = v_d = a_d = None
+        if phase.reference is not None:
+            x_d, v_d, a_d = phase.reference.at(t)
+        force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
+        forces = {name: float(o[i_fint + i]) for i, name in enumerate(names)}
+        forces.update({key: float(o[k]) for key, k in ifaces})
+        R_tip = pin.updateFramePlacement(model, data, fid).rotation
+        J_ang = pin.getFrameJacobian(model, data, fid, LWA).reshape(6, nv)[3:]
+        inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
+                           e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d,
+                           forces,
+                           force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang)
+        return ctl.command(inp)
+
+    return call

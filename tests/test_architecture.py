@@ -1,0 +1,87 @@
+"""The package's shape (docs/architecture.md): imports flow one way, the model's modules stay small."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parent.parent / "contactdyn"
+#: the model and the loop, one concept per module (docs/architecture.md's module map)
+CORE = ["elements", "chain", "contact", "layout", "phases", "chain_forces", "friction", "constraints", "impact",
+        "dynamics", "drives", "system", "plan_probe", "plan_kkt", "plan_rhs", "rhsplan", "samples", "events",
+        "transitions", "hybrid", "channels", "simulate", "integrators"]
+MAX_CLASS, MAX_FUNCTION = 300, 80  #: [lines]
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(PKG.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module -> the package's modules it imports (module level or inside functions; not TYPE_CHECKING)."""
+    paths = {_module_name(p): p for p in PKG.rglob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for name, path in paths.items():
+        tree = ast.parse(path.read_text())
+        typing_only = {id(n) for block in ast.walk(tree)
+                       if isinstance(block, ast.If) and "TYPE_CHECKING" in ast.unparse(block.test)
+                       for n in ast.walk(block)}
+        package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+        edges: set[str] = set()
+        for node in ast.walk(tree):
+            if id(node) in typing_only or not isinstance(node, ast.ImportFrom):
+                continue
+            base = package[:len(package) - node.level + 1] if node.level else []
+            target = ".".join(base + ([node.module] if node.module else [])) if node.level else node.module or ""
+            for alias in node.names:
+                sub = f"{target}.{alias.name}"
+                edges.add(sub if sub in paths else target)
+        graph[name] = {e for e in edges if e in paths and e != name}
+    return graph
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str]:
+    """One import cycle as a list of modules, or []."""
+    state: dict[str, int] = {}  # 1: on the path, 2: done
+    path: list[str] = []
+
+    def visit(v: str) -> list[str]:
+        state[v] = 1
+        path.append(v)
+        for w in sorted(graph[v]):
+            if state.get(w) == 1:
+                return path[path.index(w):] + [w]
+            if w not in state and (found := visit(w)):
+                return found
+        state[v] = 2
+        path.pop()
+        return []
+
+    for v in sorted(graph):
+        if v not in state and (found := visit(v)):
+            return found
+    return []
+
+
+def test_the_package_has_no_import_cycle():
+    assert _cycle(_import_graph()) == []
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert set(_cycle(graph)) == {"a", "b", "c"}
+    assert _cycle({"a": {"b"}, "b": set()}) == []
+
+
+@pytest.mark.parametrize("module", CORE)
+def test_core_module_is_documented_and_small(module):
+    tree = ast.parse((PKG / f"{module}.py").read_text())
+    doc = ast.get_docstring(tree)
+    assert doc and len(doc.splitlines()) >= 3, f"{module}: a module docstring stating its concept"
+    too_long = [f"{node.name}: {node.end_lineno - node.lineno + 1} lines" for node in ast.walk(tree)
+                if isinstance(node, ast.ClassDef) and node.end_lineno - node.lineno + 1 > MAX_CLASS
+                or isinstance(node, ast.FunctionDef) and node.end_lineno - node.lineno + 1 > MAX_FUNCTION]
+    assert too_long == []

@@ -1,0 +1,358 @@
+"""Hostile inputs: bad scenes, URDFs, overrides and run files end in one clear line, never a crash.
+
+Each case is a ``contactdyn`` command line with the exit code and a piece of the message it
+must give. The cases run in batches, each batch in one subprocess (the interpreter's start
+dominates a case) under a memory cap (RLIMIT_AS) and a timeout, so a case that crashes,
+hangs or grows without bound fails the test instead of taking the test run down. Large
+inputs (a 17 MB scene, a 1000-link URDF, a 16 GiB channel header) are generated here.
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import contactdyn
+from contactdyn.scene import sims_dir
+
+ROOT = Path(contactdyn.__file__).parent.parent
+RUNNER = Path(__file__).parent / "hostile_runner.py"
+MEMORY_CAP = 2 * 2**30  #: [B] address space of a batch
+BATCH_TIMEOUT = 240.0  #: [s] for one batch of cases
+FAST = ["--set", "duration=0.01", "--set", "solver.output_rate=200"]
+B1 = (sims_dir() / "b1.toml").read_text()
+MOVE = '{ kind = "constant_velocity", delta = [-0.6, 0.0, 0.0], duration = 4.0 }'
+LIMIT = '<limit lower="-6.283185307180" upper="6.283185307180" effort="500.0" velocity="20.0"/>'
+INERTIAL = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
+
+Case = tuple[str, list[str], int, str]  # id, argv, exit code, a piece of stderr ("" for none)
+
+
+def _cap() -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_CAP, MEMORY_CAP))
+
+
+def run_batch(cases: list[Case], cwd: Path) -> dict[str, dict]:
+    payload = json.dumps([{"id": c[0], "argv": c[1]} for c in cases])
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "HOME": str(cwd), "MPLBACKEND": "Agg",
+           "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, str(RUNNER)], input=payload, capture_output=True, text=True, cwd=cwd,
+                          env=env, timeout=BATCH_TIMEOUT, preexec_fn=_cap)
+    results = {r["id"]: r for r in map(json.loads, proc.stdout.splitlines())}
+    missing = [c[0] for c in cases if c[0] not in results]
+    assert not missing, f"the batch died (exit {proc.returncode}) at case {missing[0]}: {proc.stderr[-2000:]}"
+    return results
+
+
+def check(cases: list[Case], cwd: Path) -> None:
+    assert len({c[0] for c in cases}) == len(cases), "duplicate case ids"
+    results = run_batch(cases, cwd)
+    wrong = []
+    for cid, _, code, piece in cases:
+        r = results[cid]
+        err = r["err"]
+        ok = r["code"] == code and piece in err and "Traceback" not in err and "\x1b" not in err + r["out"]
+        if code == 2:  # bad input: exactly one line, short, no NumPy or Pinocchio text
+            ok = ok and err.count("\n") == 1 and err.startswith("contactdyn") and r["err_chars"] < 1000
+        if not ok:
+            wrong.append(f"{cid}: exit {r['code']} (expected {code}, {piece!r}): {err[:600]!r}")
+    assert not wrong, "\n".join(wrong)
+
+
+# ---- scenes ------------------------------------------------------------------------------------
+def scene_cases(tmp: Path) -> list[Case]:
+    def write(name: str, text: str | bytes) -> str:
+        path = tmp / f"{name}.toml"
+        path.write_bytes(text if isinstance(text, bytes) else text.encode())
+        return str(path)
+
+    moves = lambda n: B1.replace(f"moves = [{MOVE}]", "moves = [" + ", ".join([MOVE] * n) + "]")  # noqa: E731
+    big_q0 = "[" + ", ".join(["0.1"] * 10**6) + "]"
+    (tmp / "adir.toml").mkdir()
+    files = {
+        "empty": ("", 2, "expected a value (required key is missing)"),
+        "binary": (bytes(range(256)) * 4, 2, "<file>: expected"),
+        "bad_toml": ("duration = = 1", 2, "expected valid TOML"),
+        "latin1": ("name = 'caf\xe9'".encode("latin-1"), 2, "expected UTF-8 text"),
+        "deep_arrays": (B1 + "\nx = " + "[" * 5000 + "]" * 5000 + "\n", 2, "nested at most 32 deep"),
+        "deep_tables": (B1 + "\n[" + ".".join(f"t{i}" for i in range(40)) + "]\n", 2, "nested at most 32 deep"),
+        "deep_inline": (B1 + "\nx = " + "{a = " * 40 + "1" + "}" * 40 + "\n", 2, "nested at most 32 deep"),
+        "huge": (B1 + "\n#" + "x" * (17 * 2**20) + "\n", 2, "at most 16 MB"),
+        "moves_2000": (moves(2000), 2, "phase[0].reference.moves: expected at most 64 moves, found '2000 moves'"),
+        "moves_65": (moves(65), 2, "at most 64 moves"),
+        "typo_key": (B1.replace("duration = 2.0", "durration = 2.0"), 2, "did you mean 'duration'"),
+        "duration_text": (B1.replace("duration = 2.0", 'duration = "2 s"'), 2, "duration: expected a number [s]"),
+        "duration_bool": (B1.replace("duration = 2.0", "duration = true"), 2, "duration: expected a number"),
+        "duration_inf": (B1.replace("duration = 2.0", "duration = inf"), 2, "duration: expected a finite number"),
+        "duration_nan": (B1.replace("duration = 2.0", "duration = nan"), 2, "duration: expected a finite number"),
+        "q0_million": (B1.replace("q0 = [0.337307481430, -1.318116071653]", f"q0 = {big_q0}"), 2, "robot.q0"),
+        "name_number": (B1.replace('name = "b1"', "name = 5"), 2, "name: expected a string"),
+        "urdf_number": (B1.replace('urdf = "planar2r_b1"', "urdf = 5"), 2, "robot"),
+        "normal_model": (B1.replace('normal.model = "b"', 'normal.model = "zzz"'), 2, "normal.model: expected one of"),
+        "zero_normal": (B1.replace("normal.direction = [0.0, 1.0, 0.0]", "normal.direction = [0.0, 0.0, 0.0]"), 2,
+                        "non-zero direction"),
+        "phase_number": (B1.replace("[[phase]]", "phase = 5\n[[xphase]]"), 2, "phase"),
+        "solver_number": (B1.replace("[solver]", "solver = 5\n[xsolver]"), 2, "solver"),
+        "method": (B1.replace('method = "DOP853"', 'method = "Euler"'), 2, "solver.method: expected one of"),
+        "controller_kind": (B1.replace('kind = "task_pd"', 'kind = "nope"'), 2, "controller"),
+        "gravity_2": (B1.replace("gravity = [0.0, 0.0, 0.0]", "gravity = [0.0, 0.0]"), 2, "robot.gravity"),
+        "k_inf": (B1.replace("normal.k = 1e5", "normal.k = inf"), 2, "contact.tip.normal.k: expected a finite"),
+        "k_absurd": (B1.replace("normal.k = 1e5", "normal.k = 1e300"), 2, "magnitude <= 1e+12"),
+        "mu_negative": (B1.replace("tangent.mu = 0.4", "tangent.mu = -0.4"), 2, "contact.tip.tangent.mu"),
+    }
+    keep_duration = ["--set", "solver.output_rate=200"]  # FAST would override the file's duration
+    cases = [(f"scene/{name}", ["run", write(name, text), *(keep_duration if "duration" in name else FAST)], code,
+              piece) for name, (text, code, piece) in files.items()]
+    escaped = write("escape", B1.replace('name = "b1"', 'name = "b1\\u001b[31mRED\\u001b]0;title\\u0007"'))
+    cases += [
+        ("scene/escape_codes_printed_escaped", ["run", escaped, *FAST], 0, ""),
+        ("scene/directory", ["run", str(tmp / "adir.toml"), *FAST], 2, "scene: expected a scene file"),
+        ("scene/missing", ["run", str(tmp / "nothing.toml"), *FAST], 2, "scene: expected a scene file"),
+        ("scene/sweep_deep_file", ["sweep", "--file", write("sweep_deep", "x = " + "[" * 3000 + "]" * 3000),
+                                   "--workers", "0"], 2, "nested at most 32 deep"),
+        ("scene/sweep_too_many_runs", ["sweep", "b1", "--range", "controller.kp=1:2:1000", "--range",
+                                       "contact.tip.normal.k=1:2:1000", "--out", str(tmp / "sw")], 2,
+         "at most 100000 runs"),
+        ("scene/sweep_range_n", ["sweep", "b1", "--range", "controller.kp=1:2:1000000000", "--out", str(tmp / "sw")],
+         2, "1 <= n <= 100000"),
+    ]
+    return cases
+
+
+# ---- overrides ---------------------------------------------------------------------------------
+OVERRIDES: list[tuple[str | list[str], int, str]] = [  # --set value(s), exit code, message piece
+    *[(f"{key}={value}", 2, f"{key}: expected a finite number")
+      for key in ("contact.tip.normal.k", "contact.tip.normal.m", "contact.tip.normal.b", "contact.tip.tangent.mu",
+                  "contact.tip.tangent.viscous", "solver.stabilization", "duration", "solver.rtol")
+      for value in ("inf", "nan", "-inf")],
+    ("controller.kp=inf", 2, "phase[0].controller.kp: expected a finite number"),
+    ("controller.kd=nan", 2, "phase[0].controller.kd: expected a finite number"),
+    ("duration=-1", 2, "duration: expected a number > 0"),
+    ("duration=0", 2, "duration: expected a number > 0"),
+    ("duration=1e308", 2, "duration: expected a number of magnitude <= 1e+12"),
+    ("duration=1e5", 2, "duration: expected a number <= 10000 [s]"),
+    ("solver.max_step=1e-300", 2, "solver.max_step: expected at most 1e+07 steps"),
+    ("solver.max_step=0", 2, "solver.max_step: expected a number > 0"),
+    ("solver.max_step=nan", 2, "solver.max_step: expected a finite number"),
+    ("solver.output_rate=1e7", 0, ""),  # 0.01 s: 1e5 samples, fine
+    (["duration=2.0", "solver.output_rate=1e7"], 2,
+     "solver.output_rate: expected at most 1e+07 samples over the run (duration"),
+    (["duration=1000.0", "solver.output_rate=5e3"], 2, "fits in memory: 5e+06 samples would need about 4.8 GiB"),
+    ("solver.output_rate=1e12", 2, "solver.output_rate"),
+    ("solver.output_rate=0", 2, "solver.output_rate: expected a number > 0"),
+    ("solver.output_rate=inf", 2, "solver.output_rate: expected a finite number"),
+    ("solver.rtol=0", 2, "solver.rtol: expected a number >= 1e-14"),
+    ("solver.max_events=0", 2, "solver.max_events: expected an integer >= 1"),
+    ("solver.max_events=1.5", 2, "solver.max_events: expected an integer"),
+    ("robot.q0=[nan, 1.0]", 2, "robot.q0: expected finite numbers"),
+    ("robot.q0=[1e300, 0.0]", 2, "robot.q0: expected numbers of magnitude <= 1e+12"),
+    ("robot.q0=[1.0]", 2, "robot.q0"),
+    ("robot.v0=[inf, 0.0]", 2, "robot.v0: expected finite numbers"),
+    ("robot.v0=[1e308, 1e308]", 2, "robot.v0: expected numbers of magnitude"),
+    ("contact.tip.normal.k=1e300", 2, "contact.tip.normal.k: expected a number of magnitude <= 1e+12"),
+    ("controller.kp=1e13", 2, "phase[0].controller.kp: expected a number of magnitude <= 1e+12"),
+    ("contact.tip.point=[nan, 0.0, 0.0]", 2, "contact.tip.point: expected finite numbers"),
+    ("contact.tip.normal.kk=1.0", 2, "did you mean 'k'"),
+    ("phase.5.name=x", 2, "phase.5: expected an index < 1"),
+    ("duration.x=1", 2, "duration.x: expected a table to set a key in, found 0.01"),
+    ("duration", 2, "--set: expected key.path=value"),
+    ("robot.gravity_compensation=2.0", 2, "robot.gravity_compensation: expected a number <= 1"),
+    ("phase.0.until=-1.0", 2, "phase[0].until"),
+    ("solver.method=\"RK4\"", 2, "solver.max_step"),
+    ("robot.q0=" + "[" * 200 + "]" * 200, 2, "nested at most 32 deep"),
+    ("robot.q0=[" + ", ".join(["0.5"] * 100000) + "]", 2, "characters)"),  # the value abbreviated
+    ("name=\"\\u001b[2J\"", 0, ""),
+]
+
+
+def override_cases() -> list[Case]:
+    cases = []
+    for i, (sets, code, piece) in enumerate(OVERRIDES):
+        sets = [sets] if isinstance(sets, str) else sets
+        argv = ["run", "b1", *FAST, *[a for text in sets for a in ("--set", text)]]
+        cases.append((f"set/{i:02d} {' '.join(sets)[:60]}", argv, code, piece))
+    cases.append(("set/rk4_step_too_large", ["run", "b1", "--set", "duration=0.5", "--set", "solver.method=\"RK4\"",
+                                             "--set", "solver.max_step=0.5"], 1,
+                  "too large for the stiffest mode (|λ| = 91.6 1/s, period 0.0686 s)"))
+    return cases
+
+
+# ---- URDFs -------------------------------------------------------------------------------------
+def _urdf(joints: list[tuple[str, str, str]], links: list[str], extra: str = "") -> str:
+    body = "".join(f'<link name="{n}">{INERTIAL}</link>' for n in links)
+    body += "".join(f'<joint name="{n}" type="revolute"><parent link="{p}"/><child link="{c}"/><axis xyz="0 0 1"/>'
+                    '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>' for n, p, c in joints)
+    return f'<robot name="r">{body}{extra}</robot>'
+
+
+def urdf_cases(tmp: Path) -> list[Case]:
+    good = (ROOT / "urdf" / "planar2r_b1.urdf").read_text()
+    chain = [(f"j{i}", f"l{i}", f"l{i + 1}") for i in range(999)]
+    laughs = ('<?xml version="1.0"?><!DOCTYPE lolz [<!ENTITY lol "lol">' +
+              "".join(f'<!ENTITY lol{i} "{("&lol" + str(i - 1) + ";") * 10 if i else "&lol;" * 10}">'
+                      for i in range(9)) + ']><robot name="r"><link name="&lol8;"/></robot>')
+    files: dict[str, tuple[str | bytes, str]] = {
+        "cycle_second_parent": (_urdf([("j1", "base", "a"), ("j2", "a", "b"), ("j3", "b", "a")], ["base", "a", "b"]),
+                                "link 'a' is the child of two joints"),
+        "own_parent": (_urdf([("j1", "base", "a"), ("j2", "a", "a")], ["base", "a"]), "'a' is its own parent"),
+        "root_own_parent": (_urdf([("j1", "base", "base")], ["base"]), "'base' is its own parent"),
+        "detached_cycle": (_urdf([("j1", "base", "a"), ("j2", "b", "c"), ("j3", "c", "b")], ["base", "a", "b", "c"]),
+                           "cycle through links b -> c -> b"),
+        "long_cycle": (_urdf([("j1", "base", "a"), ("j2", "x", "y"), ("j3", "y", "z"), ("j4", "z", "x")],
+                             ["base", "a", "x", "y", "z"]), "the joints form a cycle"),
+        "no_root": (_urdf([("j1", "a", "b"), ("j2", "b", "a")], ["a", "b"]), "found none"),
+        "two_roots": (_urdf([("j1", "base", "a")], ["base", "a", "b"]), "expected one root link"),
+        "undefined_parent": (_urdf([("j1", "nowhere", "a")], ["a"]), "parent link 'nowhere' is not defined"),
+        "undefined_child": (_urdf([("j1", "base", "nowhere")], ["base"]), "child link 'nowhere' is not defined"),
+        "duplicate_link": (_urdf([("j1", "base", "a")], ["base", "a", "a"]), "two links named 'a'"),
+        "duplicate_joint": (_urdf([("j1", "base", "a"), ("j1", "a", "b")], ["base", "a", "b"]),
+                            "two joints named 'j1'"),
+        "joint_without_parent": ('<robot name="r"><link name="a"/><joint name="j" type="fixed"><child link="a"/>'
+                                 "</joint></robot>", "missing <parent"),
+        "thousand_links": (_urdf(chain, [f"l{i}" for i in range(1000)]), "1000 links; at most 400"),
+        "129_moving_joints": (_urdf(chain[:129], [f"l{i}" for i in range(130)]), "129 moving joints; at most 128"),
+        "huge": (good.replace("<robot", "<!--" + "x" * (17 * 2**20) + "--><robot", 1), "at most 16 MB is read"),
+        "malformed": (good[: len(good) // 2], "malformed XML"),
+        "empty": ("", "malformed XML"),
+        "binary": (bytes(range(256)) * 8, "malformed XML"),
+        "not_a_robot": ("<html><body/></html>", "expected a <robot> element"),
+        "xxe": ('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]>'
+                '<robot name="r"><link name="&x;"/></robot>', "reference to external entity"),
+        "xxe_content": ('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]>'
+                        '<robot name="r"><link name="a">&x;</link></robot>', "undefined entity"),
+        "billion_laughs": (laughs, "amplification"),
+        "negative_mass": (good.replace('<mass value="3.0"/>', '<mass value="-3.0"/>', 1), "mass must be >= 0"),
+        "nan_mass": (good.replace('<mass value="3.0"/>', '<mass value="nan"/>', 1), "mass must be >= 0"),
+        "text_mass": (good.replace('<mass value="3.0"/>', '<mass value="heavy"/>', 1), "must be a number"),
+        "limits_reversed": (good.replace('lower="-6.283185307180" upper="6.283185307180"', 'lower="1" upper="-1"', 1),
+                            "lower limit [1.0] > upper limit [-1.0]"),
+        "no_limits": (good.replace(LIMIT, "", 1), "does not specify limits"),
+        "missing_mesh": (good.replace("<geometry>", '<geometry><mesh filename="nope.stl"/>', 1),
+                         "visual mesh 'nope.stl' not found"),
+        "no_tip_link": (good.replace('"tip"', '"tip2"'), "tip"),
+    }
+    (tmp / "adir.urdf").mkdir()
+    cases = []
+    for name, (text, piece) in files.items():
+        path = tmp / f"{name}.urdf"
+        path.write_bytes(text if isinstance(text, bytes) else text.encode())
+        cases.append((f"urdf/{name}", ["run", "b1", *FAST, "--set", f'robot.urdf="{path}"'], 2, piece))
+    cases += [("urdf/missing", ["run", "b1", *FAST, "--set", f'robot.urdf="{tmp / "nope.urdf"}"'], 2,
+               "no such URDF file"),
+              ("urdf/directory", ["run", "b1", *FAST, "--set", f'robot.urdf="{tmp / "adir.urdf"}"'], 2, "robot")]
+    return cases
+
+
+# ---- saved runs --------------------------------------------------------------------------------
+def _npy_header(shape: tuple[int, ...], descr: str = "<f8") -> bytes:
+    text = f"{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}".ljust(117) + "\n"
+    return b"\x93NUMPY\x01\x00" + len(text).to_bytes(2, "little") + text.encode()
+
+
+def run_file_cases(tmp: Path) -> list[Case]:
+    good = tmp / "good"
+    contactdyn.simulate("b1", {"duration": 0.01, "solver.output_rate": 200}).save(good)
+    npz, sidecar = good.with_name("good.npz").read_bytes(), good.with_name("good.json").read_text()
+    doc = json.loads(sidecar)
+    t = np.linspace(0.0, 0.01, 3)
+
+    def channels_npz(path: Path, **arrays) -> None:
+        with open(path, "wb") as f:
+            np.savez(f, **arrays)
+
+    def cycle_scene() -> str:
+        (tmp / "cycle.urdf").write_text(_urdf([("j1", "base", "a"), ("j2", "a", "a")], ["base", "a"]))
+        robot = {**doc["scene"]["robot"], "urdf": str(tmp / "cycle.urdf")}
+        return json.dumps({**doc, "scene": {**doc["scene"], "robot": robot},
+                           "meta": {**doc["meta"], "robot": str(tmp / "cycle.urdf")}})
+
+    runs: dict[str, tuple[object, object, str]] = {  # name: (npz bytes or writer, json text, message piece)
+        "garbage_npz": (b"not a zip file at all", sidecar, "not a readable run archive (BadZipFile"),
+        "truncated_npz": (npz[: len(npz) // 2], sidecar, "not a readable run archive"),
+        "empty_npz": (b"", sidecar, "not a readable run archive"),
+        "empty_zip": (lambda p: zipfile.ZipFile(p, "w").close(), sidecar, "no time channel t"),
+        "foreign_npz": (lambda p: channels_npz(p, a=np.ones(3), b=np.zeros(2)), sidecar, "no time channel t"),
+        "t_2d": (lambda p: channels_npz(p, t=np.ones((3, 2))), sidecar, "no time channel t"),
+        "t_empty": (lambda p: channels_npz(p, t=np.zeros(0)), sidecar, "no time channel t"),
+        "length_mismatch": (lambda p: channels_npz(p, t=t, q=np.ones((5, 2))), sidecar, "channel 'q' has shape (5, 2)"),
+        "channel_3d": (lambda p: channels_npz(p, t=t, q=np.ones((3, 2, 2))), sidecar, "has shape (3, 2, 2)"),
+        "object_dtype": (lambda p: channels_npz(p, t=t, q=np.array([None, 1, "x"], dtype=object)), sidecar,
+                         "holds object, expected numbers"),
+        "string_dtype": (lambda p: channels_npz(p, t=t, q=np.array(["a", "b", "c"])), sidecar, "expected numbers"),
+        "complex_dtype": (lambda p: channels_npz(p, t=t, q=t * 1j), sidecar, "expected numbers"),
+        "header_16gib": (lambda p: zipfile.ZipFile(p, "w").writestr("t.npy", _npy_header((2**31,))), sidecar,
+                         "declares 2147483648 values in a 128-byte member"),
+        "bad_npy_magic": (lambda p: zipfile.ZipFile(p, "w").writestr("t.npy", b"\x93NUMPY\x09\x00zz"), sidecar,
+                          "channel 't' is in an unknown .npy format version"),
+        "bad_npy_header": (lambda p: zipfile.ZipFile(p, "w").writestr("t.npy", _npy_header((3,))[:20]), sidecar,
+                           "not a readable run archive"),
+        "json_garbage": (npz, "{not json", "not a run's JSON sidecar (JSONDecodeError"),
+        "json_list": (npz, "[1, 2, 3]", "expected a JSON object, found list"),
+        "json_no_events": (npz, json.dumps({k: v for k, v in doc.items() if k != "events"}),
+                           "'events' must be a JSON array, found 'nothing'"),
+        "json_events_dict": (npz, json.dumps({**doc, "events": {"a": 1}}), "'events' must be a JSON array"),
+        "json_event_without_t": (npz, json.dumps({**doc, "events": [{"kind": "touch"}]}),
+                                 "events[0] must be an object with a time t"),
+        "json_impact_text_t": (npz, json.dumps({**doc, "impacts": [{"t": "soon"}]}), "impacts[0] must be an object"),
+        "json_meta_list": (npz, json.dumps({**doc, "meta": [1]}), "'meta' must be a JSON object"),
+        "json_deep": (npz, "[" * 100000 + "]" * 100000, "not a run's JSON sidecar (RecursionError"),
+        "json_binary": (npz, "\udcff\udcfe".encode("utf-8", "surrogateescape").decode("latin-1"),
+                        "not a run's JSON sidecar"),
+    }
+    cases = []
+    for name, (channels, text, piece) in runs.items():
+        base = tmp / name
+        npz_path, json_path = base.with_name(f"{name}.npz"), base.with_name(f"{name}.json")
+        if callable(channels):
+            channels(npz_path)
+        else:
+            npz_path.write_bytes(channels)
+        json_path.write_text(text, encoding="latin-1")
+        cases.append((f"run/plot/{name}", ["plot", str(base), "--out", str(tmp / "figs")], 2, piece))
+        cases.append((f"run/view/{name}", ["view", str(base), "--html", str(tmp / "v.html")], 2, piece))
+    (tmp / "foreign_scene.npz").write_bytes(npz)
+    (tmp / "foreign_scene.json").write_text(json.dumps({**doc, "scene": {"foo": 1}}))
+    (tmp / "sparse.npz").write_bytes(npz)
+    with open(tmp / "sparse.json", "wb") as f:
+        f.truncate(2**29)  # 512 MB of zeros, sparse on disk
+    (tmp / "dir.npz").mkdir()
+    (tmp / "dir.json").write_text(sidecar)
+    (tmp / "cyc.npz").write_bytes(npz)
+    (tmp / "cyc.json").write_text(cycle_scene())
+    cases += [
+        ("run/plot/missing", ["plot", str(tmp / "nothing")], 2, "not a saved run (need nothing.npz and nothing.json"),
+        ("run/view/missing", ["view", str(tmp / "nothing.npz")], 2, "not a saved run"),
+        ("run/plot/huge_sidecar", ["plot", str(tmp / "sparse")], 2, "more than a run's sidecar"),
+        ("run/view/npz_is_a_directory", ["view", str(tmp / "dir"), "--html", str(tmp / "v.html")], 2,
+         "not a saved run"),
+        ("run/view/foreign_scene", ["view", str(tmp / "foreign_scene"), "--html", str(tmp / "v.html")], 2,
+         "its scene document no longer validates"),
+        ("run/view/scene_names_a_cyclic_urdf", ["view", str(tmp / "cyc"), "--html", str(tmp / "v.html")], 2,
+         "'a' is its own parent"),
+    ]
+    return cases
+
+
+BUILDERS = {"scenes": scene_cases, "overrides": lambda _: override_cases(), "urdfs": urdf_cases,
+            "run_files": run_file_cases}
+
+
+def test_corpus_has_at_least_100_cases(tmp_path):
+    counts = {}
+    for kind, build in BUILDERS.items():
+        (tmp_path / kind).mkdir()
+        counts[kind] = len(build(tmp_path / kind))
+    assert sum(counts.values()) >= 100 and min(counts.values()) >= 20, counts
+
+
+@pytest.mark.timeout(600)
+@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files"])
+def test_hostile_inputs(tmp_path, kind):
+    check(BUILDERS[kind](tmp_path), tmp_path)
