@@ -7,9 +7,9 @@ moments satisfy the triangle inequality I1 + I2 ≥ I3 (zero moments are accepte
 and thin rods are idealizations; relative tolerance 1e-6 for rounded file values).
 
 ``robot.inertia`` chooses what a failure does: ``"check"`` (default) raises, ``"repair"``
-replaces the inertia by a nearest valid one (same principal axes, the principal moments
-moved onto the cone of valid moments by alternating projections; a zero-mass link loses its
-rotational inertia) and reports every change, ``"trust"`` keeps the file's values with a
+replaces the inertia by the nearest valid one (Frobenius norm: same principal axes, the
+principal moments projected onto the valid ones; a zero-mass link loses its rotational
+inertia) and reports every change, ``"trust"`` keeps the file's values with a
 warning. A negative or non-finite mass is never repaired.
 """
 
@@ -37,16 +37,34 @@ def _number(element: ET.Element | None, key: str, where: str) -> float:
         raise RobotError(f"{where}: {key} must be a number, found {text!r}") from None
 
 
-def nearest_valid_moments(moments: np.ndarray) -> np.ndarray:
-    """Principal moments near ``moments`` with every I ≥ 0 and Ii + Ij ≥ Ik (alternating projections)."""
-    m = np.sort(np.asarray(moments, float))
-    for _ in range(200):
-        m = np.maximum(m, 0.0)
-        gap = m[2] - m[0] - m[1]
-        if gap <= 0.0:
-            return m
-        m = m + gap / 3.0 * np.array([1.0, 1.0, -1.0])  # projection onto I1 + I2 = I3
-        m = np.sort(m)
+_TRIANGLES = np.array([[1.0, 1.0, -1.0], [1.0, -1.0, 1.0], [-1.0, 1.0, 1.0]])  #: Ii + Ij − Ik ≥ 0
+
+
+def nearest_valid_moments(moments: np.ndarray, iterations: int = 500) -> np.ndarray:
+    """The nearest principal moments (Euclidean) with every I ≥ 0 and Ii + Ij ≥ Ik (Dykstra's projections).
+
+    The valid moments are the intersection of the positive orthant and three half-spaces;
+    Dykstra's algorithm converges to the projection onto it. With the same principal axes
+    this is the nearest valid inertia in the Frobenius norm (the set is invariant under
+    permutations, so the nearest matrix shares the eigenvectors).
+    """
+    m = np.asarray(moments, float).copy()
+    if np.all(m >= 0.0) and np.all(_TRIANGLES @ m >= 0.0):
+        return m
+    corrections = np.zeros((4, 3))
+    for _ in range(iterations):
+        previous = m.copy()
+        y = m + corrections[0]
+        m = np.maximum(y, 0.0)
+        corrections[0] = y - m
+        for k, a in enumerate(_TRIANGLES, start=1):
+            y = m + corrections[k]
+            m = y - min(float(a @ y), 0.0) / 3.0 * a  # |a|² = 3
+            corrections[k] = y - m
+        if np.abs(m - previous).max() <= 1e-15 * max(np.abs(m).max(), 1e-300):
+            break
+    m = np.maximum(m, 0.0)
+    m[m < 1e-12 * np.abs(moments).max()] = 0.0  # round-off of the projections
     return m
 
 
@@ -71,8 +89,7 @@ def _repaired(mass: float, inertia: np.ndarray) -> np.ndarray:
     if mass == 0.0:
         return np.zeros((3, 3))
     eig, axes = np.linalg.eigh(inertia)
-    moments = nearest_valid_moments(eig)  # sorted ascending, as eig
-    return axes @ np.diag(moments) @ axes.T
+    return axes @ np.diag(nearest_valid_moments(eig)) @ axes.T
 
 
 def check_inertias(root: ET.Element, path: Path, mode: str = "check") -> list[str]:
