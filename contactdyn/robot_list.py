@@ -5,31 +5,49 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 import pinocchio as pin
 
 from .errors import ContactdynError
 from .frames import frame_tree
 from .robot_catalog import example_robots, urdf_dir
+from .urdf_check import check_urdf_tree
 from .urdf_model import build_urdf_model
 
 __all__ = ["robot_entries", "frames_command", "end_effectors"]
 
 
 def end_effectors(model: pin.Model) -> list[str]:
-    """Body frames with no frame below them: the tips a scene would usually name."""
+    """Body frames with no frame below them, moved by some joint: the tips a scene would usually name."""
     parents = {f.parentFrame for i, f in enumerate(model.frames) if i}
     return [f.name for i, f in enumerate(model.frames)
             if f.type == pin.FrameType.BODY and i not in parents and f.parentJoint > 0]
 
 
+_JOINT_DOF = {"revolute": 1, "continuous": 1, "prismatic": 1, "fixed": 0, "floating": 6, "planar": 3}
+
+
 def _entry(name: str, source: str, file: str) -> dict:
+    """DOF and leaf links of a URDF, read from its XML (no Pinocchio build: listing stays fast and safe)."""
     entry = {"name": name, "source": source, "file": file}
     try:
-        model = build_urdf_model(file, inertia="trust").model
+        root = check_urdf_tree(Path(file))
     except ContactdynError as exc:
         return {**entry, "dof": None, "end_effectors": [], "error": str(exc)}
-    return {**entry, "dof": model.nv, "end_effectors": end_effectors(model)}
+    joints = root.findall("joint")
+    above = {j.find("child").get("link"): j for j in joints}  # link -> the joint carrying it (a tree)
+    parents = {j.find("parent").get("link") for j in joints}
+
+    def moves(link: str) -> bool:  # some moving joint between the root and the link
+        while link in above:
+            if above[link].get("type") != "fixed":
+                return True
+            link = above[link].find("parent").get("link")
+        return False
+
+    return {**entry, "dof": sum(_JOINT_DOF.get(j.get("type", ""), 0) for j in joints),
+            "end_effectors": [link for link in above if link not in parents and moves(link)]}
 
 
 def robot_entries() -> list[dict]:
