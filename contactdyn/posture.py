@@ -138,8 +138,7 @@ def solve_posture(robot: Robot, task: PostureTask, seed: np.ndarray | None = Non
         raise RobotError(
             f"{Path(robot.source).name}: frame {task.frame!r} cannot reach the task's {what} within the joint limits: "
             f"the best of {len(seeds)} attempts misses by {closest[0]:.3g} m"
-            + (f" and {closest[1]:.3g} rad" if task.tool_axis is not None else "")
-            + f" (target {np.round(task.position, 6).tolist()} m)")
+            + (f" and {closest[1]:.3g} rad" if task.tool_axis is not None else ""))
     return best
 
 
@@ -181,7 +180,7 @@ def start_posture(robot: Robot, spec: RobotSpec, controller: Any, file: str | No
     try:
         posture = solve_posture(robot, task, seed)
     except RobotError as exc:
-        raise SceneError("robot.tip0", "a pose the robot can reach", str(exc), file) from None
+        raise SceneError("robot.tip0", f"a pose the robot can reach ({exc})", spec.tip0.tolist(), file) from None
     how = "solved from robot.tip0" + (" and the controller's tool_target" if axis is not None else "")
     return posture.q, {"how": how, "from_seed": posture.from_seed, "limit_margin": posture.limit_margin,
                        "sigma_min": posture.sigma_min, "position_error_m": posture.position_error,
