@@ -12,6 +12,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 from .errors import ContactdynError, RobotError, RunFileError, SceneError
@@ -113,6 +114,10 @@ def _cmd_list(args: argparse.Namespace) -> int:
         from .robot_list import frames_command
 
         return frames_command(args)
+    if args.what == "keys" or args.prefix:
+        from .keys import list_keys
+
+        return list_keys(args)
     catalog = _catalog()
     sections = [args.what] if args.what else list(LIST_SECTIONS)
     if args.json:
@@ -143,15 +148,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     overrides = dict(parse_override(s) for s in args.set)
     scene = load_scene(args.scene, overrides)
-    result = simulate(scene)
-    if not args.quiet:
-        from .robot_list import run_warnings
+    _out(args, f"scene {scene.name}: {scene.file}")
+    result = _simulate_quietly(simulate, scene)
+    from .robot_list import run_warnings
 
-        for warning in run_warnings(result.meta):
-            print(f"contactdyn: warning: {warning}", file=sys.stderr)
+    warnings = result.meta.get("warnings", []) + run_warnings(result.meta)  # sanity, then inertia and limits
+    if not args.quiet and not args.json:
+        for note in warnings:
+            print(f"contactdyn: warning: {note}", file=sys.stderr)
     saved = str(result.save(args.out)) if args.out else None
     if args.json:
         _emit_json({"scene": scene.name, "file": scene.file, "status": "ok", "out": saved,
+                    "warnings": warnings,
                     "metrics": metrics(result), "stats": result.stats, "impacts": result.impacts})
     else:
         s = result.stats
@@ -184,12 +192,27 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _simulate_quietly(simulate, scene):
+    """Simulate without Python's own warning lines (the command prints the sanity warnings itself)."""
+    import warnings
+
+    from .sanity import SanityWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SanityWarning)
+        return simulate(scene)
+
+
 # ---- sweep -----------------------------------------------------------------------------------
 def _cmd_sweep(args: argparse.Namespace) -> int:
     from .sweep import make_sweep, run_sweep
 
     sweep = make_sweep(args.scene, args.set, args.grid, args.range, args.file)
-    out = args.out or f"sweeps/{sweep.name}"
+    out = str(Path(args.out or f"sweeps/{sweep.name}").absolute())  # workers may run elsewhere (Dask)
+    if (args.plot is None) != (args.over is None):
+        raise SceneError("--plot/--over", "both: --plot METRIC --over PARAMETER", args.plot or args.over)
+    if args.over is not None and args.over not in sweep.parameter_keys():
+        raise SceneError("--over", f"a swept parameter ({', '.join(sweep.parameter_keys()) or 'none'})", args.over)
     if args.workers is not None and args.workers < 0:
         raise SceneError("--workers", "an integer >= 0 (0: run in this process)", args.workers)
     if args.chunk is not None and args.chunk < 1:
@@ -206,9 +229,14 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     else:
         _out(args, f"  {report.counts['ok']} ok, {report.counts['failed']} failed, {report.counts['crashed']} crashed"
                    f" ({report.skipped} already done) in {report.wall_s:.2f} s; summary {report.summary}")
+    from .sweep.report import failure_lines, failures, plot_over
+
     if bad and not args.json:
-        print(f"contactdyn: {bad} of {report.total} runs failed; see the status and error columns of "
-              f"{report.summary}", file=sys.stderr)
+        print(f"contactdyn: {bad} of {report.total} runs failed:", file=sys.stderr)
+        print("\n".join(failure_lines(failures(report.summary, sweep.parameter_keys()))), file=sys.stderr)
+    if args.plot:
+        figure = plot_over(report.summary, args.plot, args.over, sweep.parameter_keys(), report.out)
+        _out(args, f"  plot {figure}")
     return EXIT_FAILED if bad else EXIT_OK
 
 
@@ -257,6 +285,17 @@ def _set_option(p: argparse.ArgumentParser) -> None:
                    help="override a scene key, value read as TOML (repeatable), e.g. contact.tip.normal.k=1e4")
 
 
+def _speed(text: str) -> float:
+    """A playback speed: a finite number > 0 (argparse turns the ValueError into exit 2)."""
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(text)
+    return value
+
+
+_speed.__name__ = "speed (a number > 0)"  # argparse: "invalid speed (a number > 0) value: '0'"
+
+
 def _csv_list(text: str) -> list[str]:
     return [s.strip() for s in text.split(",") if s.strip()]
 
@@ -272,9 +311,11 @@ def build_parser() -> argparse.ArgumentParser:
     ls = sub.add_parser("list", help="list scenes, robots, contact models, controllers, integrators",
                         description="List what a scene can name.", formatter_class=fmt,
                         epilog="examples:\n  contactdyn list\n  contactdyn list robots --json\n"
-                               "  contactdyn list frames panda")
-    ls.add_argument("what", nargs="?", choices=LIST_SECTIONS + LIST_MORE, help="one section only")
-    ls.add_argument("robot", nargs="?", help="with 'frames': the robot whose kinematic tree to print")
+                               "  contactdyn list keys contact   (the scene keys, as docs/scenes.md)\n"
+                               "  contactdyn list frames panda   (a robot's kinematic tree)")
+    ls.add_argument("what", nargs="?", choices=(*LIST_SECTIONS, *LIST_MORE, "keys"), help="one section only")
+    ls.add_argument("prefix", nargs="?", help="with keys: only the keys starting with it (e.g. contact, "
+                                              "phase[].force); with frames: the robot")
     _scripting(ls)
     ls.set_defaults(func=_cmd_list)
 
@@ -291,7 +332,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--html", help="with --view: write a self-contained HTML player instead of serving")
     run.add_argument("--port", type=int, help="with --view: meshcat server port")
     run.add_argument("--host", help="with --view: listen on this address (default 127.0.0.1, this machine only)")
-    run.add_argument("--speed", type=float, default=1.0, help="with --view: playback speed factor")
+    run.add_argument("--speed", type=_speed, default=1.0,
+                     help="with --view: playback speed factor (> 0; 1 = real time)")
     _scripting(run)
     run.set_defaults(func=_cmd_run)
 
@@ -304,6 +346,8 @@ def build_parser() -> argparse.ArgumentParser:
                "--out sweeps/b1 --csv\n"
                "  contactdyn sweep b1 --range contact.tip.tangent.mu=0.1:0.8:8 --set duration=0.5 --workers 2\n"
                "  contactdyn sweep --file mysweep.toml --scheduler tcp://10.0.0.5:8786\n"
+               "  contactdyn sweep b1 --range contact.tip.normal.k=1e4:1e6:5:log --plot contact.tip.F_peak "
+               "--over contact.tip.normal.k\n"
                "exit codes: 0 all runs ok, 1 some run failed (recorded in the summary), 2 bad input")
     sw.add_argument("scene", nargs="?", help="scene file or name in sims/ (or `scene` in the sweep file)")
     _set_option(sw)
@@ -317,8 +361,25 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--chunk", type=int, help="runs per task sent to a worker (default: about 4 tasks per worker)")
     sw.add_argument("--csv", action="store_true", help="also write OUT/summary.csv")
     sw.add_argument("--retry-failed", action="store_true", help="run the failed runs again on resume")
+    sw.add_argument("--plot", metavar="METRIC", help="draw this metric of the summary (e.g. contact.tip.F_final) ...")
+    sw.add_argument("--over", metavar="KEY", help="... against this swept parameter: OUT/plot_METRIC_over_KEY.png")
     _scripting(sw)
     sw.set_defaults(func=_cmd_sweep)
+
+    new = sub.add_parser("new", help="write a commented starter scene (press, then slide)", formatter_class=fmt,
+                         description="Write sims/NAME.toml: the robot's tip approaches a table, presses 20 N and "
+                                     "slides 10 cm. It runs as written; edit it from there.",
+                         epilog="examples:\n  contactdyn new mine && contactdyn run mine\n"
+                                "  contactdyn new press_ur5 --robot ur5 --contact c --friction")
+    new.add_argument("name", help="scene name (written to sims/NAME.toml in the working directory)")
+    new.add_argument("--robot", default="writer2r", help="robot: a name in urdf/, of example-robot-data, or a path "
+                                                        "(default writer2r)")
+    new.add_argument("--tip", help="tip frame (default: known for writer2r, planar2r_b1, writer5dof, ur5; else tip)")
+    new.add_argument("--contact", default="b", choices=("b", "a", "c", "rigid"), help="normal contact model")
+    new.add_argument("--friction", action="store_true", help="Coulomb friction along the slide (mu = 0.3)")
+    new.add_argument("--out", metavar="FILE", help="write here instead of sims/NAME.toml")
+    new.add_argument("--force", action="store_true", help="overwrite an existing file")
+    new.set_defaults(func=_delegate("starter", "new_command"))
 
     view = sub.add_parser("view", help="show a saved run in the meshcat viewer", formatter_class=fmt,
                           epilog="examples:\n  contactdyn view runs/b1\n  contactdyn view runs/b1 --html b1.html")
@@ -326,7 +387,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--html", metavar="FILE", help="write a self-contained HTML player instead of serving")
     view.add_argument("--port", type=int, help="meshcat server port")
     view.add_argument("--host", help="listen on this address (default 127.0.0.1, this machine only)")
-    view.add_argument("--speed", type=float, default=1.0, help="playback speed factor")
+    view.add_argument("--speed", type=_speed, default=1.0, help="playback speed factor (> 0; 1 = real time)")
     view.set_defaults(func=_delegate("viewer", "view_command"))
 
     plot = sub.add_parser("plot", help="paper-style figures of a saved run", formatter_class=fmt,
@@ -341,11 +402,13 @@ def build_parser() -> argparse.ArgumentParser:
                            epilog="example:\n  contactdyn bench b1 --methods DOP853,RK45 --rtols 1e-4,1e-6,1e-8 "
                                   "--repeats 3 --out bench/b1")
     bench.add_argument("scene", help="scene file or name in sims/")
-    bench.add_argument("--methods", help="comma-separated integrators (see `contactdyn list`); RK4=1e-3/1e-4 gives "
-                                         "RK4's fixed steps")
-    bench.add_argument("--rtols", help="comma-separated relative tolerances")
-    bench.add_argument("--repeats", type=int, default=3, help="timing repeats per point")
-    bench.add_argument("--out", metavar="DIR", help="output folder")
+    bench.add_argument("--methods", help="comma-separated integrators (see `contactdyn list`; default DOP853,RK45,"
+                                         "RK23,Radau,RK4); RK4=1e-3/1e-4 gives RK4's fixed steps (default 1e-3, "
+                                         "3e-4, 1e-4 s)")
+    bench.add_argument("--rtols", help="comma-separated relative tolerances (default: per method, 1e-3 down to "
+                                       "1e-10 for DOP853; the command prints them first)")
+    bench.add_argument("--repeats", type=int, default=3, help="timing repeats per point (default 3)")
+    bench.add_argument("--out", metavar="DIR", help="output folder (default out/bench/SCENE)")
     _set_option(bench)
     bench.set_defaults(func=_delegate("workprecision", "bench_command"))
     _fit_parser(sub, fmt)

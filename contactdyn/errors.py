@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "SimulationError"]
+__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "UnknownKeyError", "SimulationError"]
 
 
 class ContactdynError(Exception):
@@ -34,6 +34,16 @@ def abbreviate(value: object, limit: int = 200) -> str:
     if len(text) <= limit:
         return text
     return f"{text[:limit - 40]} ... {text[-20:]} ({len(text)} characters)"
+
+
+class UnknownKeyError(SceneError):
+    """A key no reader knows: ``contact.tip.normal.kk: unknown key; did you mean 'k'? (known here: b, k, m)``."""
+
+    def __init__(self, key: str, known: list[str], suggestion: str | None, file: str | None = None):
+        super().__init__(key, f"a known key ({', '.join(known) or 'none'})", "an unknown key", file)
+        hint = f"; did you mean {suggestion!r}?" if suggestion else ""
+        where = f"{file}: " if file else ""
+        self.args = (f"{where}{key}: unknown key{hint} (known here: {', '.join(known) or 'none'})",)
 
 
 class SimulationError(ContactdynError):

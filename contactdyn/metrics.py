@@ -28,12 +28,15 @@ import numpy as np
 
 from .result import Result
 
-__all__ = ["metrics", "is_metric", "CONTACT_METRICS", "RUN_METRICS"]
+__all__ = ["metrics", "is_metric", "CONTACT_METRICS", "RUN_METRICS", "UNITS"]
 
 #: metric suffixes under ``contact.<name>.``
 CONTACT_METRICS = ("F_peak", "F_final", "impacts", "impulse_n", "impulse_n_first", "impulse_t", "force_rms")
 #: metrics of the whole run
 RUN_METRICS = ("tracking_rms", "max_deformation", "events")
+#: unit of each metric (by its last name part; "" : a count), as in the table above
+UNITS = {"F_peak": "N", "F_final": "N", "impacts": "", "impulse_n": "N·s", "impulse_n_first": "N·s",
+         "impulse_t": "N·s", "force_rms": "N", "tracking_rms": "m", "max_deformation": "m", "events": ""}
 
 
 def is_metric(name: str) -> bool:

@@ -94,10 +94,17 @@ def _direction(result: Result, contact: str, label: str) -> np.ndarray | None:
 
 
 def _is_vertical(result: Result, contact: str, label: str) -> bool:
+    """Along gravity (|cos| > VERTICAL_COS); without gravity (B1's horizontal plane) or a scene
+    document, the paper's reading: the normal is "vertical", the tangents "horizontal"."""
     u = _direction(result, contact, label)
-    if u is None:  # no scene document: the normal is taken as vertical, tangents as horizontal
+    robot = result.scene.get("robot", {}) if isinstance(result.scene, dict) else {}
+    try:
+        g = np.asarray(robot.get("gravity", [0.0, 0.0, -9.81]) if isinstance(robot, dict) else [], float)
+    except (TypeError, ValueError):
+        g = np.zeros(0)
+    if u is None or g.shape != (3,) or np.linalg.norm(g) == 0.0:
         return label == "n"
-    return abs(u[2]) > VERTICAL_COS
+    return abs(u @ g) / np.linalg.norm(g) > VERTICAL_COS
 
 
 def _direction_name(result: Result, contact: str, label: str) -> str:

@@ -68,10 +68,10 @@ def print_robots(entries: list[dict]) -> None:
 
 
 def frames_command(args: argparse.Namespace) -> int:
-    """Print the kinematic tree of ``args.robot`` with frame types (JSON: the frames as a list)."""
-    if not args.robot:
+    """Print the kinematic tree of the robot ``args.prefix`` names, with frame types (JSON: the frames)."""
+    if not args.prefix:
         raise ContactdynError("list frames: name a robot (contactdyn list frames ROBOT)")
-    urdf = build_urdf_model(args.robot, inertia="trust")
+    urdf = build_urdf_model(args.prefix, inertia="trust")
     model = urdf.model
     if args.json:
         frames = [{"name": f.name, "type": str(f.type).rsplit(".", 1)[-1], "parent": model.frames[f.parentFrame].name,

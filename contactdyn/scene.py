@@ -30,7 +30,7 @@ from .trajectory import PROFILES, Move, Ramp
 __all__ = [
     "Scene", "RobotSpec", "BodySpec", "ContactSpec", "ChainSpec", "Stage", "Mass", "FrictionSpec",
     "PhaseSpec", "ReferenceSpec", "SolverSpec", "load_scene", "parse_scene", "apply_overrides",
-    "parse_override", "sims_dir", "find_scene",
+    "parse_override", "sims_dir", "scene_dirs", "find_scene",
 ]
 
 NORMAL_MODELS = ("rigid", "a", "b", "c", "chain")
@@ -161,18 +161,36 @@ def sims_dir() -> Path:
     return packaged if packaged.is_dir() else Path(__file__).parent.parent / "sims"
 
 
+def scene_dirs() -> list[Path]:
+    """Where scene names are looked up, in order: ``./sims`` of the working directory, then the installed ``sims/``."""
+    local = Path.cwd() / "sims"
+    dirs = [local] if local.is_dir() else []
+    return dirs + [d for d in (sims_dir(),) if not dirs or d.resolve() != local.resolve()]
+
+
 def find_scene(name: str | Path) -> Path:
-    """A scene path, or a scene name in ``sims/`` (with or without ``.toml``)."""
+    """A scene path, or a scene name (with or without ``.toml``) in :func:`scene_dirs`, the first found."""
     path = Path(name)
     if path.is_file():
         return path
-    for candidate in (sims_dir() / f"{name}.toml", sims_dir() / str(name)):
-        if candidate.is_file():
-            return candidate
-    known = sorted(p.stem for p in sims_dir().glob("*.toml"))
+    for folder in scene_dirs():
+        for candidate in (folder / f"{name}.toml", folder / str(name)):
+            if candidate.is_file():
+                return candidate
+    known = sorted({p.stem for folder in scene_dirs() for p in folder.glob("*.toml")})
     close = difflib.get_close_matches(str(name), known, n=3)
     hint = f"; did you mean {', '.join(close)}?" if close else ""
     raise SceneError("scene", f"a scene file or one of {known}{hint}", str(name))
+
+
+def _relative_to_scene(source: str, file: str | None) -> str:
+    """A relative URDF path in a scene names a file beside the scene (not in the working directory)."""
+    if file is None or Path(source).is_absolute():
+        return source
+    beside = Path(file).parent / source
+    if beside.is_file() or "/" in source or "\\" in source:
+        return str(beside.resolve())
+    return source  # a name in urdf/ or of example-robot-data
 
 
 # ---- overrides ---------------------------------------------------------------------------
@@ -258,7 +276,7 @@ def _read_robot(r: Reader) -> RobotSpec:
     locked = {k: locked_r.float(k, unit="rad or m") for k in locked_r.data}
     q0 = r.vector("q0", None) if r.has("q0") else None
     spec = RobotSpec(
-        source=r.str("urdf"),
+        source=_relative_to_scene(r.str("urdf"), r.file),
         tip=r.str("tip", "tip"),
         active_joints=tuple(active) if active is not None else None,
         locked=locked,

@@ -42,7 +42,22 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None)
         scene = parse_scene(scene.document, overrides, scene.file)
     wall0 = time.perf_counter()
     system = System(scene)
-    return HybridRun(system).run(wall0)
+    notes = sanity_warnings(system)
+    result = HybridRun(system).run(wall0)
+    result.meta["warnings"] = notes
+    return result
+
+
+def sanity_warnings(system: System) -> list[str]:
+    """The scene's :mod:`~contactdyn.sanity` warnings, issued as SanityWarning (never fatal)."""
+    import warnings
+
+    from .sanity import SanityWarning, scene_warnings, system_warnings
+
+    notes = scene_warnings(system.scene) + system_warnings(system)
+    for note in notes:
+        warnings.warn(f"{system.scene.name}: {note}", SanityWarning, stacklevel=3)
+    return notes
 
 
 def prepare(scene: Scene) -> tuple[System, list[ContactMode], Phase, np.ndarray]:

@@ -355,6 +355,11 @@ def _floats(text: str | None, what: str) -> tuple[float, ...] | None:
         raise SceneError(what, "comma-separated numbers like 1e-4,1e-6", text) from None
 
 
+def _speed_words(ratio: float) -> str:
+    """``2.5× faster`` or ``1.7× slower`` (a ratio below 1 is a slowdown, never "0.6× faster")."""
+    return f"{ratio:.1f}× faster" if ratio >= 1.0 else f"{1.0 / ratio:.1f}× slower"
+
+
 def bench_command(args) -> int:
     """``contactdyn bench SCENE [--methods M,...] [--rtols r,...] [--repeats N] [--out DIR] [--set k=v]...``.
 
@@ -376,6 +381,10 @@ def bench_command(args) -> int:
     out = Path(args.out) if args.out else Path("out") / "bench" / name
     print(f"bench {name}: reference run, then {', '.join(methods or DEFAULT_METHODS)} "
           f"({args.repeats} repeats each)", flush=True)
+    for m in methods or DEFAULT_METHODS:  # the settings each method runs at (defaults unless given)
+        at = (f"steps {', '.join(f'{h:g}' for h in steps or DEFAULT_STEPS)} s" if m == "RK4" else
+              f"rtol {', '.join(f'{r:g}' for r in rtols or DEFAULT_RTOLS.get(m, DEFAULT_RTOLS['DOP853']))}")
+        print(f"  {m}: {at}", flush=True)
 
     def progress(p: WorkPoint) -> None:
         if p.status == "ok":
@@ -390,7 +399,7 @@ def bench_command(args) -> int:
     if doc["recommended"]:
         print(f"recommended ({doc['recommend_rule']}): {doc['recommended']}")
     for r in doc["others"]:
-        print(f"  vs {r['other']}: ours {r['ours']} {r['speedup']:.1f}x faster at error {r['ours_error_N']:.1e} N"
+        print(f"  vs {r['other']}: ours {r['ours']} {_speed_words(r['speedup'])} at error {r['ours_error_N']:.1e} N"
               if r["ours"] != "none" else f"  vs {r['other']}: no setting of ours reached {r['other_error_N']} N")
     print(f"wrote {out / (name + '.md')}, .csv, .json, .png")
     return 0

@@ -53,3 +53,10 @@ def test_undefined_metrics_are_nan():
         del r.channels[k]
     m = metrics(r)
     assert math.isnan(m["tracking_rms"]) and math.isnan(m["max_deformation"])
+
+
+def test_every_metric_has_its_unit():
+    from contactdyn.metrics import CONTACT_METRICS, RUN_METRICS, UNITS
+
+    assert set(UNITS) == set(CONTACT_METRICS) | set(RUN_METRICS)
+    assert UNITS["F_peak"] == "N" and UNITS["impulse_n"] == "N·s" and UNITS["events"] == ""

@@ -108,11 +108,23 @@ def test_deformations_split_by_direction_and_named_as_in_the_paper():
 
 def test_a_horizontal_normal_puts_its_deformation_in_the_horizontal_figure(tmp_path):
     run = synthetic_run()
-    run.scene["contact"]["tip"]["normal"]["direction"] = [0.0, 1.0, 0.0]  # benchmark B1: surface normal +y
+    run.scene["contact"]["tip"]["normal"]["direction"] = [0.0, 1.0, 0.0]  # a wall, under gravity -z
     run.scene["contact"]["tip"]["tangent"]["directions"] = [[1.0, 0.0, 0.0]]
+    run.scene.setdefault("robot", {})["gravity"] = [0.0, 0.0, -9.81]
     horizontal = FIGURES_BY_NAME["fig11_deformations_horizontal"].build(run)
     assert {p.title for p in horizontal} == {"contact tip, normal +y", "contact tip, tangent +x"}
     assert FIGURES_BY_NAME["fig12_deformations_vertical"].build(run) is None
+
+
+def test_without_gravity_the_normal_is_the_vertical_direction():
+    """Benchmark B1 works in the horizontal plane without gravity: its normal +y goes to the "vertical" figure."""
+    run = synthetic_run()
+    run.scene["contact"]["tip"]["normal"]["direction"] = [0.0, 1.0, 0.0]
+    run.scene["contact"]["tip"]["tangent"]["directions"] = [[1.0, 0.0, 0.0]]
+    run.scene.setdefault("robot", {})["gravity"] = [0.0, 0.0, 0.0]
+    (vertical,) = FIGURES_BY_NAME["fig12_deformations_vertical"].build(run)
+    (horizontal,) = FIGURES_BY_NAME["fig11_deformations_horizontal"].build(run)
+    assert vertical.title == "contact tip, normal +y" and horizontal.title == "contact tip, tangent +x"
 
 
 def test_tracking_errors_stop_at_the_first_touch():

@@ -114,31 +114,49 @@ def test_bad_sweep_files_name_file_and_key(capsys, tmp_path, text, words):
 
 
 # ---- running -------------------------------------------------------------------------------------
-def test_sweep_rows_metrics_and_a_recorded_bad_combination(capsys, tmp_path):
+def test_a_bad_grid_value_is_bad_input_before_any_run(capsys, tmp_path):
     out = tmp_path / "s"
     code = main(["sweep", "b1", *FAST, *GRID, "--grid", "contact.tip.normal.b=1.0,-1.0", "--out", str(out),
                  "--workers", "0", "--csv", "--quiet"])
-    assert code == EXIT_FAILED  # the b = -1 runs failed; all eight are recorded
+    err = capsys.readouterr().err
+    assert code == EXIT_USAGE and "Traceback" not in err
+    assert "sweep value " in err and "contact.tip.normal.b = -1.0" in err
+    assert "contact.tip.normal.b: expected a number >= 0" in err
+    assert not list((out / "runs").iterdir())  # nothing ran
+
+
+def test_sweep_rows_metrics_sorted_by_the_swept_parameters(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    code = main(["sweep", "b1", *FAST, *GRID, "--out", "s", "--workers", "0", "--csv", "--plot",
+                 "contact.tip.F_peak", "--over", "contact.tip.normal.k"])
+    assert code == EXIT_OK
+    out = tmp_path / "s"
+    stdout = capsys.readouterr().out
+    assert f"-> {out}" in stdout  # a relative --out is made absolute before it reaches any worker
     s = _summary(out)
-    assert len(s) == 8 and list(s.run_id) == sorted(s.run_id)
-    assert list(s.columns[:7]) == ["run_id", "contact.tip.normal.k", "controller.kp", "contact.tip.normal.b",
-                                   "status", "error", "wall_s"]
-    failed = s[s.status != "ok"]
-    assert (failed["contact.tip.normal.b"] == -1.0).all() and len(failed) == 4
-    assert failed.error.str.contains("contact.tip.normal.b: expected a number >= 0").all()
-    assert failed["contact.tip.F_peak"].isna().all()
-    ok = s[s.status == "ok"]
-    assert (ok.error == "").all() and (ok.wall_s > 0).all()
-    for _, row in ok.iterrows():
+    assert len(s) == 4 and list(s.columns[:6]) == ["run_id", "contact.tip.normal.k", "controller.kp", "status",
+                                                   "error", "wall_s"]
+    swept = list(zip(s["contact.tip.normal.k"], s["controller.kp"], strict=True))
+    assert swept == sorted(swept)  # by the parameters in axis order, not by run id
+    assert (s.error == "").all() and (s.wall_s > 0).all()
+    for _, row in s.iterrows():
         result = load_result(out / "runs" / row.run_id)
         assert result.scene["controller"]["kp"] == row["controller.kp"]
         for name, value in metrics(result).items():
             assert row[name] == value or (np.isnan(row[name]) and np.isnan(value)), name
-    for rid in failed.run_id:
-        doc = json.loads((out / "runs" / f"{rid}.failed.json").read_text())
-        assert doc["status"] == "failed" and doc["overrides"]["contact.tip.normal.b"] == -1.0
     csv = pd.read_csv(out / "summary.csv", keep_default_na=False)
     assert list(csv.run_id) == list(s.run_id)
+    figure = out / "plot_contact.tip.F_peak_over_contact.tip.normal.k.png"
+    assert f"plot {figure}" in stdout and figure.stat().st_size > 10_000
+
+
+def test_plot_and_over_are_checked(capsys, tmp_path):
+    base = ["sweep", "b1", *FAST, *GRID, "--out", str(tmp_path / "s"), "--workers", "0", "-q"]
+    assert main([*base, "--plot", "contact.tip.F_peak"]) == EXIT_USAGE
+    assert main([*base, "--plot", "contact.tip.F_peak", "--over", "duration"]) == EXIT_USAGE
+    assert "a swept parameter (contact.tip.normal.k, controller.kp)" in capsys.readouterr().err
+    assert main([*base, "--plot", "nosuch", "--over", "controller.kp"]) == EXIT_USAGE
+    assert "a metric of the summary" in capsys.readouterr().err
 
 
 def test_simulation_failure_and_crash_do_not_stop_the_others(capsys, tmp_path, monkeypatch):
@@ -163,6 +181,10 @@ def test_simulation_failure_and_crash_do_not_stop_the_others(capsys, tmp_path, m
     assert s.loc[1000.0, "status"] == "failed" and s.loc[1000.0, "error"] == "SimulationError: b1: event storm"
     assert s.loc[2000.0, "status"] == "crashed" and s.loc[2000.0, "error"] == "RuntimeError: a bug"
     assert s.loc[3000.0, "status"] == "failed" and "LinAlgError" in s.loc[3000.0, "error"]
+    err = capsys.readouterr().err  # each failure on the console, with its error, at the end
+    assert "3 of 4 runs failed:" in err and "see the status" not in err
+    assert "(controller.kp = 1000):\n      SimulationError: b1: event storm" in err
+    assert "crashed" in err and "RuntimeError: a bug" in err
 
 
 def test_non_finite_channels_make_a_failed_row():
@@ -257,7 +279,9 @@ def test_unreachable_scheduler_is_bad_input(capsys, tmp_path, monkeypatch):
 
 def test_retry_failed_runs_the_failed_runs_again(capsys, tmp_path):
     out = tmp_path / "s"
-    args = ["sweep", "b1", *FAST, "--grid", "contact.tip.normal.b=1.0,-1.0", "--out", str(out), "--workers", "0"]
+    # a q0 of the wrong length validates as a scene but fails when the robot is known: a failed run
+    args = ["sweep", "b1", *FAST, "--grid", "robot.q0=[0.337307481430, -1.318116071653],[0.1]", "--out", str(out),
+            "--workers", "0"]
     assert main([*args, "--json"]) == EXIT_FAILED
     assert json.loads(capsys.readouterr().out)["skipped"] == 0
     assert main([*args, "--json"]) == EXIT_FAILED

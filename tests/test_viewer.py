@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import base64
-import json
 import re
 import socket
 import urllib.request
@@ -16,6 +14,7 @@ import umsgpack
 import contactdyn
 from contactdyn import ContactdynError, Result, Robot, load_result
 from contactdyn.viewer import LiveViewer, build_scene, export_html, view_command
+from contactdyn.viewer.export import html_payload, unpack_payload
 from contactdyn.viewer.shapes import nice_ceil, nice_floor
 
 # A cart-mounted surface with a mass in its chain: the tip strikes it (a plastic impact at
@@ -145,26 +144,97 @@ def test_chain_gauge_magnifies_the_compression(b1_run):
 
 
 def test_force_arrows_end_at_the_tip_with_the_stated_scale(b1_run):
+    from contactdyn.viewer.contact_visuals import ARROW_RADIUS
+
     _, result = b1_run
     scene = build_scene(result)
     line = next(s for s in scene.legend if s.startswith("force arrows"))
-    metres, newtons = map(float, re.search(r": ([0-9.e+-]+) m = ([0-9.e+-]+) N", line).groups())
+    metres, newtons, tangential = re.search(r": ([0-9.e+-]+) m = ([0-9.e+-]+) N normal \(red\), ([0-9.e+-]+) N "
+                                            r"tangential", line).groups()
+    metres, newtons, tangential = float(metres), float(newtons), float(tangential)
     assert metres / newtons == pytest.approx(scene.scales["arrow"], rel=1e-2)  # the legend rounds to 3 digits
-    L = scene.scales["size"]
-    metres, newtons = 0.1 * L, 0.1 * L / scene.scales["arrow"]
+    assert metres / tangential == pytest.approx(scene.scales["arrow_tangent"], rel=1e-2)
+    unit = scene.scales["arrow"] * newtons  # [m] one scale step, exactly
     arrow = clip(scene, "/meshcat/forces/tip_normal")
     origin = values(arrow["position"])
     shaft = values(clip(scene, "/meshcat/forces/tip_normal/shaft")["scale"])[:, 1]
     head = clip(scene, "/meshcat/forces/tip_normal/head")
-    head_tip = values(head["position"])[:, 1] + values(head["scale"])[:, 1] * 4 * 0.006 * L  # cone height 4 radii
+    head_tip = values(head["position"])[:, 1] + values(head["scale"])[:, 1] * 4 * ARROW_RADIUS * unit  # 4 radii
     F_n = result["contact.tip.F_n"]
     tip = result["tip"]
     # the arrow's origin is the tip minus the force vector, scaled: F_n along +y (the normal)
-    np.testing.assert_allclose(tip - origin, np.outer(F_n * metres / newtons, [0.0, 1.0, 0.0]), atol=1e-9)
-    np.testing.assert_allclose(head_tip, F_n * metres / newtons, atol=1e-9)  # the head touches the tip
+    np.testing.assert_allclose(tip - origin, np.outer(F_n * scene.scales["arrow"], [0.0, 1.0, 0.0]), atol=1e-9)
+    np.testing.assert_allclose(head_tip, F_n * scene.scales["arrow"], atol=1e-9)  # the head touches the tip
     big = F_n > 0.5 * F_n.max()
-    assert np.all(shaft[big] > 0) and np.all(shaft[big] < F_n[big] * metres / newtons)
-    assert newtons == nice_ceil(newtons)
+    assert np.all(shaft[big] > 0) and np.all(shaft[big] < F_n[big] * scene.scales["arrow"])
+    # each scale is the 1-2-5 number putting the 90th percentile of its forces at <= 3 steps
+    F_t = np.abs(result["contact.tip.F_f"][:, 0])
+    for per, F in ((newtons, F_n), (tangential, F_t)):
+        assert per == nice_ceil(per) and 3 * nice_floor(0.99 * per) < np.percentile(F, 90) <= 3 * per
+    assert np.percentile(F_t, 90) < np.percentile(F_n, 90) / 1.5  # why the tangential arrows have their own scale
+
+
+def test_tool_ball_and_trace_follow_the_tip(b1_run):
+    _, result = b1_run
+    scene = build_scene(result)
+    ball = values(clip(scene, "/meshcat/tool/tip/ball")["position"])
+    np.testing.assert_allclose(ball, result["tip"], atol=1e-12)
+    trace = next(c for c in scene.commands if c["type"] == "set_object" and c["path"] == "/meshcat/tool/tip/trace")
+    packed = trace["object"]["geometries"][0]["data"]["attributes"]["position"]["array"]  # a Float32Array
+    points = np.frombuffer(packed.data, np.float32).reshape(-1, 3)
+    np.testing.assert_allclose(points, result["tip"], atol=1e-6)  # float32
+
+
+def _in_view(scene, points: np.ndarray, margin: float = 1.0) -> np.ndarray:
+    """Whether world points, as drawn (the scene is shifted), fall inside the default camera's frustum."""
+    from contactdyn.viewer.camera import ASPECT, FOV
+
+    eye = next(c for c in scene.commands if c["type"] == "set_property" and c["path"].startswith("/Cameras"))["value"]
+    eye = np.array([eye[0], -eye[2], eye[1]])  # meshcat's y-up frame -> world
+    d = eye / np.linalg.norm(eye)
+    right = np.cross([0.0, 0.0, 1.0], d)
+    right /= np.linalg.norm(right)
+    up = np.cross(d, right)
+    shift = np.array(commands_at(scene, "/meshcat")[0]["matrix"]).reshape(4, 4).T[:3, 3]
+    rel = np.atleast_2d(points) + shift - eye
+    depth = -rel @ d
+    t = np.tan(FOV / 2) / margin
+    return (depth > 0) & (np.abs(rel @ up) < t * depth) & (np.abs(rel @ right) < ASPECT * t * depth)
+
+
+def test_default_camera_looks_along_the_surface_from_the_robot_side(b1_run):
+    """B1: normal +y, slide x: the camera looks along ±z (the surface's second tangent), raised towards +y."""
+    from contactdyn.viewer.camera import ELEVATION
+
+    _, result = b1_run
+    scene = build_scene(result)
+    eye = next(c for c in scene.commands if c["type"] == "set_property" and c["path"].startswith("/Cameras"))["value"]
+    eye = np.array([eye[0], -eye[2], eye[1]])
+    d = eye / np.linalg.norm(eye)
+    assert abs(d[0]) < 1e-12 and abs(abs(d[2]) - np.cos(ELEVATION)) < 1e-12
+    assert abs(abs(d[1]) - np.sin(ELEVATION)) < 1e-12
+    right = np.cross([0.0, 0.0, 1.0], d)
+    up = np.cross(d, right / np.linalg.norm(right))
+    assert up @ [0.0, 1.0, 0.0] > 0.9  # the normal points up the screen
+    assert _in_view(scene, result["tip"], margin=1.5).all()
+
+
+SIMS = sorted(p.stem for p in contactdyn.scene.sims_dir().glob("*.toml"))
+
+
+@pytest.mark.parametrize("name", SIMS)
+def test_every_scene_shows_its_tool_and_arrows_in_the_default_view(name):
+    """The tool's path and each arrow's both ends lie inside the default view, away from its edges."""
+    result = contactdyn.simulate(name, {"duration": 0.3, "solver.output_rate": 50})
+    scene = build_scene(result)
+    for c in result.meta["contacts"]:
+        tool = values(clip(scene, f"/meshcat/tool/{c}/ball")["position"])
+        assert _in_view(scene, tool, margin=1.2).all(), f"{name}: the tool leaves the view"
+        for kind in ("normal", "tangent"):
+            arrow = clip(scene, f"/meshcat/forces/{c}_{kind}")
+            if arrow:
+                tails = values(arrow["position"])
+                assert _in_view(scene, tails, margin=1.05).all(), f"{name}: the {kind} arrow leaves the view"
 
 
 def test_cart_moves_impact_marked_and_friction_drawn(cart_run):
@@ -187,6 +257,21 @@ def test_cart_moves_impact_marked_and_friction_drawn(cart_run):
     p = np.array(place[-1]["matrix"]).reshape(4, 4).T[:3, 3]
     tip_x = np.interp(t_imp, result["t"], result["tip"][:, 0]) - np.interp(t_imp, result["t"], result["body.cart.x"])
     assert p[0] == pytest.approx(tip_x, abs=2e-3) and p[1] == pytest.approx(-0.15, abs=1e-3)
+
+
+def test_html_stores_each_mesh_once_compressed(tmp_path):
+    """A UR5 whose meshes appear twice (two identical frames) still carries each mesh file once, gzip'd."""
+    ur5 = Robot.load("ur5")
+    q = np.zeros((2, ur5.nq))
+    scene = build_scene(Result({"t": np.array([0.0, 1.0]), "q": q}, meta={"robot": "ur5", "name": "ur5"}))
+    doubled = type(scene)(scene.commands[:-1] + scene.commands, scene.duration, scene.speed, scene.legend)
+    meshes = [c for c in scene.commands if c["type"] == "set_object" and c["object"]["object"]["type"] ==
+              "_meshfile_object"]
+    raw = sum(len(m["object"]["object"]["data"]) for m in meshes)  # [bytes] the Collada text, once
+    once, twice = export_html(scene, tmp_path / "a.html"), export_html(doubled, tmp_path / "b.html")
+    assert len(html_payload(twice.read_text())) < len(html_payload(once.read_text())) + 0.02 * raw
+    assert len(html_payload(once.read_text())) < 0.35 * raw  # gzip'd text, not base64 of msgpack (1.33 × raw)
+    assert [umsgpack.packb(c) for c in unpack_payload(html_payload(twice.read_text()))] == doubled.packed()
 
 
 def test_locked_joints_and_example_robot_meshes():
@@ -221,9 +306,8 @@ def test_export_html_is_self_contained_and_replays_the_commands(b1_run, tmp_path
     out = export_html(scene, tmp_path / "b1.html")
     text = out.read_text()
     assert "MeshCat.Viewer" in text and "<script src" not in text  # meshcat's JavaScript is inline
-    array = re.search(r"const commands = \[(.*?)\];", text, re.S).group(1)
-    decoded = [umsgpack.unpackb(base64.b64decode(json.loads(s))) for s in array.split(",\n")]
-    assert [c["type"] for c in decoded] == [c["type"] for c in scene.commands]
+    decoded = unpack_payload(html_payload(text))
+    assert [umsgpack.packb(c) for c in decoded] == scene.packed()  # every command, bit for bit
     assert decoded[-1]["animations"][0]["path"] == scene.commands[-1]["animations"][0]["path"]
     assert "magnified ×" in text  # the legend overlay
     again = export_html(result, tmp_path / "again.html", speed=0.5)

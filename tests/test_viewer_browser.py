@@ -160,3 +160,40 @@ def test_live_page_plays(browser, b1_run, tmp_path):
             except ProcessLookupError:
                 pass
         proc.stdout.close()
+
+
+# ---- the default view: tool and both force arrows on screen --------------------------------------
+#: (scene, simulated [s], time shown [s]): B1 slides with 100 N; the UR5 writes pressing 5 N
+DEFAULT_VIEWS = [("b1", 1.0, 0.5), ("case2_writer_ur5", 1.5, 1.2)]
+MIN_PART_PIXELS = 40  #: each part covers at least this many pixels of its own colour in an 800 × 600 frame
+
+
+def colour_pixels(shown: np.ndarray, hidden: np.ndarray, colour: int) -> int:
+    """Pixels that change when a part is shown and then have the part's (unlit) colour."""
+    rgb = np.array([(colour >> 16) & 255, (colour >> 8) & 255, colour & 255])
+    changed = np.abs(shown - hidden).sum(axis=2) > 30
+    return int((changed & (np.abs(shown - rgb).max(axis=2) <= 12)).sum())
+
+
+@pytest.mark.parametrize("name, duration, t", DEFAULT_VIEWS)
+def test_default_view_shows_the_tool_and_both_arrows(browser, tmp_path, name, duration, t):
+    from contactdyn.viewer.contact_visuals import COLORS
+
+    result = contactdyn.simulate(name, {"duration": duration, "solver.output_rate": 100})
+    html = export_html(result, tmp_path / f"{name}.html")
+    errors: list[str] = []
+    page = open_page(browser, html.as_uri(), "window.contactdyn && window.contactdyn.ready === true", errors)
+    try:
+        full = frame(page, t, tmp_path / f"{name}_default.png")  # the default camera, nothing moved
+        counts = {}
+        for part, paths, colours in (("tool", ["/meshcat/tool"], {"tool": COLORS["tool"]}),
+                                     ("arrows", ["/meshcat/forces"], {"normal": COLORS["normal"],
+                                                                      "tangential": COLORS["friction"]})):
+            show(page, paths, False)
+            hidden = frame(page, t, tmp_path / f"{name}_without_{part}.png")
+            show(page, paths, True)
+            counts.update({k: colour_pixels(full, hidden, c) for k, c in colours.items()})
+    finally:
+        page.close()
+    assert not errors, errors
+    assert min(counts.values()) >= MIN_PART_PIXELS, f"{name}: pixels per part {counts} (screenshots in {tmp_path})"

@@ -200,6 +200,8 @@ class PositionDynamicConfig:
 
 @register
 class PositionDynamic(Controller):
+    """A7: tau = H q" + h - tau_c with error dynamics eta" = -kp eta - kv eta', in joint or task space."""
+
     name = "position_dynamic"
     uses_forces = True
 
@@ -282,6 +284,8 @@ class ForceDynamicConfig:
 
 @register
 class ForceDynamic(Controller):
+    """A10: the force set-point F* = F_d + integral of -kf (F - F_d) along the normals, via the nominal surface."""
+
     name = "force_dynamic"
     uses_forces = True
     tracks_position = False
@@ -357,5 +361,7 @@ class ForceDynamic(Controller):
 
 @register
 class Hybrid(ForceDynamic):
+    """A7 along the position axes and A10 along the force normals (the paper's case 2)."""
+
     name = "hybrid"
     tracks_position = True

@@ -36,6 +36,8 @@ class TaskForceConfig:
 
 @register
 class TaskForce(Controller):
+    """Open-loop tip force: constant + ramp + sinusoid, tau = J^T f (no feedback)."""
+
     name = "task_force"
 
     @staticmethod

@@ -52,6 +52,8 @@ class TaskPDConfig:
 
 @register
 class TaskPD(Controller):
+    """Tip-space PD on the position axes, minus the force set-points along their normals; tau = J^T f."""
+
     name = "task_pd"
 
     @staticmethod
@@ -113,6 +115,8 @@ class JointPDConfig:
 
 @register
 class JointPD(Controller):
+    """Joint-space PD: tau = kp (q_d - q) + kd (v_d - v) [+ feedforward]; ignores force set-points."""
+
     name = "joint_pd"
 
     @staticmethod

@@ -7,7 +7,7 @@ overrides (fixed and varied), so the same case always lands in the same files:
 
 - ``OUT/runs/<id>.npz`` + ``.json``: the run's :class:`~contactdyn.result.Result`
   (``<id>.failed.json`` instead, with the error, when the run failed);
-- ``OUT/summary.parquet`` (and ``summary.csv`` on request): one row per run, sorted by id:
+- ``OUT/summary.parquet`` (and ``summary.csv`` on request): one row per run, sorted by the swept parameters:
   the varied parameters, status, error message, wall time [s] and the key metrics
   (:mod:`contactdyn.metrics`);
 - ``OUT/sweep.json``: the base scene document, fixed overrides and the cases.
@@ -34,8 +34,9 @@ Sweep file (TOML)::
     [[run]]                                        # explicit runs, each crossed with the axes
     "solver.method" = "RK45"
 
-Modules: :mod:`.plan` (what runs: axes, sweep files, run ids), :mod:`.execute` (where: this
-process, a process pool, Dask; chunks of runs), :mod:`.store` (the files).
+Modules: :mod:`.plan` (what runs: axes, sweep files, run ids, validation of every case),
+:mod:`.execute` (where: this process, a process pool, Dask; chunks of runs), :mod:`.store` (the
+files), :mod:`.report` (failures for the console, a metric plotted over a parameter).
 """
 
 from .execute import NUMERICAL, SweepReport, process_pool, run_chunk, run_sweep, stop_pool

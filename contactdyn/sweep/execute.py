@@ -77,7 +77,7 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
     scheduler address instead (chunks of ``chunk`` runs are the tasks either way).
     """
     wall0 = time.perf_counter()
-    out = Path(out)
+    out = Path(out).absolute()  # the workers' working directory may differ (Dask)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
     lock = lock_out(out)

@@ -189,24 +189,23 @@ def make_sweep(scene: str | Path | None, sets: Iterable[str] = (), grids: Iterab
 
 
 def check_sweep(sweep: Sweep) -> None:
-    """Reject a sweep that cannot be right as a whole (exit 2), before any run starts.
+    """Reject a sweep with any invalid case (exit 2) before the first run starts.
 
-    An unknown key in any case, every case invalid, or a robot that cannot be found is bad
-    input. A case whose values alone are invalid is a bad parameter combination: it runs
-    (and fails, recorded) with the others.
+    Every case is validated as the run would validate it; the first invalid one is named by
+    its varied values (``contact.tip.normal.b = -1``), then the scene's own message. A robot
+    that cannot be found is bad input too.
     """
     from ..robot import resolve_robot_path
 
-    first_ok, first_error = None, None
-    for _, _, overrides in sweep.cases():
+    first = None
+    for _, params, overrides in sweep.cases():
         try:
             scene = parse_scene(sweep.document, overrides, sweep.file)
         except SceneError as exc:
-            if exc.found == "an unknown key":
+            if exc.found == "an unknown key" or not params:
                 raise
-            first_error = first_error or exc
-            continue
-        first_ok = first_ok or scene
-    if first_ok is None:
-        raise first_error  # type: ignore[misc]
-    resolve_robot_path(first_ok.robot.source)
+            values = ", ".join(f"{k} = {_canonical(v)}" for k, v in params.items())
+            raise SceneError(f"sweep value {values}: {exc.key}", exc.expected, exc.found, exc.file) from None
+        first = first or scene
+    if first is not None:
+        resolve_robot_path(first.robot.source)

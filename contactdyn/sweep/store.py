@@ -119,10 +119,10 @@ def write_manifest(out: Path, sweep: Sweep, cases: list) -> None:
 
 def write_summary(out: Path, rows: dict[str, dict[str, Any]], params: dict[str, dict[str, Any]],
                    keys: list[str], csv: bool) -> Path:
-    """summary.parquet (and .csv) of the finished runs, sorted by run id, written atomically."""
+    """summary.parquet (and .csv) of the finished runs, sorted by the swept parameters, written atomically."""
     import pandas as pd
 
-    ids = sorted(rows)
+    ids = sorted(rows, key=lambda i: (_parameter_order(params[i], keys), i))
     metric_cols = sorted({k for r in rows.values() for k in r} - set(SUMMARY_FIXED))
     data: dict[str, Any] = {"run_id": ids}
     for key in keys:
@@ -138,6 +138,20 @@ def write_summary(out: Path, rows: dict[str, dict[str, Any]], params: dict[str, 
     if csv:
         atomic_path(out / "summary.csv", lambda tmp: frame.to_csv(tmp, index=False))
     return path
+
+
+def _parameter_order(params: dict[str, Any], keys: list[str]) -> tuple:
+    """Sort key of a run: its parameter values in the order of ``keys`` (numbers, then strings, then the rest)."""
+    order = []
+    for key in keys:
+        v = params.get(key)
+        if isinstance(v, int | float) and not isinstance(v, bool):
+            order.append((0, float(v), ""))
+        elif isinstance(v, str | bool):
+            order.append((1, 0.0, str(v)))
+        else:
+            order.append((2 if v is not None else 3, 0.0, json.dumps(v, sort_keys=True)))
+    return tuple(order)
 
 
 def _column(values: list[Any]) -> Any:

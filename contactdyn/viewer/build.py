@@ -11,8 +11,17 @@ from ..errors import ContactdynError, RunFileError
 from ..result import Result
 from ..robot import Robot
 from ..scene import Scene, parse_scene
-from .contact_visuals import STAGE_LENGTH, add_environment, add_forces, add_gauges, add_impacts, contact_views
-from .robot_visuals import add_robot, geometry_placements
+from .camera import frame_view
+from .contact_visuals import (
+    STAGE_LENGTH,
+    add_environment,
+    add_forces,
+    add_gauges,
+    add_impacts,
+    add_tool,
+    contact_views,
+)
+from .robot_visuals import add_robot, geometry_spheres
 from .shapes import add_label
 from .writer import ROOT, SceneWriter, ViewerScene
 
@@ -21,7 +30,8 @@ __all__ = ["build_scene", "MAX_FRAMES"]
 MAX_FRAMES = 2000  #: animation keys per track at most (the run's samples are thinned to this)
 IMPACT_HOLD = 0.25  #: [s of playback] an impact marker stays large this long
 GROUPS = {"robot": f"{ROOT}/robot", "environment": f"{ROOT}/environment", "chains": f"{ROOT}/chains",
-          "forces": f"{ROOT}/forces", "labels": f"{ROOT}/labels"}
+          "forces": f"{ROOT}/forces", "tool": f"{ROOT}/tool", "labels": f"{ROOT}/labels"}
+ARROW_UNIT = 0.2  #: drawn length of one arrow scale step, in view radii (the typical force spans ~3 steps)
 
 
 def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES) -> ViewerScene:
@@ -48,13 +58,17 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
     tips = {c.name: _frame_positions(robot, q, c.frame) for c in contacts}
     disp = {name: np.outer(ch(f"body.{name}.x") if f"body.{name}.x" in result.channels else np.zeros(len(idx)),
                            b.axis) for name, b in bodies.items()}
-    points = [geometry_placements(robot, q[:: max(1, len(q) // 50)])[:, :, :3, 3].reshape(-1, 3),
-              *tips.values(), *(c.point[None] for c in contacts)]
+    body, body_radii = geometry_spheres(robot, q[:: max(1, len(q) // 50)])
+    points = [body, *tips.values(), *(c.point[None] for c in contacts)]
     cloud = np.concatenate(points) if points else np.zeros((1, 3))
+    radii = np.concatenate([body_radii, np.zeros(len(cloud) - len(body))])  # [m] what reaches beyond each point
     L = max(float(np.max(np.linalg.norm(cloud, axis=1))), 0.1)  # [m] scene size
-    label_rotation = _camera(writer, cloud, L)
 
     views = contact_views(scene, tips, disp, L, GROUPS["environment"]) if scene else []
+    v0 = views[0] if views else None
+    label_rotation, V = frame_view(writer, cloud, radii, v0.u if v0 else None, v0.e1 if v0 else None,
+                                   body.mean(axis=0) - v0.tip.mean(axis=0) if v0 and len(body) else None)
+    add_tool(writer, tips, V, GROUPS["tool"])
     legend = [f"run {result.meta.get('name', '?')}: {duration:g} s at {speed:g} × real time "
               f"({len(idx)} frames of {len(t_all)} samples)"]
     scales = {"size": L, "stage_length": STAGE_LENGTH * L}
@@ -66,13 +80,18 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
         if any(not v.spec.normal_chain.rigid or v.spec.tangent_chain is not None for v in views):
             legend.append(f"deformation chains: gauges beside the surface, compressions magnified ×{S:g}, "
                           f"{STAGE_LENGTH * L:.3g} m per stage at rest")
-        per = add_forces(writer, views, ch, L, GROUPS["forces"])
-        scales["arrow"] = 0.1 * L / per
-        legend.append(f"force arrows (on the robot, ending at the contact point): {0.1 * L:.3g} m = {per:g} N "
-                      "(red normal, green tangential)")
-        v0 = views[0]
-        add_label(writer, f"{GROUPS['labels']}/forces", f"arrows: {0.1 * L:.2g} m = {per:g} N", 0.03 * L,
-                  label_rotation, v0.spec.point + (v0.range1[1] + 0.3 * L) * v0.e1)
+        unit = ARROW_UNIT * V  # [m] drawn length of one scale step
+        per = add_forces(writer, views, ch, unit, GROUPS["forces"])
+        scales["arrow"] = unit / per["normal"]
+        scales["arrow_tangent"] = unit / per["tangent"]
+        both = per["normal"] == per["tangent"]
+        text = f"{unit:.3g} m = {per['normal']:g} N" + ("" if both else f" normal (red), {per['tangent']:g} N "
+                                                                           "tangential (green)")
+        legend.append(f"force arrows (on the robot, ending at the contact point): {text}"
+                      + (" (red normal, green tangential)" if both else ""))
+        add_label(writer, f"{GROUPS['labels']}/forces", f"arrows: {unit:.2g} m = {per['normal']:g} N"
+                  + ("" if both else f" / {per['tangent']:g} N"), 0.04 * V, label_rotation,
+                  v0.tip.mean(axis=0) + 0.5 * V * v0.u - 0.5 * V * v0.e1)
 
         def tips_at(name: str, t: float) -> tuple[np.ndarray, np.ndarray]:
             qt = np.array([np.interp(t, t_all, q_all[:, j]) for j in range(q_all.shape[1])])
@@ -127,31 +146,3 @@ def _frames(n: int, max_frames: int) -> np.ndarray:
 def _frame_positions(robot: Robot, q: np.ndarray, frame: str) -> np.ndarray:
     fid = robot.frame_id(frame)
     return np.array([robot.frame_position(qk, fid) for qk in q])
-
-
-def _camera(writer: SceneWriter, cloud: np.ndarray, L: float) -> np.ndarray:
-    """Centre the scene horizontally on the view target and place the camera; return a label rotation."""
-    lo, hi = cloud.min(axis=0), cloud.max(axis=0)
-    shift = -0.5 * (lo + hi)
-    shift[2] = 0.0  # keep the grid at z = 0
-    writer.transform(ROOT, _translation(shift))
-    centred = cloud + shift
-    radius = max(float(np.max(np.linalg.norm(centred, axis=1))), 0.1)
-    spread = np.linalg.svd(centred - centred.mean(axis=0), full_matrices=False)
-    normal = spread[2][-1] if spread[1][-1] < 0.05 * spread[1][0] else np.array([0.6, -0.6, 0.5])
-    if normal @ np.array([0.1, -1.0, 1.0]) < 0:
-        normal = -normal
-    tilt = np.array([0.0, -1.0, 0.0]) if abs(normal[2]) > 0.9 else np.array([0.0, 0.0, 1.0])
-    direction = normal / np.linalg.norm(normal) + 0.3 * tilt
-    direction /= np.linalg.norm(direction)
-    eye = 2.2 * radius * direction
-    writer.prop("/Cameras/default/rotated/<object>", "position", [float(eye[0]), float(eye[2]), float(-eye[1])])
-    x = np.cross([0.0, 0.0, 1.0], direction)
-    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
-    return np.column_stack([x, np.cross(direction, x), direction])
-
-
-def _translation(p: np.ndarray) -> np.ndarray:
-    H = np.eye(4)
-    H[:3, 3] = p
-    return H

@@ -18,15 +18,20 @@ import numpy as np
 
 from ..chain import Chain, NodeKind, build_chain
 from ..scene import ContactSpec, Scene
-from .shapes import add_arrow, add_label, frame_matrix, nice_ceil, nice_floor, spring_object
+from .shapes import ON_TOP, add_arrow, add_label, frame_matrix, nice_ceil, nice_floor, on_top_material, spring_object
 from .writer import TINY, SceneWriter
 
-__all__ = ["ContactView", "contact_views", "add_environment", "add_gauges", "add_forces", "add_impacts"]
+__all__ = ["ContactView", "contact_views", "add_environment", "add_gauges", "add_forces", "add_tool", "add_impacts",
+           "COLORS"]
 
 STAGE_LENGTH = 0.1  #: ℓ, a stage's drawn length at zero compression [L]
 MARGIN = 0.15  #: surface plate beyond the tip's travel [L]
 COLORS = {"surface": 0x9a9a9a, "cart": 0xd98c1f, "env": 0x7a4a1a, "robot": 0x1f4fa0, "mass": 0x555555,
-          "normal": 0xd62728, "friction": 0x2ca02c, "impact": 0xff2020}
+          "normal": 0xd62728, "friction": 0x2ca02c, "impact": 0xff2020, "tool": 0xd000d0, "trace": 0xff8c00}
+ARROW_RADIUS = 0.15  #: arrow shaft radius, in scale steps (the head is 4 radii long, 2.5 wide)
+PERCENTILE = 90  #: [%] the force an arrow scale is fitted to (impact peaks may draw longer)
+SHARED_SCALE = 1.5  #: tangential forces this many times smaller than the normal ones get their own arrow scale
+TOOL_RADIUS = 0.03  #: the tool ball's radius, in view radii
 
 Channel = Callable[[str], np.ndarray | None]
 
@@ -170,17 +175,21 @@ def _draw_chain(writer: SceneWriter, path: str, chain: Chain, x: dict[str, np.nd
         writer.track(np_, "position", "vector3", np.column_stack([np.zeros(n), y[i], np.zeros(n)]))
 
 
-def add_forces(writer: SceneWriter, views: list[ContactView], ch: Channel, L: float, root: str) -> float:
+def add_forces(writer: SceneWriter, views: list[ContactView], ch: Channel, unit: float, root: str
+               ) -> dict[str, float]:
     """Arrows of the normal and tangential force on the robot, ending at each contact point.
 
-    Return the arrow scale: newtons per 0.1 L.
+    ``unit`` [m] is the drawn length of one scale step. Return the newtons per step of the normal
+    and the tangential arrows: each the 1-2-5 number putting the :data:`PERCENTILE` of its force at
+    ≤ 3 steps (peaks such as impacts may draw longer), the tangential one on its own scale when
+    its forces are below 1/:data:`SHARED_SCALE` of the normal ones (else both share the normal scale).
     """
-    forces: list[tuple[str, ContactView, np.ndarray, int]] = []
+    forces: list[tuple[str, str, ContactView, np.ndarray, int]] = []
     for v in views:
         name = v.spec.name
         F_n = ch(f"contact.{name}.F_n")
         if F_n is not None:
-            forces.append((f"{name}_normal", v, np.outer(F_n, v.u), COLORS["normal"]))
+            forces.append(("normal", f"{name}_normal", v, np.outer(F_n, v.u), COLORS["normal"]))
         F_f = ch(f"contact.{name}.F_f")
         tangential = np.zeros_like(v.tip)
         if F_f is not None:
@@ -190,13 +199,28 @@ def add_forces(writer: SceneWriter, views: list[ContactView], ch: Channel, L: fl
             if F_t is not None:
                 tangential += np.outer(F_t, t)
         if F_f is not None or v.spec.tangent_chain is not None:
-            forces.append((f"{name}_tangent", v, tangential, COLORS["friction"]))
-    F_max = max((float(np.max(np.linalg.norm(F, axis=1))) for _, _, F, _ in forces), default=0.0)
-    per = nice_ceil(F_max / 3.0) if F_max > 0 else 1.0  # [N] per 0.1 L: the largest arrow ≤ 0.3 L
-    for name, v, F, color in forces:  # the force on the robot, its head at the contact point
-        vectors = F * (0.1 * L / per)
-        add_arrow(writer, f"{root}/{name}", v.tip - vectors, vectors, 0.006 * L, color)
+            forces.append(("tangent", f"{name}_tangent", v, tangential, COLORS["friction"]))
+    typical = {kind: max((float(np.percentile(np.linalg.norm(F, axis=1), PERCENTILE)) for k, _, _, F, _ in forces
+                          if k == kind), default=0.0) for kind in ("normal", "tangent")}
+    per = {kind: nice_ceil(f / 3.0) if f > 0 else 1.0 for kind, f in typical.items()}  # [N] per step
+    if typical["normal"] > 0 and typical["tangent"] >= typical["normal"] / SHARED_SCALE:
+        per["tangent"] = per["normal"]
+    for kind, name, v, F, color in forces:  # the force on the robot, its head at the contact point
+        vectors = F * (unit / per[kind])
+        add_arrow(writer, f"{root}/{name}", v.tip - vectors, vectors, ARROW_RADIUS * unit, color,
+                  order=ON_TOP + (2 if kind == "normal" else 1))  # the normal over the tangential
     return per
+
+
+def add_tool(writer: SceneWriter, tips: dict[str, np.ndarray], size: float, root: str) -> None:
+    """Each contact frame (the tool's tip) as a ball in :data:`COLORS` ``tool``, and its path as a trace."""
+    for name, tip in tips.items():
+        path = f"{root}/{name}"
+        writer.object(f"{path}/ball", mg.Sphere(TOOL_RADIUS * size), on_top_material(COLORS["tool"]))
+        writer.prop(f"{path}/ball", "renderOrder", ON_TOP + 3)
+        writer.placement(f"{path}/ball", _translations(tip))
+        points = np.asarray(tip, np.float32).T
+        writer.object(f"{path}/trace", mg.Line(mg.PointsGeometry(points), mg.LineBasicMaterial(color=COLORS["trace"])))
 
 
 def add_impacts(writer: SceneWriter, views: list[ContactView], impacts: list[dict], tips_at: Callable,
@@ -237,6 +261,12 @@ def _perpendicular(u: np.ndarray) -> np.ndarray:
 
 def _ty(y: float) -> np.ndarray:
     return _tr(np.array([0.0, y, 0.0]))
+
+
+def _translations(p: np.ndarray) -> np.ndarray:
+    H = np.tile(np.eye(4), (len(p), 1, 1))
+    H[:, :3, 3] = p
+    return H
 
 
 def _tr(p: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ import umsgpack
 from ..robot import Robot
 from .writer import MeshFileGeometry, MeshFileObject, SceneWriter, color_int
 
-__all__ = ["add_robot", "geometry_placements", "MESH_FORMATS"]
+__all__ = ["add_robot", "geometry_placements", "geometry_spheres", "MESH_FORMATS"]
 
 MESH_FORMATS = {".dae": "dae", ".obj": "obj", ".stl": "stl"}
 _RX90 = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])  # meshcat's y axis -> z
@@ -40,6 +40,21 @@ def geometry_placements(robot: Robot, q: np.ndarray) -> np.ndarray:
         for i in range(vmodel.ngeoms):
             out[i, k] = vdata.oMg[i].homogeneous
     return out
+
+
+def geometry_spheres(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding spheres of every visual at each row of q: centres (n_geoms·N, 3) [m] and radii (n_geoms·N,) [m]."""
+    placements = geometry_placements(robot, q)  # (n_geoms, N, 4, 4)
+    centres, radii = [], []
+    for i, geom in enumerate(robot.visual_model.geometryObjects):
+        shape = geom.geometry
+        shape.computeLocalAABB()
+        centre = np.append(np.asarray(shape.aabb_center, float) * geom.meshScale, 1.0)
+        centres.append((placements[i] @ centre)[:, :3])
+        radii.append(np.full(len(q), float(shape.aabb_radius) * float(np.max(np.abs(geom.meshScale)))))
+    if not centres:
+        return np.zeros((0, 3)), np.zeros(0)
+    return np.concatenate(centres), np.concatenate(radii)
 
 
 def add_robot(writer: SceneWriter, robot: Robot, q: np.ndarray, root: str) -> list[str]:

@@ -10,7 +10,8 @@ from scipy.spatial.transform import Rotation
 
 from .writer import TINY, Cone, Plane, SceneWriter, TextTexture
 
-__all__ = ["nice_floor", "nice_ceil", "spring_object", "add_arrow", "add_label", "rotation_from_y", "frame_matrix"]
+__all__ = ["nice_floor", "nice_ceil", "spring_object", "add_arrow", "add_label", "rotation_from_y", "frame_matrix",
+           "on_top_material", "ON_TOP"]
 
 
 def nice_floor(x: float) -> float:
@@ -52,6 +53,15 @@ def spring_object(width: float, color: int, turns: int = 5) -> mg.Line:
     return mg.Line(mg.PointsGeometry(points), mg.LineBasicMaterial(color=color))
 
 
+ON_TOP = 10  #: three.js renderOrder of what is drawn over everything (arrows, the tool)
+
+
+def on_top_material(color: int) -> mg.MeshBasicMaterial:
+    """Unlit (the colour on screen is exactly ``color``), drawn last and over everything: never hidden
+    inside an arm or a semi-transparent surface. Give the mesh renderOrder :data:`ON_TOP`."""
+    return mg.MeshBasicMaterial(color=color, transparent=True, opacity=1.0, depthTest=False)
+
+
 def rotation_from_y(direction: np.ndarray) -> np.ndarray:
     """A rotation matrix taking +y to the unit ``direction``."""
     d = np.asarray(direction, float) / np.linalg.norm(direction)
@@ -64,13 +74,15 @@ def rotation_from_y(direction: np.ndarray) -> np.ndarray:
 
 
 def add_arrow(writer: SceneWriter, path: str, origins: np.ndarray, vectors: np.ndarray, radius: float,
-              color: int) -> None:
+              color: int, order: int = ON_TOP) -> None:
     """An arrow from each origin [m] along each vector [m] (already scaled from force)."""
-    material = mg.MeshPhongMaterial(color=color)
+    material = on_top_material(color)
     head_h, head_r = 4.0 * radius, 2.5 * radius
     writer.object(f"{path}/shaft/body", mg.Cylinder(1.0, radius), material)
+    writer.prop(f"{path}/shaft/body", "renderOrder", order)
     writer.transform(f"{path}/shaft/body", _translation(0.0, 0.5, 0.0))
     writer.object(f"{path}/head/cone", Cone(head_h, head_r), material)
+    writer.prop(f"{path}/head/cone", "renderOrder", order)
     writer.transform(f"{path}/head/cone", _translation(0.0, 0.5 * head_h, 0.0))
     lengths = np.linalg.norm(vectors, axis=1)
     rot = np.empty((len(vectors), 3, 3))
