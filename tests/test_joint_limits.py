@@ -4,6 +4,7 @@ plastically, held while the joint presses and released when its torque vanishes.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -92,13 +93,15 @@ def test_start_outside_the_limits_is_a_clear_error(tmp_path):
         simulate(pendulum(tmp_path, q0=[0.5]))
 
 
-# ---- an arm that runs into a limit mid-task: sims/panda_joint_limit.toml ---------------------------
+# ---- an arm that runs into a limit mid-task: tests/scenes/panda_joint_limit.toml ----------------------
 UPPER4 = -0.0698  #: [rad] the Panda's joint 4 upper limit (example-robot-data)
+#: a joint-space move without contacts (so not among the shipped scenes, which all have a contact task)
+PANDA_LIMIT = str(Path(__file__).parent / "scenes" / "panda_joint_limit.toml")
 
 
 @pytest.fixture(scope="module")
 def panda_run():
-    return simulate("panda_joint_limit", {"duration": 1.8})
+    return simulate(PANDA_LIMIT, {"duration": 1.8})
 
 
 def test_arm_stops_at_the_limit_presses_and_is_released(panda_run):
@@ -119,5 +122,5 @@ def test_arm_stops_at_the_limit_presses_and_is_released(panda_run):
 
 
 def test_without_enforcement_the_joint_passes_its_limit():
-    r = simulate("panda_joint_limit", {"duration": 1.0, "robot.joint_limits": "ignore"})
+    r = simulate(PANDA_LIMIT, {"duration": 1.0, "robot.joint_limits": "ignore"})
     assert r["q"][:, 3].max() > 0.2 and not [e for e in r.events if e["kind"] == "limit"]
