@@ -25,6 +25,7 @@ from enum import IntEnum
 
 from .elements import ChainSpec, Mass, Stage
 from .errors import SceneError
+from .stage_laws import STAGE_LAWS
 
 __all__ = ["NodeKind", "ChainNode", "ChainStage", "Chain", "build_chain"]
 
@@ -51,19 +52,26 @@ class ChainStage:
     upper: int  #: node index nearer the tip
     k: float  #: [N/m]
     b: float  #: [N·s/m]
-    law: str = "linear"
+    law: str = "linear"  #: a name in contactdyn.stage_laws.STAGE_LAWS
     exponent: float = 1.5
     side: str = "environment"
     label: str = ""  #: e.g. "env1" (from the anchor) or "rob1" (from the tip)
 
+    def __post_init__(self) -> None:
+        self._law = STAGE_LAWS[self.law]
+
+    @property
+    def fast_path_gap(self) -> str:
+        """Why the compiled right-hand side cannot run this stage ("" when it can; see contactdyn.fastpath).
+
+        The plan reads stage forces off :func:`~contactdyn.chain_forces.chain_forces` by unit
+        probes, which holds for a law affine in (x, ẋ) (:mod:`contactdyn.stage_laws`).
+        """
+        return "" if self._law.affine else f"stage law {self.law!r} is not affine in (x, ẋ)"
+
     def force(self, x: float, xdot: float) -> float:
-        """Compressive force [N] at compression x [m] and rate ẋ [m/s]."""
-        if self.law == "linear":
-            return self.k * x + self.b * xdot
-        if x <= 0.0:  # Hunt–Crossley acts only in compression and never pulls
-            return 0.0
-        xn = x**self.exponent
-        return max(self.k * xn + self.b * xn * xdot, 0.0)
+        """Compressive force [N] at compression x [m] and rate ẋ [m/s] (the stage's law)."""
+        return self._law.force(self.k, self.b, self.exponent, x, xdot)
 
 
 @dataclass

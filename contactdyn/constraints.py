@@ -23,7 +23,7 @@ column, its γ and who owns it, ``meta = (owner, kind, index)``. The kinds in us
 - ``(joint, "limit", i)``: joint coordinate i pressing on its position limit (force = the limit's
   torque [N·m or N], :mod:`contactdyn.limits`).
 
-A new kind of row (a joint limit, a bilateral bond) is a new ``rows.add(...)`` in the
+A new kind of row (a bilateral bond, ...) is a new ``rows.add(...)`` in the
 evaluation plus a branch in :func:`record_row_forces` that says where its force goes.
 
 A controller that reads measured forces is affine in them, τ = τ₀ + B λ; its columns B
@@ -83,7 +83,10 @@ class Rows:
 
 
 def record_row_forces(system, ev, rows: Rows, lam: np.ndarray) -> None:
-    """Put each row's solved force where its kind says: normal force, stick friction or chain interface."""
+    """Put each row's solved force where its kind says: normal force, stick friction or chain interface.
+
+    Kinds without a home here (none yet) keep their force in ``ev.lam`` beside ``ev.row_meta`` only.
+    """
     for (name, kind, i), value in zip(rows.meta, lam, strict=True):
         if kind == "n":
             ev.normal_force[name] = float(value)
@@ -91,7 +94,7 @@ def record_row_forces(system, ev, rows: Rows, lam: np.ndarray) -> None:
             ev.friction.setdefault(name, np.zeros(len(system.contact(name).tangents)))[i] = value
         elif kind == "limit":
             ev.limit_torque[i] = float(value)
-        else:
+        elif kind[:1] == "t" and kind[1:].isdigit():  # a tangential chain's bond ("t1", "t2")
             ev.interface[f"{name}.{kind}"] = float(value)
 
 

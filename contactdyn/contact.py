@@ -4,7 +4,7 @@ Along the normal a :class:`~contactdyn.chain.Chain` (rigid when empty); along th
 tangential directions nothing (``free``), Coulomb friction, or a chain per direction that
 bonds at touch (case 1's horizontal deformations). A contact's *mode* says whether it
 touches and, with friction, whether it sticks or in which direction it slides; the
-mode only changes at located events (see :mod:`contactdyn.simulate`).
+mode only changes at located events (:mod:`contactdyn.events`, :mod:`contactdyn.transitions`).
 """
 
 from __future__ import annotations

@@ -44,7 +44,7 @@ class Evaluation:
 
     xdot: np.ndarray
     lam: np.ndarray  #: forces of the active rows [N]
-    row_meta: list[tuple[str, str, int]]  #: (contact, "n" or "t", tangent index) per row
+    row_meta: list[tuple[str, str, int]]  #: (owner, kind, index) per row (see contactdyn.constraints)
     normal_force: dict[str, float]  #: interface force per contact [N], > 0 pressing
     friction: dict[str, np.ndarray]  #: friction force per contact, tangent coordinates [N]
     slip: dict[str, np.ndarray]  #: slip velocity per contact, tangent coordinates [m/s]

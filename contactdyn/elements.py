@@ -5,16 +5,16 @@ Part I's models of the contact zone are chains of these along one direction
 compression x [m] (linear), or Hunt–Crossley, F = k xⁿ + b xⁿ ẋ; a mass is an equivalent
 mass of the zone [kg]. Plain frozen data: the scene reads them, the chain and the
 controllers that need a contact's equivalent model (:mod:`contactdyn.controllers.dynamic`)
-use them, and this module imports neither.
+use them, and this module imports neither. The laws are in :mod:`contactdyn.stage_laws`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["STAGE_LAWS", "Stage", "Mass", "Element", "ChainSpec"]
+from .stage_laws import STAGE_LAWS
 
-STAGE_LAWS = ("linear", "hunt_crossley")
+__all__ = ["STAGE_LAWS", "Stage", "Mass", "Element", "ChainSpec"]
 
 
 @dataclass(frozen=True)
@@ -23,8 +23,8 @@ class Stage:
 
     k: float  #: stiffness [N/m] (Hunt–Crossley: [N/mⁿ])
     b: float  #: damping [N·s/m] (Hunt–Crossley: [N·s/mⁿ⁺¹])
-    law: str = "linear"
-    exponent: float = 1.5  #: n, Hunt–Crossley only
+    law: str = "linear"  #: a name in STAGE_LAWS (contactdyn.stage_laws)
+    exponent: float = 1.5  #: n, for laws that use it (Hunt–Crossley)
 
 
 @dataclass(frozen=True)

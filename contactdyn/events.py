@@ -20,8 +20,9 @@ What happens at each event is decided in :mod:`contactdyn.transitions`. The stor
 (:class:`EventLog`): more than ``storm_count`` events within ``storm_window`` seconds, or
 more than ``max_events`` in the run, stop with a :class:`SimulationError` naming them.
 
-The functions read either :meth:`System.evaluate` (:func:`segment_events`) or, when the
-mode is compiled, the plan's values at the same states (same functions, same order).
+The event functions are written once (:func:`segment_events`) against a source of values:
+the compiled plan's (its last calls', no second solve) or, when the mode is not compiled,
+:meth:`System.evaluate`'s through a small cache shared with the right-hand side.
 """
 
 from __future__ import annotations
@@ -94,19 +95,28 @@ def start_storm_cause(events: list[dict], contact: str) -> str | None:
 
 
 class EvaluationCache:
-    """Evaluations shared by the event functions of one step (they see the same states)."""
+    """The latest evaluations at (t, x), shared by the right-hand side and the event functions.
+
+    Four, like the plan's ring: DOP853 evaluates the step's end state (FSAL), then three more
+    stages for its dense output, then the event functions at the step's end.
+    """
+
+    SIZE = 4
 
     def __init__(self, system: System, modes: list[ContactMode], phase: Phase):
         self.system, self.modes, self.phase = system, modes, phase
-        self.key: tuple[float, bytes] | None = None
-        self.value: Evaluation | None = None
+        self.ring: list[tuple[tuple[float, bytes], Evaluation]] = []
 
     def __call__(self, t: float, x: np.ndarray) -> Evaluation:
         key = (t, x.tobytes())
-        if key != self.key:
-            self.value = self.system.evaluate(t, x, self.modes, self.phase)
-            self.key = key
-        return self.value  # type: ignore[return-value]
+        for k, value in reversed(self.ring):
+            if k == key:
+                return value
+        value = self.system.evaluate(t, x, self.modes, self.phase)
+        self.ring.append((key, value))
+        if len(self.ring) > self.SIZE:
+            del self.ring[0]
+        return value
 
 
 class SlipCache:
@@ -203,90 +213,81 @@ class StepBudget:
         return -1.0 if t >= self.t_fire else 1.0
 
 
+class _ReadableValues:
+    """What the event functions read, from :meth:`System.evaluate` (one evaluation per state, shared).
+
+    The compiled plan offers the same methods (:class:`~contactdyn.rhsplan.ModePlan`); the
+    event functions are written once against either.
+    """
+
+    def __init__(self, system: System, modes: list[ContactMode], phase: Phase):
+        self.names = [c.name for c in system.contacts]
+        self.cache = EvaluationCache(system, modes, phase)
+        self.slips = SlipCache(system, [c.name for c, m in zip(system.contacts, modes, strict=True)
+                                        if m.touching and not m.stuck and c.friction is not None and len(c.tangents)])
+
+    def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
+        return self.cache(t, x).xdot
+
+    def gap(self, ci: int, t: float, x: np.ndarray) -> float:
+        return self.cache(t, x).gap[self.names[ci]]
+
+    def normal_force(self, ci: int, t: float, x: np.ndarray) -> float:
+        return self.cache(t, x).normal_force[self.names[ci]]
+
+    def slip(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
+        return self.slips(t, x)[self.names[ci]]
+
+    def cone_margin(self, ci: int, mu_s: float, t: float, x: np.ndarray) -> float:
+        ev = self.cache(t, x)
+        return mu_s * ev.normal_force[self.names[ci]] - float(np.linalg.norm(ev.friction[self.names[ci]]))
+
+    def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """Torques [N·m or N] of the joints pressing on a limit (only this path has them: plans decline)."""
+        return self.cache(t, x).limit_torque
+
+
 def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
                    plan: ModePlan | None = None):
-    """The event functions of one segment, and the right-hand side that feeds their stage watches."""
-    if plan is not None:
-        return _plan_events(system, modes, plan, t0, x0)
-    cache = EvaluationCache(system, modes, phase)
-    slip = SlipCache(system, [c.name for c, m in zip(system.contacts, modes, strict=True)
-                               if m.touching and not m.stuck and c.friction is not None and len(c.tangents)])
-    out: list = []
-    watches: list[SlipWatch] = []
-    for c, mode in zip(system.contacts, modes, strict=True):
-        name = c.name
-        if not mode.touching:
-            floor = min(cache(t0, x0).gap[name], 0.0) - TOUCH_TOL  # [m] never zero at the start
-            out.append(terminal_event(lambda t, x, n=name, g0=floor: cache(t, x).gap[n] - g0, "touch", name))
-            continue
-        if not c.spec.bonded:
-            out.append(terminal_event(lambda t, x, n=name: cache(t, x).normal_force[n], "separate", name))
-        if c.friction is None or not len(c.tangents):
-            continue
-        fr, band = c.friction, system.slip_band
-        if mode.stuck:
-            watch = SlipWatch(None, name, fr.mu_s)
-            watch.value = lambda t, x, w=watch: w.g(cache(t, x))
-            watches.append(watch)
-            out.append(watches[-1])
-            continue
-        r = np.asarray(mode.slip, float)
-        out.append(terminal_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r) - b, "stop", name))
-        out.append(terminal_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r) + b, "reverse", name))
-        if len(r) == 2:
-            out.append(terminal_event(lambda t, x, n=name, r=r, b=band: float(slip(t, x)[n] @ r)
-                              - 0.5 * float(np.linalg.norm(slip(t, x)[n])) + b, "turn", name))
-    out += system.limits.events(phase.limits, x0, lambda t, x: cache(t, x).limit_torque)
-    if not watches:
-        return out, system.rhs(modes, phase)
+    """The event functions of one segment, and the right-hand side that feeds their stage watches.
 
-    def rhs(t: float, x: np.ndarray) -> np.ndarray:
-        ev = system.evaluate(t, x, modes, phase)
-        for w in watches:
-            w.sample(t, w.g(ev))
-        return ev.xdot
-
-    return out, rhs
-
-
-def _plan_events(system: System, modes: list[ContactMode], plan: ModePlan, t0: float, x0: np.ndarray):
-    """:func:`segment_events` on a compiled plan's values (same functions, same order)."""
+    They read the compiled ``plan``'s values when given (its last call's, no second solve),
+    else :meth:`System.evaluate`'s through one shared evaluation per state.
+    """
+    values = plan if plan is not None else _ReadableValues(system, modes, phase)
     out: list = []
     watches: list[SlipWatch] = []
     for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
         name = c.name
         if not mode.touching:
-            floor = min(plan.gap(ci, t0, x0), 0.0) - TOUCH_TOL
-            out.append(terminal_event(lambda t, x, i=ci, g0=floor: plan.gap(i, t, x) - g0, "touch", name))
+            floor = min(values.gap(ci, t0, x0), 0.0) - TOUCH_TOL  # [m] never zero at the start
+            out.append(terminal_event(lambda t, x, i=ci, g0=floor: values.gap(i, t, x) - g0, "touch", name))
             continue
         if not c.spec.bonded:
-            out.append(terminal_event(lambda t, x, i=ci: plan.normal_force(i, t, x), "separate", name))
+            out.append(terminal_event(lambda t, x, i=ci: values.normal_force(i, t, x), "separate", name))
         if c.friction is None or not len(c.tangents):
             continue
         fr, band = c.friction, system.slip_band
         if mode.stuck:
-            def value(t, x, i=ci, mu=fr.mu_s):
-                F_f = plan.stick_force(i, t, x)
-                return mu * plan.normal_force(i, t, x) - math.sqrt(float(F_f @ F_f))
-
-            watches.append(SlipWatch(value, name, fr.mu_s))
+            watches.append(SlipWatch(lambda t, x, i=ci, mu=fr.mu_s: values.cone_margin(i, mu, t, x), name, fr.mu_s))
             out.append(watches[-1])
             continue
         r = np.asarray(mode.slip, float)
-        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r) - b, "stop", name))
-        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r) + b, "reverse", name))
+        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(values.slip(i, t, x) @ r) - b, "stop", name))
+        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(values.slip(i, t, x) @ r) + b, "reverse",
+                                  name))
         if len(r) == 2:
-            out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(plan.slip(i, t, x) @ r)
-                              - 0.5 * float(np.linalg.norm(plan.slip(i, t, x))) + b, "turn", name))
-    out += system.limits.events((), x0)  # (a plan has no joint pressing on a limit: plans decline those)
+            out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(values.slip(i, t, x) @ r)
+                                      - 0.5 * float(np.linalg.norm(values.slip(i, t, x))) + b, "turn", name))
+    out += system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # contactdyn.limits
+    fun = values.rhs
     if not watches:
-        return out, plan.rhs
-    fun = plan.rhs
+        return out, fun
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         xd = fun(t, x)
         for w in watches:
-            w.sample(t, w.value(t, x))  # the plan's last call: no second solve
+            w.sample(t, w.value(t, x))  # the same evaluation (plan: its last call): no second solve
         return xd
 
     return out, rhs

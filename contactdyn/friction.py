@@ -70,6 +70,7 @@ def slip_direction(system, vt: np.ndarray, mode: ContactMode) -> np.ndarray:
         return r if len(vt) == 1 else vt / math.sqrt(float(vt @ vt))
     return r
 
+
 def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:
     """Tangential tip–environment acceleration [m/s²] in tangent coordinates at (x, ẋ)."""
     nQ, nv = system.nQ, system.nv
@@ -79,8 +80,9 @@ def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np
     a_env = c.body_axis * qdd[c.body_index] if c.body_index >= 0 else np.zeros(3)
     return c.tangents @ (kin.J @ qdd[:nv] + kin.drift - a_env)
 
+
 def launch_directions(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
-                       ) -> list[ContactMode]:
+                      ) -> list[ContactMode]:
     """Modes whose 2-D slides from rest, still inside the stick band, slide the consistent way.
 
     A slip from rest starts where it accelerates: d with a_t(d) = λ d, λ ≥ 0, a_t the
@@ -115,6 +117,7 @@ def launch_directions(system, t: float, x: np.ndarray, modes: list[ContactMode],
     system.robot.update(x[:nv], x[nQ:nQ + nv])
     return out
 
+
 def _launch_cross(system, t: float, x: np.ndarray, modes: list[ContactMode], i: int, phase: Phase,
                   theta: float) -> tuple[float, np.ndarray, float]:
     """Sliding contact i along d = (cos θ, sin θ): (d × a_t, d, a_t · d) [m/s²]."""
@@ -125,12 +128,14 @@ def _launch_cross(system, t: float, x: np.ndarray, modes: list[ContactMode], i: 
     a = slip_acceleration(system, c, x, system.evaluate(t, x, trial, phase).xdot)
     return float(d[0] * a[1] - d[1] * a[0]), d, float(a @ d)
 
+
 def slip_velocity(system, c: Contact, kin: Kinematics, qd: np.ndarray | None = None) -> np.ndarray:
     """Tangential tip–environment velocity [m/s] in tangent coordinates (at Q̇ = qd if given)."""
     if qd is None:
         return c.tangents @ (kin.v_tip - kin.v_env)
     v_env = c.body_axis * qd[c.body_index] if c.body_index >= 0 else np.zeros(3)
     return c.tangents @ (kin.J @ qd[: system.nv] - v_env)
+
 
 def initial_slip(c: Contact, kin: Kinematics) -> tuple[float, ...]:
     """Reference sliding direction of a contact at the start: its slip velocity's (1-D: its sign)."""
@@ -141,7 +146,6 @@ def initial_slip(c: Contact, kin: Kinematics) -> tuple[float, ...]:
     if norm == 0.0:
         return tuple(np.eye(len(vt))[0]) if len(vt) else ()
     return tuple(np.sign(vt)) if len(vt) == 1 else tuple(vt / norm)
-
 
 
 def friction_terms(system, c: Contact, mode: ContactMode, kin: Kinematics, row: np.ndarray | None, F_n: float,

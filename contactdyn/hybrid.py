@@ -226,7 +226,8 @@ class HybridRun:
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
                      compiled_modes=sum(p.ok for p in self.plans.values()),
-                     fallback_modes=dict(self.fallbacks), limits=rate_stats)
+                     fallback_modes=dict(self.fallbacks), limits=rate_stats,
+                     fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
                 "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,

@@ -25,6 +25,7 @@ import numpy as np
 
 from .chain_forces import chain_forces
 from .contact import Kinematics
+from .fastpath import UNDECLARED
 
 __all__ = ["affine_map", "ProbedModel"]
 
@@ -201,7 +202,7 @@ class ProbedModel:
             e = np.append(rng.normal(size=ne - 1), 1.0)
             o = self._probe_all(e)
             if not np.allclose(W @ e, o, rtol=1e-9, atol=1e-9 * (1.0 + np.abs(o).max())):
-                self.reason = "non-linear stage law (e.g. Hunt–Crossley)"
+                self.reason = f"{UNDECLARED}a part that is not affine (its declared fast_path_gap is empty)"
                 return
         self.o_gam = slice(self.no, len(w0))  # γ's state part, one per constraint row
         self.no = len(w0)

@@ -27,12 +27,14 @@ holds the plan itself, what it declines, the values the events read, and its sel
 
 from __future__ import annotations
 
+import math
 import pickle
 import weakref
 
 import numpy as np
 
 from .contact import ContactMode
+from .fastpath import UNDECLARED, mode_gap
 from .friction import slip_direction
 from .plan_kkt import CompiledKKT
 from .plan_probe import ProbedModel, affine_map
@@ -82,23 +84,14 @@ class ModePlan(ProbedModel, CompiledKKT):
 
     # ---- what a plan can represent ----------------------------------------------------
     def _unsupported(self) -> str:
+        """Why this plan declines: a gap its parts declared at load (contactdyn.fastpath), or one they did not."""
         s = self.system
-        if s.energy_slot >= 0:
-            return "energy audit (solver.record_energy)"
-        drives = getattr(s, "drives", None)
-        if drives is not None and drives.any_motor:
-            return "motors (drive models)"
+        reason = mode_gap(s, self.modes, self.phase)
+        if reason:
+            return reason
         expected_nQ = s.nv + len(s.body_names) + len(s.mass_labels)
         if s.nQ != expected_nQ:
-            return f"coordinates the plan does not know ({s.nQ - expected_nQ} beyond robot, bodies, masses)"
-        if getattr(self.phase.controller, "uses_forces", False):
-            return "a controller reading measured forces (folded into the linear solve)"
-        if any(getattr(m, "from_rest", False) and len(m.slip) == 2 and not m.stuck for m in self.modes):
-            return "a 2-D slip launching from rest (its direction is solved per call)"
-        if getattr(self.phase, "carrier", None) is not None:
-            return "a reference carried by a body (its acceleration is folded into the linear solve)"
-        if getattr(self.phase, "limits", ()):
-            return "a joint pressing on its position limit (contactdyn.limits)"
+            return f"{UNDECLARED}coordinates the plan does not know ({s.nQ - expected_nQ} beyond robot, bodies, masses)"
         return ""
 
 
@@ -165,6 +158,11 @@ class ModePlan(ProbedModel, CompiledKKT):
         """Slip velocity of contact ci in its tangent coordinates [m/s]."""
         return self.values(t, x)[1][self.o_vt[self.system.contacts[ci].name]]
 
+    def cone_margin(self, ci: int, mu_s: float, t: float, x: np.ndarray) -> float:
+        """μ_s F − |F_f| [N] of a sticking contact ci: the ``slip`` event's function."""
+        F_f = self.stick_force(ci, t, x)
+        return mu_s * self.normal_force(ci, t, x) - math.sqrt(float(F_f @ F_f))
+
     def stick_force(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
         """Friction force of a sticking contact ci in tangent coordinates [N]."""
         z, _ = self.values(t, x)
@@ -183,7 +181,7 @@ class ModePlan(ProbedModel, CompiledKKT):
             scale = 1.0 + float(np.abs(ref).max())
             if not np.all(np.isfinite(got)) or float(np.abs(got - ref).max()) > CHECK_RTOL * scale:
                 self.ok = False
-                self.reason = f"disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g}"
+                self.reason = f"{UNDECLARED}disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g}"
                 return
         self.ring[:] = [(None, None, None, None)] * 4
         self.singular = 0

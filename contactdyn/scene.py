@@ -332,7 +332,7 @@ def _read_stage(e: Reader, k: str = "k", b: str = "b") -> Stage:
         k=e.float(k, lo=0.0, lo_open=True, unit="N/m"),
         b=e.float(b, 0.0, lo=0.0, unit="N·s/m"),
         law=law,
-        exponent=e.float("exponent", 1.5, lo=1.0, hi=3.0) if law == "hunt_crossley" else 1.5,
+        exponent=e.float("exponent", 1.5, lo=1.0, hi=3.0) if STAGE_LAWS[law].uses_exponent else 1.5,
     )
 
 

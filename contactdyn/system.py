@@ -30,6 +30,7 @@ from .controllers.base import BindContext
 from .drives import Drives
 from .dynamics import Evaluation, evaluate
 from .errors import RobotError, SceneError
+from .fastpath import declared_gaps
 from .friction import initial_slip, slip_acceleration, slip_velocity
 from .impact import Impact, impact, project_velocity
 from .layout import assign_chain_slots, assign_first_order_slots
@@ -90,6 +91,8 @@ class System:
         self.force_directions = {c.name: c.normal.u for c in self.contacts}
         self.force_directions.update({f"{c.name}.t{i + 1}": t for c in self.contacts for i, t in enumerate(c.tangents)})
         self.slip_band = scene.solver.stick_velocity  #: [m/s] stick/slip guard band (see contactdyn.friction)
+        #: the parts the compiled right-hand side does not run, as they declare it (contactdyn.fastpath)
+        self.fast_path_gaps = declared_gaps(self)
 
     def _contact_of(self, spec) -> Contact:
         try:

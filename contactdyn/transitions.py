@@ -13,7 +13,8 @@ At each event of :mod:`contactdyn.events` (t fixed, x continuous unless an impac
   is a false alarm (``slip_check``), still stuck;
 - a phase that ends at ``touch:<contact>`` starts the next phase;
 - ``limit`` / ``release``: a joint reaches a position limit (plastic impact, then it presses)
-  or its limit torque vanishes (:mod:`contactdyn.limits`).
+  or its limit torque vanishes (:mod:`contactdyn.limits`); after any event, a joint whose
+  limit torque pulls is released.
 
 Then :meth:`Transitions.consistent` fixes whatever mode the state contradicts: a pulling
 contact (F < −``FORCE_TOL``) separates; a stick outside the cone slides; a slide at rest
@@ -34,13 +35,20 @@ from .errors import SimulationError
 from .events import EventLog
 from .friction import direction_of, in_cone, slip_velocity
 from .impact import impact, project_velocity
-from .limits import LIMIT_EVENTS
 from .system import System
 
 __all__ = ["Transitions", "FORCE_TOL", "SLIP_ALARM"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
 SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
+
+
+class _After:
+    """What an event handler leaves for the consistency pass: contacts to decide at rest, and released ones."""
+
+    def __init__(self) -> None:
+        self.rest: set[int] = set()  #: contacts to decide at rest (a stop)
+        self.released: set[int] = set()  #: contacts that broke away at this event (not stuck again at once)
 
 
 class Transitions:
@@ -51,75 +59,101 @@ class Transitions:
         self.log, self.stats, self.impacts = log, stats, impacts
 
     def handle(self, t, x, modes, phase, event):
-        """Apply a located event: (state, modes, phase) right after it; then release the joints whose
-        limit torque pulls."""
-        handle = self._limit if event.kind in LIMIT_EVENTS else self._contact_event
-        return self.release_pulling(t, *handle(t, x, modes, phase, event))
+        """Apply a located event: (state, modes, phase) right after it.
 
-    def _contact_event(self, t, x, modes, phase, event):
-        system = self.system
-        i = next(k for k, c in enumerate(system.contacts) if c.name == event.contact)
-        c = system.contacts[i]
+        The event's kind picks its handler (:attr:`HANDLERS`); a handler changes ``modes`` in
+        place and returns (x, phase, settle); with ``settle`` the modes are then made
+        consistent with the state (:meth:`consistent`). A new kind of event is a new handler.
+        """
         modes = list(modes)
-        self.log.log(t, event.kind, c.name)
-        rest: set[int] = set()  #: contacts to decide at rest (a stop)
-        released: set[int] = set()  #: contacts that broke away at this event
-        if event.kind == "touch":
-            modes[i], x = self._touch(t, x, modes, i)
-            if c.normal.chain.bonded_when_touching:
-                x, imp = impact(system, t, x, modes, c, phase.limits)
-                self.impacts.append({"t": t, "contact": c.name, "normal_impulse": imp.normal_impulse,
-                                     "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
-                                     "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
-                                     "v_after": imp.v_after.tolist(), "slip_before": imp.slip_before.tolist(),
-                                     "slip_after": imp.slip_after.tolist()})
-                if imp.jammed:
-                    modes[i] = modes[i].with_(stuck=True)
-                elif c.friction is not None and len(c.tangents):
-                    after = imp.slip_after if np.linalg.norm(imp.slip_after) > system.slip_band else imp.direction
-                    if np.any(after):
-                        modes[i] = modes[i].with_(slip=direction_of(after))
-            if phase.spec.until == f"touch:{c.name}":
-                phase = self.system.start_phase(phase.index + 1, t, x, phase) \
-                    if phase.index + 1 < len(self.scene.phases) else phase
-                if phase.index < len(self.scene.phases):
-                    self.log.log(t, "phase", phase.spec.name, check_storm=False)
-        elif event.kind == "separate":
-            x = system.separate(t, x, modes, phase, c)
-            modes[i] = modes[i].with_(touching=False, stuck=False)
-        elif event.kind in ("stop", "reverse"):
-            rest.add(i)
-        elif event.kind == "turn":  # 2-D: the slip turned 60° from the reference; refresh it (no mode change)
-            ev = system.evaluate(t, x, modes, phase)
-            modes[i] = modes[i].with_(slip=direction_of(ev.slip[c.name]), from_rest=False)
-            return x, modes, phase
-        elif event.kind == "slip":  # the cone is reached: slide from rest where the holding force pushes
-            ev = system.evaluate(t, x, modes, phase)
-            self.stats["slips_seen_inside_a_step"] += int(event.latch < math.inf)
-            if event.g(ev) <= SLIP_ALARM * c.friction.mu_s * max(ev.normal_force[c.name], 0.0):
-                modes[i] = modes[i].with_(stuck=False, slip=direction_of(-ev.friction[c.name]), from_rest=True)
-                released.add(i)
-            else:  # a stage saw the cone left, the located point does not: a false alarm, still stuck
-                self.log.events[-1]["kind"] = "slip_check"
-                self.stats["slip_false_alarms"] += 1
-        x, modes = self.consistent(t, x, modes, phase, rest, released)
-        return x, modes, phase
-
-    def _limit(self, t, x, modes, phase, event):
-        """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (contactdyn.limits)."""
-        x, phase, info = self.system.limits.switch(self.system, t, x, modes, phase, event)
-        self.log.log(t, event.kind, event.contact, **info)
-        x, modes = self.consistent(t, x, list(modes), phase)
-        return x, modes, phase
+        self.log.log(t, event.kind, event.contact)
+        after = _After()
+        x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
+        if settle:
+            x, modes = self.consistent(t, x, modes, phase, after.rest, after.released)
+        return self.release_pulling(t, x, modes, phase)
 
     def release_pulling(self, t, x, modes, phase):
-        """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) at t."""
+        """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event."""
         limits = self.system.limits
         while phase.limits and (pulling := limits.pulling(phase, self.system.evaluate(t, x, modes, phase))):
             phase = replace(phase, limits=tuple(p for p in phase.limits if p != pulling[0]))
             self.log.log(t, "release", limits.by_index[pulling[0][0]].name)
             x, modes = self.consistent(t, x, modes, phase)
         return x, modes, phase
+
+    def _index(self, name: str) -> int:
+        return next(k for k, c in enumerate(self.system.contacts) if c.name == name)
+
+    def _on_touch(self, t, x, modes, phase, event, after):
+        """Touching; a bonded touch maps velocities (impact) and slides or jams; a phase may end here."""
+        system = self.system
+        i = self._index(event.contact)
+        c = system.contacts[i]
+        modes[i], x = self._touch(t, x, modes, i)
+        if c.normal.chain.bonded_when_touching:
+            x, imp = impact(system, t, x, modes, c, phase.limits)
+            self.impacts.append({"t": t, "contact": c.name, "normal_impulse": imp.normal_impulse,
+                                 "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
+                                 "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
+                                 "v_after": imp.v_after.tolist(), "slip_before": imp.slip_before.tolist(),
+                                 "slip_after": imp.slip_after.tolist()})
+            if imp.jammed:
+                modes[i] = modes[i].with_(stuck=True)
+            elif c.friction is not None and len(c.tangents):
+                slip = imp.slip_after if np.linalg.norm(imp.slip_after) > system.slip_band else imp.direction
+                if np.any(slip):
+                    modes[i] = modes[i].with_(slip=direction_of(slip))
+        if phase.spec.until == f"touch:{c.name}":
+            phase = self.system.start_phase(phase.index + 1, t, x, phase) \
+                if phase.index + 1 < len(self.scene.phases) else phase
+            if phase.index < len(self.scene.phases):
+                self.log.log(t, "phase", phase.spec.name, check_storm=False)
+        return x, phase, True
+
+    def _on_separate(self, t, x, modes, phase, event, after):
+        """The contact lets go; damped surface ends relax from where they are."""
+        i = self._index(event.contact)
+        x = self.system.separate(t, x, modes, phase, self.system.contacts[i])
+        modes[i] = modes[i].with_(touching=False, stuck=False)
+        return x, phase, True
+
+    def _on_stop(self, t, x, modes, phase, event, after):
+        """A slide came to rest (``stop``, or ``reverse`` for a slip from rest): decide it at rest."""
+        after.rest.add(self._index(event.contact))
+        return x, phase, True
+
+    def _on_turn(self, t, x, modes, phase, event, after):
+        """2-D: the slip turned 60° from the reference; refresh it (no mode change)."""
+        i = self._index(event.contact)
+        ev = self.system.evaluate(t, x, modes, phase)
+        modes[i] = modes[i].with_(slip=direction_of(ev.slip[event.contact]), from_rest=False)
+        return x, phase, False
+
+    def _on_slip(self, t, x, modes, phase, event, after):
+        """The cone is reached: slide from rest where the holding force pushes (or a false alarm)."""
+        i = self._index(event.contact)
+        c = self.system.contacts[i]
+        ev = self.system.evaluate(t, x, modes, phase)
+        self.stats["slips_seen_inside_a_step"] += int(event.latch < math.inf)
+        if event.g(ev) <= SLIP_ALARM * c.friction.mu_s * max(ev.normal_force[c.name], 0.0):
+            modes[i] = modes[i].with_(stuck=False, slip=direction_of(-ev.friction[c.name]), from_rest=True)
+            after.released.add(i)
+        else:  # a stage saw the cone left, the located point does not: a false alarm, still stuck
+            self.log.events[-1]["kind"] = "slip_check"
+            self.stats["slip_false_alarms"] += 1
+        return x, phase, True
+
+    def _on_limit(self, t, x, modes, phase, event, after):
+        """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (contactdyn.limits)."""
+        x, phase, info = self.system.limits.switch(self.system, t, x, modes, phase, event)
+        self.log.events[-1].update(info)  # the joint, side, velocity before and impulse, with the event
+        return x, phase, True
+
+    #: event kind -> handler (see :meth:`handle`)
+    HANDLERS = {"limit": _on_limit, "release": _on_limit,
+                "touch": _on_touch, "separate": _on_separate, "stop": _on_stop, "reverse": _on_stop,
+                "turn": _on_turn, "slip": _on_slip}
 
     def _touch(self, t, x, modes, i):
         """Mode after touch: touching, tangential chains anchored where the tip now is."""

@@ -102,6 +102,16 @@ class Controller:
         """Joint torques and the rates of the controller's states."""
         raise NotImplementedError
 
+    @property
+    def fast_path_gap(self) -> str:
+        """Why the compiled right-hand side cannot run this controller ("" when it can; see contactdyn.fastpath).
+
+        A controller without a :meth:`tip_force_law` is called per right-hand side by the
+        compiled plan with the same :class:`ControlInput`; one that reads measured forces is
+        folded into the linear solve, which only the readable model does so far.
+        """
+        return "a controller reading measured forces (folded into the linear solve)" if self.uses_forces else ""
+
     def tip_force_law(self) -> TipForceLaw | None:
         """The law as data when the command is exactly
         τ = Jᵀ(K_p (x_d − p) + K_d (ẋ_d − ṗ) − Σ F_d n) + feedforward − k_dj q̇

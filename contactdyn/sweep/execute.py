@@ -77,22 +77,22 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
     scheduler address instead (chunks of ``chunk`` runs are the tasks either way).
     """
     wall0 = time.perf_counter()
+    if check:  # bad input is refused before anything is written
+        check_sweep(sweep)
     out = Path(out).absolute()  # the workers' working directory may differ (Dask)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
     lock = lock_out(out)
     try:
-        return _run_locked(sweep, out, runs_dir, wall0, workers, scheduler, chunk, csv, retry_failed, progress, check)
+        return _run_locked(sweep, out, runs_dir, wall0, workers, scheduler, chunk, csv, retry_failed, progress)
     finally:
         lock.close()
 
 
 def _run_locked(sweep: Sweep, out: Path, runs_dir: Path, wall0: float, workers, scheduler, chunk, csv, retry_failed,
-                progress, check) -> SweepReport:
+                progress) -> SweepReport:
     for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer (we hold the lock: no writer is live)
         stale.unlink(missing_ok=True)
-    if check:
-        check_sweep(sweep)
     cases = sweep.cases()
     write_manifest(out, sweep, cases)
     rows: dict[str, dict[str, Any]] = {}

@@ -1,0 +1,91 @@
+"""Which parts of a scene the compiled right-hand side runs, declared by the parts and known at load.
+
+One description of the model serves both paths. The readable right-hand side
+(:mod:`contactdyn.dynamics`) is the model; the compiled plan (:mod:`contactdyn.rhsplan`)
+reads its affine parts off the same functions by unit probes (:mod:`contactdyn.plan_probe`)
+and calls the rest — a controller's ``command`` — with the same inputs. A part therefore
+needs no second implementation to be fast, *if* the plan can represent it. Where it
+cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when compiled):
+
+- a stage law (:class:`~contactdyn.chain.ChainStage`): only the linear law is affine;
+- the drives (:class:`~contactdyn.drives.Drives`): DC motors and elastic transmissions are not compiled;
+- a controller (:class:`~contactdyn.controllers.base.Controller`): one reading measured forces is not;
+
+and the system adds its own: the energy audit, a reference carried by a body, a 2-D slip
+launching from rest (its direction is solved per call), a joint pressing on its position limit.
+:func:`declared_gaps` collects them when the system is built (``System.fast_path_gaps``, reported in
+``Result.stats["fast_path_gaps"]``); the plan of a mode declines exactly when one of them
+applies to that mode (:func:`mode_gap`). A plan that declines for any other reason — its
+probes find a non-affine part, or its self-check disagrees with the readable model — is
+an undeclared gap: its reason in ``Result.stats["fallback_modes"]`` starts with
+``"undeclared: "``, which the tests treat as a bug.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "CARRIED", "LAUNCH", "LIMIT"]
+
+UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
+ENERGY = "energy audit (solver.record_energy)"
+CARRIED = "a reference carried by a body (its acceleration is folded into the linear solve)"
+LAUNCH = "a 2-D slip launching from rest (its direction is solved per call)"
+LIMIT = "a joint pressing on its position limit (contactdyn.limits: its row is not compiled)"
+
+
+class Gap(NamedTuple):
+    """A part the compiled right-hand side does not run, and in which modes that matters."""
+
+    part: str  #: the part's scene key, e.g. "robot.drive", "phase[0].controller", "contact.tip.n.env1"
+    reason: str
+    when: str  #: in words: "always", "in its phase", ...
+    applies: Callable  #: applies(modes, phase) -> bool: the plan of (modes, phase) must decline
+
+    def describe(self) -> dict[str, str]:
+        return {"part": self.part, "reason": self.reason, "when": self.when}
+
+
+def declared_gaps(system) -> list[Gap]:
+    """The parts of ``system`` that declare themselves not compiled, in the order the plan checks them."""
+    gaps = []
+    if system.energy_slot >= 0:
+        gaps.append(Gap("solver.record_energy", ENERGY, "always", lambda modes, phase: True))
+    if system.drives.fast_path_gap:
+        gaps.append(Gap("robot.drive", system.drives.fast_path_gap, "always", lambda modes, phase: True))
+    for i, ctl in enumerate(system.controllers):
+        if ctl.fast_path_gap:
+            gaps.append(Gap(f"phase[{i}].controller", ctl.fast_path_gap, "in its phase",
+                            lambda modes, phase, i=i: phase.index == i))
+    for ci, c in enumerate(system.contacts):
+        if c.friction is not None and len(c.tangents) == 2:
+            gaps.append(Gap(f"contact.{c.name}.tangent", LAUNCH, "while a 2-D slip launches from rest",
+                            lambda modes, phase, ci=ci: _launching(modes[ci])))
+    for i, spec in enumerate(system.scene.phases):
+        if spec.reference is not None and spec.reference.body != "ground":
+            gaps.append(Gap(f"phase[{i}].reference.body", CARRIED, "in its phase",
+                            lambda modes, phase, i=i: phase.index == i and phase.carrier is not None))
+    if system.limits.limits:
+        gaps.append(Gap("robot.joint_limits", LIMIT, "while a joint presses on its limit",
+                        lambda modes, phase: bool(phase.limits)))
+    for ci, c in enumerate(system.contacts):
+        for dc in c.chains:
+            for k, stage in enumerate(dc.chain.stages):
+                if stage.fast_path_gap:
+                    gaps.append(Gap(f"contact.{c.name}.{dc.label}.{stage.label}", stage.fast_path_gap,
+                                    "while the stage carries force",
+                                    lambda modes, phase, ci=ci, dc=dc, k=k: k in dc.plan(modes[ci].touching).active))
+    return gaps
+
+
+def mode_gap(system, modes, phase) -> str:
+    """Why the plan of (modes, phase) must decline: the first declared gap that applies ("" if none)."""
+    for gap in system.fast_path_gaps:
+        if gap.applies(modes, phase):
+            return gap.reason
+    return ""
+
+
+def _launching(mode) -> bool:
+    return mode.from_rest and len(mode.slip) == 2 and not mode.stuck

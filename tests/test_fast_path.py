@@ -1,0 +1,100 @@
+"""The compiled right-hand side runs every mode unless a part declared at load that it cannot (fastpath)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contactdyn import load_scene, parse_scene, simulate
+from contactdyn.chain import ChainStage
+from contactdyn.fastpath import ENERGY, UNDECLARED
+from contactdyn.scene import sims_dir
+from contactdyn.simulate import run_system
+from contactdyn.stage_laws import STAGE_LAWS, StageLaw, register_stage_law
+from contactdyn.system import System
+
+HARD = Path(__file__).resolve().parent.parent / "benchmarks" / "hard"
+HUNT_CROSSLEY = {"model": "chain", "environment": [{"k": 1e7, "b": 1e9, "law": "hunt_crossley", "exponent": 1.5}]}
+
+
+def axis_scene(normal: dict, duration: float):
+    """The cylindrical robot's vertical axis (1 DOF) falling at 0.5 m/s onto a surface 1 mm below its tip."""
+    return parse_scene({
+        "duration": duration, "solver": {"rtol": 1e-10, "atol": 1e-13},
+        "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.999],
+                  "v0": [0.5]},
+        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], **normal}}},
+        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0},
+    })
+
+
+def _declared(result) -> set[str]:
+    return {gap["reason"] for gap in result.stats["fast_path_gaps"]}
+
+
+def _assert_only_declared_fallbacks(result) -> None:
+    fallbacks = set(result.stats["fallback_modes"])
+    assert not any(reason.startswith(UNDECLARED) for reason in fallbacks), fallbacks
+    assert fallbacks <= _declared(result)
+
+
+def test_a_hunt_crossley_stage_declares_its_gap_at_load_and_only_its_touching_modes_fall_back():
+    scene = axis_scene(HUNT_CROSSLEY, duration=0.05)  # free flight, then touch
+    gaps = System(scene).fast_path_gaps
+    assert [g.part for g in gaps] == ["contact.tip.n.env1"]
+    r = simulate(scene)
+    assert r.events[0]["kind"] == "touch"
+    assert r.stats["compiled_modes"] >= 1  # the free flight: the stage carries no force
+    assert set(r.stats["fallback_modes"]) == {gaps[0].reason}
+    _assert_only_declared_fallbacks(r)
+
+
+def test_the_energy_audit_and_motors_are_declared_gaps():
+    r = simulate("b1", {"solver.record_energy": True, "duration": 0.05})
+    assert set(r.stats["fallback_modes"]) == {ENERGY} == _declared(r)
+    system = System(load_scene("case3_b_force"))
+    parts = {g.part: g.reason for g in system.fast_path_gaps}
+    assert parts["robot.drive"] == "motors (drive models)"
+    assert "phase[1].controller" in parts  # force_dynamic reads the measured force
+
+
+def test_a_part_that_claims_to_compile_but_does_not_is_reported_as_undeclared(monkeypatch):
+    scene = axis_scene(HUNT_CROSSLEY, duration=0.05)
+    honest = simulate(scene)
+    monkeypatch.setattr(ChainStage, "fast_path_gap", property(lambda self: ""))
+    assert System(scene).fast_path_gaps == []
+    r = simulate(scene)
+    assert r.stats["fallback_modes"] and all(k.startswith(UNDECLARED) for k in r.stats["fallback_modes"])
+    np.testing.assert_array_equal(r["q"], honest["q"])  # the readable model still runs those modes
+    with pytest.raises(AssertionError):
+        _assert_only_declared_fallbacks(r)
+
+
+def test_a_new_affine_stage_law_is_compiled_by_construction():
+    class Doubled(StageLaw):  # a stage twice as stiff and twice as damped as its k and b say
+        name, affine = "doubled", True
+
+        @staticmethod
+        def force(k, b, n, x, xdot):
+            return 2.0 * k * x + 2.0 * b * xdot
+
+    register_stage_law(Doubled)
+    try:
+        k, b = 5e4, 1500.0  # [N/m], [N·s/m]
+        doubled = simulate(axis_scene({"model": "chain", "environment": [{"k": k, "b": b, "law": "doubled"}]}, 0.05))
+    finally:
+        del STAGE_LAWS["doubled"]
+    linear = simulate(axis_scene({"model": "chain", "environment": [{"k": 2 * k, "b": 2 * b}]}, 0.05))
+    assert doubled.stats["fast_path_gaps"] == [] and not doubled.stats["fallback_modes"]
+    assert doubled.stats["compiled_modes"] == linear.stats["compiled_modes"] >= 2  # approach, then touching
+    np.testing.assert_allclose(doubled["contact.tip.F_n"], linear["contact.tip.F_n"], rtol=0,
+                               atol=1e-9 * np.abs(linear["contact.tip.F_n"]).max())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", sorted(sims_dir().glob("*.toml")) + sorted(HARD.glob("*.toml")),
+                         ids=lambda p: p.stem)
+def test_every_scene_falls_back_only_where_a_part_declared_it(path):
+    _assert_only_declared_fallbacks(run_system(System(load_scene(path))))
