@@ -12,13 +12,15 @@ cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when com
 - a controller (:class:`~contactdyn.controllers.base.Controller`): one reading measured forces is not;
 
 and the system adds its own: the energy audit, a reference carried by a body, a 2-D slip
-launching from rest (its direction is solved per call), a joint pressing on its position limit.
-:func:`declared_gaps` collects them when the system is built (``System.fast_path_gaps``, reported in
+launching from rest (its direction is solved per call). :func:`declared_gaps` collects them
+when the system is built (``System.fast_path_gaps``, reported in
 ``Result.stats["fast_path_gaps"]``); the plan of a mode declines exactly when one of them
-applies to that mode (:func:`mode_gap`). A plan that declines for any other reason — its
-probes find a non-affine part, or its self-check disagrees with the readable model — is
-an undeclared gap: its reason in ``Result.stats["fallback_modes"]`` starts with
-``"undeclared: "``, which the tests treat as a bug.
+applies to that mode (:func:`mode_gap`), or while a joint presses on its position limit
+(:data:`LIMIT`; every robot has limits, so this one is a rule of :func:`mode_gap`, not a
+listed gap). A plan that declines for any other reason — its probes find a non-affine
+part, or its self-check disagrees with the readable model — is an undeclared gap: its
+reason in ``Result.stats["fallback_modes"]`` starts with ``"undeclared: "``, which the
+tests treat as a bug.
 """
 
 from __future__ import annotations
@@ -66,9 +68,6 @@ def declared_gaps(system) -> list[Gap]:
         if spec.reference is not None and spec.reference.body != "ground":
             gaps.append(Gap(f"phase[{i}].reference.body", CARRIED, "in its phase",
                             lambda modes, phase, i=i: phase.index == i and phase.carrier is not None))
-    if system.limits.limits:
-        gaps.append(Gap("robot.joint_limits", LIMIT, "while a joint presses on its limit",
-                        lambda modes, phase: bool(phase.limits)))
     for ci, c in enumerate(system.contacts):
         for dc in c.chains:
             for k, stage in enumerate(dc.chain.stages):
@@ -81,6 +80,8 @@ def declared_gaps(system) -> list[Gap]:
 
 def mode_gap(system, modes, phase) -> str:
     """Why the plan of (modes, phase) must decline: the first declared gap that applies ("" if none)."""
+    if getattr(phase, "limits", ()):
+        return LIMIT
     for gap in system.fast_path_gaps:
         if gap.applies(modes, phase):
             return gap.reason
