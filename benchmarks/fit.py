@@ -1,6 +1,7 @@
 """Validation of ``contactdyn fit`` on benchmark B1 (issue 17, item 4).
 
     PYTHONPATH=. python benchmarks/fit.py [--realisations 20] [--workers 0] [--out benchmarks/out/fit.json]
+    PYTHONPATH=. python benchmarks/fit.py --pool 3     # the pool's speed-up on one fit (fit_pool.json)
 
 Truth: B1 with k = 1.3e5 N/m, m′ = 8 kg, μ = 0.35 (the scene has 1e5, 10, 0.4), simulated
 at rtol 1e-11; 1 % Gaussian noise = σ of 1 % of each channel's RMS value (F_n ≈ 100 N:
@@ -21,8 +22,10 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import statistics
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -72,8 +75,9 @@ def write_log(channels: dict[str, np.ndarray], seed: int, path: Path) -> dict[st
 
 
 def one_fit(log: Path, params: list[str], workers: int) -> dict:
+    cpu0 = time.process_time()
     res = contactdyn.fit("b1", log, ",".join(params), workers=workers)
-    out = {"runs": res.runs, "wall_s": res.wall_s, "chi2_red": res.chi2_red,
+    out = {"runs": res.runs, "wall_s": res.wall_s, "cpu_s": time.process_time() - cpu0, "chi2_red": res.chi2_red,
            "channels": {c.name: {"rms_over_noise": c.ratio, "noise": c.sigma} for c in res.channels},
            "estimates": {}}
     for e in res.estimates:
@@ -94,15 +98,37 @@ def _print_fit(title: str, fit: dict) -> None:
               f"{'' if e['determined'] else '  (not determined: ' + e['warnings'][0] + ')'}")
 
 
+def pool_ratio(log: Path, repeats: int, workers: int) -> dict:
+    """Wall time of the same fit in this process and on ``workers`` pool processes, interleaved; medians."""
+    walls: dict[int, list[float]] = {0: [], workers: []}
+    for _ in range(repeats):
+        for w in walls:
+            t0 = time.perf_counter()
+            contactdyn.fit("b1", log, f"{K},{M},{MU}", workers=w)
+            walls[w].append(time.perf_counter() - t0)
+    here, pooled = statistics.median(walls[0]), statistics.median(walls[workers])
+    print(f"pool: {workers} workers {pooled:.1f} s, this process {here:.1f} s (medians of {repeats}, interleaved): "
+          f"speed-up {here / pooled:.2f}; load average {os.getloadavg()[0]:.1f}")
+    return {"workers": workers, "wall_s": walls, "speedup": here / pooled, "load_average": os.getloadavg()[0]}
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--realisations", type=int, default=20)
     p.add_argument("--workers", type=int, default=0)
     p.add_argument("--out", default="benchmarks/out/fit.json")
     p.add_argument("--tmp", default="benchmarks/out/fit_logs")
+    p.add_argument("--pool", type=int, default=0, metavar="REPEATS",
+                   help="only time one fit in this process against 2 pool workers, REPEATS times each")
     args = p.parse_args(argv)
     tmp = Path(args.tmp)
     tmp.mkdir(parents=True, exist_ok=True)
+    if args.pool:
+        log = tmp / "b1_seed0.csv"
+        write_log(simulated_channels(), 0, log)
+        out = Path(args.out).with_name("fit_pool.json")
+        out.write_text(json.dumps(pool_ratio(log, args.pool, 2), indent=1))
+        return 0
     three = [K, M, MU]
     report: dict = {"truth": TRUTH, "noise": "1 % of each channel's RMS", "workers": args.workers}
 
@@ -115,7 +141,8 @@ def main(argv: list[str] | None = None) -> int:
         e = fits[-1]["estimates"]
         print(f"seed {seed:2d}: " + "  ".join(f"{k.split('.')[-1]} {v['error_pct']:+.3f} % "
                                               f"{'in' if v['in_ci'] else 'OUT'}" for k, v in e.items())
-              + f"  ({fits[-1]['runs']} runs, {fits[-1]['wall_s']:.1f} s)", flush=True)
+              + f"  ({fits[-1]['runs']} runs, {fits[-1]['wall_s']:.1f} s wall, {fits[-1]['cpu_s']:.1f} s CPU)",
+              flush=True)
     _print_fit("1. recovery (seed 0)", fits[0])
     report["recovery"] = fits[0]
     report["recovery_ok"] = all(abs(e["error_pct"]) < 2 and e["in_ci"] for e in fits[0]["estimates"].values())
@@ -125,8 +152,10 @@ def main(argv: list[str] | None = None) -> int:
                                                 for k in three}}
     print(f"2. coverage over {len(fits)} realisations (target >= {0.8 * len(fits):g}): {coverage}; "
           f"max |error| %: {report['coverage']['max_abs_error_pct']}")
-    walls, runs = [f["wall_s"] for f in fits], [f["runs"] for f in fits]
+    walls, runs, cpus = [f["wall_s"] for f in fits], [f["runs"] for f in fits], [f["cpu_s"] for f in fits]
     report["cost"] = {"wall_s_median": statistics.median(walls), "wall_s_max": max(walls),
+                      "cpu_s_median": statistics.median(cpus), "cpu_s_max": max(cpus),
+                      "cpu_s_per_run_median": statistics.median(c / r for c, r in zip(cpus, runs, strict=True)),
                       "runs_median": statistics.median(runs), "runs_max": max(runs)}
 
     with_b = one_fit(tmp / "b1_seed0.csv", [*three, B], args.workers)
@@ -140,9 +169,12 @@ def main(argv: list[str] | None = None) -> int:
     _print_fit("4. data from the closed-form model (b1_reference.py)", independent)
     report["independent"] = independent
     report["independent_ok"] = all(abs(e["error_pct"]) < 2 for e in independent["estimates"].values())
-    print(f"cost per fit (B1, 3 parameters, {len(fits)} fits): wall median {report['cost']['wall_s_median']:.1f} s "
-          f"(max {report['cost']['wall_s_max']:.1f}), simulations median {report['cost']['runs_median']:g} "
-          f"(max {report['cost']['runs_max']})")
+    c = report["cost"]
+    print(f"cost per fit (B1, 3 parameters, {len(fits)} fits): wall median {c['wall_s_median']:.1f} s "
+          f"(max {c['wall_s_max']:.1f}), CPU median {c['cpu_s_median']:.1f} s (max {c['cpu_s_max']:.1f}; "
+          f"{c['cpu_s_per_run_median'] * 1e3:.0f} ms per simulation), simulations median {c['runs_median']:g} "
+          f"(max {c['runs_max']}); load average at the end {os.getloadavg()[0]:.1f}")
+    report["load_average_end"] = os.getloadavg()[0]
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(report, indent=1))
     print(f"-> {args.out}")

@@ -1,15 +1,17 @@
 """Scaling of a sweep: 1 vs 2 workers on a process pool and on a Dask LocalCluster, and their per-run overhead.
 
-    python benchmarks/sweep_scaling.py [--runs 200] [--repeats 3] [--duration 0.1] [--no-dask]
+    python benchmarks/sweep_scaling.py [--runs 200] [--repeats 3] [--duration 0.1] [--no-dask] [--set K=V]
 
 A sweep of RUNS short B1 runs (``duration`` seconds at 200 Hz output, contact stiffness
-log-spaced over 5e4..2e5 N/m) is timed end to end (``run_sweep``: results and summary
+log-spaced over 5e4..2e5 N/m, ``--set`` overrides on every run, e.g. the integrator) is
+timed end to end (``run_sweep``: results and summary
 written to a temporary folder) in five ways: in this process (no pool: the baseline),
 a process pool of 1 and of 2 workers, a Dask ``LocalCluster`` of 1 and of 2 worker
 processes. Each is repeated REPEATS times; the median and the range are reported, with how
 busy the whole machine was meanwhile (from /proc/stat: a sweep on one worker of an otherwise idle 2-core machine
 keeps it about 50 % busy; more means someone else was computing too).
 
+- runs per second = RUNS / the median sweep time;
 - speed-up = time with 1 worker / time with 2 workers (the goal: >= 1.7 on 2 cores);
 - per-run overhead = (time with 1 worker − time in this process) / RUNS: what the pool or
   Dask costs per run. Start-up is reported apart: the pool's workers fork from a server
@@ -39,8 +41,8 @@ from contactdyn.sweep import make_sweep, run_sweep  # noqa: E402
 OUT = Path(__file__).resolve().parent / "out" / "sweep_scaling.json"
 
 
-def _sweep(runs: int, duration: float):
-    return make_sweep("b1", sets=[f"duration={duration}", "solver.output_rate=200"],
+def _sweep(runs: int, duration: float, sets: tuple[str, ...] = ()):
+    return make_sweep("b1", sets=[f"duration={duration}", "solver.output_rate=200", *sets],
                       ranges=[f"contact.tip.normal.k=5e4:2e5:{runs}:log"])
 
 
@@ -87,9 +89,11 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--duration", type=float, default=0.1, help="simulated seconds per run")
     ap.add_argument("--no-dask", action="store_true")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a scene override for every run (e.g. solver.method=DOP853C)")
     args = ap.parse_args()
 
-    big, one = _sweep(args.runs, args.duration), _sweep(1, args.duration)
+    big, one = _sweep(args.runs, args.duration, tuple(args.set)), _sweep(1, args.duration, tuple(args.set))
     modes: dict[str, dict] = {"inline": {"workers": 0}, "pool1": {"workers": 1}, "pool2": {"workers": 2}}
     cluster_start: dict[str, list[float]] = {}
     if not args.no_dask:
@@ -124,7 +128,8 @@ def main() -> None:
     med1 = {m: statistics.median(v) for m, v in single.items()}
     n = args.runs
     report = {
-        "runs": n, "repeats": args.repeats, "duration_s": args.duration, "cpu_count": os.cpu_count(),
+        "runs": n, "repeats": args.repeats, "duration_s": args.duration, "sets": args.set,
+        "cpu_count": os.cpu_count(),
         "loadavg_before": load0, "loadavg_after": load1, "python": platform.python_version(),
         "statuses": counts,
         "machine_busy_fraction": busy,
@@ -133,6 +138,7 @@ def main() -> None:
         "dask_cluster_start_s": cluster_start,  #: not in any sweep time
         "first_pool_1_run_sweep_s": first_pool,  #: includes starting the fork server (imports the package)
         "per_run_inline_s": med["inline"] / n,
+        "runs_per_s": {m: n / v for m, v in med.items()},
         "speedup_pool": med["pool1"] / med["pool2"],
         "speedup_pool_range": [min(times["pool1"]) / max(times["pool2"]), max(times["pool1"]) / min(times["pool2"])],
         "overhead_per_run_s": {}, "startup_s": {},
@@ -147,11 +153,12 @@ def main() -> None:
     OUT.parent.mkdir(exist_ok=True)
     OUT.write_text(json.dumps(report, indent=1))
 
-    print(f"\n{n} runs of b1 ({args.duration} s simulated each), median of {args.repeats} "
+    print(f"\n{n} runs of b1 ({args.duration} s simulated each{', ' + ' '.join(args.set) if args.set else ''}), "
+          f"median of {args.repeats} "
           f"(load average {load0[0]:.1f} -> {load1[0]:.1f} on {os.cpu_count()} cores)")
-    print(f"{'mode':>8} {'median [s]':>11} {'range [s]':>17} {'per run [ms]':>13} {'machine busy':>13}")
+    print(f"{'mode':>8} {'median [s]':>11} {'range [s]':>17} {'per run [ms]':>13} {'runs/s':>8} {'machine busy':>13}")
     for m, v in times.items():
-        print(f"{m:>8} {med[m]:11.2f} {min(v):8.2f}-{max(v):<8.2f} {1e3 * med[m] / n:13.2f} "
+        print(f"{m:>8} {med[m]:11.2f} {min(v):8.2f}-{max(v):<8.2f} {1e3 * med[m] / n:13.2f} {n / med[m]:8.1f} "
               f"{100 * statistics.median(busy[m]):12.0f}%")
     print(f"(machine busy: all cores, anyone's work; a quiet {os.cpu_count()}-core machine shows about "
           f"{100 / (os.cpu_count() or 1):.0f}% for one worker, 100% for two)")

@@ -20,6 +20,7 @@ from .errors import ContactdynError, RobotError, RunFileError, SceneError
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+MAX_MESSAGE = 1000  #: characters of an error line at most
 LIST_SECTIONS = ("scenes", "robots", "models", "controllers", "integrators")
 LIST_MORE = ("frames",)  #: sections listed only by name: ``list frames ROBOT``
 
@@ -471,7 +472,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _fail(args: argparse.Namespace, exc: Exception | str, code: int) -> int:
-    print(_printable(f"contactdyn: error: {exc}"), file=sys.stderr)
+    text = _printable(f"contactdyn: error: {exc}")
+    if len(text) > MAX_MESSAGE:  # whatever a value held, the message stays a readable line
+        text = f"{text[:MAX_MESSAGE - 250]} ... {text[-200:]} ({len(text)} characters)"
+    print(text, file=sys.stderr)
     if getattr(args, "json", False):
         _emit_json({"status": "bad input" if code == EXIT_USAGE else "failed", "error": str(exc),
                     "exit_code": code})

@@ -3,8 +3,9 @@
 A contact task (Part II's description) alternates smooth motions, in which the contact
 modes and the task phase are fixed, and instants at which they change. The loop:
 
-1. integrate the smooth phase from (t, x) with error control (``solve_ivp``; the method
-   from :mod:`contactdyn.integrators`) on the mode's right-hand side — the compiled plan
+1. integrate the smooth phase from (t, x) with error control (``solve_ivp``, or the compiled
+   DOP853 of :mod:`contactdyn.dop853`; the method from :mod:`contactdyn.integrators`) on the
+   mode's right-hand side — the compiled plan
    (:mod:`contactdyn.rhsplan`) where it represents the mode, else
    :meth:`System.evaluate` — with the mode's events (:mod:`contactdyn.events`);
 2. at the first event, apply the transition (:mod:`contactdyn.transitions`): an impact,
@@ -28,7 +29,6 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from .channels import Segment, output_grid, sample_segments
 from .contact import ContactMode
@@ -41,8 +41,8 @@ from .integrators import (
     STABILITY_RADIUS,
     STEP_BUDGET,
     FiniteDifferenceJacobian,
+    integrate,
     jacobian_eigenvalues,
-    solver_class,
     stability_bound,
 )
 from .limits import rate_limit_report
@@ -150,10 +150,8 @@ class HybridRun:
                 events = [*events, StepBudget(STEP_BUDGET)]
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
-                sol = solve_ivp(rhs, (t, t_end), x, method=solver_class(method),
-                                rtol=self.solver.rtol, atol=self.solver.atol, max_step=self.solver.max_step,
-                                events=events or None, dense_output=True, first_step=h0,
-                                **({"jac": jac} if jac else {}))
+                sol = integrate(rhs, (t, t_end), x, method, rtol=self.solver.rtol, atol=self.solver.atol,
+                                max_step=self.solver.max_step, events=events, first_step=h0, jac=jac)
             self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
             if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
                 break  # else a failed launch method: retry with the scene's
@@ -223,6 +221,7 @@ class HybridRun:
         T = scene.duration
         channels = sample_segments(system, self.segments, output_grid(T, self.solver.output_rate), self.stats)
         rate_stats, rate_warnings = rate_limit_report(system.robot, channels["t"], channels["v"], channels["tau"])
+        self.stats["rhs_evals"] += sum(getattr(seg.sol, "late_calls", 0) for seg in self.segments)  # DOP853C's
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
                      compiled_modes=sum(p.ok for p in self.plans.values()),

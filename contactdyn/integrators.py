@@ -1,4 +1,7 @@
-"""Integrators for the smooth phases: scipy's ``solve_ivp`` methods by name, ``auto``, ``RK4``.
+"""Integrators for the smooth phases: scipy's ``solve_ivp`` methods by name, ``auto``, ``RK4``, ``DOP853C``.
+
+``DOP853C`` is DOP853 stepped by scipy's compiled core (:mod:`contactdyn.dop853`): the same
+method and step control, a fraction of ``solve_ivp``'s per-step cost.
 
 ``RK4`` is the classical fixed-step Runge–Kutta method (4 calls per step) with step
 ``solver.max_step`` [s] (required), cubic Hermite dense output and scipy's event location:
@@ -27,20 +30,24 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from scipy.integrate import DenseOutput, OdeSolver
+from scipy.integrate import DenseOutput, OdeSolver, solve_ivp
+
+from . import dop853
 
 __all__ = ["METHODS", "IMPLICIT", "EXPLICIT", "FIXED", "stability_bound", "jacobian_eigenvalues",
-           "FiniteDifferenceJacobian", "RK4", "solver_class"]
+           "FiniteDifferenceJacobian", "RK4", "solver_class", "integrate"]
 
 #: ``auto``, explicit Runge–Kutta methods and the implicit ones for stiff scenes
-METHODS = ("auto", "DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA", "RK4")
-EXPLICIT = ("DOP853", "RK45", "RK23", "RK4")
+METHODS = ("auto", "DOP853", "DOP853C", "RK45", "RK23", "Radau", "BDF", "LSODA", "RK4")
+EXPLICIT = ("DOP853", "DOP853C", "RK45", "RK23", "RK4")
+COMPILED = ("DOP853C",)  #: run by contactdyn.dop853 rather than solve_ivp
 FIXED = ("RK4",)  #: fixed-step methods: the step is solver.max_step
 IMPLICIT = ("Radau", "BDF", "LSODA")
 
 STABILITY_RADIUS = 6.0  #: DOP853's stability region reaches about |hλ| ≈ 6 along the negative real axis [-]
 STEP_BUDGET = 1000  #: DOP853 steps in a segment before ``auto`` checks for stiffness
 RK4_RADIUS = 2.78  #: RK4 is stable for real hλ in [-2.78, 0] [-]
+RK4_RECHECK_GROWTH = 1e3  #: the step is checked again once the state has grown this much since the last check
 RK4_GROWTH = 1.001  #: a decaying mode amplified by more than this per step is an instability [-]
 STABILITY_BAND = (0.5, 8.0)  #: h|λ| in this band: the step is stability-bound (measured 1.4–1.6 on stiff scenes)
 DECAY_SPAN = 20.0  #: a mode "decays within the span" when −Re λ · T is at least this [-]
@@ -144,7 +151,8 @@ class RK4(OdeSolver):
 
     Before its first step it checks the step against the system's modes at the start
     (:func:`fixed_step_instability`) and stops with that reason rather than run a blow-up;
-    a step that leaves the finite numbers stops it too.
+    it checks again whenever the state has grown RK4_RECHECK_GROWTH-fold since the last
+    check, and a step that leaves the finite numbers stops it too.
     """
 
     def __init__(self, fun, t0, y0, t_bound, max_step=np.inf, vectorized=False, rtol=None, atol=None,
@@ -158,6 +166,7 @@ class RK4(OdeSolver):
         self.f = self.fun(self.t, self.y)
         self.y_old = self.f_old = None
         self.unstable = fixed_step_instability(self.fun, t0, np.asarray(y0, float), self.h)
+        self.checked_size = float(np.max(np.abs(y0), initial=0.0)) + 1.0  #: state size at the last check
 
     def _step_impl(self):
         t, y, f, h = self.t, self.y, self.f, self.h
@@ -174,6 +183,12 @@ class RK4(OdeSolver):
         if not np.all(np.isfinite(y_new)):
             return False, (f"the state left the finite numbers in the step from t = {t:.6g} s "
                            f"(step {h:.3g} s): too large a step, or a scene that blows up")
+        size = float(np.max(np.abs(y_new), initial=0.0))
+        if size > RK4_RECHECK_GROWTH * self.checked_size:  # grown a lot: the step may have left the region
+            self.checked_size = size
+            self.unstable = fixed_step_instability(self.fun, t_new, y_new, h)
+            if self.unstable:
+                return False, f"at t = {t_new:.6g} s {self.unstable}"
         self.y_old, self.f_old = y, f
         self.t, self.y = t_new, y_new
         self.f = self.fun(t_new, y_new)
@@ -187,3 +202,13 @@ class RK4(OdeSolver):
 def solver_class(method: str):
     """What ``solve_ivp`` takes as ``method`` for a method name."""
     return RK4 if method == "RK4" else method
+
+
+def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, rtol: float, atol: float,
+              max_step: float = np.inf, events=None, first_step: float | None = None, jac=None):
+    """One smooth segment by the named method, with dense output and events (``solve_ivp``'s result fields)."""
+    if method in COMPILED:
+        return dop853.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
+                            first_step=first_step)
+    return solve_ivp(fun, t_span, y0, method=solver_class(method), rtol=rtol, atol=atol, max_step=max_step,
+                     events=events or None, dense_output=True, first_step=first_step, **({"jac": jac} if jac else {}))

@@ -135,6 +135,9 @@ MEANINGS: dict[str, str] = {
     "controller.kd": "damping gain; one value or one per axis/joint",
     "controller.kv": "velocity gain 2 zeta omega of the error dynamics; one value or one per axis",
     "controller.kf": "force gain K_F of A10: the force error decays as exp(-kf t)",
+    "controller.cancel": "A10 along the force normals: target subtracts J^T n F* (F* = F_d + integral of Q, the "
+                         "paper's A10, no explicit force feedback); measured subtracts the measured force",
+    "controller.inertia": "the H the law multiplies by: model (link + reflected rotor) or link (link alone)",
     "controller.k_null": "damping of the null-space motion of redundant arms",
     "controller.axes": "position-controlled directions (the others are left to force set-points)",
     "controller.axes[]": "one position-controlled direction",

@@ -5,9 +5,9 @@ document, events, impacts, statistics), each written atomically with the user's 
 ``NAME`` is taken as given (``mu0.2`` -> ``mu0.2.npz``); a trailing ``.npz`` or ``.json`` is
 dropped. Channel names are stable and documented in the README.
 
-:func:`load_result` checks what it reads before anything uses it (sizes declared in the
-archive, numeric channels of one length, the sidecar's structure) and answers a damaged
-or foreign file with one :class:`~contactdyn.errors.RunFileError` naming it.
+:func:`load_result` checks what it reads before anything uses it (:mod:`contactdyn.run_check`)
+and answers a damaged or foreign file with one :class:`~contactdyn.errors.RunFileError`
+naming it.
 """
 
 from __future__ import annotations
@@ -23,11 +23,9 @@ from typing import Any
 import numpy as np
 
 from .errors import RunFileError
+from .run_check import read_channels, read_sidecar
 
 __all__ = ["Result", "load_result", "run_files", "atomic_path"]
-
-MAX_RUN_BYTES = 2**31  #: [B] channels a saved run may declare (a run at the sample bound is far below)
-MAX_SIDECAR_BYTES = 2**28  #: [B] size of a run's .json sidecar
 
 
 @dataclass
@@ -82,86 +80,9 @@ def load_result(path: str | os.PathLike) -> Result:
     for file in (npz, sidecar):
         if not file.is_file():
             raise RunFileError(missing_run_message(path))
-    channels = _read_channels(npz)
-    doc = _read_sidecar(sidecar)
+    channels = read_channels(npz)
+    doc = read_sidecar(sidecar)
     return Result(channels, doc["events"], doc["impacts"], doc["stats"], doc["scene"], doc["meta"])
-
-
-def _read_channels(npz: Path) -> dict[str, np.ndarray]:
-    import zipfile
-
-    try:
-        with zipfile.ZipFile(npz) as archive:
-            declared = sum(info.file_size for info in archive.infolist())
-            if declared > MAX_RUN_BYTES:
-                raise RunFileError(f"{npz}: declares {declared / 2**30:.3g} GiB of channels; a saved run holds at "
-                                   f"most {MAX_RUN_BYTES / 2**30:g} GiB")
-            channels = {}
-            for info in archive.infolist():
-                name = info.filename.removesuffix(".npy")
-                with archive.open(info) as member:
-                    channels[name] = _read_array(member, info.file_size, npz, name)
-    except RunFileError:
-        raise
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, RuntimeError, NotImplementedError) as exc:
-        raise RunFileError(f"{npz}: not a readable run archive ({type(exc).__name__}: {_short(exc)})") from None
-    t = channels.get("t")
-    if t is None or t.ndim != 1 or t.size == 0:
-        raise RunFileError(f"{npz}: no time channel t (a 1-D array of samples)")
-    for name, value in channels.items():
-        if value.ndim not in (1, 2) or value.shape[0] != t.size:
-            raise RunFileError(f"{npz}: channel {_short(name)} has shape {value.shape}, expected ({t.size},) or "
-                               f"({t.size}, n): one row per sample of t")
-    return channels
-
-
-def _read_array(member, size: int, npz: Path, name: str) -> np.ndarray:
-    """One .npy member: a numeric array whose header agrees with the member's size."""
-    from numpy.lib import format as npy
-
-    read_header = {(1, 0): npy.read_array_header_1_0, (2, 0): npy.read_array_header_2_0}.get(npy.read_magic(member))
-    if read_header is None:
-        raise RunFileError(f"{npz}: channel {_short(name)} is in an unknown .npy format version")
-    shape, fortran, dtype = read_header(member)
-    if dtype.kind not in "biuf" or dtype.hasobject:
-        raise RunFileError(f"{npz}: channel {_short(name)} holds {dtype}, expected numbers")
-    count = int(np.prod(shape, dtype=object))
-    if count * dtype.itemsize > size:
-        raise RunFileError(f"{npz}: channel {_short(name)} declares {count} values in a {size}-byte member")
-    data = member.read(count * dtype.itemsize)
-    if len(data) != count * dtype.itemsize:
-        raise RunFileError(f"{npz}: channel {_short(name)} is truncated")
-    array = np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")
-    return array.astype(float) if dtype.kind != "f" else array.copy()
-
-
-def _read_sidecar(sidecar: Path) -> dict[str, Any]:
-    if sidecar.stat().st_size > MAX_SIDECAR_BYTES:
-        raise RunFileError(f"{sidecar}: {sidecar.stat().st_size / 2**20:.0f} MB, more than a run's sidecar "
-                           f"({MAX_SIDECAR_BYTES // 2**20} MB at most)")
-    try:
-        doc = json.loads(sidecar.read_bytes())
-    except (ValueError, RecursionError, OSError) as exc:
-        raise RunFileError(f"{sidecar}: not a run's JSON sidecar ({type(exc).__name__}: {_short(exc)})") from None
-    if not isinstance(doc, dict):
-        raise RunFileError(f"{sidecar}: expected a JSON object, found {type(doc).__name__}")
-    doc.setdefault("meta", {})
-    for key, kind in (("events", list), ("impacts", list), ("stats", dict), ("scene", dict), ("meta", dict)):
-        if not isinstance(doc.get(key), kind):
-            raise RunFileError(f"{sidecar}: {key!r} must be a JSON {'array' if kind is list else 'object'}, "
-                               f"found {_short(doc.get(key, 'nothing'))}")
-    for key in ("events", "impacts"):
-        for i, item in enumerate(doc[key]):
-            if not (isinstance(item, dict) and isinstance(item.get("t"), int | float)):
-                raise RunFileError(f"{sidecar}: {key}[{i}] must be an object with a time t, found {_short(item)}")
-    return doc
-
-
-def _short(value: object, limit: int = 80) -> str:
-    """repr (or str of an exception), abbreviated to ``limit`` characters, control characters escaped."""
-    text = str(value) if isinstance(value, BaseException) else repr(value)
-    text = text.encode("unicode_escape", "backslashreplace").decode("ascii")
-    return text if len(text) <= limit else f"{text[:limit - 20]}...{text[-15:]} ({len(text)} chars)"
 
 
 def atomic_path(path: Path, write: Callable[[str], None]) -> None:

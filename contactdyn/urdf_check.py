@@ -23,7 +23,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from pathlib import Path
 
-from .errors import RobotError
+from .errors import RobotError, abbreviate
 
 __all__ = ["MAX_URDF_BYTES", "MAX_URDF_LINKS", "MAX_URDF_MOVING_JOINTS", "check_urdf_tree", "isolated_build"]
 
@@ -65,12 +65,12 @@ def check_urdf_tree(path: Path) -> ET.Element:
         parent, child = (_link_ref(path, joint, name, tag) for tag in ("parent", "child"))
         for role, link in (("parent", parent), ("child", child)):
             if link not in defined:
-                raise RobotError(f"{path}: joint {name!r}: {role} link {link!r} is not defined (<link name=...>)")
+                raise RobotError(f"{path}: joint {_q(name)}: {role} link {_q(link)} is not defined (<link name=...>)")
         if parent == child:
-            raise RobotError(f"{path}: joint {name!r}: link {child!r} is its own parent")
+            raise RobotError(f"{path}: joint {_q(name)}: link {_q(child)} is its own parent")
         if child in parent_of:
-            raise RobotError(f"{path}: link {child!r} is the child of two joints, {parent_of[child][0]!r} "
-                             f"and {name!r}: the joints must form a tree")
+            raise RobotError(f"{path}: link {_q(child)} is the child of two joints, {_q(parent_of[child][0])} "
+                             f"and {_q(name)}: the joints must form a tree")
         parent_of[child] = (name, parent)
     _unique(path, "joint", names)
     moving = sum(joint.get("type") != "fixed" for joint in root.findall("joint"))
@@ -78,7 +78,7 @@ def check_urdf_tree(path: Path) -> ET.Element:
         raise RobotError(f"{path}: {moving} moving joints; at most {MAX_URDF_MOVING_JOINTS} are supported")
     roots = [link for link in links if link not in parent_of]
     if len(roots) != 1:
-        found = f"{len(roots)} ({', '.join(map(repr, roots[:5]))})" if roots else "none (every link has a parent)"
+        found = f"{len(roots)} ({', '.join(map(_q, roots[:5]))})" if roots else "none (every link has a parent)"
         raise RobotError(f"{path}: expected one root link (a link that is no joint's child), found {found}")
     for link in links:  # with one parent per link, a link that never reaches the root sits on a cycle
         seen = [link]
@@ -86,7 +86,8 @@ def check_urdf_tree(path: Path) -> ET.Element:
             seen.append(parent_of[seen[-1]][1])
             if seen[-1] in seen[:-1]:
                 loop = seen[seen.index(seen[-1]):]
-                raise RobotError(f"{path}: the joints form a cycle through links {' -> '.join(loop)}")
+                names = " -> ".join(x if len(x) <= 60 else f"{x[:50]}..." for x in loop[:12])
+                raise RobotError(f"{path}: the joints form a cycle through links {names}")
     return root
 
 
@@ -94,7 +95,7 @@ def _link_ref(path: Path, joint: ET.Element, name: str | None, tag: str) -> str:
     element = joint.find(tag)
     link = element.get("link") if element is not None else None
     if not link:
-        raise RobotError(f"{path}: joint {name!r}: missing <{tag} link=\"...\"/>")
+        raise RobotError(f"{path}: joint {_q(name)}: missing <{tag} link=\"...\"/>")
     return link
 
 
@@ -104,8 +105,13 @@ def _unique(path: Path, what: str, names: list[str | None]) -> None:
         if not name:
             raise RobotError(f"{path}: a <{what}> without a name")
         if name in seen:
-            raise RobotError(f"{path}: two {what}s named {name!r}")
+            raise RobotError(f"{path}: two {what}s named {_q(name)}")
         seen.add(name)
+
+
+def _q(name: object, limit: int = 80) -> str:
+    """A name from the file, quoted and abbreviated (a hostile file may hold megabyte names)."""
+    return abbreviate(name, limit)
 
 
 def isolated_build(path: Path, label: str, build: Callable[[], object]) -> None:

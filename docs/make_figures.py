@@ -22,6 +22,7 @@ SHOWN = {
                    "fig12_deformations_vertical", "fig13_contact_forces"],
     "case2_writer_b": ["fig14_tip_motion", "fig15_forces_friction", "fig16_tracking_errors"],
     "case2_writer_rigid": ["fig15_forces_friction"],
+    "case2_writer_motors": ["fig10_voltages", "fig15_forces_friction"],
     "case2_writer5dof": ["fig15_forces_friction"],
     "case3_b_position": ["fig10_voltages", "fig16_tracking_errors", "fig17_force_position_errors"],
     "case3_a_position": ["fig17_force_position_errors"],

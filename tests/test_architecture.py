@@ -11,7 +11,7 @@ PKG = Path(__file__).resolve().parent.parent / "contactdyn"
 #: the model and the loop, one concept per module (docs/architecture.md's module map)
 CORE = ["elements", "chain", "contact", "layout", "phases", "chain_forces", "friction", "constraints", "impact",
         "dynamics", "drives", "system", "plan_probe", "plan_kkt", "plan_rhs", "rhsplan", "samples", "events",
-        "transitions", "hybrid", "channels", "simulate", "integrators", "fastpath", "stage_laws"]
+        "transitions", "hybrid", "channels", "simulate", "integrators", "fastpath", "stage_laws", "dop853"]
 MAX_CLASS, MAX_FUNCTION = 300, 80  #: [lines]
 
 

@@ -84,8 +84,8 @@ def test_position_law_with_force_reference_presses_the_static_depth():
 
 # ---- A10 on case 3's axis ---------------------------------------------------------------------------
 def axis_doc(normal: dict, force: dict, *, bonded: bool, nominal: dict | None = None, duration: float = 0.5,
-             drive: dict = CASE3) -> dict:
-    ctl = {"kind": "force_dynamic", "kf": KF, **({"nominal": nominal} if nominal else {})}
+             drive: dict = CASE3, **options) -> dict:
+    ctl = {"kind": "force_dynamic", "kf": KF, **({"nominal": nominal} if nominal else {}), **options}
     return {"duration": duration, "solver": {"rtol": 1e-10, "atol": 1e-12, "output_rate": 1000.0},
             "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0, 0, 0], "q0": [1.0],
                       "drive": drive},
@@ -109,12 +109,43 @@ def test_force_law_with_exact_model_b_makes_F_equal_the_target():
     assert np.ptp(depth[r.t > 0.3]) > 0.1 * 100.0 / k  # still ringing: A10 fixes F, not the position
 
 
-def test_force_law_drives_the_force_error_at_the_rate_Q_prescribes():
-    """Model (c) with damping: relative degree one, μ̇ = −K_F μ from μ(0) = −F_d."""
+def test_force_law_as_written_settles_the_force_through_the_integral_only():
+    """A10 as written (τ = H q̈* + h − Jᵀ F*, F* = F_d + ∫Q): on a damped massless surface (c),
+    F = k s + b ṡ, the gap e = F − F* obeys ė = −(b/m_r) e (m_r: link + reflected rotor, the
+    rigid gear makes the model exact) and μ = e + ∫Q, ż = −K_F μ: from e(0) = μ(0) = −F_d,
+    μ(t) = −F_d e^(−βt) + F_d K_F (e^(−βt) − e^(−K_F t)) / (K_F − β), β = b/m_r."""
+    doc = axis_doc({"model": "c", "k": 1e5, "b": 1e3}, {"value": 100.0, "kind": "step"}, bonded=False)
+    system = System(parse_scene(doc))
+    system.robot.update(np.array([1.0]), np.zeros(1))
+    beta = 1e3 / system.mass_matrix()[0, 0]  # [1/s]; m_r = 50 kg + N²J/r² = 137.8 kg
+    r = simulate(parse_scene(doc))
+    mu = r["contact.tip.F_n"] - 100.0
+    closed = -100.0 * np.exp(-beta * r.t) + 100.0 * KF * (np.exp(-beta * r.t) - np.exp(-KF * r.t)) / (KF - beta)
+    assert np.max(np.abs(mu - closed)) <= 1e-6 * 100.0
+    assert np.max(np.abs(mu + 100.0 * np.exp(-KF * r.t))) > 10.0  # not the measured-force law's transient
+
+
+def test_force_law_cancelling_the_measured_force_drives_the_error_at_the_rate_Q_prescribes():
+    """cancel = "measured" (τ = H q̈* + h − Jᵀ F): model (c) with damping, relative degree one,
+    μ̇ = −K_F μ from μ(0) = −F_d."""
     r = simulate(parse_scene(axis_doc({"model": "c", "k": 1e5, "b": 1e3}, {"value": 100.0, "kind": "step"},
-                                      bonded=False)))
+                                      bonded=False, cancel="measured")))
     mu = r["contact.tip.F_n"] - 100.0
     assert np.max(np.abs(mu + 100.0 * np.exp(-KF * r.t))) <= 1e-6 * 100.0
+
+
+@pytest.mark.parametrize("cancel", ["target", "measured"])
+def test_force_law_link_inertia_reading_takes_the_rotor_out_of_H(cancel):
+    """inertia = "link": the law multiplies by the link's 50 kg, not the rigid model's 137.8 kg.
+    On model (c) with a massless nominal and the measured form, the robot then reaches only
+    m_link/m_r of the commanded acceleration, so μ no longer follows e^(−K_F t); with the exact
+    H it does (previous test). Both forms still settle F at F_d."""
+    doc = axis_doc({"model": "c", "k": 1e5, "b": 1e3}, {"value": 100.0, "kind": "step"}, bonded=False,
+                   cancel=cancel, inertia="link", duration=1.0)
+    r = simulate(parse_scene(doc))
+    mu = r["contact.tip.F_n"] - 100.0
+    assert np.max(np.abs(mu + 100.0 * np.exp(-KF * r.t))) > 1.0
+    assert abs(mu[-1]) < 1e-3 * 100.0
 
 
 def test_force_law_with_a_mismatched_environment_completes_and_reports_its_errors():
@@ -137,13 +168,14 @@ def test_force_law_with_a_mismatched_environment_completes_and_reports_its_error
 
 
 # ---- hybrid: position along the surface, force along its normal (case 2) -----------------------------
-def hybrid_doc(nominal: dict | None = None, friction: float | None = None) -> dict:
+def hybrid_doc(nominal: dict | None = None, friction: float | None = None, cancel: str = "target") -> dict:
     p0 = tip0()
     contact = {"point": [0.0, 0.0, float(p0[2])], "bonded": True,  # the paper under the tip: case 2's (b) surface
                "normal": {"direction": [0, 0, 1], "model": "b", "k": 1e5, "b": 1.0, "m": 10.0}}
     if friction is not None:
         contact["tangent"] = {"model": "friction", "directions": [[1, 0, 0]], "mu": friction}
-    ctl = {"kind": "hybrid", "kp": KP, "kv": KV, "kf": KF, **({"nominal": nominal} if nominal else {})}
+    ctl = {"kind": "hybrid", "kp": KP, "kv": KV, "kf": KF, "cancel": cancel,
+           **({"nominal": nominal} if nominal else {})}
     phase = {"reference": {"start": p0.tolist(), "moves": [{"kind": "trapezoid", "delta": [-0.1, 0.0, 0.0],
                                                              "duration": 0.8, "accel_fraction": 0.2}]},
              "force": [{"contact": "c", "value": 100.0, "duration": 0.1}]}  # case 2: 100 N after 0.1 s
@@ -152,15 +184,27 @@ def hybrid_doc(nominal: dict | None = None, friction: float | None = None) -> di
     return doc
 
 
-@pytest.mark.parametrize("nominal", [None, {"k": 1.2e5, "b": 1.0, "m": 10.0}])
-def test_hybrid_law_holds_100_N_while_tracking_a_tangential_path(nominal):
-    r = simulate(parse_scene(hybrid_doc(nominal)))
+@pytest.mark.parametrize(("nominal", "cancel"), [(None, "target"), (None, "measured"),
+                                                 ({"k": 1.2e5, "b": 1.0, "m": 10.0}, "measured")])
+def test_hybrid_law_holds_100_N_while_tracking_a_tangential_path(nominal, cancel):
+    r = simulate(parse_scene(hybrid_doc(nominal, cancel=cancel)))
     F = r["contact.c.F_n"]
     after = r.t > (0.1 if nominal is None else 0.7)  # the ramp, plus the integral's transient if mismatched
     assert np.max(np.abs(F[after] - 100.0)) <= 1.0  # 1 %
     x_err = r["tip"][:, 0] - r["tip_ref"][:, 0]
     assert np.max(np.abs(x_err)) <= 1e-8  # tangential error obeys P from η = 0: stays 0
     assert r["tip"][-1, 0] - r["tip"][0, 0] == pytest.approx(-0.1, abs=1e-8)
+
+
+def test_hybrid_law_as_written_lets_a_nominal_mismatch_reach_the_tangent():
+    """A10 as written pushes with F* = F_d + ∫Q, not the measured F: with a 20 % too stiff nominal
+    F ≠ F* in the transient, and Jᵀ n (F − F*) moves the 2R arm's tip along x too (its inertia
+    couples the directions), whereas cancelling the measured force keeps x_err at 0 (test above)."""
+    r = simulate(parse_scene(hybrid_doc({"k": 1.2e5, "b": 1.0, "m": 10.0}, cancel="target")))
+    F = r["contact.c.F_n"]
+    assert np.max(np.abs(F[r.t > 0.7] - 100.0)) <= 1.0
+    x_err = r["tip"][:, 0] - r["tip_ref"][:, 0]
+    assert 1e-5 < np.max(np.abs(x_err)) < 5e-3  # [m]: disturbed, not lost
 
 
 def test_hybrid_law_cancels_sliding_friction_too():

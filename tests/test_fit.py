@@ -227,3 +227,26 @@ def test_times_must_increase(capsys, tmp_path):
     path.write_text("t,contact.tip.F_n\n0.0,100\n0.002,101\n0.001,99\n")
     _bad(capsys, tmp_path, ["--data", str(path), "--params", MU], "t: expected strictly increasing",
          "0.001 after 0.002 in row 4")
+
+
+def test_a_dead_worker_is_an_error_naming_the_runs(log):
+    """A worker killed by a library crash breaks the pool: a ContactdynError with the parameter values."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    from contactdyn.identify.data import measurements
+    from contactdyn.identify.model import FitModel, FitSettings
+    from contactdyn.identify.params import parse_params
+
+    class DeadPool:
+        def submit(self, *args):
+            class Dead:
+                def result(self):
+                    raise BrokenProcessPool("a child process terminated abruptly")
+
+            return Dead()
+
+    scene = load_scene("b1", {"duration": 0.1})
+    model = FitModel(scene.document, scene.file, parse_params(MU, scene.document), measurements(log, None, 0.1),
+                     FitSettings(), pool=DeadPool())
+    with pytest.raises(contactdyn.ContactdynError, match=r"worker process died .*'contact.tip.tangent.mu': 0.5"):
+        model.evaluate([np.array([math.log(0.5)])])

@@ -74,7 +74,7 @@ def scene_cases(tmp: Path) -> list[Case]:
         return str(path)
 
     moves = lambda n: B1.replace(f"moves = [{MOVE}]", "moves = [" + ", ".join([MOVE] * n) + "]")  # noqa: E731
-    big_q0 = "[" + ", ".join(["0.1"] * 10**6) + "]"
+    big_q0 = "[" + ", ".join(["0.1"] * 10**5) + "]"  # tomllib reads ~10^5 numbers per second
     (tmp / "adir.toml").mkdir()
     files = {
         "empty": ("", 2, "expected a value (required key is missing)"),
@@ -92,7 +92,7 @@ def scene_cases(tmp: Path) -> list[Case]:
         "duration_bool": (B1.replace("duration = 2.0", "duration = true"), 2, "duration: expected a number"),
         "duration_inf": (B1.replace("duration = 2.0", "duration = inf"), 2, "duration: expected a finite number"),
         "duration_nan": (B1.replace("duration = 2.0", "duration = nan"), 2, "duration: expected a finite number"),
-        "q0_million": (B1.replace("q0 = [0.337307481430, -1.318116071653]", f"q0 = {big_q0}"), 2, "robot.q0"),
+        "q0_100000": (B1.replace("q0 = [0.337307481430, -1.318116071653]", f"q0 = {big_q0}"), 2, "robot.q0"),
         "name_number": (B1.replace('name = "b1"', "name = 5"), 2, "name: expected a string"),
         "urdf_number": (B1.replace('urdf = "planar2r_b1"', "urdf = 5"), 2, "robot"),
         "normal_model": (B1.replace('normal.model = "b"', 'normal.model = "zzz"'), 2, "normal.model: expected one of"),
@@ -207,6 +207,8 @@ def urdf_cases(tmp: Path) -> list[Case]:
                            "cycle through links b -> c -> b"),
         "long_cycle": (_urdf([("j1", "base", "a"), ("j2", "x", "y"), ("j3", "y", "z"), ("j4", "z", "x")],
                              ["base", "a", "x", "y", "z"]), "the joints form a cycle"),
+        "long_names": (_urdf([("j" * 10**5, "base", "a" * 10**5), ("j2", "a" * 10**5, "a" * 10**5)],
+                             ["base", "a" * 10**5]), "(100002 characters) is its own parent"),
         "no_root": (_urdf([("j1", "a", "b"), ("j2", "b", "a")], ["a", "b"]), "found none"),
         "two_roots": (_urdf([("j1", "base", "a")], ["base", "a", "b"]), "expected one root link"),
         "undefined_parent": (_urdf([("j1", "nowhere", "a")], ["a"]), "parent link 'nowhere' is not defined"),
@@ -228,6 +230,8 @@ def urdf_cases(tmp: Path) -> list[Case]:
         "xxe_content": ('<?xml version="1.0"?><!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]>'
                         '<robot name="r"><link name="a">&x;</link></robot>', "undefined entity"),
         "billion_laughs": (laughs, "amplification"),
+        "long_link_negative_mass": (good.replace('"link1"', '"' + "L" * 10**5 + '"').replace(
+            '<mass value="3.0"/>', '<mass value="-3.0"/>', 1), "characters)"),
         "negative_mass": (good.replace('<mass value="3.0"/>', '<mass value="-3.0"/>', 1), "mass must be >= 0"),
         "nan_mass": (good.replace('<mass value="3.0"/>', '<mass value="nan"/>', 1), "mass must be >= 0"),
         "text_mass": (good.replace('<mass value="3.0"/>', '<mass value="heavy"/>', 1), "must be a number"),
@@ -293,6 +297,13 @@ def run_file_cases(tmp: Path) -> list[Case]:
                           "channel 't' is in an unknown .npy format version"),
         "bad_npy_header": (lambda p: zipfile.ZipFile(p, "w").writestr("t.npy", _npy_header((3,))[:20]), sidecar,
                            "not a readable run archive"),
+        "t_nan": (lambda p: channels_npz(p, t=t * np.nan), sidecar, "t is not finite and non-decreasing"),
+        "t_decreasing": (lambda p: channels_npz(p, t=t[::-1].copy()), sidecar, "not finite and non-decreasing"),
+        "force_2d": (lambda p: channels_npz(p, t=t, **{"contact.tip.F_n": np.ones((3, 4))}), sidecar,
+                     "channel 'contact.tip.F_n' has shape (3, 4), expected (3,)"),
+        "tip_2_columns": (lambda p: channels_npz(p, t=t, tip=np.ones((3, 2))), sidecar, "expected (3, 3)"),
+        "q_v_disagree": (lambda p: channels_npz(p, t=t, q=np.ones((3, 5)), v=np.ones((3, 2))), sidecar,
+                         "channels q and v have different numbers of joints"),
         "json_garbage": (npz, "{not json", "not a run's JSON sidecar (JSONDecodeError"),
         "json_list": (npz, "[1, 2, 3]", "expected a JSON object, found list"),
         "json_no_events": (npz, json.dumps({k: v for k, v in doc.items() if k != "events"}),
@@ -302,6 +313,14 @@ def run_file_cases(tmp: Path) -> list[Case]:
                                  "events[0] must be an object with a time t"),
         "json_impact_text_t": (npz, json.dumps({**doc, "impacts": [{"t": "soon"}]}), "impacts[0] must be an object"),
         "json_meta_list": (npz, json.dumps({**doc, "meta": [1]}), "'meta' must be a JSON object"),
+        "json_meta_joints_number": (npz, json.dumps({**doc, "meta": {**doc["meta"], "joints": 5}}),
+                                    "meta.joints has the wrong type: 5"),
+        "json_event_kind_list": (npz, json.dumps({**doc, "events": [{"t": 0.0, "kind": ["x"]}]}),
+                                 "events[0].kind has the wrong type"),
+        "json_impact_contact_list": (npz, json.dumps({**doc, "impacts": [{"t": 0.0, "contact": ["x"]}]}),
+                                     "impacts[0].contact has the wrong type"),
+        "json_scene_contact_number": (npz, json.dumps({**doc, "scene": {**doc["scene"], "contact": 5}}),
+                                      "scene.contact must be a table of tables, found 5"),
         "json_deep": (npz, "[" * 100000 + "]" * 100000, "not a run's JSON sidecar (RecursionError"),
         "json_binary": (npz, "\udcff\udcfe".encode("utf-8", "surrogateescape").decode("latin-1"),
                         "not a run's JSON sidecar"),
@@ -326,7 +345,23 @@ def run_file_cases(tmp: Path) -> list[Case]:
     (tmp / "dir.json").write_text(sidecar)
     (tmp / "cyc.npz").write_bytes(npz)
     (tmp / "cyc.json").write_text(cycle_scene())
+    channels_npz(tmp / "no_q.npz", t=t)
+    (tmp / "no_q.json").write_text(sidecar)
+    channels_npz(tmp / "q_5.npz", t=t, q=np.ones((3, 5)))
+    (tmp / "q_5.json").write_text(sidecar)
+    bad = dict(np.load(good.with_name("good.npz")))
+    channels_npz(tmp / "q_nan.npz", **{**bad, "q": np.full_like(bad["q"], np.nan)})
+    (tmp / "q_nan.json").write_text(sidecar)
+    channels_npz(tmp / "ff_5.npz", **{**bad, "contact.tip.F_f": np.ones((len(bad["t"]), 5))})
+    (tmp / "ff_5.json").write_text(sidecar)
     cases += [
+        ("run/view/q_nan", ["view", str(tmp / "q_nan"), "--html", str(tmp / "v.html")], 2,
+         "channel q holds non-finite values"),
+        ("run/view/friction_columns", ["view", str(tmp / "ff_5"), "--html", str(tmp / "v.html")], 2,
+         "channel contact.tip.F_f has 5 columns but the scene gives contact 'tip' 1 tangents"),
+        ("run/view/no_q", ["view", str(tmp / "no_q"), "--html", str(tmp / "v.html")], 2, "no joint channel q"),
+        ("run/view/q_for_another_robot", ["view", str(tmp / "q_5"), "--html", str(tmp / "v.html")], 2,
+         "channel q has 5 columns but robot"),
         ("run/plot/missing", ["plot", str(tmp / "nothing")], 2, "not a saved run (need nothing.npz and nothing.json"),
         ("run/view/missing", ["view", str(tmp / "nothing.npz")], 2, "not a saved run"),
         ("run/plot/huge_sidecar", ["plot", str(tmp / "sparse")], 2, "more than a run's sidecar"),

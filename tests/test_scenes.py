@@ -17,11 +17,12 @@ from contactdyn.scene import load_scene, sims_dir
 SCENES = sorted(p.stem for p in sims_dir().glob("*.toml"))
 
 #: [s] smoke-run length per scene: past the first contact (and its impact) where there is one
-SMOKE_DURATION = {"b1": 0.3, "case1_cart": 1.2, "case2_writer_b": 1.2, "case2_writer_rigid": 1.2}
+SMOKE_DURATION = {"b1": 0.3, "case1_cart": 1.2, "case2_writer_b": 1.2, "case2_writer_rigid": 1.2,
+                  "case2_writer_motors": 1.2}
 SMOKE_DURATION.update({f"case3_{env}_{law}": 1.6 for env in "ab" for law in ("position", "force")})
 SMOKE_DURATION["case3_b_force_varied"] = 1.6
 CASE3 = ("case3_b_position", "case3_a_position", "case3_b_force", "case3_a_force", "case3_b_force_varied")
-CASE_SCENES = ("case1_cart", "case2_writer_b", "case2_writer_rigid", "case2_writer5dof", *CASE3)
+CASE_SCENES = ("case1_cart", "case2_writer_b", "case2_writer_rigid", "case2_writer_motors", "case2_writer5dof", *CASE3)
 
 
 def test_sims_folder_holds_the_case_scenes():
@@ -201,11 +202,14 @@ def case3_runs():
 @pytest.mark.parametrize("name", CASE3[:4])
 def test_case3_force_follows_its_ramp_to_100_N(case3_runs, name):
     """Figs. 17-19 (nominal): both laws, both surfaces bring the force to its 100 N set-point through
-    the elastic transmission: within 3 N over the last 0.5 s of the 3 s run (the impact on model
-    (b), or the continuous touch on model (a), overshoots first)."""
+    the elastic transmission, without twist damping (the drive as the paper writes it): within
+    0.5 N over the last 0.5 s of the 5 s run (the impact on model (b), or the continuous touch on
+    model (a), overshoots first; the gains inside the stable region are slow, dominant poles
+    −2.6 to −4.4 /s, so the 3 s runs of the damped scenes would not have settled)."""
     r = case3_runs[name]
+    assert load_scene(name).robot.drive.values.get("twist_damping", 0.0) == 0.0
     last = r.t > r.t[-1] - 0.5
-    np.testing.assert_allclose(r["contact.tip.F_n"][last], 100.0, atol=3.0)  # [N]
+    np.testing.assert_allclose(r["contact.tip.F_n"][last], 100.0, atol=0.5)  # [N]
     assert np.all(r["contact.tip.F_d"][last] == 100.0)
     assert np.abs(r["u"]).max() > 1.0 and "drive.q3.theta" in r.channels  # through the motor and the tube
     assert len(r.impacts) == (2 if "_b_" in name else 0)  # model (b): impact and a bounce; (a): continuous
@@ -214,11 +218,13 @@ def test_case3_force_follows_its_ramp_to_100_N(case3_runs, name):
 def test_case3_force_law_position_tracking_degrades_with_the_varied_surface(case3_runs):
     """Fig. 19: the force law believing k = 1e5 N/m holds the nominal surface at its 1 mm depth;
     on the varied surface (m' = 5 kg, k = 1e3 N/m, b = 0) the tip keeps sinking (tens of mm, not
-    settled) and the force lags far behind its set-point."""
+    settled) and the force lags far behind its set-point. With the scenes' K_F = 3 /s (the stable
+    region without twist damping) the slow pole is about −K_F k/k̂ = −0.03 /s: the tip sinks
+    ~2 mm over the last second (5 mm with the former K_F = 20)."""
     nominal, varied = case3_runs["case3_b_force"], case3_runs["case3_b_force_varied"]
     last = nominal.t > nominal.t[-1] - 1.0
     depth_nominal = 0.2 - nominal["tip"][last, 2]  # [m] below the undeformed surface
     depth_varied = 0.2 - varied["tip"][last, 2]
     np.testing.assert_allclose(depth_nominal, 100.0 / 1e5, rtol=0.01)  # F_d / k = 1 mm, settled
-    assert depth_varied.min() > 10 * 100.0 / 1e5 and np.ptp(depth_varied) > 5e-3  # > 10 mm, still moving 5 mm/s
+    assert depth_varied.min() > 10 * 100.0 / 1e5 and np.ptp(depth_varied) > 1e-3  # > 10 mm, still moving > 1 mm/s
     assert np.abs(varied["contact.tip.F_n"][last] - 100.0).min() > 50.0  # [N]

@@ -199,7 +199,7 @@ def test_whole_sweep_invalid_is_bad_input(capsys, tmp_path):
     code = main(["sweep", "b1", "--grid", "duration=-1,0", "--out", str(tmp_path / "s"), "--workers", "0"])
     err = capsys.readouterr().err
     assert code == EXIT_USAGE and "duration: expected a number > 0" in err
-    assert not (tmp_path / "s").exists()  # nothing written
+    assert not (tmp_path / "s").exists()  # bad input writes nothing
 
 
 def test_resume_skips_finished_runs(capsys, tmp_path):

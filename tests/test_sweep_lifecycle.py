@@ -26,9 +26,9 @@ def _env(extra: Path | None = None) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": os.pathsep.join([*paths, os.environ.get("PYTHONPATH", "")])}
 
 
-def test_a_run_that_kills_its_worker_is_recorded_with_the_signal(tmp_path):
-    # every process of the sweep (parent, forkserver, workers) imports this at start-up:
-    # the run with kp = 2000 ends its process with SIGSEGV, as a crash in a C library would
+def _crash_hook(tmp_path: Path) -> Path:
+    """A folder whose sitecustomize every process of the sweep imports at start-up (parent, fork server,
+    workers): the run with kp = 2000 ends its process with SIGSEGV, as a crash in a C library would."""
     hook = tmp_path / "hook"
     hook.mkdir()
     (hook / "sitecustomize.py").write_text(textwrap.dedent("""
@@ -42,6 +42,11 @@ def test_a_run_that_kills_its_worker_is_recorded_with_the_signal(tmp_path):
             return real(scene, overrides)
         sim.simulate = crashing
     """))
+    return hook
+
+
+def test_a_run_that_kills_its_worker_is_recorded_with_the_signal(tmp_path):
+    hook = _crash_hook(tmp_path)
     out = tmp_path / "s"
     cmd = [sys.executable, "-m", "contactdyn.cli", "sweep", "b1", *FAST, "--grid",
            "controller.kp=500.0,1000.0,2000.0,3000.0,4000.0", "--workers", "2", "--chunk", "2", "--quiet",
@@ -54,6 +59,29 @@ def test_a_run_that_kills_its_worker_is_recorded_with_the_signal(tmp_path):
     assert s.loc[2000.0, "status"] == "failed"
     assert s.loc[2000.0, "error"] == "the run's process killed by SIGSEGV (11)"
     assert (s.drop(index=2000.0).status == "ok").all()
+
+
+@pytest.mark.slow
+def test_a_run_that_kills_its_dask_worker_is_recorded(tmp_path):
+    pytest.importorskip("distributed")
+    hook = _crash_hook(tmp_path)
+    out = tmp_path / "s"
+    script = textwrap.dedent(f"""
+        import sys, distributed
+        from contactdyn.cli import main
+        with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                                      dashboard_address=None) as cluster:
+            sys.exit(main(["sweep", "b1", *{FAST!r}, "--grid", "controller.kp=500.0,1000.0,2000.0,3000.0",
+                           "--scheduler", cluster.scheduler_address, "--chunk", "2", "--quiet",
+                           "--out", {str(out)!r}]))
+    """)
+    env = {**_env(hook), "DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": "0"}
+    proc = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr[-3000:]
+    s = pd.read_parquet(out / "summary.parquet").set_index("controller.kp")
+    # the runs of a chunk whose Dask worker died run again here, each in its own process
+    assert s.loc[2000.0, "status"] == "failed" and s.loc[2000.0, "error"] == "the run's process killed by SIGSEGV (11)"
+    assert (s.drop(index=2000.0).status == "ok").all() and len(s) == 4
 
 
 def _session(sid: int) -> list[int]:

@@ -232,3 +232,17 @@ def test_rk4_amplification_matches_the_closed_form():
     assert got[2] == pytest.approx(1.0, abs=1e-6)  # the edge of the stability interval on the real axis
     assert got[3] == pytest.approx(1 - 3 + 9 / 2 - 27 / 6 + 81 / 24, rel=1e-15) and got[3] > 1
     assert got[4] < 1.0  # inside the stability region along the imaginary axis (|z| < 2.83)
+
+
+def test_rk4_rechecks_the_step_when_the_state_grows():
+    """y' = -λ(t) y with λ = 1 1/s, then 1000 1/s from t = 1 s: h = 0.01 s is stable at the start only."""
+    from scipy.integrate import solve_ivp
+
+    from contactdyn.integrators import RK4
+
+    def fun(t, y):
+        return -(1.0 if t < 1.0 else 1000.0) * y
+
+    sol = solve_ivp(fun, (0.0, 2.0), [1.0], method=RK4, max_step=0.01)
+    assert sol.status == -1 and 1.0 < sol.t[-1] < 1.1
+    assert "too large for the stiffest mode (|λ| = 1e+03 1/s, period 0.00628 s)" in sol.message

@@ -14,11 +14,24 @@ where that chain was undeformed at the latest touch.
 ``force_dynamic`` (A10): along each contact normal with a force set-point the nominal
 environment F = m s̈ + b ṡ + k s (s the penetration [m]) turns the force target
 F* = F_d + ∫Q(μ) dt, Q(μ) = −K_F μ, μ = F − F_d, into the penetration acceleration
-s̈* = (F* − b ṡ − k s) / m, the tip acceleration −s̈* n; then computed torque as in A7.
-With an exact model F = F*, so μ = ∫Q(μ) dt, i.e. μ̇ = −K_F μ. A massless nominal model
-(m = 0, b > 0) has relative degree one: s̈* = (Ḟ_d − K_F μ − k ṡ) / b gives μ̇ = −K_F μ
-directly. The other task directions are damped (a* = −K_v ẋ). While a contact does not
-touch, its normal is treated like the other directions and its integral is frozen.
+s̈* = (F* − b ṡ − k s) / m, the tip acceleration −s̈* n; then computed torque
+τ = H q̈* + h − Jᵀ n F* (the appendix's eq. A10 as written: the measured force enters only
+through the integral of μ, "no explicit force feedback"). With exact models the robot then
+moves as commanded only if F = F*; for model (b) that is algebraic (the bond's force is what
+makes the tip follow s̈*), so F = F* and μ = ∫Q(μ) dt, i.e. μ̇ = −K_F μ. A massless nominal
+(m = 0, b > 0) has relative degree one: s̈* = (Ḟ* − k ṡ) / b with Ḟ* = Ḟ_d − K_F μ; on a
+massless true surface e = F − F* then obeys ė = −(b / m_r) e (m_r the robot's mass along n)
+and μ = e + ∫Q(μ) dt. Option ``cancel = "measured"``: τ = H q̈* + h − τ_c cancels the
+measured force instead (our earlier realisation): the robot then follows s̈* whatever F is,
+and on the massless nominal μ̇ = −K_F μ exactly. The other task directions are damped
+(a* = −K_v ẋ), and any measured force along them (friction) is cancelled as in A7. While a
+contact does not touch, its normal is treated like the other directions and its integral is
+frozen.
+
+Option ``inertia`` (A7 and A10): the H the law multiplies by. ``"model"`` (default) is the
+rigid model's, the link plus the rotor inertia a motor reflects through its gear (n_s n_t J);
+``"link"`` is the link alone (eq. 49's m for case 3), the reading of A7/A10 that ignores the
+drive. Through an elastic transmission the two differ by 88 kg on case 3's 50 kg axis.
 
 ``hybrid``: A7 along ``axes`` (default: every direction orthogonal to the force normals)
 tracking a task-space reference, A10 along the normals: the position/force split of case 2.
@@ -114,6 +127,24 @@ def _axes(r) -> np.ndarray | None:
     return axes
 
 
+def _inertia(r) -> str:
+    return r.str("inertia", "model", choices=["model", "link"])
+
+
+def _rotor_inertia(context: BindContext, inertia: str) -> np.ndarray | None:
+    """Per joint, the reflected rotor inertia to take out of the rigid model's H (``inertia = "link"``)."""
+    if inertia == "model":
+        return None
+    names = context.joint_names
+    specs = context.scene.robot.drive.expand(len(names), names)
+    return np.array([s.reflected_inertia for s in specs])
+
+
+def _inertia_times(H: np.ndarray, rotor: np.ndarray | None, qdd: np.ndarray) -> np.ndarray:
+    """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out)."""
+    return H @ qdd if rotor is None else H @ qdd - rotor * qdd
+
+
 # ---- shared task-space pieces ---------------------------------------------------------------
 def _check_gain_size(g: np.ndarray, sizes: tuple[int, ...], key: str, file) -> None:
     if len(g) not in sizes:
@@ -195,6 +226,7 @@ class PositionDynamicConfig:
     k_null: float  #: [1/s]
     force_reference: bool
     nominal: NominalEnvironment | None
+    inertia: str = "model"  #: "model" (link + reflected rotor) or "link" (link only)
     kind: str = "position_dynamic"
 
 
@@ -212,10 +244,11 @@ class PositionDynamic(Controller):
             kp=_gain(r, "kp", KP, "1/s²"), kv=_gain(r, "kv", KV, "1/s"),
             k_null=r.float("k_null", K_NULL, lo=0.0, unit="1/s"),
             force_reference=r.bool("force_reference", False),
-            nominal=_nominal(r, need_dynamics=False))
+            nominal=_nominal(r, need_dynamics=False), inertia=_inertia(r))
 
     def bind(self, context: BindContext) -> None:
         self._pinv = _Pinv()
+        self._rotor = _rotor_inertia(context, self.config.inertia)
         cfg, key, file = self.config, context.key, context.scene.file
         dims = self.nv if cfg.space == "joint" else 3
         for name in ("kp", "kv"):
@@ -251,7 +284,7 @@ class PositionDynamic(Controller):
                     x_d, v_d, a_d = self._pressing_reference(inp)
                 a = a_d - cfg.kp * (inp.p_tip - x_d) - cfg.kv * (inp.v_tip - v_d)
             qdd = joint_acceleration(inp, a, cfg.k_null, self._pinv)
-        return inp.H @ qdd + inp.h - inp.tau_contact, None
+        return _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact, None
 
     def _pressing_reference(self, inp: ControlInput):
         """Along each touching contact's set-point direction n (normal or tangent): F_d/k beyond the
@@ -279,6 +312,8 @@ class ForceDynamicConfig:
     k_null: float  #: [1/s]
     axes: np.ndarray | None  #: (k, 3) position-controlled directions (hybrid), None: complement of the normals
     nominal: NominalEnvironment | None
+    cancel: str = "target"  #: along the normals τ −= Jᵀ n F*, F* = F_d + ∫Q ("target", A10) or Jᵀ n F ("measured")
+    inertia: str = "model"  #: "model" (link + reflected rotor) or "link" (link only)
     kind: str = "force_dynamic"
 
 
@@ -298,10 +333,12 @@ class ForceDynamic(Controller):
             kf=r.float("kf", KF, lo=0.0, lo_open=True, unit="1/s"),
             k_null=r.float("k_null", K_NULL, lo=0.0, unit="1/s"),
             axes=_axes(r) if cls.tracks_position else None,
-            nominal=_nominal(r, need_dynamics=True), kind=cls.name)
+            nominal=_nominal(r, need_dynamics=True),
+            cancel=r.str("cancel", "target", choices=["target", "measured"]), inertia=_inertia(r), kind=cls.name)
 
     def bind(self, context: BindContext) -> None:
         self._pinv = _Pinv()
+        self._rotor = _rotor_inertia(context, self.config.inertia)
         cfg, key, file, phase = self.config, context.key, context.scene.file, context.phase
         for name in ("kp", "kv"):
             _check_gain_size(getattr(cfg, name), (1, 3), f"{key}.{name}", file)
@@ -334,6 +371,7 @@ class ForceDynamic(Controller):
         cfg = self.config
         P = self.P.copy()
         a_force = np.zeros(3)
+        f_swap = np.zeros(3)  # tip force [N]: measured normal forces out, targets F* in (cancel = "target")
         zdot = np.zeros(self.n_states)
         for i, name in enumerate(self.names):
             n = inp.normals[name]
@@ -345,18 +383,23 @@ class ForceDynamic(Controller):
             s, sd = n @ (p_s - inp.p_tip), n @ (v_s - inp.v_tip)  # penetration [m], its rate [m/s]
             F_d, dF_d = inp.force_d[name]
             mu = inp.forces[name] - F_d  # force error [N]
+            target = F_d + inp.z[i]  # F* = F_d + ∫Q(μ) dt [N]
             if env.m > 0.0:
-                sdd = (F_d + inp.z[i] - env.b * sd - env.k * s) / env.m
-            else:
+                sdd = (target - env.b * sd - env.k * s) / env.m
+            else:  # Ḟ* = Ḟ_d + Q(μ)
                 sdd = (dF_d - cfg.kf * mu - env.k * sd) / env.b
             a_force -= sdd * n
             zdot[i] = -cfg.kf * mu
+            f_swap += (inp.forces[name] - target) * n
         if self.tracks_position:
             a_pos = inp.a_d - cfg.kp * (inp.p_tip - inp.x_d) - cfg.kv * (inp.v_tip - inp.v_d)
         else:
             a_pos = -cfg.kv * inp.v_tip
         qdd = joint_acceleration(inp, P @ a_pos + a_force, cfg.k_null, self._pinv)
-        return inp.H @ qdd + inp.h - inp.tau_contact, zdot
+        tau = _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact
+        if cfg.cancel == "target":
+            tau += inp.J.T @ f_swap
+        return tau, zdot
 
 
 @register

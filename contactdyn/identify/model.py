@@ -126,7 +126,7 @@ class FitModel:
         if self.pool is None:
             outs = [predict(*job) for job in jobs]
         else:
-            outs = [f.result() for f in [self.pool.submit(predict, *job) for job in jobs]]
+            outs = self._on_pool(jobs)
         self.run_wall_s += time.perf_counter() - wall0
         self.runs += len(jobs)
         residuals: list[np.ndarray | None] = []
@@ -137,3 +137,14 @@ class FitModel:
             else:
                 residuals.append(self.weighted(out))
         return residuals
+
+    def _on_pool(self, jobs: list[tuple]) -> list[list[np.ndarray] | str]:
+        from concurrent.futures.process import BrokenProcessPool
+
+        futures = [self.pool.submit(predict, *job) for job in jobs]
+        try:
+            return [f.result() for f in futures]
+        except BrokenProcessPool:  # a library crashed a worker (a segfault, the OOM killer): the pool is gone
+            tried = "; ".join(str({p.key: job[2][p.key] for p in self.params}) for job in jobs)
+            raise ContactdynError(f"a worker process died while simulating the fit's runs at {tried}; "
+                                  "run again with --workers 0 to see the run's own error") from None

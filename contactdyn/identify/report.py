@@ -28,6 +28,8 @@ def as_dict(res: FitResult) -> dict[str, Any]:
         "chi2_reduced": res.chi2_red, "dof": res.dof,
         "starts": [{"start": s.start, "end": s.values, "cost": s.cost, "evaluations": s.evaluations,
                     "status": s.status} for s in res.starts],
+        "stages": [{"window_s": st.window, "samples": st.samples, "cost": st.cost, "values": st.values,
+                    "runs": st.runs} for st in res.stages],
         "failed_runs": [{"values": f.values, "error": f.error} for f in res.failures],
         "runs": res.runs, "wall_s": res.wall_s,
         "settings": {"rtol": res.settings.rtol, "atol": res.settings.atol, "workers": res.settings.workers},

@@ -77,24 +77,39 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
     scheduler address instead (chunks of ``chunk`` runs are the tasks either way).
     """
     wall0 = time.perf_counter()
-    if check:  # bad input is refused before anything is written
+    if check:  # bad input touches no file
         check_sweep(sweep)
     out = Path(out).absolute()  # the workers' working directory may differ (Dask)
     runs_dir = out / "runs"
     runs_dir.mkdir(parents=True, exist_ok=True)
-    lock = lock_out(out)
-    try:
-        return _run_locked(sweep, out, runs_dir, wall0, workers, scheduler, chunk, csv, retry_failed, progress)
-    finally:
-        lock.close()
+    with lock_out(out):  # released when the sweep ends, however it ends
+        for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer (we hold the lock: no writer is live)
+            stale.unlink(missing_ok=True)
+        cases = sweep.cases()
+        write_manifest(out, sweep, cases)
+        rows = _finished_rows(out, runs_dir, cases, retry_failed)
+        todo = [(rid, overrides) for rid, _, overrides in cases if rid not in rows]
+        skipped = len(rows)
+        params = {rid: p for rid, p, _ in cases}
+        summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
+        n_workers = (os.cpu_count() or 1) if workers is None else max(0, workers)
+        size = chunk or max(1, min(MAX_CHUNK, math.ceil(len(todo) / (CHUNKS_PER_WORKER * max(1, n_workers)))))
+        chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
+        bar = _progress(len(cases), skipped, progress)
+        try:
+            for chunk_rows in _execute(sweep, runs_dir, chunks, n_workers, scheduler):
+                rows.update((r["run_id"], r) for r in chunk_rows)
+                summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
+                bar.update(len(chunk_rows))
+                bar.set_postfix(failed=sum(r["status"] != "ok" for r in rows.values()), refresh=False)
+        finally:
+            bar.close()
+    counts = {s: sum(r["status"] == s for r in rows.values()) for s in STATUSES}
+    return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary)
 
 
-def _run_locked(sweep: Sweep, out: Path, runs_dir: Path, wall0: float, workers, scheduler, chunk, csv, retry_failed,
-                progress) -> SweepReport:
-    for stale in runs_dir.glob(".*.tmp"):  # left by a killed writer (we hold the lock: no writer is live)
-        stale.unlink(missing_ok=True)
-    cases = sweep.cases()
-    write_manifest(out, sweep, cases)
+def _finished_rows(out: Path, runs_dir: Path, cases: list, retry_failed: bool) -> dict[str, dict[str, Any]]:
+    """Rows of the runs finished before this call (failed ones forgotten with ``retry_failed``)."""
     rows: dict[str, dict[str, Any]] = {}
     cache = cached_rows(out)
     for rid, _, _ in cases:
@@ -103,24 +118,7 @@ def _run_locked(sweep: Sweep, out: Path, runs_dir: Path, wall0: float, workers, 
         row = done_row(runs_dir, rid, cache)
         if row is not None:
             rows[rid] = row
-    todo = [(rid, overrides) for rid, _, overrides in cases if rid not in rows]
-    skipped = len(rows)
-    params = {rid: p for rid, p, _ in cases}
-    summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
-    n_workers = (os.cpu_count() or 1) if workers is None else max(0, workers)
-    size = chunk or max(1, min(MAX_CHUNK, math.ceil(len(todo) / (CHUNKS_PER_WORKER * max(1, n_workers)))))
-    chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
-    bar = _progress(len(cases), skipped, progress)
-    try:
-        for chunk_rows in _execute(sweep, runs_dir, chunks, n_workers, scheduler):
-            rows.update((r["run_id"], r) for r in chunk_rows)
-            summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
-            bar.update(len(chunk_rows))
-            bar.set_postfix(failed=sum(r["status"] != "ok" for r in rows.values()), refresh=False)
-    finally:
-        bar.close()
-    counts = {s: sum(r["status"] == s for r in rows.values()) for s in STATUSES}
-    return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary)
+    return rows
 
 
 def _execute(sweep: Sweep, runs_dir: Path, chunks: list, n_workers: int, scheduler: str | None):
@@ -157,9 +155,7 @@ def _execute_pool(args: tuple, chunks: list, n_workers: int):
         raise
     pool.shutdown(wait=True)
     if broken:
-        import multiprocessing
-
-        yield from run_isolated(multiprocessing.get_context("forkserver"), run_chunk, args, broken, n_workers)
+        yield from run_isolated(_forkserver(), run_chunk, args, broken, n_workers)
 
 
 def process_pool(n_workers: int, preload: tuple[str, ...] = ("contactdyn.sweep", "contactdyn.simulate")):
@@ -169,12 +165,9 @@ def process_pool(n_workers: int, preload: tuple[str, ...] = ("contactdyn.sweep",
     ``preload``; they end with this process and ignore Ctrl-C (:func:`.workers.worker_init`;
     the parent stops them with :func:`stop_pool`).
     """
-    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(list(preload))
-    return ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx, initializer=worker_init,
+    return ProcessPoolExecutor(max_workers=n_workers, mp_context=_forkserver(preload), initializer=worker_init,
                                initargs=(os.getpid(),))
 
 
@@ -185,9 +178,18 @@ def stop_pool(pool) -> None:
     pool.shutdown(wait=False, cancel_futures=True)
 
 
+def _forkserver(preload: tuple[str, ...] = ("contactdyn.sweep", "contactdyn.simulate")):
+    """The forkserver context, preloading ``preload`` (workers fork from it, not from this process)."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(list(preload))
+    return ctx
+
+
 def _execute_dask(scheduler: str, args: tuple, chunks: list):
     try:
-        from distributed import Client, as_completed
+        from distributed import Client, KilledWorker, as_completed
     except ImportError:
         raise SceneError("--scheduler", "dask.distributed installed (pip install 'dask[distributed]')",
                          scheduler) from None
@@ -195,13 +197,21 @@ def _execute_dask(scheduler: str, args: tuple, chunks: list):
         client = Client(scheduler, timeout=SCHEDULER_TIMEOUT)
     except (OSError, TimeoutError, ValueError) as exc:
         raise SceneError("--scheduler", "the address of a running Dask scheduler", f"{scheduler} ({exc})") from None
+    broken: list = []
     with client:
-        futures = [client.submit(run_chunk, *args, c, pure=False) for c in chunks]
+        futures = {client.submit(run_chunk, *args, c, pure=False): c for c in chunks}
         try:
-            for fut in as_completed(futures):
-                yield fut.result()
+            for fut in as_completed(list(futures)):
+                try:
+                    rows = fut.result()
+                except KilledWorker:  # its workers died: which run killed them is unknown
+                    broken.extend(futures[fut])
+                    continue
+                yield rows
         finally:
-            client.cancel(futures)
+            client.cancel(list(futures))
+    if broken:  # each suspect alone in a local process, to record the culprit with its signal
+        yield from run_isolated(_forkserver(), run_chunk, args, broken, os.cpu_count() or 1)
 
 
 def _progress(total: int, initial: int, enabled: bool):

@@ -80,7 +80,7 @@ def done_row(runs_dir: Path, rid: str, cache: dict[str, dict[str, Any]]) -> dict
             doc = json.loads(failed.read_text())
             return {k: doc[k] for k in SUMMARY_FIXED}
         return result_row(rid, load_result(runs_dir / rid))
-    except (OSError, ValueError, KeyError, ContactdynError):  # damaged by hand (never by us): run it again
+    except (OSError, ValueError, KeyError, TypeError, RecursionError, ContactdynError):  # damaged by hand: run again
         return None
 
 
@@ -106,7 +106,7 @@ def write_manifest(out: Path, sweep: Sweep, cases: list) -> None:
     if path.is_file():
         try:
             old = json.loads(path.read_text()).get("scene_digest")
-        except (OSError, ValueError, AttributeError):
+        except (OSError, ValueError, AttributeError, RecursionError):
             old = None
         if old not in (None, digest):
             raise SceneError("<file>", f"a sweep of the same base scene (this one is {sweep.file}); "

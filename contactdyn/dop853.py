@@ -1,0 +1,306 @@
+"""DOP853 stepped by scipy's compiled core, with dense output and located events.
+
+``solve_ivp``'s DOP853 is written in Python: every step pays for its stage
+combinations, error norm, step control, dense output and event bookkeeping in NumPy
+calls (65 µs per step with an empty right-hand side, against 8 µs here; ~75 µs on B1
+against ~100 µs of right-hand side; docs/performance.md). Here the steps are
+taken by scipy's compiled DOP853 (``scipy.integrate._dop.dopri853``, the C translation of
+Hairer's code behind ``scipy.integrate.ode("dop853")``), and Python sees each accepted
+step once, in the ``solout`` callback, to test the events.
+
+Dense output. scipy's C wrapper does not pass Hairer's ``CONT`` array to ``solout``, and
+asking for it (``iout = 2``) crashes scipy 1.17 (the core advances its ``nfcn`` pointer
+instead of the count). The stages are still in the workspace the caller owns, laid out as
+Hairer documents (``WORK(21…)``: k1…k10, y1): at each accepted step ``solout`` copies
+them, and the 7th-order interpolant of a step (scipy's coefficient tables, three more
+right-hand-side calls) is built only when something needs it: an event's sign change in
+that step, or output samples falling in it, then for all those steps in one batch.
+
+Events follow ``solve_ivp``'s contract: ``g(t, y)`` at t0 and at every step end in
+increasing t; a sign change in the event's direction is located by ``brentq`` on the
+step's interpolant (xtol = rtol = 4 ε), and the earliest terminal root ends the run there.
+Step control is Hairer's (safety 0.9, step ratio at most ``GROW``, ``SHRINK`` after a rejection);
+stiffness detection is off, as in ``solve_ivp``. Verified against ``solve_ivp``'s DOP853
+in ``tests/test_dop853.py``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy
+from scipy.integrate import _dop
+from scipy.integrate._ivp import dop853_coefficients as _coef
+from scipy.optimize import brentq
+
+from .errors import SceneError
+
+__all__ = ["solve", "DenseSolution", "Solution"]
+
+SAFETY = 0.9  #: step size safety factor [-]
+#: step ratio h_new / h after a rejected step [-]. scipy 1.17's C core shrinks a rejected step by
+#: this fixed factor (its translation reads facc1/safe where Hairer's Fortran has fac11/safe),
+#: solve_ivp by max(0.2, 0.9 err^(−1/8)). Hairer's default 1/3 measured the most even: 0.8 saves
+#: 15 % of B1's calls but, creeping up on a kink of the rhs (a force ramp's end) with many small
+#: cuts, accepts steps whose error estimate was just below 1 more often (case 3 a force at rtol
+#: 3e-8: F_n error 1.7e-2 N against 3e-5 N at 1/3; see docs/performance.md).
+#: It is also the lower bound of the ratio after an accepted step, never binding there.
+SHRINK = 1.0 / 3.0
+GROW = 10.0  #: largest step ratio h_new / h [-] (solve_ivp's MAX_FACTOR)
+MAX_STEPS = 10**9  #: step budget of one call (no practical limit; stiffness detection is off)
+_EPS = np.finfo(float).eps
+_WORK0 = 20  #: k1 starts at work[20] (Hairer's WORK(21))
+# slots of the workspace block k1…k10 after an accepted step (each n long)
+_F_NEW, _S11, _S12, _Y_NEW = 0, 1, 2, 4  # k1 = f(t_new), k2 = stage 11, k3 = stage 12, k5 = y_new
+_STAGES_6_10 = slice(5, 10)  # k6…k10 = stages 6…10
+_A, _C, _D = _coef.A, _coef.C, _coef.D
+_N = _coef.N_STAGES  # 12
+_CORE = getattr(_dop, "dopri853", None)  #: scipy's C core (scipy 1.17; older scipy has an f2py one)
+_MESSAGES = {-1: "input is not consistent", -2: "larger nsteps is needed", -3: "step size becomes too small",
+             -4: "problem is probably stiff"}
+
+
+@dataclass
+class _Steps:
+    """Accepted steps of one run: ends, states, stages; interpolants built on demand."""
+
+    fun: Callable
+    n: int
+    t: list[float] = field(default_factory=list)  #: step ends [s], t[0] = t0
+    y0: np.ndarray | None = None
+    f0: np.ndarray | None = None  #: f(t0, y0)
+    blocks: list[np.ndarray] = field(default_factory=list)  #: workspace k1…k10 (10 n) per step
+    coef: dict[int, np.ndarray] = field(default_factory=dict)  #: step -> interpolant coefficients (7, n)
+    calls: int = 0  #: right-hand-side calls made for interpolants
+
+    def y_old(self, i: int) -> np.ndarray:
+        return self.y0 if i == 0 else self.blocks[i - 1][_Y_NEW]
+
+    def f_old(self, i: int) -> np.ndarray:
+        return self.f0 if i == 0 else self.blocks[i - 1][_F_NEW]
+
+    def build(self, steps: np.ndarray) -> None:
+        """Interpolant coefficients of the given steps (DOP853's stages 14–16, in one batch)."""
+        steps = [int(i) for i in steps if int(i) not in self.coef]
+        if not steps:
+            return
+        m = len(steps)
+        t_old = np.array([self.t[i] for i in steps])
+        h = np.array([self.t[i + 1] for i in steps]) - t_old
+        Y0 = np.array([self.y_old(i) for i in steps])
+        B = np.array([self.blocks[i] for i in steps])
+        K = np.zeros((m, _coef.N_STAGES_EXTENDED, self.n))
+        K[:, 0] = [self.f_old(i) for i in steps]
+        K[:, 5:10] = B[:, _STAGES_6_10]
+        K[:, 10], K[:, 11], K[:, _N] = B[:, _S11], B[:, _S12], B[:, _F_NEW]
+        for s in range(_N + 1, _coef.N_STAGES_EXTENDED):
+            Ys = Y0 + h[:, None] * np.einsum("msn,s->mn", K[:, :s], _A[s, :s])
+            ts = t_old + _C[s] * h
+            for k in range(m):
+                K[k, s] = self.fun(float(ts[k]), Ys[k])
+            self.calls += m
+        dy = B[:, _Y_NEW] - Y0
+        F = np.empty((m, _coef.INTERPOLATOR_POWER, self.n))
+        F[:, 0] = dy
+        F[:, 1] = h[:, None] * K[:, 0] - dy
+        F[:, 2] = 2.0 * dy - h[:, None] * (K[:, _N] + K[:, 0])
+        F[:, 3:] = h[:, None, None] * np.einsum("ds,msn->mdn", _D, K)
+        for k, i in enumerate(steps):
+            self.coef[i] = F[k]
+
+
+class DenseSolution:
+    """y(t) on [t0, t_end] from the steps' 7th-order interpolants (like ``OdeSolution``)."""
+
+    def __init__(self, steps: _Steps, t_end: float):
+        self.steps = steps
+        self.t_min, self.t_max = steps.t[0], t_end
+        self.ends = np.array(steps.t[1:])
+        self.calls_counted = steps.calls  #: interpolant calls already in the Solution's nfev
+
+    @property
+    def late_calls(self) -> int:
+        """Right-hand-side calls made for interpolants after the run returned (output sampling)."""
+        return self.steps.calls - self.calls_counted
+
+    def __call__(self, t) -> np.ndarray:
+        """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t)))."""
+        st = self.steps
+        tt = np.atleast_1d(np.asarray(t, float))
+        if not len(self.ends):
+            out = np.repeat(st.y0[:, None], len(tt), axis=1)
+            return out[:, 0] if np.ndim(t) == 0 else out
+        idx = np.minimum(np.searchsorted(self.ends, tt, side="left"), len(self.ends) - 1)
+        steps, at = np.unique(idx, return_inverse=True)  # per step, then per sample
+        st.build(steps)
+        ends = np.array(st.t)
+        s = ((tt - ends[idx]) / (ends[idx + 1] - ends[idx]))[:, None]
+        F = np.array([st.coef[int(i)] for i in steps])[at]
+        y = np.zeros((len(tt), st.n))
+        for k, row in enumerate(range(F.shape[1] - 1, -1, -1)):  # Horner, as scipy's Dop853DenseOutput
+            y += F[:, row]
+            y *= s if k % 2 == 0 else 1.0 - s
+        y += np.array([st.y_old(int(i)) for i in steps])[at]
+        return y[0] if np.ndim(t) == 0 else y.T
+
+
+@dataclass
+class Solution:
+    """What ``solve_ivp`` returns, as far as the hybrid loop reads it."""
+
+    t: np.ndarray
+    y: np.ndarray
+    sol: DenseSolution
+    t_events: list[np.ndarray]
+    status: int  #: 0 end reached, 1 a terminal event, −1 failure
+    message: str
+    nfev: int
+    naccept: int
+    nreject: int
+
+    @property
+    def success(self) -> bool:
+        return self.status >= 0
+
+
+def _active(g_old: float, g_new: float, direction: float) -> bool:
+    """Did g cross zero between two step ends in the event's direction (``solve_ivp``'s test)?"""
+    up = g_old <= 0.0 <= g_new
+    down = g_old >= 0.0 >= g_new
+    return (up and direction > 0) or (down and direction < 0) or ((up or down) and direction == 0)
+
+
+class _EventWatch:
+    """The events' values at the step ends, and their roots (``solve_ivp``'s rules)."""
+
+    def __init__(self, events: Sequence[Callable], t0: float, y0: np.ndarray):
+        self.events = list(events)
+        self.g = [float(e(t0, y0)) for e in self.events]
+        self.direction = [float(getattr(e, "direction", 0.0)) for e in self.events]
+        self.terminal = [bool(getattr(e, "terminal", False)) for e in self.events]
+        self.hits: list[tuple[float, int]] = []  #: (root [s], event), in time order
+
+    def stop(self, steps: _Steps, t: float, x: np.ndarray) -> bool:
+        """At the step end (t, x): record the roots in the step; True at a terminal one (hits ends with it)."""
+        g_new = [float(e(t, x)) for e in self.events]
+        fired = [i for i, (a, b, d) in enumerate(zip(self.g, g_new, self.direction, strict=True)) if _active(a, b, d)]
+        self.g = g_new
+        if not fired:
+            return False
+        dense, t_old = DenseSolution(steps, t), steps.t[-2]
+        for i in fired:  # as solve_ivp: brentq on the step's interpolant
+            root = brentq(lambda s, e=self.events[i]: e(s, dense(s)), t_old, t, xtol=4 * _EPS, rtol=4 * _EPS)
+            self.hits.append((root, i))
+        self.hits.sort()
+        first = next((k for k, (_, i) in enumerate(self.hits) if self.terminal[i]), None)
+        if first is None:
+            return False
+        del self.hits[first + 1:]
+        return True
+
+    def t_events(self) -> list[np.ndarray]:
+        return [np.array([r for r, k in self.hits if k == i]) for i in range(len(self.events))]
+
+
+class _Core:
+    """One call of scipy's compiled DOP853: its workspace, and the two callbacks it makes."""
+
+    def __init__(self, fun: Callable, t0: float, y0: np.ndarray, events: _EventWatch):
+        n = len(y0)
+        self.fun, self.n, self.watch = fun, n, events
+        self.work = np.zeros(11 * n + 21)  # Hairer's layout: 20 parameters, then k1…k10, y1
+        self.iwork = np.zeros(21, dtype=np.int32)
+        self.steps = _Steps(fun, n, [t0], y0.copy())
+        self.last_t, self.last_x, self.calls = None, None, 0  # the latest call: at a step end, the FSAL one
+        self.failure: list[BaseException] = []
+        self.nan = np.full(n, np.nan)
+
+    def run(self, t_end: float, rtol: float, atol: float, max_step: float, first_step: float | None) -> int:
+        work = self.work
+        work[1], work[2], work[3] = SAFETY, SHRINK, GROW
+        work[4] = -1.0  # no Lund stabilisation (beta = 0)
+        work[5] = max_step if np.isfinite(max_step) else 0.0
+        work[6] = first_step or 0.0
+        self.iwork[3] = -1  # no stiffness detection
+        y0 = self.steps.y0
+        if _CORE is None:
+            raise SceneError("solver.method", "DOP853C: scipy's compiled DOP853 (scipy.integrate._dop.dopri853, "
+                             "as in scipy 1.17); or DOP853", f"scipy {scipy.__version__} without it")
+        _, _, ierr = _CORE(self.f, self.steps.t[0], y0, t_end, rtol, atol, self.solout, 1, work,
+                                   self.iwork, MAX_STEPS, -1)
+        if self.failure:
+            raise self.failure[0]
+        return int(ierr)
+
+    def f(self, t: float, x: np.ndarray) -> np.ndarray:
+        """The right-hand side as the core calls it."""
+        if self.failure:
+            return self.nan
+        x = x.copy()  # the core passes a view of its workspace: nothing may keep that past the run
+        self.last_t, self.last_x = t, x
+        self.calls += 1
+        try:
+            return self.fun(t, x)
+        except BaseException as exc:  # raised again after the core returns (it cannot carry it)
+            self.failure.append(exc)
+            return self.nan
+
+    def solout(self, t: float, y: np.ndarray) -> int:
+        """After each accepted step: keep its stages, test the events; −1 stops the core."""
+        try:
+            return self._step_end(t)
+        except BaseException as exc:  # as in f
+            self.failure.append(exc)
+            return -1
+
+    def _step_end(self, t: float) -> int:
+        steps, n = self.steps, self.n
+        if self.failure:
+            return -1
+        if steps.f0 is None:  # the call at t0: k1 = f(t0, y0)
+            steps.f0 = self.work[_WORK0:_WORK0 + n].copy()
+            return 0
+        steps.t.append(t)
+        steps.blocks.append(self.work[_WORK0:_WORK0 + 10 * n].reshape(10, n).copy())
+        if not self.watch.events:
+            return 0
+        # the FSAL call's own array (the same values): the compiled plan has its results cached
+        x = self.last_x if self.last_t == t else steps.blocks[-1][_Y_NEW]
+        if self.watch.stop(steps, t, x):
+            steps.build(np.array([len(steps.t) - 2]))
+            return -1
+        return 0
+
+
+def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, float], y0: np.ndarray, *,
+          rtol: float, atol: float, max_step: float = np.inf, first_step: float | None = None,
+          events: Sequence[Callable] | None = None) -> Solution:
+    """Integrate y' = fun(t, y) over t_span by compiled DOP853, locating the events (``solve_ivp``'s contract).
+
+    ``atol`` and ``rtol`` are scalars; ``max_step`` [s] (inf: none) and ``first_step`` [s] (None:
+    Hairer's estimate) as in ``solve_ivp``. Events are terminal if their ``terminal`` attribute is.
+    """
+    t0, t_end = float(t_span[0]), float(t_span[1])
+    y0 = np.array(y0, float)
+    watch = _EventWatch(events or [], t0, y0)
+    core = _Core(fun, t0, y0, watch)
+    ierr = core.run(t_end, rtol, atol, max_step, first_step)
+    steps = core.steps
+    t_stop = steps.t[-1]
+    if ierr == 1:
+        steps.t[-1] = t_stop = t_end  # the core's last step ends at t0 + Σh, within rounding of t_end
+    status, message = 0, "The solver successfully reached the end of the integration interval."
+    if ierr == 2 and watch.hits and watch.terminal[watch.hits[-1][1]]:
+        status, message, t_stop = 1, "A termination event occurred.", watch.hits[-1][0]
+    elif ierr < 0:
+        status, message = -1, f"DOP853 (compiled): {_MESSAGES.get(ierr, f'error {ierr}')} at t = {t_stop:.9g} s"
+    dense = DenseSolution(steps, t_stop)
+    ts = np.array(steps.t)
+    ys = np.column_stack([steps.y0] + [b[_Y_NEW] for b in steps.blocks])
+    if status == 1:
+        ts[-1] = t_stop
+        ys[:, -1] = dense(t_stop)
+    return Solution(ts, ys, dense, watch.t_events(), status, message, core.calls + steps.calls,
+                    int(core.iwork[18]), int(core.iwork[19]))

@@ -1,0 +1,153 @@
+"""The compiled DOP853 (contactdyn.dop853) against solve_ivp's DOP853 and closed forms."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from contactdyn.dop853 import solve
+from contactdyn.errors import SceneError
+
+
+def oscillator(t, y):
+    """y'' = −y − 0.1 y': y(t) = e^(−t/20) (cos ωt + sin(ωt)/(20ω)), ω² = 1 − 1/400."""
+    return np.array([y[1], -y[0] - 0.1 * y[1]])
+
+
+W = math.sqrt(1.0 - 1.0 / 400.0)
+
+
+def exact(t):
+    t = np.asarray(t)
+    return np.exp(-t / 20.0) * (np.cos(W * t) + np.sin(W * t) / (20.0 * W))
+
+
+def terminal(fn, direction):
+    fn.terminal, fn.direction = True, direction
+    return fn
+
+
+@pytest.mark.parametrize("rtol", [1e-6, 1e-9])
+def test_same_accepted_steps_as_solve_ivp(rtol):
+    """Same method, same step control, same first step: the same accepted steps (to rounding of the
+    error norm, which the step size amplifies as err^(1/8)), states within the tolerance."""
+    kw = dict(rtol=rtol, atol=rtol * 1e-2, first_step=1e-3)
+    ref = solve_ivp(oscillator, (0.0, 20.0), [1.0, 0.0], method="DOP853", dense_output=True, **kw)
+    got = solve(oscillator, (0.0, 20.0), [1.0, 0.0], **kw)
+    assert got.status == 0 and got.nreject == 0  # (no rejections: those differ, see SHRINK)
+    assert len(got.t) == len(ref.t)
+    np.testing.assert_allclose(got.t, ref.t, rtol=1e-7, atol=0.0)
+    ts = np.linspace(0.0, 20.0, 333)  # dense output: the same 7th-order interpolant
+    assert float(np.abs(got.sol(ts) - ref.sol(ts)).max()) < 1e-3 * rtol  # measured 4e-13, 2e-15
+    assert float(np.abs(got.sol(ts)[0] - exact(ts)).max()) < 10 * rtol
+
+
+def test_error_within_tolerance_of_the_closed_form():
+    got = solve(oscillator, (0.0, 20.0), [1.0, 0.0], rtol=1e-8, atol=1e-10)
+    assert got.t[-1] == 20.0  # the end is hit exactly (the hybrid loop compares t with T)
+    ts = np.linspace(0.0, 20.0, 1001)  # dense output between the steps, too
+    assert float(np.abs(got.sol(ts)[0] - exact(ts)).max()) < 1e-7
+
+
+def test_terminal_event_located_on_the_interpolant():
+    """cos-like decay crosses 0.3 downwards first at t*: found to ~1e-12 s, state on the surface."""
+    ev = terminal(lambda t, y: y[0] - 0.3, -1)
+    got = solve(oscillator, (0.0, 20.0), [1.0, 0.0], rtol=1e-10, atol=1e-12, events=[ev])
+    from scipy.optimize import brentq
+
+    t_star = brentq(lambda t: exact(t) - 0.3, 0.5, 1.6, xtol=1e-15)
+    assert got.status == 1
+    assert abs(got.t_events[0][0] - t_star) < 1e-9
+    assert got.t[-1] == got.t_events[0][0]
+    assert abs(got.y[0, -1] - 0.3) < 1e-12
+
+
+def test_direction_and_earliest_terminal_event():
+    up = terminal(lambda t, y: y[0] - 0.3, +1)  # y falls through 0.3 first: no upward crossing then
+    down = terminal(lambda t, y: y[0] + 0.2, -1)  # later, downwards
+    got = solve(oscillator, (0.0, 20.0), [1.0, 0.0], rtol=1e-9, atol=1e-11, events=[up, down])
+    assert got.status == 1 and len(got.t_events[1]) == 1 and len(got.t_events[0]) == 0
+    ref = solve_ivp(oscillator, (0.0, 20.0), [1.0, 0.0], method="DOP853", rtol=1e-9, atol=1e-11,
+                    events=[up, down])
+    assert abs(got.t_events[1][0] - ref.t_events[1][0]) < 1e-9
+
+
+def test_event_calls_follow_solve_ivp_contract():
+    """g is called at t0 first, then once at every step end in increasing t (the loop's guards rely on it)."""
+    calls = []
+
+    def g(t, y):
+        calls.append(t)
+        return 1.0
+
+    got = solve(oscillator, (0.0, 5.0), [1.0, 0.0], rtol=1e-8, atol=1e-10, events=[g])
+    assert calls == list(got.t)
+
+
+def test_exception_in_the_right_hand_side_propagates():
+    def bad(t, y):
+        if t > 0.5:
+            raise np.linalg.LinAlgError("singular contact system")
+        return oscillator(t, y)
+
+    with pytest.raises(np.linalg.LinAlgError, match="singular contact system"):
+        solve(bad, (0.0, 2.0), [1.0, 0.0], rtol=1e-8, atol=1e-10)
+
+
+def test_failure_is_reported_not_hidden():
+    got = solve(lambda t, y: np.array([np.nan if t > 0.1 else 1.0]), (0.0, 1.0), [0.0], rtol=1e-8, atol=1e-10)
+    assert got.status == -1 and "step size" in got.message
+    assert got.t[-1] < 0.2
+
+
+def test_exception_in_an_event_propagates():
+    def g(t, y):
+        if t > 0.5:
+            raise KeyError("contact 'tip'")
+        return 1.0
+
+    with pytest.raises(KeyError, match="tip"):
+        solve(oscillator, (0.0, 2.0), [1.0, 0.0], rtol=1e-8, atol=1e-10, events=[g])
+
+
+def test_interpolants_cost_three_calls_per_step_and_only_where_asked():
+    calls = []
+
+    def counted(t, y):
+        calls.append(t)
+        return oscillator(t, y)
+
+    got = solve(counted, (0.0, 10.0), [1.0, 0.0], rtol=1e-8, atol=1e-10)
+    assert got.nfev == len(calls)  # the core's count and ours agree
+    n_steps = len(got.t) - 1
+    got.sol(np.array([0.5 * (got.t[0] + got.t[1])]))  # one step's interpolant
+    assert got.sol.late_calls == 3
+    got.sol(np.linspace(0.0, 10.0, 1001))  # all steps: 3 calls each, the first not again
+    assert got.sol.late_calls == 3 * n_steps == len(calls) - got.nfev
+
+
+@pytest.mark.parametrize("scene, duration, force_tol", [
+    ("b1", 0.5, 1e-5),  # smooth sliding: measured 1.4e-6 N apart, each ~2e-6 N from the reference
+    ("case2_writer_b", 1.5, 1e-4),  # touch, impact, stick, slip, separation: measured 5e-6 N apart
+])
+def test_scenes_agree_with_solve_ivp(scene, duration, force_tol):
+    """A whole hybrid run on DOP853C: the same events at the same times, channels within the error."""
+    from contactdyn import simulate
+
+    ref = simulate(scene, {"duration": duration})
+    got = simulate(scene, {"duration": duration, "solver.method": "DOP853C"})
+    assert [(e["kind"], e["name"]) for e in got.events] == [(e["kind"], e["name"]) for e in ref.events]
+    assert max((abs(a["t"] - b["t"]) for a, b in zip(got.events, ref.events, strict=True)), default=0.0) < 1e-7
+    for name in (c for c in ref.channels if c.endswith(".F_n")):
+        assert float(np.abs(got[name] - ref[name]).max()) < force_tol
+    assert float(np.abs(got["tip"] - ref["tip"]).max()) < 1e-8
+    assert got.stats["segments_by_method"] == {"DOP853C": ref.stats["segments_by_method"]["DOP853"]}
+
+
+def test_a_scipy_without_the_compiled_core_is_named(monkeypatch):
+    import contactdyn.dop853 as dop
+
+    monkeypatch.setattr(dop, "_CORE", None)
+    with pytest.raises(SceneError, match="solver.method.*DOP853C.*scipy"):
+        solve(oscillator, (0.0, 1.0), [1.0, 0.0], rtol=1e-8, atol=1e-10)
