@@ -309,6 +309,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"contactdyn {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
+    for add in (_list_parser, _run_parser, _sweep_parser, _new_parser, _view_parser, _plot_parser, _bench_parser,
+                _fit_parser):
+        add(sub, fmt)
+    return parser
+
+
+def _list_parser(sub, fmt) -> None:
     ls = sub.add_parser("list", help="list scenes, robots, contact models, controllers, integrators",
                         description="List what a scene can name.", formatter_class=fmt,
                         epilog="examples:\n  contactdyn list\n  contactdyn list robots --json\n"
@@ -320,6 +327,8 @@ def build_parser() -> argparse.ArgumentParser:
     _scripting(ls)
     ls.set_defaults(func=_cmd_list)
 
+
+def _run_parser(sub, fmt) -> None:
     run = sub.add_parser("run", help="simulate a scene", description="Simulate one scene and print its key figures.",
                          formatter_class=fmt,
                          epilog="examples:\n  contactdyn run b1 --set solver.rtol=1e-6 --out runs/b1\n"
@@ -338,6 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
     _scripting(run)
     run.set_defaults(func=_cmd_run)
 
+
+def _sweep_parser(sub, fmt) -> None:
     sw = sub.add_parser(
         "sweep", help="run a scene over a grid of parameters (process pool or Dask)", formatter_class=fmt,
         description="Run every combination of the axes; results in OUT/runs/, one summary row per run in "
@@ -367,6 +378,8 @@ def build_parser() -> argparse.ArgumentParser:
     _scripting(sw)
     sw.set_defaults(func=_cmd_sweep)
 
+
+def _new_parser(sub, fmt) -> None:
     new = sub.add_parser("new", help="write a commented starter scene (press, then slide)", formatter_class=fmt,
                          description="Write sims/NAME.toml: the robot's tip approaches a table, presses 20 N and "
                                      "slides 10 cm. It runs as written; edit it from there.",
@@ -382,6 +395,8 @@ def build_parser() -> argparse.ArgumentParser:
     new.add_argument("--force", action="store_true", help="overwrite an existing file")
     new.set_defaults(func=_delegate("starter", "new_command"))
 
+
+def _view_parser(sub, fmt) -> None:
     view = sub.add_parser("view", help="show a saved run in the meshcat viewer", formatter_class=fmt,
                           epilog="examples:\n  contactdyn view runs/b1\n  contactdyn view runs/b1 --html b1.html")
     view.add_argument("run", help="saved run (RUN.npz + RUN.json)")
@@ -391,6 +406,8 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--speed", type=_speed, default=1.0, help="playback speed factor (> 0; 1 = real time)")
     view.set_defaults(func=_delegate("viewer", "view_command"))
 
+
+def _plot_parser(sub, fmt) -> None:
     plot = sub.add_parser("plot", help="paper-style figures of a saved run", formatter_class=fmt,
                           epilog="example:\n  contactdyn plot runs/b1 --out figs --format png,svg")
     plot.add_argument("run", help="saved run (RUN.npz + RUN.json)")
@@ -398,6 +415,8 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("--format", type=_csv_list, help="comma-separated formats (default png,svg)")
     plot.set_defaults(func=_delegate("plots", "plot_command"))
 
+
+def _bench_parser(sub, fmt) -> None:
     bench = sub.add_parser("bench", help="work-precision benchmark of the integrators on a scene",
                            formatter_class=fmt,
                            epilog="example:\n  contactdyn bench b1 --methods DOP853,RK45 --rtols 1e-4,1e-6,1e-8 "
@@ -412,8 +431,6 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", metavar="DIR", help="output folder (default out/bench/SCENE)")
     _set_option(bench)
     bench.set_defaults(func=_delegate("workprecision", "bench_command"))
-    _fit_parser(sub, fmt)
-    return parser
 
 
 def _fit_parser(sub, fmt) -> None:
