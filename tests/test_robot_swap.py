@@ -117,7 +117,7 @@ SHORT = 0.8  #: [s] simulated: the 0.5 s press and 0.3 s of drawing (the full 4.
 
 @pytest.mark.parametrize("robot", SWAP)
 def test_swap_matrix_presses_and_draws_or_says_why_not(robot, tmp_path, capsys):
-    """Exit 0 with the pencil pressed at 5 N ± 10 % (mean while drawing) and never lifted, or exit 2
+    """Exit 0 with the pencil pressed at 5 N ± 10 % (min and max while drawing) and never lifted, or exit 2
     with one line saying by how much the pose is missed [m, rad]; never a traceback, never exit 1."""
     out = tmp_path / robot
     code = main(["run", UR5, "--set", f"robot.urdf={robot}", "--set", f"robot.tip={TOOL_FRAMES[robot]}",
@@ -136,7 +136,8 @@ def test_swap_matrix_presses_and_draws_or_says_why_not(robot, tmp_path, capsys):
     assert not [e for e in r.events if e["kind"] == "separate"], robot
     drawing = r.t > 0.5
     assert np.all(r["contact.pencil.touching"][drawing] == 1.0)
-    assert r["contact.pencil.F_n"][drawing].mean() == pytest.approx(PRESSURE, rel=0.1), robot
+    F_n = r["contact.pencil.F_n"][drawing]
+    assert np.all(np.abs(F_n - PRESSURE) <= 0.1 * PRESSURE), (robot, F_n.min(), F_n.max())  # 5 N ± 10 %, every sample
 
 
 def test_swap_keeps_fingers_and_grippers_locked(tmp_path, capsys):

@@ -2,7 +2,8 @@
 
 Task space: f = K_p P (x_d − x) + K_d P (ẋ_d − ẋ) − Σ F_d n, τ = Jᵀ f [+ feedforward],
 where P projects on the position-controlled axes and F_d n presses with each force set-point F_d
-along its direction n: a contact normal (benchmark B1's law) or a tangent (case 1's F1). Optionally
+along its direction n: a contact normal (benchmark B1's law) or a tangent (case 1's F1), damped
+along n by ``kd_normal``: f −= D_n (n·ẋ) n (zero at rest, so the pressure's set-point is kept). Optionally
 the task PD also holds a tool axis a (e.g. a pencil, the tip frame's local ``tool_axis``) along a
 world direction d: moment m = K_o (a × d) − D_o ω⊥, τ += J_ωᵀ m, ω⊥ the angular velocity
 without its roll about a (a 5-DOF robot cannot control that roll). Joint space:
@@ -47,6 +48,7 @@ class TaskPDConfig:
     ko: float = 50.0  #: orientation stiffness [N·m/rad]
     do: float = 2.0  #: orientation damping [N·m·s/rad]
     kd_joint: float = 0.0  #: joint damping for redundant robots [N·m·s/rad]
+    kd_normal: float = 0.0  #: damping of the tip's velocity along each force set-point's direction [N·s/m]
     kind: str = "task_pd"
 
 
@@ -72,7 +74,8 @@ class TaskPD(Controller):
             else None
         return TaskPDConfig(kp, kd, axes, r.str("feedforward", "none", choices=FEEDFORWARD), tool_axis, tool_target,
                             r.float("ko", 50.0, lo=0.0, unit="N·m/rad"), r.float("do", 2.0, lo=0.0, unit="N·m·s/rad"),
-                            r.float("kd_joint", 0.0, lo=0.0, unit="N·m·s/rad"))
+                            r.float("kd_joint", 0.0, lo=0.0, unit="N·m·s/rad"),
+                            r.float("kd_normal", 0.0, lo=0.0, unit="N·s/m"))
 
     def __init__(self, config: TaskPDConfig, nv: int):
         super().__init__(config, nv)
@@ -82,26 +85,27 @@ class TaskPD(Controller):
         self._kd = (a.T * np.broadcast_to(config.kd, len(a))) @ a
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
-        f = np.zeros(3)
-        if inp.x_d is not None:
-            f += self._kp @ (inp.x_d - inp.p_tip) + self._kd @ (inp.v_d - inp.v_tip)
-        for contact, (F_d, _) in inp.force_d.items():
-            f -= F_d * inp.normals[contact]
-        tau = inp.J.T @ f + _feedforward(inp, self.config.feedforward)
         cfg = self.config
+        tau = np.zeros(self.nv)
+        if inp.x_d is not None:
+            tau += inp.J.T @ (self._kp @ (inp.x_d - inp.p_tip) + self._kd @ (inp.v_d - inp.v_tip))
         if cfg.tool_axis is not None:
             a = inp.R_tip @ cfg.tool_axis  # current tool direction (world)
             omega = inp.J_ang @ inp.v
             omega_perp = omega - (omega @ a) * a
-            tau = tau + inp.J_ang.T @ (cfg.ko * np.cross(a, cfg.tool_target) - cfg.do * omega_perp)
+            tau += inp.J_ang.T @ (cfg.ko * np.cross(a, cfg.tool_target) - cfg.do * omega_perp)
         if cfg.kd_joint:
-            tau = tau - cfg.kd_joint * inp.v
-        return tau, None
+            tau -= cfg.kd_joint * inp.v
+        f = np.zeros(3)
+        for contact, (F_d, _) in inp.force_d.items():
+            n = inp.normals[contact]
+            f -= F_d * n + cfg.kd_normal * (n @ inp.v_tip) * n
+        return tau + inp.J.T @ f + _feedforward(inp, cfg.feedforward), None
 
     def tip_force_law(self) -> TipForceLaw | None:
         cfg = self.config
-        if cfg.tool_axis is not None:  # the tool-axis moment is not affine in the state
-            return None
+        if cfg.tool_axis is not None or cfg.kd_normal:  # the tool-axis moment is not affine in the state,
+            return None                                 # the normal damping is not in the data law
         return TipForceLaw(self._kp, self._kd, cfg.feedforward, float(cfg.kd_joint))
 
 
