@@ -147,6 +147,7 @@ MEANINGS: dict[str, str] = {
     "controller.ko": "orientation stiffness of the tool-axis hold",
     "controller.do": "orientation damping of the tool-axis hold",
     "controller.kd_joint": "joint damping (damps what the task leaves free)",
+    "controller.kd_normal": "damping of the tip velocity along each force set-point's direction (zero at rest)",
     "controller.u": "motor voltages, one for every joint or one per joint",
     "controller.force": "constant tip force",
     "controller.rate": "growth rate of the tip force from start for ramp_time",
