@@ -35,7 +35,7 @@ from .controllers import ControlInput
 from .friction import friction_terms, launch_directions
 from .phases import Phase, reference_at
 
-__all__ = ["Evaluation", "evaluate"]
+__all__ = ["Evaluation", "evaluate", "drive_command"]
 
 
 @dataclass
@@ -161,7 +161,7 @@ def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], ph
 
 def _command_and_solve(system, inp: ControlInput, phase: Phase, x: np.ndarray, x_d, f: np.ndarray, rows: Rows):
     """The controller's command through the drives, then the solve: (drive output, Q̈, λ, regular, cmd, ż)."""
-    nQ, nv = system.nQ, system.nv
+    nQ = system.nQ
     ctl = phase.controller
     drives = system.drives
     tau, zdot = ctl.command(inp)
@@ -171,10 +171,7 @@ def _command_and_solve(system, inp: ControlInput, phase: Phase, x: np.ndarray, x
         tau_b, zdot_b = ctl.command(replace(inp, a_d=inp.a_d + axis))
         if np.any(tau_b != tau):
             carried = (i_b, tau_b - tau, None if zdot is None else zdot_b - zdot)
-    cmd = np.zeros(len(drives.specs))  # per drive: joints, then bodies
-    cmd[:nv] = tau
-    for idx, v_ref, gain in system.servo:
-        cmd[idx] = gain * (v_ref - x[nQ + idx])  # body coordinate idx = drive idx
+    cmd = drive_command(system, tau, x)
     vmask = system._joint_motors if ctl.outputs == "voltage" else None
     # drives, folded measured forces, solve
     if (ctl.uses_forces and rows) or carried is not None:
@@ -200,3 +197,13 @@ def _finish_friction(system, ev: Evaluation, pending: list, xdot: np.ndarray, yd
             i0 = 2 * nQ + slot
             xdot[i0] = ev.normal_force[name]
             xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
+
+
+def drive_command(system, tau: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The command per drive (joints, then bodies): the controller's τ [N·m or N; V], the bodies' servo forces [N]."""
+    nQ = system.nQ
+    cmd = np.zeros(len(system.drives.specs))
+    cmd[:system.nv] = tau
+    for idx, v_ref, gain in system.servo:
+        cmd[idx] = gain * (v_ref - x[nQ + idx])  # body coordinate idx = drive idx
+    return cmd

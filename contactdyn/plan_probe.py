@@ -77,7 +77,8 @@ class ProbedModel:
         self.e_frame = [n + 6 * i for i in range(len(fids))]  # p at [k, k+3), ṗ at [k+3, k+6)
         ne = n + 6 * len(fids)
         ctl = phase.controller
-        law = ctl.tip_force_law() if hasattr(ctl, "tip_force_law") else None
+        # through motors the command's drive model runs per call (plan_rhs.drive_forces): the law is called as it is
+        law = ctl.tip_force_law() if hasattr(ctl, "tip_force_law") and not s.drives.any_motor else None
         self.affine_ctl = law is not None
         self.time_moves: list[tuple] = []  # (slot, move)
         self.time_ramps: list[tuple] = []  # (slot, ramp, contact index)
@@ -167,7 +168,8 @@ class ProbedModel:
                 rows.append(("normal", ci, 0, row, gamma))
         for idx, v_ref, gain in s.servo:
             F = gain * (v_ref - x[nQ + idx])
-            f[idx] += F
+            if not s.drives.any_motor:  # else the servo is a drive command (plan_rhs.drive_forces)
+                f[idx] += F
             o[self.o_body.start + idx - nv] = F
         if self.affine_ctl:
             k = self.e_frame[self.tip_frame]

@@ -7,7 +7,9 @@ Per call at (t, x) in the mode a :class:`~contactdyn.rhsplan.ModePlan` was built
 2. y = P φ = [A, b, o]: the KKT matrix, its right-hand side and the affine outputs o
    (:mod:`contactdyn.plan_kkt`, :mod:`contactdyn.plan_probe`);
 3. what is not affine: Coulomb friction −μ max(F, 0) d with 2-D directions d, the column
-   tilt of 2-D sliding, a controller without an affine tip-force law;
+   tilt of 2-D sliding, a controller without an affine tip-force law, and motors: the
+   command goes through :meth:`~contactdyn.drives.Drives.apply` per call (:func:`drive_forces`),
+   the readable drive model itself, so the voltage clips exactly where it does there;
 4. z = A⁻¹ b = [Q̈, λ, w]; ẋ = [Q̇, Q̈, ẏ] with the impulse states' rates ∫F, ∫F_f.
 
 The last four calls' (t, x, z, o) stay in ``plan.ring`` so the event functions read them
@@ -22,9 +24,10 @@ import numpy as np
 import pinocchio as pin
 
 from .controllers import ControlInput
+from .dynamics import drive_command
 from .trajectory import profile
 
-__all__ = ["make_rhs", "controller_call", "impulse_terms", "LWA"]
+__all__ = ["make_rhs", "controller_call", "drive_forces", "impulse_terms", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 try:  # numpy's gufunc without the Python wrapper (see constraints.solve_linear)
@@ -48,6 +51,7 @@ def make_rhs(plan):
     dyn_tilt = plan.dyn_tilt
     generic_ctl = not plan.affine_ctl
     ctl_call = controller_call(plan) if generic_ctl else None
+    drives = drive_forces(plan)
     z_slice = plan.z_slice
     solve = _solve1
     cat = np.concatenate
@@ -82,7 +86,10 @@ def make_rhs(plan):
         zdot = None
         if generic_ctl:
             tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, y[m2 + m:])
-            b[:nv] += tau
+            if drives is None:
+                b[:nv] += tau
+            else:
+                b[:nQ] += drives(x, tau)
         z = solve(A, b)
         if not isfinite(z.dot(z)):
             z = plan._singular(A, b)
@@ -204,6 +211,31 @@ def impulse_terms(plan) -> list[tuple]:
     return out
 
 
+def drive_forces(plan):
+    """forces(x, τ) -> generalized forces [N·m or N] of the drives at the command τ (None without motors).
+
+    The readable model's own drive law (:meth:`~contactdyn.drives.Drives.apply`), called per
+    call: while no voltage clips a rigid gear delivers τ exactly and an elastic one is
+    affine in (τ, x), but the clip pattern changes within a mode (case 1's cart), so the
+    law runs as it is rather than being probed; the rotor inertia reflected through rigid
+    gears is a constant on the KKT matrix's diagonal (:meth:`~contactdyn.plan_kkt.CompiledKKT._build`).
+    """
+    s = plan.system
+    drives = s.drives
+    if not drives.any_motor:
+        return None
+    nQ = s.nQ
+    vmask = s._joint_motors if plan.phase.controller.outputs == "voltage" else None
+    zeros = np.zeros
+
+    def forces(x, tau):
+        f = zeros(nQ)
+        drives.apply(drive_command(s, tau, x), x, nQ, f, voltage=vmask)
+        return f
+
+    return forces
+
+
 def controller_call(plan):
     """Per-call ControlInput for a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o)."""
     s, phase = plan.system, plan.phase
@@ -219,6 +251,7 @@ def controller_call(plan):
     zs = phase.z_slice
 
     i_e, i_dr = plan.i_e, plan.i_dr[tf]
+    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
     model, data, fid, nv = robot.model, robot.data, plan.fids[tf], s.nv
 
     def call(t, x, q, v, Js, phi, o):
@@ -231,7 +264,8 @@ def controller_call(plan):
         forces.update({key: float(o[k]) for key, k in ifaces})
         R_tip = pin.updateFramePlacement(model, data, fid).rotation
         J_ang = pin.getFrameJacobian(model, data, fid, LWA).reshape(6, nv)[3:]
-        inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
+        H = robot.H + D_ctl if D_ctl is not None else robot.H
+        inp = ControlInput(t, q, v, H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
                            e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d,
                            forces,
                            force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang)
