@@ -35,7 +35,7 @@ from .controllers import ControlInput
 from .friction import friction_terms, launch_directions
 from .phases import Phase, reference_at
 
-__all__ = ["Evaluation", "evaluate", "drive_command"]
+__all__ = ["Evaluation", "evaluate", "drive_command", "set_force_inputs"]
 
 
 @dataclass
@@ -150,13 +150,22 @@ def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], ph
                        p_tip, v_tip, J, drift, x_d, v_d, a_d, {**ev.normal_force, **ev.interface}, force_d,
                        system.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian)
     if ctl.uses_forces:
-        inp.tau_contact = f[:nv] + robot.h
-        inp.surfaces = {c.name: (k.p_env, k.v_env) for c, k in zip(system.contacts, kins, strict=True)}
-        for c, k, m in zip(system.contacts, kins, modes, strict=True):  # tangential chains: their anchors
-            for i, dc in enumerate(c.tangent_chains):
-                inp.surfaces[f"{c.name}.{dc.label}"] = (k.p_env + dc.u * m.offsets[i], k.v_env)
-        inp.touching = {c.name: m.touching for c, m in zip(system.contacts, modes, strict=True)}
+        set_force_inputs(system, inp, x, modes, f[:nv] + robot.h)
     return inp, ft, x_d, force_d
+
+
+def set_force_inputs(system, inp: ControlInput, x: np.ndarray, modes: list[ContactMode],
+                     tau_contact: np.ndarray) -> None:
+    """What a force-reading controller reads beyond the forces: the contacts' generalized force on the
+    joints [N·m or N], the surfaces (and tangential chains' anchors) it presses on, the contact modes."""
+    inp.tau_contact = tau_contact
+    inp.surfaces = {}
+    for c, m in zip(system.contacts, modes, strict=True):
+        p_env, v_env = c.surface(x, system.nQ)
+        inp.surfaces[c.name] = (p_env, v_env)
+        for i, dc in enumerate(c.tangent_chains):  # tangential chains: their anchors
+            inp.surfaces[f"{c.name}.{dc.label}"] = (p_env + dc.u * m.offsets[i], v_env)
+    inp.touching = {c.name: m.touching for c, m in zip(system.contacts, modes, strict=True)}
 
 
 def _command_and_solve(system, inp: ControlInput, phase: Phase, x: np.ndarray, x_d, f: np.ndarray, rows: Rows):

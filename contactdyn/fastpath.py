@@ -8,8 +8,9 @@ needs no second implementation to be fast, *if* the plan can represent it. Where
 cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when compiled):
 
 - a stage law (:class:`~contactdyn.chain.ChainStage`): only the linear law is affine;
-- the drives (:class:`~contactdyn.drives.Drives`): DC motors and elastic transmissions are not compiled;
-- a controller (:class:`~contactdyn.controllers.base.Controller`): one reading measured forces is not;
+- the drives (:class:`~contactdyn.drives.Drives`) and controllers
+  (:class:`~contactdyn.controllers.base.Controller`) declare none today: the plan calls the
+  drive law per call, and folds a force-reading law into its solve (:mod:`contactdyn.plan_fold`);
 
 and the system adds its own: the energy audit, a reference carried by a body, a 2-D slip
 launching from rest (its direction is solved per call). :func:`declared_gaps` collects

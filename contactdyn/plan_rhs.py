@@ -24,10 +24,11 @@ import numpy as np
 import pinocchio as pin
 
 from .controllers import ControlInput
-from .dynamics import drive_command
+from .dynamics import drive_command, set_force_inputs
+from .plan_fold import contact_torque_of, folded_solve
 from .trajectory import profile
 
-__all__ = ["make_rhs", "controller_call", "drive_forces", "impulse_terms", "LWA"]
+__all__ = ["make_rhs", "controller_call", "controller_input", "drive_forces", "impulse_terms", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 try:  # numpy's gufunc without the Python wrapper (see constraints.solve_linear)
@@ -52,6 +53,9 @@ def make_rhs(plan):
     generic_ctl = not plan.affine_ctl
     ctl_call = controller_call(plan) if generic_ctl else None
     drives = drive_forces(plan)
+    reads_forces = plan.phase.controller.uses_forces
+    folded = folded_solve(plan, controller_input(plan)) if reads_forces and nr else None
+    contact_torque = contact_torque_of(plan)
     z_slice = plan.z_slice
     solve = _solve1
     cat = np.concatenate
@@ -83,16 +87,20 @@ def make_rhs(plan):
             d = plan._direction(ci, y[m2 + m:])
             A[:nv, nQ + r] += mu * Js[j].T.dot(d.dot(T))
             A[nv:nQ, nQ + r] = A0[nv:nQ, nQ + r] + mu * d.dot(consts)
-        zdot = None
-        if generic_ctl:
-            tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, y[m2 + m:])
+        zdot = z = None
+        if folded is not None:  # a force-reading controller with rows: its forces folded into the solve
+            z, zdot = folded(t, x, Js, phi, y[m2 + m:], A, b)
+        elif generic_ctl:
+            tau_c = contact_torque(b, Js) if reads_forces else None
+            tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, y[m2 + m:], tau_c)
             if drives is None:
                 b[:nv] += tau
             else:
                 b[:nQ] += drives(x, tau)
-        z = solve(A, b)
-        if not isfinite(z.dot(z)):
-            z = plan._singular(A, b)
+        if z is None:
+            z = solve(A, b)
+            if not isfinite(z.dot(z)):
+                z = plan._singular(A, b)
         if with_y:
             xd = cat((x[nQ:2 * nQ], z[:nQ], y[o_y]))
             if zdot is not None:
@@ -212,7 +220,8 @@ def impulse_terms(plan) -> list[tuple]:
 
 
 def drive_forces(plan):
-    """forces(x, τ) -> generalized forces [N·m or N] of the drives at the command τ (None without motors).
+    """forces(x, τ) -> generalized forces [N·m or N] of the drives at the command τ (None unless
+    ``plan.drives_per_call``: motors, or a force-reading controller whose command the servos join).
 
     The readable model's own drive law (:meth:`~contactdyn.drives.Drives.apply`), called per
     call: while no voltage clips a rigid gear delivers τ exactly and an elastic one is
@@ -222,7 +231,7 @@ def drive_forces(plan):
     """
     s = plan.system
     drives = s.drives
-    if not drives.any_motor:
+    if not plan.drives_per_call:
         return None
     nQ = s.nQ
     vmask = s._joint_motors if plan.phase.controller.outputs == "voltage" else None
@@ -237,7 +246,19 @@ def drive_forces(plan):
 
 
 def controller_call(plan):
-    """Per-call ControlInput for a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o)."""
+    """The command of a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o, τ_c) -> (τ, ż)."""
+    make = controller_input(plan)
+    command = plan.phase.controller.command
+
+    def call(t, x, q, v, Js, phi, o, tau_contact=None):
+        return command(make(t, x, q, v, Js, phi, o, tau_contact))
+
+    return call
+
+
+def controller_input(plan):
+    """Per-call ControlInput of the plan's controller: make(t, x, q, v, Js, φ, o, τ_c) (τ_c: the contacts'
+    generalized force on the joints [N·m or N], for a force-reading controller; see dynamics.set_force_inputs)."""
     s, phase = plan.system, plan.phase
     robot = s.robot
     ctl = phase.controller
@@ -249,12 +270,12 @@ def controller_call(plan):
     kt = plan.e_frame[tf]
     nQ = s.nQ
     zs = phase.z_slice
-
+    modes = plan.modes
     i_e, i_dr = plan.i_e, plan.i_dr[tf]
     D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
     model, data, fid, nv = robot.model, robot.data, plan.fids[tf], s.nv
 
-    def call(t, x, q, v, Js, phi, o):
+    def make(t, x, q, v, Js, phi, o, tau_contact=None):
         e = phi[i_e:]
         x_d = v_d = a_d = None
         if phase.reference is not None:
@@ -269,6 +290,8 @@ def controller_call(plan):
                            e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d,
                            forces,
                            force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang)
-        return ctl.command(inp)
+        if ctl.uses_forces:
+            set_force_inputs(s, inp, x, modes, tau_contact)
+        return inp
 
-    return call
+    return make

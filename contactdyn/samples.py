@@ -102,7 +102,7 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     """Diagnostics at the states X[k] (times ts[k]) of this mode: one Pinocchio pass per
     sample, then the assembly, solve and read-out for all samples at once."""
     N = len(ts)
-    if plan.system.drives.any_motor:  # applied forces and voltages of the drives: the readable model per sample
+    if plan.drives_per_call:  # drives' voltages, a force-reading law's fold: the readable model per sample
         return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
     S = Samples(N, plan.system)
     if N == 0:

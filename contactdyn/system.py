@@ -170,12 +170,7 @@ class System:
     def kinematics(self, c: Contact, x: np.ndarray) -> Kinematics:
         """Contact kinematics at x; requires ``robot.update`` at x's (q, q̇) first."""
         ft = self.robot.frame_terms(c.fid)
-        nQ = self.nQ
-        if c.body_index >= 0:
-            p_env = c.spec.point + c.body_axis * x[c.body_index]
-            v_env = c.body_axis * x[nQ + c.body_index]
-        else:
-            p_env, v_env = c.spec.point, np.zeros(3)
+        p_env, v_env = c.surface(x, self.nQ)
         return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env, ft)
 
     def mass_matrix(self) -> np.ndarray:

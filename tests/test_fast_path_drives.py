@@ -1,13 +1,17 @@
-"""Motors on the compiled path: rigid gears (clipping or not) and elastic drives agree with the readable model."""
+"""Motors and force-reading laws on the compiled path agree with the readable model."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from contactdyn.fastpath import Gap
+from contactdyn.phases import start_phase
+from contactdyn.rhsplan import ModePlan
 from contactdyn.scene import load_scene
-from contactdyn.simulate import run_system
+from contactdyn.simulate import prepare, run_system
 from contactdyn.system import System
 
 READABLE = Gap("test", "readable model forced by the test", "always", lambda modes, phase: True)
@@ -42,3 +46,26 @@ def test_an_elastic_transmission_is_compiled_and_agrees_with_the_readable_model(
     theta = next(k for k in compiled.channels if k.endswith(".theta"))
     for key in ("q", "v", "tau", "u", theta):
         _close(compiled[key], readable[key], 1e-7)
+
+
+@pytest.mark.parametrize("scene", ["case3_a_position", "case3_b_force"])  # position_dynamic; force_dynamic, a row
+def test_a_force_reading_law_is_folded_into_the_plan_as_in_the_readable_model(scene):
+    system, modes, phase, x0 = prepare(load_scene(scene))
+    press = start_phase(system, 1, 0.0, x0, phase)
+    assert press.controller.uses_forces
+    touching = [replace(m, touching=True) for m in modes]
+    plan = ModePlan(system, touching, press)
+    assert plan.ok, plan.reason
+    rng = np.random.default_rng(5)
+    for k in range(3):
+        t, x = 0.02 * k, x0 + 1e-3 * rng.normal(size=system.n)
+        ref = system.evaluate(t, x, touching, press).xdot
+        assert np.abs(plan.rhs(t, x) - ref).max() <= 1e-12 * (1.0 + np.abs(ref).max())
+
+
+def test_a_force_phase_runs_compiled_and_agrees_with_the_readable_model():
+    compiled, readable = _both("case3_b_force", {"duration": 1.5})  # touch and press at 1.407 s
+    assert compiled.stats["compiled_modes"] >= 2 and not compiled.stats["fallback_modes"]
+    assert [e["kind"] for e in compiled.events] == [e["kind"] for e in readable.events]
+    for key in ("q", "tau", "u", "contact.tip.F_n"):
+        _close(compiled[key], readable[key], 1e-6)

@@ -108,9 +108,9 @@ class Controller:
 
         A controller without a :meth:`tip_force_law` is called per right-hand side by the
         compiled plan with the same :class:`ControlInput`; one that reads measured forces is
-        folded into the linear solve, which only the readable model does so far.
+        folded into the plan's solve by the readable model's fold (:mod:`contactdyn.plan_fold`).
         """
-        return "a controller reading measured forces (folded into the linear solve)" if self.uses_forces else ""
+        return ""
 
     def tip_force_law(self) -> TipForceLaw | None:
         """The law as data when the command is exactly
