@@ -35,7 +35,7 @@ from .controllers import ControlInput
 from .friction import friction_terms, launch_directions
 from .phases import Phase, reference_at
 
-__all__ = ["Evaluation", "evaluate", "drive_command", "set_force_inputs"]
+__all__ = ["Evaluation", "evaluate", "carried_command", "drive_command", "set_force_inputs"]
 
 
 @dataclass
@@ -174,12 +174,7 @@ def _command_and_solve(system, inp: ControlInput, phase: Phase, x: np.ndarray, x
     ctl = phase.controller
     drives = system.drives
     tau, zdot = ctl.command(inp)
-    carried = None  # a reference on a body: the command's part proportional to the body's acceleration
-    if phase.carrier is not None and x_d is not None:
-        i_b, axis = phase.carrier
-        tau_b, zdot_b = ctl.command(replace(inp, a_d=inp.a_d + axis))
-        if np.any(tau_b != tau):
-            carried = (i_b, tau_b - tau, None if zdot is None else zdot_b - zdot)
+    carried = carried_command(inp, phase, tau, zdot)
     cmd = drive_command(system, tau, x)
     vmask = system._joint_motors if ctl.outputs == "voltage" else None
     # drives, folded measured forces, solve
@@ -206,6 +201,18 @@ def _finish_friction(system, ev: Evaluation, pending: list, xdot: np.ndarray, yd
             i0 = 2 * nQ + slot
             xdot[i0] = ev.normal_force[name]
             xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
+
+
+def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot) -> tuple | None:
+    """(i_b, ∂τ/∂Q̈_b, ∂ż/∂Q̈_b) of a reference carried by body coordinate i_b: the command's part
+    proportional to the body's acceleration, an unknown of the solve; None if there is none."""
+    if phase.carrier is None or inp.x_d is None:
+        return None
+    i_b, axis = phase.carrier
+    tau_b, zdot_b = phase.controller.command(replace(inp, a_d=inp.a_d + axis))
+    if not np.any(tau_b != tau):
+        return None
+    return i_b, tau_b - tau, None if zdot is None else zdot_b - zdot
 
 
 def drive_command(system, tau: np.ndarray, x: np.ndarray) -> np.ndarray:

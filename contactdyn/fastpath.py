@@ -12,14 +12,13 @@ cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when com
   (:class:`~contactdyn.controllers.base.Controller`) declare none today: the plan calls the
   drive law per call, and folds a force-reading law into its solve (:mod:`contactdyn.plan_fold`);
 
-and the system adds its own: the energy audit, a reference carried by a body, a 2-D slip
-launching from rest (its direction is solved per call). :func:`declared_gaps` collects
-them when the system is built (``System.fast_path_gaps``, reported in
-``Result.stats["fast_path_gaps"]``); the plan of a mode declines exactly when one of them
-applies to that mode (:func:`mode_gap`). A plan that declines for any other reason — its
-probes find a non-affine part, or its self-check disagrees with the readable model — is
-an undeclared gap: its reason in ``Result.stats["fallback_modes"]`` starts with
-``"undeclared: "``, which the tests treat as a bug.
+and the system adds its own: the energy audit and a 2-D slip launching from rest (its
+direction is solved per call). :func:`declared_gaps` collects them when the system is
+built (``System.fast_path_gaps``, reported in ``Result.stats["fast_path_gaps"]``); the
+plan of a mode declines exactly when one of them applies to that mode (:func:`mode_gap`).
+A plan that declines for any other reason — its probes find a non-affine part, or its
+self-check disagrees with the readable model — is an undeclared gap: its reason in
+``Result.stats["fallback_modes"]`` starts with ``"undeclared: "``, which the tests treat as a bug.
 """
 
 from __future__ import annotations
@@ -27,11 +26,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "CARRIED", "LAUNCH"]
+__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "LAUNCH"]
 
 UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
 ENERGY = "energy audit (solver.record_energy)"
-CARRIED = "a reference carried by a body (its acceleration is folded into the linear solve)"
 LAUNCH = "a 2-D slip launching from rest (its direction is solved per call)"
 
 
@@ -62,10 +60,6 @@ def declared_gaps(system) -> list[Gap]:
         if c.friction is not None and len(c.tangents) == 2:
             gaps.append(Gap(f"contact.{c.name}.tangent", LAUNCH, "while a 2-D slip launches from rest",
                             lambda modes, phase, ci=ci: _launching(modes[ci])))
-    for i, spec in enumerate(system.scene.phases):
-        if spec.reference is not None and spec.reference.body != "ground":
-            gaps.append(Gap(f"phase[{i}].reference.body", CARRIED, "in its phase",
-                            lambda modes, phase, i=i: phase.index == i and phase.carrier is not None))
     for ci, c in enumerate(system.contacts):
         for dc in c.chains:
             for k, stage in enumerate(dc.chain.stages):

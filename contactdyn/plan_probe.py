@@ -77,8 +77,8 @@ class ProbedModel:
         self.e_frame = [n + 6 * i for i in range(len(fids))]  # p at [k, k+3), ṗ at [k+3, k+6)
         ne = n + 6 * len(fids)
         ctl = phase.controller
-        # motors or a force-reading law: the command runs through the drives per call (plan_rhs.drive_forces)
-        self.drives_per_call = s.drives.any_motor or ctl.uses_forces
+        # motors, a force-reading law, a carried reference: the command runs through the drives per call
+        self.drives_per_call = s.drives.any_motor or ctl.uses_forces or phase.carrier is not None
         law = ctl.tip_force_law() if hasattr(ctl, "tip_force_law") and not self.drives_per_call else None
         self.affine_ctl = law is not None
         self.time_moves: list[tuple] = []  # (slot, move)

@@ -25,6 +25,7 @@ import pinocchio as pin
 
 from .controllers import ControlInput
 from .dynamics import drive_command, set_force_inputs
+from .phases import reference_at
 from .plan_fold import contact_torque_of, folded_solve
 from .trajectory import profile
 
@@ -54,7 +55,7 @@ def make_rhs(plan):
     ctl_call = controller_call(plan) if generic_ctl else None
     drives = drive_forces(plan)
     reads_forces = plan.phase.controller.uses_forces
-    folded = folded_solve(plan, controller_input(plan)) if reads_forces and nr else None
+    folded = folded_solve(plan, controller_input(plan)) if (reads_forces and nr) or plan.phase.carrier else None
     contact_torque = contact_torque_of(plan)
     z_slice = plan.z_slice
     solve = _solve1
@@ -279,7 +280,7 @@ def controller_input(plan):
         e = phi[i_e:]
         x_d = v_d = a_d = None
         if phase.reference is not None:
-            x_d, v_d, a_d = phase.reference.at(t)
+            x_d, v_d, a_d = reference_at(s, phase, t, x)
         force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
         forces = {name: float(o[i_fint + i]) for i, name in enumerate(names)}
         forces.update({key: float(o[k]) for key, k in ifaces})

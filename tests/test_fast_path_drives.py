@@ -69,3 +69,11 @@ def test_a_force_phase_runs_compiled_and_agrees_with_the_readable_model():
     assert [e["kind"] for e in compiled.events] == [e["kind"] for e in readable.events]
     for key in ("q", "tau", "u", "contact.tip.F_n"):
         _close(compiled[key], readable[key], 1e-6)
+
+
+def test_a_reference_carried_by_a_body_runs_compiled_and_agrees_with_the_readable_model():
+    compiled, readable = _both("case1_cart", {"duration": 1.1})  # the push phase rides on the cart from 1.0 s
+    assert compiled.stats["compiled_modes"] >= 3 and not compiled.stats["fallback_modes"]
+    assert [e["kind"] for e in compiled.events] == [e["kind"] for e in readable.events]
+    for key in ("q", "tau", "u", "body.cart.x", "contact.tip.F_n"):
+        _close(compiled[key], readable[key], 1e-6)
