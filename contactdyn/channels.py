@@ -19,6 +19,7 @@ import numpy as np
 from .contact import ContactMode
 from .drives import drive_channels
 from .dynamics import Evaluation
+from .limits import limit_channels
 from .phases import Phase
 from .rhsplan import ModePlan
 from .samples import Samples, evaluated_samples
@@ -56,6 +57,7 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
     xs = np.empty((len(grid), system.n))
     parts: list[Samples] = []
     modes_of: list[list[ContactMode]] = []
+    phases_of: list[Phase] = []
     evs: list[Evaluation | None] = []
     for i in np.unique(idx):
         seg = segments[i]
@@ -73,8 +75,11 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
             parts.append(part)
             evs += part_evs
         modes_of += [seg.modes] * len(sel)
+        phases_of += [seg.phase] * len(sel)
     samples = Samples.concatenate(parts, system)
     out = channels(system, grid, xs, samples, modes_of)
+    if system.limits.limits:
+        out.update(limit_channels(system, phases_of, evs))
     if system.drives.any_motor:  # (motor scenes sample every output through the readable model)
         out.update(drive_channels(system, xs, evs))
     return out

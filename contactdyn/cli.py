@@ -22,6 +22,7 @@ __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE", "EXIT
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 MAX_MESSAGE = 1000  #: characters of an error line at most
 LIST_SECTIONS = ("scenes", "robots", "models", "controllers", "integrators")
+LIST_MORE = ("frames",)  #: sections listed only by name: ``list frames ROBOT``
 
 
 class _Usage(Exception):
@@ -70,7 +71,7 @@ def _catalog() -> dict[str, Any]:
 
     from .controllers import CONTROLLERS
     from .integrators import FIXED, IMPLICIT, METHODS
-    from .robot import EXAMPLE_ROBOTS, urdf_dir
+    from .robot_list import robot_entries
     from .scene import NORMAL_MODELS, TANGENT_MODELS, sims_dir
 
     scenes = []
@@ -80,8 +81,7 @@ def _catalog() -> dict[str, Any]:
         except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
             description = f"(unreadable: {exc})"
         scenes.append({"name": path.stem, "file": str(path), "description": str(description)})
-    robots = [{"name": p.stem, "source": "urdf/", "file": str(p)} for p in sorted(urdf_dir().glob("*.urdf"))]
-    robots += [{"name": n, "source": "example-robot-data", "file": EXAMPLE_ROBOTS[n]} for n in sorted(EXAMPLE_ROBOTS)]
+    robots = robot_entries()
     normal = {"rigid": "constraint, impact at touch", "a": "ground -[k'', b'']- m' -[k', b']- tip (continuous)",
               "b": "ground -[k, b]- m', struck by the tip (impact at touch)", "c": "massless Kelvin-Voigt stage k, b",
               "chain": "explicit stages {k, b} and masses {m}, environment and robot side"}
@@ -111,6 +111,10 @@ def _integrator(name: str, implicit: tuple[str, ...], fixed: tuple[str, ...]) ->
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
+    if args.what == "frames":
+        from .robot_list import frames_command
+
+        return frames_command(args)
     if args.what == "keys" or args.prefix:
         from .keys import list_keys
 
@@ -128,8 +132,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
                 for m in catalog[s][kind]:
                     print(f"    {m['name']:<8} {m['description']}")
         elif s == "robots":
-            for r in catalog[s]:
-                print(f"  {r['name']:<16} {r['source']}")
+            from .robot_list import print_robots
+
+            print_robots(catalog[s])
         else:
             for item in catalog[s]:
                 print(f"  {item['name']:<16} {item['description']}")
@@ -146,25 +151,38 @@ def _cmd_run(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene, overrides)
     _out(args, f"scene {scene.name}: {scene.file}")
     result = _simulate_quietly(simulate, scene)
+    from .robot_list import run_warnings
+
+    warnings = result.meta.get("warnings", []) + run_warnings(result.meta)  # sanity, then inertia and limits
     if not args.quiet and not args.json:
-        for note in result.meta.get("warnings", []):
+        for note in warnings:
             print(f"contactdyn: warning: {note}", file=sys.stderr)
     saved = str(result.save(args.out)) if args.out else None
     if args.json:
         _emit_json({"scene": scene.name, "file": scene.file, "status": "ok", "out": saved,
-                    "warnings": result.meta.get("warnings", []),
+                    "warnings": warnings,
                     "metrics": metrics(result), "stats": result.stats, "impacts": result.impacts})
     else:
         s = result.stats
         _out(args, f"{result.meta['name']}: {result.meta['duration']:g} s simulated in {s['wall_s']:.3f} s "
                    f"(real-time factor {s['real_time_factor']:.1f}), {s['steps']} steps, {s['rhs_evals']} rhs "
                    f"evaluations, {s['events']} events, {len(result.impacts)} impacts")
+        if args.verbose:
+            from .robot_list import run_details
+
+            for line in run_details(result.meta):
+                _out(args, line)
         for name in result.meta["contacts"]:
             F = result[f"contact.{name}.F_n"]
             _out(args, f"  contact {name}: normal force peak {F.max():.4g} N, final {F[-1]:.4g} N")
         for imp in result.impacts:
             _out(args, f"  impact t = {imp['t']:.6g} s on {imp['contact']}: FΔt = {imp['normal_impulse']:.6g} N·s, "
                        f"F_fΔt = {imp['friction_impulse']} N·s, jammed = {imp['jammed']}")
+        for e in result.events:
+            if e["kind"] in ("limit", "release"):
+                what = f"stops at its {e['side']} limit, impulse {e['impulse']:.6g}" if e["kind"] == "limit" else \
+                    "leaves its limit"
+                _out(args, f"  joint limit t = {e['t']:.6g} s: {e['name']} {what}")
         if saved:
             _out(args, f"  saved {saved} and {saved.removesuffix('.npz')}.json")
     if args.view:
@@ -291,15 +309,26 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"contactdyn {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
+    for add in (_list_parser, _run_parser, _sweep_parser, _new_parser, _view_parser, _plot_parser, _bench_parser,
+                _fit_parser):
+        add(sub, fmt)
+    return parser
+
+
+def _list_parser(sub, fmt) -> None:
     ls = sub.add_parser("list", help="list scenes, robots, contact models, controllers, integrators",
                         description="List what a scene can name.", formatter_class=fmt,
                         epilog="examples:\n  contactdyn list\n  contactdyn list robots --json\n"
-                               "  contactdyn list keys contact   (the scene keys, as docs/scenes.md)")
-    ls.add_argument("what", nargs="?", choices=(*LIST_SECTIONS, "keys"), help="one section only")
-    ls.add_argument("prefix", nargs="?", help="with keys: only the keys starting with it (e.g. contact, phase[].force)")
+                               "  contactdyn list keys contact   (the scene keys, as docs/scenes.md)\n"
+                               "  contactdyn list frames panda   (a robot's kinematic tree)")
+    ls.add_argument("what", nargs="?", choices=(*LIST_SECTIONS, *LIST_MORE, "keys"), help="one section only")
+    ls.add_argument("prefix", nargs="?", help="with keys: only the keys starting with it (e.g. contact, "
+                                              "phase[].force); with frames: the robot")
     _scripting(ls)
     ls.set_defaults(func=_cmd_list)
 
+
+def _run_parser(sub, fmt) -> None:
     run = sub.add_parser("run", help="simulate a scene", description="Simulate one scene and print its key figures.",
                          formatter_class=fmt,
                          epilog="examples:\n  contactdyn run b1 --set solver.rtol=1e-6 --out runs/b1\n"
@@ -307,6 +336,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("scene", help="scene file or name in sims/")
     _set_option(run)
     run.add_argument("--out", help="save the run as OUT.npz + OUT.json")
+    run.add_argument("--verbose", "-v", action="store_true",
+                     help="also print the active and locked joints and how the start posture was found")
     run.add_argument("--view", action="store_true", help="show the run in the meshcat viewer afterwards")
     run.add_argument("--html", help="with --view: write a self-contained HTML player instead of serving")
     run.add_argument("--port", type=int, help="with --view: meshcat server port")
@@ -316,6 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
     _scripting(run)
     run.set_defaults(func=_cmd_run)
 
+
+def _sweep_parser(sub, fmt) -> None:
     sw = sub.add_parser(
         "sweep", help="run a scene over a grid of parameters (process pool or Dask)", formatter_class=fmt,
         description="Run every combination of the axes; results in OUT/runs/, one summary row per run in "
@@ -345,6 +378,8 @@ def build_parser() -> argparse.ArgumentParser:
     _scripting(sw)
     sw.set_defaults(func=_cmd_sweep)
 
+
+def _new_parser(sub, fmt) -> None:
     new = sub.add_parser("new", help="write a commented starter scene (press, then slide)", formatter_class=fmt,
                          description="Write sims/NAME.toml: the robot's tip approaches a table, presses 20 N and "
                                      "slides 10 cm. It runs as written; edit it from there.",
@@ -360,6 +395,8 @@ def build_parser() -> argparse.ArgumentParser:
     new.add_argument("--force", action="store_true", help="overwrite an existing file")
     new.set_defaults(func=_delegate("starter", "new_command"))
 
+
+def _view_parser(sub, fmt) -> None:
     view = sub.add_parser("view", help="show a saved run in the meshcat viewer", formatter_class=fmt,
                           epilog="examples:\n  contactdyn view runs/b1\n  contactdyn view runs/b1 --html b1.html")
     view.add_argument("run", help="saved run (RUN.npz + RUN.json)")
@@ -369,6 +406,8 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--speed", type=_speed, default=1.0, help="playback speed factor (> 0; 1 = real time)")
     view.set_defaults(func=_delegate("viewer", "view_command"))
 
+
+def _plot_parser(sub, fmt) -> None:
     plot = sub.add_parser("plot", help="paper-style figures of a saved run", formatter_class=fmt,
                           epilog="example:\n  contactdyn plot runs/b1 --out figs --format png,svg")
     plot.add_argument("run", help="saved run (RUN.npz + RUN.json)")
@@ -376,6 +415,8 @@ def build_parser() -> argparse.ArgumentParser:
     plot.add_argument("--format", type=_csv_list, help="comma-separated formats (default png,svg)")
     plot.set_defaults(func=_delegate("plots", "plot_command"))
 
+
+def _bench_parser(sub, fmt) -> None:
     bench = sub.add_parser("bench", help="work-precision benchmark of the integrators on a scene",
                            formatter_class=fmt,
                            epilog="example:\n  contactdyn bench b1 --methods DOP853,RK45 --rtols 1e-4,1e-6,1e-8 "
@@ -390,8 +431,6 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--out", metavar="DIR", help="output folder (default out/bench/SCENE)")
     _set_option(bench)
     bench.set_defaults(func=_delegate("workprecision", "bench_command"))
-    _fit_parser(sub, fmt)
-    return parser
 
 
 def _fit_parser(sub, fmt) -> None:

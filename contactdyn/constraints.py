@@ -19,9 +19,11 @@ column, its γ and who owns it, ``meta = (owner, kind, index)``. The kinds in us
 
 - ``(contact, "n", 0)``: a rigid or bonded contact's normal (force = the normal force F);
 - ``(contact, "t", i)``: a sticking contact's tangent i (force = friction F_f,i);
-- ``(contact, "t1" | "t2", i)``: a bonded tangential chain (force = its interface force).
+- ``(contact, "t1" | "t2", i)``: a bonded tangential chain (force = its interface force);
+- ``(joint, "limit", i)``: joint coordinate i pressing on its position limit (force = the limit's
+  torque [N·m or N], :mod:`contactdyn.limits`).
 
-A new kind of row (a joint limit, a bilateral bond) is a new ``rows.add(...)`` in the
+A new kind of row (a bilateral bond, ...) is a new ``rows.add(...)`` in the
 evaluation plus a branch in :func:`record_row_forces` that says where its force goes.
 
 A controller that reads measured forces is affine in them, τ = τ₀ + B λ; its columns B
@@ -90,6 +92,8 @@ def record_row_forces(system, ev, rows: Rows, lam: np.ndarray) -> None:
             ev.normal_force[name] = float(value)
         elif kind == "t":
             ev.friction.setdefault(name, np.zeros(len(system.contact(name).tangents)))[i] = value
+        elif kind == "limit":
+            ev.limit_torque[i] = float(value)
         elif kind[:1] == "t" and kind[1:].isdigit():  # a tangential chain's bond ("t1", "t2")
             ev.interface[f"{name}.{kind}"] = float(value)
 
@@ -187,8 +191,10 @@ def solve_folded(system, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zd
     return check, qdd, lam, regular, full, zdot
 
 
-def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray] | None = None, jam: Contact | None = None):
-    """Velocity constraints of the touching contacts: bond rows, sticks, tangential chain bonds.
+def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray] | None = None, jam: Contact | None = None,
+                  limits: tuple = ()):
+    """Velocity constraints of the touching contacts (bond rows, sticks, tangential chain bonds) and of
+    the joints pressing on ``limits`` (:mod:`contactdyn.limits`).
 
     ``slide = (contact, d)`` tilts that contact's normal column by the sliding friction
     −μ_k d; ``jam`` adds stick rows for a contact that is not (yet) stuck.
@@ -216,6 +222,7 @@ def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray] | None = N
                                             False)
             if trow is not None:
                 rows.add(trow, 0.0, (c.name, dc.label, i))
+    system.limits.add_rows(limits, x, system.nQ, rows, 0.0)
     return rows
 
 

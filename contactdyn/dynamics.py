@@ -11,7 +11,7 @@ with Q̈ and the active rows' forces λ from the constraint system
 1. Pinocchio's terms at (q, q̇): H, h, the frames' positions, Jacobians and J̇q̇;
 2. per contact: its chains' stage forces and bond rows (:mod:`contactdyn.chain_forces`),
    then friction (:mod:`contactdyn.friction`): stick rows, or the Coulomb force, or the
-   tilt of the normal column;
+   tilt of the normal column; a row per joint pressing on its limit (:mod:`contactdyn.limits`);
 3. the phase's controller reads the state (and, if it asks, the measured forces) and
    commands joint torques [N·m or N] or voltages [V] (:mod:`contactdyn.controllers`);
 4. the drives turn the command into generalized forces (:mod:`contactdyn.drives`);
@@ -24,7 +24,7 @@ reads the affine parts off the functions named above, so they are written once.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -59,6 +59,7 @@ class Evaluation:
     regular: bool = True  #: False when the linear solve fell back to least squares
     tau_cmd: np.ndarray | None = None  #: the controller's command per joint [N·m or N; V for voltage controllers]
     u: np.ndarray | None = None  #: motor voltage per drive (joints, then bodies) [V], NaN for ideal drives
+    limit_torque: dict[int, float] = field(default_factory=dict)  #: joint -> limit torque [N·m or N] (pressing)
 
 
 def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
@@ -77,6 +78,7 @@ def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: P
     ev = Evaluation(np.empty(0), np.empty(0), rows.meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),
                     np.empty(0), None, {})
     kins, pending = _contact_terms(system, x, modes, f, ydot, rows, ev, full)
+    system.limits.add_rows(phase.limits, x, nQ, rows, system.stabilization)  # joints pressing on a limit
     inp, ft, x_d, force_d = _control_input(system, t, x, modes, phase, f, kins, ev)
     out, qdd, lam, regular, cmd, zdot = _command_and_solve(system, inp, phase, x, x_d, f, rows)
     if zdot is not None:

@@ -42,7 +42,7 @@ from .rhsplan import ModePlan
 from .system import System
 
 __all__ = ["TOUCH_TOL", "terminal_event", "EvaluationCache", "SlipCache", "SlipWatch", "StepBudget",
-           "segment_events", "EventLog"]
+           "segment_events", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
 #: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
@@ -68,13 +68,30 @@ class EventLog:
         self.recent.append(t)
         if self.stats["events"] > self.solver.max_events:
             raise SimulationError(f"{self.scene_name}: more than {self.solver.max_events} events by t = {t:.9g} s "
-                                  f"(last: {kind} on {name}); raise solver.max_events if this is expected")
+                                  f"(last: {kind} on {name}); " + (start_storm_cause(self.events, name) or
+                                                                   "raise solver.max_events if this is expected"))
         if len(self.recent) == self.recent.maxlen and self.recent[-1] - self.recent[0] <= self.solver.storm_window:
             kinds = ", ".join(f"{e['kind']}:{e['name']}" for e in self.events[-5:])
             raise SimulationError(
                 f"{self.scene_name}: event storm: {self.recent.maxlen} events within "
-                f"{self.recent[-1] - self.recent[0]:.3g} s at t = {t:.9g} s (last: {kinds}); the contact chatters "
-                "(grazing or inconsistent stick/slip); see solver.storm_count / storm_window")
+                f"{self.recent[-1] - self.recent[0]:.3g} s at t = {t:.9g} s (last: {kinds}); " +
+                (start_storm_cause(self.events, name) or "the contact chatters (grazing or inconsistent "
+                                                          "stick/slip); see solver.storm_count / storm_window"))
+
+
+START_STORM = 1e-3  #: [s] a storm whose contact events began this early started with the run
+
+
+def start_storm_cause(events: list[dict], contact: str) -> str | None:
+    """The likely cause when the events flooding the run are on one contact since t ≈ 0, else None."""
+    on_contact = [e for e in events if e["kind"] != "phase"]
+    if not on_contact or on_contact[0]["t"] > START_STORM or \
+            sum(e["name"] == contact for e in on_contact) < 0.9 * len(on_contact):
+        return None
+    return (f"the events on contact {contact!r} began at t = {on_contact[0]['t']:.3g} s, with the run: the start "
+            "posture does not suit the contact (initial penetration, the tip on the surface while moving or "
+            "pulling away, a posture near a singularity); check robot.tip0, robot.q0 / q_seed and the contact's "
+            "point, and `contactdyn run --verbose` for the posture found")
 
 
 class EvaluationCache:
@@ -225,6 +242,10 @@ class _ReadableValues:
         ev = self.cache(t, x)
         return mu_s * ev.normal_force[self.names[ci]] - float(np.linalg.norm(ev.friction[self.names[ci]]))
 
+    def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """Torques [N·m or N] of the joints pressing on a limit (only this path has them: plans decline)."""
+        return self.cache(t, x).limit_torque
+
 
 def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
                    plan: ModePlan | None = None):
@@ -258,6 +279,7 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         if len(r) == 2:
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(values.slip(i, t, x) @ r)
                                       - 0.5 * float(np.linalg.norm(values.slip(i, t, x))) + b, "turn", name))
+    out += system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # contactdyn.limits
     fun = values.rhs
     if not watches:
         return out, fun

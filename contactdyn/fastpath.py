@@ -15,10 +15,12 @@ cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when com
 and the system adds its own: the energy audit and a 2-D slip launching from rest (its
 direction is solved per call). :func:`declared_gaps` collects them when the system is
 built (``System.fast_path_gaps``, reported in ``Result.stats["fast_path_gaps"]``); the
-plan of a mode declines exactly when one of them applies to that mode (:func:`mode_gap`).
-A plan that declines for any other reason — its probes find a non-affine part, or its
-self-check disagrees with the readable model — is an undeclared gap: its reason in
-``Result.stats["fallback_modes"]`` starts with ``"undeclared: "``, which the tests treat as a bug.
+plan of a mode declines exactly when one of them applies to that mode (:func:`mode_gap`),
+or while a joint presses on its position limit (:data:`LIMIT`; every robot has limits, so
+this one is a rule of :func:`mode_gap`, not a listed gap). A plan that declines for any
+other reason — its probes find a non-affine part, or its self-check disagrees with the
+readable model — is an undeclared gap: its reason in ``Result.stats["fallback_modes"]``
+starts with ``"undeclared: "``, which the tests treat as a bug.
 """
 
 from __future__ import annotations
@@ -26,11 +28,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "LAUNCH"]
+__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "LAUNCH", "LIMIT"]
 
 UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
 ENERGY = "energy audit (solver.record_energy)"
 LAUNCH = "a 2-D slip launching from rest (its direction is solved per call)"
+LIMIT = "a joint pressing on its position limit (contactdyn.limits: its row is not compiled)"
 
 
 class Gap(NamedTuple):
@@ -72,6 +75,8 @@ def declared_gaps(system) -> list[Gap]:
 
 def mode_gap(system, modes, phase) -> str:
     """Why the plan of (modes, phase) must decline: the first declared gap that applies ("" if none)."""
+    if getattr(phase, "limits", ()):
+        return LIMIT
     for gap in system.fast_path_gaps:
         if gap.applies(modes, phase):
             return gap.reason

@@ -45,6 +45,7 @@ from .integrators import (
     jacobian_eigenvalues,
     stability_bound,
 )
+from .limits import rate_limit_report
 from .phases import Phase
 from .result import Result
 from .rhsplan import ModePlan, cached_plan
@@ -219,13 +220,15 @@ class HybridRun:
         system, scene = self.system, self.scene
         T = scene.duration
         channels = sample_segments(system, self.segments, output_grid(T, self.solver.output_rate), self.stats)
+        rate_stats, rate_warnings = rate_limit_report(system.robot, channels["t"], channels["v"], channels["tau"])
         self.stats["rhs_evals"] += sum(getattr(seg.sol, "late_calls", 0) for seg in self.segments)  # DOP853C's
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
                      compiled_modes=sum(p.ok for p in self.plans.values()),
-                     fallback_modes=dict(self.fallbacks),
+                     fallback_modes=dict(self.fallbacks), limits=rate_stats,
                      fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
-        meta = {"joints": system.robot.joint_names, "contacts": [c.name for c in system.contacts],
+        meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
+                "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)

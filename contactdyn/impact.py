@@ -50,7 +50,8 @@ class Impact:
     direction: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: sliding direction d (0: none)
 
 
-def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact) -> tuple[np.ndarray, Impact]:
+def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact,
+           limits: tuple = ()) -> tuple[np.ndarray, Impact]:
     """Velocity jump when ``contact`` touches (its mode already says touching).
 
     Momentum law over Δt → 0 (eqs 27–31, 35–38): M(Q̇⁺ − Q̇⁻) = Cᵀ Λ with every bond,
@@ -74,7 +75,7 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
 
     def solve(slide=None, jam=False):
         rows = velocity_rows(system, x, modes, slide=(contact, slide) if slide is not None else None,
-                             jam=contact if jam else None)
+                             jam=contact if jam else None, limits=limits)
         z, _ = impulse_solve(system, M, rows, qd_minus)
         lam = {m: z[nQ + j] for j, m in enumerate(rows.meta)}
         P_n = float(lam[(contact.name, "n", 0)])
@@ -109,7 +110,7 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     return x_new, Impact(t, contact.name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d)
 
 
-def project_velocity(system, x: np.ndarray, modes: list[ContactMode]) -> np.ndarray:
+def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tuple = ()) -> np.ndarray:
     """x with Q̇ moved onto every active velocity constraint (bonds, rigid contacts, sticks).
 
     The smallest change in the kinetic-energy norm, M ΔQ̇ = Gᵀ Λ, G Q̇⁺ = 0: an impulse
@@ -118,7 +119,7 @@ def project_velocity(system, x: np.ndarray, modes: list[ContactMode]) -> np.ndar
     """
     nQ, nv = system.nQ, system.nv
     system.robot.update(x[:nv], x[nQ:nQ + nv])
-    rows = velocity_rows(system, x, modes)
+    rows = velocity_rows(system, x, modes, limits=limits)
     if not rows:
         return x
     M = system.mass_matrix()

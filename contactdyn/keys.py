@@ -44,17 +44,24 @@ MEANINGS: dict[str, str] = {
     "solver": "integrator settings",
     # robot
     "robot.urdf": "a URDF path (relative to the scene file), a file in urdf/, or an example-robot-data name (ur5, "
-                  "panda, ...)",
-    "robot.tip": "the controlled frame (the tool tip); contacts default to it",
-    "robot.active_joints": "joints that move; every other joint is locked (at robot.locked or 0)",
+                  "panda, talos_arm, ...: contactdyn list robots)",
+    "robot.tip": "the controlled frame (the tool tip; contactdyn list frames ROBOT); contacts default to it",
+    "robot.active_joints": "joints that move (default: the chain from the root to robot.tip); every other joint is "
+                           "locked (at robot.locked, else 0 clipped into its limits)",
     "robot.locked": "positions of locked joints, by joint name",
     "robot.locked.<joint>": "position of that locked joint",
     "robot.gravity": "gravity vector in the world frame",
     "robot.gravity_compensation": "fraction of gravity compensated statically (0: none, 1: all)",
-    "robot.q0": "initial joint positions (default: the neutral posture, or tip0 by inverse kinematics)",
+    "robot.q0": "initial joint positions, within the limits (default: solved from tip0, else q_seed, else neutral)",
     "robot.v0": "initial joint velocities (default: zero)",
-    "robot.tip0": "initial tip position, solved by inverse kinematics from q0 or q_seed",
-    "robot.q_seed": "starting posture of the inverse kinematics for tip0 (sets the arm's posture)",
+    "robot.tip0": "initial tip position: the start posture is solved for it (and the controller's tool_target), "
+                  "within the joint limits, from several seeds",
+    "robot.q_seed": "a hint for the posture solved from tip0: used when its size fits the robot and its solution "
+                    "keeps 10 % of each joint's range from the limits",
+    "robot.inertia": "a link failing the inertia checks: check (stop), repair (nearest valid inertia, reported), "
+                     "trust (use it, with a warning)",
+    "robot.joint_limits": "enforce: position limits are unilateral constraints (impact, pressing, release); "
+                          "ignore: none",
     "robot.drive": "drives of the joints: a kind and its parameters, each a scalar or one per joint",
     # drives (robot.drive and body.<body>.drive share them)
     "drive.kind": "torque: ideal torque source; dc_motor: motor through a rigid gear (eq. 51); elastic: through an "

@@ -35,6 +35,8 @@ class Phase:
     #: (body coordinate, unit axis) when the reference rides on an active body (``reference.body``):
     #: x_d = axis · Q_b + reference (see :func:`reference_at`)
     carrier: tuple[int, np.ndarray] | None = None
+    #: joints pressing on a position limit: (coordinate, +1 lower / −1 upper), see contactdyn.limits
+    limits: tuple[tuple[int, int], ...] = ()
 
 
 def start_phase(system, index: int, t: float, x: np.ndarray, previous: Phase | None) -> Phase:
@@ -73,7 +75,8 @@ def start_phase(system, index: int, t: float, x: np.ndarray, previous: Phase | N
         reference = Reference(start, moves)
     forces = {f.key: Ramp(f.ramp.value, f.ramp.start + t, f.ramp.duration, f.ramp.kind, f.ramp.initial)
               for f in spec.forces}
-    phase = Phase(spec, index, t, controller, system.z_slices[index], reference, forces, carrier)
+    phase = Phase(spec, index, t, controller, system.z_slices[index], reference, forces, carrier,
+                  previous.limits if previous is not None else ())
     return phase
 
 

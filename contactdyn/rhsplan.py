@@ -54,7 +54,7 @@ def cached_plan(system, modes: list[ContactMode], phase) -> ModePlan:
     (benchmarks, sweeps) reuses it. The key is the modes and the phase's content (index, start,
     reference, set-points), not the Phase object, which every run makes anew."""
     content = pickle.dumps((phase.index, phase.t_start, phase.spec.name, phase.reference, phase.forces,
-                            getattr(phase, "carrier", None)))
+                            getattr(phase, "carrier", None), getattr(phase, "limits", ())))
     key = (tuple(modes), content)
     plans = _PLANS.setdefault(system, {})
     plan = plans.get(key)

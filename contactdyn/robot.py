@@ -1,18 +1,13 @@
 """The robot model: a thin, allocation-light layer over Pinocchio.
 
-A :class:`Robot` is loaded from a URDF path, a file in the project's ``urdf/`` folder, or
-an example-robot-data name. It gives H(q), h(q, q̇), frame placements, world-aligned frame
-Jacobians and the drift term J̇q̇. Joints can be locked at given values (the robot is then
-reduced to its active joints), and a fraction of gravity can be compensated statically.
-Units: SI, radians.
-
-Checks beyond Pinocchio's (which accepts all of these silently), per URDF link:
-mass ≥ 0 [kg]; a zero mass only with a zero rotational inertia (a massless frame link such
-as ``tip``); for a massive link the rotational inertia about the COM is positive
-semi-definite and its principal moments satisfy the triangle inequality I1 + I2 ≥ I3
-(zero moments are allowed: point masses and thin rods are accepted idealizations; relative
-tolerance 1e-6 for rounded file values). Per joint: lower limit ≤ upper limit, and every
-active joint moves some mass (H(q0)ᵢᵢ > 0), else H is singular. Every visual mesh exists.
+A :class:`Robot` is loaded from a URDF path, a file in the project's ``urdf/`` folder, or a
+robot name (:mod:`contactdyn.robot_catalog`); :mod:`contactdyn.urdf_model` finds, checks and
+builds the URDF. It gives H(q), h(q, q̇), frame placements, world-aligned frame Jacobians and
+the drift term J̇q̇. Only the active joints are degrees of freedom: by default the joints on the
+chain from the root to the tip frame (fingers, the other arm, a head stay locked), or all
+joints when no tip is named. A locked joint holds its value in ``locked``, else its neutral
+value: 0 clipped into its limits. A fraction of gravity can be compensated statically.
+Every active joint must move some mass (H(q0)ᵢᵢ > 0), else H is singular. Units: SI, radians.
 """
 
 from __future__ import annotations
@@ -20,209 +15,92 @@ from __future__ import annotations
 import difflib
 import functools
 import os
-import sys
-import tempfile
-import xml.etree.ElementTree as ET
 from collections.abc import Callable
-from pathlib import Path
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import pinocchio as pin
 
 from .errors import RobotError
-from .urdf_check import check_urdf_tree, isolated_build
+from .frames import chain_joints, find_frame
+from .robot_catalog import example_robots, urdf_dir
+from .urdf_check import isolated_build
+from .urdf_model import UrdfModel, build_isolated, build_urdf_model, lock_joints, xml_label
+from .urdf_source import resolve_robot_path
+
+if TYPE_CHECKING:
+    from .scene import RobotSpec
 
 __all__ = ["Robot", "FrameTerms", "EXAMPLE_ROBOTS", "urdf_dir", "resolve_robot_path"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-_INERTIA_RTOL = 1e-6  # URDF values are rounded to a few digits; exact equalities may break by this much
 
-#: example-robot-data names and their URDF, relative to the package's ``robots`` folder.
-EXAMPLE_ROBOTS: dict[str, str] = {
-    "ur3": "ur_description/urdf/ur3_robot.urdf",
-    "ur5": "ur_description/urdf/ur5_robot.urdf",
-    "ur10": "ur_description/urdf/ur10_robot.urdf",
-    "panda": "panda_description/urdf/panda.urdf",
-    "double_pendulum": "double_pendulum_description/urdf/double_pendulum.urdf",
-    "z1": "z1_description/urdf/z1.urdf",
-    "xarm7": "xarm_description/urdf/xarm7.urdf",
-    "so100": "so_arm_description/urdf/so100.urdf",
-}
+#: example-robot-data names and their URDF files (derived from the installed package)
+EXAMPLE_ROBOTS = example_robots()
 
 
-def urdf_dir() -> Path:
-    """The project's ``urdf/`` folder, from a checkout or an installed wheel."""
-    packaged = Path(__file__).parent / "data" / "urdf"
-    return packaged if packaged.is_dir() else Path(__file__).parent.parent / "urdf"
+def _neutral_value(model: pin.Model, i: int) -> float:
+    """0 clipped into the joint's limits [rad or m]."""
+    return float(np.clip(0.0, model.lowerPositionLimit[i], model.upperPositionLimit[i]))
 
 
-def _example_robot_data_share() -> Path:
-    import sysconfig
-
-    for base in {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]}:
-        share = Path(base) / "cmeel.prefix" / "share" / "example-robot-data"
-        if share.is_dir():
-            return share
-    raise RobotError("example-robot-data is not installed: pip install example-robot-data")
-
-
-def resolve_robot_path(source: str | os.PathLike) -> tuple[Path, list[str]]:
-    """Return (URDF path, package dirs) for a path, a name in ``urdf/``, or a robot name."""
-    text = str(source)
-    given = Path(text)
-    if given.is_file():
-        return given, [str(p) for p in given.resolve().parents[:3]]
-    for path in (urdf_dir() / text, urdf_dir() / f"{text}.urdf"):
-        if path.suffix == ".urdf" and path.is_file():
-            return path, [str(path.parent)]
-    if text in EXAMPLE_ROBOTS:
-        share = _example_robot_data_share()
-        return share / "robots" / EXAMPLE_ROBOTS[text], [str(share.parent), str(share / "robots")]
-    if text.endswith(".urdf") or os.sep in text:
-        raise RobotError(f"{text}: no such URDF file (looked at {given.absolute()} and in {urdf_dir()})")
-    ours = sorted(p.stem for p in urdf_dir().glob("*.urdf"))
-    known = ours + sorted(EXAMPLE_ROBOTS)
-    close = difflib.get_close_matches(text, known, n=3)
-    hint = f"; did you mean {', '.join(close)}?" if close else ""
-    raise RobotError(f"robot {text!r}: not a URDF file nor a known robot name{hint} (known: {', '.join(known)})")
-
-
-# ---- building, with urdfdom's reason for a failure ----------------------------------------
-def _urdf_call(path: Path, build: Callable[[], object]) -> object:
-    """Run a Pinocchio URDF builder; on failure raise RobotError with urdfdom's reason.
-
-    Pinocchio's exception says only "does not contain a valid URDF model"; urdfdom writes
-    the reason to file descriptor 2, which is captured here for the duration of the call.
-    """
-    sys.stderr.flush()
-    with tempfile.TemporaryFile(mode="w+b") as err:
-        saved = os.dup(2)
-        os.dup2(err.fileno(), 2)
-        try:
-            return build()
-        except (ValueError, RuntimeError) as exc:
-            failure: Exception = exc
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-        err.seek(0)
-        reason = err.read().decode(errors="replace")
-    lines = [ln.strip().removeprefix("Error:").strip() for ln in reason.splitlines() if ln.strip().startswith("Error")]
-    detail = "; ".join(lines) or str(failure)
-    try:
-        ET.parse(path)
-    except ET.ParseError as exc:
-        detail = f"malformed XML: {exc} (urdfdom: {detail})"
-    raise RobotError(f"{path}: not a valid URDF: {detail}")
-
-
-def _number(element: ET.Element | None, key: str, where: str) -> float:
-    text = element.get(key, "0") if element is not None else "0"
-    try:
-        return float(text)
-    except ValueError:
-        raise RobotError(f"{where}: {key} must be a number, found {text!r}") from None
-
-
-def _check_links(root: ET.Element, path: Path) -> None:
-    """Masses and rotational inertias of every link (see the module docstring)."""
-    for link in root.iter("link"):
-        inertial = link.find("inertial")
-        if inertial is None:
-            continue
-        where = f"{path}: link {link.get('name')!r}"
-        mass = _number(inertial.find("mass"), "value", where)
-        el = inertial.find("inertia")
-        xx, yy, zz, xy, xz, yz = (_number(el, k, where) for k in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz"))
-        inertia = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
-        if not np.isfinite(mass) or mass < 0.0:
-            raise RobotError(f"{where}: mass must be >= 0 [kg], found {mass}")
-        if not np.all(np.isfinite(inertia)):
-            raise RobotError(f"{where}: rotational inertia must be finite [kg·m²], found {inertia.tolist()}")
-        if mass == 0.0:
-            if np.any(inertia != 0.0):
-                raise RobotError(
-                    f"{where}: zero mass [kg] with a non-zero rotational inertia {inertia.tolist()} [kg·m²]: "
-                    "give the link its mass, or drop the inertial for a massless frame link"
-                )
-            continue
-        eig = np.linalg.eigvalsh(inertia)  # ascending
-        tol = _INERTIA_RTOL * max(abs(eig).max(), 1e-300)
-        moments = [float(f"{e:.6g}") for e in eig]
-        if eig[0] < -tol:
-            raise RobotError(
-                f"{where}: rotational inertia is not positive (semi-)definite: principal moments {moments} [kg·m²]"
-            )
-        if eig[0] + eig[1] < eig[2] - tol:
-            raise RobotError(
-                f"{where}: principal moments {moments} [kg·m²] violate the triangle inequality "
-                f"I1 + I2 >= I3 ({eig[0] + eig[1]:.6g} < {eig[2]:.6g}): no rigid body has this inertia"
-            )
-
-
-def _mesh_file(filename: str, path: Path, package_dirs: list[str]) -> Path | None:
-    if filename.startswith("package://"):
-        rest = filename.removeprefix("package://")
-        dirs = package_dirs + [d for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d]
-        candidates = [Path(d) / rest for d in dirs]
-    else:
-        file = Path(filename.removeprefix("file://"))
-        candidates = [file if file.is_absolute() else path.parent / file]
-    return next((c for c in candidates if c.is_file()), None)
-
-
-def _check_meshes(root: ET.Element, path: Path, package_dirs: list[str]) -> None:
-    """Every visual mesh resolves to a file, checked without loading it (that is slow)."""
-    for link in root.iter("link"):
-        for mesh in link.findall("visual/geometry/mesh"):
-            filename = mesh.get("filename", "")
-            if _mesh_file(filename, path, package_dirs) is None:
-                raise RobotError(
-                    f"{path}: link {link.get('name')!r}: visual mesh {filename!r} not found "
-                    f"(package dirs: {', '.join(package_dirs)})"
-                )
-
-
-def _check_limits(model: pin.Model, path: Path) -> None:
-    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
-    for jid in range(1, model.njoints):
-        sl = slice(model.idx_qs[jid], model.idx_qs[jid] + model.nqs[jid])
-        if np.any(lower[sl] > upper[sl]):
-            raise RobotError(f"{path}: joint {model.names[jid]!r}: "
-                             f"lower limit {lower[sl].tolist()} > upper limit {upper[sl].tolist()}")
-
-
-def _lock_reference(model: pin.Model, names: list[str], locked: dict[str, float], path: Path) -> np.ndarray:
-    """Configuration holding each locked joint at its given value (default 0), within limits."""
-    q_ref = pin.neutral(model)
+def _lock_values(model: pin.Model, names: list[str], locked: dict[str, float], path) -> dict[str, float]:
+    """Value of each locked joint [rad or m]: as given, else neutral; within the joint's limits."""
+    values = {}
     for name in names:
         jid = model.getJointId(name)
-        i, nq, nv = model.idx_qs[jid], model.nqs[jid], model.nvs[jid]
-        value = float(locked.get(name, 0.0))
-        if nq == 1:
-            lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
-            if not lo <= value <= hi:
-                given = "" if name in locked else " (the default: give a value in locked)"
-                raise RobotError(f"{path}: locked joint {name!r} at {value}{given} is outside its limits [{lo}, {hi}]")
-            q_ref[i] = value
-        elif nq == 2 and nv == 1:  # continuous joint: (cos θ, sin θ)
-            q_ref[i:i + 2] = np.cos(value), np.sin(value)
-        elif name in locked:
-            raise RobotError(f"{path}: locked joint {name!r} has {nq} coordinates: only its neutral value is supported")
-    return q_ref
+        i, nq = model.idx_qs[jid], model.nqs[jid]
+        if nq != 1:
+            if name in locked:
+                raise RobotError(f"{path}: locked joint {name!r} has {nq} coordinates: only 1-DOF joints can be "
+                                 "locked at a value")
+            raise RobotError(f"{path}: joint {name!r} has {nq} coordinates (spherical, planar or free): "
+                             "not supported")
+        value = float(locked[name]) if name in locked else _neutral_value(model, i)
+        lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
+        if not lo <= value <= hi:
+            raise RobotError(f"{path}: locked joint {name!r} at {value} is outside its limits [{lo}, {hi}]")
+        values[name] = value
+    return values
 
 
-def _build_visual(path: Path, package_dirs: list[str], full: pin.Model, lock_ids: list[int],
-                  q_ref: np.ndarray) -> pin.GeometryModel:
+def _copy_limits(full: pin.Model, model: pin.Model, active: list[str]) -> None:
+    """The full model's position limits (±inf for continuous joints) on the reduced model's joints."""
+    lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
+    for name in active:
+        i, k = model.idx_qs[model.getJointId(name)], full.idx_qs[full.getJointId(name)]
+        lower[i], upper[i] = full.lowerPositionLimit[k], full.upperPositionLimit[k]
+    model.lowerPositionLimit, model.upperPositionLimit = lower, upper
+
+
+def _active_names(urdf: UrdfModel, tip: str | None, active_joints: list[str] | None,
+                  locked: dict[str, float]) -> list[str]:
+    """The active joints: as given, else the tip's chain (or all joints) minus the locked ones."""
+    full, path = urdf.model, urdf.path
+    names = [full.names[j] for j in range(1, full.njoints)]
+    for name in list(locked) + list(active_joints or []):
+        if name not in names:
+            raise RobotError(f"{path}: no joint named {name!r}{_suggest(name, names)}; joints: {names}")
+    if active_joints is not None:
+        both = sorted(set(active_joints) & set(locked))
+        if both:
+            raise RobotError(f"{path}: joint(s) {both} are both active and locked")
+        return [n for n in names if n in active_joints]
+    chain = chain_joints(full, find_frame(full, tip, str(path))) if tip is not None else names
+    return [n for n in names if n in chain and n not in locked]
+
+
+def _build_visual(path, model: pin.Model, xml: str) -> pin.GeometryModel:
     def build() -> pin.GeometryModel:
-        return pin.buildGeomFromUrdf(full, str(path), pin.GeometryType.VISUAL, package_dirs=package_dirs)
+        return pin.buildGeomFromUrdfString(model, xml, pin.GeometryType.VISUAL)
 
-    isolated_build(path, "buildGeomFromUrdf", build)
-    visual = _urdf_call(path, build)
-    if lock_ids:
-        visual = pin.buildReducedModel(full, visual, lock_ids, q_ref)[1]
-    return visual
+    isolated_build(path, xml_label("buildGeomFromUrdfString", xml), build)
+    try:
+        return build()
+    except (ValueError, RuntimeError) as exc:  # the mesh loader's multi-line report: keep its message line
+        lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+        detail = next((ln for ln in lines if ln.startswith("message:")), lines[0] if lines else "?")
+        raise RobotError(f"{path}: a visual mesh cannot be loaded: {detail}") from None
 
 
 class FrameTerms(NamedTuple):
@@ -256,10 +134,18 @@ class Robot:
         self.nq, self.nv = model.nq, model.nv
         self.joint_names = [model.names[j] for j in range(1, model.njoints)]
         self._visual = visual
+        self.notes: list[str] = []  #: inertia repairs or trusts (see contactdyn.inertia), one line each
+        self.unbounded: list[str] = []  #: active joints without position limits (continuous in the URDF)
+        self.lower = model.lowerPositionLimit.copy()  #: position limits of the active joints [rad or m]
+        self.upper = model.upperPositionLimit.copy()
+        self.velocity_limit = model.velocityLimit.copy()  #: [rad/s or m/s], 0: none given
+        self.effort_limit = model.effortLimit.copy()  #: [N·m or N], 0: none given
+        if self.nv == 0:
+            raise RobotError(f"{source}: no active joint (the robot has nothing to move)")
         if self.nq != self.nv:
             raise RobotError(
-                f"{source}: joints with nq != nv (continuous or spherical) are not supported as active joints; "
-                "lock them or give them limits"
+                f"{source}: joints with nq != nv (spherical, planar or free) are not supported as active joints; "
+                "lock them"
             )
         diag = np.diag(pin.crba(model, self._aux, pin.neutral(model)))
         if np.any(diag <= 0.0):
@@ -273,46 +159,53 @@ class Robot:
         cls,
         source: str | os.PathLike,
         *,
+        tip: str | None = None,
         active_joints: list[str] | None = None,
         locked: dict[str, float] | None = None,
         gravity: tuple[float, float, float] = (0.0, 0.0, -9.81),
         gravity_compensation: float = 0.0,
+        inertia: str = "check",
     ) -> Robot:
-        """Load a robot; keep ``active_joints`` (default: all not in ``locked``) and lock the rest.
+        """Load a robot; keep ``active_joints`` (default: the chain to ``tip``, else all) and lock the rest.
 
-        ``locked`` gives values [rad or m] for locked joints (default 0, which must lie within
-        the joint's limits). ``gravity`` [m/s²]; ``gravity_compensation`` is the fraction of
-        the gravity load removed by a static compensator (0 ≤ c ≤ 1; case 1 uses 0.7).
-        Visual meshes are checked to exist now but loaded on first use of :attr:`visual_model`.
+        ``locked`` gives values [rad or m] for locked joints (default: neutral, see the module
+        docstring); a value outside the joint's limits is an error. ``gravity`` [m/s²];
+        ``gravity_compensation`` is the fraction of the gravity load removed by a static
+        compensator (0 ≤ c ≤ 1; case 1 uses 0.7). ``inertia``: "check", "repair" or "trust"
+        (see :mod:`contactdyn.inertia`). Visual meshes are checked to exist now but loaded on
+        first use of :attr:`visual_model`.
         """
         if not 0.0 <= gravity_compensation <= 1.0:
             raise RobotError(f"gravity_compensation must be in [0, 1], found {gravity_compensation}")
-        path, package_dirs = resolve_robot_path(source)
-        root = check_urdf_tree(path)  # before Pinocchio: a non-tree URDF crashes it
-        isolated_build(path, "buildModelFromUrdf", lambda: pin.buildModelFromUrdf(str(path)))
-        full: pin.Model = _urdf_call(path, lambda: pin.buildModelFromUrdf(str(path)))
-        _check_links(root, path)
-        _check_meshes(root, path, package_dirs)
-        _check_limits(full, path)
-        names = [full.names[j] for j in range(1, full.njoints)]
+        urdf = build_urdf_model(source, inertia)
+        full, path = urdf.model, urdf.path
         locked = dict(locked or {})
-        for name in list(locked) + list(active_joints or []):
-            if name not in names:
-                raise RobotError(f"{path}: no joint named {name!r}{_suggest(name, names)}; joints: {names}")
-        if active_joints is not None:
-            both = sorted(set(active_joints) & set(locked))
-            if both:
-                raise RobotError(f"{path}: joint(s) {both} are both active and locked")
-            lock_names = [n for n in names if n not in active_joints]
-        else:
-            lock_names = [n for n in names if n in locked]
-        lock_ids = [full.getJointId(n) for n in lock_names]
-        q_ref = _lock_reference(full, lock_names, locked, path)
-        model = pin.buildReducedModel(full, lock_ids, q_ref) if lock_ids else full
+        active = _active_names(urdf, tip, active_joints, locked)
+        lock_names = [full.names[j] for j in range(1, full.njoints) if full.names[j] not in active]
+        values = _lock_values(full, lock_names, locked, path)
+        xml = lock_joints(urdf, values) if values else urdf.xml
+        model = build_isolated(path, xml_label("buildModelFromXML", xml), lambda: pin.buildModelFromXML(xml)) \
+            if values else full
+        _copy_limits(full, model, active)
         model.gravity.linear = (1.0 - gravity_compensation) * np.asarray(gravity, dtype=float)
-        values = {n: float(q_ref[full.idx_qs[full.getJointId(n)]]) for n in lock_names}
-        visual = functools.partial(_build_visual, path, package_dirs, full, lock_ids, q_ref)
-        return cls(model, str(path), gravity_compensation, locked=values, visual=visual)
+        visual = functools.partial(_build_visual, path, model, xml)
+        robot = cls(model, str(path), gravity_compensation, locked=values, visual=visual)
+        robot.notes = list(urdf.notes)
+        robot.unbounded = [n for n in urdf.unbounded if n in robot.joint_names]
+        return robot
+
+    @classmethod
+    def from_spec(cls, spec: RobotSpec) -> Robot:
+        """The robot a scene's ``[robot]`` table names (what the simulation and the viewer load)."""
+        active = list(spec.active_joints) if spec.active_joints else None
+        return cls.load(spec.source, tip=spec.tip, active_joints=active, locked=spec.locked,
+                        gravity=tuple(spec.gravity), gravity_compensation=spec.gravity_compensation,
+                        inertia=spec.inertia)
+
+    def describe(self) -> dict:
+        """Which joints move and which are locked where, and the inertia notes (stored with a run)."""
+        return {"joints": list(self.joint_names), "locked": dict(self.locked), "unbounded": list(self.unbounded),
+                "inertia_notes": list(self.notes)}
 
     @property
     def visual_model(self) -> pin.GeometryModel:
@@ -322,12 +215,8 @@ class Robot:
         return self._visual
 
     def frame_id(self, name: str) -> int:
-        """Index of a named frame; a clear error lists close matches."""
-        if not self.model.existFrame(name):
-            names = [f.name for f in self.model.frames]
-            hint = _suggest(name, names) or f"; frames: {names}"
-            raise RobotError(f"{self.source}: no frame named {name!r}{hint}")
-        return self.model.getFrameId(name)
+        """Index of a named frame (the body's when several share the name); a clear error lists close matches."""
+        return find_frame(self.model, name, self.source)
 
     # ---- the right-hand-side path: one update, then cheap reads ---------------------
     def update(self, q: np.ndarray, v: np.ndarray) -> None:
@@ -408,22 +297,6 @@ class Robot:
     def potential_energy(self, q: np.ndarray) -> float:
         """Potential energy of the uncompensated gravity [J]."""
         return float(pin.computePotentialEnergy(self.model, self._aux, np.asarray(q, float)))
-
-    def inverse_kinematics(self, frame: str, target: np.ndarray, q0: np.ndarray, *, tol: float = 1e-12) -> np.ndarray:
-        """Joint values putting the frame's origin at ``target`` [m] (Gauss-Newton from q0)."""
-        fid = self.frame_id(frame)
-        q = np.asarray(q0, float).copy()
-        target = np.asarray(target, float)
-        for _ in range(200):
-            err = target - self.frame_position(q, fid)
-            if np.linalg.norm(err) < tol:
-                return q
-            J = self.frame_jacobian(q, fid)[:3]
-            q += np.linalg.lstsq(J, err, rcond=None)[0]
-        raise RobotError(
-            f"{self.source}: frame {frame!r} cannot reach {target.tolist()} from q0 = {np.asarray(q0).tolist()} "
-            f"(closest distance {np.linalg.norm(err):.3g} m): unreachable pose"
-        )
 
 
 def _suggest(name: str, names: list[str]) -> str:

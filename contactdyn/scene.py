@@ -84,8 +84,10 @@ class RobotSpec:
     q0: np.ndarray | None  #: [rad or m]
     v0: np.ndarray | None  #: [rad/s or m/s]
     tip0: np.ndarray | None  #: [m] initial tip position, solved by inverse kinematics from q0/q_seed
-    q_seed: np.ndarray | None
+    q_seed: np.ndarray | None  #: a hint for the start posture (ignored when its size is not the robot's)
     drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.drives)
+    inertia: str = "check"  #: what a link failing the inertia checks does: "check", "repair", "trust"
+    joint_limits: str = "enforce"  #: "enforce" position limits as unilateral constraints, or "ignore"
 
 
 @dataclass(frozen=True)
@@ -285,6 +287,8 @@ def _read_robot(r: Reader) -> RobotSpec:
         tip0=r.vector("tip0", None, size=3, unit="m") if r.has("tip0") else None,
         q_seed=r.vector("q_seed", None) if r.has("q_seed") else None,
         drive=read_drive_table(r.sub("drive", {}), per_joint=True),
+        inertia=r.str("inertia", "check", choices=["check", "repair", "trust"]),
+        joint_limits=r.str("joint_limits", "enforce", choices=["enforce", "ignore"]),
     )
     r.finish()
     return spec

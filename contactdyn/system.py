@@ -11,6 +11,8 @@ call:
 - :meth:`System.impact` — the plastic impact map (:mod:`contactdyn.impact`);
 - :meth:`System.project_velocity` — velocities onto the active constraints (same module);
 - :meth:`System.start_phase` — a task phase at run time (:mod:`contactdyn.phases`);
+- the joints' position limits as constraint rows (:attr:`System.limits`, :mod:`contactdyn.limits`);
+- the start posture solved from the task (:mod:`contactdyn.posture`);
 - friction's slip velocity and acceleration (:mod:`contactdyn.friction`).
 
 Which parts the compiled right-hand side (:mod:`contactdyn.rhsplan`) covers is declared
@@ -32,7 +34,9 @@ from .fastpath import declared_gaps
 from .friction import initial_slip, slip_acceleration, slip_velocity
 from .impact import Impact, impact, project_velocity
 from .layout import assign_chain_slots, assign_first_order_slots
+from .limits import JointLimits
 from .phases import Phase, reference_at, start_phase
+from .posture import start_posture
 from .robot import Robot
 from .scene import Scene
 
@@ -44,11 +48,11 @@ class System:
 
     def __init__(self, scene: Scene):
         self.scene = scene
+        self.posture: dict = {}  #: how the start posture was found (see contactdyn.posture.start_posture)
         rs = scene.robot
         try:
-            self.robot = Robot.load(rs.source, active_joints=list(rs.active_joints) if rs.active_joints else None,
-                                    locked=rs.locked, gravity=tuple(rs.gravity),
-                                    gravity_compensation=rs.gravity_compensation)
+            self.robot = Robot.from_spec(rs)
+            self.limits = JointLimits(self.robot, rs.joint_limits == "enforce")
             self.tip_fid = self.robot.frame_id(rs.tip)
         except RobotError as exc:
             raise SceneError("robot", "a loadable robot", str(exc), scene.file) from None
@@ -112,16 +116,7 @@ class System:
     # ---- initial state ------------------------------------------------------------------
     def initial_state(self) -> tuple[np.ndarray, list[ContactMode]]:
         rs, robot = self.scene.robot, self.robot
-        if rs.q0 is not None and len(rs.q0) != robot.nq:
-            raise SceneError("robot.q0", f"{robot.nq} joint values for joints {robot.joint_names}", rs.q0.tolist(),
-                             self.scene.file)
-        q = rs.q0.copy() if rs.q0 is not None else (rs.q_seed.copy() if rs.q_seed is not None else
-                                                    np.zeros(robot.nq))
-        if rs.tip0 is not None:
-            try:
-                q = robot.inverse_kinematics(rs.tip, rs.tip0, q)
-            except RobotError as exc:
-                raise SceneError("robot.tip0", "a reachable tip position", str(exc), self.scene.file) from None
+        q, self.posture = start_posture(robot, rs, self.scene.phases[0].controller, self.scene.file)
         v = rs.v0.copy() if rs.v0 is not None else np.zeros(robot.nv)
         if len(v) != robot.nv:
             raise SceneError("robot.v0", f"{robot.nv} joint velocities", rs.v0.tolist(), self.scene.file)
@@ -205,13 +200,16 @@ class System:
 
         return f
 
-    def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact) -> tuple[np.ndarray, Impact]:
-        """Velocity jump when ``contact`` touches (:func:`contactdyn.impact.impact`)."""
-        return impact(self, t, x, modes, contact)
+    def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact,
+               limits: tuple = ()) -> tuple[np.ndarray, Impact]:
+        """Velocity jump when ``contact`` touches, joints pressing on ``limits`` held
+        (:func:`contactdyn.impact.impact`)."""
+        return impact(self, t, x, modes, contact, limits)
 
-    def project_velocity(self, x: np.ndarray, modes: list[ContactMode]) -> np.ndarray:
-        """x with Q̇ moved onto every active velocity constraint (:func:`contactdyn.impact.project_velocity`)."""
-        return project_velocity(self, x, modes)
+    def project_velocity(self, x: np.ndarray, modes: list[ContactMode], limits: tuple = ()) -> np.ndarray:
+        """x with Q̇ moved onto every active velocity constraint, the joints pressing on ``limits`` included
+        (:func:`contactdyn.impact.project_velocity`)."""
+        return project_velocity(self, x, modes, limits)
 
     def separate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, contact: Contact
                  ) -> np.ndarray:

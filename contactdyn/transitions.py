@@ -11,7 +11,10 @@ At each event of :mod:`contactdyn.events` (t fixed, x continuous unless an impac
 - ``slip``: the stick's friction reached the cone |F_f| = μ_s F: it slides from rest where
   the holding force pushes (−F_f); a stage-only crossing not confirmed at the located point
   is a false alarm (``slip_check``), still stuck;
-- a phase that ends at ``touch:<contact>`` starts the next phase.
+- a phase that ends at ``touch:<contact>`` starts the next phase;
+- ``limit`` / ``release``: a joint reaches a position limit (plastic impact, then it presses)
+  or its limit torque vanishes (:mod:`contactdyn.limits`); after any event, a joint whose
+  limit torque pulls is released.
 
 Then :meth:`Transitions.consistent` fixes whatever mode the state contradicts: a pulling
 contact (F < −``FORCE_TOL``) separates; a stick outside the cone slides; a slide at rest
@@ -22,6 +25,7 @@ sticks if the friction needed to hold it is within μ_s F (its residual slip pro
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -67,6 +71,15 @@ class Transitions:
         x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
         if settle:
             x, modes = self.consistent(t, x, modes, phase, after.rest, after.released)
+        return self.release_pulling(t, x, modes, phase)
+
+    def release_pulling(self, t, x, modes, phase):
+        """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event."""
+        limits = self.system.limits
+        while phase.limits and (pulling := limits.pulling(phase, self.system.evaluate(t, x, modes, phase))):
+            phase = replace(phase, limits=tuple(p for p in phase.limits if p != pulling[0]))
+            self.log.log(t, "release", limits.by_index[pulling[0][0]].name)
+            x, modes = self.consistent(t, x, modes, phase)
         return x, modes, phase
 
     def _index(self, name: str) -> int:
@@ -79,7 +92,7 @@ class Transitions:
         c = system.contacts[i]
         modes[i], x = self._touch(t, x, modes, i)
         if c.normal.chain.bonded_when_touching:
-            x, imp = impact(system, t, x, modes, c)
+            x, imp = impact(system, t, x, modes, c, phase.limits)
             self.impacts.append({"t": t, "contact": c.name, "normal_impulse": imp.normal_impulse,
                                  "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
                                  "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
@@ -131,8 +144,15 @@ class Transitions:
             self.stats["slip_false_alarms"] += 1
         return x, phase, True
 
+    def _on_limit(self, t, x, modes, phase, event, after):
+        """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (contactdyn.limits)."""
+        x, phase, info = self.system.limits.switch(self.system, t, x, modes, phase, event)
+        self.log.events[-1].update(info)  # the joint, side, velocity before and impulse, with the event
+        return x, phase, True
+
     #: event kind -> handler (see :meth:`handle`)
-    HANDLERS = {"touch": _on_touch, "separate": _on_separate, "stop": _on_stop, "reverse": _on_stop,
+    HANDLERS = {"limit": _on_limit, "release": _on_limit,
+                "touch": _on_touch, "separate": _on_separate, "stop": _on_stop, "reverse": _on_stop,
                 "turn": _on_turn, "slip": _on_slip}
 
     def _touch(self, t, x, modes, i):
@@ -248,7 +268,7 @@ class Transitions:
                 rest.discard(i)
                 trial = list(modes)
                 trial[i] = mode.with_(stuck=True)
-                x = project_velocity(system, x, trial)
+                x = project_velocity(system, x, trial, phase.limits)
                 ev2 = system.evaluate(t, x, trial, phase)
                 F_f = ev2.friction[c.name]
                 if in_cone(F_f, ev2.normal_force[c.name], mu_s):

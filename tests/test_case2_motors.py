@@ -36,8 +36,8 @@ def test_case2_with_motors_obeys_the_momentum_law_with_the_rotors(monkeypatch):
     seen = []
     impact = transitions.impact
 
-    def spy(system, t, x, modes, contact):  # the impact law, recording the state it was applied at
-        out = impact(system, t, x, modes, contact)
+    def spy(system, t, x, modes, contact, *limits):  # the impact law, recording the state it was applied at
+        out = impact(system, t, x, modes, contact, *limits)
         seen.append((x.copy(), out[1]))
         return out
 

@@ -1,4 +1,5 @@
-"""Swapping the robot is a one-line change: case 2's writing task on our 5-DOF writer, a UR5 and a Panda.
+"""Swapping the robot is a one-line change: case 2's writing task on our 5-DOF writer, a UR5 and a Panda,
+and the swap matrix: nine arms of example-robot-data with only ``robot.urdf`` and ``robot.tip`` changed.
 
 ``sims/case2_writer_ur5.toml`` is ``sims/case2_writer5dof.toml`` with only the robot lines changed
 (``robot.urdf``, ``robot.tip`` and the inverse-kinematics seed ``robot.q_seed``; the pencil point
@@ -16,6 +17,9 @@ import numpy as np
 import pytest
 
 from contactdyn import Robot, simulate
+from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
+from contactdyn.result import load_result
+from contactdyn.robot_catalog import TOOL_FRAMES
 from contactdyn.scene import sims_dir
 
 WRITER, UR5 = "case2_writer5dof", "case2_writer_ur5"
@@ -101,3 +105,52 @@ def test_the_tip_follows_the_circle_and_the_pencil_keeps_its_tilt(run):
     tilt = [np.arccos(np.clip(model.frame_placement(q, scene["robot"]["tip"]).rotation[:, 2] @ target, -1, 1))
             for q in r["q"]]
     assert max(tilt) < 0.02, (robot, max(tilt))  # [rad] the pencil direction is held
+
+
+# ---- the swap matrix: only robot.urdf and robot.tip change -------------------------------------
+SWAP = ["panda", "ur3", "ur5", "ur10", "xarm7", "z1", "kinova", "talos_arm", "so100"]
+#: arms that reach the writer's pencil pose (measured: benchmarks/robot_swap.py); the others must stop
+#: with exit 2 and the amount they miss by
+REACH = {"panda", "ur3", "ur5", "ur10", "xarm7", "kinova"}
+SHORT = 0.8  #: [s] simulated: the 0.5 s press and 0.3 s of drawing (the full 4.5 s: benchmarks/robot_swap.py)
+
+
+@pytest.mark.parametrize("robot", SWAP)
+def test_swap_matrix_presses_and_draws_or_says_why_not(robot, tmp_path, capsys):
+    """Exit 0 with the pencil pressed at 5 N ± 10 % (mean while drawing) and never lifted, or exit 2
+    with one line saying by how much the pose is missed [m, rad]; never a traceback, never exit 1."""
+    out = tmp_path / robot
+    code = main(["run", UR5, "--set", f"robot.urdf={robot}", "--set", f"robot.tip={TOOL_FRAMES[robot]}",
+                 "--set", f"duration={SHORT}", "--set", "solver.output_rate=200", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code in (EXIT_OK, EXIT_USAGE), (robot, err)
+    assert "Traceback" not in err
+    if code == EXIT_USAGE:
+        assert robot not in REACH, err
+        assert err.count("\n") == 1 and "misses by" in err and " m and " in err and " rad" in err, err
+        return
+    assert robot in REACH
+    r = load_result(f"{out}.npz")
+    assert r.scene["robot"]["urdf"] == robot and r.meta["tip"] == TOOL_FRAMES[robot]
+    np.testing.assert_allclose(r["tip"][0], [0.305707676520, 0.094566466132, 0.0], atol=1e-9)  # the posture
+    assert not [e for e in r.events if e["kind"] == "separate"], robot
+    drawing = r.t > 0.5
+    assert np.all(r["contact.pencil.touching"][drawing] == 1.0)
+    assert r["contact.pencil.F_n"][drawing].mean() == pytest.approx(PRESSURE, rel=0.1), robot
+
+
+def test_swap_keeps_fingers_and_grippers_locked(tmp_path, capsys):
+    """The default active joints are the chain to the tip: the Panda's fingers and the z1's gripper stay locked,
+    and the run's JSON says which joints moved and where the others were held."""
+    out = tmp_path / "panda"
+    assert main(["run", UR5, "--set", "robot.urdf=panda", "--set", "robot.tip=panda_hand_tcp", "--set",
+                 "duration=0.05", "--out", str(out), "--verbose"]) == EXIT_OK
+    printed = capsys.readouterr().out
+    assert "active joints (7): panda_joint1" in printed and "locked joints (2): panda_finger_joint1 = 0" in printed
+    assert "start posture: solved from robot.tip0" in printed
+    meta = load_result(f"{out}.npz").meta
+    assert meta["joints"] == [f"panda_joint{i}" for i in range(1, 8)]
+    assert meta["locked"] == {"panda_finger_joint1": 0.0, "panda_finger_joint2": 0.0}
+    assert meta["posture"]["position_error_m"] < 1e-10
+    z1 = Robot.load("z1", tip="gripperStator")
+    assert z1.joint_names == [f"joint{i}" for i in range(1, 7)] and list(z1.locked) == ["jointGripper"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -139,12 +140,12 @@ def _robot_of(result: Result, scene: Scene | None) -> Robot:
     sources = [s for s in (scene.robot.source if scene else None, result.meta.get("robot")) if s]
     if not sources:
         raise RunFileError("run has no robot: neither a scene document nor meta['robot']")
-    active = list(scene.robot.active_joints) if scene and scene.robot.active_joints else None
-    locked = dict(scene.robot.locked) if scene else None
     first: ContactdynError | None = None
     for source in dict.fromkeys(sources):
         try:
-            return Robot.load(source, active_joints=active, locked=locked)
+            if scene is not None:
+                return Robot.from_spec(replace(scene.robot, source=source))
+            return Robot.load(source, active_joints=result.meta.get("joints"), locked=result.meta.get("locked"))
         except ContactdynError as exc:
             first = first or exc
     raise first
