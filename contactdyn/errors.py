@@ -25,7 +25,9 @@ class SceneError(ContactdynError):
         where = f"{file}: " if file else ""
         if len(expected) > 300:
             expected = f"{expected[:260]} ... {expected[-20:]}"
-        super().__init__(f"{where}{key}: expected {expected}, found {abbreviate(found)}")
+        # our own error's message (a robot's, a frame's) is kept whole; a value the user typed is shortened
+        found_text = str(found) if isinstance(found, ContactdynError) else abbreviate(found)
+        super().__init__(f"{where}{key}: expected {expected}, found {found_text}")
 
 
 def abbreviate(value: object, limit: int = 200) -> str:
