@@ -164,10 +164,13 @@ def write_report(res: FitResult, out: str | Path) -> dict[str, Path]:
 
 def save_scene(res: FitResult, path: str | Path) -> Path:
     """The scene document with the fitted values, as TOML (comments list the estimates)."""
-    from ..scene import apply_overrides
+    from ..scene import apply_overrides, urdf_beside_scene
     from ..toml_writer import dumps
 
     doc = apply_overrides(res.document, res.values, res.scene_file)
+    robot = doc.get("robot", {})
+    if isinstance(robot.get("urdf"), str):  # a URDF beside the original scene stays found from the new file
+        robot["urdf"] = urdf_beside_scene(robot["urdf"], res.scene_file)
     lines = [f"Scene {res.scene} with values fitted by `contactdyn fit` to {res.data_file}",
              f"(from {res.scene_file}); estimate ± standard error [95 % interval]:"]
     for e in res.estimates:
