@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..result import atomic_path
+from ..result import atomic_path, atomic_write
 from .fitting import FitResult
 
 __all__ = ["as_dict", "text", "markdown", "figure", "write_report", "save_scene"]
@@ -156,8 +156,8 @@ def write_report(res: FitResult, out: str | Path) -> dict[str, Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "fit.json", "md": out / "fit.md", "png": out / "fit.png"}
-    _write_text(paths["json"], json.dumps(as_dict(res), indent=1, allow_nan=False))
-    _write_text(paths["md"], markdown(res, paths["png"].name))
+    atomic_write(paths["json"], json.dumps(as_dict(res), indent=1, allow_nan=False))
+    atomic_write(paths["md"], markdown(res, paths["png"].name))
     figure(res, paths["png"])
     return paths
 
@@ -178,12 +178,7 @@ def save_scene(res: FitResult, path: str | Path) -> Path:
         lines.append(f"  {e.key} = {e.value:.6g} ± {e.se:.3g} [{e.low:.6g}, {e.high:.6g}]{flag}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    _write_text(path, dumps(doc, "\n".join(lines)))
+    atomic_write(path, dumps(doc, "\n".join(lines)))
     return path
 
 
-def _write_text(path: Path, text: str) -> None:
-    def write(tmp: str) -> None:
-        Path(tmp).write_text(text)
-
-    atomic_path(path, write)
