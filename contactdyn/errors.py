@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "UnknownKeyError", "SimulationError"]
+__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "UnknownKeyError", "SimulationError",
+           "signal_name"]
 
 
 class ContactdynError(Exception):
@@ -54,3 +55,13 @@ class SimulationError(ContactdynError):
 
 class RunFileError(ContactdynError):
     """A saved run (NAME.npz + NAME.json) is missing, damaged or not one of ours; names the file."""
+
+
+def signal_name(sig: int) -> str:
+    """A signal for a message: ``SIGSEGV (11)``."""
+    import signal
+
+    try:
+        return f"{signal.Signals(sig).name} ({sig})"
+    except ValueError:
+        return f"signal {sig}"
