@@ -102,6 +102,11 @@ class Controller:
         """Joint torques and the rates of the controller's states."""
         raise NotImplementedError
 
+    @staticmethod
+    def applies_force_setpoints(config: Any) -> bool:
+        """Whether this controller, so configured, acts on a phase's ``[[phase.force]]`` set-points."""
+        return False
+
     @property
     def fast_path_gap(self) -> str:
         """Why the compiled right-hand side cannot run this controller ("" when it can; see contactdyn.fastpath).
