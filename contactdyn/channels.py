@@ -22,7 +22,7 @@ from .dynamics import Evaluation
 from .limits import limit_channels
 from .phases import Phase
 from .rhsplan import ModePlan
-from .samples import Samples
+from .samples import Samples, evaluated_samples
 from .system import System
 
 __all__ = ["Segment", "output_grid", "sample_segments", "channels"]
@@ -66,23 +66,21 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
         X = np.atleast_2d(seg.sol(ts).T) if len(ts) > 1 else seg.sol(ts[0])[None, :]
         xs[sel] = X
         if seg.plan.ok:
-            parts.append(seg.plan.samples(ts, X))
             stats["singular_solves"] += seg.plan.singular
+        if seg.plan.ok and not system.drives.any_motor:  # the drive channels need each sample's Evaluation
+            parts.append(seg.plan.samples(ts, X))
             evs += [None] * len(ts)
         else:
-            part = Samples(len(ts), system)
-            for k, (t, x) in enumerate(zip(ts, X, strict=True)):
-                ev = system.evaluate(t, x, seg.modes, seg.phase, full=True)
-                part.fill(k, ev)
-                evs.append(ev)
+            part, part_evs = evaluated_samples(system, ts, X, seg.modes, seg.phase)
             parts.append(part)
+            evs += part_evs
         modes_of += [seg.modes] * len(sel)
         phases_of += [seg.phase] * len(sel)
     samples = Samples.concatenate(parts, system)
     out = channels(system, grid, xs, samples, modes_of)
     if system.limits.limits:
         out.update(limit_channels(system, phases_of, evs))
-    if system.drives.any_motor:  # (plans decline motors: every sample has its Evaluation)
+    if system.drives.any_motor:  # (motor scenes sample every output through the readable model)
         out.update(drive_channels(system, xs, evs))
     return out
 

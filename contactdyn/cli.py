@@ -67,18 +67,21 @@ def _plain(obj: Any) -> Any:
 
 # ---- list ------------------------------------------------------------------------------------
 def _catalog() -> dict[str, Any]:
-    import tomllib
-
+    from .config import read_toml
     from .controllers import CONTROLLERS
+    from .errors import SceneError
     from .integrators import FIXED, IMPLICIT, METHODS
     from .robot_list import robot_entries
-    from .scene import NORMAL_MODELS, TANGENT_MODELS, sims_dir
+    from .scene import NORMAL_MODELS, TANGENT_MODELS, scene_dirs
 
-    scenes = []
-    for path in sorted(sims_dir().glob("*.toml")):
+    scenes, seen = [], set()
+    for path in (p for folder in scene_dirs() for p in sorted(folder.glob("*.toml"))):
+        if path.stem in seen:  # the name runs the first one found (./sims before the installed scenes)
+            continue
+        seen.add(path.stem)
         try:
-            description = tomllib.loads(path.read_text()).get("description", "")
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+            description = read_toml(path).get("description", "")
+        except SceneError as exc:
             description = f"(unreadable: {exc})"
         scenes.append({"name": path.stem, "file": str(path), "description": str(description)})
     robots = robot_entries()

@@ -154,3 +154,9 @@ class Contact:
     @property
     def chains(self) -> list[DirectionalChain]:
         return [self.normal, *self.tangent_chains]
+
+    def surface(self, x: np.ndarray, nQ: int) -> tuple[np.ndarray, np.ndarray]:
+        """(p_env [m], v_env [m/s]): the contact point on the environment, carried by its body if any."""
+        if self.body_index >= 0:
+            return self.spec.point + self.body_axis * x[self.body_index], self.body_axis * x[nQ + self.body_index]
+        return self.spec.point, np.zeros(3)

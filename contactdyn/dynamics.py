@@ -35,7 +35,7 @@ from .controllers import ControlInput
 from .friction import friction_terms, launch_directions
 from .phases import Phase, reference_at
 
-__all__ = ["Evaluation", "evaluate"]
+__all__ = ["Evaluation", "evaluate", "carried_command", "drive_command", "set_force_inputs"]
 
 
 @dataclass
@@ -152,31 +152,32 @@ def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], ph
                        p_tip, v_tip, J, drift, x_d, v_d, a_d, {**ev.normal_force, **ev.interface}, force_d,
                        system.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian)
     if ctl.uses_forces:
-        inp.tau_contact = f[:nv] + robot.h
-        inp.surfaces = {c.name: (k.p_env, k.v_env) for c, k in zip(system.contacts, kins, strict=True)}
-        for c, k, m in zip(system.contacts, kins, modes, strict=True):  # tangential chains: their anchors
-            for i, dc in enumerate(c.tangent_chains):
-                inp.surfaces[f"{c.name}.{dc.label}"] = (k.p_env + dc.u * m.offsets[i], k.v_env)
-        inp.touching = {c.name: m.touching for c, m in zip(system.contacts, modes, strict=True)}
+        set_force_inputs(system, inp, x, modes, f[:nv] + robot.h)
     return inp, ft, x_d, force_d
+
+
+def set_force_inputs(system, inp: ControlInput, x: np.ndarray, modes: list[ContactMode],
+                     tau_contact: np.ndarray) -> None:
+    """What a force-reading controller reads beyond the forces: the contacts' generalized force on the
+    joints [N·m or N], the surfaces (and tangential chains' anchors) it presses on, the contact modes."""
+    inp.tau_contact = tau_contact
+    inp.surfaces = {}
+    for c, m in zip(system.contacts, modes, strict=True):
+        p_env, v_env = c.surface(x, system.nQ)
+        inp.surfaces[c.name] = (p_env, v_env)
+        for i, dc in enumerate(c.tangent_chains):  # tangential chains: their anchors
+            inp.surfaces[f"{c.name}.{dc.label}"] = (p_env + dc.u * m.offsets[i], v_env)
+    inp.touching = {c.name: m.touching for c, m in zip(system.contacts, modes, strict=True)}
 
 
 def _command_and_solve(system, inp: ControlInput, phase: Phase, x: np.ndarray, x_d, f: np.ndarray, rows: Rows):
     """The controller's command through the drives, then the solve: (drive output, Q̈, λ, regular, cmd, ż)."""
-    nQ, nv = system.nQ, system.nv
+    nQ = system.nQ
     ctl = phase.controller
     drives = system.drives
     tau, zdot = ctl.command(inp)
-    carried = None  # a reference on a body: the command's part proportional to the body's acceleration
-    if phase.carrier is not None and x_d is not None:
-        i_b, axis = phase.carrier
-        tau_b, zdot_b = ctl.command(replace(inp, a_d=inp.a_d + axis))
-        if np.any(tau_b != tau):
-            carried = (i_b, tau_b - tau, None if zdot is None else zdot_b - zdot)
-    cmd = np.zeros(len(drives.specs))  # per drive: joints, then bodies
-    cmd[:nv] = tau
-    for idx, v_ref, gain in system.servo:
-        cmd[idx] = gain * (v_ref - x[nQ + idx])  # body coordinate idx = drive idx
+    carried = carried_command(inp, phase, tau, zdot)
+    cmd = drive_command(system, tau, x)
     vmask = system._joint_motors if ctl.outputs == "voltage" else None
     # drives, folded measured forces, solve
     if (ctl.uses_forces and rows) or carried is not None:
@@ -202,3 +203,25 @@ def _finish_friction(system, ev: Evaluation, pending: list, xdot: np.ndarray, yd
             i0 = 2 * nQ + slot
             xdot[i0] = ev.normal_force[name]
             xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
+
+
+def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot) -> tuple | None:
+    """(i_b, ∂τ/∂Q̈_b, ∂ż/∂Q̈_b) of a reference carried by body coordinate i_b: the command's part
+    proportional to the body's acceleration, an unknown of the solve; None if there is none."""
+    if phase.carrier is None or inp.x_d is None:
+        return None
+    i_b, axis = phase.carrier
+    tau_b, zdot_b = phase.controller.command(replace(inp, a_d=inp.a_d + axis))
+    if not np.any(tau_b != tau):
+        return None
+    return i_b, tau_b - tau, None if zdot is None else zdot_b - zdot
+
+
+def drive_command(system, tau: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The command per drive (joints, then bodies): the controller's τ [N·m or N; V], the bodies' servo forces [N]."""
+    nQ = system.nQ
+    cmd = np.zeros(len(system.drives.specs))
+    cmd[:system.nv] = tau
+    for idx, v_ref, gain in system.servo:
+        cmd[idx] = gain * (v_ref - x[nQ + idx])  # body coordinate idx = drive idx
+    return cmd

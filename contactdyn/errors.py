@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "UnknownKeyError", "SimulationError"]
+__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "UnknownKeyError", "SimulationError",
+           "signal_name"]
 
 
 class ContactdynError(Exception):
@@ -25,7 +26,9 @@ class SceneError(ContactdynError):
         where = f"{file}: " if file else ""
         if len(expected) > 300:
             expected = f"{expected[:260]} ... {expected[-20:]}"
-        super().__init__(f"{where}{key}: expected {expected}, found {abbreviate(found)}")
+        # our own error's message (a robot's, a frame's) is kept whole; a value the user typed is shortened
+        found_text = str(found) if isinstance(found, ContactdynError) else abbreviate(found)
+        super().__init__(f"{where}{key}: expected {expected}, found {found_text}")
 
 
 def abbreviate(value: object, limit: int = 200) -> str:
@@ -52,3 +55,13 @@ class SimulationError(ContactdynError):
 
 class RunFileError(ContactdynError):
     """A saved run (NAME.npz + NAME.json) is missing, damaged or not one of ours; names the file."""
+
+
+def signal_name(sig: int) -> str:
+    """A signal for a message: ``SIGSEGV (11)``."""
+    import signal
+
+    try:
+        return f"{signal.Signals(sig).name} ({sig})"
+    except ValueError:
+        return f"signal {sig}"

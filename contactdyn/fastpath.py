@@ -8,19 +8,19 @@ needs no second implementation to be fast, *if* the plan can represent it. Where
 cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when compiled):
 
 - a stage law (:class:`~contactdyn.chain.ChainStage`): only the linear law is affine;
-- the drives (:class:`~contactdyn.drives.Drives`): DC motors and elastic transmissions are not compiled;
-- a controller (:class:`~contactdyn.controllers.base.Controller`): one reading measured forces is not;
+- the drives (:class:`~contactdyn.drives.Drives`) and controllers
+  (:class:`~contactdyn.controllers.base.Controller`) declare none today: the plan calls the
+  drive law per call, and folds a force-reading law into its solve (:mod:`contactdyn.plan_fold`);
 
-and the system adds its own: the energy audit, a reference carried by a body, a 2-D slip
-launching from rest (its direction is solved per call). :func:`declared_gaps` collects them
-when the system is built (``System.fast_path_gaps``, reported in
-``Result.stats["fast_path_gaps"]``); the plan of a mode declines exactly when one of them
-applies to that mode (:func:`mode_gap`), or while a joint presses on its position limit
-(:data:`LIMIT`; every robot has limits, so this one is a rule of :func:`mode_gap`, not a
-listed gap). A plan that declines for any other reason — its probes find a non-affine
-part, or its self-check disagrees with the readable model — is an undeclared gap: its
-reason in ``Result.stats["fallback_modes"]`` starts with ``"undeclared: "``, which the
-tests treat as a bug.
+and the system adds its own: the energy audit and a 2-D slip launching from rest (its
+direction is solved per call). :func:`declared_gaps` collects them when the system is
+built (``System.fast_path_gaps``, reported in ``Result.stats["fast_path_gaps"]``); the
+plan of a mode declines exactly when one of them applies to that mode (:func:`mode_gap`),
+or while a joint presses on its position limit (:data:`LIMIT`; every robot has limits, so
+this one is a rule of :func:`mode_gap`, not a listed gap). A plan that declines for any
+other reason — its probes find a non-affine part, or its self-check disagrees with the
+readable model — is an undeclared gap: its reason in ``Result.stats["fallback_modes"]``
+starts with ``"undeclared: "``, which the tests treat as a bug.
 """
 
 from __future__ import annotations
@@ -28,11 +28,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "CARRIED", "LAUNCH", "LIMIT"]
+__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "LAUNCH", "LIMIT"]
 
 UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
 ENERGY = "energy audit (solver.record_energy)"
-CARRIED = "a reference carried by a body (its acceleration is folded into the linear solve)"
 LAUNCH = "a 2-D slip launching from rest (its direction is solved per call)"
 LIMIT = "a joint pressing on its position limit (contactdyn.limits: its row is not compiled)"
 
@@ -64,10 +63,6 @@ def declared_gaps(system) -> list[Gap]:
         if c.friction is not None and len(c.tangents) == 2:
             gaps.append(Gap(f"contact.{c.name}.tangent", LAUNCH, "while a 2-D slip launches from rest",
                             lambda modes, phase, ci=ci: _launching(modes[ci])))
-    for i, spec in enumerate(system.scene.phases):
-        if spec.reference is not None and spec.reference.body != "ground":
-            gaps.append(Gap(f"phase[{i}].reference.body", CARRIED, "in its phase",
-                            lambda modes, phase, i=i: phase.index == i and phase.carrier is not None))
     for ci, c in enumerate(system.contacts):
         for dc in c.chains:
             for k, stage in enumerate(dc.chain.stages):

@@ -32,7 +32,9 @@ class CompiledKKT:
         nQ, nv, nr, nf = s.nQ, s.nv, self.nr, len(self.fids)
         m = nQ + nr + 3 * nf
         A0 = np.zeros((m, m))
-        A0[nv:nQ, nv:nQ] = np.diag(s.M_rest)
+        A0[nv:nQ, nv:nQ] = np.diag(s.M_rest)  # bodies (with rotors through wheels), chain masses, motor shafts
+        if s.drives.any_motor:
+            A0[:nv, :nv] += np.diag(s._D)  # rotor inertias through rigid gears, n_s n_t J [kg·m²]
         for i in range(3 * nf):  # w = g: the Cartesian force on each frame, an unknown with a trivial row
             A0[nQ + nr + i, nQ + nr + i] = 1.0
         self.dyn_tilt = []  # 2-D sliding: column tilt computed per call

@@ -77,7 +77,9 @@ class ProbedModel:
         self.e_frame = [n + 6 * i for i in range(len(fids))]  # p at [k, k+3), ṗ at [k+3, k+6)
         ne = n + 6 * len(fids)
         ctl = phase.controller
-        law = ctl.tip_force_law() if hasattr(ctl, "tip_force_law") else None
+        # motors, a force-reading law, a carried reference: the command runs through the drives per call
+        self.drives_per_call = s.drives.any_motor or ctl.uses_forces or phase.carrier is not None
+        law = ctl.tip_force_law() if hasattr(ctl, "tip_force_law") and not self.drives_per_call else None
         self.affine_ctl = law is not None
         self.time_moves: list[tuple] = []  # (slot, move)
         self.time_ramps: list[tuple] = []  # (slot, ramp, contact index)
@@ -130,11 +132,7 @@ class ProbedModel:
             j = self.frame_of[c.fid]
             k = self.e_frame[j]
             p_tip, v_tip = e[k:k + 3], e[k + 3:k + 6]
-            if c.body_index >= 0:
-                p_env = c.spec.point + c.body_axis * x[c.body_index]
-                v_env = c.body_axis * x[nQ + c.body_index]
-            else:
-                p_env, v_env = c.spec.point, np.zeros(3)
+            p_env, v_env = c.surface(x, nQ)
             kin = Kinematics(p_tip, v_tip, J0, d0, p_env, v_env)
             tip_F, row, gamma, F_int, gap = chain_forces(s, c, c.normal, mode.touching, 0.0, kin, x, f, ydot, ev, True)
             g[j] += tip_F * c.normal.u
@@ -167,7 +165,8 @@ class ProbedModel:
                 rows.append(("normal", ci, 0, row, gamma))
         for idx, v_ref, gain in s.servo:
             F = gain * (v_ref - x[nQ + idx])
-            f[idx] += F
+            if not self.drives_per_call:  # else the servo is a drive command (plan_rhs.drive_forces)
+                f[idx] += F
             o[self.o_body.start + idx - nv] = F
         if self.affine_ctl:
             k = self.e_frame[self.tip_frame]

@@ -7,7 +7,9 @@ Per call at (t, x) in the mode a :class:`~contactdyn.rhsplan.ModePlan` was built
 2. y = P φ = [A, b, o]: the KKT matrix, its right-hand side and the affine outputs o
    (:mod:`contactdyn.plan_kkt`, :mod:`contactdyn.plan_probe`);
 3. what is not affine: Coulomb friction −μ max(F, 0) d with 2-D directions d, the column
-   tilt of 2-D sliding, a controller without an affine tip-force law;
+   tilt of 2-D sliding, a controller without an affine tip-force law, and motors: the
+   command goes through :meth:`~contactdyn.drives.Drives.apply` per call (:func:`drive_forces`),
+   the readable drive model itself, so the voltage clips exactly where it does there;
 4. z = A⁻¹ b = [Q̈, λ, w]; ẋ = [Q̇, Q̈, ẏ] with the impulse states' rates ∫F, ∫F_f.
 
 The last four calls' (t, x, z, o) stay in ``plan.ring`` so the event functions read them
@@ -22,9 +24,12 @@ import numpy as np
 import pinocchio as pin
 
 from .controllers import ControlInput
+from .dynamics import drive_command, set_force_inputs
+from .phases import reference_at
+from .plan_fold import contact_torque_of, folded_solve
 from .trajectory import profile
 
-__all__ = ["make_rhs", "controller_call", "impulse_terms", "LWA"]
+__all__ = ["make_rhs", "controller_call", "controller_input", "drive_forces", "impulse_terms", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 try:  # numpy's gufunc without the Python wrapper (see constraints.solve_linear)
@@ -48,6 +53,10 @@ def make_rhs(plan):
     dyn_tilt = plan.dyn_tilt
     generic_ctl = not plan.affine_ctl
     ctl_call = controller_call(plan) if generic_ctl else None
+    drives = drive_forces(plan)
+    reads_forces = plan.phase.controller.uses_forces
+    folded = folded_solve(plan, controller_input(plan)) if (reads_forces and nr) or plan.phase.carrier else None
+    contact_torque = contact_torque_of(plan)
     z_slice = plan.z_slice
     solve = _solve1
     cat = np.concatenate
@@ -79,13 +88,20 @@ def make_rhs(plan):
             d = plan._direction(ci, y[m2 + m:])
             A[:nv, nQ + r] += mu * Js[j].T.dot(d.dot(T))
             A[nv:nQ, nQ + r] = A0[nv:nQ, nQ + r] + mu * d.dot(consts)
-        zdot = None
-        if generic_ctl:
-            tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, y[m2 + m:])
-            b[:nv] += tau
-        z = solve(A, b)
-        if not isfinite(z.dot(z)):
-            z = plan._singular(A, b)
+        zdot = z = None
+        if folded is not None:  # a force-reading controller with rows: its forces folded into the solve
+            z, zdot = folded(t, x, Js, phi, y[m2 + m:], A, b)
+        elif generic_ctl:
+            tau_c = contact_torque(b, Js) if reads_forces else None
+            tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, y[m2 + m:], tau_c)
+            if drives is None:
+                b[:nv] += tau
+            else:
+                b[:nQ] += drives(x, tau)
+        if z is None:
+            z = solve(A, b)
+            if not isfinite(z.dot(z)):
+                z = plan._singular(A, b)
         if with_y:
             xd = cat((x[nQ:2 * nQ], z[:nQ], y[o_y]))
             if zdot is not None:
@@ -204,8 +220,46 @@ def impulse_terms(plan) -> list[tuple]:
     return out
 
 
+def drive_forces(plan):
+    """forces(x, τ) -> generalized forces [N·m or N] of the drives at the command τ (None unless
+    ``plan.drives_per_call``: motors, or a force-reading controller whose command the servos join).
+
+    The readable model's own drive law (:meth:`~contactdyn.drives.Drives.apply`), called per
+    call: while no voltage clips a rigid gear delivers τ exactly and an elastic one is
+    affine in (τ, x), but the clip pattern changes within a mode (case 1's cart), so the
+    law runs as it is rather than being probed; the rotor inertia reflected through rigid
+    gears is a constant on the KKT matrix's diagonal (:meth:`~contactdyn.plan_kkt.CompiledKKT._build`).
+    """
+    s = plan.system
+    drives = s.drives
+    if not plan.drives_per_call:
+        return None
+    nQ = s.nQ
+    vmask = s._joint_motors if plan.phase.controller.outputs == "voltage" else None
+    zeros = np.zeros
+
+    def forces(x, tau):
+        f = zeros(nQ)
+        drives.apply(drive_command(s, tau, x), x, nQ, f, voltage=vmask)
+        return f
+
+    return forces
+
+
 def controller_call(plan):
-    """Per-call ControlInput for a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o)."""
+    """The command of a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o, τ_c) -> (τ, ż)."""
+    make = controller_input(plan)
+    command = plan.phase.controller.command
+
+    def call(t, x, q, v, Js, phi, o, tau_contact=None):
+        return command(make(t, x, q, v, Js, phi, o, tau_contact))
+
+    return call
+
+
+def controller_input(plan):
+    """Per-call ControlInput of the plan's controller: make(t, x, q, v, Js, φ, o, τ_c) (τ_c: the contacts'
+    generalized force on the joints [N·m or N], for a force-reading controller; see dynamics.set_force_inputs)."""
     s, phase = plan.system, plan.phase
     robot = s.robot
     ctl = phase.controller
@@ -217,24 +271,28 @@ def controller_call(plan):
     kt = plan.e_frame[tf]
     nQ = s.nQ
     zs = phase.z_slice
-
+    modes = plan.modes
     i_e, i_dr = plan.i_e, plan.i_dr[tf]
+    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
     model, data, fid, nv = robot.model, robot.data, plan.fids[tf], s.nv
 
-    def call(t, x, q, v, Js, phi, o):
+    def make(t, x, q, v, Js, phi, o, tau_contact=None):
         e = phi[i_e:]
         x_d = v_d = a_d = None
         if phase.reference is not None:
-            x_d, v_d, a_d = phase.reference.at(t)
+            x_d, v_d, a_d = reference_at(s, phase, t, x)
         force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
         forces = {name: float(o[i_fint + i]) for i, name in enumerate(names)}
         forces.update({key: float(o[k]) for key, k in ifaces})
         R_tip = pin.updateFramePlacement(model, data, fid).rotation
         J_ang = pin.getFrameJacobian(model, data, fid, LWA).reshape(6, nv)[3:]
-        inp = ControlInput(t, q, v, robot.H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
+        H = robot.H + D_ctl if D_ctl is not None else robot.H
+        inp = ControlInput(t, q, v, H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
                            e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d,
                            forces,
                            force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang)
-        return ctl.command(inp)
+        if ctl.uses_forces:
+            set_force_inputs(s, inp, x, modes, tau_contact)
+        return inp
 
-    return call
+    return make

@@ -25,7 +25,7 @@ import numpy as np
 from .errors import RunFileError
 from .run_check import read_channels, read_sidecar
 
-__all__ = ["Result", "load_result", "run_files", "atomic_path"]
+__all__ = ["Result", "load_result", "run_files", "atomic_path", "atomic_write"]
 
 
 @dataclass
@@ -116,6 +116,12 @@ def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
+
+
+def atomic_write(path: Path, data: bytes | str) -> None:
+    """Write ``data`` (text as UTF-8) to ``path`` atomically (:func:`atomic_path`)."""
+    raw = data.encode() if isinstance(data, str) else data
+    _atomic(path, lambda f: f.write(raw))
 
 
 def _atomic(path: Path, write: Callable[[Any], None]) -> None:

@@ -89,9 +89,10 @@ class ModePlan(ProbedModel, CompiledKKT):
         reason = mode_gap(s, self.modes, self.phase)
         if reason:
             return reason
-        expected_nQ = s.nv + len(s.body_names) + len(s.mass_labels)
+        expected_nQ = s.nv + len(s.body_names) + len(s.mass_labels) + s.drives.n_motor_coords
         if s.nQ != expected_nQ:
-            return f"{UNDECLARED}coordinates the plan does not know ({s.nQ - expected_nQ} beyond robot, bodies, masses)"
+            return (f"{UNDECLARED}coordinates the plan does not know ({s.nQ - expected_nQ} beyond robot, bodies, "
+                    "masses, motors)")
         return ""
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["Samples", "plan_samples", "slip_directions"]
+__all__ = ["Samples", "plan_samples", "evaluated_samples", "slip_directions"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: rows per matrix product in the output pass, small enough to keep OpenBLAS on one thread: with 128,
@@ -87,10 +87,23 @@ class Samples:
             self.stages[label][k] = ev.stages.get(label, (0.0, 0.0, 0.0))
 
 
+def evaluated_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> tuple[Samples, list]:
+    """(Samples, Evaluations) at the states X[k] (times ts[k]), each sample by :meth:`System.evaluate`."""
+    S = Samples(len(ts), system)
+    evs = []
+    for k, (t, x) in enumerate(zip(ts, X, strict=True)):
+        ev = system.evaluate(t, x, modes, phase, full=True)
+        S.fill(k, ev)
+        evs.append(ev)
+    return S, evs
+
+
 def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     """Diagnostics at the states X[k] (times ts[k]) of this mode: one Pinocchio pass per
     sample, then the assembly, solve and read-out for all samples at once."""
     N = len(ts)
+    if plan.drives_per_call:  # drives' voltages, a force-reading law's fold: the readable model per sample
+        return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
     S = Samples(N, plan.system)
     if N == 0:
         return S

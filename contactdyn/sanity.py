@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from .controllers import CONTROLLERS, Controller
 from .errors import ContactdynError
 from .scene import Mass, Scene, Stage
 
@@ -30,8 +31,6 @@ __all__ = ["SanityWarning", "MU_MAX", "scene_warnings", "system_warnings"]
 
 MU_MAX = 2.0  #: [-] friction coefficients above this are almost certainly a typo
 GAP_TOL = 1e-9  #: [m] a bonded tip further than this from its surface "starts off it"
-#: controllers that apply a force set-point (position_dynamic: with force_reference = true)
-APPLIES_FORCE = ("task_pd", "force_dynamic", "hybrid")
 
 
 class SanityWarning(UserWarning):
@@ -58,10 +57,9 @@ def _force_warnings(scene: Scene, i: int, phase) -> list[str]:
     out = []
     for f in phase.forces:
         what = f"force set-point {f.ramp.value:g} N on contact {f.contact!r}"
-        applies = cfg.kind in APPLIES_FORCE or (cfg.kind == "position_dynamic" and cfg.force_reference)
-        if not applies:
+        if not CONTROLLERS[cfg.kind].applies_force_setpoints(cfg):
             out.append(f"{where}: {what}, but its controller {cfg.kind!r} does not apply force set-points "
-                       f"({', '.join(APPLIES_FORCE)} do, and position_dynamic with force_reference = true): "
+                       f"({', '.join(_force_controllers())} can; see contactdyn list controllers): "
                        "the force is whatever the motion makes it")
             continue
         c = scene.contacts[f.contact]
@@ -120,3 +118,9 @@ def _period_warnings(where: str, chain, m_tip: float, step: float, rate: float) 
                        f"(solver.output_rate = {rate:g} Hz): the sampled force aliases; raise solver.output_rate "
                        "or check k")
     return out
+
+
+def _force_controllers() -> list[str]:
+    """The controller kinds that can act on force set-points (some only when so configured)."""
+    return sorted(name for name, cls in CONTROLLERS.items()
+                  if cls.applies_force_setpoints is not Controller.applies_force_setpoints)

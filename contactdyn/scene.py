@@ -183,7 +183,7 @@ def find_scene(name: str | Path) -> Path:
     raise SceneError("scene", f"a scene file or one of {known}{hint}", str(name))
 
 
-def _relative_to_scene(source: str, file: str | None) -> str:
+def urdf_beside_scene(source: str, file: str | None) -> str:
     """A relative URDF path in a scene names a file beside the scene (not in the working directory)."""
     if file is None or Path(source).is_absolute():
         return source
@@ -276,7 +276,7 @@ def _read_robot(r: Reader) -> RobotSpec:
     locked = {k: locked_r.float(k, unit="rad or m") for k in locked_r.data}
     q0 = r.vector("q0", None) if r.has("q0") else None
     spec = RobotSpec(
-        source=_relative_to_scene(r.str("urdf"), r.file),
+        source=urdf_beside_scene(r.str("urdf"), r.file),
         tip=r.str("tip", "tip"),
         active_joints=tuple(active) if active is not None else None,
         locked=locked,

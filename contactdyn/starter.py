@@ -48,6 +48,14 @@ GAP = 0.02  #: [m] tip start above the surface
 SLIDE = 0.10  #: [m] slide length
 
 
+def _inside_limits(arm) -> np.ndarray:
+    """Zero posture moved at least 10 % of each joint's range inside its limits [rad or m]."""
+    span = np.where(np.isfinite(arm.upper - arm.lower), arm.upper - arm.lower, 0.0)
+    lo = np.where(np.isfinite(arm.lower), arm.lower + 0.1 * span, -np.inf)
+    hi = np.where(np.isfinite(arm.upper), arm.upper - 0.1 * span, np.inf)
+    return np.clip(np.zeros(arm.nq), lo, hi)
+
+
 def _num(x: float) -> str:
     text = f"{float(x) + 0.0:.6g}"  # + 0.0: no "-0"
     return text if any(c in text for c in ".en") else text + ".0"
@@ -82,18 +90,19 @@ def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", fricti
     """The TOML text of a starter scene (see the module docstring)."""
     from .errors import RobotError
     from .robot import Robot
+    from .robot_catalog import TOOL_FRAMES
 
     if contact not in CONTACT_MODELS:
         raise SceneError("--contact", f"one of {list(CONTACT_MODELS)}", contact)
     known_tip, q0 = POSTURES.get(robot, (None, None))
-    tip = tip or known_tip or "tip"
+    tip = tip or known_tip or TOOL_FRAMES.get(robot) or "tip"
     try:
-        arm = Robot.load(robot)
-        q = np.asarray(q0, float) if q0 is not None and len(q0) == arm.nq else np.zeros(arm.nq)
+        arm = Robot.load(robot, tip=tip)  # active joints: the chain to the tip
+        q = np.asarray(q0, float) if q0 is not None and len(q0) == arm.nq else _inside_limits(arm)
         p0 = arm.frame_position(q, tip)
         J = arm.frame_jacobian(q, tip)[:3]  # linear part, world-aligned
     except RobotError as exc:
-        raise SceneError("--robot", "a loadable robot and its tip frame (--tip)", str(exc)) from None
+        raise SceneError("--robot", "a loadable robot and its tip frame (--tip)", exc) from None
     n, t = _directions(J)
     rest = [a for a in np.eye(3) if abs(a @ n) < 0.5]  # position-controlled axes while pressing
     tangent = (f"tangent.model = \"friction\"              # Coulomb stick/slip along the slide\n"

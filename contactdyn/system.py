@@ -55,7 +55,7 @@ class System:
             self.limits = JointLimits(self.robot, rs.joint_limits == "enforce")
             self.tip_fid = self.robot.frame_id(rs.tip)
         except RobotError as exc:
-            raise SceneError("robot", "a loadable robot", str(exc), scene.file) from None
+            raise SceneError("robot", "a loadable robot", exc, scene.file) from None
         nv = self.nv = self.robot.nv
         # ---- generalized coordinates: robot, bodies, chain masses, motors (contactdyn.layout) ----
         self.body_names = list(scene.bodies)
@@ -98,7 +98,7 @@ class System:
         try:
             fid = self.robot.frame_id(spec.frame)
         except RobotError as exc:
-            raise SceneError(f"contact.{spec.name}.frame", "a frame of the robot", str(exc), self.scene.file) from None
+            raise SceneError(f"contact.{spec.name}.frame", "a frame of the robot", exc, self.scene.file) from None
         idx = self.body_index.get(spec.body, -1)
         axis = self.scene.bodies[spec.body].axis if spec.body in self.scene.bodies else np.zeros(3)
         return Contact(spec, fid, idx, axis)
@@ -165,12 +165,7 @@ class System:
     def kinematics(self, c: Contact, x: np.ndarray) -> Kinematics:
         """Contact kinematics at x; requires ``robot.update`` at x's (q, q̇) first."""
         ft = self.robot.frame_terms(c.fid)
-        nQ = self.nQ
-        if c.body_index >= 0:
-            p_env = c.spec.point + c.body_axis * x[c.body_index]
-            v_env = c.body_axis * x[nQ + c.body_index]
-        else:
-            p_env, v_env = c.spec.point, np.zeros(3)
+        p_env, v_env = c.surface(x, self.nQ)
         return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env, ft)
 
     def mass_matrix(self) -> np.ndarray:

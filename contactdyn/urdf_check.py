@@ -23,7 +23,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from pathlib import Path
 
-from .errors import RobotError, abbreviate
+from .errors import RobotError, abbreviate, signal_name
 
 __all__ = ["MAX_URDF_BYTES", "MAX_URDF_LINKS", "MAX_URDF_MOVING_JOINTS", "check_urdf_tree", "isolated_build"]
 
@@ -144,7 +144,7 @@ def isolated_build(path: Path, label: str, build: Callable[[], object]) -> None:
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         raise RobotError(f"{path}: Pinocchio crashed reading this URDF ({label} died with "
-                         f"{_signal_name(sig)}); check its joints and links")
+                         f"{signal_name(sig)}); check its joints and links")
     _probed[key] = None
 
 
@@ -165,8 +165,3 @@ def _wait(pid: int) -> tuple[int, bool]:
         delay = min(2 * delay, 0.05)
 
 
-def _signal_name(sig: int) -> str:
-    try:
-        return f"{signal.Signals(sig).name} ({sig})"
-    except ValueError:
-        return f"signal {sig}"

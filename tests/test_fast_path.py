@@ -51,13 +51,11 @@ def test_a_hunt_crossley_stage_declares_its_gap_at_load_and_only_its_touching_mo
     _assert_only_declared_fallbacks(r)
 
 
-def test_the_energy_audit_and_motors_are_declared_gaps():
+def test_the_energy_audit_is_a_declared_gap_and_motors_and_force_reading_laws_are_not():
     r = simulate("b1", {"solver.record_energy": True, "duration": 0.05})
     assert set(r.stats["fallback_modes"]) == {ENERGY} == _declared(r)
-    system = System(load_scene("case3_b_force"))
-    parts = {g.part: g.reason for g in system.fast_path_gaps}
-    assert parts["robot.drive"] == "motors (drive models)"
-    assert "phase[1].controller" in parts  # force_dynamic reads the measured force
+    system = System(load_scene("case3_b_force"))  # DC motor, elastic drive, force_dynamic reading the force
+    assert system.fast_path_gaps == []  # all compiled (tests/test_fast_path_drives.py)
 
 
 def test_a_part_that_claims_to_compile_but_does_not_is_reported_as_undeclared(monkeypatch):

@@ -40,3 +40,11 @@ def test_new_refuses_to_overwrite_and_checks_its_options(tmp_path, monkeypatch, 
     assert main(["new", "mine", "--contact", "z"]) == EXIT_USAGE
     assert main(["new", "arm", "--robot", "nosuchrobot"]) == EXIT_USAGE
     assert "nosuchrobot" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("robot", ["panda", "xarm7"])
+def test_the_starter_finds_the_tool_frame_and_a_posture_of_an_example_robot(tmp_path, monkeypatch, robot):
+    monkeypatch.chdir(tmp_path)
+    assert main(["new", "arm", "--robot", robot]) == EXIT_OK  # tip: the catalog's tool frame, q0 inside limits
+    r = simulate("arm", {"duration": 1.0})
+    assert abs(r["contact.table.F_n"][-1] - 20.0) < 1.0  # [N] pressing by the end of the press phase

@@ -102,15 +102,20 @@ class Controller:
         """Joint torques and the rates of the controller's states."""
         raise NotImplementedError
 
+    @staticmethod
+    def applies_force_setpoints(config: Any) -> bool:
+        """Whether this controller, so configured, acts on a phase's ``[[phase.force]]`` set-points."""
+        return False
+
     @property
     def fast_path_gap(self) -> str:
         """Why the compiled right-hand side cannot run this controller ("" when it can; see contactdyn.fastpath).
 
         A controller without a :meth:`tip_force_law` is called per right-hand side by the
         compiled plan with the same :class:`ControlInput`; one that reads measured forces is
-        folded into the linear solve, which only the readable model does so far.
+        folded into the plan's solve by the readable model's fold (:mod:`contactdyn.plan_fold`).
         """
-        return "a controller reading measured forces (folded into the linear solve)" if self.uses_forces else ""
+        return ""
 
     def tip_force_law(self) -> TipForceLaw | None:
         """The law as data when the command is exactly

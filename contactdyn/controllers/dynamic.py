@@ -238,6 +238,10 @@ class PositionDynamic(Controller):
     uses_forces = True
 
     @staticmethod
+    def applies_force_setpoints(config: PositionDynamicConfig) -> bool:
+        return config.force_reference  # the reference becomes the depth that gives F_d
+
+    @staticmethod
     def read(r) -> PositionDynamicConfig:
         return PositionDynamicConfig(
             space=r.str("space", "task", choices=["joint", "task"]),
@@ -324,6 +328,10 @@ class ForceDynamic(Controller):
     name = "force_dynamic"
     uses_forces = True
     tracks_position = False
+
+    @staticmethod
+    def applies_force_setpoints(config: ForceDynamicConfig) -> bool:
+        return True
 
     @classmethod
     def read(cls, r) -> ForceDynamicConfig:

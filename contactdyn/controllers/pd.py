@@ -59,6 +59,10 @@ class TaskPD(Controller):
     name = "task_pd"
 
     @staticmethod
+    def applies_force_setpoints(config: TaskPDConfig) -> bool:
+        return True
+
+    @staticmethod
     def read(r) -> TaskPDConfig:
         axes_raw = r.raw("axes", [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
         if not isinstance(axes_raw, list) or not axes_raw:

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ContactdynError, SceneError
+from ..scene import SolverSpec
 from .data import Measurements
 from .params import Parameter
 
@@ -100,7 +101,8 @@ class FitModel:
     def fixed(self) -> dict[str, Any]:
         """Overrides every fit run gets: tight tolerances and an output grid at least the data's rate."""
         solver = self.document.get("solver", {})
-        rate = float(solver.get("output_rate", 1000.0)) if isinstance(solver, dict) else 1000.0
+        rate = float(solver.get("output_rate", SolverSpec.output_rate)) if isinstance(solver, dict) \
+            else SolverSpec.output_rate  # [Hz] the scene's, else the scene default
         spacing = self.data.sample_spacing()
         if math.isfinite(spacing):
             rate = min(max(rate, 1.0 / spacing), MAX_OUTPUT_RATE)

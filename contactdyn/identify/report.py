@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..result import atomic_path
+from ..result import atomic_path, atomic_write
 from .fitting import FitResult
 
 __all__ = ["as_dict", "text", "markdown", "figure", "write_report", "save_scene"]
@@ -156,18 +156,21 @@ def write_report(res: FitResult, out: str | Path) -> dict[str, Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "fit.json", "md": out / "fit.md", "png": out / "fit.png"}
-    _write_text(paths["json"], json.dumps(as_dict(res), indent=1, allow_nan=False))
-    _write_text(paths["md"], markdown(res, paths["png"].name))
+    atomic_write(paths["json"], json.dumps(as_dict(res), indent=1, allow_nan=False))
+    atomic_write(paths["md"], markdown(res, paths["png"].name))
     figure(res, paths["png"])
     return paths
 
 
 def save_scene(res: FitResult, path: str | Path) -> Path:
     """The scene document with the fitted values, as TOML (comments list the estimates)."""
-    from ..scene import apply_overrides
+    from ..scene import apply_overrides, urdf_beside_scene
     from ..toml_writer import dumps
 
     doc = apply_overrides(res.document, res.values, res.scene_file)
+    robot = doc.get("robot", {})
+    if isinstance(robot.get("urdf"), str):  # a URDF beside the original scene stays found from the new file
+        robot["urdf"] = urdf_beside_scene(robot["urdf"], res.scene_file)
     lines = [f"Scene {res.scene} with values fitted by `contactdyn fit` to {res.data_file}",
              f"(from {res.scene_file}); estimate ± standard error [95 % interval]:"]
     for e in res.estimates:
@@ -175,12 +178,7 @@ def save_scene(res: FitResult, path: str | Path) -> Path:
         lines.append(f"  {e.key} = {e.value:.6g} ± {e.se:.3g} [{e.low:.6g}, {e.high:.6g}]{flag}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    _write_text(path, dumps(doc, "\n".join(lines)))
+    atomic_write(path, dumps(doc, "\n".join(lines)))
     return path
 
 
-def _write_text(path: Path, text: str) -> None:
-    def write(tmp: str) -> None:
-        Path(tmp).write_text(text)
-
-    atomic_path(path, write)

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import SceneError
+from ..result import atomic_path
 
 __all__ = ["failures", "failure_lines", "plot_over"]
 
@@ -79,7 +80,7 @@ def plot_over(summary: Path, y: str, x: str, keys: list[str], out: Path) -> Path
     ax.grid(alpha=0.3)
     fig.tight_layout()
     path = out / f"plot_{_safe(y)}_over_{_safe(x)}.png"
-    fig.savefig(path, dpi=120)
+    atomic_path(path, lambda tmp: fig.savefig(tmp, dpi=120, format="png"))
     plt.close(fig)
     return path
 

@@ -11,11 +11,11 @@ from typing import Any
 import numpy as np
 
 from ..errors import ContactdynError, SceneError
-from ..result import atomic_path
+from ..result import atomic_path, atomic_write
 from .plan import Sweep
 
 __all__ = ["STATUSES", "SUMMARY_FIXED", "result_row", "record_failure", "done_row", "cached_rows", "write_manifest",
-           "write_summary", "atomic_write", "lock_out"]
+           "write_summary", "lock_out"]
 
 STATUSES = ("ok", "failed", "crashed")
 SUMMARY_FIXED = ("run_id", "status", "error", "wall_s")  #: columns before the metrics (after the parameters)
@@ -166,9 +166,3 @@ def _column(values: list[Any]) -> Any:
     return [None if v is None else json.dumps(v, sort_keys=True) for v in values]
 
 
-def atomic_write(path: Path, data: bytes) -> None:
-    def write(tmp: str) -> None:
-        with open(tmp, "wb") as f:
-            f.write(data)
-
-    atomic_path(path, write)

@@ -25,6 +25,7 @@ from multiprocessing.connection import wait
 from pathlib import Path
 from typing import Any
 
+from ..errors import signal_name
 from .store import done_row, record_failure
 
 __all__ = ["worker_init", "run_isolated", "signal_text"]
@@ -79,11 +80,7 @@ def _alive(pid: int) -> bool:
 def signal_text(exitcode: int | None) -> str:
     """How a process ended, for a run's error message."""
     if exitcode is not None and exitcode < 0:
-        try:
-            name = signal.Signals(-exitcode).name
-        except ValueError:
-            name = "signal"
-        return f"killed by {name} ({-exitcode})"
+        return f"killed by {signal_name(-exitcode)}"
     return f"exited with code {exitcode}"
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import meshcat
 import umsgpack
 
-from ..result import Result
+from ..result import Result, atomic_write
 from .build import build_scene
 from .writer import ViewerScene
 
@@ -182,7 +182,5 @@ def export_html(result: Result | ViewerScene, path: str | os.PathLike, *, speed:
     title = scene.legend[0].split(":")[0] if scene.legend else "contactdyn run"
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp")
-    tmp.write_text(html_document(scene, title), encoding="utf-8")
-    os.replace(tmp, out)
+    atomic_write(out, html_document(scene, title))
     return out

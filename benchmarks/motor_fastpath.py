@@ -1,0 +1,98 @@
+"""Motor scenes on the compiled path against the readable model, timed in the same process.
+
+    PYTHONPATH=. python3 benchmarks/motor_fastpath.py [--repeats 3] [--error] [scene ...]
+
+For each scene with DC motors or elastic transmissions: the run as it is (compiled plans
+wherever no part declares a gap) and the same run with every plan declined (the readable
+``System.evaluate`` integrates every mode, which is what a motor scene did before motors
+were compiled), interleaved, ``--repeats`` times each; the median walls [s] and their ratio.
+With ``--error``: both default runs' force error max |F_n − F_n,ref| [N] against a compiled
+reference at rtol 1e-11, atol 1e-13, away from ±2 samples of every event (the two paths
+differ by round-off only, so the errors should agree). Writes benchmarks/out/motor_fastpath.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import numpy as np  # noqa: E402
+
+from contactdyn.fastpath import Gap  # noqa: E402
+from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.simulate import run_system  # noqa: E402
+from contactdyn.system import System  # noqa: E402
+
+SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
+          "case3_b_force", "case3_b_force_varied"]
+READABLE = Gap("benchmark", "readable model (benchmark)", "always", lambda modes, phase: True)
+OUT = Path(__file__).resolve().parent / "out" / "motor_fastpath.json"
+
+
+def run(scene: str, readable: bool, overrides: dict | None = None):
+    """(wall [s] of building and running, Result)."""
+    t0 = time.perf_counter()
+    system = System(load_scene(scene, overrides or {}))
+    if readable:
+        system.fast_path_gaps = [READABLE]
+    result = run_system(system)
+    return time.perf_counter() - t0, result
+
+
+def force_error(result, ref) -> float:
+    """max |F_n − F_n,ref| over the contacts [N] on the common output grid, away from ±2 samples of
+    every event of either run (a mode switch at a slightly different time is a jump, not an error)."""
+    t = ref.t
+    keep = np.ones(len(t), bool)
+    dt = t[1] - t[0]
+    for ev in list(result.events) + list(ref.events):
+        keep &= np.abs(t - ev["t"]) > 2.5 * dt
+    keys = [k for k in ref.channels if k.endswith(".F_n")]
+    return max(float(np.max(np.abs(result[k] - ref[k])[keep])) for k in keys)
+
+
+def measure(scene: str, repeats: int, error: bool) -> dict:
+    walls: dict[bool, list[float]] = {False: [], True: []}
+    results = {}
+    for _ in range(repeats):
+        for readable in (False, True):
+            wall, results[readable] = run(scene, readable)
+            walls[readable].append(wall)
+    row = {"scene": scene, "compiled_s": statistics.median(walls[False]), "readable_s": statistics.median(walls[True]),
+           "compiled_modes": results[False].stats["compiled_modes"],
+           "fallback_modes": results[False].stats["fallback_modes"]}
+    row["speedup"] = row["readable_s"] / row["compiled_s"]
+    if error:
+        _, ref = run(scene, False, {"solver.rtol": 1e-11, "solver.atol": 1e-13})
+        row["F_err_compiled"] = force_error(results[False], ref)
+        row["F_err_readable"] = force_error(results[True], ref)
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenes", nargs="*", default=SCENES)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--error", action="store_true")
+    args = ap.parse_args(argv)
+    rows = []
+    print(f"{'scene':24s} {'compiled [s]':>12s} {'readable [s]':>12s} {'speed-up':>9s}  F err compiled / readable [N]")
+    for scene in args.scenes:
+        row = measure(scene, args.repeats, args.error)
+        rows.append(row)
+        err = f"  {row['F_err_compiled']:.3g} / {row['F_err_readable']:.3g}" if args.error else ""
+        print(f"{scene:24s} {row['compiled_s']:12.3f} {row['readable_s']:12.3f} {row['speedup']:8.2f}x{err}"
+              f"   (compiled modes {row['compiled_modes']}, fallbacks {sum(row['fallback_modes'].values())})")
+    OUT.parent.mkdir(exist_ok=True)
+    OUT.write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
