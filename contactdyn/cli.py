@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -482,6 +483,9 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(args, exc, EXIT_FAILED)
     except NUMERICAL as exc:  # a blow-up numpy noticed before the simulator did: the run failed
         return _fail(args, f"the run blew up: {type(exc).__name__}: {exc}", EXIT_FAILED)
+    except BrokenPipeError:  # the reader of our output left (`contactdyn list | head`): not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        return EXIT_OK
     except OSError as exc:  # an output path that cannot be written (a file where a folder must go, ...)
         where = exc.filename if exc.filename is not None else "?"
         return _fail(args, f"{where}: {exc.strerror or exc}", EXIT_USAGE)

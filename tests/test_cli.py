@@ -191,3 +191,14 @@ def test_missing_module_is_one_line_and_exit_1(capsys, monkeypatch, saved_run, a
         monkeypatch.setitem(sys.modules, f"contactdyn.{name}", None)  # import raises ImportError
     code, _, err = _run(capsys, argv)
     assert code == EXIT_FAILED and "not available yet" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_reader_that_leaves_early_is_not_an_error():
+    import subprocess
+
+    # `contactdyn list robots | head -0`: the pipe is closed before the listing is written
+    proc = subprocess.Popen([sys.executable, "-m", "contactdyn.cli", "list", "robots"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 0 and "error" not in err, err
