@@ -238,9 +238,6 @@ class Drives:
         self.motor_inertias = [s.motor_inertia for s in specs if s.kind == "elastic"]
         self.motorized = np.array([s.motorized for s in specs], bool)
         self.any_motor = bool(self.motorized.any())
-        #: why the compiled right-hand side cannot run these drives ("" when it can; see contactdyn.fastpath):
-        #: it calls :meth:`apply` per call with the command, as the readable model does
-        self.fast_path_gap = ""
         self.any_elastic = self.n_motor_coords > 0
         #: rigid gears: inertia added to the true system's diagonal [kg·m² or kg]
         self.reflected = np.array([s.reflected_inertia if s.kind == "dc_motor" else 0.0 for s in specs])

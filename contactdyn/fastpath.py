@@ -6,11 +6,9 @@ reads its affine parts off the same functions by unit probes (:mod:`contactdyn.p
 and calls the rest — a controller's ``command`` — with the same inputs. A part therefore
 needs no second implementation to be fast, *if* the plan can represent it. Where it
 cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when compiled):
-
-- a stage law (:class:`~contactdyn.chain.ChainStage`): only the linear law is affine;
-- the drives (:class:`~contactdyn.drives.Drives`) and controllers
-  (:class:`~contactdyn.controllers.base.Controller`) declare none today: the plan calls the
-  drive law per call, and folds a force-reading law into its solve (:mod:`contactdyn.plan_fold`);
+a stage law (:class:`~contactdyn.chain.ChainStage`), since only the linear law is affine.
+The drives and controllers need none: the plan calls the drive law per call, and folds a
+force-reading law into its solve (:mod:`contactdyn.plan_fold`);
 
 and the system adds its own: the energy audit and a 2-D slip launching from rest (its
 direction is solved per call). :func:`declared_gaps` collects them when the system is
@@ -39,7 +37,7 @@ LIMIT = "a joint pressing on its position limit (contactdyn.limits: its row is n
 class Gap(NamedTuple):
     """A part the compiled right-hand side does not run, and in which modes that matters."""
 
-    part: str  #: the part's scene key, e.g. "robot.drive", "phase[0].controller", "contact.tip.n.env1"
+    part: str  #: the part's scene key, e.g. "solver.record_energy", "contact.tip.n.env1"
     reason: str
     when: str  #: in words: "always", "in its phase", ...
     applies: Callable  #: applies(modes, phase) -> bool: the plan of (modes, phase) must decline
@@ -53,12 +51,6 @@ def declared_gaps(system) -> list[Gap]:
     gaps = []
     if system.energy_slot >= 0:
         gaps.append(Gap("solver.record_energy", ENERGY, "always", lambda modes, phase: True))
-    if system.drives.fast_path_gap:
-        gaps.append(Gap("robot.drive", system.drives.fast_path_gap, "always", lambda modes, phase: True))
-    for i, ctl in enumerate(system.controllers):
-        if ctl.fast_path_gap:
-            gaps.append(Gap(f"phase[{i}].controller", ctl.fast_path_gap, "in its phase",
-                            lambda modes, phase, i=i: phase.index == i))
     for ci, c in enumerate(system.contacts):
         if c.friction is not None and len(c.tangents) == 2:
             gaps.append(Gap(f"contact.{c.name}.tangent", LAUNCH, "while a 2-D slip launches from rest",

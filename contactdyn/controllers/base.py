@@ -107,16 +107,6 @@ class Controller:
         """Whether this controller, so configured, acts on a phase's ``[[phase.force]]`` set-points."""
         return False
 
-    @property
-    def fast_path_gap(self) -> str:
-        """Why the compiled right-hand side cannot run this controller ("" when it can; see contactdyn.fastpath).
-
-        A controller without a :meth:`tip_force_law` is called per right-hand side by the
-        compiled plan with the same :class:`ControlInput`; one that reads measured forces is
-        folded into the plan's solve by the readable model's fold (:mod:`contactdyn.plan_fold`).
-        """
-        return ""
-
     def tip_force_law(self) -> TipForceLaw | None:
         """The law as data when the command is exactly
         τ = Jᵀ(K_p (x_d − p) + K_d (ẋ_d − ṗ) − Σ F_d n) + feedforward − k_dj q̇
