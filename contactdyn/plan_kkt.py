@@ -57,7 +57,6 @@ class CompiledKKT:
                 self.dyn_tilt.append((r, ci, mu, T, consts[:, nv:], self.frame_of[c.fid]))
         self.m, self.A0, self.Qr, self.Qc = m, A0, Qr, Qc
         # φ = [H, (J_f), (J̇q̇_f), h, e]; e = [x, (p_f, ṗ_f), time terms, 1]
-        self.i_H = 0
         self.i_J = [nv * nv + 3 * nv * f for f in range(nf)]
         self.i_dr = [nv * nv + 3 * nv * nf + 3 * f for f in range(nf)]
         self.i_h = nv * nv + 3 * nv * nf + 3 * nf

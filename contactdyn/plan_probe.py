@@ -102,7 +102,6 @@ class ProbedModel:
         self.o_f = out.add("f_rest", nQ - nv)
         self.o_y = out.add("ydot", s.ny)
         self.o_g = out.add("g", 3 * len(fids))
-        self.n_rhs = len(out.names)
         self.o_gctl = out.add("g_ctl", 3)
         self.o_Fint = out.add("F_int", len(s.contacts))
         self.o_gap = out.add("gap", len(s.contacts))

@@ -71,7 +71,6 @@ class System:
         self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
         self._D_ctl = self.drives.model_reflected[:nv]  #: the same in the controller's rigid model
         self._joint_motors = self.drives.motorized & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
-        self.n_junctions = n_first
         # ---- controllers, then the first-order slots after the junctions ----
         self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
         for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
