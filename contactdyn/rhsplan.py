@@ -39,7 +39,7 @@ from .friction import slip_direction
 from .plan_kkt import CompiledKKT
 from .plan_probe import ProbedModel, affine_map
 from .plan_rhs import controller_call
-from .samples import Samples, plan_samples, slip_directions
+from .samples import Samples, plan_samples
 
 __all__ = ["ModePlan", "Samples", "cached_plan", "affine_map"]  # Samples: re-exported from contactdyn.samples
 
@@ -106,9 +106,6 @@ class ModePlan(ProbedModel, CompiledKKT):
     def samples(self, ts: np.ndarray, X: np.ndarray) -> Samples:
         """Diagnostics at the states X[k] (times ts[k]) of this mode, as arrays."""
         return plan_samples(self, ts, X)
-
-    def _directions(self, ci: int, O: np.ndarray) -> np.ndarray:
-        return slip_directions(self, ci, O)
 
     def _controller_call(self):
         """Per-call ControlInput for a controller without an affine tip-force law (:func:`plan_rhs.controller_call`)."""
