@@ -75,25 +75,26 @@ def make_rhs(plan):
         y = P.dot(phi)
         A = y[:m2].reshape(m, m)
         b = y[m2:m2 + m]
+        o = y[m2 + m:]  # the affine outputs
         for i_fn, mu, T, consts, j, dT, dC, ci in coulomb:
             F_n = y[i_fn]
             if F_n > 0.0:
                 if dT is None:
-                    d = plan._direction(ci, y[m2 + m:])
+                    d = plan._direction(ci, o)
                     dT, dC = d.dot(T), d.dot(consts)
                 b[w0 + 3 * j:w0 + 3 * j + 3] -= (mu * F_n) * dT
                 if nQ > nv:
                     b[nv:nQ] -= (mu * F_n) * dC
         for r, ci, mu, T, consts, j in dyn_tilt:
-            d = plan._direction(ci, y[m2 + m:])
+            d = plan._direction(ci, o)
             A[:nv, nQ + r] += mu * Js[j].T.dot(d.dot(T))
             A[nv:nQ, nQ + r] = A0[nv:nQ, nQ + r] + mu * d.dot(consts)
         zdot = z = None
         if folded is not None:  # a force-reading controller with rows: its forces folded into the solve
-            z, zdot = folded(t, x, Js, phi, y[m2 + m:], A, b)
+            z, zdot = folded(t, x, Js, phi, o, A, b)
         elif generic_ctl:
             tau_c = contact_torque(b, Js) if reads_forces else None
-            tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, y[m2 + m:], tau_c)
+            tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
             if drives is None:
                 b[:nv] += tau
             else:
@@ -112,7 +113,7 @@ def make_rhs(plan):
         ring[0] = ring[1]
         ring[1] = ring[2]
         ring[2] = ring[3]
-        ring[3] = (t, x, z, y[m2 + m:])
+        ring[3] = (t, x, z, o)
         return xd
 
     return rhs
