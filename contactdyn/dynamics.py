@@ -35,7 +35,7 @@ from .controllers import ControlInput
 from .friction import friction_terms, launch_directions
 from .phases import Phase, reference_at
 
-__all__ = ["Evaluation", "evaluate", "carried_command", "drive_command", "set_force_inputs"]
+__all__ = ["Evaluation", "evaluate", "carried_command", "command_of", "drive_command", "set_force_inputs"]
 
 
 @dataclass
@@ -172,17 +172,13 @@ def set_force_inputs(system, inp: ControlInput, x: np.ndarray, modes: list[Conta
 
 def _command_and_solve(system, inp: ControlInput, phase: Phase, x: np.ndarray, x_d, f: np.ndarray, rows: Rows):
     """The controller's command through the drives, then the solve: (drive output, Q̈, λ, regular, cmd, ż)."""
-    nQ = system.nQ
     ctl = phase.controller
-    drives = system.drives
-    tau, zdot = ctl.command(inp)
-    carried = carried_command(inp, phase, tau, zdot)
-    cmd = drive_command(system, tau, x)
+    cmd, zdot, carried = command_of(system, inp, phase, x)
     vmask = system._joint_motors if ctl.outputs == "voltage" else None
     # drives, folded measured forces, solve
     if (ctl.uses_forces and rows) or carried is not None:
         return solve_folded(system, inp, ctl, cmd, zdot, f, rows, x, vmask, carried)
-    out = drives.apply(cmd, x, nQ, f, voltage=vmask)
+    out = system.drives.apply(cmd, x, system.nQ, f, voltage=vmask)
     qdd, lam, regular = kkt_solve(system, f, rows, None)
     return out, qdd, lam, regular, cmd, zdot
 
@@ -203,6 +199,13 @@ def _finish_friction(system, ev: Evaluation, pending: list, xdot: np.ndarray, yd
             i0 = 2 * nQ + slot
             xdot[i0] = ev.normal_force[name]
             xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
+
+
+def command_of(system, inp: ControlInput, phase: Phase, x: np.ndarray) -> tuple:
+    """(drive command, ż, carried reference) of the phase's controller at ``inp``: its τ through
+    :func:`drive_command`, and :func:`carried_command` (the readable model and the plan's fold share it)."""
+    tau, zdot = phase.controller.command(inp)
+    return drive_command(system, tau, x), zdot, carried_command(inp, phase, tau, zdot)
 
 
 def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot) -> tuple | None:

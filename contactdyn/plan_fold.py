@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from .constraints import Rows, solve_folded
-from .dynamics import carried_command, drive_command
+from .dynamics import command_of
 
 __all__ = ["contact_torque_of", "folded_solve"]
 
@@ -56,9 +56,7 @@ def folded_solve(plan, make_input):
     def solve(t, x, Js, phi, o, A, b):
         tau_c = torque(b, Js)
         inp = make_input(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
-        tau, zdot = ctl.command(inp)
-        carried = carried_command(inp, phase, tau, zdot)
-        cmd = drive_command(s, tau, x)
+        cmd, zdot, carried = command_of(s, inp, phase, x)
         if not fold_rows and carried is None:  # as the readable model: the drives, then the plain solve
             s.drives.apply(cmd, x, nQ, b, voltage=vmask)  # b[:nQ] takes the drives' forces
             z = np.linalg.solve(A, b)
