@@ -107,6 +107,12 @@ def _pattern(path: str) -> str:
         if path == prefix or path.startswith(prefix + ".") or path.startswith(prefix + "["):
             path = names[prefix] + path[len(prefix):]
             break
+    return _list_index_free(path)
+
+
+
+def _list_index_free(path: str) -> str:
+    """``phase[0].force.1`` -> ``phase[].force[]``: a list index, bracketed or dotted, becomes ``[]``."""
     return re.sub(r"\.\d+(?=\.|$)", "[]", re.sub(r"\[\d+\]", "[]", path))
 
 
@@ -273,7 +279,7 @@ def table_fields(path: str) -> str:
     """The fields of the table at ``path`` (``phase[0].force[1]``, ``contact.tip.normal``), required ones first."""
     from .keyfields import TABLE_FIELDS
 
-    path = re.sub(r"\.\d+(?=\.|$)", "[]", re.sub(r"\[\d+\]", "[]", path))
+    path = _list_index_free(path)
     for table, fields in TABLE_FIELDS.items():
         if re.fullmatch(re.sub(r"<\w+>", r"[^.\\[]+", re.escape(table)), path):
             return fields
