@@ -7,7 +7,6 @@ the type is right and the number is finite and in range. Its errors are
 
 from __future__ import annotations
 
-import difflib
 import math
 import re
 import tomllib
@@ -18,7 +17,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .errors import SceneError, UnknownKeyError
+from .errors import SceneError, UnknownKeyError, close_matches
 
 __all__ = ["Reader", "MISSING", "MAX_DEPTH", "MAX_MAGNITUDE", "MAX_TOML_BYTES", "read_toml", "check_depth", "KeyRead",
            "recording"]
@@ -108,6 +107,12 @@ def _pattern(path: str) -> str:
         if path == prefix or path.startswith(prefix + ".") or path.startswith(prefix + "["):
             path = names[prefix] + path[len(prefix):]
             break
+    return _list_index_free(path)
+
+
+
+def _list_index_free(path: str) -> str:
+    """``phase[0].force.1`` -> ``phase[].force[]``: a list index, bracketed or dotted, becomes ``[]``."""
     return re.sub(r"\.\d+(?=\.|$)", "[]", re.sub(r"\[\d+\]", "[]", path))
 
 
@@ -223,7 +228,7 @@ class Reader:
             raise self.error(name, "a string", value)
         if choices is not None:
             if value not in choices:
-                close = difflib.get_close_matches(value, choices, n=1)
+                close = close_matches(value, choices, n=1)
                 hint = f" (did you mean {close[0]!r}?)" if close else ""
                 raise self.error(name, f"one of {choices}{hint}", value)
             if name in VARIANT_KEYS and not any(v.startswith(f"{name} = ") for v in self.variant):
@@ -256,7 +261,7 @@ class Reader:
         """Reject keys nobody read, suggesting the closest known one."""
         for name in self.data:
             if name not in self._used:
-                close = difflib.get_close_matches(name, sorted(self._used), n=1)
+                close = close_matches(name, sorted(self._used), n=1)
                 raise UnknownKeyError(self.key(name), sorted(self._used), close[0] if close else None, self.file)
 
 
@@ -274,7 +279,7 @@ def table_fields(path: str) -> str:
     """The fields of the table at ``path`` (``phase[0].force[1]``, ``contact.tip.normal``), required ones first."""
     from .keyfields import TABLE_FIELDS
 
-    path = re.sub(r"\.\d+(?=\.|$)", "[]", re.sub(r"\[\d+\]", "[]", path))
+    path = _list_index_free(path)
     for table, fields in TABLE_FIELDS.items():
         if re.fullmatch(re.sub(r"<\w+>", r"[^.\\[]+", re.escape(table)), path):
             return fields

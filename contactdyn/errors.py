@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 __all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "UnknownKeyError", "SimulationError",
-           "signal_name"]
+           "close_matches", "signal_name"]
 
 
 class ContactdynError(Exception):
@@ -37,6 +37,13 @@ def abbreviate(value: object, limit: int = 200) -> str:
     if len(text) <= limit:
         return text
     return f"{text[:limit - 40]} ... {text[-20:]} ({len(text)} characters)"
+
+
+def close_matches(name: str, choices, n: int = 3, cutoff: float = 0.6) -> list[str]:
+    """Up to ``n`` of ``choices`` close to ``name``, best first (for a "did you mean" hint)."""
+    import difflib
+
+    return difflib.get_close_matches(str(name), list(choices), n=n, cutoff=cutoff)
 
 
 class UnknownKeyError(SceneError):

@@ -7,12 +7,10 @@ order of :data:`FRAME_PREFERENCE` (the body first), so the choice never depends 
 
 from __future__ import annotations
 
-import difflib
-
 import numpy as np
 import pinocchio as pin
 
-from .errors import RobotError
+from .errors import RobotError, close_matches
 
 __all__ = ["FRAME_PREFERENCE", "find_frame", "chain_joints", "frame_tree"]
 
@@ -26,7 +24,7 @@ def find_frame(model: pin.Model, name: str, source: str) -> int:
     matches = [i for i, f in enumerate(model.frames) if f.name == name]
     if not matches:
         names = list(dict.fromkeys(f.name for f in model.frames))
-        close = difflib.get_close_matches(name, names, n=5, cutoff=0.5)
+        close = close_matches(name, names, n=5, cutoff=0.5)
         hint = f"; close matches: {', '.join(map(repr, close))}" if close else ""
         raise RobotError(f"{source}: no frame named {name!r}{hint} (contactdyn list frames ROBOT shows them all)")
     return min(matches, key=lambda i: FRAME_PREFERENCE.index(model.frames[i].type))

@@ -20,7 +20,7 @@ from typing import Any, NamedTuple
 
 from .config import MISSING, VARIANT_KEYS, KeyRead, recording
 
-__all__ = ["KeyDoc", "reference", "markdown", "text", "list_keys", "table_fields", "table_field_map", "write_generated",
+__all__ = ["KeyDoc", "reference", "markdown", "text", "list_keys", "table_field_map", "write_generated",
            "MEANINGS"]
 
 #: key paths the reader uses inside that are shown under another name
@@ -466,13 +466,6 @@ def table_field_map() -> dict[str, str]:
     return {table: ", ".join(sorted((f"{k} (required)" if req else k for k, req in f.items()),
                                     key=lambda k: not k.endswith("(required)")))
             for table, f in fields.items()}
-
-
-def table_fields(path: str) -> str:
-    """The fields of the table at ``path`` as the reader's errors state them (see :mod:`contactdyn.keyfields`)."""
-    from .config import table_fields as reader_fields
-
-    return reader_fields(path)
 
 
 def keyfields_source() -> str:

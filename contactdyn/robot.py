@@ -12,7 +12,6 @@ Every active joint must move some mass (H(q0)ᵢᵢ > 0), else H is singular. Un
 
 from __future__ import annotations
 
-import difflib
 import functools
 import os
 from collections.abc import Callable
@@ -21,7 +20,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from .errors import RobotError
+from .errors import RobotError, close_matches
 from .frames import chain_joints, find_frame
 from .robot_catalog import example_robots, urdf_dir
 from .urdf_check import isolated_build
@@ -300,5 +299,5 @@ class Robot:
 
 
 def _suggest(name: str, names: list[str]) -> str:
-    close = difflib.get_close_matches(name, names, n=3)
+    close = close_matches(name, names)
     return f" (did you mean {', '.join(map(repr, close))}?)" if close else ""

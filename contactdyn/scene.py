@@ -11,7 +11,6 @@ to the raw document before validation, from Python or the command line.
 from __future__ import annotations
 
 import copy
-import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -24,7 +23,7 @@ from .budget import check_budget
 from .config import MAX_DEPTH, Reader, check_depth, read_toml
 from .drives import DriveTable, read_drive_table
 from .elements import STAGE_LAWS, ChainSpec, Element, Mass, Stage
-from .errors import SceneError
+from .errors import SceneError, close_matches
 from .trajectory import PROFILES, Move, Ramp
 
 __all__ = [
@@ -178,7 +177,7 @@ def find_scene(name: str | Path) -> Path:
             if candidate.is_file():
                 return candidate
     known = sorted({p.stem for folder in scene_dirs() for p in folder.glob("*.toml")})
-    close = difflib.get_close_matches(str(name), known, n=3)
+    close = close_matches(name, known)
     hint = f"; did you mean {', '.join(close)}?" if close else ""
     raise SceneError("scene", f"a scene file or one of {known}{hint}", str(name))
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SceneError
+from .toml_writer import format_value as toml_value
 
 __all__ = ["starter_scene", "new_command", "CONTACT_MODELS"]
 
@@ -115,13 +116,13 @@ def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", fricti
 # {name}: a starter scene written by `contactdyn new` (robot {robot}, contact model {contact}).
 # The tip approaches a table, presses {PRESS:g} N on it, then slides {SLIDE * 100:g} cm while pressing.
 # Every key: docs/scenes.md or `contactdyn list keys`. Run: contactdyn run {name}
-name = "{name}"
-description = "{robot} pressing {PRESS:g} N on a model ({contact}) table and sliding {SLIDE * 100:g} cm"
+name = {toml_value(name)}
+description = {toml_value(f"{robot} pressing {PRESS:g} N on a model ({contact}) table and sliding {SLIDE * 100:g} cm")}
 duration = 3.0                          # [s] simulated time
 
 [robot]
-urdf = "{robot}"                        # a name in urdf/, of example-robot-data, or a path beside this file
-tip = "{tip}"                           # the controlled frame
+urdf = {toml_value(robot)}                       # a name in urdf/, of example-robot-data, or a path beside this file
+tip = {toml_value(tip)}                          # the controlled frame
 q0 = {_vec(q)}                          # [rad] start posture: tip at {_vec(p0)} m
 
 [contact.table]                         # the name is yours; frame: robot.tip by default

@@ -11,7 +11,7 @@ import json
 import math
 from typing import Any
 
-__all__ = ["dumps"]
+__all__ = ["dumps", "format_value"]
 
 
 def dumps(document: dict[str, Any], header: str = "") -> str:
@@ -29,7 +29,7 @@ def _table(table: dict[str, Any], path: list[str], lines: list[str]) -> None:
         elif _is_table_array(value):
             arrays.append((key, value))
         else:
-            lines.append(f"{_key(key)} = {_value(value)}")
+            lines.append(f"{_key(key)} = {format_value(value)}")
     for key, value in subtables:
         lines += ["", f"[{'.'.join(_key(k) for k in [*path, key])}]"]
         _table(value, [*path, key], lines)
@@ -48,7 +48,8 @@ def _key(key: str) -> str:
     return key if bare else json.dumps(key)
 
 
-def _value(value: Any) -> str:
+def format_value(value: Any) -> str:
+    """One TOML value (string, number, bool, array, inline table), escaped as TOML needs."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -62,7 +63,7 @@ def _value(value: Any) -> str:
     if isinstance(value, str):
         return json.dumps(value, ensure_ascii=False)
     if isinstance(value, list):
-        return "[" + ", ".join(_value(v) for v in value) + "]"
+        return "[" + ", ".join(format_value(v) for v in value) + "]"
     if isinstance(value, dict):
-        return "{ " + ", ".join(f"{_key(k)} = {_value(v)}" for k, v in value.items()) + " }"
+        return "{ " + ", ".join(f"{_key(k)} = {format_value(v)}" for k, v in value.items()) + " }"
     raise TypeError(f"cannot write {type(value).__name__} {value!r} as TOML")

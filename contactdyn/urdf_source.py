@@ -10,12 +10,11 @@ and plain paths are absolute or relative to the URDF's folder.
 
 from __future__ import annotations
 
-import difflib
 import os
 from pathlib import Path
 from typing import NamedTuple
 
-from .errors import RobotError
+from .errors import RobotError, close_matches
 from .robot_catalog import SHORT_NAMES, example_robot_data_share, example_robots, require_example_robot_data, urdf_dir
 
 __all__ = ["UrdfSource", "resolve_robot_path", "package_dirs", "resolve_uri"]
@@ -71,7 +70,7 @@ def resolve_robot_path(source: str | os.PathLike) -> UrdfSource:
     if not known_examples:
         require_example_robot_data()
     ours = sorted(p.stem for p in urdf_dir().glob("*.urdf"))
-    close = difflib.get_close_matches(text, ours + sorted(known_examples), n=3)
+    close = close_matches(text, ours + sorted(known_examples))
     hint = f"; did you mean {', '.join(close)}?" if close else ""
     usual = ours + [n for n in SHORT_NAMES if n in known_examples]
     raise RobotError(f"robot {text!r}: not a URDF file nor a known robot name{hint} (known: {', '.join(usual)} "

@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
-from contactdyn.config import recording
+from contactdyn.config import recording, table_fields
 from contactdyn.errors import SceneError
-from contactdyn.keys import _display, keyfields_source, markdown, reference, table_fields
+from contactdyn.keys import _display, keyfields_source, markdown, reference
 from contactdyn.scene import load_scene, parse_scene, sims_dir
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -42,6 +42,15 @@ def test_new_refuses_to_overwrite_and_checks_its_options(tmp_path, monkeypatch, 
     assert "nosuchrobot" in capsys.readouterr().err
 
 
+def test_the_starter_writes_valid_toml_for_a_name_with_quotes():
+    import tomllib
+
+    from contactdyn.starter import starter_scene
+
+    name = 'my "best" \\ scene'
+    assert tomllib.loads(starter_scene(name))["name"] == name
+
+
 @pytest.mark.parametrize("robot", ["panda", "xarm7"])
 def test_the_starter_finds_the_tool_frame_and_a_posture_of_an_example_robot(tmp_path, monkeypatch, robot):
     monkeypatch.chdir(tmp_path)
