@@ -227,14 +227,18 @@ def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray] | None = N
 
 
 def impulse_solve(system, M: np.ndarray, rows: Rows, qd_minus: np.ndarray) -> tuple[np.ndarray, bool]:
-    """[Q̇⁺; Λ] of [[M, −Cᵀ], [G, 0]] [Q̇⁺; Λ] = [M Q̇⁻; 0]: the momentum law with every row held."""
+    """[Q̇⁺; Λ] of [[M, −Cᵀ], [G, 0]] [Q̇⁺; Λ] = [M Q̇⁻; 0]: the momentum law with every row held.
+
+    Solved for the jump ΔQ̇ = Q̇⁺ − Q̇⁻ (right-hand side [0; −G Q̇⁻]), so a coordinate no row
+    reaches (an elastic drive's motor, eq. 58) keeps its velocity exactly."""
     nQ, nr = system.nQ, len(rows)
     A = np.zeros((nQ + nr, nQ + nr))
     A[:nQ, :nQ] = M
     A[:nQ, nQ:] = -np.array(rows.cols).T
-    A[nQ:, :nQ] = np.array(rows.rows)
-    b = np.concatenate([M @ qd_minus, np.zeros(nr)])
+    A[nQ:, :nQ] = G = np.array(rows.rows)
+    b = np.concatenate([np.zeros(nQ), -(G @ qd_minus) if nr else np.zeros(0)])
     z, regular = solve_linear(A, b)
     if not np.all(np.isfinite(z)):
         raise SimulationError("impact map: the momentum-law system has no finite solution")
+    z[:nQ] += qd_minus
     return z, regular

@@ -267,12 +267,13 @@ class Drives:
                 x[nQ + m] = s.n_speed * x[nQ + self.coords[i]]
 
     def apply(self, cmd: np.ndarray, x: np.ndarray, nQ: int, f: np.ndarray, *, voltage: np.ndarray | None = None,
-              sat_cmd: np.ndarray | None = None) -> DriveOutput:
+              sat_cmd: np.ndarray | None = None, clip: bool = True) -> DriveOutput:
         """Add the drives' generalized forces to ``f``; ``cmd`` holds a force per drive, or a voltage [V]
         where the mask ``voltage`` is true.
 
         ``sat_cmd`` (default ``cmd``) decides which voltages clip: the system passes the full
-        command there while ``cmd`` lacks the part it folds into its linear solve.
+        command there while ``cmd`` lacks the part it folds into its linear solve. ``clip=False``:
+        the law without the voltage limits, affine in (cmd, x) (the compiled plan probes it).
         """
         n = len(self.specs)
         if not self.any_motor:  # ideal sources only; the coordinates are 0 .. n−1 (joints, then bodies)
@@ -297,7 +298,7 @@ class Drives:
                 ui = cmd[i]
             else:  # eq. 51 inverted at the rigid model's speed
                 ui = R * (sat_cmd[i] / nt + M_fast) / C_M + C_E * w_model
-            saturated[i] = abs(ui) > u_max
+            saturated[i] = clip and abs(ui) > u_max
             if saturated[i]:
                 ui = math.copysign(u_max, ui)
             elif sat_cmd is not cmd and not (voltage is not None and voltage[i]):

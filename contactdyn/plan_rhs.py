@@ -8,8 +8,9 @@ Per call at (t, x) in the mode a :class:`~contactdyn.rhsplan.ModePlan` was built
    (:mod:`contactdyn.plan_kkt`, :mod:`contactdyn.plan_probe`);
 3. what is not affine: Coulomb friction −μ max(F, 0) d with 2-D directions d, the column
    tilt of 2-D sliding, a controller without an affine tip-force law, and motors: the
-   command goes through :meth:`~contactdyn.drives.Drives.apply` per call (:func:`drive_forces`),
-   the readable drive model itself, so the voltage clips exactly where it does there;
+   command τ goes through the drives' law per call (:func:`~contactdyn.plan_drives.drive_forces`:
+   one product while no voltage clips, the readable law where one does). An affine task law
+   with motors gives τ = J_tipᵀ g_ctl + feedforward from o and φ, no controller call;
 4. z = A⁻¹ b = [Q̈, λ, w]; ẋ = [Q̇, Q̈, ẏ] with the impulse states' rates ∫F, ∫F_f.
 
 The last four calls' (t, x, z, o) stay in ``plan.ring`` so the event functions read them
@@ -24,12 +25,13 @@ import numpy as np
 import pinocchio as pin
 
 from .controllers import ControlInput
-from .dynamics import drive_command, set_force_inputs
+from .dynamics import set_force_inputs
 from .phases import reference_at
+from .plan_drives import drive_forces
 from .plan_fold import contact_torque_of, folded_solve
 from .trajectory import profile
 
-__all__ = ["make_rhs", "controller_call", "controller_input", "drive_forces", "impulse_terms", "LWA"]
+__all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 try:  # numpy's gufunc without the Python wrapper (see constraints.solve_linear)
@@ -52,8 +54,10 @@ def make_rhs(plan):
                in plan.coulomb_terms]
     dyn_tilt = plan.dyn_tilt
     generic_ctl = not plan.affine_ctl
-    ctl_call = controller_call(plan) if generic_ctl else None
     drives = drive_forces(plan)
+    ctl_call = controller_call(plan) if generic_ctl or drives is not None else None
+    fast_drives, readable_drives = drives if drives is not None else (None, None)
+    tf, o_gctl, i_e, feedforward = plan.tip_frame, plan.o_gctl, plan.i_e, plan._feedforward_torque
     reads_forces = plan.phase.controller.uses_forces
     folded = folded_solve(plan, controller_input(plan)) if (reads_forces and nr) or plan.phase.carrier else None
     contact_torque = contact_torque_of(plan)
@@ -98,7 +102,13 @@ def make_rhs(plan):
             if drives is None:
                 b[:nv] += tau
             else:
-                b[:nQ] += drives(x, tau)
+                f = fast_drives(x, tau)
+                b[:nQ] += readable_drives(x, tau) if f is None else f
+        elif drives is not None:  # the affine task law through the motors
+            f = fast_drives(x, Js[tf].T.dot(o[o_gctl]) + feedforward(phi, phi[i_e:]))
+            if f is None:  # a voltage clips: the controller and the drives' law as they are
+                f = readable_drives(x, ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o)[0])
+            b[:nQ] += f
         if z is None:
             z = solve(A, b)
             if not isfinite(z.dot(z)):
@@ -219,32 +229,6 @@ def impulse_terms(plan) -> list[tuple]:
         k_visc = off + plan.o_visc[name].start
         out.append((2 * nQ + slot, from_z, k_n, sliding, c.friction.mu_k, d0, k_visc, stick, ci))
     return out
-
-
-def drive_forces(plan):
-    """forces(x, τ) -> generalized forces [N·m or N] of the drives at the command τ (None unless
-    ``plan.drives_per_call``: motors, or a force-reading controller whose command the servos join).
-
-    The readable model's own drive law (:meth:`~contactdyn.drives.Drives.apply`), called per
-    call: while no voltage clips a rigid gear delivers τ exactly and an elastic one is
-    affine in (τ, x), but the clip pattern changes within a mode (case 1's cart), so the
-    law runs as it is rather than being probed; the rotor inertia reflected through rigid
-    gears is a constant on the KKT matrix's diagonal (:meth:`~contactdyn.plan_kkt.CompiledKKT._build`).
-    """
-    s = plan.system
-    drives = s.drives
-    if not plan.drives_per_call:
-        return None
-    nQ = s.nQ
-    vmask = s._joint_motors if plan.phase.controller.outputs == "voltage" else None
-    zeros = np.zeros
-
-    def forces(x, tau):
-        f = zeros(nQ)
-        drives.apply(drive_command(s, tau, x), x, nQ, f, voltage=vmask)
-        return f
-
-    return forces
 
 
 def controller_call(plan):
