@@ -22,41 +22,53 @@ import numpy as np
 from .dynamics import drive_command
 from .plan_probe import affine_map
 
-__all__ = ["drive_forces"]
+__all__ = ["CompiledDrives", "drive_forces"]
 
 
-def drive_forces(plan):
-    """(fast, readable) or None unless ``plan.drives_per_call`` (motors, or a force-reading controller
-    whose command the servos join): the drives' generalized forces [N·m or N] at the joint command τ,
-    fast(x, τ) by the matrix (None where a voltage clips), readable(x, τ) by the law itself."""
-    if not plan.drives_per_call:
-        return None
-    s = plan.system
-    drives, nQ, nv, n = s.drives, s.nQ, s.nv, s.n
-    vmask = s._joint_motors if plan.phase.controller.outputs == "voltage" else None
-    limited = [i for i, spec in enumerate(drives.specs) if spec.motorized and np.isfinite(spec.u_max)]
-    u_max = np.array([drives.specs[i].u_max for i in limited])
+class CompiledDrives:
+    """The drives of one plan: :meth:`fast` by the matrix L, :meth:`readable` by the law itself."""
 
-    def law(x, tau, clip=True):
-        f = np.zeros(nQ)
-        out = drives.apply(drive_command(s, tau, x), x, nQ, f, voltage=vmask, clip=clip)
-        return f, out.u[limited]
+    def __init__(self, plan):
+        s = plan.system
+        self.system, self.nQ, self.nv = s, s.nQ, s.nv
+        self.vmask = s._joint_motors if plan.phase.controller.outputs == "voltage" else None
+        specs = s.drives.specs
+        self.limited = [i for i, spec in enumerate(specs) if spec.motorized and np.isfinite(spec.u_max)]
+        self.u_max = np.array([specs[i].u_max for i in self.limited])
+        nv, n = s.nv, s.n
+        self.L = affine_map(lambda e: self._probe(e[nv:nv + n], e[:nv]), nv + n + 1)  #: [f; u/u_max] = L [τ, x, 1]
+        self.L_tau = np.ascontiguousarray(self.L[:, :nv])  #: ∂[f; u/u_max]/∂τ
+        self._one = np.ones(1)
 
-    def probe(e):
-        f, u = law(e[nv:nv + n], e[:nv], clip=False)
-        return np.concatenate((f, u / u_max))
+    def _probe(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        f, u = self._law(x, tau, clip=False)
+        return np.concatenate((f, u / self.u_max))
 
-    L = affine_map(probe, nv + n + 1)
-    cat = np.concatenate
-    one = np.ones(1)
+    def _law(self, x: np.ndarray, tau: np.ndarray, clip: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        s = self.system
+        f = np.zeros(self.nQ)
+        out = s.drives.apply(drive_command(s, tau, x), x, self.nQ, f, voltage=self.vmask, clip=clip)
+        return f, out.u[self.limited]
 
-    def fast(x, tau):
-        y = L.dot(cat((tau, x, one)))
-        if limited and np.abs(y[nQ:]).max() > 1.0:  # a voltage clips
-            return None
-        return y[:nQ]
+    def unclipped(self, y: np.ndarray) -> bool:
+        """No voltage beyond its limit in y = L [τ, x, 1]."""
+        return not self.limited or np.abs(y[self.nQ:]).max() <= 1.0
 
-    def readable(x, tau):
-        return law(x, tau)[0]
+    def values(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """y = L [τ, x, 1]: the drives' forces [N·m or N] and the limited voltages over their limits, unclipped."""
+        return self.L.dot(np.concatenate((tau, x, self._one)))
 
-    return fast, readable
+    def fast(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray | None:
+        """The drives' generalized forces [N·m or N] at the joint command τ; None where a voltage clips."""
+        y = self.values(x, tau)
+        return y[:self.nQ] if self.unclipped(y) else None
+
+    def readable(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """The same by the readable law, clipping included."""
+        return self._law(x, tau)[0]
+
+
+def drive_forces(plan) -> CompiledDrives | None:
+    """The plan's compiled drives, or None unless ``plan.drives_per_call`` (motors, or a force-reading
+    controller whose command the servos join)."""
+    return CompiledDrives(plan) if plan.drives_per_call else None

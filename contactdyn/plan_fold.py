@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .constraints import Rows, solve_folded
+from .constraints import Rows, force_columns, solve_folded
 from .dynamics import command_of
 
 __all__ = ["contact_torque_of", "folded_solve"]
@@ -39,8 +39,14 @@ def contact_torque_of(plan):
     return torque
 
 
-def folded_solve(plan, make_input):
-    """solve(t, x, Js, φ, o, A, b) -> (z = [Q̈, λ, w], ż): the readable fold on the plan's KKT system."""
+def folded_solve(plan, make_input, drives=None):
+    """solve(t, x, Js, φ, o, A, b) -> (z = [Q̈, λ, w], ż): the readable fold on the plan's KKT system.
+
+    With compiled drives (:class:`~contactdyn.plan_drives.CompiledDrives`) and no carried
+    reference, the fold goes into the plan's own matrix while no voltage clips:
+    A[:nQ, λ] −= L_τ B, b[:nQ] += the drives' forces at the λ-free command; a call whose
+    solved command clips a voltage goes through :func:`~contactdyn.constraints.solve_folded`.
+    """
     s = plan.system
     nQ, nv, nr = s.nQ, s.nv, plan.nr
     phase = plan.phase
@@ -53,10 +59,16 @@ def folded_solve(plan, make_input):
     fold_rows = ctl.uses_forces and nr > 0
     w0 = nQ + nr
 
+    lam_cols = slice(nQ, nQ + nr)
+
     def solve(t, x, Js, phi, o, A, b):
         tau_c = torque(b, Js)
         inp = make_input(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
         cmd, zdot, carried = command_of(s, inp, phase, x)
+        if fold_rows and carried is None and drives is not None:
+            z = matrix_fold(inp, cmd[:nv], zdot, x, A, b)
+            if z is not None:
+                return z
         if not fold_rows and carried is None:  # as the readable model: the drives, then the plain solve
             s.drives.apply(cmd, x, nQ, b, voltage=vmask)  # b[:nQ] takes the drives' forces
             z = np.linalg.solve(A, b)
@@ -70,5 +82,22 @@ def folded_solve(plan, make_input):
         if not regular:
             plan.singular += 1
         return np.concatenate((qdd, lam, b[w0:])), zdot
+
+    def matrix_fold(inp, tau, zdot, x, A, b):
+        """(z, ż) with the fold in the plan's matrix, or None where the solved command clips a voltage."""
+        B, Dz = force_columns(inp, ctl, tau, zdot, meta, [-A[:nQ, nQ + r] for r in range(nr)], nv)
+        y0 = drives.values(x, tau)
+        Y = drives.L_tau.dot(B)  # the drives' forces and voltages per unit row force
+        A2 = A.copy()
+        A2[:nQ, lam_cols] -= Y[:nQ]
+        b2 = b.copy()
+        b2[:nQ] += y0[:nQ]
+        z = np.linalg.solve(A2, b2)
+        if not np.all(np.isfinite(z)):
+            z = plan._singular(A2, b2)
+        lam = z[lam_cols]
+        if not drives.unclipped(y0 + Y.dot(lam)):
+            return None
+        return z, (zdot + Dz.dot(lam) if Dz is not None else zdot)
 
     return solve

@@ -54,12 +54,13 @@ def make_rhs(plan):
                in plan.coulomb_terms]
     dyn_tilt = plan.dyn_tilt
     generic_ctl = not plan.affine_ctl
+    reads_forces = plan.phase.controller.uses_forces
     drives = drive_forces(plan)
     ctl_call = controller_call(plan) if generic_ctl or drives is not None else None
-    fast_drives, readable_drives = drives if drives is not None else (None, None)
+    fast_drives, readable_drives = (drives.fast, drives.readable) if drives is not None else (None, None)
+    folded = folded_solve(plan, controller_input(plan), drives) if (reads_forces and nr) or plan.phase.carrier \
+        else None
     tf, o_gctl, i_e, feedforward = plan.tip_frame, plan.o_gctl, plan.i_e, plan._feedforward_torque
-    reads_forces = plan.phase.controller.uses_forces
-    folded = folded_solve(plan, controller_input(plan)) if (reads_forces and nr) or plan.phase.carrier else None
     contact_torque = contact_torque_of(plan)
     z_slice = plan.z_slice
     solve = _solve1
