@@ -33,8 +33,6 @@ solve returns (see :mod:`contactdyn.controllers.base`).
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from .chain_forces import chain_forces
@@ -148,7 +146,7 @@ def force_columns(inp: ControlInput, ctl: Controller, tau: np.ndarray, zdot, met
             continue
         forces = inp.forces if kind != "n" else {**inp.forces, name: inp.forces[name] + 1.0}
         tau_c = inp.tau_contact + cols[j][:nv] if fed_back else inp.tau_contact
-        tau_j, zdot_j = ctl.command(replace(inp, forces=forces, tau_contact=tau_c))
+        tau_j, zdot_j = ctl.command(inp.replaced(forces=forces, tau_contact=tau_c))
         B[:, j] = tau_j - tau
         if Dz is not None:
             Dz[:, j] = zdot_j - zdot

@@ -236,6 +236,7 @@ class PositionDynamic(Controller):
 
     name = "position_dynamic"
     uses_forces = True
+    reads_orientation = False
 
     @staticmethod
     def applies_force_setpoints(config: PositionDynamicConfig) -> bool:
@@ -327,6 +328,7 @@ class ForceDynamic(Controller):
 
     name = "force_dynamic"
     uses_forces = True
+    reads_orientation = False
     tracks_position = False
 
     @staticmethod
