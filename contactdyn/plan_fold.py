@@ -18,9 +18,12 @@ command once per row (and once more for a carried reference) and a second small 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .constraints import Rows, force_columns, solve_folded
+from .constraints import _fast_solve as solve_linear  # numpy's gufunc without its Python wrapper
 from .dynamics import command_of
 
 __all__ = ["contact_torque_of", "folded_solve"]
@@ -92,8 +95,8 @@ def folded_solve(plan, make_input, drives=None):
         A2[:nQ, lam_cols] -= Y[:nQ]
         b2 = b.copy()
         b2[:nQ] += y0[:nQ]
-        z = np.linalg.solve(A2, b2)
-        if not np.all(np.isfinite(z)):
+        z = solve_linear(A2, b2)
+        if not math.isfinite(z.dot(z)):
             z = plan._singular(A2, b2)
         lam = z[lam_cols]
         if not drives.unclipped(y0 + Y.dot(lam)):

@@ -379,14 +379,14 @@ class ForceDynamic(Controller):
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray]:
         cfg = self.config
-        P = self.P.copy()
+        P = self.P
         a_force = np.zeros(3)
         f_swap = np.zeros(3)  # tip force [N]: measured normal forces out, targets F* in (cancel = "target")
         zdot = np.zeros(self.n_states)
         for i, name in enumerate(self.names):
             n = inp.normals[name]
             if not inp.touching.get(name):
-                P += np.outer(n, n)  # not touching yet: like a free direction, integral frozen
+                P = P + np.outer(n, n)  # not touching yet: like a free direction, integral frozen
                 continue
             env = self.envs[name]
             p_s, v_s = inp.surfaces[name]
