@@ -13,21 +13,22 @@ the cost of the full ``System.evaluate`` (all diagnostics) for comparison.
 ``SCENE@T``: the mode the run is in at time T [s] (e.g. ``case3_a_position@2`` for the
 press after the approach) instead of the first. ``--baseline TREE``: before/after, the
 measurement run alternately in child processes importing ``contactdyn`` from TREE (e.g. an
-export of ``main``) and from this tree, ``--repeats`` times each; medians and their ratio.
+export of ``main``; :mod:`before_after`) and from this tree, ``--repeats`` times each; medians and their ratio.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, os.environ.get("RHS_COST_TREE") or str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from before_after import HERE, alternate, use_tree  # noqa: E402
+
+use_tree()
 
 import numpy as np  # noqa: E402
 
@@ -106,18 +107,12 @@ def _scene_at(arg: str) -> tuple[str, float | None]:
 
 def compare(scenes: list[str], calls: int, baseline: str, repeats: int) -> list[dict]:
     """Before/after: each repeat measures every scene in a child importing TREE, then one importing this tree."""
-    trees = {"baseline": str(Path(baseline).resolve()), "this": str(Path(__file__).resolve().parent.parent)}
-    got: dict[tuple[str, str], list[float]] = {}
-    for _ in range(repeats):
-        for label, tree in trees.items():
-            out = subprocess.run([sys.executable, __file__, *scenes, "--calls", str(calls), "--json"], check=True,
-                                 capture_output=True, text=True, env={**os.environ, "RHS_COST_TREE": tree}).stdout
-            for r in json.loads(out.splitlines()[-1]):
-                got.setdefault((r["scene"], label), []).append(r["rhs_cpu_median_us"])
+    got = alternate(__file__, [*scenes, "--calls", str(calls)], {"baseline": baseline, "this": str(HERE)}, repeats)
     rows = []
-    for scene in dict.fromkeys(k[0] for k in got):
-        before, after = statistics.median(got[scene, "baseline"]), statistics.median(got[scene, "this"])
-        rows.append({"scene": scene, "baseline_cpu_us": before, "this_cpu_us": after, "ratio": before / after,
+    for i, first in enumerate(got["this"][0]):
+        before = statistics.median(run[i]["rhs_cpu_median_us"] for run in got["baseline"])
+        after = statistics.median(run[i]["rhs_cpu_median_us"] for run in got["this"])
+        rows.append({"scene": first["scene"], "baseline_cpu_us": before, "this_cpu_us": after, "ratio": before / after,
                      "repeats": repeats})
     return rows
 
