@@ -295,17 +295,18 @@ class PositionDynamic(Controller):
         """Along each touching contact's set-point direction n (normal or tangent): F_d/k beyond the
         undeformed surface or tangential anchor, along −n. The surface's acceleration along n and
         F̈_d/k are left out (a_d's component along n is 0)."""
-        x_d, v_d, a_d = inp.x_d.copy(), inp.v_d.copy(), inp.a_d.copy()
+        R = np.array((inp.x_d, inp.v_d, inp.a_d))  # rows x_d, v_d, a_d (copies)
+        target = np.zeros(3)
         for name, env in self.envs.items():
             if not inp.touching.get(name.partition(".")[0]) or name not in inp.force_d:
                 continue
             n = inp.normals[name]
             p_s, v_s = inp.surfaces[name]
             F_d, dF_d = inp.force_d[name]
-            x_d += n * (n @ p_s - F_d / env.k - n @ x_d)
-            v_d += n * (n @ v_s - dF_d / env.k - n @ v_d)
-            a_d -= n * (n @ a_d)
-        return x_d, v_d, a_d
+            target[0] = n.dot(p_s) - F_d / env.k  # along n: x_d = p_s − F_d/k, v_d = v_s − Ḟ_d/k, a_d = 0
+            target[1] = n.dot(v_s) - dF_d / env.k
+            R += np.multiply.outer(target - R.dot(n), n)
+        return R[0], R[1], R[2]
 
 
 # ---- A10 and hybrid ---------------------------------------------------------------------------
