@@ -1,7 +1,8 @@
 """Integrators for the smooth phases: scipy's ``solve_ivp`` methods by name, ``auto``, ``RK4``, ``DOP853C``.
 
-``DOP853C`` is DOP853 stepped by scipy's compiled core (:mod:`contactdyn.dop853`): the same
-method and step control, a fraction of ``solve_ivp``'s per-step cost.
+``DOP853C`` (the default) is DOP853 stepped by scipy's compiled core (:mod:`contactdyn.dop853`):
+the same method, the same steps and events as ``solve_ivp``'s ``DOP853`` (which stays selectable),
+at a fraction of its per-step cost.
 
 ``RK4`` is the classical fixed-step Runge–Kutta method (4 calls per step) with step
 ``solver.max_step`` [s] (required), cubic Hermite dense output and scipy's event location:

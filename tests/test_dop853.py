@@ -185,11 +185,15 @@ def test_interpolants_cost_three_calls_per_step_and_only_where_asked():
     ("case2_writer_b", 1.5, 1e-4),  # touch, impact, stick, slip, separation: measured 5e-6 N apart
 ])
 def test_scenes_agree_with_solve_ivp(scene, duration, force_tol):
-    """A whole hybrid run on DOP853C: the same events at the same times, channels within the error."""
+    """A whole hybrid run on DOP853C (the default) and on solve_ivp's DOP853: the same events at the same
+    times, channels within the error, the same number of steps to 1 % (measured: equal on B1, 1694
+    against 1691 on the writer; the core's own rejection rule took 26 % more on B1)."""
     from contactdyn import simulate
 
-    ref = simulate(scene, {"duration": duration})
-    got = simulate(scene, {"duration": duration, "solver.method": "DOP853C"})
+    ref = simulate(scene, {"duration": duration, "solver.method": "DOP853"})
+    got = simulate(scene, {"duration": duration})
+    assert got.stats["method"] == "DOP853C"
+    assert abs(got.stats["steps"] - ref.stats["steps"]) <= 0.01 * ref.stats["steps"]
     assert [(e["kind"], e["name"]) for e in got.events] == [(e["kind"], e["name"]) for e in ref.events]
     assert max((abs(a["t"] - b["t"]) for a, b in zip(got.events, ref.events, strict=True)), default=0.0) < 1e-7
     for name in (c for c in ref.channels if c.endswith(".F_n")):
