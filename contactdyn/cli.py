@@ -108,7 +108,7 @@ def _catalog() -> dict[str, Any]:
 
 def _integrator(name: str, implicit: tuple[str, ...], fixed: tuple[str, ...]) -> str:
     if name == "auto":
-        return "DOP853 (solve_ivp), switching to Radau where a decaying stiff mode holds the step"
+        return "DOP853C, switching to Radau where a decaying stiff mode holds the step"
     if name == "DOP853C":
         return "DOP853 on scipy's compiled core: solve_ivp's steps and events, less work per step (default)"
     if name == "DOP853":
