@@ -83,6 +83,17 @@ def test_rejections_follow_solve_ivp(fun, t_span, y0, kw):
     assert got.nfev == ref.nfev - rejected  # a rejected attempt skips the end call solve_ivp makes
 
 
+@pytest.mark.parametrize("max_step, first_step", [(0.05, None), (0.3, 2.0)])  # 2.0: a first step above max_step
+def test_max_step_as_solve_ivp(max_step, first_step):
+    """The core caps a step at hmax only after an accepted one; the first step is capped here: the same steps."""
+    kw = dict(rtol=1e-9, atol=1e-11, max_step=max_step, first_step=first_step)
+    ref = solve_ivp(oscillator, (0.0, 20.0), [1.0, 0.0], method="DOP853", **kw)
+    got = solve(oscillator, (0.0, 20.0), [1.0, 0.0], **kw)
+    assert len(got.t) == len(ref.t)
+    np.testing.assert_allclose(got.t, ref.t, rtol=1e-12, atol=0.0)  # measured: identical
+    assert float(np.diff(got.t).max()) <= max_step * (1.0 + 1e-12)
+
+
 def test_error_weights_live_in_the_workspace_rows():
     """The rejected attempt's error norm is read from the core's workspace, which keeps stages 1, 6–12
     only: every stage it does not keep has weight 0 in both of DOP853's error estimates."""
