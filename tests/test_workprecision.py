@@ -158,13 +158,13 @@ def test_finite_difference_jacobian_with_an_inert_state():
 
 def test_auto_picks_radau_for_a_near_rigid_contact_only():
     stiff = simulate(str(ROOT / "benchmarks" / "hard" / "stiff.toml"), {"solver.output_rate": 50.0})
-    assert stiff.stats["segments_by_method"] == {"DOP853": 1, "Radau": 1}  # switched after the step budget
+    assert stiff.stats["segments_by_method"] == {"DOP853C": 1, "Radau": 1}  # switched after the step budget
     assert stiff.stats["auto_switches"] == 1
     assert stiff.stats["stiffness"] > 5e3  # [1/s] the contact mode, ω = sqrt(k / m_y) = 6.6e3
     short = simulate(str(ROOT / "benchmarks" / "hard" / "stiff.toml"), {"duration": 0.02})
-    assert set(short.stats["segments_by_method"]) == {"DOP853"}  # 0.02 s: ~20 stability-bound steps only
+    assert set(short.stats["segments_by_method"]) == {"DOP853C"}  # 0.02 s: ~20 stability-bound steps only
     b1 = simulate("b1", {"duration": 0.02, "solver.method": "auto"})
-    assert set(b1.stats["segments_by_method"]) == {"DOP853"}
+    assert set(b1.stats["segments_by_method"]) == {"DOP853C"}
 
 
 def test_bench_errors_fall_with_the_tolerance(tmp_path):
