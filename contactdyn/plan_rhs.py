@@ -53,15 +53,10 @@ def make_rhs(plan):
     coulomb = [(m2 + m + i_fn, mu, T, consts, j, dT, dC, ci) for ci, i_fn, mu, T, consts, j, dT, dC
                in plan.coulomb_terms]
     dyn_tilt = plan.dyn_tilt
-    generic_ctl = not plan.affine_ctl
-    reads_forces = plan.phase.controller.uses_forces
     drives = drive_forces(plan)
-    ctl_call = controller_call(plan) if generic_ctl or drives is not None else None
-    fast_drives, readable_drives = (drives.fast, drives.readable) if drives is not None else (None, None)
-    folded = folded_solve(plan, controller_input(plan), drives) if (reads_forces and nr) or plan.phase.carrier \
-        else None
-    tf, o_gctl, i_e, feedforward = plan.tip_frame, plan.o_gctl, plan.i_e, plan._feedforward_torque
-    contact_torque = contact_torque_of(plan)
+    folded = folded_solve(plan, controller_input(plan), drives) \
+        if (plan.phase.controller.uses_forces and nr) or plan.phase.carrier else None
+    command = _command_function(plan, drives)
     z_slice = plan.z_slice
     solve = _solve1
     cat = np.concatenate
@@ -97,19 +92,8 @@ def make_rhs(plan):
         zdot = z = None
         if folded is not None:  # a force-reading controller with rows: its forces folded into the solve
             z, zdot = folded(t, x, Js, phi, o, A, b)
-        elif generic_ctl:
-            tau_c = contact_torque(b, Js) if reads_forces else None
-            tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
-            if drives is None:
-                b[:nv] += tau
-            else:
-                f = fast_drives(x, tau)
-                b[:nQ] += readable_drives(x, tau) if f is None else f
-        elif drives is not None:  # the affine task law through the motors
-            f = fast_drives(x, Js[tf].T.dot(o[o_gctl]) + feedforward(phi, phi[i_e:]))
-            if f is None:  # a voltage clips: the controller and the drives' law as they are
-                f = readable_drives(x, ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o)[0])
-            b[:nQ] += f
+        elif command is not None:
+            zdot = command(t, x, Js, phi, o, b)
         if z is None:
             z = solve(A, b)
             if not isfinite(z.dot(z)):
@@ -128,6 +112,40 @@ def make_rhs(plan):
         return xd
 
     return rhs
+
+
+def _command_function(plan, drives):
+    """add(t, x, Js, φ, o, b) -> ż: the controller's command, through the drives if any, added to b[:nQ];
+    None when the task law is all in the map P (no motors)."""
+    if plan.affine_ctl and drives is None:
+        return None
+    s = plan.system
+    nQ, nv = s.nQ, s.nv
+    ctl_call = controller_call(plan)
+    fast, readable = (drives.fast, drives.readable) if drives is not None else (None, None)
+    if plan.affine_ctl:  # the affine task law through the motors
+        tf, o_gctl, i_e, feedforward = plan.tip_frame, plan.o_gctl, plan.i_e, plan._feedforward_torque
+
+        def task_law(t, x, Js, phi, o, b):
+            f = fast(x, Js[tf].T.dot(o[o_gctl]) + feedforward(phi, phi[i_e:]))
+            if f is None:  # a voltage clips: the controller and the drives' law as they are
+                f = readable(x, ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o)[0])
+            b[:nQ] += f
+
+        return task_law
+    contact_torque = contact_torque_of(plan) if plan.phase.controller.uses_forces else None
+
+    def generic(t, x, Js, phi, o, b):
+        tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o,
+                             contact_torque(b, Js) if contact_torque is not None else None)
+        if fast is None:
+            b[:nv] += tau
+        else:
+            f = fast(x, tau)
+            b[:nQ] += readable(x, tau) if f is None else f
+        return zdot
+
+    return generic
 
 
 def _time_terms(plan):
