@@ -10,8 +10,9 @@ a stage law (:class:`~contactdyn.chain.ChainStage`), since only the linear law i
 The drives and controllers need none: the plan calls the drive law per call, and folds a
 force-reading law into its solve (:mod:`contactdyn.plan_fold`);
 
-and the system adds its own: the energy audit and a 2-D slip launching from rest (its
-direction is solved per call). :func:`declared_gaps` collects them when the system is
+and the system adds its own: the energy audit. (A 2-D slip launching from rest is compiled:
+the plan solves its direction per call on its own KKT system, :mod:`contactdyn.plan_rhs`.)
+:func:`declared_gaps` collects them when the system is
 built (``System.fast_path_gaps``, reported in ``Result.stats["fast_path_gaps"]``); the
 plan of a mode declines exactly when one of them applies to that mode (:func:`mode_gap`),
 or while a joint presses on its position limit (:data:`LIMIT`; every robot has limits, so
@@ -26,11 +27,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "LAUNCH", "LIMIT"]
+__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "LIMIT"]
 
 UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
 ENERGY = "energy audit (solver.record_energy)"
-LAUNCH = "a 2-D slip launching from rest (its direction is solved per call)"
 LIMIT = "a joint pressing on its position limit (contactdyn.limits: its row is not compiled)"
 
 
@@ -52,10 +52,6 @@ def declared_gaps(system) -> list[Gap]:
     if system.energy_slot >= 0:
         gaps.append(Gap("solver.record_energy", ENERGY, "always", lambda modes, phase: True))
     for ci, c in enumerate(system.contacts):
-        if c.friction is not None and len(c.tangents) == 2:
-            gaps.append(Gap(f"contact.{c.name}.tangent", LAUNCH, "while a 2-D slip launches from rest",
-                            lambda modes, phase, ci=ci: _launching(modes[ci])))
-    for ci, c in enumerate(system.contacts):
         for dc in c.chains:
             for k, stage in enumerate(dc.chain.stages):
                 if stage.fast_path_gap:
@@ -73,7 +69,3 @@ def mode_gap(system, modes, phase) -> str:
         if gap.applies(modes, phase):
             return gap.reason
     return ""
-
-
-def _launching(mode) -> bool:
-    return mode.from_rest and len(mode.slip) == 2 and not mode.stuck

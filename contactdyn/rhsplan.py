@@ -12,7 +12,8 @@ friction and the plain task-space PD law. A :class:`ModePlan` measures that affi
 vectors, so it is the same model by construction; the constraint rows are ``a·J`` plus
 constants, collected once. A call then costs Pinocchio's terms, one product ``W e``,
 one product for the rows and one small linear solve. What is not affine stays explicit:
-Coulomb friction ``−μ max(F_n, 0) d``, 2-D slip directions, other controllers.
+Coulomb friction ``−μ max(F_n, 0) d``, 2-D slip directions (a slide launching from rest:
+its direction solved per call on the plan's own KKT system), other controllers.
 
 A plan checks itself against :meth:`System.evaluate` when it is built (two states) and
 declines (``plan.ok`` false, ``plan.reason`` says why) where it cannot represent the
@@ -35,7 +36,6 @@ import numpy as np
 
 from .contact import ContactMode
 from .fastpath import UNDECLARED, mode_gap
-from .friction import slip_direction
 from .plan_kkt import CompiledKKT
 from .plan_probe import ProbedModel, affine_map
 from .plan_rhs import controller_call
@@ -94,12 +94,6 @@ class ModePlan(ProbedModel, CompiledKKT):
             return (f"{UNDECLARED}coordinates the plan does not know ({s.nQ - expected_nQ} beyond robot, bodies, "
                     "masses, motors)")
         return ""
-
-
-    def _direction(self, ci: int, o: np.ndarray) -> np.ndarray:
-        """The sliding direction d of contact ci at outputs o (:func:`~contactdyn.friction.slip_direction`'s rule)."""
-        c, mode = self.system.contacts[ci], self.modes[ci]
-        return slip_direction(self.system, o[self.o_vt[c.name]], mode)
 
 
     # ---- output samples, all at once (contactdyn.samples) ----------------------------------
