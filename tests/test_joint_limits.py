@@ -89,7 +89,7 @@ def test_velocity_and_effort_limits_are_reported(tmp_path, capsys):
 
 def test_start_outside_the_limits_is_a_clear_error(tmp_path):
     with pytest.raises(SceneError, match=r"robot.q0: expected a start posture within the joint limits \(joint 'swing' "
-                                         r"in \[1, 3\]"):
+                                         r"in \[1, 3\] rad; .*found '0.5 rad'"):
         simulate(pendulum(tmp_path, q0=[0.5]))
 
 
