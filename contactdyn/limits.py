@@ -14,9 +14,9 @@ A position limit of an active joint is handled like a rigid contact (``robot.joi
 - ``release`` event: λ reaches zero (the joint stops pressing) and the joint is free again.
 
 The joints pressing on a limit are part of the run's :class:`~contactdyn.system.Phase`
-(``Phase.limits``), so every segment knows its constraint rows; such segments run on
-``System.evaluate`` (the compiled plans decline them). Continuous joints (and limits given as
-lower = upper) have no position limit. Velocity and effort limits of the URDF (0: none given)
+(``Phase.limits``), so every segment knows its constraint rows; the compiled plans carry
+them as rows of their KKT system (:mod:`contactdyn.plan_probe`). Continuous joints (and
+limits given as lower = upper) have no position limit. Velocity and effort limits of the URDF (0: none given)
 are checked on the run's samples: count and first time per joint in ``Result.stats["limits"]``,
 a warning per joint in ``Result.meta["limit_warnings"]``.
 """
@@ -64,7 +64,7 @@ class JointLimits:
         """Event functions of one segment: ``limit`` for free joints, ``release`` for pressing ones.
 
         ``torque(t, x)`` gives the pressing joints' limit torques {index: λ} (needed only when
-        some joint presses; such segments run on ``System.evaluate``).
+        some joint presses).
         """
         out = []
         held = {i for i, _ in pressing}
@@ -114,16 +114,14 @@ class JointLimits:
         return [(i, s) for i, s in phase.limits if s * ev.limit_torque.get(i, 0.0) < -RELEASE_TOL]
 
 
-def limit_channels(system: Any, phases_of: list, evs: list) -> dict[str, np.ndarray]:
-    """``limit.torque`` [N·m or N] (per joint, 0 when free) and ``limit.side`` (+1 lower, −1 upper, 0 free)."""
-    n = len(phases_of)
-    torque, side = np.zeros((n, system.nv)), np.zeros((n, system.nv))
-    for k, (phase, ev) in enumerate(zip(phases_of, evs, strict=True)):
+def limit_channels(system: Any, phases_of: list, samples: Any) -> dict[str, np.ndarray]:
+    """``limit.torque`` [N·m or N] (per joint, 0 when free; from the output ``samples``,
+    :class:`~contactdyn.samples.Samples`) and ``limit.side`` (+1 lower, −1 upper, 0 free)."""
+    side = np.zeros((len(phases_of), system.nv))
+    for k, phase in enumerate(phases_of):
         for i, s in phase.limits:
             side[k, i] = s
-            if ev is not None:
-                torque[k, i] = ev.limit_torque.get(i, 0.0)
-    return {"limit.torque": torque, "limit.side": side}
+    return {"limit.torque": samples.limit_torque.copy(), "limit.side": side}
 
 
 def rate_limit_report(robot: Robot, t: np.ndarray, v: np.ndarray, tau: np.ndarray) -> tuple[dict, list[str]]:

@@ -155,6 +155,11 @@ class ModePlan(ProbedModel, CompiledKKT):
         F_f = self.stick_force(ci, t, x)
         return mu_s * self.normal_force(ci, t, x) - math.sqrt(float(F_f @ F_f))
 
+    def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate (the ``release`` event's)."""
+        z, _ = self.values(t, x)
+        return {i: float(z[k]) for i, k in self.limit_rows.items()}
+
     def stick_force(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
         """Friction force of a sticking contact ci in tangent coordinates [N]."""
         z, _ = self.values(t, x)

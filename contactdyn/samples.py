@@ -39,6 +39,7 @@ class Samples:
     def __init__(self, n: int, system):
         nv, nb = system.nv, len(system.body_names)
         self.tau = np.zeros((n, nv))
+        self.limit_torque = np.zeros((n, nv))  #: per joint [N·m or N], 0 unless pressing on a limit
         self.tip = np.zeros((n, 3))
         self.x_d = np.full((n, 3), np.nan)
         self.has_x_d = False
@@ -55,7 +56,7 @@ class Samples:
     @classmethod
     def concatenate(cls, parts: list[Samples], system) -> Samples:
         out = cls(0, system)
-        for name in ("tau", "tip", "x_d", "body_force"):
+        for name in ("tau", "limit_torque", "tip", "x_d", "body_force"):
             setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
         out.has_x_d = any(p.has_x_d for p in parts)
         out.has_F_d = {key: any(p.has_F_d[key] for p in parts) for key in out.has_F_d}
@@ -68,6 +69,8 @@ class Samples:
     def fill(self, k: int, ev) -> None:
         """Row k from a full :class:`~contactdyn.dynamics.Evaluation`."""
         self.tau[k] = ev.tau
+        for i, value in ev.limit_torque.items():
+            self.limit_torque[k, i] = value
         self.tip[k] = ev.p_tip
         if ev.x_d is not None and len(ev.x_d) == 3:
             self.x_d[k] = ev.x_d
@@ -215,6 +218,8 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
             S.x_d[:] = x_d
             S.has_x_d = True
     S.body_force[:] = O[:, plan.o_body]
+    for i, k in plan.limit_rows.items():
+        S.limit_torque[:, i] = Z[:, k]
     slots = {key: slot for slot, _, key in plan.time_ramps}
     for key, ramp in phase.forces.items():
         S.F_d[key][:] = Phi[:, plan.i_e + slots[key]] if key in slots else [ramp.at(t)[0] for t in ts]

@@ -55,6 +55,7 @@ def test_pendulum_falls_onto_its_limit_closed_form(tmp_path):
     assert hits[0]["velocity_before"] == pytest.approx(v_hit, rel=1e-8)
     assert hits[0]["impulse"] == pytest.approx(-M * L * L * v_hit, rel=1e-8)  # plastic: all momentum taken
     assert not [e for e in r.events if e["kind"] == "release"]  # gravity keeps it pressing
+    assert r.stats["fallback_modes"] == {} and r.stats["compiled_modes"] == 2  # free, then pressing: compiled
     after = r.t > hits[0]["t"] + 1e-3
     # the velocity is zeroed and stays so: what remains is the solver's absolute tolerance (atol 1e-12 per
     # step, over ~400 steps) and the Baumgarte return from the event's 1e-13 rad overshoot
@@ -108,6 +109,7 @@ def test_arm_stops_at_the_limit_presses_and_is_released(panda_run):
     r = panda_run
     kinds = [(e["kind"], e["name"]) for e in r.events if e["kind"] != "phase"]
     assert kinds == [("limit", "panda_joint4"), ("release", "panda_joint4")]
+    assert r.stats["fallback_modes"] == {}  # the pressing segment too: its row is on the compiled path
     hit, release = (e["t"] for e in r.events if e["kind"] in ("limit", "release"))
     assert 0.5 < hit < 1.0 < 1.5 < release  # hit on the way out, released on the way back
     q4 = r["q"][:, 3]
