@@ -72,7 +72,8 @@ def make_rhs(plan):
         if launch is not None:  # 2-D slides from rest: their directions solved on this call's KKT system
             b_ctl = []
             now = launch(t, x, phi, Js, y, b_ctl)
-        friction(y, Js, now)
+        if friction is not None:
+            friction(y, Js, now)
         z, zdot = solve(t, x, phi, Js, y, b_ctl)
         if with_y:
             xd = cat((x[nQ:2 * nQ], z[:nQ], y[o_y]))
@@ -92,7 +93,8 @@ def make_rhs(plan):
 
 def _friction_terms(plan):
     """terms(y, Js, modes): sliding friction into y = [A, b, o] in place — Coulomb forces −μ max(F, 0) d into b
-    where the normal force is known, the column tilt of 2-D sliding into A — with d by the modes' rule."""
+    where the normal force is known, the column tilt of 2-D sliding into A — with d by the modes' rule
+    (None when the mode has neither)."""
     s = plan.system
     nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
     m2 = m * m
@@ -100,6 +102,8 @@ def _friction_terms(plan):
     coulomb = [(m2 + m + i_fn, mu, T, consts, j, dT, dC, ci) for ci, i_fn, mu, T, consts, j, dT, dC
                in plan.coulomb_terms]
     dyn_tilt = plan.dyn_tilt
+    if not coulomb and not dyn_tilt:
+        return None
     A0 = plan.A0
     o_vt = [plan.o_vt[c.name] for c in s.contacts]
 
@@ -188,7 +192,8 @@ def _launch(plan, friction, solve):
             if any(launching(mode) for mode in trial):  # another slide from rest: resolved inside, as readable
                 trial = launch_directions(s, trial, slip_of, acceleration_of)
             yt = y.copy()
-            friction(yt, Js, trial)
+            if friction is not None:
+                friction(yt, Js, trial)
             z, _ = solve(t, x, phi, Js, yt, b_ctl)
             T, consts, j, i_dr = tangent[i]
             return T.dot(Js[j].dot(z[:nv]) + phi[i_dr:i_dr + 3]) + consts.dot(z[:s.nQ])
