@@ -138,9 +138,9 @@ T_SLOPE = np.array([[math.cos(SLOPE), 0.0, -math.sin(SLOPE)], [0.0, 1.0, 0.0]]) 
 MU_SLOPE = 0.3
 
 
-def slope_scene(v_tip: np.ndarray, duration: float = 0.2, **solver):
+def slope_scene(v_tip: np.ndarray, duration: float = 0.2, mu: float = MU_SLOPE, **solver):
     """cylindrical3 (base turn, radial slide q2 in [-0.5, 0.5] m, lift) at q = (0.3 rad, 0.5 m, 1 m): its radial
-    slide on its upper limit, its tip sliding at v_tip [m/s] on a rigid 30° slope with μ = 0.3 (2-D)."""
+    slide on its upper limit, its tip sliding at v_tip [m/s] on a rigid 30° slope with μ (2-D)."""
     robot = Robot.load("cylindrical3")
     q0 = np.array([0.3, 0.5, 1.0])
     J = robot.frame_jacobian(q0, "tip")[:3]
@@ -148,15 +148,17 @@ def slope_scene(v_tip: np.ndarray, duration: float = 0.2, **solver):
            "robot": {"urdf": "cylindrical3", "q0": q0.tolist(), "v0": np.linalg.solve(J, v_tip).tolist()},
            "contact": {"slope": {"point": robot.frame_position(q0, "tip").tolist(),
                                  "normal": {"direction": N_SLOPE.tolist()}, "bonded": True,
-                                 "tangent": {"model": "friction", "directions": T_SLOPE.tolist(), "mu": MU_SLOPE}}},
+                                 "tangent": {"model": "friction", "directions": T_SLOPE.tolist(), "mu": mu}}},
            "controller": {"kind": "joint_pd", "kp": 0.0, "kd": 0.0}}
     return parse_scene(doc), robot, q0, J
 
 
-@pytest.mark.parametrize("sideways", [0.5, 0.0])  # [m/s] the slip's sideways part before the impact
+@pytest.mark.parametrize("sideways", [0.5, 0.0, 0.35])  # [m/s] the slip's sideways part before the impact
 def test_a_limit_impact_takes_the_sliding_contacts_friction_impulse_momentum_balance(sideways):
     """The radial slide hits its upper limit while the tip slides: M ΔQ̇ = Jᵀ(n Λ_n + Tᵀ Λ_t) + e₂ Λ_limit
-    with Λ_t = −μ Λ_n d (d the slip's direction before), the radial slide and the normal velocity zero after."""
+    with |Λ_t| = μ Λ_n, the radial slide and the normal velocity zero after. At 0.5 and 0 m/s sideways the
+    tip slides on, Λ_t = −μ Λ_n d (d the slip's direction before); at 0.35 m/s sliding on would reverse the
+    slip, so the impact jams (eqs 30–31), holding needs more than the cone, and it slides where that pushes."""
     scene, robot, q, J = slope_scene(T_SLOPE[0] + sideways * T_SLOPE[1])
     system = System(scene)
     x, modes = system.initial_state()
@@ -166,8 +168,13 @@ def test_a_limit_impact_takes_the_sliding_contacts_friction_impulse_momentum_bal
     balance = M @ dv - J.T @ (N_SLOPE * imp.normal_impulse + T_SLOPE.T @ imp.friction_impulse)
     np.testing.assert_allclose(balance, [0.0, limit, 0.0], rtol=0, atol=1e-10 * np.abs(M @ dv).max())
     assert imp.contact == "slope" and not imp.jammed
+    assert np.linalg.norm(imp.friction_impulse) == pytest.approx(MU_SLOPE * imp.normal_impulse, rel=1e-12)
     d = imp.slip_before / np.linalg.norm(imp.slip_before)
-    np.testing.assert_allclose(imp.friction_impulse, -MU_SLOPE * imp.normal_impulse * d, rtol=1e-12)
+    turned = math.degrees(math.acos(float(-imp.friction_impulse @ d) / np.linalg.norm(imp.friction_impulse)))
+    if sideways == 0.35:
+        assert turned > 1.0  # (1.7°) not against the slip before: where the jammed impulse pushed
+    else:
+        np.testing.assert_allclose(imp.friction_impulse, -MU_SLOPE * imp.normal_impulse * d, rtol=1e-12)
     assert imp.normal_impulse > 10.0 and limit < -50.0  # [N·s] the slope and the limit both push back, hard
     assert abs(imp.v_after[1]) < 1e-12 and abs(N_SLOPE @ J @ imp.v_after) < 1e-12  # stopped, still on the plane
     assert imp.energy_loss == pytest.approx(0.5 * (imp.v_before @ M @ imp.v_before - imp.v_after @ M @ imp.v_after))
