@@ -124,15 +124,17 @@ def limit_impact(system, t: float, x: np.ndarray, modes: list[ContactMode], limi
     """A joint reaching its position limit, its row (i, side) the last of ``limits``: (x⁺, the impact,
     the limit's impulse Λ [N·m·s or N·s]).
 
-    The same momentum law as at a touch (:func:`impact`) with the limit row among the rows. A
-    touching contact that slides on a normal row (rigid or bonded: its normal impulse is finite)
-    takes its friction impulse by the same sliding/jamming branch; with several such contacts the
-    first does (the others' normal columns untilted). Without one, the impact's contact is "".
+    The same momentum law as at a touch (:func:`impact`) with the limit row among the rows. The
+    impact's contact is the first touching one with a normal row (rigid or bonded: its normal
+    impulse is finite), a sliding one with friction first: it takes its friction impulse by the
+    same sliding/jamming branch (with several sliding contacts, the others' normal columns stay
+    untilted); a sticking one holds through its stick rows. Without one, the contact is "".
     """
-    sliding = [c for c, m in zip(system.contacts, modes, strict=True)
-               if m.touching and not m.stuck and c.friction is not None and len(c.tangents)
-               and c.normal.chain.bonded_when_touching]
-    x_new, imp = impact(system, t, x, modes, sliding[0] if sliding else None, limits)
+    rowed = [(c, m) for c, m in zip(system.contacts, modes, strict=True)
+             if m.touching and c.normal.chain.bonded_when_touching]
+    sliding = [c for c, m in rowed if not m.stuck and c.friction is not None and len(c.tangents)]
+    contact = sliding[0] if sliding else rowed[0][0] if rowed else None
+    x_new, imp = impact(system, t, x, modes, contact, limits)
     i = limits[-1][0]
     return x_new, imp, imp.row_impulses[(system.limits.by_index[i].name, "limit", i)]
 

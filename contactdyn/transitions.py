@@ -138,7 +138,7 @@ class Transitions:
         """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (contactdyn.limits)."""
         x, phase, info, imp = self.system.limits.switch(self.system, t, x, modes, phase, event)
         self.log.events[-1].update(info)  # the joint, side, velocity before and impulse, with the event
-        if imp is not None and imp.contact:  # a sliding contact took its friction impulse: recorded as at a touch
+        if imp is not None and imp.contact:  # a contact took part (its friction impulse too): recorded as at a touch
             self._after_impact(imp, modes, joint=info["joint"], limit_impulse=info["impulse"])
         return x, phase, True
 

@@ -181,6 +181,21 @@ def test_a_limit_impact_takes_the_sliding_contacts_friction_impulse_momentum_bal
     assert imp.energy_loss > 0.0 and np.array_equal(x_after[3:6], imp.v_after)  # x = [Q, Q̇, y], nQ = 3
 
 
+def test_a_limit_impact_holds_a_sticking_contact_through_its_stick_rows():
+    """The same arm with its tip stuck (mode): the limit and the stick rows stop everything, the impulses balance
+    M ΔQ̇ with the friction impulse the stick rows' Λ_t (no cone test at an impact of a stuck contact)."""
+    scene, robot, q, J = slope_scene(T_SLOPE[0] + 0.5 * T_SLOPE[1], mu=5.0)
+    system = System(scene)
+    x, modes = system.initial_state()
+    _, imp, limit = limit_impact(system, 0.0, x, [modes[0].with_(stuck=True)], ((1, -1),))
+    M = robot.mass_matrix(q)
+    dv = imp.v_after - imp.v_before
+    balance = M @ dv - J.T @ (N_SLOPE * imp.normal_impulse + T_SLOPE.T @ imp.friction_impulse)
+    np.testing.assert_allclose(balance, [0.0, limit, 0.0], rtol=0, atol=1e-10 * np.abs(M @ dv).max())
+    assert imp.contact == "slope" and np.linalg.norm(imp.friction_impulse) > 1.0
+    np.testing.assert_allclose(J @ imp.v_after, 0.0, atol=1e-12)  # stuck on the plane, radial slide stopped
+
+
 def test_a_run_records_the_limit_impact_with_the_contacts_friction_impulse():
     """From 0.35 m the radial slide runs into its limit while the tip slides down the slope under gravity."""
     scene, *_ = slope_scene(T_SLOPE[0] + 0.5 * T_SLOPE[1])
