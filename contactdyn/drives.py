@@ -320,15 +320,15 @@ class Drives:
         return DriveOutput(applied, u, saturated, power, dissipation)
 
 
-def drive_channels(system, xs: np.ndarray, evs: list) -> dict[str, np.ndarray]:
+def drive_channels(system, xs: np.ndarray, samples) -> dict[str, np.ndarray]:
     """Result channels of the drives: voltages, commands and motor angles (only what the scene has)."""
     ch: dict[str, np.ndarray] = {}
     drives = system.drives
     if not drives.any_motor:
         return ch
     nv, nQ = system.nv, system.nQ
-    ch["tau_cmd"] = np.array([e.tau_cmd for e in evs])
-    u = np.array([e.u for e in evs])
+    ch["tau_cmd"] = samples.tau_cmd
+    u = samples.u
     if drives.motorized[:nv].any():
         ch["u"] = u[:, :nv]
     for k, name in enumerate(system.body_names):

@@ -17,8 +17,11 @@ unclips within one mode).
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
+from .drives import DriveOutput
 from .dynamics import drive_command
 from .plan_probe import affine_map
 
@@ -45,10 +48,20 @@ class CompiledDrives:
         return np.concatenate((f, u / self.u_max))
 
     def _law(self, x: np.ndarray, tau: np.ndarray, clip: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        f, out = self.output(x, tau, clip)
+        return f, out.u[self.limited]
+
+    def output(self, x: np.ndarray, tau: np.ndarray, clip: bool = True) -> tuple[np.ndarray, DriveOutput]:
+        """(the drives' generalized forces [N·m or N], the law's DriveOutput) at the joint command τ."""
         s = self.system
         f = np.zeros(self.nQ)
-        out = s.drives.apply(drive_command(s, tau, x), x, self.nQ, f, voltage=self.vmask, clip=clip)
-        return f, out.u[self.limited]
+        return f, s.drives.apply(drive_command(s, tau, x), x, self.nQ, f, voltage=self.vmask, clip=clip)
+
+    @cached_property
+    def V(self) -> np.ndarray:
+        """u = V [τ, x, 1]: the motorized drives' voltages [V], unclipped (read off the law like L; the output's)."""
+        nv, n, motorized = self.nv, self.system.n, self.system.drives.motorized
+        return affine_map(lambda e: self.output(e[nv:nv + n], e[:nv], clip=False)[1].u[motorized], nv + n + 1)
 
     def unclipped(self, y: np.ndarray) -> bool:
         """No voltage beyond its limit in y = L [τ, x, 1]."""

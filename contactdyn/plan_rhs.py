@@ -61,6 +61,7 @@ def make_rhs(plan):
     solve = _command_and_solve(plan)
     launch = _launch(plan, friction, solve) if any(launching(mode) for mode in plan.modes) else None
     plan.launch = launch
+    plan.friction_terms = friction
     plan.time_terms = time_terms
     plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0]
     modes = plan.modes
@@ -135,7 +136,7 @@ def _command_and_solve(plan):
     trial solves of a launch (:func:`_launch`) call a controller that reads no force once per call."""
     m = plan.m
     m2 = m * m
-    drives = drive_forces(plan)
+    drives = plan.compiled_drives = drive_forces(plan)  # (the output's batched drive channels read it too)
     reads_forces = plan.phase.controller.uses_forces
     folded = folded_solve(plan, controller_input(plan), drives) if (reads_forces and plan.nr) or plan.phase.carrier \
         else None
