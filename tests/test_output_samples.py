@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import contactdyn.rhsplan as rhsplan
+from contactdyn import parse_scene
 from contactdyn.samples import evaluated_samples
 from contactdyn.simulate import simulate
 
@@ -22,9 +23,19 @@ def _readable(plan, ts, X):
     return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
 
 
-@pytest.mark.parametrize("scene", SCENES)
-def test_batched_output_equals_evaluate(scene, monkeypatch):
-    overrides = {"duration": SCENES[scene], "solver.output_rate": 500.0}
+#: a prismatic axis under a joint PD asking far more than its voltage limit gives: it clips, then settles
+CASE3 = {"R": 0.175, "C_M": 0.0575, "J": 7.9e-4, "N": 50.0, "wheel_radius": 0.15, "u_max": 6.0}
+
+
+def _clipping_axis(drive: dict) -> dict:
+    return {"duration": 0.3, "solver": {"output_rate": 1000.0},
+            "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.0],
+                      "drive": drive},
+            "controller": {"kind": "joint_pd", "kp": 2e5, "kd": 0.0},
+            "phase": [{"name": "go", "reference": {"space": "joint", "start": [0.02], "moves": []}}]}
+
+
+def _assert_same_channels(scene, overrides, monkeypatch):
     fast = simulate(scene, overrides)
     monkeypatch.setattr(rhsplan, "plan_samples", _readable)
     ref = simulate(scene, overrides)
@@ -35,10 +46,18 @@ def test_batched_output_equals_evaluate(scene, monkeypatch):
         scale = 1.0 + np.nanmax(np.abs(want)) if np.any(np.isfinite(want)) else 1.0
         assert np.array_equal(np.isnan(got), np.isnan(want)), name
         assert np.nanmax(np.abs(got - want), initial=0.0) <= 1e-10 * scale, name
+    return fast
 
 
-def test_clipped_voltages_reach_the_output():
-    """case1's cart clips its motor voltage: the batched output gives the law's clipped u there, |u| = u_max."""
-    result = simulate("case1_cart", {"duration": 0.6, "solver.output_rate": 500.0})
-    u = result.channels["body.cart.u"] if "body.cart.u" in result.channels else result.channels["u"]
-    assert np.isclose(np.abs(u).max(), np.nanmax(np.abs(u))) and np.any(np.isclose(np.abs(u), np.abs(u).max()))
+@pytest.mark.parametrize("scene", SCENES)
+def test_batched_output_equals_evaluate(scene, monkeypatch):
+    _assert_same_channels(scene, {"duration": SCENES[scene], "solver.output_rate": 500.0}, monkeypatch)
+
+
+@pytest.mark.parametrize("drive", [{"kind": "dc_motor", **CASE3},
+                                   {"kind": "elastic", **CASE3, "c": 14000.0, "d": 0.0196}], ids=["rigid", "elastic"])
+def test_clipped_voltages_in_the_batched_output(drive, monkeypatch):
+    """Samples where a voltage clips take the drive law itself: the same u (at ±u_max), τ and motion channels."""
+    result = _assert_same_channels(parse_scene(_clipping_axis(drive)), None, monkeypatch)
+    u = result.channels["u"][:, 0]
+    assert np.mean(np.abs(u) == CASE3["u_max"]) > 0.1 and np.mean(np.abs(u) < CASE3["u_max"]) > 0.1
