@@ -67,7 +67,8 @@ def folded_solve(plan, make_input, drives):
 
     lam_cols = slice(nQ, nQ + nr)
 
-    def solve(t, x, Js, phi, o, A, b):
+    def detail(t, x, Js, phi, o, A, b):
+        """(z, ż, the solved joint command τ [N·m or N; V]): the output reads what the drives made of τ."""
         tau_c = torque(b, Js)
         inp = make_input(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
         cmd, zdot, carried = command_of(s, inp, phase, x)
@@ -77,19 +78,19 @@ def folded_solve(plan, make_input, drives):
         if not fold_rows and carried is None:  # as the readable model: the drives, then the plain solve
             s.drives.apply(cmd, x, nQ, b, voltage=vmask)  # b[:nQ] takes the drives' forces
             z = np.linalg.solve(A, b)
-            return (z if np.all(np.isfinite(z)) else plan._singular(A, b)), zdot
+            return (z if np.all(np.isfinite(z)) else plan._singular(A, b)), zdot, cmd[:nv]
         rows = Rows()
         for r in range(nr):
             rows.add(A[nQ + r, :nQ].copy(), -b[nQ + r], meta[r], -A[:nQ, nQ + r])
         f = b[:nQ].copy()
         f[:nv] += tau_c
-        _, qdd, lam, regular, _, zdot = solve_folded(s, inp, ctl, cmd, zdot, f, rows, x, vmask, carried)
+        _, qdd, lam, regular, full, zdot = solve_folded(s, inp, ctl, cmd, zdot, f, rows, x, vmask, carried)
         if not regular:
             plan.singular += 1
-        return np.concatenate((qdd, lam, b[w0:])), zdot
+        return np.concatenate((qdd, lam, b[w0:])), zdot, full[:nv]
 
     def matrix_fold(inp, tau, zdot, carried, x, A, b):
-        """(z, ż) with the fold in the plan's matrix, or None where the solved command clips a voltage."""
+        """(z, ż, τ) with the fold in the plan's matrix, or None where the solved command clips a voltage."""
         B, Dz = force_columns(inp, ctl, tau, zdot, meta, [-A[:nQ, nQ + r] for r in range(nr)], nv)
         y0 = drives.values(x, tau)
         Y = drives.L_tau.dot(B)  # the drives' forces and voltages per unit row force
@@ -106,14 +107,20 @@ def folded_solve(plan, make_input, drives):
             z = plan._singular(A2, b2)
         lam = z[lam_cols]
         y = y0 + Y.dot(lam)
+        tau = tau + B.dot(lam)
         if carried is not None:
             y += Y_b * z[i_b]
+            tau = tau + tau_b * z[i_b]
         if not drives.unclipped(y):
             return None
         if Dz is not None:
             zdot = zdot + Dz.dot(lam)
             if carried is not None and zdot_b is not None:
                 zdot = zdot + zdot_b * z[i_b]
-        return z, zdot
+        return z, zdot, tau
 
+    def solve(t, x, Js, phi, o, A, b):
+        return detail(t, x, Js, phi, o, A, b)[:2]
+
+    plan.folded_detail = detail
     return solve

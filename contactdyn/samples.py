@@ -112,19 +112,42 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     """Diagnostics at the states X[k] (times ts[k]) of this mode: one Pinocchio pass per
     sample, then the assembly, solve and read-out for all samples at once."""
     N = len(ts)
-    if plan.drives_per_call and (_folds(plan) or plan.launch is not None):
-        # the measured forces folded into the solve, a carried reference, a launch with drives: the readable model
+    if plan.drives_per_call and plan.launch is not None:  # a slide from rest under motors: the readable model
         return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
     S = Samples(N, plan.system)
     if N == 0:
         return S
-    _read_out(plan, S, ts, X, *_solve_samples(plan, ts, X))
+    _read_out(plan, S, ts, X, *(_solve_folded_samples if _folds(plan) else _solve_samples)(plan, ts, X))
     return S
 
 
 def _folds(plan) -> bool:
     """The plan's call folds the command into its solve (plan_rhs._command_and_solve's rule)."""
     return bool(plan.phase.controller.uses_forces and plan.nr) or plan.phase.carrier is not None
+
+
+def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
+    """As :func:`_solve_samples` for a plan folding measured forces or a carried reference into its solve:
+    each sample through the plan's own fold (:func:`~contactdyn.plan_fold.folded_solve`), which gives the
+    solved command; the drives' forces and voltages at those commands over all samples at once."""
+    s = plan.system
+    N, nv, m = len(ts), s.nv, plan.m
+    m2 = m * m
+    Phi = np.empty((N, plan.P.shape[1]))
+    Y = np.empty((N, plan.P.shape[0]))
+    Z = np.empty((N, m))
+    tau = np.empty((N, nv))
+    friction, detail = plan.friction_terms, plan.folded_detail
+    for k in range(N):
+        t, x = ts[k], X[k]
+        Phi[k] = phi = plan.phi_at(t, x)
+        Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+        Y[k] = y = plan.P.dot(phi)
+        if friction is not None:
+            friction(y, Js, plan.modes)
+        Z[k], _, tau[k] = detail(t, x, Js, phi, y[m2 + m:], y[:m2].reshape(m, m), y[m2:m2 + m])
+    J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
+    return Phi, Y[:, m2 + m:], Z, J_all, tau, {}, _drive_samples(plan.compiled_drives, X, tau)
 
 
 def _generic_command(plan):
