@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import contactdyn.rhsplan as rhsplan
-from contactdyn import parse_scene
+from contactdyn import Robot, parse_scene
 from contactdyn.samples import evaluated_samples
 from contactdyn.simulate import simulate
 
@@ -61,3 +61,21 @@ def test_clipped_voltages_in_the_batched_output(drive, monkeypatch):
     result = _assert_same_channels(parse_scene(_clipping_axis(drive)), None, monkeypatch)
     u = result.channels["u"][:, 0]
     assert np.mean(np.abs(u) == CASE3["u_max"]) > 0.1 and np.mean(np.abs(u) < CASE3["u_max"]) > 0.1
+
+
+def test_folded_forces_with_clipped_voltages_in_the_batched_output(monkeypatch):
+    """A7 pressing a bonded wall with a voltage limit (tests/test_controllers.py's case): the measured force
+    folded into the solve and the clip re-checked with it, through the plan's fold at every sample."""
+    q0 = [0.3, 1.2]  # [rad] the writer's pose, tip at p0
+    p0 = Robot.load("writer2r").frame_position(np.array(q0), "tip")
+    drive = {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": 0.000452, "N": 160.0, "N_star": 65.12, "u_max": 4.0}
+    doc = {"duration": 0.3, "solver": {"output_rate": 500.0},
+           "robot": {"urdf": "writer2r", "q0": q0, "drive": drive},
+           "controller": {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0},
+           "phase": [{"name": "main", "reference": {"space": "task", "start": (p0 + [0.01, 0.0, -0.03]).tolist(),
+                                                    "moves": []}}],
+           "contact": {"c": {"point": p0.tolist(), "bonded": True,
+                             "normal": {"direction": [-1, 0, 0], "model": "b", "k": 1e4, "b": 10.0, "m": 2.0}}}}
+    result = _assert_same_channels(parse_scene(doc), None, monkeypatch)
+    u = result.channels["u"]
+    assert np.mean(np.abs(u) == 4.0) > 0.05 and np.mean(np.abs(u) < 4.0) > 0.05
