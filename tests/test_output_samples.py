@@ -15,8 +15,8 @@ from contactdyn import Robot, parse_scene
 from contactdyn.samples import evaluated_samples
 from contactdyn.simulate import simulate
 
-#: scene -> a duration [s] that holds its phases' kinds (motor, elastic, force-reading, clipping)
-SCENES = {"case1_cart": 0.6, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "case3_b_force": 0.3}
+#: scene -> a duration [s] that holds its phases' kinds (motor, elastic, force-reading, a carried reference)
+SCENES = {"case1_cart": 1.1, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "case3_b_force": 0.3}
 
 
 def _readable(plan, ts, X):
