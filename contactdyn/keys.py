@@ -144,7 +144,8 @@ MEANINGS: dict[str, str] = {
     "controller.feedforward": "none; gravity: + g(q); bias: + h(q, q')",
     "controller.tool_axis": "tool direction in the tip frame to hold (none: orientation free)",
     "controller.tool_target": "world direction the tool axis is held along",
-    "controller.ko": "tool-axis hold: a stiffness (task_pd) or omega^2 of the tilt's error dynamics (operational_space)",
+    "controller.ko": "tool-axis hold: a stiffness (task_pd) or omega^2 of the tilt's error dynamics "
+                     "(operational_space)",
     "controller.do": "tool-axis hold: a damping (task_pd) or 2 zeta omega of the tilt's error dynamics "
                      "(operational_space)",
     "controller.kd_joint": "joint damping (damps what the task leaves free)",
