@@ -28,6 +28,7 @@ direction the arm cannot move (a task singularity) is a clear error.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,11 +68,17 @@ class OperationalSpaceConfig:
     kind: str = "operational_space"
 
 
-def _perpendicular(a: np.ndarray) -> np.ndarray:
-    """(2, 3): an orthonormal basis of the plane perpendicular to the unit vector a."""
-    e1 = np.cross(a, (1.0, 0.0, 0.0) if abs(a[0]) < 0.9 else (0.0, 1.0, 0.0))
-    e1 /= np.sqrt(e1 @ e1)
-    return np.array((e1, np.cross(a, e1)))
+def _cross(a: list[float], b: list[float]) -> tuple[float, float, float]:
+    """a × b of two 3-lists (np.cross costs ~15 µs a call, this ~0.3 µs)."""
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+def _perpendicular(a: list[float]) -> np.ndarray:
+    """(2, 3): an orthonormal basis (e1, a × e1) of the plane perpendicular to the unit 3-list a."""
+    e1 = (0.0, a[2], -a[1]) if abs(a[0]) < 0.9 else (-a[2], 0.0, a[0])  # a × x or a × y
+    s = 1.0 / math.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
+    e1 = (e1[0] * s, e1[1] * s, e1[2] * s)
+    return np.array((e1, _cross(a, e1)))
 
 
 @register
@@ -127,47 +134,46 @@ class OperationalSpace(Controller):
         self._k, self._m = k, m
         self._kp = np.broadcast_to(cfg.kp, k).copy()  # [N/m] per axis
         self._kd = np.broadcast_to(cfg.kd, k).copy()  # [N·s/m]
-        self._select = np.zeros((m, 6))  #: task rows from the world-aligned [linear; angular] frame terms
-        self._select[:k + len(forced), :3] = self._S
+        self._null = bool(cfg.k_null) and m < self.nv  #: a redundant arm with null-space damping
+        self._target = None if cfg.tool_target is None else cfg.tool_target.tolist()
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         cfg, k, m = self.config, self._k, self._m
-        sel = self._select
         a_task = np.zeros(m)  # a* [m/s², rad/s²], through Λ
         f = np.zeros(m)  # [N, N·m], directly
-        axes = self._S[:k]
+        axes, S = self._S[:k], self._S
         if inp.x_d is not None:
             a_task[:k] = axes @ inp.a_d
             f[:k] = self._kp * (axes @ (inp.x_d - inp.p_tip)) + self._kd * (axes @ (inp.v_d - inp.v_tip))
         else:
             f[:k] = -self._kd * (axes @ inp.v_tip)
+        Jt = np.empty((m, self.nv))
+        Jt[:len(S)] = S @ inp.J
+        drift = np.empty(m)
+        drift[:len(S)] = S @ inp.drift
         if cfg.tool_axis is not None:
-            a = inp.R_tip @ cfg.tool_axis  # current tool direction (world)
+            a = (inp.R_tip @ cfg.tool_axis).tolist()  # current tool direction (world)
             E = _perpendicular(a)
-            sel[m - 2:, 3:] = E
+            Jt[m - 2:] = E @ inp.J_ang
+            drift[m - 2:] = E @ inp.drift_ang
             omega = inp.J_ang @ inp.v  # [rad/s]
-            a_task[m - 2:] = E @ (cfg.ko * np.cross(a, cfg.tool_target) - cfg.do * omega)
-            Jt = sel @ np.concatenate((inp.J, inp.J_ang))
-            drift = sel @ np.concatenate((inp.drift, inp.drift_ang))
-        else:
-            Jt = sel[:, :3] @ inp.J
-            drift = sel[:, :3] @ inp.drift
+            a_task[m - 2:] = E @ (cfg.ko * np.array(_cross(a, self._target)) - cfg.do * omega)
         xdot = Jt @ inp.v
         L_inv = Jt @ _solve(inp.H, Jt.T)  # Λ⁻¹
         self._guard(L_inv, inp.t)
         rhs = a_task - drift
-        if cfg.k_null and m < self.nv:
+        if self._null:
             rhs += cfg.k_null * xdot
         f += _solve1(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
         for i, key in enumerate(self._force_keys):  # the set-points, directly along their directions [N]
             f[k + i] -= inp.force_d[key][0] + cfg.kd_normal * xdot[k + i]
         tau = Jt.T @ f + inp.h
-        if cfg.k_null and m < self.nv:
+        if self._null:
             tau -= cfg.k_null * (inp.H @ inp.v)
         return tau, None
 
     def _guard(self, L_inv: np.ndarray, t: float) -> None:
-        ratio = _det(L_inv) / np.prod(np.diag(L_inv))
+        ratio = _det(L_inv) / L_inv.diagonal().prod()
         if not ratio >= SINGULAR:  # also NaN
             what = "position axes, force directions" + (" and tool tilt" if self.config.tool_axis is not None else "")
             raise SimulationError(
