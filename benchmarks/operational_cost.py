@@ -1,15 +1,15 @@
 """Per-call cost of the writer's task law: ``operational_space`` against ``task_pd`` with its tool axis.
 
-    PYTHONPATH=. python3 benchmarks/operational_cost.py [--robots ur5,panda,writer5dof] [--calls 4000]
+    PYTHONPATH=. python3 benchmarks/operational_cost.py [--robots ur5,panda,writer5dof] [--calls 4000] [--runs 0]
 
 For each robot the writing scene (``case2_writer_ur5`` with robot.urdf/robot.tip changed, or
 ``case2_writer5dof``) is built twice: with its ``operational_space`` law and with the ``task_pd``
 law it used before (``TASK_PD``). On the states of 10 ms of the operational run (the first mode,
 the press, on the compiled plan) it times, interleaved (the laws alternate batch by batch;
 medians over 41 batches): the controller's ``command`` alone, on the same inputs, and each plan's
-whole right-hand side. Ratios are new / old. The force error each law runs at over the full task:
-benchmarks/robot_swap.py (new) and README "Swapping the robot" (both). Writes
-benchmarks/out/operational_cost.json.
+whole right-hand side. With ``--runs N``, also the whole 4.5 s run (``simulate``), N times each,
+alternating, the median wall time, with the pressure each law holds while drawing (t > 0.5 s,
+min / max [N]: the error it runs at). Ratios are new / old. Writes benchmarks/out/operational_cost.json.
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ from contactdyn.phases import reference_at
 from contactdyn.rhsplan import ModePlan
 from contactdyn.robot_catalog import TOOL_FRAMES
 from contactdyn.scene import parse_scene, sims_dir
-from contactdyn.simulate import prepare
+from contactdyn.simulate import prepare, run_system
+from contactdyn.system import System
 
 OUT = Path(__file__).parent / "out"
 BATCHES = 41
@@ -39,13 +40,17 @@ TASK_PD = {"kind": "task_pd", "kp": 800.0, "kd": 40.0, "axes": [[1.0, 0.0, 0.0],
            "kd_joint": 0.1, "kd_normal": 100.0, "feedforward": "gravity"}
 
 
-def _plan(robot: str, controller: dict | None):
+def _scene(robot: str, controller: dict | None):
     name = "case2_writer5dof" if robot == "writer5dof" else "case2_writer_ur5"
     doc = tomllib.loads((sims_dir() / f"{name}.toml").read_text())
     if controller is not None:
         doc["controller"] = controller
     overrides = {} if robot == "writer5dof" else {"robot.urdf": robot, "robot.tip": TOOL_FRAMES[robot]}
-    system, modes, phase, x0 = prepare(parse_scene(doc, overrides))
+    return parse_scene(doc, overrides)
+
+
+def _plan(robot: str, controller: dict | None):
+    system, modes, phase, x0 = prepare(_scene(robot, controller))
     plan = ModePlan(system, modes, phase)
     if not plan.ok:
         raise SystemExit(f"{robot}: not on the compiled path ({plan.reason})")
@@ -79,6 +84,26 @@ def _interleaved(fns: list, args: list, calls: int) -> list[float]:
     return [statistics.median(ts) for ts in times]
 
 
+def _runs(robot: str, repeats: int) -> dict:
+    """Whole runs of both laws, alternating: median wall [s] (built system, integration and output) and
+    the pressure while drawing [N]."""
+    scenes = {"new": _scene(robot, None), "old": _scene(robot, TASK_PD)}
+    walls: dict[str, list[float]] = {"new": [], "old": []}
+    out = {}
+    for _ in range(repeats):
+        for name, scene in scenes.items():
+            system = System(scene)
+            t0 = time.perf_counter()
+            result = run_system(system)
+            walls[name].append(time.perf_counter() - t0)
+            F = result["contact.pencil.F_n"][result.t > 0.5]
+            out[f"F_{name}"] = [float(F.min()), float(F.max())]
+            out[f"steps_{name}"] = result.stats["steps"]
+    out.update({f"run_{k}_s": statistics.median(v) for k, v in walls.items()})
+    out["run_ratio"] = out["run_new_s"] / out["run_old_s"]
+    return out
+
+
 def measure(robot: str, calls: int) -> dict:
     new, old = _plan(robot, None), _plan(robot, TASK_PD)
     sol = solve_ivp(new[1].rhs, (new[2].t_start, new[2].t_start + 0.01), new[3], method="DOP853", rtol=1e-8,
@@ -96,15 +121,22 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", default="ur5,panda,writer5dof")
     parser.add_argument("--calls", type=int, default=4000)
+    parser.add_argument("--runs", type=int, default=0, help="whole runs of each law (0: none)")
     args = parser.parse_args(argv)
     rows = []
     print(f"{'robot':<11} {'DOF':>3} {'law new / old [µs]':>19} {'ratio':>6} {'rhs new / old [µs]':>19} {'ratio':>6}")
     for robot in args.robots.split(","):
         r = measure(robot, args.calls)
+        if args.runs:
+            r.update(_runs(robot, args.runs))
         rows.append(r)
         print(f"{r['robot']:<11} {r['dof']:>3} {r['law_new_us']:>9.1f} / {r['law_old_us']:<7.1f} "
               f"{r['law_ratio']:>6.2f} {r['rhs_new_us']:>9.1f} / {r['rhs_old_us']:<7.1f} {r['rhs_ratio']:>6.2f}",
               flush=True)
+        if args.runs:
+            print(f"{'':<11} whole run new / old: {r['run_new_s']:.2f} / {r['run_old_s']:.2f} s (ratio "
+                  f"{r['run_ratio']:.2f}), steps {r['steps_new']} / {r['steps_old']}, pressure while drawing "
+                  f"{r['F_new'][0]:.2f}-{r['F_new'][1]:.2f} / {r['F_old'][0]:.2f}-{r['F_old'][1]:.2f} N", flush=True)
     OUT.mkdir(exist_ok=True)
     (OUT / "operational_cost.json").write_text(json.dumps(rows, indent=1))
 
