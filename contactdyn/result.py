@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import RunFileError
+from .errors import RunFileError, close_matches
 from .run_check import read_channels, read_sidecar
 
 __all__ = ["Result", "load_result", "run_files", "atomic_path", "atomic_write"]
@@ -45,9 +45,7 @@ class Result:
         try:
             return self.channels[name]
         except KeyError:
-            import difflib
-
-            close = difflib.get_close_matches(name, list(self.channels), n=3)
+            close = close_matches(name, self.channels)
             raise KeyError(f"no channel {name!r}; close: {close}; all: {sorted(self.channels)}") from None
 
     def save(self, path: str | os.PathLike) -> Path:

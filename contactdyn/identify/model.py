@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ContactdynError, SceneError
+from ..errors import ContactdynError, SceneError, close_matches
 from ..scene import SolverSpec
 from .data import Measurements
 from .params import Parameter
@@ -65,11 +65,9 @@ def read_channel(channels: dict[str, np.ndarray], channel: str, index: int | Non
 
 def check_columns(channels: dict[str, np.ndarray], data: Measurements) -> None:
     """Each column must name a scalar channel or a component of a vector channel of the run."""
-    import difflib
-
     for col in data.columns:
         if col.channel not in channels:
-            close = difflib.get_close_matches(col.channel, list(channels), n=3)
+            close = close_matches(col.channel, channels)
             hint = f" (close: {', '.join(close)})" if close else ""
             raise SceneError(col.name, f"a channel of the run{hint}; channels: {', '.join(sorted(channels))}",
                              "no such channel", data.file)
