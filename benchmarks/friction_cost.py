@@ -15,7 +15,7 @@ For each: wall time (the minimum of REPEATS runs, friction and free interleaved:
 is shared, noise only adds), right-hand-side evaluations, steps, segments, events, and the ratio friction/free.
 The load average is recorded.
 
-    PYTHONPATH=. /work/venv/bin/python benchmarks/friction_cost.py [--repeats 5]
+    PYTHONPATH=. python3 benchmarks/friction_cost.py [--repeats 5]
 
 Prints a table and writes benchmarks/out/friction_cost.json.
 """
