@@ -6,7 +6,8 @@
    (the first load of a file content: tree check + fork + build in the child) against a
    load whose probe is cached (tree check only), interleaved, medians over REPEATS; the
    ratio is the cost of the first load of a file in a process.
-2. Validation: ``parse_scene`` of every scene in sims/ (all checks incl. the run budget).
+2. Validation: ``load_scene`` of every scene in sims/ (the file read, then ``parse_scene``: all checks incl.
+   the run budget), the scenes interleaved, medians over REPEATS.
 3. Cleanup: a 2-worker sweep of b1 is killed with SIGKILL after its third run; the time
    until no process of its session remains (the workers, fork server, resource tracker),
    median over KILLS.
@@ -103,7 +104,7 @@ def main() -> None:
     for name, row in loads.items():
         print(f"{name:<18} {row['probed_ms']:12.2f} {row['cached_ms']:12.2f} {row['ratio']:7.2f}")
     scenes = validation_times(args.repeats)
-    print("\nparse_scene, all checks [ms]: " + ", ".join(f"{k} {v:.2f}" for k, v in scenes.items()))
+    print("\nload_scene (read + parse_scene, all checks) [ms]: " + ", ".join(f"{k} {v:.2f}" for k, v in scenes.items()))
     kills = cleanup_time(args.kills)
     print(f"\nSIGKILL of a 2-worker sweep -> no process left after {statistics.median(kills):.3f} s "
           f"(median of {len(kills)}; range {min(kills):.3f}-{max(kills):.3f} s)")
