@@ -20,9 +20,9 @@ from .writer import ROOT, SceneWriter
 
 __all__ = ["frame_view", "FOV", "ELEVATION", "ASPECT"]
 
-FOV = math.radians(75.0)  #: meshcat's vertical field of view
+FOV = math.radians(75.0)  #: [rad] meshcat's vertical field of view
 ASPECT = 4.0 / 3.0  #: width / height assumed when fitting the frame
-ELEVATION = math.radians(20.0)  #: camera raised above the surface plane, towards the normal
+ELEVATION = math.radians(20.0)  #: [rad] camera raised above the surface plane, towards the normal
 MARGIN = 1.15  #: the framed region (bounding spheres of the meshes included) fills 1/MARGIN of the view
 
 
