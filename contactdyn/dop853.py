@@ -19,9 +19,16 @@ that step, or output samples falling in it, then for all those steps in one batc
 Events follow ``solve_ivp``'s contract: ``g(t, y)`` at t0 and at every step end in
 increasing t; a sign change in the event's direction is located by ``brentq`` on the
 step's interpolant (xtol = rtol = 4 ε), and the earliest terminal root ends the run there.
-Step control is Hairer's (safety 0.9, step ratio at most ``GROW``, ``SHRINK`` after a rejection);
-stiffness detection is off, as in ``solve_ivp``. Verified against ``solve_ivp``'s DOP853
-in ``tests/test_dop853.py``.
+Step control is ``solve_ivp``'s, so both take the same steps. The first step is scipy's
+``select_initial_step`` (the core's own estimate uses other norms). After an accepted step
+the core's rule is solve_ivp's (h·min(MAX_FACTOR, SAFETY err^(−1/8)), no Lund stabilisation).
+After a rejection it is not: scipy's C core shrinks by a fixed factor (a slip in its translation
+of Hairer's code) where solve_ivp shrinks by max(MIN_FACTOR, SAFETY err^(−1/8)), and on B1 that
+cost 26 % more steps (306 against 243). So a rejection ends the core's run (``_Core``), the
+rejected step's error norm is read from the stages left in the workspace, and the run restarts
+with solve_ivp's smaller step; the step after it may not grow (solve_ivp's rule, enforced by
+reading the next step off its first stage time). Stiffness detection is off, as in
+``solve_ivp``. Verified against ``solve_ivp``'s DOP853 in ``tests/test_dop853.py``.
 """
 
 from __future__ import annotations
@@ -33,28 +40,33 @@ import numpy as np
 import scipy
 from scipy.integrate import _dop
 from scipy.integrate._ivp import dop853_coefficients as _coef
+from scipy.integrate._ivp.common import select_initial_step
+from scipy.integrate._ivp.rk import MAX_FACTOR, MIN_FACTOR, SAFETY
 from scipy.optimize import brentq
 
 from .errors import SceneError
 
 __all__ = ["solve", "DenseSolution", "Solution"]
 
-SAFETY = 0.9  #: step size safety factor [-]
-#: step ratio h_new / h after a rejected step [-]. scipy 1.17's C core shrinks a rejected step by
-#: this fixed factor (its translation reads facc1/safe where Hairer's Fortran has fac11/safe),
-#: solve_ivp by max(0.2, 0.9 err^(−1/8)). Hairer's default 1/3 measured the most even: 0.8 saves
-#: 15 % of B1's calls but, creeping up on a kink of the rhs (a force ramp's end) with many small
-#: cuts, accepts steps whose error estimate was just below 1 more often (case 3 a force at rtol
-#: 3e-8: F_n error 1.7e-2 N against 3e-5 N at 1/3; see docs/performance.md).
-#: It is also the lower bound of the ratio after an accepted step, never binding there.
-SHRINK = 1.0 / 3.0
-GROW = 10.0  #: largest step ratio h_new / h [-] (solve_ivp's MAX_FACTOR)
+#: the core's rejection factor (its fac1). scipy 1.17's C translation shrinks a rejected step by this fixed
+#: factor (it reads facc1/safe where Hairer's Fortran has fac11/safe); solve_ivp by max(MIN_FACTOR,
+#: SAFETY err^(−1/8)). So small that the core's next step is below its minimum: the run returns at
+#: once, and solve() restarts it with solve_ivp's step. It bounds accepted steps' ratios too, never binding.
+_END_AT_REJECTION = 1e-300
+_LIMIT_SLACK = 1e-9  #: relative slack when reading a step size back from a stage time (rounding) [-]
 MAX_STEPS = 10**9  #: step budget of one call (no practical limit; stiffness detection is off)
+_ERROR_ORDER = 7  #: DOP853's error estimator order (solve_ivp's error_estimator_order)
+_EXPONENT = -1.0 / (_ERROR_ORDER + 1)  #: step ratio = SAFETY err^_EXPONENT
 _EPS = np.finfo(float).eps
 _WORK0 = 20  #: k1 starts at work[20] (Hairer's WORK(21))
 # slots of the workspace block k1…k10 after an accepted step (each n long)
 _F_NEW, _S11, _S12, _Y_NEW = 0, 1, 2, 4  # k1 = f(t_new), k2 = stage 11, k3 = stage 12, k5 = y_new
 _STAGES_6_10 = slice(5, 10)  # k6…k10 = stages 6…10
+#: the stage held in each row of the workspace block after a rejected attempt (k1 is still f(t_old);
+#: k4 = Σ b k and k5 = y_new hold no stage): the error norms' weights E5, E3 on those rows (the other
+#: stages have weight 0, tests/test_dop853.py)
+_ROW_STAGE = (0, 10, 11, None, None, 5, 6, 7, 8, 9)
+_ERR_ROWS = np.array([[0.0 if s is None else E[s] for s in _ROW_STAGE] for E in (_coef.E5, _coef.E3)])
 _A, _C, _D = _coef.A, _coef.C, _coef.D
 _N = _coef.N_STAGES  # 12
 _CORE = getattr(_dop, "dopri853", None)  #: scipy's C core (scipy 1.17; older scipy has an f2py one)
@@ -205,38 +217,82 @@ class _EventWatch:
 
 
 class _Core:
-    """One call of scipy's compiled DOP853: its workspace, and the two callbacks it makes."""
+    """Runs of scipy's compiled DOP853 from the last accepted step: its workspace and its two callbacks.
 
-    def __init__(self, fun: Callable, t0: float, y0: np.ndarray, events: _EventWatch):
+    A run ends at t_end, at a terminal event, or at the first rejected step: with the core's
+    rejection factor at ``_END_AT_REJECTION`` its next step is below its own minimum and it returns
+    (ierr −3) with the rejected attempt's stages still in the workspace, from which
+    :meth:`error_norm` reads solve_ivp's error norm; the driver (:func:`solve`) then restarts it
+    with solve_ivp's smaller step. (At t = 0 the core's minimum is 0 and it tries once more: the
+    new attempt's first call tells, and the run is ended from ``f``.)
+    """
+
+    def __init__(self, fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, events: _EventWatch,
+                 rtol: float, atol: float, max_step: float):
         n = len(y0)
         self.fun, self.n, self.watch = fun, n, events
+        self.rtol, self.atol = rtol, atol
         self.work = np.zeros(11 * n + 21)  # Hairer's layout: 20 parameters, then k1…k10, y1
         self.iwork = np.zeros(21, dtype=np.int32)
-        self.steps = _Steps(fun, n, [t0], y0.copy())
+        self.work[1], self.work[2], self.work[3] = SAFETY, _END_AT_REJECTION, MAX_FACTOR
+        self.work[4] = -1.0  # no Lund stabilisation (beta = 0), as solve_ivp
+        self.work[5] = max_step if np.isfinite(max_step) else 0.0
+        self.steps = _Steps(fun, n, [t0], y0.copy(), f0)
         self.last_t, self.last_x, self.calls = None, None, 0  # the latest call: at a step end, the FSAL one
         self.failure: list[BaseException] = []
         self.nan = np.full(n, np.nan)
+        self.rejected: tuple[float, float] | None = None  #: (step [s], error norm) that ended the run
+        self.grew = False  #: the run was ended because the step after a retried one grew (solve_ivp forbids it)
 
-    def run(self, t_end: float, rtol: float, atol: float, max_step: float, first_step: float | None) -> int:
-        work = self.work
-        work[1], work[2], work[3] = SAFETY, SHRINK, GROW
-        work[4] = -1.0  # no Lund stabilisation (beta = 0)
-        work[5] = max_step if np.isfinite(max_step) else 0.0
-        work[6] = first_step or 0.0
+    def run(self, t_end: float, h: float, limit: float | None) -> int:
+        """One run of the core from the last accepted step with first step h [s] (the core's ierr).
+
+        ``limit`` [s]: after a rejection, the step following the first accepted one may not exceed it.
+        """
+        steps = self.steps
+        self.limit, self.check_next, self.rejected, self.grew = limit, False, None, False
+        self.fresh, self.started, self.since = True, False, 0
+        self.work[6] = h
+        self.iwork[:] = 0
         self.iwork[3] = -1  # no stiffness detection
-        y0 = self.steps.y0
-        if _CORE is None:
-            raise SceneError("solver.method", "DOP853C: scipy's compiled DOP853 (scipy.integrate._dop.dopri853, "
-                             "as in scipy 1.17); or DOP853", f"scipy {scipy.__version__} without it")
-        _, _, ierr = _CORE(self.f, self.steps.t[0], y0, t_end, rtol, atol, self.solout, 1, work,
-                                   self.iwork, MAX_STEPS, -1)
+        t = steps.t[-1]
+        _, _, ierr = _CORE(self.f, t, steps.y_old(len(steps.t) - 1), t_end, self.rtol, self.atol, self.solout,
+                           1, self.work, self.iwork, MAX_STEPS, -1)
         if self.failure:
             raise self.failure[0]
+        if ierr == -3 and self.since == _N - 1 and self.rejected is None and not self.grew:
+            h_step = self.last_t - steps.t[-1]  # the attempt's last stage is at its end
+            self.rejected = (h_step, self.error_norm(h_step))
         return int(ierr)
+
+    def error_norm(self, h_step: float) -> float:
+        """solve_ivp's error norm of the attempt whose stages are in the workspace (the rejected one)."""
+        n = self.n
+        block = self.work[_WORK0:_WORK0 + 10 * n].reshape(10, n)
+        y_old = self.steps.y_old(len(self.steps.t) - 1)
+        scale = self.atol + self.rtol * np.maximum(np.abs(y_old), np.abs(block[_Y_NEW]))
+        e5, e3 = (_ERR_ROWS @ block) / scale
+        s5, s3 = float(e5 @ e5), float(e3 @ e3)
+        if s5 == 0.0 and s3 == 0.0:
+            return 0.0
+        return abs(h_step) * s5 / np.sqrt((s5 + 0.01 * s3) * n)
 
     def f(self, t: float, x: np.ndarray) -> np.ndarray:
         """The right-hand side as the core calls it."""
-        if self.failure:
+        if self.failure or self.rejected or self.grew:
+            return self.nan  # the run is being ended (the core stops after this attempt)
+        if self.fresh:  # the core's first call: f at the start, known (f0 or the last FSAL value)
+            self.fresh = False
+            return self.steps.f_old(len(self.steps.t) - 1)
+        self.since += 1
+        if self.since == 1 and self.check_next:  # the first stage of the step after a retried one
+            self.check_next, limit, self.limit = False, self.limit, None
+            if (t - self.steps.t[-1]) / _C[1] > limit * (1.0 + _LIMIT_SLACK):
+                self.grew = True
+                return self.nan
+        elif self.since == _N and t != self.last_t:  # not the FSAL call: a new attempt (a rejection at t = 0)
+            h_step = self.last_t - self.steps.t[-1]
+            self.rejected = (h_step, self.error_norm(h_step))
             return self.nan
         x = x.copy()  # the core passes a view of its workspace: nothing may keep that past the run
         self.last_t, self.last_x = t, x
@@ -259,9 +315,11 @@ class _Core:
         steps, n = self.steps, self.n
         if self.failure:
             return -1
-        if steps.f0 is None:  # the call at t0: k1 = f(t0, y0)
-            steps.f0 = self.work[_WORK0:_WORK0 + n].copy()
+        if not self.started:  # the call at the run's start
+            self.started = True
             return 0
+        self.check_next = self.limit is not None  # the run's first accepted step (f clears the limit)
+        self.since = 0
         steps.t.append(t)
         steps.blocks.append(self.work[_WORK0:_WORK0 + 10 * n].reshape(10, n).copy())
         if not self.watch.events:
@@ -274,23 +332,63 @@ class _Core:
         return 0
 
 
+def _first_step(fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, t_end: float, max_step: float,
+                rtol: float, atol: float, first_step: float | None) -> float:
+    """solve_ivp's first step [s]: the given one (within max_step), else scipy's own estimate (one call)."""
+    if first_step:
+        return min(float(first_step), max_step)
+    return float(select_initial_step(fun, t0, y0, t_end, max_step, f0, 1.0, _ERROR_ORDER, rtol, atol))
+
+
 def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, float], y0: np.ndarray, *,
           rtol: float, atol: float, max_step: float = np.inf, first_step: float | None = None,
           events: Sequence[Callable] | None = None) -> Solution:
     """Integrate y' = fun(t, y) over t_span by compiled DOP853, locating the events (``solve_ivp``'s contract).
 
     ``atol`` and ``rtol`` are scalars; ``max_step`` [s] (inf: none) and ``first_step`` [s] (None:
-    Hairer's estimate) as in ``solve_ivp``. Events are terminal if their ``terminal`` attribute is.
+    solve_ivp's estimate) as in ``solve_ivp``. Events are terminal if their ``terminal`` attribute is.
+    The steps are solve_ivp's: after a rejection the step shrinks by max(MIN_FACTOR, SAFETY err^(−1/8))
+    and the next step may not grow.
     """
+    if _CORE is None:
+        raise SceneError("solver.method", "DOP853C: scipy's compiled DOP853 (scipy.integrate._dop.dopri853, "
+                         "as in scipy 1.17); or DOP853", f"scipy {scipy.__version__} without it")
     t0, t_end = float(t_span[0]), float(t_span[1])
     y0 = np.array(y0, float)
     watch = _EventWatch(events or [], t0, y0)
-    core = _Core(fun, t0, y0, watch)
-    ierr = core.run(t_end, rtol, atol, max_step, first_step)
+    f0 = np.asarray(fun(t0, y0), float)
+    calls = [1]
+
+    def counted(t, y):
+        calls[0] += 1
+        return fun(t, y)
+
+    h = _first_step(counted, t0, y0, f0, t_end, max_step, rtol, atol, first_step)
+    core = _Core(fun, t0, y0, f0, watch, rtol, atol, max_step)
+    limit, nreject, ierr = None, 0, 1
+    while t_end > core.steps.t[-1]:
+        t = core.steps.t[-1]
+        if h < 10.0 * abs(np.nextafter(t, np.inf) - t):  # solve_ivp's smallest step
+            ierr = -3
+            break
+        ierr = core.run(t_end, h, limit)
+        if core.rejected:  # solve_ivp's rule: shrink by the error, and the step after may not grow
+            h_step, err = core.rejected
+            h = limit = abs(h_step) * max(MIN_FACTOR, SAFETY * err ** _EXPONENT)
+            nreject += 1
+        elif core.grew:
+            h, limit = limit, None
+        else:
+            break
+    return _solution(core, watch, ierr, t_end, calls[0], nreject)
+
+
+def _solution(core: _Core, watch: _EventWatch, ierr: int, t_end: float, calls: int, nreject: int) -> Solution:
+    """The Solution of a finished integration (core's ierr: 1 end, 2 stopped by an event, < 0 failure)."""
     steps = core.steps
     t_stop = steps.t[-1]
     if ierr == 1:
-        steps.t[-1] = t_stop = t_end  # the core's last step ends at t0 + Σh, within rounding of t_end
+        steps.t[-1] = t_stop = t_end  # the core's last step ends at t + (t_end − t), within rounding of t_end
     status, message = 0, "The solver successfully reached the end of the integration interval."
     if ierr == 2 and watch.hits and watch.terminal[watch.hits[-1][1]]:
         status, message, t_stop = 1, "A termination event occurred.", watch.hits[-1][0]
@@ -302,5 +400,5 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     if status == 1:
         ts[-1] = t_stop
         ys[:, -1] = dense(t_stop)
-    return Solution(ts, ys, dense, watch.t_events(), status, message, core.calls + steps.calls,
-                    int(core.iwork[18]), int(core.iwork[19]))
+    return Solution(ts, ys, dense, watch.t_events(), status, message, calls + core.calls + steps.calls,
+                    len(steps.t) - 1, nreject)

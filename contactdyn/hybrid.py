@@ -35,6 +35,7 @@ from .contact import ContactMode
 from .errors import SceneError, SimulationError
 from .events import EventLog, StepBudget, segment_events
 from .integrators import (
+    AUTO_EXPLICIT,
     EXPLICIT,
     FIXED,
     IMPLICIT,
@@ -143,10 +144,10 @@ class HybridRun:
         h0 = min(self.next_step, t_end - t) if self.next_step else None
         plan = self._plan(modes, phase)
         fun = plan.rhs if plan.ok else system.rhs(modes, phase)
-        scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or "DOP853")
+        scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
-            if self.solver.method == "auto" and method == "DOP853" and self.auto_state is None:
+            if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
                 events = [*events, StepBudget(STEP_BUDGET)]
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
@@ -172,7 +173,7 @@ class HybridRun:
         stiff, lam = stability_bound(fun, t, x, h, span)
         self.stats["rhs_evals"] += len(x) + 1
         self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
-        self.auto_state = "Radau" if stiff else "DOP853"
+        self.auto_state = "Radau" if stiff else AUTO_EXPLICIT
         if stiff:
             self.stats["auto_switches"] = self.stats.get("auto_switches", 0) + 1
         else:

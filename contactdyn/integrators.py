@@ -1,27 +1,28 @@
 """Integrators for the smooth phases: scipy's ``solve_ivp`` methods by name, ``auto``, ``RK4``, ``DOP853C``.
 
-``DOP853C`` is DOP853 stepped by scipy's compiled core (:mod:`contactdyn.dop853`): the same
-method and step control, a fraction of ``solve_ivp``'s per-step cost.
+``DOP853C`` (the default) is DOP853 stepped by scipy's compiled core (:mod:`contactdyn.dop853`):
+the same method, the same steps and events as ``solve_ivp``'s ``DOP853`` (which stays selectable),
+at a fraction of its per-step cost.
 
 ``RK4`` is the classical fixed-step Runge–Kutta method (4 calls per step) with step
 ``solver.max_step`` [s] (required), cubic Hermite dense output and scipy's event location:
 the like-for-like comparison with fixed-step simulators (MuJoCo's RK4, Drake's discrete
 plant). It has no error control: its error is whatever the step gives.
 
-``auto`` detects stiffness by what the explicit method does, as LSODA does, rather than
-by eigenvalues alone (a stiff mode that nothing excites, e.g. a relaxed massless surface
-end of rate k/b = 1e5 1/s, costs an explicit method nothing). A segment starts with
-DOP853 and a budget of ``STEP_BUDGET`` steps. When the budget runs out, the eigenvalues λ
-of the finite-difference Jacobian ∂f/∂x (n + 1 calls of the compiled right-hand side) are
-compared with the step size h the method had reached: if some mode decays within the rest
-of the segment (−Re λ · T ≥ ``DECAY_SPAN``) and h|λ| lies in ``STABILITY_BAND`` — the
-step is held at the edge of DOP853's stability region, not set by accuracy — the rest of
-the segment runs with Radau IIA (order 5, L-stable) and the same finite-difference
-Jacobian; else DOP853 goes on without a budget. A fast mode that does not decay (an
-undamped stiff contact ringing) must be resolved by either method, and DOP853's steps are
-cheaper. Measured (docs/performance.md): near-rigid contact 1e8 N/m, 2 s: DOP853 1.9 s,
-Radau 0.32 s; 1e-3 kg equivalent mass: 4.0 s against 0.75 s; on scenes without such modes
-``auto`` is DOP853 and costs nothing more.
+``auto`` detects stiffness by what the explicit method does, as LSODA does, rather than by
+eigenvalues alone (a stiff mode that nothing excites, e.g. a relaxed massless surface end
+of rate k/b = 1e5 1/s, costs an explicit method nothing). A segment starts with DOP853
+(``AUTO_EXPLICIT``: the compiled one) and a budget of ``STEP_BUDGET`` steps. When the
+budget runs out, the eigenvalues λ of the finite-difference Jacobian ∂f/∂x (n + 1 calls of
+the compiled right-hand side) are compared with the step size h the method had reached: if
+some mode decays within the rest of the segment (−Re λ · T ≥ ``DECAY_SPAN``) and h|λ| lies
+in ``STABILITY_BAND`` — the step is held at the edge of DOP853's stability region, not set
+by accuracy — the rest of the segment runs with Radau IIA (order 5, L-stable) and the same
+finite-difference Jacobian; else DOP853 goes on without a budget. A fast mode that does
+not decay (an undamped stiff contact ringing) must be resolved by either method, and
+DOP853's steps are cheaper. Measured (docs/performance.md): near-rigid contact 1e8 N/m, 2
+s: DOP853 1.9 s, Radau 0.32 s; 1e-3 kg equivalent mass: 4.0 s against 0.75 s; on scenes
+without such modes ``auto`` is DOP853 and costs nothing more.
 """
 
 from __future__ import annotations
@@ -34,13 +35,14 @@ from scipy.integrate import DenseOutput, OdeSolver, solve_ivp
 
 from . import dop853
 
-__all__ = ["METHODS", "IMPLICIT", "EXPLICIT", "FIXED", "stability_bound", "jacobian_eigenvalues",
+__all__ = ["METHODS", "IMPLICIT", "EXPLICIT", "FIXED", "AUTO_EXPLICIT", "stability_bound", "jacobian_eigenvalues",
            "FiniteDifferenceJacobian", "RK4", "solver_class", "integrate"]
 
 #: ``auto``, explicit Runge–Kutta methods and the implicit ones for stiff scenes
 METHODS = ("auto", "DOP853", "DOP853C", "RK45", "RK23", "Radau", "BDF", "LSODA", "RK4")
 EXPLICIT = ("DOP853", "DOP853C", "RK45", "RK23", "RK4")
 COMPILED = ("DOP853C",)  #: run by contactdyn.dop853 rather than solve_ivp
+AUTO_EXPLICIT = "DOP853C"  #: ``auto``'s method until the step budget says a segment is stiff
 FIXED = ("RK4",)  #: fixed-step methods: the step is solver.max_step
 IMPLICIT = ("Radau", "BDF", "LSODA")
 

@@ -125,7 +125,7 @@ class PhaseSpec:
 
 @dataclass(frozen=True)
 class SolverSpec:
-    method: str = "DOP853"
+    method: str = "DOP853C"  #: DOP853 on scipy's compiled core (contactdyn.dop853); "DOP853": solve_ivp's
     rtol: float = 1e-8
     atol: float = 1e-10
     max_step: float = math.inf  #: [s]

@@ -100,7 +100,7 @@ def scene_cases(tmp: Path) -> list[Case]:
                         "non-zero direction"),
         "phase_number": (B1.replace("[[phase]]", "phase = 5\n[[xphase]]"), 2, "phase"),
         "solver_number": (B1.replace("[solver]", "solver = 5\n[xsolver]"), 2, "solver"),
-        "method": (B1.replace('method = "DOP853"', 'method = "Euler"'), 2, "solver.method: expected one of"),
+        "method": (B1.replace('method = "DOP853C"', 'method = "Euler"'), 2, "solver.method: expected one of"),
         "controller_kind": (B1.replace('kind = "task_pd"', 'kind = "nope"'), 2, "controller"),
         "gravity_2": (B1.replace("gravity = [0.0, 0.0, 0.0]", "gravity = [0.0, 0.0]"), 2, "robot.gravity"),
         "k_inf": (B1.replace("normal.k = 1e5", "normal.k = inf"), 2, "contact.tip.normal.k: expected a finite"),
