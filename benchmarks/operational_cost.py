@@ -15,22 +15,26 @@ min / max [N]: the error it runs at). Ratios are new / old. Writes benchmarks/ou
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
-import statistics
-import time
+import sys
 import tomllib
 from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from contactdyn.controllers import ControlInput
-from contactdyn.phases import reference_at
-from contactdyn.rhsplan import ModePlan
-from contactdyn.robot_catalog import TOOL_FRAMES
-from contactdyn.scene import parse_scene, sims_dir
-from contactdyn.simulate import prepare, run_system
-from contactdyn.system import System
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from timing import interleaved  # noqa: E402
+
+from contactdyn.controllers import ControlInput  # noqa: E402
+from contactdyn.phases import reference_at  # noqa: E402
+from contactdyn.rhsplan import ModePlan  # noqa: E402
+from contactdyn.robot_catalog import TOOL_FRAMES  # noqa: E402
+from contactdyn.scene import parse_scene, sims_dir  # noqa: E402
+from contactdyn.simulate import prepare, run_system  # noqa: E402
+from contactdyn.system import System  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
 BATCHES = 41
@@ -70,36 +74,32 @@ def _input(system, phase, t: float, x: np.ndarray) -> ControlInput:
                         drift_ang=ft.angular_drift)
 
 
-def _interleaved(fns: list, args: list, calls: int) -> list[float]:
-    """Median seconds per call of each function, the functions alternating batch by batch."""
+def _per_call(fns: dict, args: dict, calls: int) -> dict[str, float]:
+    """Median seconds per call of each function over BATCHES batches, the functions alternating batch by
+    batch (benchmarks/timing.py); each batch calls its function on the next of its argument tuples."""
     per_batch = max(calls // BATCHES, 1)
-    times: list[list[float]] = [[] for _ in fns]
-    for b in range(BATCHES):
-        for i, fn in enumerate(fns):
-            a = args[i][b % len(args[i])]
-            t0 = time.perf_counter()
+
+    def batch(fn, cycle):
+        def run():
+            a = next(cycle)
             for _ in range(per_batch):
                 fn(*a)
-            times[i].append((time.perf_counter() - t0) / per_batch)
-    return [statistics.median(ts) for ts in times]
+        return run
+
+    times = interleaved({k: batch(fn, itertools.cycle(args[k])) for k, fn in fns.items()}, BATCHES)
+    return {k: t.wall / per_batch for k, t in times.items()}
 
 
 def _runs(robot: str, repeats: int) -> dict:
-    """Whole runs of both laws, alternating: median wall [s] (built system, integration and output) and
+    """Whole runs of both laws, alternating: median wall [s] (the System built, integrated, sampled) and
     the pressure while drawing [N]."""
     scenes = {"new": _scene(robot, None), "old": _scene(robot, TASK_PD)}
-    walls: dict[str, list[float]] = {"new": [], "old": []}
-    out = {}
-    for _ in range(repeats):
-        for name, scene in scenes.items():
-            system = System(scene)
-            t0 = time.perf_counter()
-            result = run_system(system)
-            walls[name].append(time.perf_counter() - t0)
-            F = result["contact.pencil.F_n"][result.t > 0.5]
-            out[f"F_{name}"] = [float(F.min()), float(F.max())]
-            out[f"steps_{name}"] = result.stats["steps"]
-    out.update({f"run_{k}_s": statistics.median(v) for k, v in walls.items()})
+    times = interleaved({k: (lambda sc=sc: run_system(System(sc))) for k, sc in scenes.items()}, repeats)
+    out: dict = {}
+    for name, t in times.items():
+        F = t.last["contact.pencil.F_n"][t.last.t > 0.5]
+        out.update({f"run_{name}_s": t.wall, f"F_{name}": [float(F.min()), float(F.max())],
+                    f"steps_{name}": t.last.stats["steps"]})
     out["run_ratio"] = out["run_new_s"] / out["run_old_s"]
     return out
 
@@ -109,9 +109,10 @@ def measure(robot: str, calls: int) -> dict:
     sol = solve_ivp(new[1].rhs, (new[2].t_start, new[2].t_start + 0.01), new[3], method="DOP853", rtol=1e-8,
                     atol=1e-10)
     states = [(float(t), sol.y[:, i].copy()) for i, t in enumerate(sol.t)]
-    inputs = [[(_input(s, ph, t, x),) for t, x in states] for s, _, ph, _ in (new, old)]
-    law_new, law_old = _interleaved([new[2].controller.command, old[2].controller.command], inputs, calls)
-    rhs_new, rhs_old = _interleaved([new[1].rhs, old[1].rhs], [states, states], calls)
+    inputs = {k: [(_input(s, ph, t, x),) for t, x in states] for k, (s, _, ph, _) in (("new", new), ("old", old))}
+    law = _per_call({"new": new[2].controller.command, "old": old[2].controller.command}, inputs, calls)
+    rhs = _per_call({"new": new[1].rhs, "old": old[1].rhs}, {"new": states, "old": states}, calls)
+    law_new, law_old, rhs_new, rhs_old = law["new"], law["old"], rhs["new"], rhs["old"]
     return {"robot": robot, "dof": new[0].nv, "states": len(states), "law_new_us": 1e6 * law_new,
             "law_old_us": 1e6 * law_old, "law_ratio": law_new / law_old, "rhs_new_us": 1e6 * rhs_new,
             "rhs_old_us": 1e6 * rhs_old, "rhs_ratio": rhs_new / rhs_old}
