@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from before_after import use_tree  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 use_tree()
 
@@ -64,15 +65,13 @@ def recorded_run(name: str):
     return result, run_s, seen["system"], seen["segments"], seen["grid"]
 
 
-def _output(system, segments, grid, readable: bool) -> tuple[float, dict]:
-    """(CPU s, channels) of the output pass, batched or readable."""
+def _output(system, segments, grid, readable: bool) -> dict:
+    """The channels of the output pass, batched or readable."""
     batched = rhsplan.plan_samples
     if readable:
         rhsplan.plan_samples = _readable
     try:
-        t0 = time.process_time()
-        ch = sample_segments(system, segments, grid, {"singular_solves": 0})
-        return time.process_time() - t0, ch
+        return sample_segments(system, segments, grid, {"singular_solves": 0})
     finally:
         rhsplan.plan_samples = batched
 
@@ -92,20 +91,15 @@ def measure(scenes: list[str], repeats: int) -> list[dict]:
     for name in scenes:
         result, run_s, system, segments, grid = recorded_run(name)
         n = len(grid)
-        fast, slow, hand = [], [], []
-        for _ in range(repeats):
-            t0 = time.process_time()
-            b1_reference.run()
-            hand.append((time.process_time() - t0) / HAND_WRITTEN_SPAN * 1e3)
-            s_fast, ch_fast = _output(system, segments, grid, readable=False)
-            s_slow, ch_slow = _output(system, segments, grid, readable=True)
-            fast.append(s_fast / n * 1e6)
-            slow.append(s_slow / n * 1e6)
-        f, s = statistics.median(fast), statistics.median(slow)
+        times = interleaved({"hand": b1_reference.run,
+                             "batched": partial(_output, system, segments, grid, readable=False),
+                             "readable": partial(_output, system, segments, grid, readable=True)}, repeats)
+        f, s = times["batched"].cpu / n * 1e6, times["readable"].cpu / n * 1e6
         rows.append({"scene": name, "samples": n, "batched_us": f, "readable_us": s, "speedup": s / f,
-                     "max_rel_diff": _difference(ch_fast, ch_slow), "output_share_of_run": f * n * 1e-6 / run_s,
+                     "max_rel_diff": _difference(times["batched"].last, times["readable"].last),
+                     "output_share_of_run": f * n * 1e-6 / run_s,
                      "batched_ms_per_s": f * n * 1e-3 / float(result.t[-1]),
-                     "hand_written_ms_per_s": statistics.median(hand)})
+                     "hand_written_ms_per_s": times["hand"].cpu / HAND_WRITTEN_SPAN * 1e3})
     return rows
 
 
