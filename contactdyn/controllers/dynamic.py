@@ -217,6 +217,38 @@ def _tangent_nominal(context: BindContext, force, nominal) -> NominalEnvironment
     return env
 
 
+class _ComputedTorque(Controller):
+    """The computed torque shared by A7 (task space), A10 and hybrid, around their tip targets.
+
+    :meth:`tip_targets` gives (a*, f_swap, ż): the desired tip acceleration [m/s²], the tip force
+    swapped into τ [N] (A10's cancel = "target") and the states' rates. They are affine in the
+    tip's motion, the reference, the measured forces, the set-points, the surfaces and z (for a
+    fixed contact mode), so the compiled path reads them off by unit probes
+    (:mod:`contactdyn.plan_law`); τ follows from them here, on both paths.
+    """
+
+    uses_forces = True
+    reads_orientation = False
+    in_task_space = False  #: the command is computed_torque(tip_targets(...))
+
+    def tip_targets(self, inp: ControlInput) -> tuple:
+        raise NotImplementedError
+
+    def computed_torque(self, inp: ControlInput, a: np.ndarray, f_swap: np.ndarray | None) -> np.ndarray:
+        """τ = H q̈*(a) + h − τ_c (+ Jᵀ f_swap) [N·m or N]."""
+        qdd = joint_acceleration(inp, a, self.config.k_null, self._pinv)
+        tau = _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact
+        if f_swap is not None:
+            tau += inp.J.T @ f_swap
+        return tau
+
+    def torque_increments(self, inp: ControlInput, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
+        """∂τ for changes of the tip targets, one per column: H J⁺ da (+ Jᵀ df) [N·m or N]."""
+        dqdd = self._pinv(inp.J) @ da
+        dtau = inp.H @ dqdd if self._rotor is None else inp.H @ dqdd - self._rotor[:, None] * dqdd
+        return dtau if df is None else dtau + inp.J.T @ df
+
+
 # ---- A7 -----------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PositionDynamicConfig:
@@ -231,12 +263,10 @@ class PositionDynamicConfig:
 
 
 @register
-class PositionDynamic(Controller):
+class PositionDynamic(_ComputedTorque):
     """A7: tau = H q" + h - tau_c with error dynamics eta" = -kp eta - kv eta', in joint or task space."""
 
     name = "position_dynamic"
-    uses_forces = True
-    reads_orientation = False
 
     @staticmethod
     def applies_force_setpoints(config: PositionDynamicConfig) -> bool:
@@ -273,23 +303,29 @@ class PositionDynamic(Controller):
             self.envs = {f.key: normals[f.contact] if f.direction == "n" else
                          _tangent_nominal(context, f, cfg.nominal) for f in forces}
 
+    @property
+    def in_task_space(self) -> bool:
+        return self.config.space == "task"
+
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         cfg = self.config
-        if cfg.space == "joint":
-            if inp.x_d is None:
-                qdd = -cfg.kv * inp.v
-            else:
-                qdd = inp.a_d - cfg.kp * (inp.q - inp.x_d) - cfg.kv * (inp.v - inp.v_d)
+        if cfg.space == "task":
+            return self.computed_torque(inp, *self.tip_targets(inp)[:2]), None
+        if inp.x_d is None:
+            qdd = -cfg.kv * inp.v
         else:
-            if inp.x_d is None:
-                a = -cfg.kv * inp.v_tip
-            else:
-                x_d, v_d, a_d = inp.x_d, inp.v_d, inp.a_d
-                if self.envs:
-                    x_d, v_d, a_d = self._pressing_reference(inp)
-                a = a_d - cfg.kp * (inp.p_tip - x_d) - cfg.kv * (inp.v_tip - v_d)
-            qdd = joint_acceleration(inp, a, cfg.k_null, self._pinv)
+            qdd = inp.a_d - cfg.kp * (inp.q - inp.x_d) - cfg.kv * (inp.v - inp.v_d)
         return _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact, None
+
+    def tip_targets(self, inp: ControlInput) -> tuple[np.ndarray, None, None]:
+        """(a*, no force swap, no states): the desired tip acceleration [m/s²] of the task-space law."""
+        cfg = self.config
+        if inp.x_d is None:
+            return -cfg.kv * inp.v_tip, None, None
+        x_d, v_d, a_d = inp.x_d, inp.v_d, inp.a_d
+        if self.envs:
+            x_d, v_d, a_d = self._pressing_reference(inp)
+        return a_d - cfg.kp * (inp.p_tip - x_d) - cfg.kv * (inp.v_tip - v_d), None, None
 
     def _pressing_reference(self, inp: ControlInput):
         """Along each touching contact's set-point direction n (normal or tangent): F_d/k beyond the
@@ -324,12 +360,10 @@ class ForceDynamicConfig:
 
 
 @register
-class ForceDynamic(Controller):
+class ForceDynamic(_ComputedTorque):
     """A10: the force set-point F* = F_d + integral of -kf (F - F_d) along the normals, via the nominal surface."""
 
     name = "force_dynamic"
-    uses_forces = True
-    reads_orientation = False
     tracks_position = False
 
     @staticmethod
@@ -378,7 +412,14 @@ class ForceDynamic(Controller):
             axes = vt[int(np.sum(sv > 1e-9)):]
         self.P = axes.T @ axes  #: projector on the position-controlled directions
 
+    in_task_space = True
+
     def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray]:
+        a, f_swap, zdot = self.tip_targets(inp)
+        return self.computed_torque(inp, a, f_swap), zdot
+
+    def tip_targets(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """(a* [m/s²], the tip force swapped into τ [N] (cancel = "target"; else None), ż [N/s])."""
         cfg = self.config
         P = self.P
         a_force = np.zeros(3)
@@ -406,11 +447,7 @@ class ForceDynamic(Controller):
             a_pos = inp.a_d - cfg.kp * (inp.p_tip - inp.x_d) - cfg.kv * (inp.v_tip - inp.v_d)
         else:
             a_pos = -cfg.kv * inp.v_tip
-        qdd = joint_acceleration(inp, P @ a_pos + a_force, cfg.k_null, self._pinv)
-        tau = _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact
-        if cfg.cancel == "target":
-            tau += inp.J.T @ f_swap
-        return tau, zdot
+        return P @ a_pos + a_force, (f_swap if cfg.cancel == "target" else None), zdot
 
 
 @register
