@@ -202,20 +202,23 @@ def _finish_friction(system, ev: Evaluation, pending: list, xdot: np.ndarray, yd
             xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
 
 
-def command_of(system, inp: ControlInput, phase: Phase, x: np.ndarray) -> tuple:
-    """(drive command, ż, carried reference) of the phase's controller at ``inp``: its τ through
-    :func:`drive_command`, and :func:`carried_command` (the readable model and the plan's fold share it)."""
-    tau, zdot = phase.controller.command(inp)
-    return drive_command(system, tau, x), zdot, carried_command(inp, phase, tau, zdot)
+def command_of(system, inp: ControlInput, phase: Phase, x: np.ndarray, ctl=None) -> tuple:
+    """(drive command, ż, carried reference) of the phase's controller (or ``ctl``, the same law read off as
+    a matrix: contactdyn.plan_law) at ``inp``: its τ through :func:`drive_command`, and :func:`carried_command`
+    (the readable model and the plan's fold share it)."""
+    ctl = phase.controller if ctl is None else ctl
+    tau, zdot = ctl.command(inp)
+    return drive_command(system, tau, x), zdot, carried_command(inp, phase, tau, zdot, ctl)
 
 
-def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot) -> tuple | None:
+def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot, ctl=None) -> tuple | None:
     """(i_b, ∂τ/∂Q̈_b, ∂ż/∂Q̈_b) of a reference carried by body coordinate i_b: the command's part
     proportional to the body's acceleration, an unknown of the solve; None if there is none."""
     if phase.carrier is None or inp.x_d is None:
         return None
     i_b, axis = phase.carrier
-    tau_b, zdot_b = phase.controller.command(inp.replaced(a_d=inp.a_d + axis))
+    ctl = phase.controller if ctl is None else ctl
+    tau_b, zdot_b = ctl.command(inp.replaced(a_d=inp.a_d + axis))
     if not np.any(tau_b != tau):
         return None
     return i_b, tau_b - tau, None if zdot is None else zdot_b - zdot

@@ -27,6 +27,7 @@ import numpy as np
 from .constraints import Rows, force_columns, solve_folded
 from .constraints import _fast_solve as solve_linear  # numpy's gufunc without its Python wrapper
 from .dynamics import command_of
+from .plan_law import compiled_law
 
 __all__ = ["contact_torque_of", "folded_solve"]
 
@@ -57,7 +58,7 @@ def folded_solve(plan, make_input, drives):
     s = plan.system
     nQ, nv, nr = s.nQ, s.nv, plan.nr
     phase = plan.phase
-    ctl = phase.controller
+    ctl = compiled_law(plan)  # a force-reading tip law by its matrix (contactdyn.plan_law), else the controller
     vmask = s._joint_motors if ctl.outputs == "voltage" else None
     kinds = {"normal": "n", "stick": "t", "limit": "limit"}
     meta = [(row.owner, kinds.get(row.kind, row.label), row.index) for row in plan.rows]
@@ -71,7 +72,7 @@ def folded_solve(plan, make_input, drives):
         """(z, ż, the solved joint command τ [N·m or N; V]): the output reads what the drives made of τ."""
         tau_c = torque(b, Js)
         inp = make_input(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
-        cmd, zdot, carried = command_of(s, inp, phase, x)
+        cmd, zdot, carried = command_of(s, inp, phase, x, ctl)
         z = matrix_fold(inp, cmd[:nv], zdot, carried, x, A, b)
         if z is not None:
             return z

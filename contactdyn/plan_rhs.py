@@ -30,6 +30,7 @@ from .friction import launch_directions, launching, slip_direction
 from .phases import reference_at
 from .plan_drives import drive_forces
 from .plan_fold import contact_torque_of, folded_solve
+from .plan_law import compiled_law
 from .trajectory import profile
 
 __all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
@@ -342,7 +343,7 @@ def impulse_terms(plan) -> list[tuple]:
 def controller_call(plan):
     """The command of a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o, τ_c) -> (τ, ż)."""
     make = controller_input(plan)
-    command = plan.phase.controller.command
+    command = compiled_law(plan).command
 
     def call(t, x, q, v, Js, phi, o, tau_contact=None):
         return command(make(t, x, q, v, Js, phi, o, tau_contact))

@@ -1,0 +1,147 @@
+"""A force-reading dynamic law on the compiled path: its tip targets as one matrix.
+
+A7 (task space), A10 and the hybrid law compute τ = H q̈*(a*) + h − τ_c (+ Jᵀ f_swap)
+around tip targets (a*, f_swap, ż) (:meth:`~contactdyn.controllers.dynamic._ComputedTorque.tip_targets`).
+Within one contact mode those targets are affine in
+
+    u = [p_tip, ṗ_tip, (x_d, ẋ_d, ẍ_d), measured forces, (F_d, Ḟ_d) per set-point,
+         (p_s, ṗ_s) per surface or anchor, z, 1]
+
+so the plan reads the map [a*; f_swap; ż] = M u off the law itself by unit probes
+(:func:`~contactdyn.plan_probe.affine_map`) at the first call of its mode, checks it at
+random u, and from then on a call costs one product and the computed torque; the force
+columns of the fold (:func:`~contactdyn.constraints.force_columns`) are M's columns of the
+measured forces. The law stays written once, in :mod:`contactdyn.controllers.dynamic`.
+Joint-space A7, or a law that is not affine in u (a clip, a switch), is declined: the
+readable ``command`` runs as before.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .controllers import ControlInput
+from .plan_probe import affine_map
+
+__all__ = ["CompiledLaw", "compiled_law"]
+
+
+class CompiledLaw:
+    """The plan's controller with ``command`` and ``force_columns`` by the matrix M (see the module)."""
+
+    uses_forces = True
+
+    def __init__(self, ctl):
+        self.ctl = ctl
+        self.outputs, self.n_states = ctl.outputs, ctl.n_states
+        self.M: np.ndarray | None = None
+        #: why the law runs readable (None: compiled, or not read yet)
+        self.reason = None if getattr(ctl, "in_task_space", False) else f"{ctl.name}: not a task-space tip law"
+
+    # ---- the layout of u, read off the first input ------------------------------------------
+    def _layout(self, inp: ControlInput) -> None:
+        self.ref = inp.x_d is not None
+        self.force_keys = list(inp.forces)
+        self.force_index = {k: j for j, k in enumerate(self.force_keys)}
+        self.set_keys = list(inp.force_d)
+        self.surface_keys = list(inp.surfaces)
+        i = 6 + (9 if self.ref else 0)
+        self.i_forces = i
+        self.nu = i + len(self.force_keys) + 2 * len(self.set_keys) + 6 * len(self.surface_keys) + len(inp.z) + 1
+
+    def inputs(self, inp: ControlInput) -> np.ndarray:
+        """u of the module docstring at ``inp``."""
+        parts = [inp.p_tip, inp.v_tip]
+        if self.ref:
+            parts += [inp.x_d, inp.v_d, inp.a_d]
+        forces, force_d = inp.forces, inp.force_d
+        parts.append([forces[k] for k in self.force_keys])
+        parts.append([v for k in self.set_keys for v in force_d[k]])
+        for k in self.surface_keys:
+            parts += inp.surfaces[k]
+        parts += [inp.z, (1.0,)]
+        return np.concatenate(parts)
+
+    def _at(self, template: ControlInput, u: np.ndarray) -> ControlInput:
+        """``template`` with the fields of u (the inverse of :meth:`inputs`)."""
+        ch = {"p_tip": u[0:3], "v_tip": u[3:6]}
+        i = 6
+        if self.ref:
+            ch.update(x_d=u[6:9], v_d=u[9:12], a_d=u[12:15])
+            i = 15
+        ch["forces"] = {**template.forces, **{k: float(u[i + j]) for j, k in enumerate(self.force_keys)}}
+        i += len(self.force_keys)
+        ch["force_d"] = {k: (float(u[i + 2 * j]), float(u[i + 2 * j + 1])) for j, k in enumerate(self.set_keys)}
+        i += 2 * len(self.set_keys)
+        surfaces = dict(template.surfaces)
+        for k in self.surface_keys:
+            surfaces[k] = (u[i:i + 3], u[i + 3:i + 6])
+            i += 6
+        ch["surfaces"] = surfaces
+        ch["z"] = u[i:self.nu - 1]
+        return template.replaced(**ch)
+
+    def _targets(self, inp: ControlInput) -> np.ndarray:
+        a, f_swap, zdot = self.ctl.tip_targets(inp)
+        return np.concatenate((a, () if f_swap is None else f_swap, () if zdot is None else zdot))
+
+    # ---- reading M --------------------------------------------------------------------------
+    def read(self, inp: ControlInput) -> bool:
+        """Read M off the law at ``inp``'s mode; False (and ``reason``) where it is not affine in u."""
+        if self.reason is not None:
+            return False
+        self._layout(inp)
+        a, f_swap, zdot = self.ctl.tip_targets(inp)
+        self.swap = f_swap is not None
+        self.zs = slice(6 if self.swap else 3, None) if zdot is not None else None
+        M = affine_map(lambda u: self._targets(self._at(inp, u)), self.nu)
+        rng = np.random.default_rng(2)
+        for _ in range(2):
+            u = np.append(rng.normal(size=self.nu - 1), 1.0)
+            y = self._targets(self._at(inp, u))
+            if not np.allclose(M @ u, y, rtol=1e-9, atol=1e-9 * (1.0 + np.abs(y).max())):
+                self.reason = f"{self.ctl.name}: its tip targets are not affine in this mode"
+                return False
+        self.M = M
+        return True
+
+    def targets(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """(a* [m/s²], f_swap [N] or None, ż or None) by the matrix."""
+        y = self.M.dot(self.inputs(inp))
+        return y[:3], (y[3:6] if self.swap else None), (y[self.zs] if self.zs is not None else None)
+
+    # ---- the controller's interface ---------------------------------------------------------
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray | None]:
+        """The law's (τ, ż): by M once read, else the readable command."""
+        if self.M is None and not self.read(inp):
+            return self.ctl.command(inp)
+        a, f_swap, zdot = self.targets(inp)
+        return self.ctl.computed_torque(inp, a, f_swap), zdot
+
+    def force_columns(self, inp: ControlInput, tau: np.ndarray, zdot, meta: list, cols: list, nv: int):
+        """(B, D_z) of :func:`~contactdyn.constraints.force_columns` from M's columns of the measured forces."""
+        if self.M is None and not self.read(inp):
+            from .constraints import force_columns
+
+            return force_columns(inp, self.ctl, tau, zdot, meta, cols, nv)
+        nr = len(meta)
+        D = np.zeros((self.M.shape[0], nr))
+        for j, (name, kind, _) in enumerate(meta):
+            if kind == "n":
+                D[:, j] = self.M[:, self.i_forces + self.force_index[name]]
+        B = self.ctl.torque_increments(inp, D[:3], D[3:6] if self.swap else None)
+        for j in range(nr):
+            if np.any(cols[j][nv:]):  # the row reaches beyond the robot: in the measured joint torque
+                B[:, j] -= cols[j][:nv]
+        return B, (D[self.zs] if zdot is not None and self.zs is not None else
+                   (np.zeros((len(zdot), nr)) if zdot is not None else None))
+
+
+def compiled_law(plan):
+    """The plan's controller for its calls: a :class:`CompiledLaw` for a force-reading tip law, else itself."""
+    law = plan.__dict__.get("_compiled_law")
+    if law is None:
+        ctl = plan.phase.controller
+        law = CompiledLaw(ctl) if getattr(ctl, "in_task_space", False) else ctl
+        plan._compiled_law = law
+    return law
