@@ -118,6 +118,12 @@ class CompiledLaw:
         a, f_swap, zdot = self.targets(inp)
         return self.ctl.computed_torque(inp, a, f_swap), zdot
 
+    def a_d_increment(self, inp: ControlInput, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """(∂τ, ∂ż) per unit of ẍ_d along ``axis`` (a reference carried by a body), from M's ẍ_d columns."""
+        d = self.M[:, 12:15].dot(axis)
+        dtau = self.ctl.torque_increments(inp, d[:3, None], d[3:6, None] if self.swap else None)[:, 0]
+        return dtau, (d[self.zs] if self.zs is not None else None)
+
     def force_columns(self, inp: ControlInput, tau: np.ndarray, zdot, meta: list, cols: list, nv: int):
         """(B, D_z) of :func:`~contactdyn.constraints.force_columns` from M's columns of the measured forces."""
         if self.M is None and not self.read(inp):

@@ -1,0 +1,110 @@
+"""The force-reading dynamic laws read off as a matrix (contactdyn.plan_law) equal the readable law."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from test_controllers import hybrid_doc
+
+from contactdyn import parse_scene
+from contactdyn.constraints import force_columns
+from contactdyn.dynamics import carried_command
+from contactdyn.phases import start_phase
+from contactdyn.plan_law import CompiledLaw
+from contactdyn.plan_rhs import controller_input
+from contactdyn.rhsplan import ModePlan
+from contactdyn.scene import load_scene
+from contactdyn.simulate import prepare
+
+
+def _inputs(scene, count: int = 4):
+    """The phase's controller and its ControlInputs at random states near the start, every contact touching."""
+    system, modes, phase, x0 = prepare(scene)
+    index = next(i for i, ctl in enumerate(system.controllers) if ctl.uses_forces)
+    if index:
+        phase = start_phase(system, index, 0.0, x0, phase)
+    modes = [replace(m, touching=True) for m in modes]
+    plan = ModePlan(system, modes, phase)
+    make = controller_input(plan)
+    nQ, nv = system.nQ, system.nv
+    rng = np.random.default_rng(7)
+    out = []
+    for _ in range(count):
+        x = x0 + 1e-3 * rng.normal(size=x0.size)
+        t = rng.uniform(0.0, 0.5)
+        phi = plan.phi_at(t, x)
+        Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+        o = plan.P.dot(phi)[plan.m * plan.m + plan.m:]
+        out.append(make(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, rng.normal(size=nv)))
+    return phase, out
+
+
+def _scenes():
+    yield "case3_b_force (A10, cancel measured)", load_scene("case3_b_force")
+    yield "case3_a_position (A7, force reference)", load_scene("case3_a_position")
+    yield "case1_cart (A7, carried reference, tangential set-point)", load_scene("case1_cart")
+    for cancel in ("target", "measured"):
+        yield f"hybrid (cancel {cancel})", parse_scene(hybrid_doc(cancel=cancel, friction=0.3))
+    doc = hybrid_doc(cancel="target")
+    doc["controller"] = {"kind": "force_dynamic", "kf": 20.0}
+    doc["phase"][0].pop("reference")
+    yield "force_dynamic (A10, cancel target)", parse_scene(doc)
+
+
+@pytest.mark.parametrize(("what", "scene"), list(_scenes()), ids=[w for w, _ in _scenes()])
+def test_probed_law_equals_the_readable_command(what, scene):
+    phase, inputs = _inputs(scene)
+    ctl = phase.controller
+    law = CompiledLaw(ctl)
+    for inp in inputs:
+        tau, zdot = ctl.command(inp)
+        tau_m, zdot_m = law.command(inp)
+        assert law.M is not None, law.reason
+        scale = 1.0 + np.abs(tau).max()
+        assert np.max(np.abs(tau_m - tau)) <= 1e-12 * scale
+        if zdot is not None:
+            assert np.max(np.abs(zdot_m - zdot)) <= 1e-12 * (1.0 + np.abs(zdot).max())
+        # the fold's force columns: +1 N on each measured normal force, and a column reaching beyond the robot
+        names = [k for k in inp.forces if "." not in k]
+        meta = [(name, "n", 0) for name in names] + [(names[0], "t", 0)]
+        cols = [np.zeros(len(tau) + 1) for _ in names] + [np.r_[np.ones(len(tau)), 1.0]]
+        B, Dz = force_columns(inp, ctl, tau, zdot, meta, cols, len(tau))
+        B_m, Dz_m = law.force_columns(inp, tau, zdot, meta, cols, len(tau))
+        assert np.max(np.abs(B_m - B)) <= 1e-12 * (1.0 + np.abs(B).max())
+        if Dz is not None:
+            assert np.max(np.abs(Dz_m - Dz)) <= 1e-12 * (1.0 + np.abs(Dz).max())
+        carried = carried_command(inp, phase, tau, zdot)
+        carried_m = carried_command(inp, phase, tau, zdot, law)
+        assert (carried is None) == (carried_m is None)
+        if carried is not None:
+            assert np.max(np.abs(carried_m[1] - carried[1])) <= 1e-12 * (1.0 + np.abs(carried[1]).max())
+
+
+def test_a_law_that_is_not_affine_in_its_inputs_is_declined():
+    """A clip inside the tip targets: the matrix is refused and the readable command runs."""
+    phase, inputs = _inputs(load_scene("case3_b_force"), count=1)
+    ctl = phase.controller
+
+    class Clipped(type(ctl)):
+        def tip_targets(self, inp):
+            a, f_swap, zdot = super().tip_targets(inp)
+            return np.clip(a, -1e-3, 1e-3), f_swap, zdot
+
+    clipped = object.__new__(Clipped)
+    clipped.__dict__.update(ctl.__dict__)
+    law = CompiledLaw(clipped)
+    inp = inputs[0]
+    tau, _ = law.command(inp)
+    assert law.M is None and "not affine" in law.reason
+    assert np.array_equal(tau, clipped.command(inp)[0])
+
+
+def test_joint_space_position_law_is_declined():
+    doc = hybrid_doc()
+    doc["controller"] = {"kind": "position_dynamic", "space": "joint"}
+    doc["phase"][0] = {"name": "main"}
+    phase, _ = _inputs(parse_scene(doc), count=1)
+    law = CompiledLaw(phase.controller)
+    assert law.reason is not None and "task-space" in law.reason
