@@ -50,6 +50,7 @@ class Summary:
         self.path = out / "summary.parquet"
         self.rewrites = 0
         self._clock = clock
+        self.pending = False  #: rows added since the last rewrite of the table
         self._parts = 0  #: part files written since the last rewrite
         self._last = clock()  #: [s] when the last rewrite ended
         self._cost = 0.0  #: [s] the last rewrite's duration
@@ -57,6 +58,7 @@ class Summary:
     def add(self, chunk_rows: list[dict[str, Any]]) -> None:
         """Record a chunk's rows: in their own part file, and in the table when it is due."""
         self.rows.update((r["run_id"], r) for r in chunk_rows)
+        self.pending = True  # in the table at the next rewrite, even if the part below is interrupted
         parts = self.out / PARTS
         parts.mkdir(exist_ok=True)
         atomic_write(parts / f"{self._parts:06d}.json", json.dumps(chunk_rows, default=jsonable))
@@ -64,18 +66,13 @@ class Summary:
         if self._clock() - self._last >= max(REFRESH_S, COST_FACTOR * self._cost):
             self.rewrite()
 
-    @property
-    def pending(self) -> bool:
-        """Whether rows were added since the last rewrite of the table."""
-        return self._parts > 0
-
     def rewrite(self) -> Path:
         """Write the whole table (atomically), then remove the part files it now holds."""
         start = self._clock()
         write_summary(self.out, self.rows, self.params, self.keys, self.csv)
         shutil.rmtree(self.out / PARTS, ignore_errors=True)  # only this sweep writes them (it holds the lock)
         self.rewrites += 1
-        self._parts = 0
+        self.pending, self._parts = False, 0
         self._last = self._clock()
         self._cost = self._last - start
         return self.path
