@@ -213,17 +213,23 @@ class StepBudget:
         return -1.0 if t >= self.t_fire else 1.0
 
 
+#: event kinds whose functions read forces (normal force, friction, limit torque): these jump where the
+#: set-points' acceleration or a force set-point jumps; touch, stop, reverse, turn and limit read the state
+JUMPING = ("separate", "slip", "release")
+
+
 def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray) -> list:
     """The events whose function falls through zero from (t_before, x) to (t_after, x), in list order.
 
     At a corner of the set-points (:class:`~contactdyn.trajectory.Corner`) one segment ends at
     ``t_before`` and the next starts at ``t_after`` with the same state: a force that jumps
     there (a rigid contact's, with the reference's acceleration) is seen here, as a step
-    straddling the corner would have seen it. The step budget is no function of the state.
+    straddling the corner would have seen it. Only functions of forces can jump (``JUMPING``):
+    the others read the state alone.
     """
     fired = []
     for e in events:
-        if e.kind == "budget":
+        if e.kind not in JUMPING:
             continue
         g = e.value if isinstance(e, SlipWatch) else e  # (a SlipWatch's call keeps step-end state)
         if g(t_before, x) > 0.0 >= g(t_after, x):
