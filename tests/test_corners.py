@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_contact_layer import axis_scene
 from test_controllers import KP, KV, Q0, critically_damped, writer_doc
 
-from contactdyn import parse_scene
+from contactdyn import parse_scene, simulate
 from contactdyn.hybrid import HybridRun
 from contactdyn.system import System
 from contactdyn.trajectory import Move, Reference
@@ -58,3 +59,19 @@ def test_the_step_placement_does_not_change_the_result():
     assert a.stats["steps"] != b.stats["steps"]  # other steps, the same corners
     np.testing.assert_allclose(a["q"], b["q"], rtol=0, atol=0.1 * RTOL)
     np.testing.assert_allclose(a["v"], b["v"], rtol=0, atol=3 * RTOL * np.abs(b["v"]).max())
+
+
+def test_a_force_jumping_through_zero_at_a_corner_is_the_event_a_straddling_step_would_find():
+    """A rigid contact held by a 10 N push whose set-point steps to a 5 N pull at 0.3 s: the normal force
+    jumps through zero between the segments either side of the corner (no step sees the sign change),
+    and the contact separates there (events.fired_across)."""
+    scene = axis_scene({"model": "rigid"}, q0=1.0, v0=0.0, duration=0.4, solver={"rtol": 1e-8, "atol": 1e-10})
+    doc = {**scene.document, "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0, "axes": [[1.0, 0.0, 0.0]]},
+           "phase": [{"name": "pull", "force": [{"contact": "tip", "value": -5.0, "kind": "step", "start": 0.3,
+                                                 "initial": 10.0}]}]}
+    r = simulate(parse_scene(doc))
+    assert r.stats["corners"] == 1
+    assert [(e["kind"], e["t"]) for e in r.events] == [("separate", 0.3)]
+    before, after = r.t < 0.3, r.t > 0.3
+    np.testing.assert_allclose(r["contact.tip.F_n"][before], 10.0, rtol=1e-6)
+    assert np.all(r["contact.tip.touching"][after] == 0) and np.all(r["contact.tip.F_n"][after] == 0.0)
