@@ -81,7 +81,7 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
     samples = Samples.concatenate(parts, system)
     out = channels(system, grid, xs, samples, modes_of)
     if system.limits.limits:
-        out.update(limit_channels(system, phases_of, evs))
+        out.update(limit_channels(system, phases_of, samples))
     if system.drives.any_motor:  # (motor scenes sample every output through the readable model)
         out.update(drive_channels(system, xs, evs))
     return out

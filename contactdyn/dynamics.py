@@ -32,7 +32,7 @@ from .chain_forces import chain_forces
 from .constraints import Rows, kkt_solve, record_row_forces, solve_folded
 from .contact import Contact, ContactMode, Kinematics
 from .controllers import ControlInput
-from .friction import friction_terms, launch_directions
+from .friction import friction_terms, launch_directions_at, launching
 from .phases import Phase, reference_at
 
 __all__ = ["Evaluation", "evaluate", "carried_command", "command_of", "drive_command", "set_force_inputs"]
@@ -68,8 +68,8 @@ def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: P
     nQ, nv = system.nQ, system.nv
     q, v = x[:nv], x[nQ:nQ + nv]
     robot = system.robot
-    if any(m.from_rest and len(m.slip) == 2 for m in modes):
-        modes = launch_directions(system, t, x, modes, phase)
+    if any(launching(m) for m in modes):
+        modes = launch_directions_at(system, t, x, modes, phase)
     robot.update(q, v)
     f = np.zeros(nQ)
     f[:nv] = -robot.h

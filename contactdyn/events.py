@@ -267,7 +267,7 @@ class _ReadableValues:
         return mu_s * ev.normal_force[self.names[ci]] - float(np.linalg.norm(ev.friction[self.names[ci]]))
 
     def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
-        """Torques [N·m or N] of the joints pressing on a limit (only this path has them: plans decline)."""
+        """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate."""
         return self.cache(t, x).limit_torque
 
 

@@ -8,14 +8,13 @@ needs no second implementation to be fast, *if* the plan can represent it. Where
 cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when compiled):
 a stage law (:class:`~contactdyn.chain.ChainStage`), since only the linear law is affine.
 The drives and controllers need none: the plan calls the drive law per call, and folds a
-force-reading law into its solve (:mod:`contactdyn.plan_fold`);
-
-and the system adds its own: the energy audit and a 2-D slip launching from rest (its
-direction is solved per call). :func:`declared_gaps` collects them when the system is
-built (``System.fast_path_gaps``, reported in ``Result.stats["fast_path_gaps"]``); the
-plan of a mode declines exactly when one of them applies to that mode (:func:`mode_gap`),
-or while a joint presses on its position limit (:data:`LIMIT`; every robot has limits, so
-this one is a rule of :func:`mode_gap`, not a listed gap). A plan that declines for any
+force-reading law into its solve (:mod:`contactdyn.plan_fold`); a slip launching from rest
+has its direction solved per call on the plan's own KKT system (:mod:`contactdyn.plan_rhs`);
+a joint pressing on its position limit is one more row of that system
+(:mod:`contactdyn.plan_probe`). The system adds its own gap: the energy audit.
+:func:`declared_gaps` collects them when the system is built (``System.fast_path_gaps``,
+reported in ``Result.stats["fast_path_gaps"]``); the plan of a mode declines exactly when
+one of them applies to that mode (:func:`mode_gap`). A plan that declines for any
 other reason — its probes find a non-affine part, or its self-check disagrees with the
 readable model — is an undeclared gap: its reason in ``Result.stats["fallback_modes"]``
 starts with ``"undeclared: "``, which the tests treat as a bug.
@@ -26,12 +25,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "LAUNCH", "LIMIT"]
+__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY"]
 
 UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
 ENERGY = "energy audit (solver.record_energy)"
-LAUNCH = "a 2-D slip launching from rest (its direction is solved per call)"
-LIMIT = "a joint pressing on its position limit (contactdyn.limits: its row is not compiled)"
 
 
 class Gap(NamedTuple):
@@ -52,10 +49,6 @@ def declared_gaps(system) -> list[Gap]:
     if system.energy_slot >= 0:
         gaps.append(Gap("solver.record_energy", ENERGY, "always", lambda modes, phase: True))
     for ci, c in enumerate(system.contacts):
-        if c.friction is not None and len(c.tangents) == 2:
-            gaps.append(Gap(f"contact.{c.name}.tangent", LAUNCH, "while a 2-D slip launches from rest",
-                            lambda modes, phase, ci=ci: _launching(modes[ci])))
-    for ci, c in enumerate(system.contacts):
         for dc in c.chains:
             for k, stage in enumerate(dc.chain.stages):
                 if stage.fast_path_gap:
@@ -67,13 +60,7 @@ def declared_gaps(system) -> list[Gap]:
 
 def mode_gap(system, modes, phase) -> str:
     """Why the plan of (modes, phase) must decline: the first declared gap that applies ("" if none)."""
-    if getattr(phase, "limits", ()):
-        return LIMIT
     for gap in system.fast_path_gaps:
         if gap.applies(modes, phase):
             return gap.reason
     return ""
-
-
-def _launching(mode) -> bool:
-    return mode.from_rest and len(mode.slip) == 2 and not mode.stuck

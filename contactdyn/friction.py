@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from .phases import Phase
 
 __all__ = ["CONE_TOL", "FORCE_ABS_TOL", "in_cone", "direction_of", "initial_slip", "slip_direction", "slip_velocity",
-           "slip_acceleration", "launch_directions", "friction_terms"]
+           "slip_acceleration", "launching", "launch_directions", "launch_directions_at", "friction_terms"]
 
 CONE_TOL = 1e-10  #: relative slack of the friction-cone tests |F_f| ≤ μ_s F (round-off of the solves)
 FORCE_ABS_TOL = 1e-12  #: [N] absolute slack of the same tests
@@ -81,8 +81,12 @@ def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np
     return c.tangents @ (kin.J @ qdd[:nv] + kin.drift - a_env)
 
 
-def launch_directions(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
-                      ) -> list[ContactMode]:
+def launching(mode: ContactMode) -> bool:
+    """A touching 2-D slide started from rest whose direction is still to be solved (:func:`launch_directions`)."""
+    return mode.from_rest and len(mode.slip) == 2 and mode.touching and not mode.stuck
+
+
+def launch_directions(system, modes: list[ContactMode], slip_of, acceleration_of) -> list[ContactMode]:
     """Modes whose 2-D slides from rest, still inside the stick band, slide the consistent way.
 
     A slip from rest starts where it accelerates: d with a_t(d) = λ d, λ ≥ 0, a_t the
@@ -91,42 +95,61 @@ def launch_directions(system, t: float, x: np.ndarray, modes: list[ContactMode],
     a slide that started along that one would swing round at |v_t| ≈ v_ε, where the
     direction dynamics are stiff (rate ∝ 1/|v_t|). Newton on the angle (at most 4
     iterations, two evaluations each); the reference r if it does not converge.
+
+    Written once for both right-hand sides, which give what it reads: ``slip_of(i)`` the
+    slip velocity of contact i [m/s], ``acceleration_of(trial, i)`` its tangential
+    acceleration [m/s²] in the modes ``trial`` (the readable model: :func:`launch_directions_at`;
+    the compiled plan: from its own KKT data, :mod:`contactdyn.plan_rhs`). A slide already
+    past the stick band is launched: its own direction from here on.
     """
-    nQ, nv = system.nQ, system.nv
-    system.robot.update(x[:nv], x[nQ:nQ + nv])
     out = list(modes)
-    for i, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
-        if not (mode.from_rest and len(mode.slip) == 2 and mode.touching and not mode.stuck):
+    for i, mode in enumerate(modes):
+        if not launching(mode):
             continue
         r = np.asarray(mode.slip, float)
-        if float(slip_velocity(system, c, system.kinematics(c, x)) @ r) > system.slip_band:
+        if float(slip_of(i) @ r) > system.slip_band:
             out[i] = mode.with_(from_rest=False)  # launched: the slip's own direction from here on
             continue
+
+        def cross(theta: float, i: int = i, mode: ContactMode = mode) -> tuple[float, np.ndarray, float]:
+            """Sliding along d = (cos θ, sin θ): (d × a_t, d, a_t · d) [m/s²]."""
+            d = np.array([np.cos(theta), np.sin(theta)])
+            trial = list(out)
+            trial[i] = mode.with_(slip=tuple(d), from_rest=False)
+            a = acceleration_of(trial, i)
+            return float(d[0] * a[1] - d[1] * a[0]), d, float(a @ d)
+
         theta = float(np.arctan2(r[1], r[0]))
         best = r
         for _ in range(4):
-            phi, d, ahead = _launch_cross(system, t, x, out, i, phase, theta)
+            phi, d, ahead = cross(theta)
             if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):
                 best = d
                 break
-            dphi = (_launch_cross(system, t, x, out, i, phase, theta + 1e-7)[0] - phi) / 1e-7
+            dphi = (cross(theta + 1e-7)[0] - phi) / 1e-7
             if not dphi < 0.0:  # a stable direction turns the acceleration back onto d
                 break
             theta -= float(np.clip(phi / dphi, -0.5, 0.5))
         out[i] = mode.with_(slip=tuple(best), from_rest=False)
-    system.robot.update(x[:nv], x[nQ:nQ + nv])
     return out
 
 
-def _launch_cross(system, t: float, x: np.ndarray, modes: list[ContactMode], i: int, phase: Phase,
-                  theta: float) -> tuple[float, np.ndarray, float]:
-    """Sliding contact i along d = (cos θ, sin θ): (d × a_t, d, a_t · d) [m/s²]."""
-    c = system.contacts[i]
-    d = np.array([np.cos(theta), np.sin(theta)])
-    trial = list(modes)
-    trial[i] = modes[i].with_(slip=tuple(d), from_rest=False)
-    a = slip_acceleration(system, c, x, system.evaluate(t, x, trial, phase).xdot)
-    return float(d[0] * a[1] - d[1] * a[0]), d, float(a @ d)
+def launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
+                         ) -> list[ContactMode]:
+    """:func:`launch_directions` on the readable model: ``System.evaluate`` per trial direction."""
+    nQ, nv = system.nQ, system.nv
+    contacts = system.contacts
+
+    def slip_of(i: int) -> np.ndarray:
+        system.robot.update(x[:nv], x[nQ:nQ + nv])
+        return slip_velocity(system, contacts[i], system.kinematics(contacts[i], x))
+
+    def acceleration_of(trial: list[ContactMode], i: int) -> np.ndarray:
+        return slip_acceleration(system, contacts[i], x, system.evaluate(t, x, trial, phase).xdot)
+
+    out = launch_directions(system, modes, slip_of, acceleration_of)
+    system.robot.update(x[:nv], x[nQ:nQ + nv])
+    return out
 
 
 def slip_velocity(system, c: Contact, kin: Kinematics, qd: np.ndarray | None = None) -> np.ndarray:

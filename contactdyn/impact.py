@@ -15,6 +15,9 @@ with every bond, stick and the new contact held at velocity level (Λ the impuls
   sliding assumption is wrong: zero tangential velocity, F_fΔt an unknown; if holding it
   needs more than μ_s FΔt (eqs 35–38) the tip slides where that impulse pushes.
 
+A joint reaching its position limit is the same map with the limit's row among the rows
+(:func:`limit_impact`), friction impulses at a sliding contact included.
+
 The energy lost [J] is ½ Q̇⁻ᵀ M Q̇⁻ − ½ Q̇⁺ᵀ M Q̇⁺ ≥ 0. :func:`project_velocity` is the same
 law without a new contact: the smallest kinetic-energy-norm change that keeps every
 active constraint (used when a slide stops inside the stick band).
@@ -30,7 +33,7 @@ from .constraints import impulse_solve, velocity_rows
 from .contact import Contact, ContactMode
 from .friction import CONE_TOL, FORCE_ABS_TOL, slip_velocity
 
-__all__ = ["Impact", "impact", "project_velocity"]
+__all__ = ["Impact", "impact", "limit_impact", "project_velocity"]
 
 
 @dataclass
@@ -48,14 +51,17 @@ class Impact:
     slip_before: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
     slip_after: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
     direction: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: sliding direction d (0: none)
+    row_impulses: dict = field(default_factory=dict)  #: (owner, kind, index) -> Λ of every held row [N·s or N·m·s]
 
 
-def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact,
+def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact | None,
            limits: tuple = ()) -> tuple[np.ndarray, Impact]:
-    """Velocity jump when ``contact`` touches (its mode already says touching).
+    """Velocity jump when ``contact`` touches (its mode already says touching), or when a joint
+    reaches its position limit (its row the last of ``limits``; ``contact``: the sliding contact
+    whose friction takes part, :func:`limit_impact`, or None).
 
     Momentum law over Δt → 0 (eqs 27–31, 35–38): M(Q̇⁺ − Q̇⁻) = Cᵀ Λ with every bond,
-    stick and the new contact holding at velocity level, G Q̇⁺ = 0. With friction the
+    stick, limit and the new contact holding at velocity level, G Q̇⁺ = 0. With friction the
     tip first slides in its pre-impact slip direction d (friction impulse −μ_k FΔt d,
     the normal column tilted as in eq. 27). If the tangential velocity after the
     impact points against d the assumption is wrong and the impact jams (eqs 30–31):
@@ -68,23 +74,25 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     system.robot.update(q, v)
     qd_minus = x[nQ:2 * nQ].copy()
     M = system.mass_matrix()
-    i_c = system.contacts.index(contact)
-    kin = system.kinematics(contact, x)
-    fr, k = contact.friction, len(contact.tangents)
+    name = contact.name if contact is not None else ""
+    fr, k = (contact.friction, len(contact.tangents)) if contact is not None else (None, 0)
+    kin = system.kinematics(contact, x) if contact is not None else None
     vt_minus = slip_velocity(system, contact, kin, qd_minus) if k else np.zeros(0)
+    impulses: dict = {}
 
     def solve(slide=None, jam=False):
         rows = velocity_rows(system, x, modes, slide=(contact, slide) if slide is not None else None,
                              jam=contact if jam else None, limits=limits)
         z, _ = impulse_solve(system, M, rows, qd_minus)
-        lam = {m: z[nQ + j] for j, m in enumerate(rows.meta)}
-        P_n = float(lam[(contact.name, "n", 0)])
-        P_t = np.array([lam.get((contact.name, "t", i), 0.0) for i in range(k)])
+        impulses.clear()
+        impulses.update({m: float(z[nQ + j]) for j, m in enumerate(rows.meta)})
+        P_n = impulses.get((name, "n", 0), 0.0)
+        P_t = np.array([impulses.get((name, "t", i), 0.0) for i in range(k)])
         return z[:nQ], P_n, P_t
 
     jammed = False
     d = np.zeros(k)
-    if fr is None or not k or modes[i_c].stuck:
+    if fr is None or not k or modes[system.contacts.index(contact)].stuck:
         qd_plus, P_n, P_t = solve()
     else:
         speed = float(np.linalg.norm(vt_minus))
@@ -107,7 +115,28 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     x_new[nQ:2 * nQ] = qd_plus
     energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
     vt_plus = slip_velocity(system, contact, kin, qd_plus) if k else np.zeros(0)
-    return x_new, Impact(t, contact.name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d)
+    return x_new, Impact(t, name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d,
+                         dict(impulses))
+
+
+def limit_impact(system, t: float, x: np.ndarray, modes: list[ContactMode], limits: tuple
+                 ) -> tuple[np.ndarray, Impact, float]:
+    """A joint reaching its position limit, its row (i, side) the last of ``limits``: (x⁺, the impact,
+    the limit's impulse Λ [N·m·s or N·s]).
+
+    The same momentum law as at a touch (:func:`impact`) with the limit row among the rows. The
+    impact's contact is the first touching one with a normal row (rigid or bonded: its normal
+    impulse is finite), a sliding one with friction first: it takes its friction impulse by the
+    same sliding/jamming branch (with several sliding contacts, the others' normal columns stay
+    untilted); a sticking one holds through its stick rows. Without one, the contact is "".
+    """
+    rowed = [(c, m) for c, m in zip(system.contacts, modes, strict=True)
+             if m.touching and c.normal.chain.bonded_when_touching]
+    sliding = [c for c, m in rowed if not m.stuck and c.friction is not None and len(c.tangents)]
+    contact = sliding[0] if sliding else rowed[0][0] if rowed else None
+    x_new, imp = impact(system, t, x, modes, contact, limits)
+    i = limits[-1][0]
+    return x_new, imp, imp.row_impulses[(system.limits.by_index[i].name, "limit", i)]
 
 
 def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tuple = ()) -> np.ndarray:

@@ -5,18 +5,19 @@ A position limit of an active joint is handled like a rigid contact (``robot.joi
 
 - ``limit`` event: the joint's coordinate reaches its lower or upper limit (located by the
   integrator, as a ``touch``);
-- plastic impact map: the smallest kinetic-energy change M ΔQ̇ = Gᵀ Λ that stops the joint
-  (q̇ᵢ⁺ = 0) while every active constraint (bonds, sticks, other limits) keeps holding
-  (``System.project_velocity``; friction impulses at sliding contacts are not part of it);
+- plastic impact map: the momentum law M ΔQ̇ = Cᵀ Λ that stops the joint (q̇ᵢ⁺ = 0) while every
+  active constraint (bonds, sticks, other limits) keeps holding, the one of a touch with the
+  limit's row among the rows (:func:`~contactdyn.impact.limit_impact`): a contact sliding on a
+  rigid or bonded normal takes its friction impulse −μ_k Λ_n d, or jams, as at a touch;
 - while the joint presses on its limit: a constraint row eᵢ with an unknown torque λ [N·m or N]
   and Baumgarte stabilization q̈ᵢ = −2ω q̇ᵢ − ω² (qᵢ − limit) (ω = ``solver.stabilization``);
   λ ≥ 0 at a lower limit, λ ≤ 0 at an upper one;
 - ``release`` event: λ reaches zero (the joint stops pressing) and the joint is free again.
 
 The joints pressing on a limit are part of the run's :class:`~contactdyn.system.Phase`
-(``Phase.limits``), so every segment knows its constraint rows; such segments run on
-``System.evaluate`` (the compiled plans decline them). Continuous joints (and limits given as
-lower = upper) have no position limit. Velocity and effort limits of the URDF (0: none given)
+(``Phase.limits``), so every segment knows its constraint rows; the compiled plans carry
+them as rows of their KKT system (:mod:`contactdyn.plan_probe`). Continuous joints (and
+limits given as lower = upper) have no position limit. Velocity and effort limits of the URDF (0: none given)
 are checked on the run's samples: count and first time per joint in ``Result.stats["limits"]``,
 a warning per joint in ``Result.meta["limit_warnings"]``.
 """
@@ -28,6 +29,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from .impact import limit_impact
 from .robot import Robot
 
 __all__ = ["JointLimits", "LIMIT_EVENTS", "limit_channels", "rate_limit_report"]
@@ -64,7 +66,7 @@ class JointLimits:
         """Event functions of one segment: ``limit`` for free joints, ``release`` for pressing ones.
 
         ``torque(t, x)`` gives the pressing joints' limit torques {index: λ} (needed only when
-        some joint presses; such segments run on ``System.evaluate``).
+        some joint presses).
         """
         out = []
         held = {i for i, _ in pressing}
@@ -94,36 +96,37 @@ class JointLimits:
 
     # ---- switching -------------------------------------------------------------------------
     def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event) -> tuple:
-        """Apply a ``limit`` (plastic impact, then pressing) or ``release`` event; return (x, phase, info)."""
-        nQ, nv, i = system.nQ, system.nv, event.index
+        """Apply a ``limit`` (plastic impact, then pressing) or ``release`` event: (x, phase, info, impact).
+
+        ``impact`` (:class:`~contactdyn.impact.Impact`, None at a release) is the momentum law with
+        the limit's row among the rows, a sliding contact's friction impulse included
+        (:func:`~contactdyn.impact.limit_impact`); its contact is "" when no contact took part.
+        """
+        i = event.index
         if event.kind == "release":
-            return x, replace(phase, limits=tuple(p for p in phase.limits if p[0] != i)), {"joint": event.contact}
+            return x, replace(phase, limits=tuple(p for p in phase.limits if p[0] != i)), \
+                {"joint": event.contact}, None
         phase = replace(phase, limits=(*phase.limits, (i, event.side)))
-        v_before = x[nQ:nQ + nv].copy()
-        x = system.project_velocity(x, modes, phase.limits)
-        dv = x[nQ:nQ + nv] - v_before
-        impulse = system.robot.mass_matrix(x[:nv]) @ dv  # [N·m·s or N·s] the limit's share is at joint i
+        v_before = float(x[system.nQ + i])
+        x, imp, impulse = limit_impact(system, t, x, modes, phase.limits)
         info = {"joint": event.contact, "side": "lower" if event.side > 0 else "upper",
-                "velocity_before": float(v_before[i]), "impulse": float(impulse[i]),
-                "energy_loss": float(0.5 * (v_before @ system.robot.mass_matrix(x[:nv]) @ v_before)
-                                     - 0.5 * (x[nQ:nQ + nv] @ system.robot.mass_matrix(x[:nv]) @ x[nQ:nQ + nv]))}
-        return x, phase, info
+                "velocity_before": v_before, "impulse": impulse,  # [N·m·s or N·s] the limit row's Λ
+                "energy_loss": imp.energy_loss}
+        return x, phase, info, imp
 
     def pulling(self, phase: Any, ev: Any) -> list[tuple[int, int]]:
         """Pressing joints whose limit torque pulls (λ·side < 0): they release at once."""
         return [(i, s) for i, s in phase.limits if s * ev.limit_torque.get(i, 0.0) < -RELEASE_TOL]
 
 
-def limit_channels(system: Any, phases_of: list, evs: list) -> dict[str, np.ndarray]:
-    """``limit.torque`` [N·m or N] (per joint, 0 when free) and ``limit.side`` (+1 lower, −1 upper, 0 free)."""
-    n = len(phases_of)
-    torque, side = np.zeros((n, system.nv)), np.zeros((n, system.nv))
-    for k, (phase, ev) in enumerate(zip(phases_of, evs, strict=True)):
+def limit_channels(system: Any, phases_of: list, samples: Any) -> dict[str, np.ndarray]:
+    """``limit.torque`` [N·m or N] (per joint, 0 when free; from the output ``samples``,
+    :class:`~contactdyn.samples.Samples`) and ``limit.side`` (+1 lower, −1 upper, 0 free)."""
+    side = np.zeros((len(phases_of), system.nv))
+    for k, phase in enumerate(phases_of):
         for i, s in phase.limits:
             side[k, i] = s
-            if ev is not None:
-                torque[k, i] = ev.limit_torque.get(i, 0.0)
-    return {"limit.torque": torque, "limit.side": side}
+    return {"limit.torque": samples.limit_torque.copy(), "limit.side": side}
 
 
 def rate_limit_report(robot: Robot, t: np.ndarray, v: np.ndarray, tau: np.ndarray) -> tuple[dict, list[str]]:

@@ -46,9 +46,8 @@ def folded_solve(plan, make_input):
     phase = plan.phase
     ctl = phase.controller
     vmask = s._joint_motors if ctl.outputs == "voltage" else None
-    names = [s.contacts[row.contact].name for row in plan.rows]
-    meta = [(name, "n" if row.kind == "normal" else "t" if row.kind == "stick" else row.label, row.index)
-            for name, row in zip(names, plan.rows, strict=True)]
+    kinds = {"normal": "n", "stick": "t", "limit": "limit"}
+    meta = [(row.owner, kinds.get(row.kind, row.label), row.index) for row in plan.rows]
     torque = contact_torque_of(plan)
     fold_rows = ctl.uses_forces and nr > 0
     w0 = nQ + nr

@@ -11,7 +11,9 @@ friction and the plain task-space PD law. :meth:`ProbedModel._measure` reads tha
 the friction rows, the servo law, the controller's :class:`~contactdyn.controllers.base.TipForceLaw` —
 by evaluating them at unit vectors e_k (:func:`affine_map`), and checks it at random e:
 a law that is not affine (Hunt–Crossley) is refused there. The constraint rows are
-``a·J_f + const`` with γ = a·J̇q̇ + Baumgarte terms, read off the same way (:meth:`ProbedModel._rows`).
+``a·J_f + const`` with γ = a·J̇q̇ + Baumgarte terms, read off the same way (:meth:`ProbedModel._rows`);
+a joint pressing on its position limit is one more row, e_i with its Baumgarte γ, written by
+:meth:`~contactdyn.limits.JointLimits.add_rows` as in the readable model.
 
 So a stage law, a servo or a tip-force law is written once, in the readable model, and
 the compiled plan (:mod:`contactdyn.rhsplan`) gets it by construction.
@@ -24,6 +26,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .chain_forces import chain_forces
+from .constraints import Rows
 from .contact import Kinematics
 from .fastpath import UNDECLARED
 
@@ -162,6 +165,10 @@ class ProbedModel:
                         f[c.body_index] -= float(visc @ (T @ c.body_axis))
             if row is not None:
                 rows.append(("normal", ci, 0, row, gamma))
+        limit_rows = Rows()  # joints pressing on a position limit: the readable model's own rows (contactdyn.limits)
+        s.limits.add_rows(self.phase.limits, x, nQ, limit_rows, s.stabilization)
+        for row, gamma, (_, _, i) in zip(limit_rows.rows, limit_rows.gammas, limit_rows.meta, strict=True):
+            rows.append(("limit", -1, i, row, gamma))
         for idx, v_ref, gain in s.servo:
             F = gain * (v_ref - x[nQ + idx])
             if not self.drives_per_call:  # else the servo is a drive command (plan_rhs.drive_forces)
@@ -218,10 +225,14 @@ class ProbedModel:
         self.rows = []
         for r, (kind, ci, i, const, gamma0) in enumerate(rows0):
             a = np.array([probes[k][r][4] - gamma0 for k in range(3)])
+            if kind == "limit":  # joint coordinate i on its limit: no Cartesian part (a = 0)
+                self.rows.append(SimpleNamespace(kind=kind, contact=-1, index=i, a=a, const=np.array(const, float),
+                                                 frame=0, label=None, owner=s.limits.by_index[i].name))
+                continue
             c = s.contacts[ci]
             self.rows.append(SimpleNamespace(kind=kind, contact=ci, index=i, a=a, const=np.array(const, float),
                                              frame=self.frame_of[c.fid], label=c.tangent_chains[i].label
-                                             if kind == "chain" else None))
+                                             if kind == "chain" else None, owner=c.name))
         self.nr = len(self.rows)
         nQ = s.nQ
         self.normal_row = {row.contact: r for r, row in enumerate(self.rows) if row.kind == "normal"}
@@ -229,6 +240,8 @@ class ProbedModel:
         for r, row in enumerate(self.rows):
             if row.kind == "stick":
                 self.stick_rows.setdefault(row.contact, []).append(nQ + r)
+        #: joint coordinate -> index in z of its limit torque [N·m or N] (joints pressing on a limit)
+        self.limit_rows = {row.index: nQ + r for r, row in enumerate(self.rows) if row.kind == "limit"}
         # sliding friction: tilt of the normal row's column, or an explicit force
         self.tilts = []  # (row, contact, 1-D?)
         self.coulomb = []  # (contact index, frame) for sliding without a normal row

@@ -25,6 +25,7 @@ import pinocchio as pin
 
 from .controllers import ControlInput
 from .dynamics import drive_command, set_force_inputs
+from .friction import launch_directions, launching, slip_direction
 from .phases import reference_at
 from .plan_fold import contact_torque_of, folded_solve
 from .trajectory import profile
@@ -43,71 +44,42 @@ except (ImportError, AttributeError):  # pragma: no cover
 def make_rhs(plan):
     """Build ``plan.time_terms``, ``plan.phi_at`` and return the right-hand side f(t, x) of the plan's mode."""
     s = plan.system
-    nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
+    nQ, m = s.nQ, plan.m
     m2 = m * m
     P = plan.P
     o_y = slice(m2 + m + plan.o_y.start, m2 + m + plan.o_y.stop)
     with_y = s.n > 2 * nQ
-    coulomb = [(m2 + m + i_fn, mu, T, consts, j, dT, dC, ci) for ci, i_fn, mu, T, consts, j, dT, dC
-               in plan.coulomb_terms]
-    dyn_tilt = plan.dyn_tilt
-    generic_ctl = not plan.affine_ctl
-    ctl_call = controller_call(plan) if generic_ctl else None
-    drives = drive_forces(plan)
-    reads_forces = plan.phase.controller.uses_forces
-    folded = folded_solve(plan, controller_input(plan)) if (reads_forces and nr) or plan.phase.carrier else None
-    contact_torque = contact_torque_of(plan)
     z_slice = plan.z_slice
-    solve = _solve1
     cat = np.concatenate
-    isfinite = math.isfinite
     ring = plan.ring
-    A0 = plan.A0
-    w0 = nQ + nr
     time_terms, tv = _time_terms(plan)
     phi_and_jacobians = _phi_function(plan, time_terms)
     impulse_rates = _impulse_rates(plan)
+    friction = _friction_terms(plan)
+    solve = _command_and_solve(plan)
+    launch = _launch(plan, friction, solve) if any(launching(mode) for mode in plan.modes) else None
+    plan.launch = launch
     plan.time_terms = time_terms
     plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0]
+    modes = plan.modes
 
     def rhs(t, x):
         phi, Js = phi_and_jacobians(t, x, time_terms(t, tv))
         y = P.dot(phi)
-        A = y[:m2].reshape(m, m)
-        b = y[m2:m2 + m]
         o = y[m2 + m:]  # the affine outputs
-        for i_fn, mu, T, consts, j, dT, dC, ci in coulomb:
-            F_n = y[i_fn]
-            if F_n > 0.0:
-                if dT is None:
-                    d = plan._direction(ci, o)
-                    dT, dC = d.dot(T), d.dot(consts)
-                b[w0 + 3 * j:w0 + 3 * j + 3] -= (mu * F_n) * dT
-                if nQ > nv:
-                    b[nv:nQ] -= (mu * F_n) * dC
-        for r, ci, mu, T, consts, j in dyn_tilt:
-            d = plan._direction(ci, o)
-            A[:nv, nQ + r] += mu * Js[j].T.dot(d.dot(T))
-            A[nv:nQ, nQ + r] = A0[nv:nQ, nQ + r] + mu * d.dot(consts)
-        zdot = z = None
-        if folded is not None:  # a force-reading controller with rows: its forces folded into the solve
-            z, zdot = folded(t, x, Js, phi, o, A, b)
-        elif generic_ctl:
-            tau_c = contact_torque(b, Js) if reads_forces else None
-            tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
-            if drives is None:
-                b[:nv] += tau
-            else:
-                b[:nQ] += drives(x, tau)
-        if z is None:
-            z = solve(A, b)
-            if not isfinite(z.dot(z)):
-                z = plan._singular(A, b)
+        b_ctl = None
+        now = modes
+        if launch is not None:  # 2-D slides from rest: their directions solved on this call's KKT system
+            b_ctl = []
+            now = launch(t, x, phi, Js, y, b_ctl)
+        if friction is not None:
+            friction(y, Js, now)
+        z, zdot = solve(t, x, phi, Js, y, b_ctl)
         if with_y:
             xd = cat((x[nQ:2 * nQ], z[:nQ], y[o_y]))
             if zdot is not None:
                 xd[z_slice] = zdot
-            impulse_rates(xd, z, y)
+            impulse_rates(xd, z, y, now)
         else:
             xd = cat((x[nQ:2 * nQ], z[:nQ]))
         ring[0] = ring[1]
@@ -117,6 +89,118 @@ def make_rhs(plan):
         return xd
 
     return rhs
+
+
+def _friction_terms(plan):
+    """terms(y, Js, modes): sliding friction into y = [A, b, o] in place — Coulomb forces −μ max(F, 0) d into b
+    where the normal force is known, the column tilt of 2-D sliding into A — with d by the modes' rule
+    (None when the mode has neither)."""
+    s = plan.system
+    nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
+    m2 = m * m
+    w0 = nQ + nr
+    coulomb = [(m2 + m + i_fn, mu, T, consts, j, dT, dC, ci) for ci, i_fn, mu, T, consts, j, dT, dC
+               in plan.coulomb_terms]
+    dyn_tilt = plan.dyn_tilt
+    if not coulomb and not dyn_tilt:
+        return None
+    A0 = plan.A0
+    o_vt = [plan.o_vt[c.name] for c in s.contacts]
+
+    def terms(y, Js, modes):
+        A = y[:m2].reshape(m, m)
+        o = y[m2 + m:]
+        for i_fn, mu, T, consts, j, dT, dC, ci in coulomb:
+            F_n = y[i_fn]
+            if F_n > 0.0:
+                if dT is None:
+                    d = slip_direction(s, o[o_vt[ci]], modes[ci])
+                    dT, dC = d.dot(T), d.dot(consts)
+                y[m2 + w0 + 3 * j:m2 + w0 + 3 * j + 3] -= (mu * F_n) * dT
+                if nQ > nv:
+                    y[m2 + nv:m2 + nQ] -= (mu * F_n) * dC
+        for r, ci, mu, T, consts, j in dyn_tilt:
+            d = slip_direction(s, o[o_vt[ci]], modes[ci])
+            A[:nv, nQ + r] += mu * Js[j].T.dot(d.dot(T))
+            A[nv:nQ, nQ + r] = A0[nv:nQ, nQ + r] + mu * d.dot(consts)
+
+    return terms
+
+
+def _command_and_solve(plan):
+    """solve(t, x, φ, Js, y, b_ctl) -> (z = [Q̈, λ, w], ż): the controller's command through the drives (or
+    folded into the solve), then A z = b. ``b_ctl``: a list to keep the command's share of b in, so the
+    trial solves of a launch (:func:`_launch`) call a controller that reads no force once per call."""
+    s = plan.system
+    nQ, nv, m = s.nQ, s.nv, plan.m
+    m2 = m * m
+    generic_ctl = not plan.affine_ctl
+    ctl_call = controller_call(plan) if generic_ctl else None
+    drives = drive_forces(plan)
+    reads_forces = plan.phase.controller.uses_forces
+    folded = folded_solve(plan, controller_input(plan)) if (reads_forces and plan.nr) or plan.phase.carrier \
+        else None
+    contact_torque = contact_torque_of(plan)
+    isfinite = math.isfinite
+
+    def solve(t, x, phi, Js, y, b_ctl):
+        A = y[:m2].reshape(m, m)
+        b = y[m2:m2 + m]
+        o = y[m2 + m:]
+        zdot = None
+        if folded is not None:  # a force-reading controller with rows: its forces folded into the solve
+            return folded(t, x, Js, phi, o, A, b)
+        if generic_ctl:
+            if b_ctl and not reads_forces:
+                f_ctl, zdot = b_ctl
+            else:
+                tau_c = contact_torque(b, Js) if reads_forces else None
+                tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
+                f_ctl = tau if drives is None else drives(x, tau)
+                if b_ctl is not None:
+                    b_ctl[:] = (f_ctl, zdot)
+            b[:len(f_ctl)] += f_ctl
+        z = _solve1(A, b)
+        if not isfinite(z.dot(z)):
+            z = plan._singular(A, b)
+        return z, zdot
+
+    return solve
+
+
+def _launch(plan, friction, solve):
+    """launch(t, x, φ, Js, y, b_ctl) -> the modes with every 2-D slide from rest given its direction
+    (:func:`~contactdyn.friction.launch_directions`, the readable rule), each trial direction solved
+    on a copy of this call's KKT system: a_t = T (J_f Q̈ + J̇q̇_f) + (body columns) Q̈."""
+    s = plan.system
+    nv, m = s.nv, plan.m
+    m2 = m * m
+    o_vt = [plan.o_vt[c.name] for c in s.contacts]
+    tangent = []
+    for c in s.contacts:
+        T, consts = plan._tangent_terms(c)
+        j = plan.frame_of[c.fid]
+        tangent.append((T, consts, j, plan.i_dr[j]))
+
+    def launch(t, x, phi, Js, y, b_ctl):
+        o = y[m2 + m:]
+
+        def slip_of(i):
+            return o[o_vt[i]]
+
+        def acceleration_of(trial, i):
+            if any(launching(mode) for mode in trial):  # another slide from rest: resolved inside, as readable
+                trial = launch_directions(s, trial, slip_of, acceleration_of)
+            yt = y.copy()
+            if friction is not None:
+                friction(yt, Js, trial)
+            z, _ = solve(t, x, phi, Js, yt, b_ctl)
+            T, consts, j, i_dr = tangent[i]
+            return T.dot(Js[j].dot(z[:nv]) + phi[i_dr:i_dr + 3]) + consts.dot(z[:s.nQ])
+
+        return launch_directions(s, plan.modes, slip_of, acceleration_of)
+
+    return launch
 
 
 def _time_terms(plan):
@@ -184,7 +268,10 @@ def _impulse_rates(plan):
     m = plan.m
     off = m * m + m
 
-    def rates(xd, z, y):
+    s = plan.system
+    o_vt = [plan.o_vt[c.name] for c in s.contacts]
+
+    def rates(xd, z, y, modes):
         for i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci in impulses:
             F_n = z[k_n] if from_z else y[k_n]
             xd[i0] = F_n
@@ -195,7 +282,7 @@ def _impulse_rates(plan):
                 if d0 is not None:  # 1-D
                     xd[i0 + 1] = -mu * Fp * d0 + y[k_visc]
                 else:
-                    d = plan._direction(ci, y[off:])
+                    d = slip_direction(s, y[off:][o_vt[ci]], modes[ci])
                     xd[i0 + 1:i0 + 1 + len(d)] = -mu * Fp * d + y[k_visc:k_visc + len(d)]
 
     return rates

@@ -144,10 +144,11 @@ def solve_posture(robot: Robot, task: PostureTask, seed: np.ndarray | None = Non
 
 def check_within_limits(robot: Robot, q: np.ndarray, key: str, file: str | None) -> None:
     """A start posture outside the joint limits is bad input naming the joint."""
-    for name, value, lo, hi in zip(robot.joint_names, q, robot.lower, robot.upper, strict=True):
+    for name, unit, value, lo, hi in zip(robot.joint_names, robot.joint_units, q, robot.lower, robot.upper,
+                                         strict=True):
         if not lo <= value <= hi:
-            raise SceneError(key, f"a start posture within the joint limits (joint {name!r} in [{lo:.6g}, {hi:.6g}]; "
-                             "or robot.joint_limits = \"ignore\")", f"{value:.6g}", file)
+            raise SceneError(key, f"a start posture within the joint limits (joint {name!r} in [{lo:.6g}, {hi:.6g}] "
+                             f"{unit}; or robot.joint_limits = \"ignore\")", f"{value:.6g} {unit}", file)
 
 
 def start_posture(robot: Robot, spec: RobotSpec, controller: Any, file: str | None) -> tuple[np.ndarray, dict]:

@@ -12,7 +12,8 @@ friction and the plain task-space PD law. A :class:`ModePlan` measures that affi
 vectors, so it is the same model by construction; the constraint rows are ``a·J`` plus
 constants, collected once. A call then costs Pinocchio's terms, one product ``W e``,
 one product for the rows and one small linear solve. What is not affine stays explicit:
-Coulomb friction ``−μ max(F_n, 0) d``, 2-D slip directions, other controllers.
+Coulomb friction ``−μ max(F_n, 0) d``, 2-D slip directions (a slide launching from rest:
+its direction solved per call on the plan's own KKT system), other controllers.
 
 A plan checks itself against :meth:`System.evaluate` when it is built (two states) and
 declines (``plan.ok`` false, ``plan.reason`` says why) where it cannot represent the
@@ -35,7 +36,6 @@ import numpy as np
 
 from .contact import ContactMode
 from .fastpath import UNDECLARED, mode_gap
-from .friction import slip_direction
 from .plan_kkt import CompiledKKT
 from .plan_probe import ProbedModel, affine_map
 from .plan_rhs import controller_call
@@ -96,12 +96,6 @@ class ModePlan(ProbedModel, CompiledKKT):
         return ""
 
 
-    def _direction(self, ci: int, o: np.ndarray) -> np.ndarray:
-        """The sliding direction d of contact ci at outputs o (:func:`~contactdyn.friction.slip_direction`'s rule)."""
-        c, mode = self.system.contacts[ci], self.modes[ci]
-        return slip_direction(self.system, o[self.o_vt[c.name]], mode)
-
-
     # ---- output samples, all at once (contactdyn.samples) ----------------------------------
     def samples(self, ts: np.ndarray, X: np.ndarray) -> Samples:
         """Diagnostics at the states X[k] (times ts[k]) of this mode, as arrays."""
@@ -160,6 +154,11 @@ class ModePlan(ProbedModel, CompiledKKT):
         """μ_s F − |F_f| [N] of a sticking contact ci: the ``slip`` event's function."""
         F_f = self.stick_force(ci, t, x)
         return mu_s * self.normal_force(ci, t, x) - math.sqrt(float(F_f @ F_f))
+
+    def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate (the ``release`` event's)."""
+        z, _ = self.values(t, x)
+        return {i: float(z[k]) for i, k in self.limit_rows.items()}
 
     def stick_force(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
         """Friction force of a sticking contact ci in tangent coordinates [N]."""

@@ -38,6 +38,12 @@ _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 EXAMPLE_ROBOTS = example_robots()
 
 
+def joint_unit(model: pin.Model, jid: int) -> str:
+    """The unit of joint ``jid``'s coordinate: "m" for a prismatic joint, else "rad"."""
+    kind = model.joints[jid].shortname().removeprefix("JointModel")
+    return "m" if kind.startswith("Prismatic") or kind in ("PX", "PY", "PZ") else "rad"
+
+
 def _neutral_value(model: pin.Model, i: int) -> float:
     """0 clipped into the joint's limits [rad or m]."""
     return float(np.clip(0.0, model.lowerPositionLimit[i], model.upperPositionLimit[i]))
@@ -58,7 +64,9 @@ def _lock_values(model: pin.Model, names: list[str], locked: dict[str, float], p
         value = float(locked[name]) if name in locked else _neutral_value(model, i)
         lo, hi = model.lowerPositionLimit[i], model.upperPositionLimit[i]
         if not lo <= value <= hi:
-            raise RobotError(f"{path}: locked joint {name!r} at {value} is outside its limits [{lo}, {hi}]")
+            unit = joint_unit(model, jid)
+            raise RobotError(f"{path}: locked joint {name!r} at {value} {unit} is outside its limits [{lo}, {hi}] "
+                             f"{unit}")
         values[name] = value
     return values
 
@@ -132,6 +140,7 @@ class Robot:
         self.locked = dict(locked or {})  #: locked joint -> value [rad or m]
         self.nq, self.nv = model.nq, model.nv
         self.joint_names = [model.names[j] for j in range(1, model.njoints)]
+        self.joint_units = [joint_unit(model, j) for j in range(1, model.njoints)]  #: "rad" or "m" per joint
         self._visual = visual
         self.notes: list[str] = []  #: inertia repairs or trusts (see contactdyn.inertia), one line each
         self.unbounded: list[str] = []  #: active joints without position limits (continuous in the URDF)

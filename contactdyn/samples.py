@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from .friction import launching
+
 __all__ = ["Samples", "plan_samples", "evaluated_samples", "slip_directions"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -37,6 +39,7 @@ class Samples:
     def __init__(self, n: int, system):
         nv, nb = system.nv, len(system.body_names)
         self.tau = np.zeros((n, nv))
+        self.limit_torque = np.zeros((n, nv))  #: per joint [N·m or N], 0 unless pressing on a limit
         self.tip = np.zeros((n, 3))
         self.x_d = np.full((n, 3), np.nan)
         self.has_x_d = False
@@ -53,7 +56,7 @@ class Samples:
     @classmethod
     def concatenate(cls, parts: list[Samples], system) -> Samples:
         out = cls(0, system)
-        for name in ("tau", "tip", "x_d", "body_force"):
+        for name in ("tau", "limit_torque", "tip", "x_d", "body_force"):
             setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
         out.has_x_d = any(p.has_x_d for p in parts)
         out.has_F_d = {key: any(p.has_F_d[key] for p in parts) for key in out.has_F_d}
@@ -66,6 +69,8 @@ class Samples:
     def fill(self, k: int, ev) -> None:
         """Row k from a full :class:`~contactdyn.dynamics.Evaluation`."""
         self.tau[k] = ev.tau
+        for i, value in ev.limit_torque.items():
+            self.limit_torque[k, i] = value
         self.tip[k] = ev.p_tip
         if ev.x_d is not None and len(ev.x_d) == 3:
             self.x_d[k] = ev.x_d
@@ -107,8 +112,8 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     S = Samples(N, plan.system)
     if N == 0:
         return S
-    Phi, O, Z, J_all, tau = _solve_samples(plan, ts, X)
-    _read_out(plan, S, ts, X, Phi, O, Z, J_all, tau)
+    Phi, O, Z, J_all, tau, refs = _solve_samples(plan, ts, X)
+    _read_out(plan, S, ts, X, Phi, O, Z, J_all, tau, refs)
     return S
 
 
@@ -144,23 +149,49 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
     O = Y[:, m2 + m:]
     J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
     w0 = nQ + nr
+    refs = _launch_references(plan, ts, X, Y) if plan.launch is not None else {}
     for ci, i_fn, mu, T, consts, j, _, _ in plan.coulomb_terms:
         Fp = np.maximum(O[:, i_fn], 0.0)
-        D = slip_directions(plan, ci, O)
+        D = slip_directions(plan, ci, O, refs.get(ci))
         B[:, w0 + 3 * j:w0 + 3 * j + 3] -= (mu * Fp)[:, None] * (D @ T)
         if nQ > nv:
             B[:, nv:nQ] -= (mu * Fp)[:, None] * (D @ consts)
     for r, ci, mu, T, consts, j in plan.dyn_tilt:
-        D = slip_directions(plan, ci, O)
+        D = slip_directions(plan, ci, O, refs.get(ci))
         A[:, :nv, nQ + r] += mu * np.einsum("kiv,ki->kv", J_all[j], D @ T)
         A[:, nv:nQ, nQ + r] = plan.A0[nv:nQ, nQ + r] + mu * (D @ consts)
     B[:, :nv] += tau
     Z = _solve_all(plan, A, B)
-    return Phi, O, Z, J_all, tau
+    return Phi, O, Z, J_all, tau, refs
+
+
+def _launch_references(plan, ts: np.ndarray, X: np.ndarray, Y: np.ndarray) -> dict[int, np.ndarray]:
+    """Per launching contact, the reference r of each sample: the direction its slide from rest takes
+    (the plan's own per-call launch, :func:`~contactdyn.plan_rhs.make_rhs`) where the slip is still inside
+    the stick band, the mode's r where it has left it (there the slip's own direction rules anyway)."""
+    s = plan.system
+    m = plan.m
+    nv = s.nv
+    out = {}
+    for ci, mode in enumerate(plan.modes):
+        if launching(mode):
+            r = np.asarray(mode.slip, float)
+            out[ci] = np.broadcast_to(r, (len(ts), 2)).copy()
+    inside = np.zeros(len(ts), bool)
+    O = Y[:, m * m + m:]
+    for ci in out:
+        inside |= O[:, plan.o_vt[s.contacts[ci].name]] @ np.asarray(plan.modes[ci].slip) <= s.slip_band
+    for k in np.flatnonzero(inside):
+        phi = plan.phi_at(ts[k], X[k])  # Pinocchio at this sample: the controller reads it
+        Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+        resolved = plan.launch(ts[k], X[k], phi, Js, plan.P.dot(phi), [])
+        for ci in out:
+            out[ci][k] = resolved[ci].slip
+    return out
 
 
 def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, O: np.ndarray, Z: np.ndarray,
-              J_all: list, tau: np.ndarray) -> None:
+              J_all: list, tau: np.ndarray, refs: dict) -> None:
     """Fill S with the same quantities System.evaluate reports, from the solved samples."""
     s, phase = plan.system, plan.phase
     nQ, nv = s.nQ, s.nv
@@ -187,6 +218,8 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
             S.x_d[:] = x_d
             S.has_x_d = True
     S.body_force[:] = O[:, plan.o_body]
+    for i, k in plan.limit_rows.items():
+        S.limit_torque[:, i] = Z[:, k]
     slots = {key: slot for slot, _, key in plan.time_ramps}
     for key, ramp in phase.forces.items():
         S.F_d[key][:] = Phi[:, plan.i_e + slots[key]] if key in slots else [ramp.at(t)[0] for t in ts]
@@ -203,7 +236,7 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
             if mode.touching and mode.stuck:
                 S.F_f[name][:] = Z[:, plan.stick_rows[ci]]
             elif mode.touching:
-                D = slip_directions(plan, ci, O)
+                D = slip_directions(plan, ci, O, refs.get(ci))
                 S.F_f[name][:] = -c.friction.mu_k * np.maximum(F_n, 0.0)[:, None] * D + O[:, plan.o_visc[name]]
         for i, dc in enumerate(c.tangent_chains):
             key = f"{name}.{dc.label}"
@@ -243,16 +276,17 @@ def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
     Phi[:, i_e + n + 3:i_e + n + 6] = np.einsum("kiv,kv->ki", J_all, X[:, nQ:nQ + nv])
     Phi[:, i_e + n + 6:] = TV
 
-def slip_directions(plan, ci: int, O: np.ndarray) -> np.ndarray:
+def slip_directions(plan, ci: int, O: np.ndarray, refs: np.ndarray | None = None) -> np.ndarray:
     """Sliding directions (N, k) of contact ci at the samples' outputs O (friction.slip_direction's rule:
-    v_t/|v_t| while v_t·r exceeds the stick band, else the mode's reference r; 1-D: r)."""
+    v_t/|v_t| while v_t·r exceeds the stick band, else the reference r; 1-D: r). r: the mode's, or per
+    sample ``refs`` (N, 2) (a slide launching from rest, :func:`_launch_references`)."""
     c, mode = plan.system.contacts[ci], plan.modes[ci]
     r = np.asarray(mode.slip, float)
     if len(c.tangents) == 1:
         return np.broadcast_to(r, (len(O), 1))
     vt = O[:, plan.o_vt[c.name]]
-    out = np.broadcast_to(r, vt.shape).copy()
-    ahead = vt @ r > plan.system.slip_band
+    out = np.broadcast_to(r, vt.shape).copy() if refs is None else refs.copy()
+    ahead = np.einsum("ki,ki->k", vt, out) > plan.system.slip_band
     out[ahead] = vt[ahead] / np.sqrt((vt[ahead] ** 2).sum(axis=1))[:, None]
     return out
 

@@ -93,17 +93,7 @@ class Transitions:
         modes[i], x = self._touch(t, x, modes, i)
         if c.normal.chain.bonded_when_touching:
             x, imp = impact(system, t, x, modes, c, phase.limits)
-            self.impacts.append({"t": t, "contact": c.name, "normal_impulse": imp.normal_impulse,
-                                 "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
-                                 "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
-                                 "v_after": imp.v_after.tolist(), "slip_before": imp.slip_before.tolist(),
-                                 "slip_after": imp.slip_after.tolist()})
-            if imp.jammed:
-                modes[i] = modes[i].with_(stuck=True)
-            elif c.friction is not None and len(c.tangents):
-                slip = imp.slip_after if np.linalg.norm(imp.slip_after) > system.slip_band else imp.direction
-                if np.any(slip):
-                    modes[i] = modes[i].with_(slip=direction_of(slip))
+            self._after_impact(imp, modes)
         if phase.spec.until == f"touch:{c.name}":
             phase = self.system.start_phase(phase.index + 1, t, x, phase) \
                 if phase.index + 1 < len(self.scene.phases) else phase
@@ -146,9 +136,29 @@ class Transitions:
 
     def _on_limit(self, t, x, modes, phase, event, after):
         """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (contactdyn.limits)."""
-        x, phase, info = self.system.limits.switch(self.system, t, x, modes, phase, event)
+        x, phase, info, imp = self.system.limits.switch(self.system, t, x, modes, phase, event)
         self.log.events[-1].update(info)  # the joint, side, velocity before and impulse, with the event
+        if imp is not None and imp.contact:  # a contact took part (its friction impulse too): recorded as at a touch
+            self._after_impact(imp, modes, joint=info["joint"], limit_impulse=info["impulse"])
         return x, phase, True
+
+    def _after_impact(self, imp, modes, **extra) -> None:
+        """Record an impact on a contact in ``Result.impacts`` and set the contact's mode after it:
+        stuck if it jammed, else sliding along its slip after the impact (or the impact's direction)."""
+        system = self.system
+        self.impacts.append({"t": imp.t, "contact": imp.contact, "normal_impulse": imp.normal_impulse,
+                             "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
+                             "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
+                             "v_after": imp.v_after.tolist(), "slip_before": imp.slip_before.tolist(),
+                             "slip_after": imp.slip_after.tolist(), **extra})
+        i = self._index(imp.contact)
+        c = system.contacts[i]
+        if imp.jammed:
+            modes[i] = modes[i].with_(stuck=True)
+        elif c.friction is not None and len(c.tangents):
+            slip = imp.slip_after if np.linalg.norm(imp.slip_after) > system.slip_band else imp.direction
+            if np.any(slip):
+                modes[i] = modes[i].with_(slip=direction_of(slip))
 
     #: event kind -> handler (see :meth:`handle`)
     HANDLERS = {"limit": _on_limit, "release": _on_limit,

@@ -9,13 +9,14 @@ import pytest
 
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.chain import ChainStage
-from contactdyn.fastpath import ENERGY, UNDECLARED
+from contactdyn.fastpath import ENERGY, UNDECLARED, Gap
 from contactdyn.scene import sims_dir
 from contactdyn.simulate import run_system
 from contactdyn.stage_laws import STAGE_LAWS, StageLaw, register_stage_law
 from contactdyn.system import System
 
 HARD = Path(__file__).resolve().parent.parent / "benchmarks" / "hard"
+READABLE = Gap("test", "readable model forced by the test", "always", lambda modes, phase: True)
 HUNT_CROSSLEY = {"model": "chain", "environment": [{"k": 1e7, "b": 1e9, "law": "hunt_crossley", "exponent": 1.5}]}
 
 
@@ -91,8 +92,41 @@ def test_a_new_affine_stage_law_is_compiled_by_construction():
                                atol=1e-9 * np.abs(linear["contact.tip.F_n"]).max())
 
 
+@pytest.mark.parametrize("scene", ["case2_writer5dof", "case2_writer_ur5"])
+def test_the_writers_2d_slip_launching_from_rest_runs_on_the_compiled_path(scene):
+    """Both writers stick at the start, then break away (a 2-D slide from rest, its direction solved per
+    call): up to 0.85 s every mode, the launch included, is compiled."""
+    r = simulate(scene, {"duration": 0.85})
+    assert [e["kind"] for e in r.events if e["kind"] != "phase"] == ["stick", "slip"]
+    assert r.events[-1]["t"] < 0.8  # the launch segment ran for more than 50 ms
+    assert r.stats["fallback_modes"] == {} and r.stats["fast_path_gaps"] == []
+    assert r.stats["segments_by_method"].get("LSODA") == 1  # the launch segment (contactdyn.hybrid)
+
+
+def test_a_compiled_launch_from_rest_agrees_with_the_readable_model():
+    """cylindrical3 pushed at 45° on a table until it breaks away (test_friction's anisotropic arm): the
+    launch direction solved on the plan's KKT system = the readable Newton on System.evaluate."""
+    doc = {"name": "cyl", "duration": 0.6, "solver": {"rtol": 1e-10, "atol": 1e-12, "output_rate": 1000.0},
+           "robot": {"urdf": "cylindrical3", "q0": [0.0, 0.0, 1.0]},
+           "contact": {"table": {"point": [0.0, 0.0, 0.2], "normal": {"direction": [0.0, 0.0, 1.0]},
+                                 "tangent": {"model": "friction", "directions": [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                                             "mu_s": 0.5, "mu_k": 0.3}}},
+           "controller": {"kind": "task_force", "rate": [500.0 / np.sqrt(2), 500.0 / np.sqrt(2), 0.0]}}
+    compiled = run_system(System(parse_scene(doc)))
+    readable_system = System(parse_scene(doc))
+    readable_system.fast_path_gaps = [READABLE]
+    readable = run_system(readable_system)
+    assert [e["kind"] for e in compiled.events] == [e["kind"] for e in readable.events] == ["stick", "slip"]
+    assert compiled.stats["fallback_modes"] == {} and readable.stats["compiled_modes"] == 0
+    assert compiled.stats["segments_by_method"]["LSODA"] == 1  # the launch segment
+    for key in ("q", "v", "contact.table.F_f", "contact.table.v_slip"):
+        scale = float(np.abs(readable[key]).max())
+        np.testing.assert_allclose(compiled[key], readable[key], rtol=0, atol=1e-8 * scale)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("path", sorted(sims_dir().glob("*.toml")) + sorted(HARD.glob("*.toml")),
                          ids=lambda p: p.stem)
-def test_every_scene_falls_back_only_where_a_part_declared_it(path):
-    _assert_only_declared_fallbacks(run_system(System(load_scene(path))))
+def test_every_scene_runs_every_mode_on_the_compiled_path(path):
+    r = run_system(System(load_scene(path)))
+    assert r.stats["fallback_modes"] == {}, r.stats["fallback_modes"]

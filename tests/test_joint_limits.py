@@ -12,7 +12,10 @@ from scipy.special import ellipk, ellipkinc
 
 from contactdyn import simulate
 from contactdyn.errors import SceneError
+from contactdyn.impact import limit_impact
+from contactdyn.robot import Robot
 from contactdyn.scene import parse_scene
+from contactdyn.system import System
 
 M, L, G = 2.0, 0.5, 9.81  #: point mass [kg] on a massless rod [m], gravity [m/s²]
 LOWER, UPPER, THETA0 = 1.0, 3.0, 2.5  #: [rad] limits; start at rest near the top
@@ -55,6 +58,7 @@ def test_pendulum_falls_onto_its_limit_closed_form(tmp_path):
     assert hits[0]["velocity_before"] == pytest.approx(v_hit, rel=1e-8)
     assert hits[0]["impulse"] == pytest.approx(-M * L * L * v_hit, rel=1e-8)  # plastic: all momentum taken
     assert not [e for e in r.events if e["kind"] == "release"]  # gravity keeps it pressing
+    assert r.stats["fallback_modes"] == {} and r.stats["compiled_modes"] == 2  # free, then pressing: compiled
     after = r.t > hits[0]["t"] + 1e-3
     # the velocity is zeroed and stays so: what remains is the solver's absolute tolerance (atol 1e-12 per
     # step, over ~400 steps) and the Baumgarte return from the event's 1e-13 rad overshoot
@@ -89,7 +93,7 @@ def test_velocity_and_effort_limits_are_reported(tmp_path, capsys):
 
 def test_start_outside_the_limits_is_a_clear_error(tmp_path):
     with pytest.raises(SceneError, match=r"robot.q0: expected a start posture within the joint limits \(joint 'swing' "
-                                         r"in \[1, 3\]"):
+                                         r"in \[1, 3\] rad; .*found '0.5 rad'"):
         simulate(pendulum(tmp_path, q0=[0.5]))
 
 
@@ -108,6 +112,7 @@ def test_arm_stops_at_the_limit_presses_and_is_released(panda_run):
     r = panda_run
     kinds = [(e["kind"], e["name"]) for e in r.events if e["kind"] != "phase"]
     assert kinds == [("limit", "panda_joint4"), ("release", "panda_joint4")]
+    assert r.stats["fallback_modes"] == {}  # the pressing segment too: its row is on the compiled path
     hit, release = (e["t"] for e in r.events if e["kind"] in ("limit", "release"))
     assert 0.5 < hit < 1.0 < 1.5 < release  # hit on the way out, released on the way back
     q4 = r["q"][:, 3]
@@ -124,3 +129,82 @@ def test_arm_stops_at_the_limit_presses_and_is_released(panda_run):
 def test_without_enforcement_the_joint_passes_its_limit():
     r = simulate(PANDA_LIMIT, {"duration": 1.0, "robot.joint_limits": "ignore"})
     assert r["q"][:, 3].max() > 0.2 and not [e for e in r.events if e["kind"] == "limit"]
+
+
+# ---- a limit impact while a contact slides: friction impulses through the one impact map ------------------------
+SLOPE = math.radians(30.0)  #: [rad] the plane's tilt about y
+N_SLOPE = np.array([math.sin(SLOPE), 0.0, math.cos(SLOPE)])  #: its normal
+T_SLOPE = np.array([[math.cos(SLOPE), 0.0, -math.sin(SLOPE)], [0.0, 1.0, 0.0]])  #: down-slope, sideways
+MU_SLOPE = 0.3
+
+
+def slope_scene(v_tip: np.ndarray, duration: float = 0.2, mu: float = MU_SLOPE, **solver):
+    """cylindrical3 (base turn, radial slide q2 in [-0.5, 0.5] m, lift) at q = (0.3 rad, 0.5 m, 1 m): its radial
+    slide on its upper limit, its tip sliding at v_tip [m/s] on a rigid 30° slope with μ (2-D)."""
+    robot = Robot.load("cylindrical3")
+    q0 = np.array([0.3, 0.5, 1.0])
+    J = robot.frame_jacobian(q0, "tip")[:3]
+    doc = {"duration": duration, "solver": {"rtol": 1e-10, "atol": 1e-12, **solver},
+           "robot": {"urdf": "cylindrical3", "q0": q0.tolist(), "v0": np.linalg.solve(J, v_tip).tolist()},
+           "contact": {"slope": {"point": robot.frame_position(q0, "tip").tolist(),
+                                 "normal": {"direction": N_SLOPE.tolist()}, "bonded": True,
+                                 "tangent": {"model": "friction", "directions": T_SLOPE.tolist(), "mu": mu}}},
+           "controller": {"kind": "joint_pd", "kp": 0.0, "kd": 0.0}}
+    return parse_scene(doc), robot, q0, J
+
+
+@pytest.mark.parametrize("sideways", [0.5, 0.0, 0.35])  # [m/s] the slip's sideways part before the impact
+def test_a_limit_impact_takes_the_sliding_contacts_friction_impulse_momentum_balance(sideways):
+    """The radial slide hits its upper limit while the tip slides: M ΔQ̇ = Jᵀ(n Λ_n + Tᵀ Λ_t) + e₂ Λ_limit
+    with |Λ_t| = μ Λ_n, the radial slide and the normal velocity zero after. At 0.5 and 0 m/s sideways the
+    tip slides on, Λ_t = −μ Λ_n d (d the slip's direction before); at 0.35 m/s sliding on would reverse the
+    slip, so the impact jams (eqs 30–31), holding needs more than the cone, and it slides where that pushes."""
+    scene, robot, q, J = slope_scene(T_SLOPE[0] + sideways * T_SLOPE[1])
+    system = System(scene)
+    x, modes = system.initial_state()
+    x_after, imp, limit = limit_impact(system, 0.0, x, modes, ((1, -1),))
+    M = robot.mass_matrix(q)
+    dv = imp.v_after - imp.v_before
+    balance = M @ dv - J.T @ (N_SLOPE * imp.normal_impulse + T_SLOPE.T @ imp.friction_impulse)
+    np.testing.assert_allclose(balance, [0.0, limit, 0.0], rtol=0, atol=1e-10 * np.abs(M @ dv).max())
+    assert imp.contact == "slope" and not imp.jammed
+    assert np.linalg.norm(imp.friction_impulse) == pytest.approx(MU_SLOPE * imp.normal_impulse, rel=1e-12)
+    d = imp.slip_before / np.linalg.norm(imp.slip_before)
+    turned = math.degrees(math.acos(float(-imp.friction_impulse @ d) / np.linalg.norm(imp.friction_impulse)))
+    if sideways == 0.35:
+        assert turned > 1.0  # (1.7°) not against the slip before: where the jammed impulse pushed
+    else:
+        np.testing.assert_allclose(imp.friction_impulse, -MU_SLOPE * imp.normal_impulse * d, rtol=1e-12)
+    assert imp.normal_impulse > 10.0 and limit < -50.0  # [N·s] the slope and the limit both push back, hard
+    assert abs(imp.v_after[1]) < 1e-12 and abs(N_SLOPE @ J @ imp.v_after) < 1e-12  # stopped, still on the plane
+    assert imp.energy_loss == pytest.approx(0.5 * (imp.v_before @ M @ imp.v_before - imp.v_after @ M @ imp.v_after))
+    assert imp.energy_loss > 0.0 and np.array_equal(x_after[3:6], imp.v_after)  # x = [Q, Q̇, y], nQ = 3
+
+
+def test_a_limit_impact_holds_a_sticking_contact_through_its_stick_rows():
+    """The same arm with its tip stuck (mode): the limit and the stick rows stop everything, the impulses balance
+    M ΔQ̇ with the friction impulse the stick rows' Λ_t (no cone test at an impact of a stuck contact)."""
+    scene, robot, q, J = slope_scene(T_SLOPE[0] + 0.5 * T_SLOPE[1], mu=5.0)
+    system = System(scene)
+    x, modes = system.initial_state()
+    _, imp, limit = limit_impact(system, 0.0, x, [modes[0].with_(stuck=True)], ((1, -1),))
+    M = robot.mass_matrix(q)
+    dv = imp.v_after - imp.v_before
+    balance = M @ dv - J.T @ (N_SLOPE * imp.normal_impulse + T_SLOPE.T @ imp.friction_impulse)
+    np.testing.assert_allclose(balance, [0.0, limit, 0.0], rtol=0, atol=1e-10 * np.abs(M @ dv).max())
+    assert imp.contact == "slope" and np.linalg.norm(imp.friction_impulse) > 1.0
+    np.testing.assert_allclose(J @ imp.v_after, 0.0, atol=1e-12)  # stuck on the plane, radial slide stopped
+
+
+def test_a_run_records_the_limit_impact_with_the_contacts_friction_impulse():
+    """From 0.35 m the radial slide runs into its limit while the tip slides down the slope under gravity."""
+    scene, *_ = slope_scene(T_SLOPE[0] + 0.5 * T_SLOPE[1])
+    r = simulate(scene, {"robot.q0": [0.3, 0.35, 1.0 - 0.15 * math.tan(SLOPE) * math.cos(0.3)], "duration": 0.25})
+    (hit,) = [e for e in r.events if e["kind"] == "limit"]
+    (imp,) = r.impacts
+    assert imp["joint"] == "q2" == hit["joint"] and imp["contact"] == "slope" and imp["t"] == hit["t"]
+    assert imp["limit_impulse"] == hit["impulse"] < 0.0
+    assert np.linalg.norm(imp["friction_impulse"]) == pytest.approx(MU_SLOPE * imp["normal_impulse"], rel=1e-12)
+    assert r.stats["fallback_modes"] == {}
+    after = r.t > hit["t"] + 1e-3
+    np.testing.assert_allclose(r["q"][after, 1], 0.5, atol=1e-9)  # [m] held on its limit

@@ -475,7 +475,8 @@ def test_unknown_joint_names(tmp_path):
 
 
 def test_locked_outside_limits():
-    load_error("cylindrical3", "locked joint 'q2' at 0.9", "outside its limits [-0.5, 0.5]", locked={"q2": 0.9})
+    load_error("cylindrical3", "locked joint 'q2' at 0.9 m", "outside its limits [-0.5, 0.5] m", locked={"q2": 0.9})
+    load_error("cylindrical3", "locked joint 'q1' at 4.0 rad", "outside its limits", "rad", locked={"q1": 4.0})
     # panda joint 4 lives in [-3.07, -0.07]: its neutral value is 0 clipped into them
     assert Robot.load("panda", active_joints=["panda_joint1"]).locked["panda_joint4"] == pytest.approx(-0.0698)
 

@@ -18,6 +18,7 @@ import argparse
 import importlib.util
 import itertools
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +41,7 @@ from contactdyn.workprecision import (
 )
 
 ROOT = Path(__file__).resolve().parent.parent
-DECLINED = ("motors", "a controller reading measured forces", "a 2-D slip launching", "energy audit")
+DECLINED = ("motors", "a controller reading measured forces", "energy audit")
 SCENES = sorted(str(p) for p in (ROOT / "sims").glob("*.toml")) + \
     sorted(str(p) for p in (ROOT / "benchmarks" / "hard").glob("*.toml"))
 
@@ -53,7 +54,8 @@ def _b1_reference():
 
 
 def _mode_variants(system, modes):
-    """Every touching/stuck/slip-direction combination of the scene's contacts (at most 16)."""
+    """Every touching/stuck/slip-direction combination of the scene's contacts (at most 16); a 2-D slide
+    also launching from rest (its direction solved per call)."""
     per_contact = []
     for c, m in zip(system.contacts, modes, strict=True):
         k = len(c.tangents)
@@ -64,6 +66,8 @@ def _mode_variants(system, modes):
                 continue
             for slip in slips:
                 opts.append(ContactMode(touching, stuck, tuple(slip), m.offsets))
+            if k == 2 and not stuck:
+                opts.append(ContactMode(touching, stuck, slips[0], m.offsets, from_rest=True))
         per_contact.append(opts)
     return list(itertools.islice(itertools.product(*per_contact), 16))
 
@@ -73,7 +77,8 @@ def test_plan_agrees_with_evaluate(path):
     """Derivatives, event values and output samples of the plan equal System.evaluate's (rtol 1e-9)."""
     system, modes, phase, x0 = prepare(load_scene(path, {"duration": 0.1}))
     rng = np.random.default_rng(3)
-    for variant in _mode_variants(system, modes):
+    pressing = replace(phase, limits=((0, 1),)) if 0 in system.limits.by_index else phase  # joint 0 on its limit
+    for variant, phase in [(v, phase) for v in _mode_variants(system, modes)] + [(modes, pressing)]:
         variant = list(variant)
         plan = ModePlan(system, variant, phase)
         if not plan.ok:  # declining is fine for what the plan documents it leaves to System.evaluate
@@ -99,7 +104,8 @@ def test_plan_agrees_with_evaluate(path):
                 if variant[ci].touching and variant[ci].stuck:
                     np.testing.assert_allclose(plan.stick_force(ci, t, x), ev.friction[c.name], rtol=1e-8,
                                                atol=1e-9 * scale)
-        for name in ("tau", "tip", "body_force"):
+            assert plan.limit_torque(t, x) == pytest.approx(ev.limit_torque, rel=1e-9, abs=1e-9 * scale)
+        for name in ("tau", "tip", "body_force", "limit_torque"):
             np.testing.assert_allclose(getattr(samples, name), getattr(ref_samples, name), rtol=1e-8, atol=1e-8)
         for field in ("F_n", "gap", "F_d", "F_f", "v_slip", "iface", "stages"):
             for key, val in getattr(ref_samples, field).items():

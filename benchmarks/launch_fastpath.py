@@ -1,0 +1,98 @@
+"""The writers' 2-D launch from rest on the compiled path: cost per simulated second against B1 by hand.
+
+    PYTHONPATH=. python3 benchmarks/launch_fastpath.py [--repeats 5] [scene ...]
+
+For each scene (default: the two writers, whose pencil sticks, then breaks away into a 2-D
+slide from rest): the run as it is now (every mode compiled, the launch direction solved per
+call on the plan's KKT system) and the run as it was before (the same, but the launching
+modes declined, so ``System.evaluate`` integrates them: what the declared gap did), and the
+hand-written closed-form B1 (``benchmarks/b1_reference.py`` at rtol 1e-8), interleaved,
+``--repeats`` times each. Reported: the median wall per simulated second [ms/s] (building the
+system and the output included), its ratio to the hand-written B1's, and the force error
+max |F_n − F_n,ref| [N] of both runs against a compiled reference at rtol 1e-11, atol 1e-13
+(away from ±2 samples of every event, :func:`motor_fastpath.force_error`).
+Writes benchmarks/out/launch_fastpath.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import b1_reference  # noqa: E402
+from motor_fastpath import force_error  # noqa: E402
+
+from contactdyn.fastpath import Gap  # noqa: E402
+from contactdyn.friction import launching  # noqa: E402
+from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.simulate import run_system  # noqa: E402
+from contactdyn.system import System  # noqa: E402
+
+SCENES = ["case2_writer5dof", "case2_writer_ur5"]
+#: the gap this branch removed: a mode with a 2-D slide launching from rest runs on System.evaluate
+BEFORE = Gap("benchmark", "a 2-D slip launching from rest (as before)", "while it launches",
+             lambda modes, phase: any(launching(m) for m in modes))
+OUT = Path(__file__).resolve().parent / "out" / "launch_fastpath.json"
+
+
+def run(scene: str, before: bool, overrides: dict | None = None):
+    """(wall [s] of building and running, Result)."""
+    t0 = time.perf_counter()
+    system = System(load_scene(scene, overrides or {}))
+    if before:
+        system.fast_path_gaps = [BEFORE]
+    result = run_system(system)
+    return time.perf_counter() - t0, result
+
+
+def measure(scene: str, repeats: int) -> dict:
+    walls: dict[str, list[float]] = {"after": [], "before": [], "b1_hand": []}
+    results = {}
+    duration = load_scene(scene).duration
+    for _ in range(repeats):
+        for key in ("after", "before"):
+            wall, results[key] = run(scene, key == "before")
+            walls[key].append(wall / duration)
+        walls["b1_hand"].append(b1_reference.run()["wall_s"] / b1_reference.T_END)
+    _, ref = run(scene, False, {"solver.rtol": 1e-11, "solver.atol": 1e-13})
+    row: dict = {"scene": scene, "duration_s": duration, "repeats": repeats}
+    for key, values in walls.items():
+        row[f"{key}_ms_per_s"] = 1e3 * statistics.median(values)
+    for key in ("after", "before"):
+        row[f"{key}_x_b1_hand"] = row[f"{key}_ms_per_s"] / row["b1_hand_ms_per_s"]
+        row[f"{key}_F_err_N"] = force_error(results[key], ref)
+        row[f"{key}_fallback_modes"] = results[key].stats["fallback_modes"]
+        row[f"{key}_rhs_evals"] = results[key].stats["rhs_evals"]
+    row["speedup"] = row["before_ms_per_s"] / row["after_ms_per_s"]
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenes", nargs="*", default=SCENES)
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args(argv)
+    rows = []
+    print(f"{'scene':18s} {'before [ms/s]':>13s} {'after [ms/s]':>12s} {'B1 hand':>8s} {'before/B1':>9s} "
+          f"{'after/B1':>8s} {'speed-up':>8s}  F_n err before / after [N]   fallbacks before / after")
+    for scene in args.scenes:
+        row = measure(scene, args.repeats)
+        rows.append(row)
+        print(f"{scene:18s} {row['before_ms_per_s']:13.1f} {row['after_ms_per_s']:12.1f} "
+              f"{row['b1_hand_ms_per_s']:8.1f} {row['before_x_b1_hand']:9.1f} {row['after_x_b1_hand']:8.1f} "
+              f"{row['speedup']:7.2f}x  {row['before_F_err_N']:.3g} / {row['after_F_err_N']:.3g}"
+              f"   {sum(row['before_fallback_modes'].values())} / {sum(row['after_fallback_modes'].values())}")
+    OUT.parent.mkdir(exist_ok=True)
+    OUT.write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
