@@ -9,7 +9,10 @@ modes and the task phase are fixed, and instants at which they change. The loop:
    (:mod:`contactdyn.rhsplan`) where it represents the mode, else
    :meth:`System.evaluate` — with the mode's events (:mod:`contactdyn.events`);
 2. at the first event, apply the transition (:mod:`contactdyn.transitions`): an impact,
-   a separation, a stick or a slip; or, at a phase's end, start the next phase;
+   a separation, a stick or a slip; or, at a phase's end, start the next phase; at a
+   corner of the phase's set-points (:class:`~contactdyn.trajectory.Corner`: a jump of the
+   reference's acceleration or of a force ramp's rate) go on past it with the same state,
+   so that no step straddles the jump (:meth:`HybridRun._pass_corner`);
 3. repeat until the duration; then sample the segments into channels
    (:mod:`contactdyn.channels`).
 
@@ -17,7 +20,7 @@ Integrator choice per segment: the scene's ``solver.method``; ``auto`` runs DOP8
 step budget and switches to Radau for a segment whose steps are stability-bound; a 2-D
 slip launching from rest runs on LSODA (its direction relaxes at a rate ∝ 1/|v_t|, stiff
 for an explicit method) until the next event. After a friction event the next segment
-starts with the step size the solver had reached. An integration failure reports what the
+(or a corner) starts with the step size the solver had reached. An integration failure reports what the
 state says: a singular contact system or stiffness.
 """
 
