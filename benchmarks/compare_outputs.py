@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
 
+from contactdyn.result import jsonable  # noqa: E402
 from contactdyn.scene import load_scene, sims_dir  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
 from contactdyn.system import System  # noqa: E402
@@ -107,7 +108,7 @@ def compare_case(channels, doc, saved: Path) -> tuple[float, str, str]:
         d = rel_diff(channels[name], old[name]) if name in old and name in channels else float("inf")
         if d > worst:
             worst, worst_name = d, name
-    new_doc = json.loads(json.dumps(doc, default=_jsonable))
+    new_doc = json.loads(json.dumps(doc, default=jsonable))
     verdict = "same"
     for key in ("events", "impacts"):
         if len(new_doc[key]) != len(old_doc[key]):
@@ -126,14 +127,6 @@ def compare_case(channels, doc, saved: Path) -> tuple[float, str, str]:
             if d > 0 and worst == d:
                 worst_name = key
     return worst, worst_name, verdict
-
-
-def _jsonable(obj):
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return str(obj)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -165,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
         path = args.dir / name
         if args.action == "save":
             np.savez(path.with_suffix(".npz"), **channels)
-            path.with_suffix(".json").write_text(json.dumps(doc, default=_jsonable))
+            path.with_suffix(".json").write_text(json.dumps(doc, default=jsonable))
             print(f"{name:32s} {wall:8.2f} {'saved':>12s}  {len(channels)} channels, {len(doc['events'])} events")
             continue
         worst, channel, verdict = compare_case(channels, doc, path)

@@ -34,6 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import b1_reference  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 import contactdyn  # noqa: E402
 
@@ -100,13 +101,10 @@ def _print_fit(title: str, fit: dict) -> None:
 
 def pool_ratio(log: Path, repeats: int, workers: int) -> dict:
     """Wall time of the same fit in this process and on ``workers`` pool processes, interleaved; medians."""
-    walls: dict[int, list[float]] = {0: [], workers: []}
-    for _ in range(repeats):
-        for w in walls:
-            t0 = time.perf_counter()
-            contactdyn.fit("b1", log, f"{K},{M},{MU}", workers=w)
-            walls[w].append(time.perf_counter() - t0)
-    here, pooled = statistics.median(walls[0]), statistics.median(walls[workers])
+    times = interleaved({w: lambda w=w: contactdyn.fit("b1", log, f"{K},{M},{MU}", workers=w) for w in (0, workers)},
+                        repeats)
+    walls = {w: t.wall_s for w, t in times.items()}
+    here, pooled = times[0].wall, times[workers].wall
     print(f"pool: {workers} workers {pooled:.1f} s, this process {here:.1f} s (medians of {repeats}, interleaved): "
           f"speed-up {here / pooled:.2f}; load average {os.getloadavg()[0]:.1f}")
     return {"workers": workers, "wall_s": walls, "speedup": here / pooled, "load_average": os.getloadavg()[0]}

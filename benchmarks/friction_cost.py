@@ -11,11 +11,11 @@ Scenes (defined below, all on a rigid surface):
 - ``point mass 2-D, rotating push``: circular sliding (no stops), 2-D friction and its
   ``turn`` events.
 
-For each: wall time (the minimum of REPEATS runs: the machine is shared, noise only
-adds), right-hand-side evaluations, steps, segments, events, and the ratio friction/free.
+For each: wall time (the minimum of REPEATS runs, friction and free interleaved: the machine
+is shared, noise only adds), right-hand-side evaluations, steps, segments, events, and the ratio friction/free.
 The load average is recorded.
 
-    PYTHONPATH=. /work/venv/bin/python benchmarks/friction_cost.py [--repeats 5]
+    PYTHONPATH=. python3 benchmarks/friction_cost.py [--repeats 5]
 
 Prints a table and writes benchmarks/out/friction_cost.json.
 """
@@ -28,12 +28,16 @@ import json
 import math
 import os
 import platform
-import time
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from contactdyn import Robot, parse_scene, simulate
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from timing import interleaved  # noqa: E402
+
+from contactdyn import Robot, parse_scene, simulate  # noqa: E402
 
 OUT = Path(__file__).parent / "out" / "friction_cost.json"
 SOLVER = {"rtol": 1e-8, "atol": 1e-10, "output_rate": 100.0}
@@ -93,17 +97,17 @@ SCENES = [("writer2r drag (stick-slip)", writer_drag), ("point mass, oscillating
           ("point mass 2-D, rotating push", point_mass_circle)]
 
 
-def measure(doc: dict, repeats: int) -> dict:
-    scene = parse_scene(copy.deepcopy(doc))
-    walls, result = [], None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        result = simulate(scene)
-        walls.append(time.perf_counter() - t0)
-    st = result.stats
-    return {"wall_s_min": min(walls), "wall_s_median": float(np.median(walls)), "rhs_evals": st["rhs_evals"],
-            "steps": st["steps"], "segments": st["segments"], "events": len(result.events),
-            "event_kinds": sorted({e["kind"] for e in result.events})}
+def measure(docs: dict[str, dict], repeats: int) -> dict[str, dict]:
+    """Each scene document run ``repeats`` times, interleaved: wall times [s], counters, events."""
+    scenes = {key: parse_scene(copy.deepcopy(doc)) for key, doc in docs.items()}
+    times = interleaved({key: lambda scene=scene: simulate(scene) for key, scene in scenes.items()}, repeats)
+    rows = {}
+    for key, timing in times.items():
+        result, st = timing.last, timing.last.stats
+        rows[key] = {"wall_s_min": min(timing.wall_s), "wall_s_median": timing.wall, "rhs_evals": st["rhs_evals"],
+                     "steps": st["steps"], "segments": st["segments"], "events": len(result.events),
+                     "event_kinds": sorted({e["kind"] for e in result.events})}
+    return rows
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -115,7 +119,7 @@ def main(argv: list[str] | None = None) -> dict:
         doc, contact = make()
         free = copy.deepcopy(doc)
         free["contact"][contact]["tangent"] = {"model": "free"}
-        fr, fe = measure(doc, args.repeats), measure(free, args.repeats)
+        fr, fe = measure({"friction": doc, "free": free}, args.repeats).values()
         rows.append({"scene": label, "friction": fr, "free": fe,
                      "wall_ratio": fr["wall_s_min"] / fe["wall_s_min"],
                      "rhs_ratio": fr["rhs_evals"] / fe["rhs_evals"]})

@@ -16,14 +16,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
-import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 from contactdyn.errors import ContactdynError  # noqa: E402
 from contactdyn.result import Result  # noqa: E402
@@ -53,12 +53,8 @@ def run(scene_path, overrides: dict, repeats: int = 1) -> tuple[Result | None, f
     """(result, median wall [s], status) of one setting."""
     try:
         system = System(load_scene(scene_path, overrides))
-        walls, result = [], None
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            result = run_system(system)
-            walls.append(time.perf_counter() - t0)
-        return result, statistics.median(walls), "ok"
+        times = interleaved({"run": lambda: run_system(system)}, repeats)["run"]
+        return times.last, times.wall, "ok"
     except ContactdynError as exc:
         return None, float("nan"), str(exc)
 

@@ -6,7 +6,8 @@
    (the first load of a file content: tree check + fork + build in the child) against a
    load whose probe is cached (tree check only), interleaved, medians over REPEATS; the
    ratio is the cost of the first load of a file in a process.
-2. Validation: ``parse_scene`` of every scene in sims/ (all checks incl. the run budget).
+2. Validation: ``load_scene`` of every scene in sims/ (the file read, then ``parse_scene``: all checks incl.
+   the run budget), the scenes interleaved, medians over REPEATS.
 3. Cleanup: a 2-worker sweep of b1 is killed with SIGKILL after its third run; the time
    until no process of its session remains (the workers, fork server, resource tracker),
    median over KILLS.
@@ -29,6 +30,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from timing import interleaved  # noqa: E402
 
 import contactdyn.urdf_check as urdf_check  # noqa: E402
 from contactdyn.robot import Robot, urdf_dir  # noqa: E402
@@ -40,30 +44,18 @@ OUT = ROOT / "benchmarks" / "out" / "hardening_cost.json"
 def load_times(repeats: int) -> dict[str, dict[str, float]]:
     table = {}
     for path in sorted(urdf_dir().glob("*.urdf")):
-        cold, warm = [], []
-        for _ in range(repeats):  # interleaved: probe, then cached, each repeat
-            urdf_check._probed.clear()
-            t0 = time.perf_counter()
-            Robot.load(path)
-            cold.append(time.perf_counter() - t0)
-            t0 = time.perf_counter()
-            Robot.load(path)
-            warm.append(time.perf_counter() - t0)
-        c, w = statistics.median(cold), statistics.median(warm)
+        # interleaved: probe (the cache cleared first: ~0.1 µs of a load of milliseconds), then cached
+        times = interleaved({"cold": lambda path=path: (urdf_check._probed.clear(), Robot.load(path)),
+                             "warm": lambda path=path: Robot.load(path)}, repeats)
+        c, w = times["cold"].wall, times["warm"].wall
         table[path.stem] = {"probed_ms": 1e3 * c, "cached_ms": 1e3 * w, "ratio": c / w}
     return table
 
 
 def validation_times(repeats: int) -> dict[str, float]:
-    out = {}
-    for path in sorted(sims_dir().glob("*.toml")):
-        times = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            load_scene(path)
-            times.append(time.perf_counter() - t0)
-        out[path.stem] = 1e3 * statistics.median(times)
-    return out
+    times = interleaved({path.stem: lambda path=path: load_scene(path) for path in sorted(sims_dir().glob("*.toml"))},
+                        repeats)
+    return {name: 1e3 * t.wall for name, t in times.items()}
 
 
 def _session(sid: int) -> list[int]:
@@ -112,7 +104,7 @@ def main() -> None:
     for name, row in loads.items():
         print(f"{name:<18} {row['probed_ms']:12.2f} {row['cached_ms']:12.2f} {row['ratio']:7.2f}")
     scenes = validation_times(args.repeats)
-    print("\nparse_scene, all checks [ms]: " + ", ".join(f"{k} {v:.2f}" for k, v in scenes.items()))
+    print("\nload_scene (read + parse_scene, all checks) [ms]: " + ", ".join(f"{k} {v:.2f}" for k, v in scenes.items()))
     kills = cleanup_time(args.kills)
     print(f"\nSIGKILL of a 2-worker sweep -> no process left after {statistics.median(kills):.3f} s "
           f"(median of {len(kills)}; range {min(kills):.3f}-{max(kills):.3f} s)")

@@ -15,15 +15,14 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import statistics
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import scenes  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 from contactdyn import simulate  # noqa: E402
 from contactdyn.scene import load_scene, sims_dir  # noqa: E402
@@ -33,21 +32,13 @@ OUT = Path(__file__).parent / "out"
 
 def compare(name: str, methods: list[str], repeats: int) -> dict:
     scene = load_scene(name)
-    walls: dict[str, list[float]] = {m: [] for m in methods}
-    cpus: dict[str, list[float]] = {m: [] for m in methods}
-    runs = {}
-    for _ in range(repeats):
-        for m in methods:
-            t0, c0 = time.perf_counter(), time.process_time()
-            runs[m] = simulate(name, {"solver.method": m})
-            walls[m].append(time.perf_counter() - t0)
-            cpus[m].append(time.process_time() - c0)
+    times = interleaved({m: lambda m=m: simulate(name, {"solver.method": m}) for m in methods}, repeats)
     ref = simulate(name, scenes.REFERENCE)
     row: dict = {"scene": name, "duration_s": scene.duration, "rtol": scene.solver.rtol}
     for m in methods:
-        r, err = runs[m], scenes.errors(runs[m], ref)
-        row[m] = {"wall_s": statistics.median(walls[m]), "cpu_s": statistics.median(cpus[m]),
-                  "ms_per_simulated_s": statistics.median(cpus[m]) / scene.duration * 1e3,
+        r, cpu = times[m].last, times[m].cpu
+        err = scenes.errors(r, ref)
+        row[m] = {"wall_s": times[m].wall, "cpu_s": cpu, "ms_per_simulated_s": cpu / scene.duration * 1e3,
                   "steps": r.stats["steps"], "rhs_evals": r.stats["rhs_evals"],
                   "events": len(r.events), "force_err": err["force_away"], "tip_err": err["tip_away"],
                   "fallback_modes": r.stats.get("fallback_modes", {})}

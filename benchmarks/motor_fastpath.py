@@ -15,14 +15,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
-import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 from contactdyn.fastpath import Gap  # noqa: E402
 from contactdyn.scene import load_scene  # noqa: E402
@@ -36,13 +36,11 @@ OUT = Path(__file__).resolve().parent / "out" / "motor_fastpath.json"
 
 
 def run(scene: str, readable: bool, overrides: dict | None = None):
-    """(wall [s] of building and running, Result)."""
-    t0 = time.perf_counter()
+    """Build the scene's system and run it (on the readable model if ``readable``); the Result."""
     system = System(load_scene(scene, overrides or {}))
     if readable:
         system.fast_path_gaps = [READABLE]
-    result = run_system(system)
-    return time.perf_counter() - t0, result
+    return run_system(system)
 
 
 def force_error(result, ref) -> float:
@@ -58,18 +56,15 @@ def force_error(result, ref) -> float:
 
 
 def measure(scene: str, repeats: int, error: bool) -> dict:
-    walls: dict[bool, list[float]] = {False: [], True: []}
-    results = {}
-    for _ in range(repeats):
-        for readable in (False, True):
-            wall, results[readable] = run(scene, readable)
-            walls[readable].append(wall)
-    row = {"scene": scene, "compiled_s": statistics.median(walls[False]), "readable_s": statistics.median(walls[True]),
+    times = interleaved({readable: lambda readable=readable: run(scene, readable) for readable in (False, True)},
+                        repeats)
+    results = {readable: t.last for readable, t in times.items()}
+    row = {"scene": scene, "compiled_s": times[False].wall, "readable_s": times[True].wall,
            "compiled_modes": results[False].stats["compiled_modes"],
            "fallback_modes": results[False].stats["fallback_modes"]}
     row["speedup"] = row["readable_s"] / row["compiled_s"]
     if error:
-        _, ref = run(scene, False, {"solver.rtol": 1e-11, "solver.atol": 1e-13})
+        ref = run(scene, False, {"solver.rtol": 1e-11, "solver.atol": 1e-13})
         row["F_err_compiled"] = force_error(results[False], ref)
         row["F_err_readable"] = force_error(results[True], ref)
     return row

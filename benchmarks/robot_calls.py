@@ -5,7 +5,7 @@ spread, for contactdyn's wrapper and for the same Pinocchio calls made directly 
 the wrapper can reach), and the minimum sample. One fixed state per robot; the timed
 closures reuse their arrays. The load average is recorded: on a busy machine trust the minimum.
 
-    PYTHONPATH=. /work/venv/bin/python benchmarks/robot_calls.py [--samples 200] [--calls 2000]
+    PYTHONPATH=. python3 benchmarks/robot_calls.py [--samples 200] [--calls 2000]
 
 Prints a table and writes benchmarks/out/robot_calls.json.
 """

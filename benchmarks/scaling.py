@@ -32,9 +32,7 @@ import argparse
 import copy
 import csv
 import json
-import statistics
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -42,6 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import rhs_cost  # noqa: E402
 import robot_calls  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 from contactdyn import simulate  # noqa: E402
 from contactdyn.scene import load_scene, parse_scene  # noqa: E402
@@ -122,16 +121,12 @@ def measure(scene, repeats: int, robot: tuple | None) -> dict:
         source, frame, options = robot
         calls = robot_calls.measure(source, frame, options, 30, 300)
         row["pinocchio_us"] = calls["raw pinocchio, same calls"]["min"]  # (wall clock: the minimum on a busy machine)
-    walls: dict[str, list[float]] = {m: [] for m in METHODS}
-    for _ in range(repeats):
-        for m in METHODS:
-            t0 = time.process_time()
-            r = simulate(scene, {"solver.method": m})
-            walls[m].append(time.process_time() - t0)
-            row[f"{m}_steps"], row[f"{m}_rhs_evals"] = r.stats["steps"], r.stats["rhs_evals"]
-            row["fallback_modes"] = r.stats.get("fallback_modes", {})
+    times = interleaved({m: lambda m=m: simulate(scene, {"solver.method": m}) for m in METHODS}, repeats)
     for m in METHODS:
-        row[f"{m}_ms_per_s"] = statistics.median(walls[m]) / scene.duration * 1e3
+        stats = times[m].last.stats
+        row[f"{m}_steps"], row[f"{m}_rhs_evals"] = stats["steps"], stats["rhs_evals"]
+        row["fallback_modes"] = stats.get("fallback_modes", {})
+        row[f"{m}_ms_per_s"] = times[m].cpu / scene.duration * 1e3
     return row
 
 

@@ -83,6 +83,78 @@ def _stats(times: list[float]) -> dict:
     return {"median_s": statistics.median(times), "min_s": min(times), "max_s": max(times), "all_s": times}
 
 
+def measure(modes: dict[str, dict], big, one, repeats: int, runs: int) -> dict[str, dict]:
+    """Each mode's sweep times [s], 1-run sweep times [s], machine busy fractions, statuses, cluster starts [s]."""
+    times: dict[str, list[float]] = {m: [] for m in modes}
+    single: dict[str, list[float]] = {m: [] for m in modes}
+    busy: dict[str, list[float]] = {m: [] for m in modes}
+    cluster_start: dict[str, list[float]] = {m: [] for m in modes if "dask_workers" in modes[m]}
+    counts = {}
+    for r in range(repeats):  # interleaved, so slow drifts of the machine hit every mode alike
+        for mode, kw in modes.items():
+            if "dask_workers" in kw:  # a fresh cluster per measurement, so idle clusters never compete
+                t, counts[mode], b, t1, start = _time_dask(big, one, kw["dask_workers"])
+                cluster_start[mode].append(start)
+            else:
+                t, counts[mode], b = _time(big, **kw)
+                t1 = _time(one, **kw)[0]
+            times[mode].append(t)
+            busy[mode].append(b)
+            single[mode].append(t1)
+            print(f"repeat {r + 1}/{repeats} {mode:>6}: {t:7.2f} s for {runs} runs, "
+                  f"machine busy {100 * b:3.0f} %", flush=True)
+    return {"times": times, "single": single, "busy": busy, "counts": counts, "cluster_start": cluster_start}
+
+
+def summarise(m: dict[str, dict], runs: int) -> dict:
+    """Runs per second, speed-ups 2 vs 1 workers (with their ranges), overhead per run and start-up [s]."""
+    times = m["times"]
+    med = {k: statistics.median(v) for k, v in times.items()}
+    med1 = {k: statistics.median(v) for k, v in m["single"].items()}
+    out = {
+        "statuses": m["counts"], "machine_busy_fraction": m["busy"],
+        "sweep": {k: _stats(v) for k, v in times.items()},
+        "one_run_sweep": {k: _stats(v) for k, v in m["single"].items()},
+        "dask_cluster_start_s": m["cluster_start"],  #: not in any sweep time
+        "per_run_inline_s": med["inline"] / runs,
+        "runs_per_s": {k: runs / v for k, v in med.items()},
+        "overhead_per_run_s": {k: (med[k] - med["inline"]) / runs for k in med if k.endswith("1")},
+        "startup_s": {k: med1[k] - med1["inline"] for k in med if k.endswith("1")},
+    }
+    for kind in ("pool", "dask"):
+        if f"{kind}2" in med:
+            one, two = times[f"{kind}1"], times[f"{kind}2"]
+            out[f"speedup_{kind}"] = med[f"{kind}1"] / med[f"{kind}2"]
+            out[f"speedup_{kind}_range"] = [min(one) / max(two), max(one) / min(two)]
+    return out
+
+
+def print_report(report: dict, sets: list[str]) -> None:
+    n, sweep = report["runs"], report["sweep"]
+    load0, load1 = report["loadavg_before"], report["loadavg_after"]
+    print(f"\n{n} runs of b1 ({report['duration_s']} s simulated each{', ' + ' '.join(sets) if sets else ''}), "
+          f"median of {report['repeats']} "
+          f"(load average {load0[0]:.1f} -> {load1[0]:.1f} on {os.cpu_count()} cores)")
+    print(f"{'mode':>8} {'median [s]':>11} {'range [s]':>17} {'per run [ms]':>13} {'runs/s':>8} {'machine busy':>13}")
+    for m, st in sweep.items():
+        print(f"{m:>8} {st['median_s']:11.2f} {st['min_s']:8.2f}-{st['max_s']:<8.2f} "
+              f"{1e3 * st['median_s'] / n:13.2f} {n / st['median_s']:8.1f} "
+              f"{100 * statistics.median(report['machine_busy_fraction'][m]):12.0f}%")
+    print(f"(machine busy: all cores, anyone's work; a quiet {os.cpu_count()}-core machine shows about "
+          f"{100 / (os.cpu_count() or 1):.0f}% for one worker, 100% for two)")
+    print(f"speed-up 2 vs 1 workers: pool {report['speedup_pool']:.2f} (range {report['speedup_pool_range'][0]:.2f}-"
+          f"{report['speedup_pool_range'][1]:.2f})", end="")
+    if "speedup_dask" in report:
+        print(f", Dask {report['speedup_dask']:.2f} (range {report['speedup_dask_range'][0]:.2f}-"
+              f"{report['speedup_dask_range'][1]:.2f})", end="")
+    print()
+    for m, o in report["overhead_per_run_s"].items():
+        print(f"overhead per run, {m}: {1e3 * o:.2f} ms (start-up of a 1-run sweep: {report['startup_s'][m]:.2f} s)")
+    if report["dask_cluster_start_s"]:
+        print("Dask LocalCluster start (not in the sweep times): "
+              + ", ".join(f"{m} {statistics.median(t):.2f} s" for m, t in report["dask_cluster_start_s"].items()))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=200)
@@ -95,86 +167,24 @@ def main() -> None:
 
     big, one = _sweep(args.runs, args.duration, tuple(args.set)), _sweep(1, args.duration, tuple(args.set))
     modes: dict[str, dict] = {"inline": {"workers": 0}, "pool1": {"workers": 1}, "pool2": {"workers": 2}}
-    cluster_start: dict[str, list[float]] = {}
     if not args.no_dask:
         import logging
 
         logging.getLogger("distributed").setLevel(logging.ERROR)
         modes.update({"dask1": {"dask_workers": 1}, "dask2": {"dask_workers": 2}})
-        cluster_start = {"dask1": [], "dask2": []}
     _time(one, workers=0)  # warm this process up (imports, first URDF parse) before the baseline is timed
     first_pool = _time(one, workers=1)[0]  # starts the fork server (once per process: not charged to a mode)
     load0 = os.getloadavg()
-    times: dict[str, list[float]] = {m: [] for m in modes}
-    single: dict[str, list[float]] = {m: [] for m in modes}
-    busy: dict[str, list[float]] = {m: [] for m in modes}
-    counts = {}
-    for r in range(args.repeats):  # interleaved, so slow drifts of the machine hit every mode alike
-        for mode, kw in modes.items():
-            if "dask_workers" in kw:  # a fresh cluster per measurement, so idle clusters never compete
-                t, counts[mode], b, t1, start = _time_dask(big, one, kw["dask_workers"])
-                cluster_start[mode].append(start)
-            else:
-                t, counts[mode], b = _time(big, **kw)
-                t1 = _time(one, **kw)[0]
-            times[mode].append(t)
-            busy[mode].append(b)
-            single[mode].append(t1)
-            print(f"repeat {r + 1}/{args.repeats} {mode:>6}: {t:7.2f} s for {args.runs} runs, "
-                  f"machine busy {100 * b:3.0f} %", flush=True)
-    load1 = os.getloadavg()
-
-    med = {m: statistics.median(v) for m, v in times.items()}
-    med1 = {m: statistics.median(v) for m, v in single.items()}
-    n = args.runs
-    report = {
-        "runs": n, "repeats": args.repeats, "duration_s": args.duration, "sets": args.set,
-        "cpu_count": os.cpu_count(),
-        "loadavg_before": load0, "loadavg_after": load1, "python": platform.python_version(),
-        "statuses": counts,
-        "machine_busy_fraction": busy,
-        "sweep": {m: _stats(v) for m, v in times.items()},
-        "one_run_sweep": {m: _stats(v) for m, v in single.items()},
-        "dask_cluster_start_s": cluster_start,  #: not in any sweep time
-        "first_pool_1_run_sweep_s": first_pool,  #: includes starting the fork server (imports the package)
-        "per_run_inline_s": med["inline"] / n,
-        "runs_per_s": {m: n / v for m, v in med.items()},
-        "speedup_pool": med["pool1"] / med["pool2"],
-        "speedup_pool_range": [min(times["pool1"]) / max(times["pool2"]), max(times["pool1"]) / min(times["pool2"])],
-        "overhead_per_run_s": {}, "startup_s": {},
-    }
-    for m in [m for m in modes if m.endswith("1")]:
-        report["overhead_per_run_s"][m] = (med[m] - med["inline"]) / n
-        report["startup_s"][m] = med1[m] - med1["inline"]
-    if "dask2" in med:
-        report["speedup_dask"] = med["dask1"] / med["dask2"]
-        report["speedup_dask_range"] = [min(times["dask1"]) / max(times["dask2"]),
-                                        max(times["dask1"]) / min(times["dask2"])]
+    measured = measure(modes, big, one, args.repeats, args.runs)
+    report = {"runs": args.runs, "repeats": args.repeats, "duration_s": args.duration, "sets": args.set,
+              "cpu_count": os.cpu_count(), "loadavg_before": load0, "loadavg_after": os.getloadavg(),
+              "python": platform.python_version(),
+              "first_pool_1_run_sweep_s": first_pool,  #: includes starting the fork server (imports the package)
+              **summarise(measured, args.runs)}
     OUT.parent.mkdir(exist_ok=True)
     OUT.write_text(json.dumps(report, indent=1))
-
-    print(f"\n{n} runs of b1 ({args.duration} s simulated each{', ' + ' '.join(args.set) if args.set else ''}), "
-          f"median of {args.repeats} "
-          f"(load average {load0[0]:.1f} -> {load1[0]:.1f} on {os.cpu_count()} cores)")
-    print(f"{'mode':>8} {'median [s]':>11} {'range [s]':>17} {'per run [ms]':>13} {'runs/s':>8} {'machine busy':>13}")
-    for m, v in times.items():
-        print(f"{m:>8} {med[m]:11.2f} {min(v):8.2f}-{max(v):<8.2f} {1e3 * med[m] / n:13.2f} {n / med[m]:8.1f} "
-              f"{100 * statistics.median(busy[m]):12.0f}%")
-    print(f"(machine busy: all cores, anyone's work; a quiet {os.cpu_count()}-core machine shows about "
-          f"{100 / (os.cpu_count() or 1):.0f}% for one worker, 100% for two)")
-    print(f"speed-up 2 vs 1 workers: pool {report['speedup_pool']:.2f} (range {report['speedup_pool_range'][0]:.2f}-"
-          f"{report['speedup_pool_range'][1]:.2f})", end="")
-    if "speedup_dask" in report:
-        print(f", Dask {report['speedup_dask']:.2f} (range {report['speedup_dask_range'][0]:.2f}-"
-              f"{report['speedup_dask_range'][1]:.2f})", end="")
-    print()
-    for m, o in report["overhead_per_run_s"].items():
-        print(f"overhead per run, {m}: {1e3 * o:.2f} ms (start-up of a 1-run sweep: {report['startup_s'][m]:.2f} s)")
-    if cluster_start:
-        print("Dask LocalCluster start (not in the sweep times): "
-              + ", ".join(f"{m} {statistics.median(t):.2f} s" for m, t in cluster_start.items()))
+    print_report(report, args.set)
     print(f"wrote {OUT}")
-
 
 if __name__ == "__main__":
     main()

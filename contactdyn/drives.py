@@ -124,14 +124,6 @@ class DriveSpec:
         """Rigid-model inertia the motor adds to its coordinate, n_s n_t J_m [kg·m² or kg]."""
         return self.n_speed * self.n_torque * self.motor_inertia if self.motorized else 0.0
 
-    def voltage(self, tau_d: float, omega: float) -> float:
-        """Voltage [V] realising the generalized force ``tau_d`` at motor speed ``omega`` [rad/s] (unclipped)."""
-        return self.R * tau_d / (self.n_torque * self.C_M) + self.C_E * omega
-
-    def motor_torque(self, u: float, omega: float) -> float:
-        """Eq. 51: M = (C_M/R) u − (C_M C_E/R) θ̇ [N·m]."""
-        return self.C_M / self.R * (u - self.C_E * omega)
-
     @property
     def natural_frequency(self) -> float:
         """Torsional frequency of the transmission with the output clamped, √(c / (N² J_m)) [rad/s]."""
@@ -238,7 +230,6 @@ class Drives:
         self.motor_inertias = [s.motor_inertia for s in specs if s.kind == "elastic"]
         self.motorized = np.array([s.motorized for s in specs], bool)
         self.any_motor = bool(self.motorized.any())
-        self.any_elastic = self.n_motor_coords > 0
         #: rigid gears: inertia added to the true system's diagonal [kg·m² or kg]
         self.reflected = np.array([s.reflected_inertia if s.kind == "dc_motor" else 0.0 for s in specs])
         #: rigid-model inertia the controller adds (rigid and elastic drives)

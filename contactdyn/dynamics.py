@@ -150,7 +150,8 @@ def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], ph
     inp = ControlInput(t, q, v, robot.H + np.diag(system._D_ctl) if drives.any_motor else robot.H, robot.h,
                        robot.gravity_torque(q) if ctl.needs_gravity else None,
                        p_tip, v_tip, J, drift, x_d, v_d, a_d, {**ev.normal_force, **ev.interface}, force_d,
-                       system.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian)
+                       system.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian,
+                       drift_ang=ft.angular_drift)
     if ctl.uses_forces:
         set_force_inputs(system, inp, x, modes, f[:nv] + robot.h)
     return inp, ft, x_d, force_d

@@ -378,7 +378,8 @@ def controller_input(plan):
         inp = ControlInput(t, q, v, H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
                            e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d,
                            forces,
-                           force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang)
+                           force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang,
+                           drift_ang=pin.getFrameAcceleration(model, data, fid, LWA).angular)
         if ctl.uses_forces:
             set_force_inputs(s, inp, x, modes, tau_contact)
         return inp

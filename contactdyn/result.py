@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from .errors import RunFileError
+from .errors import RunFileError, close_matches
 from .run_check import read_channels, read_sidecar
 
-__all__ = ["Result", "load_result", "run_files", "atomic_path", "atomic_write"]
+__all__ = ["Result", "load_result", "run_files", "atomic_path", "atomic_write", "jsonable"]
 
 
 @dataclass
@@ -45,9 +45,7 @@ class Result:
         try:
             return self.channels[name]
         except KeyError:
-            import difflib
-
-            close = difflib.get_close_matches(name, list(self.channels), n=3)
+            close = close_matches(name, self.channels)
             raise KeyError(f"no channel {name!r}; close: {close}; all: {sorted(self.channels)}") from None
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -57,7 +55,7 @@ class Result:
         _atomic(npz, lambda f: np.savez(f, **self.channels))
         doc = {"events": self.events, "impacts": self.impacts, "stats": self.stats, "scene": self.scene,
                "meta": self.meta}
-        _atomic(sidecar, lambda f: f.write(json.dumps(doc, indent=1, default=_jsonable).encode()))
+        _atomic(sidecar, lambda f: f.write(json.dumps(doc, indent=1, default=jsonable).encode()))
         return npz
 
 
@@ -134,11 +132,10 @@ def _atomic(path: Path, write: Callable[[Any], None]) -> None:
     atomic_path(path, to_file)
 
 
-def _jsonable(obj: Any) -> Any:
+def jsonable(obj: Any) -> Any:
+    """What a run's sidecar holds for a value JSON has no type for (``json.dumps(..., default=jsonable)``)."""
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, np.generic):
         return obj.item()
-    if isinstance(obj, float):
-        return obj
     return str(obj)

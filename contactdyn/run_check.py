@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from .budget import available_memory
-from .errors import RunFileError
+from .errors import RunFileError, abbreviate
 
 __all__ = ["MAX_RUN_BYTES", "MAX_SIDECAR_BYTES", "read_channels", "read_sidecar"]
 
@@ -49,7 +49,8 @@ def read_channels(npz: Path) -> dict[str, np.ndarray]:
     except RunFileError:
         raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError, RuntimeError, NotImplementedError, MemoryError) as exc:
-        raise RunFileError(f"{npz}: not a readable run archive ({type(exc).__name__}: {_short(exc)})") from None
+        raise RunFileError(f"{npz}: not a readable run archive "
+                           f"({type(exc).__name__}: {abbreviate(str(exc))})") from None
     _check_shapes(npz, channels)
     return channels
 
@@ -71,7 +72,7 @@ def _check_shapes(npz: Path, channels: dict[str, np.ndarray]) -> None:
         else:
             expected, ok = f"({n},) or ({n}, k)", value.ndim in (1, 2) and value.shape[0] == n
         if not ok:
-            raise RunFileError(f"{npz}: channel {_short(name)} has shape {value.shape}, expected {expected}: "
+            raise RunFileError(f"{npz}: channel {abbreviate(name)} has shape {value.shape}, expected {expected}: "
                                "one row per sample of t")
     joints = {channels[k].reshape(n, -1).shape[1] for k in ("q", "v") if k in channels}
     if len(joints) > 1:
@@ -84,16 +85,16 @@ def _read_array(member, size: int, npz: Path, name: str) -> np.ndarray:
 
     read_header = {(1, 0): npy.read_array_header_1_0, (2, 0): npy.read_array_header_2_0}.get(npy.read_magic(member))
     if read_header is None:
-        raise RunFileError(f"{npz}: channel {_short(name)} is in an unknown .npy format version")
+        raise RunFileError(f"{npz}: channel {abbreviate(name)} is in an unknown .npy format version")
     shape, fortran, dtype = read_header(member)
     if dtype.kind not in "biuf" or dtype.hasobject:
-        raise RunFileError(f"{npz}: channel {_short(name)} holds {dtype}, expected numbers")
+        raise RunFileError(f"{npz}: channel {abbreviate(name)} holds {dtype}, expected numbers")
     count = int(np.prod(shape, dtype=object))
     if count * dtype.itemsize > size:
-        raise RunFileError(f"{npz}: channel {_short(name)} declares {count} values in a {size}-byte member")
+        raise RunFileError(f"{npz}: channel {abbreviate(name)} declares {count} values in a {size}-byte member")
     data = member.read(count * dtype.itemsize)
     if len(data) != count * dtype.itemsize:
-        raise RunFileError(f"{npz}: channel {_short(name)} is truncated")
+        raise RunFileError(f"{npz}: channel {abbreviate(name)} is truncated")
     array = np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")
     return array.astype(float) if dtype.kind != "f" else array.copy()
 
@@ -105,31 +106,32 @@ def read_sidecar(sidecar: Path) -> dict[str, Any]:
     try:
         doc = json.loads(sidecar.read_bytes())
     except (ValueError, RecursionError, OSError) as exc:
-        raise RunFileError(f"{sidecar}: not a run's JSON sidecar ({type(exc).__name__}: {_short(exc)})") from None
+        raise RunFileError(f"{sidecar}: not a run's JSON sidecar "
+                           f"({type(exc).__name__}: {abbreviate(str(exc))})") from None
     if not isinstance(doc, dict):
         raise RunFileError(f"{sidecar}: expected a JSON object, found {type(doc).__name__}")
     doc.setdefault("meta", {})
     for key, kind in (("events", list), ("impacts", list), ("stats", dict), ("scene", dict), ("meta", dict)):
         if not isinstance(doc.get(key), kind):
             raise RunFileError(f"{sidecar}: {key!r} must be a JSON {'array' if kind is list else 'object'}, "
-                               f"found {_short(doc.get(key, 'nothing'))}")
+                               f"found {abbreviate(doc.get(key, 'nothing'))}")
     for key in ("events", "impacts"):
         for i, item in enumerate(doc[key]):
             if not (isinstance(item, dict) and isinstance(item.get("t"), int | float)):
-                raise RunFileError(f"{sidecar}: {key}[{i}] must be an object with a time t, found {_short(item)}")
+                raise RunFileError(f"{sidecar}: {key}[{i}] must be an object with a time t, found {abbreviate(item)}")
             _check_fields(sidecar, f"{key}[{i}]", item, SIDECAR_FIELDS)
     _check_fields(sidecar, "meta", doc["meta"], SIDECAR_FIELDS)
     for key in ("contact", "body"):  # the tables plots read from the scene document
         table = doc["scene"].get(key, {})
         if not (isinstance(table, dict) and all(isinstance(v, dict) for v in table.values())):
-            raise RunFileError(f"{sidecar}: scene.{key} must be a table of tables, found {_short(table)}")
+            raise RunFileError(f"{sidecar}: scene.{key} must be a table of tables, found {abbreviate(table)}")
     return doc
 
 
 def _check_fields(sidecar: Path, where: str, doc: dict[str, Any], fields: dict[str, Callable[[Any], bool]]) -> None:
     for key, valid in fields.items():
         if key in doc and not valid(doc[key]):
-            raise RunFileError(f"{sidecar}: {where}.{key} has the wrong type: {_short(doc[key])}")
+            raise RunFileError(f"{sidecar}: {where}.{key} has the wrong type: {abbreviate(doc[key])}")
 
 
 def _texts(value: Any) -> bool:
@@ -143,10 +145,3 @@ SIDECAR_FIELDS: dict[str, Callable[[Any], bool]] = {
     "kind": lambda v: isinstance(v, str), "contact": lambda v: isinstance(v, str),
     "duration": lambda v: isinstance(v, int | float) and not isinstance(v, bool),
 }
-
-
-def _short(value: object, limit: int = 80) -> str:
-    """repr (or str of an exception), abbreviated to ``limit`` characters, control characters escaped."""
-    text = str(value) if isinstance(value, BaseException) else repr(value)
-    text = text.encode("unicode_escape", "backslashreplace").decode("ascii")
-    return text if len(text) <= limit else f"{text[:limit - 20]}...{text[-15:]} ({len(text)} chars)"

@@ -8,6 +8,7 @@ is two overlapping moves. A :class:`Ramp` shapes a force set-point. SI units.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -155,11 +156,20 @@ class Move:
         s, ds, dds = profile("trapezoid", self.tau(t), self.accel_fraction)
         span = 2.0 * math.pi * self.turns
         th, dth, ddth = span * s, span * ds / self.duration, span * dds / self.duration**2
-        n, c = self.normal, self.delta
+        c, u, w, p = self._circle_terms
         # r(θ) = R(n, θ) c (centre to start rotated); the point is start + c − r(θ)
-        r = c * math.cos(th) + np.cross(n, c) * math.sin(th) + n * (n @ c) * (1.0 - math.cos(th))
-        nr = np.cross(n, r)
-        return c - r, -nr * dth, -nr * ddth - np.cross(n, nr) * dth * dth
+        cos, sin = math.cos(th), math.sin(th)
+        r = c * cos + u * sin + p * (1.0 - cos)
+        nr = u * cos + w * sin  # n × r
+        return c - r, -nr * dth, -nr * ddth - (w * cos - u * sin) * dth * dth  # n × (n × r) = w cos − u sin
+
+    @functools.cached_property
+    def _circle_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """c, u = n × c, w = n × u, p = n (n·c): r(θ) and its cross products with n in closed form
+        (three np.cross calls cost ~40 µs per reference evaluation)."""
+        n, c = self.normal, self.delta
+        u = np.cross(n, c)
+        return c, u, np.cross(n, u), n * (n @ c)
 
 
 @dataclass(frozen=True)

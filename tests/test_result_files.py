@@ -31,6 +31,11 @@ def test_the_name_is_taken_as_given(tmp_path):
     assert run_files("x/run.npz") == (Path("x/run.npz"), Path("x/run.json"))
 
 
+def test_an_unknown_channel_names_the_close_ones():
+    with pytest.raises(KeyError, match=r"no channel 'qq'; close: \['q'\]; all: \['q', 't'\]"):
+        small()["qq"]
+
+
 @pytest.mark.parametrize("mask", [0o022, 0o077, 0o002])
 def test_files_get_the_users_umask(tmp_path, mask):
     old = os.umask(mask)

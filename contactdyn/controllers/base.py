@@ -51,6 +51,7 @@ class ControlInput:
     z: np.ndarray  #: controller states
     R_tip: np.ndarray | None = None  #: tip frame orientation (3, 3)
     J_ang: np.ndarray | None = None  #: tip angular Jacobian (3, nv)
+    drift_ang: np.ndarray | None = None  #: J̇_ω q̇ of the tip frame [rad/s²]
     #: measured generalized contact force on the joints, Σ_c J_cᵀ F_c, friction included [N·m or N];
     #: without forces of constraints on the robot alone (rigid contact or stick on the fixed ground)
     tau_contact: np.ndarray | None = None

@@ -10,13 +10,12 @@ Runs go to a process pool (``workers`` > 0) or run in this process.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ..errors import ContactdynError, SceneError
+from ..errors import ContactdynError, SceneError, close_matches
 from ..scene import SolverSpec
 from .data import Measurements
 from .params import Parameter
@@ -65,11 +64,9 @@ def read_channel(channels: dict[str, np.ndarray], channel: str, index: int | Non
 
 def check_columns(channels: dict[str, np.ndarray], data: Measurements) -> None:
     """Each column must name a scalar channel or a component of a vector channel of the run."""
-    import difflib
-
     for col in data.columns:
         if col.channel not in channels:
-            close = difflib.get_close_matches(col.channel, list(channels), n=3)
+            close = close_matches(col.channel, channels)
             hint = f" (close: {', '.join(close)})" if close else ""
             raise SceneError(col.name, f"a channel of the run{hint}; channels: {', '.join(sorted(channels))}",
                              "no such channel", data.file)
@@ -94,7 +91,6 @@ class FitModel:
     pool: Any = None  #: a concurrent.futures executor, or None (this process)
     duration: float | None = None  #: [s] simulate only this long (a continuation stage; None: the scene's)
     runs: int = 0  #: simulations started
-    run_wall_s: float = 0.0  #: [s] wall time spent waiting for runs
     failures: list[Failure] = field(default_factory=list)
 
     @property
@@ -124,12 +120,10 @@ class FitModel:
         """Weighted residuals at each point (None where the run failed; the failure is recorded)."""
         fixed, targets = self.fixed, self.targets()
         jobs = [(self.document, self.file, {**fixed, **self.values(z)}, targets) for z in points]
-        wall0 = time.perf_counter()
         if self.pool is None:
             outs = [predict(*job) for job in jobs]
         else:
             outs = self._on_pool(jobs)
-        self.run_wall_s += time.perf_counter() - wall0
         self.runs += len(jobs)
         residuals: list[np.ndarray | None] = []
         for z, out in zip(points, outs, strict=True):

@@ -25,6 +25,7 @@ NUMERICAL: tuple[type[Exception], ...] = (np.linalg.LinAlgError, FloatingPointEr
 CHUNKS_PER_WORKER = 4  #: aim for this many chunks per worker (load balance vs per-chunk cost)
 MAX_CHUNK = 32  #: runs per chunk at most, so the summary is refreshed often
 SCHEDULER_TIMEOUT = 10.0  #: [s] to connect to a Dask scheduler
+PRELOAD = ("contactdyn.sweep", "contactdyn.simulate")  #: modules the workers' forkserver imports once
 
 
 def run_chunk(document: dict[str, Any], file: str | None, runs_dir: str, tasks: list[tuple[str, dict[str, Any]]]
@@ -158,7 +159,7 @@ def _execute_pool(args: tuple, chunks: list, n_workers: int):
         yield from run_isolated(_forkserver(), run_chunk, args, broken, n_workers)
 
 
-def process_pool(n_workers: int, preload: tuple[str, ...] = ("contactdyn.sweep", "contactdyn.simulate")):
+def process_pool(n_workers: int, preload: tuple[str, ...] = PRELOAD):
     """A local pool of ``n_workers`` processes for runs (sweeps, the fit's Jacobian columns).
 
     No fork of a (possibly threaded) parent: workers fork from a server that preloaded
@@ -178,7 +179,7 @@ def stop_pool(pool) -> None:
     pool.shutdown(wait=False, cancel_futures=True)
 
 
-def _forkserver(preload: tuple[str, ...] = ("contactdyn.sweep", "contactdyn.simulate")):
+def _forkserver(preload: tuple[str, ...] = PRELOAD):
     """The forkserver context, preloading ``preload`` (workers fork from it, not from this process)."""
     import multiprocessing
 

@@ -15,13 +15,14 @@ import math
 
 import numpy as np
 
+from .shapes import translation
 from .writer import ROOT, SceneWriter
 
 __all__ = ["frame_view", "FOV", "ELEVATION", "ASPECT"]
 
-FOV = math.radians(75.0)  #: meshcat's vertical field of view
+FOV = math.radians(75.0)  #: [rad] meshcat's vertical field of view
 ASPECT = 4.0 / 3.0  #: width / height assumed when fitting the frame
-ELEVATION = math.radians(20.0)  #: camera raised above the surface plane, towards the normal
+ELEVATION = math.radians(20.0)  #: [rad] camera raised above the surface plane, towards the normal
 MARGIN = 1.15  #: the framed region (bounding spheres of the meshes included) fills 1/MARGIN of the view
 
 
@@ -36,9 +37,9 @@ def frame_view(writer: SceneWriter, cloud: np.ndarray, radii: np.ndarray, normal
     """
     lo, hi = (cloud - radii[:, None]).min(axis=0), (cloud + radii[:, None]).max(axis=0)
     centre = 0.5 * (lo + hi)
-    writer.transform(ROOT, _translation(-centre))
-    writer.transform("/Grid", _translation(np.array([0.0, 0.0, -centre[2]])))  # the floor stays at z = 0
-    writer.transform("/Axes", _translation(-centre))
+    writer.transform(ROOT, translation(-centre))
+    writer.transform("/Grid", translation(np.array([0.0, 0.0, -centre[2]])))  # the floor stays at z = 0
+    writer.transform("/Axes", translation(-centre))
     direction, up = _direction(cloud - centre, normal, slide, robot_side)
     right = np.cross(up, direction)
     right /= np.linalg.norm(right)
@@ -76,9 +77,3 @@ def _direction(rel: np.ndarray, normal: np.ndarray | None, slide: np.ndarray | N
     if abs(direction @ z) > 0.7:  # looking (nearly) straight down or up: turn so the normal points up the screen
         direction = math.cos(ELEVATION) * side - math.sin(ELEVATION) * up_along
     return direction / np.linalg.norm(direction), z
-
-
-def _translation(p: np.ndarray) -> np.ndarray:
-    H = np.eye(4)
-    H[:3, 3] = p
-    return H

@@ -18,7 +18,18 @@ import numpy as np
 
 from ..chain import Chain, NodeKind, build_chain
 from ..scene import ContactSpec, Scene
-from .shapes import ON_TOP, add_arrow, add_label, frame_matrix, nice_ceil, nice_floor, on_top_material, spring_object
+from .shapes import (
+    ON_TOP,
+    add_arrow,
+    add_label,
+    frame_matrix,
+    nice_ceil,
+    nice_floor,
+    on_top_material,
+    placements,
+    spring_object,
+    translation,
+)
 from .writer import TINY, SceneWriter
 
 __all__ = ["ContactView", "contact_views", "add_environment", "add_gauges", "add_forces", "add_tool", "add_impacts",
@@ -160,7 +171,7 @@ def _draw_chain(writer: SceneWriter, path: str, chain: Chain, x: dict[str, np.nd
         writer.track(sp, "scale", "vector3", np.column_stack([np.ones(n), length, np.ones(n)]))
     anchor = mg.Box([0.7 * ell, 0.08 * ell, 0.7 * ell])
     writer.object(f"{path}/anchor", anchor, mg.MeshPhongMaterial(color=COLORS["env"]))
-    writer.transform(f"{path}/anchor", _ty(-0.04 * ell))
+    writer.transform(f"{path}/anchor", translation((0.0, -0.04 * ell, 0.0)))
     for i, node in enumerate(chain.nodes):
         if i == chain.anchor:
             continue
@@ -218,7 +229,7 @@ def add_tool(writer: SceneWriter, tips: dict[str, np.ndarray], size: float, root
         path = f"{root}/{name}"
         writer.object(f"{path}/ball", mg.Sphere(TOOL_RADIUS * size), on_top_material(COLORS["tool"]))
         writer.prop(f"{path}/ball", "renderOrder", ON_TOP + 3)
-        writer.placement(f"{path}/ball", _translations(tip))
+        writer.placement(f"{path}/ball", placements(tip))
         points = np.asarray(tip, np.float32).T
         writer.object(f"{path}/trace", mg.Line(mg.PointsGeometry(points), mg.LineBasicMaterial(color=COLORS["trace"])))
 
@@ -242,7 +253,7 @@ def add_impacts(writer: SceneWriter, views: list[ContactView], impacts: list[dic
         sizes = [TINY, TINY, 1.0, 1.0, 0.35, 0.35]
         keep = np.concatenate([[True], np.diff(times) > 0])
         times, sizes = np.asarray(times)[keep], np.asarray(sizes)[keep]
-        writer.transform(path, _tr(tip - disp))
+        writer.transform(path, translation(tip - disp))
         writer.track(path, "scale", "vector3", np.column_stack([sizes, sizes, sizes]), times=times)
         lines.append(f"impact on {v.spec.name} at t = {t:.6g} s: F·Δt = {float(imp.get('normal_impulse', 0)):.4g} N·s")
     return lines
@@ -257,19 +268,3 @@ def _perpendicular(u: np.ndarray) -> np.ndarray:
     trial = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     p = trial - (trial @ u) * u
     return p / np.linalg.norm(p)
-
-
-def _ty(y: float) -> np.ndarray:
-    return _tr(np.array([0.0, y, 0.0]))
-
-
-def _translations(p: np.ndarray) -> np.ndarray:
-    H = np.tile(np.eye(4), (len(p), 1, 1))
-    H[:, :3, 3] = p
-    return H
-
-
-def _tr(p: np.ndarray) -> np.ndarray:
-    H = np.eye(4)
-    H[:3, 3] = p
-    return H

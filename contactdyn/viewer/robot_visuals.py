@@ -21,7 +21,7 @@ import pinocchio as pin
 import umsgpack
 
 from ..robot import Robot
-from .writer import MeshFileGeometry, MeshFileObject, SceneWriter, color_int
+from .writer import Cone, MeshFileGeometry, MeshFileObject, SceneWriter, color_int
 
 __all__ = ["add_robot", "geometry_placements", "geometry_spheres", "MESH_FORMATS"]
 
@@ -97,8 +97,7 @@ def _shape_parts(geom: pin.GeometryObject) -> list[tuple[str, object, object, np
     if isinstance(shape, coal.Cylinder):
         return [("cylinder", mg.Cylinder(2.0 * shape.halfLength, shape.radius), material, _RX90)]
     if isinstance(shape, coal.Cone):
-        return [("cone", mg.Cylinder(2.0 * shape.halfLength, radiusTop=0.0, radiusBottom=shape.radius), material,
-                 _RX90)]
+        return [("cone", Cone(2.0 * shape.halfLength, shape.radius), material, _RX90)]
     if isinstance(shape, coal.Capsule):
         ends = [eye.copy(), eye.copy()]
         ends[0][2, 3], ends[1][2, 3] = shape.halfLength, -shape.halfLength

@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from .writer import TINY, Cone, Plane, SceneWriter, TextTexture
 
 __all__ = ["nice_floor", "nice_ceil", "spring_object", "add_arrow", "add_label", "rotation_from_y", "frame_matrix",
-           "on_top_material", "ON_TOP"]
+           "translation", "placements", "on_top_material", "ON_TOP"]
 
 
 def nice_floor(x: float) -> float:
@@ -37,6 +37,22 @@ def frame_matrix(x_axis: np.ndarray, y_axis: np.ndarray, origin=(0.0, 0.0, 0.0))
     H = np.eye(4)
     H[:3, 0], H[:3, 1], H[:3, 2] = x_axis, y_axis, np.cross(x_axis, y_axis)
     H[:3, 3] = origin
+    return H
+
+
+def translation(p) -> np.ndarray:
+    """Homogeneous transform moving by ``p`` (3,) [m]."""
+    H = np.eye(4)
+    H[:3, 3] = p
+    return H
+
+
+def placements(positions: np.ndarray, rotations: np.ndarray | None = None) -> np.ndarray:
+    """(N, 4, 4) homogeneous transforms at ``positions`` (N, 3) [m], turned by ``rotations`` (N, 3, 3) or one (3, 3)."""
+    H = np.tile(np.eye(4), (len(positions), 1, 1))
+    H[:, :3, 3] = positions
+    if rotations is not None:
+        H[:, :3, :3] = rotations
     return H
 
 
@@ -80,10 +96,10 @@ def add_arrow(writer: SceneWriter, path: str, origins: np.ndarray, vectors: np.n
     head_h, head_r = 4.0 * radius, 2.5 * radius
     writer.object(f"{path}/shaft/body", mg.Cylinder(1.0, radius), material)
     writer.prop(f"{path}/shaft/body", "renderOrder", order)
-    writer.transform(f"{path}/shaft/body", _translation(0.0, 0.5, 0.0))
+    writer.transform(f"{path}/shaft/body", translation((0.0, 0.5, 0.0)))
     writer.object(f"{path}/head/cone", Cone(head_h, head_r), material)
     writer.prop(f"{path}/head/cone", "renderOrder", order)
-    writer.transform(f"{path}/head/cone", _translation(0.0, 0.5 * head_h, 0.0))
+    writer.transform(f"{path}/head/cone", translation((0.0, 0.5 * head_h, 0.0)))
     lengths = np.linalg.norm(vectors, axis=1)
     rot = np.empty((len(vectors), 3, 3))
     last = np.array([0.0, 1.0, 0.0])
@@ -91,9 +107,7 @@ def add_arrow(writer: SceneWriter, path: str, origins: np.ndarray, vectors: np.n
         if n > 1e-12:
             last = v / n
         rot[k] = rotation_from_y(last)
-    H = np.tile(np.eye(4), (len(vectors), 1, 1))
-    H[:, :3, :3], H[:, :3, 3] = rot, origins
-    writer.placement(path, H)
+    writer.placement(path, placements(origins, rot))
     shaft = np.maximum(lengths - head_h, TINY)
     head = np.clip(lengths / head_h, TINY, 1.0)
     writer.track(f"{path}/shaft", "scale", "vector3", np.column_stack([np.ones_like(shaft), shaft,
@@ -117,17 +131,10 @@ def add_label(writer: SceneWriter, path: str, text: str, letter: float, rotation
     back = f"{path}/back"  # a pale strip behind the black letters, readable on meshcat's blue background
     writer.object(back, Plane(1.02 * len(text) * 0.55 * letter / 0.75, 1.5 * letter),
                   mg.MeshBasicMaterial(color=0xffffff, opacity=0.6, side=0))
-    writer.transform(back, _translation(0.0, 0.25 * letter, -0.01 * letter))
+    writer.transform(back, translation((0.0, 0.25 * letter, -0.01 * letter)))
     positions = np.atleast_2d(np.asarray(positions, float))
-    H = np.tile(np.eye(4), (len(positions), 1, 1))
-    H[:, :3, :3], H[:, :3, 3] = rotation, positions
+    H = placements(positions, rotation)
     if len(positions) == 1:
         writer.transform(path, H[0])
     else:
         writer.placement(path, H)
-
-
-def _translation(x: float, y: float, z: float) -> np.ndarray:
-    H = np.eye(4)
-    H[:3, 3] = x, y, z
-    return H

@@ -88,7 +88,7 @@ class MeshFileObject(mg.SceneElement):
 
 
 class Plane(mg.Geometry):
-    """A width × height rectangle in the local x-y plane, facing +z (three.js PlaneGeometry)."""
+    """A width × height [m] rectangle in the local x-y plane, facing +z (three.js PlaneGeometry)."""
 
     def __init__(self, width: float, height: float):
         super().__init__()
