@@ -4,7 +4,7 @@
 
 1. Every scene of sims/ at its own settings, once with ``HybridRun.at_corners`` off (the
    corners fall inside steps, as before) and once on, interleaved repeat by repeat; cost = the
-   median process CPU time around ``simulate`` (loading and output included; CPU because the
+   median process CPU time around ``simulate`` (``timing.interleaved``) (loading and output included; CPU because the
    machine is shared). Steps, right-hand-side calls, corners passed; force [N] and tip [m]
    errors against the reference of ``benchmarks/scenes.py`` (solve_ivp's DOP853 at rtol 1e-11,
    with the corners), away from ±2 samples of every event, as there.
@@ -20,49 +20,46 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import scenes  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 from contactdyn import simulate  # noqa: E402
 from contactdyn.hybrid import HybridRun  # noqa: E402
 from contactdyn.scene import load_scene, sims_dir  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
-VARIANTS = (("off", False), ("on", True))
 
 
-def _timed(name: str, overrides: dict, corners: bool):
-    HybridRun.at_corners = corners
-    try:
-        c0 = time.process_time()
-        run = simulate(name, overrides)
-        return run, time.process_time() - c0
-    finally:
-        HybridRun.at_corners = True
+def _run(name: str, overrides: dict, corners: bool):
+    """A call running the scene with the corners on or off."""
+    def call():
+        HybridRun.at_corners = corners
+        try:
+            return simulate(name, overrides)
+        finally:
+            HybridRun.at_corners = True
+    return call
+
+
+def _variants(name: str, overrides: dict, repeats: int) -> dict:
+    return interleaved({"off": _run(name, overrides, False), "on": _run(name, overrides, True)}, repeats)
 
 
 def compare(name: str, method: str | None, repeats: int) -> dict:
     """Corners off and on for one scene (its own method, or ``method``)."""
-    over = {"solver.method": method} if method else {}
-    cpus: dict[str, list[float]] = {v: [] for v, _ in VARIANTS}
-    runs = {}
-    for _ in range(repeats):
-        for label, corners in VARIANTS:
-            runs[label], cpu = _timed(name, over, corners)
-            cpus[label].append(cpu)
+    times = _variants(name, {"solver.method": method} if method else {}, repeats)
     ref = simulate(name, scenes.REFERENCE)
     row: dict = {"scene": name, "method": method or load_scene(name).solver.method}
-    for label, _ in VARIANTS:
-        r, err = runs[label], scenes.errors(runs[label], ref)
-        row[label] = {"cpu_s": statistics.median(cpus[label]), "steps": r.stats["steps"],
-                      "rhs_evals": r.stats["rhs_evals"], "corners": r.stats["corners"], "events": len(r.events),
+    for label, timing in times.items():
+        r, err = timing.last, scenes.errors(timing.last, ref)
+        row[label] = {"cpu_s": timing.cpu, "steps": r.stats["steps"], "rhs_evals": r.stats["rhs_evals"],
+                      "corners": r.stats["corners"], "events": len(r.events),
                       "force_err": err["force_away"], "tip_err": err["tip_away"]}
     return row
 
@@ -74,17 +71,12 @@ def restart_cost(n_moves: int, repeats: int) -> dict:
              *({"kind": "trapezoid", "delta": [0.0, 0.0, 0.0], "start": 0.05 + 0.07 * k, "duration": 0.05}
                for k in range(n_moves))]
     over = {"phase": [{**doc["phase"][0], "reference": {**doc["phase"][0]["reference"], "moves": moves}}]}
-    cpus: dict[str, list[float]] = {v: [] for v, _ in VARIANTS}
-    runs = {}
-    for _ in range(repeats):
-        for label, corners in VARIANTS:
-            runs[label], cpu = _timed("b1", over, corners)
-            cpus[label].append(cpu)
-    off, on = (statistics.median(cpus[v]) for v, _ in VARIANTS)
-    n = runs["on"].stats["corners"]
-    return {"moves": n_moves, "corners": n, "cpu_off_s": off, "cpu_on_s": on,
-            "us_per_corner": (on - off) / n * 1e6 if n else float("nan"),
-            "steps_off": runs["off"].stats["steps"], "steps_on": runs["on"].stats["steps"]}
+    times = _variants("b1", over, repeats)
+    off, on = times["off"], times["on"]
+    n = on.last.stats["corners"]
+    return {"moves": n_moves, "corners": n, "cpu_off_s": off.cpu, "cpu_on_s": on.cpu,
+            "us_per_corner": (on.cpu - off.cpu) / n * 1e6 if n else float("nan"),
+            "steps_off": off.last.stats["steps"], "steps_on": on.last.stats["steps"]}
 
 
 def main(argv: list[str] | None = None) -> int:
