@@ -24,7 +24,7 @@ reads the affine parts off the functions named above, so they are written once.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -215,7 +215,7 @@ def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot) -> t
     if phase.carrier is None or inp.x_d is None:
         return None
     i_b, axis = phase.carrier
-    tau_b, zdot_b = phase.controller.command(replace(inp, a_d=inp.a_d + axis))
+    tau_b, zdot_b = phase.controller.command(inp.replaced(a_d=inp.a_d + axis))
     if not np.any(tau_b != tau):
         return None
     return i_b, tau_b - tau, None if zdot is None else zdot_b - zdot

@@ -180,15 +180,22 @@ class Reference:
     moves: tuple[Move, ...] = field(default_factory=tuple)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        x = self.start.copy()
-        v = np.zeros_like(x)
-        a = np.zeros_like(x)
+        n = len(self.start)
+        if not self.moves:
+            return self.start.copy(), np.zeros(n), np.zeros(n)
+        out = np.empty((3, n))  # x, v, a; the profile's three values weigh each move's delta
+        out[0] = self.start
+        out[1:] = 0.0
         for move in self.moves:
-            dx, dv, da = move.at(t)
-            x += dx
-            v += dv
-            a += da
-        return x, v, a
+            if move.kind == "circle":
+                dx, dv, da = move.at(t)
+                out[0] += dx
+                out[1] += dv
+                out[2] += da
+                continue
+            s, ds, dds = profile(move.kind, (t - move.start) / move.duration, move.accel_fraction)
+            out += np.multiply.outer((s, ds / move.duration, dds / move.duration**2), move.delta)
+        return out[0], out[1], out[2]
 
     def corners(self) -> tuple[Corner, ...]:
         """The moves' corners, in time order."""

@@ -60,6 +60,13 @@ class ControlInput:
     surfaces: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     touching: dict[str, bool] = field(default_factory=dict)  #: contact modes
 
+    def replaced(self, **changes) -> ControlInput:
+        """A shallow copy with ``changes`` (``dataclasses.replace`` without re-running ``__init__``: the
+        force probes call it per right-hand-side call)."""
+        new = object.__new__(ControlInput)
+        new.__dict__.update(self.__dict__, **changes)
+        return new
+
 
 class TipForceLaw(NamedTuple):
     """A task-space PD law with force set-points, as data (see :meth:`Controller.tip_force_law`)."""
@@ -90,6 +97,7 @@ class Controller:
     needs_gravity: bool = False
     uses_forces: bool = False  #: reads measured forces (then it must be affine in them)
     outputs: str = "torque"  #: "torque" (generalized forces) or "voltage" (motor voltages [V])
+    reads_orientation: bool = True  #: reads R_tip and J_ang (False: the compiled path leaves them None)
 
     def __init__(self, config: Any, nv: int):
         self.config = config
