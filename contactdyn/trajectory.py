@@ -193,7 +193,7 @@ class Reference:
                 out[1] += dv
                 out[2] += da
                 continue
-            s, ds, dds = profile(move.kind, (t - move.start) / move.duration, move.accel_fraction)
+            s, ds, dds = profile(move.kind, move.tau(t), move.accel_fraction)
             out += np.multiply.outer((s, ds / move.duration, dds / move.duration**2), move.delta)
         return out[0], out[1], out[2]
 
