@@ -68,7 +68,7 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
         if seg.plan.ok:
             stats["singular_solves"] += seg.plan.singular
         if seg.plan.ok and not system.drives.any_motor:  # the drive channels need each sample's Evaluation
-            parts.append(seg.plan.samples(ts, X))
+            parts.append(seg.plan.samples(ts, X, seg.modes))  # a plan serves every turn: this segment's r
             evs += [None] * len(ts)
         else:
             part, part_evs = evaluated_samples(system, ts, X, seg.modes, seg.phase)

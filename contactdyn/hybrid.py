@@ -49,7 +49,7 @@ from .integrators import (
 from .limits import rate_limit_report
 from .phases import Phase
 from .result import Result
-from .rhsplan import ModePlan, cached_plan
+from .rhsplan import ModePlan, cached_plan, structure
 from .system import System
 from .transitions import Transitions
 
@@ -84,11 +84,12 @@ class HybridRun:
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
 
     def _plan(self, modes: list[ContactMode], phase: Phase) -> ModePlan:
-        """The compiled right-hand side of (modes, phase), built once per system and kept."""
-        key = (tuple(modes), id(phase))
+        """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``."""
+        key = (structure(modes), id(phase))
         plan = self.plans.get(key)
         if plan is None:
             plan = self.plans[key] = cached_plan(self.system, modes, phase)
+        plan.use(modes)  # a turn's new reference direction r: data of the same plan
         if not plan.ok:
             self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
         return plan
