@@ -59,13 +59,15 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
     modes_of: list[list[ContactMode]] = []
     phases_of: list[Phase] = []
     evs: list[Evaluation | None] = []
+    counted: list[ModePlan] = []
     for i in np.unique(idx):
         seg = segments[i]
         sel = np.flatnonzero(idx == i)
         ts = grid[sel]
         X = np.atleast_2d(seg.sol(ts).T) if len(ts) > 1 else seg.sol(ts[0])[None, :]
         xs[sel] = X
-        if seg.plan.ok:
+        if seg.plan.ok and seg.plan not in counted:  # a plan serves several segments (every turn): count it once
+            counted.append(seg.plan)
             stats["singular_solves"] += seg.plan.singular
         if seg.plan.ok and not system.drives.any_motor:  # the drive channels need each sample's Evaluation
             parts.append(seg.plan.samples(ts, X, seg.modes))  # a plan serves every turn: this segment's r
