@@ -116,8 +116,9 @@ class ModePlan(ProbedModel, CompiledKKT):
         if structure(modes) != structure(self.modes):
             raise ValueError(f"a plan runs modes of its own structure only; built for {self.modes}, given {modes}")
         self.modes = list(modes)
-        self.rhs = make_rhs(self)
-        self.ring[:] = [(None, None, None, None)] * 4
+        if self.ok:  # a declined plan has no call: its modes run on System.evaluate
+            self.rhs = make_rhs(self)
+            self.ring[:] = [(None, None, None, None)] * 4
 
     # ---- output samples, all at once (contactdyn.samples) ----------------------------------
     def samples(self, ts: np.ndarray, X: np.ndarray, modes: list[ContactMode] | None = None) -> Samples:

@@ -88,3 +88,13 @@ def test_a_plan_refuses_modes_of_another_structure():
     assert structure([ContactMode(touching=True, stuck=True, slip=(1.0, 0.0))]) != structure(sliding)
     with pytest.raises(ValueError, match="its own structure"):
         plan.use([ContactMode(touching=True, stuck=True, slip=(1.0, 0.0))])
+
+
+def test_a_declined_plan_takes_every_turn_too():
+    """The energy audit declines the plan (a declared gap): the turns still reuse it, on System.evaluate."""
+    doc = circle()
+    doc["duration"] = 0.5
+    doc["solver"]["record_energy"] = True
+    result = run_system(System(parse_scene(doc)))
+    assert sum(e["kind"] == "turn" for e in result.events) >= 2
+    assert result.stats["compiled_modes"] == 0 and result.stats["fallback_modes"]
