@@ -1,6 +1,7 @@
 """Cost of one right-hand-side evaluation (the function the integrator calls).
 
-    python benchmarks/rhs_cost.py [SCENE ...] [--calls 20000] [--out FILE.csv]
+    python benchmarks/rhs_cost.py [SCENE[@T] ...] [--calls 20000] [--out FILE.csv]
+    python benchmarks/rhs_cost.py SCENE[@T] ... --baseline TREE [--repeats 5] [--out FILE.csv]
 
 Default scene: b1 (2 DOF + one deformable frictional contact: a bonded model-(b) surface
 mass and sliding Coulomb friction), the budget case (≤ 10 µs median). Each scene is
@@ -8,17 +9,26 @@ built, its initial modes made consistent, and the integrator's function called o
 states of a short run (so the timing covers real states, not one cached point). Reports
 the median and the 10th/90th percentiles over batches of calls, wall and CPU time, and
 the cost of the full ``System.evaluate`` (all diagnostics) for comparison.
+
+``SCENE@T``: the mode the run is in at time T [s] (e.g. ``case3_a_position@2`` for the
+press after the approach) instead of the first. ``--baseline TREE``: before/after, the
+measurement run alternately in child processes importing ``contactdyn`` from TREE (e.g. an
+export of ``main``; :mod:`before_after`) and from this tree, ``--repeats`` times each; medians and their ratio.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from before_after import HERE, alternate, use_tree  # noqa: E402
+
+use_tree()
 
 import numpy as np  # noqa: E402
 
@@ -42,17 +52,34 @@ def _batches(fn, states, calls: int, clock) -> list[float]:
     return out
 
 
-def measure(scene: str | Scene, calls: int = 20000) -> dict:
-    """Median cost [µs] of one rhs call and of one full evaluate on a scene's first mode (a name or a Scene)."""
+def _mode_at(scene: Scene, at: float | None):
+    """(system, modes, phase, t, x) of the mode the run is in at time ``at`` (None: the first, at its start)."""
+    if at is None:
+        system, modes, phase, x0 = prepare(scene)
+        return system, modes, phase, phase.t_start, x0
+    from contactdyn.rhsplan import _PLANS
+    from contactdyn.simulate import run_system
+    from contactdyn.system import System
+
+    system = System(load_scene(scene.file, {"duration": at}) if scene.file else scene)
+    run_system(system)
+    plan = max(_PLANS[system].values(), key=lambda p: -1.0 if p.ring[3][0] is None else p.ring[3][0])
+    t, x, _, _ = plan.ring[3]
+    return system, plan.modes, plan.phase, t, x.copy()
+
+
+def measure(scene: str | Scene, calls: int = 20000, at: float | None = None) -> dict:
+    """Median cost [µs] of one rhs call and of one full evaluate on a scene's mode at time ``at``
+    (None: its first mode; ``scene``: a name or a Scene)."""
     scene = load_scene(scene) if isinstance(scene, str) else scene
-    scene_name = scene.name
-    system, modes, phase, x0 = prepare(scene)
+    scene_name = scene.name if at is None else f"{scene.name}@{at:g}"
+    system, modes, phase, t0, x0 = _mode_at(scene, at)
     plan = ModePlan(system, modes, phase)
     f = plan.rhs if plan.ok else system.rhs(modes, phase)
-    # states along a short stretch of the real trajectory (first mode only)
+    # states along a short stretch of the real trajectory (this mode's physics only)
     from scipy.integrate import solve_ivp
 
-    sol = solve_ivp(f, (phase.t_start, phase.t_start + 0.01), x0, method="DOP853", rtol=1e-8, atol=1e-10)
+    sol = solve_ivp(f, (t0, t0 + 0.01), x0, method="DOP853", rtol=1e-8, atol=1e-10)
     states = [(float(t), sol.y[:, i].copy()) for i, t in enumerate(sol.t)]
     for t, x in states[:50]:  # the lean path must agree with the full evaluation
         ref = system.evaluate(t, x, modes, phase).xdot
@@ -73,13 +100,39 @@ def measure(scene: str | Scene, calls: int = 20000) -> dict:
             "rhs_cpu_min_us": min(cpu) * 1e6, "evaluate_cpu_min_us": min(full_cpu) * 1e6}
 
 
+def _scene_at(arg: str) -> tuple[str, float | None]:
+    name, _, at = arg.partition("@")
+    return name, float(at) if at else None
+
+
+def compare(scenes: list[str], calls: int, baseline: str, repeats: int) -> list[dict]:
+    """Before/after: each repeat measures every scene in a child importing TREE, then one importing this tree."""
+    got = alternate(__file__, [*scenes, "--calls", str(calls)], {"baseline": baseline, "this": str(HERE)}, repeats)
+    rows = []
+    for i, first in enumerate(got["this"][0]):
+        before = statistics.median(run[i]["rhs_cpu_median_us"] for run in got["baseline"])
+        after = statistics.median(run[i]["rhs_cpu_median_us"] for run in got["this"])
+        rows.append({"scene": first["scene"], "baseline_cpu_us": before, "this_cpu_us": after, "ratio": before / after,
+                     "repeats": repeats})
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="*", default=["b1"])
     p.add_argument("--calls", type=int, default=20000)
     p.add_argument("--out", help="CSV file to write")
+    p.add_argument("--baseline", help="source tree to compare against (before/after)")
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # a child's output
     args = p.parse_args(argv)
-    rows = [measure(s, args.calls) for s in args.scenes]
+    if args.baseline:
+        rows = compare(args.scenes, args.calls, args.baseline, args.repeats)
+    else:
+        rows = [measure(name, args.calls, at) for name, at in map(_scene_at, args.scenes)]
+    if args.json:
+        print(json.dumps(rows))
+        return 0
     cols = list(rows[0])
     print(" | ".join(cols))
     for r in rows:

@@ -10,6 +10,7 @@ and smallest singular value.
 
     PYTHONPATH=. python3 benchmarks/robot_swap.py [robot ...]
 
+The 5 N ± 10 % band over the full run is asserted by ``pytest --slow tests/test_robot_swap.py``.
 Prints a table; writes benchmarks/out/robot_swap.json and .csv and each run as
 benchmarks/out/robot_swap/<robot>.npz + .json (read by docs/make_swap_figures.py). The arms that
 cannot reach the pose run again with the task moved within their reach (``MOVED``: robot.tip0).

@@ -18,7 +18,6 @@ import numpy as np
 
 from .contact import ContactMode
 from .drives import drive_channels
-from .dynamics import Evaluation
 from .limits import limit_channels
 from .phases import Phase
 from .rhsplan import ModePlan
@@ -58,7 +57,6 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
     parts: list[Samples] = []
     modes_of: list[list[ContactMode]] = []
     phases_of: list[Phase] = []
-    evs: list[Evaluation | None] = []
     counted: list[ModePlan] = []
     for i in np.unique(idx):
         seg = segments[i]
@@ -69,21 +67,17 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
         if seg.plan.ok and seg.plan not in counted:  # a plan serves several segments (every turn): count it once
             counted.append(seg.plan)
             stats["singular_solves"] += seg.plan.singular
-        if seg.plan.ok and not system.drives.any_motor:  # the drive channels need each sample's Evaluation
+        if seg.plan.ok:
             parts.append(seg.plan.samples(ts, X, seg.modes))  # a plan serves every turn: this segment's r
-            evs += [None] * len(ts)
         else:
-            part, part_evs = evaluated_samples(system, ts, X, seg.modes, seg.phase)
-            parts.append(part)
-            evs += part_evs
+            parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase)[0])
         modes_of += [seg.modes] * len(sel)
         phases_of += [seg.phase] * len(sel)
     samples = Samples.concatenate(parts, system)
     out = channels(system, grid, xs, samples, modes_of)
     if system.limits.limits:
         out.update(limit_channels(system, phases_of, samples))
-    if system.drives.any_motor:  # (motor scenes sample every output through the readable model)
-        out.update(drive_channels(system, xs, evs))
+    out.update(drive_channels(system, xs, samples))
     return out
 
 

@@ -144,8 +144,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
             print_robots(catalog[s])
         else:
+            width = max((len(item["name"]) for item in catalog[s]), default=0)
             for item in catalog[s]:
-                print(f"  {item['name']:<16} {item['description']}")
+                print(f"  {item['name']:<{max(width, 16)}} {item['description']}")
     return EXIT_OK
 
 

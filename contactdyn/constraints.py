@@ -33,8 +33,6 @@ solve returns (see :mod:`contactdyn.controllers.base`).
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from .chain_forces import chain_forces
@@ -42,7 +40,7 @@ from .contact import Contact, Kinematics
 from .controllers import ControlInput, Controller
 from .errors import SimulationError
 
-__all__ = ["Rows", "solve_linear", "contact_row", "kkt_solve", "solve_folded", "record_row_forces",
+__all__ = ["Rows", "solve_linear", "contact_row", "kkt_solve", "force_columns", "solve_folded", "record_row_forces",
            "velocity_rows", "impulse_solve"]
 
 try:  # numpy's gufunc without the Python wrapper: ~4x cheaper on tiny systems
@@ -131,6 +129,30 @@ def kkt_solve(system, f: np.ndarray, rows: Rows, fold: np.ndarray | None,
     return qdd, np.empty(0), regular
 
 
+def force_columns(inp: ControlInput, ctl: Controller, tau: np.ndarray, zdot, meta: list, cols: list, nv: int):
+    """(B, D_z): how a force-reading controller's command τ and state rates ż change per unit force
+    of each row (meta[j], force column cols[j] on the coordinates), probed by calling the law:
+    +1 N on the contact's measured normal force for a normal row, the row's column on the joints'
+    measured contact torque where it reaches a coordinate beyond the robot (else the row acts on
+    the robot alone and stays out of the measurement)."""
+    nr = len(meta)
+    B = np.zeros((nv, nr))
+    Dz = np.zeros((len(zdot), nr)) if zdot is not None else None
+    if not ctl.uses_forces:
+        return B, Dz
+    for j, (name, kind, _) in enumerate(meta):
+        fed_back = bool(np.any(cols[j][nv:]))
+        if kind != "n" and not fed_back:
+            continue
+        forces = inp.forces if kind != "n" else {**inp.forces, name: inp.forces[name] + 1.0}
+        tau_c = inp.tau_contact + cols[j][:nv] if fed_back else inp.tau_contact
+        tau_j, zdot_j = ctl.command(inp.replaced(forces=forces, tau_contact=tau_c))
+        B[:, j] = tau_j - tau
+        if Dz is not None:
+            Dz[:, j] = zdot_j - zdot
+    return B, Dz
+
+
 def solve_folded(system, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zdot, f: np.ndarray, rows: Rows,
                  x: np.ndarray, vmask, carried=None):
     """Solve with a force-reading controller whose measured forces include unknown row forces λ.
@@ -148,20 +170,7 @@ def solve_folded(system, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zd
     """
     nQ, nv, drives = system.nQ, system.nv, system.drives
     nr = len(rows)
-    B = np.zeros((nv, nr))
-    Dz = np.zeros((len(zdot), nr)) if zdot is not None else None
-    for j, (name, kind, _) in enumerate(rows.meta):
-        if not ctl.uses_forces:
-            break
-        fed_back = bool(np.any(rows.cols[j][nv:]))
-        if kind != "n" and not fed_back:
-            continue
-        forces = inp.forces if kind != "n" else {**inp.forces, name: inp.forces[name] + 1.0}
-        tau_c = inp.tau_contact + rows.cols[j][:nv] if fed_back else inp.tau_contact
-        tau_j, zdot_j = ctl.command(replace(inp, forces=forces, tau_contact=tau_c))
-        B[:, j] = tau_j - cmd[:nv]
-        if Dz is not None:
-            Dz[:, j] = zdot_j - zdot
+    B, Dz = force_columns(inp, ctl, cmd[:nv], zdot, rows.meta, rows.cols, nv)
     sat_cmd = cmd
     full = cmd.copy()
     for _ in range(nv + 2):
@@ -227,14 +236,18 @@ def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray] | None = N
 
 
 def impulse_solve(system, M: np.ndarray, rows: Rows, qd_minus: np.ndarray) -> tuple[np.ndarray, bool]:
-    """[Q̇⁺; Λ] of [[M, −Cᵀ], [G, 0]] [Q̇⁺; Λ] = [M Q̇⁻; 0]: the momentum law with every row held."""
+    """[Q̇⁺; Λ] of [[M, −Cᵀ], [G, 0]] [Q̇⁺; Λ] = [M Q̇⁻; 0]: the momentum law with every row held.
+
+    Solved for the jump ΔQ̇ = Q̇⁺ − Q̇⁻ (right-hand side [0; −G Q̇⁻]), so a coordinate no row
+    reaches (an elastic drive's motor, eq. 58) keeps its velocity exactly."""
     nQ, nr = system.nQ, len(rows)
     A = np.zeros((nQ + nr, nQ + nr))
     A[:nQ, :nQ] = M
     A[:nQ, nQ:] = -np.array(rows.cols).T
-    A[nQ:, :nQ] = np.array(rows.rows)
-    b = np.concatenate([M @ qd_minus, np.zeros(nr)])
+    A[nQ:, :nQ] = G = np.array(rows.rows)
+    b = np.concatenate([np.zeros(nQ), -(G @ qd_minus) if nr else np.zeros(0)])
     z, regular = solve_linear(A, b)
     if not np.all(np.isfinite(z)):
         raise SimulationError("impact map: the momentum-law system has no finite solution")
+    z[:nQ] += qd_minus
     return z, regular

@@ -258,12 +258,13 @@ class Drives:
                 x[nQ + m] = s.n_speed * x[nQ + self.coords[i]]
 
     def apply(self, cmd: np.ndarray, x: np.ndarray, nQ: int, f: np.ndarray, *, voltage: np.ndarray | None = None,
-              sat_cmd: np.ndarray | None = None) -> DriveOutput:
+              sat_cmd: np.ndarray | None = None, clip: bool = True) -> DriveOutput:
         """Add the drives' generalized forces to ``f``; ``cmd`` holds a force per drive, or a voltage [V]
         where the mask ``voltage`` is true.
 
         ``sat_cmd`` (default ``cmd``) decides which voltages clip: the system passes the full
-        command there while ``cmd`` lacks the part it folds into its linear solve.
+        command there while ``cmd`` lacks the part it folds into its linear solve. ``clip=False``:
+        the law without the voltage limits, affine in (cmd, x) (the compiled plan probes it).
         """
         n = len(self.specs)
         if not self.any_motor:  # ideal sources only; the coordinates are 0 .. n−1 (joints, then bodies)
@@ -288,7 +289,7 @@ class Drives:
                 ui = cmd[i]
             else:  # eq. 51 inverted at the rigid model's speed
                 ui = R * (sat_cmd[i] / nt + M_fast) / C_M + C_E * w_model
-            saturated[i] = abs(ui) > u_max
+            saturated[i] = clip and abs(ui) > u_max
             if saturated[i]:
                 ui = math.copysign(u_max, ui)
             elif sat_cmd is not cmd and not (voltage is not None and voltage[i]):
@@ -310,15 +311,15 @@ class Drives:
         return DriveOutput(applied, u, saturated, power, dissipation)
 
 
-def drive_channels(system, xs: np.ndarray, evs: list) -> dict[str, np.ndarray]:
+def drive_channels(system, xs: np.ndarray, samples) -> dict[str, np.ndarray]:
     """Result channels of the drives: voltages, commands and motor angles (only what the scene has)."""
     ch: dict[str, np.ndarray] = {}
     drives = system.drives
     if not drives.any_motor:
         return ch
     nv, nQ = system.nv, system.nQ
-    ch["tau_cmd"] = np.array([e.tau_cmd for e in evs])
-    u = np.array([e.u for e in evs])
+    ch["tau_cmd"] = samples.tau_cmd
+    u = samples.u
     if drives.motorized[:nv].any():
         ch["u"] = u[:, :nv]
     for k, name in enumerate(system.body_names):

@@ -24,7 +24,7 @@ reads the affine parts off the functions named above, so they are written once.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -150,7 +150,8 @@ def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], ph
     inp = ControlInput(t, q, v, robot.H + np.diag(system._D_ctl) if drives.any_motor else robot.H, robot.h,
                        robot.gravity_torque(q) if ctl.needs_gravity else None,
                        p_tip, v_tip, J, drift, x_d, v_d, a_d, {**ev.normal_force, **ev.interface}, force_d,
-                       system.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian)
+                       system.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian,
+                       drift_ang=ft.angular_drift)
     if ctl.uses_forces:
         set_force_inputs(system, inp, x, modes, f[:nv] + robot.h)
     return inp, ft, x_d, force_d
@@ -214,7 +215,7 @@ def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot) -> t
     if phase.carrier is None or inp.x_d is None:
         return None
     i_b, axis = phase.carrier
-    tau_b, zdot_b = phase.controller.command(replace(inp, a_d=inp.a_d + axis))
+    tau_b, zdot_b = phase.controller.command(inp.replaced(a_d=inp.a_d + axis))
     if not np.any(tau_b != tau):
         return None
     return i_b, tau_b - tau, None if zdot is None else zdot_b - zdot

@@ -144,8 +144,10 @@ MEANINGS: dict[str, str] = {
     "controller.feedforward": "none; gravity: + g(q); bias: + h(q, q')",
     "controller.tool_axis": "tool direction in the tip frame to hold (none: orientation free)",
     "controller.tool_target": "world direction the tool axis is held along",
-    "controller.ko": "orientation stiffness of the tool-axis hold",
-    "controller.do": "orientation damping of the tool-axis hold",
+    "controller.ko": "tool-axis hold: a stiffness (task_pd) or omega^2 of the tilt's error dynamics "
+                     "(operational_space)",
+    "controller.do": "tool-axis hold: a damping (task_pd) or 2 zeta omega of the tilt's error dynamics "
+                     "(operational_space)",
     "controller.kd_joint": "joint damping (damps what the task leaves free)",
     "controller.kd_normal": "damping of the tip velocity along each force set-point's direction (zero at rest)",
     "controller.u": "motor voltages, one for every joint or one per joint",
@@ -226,7 +228,9 @@ OVERRIDES: dict[str, dict[str, str]] = {
     "contact.<contact>.normal.robot": {"type": "list of elements"},
     "contact.<contact>.tangent.environment": {"type": "list of elements"},
     "contact.<contact>.tangent.robot": {"type": "list of elements"},
-    "controller.axes": {"type": "list of 3-vectors", "default": "x, y, z"},
+    "controller.axes": {"type": "list of 3-vectors",
+                        "default": "x, y, z (task_pd); every direction orthogonal to the force set-points (hybrid, "
+                                   "operational_space)"},
     "controller.kp": {"type": "number or list"},
     "controller.kd": {"type": "number or list"},
     "controller.kv": {"type": "number or list"},

@@ -200,6 +200,19 @@ kf = 20.0
 k_null = 10.0
 axes = [[1.0, 0.0, 0.0]]
 nominal = { k = 1e4, b = 10.0, m = 1.0 }
+[[phase]]
+force = [{ contact = "tip", value = 10.0 }]
+[phase.controller]
+kind = "operational_space"
+kp = 800.0
+kd = 40.0
+axes = [[1.0, 0.0, 0.0]]
+tool_axis = [0.0, 0.0, 1.0]
+tool_target = [0.0, 0.0, -1.0]
+ko = 400.0
+do = 40.0
+k_null = 10.0
+kd_normal = 1000.0
 '''
 
 _TORQUE = '''

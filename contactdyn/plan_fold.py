@@ -6,21 +6,26 @@ a bonded tangential chain) B folds into the constraint matrix; a reference carri
 body makes the command affine in that body's acceleration, which folds the same way. The
 readable model does that in :func:`~contactdyn.constraints.solve_folded` (probing the
 controller with a unit force per row, re-checking the drives' clip pattern with the solved
-λ); the plan calls the very same function on its own system, read off the compiled KKT
-matrix per call:
+λ). The plan probes with the same :func:`~contactdyn.constraints.force_columns` and folds
+through its compiled drives (L_τ, :mod:`contactdyn.plan_drives`) into its own KKT matrix:
+one solve, then a check that no voltage clips at the solved command. Where one does, it
+calls ``solve_folded`` itself on its system read off the compiled KKT matrix:
 
     f = [b_Q + Σ_f J_fᵀ w_f]   (w_f = g_f: the Cartesian forces the plan carries as unknowns)
     rows G = A[rows, :nQ],   columns C = −A[:nQ, rows]ᵀ (sliding tilt included),   γ = −b[rows]
 
-So the fold, the drives and the clipping are written once. It costs the controller's
-command once per row (and once more for a carried reference) and a second small solve.
+So the probes, the drives' law and the clipping are written once. It costs the controller's
+command once per row (and once more for a carried reference) besides its own.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .constraints import Rows, solve_folded
+from .constraints import Rows, force_columns, solve_folded
+from .constraints import _fast_solve as solve_linear  # numpy's gufunc without its Python wrapper
 from .dynamics import command_of
 
 __all__ = ["contact_torque_of", "folded_solve"]
@@ -39,8 +44,16 @@ def contact_torque_of(plan):
     return torque
 
 
-def folded_solve(plan, make_input):
-    """solve(t, x, Js, φ, o, A, b) -> (z = [Q̈, λ, w], ż): the readable fold on the plan's KKT system."""
+def folded_solve(plan, make_input, drives):
+    """solve(t, x, Js, φ, o, A, b) -> (z = [Q̈, λ, w], ż): the readable fold on the plan's KKT system.
+
+    The fold goes through the compiled drives (:class:`~contactdyn.plan_drives.CompiledDrives`)
+    into the plan's own matrix while no voltage clips: A[:nQ, λ] −= L_τ B (B: the command per
+    unit row force, :func:`~contactdyn.constraints.force_columns`), A[:nQ, Q_b] −= L_τ ∂τ/∂Q̈_b
+    for a reference carried by body coordinate Q_b, b[:nQ] += the drives' forces at the
+    λ-free command; a call whose solved command clips a voltage goes through the readable
+    :func:`~contactdyn.constraints.solve_folded`.
+    """
     s = plan.system
     nQ, nv, nr = s.nQ, s.nv, plan.nr
     phase = plan.phase
@@ -52,22 +65,62 @@ def folded_solve(plan, make_input):
     fold_rows = ctl.uses_forces and nr > 0
     w0 = nQ + nr
 
-    def solve(t, x, Js, phi, o, A, b):
+    lam_cols = slice(nQ, nQ + nr)
+
+    def detail(t, x, Js, phi, o, A, b):
+        """(z, ż, the solved joint command τ [N·m or N; V]): the output reads what the drives made of τ."""
         tau_c = torque(b, Js)
         inp = make_input(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
         cmd, zdot, carried = command_of(s, inp, phase, x)
+        z = matrix_fold(inp, cmd[:nv], zdot, carried, x, A, b)
+        if z is not None:
+            return z
         if not fold_rows and carried is None:  # as the readable model: the drives, then the plain solve
             s.drives.apply(cmd, x, nQ, b, voltage=vmask)  # b[:nQ] takes the drives' forces
             z = np.linalg.solve(A, b)
-            return (z if np.all(np.isfinite(z)) else plan._singular(A, b)), zdot
+            return (z if np.all(np.isfinite(z)) else plan._singular(A, b)), zdot, cmd[:nv]
         rows = Rows()
         for r in range(nr):
             rows.add(A[nQ + r, :nQ].copy(), -b[nQ + r], meta[r], -A[:nQ, nQ + r])
         f = b[:nQ].copy()
         f[:nv] += tau_c
-        _, qdd, lam, regular, _, zdot = solve_folded(s, inp, ctl, cmd, zdot, f, rows, x, vmask, carried)
+        _, qdd, lam, regular, full, zdot = solve_folded(s, inp, ctl, cmd, zdot, f, rows, x, vmask, carried)
         if not regular:
             plan.singular += 1
-        return np.concatenate((qdd, lam, b[w0:])), zdot
+        return np.concatenate((qdd, lam, b[w0:])), zdot, full[:nv]
 
+    def matrix_fold(inp, tau, zdot, carried, x, A, b):
+        """(z, ż, τ) with the fold in the plan's matrix, or None where the solved command clips a voltage."""
+        B, Dz = force_columns(inp, ctl, tau, zdot, meta, [-A[:nQ, nQ + r] for r in range(nr)], nv)
+        y0 = drives.values(x, tau)
+        Y = drives.L_tau.dot(B)  # the drives' forces and voltages per unit row force
+        A2 = A.copy()
+        A2[:nQ, lam_cols] -= Y[:nQ]
+        if carried is not None:  # the command's part proportional to the carrying body's acceleration
+            i_b, tau_b, zdot_b = carried
+            Y_b = drives.L_tau.dot(tau_b)
+            A2[:nQ, i_b] -= Y_b[:nQ]
+        b2 = b.copy()
+        b2[:nQ] += y0[:nQ]
+        z = solve_linear(A2, b2)
+        if not math.isfinite(z.dot(z)):
+            z = plan._singular(A2, b2)
+        lam = z[lam_cols]
+        y = y0 + Y.dot(lam)
+        tau = tau + B.dot(lam)
+        if carried is not None:
+            y += Y_b * z[i_b]
+            tau = tau + tau_b * z[i_b]
+        if not drives.unclipped(y):
+            return None
+        if Dz is not None:
+            zdot = zdot + Dz.dot(lam)
+            if carried is not None and zdot_b is not None:
+                zdot = zdot + zdot_b * z[i_b]
+        return z, zdot, tau
+
+    def solve(t, x, Js, phi, o, A, b):
+        return detail(t, x, Js, phi, o, A, b)[:2]
+
+    plan.folded_detail = detail
     return solve

@@ -90,7 +90,9 @@ class CompiledKKT:
         A = self.A0.copy()
         b = np.zeros(m)
         A[:nv, :nv] += H
-        b[:nv] = -phi[self.i_h:self.i_h + nv] + self._feedforward_torque(phi, e)
+        b[:nv] = -phi[self.i_h:self.i_h + nv]
+        if not self.law_via_drives:  # else the law's τ goes through the drives per call (plan_rhs)
+            b[:nv] += self._feedforward_torque(phi, e)
         b[nv:nQ] = o[self.o_f]
         b[nQ:nQ + nr] = -o[self.o_gam]
         for f in range(len(self.fids)):

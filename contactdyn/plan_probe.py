@@ -82,8 +82,11 @@ class ProbedModel:
         ctl = phase.controller
         # motors, a force-reading law, a carried reference: the command runs through the drives per call
         self.drives_per_call = s.drives.any_motor or ctl.uses_forces or phase.carrier is not None
-        law = ctl.tip_force_law() if hasattr(ctl, "tip_force_law") and not self.drives_per_call else None
+        reads = ctl.uses_forces or phase.carrier is not None or ctl.outputs == "voltage"
+        law = ctl.tip_force_law() if hasattr(ctl, "tip_force_law") and not reads else None
         self.affine_ctl = law is not None
+        #: an affine task law whose τ = J_tipᵀ g_ctl + feedforward goes through motors (plan_drives), not onto w
+        self.law_via_drives = self.affine_ctl and self.drives_per_call
         self.time_moves: list[tuple] = []  # (slot, move)
         self.time_ramps: list[tuple] = []  # (slot, ramp, contact index)
         self.feedforward, self.kd_joint = "none", 0.0
@@ -171,7 +174,7 @@ class ProbedModel:
             rows.append(("limit", -1, i, row, gamma))
         for idx, v_ref, gain in s.servo:
             F = gain * (v_ref - x[nQ + idx])
-            if not self.drives_per_call:  # else the servo is a drive command (plan_rhs.drive_forces)
+            if not self.drives_per_call:  # else the servo is a drive command (plan_drives)
                 f[idx] += F
             o[self.o_body.start + idx - nv] = F
         if self.affine_ctl:
@@ -184,7 +187,8 @@ class ProbedModel:
                     g_ctl += (self.kp @ m.delta) * e[slot] + (self.kd @ m.delta) * e[slot + 1]
             for slot, _, key in self.time_ramps:
                 g_ctl -= e[slot] * s.force_directions[key]
-            g[self.tip_frame] += g_ctl
+            if not self.law_via_drives:
+                g[self.tip_frame] += g_ctl
             o[self.o_gctl] = g_ctl
         o[self.o_f] = f[nv:]
         o[self.o_y] = ydot

@@ -8,8 +8,9 @@ Per call at (t, x) in the mode a :class:`~contactdyn.rhsplan.ModePlan` was built
    (:mod:`contactdyn.plan_kkt`, :mod:`contactdyn.plan_probe`);
 3. what is not affine: Coulomb friction −μ max(F, 0) d with 2-D directions d, the column
    tilt of 2-D sliding, a controller without an affine tip-force law, and motors: the
-   command goes through :meth:`~contactdyn.drives.Drives.apply` per call (:func:`drive_forces`),
-   the readable drive model itself, so the voltage clips exactly where it does there;
+   command τ goes through the drives' law per call (:func:`~contactdyn.plan_drives.drive_forces`:
+   one product while no voltage clips, the readable law where one does). An affine task law
+   with motors gives τ = J_tipᵀ g_ctl + feedforward from o and φ, no controller call;
 4. z = A⁻¹ b = [Q̈, λ, w]; ẋ = [Q̇, Q̈, ẏ] with the impulse states' rates ∫F, ∫F_f.
 
 The last four calls' (t, x, z, o) stay in ``plan.ring`` so the event functions read them
@@ -24,13 +25,14 @@ import numpy as np
 import pinocchio as pin
 
 from .controllers import ControlInput
-from .dynamics import drive_command, set_force_inputs
+from .dynamics import set_force_inputs
 from .friction import launch_directions, launching, slip_direction
 from .phases import reference_at
+from .plan_drives import drive_forces
 from .plan_fold import contact_torque_of, folded_solve
 from .trajectory import profile
 
-__all__ = ["make_rhs", "controller_call", "controller_input", "drive_forces", "impulse_terms", "LWA"]
+__all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 try:  # numpy's gufunc without the Python wrapper (see constraints.solve_linear)
@@ -59,6 +61,7 @@ def make_rhs(plan):
     solve = _command_and_solve(plan)
     launch = _launch(plan, friction, solve) if any(launching(mode) for mode in plan.modes) else None
     plan.launch = launch
+    plan.friction_terms = friction
     plan.time_terms = time_terms
     plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0]
     modes = plan.modes  # this call's own, 2-D reference directions included (ModePlan.use)
@@ -131,16 +134,13 @@ def _command_and_solve(plan):
     """solve(t, x, φ, Js, y, b_ctl) -> (z = [Q̈, λ, w], ż): the controller's command through the drives (or
     folded into the solve), then A z = b. ``b_ctl``: a list to keep the command's share of b in, so the
     trial solves of a launch (:func:`_launch`) call a controller that reads no force once per call."""
-    s = plan.system
-    nQ, nv, m = s.nQ, s.nv, plan.m
+    m = plan.m
     m2 = m * m
-    generic_ctl = not plan.affine_ctl
-    ctl_call = controller_call(plan) if generic_ctl else None
-    drives = drive_forces(plan)
+    drives = plan.compiled_drives = drive_forces(plan)  # (the output's batched drive channels read it too)
     reads_forces = plan.phase.controller.uses_forces
-    folded = folded_solve(plan, controller_input(plan)) if (reads_forces and plan.nr) or plan.phase.carrier \
+    folded = folded_solve(plan, controller_input(plan), drives) if (reads_forces and plan.nr) or plan.phase.carrier \
         else None
-    contact_torque = contact_torque_of(plan)
+    command = _command_function(plan, drives)
     isfinite = math.isfinite
 
     def solve(t, x, phi, Js, y, b_ctl):
@@ -150,13 +150,11 @@ def _command_and_solve(plan):
         zdot = None
         if folded is not None:  # a force-reading controller with rows: its forces folded into the solve
             return folded(t, x, Js, phi, o, A, b)
-        if generic_ctl:
+        if command is not None:
             if b_ctl and not reads_forces:
                 f_ctl, zdot = b_ctl
             else:
-                tau_c = contact_torque(b, Js) if reads_forces else None
-                tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
-                f_ctl = tau if drives is None else drives(x, tau)
+                f_ctl, zdot = command(t, x, Js, phi, o, b)
                 if b_ctl is not None:
                     b_ctl[:] = (f_ctl, zdot)
             b[:len(f_ctl)] += f_ctl
@@ -166,6 +164,39 @@ def _command_and_solve(plan):
         return z, zdot
 
     return solve
+
+
+def _command_function(plan, drives):
+    """command(t, x, Js, φ, o, b) -> (f_ctl, ż): the controller's command as generalized forces, through
+    the drives if any ([N·m or N] on the first len(f_ctl) coordinates); None when the task law is all in
+    the map P (no motors)."""
+    if plan.affine_ctl and drives is None:
+        return None
+    s = plan.system
+    nQ, nv = s.nQ, s.nv
+    ctl_call = controller_call(plan)
+    fast, readable = (drives.fast, drives.readable) if drives is not None else (None, None)
+    if plan.affine_ctl:  # the affine task law through the motors
+        tf, o_gctl, i_e, feedforward = plan.tip_frame, plan.o_gctl, plan.i_e, plan._feedforward_torque
+
+        def task_law(t, x, Js, phi, o, b):
+            f = fast(x, Js[tf].T.dot(o[o_gctl]) + feedforward(phi, phi[i_e:]))
+            if f is None:  # a voltage clips: the controller and the drives' law as they are
+                f = readable(x, ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o)[0])
+            return f, None
+
+        return task_law
+    contact_torque = contact_torque_of(plan) if plan.phase.controller.uses_forces else None
+
+    def generic(t, x, Js, phi, o, b):
+        tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o,
+                             contact_torque(b, Js) if contact_torque is not None else None)
+        if fast is None:
+            return tau, zdot
+        f = fast(x, tau)
+        return (readable(x, tau) if f is None else f), zdot
+
+    return generic
 
 
 def _launch(plan, friction, solve):
@@ -309,32 +340,6 @@ def impulse_terms(plan) -> list[tuple]:
     return out
 
 
-def drive_forces(plan):
-    """forces(x, τ) -> generalized forces [N·m or N] of the drives at the command τ (None unless
-    ``plan.drives_per_call``: motors, or a force-reading controller whose command the servos join).
-
-    The readable model's own drive law (:meth:`~contactdyn.drives.Drives.apply`), called per
-    call: while no voltage clips a rigid gear delivers τ exactly and an elastic one is
-    affine in (τ, x), but the clip pattern changes within a mode (case 1's cart), so the
-    law runs as it is rather than being probed; the rotor inertia reflected through rigid
-    gears is a constant on the KKT matrix's diagonal (:meth:`~contactdyn.plan_kkt.CompiledKKT._build`).
-    """
-    s = plan.system
-    drives = s.drives
-    if not plan.drives_per_call:
-        return None
-    nQ = s.nQ
-    vmask = s._joint_motors if plan.phase.controller.outputs == "voltage" else None
-    zeros = np.zeros
-
-    def forces(x, tau):
-        f = zeros(nQ)
-        drives.apply(drive_command(s, tau, x), x, nQ, f, voltage=vmask)
-        return f
-
-    return forces
-
-
 def controller_call(plan):
     """The command of a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o, τ_c) -> (τ, ż)."""
     make = controller_input(plan)
@@ -364,6 +369,7 @@ def controller_input(plan):
     i_e, i_dr = plan.i_e, plan.i_dr[tf]
     D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
     model, data, fid, nv = robot.model, robot.data, plan.fids[tf], s.nv
+    orient = ctl.reads_orientation
 
     def make(t, x, q, v, Js, phi, o, tau_contact=None):
         e = phi[i_e:]
@@ -373,13 +379,16 @@ def controller_input(plan):
         force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
         forces = {name: float(o[i_fint + i]) for i, name in enumerate(names)}
         forces.update({key: float(o[k]) for key, k in ifaces})
-        R_tip = pin.updateFramePlacement(model, data, fid).rotation
-        J_ang = pin.getFrameJacobian(model, data, fid, LWA).reshape(6, nv)[3:]
+        R_tip = J_ang = None
+        if orient:
+            R_tip = pin.updateFramePlacement(model, data, fid).rotation
+            J_ang = pin.getFrameJacobian(model, data, fid, LWA).reshape(6, nv)[3:]
         H = robot.H + D_ctl if D_ctl is not None else robot.H
         inp = ControlInput(t, q, v, H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
                            e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d,
                            forces,
-                           force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang)
+                           force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang,
+                           drift_ang=pin.getFrameAcceleration(model, data, fid, LWA).angular)
         if ctl.uses_forces:
             set_force_inputs(s, inp, x, modes, tau_contact)
         return inp

@@ -119,6 +119,7 @@ class FrameTerms(NamedTuple):
     drift: np.ndarray  #: J̇ q̇ [m/s²], shape (3,)
     rotation: np.ndarray  #: frame orientation in the world, shape (3, 3)
     angular_jacobian: np.ndarray  #: ω = J_ω q̇ [rad/s per joint unit], shape (3, nv)
+    angular_drift: np.ndarray  #: J̇_ω q̇ [rad/s²], shape (3,)
 
 
 class Robot:
@@ -249,13 +250,15 @@ class Robot:
         model, data = self.model, self.data
         placement = pin.updateFramePlacement(model, data, fid)
         J6 = pin.getFrameJacobian(model, data, fid, _LWA).reshape(6, self.nv)  # eigenpy gives (6,) for nv = 1
+        drift = pin.getFrameClassicalAcceleration(model, data, fid, _LWA)
         return FrameTerms(
             placement.translation,  # placement is already a copy of data.oMf[fid]
             pin.getFrameVelocity(model, data, fid, _LWA).linear,
             J6[:3],
-            pin.getFrameClassicalAcceleration(model, data, fid, _LWA).linear,
+            drift.linear,
             placement.rotation,
             J6[3:],
+            drift.angular,
         )
 
     # ---- convenience (allocating, own data) ---------------------------------------------

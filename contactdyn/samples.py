@@ -15,6 +15,8 @@ import numpy as np
 import pinocchio as pin
 
 from .friction import launching
+from .phases import reference_at
+from .plan_fold import contact_torque_of
 
 __all__ = ["Samples", "plan_samples", "evaluated_samples", "slip_directions"]
 
@@ -38,7 +40,9 @@ class Samples:
 
     def __init__(self, n: int, system):
         nv, nb = system.nv, len(system.body_names)
-        self.tau = np.zeros((n, nv))
+        self.tau = np.zeros((n, nv))  #: the drives' applied joint torques [N·m or N]
+        self.tau_cmd = np.zeros((n, nv))  #: the controller's command [N·m or N; V for voltage controllers]
+        self.u = np.full((n, len(system.drives.specs)), np.nan)  #: voltage per drive [V], NaN for ideal drives
         self.limit_torque = np.zeros((n, nv))  #: per joint [N·m or N], 0 unless pressing on a limit
         self.tip = np.zeros((n, 3))
         self.x_d = np.full((n, 3), np.nan)
@@ -56,7 +60,7 @@ class Samples:
     @classmethod
     def concatenate(cls, parts: list[Samples], system) -> Samples:
         out = cls(0, system)
-        for name in ("tau", "limit_torque", "tip", "x_d", "body_force"):
+        for name in ("tau", "tau_cmd", "u", "limit_torque", "tip", "x_d", "body_force"):
             setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
         out.has_x_d = any(p.has_x_d for p in parts)
         out.has_F_d = {key: any(p.has_F_d[key] for p in parts) for key in out.has_F_d}
@@ -69,6 +73,8 @@ class Samples:
     def fill(self, k: int, ev) -> None:
         """Row k from a full :class:`~contactdyn.dynamics.Evaluation`."""
         self.tau[k] = ev.tau
+        self.tau_cmd[k] = ev.tau_cmd
+        self.u[k] = ev.u
         for i, value in ev.limit_torque.items():
             self.limit_torque[k, i] = value
         self.tip[k] = ev.p_tip
@@ -107,14 +113,65 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     """Diagnostics at the states X[k] (times ts[k]) of this mode: one Pinocchio pass per
     sample, then the assembly, solve and read-out for all samples at once."""
     N = len(ts)
-    if plan.drives_per_call:  # drives' voltages, a force-reading law's fold: the readable model per sample
+    if plan.drives_per_call and plan.launch is not None:  # a slide from rest under motors: the readable model
         return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
     S = Samples(N, plan.system)
     if N == 0:
         return S
-    Phi, O, Z, J_all, tau, refs = _solve_samples(plan, ts, X)
-    _read_out(plan, S, ts, X, Phi, O, Z, J_all, tau, refs)
+    _read_out(plan, S, ts, X, *(_solve_folded_samples if _folds(plan) else _solve_samples)(plan, ts, X))
     return S
+
+
+def _folds(plan) -> bool:
+    """The plan's call folds the command into its solve (plan_rhs._command_and_solve's rule)."""
+    return bool(plan.phase.controller.uses_forces and plan.nr) or plan.phase.carrier is not None
+
+
+def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
+    """As :func:`_solve_samples` for a plan folding measured forces or a carried reference into its solve:
+    each sample through the plan's own fold (:func:`~contactdyn.plan_fold.folded_solve`), which gives the
+    solved command; the drives' forces and voltages at those commands over all samples at once."""
+    s = plan.system
+    N, nv, m = len(ts), s.nv, plan.m
+    m2 = m * m
+    Phi = np.empty((N, plan.P.shape[1]))
+    Y = np.empty((N, plan.P.shape[0]))
+    Z = np.empty((N, m))
+    tau = np.empty((N, nv))
+    friction, detail = plan.friction_terms, plan.folded_detail
+    for k in range(N):
+        t, x = ts[k], X[k]
+        Phi[k] = phi = plan.phi_at(t, x)
+        Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+        Y[k] = y = plan.P.dot(phi)
+        if friction is not None:
+            friction(y, Js, plan.modes)
+        Z[k], _, tau[k] = detail(t, x, Js, phi, y[m2 + m:], y[:m2].reshape(m, m), y[m2:m2 + m])
+    J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
+    return Phi, Y[:, m2 + m:], Z, J_all, tau, {}, _drive_samples(plan.compiled_drives, X, tau)
+
+
+def _generic_command(plan):
+    """command(t, x, Js, φ) -> τ [N·m or N; V]: the controller's command at one sample, reading what the plan's
+    call gives it (a force-reading law without rows: the contacts' torque after the call's sliding friction)."""
+    s = plan.system
+    nQ, nv, m = s.nQ, s.nv, plan.m
+    m2 = m * m
+    ctl_call = plan._controller_call()
+    contact_torque = contact_torque_of(plan) if plan.phase.controller.uses_forces else None
+    friction = plan.friction_terms
+
+    def command(t, x, Js, phi):
+        if contact_torque is None:
+            o, tau_c = plan.W.dot(phi[plan.i_e:]), None
+        else:
+            y = plan.P.dot(phi)
+            if friction is not None:
+                friction(y, Js, plan.modes)
+            o, tau_c = y[m2 + m:], contact_torque(y[m2:m2 + m], Js)
+        return ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)[0]
+
+    return command
 
 
 def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
@@ -127,7 +184,7 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
     generic = not plan.affine_ctl
     tau = np.zeros((N, nv))
     if generic:
-        ctl_call = plan._controller_call()
+        command = _generic_command(plan)
     ntv = plan.ne - plan.e_frame[-1] - 6
     TV = np.empty((N, ntv))
     TV[:, -1] = 1.0
@@ -137,10 +194,8 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
         phi_at = plan.phi_at
         for k in range(N):
             Phi[k] = phi = phi_at(ts[k], X[k], TV[k])
-            if generic:
-                x = X[k]
-                Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
-                tau[k] = ctl_call(ts[k], x, x[:nv], x[nQ:nQ + nv], Js, phi, plan.W.dot(phi[plan.i_e:]))[0]
+            if generic:  # (Pinocchio's data at this sample: the controller reads it)
+                tau[k] = command(ts[k], X[k], [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J], phi)
     else:
         _phi_batch(plan, X, TV, Phi)
     Y = _rows_times(Phi, plan.PT)
@@ -160,9 +215,34 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
         D = slip_directions(plan, ci, O, refs.get(ci))
         A[:, :nv, nQ + r] += mu * np.einsum("kiv,ki->kv", J_all[j], D @ T)
         A[:, nv:nQ, nQ + r] = plan.A0[nv:nQ, nQ + r] + mu * (D @ consts)
-    B[:, :nv] += tau
+    drives = plan.compiled_drives
+    if drives is None:
+        B[:, :nv] += tau
+        drive_out = None
+    else:  # the command through the drives: their matrix, the law itself where a voltage clips
+        if plan.affine_ctl:
+            tau = _task_torque(plan, Phi, O, J_all, X)
+        drive_out = _drive_samples(drives, X, tau)
+        B[:, :nQ] += drive_out[0]
     Z = _solve_all(plan, A, B)
-    return Phi, O, Z, J_all, tau, refs
+    return Phi, O, Z, J_all, tau, refs, drive_out
+
+
+def _drive_samples(drives, X: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the drives' generalized forces (N, nQ) [N·m or N], the voltages per drive (N, n_drives) [V]) at the
+    commands τ: [f; u/u_max] = L [τ, x, 1] and u = V [τ, x, 1], the readable law at the samples where one clips."""
+    nQ = drives.nQ
+    E = np.hstack((tau, X, np.ones((len(X), 1))))
+    Y = _rows_times(E, drives.L.T)
+    F = Y[:, :nQ]
+    motorized = drives.system.drives.motorized
+    U = np.full((len(X), len(motorized)), np.nan)
+    U[:, motorized] = _rows_times(E, drives.V.T)
+    clipped = np.flatnonzero(np.abs(Y[:, nQ:]).max(axis=1) > 1.0) if drives.limited else ()
+    for k in clipped:
+        F[k], out = drives.output(X[k], tau[k])
+        U[k] = out.u
+    return F, U
 
 
 def _launch_references(plan, ts: np.ndarray, X: np.ndarray, Y: np.ndarray) -> dict[int, np.ndarray]:
@@ -190,34 +270,45 @@ def _launch_references(plan, ts: np.ndarray, X: np.ndarray, Y: np.ndarray) -> di
     return out
 
 
+def _task_torque(plan, Phi: np.ndarray, O: np.ndarray, J_all: list, X: np.ndarray) -> np.ndarray:
+    """The affine task law's joint command at every sample [N·m or N]: J_tipᵀ g_ctl + the feedforward − k_dj q̇
+    (:meth:`~contactdyn.plan_kkt.CompiledKKT._feedforward_torque`, over samples)."""
+    nQ, nv = plan.system.nQ, plan.system.nv
+    tau = np.einsum("kiv,ki->kv", J_all[plan.tip_frame], O[:, plan.o_gctl])
+    if plan.feedforward == "gravity":
+        tau += Phi[:, plan.i_h + nv:plan.i_h + 2 * nv]
+    elif plan.feedforward == "bias":
+        tau += Phi[:, plan.i_h:plan.i_h + nv]
+    if plan.kd_joint:
+        tau -= plan.kd_joint * X[:, nQ:nQ + nv]
+    return tau
+
+
 def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, O: np.ndarray, Z: np.ndarray,
-              J_all: list, tau: np.ndarray, refs: dict) -> None:
+              J_all: list, tau: np.ndarray, refs: dict, drive_out: tuple | None) -> None:
     """Fill S with the same quantities System.evaluate reports, from the solved samples."""
     s, phase = plan.system, plan.phase
     nQ, nv = s.nQ, s.nv
     kt = plan.i_e + plan.e_frame[plan.tip_frame]
     S.tip[:] = Phi[:, kt:kt + 3]
-    if plan.affine_ctl:
-        S.tau[:] = np.einsum("kiv,ki->kv", J_all[plan.tip_frame], O[:, plan.o_gctl])
-        if plan.feedforward == "gravity":
-            S.tau += Phi[:, plan.i_h + nv:plan.i_h + 2 * nv]
-        elif plan.feedforward == "bias":
-            S.tau += Phi[:, plan.i_h:plan.i_h + nv]
-        if plan.kd_joint:
-            S.tau -= plan.kd_joint * X[:, nQ:nQ + nv]
-    else:
-        S.tau[:] = tau
+    S.tau_cmd[:] = _task_torque(plan, Phi, O, J_all, X) if plan.affine_ctl and drive_out is None else tau
+    if drive_out is None:
+        S.tau[:] = S.tau_cmd
+        S.body_force[:] = O[:, plan.o_body]
+    else:  # what the drives apply: joints, then bodies
+        F, S.u[:] = drive_out
+        S.tau[:] = F[:, :nv]
+        S.body_force[:] = F[:, nv:S.u.shape[1]]
     if phase.reference is not None and plan.affine_ctl:  # x_d = start + Σ δ_m σ_m, σ_m in φ's time terms
         S.x_d[:] = phase.reference.start
         for slot, m_ in plan.time_moves:
             S.x_d += Phi[:, plan.i_e + slot, None] * m_.delta
         S.has_x_d = True
     elif phase.reference is not None:
-        x_d = np.array([phase.reference.at(t)[0] for t in ts])
+        x_d = np.array([reference_at(s, phase, t, x)[0] for t, x in zip(ts, X, strict=True)])  # (carried: + body)
         if x_d.shape[1] == 3:
             S.x_d[:] = x_d
             S.has_x_d = True
-    S.body_force[:] = O[:, plan.o_body]
     for i, k in plan.limit_rows.items():
         S.limit_torque[:, i] = Z[:, k]
     slots = {key: slot for slot, _, key in plan.time_ramps}
@@ -242,7 +333,7 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
             key = f"{name}.{dc.label}"
             rows = [nQ + r for r, row in enumerate(plan.rows) if row.kind == "chain" and row.contact == ci
                     and row.index == i]
-            S.iface[key][:] = Z[:, rows[0]] if rows else O[:, plan.o_iface[key]]
+            S.iface[key][:] = Z[:, rows[0]] if rows else O[:, plan.o_iface[key].start]
     for label, sl in plan.o_stage.items():
         S.stages[label][:] = O[:, sl]
 

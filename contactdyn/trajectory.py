@@ -8,6 +8,7 @@ is two overlapping moves. A :class:`Ramp` shapes a force set-point. SI units.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -87,11 +88,20 @@ class Move:
         s, ds, dds = profile("trapezoid", (t - self.start) / self.duration, self.accel_fraction)
         span = 2.0 * math.pi * self.turns
         th, dth, ddth = span * s, span * ds / self.duration, span * dds / self.duration**2
-        n, c = self.normal, self.delta
+        c, u, w, p = self._circle_terms
         # r(θ) = R(n, θ) c (centre to start rotated); the point is start + c − r(θ)
-        r = c * math.cos(th) + np.cross(n, c) * math.sin(th) + n * (n @ c) * (1.0 - math.cos(th))
-        nr = np.cross(n, r)
-        return c - r, -nr * dth, -nr * ddth - np.cross(n, nr) * dth * dth
+        cos, sin = math.cos(th), math.sin(th)
+        r = c * cos + u * sin + p * (1.0 - cos)
+        nr = u * cos + w * sin  # n × r
+        return c - r, -nr * dth, -nr * ddth - (w * cos - u * sin) * dth * dth  # n × (n × r) = w cos − u sin
+
+    @functools.cached_property
+    def _circle_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """c, u = n × c, w = n × u, p = n (n·c): r(θ) and its cross products with n in closed form
+        (three np.cross calls cost ~40 µs per reference evaluation)."""
+        n, c = self.normal, self.delta
+        u = np.cross(n, c)
+        return c, u, np.cross(n, u), n * (n @ c)
 
 
 @dataclass(frozen=True)
@@ -102,15 +112,22 @@ class Reference:
     moves: tuple[Move, ...] = field(default_factory=tuple)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        x = self.start.copy()
-        v = np.zeros_like(x)
-        a = np.zeros_like(x)
+        n = len(self.start)
+        if not self.moves:
+            return self.start.copy(), np.zeros(n), np.zeros(n)
+        out = np.empty((3, n))  # x, v, a; the profile's three values weigh each move's delta
+        out[0] = self.start
+        out[1:] = 0.0
         for move in self.moves:
-            dx, dv, da = move.at(t)
-            x += dx
-            v += dv
-            a += da
-        return x, v, a
+            if move.kind == "circle":
+                dx, dv, da = move.at(t)
+                out[0] += dx
+                out[1] += dv
+                out[2] += da
+                continue
+            s, ds, dds = profile(move.kind, (t - move.start) / move.duration, move.accel_fraction)
+            out += np.multiply.outer((s, ds / move.duration, dds / move.duration**2), move.delta)
+        return out[0], out[1], out[2]
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from contactdyn.scene import load_scene, parse_scene, sims_dir
 ROOT = Path(__file__).resolve().parent.parent
 #: modules whose Reader calls define scene keys
 READERS = ["scene.py", "drives.py", "controllers/base.py", "controllers/pd.py", "controllers/force.py",
-           "controllers/voltage.py", "controllers/dynamic.py"]
+           "controllers/voltage.py", "controllers/dynamic.py", "controllers/operational.py"]
 READ_METHODS = {"float", "int", "bool", "str", "vector", "raw", "has", "sub", "tables", "named_tables", "error"}
 KEY_HELPERS = {"_gain": slice(1, 2), "_gains": slice(1, 2), "_read_stage": slice(1, 3), "_read_elements": slice(1, 2)}
 

@@ -112,16 +112,18 @@ SWAP = ["panda", "ur3", "ur5", "ur10", "xarm7", "z1", "kinova", "talos_arm", "so
 #: arms that reach the writer's pencil pose (measured: benchmarks/robot_swap.py); the others must stop
 #: with exit 2 and the amount they miss by
 REACH = {"panda", "ur3", "ur5", "ur10", "xarm7", "kinova"}
-SHORT = 0.8  #: [s] simulated: the 0.5 s press and 0.3 s of drawing (the full 4.5 s: benchmarks/robot_swap.py)
+SHORT = 0.8  #: [s] simulated by default: the 0.5 s press and 0.3 s of drawing
+FULL = 4.5  #: [s] the scene's whole run (``pytest --slow``; table: benchmarks/robot_swap.py)
 
 
+@pytest.mark.parametrize("duration", [SHORT, pytest.param(FULL, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("robot", SWAP)
-def test_swap_matrix_presses_and_draws_or_says_why_not(robot, tmp_path, capsys):
-    """Exit 0 with the pencil pressed at 5 N ± 10 % (min and max while drawing) and never lifted, or exit 2
+def test_swap_matrix_presses_and_draws_or_says_why_not(robot, duration, tmp_path, capsys):
+    """Exit 0 with the pencil pressed at 5 N ± 10 % (every sample while drawing) and never lifted, or exit 2
     with one line saying by how much the pose is missed [m, rad]; never a traceback, never exit 1."""
     out = tmp_path / robot
     code = main(["run", UR5, "--set", f"robot.urdf={robot}", "--set", f"robot.tip={TOOL_FRAMES[robot]}",
-                 "--set", f"duration={SHORT}", "--set", "solver.output_rate=200", "--out", str(out)])
+                 "--set", f"duration={duration}", "--set", "solver.output_rate=200", "--out", str(out)])
     err = capsys.readouterr().err
     assert code in (EXIT_OK, EXIT_USAGE), (robot, err)
     assert "Traceback" not in err
@@ -132,6 +134,7 @@ def test_swap_matrix_presses_and_draws_or_says_why_not(robot, tmp_path, capsys):
     assert robot in REACH
     r = load_result(f"{out}.npz")
     assert r.scene["robot"]["urdf"] == robot and r.meta["tip"] == TOOL_FRAMES[robot]
+    assert r.t[-1] == pytest.approx(duration)  # [s] the whole run
     np.testing.assert_allclose(r["tip"][0], [0.305707676520, 0.094566466132, 0.0], atol=1e-9)  # the posture
     assert not [e for e in r.events if e["kind"] == "separate"], robot
     drawing = r.t > 0.5

@@ -51,6 +51,7 @@ class ControlInput:
     z: np.ndarray  #: controller states
     R_tip: np.ndarray | None = None  #: tip frame orientation (3, 3)
     J_ang: np.ndarray | None = None  #: tip angular Jacobian (3, nv)
+    drift_ang: np.ndarray | None = None  #: J̇_ω q̇ of the tip frame [rad/s²]
     #: measured generalized contact force on the joints, Σ_c J_cᵀ F_c, friction included [N·m or N];
     #: without forces of constraints on the robot alone (rigid contact or stick on the fixed ground)
     tau_contact: np.ndarray | None = None
@@ -58,6 +59,13 @@ class ControlInput:
     #: the tangential chain's anchor (where it is undeformed since the latest touch) and its velocity
     surfaces: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     touching: dict[str, bool] = field(default_factory=dict)  #: contact modes
+
+    def replaced(self, **changes) -> ControlInput:
+        """A shallow copy with ``changes`` (``dataclasses.replace`` without re-running ``__init__``: the
+        force probes call it per right-hand-side call)."""
+        new = object.__new__(ControlInput)
+        new.__dict__.update(self.__dict__, **changes)
+        return new
 
 
 class TipForceLaw(NamedTuple):
@@ -89,6 +97,7 @@ class Controller:
     needs_gravity: bool = False
     uses_forces: bool = False  #: reads measured forces (then it must be affine in them)
     outputs: str = "torque"  #: "torque" (generalized forces) or "voltage" (motor voltages [V])
+    reads_orientation: bool = True  #: reads R_tip and J_ang (False: the compiled path leaves them None)
 
     def __init__(self, config: Any, nv: int):
         self.config = config

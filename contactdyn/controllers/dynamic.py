@@ -236,6 +236,7 @@ class PositionDynamic(Controller):
 
     name = "position_dynamic"
     uses_forces = True
+    reads_orientation = False
 
     @staticmethod
     def applies_force_setpoints(config: PositionDynamicConfig) -> bool:
@@ -294,17 +295,18 @@ class PositionDynamic(Controller):
         """Along each touching contact's set-point direction n (normal or tangent): F_d/k beyond the
         undeformed surface or tangential anchor, along −n. The surface's acceleration along n and
         F̈_d/k are left out (a_d's component along n is 0)."""
-        x_d, v_d, a_d = inp.x_d.copy(), inp.v_d.copy(), inp.a_d.copy()
+        R = np.array((inp.x_d, inp.v_d, inp.a_d))  # rows x_d, v_d, a_d (copies)
+        target = np.zeros(3)
         for name, env in self.envs.items():
             if not inp.touching.get(name.partition(".")[0]) or name not in inp.force_d:
                 continue
             n = inp.normals[name]
             p_s, v_s = inp.surfaces[name]
             F_d, dF_d = inp.force_d[name]
-            x_d += n * (n @ p_s - F_d / env.k - n @ x_d)
-            v_d += n * (n @ v_s - dF_d / env.k - n @ v_d)
-            a_d -= n * (n @ a_d)
-        return x_d, v_d, a_d
+            target[0] = n.dot(p_s) - F_d / env.k  # along n: x_d = p_s − F_d/k, v_d = v_s − Ḟ_d/k, a_d = 0
+            target[1] = n.dot(v_s) - dF_d / env.k
+            R += np.multiply.outer(target - R.dot(n), n)
+        return R[0], R[1], R[2]
 
 
 # ---- A10 and hybrid ---------------------------------------------------------------------------
@@ -327,6 +329,7 @@ class ForceDynamic(Controller):
 
     name = "force_dynamic"
     uses_forces = True
+    reads_orientation = False
     tracks_position = False
 
     @staticmethod
@@ -377,14 +380,14 @@ class ForceDynamic(Controller):
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray]:
         cfg = self.config
-        P = self.P.copy()
+        P = self.P
         a_force = np.zeros(3)
         f_swap = np.zeros(3)  # tip force [N]: measured normal forces out, targets F* in (cancel = "target")
         zdot = np.zeros(self.n_states)
         for i, name in enumerate(self.names):
             n = inp.normals[name]
             if not inp.touching.get(name):
-                P += np.outer(n, n)  # not touching yet: like a free direction, integral frozen
+                P = P + np.outer(n, n)  # not touching yet: like a free direction, integral frozen
                 continue
             env = self.envs[name]
             p_s, v_s = inp.surfaces[name]

@@ -19,7 +19,9 @@ import numpy as np
 
 from .base import FEEDFORWARD, ControlInput, Controller, TipForceLaw, register
 
-__all__ = ["TaskPD", "JointPD"]
+__all__ = ["TaskPD", "JointPD", "KP_TASK", "KD_TASK"]
+
+KP_TASK, KD_TASK = 2000.0, 100.0  #: default task-space stiffness [N/m] and damping [N·s/m]
 
 
 def _gains(reader, name: str, default: float, unit: str) -> np.ndarray:
@@ -69,7 +71,7 @@ class TaskPD(Controller):
             raise r.error("axes", "a list of direction vectors", axes_raw)
         axes = np.array([type(r)({str(i): a}, r.key("axes"), r.file).vector(str(i), size=3, unit_norm=True)
                          for i, a in enumerate(axes_raw)])
-        kp, kd = _gains(r, "kp", 2000.0, "N/m"), _gains(r, "kd", 100.0, "N·s/m")
+        kp, kd = _gains(r, "kp", KP_TASK, "N/m"), _gains(r, "kd", KD_TASK, "N·s/m")
         for name, g in (("kp", kp), ("kd", kd)):
             if len(g) not in (1, len(axes)):
                 raise r.error(name, f"one gain or one per axis ({len(axes)})", g.tolist())

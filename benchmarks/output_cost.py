@@ -1,0 +1,124 @@
+"""Cost of a run's output per sample: the plans' batched output against the readable model per sample.
+
+    PYTHONPATH=. python3 benchmarks/output_cost.py [SCENE ...] [--repeats 5] [--out FILE.json]
+
+Per scene, one run records its segments; then, interleaved per repeat in one process, the
+output pass (:func:`~contactdyn.channels.sample_segments`) over those segments twice: with
+the plans' batched output (:func:`~contactdyn.samples.plan_samples`, as the run does) and
+with every sample from ``System.evaluate(full=True)`` (what motor, elastic and force-reading
+phases did before). CPU µs per sample, medians over the repeats, their ratio, the largest
+relative difference of the channels between the two, and the share of the run's CPU time
+the output takes. The hand-written B1 (:mod:`b1_reference`) runs in the same loop so the
+per-sample cost can be read against its cost per simulated second.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from functools import partial
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from before_after import use_tree  # noqa: E402
+from timing import interleaved  # noqa: E402
+
+use_tree()
+
+import b1_reference  # noqa: E402
+import numpy as np  # noqa: E402
+
+import contactdyn.hybrid as hybrid  # noqa: E402
+import contactdyn.rhsplan as rhsplan  # noqa: E402
+from contactdyn import simulate  # noqa: E402
+from contactdyn.channels import sample_segments  # noqa: E402
+from contactdyn.samples import evaluated_samples  # noqa: E402
+from contactdyn.scene import load_scene  # noqa: E402
+
+SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
+          "case3_b_force", "b1"]
+HAND_WRITTEN_SPAN = 2.0  #: simulated seconds of b1_reference.run() [s]
+
+
+def _readable(plan, ts, X):
+    return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
+
+
+def recorded_run(name: str):
+    """(result, its CPU time [s], system, segments, output grid) of one run of the scene."""
+    seen = {}
+    original = hybrid.sample_segments
+
+    def record(system, segments, grid, stats):
+        seen.update(system=system, segments=segments, grid=grid)
+        return original(system, segments, grid, stats)
+
+    hybrid.sample_segments = record
+    try:
+        t0 = time.process_time()
+        result = simulate(load_scene(name))
+        run_s = time.process_time() - t0
+    finally:
+        hybrid.sample_segments = original
+    return result, run_s, seen["system"], seen["segments"], seen["grid"]
+
+
+def _output(system, segments, grid, readable: bool) -> dict:
+    """The channels of the output pass, batched or readable."""
+    batched = rhsplan.plan_samples
+    if readable:
+        rhsplan.plan_samples = _readable
+    try:
+        return sample_segments(system, segments, grid, {"singular_solves": 0})
+    finally:
+        rhsplan.plan_samples = batched
+
+
+def _difference(a: dict, b: dict) -> float:
+    """Largest relative difference over the channels (NaN equal to NaN)."""
+    worst = 0.0
+    for key, ref in b.items():
+        ref, got = np.asarray(ref, float), np.asarray(a[key], float)
+        scale = max(float(np.nanmax(np.abs(ref))) if np.any(np.isfinite(ref)) else 0.0, 1e-300)
+        worst = max(worst, float(np.nanmax(np.abs(got - ref), initial=0.0)) / scale)
+    return worst
+
+
+def measure(scenes: list[str], repeats: int) -> list[dict]:
+    rows = []
+    for name in scenes:
+        result, run_s, system, segments, grid = recorded_run(name)
+        n = len(grid)
+        times = interleaved({"hand": b1_reference.run,
+                             "batched": partial(_output, system, segments, grid, readable=False),
+                             "readable": partial(_output, system, segments, grid, readable=True)}, repeats)
+        f, s = times["batched"].cpu / n * 1e6, times["readable"].cpu / n * 1e6
+        rows.append({"scene": name, "samples": n, "batched_us": f, "readable_us": s, "speedup": s / f,
+                     "max_rel_diff": _difference(times["batched"].last, times["readable"].last),
+                     "output_share_of_run": f * n * 1e-6 / run_s,
+                     "batched_ms_per_s": f * n * 1e-3 / float(result.t[-1]),
+                     "hand_written_ms_per_s": times["hand"].cpu / HAND_WRITTEN_SPAN * 1e3})
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenes", nargs="*", default=SCENES)
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--out", help="JSON file to write")
+    args = p.parse_args(argv)
+    rows = measure(args.scenes, args.repeats)
+    cols = list(rows[0])
+    print(" | ".join(cols))
+    for r in rows:
+        print(" | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c]) for c in cols))
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,94 @@
+"""Cost per simulated second of whole scene runs, as a ratio to the hand-written B1 model.
+
+    PYTHONPATH=. python3 benchmarks/scene_cost.py [SCENE ...] [--repeats 3] [--baseline TREE] [--out FILE.json]
+
+Per repeat and scene, interleaved in one process: the hand-written closed-form B1 model
+(:mod:`b1_reference`, 2 s simulated) and the scene's full run (``simulate``: loading,
+building, output). CPU time per simulated second [ms/s], medians over the repeats, and the
+ratio scene / hand-written. With ``--baseline TREE`` the same runs alternate between child
+processes importing ``contactdyn`` from TREE and from this tree (:mod:`before_after`).
+Default scenes: those with motors (DC motors, elastic transmissions, force-reading laws).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from before_after import HERE, alternate, use_tree  # noqa: E402
+
+use_tree()
+
+import b1_reference  # noqa: E402
+
+from contactdyn import simulate  # noqa: E402
+from contactdyn.scene import load_scene  # noqa: E402
+
+SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
+          "case3_b_force", "case3_b_force_varied"]
+HAND_WRITTEN_SPAN = 2.0  #: simulated seconds of b1_reference.run() [s]
+
+
+def measure(scenes: list[str], repeats: int) -> list[dict]:
+    """Per scene: median CPU ms per simulated second of the scene and of the hand-written B1, interleaved."""
+    rows = []
+    for name in scenes:
+        cost, hand = [], []
+        for _ in range(repeats):
+            t0 = time.process_time()
+            b1_reference.run()
+            hand.append((time.process_time() - t0) / HAND_WRITTEN_SPAN * 1e3)
+            t0 = time.process_time()
+            r = simulate(load_scene(name))
+            cost.append((time.process_time() - t0) / float(r.t[-1] - r.t[0]) * 1e3)
+        c, h = statistics.median(cost), statistics.median(hand)
+        rows.append({"scene": name, "ms_per_s": c, "hand_written_ms_per_s": h, "x_hand_written": c / h,
+                     "steps": r.stats.get("steps"), "rhs_evals": r.stats.get("rhs_evals"),
+                     "fallback_modes": len(r.stats.get("fallback_modes") or {})})
+    return rows
+
+
+def compare(scenes: list[str], repeats: int, baseline: str) -> list[dict]:
+    """Before/after, alternating child processes; medians over the repeats of each child's medians."""
+    got = alternate(__file__, [*scenes, "--repeats", "1"], {"baseline": baseline, "this": str(HERE)}, repeats)
+    rows = []
+    for i, name in enumerate(scenes):
+        row = {"scene": name}
+        for label, runs in got.items():
+            row[f"{label}_ms_per_s"] = statistics.median(run[i]["ms_per_s"] for run in runs)
+            row[f"{label}_x_hand_written"] = statistics.median(run[i]["x_hand_written"] for run in runs)
+            row[f"{label}_steps"] = runs[-1][i]["steps"]
+        row["speedup"] = row["baseline_ms_per_s"] / row["this_ms_per_s"]
+        rows.append(row)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenes", nargs="*", default=SCENES)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--baseline", help="source tree to compare against (before/after)")
+    p.add_argument("--out", help="JSON file to write")
+    p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # a child's output
+    args = p.parse_args(argv)
+    rows = compare(args.scenes, args.repeats, args.baseline) if args.baseline else measure(args.scenes, args.repeats)
+    if args.json:
+        print(json.dumps(rows))
+        return 0
+    cols = list(rows[0])
+    print(" | ".join(cols))
+    for r in rows:
+        print(" | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c]) for c in cols))
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

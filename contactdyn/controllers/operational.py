@@ -1,0 +1,189 @@
+"""Operational-space (Khatib) motion/force control: the task's own inertia decouples its directions.
+
+The task x = [S p; tilt] stacks the tip position p [m] along the position axes and the force
+set-point directions (S: their orthonormal rows) and, when a ``tool_axis`` a is held, the two
+components of the tip's angular motion perpendicular to a (E: an orthonormal basis of a⊥; the
+roll about a is left to the null space). Its Jacobian J_t = [S J; E J_ω], its inertia
+Λ = (J_t H⁻¹ J_tᵀ)⁻¹, and the law
+
+    τ = J_tᵀ (Λ (a* − J̇_t q̇ + k_null ẋ_t) + f) − k_null H q̇ + h(q, q̇)
+
+Through Λ, the commanded task acceleration a* [m/s², rad/s²]: the reference acceleration a_d
+along each position axis, ko (a × d) − do ω⊥ on the tilt (d the ``tool_target``), zero along
+the force directions. Directly, the task force f: along each position axis the stiffness
+kp (x_d − p) + kd (ẋ_d − ṗ) [N] (−kd ṗ when the phase has no reference), along each force
+set-point direction n the set-point −F_d − kd_normal (n·ṗ) [N]. The k_null [1/s] terms are the
+null-space damping N_tᵀ(−k_null H q̇) of a redundant arm (they cancel when the task has as many
+directions as the arm has joints).
+
+Why this split. With the robot alone ẍ_t = a* + Λ⁻¹ (f + the contact force in task
+coordinates): the reference's motion and the tilt's correction are realised without any push
+along the normal (the Jacobian-transpose law ``task_pd`` turns its tilt moment into force on
+the surface through the arm's inertia). The position error's stiffness is the part that must
+balance friction at rest; as a force along the axes it has no component along the normal, so
+at rest the normal force equals F_d whatever friction does. Sent through Λ it would press by
+Λ_nt Λ_tt⁻¹ F_f (measured on the writing task: 3.3-10.7 N instead of 5 N on a Panda). A task
+direction the arm cannot move (a task singularity) is a clear error.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SceneError, SimulationError
+from .base import BindContext, ControlInput, Controller, register
+from .dynamic import K_NULL, KP, KV, _axes, _check_gain_size, _gain
+from .pd import KD_TASK, KP_TASK
+
+try:  # numpy's gufuncs without the Python wrappers (~3 µs less per call; see constraints.solve_linear)
+    from numpy.linalg import _umath_linalg
+
+    _solve, _solve1, _det = _umath_linalg.solve, _umath_linalg.solve1, _umath_linalg.det
+except (ImportError, AttributeError):  # pragma: no cover
+    _solve = _solve1 = np.linalg.solve
+    _det = np.linalg.det
+
+__all__ = ["OperationalSpace", "OperationalSpaceConfig", "SINGULAR"]
+
+#: smallest det(Λ⁻¹) / Π diag(Λ⁻¹) (Hadamard ratio in (0, 1]: the product of sin² of the angles, in the
+#: metric H⁻¹, between each task direction and the ones before it) the law accepts; below it the task is
+#: singular: one direction within ~1e-4 rad of the others, Λ and the torques beyond what the arm can give
+#: (the writing task runs at 2e-4 on the UR10, 0.013 on the Panda and the 5-DOF writer, 0.27 on the UR5)
+SINGULAR = 1e-8
+
+
+@dataclass(frozen=True)
+class OperationalSpaceConfig:
+    kp: np.ndarray  #: [N/m] position stiffness, one or one per axis
+    kd: np.ndarray  #: [N·s/m]
+    axes: np.ndarray | None  #: (k, 3) position-controlled directions; None: every direction but the force ones
+    tool_axis: np.ndarray | None = None  #: tool direction in the tip frame (None: orientation free)
+    tool_target: np.ndarray | None = None  #: desired tool direction in the world (unit)
+    ko: float = KP  #: [1/s²] tilt error transient
+    do: float = KV  #: [1/s]
+    k_null: float = K_NULL  #: [1/s] null-space joint damping of a redundant arm
+    kd_normal: float = 0.0  #: [N·s/m] damping of the tip velocity along each force set-point direction
+    kind: str = "operational_space"
+
+
+def _cross(a: list[float], b: list[float]) -> tuple[float, float, float]:
+    """a × b of two 3-lists (np.cross costs ~15 µs a call, this ~0.3 µs)."""
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+def _perpendicular(a: list[float]) -> np.ndarray:
+    """(2, 3): an orthonormal basis (e1, a × e1) of the plane perpendicular to the unit 3-list a."""
+    e1 = (0.0, a[2], -a[1]) if abs(a[0]) < 0.9 else (-a[2], 0.0, a[0])  # a × x or a × y
+    s = 1.0 / math.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
+    e1 = (e1[0] * s, e1[1] * s, e1[2] * s)
+    return np.array((e1, _cross(a, e1)))
+
+
+@register
+class OperationalSpace(Controller):
+    """Operational-space motion/force law: motion and tool tilt through the task inertia, force set-points directly."""
+
+    name = "operational_space"
+
+    @staticmethod
+    def applies_force_setpoints(config: OperationalSpaceConfig) -> bool:
+        return True
+
+    @staticmethod
+    def read(r) -> OperationalSpaceConfig:
+        tool_axis = r.vector("tool_axis", None, size=3, unit_norm=True) if r.has("tool_axis") else None
+        tool_target = r.vector("tool_target", [0.0, 0.0, -1.0], size=3, unit_norm=True) if tool_axis is not None \
+            else None
+        return OperationalSpaceConfig(
+            kp=_gain(r, "kp", KP_TASK, "N/m"), kd=_gain(r, "kd", KD_TASK, "N·s/m"), axes=_axes(r),
+            tool_axis=tool_axis, tool_target=tool_target,
+            ko=r.float("ko", KP, lo=0.0, unit="1/s²"), do=r.float("do", KV, lo=0.0, unit="1/s"),
+            k_null=r.float("k_null", K_NULL, lo=0.0, unit="1/s"),
+            kd_normal=r.float("kd_normal", 0.0, lo=0.0, unit="N·s/m"))
+
+    def bind(self, context: BindContext) -> None:
+        cfg, key, file, phase = self.config, context.key, context.scene.file, context.phase
+        ref = phase.reference
+        if ref is not None and ref.space != "task":
+            raise SceneError(f"phase[{context.index}].reference.space", "'task' (operational_space tracks the tip)",
+                             ref.space, file)
+        self._force_keys = [f.key for f in phase.forces]
+        forced = np.array([_direction(context.scene.contacts[f.contact], f.direction) for f in phase.forces]
+                          ).reshape(-1, 3)
+        if np.max(np.abs(forced @ forced.T - np.eye(len(forced))), initial=0.0) > 1e-9:
+            raise SceneError(f"phase[{context.index}].force", "set-points along mutually orthogonal directions",
+                             forced.tolist(), file)
+        if cfg.axes is not None:
+            if np.max(np.abs(cfg.axes @ forced.T), initial=0.0) > 1e-9:
+                raise SceneError(f"{key}.axes", f"directions orthogonal to the force set-points' {forced.tolist()}",
+                                 cfg.axes.tolist(), file)
+            axes = cfg.axes
+        else:  # the orthogonal complement of the force directions
+            _, sv, vt = np.linalg.svd(np.vstack((forced, np.zeros((1, 3)))))
+            axes = vt[int(np.sum(sv > 1e-9)):]
+        for name in ("kp", "kd"):
+            _check_gain_size(getattr(cfg, name), (1, len(axes)), f"{key}.{name}", file)
+        k, n_tilt = len(axes), 0 if cfg.tool_axis is None else 2
+        m = k + len(forced) + n_tilt
+        if m > self.nv:
+            raise SceneError(key, f"a task of at most {self.nv} directions (the arm's joints): {k} position axes, "
+                             f"{len(forced)} force directions" + (", 2 tool tilts" if n_tilt else ""), m, file)
+        self._S = np.vstack((axes, forced))  #: (k + f, 3) position rows of the task [unit]
+        self._k, self._m = k, m
+        self._kp = np.broadcast_to(cfg.kp, k).copy()  # [N/m] per axis
+        self._kd = np.broadcast_to(cfg.kd, k).copy()  # [N·s/m]
+        self._null = bool(cfg.k_null) and m < self.nv  #: a redundant arm with null-space damping
+        self._target = None if cfg.tool_target is None else cfg.tool_target.tolist()
+
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
+        cfg, k, m = self.config, self._k, self._m
+        a_task = np.zeros(m)  # a* [m/s², rad/s²], through Λ
+        f = np.zeros(m)  # [N, N·m], directly
+        axes, S = self._S[:k], self._S
+        if inp.x_d is not None:
+            a_task[:k] = axes @ inp.a_d
+            f[:k] = self._kp * (axes @ (inp.x_d - inp.p_tip)) + self._kd * (axes @ (inp.v_d - inp.v_tip))
+        else:
+            f[:k] = -self._kd * (axes @ inp.v_tip)
+        Jt = np.empty((m, self.nv))
+        Jt[:len(S)] = S @ inp.J
+        drift = np.empty(m)
+        drift[:len(S)] = S @ inp.drift
+        if cfg.tool_axis is not None:
+            a = (inp.R_tip @ cfg.tool_axis).tolist()  # current tool direction (world)
+            E = _perpendicular(a)
+            Jt[m - 2:] = E @ inp.J_ang
+            drift[m - 2:] = E @ inp.drift_ang
+            omega = inp.J_ang @ inp.v  # [rad/s]
+            a_task[m - 2:] = E @ (cfg.ko * np.array(_cross(a, self._target)) - cfg.do * omega)
+        xdot = Jt @ inp.v
+        L_inv = Jt @ _solve(inp.H, Jt.T)  # Λ⁻¹
+        self._guard(L_inv, inp.t)
+        rhs = a_task - drift
+        if self._null:
+            rhs += cfg.k_null * xdot
+        f += _solve1(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
+        for i, key in enumerate(self._force_keys):  # the set-points, directly along their directions [N]
+            f[k + i] -= inp.force_d[key][0] + cfg.kd_normal * xdot[k + i]
+        tau = Jt.T @ f + inp.h
+        if self._null:
+            tau -= cfg.k_null * (inp.H @ inp.v)
+        return tau, None
+
+    def _guard(self, L_inv: np.ndarray, t: float) -> None:
+        ratio = _det(L_inv) / L_inv.diagonal().prod()
+        if not ratio >= SINGULAR:  # also NaN
+            what = "position axes, force directions" + (" and tool tilt" if self.config.tool_axis is not None else "")
+            raise SimulationError(
+                f"t = {t:.6g} s: operational_space: the task ({what}: {self._m} directions) is singular at this "
+                f"posture (Hadamard ratio of J_t H⁻¹ J_tᵀ {ratio:.3g} < {SINGULAR:g}): the arm cannot move the tip "
+                "along one task direction independently of the others; move the task (robot.tip0) away from the "
+                "arm's singularities, drop the tool_axis, or use task_pd")
+
+
+def _direction(contact, direction: str) -> np.ndarray:
+    """World direction of a force set-point: the contact's normal ("n") or its tangent ("t1", "t2")."""
+    return contact.normal if direction == "n" else contact.tangents[int(direction[1:]) - 1]
