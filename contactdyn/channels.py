@@ -57,6 +57,7 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
     parts: list[Samples] = []
     modes_of: list[list[ContactMode]] = []
     phases_of: list[Phase] = []
+    counted: list[ModePlan] = []
     for run in _same_mode_runs(segments, np.unique(idx)):  # segments split at corners: one batch
         seg = segments[run[0]]
         sel = np.flatnonzero(np.isin(idx, run))
@@ -65,10 +66,11 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
             at = sel[idx[sel] == i]
             xs[at] = np.atleast_2d(segments[i].sol(grid[at]).T) if len(at) > 1 else segments[i].sol(grid[at[0]])
         X = xs[sel]
-        if seg.plan.ok:
+        if seg.plan.ok and seg.plan not in counted:  # a plan serves several segments (every turn): count it once
+            counted.append(seg.plan)
             stats["singular_solves"] += seg.plan.singular
         if seg.plan.ok:
-            parts.append(seg.plan.samples(ts, X))
+            parts.append(seg.plan.samples(ts, X, seg.modes))  # a plan serves every turn: this segment's r
         else:
             parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase)[0])
         modes_of += [seg.modes] * len(sel)

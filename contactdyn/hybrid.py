@@ -52,7 +52,7 @@ from .integrators import (
 from .limits import rate_limit_report
 from .phases import Phase
 from .result import Result
-from .rhsplan import ModePlan, cached_plan
+from .rhsplan import ModePlan, cached_plan, structure
 from .system import System
 from .trajectory import min_span
 from .transitions import Transitions
@@ -92,12 +92,13 @@ class HybridRun:
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
 
     def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True) -> ModePlan:
-        """The compiled right-hand side of (modes, phase), built once per system and kept
+        """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``
         (``count``: a segment runs on it, so a fallback is counted)."""
-        key = (tuple(modes), id(phase))
+        key = (structure(modes), id(phase))
         plan = self.plans.get(key)
         if plan is None:
             plan = self.plans[key] = cached_plan(self.system, modes, phase)
+        plan.use(modes)  # a turn's new reference direction r: data of the same plan
         if count and not plan.ok:
             self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
         return plan
