@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .constraints import force_columns
 from .controllers import ControlInput
 from .plan_probe import affine_map
 
@@ -91,7 +92,7 @@ class CompiledLaw:
         if self.reason is not None:
             return False
         self._layout(inp)
-        a, f_swap, zdot = self.ctl.tip_targets(inp)
+        _, f_swap, zdot = self.ctl.tip_targets(inp)
         self.swap = f_swap is not None
         self.zs = slice(6 if self.swap else 3, None) if zdot is not None else None
         M = affine_map(lambda u: self._targets(self._at(inp, u)), self.nu)
@@ -127,8 +128,6 @@ class CompiledLaw:
     def force_columns(self, inp: ControlInput, tau: np.ndarray, zdot, meta: list, cols: list, nv: int):
         """(B, D_z) of :func:`~contactdyn.constraints.force_columns` from M's columns of the measured forces."""
         if self.M is None and not self.read(inp):
-            from .constraints import force_columns
-
             return force_columns(inp, self.ctl, tau, zdot, meta, cols, nv)
         nr = len(meta)
         D = np.zeros((self.M.shape[0], nr))
@@ -139,8 +138,7 @@ class CompiledLaw:
         for j in range(nr):
             if np.any(cols[j][nv:]):  # the row reaches beyond the robot: in the measured joint torque
                 B[:, j] -= cols[j][:nv]
-        return B, (D[self.zs] if zdot is not None and self.zs is not None else
-                   (np.zeros((len(zdot), nr)) if zdot is not None else None))
+        return B, (None if zdot is None else D[self.zs])
 
 
 def compiled_law(plan):
