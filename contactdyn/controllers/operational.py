@@ -195,7 +195,7 @@ class OperationalSpace(Controller):
         return tau, None
 
     def _guard(self, L_inv: np.ndarray, t: float) -> None:
-        ratio = _det(L_inv) / L_inv.diagonal().prod()
+        ratio = _det(L_inv) / math.prod(L_inv.diagonal().tolist())
         if not ratio >= SINGULAR:  # also NaN
             what = "position axes, force directions" + (" and tool tilt" if self.config.tool_axis is not None else "")
             raise SimulationError(
