@@ -57,16 +57,20 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
     parts: list[Samples] = []
     modes_of: list[list[ContactMode]] = []
     phases_of: list[Phase] = []
-    for i in np.unique(idx):
-        seg = segments[i]
-        sel = np.flatnonzero(idx == i)
+    counted: list[ModePlan] = []
+    for run in _same_mode_runs(segments, np.unique(idx)):  # segments split at corners: one batch
+        seg = segments[run[0]]
+        sel = np.flatnonzero(np.isin(idx, run))
         ts = grid[sel]
-        X = np.atleast_2d(seg.sol(ts).T) if len(ts) > 1 else seg.sol(ts[0])[None, :]
-        xs[sel] = X
-        if seg.plan.ok:
+        for i in run:
+            at = sel[idx[sel] == i]
+            xs[at] = np.atleast_2d(segments[i].sol(grid[at]).T) if len(at) > 1 else segments[i].sol(grid[at[0]])
+        X = xs[sel]
+        if seg.plan.ok and seg.plan not in counted:  # a plan serves several segments (every turn): count it once
+            counted.append(seg.plan)
             stats["singular_solves"] += seg.plan.singular
         if seg.plan.ok:
-            parts.append(seg.plan.samples(ts, X))
+            parts.append(seg.plan.samples(ts, X, seg.modes))  # a plan serves every turn: this segment's r
         else:
             parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase)[0])
         modes_of += [seg.modes] * len(sel)
@@ -77,6 +81,22 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
         out.update(limit_channels(system, phases_of, samples))
     out.update(drive_channels(system, xs, samples))
     return out
+
+
+def _same_mode_runs(segments: list[Segment], used: np.ndarray) -> list[list[int]]:
+    """The used segments' indices in runs of consecutive segments on the same modes, phase and plan."""
+    runs: list[list[int]] = []
+    for i in used:
+        seg = segments[i]
+        if runs and runs[-1][-1] == i - 1 and _same_mode(segments[i - 1], seg):
+            runs[-1].append(int(i))
+        else:
+            runs.append([int(i)])
+    return runs
+
+
+def _same_mode(a: Segment, b: Segment) -> bool:
+    return a.plan is b.plan and a.phase is b.phase and a.modes == b.modes
 
 
 def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,

@@ -256,8 +256,10 @@ class _Core:
         self.iwork[:] = 0
         self.iwork[3] = -1  # no stiffness detection
         t = steps.t[-1]
+        # the extra-arguments tuple () given explicitly: scipy 1.17's wrapper leaves its optional
+        # fcn_extra_args uninitialized when omitted and may append a stale tuple's items to every call
         _, _, ierr = _CORE(self.f, t, steps.y_old(len(steps.t) - 1), t_end, self.rtol, self.atol, self.solout,
-                           1, self.work, self.iwork, MAX_STEPS, -1)
+                           1, self.work, self.iwork, MAX_STEPS, -1, ())
         if self.failure:
             raise self.failure[0]
         if ierr == -3 and self.since == _N - 1 and self.rejected is None and not self.grew:

@@ -42,7 +42,7 @@ from .rhsplan import ModePlan
 from .system import System
 
 __all__ = ["TOUCH_TOL", "terminal_event", "EvaluationCache", "SlipCache", "SlipWatch", "StepBudget",
-           "segment_events", "EventLog", "start_storm_cause"]
+           "segment_events", "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
 #: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
@@ -211,6 +211,30 @@ class StepBudget:
             if self.count > self.budget and self.t_fire == math.inf:
                 self.t_fire = t
         return -1.0 if t >= self.t_fire else 1.0
+
+
+#: event kinds whose functions read forces (normal force, friction, limit torque): these jump where the
+#: set-points' acceleration or a force set-point jumps; touch, stop, reverse, turn and limit read the state
+JUMPING = ("separate", "slip", "release")
+
+
+def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray) -> list:
+    """The events whose function falls through zero from (t_before, x) to (t_after, x), in list order.
+
+    At a corner of the set-points (:class:`~contactdyn.trajectory.Corner`) one segment ends at
+    ``t_before`` and the next starts at ``t_after`` with the same state: a force that jumps
+    there (a rigid contact's, with the reference's acceleration) is seen here, as a step
+    straddling the corner would have seen it. Only functions of forces can jump (``JUMPING``):
+    the others read the state alone.
+    """
+    fired = []
+    for e in events:
+        if e.kind not in JUMPING:
+            continue
+        g = e.value if isinstance(e, SlipWatch) else e  # (a SlipWatch's call keeps step-end state)
+        if g(t_before, x) > 0.0 >= g(t_after, x):
+            fired.append(e)
+    return fired
 
 
 class _ReadableValues:

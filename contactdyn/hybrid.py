@@ -9,7 +9,10 @@ modes and the task phase are fixed, and instants at which they change. The loop:
    (:mod:`contactdyn.rhsplan`) where it represents the mode, else
    :meth:`System.evaluate` — with the mode's events (:mod:`contactdyn.events`);
 2. at the first event, apply the transition (:mod:`contactdyn.transitions`): an impact,
-   a separation, a stick or a slip; or, at a phase's end, start the next phase;
+   a separation, a stick or a slip; or, at a phase's end, start the next phase; at a
+   corner of the phase's set-points (:class:`~contactdyn.trajectory.Corner`: a jump of the
+   reference's acceleration or of a force ramp's rate) go on past it with the same state,
+   so that no step straddles the jump (:meth:`HybridRun._pass_corner`);
 3. repeat until the duration; then sample the segments into channels
    (:mod:`contactdyn.channels`).
 
@@ -17,7 +20,7 @@ Integrator choice per segment: the scene's ``solver.method``; ``auto`` runs DOP8
 step budget and switches to Radau for a segment whose steps are stability-bound; a 2-D
 slip launching from rest runs on LSODA (its direction relaxes at a rate ∝ 1/|v_t|, stiff
 for an explicit method) until the next event. After a friction event the next segment
-starts with the step size the solver had reached. An integration failure reports what the
+(or a corner) starts with the step size the solver had reached. An integration failure reports what the
 state says: a singular contact system or stiffness.
 """
 
@@ -33,7 +36,7 @@ import numpy as np
 from .channels import Segment, output_grid, sample_segments
 from .contact import ContactMode
 from .errors import SceneError, SimulationError
-from .events import EventLog, StepBudget, segment_events
+from .events import EventLog, StepBudget, fired_across, segment_events
 from .integrators import (
     AUTO_EXPLICIT,
     EXPLICIT,
@@ -49,8 +52,9 @@ from .integrators import (
 from .limits import rate_limit_report
 from .phases import Phase
 from .result import Result
-from .rhsplan import ModePlan, cached_plan
+from .rhsplan import ModePlan, cached_plan, structure
 from .system import System
+from .trajectory import min_span
 from .transitions import Transitions
 
 __all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
@@ -64,6 +68,10 @@ LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest (see 
 class HybridRun:
     """One run of a system: the loop, its counters, its segments and events."""
 
+    #: end segments at the corners of the phase's set-points (trajectory.Corner); False only for
+    #: the benchmarks' before/after comparison (benchmarks/corners.py)
+    at_corners = True
+
     def __init__(self, system: System):
         self.system = system
         self.scene = system.scene
@@ -74,7 +82,7 @@ class HybridRun:
         if self.solver.method in FIXED and not math.isfinite(self.solver.max_step):
             raise SceneError("solver.max_step", f"the step [s] of the fixed-step method {self.solver.method}",
                              "no max_step", self.scene.file)
-        self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "singular_solves": 0,
+        self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "corners": 0, "singular_solves": 0,
                       "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
         self.log = EventLog(self.scene.name, self.solver, self.stats)
         self.events = self.log.events
@@ -83,13 +91,15 @@ class HybridRun:
         self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
 
-    def _plan(self, modes: list[ContactMode], phase: Phase) -> ModePlan:
-        """The compiled right-hand side of (modes, phase), built once per system and kept."""
-        key = (tuple(modes), id(phase))
+    def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True) -> ModePlan:
+        """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``
+        (``count``: a segment runs on it, so a fallback is counted)."""
+        key = (structure(modes), id(phase))
         plan = self.plans.get(key)
         if plan is None:
             plan = self.plans[key] = cached_plan(self.system, modes, phase)
-        if not plan.ok:
+        plan.use(modes)  # a turn's new reference direction r: data of the same plan
+        if count and not plan.ok:
             self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
         return plan
 
@@ -121,10 +131,17 @@ class HybridRun:
             if t_end <= t:
                 phase = self._next_phase(phase, t, x)
                 continue
-            sol, events, fun = self._segment(t, t_end, x, modes, phase)
+            corner = phase.next_corner(t, t_end) if self.at_corners else None
+            if corner is not None and corner.before - t <= min_span(t):  # at it already (an event landed there)
+                t, x, modes, phase = self._pass_corner(t, corner.after, x, modes, phase)
+                continue
+            sol, events, fun = self._segment(t, corner.before if corner else t_end, x, modes, phase)
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
-            self.next_step = None
-            if sol.status == 1:
+            h0, self.next_step = self.next_step, None
+            if sol.status == 0 and corner is not None:  # reached the corner: go on past it with the step reached
+                self.next_step = float(sol.t[-2] - sol.t[-3]) if len(sol.t) > 2 else h0
+                t, x, modes, phase = self._pass_corner(t, corner.after, x, modes, phase)
+            elif sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
                 if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
                     self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
@@ -137,6 +154,21 @@ class HybridRun:
                 self.auto_state = None
                 phase = self._next_phase(phase, t, x)
         return self._result(time.perf_counter() - wall0)
+
+    def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
+        """Restart past a corner of the set-points at t_after [s] with the state x reached at t [s]
+        (no event: the same modes, unless a contact force or limit torque jumps through zero there,
+        which is handled as the event a step straddling the corner would have located)."""
+        self.stats["corners"] += 1
+        plan = self._plan(modes, phase, count=False)
+        events, _ = segment_events(self.system, modes, phase, t, x, plan if plan.ok else None)
+        fired = fired_across(events, t, t_after, x)
+        if fired:
+            self.auto_state = None
+            if fired[0].kind not in RESUME_STEP:
+                self.next_step = None
+            x, modes, phase = self.transitions.handle(t_after, x, modes, phase, fired[0])
+        return t_after, x, modes, phase
 
     def _segment(self, t: float, t_end: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
         """Integrate one smooth phase from t towards t_end [s]: (solution, its events, its right-hand side)."""

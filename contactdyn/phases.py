@@ -16,7 +16,7 @@ import numpy as np
 from .controllers import Controller
 from .errors import SceneError
 from .scene import PhaseSpec
-from .trajectory import Ramp, Reference
+from .trajectory import Corner, Ramp, Reference, merge_corners, min_span
 
 __all__ = ["Phase", "start_phase", "reference_at"]
 
@@ -37,6 +37,15 @@ class Phase:
     carrier: tuple[int, np.ndarray] | None = None
     #: joints pressing on a position limit: (coordinate, +1 lower / −1 upper), see contactdyn.limits
     limits: tuple[tuple[int, int], ...] = ()
+    #: the corners of its reference and force set-points, in time order (absolute times)
+    corners: tuple[Corner, ...] = ()
+
+    def next_corner(self, t: float, t_end: float) -> Corner | None:
+        """The first corner not yet passed at t [s] that comes before t_end [s] (by more than min_span), or None."""
+        for c in self.corners:
+            if c.after > t:
+                return c if c.before < t_end - min_span(t_end) else None
+        return None
 
 
 def start_phase(system, index: int, t: float, x: np.ndarray, previous: Phase | None) -> Phase:
@@ -75,9 +84,10 @@ def start_phase(system, index: int, t: float, x: np.ndarray, previous: Phase | N
         reference = Reference(start, moves)
     forces = {f.key: Ramp(f.ramp.value, f.ramp.start + t, f.ramp.duration, f.ramp.kind, f.ramp.initial)
               for f in spec.forces}
-    phase = Phase(spec, index, t, controller, system.z_slices[index], reference, forces, carrier,
-                  previous.limits if previous is not None else ())
-    return phase
+    corners = merge_corners([*(reference.corners() if reference is not None else ()),
+                             *(c for ramp in forces.values() for c in ramp.corners())])
+    return Phase(spec, index, t, controller, system.z_slices[index], reference, forces, carrier,
+                 previous.limits if previous is not None else (), corners)
 
 
 def reference_at(system, phase: Phase, t: float, x: np.ndarray):

@@ -64,7 +64,7 @@ def make_rhs(plan):
     plan.friction_terms = friction
     plan.time_terms = time_terms
     plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0]
-    modes = plan.modes
+    modes = plan.modes  # this call's own, 2-D reference directions included (ModePlan.use)
 
     def rhs(t, x):
         phi, Js = phi_and_jacobians(t, x, time_terms(t, tv))
@@ -207,6 +207,7 @@ def _launch(plan, friction, solve):
     nv, m = s.nv, plan.m
     m2 = m * m
     o_vt = [plan.o_vt[c.name] for c in s.contacts]
+    modes = plan.modes  # this call's own: a later ModePlan.use binds a new list
     tangent = []
     for c in s.contacts:
         T, consts = plan._tangent_terms(c)
@@ -229,7 +230,7 @@ def _launch(plan, friction, solve):
             T, consts, j, i_dr = tangent[i]
             return T.dot(Js[j].dot(z[:nv]) + phi[i_dr:i_dr + 3]) + consts.dot(z[:s.nQ])
 
-        return launch_directions(s, plan.modes, slip_of, acceleration_of)
+        return launch_directions(s, modes, slip_of, acceleration_of)
 
     return launch
 

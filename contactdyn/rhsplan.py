@@ -14,6 +14,8 @@ constants, collected once. A call then costs Pinocchio's terms, one product ``W 
 one product for the rows and one small linear solve. What is not affine stays explicit:
 Coulomb friction ``−μ max(F_n, 0) d``, 2-D slip directions (a slide launching from rest:
 its direction solved per call on the plan's own KKT system), other controllers.
+The 2-D reference directions r are data the call reads, not part of the plan
+(:func:`structure`, :meth:`ModePlan.use`): every ``turn`` event of a slide reuses its plan.
 
 A plan checks itself against :meth:`System.evaluate` when it is built (two states) and
 declines (``plan.ok`` false, ``plan.reason`` says why) where it cannot represent the
@@ -38,28 +40,37 @@ from .contact import ContactMode
 from .fastpath import UNDECLARED, mode_gap
 from .plan_kkt import CompiledKKT
 from .plan_probe import ProbedModel, affine_map
-from .plan_rhs import controller_call
+from .plan_rhs import controller_call, make_rhs
 from .samples import Samples, plan_samples
 
-__all__ = ["ModePlan", "Samples", "cached_plan", "affine_map"]  # Samples: re-exported from contactdyn.samples
+__all__ = ["ModePlan", "Samples", "cached_plan", "structure", "affine_map"]  # Samples: from contactdyn.samples
 
 CHECK_RTOL = 1e-9  #: agreement a plan must show with System.evaluate when it is built
+ANY_2D = (0.0, 0.0)  #: a 2-D reference direction in a plan's key (:func:`structure`): never a real one
 
 
 _PLANS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  #: system -> {key: ModePlan}
 
 
+def structure(modes: list[ContactMode]) -> tuple[ContactMode, ...]:
+    """What shapes a plan: the modes with each 2-D reference direction r blanked. r is data the
+    plan's call reads (:meth:`ModePlan.use`): a ``turn`` event refreshes it without a new plan."""
+    return tuple(m.with_(slip=ANY_2D) if len(m.slip) == 2 else m for m in modes)
+
+
 def cached_plan(system, modes: list[ContactMode], phase) -> ModePlan:
-    """The plan of (modes, phase), compiled once per system: a repeated run of the same system
-    (benchmarks, sweeps) reuses it. The key is the modes and the phase's content (index, start,
-    reference, set-points), not the Phase object, which every run makes anew."""
+    """The plan of (modes, phase), compiled once per system and set to run with ``modes``: a repeated
+    run of the same system (benchmarks, sweeps) and every turn of a 2-D slide reuse it. The key is the
+    modes' :func:`structure` and the phase's content (index, start, reference, set-points), not the
+    Phase object, which every run makes anew."""
     content = pickle.dumps((phase.index, phase.t_start, phase.spec.name, phase.reference, phase.forces,
                             getattr(phase, "carrier", None), getattr(phase, "limits", ())))
-    key = (tuple(modes), content)
+    key = (structure(modes), content)
     plans = _PLANS.setdefault(system, {})
     plan = plans.get(key)
     if plan is None:
         plan = plans[key] = ModePlan(system, modes, phase)
+    plan.use(modes)
     return plan
 
 
@@ -96,9 +107,24 @@ class ModePlan(ProbedModel, CompiledKKT):
         return ""
 
 
+    def use(self, modes: list[ContactMode]) -> None:
+        """Run with these modes from now on: the same :func:`structure`, their own 2-D reference
+        directions r. ``self.rhs`` becomes a call bound to them (a few µs to make); the calls made
+        for earlier modes keep theirs: a finished segment's dense output calls its own later."""
+        if modes == self.modes:
+            return
+        if structure(modes) != structure(self.modes):
+            raise ValueError(f"a plan runs modes of its own structure only; built for {self.modes}, given {modes}")
+        self.modes = list(modes)
+        if self.ok:  # a declined plan has no call: its modes run on System.evaluate
+            self.rhs = make_rhs(self)
+            self.ring[:] = [(None, None, None, None)] * 4
+
     # ---- output samples, all at once (contactdyn.samples) ----------------------------------
-    def samples(self, ts: np.ndarray, X: np.ndarray) -> Samples:
-        """Diagnostics at the states X[k] (times ts[k]) of this mode, as arrays."""
+    def samples(self, ts: np.ndarray, X: np.ndarray, modes: list[ContactMode] | None = None) -> Samples:
+        """Diagnostics at the states X[k] (times ts[k]) of this mode (run with ``modes`` if given), as arrays."""
+        if modes is not None:
+            self.use(modes)
         return plan_samples(self, ts, X)
 
     def _controller_call(self):

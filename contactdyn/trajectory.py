@@ -10,11 +10,14 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Move", "Ramp", "Reference", "profile"]
+__all__ = ["Corner", "Move", "Ramp", "Reference", "profile", "profile_corners", "merge_corners",
+           "min_span"]
 
 PROFILES = ("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step", "circle", "exponential")
 
@@ -29,6 +32,8 @@ def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, 
     for τ ≤ 1, then τ − 1/2 (the move's displacement is then a velocity × duration).
     ``exponential``: σ = 1 − e^(−τ), the duration being the time constant (never clamped;
     case 1's position-based push follows its exponential force ramps this way).
+    Every piece holds from its corner (:func:`profile_corners`) on: at a corner the profile
+    takes its right-hand limit.
     """
     if kind == "exponential":
         if tau < 0.0:
@@ -38,7 +43,7 @@ def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, 
     if kind == "velocity_ramp":
         if tau < 0.0:
             return 0.0, 0.0, 0.0
-        if tau <= 1.0:
+        if tau < 1.0:
             return 0.5 * tau * tau, tau, 1.0
         return tau - 0.5, 1.0, 0.0
     if tau < 0.0:  # at τ = 0 and τ = 1 the profile takes its right-hand limit
@@ -54,10 +59,63 @@ def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, 
     acc = vmax / a
     if tau < a:
         return 0.5 * acc * tau * tau, acc * tau, acc
-    if tau <= 1.0 - a:
+    if tau < 1.0 - a:
         return 0.5 * acc * a * a + vmax * (tau - a), vmax, 0.0
     r = 1.0 - tau
     return 1.0 - 0.5 * acc * r * r, acc * r, -acc
+
+
+def profile_corners(kind: str, accel_fraction: float = 0.1) -> tuple[float, ...]:
+    """The τ at which ``profile``'s pieces meet (σ or one of its derivatives jumps), as ``profile`` compares."""
+    if kind in ("exponential", "step"):
+        return (0.0,)
+    if kind in ("velocity_ramp", "constant_velocity"):
+        return (0.0, 1.0)
+    a = 0.5 if kind == "triangle" else accel_fraction
+    return tuple(sorted({0.0, a, 1.0 - a, 1.0}))
+
+
+class Corner(NamedTuple):
+    """A set-point's corner: ``before`` [s], the last time on the piece before it, and ``after`` [s],
+    the first on the piece after (the next float; a few ulps apart where corners are merged).
+
+    An integration segment ends at ``before`` and the next starts at ``after`` with the same
+    state, so no step ever straddles a jump of the reference's acceleration (or of a force
+    set-point's rate), and no Runge–Kutta stage sees the other piece.
+    """
+
+    before: float
+    after: float
+
+
+def _corner(tau_of: Callable[[float], float], t: float, tau_c: float) -> Corner:
+    """The corner where ``tau_of`` (monotone, as the profile computes it) reaches tau_c, from t within ulps."""
+    for _ in range(256):  # the rounding of start + τ_c · duration puts t a few ulps off
+        if tau_of(t) >= tau_c:
+            t = math.nextafter(t, -math.inf)
+            continue
+        after = math.nextafter(t, math.inf)
+        if tau_of(after) >= tau_c:
+            return Corner(t, after)
+        t = after
+    raise ArithmeticError(f"no corner at τ = {tau_c} near t = {t} s")  # unreachable for a monotone tau_of
+
+
+def min_span(t: float) -> float:
+    """The shortest segment [s] worth integrating near t [s] (64 ulps; the integrators' floor is 10):
+    closer corners merge, and a segment that would end this close after its start starts past the corner."""
+    return 64.0 * math.ulp(max(1.0, abs(t)))
+
+
+def merge_corners(corners) -> tuple[Corner, ...]:
+    """Corners in time order, those within :func:`min_span` of each other (or overlapping) made one."""
+    out: list[Corner] = []
+    for c in sorted(corners):
+        if out and c.before - out[-1].after <= min_span(c.before):
+            out[-1] = Corner(min(out[-1].before, c.before), max(out[-1].after, c.after))
+        else:
+            out.append(c)
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -78,11 +136,21 @@ class Move:
     normal: np.ndarray | None = None  #: circle only: rotation axis (unit)
     turns: float = 1.0  #: circle only: number of turns (negative: clockwise about normal)
 
+    def tau(self, t: float) -> float:
+        """Normalised time τ = (t − start)/duration [-] (the profile's argument)."""
+        return (t - self.start) / self.duration
+
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self.kind == "circle":
             return self._circle(t)
-        s, ds, dds = profile(self.kind, (t - self.start) / self.duration, self.accel_fraction)
+        s, ds, dds = profile(self.kind, self.tau(t), self.accel_fraction)
         return self.delta * s, self.delta * (ds / self.duration), self.delta * (dds / self.duration**2)
+
+    def corners(self) -> tuple[Corner, ...]:
+        """Where the move's acceleration (or, for ``step``, its position) jumps."""
+        kind = "trapezoid" if self.kind == "circle" else self.kind
+        return tuple(_corner(self.tau, self.start + tc * self.duration, tc)
+                     for tc in profile_corners(kind, self.accel_fraction))
 
     def _circle(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         rows = self.circle_rows(t)
@@ -91,7 +159,7 @@ class Move:
     def circle_rows(self, t: float) -> np.ndarray:
         """(3, 3): the circle's displacement [m], velocity [m/s] and acceleration [m/s²] at t (Python floats per
         component: nine 3-vector numpy operations cost ~8 µs, these ~2)."""
-        s, ds, dds = profile("trapezoid", (t - self.start) / self.duration, self.accel_fraction)
+        s, ds, dds = profile("trapezoid", self.tau(t), self.accel_fraction)
         span = 2.0 * math.pi * self.turns
         th, dth, ddth = span * s, span * ds / self.duration, span * dds / self.duration**2
         cos, sin = math.cos(th), math.sin(th)
@@ -128,7 +196,7 @@ class Reference:
             if move.kind == "circle":
                 out += move.circle_rows(t)
                 continue
-            s, ds, dds = profile(move.kind, (t - move.start) / move.duration, move.accel_fraction)
+            s, ds, dds = profile(move.kind, move.tau(t), move.accel_fraction)
             out += np.multiply.outer((s, ds / move.duration, dds / move.duration**2), move.delta)
         return out[0], out[1], out[2]
 
@@ -138,6 +206,10 @@ class Reference:
         out = np.zeros((3, len(self.start)))
         out[0] = self.start
         return out
+
+    def corners(self) -> tuple[Corner, ...]:
+        """The moves' corners, in time order."""
+        return merge_corners(c for move in self.moves for c in move.corners())
 
 
 @dataclass(frozen=True)
@@ -168,3 +240,11 @@ class Ramp:
         if tau >= self.duration:
             return self.value, 0.0
         return self.initial + span * tau / self.duration, span / self.duration
+
+    def corners(self) -> tuple[Corner, ...]:
+        """Where the set-point (step) or its rate (linear, exponential) jumps: its start, a linear ramp's end."""
+        def since(t: float) -> float:  # ``at``'s τ [s]
+            return t - self.start
+
+        ends = (0.0, self.duration) if self.kind == "linear" else (0.0,)
+        return tuple(_corner(since, self.start + tc, tc) for tc in ends)

@@ -178,13 +178,8 @@ def test_cylindrical_full_model_gives_the_reduced_axis_motion(gravity):
     the full 3-DOF model, even while q1 and q2 move, as in the model reduced to q3 (both runs
     with tight tolerances; they differ only by integration error). q3 keeps its elastic drive,
     q1 and q2 get ideal ones; the approach, the impact and A7's contact phase are all compared."""
-    # solve_ivp's DOP853: the approach's trapezoid has a corner at 1.2 s inside the segment, and where a
-    # step's stages fall around it decides whether DOP853's error estimate sees it. The compiled DOP853C
-    # (the same step control, steps ~1e-9 apart) lands the full model's step with the corner at 0.47 of
-    # it, which the estimate misses: q3 8e-11 off an rtol 1e-13 run where eight neighbouring rtols give
-    # ≤ 5e-13 on either integrator, and the second impulse 1.3e-7 apart (docs/performance.md, kinks)
     tight = {"duration": 1.7, "solver.output_rate": 500.0, "solver.rtol": 1e-12, "solver.atol": 1e-14,
-             "robot.gravity": gravity, "solver.method": "DOP853"}
+             "robot.gravity": gravity}
     reduced = simulate("case3_b_position", tight)
     full = simulate("case3_b_position", {**tight, "robot.active_joints": ["q1", "q2", "q3"],
                                          "robot.q0": [0.3, 0.2, 0.0], "robot.v0": [0.5, -0.1, 0.0],

@@ -72,3 +72,36 @@ def test_exponential_move_follows_the_exponential_force_ramp():
     accs = np.array([move.at(t)[2][0] for t in ts])
     assert np.max(np.abs(np.gradient(xs, ts)[1:-1] - vs[1:-1])) < 1e-5
     assert np.max(np.abs(np.gradient(vs, ts)[1:-1] - accs[1:-1])) < 1e-3
+
+
+@pytest.mark.parametrize("kind, n_corners", [("trapezoid", 4), ("triangle", 3), ("velocity_ramp", 2),
+                                             ("constant_velocity", 2), ("circle", 4)])
+def test_a_moves_corners_split_its_pieces_at_adjacent_floats(kind, n_corners):
+    """``before`` is still on the piece before the corner, ``after`` (the next float) on the piece after:
+    the acceleration there equals its value a little way inside each piece (piecewise constant)."""
+    normal = np.array([0.0, 0.0, 1.0]) if kind == "circle" else None
+    move = Move(np.array([0.3, -0.1, 0.0]), start=0.1 + 0.2, duration=0.7, kind=kind, accel_fraction=0.3,
+                normal=normal)
+    corners = move.corners()
+    assert len(corners) == n_corners
+    nominal = [0.3, 0.51, 0.79, 1.0] if kind in ("trapezoid", "circle") else \
+        [0.3, 0.65, 1.0] if kind == "triangle" else [0.3, 1.0]
+    for c, t_c in zip(corners, nominal, strict=True):
+        assert c.after == np.nextafter(c.before, np.inf) and abs(c.before - t_c) <= 1e-15
+        if kind != "circle":  # the circle's acceleration is not piecewise constant
+            np.testing.assert_array_equal(move.at(c.before)[2], move.at(c.before - 1e-4)[2])
+            np.testing.assert_array_equal(move.at(c.after)[2], move.at(c.after + 1e-4)[2])
+    assert move.tau(corners[0].before) < 0.0 <= move.tau(corners[0].after)
+
+
+def test_force_ramp_corners_and_overlapping_corners_merge():
+    linear = Ramp(10.0, start=0.3, duration=0.2)
+    (c0, c1) = linear.corners()
+    assert linear.at(c0.before)[1] == 0.0 and linear.at(c0.after)[1] == pytest.approx(50.0)
+    assert linear.at(c1.before)[1] == pytest.approx(50.0) and linear.at(c1.after)[1] == 0.0
+    assert len(Ramp(10.0, start=0.3, kind="step").corners()) == 1
+    # case 1's push: the ramp's end and the triangle's peak meet at 0.5 s: one corner
+    ramp = Move(np.array([0.1, 0.0, 0.0]), 0.0, 0.5, "velocity_ramp")
+    tri = Move(np.array([0.0, 0.0, -0.1]), 0.0, 1.0, "triangle")
+    corners = Reference(np.zeros(3), (ramp, tri)).corners()
+    assert len(corners) == 3 and abs(corners[1].before - 0.5) <= 1e-15

@@ -12,14 +12,16 @@ overrides (fixed and varied), so the same case always lands in the same files:
   (:mod:`contactdyn.metrics`);
 - ``OUT/sweep.json``: the base scene document, fixed overrides and the cases.
 
-Every file is written atomically; the summary is rewritten after each chunk of runs, so an
-interrupted sweep loses at most the runs in progress, and re-running the same command
-skips the runs whose files exist. A run that fails (a bad parameter combination, a solver
-failure, a blow-up) is a row with status ``failed`` (a :class:`ContactdynError` or a
-numerical failure such as ``LinAlgError``, or a process that died: the run is then run
-again alone and recorded with the signal) or ``crashed`` (any other exception, i.e. a
-bug) and its message; the other runs go on. Workers end with the sweep however it ends,
-and one sweep at a time writes into an ``OUT`` (``OUT/.sweep.lock``).
+Every file is written atomically; each chunk's rows go to a part file of their own
+(``OUT/summary.parts/``), merged into the summary when the sweep ends and in between every
+30 s or more (:mod:`.summary`: a cost linear in the runs), so an interrupted sweep loses at
+most the runs in progress, and re-running the same command skips the runs whose files exist.
+A run that fails (a bad parameter combination, a solver failure, a blow-up) is a row with
+status ``failed`` (a :class:`ContactdynError` or a numerical failure such as ``LinAlgError``,
+or a process that died: the run is then run again alone and recorded with the signal) or
+``crashed`` (any other exception, i.e. a bug) and its message; the other runs go on.
+Workers end with the sweep however it ends, and one sweep at a time writes into an ``OUT``
+(``OUT/.sweep.lock``).
 Apart from the wall time (``wall_s`` in the summary, ``stats.wall_s`` and
 ``stats.real_time_factor`` in each ``<id>.json``) the outputs are bit-identical for the
 same inputs.
@@ -39,7 +41,8 @@ Sweep file (TOML)::
 Modules: :mod:`.plan` (what runs: axes, sweep files, run ids, validation of every case),
 :mod:`.execute` (where: this process, a process pool, Dask; chunks of runs), :mod:`.workers`
 (the workers' lifetime, runs in processes of their own), :mod:`.store` (the files, the lock),
-:mod:`.report` (failures for the console, a metric plotted over a parameter).
+:mod:`.summary` (the summary table and its part files), :mod:`.report` (failures for the console, a metric
+plotted over a parameter).
 """
 
 from .execute import NUMERICAL, SweepReport, process_pool, run_chunk, run_sweep, stop_pool

@@ -15,7 +15,8 @@ import numpy as np
 from ..errors import ContactdynError, SceneError
 from ..scene import parse_scene
 from .plan import Sweep, check_sweep
-from .store import STATUSES, cached_rows, done_row, lock_out, record_failure, result_row, write_manifest, write_summary
+from .store import STATUSES, done_row, lock_out, record_failure, result_row, write_manifest
+from .summary import Summary, cached_rows
 from .workers import run_isolated, worker_init
 
 __all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk", "process_pool", "stop_pool"]
@@ -23,7 +24,7 @@ __all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk", "process_pool",
 #: numerical failures a blow-up raises from numpy inside a run (a failed run, not a bug)
 NUMERICAL: tuple[type[Exception], ...] = (np.linalg.LinAlgError, FloatingPointError, OverflowError)
 CHUNKS_PER_WORKER = 4  #: aim for this many chunks per worker (load balance vs per-chunk cost)
-MAX_CHUNK = 32  #: runs per chunk at most, so the summary is refreshed often
+MAX_CHUNK = 32  #: runs per chunk at most, so a run's row reaches the summary's part files soon
 SCHEDULER_TIMEOUT = 10.0  #: [s] to connect to a Dask scheduler
 PRELOAD = ("contactdyn.sweep", "contactdyn.simulate")  #: modules the workers' forkserver imports once
 
@@ -91,22 +92,25 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
         rows = _finished_rows(out, runs_dir, cases, retry_failed)
         todo = [(rid, overrides) for rid, _, overrides in cases if rid not in rows]
         skipped = len(rows)
-        params = {rid: p for rid, p, _ in cases}
-        summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
+        summary = Summary(out, rows, {rid: p for rid, p, _ in cases}, sweep.parameter_keys(), csv)
+        summary.rewrite()  # merges what a killed sweep left in part files
         n_workers = (os.cpu_count() or 1) if workers is None else max(0, workers)
         size = chunk or max(1, min(MAX_CHUNK, math.ceil(len(todo) / (CHUNKS_PER_WORKER * max(1, n_workers)))))
         chunks = [todo[i:i + size] for i in range(0, len(todo), size)]
         bar = _progress(len(cases), skipped, progress)
+        failed = sum(r["status"] != "ok" for r in rows.values())
         try:
             for chunk_rows in _execute(sweep, runs_dir, chunks, n_workers, scheduler):
-                rows.update((r["run_id"], r) for r in chunk_rows)
-                summary = write_summary(out, rows, params, sweep.parameter_keys(), csv)
+                summary.add(chunk_rows)
+                failed += sum(r["status"] != "ok" for r in chunk_rows)  # each run finishes once per call
                 bar.update(len(chunk_rows))
-                bar.set_postfix(failed=sum(r["status"] != "ok" for r in rows.values()), refresh=False)
+                bar.set_postfix(failed=failed, refresh=False)
         finally:
             bar.close()
+            if summary.pending:  # however the sweep ends (a SIGKILL aside: the next sweep merges the parts)
+                summary.rewrite()
     counts = {s: sum(r["status"] == s for r in rows.values()) for s in STATUSES}
-    return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary)
+    return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary.path)
 
 
 def _finished_rows(out: Path, runs_dir: Path, cases: list, retry_failed: bool) -> dict[str, dict[str, Any]]:

@@ -1,4 +1,4 @@
-"""A sweep's files: per-run rows, the summary table, the manifest; every write atomic."""
+"""A sweep's files: per-run rows, the manifest, the lock; every write atomic (the summary: :mod:`.summary`)."""
 
 from __future__ import annotations
 
@@ -11,14 +11,13 @@ from typing import Any
 import numpy as np
 
 from ..errors import ContactdynError, SceneError
-from ..result import atomic_path, atomic_write
+from ..result import atomic_write
 from .plan import Sweep
+from .summary import SUMMARY_FIXED
 
-__all__ = ["STATUSES", "SUMMARY_FIXED", "result_row", "record_failure", "done_row", "cached_rows", "write_manifest",
-           "write_summary", "lock_out"]
+__all__ = ["STATUSES", "result_row", "record_failure", "done_row", "write_manifest", "lock_out"]
 
 STATUSES = ("ok", "failed", "crashed")
-SUMMARY_FIXED = ("run_id", "status", "error", "wall_s")  #: columns before the metrics (after the parameters)
 
 
 def result_row(rid: str, result) -> dict[str, Any]:
@@ -84,22 +83,6 @@ def done_row(runs_dir: Path, rid: str, cache: dict[str, dict[str, Any]]) -> dict
         return None
 
 
-def cached_rows(out: Path) -> dict[str, dict[str, Any]]:
-    """Rows of the last summary by run id, to resume without reloading every result."""
-    import pandas as pd
-
-    from ..metrics import is_metric
-
-    try:
-        frame = pd.read_parquet(out / "summary.parquet")
-    except (OSError, ValueError, ImportError):
-        return {}
-    cols = [c for c in frame.columns if c in SUMMARY_FIXED or is_metric(c)]
-    if not set(SUMMARY_FIXED) <= set(cols):
-        return {}
-    return {r["run_id"]: r for r in frame[cols].to_dict("records")}
-
-
 def write_manifest(out: Path, sweep: Sweep, cases: list) -> None:
     path = out / "sweep.json"
     digest = sweep.digest()
@@ -115,54 +98,3 @@ def write_manifest(out: Path, sweep: Sweep, cases: list) -> None:
            "runs": sweep.runs, "cases": [{"run_id": rid, "params": p} for rid, p, _ in cases],
            "document": sweep.document}
     atomic_write(path, json.dumps(doc, indent=1, sort_keys=True, default=str).encode())
-
-
-def write_summary(out: Path, rows: dict[str, dict[str, Any]], params: dict[str, dict[str, Any]],
-                   keys: list[str], csv: bool) -> Path:
-    """summary.parquet (and .csv) of the finished runs, sorted by the swept parameters, written atomically."""
-    import pandas as pd
-
-    ids = sorted(rows, key=lambda i: (_parameter_order(params[i], keys), i))
-    metric_cols = sorted({k for r in rows.values() for k in r} - set(SUMMARY_FIXED))
-    data: dict[str, Any] = {"run_id": ids}
-    for key in keys:
-        data[key] = _column([params[i].get(key) for i in ids])
-    for col in SUMMARY_FIXED[1:]:
-        data[col] = [rows[i][col] for i in ids]
-    data["wall_s"] = np.array(data["wall_s"], dtype=float)
-    for col in metric_cols:
-        data[col] = np.array([rows[i].get(col, math.nan) for i in ids], dtype=float)
-    frame = pd.DataFrame(data)
-    path = out / "summary.parquet"
-    atomic_path(path, lambda tmp: frame.to_parquet(tmp, index=False, engine="pyarrow"))
-    if csv:
-        atomic_path(out / "summary.csv", lambda tmp: frame.to_csv(tmp, index=False))
-    return path
-
-
-def _parameter_order(params: dict[str, Any], keys: list[str]) -> tuple:
-    """Sort key of a run: its parameter values in the order of ``keys`` (numbers, then strings, then the rest)."""
-    order = []
-    for key in keys:
-        v = params.get(key)
-        if isinstance(v, int | float) and not isinstance(v, bool):
-            order.append((0, float(v), ""))
-        elif isinstance(v, str | bool):
-            order.append((1, 0.0, str(v)))
-        else:
-            order.append((2 if v is not None else 3, 0.0, json.dumps(v, sort_keys=True)))
-    return tuple(order)
-
-
-def _column(values: list[Any]) -> Any:
-    """A parameter column with one type: numbers, strings or booleans; anything else as JSON text."""
-    present = [v for v in values if v is not None]
-    if present and all(isinstance(v, bool) for v in present):
-        return [v for v in values]
-    if present and all(isinstance(v, int | float) and not isinstance(v, bool) for v in present):
-        return np.array([math.nan if v is None else float(v) for v in values])
-    if all(isinstance(v, str) for v in present):
-        return values
-    return [None if v is None else json.dumps(v, sort_keys=True) for v in values]
-
-
