@@ -16,11 +16,11 @@ import argparse
 import json
 import statistics
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from before_after import HERE, alternate, use_tree  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 use_tree()
 
@@ -38,15 +38,11 @@ def measure(scenes: list[str], repeats: int) -> list[dict]:
     """Per scene: median CPU ms per simulated second of the scene and of the hand-written B1, interleaved."""
     rows = []
     for name in scenes:
-        cost, hand = [], []
-        for _ in range(repeats):
-            t0 = time.process_time()
-            b1_reference.run()
-            hand.append((time.process_time() - t0) / HAND_WRITTEN_SPAN * 1e3)
-            t0 = time.process_time()
-            r = simulate(load_scene(name))
-            cost.append((time.process_time() - t0) / float(r.t[-1] - r.t[0]) * 1e3)
-        c, h = statistics.median(cost), statistics.median(hand)
+        times = interleaved({"hand": b1_reference.run, "scene": lambda name=name: simulate(load_scene(name))},
+                            repeats)
+        r = times["scene"].last
+        c = times["scene"].cpu / float(r.t[-1] - r.t[0]) * 1e3
+        h = times["hand"].cpu / HAND_WRITTEN_SPAN * 1e3
         rows.append({"scene": name, "ms_per_s": c, "hand_written_ms_per_s": h, "x_hand_written": c / h,
                      "steps": r.stats.get("steps"), "rhs_evals": r.stats.get("rhs_evals"),
                      "fallback_modes": len(r.stats.get("fallback_modes") or {})})
