@@ -118,13 +118,9 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     S = Samples(N, plan.system)
     if N == 0:
         return S
-    _read_out(plan, S, ts, X, *(_solve_folded_samples if _folds(plan) else _solve_samples)(plan, ts, X))
+    folds = getattr(plan, "folded_detail", None) is not None  # the call folds the command into its solve
+    _read_out(plan, S, ts, X, *(_solve_folded_samples if folds else _solve_samples)(plan, ts, X))
     return S
-
-
-def _folds(plan) -> bool:
-    """The plan's call folds the command into its solve (plan_rhs._command_and_solve's rule)."""
-    return bool(plan.phase.controller.uses_forces and plan.nr) or plan.phase.carrier is not None
 
 
 def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
