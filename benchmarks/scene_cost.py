@@ -31,7 +31,6 @@ from contactdyn.scene import load_scene  # noqa: E402
 
 SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
           "case3_b_force", "case3_b_force_varied"]
-HAND_WRITTEN_SPAN = 2.0  #: simulated seconds of b1_reference.run() [s]
 
 
 def measure(scenes: list[str], repeats: int) -> list[dict]:
@@ -42,7 +41,7 @@ def measure(scenes: list[str], repeats: int) -> list[dict]:
                             repeats)
         r = times["scene"].last
         c = times["scene"].cpu / float(r.t[-1] - r.t[0]) * 1e3
-        h = times["hand"].cpu / HAND_WRITTEN_SPAN * 1e3
+        h = times["hand"].cpu / b1_reference.T_END * 1e3
         rows.append({"scene": name, "ms_per_s": c, "hand_written_ms_per_s": h, "x_hand_written": c / h,
                      "steps": r.stats.get("steps"), "rhs_evals": r.stats.get("rhs_evals"),
                      "fallback_modes": len(r.stats.get("fallback_modes") or {})})
