@@ -15,7 +15,6 @@ per-sample cost can be read against its cost per simulated second.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from functools import partial
@@ -23,6 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from before_after import use_tree  # noqa: E402
+from scene_cost import report  # noqa: E402
 from timing import interleaved  # noqa: E402
 
 use_tree()
@@ -108,14 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--out", help="JSON file to write")
     args = p.parse_args(argv)
-    rows = measure(args.scenes, args.repeats)
-    cols = list(rows[0])
-    print(" | ".join(cols))
-    for r in rows:
-        print(" | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c]) for c in cols))
-    if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(json.dumps(rows, indent=1))
+    report(measure(args.scenes, args.repeats), args.out)
     return 0
 
 
