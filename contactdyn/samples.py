@@ -200,7 +200,7 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
     O = Y[:, m2 + m:]
     J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
     w0 = nQ + nr
-    refs = _launch_references(plan, ts, X, Y) if plan.launch is not None else {}
+    refs = _launch_references(plan, ts, X, O) if plan.launch is not None else {}
     for ci, i_fn, mu, T, consts, j, _, _ in plan.coulomb_terms:
         Fp = np.maximum(O[:, i_fn], 0.0)
         D = slip_directions(plan, ci, O, refs.get(ci))
@@ -241,22 +241,20 @@ def _drive_samples(drives, X: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, 
     return F, U
 
 
-def _launch_references(plan, ts: np.ndarray, X: np.ndarray, Y: np.ndarray) -> dict[int, np.ndarray]:
-    """Per launching contact, the reference r of each sample: the direction its slide from rest takes
-    (the plan's own per-call launch, :func:`~contactdyn.plan_rhs.make_rhs`) where the slip is still inside
-    the stick band, the mode's r where it has left it (there the slip's own direction rules anyway)."""
+def _launch_references(plan, ts: np.ndarray, X: np.ndarray, O: np.ndarray) -> dict[int, np.ndarray]:
+    """Per launching contact, the reference r of each sample (O: the samples' outputs): the direction its
+    slide from rest takes (the plan's own per-call launch, :func:`~contactdyn.plan_rhs.make_rhs`) where the
+    slip is still inside the stick band, the mode's r where it has left it (there the slip's own direction
+    rules anyway)."""
     s = plan.system
-    m = plan.m
     nv = s.nv
     out = {}
+    inside = np.zeros(len(ts), bool)
     for ci, mode in enumerate(plan.modes):
         if launching(mode):
             r = np.asarray(mode.slip, float)
-            out[ci] = np.broadcast_to(r, (len(ts), 2)).copy()
-    inside = np.zeros(len(ts), bool)
-    O = Y[:, m * m + m:]
-    for ci in out:
-        inside |= O[:, plan.o_vt[s.contacts[ci].name]] @ np.asarray(plan.modes[ci].slip) <= s.slip_band
+            out[ci] = np.tile(r, (len(ts), 1))
+            inside |= O[:, plan.o_vt[s.contacts[ci].name]] @ r <= s.slip_band
     for k in np.flatnonzero(inside):
         phi = plan.phi_at(ts[k], X[k])  # Pinocchio at this sample: the controller reads it
         Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
