@@ -42,7 +42,7 @@ SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_forc
 
 
 def _readable(plan, ts, X):
-    return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
+    return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)
 
 
 def recorded_run(name: str):

@@ -98,15 +98,12 @@ class Samples:
             self.stages[label][k] = ev.stages.get(label, (0.0, 0.0, 0.0))
 
 
-def evaluated_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> tuple[Samples, list]:
-    """(Samples, Evaluations) at the states X[k] (times ts[k]), each sample by :meth:`System.evaluate`."""
+def evaluated_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> Samples:
+    """Samples at the states X[k] (times ts[k]), each sample by :meth:`System.evaluate`."""
     S = Samples(len(ts), system)
-    evs = []
     for k, (t, x) in enumerate(zip(ts, X, strict=True)):
-        ev = system.evaluate(t, x, modes, phase, full=True)
-        S.fill(k, ev)
-        evs.append(ev)
-    return S, evs
+        S.fill(k, system.evaluate(t, x, modes, phase, full=True))
+    return S
 
 
 def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
@@ -114,7 +111,7 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     sample, then the assembly, solve and read-out for all samples at once."""
     N = len(ts)
     if plan.drives_per_call and plan.launch is not None:  # a slide from rest under motors: the readable model
-        return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
+        return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)
     S = Samples(N, plan.system)
     if N == 0:
         return S
