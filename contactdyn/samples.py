@@ -289,7 +289,7 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
     else:  # what the drives apply: joints, then bodies
         F, S.u[:] = drive_out
         S.tau[:] = F[:, :nv]
-        S.body_force[:] = F[:, nv:S.u.shape[1]]
+        S.body_force[:] = F[:, nv:nv + S.body_force.shape[1]]
     if phase.reference is not None and plan.affine_ctl:  # x_d = start + Σ δ_m σ_m, σ_m in φ's time terms
         S.x_d[:] = phase.reference.start
         for slot, m_ in plan.time_moves:
