@@ -4,8 +4,11 @@ The integrator needs only derivatives; a Result needs, at every output sample, t
 forces, torques, gaps, slip velocities and stage deformations. :func:`plan_samples`
 computes them for all samples of a segment together: one Pinocchio pass per sample
 (H, J, J̇q̇, h, the tip position), then φ, the map P φ, the friction terms, the KKT
-solves and the read-out as array operations. :class:`Samples` holds the result (and is
-filled from :class:`~contactdyn.dynamics.Evaluation` objects where a mode runs on
+solves and the read-out as array operations. Through motors, the drives' forces and
+voltages come from the plan's drive matrix (:mod:`contactdyn.plan_drives`; the law itself
+at samples where a voltage clips); a plan folding measured forces or a carried reference
+into its solve takes each sample through that fold. :class:`Samples` holds the result (and
+is filled from :class:`~contactdyn.dynamics.Evaluation` objects where a mode runs on
 ``System.evaluate``).
 """
 
