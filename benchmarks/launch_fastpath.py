@@ -25,14 +25,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import b1_reference  # noqa: E402
+import motor_fastpath  # noqa: E402
 from motor_fastpath import force_error  # noqa: E402
 from timing import interleaved  # noqa: E402
 
 from contactdyn.fastpath import Gap  # noqa: E402
 from contactdyn.friction import launching  # noqa: E402
 from contactdyn.scene import load_scene  # noqa: E402
-from contactdyn.simulate import run_system  # noqa: E402
-from contactdyn.system import System  # noqa: E402
 
 SCENES = ["case2_writer5dof", "case2_writer_ur5"]
 #: the gap this branch removed: a mode with a 2-D slide launching from rest runs on System.evaluate
@@ -43,10 +42,7 @@ OUT = Path(__file__).resolve().parent / "out" / "launch_fastpath.json"
 
 def run(scene: str, before: bool, overrides: dict | None = None):
     """The Result of building and running the scene (``before``: the launching modes declined)."""
-    system = System(load_scene(scene, overrides or {}))
-    if before:
-        system.fast_path_gaps = [BEFORE]
-    return run_system(system)
+    return motor_fastpath.run(scene, before, overrides, gap=BEFORE)
 
 
 def measure(scene: str, repeats: int) -> dict:
