@@ -18,22 +18,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import b1_reference  # noqa: E402
+import motor_fastpath  # noqa: E402
 from motor_fastpath import force_error  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 from contactdyn.fastpath import Gap  # noqa: E402
 from contactdyn.friction import launching  # noqa: E402
 from contactdyn.scene import load_scene  # noqa: E402
-from contactdyn.simulate import run_system  # noqa: E402
-from contactdyn.system import System  # noqa: E402
 
 SCENES = ["case2_writer5dof", "case2_writer_ur5"]
 #: the gap this branch removed: a mode with a 2-D slide launching from rest runs on System.evaluate
@@ -43,33 +41,24 @@ OUT = Path(__file__).resolve().parent / "out" / "launch_fastpath.json"
 
 
 def run(scene: str, before: bool, overrides: dict | None = None):
-    """(wall [s] of building and running, Result)."""
-    t0 = time.perf_counter()
-    system = System(load_scene(scene, overrides or {}))
-    if before:
-        system.fast_path_gaps = [BEFORE]
-    result = run_system(system)
-    return time.perf_counter() - t0, result
+    """The Result of building and running the scene (``before``: the launching modes declined)."""
+    return motor_fastpath.run(scene, before, overrides, gap=BEFORE)
 
 
 def measure(scene: str, repeats: int) -> dict:
-    walls: dict[str, list[float]] = {"after": [], "before": [], "b1_hand": []}
-    results = {}
     duration = load_scene(scene).duration
-    for _ in range(repeats):
-        for key in ("after", "before"):
-            wall, results[key] = run(scene, key == "before")
-            walls[key].append(wall / duration)
-        walls["b1_hand"].append(b1_reference.run()["wall_s"] / b1_reference.T_END)
-    _, ref = run(scene, False, {"solver.rtol": 1e-11, "solver.atol": 1e-13})
+    times = interleaved({"after": lambda: run(scene, False), "before": lambda: run(scene, True),
+                         "b1_hand": b1_reference.run}, repeats)
+    ref = run(scene, False, {"solver.rtol": 1e-11, "solver.atol": 1e-13})
     row: dict = {"scene": scene, "duration_s": duration, "repeats": repeats}
-    for key, values in walls.items():
-        row[f"{key}_ms_per_s"] = 1e3 * statistics.median(values)
+    for key, span in (("after", duration), ("before", duration), ("b1_hand", b1_reference.T_END)):
+        row[f"{key}_ms_per_s"] = 1e3 * times[key].wall / span
     for key in ("after", "before"):
+        result = times[key].last
         row[f"{key}_x_b1_hand"] = row[f"{key}_ms_per_s"] / row["b1_hand_ms_per_s"]
-        row[f"{key}_F_err_N"] = force_error(results[key], ref)
-        row[f"{key}_fallback_modes"] = results[key].stats["fallback_modes"]
-        row[f"{key}_rhs_evals"] = results[key].stats["rhs_evals"]
+        row[f"{key}_F_err_N"] = force_error(result, ref)
+        row[f"{key}_fallback_modes"] = result.stats["fallback_modes"]
+        row[f"{key}_rhs_evals"] = result.stats["rhs_evals"]
     row["speedup"] = row["before_ms_per_s"] / row["after_ms_per_s"]
     return row
 

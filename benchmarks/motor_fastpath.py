@@ -35,11 +35,12 @@ READABLE = Gap("benchmark", "readable model (benchmark)", "always", lambda modes
 OUT = Path(__file__).resolve().parent / "out" / "motor_fastpath.json"
 
 
-def run(scene: str, readable: bool, overrides: dict | None = None):
-    """Build the scene's system and run it (on the readable model if ``readable``); the Result."""
+def run(scene: str, readable: bool, overrides: dict | None = None, gap: Gap = READABLE):
+    """Build the scene's system and run it (with ``gap`` declining every mode it matches if
+    ``readable``: those run on the readable model); the Result."""
     system = System(load_scene(scene, overrides or {}))
     if readable:
-        system.fast_path_gaps = [READABLE]
+        system.fast_path_gaps = [gap]
     return run_system(system)
 
 

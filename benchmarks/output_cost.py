@@ -15,7 +15,6 @@ per-sample cost can be read against its cost per simulated second.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from functools import partial
@@ -23,6 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from before_after import use_tree  # noqa: E402
+from scene_cost import report  # noqa: E402
 from timing import interleaved  # noqa: E402
 
 use_tree()
@@ -39,11 +39,10 @@ from contactdyn.scene import load_scene  # noqa: E402
 
 SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
           "case3_b_force", "b1"]
-HAND_WRITTEN_SPAN = 2.0  #: simulated seconds of b1_reference.run() [s]
 
 
 def _readable(plan, ts, X):
-    return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
+    return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)
 
 
 def recorded_run(name: str):
@@ -99,7 +98,7 @@ def measure(scenes: list[str], repeats: int) -> list[dict]:
                      "max_rel_diff": _difference(times["batched"].last, times["readable"].last),
                      "output_share_of_run": f * n * 1e-6 / run_s,
                      "batched_ms_per_s": f * n * 1e-3 / float(result.t[-1]),
-                     "hand_written_ms_per_s": times["hand"].cpu / HAND_WRITTEN_SPAN * 1e3})
+                     "hand_written_ms_per_s": times["hand"].cpu / b1_reference.T_END * 1e3})
     return rows
 
 
@@ -109,14 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--out", help="JSON file to write")
     args = p.parse_args(argv)
-    rows = measure(args.scenes, args.repeats)
-    cols = list(rows[0])
-    print(" | ".join(cols))
-    for r in rows:
-        print(" | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c]) for c in cols))
-    if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(json.dumps(rows, indent=1))
+    report(measure(args.scenes, args.repeats), args.out)
     return 0
 
 

@@ -16,11 +16,11 @@ import argparse
 import json
 import statistics
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from before_after import HERE, alternate, use_tree  # noqa: E402
+from timing import interleaved  # noqa: E402
 
 use_tree()
 
@@ -31,22 +31,17 @@ from contactdyn.scene import load_scene  # noqa: E402
 
 SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
           "case3_b_force", "case3_b_force_varied"]
-HAND_WRITTEN_SPAN = 2.0  #: simulated seconds of b1_reference.run() [s]
 
 
 def measure(scenes: list[str], repeats: int) -> list[dict]:
     """Per scene: median CPU ms per simulated second of the scene and of the hand-written B1, interleaved."""
     rows = []
     for name in scenes:
-        cost, hand = [], []
-        for _ in range(repeats):
-            t0 = time.process_time()
-            b1_reference.run()
-            hand.append((time.process_time() - t0) / HAND_WRITTEN_SPAN * 1e3)
-            t0 = time.process_time()
-            r = simulate(load_scene(name))
-            cost.append((time.process_time() - t0) / float(r.t[-1] - r.t[0]) * 1e3)
-        c, h = statistics.median(cost), statistics.median(hand)
+        times = interleaved({"hand": b1_reference.run, "scene": lambda name=name: simulate(load_scene(name))},
+                            repeats)
+        r = times["scene"].last
+        c = times["scene"].cpu / float(r.t[-1] - r.t[0]) * 1e3
+        h = times["hand"].cpu / b1_reference.T_END * 1e3
         rows.append({"scene": name, "ms_per_s": c, "hand_written_ms_per_s": h, "x_hand_written": c / h,
                      "steps": r.stats.get("steps"), "rhs_evals": r.stats.get("rhs_evals"),
                      "fallback_modes": len(r.stats.get("fallback_modes") or {})})
@@ -68,6 +63,17 @@ def compare(scenes: list[str], repeats: int, baseline: str) -> list[dict]:
     return rows
 
 
+def report(rows: list[dict], out: str | None) -> None:
+    """Print the rows as a table (floats to 3 digits); write them to the JSON file ``out`` if given."""
+    cols = list(rows[0])
+    print(" | ".join(cols))
+    for r in rows:
+        print(" | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c]) for c in cols))
+    if out:
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        Path(out).write_text(json.dumps(rows, indent=1))
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="*", default=SCENES)
@@ -80,13 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(rows))
         return 0
-    cols = list(rows[0])
-    print(" | ".join(cols))
-    for r in rows:
-        print(" | ".join(f"{r[c]:.3g}" if isinstance(r[c], float) else str(r[c]) for c in cols))
-    if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(json.dumps(rows, indent=1))
+    report(rows, args.out)
     return 0
 
 

@@ -72,7 +72,7 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
         if seg.plan.ok:
             parts.append(seg.plan.samples(ts, X, seg.modes))  # a plan serves every turn: this segment's r
         else:
-            parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase)[0])
+            parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase))
         modes_of += [seg.modes] * len(sel)
         phases_of += [seg.phase] * len(sel)
     samples = Samples.concatenate(parts, system)

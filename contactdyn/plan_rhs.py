@@ -370,7 +370,7 @@ def controller_input(plan):
     i_e, i_dr = plan.i_e, plan.i_dr[tf]
     D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
     model, data, fid, nv = robot.model, robot.data, plan.fids[tf], s.nv
-    orient = ctl.reads_orientation
+    orient, reads_forces = ctl.reads_orientation, ctl.uses_forces
 
     def make(t, x, q, v, Js, phi, o, tau_contact=None):
         e = phi[i_e:]
@@ -378,19 +378,22 @@ def controller_input(plan):
         if phase.reference is not None:
             x_d, v_d, a_d = reference_at(s, phase, t, x)
         force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
-        forces = {name: float(o[i_fint + i]) for i, name in enumerate(names)}
-        forces.update({key: float(o[k]) for key, k in ifaces})
-        R_tip = J_ang = None
+        forces = {}  # measured forces: only a controller that reads them (uses_forces) sees them
+        if reads_forces:
+            forces = {name: float(o[i_fint + i]) for i, name in enumerate(names)}
+            forces.update({key: float(o[k]) for key, k in ifaces})
+        R_tip = J_ang = drift_ang = None
         if orient:
             R_tip = pin.updateFramePlacement(model, data, fid).rotation
             J_ang = pin.getFrameJacobian(model, data, fid, LWA).reshape(6, nv)[3:]
+            drift_ang = pin.getFrameAcceleration(model, data, fid, LWA).angular
         H = robot.H + D_ctl if D_ctl is not None else robot.H
         inp = ControlInput(t, q, v, H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
                            e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d,
                            forces,
                            force_d, normals, x[2 * nQ + zs.start: 2 * nQ + zs.stop], R_tip=R_tip, J_ang=J_ang,
-                           drift_ang=pin.getFrameAcceleration(model, data, fid, LWA).angular)
-        if ctl.uses_forces:
+                           drift_ang=drift_ang)
+        if reads_forces:
             set_force_inputs(s, inp, x, modes, tau_contact)
         return inp
 

@@ -4,8 +4,11 @@ The integrator needs only derivatives; a Result needs, at every output sample, t
 forces, torques, gaps, slip velocities and stage deformations. :func:`plan_samples`
 computes them for all samples of a segment together: one Pinocchio pass per sample
 (H, J, J̇q̇, h, the tip position), then φ, the map P φ, the friction terms, the KKT
-solves and the read-out as array operations. :class:`Samples` holds the result (and is
-filled from :class:`~contactdyn.dynamics.Evaluation` objects where a mode runs on
+solves and the read-out as array operations. Through motors, the drives' forces and
+voltages come from the plan's drive matrix (:mod:`contactdyn.plan_drives`; the law itself
+at samples where a voltage clips); a plan folding measured forces or a carried reference
+into its solve takes each sample through that fold. :class:`Samples` holds the result (and
+is filled from :class:`~contactdyn.dynamics.Evaluation` objects where a mode runs on
 ``System.evaluate``).
 """
 
@@ -98,15 +101,12 @@ class Samples:
             self.stages[label][k] = ev.stages.get(label, (0.0, 0.0, 0.0))
 
 
-def evaluated_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> tuple[Samples, list]:
-    """(Samples, Evaluations) at the states X[k] (times ts[k]), each sample by :meth:`System.evaluate`."""
+def evaluated_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> Samples:
+    """Samples at the states X[k] (times ts[k]), each sample by :meth:`System.evaluate`."""
     S = Samples(len(ts), system)
-    evs = []
     for k, (t, x) in enumerate(zip(ts, X, strict=True)):
-        ev = system.evaluate(t, x, modes, phase, full=True)
-        S.fill(k, ev)
-        evs.append(ev)
-    return S, evs
+        S.fill(k, system.evaluate(t, x, modes, phase, full=True))
+    return S
 
 
 def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
@@ -114,17 +114,13 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     sample, then the assembly, solve and read-out for all samples at once."""
     N = len(ts)
     if plan.drives_per_call and plan.launch is not None:  # a slide from rest under motors: the readable model
-        return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
+        return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)
     S = Samples(N, plan.system)
     if N == 0:
         return S
-    _read_out(plan, S, ts, X, *(_solve_folded_samples if _folds(plan) else _solve_samples)(plan, ts, X))
+    folds = getattr(plan, "folded_detail", None) is not None  # the call folds the command into its solve
+    _read_out(plan, S, ts, X, *(_solve_folded_samples if folds else _solve_samples)(plan, ts, X))
     return S
-
-
-def _folds(plan) -> bool:
-    """The plan's call folds the command into its solve (plan_rhs._command_and_solve's rule)."""
-    return bool(plan.phase.controller.uses_forces and plan.nr) or plan.phase.carrier is not None
 
 
 def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
@@ -204,7 +200,7 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
     O = Y[:, m2 + m:]
     J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
     w0 = nQ + nr
-    refs = _launch_references(plan, ts, X, Y) if plan.launch is not None else {}
+    refs = _launch_references(plan, ts, X, O) if plan.launch is not None else {}
     for ci, i_fn, mu, T, consts, j, _, _ in plan.coulomb_terms:
         Fp = np.maximum(O[:, i_fn], 0.0)
         D = slip_directions(plan, ci, O, refs.get(ci))
@@ -245,22 +241,20 @@ def _drive_samples(drives, X: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, 
     return F, U
 
 
-def _launch_references(plan, ts: np.ndarray, X: np.ndarray, Y: np.ndarray) -> dict[int, np.ndarray]:
-    """Per launching contact, the reference r of each sample: the direction its slide from rest takes
-    (the plan's own per-call launch, :func:`~contactdyn.plan_rhs.make_rhs`) where the slip is still inside
-    the stick band, the mode's r where it has left it (there the slip's own direction rules anyway)."""
+def _launch_references(plan, ts: np.ndarray, X: np.ndarray, O: np.ndarray) -> dict[int, np.ndarray]:
+    """Per launching contact, the reference r of each sample (O: the samples' outputs): the direction its
+    slide from rest takes (the plan's own per-call launch, :func:`~contactdyn.plan_rhs.make_rhs`) where the
+    slip is still inside the stick band, the mode's r where it has left it (there the slip's own direction
+    rules anyway)."""
     s = plan.system
-    m = plan.m
     nv = s.nv
     out = {}
+    inside = np.zeros(len(ts), bool)
     for ci, mode in enumerate(plan.modes):
         if launching(mode):
             r = np.asarray(mode.slip, float)
-            out[ci] = np.broadcast_to(r, (len(ts), 2)).copy()
-    inside = np.zeros(len(ts), bool)
-    O = Y[:, m * m + m:]
-    for ci in out:
-        inside |= O[:, plan.o_vt[s.contacts[ci].name]] @ np.asarray(plan.modes[ci].slip) <= s.slip_band
+            out[ci] = np.tile(r, (len(ts), 1))
+            inside |= O[:, plan.o_vt[s.contacts[ci].name]] @ r <= s.slip_band
     for k in np.flatnonzero(inside):
         phi = plan.phi_at(ts[k], X[k])  # Pinocchio at this sample: the controller reads it
         Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
@@ -298,7 +292,7 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
     else:  # what the drives apply: joints, then bodies
         F, S.u[:] = drive_out
         S.tau[:] = F[:, :nv]
-        S.body_force[:] = F[:, nv:S.u.shape[1]]
+        S.body_force[:] = F[:, nv:nv + S.body_force.shape[1]]
     if phase.reference is not None and plan.affine_ctl:  # x_d = start + Σ δ_m σ_m, σ_m in φ's time terms
         S.x_d[:] = phase.reference.start
         for slot, m_ in plan.time_moves:

@@ -7,7 +7,8 @@ At each event of :mod:`contactdyn.events` (t fixed, x continuous unless an impac
   by the impact law (:mod:`contactdyn.impact`) and the contact slides or jams;
 - ``separate``: the contact lets go; damped surface ends relax from where they are;
 - ``stop`` / ``reverse``: the slide has come to rest (|v_t| ≤ v_ε): decided at rest (below);
-- ``turn``: the 2-D reference direction r is refreshed to the slip's own (no mode change);
+- ``turn``: the 2-D reference direction r is refreshed to the slip's own (no mode change), unless
+  the slip is within ``TURN_AT_REST`` stick bands of rest: then it is a ``stop``;
 - ``slip``: the stick's friction reached the cone |F_f| = μ_s F: it slides from rest where
   the holding force pushes (−F_f); a stage-only crossing not confirmed at the located point
   is a false alarm (``slip_check``), still stuck;
@@ -37,10 +38,14 @@ from .friction import direction_of, in_cone, slip_velocity
 from .impact import impact, project_velocity
 from .system import System
 
-__all__ = ["Transitions", "FORCE_TOL", "SLIP_ALARM"]
+__all__ = ["Transitions", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
 SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
+#: a turn located with |v_t| ≤ this × v_ε is a slide coming to rest (turn and stop tie, within a rounding, when
+#: it decelerates to rest: the 5-DOF writer's turn at |v_t| = 4.1 v_ε): decided at rest like a stop. Refreshing
+#: r there would keep a slide at a few v_ε whose direction relaxes at a rate ∝ 1/|v_t|: stiff, 10x the steps
+TURN_AT_REST = 10.0
 
 
 class _After:
@@ -116,8 +121,10 @@ class Transitions:
     def _on_turn(self, t, x, modes, phase, event, after):
         """2-D: the slip turned 60° from the reference; refresh it (no mode change)."""
         i = self._index(event.contact)
-        ev = self.system.evaluate(t, x, modes, phase)
-        modes[i] = modes[i].with_(slip=direction_of(ev.slip[event.contact]), from_rest=False)
+        slip = self.system.evaluate(t, x, modes, phase).slip[event.contact]  # [m/s]
+        if float(np.linalg.norm(slip)) <= TURN_AT_REST * self.system.slip_band:
+            return self._on_stop(t, x, modes, phase, event, after)
+        modes[i] = modes[i].with_(slip=direction_of(slip), from_rest=False)
         return x, phase, False
 
     def _on_slip(self, t, x, modes, phase, event, after):

@@ -153,6 +153,13 @@ def slope_scene(v_tip: np.ndarray, duration: float = 0.2, mu: float = MU_SLOPE, 
     return parse_scene(doc), robot, q0, J
 
 
+def assert_momentum_balance(M: np.ndarray, J: np.ndarray, imp, limit: float) -> None:
+    """M ΔQ̇ = Jᵀ(n Λ_n + Tᵀ Λ_t) + e₂ Λ_limit: the slope's and the radial slide's limit impulses [N·s] take it all."""
+    dv = imp.v_after - imp.v_before
+    balance = M @ dv - J.T @ (N_SLOPE * imp.normal_impulse + T_SLOPE.T @ imp.friction_impulse)
+    np.testing.assert_allclose(balance, [0.0, limit, 0.0], rtol=0, atol=1e-10 * np.abs(M @ dv).max())
+
+
 @pytest.mark.parametrize("sideways", [0.5, 0.0, 0.35])  # [m/s] the slip's sideways part before the impact
 def test_a_limit_impact_takes_the_sliding_contacts_friction_impulse_momentum_balance(sideways):
     """The radial slide hits its upper limit while the tip slides: M ΔQ̇ = Jᵀ(n Λ_n + Tᵀ Λ_t) + e₂ Λ_limit
@@ -164,9 +171,7 @@ def test_a_limit_impact_takes_the_sliding_contacts_friction_impulse_momentum_bal
     x, modes = system.initial_state()
     x_after, imp, limit = limit_impact(system, 0.0, x, modes, ((1, -1),))
     M = robot.mass_matrix(q)
-    dv = imp.v_after - imp.v_before
-    balance = M @ dv - J.T @ (N_SLOPE * imp.normal_impulse + T_SLOPE.T @ imp.friction_impulse)
-    np.testing.assert_allclose(balance, [0.0, limit, 0.0], rtol=0, atol=1e-10 * np.abs(M @ dv).max())
+    assert_momentum_balance(M, J, imp, limit)
     assert imp.contact == "slope" and not imp.jammed
     assert np.linalg.norm(imp.friction_impulse) == pytest.approx(MU_SLOPE * imp.normal_impulse, rel=1e-12)
     d = imp.slip_before / np.linalg.norm(imp.slip_before)
@@ -188,10 +193,7 @@ def test_a_limit_impact_holds_a_sticking_contact_through_its_stick_rows():
     system = System(scene)
     x, modes = system.initial_state()
     _, imp, limit = limit_impact(system, 0.0, x, [modes[0].with_(stuck=True)], ((1, -1),))
-    M = robot.mass_matrix(q)
-    dv = imp.v_after - imp.v_before
-    balance = M @ dv - J.T @ (N_SLOPE * imp.normal_impulse + T_SLOPE.T @ imp.friction_impulse)
-    np.testing.assert_allclose(balance, [0.0, limit, 0.0], rtol=0, atol=1e-10 * np.abs(M @ dv).max())
+    assert_momentum_balance(robot.mass_matrix(q), J, imp, limit)
     assert imp.contact == "slope" and np.linalg.norm(imp.friction_impulse) > 1.0
     np.testing.assert_allclose(J @ imp.v_after, 0.0, atol=1e-12)  # stuck on the plane, radial slide stopped
 

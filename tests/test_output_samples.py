@@ -20,7 +20,7 @@ SCENES = {"case1_cart": 1.1, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "
 
 
 def _readable(plan, ts, X):
-    return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)[0]
+    return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)
 
 
 #: a prismatic axis under a joint PD asking far more than its voltage limit gives: it clips, then settles

@@ -43,6 +43,7 @@ class ControlInput:
     v_d: np.ndarray | None
     a_d: np.ndarray | None
     #: measured contact force [N], > 0 pressing: normal per contact name, tangential chain per "<contact>.t1"
+    #: (the compiled plan fills it only for a controller that reads forces, ``uses_forces``)
     forces: dict[str, float]
     #: force set-point and its rate [N, N/s]: per contact (normal) or "<contact>.t1" (tangential)
     force_d: dict[str, tuple[float, float]]

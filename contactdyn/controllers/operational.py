@@ -74,12 +74,17 @@ def _cross(a: list[float], b: list[float]) -> tuple[float, float, float]:
     return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
 
 
-def _perpendicular(a: list[float]) -> np.ndarray:
-    """(2, 3): an orthonormal basis (e1, a × e1) of the plane perpendicular to the unit 3-list a."""
+def _perpendicular(a: list[float]) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """An orthonormal basis (e1, a × e1) of the plane perpendicular to the unit 3-list a."""
     e1 = (0.0, a[2], -a[1]) if abs(a[0]) < 0.9 else (-a[2], 0.0, a[0])  # a × x or a × y
     s = 1.0 / math.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
     e1 = (e1[0] * s, e1[1] * s, e1[2] * s)
-    return np.array((e1, _cross(a, e1)))
+    return e1, _cross(a, e1)
+
+
+def _dot(a, b) -> float:
+    """a · b of two 3-sequences of floats."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 @register
@@ -137,44 +142,60 @@ class OperationalSpace(Controller):
         self._kd = np.broadcast_to(cfg.kd, k).copy()  # [N·s/m]
         self._null = bool(cfg.k_null) and m < self.nv  #: a redundant arm with null-space damping
         self._target = None if cfg.tool_target is None else cfg.tool_target.tolist()
+        self._axes_rows = axes.tolist()
+        self._forced_rows = forced.tolist()
+        self._kp_list, self._kd_list = self._kp.tolist(), self._kd.tolist()
+        self._W = np.zeros((m, 6))  #: [S 0; 0 E]: the task's rows on the tip's [linear; angular] motion
+        self._W[:len(self._S), :3] = self._S
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
-        cfg, k, m = self.config, self._k, self._m
-        a_task = np.zeros(m)  # a* [m/s², rad/s²], through Λ
-        f = np.zeros(m)  # [N, N·m], directly
-        axes, S = self._S[:k], self._S
+        # The task's rows act on the tip's 6-D motion: W = [S 0; 0 E] (m, 6), E refreshed per call; the
+        # task-space terms are Python floats (k, m ≤ 6: cheaper than one numpy call each, ~0.5 µs)
+        cfg, k, m, W = self.config, self._k, self._m, self._W
+        axes = self._axes_rows
+        vt = inp.v_tip.tolist()
+        kp, kd = self._kp_list, self._kd_list
         if inp.x_d is not None:
-            a_task[:k] = axes @ inp.a_d
-            f[:k] = self._kp * (axes @ (inp.x_d - inp.p_tip)) + self._kd * (axes @ (inp.v_d - inp.v_tip))
+            ad, ex = inp.a_d.tolist(), (inp.x_d - inp.p_tip).tolist()
+            ev = (inp.v_d - inp.v_tip).tolist()
+            a_task = [_dot(n, ad) for n in axes]  # a* [m/s², rad/s²], through Λ
+            f = [kp[i] * _dot(n, ex) + kd[i] * _dot(n, ev) for i, n in enumerate(axes)]  # [N], directly
         else:
-            f[:k] = -self._kd * (axes @ inp.v_tip)
-        Jt = np.empty((m, self.nv))
-        Jt[:len(S)] = S @ inp.J
-        drift = np.empty(m)
-        drift[:len(S)] = S @ inp.drift
+            a_task = [0.0] * k
+            f = [-kd[i] * _dot(n, vt) for i, n in enumerate(axes)]
+        for key, n in zip(self._force_keys, self._forced_rows, strict=True):  # set-points along their directions
+            a_task.append(0.0)
+            f.append(-inp.force_d[key][0] - cfg.kd_normal * _dot(n, vt))  # [N]
         if cfg.tool_axis is not None:
-            a = (inp.R_tip @ cfg.tool_axis).tolist()  # current tool direction (world)
-            E = _perpendicular(a)
-            Jt[m - 2:] = E @ inp.J_ang
-            drift[m - 2:] = E @ inp.drift_ang
-            omega = inp.J_ang @ inp.v  # [rad/s]
-            a_task[m - 2:] = E @ (cfg.ko * np.array(_cross(a, self._target)) - cfg.do * omega)
-        xdot = Jt @ inp.v
-        L_inv = Jt @ _solve(inp.H, Jt.T)  # Λ⁻¹
+            a = inp.R_tip.dot(cfg.tool_axis).tolist()  # current tool direction (world)
+            e1, e2 = _perpendicular(a)
+            W[m - 2, 3:] = e1
+            W[m - 1, 3:] = e2
+            omega = inp.J_ang.dot(inp.v).tolist()  # [rad/s]
+            c = _cross(a, self._target)
+            w = [cfg.ko * c[i] - cfg.do * omega[i] for i in range(3)]
+            a_task += [_dot(e1, w), _dot(e2, w)]
+            f += [0.0, 0.0]
+            Jt = W.dot(np.concatenate((inp.J, inp.J_ang)))
+            drift = W.dot(np.concatenate((inp.drift, inp.drift_ang)))
+        else:
+            Jt, drift = W[:, :3].dot(inp.J), W[:, :3].dot(inp.drift)
+        xdot = Jt.dot(inp.v)
+        L_inv = Jt.dot(_solve(inp.H, Jt.T))  # Λ⁻¹
         self._guard(L_inv, inp.t)
-        rhs = a_task - drift
+        rhs = np.array(a_task) - drift
         if self._null:
             rhs += cfg.k_null * xdot
-        f += _solve1(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
-        for i, key in enumerate(self._force_keys):  # the set-points, directly along their directions [N]
-            f[k + i] -= inp.force_d[key][0] + cfg.kd_normal * xdot[k + i]
-        tau = Jt.T @ f + inp.h
+        ft = _solve1(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
+        ft += f
+        tau = ft.dot(Jt)
+        tau += inp.h
         if self._null:
-            tau -= cfg.k_null * (inp.H @ inp.v)
+            tau -= cfg.k_null * inp.H.dot(inp.v)
         return tau, None
 
     def _guard(self, L_inv: np.ndarray, t: float) -> None:
-        ratio = _det(L_inv) / L_inv.diagonal().prod()
+        ratio = _det(L_inv) / math.prod(L_inv.diagonal().tolist())
         if not ratio >= SINGULAR:  # also NaN
             what = "position axes, force directions" + (" and tool tilt" if self.config.tool_axis is not None else "")
             raise SimulationError(
