@@ -76,14 +76,13 @@ def make_rhs(plan):
         if launch is not None:  # 2-D slides from rest: their directions solved on this call's KKT system
             b_ctl = []
             now = launch(t, x, phi, Js, y, b_ctl)
-        if friction is not None:
-            friction(y, Js, now)
+        dirs = friction(y, Js, now) if friction is not None else None
         z, zdot = solve(t, x, phi, Js, y, b_ctl)
         if with_y:
             xd = cat((x[nQ:2 * nQ], z[:nQ], y[o_y]))
             if zdot is not None:
                 xd[z_slice] = zdot
-            impulse_rates(xd, z, y, now)
+            impulse_rates(xd, z, y, now, dirs)
         else:
             xd = cat((x[nQ:2 * nQ], z[:nQ]))
         ring[0] = ring[1]
@@ -96,9 +95,10 @@ def make_rhs(plan):
 
 
 def _friction_terms(plan):
-    """terms(y, Js, modes): sliding friction into y = [A, b, o] in place — Coulomb forces −μ max(F, 0) d into b
-    where the normal force is known, the column tilt of 2-D sliding into A — with d by the modes' rule
-    (None when the mode has neither)."""
+    """terms(y, Js, modes) -> {contact index: d}: sliding friction into y = [A, b, o] in place — Coulomb forces
+    −μ max(F, 0) d into b where the normal force is known, the column tilt of 2-D sliding into A — with d by
+    the modes' rule; returns the 2-D directions it computed, for the impulse rates (None when the mode has
+    neither)."""
     s = plan.system
     nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
     m2 = m * m
@@ -114,19 +114,21 @@ def _friction_terms(plan):
     def terms(y, Js, modes):
         A = y[:m2].reshape(m, m)
         o = y[m2 + m:]
+        dirs = {}
         for i_fn, mu, T, consts, j, dT, dC, ci in coulomb:
             F_n = y[i_fn]
             if F_n > 0.0:
                 if dT is None:
-                    d = slip_direction(s, o[o_vt[ci]], modes[ci])
+                    dirs[ci] = d = slip_direction(s, o[o_vt[ci]], modes[ci])
                     dT, dC = d.dot(T), d.dot(consts)
                 y[m2 + w0 + 3 * j:m2 + w0 + 3 * j + 3] -= (mu * F_n) * dT
                 if nQ > nv:
                     y[m2 + nv:m2 + nQ] -= (mu * F_n) * dC
         for r, ci, mu, T, consts, j in dyn_tilt:
-            d = slip_direction(s, o[o_vt[ci]], modes[ci])
+            dirs[ci] = d = slip_direction(s, o[o_vt[ci]], modes[ci])
             A[:nv, nQ + r] += mu * Js[j].T.dot(d.dot(T))
             A[nv:nQ, nQ + r] = A0[nv:nQ, nQ + r] + mu * d.dot(consts)
+        return dirs
 
     return terms
 
@@ -296,7 +298,8 @@ def _phi_function(plan, time_terms):
 
 
 def _impulse_rates(plan):
-    """rates(ẋ, z, y): write the impulse states' rates (∫F dt, ∫F_f dt per friction contact) into ẋ."""
+    """rates(ẋ, z, y, modes, dirs): write the impulse states' rates (∫F dt, ∫F_f dt per friction contact) into ẋ;
+    ``dirs``: the 2-D sliding directions this call's friction terms already computed (by contact index)."""
     impulses = impulse_terms(plan)
     m = plan.m
     off = m * m + m
@@ -304,7 +307,7 @@ def _impulse_rates(plan):
     s = plan.system
     o_vt = [plan.o_vt[c.name] for c in s.contacts]
 
-    def rates(xd, z, y, modes):
+    def rates(xd, z, y, modes, dirs):
         for i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci in impulses:
             F_n = z[k_n] if from_z else y[k_n]
             xd[i0] = F_n
@@ -315,7 +318,9 @@ def _impulse_rates(plan):
                 if d0 is not None:  # 1-D
                     xd[i0 + 1] = -mu * Fp * d0 + y[k_visc]
                 else:
-                    d = slip_direction(s, y[off:][o_vt[ci]], modes[ci])
+                    d = dirs.get(ci) if dirs else None
+                    if d is None:
+                        d = slip_direction(s, y[off:][o_vt[ci]], modes[ci])
                     xd[i0 + 1:i0 + 1 + len(d)] = -mu * Fp * d + y[k_visc:k_visc + len(d)]
 
     return rates
