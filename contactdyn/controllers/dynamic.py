@@ -365,6 +365,7 @@ class ForceDynamic(_ComputedTorque):
 
     name = "force_dynamic"
     tracks_position = False
+    in_task_space = True
 
     @staticmethod
     def applies_force_setpoints(config: ForceDynamicConfig) -> bool:
@@ -411,8 +412,6 @@ class ForceDynamic(_ComputedTorque):
             _, sv, vt = np.linalg.svd(normals)
             axes = vt[int(np.sum(sv > 1e-9)):]
         self.P = axes.T @ axes  #: projector on the position-controlled directions
-
-    in_task_space = True
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray]:
         a, f_swap, zdot = self.tip_targets(inp)
