@@ -24,8 +24,7 @@ import math
 
 import numpy as np
 
-from .constraints import Rows, force_columns, solve_folded
-from .constraints import _fast_solve as solve_linear  # numpy's gufunc without its Python wrapper
+from .constraints import Rows, _fast_solve, force_columns, solve_folded  # _fast_solve: numpy's solve gufunc
 from .dynamics import command_of
 from .plan_law import compiled_law
 
@@ -103,7 +102,7 @@ def folded_solve(plan, make_input, drives):
             A2[:nQ, i_b] -= Y_b[:nQ]
         b2 = b.copy()
         b2[:nQ] += y0[:nQ]
-        z = solve_linear(A2, b2)
+        z = _fast_solve(A2, b2)
         if not math.isfinite(z.dot(z)):
             z = plan._singular(A2, b2)
         lam = z[lam_cols]
