@@ -111,6 +111,7 @@ class OperationalSpace(Controller):
 
     def bind(self, context: BindContext) -> None:
         cfg, key, file, phase = self.config, context.key, context.scene.file, context.phase
+        self.reads_orientation = cfg.tool_axis is not None  # R_tip, J_ang, drift_ang: for the tilt only
         ref = phase.reference
         if ref is not None and ref.space != "task":
             raise SceneError(f"phase[{context.index}].reference.space", "'task' (operational_space tracks the tip)",

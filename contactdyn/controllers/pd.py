@@ -86,6 +86,7 @@ class TaskPD(Controller):
     def __init__(self, config: TaskPDConfig, nv: int):
         super().__init__(config, nv)
         self.needs_gravity = config.feedforward == "gravity"
+        self.reads_orientation = config.tool_axis is not None  # R_tip, J_ang: for the tool-axis moment only
         a = config.axes
         self._kp = (a.T * np.broadcast_to(config.kp, len(a))) @ a  # Σ kp_i a_i a_iᵀ [N/m]
         self._kd = (a.T * np.broadcast_to(config.kd, len(a))) @ a
