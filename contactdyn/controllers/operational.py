@@ -36,7 +36,7 @@ import numpy as np
 from ..errors import SceneError, SimulationError
 from .base import BindContext, ControlInput, Controller, register
 from .dynamic import K_NULL, KP, KV, _axes, _check_gain_size, _gain
-from .pd import KD_TASK, KP_TASK
+from .pd import KD_TASK, KP_TASK, read_tool_axis
 
 try:  # numpy's gufuncs without the Python wrappers (~3 µs less per call; see constraints.solve_linear)
     from numpy.linalg import _umath_linalg
@@ -99,9 +99,7 @@ class OperationalSpace(Controller):
 
     @staticmethod
     def read(r) -> OperationalSpaceConfig:
-        tool_axis = r.vector("tool_axis", None, size=3, unit_norm=True) if r.has("tool_axis") else None
-        tool_target = r.vector("tool_target", [0.0, 0.0, -1.0], size=3, unit_norm=True) if tool_axis is not None \
-            else None
+        tool_axis, tool_target = read_tool_axis(r)
         return OperationalSpaceConfig(
             kp=_gain(r, "kp", KP_TASK, "N/m"), kd=_gain(r, "kd", KD_TASK, "N·s/m"), axes=_axes(r),
             tool_axis=tool_axis, tool_target=tool_target,

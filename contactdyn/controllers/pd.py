@@ -19,7 +19,7 @@ import numpy as np
 
 from .base import FEEDFORWARD, ControlInput, Controller, TipForceLaw, register
 
-__all__ = ["TaskPD", "JointPD", "KP_TASK", "KD_TASK"]
+__all__ = ["TaskPD", "JointPD", "KP_TASK", "KD_TASK", "read_tool_axis"]
 
 KP_TASK, KD_TASK = 2000.0, 100.0  #: default task-space stiffness [N/m] and damping [N·s/m]
 
@@ -29,6 +29,14 @@ def _gains(reader, name: str, default: float, unit: str) -> np.ndarray:
     if isinstance(raw, list):
         return reader.vector(name, unit=unit)
     return np.array([reader.float(name, default, lo=0.0, unit=unit)])
+
+
+def read_tool_axis(r) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(tool_axis in the tip frame, tool_target in the world), both unit; (None, None) without a tool_axis."""
+    if not r.has("tool_axis"):
+        return None, None
+    return (r.vector("tool_axis", None, size=3, unit_norm=True),
+            r.vector("tool_target", [0.0, 0.0, -1.0], size=3, unit_norm=True))
 
 
 def _feedforward(inp: ControlInput, kind: str) -> np.ndarray | float:
@@ -75,9 +83,7 @@ class TaskPD(Controller):
         for name, g in (("kp", kp), ("kd", kd)):
             if len(g) not in (1, len(axes)):
                 raise r.error(name, f"one gain or one per axis ({len(axes)})", g.tolist())
-        tool_axis = r.vector("tool_axis", None, size=3, unit_norm=True) if r.has("tool_axis") else None
-        tool_target = r.vector("tool_target", [0.0, 0.0, -1.0], size=3, unit_norm=True) if tool_axis is not None \
-            else None
+        tool_axis, tool_target = read_tool_axis(r)
         return TaskPDConfig(kp, kd, axes, r.str("feedforward", "none", choices=FEEDFORWARD), tool_axis, tool_target,
                             r.float("ko", 50.0, lo=0.0, unit="N·m/rad"), r.float("do", 2.0, lo=0.0, unit="N·m·s/rad"),
                             r.float("kd_joint", 0.0, lo=0.0, unit="N·m·s/rad"),
