@@ -98,7 +98,7 @@ class Controller:
     needs_gravity: bool = False
     uses_forces: bool = False  #: reads measured forces (then it must be affine in them)
     outputs: str = "torque"  #: "torque" (generalized forces) or "voltage" (motor voltages [V])
-    reads_orientation: bool = True  #: reads R_tip and J_ang (False: the compiled path leaves them None)
+    reads_orientation: bool = True  #: reads R_tip, J_ang and drift_ang (False: the compiled path leaves them None)
 
     def __init__(self, config: Any, nv: int):
         self.config = config
