@@ -129,11 +129,16 @@ def main(argv: list[str] | None = None) -> dict:
         fr, fe = r["friction"], r["free"]
         print(f"{r['scene']:32s} {fr['wall_s_min']:9.3f}/{fe['wall_s_min']:<9.3f} {r['wall_ratio']:6.2f} "
               f"{fr['rhs_evals']:6d}/{fe['rhs_evals']:<7d} {r['rhs_ratio']:6.2f} {fr['segments']:9d} {fr['events']:7d}")
-    out = {"solver": SOLVER, "repeats": args.repeats, "load_average": os.getloadavg(),
-           "python": platform.python_version(), "machine": platform.machine(), "rows": rows}
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(out, indent=1))
-    print(f"wrote {OUT}")
+    return write_report(OUT, {"solver": SOLVER, "repeats": args.repeats}, rows)
+
+
+def write_report(path: Path, head: dict, rows: list) -> dict:
+    """Write ``head``, the machine's load average, Python and machine, then ``rows`` as JSON at path; return it."""
+    out = {**head, "load_average": os.getloadavg(), "python": platform.python_version(),
+           "machine": platform.machine(), "rows": rows}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(out, indent=1))
+    print(f"wrote {path}")
     return out
 
 

@@ -17,9 +17,6 @@ Prints a table and writes benchmarks/out/turn_plans.json.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import sys
 from pathlib import Path
 
@@ -27,7 +24,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from friction_cost import SCENES  # noqa: E402
+from friction_cost import SCENES, write_report  # noqa: E402
 from timing import interleaved  # noqa: E402
 
 from contactdyn import hybrid, load_scene, parse_scene, rhsplan  # noqa: E402
@@ -96,12 +93,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"{r['scene']:32s} {r['turns']:5d} {r['plans_before']:9d}/{r['plans_after']:<8d} "
               f"{r['cpu_before_s']:10.3f}/{r['cpu_after_s']:<10.3f} {r['cpu_ratio']:6.2f} {r['max_rel_diff']:12.1e} "
               f"{str(r['same_events']):>11s}")
-    out = {"repeats": args.repeats, "load_average": os.getloadavg(), "python": platform.python_version(),
-           "machine": platform.machine(), "rows": rows}
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps(out, indent=1))
-    print(f"wrote {OUT}")
-    return out
+    return write_report(OUT, {"repeats": args.repeats}, rows)
 
 
 if __name__ == "__main__":

@@ -12,11 +12,13 @@ on its dense output; each is terminal and fires when its function falls through 
   stick band, v_t·r = v_ε [m/s] (``solver.stick_velocity``);
 - ``reverse``: a slip from rest runs backwards past −v_ε (v_t·r = −v_ε);
 - ``turn`` (2-D): the slip velocity turned 60° away from r, v_t·r − ½|v_t| + v_ε = 0
-  (r is refreshed, no mode change);
+  (r is refreshed, no mode change; near rest it is decided as a stop, ``transitions.TURN_AT_REST``);
 - ``slip``: a sticking contact's friction reaches the cone, g = μ_s F − |F_f| = 0
   (:class:`SlipWatch`, which also sees inside a step).
 
-What happens at each event is decided in :mod:`contactdyn.transitions`. The storm guard
+What happens at each event is decided in :mod:`contactdyn.transitions`. At a corner of the
+set-points, where no step straddles a jump of the forces, :func:`fired_across` finds the
+events whose functions jump through zero there. The storm guard
 (:class:`EventLog`): more than ``storm_count`` events within ``storm_window`` seconds, or
 more than ``max_events`` in the run, stop with a :class:`SimulationError` naming them.
 

@@ -141,20 +141,21 @@ class Move:
         return (t - self.start) / self.duration
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        rows = self.rows(t)
+        return rows[0], rows[1], rows[2]
+
+    def rows(self, t: float) -> np.ndarray:
+        """(3, n): the move's displacement, velocity and acceleration at t (``delta``'s unit, per s, per s²)."""
         if self.kind == "circle":
-            return self._circle(t)
+            return self.circle_rows(t)
         s, ds, dds = profile(self.kind, self.tau(t), self.accel_fraction)
-        return self.delta * s, self.delta * (ds / self.duration), self.delta * (dds / self.duration**2)
+        return np.multiply.outer((s, ds / self.duration, dds / self.duration**2), self.delta)
 
     def corners(self) -> tuple[Corner, ...]:
         """Where the move's acceleration (or, for ``step``, its position) jumps."""
         kind = "trapezoid" if self.kind == "circle" else self.kind
         return tuple(_corner(self.tau, self.start + tc * self.duration, tc)
                      for tc in profile_corners(kind, self.accel_fraction))
-
-    def _circle(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        rows = self.circle_rows(t)
-        return rows[0], rows[1], rows[2]
 
     def circle_rows(self, t: float) -> np.ndarray:
         """(3, 3): the circle's displacement [m], velocity [m/s] and acceleration [m/s²] at t (Python floats per
@@ -191,13 +192,9 @@ class Reference:
         n = len(self.start)
         if not self.moves:
             return self.start.copy(), np.zeros(n), np.zeros(n)
-        out = self._at_rest.copy()  # x, v, a; the profile's three values weigh each move's delta
+        out = self._at_rest.copy()  # x, v, a
         for move in self.moves:
-            if move.kind == "circle":
-                out += move.circle_rows(t)
-                continue
-            s, ds, dds = profile(move.kind, move.tau(t), move.accel_fraction)
-            out += np.multiply.outer((s, ds / move.duration, dds / move.duration**2), move.delta)
+            out += move.rows(t)
         return out[0], out[1], out[2]
 
     @functools.cached_property

@@ -42,9 +42,12 @@ __all__ = ["Transitions", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
 SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
-#: a turn located with |v_t| ≤ this × v_ε is a slide coming to rest (turn and stop tie, within a rounding, when
-#: it decelerates to rest: the 5-DOF writer's turn at |v_t| = 4.1 v_ε): decided at rest like a stop. Refreshing
-#: r there would keep a slide at a few v_ε whose direction relaxes at a rate ∝ 1/|v_t|: stiff, 10x the steps
+#: [-] a turn located with |v_t| ≤ this × v_ε is taken for a slide coming to rest and decided at rest like a
+#: stop. Why: when a slide decelerates to rest, its ``turn`` and ``stop`` tie within a rounding (the 5-DOF
+#: writer's turn fires at |v_t| = 4.1 v_ε); refreshing r there keeps a slide of a few v_ε whose direction relaxes
+#: at a rate ∝ 1/|v_t| (stiff: 10x the steps). 10 leaves that case a margin of ~2.4. Cost: a slide slower than
+#: 10 v_ε that really turns loses its residual slip (≤ 10 v_ε) to the decision at rest and, if the cone cannot
+#: hold it, restarts where the holding force pushes, not along its own slip.
 TURN_AT_REST = 10.0
 
 
