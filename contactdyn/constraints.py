@@ -39,22 +39,15 @@ from .chain_forces import chain_forces
 from .contact import Contact, Kinematics
 from .controllers import ControlInput, Controller
 from .errors import SimulationError
+from .linalg import solve_vector
 
 __all__ = ["Rows", "solve_linear", "contact_row", "kkt_solve", "force_columns", "solve_folded", "record_row_forces",
            "velocity_rows", "impulse_solve"]
 
-try:  # numpy's gufunc without the Python wrapper: ~4x cheaper on tiny systems
-    from numpy.linalg import _umath_linalg
-
-    _fast_solve = _umath_linalg.solve1
-except (ImportError, AttributeError):  # pragma: no cover
-    _fast_solve = np.linalg.solve
-
-
 def solve_linear(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     """Solve A z = b; on a singular A fall back to the minimum-norm least-squares z."""
     with np.errstate(all="ignore"):
-        z = _fast_solve(A, b)
+        z = solve_vector(A, b)
     if np.all(np.isfinite(z)) and np.linalg.norm(A @ z - b) <= 1e-9 * (1.0 + np.linalg.norm(b)):
         return z, True
     return np.linalg.lstsq(A, b, rcond=1e-12)[0], False

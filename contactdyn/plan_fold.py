@@ -24,8 +24,9 @@ import math
 
 import numpy as np
 
-from .constraints import Rows, _fast_solve, force_columns, solve_folded  # _fast_solve: numpy's solve gufunc
+from .constraints import Rows, force_columns, solve_folded
 from .dynamics import command_of
+from .linalg import solve_vector
 from .plan_law import compiled_law
 
 __all__ = ["contact_torque_of", "folded_solve"]
@@ -102,7 +103,7 @@ def folded_solve(plan, make_input, drives):
             A2[:nQ, i_b] -= Y_b[:nQ]
         b2 = b.copy()
         b2[:nQ] += y0[:nQ]
-        z = _fast_solve(A2, b2)
+        z = solve_vector(A2, b2)
         if not math.isfinite(z.dot(z)):
             z = plan._singular(A2, b2)
         lam = z[lam_cols]

@@ -27,6 +27,7 @@ import pinocchio as pin
 from .controllers import ControlInput
 from .dynamics import set_force_inputs
 from .friction import launch_directions, launching, slip_direction
+from .linalg import solve_vector
 from .phases import reference_at
 from .plan_drives import drive_forces
 from .plan_fold import contact_torque_of, folded_solve
@@ -36,13 +37,6 @@ from .trajectory import profile
 __all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-try:  # numpy's gufunc without the Python wrapper (see constraints.solve_linear)
-    from numpy.linalg import _umath_linalg
-
-    _solve1 = _umath_linalg.solve1
-except (ImportError, AttributeError):  # pragma: no cover
-    _solve1 = np.linalg.solve
-
 
 def make_rhs(plan):
     """Build ``plan.time_terms``, ``plan.phi_at`` and return the right-hand side f(t, x) of the plan's mode."""
@@ -161,7 +155,7 @@ def _command_and_solve(plan):
                 if b_ctl is not None:
                     b_ctl[:] = (f_ctl, zdot)
             b[:len(f_ctl)] += f_ctl
-        z = _solve1(A, b)
+        z = solve_vector(A, b)
         if not isfinite(z.dot(z)):
             z = plan._singular(A, b)
         return z, zdot

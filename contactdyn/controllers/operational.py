@@ -34,17 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError, SimulationError
+from ..linalg import det, solve_matrix, solve_vector
 from .base import BindContext, ControlInput, Controller, register
 from .dynamic import K_NULL, KP, KV, _axes, _check_gain_size, _gain
 from .pd import KD_TASK, KP_TASK, read_tool_axis
-
-try:  # numpy's gufuncs without the Python wrappers (~3 µs less per call; see constraints.solve_linear)
-    from numpy.linalg import _umath_linalg
-
-    _solve, _solve1, _det = _umath_linalg.solve, _umath_linalg.solve1, _umath_linalg.det
-except (ImportError, AttributeError):  # pragma: no cover
-    _solve = _solve1 = np.linalg.solve
-    _det = np.linalg.det
 
 __all__ = ["OperationalSpace", "OperationalSpaceConfig", "SINGULAR"]
 
@@ -180,12 +173,12 @@ class OperationalSpace(Controller):
         else:
             Jt, drift = W[:, :3].dot(inp.J), W[:, :3].dot(inp.drift)
         xdot = Jt.dot(inp.v)
-        L_inv = Jt.dot(_solve(inp.H, Jt.T))  # Λ⁻¹
+        L_inv = Jt.dot(solve_matrix(inp.H, Jt.T))  # Λ⁻¹
         self._guard(L_inv, inp.t)
         rhs = np.array(a_task) - drift
         if self._null:
             rhs += cfg.k_null * xdot
-        ft = _solve1(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
+        ft = solve_vector(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
         ft += f
         tau = ft.dot(Jt)
         tau += inp.h
@@ -194,7 +187,7 @@ class OperationalSpace(Controller):
         return tau, None
 
     def _guard(self, L_inv: np.ndarray, t: float) -> None:
-        ratio = _det(L_inv) / math.prod(L_inv.diagonal().tolist())
+        ratio = det(L_inv) / math.prod(L_inv.diagonal().tolist())
         if not ratio >= SINGULAR:  # also NaN
             what = "position axes, force directions" + (" and tool tilt" if self.config.tool_axis is not None else "")
             raise SimulationError(
