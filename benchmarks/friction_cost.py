@@ -24,10 +24,7 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import math
-import os
-import platform
 import sys
 from pathlib import Path
 
@@ -35,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from timing import interleaved  # noqa: E402
+from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn import Robot, parse_scene, simulate  # noqa: E402
 
@@ -130,16 +127,6 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"{r['scene']:32s} {fr['wall_s_min']:9.3f}/{fe['wall_s_min']:<9.3f} {r['wall_ratio']:6.2f} "
               f"{fr['rhs_evals']:6d}/{fe['rhs_evals']:<7d} {r['rhs_ratio']:6.2f} {fr['segments']:9d} {fr['events']:7d}")
     return write_report(OUT, {"solver": SOLVER, "repeats": args.repeats}, rows)
-
-
-def write_report(path: Path, head: dict, rows: list) -> dict:
-    """Write ``head``, the machine's load average, Python and machine, then ``rows`` as JSON at path; return it."""
-    out = {**head, "load_average": os.getloadavg(), "python": platform.python_version(),
-           "machine": platform.machine(), "rows": rows}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=1))
-    print(f"wrote {path}")
-    return out
 
 
 if __name__ == "__main__":

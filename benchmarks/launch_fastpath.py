@@ -17,7 +17,6 @@ Writes benchmarks/out/launch_fastpath.json.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -27,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import b1_reference  # noqa: E402
 import motor_fastpath  # noqa: E402
 from motor_fastpath import force_error  # noqa: E402
-from timing import interleaved  # noqa: E402
+from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn.fastpath import Gap  # noqa: E402
 from contactdyn.friction import launching  # noqa: E402
@@ -78,8 +77,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{row['b1_hand_ms_per_s']:8.1f} {row['before_x_b1_hand']:9.1f} {row['after_x_b1_hand']:8.1f} "
               f"{row['speedup']:7.2f}x  {row['before_F_err_N']:.3g} / {row['after_F_err_N']:.3g}"
               f"   {sum(row['before_fallback_modes'].values())} / {sum(row['after_fallback_modes'].values())}")
-    OUT.parent.mkdir(exist_ok=True)
-    OUT.write_text(json.dumps(rows, indent=1))
+    write_report(OUT, {"repeats": args.repeats}, rows)
     return 0
 
 

@@ -14,7 +14,6 @@ differ by round-off only, so the errors should agree). Writes benchmarks/out/mot
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -22,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
-from timing import interleaved  # noqa: E402
+from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn.fastpath import Gap  # noqa: E402
 from contactdyn.scene import load_scene  # noqa: E402
@@ -85,8 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         err = f"  {row['F_err_compiled']:.3g} / {row['F_err_readable']:.3g}" if args.error else ""
         print(f"{scene:24s} {row['compiled_s']:12.3f} {row['readable_s']:12.3f} {row['speedup']:8.2f}x{err}"
               f"   (compiled modes {row['compiled_modes']}, fallbacks {sum(row['fallback_modes'].values())})")
-    OUT.parent.mkdir(exist_ok=True)
-    OUT.write_text(json.dumps(rows, indent=1))
+    write_report(OUT, {"repeats": args.repeats, "error": args.error}, rows)
     return 0
 
 

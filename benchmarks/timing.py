@@ -12,13 +12,17 @@ wall time and in this process's CPU time [s]; a benchmark reports whichever suit
 
 from __future__ import annotations
 
+import json
+import os
+import platform
 import statistics
 import time
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = ["Timing", "interleaved"]
+__all__ = ["Timing", "interleaved", "write_report"]
 
 K = TypeVar("K", bound=Hashable)
 
@@ -54,3 +58,13 @@ def interleaved(variants: dict[K, Callable[[], Any]], repeats: int) -> dict[K, T
             timing.cpu_s.append(time.process_time() - c0)
             timing.last = value
     return timings
+
+
+def write_report(path: Path, head: dict, rows: list) -> dict:
+    """Write ``head``, the machine's load average, Python and machine, then ``rows`` as JSON at path; return it."""
+    out = {**head, "load_average": os.getloadavg(), "python": platform.python_version(),
+           "machine": platform.machine(), "rows": rows}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(out, indent=1))
+    print(f"wrote {path}")
+    return out

@@ -24,8 +24,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from friction_cost import SCENES, write_report  # noqa: E402
-from timing import interleaved  # noqa: E402
+from friction_cost import SCENES  # noqa: E402
+from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn import hybrid, load_scene, parse_scene, rhsplan  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
