@@ -218,13 +218,8 @@ def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot, ctl=
         return None
     i_b, axis = phase.carrier
     ctl = phase.controller if ctl is None else ctl
-    if getattr(ctl, "M", None) is not None:  # the law read off as a matrix (contactdyn.plan_law)
-        dtau, dzdot = ctl.a_d_increment(inp, axis)
-        return (i_b, dtau, None if zdot is None else dzdot) if np.any(dtau != 0.0) else None
-    tau_b, zdot_b = ctl.command(inp.replaced(a_d=inp.a_d + axis))
-    if not np.any(tau_b != tau):
-        return None
-    return i_b, tau_b - tau, None if zdot is None else zdot_b - zdot
+    dtau, dzdot = ctl.a_d_increment(inp, axis, tau, zdot)
+    return (i_b, dtau, None if zdot is None else dzdot) if np.any(dtau != 0.0) else None
 
 
 def drive_command(system, tau: np.ndarray, x: np.ndarray) -> np.ndarray:

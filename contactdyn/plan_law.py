@@ -119,8 +119,12 @@ class CompiledLaw:
         a, f_swap, zdot = self.targets(inp)
         return self.ctl.computed_torque(inp, a, f_swap), zdot
 
-    def a_d_increment(self, inp: ControlInput, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """(∂τ, ∂ż) per unit of ẍ_d along ``axis`` (a reference carried by a body), from M's ẍ_d columns."""
+    def a_d_increment(self, inp: ControlInput, axis: np.ndarray, tau: np.ndarray,
+                      zdot: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`Controller.a_d_increment <contactdyn.controllers.base.Controller.a_d_increment>` from M's
+        ẍ_d columns once M is read (the readable law's difference before)."""
+        if self.M is None:
+            return self.ctl.a_d_increment(inp, axis, tau, zdot)
         d = self.M[:, 12:15].dot(axis)
         dtau = self.ctl.torque_increments(inp, d[:3, None], d[3:6, None] if self.swap else None)[:, 0]
         return dtau, (d[self.zs] if self.zs is not None else None)
