@@ -37,7 +37,7 @@ class CompiledLaw:
         self.outputs, self.n_states = ctl.outputs, ctl.n_states
         self.M: np.ndarray | None = None
         #: why the law runs readable (None: compiled, or not read yet)
-        self.reason = None if getattr(ctl, "in_task_space", False) else f"{ctl.name}: not a task-space tip law"
+        self.reason = None if ctl.in_task_space else f"{ctl.name}: not a task-space tip law"
 
     # ---- the layout of u, read off the first input ------------------------------------------
     def _layout(self, inp: ControlInput) -> None:
@@ -150,6 +150,6 @@ def compiled_law(plan):
     law = plan.__dict__.get("_compiled_law")
     if law is None:
         ctl = plan.phase.controller
-        law = CompiledLaw(ctl) if getattr(ctl, "in_task_space", False) else ctl
+        law = CompiledLaw(ctl) if ctl.in_task_space else ctl
         plan._compiled_law = law
     return law

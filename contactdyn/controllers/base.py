@@ -99,6 +99,7 @@ class Controller:
     uses_forces: bool = False  #: reads measured forces (then it must be affine in them)
     outputs: str = "torque"  #: "torque" (generalized forces) or "voltage" (motor voltages [V])
     reads_orientation: bool = True  #: reads R_tip, J_ang and drift_ang (False: the compiled path leaves them None)
+    in_task_space: bool = False  #: command = computed_torque(tip_targets(...)), read as a matrix by plan_law
 
     def __init__(self, config: Any, nv: int):
         self.config = config

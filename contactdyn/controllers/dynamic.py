@@ -229,7 +229,6 @@ class _ComputedTorque(Controller):
 
     uses_forces = True
     reads_orientation = False
-    in_task_space = False  #: the command is computed_torque(tip_targets(...))
 
     def tip_targets(self, inp: ControlInput) -> tuple:
         raise NotImplementedError
