@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .chain import Chain, NodeKind, build_chain
+from .chain import Chain, NodeKind, balanced, build_chain
 from .robot import FrameTerms
 from .scene import ContactSpec
 
@@ -103,6 +103,8 @@ def _plan(chain: Chain, touching: bool, junction_state: int) -> ChainPlan:
         group = {j} | {a for a, b in aliases if b == j}  # the interface junction is both surface nodes
         stages_j = sorted({k for n in group for k in chain.stages_of(n) if k in active})
         slot = junction_state if touching and j in (es, rs) else nodes[j].state
+        if len(stages_j) > 1 and balanced([stages[k] for k in stages_j]):
+            slot = -1  # it stays where its springs balance: algebraic, its slot (if any) rests
         junctions.append((j, stages_j, slot, frozenset(group)))
     bond = touching and chain.bonded_when_touching
     interface_stage = -1
