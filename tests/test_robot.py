@@ -286,7 +286,7 @@ def test_example_robot_data_loads(name):
         load_error(name, "no active joint")
         return
     if name == "ur_description/ur3":  # a xacro-made file without links or a robot name: not a URDF
-        load_error(name, "expected one root link")
+        load_error(name, "expected <link> elements in <robot>, found none")
         return
     if name == "romeo":  # its finger links carry no inertial
         load_error(name, "move no mass or inertia")
