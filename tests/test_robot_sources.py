@@ -89,10 +89,11 @@ def test_package_uri_from_ros_package_path(tmp_path, monkeypatch):
     mesh.write_text(STL)
     path = slider(tmp_path / "elsewhere" / "robot.urdf", mesh_visual("package://my_pkg/meshes/link.stl"))
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
-    with pytest.raises(RobotError, match="visual mesh 'package://my_pkg/meshes/link.stl' not found"):
-        Robot.load(path)
+    r = Robot.load(path)  # not found: drawn without it, with a note
+    assert "link 'carriage' ('package://my_pkg/meshes/link.stl')" in r.visual_notes[0] and r.visual_model.ngeoms == 0
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws"))
     r = Robot.load(path)
+    assert r.visual_notes == []
     assert [g.meshPath for g in r.visual_model.geometryObjects] == [str(mesh.resolve())]
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws" / "my_pkg"))  # the package folder itself
     assert Robot.load(path).visual_model.geometryObjects[0].meshPath == str(mesh.resolve())
