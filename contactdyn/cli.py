@@ -189,8 +189,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                        f"F_fΔt = {imp['friction_impulse']} N·s, jammed = {imp['jammed']}")
         for e in result.events:
             if e["kind"] in ("limit", "release"):
-                what = f"stops at its {e['side']} limit, impulse {e['impulse']:.6g}" if e["kind"] == "limit" else \
-                    "leaves its limit"
+                what = f"stops at its {e['side']} limit, impulse {e['impulse']:.6g} {e['impulse_unit']}" \
+                    if e["kind"] == "limit" else "leaves its limit"
                 _out(args, f"  joint limit t = {e['t']:.6g} s: {e['name']} {what}")
         if saved:
             _out(args, f"  saved {saved} and {saved.removesuffix('.npz')}.json")
