@@ -332,7 +332,7 @@ def _list_parser(sub, fmt) -> None:
                                "  contactdyn list frames panda   (a robot's kinematic tree)")
     ls.add_argument("what", nargs="?", choices=(*LIST_SECTIONS, *LIST_MORE, "keys"), help="one section only")
     ls.add_argument("prefix", nargs="?", help="with keys: only the keys starting with it (e.g. contact, "
-                                              "phase[].force); with frames: the robot")
+                                              "phase.force, contact.pencil.normal); with frames: the robot")
     _scripting(ls)
     ls.set_defaults(func=_cmd_list)
 
