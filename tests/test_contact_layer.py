@@ -8,6 +8,7 @@ from scipy.linalg import expm
 
 import contactdyn
 from contactdyn import Robot, SceneError, parse_scene, simulate
+from contactdyn.sanity import SanityWarning
 
 TIGHT = {"rtol": 1e-12, "atol": 1e-14}
 
@@ -191,9 +192,16 @@ def test_error_falls_with_tolerance_at_first_order_in_rtol():
     assert np.all((slopes > 0.6) & (slopes < 1.5)), (errors, slopes)
 
 
-def test_a_tip_starting_inside_the_surface_is_a_clear_error():
-    with pytest.raises(SceneError, match="contact.tip.*gap"):
-        simulate(axis_scene({"model": "c", "k": 1e5, "b": 1.0}, q0=1.1, v0=0.0, duration=0.1))
+def test_a_tip_starting_inside_the_surface():
+    """Inside a rigid surface: an error naming the contact and the gap. Inside a compliant one (model c):
+    a sanity warning, and the run starts pressed, F_n = k d at rest (issue 16: such warnings are not fatal)."""
+    with pytest.raises(SceneError, match=r"contact.tip: expected a start with the tip on or above the rigid surface"):
+        simulate(axis_scene({"model": "rigid"}, q0=1.1, v0=0.0, duration=0.1))
+    with pytest.warns(SanityWarning, match="m inside the surface"):
+        r = simulate(axis_scene({"model": "c", "k": 1e5, "b": 1.0}, q0=1.1, v0=0.0, duration=0.1))
+    depth = SURFACE_Z - r["tip"][0, 2]  # [m]
+    assert depth > 1e-3 and r["contact.tip.touching"][0] == 1.0
+    assert r["contact.tip.F_n"][0] == pytest.approx(1e5 * depth, rel=1e-9)  # [N]
 
 
 def test_hunt_crossley_stage_settles_at_its_static_deflection_and_never_pulls():
