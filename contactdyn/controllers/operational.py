@@ -158,28 +158,28 @@ class OperationalSpace(Controller):
         for key, n in zip(self._force_keys, self._forced_rows, strict=True):  # set-points along their directions
             a_task.append(0.0)
             f.append(-inp.force_d[key][0] - cfg.kd_normal * _dot(n, vt))  # [N]
-        if cfg.tool_axis is not None:
+        if self._target is not None:
             a = inp.R_tip.dot(cfg.tool_axis).tolist()  # current tool direction (world)
             e1, e2 = _perpendicular(a)
-            W[m - 2, 3:] = e1
-            W[m - 1, 3:] = e2
+            W[m - 2:, 3:] = e1, e2
             omega = inp.J_ang.dot(inp.v).tolist()  # [rad/s]
             c = _cross(a, self._target)
-            w = [cfg.ko * c[i] - cfg.do * omega[i] for i in range(3)]
+            ko, do = cfg.ko, cfg.do
+            w = [ko * c[0] - do * omega[0], ko * c[1] - do * omega[1], ko * c[2] - do * omega[2]]
             a_task += [_dot(e1, w), _dot(e2, w)]
             f += [0.0, 0.0]
             Jt = W.dot(np.concatenate((inp.J, inp.J_ang)))
             drift = W.dot(np.concatenate((inp.drift, inp.drift_ang)))
         else:
-            Jt, drift = W[:, :3].dot(inp.J), W[:, :3].dot(inp.drift)
-        xdot = Jt.dot(inp.v)
+            Jt, drift = self._S.dot(inp.J), self._S.dot(inp.drift)
         L_inv = Jt.dot(solve_matrix(inp.H, Jt.T))  # Λ⁻¹
         self._guard(L_inv, inp.t)
-        rhs = np.array(a_task) - drift
+        a_f = np.array((a_task, f))
+        rhs = a_f[0] - drift
         if self._null:
-            rhs += cfg.k_null * xdot
+            rhs += cfg.k_null * Jt.dot(inp.v)  # k_null ẋ_t
         ft = solve_vector(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
-        ft += f
+        ft += a_f[1]
         tau = ft.dot(Jt)
         tau += inp.h
         if self._null:
