@@ -145,19 +145,21 @@ class OperationalSpace(Controller):
         # task-space terms are Python floats (k, m ≤ 6: cheaper than one numpy call each, ~0.5 µs)
         cfg, k, m, W = self.config, self._k, self._m, self._W
         axes = self._axes_rows
-        vt = inp.v_tip.tolist()
+        vx, vy, vz = inp.v_tip.tolist()
         kp, kd = self._kp_list, self._kd_list
         if inp.x_d is not None:
-            ad, ex = inp.a_d.tolist(), (inp.x_d - inp.p_tip).tolist()
-            ev = (inp.v_d - inp.v_tip).tolist()
-            a_task = [_dot(n, ad) for n in axes]  # a* [m/s², rad/s²], through Λ
-            f = [kp[i] * _dot(n, ex) + kd[i] * _dot(n, ev) for i, n in enumerate(axes)]  # [N], directly
+            (ax, ay, az), (px, py, pz) = inp.a_d.tolist(), inp.p_tip.tolist()
+            (xx, xy, xz), (wx, wy, wz) = inp.x_d.tolist(), inp.v_d.tolist()
+            ex, ey, ez, fx, fy, fz = xx - px, xy - py, xz - pz, wx - vx, wy - vy, wz - vz  # x_d − p, ẋ_d − ṗ
+            a_task = [n[0] * ax + n[1] * ay + n[2] * az for n in axes]  # a* [m/s², rad/s²], through Λ
+            f = [kp[i] * (n[0] * ex + n[1] * ey + n[2] * ez) + kd[i] * (n[0] * fx + n[1] * fy + n[2] * fz)
+                 for i, n in enumerate(axes)]  # [N], directly
         else:
             a_task = [0.0] * k
-            f = [-kd[i] * _dot(n, vt) for i, n in enumerate(axes)]
+            f = [-kd[i] * (n[0] * vx + n[1] * vy + n[2] * vz) for i, n in enumerate(axes)]
         for key, n in zip(self._force_keys, self._forced_rows, strict=True):  # set-points along their directions
             a_task.append(0.0)
-            f.append(-inp.force_d[key][0] - cfg.kd_normal * _dot(n, vt))  # [N]
+            f.append(-inp.force_d[key][0] - cfg.kd_normal * (n[0] * vx + n[1] * vy + n[2] * vz))  # [N]
         if self._target is not None:
             a = inp.R_tip.dot(cfg.tool_axis).tolist()  # current tool direction (world)
             e1, e2 = _perpendicular(a)
