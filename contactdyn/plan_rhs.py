@@ -107,14 +107,15 @@ def _friction_terms(plan):
             G[:, m2 + nv:m2 + nQ] = consts
         g1 = np.asarray(plan.modes[ci].slip, float).dot(G) if len(T) == 1 else None  # 1-D: the mode's fixed d
         coulomb.append((m2 + m + i_fn, mu, G, g1, ci))
-    dyn_tilt = plan.dyn_tilt
+    # 2-D sliding with the normal force an unknown: the normal row's column nQ + r of A (flat in y, stride m)
+    # tilts by μ Jᵀ Tᵀ d on the robot's rows and is μ constsᵀ d over A0 on the bodies' rows
+    dyn_tilt = [(slice(nQ + r, nv * m + nQ + r, m), slice(nv * m + nQ + r, nQ * m + nQ + r, m) if nQ > nv else None,
+                 plan.A0[nv:nQ, nQ + r].copy(), ci, mu, T, consts, j) for r, ci, mu, T, consts, j in plan.dyn_tilt]
     if not coulomb and not dyn_tilt:
         return None
-    A0 = plan.A0
     o_vt = [plan.o_vt[c.name] for c in s.contacts]
 
     def terms(y, Js, modes):
-        A = y[:m2].reshape(m, m)
         o = y[m2 + m:]
         dirs = {}
         for i_fn, mu, G, g1, ci in coulomb:
@@ -125,10 +126,11 @@ def _friction_terms(plan):
                     y -= (mu * F_n) * d.dot(G)
                 else:
                     y -= (mu * F_n) * g1
-        for r, ci, mu, T, consts, j in dyn_tilt:
+        for robot_rows, body_rows, a0, ci, mu, T, consts, j in dyn_tilt:
             dirs[ci] = d = slip_direction(s, o[o_vt[ci]], modes[ci])
-            A[:nv, nQ + r] += mu * Js[j].T.dot(d.dot(T))
-            A[nv:nQ, nQ + r] = A0[nv:nQ, nQ + r] + mu * d.dot(consts)
+            y[robot_rows] += mu * Js[j].T.dot(d.dot(T))
+            if body_rows is not None:
+                y[body_rows] = a0 + mu * d.dot(consts)
         return dirs
 
     return terms
