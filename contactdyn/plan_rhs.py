@@ -98,7 +98,7 @@ def _friction_terms(plan):
     m2 = m * m
     w0 = nQ + nr
     coulomb = []
-    for ci, i_fn, mu, T, consts, j, _dT, _dC in plan.coulomb_terms:
+    for ci, i_fn, mu, T, consts, j in plan.coulomb_terms:
         # G: the Coulomb force's share of y per unit μF along each tangent: its tip force T into b's frame
         # slots, its body columns into the body rows (one product and one subtraction per call)
         G = np.zeros((len(T), plan.P.shape[0]))
