@@ -50,7 +50,7 @@ def make_rhs(plan):
     cat = np.concatenate
     ring = plan.ring
     time_terms, tv = _time_terms(plan)
-    phi_and_jacobians = _phi_function(plan, time_terms)
+    phi_and_jacobians = _phi_function(plan, time_terms, tv)
     impulse_rates = _impulse_rates(plan)
     friction = _friction_terms(plan)
     solve = _command_and_solve(plan)
@@ -58,11 +58,11 @@ def make_rhs(plan):
     plan.launch = launch
     plan.friction_terms = friction
     plan.time_terms = time_terms
-    plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0]
+    plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0].copy()
     modes = plan.modes  # this call's own, 2-D reference directions included (ModePlan.use)
 
     def rhs(t, x):
-        phi, Js = phi_and_jacobians(t, x, time_terms(t, tv))
+        phi, Js = phi_and_jacobians(t, x)
         y = P.dot(phi)
         o = y[m2 + m:]  # the affine outputs
         b_ctl = None
@@ -253,42 +253,59 @@ def _time_terms(plan):
     return time_terms, tv
 
 
-def _phi_function(plan, time_terms):
-    """phi(t, x, tv) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x."""
+def _phi_function(plan, time_terms, tv0):
+    """phi(t, x, tv=None) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x.
+
+    φ and the Jacobians are views of one buffer the next call overwrites: a call writes each piece
+    in place (Pinocchio's H, h, g and frame translations are read through views of its data, which
+    keeps its arrays for its lifetime), ~1 µs cheaper than concatenating fresh pieces. ``tv``: the
+    time terms, else computed into the buffer; ``tv0``: their initial values (the trailing 1).
+    """
     s = plan.system
     model, data = s.robot.model, s.robot.data
     nQ, nv = s.nQ, s.nv
     fids = plan.fids
-    single = len(fids) == 1
-    fid0 = fids[0]
+    nf = len(fids)
+    phi = np.empty(plan.P.shape[1])
+    H_part = phi[:nv * nv].reshape((nv, nv), order="F")  # φ holds H column by column (ravel "K" of F-order)
+    Js = tuple(phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J)
+    drifts = [phi[i:i + 3] for i in plan.i_dr]
+    h_part = phi[plan.i_h:plan.i_h + nv]
+    g_part = phi[plan.i_h + nv:plan.i_e] if plan.with_g else None
+    i_x = plan.i_e
+    x_part = phi[i_x:i_x + s.n]
+    e_frame = [i_x + k for k in plan.e_frame]
+    tv_part = phi[e_frame[-1] + 6:]
+    tv_part[:] = tv0
     compute = pin.computeAllTerms
     placement, jacobian, accel = pin.updateFramePlacement, pin.getFrameJacobian, pin.getFrameClassicalAcceleration
     lwa = LWA
-    cat = np.concatenate
-    with_g = plan.with_g
+    dot = np.dot
+    H, h, g = data.M, data.nle, data.g  # views of Pinocchio's data
+    frames = [(fids[f], Js[f], drifts[f], data.oMf[fids[f]].translation, phi[e_frame[f]:e_frame[f] + 3],
+               phi[e_frame[f] + 3:e_frame[f] + 6]) for f in range(nf)]
 
-    def phi(t, x, tv=None):
-        q = x[:nv]
+    def phi_of(t, x, tv=None):
         v = x[nQ:nQ + nv]
-        compute(model, data, q, v)
+        compute(model, data, x[:nv], v)
+        H_part[:] = H
+        h_part[:] = h
+        if g_part is not None:
+            g_part[:] = g
+        x_part[:] = x
+        for fid, J, drift, p, p_part, pd_part in frames:
+            J[:] = jacobian(model, data, fid, lwa).reshape(6, nv)[:3]  # (a 1-DOF robot's comes as (6,))
+            drift[:] = accel(model, data, fid, lwa).linear
+            placement(model, data, fid)
+            p_part[:] = p
+            dot(J, v, out=pd_part)
         if tv is None:
-            tv = time_terms(t)
-        if single:
-            J = jacobian(model, data, fid0, lwa).reshape(6, nv)[:3]
-            if with_g:
-                return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, data.g,
-                            x, placement(model, data, fid0).translation, J.dot(v), tv)), (J,)
-            return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
-                        placement(model, data, fid0).translation, J.dot(v), tv)), (J,)
-        Js = [jacobian(model, data, fid, lwa).reshape(6, nv)[:3] for fid in fids]
-        pv = []
-        for fid, J in zip(fids, Js, strict=True):
-            pv += [placement(model, data, fid).translation, J.dot(v)]
-        g_part = (data.g,) if with_g else ()
-        return cat([data.M.ravel("K"), *[J.ravel() for J in Js],
-                    *[accel(model, data, fid, lwa).linear for fid in fids], data.nle, *g_part, x, *pv, tv]), Js
+            time_terms(t, tv_part)
+        else:
+            tv_part[:] = tv
+        return phi, Js
 
-    return phi
+    return phi_of
 
 
 def _impulse_rates(plan):
