@@ -233,7 +233,8 @@ def _launch(plan, friction, solve):
 
 
 def _time_terms(plan):
-    """(time_terms(t, out), its default buffer): the reference's and ramps' time terms of e, and the trailing 1."""
+    """(time_terms(t, out), its default buffer): the reference's and ramps' time terms of e, and the trailing 1;
+    ``time_terms.at_times(ts)``: the same at many times, as rows."""
     tv = np.zeros(plan.ne - plan.e_frame[-1] - 6)  # time terms and the trailing 1
     tv[-1] = 1.0
     base = plan.e_frame[-1] + 6
@@ -250,6 +251,20 @@ def _time_terms(plan):
             out[slot] = at(t)[0]
         return out
 
+    ones = tv.copy()
+
+    def at_times(ts):
+        """The time terms at each time of ``ts`` [s], as rows (len(ts), len(tv)): each term over all times at once."""
+        out = np.tile(ones, (len(ts), 1))
+        for slot, kind, start, duration, af in time_moves:
+            rows = np.array([profile(kind, (t - start) / duration, af)[:2] for t in ts]).reshape(len(ts), 2)
+            out[:, slot] = rows[:, 0]
+            out[:, slot + 1] = rows[:, 1] / duration
+        for slot, at in time_ramps:
+            out[:, slot] = [at(t)[0] for t in ts]
+        return out
+
+    time_terms.at_times = at_times
     return time_terms, tv
 
 
@@ -258,7 +273,8 @@ def _phi_function(plan, time_terms, tv0):
 
     φ and the Jacobians are views of one buffer the next call overwrites: a call writes each piece
     in place (Pinocchio's H, h, g and frame translations are read through views of its data, which
-    keeps its arrays for its lifetime), ~1 µs cheaper than concatenating fresh pieces. ``tv``: the
+    keeps its arrays for its lifetime; ``a[...] = b`` is the cheapest write), ~1.5 µs cheaper than
+    concatenating fresh pieces. ``tv``: the
     time terms, else computed into the buffer; ``tv0``: their initial values (the trailing 1).
     """
     s = plan.system
@@ -288,21 +304,21 @@ def _phi_function(plan, time_terms, tv0):
     def phi_of(t, x, tv=None):
         v = x[nQ:nQ + nv]
         compute(model, data, x[:nv], v)
-        H_part[:] = H
-        h_part[:] = h
+        H_part[...] = H
+        h_part[...] = h
         if g_part is not None:
-            g_part[:] = g
-        x_part[:] = x
+            g_part[...] = g
+        x_part[...] = x
         for fid, J, drift, p, p_part, pd_part in frames:
-            J[:] = jacobian(model, data, fid, lwa).reshape(6, nv)[:3]  # (a 1-DOF robot's comes as (6,))
-            drift[:] = accel(model, data, fid, lwa).linear
+            J[...] = jacobian(model, data, fid, lwa).reshape(6, nv)[:3]  # (a 1-DOF robot's comes as (6,))
+            drift[...] = accel(model, data, fid, lwa).linear
             placement(model, data, fid)
-            p_part[:] = p
+            p_part[...] = p
             dot(J, v, out=pd_part)
         if tv is None:
             time_terms(t, tv_part)
         else:
-            tv_part[:] = tv
+            tv_part[...] = tv
         return phi, Js
 
     return phi_of

@@ -181,11 +181,7 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
     tau = np.zeros((N, nv))
     if generic:
         command = _generic_command(plan)
-    ntv = plan.ne - plan.e_frame[-1] - 6
-    TV = np.empty((N, ntv))
-    TV[:, -1] = 1.0
-    for k in range(N):
-        plan.time_terms(ts[k], TV[k])
+    TV = plan.time_terms.at_times(ts)
     if generic or len(plan.fids) > 1:
         phi_at = plan.phi_at
         for k in range(N):
@@ -333,32 +329,43 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
 
 
 def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
-    """Φ for one robot frame: Pinocchio per sample (H, J, J̇q̇, h, [g], p), the rest in batch."""
+    """Φ for one robot frame: Pinocchio per sample (H, J, J̇q̇, h, [g], p: each written into its own
+    per-sample array, H, h, g and p through views of Pinocchio's data), the rest (x, ṗ = J q̇, the
+    time terms) in batch."""
     s = plan.system
     model, data = s.robot.model, s.robot.data
     nv, nQ, n = s.nv, s.nQ, s.n
+    N = len(X)
     fid = plan.fids[0]
     i_e = plan.i_e
     compute, placement = pin.computeAllTerms, pin.updateFramePlacement
     jacobian, accel = pin.getFrameJacobian, pin.getFrameClassicalAcceleration
-    cat = np.concatenate
+    H, h, g, p = data.M, data.nle, data.g, data.oMf[fid].translation  # views of Pinocchio's data
     with_g = plan.with_g
-    raw = np.empty((len(X), i_e + 3))
-    for k in range(len(X)):
-        x = X[k]
-        compute(model, data, x[:nv], x[nQ:nQ + nv])
-        J = jacobian(model, data, fid, _LWA).reshape(6, nv)[:3]
+    Hs = np.empty((N, nv, nv))
+    Js = np.empty((N, 6, nv))
+    drifts, hs, gs, ps = np.empty((N, 3)), np.empty((N, nv)), np.empty((N, nv)), np.empty((N, 3))
+    Q, V = X[:, :nv], X[:, nQ:nQ + nv]
+    for q, v, H_k, h_k, g_k, J_k, drift_k, p_k in zip(Q, V, Hs, hs, gs, Js, drifts, ps, strict=True):
+        compute(model, data, q, v)
+        H_k[...] = H
+        h_k[...] = h
         if with_g:
-            raw[k] = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid, _LWA).linear, data.nle, data.g,
-                          placement(model, data, fid).translation))
-        else:
-            raw[k] = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid, _LWA).linear, data.nle,
-                          placement(model, data, fid).translation))
-    Phi[:, :i_e] = raw[:, :i_e]
+            g_k[...] = g
+        J_k[...] = jacobian(model, data, fid, _LWA).reshape(6, nv)
+        drift_k[...] = accel(model, data, fid, _LWA).linear
+        placement(model, data, fid)
+        p_k[...] = p
+    J_all = Js[:, :3]
+    Phi[:, :nv * nv] = Hs.transpose(0, 2, 1).reshape(N, nv * nv)  # φ holds H column by column (ravel "K")
+    Phi[:, plan.i_J[0]:plan.i_J[0] + 3 * nv] = J_all.reshape(N, 3 * nv)
+    Phi[:, plan.i_dr[0]:plan.i_dr[0] + 3] = drifts
+    Phi[:, plan.i_h:plan.i_h + nv] = hs
+    if plan.with_g:
+        Phi[:, plan.i_h + nv:i_e] = gs
     Phi[:, i_e:i_e + n] = X
-    Phi[:, i_e + n:i_e + n + 3] = raw[:, i_e:]
-    J_all = raw[:, plan.i_J[0]:plan.i_J[0] + 3 * nv].reshape(len(X), 3, nv)
-    Phi[:, i_e + n + 3:i_e + n + 6] = np.einsum("kiv,kv->ki", J_all, X[:, nQ:nQ + nv])
+    Phi[:, i_e + n:i_e + n + 3] = ps
+    Phi[:, i_e + n + 3:i_e + n + 6] = np.einsum("kiv,kv->ki", J_all, V)
     Phi[:, i_e + n + 6:] = TV
 
 def slip_directions(plan, ci: int, O: np.ndarray, refs: np.ndarray | None = None) -> np.ndarray:
