@@ -12,6 +12,7 @@ Channel names and units are documented in the README (``q`` [rad or m], ``contac
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import groupby
 from typing import Any
 
 import numpy as np
@@ -115,12 +116,12 @@ def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
         p = f"contact.{c.name}"
         ch[f"{p}.F_n"] = smp.F_n[c.name]
         ch[f"{p}.gap"] = smp.gap[c.name]
-        ch[f"{p}.touching"] = np.array([float(m[i].touching) for m in modes_of])
+        ch[f"{p}.touching"] = _per_sample(modes_of, lambda m, i=i: m[i].touching)
         ch[f"{p}.F_d"] = smp.F_d[c.name]
         if c.friction is not None and len(c.tangents):
             ch[f"{p}.F_f"] = smp.F_f[c.name]
             ch[f"{p}.v_slip"] = smp.v_slip[c.name]
-            ch[f"{p}.stuck"] = np.array([float(m[i].stuck) for m in modes_of])
+            ch[f"{p}.stuck"] = _per_sample(modes_of, lambda m, i=i: m[i].stuck)
         for dc in c.tangent_chains:
             ch[f"{p}.{dc.label}.F"] = smp.iface[f"{c.name}.{dc.label}"]
         for k in range(len(c.tangents)):
@@ -142,3 +143,13 @@ def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
         ch["energy.work"] = xs[:, 2 * nQ + system.energy_slot]
         ch["energy.dissipated"] = xs[:, 2 * nQ + system.energy_slot + 1]
     return ch
+
+
+def _per_sample(modes_of: list[list[ContactMode]], value) -> np.ndarray:
+    """float(value(modes)) per sample, evaluated once per run of samples sharing one modes list."""
+    values, counts = [], []
+    for _, run in groupby(modes_of, key=id):
+        same = list(run)
+        values.append(float(value(same[0])))
+        counts.append(len(same))
+    return np.repeat(np.array(values), counts)

@@ -252,16 +252,18 @@ def _time_terms(plan):
         return out
 
     ones = tv.copy()
+    profiles = np.frompyfunc(profile, 3, 3)  # element by element, without a Python loop per time
+    ramps = [(slot, np.frompyfunc(lambda t, at=at: at(t)[0], 1, 1)) for slot, at in time_ramps]
 
     def at_times(ts):
         """The time terms at each time of ``ts`` [s], as rows (len(ts), len(tv)): each term over all times at once."""
         out = np.tile(ones, (len(ts), 1))
         for slot, kind, start, duration, af in time_moves:
-            rows = np.array([profile(kind, (t - start) / duration, af)[:2] for t in ts]).reshape(len(ts), 2)
-            out[:, slot] = rows[:, 0]
-            out[:, slot + 1] = rows[:, 1] / duration
-        for slot, at in time_ramps:
-            out[:, slot] = [at(t)[0] for t in ts]
+            sg, dsg, _ = profiles(kind, (ts - start) / duration, af)
+            out[:, slot] = sg
+            out[:, slot + 1] = dsg.astype(float) / duration
+        for slot, at in ramps:
+            out[:, slot] = at(ts)
         return out
 
     time_terms.at_times = at_times
