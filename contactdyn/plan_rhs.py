@@ -300,8 +300,10 @@ def _phi_function(plan, time_terms, tv0):
     lwa = LWA
     dot = np.dot
     H, h, g = data.M, data.nle, data.g  # views of Pinocchio's data
-    frames = [(fids[f], Js[f], drifts[f], data.oMf[fids[f]].translation, phi[e_frame[f]:e_frame[f] + 3],
-               phi[e_frame[f] + 3:e_frame[f] + 6]) for f in range(nf)]
+    #: per frame: its id, where its Jacobian goes (a 1-DOF robot's comes as (6,): written into a (3,) view),
+    #: its Jacobian, J̇q̇, Pinocchio's translation, and φ's p and ṗ
+    frames = [(fids[f], Js[f].reshape(3) if nv == 1 else Js[f], Js[f], drifts[f], data.oMf[fids[f]].translation,
+               phi[e_frame[f]:e_frame[f] + 3], phi[e_frame[f] + 3:e_frame[f] + 6]) for f in range(nf)]
 
     def phi_of(t, x, tv=None):
         v = x[nQ:nQ + nv]
@@ -311,8 +313,8 @@ def _phi_function(plan, time_terms, tv0):
         if g_part is not None:
             g_part[...] = g
         x_part[...] = x
-        for fid, J, drift, p, p_part, pd_part in frames:
-            J[...] = jacobian(model, data, fid, lwa).reshape(6, nv)[:3]  # (a 1-DOF robot's comes as (6,))
+        for fid, J_rows, J, drift, p, p_part, pd_part in frames:
+            J_rows[...] = jacobian(model, data, fid, lwa)[:3]
             drift[...] = accel(model, data, fid, lwa).linear
             placement(model, data, fid)
             p_part[...] = p

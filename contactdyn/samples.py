@@ -346,13 +346,14 @@ def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
     Js = np.empty((N, 6, nv))
     drifts, hs, gs, ps = np.empty((N, 3)), np.empty((N, nv)), np.empty((N, nv)), np.empty((N, 3))
     Q, V = X[:, :nv], X[:, nQ:nQ + nv]
-    for q, v, H_k, h_k, g_k, J_k, drift_k, p_k in zip(Q, V, Hs, hs, gs, Js, drifts, ps, strict=True):
+    J_rows = Js.reshape(N, 6) if nv == 1 else Js  # a 1-DOF robot's Jacobian comes as (6,)
+    for q, v, H_k, h_k, g_k, J_k, drift_k, p_k in zip(Q, V, Hs, hs, gs, J_rows, drifts, ps, strict=True):
         compute(model, data, q, v)
         H_k[...] = H
         h_k[...] = h
         if with_g:
             g_k[...] = g
-        J_k[...] = jacobian(model, data, fid, _LWA).reshape(6, nv)
+        J_k[...] = jacobian(model, data, fid, _LWA)
         drift_k[...] = accel(model, data, fid, _LWA).linear
         placement(model, data, fid)
         p_k[...] = p
