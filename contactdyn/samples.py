@@ -62,6 +62,8 @@ class Samples:
 
     @classmethod
     def concatenate(cls, parts: list[Samples], system) -> Samples:
+        if len(parts) == 1:
+            return parts[0]
         out = cls(0, system)
         for name in ("tau", "tau_cmd", "u", "limit_torque", "tip", "x_d", "body_force"):
             setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
