@@ -12,17 +12,19 @@ Channel names and units are documented in the README (``q`` [rad or m], ``contac
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from itertools import groupby
 from typing import Any
 
 import numpy as np
 
 from .contact import ContactMode
+from .dop853 import DenseSolution
 from .drives import drive_channels
 from .limits import limit_channels
 from .phases import Phase
 from .rhsplan import ModePlan
-from .samples import Samples, evaluated_samples
+from .samples import Samples, evaluated_samples, plan_derivatives
 from .system import System
 
 __all__ = ["Segment", "output_grid", "sample_segments", "channels"]
@@ -63,9 +65,16 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
         seg = segments[run[0]]
         sel = np.flatnonzero(np.isin(idx, run))
         ts = grid[sel]
+        derivatives = None
+        if seg.plan.ok:  # the interpolants' extra stages all at once
+            seg.plan.use(seg.modes)
+            derivatives = plan_derivatives(seg.plan)
         for i in run:
             at = sel[idx[sel] == i]
-            xs[at] = np.atleast_2d(segments[i].sol(grid[at]).T) if len(at) > 1 else segments[i].sol(grid[at[0]])
+            sol = segments[i].sol
+            if derivatives is not None and isinstance(sol, DenseSolution):
+                sol = partial(sol, derivatives=derivatives)
+            xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
         X = xs[sel]
         if seg.plan.ok and seg.plan not in counted:  # a plan serves several segments (every turn): count it once
             counted.append(seg.plan)

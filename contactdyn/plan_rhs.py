@@ -57,6 +57,7 @@ def make_rhs(plan):
     launch = _launch(plan, friction, solve) if any(launching(mode) for mode in plan.modes) else None
     plan.launch = launch
     plan.friction_terms = friction
+    plan.impulse_rates = impulse_rates
     plan.time_terms = time_terms
     plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0].copy()
     modes = plan.modes  # this call's own, 2-D reference directions included (ModePlan.use)
@@ -76,7 +77,7 @@ def make_rhs(plan):
             xd = cat((x[nQ:2 * nQ], z[:nQ], y[o_y]))
             if zdot is not None:
                 xd[z_slice] = zdot
-            impulse_rates(xd, z, y, now, dirs)
+            impulse_rates(xd, z, o, now, dirs)
         else:
             xd = cat((x[nQ:2 * nQ], z[:nQ]))
         ring[0] = ring[1]
@@ -329,30 +330,30 @@ def _phi_function(plan, time_terms, tv0):
 
 
 def _impulse_rates(plan):
-    """rates(ẋ, z, y, modes, dirs): write the impulse states' rates (∫F dt, ∫F_f dt per friction contact) into ẋ;
-    ``dirs``: the 2-D sliding directions this call's friction terms already computed (by contact index)."""
-    impulses = impulse_terms(plan)
-    m = plan.m
-    off = m * m + m
-
+    """rates(ẋ, z, o, modes, dirs): write the impulse states' rates (∫F dt, ∫F_f dt per friction contact) into ẋ
+    from the solution z and the affine outputs o; ``dirs``: the 2-D sliding directions this call's friction
+    terms already computed (by contact index), or None."""
+    off = plan.m * plan.m + plan.m  # impulse_terms index y = [A, b, o]: o's start
+    impulses = [(i0, from_z, k_n if from_z else k_n - off, sliding, mu, d0, k_visc - off, stick, ci)
+                for i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci in impulse_terms(plan)]
     s = plan.system
     o_vt = [plan.o_vt[c.name] for c in s.contacts]
 
-    def rates(xd, z, y, modes, dirs):
+    def rates(xd, z, o, modes, dirs):
         for i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci in impulses:
-            F_n = z[k_n] if from_z else y[k_n]
+            F_n = z[k_n] if from_z else o[k_n]
             xd[i0] = F_n
             if stick is not None:
                 xd[i0 + 1:i0 + 1 + len(stick)] = z[stick]
             elif sliding:
                 Fp = F_n if F_n > 0.0 else 0.0
                 if d0 is not None:  # 1-D
-                    xd[i0 + 1] = -mu * Fp * d0 + y[k_visc]
+                    xd[i0 + 1] = -mu * Fp * d0 + o[k_visc]
                 else:
                     d = dirs.get(ci) if dirs else None
                     if d is None:
-                        d = slip_direction(s, y[off:][o_vt[ci]], modes[ci])
-                    xd[i0 + 1:i0 + 1 + len(d)] = -mu * Fp * d + y[k_visc:k_visc + len(d)]
+                        d = slip_direction(s, o[o_vt[ci]], modes[ci])
+                    xd[i0 + 1:i0 + 1 + len(d)] = -mu * Fp * d + o[k_visc:k_visc + len(d)]
 
     return rates
 

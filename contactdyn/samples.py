@@ -21,7 +21,7 @@ from .friction import launching
 from .phases import reference_at
 from .plan_fold import contact_torque_of
 
-__all__ = ["Samples", "plan_samples", "evaluated_samples", "slip_directions"]
+__all__ = ["Samples", "plan_samples", "plan_derivatives", "evaluated_samples", "slip_directions"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: rows per matrix product in the output pass, small enough to keep OpenBLAS on one thread: with 128,
@@ -125,6 +125,34 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     return S
 
 
+def plan_derivatives(plan):
+    """f(ts, X) -> Ẋ (N, n): the plan's right-hand side at many states at once (φ, the solves and the
+    read-out as in :func:`plan_samples`), for the extra stages of the dense output's interpolants
+    (:meth:`~contactdyn.dop853.DenseSolution.__call__`); equal to the call's to rounding (BLAS products
+    over rows instead of one by one). None for a plan whose call does more than its samples do: a slide
+    launching from rest, a fold, a controller called per call or drives (a clipping sample takes the
+    readable law, equal only to 1e-10)."""
+    if plan.launch is not None or getattr(plan, "folded_detail", None) is not None or not plan.affine_ctl \
+            or plan.compiled_drives is not None:
+        return None
+    s = plan.system
+    nQ, n = s.nQ, s.n
+    rates, modes = plan.impulse_rates, plan.modes
+
+    def derivatives(ts: np.ndarray, X: np.ndarray) -> np.ndarray:
+        _, O, Z, _, _, _, _ = _solve_samples(plan, ts, X, exact=True)
+        Xd = np.empty((len(ts), n))
+        Xd[:, :nQ] = X[:, nQ:2 * nQ]
+        Xd[:, nQ:2 * nQ] = Z[:, :nQ]
+        if n > 2 * nQ:
+            Xd[:, 2 * nQ:] = O[:, plan.o_y]
+            for xd, z, o in zip(Xd, Z, O, strict=True):
+                rates(xd, z, o, modes, None)
+        return Xd
+
+    return derivatives
+
+
 def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
     """As :func:`_solve_samples` for a plan folding measured forces or a carried reference into its solve:
     each sample through the plan's own fold (:func:`~contactdyn.plan_fold.folded_solve`), which gives the
@@ -172,8 +200,11 @@ def _generic_command(plan):
     return command
 
 
-def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
-    """φ, the outputs o and the solution z at every sample, all at once: (Φ, O, Z, Jacobians, τ of a generic law)."""
+def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
+    """φ, the outputs o and the solution z at every sample, all at once: (Φ, O, Z, Jacobians, τ of a generic law).
+
+    ``exact``: the products the call makes one by one (P φ, J q̇) made so here too, for values bitwise those
+    of the call where the rest is elementwise (:func:`plan_derivatives`)."""
     s = plan.system
     N = len(ts)
     nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
@@ -191,8 +222,8 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
             if generic:  # (Pinocchio's data at this sample: the controller reads it)
                 tau[k] = command(ts[k], X[k], [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J], phi)
     else:
-        _phi_batch(plan, X, TV, Phi)
-    Y = _rows_times(Phi, plan.PT)
+        _phi_batch(plan, X, TV, Phi, exact)
+    Y = np.array([plan.P.dot(phi) for phi in Phi]).reshape(N, -1) if exact else _rows_times(Phi, plan.PT)
     A = Y[:, :m2].reshape(N, m, m)
     B = Y[:, m2:m2 + m]
     O = Y[:, m2 + m:]
@@ -330,7 +361,7 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
         S.stages[label][:] = O[:, sl]
 
 
-def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
+def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray, exact: bool = False) -> None:
     """Φ for one robot frame: Pinocchio per sample (H, J, J̇q̇, h, [g], p: each written into its own
     per-sample array, H, h, g and p through views of Pinocchio's data), the rest (x, ṗ = J q̇, the
     time terms) in batch."""
@@ -368,7 +399,12 @@ def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
         Phi[:, plan.i_h + nv:i_e] = gs
     Phi[:, i_e:i_e + n] = X
     Phi[:, i_e + n:i_e + n + 3] = ps
-    Phi[:, i_e + n + 3:i_e + n + 6] = np.einsum("kiv,kv->ki", J_all, V)
+    if exact:  # ṗ = J q̇ one by one, as the call (BLAS may fuse its multiply-adds)
+        J_rows = Phi[:, plan.i_J[0]:plan.i_J[0] + 3 * nv].reshape(N, 3, nv)  # contiguous, as the call's
+        for J, v, pd in zip(J_rows, V, Phi[:, i_e + n + 3:i_e + n + 6], strict=True):
+            np.dot(J, v, out=pd)
+    else:
+        Phi[:, i_e + n + 3:i_e + n + 6] = np.einsum("kiv,kv->ki", J_all, V)
     Phi[:, i_e + n + 6:] = TV
 
 def slip_directions(plan, ci: int, O: np.ndarray, refs: np.ndarray | None = None) -> np.ndarray:

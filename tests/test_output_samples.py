@@ -7,6 +7,8 @@ Each scene runs twice on the same integration: once with the plans' batched outp
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -15,7 +17,7 @@ from contactdyn import Robot, parse_scene
 from contactdyn.channels import _per_sample
 from contactdyn.contact import ContactMode
 from contactdyn.rhsplan import _PLANS
-from contactdyn.samples import evaluated_samples
+from contactdyn.samples import evaluated_samples, plan_derivatives
 from contactdyn.scene import load_scene
 from contactdyn.simulate import run_system, simulate
 from contactdyn.system import System
@@ -116,3 +118,25 @@ def test_mode_flags_per_run_of_samples():
     for value in (lambda m: m[0].touching, lambda m: m[0].stuck):
         assert np.array_equal(_per_sample(modes_of, value), [float(value(m)) for m in modes_of])
     assert _per_sample([], lambda m: m[0].stuck).shape == (0,)
+
+
+@pytest.mark.parametrize("scene", ["b1", "case2_writer_b", "hard_mass_ratio"])
+def test_derivatives_of_many_states_are_the_calls_bitwise(scene):
+    """``plan_derivatives`` (the dense output's extra stages all at once) gives bitwise the plan's call at
+    each state (a stiff chain included: a last-bit difference there shows in the stages' rates at 1e-11)."""
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / "hard" / f"{scene[5:]}.toml"
+    system = System(load_scene(str(path) if scene.startswith("hard_") else scene, {"solver.output_rate": 10.0}))
+    run_system(system)
+    rng = np.random.default_rng(5)
+    x0, _ = system.initial_state()
+    checked = 0
+    for plan in (p for p in _PLANS[system].values() if p.ok):
+        derivatives = plan_derivatives(plan)
+        assert derivatives is not None
+        ts = plan.phase.t_start + rng.uniform(0.0, 0.5, 40)
+        X = x0 + 1e-3 * rng.normal(size=(40, system.n))
+        got = derivatives(ts, X)
+        for t, x, xd in zip(ts, X, got, strict=True):
+            assert np.array_equal(plan.rhs(float(t), x.copy()), xd)
+        checked += 1
+    assert checked
