@@ -97,7 +97,8 @@ class _Steps:
         """Interpolant coefficients of the given steps (DOP853's stages 14–16, in one batch).
 
         ``derivatives(ts, Y) -> F``: the right-hand side at all the steps' stage states at once, in place
-        of one call per state (output sampling; equal to the calls to rounding)."""
+        of one call per state (output sampling; :func:`~contactdyn.samples.plan_derivatives` gives the
+        calls' values bitwise)."""
         steps = [int(i) for i in steps if int(i) not in self.coef]
         if not steps:
             return
