@@ -128,12 +128,14 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
 def plan_derivatives(plan):
     """f(ts, X) -> Ẋ (N, n): the plan's right-hand side at many states at once (φ, the solves and the
     read-out as in :func:`plan_samples`), for the extra stages of the dense output's interpolants
-    (:meth:`~contactdyn.dop853.DenseSolution.__call__`); equal to the call's to rounding (BLAS products
-    over rows instead of one by one). None for a plan whose call does more than its samples do: a slide
-    launching from rest, a fold, a controller called per call or drives (a clipping sample takes the
-    readable law, equal only to 1e-10)."""
+    (:meth:`~contactdyn.dop853.DenseSolution.__call__`), bitwise the call's: the products the call makes one
+    by one are made so here (``exact``), the rest is elementwise or the same LAPACK solve. None where the
+    samples' arithmetic is not the call's: a slide launching from rest, a fold, a controller called per
+    call, drives (a clipping sample takes the readable law, equal only to 1e-10), 2-D sliding (its
+    directions and tilt are computed over samples in another order)."""
+    two_d = plan.dyn_tilt or any(dT is None for *_, dT, _ in plan.coulomb_terms)
     if plan.launch is not None or getattr(plan, "folded_detail", None) is not None or not plan.affine_ctl \
-            or plan.compiled_drives is not None:
+            or plan.compiled_drives is not None or two_d:
         return None
     s = plan.system
     nQ, n = s.nQ, s.n
