@@ -1,6 +1,7 @@
 """Where B1's time goes: right-hand side, the integrator's own work per step, output sampling.
 
     PYTHONPATH=. python3 benchmarks/step_overhead.py [--repeats 7] [--rtols 1e-6,1e-7,1e-8]
+    PYTHONPATH=. python3 benchmarks/step_overhead.py --baseline TREE [--repeats 5] [--inner 1] [--rtols ...]
 
 For each rtol (atol = rtol/100) and each integrator (``solve_ivp``'s DOP853, the compiled
 ``DOP853C`` of contactdyn.dop853), B1 is run on a built system (``run_system``: no robot
@@ -19,6 +20,12 @@ interleaved, repeat by repeat; times are medians of process CPU time (see CLOCK)
 
 Errors: B1.md's F_n error against the hand-written model at rtol 1e-13. Writes
 benchmarks/out/step_overhead.json.
+
+``--baseline TREE``: before/after. The measurement (``--inner`` repeats) runs alternately in
+child processes importing ``contactdyn`` from TREE (e.g. an export of ``main``) and from this
+tree, ``--repeats`` times each (:mod:`before_after`); the hand-written model is this tree's in
+both. Prints DOP853C's CPU time before and after, medians over the children, against the
+hand-written model's median over all children; writes benchmarks/out/step_overhead_before_after.json.
 """
 
 from __future__ import annotations
@@ -31,7 +38,9 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from before_after import HERE, alternate, use_tree  # noqa: E402
+
+use_tree()
 
 import b1_reference  # noqa: E402
 import numpy as np  # noqa: E402
@@ -165,11 +174,58 @@ def measure(rtol: float, repeats: int, ref: dict) -> dict:
     return row
 
 
+def compare(rtols: str, repeats: int, inner: int, baseline: str) -> list[dict]:
+    """Before/after rows per rtol: DOP853C's CPU time and split in TREE's children and this tree's."""
+    got = alternate(__file__, ["--rtols", rtols, "--repeats", str(inner)], {"baseline": baseline, "this": str(HERE)},
+                    repeats)
+    rows = []
+    for i, first in enumerate(got["this"][0]):
+        row: dict = {"rtol": first["rtol"], "repeats": repeats, "inner": inner}
+        for label, runs in got.items():
+            row[label] = {key: statistics.median(run[i]["DOP853C"][key] for run in runs)
+                          for key in ("cpu_ms", "rhs_ms", "output_ms", "rhs_us_per_call", "integrator_us_per_step")}
+            row[label].update({key: runs[-1][i]["DOP853C"][key] for key in ("steps", "rhs_evals", "F_n_error")})
+        row["hand"] = {"cpu_ms": statistics.median(run[i]["hand"]["cpu_ms"] for runs in got.values() for run in runs),
+                       "F_n_error": first["hand"]["F_n_error"]}
+        rows.append(row)
+    return rows
+
+
+def _print_compare(rows: list[dict]) -> None:
+    print("| rtol | before [ms] | after [ms] | speed-up | hand-written [ms] | before × hand | after × hand | "
+          "rhs before/after [ms] | µs per call before/after | output before/after [ms] | "
+          "rest per step before/after [µs] | steps | F_n error before/after [N] | hand-written F_n error [N] |")
+    print("|---" * 14 + "|")
+    for r in rows:
+        b, a, hand = r["baseline"], r["this"], r["hand"]["cpu_ms"]
+        cells = [f"{r['rtol']:g}", f"{b['cpu_ms']:.1f}", f"{a['cpu_ms']:.1f}", f"{b['cpu_ms'] / a['cpu_ms']:.2f}",
+                 f"{hand:.1f}", f"{b['cpu_ms'] / hand:.2f}", f"{a['cpu_ms'] / hand:.2f}"]
+        cells += [f"{b[key]:{fmt}} / {a[key]:{fmt}}" for key, fmt in (
+            ("rhs_ms", ".1f"), ("rhs_us_per_call", ".1f"), ("output_ms", ".1f"), ("integrator_us_per_step", ".1f"),
+            ("steps", "d"), ("F_n_error", ".1e"))]
+        print("| " + " | ".join([*cells, f"{r['hand']['F_n_error']:.1e}"]) + " |")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--rtols", default="1e-6,1e-7,1e-8")
+    p.add_argument("--baseline", help="source tree to compare against (before/after)")
+    p.add_argument("--inner", type=int, default=1, help="repeats inside each child of --baseline")
+    p.add_argument("--json", action="store_true", help=argparse.SUPPRESS)  # a child's output
     args = p.parse_args(argv)
+    if args.baseline:
+        rows = compare(args.rtols, args.repeats, args.inner, args.baseline)
+        _print_compare(rows)
+        OUT.mkdir(parents=True, exist_ok=True)
+        (OUT / "step_overhead_before_after.json").write_text(json.dumps({"baseline": args.baseline, "rows": rows},
+                                                                        indent=1))
+        print(f"wrote {OUT / 'step_overhead_before_after.json'}")
+        return 0
+    if args.json:
+        ref = b1_reference.reference()
+        print(json.dumps([measure(float(r), args.repeats, ref) for r in args.rtols.split(",")], default=float))
+        return 0
     bare = bare_overhead()
     print("integrator alone, CPU µs per step (8 states, empty right-hand side): "
           + ", ".join(f"{m} {v:.1f}" for m, v in bare.items()))

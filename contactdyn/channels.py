@@ -12,16 +12,19 @@ Channel names and units are documented in the README (``q`` [rad or m], ``contac
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
+from itertools import groupby
 from typing import Any
 
 import numpy as np
 
 from .contact import ContactMode
+from .dop853 import DenseSolution
 from .drives import drive_channels
 from .limits import limit_channels
 from .phases import Phase
 from .rhsplan import ModePlan
-from .samples import Samples, evaluated_samples
+from .samples import Samples, evaluated_samples, plan_derivatives
 from .system import System
 
 __all__ = ["Segment", "output_grid", "sample_segments", "channels"]
@@ -62,9 +65,16 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
         seg = segments[run[0]]
         sel = np.flatnonzero(np.isin(idx, run))
         ts = grid[sel]
+        derivatives = None
+        if seg.plan.ok:  # the interpolants' extra stages all at once
+            seg.plan.use(seg.modes)
+            derivatives = plan_derivatives(seg.plan)
         for i in run:
             at = sel[idx[sel] == i]
-            xs[at] = np.atleast_2d(segments[i].sol(grid[at]).T) if len(at) > 1 else segments[i].sol(grid[at[0]])
+            sol = segments[i].sol
+            if derivatives is not None and isinstance(sol, DenseSolution):
+                sol = partial(sol, derivatives=derivatives)
+            xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
         X = xs[sel]
         if seg.plan.ok and seg.plan not in counted:  # a plan serves several segments (every turn): count it once
             counted.append(seg.plan)
@@ -115,12 +125,12 @@ def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
         p = f"contact.{c.name}"
         ch[f"{p}.F_n"] = smp.F_n[c.name]
         ch[f"{p}.gap"] = smp.gap[c.name]
-        ch[f"{p}.touching"] = np.array([float(m[i].touching) for m in modes_of])
+        ch[f"{p}.touching"] = _per_sample(modes_of, lambda m, i=i: m[i].touching)
         ch[f"{p}.F_d"] = smp.F_d[c.name]
         if c.friction is not None and len(c.tangents):
             ch[f"{p}.F_f"] = smp.F_f[c.name]
             ch[f"{p}.v_slip"] = smp.v_slip[c.name]
-            ch[f"{p}.stuck"] = np.array([float(m[i].stuck) for m in modes_of])
+            ch[f"{p}.stuck"] = _per_sample(modes_of, lambda m, i=i: m[i].stuck)
         for dc in c.tangent_chains:
             ch[f"{p}.{dc.label}.F"] = smp.iface[f"{c.name}.{dc.label}"]
         for k in range(len(c.tangents)):
@@ -142,3 +152,13 @@ def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
         ch["energy.work"] = xs[:, 2 * nQ + system.energy_slot]
         ch["energy.dissipated"] = xs[:, 2 * nQ + system.energy_slot + 1]
     return ch
+
+
+def _per_sample(modes_of: list[list[ContactMode]], value) -> np.ndarray:
+    """float(value(modes)) per sample, evaluated once per run of samples sharing one modes list."""
+    values, counts = [], []
+    for _, run in groupby(modes_of, key=id):
+        same = list(run)
+        values.append(float(value(same[0])))
+        counts.append(len(same))
+    return np.repeat(np.array(values), counts)

@@ -93,8 +93,12 @@ class _Steps:
     def f_old(self, i: int) -> np.ndarray:
         return self.f0 if i == 0 else self.blocks[i - 1][_F_NEW]
 
-    def build(self, steps: np.ndarray) -> None:
-        """Interpolant coefficients of the given steps (DOP853's stages 14–16, in one batch)."""
+    def build(self, steps: np.ndarray, derivatives: Callable | None = None) -> None:
+        """Interpolant coefficients of the given steps (DOP853's stages 14–16, in one batch).
+
+        ``derivatives(ts, Y) -> F``: the right-hand side at all the steps' stage states at once, in place
+        of one call per state (output sampling; :func:`~contactdyn.samples.plan_derivatives` gives the
+        calls' values bitwise)."""
         steps = [int(i) for i in steps if int(i) not in self.coef]
         if not steps:
             return
@@ -110,8 +114,11 @@ class _Steps:
         for s in range(_N + 1, _coef.N_STAGES_EXTENDED):
             Ys = Y0 + h[:, None] * np.einsum("msn,s->mn", K[:, :s], _A[s, :s])
             ts = t_old + _C[s] * h
-            for k in range(m):
-                K[k, s] = self.fun(float(ts[k]), Ys[k])
+            if derivatives is not None:
+                K[:, s] = derivatives(ts, Ys)
+            else:
+                for k in range(m):
+                    K[k, s] = self.fun(float(ts[k]), Ys[k])
             self.calls += m
         dy = B[:, _Y_NEW] - Y0
         F = np.empty((m, _coef.INTERPOLATOR_POWER, self.n))
@@ -137,8 +144,11 @@ class DenseSolution:
         """Right-hand-side calls made for interpolants after the run returned (output sampling)."""
         return self.steps.calls - self.calls_counted
 
-    def __call__(self, t) -> np.ndarray:
-        """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t)))."""
+    def __call__(self, t, derivatives: Callable | None = None) -> np.ndarray:
+        """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t))).
+
+        ``derivatives``: see :meth:`_Steps.build` (the interpolants this call builds; for output samples
+        only: the run's own event location and segment ends use the calls)."""
         st = self.steps
         tt = np.atleast_1d(np.asarray(t, float))
         if not len(self.ends):
@@ -146,7 +156,7 @@ class DenseSolution:
             return out[:, 0] if np.ndim(t) == 0 else out
         idx = np.minimum(np.searchsorted(self.ends, tt, side="left"), len(self.ends) - 1)
         steps, at = np.unique(idx, return_inverse=True)  # per step, then per sample
-        st.build(steps)
+        st.build(steps, derivatives)
         ends = np.array(st.t)
         s = ((tt - ends[idx]) / (ends[idx + 1] - ends[idx]))[:, None]
         F = np.array([st.coef[int(i)] for i in steps])[at]

@@ -50,19 +50,20 @@ def make_rhs(plan):
     cat = np.concatenate
     ring = plan.ring
     time_terms, tv = _time_terms(plan)
-    phi_and_jacobians = _phi_function(plan, time_terms)
+    phi_and_jacobians = _phi_function(plan, time_terms, tv)
     impulse_rates = _impulse_rates(plan)
     friction = _friction_terms(plan)
     solve = _command_and_solve(plan)
     launch = _launch(plan, friction, solve) if any(launching(mode) for mode in plan.modes) else None
     plan.launch = launch
     plan.friction_terms = friction
+    plan.impulse_rates = impulse_rates
     plan.time_terms = time_terms
-    plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0]
+    plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0].copy()
     modes = plan.modes  # this call's own, 2-D reference directions included (ModePlan.use)
 
     def rhs(t, x):
-        phi, Js = phi_and_jacobians(t, x, time_terms(t, tv))
+        phi, Js = phi_and_jacobians(t, x)
         y = P.dot(phi)
         o = y[m2 + m:]  # the affine outputs
         b_ctl = None
@@ -76,7 +77,7 @@ def make_rhs(plan):
             xd = cat((x[nQ:2 * nQ], z[:nQ], y[o_y]))
             if zdot is not None:
                 xd[z_slice] = zdot
-            impulse_rates(xd, z, y, now, dirs)
+            impulse_rates(xd, z, o, now, dirs)
         else:
             xd = cat((x[nQ:2 * nQ], z[:nQ]))
         ring[0] = ring[1]
@@ -242,7 +243,8 @@ def _launch(plan, friction, solve):
 
 
 def _time_terms(plan):
-    """(time_terms(t, out), its default buffer): the reference's and ramps' time terms of e, and the trailing 1."""
+    """(time_terms(t, out), its default buffer): the reference's and ramps' time terms of e, and the trailing 1;
+    ``time_terms.at_times(ts)``: the same at many times, as rows."""
     tv = np.zeros(plan.ne - plan.e_frame[-1] - 6)  # time terms and the trailing 1
     tv[-1] = 1.0
     base = plan.e_frame[-1] + 6
@@ -259,72 +261,108 @@ def _time_terms(plan):
             out[slot] = at(t)[0]
         return out
 
+    ones = tv.copy()
+    profiles = np.frompyfunc(profile, 3, 3)  # element by element, without a Python loop per time
+    ramps = [(slot, np.frompyfunc(lambda t, at=at: at(t)[0], 1, 1)) for slot, at in time_ramps]
+
+    def at_times(ts):
+        """The time terms at each time of ``ts`` [s], as rows (len(ts), len(tv)): each term over all times at once."""
+        out = np.tile(ones, (len(ts), 1))
+        for slot, kind, start, duration, af in time_moves:
+            sg, dsg, _ = profiles(kind, (ts - start) / duration, af)
+            out[:, slot] = sg
+            out[:, slot + 1] = dsg.astype(float) / duration
+        for slot, at in ramps:
+            out[:, slot] = at(ts)
+        return out
+
+    time_terms.at_times = at_times
     return time_terms, tv
 
 
-def _phi_function(plan, time_terms):
-    """phi(t, x, tv) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x."""
+def _phi_function(plan, time_terms, tv0):
+    """phi(t, x, tv=None) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x.
+
+    φ and the Jacobians are views of one buffer the next call overwrites: a call writes each piece
+    in place (Pinocchio's H, h, g and frame translations are read through views of its data, which
+    keeps its arrays for its lifetime; ``a[...] = b`` is the cheapest write), ~1.5 µs cheaper than
+    concatenating fresh pieces. ``tv``: the
+    time terms, else computed into the buffer; ``tv0``: their initial values (the trailing 1).
+    """
     s = plan.system
     model, data = s.robot.model, s.robot.data
     nQ, nv = s.nQ, s.nv
     fids = plan.fids
-    single = len(fids) == 1
-    fid0 = fids[0]
+    nf = len(fids)
+    phi = np.empty(plan.P.shape[1])
+    H_part = phi[:nv * nv].reshape((nv, nv), order="F")  # φ holds H column by column (ravel "K" of F-order)
+    Js = tuple(phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J)
+    drifts = [phi[i:i + 3] for i in plan.i_dr]
+    h_part = phi[plan.i_h:plan.i_h + nv]
+    g_part = phi[plan.i_h + nv:plan.i_e] if plan.with_g else None
+    i_x = plan.i_e
+    x_part = phi[i_x:i_x + s.n]
+    e_frame = [i_x + k for k in plan.e_frame]
+    tv_part = phi[e_frame[-1] + 6:]
+    tv_part[:] = tv0
     compute = pin.computeAllTerms
     placement, jacobian, accel = pin.updateFramePlacement, pin.getFrameJacobian, pin.getFrameClassicalAcceleration
     lwa = LWA
-    cat = np.concatenate
-    with_g = plan.with_g
+    dot = np.dot
+    H, h, g = data.M, data.nle, data.g  # views of Pinocchio's data
+    #: per frame: its id, where its Jacobian goes (a 1-DOF robot's comes as (6,): written into a (3,) view),
+    #: its Jacobian, J̇q̇, Pinocchio's translation, and φ's p and ṗ
+    frames = [(fids[f], Js[f].reshape(3) if nv == 1 else Js[f], Js[f], drifts[f], data.oMf[fids[f]].translation,
+               phi[e_frame[f]:e_frame[f] + 3], phi[e_frame[f] + 3:e_frame[f] + 6]) for f in range(nf)]
 
-    def phi(t, x, tv=None):
-        q = x[:nv]
+    def phi_of(t, x, tv=None):
         v = x[nQ:nQ + nv]
-        compute(model, data, q, v)
+        compute(model, data, x[:nv], v)
+        H_part[...] = H
+        h_part[...] = h
+        if g_part is not None:
+            g_part[...] = g
+        x_part[...] = x
+        for fid, J_rows, J, drift, p, p_part, pd_part in frames:
+            J_rows[...] = jacobian(model, data, fid, lwa)[:3]
+            drift[...] = accel(model, data, fid, lwa).linear
+            placement(model, data, fid)
+            p_part[...] = p
+            dot(J, v, out=pd_part)
         if tv is None:
-            tv = time_terms(t)
-        if single:
-            J = jacobian(model, data, fid0, lwa).reshape(6, nv)[:3]
-            if with_g:
-                return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, data.g,
-                            x, placement(model, data, fid0).translation, J.dot(v), tv)), (J,)
-            return cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid0, lwa).linear, data.nle, x,
-                        placement(model, data, fid0).translation, J.dot(v), tv)), (J,)
-        Js = [jacobian(model, data, fid, lwa).reshape(6, nv)[:3] for fid in fids]
-        pv = []
-        for fid, J in zip(fids, Js, strict=True):
-            pv += [placement(model, data, fid).translation, J.dot(v)]
-        g_part = (data.g,) if with_g else ()
-        return cat([data.M.ravel("K"), *[J.ravel() for J in Js],
-                    *[accel(model, data, fid, lwa).linear for fid in fids], data.nle, *g_part, x, *pv, tv]), Js
+            time_terms(t, tv_part)
+        else:
+            tv_part[...] = tv
+        return phi, Js
 
-    return phi
+    return phi_of
 
 
 def _impulse_rates(plan):
-    """rates(ẋ, z, y, modes, dirs): write the impulse states' rates (∫F dt, ∫F_f dt per friction contact) into ẋ;
-    ``dirs``: the 2-D sliding directions this call's friction terms already computed (by contact index)."""
-    impulses = impulse_terms(plan)
-    m = plan.m
-    off = m * m + m
-
+    """rates(ẋ, z, o, modes, dirs): write the impulse states' rates (∫F dt, ∫F_f dt per friction contact) into ẋ
+    from the solution z and the affine outputs o; ``dirs``: the 2-D sliding directions this call's friction
+    terms already computed (by contact index), or None."""
+    off = plan.m * plan.m + plan.m  # impulse_terms index y = [A, b, o]: o's start
+    impulses = [(i0, from_z, k_n if from_z else k_n - off, sliding, mu, d0, k_visc - off, stick, ci)
+                for i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci in impulse_terms(plan)]
     s = plan.system
     o_vt = [plan.o_vt[c.name] for c in s.contacts]
 
-    def rates(xd, z, y, modes, dirs):
+    def rates(xd, z, o, modes, dirs):
         for i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci in impulses:
-            F_n = z[k_n] if from_z else y[k_n]
+            F_n = z[k_n] if from_z else o[k_n]
             xd[i0] = F_n
             if stick is not None:
                 xd[i0 + 1:i0 + 1 + len(stick)] = z[stick]
             elif sliding:
                 Fp = F_n if F_n > 0.0 else 0.0
                 if d0 is not None:  # 1-D
-                    xd[i0 + 1] = -mu * Fp * d0 + y[k_visc]
+                    xd[i0 + 1] = -mu * Fp * d0 + o[k_visc]
                 else:
                     d = dirs.get(ci) if dirs else None
                     if d is None:
-                        d = slip_direction(s, y[off:][o_vt[ci]], modes[ci])
-                    xd[i0 + 1:i0 + 1 + len(d)] = -mu * Fp * d + y[k_visc:k_visc + len(d)]
+                        d = slip_direction(s, o[o_vt[ci]], modes[ci])
+                    xd[i0 + 1:i0 + 1 + len(d)] = -mu * Fp * d + o[k_visc:k_visc + len(d)]
 
     return rates
 

@@ -21,7 +21,7 @@ from .friction import launching
 from .phases import reference_at
 from .plan_fold import contact_torque_of
 
-__all__ = ["Samples", "plan_samples", "evaluated_samples", "slip_directions"]
+__all__ = ["Samples", "plan_samples", "plan_derivatives", "evaluated_samples", "slip_directions"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: rows per matrix product in the output pass, small enough to keep OpenBLAS on one thread: with 128,
@@ -62,6 +62,8 @@ class Samples:
 
     @classmethod
     def concatenate(cls, parts: list[Samples], system) -> Samples:
+        if len(parts) == 1:
+            return parts[0]
         out = cls(0, system)
         for name in ("tau", "tau_cmd", "u", "limit_torque", "tip", "x_d", "body_force"):
             setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
@@ -123,6 +125,36 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     return S
 
 
+def plan_derivatives(plan):
+    """f(ts, X) -> Ẋ (N, n): the plan's right-hand side at many states at once (φ, the solves and the
+    read-out as in :func:`plan_samples`), for the extra stages of the dense output's interpolants
+    (:meth:`~contactdyn.dop853.DenseSolution.__call__`), bitwise the call's: the products the call makes one
+    by one are made so here (``exact``), the rest is elementwise or the same LAPACK solve. None where the
+    samples' arithmetic is not the call's: a slide launching from rest, a fold, a controller called per
+    call, drives (a clipping sample takes the readable law, equal only to 1e-10), 2-D sliding (its
+    directions and tilt are computed over samples in another order)."""
+    two_d = plan.dyn_tilt or any(dT is None for *_, dT, _ in plan.coulomb_terms)
+    if plan.launch is not None or getattr(plan, "folded_detail", None) is not None or not plan.affine_ctl \
+            or plan.compiled_drives is not None or two_d:
+        return None
+    s = plan.system
+    nQ, n = s.nQ, s.n
+    rates, modes = plan.impulse_rates, plan.modes
+
+    def derivatives(ts: np.ndarray, X: np.ndarray) -> np.ndarray:
+        _, O, Z, _, _, _, _ = _solve_samples(plan, ts, X, exact=True)
+        Xd = np.empty((len(ts), n))
+        Xd[:, :nQ] = X[:, nQ:2 * nQ]
+        Xd[:, nQ:2 * nQ] = Z[:, :nQ]
+        if n > 2 * nQ:
+            Xd[:, 2 * nQ:] = O[:, plan.o_y]
+            for xd, z, o in zip(Xd, Z, O, strict=True):
+                rates(xd, z, o, modes, None)
+        return Xd
+
+    return derivatives
+
+
 def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
     """As :func:`_solve_samples` for a plan folding measured forces or a carried reference into its solve:
     each sample through the plan's own fold (:func:`~contactdyn.plan_fold.folded_solve`), which gives the
@@ -170,8 +202,11 @@ def _generic_command(plan):
     return command
 
 
-def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
-    """φ, the outputs o and the solution z at every sample, all at once: (Φ, O, Z, Jacobians, τ of a generic law)."""
+def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
+    """φ, the outputs o and the solution z at every sample, all at once: (Φ, O, Z, Jacobians, τ of a generic law).
+
+    ``exact``: the products the call makes one by one (P φ, J q̇) made so here too, for values bitwise those
+    of the call where the rest is elementwise (:func:`plan_derivatives`)."""
     s = plan.system
     N = len(ts)
     nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
@@ -181,11 +216,7 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
     tau = np.zeros((N, nv))
     if generic:
         command = _generic_command(plan)
-    ntv = plan.ne - plan.e_frame[-1] - 6
-    TV = np.empty((N, ntv))
-    TV[:, -1] = 1.0
-    for k in range(N):
-        plan.time_terms(ts[k], TV[k])
+    TV = plan.time_terms.at_times(ts)
     if generic or len(plan.fids) > 1:
         phi_at = plan.phi_at
         for k in range(N):
@@ -193,8 +224,8 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
             if generic:  # (Pinocchio's data at this sample: the controller reads it)
                 tau[k] = command(ts[k], X[k], [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J], phi)
     else:
-        _phi_batch(plan, X, TV, Phi)
-    Y = _rows_times(Phi, plan.PT)
+        _phi_batch(plan, X, TV, Phi, exact)
+    Y = np.array([plan.P.dot(phi) for phi in Phi]).reshape(N, -1) if exact else _rows_times(Phi, plan.PT)
     A = Y[:, :m2].reshape(N, m, m)
     B = Y[:, m2:m2 + m]
     O = Y[:, m2 + m:]
@@ -332,33 +363,50 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
         S.stages[label][:] = O[:, sl]
 
 
-def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray) -> None:
-    """Φ for one robot frame: Pinocchio per sample (H, J, J̇q̇, h, [g], p), the rest in batch."""
+def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray, exact: bool = False) -> None:
+    """Φ for one robot frame: Pinocchio per sample (H, J, J̇q̇, h, [g], p: each written into its own
+    per-sample array, H, h, g and p through views of Pinocchio's data), the rest (x, ṗ = J q̇, the
+    time terms) in batch."""
     s = plan.system
     model, data = s.robot.model, s.robot.data
     nv, nQ, n = s.nv, s.nQ, s.n
+    N = len(X)
     fid = plan.fids[0]
     i_e = plan.i_e
     compute, placement = pin.computeAllTerms, pin.updateFramePlacement
     jacobian, accel = pin.getFrameJacobian, pin.getFrameClassicalAcceleration
-    cat = np.concatenate
+    H, h, g, p = data.M, data.nle, data.g, data.oMf[fid].translation  # views of Pinocchio's data
     with_g = plan.with_g
-    raw = np.empty((len(X), i_e + 3))
-    for k in range(len(X)):
-        x = X[k]
-        compute(model, data, x[:nv], x[nQ:nQ + nv])
-        J = jacobian(model, data, fid, _LWA).reshape(6, nv)[:3]
+    Hs = np.empty((N, nv, nv))
+    Js = np.empty((N, 6, nv))
+    drifts, hs, gs, ps = np.empty((N, 3)), np.empty((N, nv)), np.empty((N, nv)), np.empty((N, 3))
+    Q, V = X[:, :nv], X[:, nQ:nQ + nv]
+    J_rows = Js.reshape(N, 6) if nv == 1 else Js  # a 1-DOF robot's Jacobian comes as (6,)
+    for q, v, H_k, h_k, g_k, J_k, drift_k, p_k in zip(Q, V, Hs, hs, gs, J_rows, drifts, ps, strict=True):
+        compute(model, data, q, v)
+        H_k[...] = H
+        h_k[...] = h
         if with_g:
-            raw[k] = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid, _LWA).linear, data.nle, data.g,
-                          placement(model, data, fid).translation))
-        else:
-            raw[k] = cat((data.M.ravel("K"), J.ravel(), accel(model, data, fid, _LWA).linear, data.nle,
-                          placement(model, data, fid).translation))
-    Phi[:, :i_e] = raw[:, :i_e]
+            g_k[...] = g
+        J_k[...] = jacobian(model, data, fid, _LWA)
+        drift_k[...] = accel(model, data, fid, _LWA).linear
+        placement(model, data, fid)
+        p_k[...] = p
+    J_all = Js[:, :3]
+    Phi[:, :nv * nv] = Hs.transpose(0, 2, 1).reshape(N, nv * nv)  # φ holds H column by column (ravel "K")
+    Phi[:, plan.i_J[0]:plan.i_J[0] + 3 * nv] = J_all.reshape(N, 3 * nv)
+    Phi[:, plan.i_dr[0]:plan.i_dr[0] + 3] = drifts
+    Phi[:, plan.i_h:plan.i_h + nv] = hs
+    if plan.with_g:
+        Phi[:, plan.i_h + nv:i_e] = gs
     Phi[:, i_e:i_e + n] = X
-    Phi[:, i_e + n:i_e + n + 3] = raw[:, i_e:]
-    J_all = raw[:, plan.i_J[0]:plan.i_J[0] + 3 * nv].reshape(len(X), 3, nv)
-    Phi[:, i_e + n + 3:i_e + n + 6] = np.einsum("kiv,kv->ki", J_all, X[:, nQ:nQ + nv])
+    Phi[:, i_e + n:i_e + n + 3] = ps
+    if exact:  # ṗ = J q̇ one by one, as the call (BLAS may fuse its multiply-adds)
+        J_rows = Phi[:, plan.i_J[0]:plan.i_J[0] + 3 * nv].reshape(N, 3, nv)  # contiguous, as the call's
+        for J, v, pd in zip(J_rows, V, Phi[:, i_e + n + 3:i_e + n + 6], strict=True):
+            np.dot(J, v, out=pd)
+    else:
+        Phi[:, i_e + n + 3:i_e + n + 6] = np.einsum("kiv,kv->ki", J_all, V)
     Phi[:, i_e + n + 6:] = TV
 
 def slip_directions(plan, ci: int, O: np.ndarray, refs: np.ndarray | None = None) -> np.ndarray:

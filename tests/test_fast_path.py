@@ -10,6 +10,7 @@ import pytest
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.chain import ChainStage
 from contactdyn.fastpath import ENERGY, UNDECLARED, Gap
+from contactdyn.rhsplan import _PLANS
 from contactdyn.scene import sims_dir
 from contactdyn.simulate import run_system
 from contactdyn.stage_laws import STAGE_LAWS, StageLaw, register_stage_law
@@ -130,3 +131,24 @@ def test_a_compiled_launch_from_rest_agrees_with_the_readable_model():
 def test_every_scene_runs_every_mode_on_the_compiled_path(path):
     r = run_system(System(load_scene(path)))
     assert r.stats["fallback_modes"] == {}, r.stats["fallback_modes"]
+
+
+def test_a_call_writes_phi_in_place_and_phi_at_returns_its_own_array():
+    """The call's φ is one buffer rewritten in place; ``phi_at`` hands out copies (a caller keeping one
+    is not changed by the next call), and each is the φ of its own state: the call at that state gives
+    System.evaluate's ẋ (the pieces written in place, not stale values of an earlier state)."""
+    system = System(load_scene("b1", {"duration": 0.05}))
+    run_system(system)
+    plan = next(p for p in _PLANS[system].values() if p.ok)
+    x0, _ = system.initial_state()
+    rng = np.random.default_rng(3)
+    states = [x0 + 1e-2 * rng.normal(size=system.n) for _ in range(3)]
+    phis = [plan.phi_at(0.1, x) for x in states]
+    kept = [phi.copy() for phi in phis]
+    for x, phi, first in zip(states, phis, kept, strict=True):
+        assert np.array_equal(phi, first)  # no later call changed it
+        assert np.array_equal(plan.phi_at(0.1, x), phi)
+    assert not np.array_equal(phis[0], phis[1])
+    for x in states[::-1]:
+        want = system.evaluate(0.1, x, plan.modes, plan.phase).xdot
+        np.testing.assert_allclose(plan.rhs(0.1, x.copy()), want, rtol=1e-9, atol=1e-9 * np.abs(want).max())

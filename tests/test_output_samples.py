@@ -7,16 +7,23 @@ Each scene runs twice on the same integration: once with the plans' batched outp
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import contactdyn.rhsplan as rhsplan
 from contactdyn import Robot, parse_scene
-from contactdyn.samples import evaluated_samples
-from contactdyn.simulate import simulate
+from contactdyn.channels import _per_sample
+from contactdyn.contact import ContactMode
+from contactdyn.rhsplan import _PLANS
+from contactdyn.samples import evaluated_samples, plan_derivatives
+from contactdyn.scene import load_scene
+from contactdyn.simulate import run_system, simulate
+from contactdyn.system import System
 
 #: scene -> a duration [s] that holds its phases' kinds (motor, elastic, force-reading, a carried reference)
-SCENES = {"case1_cart": 1.1, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "case3_b_force": 0.3}
+SCENES = {"case1_cart": 1.1, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "case3_b_force": 0.3, "b1": 0.3}
 
 
 def _readable(plan, ts, X):
@@ -79,3 +86,57 @@ def test_folded_forces_with_clipped_voltages_in_the_batched_output(monkeypatch):
     result = _assert_same_channels(parse_scene(doc), None, monkeypatch)
     u = result.channels["u"]
     assert np.mean(np.abs(u) == 4.0) > 0.05 and np.mean(np.abs(u) < 4.0) > 0.05
+
+
+@pytest.mark.parametrize("scene, duration", [("b1", 2.0), ("case2_writer_b", 1.2), ("case1_cart", 4.0)])
+def test_time_terms_of_many_samples_equal_one_at_a_time(scene, duration):
+    """The output's time terms (``time_terms.at_times``: element by element over all samples) are bitwise
+    those the right-hand side computes at one time, before, inside and after every move and ramp and at
+    both sides of each corner: constant velocity, trapezoid, triangle, velocity ramp, exponential, step
+    and linear set-points."""
+    system = System(load_scene(scene, {"duration": duration, "solver.output_rate": 10.0}))
+    run_system(system)
+    checked = 0
+    for plan in (p for p in _PLANS[system].values() if p.ok and len(p.time_moves) + len(p.time_ramps)):
+        corners = [c for _, m in plan.time_moves for c in m.corners()] + [c for _, r, _ in plan.time_ramps
+                                                                             for c in r.corners()]
+        ts = np.concatenate([np.linspace(-0.5, 6.0, 101), np.ravel(corners)])
+        rows = plan.time_terms.at_times(ts)
+        for t, row in zip(ts, rows, strict=True):
+            one = np.zeros(len(row))
+            one[-1] = 1.0
+            assert np.array_equal(plan.time_terms(float(t), one), row), t
+        checked += 1
+    assert checked
+
+
+def test_mode_flags_per_run_of_samples():
+    """A channel read off the modes (touching, stuck) is the same evaluated once per run of samples
+    sharing one modes list as per sample, runs of one and a list coming back included."""
+    free, slide, stick = [ContactMode()], [ContactMode(True, False, (1.0,))], [ContactMode(True, True)]
+    modes_of = [free] * 3 + [slide] + [stick] * 4 + [slide] * 2 + [free]
+    for value in (lambda m: m[0].touching, lambda m: m[0].stuck):
+        assert np.array_equal(_per_sample(modes_of, value), [float(value(m)) for m in modes_of])
+    assert _per_sample([], lambda m: m[0].stuck).shape == (0,)
+
+
+@pytest.mark.parametrize("scene", ["b1", "case2_writer_b", "hard_mass_ratio"])
+def test_derivatives_of_many_states_are_the_calls_bitwise(scene):
+    """``plan_derivatives`` (the dense output's extra stages all at once) gives bitwise the plan's call at
+    each state (a stiff chain included: a last-bit difference there shows in the stages' rates at 1e-11)."""
+    path = Path(__file__).resolve().parent.parent / "benchmarks" / "hard" / f"{scene[5:]}.toml"
+    system = System(load_scene(str(path) if scene.startswith("hard_") else scene, {"solver.output_rate": 10.0}))
+    run_system(system)
+    rng = np.random.default_rng(5)
+    x0, _ = system.initial_state()
+    checked = 0
+    for plan in (p for p in _PLANS[system].values() if p.ok):
+        derivatives = plan_derivatives(plan)
+        assert derivatives is not None
+        ts = plan.phase.t_start + rng.uniform(0.0, 0.5, 40)
+        X = x0 + 1e-3 * rng.normal(size=(40, system.n))
+        got = derivatives(ts, X)
+        for t, x, xd in zip(ts, X, got, strict=True):
+            assert np.array_equal(plan.rhs(float(t), x.copy()), xd)
+        checked += 1
+    assert checked
