@@ -129,6 +129,19 @@ class _Steps:
         for k, i in enumerate(steps):
             self.coef[i] = F[k]
 
+    def at(self, i: int, t: float) -> np.ndarray:
+        """The state at t [s] on step i's own interpolant (built if needed), as solve_ivp's step dense output."""
+        if i not in self.coef:
+            self.build(np.array([i]))
+        F = self.coef[i]
+        t_old = self.t[i]
+        s = (t - t_old) / (self.t[i + 1] - t_old)
+        y = np.zeros(self.n)
+        for k, row in enumerate(range(F.shape[0] - 1, -1, -1)):  # Horner, as scipy's Dop853DenseOutput
+            y += F[row]
+            y *= s if k % 2 == 0 else 1.0 - s
+        return y + self.y_old(i)
+
 
 class DenseSolution:
     """y(t) on [t0, t_end] from the steps' 7th-order interpolants (like ``OdeSolution``)."""
@@ -211,9 +224,10 @@ class _EventWatch:
         self.g = g_new
         if not fired:
             return False
-        dense, t_old = DenseSolution(steps, t), steps.t[-2]
-        for i in fired:  # as solve_ivp: brentq on the step's interpolant
-            root = brentq(lambda s, e=self.events[i]: e(s, dense(s)), t_old, t, xtol=4 * _EPS, rtol=4 * _EPS)
+        step, t_old = len(steps.t) - 2, steps.t[-2]
+        for i in fired:  # as solve_ivp: brentq on the step's own interpolant
+            root = brentq(lambda s, e=self.events[i]: e(s, steps.at(step, s)), t_old, t, xtol=4 * _EPS,
+                          rtol=4 * _EPS)
             self.hits.append((root, i))
         self.hits.sort()
         first = next((k for k, (_, i) in enumerate(self.hits) if self.terminal[i]), None)
