@@ -215,13 +215,17 @@ class _EventWatch:
         self.g = [float(e(t0, y0)) for e in self.events]
         self.direction = [float(getattr(e, "direction", 0.0)) for e in self.events]
         self.terminal = [bool(getattr(e, "terminal", False)) for e in self.events]
+        self.falling = all(d < 0 for d in self.direction)  #: _active reduces to g_old ≥ 0 ≥ g_new
         self.hits: list[tuple[float, int]] = []  #: (root [s], event), in time order
 
     def stop(self, steps: _Steps, t: float, x: np.ndarray) -> bool:
         """At the step end (t, x): record the roots in the step; True at a terminal one (hits ends with it)."""
-        g_new = [float(e(t, x)) for e in self.events]
-        fired = [i for i, (a, b, d) in enumerate(zip(self.g, g_new, self.direction, strict=True)) if _active(a, b, d)]
+        g_old, g_new = self.g, [float(e(t, x)) for e in self.events]
         self.g = g_new
+        if self.falling:  # all events fall through zero (the hybrid loop's): one test per event
+            fired = [i for i, (a, b) in enumerate(zip(g_old, g_new)) if a >= 0.0 >= b]
+        else:
+            fired = [i for i, (a, b, d) in enumerate(zip(g_old, g_new, self.direction)) if _active(a, b, d)]
         if not fired:
             return False
         step, t_old = len(steps.t) - 2, steps.t[-2]

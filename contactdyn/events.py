@@ -168,20 +168,23 @@ class SlipWatch:
         self.kind = "slip"
         self.t_end = -math.inf  #: last step end seen [s]
         self.latch = math.inf  #: from this time on g is held negative [s]
-        self.samples: list[tuple[float, float]] = []  #: (t, g) at the stages since the last step end
+        self.outside: list[float] = []  #: times [s] of the stages since the last step end that saw g < 0
 
     def g(self, ev: Evaluation) -> float:
         return self.mu_s * ev.normal_force[self.contact] - float(np.linalg.norm(ev.friction[self.contact]))
 
     def sample(self, t: float, g: float) -> None:
-        self.samples.append((t, g))
+        if g < 0.0:
+            self.outside.append(t)
 
     def __call__(self, t: float, x: np.ndarray) -> float:
         g = self.value(t, x)
         if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
             t_old, self.t_end = self.t_end, t
-            hidden = [ts for ts, gs in self.samples if t_old < ts < t and gs < 0.0]
-            self.samples = [(ts, gs) for ts, gs in self.samples if ts > t]
+            if not self.outside:
+                return g
+            hidden = [ts for ts in self.outside if t_old < ts < t]
+            self.outside = [ts for ts in self.outside if ts > t]
             if g > 0.0 and hidden:
                 self.latch = min(hidden)
                 return -1.0
