@@ -261,6 +261,7 @@ class _Core:
         self.fun, self.n, self.watch = fun, n, events
         self.rtol, self.atol = rtol, atol
         self.work = np.zeros(11 * n + 21)  # Hairer's layout: 20 parameters, then k1…k10, y1
+        self.block = self.work[_WORK0:_WORK0 + 10 * n].reshape(10, n)  #: view of k1…k10
         self.iwork = np.zeros(21, dtype=np.int32)
         self.work[1], self.work[2], self.work[3] = SAFETY, _END_AT_REJECTION, MAX_FACTOR
         self.work[4] = -1.0  # no Lund stabilisation (beta = 0), as solve_ivp
@@ -271,6 +272,7 @@ class _Core:
         self.nan = np.full(n, np.nan)
         self.rejected: tuple[float, float] | None = None  #: (step [s], error norm) that ended the run
         self.grew = False  #: the run was ended because the step after a retried one grew (solve_ivp forbids it)
+        self.ending = False  #: failure, rejected or grew: the run is being ended
 
     def run(self, t_end: float, h: float, limit: float | None) -> int:
         """One run of the core from the last accepted step with first step h [s] (the core's ierr).
@@ -278,7 +280,7 @@ class _Core:
         ``limit`` [s]: after a rejection, the step following the first accepted one may not exceed it.
         """
         steps = self.steps
-        self.limit, self.check_next, self.rejected, self.grew = limit, False, None, False
+        self.limit, self.check_next, self.rejected, self.grew, self.ending = limit, False, None, False, False
         self.fresh, self.started, self.since = True, False, 0
         self.work[6] = h
         self.iwork[:] = 0
@@ -297,8 +299,7 @@ class _Core:
 
     def error_norm(self, h_step: float) -> float:
         """solve_ivp's error norm of the attempt whose stages are in the workspace (the rejected one)."""
-        n = self.n
-        block = self.work[_WORK0:_WORK0 + 10 * n].reshape(10, n)
+        n, block = self.n, self.block
         y_old = self.steps.y_old(len(self.steps.t) - 1)
         scale = self.atol + self.rtol * np.maximum(np.abs(y_old), np.abs(block[_Y_NEW]))
         e5, e3 = (_ERR_ROWS @ block) / scale
@@ -309,20 +310,20 @@ class _Core:
 
     def f(self, t: float, x: np.ndarray) -> np.ndarray:
         """The right-hand side as the core calls it."""
-        if self.failure or self.rejected or self.grew:
+        if self.ending:
             return self.nan  # the run is being ended (the core stops after this attempt)
         if self.fresh:  # the core's first call: f at the start, known (f0 or the last FSAL value)
             self.fresh = False
             return self.steps.f_old(len(self.steps.t) - 1)
-        self.since += 1
-        if self.since == 1 and self.check_next:  # the first stage of the step after a retried one
+        since = self.since = self.since + 1
+        if since == 1 and self.check_next:  # the first stage of the step after a retried one
             self.check_next, limit, self.limit = False, self.limit, None
             if (t - self.steps.t[-1]) / _C[1] > limit * (1.0 + _LIMIT_SLACK):
-                self.grew = True
+                self.grew = self.ending = True
                 return self.nan
-        elif self.since == _N and t != self.last_t:  # not the FSAL call: a new attempt (a rejection at t = 0)
+        elif since == _N and t != self.last_t:  # not the FSAL call: a new attempt (a rejection at t = 0)
             h_step = self.last_t - self.steps.t[-1]
-            self.rejected = (h_step, self.error_norm(h_step))
+            self.rejected, self.ending = (h_step, self.error_norm(h_step)), True
             return self.nan
         x = x.copy()  # the core passes a view of its workspace: nothing may keep that past the run
         self.last_t, self.last_x = t, x
@@ -331,6 +332,7 @@ class _Core:
             return self.fun(t, x)
         except BaseException as exc:  # raised again after the core returns (it cannot carry it)
             self.failure.append(exc)
+            self.ending = True
             return self.nan
 
     def solout(self, t: float, y: np.ndarray) -> int:
@@ -339,10 +341,11 @@ class _Core:
             return self._step_end(t)
         except BaseException as exc:  # as in f
             self.failure.append(exc)
+            self.ending = True
             return -1
 
     def _step_end(self, t: float) -> int:
-        steps, n = self.steps, self.n
+        steps = self.steps
         if self.failure:
             return -1
         if not self.started:  # the call at the run's start
@@ -351,7 +354,7 @@ class _Core:
         self.check_next = self.limit is not None  # the run's first accepted step (f clears the limit)
         self.since = 0
         steps.t.append(t)
-        steps.blocks.append(self.work[_WORK0:_WORK0 + 10 * n].reshape(10, n).copy())
+        steps.blocks.append(self.block.copy())
         if not self.watch.events:
             return 0
         # the FSAL call's own array (the same values): the compiled plan has its results cached

@@ -276,6 +276,11 @@ class _ReadableValues:
         return self.cache(t, x).limit_torque
 
 
+def _turn_margin(v: np.ndarray, r: np.ndarray, band: float) -> float:
+    """The ``turn`` function v·r − ½|v| + v_ε [m/s] of a 2-D slip velocity v (|v| as np.linalg.norm's, √(v·v))."""
+    return float(v @ r) - 0.5 * math.sqrt(float(v @ v)) + band
+
+
 def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
                    plan: ModePlan | None = None):
     """The event functions of one segment, and the right-hand side that feeds their stage watches.
@@ -306,8 +311,8 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(values.slip(i, t, x) @ r) + b, "reverse",
                                   name))
         if len(r) == 2:
-            out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(values.slip(i, t, x) @ r)
-                                      - 0.5 * float(np.linalg.norm(values.slip(i, t, x))) + b, "turn", name))
+            out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
+                                      name))
     out += system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # contactdyn.limits
     fun = values.rhs
     if not watches:
