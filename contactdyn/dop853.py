@@ -223,9 +223,10 @@ class _EventWatch:
         g_old, g_new = self.g, [float(e(t, x)) for e in self.events]
         self.g = g_new
         if self.falling:  # all events fall through zero (the hybrid loop's): one test per event
-            fired = [i for i, (a, b) in enumerate(zip(g_old, g_new)) if a >= 0.0 >= b]
+            fired = [i for i, (a, b) in enumerate(zip(g_old, g_new, strict=True)) if a >= 0.0 >= b]
         else:
-            fired = [i for i, (a, b, d) in enumerate(zip(g_old, g_new, self.direction)) if _active(a, b, d)]
+            fired = [i for i, (a, b, d) in enumerate(zip(g_old, g_new, self.direction, strict=True))
+                     if _active(a, b, d)]
         if not fired:
             return False
         step, t_old = len(steps.t) - 2, steps.t[-2]

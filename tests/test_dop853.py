@@ -191,6 +191,21 @@ def test_interpolants_cost_three_calls_per_step_and_only_where_asked():
     assert got.sol.late_calls == 3 * n_steps == len(calls) - got.nfev
 
 
+def test_events_read_each_step_on_its_own_interpolant():
+    """Event location evaluates the step's own interpolant (as solve_ivp's step dense output): its start
+    state exactly at the step's start, its end state to rounding, and inside the step the values the
+    output's DenseSolution gives."""
+    got = solve(oscillator, (0.0, 10.0), [1.0, 0.0], rtol=1e-8, atol=1e-10)
+    steps = got.sol.steps
+    for i in (0, 1, len(got.t) // 2, len(got.t) - 2):
+        t_old, t_new = got.t[i], got.t[i + 1]
+        assert np.array_equal(steps.at(i, t_old), got.y[:, i])
+        assert np.allclose(steps.at(i, t_new), got.y[:, i + 1], rtol=1e-14, atol=1e-15)
+        for s in (0.25, 0.5, 0.9):
+            t = t_old + s * (t_new - t_old)
+            assert np.array_equal(steps.at(i, t), got.sol(t))
+
+
 @pytest.mark.parametrize("scene, duration, force_tol", [
     ("b1", 0.5, 1e-5),  # smooth sliding: measured 1.4e-6 N apart, each ~2e-6 N from the reference
     ("case2_writer_b", 1.5, 1e-4),  # touch, impact, stick, slip, separation: measured 5e-6 N apart
