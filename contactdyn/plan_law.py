@@ -22,9 +22,11 @@ import numpy as np
 
 from .constraints import force_columns
 from .controllers import ControlInput
+from .dynamics import surface_keys, surface_points
+from .phases import reference_at
 from .plan_probe import affine_map
 
-__all__ = ["CompiledLaw", "compiled_law"]
+__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "plan_command"]
 
 
 class CompiledLaw:
@@ -125,21 +127,41 @@ class CompiledLaw:
         ẍ_d columns once M is read (the readable law's difference before)."""
         if self.M is None:
             return self.ctl.a_d_increment(inp, axis, tau, zdot)
+        return self.carried_increment(inp.H, inp.J, axis)
+
+    def carried_increment(self, H: np.ndarray, J: np.ndarray, axis: np.ndarray) -> tuple:
+        """(Δτ, Δż or None) per unit [m/s²] more of ẍ_d along ``axis``, from M's ẍ_d columns and the model's H, J."""
         d = self.M[:, 12:15].dot(axis)
-        dtau = self.ctl.torque_increments(inp, d[:3, None], d[3:6, None] if self.swap else None)[:, 0]
+        dtau = self.ctl.increments(H, J, d[:3, None], d[3:6, None] if self.swap else None)[:, 0]
         return dtau, (d[self.zs] if self.zs is not None else None)
+
+    def row_targets(self, meta: list) -> np.ndarray:
+        """D: the tip targets per unit force of each row (M's column of a normal row's measured force, else 0)."""
+        key = tuple(meta)
+        if self._rows_key != key:
+            D = np.zeros((self.M.shape[0], len(meta)))
+            for j, (name, kind, _) in enumerate(meta):
+                if kind == "n":
+                    D[:, j] = self.M[:, self.i_forces + self.force_index[name]]
+            self._rows_key, self._rows_D = key, D
+        return self._rows_D
+
+    _rows_key: tuple | None = None
+
+    def columns(self, H: np.ndarray, J: np.ndarray, meta: list) -> tuple[np.ndarray, np.ndarray | None]:
+        """(B, D_z) of :meth:`force_columns` from the model's H and J, before the rows' own columns on the
+        measured joint torque (the caller adds them: it knows the rows)."""
+        D = self.row_targets(meta)
+        B = self.ctl.increments(H, J, D[:3], D[3:6] if self.swap else None)
+        return B, (None if self.zs is None else D[self.zs])
 
     def force_columns(self, inp: ControlInput, tau: np.ndarray, zdot, meta: list, cols: list, nv: int):
         """(B, D_z) of :func:`~contactdyn.constraints.force_columns` from M's columns of the measured forces."""
         if self.M is None and not self.read(inp):
             return force_columns(inp, self.ctl, tau, zdot, meta, cols, nv)
-        nr = len(meta)
-        D = np.zeros((self.M.shape[0], nr))
-        for j, (name, kind, _) in enumerate(meta):
-            if kind == "n":
-                D[:, j] = self.M[:, self.i_forces + self.force_index[name]]
+        D = self.row_targets(meta)
         B = self.ctl.torque_increments(inp, D[:3], D[3:6] if self.swap else None)
-        for j in range(nr):
+        for j in range(len(meta)):
             if np.any(cols[j][nv:]):  # the row reaches beyond the robot: in the measured joint torque
                 B[:, j] -= cols[j][:nv]
         return B, (None if zdot is None else D[self.zs])
@@ -153,3 +175,78 @@ def compiled_law(plan):
         law = CompiledLaw(ctl) if ctl.in_task_space else ctl
         plan._compiled_law = law
     return law
+
+
+def plan_inputs(plan, law: CompiledLaw):
+    """inputs(t, x, φ, o) -> u: :meth:`CompiledLaw.inputs` read from the plan's own slots (the tip's p and ṗ
+    in φ's e, the forces in o, z in x) and the phase's reference, ramps and surfaces, without a ControlInput
+    (the values the plan's ControlInput carries, :func:`~contactdyn.plan_rhs.controller_input`). u is one
+    buffer, rewritten per call."""
+    s, phase = plan.system, plan.phase
+    nQ = s.nQ
+    tip = plan.i_e + plan.e_frame[plan.tip_frame]
+    o_index = {c.name: plan.o_Fint.start + i for i, c in enumerate(s.contacts)}
+    o_index.update({key: sl.start for key, sl in plan.o_iface.items()})
+    i_forces = np.array([o_index[k] for k in law.force_keys], dtype=np.intp)
+    ramps = [phase.forces[k] for k in law.set_keys]
+    if surface_keys(s) != law.surface_keys:
+        raise ValueError(f"the law's surfaces {law.surface_keys} are not the system's {surface_keys(s)}")
+    modes, ref = plan.modes, law.ref
+    i_f = law.i_forces
+    i_set = i_f + len(i_forces)
+    i_z = i_set + 2 * len(ramps) + 6 * len(law.surface_keys)
+    z = slice(2 * nQ + phase.z_slice.start, 2 * nQ + phase.z_slice.stop)
+    u = np.zeros(law.nu)
+    u[-1] = 1.0
+
+    def inputs(t, x, phi, o):
+        u[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
+        if ref:
+            x_d, v_d, a_d = reference_at(s, phase, t, x)
+            u[6:9] = x_d
+            u[9:12] = v_d
+            u[12:15] = a_d
+        u[i_f:i_set] = o[i_forces]  # measured forces [N]
+        j = i_set
+        for ramp in ramps:  # F_d [N], Ḟ_d [N/s]
+            u[j:j + 2] = ramp.at(t)
+            j += 2
+        for p, v in surface_points(s, x, modes):
+            u[j:j + 3] = p
+            u[j + 3:j + 6] = v
+            j += 6
+        u[i_z:-1] = x[z]
+        return u
+
+    return inputs
+
+
+def plan_command(plan):
+    """command(t, x, Js, φ, o, τ_c) -> (τ [N·m or N], ż, H, J) of the plan's force-reading tip law by its
+    matrix M at the plan's own slots (:func:`plan_inputs`; H, J: the model's terms it used), or None while M
+    is not read; None for a controller without one (:func:`compiled_law`)."""
+    law = compiled_law(plan)
+    if not isinstance(law, CompiledLaw) or law.reason is not None:
+        return None
+    s = plan.system
+    nQ, nv = s.nQ, s.nv
+    robot, ctl = s.robot, law.ctl
+    tf = plan.tip_frame
+    i_dr = plan.i_dr[tf]
+    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
+    inputs = None
+
+    def command(t, x, Js, phi, o, tau_c):
+        nonlocal inputs
+        if law.M is None:
+            return None
+        if inputs is None:
+            inputs = plan_inputs(plan, law)
+        y = law.M.dot(inputs(t, x, phi, o))
+        H = robot.H + D_ctl if D_ctl is not None else robot.H
+        J = Js[tf]
+        tau = ctl.torque(H, robot.h, tau_c, J, phi[i_dr:i_dr + 3], x[nQ:nQ + nv], y[:3],
+                         y[3:6] if law.swap else None)
+        return tau, (y[law.zs] if law.zs is not None else None), H, J
+
+    return command

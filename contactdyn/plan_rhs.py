@@ -31,7 +31,7 @@ from .linalg import solve_vector
 from .phases import reference_at
 from .plan_drives import drive_forces
 from .plan_fold import contact_torque_of, folded_solve
-from .plan_law import compiled_law
+from .plan_law import compiled_law, plan_command
 from .trajectory import profile
 
 __all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
@@ -341,11 +341,16 @@ def impulse_terms(plan) -> list[tuple]:
 
 
 def controller_call(plan):
-    """The command of a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o, τ_c) -> (τ, ż)."""
+    """The command of a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o, τ_c) -> (τ, ż);
+    a tip law read off as a matrix by it at the plan's own slots (:func:`~contactdyn.plan_law.plan_command`)."""
     make = controller_input(plan)
     command = compiled_law(plan).command
+    fast = plan_command(plan)
 
     def call(t, x, q, v, Js, phi, o, tau_contact=None):
+        got = fast(t, x, Js, phi, o, tau_contact) if fast is not None else None
+        if got is not None:
+            return got[0], got[1]
         return command(make(t, x, q, v, Js, phi, o, tau_contact))
 
     return call

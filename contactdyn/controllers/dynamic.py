@@ -56,6 +56,7 @@ import numpy as np
 
 from ..elements import Mass, Stage
 from ..errors import SceneError
+from ..linalg import svd
 from .base import BindContext, ControlInput, Controller, register
 
 __all__ = ["NominalEnvironment", "PositionDynamic", "ForceDynamic", "Hybrid", "nominal_from_chain"]
@@ -153,7 +154,7 @@ def _check_gain_size(g: np.ndarray, sizes: tuple[int, ...], key: str, file) -> N
 
 
 class _Pinv:
-    """J⁺ of the last Jacobian (the force probes call the law again at the same state)."""
+    """J⁺ of the last Jacobian (the force columns and the command read it at the same state)."""
 
     def __init__(self):
         self.key: bytes = b""
@@ -162,20 +163,24 @@ class _Pinv:
     def __call__(self, J: np.ndarray) -> np.ndarray:
         key = J.tobytes()
         if key != self.key:
-            u, s, vt = np.linalg.svd(J, full_matrices=False)
-            keep = s > 1e-10 * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, bool)
-            self.value = (vt[keep].T / s[keep]) @ u[:, keep].T
+            u, s, vt = svd(J)
+            if s.size and s[-1] > 1e-10 * s[0]:  # full rank: every singular value kept
+                self.value = (vt.T / s) @ u.T
+            else:
+                keep = s > 1e-10 * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, bool)
+                self.value = (vt[keep].T / s[keep]) @ u[:, keep].T
             self.key = key
         return self.value
 
 
-def joint_acceleration(inp: ControlInput, a: np.ndarray, k_null: float, pinv=None) -> np.ndarray:
-    """q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for a desired tip acceleration a [m/s²]."""
-    J = inp.J
+def joint_acceleration(J: np.ndarray, drift: np.ndarray, v: np.ndarray, a: np.ndarray, k_null: float,
+                       pinv=None) -> np.ndarray:
+    """q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for a desired tip acceleration a [m/s²] (J: the tip
+    Jacobian (3, nv), drift: J̇q̇ [m/s²], v: q̇)."""
     Jp = pinv(J) if pinv is not None else np.linalg.pinv(J, rcond=1e-10)
-    qdd = Jp @ (a - inp.drift)
+    qdd = Jp @ (a - drift)
     if k_null > 0.0 and J.shape[1] > 3:
-        qdd -= (np.eye(J.shape[1]) - Jp @ J) @ (k_null * inp.v)
+        qdd -= (np.eye(J.shape[1]) - Jp @ J) @ (k_null * v)
     return qdd
 
 
@@ -234,18 +239,28 @@ class _ComputedTorque(Controller):
         raise NotImplementedError
 
     def computed_torque(self, inp: ControlInput, a: np.ndarray, f_swap: np.ndarray | None) -> np.ndarray:
-        """τ = H q̈*(a) + h − τ_c (+ Jᵀ f_swap) [N·m or N]."""
-        qdd = joint_acceleration(inp, a, self.config.k_null, self._pinv)
-        tau = _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact
+        """τ = H q̈*(a) + h − τ_c (+ Jᵀ f_swap) [N·m or N] at ``inp``."""
+        return self.torque(inp.H, inp.h, inp.tau_contact, inp.J, inp.drift, inp.v, a, f_swap)
+
+    def torque(self, H: np.ndarray, h: np.ndarray, tau_c: np.ndarray, J: np.ndarray, drift: np.ndarray,
+               v: np.ndarray, a: np.ndarray, f_swap: np.ndarray | None) -> np.ndarray:
+        """τ = H q̈*(a) + h − τ_c (+ Jᵀ f_swap) [N·m or N] from the model's terms (the compiled path
+        passes its own; :meth:`computed_torque` a ControlInput's)."""
+        qdd = joint_acceleration(J, drift, v, a, self.config.k_null, self._pinv)
+        tau = _inertia_times(H, self._rotor, qdd) + h - tau_c
         if f_swap is not None:
-            tau += inp.J.T @ f_swap
+            tau += J.T @ f_swap
         return tau
 
     def torque_increments(self, inp: ControlInput, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
         """∂τ for changes of the tip targets, one per column: H J⁺ da (+ Jᵀ df) [N·m or N]."""
-        dqdd = self._pinv(inp.J) @ da
-        dtau = inp.H @ dqdd if self._rotor is None else inp.H @ dqdd - self._rotor[:, None] * dqdd
-        return dtau if df is None else dtau + inp.J.T @ df
+        return self.increments(inp.H, inp.J, da, df)
+
+    def increments(self, H: np.ndarray, J: np.ndarray, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
+        """:meth:`torque_increments` from the model's terms H and J."""
+        dqdd = self._pinv(J) @ da
+        dtau = H @ dqdd if self._rotor is None else H @ dqdd - self._rotor[:, None] * dqdd
+        return dtau if df is None else dtau + J.T @ df
 
 
 # ---- A7 -----------------------------------------------------------------------------------------
