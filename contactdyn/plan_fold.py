@@ -84,6 +84,7 @@ def folded_solve(plan, make_input, drives):
     lam_cols = slice(nQ, nQ + nr)
     L_tau, limited = drives.L_tau, bool(drives.limited)
     reach = _reaching_rows(plan)
+    every_row_reaches = reach == list(range(nr))
 
     def parts(t, x, Js, phi, o, A, tau_c):
         """(τ, ż, B, D_z, carried, (ControlInput, drive command) or None): the λ-free command and its parts per
@@ -93,8 +94,11 @@ def folded_solve(plan, make_input, drives):
         if got is not None:
             tau, zdot, H, J = got
             B, Dz = ctl.columns(H, J, meta)
-            for j in (reach if reach is not None else np.flatnonzero(A[nv:nQ, lam_cols].any(axis=0))):
-                B[:, j] += A[:nv, nQ + j]  # a row reaching beyond the robot is in the measured joint torque
+            if every_row_reaches:  # a row reaching beyond the robot is in the measured joint torque
+                B += A[:nv, lam_cols]
+            else:
+                for j in (reach if reach is not None else np.flatnonzero(A[nv:nQ, lam_cols].any(axis=0))):
+                    B[:, j] += A[:nv, nQ + j]
             carried = None if carrier is None else carried_terms(carrier[0], *ctl.carried_increment(
                 H, J, carrier[1]), zdot)
             return tau, zdot, B, Dz, carried, None

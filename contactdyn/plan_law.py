@@ -191,17 +191,26 @@ def plan_inputs(plan, law: CompiledLaw):
     ramps = [phase.forces[k] for k in law.set_keys]
     if surface_keys(s) != law.surface_keys:
         raise ValueError(f"the law's surfaces {law.surface_keys} are not the system's {surface_keys(s)}")
-    modes, ref = plan.modes, law.ref
+    modes = plan.modes
     i_f = law.i_forces
     i_set = i_f + len(i_forces)
-    i_z = i_set + 2 * len(ramps) + 6 * len(law.surface_keys)
+    i_surf = i_set + 2 * len(ramps)
+    i_z = i_surf + 6 * len(law.surface_keys)
     z = slice(2 * nQ + phase.z_slice.start, 2 * nQ + phase.z_slice.stop)
     u = np.zeros(law.nu)
     u[-1] = 1.0
+    # written once where they cannot change within the mode: a reference without moves on no body, surfaces
+    # on the ground (Contact.body_index < 0)
+    moving_ref = law.ref and (phase.reference.moves or phase.carrier is not None)
+    if law.ref and not moving_ref:
+        u[6:15] = np.concatenate(reference_at(s, phase, phase.t_start, np.zeros(s.n)))
+    surfaces_move = any(c.body_index >= 0 for c in s.contacts)
+    if not surfaces_move:
+        u[i_surf:i_z] = np.concatenate([np.concatenate(pv) for pv in surface_points(s, np.zeros(s.n), modes)] or [[]])
 
     def inputs(t, x, phi, o):
         u[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
-        if ref:
+        if moving_ref:
             x_d, v_d, a_d = reference_at(s, phase, t, x)
             u[6:9] = x_d
             u[9:12] = v_d
@@ -211,10 +220,11 @@ def plan_inputs(plan, law: CompiledLaw):
         for ramp in ramps:  # F_d [N], Ḟ_d [N/s]
             u[j:j + 2] = ramp.at(t)
             j += 2
-        for p, v in surface_points(s, x, modes):
-            u[j:j + 3] = p
-            u[j + 3:j + 6] = v
-            j += 6
+        if surfaces_move:
+            for p, v in surface_points(s, x, modes):
+                u[j:j + 3] = p
+                u[j + 3:j + 6] = v
+                j += 6
         u[i_z:-1] = x[z]
         return u
 
