@@ -85,15 +85,22 @@ def folded_solve(plan, make_input, drives):
     L_tau, limited = drives.L_tau, bool(drives.limited)
     reach = _reaching_rows(plan)
     every_row_reaches = reach == list(range(nr))
+    increments = ctl.ctl.increments if fast is not None else None
+
+    row_columns = None  # (D_a, D_f, D_z) of CompiledLaw.row_columns, once the law's matrix is read
 
     def parts(t, x, Js, phi, o, A, tau_c):
         """(τ, ż, B, D_z, carried, (ControlInput, drive command) or None): the λ-free command and its parts per
         unit row force and body acceleration, by the law's matrix at the plan's slots where it is read, else
         probed."""
+        nonlocal row_columns
         got = fast(t, x, Js, phi, o, tau_c) if fast is not None else None
         if got is not None:
             tau, zdot, H, J = got
-            B, Dz = ctl.columns(H, J, meta)
+            if row_columns is None:
+                row_columns = ctl.row_columns(meta)
+            D_a, D_f, Dz = row_columns
+            B = increments(H, J, D_a, D_f)
             if every_row_reaches:  # a row reaching beyond the robot is in the measured joint torque
                 B += A[:nv, lam_cols]
             else:
@@ -136,15 +143,19 @@ def folded_solve(plan, make_input, drives):
     def matrix_fold(tau, zdot, B, Dz, carried, x, A, b, with_tau):
         """(z, ż, τ or None) with the fold in the plan's matrix, or None where the solved command clips a voltage."""
         y0 = drives.values(x, tau)
-        Y = L_tau.dot(B)  # the drives' forces and voltages per unit row force
-        A2 = A.copy()
-        A2[:nQ, lam_cols] -= Y[:nQ]
+        Y = L_tau.dot(B)  # the drives' forces (and limited voltages) per unit row force
+        # in place in the plan's A, b (fresh per call), unless a clipping call needs them for the readable model
+        A2, b2 = (A.copy(), b.copy()) if limited else (A, b)
+        if limited:
+            A2[:nQ, lam_cols] -= Y[:nQ]
+            b2[:nQ] += y0[:nQ]
+        else:  # Y and y0 have the nQ rows of the forces alone
+            A2[:nQ, lam_cols] -= Y
+            b2[:nQ] += y0
         if carried is not None:  # the command's part proportional to the carrying body's acceleration
             i_b, tau_b, zdot_b = carried
             Y_b = L_tau.dot(tau_b)
             A2[:nQ, i_b] -= Y_b[:nQ]
-        b2 = b.copy()
-        b2[:nQ] += y0[:nQ]
         z = solve_vector(A2, b2)
         if not math.isfinite(z.dot(z)):
             z = plan._singular(A2, b2)

@@ -135,36 +135,25 @@ class CompiledLaw:
         dtau = self.ctl.increments(H, J, d[:3, None], d[3:6, None] if self.swap else None)[:, 0]
         return dtau, (d[self.zs] if self.zs is not None else None)
 
-    def row_targets(self, meta: list) -> np.ndarray:
-        """D: the tip targets per unit force of each row (M's column of a normal row's measured force, else 0)."""
-        key = tuple(meta)
-        if self._rows_key != key:
-            D = np.zeros((self.M.shape[0], len(meta)))
-            for j, (name, kind, _) in enumerate(meta):
-                if kind == "n":
-                    D[:, j] = self.M[:, self.i_forces + self.force_index[name]]
-            self._rows_key, self._rows_D = key, D
-        return self._rows_D
-
-    _rows_key: tuple | None = None
-
-    def columns(self, H: np.ndarray, J: np.ndarray, meta: list) -> tuple[np.ndarray, np.ndarray | None]:
-        """(B, D_z) of :meth:`force_columns` from the model's H and J, before the rows' own columns on the
-        measured joint torque (the caller adds them: it knows the rows)."""
-        D = self.row_targets(meta)
-        B = self.ctl.increments(H, J, D[:3], D[3:6] if self.swap else None)
-        return B, (None if self.zs is None else D[self.zs])
+    def row_columns(self, meta: list) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """(D_a, D_f, D_z): the tip targets a* [m/s²], f_swap [N] (None without a swap) and ż per unit force of
+        each row: M's column of a normal row's measured force, else 0 (one column per row of ``meta``)."""
+        D = np.zeros((self.M.shape[0], len(meta)))
+        for j, (name, kind, _) in enumerate(meta):
+            if kind == "n":
+                D[:, j] = self.M[:, self.i_forces + self.force_index[name]]
+        return D[:3], (D[3:6] if self.swap else None), (D[self.zs] if self.zs is not None else None)
 
     def force_columns(self, inp: ControlInput, tau: np.ndarray, zdot, meta: list, cols: list, nv: int):
         """(B, D_z) of :func:`~contactdyn.constraints.force_columns` from M's columns of the measured forces."""
         if self.M is None and not self.read(inp):
             return force_columns(inp, self.ctl, tau, zdot, meta, cols, nv)
-        D = self.row_targets(meta)
-        B = self.ctl.torque_increments(inp, D[:3], D[3:6] if self.swap else None)
+        D_a, D_f, D_z = self.row_columns(meta)
+        B = self.ctl.torque_increments(inp, D_a, D_f)
         for j in range(len(meta)):
             if np.any(cols[j][nv:]):  # the row reaches beyond the robot: in the measured joint torque
                 B[:, j] -= cols[j][:nv]
-        return B, (None if zdot is None else D[self.zs])
+        return B, (None if zdot is None else D_z)
 
 
 def compiled_law(plan):

@@ -186,8 +186,8 @@ def _command_function(plan, drives):
     contact_torque = contact_torque_of(plan) if plan.phase.controller.uses_forces else None
 
     def generic(t, x, Js, phi, o, b):
-        tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o,
-                             contact_torque(b, Js) if contact_torque is not None else None)
+        tau_c = contact_torque(b, Js) if contact_torque is not None else None
+        tau, zdot = ctl_call(t, x, None, None, Js, phi, o, tau_c)
         if fast is None:
             return tau, zdot
         f = fast(x, tau)
@@ -346,11 +346,15 @@ def controller_call(plan):
     make = controller_input(plan)
     command = compiled_law(plan).command
     fast = plan_command(plan)
+    nQ, nv = plan.system.nQ, plan.system.nv
 
     def call(t, x, q, v, Js, phi, o, tau_contact=None):
+        """(τ, ż) at (t, x); q, v: x's joint slots (None: sliced here, where the ControlInput needs them)."""
         got = fast(t, x, Js, phi, o, tau_contact) if fast is not None else None
         if got is not None:
             return got[0], got[1]
+        if q is None:
+            q, v = x[:nv], x[nQ:nQ + nv]
         return command(make(t, x, q, v, Js, phi, o, tau_contact))
 
     return call
