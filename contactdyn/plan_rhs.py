@@ -175,9 +175,11 @@ def _command_function(plan, drives):
     fast, readable = (drives.fast, drives.readable) if drives is not None else (None, None)
     if plan.affine_ctl:  # the affine task law through the motors
         tf, o_gctl, i_e, feedforward = plan.tip_frame, plan.o_gctl, plan.i_e, plan._feedforward_torque
+        joint_terms = plan.feedforward != "none" or plan.kd_joint != 0.0  # else the feedforward is 0
 
         def task_law(t, x, Js, phi, o, b):
-            f = fast(x, Js[tf].T.dot(o[o_gctl]) + feedforward(phi, phi[i_e:]))
+            tau = Js[tf].T.dot(o[o_gctl])
+            f = fast(x, tau + feedforward(phi, phi[i_e:]) if joint_terms else tau)
             if f is None:  # a voltage clips: the controller and the drives' law as they are
                 f = readable(x, ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o)[0])
             return f, None
