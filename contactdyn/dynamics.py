@@ -237,7 +237,7 @@ def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot, ctl=
 def carried_terms(i_b: int, dtau: np.ndarray, dzdot, zdot) -> tuple | None:
     """(i_b, Δτ, Δż) of :func:`carried_command` from the command's increments per unit body acceleration;
     None where τ does not depend on it."""
-    return (i_b, dtau, None if zdot is None else dzdot) if np.any(dtau != 0.0) else None
+    return (i_b, dtau, None if zdot is None else dzdot) if (dtau != 0.0).any() else None
 
 
 def drive_command(system, tau: np.ndarray, x: np.ndarray) -> np.ndarray:
