@@ -7,8 +7,9 @@ robot side start at the tip; the two sides meet at the contact *interface*. Node
 - ``TIP`` and ``ANCHOR`` move with the robot and the environment body (kinematic);
 - ``MASS`` is an equivalent mass, a second-order coordinate of its own;
 - ``FREE`` is a massless node: between two stages it is a junction (a first-order state
-  when the stages have damping, an algebraic point when they have none); at a free end
-  it follows its stage's other node (a massless stage carries no force unloaded).
+  when the stages have damping, an algebraic point when they have none or the same time
+  constant b/k, see :func:`balanced`); at a free end it follows its stage's other node (a
+  massless stage carries no force unloaded).
 
 At the interface, touching merges the two surface nodes: two *solid* nodes (tip, anchor
 or mass) make a bond, a constraint row with an unknown force and a plastic impact at
@@ -20,6 +21,7 @@ F = k x + b ẋ pushes its upper node along +u.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -27,7 +29,7 @@ from .elements import ChainSpec, Mass, Stage
 from .errors import SceneError
 from .stage_laws import STAGE_LAWS
 
-__all__ = ["NodeKind", "ChainNode", "ChainStage", "Chain", "build_chain"]
+__all__ = ["NodeKind", "ChainNode", "ChainStage", "Chain", "build_chain", "balanced"]
 
 
 class NodeKind(IntEnum):
@@ -98,6 +100,22 @@ class Chain:
 
     def stages_of(self, node: int) -> list[int]:
         return [i for i, s in enumerate(self.stages) if node in (s.lower, s.upper)]
+
+
+def balanced(stages: list[ChainStage]) -> bool:
+    """A junction between these linear stages stays where their springs balance (no state needed).
+
+    Its imbalance g = Σ ± k x (the stages' spring forces on it) obeys g + τ ġ = 0 when every
+    stage has the same time constant τ = b / k [s] (their dampers balance as their springs do),
+    so g stays zero from a balanced start: chains start undeformed, a touch starts the junction
+    balanced and, after a separation, ends with the same τ relax keeping g = 0. Then the junction
+    is the algebraic point of an undamped one (b = 0 is τ = 0), not a mode decaying at 1/τ that
+    holds an explicit integrator's step to |h / τ| ≲ 6.
+    """
+    if any(s.law != "linear" or s.k <= 0.0 for s in stages):
+        return False
+    tau = [s.b / s.k for s in stages]
+    return all(math.isclose(t, tau[0], rel_tol=1e-12, abs_tol=0.0) for t in tau)
 
 
 def build_chain(spec: ChainSpec, where: str) -> Chain:

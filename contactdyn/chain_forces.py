@@ -31,14 +31,15 @@ __all__ = ["chain_forces"]
 
 
 def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offset: float, kin: Kinematics,
-                 x: np.ndarray, f: np.ndarray, ydot: np.ndarray, ev, full: bool):
+                 x: np.ndarray, f: np.ndarray, ydot: np.ndarray, ev, full: bool, relaxing: bool = False):
     """Apply a chain's stage forces; return (tip force along u [N], bond row or None, γ, interface F, gap).
 
     Adds the stages' forces on masses and the body to ``f`` [N], junction rates and the
     energy audit's damper power to ``ydot``; with ``full`` records every stage's (x, ẋ, F)
-    in ``ev.stages``. ``offset`` [m] shifts the anchor (tangential chains anchored at touch).
+    in ``ev.stages``. ``offset`` [m] shifts the anchor (tangential chains anchored at touch);
+    ``relaxing``: the damped surface ends relax after a separation (``ContactMode.relaxing``).
     """
-    plan = dc.plan(touching)
+    plan = dc.plan(touching, relaxing)
     pos, vel = _node_motion(system.nQ, dc, plan, kin, x, offset, ydot)
     dc.last_positions = pos
     tip_F, anchor_F, interface_F = _stage_forces(system, c, dc, plan, pos, vel, f, ydot, ev, full)
@@ -71,12 +72,12 @@ def _node_motion(nQ: int, dc: DirectionalChain, plan: ChainPlan, kin: Kinematics
             pos[i], vel[i] = s_anc, v_anc
         else:
             pos[i], vel[i] = x[nodes[i].coord], x[nQ + nodes[i].coord]
-    junction_nodes = {j for j, _, _, _ in plan.junctions}
+    junction_nodes = {j for j, _, _, _, _ in plan.junctions}
     for a, b in plan.aliases:
         if b not in junction_nodes:
             pos[a], vel[a] = pos[b], vel[b]
     y = x[2 * nQ:]
-    for j, active, slot, group in plan.junctions:
+    for j, active, slot, group, algebraic in plan.junctions:
         num = den = kk = ks = 0.0
         for k in active:
             s = stages[k]
@@ -88,19 +89,29 @@ def _node_motion(nQ: int, dc: DirectionalChain, plan: ChainPlan, kin: Kinematics
                 ks += s.k * pos[s.upper]
             den += s.b
             kk += s.k
-        if den > 0.0 and slot >= 0:
+        if den > 0.0 and not algebraic:
             pos[j], vel[j] = y[slot], num / den
             ydot[slot] = vel[j]
-        else:  # undamped junction: algebraic force balance
+        else:  # undamped or balanced junction: algebraic force balance
             pos[j] = ks / kk if kk > 0 else 0.0
             vel[j] = sum(stages[k].k * vel[stages[k].lower if stages[k].upper in group else stages[k].upper]
                          for k in active) / kk if kk > 0 else 0.0
+            if den > 0.0:
+                _follow(slot, vel[j], ydot)
     for a, b in plan.aliases:
         if b in junction_nodes:
             pos[a], vel[a] = pos[b], vel[b]
     for a, b in plan.free_ends:
         pos[a], vel[a] = pos[b], vel[b]
+        _follow(nodes[a].state, vel[a], ydot)
     return pos, vel
+
+
+def _follow(slot: int, vel: float, ydot: np.ndarray) -> None:
+    """An algebraic node's slot of y (if it has one) moves with it: its position stays ready for the
+    mode that needs it as a state (relaxing after a separation) without a stiff term to integrate."""
+    if slot >= 0:
+        ydot[slot] = vel
 
 
 def _stage_forces(system, c: Contact, dc: DirectionalChain, plan: ChainPlan, pos: list[float], vel: list[float],

@@ -189,8 +189,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                        f"F_fΔt = {imp['friction_impulse']} N·s, jammed = {imp['jammed']}")
         for e in result.events:
             if e["kind"] in ("limit", "release"):
-                what = f"stops at its {e['side']} limit, impulse {e['impulse']:.6g}" if e["kind"] == "limit" else \
-                    "leaves its limit"
+                what = f"stops at its {e['side']} limit, impulse {e['impulse']:.6g} {e['impulse_unit']}" \
+                    if e["kind"] == "limit" else "leaves its limit"
                 _out(args, f"  joint limit t = {e['t']:.6g} s: {e['name']} {what}")
         if saved:
             _out(args, f"  saved {saved} and {saved.removesuffix('.npz')}.json")
@@ -332,7 +332,7 @@ def _list_parser(sub, fmt) -> None:
                                "  contactdyn list frames panda   (a robot's kinematic tree)")
     ls.add_argument("what", nargs="?", choices=(*LIST_SECTIONS, *LIST_MORE, "keys"), help="one section only")
     ls.add_argument("prefix", nargs="?", help="with keys: only the keys starting with it (e.g. contact, "
-                                              "phase[].force); with frames: the robot")
+                                              "phase.force, contact.pencil.normal); with frames: the robot")
     _scripting(ls)
     ls.set_defaults(func=_cmd_list)
 

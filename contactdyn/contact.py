@@ -9,11 +9,12 @@ mode only changes at located events (:mod:`contactdyn.events`, :mod:`contactdyn.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .chain import Chain, NodeKind, build_chain
+from .chain import Chain, NodeKind, balanced, build_chain
 from .robot import FrameTerms
 from .scene import ContactSpec
 
@@ -34,6 +35,10 @@ class ContactMode:
     #: the slide started from rest (2-D: until the slip leaves the stick band its direction is
     #: the consistent one, where the slip accelerates, rather than the fixed reference)
     from_rest: bool = False
+    #: not touching since a separation: the chains' damped surface ends relax from the deformation
+    #: they had (first-order states, rate 1/τ = k/b). Else (chains start undeformed, a touch ends it)
+    #: they sit at zero compression and follow their stages' other nodes: no state to integrate.
+    relaxing: bool = False
 
     def with_(self, **changes) -> ContactMode:
         return replace(self, **changes)
@@ -58,15 +63,16 @@ class ChainPlan:
 
     solid: list[int]
     aliases: list[tuple[int, int]]  #: (free node, node it follows)
-    #: (node, active neighbour stages, state index or -1, nodes merged into it)
-    junctions: list[tuple[int, list[int], int, frozenset[int]]]
+    #: (node, active neighbour stages, state index or -1, nodes merged into it, algebraic: it sits where
+    #: its springs balance, its state (if any) only following it)
+    junctions: list[tuple[int, list[int], int, frozenset[int], bool]]
     free_ends: list[tuple[int, int]]  #: (free node, node it rests on)
     active: list[int]  #: stages carrying force
     bond: bool
     interface_stage: int  #: stage whose force is the interface force (-1: bond or none)
 
 
-def _plan(chain: Chain, touching: bool, junction_state: int) -> ChainPlan:
+def _plan(chain: Chain, touching: bool, junction_state: int, relaxing: bool) -> ChainPlan:
     nodes, stages = chain.nodes, chain.stages
     solid = [i for i, n in enumerate(nodes) if n.kind != NodeKind.FREE]
     aliases: list[tuple[int, int]] = []
@@ -85,7 +91,7 @@ def _plan(chain: Chain, touching: bool, junction_state: int) -> ChainPlan:
     interior = [i for i, n in enumerate(nodes)
                 if n.kind == NodeKind.FREE and len(chain.stages_of(i)) == 2 and i not in aliased]
     junction_nodes += [i for i in interior if i not in junction_nodes]
-    if not touching:  # damped surface ends relax on their own: k x + b ẋ = 0
+    if not touching and relaxing:  # damped surface ends relax on their own: k x + b ẋ = 0
         junction_nodes += [i for i in (es, rs) if nodes[i].kind == NodeKind.FREE and nodes[i].state >= 0
                            and i not in junction_nodes]
     # a node is "loaded" when its position is determined by something other than its stage
@@ -103,7 +109,8 @@ def _plan(chain: Chain, touching: bool, junction_state: int) -> ChainPlan:
         group = {j} | {a for a, b in aliases if b == j}  # the interface junction is both surface nodes
         stages_j = sorted({k for n in group for k in chain.stages_of(n) if k in active})
         slot = junction_state if touching and j in (es, rs) else nodes[j].state
-        junctions.append((j, stages_j, slot, frozenset(group)))
+        algebraic = slot < 0 or (len(stages_j) > 1 and balanced([stages[k] for k in stages_j]))
+        junctions.append((j, stages_j, slot, frozenset(group), algebraic))
     bond = touching and chain.bonded_when_touching
     interface_stage = -1
     if touching and not bond:  # the stage that meets the other side carries the interface force
@@ -122,13 +129,15 @@ class DirectionalChain:
     u: np.ndarray
     label: str  #: "n", "t1", "t2"
     junction_state: int = -1  #: state slot of the interface junction (when touching), set by the system
-    plans: dict[bool, ChainPlan] = field(default_factory=dict)
+    plans: dict[tuple[bool, bool], ChainPlan] = field(default_factory=dict)
     last_positions: list[float] = field(default_factory=list)  #: node positions at the last evaluation [m]
 
-    def plan(self, touching: bool) -> ChainPlan:
-        if touching not in self.plans:
-            self.plans[touching] = _plan(self.chain, touching, self.junction_state)
-        return self.plans[touching]
+    def plan(self, touching: bool, relaxing: bool = False) -> ChainPlan:
+        """How to evaluate the chain touching or not, with its damped ends relaxing (see ContactMode)."""
+        key = (touching, relaxing and not touching)
+        if key not in self.plans:
+            self.plans[key] = _plan(self.chain, touching, self.junction_state, key[1])
+        return self.plans[key]
 
 
 class Contact:
@@ -154,6 +163,13 @@ class Contact:
     @property
     def chains(self) -> list[DirectionalChain]:
         return [self.normal, *self.tangent_chains]
+
+    def relaxation_time(self, mode: ContactMode) -> float:
+        """[s] The shortest time constant b / k of the damped ends relaxing in this mode (inf: none)."""
+        taus = [s.b / s.k for dc in self.chains for j, _, slot, _, algebraic in dc.plan(mode.touching, mode.relaxing)
+                .junctions if slot >= 0 and not algebraic for s in (dc.chain.stages[k] for k in dc.chain.stages_of(j))
+                if s.k > 0.0]
+        return min(taus, default=math.inf)
 
     def surface(self, x: np.ndarray, nQ: int) -> tuple[np.ndarray, np.ndarray]:
         """(p_env [m], v_env [m/s]): the contact point on the environment, carried by its body if any."""

@@ -110,13 +110,13 @@ def _contact_terms(system, x: np.ndarray, modes: list[ContactMode], f: np.ndarra
         tip_force = np.zeros(3)
         # normal
         tip_F, row, gamma, F_n, gap = chain_forces(system, c, c.normal, mode.touching, 0.0, kin, x, f, ydot, ev,
-                                                   full)
+                                                   full, mode.relaxing)
         tip_force += tip_F * c.normal.u
         ev.gap[c.name] = gap
         # tangential chains (bonded while the normal touches)
         for i, dc in enumerate(c.tangent_chains):
             tF, trow, tgamma, tint, _ = chain_forces(system, c, dc, mode.touching, mode.offsets[i], kin, x, f, ydot,
-                                                     ev, full)
+                                                     ev, full, mode.relaxing)
             tip_force += tF * dc.u
             ev.interface[f"{c.name}.{dc.label}"] = tint
             if trow is not None:

@@ -419,11 +419,39 @@ def markdown() -> str:
     return "\n".join(lines) + "\n"
 
 
+_TOKEN = re.compile(r"\[[^\]]*\]?|[^.\[]+")  #: a key's parts: names, ``<placeholders>`` and ``[]`` / ``[0]``
+
+
+def key_matches(key: str, prefix: str) -> bool:
+    """True when ``key`` starts with ``prefix``, where a table's own name or index may stand for its placeholder
+    and an array's ``[]`` may be left out, as in TOML headers: ``contact.pencil.normal``, ``phase[1].force`` and
+    ``phase.force`` all match ``contact.<contact>.normal...`` or ``phase[].force...``."""
+    parts, typed = _TOKEN.findall(key), _TOKEN.findall(prefix)
+    i = 0
+    for k, word in enumerate(typed):
+        last = k == len(typed) - 1 and not prefix.endswith(".")
+        if i < len(parts) and parts[i] == "[]" and not word.startswith("["):
+            i += 1  # `phase.force` for `phase[].force`
+        if i == len(parts):
+            return False
+        part = parts[i]
+        if part.startswith("<"):
+            ok = not word.startswith("[")
+        elif part == "[]":
+            ok = re.fullmatch(r"\[\d*\]?" if last else r"\[\d*\]", word) is not None
+        else:
+            ok = part.startswith(word) if last else part == word
+        if not ok:
+            return False
+        i += 1
+    return i < len(parts) or not prefix.endswith(".")
+
+
 def text(prefix: str = "") -> str:
     """The reference for the terminal, keys starting with ``prefix`` (``contactdyn list keys``)."""
     out = []
     for d in reference():
-        if not d.key.startswith(prefix):
+        if not key_matches(d.key, prefix):
             continue
         details = ", ".join(p for p in (d.type, f"[{d.unit}]" if d.unit else "",
                                         f"default {d.default}" if d.default not in ("", "required") else d.default,
@@ -442,7 +470,7 @@ def list_keys(args: Any) -> int:
     if args.what != "keys":
         raise SceneError("list", "a prefix only after `keys` (contactdyn list keys PREFIX)", args.prefix)
     prefix = args.prefix or ""
-    rows = [d for d in reference() if d.key.startswith(prefix)]
+    rows = [d for d in reference() if key_matches(d.key, prefix)]
     if not rows:
         sections = sorted({re.split(r"[.\[]", d.key, maxsplit=1)[0] for d in reference()})
         raise SceneError("PREFIX", f"the start of a scene key ({', '.join(sections)})", prefix)

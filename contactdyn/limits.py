@@ -111,6 +111,7 @@ class JointLimits:
         x, imp, impulse = limit_impact(system, t, x, modes, phase.limits)
         info = {"joint": event.contact, "side": "lower" if event.side > 0 else "upper",
                 "velocity_before": v_before, "impulse": impulse,  # [N·m·s or N·s] the limit row's Λ
+                "impulse_unit": "N·m·s" if system.robot.joint_units[i] == "rad" else "N·s",
                 "energy_loss": imp.energy_loss}
         return x, phase, info, imp
 
@@ -132,11 +133,12 @@ def limit_channels(system: Any, phases_of: list, samples: Any) -> dict[str, np.n
 def rate_limit_report(robot: Robot, t: np.ndarray, v: np.ndarray, tau: np.ndarray) -> tuple[dict, list[str]]:
     """Velocity and effort limits (URDF values > 0) against the run's samples: stats and warnings."""
     stats, warnings = {}, []
-    for what, values, limit, unit in (("velocity", v, robot.velocity_limit, "rad/s or m/s"),
-                                      ("effort", tau, robot.effort_limit, "N·m or N")):
+    for what, values, limit, units in (("velocity", v, robot.velocity_limit, {"rad": "rad/s", "m": "m/s"}),
+                                       ("effort", tau, robot.effort_limit, {"rad": "N·m", "m": "N"})):
         for j, name in enumerate(robot.joint_names):
             if not limit[j] > 0.0:
                 continue
+            unit = units[robot.joint_units[j]]
             over = np.flatnonzero(np.abs(values[:, j]) > limit[j] * (1.0 + 1e-12))
             if len(over):
                 first = float(t[over[0]])

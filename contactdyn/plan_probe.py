@@ -139,13 +139,14 @@ class ProbedModel:
             p_tip, v_tip = e[k:k + 3], e[k + 3:k + 6]
             p_env, v_env = c.surface(x, nQ)
             kin = Kinematics(p_tip, v_tip, J0, d0, p_env, v_env)
-            tip_F, row, gamma, F_int, gap = chain_forces(s, c, c.normal, mode.touching, 0.0, kin, x, f, ydot, ev, True)
+            tip_F, row, gamma, F_int, gap = chain_forces(s, c, c.normal, mode.touching, 0.0, kin, x, f, ydot, ev, True,
+                                                         mode.relaxing)
             g[j] += tip_F * c.normal.u
             o[self.o_Fint.start + ci] = F_int
             o[self.o_gap.start + ci] = gap
             for i, dc in enumerate(c.tangent_chains):
                 tF, trow, tgamma, tint, _ = chain_forces(s, c, dc, mode.touching, mode.offsets[i], kin, x, f, ydot,
-                                                         ev, True)
+                                                         ev, True, mode.relaxing)
                 g[j] += tF * dc.u
                 o[self.o_iface[f"{c.name}.{dc.label}"]] = tint
                 if trow is not None:

@@ -144,6 +144,7 @@ class Robot:
         self.joint_units = [joint_unit(model, j) for j in range(1, model.njoints)]  #: "rad" or "m" per joint
         self._visual = visual
         self.notes: list[str] = []  #: inertia repairs or trusts (see contactdyn.inertia), one line each
+        self.visual_notes: list[str] = []  #: visual meshes not found and left out of the drawing
         self.unbounded: list[str] = []  #: active joints without position limits (continuous in the URDF)
         self.lower = model.lowerPositionLimit.copy()  #: position limits of the active joints [rad or m]
         self.upper = model.upperPositionLimit.copy()
@@ -199,7 +200,7 @@ class Robot:
         model.gravity.linear = (1.0 - gravity_compensation) * np.asarray(gravity, dtype=float)
         visual = functools.partial(_build_visual, path, model, xml)
         robot = cls(model, str(path), gravity_compensation, locked=values, visual=visual)
-        robot.notes = list(urdf.notes)
+        robot.notes, robot.visual_notes = list(urdf.notes), list(urdf.visual_notes)
         robot.unbounded = [n for n in urdf.unbounded if n in robot.joint_names]
         return robot
 
@@ -212,9 +213,9 @@ class Robot:
                         inertia=spec.inertia)
 
     def describe(self) -> dict:
-        """Which joints move and which are locked where, and the inertia notes (stored with a run)."""
+        """Which joints move and which are locked where, the inertia and visual notes (stored with a run)."""
         return {"joints": list(self.joint_names), "locked": dict(self.locked), "unbounded": list(self.unbounded),
-                "inertia_notes": list(self.notes)}
+                "inertia_notes": list(self.notes), "visual_notes": list(self.visual_notes)}
 
     @property
     def visual_model(self) -> pin.GeometryModel:

@@ -86,8 +86,9 @@ def frames_command(args: argparse.Namespace) -> int:
 
 
 def run_warnings(meta: dict) -> list[str]:
-    """Console warnings of a run about its robot: inertia repairs or trusts, limit violations."""
-    return [f"inertia: {note}" for note in meta.get("inertia_notes", [])] + list(meta.get("limit_warnings", []))
+    """Console warnings of a run about its robot: inertia repairs or trusts, meshes not found, limit violations."""
+    return [f"inertia: {note}" for note in meta.get("inertia_notes", [])] + \
+        [f"visual: {note}" for note in meta.get("visual_notes", [])] + list(meta.get("limit_warnings", []))
 
 
 def run_details(meta: dict) -> list[str]:

@@ -13,8 +13,9 @@ Each check returns plain sentences naming the key to look at. They never stop a 
 - a linear stage whose contact period 2π√(m/k) is shorter than the output step, m its
   lightest neighbouring mass (an equivalent mass, or the robot's effective mass at the tip
   along the chain's direction in the start posture);
-- a bonded contact whose tip starts off its surface (the bond then holds it there; a
-  non-bonded start inside a surface is an error of :meth:`contactdyn.system.System.initial_state`).
+- a bonded contact whose tip starts off its surface (the bond then holds it there);
+- a tip starting inside a compliant surface (the surface starts deformed by that depth; inside
+  a rigid one is an error of :meth:`contactdyn.system.System.initial_state`: nothing can be deformed).
 """
 
 from __future__ import annotations
@@ -97,6 +98,9 @@ def system_warnings(system) -> list[str]:
         if c.spec.bonded and abs(gap) > GAP_TOL:
             out.append(f"contact.{c.name}: bonded, but the tip starts {gap:+.3g} m off the surface "
                        f"(contact.{c.name}.point, robot.q0/tip0): the bond holds it there, not on the surface")
+        elif not c.spec.bonded and gap < -GAP_TOL:
+            out.append(f"contact.{c.name}: the tip starts {-gap:.3g} m inside the surface (contact.{c.name}.point, "
+                       "robot.q0/tip0): the surface starts deformed by that depth and pushes back from t = 0")
     return out
 
 

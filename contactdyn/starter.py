@@ -168,7 +168,7 @@ def new_command(args: argparse.Namespace) -> int:
     """``contactdyn new NAME``: write ``sims/NAME.toml`` (or ``--out``), refusing to overwrite."""
     out = Path(args.out) if args.out else Path("sims") / f"{args.name}.toml"
     if out.exists() and not args.force:
-        raise SceneError("--out", "a file that does not exist yet (or --force)", str(out))
+        raise SceneError("--out" if args.out else "NAME", "a file that does not exist yet (or --force)", str(out))
     text = starter_scene(args.name, args.robot, args.contact, args.friction, args.tip)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)

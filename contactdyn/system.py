@@ -133,8 +133,9 @@ class System:
         for c in self.contacts:
             kin = self.kinematics(c, x)
             gap0 = float(c.normal.u @ (kin.p_tip - kin.p_env))  # chains start undeformed
-            if gap0 < -1e-9 and not c.spec.bonded:
-                raise SceneError(f"contact.{c.name}", "a start with the tip on or above the surface (gap >= 0)",
+            pressed_in = gap0 < -1e-9 and not c.spec.bonded  # a compliant surface starts deformed (a warning)
+            if pressed_in and c.spec.normal_chain.rigid:
+                raise SceneError(f"contact.{c.name}", "a start with the tip on or above the rigid surface (gap >= 0)",
                                  f"gap {gap0:.6g} m", self.scene.file)
             touching = c.spec.bonded or gap0 <= 1e-12
             # masses start at rest where their chain puts them undeformed (zero rest lengths)
@@ -143,7 +144,7 @@ class System:
                 v_tip, v_anc = float(dc.u @ kin.v_tip), float(dc.u @ kin.v_env)
                 for node in dc.chain.nodes:
                     if node.kind == NodeKind.MASS:
-                        on_robot = node.side == "robot"
+                        on_robot = node.side == "robot" or pressed_in
                         x[node.coord] = s_tip if on_robot else s_anc
                         x[nQ + node.coord] = v_tip if on_robot else v_anc
                     if node.state >= 0:

@@ -53,6 +53,8 @@ def check_urdf_tree(path: Path) -> ET.Element:
     if root.tag != "robot":
         raise RobotError(f"{path}: expected a <robot> element at the top, found <{root.tag}>")
     links = [link.get("name") for link in root.findall("link")]
+    if not links:
+        raise RobotError(f"{path}: expected <link> elements in <robot>, found none (a xacro file not yet expanded?)")
     if len(links) > MAX_URDF_LINKS:
         raise RobotError(f"{path}: {len(links)} links; at most {MAX_URDF_LINKS} are supported")
     _unique(path, "link", links)

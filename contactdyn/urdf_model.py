@@ -43,6 +43,7 @@ class UrdfModel(NamedTuple):
     package_dirs: list[str]
     notes: list[str]  #: inertia repairs or trusts, one line each
     unbounded: list[str]  #: joints without position limits (±inf): continuous ones, and lower = upper in the file
+    visual_notes: list[str] = []  #: the visual meshes not found, dropped from the drawing (one line)
 
 
 def urdf_call(path: Path, build: Callable[[], object]) -> object:
@@ -82,16 +83,29 @@ def xml_label(builder: str, xml: str) -> str:
     return f"{builder} {hashlib.sha256(xml.encode()).hexdigest()[:16]}"
 
 
-def _resolve_meshes(root: ET.Element, path: Path, package_dirs: list[str]) -> None:
-    """Every visual mesh resolves to a file (not loaded: that is slow); its filename becomes absolute."""
+def _resolve_meshes(root: ET.Element, path: Path, package_dirs: list[str]) -> list[str]:
+    """Every visual mesh resolves to a file (not loaded: that is slow); its filename becomes absolute.
+
+    A visual whose mesh is nowhere to be found is dropped, as ROS tools do: the link is drawn without
+    it, and the dynamics never read visuals. Returns one note naming them, or none."""
+    missing = []
     for link in root.iter("link"):
-        for mesh in link.findall("visual/geometry/mesh"):
+        for visual in link.findall("visual"):
+            mesh = visual.find("geometry/mesh")
+            if mesh is None:
+                continue
             filename = mesh.get("filename", "")
             file = resolve_uri(filename, path, package_dirs)
             if file is None:
-                raise RobotError(f"{path}: link {link.get('name')!r}: visual mesh {filename!r} not found "
-                                 f"(searched the URDF's folders, example-robot-data and ROS_PACKAGE_PATH)")
+                link.remove(visual)
+                missing.append(f"link {link.get('name')!r} ({filename!r})")
+                continue
             mesh.set("filename", str(file.resolve()))
+    if not missing:
+        return []
+    more = f" and {len(missing) - 2} more" if len(missing) > 2 else ""
+    return [f"{path.name}: {len(missing)} visual mesh(es) not found (searched the URDF's folders, example-robot-data "
+            f"and ROS_PACKAGE_PATH): {', '.join(missing[:2])}{more}; the viewer draws those links without them"]
 
 
 def _unbind_continuous(root: ET.Element) -> list[str]:
@@ -126,7 +140,7 @@ def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfM
     path, package_dirs = resolve_robot_path(source)
     root = check_urdf_tree(path)  # one root, no cycle...: before Pinocchio reads anything (it crashes)
     notes = check_inertias(root, path, inertia)
-    _resolve_meshes(root, path, package_dirs)
+    visual_notes = _resolve_meshes(root, path, package_dirs)
     unbounded = _unbind_continuous(root)
     xml = ET.tostring(root, encoding="unicode")
     model: pin.Model = build_isolated(path, xml_label("buildModelFromXML", xml), lambda: pin.buildModelFromXML(xml))
@@ -140,7 +154,7 @@ def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfM
         lower[i], upper[i] = -np.inf, np.inf
     model.lowerPositionLimit, model.upperPositionLimit = lower, upper
     _check_limits(model, path)
-    return UrdfModel(path, xml, model, package_dirs, notes, unbounded)
+    return UrdfModel(path, xml, model, package_dirs, notes, unbounded, visual_notes)
 
 
 def _origin(joint: ET.Element) -> pin.SE3:

@@ -8,6 +8,7 @@ from scipy.linalg import expm
 
 import contactdyn
 from contactdyn import Robot, SceneError, parse_scene, simulate
+from contactdyn.sanity import SanityWarning
 
 TIGHT = {"rtol": 1e-12, "atol": 1e-14}
 
@@ -191,9 +192,16 @@ def test_error_falls_with_tolerance_at_first_order_in_rtol():
     assert np.all((slopes > 0.6) & (slopes < 1.5)), (errors, slopes)
 
 
-def test_a_tip_starting_inside_the_surface_is_a_clear_error():
-    with pytest.raises(SceneError, match="contact.tip.*gap"):
-        simulate(axis_scene({"model": "c", "k": 1e5, "b": 1.0}, q0=1.1, v0=0.0, duration=0.1))
+def test_a_tip_starting_inside_the_surface():
+    """Inside a rigid surface: an error naming the contact and the gap. Inside a compliant one (model c):
+    a sanity warning, and the run starts pressed, F_n = k d at rest (issue 16: such warnings are not fatal)."""
+    with pytest.raises(SceneError, match=r"contact.tip: expected a start with the tip on or above the rigid surface"):
+        simulate(axis_scene({"model": "rigid"}, q0=1.1, v0=0.0, duration=0.1))
+    with pytest.warns(SanityWarning, match="m inside the surface"):
+        r = simulate(axis_scene({"model": "c", "k": 1e5, "b": 1.0}, q0=1.1, v0=0.0, duration=0.1))
+    depth = SURFACE_Z - r["tip"][0, 2]  # [m]
+    assert depth > 1e-3 and r["contact.tip.touching"][0] == 1.0
+    assert r["contact.tip.F_n"][0] == pytest.approx(1e5 * depth, rel=1e-9)  # [N]
 
 
 def test_hunt_crossley_stage_settles_at_its_static_deflection_and_never_pulls():
@@ -204,3 +212,43 @@ def test_hunt_crossley_stage_settles_at_its_static_deflection_and_never_pulls():
     assert r["q"][-1, 0] - 1.0 == pytest.approx((F / k) ** (1.0 / n), rel=1e-6)  # k xⁿ = F
     assert r["contact.tip.F_n"][-1] == pytest.approx(F, rel=1e-6)
     assert r["contact.tip.F_n"].min() >= 0.0
+
+
+def _two_sided_junction_run(k1: float, b1: float, k2: float, b2: float, F: float):
+    """The axis tip on a massless two-sided chain, body -[k1, b1]- junction -[k2, b2]- tip, pushed by F [N]."""
+    normal = {"environment": [{"k": k1, "b": b1}], "robot": [{"k": k2, "b": b2}]}
+    return simulate(axis_scene(normal, q0=1.0, v0=0.0, duration=0.05, push=F))
+
+
+@pytest.mark.parametrize("b2", [20.0, 50.0])  # τ2 = τ1 = 1e-4 s (algebraic junction), or 2.5e-4 s (a state)
+def test_two_sided_massless_chain_matches_matrix_exponential(b2):
+    """The junction where the two sides' stages meet balances them, F1 = k1 d_j + b1 ḋ_j = F2 =
+    k2 (d − d_j) + b2 (ḋ − ḋ_j) (d, d_j: tip and junction displacements into the body [m]). With one
+    time constant b/k on both sides it is computed as the algebraic point where the springs balance
+    (no state): the same motion as the first-order state it is with different time constants."""
+    k1, b1, k2, F = 1e5, 10.0, 2e5, 100.0
+    r = _two_sided_junction_run(k1, b1, k2, b2, F)
+    assert r["contact.tip.touching"].min() == 1.0 and not r.impacts
+    m = AXIS_MASS
+    # X = [d, ḋ, d_j]: ḋ_j from the balance, m d̈ = F − F2
+    jd = np.array([k2, b2, -(k1 + k2)]) / (b1 + b2)  # ḋ_j = jd · X
+    A = np.array([[0.0, 1.0, 0.0], -(np.array([k2, b2, -k2]) - b2 * jd) / m, jd])
+    X = linear_response(A, np.array([0.0, F / m, 0.0]), np.zeros(3), r.t)
+    d = r["q"][:, 0] - 1.0
+    assert np.max(np.abs(d - X[:, 0])) <= 1e-8 * np.max(np.abs(X[:, 0]))
+    F1 = k1 * X[:, 2] + b1 * (A[2] @ X.T)
+    assert np.max(np.abs(r["contact.tip.F_n"] - F1)) <= 1e-7 * np.max(np.abs(F1))
+    assert np.max(np.abs(r["stage.tip.n.env1.x"] - X[:, 2])) <= 1e-8 * np.max(np.abs(X[:, 2]))
+
+
+def test_a_junction_is_algebraic_only_with_one_time_constant():
+    """chain.balanced: linear stages of one b/k (b = 0 included) keep a junction balanced; others do not."""
+    from contactdyn.chain import ChainStage, balanced
+
+    def stage(k, b, law="linear"):
+        return ChainStage(0, 1, k, b, law)
+
+    assert balanced([stage(1e5, 10.0), stage(2e5, 20.0)])
+    assert balanced([stage(1e5, 0.0), stage(3e4, 0.0)])
+    assert not balanced([stage(1e5, 10.0), stage(2e5, 50.0)])
+    assert not balanced([stage(1e5, 10.0), stage(1e5, 10.0, "hunt_crossley")])

@@ -4,6 +4,7 @@ plastically, held while the joint presses and released when its torque vanishes.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -88,7 +89,9 @@ def test_velocity_and_effort_limits_are_reported(tmp_path, capsys):
     scene = tmp_path / "p.toml"
     scene.write_text(f'duration = 0.5\n[robot]\nurdf = "{tmp_path / "pendulum.urdf"}"\nq0 = [{THETA0}]\n')
     assert main(["run", str(scene)]) == 0
-    assert "warning: joint 'swing' exceeds its velocity limit" in capsys.readouterr().err
+    out, err = capsys.readouterr()
+    assert "warning: joint 'swing' exceeds its velocity limit 1 [rad/s] in " in err
+    assert re.search(r"joint limit t = 0\.45\d+ s: swing stops at its lower limit, impulse [\d.]+ N·m·s\n", out), out
 
 
 def test_start_outside_the_limits_is_a_clear_error(tmp_path):

@@ -112,6 +112,19 @@ def test_list_keys_prints_the_reference(capsys):
     assert "scene key" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("prefix, first, absent", [
+    ("contact.pencil.normal.k", "contact.<contact>.normal.k (when", "normal.b"),  # a contact's own name
+    ("phase[1].force", "phase[].force: array of tables", "phase[].reference"),  # an index
+    ("phase.force.val", "phase[].force[].value: number", "force[].contact"),  # as in a [[phase.force]] header
+    ("body.cart.", "body.<body>.mass", "body.<body>: table"),  # a trailing dot: the table's keys only
+])
+def test_list_keys_takes_the_names_a_scene_uses(prefix, first, absent, capsys):
+    assert main(["list", "keys", prefix]) == EXIT_OK
+    out = capsys.readouterr().out
+    assert first in out and absent not in out, out
+    assert main(["list", "keys", prefix + ".zz"]) == EXIT_USAGE and "scene key" in capsys.readouterr().err
+
+
 # ---- which file runs -------------------------------------------------------------------------
 def test_a_scene_name_is_found_in_the_working_directory_sims_first(tmp_path, monkeypatch, capsys):
     (tmp_path / "sims").mkdir()

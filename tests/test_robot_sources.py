@@ -12,8 +12,8 @@ import pytest
 
 from contactdyn import Robot, RobotError
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
-from contactdyn.errors import SceneError
-from contactdyn.events import start_storm_cause
+from contactdyn.errors import SceneError, SimulationError
+from contactdyn.events import EventLog, start_storm_cause
 from contactdyn.inertia import nearest_valid_moments
 from contactdyn.posture import PostureTask, solve_posture
 from contactdyn.robot_catalog import example_robot_data_share, example_robots
@@ -89,10 +89,11 @@ def test_package_uri_from_ros_package_path(tmp_path, monkeypatch):
     mesh.write_text(STL)
     path = slider(tmp_path / "elsewhere" / "robot.urdf", mesh_visual("package://my_pkg/meshes/link.stl"))
     monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
-    with pytest.raises(RobotError, match="visual mesh 'package://my_pkg/meshes/link.stl' not found"):
-        Robot.load(path)
+    r = Robot.load(path)  # not found: drawn without it, with a note
+    assert "link 'carriage' ('package://my_pkg/meshes/link.stl')" in r.visual_notes[0] and r.visual_model.ngeoms == 0
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws"))
     r = Robot.load(path)
+    assert r.visual_notes == []
     assert [g.meshPath for g in r.visual_model.geometryObjects] == [str(mesh.resolve())]
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws" / "my_pkg"))  # the package folder itself
     assert Robot.load(path).visual_model.geometryObjects[0].meshPath == str(mesh.resolve())
@@ -233,3 +234,19 @@ def test_event_storm_at_the_start_names_the_posture():
     assert "contact 'pen' began at t = 0 s" in cause and "robot.tip0" in cause and "initial penetration" in cause
     late = [{"t": 0.5 + 1e-12 * k, "kind": "touch", "name": "pen"} for k in range(60)]
     assert start_storm_cause(late, "pen") is None
+
+
+@pytest.mark.parametrize("max_events, storm_count", [(20, 1000), (10**6, 30)])
+def test_the_run_stops_a_start_storm_naming_the_posture_not_max_events(max_events, storm_count):
+    """Both guards of the run's event log (too many events; too many too close together) give the cause."""
+    from types import SimpleNamespace
+
+    log = EventLog("scene", SimpleNamespace(max_events=max_events, storm_count=storm_count, storm_window=1e-3),
+                   {"events": 0})
+    log.log(0.0, "phase", "main", check_storm=False)
+    with pytest.raises(SimulationError) as info:
+        for k in range(10**4):
+            log.log(1e-9 * k, "touch" if k % 2 else "separate", "pen")
+    message = str(info.value)
+    assert "contact 'pen' began at t = 0 s, with the run" in message and "robot.tip0" in message
+    assert "raise solver.max_events" not in message and "storm_count" not in message

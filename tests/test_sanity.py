@@ -10,6 +10,7 @@ import warnings
 import pytest
 
 from contactdyn.cli import EXIT_OK, main
+from contactdyn.errors import SceneError
 from contactdyn.sanity import SanityWarning, scene_warnings, system_warnings
 from contactdyn.scene import load_scene, parse_scene, sims_dir
 from contactdyn.simulate import simulate
@@ -75,6 +76,41 @@ def test_a_contact_period_below_the_output_step():
 def test_a_bonded_tip_starting_off_its_surface():
     (note,) = system_warnings(System(_b1(**{"contact.tip.point": [0.0, -0.16, 0.0]})))
     assert note.startswith("contact.tip: bonded, but the tip starts +0.01 m off the surface")
+
+
+def _pressed_in(model: str, depth: float):
+    """B1 unbonded, its surface moved ``depth`` [m] above the tip's start (the tip starts inside it)."""
+    normal = {"b": {}, "c": {"contact.tip.normal.model": "c", "contact.tip.normal.k": 2e4, "contact.tip.normal.b": 5.0},
+              "rigid": {"contact.tip.normal.model": "rigid"}}[model]
+    drop = ("contact.tip.normal.m",) if model != "b" else ()
+    if model == "rigid":
+        drop += ("contact.tip.normal.k", "contact.tip.normal.b")
+    return _b1(drop, **{"contact.tip.bonded": False, "contact.tip.point": [0.0, -0.15 + depth, 0.0],
+                        "duration": 0.01, **normal})
+
+
+def test_a_tip_starting_inside_a_compliant_surface_is_a_warning_and_starts_pressed():
+    """Model (c), k = 2e4 N/m, 1 mm deep, at rest: the run starts with F_n = k d = 20 N (the damper idle)."""
+    scene = _pressed_in("c", 1e-3)
+    (note,) = system_warnings(System(scene))
+    assert note.startswith("contact.tip: the tip starts 0.001 m inside the surface (contact.tip.point")
+    with pytest.warns(SanityWarning, match="inside the surface"):
+        r = simulate(scene)
+    assert r["contact.tip.touching"][0] == 1.0 and r["contact.tip.F_n"][0] == pytest.approx(2e4 * 1e-3, rel=1e-9)
+    assert note in r.meta["warnings"]
+    # model (b): the surface mass starts with the tip, its stage compressed by the depth: the tip is pushed out
+    with pytest.warns(SanityWarning, match="inside the surface"):
+        r = simulate(_pressed_in("b", 1e-3))
+    assert r["mass.tip.n.m1.x"][0] == pytest.approx(r["tip"][0, 1], abs=1e-15)  # [m] along the normal, with the tip
+    assert r["stage.tip.n.env1.x"][0] == pytest.approx(1e-3, abs=1e-12)  # [m] compressed by the depth
+    assert r["stage.tip.n.env1.F"][0] == pytest.approx(1e5 * 1e-3, rel=1e-9)  # [N] k d (B1: k = 1e5 N/m)
+    assert system_warnings(System(_pressed_in("c", 0.0))) == []  # on the surface: nothing to say
+
+
+def test_a_tip_starting_inside_a_rigid_surface_is_an_error():
+    with pytest.raises(SceneError, match=r"contact.tip: expected a start with the tip on or above the rigid surface "
+                                         r"\(gap >= 0\), found 'gap -0.001 m'"):
+        System(_pressed_in("rigid", 1e-3)).initial_state()
 
 
 def test_warnings_are_issued_stored_and_printed(tmp_path, capsys):

@@ -34,7 +34,8 @@ def test_new_refuses_to_overwrite_and_checks_its_options(tmp_path, monkeypatch, 
     monkeypatch.chdir(tmp_path)
     assert main(["new", "mine"]) == EXIT_OK
     assert main(["new", "mine"]) == EXIT_USAGE
-    assert "--force" in capsys.readouterr().err
+    assert capsys.readouterr().err.startswith("contactdyn: error: NAME: expected a file that does not exist yet "
+                                              "(or --force), found 'sims")  # no --out was given: not named
     assert main(["new", "mine", "--force", "--out", "elsewhere/x.toml"]) == EXIT_OK
     assert (tmp_path / "elsewhere" / "x.toml").is_file()
     assert main(["new", "mine", "--contact", "z"]) == EXIT_USAGE

@@ -37,6 +37,7 @@ CASES = {
     "undefined child": ([("j1", "base", "zz")], ["base"], "revolute", "child link 'zz' is not defined"),
     "duplicate joint": ([("j1", "base", "a"), ("j1", "a", "b")], ["base", "a", "b"], "revolute", "two joints named"),
     "duplicate link": ([("j1", "base", "a")], ["base", "a", "a"], "revolute", "two links named 'a'"),
+    "no link at all": ([], [], "revolute", "expected <link> elements in <robot>, found none"),
 }
 
 
