@@ -57,6 +57,52 @@ def _reaching_rows(plan) -> list[int] | None:
     return [int(j) for j in np.flatnonzero(np.any(P[..., -1] != 0.0, axis=0))]
 
 
+def _matrix_fold(plan, drives):
+    """fold(τ, ż, B, D_z, carried, x, A, b, with_tau) -> (z, ż, τ or None), or None where the solved command
+    clips a voltage: the λ-free command τ through the compiled drives into b, its parts per unit row force B
+    (and per unit acceleration of a carrying body) through L_τ into A's columns, one solve."""
+    nQ, nr = plan.system.nQ, plan.nr
+    lam_cols = slice(nQ, nQ + nr)
+    L_tau, limited = drives.L_tau, bool(drives.limited)
+
+    def fold(tau, zdot, B, Dz, carried, x, A, b, with_tau):
+        y0 = drives.values(x, tau)
+        Y = L_tau.dot(B)  # the drives' forces (and limited voltages) per unit row force
+        if limited:  # copies: a call that clips needs A and b as they are for the readable model
+            A2, b2 = A.copy(), b.copy()
+            A2[:nQ, lam_cols] -= Y[:nQ]
+            b2[:nQ] += y0[:nQ]
+        else:  # in place in the plan's A and b (fresh per call); Y and y0 hold the nQ forces alone
+            A2, b2 = A, b
+            A2[:nQ, lam_cols] -= Y
+            b2[:nQ] += y0
+        if carried is not None:  # the command's part proportional to the carrying body's acceleration
+            i_b, tau_b, zdot_b = carried
+            Y_b = L_tau.dot(tau_b)
+            A2[:nQ, i_b] -= Y_b[:nQ]
+        z = solve_vector(A2, b2)
+        if not math.isfinite(z.dot(z)):
+            z = plan._singular(A2, b2)
+        lam = z[lam_cols]
+        if limited:  # the voltages at the solved command
+            y = y0 + Y.dot(lam)
+            if carried is not None:
+                y += Y_b * z[i_b]
+            if not drives.unclipped(y):
+                return None
+        if with_tau:
+            tau = tau + B.dot(lam)
+            if carried is not None:
+                tau = tau + tau_b * z[i_b]
+        if Dz is not None:
+            zdot = zdot + Dz.dot(lam)
+            if carried is not None and zdot_b is not None:
+                zdot = zdot + zdot_b * z[i_b]
+        return z, zdot, (tau if with_tau else None)
+
+    return fold
+
+
 def folded_solve(plan, make_input, drives):
     """solve(t, x, Js, φ, o, A, b) -> (z = [Q̈, λ, w], ż): the readable fold on the plan's KKT system.
 
@@ -82,11 +128,11 @@ def folded_solve(plan, make_input, drives):
     carrier = phase.carrier if phase.reference is not None else None
     w0 = nQ + nr
     lam_cols = slice(nQ, nQ + nr)
-    L_tau, limited = drives.L_tau, bool(drives.limited)
     reach = _reaching_rows(plan)
     every_row_reaches = reach == list(range(nr))
     increments = ctl.ctl.increments if fast is not None else None
 
+    matrix_fold = _matrix_fold(plan, drives)
     row_columns = None  # (D_a, D_f, D_z) of CompiledLaw.row_columns, once the law's matrix is read
 
     def parts(t, x, Js, phi, o, A, tau_c):
@@ -139,42 +185,6 @@ def folded_solve(plan, make_input, drives):
         if not regular:
             plan.singular += 1
         return np.concatenate((qdd, lam, b[w0:])), zdot, full[:nv]
-
-    def matrix_fold(tau, zdot, B, Dz, carried, x, A, b, with_tau):
-        """(z, ż, τ or None) with the fold in the plan's matrix, or None where the solved command clips a voltage."""
-        y0 = drives.values(x, tau)
-        Y = L_tau.dot(B)  # the drives' forces (and limited voltages) per unit row force
-        # in place in the plan's A, b (fresh per call), unless a clipping call needs them for the readable model
-        A2, b2 = (A.copy(), b.copy()) if limited else (A, b)
-        if limited:
-            A2[:nQ, lam_cols] -= Y[:nQ]
-            b2[:nQ] += y0[:nQ]
-        else:  # Y and y0 have the nQ rows of the forces alone
-            A2[:nQ, lam_cols] -= Y
-            b2[:nQ] += y0
-        if carried is not None:  # the command's part proportional to the carrying body's acceleration
-            i_b, tau_b, zdot_b = carried
-            Y_b = L_tau.dot(tau_b)
-            A2[:nQ, i_b] -= Y_b[:nQ]
-        z = solve_vector(A2, b2)
-        if not math.isfinite(z.dot(z)):
-            z = plan._singular(A2, b2)
-        lam = z[lam_cols]
-        if limited:  # the voltages at the solved command
-            y = y0 + Y.dot(lam)
-            if carried is not None:
-                y += Y_b * z[i_b]
-            if not drives.unclipped(y):
-                return None
-        if with_tau:
-            tau = tau + B.dot(lam)
-            if carried is not None:
-                tau = tau + tau_b * z[i_b]
-        if Dz is not None:
-            zdot = zdot + Dz.dot(lam)
-            if carried is not None and zdot_b is not None:
-                zdot = zdot + zdot_b * z[i_b]
-        return z, zdot, (tau if with_tau else None)
 
     def solve(t, x, Js, phi, o, A, b):
         return detail(t, x, Js, phi, o, A, b, False)[:2]
