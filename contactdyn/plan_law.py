@@ -11,7 +11,10 @@ so the plan reads the map [a*; f_swap; ż] = M u off the law itself by unit prob
 (:func:`~contactdyn.plan_probe.affine_map`) at the first call of its mode, checks it at
 random u, and from then on a call costs one product and the computed torque; the force
 columns of the fold (:func:`~contactdyn.constraints.force_columns`) are M's columns of the
-measured forces. The law stays written once, in :mod:`contactdyn.controllers.dynamic`.
+measured forces. The plan's call (:func:`plan_command`) writes u from its own slots — φ, o,
+x, the reference and the ramps (:func:`plan_inputs`) — and takes τ from the law's own
+``torque``, so no ControlInput is built per call. The law stays written once, in
+:mod:`contactdyn.controllers.dynamic`.
 Joint-space A7, or a law that is not affine in u (a clip, a switch), is declined: the
 readable ``command`` runs as before.
 """
@@ -195,7 +198,7 @@ def plan_inputs(plan, law: CompiledLaw):
         u[6:15] = np.concatenate(reference_at(s, phase, phase.t_start, np.zeros(s.n)))
     surfaces_move = any(c.body_index >= 0 for c in s.contacts)
     if not surfaces_move:
-        u[i_surf:i_z] = np.concatenate([np.concatenate(pv) for pv in surface_points(s, np.zeros(s.n), modes)] or [[]])
+        _write_surfaces(u, i_surf, surface_points(s, np.zeros(s.n), modes))
 
     def inputs(t, x, phi, o):
         u[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
@@ -210,14 +213,19 @@ def plan_inputs(plan, law: CompiledLaw):
             u[j:j + 2] = ramp.at(t)
             j += 2
         if surfaces_move:
-            for p, v in surface_points(s, x, modes):
-                u[j:j + 3] = p
-                u[j + 3:j + 6] = v
-                j += 6
+            _write_surfaces(u, i_surf, surface_points(s, x, modes))
         u[i_z:-1] = x[z]
         return u
 
     return inputs
+
+
+def _write_surfaces(u: np.ndarray, j: int, points: list) -> None:
+    """u[j:] = p₁, v₁, p₂, v₂, …: the surfaces' points [m] and velocities [m/s] of :func:`surface_points`."""
+    for p, v in points:
+        u[j:j + 3] = p
+        u[j + 3:j + 6] = v
+        j += 6
 
 
 def plan_command(plan):
