@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from contactdyn.posture import PostureTask, solve_posture
 from contactdyn.robot import Robot
 
 MU = 0.4  # sec. 5.2
@@ -61,7 +62,10 @@ def scan() -> list[dict]:
     robot = Robot.load("writer2r")
     rows = []
     for x in XS:
-        q = robot.inverse_kinematics("tip", np.array([x, 0.0, Z_S]), SEED)
+        posture = solve_posture(robot, PostureTask("tip", np.array([x, 0.0, Z_S])), SEED)
+        if not posture.from_seed:
+            raise RuntimeError(f"x = {x} m: the elbow-up posture from SEED is not the one found")
+        q = posture.q
         H = robot.mass_matrix(q)
         J = robot.frame_jacobian(q, "tip")[:3]
         Jx, Jz = J[0], J[2]

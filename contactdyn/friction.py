@@ -65,10 +65,12 @@ def slip_direction(system, vt: np.ndarray, mode: ContactMode) -> np.ndarray:
     a stop: the force stays continuous across the stop instead of flipping there,
     which would make the step size collapse. Never a smoothed sgn.
     """
-    r = np.asarray(mode.slip, float)
-    if float(vt @ r) > system.slip_band:
-        return r if len(vt) == 1 else vt / math.sqrt(float(vt @ vt))
-    return r
+    r = mode.slip
+    v = vt.tolist()  # the test in Python floats: ~1 µs less per call than numpy's on a 2-vector
+    ahead = v[0] * r[0] + v[1] * r[1] if len(r) == 2 else v[0] * r[0]  # v_t·r [m/s]
+    if ahead > system.slip_band and len(r) == 2:
+        return vt / math.sqrt(float(vt @ vt))
+    return np.array(r)
 
 
 def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:

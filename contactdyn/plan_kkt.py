@@ -69,11 +69,8 @@ class CompiledKKT:
         for ci in self.coulomb:
             c = s.contacts[ci]
             T, consts = self._tangent_terms(c)
-            one_d = len(T) == 1
-            dT = np.asarray(self.modes[ci].slip, float) @ T if one_d else None
-            dC = np.asarray(self.modes[ci].slip, float) @ consts[:, nv:] if one_d else None
             self.coulomb_terms.append((ci, self.o_Fint.start + ci, c.friction.mu_k, T, consts[:, nv:],
-                                       self.frame_of[c.fid], dT, dC))
+                                       self.frame_of[c.fid]))
         self.z_slice = slice(2 * nQ + self.phase.z_slice.start, 2 * nQ + self.phase.z_slice.stop)
         self.rhs = make_rhs(self)
 

@@ -97,31 +97,40 @@ def _friction_terms(plan):
     nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
     m2 = m * m
     w0 = nQ + nr
-    coulomb = [(m2 + m + i_fn, mu, T, consts, j, dT, dC, ci) for ci, i_fn, mu, T, consts, j, dT, dC
-               in plan.coulomb_terms]
-    dyn_tilt = plan.dyn_tilt
+    coulomb = []
+    for ci, i_fn, mu, T, consts, j in plan.coulomb_terms:
+        # G: the Coulomb force's share of y per unit μF along each tangent: its tip force T into b's frame
+        # slots, its body columns into the body rows (one product and one subtraction per call)
+        G = np.zeros((len(T), plan.P.shape[0]))
+        G[:, m2 + w0 + 3 * j:m2 + w0 + 3 * j + 3] = T
+        if nQ > nv:
+            G[:, m2 + nv:m2 + nQ] = consts
+        g1 = np.asarray(plan.modes[ci].slip, float).dot(G) if len(T) == 1 else None  # 1-D: the mode's fixed d
+        coulomb.append((m2 + m + i_fn, mu, G, g1, ci))
+    # 2-D sliding with the normal force an unknown: the normal row's column nQ + r of A (flat in y, stride m)
+    # tilts by μ Jᵀ Tᵀ d on the robot's rows and is μ constsᵀ d over A0 on the bodies' rows
+    dyn_tilt = [(slice(nQ + r, nv * m + nQ + r, m), slice(nv * m + nQ + r, nQ * m + nQ + r, m) if nQ > nv else None,
+                 plan.A0[nv:nQ, nQ + r].copy(), ci, mu, T, consts, j) for r, ci, mu, T, consts, j in plan.dyn_tilt]
     if not coulomb and not dyn_tilt:
         return None
-    A0 = plan.A0
     o_vt = [plan.o_vt[c.name] for c in s.contacts]
 
     def terms(y, Js, modes):
-        A = y[:m2].reshape(m, m)
         o = y[m2 + m:]
         dirs = {}
-        for i_fn, mu, T, consts, j, dT, dC, ci in coulomb:
+        for i_fn, mu, G, g1, ci in coulomb:
             F_n = y[i_fn]
             if F_n > 0.0:
-                if dT is None:
+                if g1 is None:
                     dirs[ci] = d = slip_direction(s, o[o_vt[ci]], modes[ci])
-                    dT, dC = d.dot(T), d.dot(consts)
-                y[m2 + w0 + 3 * j:m2 + w0 + 3 * j + 3] -= (mu * F_n) * dT
-                if nQ > nv:
-                    y[m2 + nv:m2 + nQ] -= (mu * F_n) * dC
-        for r, ci, mu, T, consts, j in dyn_tilt:
+                    y -= (mu * F_n) * d.dot(G)
+                else:
+                    y -= (mu * F_n) * g1
+        for robot_rows, body_rows, a0, ci, mu, T, consts, j in dyn_tilt:
             dirs[ci] = d = slip_direction(s, o[o_vt[ci]], modes[ci])
-            A[:nv, nQ + r] += mu * Js[j].T.dot(d.dot(T))
-            A[nv:nQ, nQ + r] = A0[nv:nQ, nQ + r] + mu * d.dot(consts)
+            y[robot_rows] += mu * Js[j].T.dot(d.dot(T))
+            if body_rows is not None:
+                y[body_rows] = a0 + mu * d.dot(consts)
         return dirs
 
     return terms

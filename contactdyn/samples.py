@@ -201,7 +201,7 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray):
     J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
     w0 = nQ + nr
     refs = _launch_references(plan, ts, X, O) if plan.launch is not None else {}
-    for ci, i_fn, mu, T, consts, j, _, _ in plan.coulomb_terms:
+    for ci, i_fn, mu, T, consts, j in plan.coulomb_terms:
         Fp = np.maximum(O[:, i_fn], 0.0)
         D = slip_directions(plan, ci, O, refs.get(ci))
         B[:, w0 + 3 * j:w0 + 3 * j + 3] -= (mu * Fp)[:, None] * (D @ T)

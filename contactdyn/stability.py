@@ -27,7 +27,7 @@ from .scene import Scene, load_scene, parse_scene
 from .simulate import prepare, simulate
 
 __all__ = ["BAUMGARTE", "Linearization", "ContactLoop", "contact_phase_scene", "growth_rate", "stability_map",
-           "simulated_growth"]
+           "modal_poles", "modal_rate", "envelope_rate", "contact_force_error", "simulated_growth"]
 
 BAUMGARTE = 1000.0  #: [1/s] constraint stabilisation rate during linearisation (its poles are dropped)
 _FD_STEP = 1e-6  #: relative central-difference step
@@ -156,14 +156,55 @@ def stability_map(loop: ContactLoop, x_gain: tuple[str, np.ndarray], y_gain: tup
     return out
 
 
-def simulated_growth(scene: Scene, t_fit: float, hi: float = 95.0) -> tuple[float, complex]:
-    """The force error's growth rate [1/s] in a run of ``scene`` (see :func:`contact_phase_scene`), fitted
-    from ``t_fit`` [s] (after the faster modes died out) while the envelope is below ``hi`` [N] (before
-    any lift-off), and the dominant pole of the same scene's linearisation, for comparison."""
-    dom = ContactLoop(scene).linearize().dominant
+def modal_poles(t: np.ndarray, y: np.ndarray, rel: float = 1e-6, max_modes: int = 40) -> np.ndarray:
+    """The exponents λ [1/s] of y(t) = Σ c_k e^(λ_k t) on a uniform grid, by the matrix pencil method: the
+    signal's Hankel matrix keeps the singular values above ``rel`` times the largest (at most ``max_modes``),
+    and the shift between its rows gives e^(λ Δt). Modes with close rates but different frequencies come
+    apart, where an envelope fit mixes them."""
+    dt = float(t[1] - t[0])
+    if len(t) < 30 or not np.allclose(np.diff(t), dt, rtol=1e-6, atol=0.0):
+        raise ValueError(f"modal_poles: need at least 30 uniformly spaced samples, got {len(t)}")
+    n_cols = len(y) // 3
+    hankel = np.lib.stride_tricks.sliding_window_view(np.asarray(y, float), n_cols + 1)
+    _, sv, vt = np.linalg.svd(hankel, full_matrices=False)
+    order = min(int(np.count_nonzero(sv > rel * sv[0])), max_modes)
+    v = vt[:order].T
+    shift = np.linalg.lstsq(v[:-1], v[1:], rcond=None)[0]
+    return np.log(np.linalg.eigvals(shift).astype(complex)) / dt
+
+
+def contact_force_error(scene: Scene, t_fit: float, hi: float = 95.0) -> tuple[np.ndarray, np.ndarray]:
+    """(t [s], F_n − F_d [N]) of a run of ``scene`` (see :func:`contact_phase_scene`) from ``t_fit``, up to
+    the first sample where the error exceeds ``hi`` or the contact is lost (the loop is linear while touching)."""
     r = simulate(scene)
     name = next(iter(scene.contacts))
-    err = r[f"contact.{name}.F_n"] - r[f"contact.{name}.F_d"]  # [N]
-    sel = r.t > t_fit
-    period = 2.0 * np.pi / abs(dom.imag) if abs(dom.imag) > 1e-6 else 0.05
-    return growth_rate(r.t[sel], err[sel], period, 1e-6, hi), dom
+    err = r[f"contact.{name}.F_n"] - r[f"contact.{name}.F_d"]
+    keep = (np.abs(err) <= hi) & (r[f"contact.{name}.touching"] > 0.5)
+    end = int(np.argmin(keep)) if not np.all(keep) else len(err)
+    sel = np.flatnonzero(r.t[:end] > t_fit)
+    return r.t[sel], err[sel]
+
+
+def simulated_growth(scene: Scene, t_fit: float, hi: float = 95.0, method: str = "modal"
+                     ) -> tuple[float, complex]:
+    """The force error's growth rate [1/s] in a run of ``scene`` (see :func:`contact_phase_scene`) from ``t_fit``
+    [s] while it stays in contact and below ``hi`` [N], and the dominant pole of the same scene's
+    linearisation, for comparison. ``method``: "modal" — the real part of the run's own mode
+    (:func:`modal_poles`) whose frequency is nearest the pole's; "envelope" — :func:`growth_rate`."""
+    dom = ContactLoop(scene).linearize().dominant
+    t, err = contact_force_error(scene, t_fit, hi)
+    if method == "envelope":
+        return envelope_rate(t, err, dom, hi), dom
+    return modal_rate(t, err, dom), dom
+
+
+def modal_rate(t: np.ndarray, err: np.ndarray, pole: complex) -> float:
+    """Real part [1/s] of the mode of err(t) (:func:`modal_poles`) whose frequency is nearest ``pole``'s."""
+    found = modal_poles(t, err)
+    return float(found[int(np.argmin(np.abs(np.abs(found.imag) - abs(pole.imag))))].real)
+
+
+def envelope_rate(t: np.ndarray, err: np.ndarray, pole: complex, hi: float = 95.0) -> float:
+    """:func:`growth_rate` of err(t) over windows of ``pole``'s period."""
+    period = 2.0 * np.pi / abs(pole.imag) if abs(pole.imag) > 1e-6 else 0.05
+    return growth_rate(t, err, period, 1e-6, hi)

@@ -192,6 +192,10 @@ class Reference:
         n = len(self.start)
         if not self.moves:
             return self.start.copy(), np.zeros(n), np.zeros(n)
+        if len(self.moves) == 1:  # the start plus one move's rows, without the zero rows' copy and sum
+            out = self.moves[0].rows(t)
+            out[0] += self.start
+            return out[0], out[1], out[2]
         out = self._at_rest.copy()  # x, v, a
         for move in self.moves:
             out += move.rows(t)

@@ -76,12 +76,71 @@ def test_the_cycle_finder_finds_a_cycle():
     assert _cycle({"a": {"b"}, "b": set()}) == []
 
 
+def _too_long(path: Path) -> list[str]:
+    """The classes over MAX_CLASS lines and the functions over MAX_FUNCTION lines in one file."""
+    tree = ast.parse(path.read_text())
+    return [f"{path.name}: {node.name}: {node.end_lineno - node.lineno + 1} lines" for node in ast.walk(tree)
+            if isinstance(node, ast.ClassDef) and node.end_lineno - node.lineno + 1 > MAX_CLASS
+            or isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+            and node.end_lineno - node.lineno + 1 > MAX_FUNCTION]
+
+
 @pytest.mark.parametrize("module", CORE)
 def test_core_module_is_documented_and_small(module):
     tree = ast.parse((PKG / f"{module}.py").read_text())
     doc = ast.get_docstring(tree)
     assert doc and len(doc.splitlines()) >= 3, f"{module}: a module docstring stating its concept"
-    too_long = [f"{node.name}: {node.end_lineno - node.lineno + 1} lines" for node in ast.walk(tree)
-                if isinstance(node, ast.ClassDef) and node.end_lineno - node.lineno + 1 > MAX_CLASS
-                or isinstance(node, ast.FunctionDef) and node.end_lineno - node.lineno + 1 > MAX_FUNCTION]
-    assert too_long == []
+    assert _too_long(PKG / f"{module}.py") == []
+
+
+def test_no_class_or_function_in_the_package_is_too_long():
+    assert [line for path in sorted(PKG.rglob("*.py")) for line in _too_long(path)] == []
+
+
+def test_the_size_rule_finds_a_long_function(tmp_path):
+    body = "\n".join(f"    x{i} = {i}" for i in range(MAX_FUNCTION))
+    (tmp_path / "m.py").write_text(f"def short():\n    pass\n\n\ndef long():\n{body}\n")
+    assert _too_long(tmp_path / "m.py") == [f"m.py: long: {MAX_FUNCTION + 1} lines"]
+
+
+#: the data flow of one run (docs/architecture.md), upstream first; a module imports only from its own
+#: layer or those before it. Modules not listed (robot sources, errors, config, ...) are shared below all.
+LAYERS = [
+    ["scene"],
+    ["chain", "contact", "layout", "phases", "chain_forces", "friction", "constraints", "impact", "dynamics",
+     "drives", "controllers", "limits", "posture", "system", "fastpath"],
+    ["rhsplan", "plan_probe", "plan_kkt", "plan_rhs", "plan_fold", "plan_law", "plan_drives", "samples"],
+    ["integrators", "dop853", "events", "transitions", "hybrid", "channels", "result", "run_check"],  # the loop
+    ["simulate", "sanity", "metrics"],
+    ["plots", "viewer", "sweep", "identify", "workprecision", "stability", "cli", "starter", "keys"],
+]
+#: the scene reads each part's own keys and names to validate a file: the drive table, a controller's
+#: reader, the integrators' method names. These are the only imports against the flow.
+SCENE_READS = {("scene", "drives"), ("scene", "controllers"), ("scene", "integrators")}
+
+
+def _layer(module: str) -> tuple[str, int] | None:
+    top = module.removeprefix("contactdyn.").split(".")[0]
+    return next(((top, i) for i, names in enumerate(LAYERS) if top in names), None)
+
+
+def _against_the_flow(graph: dict[str, set[str]]) -> list[str]:
+    """Imports from a module to one in a later layer, other than the scene's validation reads."""
+    found = []
+    for module, targets in graph.items():
+        for target in targets:
+            src, dst = _layer(module), _layer(target)
+            if src and dst and dst[1] > src[1] and (src[0], dst[0]) not in SCENE_READS:
+                found.append(f"{module} imports {target}")
+    return sorted(found)
+
+
+def test_imports_follow_the_data_flow():
+    assert _against_the_flow(_import_graph()) == []
+
+
+def test_the_flow_rule_finds_an_import_against_the_flow():
+    graph = {"contactdyn.system": {"contactdyn.hybrid"}, "contactdyn.hybrid": {"contactdyn.system"},
+             "contactdyn.scene": {"contactdyn.integrators"}, "contactdyn.result": {"contactdyn.plots"}}
+    assert _against_the_flow(graph) == ["contactdyn.result imports contactdyn.plots",
+                                        "contactdyn.system imports contactdyn.hybrid"]

@@ -205,6 +205,15 @@ def test_column_naming_no_channel(capsys, tmp_path, log):
     _bad(capsys, tmp_path, ["--data", str(path), "--params", MU], "tip[7]", "an index < 3")
 
 
+def test_a_short_log_with_a_column_naming_no_channel_is_told_the_name_not_the_noise(capsys, tmp_path):
+    """Two samples are too few to estimate a noise level, but the column's name is the first error to report."""
+    path = tmp_path / "short.csv"
+    path.write_text("t,contact.tip.Fn\n0.0,100\n0.001,101\n")
+    _bad(capsys, tmp_path, ["--data", str(path), "--params", MU], "contact.tip.Fn", "no such channel")
+    path.write_text("t,contact.tip.F_n\n0.0,100\n0.001,101\n")  # a right name: the noise is what is missing
+    _bad(capsys, tmp_path, ["--data", str(path), "--params", MU], "contact.tip.F_n", "--noise COLUMN=SIGMA")
+
+
 def test_key_that_is_not_a_number(capsys, tmp_path, log):
     _bad(capsys, tmp_path, ["--data", str(log), "--params", "contact.tip.normal.model"], "contact.tip.normal.model",
          "a number in the scene")

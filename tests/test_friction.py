@@ -430,3 +430,33 @@ def test_bad_friction_inputs_name_the_key():
     with pytest.raises(SceneError, match="mu_s"):
         parse_scene(scene(mu_s=0.2, mu_k=0.4))
     assert "task_force" in contactdyn.controllers.CONTROLLERS
+
+
+def test_2d_coulomb_on_a_moving_body_compiled_equals_the_readable_model():
+    """A compliant (chain) contact on a cart with 2-D friction: the plan's Coulomb force, its tip share
+    and its reaction on the cart's row (plan_rhs._friction_terms' map G), equals System.evaluate's at
+    slips in several directions, and the cart takes the reaction μ_k F_n d_x in closed form."""
+    from contactdyn.rhsplan import cached_plan
+
+    doc = scene(dims=2)
+    doc["body"] = {"cart": {"mass": 5.0, "axis": [1.0, 0.0, 0.0]}}
+    doc["contact"]["ground"].update(body="cart", normal={"direction": [0.0, 0.0, 1.0], "model": "chain",
+                                                         "environment": [{"k": 1e6, "b": 2e3}]})
+    system = System(parse_scene(doc))
+    x0, _ = system.initial_state()
+    phase = system.start_phase(0, 0.0, x0, None)
+    modes = [ContactMode(touching=True, slip=(1.0, 0.0))]
+    plan = cached_plan(system, modes, phase)
+    assert plan.ok, plan.reason
+    assert system.nQ > system.nv  # the cart's coordinate: G's body columns are in play
+    nQ, nv = system.nQ, system.nv
+    got = {}
+    for v in ([0.3, 0.0], [0.2, 0.5], [0.1, -0.4]):  # ahead of r = +x, each its own direction
+        x = x0.copy()
+        x[2] = -W / 1e6  # [m] pressed in: the compliant ground bears the weight
+        x[nQ:nQ + 2] = v
+        ref = system.evaluate(0.1, x, modes, phase).xdot
+        got[tuple(v)] = out = plan.rhs(0.1, x.copy())
+        assert np.abs(out - ref).max() <= 1e-10 * (1.0 + np.abs(ref).max())
+    for v, xdot in got.items():  # the cart (5 kg, free along x) takes the reaction μ_k F_n d_x, F_n = W
+        assert xdot[nQ + nv] == pytest.approx(0.4 * W * v[0] / math.hypot(*v) / 5.0, rel=1e-9)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from contactdyn.scene import parse_scene
-from contactdyn.stability import ContactLoop, contact_phase_scene, simulated_growth
+from contactdyn.stability import ContactLoop, contact_phase_scene, envelope_rate, modal_poles, simulated_growth
 
 
 def rigid_case3_b_a7(kp: float, kv: float) -> ContactLoop:
@@ -45,12 +45,13 @@ def test_the_case3_scenes_sit_inside_their_stable_regions():
         assert ContactLoop(contact_phase_scene(name, [1.0])).linearize().dominant.real < -2.0, name
 
 
-def growth_in_run(kp: float, kv: float, duration: float, t_fit: float) -> tuple[float, complex]:
-    """Growth rate of the force error's envelope in a run of the press phase (from the surface, at
-    rest, F_d ramping), fitted after t_fit where the dominant mode has taken over."""
+def growth_in_run(kp: float, kv: float, duration: float, t_fit: float, scene: str = "case3_b_position"
+                  ) -> tuple[float, complex]:
+    """Growth rate of the force error's dominant mode in a run of the press phase (from the surface, at
+    rest, F_d ramping), fitted after t_fit (stability.simulated_growth: the run's own modes by matrix pencil)."""
     over = {"phase.0.controller.kp": kp, "phase.0.controller.kv": kv, "solver.rtol": 1e-9, "solver.atol": 1e-11,
             "solver.output_rate": 1000.0, "duration": duration}
-    return simulated_growth(contact_phase_scene("case3_b_position", [1.0], over), t_fit)
+    return simulated_growth(contact_phase_scene(scene, [1.0], over), t_fit)
 
 
 def test_simulation_grows_at_the_unstable_side_of_the_boundary():
@@ -61,9 +62,46 @@ def test_simulation_grows_at_the_unstable_side_of_the_boundary():
     assert rate == pytest.approx(dom.real, rel=0.1)
 
 
+def test_simulation_grows_at_the_rate_of_the_dominant_mode_where_a_second_one_is_close():
+    """A7 on (a), link H, K_p = 1000, K_v = 100: two unstable modes, +3.07 ± 127.8i and +2.75 ± 158.8i (the
+    tube's and the two-stage surface's); the envelope of the force error mixes them (−29 % with the
+    former fit), the run's own mode at the dominant frequency grows at the dominant pole's rate."""
+    rate, dom = growth_in_run(1000.0, 100.0, 1.2, 0.6, "case3_a_position")
+    assert dom.real == pytest.approx(3.071, abs=1e-3)
+    assert rate == pytest.approx(dom.real, rel=0.1)
+
+
 @pytest.mark.slow
 def test_simulation_decays_at_the_stable_side_of_the_boundary():
     """Same K_p, K_v = 60: just inside (−0.77 ± 132.6i); the run's force error decays at that rate."""
     rate, dom = growth_in_run(1000.0, 60.0, 2.0, 1.0)
     assert dom.real < 0.0
+    assert rate == pytest.approx(dom.real, rel=0.1)
+
+
+def test_the_matrix_pencil_separates_two_modes_of_close_rates_that_the_envelope_mixes():
+    """y = e^(3.07 t) cos(127.77 t) + 0.8 e^(2.75 t) cos(158.8 t + 1) (case 3 on (a), K_p = 1000, K_v = 100):
+    both exponents come back to 1e-8; the envelope's fit is pulled off the dominant rate."""
+    t = np.arange(0.0, 0.6, 1e-3)
+    y = np.exp(3.07 * t) * np.cos(127.77 * t) + 0.8 * np.exp(2.75 * t) * np.cos(158.8 * t + 1.0)
+    found = modal_poles(t, y)
+    upper = sorted(found[found.imag > 0], key=lambda z: z.imag)
+    np.testing.assert_allclose(upper, [3.07 + 127.77j, 2.75 + 158.8j], rtol=1e-8)
+    assert abs(envelope_rate(t, y, 3.07 + 127.77j) / 3.07 - 1.0) > 0.05
+
+
+def test_the_matrix_pencil_refuses_a_non_uniform_grid():
+    t = np.sort(np.random.default_rng(0).uniform(0.0, 1.0, 100))
+    with pytest.raises(ValueError, match="uniformly spaced"):
+        modal_poles(t, np.exp(-t))
+
+
+@pytest.mark.slow
+def test_a10_as_written_decays_at_its_dominant_rate_next_to_a_close_pole():
+    """A10 as written, massless nominal, K_F = 10 on (b): −2.90 ± 136.1i with a pole at −4.60 ± 26.3i
+    close by (the envelope fit read −4.43, +53 %); the run's mode at 136 rad/s decays at −2.90."""
+    over = {"phase.0.controller.kf": 10.0, "phase.0.controller.cancel": "target", "solver.rtol": 1e-9,
+            "solver.atol": 1e-11, "solver.output_rate": 1000.0, "duration": 2.0}
+    rate, dom = simulated_growth(contact_phase_scene("case3_b_force", [1.0], over), 0.8)
+    assert dom.real == pytest.approx(-2.900, abs=1e-3)
     assert rate == pytest.approx(dom.real, rel=0.1)

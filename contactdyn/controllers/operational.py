@@ -145,41 +145,43 @@ class OperationalSpace(Controller):
         # task-space terms are Python floats (k, m ≤ 6: cheaper than one numpy call each, ~0.5 µs)
         cfg, k, m, W = self.config, self._k, self._m, self._W
         axes = self._axes_rows
-        vt = inp.v_tip.tolist()
+        vx, vy, vz = inp.v_tip.tolist()
         kp, kd = self._kp_list, self._kd_list
         if inp.x_d is not None:
-            ad, ex = inp.a_d.tolist(), (inp.x_d - inp.p_tip).tolist()
-            ev = (inp.v_d - inp.v_tip).tolist()
-            a_task = [_dot(n, ad) for n in axes]  # a* [m/s², rad/s²], through Λ
-            f = [kp[i] * _dot(n, ex) + kd[i] * _dot(n, ev) for i, n in enumerate(axes)]  # [N], directly
+            (ax, ay, az), (px, py, pz) = inp.a_d.tolist(), inp.p_tip.tolist()
+            (xx, xy, xz), (wx, wy, wz) = inp.x_d.tolist(), inp.v_d.tolist()
+            ex, ey, ez, fx, fy, fz = xx - px, xy - py, xz - pz, wx - vx, wy - vy, wz - vz  # x_d − p, ẋ_d − ṗ
+            a_task = [n[0] * ax + n[1] * ay + n[2] * az for n in axes]  # a* [m/s², rad/s²], through Λ
+            f = [kp[i] * (n[0] * ex + n[1] * ey + n[2] * ez) + kd[i] * (n[0] * fx + n[1] * fy + n[2] * fz)
+                 for i, n in enumerate(axes)]  # [N], directly
         else:
             a_task = [0.0] * k
-            f = [-kd[i] * _dot(n, vt) for i, n in enumerate(axes)]
+            f = [-kd[i] * (n[0] * vx + n[1] * vy + n[2] * vz) for i, n in enumerate(axes)]
         for key, n in zip(self._force_keys, self._forced_rows, strict=True):  # set-points along their directions
             a_task.append(0.0)
-            f.append(-inp.force_d[key][0] - cfg.kd_normal * _dot(n, vt))  # [N]
-        if cfg.tool_axis is not None:
+            f.append(-inp.force_d[key][0] - cfg.kd_normal * (n[0] * vx + n[1] * vy + n[2] * vz))  # [N]
+        if self._target is not None:
             a = inp.R_tip.dot(cfg.tool_axis).tolist()  # current tool direction (world)
             e1, e2 = _perpendicular(a)
-            W[m - 2, 3:] = e1
-            W[m - 1, 3:] = e2
+            W[m - 2:, 3:] = e1, e2
             omega = inp.J_ang.dot(inp.v).tolist()  # [rad/s]
             c = _cross(a, self._target)
-            w = [cfg.ko * c[i] - cfg.do * omega[i] for i in range(3)]
+            ko, do = cfg.ko, cfg.do
+            w = [ko * c[0] - do * omega[0], ko * c[1] - do * omega[1], ko * c[2] - do * omega[2]]
             a_task += [_dot(e1, w), _dot(e2, w)]
             f += [0.0, 0.0]
             Jt = W.dot(np.concatenate((inp.J, inp.J_ang)))
             drift = W.dot(np.concatenate((inp.drift, inp.drift_ang)))
         else:
-            Jt, drift = W[:, :3].dot(inp.J), W[:, :3].dot(inp.drift)
-        xdot = Jt.dot(inp.v)
+            Jt, drift = self._S.dot(inp.J), self._S.dot(inp.drift)
         L_inv = Jt.dot(solve_matrix(inp.H, Jt.T))  # Λ⁻¹
         self._guard(L_inv, inp.t)
-        rhs = np.array(a_task) - drift
+        a_f = np.array((a_task, f))
+        rhs = a_f[0] - drift
         if self._null:
-            rhs += cfg.k_null * xdot
+            rhs += cfg.k_null * Jt.dot(inp.v)  # k_null ẋ_t
         ft = solve_vector(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
-        ft += f
+        ft += a_f[1]
         tau = ft.dot(Jt)
         tau += inp.h
         if self._null:

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import ContactdynError, SceneError
 from ..scene import Scene, load_scene, parse_scene
-from .data import Measurements, measurements
+from .data import Measurements, measurements, read_csv
 from .model import Failure, FitModel, FitSettings, check_columns, read_channel
 from .params import Parameter, parse_params
 from .solver import Stage, StartOutcome, solve_in_stages, start_points
@@ -73,7 +73,11 @@ def fit(scene: Scene | str | Path, data: str | Path | Measurements, params: str 
         raise SceneError("--workers", "an integer >= 0 (0: this process)", workers)
     parameters = parse_params(params, scene.document, scene.file)
     if not isinstance(data, Measurements):
-        data = measurements(data, noise, scene.duration)
+        try:
+            data = measurements(data, noise, scene.duration)
+        except SceneError:
+            _check_names(scene, data)  # a column naming no channel is the first thing to say
+            raise
     settings = FitSettings(rtol, atol, workers)
     model = FitModel(scene.document, scene.file, parameters, data, settings)
     start_series = _first_run(model, parameters)
@@ -112,8 +116,21 @@ def _first_run(model: FitModel, parameters: list[Parameter]) -> list[np.ndarray]
         result = simulate(parse_scene(model.document, {**model.fixed, **values}, model.file))
     except ContactdynError as exc:
         raise ContactdynError(f"the run at the scene's values {values} failed: {exc}") from None
-    check_columns(result.channels, model.data)
+    check_columns(result.channels, [c.name for c in model.data.columns], model.data.file)
     return [read_channel(result.channels, c.channel, c.index, c.t) for c in model.data.columns]
+
+
+def _check_names(scene: Scene, path) -> None:
+    """Raise if a column of the log at ``path`` names no channel of the scene's run (a 1 ms run gives the
+    names); say nothing if the log cannot be read."""
+    from ..simulate import simulate
+
+    try:
+        _, raw = read_csv(path)
+        channels = simulate(parse_scene(scene.document, {"duration": 1e-3}, scene.file)).channels
+    except ContactdynError:
+        return
+    check_columns(channels, list(raw), str(path))
 
 
 def _pool(workers: int):

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import ContactdynError, SceneError, close_matches
 from ..scene import SolverSpec
-from .data import Measurements
+from .data import Measurements, split_column
 from .params import Parameter
 
 __all__ = ["FitModel", "FitSettings", "Failure", "predict", "check_columns"]
@@ -62,21 +62,22 @@ def read_channel(channels: dict[str, np.ndarray], channel: str, index: int | Non
     return np.interp(t, channels["t"], values)
 
 
-def check_columns(channels: dict[str, np.ndarray], data: Measurements) -> None:
+def check_columns(channels: dict[str, np.ndarray], names: list[str], file: str) -> None:
     """Each column must name a scalar channel or a component of a vector channel of the run."""
-    for col in data.columns:
-        if col.channel not in channels:
-            close = close_matches(col.channel, channels)
+    for name in names:
+        channel, index = split_column(name)
+        if channel not in channels:
+            close = close_matches(channel, channels)
             hint = f" (close: {', '.join(close)})" if close else ""
-            raise SceneError(col.name, f"a channel of the run{hint}; channels: {', '.join(sorted(channels))}",
-                             "no such channel", data.file)
-        shape = channels[col.channel].shape
-        if col.index is None and len(shape) > 1:
-            raise SceneError(col.name, f"a component {col.channel}[0] ... {col.channel}[{shape[1] - 1}] "
-                             "of this vector channel", col.name, data.file)
-        if col.index is not None and (len(shape) == 1 or col.index >= shape[1]):
+            raise SceneError(name, f"a channel of the run{hint}; channels: {', '.join(sorted(channels))}",
+                             "no such channel", file)
+        shape = channels[channel].shape
+        if index is None and len(shape) > 1:
+            raise SceneError(name, f"a component {channel}[0] ... {channel}[{shape[1] - 1}] "
+                             "of this vector channel", name, file)
+        if index is not None and (len(shape) == 1 or index >= shape[1]):
             size = "a scalar channel (no [i])" if len(shape) == 1 else f"an index < {shape[1]}"
-            raise SceneError(col.name, size, col.index, data.file)
+            raise SceneError(name, size, index, file)
 
 
 @dataclass
