@@ -103,6 +103,45 @@ def _matrix_fold(plan, drives):
     return fold
 
 
+def _law_parts(plan, ctl, meta: list):
+    """parts(t, x, Js, φ, o, A, τ_c) -> (τ, ż, B, D_z, carried, None) of a tip law read off as a matrix, at the
+    plan's own slots (:func:`~contactdyn.plan_law.plan_command`), or None while its matrix is not read; None
+    for a controller that is not one. B = H J⁺ D_a (+ Jᵀ D_f) with D, M's columns of the rows' measured forces,
+    read once; a row reaching beyond the robot adds its column on the joints (the measured joint torque)."""
+    fast = plan_command(plan)
+    if fast is None:
+        return None
+    s, phase, nr = plan.system, plan.phase, plan.nr
+    nQ, nv = s.nQ, s.nv
+    carrier = phase.carrier if phase.reference is not None else None
+    lam_cols = slice(nQ, nQ + nr)
+    reach = _reaching_rows(plan)
+    every_row_reaches = reach == list(range(nr))
+    increments = ctl.ctl.increments
+    row_columns = None  # (D_a, D_f, D_z) of CompiledLaw.row_columns, once the law's matrix is read
+
+    def parts(t, x, Js, phi, o, A, tau_c):
+        nonlocal row_columns
+        got = fast(t, x, Js, phi, o, tau_c)
+        if got is None:
+            return None
+        tau, zdot, H, J = got
+        if row_columns is None:
+            row_columns = ctl.row_columns(meta)
+        D_a, D_f, Dz = row_columns
+        B = increments(H, J, D_a, D_f)
+        if every_row_reaches:
+            B += A[:nv, lam_cols]
+        else:
+            for j in (reach if reach is not None else np.flatnonzero(A[nv:nQ, lam_cols].any(axis=0))):
+                B[:, j] += A[:nv, nQ + j]
+        carried = None if carrier is None else carried_terms(carrier[0], *ctl.carried_increment(H, J, carrier[1]),
+                                                             zdot)
+        return tau, zdot, B, Dz, carried, None
+
+    return parts
+
+
 def folded_solve(plan, make_input, drives):
     """solve(t, x, Js, φ, o, A, b) -> (z = [Q̈, λ, w], ż): the readable fold on the plan's KKT system.
 
@@ -124,37 +163,17 @@ def folded_solve(plan, make_input, drives):
     meta = [(row.owner, kinds.get(row.kind, row.label), row.index) for row in plan.rows]
     torque = contact_torque_of(plan)
     fold_rows = ctl.uses_forces and nr > 0
-    fast = plan_command(plan)
-    carrier = phase.carrier if phase.reference is not None else None
     w0 = nQ + nr
-    lam_cols = slice(nQ, nQ + nr)
-    reach = _reaching_rows(plan)
-    every_row_reaches = reach == list(range(nr))
-    increments = ctl.ctl.increments if fast is not None else None
-
     matrix_fold = _matrix_fold(plan, drives)
-    row_columns = None  # (D_a, D_f, D_z) of CompiledLaw.row_columns, once the law's matrix is read
+    law_parts = _law_parts(plan, ctl, meta)
 
     def parts(t, x, Js, phi, o, A, tau_c):
         """(τ, ż, B, D_z, carried, (ControlInput, drive command) or None): the λ-free command and its parts per
         unit row force and body acceleration, by the law's matrix at the plan's slots where it is read, else
         probed."""
-        nonlocal row_columns
-        got = fast(t, x, Js, phi, o, tau_c) if fast is not None else None
+        got = law_parts(t, x, Js, phi, o, A, tau_c) if law_parts is not None else None
         if got is not None:
-            tau, zdot, H, J = got
-            if row_columns is None:
-                row_columns = ctl.row_columns(meta)
-            D_a, D_f, Dz = row_columns
-            B = increments(H, J, D_a, D_f)
-            if every_row_reaches:  # a row reaching beyond the robot is in the measured joint torque
-                B += A[:nv, lam_cols]
-            else:
-                for j in (reach if reach is not None else np.flatnonzero(A[nv:nQ, lam_cols].any(axis=0))):
-                    B[:, j] += A[:nv, nQ + j]
-            carried = None if carrier is None else carried_terms(carrier[0], *ctl.carried_increment(
-                H, J, carrier[1]), zdot)
-            return tau, zdot, B, Dz, carried, None
+            return got
         inp = make_input(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
         cmd, zdot, carried = command_of(s, inp, phase, x, ctl)
         B, Dz = force_columns(inp, ctl, cmd[:nv], zdot, meta, [-A[:nQ, nQ + r] for r in range(nr)], nv)
