@@ -166,9 +166,12 @@ class Contact:
 
     def relaxation_time(self, mode: ContactMode) -> float:
         """[s] The shortest time constant b / k of the damped ends relaxing in this mode (inf: none)."""
-        taus = [s.b / s.k for dc in self.chains for j, _, slot, _, algebraic in dc.plan(mode.touching, mode.relaxing)
-                .junctions if slot >= 0 and not algebraic for s in (dc.chain.stages[k] for k in dc.chain.stages_of(j))
-                if s.k > 0.0]
+        taus = []
+        for dc in self.chains:
+            for j, _, slot, _, algebraic in dc.plan(mode.touching, mode.relaxing).junctions:
+                if slot >= 0 and not algebraic:  # a junction integrated as a state
+                    stages = (dc.chain.stages[k] for k in dc.chain.stages_of(j))
+                    taus += [s.b / s.k for s in stages if s.k > 0.0]
         return min(taus, default=math.inf)
 
     def surface(self, x: np.ndarray, nQ: int) -> tuple[np.ndarray, np.ndarray]:
