@@ -3,8 +3,9 @@
 Along the normal a :class:`~contactdyn.chain.Chain` (rigid when empty); along the
 tangential directions nothing (``free``), Coulomb friction, or a chain per direction that
 bonds at touch (case 1's horizontal deformations). A contact's *mode* says whether it
-touches and, with friction, whether it sticks or in which direction it slides; the
-mode only changes at located events (:mod:`contactdyn.events`, :mod:`contactdyn.transitions`).
+touches and, with friction, whether it sticks or in which direction it slides (and, after a
+separation, that its chains' damped ends relax); the mode only changes at located events
+(:mod:`contactdyn.events`, :mod:`contactdyn.transitions`).
 """
 
 from __future__ import annotations
