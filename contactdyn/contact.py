@@ -44,6 +44,10 @@ class ContactMode:
     def with_(self, **changes) -> ContactMode:
         return replace(self, **changes)
 
+    def separated(self) -> ContactMode:
+        """The mode after the contact lets go: not touching, not stuck, its damped chain ends relaxing."""
+        return replace(self, touching=False, stuck=False, relaxing=True)
+
 
 @dataclass
 class Kinematics:
