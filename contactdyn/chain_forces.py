@@ -74,7 +74,7 @@ def _node_motion(nQ: int, dc: DirectionalChain, plan: ChainPlan, kin: Kinematics
             pos[i], vel[i] = s_anc, v_anc
         else:
             pos[i], vel[i] = x[nodes[i].coord], x[nQ + nodes[i].coord]
-    junction_nodes = {j for j, _, _, _, _ in plan.junctions}
+    junction_nodes = plan.junction_nodes
     for a, b in plan.aliases:
         if b not in junction_nodes:
             pos[a], vel[a] = pos[b], vel[b]

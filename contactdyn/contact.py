@@ -75,6 +75,7 @@ class ChainPlan:
     active: list[int]  #: stages carrying force
     bond: bool
     interface_stage: int  #: stage whose force is the interface force (-1: bond or none)
+    junction_nodes: frozenset[int]  #: the nodes of ``junctions`` (a membership test per evaluation)
 
 
 def _plan(chain: Chain, touching: bool, junction_state: int, relaxing: bool) -> ChainPlan:
@@ -123,7 +124,7 @@ def _plan(chain: Chain, touching: bool, junction_state: int, relaxing: bool) -> 
             interface_stage = next(k for k, s in enumerate(stages) if s.upper == es)
         else:
             interface_stage = next(k for k, s in enumerate(stages) if s.lower == rs)
-    return ChainPlan(solid, aliases, junctions, free_ends, active, bond, interface_stage)
+    return ChainPlan(solid, aliases, junctions, free_ends, active, bond, interface_stage, frozenset(junction_nodes))
 
 
 @dataclass
