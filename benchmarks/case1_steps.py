@@ -19,12 +19,12 @@ import argparse
 from pathlib import Path
 
 import b1_reference
-import numpy as np
 from rhs_cost import _mode_at
 from scenes import CHECK, REFERENCE, errors
 from timing import interleaved, write_report
 
 from contactdyn import simulate
+from contactdyn.integrators import jacobian_eigenvalues
 from contactdyn.rhsplan import ModePlan
 from contactdyn.scene import load_scene
 
@@ -43,17 +43,9 @@ PHASE_TIMES = (0.5, 2.0)  #: [s] one state in the approach, one in the push
 
 
 def eigenvalues(at: float, n_show: int = 4) -> list[complex]:
-    """The fastest eigenvalues [1/s] of the compiled right-hand side's Jacobian (central differences) at ``at``."""
+    """The fastest eigenvalues [1/s] of the compiled right-hand side's finite-difference Jacobian at ``at``."""
     system, modes, phase, t, x = _mode_at(load_scene(SCENE), at)
-    f = ModePlan(system, modes, phase).rhs
-    J = np.zeros((len(x), len(x)))
-    for i in range(len(x)):
-        h = 1e-7 * max(1.0, abs(x[i]))
-        xp, xm = x.copy(), x.copy()
-        xp[i] += h
-        xm[i] -= h
-        J[:, i] = (np.asarray(f(t, xp)) - np.asarray(f(t, xm))) / (2.0 * h)
-    lam = np.linalg.eigvals(J)
+    lam = jacobian_eigenvalues(ModePlan(system, modes, phase).rhs, t, x)
     return sorted(lam, key=lambda w: -abs(w))[:n_show]
 
 

@@ -8,7 +8,9 @@ At a state x, with the chain's touching plan (:class:`~contactdyn.contact.ChainP
    (s = u·p [m], ṡ = u·ṗ [m/s]); masses are coordinates of Q; a damped junction j is a
    first-order state whose rate balances its stages,
    Σ_below (k (s_lower − s_j) + b (ṡ_lower − ṡ_j)) = Σ_above (k (s_j − s_upper) + b (ṡ_j − ṡ_upper)),
-   an undamped one sits where its springs balance;
+   an undamped one, or one whose stages share a time constant b/k (:func:`~contactdyn.chain.balanced`),
+   sits where its springs balance; a damped free end is a state only while it relaxes after a
+   separation, else it follows its stage's other node;
 2. stage forces F = k x + b ẋ [N] at compression x = s_lower − s_upper (or the
    Hunt–Crossley law) push the upper node along +u and the lower one back; their sums act
    on the tip (a Cartesian force along u), the masses and the environment body;
@@ -72,7 +74,7 @@ def _node_motion(nQ: int, dc: DirectionalChain, plan: ChainPlan, kin: Kinematics
             pos[i], vel[i] = s_anc, v_anc
         else:
             pos[i], vel[i] = x[nodes[i].coord], x[nQ + nodes[i].coord]
-    junction_nodes = {j for j, _, _, _, _ in plan.junctions}
+    junction_nodes = plan.junction_nodes
     for a, b in plan.aliases:
         if b not in junction_nodes:
             pos[a], vel[a] = pos[b], vel[b]

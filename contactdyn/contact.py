@@ -3,8 +3,9 @@
 Along the normal a :class:`~contactdyn.chain.Chain` (rigid when empty); along the
 tangential directions nothing (``free``), Coulomb friction, or a chain per direction that
 bonds at touch (case 1's horizontal deformations). A contact's *mode* says whether it
-touches and, with friction, whether it sticks or in which direction it slides; the
-mode only changes at located events (:mod:`contactdyn.events`, :mod:`contactdyn.transitions`).
+touches and, with friction, whether it sticks or in which direction it slides (and, after a
+separation, that its chains' damped ends relax); the mode only changes at located events
+(:mod:`contactdyn.events`, :mod:`contactdyn.transitions`).
 """
 
 from __future__ import annotations
@@ -43,6 +44,10 @@ class ContactMode:
     def with_(self, **changes) -> ContactMode:
         return replace(self, **changes)
 
+    def separated(self) -> ContactMode:
+        """The mode after the contact lets go: not touching, not stuck, its damped chain ends relaxing."""
+        return replace(self, touching=False, stuck=False, relaxing=True)
+
 
 @dataclass
 class Kinematics:
@@ -70,6 +75,7 @@ class ChainPlan:
     active: list[int]  #: stages carrying force
     bond: bool
     interface_stage: int  #: stage whose force is the interface force (-1: bond or none)
+    junction_nodes: frozenset[int]  #: the nodes of ``junctions`` (a membership test per evaluation)
 
 
 def _plan(chain: Chain, touching: bool, junction_state: int, relaxing: bool) -> ChainPlan:
@@ -118,7 +124,7 @@ def _plan(chain: Chain, touching: bool, junction_state: int, relaxing: bool) -> 
             interface_stage = next(k for k, s in enumerate(stages) if s.upper == es)
         else:
             interface_stage = next(k for k, s in enumerate(stages) if s.lower == rs)
-    return ChainPlan(solid, aliases, junctions, free_ends, active, bond, interface_stage)
+    return ChainPlan(solid, aliases, junctions, free_ends, active, bond, interface_stage, frozenset(junction_nodes))
 
 
 @dataclass
@@ -166,9 +172,12 @@ class Contact:
 
     def relaxation_time(self, mode: ContactMode) -> float:
         """[s] The shortest time constant b / k of the damped ends relaxing in this mode (inf: none)."""
-        taus = [s.b / s.k for dc in self.chains for j, _, slot, _, algebraic in dc.plan(mode.touching, mode.relaxing)
-                .junctions if slot >= 0 and not algebraic for s in (dc.chain.stages[k] for k in dc.chain.stages_of(j))
-                if s.k > 0.0]
+        taus = []
+        for dc in self.chains:
+            for j, _, slot, _, algebraic in dc.plan(mode.touching, mode.relaxing).junctions:
+                if slot >= 0 and not algebraic:  # a junction integrated as a state
+                    stages = (dc.chain.stages[k] for k in dc.chain.stages_of(j))
+                    taus += [s.b / s.k for s in stages if s.k > 0.0]
         return min(taus, default=math.inf)
 
     def surface(self, x: np.ndarray, nQ: int) -> tuple[np.ndarray, np.ndarray]:

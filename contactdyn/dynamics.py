@@ -35,7 +35,8 @@ from .controllers import ControlInput
 from .friction import friction_terms, launch_directions_at, launching
 from .phases import Phase, reference_at
 
-__all__ = ["Evaluation", "evaluate", "carried_command", "command_of", "drive_command", "set_force_inputs"]
+__all__ = ["Evaluation", "evaluate", "carried_command", "command_of", "drive_command", "set_force_inputs",
+           "surface_keys", "surface_points", "carried_terms"]
 
 
 @dataclass
@@ -162,13 +163,25 @@ def set_force_inputs(system, inp: ControlInput, x: np.ndarray, modes: list[Conta
     """What a force-reading controller reads beyond the forces: the contacts' generalized force on the
     joints [N·m or N], the surfaces (and tangential chains' anchors) it presses on, the contact modes."""
     inp.tau_contact = tau_contact
-    inp.surfaces = {}
+    inp.surfaces = dict(zip(surface_keys(system), surface_points(system, x, modes), strict=True))
+    inp.touching = {c.name: m.touching for c, m in zip(system.contacts, modes, strict=True)}
+
+
+def surface_keys(system) -> list[str]:
+    """The keys of :func:`surface_points`: per contact its name, then "<contact>.<label>" per tangential chain."""
+    return [key for c in system.contacts for key in (c.name, *(f"{c.name}.{dc.label}" for dc in c.tangent_chains))]
+
+
+def surface_points(system, x: np.ndarray, modes: list[ContactMode]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(p [m], v [m/s])] in the order of :func:`surface_keys`: per contact a point of its undeformed surface
+    and that point's velocity, per tangential chain its anchor (where it is undeformed since the latest touch)."""
+    out = []
     for c, m in zip(system.contacts, modes, strict=True):
         p_env, v_env = c.surface(x, system.nQ)
-        inp.surfaces[c.name] = (p_env, v_env)
-        for i, dc in enumerate(c.tangent_chains):  # tangential chains: their anchors
-            inp.surfaces[f"{c.name}.{dc.label}"] = (p_env + dc.u * m.offsets[i], v_env)
-    inp.touching = {c.name: m.touching for c, m in zip(system.contacts, modes, strict=True)}
+        out.append((p_env, v_env))
+        for i, dc in enumerate(c.tangent_chains):
+            out.append((p_env + dc.u * m.offsets[i], v_env))
+    return out
 
 
 def _command_and_solve(system, inp: ControlInput, phase: Phase, x: np.ndarray, x_d, f: np.ndarray, rows: Rows):
@@ -218,8 +231,13 @@ def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot, ctl=
         return None
     i_b, axis = phase.carrier
     ctl = phase.controller if ctl is None else ctl
-    dtau, dzdot = ctl.a_d_increment(inp, axis, tau, zdot)
-    return (i_b, dtau, None if zdot is None else dzdot) if np.any(dtau != 0.0) else None
+    return carried_terms(i_b, *ctl.a_d_increment(inp, axis, tau, zdot), zdot)
+
+
+def carried_terms(i_b: int, dtau: np.ndarray, dzdot, zdot) -> tuple | None:
+    """(i_b, Δτ, Δż) of :func:`carried_command` from the command's increments per unit body acceleration;
+    None where τ does not depend on it."""
+    return (i_b, dtau, None if zdot is None else dzdot) if (dtau != 0.0).any() else None
 
 
 def drive_command(system, tau: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["solve_vector", "solve_matrix", "det"]
+__all__ = ["solve_vector", "solve_matrix", "det", "svd"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -19,6 +19,10 @@ try:
     solve_vector = _umath_linalg.solve1  #: A z = b for a vector b
     solve_matrix = _umath_linalg.solve  #: A Z = B for a matrix B
     det = _umath_linalg.det
+    svd = _umath_linalg.svd_s  #: (u, s, vᵀ) = the reduced SVD (numpy.linalg.svd's full_matrices=False)
 except (ImportError, AttributeError):  # pragma: no cover
     solve_vector = solve_matrix = np.linalg.solve
     det = np.linalg.det
+
+    def svd(a):
+        return np.linalg.svd(a, full_matrices=False)

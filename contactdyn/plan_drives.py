@@ -74,6 +74,8 @@ class CompiledDrives:
     def fast(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray | None:
         """The drives' generalized forces [N·m or N] at the joint command τ; None where a voltage clips."""
         y = self.values(x, tau)
+        if not self.limited:  # y is the forces alone
+            return y
         return y[:self.nQ] if self.unclipped(y) else None
 
     def readable(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:

@@ -25,9 +25,9 @@ import math
 import numpy as np
 
 from .constraints import Rows, force_columns, solve_folded
-from .dynamics import command_of
+from .dynamics import carried_terms, command_of
 from .linalg import solve_vector
-from .plan_law import compiled_law
+from .plan_law import compiled_law, plan_command
 
 __all__ = ["contact_torque_of", "folded_solve"]
 
@@ -45,6 +45,103 @@ def contact_torque_of(plan):
     return torque
 
 
+def _reaching_rows(plan) -> list[int] | None:
+    """The rows whose column on the coordinates beyond the robot, A[nv:nQ, nQ + r], is nonzero (their force is
+    in the measured joint torque, :func:`~contactdyn.constraints.force_columns`), where the plan's map P makes
+    those entries constant (no sliding tilt writes them); None where a call must look."""
+    s, m, nr = plan.system, plan.m, plan.nr
+    nv, nQ = s.nv, s.nQ
+    P = plan.P[:m * m].reshape(m, m, -1)[nv:nQ, nQ:nQ + nr]  # φ's last entry is the constant 1
+    if plan.dyn_tilt or np.any(P[..., :-1]):
+        return None
+    return [int(j) for j in np.flatnonzero(np.any(P[..., -1] != 0.0, axis=0))]
+
+
+def _matrix_fold(plan, drives):
+    """fold(τ, ż, B, D_z, carried, x, A, b, with_tau) -> (z, ż, τ or None), or None where the solved command
+    clips a voltage: the λ-free command τ through the compiled drives into b, its parts per unit row force B
+    (and per unit acceleration of a carrying body) through L_τ into A's columns, one solve."""
+    nQ, nr = plan.system.nQ, plan.nr
+    lam_cols = slice(nQ, nQ + nr)
+    L_tau, limited = drives.L_tau, bool(drives.limited)
+
+    def fold(tau, zdot, B, Dz, carried, x, A, b, with_tau):
+        y0 = drives.values(x, tau)
+        Y = L_tau.dot(B)  # the drives' forces (and limited voltages) per unit row force
+        if limited:  # copies: a call that clips needs A and b as they are for the readable model
+            A2, b2 = A.copy(), b.copy()
+            A2[:nQ, lam_cols] -= Y[:nQ]
+            b2[:nQ] += y0[:nQ]
+        else:  # in place in the plan's A and b (fresh per call); Y and y0 hold the nQ forces alone
+            A2, b2 = A, b
+            A2[:nQ, lam_cols] -= Y
+            b2[:nQ] += y0
+        if carried is not None:  # the command's part proportional to the carrying body's acceleration
+            i_b, tau_b, zdot_b = carried
+            Y_b = L_tau.dot(tau_b)
+            A2[:nQ, i_b] -= Y_b[:nQ]
+        z = solve_vector(A2, b2)
+        if not math.isfinite(z.dot(z)):
+            z = plan._singular(A2, b2)
+        lam = z[lam_cols]
+        if limited:  # the voltages at the solved command
+            y = y0 + Y.dot(lam)
+            if carried is not None:
+                y += Y_b * z[i_b]
+            if not drives.unclipped(y):
+                return None
+        if with_tau:
+            tau = tau + B.dot(lam)
+            if carried is not None:
+                tau = tau + tau_b * z[i_b]
+        if Dz is not None:
+            zdot = zdot + Dz.dot(lam)
+            if carried is not None and zdot_b is not None:
+                zdot = zdot + zdot_b * z[i_b]
+        return z, zdot, (tau if with_tau else None)
+
+    return fold
+
+
+def _law_parts(plan, ctl, meta: list):
+    """parts(t, x, Js, φ, o, A, τ_c) -> (τ, ż, B, D_z, carried, None) of a tip law read off as a matrix, at the
+    plan's own slots (:func:`~contactdyn.plan_law.plan_command`), or None while its matrix is not read; None
+    for a controller that is not one. B = H J⁺ D_a (+ Jᵀ D_f) with D, M's columns of the rows' measured forces,
+    read once; a row reaching beyond the robot adds its column on the joints (the measured joint torque)."""
+    fast = plan_command(plan)
+    if fast is None:
+        return None
+    s, phase, nr = plan.system, plan.phase, plan.nr
+    nQ, nv = s.nQ, s.nv
+    carrier = phase.carrier if phase.reference is not None else None
+    lam_cols = slice(nQ, nQ + nr)
+    reach = _reaching_rows(plan)
+    every_row_reaches = reach == list(range(nr))
+    increments = ctl.ctl.increments
+    row_columns = None  # (D_a, D_f, D_z) of CompiledLaw.row_columns, once the law's matrix is read
+
+    def parts(t, x, Js, phi, o, A, tau_c):
+        nonlocal row_columns
+        got = fast(t, x, Js, phi, o, tau_c)
+        if got is None:
+            return None
+        tau, zdot, H, J = got
+        if row_columns is None:
+            row_columns = ctl.row_columns(meta)
+        D_a, D_f, Dz = row_columns
+        B = increments(H, J, D_a, D_f)
+        if every_row_reaches:
+            B += A[:nv, lam_cols]
+        else:
+            for j in (reach if reach is not None else np.flatnonzero(A[nv:nQ, lam_cols].any(axis=0))):
+                B[:, j] += A[:nv, nQ + j]
+        carried = None if carrier is None else carried_terms(carrier[0], *ctl.carried_increment(H, J, carrier[1]),
+                                                             zdot)
+        return tau, zdot, B, Dz, carried, None
+
+    return parts
+
+
 def folded_solve(plan, make_input, drives):
     """solve(t, x, Js, φ, o, A, b) -> (z = [Q̈, λ, w], ż): the readable fold on the plan's KKT system.
 
@@ -53,7 +150,9 @@ def folded_solve(plan, make_input, drives):
     unit row force, :func:`~contactdyn.constraints.force_columns`), A[:nQ, Q_b] −= L_τ ∂τ/∂Q̈_b
     for a reference carried by body coordinate Q_b, b[:nQ] += the drives' forces at the
     λ-free command; a call whose solved command clips a voltage goes through the readable
-    :func:`~contactdyn.constraints.solve_folded`.
+    :func:`~contactdyn.constraints.solve_folded`. A tip law read off as a matrix
+    (:mod:`contactdyn.plan_law`) gives τ, ż, B and D_z from the plan's own slots
+    (:func:`~contactdyn.plan_law.plan_command`), no ControlInput.
     """
     s = plan.system
     nQ, nv, nr = s.nQ, s.nv, plan.nr
@@ -65,17 +164,33 @@ def folded_solve(plan, make_input, drives):
     torque = contact_torque_of(plan)
     fold_rows = ctl.uses_forces and nr > 0
     w0 = nQ + nr
+    matrix_fold = _matrix_fold(plan, drives)
+    law_parts = _law_parts(plan, ctl, meta)
 
-    lam_cols = slice(nQ, nQ + nr)
-
-    def detail(t, x, Js, phi, o, A, b):
-        """(z, ż, the solved joint command τ [N·m or N; V]): the output reads what the drives made of τ."""
-        tau_c = torque(b, Js)
+    def parts(t, x, Js, phi, o, A, tau_c):
+        """(τ, ż, B, D_z, carried, (ControlInput, drive command) or None): the λ-free command and its parts per
+        unit row force and body acceleration, by the law's matrix at the plan's slots where it is read, else
+        probed."""
+        got = law_parts(t, x, Js, phi, o, A, tau_c) if law_parts is not None else None
+        if got is not None:
+            return got
         inp = make_input(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
         cmd, zdot, carried = command_of(s, inp, phase, x, ctl)
-        z = matrix_fold(inp, cmd[:nv], zdot, carried, x, A, b)
+        B, Dz = force_columns(inp, ctl, cmd[:nv], zdot, meta, [-A[:nQ, nQ + r] for r in range(nr)], nv)
+        return cmd[:nv], zdot, B, Dz, carried, (inp, cmd)
+
+    def detail(t, x, Js, phi, o, A, b, with_tau=True):
+        """(z, ż, the solved joint command τ [N·m or N; V]): the output reads what the drives made of τ."""
+        tau_c = torque(b, Js)
+        tau, zdot, B, Dz, carried, readable = parts(t, x, Js, phi, o, A, tau_c)
+        z = matrix_fold(tau, zdot, B, Dz, carried, x, A, b, with_tau)
         if z is not None:
             return z
+        if readable is None:  # a voltage clips: the readable model, from a ControlInput
+            inp = make_input(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
+            cmd, zdot, carried = command_of(s, inp, phase, x, ctl)
+        else:
+            inp, cmd = readable
         if not fold_rows and carried is None:  # as the readable model: the drives, then the plain solve
             s.drives.apply(cmd, x, nQ, b, voltage=vmask)  # b[:nQ] takes the drives' forces
             z = np.linalg.solve(A, b)
@@ -90,38 +205,8 @@ def folded_solve(plan, make_input, drives):
             plan.singular += 1
         return np.concatenate((qdd, lam, b[w0:])), zdot, full[:nv]
 
-    def matrix_fold(inp, tau, zdot, carried, x, A, b):
-        """(z, ż, τ) with the fold in the plan's matrix, or None where the solved command clips a voltage."""
-        B, Dz = force_columns(inp, ctl, tau, zdot, meta, [-A[:nQ, nQ + r] for r in range(nr)], nv)
-        y0 = drives.values(x, tau)
-        Y = drives.L_tau.dot(B)  # the drives' forces and voltages per unit row force
-        A2 = A.copy()
-        A2[:nQ, lam_cols] -= Y[:nQ]
-        if carried is not None:  # the command's part proportional to the carrying body's acceleration
-            i_b, tau_b, zdot_b = carried
-            Y_b = drives.L_tau.dot(tau_b)
-            A2[:nQ, i_b] -= Y_b[:nQ]
-        b2 = b.copy()
-        b2[:nQ] += y0[:nQ]
-        z = solve_vector(A2, b2)
-        if not math.isfinite(z.dot(z)):
-            z = plan._singular(A2, b2)
-        lam = z[lam_cols]
-        y = y0 + Y.dot(lam)
-        tau = tau + B.dot(lam)
-        if carried is not None:
-            y += Y_b * z[i_b]
-            tau = tau + tau_b * z[i_b]
-        if not drives.unclipped(y):
-            return None
-        if Dz is not None:
-            zdot = zdot + Dz.dot(lam)
-            if carried is not None and zdot_b is not None:
-                zdot = zdot + zdot_b * z[i_b]
-        return z, zdot, tau
-
     def solve(t, x, Js, phi, o, A, b):
-        return detail(t, x, Js, phi, o, A, b)[:2]
+        return detail(t, x, Js, phi, o, A, b, False)[:2]
 
     plan.folded_detail = detail
     return solve

@@ -11,7 +11,10 @@ so the plan reads the map [a*; f_swap; ż] = M u off the law itself by unit prob
 (:func:`~contactdyn.plan_probe.affine_map`) at the first call of its mode, checks it at
 random u, and from then on a call costs one product and the computed torque; the force
 columns of the fold (:func:`~contactdyn.constraints.force_columns`) are M's columns of the
-measured forces. The law stays written once, in :mod:`contactdyn.controllers.dynamic`.
+measured forces. The plan's call (:func:`plan_command`) writes u from its own slots — φ, o,
+x, the reference and the ramps (:func:`plan_inputs`) — and takes τ from the law's own
+``torque``, so no ControlInput is built per call. The law stays written once, in
+:mod:`contactdyn.controllers.dynamic`.
 Joint-space A7, or a law that is not affine in u (a clip, a switch), is declined: the
 readable ``command`` runs as before.
 """
@@ -22,9 +25,11 @@ import numpy as np
 
 from .constraints import force_columns
 from .controllers import ControlInput
+from .dynamics import surface_keys, surface_points
+from .phases import reference_at
 from .plan_probe import affine_map
 
-__all__ = ["CompiledLaw", "compiled_law"]
+__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "plan_command"]
 
 
 class CompiledLaw:
@@ -125,24 +130,33 @@ class CompiledLaw:
         ẍ_d columns once M is read (the readable law's difference before)."""
         if self.M is None:
             return self.ctl.a_d_increment(inp, axis, tau, zdot)
+        return self.carried_increment(inp.H, inp.J, axis)
+
+    def carried_increment(self, H: np.ndarray, J: np.ndarray, axis: np.ndarray) -> tuple:
+        """(Δτ, Δż or None) per unit [m/s²] more of ẍ_d along ``axis``, from M's ẍ_d columns and the model's H, J."""
         d = self.M[:, 12:15].dot(axis)
-        dtau = self.ctl.torque_increments(inp, d[:3, None], d[3:6, None] if self.swap else None)[:, 0]
+        dtau = self.ctl.increments(H, J, d[:3, None], d[3:6, None] if self.swap else None)[:, 0]
         return dtau, (d[self.zs] if self.zs is not None else None)
+
+    def row_columns(self, meta: list) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """(D_a, D_f, D_z): the tip targets a* [m/s²], f_swap [N] (None without a swap) and ż per unit force of
+        each row: M's column of a normal row's measured force, else 0 (one column per row of ``meta``)."""
+        D = np.zeros((self.M.shape[0], len(meta)))
+        for j, (name, kind, _) in enumerate(meta):
+            if kind == "n":
+                D[:, j] = self.M[:, self.i_forces + self.force_index[name]]
+        return D[:3], (D[3:6] if self.swap else None), (D[self.zs] if self.zs is not None else None)
 
     def force_columns(self, inp: ControlInput, tau: np.ndarray, zdot, meta: list, cols: list, nv: int):
         """(B, D_z) of :func:`~contactdyn.constraints.force_columns` from M's columns of the measured forces."""
         if self.M is None and not self.read(inp):
             return force_columns(inp, self.ctl, tau, zdot, meta, cols, nv)
-        nr = len(meta)
-        D = np.zeros((self.M.shape[0], nr))
-        for j, (name, kind, _) in enumerate(meta):
-            if kind == "n":
-                D[:, j] = self.M[:, self.i_forces + self.force_index[name]]
-        B = self.ctl.torque_increments(inp, D[:3], D[3:6] if self.swap else None)
-        for j in range(nr):
+        D_a, D_f, D_z = self.row_columns(meta)
+        B = self.ctl.torque_increments(inp, D_a, D_f)
+        for j in range(len(meta)):
             if np.any(cols[j][nv:]):  # the row reaches beyond the robot: in the measured joint torque
                 B[:, j] -= cols[j][:nv]
-        return B, (None if zdot is None else D[self.zs])
+        return B, (None if zdot is None else D_z)
 
 
 def compiled_law(plan):
@@ -153,3 +167,93 @@ def compiled_law(plan):
         law = CompiledLaw(ctl) if ctl.in_task_space else ctl
         plan._compiled_law = law
     return law
+
+
+def plan_inputs(plan, law: CompiledLaw):
+    """inputs(t, x, φ, o) -> u: :meth:`CompiledLaw.inputs` read from the plan's own slots (the tip's p and ṗ
+    in φ's e, the forces in o, z in x) and the phase's reference, ramps and surfaces, without a ControlInput
+    (the values the plan's ControlInput carries, :func:`~contactdyn.plan_rhs.controller_input`). u is one
+    buffer, rewritten per call."""
+    s, phase = plan.system, plan.phase
+    nQ = s.nQ
+    tip = plan.i_e + plan.e_frame[plan.tip_frame]
+    o_index = {c.name: plan.o_Fint.start + i for i, c in enumerate(s.contacts)}
+    o_index.update({key: sl.start for key, sl in plan.o_iface.items()})
+    i_forces = np.array([o_index[k] for k in law.force_keys], dtype=np.intp)
+    ramps = [phase.forces[k] for k in law.set_keys]
+    if surface_keys(s) != law.surface_keys:
+        raise ValueError(f"the law's surfaces {law.surface_keys} are not the system's {surface_keys(s)}")
+    modes = plan.modes
+    i_f = law.i_forces
+    i_set = i_f + len(i_forces)
+    i_surf = i_set + 2 * len(ramps)
+    i_z = i_surf + 6 * len(law.surface_keys)
+    z = slice(2 * nQ + phase.z_slice.start, 2 * nQ + phase.z_slice.stop)
+    u = np.zeros(law.nu)
+    u[-1] = 1.0
+    # written once where they cannot change within the mode: a reference without moves on no body, surfaces
+    # on the ground (Contact.body_index < 0)
+    moving_ref = law.ref and (phase.reference.moves or phase.carrier is not None)
+    if law.ref and not moving_ref:
+        u[6:15] = np.concatenate(reference_at(s, phase, phase.t_start, np.zeros(s.n)))
+    surfaces_move = any(c.body_index >= 0 for c in s.contacts)
+    if not surfaces_move:
+        _write_surfaces(u, i_surf, surface_points(s, np.zeros(s.n), modes))
+
+    def inputs(t, x, phi, o):
+        u[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
+        if moving_ref:
+            x_d, v_d, a_d = reference_at(s, phase, t, x)
+            u[6:9] = x_d
+            u[9:12] = v_d
+            u[12:15] = a_d
+        u[i_f:i_set] = o[i_forces]  # measured forces [N]
+        j = i_set
+        for ramp in ramps:  # F_d [N], Ḟ_d [N/s]
+            u[j:j + 2] = ramp.at(t)
+            j += 2
+        if surfaces_move:
+            _write_surfaces(u, i_surf, surface_points(s, x, modes))
+        u[i_z:-1] = x[z]
+        return u
+
+    return inputs
+
+
+def _write_surfaces(u: np.ndarray, j: int, points: list) -> None:
+    """u[j:] = p₁, v₁, p₂, v₂, …: the surfaces' points [m] and velocities [m/s] of :func:`surface_points`."""
+    for p, v in points:
+        u[j:j + 3] = p
+        u[j + 3:j + 6] = v
+        j += 6
+
+
+def plan_command(plan):
+    """command(t, x, Js, φ, o, τ_c) -> (τ [N·m or N], ż, H, J) of the plan's force-reading tip law by its
+    matrix M at the plan's own slots (:func:`plan_inputs`; H, J: the model's terms it used), or None while M
+    is not read; None for a controller without one (:func:`compiled_law`)."""
+    law = compiled_law(plan)
+    if not isinstance(law, CompiledLaw) or law.reason is not None:
+        return None
+    s = plan.system
+    nQ, nv = s.nQ, s.nv
+    robot, ctl = s.robot, law.ctl
+    tf = plan.tip_frame
+    i_dr = plan.i_dr[tf]
+    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
+    inputs = None
+
+    def command(t, x, Js, phi, o, tau_c):
+        nonlocal inputs
+        if law.M is None:
+            return None
+        if inputs is None:
+            inputs = plan_inputs(plan, law)
+        y = law.M.dot(inputs(t, x, phi, o))
+        H = robot.H + D_ctl if D_ctl is not None else robot.H
+        J = Js[tf]
+        tau = ctl.torque(H, robot.h, tau_c, J, phi[i_dr:i_dr + 3], x[nQ:nQ + nv], y[:3],
+                         y[3:6] if law.swap else None)
+        return tau, (y[law.zs] if law.zs is not None else None), H, J
+
+    return command

@@ -31,7 +31,7 @@ from .linalg import solve_vector
 from .phases import reference_at
 from .plan_drives import drive_forces
 from .plan_fold import contact_torque_of, folded_solve
-from .plan_law import compiled_law
+from .plan_law import compiled_law, plan_command
 from .trajectory import profile
 
 __all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
@@ -185,9 +185,11 @@ def _command_function(plan, drives):
     fast, readable = (drives.fast, drives.readable) if drives is not None else (None, None)
     if plan.affine_ctl:  # the affine task law through the motors
         tf, o_gctl, i_e, feedforward = plan.tip_frame, plan.o_gctl, plan.i_e, plan._feedforward_torque
+        joint_terms = plan.feedforward != "none" or plan.kd_joint != 0.0  # else the feedforward is 0
 
         def task_law(t, x, Js, phi, o, b):
-            f = fast(x, Js[tf].T.dot(o[o_gctl]) + feedforward(phi, phi[i_e:]))
+            tau = Js[tf].T.dot(o[o_gctl])
+            f = fast(x, tau + feedforward(phi, phi[i_e:]) if joint_terms else tau)
             if f is None:  # a voltage clips: the controller and the drives' law as they are
                 f = readable(x, ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o)[0])
             return f, None
@@ -196,8 +198,8 @@ def _command_function(plan, drives):
     contact_torque = contact_torque_of(plan) if plan.phase.controller.uses_forces else None
 
     def generic(t, x, Js, phi, o, b):
-        tau, zdot = ctl_call(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o,
-                             contact_torque(b, Js) if contact_torque is not None else None)
+        tau_c = contact_torque(b, Js) if contact_torque is not None else None
+        tau, zdot = ctl_call(t, x, None, None, Js, phi, o, tau_c)
         if fast is None:
             return tau, zdot
         f = fast(x, tau)
@@ -388,11 +390,20 @@ def impulse_terms(plan) -> list[tuple]:
 
 
 def controller_call(plan):
-    """The command of a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o, τ_c) -> (τ, ż)."""
+    """The command of a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o, τ_c) -> (τ, ż);
+    a tip law read off as a matrix by it at the plan's own slots (:func:`~contactdyn.plan_law.plan_command`)."""
     make = controller_input(plan)
     command = compiled_law(plan).command
+    fast = plan_command(plan)
+    nQ, nv = plan.system.nQ, plan.system.nv
 
     def call(t, x, q, v, Js, phi, o, tau_contact=None):
+        """(τ, ż) at (t, x); q, v: x's joint slots (None: sliced here, where the ControlInput needs them)."""
+        got = fast(t, x, Js, phi, o, tau_contact) if fast is not None else None
+        if got is not None:
+            return got[0], got[1]
+        if q is None:
+            q, v = x[:nv], x[nQ:nQ + nv]
         return command(make(t, x, q, v, Js, phi, o, tau_contact))
 
     return call

@@ -14,6 +14,10 @@ kinds of state left out because they are not dynamics of the loop:
 
 Gains can be changed on the bound controller without rebuilding the system
 (:meth:`ContactLoop.set_gains`), which is what makes a map over a grid of gains cheap.
+
+A run checks the poles: :func:`simulated_growth` fits the force error's growth rate from the
+run's own modes (:func:`modal_poles`, the matrix pencil method); :func:`envelope_rate`, a fit of
+its envelope, is kept for comparison (it mixes modes of close rates).
 """
 
 from __future__ import annotations
@@ -185,16 +189,12 @@ def contact_force_error(scene: Scene, t_fit: float, hi: float = 95.0) -> tuple[n
     return r.t[sel], err[sel]
 
 
-def simulated_growth(scene: Scene, t_fit: float, hi: float = 95.0, method: str = "modal"
-                     ) -> tuple[float, complex]:
+def simulated_growth(scene: Scene, t_fit: float, hi: float = 95.0) -> tuple[float, complex]:
     """The force error's growth rate [1/s] in a run of ``scene`` (see :func:`contact_phase_scene`) from ``t_fit``
-    [s] while it stays in contact and below ``hi`` [N], and the dominant pole of the same scene's
-    linearisation, for comparison. ``method``: "modal" — the real part of the run's own mode
-    (:func:`modal_poles`) whose frequency is nearest the pole's; "envelope" — :func:`growth_rate`."""
+    [s] while it stays in contact and below ``hi`` [N] (:func:`modal_rate`: the real part of the run's own mode
+    whose frequency is nearest the pole's), and the dominant pole of the same scene's linearisation."""
     dom = ContactLoop(scene).linearize().dominant
     t, err = contact_force_error(scene, t_fit, hi)
-    if method == "envelope":
-        return envelope_rate(t, err, dom, hi), dom
     return modal_rate(t, err, dom), dom
 
 

@@ -113,7 +113,7 @@ class Transitions:
         """The contact lets go; damped surface ends relax from where they are."""
         i = self._index(event.contact)
         x = self.system.separate(t, x, modes, phase, self.system.contacts[i])
-        modes[i] = modes[i].with_(touching=False, stuck=False, relaxing=True)
+        modes[i] = modes[i].separated()
         return x, phase, True
 
     def _on_stop(self, t, x, modes, phase, event, after):
@@ -260,7 +260,7 @@ class Transitions:
                 F_n = ev.normal_force[c.name]
                 if not c.spec.bonded and F_n < -FORCE_TOL * (1.0 + abs(F_n)):
                     x[:] = system.separate(t, x, modes, phase, c)
-                    modes[i] = mode.with_(touching=False, stuck=False, relaxing=True)
+                    modes[i] = mode.separated()
                     self.log.log(t, "separate", c.name)
                     changed = True
                     break

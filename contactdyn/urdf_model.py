@@ -43,7 +43,7 @@ class UrdfModel(NamedTuple):
     package_dirs: list[str]
     notes: list[str]  #: inertia repairs or trusts, one line each
     unbounded: list[str]  #: joints without position limits (±inf): continuous ones, and lower = upper in the file
-    visual_notes: list[str] = []  #: the visual meshes not found, dropped from the drawing (one line)
+    visual_notes: list[str]  #: the visual meshes not found, dropped from the drawing (one line)
 
 
 def urdf_call(path: Path, build: Callable[[], object]) -> object:

@@ -12,23 +12,23 @@ from contactdyn import parse_scene
 from contactdyn.constraints import force_columns
 from contactdyn.dynamics import carried_command
 from contactdyn.phases import start_phase
-from contactdyn.plan_law import CompiledLaw
+from contactdyn.plan_law import CompiledLaw, compiled_law, plan_command, plan_inputs
 from contactdyn.plan_rhs import controller_input
 from contactdyn.rhsplan import ModePlan
 from contactdyn.scene import load_scene
 from contactdyn.simulate import prepare
 
 
-def _inputs(scene, count: int = 4):
-    """The phase's controller and its ControlInputs at random states near the start, every contact touching."""
+def _plan_states(scene, count: int = 4):
+    """A plan of the phase with the force-reading controller, every contact touching, and (t, x, Js, φ, o, τ_c)
+    at random states near the start."""
     system, modes, phase, x0 = prepare(scene)
     index = next(i for i, ctl in enumerate(system.controllers) if ctl.uses_forces)
     if index:
         phase = start_phase(system, index, 0.0, x0, phase)
     modes = [replace(m, touching=True) for m in modes]
     plan = ModePlan(system, modes, phase)
-    make = controller_input(plan)
-    nQ, nv = system.nQ, system.nv
+    nv = system.nv
     rng = np.random.default_rng(7)
     out = []
     for _ in range(count):
@@ -37,8 +37,16 @@ def _inputs(scene, count: int = 4):
         phi = plan.phi_at(t, x)
         Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
         o = plan.P.dot(phi)[plan.m * plan.m + plan.m:]
-        out.append(make(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, rng.normal(size=nv)))
-    return phase, out
+        out.append((t, x, Js, phi, o, rng.normal(size=nv)))
+    return plan, out
+
+
+def _inputs(scene, count: int = 4):
+    """The phase's controller and its ControlInputs at random states near the start, every contact touching."""
+    plan, states = _plan_states(scene, count)
+    make = controller_input(plan)
+    nQ, nv = plan.system.nQ, plan.system.nv
+    return plan.phase, [make(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c) for t, x, Js, phi, o, tau_c in states]
 
 
 def _scenes():
@@ -108,3 +116,37 @@ def test_joint_space_position_law_is_declined():
     phase, _ = _inputs(parse_scene(doc), count=1)
     law = CompiledLaw(phase.controller)
     assert law.reason is not None and "task-space" in law.reason
+
+
+@pytest.mark.parametrize(("what", "scene"), list(_scenes()), ids=[w for w, _ in _scenes()])
+def test_plan_command_reads_the_same_inputs_off_the_plans_slots(what, scene):
+    """plan_command builds u from φ, o and x (no ControlInput): the same u, τ and ż as the law at the plan's
+    ControlInput, to the bit."""
+    plan, states = _plan_states(scene)
+    make = controller_input(plan)
+    law, fast = compiled_law(plan), plan_command(plan)
+    inputs = plan_inputs(plan, law)
+    nQ, nv = plan.system.nQ, plan.system.nv
+    for t, x, Js, phi, o, tau_c in states:
+        inp = make(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o, tau_c)
+        assert law.M is not None, law.reason
+        assert np.array_equal(inputs(t, x, phi, o), law.inputs(inp))
+        tau, zdot = law.command(inp)
+        tau_f, zdot_f, H, J = fast(t, x, Js, phi, o, tau_c)
+        assert np.array_equal(tau_f, tau) and np.array_equal(H, inp.H) and np.array_equal(J, inp.J)
+        assert (zdot is None and zdot_f is None) or np.array_equal(zdot_f, zdot)
+
+
+def test_plan_command_waits_for_the_matrix_and_declines_a_readable_law():
+    plan, states = _plan_states(load_scene("case3_b_force"), count=1)
+    law = compiled_law(plan)
+    fast = plan_command(plan)
+    M, law.M = law.M, None  # as before the first call of the mode
+    assert fast(*states[0]) is None
+    law.M = M
+    assert fast(*states[0]) is not None
+    doc = hybrid_doc()
+    doc["controller"] = {"kind": "position_dynamic", "space": "joint"}
+    doc["phase"][0] = {"name": "main"}
+    joint_plan, _ = _plan_states(parse_scene(doc), count=1)
+    assert plan_command(joint_plan) is None

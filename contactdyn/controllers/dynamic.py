@@ -56,6 +56,7 @@ import numpy as np
 
 from ..elements import Mass, Stage
 from ..errors import SceneError
+from ..linalg import svd
 from .base import BindContext, ControlInput, Controller, register
 
 __all__ = ["NominalEnvironment", "PositionDynamic", "ForceDynamic", "Hybrid", "nominal_from_chain"]
@@ -142,7 +143,7 @@ def _rotor_inertia(context: BindContext, inertia: str) -> np.ndarray | None:
 
 def _inertia_times(H: np.ndarray, rotor: np.ndarray | None, qdd: np.ndarray) -> np.ndarray:
     """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out)."""
-    return H @ qdd if rotor is None else H @ qdd - rotor * qdd
+    return H.dot(qdd) if rotor is None else H.dot(qdd) - rotor * qdd
 
 
 # ---- shared task-space pieces ---------------------------------------------------------------
@@ -152,8 +153,17 @@ def _check_gain_size(g: np.ndarray, sizes: tuple[int, ...], key: str, file) -> N
                          g.tolist(), file)
 
 
+def pseudo_inverse(J: np.ndarray) -> np.ndarray:
+    """J⁺ by the reduced SVD, singular values below 1e-10 of the largest dropped (numpy.linalg.pinv's rcond)."""
+    u, s, vt = svd(J)
+    if s.size and s[-1] > 1e-10 * s[0]:  # full rank: every singular value kept
+        return (vt.T / s) @ u.T
+    keep = s > 1e-10 * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, bool)
+    return (vt[keep].T / s[keep]) @ u[:, keep].T
+
+
 class _Pinv:
-    """J⁺ of the last Jacobian (the force probes call the law again at the same state)."""
+    """J⁺ of the last Jacobian (the command and its force columns read it at one state)."""
 
     def __init__(self):
         self.key: bytes = b""
@@ -162,21 +172,9 @@ class _Pinv:
     def __call__(self, J: np.ndarray) -> np.ndarray:
         key = J.tobytes()
         if key != self.key:
-            u, s, vt = np.linalg.svd(J, full_matrices=False)
-            keep = s > 1e-10 * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, bool)
-            self.value = (vt[keep].T / s[keep]) @ u[:, keep].T
+            self.value = pseudo_inverse(J)
             self.key = key
         return self.value
-
-
-def joint_acceleration(inp: ControlInput, a: np.ndarray, k_null: float, pinv=None) -> np.ndarray:
-    """q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for a desired tip acceleration a [m/s²]."""
-    J = inp.J
-    Jp = pinv(J) if pinv is not None else np.linalg.pinv(J, rcond=1e-10)
-    qdd = Jp @ (a - inp.drift)
-    if k_null > 0.0 and J.shape[1] > 3:
-        qdd -= (np.eye(J.shape[1]) - Jp @ J) @ (k_null * inp.v)
-    return qdd
 
 
 def _contact_checks(context: BindContext, names: list[str], need_exact: bool, nominal, what: str
@@ -234,18 +232,33 @@ class _ComputedTorque(Controller):
         raise NotImplementedError
 
     def computed_torque(self, inp: ControlInput, a: np.ndarray, f_swap: np.ndarray | None) -> np.ndarray:
-        """τ = H q̈*(a) + h − τ_c (+ Jᵀ f_swap) [N·m or N]."""
-        qdd = joint_acceleration(inp, a, self.config.k_null, self._pinv)
-        tau = _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact
+        """τ = H q̈*(a) + h − τ_c (+ Jᵀ f_swap) [N·m or N] at ``inp``."""
+        return self.torque(inp.H, inp.h, inp.tau_contact, inp.J, inp.drift, inp.v, a, f_swap)
+
+    def torque(self, H: np.ndarray, h: np.ndarray, tau_c: np.ndarray, J: np.ndarray, drift: np.ndarray,
+               v: np.ndarray, a: np.ndarray, f_swap: np.ndarray | None) -> np.ndarray:
+        """τ = H q̈* + h − τ_c (+ Jᵀ f_swap) [N·m or N], q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for the tip
+        acceleration a [m/s²], from the model's terms (J: the tip Jacobian (3, nv), drift: J̇q̇ [m/s²], v: q̇;
+        the compiled path passes its own, :meth:`computed_torque` a ControlInput's)."""
+        Jp = self._pinv(J)
+        qdd = Jp.dot(a - drift)  # (ndarray.dot: the same numbers as @ at a third of its cost on these sizes)
+        k_null = self.config.k_null
+        if k_null > 0.0 and J.shape[1] > 3:
+            qdd -= (np.eye(J.shape[1]) - Jp.dot(J)).dot(k_null * v)
+        tau = _inertia_times(H, self._rotor, qdd) + h - tau_c
         if f_swap is not None:
-            tau += inp.J.T @ f_swap
+            tau += J.T.dot(f_swap)
         return tau
 
     def torque_increments(self, inp: ControlInput, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
         """∂τ for changes of the tip targets, one per column: H J⁺ da (+ Jᵀ df) [N·m or N]."""
-        dqdd = self._pinv(inp.J) @ da
-        dtau = inp.H @ dqdd if self._rotor is None else inp.H @ dqdd - self._rotor[:, None] * dqdd
-        return dtau if df is None else dtau + inp.J.T @ df
+        return self.increments(inp.H, inp.J, da, df)
+
+    def increments(self, H: np.ndarray, J: np.ndarray, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
+        """:meth:`torque_increments` from the model's terms H and J."""
+        dqdd = self._pinv(J).dot(da)
+        dtau = H.dot(dqdd) if self._rotor is None else H.dot(dqdd) - self._rotor[:, None] * dqdd
+        return dtau if df is None else dtau + J.T.dot(df)
 
 
 # ---- A7 -----------------------------------------------------------------------------------------
