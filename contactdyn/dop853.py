@@ -133,14 +133,17 @@ class _Steps:
         """The state at t [s] on step i's own interpolant (built if needed), as solve_ivp's step dense output."""
         if i not in self.coef:
             self.build(np.array([i]))
-        F = self.coef[i]
         t_old = self.t[i]
-        s = (t - t_old) / (self.t[i + 1] - t_old)
-        y = np.zeros(self.n)
-        for k, row in enumerate(range(F.shape[0] - 1, -1, -1)):  # Horner, as scipy's Dop853DenseOutput
-            y += F[row]
-            y *= s if k % 2 == 0 else 1.0 - s
-        return y + self.y_old(i)
+        return _horner(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old)) + self.y_old(i)
+
+
+def _horner(F: np.ndarray, s) -> np.ndarray:
+    """y − y_old of interpolants F (..., rows, n) at step fractions s (Horner, as scipy's Dop853DenseOutput)."""
+    y = np.zeros(F.shape[:-2] + F.shape[-1:])
+    for k, row in enumerate(range(F.shape[-2] - 1, -1, -1)):
+        y += F[..., row, :]
+        y *= s if k % 2 == 0 else 1.0 - s
+    return y
 
 
 class DenseSolution:
@@ -172,11 +175,7 @@ class DenseSolution:
         st.build(steps, derivatives)
         ends = np.array(st.t)
         s = ((tt - ends[idx]) / (ends[idx + 1] - ends[idx]))[:, None]
-        F = np.array([st.coef[int(i)] for i in steps])[at]
-        y = np.zeros((len(tt), st.n))
-        for k, row in enumerate(range(F.shape[1] - 1, -1, -1)):  # Horner, as scipy's Dop853DenseOutput
-            y += F[:, row]
-            y *= s if k % 2 == 0 else 1.0 - s
+        y = _horner(np.array([st.coef[int(i)] for i in steps])[at], s)
         y += np.array([st.y_old(int(i)) for i in steps])[at]
         return y[0] if np.ndim(t) == 0 else y.T
 
