@@ -209,4 +209,5 @@ def folded_solve(plan, make_input, drives):
         return detail(t, x, Js, phi, o, A, b, False)[:2]
 
     plan.folded_detail = detail
+    plan.folded_parts = parts  # (the output folds its samples' parts all at once, contactdyn.samples)
     return solve

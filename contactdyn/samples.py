@@ -18,6 +18,7 @@ import numpy as np
 import pinocchio as pin
 
 from .friction import launching
+from .linalg import solve_vector
 from .phases import reference_at
 from .plan_fold import contact_torque_of
 
@@ -156,9 +157,11 @@ def plan_derivatives(plan):
 
 
 def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
-    """As :func:`_solve_samples` for a plan folding measured forces or a carried reference into its solve:
-    each sample through the plan's own fold (:func:`~contactdyn.plan_fold.folded_solve`), which gives the
-    solved command; the drives' forces and voltages at those commands over all samples at once."""
+    """As :func:`_solve_samples` for a plan folding measured forces or a carried reference into its solve: each
+    sample's command and its parts per unit row force from the plan's fold (:func:`~contactdyn.plan_fold.folded_solve`),
+    then the fold through the drives and the solve for all those samples at once (:func:`_fold_all`); a sample
+    whose command reads a carried body or a ControlInput, or whose solved command clips a voltage, through the
+    plan's own fold. The drives' forces and voltages at the solved commands over all samples at once."""
     s = plan.system
     N, nv, m = len(ts), s.nv, plan.m
     m2 = m * m
@@ -166,7 +169,10 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
     Y = np.empty((N, plan.P.shape[0]))
     Z = np.empty((N, m))
     tau = np.empty((N, nv))
-    friction, detail = plan.friction_terms, plan.folded_detail
+    B = np.empty((N, nv, plan.nr))
+    friction, parts, detail = plan.friction_terms, plan.folded_parts, plan.folded_detail
+    contact_torque = contact_torque_of(plan)
+    batched = np.zeros(N, bool)
     for k in range(N):
         t, x = ts[k], X[k]
         Phi[k] = phi = plan.phi_at(t, x)
@@ -174,9 +180,46 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
         Y[k] = y = plan.P.dot(phi)
         if friction is not None:
             friction(y, Js, plan.modes)
-        Z[k], _, tau[k] = detail(t, x, Js, phi, y[m2 + m:], y[:m2].reshape(m, m), y[m2:m2 + m])
+        A, b, o = y[:m2].reshape(m, m), y[m2:m2 + m], y[m2 + m:]
+        tau[k], _, B[k], _, carried, readable = parts(t, x, Js, phi, o, A, contact_torque(b, Js))
+        batched[k] = carried is None and readable is None
+        if not batched[k]:
+            Z[k], _, tau[k] = detail(t, x, Js, phi, o, A, b)
+    K = np.flatnonzero(batched)
+    if len(K):
+        A_all, b_all = Y[K, :m2].reshape(-1, m, m), Y[K, m2:m2 + m]
+        Z[K], tau[K], clipped = _fold_all(plan, X[K], A_all, b_all, tau[K], B[K])
+        for k in K[clipped]:  # the readable model, from the sample's unfolded system (and Pinocchio's data at it)
+            phi = plan.phi_at(ts[k], X[k])
+            Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+            A, b = Y[k, :m2].reshape(m, m), Y[k, m2:m2 + m]
+            Z[k], _, tau[k] = detail(ts[k], X[k], Js, phi, Y[k, m2 + m:], A, b)
     J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
     return Phi, Y[:, m2 + m:], Z, J_all, tau, {}, _drive_samples(plan.compiled_drives, X, tau)
+
+
+def _fold_all(plan, X: np.ndarray, A: np.ndarray, b: np.ndarray, tau: np.ndarray, B: np.ndarray):
+    """(z, the solved joint commands τ [N·m or N; V], the samples whose solved command clips a voltage) of the
+    fold (:func:`~contactdyn.plan_fold._matrix_fold`) over samples: the λ-free commands τ through the drives
+    into b, their parts per unit row force B (N, nv, nr) through L_τ into A's columns of λ, one stacked solve."""
+    drives = plan.compiled_drives
+    nQ, nr = plan.system.nQ, plan.nr
+    lam_cols = slice(nQ, nQ + nr)
+    y0 = _rows_times(np.hstack((tau, X, np.ones((len(X), 1)))), drives.L.T)  # L [τ, x, 1]
+    YB = np.matmul(drives.L_tau, B)  # the drives' forces (and limited voltages) per unit row force
+    A2, b2 = A.copy(), b.copy()  # (the clipped samples' readable model needs A and b as they are)
+    A2[:, :nQ, lam_cols] -= YB[:, :nQ]
+    b2[:, :nQ] += y0[:, :nQ]
+    with np.errstate(all="ignore"):
+        Z = solve_vector(A2, b2)
+    for k in np.flatnonzero(~np.all(np.isfinite(Z), axis=1)):
+        Z[k] = plan._singular(A2[k], b2[k])
+    lam = Z[:, lam_cols]
+    clipped = np.zeros(len(X), bool)
+    if drives.limited:  # the voltages at the solved commands
+        u = y0[:, nQ:] + np.einsum("kir,kr->ki", YB[:, nQ:], lam)
+        clipped = np.abs(u).max(axis=1) > 1.0
+    return Z, tau + np.einsum("kvr,kr->kv", B, lam), clipped
 
 
 def _generic_command(plan):
