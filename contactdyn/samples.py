@@ -170,6 +170,8 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
     Z = np.empty((N, m))
     tau = np.empty((N, nv))
     B = np.empty((N, nv, plan.nr))
+    tau_b = np.zeros((N, nv))  # per unit acceleration of the body carrying the reference [N·m or N per m/s²]
+    carries = np.zeros(N, bool)
     friction, parts, detail = plan.friction_terms, plan.folded_parts, plan.folded_detail
     contact_torque = contact_torque_of(plan)
     batched = np.zeros(N, bool)
@@ -182,13 +184,15 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
             friction(y, Js, plan.modes)
         A, b, o = y[:m2].reshape(m, m), y[m2:m2 + m], y[m2 + m:]
         tau[k], _, B[k], _, carried, readable = parts(t, x, Js, phi, o, A, contact_torque(b, Js))
-        batched[k] = carried is None and readable is None
+        batched[k] = readable is None
+        if carried is not None:
+            carries[k], tau_b[k] = True, carried[1]
         if not batched[k]:
             Z[k], _, tau[k] = detail(t, x, Js, phi, o, A, b)
     K = np.flatnonzero(batched)
     if len(K):
         A_all, b_all = Y[K, :m2].reshape(-1, m, m), Y[K, m2:m2 + m]
-        Z[K], tau[K], clipped = _fold_all(plan, X[K], A_all, b_all, tau[K], B[K])
+        Z[K], tau[K], clipped = _fold_all(plan, X[K], A_all, b_all, tau[K], B[K], tau_b[K], carries[K])
         for k in K[clipped]:  # the readable model, from the sample's unfolded system (and Pinocchio's data at it)
             phi = plan.phi_at(ts[k], X[k])
             Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
@@ -198,10 +202,13 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
     return Phi, Y[:, m2 + m:], Z, J_all, tau, {}, _drive_samples(plan.compiled_drives, X, tau)
 
 
-def _fold_all(plan, X: np.ndarray, A: np.ndarray, b: np.ndarray, tau: np.ndarray, B: np.ndarray):
+def _fold_all(plan, X: np.ndarray, A: np.ndarray, b: np.ndarray, tau: np.ndarray, B: np.ndarray,
+              tau_b: np.ndarray, carries: np.ndarray):
     """(z, the solved joint commands τ [N·m or N; V], the samples whose solved command clips a voltage) of the
     fold (:func:`~contactdyn.plan_fold._matrix_fold`) over samples: the λ-free commands τ through the drives
-    into b, their parts per unit row force B (N, nv, nr) through L_τ into A's columns of λ, one stacked solve."""
+    into b, their parts per unit row force B (N, nv, nr) through L_τ into A's columns of λ, and where a sample
+    ``carries`` a reference, its part per unit acceleration of the carrying body τ_b through L_τ into that
+    body's column, one stacked solve."""
     drives = plan.compiled_drives
     nQ, nr = plan.system.nQ, plan.nr
     lam_cols = slice(nQ, nQ + nr)
@@ -210,6 +217,10 @@ def _fold_all(plan, X: np.ndarray, A: np.ndarray, b: np.ndarray, tau: np.ndarray
     A2, b2 = A.copy(), b.copy()  # (the clipped samples' readable model needs A and b as they are)
     A2[:, :nQ, lam_cols] -= YB[:, :nQ]
     b2[:, :nQ] += y0[:, :nQ]
+    if carries.any():
+        i_b = plan.phase.carrier[0]
+        Y_b = _rows_times(tau_b, drives.L_tau.T)
+        A2[carries, :nQ, i_b] -= Y_b[carries, :nQ]
     with np.errstate(all="ignore"):
         Z = solve_vector(A2, b2)
     for k in np.flatnonzero(~np.all(np.isfinite(Z), axis=1)):
@@ -218,8 +229,13 @@ def _fold_all(plan, X: np.ndarray, A: np.ndarray, b: np.ndarray, tau: np.ndarray
     clipped = np.zeros(len(X), bool)
     if drives.limited:  # the voltages at the solved commands
         u = y0[:, nQ:] + np.einsum("kir,kr->ki", YB[:, nQ:], lam)
+        if carries.any():
+            u[carries] += Y_b[carries, nQ:] * Z[carries, i_b, None]
         clipped = np.abs(u).max(axis=1) > 1.0
-    return Z, tau + np.einsum("kvr,kr->kv", B, lam), clipped
+    tau = tau + np.einsum("kvr,kr->kv", B, lam)
+    if carries.any():
+        tau[carries] += tau_b[carries] * Z[carries, i_b, None]
+    return Z, tau, clipped
 
 
 def _generic_command(plan):
