@@ -18,7 +18,7 @@ from .errors import SceneError
 from .scene import PhaseSpec
 from .trajectory import Corner, Ramp, Reference, merge_corners, min_span
 
-__all__ = ["Phase", "start_phase", "reference_at"]
+__all__ = ["Phase", "start_phase", "reference_at", "reference_positions"]
 
 
 @dataclass
@@ -104,3 +104,12 @@ def reference_at(system, phase: Phase, t: float, x: np.ndarray):
         i, axis = phase.carrier
         x_d, v_d = x_d + axis * x[i], v_d + axis * x[system.nQ + i]
     return x_d, v_d, a_d
+
+
+def reference_positions(system, phase: Phase, ts: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """x_d of :func:`reference_at` at each sample (ts[k], X[k]), as rows (its arithmetic elementwise over them)."""
+    x_d = phase.reference.positions(ts)
+    if phase.carrier is not None:
+        i, axis = phase.carrier
+        x_d = x_d + axis * X[:, i, None]
+    return x_d

@@ -19,7 +19,7 @@ import pinocchio as pin
 
 from .friction import launching
 from .linalg import solve_vector
-from .phases import reference_at
+from .phases import reference_positions
 from .plan_fold import contact_torque_of
 
 __all__ = ["Samples", "plan_samples", "plan_derivatives", "evaluated_samples", "slip_directions"]
@@ -389,7 +389,7 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
             S.x_d += Phi[:, plan.i_e + slot, None] * m_.delta
         S.has_x_d = True
     elif phase.reference is not None:
-        x_d = np.array([reference_at(s, phase, t, x)[0] for t, x in zip(ts, X, strict=True)])  # (carried: + body)
+        x_d = reference_positions(s, phase, ts, X)  # (carried: + the body's origin)
         if x_d.shape[1] == 3:
             S.x_d[:] = x_d
             S.has_x_d = True

@@ -118,6 +118,9 @@ def merge_corners(corners) -> tuple[Corner, ...]:
     return tuple(out)
 
 
+_profiles = np.frompyfunc(profile, 3, 3)  #: :func:`profile` element by element over arrays of τ
+
+
 @dataclass(frozen=True)
 class Move:
     """Displace the reference by ``delta`` over [start, start + duration] along a profile.
@@ -150,6 +153,13 @@ class Move:
             return self.circle_rows(t)
         s, ds, dds = profile(self.kind, self.tau(t), self.accel_fraction)
         return np.multiply.outer((s, ds / self.duration, dds / self.duration**2), self.delta)
+
+    def displacements(self, ts: np.ndarray) -> np.ndarray:
+        """(len(ts), n): the move's displacement at each time of ``ts``, ``rows``' first row elementwise over them."""
+        if self.kind == "circle":
+            return np.array([self.circle_rows(t)[0] for t in ts]).reshape(len(ts), len(self.delta))
+        s = _profiles(self.kind, (ts - self.start) / self.duration, self.accel_fraction)[0].astype(float)
+        return np.multiply.outer(s, self.delta)
 
     def corners(self) -> tuple[Corner, ...]:
         """Where the move's acceleration (or, for ``step``, its position) jumps."""
@@ -200,6 +210,13 @@ class Reference:
         for move in self.moves:
             out += move.rows(t)
         return out[0], out[1], out[2]
+
+    def positions(self, ts: np.ndarray) -> np.ndarray:
+        """(len(ts), n): the position at each time of ``ts``, ``at``'s first row elementwise over them."""
+        out = np.tile(self.start, (len(ts), 1))
+        for move in self.moves:
+            out += move.displacements(ts)
+        return out
 
     @functools.cached_property
     def _at_rest(self) -> np.ndarray:

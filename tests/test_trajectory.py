@@ -105,3 +105,16 @@ def test_force_ramp_corners_and_overlapping_corners_merge():
     tri = Move(np.array([0.0, 0.0, -0.1]), 0.0, 1.0, "triangle")
     corners = Reference(np.zeros(3), (ramp, tri)).corners()
     assert len(corners) == 3 and abs(corners[1].before - 0.5) <= 1e-15
+
+
+def test_positions_are_at_elementwise_over_times():
+    """Reference.positions(ts) gives at(t)'s position bit for bit at every time, every profile and a circle."""
+    moves = tuple(Move(np.array([0.01 * (i + 1), -0.02, 0.003]), 0.1 * i, 0.3, kind)
+                  for i, kind in enumerate(("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step",
+                                            "exponential")))
+    circle = Move(np.array([0.0, 0.05, 0.0]), 0.2, 0.5, "circle", normal=np.array([0.0, 0.0, 1.0]), turns=1.5)
+    ts = np.linspace(-0.1, 1.2, 263)
+    for ref in (Reference(np.array([0.4, 0.1, -0.2]), moves), Reference(np.array([0.4, 0.1, -0.2]), (circle,)),
+                Reference(np.array([0.4, 0.1, -0.2]))):
+        want = np.array([ref.at(t)[0] for t in ts])
+        assert np.array_equal(ref.positions(ts), want)
