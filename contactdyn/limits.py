@@ -25,6 +25,7 @@ a warning per joint in ``Result.meta["limit_warnings"]``.
 from __future__ import annotations
 
 from dataclasses import replace
+from itertools import groupby
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -124,9 +125,12 @@ def limit_channels(system: Any, phases_of: list, samples: Any) -> dict[str, np.n
     """``limit.torque`` [N·m or N] (per joint, 0 when free; from the output ``samples``,
     :class:`~contactdyn.samples.Samples`) and ``limit.side`` (+1 lower, −1 upper, 0 free)."""
     side = np.zeros((len(phases_of), system.nv))
-    for k, phase in enumerate(phases_of):
-        for i, s in phase.limits:
-            side[k, i] = s
+    k = 0
+    for _, run in groupby(phases_of, key=id):  # a run of samples in one phase: its sides at once
+        run = list(run)
+        for i, s in run[0].limits:
+            side[k:k + len(run), i] = s
+        k += len(run)
     return {"limit.torque": samples.limit_torque.copy(), "limit.side": side}
 
 
