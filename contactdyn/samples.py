@@ -177,9 +177,10 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
     batched = np.zeros(N, bool)
     for k in range(N):
         t, x = ts[k], X[k]
-        Phi[k] = phi = plan.phi_at(t, x)
+        Phi[k] = plan.phi_at(t, x)
+        phi, y = Phi[k], Y[k]  # (views: the sample's rows)
         Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
-        Y[k] = y = plan.P.dot(phi)
+        np.dot(plan.P, phi, out=y)
         if friction is not None:
             friction(y, Js, plan.modes)
         A, b, o = y[:m2].reshape(m, m), y[m2:m2 + m], y[m2 + m:]
