@@ -285,6 +285,7 @@ def operational_command(plan):
     referenced, orient = phase.reference is not None, ctl.reads_orientation
     placement, jacobian, acceleration = pin.updateFramePlacement, pin.getFrameJacobian, pin.getFrameAcceleration
     lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    H_rigid, h = robot.H, robot.h  # views of Pinocchio's data, as φ's (plan_rhs._phi_function)
 
     def command(t, x, Js, phi, o, tau_c):
         ref = reference_at(s, phase, t, x) if referenced else None
@@ -294,9 +295,9 @@ def operational_command(plan):
             R_tip = placement(model, data, fid).rotation
             J_ang = jacobian(model, data, fid, lwa).reshape(6, nv)[3:]
             drift_ang = acceleration(model, data, fid, lwa).angular
-        H = robot.H + D_ctl if D_ctl is not None else robot.H
+        H = H_rigid + D_ctl if D_ctl is not None else H_rigid
         J = Js[tf]
-        tau = ctl.torque(t, x[nQ:nQ + nv], H, robot.h, J, phi[i_dr:i_dr + 3], phi[tip:tip + 3], phi[tip + 3:tip + 6],
+        tau = ctl.torque(t, x[nQ:nQ + nv], H, h, J, phi[i_dr:i_dr + 3], phi[tip:tip + 3], phi[tip + 3:tip + 6],
                          ref, set_points, R_tip, J_ang, drift_ang)
         return tau, None, H, J
 

@@ -177,12 +177,13 @@ class OperationalSpace(Controller):
             Jt, drift_t = self._S.dot(J), self._S.dot(drift)
         L_inv = Jt.dot(solve_matrix(H, Jt.T))  # Λ⁻¹
         self._guard(L_inv, t)
-        a_f = np.array((a_task, f))
-        rhs = a_f[0] - drift_t
-        if self._null:
-            rhs += cfg.k_null * Jt.dot(v)  # k_null ẋ_t
-        ft = solve_vector(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
-        ft += a_f[1]
+        if self._null:  # a* − J̇_t q̇ + k_null ẋ_t, as floats (m ≤ 6)
+            k_null = cfg.k_null
+            rhs = [a - d + k_null * xd for a, d, xd in zip(a_task, drift_t.tolist(), Jt.dot(v).tolist(), strict=True)]
+        else:
+            rhs = [a - d for a, d in zip(a_task, drift_t.tolist(), strict=True)]
+        ft = solve_vector(L_inv, np.array(rhs))  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
+        ft += f
         tau = ft.dot(Jt)
         tau += h
         if self._null:
