@@ -283,22 +283,24 @@ def operational_command(plan):
     D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
     ramps = [phase.forces[key] for key in ctl.force_keys]
     referenced, orient = phase.reference is not None, ctl.reads_orientation
-    placement, jacobian, acceleration = pin.updateFramePlacement, pin.getFrameJacobian, pin.getFrameAcceleration
+    placement, jacobian = pin.updateFramePlacement, pin.getFrameJacobian
+    acceleration = pin.getFrameClassicalAcceleration
     lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
     H_rigid, h = robot.H, robot.h  # views of Pinocchio's data, as φ's (plan_rhs._phi_function)
 
     def command(t, x, Js, phi, o, tau_c):
         ref = reference_at(s, phase, t, x) if referenced else None
         set_points = [ramp.at(t)[0] for ramp in ramps]  # F_d [N]
-        R_tip = J_ang = drift_ang = None
-        if orient:
-            R_tip = placement(model, data, fid).rotation
-            J_ang = jacobian(model, data, fid, lwa).reshape(6, nv)[3:]
-            drift_ang = acceleration(model, data, fid, lwa).angular
-        H = H_rigid + D_ctl if D_ctl is not None else H_rigid
         J = Js[tf]
-        tau = ctl.torque(t, x[nQ:nQ + nv], H, h, J, phi[i_dr:i_dr + 3], phi[tip:tip + 3], phi[tip + 3:tip + 6],
-                         ref, set_points, R_tip, J_ang, drift_ang)
+        if orient:  # the 6 rows of the tip's Jacobian and J̇q̇ (φ holds the linear 3: the same bits)
+            R_tip = placement(model, data, fid).rotation
+            J_tip = jacobian(model, data, fid, lwa).reshape(6, nv)
+            drift_tip = acceleration(model, data, fid, lwa).vector
+        else:
+            R_tip, J_tip, drift_tip = None, J, phi[i_dr:i_dr + 3]
+        H = H_rigid + D_ctl if D_ctl is not None else H_rigid
+        tau = ctl.torque(t, x[nQ:nQ + nv], H, h, J_tip, drift_tip, phi[tip:tip + 3], phi[tip + 3:tip + 6], ref,
+                         set_points, R_tip)
         return tau, None, H, J
 
     return command

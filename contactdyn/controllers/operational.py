@@ -139,42 +139,40 @@ class OperationalSpace(Controller):
         self._kp_list, self._kd_list = self._kp.tolist(), self._kd.tolist()
         self._W = np.zeros((m, 6))  #: [S 0; 0 E]: the task's rows on the tip's [linear; angular] motion
         self._W[:len(self._S), :3] = self._S
-        self._J6, self._d6 = np.empty((6, self.nv)), np.empty(6)
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         ref = None if inp.x_d is None else (inp.x_d, inp.v_d, inp.a_d)
         set_points = [inp.force_d[key][0] for key in self.force_keys]
-        return self.torque(inp.t, inp.v, inp.H, inp.h, inp.J, inp.drift, inp.p_tip, inp.v_tip, ref, set_points,
-                           inp.R_tip, inp.J_ang, inp.drift_ang), None
+        J_tip, drift_tip = inp.J, inp.drift
+        if self._target is not None:  # [J; J_ω], [J̇q̇; J̇_ω q̇]
+            J_tip, drift_tip = np.concatenate((inp.J, inp.J_ang)), np.concatenate((inp.drift, inp.drift_ang))
+        return self.torque(inp.t, inp.v, inp.H, inp.h, J_tip, drift_tip, inp.p_tip, inp.v_tip, ref, set_points,
+                           inp.R_tip), None
 
-    def torque(self, t: float, v: np.ndarray, H: np.ndarray, h: np.ndarray, J: np.ndarray, drift: np.ndarray,
-               p_tip: np.ndarray, v_tip: np.ndarray, ref: tuple | None, set_points: list[float],
-               R_tip: np.ndarray | None, J_ang: np.ndarray | None, drift_ang: np.ndarray | None) -> np.ndarray:
+    def torque(self, t: float, v: np.ndarray, H: np.ndarray, h: np.ndarray, J_tip: np.ndarray,
+               drift_tip: np.ndarray, p_tip: np.ndarray, v_tip: np.ndarray, ref: tuple | None,
+               set_points: list[float], R_tip: np.ndarray | None) -> np.ndarray:
         """τ [N·m or N] of the module's law at the joint velocities v, the rigid model's H and h, the tip's
-        Jacobian J (3, nv), J̇q̇ ``drift`` [m/s²], p_tip [m], v_tip [m/s], the reference ``ref`` = (x_d, ẋ_d,
-        ẍ_d) or None, the set-points F_d [N] in the order of the phase's forces, and for a held tool axis the
-        tip's rotation, angular Jacobian and J̇_ω q̇ [rad/s²] (else None). The readable ``command`` and the
-        plan's call (:func:`~contactdyn.plan_law.plan_command`) both come here."""
+        Jacobian J_tip and J̇q̇ ``drift_tip`` (its linear rows (3, nv) and (3,) [m/s²]; for a held tool axis
+        the 6 rows [J; J_ω], [J̇q̇; J̇_ω q̇ [rad/s²]] in Pinocchio's order, and the tip's rotation R_tip,
+        else None), p_tip [m], v_tip [m/s], the reference ``ref`` = (x_d, ẋ_d, ẍ_d) or None and the
+        set-points F_d [N] in the order of ``force_keys``. The readable ``command`` and the plan's call
+        (:func:`~contactdyn.plan_law.operational_command`) both come here."""
         cfg, W = self.config, self._W
         a_task, f = self._task_terms(v_tip, p_tip, ref, set_points)
         if self._target is not None:
             a = R_tip.dot(cfg.tool_axis).tolist()  # current tool direction (world)
             e1, e2 = _perpendicular(a)
             W[-2:, 3:] = e1, e2
-            omega = J_ang.dot(v).tolist()  # [rad/s]
+            omega = J_tip[3:].dot(v).tolist()  # [rad/s]
             c = _cross(a, self._target)
             ko, do = cfg.ko, cfg.do
             w = [ko * c[0] - do * omega[0], ko * c[1] - do * omega[1], ko * c[2] - do * omega[2]]
             a_task += [_dot(e1, w), _dot(e2, w)]
             f += [0.0, 0.0]
-            J6, d6 = self._J6, self._d6  # [J; J_ω], [J̇q̇; J̇_ω q̇] in buffers (np.concatenate costs ~1 µs each)
-            J6[:3] = J
-            J6[3:] = J_ang
-            d6[:3] = drift
-            d6[3:] = drift_ang
-            Jt, drift_t = W.dot(J6), W.dot(d6)
+            Jt, drift_t = W.dot(J_tip), W.dot(drift_tip)
         else:
-            Jt, drift_t = self._S.dot(J), self._S.dot(drift)
+            Jt, drift_t = self._S.dot(J_tip), self._S.dot(drift_tip)
         L_inv = Jt.dot(solve_matrix(H, Jt.T))  # Λ⁻¹
         self._guard(L_inv, t)
         if self._null:  # a* − J̇_t q̇ + k_null ẋ_t, as floats (m ≤ 6)
