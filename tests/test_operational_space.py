@@ -183,3 +183,20 @@ def test_more_task_directions_than_joints_is_a_scene_error():
     with pytest.raises(SceneError, match=r"controller: expected a task of at most 4 directions \(the arm's joints\): "
                                          r"3 position axes, 0 force directions, 2 tool tilts, found 5"):
         _law(4)
+
+
+def test_the_plans_right_hand_side_builds_no_control_input(monkeypatch):
+    """The writer's compiled call runs the law without a ControlInput: with the constructor made to fail, the
+    right-hand side gives the same ẋ, to the bit."""
+    import contactdyn.plan_rhs as plan_rhs
+
+    system, modes, phase, x0 = prepare(load_scene("case2_writer_ur5"))
+    plan = ModePlan(system, modes, phase)
+    assert plan.ok, plan.reason
+    xdot = plan.rhs(0.1, x0).copy()
+
+    def no_input(*args, **kwargs):
+        raise AssertionError("a ControlInput was built")
+
+    monkeypatch.setattr(plan_rhs, "ControlInput", no_input)
+    assert np.array_equal(plan.rhs(0.1, x0), xdot)
