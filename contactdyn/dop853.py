@@ -359,10 +359,7 @@ class _Core:
             return 0
         # the FSAL call's own array (the same values): the compiled plan has its results cached
         x = self.last_x if self.last_t == t else steps.blocks[-1][_Y_NEW]
-        if self.watch.stop(steps, t, x):
-            steps.build(np.array([len(steps.t) - 2]))
-            return -1
-        return 0
+        return -1 if self.watch.stop(steps, t, x) else 0  # (the located step's interpolant is built)
 
 
 def _first_step(fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, t_end: float, max_step: float,

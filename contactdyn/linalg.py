@@ -1,10 +1,11 @@
-"""Small dense solves without numpy's Python wrappers.
+"""Small dense solves (and the reduced SVD) without numpy's Python wrappers.
 
-``numpy.linalg.solve`` and ``det`` check their arguments in Python before calling their gufuncs;
-on the 2–12-row systems of a right-hand side call that check costs more than the solve (~3 µs of
-~1 µs). The gufuncs themselves are used here where numpy has them (private but stable since numpy
-1.8), the public functions otherwise. Arguments must be float arrays of matching shapes; a
-singular matrix gives inf/nan (or LinAlgError on the fallback), which callers test.
+``numpy.linalg.solve``, ``det`` and ``svd`` check their arguments in Python before calling their
+gufuncs; on the 2–12-row systems of a right-hand side call that check costs more than the solve
+(~3 µs of ~1 µs). The gufuncs themselves are used here where numpy has them (private but stable
+since numpy 1.8), the public functions otherwise. Arguments must be float arrays of matching
+shapes; a singular matrix gives inf/nan, and a matrix with nan an SVD of nan (with a
+RuntimeWarning), where the fallback raises LinAlgError; callers test.
 """
 
 from __future__ import annotations

@@ -6,16 +6,20 @@ a bonded tangential chain) B folds into the constraint matrix; a reference carri
 body makes the command affine in that body's acceleration, which folds the same way. The
 readable model does that in :func:`~contactdyn.constraints.solve_folded` (probing the
 controller with a unit force per row, re-checking the drives' clip pattern with the solved
-λ). The plan probes with the same :func:`~contactdyn.constraints.force_columns` and folds
-through its compiled drives (L_τ, :mod:`contactdyn.plan_drives`) into its own KKT matrix:
-one solve, then a check that no voltage clips at the solved command. Where one does, it
-calls ``solve_folded`` itself on its system read off the compiled KKT matrix:
+λ). The plan gets τ₀ and B from a tip law read off as a matrix (:mod:`contactdyn.plan_law`:
+B = H J⁺ D from the matrix's columns of the measured forces, no ``ControlInput``), else
+probes with the same :func:`~contactdyn.constraints.force_columns`, and folds through its
+compiled drives (L_τ, :mod:`contactdyn.plan_drives`) into its own KKT matrix: one solve,
+then, where a drive has a voltage limit, a check that none clips at the solved command.
+Where one does, it calls ``solve_folded`` itself on its system read off the compiled KKT
+matrix:
 
     f = [b_Q + Σ_f J_fᵀ w_f]   (w_f = g_f: the Cartesian forces the plan carries as unknowns)
     rows G = A[rows, :nQ],   columns C = −A[:nQ, rows]ᵀ (sliding tilt included),   γ = −b[rows]
 
-So the probes, the drives' law and the clipping are written once. It costs the controller's
-command once per row (and once more for a carried reference) besides its own.
+So the probes, the drives' law and the clipping are written once. Probing costs the
+controller's command once per row (and once more for a carried reference) besides its own;
+the matrix path a few products per call (B from H, J⁺ and the columns read once).
 """
 
 from __future__ import annotations

@@ -17,19 +17,26 @@ x, the reference and the ramps (:func:`plan_inputs`) — and takes τ from the l
 :mod:`contactdyn.controllers.dynamic`.
 Joint-space A7, or a law that is not affine in u (a clip, a switch), is declined: the
 readable ``command`` runs as before.
+
+The operational_space law (not affine: its Λ depends on q) is called the same way by
+:func:`operational_command`: its :meth:`~contactdyn.controllers.operational.OperationalSpace.torque`
+at the plan's own slots, with the tip's rotation, angular Jacobian and J̇_ω q̇ read off Pinocchio's
+data the plan's φ was computed from.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 
 from .constraints import force_columns
 from .controllers import ControlInput
+from .controllers.operational import OperationalSpace
 from .dynamics import surface_keys, surface_points
 from .phases import reference_at
 from .plan_probe import affine_map
 
-__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "plan_command"]
+__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "plan_command", "operational_command"]
 
 
 class CompiledLaw:
@@ -255,5 +262,45 @@ def plan_command(plan):
         tau = ctl.torque(H, robot.h, tau_c, J, phi[i_dr:i_dr + 3], x[nQ:nQ + nv], y[:3],
                          y[3:6] if law.swap else None)
         return tau, (y[law.zs] if law.zs is not None else None), H, J
+
+    return command
+
+
+def operational_command(plan):
+    """command(t, x, Js, φ, o, τ_c) -> (τ [N·m or N], None, H, J) of the plan's operational_space law at the
+    plan's own slots (the values :func:`~contactdyn.plan_rhs.controller_input` gives it); None for another
+    controller. The tip's R, J_ω and J̇_ω q̇ come from Pinocchio's data of this call's φ."""
+    ctl = plan.phase.controller
+    if not isinstance(ctl, OperationalSpace):
+        return None
+    s, phase = plan.system, plan.phase
+    nQ, nv = s.nQ, s.nv
+    robot = s.robot
+    model, data = robot.model, robot.data
+    tf = plan.tip_frame
+    fid, i_dr = plan.fids[tf], plan.i_dr[tf]
+    tip = plan.i_e + plan.e_frame[tf]
+    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
+    ramps = [phase.forces[key] for key in ctl.force_keys]
+    referenced, orient = phase.reference is not None, ctl.reads_orientation
+    placement, jacobian = pin.updateFramePlacement, pin.getFrameJacobian
+    acceleration = pin.getFrameClassicalAcceleration
+    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    H_rigid, h = robot.H, robot.h  # views of Pinocchio's data, as φ's (plan_rhs._phi_function)
+
+    def command(t, x, Js, phi, o, tau_c):
+        ref = reference_at(s, phase, t, x) if referenced else None
+        set_points = [ramp.at(t)[0] for ramp in ramps]  # F_d [N]
+        J = Js[tf]
+        if orient:  # the 6 rows of the tip's Jacobian and J̇q̇ (φ holds the linear 3: the same bits)
+            R_tip = placement(model, data, fid).rotation
+            J_tip = jacobian(model, data, fid, lwa).reshape(6, nv)
+            drift_tip = acceleration(model, data, fid, lwa).vector
+        else:
+            R_tip, J_tip, drift_tip = None, J, phi[i_dr:i_dr + 3]
+        H = H_rigid + D_ctl if D_ctl is not None else H_rigid
+        tau = ctl.torque(t, x[nQ:nQ + nv], H, h, J_tip, drift_tip, phi[tip:tip + 3], phi[tip + 3:tip + 6], ref,
+                         set_points, R_tip)
+        return tau, None, H, J
 
     return command

@@ -31,7 +31,7 @@ from .linalg import solve_vector
 from .phases import reference_at
 from .plan_drives import drive_forces
 from .plan_fold import contact_torque_of, folded_solve
-from .plan_law import compiled_law, plan_command
+from .plan_law import compiled_law, operational_command, plan_command
 from .trajectory import profile
 
 __all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
@@ -391,10 +391,11 @@ def impulse_terms(plan) -> list[tuple]:
 
 def controller_call(plan):
     """The command of a controller without an affine tip-force law: call(t, x, q, v, Js, φ, o, τ_c) -> (τ, ż);
-    a tip law read off as a matrix by it at the plan's own slots (:func:`~contactdyn.plan_law.plan_command`)."""
+    a tip law read off as a matrix, and the operational_space law, at the plan's own slots
+    (:func:`~contactdyn.plan_law.plan_command`, :func:`~contactdyn.plan_law.operational_command`)."""
     make = controller_input(plan)
     command = compiled_law(plan).command
-    fast = plan_command(plan)
+    fast = plan_command(plan) or operational_command(plan)
     nQ, nv = plan.system.nQ, plan.system.nv
 
     def call(t, x, q, v, Js, phi, o, tau_contact=None):

@@ -136,6 +136,41 @@ def test_the_compiled_right_hand_side_calls_the_same_law(robot):
         np.testing.assert_allclose(plan.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
 
 
+def _writer_variants():
+    yield "writer5dof (tilt, 5 directions on 5 joints)", load_scene("case2_writer5dof")
+    yield "ur5 (tilt, null-space damping)", load_scene("case2_writer_ur5")
+    with open(sims_dir() / "case2_writer_ur5.toml", "rb") as fh:
+        controller = tomllib.load(fh)["controller"]
+    del controller["tool_axis"], controller["tool_target"]
+    yield "ur5 (no tool axis, no reference)", parse_scene(_rigid_writer(controller) | {"phase": [
+        {"name": "hold", "force": [{"contact": "pencil", "value": 5.0, "kind": "linear", "duration": 0.1}]}]})
+
+
+@pytest.mark.parametrize(("what", "scene"), list(_writer_variants()), ids=[w for w, _ in _writer_variants()])
+def test_the_plans_call_reads_the_same_inputs_off_its_slots(what, scene):
+    """operational_command calls the law at the plan's own slots (no ControlInput): the same τ as the readable
+    command at the plan's ControlInput, to the bit, at random states."""
+    from contactdyn.plan_law import operational_command
+    from contactdyn.plan_rhs import controller_input
+
+    system, modes, phase, x0 = prepare(scene)
+    plan = ModePlan(system, modes, phase)
+    make, fast = controller_input(plan), operational_command(plan)
+    assert fast is not None
+    nQ, nv = system.nQ, system.nv
+    rng = np.random.default_rng(3)
+    for _ in range(4):
+        x, t = x0 + 1e-3 * rng.normal(size=x0.size), rng.uniform(0.0, 0.5)
+        phi = plan.phi_at(t, x)  # Pinocchio's data at x: what both paths read the tip's rotation from
+        Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+        o = plan.P.dot(phi)[plan.m * plan.m + plan.m:]
+        inp = make(t, x, x[:nv], x[nQ:nQ + nv], Js, phi, o)
+        tau, zdot = phase.controller.command(inp)
+        tau_f, zdot_f, H, J = fast(t, x, Js, phi, o, None)
+        assert np.array_equal(tau_f, tau) and zdot is None and zdot_f is None
+        assert np.array_equal(H, inp.H) and np.array_equal(J, inp.J)
+
+
 def test_a_singular_task_is_a_clear_error():
     robot = Robot.load("ur5", tip="tool0")
     law = _law(6)
@@ -148,3 +183,20 @@ def test_more_task_directions_than_joints_is_a_scene_error():
     with pytest.raises(SceneError, match=r"controller: expected a task of at most 4 directions \(the arm's joints\): "
                                          r"3 position axes, 0 force directions, 2 tool tilts, found 5"):
         _law(4)
+
+
+def test_the_plans_right_hand_side_builds_no_control_input(monkeypatch):
+    """The writer's compiled call runs the law without a ControlInput: with the constructor made to fail, the
+    right-hand side gives the same ẋ, to the bit."""
+    import contactdyn.plan_rhs as plan_rhs
+
+    system, modes, phase, x0 = prepare(load_scene("case2_writer_ur5"))
+    plan = ModePlan(system, modes, phase)
+    assert plan.ok, plan.reason
+    xdot = plan.rhs(0.1, x0).copy()
+
+    def no_input(*args, **kwargs):
+        raise AssertionError("a ControlInput was built")
+
+    monkeypatch.setattr(plan_rhs, "ControlInput", no_input)
+    assert np.array_equal(plan.rhs(0.1, x0), xdot)

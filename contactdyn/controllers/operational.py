@@ -107,7 +107,7 @@ class OperationalSpace(Controller):
         if ref is not None and ref.space != "task":
             raise SceneError(f"phase[{context.index}].reference.space", "'task' (operational_space tracks the tip)",
                              ref.space, file)
-        self._force_keys = [f.key for f in phase.forces]
+        self.force_keys = [f.key for f in phase.forces]  #: the set-points' keys, in the order of torque's F_d
         forced = np.array([_direction(context.scene.contacts[f.contact], f.direction) for f in phase.forces]
                           ).reshape(-1, 3)
         if np.max(np.abs(forced @ forced.T - np.eye(len(forced))), initial=0.0) > 1e-9:
@@ -141,52 +141,75 @@ class OperationalSpace(Controller):
         self._W[:len(self._S), :3] = self._S
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
-        # The task's rows act on the tip's 6-D motion: W = [S 0; 0 E] (m, 6), E refreshed per call; the
-        # task-space terms are Python floats (k, m ≤ 6: cheaper than one numpy call each, ~0.5 µs)
-        cfg, k, m, W = self.config, self._k, self._m, self._W
-        axes = self._axes_rows
-        vx, vy, vz = inp.v_tip.tolist()
-        kp, kd = self._kp_list, self._kd_list
-        if inp.x_d is not None:
-            (ax, ay, az), (px, py, pz) = inp.a_d.tolist(), inp.p_tip.tolist()
-            (xx, xy, xz), (wx, wy, wz) = inp.x_d.tolist(), inp.v_d.tolist()
-            ex, ey, ez, fx, fy, fz = xx - px, xy - py, xz - pz, wx - vx, wy - vy, wz - vz  # x_d − p, ẋ_d − ṗ
-            a_task = [n[0] * ax + n[1] * ay + n[2] * az for n in axes]  # a* [m/s², rad/s²], through Λ
-            f = [kp[i] * (n[0] * ex + n[1] * ey + n[2] * ez) + kd[i] * (n[0] * fx + n[1] * fy + n[2] * fz)
-                 for i, n in enumerate(axes)]  # [N], directly
-        else:
-            a_task = [0.0] * k
-            f = [-kd[i] * (n[0] * vx + n[1] * vy + n[2] * vz) for i, n in enumerate(axes)]
-        for key, n in zip(self._force_keys, self._forced_rows, strict=True):  # set-points along their directions
-            a_task.append(0.0)
-            f.append(-inp.force_d[key][0] - cfg.kd_normal * (n[0] * vx + n[1] * vy + n[2] * vz))  # [N]
+        ref = None if inp.x_d is None else (inp.x_d, inp.v_d, inp.a_d)
+        set_points = [inp.force_d[key][0] for key in self.force_keys]
+        J_tip, drift_tip = inp.J, inp.drift
+        if self._target is not None:  # [J; J_ω], [J̇q̇; J̇_ω q̇]
+            J_tip, drift_tip = np.concatenate((inp.J, inp.J_ang)), np.concatenate((inp.drift, inp.drift_ang))
+        return self.torque(inp.t, inp.v, inp.H, inp.h, J_tip, drift_tip, inp.p_tip, inp.v_tip, ref, set_points,
+                           inp.R_tip), None
+
+    def torque(self, t: float, v: np.ndarray, H: np.ndarray, h: np.ndarray, J_tip: np.ndarray,
+               drift_tip: np.ndarray, p_tip: np.ndarray, v_tip: np.ndarray, ref: tuple | None,
+               set_points: list[float], R_tip: np.ndarray | None) -> np.ndarray:
+        """τ [N·m or N] of the module's law at the joint velocities v, the rigid model's H and h, the tip's
+        Jacobian J_tip and J̇q̇ ``drift_tip`` (its linear rows (3, nv) and (3,) [m/s²]; for a held tool axis
+        the 6 rows [J; J_ω], [J̇q̇; J̇_ω q̇ [rad/s²]] in Pinocchio's order, and the tip's rotation R_tip,
+        else None), p_tip [m], v_tip [m/s], the reference ``ref`` = (x_d, ẋ_d, ẍ_d) or None and the
+        set-points F_d [N] in the order of ``force_keys``. The readable ``command`` and the plan's call
+        (:func:`~contactdyn.plan_law.operational_command`) both come here."""
+        cfg, W = self.config, self._W
+        a_task, f = self._task_terms(v_tip, p_tip, ref, set_points)
         if self._target is not None:
-            a = inp.R_tip.dot(cfg.tool_axis).tolist()  # current tool direction (world)
+            a = R_tip.dot(cfg.tool_axis).tolist()  # current tool direction (world)
             e1, e2 = _perpendicular(a)
-            W[m - 2:, 3:] = e1, e2
-            omega = inp.J_ang.dot(inp.v).tolist()  # [rad/s]
+            W[-2:, 3:] = e1, e2
+            omega = J_tip[3:].dot(v).tolist()  # [rad/s]
             c = _cross(a, self._target)
             ko, do = cfg.ko, cfg.do
             w = [ko * c[0] - do * omega[0], ko * c[1] - do * omega[1], ko * c[2] - do * omega[2]]
             a_task += [_dot(e1, w), _dot(e2, w)]
             f += [0.0, 0.0]
-            Jt = W.dot(np.concatenate((inp.J, inp.J_ang)))
-            drift = W.dot(np.concatenate((inp.drift, inp.drift_ang)))
+            Jt, drift_t = W.dot(J_tip), W.dot(drift_tip)
         else:
-            Jt, drift = self._S.dot(inp.J), self._S.dot(inp.drift)
-        L_inv = Jt.dot(solve_matrix(inp.H, Jt.T))  # Λ⁻¹
-        self._guard(L_inv, inp.t)
-        a_f = np.array((a_task, f))
-        rhs = a_f[0] - drift
-        if self._null:
-            rhs += cfg.k_null * Jt.dot(inp.v)  # k_null ẋ_t
-        ft = solve_vector(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
-        ft += a_f[1]
+            Jt, drift_t = self._S.dot(J_tip), self._S.dot(drift_tip)
+        L_inv = Jt.dot(solve_matrix(H, Jt.T))  # Λ⁻¹
+        self._guard(L_inv, t)
+        if self._null:  # a* − J̇_t q̇ + k_null ẋ_t, as floats (m ≤ 6)
+            k_null = cfg.k_null
+            rhs = [a - d + k_null * xd for a, d, xd in zip(a_task, drift_t.tolist(), Jt.dot(v).tolist(), strict=True)]
+        else:
+            rhs = [a - d for a, d in zip(a_task, drift_t.tolist(), strict=True)]
+        ft = solve_vector(L_inv, np.array(rhs))  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
+        ft += f
         tau = ft.dot(Jt)
-        tau += inp.h
+        tau += h
         if self._null:
-            tau -= cfg.k_null * inp.H.dot(inp.v)
-        return tau, None
+            tau -= cfg.k_null * H.dot(v)
+        return tau
+
+    def _task_terms(self, v_tip: np.ndarray, p_tip: np.ndarray, ref: tuple | None,
+                    set_points: list[float]) -> tuple[list[float], list[float]]:
+        """(a* [m/s²], f [N]) on the position axes and force directions, as Python floats (k + f ≤ 6 terms:
+        cheaper than one numpy call each, ~0.5 µs)."""
+        axes, kp, kd = self._axes_rows, self._kp_list, self._kd_list
+        vx, vy, vz = v_tip.tolist()
+        if ref is not None:
+            x_d, v_d, a_d = ref
+            (ax, ay, az), (px, py, pz) = a_d.tolist(), p_tip.tolist()
+            (xx, xy, xz), (wx, wy, wz) = x_d.tolist(), v_d.tolist()
+            ex, ey, ez, fx, fy, fz = xx - px, xy - py, xz - pz, wx - vx, wy - vy, wz - vz  # x_d − p, ẋ_d − ṗ
+            a_task = [n[0] * ax + n[1] * ay + n[2] * az for n in axes]  # a* [m/s², rad/s²], through Λ
+            f = [kp[i] * (n[0] * ex + n[1] * ey + n[2] * ez) + kd[i] * (n[0] * fx + n[1] * fy + n[2] * fz)
+                 for i, n in enumerate(axes)]  # [N], directly
+        else:
+            a_task = [0.0] * self._k
+            f = [-kd[i] * (n[0] * vx + n[1] * vy + n[2] * vz) for i, n in enumerate(axes)]
+        kd_normal = self.config.kd_normal
+        for F_d, n in zip(set_points, self._forced_rows, strict=True):  # set-points along their directions
+            a_task.append(0.0)
+            f.append(-F_d - kd_normal * (n[0] * vx + n[1] * vy + n[2] * vz))  # [N]
+        return a_task, f
 
     def _guard(self, L_inv: np.ndarray, t: float) -> None:
         ratio = det(L_inv) / math.prod(L_inv.diagonal().tolist())
