@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import contactdyn.rhsplan as rhsplan
+import contactdyn.samples as samples
 from contactdyn import Robot, parse_scene
 from contactdyn.channels import _per_sample
 from contactdyn.contact import ContactMode
@@ -86,6 +87,40 @@ def test_folded_forces_with_clipped_voltages_in_the_batched_output(monkeypatch):
     result = _assert_same_channels(parse_scene(doc), None, monkeypatch)
     u = result.channels["u"]
     assert np.mean(np.abs(u) == 4.0) > 0.05 and np.mean(np.abs(u) < 4.0) > 0.05
+
+
+def test_folded_forces_with_coulomb_friction_in_b(monkeypatch):
+    """A7 bonded to a wall (a normal row: the measured force folded into the solve) while sliding on a
+    compliant model-(a) floor with Coulomb friction: the floor's normal force is its interface stage's, known,
+    so −μ max(F_n, 0) d goes into b before the plan's fold over samples (``_fold_all``) reads it."""
+    q0 = [0.3, 1.2]  # [rad] the writer's pose, tip at p0
+    p0 = Robot.load("writer2r").frame_position(np.array(q0), "tip")
+    drive = {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": 0.000452, "N": 160.0, "N_star": 65.12}
+    floor = {"direction": [0, 0, 1], "model": "a", "m": 1.0, "k_ext": 1e4, "b_ext": 5.0, "k_int": 1e4, "b_int": 2.0}
+    doc = {"duration": 0.4, "solver": {"output_rate": 500.0},
+           "robot": {"urdf": "writer2r", "q0": q0, "drive": drive},
+           "controller": {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0},
+           "phase": [{"name": "main", "reference": {
+               "start": (p0 + [0.0, 0.0, -0.01]).tolist(),
+               "moves": [{"kind": "trapezoid", "delta": [0.02, 0.0, 0.0], "duration": 0.4}]}}],
+           "contact": {"wall": {"point": p0.tolist(), "bonded": True,
+                                "normal": {"direction": [-1, 0, 0], "model": "b", "k": 1e3, "b": 10.0, "m": 2.0}},
+                       "floor": {"point": (p0 + [0.0, 0.0, -0.002]).tolist(), "normal": floor,
+                                 "tangent": {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu": 0.3}}}}
+    folded = []  # per call of the fold over samples: (the plan folds rows, Coulomb terms in b, the floor slides, N)
+    fold_all = samples._fold_all
+
+    def spy(plan, X, *args):
+        floor_mode = plan.modes[[c.name for c in plan.system.contacts].index("floor")]
+        folded.append((plan.folded_parts is not None and plan.nr > 0, len(plan.coulomb_terms) > 0,
+                       floor_mode.touching and not floor_mode.stuck, len(X)))
+        return fold_all(plan, X, *args)
+
+    monkeypatch.setattr(samples, "_fold_all", spy)
+    result = _assert_same_channels(parse_scene(doc), None, monkeypatch)
+    assert sum(n for rows, coulomb, sliding, n in folded if rows and coulomb and sliding) >= 150
+    F_n, F_f = result.channels["contact.floor.F_n"], result.channels["contact.floor.F_f"][:, 0]
+    assert F_n.max() > 30.0 and np.abs(F_f).max() > 9.0  # μ F_n of ~12 N in b
 
 
 @pytest.mark.parametrize("scene, duration", [("b1", 2.0), ("case2_writer_b", 1.2), ("case1_cart", 4.0)])
