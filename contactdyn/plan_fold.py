@@ -31,7 +31,7 @@ import numpy as np
 from .constraints import Rows, force_columns, solve_folded
 from .dynamics import carried_terms, command_of
 from .linalg import solve_vector
-from .plan_law import compiled_law, plan_command
+from .plan_law import compiled_law, plan_command, plan_commands
 
 __all__ = ["contact_torque_of", "folded_solve"]
 
@@ -124,25 +124,43 @@ def _law_parts(plan, ctl, meta: list):
     increments = ctl.ctl.increments
     row_columns = None  # (D_a, D_f, D_z) of CompiledLaw.row_columns, once the law's matrix is read
 
-    def parts(t, x, Js, phi, o, A, tau_c):
+    def row_parts(H, J, A):
+        """B for one sample, or per sample of a stack (H, J, A with a leading sample axis; ``reach`` known)."""
         nonlocal row_columns
-        got = fast(t, x, Js, phi, o, tau_c)
-        if got is None:
-            return None
-        tau, zdot, H, J = got
         if row_columns is None:
             row_columns = ctl.row_columns(meta)
         D_a, D_f, Dz = row_columns
         B = increments(H, J, D_a, D_f)
         if every_row_reaches:
-            B += A[:nv, lam_cols]
+            B += A[..., :nv, lam_cols]
         else:
             for j in (reach if reach is not None else np.flatnonzero(A[nv:nQ, lam_cols].any(axis=0))):
-                B[:, j] += A[:nv, nQ + j]
+                B[..., j] += A[..., :nv, nQ + j]
+        return B, Dz
+
+    def parts(t, x, Js, phi, o, A, tau_c):
+        got = fast(t, x, Js, phi, o, tau_c)
+        if got is None:
+            return None
+        tau, zdot, H, J = got
+        B, Dz = row_parts(H, J, A)
         carried = None if carrier is None else carried_terms(carrier[0], *ctl.carried_increment(H, J, carrier[1]),
                                                              zdot)
         return tau, zdot, B, Dz, carried, None
 
+    if carrier is None and reach is not None:  # (the output's samples all at once, contactdyn.samples)
+        fast_all = plan_commands(plan)
+
+        def parts_all(ts, X, Phi, O, A, T_c):
+            """(τ (N, nv), B (N, nv, nr)) of :func:`parts` over N samples, the same arithmetic per sample; None
+            while the law's matrix is not read."""
+            got = fast_all(ts, X, Phi, O, T_c)
+            if got is None:
+                return None
+            tau, _, H, J = got
+            return tau, row_parts(H, J, A)[0]
+
+        plan.folded_parts_all = parts_all
     return parts
 
 

@@ -36,7 +36,7 @@ from .dynamics import surface_keys, surface_points
 from .phases import reference_at
 from .plan_probe import affine_map
 
-__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "plan_command", "operational_command"]
+__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "plan_command", "plan_commands", "operational_command"]
 
 
 class CompiledLaw:
@@ -264,6 +264,40 @@ def plan_command(plan):
         return tau, (y[law.zs] if law.zs is not None else None), H, J
 
     return command
+
+
+def plan_commands(plan):
+    """commands(ts, X, Φ, O, T_c) -> (τ (N, nv), ż (N, ·) or None, H (N, nv, nv), J (N, 3, nv)): :func:`plan_command`
+    over N samples at once (Φ: their φ from :meth:`phi_at`, O: their outputs, T_c: their contacts' torque), the
+    same arithmetic per sample: u by :func:`plan_inputs` per sample, M u and the law's ``torque`` over the stack;
+    None while M is not read; None for a controller without one."""
+    law = compiled_law(plan)
+    if not isinstance(law, CompiledLaw) or law.reason is not None:
+        return None
+    s = plan.system
+    nQ, nv = s.nQ, s.nv
+    ctl = law.ctl
+    tf = plan.tip_frame
+    i_dr, i_J, i_h = plan.i_dr[tf], plan.i_J[tf], plan.i_h
+    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
+
+    def commands(ts, X, Phi, O, T_c):
+        if law.M is None:
+            return None
+        inputs, N = plan_inputs(plan, law), len(ts)
+        U = np.empty((N, law.nu))
+        for k in range(N):
+            U[k] = inputs(ts[k], X[k], Phi[k], O[k])
+        Y = np.matmul(law.M, U[:, :, None])[:, :, 0]  # per sample: the same numbers as M.dot(u)
+        H = np.ascontiguousarray(Phi[:, :nv * nv].reshape(N, nv, nv).transpose(0, 2, 1))  # φ holds H by columns
+        if D_ctl is not None:
+            H = H + D_ctl
+        J = np.ascontiguousarray(Phi[:, i_J:i_J + 3 * nv].reshape(N, 3, nv))
+        tau = ctl.torque(H, Phi[:, i_h:i_h + nv], T_c, J, Phi[:, i_dr:i_dr + 3], X[:, nQ:nQ + nv], Y[:, :3],
+                         Y[:, 3:6] if law.swap else None)
+        return tau, (Y[:, law.zs] if law.zs is not None else None), H, J
+
+    return commands
 
 
 def operational_command(plan):

@@ -174,22 +174,40 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
     carries = np.zeros(N, bool)
     friction, parts, detail = plan.friction_terms, plan.folded_parts, plan.folded_detail
     contact_torque = contact_torque_of(plan)
+    T_c = np.empty((N, nv))  # the contacts' torque [N·m or N]
     batched = np.zeros(N, bool)
-    for k in range(N):
-        t, x = ts[k], X[k]
-        Phi[k] = plan.phi_at(t, x)
-        phi, y = Phi[k], Y[k]  # (views: the sample's rows)
+    parts_all = getattr(plan, "folded_parts_all", None)  # the law's command over all samples at once
+
+    def one(k):  # the sample's parts (Pinocchio's data at its φ)
+        t, x, phi, y = ts[k], X[k], Phi[k], Y[k]
         Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
-        np.dot(plan.P, phi, out=y)
-        if friction is not None:
-            friction(y, Js, plan.modes)
         A, b, o = y[:m2].reshape(m, m), y[m2:m2 + m], y[m2 + m:]
-        tau[k], _, B[k], _, carried, readable = parts(t, x, Js, phi, o, A, contact_torque(b, Js))
+        tau[k], _, B[k], _, carried, readable = parts(t, x, Js, phi, o, A, T_c[k])
         batched[k] = readable is None
         if carried is not None:
             carries[k], tau_b[k] = True, carried[1]
         if not batched[k]:
             Z[k], _, tau[k] = detail(t, x, Js, phi, o, A, b)
+
+    for k in range(N):
+        Phi[k] = plan.phi_at(ts[k], X[k])
+        phi, y = Phi[k], Y[k]  # (views: the sample's rows)
+        Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+        np.dot(plan.P, phi, out=y)
+        if friction is not None:
+            friction(y, Js, plan.modes)
+        T_c[k] = contact_torque(y[m2:m2 + m], Js)
+        if parts_all is None:
+            one(k)
+    if parts_all is not None:
+        got = parts_all(ts, X, Phi, Y[:, m2 + m:], Y[:, :m2].reshape(N, m, m), T_c)
+        if got is not None:
+            tau[:], B[:] = got
+            batched[:] = True
+        else:  # the law's matrix not read yet: per sample, Pinocchio's data at each
+            for k in range(N):
+                plan.phi_at(ts[k], X[k])
+                one(k)
     K = np.flatnonzero(batched)
     if len(K):
         A_all, b_all = Y[K, :m2].reshape(-1, m, m), Y[K, m2:m2 + m]
