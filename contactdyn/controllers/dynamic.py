@@ -141,23 +141,24 @@ def _rotor_inertia(context: BindContext, inertia: str) -> np.ndarray | None:
     return np.array([s.reflected_inertia for s in specs])
 
 
-def _times(A: np.ndarray, x: np.ndarray, columns: bool = False) -> np.ndarray:
-    """A x for one matrix (ndarray.dot: a third of @'s cost on these sizes), or per sample of a stack A (N, r, c)
-    (matmul per sample: the same numbers as one sample's dot on these sizes): x a vector per sample (N, c), or
-    with ``columns`` a matrix (c, k) or one per sample (N, c, k)."""
-    if A.ndim == 2:
-        return A.dot(x)
-    return np.matmul(A, x) if columns else np.matmul(A, x[..., None])[..., 0]
+_dot = np.ndarray.dot
 
 
-def _transposed(J: np.ndarray) -> np.ndarray:
-    """Jᵀ, of one matrix or per sample of a stack."""
-    return J.swapaxes(-1, -2)
+def _stacked_times(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A x per sample of a stack: A (N, r, c), x (N, c) (matmul per sample: one sample's dot's numbers here)."""
+    return np.matmul(A, x[..., None])[..., 0]
 
 
-def _inertia_times(H: np.ndarray, rotor: np.ndarray | None, qdd: np.ndarray) -> np.ndarray:
-    """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out)."""
-    return _times(H, qdd) if rotor is None else _times(H, qdd) - rotor * qdd
+def _products(J: np.ndarray) -> tuple:
+    """(A x for vectors x, A X for matrices X) for one sample's terms (ndarray.dot: a third of @'s cost on these sizes)
+    or per sample of a stack (J (N, 3, nv); X: one matrix, or one per sample)."""
+    return (_dot, _dot) if J.ndim == 2 else (_stacked_times, np.matmul)
+
+
+def _inertia_times(H: np.ndarray, rotor: np.ndarray | None, qdd: np.ndarray, times=_dot) -> np.ndarray:
+    """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out); ``times``
+    of :func:`_products` for a stack."""
+    return times(H, qdd) if rotor is None else times(H, qdd) - rotor * qdd
 
 
 # ---- shared task-space pieces ---------------------------------------------------------------
@@ -172,7 +173,7 @@ def pseudo_inverse(J: np.ndarray) -> np.ndarray:
     if J.ndim == 3:  # per sample of a stack (N, r, c)
         u, s, vt = svd(J)
         if s.size and np.all(s[:, -1] > 1e-10 * s[:, 0]):  # full rank everywhere: as one sample's, stacked
-            return (_transposed(vt) / s[:, None, :]) @ _transposed(u)
+            return (vt.swapaxes(1, 2) / s[:, None, :]) @ u.swapaxes(1, 2)
         return np.array([pseudo_inverse(j) for j in J])
     u, s, vt = svd(J)
     if s.size and s[-1] > 1e-10 * s[0]:  # full rank: every singular value kept
@@ -261,14 +262,15 @@ class _ComputedTorque(Controller):
         """τ = H q̈* + h − τ_c (+ Jᵀ f_swap) [N·m or N], q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for the tip
         acceleration a [m/s²], from the model's terms (J: the tip Jacobian (3, nv), drift: J̇q̇ [m/s²], v: q̇;
         the compiled path passes its own, :meth:`computed_torque` a ControlInput's)."""
+        times, times_matrix = _products(J)
         Jp = self._pinv(J)
-        qdd = _times(Jp, a - drift)
+        qdd = times(Jp, a - drift)
         k_null = self.config.k_null
         if k_null > 0.0 and J.shape[-1] > 3:
-            qdd -= _times(np.eye(J.shape[-1]) - _times(Jp, J, True), k_null * v)
-        tau = _inertia_times(H, self._rotor, qdd) + h - tau_c
+            qdd -= times(np.eye(J.shape[-1]) - times_matrix(Jp, J), k_null * v)
+        tau = _inertia_times(H, self._rotor, qdd, times) + h - tau_c
         if f_swap is not None:
-            tau += _times(_transposed(J), f_swap)
+            tau += times(J.swapaxes(-1, -2), f_swap)  # Jᵀ f_swap
         return tau
 
     def torque_increments(self, inp: ControlInput, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
@@ -277,9 +279,10 @@ class _ComputedTorque(Controller):
 
     def increments(self, H: np.ndarray, J: np.ndarray, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
         """:meth:`torque_increments` from the model's terms H and J."""
-        dqdd = _times(self._pinv(J), da, True)
-        dtau = _times(H, dqdd, True) if self._rotor is None else _times(H, dqdd, True) - self._rotor[:, None] * dqdd
-        return dtau if df is None else dtau + _times(_transposed(J), df, True)
+        times = _products(J)[1]
+        dqdd = times(self._pinv(J), da)
+        dtau = times(H, dqdd) if self._rotor is None else times(H, dqdd) - self._rotor[:, None] * dqdd
+        return dtau if df is None else dtau + times(J.swapaxes(-1, -2), df)
 
 
 # ---- A7 -----------------------------------------------------------------------------------------
