@@ -141,23 +141,18 @@ def _rotor_inertia(context: BindContext, inertia: str) -> np.ndarray | None:
     return np.array([s.reflected_inertia for s in specs])
 
 
-_dot = np.ndarray.dot
+_dot = np.ndarray.dot  #: one sample's products (a third of @'s cost on these sizes)
 
 
 def _stacked_times(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """A x per sample of a stack: A (N, r, c), x (N, c) (matmul per sample: one sample's dot's numbers here)."""
+    """A x per sample of a stack: A (N, r, c), x (N, c) (matmul per sample: one sample's dot's numbers here);
+    a stack's matrix products are np.matmul's."""
     return np.matmul(A, x[..., None])[..., 0]
-
-
-def _products(J: np.ndarray) -> tuple:
-    """(A x for vectors x, A X for matrices X) for one sample's terms (ndarray.dot: a third of @'s cost on these sizes)
-    or per sample of a stack (J (N, 3, nv); X: one matrix, or one per sample)."""
-    return (_dot, _dot) if J.ndim == 2 else (_stacked_times, np.matmul)
 
 
 def _inertia_times(H: np.ndarray, rotor: np.ndarray | None, qdd: np.ndarray, times=_dot) -> np.ndarray:
     """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out); ``times``
-    of :func:`_products` for a stack."""
+    :func:`_stacked_times` for a stack."""
     return times(H, qdd) if rotor is None else times(H, qdd) - rotor * qdd
 
 
@@ -262,7 +257,7 @@ class _ComputedTorque(Controller):
         """τ = H q̈* + h − τ_c (+ Jᵀ f_swap) [N·m or N], q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for the tip
         acceleration a [m/s²], from the model's terms (J: the tip Jacobian (3, nv), drift: J̇q̇ [m/s²], v: q̇;
         the compiled path passes its own, :meth:`computed_torque` a ControlInput's)."""
-        times, times_matrix = _products(J)
+        times, times_matrix = (_dot, _dot) if J.ndim == 2 else (_stacked_times, np.matmul)  # a stack: per sample
         Jp = self._pinv(J)
         qdd = times(Jp, a - drift)
         k_null = self.config.k_null
@@ -279,7 +274,7 @@ class _ComputedTorque(Controller):
 
     def increments(self, H: np.ndarray, J: np.ndarray, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
         """:meth:`torque_increments` from the model's terms H and J."""
-        times = _products(J)[1]
+        times = _dot if J.ndim == 2 else np.matmul  # a stack: per sample
         dqdd = times(self._pinv(J), da)
         dtau = times(H, dqdd) if self._rotor is None else times(H, dqdd) - self._rotor[:, None] * dqdd
         return dtau if df is None else dtau + times(J.swapaxes(-1, -2), df)
