@@ -71,19 +71,26 @@ def test_clipped_voltages_in_the_batched_output(drive, monkeypatch):
     assert np.mean(np.abs(u) == CASE3["u_max"]) > 0.1 and np.mean(np.abs(u) < CASE3["u_max"]) > 0.1
 
 
+def _pressing_writer(u_max: float | None = None) -> dict:
+    """A7 on the 2-DOF writer pressing a bonded wall under DC motors (``u_max`` [V]: their voltage limit, None:
+    none): every sample folded."""
+    q0 = [0.3, 1.2]  # [rad] the writer's pose, tip at p0
+    p0 = Robot.load("writer2r").frame_position(np.array(q0), "tip")
+    drive = {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": 0.000452, "N": 160.0, "N_star": 65.12,
+             **({"u_max": u_max} if u_max is not None else {})}
+    return {"duration": 0.3, "solver": {"output_rate": 500.0},
+            "robot": {"urdf": "writer2r", "q0": q0, "drive": drive},
+            "controller": {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0},
+            "phase": [{"name": "main", "reference": {"space": "task", "start": (p0 + [0.01, 0.0, -0.03]).tolist(),
+                                                     "moves": []}}],
+            "contact": {"c": {"point": p0.tolist(), "bonded": True,
+                              "normal": {"direction": [-1, 0, 0], "model": "b", "k": 1e4, "b": 10.0, "m": 2.0}}}}
+
+
 def test_folded_forces_with_clipped_voltages_in_the_batched_output(monkeypatch):
     """A7 pressing a bonded wall with a voltage limit (tests/test_controllers.py's case): the measured force
     folded into the solve and the clip re-checked with it, through the plan's fold at every sample."""
-    q0 = [0.3, 1.2]  # [rad] the writer's pose, tip at p0
-    p0 = Robot.load("writer2r").frame_position(np.array(q0), "tip")
-    drive = {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": 0.000452, "N": 160.0, "N_star": 65.12, "u_max": 4.0}
-    doc = {"duration": 0.3, "solver": {"output_rate": 500.0},
-           "robot": {"urdf": "writer2r", "q0": q0, "drive": drive},
-           "controller": {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0},
-           "phase": [{"name": "main", "reference": {"space": "task", "start": (p0 + [0.01, 0.0, -0.03]).tolist(),
-                                                    "moves": []}}],
-           "contact": {"c": {"point": p0.tolist(), "bonded": True,
-                             "normal": {"direction": [-1, 0, 0], "model": "b", "k": 1e4, "b": 10.0, "m": 2.0}}}}
+    doc = _pressing_writer(u_max=4.0)
     result = _assert_same_channels(parse_scene(doc), None, monkeypatch)
     u = result.channels["u"]
     assert np.mean(np.abs(u) == 4.0) > 0.05 and np.mean(np.abs(u) < 4.0) > 0.05
@@ -177,22 +184,8 @@ def test_derivatives_of_many_states_are_the_calls_bitwise(scene):
     assert checked
 
 
-def _pressing_writer() -> dict:
-    """A7 on the 2-DOF writer pressing a bonded wall under DC motors (no voltage limit): every sample folded."""
-    q0 = [0.3, 1.2]  # [rad] the writer's pose, tip at p0
-    p0 = Robot.load("writer2r").frame_position(np.array(q0), "tip")
-    drive = {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": 0.000452, "N": 160.0, "N_star": 65.12}
-    return {"duration": 0.3, "solver": {"output_rate": 500.0},
-            "robot": {"urdf": "writer2r", "q0": q0, "drive": drive},
-            "controller": {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0},
-            "phase": [{"name": "main", "reference": {"space": "task", "start": (p0 + [0.01, 0.0, -0.03]).tolist(),
-                                                     "moves": []}}],
-            "contact": {"c": {"point": p0.tolist(), "bonded": True,
-                              "normal": {"direction": [-1, 0, 0], "model": "b", "k": 1e4, "b": 10.0, "m": 2.0}}}}
-
-
 @pytest.mark.parametrize("scene", ["case3_b_position", "case3_b_force", "writer"])
-def test_law_over_all_samples_is_bitwise_the_per_sample_law(scene, monkeypatch):
+def test_law_over_all_samples_equals_the_per_sample_law(scene, monkeypatch):
     """A folded plan's output with the law's command over all samples at once (``folded_parts_all``) equals
     the law called per sample to round-off (1e-14 of each array's largest entry: a stacked product may sum
     in another order on another BLAS; on this machine's the two are bitwise equal); fails if the stacked
