@@ -147,8 +147,7 @@ def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], ph
     force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
     ctl = phase.controller
     z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
-    drives = system.drives
-    inp = ControlInput(t, q, v, robot.H + np.diag(system._D_ctl) if drives.any_motor else robot.H, robot.h,
+    inp = ControlInput(t, q, v, system.controller_inertia(robot.H), robot.h,
                        robot.gravity_torque(q) if ctl.needs_gravity else None,
                        p_tip, v_tip, J, drift, x_d, v_d, a_d, {**ev.normal_force, **ev.interface}, force_d,
                        system.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian,

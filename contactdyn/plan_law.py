@@ -247,7 +247,6 @@ def plan_command(plan):
     robot, ctl = s.robot, law.ctl
     tf = plan.tip_frame
     i_dr = plan.i_dr[tf]
-    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
     inputs = None
 
     def command(t, x, Js, phi, o, tau_c):
@@ -257,7 +256,7 @@ def plan_command(plan):
         if inputs is None:
             inputs = plan_inputs(plan, law)
         y = law.M.dot(inputs(t, x, phi, o))
-        H = robot.H + D_ctl if D_ctl is not None else robot.H
+        H = s.controller_inertia(robot.H)
         J = Js[tf]
         tau = ctl.torque(H, robot.h, tau_c, J, phi[i_dr:i_dr + 3], x[nQ:nQ + nv], y[:3],
                          y[3:6] if law.swap else None)
@@ -279,7 +278,6 @@ def plan_commands(plan):
     ctl = law.ctl
     tf = plan.tip_frame
     i_dr, i_J, i_h = plan.i_dr[tf], plan.i_J[tf], plan.i_h
-    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
 
     def commands(ts, X, Phi, O, T_c):
         if law.M is None:
@@ -290,8 +288,7 @@ def plan_commands(plan):
             U[k] = inputs(ts[k], X[k], Phi[k], O[k])
         Y = np.matmul(law.M, U[:, :, None])[:, :, 0]  # per sample: the same numbers as M.dot(u)
         H = np.ascontiguousarray(Phi[:, :nv * nv].reshape(N, nv, nv).transpose(0, 2, 1))  # φ holds H by columns
-        if D_ctl is not None:
-            H = H + D_ctl
+        H = s.controller_inertia(H)
         J = np.ascontiguousarray(Phi[:, i_J:i_J + 3 * nv].reshape(N, 3, nv))
         tau = ctl.torque(H, Phi[:, i_h:i_h + nv], T_c, J, Phi[:, i_dr:i_dr + 3], X[:, nQ:nQ + nv], Y[:, :3],
                          Y[:, 3:6] if law.swap else None)
@@ -314,7 +311,6 @@ def operational_command(plan):
     tf = plan.tip_frame
     fid, i_dr = plan.fids[tf], plan.i_dr[tf]
     tip = plan.i_e + plan.e_frame[tf]
-    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
     ramps = [phase.forces[key] for key in ctl.force_keys]
     referenced, orient = phase.reference is not None, ctl.reads_orientation
     placement, jacobian = pin.updateFramePlacement, pin.getFrameJacobian
@@ -332,7 +328,7 @@ def operational_command(plan):
             drift_tip = acceleration(model, data, fid, lwa).vector
         else:
             R_tip, J_tip, drift_tip = None, J, phi[i_dr:i_dr + 3]
-        H = H_rigid + D_ctl if D_ctl is not None else H_rigid
+        H = s.controller_inertia(H_rigid)
         tau = ctl.torque(t, x[nQ:nQ + nv], H, h, J_tip, drift_tip, phi[tip:tip + 3], phi[tip + 3:tip + 6], ref,
                          set_points, R_tip)
         return tau, None, H, J

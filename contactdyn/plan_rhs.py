@@ -426,7 +426,6 @@ def controller_input(plan):
     zs = phase.z_slice
     modes = plan.modes
     i_e, i_dr = plan.i_e, plan.i_dr[tf]
-    D_ctl = np.diag(s._D_ctl) if s.drives.any_motor else None  #: the controller's rigid model: rotors reflected
     model, data, fid, nv = robot.model, robot.data, plan.fids[tf], s.nv
     orient, reads_forces = ctl.reads_orientation, ctl.uses_forces
 
@@ -445,7 +444,7 @@ def controller_input(plan):
             R_tip = pin.updateFramePlacement(model, data, fid).rotation
             J_ang = pin.getFrameJacobian(model, data, fid, LWA).reshape(6, nv)[3:]
             drift_ang = pin.getFrameAcceleration(model, data, fid, LWA).angular
-        H = robot.H + D_ctl if D_ctl is not None else robot.H
+        H = s.controller_inertia(robot.H)
         inp = ControlInput(t, q, v, H, robot.h, robot.gravity_torque(q) if ctl.needs_gravity else None,
                            e[kt:kt + 3].copy(), e[kt + 3:kt + 6].copy(), Js[tf], phi[i_dr:i_dr + 3], x_d, v_d, a_d,
                            forces,
