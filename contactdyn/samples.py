@@ -156,6 +156,12 @@ def plan_derivatives(plan):
     return derivatives
 
 
+def _jacobians(plan, phi: np.ndarray) -> list[np.ndarray]:
+    """The plan's frame Jacobians J_f (3, nv) as views of one sample's φ."""
+    nv = plan.system.nv
+    return [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+
+
 def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
     """As :func:`_solve_samples` for a plan folding measured forces or a carried reference into its solve: each
     sample's command and its parts per unit row force from the plan's fold (:func:`~contactdyn.plan_fold.folded_solve`),
@@ -180,7 +186,7 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
 
     def one(k):  # the sample's parts (Pinocchio's data at its φ)
         t, x, phi, y = ts[k], X[k], Phi[k], Y[k]
-        Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+        Js = _jacobians(plan, phi)
         A, b, o = y[:m2].reshape(m, m), y[m2:m2 + m], y[m2 + m:]
         tau[k], _, B[k], _, carried, readable = parts(t, x, Js, phi, o, A, T_c[k])
         batched[k] = readable is None
@@ -192,7 +198,7 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
     for k in range(N):
         Phi[k] = plan.phi_at(ts[k], X[k])
         phi, y = Phi[k], Y[k]  # (views: the sample's rows)
-        Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+        Js = _jacobians(plan, phi)
         np.dot(plan.P, phi, out=y)
         if friction is not None:
             friction(y, Js, plan.modes)
@@ -214,7 +220,7 @@ def _solve_folded_samples(plan, ts: np.ndarray, X: np.ndarray):
         Z[K], tau[K], clipped = _fold_all(plan, X[K], A_all, b_all, tau[K], B[K], tau_b[K], carries[K])
         for k in K[clipped]:  # the readable model, from the sample's unfolded system (and Pinocchio's data at it)
             phi = plan.phi_at(ts[k], X[k])
-            Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+            Js = _jacobians(plan, phi)
             A, b = Y[k, :m2].reshape(m, m), Y[k, m2:m2 + m]
             Z[k], _, tau[k] = detail(ts[k], X[k], Js, phi, Y[k, m2 + m:], A, b)
     J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
@@ -300,7 +306,7 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
         for k in range(N):
             Phi[k] = phi = phi_at(ts[k], X[k], TV[k])
             if generic:  # (Pinocchio's data at this sample: the controller reads it)
-                tau[k] = command(ts[k], X[k], [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J], phi)
+                tau[k] = command(ts[k], X[k], _jacobians(plan, phi), phi)
     else:
         _phi_batch(plan, X, TV, Phi, exact)
     Y = np.array([plan.P.dot(phi) for phi in Phi]).reshape(N, -1) if exact else _rows_times(Phi, plan.PT)
@@ -356,7 +362,6 @@ def _launch_references(plan, ts: np.ndarray, X: np.ndarray, O: np.ndarray) -> di
     slip is still inside the stick band, the mode's r where it has left it (there the slip's own direction
     rules anyway)."""
     s = plan.system
-    nv = s.nv
     out = {}
     inside = np.zeros(len(ts), bool)
     for ci, mode in enumerate(plan.modes):
@@ -366,7 +371,7 @@ def _launch_references(plan, ts: np.ndarray, X: np.ndarray, O: np.ndarray) -> di
             inside |= O[:, plan.o_vt[s.contacts[ci].name]] @ r <= s.slip_band
     for k in np.flatnonzero(inside):
         phi = plan.phi_at(ts[k], X[k])  # Pinocchio at this sample: the controller reads it
-        Js = [phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J]
+        Js = _jacobians(plan, phi)
         resolved = plan.launch(ts[k], X[k], phi, Js, plan.P.dot(phi), [])
         for ci in out:
             out[ci][k] = resolved[ci].slip
