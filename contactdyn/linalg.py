@@ -6,13 +6,20 @@ gufuncs; on the 2–12-row systems of a right-hand side call that check costs mo
 since numpy 1.8), the public functions otherwise. Arguments must be float arrays of matching
 shapes; a singular matrix gives inf/nan, and a matrix with nan an SVD of nan (with a
 RuntimeWarning), where the fallback raises LinAlgError; callers test.
+
+:func:`lu_solve` and :func:`pinv` are compiled (numba) for the compiled kernels
+(:mod:`contactdyn.plan_kernel`, :mod:`contactdyn.controllers.computed_torque`), written in loops
+rather than on numba's LAPACK bindings, whose loading costs ~0.15 s per process.
 """
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
-__all__ = ["solve_vector", "solve_matrix", "det", "svd"]
+import numpy as np
+from numba import njit
+
+__all__ = ["solve_vector", "solve_matrix", "det", "svd", "lu_solve", "pinv"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -27,3 +34,80 @@ except (ImportError, AttributeError):  # pragma: no cover
 
     def svd(a):
         return np.linalg.svd(a, full_matrices=False)
+
+
+@njit(cache=True)
+def lu_solve(A, b):
+    """z of A z = b by Gaussian elimination with partial pivoting (LAPACK's dgetf2 order); A, b unchanged;
+    a zero pivot (singular A) gives nan."""
+    n = b.size
+    LU = A.copy()
+    z = b.copy()
+    for k in range(n):
+        p = k
+        for i in range(k + 1, n):
+            if abs(LU[i, k]) > abs(LU[p, k]):
+                p = i
+        if LU[p, k] == 0.0:
+            return np.full(n, np.nan)
+        if p != k:
+            for j in range(n):
+                LU[k, j], LU[p, j] = LU[p, j], LU[k, j]
+            z[k], z[p] = z[p], z[k]
+        for i in range(k + 1, n):
+            f = LU[i, k] / LU[k, k]
+            for j in range(k + 1, n):
+                LU[i, j] -= f * LU[k, j]
+            z[i] -= f * z[k]
+    for k in range(n - 1, -1, -1):
+        s = z[k]
+        for j in range(k + 1, n):
+            s -= LU[k, j] * z[j]
+        z[k] = s / LU[k, k]
+    return z
+
+
+@njit(cache=True)
+def pinv(J):
+    """J⁺ (c, r) of J (r, c), r ≤ 3 rows, by a one-sided Jacobi SVD of Jᵀ (its columns made orthogonal by
+    plane rotations: Jᵀ V = [σ_k u_k], J⁺ = Σ_k u_k v_kᵀ / σ_k), singular values ≤ 1e-10 of the largest
+    dropped (numpy.linalg.pinv's rcond); accurate to the precision of J, also near singular poses."""
+    r, c = J.shape
+    A = np.ascontiguousarray(J.T)  # (c, r): its columns are rotated
+    V = np.eye(r)
+    for _ in range(60):  # sweeps; converges quadratically (a few sweeps for r = 3)
+        rotated = False
+        for p in range(r - 1):
+            for q in range(p + 1, r):
+                alpha = beta = gamma = 0.0
+                for i in range(c):
+                    alpha += A[i, p] * A[i, p]
+                    beta += A[i, q] * A[i, q]
+                    gamma += A[i, p] * A[i, q]
+                if gamma == 0.0 or abs(gamma) <= 1e-15 * math.sqrt(alpha * beta):
+                    continue
+                rotated = True
+                zeta = (beta - alpha) / (2.0 * gamma)
+                t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
+                cs = 1.0 / math.sqrt(1.0 + t * t)
+                sn = cs * t
+                for i in range(c):
+                    ap, aq = A[i, p], A[i, q]
+                    A[i, p], A[i, q] = cs * ap - sn * aq, sn * ap + cs * aq
+                for i in range(r):
+                    vp, vq = V[i, p], V[i, q]
+                    V[i, p], V[i, q] = cs * vp - sn * vq, sn * vp + cs * vq
+        if not rotated:
+            break
+    sigma2 = np.zeros(r)
+    for k in range(r):
+        for i in range(c):
+            sigma2[k] += A[i, k] * A[i, k]
+    top = math.sqrt(sigma2.max()) if r else 0.0
+    out = np.zeros((c, r))
+    for k in range(r):
+        if top > 0.0 and math.sqrt(sigma2[k]) > 1e-10 * top:
+            for i in range(c):
+                for j in range(r):
+                    out[i, j] += A[i, k] * V[j, k] / sigma2[k]
+    return out

@@ -30,10 +30,10 @@ import numpy as np
 
 from .constraints import Rows, force_columns, solve_folded
 from .dynamics import carried_terms, command_of
-from .linalg import solve_vector
+from .plan_kernel import fold_solve
 from .plan_law import compiled_law, plan_command, plan_commands
 
-__all__ = ["contact_torque_of", "folded_solve"]
+__all__ = ["contact_torque_of", "folded_solve", "reaching_rows", "row_meta"]
 
 
 def contact_torque_of(plan):
@@ -49,7 +49,7 @@ def contact_torque_of(plan):
     return torque
 
 
-def _reaching_rows(plan) -> list[int] | None:
+def reaching_rows(plan) -> list[int] | None:
     """The rows whose column on the coordinates beyond the robot, A[nv:nQ, nQ + r], is nonzero (their force is
     in the measured joint torque, :func:`~contactdyn.constraints.force_columns`), where the plan's map P makes
     those entries constant (no sliding tilt writes them); None where a call must look."""
@@ -67,33 +67,22 @@ def _matrix_fold(plan, drives):
     (and per unit acceleration of a carrying body) through L_τ into A's columns, one solve."""
     nQ, nr = plan.system.nQ, plan.nr
     lam_cols = slice(nQ, nQ + nr)
-    L_tau, limited = drives.L_tau, bool(drives.limited)
+    lam_index = np.arange(nQ, nQ + nr)
+    L, L_tau, limited = _c(drives.L), drives.L_tau, bool(drives.limited)
 
     def fold(tau, zdot, B, Dz, carried, x, A, b, with_tau):
-        y0 = drives.values(x, tau)
-        Y = L_tau.dot(B)  # the drives' forces (and limited voltages) per unit row force
-        if limited:  # copies: a call that clips needs A and b as they are for the readable model
-            A2, b2 = A.copy(), b.copy()
-            A2[:nQ, lam_cols] -= Y[:nQ]
-            b2[:nQ] += y0[:nQ]
-        else:  # in place in the plan's A and b (fresh per call); Y and y0 hold the nQ forces alone
-            A2, b2 = A, b
-            A2[:nQ, lam_cols] -= Y
-            b2[:nQ] += y0
-        if carried is not None:  # the command's part proportional to the carrying body's acceleration
+        cols, B_all = lam_index, B
+        if carried is not None:  # the command's part proportional to the carrying body's acceleration: a column
             i_b, tau_b, zdot_b = carried
-            Y_b = L_tau.dot(tau_b)
-            A2[:nQ, i_b] -= Y_b[:nQ]
-        z = solve_vector(A2, b2)
+            cols, B_all = np.append(lam_index, i_b), np.column_stack((B, tau_b))
+        if limited:  # copies: a call that clips needs A and b as they are for the readable model
+            A, b = A.copy(), b.copy()
+        z, y0, Y = fold_solve(A, b, L, L_tau, _c(tau), _c(x), _c(B_all), cols, nQ)  # A, b: folded
         if not math.isfinite(z.dot(z)):
-            z = plan._singular(A2, b2)
+            z = plan._singular(A, b)
         lam = z[lam_cols]
-        if limited:  # the voltages at the solved command
-            y = y0 + Y.dot(lam)
-            if carried is not None:
-                y += Y_b * z[i_b]
-            if not drives.unclipped(y):
-                return None
+        if limited and not drives.unclipped(y0 + Y.dot(z[cols])):  # the voltages at the solved command
+            return None
         if with_tau:
             tau = tau + B.dot(lam)
             if carried is not None:
@@ -105,6 +94,16 @@ def _matrix_fold(plan, drives):
         return z, zdot, (tau if with_tau else None)
 
     return fold
+
+
+def row_meta(plan) -> list[tuple]:
+    """The plan's rows as a controller's force columns read them: (owner, "n" | "t" | "limit" | label, index)."""
+    kinds = {"normal": "n", "stick": "t", "limit": "limit"}
+    return [(row.owner, kinds.get(row.kind, row.label), row.index) for row in plan.rows]
+
+
+def _c(a) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=float)
 
 
 def _law_parts(plan, ctl, meta: list):
@@ -119,7 +118,7 @@ def _law_parts(plan, ctl, meta: list):
     nQ, nv = s.nQ, s.nv
     carrier = phase.carrier if phase.reference is not None else None
     lam_cols = slice(nQ, nQ + nr)
-    reach = _reaching_rows(plan)
+    reach = reaching_rows(plan)
     every_row_reaches = reach == list(range(nr))
     increments = ctl.ctl.increments
     row_columns = None  # (D_a, D_f, D_z) of CompiledLaw.row_columns, once the law's matrix is read
@@ -181,8 +180,7 @@ def folded_solve(plan, make_input, drives):
     phase = plan.phase
     ctl = compiled_law(plan)  # a force-reading tip law by its matrix (contactdyn.plan_law), else the controller
     vmask = s._joint_motors if ctl.outputs == "voltage" else None
-    kinds = {"normal": "n", "stick": "t", "limit": "limit"}
-    meta = [(row.owner, kinds.get(row.kind, row.label), row.index) for row in plan.rows]
+    meta = row_meta(plan)
     torque = contact_torque_of(plan)
     fold_rows = ctl.uses_forces and nr > 0
     w0 = nQ + nr

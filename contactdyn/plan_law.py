@@ -214,7 +214,8 @@ def plan_inputs(plan, law: CompiledLaw):
             u[6:9] = x_d
             u[9:12] = v_d
             u[12:15] = a_d
-        u[i_f:i_set] = o[i_forces]  # measured forces [N]
+        if o is not None:  # measured forces [N] (None: left to the caller, contactdyn.plan_kernel)
+            u[i_f:i_set] = o[i_forces]
         j = i_set
         for ramp in ramps:  # F_d [N], Ḟ_d [N/s]
             u[j:j + 2] = ramp.at(t)
@@ -224,6 +225,7 @@ def plan_inputs(plan, law: CompiledLaw):
         u[i_z:-1] = x[z]
         return u
 
+    inputs.forces = i_forces  #: o's measured forces, in u's order from u[law.i_forces]
     return inputs
 
 

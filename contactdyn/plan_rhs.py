@@ -30,7 +30,8 @@ from .friction import launch_directions, launching, slip_direction
 from .linalg import solve_vector
 from .phases import reference_at
 from .plan_drives import drive_forces
-from .plan_fold import contact_torque_of, folded_solve
+from .plan_fold import contact_torque_of, folded_solve, reaching_rows, row_meta
+from .plan_kernel import kernel_of
 from .plan_law import compiled_law, operational_command, plan_command
 from .trajectory import profile
 
@@ -62,8 +63,25 @@ def make_rhs(plan):
     plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0].copy()
     modes = plan.modes  # this call's own, 2-D reference directions included (ModePlan.use)
 
+    kernel = plan.kernel = kernel_of(plan, row_meta(plan), reaching_rows(plan)) if plan.nr else kernel_of(plan, [], [])
+    impulses = bool(impulse_terms(plan))
+
     def rhs(t, x):
         phi, Js = phi_and_jacobians(t, x)
+        got = kernel(t, x, phi) if kernel is not None else None
+        if got is not None:  # the compiled call (contactdyn.plan_kernel)
+            xd, z, o = got
+            if impulses:
+                impulse_rates(xd, z, o, modes, None)
+        else:
+            xd, z, o = numpy_call(t, x, phi, Js)
+        ring[0] = ring[1]
+        ring[1] = ring[2]
+        ring[2] = ring[3]
+        ring[3] = (t, x, z, o)
+        return xd
+
+    def numpy_call(t, x, phi, Js):
         y = P.dot(phi)
         o = y[m2 + m:]  # the affine outputs
         b_ctl = None
@@ -80,11 +98,7 @@ def make_rhs(plan):
             impulse_rates(xd, z, o, now, dirs)
         else:
             xd = cat((x[nQ:2 * nQ], z[:nQ]))
-        ring[0] = ring[1]
-        ring[1] = ring[2]
-        ring[2] = ring[3]
-        ring[3] = (t, x, z, o)
-        return xd
+        return xd, z, o
 
     return rhs
 

@@ -56,7 +56,7 @@ import numpy as np
 
 from ..elements import Mass, Stage
 from ..errors import SceneError
-from ..linalg import svd
+from . import computed_torque as compiled
 from .base import BindContext, ControlInput, Controller, register
 
 __all__ = ["NominalEnvironment", "PositionDynamic", "ForceDynamic", "Hybrid", "nominal_from_chain"]
@@ -141,19 +141,9 @@ def _rotor_inertia(context: BindContext, inertia: str) -> np.ndarray | None:
     return np.array([s.reflected_inertia for s in specs])
 
 
-_dot = np.ndarray.dot  #: one sample's products (a third of @'s cost on these sizes)
-
-
-def _stacked_times(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """A x per sample of a stack: A (N, r, c), x (N, c) (matmul per sample: one sample's dot's numbers here);
-    a stack's matrix products are np.matmul's."""
-    return np.matmul(A, x[..., None])[..., 0]
-
-
-def _inertia_times(H: np.ndarray, rotor: np.ndarray | None, qdd: np.ndarray, times=_dot) -> np.ndarray:
-    """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out); ``times``
-    :func:`_stacked_times` for a stack."""
-    return times(H, qdd) if rotor is None else times(H, qdd) - rotor * qdd
+def _inertia_times(H: np.ndarray, rotor: np.ndarray | None, qdd: np.ndarray) -> np.ndarray:
+    """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out)."""
+    return H.dot(qdd) if rotor is None else H.dot(qdd) - rotor * qdd
 
 
 # ---- shared task-space pieces ---------------------------------------------------------------
@@ -164,17 +154,18 @@ def _check_gain_size(g: np.ndarray, sizes: tuple[int, ...], key: str, file) -> N
 
 
 def pseudo_inverse(J: np.ndarray) -> np.ndarray:
-    """J⁺ by the reduced SVD, singular values below 1e-10 of the largest dropped (numpy.linalg.pinv's rcond)."""
-    if J.ndim == 3:  # per sample of a stack (N, r, c)
-        u, s, vt = svd(J)
-        if s.size and np.all(s[:, -1] > 1e-10 * s[:, 0]):  # full rank everywhere: as one sample's, stacked
-            return (vt.swapaxes(1, 2) / s[:, None, :]) @ u.swapaxes(1, 2)
-        return np.array([pseudo_inverse(j) for j in J])
-    u, s, vt = svd(J)
-    if s.size and s[-1] > 1e-10 * s[0]:  # full rank: every singular value kept
-        return (vt.T / s) @ u.T
-    keep = s > 1e-10 * s[0] if s.size and s[0] > 0 else np.zeros(s.shape, bool)
-    return (vt[keep].T / s[keep]) @ u[:, keep].T
+    """J⁺ by the reduced SVD, singular values below 1e-10 of the largest dropped (numpy.linalg.pinv's rcond);
+    one Jacobian (r, c) or a stack (N, r, c)."""
+    J = _c(J)
+    return compiled.pinv_stack(J) if J.ndim == 3 else compiled.pinv(J)
+
+
+_NO_ROTOR = np.empty(0)
+
+
+def _c(a) -> np.ndarray:
+    """``a`` as the compiled functions take it: a C-contiguous float64 array (no copy when it is one)."""
+    return np.ascontiguousarray(a, dtype=float)
 
 
 class _Pinv:
@@ -257,16 +248,13 @@ class _ComputedTorque(Controller):
         """τ = H q̈* + h − τ_c (+ Jᵀ f_swap) [N·m or N], q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for the tip
         acceleration a [m/s²], from the model's terms (J: the tip Jacobian (3, nv), drift: J̇q̇ [m/s²], v: q̇;
         the compiled path passes its own, :meth:`computed_torque` a ControlInput's)."""
-        times, times_matrix = (_dot, _dot) if J.ndim == 2 else (_stacked_times, np.matmul)  # a stack: per sample
+        rotor, k_null = self._rotor_c, float(self.config.k_null)
+        stack = J.ndim == 3  # a stack of samples: one sample's arithmetic each
         Jp = self._pinv(J)
-        qdd = times(Jp, a - drift)
-        k_null = self.config.k_null
-        if k_null > 0.0 and J.shape[-1] > 3:
-            qdd -= times(np.eye(J.shape[-1]) - times_matrix(Jp, J), k_null * v)
-        tau = _inertia_times(H, self._rotor, qdd, times) + h - tau_c
-        if f_swap is not None:
-            tau += times(J.swapaxes(-1, -2), f_swap)  # Jᵀ f_swap
-        return tau
+        if f_swap is None:
+            f_swap = np.empty(a.shape[:-1] + (0,))
+        args = (_c(H), rotor, _c(h), _c(tau_c), _c(J), Jp, _c(drift), _c(v), _c(a), _c(f_swap), k_null)
+        return compiled.torque_stack(*args) if stack else compiled.torque(*args)
 
     def torque_increments(self, inp: ControlInput, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
         """∂τ for changes of the tip targets, one per column: H J⁺ da (+ Jᵀ df) [N·m or N]."""
@@ -274,10 +262,14 @@ class _ComputedTorque(Controller):
 
     def increments(self, H: np.ndarray, J: np.ndarray, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
         """:meth:`torque_increments` from the model's terms H and J."""
-        times = _dot if J.ndim == 2 else np.matmul  # a stack: per sample
-        dqdd = times(self._pinv(J), da)
-        dtau = times(H, dqdd) if self._rotor is None else times(H, dqdd) - self._rotor[:, None] * dqdd
-        return dtau if df is None else dtau + times(J.swapaxes(-1, -2), df)
+        D_f = np.empty((0, da.shape[-1])) if df is None else _c(df)
+        args = (_c(H), self._rotor_c, _c(J), self._pinv(J), _c(da), D_f)
+        return compiled.increments_stack(*args) if J.ndim == 3 else compiled.increments(*args)
+
+    @property
+    def _rotor_c(self) -> np.ndarray:
+        """The rotor inertia the law takes out [kg·m²], empty for ``inertia = "model"`` (computed_torque's none)."""
+        return _NO_ROTOR if self._rotor is None else self._rotor
 
 
 # ---- A7 -----------------------------------------------------------------------------------------

@@ -1,0 +1,110 @@
+"""The compiled kernel of a plan's call (contactdyn.plan_kernel) and its small linear algebra (contactdyn.linalg)."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from contactdyn.linalg import lu_solve, pinv
+from contactdyn.rhsplan import _PLANS
+from contactdyn.robot import Robot
+from contactdyn.scene import load_scene, parse_scene
+from contactdyn.simulate import run_system
+from contactdyn.system import System
+
+
+@pytest.mark.parametrize("nv", [1, 2, 3, 5, 7])
+def test_pinv_is_numpys_pinv_with_its_rcond(nv):
+    """J⁺ of tip Jacobians (3, nv): full rank, a repeated column, a zero row, all zero; against numpy's SVD pinv."""
+    rng = np.random.default_rng(nv)
+    for k in range(60):
+        J = rng.normal(size=(3, nv)) * 10.0 ** rng.uniform(-3, 3)
+        if k % 3 == 1 and nv > 1:
+            J[:, 1] = 2.0 * J[:, 0]
+        if k % 4 == 2:
+            J[2] = 0.0
+        if k == 59:
+            J[:] = 0.0
+        ref = np.linalg.pinv(J, rcond=1e-10)
+        assert np.allclose(pinv(J), ref, rtol=1e-12, atol=1e-12 * (1.0 + np.abs(ref).max()))
+
+
+def test_pinv_near_a_singular_pose_keeps_the_small_singular_value():
+    """σ₂/σ₁ = 1e-8 (above the 1e-10 cut): J⁺ has the 1e8 entries numpy's has, to 1e-7 relative."""
+    u, _ = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))
+    v, _ = np.linalg.qr(np.random.default_rng(4).normal(size=(2, 2)))
+    J = u[:, :2] @ np.diag([1.0, 1e-8]) @ v.T
+    ref = np.linalg.pinv(J, rcond=1e-10)
+    assert np.abs(ref).max() > 1e7
+    assert np.allclose(pinv(J), ref, rtol=1e-7, atol=0.0)
+
+
+def test_lu_solve_is_a_solve_and_nan_when_singular():
+    rng = np.random.default_rng(5)
+    for n in (1, 3, 7, 12):
+        A, b = rng.normal(size=(n, n)), rng.normal(size=n)
+        assert np.allclose(A @ lu_solve(A, b), b, rtol=0.0, atol=1e-11 * np.abs(A).max() * (1 + np.abs(b).max()))
+    assert np.all(np.isnan(lu_solve(np.array([[1.0, 2.0], [2.0, 4.0]]), np.ones(2))))
+
+
+def _mode_at(scene, at: float):
+    """(system, the plan of the mode the run is in at time ``at``, t, x there)."""
+    system = System(scene)
+    run_system(system)
+    plan = max(_PLANS[system].values(), key=lambda p: -1.0 if p.ring[3][0] is None else p.ring[3][0])
+    t, x = plan.ring[3][0], plan.ring[3][1].copy()
+    return system, plan, t, x
+
+
+def _assert_kernel_is_the_readable_model(system, plan, t0, x0, span=0.01):
+    """On states of a short stretch of the mode: the kernel answers (does not decline) and its ẋ is
+    System.evaluate's to 1e-10 relative."""
+    assert plan.kernel is not None
+    sol = solve_ivp(plan.rhs, (t0, t0 + span), x0, method="DOP853", rtol=1e-8, atol=1e-10)
+    for t, x in zip(sol.t[:40], sol.y.T[:40], strict=True):
+        got = plan.kernel(t, x, plan.phi_at(t, x))
+        assert got is not None
+        ref = system.evaluate(t, x, plan.modes, plan.phase).xdot
+        assert np.allclose(got[0], ref, rtol=1e-10, atol=1e-10 * (1.0 + np.abs(ref).max()))
+
+
+@pytest.mark.parametrize("name", ["case3_b_force", "case3_a_position"])
+def test_kernel_is_the_readable_model_on_case3_presses(name):
+    """A10 folded with its bonded row (model b), A7 with no row (model a), both through the elastic transmission."""
+    system, plan, t, x = _mode_at(load_scene(name, {"duration": 2.0}), 2.0)
+    assert plan.nr == (1 if name.endswith("b_force") else 0)
+    _assert_kernel_is_the_readable_model(system, plan, t, x)
+
+
+def _writer_pressing(u_max: float | None) -> dict:
+    """A7 on the 2-DOF writer pressing a bonded wall under DC motors (``u_max`` [V], None: no limit)."""
+    q0 = [0.3, 1.2]  # [rad] the writer's pose, tip at p0
+    p0 = Robot.load("writer2r").frame_position(np.array(q0), "tip")
+    drive = {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": 0.000452, "N": 160.0, "N_star": 65.12,
+             **({"u_max": u_max} if u_max is not None else {})}
+    return {"duration": 0.3, "robot": {"urdf": "writer2r", "q0": q0, "drive": drive},
+            "controller": {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0},
+            "phase": [{"name": "main", "reference": {"space": "task", "start": (p0 + [0.01, 0.0, -0.03]).tolist(),
+                                                     "moves": []}}],
+            "contact": {"c": {"point": p0.tolist(), "bonded": True,
+                              "normal": {"direction": [-1, 0, 0], "model": "b", "k": 1e4, "b": 10.0, "m": 2.0}}}}
+
+
+def test_kernel_declines_a_clipping_voltage_and_the_call_stays_the_readable_models():
+    """With a 4 V limit the A7 press clips at its start: there the kernel declines (the clip is the readable
+    law's), the plan's call still equals System.evaluate; without the limit the kernel answers."""
+    system, plan, _, _ = _mode_at(parse_scene(_writer_pressing(u_max=4.0)), 0.3)
+    x0 = plan.system.initial_state()[0]
+    t = plan.phase.t_start
+    tried = [(t, x0 + dx) for dx in np.random.default_rng(1).normal(scale=1e-3, size=(20, len(x0)))]
+    declined = [(t, x) for t, x in tried if plan.kernel(t, x, plan.phi_at(t, x)) is None]
+    assert declined, "expected calls whose voltage clips"
+    for t, x in declined:
+        ref = system.evaluate(t, x, plan.modes, plan.phase).xdot
+        assert np.allclose(plan.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * (1.0 + np.abs(ref).max()))
+    system, plan, t, x = _mode_at(parse_scene(_writer_pressing(u_max=None)), 0.3)
+    _assert_kernel_is_the_readable_model(system, plan, t, x)
+
+
+def test_a_mode_without_a_force_reading_tip_law_has_no_kernel():
+    system, plan, _, _ = _mode_at(load_scene("b1", {"duration": 0.1}), 0.1)
+    assert plan.kernel is None
