@@ -28,13 +28,12 @@ direction the arm cannot move (a task singularity) is a clear error.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import SceneError, SimulationError
-from ..linalg import det, solve_matrix, solve_vector
+from . import operational_law as law
 from .base import BindContext, ControlInput, Controller, register
 from .dynamic import K_NULL, KP, KV, _axes, _check_gain_size, _gain
 from .pd import KD_TASK, KP_TASK, read_tool_axis
@@ -46,6 +45,8 @@ __all__ = ["OperationalSpace", "OperationalSpaceConfig", "SINGULAR"]
 #: singular: one direction within ~1e-4 rad of the others, Λ and the torques beyond what the arm can give
 #: (the writing task runs at 2e-4 on the UR10, 0.013 on the Panda and the 5-DOF writer, 0.27 on the UR5)
 SINGULAR = 1e-8
+_NONE = np.empty(0)  #: no reference, no tool axis (operational_law's "none")
+_NO_ROTATION = np.empty((0, 3))
 
 
 @dataclass(frozen=True)
@@ -60,24 +61,6 @@ class OperationalSpaceConfig:
     k_null: float = K_NULL  #: [1/s] null-space joint damping of a redundant arm
     kd_normal: float = 0.0  #: [N·s/m] damping of the tip velocity along each force set-point direction
     kind: str = "operational_space"
-
-
-def _cross(a: list[float], b: list[float]) -> tuple[float, float, float]:
-    """a × b of two 3-lists (np.cross costs ~15 µs a call, this ~0.3 µs)."""
-    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
-
-
-def _perpendicular(a: list[float]) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """An orthonormal basis (e1, a × e1) of the plane perpendicular to the unit 3-list a."""
-    e1 = (0.0, a[2], -a[1]) if abs(a[0]) < 0.9 else (-a[2], 0.0, a[0])  # a × x or a × y
-    s = 1.0 / math.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
-    e1 = (e1[0] * s, e1[1] * s, e1[2] * s)
-    return e1, _cross(a, e1)
-
-
-def _dot(a, b) -> float:
-    """a · b of two 3-sequences of floats."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 @register
@@ -128,17 +111,14 @@ class OperationalSpace(Controller):
         if m > self.nv:
             raise SceneError(key, f"a task of at most {self.nv} directions (the arm's joints): {k} position axes, "
                              f"{len(forced)} force directions" + (", 2 tool tilts" if n_tilt else ""), m, file)
-        self._S = np.vstack((axes, forced))  #: (k + f, 3) position rows of the task [unit]
         self._k, self._m = k, m
-        self._kp = np.broadcast_to(cfg.kp, k).copy()  # [N/m] per axis
-        self._kd = np.broadcast_to(cfg.kd, k).copy()  # [N·s/m]
-        self._null = bool(cfg.k_null) and m < self.nv  #: a redundant arm with null-space damping
-        self._target = None if cfg.tool_target is None else cfg.tool_target.tolist()
-        self._axes_rows = axes.tolist()
-        self._forced_rows = forced.tolist()
-        self._kp_list, self._kd_list = self._kp.tolist(), self._kd.tolist()
-        self._W = np.zeros((m, 6))  #: [S 0; 0 E]: the task's rows on the tip's [linear; angular] motion
-        self._W[:len(self._S), :3] = self._S
+        kp, kd = np.broadcast_to(cfg.kp, k).copy(), np.broadcast_to(cfg.kd, k).copy()  # [N/m], [N·s/m] per axis
+        null = bool(cfg.k_null) and m < self.nv  # a redundant arm with null-space damping
+        self._target = None if cfg.tool_target is None else cfg.tool_target
+        tool = (_NONE, _NONE) if self._target is None else (cfg.tool_axis.astype(float), self._target.astype(float))
+        #: the law's constant arguments (operational_law.torque's from ``axes`` on)
+        self.constants = (np.ascontiguousarray(axes, float), np.ascontiguousarray(forced, float), kp, kd, *tool,
+                          float(cfg.ko), float(cfg.do), float(cfg.k_null) if null else 0.0, float(cfg.kd_normal))
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         ref = None if inp.x_d is None else (inp.x_d, inp.v_d, inp.a_d)
@@ -156,63 +136,20 @@ class OperationalSpace(Controller):
         Jacobian J_tip and J̇q̇ ``drift_tip`` (its linear rows (3, nv) and (3,) [m/s²]; for a held tool axis
         the 6 rows [J; J_ω], [J̇q̇; J̇_ω q̇ [rad/s²]] in Pinocchio's order, and the tip's rotation R_tip,
         else None), p_tip [m], v_tip [m/s], the reference ``ref`` = (x_d, ẋ_d, ẍ_d) or None and the
-        set-points F_d [N] in the order of ``force_keys``. The readable ``command`` and the plan's call
-        (:func:`~contactdyn.plan_law.operational_command`) both come here."""
-        cfg, W = self.config, self._W
-        a_task, f = self._task_terms(v_tip, p_tip, ref, set_points)
-        if self._target is not None:
-            a = R_tip.dot(cfg.tool_axis).tolist()  # current tool direction (world)
-            e1, e2 = _perpendicular(a)
-            W[-2:, 3:] = e1, e2
-            omega = J_tip[3:].dot(v).tolist()  # [rad/s]
-            c = _cross(a, self._target)
-            ko, do = cfg.ko, cfg.do
-            w = [ko * c[0] - do * omega[0], ko * c[1] - do * omega[1], ko * c[2] - do * omega[2]]
-            a_task += [_dot(e1, w), _dot(e2, w)]
-            f += [0.0, 0.0]
-            Jt, drift_t = W.dot(J_tip), W.dot(drift_tip)
-        else:
-            Jt, drift_t = self._S.dot(J_tip), self._S.dot(drift_tip)
-        L_inv = Jt.dot(solve_matrix(H, Jt.T))  # Λ⁻¹
-        self._guard(L_inv, t)
-        if self._null:  # a* − J̇_t q̇ + k_null ẋ_t, as floats (m ≤ 6)
-            k_null = cfg.k_null
-            rhs = [a - d + k_null * xd for a, d, xd in zip(a_task, drift_t.tolist(), Jt.dot(v).tolist(), strict=True)]
-        else:
-            rhs = [a - d for a, d in zip(a_task, drift_t.tolist(), strict=True)]
-        ft = solve_vector(L_inv, np.array(rhs))  # Λ (a* − J̇_t q̇ + k_null ẋ_t)
-        ft += f
-        tau = ft.dot(Jt)
-        tau += h
-        if self._null:
-            tau -= cfg.k_null * H.dot(v)
+        set-points F_d [N] in the order of ``force_keys``. The arithmetic is
+        :func:`contactdyn.controllers.operational_law.torque`, which the plan's compiled call
+        (:mod:`contactdyn.plan_operational`) runs too; the readable ``command`` and the plan's other calls
+        (:func:`~contactdyn.plan_law.operational_command`) come here."""
+        c = np.ascontiguousarray
+        x_d, v_d, a_d = (_NONE, _NONE, _NONE) if ref is None else (c(ref[0], float), c(ref[1], float), c(ref[2], float))
+        tau, ratio = law.torque(v, c(H), h, c(J_tip), drift_tip, p_tip, v_tip, x_d, v_d, a_d,
+                                np.array(set_points, float), _NO_ROTATION if R_tip is None else c(R_tip),
+                                *self.constants)
+        self._guard(ratio, t)
         return tau
 
-    def _task_terms(self, v_tip: np.ndarray, p_tip: np.ndarray, ref: tuple | None,
-                    set_points: list[float]) -> tuple[list[float], list[float]]:
-        """(a* [m/s²], f [N]) on the position axes and force directions, as Python floats (k + f ≤ 6 terms:
-        cheaper than one numpy call each, ~0.5 µs)."""
-        axes, kp, kd = self._axes_rows, self._kp_list, self._kd_list
-        vx, vy, vz = v_tip.tolist()
-        if ref is not None:
-            x_d, v_d, a_d = ref
-            (ax, ay, az), (px, py, pz) = a_d.tolist(), p_tip.tolist()
-            (xx, xy, xz), (wx, wy, wz) = x_d.tolist(), v_d.tolist()
-            ex, ey, ez, fx, fy, fz = xx - px, xy - py, xz - pz, wx - vx, wy - vy, wz - vz  # x_d − p, ẋ_d − ṗ
-            a_task = [n[0] * ax + n[1] * ay + n[2] * az for n in axes]  # a* [m/s², rad/s²], through Λ
-            f = [kp[i] * (n[0] * ex + n[1] * ey + n[2] * ez) + kd[i] * (n[0] * fx + n[1] * fy + n[2] * fz)
-                 for i, n in enumerate(axes)]  # [N], directly
-        else:
-            a_task = [0.0] * self._k
-            f = [-kd[i] * (n[0] * vx + n[1] * vy + n[2] * vz) for i, n in enumerate(axes)]
-        kd_normal = self.config.kd_normal
-        for F_d, n in zip(set_points, self._forced_rows, strict=True):  # set-points along their directions
-            a_task.append(0.0)
-            f.append(-F_d - kd_normal * (n[0] * vx + n[1] * vy + n[2] * vz))  # [N]
-        return a_task, f
-
-    def _guard(self, L_inv: np.ndarray, t: float) -> None:
-        ratio = det(L_inv) / math.prod(L_inv.diagonal().tolist())
+    def _guard(self, ratio: float, t: float) -> None:
+        """Raise where the task is singular: its Hadamard ratio det(Λ⁻¹) / Π diag(Λ⁻¹) below SINGULAR (or nan)."""
         if not ratio >= SINGULAR:  # also NaN
             what = "position axes, force directions" + (" and tool tilt" if self.config.tool_axis is not None else "")
             raise SimulationError(
