@@ -33,6 +33,7 @@ from .plan_drives import drive_forces
 from .plan_fold import contact_torque_of, folded_solve, reaching_rows, row_meta
 from .plan_kernel import kernel_of
 from .plan_law import compiled_law, operational_command, plan_command
+from .plan_operational import operational_kernel_of
 from .trajectory import profile
 
 __all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
@@ -64,12 +65,13 @@ def make_rhs(plan):
     modes = plan.modes  # this call's own, 2-D reference directions included (ModePlan.use)
 
     kernel = plan.kernel = kernel_of(plan, row_meta(plan), reaching_rows(plan)) if plan.nr else kernel_of(plan, [], [])
+    kernel = plan.kernel = kernel or operational_kernel_of(plan)
     impulses = bool(impulse_terms(plan))
 
     def rhs(t, x):
         phi, Js = phi_and_jacobians(t, x)
         got = kernel(t, x, phi) if kernel is not None else None
-        if got is not None:  # the compiled call (contactdyn.plan_kernel)
+        if got is not None:  # the compiled call (contactdyn.plan_kernel, contactdyn.plan_operational)
             xd, z, o = got
             if impulses:
                 impulse_rates(xd, z, o, modes, None)

@@ -56,13 +56,14 @@ def _mode_at(scene, at: float):
 
 
 def _assert_kernel_is_the_readable_model(system, plan, t0, x0, span=0.01):
-    """On states of a short stretch of the mode: the kernel answers (does not decline) and its ẋ is
-    System.evaluate's to 1e-10 relative."""
+    """On states of a short stretch of the mode: the kernel answers (does not decline) and its ẋ (with the
+    impulse states' rates) is System.evaluate's to 1e-10 relative."""
     assert plan.kernel is not None
     sol = solve_ivp(plan.rhs, (t0, t0 + span), x0, method="DOP853", rtol=1e-8, atol=1e-10)
     for t, x in zip(sol.t[:40], sol.y.T[:40], strict=True):
         got = plan.kernel(t, x, plan.phi_at(t, x))
         assert got is not None
+        plan.impulse_rates(*got, plan.modes, None)  # as the plan's call does after its kernel
         ref = system.evaluate(t, x, plan.modes, plan.phase).xdot
         assert np.allclose(got[0], ref, rtol=1e-10, atol=1e-10 * (1.0 + np.abs(ref).max()))
 
@@ -108,3 +109,17 @@ def test_kernel_declines_a_clipping_voltage_and_the_call_stays_the_readable_mode
 def test_a_mode_without_a_force_reading_tip_law_has_no_kernel():
     system, plan, _, _ = _mode_at(load_scene("b1", {"duration": 0.1}), 0.1)
     assert plan.kernel is None
+
+
+@pytest.mark.parametrize("name", ["case2_writer5dof", "case2_writer_ur5"])
+def test_operational_kernel_is_the_readable_model_on_the_writers(name):
+    """The operational_space law with the pencil stuck (press), launched from rest and sliding in 2-D (circle):
+    every mode of the run has a compiled call, and it equals System.evaluate along a stretch of the mode."""
+    system = System(load_scene(name, {"duration": 1.6}))
+    run_system(system)
+    plans = list(_PLANS[system].values())
+    kinds = {(m.stuck, m.from_rest) for p in plans for m in p.modes}
+    assert kinds == {(True, False), (False, True), (False, False)}  # stuck, launching, sliding
+    for plan in plans:
+        t, x = plan.ring[3][0], plan.ring[3][1].copy()
+        _assert_kernel_is_the_readable_model(system, plan, t, x)

@@ -1,0 +1,153 @@
+"""A plan's call after Pinocchio, compiled: the operational_space law, sliding in 2-D on a normal row.
+
+For a mode whose controller is the operational_space law (:mod:`contactdyn.controllers.operational`:
+Λ depends on q, so it is not a matrix the plan can read off) and that has no drives, everything a
+call does after φ is small dense algebra:
+
+    y = P φ = [A, b, o]                          the KKT system and the affine outputs
+    per 2-D slide on a normal row r:  d = v_t/|v_t| while v_t·r_mode > v_ε, else the mode's r
+        A[:nv, nQ + r] += μ J_fᵀ Tᵀ d;   A[nv:nQ, nQ + r] = A0 + μ constsᵀ d      (the column tilt)
+    τ = operational_law.torque(...);   b[:nv] += τ;   z = A⁻¹ b
+    ẋ = [Q̇, Q̈, ẏ]
+
+:func:`call` runs it in one compiled function (numba), the same arithmetic as the readable
+path's (:mod:`contactdyn.plan_rhs`: ``_friction_terms``, ``_command_and_solve``;
+:func:`contactdyn.friction.slip_direction`'s rule). The reference, the force set-points and the
+tip's rotation, angular Jacobian and J̇_ω q̇ (Pinocchio's data at φ's state) are read in Python
+and passed in. A call goes the plan's readable way (returns status 1) where the task is singular
+(the law's guard raises there), the solve is singular or not finite, or a 2-D slide from rest is
+still inside the stick band (its direction is solved by :func:`contactdyn.friction.launch_directions`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+from numba import njit
+
+from .controllers import operational_law as law
+from .controllers.operational import SINGULAR, OperationalSpace
+from .friction import launching
+from .linalg import lu_solve
+from .phases import reference_at
+
+__all__ = ["call", "operational_kernel_of"]
+
+OK, DECLINED = 0, 1  #: :func:`call`'s status
+
+
+@njit(cache=True)
+def _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
+    """The column tilt of each 2-D slide into A (in place); False where a slide from rest is inside the band.
+    tilt_i: [row r, φ's J_f offset, v_t's offset in o, launching]; tilt_f: [μ, r_mode (2)]; tilt_T: T (2, 3);
+    tilt_body: [A0's body rows; consts (2, nQ − nv)]."""
+    for k in range(tilt_i.shape[0]):
+        col, i_J, i_vt = nQ + tilt_i[k, 0], tilt_i[k, 1], tilt_i[k, 2]
+        mu = tilt_f[k, 0]
+        vt = o[i_vt:i_vt + 2]
+        if vt[0] * tilt_f[k, 1] + vt[1] * tilt_f[k, 2] > band:  # v_t·r [m/s]: the slip's own direction
+            d = vt / np.sqrt(vt.dot(vt))
+        elif tilt_i[k, 3]:
+            return False
+        else:
+            d = tilt_f[k, 1:3].copy()
+        g = mu * np.ascontiguousarray(phi[i_J:i_J + 3 * nv].reshape((3, nv)).T).dot(d.dot(tilt_T[k]))
+        for i in range(nv):
+            A[i, col] += g[i]
+        for i in range(nQ - nv):
+            A[nv + i, col] = tilt_body[k, 0, i] + mu * (d[0] * tilt_body[k, 1, i] + d[1] * tilt_body[k, 2, i])
+    return True
+
+
+@njit(cache=True)
+def call(phi, x, P, D_ctl, ints, band, tilt_i, tilt_f, tilt_T, tilt_body, x_d, v_d, a_d, set_points, R_tip, J6,
+         drift6, axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal):
+    """(status, ẋ, z, o) of the module docstring. ints = [m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1]: sizes
+    and φ's offsets of the tip's H, h, J, J̇q̇, p (ṗ after it), ẏ's rows in y; J6, drift6, R_tip: the tip's
+    6 Jacobian rows and J̇q̇ and its rotation (none without a tool axis); the rest: operational_law.torque's."""
+    m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1 = (ints[0], ints[1], ints[2], ints[3], ints[4], ints[5], ints[6],
+                                                   ints[7], ints[8])
+    m2 = m * m
+    y = P.dot(phi)
+    A = y[:m2].copy().reshape((m, m))
+    b = y[m2:m2 + m].copy()
+    o = y[m2 + m:]
+    xd = np.empty(x.size)
+    if not _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
+        return DECLINED, xd, b, o
+    H = np.ascontiguousarray(phi[:nv * nv].reshape((nv, nv)).T) + D_ctl  # φ holds H column by column
+    if tool_axis.size:
+        J_tip, drift_tip = np.ascontiguousarray(J6), drift6
+    else:
+        J_tip, drift_tip = np.ascontiguousarray(phi[i_J:i_J + 3 * nv]).reshape((3, nv)), phi[i_dr:i_dr + 3]
+    tau, ratio = law.torque(x[nQ:nQ + nv], H, phi[i_h:i_h + nv], J_tip, drift_tip, phi[i_p:i_p + 3],
+                            phi[i_p + 3:i_p + 6], x_d, v_d, a_d, set_points, np.ascontiguousarray(R_tip), axes,
+                            forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal)
+    if not ratio >= SINGULAR:  # the readable law raises its error
+        return DECLINED, xd, b, o
+    b[:nv] += tau
+    z = lu_solve(A, b)
+    if not np.isfinite(z.dot(z)):
+        return DECLINED, xd, z, o
+    xd[:nQ] = x[nQ:2 * nQ]
+    xd[nQ:2 * nQ] = z[:nQ]
+    xd[2 * nQ:] = y[o_y0:o_y1]
+    return OK, xd, z, o
+
+
+def operational_kernel_of(plan):
+    """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (see the module); None where
+    the plan's mode is not one :func:`call` covers: the operational_space law, no drives, no Coulomb force with
+    a known normal force, no carried reference (2-D slides on normal rows and slides from rest are covered)."""
+    s, phase = plan.system, plan.phase
+    ctl = phase.controller
+    if not (isinstance(ctl, OperationalSpace) and plan.compiled_drives is None and not plan.coulomb_terms
+            and phase.carrier is None):
+        return None
+    nQ, nv, m = s.nQ, s.nv, plan.m
+    model, data = s.robot.model, s.robot.data
+    tf = plan.tip_frame
+    fid = plan.fids[tf]
+    off = m * m + m  # o's start in y
+    ints = np.array([m, nQ, nv, plan.i_h, plan.i_J[tf], plan.i_dr[tf], plan.i_e + plan.e_frame[tf],
+                     off + plan.o_y.start, off + plan.o_y.stop], dtype=np.int64)
+    D_ctl = np.zeros((nv, nv)) if s._D_ctl is None else np.ascontiguousarray(s._D_ctl, dtype=float)
+    tilt = _tilt_constants(plan)
+    ramps = [phase.forces[key] for key in ctl.force_keys]
+    referenced, orient = phase.reference is not None, ctl.reads_orientation
+    none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))
+    placement, jacobian = pin.updateFramePlacement, pin.getFrameJacobian
+    acceleration = pin.getFrameClassicalAcceleration
+    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    head = (plan.P, D_ctl, ints, float(s.slip_band), *tilt)
+
+    def kernel(t, x, phi):
+        x_d, v_d, a_d = reference_at(s, phase, t, x) if referenced else (none, none, none)
+        set_points = np.array([ramp.at(t)[0] for ramp in ramps])  # F_d [N]
+        if orient:  # Pinocchio's data is at φ's state
+            R_tip = placement(model, data, fid).rotation
+            J6, drift6 = jacobian(model, data, fid, lwa), acceleration(model, data, fid, lwa).vector
+        else:
+            R_tip, J6, drift6 = no_rotation, no_rows, none
+        status, xd, z, o = call(phi, x, *head, x_d, v_d, a_d, set_points, R_tip, J6, drift6, *ctl.constants)
+        return None if status else (xd, z, o)
+
+    return kernel
+
+
+def _tilt_constants(plan) -> tuple:
+    """(tilt_i, tilt_f, tilt_T, tilt_body) of :func:`_tilt` for the plan's 2-D slides on normal rows."""
+    s = plan.system
+    nQ, nv, nt = s.nQ, s.nv, len(plan.dyn_tilt)
+    tilt_i = np.zeros((nt, 4), dtype=np.int64)
+    tilt_f = np.zeros((nt, 3))
+    tilt_T = np.zeros((nt, 2, 3))
+    tilt_body = np.zeros((nt, 3, nQ - nv))
+    for k, (r, ci, mu, T, consts, j) in enumerate(plan.dyn_tilt):
+        mode = plan.modes[ci]
+        tilt_i[k] = r, plan.i_J[j], plan.o_vt[s.contacts[ci].name].start, launching(mode)
+        tilt_f[k] = mu, *mode.slip
+        tilt_T[k] = T
+        tilt_body[k, 0] = plan.A0[nv:nQ, nQ + r]
+        tilt_body[k, 1:] = consts
+    return tilt_i, tilt_f, tilt_T, tilt_body
