@@ -37,6 +37,15 @@ OK, DECLINED = 0, 1  #: :func:`call`'s status
 
 
 @njit(cache=True)
+def _slip_direction(vt, r, band):
+    """d of :func:`contactdyn.friction.slip_direction` for a 2-D slide: v_t/|v_t| while v_t·r > v_ε (``band``),
+    else the mode's r."""
+    if vt[0] * r[0] + vt[1] * r[1] > band:  # v_t·r [m/s]
+        return vt / np.sqrt(vt.dot(vt))
+    return r.copy()
+
+
+@njit(cache=True)
 def _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
     """The column tilt of each 2-D slide into A (in place); False where a slide from rest is inside the band.
     tilt_i: [row r, φ's J_f offset, v_t's offset in o, launching]; tilt_f: [μ, r_mode (2)]; tilt_T: T (2, 3);
@@ -44,13 +53,10 @@ def _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
     for k in range(tilt_i.shape[0]):
         col, i_J, i_vt = nQ + tilt_i[k, 0], tilt_i[k, 1], tilt_i[k, 2]
         mu = tilt_f[k, 0]
-        vt = o[i_vt:i_vt + 2]
-        if vt[0] * tilt_f[k, 1] + vt[1] * tilt_f[k, 2] > band:  # v_t·r [m/s]: the slip's own direction
-            d = vt / np.sqrt(vt.dot(vt))
-        elif tilt_i[k, 3]:
+        vt, r = o[i_vt:i_vt + 2], tilt_f[k, 1:3]
+        if tilt_i[k, 3] and not vt[0] * r[0] + vt[1] * r[1] > band:
             return False
-        else:
-            d = tilt_f[k, 1:3].copy()
+        d = _slip_direction(vt, r, band)
         g = mu * np.ascontiguousarray(phi[i_J:i_J + 3 * nv].reshape((3, nv)).T).dot(d.dot(tilt_T[k]))
         for i in range(nv):
             A[i, col] += g[i]
@@ -60,11 +66,37 @@ def _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
 
 
 @njit(cache=True)
-def call(phi, x, P, D_ctl, ints, band, tilt_i, tilt_f, tilt_T, tilt_body, x_d, v_d, a_d, set_points, R_tip, J6,
-         drift6, axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal):
-    """(status, ẋ, z, o) of the module docstring. ints = [m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1]: sizes
-    and φ's offsets of the tip's H, h, J, J̇q̇, p (ṗ after it), ẏ's rows in y; J6, drift6, R_tip: the tip's
-    6 Jacobian rows and J̇q̇ and its rotation (none without a tool axis); the rest: operational_law.torque's."""
+def _impulse_rates(xd, z, o, rates_i, rates_f, band):
+    """The impulse states' rates (∫F dt, ∫F_f dt per contact) into ẋ, as :func:`contactdyn.plan_rhs.impulse_terms`
+    gives them: rates_i = [ẋ slot, F from z?, F's index in z or o, kind (0 free, 1 stuck, 2 sliding 1-D,
+    3 sliding 2-D), the viscous force's index in o, v_t's index in o, stick rows, their z indices (2)];
+    rates_f = [μ_k, the 1-D direction, the 2-D mode's r (2)]."""
+    for k in range(rates_i.shape[0]):
+        i0, kind = rates_i[k, 0], rates_i[k, 3]
+        F_n = z[rates_i[k, 2]] if rates_i[k, 1] else o[rates_i[k, 2]]
+        xd[i0] = F_n
+        if kind == 1:
+            for j in range(rates_i[k, 6]):
+                xd[i0 + 1 + j] = z[rates_i[k, 7 + j]]
+        elif kind >= 2:
+            mu_F = rates_f[k, 0] * (F_n if F_n > 0.0 else 0.0)
+            k_visc = rates_i[k, 4]
+            if kind == 2:
+                xd[i0 + 1] = -mu_F * rates_f[k, 1] + o[k_visc]
+            else:
+                i_vt = rates_i[k, 5]
+                d = _slip_direction(o[i_vt:i_vt + 2], rates_f[k, 2:4], band)
+                xd[i0 + 1] = -mu_F * d[0] + o[k_visc]
+                xd[i0 + 2] = -mu_F * d[1] + o[k_visc + 1]
+
+
+@njit(cache=True)
+def call(phi, x, P, D_ctl, ints, band, tilt_i, tilt_f, tilt_T, tilt_body, rates_i, rates_f, x_d, v_d, a_d,
+         set_points, R_tip, J6, drift6, axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal):
+    """(status, ẋ, z, o) of the module docstring, ẋ with the impulse states' rates. ints = [m, nQ, nv, i_h,
+    i_J, i_dr, i_p, o_y0, o_y1]: sizes and φ's offsets of H, h and the tip's J, J̇q̇, p (ṗ after it), ẏ's rows
+    in y; J6, drift6, R_tip: the tip's 6 Jacobian rows, J̇q̇ and its rotation (none without a tool axis); the
+    rest: :func:`_tilt`'s, :func:`_impulse_rates`' and operational_law.torque's."""
     m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1 = (ints[0], ints[1], ints[2], ints[3], ints[4], ints[5], ints[6],
                                                    ints[7], ints[8])
     m2 = m * m
@@ -92,13 +124,16 @@ def call(phi, x, P, D_ctl, ints, band, tilt_i, tilt_f, tilt_T, tilt_body, x_d, v
     xd[:nQ] = x[nQ:2 * nQ]
     xd[nQ:2 * nQ] = z[:nQ]
     xd[2 * nQ:] = y[o_y0:o_y1]
+    _impulse_rates(xd, z, o, rates_i, rates_f, band)
     return OK, xd, z, o
 
 
-def operational_kernel_of(plan):
+def operational_kernel_of(plan, impulses: list[tuple]):
     """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (see the module); None where
     the plan's mode is not one :func:`call` covers: the operational_space law, no drives, no Coulomb force with
-    a known normal force, no carried reference (2-D slides on normal rows and slides from rest are covered)."""
+    a known normal force, no carried reference (2-D slides on normal rows and slides from rest are covered).
+    ``impulses``: the plan's :func:`~contactdyn.plan_rhs.impulse_terms`, whose rates the kernel writes into ẋ
+    (``kernel.rates`` is True)."""
     s, phase = plan.system, plan.phase
     ctl = phase.controller
     if not (isinstance(ctl, OperationalSpace) and plan.compiled_drives is None and not plan.coulomb_terms
@@ -119,7 +154,7 @@ def operational_kernel_of(plan):
     placement, jacobian = pin.updateFramePlacement, pin.getFrameJacobian
     acceleration = pin.getFrameClassicalAcceleration
     lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    head = (plan.P, D_ctl, ints, float(s.slip_band), *tilt)
+    head = (plan.P, D_ctl, ints, float(s.slip_band), *tilt, *_rates_constants(plan, impulses))
 
     def kernel(t, x, phi):
         x_d, v_d, a_d = reference_at(s, phase, t, x) if referenced else (none, none, none)
@@ -132,6 +167,7 @@ def operational_kernel_of(plan):
         status, xd, z, o = call(phi, x, *head, x_d, v_d, a_d, set_points, R_tip, J6, drift6, *ctl.constants)
         return None if status else (xd, z, o)
 
+    kernel.rates = True
     return kernel
 
 
@@ -151,3 +187,20 @@ def _tilt_constants(plan) -> tuple:
         tilt_body[k, 0] = plan.A0[nv:nQ, nQ + r]
         tilt_body[k, 1:] = consts
     return tilt_i, tilt_f, tilt_T, tilt_body
+
+
+def _rates_constants(plan, impulses: list[tuple]) -> tuple:
+    """(rates_i, rates_f) of :func:`_impulse_rates` from the plan's impulse terms (indices into y made o's)."""
+    off = plan.m * plan.m + plan.m  # o's start in y
+    names = [c.name for c in plan.system.contacts]
+    rates_i = np.zeros((len(impulses), 9), dtype=np.int64)
+    rates_f = np.zeros((len(impulses), 4))
+    for k, (i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci) in enumerate(impulses):
+        r = plan.modes[ci].slip
+        kind = 1 if stick is not None else 0 if not sliding else 2 if d0 is not None else 3
+        rows = [] if stick is None else list(stick)
+        i_vt = plan.o_vt[names[ci]].start
+        rates_i[k, :7] = i0, from_z, k_n if from_z else k_n - off, kind, k_visc - off, i_vt, len(rows)
+        rates_i[k, 7:7 + len(rows)] = rows
+        rates_f[k] = mu, d0 or 0.0, *(r if len(r) == 2 else (0.0, 0.0))
+    return rates_i, rates_f
