@@ -19,7 +19,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["solve_vector", "solve_matrix", "det", "svd", "lu_solve", "pinv"]
+__all__ = ["solve_vector", "solve_matrix", "det", "svd", "lu_solve", "pinv", "cholesky", "forward_solve",
+           "sparse_rows", "sparse_dot"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -65,6 +66,60 @@ def lu_solve(A, b):
             s -= LU[k, j] * z[j]
         z[k] = s / LU[k, k]
     return z
+
+
+@njit(cache=True)
+def cholesky(A):
+    """The lower-triangular L of A = L Lᵀ (A symmetric positive definite; nan where a pivot is not positive)."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return np.full((n, n), np.nan)
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    return L
+
+
+@njit(cache=True)
+def forward_solve(L, B):
+    """Y of L Y = B (L lower triangular, B a matrix) by forward substitution."""
+    n, k = B.shape
+    Y = np.empty((n, k))
+    for c in range(k):
+        for i in range(n):
+            s = B[i, c]
+            for j in range(i):
+                s -= L[i, j] * Y[j, c]
+            Y[i, c] = s / L[i, i]
+    return Y
+
+
+def sparse_rows(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(start, columns, values): P's nonzero entries row by row (CSR), for :func:`sparse_dot`."""
+    rows, cols = np.nonzero(P)
+    start = np.searchsorted(rows, np.arange(P.shape[0] + 1)).astype(np.int64)
+    return start, cols.astype(np.int64), np.ascontiguousarray(P[rows, cols], dtype=float)
+
+
+@njit(cache=True)
+def sparse_dot(start, columns, values, x):
+    """P x of P given by :func:`sparse_rows` (the plan's maps P hold ~1 % nonzeros)."""
+    n = start.size - 1
+    out = np.zeros(n)
+    for i in range(n):
+        acc = 0.0
+        for k in range(start[i], start[i + 1]):
+            acc += values[k] * x[columns[k]]
+        out[i] = acc
+    return out
 
 
 @njit(cache=True)

@@ -28,7 +28,7 @@ from numba import njit
 from .controllers import operational_law as law
 from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
-from .linalg import lu_solve
+from .linalg import lu_solve, sparse_dot, sparse_rows
 from .phases import reference_at
 
 __all__ = ["call", "operational_kernel_of"]
@@ -91,16 +91,18 @@ def _impulse_rates(xd, z, o, rates_i, rates_f, band):
 
 
 @njit(cache=True)
-def call(phi, x, P, D_ctl, ints, band, tilt_i, tilt_f, tilt_T, tilt_body, rates_i, rates_f, x_d, v_d, a_d,
-         set_points, R_tip, J6, drift6, axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal):
+def call(phi, x, P_start, P_columns, P_values, D_ctl, ints, band, tilt_i, tilt_f, tilt_T, tilt_body, rates_i,
+         rates_f, x_d, v_d, a_d, set_points, R_tip, J6, drift6, axes, forced, kp, kd, tool_axis, target, ko, do,
+         k_null, kd_normal):
     """(status, ẋ, z, o) of the module docstring, ẋ with the impulse states' rates. ints = [m, nQ, nv, i_h,
     i_J, i_dr, i_p, o_y0, o_y1]: sizes and φ's offsets of H, h and the tip's J, J̇q̇, p (ṗ after it), ẏ's rows
     in y; J6, drift6, R_tip: the tip's 6 Jacobian rows, J̇q̇ and its rotation (none without a tool axis); the
-    rest: :func:`_tilt`'s, :func:`_impulse_rates`' and operational_law.torque's."""
+    rest: P by its nonzeros (:func:`~contactdyn.linalg.sparse_rows`), :func:`_tilt`'s, :func:`_impulse_rates`' and
+    operational_law.torque's."""
     m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1 = (ints[0], ints[1], ints[2], ints[3], ints[4], ints[5], ints[6],
                                                    ints[7], ints[8])
     m2 = m * m
-    y = P.dot(phi)
+    y = sparse_dot(P_start, P_columns, P_values, phi)  # P φ
     A = y[:m2].copy().reshape((m, m))
     b = y[m2:m2 + m].copy()
     o = y[m2 + m:]
@@ -154,7 +156,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     placement, jacobian = pin.updateFramePlacement, pin.getFrameJacobian
     acceleration = pin.getFrameClassicalAcceleration
     lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    head = (plan.P, D_ctl, ints, float(s.slip_band), *tilt, *_rates_constants(plan, impulses))
+    head = (*sparse_rows(plan.P), D_ctl, ints, float(s.slip_band), *tilt, *_rates_constants(plan, impulses))
 
     def kernel(t, x, phi):
         x_d, v_d, a_d = reference_at(s, phase, t, x) if referenced else (none, none, none)

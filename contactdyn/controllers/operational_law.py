@@ -11,8 +11,9 @@ direction n, a* = 0 and f = −F_d − kd_normal n·ṗ; on the tilt, a* = E (ko
 k_null = 0 where the task has as many directions as the arm has joints.
 
 Written once here and compiled by numba: the readable law (``OperationalSpace.torque``) and the plan's
-compiled call (:mod:`contactdyn.plan_operational`) both run :func:`torque`. Solves by
-:func:`contactdyn.linalg.lu_solve` (loops, not numba's LAPACK bindings). Arguments are C-contiguous float64
+compiled call (:mod:`contactdyn.plan_operational`) both run :func:`torque`. Λ⁻¹ = Yᵀ Y with Y = L⁻¹ J_tᵀ,
+H = L Lᵀ (:func:`contactdyn.linalg.cholesky`), Λ (…) by :func:`contactdyn.linalg.lu_solve`: loops, not numba's
+LAPACK bindings. Arguments are C-contiguous float64
 arrays; "none" is an empty array (no reference: x_d, v_d, a_d of size 0; no tool axis: ``tool_axis``,
 ``target`` of size 0 and R_tip (0, 3)). :func:`torque` also returns the task's Hadamard ratio
 det(Λ⁻¹) / Π diag(Λ⁻¹), which the caller checks against ``operational.SINGULAR`` (in Python: the error is
@@ -26,7 +27,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..linalg import lu_solve
+from ..linalg import cholesky, forward_solve, lu_solve
 
 __all__ = ["perpendicular", "hadamard_ratio", "torque"]
 
@@ -86,7 +87,7 @@ def torque(v, H, h, J_tip, drift_tip, p_tip, v_tip, x_d, v_d, a_d, set_points, R
     axes (k, 3), forced (nf, 3) the position and force rows of S; kp, kd [N/m, N·s/m] per axis; ko [1/s²],
     do [1/s], k_null [1/s] (0: no null-space damping), kd_normal [N·s/m]."""
     a_pos, f_pos = _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, kd_normal)
-    nS, nv = a_pos.size, v.size
+    nS = a_pos.size
     m = nS + (2 if tool_axis.size else 0)
     W = np.zeros((m, J_tip.shape[0]))  # the task's rows on the tip's [linear; angular] motion
     W[:axes.shape[0], :3] = axes
@@ -107,10 +108,8 @@ def torque(v, H, h, J_tip, drift_tip, p_tip, v_tip, x_d, v_d, a_d, set_points, R
     rhs = a_task - W.dot(drift_tip)
     if k_null > 0.0:
         rhs += k_null * Jt.dot(v)
-    X = np.empty((nv, m))  # H⁻¹ J_tᵀ
-    for i in range(m):
-        X[:, i] = lu_solve(H, np.ascontiguousarray(Jt[i]))
-    L_inv = Jt.dot(X)  # Λ⁻¹
+    Y = forward_solve(cholesky(H), np.ascontiguousarray(Jt.T))  # L⁻¹ J_tᵀ, H = L Lᵀ
+    L_inv = Y.T.dot(Y)  # Λ⁻¹ = J_t H⁻¹ J_tᵀ
     ft = lu_solve(L_inv, rhs) + f  # Λ (a* − J̇_t q̇ + k_null ẋ_t) + f
     tau = Jt.T.dot(ft) + h
     if k_null > 0.0:
