@@ -7,9 +7,11 @@ since numpy 1.8), the public functions otherwise. Arguments must be float arrays
 shapes; a singular matrix gives inf/nan, and a matrix with nan an SVD of nan (with a
 RuntimeWarning), where the fallback raises LinAlgError; callers test.
 
-:func:`lu_solve` and :func:`pinv` are compiled (numba) for the compiled kernels
-(:mod:`contactdyn.plan_kernel`, :mod:`contactdyn.controllers.computed_torque`), written in loops
-rather than on numba's LAPACK bindings, whose loading costs ~0.15 s per process.
+:func:`lu_solve`, :func:`cholesky`, :func:`forward_solve`, :func:`pinv`, the products :func:`mv`, :func:`mtv`,
+:func:`mm`, :func:`mtm` and :func:`sparse_dot` are compiled (numba) for the compiled kernels
+(:mod:`contactdyn.plan_kernel`, :mod:`contactdyn.plan_operational`, :mod:`contactdyn.controllers.computed_torque`,
+:mod:`contactdyn.controllers.operational_law`), written in loops: numba's LAPACK bindings cost
+~0.15 s to load per process, and a BLAS call ~0.1 µs, more than a loop over these 3–12-row arrays.
 """
 
 from __future__ import annotations
@@ -19,8 +21,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["solve_vector", "solve_matrix", "det", "svd", "lu_solve", "pinv", "cholesky", "forward_solve",
-           "sparse_rows", "sparse_dot"]
+__all__ = ["solve_vector", "solve_matrix", "det", "svd", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
+           "forward_solve", "sparse_rows", "sparse_dot"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -130,6 +132,7 @@ def pinv(J):
     r, c = J.shape
     A = np.ascontiguousarray(J.T)  # (c, r): its columns are rotated
     V = np.eye(r)
+    floor = 1e-32 * (J * J).sum()  # a column this small (‖a‖ ≤ 1e-16 ‖J‖) is a dropped singular value: left
     for _ in range(60):  # sweeps; converges quadratically (a few sweeps for r = 3)
         rotated = False
         for p in range(r - 1):
@@ -139,7 +142,7 @@ def pinv(J):
                     alpha += A[i, p] * A[i, p]
                     beta += A[i, q] * A[i, q]
                     gamma += A[i, p] * A[i, q]
-                if gamma == 0.0 or abs(gamma) <= 1e-15 * math.sqrt(alpha * beta):
+                if min(alpha, beta) <= floor or abs(gamma) <= 1e-15 * math.sqrt(alpha * beta):
                     continue
                 rotated = True
                 zeta = (beta - alpha) / (2.0 * gamma)
@@ -165,4 +168,54 @@ def pinv(J):
             for i in range(c):
                 for j in range(r):
                     out[i, j] += A[i, k] * V[j, k] / sigma2[k]
+    return out
+
+
+@njit(cache=True)
+def mv(A, x):
+    """A x."""
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        acc = 0.0
+        for j in range(A.shape[1]):
+            acc += A[i, j] * x[j]
+        out[i] = acc
+    return out
+
+
+@njit(cache=True)
+def mtv(A, x):
+    """Aᵀ x."""
+    out = np.zeros(A.shape[1])
+    for j in range(A.shape[1]):
+        acc = 0.0
+        for i in range(A.shape[0]):
+            acc += A[i, j] * x[i]
+        out[j] = acc
+    return out
+
+
+@njit(cache=True)
+def mm(A, B):
+    """A B."""
+    out = np.zeros((A.shape[0], B.shape[1]))
+    for i in range(A.shape[0]):
+        for j in range(B.shape[1]):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                acc += A[i, k] * B[k, j]
+            out[i, j] = acc
+    return out
+
+
+@njit(cache=True)
+def mtm(A, B):
+    """Aᵀ B."""
+    out = np.zeros((A.shape[1], B.shape[1]))
+    for i in range(A.shape[1]):
+        for j in range(B.shape[1]):
+            acc = 0.0
+            for k in range(A.shape[0]):
+                acc += A[k, i] * B[k, j]
+            out[i, j] = acc
     return out

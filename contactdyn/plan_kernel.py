@@ -22,14 +22,52 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from scipy import sparse
 
 from .controllers import computed_torque as law
-from .linalg import lu_solve
+from .linalg import lu_solve, mm, mtv, mv
 from .plan_law import CompiledLaw, compiled_law, plan_inputs
 
 __all__ = ["fold_solve", "kernel_of", "call"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
+#: the constants of a plan's call, packed by :func:`pack` into one float and one int buffer (two arguments: a
+#: compiled function's call costs ~0.06 µs per argument): float arrays, then int arrays, by these indices
+P_VAL, M_, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL = range(10)  # floats (P: CSR values)
+P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(10, 17)  # ints (P: CSR columns, row starts)
+#: INTS: m nQ nv i_h i_J i_dr tip u_f u_z zs swap n_lim o_y0 o_y1 x_z0 x_z1 w0 (see :func:`call`)
+
+
+def pack(floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
+    """(fb, ib): the float arrays one after another in fb, the int arrays in ib after a table of
+    (offset, rows, columns) per array, floats first (a vector has one row)."""
+    floats = [np.atleast_2d(np.asarray(a, dtype=float)) for a in floats]
+    ints = [np.atleast_2d(np.asarray(a, dtype=np.int64)) for a in ints]
+    table, offset = [], 0
+    for a in floats:
+        table += [offset, *a.shape]
+        offset += a.size
+    offset = 3 * (len(floats) + len(ints))
+    for a in ints:
+        table += [offset, *a.shape]
+        offset += a.size
+    fb = np.concatenate([a.ravel() for a in floats]) if floats else np.zeros(0)
+    ib = np.concatenate([np.array(table, dtype=np.int64)] + [a.ravel() for a in ints])
+    return fb, ib
+
+
+@njit(cache=True)
+def _mat(fb, ib, k):
+    """Float array k of :func:`pack`'s buffers, as a (rows, columns) view."""
+    o, r, c = ib[3 * k], ib[3 * k + 1], ib[3 * k + 2]
+    return fb[o:o + r * c].reshape((r, c))
+
+
+@njit(cache=True)
+def _vec(buf, ib, k):
+    """Array k of :func:`pack`'s buffers (``buf``: fb for a float array, ib for an int array), flat."""
+    o, r, c = ib[3 * k], ib[3 * k + 1], ib[3 * k + 2]
+    return buf[o:o + r * c]
 
 
 @njit(cache=True)
@@ -43,8 +81,8 @@ def fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ):
     txo[:nv] = tau
     txo[nv:nv + n] = x
     txo[-1] = 1.0
-    y0 = L.dot(txo)
-    Y = L_tau.dot(B)
+    y0 = mv(L, txo)
+    Y = mm(L_tau, B)
     for k in range(cols.size):
         for i in range(nQ):
             A[i, cols[k]] -= Y[i, k]
@@ -54,60 +92,71 @@ def fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ):
 
 
 @njit(cache=True)
-def call(phi, x, u, P, M, L, L_tau, D_a, D_f, D_z, rotor, D_ctl, ints, frames, forces, reach, k_null):
-    """(status, ẋ, z, o) of the module docstring. ints = [m, nQ, nv, nr, i_h, i_J, i_dr, i_f, zs, swap,
-    n_lim, o_y0, o_y1, x_z0, x_z1, w0]: sizes and offsets (zs: the ż rows of M u, −1 none; x_z0:x_z1 their
-    slots in ẋ); frames: each frame's J offset in φ; forces: o's measured forces in u's order; reach: the
-    rows whose A column beyond the robot joins B."""
-    m, nQ, nv, nr, i_h, i_J, i_dr, i_f = ints[0], ints[1], ints[2], ints[3], ints[4], ints[5], ints[6], ints[7]
-    zs, swap, n_lim, o_y0, o_y1, x_z0, x_z1, w0 = (ints[8], ints[9], ints[10], ints[11], ints[12], ints[13],
-                                                   ints[14], ints[15])
+def call(phi, x, u, fb, ib):
+    """(status, ẋ, z, o) of the module docstring; fb, ib: the plan's constants (:func:`pack`). INTS: sizes
+    and offsets (zs the ż rows of M u, −1 none; x_z0:x_z1 the law's states in x and ẋ; tip the tip's p, ṗ in
+    φ; u_f, u_z the forces and z in u; w0 the frame forces in z); FRAMES: each frame's J offset in φ;
+    FORCES: o's measured forces in u's order; COLS: the folded columns of A (the rows' λ, then a carrying
+    body's Q̈_b), with D_A, D_F, D_Z per column; REACH: the rows whose A column beyond the robot joins B."""
+    m, nQ, nv, i_h, i_J, i_dr, tip, u_f, u_z, zs, swap, n_lim, o_y0, o_y1, x_z0, x_z1, w0 = _vec(ib, ib, INTS)
     m2 = m * m
-    y = P.dot(phi)
+    p_val, p_col, p_row = _vec(fb, ib, P_VAL), _vec(ib, ib, P_COL), _vec(ib, ib, P_ROW)
+    y = np.empty(p_row.size - 1)  # y = P φ, P sparse by rows
+    for i in range(y.size):
+        acc = 0.0
+        for k in range(p_row[i], p_row[i + 1]):
+            acc += p_val[k] * phi[p_col[k]]
+        y[i] = acc
     A = y[:m2].copy().reshape((m, m))
     b = y[m2:m2 + m].copy()
     o = y[m2 + m:]
+    u[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
+    forces = _vec(ib, ib, FORCES)
     for k in range(forces.size):
-        u[i_f + k] = o[forces[k]]
-    targets = M.dot(u)
-    H = np.ascontiguousarray(phi[:nv * nv].reshape((nv, nv)).T) + D_ctl  # φ holds H column by column
+        u[u_f + k] = o[forces[k]]
+    u[u_z:u_z + x_z1 - x_z0] = x[x_z0:x_z1]  # the law's states z
+    targets = mv(_mat(fb, ib, M_), u)
+    H = phi[:nv * nv].reshape((nv, nv)).T + _mat(fb, ib, D_CTL)  # φ holds H column by column
     J = phi[i_J:i_J + 3 * nv].reshape((3, nv))
     tau_c = np.zeros(nv)
+    frames = _vec(ib, ib, FRAMES)
     for f in range(frames.size):
-        tau_c += phi[frames[f]:frames[f] + 3 * nv].reshape((3, nv)).T.dot(b[w0 + 3 * f:w0 + 3 * f + 3])
+        tau_c += mtv(phi[frames[f]:frames[f] + 3 * nv].reshape((3, nv)), b[w0 + 3 * f:w0 + 3 * f + 3])
     Jp = law.pinv(J)
+    rotor = _vec(fb, ib, ROTOR)
     f_swap = targets[3:6] if swap else targets[0:0]
     tau = law.torque(H, rotor, phi[i_h:i_h + nv], tau_c, J, Jp, phi[i_dr:i_dr + 3], x[nQ:nQ + nv],
-                     targets[:3], np.ascontiguousarray(f_swap), k_null)
-    B = law.increments(H, rotor, J, Jp, D_a, D_f)
+                     targets[:3], f_swap, _vec(fb, ib, K_NULL)[0])
+    B = law.increments(H, rotor, J, Jp, _mat(fb, ib, D_A), _mat(fb, ib, D_F))
+    reach = _vec(ib, ib, REACH)
     for k in range(reach.size):
         for i in range(nv):
             B[i, reach[k]] += A[i, nQ + reach[k]]
-    cols = np.arange(nQ, nQ + nr)
-    z, y0, Y = fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ)
+    cols = _vec(ib, ib, COLS)
+    z, y0, Y = fold_solve(A, b, _mat(fb, ib, L_), _mat(fb, ib, L_TAU), tau, x, B, cols, nQ)
     xd = np.empty(x.size)
     if not np.isfinite(z.dot(z)):
         return DECLINED, xd, z, o
-    if n_lim and np.abs(y0[nQ:] + Y[nQ:].dot(z[nQ:nQ + nr])).max() > 1.0:
+    folded = z[cols]
+    if n_lim and np.abs(y0[nQ:] + mv(Y[nQ:], folded)).max() > 1.0:
         return DECLINED, xd, z, o
     xd[:nQ] = x[nQ:2 * nQ]
     xd[nQ:2 * nQ] = z[:nQ]
     xd[2 * nQ:] = y[o_y0:o_y1]
     if zs >= 0:
-        xd[x_z0:x_z1] = targets[zs:] + D_z.dot(z[nQ:nQ + nr])
+        xd[x_z0:x_z1] = targets[zs:] + mv(_mat(fb, ib, D_Z), folded)
     return OK, xd, z, o
 
 
 def kernel_of(plan, meta: list, reach: list[int] | None):
     """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (a clip, a singular solve,
     the law's M not read yet); None where the plan's mode is not one :func:`call` covers: a force-reading tip
-    law by its matrix through compiled drives, no sliding friction, no slide launching from rest, no carried
-    reference, and the rows' reach beyond the robot constant (``reach``, plan_fold's). ``meta``: the rows as
+    law by its matrix through compiled drives, no sliding friction, no slide launching from rest, and the rows'
+    reach beyond the robot constant (``reach``, plan_fold's). ``meta``: the rows as
     the law's ``row_columns`` reads them."""
     ctl = compiled_law(plan)
     covered = (isinstance(ctl, CompiledLaw) and ctl.reason is None and plan.compiled_drives is not None
-               and plan.friction_terms is None and plan.launch is None and plan.phase.carrier is None
-               and (reach is not None or not plan.nr))
+               and plan.friction_terms is None and plan.launch is None and (reach is not None or not plan.nr))
     if not covered:
         return None
     constants = None
@@ -118,8 +167,8 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             if ctl.M is None:
                 return None
             constants = _constants(plan, ctl, meta, reach or [], plan_inputs(plan, ctl))
-        inputs, args = constants
-        status, xd, z, o = call(phi, x, inputs(t, x, phi, None), *args)
+        inputs, (fb, ib) = constants
+        status, xd, z, o = call(phi, x, inputs(t, x, phi, None), fb, ib)
         return None if status else (xd, z, o)
 
     return kernel
@@ -132,15 +181,20 @@ def _constants(plan, ctl, meta, reach, inputs) -> tuple:
     tf = plan.tip_frame
     off = m * m + m  # o's start in y
     D_a, D_f, D_z = ctl.row_columns(meta)
-    none = np.empty((0, nr))
-    ints = np.array([m, nQ, nv, nr, plan.i_h, plan.i_J[tf], plan.i_dr[tf], ctl.i_forces,
-                     ctl.zs.start if ctl.zs is not None else -1, int(ctl.swap), len(drives.limited),
-                     off + plan.o_y.start, off + plan.o_y.stop, plan.z_slice.start, plan.z_slice.stop, nQ + nr],
-                    dtype=np.int64)
-    c = np.ascontiguousarray
+    cols = list(range(nQ, nQ + nr))
+    if plan.phase.carrier is not None:  # a reference carried by body coordinate i_b: ∂/∂Q̈_b, one more column
+        i_b, axis = plan.phase.carrier
+        d = ctl.M[:, 12:15].dot(axis)  # the tip targets per unit [m/s²] of ẍ_d along the axis
+        D_a = np.column_stack((D_a, d[:3]))
+        D_f = None if D_f is None else np.column_stack((D_f, d[3:6]))
+        D_z = None if D_z is None else np.column_stack((D_z, d[ctl.zs]))
+        cols.append(i_b)
+    none = np.empty((0, len(cols)))
+    P = sparse.csr_matrix(plan.P)
+    ints = [m, nQ, nv, plan.i_h, plan.i_J[tf], plan.i_dr[tf], inputs.tip, ctl.i_forces, inputs.i_z,
+            ctl.zs.start if ctl.zs is not None else -1, int(ctl.swap), len(drives.limited),
+            off + plan.o_y.start, off + plan.o_y.stop, plan.z_slice.start, plan.z_slice.stop, nQ + nr]
     D_ctl = s._D_ctl if s._D_ctl is not None else np.zeros((nv, nv))
-    args = (c(plan.P), c(ctl.M), c(drives.L), c(drives.L_tau), c(D_a), none if D_f is None else c(D_f),
-            none if D_z is None else c(D_z), law._rotor_c, c(D_ctl, dtype=float), ints,
-            np.array(plan.i_J, dtype=np.int64), np.array(inputs.forces, dtype=np.int64),
-            np.array(reach, dtype=np.int64), float(law.config.k_null))
-    return inputs, args
+    floats = [P.data, ctl.M, drives.L, drives.L_tau, D_a, none if D_f is None else D_f, none if D_z is None else D_z,
+              law._rotor_c, D_ctl, [law.config.k_null]]
+    return inputs, pack(floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach])

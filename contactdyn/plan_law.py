@@ -180,7 +180,9 @@ def plan_inputs(plan, law: CompiledLaw):
     """inputs(t, x, φ, o) -> u: :meth:`CompiledLaw.inputs` read from the plan's own slots (the tip's p and ṗ
     in φ's e, the forces in o, z in x) and the phase's reference, ramps and surfaces, without a ControlInput
     (the values the plan's ControlInput carries, :func:`~contactdyn.plan_rhs.controller_input`). u is one
-    buffer, rewritten per call."""
+    buffer, rewritten per call. With o = None only the reference, ramps and surfaces are written: the tip
+    (φ[inputs.tip:+6]), the forces (o[inputs.forces]) and z (x[inputs.z], into u[inputs.i_z:-1]) are the
+    caller's."""
     s, phase = plan.system, plan.phase
     nQ = s.nQ
     tip = plan.i_e + plan.e_frame[plan.tip_frame]
@@ -208,24 +210,28 @@ def plan_inputs(plan, law: CompiledLaw):
         _write_surfaces(u, i_surf, surface_points(s, np.zeros(s.n), modes))
 
     def inputs(t, x, phi, o):
+        if o is None:  # the parts read off φ, o and x by index are the caller's (contactdyn.plan_kernel)
+            return varying(t, x)
         u[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
+        u[i_f:i_set] = o[i_forces]  # measured forces [N]
+        u[i_z:-1] = x[z]
+        return varying(t, x)
+
+    def varying(t, x):
         if moving_ref:
             x_d, v_d, a_d = reference_at(s, phase, t, x)
             u[6:9] = x_d
             u[9:12] = v_d
             u[12:15] = a_d
-        if o is not None:  # measured forces [N] (None: left to the caller, contactdyn.plan_kernel)
-            u[i_f:i_set] = o[i_forces]
         j = i_set
         for ramp in ramps:  # F_d [N], Ḟ_d [N/s]
             u[j:j + 2] = ramp.at(t)
             j += 2
         if surfaces_move:
             _write_surfaces(u, i_surf, surface_points(s, x, modes))
-        u[i_z:-1] = x[z]
         return u
 
-    inputs.forces = i_forces  #: o's measured forces, in u's order from u[law.i_forces]
+    inputs.tip, inputs.forces, inputs.i_z, inputs.z = tip, i_forces, i_z, z  #: where o = None leaves u to the caller
     return inputs
 
 

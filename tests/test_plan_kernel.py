@@ -77,6 +77,14 @@ def test_kernel_is_the_readable_model_on_case3_presses(name):
     _assert_kernel_is_the_readable_model(system, plan, t, x)
 
 
+def test_kernel_is_the_readable_model_with_a_reference_carried_by_the_cart():
+    """Case 1's push: A7 tracking a reference carried by the cart (the command depends on the cart's
+    acceleration, one more folded column), through DC motors."""
+    system, plan, t, x = _mode_at(load_scene("case1_cart", {"duration": 2.5}), 2.5)
+    assert plan.phase.carrier is not None
+    _assert_kernel_is_the_readable_model(system, plan, t, x)
+
+
 def _writer_pressing(u_max: float | None) -> dict:
     """A7 on the 2-DOF writer pressing a bonded wall under DC motors (``u_max`` [V], None: no limit)."""
     q0 = [0.3, 1.2]  # [rad] the writer's pose, tip at p0

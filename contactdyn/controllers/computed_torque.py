@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..linalg import pinv
+from ..linalg import mm, mtm, mtv, mv, pinv
 
 __all__ = ["pinv", "torque", "increments", "pinv_stack", "torque_stack", "increments_stack"]
 
@@ -26,29 +26,29 @@ __all__ = ["pinv", "torque", "increments", "pinv_stack", "torque_stack", "increm
 @njit(cache=True)
 def torque(H, rotor, h, tau_c, J, Jp, drift, v, a, f_swap, k_null):
     """τ of the module docstring [N·m or N] for the tip acceleration a [m/s²] (J̇q̇ = drift, q̇ = v)."""
-    qdd = Jp.dot(a - drift)
+    qdd = mv(Jp, a - drift)
     nv = J.shape[1]
     if k_null > 0.0 and nv > 3:
-        qdd -= (np.eye(nv) - Jp.dot(J)).dot(k_null * v)
-    tau = H.dot(qdd)
+        qdd -= mv(np.eye(nv) - mm(Jp, J), k_null * v)
+    tau = mv(H, qdd)
     if rotor.size:
         tau = tau - rotor * qdd
     tau = tau + h - tau_c
     if f_swap.size:
-        tau += J.T.dot(f_swap)
+        tau += mtv(J, f_swap)
     return tau
 
 
 @njit(cache=True)
 def increments(H, rotor, J, Jp, D_a, D_f):
     """∂τ of the module docstring, one column per tip-target change [N·m or N per m/s² or N]."""
-    dqdd = Jp.dot(D_a)
-    dtau = H.dot(dqdd)
+    dqdd = mm(Jp, D_a)
+    dtau = mm(H, dqdd)
     if rotor.size:
         for i in range(dtau.shape[0]):
             dtau[i] -= rotor[i] * dqdd[i]
     if D_f.shape[0]:
-        dtau += J.T.dot(D_f)
+        dtau += mtm(J, D_f)
     return dtau
 
 
