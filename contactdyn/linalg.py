@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["solve_vector", "solve_matrix", "det", "svd", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
-           "forward_solve", "sparse_rows", "sparse_dot"]
+           "forward_solve", "sparse_dot"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -104,16 +104,10 @@ def forward_solve(L, B):
     return Y
 
 
-def sparse_rows(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(start, columns, values): P's nonzero entries row by row (CSR), for :func:`sparse_dot`."""
-    rows, cols = np.nonzero(P)
-    start = np.searchsorted(rows, np.arange(P.shape[0] + 1)).astype(np.int64)
-    return start, cols.astype(np.int64), np.ascontiguousarray(P[rows, cols], dtype=float)
-
-
 @njit(cache=True)
 def sparse_dot(start, columns, values, x):
-    """P x of P given by :func:`sparse_rows` (the plan's maps P hold ~1 % nonzeros)."""
+    """P x of P by rows (CSR: row i's entries ``values[start[i]:start[i + 1]]`` in ``columns``; scipy.sparse's
+    indptr, indices, data), for the plan's maps P (~1 % nonzeros)."""
     n = start.size - 1
     out = np.zeros(n)
     for i in range(n):

@@ -24,16 +24,21 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 from numba import njit
+from scipy import sparse
 
 from .controllers import operational_law as law
 from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
-from .linalg import lu_solve, sparse_dot, sparse_rows
+from .linalg import lu_solve, mtv, sparse_dot
 from .phases import reference_at
+from .plan_kernel import _mat, _vec, pack
 
 __all__ = ["call", "operational_kernel_of"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
+#: the constants of a plan's call in :func:`~contactdyn.plan_kernel.pack`'s two buffers, by these indices
+P_VAL, D_CTL, TILT_F, TILT_T, TILT_BODY, RATES_F, AXES, FORCED, KP, KD, TOOL_AXIS, TARGET, SCALARS = range(13)
+P_COL, P_ROW, INTS, TILT_I, RATES_I = range(13, 18)  # ints (P: CSR columns, row starts)
 
 
 @njit(cache=True)
@@ -41,15 +46,15 @@ def _slip_direction(vt, r, band):
     """d of :func:`contactdyn.friction.slip_direction` for a 2-D slide: v_t/|v_t| while v_t·r > v_ε (``band``),
     else the mode's r."""
     if vt[0] * r[0] + vt[1] * r[1] > band:  # v_t·r [m/s]
-        return vt / np.sqrt(vt.dot(vt))
+        return vt / np.sqrt(vt[0] * vt[0] + vt[1] * vt[1])
     return r.copy()
 
 
 @njit(cache=True)
 def _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
     """The column tilt of each 2-D slide into A (in place); False where a slide from rest is inside the band.
-    tilt_i: [row r, φ's J_f offset, v_t's offset in o, launching]; tilt_f: [μ, r_mode (2)]; tilt_T: T (2, 3);
-    tilt_body: [A0's body rows; consts (2, nQ − nv)]."""
+    tilt_i: [row r, φ's J_f offset, v_t's offset in o, launching]; tilt_f: [μ, r_mode (2)]; tilt_T: T (2, 3) flat;
+    tilt_body: [A0's body rows, consts (2, nQ − nv)] flat."""
     for k in range(tilt_i.shape[0]):
         col, i_J, i_vt = nQ + tilt_i[k, 0], tilt_i[k, 1], tilt_i[k, 2]
         mu = tilt_f[k, 0]
@@ -57,11 +62,12 @@ def _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
         if tilt_i[k, 3] and not vt[0] * r[0] + vt[1] * r[1] > band:
             return False
         d = _slip_direction(vt, r, band)
-        g = mu * np.ascontiguousarray(phi[i_J:i_J + 3 * nv].reshape((3, nv)).T).dot(d.dot(tilt_T[k]))
+        g = mu * mtv(phi[i_J:i_J + 3 * nv].reshape((3, nv)), mtv(tilt_T[k].reshape((2, 3)), d))  # μ J_fᵀ Tᵀ d
         for i in range(nv):
             A[i, col] += g[i]
+        body = tilt_body[k].reshape((3, nQ - nv))
         for i in range(nQ - nv):
-            A[nv + i, col] = tilt_body[k, 0, i] + mu * (d[0] * tilt_body[k, 1, i] + d[1] * tilt_body[k, 2, i])
+            A[nv + i, col] = body[0, i] + mu * (d[0] * body[1, i] + d[1] * body[2, i])
     return True
 
 
@@ -91,32 +97,32 @@ def _impulse_rates(xd, z, o, rates_i, rates_f, band):
 
 
 @njit(cache=True)
-def call(phi, x, P_start, P_columns, P_values, D_ctl, ints, band, tilt_i, tilt_f, tilt_T, tilt_body, rates_i,
-         rates_f, x_d, v_d, a_d, set_points, R_tip, J6, drift6, axes, forced, kp, kd, tool_axis, target, ko, do,
-         k_null, kd_normal):
-    """(status, ẋ, z, o) of the module docstring, ẋ with the impulse states' rates. ints = [m, nQ, nv, i_h,
-    i_J, i_dr, i_p, o_y0, o_y1]: sizes and φ's offsets of H, h and the tip's J, J̇q̇, p (ṗ after it), ẏ's rows
-    in y; J6, drift6, R_tip: the tip's 6 Jacobian rows, J̇q̇ and its rotation (none without a tool axis); the
-    rest: P by its nonzeros (:func:`~contactdyn.linalg.sparse_rows`), :func:`_tilt`'s, :func:`_impulse_rates`' and
-    operational_law.torque's."""
-    m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1 = (ints[0], ints[1], ints[2], ints[3], ints[4], ints[5], ints[6],
-                                                   ints[7], ints[8])
+def call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6):
+    """(status, ẋ, z, o) of the module docstring, ẋ with the impulse states' rates. fb, ib: the plan's constants
+    (:func:`~contactdyn.plan_kernel.pack`, indices above); INTS: sizes and φ's offsets of h and the tip's J, J̇q̇,
+    p (ṗ after it), ẏ's rows in y; J6, drift6, R_tip: the tip's 6 Jacobian rows, J̇q̇ and its rotation (none
+    without a tool axis); x_d, v_d, a_d [m, m/s, m/s²] the reference (none without), F_d [N] the set-points."""
+    m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1 = _vec(ib, ib, INTS)
+    band, ko, do, k_null, kd_normal = _vec(fb, ib, SCALARS)
     m2 = m * m
-    y = sparse_dot(P_start, P_columns, P_values, phi)  # P φ
+    y = sparse_dot(_vec(ib, ib, P_ROW), _vec(ib, ib, P_COL), _vec(fb, ib, P_VAL), phi)  # P φ
     A = y[:m2].copy().reshape((m, m))
     b = y[m2:m2 + m].copy()
     o = y[m2 + m:]
     xd = np.empty(x.size)
-    if not _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
+    if not _tilt(A, o, phi, _mat(ib, ib, TILT_I), _mat(fb, ib, TILT_F), _mat(fb, ib, TILT_T), _mat(fb, ib, TILT_BODY),
+                 nQ, nv, band):
         return DECLINED, xd, b, o
-    H = np.ascontiguousarray(phi[:nv * nv].reshape((nv, nv)).T) + D_ctl  # φ holds H column by column
+    H = phi[:nv * nv].reshape((nv, nv)).T + _mat(fb, ib, D_CTL)  # φ holds H column by column
+    tool_axis = _vec(fb, ib, TOOL_AXIS)
     if tool_axis.size:
         J_tip, drift_tip = np.ascontiguousarray(J6), drift6
     else:
-        J_tip, drift_tip = np.ascontiguousarray(phi[i_J:i_J + 3 * nv]).reshape((3, nv)), phi[i_dr:i_dr + 3]
+        J_tip, drift_tip = np.ascontiguousarray(phi[i_J:i_J + 3 * nv].reshape((3, nv))), phi[i_dr:i_dr + 3]
     tau, ratio = law.torque(x[nQ:nQ + nv], H, phi[i_h:i_h + nv], J_tip, drift_tip, phi[i_p:i_p + 3],
-                            phi[i_p + 3:i_p + 6], x_d, v_d, a_d, set_points, np.ascontiguousarray(R_tip), axes,
-                            forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal)
+                            phi[i_p + 3:i_p + 6], x_d, v_d, a_d, set_points, np.ascontiguousarray(R_tip),
+                            _mat(fb, ib, AXES), _mat(fb, ib, FORCED), _vec(fb, ib, KP), _vec(fb, ib, KD), tool_axis,
+                            _vec(fb, ib, TARGET), ko, do, k_null, kd_normal)
     if not ratio >= SINGULAR:  # the readable law raises its error
         return DECLINED, xd, b, o
     b[:nv] += tau
@@ -126,7 +132,7 @@ def call(phi, x, P_start, P_columns, P_values, D_ctl, ints, band, tilt_i, tilt_f
     xd[:nQ] = x[nQ:2 * nQ]
     xd[nQ:2 * nQ] = z[:nQ]
     xd[2 * nQ:] = y[o_y0:o_y1]
-    _impulse_rates(xd, z, o, rates_i, rates_f, band)
+    _impulse_rates(xd, z, o, _mat(ib, ib, RATES_I), _mat(fb, ib, RATES_F), band)
     return OK, xd, z, o
 
 
@@ -146,17 +152,21 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     tf = plan.tip_frame
     fid = plan.fids[tf]
     off = m * m + m  # o's start in y
-    ints = np.array([m, nQ, nv, plan.i_h, plan.i_J[tf], plan.i_dr[tf], plan.i_e + plan.e_frame[tf],
-                     off + plan.o_y.start, off + plan.o_y.stop], dtype=np.int64)
-    D_ctl = np.zeros((nv, nv)) if s._D_ctl is None else np.ascontiguousarray(s._D_ctl, dtype=float)
-    tilt = _tilt_constants(plan)
+    ints = [m, nQ, nv, plan.i_h, plan.i_J[tf], plan.i_dr[tf], plan.i_e + plan.e_frame[tf], off + plan.o_y.start,
+            off + plan.o_y.stop]
+    D_ctl = np.zeros((nv, nv)) if s._D_ctl is None else s._D_ctl
+    tilt_i, tilt_f, tilt_T, tilt_body = _tilt_constants(plan)
+    rates_i, rates_f = _rates_constants(plan, impulses)
+    P = sparse.csr_matrix(plan.P)
+    axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
+    fb, ib = pack([P.data, D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd, tool_axis, target,
+                   [s.slip_band, ko, do, k_null, kd_normal]], [P.indices, P.indptr, ints, tilt_i, rates_i])
     ramps = [phase.forces[key] for key in ctl.force_keys]
     referenced, orient = phase.reference is not None, ctl.reads_orientation
     none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))
     placement, jacobian = pin.updateFramePlacement, pin.getFrameJacobian
     acceleration = pin.getFrameClassicalAcceleration
     lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    head = (*sparse_rows(plan.P), D_ctl, ints, float(s.slip_band), *tilt, *_rates_constants(plan, impulses))
 
     def kernel(t, x, phi):
         x_d, v_d, a_d = reference_at(s, phase, t, x) if referenced else (none, none, none)
@@ -166,7 +176,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
             J6, drift6 = jacobian(model, data, fid, lwa), acceleration(model, data, fid, lwa).vector
         else:
             R_tip, J6, drift6 = no_rotation, no_rows, none
-        status, xd, z, o = call(phi, x, *head, x_d, v_d, a_d, set_points, R_tip, J6, drift6, *ctl.constants)
+        status, xd, z, o = call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6)
         return None if status else (xd, z, o)
 
     kernel.rates = True
@@ -179,15 +189,14 @@ def _tilt_constants(plan) -> tuple:
     nQ, nv, nt = s.nQ, s.nv, len(plan.dyn_tilt)
     tilt_i = np.zeros((nt, 4), dtype=np.int64)
     tilt_f = np.zeros((nt, 3))
-    tilt_T = np.zeros((nt, 2, 3))
-    tilt_body = np.zeros((nt, 3, nQ - nv))
+    tilt_T = np.zeros((nt, 6))
+    tilt_body = np.zeros((nt, 3 * (nQ - nv)))
     for k, (r, ci, mu, T, consts, j) in enumerate(plan.dyn_tilt):
         mode = plan.modes[ci]
         tilt_i[k] = r, plan.i_J[j], plan.o_vt[s.contacts[ci].name].start, launching(mode)
         tilt_f[k] = mu, *mode.slip
-        tilt_T[k] = T
-        tilt_body[k, 0] = plan.A0[nv:nQ, nQ + r]
-        tilt_body[k, 1:] = consts
+        tilt_T[k] = T.ravel()
+        tilt_body[k] = np.concatenate((plan.A0[nv:nQ, nQ + r], consts.ravel()))
     return tilt_i, tilt_f, tilt_T, tilt_body
 
 

@@ -27,7 +27,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..linalg import cholesky, forward_solve, lu_solve
+from ..linalg import cholesky, forward_solve, lu_solve, mm, mtm, mtv, mv
 
 __all__ = ["perpendicular", "hadamard_ratio", "torque"]
 
@@ -67,15 +67,12 @@ def _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, k
     k, nf = axes.shape[0], forced.shape[0]
     a_task = np.zeros(k + nf)
     f = np.empty(k + nf)
-    for i in range(k):
-        n = axes[i]
-        if x_d.size:
-            a_task[i] = n.dot(a_d)
-            f[i] = kp[i] * n.dot(x_d - p_tip) + kd[i] * n.dot(v_d - v_tip)
-        else:
-            f[i] = -kd[i] * n.dot(v_tip)
-    for i in range(nf):
-        f[k + i] = -set_points[i] - kd_normal * forced[i].dot(v_tip)
+    if x_d.size:
+        a_task[:k] = mv(axes, a_d)
+        f[:k] = kp * mv(axes, x_d - p_tip) + kd * mv(axes, v_d - v_tip)
+    else:
+        f[:k] = -kd * mv(axes, v_tip)
+    f[k:] = -set_points - kd_normal * mv(forced, v_tip)
     return a_task, f
 
 
@@ -97,21 +94,21 @@ def torque(v, H, h, J_tip, drift_tip, p_tip, v_tip, x_d, v_d, a_d, set_points, R
     f = np.zeros(m)
     f[:nS] = f_pos
     if tool_axis.size:
-        a = R_tip.dot(tool_axis)  # current tool direction (world)
+        a = mv(R_tip, tool_axis)  # current tool direction (world)
         e1, e2 = perpendicular(a)
         W[nS, 3:] = e1
         W[nS + 1, 3:] = e2
-        w = ko * np.cross(a, target) - do * J_tip[3:].dot(v)  # [rad/s²]
-        a_task[nS] = e1.dot(w)
-        a_task[nS + 1] = e2.dot(w)
-    Jt = W.dot(J_tip)
-    rhs = a_task - W.dot(drift_tip)
+        w = ko * np.cross(a, target) - do * mv(J_tip[3:], v)  # [rad/s²]
+        a_task[nS] = (e1 * w).sum()
+        a_task[nS + 1] = (e2 * w).sum()
+    Jt = mm(W, J_tip)
+    rhs = a_task - mv(W, drift_tip)
     if k_null > 0.0:
-        rhs += k_null * Jt.dot(v)
+        rhs += k_null * mv(Jt, v)
     Y = forward_solve(cholesky(H), np.ascontiguousarray(Jt.T))  # L⁻¹ J_tᵀ, H = L Lᵀ
-    L_inv = Y.T.dot(Y)  # Λ⁻¹ = J_t H⁻¹ J_tᵀ
+    L_inv = mtm(Y, Y)  # Λ⁻¹ = J_t H⁻¹ J_tᵀ
     ft = lu_solve(L_inv, rhs) + f  # Λ (a* − J̇_t q̇ + k_null ẋ_t) + f
-    tau = Jt.T.dot(ft) + h
+    tau = mtv(Jt, ft) + h
     if k_null > 0.0:
-        tau -= k_null * H.dot(v)
+        tau -= k_null * mv(H, v)
     return tau, hadamard_ratio(L_inv)
