@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from contactdyn.linalg import lu_solve, pinv
+from contactdyn.linalg import cholesky, forward_solve, lu_solve, pinv, sparse_dot
 from contactdyn.rhsplan import _PLANS
 from contactdyn.robot import Robot
 from contactdyn.scene import load_scene, parse_scene
@@ -44,6 +44,27 @@ def test_lu_solve_is_a_solve_and_nan_when_singular():
         A, b = rng.normal(size=(n, n)), rng.normal(size=n)
         assert np.allclose(A @ lu_solve(A, b), b, rtol=0.0, atol=1e-11 * np.abs(A).max() * (1 + np.abs(b).max()))
     assert np.all(np.isnan(lu_solve(np.array([[1.0, 2.0], [2.0, 4.0]]), np.ones(2))))
+
+
+def test_cholesky_forward_solve_and_the_sparse_product():
+    """L Lᵀ = A and L Y = B to round-off, nan for an indefinite A; P x over P's nonzeros (scipy's CSR) is P x."""
+    from scipy import sparse
+
+    rng = np.random.default_rng(6)
+    for n in (1, 4, 7):
+        B = rng.normal(size=(n, n))
+        A = B @ B.T + 0.1 * np.eye(n)
+        L = cholesky(A)
+        assert np.allclose(np.tril(L), L) and np.allclose(L @ L.T, A, rtol=0, atol=1e-13 * np.abs(A).max())
+        R = rng.normal(size=(n, 3))
+        assert np.allclose(L @ forward_solve(L, R), R, rtol=0, atol=1e-12 * (1 + np.abs(R).max()))
+    assert np.all(np.isnan(cholesky(np.array([[1.0, 2.0], [2.0, 1.0]]))))
+    P = rng.normal(size=(30, 20)) * (rng.random((30, 20)) < 0.1)
+    P[4] = 0.0  # an empty row
+    x = rng.normal(size=20)
+    S = sparse.csr_matrix(P)
+    assert np.allclose(sparse_dot(S.indptr.astype(np.int64), S.indices.astype(np.int64), S.data, x), P @ x,
+                       rtol=0, atol=1e-14)
 
 
 def _mode_at(scene, at: float):
@@ -132,3 +153,16 @@ def test_operational_kernel_is_the_readable_model_on_the_writers(name):
     for plan in plans:
         t, x = plan.ring[3][0], plan.ring[3][1].copy()
         _assert_kernel_is_the_readable_model(system, plan, t, x)
+
+
+def test_operational_kernel_declines_a_slide_from_rest_inside_the_stick_band():
+    """At rest (|v_t| = 0 ≤ v_ε) the launch direction is the readable rule's (launch_directions' Newton): the kernel
+    declines, and the plan's call (that rule on its own KKT system) still equals System.evaluate."""
+    system = System(load_scene("case2_writer5dof", {"duration": 0.8}))
+    run_system(system)
+    plan = next(p for p in _PLANS[system].values() if any(m.from_rest and not m.stuck for m in p.modes))
+    t, x = plan.ring[3][0], plan.ring[3][1].copy()
+    x[system.nQ:2 * system.nQ] = 0.0  # robot and surface at rest: no slip
+    assert plan.kernel is not None and plan.kernel(t, x, plan.phi_at(t, x)) is None
+    ref = system.evaluate(t, x, plan.modes, plan.phase).xdot
+    assert np.allclose(plan.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * (1.0 + np.abs(ref).max()))
