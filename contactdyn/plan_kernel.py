@@ -92,8 +92,9 @@ def fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ):
 
 
 @njit(cache=True)
-def call(phi, x, u, fb, ib):
-    """(status, ẋ, z, o) of the module docstring; fb, ib: the plan's constants (:func:`pack`). INTS: sizes
+def call(phi, x, u, fb, ib, out):
+    """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (τ: the solved joint
+    command [N·m or N; V], what the drives make of it); fb, ib: the plan's constants (:func:`pack`). INTS: sizes
     and offsets (zs the ż rows of M u, −1 none; x_z0:x_z1 the law's states in x and ẋ; tip the tip's p, ṗ in
     φ; u_f, u_z the forces and z in u; w0 the frame forces in z); FRAMES: each frame's J offset in φ;
     FORCES: o's measured forces in u's order; COLS: the folded columns of A (the rows' λ, then a carrying
@@ -134,43 +135,70 @@ def call(phi, x, u, fb, ib):
             B[i, reach[k]] += A[i, nQ + reach[k]]
     cols = _vec(ib, ib, COLS)
     z, y0, Y = fold_solve(A, b, _mat(fb, ib, L_), _mat(fb, ib, L_TAU), tau, x, B, cols, nQ)
-    xd = np.empty(x.size)
     if not np.isfinite(z.dot(z)):
-        return DECLINED, xd, z, o
+        return DECLINED
     folded = z[cols]
     if n_lim and np.abs(y0[nQ:] + mv(Y[nQ:], folded)).max() > 1.0:
-        return DECLINED, xd, z, o
+        return DECLINED
+    n = x.size
+    xd, z_out, o_out = out[:n], out[n:n + m], out[n + m:n + m + o.size]
     xd[:nQ] = x[nQ:2 * nQ]
     xd[nQ:2 * nQ] = z[:nQ]
     xd[2 * nQ:] = y[o_y0:o_y1]
     if zs >= 0:
         xd[x_z0:x_z1] = targets[zs:] + mv(_mat(fb, ib, D_Z), folded)
-    return OK, xd, z, o
+    z_out[:] = z
+    o_out[:] = o
+    out[n + m + o.size:] = tau + mv(B, folded)
+    return OK
 
 
 def kernel_of(plan, meta: list, reach: list[int] | None):
     """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (a clip, a singular solve,
-    the law's M not read yet); None where the plan's mode is not one :func:`call` covers: a force-reading tip
-    law by its matrix through compiled drives, no sliding friction, no slide launching from rest, and the rows'
-    reach beyond the robot constant (``reach``, plan_fold's). ``meta``: the rows as
-    the law's ``row_columns`` reads them."""
+    the law's M not read yet); ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of the output's samples, or None
+    where one declines. None where the plan's mode is not one :func:`call` covers: a force-reading tip law by
+    its matrix through compiled drives, no sliding friction, no slide launching from rest, and the rows' reach
+    beyond the robot constant (``reach``, plan_fold's). ``meta``: the rows as the law's ``row_columns``
+    reads them."""
     ctl = compiled_law(plan)
     covered = (isinstance(ctl, CompiledLaw) and ctl.reason is None and plan.compiled_drives is not None
                and plan.friction_terms is None and plan.launch is None and (reach is not None or not plan.nr))
     if not covered:
         return None
+    s = plan.system
+    n, m, no = s.n, plan.m, plan.P.shape[0] - plan.m * (plan.m + 1)
+    size = n + m + no + s.nv
     constants = None
 
-    def kernel(t, x, phi):
+    def ready() -> bool:
         nonlocal constants
-        if constants is None:
-            if ctl.M is None:
-                return None
+        if constants is None and ctl.M is not None:
             constants = _constants(plan, ctl, meta, reach or [], plan_inputs(plan, ctl))
-        inputs, (fb, ib) = constants
-        status, xd, z, o = call(phi, x, inputs(t, x, phi, None), fb, ib)
-        return None if status else (xd, z, o)
+        return constants is not None
 
+    def kernel(t, x, phi):
+        if not ready():
+            return None
+        inputs, (fb, ib) = constants
+        out = np.empty(size)
+        if call(phi, x, inputs(t, x, phi, None), fb, ib, out):
+            return None
+        return out[:n], out[n:n + m], out[n + m:n + m + no]
+
+    def samples(ts, X):
+        if not ready():
+            return None
+        inputs, (fb, ib) = constants
+        N = len(ts)
+        tv = plan.time_terms.at_times(ts)
+        Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
+        for k in range(N):
+            Phi[k] = phi = plan.phi_at(ts[k], X[k], tv[k])
+            if call(phi, X[k], inputs(ts[k], X[k], phi, None), fb, ib, out[k]):
+                return None
+        return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]
+
+    kernel.samples = samples
     return kernel
 
 
