@@ -33,9 +33,9 @@ __all__ = ["fold_solve", "kernel_of", "call"]
 OK, DECLINED = 0, 1  #: :func:`call`'s status
 #: the constants of a plan's call, packed by :func:`pack` into one float and one int buffer (two arguments: a
 #: compiled function's call costs ~0.06 µs per argument): float arrays, then int arrays, by these indices
-P_VAL, M_, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL = range(10)  # floats (P: CSR values)
-P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(10, 17)  # ints (P: CSR columns, row starts)
-#: INTS: m nQ nv i_h i_J i_dr tip u_f u_z zs swap n_lim o_y0 o_y1 x_z0 x_z1 w0 (see :func:`call`)
+P_VAL, M_, U_X, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL = range(11)  # floats (P: CSR values)
+P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(11, 18)  # ints (P: CSR columns, row starts)
+#: INTS: m nQ nv i_h i_J i_dr tip u_f zs swap n_lim o_y0 o_y1 x_z0 x_z1 w0 (see :func:`call`)
 
 
 def pack(floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
@@ -92,13 +92,15 @@ def fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ):
 
 
 @njit(cache=True)
-def call(phi, x, u, fb, ib):
-    """(status, ẋ, z, o) of the module docstring; fb, ib: the plan's constants (:func:`pack`). INTS: sizes
-    and offsets (zs the ż rows of M u, −1 none; x_z0:x_z1 the law's states in x and ẋ; tip the tip's p, ṗ in
-    φ; u_f, u_z the forces and z in u; w0 the frame forces in z); FRAMES: each frame's J offset in φ;
+def call(phi, x, u, fb, ib, out):
+    """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (τ: the solved joint
+    command [N·m or N; V], what the drives make of it); fb, ib: the plan's constants (:func:`pack`); u: the
+    law's inputs' time part (plan_law.plan_inputs), U_X its state part's map. INTS: sizes and offsets (zs the
+    ż rows of M u, −1 none; x_z0:x_z1 the law's states in x and ẋ; tip the tip's p, ṗ in φ; u_f the forces in
+    u; w0 the frame forces in z); FRAMES: each frame's J offset in φ;
     FORCES: o's measured forces in u's order; COLS: the folded columns of A (the rows' λ, then a carrying
     body's Q̈_b), with D_A, D_F, D_Z per column; REACH: the rows whose A column beyond the robot joins B."""
-    m, nQ, nv, i_h, i_J, i_dr, tip, u_f, u_z, zs, swap, n_lim, o_y0, o_y1, x_z0, x_z1, w0 = _vec(ib, ib, INTS)
+    m, nQ, nv, i_h, i_J, i_dr, tip, u_f, zs, swap, n_lim, o_y0, o_y1, x_z0, x_z1, w0 = _vec(ib, ib, INTS)
     m2 = m * m
     p_val, p_col, p_row = _vec(fb, ib, P_VAL), _vec(ib, ib, P_COL), _vec(ib, ib, P_ROW)
     y = np.empty(p_row.size - 1)  # y = P φ, P sparse by rows
@@ -110,12 +112,13 @@ def call(phi, x, u, fb, ib):
     A = y[:m2].copy().reshape((m, m))
     b = y[m2:m2 + m].copy()
     o = y[m2 + m:]
-    u[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
+    U = _mat(fb, ib, U_X)  # [U_x, u_c]: the law's inputs' state part
+    uu = u + mv(U[:, :x.size], x) + U[:, x.size]
+    uu[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
     forces = _vec(ib, ib, FORCES)
     for k in range(forces.size):
-        u[u_f + k] = o[forces[k]]
-    u[u_z:u_z + x_z1 - x_z0] = x[x_z0:x_z1]  # the law's states z
-    targets = mv(_mat(fb, ib, M_), u)
+        uu[u_f + k] = o[forces[k]]
+    targets = mv(_mat(fb, ib, M_), uu)
     H = phi[:nv * nv].reshape((nv, nv)).T + _mat(fb, ib, D_CTL)  # φ holds H column by column
     J = phi[i_J:i_J + 3 * nv].reshape((3, nv))
     tau_c = np.zeros(nv)
@@ -134,43 +137,70 @@ def call(phi, x, u, fb, ib):
             B[i, reach[k]] += A[i, nQ + reach[k]]
     cols = _vec(ib, ib, COLS)
     z, y0, Y = fold_solve(A, b, _mat(fb, ib, L_), _mat(fb, ib, L_TAU), tau, x, B, cols, nQ)
-    xd = np.empty(x.size)
     if not np.isfinite(z.dot(z)):
-        return DECLINED, xd, z, o
+        return DECLINED
     folded = z[cols]
     if n_lim and np.abs(y0[nQ:] + mv(Y[nQ:], folded)).max() > 1.0:
-        return DECLINED, xd, z, o
+        return DECLINED
+    n = x.size
+    xd, z_out, o_out = out[:n], out[n:n + m], out[n + m:n + m + o.size]
     xd[:nQ] = x[nQ:2 * nQ]
     xd[nQ:2 * nQ] = z[:nQ]
     xd[2 * nQ:] = y[o_y0:o_y1]
     if zs >= 0:
         xd[x_z0:x_z1] = targets[zs:] + mv(_mat(fb, ib, D_Z), folded)
-    return OK, xd, z, o
+    z_out[:] = z
+    o_out[:] = o
+    out[n + m + o.size:] = tau + mv(B, folded)
+    return OK
 
 
 def kernel_of(plan, meta: list, reach: list[int] | None):
     """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (a clip, a singular solve,
-    the law's M not read yet); None where the plan's mode is not one :func:`call` covers: a force-reading tip
-    law by its matrix through compiled drives, no sliding friction, no slide launching from rest, and the rows'
-    reach beyond the robot constant (``reach``, plan_fold's). ``meta``: the rows as
-    the law's ``row_columns`` reads them."""
+    the law's M not read yet); ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of the output's samples, or None
+    where one declines. None where the plan's mode is not one :func:`call` covers: a force-reading tip law by
+    its matrix through compiled drives, no sliding friction, no slide launching from rest, and the rows' reach
+    beyond the robot constant (``reach``, plan_fold's). ``meta``: the rows as the law's ``row_columns``
+    reads them."""
     ctl = compiled_law(plan)
     covered = (isinstance(ctl, CompiledLaw) and ctl.reason is None and plan.compiled_drives is not None
                and plan.friction_terms is None and plan.launch is None and (reach is not None or not plan.nr))
     if not covered:
         return None
+    s = plan.system
+    n, m, no = s.n, plan.m, plan.P.shape[0] - plan.m * (plan.m + 1)
+    size = n + m + no + s.nv
     constants = None
 
-    def kernel(t, x, phi):
+    def ready() -> bool:
         nonlocal constants
-        if constants is None:
-            if ctl.M is None:
-                return None
+        if constants is None and ctl.M is not None:
             constants = _constants(plan, ctl, meta, reach or [], plan_inputs(plan, ctl))
-        inputs, (fb, ib) = constants
-        status, xd, z, o = call(phi, x, inputs(t, x, phi, None), fb, ib)
-        return None if status else (xd, z, o)
+        return constants is not None
 
+    def kernel(t, x, phi):
+        if not ready():
+            return None
+        inputs, (fb, ib) = constants
+        out = np.empty(size)
+        if call(phi, x, inputs.time_part(t), fb, ib, out):
+            return None
+        return out[:n], out[n:n + m], out[n + m:n + m + no]
+
+    def samples(ts, X):
+        if not ready():
+            return None
+        inputs, (fb, ib) = constants
+        N = len(ts)
+        tv = plan.time_terms.at_times(ts)
+        Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
+        for k in range(N):
+            Phi[k] = phi = plan.phi_at(ts[k], X[k], tv[k])
+            if call(phi, X[k], inputs.time_part(ts[k]), fb, ib, out[k]):
+                return None
+        return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]
+
+    kernel.samples = samples
     return kernel
 
 
@@ -191,10 +221,10 @@ def _constants(plan, ctl, meta, reach, inputs) -> tuple:
         cols.append(i_b)
     none = np.empty((0, len(cols)))
     P = sparse.csr_matrix(plan.P)
-    ints = [m, nQ, nv, plan.i_h, plan.i_J[tf], plan.i_dr[tf], inputs.tip, ctl.i_forces, inputs.i_z,
+    ints = [m, nQ, nv, plan.i_h, plan.i_J[tf], plan.i_dr[tf], inputs.tip, ctl.i_forces,
             ctl.zs.start if ctl.zs is not None else -1, int(ctl.swap), len(drives.limited),
             off + plan.o_y.start, off + plan.o_y.stop, plan.z_slice.start, plan.z_slice.stop, nQ + nr]
     D_ctl = s._D_ctl if s._D_ctl is not None else np.zeros((nv, nv))
-    floats = [P.data, ctl.M, drives.L, drives.L_tau, D_a, none if D_f is None else D_f, none if D_z is None else D_z,
-              law._rotor_c, D_ctl, [law.config.k_null]]
+    floats = [P.data, ctl.M, inputs.state_map(), drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
+              none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null]]
     return inputs, pack(floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach])

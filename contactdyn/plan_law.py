@@ -179,12 +179,15 @@ def compiled_law(plan):
 def plan_inputs(plan, law: CompiledLaw):
     """inputs(t, x, φ, o) -> u: :meth:`CompiledLaw.inputs` read from the plan's own slots (the tip's p and ṗ
     in φ's e, the forces in o, z in x) and the phase's reference, ramps and surfaces, without a ControlInput
-    (the values the plan's ControlInput carries, :func:`~contactdyn.plan_rhs.controller_input`). u is one
-    buffer, rewritten per call. With o = None only the reference, ramps and surfaces are written: the tip
-    (φ[inputs.tip:+6]), the forces (o[inputs.forces]) and z (x[inputs.z], into u[inputs.i_z:-1]) are the
-    caller's."""
+    (the values the plan's ControlInput carries, :func:`~contactdyn.plan_rhs.controller_input`).
+
+    u = time part + state part + the tip and the forces: ``inputs.time_part(t)`` (the reference's moves and
+    the ramps; one buffer, rewritten per call) and ``inputs.state_part(x)`` (affine in x: a carrying body's
+    offset of the reference, surfaces on bodies, z), so a compiled call (:mod:`contactdyn.plan_kernel`) can
+    take the state part as a matrix (``inputs.state_map()``: [U_x, u_c], u's state part = U_x x + u_c) and
+    the tip (φ[inputs.tip:+6]) and forces (o[inputs.forces]) by index."""
     s, phase = plan.system, plan.phase
-    nQ = s.nQ
+    nQ, n = s.nQ, s.n
     tip = plan.i_e + plan.e_frame[plan.tip_frame]
     o_index = {c.name: plan.o_Fint.start + i for i, c in enumerate(s.contacts)}
     o_index.update({key: sl.start for key, sl in plan.o_iface.items()})
@@ -200,26 +203,19 @@ def plan_inputs(plan, law: CompiledLaw):
     z = slice(2 * nQ + phase.z_slice.start, 2 * nQ + phase.z_slice.stop)
     u = np.zeros(law.nu)
     u[-1] = 1.0
-    # written once where they cannot change within the mode: a reference without moves on no body, surfaces
-    # on the ground (Contact.body_index < 0)
-    moving_ref = law.ref and (phase.reference.moves or phase.carrier is not None)
-    if law.ref and not moving_ref:
-        u[6:15] = np.concatenate(reference_at(s, phase, phase.t_start, np.zeros(s.n)))
+    # written once where they cannot change within the mode: a reference without moves, surfaces on the ground
+    # (Contact.body_index < 0)
+    moves = law.ref and bool(phase.reference.moves)
+    if law.ref and not moves:
+        u[6:15] = np.concatenate(phase.reference.at(phase.t_start))
     surfaces_move = any(c.body_index >= 0 for c in s.contacts)
     if not surfaces_move:
-        _write_surfaces(u, i_surf, surface_points(s, np.zeros(s.n), modes))
+        _write_surfaces(u, i_surf, surface_points(s, np.zeros(n), modes))
+    carrier = phase.carrier if law.ref else None
 
-    def inputs(t, x, phi, o):
-        if o is None:  # the parts read off φ, o and x by index are the caller's (contactdyn.plan_kernel)
-            return varying(t, x)
-        u[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
-        u[i_f:i_set] = o[i_forces]  # measured forces [N]
-        u[i_z:-1] = x[z]
-        return varying(t, x)
-
-    def varying(t, x):
-        if moving_ref:
-            x_d, v_d, a_d = reference_at(s, phase, t, x)
+    def time_part(t):
+        if moves:
+            x_d, v_d, a_d = phase.reference.at(t)  # (a carrying body's offset: the state part)
             u[6:9] = x_d
             u[9:12] = v_d
             u[12:15] = a_d
@@ -227,11 +223,28 @@ def plan_inputs(plan, law: CompiledLaw):
         for ramp in ramps:  # F_d [N], Ḟ_d [N/s]
             u[j:j + 2] = ramp.at(t)
             j += 2
-        if surfaces_move:
-            _write_surfaces(u, i_surf, surface_points(s, x, modes))
         return u
 
-    inputs.tip, inputs.forces, inputs.i_z, inputs.z = tip, i_forces, i_z, z  #: where o = None leaves u to the caller
+    def state_part(x):
+        v = np.zeros(law.nu)
+        if carrier is not None:  # the reference carried by a body: its origin and velocity along the axis
+            i, axis = carrier
+            v[6:9] = axis * x[i]
+            v[9:12] = axis * x[nQ + i]
+        if surfaces_move:
+            _write_surfaces(v, i_surf, surface_points(s, x, modes))
+        v[i_z:-1] = x[z]
+        return v
+
+    def inputs(t, x, phi, o):
+        out = time_part(t) + state_part(x)
+        out[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
+        out[i_f:i_set] = o[i_forces]  # measured forces [N]
+        return out
+
+    inputs.time_part, inputs.state_part = time_part, state_part
+    inputs.state_map = lambda: affine_map(lambda e: state_part(e[:n]), n + 1)
+    inputs.tip, inputs.forces = tip, i_forces
     return inputs
 
 

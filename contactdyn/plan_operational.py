@@ -97,8 +97,9 @@ def _impulse_rates(xd, z, o, rates_i, rates_f, band):
 
 
 @njit(cache=True)
-def call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6):
-    """(status, ẋ, z, o) of the module docstring, ẋ with the impulse states' rates. fb, ib: the plan's constants
+def call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6, out):
+    """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (ẋ with the impulse states'
+    rates, τ the law's command [N·m or N], as plan_kernel.call's ``out``). fb, ib: the plan's constants
     (:func:`~contactdyn.plan_kernel.pack`, indices above); INTS: sizes and φ's offsets of h and the tip's J, J̇q̇,
     p (ṗ after it), ẏ's rows in y; J6, drift6, R_tip: the tip's 6 Jacobian rows, J̇q̇ and its rotation (none
     without a tool axis); x_d, v_d, a_d [m, m/s, m/s²] the reference (none without), F_d [N] the set-points."""
@@ -109,10 +110,9 @@ def call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6):
     A = y[:m2].copy().reshape((m, m))
     b = y[m2:m2 + m].copy()
     o = y[m2 + m:]
-    xd = np.empty(x.size)
     if not _tilt(A, o, phi, _mat(ib, ib, TILT_I), _mat(fb, ib, TILT_F), _mat(fb, ib, TILT_T), _mat(fb, ib, TILT_BODY),
                  nQ, nv, band):
-        return DECLINED, xd, b, o
+        return DECLINED
     H = phi[:nv * nv].reshape((nv, nv)).T + _mat(fb, ib, D_CTL)  # φ holds H column by column
     tool_axis = _vec(fb, ib, TOOL_AXIS)
     if tool_axis.size:
@@ -124,20 +124,26 @@ def call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6):
                             _mat(fb, ib, AXES), _mat(fb, ib, FORCED), _vec(fb, ib, KP), _vec(fb, ib, KD), tool_axis,
                             _vec(fb, ib, TARGET), ko, do, k_null, kd_normal)
     if not ratio >= SINGULAR:  # the readable law raises its error
-        return DECLINED, xd, b, o
+        return DECLINED
     b[:nv] += tau
     z = lu_solve(A, b)
     if not np.isfinite(z.dot(z)):
-        return DECLINED, xd, z, o
+        return DECLINED
+    n = x.size
+    xd = out[:n]
     xd[:nQ] = x[nQ:2 * nQ]
     xd[nQ:2 * nQ] = z[:nQ]
     xd[2 * nQ:] = y[o_y0:o_y1]
     _impulse_rates(xd, z, o, _mat(ib, ib, RATES_I), _mat(fb, ib, RATES_F), band)
-    return OK, xd, z, o
+    out[n:n + m] = z
+    out[n + m:n + m + o.size] = o
+    out[n + m + o.size:] = tau
+    return OK
 
 
 def operational_kernel_of(plan, impulses: list[tuple]):
-    """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (see the module); None where
+    """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (see the module);
+    ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of the output's samples, or None where one declines. None where
     the plan's mode is not one :func:`call` covers: the operational_space law, no drives, no Coulomb force with
     a known normal force, no carried reference (2-D slides on normal rows and slides from rest are covered).
     ``impulses``: the plan's :func:`~contactdyn.plan_rhs.impulse_terms`, whose rates the kernel writes into ẋ
@@ -168,17 +174,35 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     acceleration = pin.getFrameClassicalAcceleration
     lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
-    def kernel(t, x, phi):
-        x_d, v_d, a_d = reference_at(s, phase, t, x) if referenced else (none, none, none)
-        set_points = np.array([ramp.at(t)[0] for ramp in ramps])  # F_d [N]
-        if orient:  # Pinocchio's data is at φ's state
-            R_tip = placement(model, data, fid).rotation
-            J6, drift6 = jacobian(model, data, fid, lwa), acceleration(model, data, fid, lwa).vector
-        else:
-            R_tip, J6, drift6 = no_rotation, no_rows, none
-        status, xd, z, o = call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6)
-        return None if status else (xd, z, o)
+    n, no = s.n, plan.P.shape[0] - m * (m + 1)
+    size = n + m + no + nv
 
+    def inputs(t, x):
+        """The call's per-call inputs at (t, x): the reference, F_d [N], the tip's R, J (6 rows), J̇q̇ (6)."""
+        x_d, v_d, a_d = reference_at(s, phase, t, x) if referenced else (none, none, none)
+        set_points = np.array([ramp.at(t)[0] for ramp in ramps])
+        if not orient:
+            return x_d, v_d, a_d, set_points, no_rotation, no_rows, none
+        return (x_d, v_d, a_d, set_points, placement(model, data, fid).rotation,  # Pinocchio's data is at x
+                jacobian(model, data, fid, lwa), acceleration(model, data, fid, lwa).vector)
+
+    def kernel(t, x, phi):
+        out = np.empty(size)
+        if call(phi, x, fb, ib, *inputs(t, x), out):
+            return None
+        return out[:n], out[n:n + m], out[n + m:n + m + no]
+
+    def samples(ts, X):
+        N = len(ts)
+        tv = plan.time_terms.at_times(ts)
+        Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
+        for k in range(N):
+            Phi[k] = phi = plan.phi_at(ts[k], X[k], tv[k])
+            if call(phi, X[k], fb, ib, *inputs(ts[k], X[k]), out[k]):
+                return None
+        return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]
+
+    kernel.samples = samples
     kernel.rates = True
     return kernel
 

@@ -121,9 +121,26 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     S = Samples(N, plan.system)
     if N == 0:
         return S
-    folds = getattr(plan, "folded_detail", None) is not None  # the call folds the command into its solve
-    _read_out(plan, S, ts, X, *(_solve_folded_samples if folds else _solve_samples)(plan, ts, X))
+    solved = _kernel_samples(plan, ts, X) if getattr(plan, "kernel", None) is not None else None
+    if solved is None:
+        folds = getattr(plan, "folded_detail", None) is not None  # the call folds the command into its solve
+        solved = (_solve_folded_samples if folds else _solve_samples)(plan, ts, X)
+    _read_out(plan, S, ts, X, *solved)
     return S
+
+
+def _kernel_samples(plan, ts: np.ndarray, X: np.ndarray):
+    """As :func:`_solve_samples`, by the plan's compiled call per sample (:mod:`contactdyn.plan_kernel`,
+    :mod:`contactdyn.plan_operational`); None where a sample's call declines (a clipping voltage, a slide from
+    rest inside the stick band: the batched paths then, with the readable law there)."""
+    got = plan.kernel.samples(ts, X)
+    if got is None:
+        return None
+    Phi, O, Z, tau = got
+    nv = plan.system.nv
+    J_all = [Phi[:, i:i + 3 * nv].reshape(len(ts), 3, nv) for i in plan.i_J]
+    drives = plan.compiled_drives
+    return Phi, O, Z, J_all, tau, {}, None if drives is None else _drive_samples(drives, X, tau)
 
 
 def plan_derivatives(plan):
