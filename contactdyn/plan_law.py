@@ -33,8 +33,10 @@ from .constraints import force_columns
 from .controllers import ControlInput
 from .controllers.operational import OperationalSpace
 from .dynamics import surface_keys, surface_points
+from .linalg import mv
 from .phases import reference_at
 from .plan_probe import affine_map
+from .trajectory import profile
 
 __all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "plan_command", "plan_commands", "operational_command"]
 
@@ -212,13 +214,11 @@ def plan_inputs(plan, law: CompiledLaw):
     if not surfaces_move:
         _write_surfaces(u, i_surf, surface_points(s, np.zeros(n), modes))
     carrier = phase.carrier if law.ref else None
+    reference = _reference_rows(phase.reference) if moves else None
 
     def time_part(t):
-        if moves:
-            x_d, v_d, a_d = phase.reference.at(t)  # (a carrying body's offset: the state part)
-            u[6:9] = x_d
-            u[9:12] = v_d
-            u[12:15] = a_d
+        if moves:  # (a carrying body's offset: the state part)
+            u[6:15] = reference(t)
         j = i_set
         for ramp in ramps:  # F_d [N], Ḟ_d [N/s]
             u[j:j + 2] = ramp.at(t)
@@ -246,6 +246,32 @@ def plan_inputs(plan, law: CompiledLaw):
     inputs.state_map = lambda: affine_map(lambda e: state_part(e[:n]), n + 1)
     inputs.tip, inputs.forces = tip, i_forces
     return inputs
+
+
+def _reference_rows(reference):
+    """rows(t) -> [x_d, ẋ_d, ẍ_d] (9,) of a task-space reference [m, m/s, m/s²]: Reference.at's sum
+    start + Σ_k (σ_k, σ'_k/T_k, σ''_k/T_k²) ⊗ Δ_k as one product R w over the moves' profiles w (the same
+    sums in the same order, ~1 µs against ~2 µs per move); Reference.at itself where a move is a circle."""
+    if any(m.kind == "circle" for m in reference.moves):
+        return lambda t: np.concatenate(reference.at(t))
+    K = len(reference.moves)
+    R = np.zeros((9, 1 + 3 * K))
+    R[0:3, 0] = reference.start
+    for k, m in enumerate(reference.moves):
+        R[0:3, 1 + 3 * k], R[3:6, 2 + 3 * k], R[6:9, 3 + 3 * k] = m.delta, m.delta, m.delta
+    w = np.zeros(1 + 3 * K)
+    w[0] = 1.0
+    moves = [(m.kind, m.start, m.duration, m.accel_fraction) for m in reference.moves]
+
+    def rows(t):
+        for k, (kind, start, duration, af) in enumerate(moves):
+            s, ds, dds = profile(kind, (t - start) / duration, af)
+            w[1 + 3 * k] = s
+            w[2 + 3 * k] = ds / duration
+            w[3 + 3 * k] = dds / duration**2
+        return mv(R, w)
+
+    return rows
 
 
 def _write_surfaces(u: np.ndarray, j: int, points: list) -> None:
