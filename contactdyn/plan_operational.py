@@ -30,7 +30,6 @@ from .controllers import operational_law as law
 from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
 from .linalg import lu_solve, mtv, sparse_dot
-from .phases import reference_at
 from .plan_kernel import _mat, _vec, pack
 
 __all__ = ["call", "operational_kernel_of"]
@@ -177,10 +176,14 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     n, no = s.n, plan.P.shape[0] - m * (m + 1)
     size = n + m + no + nv
 
+    set_points = np.empty(len(ramps))  # F_d [N], rewritten per call
+    reference = phase.reference.at if referenced else None  # (no carrier: reference_at is the reference's at)
+
     def inputs(t, x):
         """The call's per-call inputs at (t, x): the reference, F_d [N], the tip's R, J (6 rows), J̇q̇ (6)."""
-        x_d, v_d, a_d = reference_at(s, phase, t, x) if referenced else (none, none, none)
-        set_points = np.array([ramp.at(t)[0] for ramp in ramps])
+        x_d, v_d, a_d = reference(t) if referenced else (none, none, none)
+        for k, ramp in enumerate(ramps):
+            set_points[k] = ramp.at(t)[0]
         if not orient:
             return x_d, v_d, a_d, set_points, no_rotation, no_rows, none
         return (x_d, v_d, a_d, set_points, placement(model, data, fid).rotation,  # Pinocchio's data is at x
