@@ -1,21 +1,24 @@
-"""A plan's call after Pinocchio, compiled: a dynamic tip law through the drives, folded or not.
+"""A plan's call after Pinocchio, compiled: the controller's command through the drives, folded or not.
 
-For a mode whose controller is a force-reading tip law read off as a matrix M
-(:mod:`contactdyn.plan_law`) and whose drives are a matrix L (:mod:`contactdyn.plan_drives`),
-everything a call does after φ is small dense algebra:
+For a mode whose drives are a matrix L (:mod:`contactdyn.plan_drives`) and whose controller is
+either a force-reading tip law read off as a matrix M (A7, A10, hybrid: :mod:`contactdyn.plan_law`)
+or the affine task PD law (its tip force g_ctl among the plan's outputs), everything a call does
+after φ is small dense algebra:
 
     y = P φ = [A, b, o]                          the KKT system and the affine outputs
-    u ← o's measured forces;  [a*, f_swap, ż] = M u      the law's tip targets
-    τ_c = Σ_f J_fᵀ w_f;   τ = computed torque   (contactdyn.controllers.computed_torque)
-    rows λ the law reads:  B = ∂τ/∂λ (+ A's column of a row reaching beyond the robot)
-    A[:nQ, λ] −= L_τ B;   b[:nQ] += L[:nQ] [τ, x, 1];   z = A⁻¹ b;   ż += D_z λ
+    tip law:   u = time part + U_x x + tip + measured forces;  [a*, f_swap, ż] = M u
+               τ_c = Σ_f J_fᵀ w_f;  τ = computed torque (contactdyn.controllers.computed_torque);
+               B = ∂τ/∂λ per row it reads (+ A's column of a row reaching beyond the robot), and
+               ∂τ/∂Q̈_b of a reference carried by body coordinate Q_b (one more folded column)
+    task law:  τ = J_tipᵀ g_ctl + F φ (its feedforward and joint damping), nothing folded
+    A[:nQ, cols] −= L_τ B;   b[:nQ] += L[:nQ] [τ, x, 1];   z = A⁻¹ b;   ż += D_z z[cols]
     ẋ = [Q̇, Q̈, ẏ] with ż in its slots
 
 :func:`call` runs it in one compiled function (numba). The fold itself (:func:`fold_solve`) is
 the one :mod:`contactdyn.plan_fold` runs for the output and the carried references. A call
 where a voltage clips, or whose solve is singular or not finite, returns status 1 and goes the
 plan's readable way (:mod:`contactdyn.plan_rhs`): the clip and the least-squares fallback stay
-written once, there. Built when the plan's law has read M (its first call).
+written once, there. A tip law's kernel is built when the law has read M (its first call).
 """
 
 from __future__ import annotations
@@ -27,15 +30,18 @@ from scipy import sparse
 from .controllers import computed_torque as law
 from .linalg import lu_solve, mm, mtv, mv
 from .plan_law import CompiledLaw, compiled_law, plan_inputs
+from .plan_probe import affine_map
 
 __all__ = ["fold_solve", "kernel_of", "call"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
+TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
 #: the constants of a plan's call, packed by :func:`pack` into one float and one int buffer (two arguments: a
 #: compiled function's call costs ~0.06 µs per argument): float arrays, then int arrays, by these indices
-P_VAL, M_, U_X, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL = range(11)  # floats (P: CSR values)
-P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(11, 18)  # ints (P: CSR columns, row starts)
-#: INTS: m nQ nv i_h i_J i_dr tip u_f zs swap n_lim o_y0 o_y1 x_z0 x_z1 w0 (see :func:`call`)
+P_VAL, M_, U_X, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL, F_FF = range(12)  # floats (P: CSR values)
+P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(12, 19)  # ints (P: CSR columns, row starts)
+#: INTS, in this order
+M, NQ, NV, I_H, I_J, I_DR, TIP, U_F, ZS, SWAP, N_LIM, O_Y0, O_Y1, X_Z0, X_Z1, W0, KIND, O_G = range(18)
 
 
 def pack(floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
@@ -92,90 +98,113 @@ def fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ):
 
 
 @njit(cache=True)
-def call(phi, x, u, fb, ib, out):
-    """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (τ: the solved joint
-    command [N·m or N; V], what the drives make of it); fb, ib: the plan's constants (:func:`pack`); u: the
-    law's inputs' time part (plan_law.plan_inputs), U_X its state part's map. INTS: sizes and offsets (zs the
-    ż rows of M u, −1 none; x_z0:x_z1 the law's states in x and ẋ; tip the tip's p, ṗ in φ; u_f the forces in
-    u; w0 the frame forces in z); FRAMES: each frame's J offset in φ;
-    FORCES: o's measured forces in u's order; COLS: the folded columns of A (the rows' λ, then a carrying
-    body's Q̈_b), with D_A, D_F, D_Z per column; REACH: the rows whose A column beyond the robot joins B."""
-    m, nQ, nv, i_h, i_J, i_dr, tip, u_f, zs, swap, n_lim, o_y0, o_y1, x_z0, x_z1, w0 = _vec(ib, ib, INTS)
-    m2 = m * m
+def _rows_times(fb, ib, phi):
+    """y = P φ, P sparse by rows."""
     p_val, p_col, p_row = _vec(fb, ib, P_VAL), _vec(ib, ib, P_COL), _vec(ib, ib, P_ROW)
-    y = np.empty(p_row.size - 1)  # y = P φ, P sparse by rows
+    y = np.empty(p_row.size - 1)
     for i in range(y.size):
         acc = 0.0
         for k in range(p_row[i], p_row[i + 1]):
             acc += p_val[k] * phi[p_col[k]]
         y[i] = acc
-    A = y[:m2].copy().reshape((m, m))
-    b = y[m2:m2 + m].copy()
-    o = y[m2 + m:]
-    U = _mat(fb, ib, U_X)  # [U_x, u_c]: the law's inputs' state part
+    return y
+
+
+@njit(cache=True)
+def _tip_law(phi, x, u, A, b, o, fb, ib, c):
+    """(τ, B, [a*, f_swap, ż]) of the force-reading tip law: u the inputs' time part, U_X the state part's
+    map [U_x, u_c]; c: INTS."""
+    nQ, nv = c[NQ], c[NV]
+    U = _mat(fb, ib, U_X)
     uu = u + mv(U[:, :x.size], x) + U[:, x.size]
-    uu[:6] = phi[tip:tip + 6]  # p_tip [m], ṗ_tip [m/s]
+    uu[:6] = phi[c[TIP]:c[TIP] + 6]  # p_tip [m], ṗ_tip [m/s]
     forces = _vec(ib, ib, FORCES)
     for k in range(forces.size):
-        uu[u_f + k] = o[forces[k]]
+        uu[c[U_F] + k] = o[forces[k]]  # the measured forces [N]
     targets = mv(_mat(fb, ib, M_), uu)
     H = phi[:nv * nv].reshape((nv, nv)).T + _mat(fb, ib, D_CTL)  # φ holds H column by column
-    J = phi[i_J:i_J + 3 * nv].reshape((3, nv))
-    tau_c = np.zeros(nv)
+    J = phi[c[I_J]:c[I_J] + 3 * nv].reshape((3, nv))
+    tau_c = np.zeros(nv)  # the contacts' torque [N·m or N]
     frames = _vec(ib, ib, FRAMES)
     for f in range(frames.size):
-        tau_c += mtv(phi[frames[f]:frames[f] + 3 * nv].reshape((3, nv)), b[w0 + 3 * f:w0 + 3 * f + 3])
+        tau_c += mtv(phi[frames[f]:frames[f] + 3 * nv].reshape((3, nv)), b[c[W0] + 3 * f:c[W0] + 3 * f + 3])
     Jp = law.pinv(J)
     rotor = _vec(fb, ib, ROTOR)
-    f_swap = targets[3:6] if swap else targets[0:0]
-    tau = law.torque(H, rotor, phi[i_h:i_h + nv], tau_c, J, Jp, phi[i_dr:i_dr + 3], x[nQ:nQ + nv],
+    f_swap = targets[3:6] if c[SWAP] else targets[0:0]
+    tau = law.torque(H, rotor, phi[c[I_H]:c[I_H] + nv], tau_c, J, Jp, phi[c[I_DR]:c[I_DR] + 3], x[nQ:nQ + nv],
                      targets[:3], f_swap, _vec(fb, ib, K_NULL)[0])
     B = law.increments(H, rotor, J, Jp, _mat(fb, ib, D_A), _mat(fb, ib, D_F))
     reach = _vec(ib, ib, REACH)
     for k in range(reach.size):
         for i in range(nv):
             B[i, reach[k]] += A[i, nQ + reach[k]]
+    return tau, B, targets
+
+
+@njit(cache=True)
+def call(phi, x, u, fb, ib, out):
+    """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (τ: the joint command
+    [N·m or N; V] at the solution, what the drives make of it); fb, ib: the plan's constants (:func:`pack`);
+    u: a tip law's inputs' time part (plan_law.plan_inputs). INTS: sizes and offsets (ZS the ż rows of
+    [a*, f_swap, ż], −1 none; X_Z0:X_Z1 the law's states in x and ẋ; TIP the tip's p, ṗ in φ; U_F the forces
+    in u; W0 the frame forces in z; O_G a task law's g_ctl in o); FRAMES: each frame's J offset in φ;
+    FORCES: o's measured forces in u's order; COLS: the folded columns of A (the rows' λ, then a carrying
+    body's Q̈_b), with D_A, D_F, D_Z per column; REACH: the rows whose A column beyond the robot joins B."""
+    c = _vec(ib, ib, INTS)
+    m, nQ, nv, n = c[M], c[NQ], c[NV], x.size
+    y = _rows_times(fb, ib, phi)
+    A = y[:m * m].copy().reshape((m, m))
+    b = y[m * m:m * m + m].copy()
+    o = y[m * m + m:]
+    if c[KIND] == TIP_LAW:
+        tau, B, targets = _tip_law(phi, x, u, A, b, o, fb, ib, c)
+    else:  # τ = J_tipᵀ g_ctl + F φ
+        tau = mtv(phi[c[I_J]:c[I_J] + 3 * nv].reshape((3, nv)), o[c[O_G]:c[O_G] + 3]) + mv(_mat(fb, ib, F_FF), phi)
+        B, targets = np.zeros((nv, 0)), np.zeros(0)
     cols = _vec(ib, ib, COLS)
     z, y0, Y = fold_solve(A, b, _mat(fb, ib, L_), _mat(fb, ib, L_TAU), tau, x, B, cols, nQ)
     if not np.isfinite(z.dot(z)):
         return DECLINED
     folded = z[cols]
-    if n_lim and np.abs(y0[nQ:] + mv(Y[nQ:], folded)).max() > 1.0:
+    if c[N_LIM] and np.abs(y0[nQ:] + mv(Y[nQ:], folded)).max() > 1.0:
         return DECLINED
-    n = x.size
-    xd, z_out, o_out = out[:n], out[n:n + m], out[n + m:n + m + o.size]
+    xd = out[:n]
     xd[:nQ] = x[nQ:2 * nQ]
     xd[nQ:2 * nQ] = z[:nQ]
-    xd[2 * nQ:] = y[o_y0:o_y1]
-    if zs >= 0:
-        xd[x_z0:x_z1] = targets[zs:] + mv(_mat(fb, ib, D_Z), folded)
-    z_out[:] = z
-    o_out[:] = o
+    xd[2 * nQ:] = y[c[O_Y0]:c[O_Y1]]
+    if c[ZS] >= 0:
+        xd[c[X_Z0]:c[X_Z1]] = targets[c[ZS]:] + mv(_mat(fb, ib, D_Z), folded)
+    out[n:n + m] = z
+    out[n + m:n + m + o.size] = o
     out[n + m + o.size:] = tau + mv(B, folded)
     return OK
 
 
 def kernel_of(plan, meta: list, reach: list[int] | None):
     """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (a clip, a singular solve,
-    the law's M not read yet); ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of the output's samples, or None
-    where one declines. None where the plan's mode is not one :func:`call` covers: a force-reading tip law by
-    its matrix through compiled drives, no sliding friction, no slide launching from rest, and the rows' reach
-    beyond the robot constant (``reach``, plan_fold's). ``meta``: the rows as the law's ``row_columns``
-    reads them."""
+    a tip law's M not read yet); ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of the output's samples, or None
+    where one declines. None where the plan's mode is not one :func:`call` covers: compiled drives, no
+    sliding friction, no slide launching from rest, and either a force-reading tip law by its matrix whose
+    rows' reach beyond the robot is constant (``reach``, plan_fold's; ``meta``: the rows as the law's
+    ``row_columns`` reads them) or the affine task law through the motors."""
     ctl = compiled_law(plan)
-    covered = (isinstance(ctl, CompiledLaw) and ctl.reason is None and plan.compiled_drives is not None
-               and plan.friction_terms is None and plan.launch is None and (reach is not None or not plan.nr))
-    if not covered:
+    tip_law = isinstance(ctl, CompiledLaw) and ctl.reason is None and (reach is not None or not plan.nr)
+    if plan.compiled_drives is None or plan.friction_terms is not None or plan.launch is not None or not (
+            tip_law or plan.law_via_drives):
         return None
     s = plan.system
     n, m, no = s.n, plan.m, plan.P.shape[0] - plan.m * (plan.m + 1)
     size = n + m + no + s.nv
     constants = None
+    no_time = np.zeros(0)
 
     def ready() -> bool:
         nonlocal constants
-        if constants is None and ctl.M is not None:
-            constants = _constants(plan, ctl, meta, reach or [], plan_inputs(plan, ctl))
+        if constants is None and not tip_law:
+            constants = None, _task_law_constants(plan)
+        elif constants is None and ctl.M is not None:
+            inputs = plan_inputs(plan, ctl)
+            constants = inputs, _tip_law_constants(plan, ctl, meta, reach or [], inputs)
         return constants is not None
 
     def kernel(t, x, phi):
@@ -183,7 +212,7 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             return None
         inputs, (fb, ib) = constants
         out = np.empty(size)
-        if call(phi, x, inputs.time_part(t), fb, ib, out):
+        if call(phi, x, inputs.time_part(t) if inputs else no_time, fb, ib, out):
             return None
         return out[:n], out[n:n + m], out[n + m:n + m + no]
 
@@ -196,7 +225,7 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
         Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
         for k in range(N):
             Phi[k] = phi = plan.phi_at(ts[k], X[k], tv[k])
-            if call(phi, X[k], inputs.time_part(ts[k]), fb, ib, out[k]):
+            if call(phi, X[k], inputs.time_part(ts[k]) if inputs else no_time, fb, ib, out[k]):
                 return None
         return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]
 
@@ -204,12 +233,34 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
     return kernel
 
 
-def _constants(plan, ctl, meta, reach, inputs) -> tuple:
-    """(inputs, the constant arguments of :func:`call`) of a plan whose law has read M."""
-    s, drives, law = plan.system, plan.compiled_drives, ctl.ctl
-    nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
-    tf = plan.tip_frame
+def _ints(plan, **given) -> list[int]:
+    """INTS of a plan: its sizes and offsets, ``given`` by name (lower case), the rest 0 (ZS −1)."""
+    s, m = plan.system, plan.m
     off = m * m + m  # o's start in y
+    values = {"m": m, "nq": s.nQ, "nv": s.nv, "i_h": plan.i_h, "i_j": plan.i_J[plan.tip_frame],
+              "i_dr": plan.i_dr[plan.tip_frame], "zs": -1, "n_lim": len(plan.compiled_drives.limited),
+              "o_y0": off + plan.o_y.start, "o_y1": off + plan.o_y.stop, "x_z0": plan.z_slice.start,
+              "x_z1": plan.z_slice.stop, "w0": s.nQ + plan.nr, **given}
+    names = "M NQ NV I_H I_J I_DR TIP U_F ZS SWAP N_LIM O_Y0 O_Y1 X_Z0 X_Z1 W0 KIND O_G".lower().split()
+    return [int(values.get(name, 0)) for name in names]
+
+
+def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pack`'s buffers for the affine task law: g_ctl's place in o, the feedforward's map F (τ_ff = F φ)."""
+    nv, width = plan.system.nv, plan.P.shape[1]
+    F = affine_map(lambda e: plan._feedforward_torque(e[:width], e[plan.i_e:width]), width + 1)[:, :width]
+    empty = np.zeros((0, 0))
+    P = sparse.csr_matrix(plan.P)
+    floats = [P.data, empty, empty, plan.compiled_drives.L, plan.compiled_drives.L_tau, np.zeros((3, 0)), empty,
+              empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F]
+    ints = _ints(plan, kind=TASK_LAW, o_g=plan.o_gctl.start)
+    return pack(floats, [P.indices, P.indptr, ints, plan.i_J, [], [], []])
+
+
+def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pack`'s buffers for a force-reading tip law whose law has read M."""
+    s, drives, law = plan.system, plan.compiled_drives, ctl.ctl
+    nQ, nv, nr = s.nQ, s.nv, plan.nr
     D_a, D_f, D_z = ctl.row_columns(meta)
     cols = list(range(nQ, nQ + nr))
     if plan.phase.carrier is not None:  # a reference carried by body coordinate i_b: ∂/∂Q̈_b, one more column
@@ -221,10 +272,9 @@ def _constants(plan, ctl, meta, reach, inputs) -> tuple:
         cols.append(i_b)
     none = np.empty((0, len(cols)))
     P = sparse.csr_matrix(plan.P)
-    ints = [m, nQ, nv, plan.i_h, plan.i_J[tf], plan.i_dr[tf], inputs.tip, ctl.i_forces,
-            ctl.zs.start if ctl.zs is not None else -1, int(ctl.swap), len(drives.limited),
-            off + plan.o_y.start, off + plan.o_y.stop, plan.z_slice.start, plan.z_slice.stop, nQ + nr]
+    ints = _ints(plan, tip=inputs.tip, u_f=ctl.i_forces, zs=ctl.zs.start if ctl.zs is not None else -1,
+                 swap=ctl.swap, kind=TIP_LAW)
     D_ctl = s._D_ctl if s._D_ctl is not None else np.zeros((nv, nv))
     floats = [P.data, ctl.M, inputs.state_map(), drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
-              none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null]]
-    return inputs, pack(floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach])
+              none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null], np.zeros((nv, 0))]
+    return pack(floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach])

@@ -137,7 +137,17 @@ def test_kernel_declines_a_clipping_voltage_and_the_call_stays_the_readable_mode
     _assert_kernel_is_the_readable_model(system, plan, t, x)
 
 
-def test_a_mode_without_a_force_reading_tip_law_has_no_kernel():
+@pytest.mark.parametrize("name, at", [("case3_b_force", 0.1), ("case1_cart", 1.0)])
+def test_kernel_is_the_readable_model_with_the_task_law_through_motors(name, at):
+    """The affine task PD law through the drives: case 3's approach (elastic transmission), case 1's first push
+    (DC motors on the robot, the cart's servo)."""
+    system, plan, t, x = _mode_at(load_scene(name, {"duration": at}), at)
+    assert plan.law_via_drives
+    _assert_kernel_is_the_readable_model(system, plan, t, x, span=0.005)
+
+
+def test_a_mode_without_drives_has_no_kernel():
+    """B1: the task PD law without motors (its command is in the plan's map P: nothing left to compile)."""
     system, plan, _, _ = _mode_at(load_scene("b1", {"duration": 0.1}), 0.1)
     assert plan.kernel is None
 
