@@ -195,3 +195,20 @@ def test_output_by_the_kernel_equals_the_batched_output(name, monkeypatch):
         w = np.asarray(w, float)
         scale = max(float(np.nanmax(np.abs(w), initial=0.0)), 1e-300)
         np.testing.assert_allclose(g, w, rtol=0.0, atol=1e-10 * scale, err_msg=key)
+
+
+def test_kernel_is_the_readable_model_on_a_redundant_arm():
+    """A7 on the 5-DOF writer (J⁺ of a 3×5 Jacobian, the null-space damping k_null) pressing a bonded wall
+    under DC motors with the rotors taken out of H (``inertia = "link"``)."""
+    q0 = [0.3, 0.678629948129, 1.834747110377, 0.428215595084, 0.0]  # [rad] sims/case2_writer5dof's pose
+    p0 = Robot.load("writer5dof").frame_position(np.array(q0), "tip")
+    drive = {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": 0.000452, "N": 160.0, "N_star": 65.12}
+    doc = {"duration": 0.2, "robot": {"urdf": "writer5dof", "tip": "tip", "q0": q0, "drive": drive},
+           "controller": {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0, "k_null": 5.0, "inertia": "link"},
+           "phase": [{"name": "main", "reference": {"space": "task", "start": (p0 + [0.005, 0.0, -0.01]).tolist(),
+                                                    "moves": []}}],
+           "contact": {"c": {"point": p0.tolist(), "bonded": True,
+                             "normal": {"direction": [-1, 0, 0], "model": "b", "k": 1e4, "b": 10.0, "m": 2.0}}}}
+    system, plan, t, x = _mode_at(parse_scene(doc), 0.2)
+    assert plan.nr == 1 and system.nv == 5
+    _assert_kernel_is_the_readable_model(system, plan, t, x, span=0.005)
