@@ -28,11 +28,11 @@ from numba import njit
 from scipy import sparse
 
 from .controllers import computed_torque as law
-from .linalg import lu_solve, mm, mtv, mv
+from .linalg import lu_solve, mm, mtv, mv, sparse_dot
 from .plan_law import CompiledLaw, compiled_law, plan_inputs
 from .plan_probe import affine_map
 
-__all__ = ["fold_solve", "kernel_of", "call"]
+__all__ = ["fold_solve", "kernel_of", "call", "pack", "matrix_of", "vector_of"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
 TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
@@ -63,14 +63,14 @@ def pack(floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
-def _mat(fb, ib, k):
+def matrix_of(fb, ib, k):
     """Float array k of :func:`pack`'s buffers, as a (rows, columns) view."""
     o, r, c = ib[3 * k], ib[3 * k + 1], ib[3 * k + 2]
     return fb[o:o + r * c].reshape((r, c))
 
 
 @njit(cache=True)
-def _vec(buf, ib, k):
+def vector_of(buf, ib, k):
     """Array k of :func:`pack`'s buffers (``buf``: fb for a float array, ib for an int array), flat."""
     o, r, c = ib[3 * k], ib[3 * k + 1], ib[3 * k + 2]
     return buf[o:o + r * c]
@@ -98,43 +98,30 @@ def fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ):
 
 
 @njit(cache=True)
-def _rows_times(fb, ib, phi):
-    """y = P φ, P sparse by rows."""
-    p_val, p_col, p_row = _vec(fb, ib, P_VAL), _vec(ib, ib, P_COL), _vec(ib, ib, P_ROW)
-    y = np.empty(p_row.size - 1)
-    for i in range(y.size):
-        acc = 0.0
-        for k in range(p_row[i], p_row[i + 1]):
-            acc += p_val[k] * phi[p_col[k]]
-        y[i] = acc
-    return y
-
-
-@njit(cache=True)
 def _tip_law(phi, x, u, A, b, o, fb, ib, c):
     """(τ, B, [a*, f_swap, ż]) of the force-reading tip law: u the inputs' time part, U_X the state part's
     map [U_x, u_c]; c: INTS."""
     nQ, nv = c[NQ], c[NV]
-    U = _mat(fb, ib, U_X)
+    U = matrix_of(fb, ib, U_X)
     uu = u + mv(U[:, :x.size], x) + U[:, x.size]
     uu[:6] = phi[c[TIP]:c[TIP] + 6]  # p_tip [m], ṗ_tip [m/s]
-    forces = _vec(ib, ib, FORCES)
+    forces = vector_of(ib, ib, FORCES)
     for k in range(forces.size):
         uu[c[U_F] + k] = o[forces[k]]  # the measured forces [N]
-    targets = mv(_mat(fb, ib, M_), uu)
-    H = phi[:nv * nv].reshape((nv, nv)).T + _mat(fb, ib, D_CTL)  # φ holds H column by column
+    targets = mv(matrix_of(fb, ib, M_), uu)
+    H = phi[:nv * nv].reshape((nv, nv)).T + matrix_of(fb, ib, D_CTL)  # φ holds H column by column
     J = phi[c[I_J]:c[I_J] + 3 * nv].reshape((3, nv))
     tau_c = np.zeros(nv)  # the contacts' torque [N·m or N]
-    frames = _vec(ib, ib, FRAMES)
+    frames = vector_of(ib, ib, FRAMES)
     for f in range(frames.size):
         tau_c += mtv(phi[frames[f]:frames[f] + 3 * nv].reshape((3, nv)), b[c[W0] + 3 * f:c[W0] + 3 * f + 3])
     Jp = law.pinv(J)
-    rotor = _vec(fb, ib, ROTOR)
+    rotor = vector_of(fb, ib, ROTOR)
     f_swap = targets[3:6] if c[SWAP] else targets[0:0]
     tau = law.torque(H, rotor, phi[c[I_H]:c[I_H] + nv], tau_c, J, Jp, phi[c[I_DR]:c[I_DR] + 3], x[nQ:nQ + nv],
-                     targets[:3], f_swap, _vec(fb, ib, K_NULL)[0])
-    B = law.increments(H, rotor, J, Jp, _mat(fb, ib, D_A), _mat(fb, ib, D_F))
-    reach = _vec(ib, ib, REACH)
+                     targets[:3], f_swap, vector_of(fb, ib, K_NULL)[0])
+    B = law.increments(H, rotor, J, Jp, matrix_of(fb, ib, D_A), matrix_of(fb, ib, D_F))
+    reach = vector_of(ib, ib, REACH)
     for k in range(reach.size):
         for i in range(nv):
             B[i, reach[k]] += A[i, nQ + reach[k]]
@@ -150,19 +137,19 @@ def call(phi, x, u, fb, ib, out):
     in u; W0 the frame forces in z; O_G a task law's g_ctl in o); FRAMES: each frame's J offset in φ;
     FORCES: o's measured forces in u's order; COLS: the folded columns of A (the rows' λ, then a carrying
     body's Q̈_b), with D_A, D_F, D_Z per column; REACH: the rows whose A column beyond the robot joins B."""
-    c = _vec(ib, ib, INTS)
+    c = vector_of(ib, ib, INTS)
     m, nQ, nv, n = c[M], c[NQ], c[NV], x.size
-    y = _rows_times(fb, ib, phi)
+    y = sparse_dot(vector_of(ib, ib, P_ROW), vector_of(ib, ib, P_COL), vector_of(fb, ib, P_VAL), phi)  # P φ
     A = y[:m * m].copy().reshape((m, m))
     b = y[m * m:m * m + m].copy()
     o = y[m * m + m:]
     if c[KIND] == TIP_LAW:
         tau, B, targets = _tip_law(phi, x, u, A, b, o, fb, ib, c)
     else:  # τ = J_tipᵀ g_ctl + F φ
-        tau = mtv(phi[c[I_J]:c[I_J] + 3 * nv].reshape((3, nv)), o[c[O_G]:c[O_G] + 3]) + mv(_mat(fb, ib, F_FF), phi)
+        tau = mtv(phi[c[I_J]:c[I_J] + 3 * nv].reshape((3, nv)), o[c[O_G]:c[O_G] + 3]) + mv(matrix_of(fb, ib, F_FF), phi)
         B, targets = np.zeros((nv, 0)), np.zeros(0)
-    cols = _vec(ib, ib, COLS)
-    z, y0, Y = fold_solve(A, b, _mat(fb, ib, L_), _mat(fb, ib, L_TAU), tau, x, B, cols, nQ)
+    cols = vector_of(ib, ib, COLS)
+    z, y0, Y = fold_solve(A, b, matrix_of(fb, ib, L_), matrix_of(fb, ib, L_TAU), tau, x, B, cols, nQ)
     if not np.isfinite(z.dot(z)):
         return DECLINED
     folded = z[cols]
@@ -173,7 +160,7 @@ def call(phi, x, u, fb, ib, out):
     xd[nQ:2 * nQ] = z[:nQ]
     xd[2 * nQ:] = y[c[O_Y0]:c[O_Y1]]
     if c[ZS] >= 0:
-        xd[c[X_Z0]:c[X_Z1]] = targets[c[ZS]:] + mv(_mat(fb, ib, D_Z), folded)
+        xd[c[X_Z0]:c[X_Z1]] = targets[c[ZS]:] + mv(matrix_of(fb, ib, D_Z), folded)
     out[n:n + m] = z
     out[n + m:n + m + o.size] = o
     out[n + m + o.size:] = tau + mv(B, folded)

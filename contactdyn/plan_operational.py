@@ -30,7 +30,7 @@ from .controllers import operational_law as law
 from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
 from .linalg import lu_solve, mtv, sparse_dot
-from .plan_kernel import _mat, _vec, pack
+from .plan_kernel import matrix_of, pack, vector_of
 
 __all__ = ["call", "operational_kernel_of"]
 
@@ -102,26 +102,26 @@ def call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6, out):
     (:func:`~contactdyn.plan_kernel.pack`, indices above); INTS: sizes and φ's offsets of h and the tip's J, J̇q̇,
     p (ṗ after it), ẏ's rows in y; J6, drift6, R_tip: the tip's 6 Jacobian rows, J̇q̇ and its rotation (none
     without a tool axis); x_d, v_d, a_d [m, m/s, m/s²] the reference (none without), F_d [N] the set-points."""
-    m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1 = _vec(ib, ib, INTS)
-    band, ko, do, k_null, kd_normal = _vec(fb, ib, SCALARS)
+    m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1 = vector_of(ib, ib, INTS)
+    band, ko, do, k_null, kd_normal = vector_of(fb, ib, SCALARS)
     m2 = m * m
-    y = sparse_dot(_vec(ib, ib, P_ROW), _vec(ib, ib, P_COL), _vec(fb, ib, P_VAL), phi)  # P φ
+    y = sparse_dot(vector_of(ib, ib, P_ROW), vector_of(ib, ib, P_COL), vector_of(fb, ib, P_VAL), phi)  # P φ
     A = y[:m2].copy().reshape((m, m))
     b = y[m2:m2 + m].copy()
     o = y[m2 + m:]
-    if not _tilt(A, o, phi, _mat(ib, ib, TILT_I), _mat(fb, ib, TILT_F), _mat(fb, ib, TILT_T), _mat(fb, ib, TILT_BODY),
-                 nQ, nv, band):
+    if not _tilt(A, o, phi, matrix_of(ib, ib, TILT_I), matrix_of(fb, ib, TILT_F), matrix_of(fb, ib, TILT_T),
+                 matrix_of(fb, ib, TILT_BODY), nQ, nv, band):
         return DECLINED
-    H = phi[:nv * nv].reshape((nv, nv)).T + _mat(fb, ib, D_CTL)  # φ holds H column by column
-    tool_axis = _vec(fb, ib, TOOL_AXIS)
+    H = phi[:nv * nv].reshape((nv, nv)).T + matrix_of(fb, ib, D_CTL)  # φ holds H column by column
+    tool_axis = vector_of(fb, ib, TOOL_AXIS)
     if tool_axis.size:
         J_tip, drift_tip = np.ascontiguousarray(J6), drift6
     else:
         J_tip, drift_tip = np.ascontiguousarray(phi[i_J:i_J + 3 * nv].reshape((3, nv))), phi[i_dr:i_dr + 3]
     tau, ratio = law.torque(x[nQ:nQ + nv], H, phi[i_h:i_h + nv], J_tip, drift_tip, phi[i_p:i_p + 3],
                             phi[i_p + 3:i_p + 6], x_d, v_d, a_d, set_points, np.ascontiguousarray(R_tip),
-                            _mat(fb, ib, AXES), _mat(fb, ib, FORCED), _vec(fb, ib, KP), _vec(fb, ib, KD), tool_axis,
-                            _vec(fb, ib, TARGET), ko, do, k_null, kd_normal)
+                            matrix_of(fb, ib, AXES), matrix_of(fb, ib, FORCED), vector_of(fb, ib, KP),
+                            vector_of(fb, ib, KD), tool_axis, vector_of(fb, ib, TARGET), ko, do, k_null, kd_normal)
     if not ratio >= SINGULAR:  # the readable law raises its error
         return DECLINED
     b[:nv] += tau
@@ -133,7 +133,7 @@ def call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6, out):
     xd[:nQ] = x[nQ:2 * nQ]
     xd[nQ:2 * nQ] = z[:nQ]
     xd[2 * nQ:] = y[o_y0:o_y1]
-    _impulse_rates(xd, z, o, _mat(ib, ib, RATES_I), _mat(fb, ib, RATES_F), band)
+    _impulse_rates(xd, z, o, matrix_of(ib, ib, RATES_I), matrix_of(fb, ib, RATES_F), band)
     out[n:n + m] = z
     out[n + m:n + m + o.size] = o
     out[n + m + o.size:] = tau
