@@ -184,6 +184,7 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
     size = n + m + no + s.nv
     constants = None
     no_time = np.zeros(0)
+    phi_at, time_terms = plan.phi_at, plan.time_terms  # this make_rhs's (a later ModePlan.use makes new ones)
 
     def ready() -> bool:
         nonlocal constants
@@ -208,10 +209,10 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             return None
         inputs, (fb, ib) = constants
         N = len(ts)
-        tv = plan.time_terms.at_times(ts)
+        tv = time_terms.at_times(ts)
         Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
         for k in range(N):
-            Phi[k] = phi = plan.phi_at(ts[k], X[k], tv[k])
+            Phi[k] = phi = phi_at(ts[k], X[k], tv[k])
             if call(phi, X[k], inputs.time_part(ts[k]) if inputs else no_time, fb, ib, out[k]):
                 return None
         return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]

@@ -22,7 +22,6 @@ still inside the stick band (its direction is solved by :func:`contactdyn.fricti
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 from numba import njit
 from scipy import sparse
 
@@ -31,6 +30,7 @@ from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
 from .linalg import lu_solve, mtv, sparse_dot
 from .plan_kernel import matrix_of, pack, vector_of
+from .plan_law import reference_rows
 
 __all__ = ["call", "operational_kernel_of"]
 
@@ -96,12 +96,12 @@ def _impulse_rates(xd, z, o, rates_i, rates_f, band):
 
 
 @njit(cache=True)
-def call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6, out):
+def call(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
     """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (ẋ with the impulse states'
     rates, τ the law's command [N·m or N], as plan_kernel.call's ``out``). fb, ib: the plan's constants
     (:func:`~contactdyn.plan_kernel.pack`, indices above); INTS: sizes and φ's offsets of h and the tip's J, J̇q̇,
     p (ṗ after it), ẏ's rows in y; J6, drift6, R_tip: the tip's 6 Jacobian rows, J̇q̇ and its rotation (none
-    without a tool axis); x_d, v_d, a_d [m, m/s, m/s²] the reference (none without), F_d [N] the set-points."""
+    without a tool axis); ref = [x_d, ẋ_d, ẍ_d] [m, m/s, m/s²] the reference (none without), F_d [N] the set-points."""
     m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1 = vector_of(ib, ib, INTS)
     band, ko, do, k_null, kd_normal = vector_of(fb, ib, SCALARS)
     m2 = m * m
@@ -119,7 +119,7 @@ def call(phi, x, fb, ib, x_d, v_d, a_d, set_points, R_tip, J6, drift6, out):
     else:
         J_tip, drift_tip = np.ascontiguousarray(phi[i_J:i_J + 3 * nv].reshape((3, nv))), phi[i_dr:i_dr + 3]
     tau, ratio = law.torque(x[nQ:nQ + nv], H, phi[i_h:i_h + nv], J_tip, drift_tip, phi[i_p:i_p + 3],
-                            phi[i_p + 3:i_p + 6], x_d, v_d, a_d, set_points, np.ascontiguousarray(R_tip),
+                            phi[i_p + 3:i_p + 6], ref[0:3], ref[3:6], ref[6:9], set_points, np.ascontiguousarray(R_tip),
                             matrix_of(fb, ib, AXES), matrix_of(fb, ib, FORCED), vector_of(fb, ib, KP),
                             vector_of(fb, ib, KD), tool_axis, vector_of(fb, ib, TARGET), ko, do, k_null, kd_normal)
     if not ratio >= SINGULAR:  # the readable law raises its error
@@ -153,7 +153,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
             and phase.carrier is None):
         return None
     nQ, nv, m = s.nQ, s.nv, plan.m
-    model, data = s.robot.model, s.robot.data
+    data = s.robot.data
     tf = plan.tip_frame
     fid = plan.fids[tf]
     off = m * m + m  # o's start in y
@@ -169,25 +169,24 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     ramps = [phase.forces[key] for key in ctl.force_keys]
     referenced, orient = phase.reference is not None, ctl.reads_orientation
     none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))
-    placement, jacobian = pin.updateFramePlacement, pin.getFrameJacobian
-    acceleration = pin.getFrameClassicalAcceleration
-    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    rotation = data.oMf[fid].rotation  # (a view: the tip's R at the last φ)
+    # this make_rhs's φ and the tip terms it keeps (a later ModePlan.use makes new ones; this kernel keeps its own)
+    tip6, phi_at, time_terms = plan.tip6, plan.phi_at, plan.time_terms
 
     n, no = s.n, plan.P.shape[0] - m * (m + 1)
     size = n + m + no + nv
 
     set_points = np.empty(len(ramps))  # F_d [N], rewritten per call
-    reference = phase.reference.at if referenced else None  # (no carrier: reference_at is the reference's at)
+    reference = reference_rows(phase.reference) if referenced else None  # (no carrier: the reference's own)
 
     def inputs(t, x):
         """The call's per-call inputs at (t, x): the reference, F_d [N], the tip's R, J (6 rows), J̇q̇ (6)."""
-        x_d, v_d, a_d = reference(t) if referenced else (none, none, none)
+        ref = reference(t) if referenced else none
         for k, ramp in enumerate(ramps):
             set_points[k] = ramp.at(t)[0]
         if not orient:
-            return x_d, v_d, a_d, set_points, no_rotation, no_rows, none
-        return (x_d, v_d, a_d, set_points, placement(model, data, fid).rotation,  # Pinocchio's data is at x
-                jacobian(model, data, fid, lwa), acceleration(model, data, fid, lwa).vector)
+            return ref, set_points, no_rotation, no_rows, none
+        return ref, set_points, rotation, *tip6  # this call's φ's (plan_rhs._phi_function)
 
     def kernel(t, x, phi):
         out = np.empty(size)
@@ -197,10 +196,10 @@ def operational_kernel_of(plan, impulses: list[tuple]):
 
     def samples(ts, X):
         N = len(ts)
-        tv = plan.time_terms.at_times(ts)
+        tv = time_terms.at_times(ts)
         Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
         for k in range(N):
-            Phi[k] = phi = plan.phi_at(ts[k], X[k], tv[k])
+            Phi[k] = phi = phi_at(ts[k], X[k], tv[k])
             if call(phi, X[k], fb, ib, *inputs(ts[k], X[k]), out[k]):
                 return None
         return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]

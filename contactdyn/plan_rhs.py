@@ -332,6 +332,10 @@ def _phi_function(plan, time_terms, tv0):
     #: its Jacobian, J̇q̇, Pinocchio's translation, and φ's p and ṗ
     frames = [(fids[f], Js[f].reshape(3) if nv == 1 else Js[f], Js[f], drifts[f], data.oMf[fids[f]].translation,
                phi[e_frame[f]:e_frame[f] + 3], phi[e_frame[f] + 3:e_frame[f] + 6]) for f in range(nf)]
+    #: a law that reads the tip's orientation: the tip's 6-row Jacobian and J̇q̇ (linear, angular) of the last
+    #: call, as Pinocchio gave them (its R: data.oMf[tip].rotation, updated by the call)
+    tip6 = plan.tip6 = [None, None]
+    tip = fids[plan.tip_frame] if plan.phase.controller.reads_orientation else None
 
     def phi_of(t, x, tv=None):
         v = x[nQ:nQ + nv]
@@ -342,8 +346,11 @@ def _phi_function(plan, time_terms, tv0):
             g_part[...] = g
         x_part[...] = x
         for fid, J_rows, J, drift, p, p_part, pd_part in frames:
-            J_rows[...] = jacobian(model, data, fid, lwa)[:3]
-            drift[...] = accel(model, data, fid, lwa).linear
+            J6, a6 = jacobian(model, data, fid, lwa), accel(model, data, fid, lwa)
+            J_rows[...] = J6[:3]
+            drift[...] = a6.linear
+            if fid == tip:
+                tip6[0], tip6[1] = J6, a6.vector
             placement(model, data, fid)
             p_part[...] = p
             dot(J, v, out=pd_part)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 __all__ = ["Corner", "Move", "Ramp", "Reference", "profile", "profile_corners", "merge_corners",
            "min_span"]
@@ -46,15 +47,25 @@ def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, 
         if tau < 1.0:
             return 0.5 * tau * tau, tau, 1.0
         return tau - 0.5, 1.0, 0.0
+    if kind in ("trapezoid", "triangle"):
+        return _trapezoid(tau, 0.5 if kind == "triangle" else accel_fraction)
     if tau < 0.0:  # at τ = 0 and τ = 1 the profile takes its right-hand limit
         return 0.0, 0.0, 0.0
     if tau >= 1.0:
         return 1.0, 0.0, 0.0
     if kind == "constant_velocity":
         return tau, 1.0, 0.0
-    if kind == "step":
+    return 1.0, 0.0, 0.0  # step
+
+
+@njit(cache=True)
+def _trapezoid(tau: float, a: float) -> tuple[float, float, float]:
+    """:func:`profile`'s trapezoid (compiled: the circle's angle runs on it too): σ, σ', σ'' with the fraction a
+    of the move accelerating, a = 0.5 the triangle; clamped outside [0, 1) (right-hand limits at 0 and 1)."""
+    if tau < 0.0:
+        return 0.0, 0.0, 0.0
+    if tau >= 1.0:
         return 1.0, 0.0, 0.0
-    a = 0.5 if kind == "triangle" else accel_fraction
     vmax = 1.0 / (1.0 - a)  # peak of dσ/dτ so that σ(1) = 1
     acc = vmax / a
     if tau < a:
@@ -168,27 +179,43 @@ class Move:
                      for tc in profile_corners(kind, self.accel_fraction))
 
     def circle_rows(self, t: float) -> np.ndarray:
-        """(3, 3): the circle's displacement [m], velocity [m/s] and acceleration [m/s²] at t (Python floats per
-        component: nine 3-vector numpy operations cost ~8 µs, these ~2)."""
-        s, ds, dds = profile("trapezoid", self.tau(t), self.accel_fraction)
-        span = 2.0 * math.pi * self.turns
-        th, dth, ddth = span * s, span * ds / self.duration, span * dds / self.duration**2
-        cos, sin = math.cos(th), math.sin(th)
-        rows = []
-        for c, u, w, p in self._circle_terms:  # per component
-            # r(θ) = R(n, θ) c (centre to start rotated); the point is start + c − r(θ)
-            r = c * cos + u * sin + p * (1.0 - cos)
-            nr = u * cos + w * sin  # n × r
-            rows.append((c - r, -nr * dth, -nr * ddth - (w * cos - u * sin) * dth * dth))  # n × (n × r) = w cos − u sin
-        return np.array(rows).T
+        """(3, 3): the circle's displacement [m], velocity [m/s] and acceleration [m/s²] at t (compiled,
+        :func:`_circle_rows`: nine 3-vector numpy operations cost ~8 µs, Python floats ~2, this ~0.5)."""
+        return circle_reference(t, self.start, self.duration, self.accel_fraction, 2.0 * math.pi * self.turns,
+                                self._circle_terms, _NO_START).reshape(3, 3)
 
     @functools.cached_property
-    def _circle_terms(self) -> list[tuple[float, float, float, float]]:
-        """Per component (c, u, w, p): c, u = n × c, w = n × u, p = n (n·c), whose combinations are r(θ) and its
-        cross products with n in closed form (three np.cross calls cost ~40 µs per reference evaluation)."""
+    def _circle_terms(self) -> np.ndarray:
+        """(3, 4): per component (c, u, w, p): c, u = n × c, w = n × u, p = n (n·c), whose combinations are r(θ)
+        and its cross products with n in closed form (three np.cross calls cost ~40 µs per reference evaluation)."""
         n, c = self.normal, self.delta
         u = np.cross(n, c)
-        return np.array((c, u, np.cross(n, u), n * (n @ c))).T.tolist()
+        return np.ascontiguousarray(np.array((c, u, np.cross(n, u), n * (n @ c)), dtype=float).T)
+
+
+_NO_START = np.zeros(0)
+
+
+@njit(cache=True)
+def circle_reference(t, t0, duration, accel_fraction, span, terms, start):
+    """[displacement [m], velocity [m/s], acceleration [m/s²]] (9,) at t of a circle move starting at t0 [s]
+    over ``duration`` [s] (its angle on the trapezoid, τ = (t − t0)/duration, ``span`` [rad] the turns'
+    angle), ``terms`` (3, 4) per component (c, u, w, p) of :meth:`Move._circle_terms`; the point is
+    start + c − r(θ), r(θ) = R(n, θ) c = c cos θ + u sin θ + p (1 − cos θ), n × r = u cos θ + w sin θ,
+    n × (n × r) = w cos θ − u sin θ. ``start`` [m] (empty: none) is added to the displacement, as
+    Reference.at adds a one-move reference's start."""
+    s, ds, dds = _trapezoid((t - t0) / duration, accel_fraction)
+    th, dth, ddth = span * s, span * ds / duration, span * dds / duration**2
+    cos, sin = math.cos(th), math.sin(th)
+    out = np.empty(9)
+    for i in range(3):
+        c, u, w, p = terms[i, 0], terms[i, 1], terms[i, 2], terms[i, 3]
+        r = c * cos + u * sin + p * (1.0 - cos)
+        nr = u * cos + w * sin
+        out[i] = c - r if start.size == 0 else (c - r) + start[i]
+        out[3 + i] = -nr * dth
+        out[6 + i] = -nr * ddth - (w * cos - u * sin) * dth * dth
+    return out
 
 
 @dataclass(frozen=True)

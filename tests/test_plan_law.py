@@ -152,19 +152,23 @@ def test_plan_command_waits_for_the_matrix_and_declines_a_readable_law():
     assert plan_command(joint_plan) is None
 
 
-def test_reference_rows_are_reference_at_bitwise():
+def testreference_rows_are_reference_at_bitwise():
     """plan_law's reference as one product over the moves' profiles equals Reference.at bitwise (same sums in the
-    same order) for 1–3 moves of every non-circle kind, before, during and after them."""
-    from contactdyn.plan_law import _reference_rows
+    same order) for 1–3 moves of every non-circle kind and one circle, before, during and after them."""
+    from contactdyn.plan_law import reference_rows
     from contactdyn.trajectory import Move, Reference
 
     rng = np.random.default_rng(0)
     kinds = ["trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step", "exponential"]
+    circle = Move(np.array([0.01, 0.02, 0.0]), 0.5, 2.0, "circle", 0.1, np.array([0.0, 0.0, 1.0]), 1.5)
+    one_circle = Reference(np.array([0.3, 0.1, 0.0]), (circle,))
+    for t in np.linspace(-1.0, 5.0, 61):
+        assert np.array_equal(reference_rows(one_circle)(t), np.concatenate(one_circle.at(t)))
     for _ in range(20):
         moves = tuple(Move(rng.normal(size=3), float(rng.uniform(0, 2)), float(rng.uniform(0.1, 2)),
                            kinds[rng.integers(len(kinds))], float(rng.uniform(0.05, 0.5)))
                       for _ in range(rng.integers(1, 4)))
         ref = Reference(rng.normal(size=3), moves)
-        rows = _reference_rows(ref)
+        rows = reference_rows(ref)
         for t in np.linspace(-1.0, 5.0, 61):
             assert np.array_equal(rows(t), np.concatenate(ref.at(t)))
