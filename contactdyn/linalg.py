@@ -179,14 +179,8 @@ def mv(A, x):
 
 @njit(cache=True)
 def mtv(A, x):
-    """Aᵀ x."""
-    out = np.zeros(A.shape[1])
-    for j in range(A.shape[1]):
-        acc = 0.0
-        for i in range(A.shape[0]):
-            acc += A[i, j] * x[i]
-        out[j] = acc
-    return out
+    """Aᵀ x (:func:`mv` on the transposed view: the same sums)."""
+    return mv(A.T, x)
 
 
 @njit(cache=True)
@@ -204,12 +198,5 @@ def mm(A, B):
 
 @njit(cache=True)
 def mtm(A, B):
-    """Aᵀ B."""
-    out = np.zeros((A.shape[1], B.shape[1]))
-    for i in range(A.shape[1]):
-        for j in range(B.shape[1]):
-            acc = 0.0
-            for k in range(A.shape[0]):
-                acc += A[k, i] * B[k, j]
-            out[i, j] = acc
-    return out
+    """Aᵀ B (:func:`mm` on the transposed view: the same sums)."""
+    return mm(A.T, B)
