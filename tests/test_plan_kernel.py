@@ -212,3 +212,22 @@ def test_kernel_is_the_readable_model_on_a_redundant_arm():
     system, plan, t, x = _mode_at(parse_scene(doc), 0.2)
     assert plan.nr == 1 and system.nv == 5
     _assert_kernel_is_the_readable_model(system, plan, t, x, span=0.005)
+
+
+def test_operational_kernel_is_the_readable_model_on_a_1d_slide():
+    """The 5-DOF writer with 1-D friction along x drawing a line: the pencil stuck, then sliding along its one
+    tangent (the kernel's 1-D impulse rate −μ F d + the viscous force, d the mode's fixed direction)."""
+    from contactdyn.config import read_toml
+    from contactdyn.scene import find_scene
+
+    doc = read_toml(find_scene("case2_writer5dof"))
+    doc["duration"] = 1.0
+    doc["contact"]["pencil"]["tangent"]["directions"] = [[1.0, 0.0, 0.0]]
+    doc["phase"][1]["reference"]["moves"] = [{"kind": "trapezoid", "delta": [0.02, 0.0, 0.0], "duration": 0.4}]
+    system = System(parse_scene(doc))
+    run_system(system)
+    plans = list(_PLANS[system].values())
+    assert {m.stuck for p in plans for m in p.modes} == {True, False}
+    for plan in plans:
+        t, x = plan.ring[3][0], plan.ring[3][1].copy()
+        _assert_kernel_is_the_readable_model(system, plan, t, x)
