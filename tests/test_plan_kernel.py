@@ -99,12 +99,22 @@ def test_kernel_is_the_readable_model_on_case3_presses(name):
     _assert_kernel_is_the_readable_model(system, plan, t, x)
 
 
-def test_kernel_is_the_readable_model_with_a_reference_carried_by_the_cart():
-    """Case 1's push: A7 tracking a reference carried by the cart (the command depends on the cart's
-    acceleration, one more folded column), through DC motors."""
-    system, plan, t, x = _mode_at(load_scene("case1_cart", {"duration": 2.5}), 2.5)
+@pytest.mark.parametrize("force_reference", [True, False])
+def test_kernel_is_the_readable_model_with_a_reference_carried_by_the_cart(force_reference):
+    """Case 1's push: A7 tracking a reference carried by the cart, through DC motors. Without force_reference the
+    command depends on the cart's acceleration along x (one more folded column, D_a = x); with it (the scene's)
+    the reference along the touching normal is the force's depth instead, and that column is zero."""
+    from contactdyn.config import read_toml
+    from contactdyn.plan_law import compiled_law
+    from contactdyn.scene import find_scene
+
+    doc = read_toml(find_scene("case1_cart"))
+    doc["phase"][1]["controller"]["force_reference"] = force_reference
+    system, plan, t, x = _mode_at(parse_scene(doc, {"duration": 2.5}), 2.5)
     assert plan.phase.carrier is not None
     _assert_kernel_is_the_readable_model(system, plan, t, x)
+    d_a = compiled_law(plan).M[:3, 12:15].dot(plan.phase.carrier[1])  # a* [m/s²] per unit ẍ_d along the axis
+    assert np.array_equal(d_a, [0.0, 0.0, 0.0] if force_reference else [1.0, 0.0, 0.0])
 
 
 def _writer_pressing(u_max: float | None) -> dict:
