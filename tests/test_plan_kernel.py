@@ -6,6 +6,7 @@ from scipy.integrate import solve_ivp
 
 from contactdyn import samples, simulate
 from contactdyn.linalg import cholesky, forward_solve, lu_solve, pinv, sparse_dot
+from contactdyn.plan_law import compiled_law
 from contactdyn.rhsplan import _PLANS
 from contactdyn.robot import Robot
 from contactdyn.scene import load_scene, parse_scene
@@ -105,7 +106,6 @@ def test_kernel_is_the_readable_model_with_a_reference_carried_by_the_cart(force
     command depends on the cart's acceleration along x (one more folded column, D_a = x); with it (the scene's)
     the reference along the touching normal is the force's depth instead, and that column is zero."""
     from contactdyn.config import read_toml
-    from contactdyn.plan_law import compiled_law
     from contactdyn.scene import find_scene
 
     doc = read_toml(find_scene("case1_cart"))
@@ -144,6 +144,17 @@ def test_kernel_declines_a_clipping_voltage_and_the_call_stays_the_readable_mode
         ref = system.evaluate(t, x, plan.modes, plan.phase).xdot
         assert np.allclose(plan.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * (1.0 + np.abs(ref).max()))
     system, plan, t, x = _mode_at(parse_scene(_writer_pressing(u_max=None)), 0.3)
+    _assert_kernel_is_the_readable_model(system, plan, t, x)
+
+
+@pytest.mark.parametrize("cancel", ["target", "measured"])
+def test_kernel_is_the_readable_model_on_the_hybrid_law(cancel):
+    """The hybrid law on the 2-DOF writer pressing case 2's (b) surface through DC motors: with cancel = "target"
+    its tip force f_swap = (F − F*) n goes into τ by Jᵀ (the kernel's swap), with "measured" it does not."""
+    from test_controllers import hybrid_doc
+
+    system, plan, t, x = _mode_at(parse_scene(hybrid_doc(cancel=cancel), {"duration": 0.3}), 0.3)
+    assert compiled_law(plan).swap == (cancel == "target")
     _assert_kernel_is_the_readable_model(system, plan, t, x)
 
 
