@@ -32,7 +32,7 @@ from .linalg import lu_solve, mm, mtv, mv, sparse_dot
 from .plan_law import CompiledLaw, compiled_law, plan_inputs
 from .plan_probe import affine_map
 
-__all__ = ["fold_solve", "kernel_of", "call", "pack", "matrix_of", "vector_of"]
+__all__ = ["fold_solve", "kernel_of", "calls", "call", "pack", "matrix_of", "vector_of"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
 TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
@@ -179,12 +179,8 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
     if plan.compiled_drives is None or plan.friction_terms is not None or plan.launch is not None or not (
             tip_law or plan.law_via_drives):
         return None
-    s = plan.system
-    n, m, no = s.n, plan.m, plan.P.shape[0] - plan.m * (plan.m + 1)
-    size = n + m + no + s.nv
     constants = None
     no_time = np.zeros(0)
-    phi_at, time_terms = plan.phi_at, plan.time_terms  # this make_rhs's (a later ModePlan.use makes new ones)
 
     def ready() -> bool:
         nonlocal constants
@@ -195,25 +191,37 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             constants = inputs, _tip_law_constants(plan, ctl, meta, reach or [], inputs)
         return constants is not None
 
-    def kernel(t, x, phi):
+    def one(t, x, phi, out):
         if not ready():
-            return None
+            return DECLINED
         inputs, (fb, ib) = constants
+        return call(phi, x, inputs.time_part(t) if inputs else no_time, fb, ib, out)
+
+    return calls(plan, one)
+
+
+def calls(plan, one):
+    """kernel(t, x, φ) -> (ẋ, z, o), None where ``one`` declines, and ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of
+    the output's samples, None where one declines: both by one(t, x, φ, out) -> status, a compiled call writing
+    [ẋ, z, o, τ] into ``out`` (this module's :func:`call`, :func:`contactdyn.plan_operational.call`)."""
+    s, m = plan.system, plan.m
+    n, no = s.n, plan.P.shape[0] - m * (m + 1)
+    size = n + m + no + s.nv
+    phi_at, time_terms = plan.phi_at, plan.time_terms  # this make_rhs's (a later ModePlan.use makes new ones)
+
+    def kernel(t, x, phi):
         out = np.empty(size)
-        if call(phi, x, inputs.time_part(t) if inputs else no_time, fb, ib, out):
+        if one(t, x, phi, out):
             return None
         return out[:n], out[n:n + m], out[n + m:n + m + no]
 
     def samples(ts, X):
-        if not ready():
-            return None
-        inputs, (fb, ib) = constants
         N = len(ts)
         tv = time_terms.at_times(ts)
         Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
         for k in range(N):
             Phi[k] = phi = phi_at(ts[k], X[k], tv[k])
-            if call(phi, X[k], inputs.time_part(ts[k]) if inputs else no_time, fb, ib, out[k]):
+            if one(ts[k], X[k], phi, out[k]):
                 return None
         return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]
 
