@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["solve_vector", "solve_matrix", "det", "svd", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
-           "forward_solve", "sparse_dot"]
+           "forward_solve", "sparse_dot", "contiguous"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -37,6 +37,11 @@ except (ImportError, AttributeError):  # pragma: no cover
 
     def svd(a):
         return np.linalg.svd(a, full_matrices=False)
+
+
+def contiguous(a) -> np.ndarray:
+    """``a`` as the compiled functions take it: a C-contiguous float64 array (no copy when it is one)."""
+    return np.ascontiguousarray(a, dtype=float)
 
 
 @njit(cache=True)

@@ -30,6 +30,7 @@ import numpy as np
 
 from .constraints import Rows, force_columns, solve_folded
 from .dynamics import carried_terms, command_of
+from .linalg import contiguous as _c
 from .plan_kernel import fold_solve
 from .plan_law import compiled_law, plan_command, plan_commands
 
@@ -100,10 +101,6 @@ def row_meta(plan) -> list[tuple]:
     """The plan's rows as a controller's force columns read them: (owner, "n" | "t" | "limit" | label, index)."""
     kinds = {"normal": "n", "stick": "t", "limit": "limit"}
     return [(row.owner, kinds.get(row.kind, row.label), row.index) for row in plan.rows]
-
-
-def _c(a) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=float)
 
 
 def _law_parts(plan, ctl, meta: list):

@@ -32,7 +32,7 @@ from .linalg import lu_solve, mm, mtv, mv, sparse_dot
 from .plan_law import CompiledLaw, compiled_law, plan_inputs
 from .plan_probe import affine_map
 
-__all__ = ["fold_solve", "kernel_of", "call", "pack", "matrix_of", "vector_of"]
+__all__ = ["fold_solve", "kernel_of", "calls", "call", "pack", "matrix_of", "vector_of"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
 TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
@@ -179,12 +179,8 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
     if plan.compiled_drives is None or plan.friction_terms is not None or plan.launch is not None or not (
             tip_law or plan.law_via_drives):
         return None
-    s = plan.system
-    n, m, no = s.n, plan.m, plan.P.shape[0] - plan.m * (plan.m + 1)
-    size = n + m + no + s.nv
     constants = None
     no_time = np.zeros(0)
-    phi_at, time_terms = plan.phi_at, plan.time_terms  # this make_rhs's (a later ModePlan.use makes new ones)
 
     def ready() -> bool:
         nonlocal constants
@@ -195,25 +191,37 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             constants = inputs, _tip_law_constants(plan, ctl, meta, reach or [], inputs)
         return constants is not None
 
-    def kernel(t, x, phi):
+    def one(t, x, phi, out):
         if not ready():
-            return None
+            return DECLINED
         inputs, (fb, ib) = constants
+        return call(phi, x, inputs.time_part(t) if inputs else no_time, fb, ib, out)
+
+    return calls(plan, one)
+
+
+def calls(plan, one):
+    """kernel(t, x, φ) -> (ẋ, z, o), None where ``one`` declines, and ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of
+    the output's samples, None where one declines: both by one(t, x, φ, out) -> status, a compiled call writing
+    [ẋ, z, o, τ] into ``out`` (this module's :func:`call`, :func:`contactdyn.plan_operational.call`)."""
+    s, m = plan.system, plan.m
+    n, no = s.n, plan.P.shape[0] - m * (m + 1)
+    size = n + m + no + s.nv
+    phi_at, time_terms = plan.phi_at, plan.time_terms  # this make_rhs's (a later ModePlan.use makes new ones)
+
+    def kernel(t, x, phi):
         out = np.empty(size)
-        if call(phi, x, inputs.time_part(t) if inputs else no_time, fb, ib, out):
+        if one(t, x, phi, out):
             return None
         return out[:n], out[n:n + m], out[n + m:n + m + no]
 
     def samples(ts, X):
-        if not ready():
-            return None
-        inputs, (fb, ib) = constants
         N = len(ts)
         tv = time_terms.at_times(ts)
         Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
         for k in range(N):
             Phi[k] = phi = phi_at(ts[k], X[k], tv[k])
-            if call(phi, X[k], inputs.time_part(ts[k]) if inputs else no_time, fb, ib, out[k]):
+            if one(ts[k], X[k], phi, out[k]):
                 return None
         return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]
 
@@ -221,16 +229,19 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
     return kernel
 
 
-def _ints(plan, **given) -> list[int]:
-    """INTS of a plan: its sizes and offsets, ``given`` by name (lower case), the rest 0 (ZS −1)."""
+def _ints(plan, given: dict) -> list[int]:
+    """INTS of a plan: its sizes and offsets, then ``given`` by index (e.g. {KIND: TASK_LAW}), the rest 0."""
     s, m = plan.system, plan.m
     off = m * m + m  # o's start in y
-    values = {"m": m, "nq": s.nQ, "nv": s.nv, "i_h": plan.i_h, "i_j": plan.i_J[plan.tip_frame],
-              "i_dr": plan.i_dr[plan.tip_frame], "zs": -1, "n_lim": len(plan.compiled_drives.limited),
-              "o_y0": off + plan.o_y.start, "o_y1": off + plan.o_y.stop, "x_z0": plan.z_slice.start,
-              "x_z1": plan.z_slice.stop, "w0": s.nQ + plan.nr, **given}
-    names = "M NQ NV I_H I_J I_DR TIP U_F ZS SWAP N_LIM O_Y0 O_Y1 X_Z0 X_Z1 W0 KIND O_G".lower().split()
-    return [int(values.get(name, 0)) for name in names]
+    ints = [0] * (O_G + 1)
+    ints[M], ints[NQ], ints[NV], ints[I_H] = m, s.nQ, s.nv, plan.i_h
+    ints[I_J], ints[I_DR] = plan.i_J[plan.tip_frame], plan.i_dr[plan.tip_frame]
+    ints[ZS], ints[N_LIM] = -1, len(plan.compiled_drives.limited)
+    ints[O_Y0], ints[O_Y1] = off + plan.o_y.start, off + plan.o_y.stop
+    ints[X_Z0], ints[X_Z1], ints[W0] = plan.z_slice.start, plan.z_slice.stop, s.nQ + plan.nr
+    for k, value in given.items():
+        ints[k] = int(value)
+    return ints
 
 
 def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
@@ -241,7 +252,7 @@ def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
     P = sparse.csr_matrix(plan.P)
     floats = [P.data, empty, empty, plan.compiled_drives.L, plan.compiled_drives.L_tau, np.zeros((3, 0)), empty,
               empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F]
-    ints = _ints(plan, kind=TASK_LAW, o_g=plan.o_gctl.start)
+    ints = _ints(plan, {KIND: TASK_LAW, O_G: plan.o_gctl.start})
     return pack(floats, [P.indices, P.indptr, ints, plan.i_J, [], [], []])
 
 
@@ -260,8 +271,8 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
         cols.append(i_b)
     none = np.empty((0, len(cols)))
     P = sparse.csr_matrix(plan.P)
-    ints = _ints(plan, tip=inputs.tip, u_f=ctl.i_forces, zs=ctl.zs.start if ctl.zs is not None else -1,
-                 swap=ctl.swap, kind=TIP_LAW)
+    ints = _ints(plan, {TIP: inputs.tip, U_F: ctl.i_forces, ZS: ctl.zs.start if ctl.zs is not None else -1,
+                        SWAP: ctl.swap, KIND: TIP_LAW})
     D_ctl = s._D_ctl if s._D_ctl is not None else np.zeros((nv, nv))
     floats = [P.data, ctl.M, inputs.state_map(), drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
               none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null], np.zeros((nv, 0))]

@@ -29,12 +29,11 @@ from .controllers import operational_law as law
 from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
 from .linalg import lu_solve, mtv, sparse_dot
-from .plan_kernel import matrix_of, pack, vector_of
+from .plan_kernel import DECLINED, OK, calls, matrix_of, pack, vector_of
 from .plan_law import reference_rows
 
 __all__ = ["call", "operational_kernel_of"]
 
-OK, DECLINED = 0, 1  #: :func:`call`'s status
 #: the constants of a plan's call in :func:`~contactdyn.plan_kernel.pack`'s two buffers, by these indices
 P_VAL, D_CTL, TILT_F, TILT_T, TILT_BODY, RATES_F, AXES, FORCED, KP, KD, TOOL_AXIS, TARGET, SCALARS = range(13)
 P_COL, P_ROW, INTS, TILT_I, RATES_I = range(13, 18)  # ints (P: CSR columns, row starts)
@@ -170,12 +169,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     referenced, orient = phase.reference is not None, ctl.reads_orientation
     none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))
     rotation = data.oMf[fid].rotation  # (a view: the tip's R at the last φ)
-    # this make_rhs's φ and the tip terms it keeps (a later ModePlan.use makes new ones; this kernel keeps its own)
-    tip6, phi_at, time_terms = plan.tip6, plan.phi_at, plan.time_terms
-
-    n, no = s.n, plan.P.shape[0] - m * (m + 1)
-    size = n + m + no + nv
-
+    tip6 = plan.tip6  # this make_rhs's tip terms (a later ModePlan.use makes new ones; this kernel keeps its own)
     set_points = np.empty(len(ramps))  # F_d [N], rewritten per call
     reference = reference_rows(phase.reference) if referenced else None  # (no carrier: the reference's own)
 
@@ -188,23 +182,10 @@ def operational_kernel_of(plan, impulses: list[tuple]):
             return ref, set_points, no_rotation, no_rows, none
         return ref, set_points, rotation, *tip6  # this call's φ's (plan_rhs._phi_function)
 
-    def kernel(t, x, phi):
-        out = np.empty(size)
-        if call(phi, x, fb, ib, *inputs(t, x), out):
-            return None
-        return out[:n], out[n:n + m], out[n + m:n + m + no]
+    def one(t, x, phi, out):
+        return call(phi, x, fb, ib, *inputs(t, x), out)
 
-    def samples(ts, X):
-        N = len(ts)
-        tv = time_terms.at_times(ts)
-        Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
-        for k in range(N):
-            Phi[k] = phi = phi_at(ts[k], X[k], tv[k])
-            if call(phi, X[k], fb, ib, *inputs(ts[k], X[k]), out[k]):
-                return None
-        return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]
-
-    kernel.samples = samples
+    kernel = calls(plan, one)
     kernel.rates = True
     return kernel
 

@@ -179,6 +179,19 @@ def test_a_singular_task_is_a_clear_error():
         law.command(_input(robot, "tool0", q, np.zeros(6), np.zeros(3)))
 
 
+def test_the_plans_compiled_call_declines_a_singular_task_and_the_law_raises_there():
+    """The writer's compiled call at the straight-elbow posture (the task singular) declines, and the plan's
+    right-hand side raises the readable law's error instead of a torque through a near-singular Λ."""
+    system, modes, phase, x0 = prepare(load_scene("case2_writer_ur5"))
+    plan = ModePlan(system, modes, phase)
+    assert plan.ok and plan.kernel is not None
+    x = x0.copy()
+    x[:6] = [0.0, -1.2, 0.0, -1.0, 1.2, 0.0]  # [rad] elbow straight (test_a_singular_task_is_a_clear_error)
+    assert plan.kernel(0.1, x, plan.phi_at(0.1, x)) is None
+    with pytest.raises(SimulationError, match=r"operational_space: the task .* is singular at this posture"):
+        plan.rhs(0.1, x)
+
+
 def test_more_task_directions_than_joints_is_a_scene_error():
     with pytest.raises(SceneError, match=r"controller: expected a task of at most 4 directions \(the arm's joints\): "
                                          r"3 position axes, 0 force directions, 2 tool tilts, found 5"):

@@ -6,6 +6,7 @@ from scipy.integrate import solve_ivp
 
 from contactdyn import samples, simulate
 from contactdyn.linalg import cholesky, forward_solve, lu_solve, pinv, sparse_dot
+from contactdyn.plan_law import compiled_law
 from contactdyn.rhsplan import _PLANS
 from contactdyn.robot import Robot
 from contactdyn.scene import load_scene, parse_scene
@@ -99,12 +100,21 @@ def test_kernel_is_the_readable_model_on_case3_presses(name):
     _assert_kernel_is_the_readable_model(system, plan, t, x)
 
 
-def test_kernel_is_the_readable_model_with_a_reference_carried_by_the_cart():
-    """Case 1's push: A7 tracking a reference carried by the cart (the command depends on the cart's
-    acceleration, one more folded column), through DC motors."""
-    system, plan, t, x = _mode_at(load_scene("case1_cart", {"duration": 2.5}), 2.5)
+@pytest.mark.parametrize("force_reference", [True, False])
+def test_kernel_is_the_readable_model_with_a_reference_carried_by_the_cart(force_reference):
+    """Case 1's push: A7 tracking a reference carried by the cart, through DC motors. Without force_reference the
+    command depends on the cart's acceleration along x (one more folded column, D_a = x); with it (the scene's)
+    the reference along the touching normal is the force's depth instead, and that column is zero."""
+    from contactdyn.config import read_toml
+    from contactdyn.scene import find_scene
+
+    doc = read_toml(find_scene("case1_cart"))
+    doc["phase"][1]["controller"]["force_reference"] = force_reference
+    system, plan, t, x = _mode_at(parse_scene(doc, {"duration": 2.5}), 2.5)
     assert plan.phase.carrier is not None
     _assert_kernel_is_the_readable_model(system, plan, t, x)
+    d_a = compiled_law(plan).M[:3, 12:15].dot(plan.phase.carrier[1])  # a* [m/s²] per unit ẍ_d along the axis
+    assert np.array_equal(d_a, [0.0, 0.0, 0.0] if force_reference else [1.0, 0.0, 0.0])
 
 
 def _writer_pressing(u_max: float | None) -> dict:
@@ -134,6 +144,17 @@ def test_kernel_declines_a_clipping_voltage_and_the_call_stays_the_readable_mode
         ref = system.evaluate(t, x, plan.modes, plan.phase).xdot
         assert np.allclose(plan.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * (1.0 + np.abs(ref).max()))
     system, plan, t, x = _mode_at(parse_scene(_writer_pressing(u_max=None)), 0.3)
+    _assert_kernel_is_the_readable_model(system, plan, t, x)
+
+
+@pytest.mark.parametrize("cancel", ["target", "measured"])
+def test_kernel_is_the_readable_model_on_the_hybrid_law(cancel):
+    """The hybrid law on the 2-DOF writer pressing case 2's (b) surface through DC motors: with cancel = "target"
+    its tip force f_swap = (F − F*) n goes into τ by Jᵀ (the kernel's swap), with "measured" it does not."""
+    from test_controllers import hybrid_doc
+
+    system, plan, t, x = _mode_at(parse_scene(hybrid_doc(cancel=cancel), {"duration": 0.3}), 0.3)
+    assert compiled_law(plan).swap == (cancel == "target")
     _assert_kernel_is_the_readable_model(system, plan, t, x)
 
 
@@ -212,3 +233,22 @@ def test_kernel_is_the_readable_model_on_a_redundant_arm():
     system, plan, t, x = _mode_at(parse_scene(doc), 0.2)
     assert plan.nr == 1 and system.nv == 5
     _assert_kernel_is_the_readable_model(system, plan, t, x, span=0.005)
+
+
+def test_operational_kernel_is_the_readable_model_on_a_1d_slide():
+    """The 5-DOF writer with 1-D friction along x drawing a line: the pencil stuck, then sliding along its one
+    tangent (the kernel's 1-D impulse rate −μ F d + the viscous force, d the mode's fixed direction)."""
+    from contactdyn.config import read_toml
+    from contactdyn.scene import find_scene
+
+    doc = read_toml(find_scene("case2_writer5dof"))
+    doc["duration"] = 1.0
+    doc["contact"]["pencil"]["tangent"]["directions"] = [[1.0, 0.0, 0.0]]
+    doc["phase"][1]["reference"]["moves"] = [{"kind": "trapezoid", "delta": [0.02, 0.0, 0.0], "duration": 0.4}]
+    system = System(parse_scene(doc))
+    run_system(system)
+    plans = list(_PLANS[system].values())
+    assert {m.stuck for p in plans for m in p.modes} == {True, False}
+    for plan in plans:
+        t, x = plan.ring[3][0], plan.ring[3][1].copy()
+        _assert_kernel_is_the_readable_model(system, plan, t, x)

@@ -152,7 +152,7 @@ def test_plan_command_waits_for_the_matrix_and_declines_a_readable_law():
     assert plan_command(joint_plan) is None
 
 
-def testreference_rows_are_reference_at_bitwise():
+def test_reference_rows_are_reference_at_bitwise():
     """plan_law's reference as one product over the moves' profiles equals Reference.at bitwise (same sums in the
     same order) for 1–3 moves of every non-circle kind and one circle, before, during and after them."""
     from contactdyn.plan_law import reference_rows

@@ -56,6 +56,7 @@ import numpy as np
 
 from ..elements import Mass, Stage
 from ..errors import SceneError
+from ..linalg import contiguous as _c
 from . import computed_torque as compiled
 from .base import BindContext, ControlInput, Controller, register
 
@@ -154,18 +155,13 @@ def _check_gain_size(g: np.ndarray, sizes: tuple[int, ...], key: str, file) -> N
 
 
 def pseudo_inverse(J: np.ndarray) -> np.ndarray:
-    """J⁺ by the reduced SVD, singular values below 1e-10 of the largest dropped (numpy.linalg.pinv's rcond);
-    one Jacobian (r, c) or a stack (N, r, c)."""
+    """J⁺ by :func:`contactdyn.linalg.pinv` (a one-sided Jacobi SVD), singular values below 1e-10 of the largest
+    dropped (numpy.linalg.pinv's rcond); one Jacobian (r, c) or a stack (N, r, c)."""
     J = _c(J)
     return compiled.pinv_stack(J) if J.ndim == 3 else compiled.pinv(J)
 
 
 _NO_ROTOR = np.empty(0)
-
-
-def _c(a) -> np.ndarray:
-    """``a`` as the compiled functions take it: a C-contiguous float64 array (no copy when it is one)."""
-    return np.ascontiguousarray(a, dtype=float)
 
 
 class _Pinv:
