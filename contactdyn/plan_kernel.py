@@ -181,13 +181,14 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
         return None
     constants = None
     no_time = np.zeros(0)
+    modes = plan.modes  # the modes this call is made for (a later ModePlan.use binds new ones)
 
     def ready() -> bool:
         nonlocal constants
         if constants is None and not tip_law:
             constants = None, _task_law_constants(plan)
         elif constants is None and ctl.M is not None:
-            inputs = plan_inputs(plan, ctl)
+            inputs = plan_inputs(plan, ctl, modes)
             constants = inputs, _tip_law_constants(plan, ctl, meta, reach or [], inputs)
         return constants is not None
 

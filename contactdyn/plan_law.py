@@ -181,7 +181,7 @@ def compiled_law(plan):
     return law
 
 
-def plan_inputs(plan, law: CompiledLaw):
+def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
     """inputs(t, x, φ, o) -> u: :meth:`CompiledLaw.inputs` read from the plan's own slots (the tip's p and ṗ
     in φ's e, the forces in o, z in x) and the phase's reference, ramps and surfaces, without a ControlInput
     (the values the plan's ControlInput carries, :func:`~contactdyn.plan_rhs.controller_input`).
@@ -190,7 +190,8 @@ def plan_inputs(plan, law: CompiledLaw):
     the ramps; one buffer, rewritten per call) and ``inputs.state_part(x)`` (affine in x: a carrying body's
     offset of the reference, surfaces on bodies, z), so a compiled call (:mod:`contactdyn.plan_kernel`) can
     take the state part as a matrix (``inputs.state_map()``: [U_x, u_c], u's state part = U_x x + u_c) and
-    the tip (φ[inputs.tip:+6]) and forces (o[inputs.forces]) by index."""
+    the tip (φ[inputs.tip:+6]) and forces (o[inputs.forces]) by index. ``modes``: those the call runs with
+    (default the plan's current; a call made before a ModePlan.use keeps its own)."""
     s, phase = plan.system, plan.phase
     nQ, n = s.nQ, s.n
     tip = plan.i_e + plan.e_frame[plan.tip_frame]
@@ -200,7 +201,7 @@ def plan_inputs(plan, law: CompiledLaw):
     ramps = [phase.forces[k] for k in law.set_keys]
     if surface_keys(s) != law.surface_keys:
         raise ValueError(f"the law's surfaces {law.surface_keys} are not the system's {surface_keys(s)}")
-    modes = plan.modes
+    modes = plan.modes if modes is None else modes  # (a call keeps the modes it was made for: ModePlan.use)
     i_f = law.i_forces
     i_set = i_f + len(i_forces)
     i_surf = i_set + 2 * len(ramps)
@@ -302,14 +303,14 @@ def plan_command(plan):
     robot, ctl = s.robot, law.ctl
     tf = plan.tip_frame
     i_dr = plan.i_dr[tf]
-    inputs = None
+    inputs, modes = None, plan.modes  # (the modes of the call this command is made for)
 
     def command(t, x, Js, phi, o, tau_c):
         nonlocal inputs
         if law.M is None:
             return None
         if inputs is None:
-            inputs = plan_inputs(plan, law)
+            inputs = plan_inputs(plan, law, modes)
         y = law.M.dot(inputs(t, x, phi, o))
         H = s.controller_inertia(robot.H)
         J = Js[tf]
