@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -211,6 +212,10 @@ def apply_overrides(document: dict[str, Any], overrides: dict[str, Any], file: s
     """A copy of ``document`` with each ``key.path`` set; array items as ``phase.1.until``."""
     doc = copy.deepcopy(document)
     for key, value in overrides.items():
+        indexed = re.search(r"\[(\d+)\]", key)
+        if indexed:  # phase[1].until: the array's item is a path part of its own
+            raise SceneError(key, f"an array item as a path part of its own, e.g. "
+                             f"{key[:indexed.start()]}.{indexed.group(1)}{key[indexed.end():]}", indexed.group(0), file)
         parts = key.split(".")
         node: Any = doc
         for i, part in enumerate(parts[:-1]):

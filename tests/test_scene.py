@@ -74,6 +74,9 @@ def test_overrides_parse_toml_values_and_index_arrays():
     assert doc["phase"][0]["force"][0]["value"] == 50.0
     with pytest.raises(SceneError, match="phase.7"):
         apply_overrides(b1_doc(), {"phase.7.until": 1.0})
+    with pytest.raises(SceneError, match=r"phase\[0\]\.until: expected an array item as a path part of its own, "
+                                         r"e\.g\. phase\.0\.until"):
+        apply_overrides(b1_doc(), {"phase[0].until": 1.0})
 
 
 def test_override_changes_the_physics():
