@@ -64,9 +64,10 @@ def make_rhs(plan):
     plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0].copy()
     modes = plan.modes  # this call's own, 2-D reference directions included (ModePlan.use)
 
-    kernel = plan.kernel = kernel_of(plan, row_meta(plan), reaching_rows(plan))  # (no rows: [], [])
-    kernel = plan.kernel = kernel or operational_kernel_of(plan, impulse_terms(plan))
-    impulses = bool(impulse_terms(plan)) and not getattr(kernel, "rates", False)  # a kernel may write them itself
+    terms = impulse_terms(plan)
+    kernel = plan.kernel = (kernel_of(plan, row_meta(plan), reaching_rows(plan))  # (no rows: [], [])
+                            or operational_kernel_of(plan, terms))
+    impulses = bool(terms) and not getattr(kernel, "rates", False)  # a kernel may write them itself
 
     def rhs(t, x):
         phi, Js = phi_and_jacobians(t, x)
