@@ -32,7 +32,8 @@ from .linalg import lu_solve, mm, mtv, mv, sparse_dot
 from .plan_law import CompiledLaw, compiled_law, plan_inputs
 from .plan_probe import affine_map
 
-__all__ = ["fold_solve", "kernel_of", "calls", "call", "pack", "matrix_of", "vector_of"]
+__all__ = ["fold_solve", "kernel_of", "calls", "call", "pack", "matrix_of", "vector_of", "csr_of", "kkt_of",
+           "write_out"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
 TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
@@ -74,6 +75,37 @@ def vector_of(buf, ib, k):
     """Array k of :func:`pack`'s buffers (``buf``: fb for a float array, ib for an int array), flat."""
     o, r, c = ib[3 * k], ib[3 * k + 1], ib[3 * k + 2]
     return buf[o:o + r * c]
+
+
+def csr_of(plan) -> sparse.csr_matrix:
+    """The plan's map P by rows (its ~1 % nonzeros), made once per plan for the kernels' constants."""
+    P = plan.__dict__.get("_P_csr")
+    if P is None:
+        P = plan._P_csr = sparse.csr_matrix(plan.P)
+    return P
+
+
+@njit(cache=True)
+def kkt_of(phi, fb, ib, k_val, k_col, k_row, m):
+    """(y, A, b, o) of y = P φ = [A, b, o] with P by rows in the packed arrays k_val, k_col, k_row (:func:`csr_of`);
+    A (m, m) and b: copies, for the caller to fold into; o: the affine outputs, a view of y."""
+    y = sparse_dot(vector_of(ib, ib, k_row), vector_of(ib, ib, k_col), vector_of(fb, ib, k_val), phi)
+    return y, y[:m * m].copy().reshape((m, m)), y[m * m:m * m + m].copy(), y[m * m + m:]
+
+
+@njit(cache=True)
+def write_out(out, x, z, y, o, tau, nQ, o_y0, o_y1):
+    """[ẋ, z, o, τ] into ``out`` with ẋ = [Q̇, Q̈, ẏ] (ẏ = y[o_y0:o_y1]); returns ẋ (a view) for the caller's
+    own slots (a law's ż, impulse rates)."""
+    n, m = x.size, z.size
+    xd = out[:n]
+    xd[:nQ] = x[nQ:2 * nQ]
+    xd[nQ:2 * nQ] = z[:nQ]
+    xd[2 * nQ:] = y[o_y0:o_y1]
+    out[n:n + m] = z
+    out[n + m:n + m + o.size] = o
+    out[n + m + o.size:] = tau
+    return xd
 
 
 @njit(cache=True)
@@ -138,11 +170,8 @@ def call(phi, x, u, fb, ib, out):
     FORCES: o's measured forces in u's order; COLS: the folded columns of A (the rows' λ, then a carrying
     body's Q̈_b), with D_A, D_F, D_Z per column; REACH: the rows whose A column beyond the robot joins B."""
     c = vector_of(ib, ib, INTS)
-    m, nQ, nv, n = c[M], c[NQ], c[NV], x.size
-    y = sparse_dot(vector_of(ib, ib, P_ROW), vector_of(ib, ib, P_COL), vector_of(fb, ib, P_VAL), phi)  # P φ
-    A = y[:m * m].copy().reshape((m, m))
-    b = y[m * m:m * m + m].copy()
-    o = y[m * m + m:]
+    nQ, nv = c[NQ], c[NV]
+    y, A, b, o = kkt_of(phi, fb, ib, P_VAL, P_COL, P_ROW, c[M])
     if c[KIND] == TIP_LAW:
         tau, B, targets = _tip_law(phi, x, u, A, b, o, fb, ib, c)
     else:  # τ = J_tipᵀ g_ctl + F φ
@@ -155,15 +184,9 @@ def call(phi, x, u, fb, ib, out):
     folded = z[cols]
     if c[N_LIM] and np.abs(y0[nQ:] + mv(Y[nQ:], folded)).max() > 1.0:
         return DECLINED
-    xd = out[:n]
-    xd[:nQ] = x[nQ:2 * nQ]
-    xd[nQ:2 * nQ] = z[:nQ]
-    xd[2 * nQ:] = y[c[O_Y0]:c[O_Y1]]
+    xd = write_out(out, x, z, y, o, tau + mv(B, folded), nQ, c[O_Y0], c[O_Y1])
     if c[ZS] >= 0:
         xd[c[X_Z0]:c[X_Z1]] = targets[c[ZS]:] + mv(matrix_of(fb, ib, D_Z), folded)
-    out[n:n + m] = z
-    out[n + m:n + m + o.size] = o
-    out[n + m + o.size:] = tau + mv(B, folded)
     return OK
 
 
@@ -250,7 +273,7 @@ def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
     nv, width = plan.system.nv, plan.P.shape[1]
     F = affine_map(lambda e: plan._feedforward_torque(e[:width], e[plan.i_e:width]), width + 1)[:, :width]
     empty = np.zeros((0, 0))
-    P = sparse.csr_matrix(plan.P)
+    P = csr_of(plan)
     floats = [P.data, empty, empty, plan.compiled_drives.L, plan.compiled_drives.L_tau, np.zeros((3, 0)), empty,
               empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F]
     ints = _ints(plan, {KIND: TASK_LAW, O_G: plan.o_gctl.start})
@@ -265,13 +288,13 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
     cols = list(range(nQ, nQ + nr))
     if plan.phase.carrier is not None:  # a reference carried by body coordinate i_b: ∂/∂Q̈_b, one more column
         i_b, axis = plan.phase.carrier
-        d = ctl.M[:, 12:15].dot(axis)  # the tip targets per unit [m/s²] of ẍ_d along the axis
+        d = ctl.per_reference_acceleration(axis)
         D_a = np.column_stack((D_a, d[:3]))
         D_f = None if D_f is None else np.column_stack((D_f, d[3:6]))
         D_z = None if D_z is None else np.column_stack((D_z, d[ctl.zs]))
         cols.append(i_b)
     none = np.empty((0, len(cols)))
-    P = sparse.csr_matrix(plan.P)
+    P = csr_of(plan)
     ints = _ints(plan, {TIP: inputs.tip, U_F: ctl.i_forces, ZS: ctl.zs.start if ctl.zs is not None else -1,
                         SWAP: ctl.swap, KIND: TIP_LAW})
     D_ctl = s._D_ctl if s._D_ctl is not None else np.zeros((nv, nv))

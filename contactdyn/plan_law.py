@@ -144,9 +144,13 @@ class CompiledLaw:
             return self.ctl.a_d_increment(inp, axis, tau, zdot)
         return self.carried_increment(inp.H, inp.J, axis)
 
+    def per_reference_acceleration(self, axis: np.ndarray) -> np.ndarray:
+        """[a*, f_swap, ż] per unit [m/s²] more of ẍ_d along ``axis``: M's ẍ_d columns (u[12:15]) times the axis."""
+        return self.M[:, 12:15].dot(axis)
+
     def carried_increment(self, H: np.ndarray, J: np.ndarray, axis: np.ndarray) -> tuple:
         """(Δτ, Δż or None) per unit [m/s²] more of ẍ_d along ``axis``, from M's ẍ_d columns and the model's H, J."""
-        d = self.M[:, 12:15].dot(axis)
+        d = self.per_reference_acceleration(axis)
         dtau = self.ctl.increments(H, J, d[:3, None], d[3:6, None] if self.swap else None)[:, 0]
         return dtau, (d[self.zs] if self.zs is not None else None)
 

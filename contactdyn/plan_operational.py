@@ -23,13 +23,12 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from scipy import sparse
 
 from .controllers import operational_law as law
 from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
-from .linalg import lu_solve, mtv, sparse_dot
-from .plan_kernel import DECLINED, OK, calls, matrix_of, pack, vector_of
+from .linalg import lu_solve, mtv
+from .plan_kernel import DECLINED, OK, calls, csr_of, kkt_of, matrix_of, pack, vector_of, write_out
 from .plan_law import reference_rows
 
 __all__ = ["call", "operational_kernel_of"]
@@ -103,11 +102,7 @@ def call(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
     without a tool axis); ref = [x_d, ẋ_d, ẍ_d] [m, m/s, m/s²] the reference (none without), F_d [N] the set-points."""
     m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1 = vector_of(ib, ib, INTS)
     band, ko, do, k_null, kd_normal = vector_of(fb, ib, SCALARS)
-    m2 = m * m
-    y = sparse_dot(vector_of(ib, ib, P_ROW), vector_of(ib, ib, P_COL), vector_of(fb, ib, P_VAL), phi)  # P φ
-    A = y[:m2].copy().reshape((m, m))
-    b = y[m2:m2 + m].copy()
-    o = y[m2 + m:]
+    y, A, b, o = kkt_of(phi, fb, ib, P_VAL, P_COL, P_ROW, m)
     if not _tilt(A, o, phi, matrix_of(ib, ib, TILT_I), matrix_of(fb, ib, TILT_F), matrix_of(fb, ib, TILT_T),
                  matrix_of(fb, ib, TILT_BODY), nQ, nv, band):
         return DECLINED
@@ -127,15 +122,8 @@ def call(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
     z = lu_solve(A, b)
     if not np.isfinite(z.dot(z)):
         return DECLINED
-    n = x.size
-    xd = out[:n]
-    xd[:nQ] = x[nQ:2 * nQ]
-    xd[nQ:2 * nQ] = z[:nQ]
-    xd[2 * nQ:] = y[o_y0:o_y1]
+    xd = write_out(out, x, z, y, o, tau, nQ, o_y0, o_y1)
     _impulse_rates(xd, z, o, matrix_of(ib, ib, RATES_I), matrix_of(fb, ib, RATES_F), band)
-    out[n:n + m] = z
-    out[n + m:n + m + o.size] = o
-    out[n + m + o.size:] = tau
     return OK
 
 
@@ -161,7 +149,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     D_ctl = np.zeros((nv, nv)) if s._D_ctl is None else s._D_ctl
     tilt_i, tilt_f, tilt_T, tilt_body = _tilt_constants(plan)
     rates_i, rates_f = _rates_constants(plan, impulses)
-    P = sparse.csr_matrix(plan.P)
+    P = csr_of(plan)
     axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
     fb, ib = pack([P.data, D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd, tool_axis, target,
                    [s.slip_band, ko, do, k_null, kd_normal]], [P.indices, P.indptr, ints, tilt_i, rates_i])
