@@ -30,6 +30,7 @@ import math
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 from .constraints import force_columns
 from .controllers import ControlInput
@@ -38,7 +39,7 @@ from .dynamics import surface_keys, surface_points
 from .linalg import mv
 from .phases import reference_at
 from .plan_probe import affine_map
-from .trajectory import circle_reference, profile
+from .trajectory import circle_reference, move_rows, move_table, ramp_rows, ramp_table
 
 __all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "plan_command", "plan_commands", "operational_command",
            "reference_rows"]
@@ -202,17 +203,18 @@ def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
     o_index = {c.name: plan.o_Fint.start + i for i, c in enumerate(s.contacts)}
     o_index.update({key: sl.start for key, sl in plan.o_iface.items()})
     i_forces = np.array([o_index[k] for k in law.force_keys], dtype=np.intp)
-    ramps = [phase.forces[k] for k in law.set_keys]
+    ramps = ramp_table([phase.forces[k] for k in law.set_keys])
     if surface_keys(s) != law.surface_keys:
         raise ValueError(f"the law's surfaces {law.surface_keys} are not the system's {surface_keys(s)}")
     modes = plan.modes if modes is None else modes  # (a call keeps the modes it was made for: ModePlan.use)
     i_f = law.i_forces
     i_set = i_f + len(i_forces)
-    i_surf = i_set + 2 * len(ramps)
+    i_surf = i_set + 2 * len(ramps)  # (F_d, Ḟ_d per ramp)
     i_z = i_surf + 6 * len(law.surface_keys)
     z = slice(2 * nQ + phase.z_slice.start, 2 * nQ + phase.z_slice.stop)
     u = np.zeros(law.nu)
     u[-1] = 1.0
+    set_points = u[i_set:i_surf]
     # written once where they cannot change within the mode: a reference without moves, surfaces on the ground
     # (Contact.body_index < 0)
     moves = law.ref and bool(phase.reference.moves)
@@ -222,15 +224,17 @@ def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
     if not surfaces_move:
         _write_surfaces(u, i_surf, surface_points(s, np.zeros(n), modes))
     carrier = phase.carrier if law.ref else None
-    reference = reference_rows(phase.reference) if moves else None
+    product = reference_product(phase.reference) if moves else _NO_MOVES
+    reference = reference_rows(phase.reference) if product is None else None
 
     def time_part(t):
-        if moves:  # (a carrying body's offset: the state part)
+        """u's time part at t [s]: the reference [m, m/s, m/s²] (a carrying body's offset: the state part), then
+        F_d [N], Ḟ_d [N/s] per ramp."""
+        if product is None:  # circles
             u[6:15] = reference(t)
-        j = i_set
-        for ramp in ramps:  # F_d [N], Ḟ_d [N/s]
-            u[j:j + 2] = ramp.at(t)
-            j += 2
+            ramp_rows(t, ramps, set_points)
+        else:
+            _time_part(t, *product, ramps, u, i_set)
         return u
 
     def state_part(x):
@@ -259,7 +263,7 @@ def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
 def reference_rows(reference):
     """rows(t) -> [x_d, ẋ_d, ẍ_d] (9,) of a task-space reference [m, m/s, m/s²], bitwise Reference.at's:
     its sum start + Σ_k (σ_k, σ'_k/T_k, σ''_k/T_k²) ⊗ Δ_k as one product R w over the moves' profiles w (the
-    same sums in the same order, ~1 µs against ~2 µs per move); with circles, one circle's rows plus the
+    same sums in the same order, one compiled call); with circles, one circle's rows plus the
     start (Reference.at's one-move sum), else Reference.at itself."""
     if any(m.kind == "circle" for m in reference.moves):
         if len(reference.moves) > 1:
@@ -267,6 +271,15 @@ def reference_rows(reference):
         m = reference.moves[0]
         terms, span, start = m._circle_terms, 2.0 * math.pi * m.turns, np.asarray(reference.start, float)
         return lambda t: circle_reference(t, m.start, m.duration, m.accel_fraction, span, terms, start)
+    moves, R, w = reference_product(reference)
+    return lambda t: _reference_rows(t, moves, R, w)
+
+
+def reference_product(reference) -> tuple | None:
+    """(moves, R, w) of :func:`reference_rows`' product R w (moves: trajectory.move_table; w's buffer), None for
+    a reference with circles."""
+    if any(m.kind == "circle" for m in reference.moves):
+        return None
     K = len(reference.moves)
     R = np.zeros((9, 1 + 3 * K))
     R[0:3, 0] = reference.start
@@ -274,17 +287,26 @@ def reference_rows(reference):
         R[0:3, 1 + 3 * k], R[3:6, 2 + 3 * k], R[6:9, 3 + 3 * k] = m.delta, m.delta, m.delta
     w = np.zeros(1 + 3 * K)
     w[0] = 1.0
-    moves = [(m.kind, m.start, m.duration, m.accel_fraction) for m in reference.moves]
+    return move_table(reference.moves), R, w
 
-    def rows(t):
-        for k, (kind, start, duration, af) in enumerate(moves):
-            s, ds, dds = profile(kind, (t - start) / duration, af)
-            w[1 + 3 * k] = s
-            w[2 + 3 * k] = ds / duration
-            w[3 + 3 * k] = dds / duration**2
-        return mv(R, w)
 
-    return rows
+_NO_MOVES = (np.zeros((0, 4)), np.zeros((9, 1)), np.ones(1))  #: reference_product's of a reference fixed in the mode
+
+
+@njit(cache=True)
+def _reference_rows(t, moves, R, w):
+    """R w at t [s]: :func:`reference_rows`' product, w = [1, (σ, σ'/T, σ''/T²) per move] (trajectory.move_rows)."""
+    move_rows(t, moves, w[1:])
+    return mv(R, w)
+
+
+@njit(cache=True)
+def _time_part(t, moves, R, w, ramps, u, i_set):
+    """:func:`plan_inputs`' time part into u at t [s]: u[6:15] = the reference's rows (none without moves), then
+    F_d [N], Ḟ_d [N/s] per ramp from u[i_set]."""
+    if moves.shape[0]:
+        u[6:15] = _reference_rows(t, moves, R, w)
+    ramp_rows(t, ramps, u[i_set:i_set + 2 * ramps.shape[0]])
 
 
 def _write_surfaces(u: np.ndarray, j: int, points: list) -> None:

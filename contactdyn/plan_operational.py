@@ -30,6 +30,7 @@ from .friction import launching
 from .linalg import lu_solve, mtv
 from .plan_kernel import DECLINED, OK, calls, csr_of, kkt_of, matrix_of, pack, vector_of, write_out
 from .plan_law import reference_rows
+from .trajectory import ramp_rows, ramp_table
 
 __all__ = ["call", "operational_kernel_of"]
 
@@ -153,19 +154,21 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
     fb, ib = pack([P.data, D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd, tool_axis, target,
                    [s.slip_band, ko, do, k_null, kd_normal]], [P.indices, P.indptr, ints, tilt_i, rates_i])
-    ramps = [phase.forces[key] for key in ctl.force_keys]
+    ramps = ramp_table([phase.forces[key] for key in ctl.force_keys])
     referenced, orient = phase.reference is not None, ctl.reads_orientation
     none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))
     rotation = data.oMf[fid].rotation  # (a view: the tip's R at the last φ)
     tip6 = plan.tip6  # this make_rhs's tip terms (a later ModePlan.use makes new ones; this kernel keeps its own)
-    set_points = np.empty(len(ramps))  # F_d [N], rewritten per call
+    ramp_values = np.empty(2 * len(ramps))  # F_d [N], Ḟ_d [N/s] per ramp, rewritten per call
+    set_points = np.empty(len(ramps))  # F_d [N]
     reference = reference_rows(phase.reference) if referenced else None  # (no carrier: the reference's own)
 
     def inputs(t, x):
         """The call's per-call inputs at (t, x): the reference, F_d [N], the tip's R, J (6 rows), J̇q̇ (6)."""
         ref = reference(t) if referenced else none
-        for k, ramp in enumerate(ramps):
-            set_points[k] = ramp.at(t)[0]
+        if ramp_values.size:
+            ramp_rows(t, ramps, ramp_values)
+            set_points[:] = ramp_values[::2]
         if not orient:
             return ref, set_points, no_rotation, no_rows, none
         return ref, set_points, rotation, *tip6  # this call's φ's (plan_rhs._phi_function)

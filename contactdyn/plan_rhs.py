@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 import pinocchio as pin
+from numba import njit
 
 from .controllers import ControlInput
 from .dynamics import set_force_inputs
@@ -34,7 +35,7 @@ from .plan_fold import contact_torque_of, folded_solve, reaching_rows, row_meta
 from .plan_kernel import kernel_of
 from .plan_law import compiled_law, operational_command, plan_command
 from .plan_operational import operational_kernel_of
-from .trajectory import profile
+from .trajectory import move_rows, move_table, ramp_rows, ramp_table
 
 __all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
 
@@ -267,94 +268,89 @@ def _time_terms(plan):
     tv = np.zeros(plan.ne - plan.e_frame[-1] - 6)  # time terms and the trailing 1
     tv[-1] = 1.0
     base = plan.e_frame[-1] + 6
-    time_moves = [(slot - base, m_.kind, m_.start, m_.duration, m_.accel_fraction) for slot, m_ in plan.time_moves]
-    time_ramps = [(slot - base, ramp.at) for slot, ramp, _ in plan.time_ramps]
+    moves = move_table([m_ for _, m_ in plan.time_moves])
+    ramps = ramp_table([ramp for _, ramp, _ in plan.time_ramps])
+    move_slots = np.array([slot - base for slot, _ in plan.time_moves], dtype=np.intp)
+    ramp_slots = np.array([slot - base for slot, _, _ in plan.time_ramps], dtype=np.intp)
+    w = np.zeros(3 * len(moves) + 2 * len(ramps))
+    timed = bool(w.size)
 
     def time_terms(t, out=tv):
         """The time terms of e at t (and the trailing 1), written into ``out``."""
-        for slot, kind, start, duration, af in time_moves:
-            sg, dsg, _ = profile(kind, (t - start) / duration, af)
-            out[slot] = sg
-            out[slot + 1] = dsg / duration
-        for slot, at in time_ramps:
-            out[slot] = at(t)[0]
+        if timed:
+            _write_time_terms(t, moves, move_slots, ramps, ramp_slots, w, out)
         return out
 
-    ones = tv.copy()
-    profiles = np.frompyfunc(profile, 3, 3)  # element by element, without a Python loop per time
-    ramps = [(slot, np.frompyfunc(lambda t, at=at: at(t)[0], 1, 1)) for slot, at in time_ramps]
-
     def at_times(ts):
-        """The time terms at each time of ``ts`` [s], as rows (len(ts), len(tv)): each term over all times at once."""
-        out = np.tile(ones, (len(ts), 1))
-        for slot, kind, start, duration, af in time_moves:
-            sg, dsg, _ = profiles(kind, (ts - start) / duration, af)
-            out[:, slot] = sg
-            out[:, slot + 1] = dsg.astype(float) / duration
-        for slot, at in ramps:
-            out[:, slot] = at(ts)
+        """The time terms at each time of ``ts`` [s], as rows (len(ts), len(tv))."""
+        out = np.tile(tv, (len(ts), 1))
+        for k, t in enumerate(ts):
+            time_terms(float(t), out[k])
         return out
 
     time_terms.at_times = at_times
     return time_terms, tv
 
 
+@njit(cache=True)
+def _write_time_terms(t, moves, move_slots, ramps, ramp_slots, w, out):
+    """out[slot], out[slot + 1] = σ, σ'/T of each move; out[slot] = F_d [N] of each ramp, at t [s]
+    (trajectory.move_rows, ramp_rows into w)."""
+    move_rows(t, moves, w)
+    for k in range(move_slots.size):
+        out[move_slots[k]] = w[3 * k]
+        out[move_slots[k] + 1] = w[3 * k + 1]
+    j = 3 * move_slots.size
+    ramp_rows(t, ramps, w[j:])
+    for k in range(ramp_slots.size):
+        out[ramp_slots[k]] = w[j + 2 * k]
+
+
 def _phi_function(plan, time_terms, tv0):
     """phi(t, x, tv=None) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x.
 
-    φ and the Jacobians are views of one buffer the next call overwrites: a call writes each piece
-    in place (Pinocchio's H, h, g and frame translations are read through views of its data, which
-    keeps its arrays for its lifetime; ``a[...] = b`` is the cheapest write), ~1.5 µs cheaper than
-    concatenating fresh pieces. ``tv``: the
-    time terms, else computed into the buffer; ``tv0``: their initial values (the trailing 1).
+    φ and the Jacobians are views of one buffer the next call overwrites: a call writes Pinocchio's H, h, g
+    (read through views of its data, which keeps its arrays for its lifetime), x and the first frame's terms
+    into it by one compiled call (:func:`_write_phi`), each further frame's by one more (:func:`_write_frame`).
+    ``tv``: the time terms, else computed into the buffer; ``tv0``: their initial values (the trailing 1).
     """
     s = plan.system
     model, data = s.robot.model, s.robot.data
     nQ, nv = s.nQ, s.nv
     fids = plan.fids
-    nf = len(fids)
     phi = np.empty(plan.P.shape[1])
-    H_part = phi[:nv * nv].reshape((nv, nv), order="F")  # φ holds H column by column (ravel "K" of F-order)
     Js = tuple(phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J)
-    drifts = [phi[i:i + 3] for i in plan.i_dr]
-    h_part = phi[plan.i_h:plan.i_h + nv]
-    g_part = phi[plan.i_h + nv:plan.i_e] if plan.with_g else None
-    i_x = plan.i_e
-    x_part = phi[i_x:i_x + s.n]
-    e_frame = [i_x + k for k in plan.e_frame]
-    tv_part = phi[e_frame[-1] + 6:]
+    tv_part = phi[plan.i_e + plan.e_frame[-1] + 6:]
     tv_part[:] = tv0
-    compute = pin.computeAllTerms
-    placement, jacobian, accel = pin.updateFramePlacement, pin.getFrameJacobian, pin.getFrameClassicalAcceleration
+    compute, jacobian, accel = pin.computeAllTerms, pin.getFrameJacobian, pin.getFrameClassicalAcceleration
     lwa = LWA
-    dot = np.dot
-    H, h, g = data.M, data.nle, data.g  # views of Pinocchio's data
-    #: per frame: its id, where its Jacobian goes (a 1-DOF robot's comes as (6,): written into a (3,) view),
-    #: its Jacobian, J̇q̇, Pinocchio's translation, and φ's p and ṗ
-    frames = [(fids[f], Js[f].reshape(3) if nv == 1 else Js[f], Js[f], drifts[f], data.oMf[fids[f]].translation,
-               phi[e_frame[f]:e_frame[f] + 3], phi[e_frame[f] + 3:e_frame[f] + 6]) for f in range(nf)]
+    H, h = data.M, data.nle  # views of Pinocchio's data
+    g = data.g if plan.with_g else np.zeros(0)
+    one_dof = nv == 1  # (Pinocchio gives a 1-DOF robot's Jacobian as (6,))
+    #: per frame: its id, Pinocchio's translation (getFrameJacobian updates the frame's placement, data.oMf), and
+    #: where x's v, its J (3 rows), J̇q̇ (3), p and ṗ go in φ; the first frame's also where h (then g) and x go
+    frames = [(fids[f], data.oMf[fids[f]].translation,
+               np.array([nQ, plan.i_J[f], plan.i_dr[f], plan.i_e + plan.e_frame[f]]
+                        + ([plan.i_h, plan.i_e] if f == 0 else []), dtype=np.intp)) for f in range(len(fids))]
+    (fid0, p0, at0), more = frames[0], frames[1:]
     #: a law that reads the tip's orientation: the tip's 6-row Jacobian and J̇q̇ (linear, angular) of the last
     #: call, as Pinocchio gave them (its R: data.oMf[tip].rotation, updated by the call)
     tip6 = plan.tip6 = [None, None]
     tip = fids[plan.tip_frame] if plan.phase.controller.reads_orientation else None
 
+    def frame_terms(fid):
+        J6, a6 = jacobian(model, data, fid, lwa), accel(model, data, fid, lwa).vector
+        if one_dof:
+            J6 = J6.reshape(6, 1)
+        if fid == tip:
+            tip6[0], tip6[1] = J6, a6
+        return J6, a6
+
     def phi_of(t, x, tv=None):
-        v = x[nQ:nQ + nv]
-        compute(model, data, x[:nv], v)
-        H_part[...] = H
-        h_part[...] = h
-        if g_part is not None:
-            g_part[...] = g
-        x_part[...] = x
-        for fid, J_rows, J, drift, p, p_part, pd_part in frames:
-            J6, a6 = jacobian(model, data, fid, lwa), accel(model, data, fid, lwa)
-            J_rows[...] = J6[:3]
-            drift[...] = a6.linear
-            if fid == tip:
-                tip6[0], tip6[1] = J6, a6.vector
-            placement(model, data, fid)
-            p_part[...] = p
-            dot(J, v, out=pd_part)
+        compute(model, data, x[:nv], x[nQ:nQ + nv])
+        _write_phi(phi, H, h, g, x, *frame_terms(fid0), p0, at0)
+        for fid, p, at in more:
+            _write_frame(phi, *frame_terms(fid), p, x, at)
         if tv is None:
             time_terms(t, tv_part)
         else:
@@ -362,6 +358,39 @@ def _phi_function(plan, time_terms, tv0):
         return phi, Js
 
     return phi_of
+
+
+@njit(cache=True)
+def _write_phi(phi, H, h, g, x, J6, a6, p, at):
+    """φ's robot terms: H [kg·m²] column by column from 0, h [N·m] (then g, if any) from at[4], x from at[5];
+    and the first frame's (:func:`_write_frame`)."""
+    nv = h.size
+    for j in range(nv):
+        for i in range(nv):
+            phi[j * nv + i] = H[i, j]
+    for i in range(nv):
+        phi[at[4] + i] = h[i]
+    for i in range(g.size):
+        phi[at[4] + nv + i] = g[i]
+    for i in range(x.size):
+        phi[at[5] + i] = x[i]
+    _write_frame(phi, J6, a6, p, x, at)
+
+
+@njit(cache=True)
+def _write_frame(phi, J6, a6, p, x, at):
+    """φ's terms of one frame: its J's translation rows (3, nv) from at[1], J̇q̇'s linear part [m/s²] from at[2],
+    p [m] and ṗ = J v [m/s] from at[3] (J6, a6: Pinocchio's 6-row Jacobian and classical acceleration; v:
+    x[at[0]:at[0] + nv])."""
+    nv = J6.shape[1]
+    for r in range(3):
+        phi[at[2] + r] = a6[r]
+        phi[at[3] + r] = p[r]
+        pd = 0.0
+        for c in range(nv):
+            phi[at[1] + r * nv + c] = J6[r, c]
+            pd += J6[r, c] * x[at[0] + c]
+        phi[at[3] + 3 + r] = pd
 
 
 def _impulse_rates(plan):

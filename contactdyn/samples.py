@@ -15,7 +15,6 @@ is filled from :class:`~contactdyn.dynamics.Evaluation` objects where a mode run
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 
 from .friction import launching
 from .linalg import solve_vector
@@ -24,7 +23,6 @@ from .plan_fold import contact_torque_of
 
 __all__ = ["Samples", "plan_samples", "plan_derivatives", "evaluated_samples", "slip_directions"]
 
-_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 #: rows per matrix product in the output pass, small enough to keep OpenBLAS on one thread: with 128,
 #: a 4-contact B1's (2001×48)·(48×232) took a median 231 ms on the busy machine (min 0.9 ms), with 16 1.2 ms
 ROW_CHUNK = 16
@@ -306,8 +304,8 @@ def _generic_command(plan):
 def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
     """φ, the outputs o and the solution z at every sample, all at once: (Φ, O, Z, Jacobians, τ of a generic law).
 
-    ``exact``: the products the call makes one by one (P φ, J q̇) made so here too, for values bitwise those
-    of the call where the rest is elementwise (:func:`plan_derivatives`)."""
+    ``exact``: the product the call makes row by row (P φ) made so here too, for values bitwise those of the
+    call where the rest is elementwise (:func:`plan_derivatives`; φ is the call's own, ``plan.phi_at``)."""
     s = plan.system
     N = len(ts)
     nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
@@ -318,14 +316,11 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
     if generic:
         command = _generic_command(plan)
     TV = plan.time_terms.at_times(ts)
-    if generic or len(plan.fids) > 1:
-        phi_at = plan.phi_at
-        for k in range(N):
-            Phi[k] = phi = phi_at(ts[k], X[k], TV[k])
-            if generic:  # (Pinocchio's data at this sample: the controller reads it)
-                tau[k] = command(ts[k], X[k], _jacobians(plan, phi), phi)
-    else:
-        _phi_batch(plan, X, TV, Phi, exact)
+    phi_at = plan.phi_at  # (the call's own φ: as cheap per sample as a batched one)
+    for k in range(N):
+        Phi[k] = phi = phi_at(ts[k], X[k], TV[k])
+        if generic:  # (Pinocchio's data at this sample: the controller reads it)
+            tau[k] = command(ts[k], X[k], _jacobians(plan, phi), phi)
     Y = np.array([plan.P.dot(phi) for phi in Phi]).reshape(N, -1) if exact else _rows_times(Phi, plan.PT)
     A = Y[:, :m2].reshape(N, m, m)
     B = Y[:, m2:m2 + m]
@@ -462,52 +457,6 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
     for label, sl in plan.o_stage.items():
         S.stages[label][:] = O[:, sl]
 
-
-def _phi_batch(plan, X: np.ndarray, TV: np.ndarray, Phi: np.ndarray, exact: bool = False) -> None:
-    """Φ for one robot frame: Pinocchio per sample (H, J, J̇q̇, h, [g], p: each written into its own
-    per-sample array, H, h, g and p through views of Pinocchio's data), the rest (x, ṗ = J q̇, the
-    time terms) in batch."""
-    s = plan.system
-    model, data = s.robot.model, s.robot.data
-    nv, nQ, n = s.nv, s.nQ, s.n
-    N = len(X)
-    fid = plan.fids[0]
-    i_e = plan.i_e
-    compute, placement = pin.computeAllTerms, pin.updateFramePlacement
-    jacobian, accel = pin.getFrameJacobian, pin.getFrameClassicalAcceleration
-    H, h, g, p = data.M, data.nle, data.g, data.oMf[fid].translation  # views of Pinocchio's data
-    with_g = plan.with_g
-    Hs = np.empty((N, nv, nv))
-    Js = np.empty((N, 6, nv))
-    drifts, hs, gs, ps = np.empty((N, 3)), np.empty((N, nv)), np.empty((N, nv)), np.empty((N, 3))
-    Q, V = X[:, :nv], X[:, nQ:nQ + nv]
-    J_rows = Js.reshape(N, 6) if nv == 1 else Js  # a 1-DOF robot's Jacobian comes as (6,)
-    for q, v, H_k, h_k, g_k, J_k, drift_k, p_k in zip(Q, V, Hs, hs, gs, J_rows, drifts, ps, strict=True):
-        compute(model, data, q, v)
-        H_k[...] = H
-        h_k[...] = h
-        if with_g:
-            g_k[...] = g
-        J_k[...] = jacobian(model, data, fid, _LWA)
-        drift_k[...] = accel(model, data, fid, _LWA).linear
-        placement(model, data, fid)
-        p_k[...] = p
-    J_all = Js[:, :3]
-    Phi[:, :nv * nv] = Hs.transpose(0, 2, 1).reshape(N, nv * nv)  # φ holds H column by column (ravel "K")
-    Phi[:, plan.i_J[0]:plan.i_J[0] + 3 * nv] = J_all.reshape(N, 3 * nv)
-    Phi[:, plan.i_dr[0]:plan.i_dr[0] + 3] = drifts
-    Phi[:, plan.i_h:plan.i_h + nv] = hs
-    if plan.with_g:
-        Phi[:, plan.i_h + nv:i_e] = gs
-    Phi[:, i_e:i_e + n] = X
-    Phi[:, i_e + n:i_e + n + 3] = ps
-    if exact:  # ṗ = J q̇ one by one, as the call (BLAS may fuse its multiply-adds)
-        J_rows = Phi[:, plan.i_J[0]:plan.i_J[0] + 3 * nv].reshape(N, 3, nv)  # contiguous, as the call's
-        for J, v, pd in zip(J_rows, V, Phi[:, i_e + n + 3:i_e + n + 6], strict=True):
-            np.dot(J, v, out=pd)
-    else:
-        Phi[:, i_e + n + 3:i_e + n + 6] = np.einsum("kiv,kv->ki", J_all, V)
-    Phi[:, i_e + n + 6:] = TV
 
 def slip_directions(plan, ci: int, O: np.ndarray, refs: np.ndarray | None = None) -> np.ndarray:
     """Sliding directions (N, k) of contact ci at the samples' outputs O (friction.slip_direction's rule:

@@ -25,7 +25,7 @@ from .config import MAX_DEPTH, Reader, check_depth, read_toml
 from .drives import DriveTable, read_drive_table
 from .elements import STAGE_LAWS, ChainSpec, Element, Mass, Stage
 from .errors import SceneError, close_matches
-from .trajectory import PROFILES, Move, Ramp
+from .trajectory import PROFILES, RAMP_KINDS, Move, Ramp
 
 __all__ = [
     "Scene", "RobotSpec", "BodySpec", "ContactSpec", "ChainSpec", "Stage", "Mass", "FrictionSpec",
@@ -492,7 +492,7 @@ def _read_force(r: Reader, contacts: dict[str, ContactSpec]) -> ForceSpec:
         value=r.float("value", unit="N"),
         start=r.float("start", 0.0, lo=0.0, unit="s"),
         duration=r.float("duration", 0.1, lo=0.0, lo_open=True, unit="s"),
-        kind=r.str("kind", "linear", choices=["linear", "exponential", "step"]),
+        kind=r.str("kind", "linear", choices=list(RAMP_KINDS)),
         initial=r.float("initial", 0.0, unit="N"),
     )
     direction = r.str("direction", "n", choices=["n", "t1", "t2"])

@@ -18,9 +18,16 @@ import numpy as np
 from numba import njit
 
 __all__ = ["Corner", "Move", "Ramp", "Reference", "profile", "profile_corners", "merge_corners",
-           "min_span"]
+           "min_span", "move_rows", "move_table", "ramp_rows", "ramp_table", "RAMP_KINDS"]
 
 PROFILES = ("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step", "circle", "exponential")
+
+
+_PROFILE_CODE = {kind: i for i, kind in enumerate(PROFILES)}  #: a profile's kind as the compiled code reads it
+_TRAPEZOID, _TRIANGLE, _VELOCITY_RAMP, _CONSTANT_VELOCITY, _STEP, _CIRCLE, _EXPONENTIAL = range(len(PROFILES))
+RAMP_KINDS = ("linear", "exponential", "step")
+_RAMP_CODE = {kind: i for i, kind in enumerate(RAMP_KINDS)}
+_LINEAR_RAMP, _EXPONENTIAL_RAMP, _STEP_RAMP = range(len(RAMP_KINDS))
 
 
 def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, float, float]:
@@ -34,28 +41,52 @@ def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, 
     ``exponential``: σ = 1 − e^(−τ), the duration being the time constant (never clamped;
     case 1's position-based push follows its exponential force ramps this way).
     Every piece holds from its corner (:func:`profile_corners`) on: at a corner the profile
-    takes its right-hand limit.
+    takes its right-hand limit. (Computed by :func:`_profile`, which compiled time parts call too.)
     """
-    if kind == "exponential":
+    return _profile(_PROFILE_CODE.get(kind, _STEP), tau, accel_fraction)
+
+
+@njit(cache=True)
+def _profile(code: int, tau: float, accel_fraction: float) -> tuple[float, float, float]:
+    """:func:`profile` of the kind PROFILES[code] (a circle's own angle: :func:`circle_reference`)."""
+    if code == _EXPONENTIAL:
         if tau < 0.0:
             return 0.0, 0.0, 0.0
         e = math.exp(-tau)
         return 1.0 - e, e, -e
-    if kind == "velocity_ramp":
+    if code == _VELOCITY_RAMP:
         if tau < 0.0:
             return 0.0, 0.0, 0.0
         if tau < 1.0:
             return 0.5 * tau * tau, tau, 1.0
         return tau - 0.5, 1.0, 0.0
-    if kind in ("trapezoid", "triangle"):
-        return _trapezoid(tau, 0.5 if kind == "triangle" else accel_fraction)
+    if code == _TRAPEZOID or code == _TRIANGLE:
+        return _trapezoid(tau, 0.5 if code == _TRIANGLE else accel_fraction)
     if tau < 0.0:  # at τ = 0 and τ = 1 the profile takes its right-hand limit
         return 0.0, 0.0, 0.0
     if tau >= 1.0:
         return 1.0, 0.0, 0.0
-    if kind == "constant_velocity":
+    if code == _CONSTANT_VELOCITY:
         return tau, 1.0, 0.0
     return 1.0, 0.0, 0.0  # step
+
+
+@njit(cache=True)
+def move_rows(t: float, moves: np.ndarray, w: np.ndarray) -> None:
+    """w[3k:3k + 3] = σ, σ'/T, σ''/T² [1, 1/s, 1/s²] at t [s] of each move k, a row (kind's code, start [s],
+    duration T [s], accel fraction) of ``moves`` (:func:`move_table`): a reference is start + Σ_k w ⊗ Δ_k."""
+    for k in range(moves.shape[0]):
+        duration = moves[k, 2]
+        s, ds, dds = _profile(int(moves[k, 0]), (t - moves[k, 1]) / duration, moves[k, 3])
+        w[3 * k] = s
+        w[3 * k + 1] = ds / duration
+        w[3 * k + 2] = dds / duration**2
+
+
+def move_table(moves) -> np.ndarray:
+    """(K, 4): per move its kind's code, start [s], duration [s] and accel fraction, as :func:`move_rows` reads."""
+    return np.array([(_PROFILE_CODE.get(m.kind, _STEP), m.start, m.duration, m.accel_fraction) for m in moves],
+                    dtype=float).reshape(len(moves), 4)
 
 
 @njit(cache=True)
@@ -272,19 +303,8 @@ class Ramp:
     initial: float = 0.0  #: set-point before ``start`` [N]
 
     def at(self, t: float) -> tuple[float, float]:
-        """Set-point and its rate [N, N/s] at time t."""
-        span = self.value - self.initial
-        tau = t - self.start
-        if tau < 0.0:
-            return self.initial, 0.0
-        if self.kind == "step":
-            return self.value, 0.0
-        if self.kind == "exponential":
-            e = math.exp(-tau / self.duration)
-            return self.initial + span * (1.0 - e), span * e / self.duration
-        if tau >= self.duration:
-            return self.value, 0.0
-        return self.initial + span * tau / self.duration, span / self.duration
+        """Set-point and its rate [N, N/s] at time t (:func:`_ramp`)."""
+        return _ramp(_RAMP_CODE[self.kind], self.value, self.initial, self.start, self.duration, t)
 
     def corners(self) -> tuple[Corner, ...]:
         """Where the set-point (step) or its rate (linear, exponential) jumps: its start, a linear ramp's end."""
@@ -293,3 +313,34 @@ class Ramp:
 
         ends = (0.0, self.duration) if self.kind == "linear" else (0.0,)
         return tuple(_corner(since, self.start + tc, tc) for tc in ends)
+
+
+@njit(cache=True)
+def _ramp(code: int, value: float, initial: float, start: float, duration: float, t: float) -> tuple[float, float]:
+    """:meth:`Ramp.at` of a ramp of kind RAMP_KINDS[code]: set-point [N] and rate [N/s] at t [s]."""
+    span = value - initial
+    tau = t - start
+    if tau < 0.0:
+        return initial, 0.0
+    if code == _STEP_RAMP:
+        return value, 0.0
+    if code == _EXPONENTIAL_RAMP:
+        e = math.exp(-tau / duration)
+        return initial + span * (1.0 - e), span * e / duration
+    if tau >= duration:
+        return value, 0.0
+    return initial + span * tau / duration, span / duration
+
+
+@njit(cache=True)
+def ramp_rows(t: float, ramps: np.ndarray, w: np.ndarray) -> None:
+    """w[2j:2j + 2] = F_d [N], Ḟ_d [N/s] at t [s] of each ramp j, a row (kind's code, value, initial, start,
+    duration) of ``ramps`` (:func:`ramp_table`)."""
+    for j in range(ramps.shape[0]):
+        w[2 * j], w[2 * j + 1] = _ramp(int(ramps[j, 0]), ramps[j, 1], ramps[j, 2], ramps[j, 3], ramps[j, 4], t)
+
+
+def ramp_table(ramps) -> np.ndarray:
+    """(J, 5): per ramp its kind's code, value [N], initial [N], start [s] and duration [s] (:func:`ramp_rows`)."""
+    return np.array([(_RAMP_CODE[r.kind], r.value, r.initial, r.start, r.duration) for r in ramps],
+                    dtype=float).reshape(len(ramps), 5)

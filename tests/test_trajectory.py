@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from contactdyn.trajectory import Move, Ramp, Reference, profile
+from contactdyn.trajectory import Move, Ramp, Reference, move_rows, move_table, profile, ramp_rows, ramp_table
 
 
 @pytest.mark.parametrize("kind", ["trapezoid", "triangle", "constant_velocity"])
@@ -118,3 +118,28 @@ def test_positions_are_at_elementwise_over_times():
                 Reference(np.array([0.4, 0.1, -0.2]))):
         want = np.array([ref.at(t)[0] for t in ts])
         assert np.array_equal(ref.positions(ts), want)
+
+
+@pytest.mark.parametrize("kind", ["trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step",
+                                  "exponential"])
+def test_compiled_move_rows_are_each_moves_rows(kind):
+    """move_rows (the compiled time parts' σ, σ'/T, σ''/T² per move) times Δ is Move.rows at every time, across
+    the corners and outside the move."""
+    moves = (Move(np.array([0.3, -0.1, 0.2]), 0.2, 0.5, kind, 0.2), Move(np.array([1.0, 0.0, 0.0]), 0.0, 0.3))
+    table = move_table(moves)
+    w = np.zeros(6)
+    for t in np.linspace(-0.1, 1.0, 57):
+        move_rows(t, table, w)
+        for k, m in enumerate(moves):
+            assert np.array_equal(np.multiply.outer(w[3 * k:3 * k + 3], m.delta), m.rows(t))
+
+
+def test_compiled_ramp_rows_are_ramp_at():
+    """ramp_rows gives each ramp's (F_d, Ḟ_d) of Ramp.at, for every kind, before, during and after its rise."""
+    ramps = [Ramp(100.0, 0.2, 0.3, "linear", 5.0), Ramp(-40.0, 0.1, 0.05, "exponential"), Ramp(7.0, 0.4, kind="step")]
+    table = ramp_table(ramps)
+    w = np.zeros(6)
+    for t in np.linspace(0.0, 1.0, 41):
+        ramp_rows(t, table, w)
+        assert [tuple(w[2 * j:2 * j + 2]) for j in range(3)] == [r.at(t) for r in ramps]
+    assert Ramp(100.0, 0.2, 0.3, "linear", 5.0).at(0.35) == pytest.approx((5.0 + 95.0 * 0.15 / 0.3, 95.0 / 0.3), rel=1e-14)
