@@ -29,7 +29,7 @@ from scipy import sparse
 
 from .controllers import computed_torque as law
 from .linalg import lu_solve, mm, mtv, mv, sparse_dot
-from .plan_law import CompiledLaw, compiled_law, plan_inputs
+from .plan_law import CompiledLaw, write_time_part, compiled_law, plan_inputs
 from .plan_probe import affine_map
 
 __all__ = ["fold_solve", "kernel_of", "calls", "call", "pack", "matrix_of", "vector_of", "csr_of", "kkt_of",
@@ -39,10 +39,11 @@ OK, DECLINED = 0, 1  #: :func:`call`'s status
 TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
 #: the constants of a plan's call, packed by :func:`pack` into one float and one int buffer (two arguments: a
 #: compiled function's call costs ~0.06 µs per argument): float arrays, then int arrays, by these indices
-P_VAL, M_, U_X, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL, F_FF = range(12)  # floats (P: CSR values)
-P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(12, 19)  # ints (P: CSR columns, row starts)
-#: INTS, in this order
-M, NQ, NV, I_H, I_J, I_DR, TIP, U_F, ZS, SWAP, N_LIM, O_Y0, O_Y1, X_Z0, X_Z1, W0, KIND, O_G = range(18)
+P_VAL, M_, U_X, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL, F_FF, T_MOVES, T_R, T_RAMPS = range(15)  # floats
+P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(15, 22)  # ints (P: CSR values, columns, row starts)
+#: INTS, in this order (TIMED: the tip law's time part is computed in the call, from T_MOVES, T_R, T_RAMPS and
+#: I_SET, plan_law.write_time_part)
+M, NQ, NV, I_H, I_J, I_DR, TIP, U_F, ZS, SWAP, N_LIM, O_Y0, O_Y1, X_Z0, X_Z1, W0, KIND, O_G, TIMED, I_SET = range(20)
 
 
 def pack(floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
@@ -161,16 +162,21 @@ def _tip_law(phi, x, u, A, b, o, fb, ib, c):
 
 
 @njit(cache=True)
-def call(phi, x, u, fb, ib, out):
-    """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (τ: the joint command
-    [N·m or N; V] at the solution, what the drives make of it); fb, ib: the plan's constants (:func:`pack`);
-    u: a tip law's inputs' time part (plan_law.plan_inputs). INTS: sizes and offsets (ZS the ż rows of
+def call(t, phi, x, u, fb, ib, out):
+    """The status of the module docstring's call at t [s], its [ẋ, z, o, τ] written into ``out`` (τ: the joint
+    command [N·m or N; V] at the solution, what the drives make of it); fb, ib: the plan's constants
+    (:func:`pack`); u: a tip law's inputs' time part (plan_law.plan_inputs), written here where INTS' TIMED says. INTS: sizes and offsets (ZS the ż rows of
     [a*, f_swap, ż], −1 none; X_Z0:X_Z1 the law's states in x and ẋ; TIP the tip's p, ṗ in φ; U_F the forces
     in u; W0 the frame forces in z; O_G a task law's g_ctl in o); FRAMES: each frame's J offset in φ;
     FORCES: o's measured forces in u's order; COLS: the folded columns of A (the rows' λ, then a carrying
     body's Q̈_b), with D_A, D_F, D_Z per column; REACH: the rows whose A column beyond the robot joins B."""
     c = vector_of(ib, ib, INTS)
     nQ, nv = c[NQ], c[NV]
+    if c[TIMED]:
+        R = matrix_of(fb, ib, T_R)
+        w = np.empty(R.shape[1])
+        w[0] = 1.0
+        write_time_part(t, matrix_of(fb, ib, T_MOVES), R, w, matrix_of(fb, ib, T_RAMPS), u, c[I_SET])
     y, A, b, o = kkt_of(phi, fb, ib, P_VAL, P_COL, P_ROW, c[M])
     if c[KIND] == TIP_LAW:
         tau, B, targets = _tip_law(phi, x, u, A, b, o, fb, ib, c)
@@ -202,24 +208,26 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
     if plan.compiled_drives is None or plan.friction_terms is not None or plan.launch is not None or not (
             tip_law or plan.law_via_drives):
         return None
-    constants = None
-    no_time = np.zeros(0)
+    fb = ib = time_part = None  # the packed constants (:func:`pack`); a time part the call does not compute
+    u = np.zeros(0)  # a tip law's inputs' buffer
     modes = plan.modes  # the modes this call is made for (a later ModePlan.use binds new ones)
 
     def ready() -> bool:
-        nonlocal constants
-        if constants is None and not tip_law:
-            constants = None, _task_law_constants(plan)
-        elif constants is None and ctl.M is not None:
+        nonlocal fb, ib, time_part, u
+        if not tip_law:
+            fb, ib = _task_law_constants(plan)
+        elif ctl.M is not None:
             inputs = plan_inputs(plan, ctl, modes)
-            constants = inputs, _tip_law_constants(plan, ctl, meta, reach or [], inputs)
-        return constants is not None
+            fb, ib = _tip_law_constants(plan, ctl, meta, reach or [], inputs)
+            u, time_part = inputs.u, None if inputs.time_tables else inputs.time_part
+        return fb is not None
 
     def one(t, x, phi, out):
-        if not ready():
+        if fb is None and not ready():
             return DECLINED
-        inputs, (fb, ib) = constants
-        return call(phi, x, inputs.time_part(t) if inputs else no_time, fb, ib, out)
+        if time_part is not None:  # a circle's reference, into u
+            time_part(t)
+        return call(t, phi, x, u, fb, ib, out)
 
     return calls(plan, one)
 
@@ -257,7 +265,7 @@ def _ints(plan, given: dict) -> list[int]:
     """INTS of a plan: its sizes and offsets, then ``given`` by index (e.g. {KIND: TASK_LAW}), the rest 0."""
     s, m = plan.system, plan.m
     off = m * m + m  # o's start in y
-    ints = [0] * (O_G + 1)
+    ints = [0] * (I_SET + 1)
     ints[M], ints[NQ], ints[NV], ints[I_H] = m, s.nQ, s.nv, plan.i_h
     ints[I_J], ints[I_DR] = plan.i_J[plan.tip_frame], plan.i_dr[plan.tip_frame]
     ints[ZS], ints[N_LIM] = -1, len(plan.compiled_drives.limited)
@@ -275,7 +283,7 @@ def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
     empty = np.zeros((0, 0))
     P = csr_of(plan)
     floats = [P.data, empty, empty, plan.compiled_drives.L, plan.compiled_drives.L_tau, np.zeros((3, 0)), empty,
-              empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F]
+              empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F, empty, empty, empty]
     ints = _ints(plan, {KIND: TASK_LAW, O_G: plan.o_gctl.start})
     return pack(floats, [P.indices, P.indptr, ints, plan.i_J, [], [], []])
 
@@ -295,9 +303,12 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
         cols.append(i_b)
     none = np.empty((0, len(cols)))
     P = csr_of(plan)
+    timed = inputs.time_tables
+    moves, R, ramps, i_set = timed or (np.zeros((0, 4)), np.zeros((9, 1)), np.zeros((0, 5)), 0)
     ints = _ints(plan, {TIP: inputs.tip, U_F: ctl.i_forces, ZS: ctl.zs.start if ctl.zs is not None else -1,
-                        SWAP: ctl.swap, KIND: TIP_LAW})
+                        SWAP: ctl.swap, KIND: TIP_LAW, TIMED: timed is not None, I_SET: i_set})
     D_ctl = s._D_ctl if s._D_ctl is not None else np.zeros((nv, nv))
     floats = [P.data, ctl.M, inputs.state_map(), drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
-              none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null], np.zeros((nv, 0))]
+              none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null], np.zeros((nv, 0)), moves, R,
+              ramps]
     return pack(floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach])

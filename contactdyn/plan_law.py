@@ -41,7 +41,7 @@ from .phases import reference_at
 from .plan_probe import affine_map
 from .trajectory import circle_reference, move_rows, move_table, ramp_rows, ramp_table
 
-__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "plan_command", "plan_commands", "operational_command",
+__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "write_time_part", "plan_command", "plan_commands", "operational_command",
            "reference_rows"]
 
 
@@ -234,7 +234,7 @@ def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
             u[6:15] = reference(t)
             ramp_rows(t, ramps, set_points)
         else:
-            _time_part(t, *product, ramps, u, i_set)
+            write_time_part(t, *product, ramps, u, i_set)
         return u
 
     def state_part(x):
@@ -257,6 +257,10 @@ def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
     inputs.time_part, inputs.state_part = time_part, state_part
     inputs.state_map = lambda: affine_map(lambda e: state_part(e[:n]), n + 1)
     inputs.tip, inputs.forces = tip, i_forces
+    #: for a compiled caller: u's buffer (the time part writes into it) and the tables of :func:`write_time_part`
+    #: (moves, R, ramps, i_set), None with circles (their reference: ``time_part`` itself)
+    inputs.u = u
+    inputs.time_tables = None if product is None else (product[0], product[1], ramps, i_set)
     return inputs
 
 
@@ -301,7 +305,7 @@ def _reference_rows(t, moves, R, w):
 
 
 @njit(cache=True)
-def _time_part(t, moves, R, w, ramps, u, i_set):
+def write_time_part(t, moves, R, w, ramps, u, i_set):
     """:func:`plan_inputs`' time part into u at t [s]: u[6:15] = the reference's rows (none without moves), then
     F_d [N], Ḟ_d [N/s] per ramp from u[i_set]."""
     if moves.shape[0]:
