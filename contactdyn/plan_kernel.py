@@ -29,10 +29,11 @@ from scipy import sparse
 
 from .controllers import computed_torque as law
 from .linalg import lu_solve, mm, mtv, mv, sparse_dot
-from .plan_law import CompiledLaw, write_time_part, compiled_law, plan_inputs
+from .plan_law import CompiledLaw, compiled_law, plan_inputs, write_time_part
+from .plan_phi import write_phi
 from .plan_probe import affine_map
 
-__all__ = ["fold_solve", "kernel_of", "calls", "call", "pack", "matrix_of", "vector_of", "csr_of", "kkt_of",
+__all__ = ["fold_solve", "kernel_of", "calls", "call", "call_at", "pack", "matrix_of", "vector_of", "csr_of", "kkt_of",
            "write_out"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
@@ -40,7 +41,9 @@ TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
 #: the constants of a plan's call, packed by :func:`pack` into one float and one int buffer (two arguments: a
 #: compiled function's call costs ~0.06 µs per argument): float arrays, then int arrays, by these indices
 P_VAL, M_, U_X, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL, F_FF, T_MOVES, T_R, T_RAMPS = range(15)  # floats
-P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(15, 22)  # ints (P: CSR values, columns, row starts)
+PHI_MOVES, PHI_RAMPS = 15, 16  # floats: φ's time tables (plan_phi.write_phi)
+P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(17, 24)  # ints (P: CSR values, columns, row starts)
+PHI_AT, PHI_MSLOTS, PHI_RSLOTS = 24, 25, 26  # ints: φ's layout and time slots (plan_phi.write_phi)
 #: INTS, in this order (TIMED: the tip law's time part is computed in the call, from T_MOVES, T_R, T_RAMPS and
 #: I_SET, plan_law.write_time_part)
 M, NQ, NV, I_H, I_J, I_DR, TIP, U_F, ZS, SWAP, N_LIM, O_Y0, O_Y1, X_Z0, X_Z1, W0, KIND, O_G, TIMED, I_SET = range(20)
@@ -196,6 +199,15 @@ def call(t, phi, x, u, fb, ib, out):
     return OK
 
 
+@njit(cache=True)
+def call_at(t, x, H, h, g, J6, a6, p, phi, u, fb, ib, out):
+    """:func:`call` at (t, x) after writing φ from Pinocchio's terms (plan_phi.write_phi: H, h, g, the first frame's
+    J6, a6, p; its layout and time tables packed in fb, ib): one compiled call per right-hand side."""
+    write_phi(t, x, H, h, g, J6, a6, p, phi, vector_of(ib, ib, PHI_AT), matrix_of(fb, ib, PHI_MOVES),
+              vector_of(ib, ib, PHI_MSLOTS), matrix_of(fb, ib, PHI_RAMPS), vector_of(ib, ib, PHI_RSLOTS))
+    return call(t, phi, x, u, fb, ib, out)
+
+
 def kernel_of(plan, meta: list, reach: list[int] | None):
     """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (a clip, a singular solve,
     a tip law's M not read yet); ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of the output's samples, or None
@@ -229,17 +241,29 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             time_part(t)
         return call(t, phi, x, u, fb, ib, out)
 
-    return calls(plan, one)
+    H, h, g, p = plan.phi.terms
+    pinocchio, phi_buffer = plan.phi.pinocchio, plan.phi.buffer
+
+    def one_at(t, x, out):  # one, with φ written in the same compiled call
+        if fb is None and not ready():
+            return DECLINED
+        if time_part is not None:
+            time_part(t)
+        J6, a6 = pinocchio(x)
+        return call_at(t, x, H, h, g, J6, a6, p, phi_buffer, u, fb, ib, out)
+
+    return calls(plan, one, one_at)
 
 
-def calls(plan, one):
+def calls(plan, one, one_at=None):
     """kernel(t, x, φ) -> (ẋ, z, o), None where ``one`` declines, and ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of
     the output's samples, None where one declines: both by one(t, x, φ, out) -> status, a compiled call writing
-    [ẋ, z, o, τ] into ``out`` (this module's :func:`call`, :func:`contactdyn.plan_operational.call`)."""
+    [ẋ, z, o, τ] into ``out`` (this module's :func:`call`, :func:`contactdyn.plan_operational.call`);
+    ``kernel.at(t, x)`` -> (ẋ, z, o) or None by one_at(t, x, out), the same writing φ itself (None: no such)."""
     s, m = plan.system, plan.m
     n, no = s.n, plan.P.shape[0] - m * (m + 1)
     size = n + m + no + s.nv
-    phi_at, time_terms = plan.phi_at, plan.time_terms  # this make_rhs's (a later ModePlan.use makes new ones)
+    phi_at = plan.phi_at  # this make_rhs's (a later ModePlan.use makes new ones)
 
     def kernel(t, x, phi):
         out = np.empty(size)
@@ -249,15 +273,21 @@ def calls(plan, one):
 
     def samples(ts, X):
         N = len(ts)
-        tv = time_terms.at_times(ts)
         Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
         for k in range(N):
-            Phi[k] = phi = phi_at(ts[k], X[k], tv[k])
+            Phi[k] = phi = phi_at(ts[k], X[k])
             if one(ts[k], X[k], phi, out[k]):
                 return None
         return Phi, out[:, n + m:n + m + no], out[:, n:n + m], out[:, n + m + no:]
 
+    def at(t, x):
+        out = np.empty(size)
+        if one_at(t, x, out):
+            return None
+        return out[:n], out[n:n + m], out[n + m:n + m + no]
+
     kernel.samples = samples
+    kernel.at = at if one_at is not None else None
     return kernel
 
 
@@ -285,7 +315,7 @@ def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
     floats = [P.data, empty, empty, plan.compiled_drives.L, plan.compiled_drives.L_tau, np.zeros((3, 0)), empty,
               empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F, empty, empty, empty]
     ints = _ints(plan, {KIND: TASK_LAW, O_G: plan.o_gctl.start})
-    return pack(floats, [P.indices, P.indptr, ints, plan.i_J, [], [], []])
+    return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, [], [], []])
 
 
 def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.ndarray]:
@@ -311,4 +341,10 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
     floats = [P.data, ctl.M, inputs.state_map(), drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
               none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null], np.zeros((nv, 0)), moves, R,
               ramps]
-    return pack(floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach])
+    return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach])
+
+
+def _pack_with_phi(plan, floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pack` of a call's constants followed by φ's layout and time tables (:func:`call_at`)."""
+    at, moves, move_slots, ramps, ramp_slots = plan.phi.tables
+    return pack([*floats, moves, ramps], [*ints, at, move_slots, ramp_slots])

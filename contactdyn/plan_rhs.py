@@ -23,7 +23,6 @@ import math
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from .controllers import ControlInput
 from .dynamics import set_force_inputs
@@ -35,14 +34,12 @@ from .plan_fold import contact_torque_of, folded_solve, reaching_rows, row_meta
 from .plan_kernel import kernel_of
 from .plan_law import compiled_law, operational_command, plan_command
 from .plan_operational import operational_kernel_of
-from .trajectory import move_rows, move_table, ramp_rows, ramp_table
+from .plan_phi import LWA, phi_function
 
-__all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms", "LWA"]
-
-LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+__all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms"]
 
 def make_rhs(plan):
-    """Build ``plan.time_terms``, ``plan.phi_at`` and return the right-hand side f(t, x) of the plan's mode."""
+    """Build ``plan.phi_at`` and return the right-hand side f(t, x) of the plan's mode."""
     s = plan.system
     nQ, m = s.nQ, plan.m
     m2 = m * m
@@ -52,8 +49,7 @@ def make_rhs(plan):
     z_slice = plan.z_slice
     cat = np.concatenate
     ring = plan.ring
-    time_terms, tv = _time_terms(plan)
-    phi_and_jacobians = _phi_function(plan, time_terms, tv)
+    phi_and_jacobians = phi_function(plan)
     impulse_rates = _impulse_rates(plan)
     friction = _friction_terms(plan)
     solve = _command_and_solve(plan)
@@ -61,18 +57,22 @@ def make_rhs(plan):
     plan.launch = launch
     plan.friction_terms = friction
     plan.impulse_rates = impulse_rates
-    plan.time_terms = time_terms
-    plan.phi_at = lambda t, x, tv=None: phi_and_jacobians(t, x, tv)[0].copy()
+    plan.phi = phi_and_jacobians
+    plan.phi_at = lambda t, x: phi_and_jacobians(t, x)[0].copy()
     modes = plan.modes  # this call's own, 2-D reference directions included (ModePlan.use)
 
     terms = impulse_terms(plan)
     kernel = plan.kernel = (kernel_of(plan, row_meta(plan), reaching_rows(plan))  # (no rows: [], [])
                             or operational_kernel_of(plan, terms))
     impulses = bool(terms) and not getattr(kernel, "rates", False)  # a kernel may write them itself
+    at = getattr(kernel, "at", None)  # a kernel writing φ in its own compiled call (contactdyn.plan_kernel)
 
     def rhs(t, x):
-        phi, Js = phi_and_jacobians(t, x)
-        got = kernel(t, x, phi) if kernel is not None else None
+        got = at(t, x) if at is not None else None
+        if got is None:  # (a kernel that declined at this state declines with φ given too)
+            phi, Js = phi_and_jacobians(t, x)
+            if kernel is not None and at is None:
+                got = kernel(t, x, phi)
         if got is not None:  # the compiled call (contactdyn.plan_kernel, contactdyn.plan_operational)
             xd, z, o = got
             if impulses:
@@ -260,137 +260,6 @@ def _launch(plan, friction, solve):
         return launch_directions(s, modes, slip_of, acceleration_of)
 
     return launch
-
-
-def _time_terms(plan):
-    """(time_terms(t, out), its default buffer): the reference's and ramps' time terms of e, and the trailing 1;
-    ``time_terms.at_times(ts)``: the same at many times, as rows."""
-    tv = np.zeros(plan.ne - plan.e_frame[-1] - 6)  # time terms and the trailing 1
-    tv[-1] = 1.0
-    base = plan.e_frame[-1] + 6
-    moves = move_table([m_ for _, m_ in plan.time_moves])
-    ramps = ramp_table([ramp for _, ramp, _ in plan.time_ramps])
-    move_slots = np.array([slot - base for slot, _ in plan.time_moves], dtype=np.intp)
-    ramp_slots = np.array([slot - base for slot, _, _ in plan.time_ramps], dtype=np.intp)
-    w = np.zeros(3 * len(moves) + 2 * len(ramps))
-    timed = bool(w.size)
-
-    def time_terms(t, out=tv):
-        """The time terms of e at t (and the trailing 1), written into ``out``."""
-        if timed:
-            _write_time_terms(t, moves, move_slots, ramps, ramp_slots, w, out)
-        return out
-
-    def at_times(ts):
-        """The time terms at each time of ``ts`` [s], as rows (len(ts), len(tv))."""
-        out = np.tile(tv, (len(ts), 1))
-        for k, t in enumerate(ts):
-            time_terms(float(t), out[k])
-        return out
-
-    time_terms.at_times = at_times
-    return time_terms, tv
-
-
-@njit(cache=True)
-def _write_time_terms(t, moves, move_slots, ramps, ramp_slots, w, out):
-    """out[slot], out[slot + 1] = σ, σ'/T of each move; out[slot] = F_d [N] of each ramp, at t [s]
-    (trajectory.move_rows, ramp_rows into w)."""
-    move_rows(t, moves, w)
-    for k in range(move_slots.size):
-        out[move_slots[k]] = w[3 * k]
-        out[move_slots[k] + 1] = w[3 * k + 1]
-    j = 3 * move_slots.size
-    ramp_rows(t, ramps, w[j:])
-    for k in range(ramp_slots.size):
-        out[ramp_slots[k]] = w[j + 2 * k]
-
-
-def _phi_function(plan, time_terms, tv0):
-    """phi(t, x, tv=None) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x.
-
-    φ and the Jacobians are views of one buffer the next call overwrites: a call writes Pinocchio's H, h, g
-    (read through views of its data, which keeps its arrays for its lifetime), x and the first frame's terms
-    into it by one compiled call (:func:`_write_phi`), each further frame's by one more (:func:`_write_frame`).
-    ``tv``: the time terms, else computed into the buffer; ``tv0``: their initial values (the trailing 1).
-    """
-    s = plan.system
-    model, data = s.robot.model, s.robot.data
-    nQ, nv = s.nQ, s.nv
-    fids = plan.fids
-    phi = np.empty(plan.P.shape[1])
-    Js = tuple(phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J)
-    tv_part = phi[plan.i_e + plan.e_frame[-1] + 6:]
-    tv_part[:] = tv0
-    compute, jacobian, accel = pin.computeAllTerms, pin.getFrameJacobian, pin.getFrameClassicalAcceleration
-    lwa = LWA
-    H, h = data.M, data.nle  # views of Pinocchio's data
-    g = data.g if plan.with_g else np.zeros(0)
-    one_dof = nv == 1  # (Pinocchio gives a 1-DOF robot's Jacobian as (6,))
-    #: per frame: its id, Pinocchio's translation (getFrameJacobian updates the frame's placement, data.oMf), and
-    #: where x's v, its J (3 rows), J̇q̇ (3), p and ṗ go in φ; the first frame's also where h (then g) and x go
-    frames = [(fids[f], data.oMf[fids[f]].translation,
-               np.array([nQ, plan.i_J[f], plan.i_dr[f], plan.i_e + plan.e_frame[f]]
-                        + ([plan.i_h, plan.i_e] if f == 0 else []), dtype=np.intp)) for f in range(len(fids))]
-    (fid0, p0, at0), more = frames[0], frames[1:]
-    #: a law that reads the tip's orientation: the tip's 6-row Jacobian and J̇q̇ (linear, angular) of the last
-    #: call, as Pinocchio gave them (its R: data.oMf[tip].rotation, updated by the call)
-    tip6 = plan.tip6 = [None, None]
-    tip = fids[plan.tip_frame] if plan.phase.controller.reads_orientation else None
-
-    def frame_terms(fid):
-        J6, a6 = jacobian(model, data, fid, lwa), accel(model, data, fid, lwa).vector
-        if one_dof:
-            J6 = J6.reshape(6, 1)
-        if fid == tip:
-            tip6[0], tip6[1] = J6, a6
-        return J6, a6
-
-    def phi_of(t, x, tv=None):
-        compute(model, data, x[:nv], x[nQ:nQ + nv])
-        _write_phi(phi, H, h, g, x, *frame_terms(fid0), p0, at0)
-        for fid, p, at in more:
-            _write_frame(phi, *frame_terms(fid), p, x, at)
-        if tv is None:
-            time_terms(t, tv_part)
-        else:
-            tv_part[...] = tv
-        return phi, Js
-
-    return phi_of
-
-
-@njit(cache=True)
-def _write_phi(phi, H, h, g, x, J6, a6, p, at):
-    """φ's robot terms: H [kg·m²] column by column from 0, h [N·m] (then g, if any) from at[4], x from at[5];
-    and the first frame's (:func:`_write_frame`)."""
-    nv = h.size
-    for j in range(nv):
-        for i in range(nv):
-            phi[j * nv + i] = H[i, j]
-    for i in range(nv):
-        phi[at[4] + i] = h[i]
-    for i in range(g.size):
-        phi[at[4] + nv + i] = g[i]
-    for i in range(x.size):
-        phi[at[5] + i] = x[i]
-    _write_frame(phi, J6, a6, p, x, at)
-
-
-@njit(cache=True)
-def _write_frame(phi, J6, a6, p, x, at):
-    """φ's terms of one frame: its J's translation rows (3, nv) from at[1], J̇q̇'s linear part [m/s²] from at[2],
-    p [m] and ṗ = J v [m/s] from at[3] (J6, a6: Pinocchio's 6-row Jacobian and classical acceleration; v:
-    x[at[0]:at[0] + nv])."""
-    nv = J6.shape[1]
-    for r in range(3):
-        phi[at[2] + r] = a6[r]
-        phi[at[3] + r] = p[r]
-        pd = 0.0
-        for c in range(nv):
-            phi[at[1] + r * nv + c] = J6[r, c]
-            pd += J6[r, c] * x[at[0] + c]
-        phi[at[3] + 3 + r] = pd
 
 
 def _impulse_rates(plan):

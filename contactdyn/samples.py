@@ -315,10 +315,9 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
     tau = np.zeros((N, nv))
     if generic:
         command = _generic_command(plan)
-    TV = plan.time_terms.at_times(ts)
     phi_at = plan.phi_at  # (the call's own φ: as cheap per sample as a batched one)
     for k in range(N):
-        Phi[k] = phi = phi_at(ts[k], X[k], TV[k])
+        Phi[k] = phi = phi_at(ts[k], X[k])
         if generic:  # (Pinocchio's data at this sample: the controller reads it)
             tau[k] = command(ts[k], X[k], _jacobians(plan, phi), phi)
     Y = np.array([plan.P.dot(phi) for phi in Phi]).reshape(N, -1) if exact else _rows_times(Phi, plan.PT)
@@ -433,7 +432,7 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
         S.limit_torque[:, i] = Z[:, k]
     slots = {key: slot for slot, _, key in plan.time_ramps}
     for key, ramp in phase.forces.items():
-        S.F_d[key][:] = Phi[:, plan.i_e + slots[key]] if key in slots else [ramp.at(t)[0] for t in ts]
+        S.F_d[key][:] = Phi[:, plan.i_e + slots[key]] if key in slots else ramp.values(ts)
         S.has_F_d[key] = True
     for ci, (c, mode) in enumerate(zip(s.contacts, plan.modes, strict=True)):
         name = c.name

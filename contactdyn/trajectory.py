@@ -160,7 +160,13 @@ def merge_corners(corners) -> tuple[Corner, ...]:
     return tuple(out)
 
 
-_profiles = np.frompyfunc(profile, 3, 3)  #: :func:`profile` element by element over arrays of τ
+@njit(cache=True)
+def _profile_values(code: int, taus: np.ndarray, accel_fraction: float) -> np.ndarray:
+    """σ of :func:`profile` (kind PROFILES[code]) at each τ of ``taus``."""
+    out = np.empty(taus.size)
+    for k in range(taus.size):
+        out[k] = _profile(code, taus[k], accel_fraction)[0]
+    return out
 
 
 @dataclass(frozen=True)
@@ -200,7 +206,8 @@ class Move:
         """(len(ts), n): the move's displacement at each time of ``ts``, ``rows``' first row elementwise over them."""
         if self.kind == "circle":
             return np.array([self.circle_rows(t)[0] for t in ts]).reshape(len(ts), len(self.delta))
-        s = _profiles(self.kind, (ts - self.start) / self.duration, self.accel_fraction)[0].astype(float)
+        s = _profile_values(_PROFILE_CODE.get(self.kind, _STEP), (np.asarray(ts, float) - self.start) / self.duration,
+                            self.accel_fraction)
         return np.multiply.outer(s, self.delta)
 
     def corners(self) -> tuple[Corner, ...]:
@@ -306,6 +313,11 @@ class Ramp:
         """Set-point and its rate [N, N/s] at time t (:func:`_ramp`)."""
         return _ramp(_RAMP_CODE[self.kind], self.value, self.initial, self.start, self.duration, t)
 
+    def values(self, ts: np.ndarray) -> np.ndarray:
+        """The set-point [N] at each time of ``ts`` [s] (``at``'s first value, elementwise)."""
+        return _ramp_values(_RAMP_CODE[self.kind], self.value, self.initial, self.start, self.duration,
+                            np.asarray(ts, float))
+
     def corners(self) -> tuple[Corner, ...]:
         """Where the set-point (step) or its rate (linear, exponential) jumps: its start, a linear ramp's end."""
         def since(t: float) -> float:  # ``at``'s τ [s]
@@ -330,6 +342,15 @@ def _ramp(code: int, value: float, initial: float, start: float, duration: float
     if tau >= duration:
         return value, 0.0
     return initial + span * tau / duration, span / duration
+
+
+@njit(cache=True)
+def _ramp_values(code: int, value: float, initial: float, start: float, duration: float, ts: np.ndarray) -> np.ndarray:
+    """:func:`_ramp`'s set-point [N] at each time of ``ts`` [s]."""
+    out = np.empty(ts.size)
+    for k in range(ts.size):
+        out[k] = _ramp(code, value, initial, start, duration, ts[k])[0]
+    return out
 
 
 @njit(cache=True)

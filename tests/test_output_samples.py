@@ -22,6 +22,7 @@ from contactdyn.samples import evaluated_samples, plan_derivatives
 from contactdyn.scene import load_scene
 from contactdyn.simulate import run_system, simulate
 from contactdyn.system import System
+from contactdyn.trajectory import profile
 
 #: scene -> a duration [s] that holds its phases' kinds (motor, elastic, force-reading, a carried reference)
 SCENES = {"case1_cart": 1.1, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "case3_b_force": 0.3, "b1": 0.3}
@@ -131,23 +132,26 @@ def test_folded_forces_with_coulomb_friction_in_b(monkeypatch):
 
 
 @pytest.mark.parametrize("scene, duration", [("b1", 2.0), ("case2_writer_b", 1.2), ("case1_cart", 4.0)])
-def test_time_terms_of_many_samples_equal_one_at_a_time(scene, duration):
-    """The output's time terms (``time_terms.at_times``: element by element over all samples) are bitwise
-    those the right-hand side computes at one time, before, inside and after every move and ramp and at
-    both sides of each corner: constant velocity, trapezoid, triangle, velocity ramp, exponential, step
+def test_time_terms_of_phi_are_the_moves_and_ramps(scene, duration):
+    """φ's time terms (written by the compiled plan_phi.write_phi) are bitwise each move's σ, σ'/T
+    (trajectory.profile) and each ramp's set-point (Ramp.at), before, inside and after every move and ramp and
+    at both sides of each corner: constant velocity, trapezoid, triangle, velocity ramp, exponential, step
     and linear set-points."""
     system = System(load_scene(scene, {"duration": duration, "solver.output_rate": 10.0}))
     run_system(system)
+    x0, _ = system.initial_state()
     checked = 0
     for plan in (p for p in _PLANS[system].values() if p.ok and len(p.time_moves) + len(p.time_ramps)):
         corners = [c for _, m in plan.time_moves for c in m.corners()] + [c for _, r, _ in plan.time_ramps
                                                                              for c in r.corners()]
-        ts = np.concatenate([np.linspace(-0.5, 6.0, 101), np.ravel(corners)])
-        rows = plan.time_terms.at_times(ts)
-        for t, row in zip(ts, rows, strict=True):
-            one = np.zeros(len(row))
-            one[-1] = 1.0
-            assert np.array_equal(plan.time_terms(float(t), one), row), t
+        for t in np.concatenate([np.linspace(-0.5, 6.0, 101), np.ravel(corners)]):
+            phi = plan.phi_at(float(t), x0)
+            for slot, m in plan.time_moves:
+                sigma, dsigma, _ = profile(m.kind, m.tau(t), m.accel_fraction)
+                assert (phi[plan.i_e + slot], phi[plan.i_e + slot + 1]) == (sigma, dsigma / m.duration), t
+            for slot, ramp, _ in plan.time_ramps:
+                assert phi[plan.i_e + slot] == ramp.at(t)[0], t
+            assert phi[-1] == 1.0
         checked += 1
     assert checked
 

@@ -143,3 +143,14 @@ def test_compiled_ramp_rows_are_ramp_at():
         ramp_rows(t, table, w)
         assert [tuple(w[2 * j:2 * j + 2]) for j in range(3)] == [r.at(t) for r in ramps]
     assert Ramp(100.0, 0.2, 0.3, "linear", 5.0).at(0.35) == pytest.approx((5.0 + 95.0 * 0.15 / 0.3, 95.0 / 0.3), rel=1e-14)
+
+
+def test_elementwise_values_are_the_pointwise_ones():
+    """Ramp.values and Move.displacements (compiled loops over times) are Ramp.at's and Move.rows' first rows."""
+    ts = np.linspace(-0.2, 1.2, 71)
+    for kind in ("linear", "exponential", "step"):
+        ramp = Ramp(30.0, 0.1, 0.4, kind, -2.0)
+        assert np.array_equal(ramp.values(ts), [ramp.at(t)[0] for t in ts])
+    for kind in ("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step", "exponential"):
+        move = Move(np.array([0.2, -0.3, 0.1]), 0.1, 0.6, kind, 0.25)
+        assert np.array_equal(move.displacements(ts), [move.rows(t)[0] for t in ts])
