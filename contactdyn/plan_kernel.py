@@ -263,7 +263,7 @@ def calls(plan, one, one_at=None):
     s, m = plan.system, plan.m
     n, no = s.n, plan.P.shape[0] - m * (m + 1)
     size = n + m + no + s.nv
-    phi_at = plan.phi_at  # this make_rhs's (a later ModePlan.use makes new ones)
+    phi_at, buffer = plan.phi_at, plan.phi.buffer  # this make_rhs's (a later ModePlan.use makes new ones)
 
     def kernel(t, x, phi):
         out = np.empty(size)
@@ -275,6 +275,11 @@ def calls(plan, one, one_at=None):
         N = len(ts)
         Phi, out = np.empty((N, plan.P.shape[1])), np.empty((N, size))
         for k in range(N):
+            if one_at is not None:  # φ written by the call itself
+                if one_at(ts[k], X[k], out[k]):
+                    return None
+                Phi[k] = buffer
+                continue
             Phi[k] = phi = phi_at(ts[k], X[k])
             if one(ts[k], X[k], phi, out[k]):
                 return None
