@@ -41,7 +41,7 @@ from .phases import reference_at
 from .plan_probe import affine_map
 from .trajectory import circle_reference, move_rows, move_table, ramp_rows, ramp_table
 
-__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "write_time_part", "plan_command", "plan_commands", "operational_command",
+__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "write_time_part", "reference_of", "reference_tables", "plan_command", "plan_commands", "operational_command",
            "reference_rows"]
 
 
@@ -267,16 +267,39 @@ def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
 def reference_rows(reference):
     """rows(t) -> [x_d, ẋ_d, ẍ_d] (9,) of a task-space reference [m, m/s, m/s²], bitwise Reference.at's:
     its sum start + Σ_k (σ_k, σ'_k/T_k, σ''_k/T_k²) ⊗ Δ_k as one product R w over the moves' profiles w (the
-    same sums in the same order, one compiled call); with circles, one circle's rows plus the
-    start (Reference.at's one-move sum), else Reference.at itself."""
-    if any(m.kind == "circle" for m in reference.moves):
-        if len(reference.moves) > 1:
-            return lambda t: np.concatenate(reference.at(t))
-        m = reference.moves[0]
-        terms, span, start = m._circle_terms, 2.0 * math.pi * m.turns, np.asarray(reference.start, float)
-        return lambda t: circle_reference(t, m.start, m.duration, m.accel_fraction, span, terms, start)
-    moves, R, w = reference_product(reference)
-    return lambda t: _reference_rows(t, moves, R, w)
+    same sums in the same order), or one circle's rows plus the start (Reference.at's one-move sum), both by
+    one compiled call (:func:`reference_of`); with a circle among other moves, Reference.at itself."""
+    tables = reference_tables(reference)
+    if tables is None:
+        return lambda t: np.concatenate(reference.at(t))
+    return lambda t: reference_of(t, *tables)
+
+
+def reference_tables(reference) -> tuple | None:
+    """(kind, moves, R, circle, terms, start) of :func:`reference_of`: REF_PRODUCT with moves, R of
+    :func:`reference_product`, or REF_CIRCLE with circle = (start [s], duration [s], accel fraction, angle [rad]),
+    the circle's terms (Move._circle_terms) and the reference's start [m]; None for a circle among other moves."""
+    no_circle = (np.zeros(4), np.zeros((3, 4)), np.zeros(3))
+    if not any(m.kind == "circle" for m in reference.moves):
+        return (REF_PRODUCT, *reference_product(reference)[:2], *no_circle)
+    if len(reference.moves) > 1:
+        return None
+    m = reference.moves[0]
+    circle = np.array([m.start, m.duration, m.accel_fraction, 2.0 * math.pi * m.turns])
+    return REF_CIRCLE, np.zeros((0, 4)), np.zeros((9, 1)), circle, m._circle_terms, np.asarray(reference.start, float)
+
+
+REF_PRODUCT, REF_CIRCLE = 0, 1  #: :func:`reference_of`'s kinds
+
+
+@njit(cache=True)
+def reference_of(t, kind, moves, R, circle, terms, start):
+    """[x_d, ẋ_d, ẍ_d] (9,) at t [s] of a reference by its tables (:func:`reference_tables`)."""
+    if kind == REF_CIRCLE:
+        return circle_reference(t, circle[0], circle[1], circle[2], circle[3], terms, start)
+    w = np.empty(R.shape[1])
+    w[0] = 1.0
+    return _reference_rows(t, moves, R, w)
 
 
 def reference_product(reference) -> tuple | None:

@@ -29,14 +29,19 @@ from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
 from .linalg import lu_solve, mtv
 from .plan_kernel import DECLINED, OK, calls, csr_of, kkt_of, matrix_of, pack, vector_of, write_out
-from .plan_law import reference_rows
+from .plan_law import reference_of, reference_rows, reference_tables
+from .plan_phi import write_phi
 from .trajectory import ramp_rows, ramp_table
 
-__all__ = ["call", "operational_kernel_of"]
+__all__ = ["call", "call_at", "operational_kernel_of"]
 
 #: the constants of a plan's call in :func:`~contactdyn.plan_kernel.pack`'s two buffers, by these indices
 P_VAL, D_CTL, TILT_F, TILT_T, TILT_BODY, RATES_F, AXES, FORCED, KP, KD, TOOL_AXIS, TARGET, SCALARS = range(13)
-P_COL, P_ROW, INTS, TILT_I, RATES_I = range(13, 18)  # ints (P: CSR columns, row starts)
+#: floats of :func:`call_at`: the reference's tables (plan_law.reference_tables), the force ramps, φ's time tables
+REF_MOVES, REF_R, REF_CIRCLE, REF_TERMS, REF_START, RAMPS, PHI_MOVES, PHI_RAMPS = range(13, 21)
+P_COL, P_ROW, INTS, TILT_I, RATES_I = range(21, 26)  # ints (P: CSR columns, row starts)
+#: ints of :func:`call_at`: φ's layout and time slots (plan_phi.write_phi); [the reference's kind, −1 none]
+PHI_AT, PHI_MSLOTS, PHI_RSLOTS, REF_KIND = range(26, 30)
 
 
 @njit(cache=True)
@@ -128,6 +133,23 @@ def call(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
     return OK
 
 
+@njit(cache=True)
+def call_at(t, x, H, h, g, J6, a6, p, R_tip, phi, fb, ib, out):
+    """:func:`call` at (t, x) with φ written from Pinocchio's terms (plan_phi.write_phi: H, h, g, the tip's J6, a6,
+    p; the tip the plan's first frame) and the reference and the force set-points at t computed here from their
+    packed tables: one compiled call per right-hand side."""
+    write_phi(t, x, H, h, g, J6, a6, p, phi, vector_of(ib, ib, PHI_AT), matrix_of(fb, ib, PHI_MOVES),
+              vector_of(ib, ib, PHI_MSLOTS), matrix_of(fb, ib, PHI_RAMPS), vector_of(ib, ib, PHI_RSLOTS))
+    kind = vector_of(ib, ib, REF_KIND)[0]
+    ref = np.empty(0) if kind < 0 else reference_of(t, kind, matrix_of(fb, ib, REF_MOVES), matrix_of(fb, ib, REF_R),
+                                                     vector_of(fb, ib, REF_CIRCLE), matrix_of(fb, ib, REF_TERMS),
+                                                     vector_of(fb, ib, REF_START))
+    ramps = matrix_of(fb, ib, RAMPS)
+    w = np.empty(2 * ramps.shape[0])
+    ramp_rows(t, ramps, w)
+    return call(phi, x, fb, ib, ref, w[::2].copy(), R_tip, J6, a6, out)
+
+
 def operational_kernel_of(plan, impulses: list[tuple]):
     """kernel(t, x, φ) -> (ẋ, z, o), or None for a call that goes the readable way (see the module);
     ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of the output's samples, or None where one declines. None where
@@ -152,16 +174,22 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     rates_i, rates_f = _rates_constants(plan, impulses)
     P = csr_of(plan)
     axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
-    fb, ib = pack([P.data, D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd, tool_axis, target,
-                   [s.slip_band, ko, do, k_null, kd_normal]], [P.indices, P.indptr, ints, tilt_i, rates_i])
     ramps = ramp_table([phase.forces[key] for key in ctl.force_keys])
     referenced, orient = phase.reference is not None, ctl.reads_orientation
+    tables = reference_tables(phase.reference) if referenced else None  # (no carrier: the reference's own)
+    kind = -1 if tables is None else tables[0]
+    ref_floats = list(tables[1:]) if tables else [np.zeros((0, 4)), np.zeros((9, 1)), np.zeros(4), np.zeros((3, 4)),
+                                                  np.zeros(3)]
+    at, phi_moves, move_slots, phi_ramps, ramp_slots = plan.phi.tables
+    fb, ib = pack([P.data, D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd, tool_axis, target,
+                   [s.slip_band, ko, do, k_null, kd_normal], *ref_floats, ramps, phi_moves, phi_ramps],
+                  [P.indices, P.indptr, ints, tilt_i, rates_i, at, move_slots, ramp_slots, [kind]])
     none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))
     rotation = data.oMf[fid].rotation  # (a view: the tip's R at the last φ)
     tip6 = plan.tip6  # this make_rhs's tip terms (a later ModePlan.use makes new ones; this kernel keeps its own)
     ramp_values = np.empty(2 * len(ramps))  # F_d [N], Ḟ_d [N/s] per ramp, rewritten per call
     set_points = np.empty(len(ramps))  # F_d [N]
-    reference = reference_rows(phase.reference) if referenced else None  # (no carrier: the reference's own)
+    reference = reference_rows(phase.reference) if referenced else None
 
     def inputs(t, x):
         """The call's per-call inputs at (t, x): the reference, F_d [N], the tip's R, J (6 rows), J̇q̇ (6)."""
@@ -171,12 +199,20 @@ def operational_kernel_of(plan, impulses: list[tuple]):
             set_points[:] = ramp_values[::2]
         if not orient:
             return ref, set_points, no_rotation, no_rows, none
-        return ref, set_points, rotation, *tip6  # this call's φ's (plan_rhs._phi_function)
+        return ref, set_points, rotation, *tip6  # this call's φ's (plan_phi.phi_function)
 
     def one(t, x, phi, out):
         return call(phi, x, fb, ib, *inputs(t, x), out)
 
-    kernel = calls(plan, one)
+    H, h, g, p = plan.phi.terms
+    pinocchio, phi_buffer = plan.phi.pinocchio, plan.phi.buffer
+
+    def one_at(t, x, out):  # one, with φ, the reference and the set-points computed in the same compiled call
+        J6, a6 = pinocchio(x)
+        return call_at(t, x, H, h, g, J6, a6, p, rotation, phi_buffer, fb, ib, out)
+
+    fused = tf == 0 and (tables is not None or not referenced)  # the tip's J6, a6 are the first frame's
+    kernel = calls(plan, one, one_at if fused else None)
     kernel.rates = True
     return kernel
 
