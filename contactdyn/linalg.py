@@ -63,6 +63,8 @@ def lu_solve(A, b):
                 LU[k, j], LU[p, j] = LU[p, j], LU[k, j]
             z[k], z[p] = z[p], z[k]
         for i in range(k + 1, n):
+            if LU[i, k] == 0.0:  # (a KKT matrix is mostly zeros: nothing to eliminate)
+                continue
             f = LU[i, k] / LU[k, k]
             for j in range(k + 1, n):
                 LU[i, j] -= f * LU[k, j]
@@ -125,7 +127,16 @@ def sparse_dot(start, columns, values, x):
 
 @njit(cache=True)
 def pinv(J):
-    """J⁺ (c, r) of J (r, c), r ≤ 3 rows, by a one-sided Jacobi SVD of Jᵀ (its columns made orthogonal by
+    """J⁺ (c, r) of J (r, c) by a one-sided Jacobi SVD of its shorter side (:func:`_jacobi_pinv`; (Jᵀ)⁺ = (J⁺)ᵀ:
+    a 3×2 Jacobian rotates one pair of columns per sweep rather than three)."""
+    if J.shape[1] < J.shape[0]:
+        return np.ascontiguousarray(_jacobi_pinv(np.ascontiguousarray(J.T)).T)
+    return _jacobi_pinv(J)
+
+
+@njit(cache=True)
+def _jacobi_pinv(J):
+    """J⁺ (c, r) of J (r, c), r ≤ c, by a one-sided Jacobi SVD of Jᵀ (its columns made orthogonal by
     plane rotations: Jᵀ V = [σ_k u_k], J⁺ = Σ_k u_k v_kᵀ / σ_k), singular values ≤ 1e-10 of the largest
     dropped (numpy.linalg.pinv's rcond); accurate to the precision of J, also near singular poses."""
     r, c = J.shape
