@@ -40,10 +40,11 @@ OK, DECLINED = 0, 1  #: :func:`call`'s status
 TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
 #: the constants of a plan's call, packed by :func:`pack` into one float and one int buffer (two arguments: a
 #: compiled function's call costs ~0.06 µs per argument): float arrays, then int arrays, by these indices
-P_VAL, M_, U_X, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL, F_FF, T_MOVES, T_R, T_RAMPS = range(15)  # floats
-PHI_MOVES, PHI_RAMPS = 15, 16  # floats: φ's time tables (plan_phi.write_phi)
-P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(17, 24)  # ints (P: CSR values, columns, row starts)
-PHI_AT, PHI_MSLOTS, PHI_RSLOTS = 24, 25, 26  # ints: φ's layout and time slots (plan_phi.write_phi)
+P_VAL, M_, U_VAL, U_C, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL, F_FF, T_MOVES, T_R, T_RAMPS = range(16)  # floats
+PHI_MOVES, PHI_RAMPS = 16, 17  # floats: φ's time tables (plan_phi.write_phi)
+P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(18, 25)  # ints (P: CSR values, columns, row starts)
+U_COL, U_ROW = 25, 26  # ints: the state map's U_x by rows (U_VAL its values, U_C its constant column)
+PHI_AT, PHI_MSLOTS, PHI_RSLOTS = 27, 28, 29  # ints: φ's layout and time slots (plan_phi.write_phi)
 #: INTS, in this order (TIMED: the tip law's time part is computed in the call, from T_MOVES, T_R, T_RAMPS and
 #: I_SET, plan_law.write_time_part)
 M, NQ, NV, I_H, I_J, I_DR, TIP, U_F, ZS, SWAP, N_LIM, O_Y0, O_Y1, X_Z0, X_Z1, W0, KIND, O_G, TIMED, I_SET = range(20)
@@ -135,11 +136,11 @@ def fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ):
 
 @njit(cache=True)
 def _tip_law(phi, x, u, A, b, o, fb, ib, c):
-    """(τ, B, [a*, f_swap, ż]) of the force-reading tip law: u the inputs' time part, U_X the state part's
-    map [U_x, u_c]; c: INTS."""
+    """(τ, B, [a*, f_swap, ż]) of the force-reading tip law: u the inputs' time part, the state part U_x x + u_c
+    (U_x by rows: a few nonzeros); c: INTS."""
     nQ, nv = c[NQ], c[NV]
-    U = matrix_of(fb, ib, U_X)
-    uu = u + mv(U[:, :x.size], x) + U[:, x.size]
+    uu = u + sparse_dot(vector_of(ib, ib, U_ROW), vector_of(ib, ib, U_COL), vector_of(fb, ib, U_VAL), x) + \
+        vector_of(fb, ib, U_C)
     uu[:6] = phi[c[TIP]:c[TIP] + 6]  # p_tip [m], ṗ_tip [m/s]
     forces = vector_of(ib, ib, FORCES)
     for k in range(forces.size):
@@ -317,10 +318,10 @@ def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
     F = affine_map(lambda e: plan._feedforward_torque(e[:width], e[plan.i_e:width]), width + 1)[:, :width]
     empty = np.zeros((0, 0))
     P = csr_of(plan)
-    floats = [P.data, empty, empty, plan.compiled_drives.L, plan.compiled_drives.L_tau, np.zeros((3, 0)), empty,
-              empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F, empty, empty, empty]
+    floats = [P.data, empty, np.zeros(0), np.zeros(0), plan.compiled_drives.L, plan.compiled_drives.L_tau,
+              np.zeros((3, 0)), empty, empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F, empty, empty, empty]
     ints = _ints(plan, {KIND: TASK_LAW, O_G: plan.o_gctl.start})
-    return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, [], [], []])
+    return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, [], [], [], [], [0]])
 
 
 def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.ndarray]:
@@ -343,10 +344,13 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
     ints = _ints(plan, {TIP: inputs.tip, U_F: ctl.i_forces, ZS: ctl.zs.start if ctl.zs is not None else -1,
                         SWAP: ctl.swap, KIND: TIP_LAW, TIMED: timed is not None, I_SET: i_set})
     D_ctl = s._D_ctl if s._D_ctl is not None else np.zeros((nv, nv))
-    floats = [P.data, ctl.M, inputs.state_map(), drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
+    U = inputs.state_map()  # [U_x, u_c]
+    U_x = sparse.csr_matrix(U[:, :s.n])
+    floats = [P.data, ctl.M, U_x.data, U[:, s.n], drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
               none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null], np.zeros((nv, 0)), moves, R,
               ramps]
-    return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach])
+    return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach,
+                                         U_x.indices, U_x.indptr])
 
 
 def _pack_with_phi(plan, floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
