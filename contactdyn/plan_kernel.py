@@ -169,11 +169,12 @@ def _tip_law(phi, x, u, A, b, o, fb, ib, c):
 def call(t, phi, x, u, fb, ib, out):
     """The status of the module docstring's call at t [s], its [ẋ, z, o, τ] written into ``out`` (τ: the joint
     command [N·m or N; V] at the solution, what the drives make of it); fb, ib: the plan's constants
-    (:func:`pack`); u: a tip law's inputs' time part (plan_law.plan_inputs), written here where INTS' TIMED says. INTS: sizes and offsets (ZS the ż rows of
-    [a*, f_swap, ż], −1 none; X_Z0:X_Z1 the law's states in x and ẋ; TIP the tip's p, ṗ in φ; U_F the forces
-    in u; W0 the frame forces in z; O_G a task law's g_ctl in o); FRAMES: each frame's J offset in φ;
-    FORCES: o's measured forces in u's order; COLS: the folded columns of A (the rows' λ, then a carrying
-    body's Q̈_b), with D_A, D_F, D_Z per column; REACH: the rows whose A column beyond the robot joins B."""
+    (:func:`pack`); u: a tip law's inputs' time part (plan_law.plan_inputs), written here where INTS' TIMED
+    says. INTS: sizes and offsets (ZS the ż rows of [a*, f_swap, ż], −1 none; X_Z0:X_Z1 the law's states in
+    x and ẋ; TIP the tip's p, ṗ in φ; U_F the forces in u; W0 the frame forces in z; O_G a task law's g_ctl
+    in o); FRAMES: each frame's J offset in φ; FORCES: o's measured forces in u's order; COLS: the folded
+    columns of A (the rows' λ, then a carrying body's Q̈_b), with D_A, D_F, D_Z per column; REACH: the rows
+    whose A column beyond the robot joins B."""
     c = vector_of(ib, ib, INTS)
     nQ, nv = c[NQ], c[NV]
     if c[TIMED]:

@@ -41,8 +41,8 @@ from .phases import reference_at
 from .plan_probe import affine_map
 from .trajectory import circle_reference, move_rows, move_table, ramp_rows, ramp_table
 
-__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "write_time_part", "reference_of", "reference_tables", "plan_command", "plan_commands", "operational_command",
-           "reference_rows"]
+__all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "write_time_part", "reference_of", "reference_tables",
+           "plan_command", "plan_commands", "operational_command", "reference_rows"]
 
 
 class CompiledLaw:

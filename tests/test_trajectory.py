@@ -142,7 +142,8 @@ def test_compiled_ramp_rows_are_ramp_at():
     for t in np.linspace(0.0, 1.0, 41):
         ramp_rows(t, table, w)
         assert [tuple(w[2 * j:2 * j + 2]) for j in range(3)] == [r.at(t) for r in ramps]
-    assert Ramp(100.0, 0.2, 0.3, "linear", 5.0).at(0.35) == pytest.approx((5.0 + 95.0 * 0.15 / 0.3, 95.0 / 0.3), rel=1e-14)
+    closed_form = (5.0 + 95.0 * 0.15 / 0.3, 95.0 / 0.3)  # [N, N/s] halfway up the linear ramp
+    assert Ramp(100.0, 0.2, 0.3, "linear", 5.0).at(0.35) == pytest.approx(closed_form, rel=1e-14)
 
 
 def test_elementwise_values_are_the_pointwise_ones():
