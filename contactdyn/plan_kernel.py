@@ -29,7 +29,7 @@ from scipy import sparse
 
 from .controllers import computed_torque as law
 from .linalg import lu_solve, mm, mtv, mv, sparse_dot
-from .plan_law import CompiledLaw, compiled_law, plan_inputs, write_time_part
+from .plan_law import NO_REFERENCE, CompiledLaw, compiled_law, plan_inputs, write_time_part
 from .plan_phi import write_phi
 from .plan_probe import affine_map
 
@@ -40,14 +40,16 @@ OK, DECLINED = 0, 1  #: :func:`call`'s status
 TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
 #: the constants of a plan's call, packed by :func:`pack` into one float and one int buffer (two arguments: a
 #: compiled function's call costs ~0.06 µs per argument): float arrays, then int arrays, by these indices
-P_VAL, M_, U_VAL, U_C, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL, F_FF, T_MOVES, T_R, T_RAMPS = range(16)  # floats
-PHI_MOVES, PHI_RAMPS = 16, 17  # floats: φ's time tables (plan_phi.write_phi)
-P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(18, 25)  # ints (P: CSR values, columns, row starts)
-U_COL, U_ROW = 25, 26  # ints: the state map's U_x by rows (U_VAL its values, U_C its constant column)
-PHI_AT, PHI_MSLOTS, PHI_RSLOTS = 27, 28, 29  # ints: φ's layout and time slots (plan_phi.write_phi)
-#: INTS, in this order (TIMED: the tip law's time part is computed in the call, from T_MOVES, T_R, T_RAMPS and
-#: I_SET, plan_law.write_time_part)
-M, NQ, NV, I_H, I_J, I_DR, TIP, U_F, ZS, SWAP, N_LIM, O_Y0, O_Y1, X_Z0, X_Z1, W0, KIND, O_G, TIMED, I_SET = range(20)
+P_VAL, M_, U_VAL, U_C, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL, F_FF = range(13)  # floats
+T_MOVES, T_R, T_CIRCLE, T_TERMS, T_START, T_RAMPS = range(13, 19)  # floats: the time part's tables
+PHI_MOVES, PHI_RAMPS = 19, 20  # floats: φ's time tables (plan_phi.write_phi)
+P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(21, 28)  # ints (P: CSR values, columns, row starts)
+U_COL, U_ROW = 28, 29  # ints: the state map's U_x by rows (U_VAL its values, U_C its constant column)
+PHI_AT, PHI_MSLOTS, PHI_RSLOTS = 30, 31, 32  # ints: φ's layout and time slots (plan_phi.write_phi)
+#: INTS, in this order (TIMED: the tip law's time part is computed in the call, plan_law.write_time_part, from
+#: the reference's tables T_* of kind T_KIND and the ramps, F_d written from u[I_SET])
+M, NQ, NV, I_H, I_J, I_DR, TIP, U_F, ZS, SWAP, N_LIM, O_Y0, O_Y1, X_Z0, X_Z1, W0, KIND, O_G, TIMED, I_SET, T_KIND = \
+    range(21)
 
 
 def pack(floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
@@ -178,10 +180,9 @@ def call(t, phi, x, u, fb, ib, out):
     c = vector_of(ib, ib, INTS)
     nQ, nv = c[NQ], c[NV]
     if c[TIMED]:
-        R = matrix_of(fb, ib, T_R)
-        w = np.empty(R.shape[1])
-        w[0] = 1.0
-        write_time_part(t, matrix_of(fb, ib, T_MOVES), R, w, matrix_of(fb, ib, T_RAMPS), u, c[I_SET])
+        write_time_part(t, c[T_KIND], matrix_of(fb, ib, T_MOVES), matrix_of(fb, ib, T_R), vector_of(fb, ib, T_CIRCLE),
+                        matrix_of(fb, ib, T_TERMS), vector_of(fb, ib, T_START), matrix_of(fb, ib, T_RAMPS), u,
+                        c[I_SET])
     y, A, b, o = kkt_of(phi, fb, ib, P_VAL, P_COL, P_ROW, c[M])
     if c[KIND] == TIP_LAW:
         tau, B, targets = _tip_law(phi, x, u, A, b, o, fb, ib, c)
@@ -239,7 +240,7 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
     def one(t, x, phi, out):
         if fb is None and not ready():
             return DECLINED
-        if time_part is not None:  # a circle's reference, into u
+        if time_part is not None:  # a circle among other moves: the reference in Python, into u
             time_part(t)
         return call(t, phi, x, u, fb, ib, out)
 
@@ -302,7 +303,7 @@ def _ints(plan, given: dict) -> list[int]:
     """INTS of a plan: its sizes and offsets, then ``given`` by index (e.g. {KIND: TASK_LAW}), the rest 0."""
     s, m = plan.system, plan.m
     off = m * m + m  # o's start in y
-    ints = [0] * (I_SET + 1)
+    ints = [0] * (T_KIND + 1)
     ints[M], ints[NQ], ints[NV], ints[I_H] = m, s.nQ, s.nv, plan.i_h
     ints[I_J], ints[I_DR] = plan.i_J[plan.tip_frame], plan.i_dr[plan.tip_frame]
     ints[ZS], ints[N_LIM] = -1, len(plan.compiled_drives.limited)
@@ -320,7 +321,8 @@ def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
     empty = np.zeros((0, 0))
     P = csr_of(plan)
     floats = [P.data, empty, np.zeros(0), np.zeros(0), plan.compiled_drives.L, plan.compiled_drives.L_tau,
-              np.zeros((3, 0)), empty, empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F, empty, empty, empty]
+              np.zeros((3, 0)), empty, empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F, *NO_REFERENCE[1:6],
+              np.zeros((0, 5))]
     ints = _ints(plan, {KIND: TASK_LAW, O_G: plan.o_gctl.start})
     return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, [], [], [], [], [0]])
 
@@ -341,15 +343,15 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
     none = np.empty((0, len(cols)))
     P = csr_of(plan)
     timed = inputs.time_tables
-    moves, R, ramps, i_set = timed or (np.zeros((0, 4)), np.zeros((9, 1)), np.zeros((0, 5)), 0)
+    kind, moves, R, circle, terms, start, ramps, i_set = timed or (*NO_REFERENCE, np.zeros((0, 5)), 0)
     ints = _ints(plan, {TIP: inputs.tip, U_F: ctl.i_forces, ZS: ctl.zs.start if ctl.zs is not None else -1,
-                        SWAP: ctl.swap, KIND: TIP_LAW, TIMED: timed is not None, I_SET: i_set})
+                        SWAP: ctl.swap, KIND: TIP_LAW, TIMED: timed is not None, I_SET: i_set, T_KIND: kind})
     D_ctl = s._D_ctl if s._D_ctl is not None else np.zeros((nv, nv))
     U = inputs.state_map()  # [U_x, u_c]
     U_x = sparse.csr_matrix(U[:, :s.n])
     floats = [P.data, ctl.M, U_x.data, U[:, s.n], drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
               none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null], np.zeros((nv, 0)), moves, R,
-              ramps]
+              circle, terms, start, ramps]
     return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach,
                                          U_x.indices, U_x.indptr])
 

@@ -42,7 +42,7 @@ from .plan_probe import affine_map
 from .trajectory import circle_reference, move_rows, move_table, ramp_rows, ramp_table
 
 __all__ = ["CompiledLaw", "compiled_law", "plan_inputs", "write_time_part", "reference_of", "reference_tables",
-           "plan_command", "plan_commands", "operational_command", "reference_rows"]
+           "NO_REFERENCE", "plan_command", "plan_commands", "operational_command", "reference_rows"]
 
 
 class CompiledLaw:
@@ -224,17 +224,17 @@ def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
     if not surfaces_move:
         _write_surfaces(u, i_surf, surface_points(s, np.zeros(n), modes))
     carrier = phase.carrier if law.ref else None
-    product = reference_product(phase.reference) if moves else _NO_MOVES
-    reference = reference_rows(phase.reference) if product is None else None
+    tables = reference_tables(phase.reference) if moves else NO_REFERENCE
+    reference = reference_rows(phase.reference) if tables is None else None
 
     def time_part(t):
         """u's time part at t [s]: the reference [m, m/s, m/s²] (a carrying body's offset: the state part), then
         F_d [N], Ḟ_d [N/s] per ramp."""
-        if product is None:  # circles
+        if tables is None:  # a circle among other moves
             u[6:15] = reference(t)
             ramp_rows(t, ramps, set_points)
         else:
-            write_time_part(t, *product, ramps, u, i_set)
+            write_time_part(t, *tables, ramps, u, i_set)
         return u
 
     def state_part(x):
@@ -258,9 +258,9 @@ def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
     inputs.state_map = lambda: affine_map(lambda e: state_part(e[:n]), n + 1)
     inputs.tip, inputs.forces = tip, i_forces
     #: for a compiled caller: u's buffer (the time part writes into it) and the tables of :func:`write_time_part`
-    #: (moves, R, ramps, i_set), None with circles (their reference: ``time_part`` itself)
+    #: (the reference's, ramps, i_set), None for a circle among other moves (then ``time_part`` itself)
     inputs.u = u
-    inputs.time_tables = None if product is None else (product[0], product[1], ramps, i_set)
+    inputs.time_tables = None if tables is None else (*tables, ramps, i_set)
     return inputs
 
 
@@ -281,7 +281,7 @@ def reference_tables(reference) -> tuple | None:
     the circle's terms (Move._circle_terms) and the reference's start [m]; None for a circle among other moves."""
     no_circle = (np.zeros(4), np.zeros((3, 4)), np.zeros(3))
     if not any(m.kind == "circle" for m in reference.moves):
-        return (REF_PRODUCT, *reference_product(reference)[:2], *no_circle)
+        return (REF_PRODUCT, *reference_product(reference), *no_circle)
     if len(reference.moves) > 1:
         return None
     m = reference.moves[0]
@@ -290,6 +290,8 @@ def reference_tables(reference) -> tuple | None:
 
 
 REF_PRODUCT, REF_CIRCLE = 0, 1  #: :func:`reference_of`'s kinds
+#: :func:`reference_tables`' shapes for a reference fixed in the mode or none (kind −1: nothing to write)
+NO_REFERENCE = (-1, np.zeros((0, 4)), np.zeros((9, 1)), np.zeros(4), np.zeros((3, 4)), np.zeros(3))
 
 
 @njit(cache=True)
@@ -302,22 +304,15 @@ def reference_of(t, kind, moves, R, circle, terms, start):
     return _reference_rows(t, moves, R, w)
 
 
-def reference_product(reference) -> tuple | None:
-    """(moves, R, w) of :func:`reference_rows`' product R w (moves: trajectory.move_table; w's buffer), None for
-    a reference with circles."""
-    if any(m.kind == "circle" for m in reference.moves):
-        return None
+def reference_product(reference) -> tuple[np.ndarray, np.ndarray]:
+    """(moves, R) of the product R w of a reference without circles, w = [1, (σ, σ'/T, σ''/T²) per move]
+    (moves: trajectory.move_table)."""
     K = len(reference.moves)
     R = np.zeros((9, 1 + 3 * K))
     R[0:3, 0] = reference.start
     for k, m in enumerate(reference.moves):
         R[0:3, 1 + 3 * k], R[3:6, 2 + 3 * k], R[6:9, 3 + 3 * k] = m.delta, m.delta, m.delta
-    w = np.zeros(1 + 3 * K)
-    w[0] = 1.0
-    return move_table(reference.moves), R, w
-
-
-_NO_MOVES = (np.zeros((0, 4)), np.zeros((9, 1)), np.ones(1))  #: reference_product's of a reference fixed in the mode
+    return move_table(reference.moves), R
 
 
 @njit(cache=True)
@@ -328,11 +323,11 @@ def _reference_rows(t, moves, R, w):
 
 
 @njit(cache=True)
-def write_time_part(t, moves, R, w, ramps, u, i_set):
-    """:func:`plan_inputs`' time part into u at t [s]: u[6:15] = the reference's rows (none without moves), then
-    F_d [N], Ḟ_d [N/s] per ramp from u[i_set]."""
-    if moves.shape[0]:
-        u[6:15] = _reference_rows(t, moves, R, w)
+def write_time_part(t, kind, moves, R, circle, terms, start, ramps, u, i_set):
+    """:func:`plan_inputs`' time part into u at t [s]: u[6:15] = the reference's rows by its tables
+    (:func:`reference_of`; kind −1: fixed, not written), then F_d [N], Ḟ_d [N/s] per ramp from u[i_set]."""
+    if kind >= 0:
+        u[6:15] = reference_of(t, kind, moves, R, circle, terms, start)
     ramp_rows(t, ramps, u[i_set:i_set + 2 * ramps.shape[0]])
 
 

@@ -29,7 +29,7 @@ from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
 from .linalg import lu_solve, mtv
 from .plan_kernel import DECLINED, OK, calls, csr_of, kkt_of, matrix_of, pack, vector_of, write_out
-from .plan_law import reference_of, reference_rows, reference_tables
+from .plan_law import NO_REFERENCE, reference_of, reference_rows, reference_tables
 from .plan_phi import write_phi
 from .trajectory import ramp_rows, ramp_table
 
@@ -177,9 +177,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     ramps = ramp_table([phase.forces[key] for key in ctl.force_keys])
     referenced, orient = phase.reference is not None, ctl.reads_orientation
     tables = reference_tables(phase.reference) if referenced else None  # (no carrier: the reference's own)
-    kind = -1 if tables is None else tables[0]
-    ref_floats = list(tables[1:]) if tables else [np.zeros((0, 4)), np.zeros((9, 1)), np.zeros(4), np.zeros((3, 4)),
-                                                  np.zeros(3)]
+    kind, *ref_floats = tables or NO_REFERENCE
     at, phi_moves, move_slots, phi_ramps, ramp_slots = plan.phi.tables
     fb, ib = pack([P.data, D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd, tool_axis, target,
                    [s.slip_band, ko, do, k_null, kd_normal], *ref_floats, ramps, phi_moves, phi_ramps],

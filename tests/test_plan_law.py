@@ -172,3 +172,27 @@ def test_reference_rows_are_reference_at_bitwise():
         rows = reference_rows(ref)
         for t in np.linspace(-1.0, 5.0, 61):
             assert np.array_equal(rows(t), np.concatenate(ref.at(t)))
+
+
+def test_write_time_part_writes_the_reference_and_the_ramps():
+    """The compiled tip laws' time part (plan_law.write_time_part, in the kernel's call): u[6:15] the reference's
+    rows by its tables (a product of moves or one circle; a fixed reference, kind −1, leaves them), then
+    (F_d, Ḟ_d) of each ramp from u[i_set], each Ramp.at's bitwise; nothing else of u changes."""
+    from contactdyn.plan_law import NO_REFERENCE, reference_tables, write_time_part
+    from contactdyn.trajectory import Move, Ramp, Reference, ramp_table
+
+    circle = Move(np.array([0.01, 0.02, 0.0]), 0.5, 2.0, "circle", 0.1, np.array([0.0, 0.0, 1.0]), 1.5)
+    moves = (Move(np.array([0.1, 0.0, -0.2]), 0.2, 1.0, "trapezoid", 0.25),
+             Move(np.array([0.0, 0.05, 0.0]), 0.0, 0.3, "exponential"))
+    ramps = [Ramp(100.0, 0.1, 0.2, "exponential"), Ramp(-5.0, 0.3, 0.5, "linear", 2.0)]
+    table = ramp_table(ramps)
+    for ref in (Reference(np.array([0.3, 0.1, 0.0]), (circle,)), Reference(np.array([-1.0, 0.2, 0.5]), moves), None):
+        tables = reference_tables(ref) if ref is not None else NO_REFERENCE
+        for t in np.linspace(-0.5, 3.0, 36):
+            u = np.full(24, 7.0)
+            write_time_part(t, *tables, table, u, 17)
+            expected = np.full(24, 7.0)
+            if ref is not None:
+                expected[6:15] = np.concatenate(ref.at(t))
+            expected[17:21] = [*ramps[0].at(t), *ramps[1].at(t)]
+            assert np.array_equal(u, expected), t
