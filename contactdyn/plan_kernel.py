@@ -14,7 +14,9 @@ after φ is small dense algebra:
     A[:nQ, cols] −= L_τ B;   b[:nQ] += L[:nQ] [τ, x, 1];   z = A⁻¹ b;   ż += D_z z[cols]
     ẋ = [Q̇, Q̈, ẏ] with ż in its slots
 
-:func:`call` runs it in one compiled function (numba). The fold itself (:func:`fold_solve`) is
+:func:`call` runs it in one compiled function (numba), the law's time part (reference, force ramps) included;
+:func:`call_at`, what the plan's right-hand side and output samples run, writes φ first (plan_phi.write_phi)
+in the same function. The fold itself (:func:`fold_solve`) is
 the one :mod:`contactdyn.plan_fold` runs for the output and the carried references. A call
 where a voltage clips, or whose solve is singular or not finite, returns status 1 and goes the
 plan's readable way (:mod:`contactdyn.plan_rhs`): the clip and the least-squares fallback stay
