@@ -152,3 +152,22 @@ def test_a_call_writes_phi_in_place_and_phi_at_returns_its_own_array():
     for x in states[::-1]:
         want = system.evaluate(0.1, x, plan.modes, plan.phase).xdot
         np.testing.assert_allclose(plan.rhs(0.1, x.copy()), want, rtol=1e-9, atol=1e-9 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("scene, duration", [("b1", 0.3), ("case2_writer_motors", 1.0)])
+def test_a_contact_on_another_frame_than_the_tip_runs_compiled_as_the_readable_model(scene, duration):
+    """The contact on link2's frame, the controller on the tip's: φ carries two frames (the second written by
+    plan_phi.write_frame after Pinocchio's calls for it), on the plain plan (B1) and in the motors' kernel
+    (writer_motors' task PD through its DC motors); the run is the readable model's."""
+    overrides = {"duration": duration, "contact.tip.frame": "link2"}
+    compiled_system = System(load_scene(scene, overrides))
+    compiled = run_system(compiled_system)
+    readable_system = System(load_scene(scene, overrides))
+    readable_system.fast_path_gaps = [READABLE]
+    readable = run_system(readable_system)
+    assert {len(p.fids) for p in _PLANS[compiled_system].values() if p.ok} == {2}
+    assert compiled.stats["fallback_modes"] == {} and readable.stats["compiled_modes"] == 0
+    assert [e["kind"] for e in compiled.events] == [e["kind"] for e in readable.events]
+    for key in ("q", "v", "contact.tip.F_n"):
+        scale = 1.0 + float(np.abs(readable[key]).max())
+        np.testing.assert_allclose(compiled[key], readable[key], rtol=0, atol=1e-6 * scale)
