@@ -17,8 +17,6 @@ unclips within one mode).
 
 from __future__ import annotations
 
-from functools import cached_property
-
 import numpy as np
 
 from .drives import DriveOutput
@@ -39,13 +37,17 @@ class CompiledDrives:
         self.limited = [i for i, spec in enumerate(specs) if spec.motorized and np.isfinite(spec.u_max)]
         self.u_max = np.array([specs[i].u_max for i in self.limited])
         nv, n = s.nv, s.n
-        self.L = affine_map(lambda e: self._probe(e[nv:nv + n], e[:nv]), nv + n + 1)  #: [f; u/u_max] = L [τ, x, 1]
+        LV = affine_map(lambda e: self._probe(e[nv:nv + n], e[:nv]), nv + n + 1)  # one read of the law for L and V
+        k = self.nQ + len(self.limited)
+        self.L = LV[:k]  #: [f; u/u_max] = L [τ, x, 1]
+        self.V = LV[k:]  #: u = V [τ, x, 1]: the motorized drives' voltages [V], unclipped (the output's)
         self.L_tau = np.ascontiguousarray(self.L[:, :nv])  #: ∂[f; u/u_max]/∂τ
         self._one = np.ones(1)
 
     def _probe(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        f, u = self._law(x, tau, clip=False)
-        return np.concatenate((f, u / self.u_max))
+        """[f; u/u_max of the limited drives; u of the motorized ones] at (x, τ), unclipped."""
+        f, out = self.output(x, tau, clip=False)
+        return np.concatenate((f, out.u[self.limited] / self.u_max, out.u[self.system.drives.motorized]))
 
     def _law(self, x: np.ndarray, tau: np.ndarray, clip: bool = True) -> tuple[np.ndarray, np.ndarray]:
         f, out = self.output(x, tau, clip)
@@ -56,12 +58,6 @@ class CompiledDrives:
         s = self.system
         f = np.zeros(self.nQ)
         return f, s.drives.apply(drive_command(s, tau, x), x, self.nQ, f, voltage=self.vmask, clip=clip)
-
-    @cached_property
-    def V(self) -> np.ndarray:
-        """u = V [τ, x, 1]: the motorized drives' voltages [V], unclipped (read off the law like L; the output's)."""
-        nv, n, motorized = self.nv, self.system.n, self.system.drives.motorized
-        return affine_map(lambda e: self.output(e[nv:nv + n], e[:nv], clip=False)[1].u[motorized], nv + n + 1)
 
     def unclipped(self, y: np.ndarray) -> bool:
         """No voltage beyond its limit in y = L [τ, x, 1]."""
