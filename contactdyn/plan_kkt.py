@@ -62,7 +62,7 @@ class CompiledKKT:
         self.i_h = nv * nv + 3 * nv * nf + 3 * nf
         self.with_g = self.feedforward == "gravity"  # then φ carries g(q) after h
         self.i_e = self.i_h + nv * (2 if self.with_g else 1)
-        P = affine_map(self._assemble, self.i_e + self.ne)
+        P = affine_map(self._assemble, self.i_e + self.ne, columns=True)
         self.P = P
         self.PT = np.ascontiguousarray(P.T)
         self.coulomb_terms = []
@@ -75,17 +75,20 @@ class CompiledKKT:
         self.rhs = make_rhs(self)
 
     def _assemble(self, phi: np.ndarray) -> np.ndarray:
-        """[A.ravel(), b, o] from φ, written out plainly (P is measured from this).
+        """[A.ravel(), b, o] from φ, written out plainly (P is measured from this, all unit probes at once: φ may
+        be a matrix of φ's as columns, and the result has one column each).
 
         Unknowns [Q̈, λ, w_f]: M Q̈ − Cᵀλ − Σ J_fᵀ w_f = [−h, f_rest];  G Q̈ = −γ;  w_f = g_f.
         """
         s = self.system
         nQ, nv, nr, m = s.nQ, s.nv, self.nr, self.m
-        H = phi[:nv * nv].reshape(nv, nv)
+        k = phi.shape[1:]  # () for one φ, (K,) for K of them
+        H = phi[:nv * nv].reshape((nv, nv) + k)
         e = phi[self.i_e:]
         o = self.W.dot(e)
-        A = self.A0.copy()
-        b = np.zeros(m)
+        A = np.zeros((m, m) + k)
+        A += self.A0.reshape((m, m) + (1,) * len(k))
+        b = np.zeros((m,) + k)
         A[:nv, :nv] += H
         b[:nv] = -phi[self.i_h:self.i_h + nv]
         if not self.law_via_drives:  # else the law's τ goes through the drives per call (plan_rhs)
@@ -93,14 +96,14 @@ class CompiledKKT:
         b[nv:nQ] = o[self.o_f]
         b[nQ:nQ + nr] = -o[self.o_gam]
         for f in range(len(self.fids)):
-            J = phi[self.i_J[f]:self.i_J[f] + 3 * nv].reshape(3, nv)
+            J = phi[self.i_J[f]:self.i_J[f] + 3 * nv].reshape((3, nv) + k)
             dr = phi[self.i_dr[f]:self.i_dr[f] + 3]
-            A[nQ:nQ + nr, :nv] += self.Qr[f] @ J
-            A[:nv, nQ:nQ + nr] += (self.Qc[f] @ J).T
-            A[:nv, nQ + nr + 3 * f:nQ + nr + 3 * f + 3] -= J.T
-            b[nQ:nQ + nr] -= self.Qr[f] @ dr
+            A[nQ:nQ + nr, :nv] += np.tensordot(self.Qr[f], J, 1)  # Q_r J
+            A[:nv, nQ:nQ + nr] += np.swapaxes(np.tensordot(self.Qc[f], J, 1), 0, 1)  # (Q_c J)ᵀ
+            A[:nv, nQ + nr + 3 * f:nQ + nr + 3 * f + 3] -= np.swapaxes(J, 0, 1)  # −Jᵀ
+            b[nQ:nQ + nr] -= np.tensordot(self.Qr[f], dr, 1)
             b[nQ + nr + 3 * f:nQ + nr + 3 * f + 3] = o[self.o_g.start + 3 * f:self.o_g.start + 3 * f + 3]
-        return np.concatenate([A.ravel(), b, o])
+        return np.concatenate([A.reshape((m * m,) + k), b, o])
 
     def _feedforward_torque(self, phi: np.ndarray, e: np.ndarray) -> np.ndarray:
         """The task PD law's joint-space terms: feedforward g(q) or h(q, q̇), and −k_dj q̇."""

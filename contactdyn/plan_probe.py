@@ -33,8 +33,17 @@ from .fastpath import UNDECLARED
 __all__ = ["affine_map", "ProbedModel"]
 
 
-def affine_map(f, n: int) -> np.ndarray:
-    """Matrix A with f(e) = A e for an affine f of e = [e₁ … e₍ₙ₋₁₎, 1], read off by unit probes."""
+def affine_map(f, n: int, columns: bool = False) -> np.ndarray:
+    """Matrix A with f(e) = A e for an affine f of e = [e₁ … e₍ₙ₋₁₎, 1], read off by unit probes.
+
+    ``columns``: f takes the probes at once, as the columns of a matrix, and returns one column each."""
+    if columns:
+        E = np.eye(n)
+        E[-1] = 1.0  # column k: e_k + the trailing 1; the last: the trailing 1 alone
+        F = np.asarray(f(E))
+        A = F - F[:, -1:]
+        A[:, -1] = F[:, -1]
+        return A
     e0 = np.zeros(n)
     e0[-1] = 1.0
     f0 = np.asarray(f(e0))

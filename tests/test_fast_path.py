@@ -171,3 +171,19 @@ def test_a_contact_on_another_frame_than_the_tip_runs_compiled_as_the_readable_m
     for key in ("q", "v", "contact.tip.F_n"):
         scale = 1.0 + float(np.abs(readable[key]).max())
         np.testing.assert_allclose(compiled[key], readable[key], rtol=0, atol=1e-6 * scale)
+
+
+def test_the_assembly_probed_all_at_once_is_probed_one_by_one():
+    """P read off ``_assemble`` with every unit probe as a column of one matrix (plan_probe.affine_map's
+    ``columns``) is bitwise P read off one probe at a time, on modes with rows, motors and a folded law."""
+    from contactdyn.plan_probe import affine_map
+
+    checked = 0
+    for name in ("b1", "case1_cart", "case3_b_force"):
+        system = System(load_scene(name, {"duration": 1.2}))
+        run_system(system)
+        for plan in (p for p in _PLANS[system].values() if p.ok):
+            one_by_one = affine_map(plan._assemble, plan.i_e + plan.ne)
+            assert np.array_equal(one_by_one, plan.P)
+            checked += 1
+    assert checked >= 5
