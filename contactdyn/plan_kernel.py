@@ -348,11 +348,10 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
     kind, moves, R, circle, terms, start, ramps, i_set = timed or (*NO_REFERENCE, np.zeros((0, 5)), 0)
     ints = _ints(plan, {TIP: inputs.tip, U_F: ctl.i_forces, ZS: ctl.zs.start if ctl.zs is not None else -1,
                         SWAP: ctl.swap, KIND: TIP_LAW, TIMED: timed is not None, I_SET: i_set, T_KIND: kind})
-    D_ctl = s._D_ctl if s._D_ctl is not None else np.zeros((nv, nv))
     U = inputs.state_map()  # [U_x, u_c]
     U_x = sparse.csr_matrix(U[:, :s.n])
     floats = [P.data, ctl.M, U_x.data, U[:, s.n], drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
-              none if D_z is None else D_z, law._rotor_c, D_ctl, [law.config.k_null], np.zeros((nv, 0)), moves, R,
+              none if D_z is None else D_z, law._rotor_c, s._D_ctl, [law.config.k_null], np.zeros((nv, 0)), moves, R,
               circle, terms, start, ramps]
     return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach,
                                          U_x.indices, U_x.indptr])

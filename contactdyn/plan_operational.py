@@ -169,7 +169,6 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     off = m * m + m  # o's start in y
     ints = [m, nQ, nv, plan.i_h, plan.i_J[tf], plan.i_dr[tf], plan.i_e + plan.e_frame[tf], off + plan.o_y.start,
             off + plan.o_y.stop]
-    D_ctl = np.zeros((nv, nv)) if s._D_ctl is None else s._D_ctl
     tilt_i, tilt_f, tilt_T, tilt_body = _tilt_constants(plan)
     rates_i, rates_f = _rates_constants(plan, impulses)
     P = csr_of(plan)
@@ -179,7 +178,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     tables = reference_tables(phase.reference) if referenced else None  # (no carrier: the reference's own)
     kind, *ref_floats = tables or NO_REFERENCE
     at, phi_moves, move_slots, phi_ramps, ramp_slots = plan.phi.tables
-    fb, ib = pack([P.data, D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd, tool_axis, target,
+    fb, ib = pack([P.data, s._D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd, tool_axis, target,
                    [s.slip_band, ko, do, k_null, kd_normal], *ref_floats, ramps, phi_moves, phi_ramps],
                   [P.indices, P.indptr, ints, tilt_i, rates_i, at, move_slots, ramp_slots, [kind]])
     none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))

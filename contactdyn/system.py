@@ -70,8 +70,8 @@ class System:
         self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg, kg·m² for motors]
         self.M_rest[: len(self.body_names)] += self.drives.reflected[nv:]  # rotor inertia through a wheel
         self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
-        #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (None: no motor)
-        self._D_ctl = np.diag(self.drives.model_reflected[:nv]) if self.drives.any_motor else None
+        #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (zero: no motor)
+        self._D_ctl = np.diag(self.drives.model_reflected[:nv])
         self._joint_motors = self.drives.motorized & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
         # ---- controllers, then the first-order slots after the junctions ----
         self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
@@ -114,11 +114,11 @@ class System:
             names.append(name)
         return Drives(specs, coords, names, first_motor_coord)
 
-    # ---- initial state ------------------------------------------------------------------
     def controller_inertia(self, H: np.ndarray) -> np.ndarray:
         """[kg·m²] The controller's H: the robot's ``H`` (one sample or a stack) with the rotors reflected."""
-        return H + self._D_ctl if self._D_ctl is not None else H
+        return H + self._D_ctl if self.drives.any_motor else H
 
+    # ---- initial state ------------------------------------------------------------------
     def initial_state(self) -> tuple[np.ndarray, list[ContactMode]]:
         rs, robot = self.scene.robot, self.robot
         if self._q_start is None:  # every compiled mode's self-check starts here too
