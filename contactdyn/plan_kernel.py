@@ -331,7 +331,7 @@ def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
 
 def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.ndarray]:
     """:func:`pack`'s buffers for a force-reading tip law whose law has read M."""
-    s, drives, law = plan.system, plan.compiled_drives, ctl.ctl
+    s, drives, readable = plan.system, plan.compiled_drives, ctl.ctl  # (the readable law: its rotor and k_null)
     nQ, nv, nr = s.nQ, s.nv, plan.nr
     D_a, D_f, D_z = ctl.row_columns(meta)
     cols = list(range(nQ, nQ + nr))
@@ -351,8 +351,8 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
     U = inputs.state_map()  # [U_x, u_c]
     U_x = sparse.csr_matrix(U[:, :s.n])
     floats = [P.data, ctl.M, U_x.data, U[:, s.n], drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
-              none if D_z is None else D_z, law._rotor_c, s._D_ctl, [law.config.k_null], np.zeros((nv, 0)), moves, R,
-              circle, terms, start, ramps]
+              none if D_z is None else D_z, readable._rotor, s._D_ctl, [readable.config.k_null], np.zeros((nv, 0)),
+              moves, R, circle, terms, start, ramps]
     return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach,
                                          U_x.indices, U_x.indptr])
 

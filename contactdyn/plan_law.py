@@ -38,6 +38,7 @@ from .controllers.operational import OperationalSpace
 from .dynamics import surface_keys, surface_points
 from .linalg import mv
 from .phases import reference_at
+from .plan_phi import LWA
 from .plan_probe import affine_map
 from .trajectory import circle_reference, move_rows, move_table, ramp_rows, ramp_table
 
@@ -419,8 +420,7 @@ def operational_command(plan):
     referenced, orient = phase.reference is not None, ctl.reads_orientation
     placement, jacobian = pin.updateFramePlacement, pin.getFrameJacobian
     acceleration = pin.getFrameClassicalAcceleration
-    lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    H_rigid, h = robot.H, robot.h  # views of Pinocchio's data, as φ's (plan_rhs._phi_function)
+    H_rigid, h = robot.H, robot.h  # views of Pinocchio's data, as φ's (plan_phi.phi_function)
 
     def command(t, x, Js, phi, o, tau_c):
         ref = reference_at(s, phase, t, x) if referenced else None
@@ -428,8 +428,8 @@ def operational_command(plan):
         J = Js[tf]
         if orient:  # the 6 rows of the tip's Jacobian and J̇q̇ (φ holds the linear 3: the same bits)
             R_tip = placement(model, data, fid).rotation
-            J_tip = jacobian(model, data, fid, lwa).reshape(6, nv)
-            drift_tip = acceleration(model, data, fid, lwa).vector
+            J_tip = jacobian(model, data, fid, LWA).reshape(6, nv)
+            drift_tip = acceleration(model, data, fid, LWA).vector
         else:
             R_tip, J_tip, drift_tip = None, J, phi[i_dr:i_dr + 3]
         H = s.controller_inertia(H_rigid)

@@ -188,8 +188,8 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     set_points = np.empty(len(ramps))  # F_d [N]
     reference = reference_rows(phase.reference) if referenced else None
 
-    def inputs(t, x):
-        """The call's per-call inputs at (t, x): the reference, F_d [N], the tip's R, J (6 rows), J̇q̇ (6)."""
+    def inputs(t):
+        """The call's per-call inputs at t: the reference, F_d [N], the tip's R, J (6 rows), J̇q̇ (6)."""
         ref = reference(t) if referenced else none
         if ramp_values.size:
             ramp_rows(t, ramps, ramp_values)
@@ -199,7 +199,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
         return ref, set_points, rotation, *tip6  # this call's φ's (plan_phi.phi_function)
 
     def one(t, x, phi, out):
-        return call(phi, x, fb, ib, *inputs(t, x), out)
+        return call(phi, x, fb, ib, *inputs(t), out)
 
     H, h, g, p = plan.phi.terms
     pinocchio, phi_buffer = plan.phi.pinocchio, plan.phi.buffer

@@ -2,9 +2,9 @@
 
 The integrator needs only derivatives; a Result needs, at every output sample, the
 forces, torques, gaps, slip velocities and stage deformations. :func:`plan_samples`
-computes them for all samples of a segment together: one Pinocchio pass per sample
-(H, J, J̇q̇, h, the tip position), then φ, the map P φ, the friction terms, the KKT
-solves and the read-out as array operations. Through motors, the drives' forces and
+computes them for all samples of a segment together: φ per sample (the call's own,
+``plan.phi_at``), then the map P φ, the friction terms, the KKT solves and the read-out as
+array operations, or, where the plan has a compiled kernel, its call per sample. Through motors, the drives' forces and
 voltages come from the plan's drive matrix (:mod:`contactdyn.plan_drives`; the law itself
 at samples where a voltage clips); a plan folding measured forces or a carried reference
 into its solve takes each sample through that fold. :class:`Samples` holds the result (and
@@ -111,8 +111,8 @@ def evaluated_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> Sa
 
 
 def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
-    """Diagnostics at the states X[k] (times ts[k]) of this mode: one Pinocchio pass per
-    sample, then the assembly, solve and read-out for all samples at once."""
+    """Diagnostics at the states X[k] (times ts[k]) of this mode: φ per sample, then the assembly, solve and
+    read-out for all samples at once (or the compiled kernel's call per sample)."""
     N = len(ts)
     if plan.drives_per_call and plan.launch is not None:  # a slide from rest under motors: the readable model
         return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)
@@ -144,8 +144,8 @@ def _kernel_samples(plan, ts: np.ndarray, X: np.ndarray):
 def plan_derivatives(plan):
     """f(ts, X) -> Ẋ (N, n): the plan's right-hand side at many states at once (φ, the solves and the
     read-out as in :func:`plan_samples`), for the extra stages of the dense output's interpolants
-    (:meth:`~contactdyn.dop853.DenseSolution.__call__`), bitwise the call's: the products the call makes one
-    by one are made so here (``exact``), the rest is elementwise or the same LAPACK solve. None where the
+    (:meth:`~contactdyn.dop853.DenseSolution.__call__`), bitwise the call's: P φ made per state as the call
+    makes it (``exact``), the rest elementwise or the same LAPACK solve. None where the
     samples' arithmetic is not the call's: a slide launching from rest, a fold, a controller called per
     call, drives (a clipping sample takes the readable law, equal only to 1e-10), 2-D sliding (its
     directions and tilt are computed over samples in another order)."""

@@ -217,11 +217,14 @@ def test_law_over_all_samples_equals_the_per_sample_law(scene, monkeypatch):
 
 
 def test_stacked_pseudo_inverse_is_each_sample_s():
-    """J⁺ over a stack equals each sample's J⁺ bitwise, full rank or not (a rank-deficient sample: per sample)."""
+    """J⁺ over a stack equals each sample's J⁺ bitwise, and numpy's pinv (rcond 1e-10) to round-off, full rank or
+    not (a zero sample: J⁺ = 0)."""
     from contactdyn.controllers.dynamic import pseudo_inverse
 
     rng = np.random.default_rng(5)
     J = rng.normal(size=(40, 3, 5))
     for stack in (J, np.concatenate((J, np.zeros((1, 3, 5))))):
         want = np.array([pseudo_inverse(j) for j in stack])
-        assert np.array_equal(pseudo_inverse(stack), want)
+        got = pseudo_inverse(stack)
+        assert np.array_equal(got, want)
+        assert np.allclose(got, np.linalg.pinv(stack, rcond=1e-10), rtol=0, atol=1e-12)

@@ -133,18 +133,19 @@ def _inertia(r) -> str:
     return r.str("inertia", "model", choices=["model", "link"])
 
 
-def _rotor_inertia(context: BindContext, inertia: str) -> np.ndarray | None:
-    """Per joint, the reflected rotor inertia to take out of the rigid model's H (``inertia = "link"``)."""
+def _rotor_inertia(context: BindContext, inertia: str) -> np.ndarray:
+    """Per joint, the reflected rotor inertia [kg·m²] to take out of the rigid model's H (``inertia = "link"``);
+    empty for ``"model"`` (none taken out, as computed_torque reads it)."""
     if inertia == "model":
-        return None
+        return np.empty(0)
     names = context.joint_names
     specs = context.scene.robot.drive.expand(len(names), names)
     return np.array([s.reflected_inertia for s in specs])
 
 
-def _inertia_times(H: np.ndarray, rotor: np.ndarray | None, qdd: np.ndarray) -> np.ndarray:
+def _inertia_times(H: np.ndarray, rotor: np.ndarray, qdd: np.ndarray) -> np.ndarray:
     """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out)."""
-    return H.dot(qdd) if rotor is None else H.dot(qdd) - rotor * qdd
+    return H.dot(qdd) - rotor * qdd if rotor.size else H.dot(qdd)
 
 
 # ---- shared task-space pieces ---------------------------------------------------------------
@@ -159,9 +160,6 @@ def pseudo_inverse(J: np.ndarray) -> np.ndarray:
     dropped (numpy.linalg.pinv's rcond); one Jacobian (r, c) or a stack (N, r, c)."""
     J = _c(J)
     return compiled.pinv_stack(J) if J.ndim == 3 else compiled.pinv(J)
-
-
-_NO_ROTOR = np.empty(0)
 
 
 class _Pinv:
@@ -244,7 +242,7 @@ class _ComputedTorque(Controller):
         """τ = H q̈* + h − τ_c (+ Jᵀ f_swap) [N·m or N], q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for the tip
         acceleration a [m/s²], from the model's terms (J: the tip Jacobian (3, nv), drift: J̇q̇ [m/s²], v: q̇;
         the compiled path passes its own, :meth:`computed_torque` a ControlInput's)."""
-        rotor, k_null = self._rotor_c, float(self.config.k_null)
+        rotor, k_null = self._rotor, float(self.config.k_null)
         stack = J.ndim == 3  # a stack of samples: one sample's arithmetic each
         Jp = self._pinv(J)
         if f_swap is None:
@@ -259,13 +257,8 @@ class _ComputedTorque(Controller):
     def increments(self, H: np.ndarray, J: np.ndarray, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
         """:meth:`torque_increments` from the model's terms H and J."""
         D_f = np.empty((0, da.shape[-1])) if df is None else _c(df)
-        args = (_c(H), self._rotor_c, _c(J), self._pinv(J), _c(da), D_f)
+        args = (_c(H), self._rotor, _c(J), self._pinv(J), _c(da), D_f)
         return compiled.increments_stack(*args) if J.ndim == 3 else compiled.increments(*args)
-
-    @property
-    def _rotor_c(self) -> np.ndarray:
-        """The rotor inertia the law takes out [kg·m²], empty for ``inertia = "model"`` (computed_torque's none)."""
-        return _NO_ROTOR if self._rotor is None else self._rotor
 
 
 # ---- A7 -----------------------------------------------------------------------------------------

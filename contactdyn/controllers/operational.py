@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError, SimulationError
+from ..linalg import contiguous
 from . import operational_law as law
 from .base import BindContext, ControlInput, Controller, register
 from .dynamic import K_NULL, KP, KV, _axes, _check_gain_size, _gain
@@ -111,13 +112,13 @@ class OperationalSpace(Controller):
         if m > self.nv:
             raise SceneError(key, f"a task of at most {self.nv} directions (the arm's joints): {k} position axes, "
                              f"{len(forced)} force directions" + (", 2 tool tilts" if n_tilt else ""), m, file)
-        self._k, self._m = k, m
+        self._m = m
         kp, kd = np.broadcast_to(cfg.kp, k).copy(), np.broadcast_to(cfg.kd, k).copy()  # [N/m], [N·s/m] per axis
         null = bool(cfg.k_null) and m < self.nv  # a redundant arm with null-space damping
-        self._target = None if cfg.tool_target is None else cfg.tool_target
-        tool = (_NONE, _NONE) if self._target is None else (cfg.tool_axis.astype(float), self._target.astype(float))
+        self._target = cfg.tool_target
+        tool = (_NONE, _NONE) if self._target is None else (contiguous(cfg.tool_axis), contiguous(self._target))
         #: the law's constant arguments (operational_law.torque's from ``axes`` on)
-        self.constants = (np.ascontiguousarray(axes, float), np.ascontiguousarray(forced, float), kp, kd, *tool,
+        self.constants = (contiguous(axes), contiguous(forced), kp, kd, *tool,
                           float(cfg.ko), float(cfg.do), float(cfg.k_null) if null else 0.0, float(cfg.kd_normal))
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
@@ -140,8 +141,8 @@ class OperationalSpace(Controller):
         :func:`contactdyn.controllers.operational_law.torque`, which the plan's compiled call
         (:mod:`contactdyn.plan_operational`) runs too; the readable ``command`` and the plan's other calls
         (:func:`~contactdyn.plan_law.operational_command`) come here."""
-        c = np.ascontiguousarray
-        x_d, v_d, a_d = (_NONE, _NONE, _NONE) if ref is None else (c(ref[0], float), c(ref[1], float), c(ref[2], float))
+        c = contiguous
+        x_d, v_d, a_d = (_NONE, _NONE, _NONE) if ref is None else (c(ref[0]), c(ref[1]), c(ref[2]))
         tau, ratio = law.torque(v, c(H), h, c(J_tip), drift_tip, p_tip, v_tip, x_d, v_d, a_d,
                                 np.array(set_points, float), _NO_ROTATION if R_tip is None else c(R_tip),
                                 *self.constants)
