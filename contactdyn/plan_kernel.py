@@ -35,8 +35,8 @@ from .plan_law import NO_REFERENCE, CompiledLaw, compiled_law, plan_inputs, writ
 from .plan_phi import write_phi
 from .plan_probe import affine_map
 
-__all__ = ["fold_solve", "kernel_of", "calls", "call", "call_at", "pack", "matrix_of", "vector_of", "csr_of", "kkt_of",
-           "write_out"]
+__all__ = ["fold_solve", "kernel_of", "calls", "call", "call_at", "pack", "pack_with_phi",
+           "matrix_of", "vector_of", "csr_of", "kkt_of", "write_out"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
 TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
@@ -260,7 +260,7 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
     return calls(plan, one, one_at)
 
 
-def calls(plan, one, one_at=None):
+def calls(plan, one, one_at=None, rates: bool = False):
     """kernel(t, x, φ) -> (ẋ, z, o), None where ``one`` declines, and ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of
     the output's samples, None where one declines: both by one(t, x, φ, out) -> status, a compiled call writing
     [ẋ, z, o, τ] into ``out`` (this module's :func:`call`, :func:`contactdyn.plan_operational.call`);
@@ -298,6 +298,7 @@ def calls(plan, one, one_at=None):
 
     kernel.samples = samples
     kernel.at = at if one_at is not None else None
+    kernel.rates = rates  # the call writes the impulse states' rates itself
     return kernel
 
 
@@ -326,7 +327,7 @@ def _task_law_constants(plan) -> tuple[np.ndarray, np.ndarray]:
               np.zeros((3, 0)), empty, empty, np.zeros(0), np.zeros((nv, nv)), [0.0], F, *NO_REFERENCE[1:6],
               np.zeros((0, 5))]
     ints = _ints(plan, {KIND: TASK_LAW, O_G: plan.o_gctl.start})
-    return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, [], [], [], [], [0]])
+    return pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, [], [], [], [], [0]])
 
 
 def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.ndarray]:
@@ -353,11 +354,11 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
     floats = [P.data, ctl.M, U_x.data, U[:, s.n], drives.L, drives.L_tau, D_a, none if D_f is None else D_f,
               none if D_z is None else D_z, readable._rotor, s._D_ctl, [readable.config.k_null], np.zeros((nv, 0)),
               moves, R, circle, terms, start, ramps]
-    return _pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach,
+    return pack_with_phi(plan, floats, [P.indices, P.indptr, ints, plan.i_J, inputs.forces, cols, reach,
                                          U_x.indices, U_x.indptr])
 
 
-def _pack_with_phi(plan, floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
+def pack_with_phi(plan, floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
     """:func:`pack` of a call's constants followed by φ's layout and time tables (:func:`call_at`)."""
     at, moves, move_slots, ramps, ramp_slots = plan.phi.tables
     return pack([*floats, moves, ramps], [*ints, at, move_slots, ramp_slots])

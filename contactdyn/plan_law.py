@@ -226,7 +226,7 @@ def plan_inputs(plan, law: CompiledLaw, modes: list | None = None):
         _write_surfaces(u, i_surf, surface_points(s, np.zeros(n), modes))
     carrier = phase.carrier if law.ref else None
     tables = reference_tables(phase.reference) if moves else NO_REFERENCE
-    reference = reference_rows(phase.reference) if tables is None else None
+    reference = (lambda t: np.concatenate(phase.reference.at(t))) if tables is None else None
 
     def time_part(t):
         """u's time part at t [s]: the reference [m, m/s, m/s²] (a carrying body's offset: the state part), then
@@ -280,14 +280,13 @@ def reference_tables(reference) -> tuple | None:
     """(kind, moves, R, circle, terms, start) of :func:`reference_of`: REF_PRODUCT with moves, R of
     :func:`reference_product`, or REF_CIRCLE with circle = (start [s], duration [s], accel fraction, angle [rad]),
     the circle's terms (Move._circle_terms) and the reference's start [m]; None for a circle among other moves."""
-    no_circle = (np.zeros(4), np.zeros((3, 4)), np.zeros(3))
     if not any(m.kind == "circle" for m in reference.moves):
-        return (REF_PRODUCT, *reference_product(reference), *no_circle)
+        return (REF_PRODUCT, *reference_product(reference), *NO_REFERENCE[3:])
     if len(reference.moves) > 1:
         return None
     m = reference.moves[0]
     circle = np.array([m.start, m.duration, m.accel_fraction, 2.0 * math.pi * m.turns])
-    return REF_CIRCLE, np.zeros((0, 4)), np.zeros((9, 1)), circle, m._circle_terms, np.asarray(reference.start, float)
+    return REF_CIRCLE, *NO_REFERENCE[1:3], circle, m._circle_terms, np.asarray(reference.start, float)
 
 
 REF_PRODUCT, REF_CIRCLE = 0, 1  #: :func:`reference_of`'s kinds
@@ -300,27 +299,21 @@ def reference_of(t, kind, moves, R, circle, terms, start):
     """[x_d, ẋ_d, ẍ_d] (9,) at t [s] of a reference by its tables (:func:`reference_tables`)."""
     if kind == REF_CIRCLE:
         return circle_reference(t, circle[0], circle[1], circle[2], circle[3], terms, start)
-    w = np.empty(R.shape[1])
+    w = np.empty(R.shape[1])  # [1, (σ, σ'/T, σ''/T²) per move]
     w[0] = 1.0
-    return _reference_rows(t, moves, R, w)
+    move_rows(t, moves, w[1:])
+    return mv(R, w)
 
 
 def reference_product(reference) -> tuple[np.ndarray, np.ndarray]:
     """(moves, R) of the product R w of a reference without circles, w = [1, (σ, σ'/T, σ''/T²) per move]
-    (moves: trajectory.move_table)."""
+    (moves: trajectory.move_table; R's rows 0:3 [m], 3:6 [m/s] and 6:9 [m/s²] per unit of w)."""
     K = len(reference.moves)
     R = np.zeros((9, 1 + 3 * K))
     R[0:3, 0] = reference.start
     for k, m in enumerate(reference.moves):
         R[0:3, 1 + 3 * k], R[3:6, 2 + 3 * k], R[6:9, 3 + 3 * k] = m.delta, m.delta, m.delta
     return move_table(reference.moves), R
-
-
-@njit(cache=True)
-def _reference_rows(t, moves, R, w):
-    """R w at t [s]: :func:`reference_rows`' product, w = [1, (σ, σ'/T, σ''/T²) per move] (trajectory.move_rows)."""
-    move_rows(t, moves, w[1:])
-    return mv(R, w)
 
 
 @njit(cache=True)

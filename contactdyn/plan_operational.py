@@ -28,7 +28,7 @@ from .controllers import operational_law as law
 from .controllers.operational import SINGULAR, OperationalSpace
 from .friction import launching
 from .linalg import lu_solve, mtv
-from .plan_kernel import DECLINED, OK, calls, csr_of, kkt_of, matrix_of, pack, vector_of, write_out
+from .plan_kernel import DECLINED, OK, calls, csr_of, kkt_of, matrix_of, pack_with_phi, vector_of, write_out
 from .plan_law import NO_REFERENCE, reference_of, reference_rows, reference_tables
 from .plan_phi import write_phi
 from .trajectory import ramp_rows, ramp_table
@@ -40,8 +40,8 @@ P_VAL, D_CTL, TILT_F, TILT_T, TILT_BODY, RATES_F, AXES, FORCED, KP, KD, TOOL_AXI
 #: floats of :func:`call_at`: the reference's tables (plan_law.reference_tables), the force ramps, φ's time tables
 REF_MOVES, REF_R, REF_CIRCLE, REF_TERMS, REF_START, RAMPS, PHI_MOVES, PHI_RAMPS = range(13, 21)
 P_COL, P_ROW, INTS, TILT_I, RATES_I = range(21, 26)  # ints (P: CSR columns, row starts)
-#: ints of :func:`call_at`: φ's layout and time slots (plan_phi.write_phi); [the reference's kind, −1 none]
-PHI_AT, PHI_MSLOTS, PHI_RSLOTS, REF_KIND = range(26, 30)
+#: ints of :func:`call_at`: [the reference's kind, −1 none]; φ's layout and time slots (plan_phi.write_phi)
+REF_KIND, PHI_AT, PHI_MSLOTS, PHI_RSLOTS = range(26, 30)
 
 
 @njit(cache=True)
@@ -177,10 +177,9 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     referenced, orient = phase.reference is not None, ctl.reads_orientation
     tables = reference_tables(phase.reference) if referenced else None  # (no carrier: the reference's own)
     kind, *ref_floats = tables or NO_REFERENCE
-    at, phi_moves, move_slots, phi_ramps, ramp_slots = plan.phi.tables
-    fb, ib = pack([P.data, s._D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd, tool_axis, target,
-                   [s.slip_band, ko, do, k_null, kd_normal], *ref_floats, ramps, phi_moves, phi_ramps],
-                  [P.indices, P.indptr, ints, tilt_i, rates_i, at, move_slots, ramp_slots, [kind]])
+    fb, ib = pack_with_phi(plan, [P.data, s._D_ctl, tilt_f, tilt_T, tilt_body, rates_f, axes, forced, kp, kd,
+                                  tool_axis, target, [s.slip_band, ko, do, k_null, kd_normal], *ref_floats, ramps],
+                           [P.indices, P.indptr, ints, tilt_i, rates_i, [kind]])
     none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))
     rotation = data.oMf[fid].rotation  # (a view: the tip's R at the last φ)
     tip6 = plan.tip6  # this make_rhs's tip terms (a later ModePlan.use makes new ones; this kernel keeps its own)
@@ -209,9 +208,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
         return call_at(t, x, H, h, g, J6, a6, p, rotation, phi_buffer, fb, ib, out)
 
     fused = tf == 0 and (tables is not None or not referenced)  # the tip's J6, a6 are the first frame's
-    kernel = calls(plan, one, one_at if fused else None)
-    kernel.rates = True
-    return kernel
+    return calls(plan, one, one_at if fused else None, rates=True)
 
 
 def _tilt_constants(plan) -> tuple:

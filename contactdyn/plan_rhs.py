@@ -64,7 +64,7 @@ def make_rhs(plan):
     terms = impulse_terms(plan)
     kernel = plan.kernel = (kernel_of(plan, row_meta(plan), reaching_rows(plan))  # (no rows: [], [])
                             or operational_kernel_of(plan, terms))
-    impulses = bool(terms) and not getattr(kernel, "rates", False)  # a kernel may write them itself
+    impulses = bool(terms) and not (kernel is not None and kernel.rates)  # a kernel may write them itself
     at = getattr(kernel, "at", None)  # a kernel writing φ in its own compiled call (contactdyn.plan_kernel)
 
     def rhs(t, x):

@@ -43,7 +43,13 @@ def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, 
     Every piece holds from its corner (:func:`profile_corners`) on: at a corner the profile
     takes its right-hand limit. (Computed by :func:`_profile`, which compiled time parts call too.)
     """
-    return _profile(_PROFILE_CODE.get(kind, _STEP), tau, accel_fraction)
+    return _profile(_profile_code(kind), tau, accel_fraction)
+
+
+def _profile_code(kind: str) -> int:
+    """The code :func:`_profile` reads for a profile's kind (a kind it does not know: the step's branch, as a
+    circle's own angle is computed by :func:`circle_reference`)."""
+    return _PROFILE_CODE.get(kind, _STEP)
 
 
 @njit(cache=True)
@@ -85,7 +91,7 @@ def move_rows(t: float, moves: np.ndarray, w: np.ndarray) -> None:
 
 def move_table(moves) -> np.ndarray:
     """(K, 4): per move its kind's code, start [s], duration [s] and accel fraction, as :func:`move_rows` reads."""
-    return np.array([(_PROFILE_CODE.get(m.kind, _STEP), m.start, m.duration, m.accel_fraction) for m in moves],
+    return np.array([(_profile_code(m.kind), m.start, m.duration, m.accel_fraction) for m in moves],
                     dtype=float).reshape(len(moves), 4)
 
 
@@ -206,7 +212,7 @@ class Move:
         """(len(ts), n): the move's displacement at each time of ``ts``, ``rows``' first row elementwise over them."""
         if self.kind == "circle":
             return np.array([self.circle_rows(t)[0] for t in ts]).reshape(len(ts), len(self.delta))
-        s = _profile_values(_PROFILE_CODE.get(self.kind, _STEP), (np.asarray(ts, float) - self.start) / self.duration,
+        s = _profile_values(_profile_code(self.kind), (np.asarray(ts, float) - self.start) / self.duration,
                             self.accel_fraction)
         return np.multiply.outer(s, self.delta)
 

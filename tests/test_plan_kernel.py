@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from test_output_samples import _pressing_writer
 
 from contactdyn import samples, simulate
 from contactdyn.linalg import cholesky, forward_solve, lu_solve, pinv, sparse_dot
@@ -86,7 +87,7 @@ def _assert_kernel_is_the_readable_model(system, plan, t0, x0, span=0.01):
     for t, x in zip(sol.t[:40], sol.y.T[:40], strict=True):
         got = plan.kernel(t, x, plan.phi_at(t, x))
         assert got is not None
-        if not getattr(plan.kernel, "rates", False):  # as the plan's call does after a kernel that leaves them
+        if not plan.kernel.rates:  # as the plan's call does after a kernel that leaves them
             plan.impulse_rates(*got, plan.modes, None)
         ref = system.evaluate(t, x, plan.modes, plan.phase).xdot
         assert np.allclose(got[0], ref, rtol=1e-10, atol=1e-10 * (1.0 + np.abs(ref).max()))
@@ -117,24 +118,10 @@ def test_kernel_is_the_readable_model_with_a_reference_carried_by_the_cart(force
     assert np.array_equal(d_a, [0.0, 0.0, 0.0] if force_reference else [1.0, 0.0, 0.0])
 
 
-def _writer_pressing(u_max: float | None) -> dict:
-    """A7 on the 2-DOF writer pressing a bonded wall under DC motors (``u_max`` [V], None: no limit)."""
-    q0 = [0.3, 1.2]  # [rad] the writer's pose, tip at p0
-    p0 = Robot.load("writer2r").frame_position(np.array(q0), "tip")
-    drive = {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": 0.000452, "N": 160.0, "N_star": 65.12,
-             **({"u_max": u_max} if u_max is not None else {})}
-    return {"duration": 0.3, "robot": {"urdf": "writer2r", "q0": q0, "drive": drive},
-            "controller": {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0},
-            "phase": [{"name": "main", "reference": {"space": "task", "start": (p0 + [0.01, 0.0, -0.03]).tolist(),
-                                                     "moves": []}}],
-            "contact": {"c": {"point": p0.tolist(), "bonded": True,
-                              "normal": {"direction": [-1, 0, 0], "model": "b", "k": 1e4, "b": 10.0, "m": 2.0}}}}
-
-
 def test_kernel_declines_a_clipping_voltage_and_the_call_stays_the_readable_models():
     """With a 4 V limit the A7 press clips at its start: there the kernel declines (the clip is the readable
     law's), the plan's call still equals System.evaluate; without the limit the kernel answers."""
-    system, plan, _, _ = _mode_at(parse_scene(_writer_pressing(u_max=4.0)), 0.3)
+    system, plan, _, _ = _mode_at(parse_scene(_pressing_writer(u_max=4.0)), 0.3)
     x0 = plan.system.initial_state()[0]
     t = plan.phase.t_start
     tried = [(t, x0 + dx) for dx in np.random.default_rng(1).normal(scale=1e-3, size=(20, len(x0)))]
@@ -143,7 +130,7 @@ def test_kernel_declines_a_clipping_voltage_and_the_call_stays_the_readable_mode
     for t, x in declined:
         ref = system.evaluate(t, x, plan.modes, plan.phase).xdot
         assert np.allclose(plan.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * (1.0 + np.abs(ref).max()))
-    system, plan, t, x = _mode_at(parse_scene(_writer_pressing(u_max=None)), 0.3)
+    system, plan, t, x = _mode_at(parse_scene(_pressing_writer(u_max=None)), 0.3)
     _assert_kernel_is_the_readable_model(system, plan, t, x)
 
 
