@@ -249,8 +249,9 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
     H, h, g, p = plan.phi.terms
     pinocchio, phi_buffer = plan.phi.pinocchio, plan.phi.buffer
 
-    def one_at(t, x, out):  # one, with φ written in the same compiled call
+    def one_at(t, x, out):  # one, with φ written in the same compiled call (a decline leaves φ written too)
         if fb is None and not ready():
+            plan.phi(t, x)
             return DECLINED
         if time_part is not None:
             time_part(t)
@@ -264,7 +265,8 @@ def calls(plan, one, one_at=None, rates: bool = False):
     """kernel(t, x, φ) -> (ẋ, z, o), None where ``one`` declines, and ``kernel.samples(ts, X)`` -> (Φ, O, Z, τ) of
     the output's samples, None where one declines: both by one(t, x, φ, out) -> status, a compiled call writing
     [ẋ, z, o, τ] into ``out`` (this module's :func:`call`, :func:`contactdyn.plan_operational.call`);
-    ``kernel.at(t, x)`` -> (ẋ, z, o) or None by one_at(t, x, out), the same writing φ itself (None: no such)."""
+    ``kernel.at(t, x)`` -> (ẋ, z, o) or None by one_at(t, x, out), the same writing φ itself (None: no such; a
+    decline leaves φ written at (t, x), in ``plan.phi.buffer``)."""
     s, m = plan.system, plan.m
     n, no = s.n, plan.P.shape[0] - m * (m + 1)
     size = n + m + no + s.nv

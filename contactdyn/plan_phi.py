@@ -29,8 +29,8 @@ def phi_function(plan):
     φ and the Jacobians are views of one buffer the next call overwrites (``plan.phi_at`` hands out copies).
     Attributes for a compiled caller: ``phi.pinocchio(x)`` -> (J6, a6) of the first frame (Pinocchio's calls;
     further frames already written), ``phi.terms`` = (H, h, g, p) of the first frame (views of Pinocchio's
-    data, which keeps its arrays for its lifetime), ``phi.buffer`` and ``phi.tables`` (:func:`write_phi`'s
-    at, moves, move_slots, ramps, ramp_slots).
+    data, which keeps its arrays for its lifetime), ``phi.buffer`` and its Jacobians' views ``phi.jacobians``,
+    and ``phi.tables`` (:func:`write_phi`'s at, moves, move_slots, ramps, ramp_slots).
     """
     s = plan.system
     model, data = s.robot.model, s.robot.data
@@ -80,6 +80,7 @@ def phi_function(plan):
         return phi, Js
 
     phi_of.pinocchio, phi_of.terms, phi_of.buffer, phi_of.tables = pinocchio, (H, h, g, p0), phi, tables
+    phi_of.jacobians = Js
     return phi_of
 
 

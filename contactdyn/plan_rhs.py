@@ -66,13 +66,15 @@ def make_rhs(plan):
                             or operational_kernel_of(plan, terms))
     impulses = bool(terms) and not (kernel is not None and kernel.rates)  # a kernel may write them itself
     at = getattr(kernel, "at", None)  # a kernel writing φ in its own compiled call (contactdyn.plan_kernel)
+    written = phi_and_jacobians.buffer, phi_and_jacobians.jacobians  # where it writes φ, declining or not
 
     def rhs(t, x):
-        got = at(t, x) if at is not None else None
-        if got is None:  # (a kernel that declined at this state declines with φ given too)
+        if at is not None:
+            got = at(t, x)
+            phi, Js = written
+        else:
             phi, Js = phi_and_jacobians(t, x)
-            if kernel is not None and at is None:
-                got = kernel(t, x, phi)
+            got = kernel(t, x, phi) if kernel is not None else None
         if got is not None:  # the compiled call (contactdyn.plan_kernel, contactdyn.plan_operational)
             xd, z, o = got
             if impulses:

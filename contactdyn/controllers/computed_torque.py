@@ -32,8 +32,9 @@ def torque(H, rotor, h, tau_c, J, Jp, drift, v, a, f_swap, k_null):
         qdd -= mv(np.eye(nv) - mm(Jp, J), k_null * v)
     tau = mv(H, qdd)
     if rotor.size:
-        tau = tau - rotor * qdd
-    tau = tau + h - tau_c
+        tau -= rotor * qdd
+    tau += h
+    tau -= tau_c
     if f_swap.size:
         tau += mtv(J, f_swap)
     return tau
