@@ -13,10 +13,11 @@ call does after φ is small dense algebra:
 :func:`call` runs it in one compiled function (numba), the same arithmetic as the readable
 path's (:mod:`contactdyn.plan_rhs`: ``_friction_terms``, ``_command_and_solve``;
 :func:`contactdyn.friction.slip_direction`'s rule). The reference, the force set-points and the
-tip's rotation, angular Jacobian and J̇_ω q̇ (Pinocchio's data at φ's state) are read in Python
-and passed in. A call goes the plan's readable way (returns status 1) where the task is singular
-(the law's guard raises there), the solve is singular or not finite, or a 2-D slide from rest is
-still inside the stick band (its direction is solved by :func:`contactdyn.friction.launch_directions`).
+tip's rotation, 6-row Jacobian and J̇q̇ (φ's, plan_phi.frame_motion) are computed in :func:`call_at`, or
+passed in from Python where the tip is not the plan's first frame. A call goes the plan's readable way
+(returns status 1) where the task is singular (the law's guard raises there), the solve is singular or not
+finite, or a 2-D slide from rest is still inside the stick band (its direction is solved by
+:func:`contactdyn.friction.launch_directions`).
 """
 
 from __future__ import annotations
@@ -38,10 +39,11 @@ __all__ = ["call", "call_at", "operational_kernel_of"]
 #: the constants of a plan's call in :func:`~contactdyn.plan_kernel.pack`'s two buffers, by these indices
 P_VAL, D_CTL, TILT_F, TILT_T, TILT_BODY, RATES_F, AXES, FORCED, KP, KD, TOOL_AXIS, TARGET, SCALARS = range(13)
 #: floats of :func:`call_at`: the reference's tables (plan_law.reference_tables), the force ramps, φ's time tables
-REF_MOVES, REF_R, REF_CIRCLE, REF_TERMS, REF_START, RAMPS, PHI_MOVES, PHI_RAMPS = range(13, 21)
-P_COL, P_ROW, INTS, TILT_I, RATES_I = range(21, 26)  # ints (P: CSR columns, row starts)
-#: ints of :func:`call_at`: [the reference's kind, −1 none]; φ's layout and time slots (plan_phi.write_phi)
-REF_KIND, PHI_AT, PHI_MSLOTS, PHI_RSLOTS = range(26, 30)
+#: and its first frame in its joint's (plan_phi.write_phi)
+REF_MOVES, REF_R, REF_CIRCLE, REF_TERMS, REF_START, RAMPS, PHI_MOVES, PHI_RAMPS, PHI_FRAME = range(13, 22)
+P_COL, P_ROW, INTS, TILT_I, RATES_I = range(22, 27)  # ints (P: CSR columns, row starts)
+#: ints of :func:`call_at`: [the reference's kind, −1 none]; φ's layout, time slots and the first frame's support
+REF_KIND, PHI_AT, PHI_MSLOTS, PHI_RSLOTS, PHI_SUPPORT = range(27, 32)
 
 
 @njit(cache=True)
@@ -134,12 +136,14 @@ def call(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
 
 
 @njit(cache=True)
-def call_at(t, x, H, h, g, J6, a6, p, R_tip, phi, fb, ib, out):
-    """:func:`call` at (t, x) with φ written from Pinocchio's terms (plan_phi.write_phi: H, h, g, the tip's J6, a6,
-    p; the tip the plan's first frame) and the reference and the force set-points at t computed here from their
-    packed tables: one compiled call per right-hand side."""
-    write_phi(t, x, H, h, g, J6, a6, p, phi, vector_of(ib, ib, PHI_AT), matrix_of(fb, ib, PHI_MOVES),
-              vector_of(ib, ib, PHI_MSLOTS), matrix_of(fb, ib, PHI_RAMPS), vector_of(ib, ib, PHI_RSLOTS))
+def call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi, fb, ib, out):
+    """:func:`call` at (t, x) with φ written from Pinocchio's terms (plan_phi.write_phi: H, h, g and the tip's joint
+    R, pj, vj, aj, Jw; the tip the plan's first frame) and the reference and the force set-points at t computed
+    here from their packed tables: one compiled call per right-hand side."""
+    J6, a6, R_tip = write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, vector_of(ib, ib, PHI_AT),
+                              matrix_of(fb, ib, PHI_MOVES), vector_of(ib, ib, PHI_MSLOTS),
+                              matrix_of(fb, ib, PHI_RAMPS), vector_of(ib, ib, PHI_RSLOTS),
+                              vector_of(fb, ib, PHI_FRAME), vector_of(ib, ib, PHI_SUPPORT))
     kind = vector_of(ib, ib, REF_KIND)[0]
     ref = np.empty(0) if kind < 0 else reference_of(t, kind, matrix_of(fb, ib, REF_MOVES), matrix_of(fb, ib, REF_R),
                                                      vector_of(fb, ib, REF_CIRCLE), matrix_of(fb, ib, REF_TERMS),
@@ -163,9 +167,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
             and phase.carrier is None):
         return None
     nQ, nv, m = s.nQ, s.nv, plan.m
-    data = s.robot.data
     tf = plan.tip_frame
-    fid = plan.fids[tf]
     off = m * m + m  # o's start in y
     ints = [m, nQ, nv, plan.i_h, plan.i_J[tf], plan.i_dr[tf], plan.i_e + plan.e_frame[tf], off + plan.o_y.start,
             off + plan.o_y.stop]
@@ -181,7 +183,6 @@ def operational_kernel_of(plan, impulses: list[tuple]):
                                   tool_axis, target, [s.slip_band, ko, do, k_null, kd_normal], *ref_floats, ramps],
                            [P.indices, P.indptr, ints, tilt_i, rates_i, [kind]])
     none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))
-    rotation = data.oMf[fid].rotation  # (a view: the tip's R at the last φ)
     tip6 = plan.tip6  # this make_rhs's tip terms (a later ModePlan.use makes new ones; this kernel keeps its own)
     ramp_values = np.empty(2 * len(ramps))  # F_d [N], Ḟ_d [N/s] per ramp, rewritten per call
     set_points = np.empty(len(ramps))  # F_d [N]
@@ -195,19 +196,20 @@ def operational_kernel_of(plan, impulses: list[tuple]):
             set_points[:] = ramp_values[::2]
         if not orient:
             return ref, set_points, no_rotation, no_rows, none
-        return ref, set_points, rotation, *tip6  # this call's φ's (plan_phi.phi_function)
+        J6, a6, rotation = tip6  # this call's φ's (plan_phi.phi_function)
+        return ref, set_points, rotation, J6, a6
 
     def one(t, x, phi, out):
         return call(phi, x, fb, ib, *inputs(t), out)
 
-    H, h, g, p = plan.phi.terms
+    H, h, g, R, pj, vj, aj, Jw = plan.phi.terms
     pinocchio, phi_buffer = plan.phi.pinocchio, plan.phi.buffer
 
     def one_at(t, x, out):  # one, with φ, the reference and the set-points computed in the same compiled call
-        J6, a6 = pinocchio(x)
-        return call_at(t, x, H, h, g, J6, a6, p, rotation, phi_buffer, fb, ib, out)
+        pinocchio(x)
+        return call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi_buffer, fb, ib, out)
 
-    fused = tf == 0 and (tables is not None or not referenced)  # the tip's J6, a6 are the first frame's
+    fused = tf == 0 and (tables is not None or not referenced)  # the tip's J, J̇q̇, R are the first frame's
     return calls(plan, one, one_at if fused else None, rates=True)
 
 

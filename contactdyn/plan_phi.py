@@ -3,11 +3,13 @@
     φ = [H (column by column), J_f (3 rows), J̇q̇_f per frame f, h, (g), e],
     e = [x, p_f, ṗ_f per frame f, the reference's and force ramps' time terms, 1]
 
-Per call: Pinocchio's ``computeAllTerms`` at (q, q̇), then per frame ``getFrameJacobian`` (which also
-updates the frame's placement, ``data.oMf``) and ``getFrameClassicalAcceleration``; everything else is
-written into one buffer by one compiled call, :func:`write_phi` (a further frame's terms by
-:func:`write_frame` each). A compiled caller (:mod:`contactdyn.plan_kernel`) runs :func:`write_phi` and
-its own call in one function. Units: H [kg·m²], h, g [N·m or N], p [m], ṗ [m/s], J̇q̇ [m/s²].
+Per call: Pinocchio's ``computeAllTerms`` at (q, q̇); everything else is written into one buffer by one
+compiled call, :func:`write_phi`, the first frame's terms included: its Jacobian, J̇q̇, position and rotation
+from its joint's placement and motion and the joint Jacobians (:func:`frame_motion`, as Pinocchio's
+``getFrameJacobian`` and ``getFrameClassicalAcceleration`` in LOCAL_WORLD_ALIGNED, to rounding; two binding
+calls fewer). A further frame's terms come from those two Pinocchio calls, written by :func:`write_frame`.
+A compiled caller (:mod:`contactdyn.plan_kernel`) runs :func:`write_phi` and its own call in one function.
+Units: H [kg·m²], h, g [N·m or N], p [m], ṗ [m/s], J̇q̇ [m/s²].
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from numba import njit
 
 from .trajectory import move_rows, move_table, ramp_rows, ramp_table
 
-__all__ = ["phi_function", "write_phi", "write_frame", "LWA"]
+__all__ = ["phi_function", "write_phi", "write_frame", "frame_motion", "frame_constants", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -27,10 +29,12 @@ def phi_function(plan):
     """phi(t, x) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x.
 
     φ and the Jacobians are views of one buffer the next call overwrites (``plan.phi_at`` hands out copies).
-    Attributes for a compiled caller: ``phi.pinocchio(x)`` -> (J6, a6) of the first frame (Pinocchio's calls;
-    further frames already written), ``phi.terms`` = (H, h, g, p) of the first frame (views of Pinocchio's
-    data, which keeps its arrays for its lifetime), ``phi.buffer`` and its Jacobians' views ``phi.jacobians``,
-    and ``phi.tables`` (:func:`write_phi`'s at, moves, move_slots, ramps, ramp_slots).
+    Attributes for a compiled caller: ``phi.pinocchio(x)`` runs Pinocchio's calls (further frames' terms
+    written), ``phi.terms`` = (H, h, g, R, p_j, v_j, a_j, J_w): the views of Pinocchio's data :func:`write_phi`
+    reads (Pinocchio keeps their memory for its lifetime), ``phi.buffer`` and its Jacobians' views
+    ``phi.jacobians``, and ``phi.tables`` (:func:`write_phi`'s at, moves, move_slots, ramps, ramp_slots, frame,
+    support). ``plan.tip6`` = [J (6, nv), J̇q̇ (6), R] of the tip at the last call, for a law reading its
+    orientation.
     """
     s = plan.system
     model, data = s.robot.model, s.robot.data
@@ -40,48 +44,56 @@ def phi_function(plan):
     phi[-1] = 1.0  # e's trailing 1
     Js = tuple(phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J)
     compute, jacobian, accel = pin.computeAllTerms, pin.getFrameJacobian, pin.getFrameClassicalAcceleration
-    H, h = data.M, data.nle
     g = data.g if plan.with_g else np.zeros(0)
-    one_dof = nv == 1  # (Pinocchio gives a 1-DOF robot's Jacobian as (6,))
-    #: per frame: its id, Pinocchio's translation, where x's v, its J (3 rows), J̇q̇, p and ṗ go in φ; the first
-    #: frame's also where h (then g) and x go
-    frames = [(fids[f], data.oMf[fids[f]].translation,
-               np.array([nQ, plan.i_J[f], plan.i_dr[f], plan.i_e + plan.e_frame[f]]
-                        + ([plan.i_h, plan.i_e] if f == 0 else []), dtype=np.intp)) for f in range(len(fids))]
-    (fid0, p0, at0), more = frames[0], frames[1:]
-    tables = (at0, *_time_tables(plan))
-    #: a law that reads the tip's orientation: the tip's 6-row Jacobian and J̇q̇ (linear, angular) of the last
-    #: call, as Pinocchio gave them (its R: data.oMf[tip].rotation, updated by the call)
-    tip6 = plan.tip6 = [None, None]
-    tip = fids[plan.tip_frame] if plan.phase.controller.reads_orientation else None
-
-    def frame_terms(fid):
-        J6, a6 = jacobian(model, data, fid, LWA), accel(model, data, fid, LWA).vector
-        if one_dof:
-            J6 = J6.reshape(6, 1)
-        if fid == tip:
-            tip6[0], tip6[1] = J6, a6
-        return J6, a6
+    terms = (data.M, data.nle, g, *joint_terms(model, data, fids[0]))
+    #: per frame: where x's v, its J (3 rows), J̇q̇, p and ṗ go in φ; the first frame's also where h (then g) and x go
+    ats = [np.array([nQ, plan.i_J[f], plan.i_dr[f], plan.i_e + plan.e_frame[f]]
+                    + ([plan.i_h, plan.i_e] if f == 0 else []), dtype=np.intp) for f in range(len(fids))]
+    more = [(fids[f], data.oMf[fids[f]].translation, ats[f]) for f in range(1, len(fids))]
+    tables = (ats[0], *_time_tables(plan), *frame_constants(model, fids[0]))
+    #: a law that reads the tip's orientation: the tip's 6-row Jacobian, J̇q̇ (linear, angular) and rotation of the
+    #: last call
+    tip6 = plan.tip6 = [None, None, None]
+    tip = plan.tip_frame if plan.phase.controller.reads_orientation else None
 
     def pinocchio(x):
         compute(model, data, x[:nv], x[nQ:nQ + nv])
-        for fid, p, at in more:
-            write_frame(phi, *frame_terms(fid), p, x, at)
-        return frame_terms(fid0)
-
-    if not more and tip is None and not one_dof:
-        def pinocchio(x):  # the same for one frame whose terms are only written (~0.13 µs less a call)
-            compute(model, data, x[:nv], x[nQ:nQ + nv])
-            return jacobian(model, data, fid0, LWA), accel(model, data, fid0, LWA).vector
+        for f, (fid, p, at) in enumerate(more, start=1):
+            J6, a6 = jacobian(model, data, fid, LWA).reshape(6, nv), accel(model, data, fid, LWA).vector
+            write_frame(phi, J6, a6, p, x, at)
+            if f == tip:
+                tip6[:] = J6, a6, data.oMf[fid].rotation
 
     def phi_of(t, x):
-        J6, a6 = pinocchio(x)
-        write_phi(t, x, H, h, g, J6, a6, p0, phi, *tables)
+        pinocchio(x)
+        first = write_phi(t, x, *terms, phi, *tables)
+        if tip == 0:
+            tip6[:] = first
         return phi, Js
 
-    phi_of.pinocchio, phi_of.terms, phi_of.buffer, phi_of.tables = pinocchio, (H, h, g, p0), phi, tables
+    phi_of.pinocchio, phi_of.terms, phi_of.buffer, phi_of.tables = pinocchio, terms, phi, tables
     phi_of.jacobians = Js
     return phi_of
+
+
+def joint_terms(model, data, fid: int) -> tuple:
+    """(R, p_j, v_j, a_j, J_w): views of Pinocchio's data of the joint frame ``fid`` is attached to, which
+    ``computeAllTerms`` updates in place: its rotation and position [m] in the world, its velocity and
+    acceleration at q̈ = 0 in its own frame ([linear, angular]), and the joint Jacobians (WORLD, 6 × nv)."""
+    j = model.frames[fid].parentJoint
+    return (data.oMi[j].rotation, data.oMi[j].translation, data.v[j].vector, data.a[j].vector,
+            data.J.reshape(6, model.nv))  # (eigenpy gives one column as (6,); the reshape is a view)
+
+
+def frame_constants(model, fid: int) -> tuple[np.ndarray, np.ndarray]:
+    """(frame, support) of :func:`frame_motion`: the frame in its joint's frame, [r (3) [m], its rotation (3 × 3,
+    by rows)], and the velocity columns of the joints that move it."""
+    frame = model.frames[fid]
+    placement = frame.placement
+    support = [k for jj in model.supports[frame.parentJoint][1:]
+               for k in range(model.joints[jj].idx_v, model.joints[jj].idx_v + model.joints[jj].nv)]
+    return (np.concatenate([placement.translation, placement.rotation.ravel()]),
+            np.array(support, dtype=np.intp))
 
 
 def _time_tables(plan) -> tuple:
@@ -95,9 +107,10 @@ def _time_tables(plan) -> tuple:
 
 
 @njit(cache=True)
-def write_phi(t, x, H, h, g, J6, a6, p, phi, at, moves, move_slots, ramps, ramp_slots):
+def write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots, frame, support):
     """φ at (t, x): H column by column from 0, h (then g, if any) from at[4], x from at[5], the first frame's
-    terms (:func:`write_frame`), the time terms at t [s] at their slots (:func:`_time_tables`)."""
+    terms (:func:`frame_motion` from its joint's R, pj, vj, aj and Jw, :func:`write_frame`), the time terms at
+    t [s] at their slots (:func:`_time_tables`). Returns the first frame's (J (6, nv), J̇q̇ (6), R)."""
     nv = h.size
     for j in range(nv):
         for i in range(nv):
@@ -108,6 +121,7 @@ def write_phi(t, x, H, h, g, J6, a6, p, phi, at, moves, move_slots, ramps, ramp_
         phi[at[4] + nv + i] = g[i]
     for i in range(x.size):
         phi[at[5] + i] = x[i]
+    J6, a6, p, Rf = frame_motion(R, pj, vj, aj, Jw, frame, support)
     write_frame(phi, J6, a6, p, x, at)
     if move_slots.size:
         w = np.empty(3 * move_slots.size)
@@ -120,6 +134,43 @@ def write_phi(t, x, H, h, g, J6, a6, p, phi, at, moves, move_slots, ramps, ramp_
         ramp_rows(t, ramps, w)
         for k in range(ramp_slots.size):
             phi[ramp_slots[k]] = w[2 * k]
+    return J6, a6, Rf
+
+
+@njit(cache=True)
+def frame_motion(R, pj, vj, aj, Jw, frame, support):
+    """(J, J̇q̇, p, R_f) of a frame in LOCAL_WORLD_ALIGNED, as Pinocchio's getFrameJacobian (6 × nv, rows linear then
+    angular), getFrameClassicalAcceleration at q̈ = 0 [m/s², rad/s²] and its placement (p [m], R_f), from its
+    joint's (:func:`joint_terms`: R, pj, vj, aj, Jw) and the frame in the joint's, ``frame`` = [r, rotation by
+    rows] (:func:`frame_constants`; ``support``: the joints' columns that move it):
+    p = p_j + R r;  J's column c = [v_c + ω_c × p, ω_c] of the joint Jacobians (WORLD, at the origin);
+    J̇q̇ = R (a + α × r + ω × (v + ω × r)) and R α, with (v, ω), (a, α) the joint's own [linear, angular]."""
+    nv = Jw.shape[1]
+    p, Rf = np.empty(3), np.empty((3, 3))
+    r0, r1, r2 = frame[0], frame[1], frame[2]
+    for i in range(3):
+        p[i] = pj[i] + R[i, 0] * r0 + R[i, 1] * r1 + R[i, 2] * r2
+        for k in range(3):
+            Rf[i, k] = R[i, 0] * frame[3 + k] + R[i, 1] * frame[6 + k] + R[i, 2] * frame[9 + k]
+    J6 = np.zeros((6, nv))
+    for c in support:
+        wx, wy, wz = Jw[3, c], Jw[4, c], Jw[5, c]
+        J6[0, c] = Jw[0, c] + (wy * p[2] - wz * p[1])
+        J6[1, c] = Jw[1, c] + (wz * p[0] - wx * p[2])
+        J6[2, c] = Jw[2, c] + (wx * p[1] - wy * p[0])
+        J6[3, c], J6[4, c], J6[5, c] = wx, wy, wz
+    wx, wy, wz = vj[3], vj[4], vj[5]
+    vx = vj[0] + (wy * r2 - wz * r1)  # the point's velocity, in the joint's frame [m/s]
+    vy = vj[1] + (wz * r0 - wx * r2)
+    vz = vj[2] + (wx * r1 - wy * r0)
+    ax = aj[0] + (aj[4] * r2 - aj[5] * r1) + (wy * vz - wz * vy)  # its classical acceleration [m/s²]
+    ay = aj[1] + (aj[5] * r0 - aj[3] * r2) + (wz * vx - wx * vz)
+    az = aj[2] + (aj[3] * r1 - aj[4] * r0) + (wx * vy - wy * vx)
+    a6 = np.empty(6)
+    for i in range(3):
+        a6[i] = R[i, 0] * ax + R[i, 1] * ay + R[i, 2] * az
+        a6[3 + i] = R[i, 0] * aj[3] + R[i, 1] * aj[4] + R[i, 2] * aj[5]
+    return J6, a6, p, Rf
 
 
 @njit(cache=True)
