@@ -33,7 +33,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy.integrate import DenseOutput, OdeSolver, solve_ivp
 
-from . import dop853
+from . import dop853, lsoda
 
 __all__ = ["METHODS", "IMPLICIT", "EXPLICIT", "FIXED", "AUTO_EXPLICIT", "stability_bound", "jacobian_eigenvalues",
            "FiniteDifferenceJacobian", "RK4", "solver_class", "integrate"]
@@ -212,5 +212,8 @@ def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, 
     if method in COMPILED:
         return dop853.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
                             first_step=first_step)
+    if method == "LSODA" and lsoda.available():  # solve_ivp's steps without its per-step Python
+        return lsoda.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
+                           first_step=first_step)
     return solve_ivp(fun, t_span, y0, method=solver_class(method), rtol=rtol, atol=atol, max_step=max_step,
                      events=events or None, dense_output=True, first_step=first_step, **({"jac": jac} if jac else {}))
