@@ -229,9 +229,10 @@ class _EventWatch:
         if not fired:
             return False
         step, t_old = len(steps.t) - 2, steps.t[-2]
-        for i in fired:  # as solve_ivp: brentq on the step's own interpolant
-            root = brentq(lambda s, e=self.events[i]: e(s, steps.at(step, s)), t_old, t, xtol=4 * _EPS,
-                          rtol=4 * _EPS)
+        for i in fired:  # as solve_ivp: brentq on the step's own interpolant (a step shorter than t's
+            # resolution, LSODA's where its steps collapse: at its end)
+            root = t if t == t_old else brentq(lambda s, e=self.events[i]: e(s, steps.at(step, s)), t_old, t,
+                                               xtol=4 * _EPS, rtol=4 * _EPS)
             self.hits.append((root, i))
         self.hits.sort()
         first = next((k for k, (_, i) in enumerate(self.hits) if self.terminal[i]), None)

@@ -43,7 +43,7 @@ from .phases import Phase
 from .rhsplan import ModePlan
 from .system import System
 
-__all__ = ["TOUCH_TOL", "terminal_event", "EvaluationCache", "SlipCache", "SlipWatch", "StepBudget",
+__all__ = ["TOUCH_TOL", "terminal_event", "EvaluationCache", "SlipCache", "SlipWatch", "StepBudget", "StepCollapse",
            "segment_events", "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
@@ -215,6 +215,34 @@ class StepBudget:
             self.count += 1
             if self.count > self.budget and self.t_fire == math.inf:
                 self.t_fire = t
+        return -1.0 if t >= self.t_fire else 1.0
+
+
+class StepCollapse:
+    """A 2-D slide's guard: a terminal event at the end of the ``count``-th step shorter than ``ratio`` times the
+    longest of the segment so far (the hybrid loop then checks whether a stiff mode holds the step: a slide
+    coming to rest, its direction relaxing at a rate ∝ 1/|v_t|; :meth:`~contactdyn.hybrid.HybridRun._method`).
+    Called at the step ends with increasing t, as :class:`StepBudget`."""
+
+    terminal = True
+    direction = -1
+    kind = "collapse"
+    contact = ""
+
+    def __init__(self, ratio: float, count: int):
+        self.ratio, self.count, self.longest = ratio, count, 0.0
+        self.t_end, self.t_fire = -math.inf, math.inf
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        if t > self.t_end:
+            h = t - self.t_end
+            if h < self.ratio * self.longest:
+                self.count -= 1
+                if self.count == 0:
+                    self.t_fire = t
+            if math.isfinite(h):
+                self.longest = max(self.longest, h)
+            self.t_end = t
         return -1.0 if t >= self.t_fire else 1.0
 
 

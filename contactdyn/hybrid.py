@@ -38,7 +38,7 @@ import numpy as np
 from .channels import Segment, output_grid, sample_segments
 from .contact import ContactMode
 from .errors import SceneError, SimulationError
-from .events import EventLog, StepBudget, fired_across, segment_events
+from .events import EventLog, StepBudget, StepCollapse, fired_across, segment_events
 from .integrators import (
     AUTO_EXPLICIT,
     EXPLICIT,
@@ -64,7 +64,15 @@ __all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
 #: events after which the next segment starts with the step size the solver had reached (friction
 #: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
 RESUME_STEP = ("stop", "reverse", "slip", "turn")
-LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest (see HybridRun._method)
+LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest or comes to rest (see HybridRun._method)
+#: a 2-D slide's explicit steps shorter than COLLAPSE_RATIO × the segment's longest, COLLAPSE_STEPS of them, have
+#: it checked for a stiff mode (events.StepCollapse): the steps shrink ~1/|v_t| as the slide comes to rest; a
+#: short collapse costs the explicit method less than a switch would
+COLLAPSE_RATIO, COLLAPSE_STEPS = 1.0 / 8.0, 50
+#: [-] LAUNCH_METHOD finishing a slide that comes to rest runs at this × the scene's tolerances: its error is then
+#: about DOP853's at the scene's own (5-DOF writer against its rtol 1e-11 reference: tip 1.1e-9 m at 1×, 3.4e-10 m
+#: at 0.1×, as DOP853 alone); where it fails there, the scene's method takes the segment over
+RESTING_TOL = 0.1
 #: [-] an explicit step while chain ends relax after a separation is at most this × their time constant
 #: b / k: the relaxation is then resolved, and so are the gap and the re-touch located on it (at 1e-2 s
 #: steps, 10 time constants, case 1's re-touch came out 1e-8 s late at rtol 3e-11)
@@ -95,6 +103,9 @@ class HybridRun:
         self.transitions = Transitions(system, self.log, self.stats, self.impacts)
         self.plans: dict[tuple, ModePlan] = {}
         self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
+        #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
+        #: them, "" when none did (no more checks in the mode); None: not checked
+        self.resting: str | None = None
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
 
     def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True) -> ModePlan:
@@ -152,12 +163,15 @@ class HybridRun:
                 if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
                     self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
                     continue
-                self.auto_state = None
+                if fired[0].kind == "collapse":  # a 2-D slide coming to rest? (same modes, same phase)
+                    self._collapse_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
+                    continue
+                self._new_mode()
                 if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
                     self.next_step = float(sol.t[-2] - sol.t[-3])
                 x, modes, phase = self.transitions.handle(t, x, modes, phase, fired[0])
             elif t < T:
-                self.auto_state = None
+                self._new_mode()
                 phase = self._next_phase(phase, t, x)
         return self._result(time.perf_counter() - wall0)
 
@@ -170,7 +184,7 @@ class HybridRun:
         events, _ = segment_events(self.system, modes, phase, t, x, plan if plan.ok else None)
         fired = fired_across(events, t, t_after, x)
         if fired:
-            self.auto_state = None
+            self._new_mode()
             if fired[0].kind not in RESUME_STEP:
                 self.next_step = None
             x, modes, phase = self.transitions.handle(t_after, x, modes, phase, fired[0])
@@ -187,9 +201,12 @@ class HybridRun:
             events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
             if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
                 events = [*events, StepBudget(STEP_BUDGET)]
+            if self.resting is None and method in EXPLICIT and method not in FIXED and _sliding_2d(modes):
+                events = [*events, StepCollapse(COLLAPSE_RATIO, COLLAPSE_STEPS)]
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
-                sol = integrate(rhs, (t, t_end), x, method, rtol=self.solver.rtol, atol=self.solver.atol,
+                k = RESTING_TOL if method == self.resting != scene_method else 1.0
+                sol = integrate(rhs, (t, t_end), x, method, rtol=k * self.solver.rtol, atol=k * self.solver.atol,
                                 max_step=self._max_step(modes, method), events=events, first_step=h0, jac=jac)
             self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
             if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
@@ -217,6 +234,20 @@ class HybridRun:
         else:
             self.next_step = h
 
+    def _collapse_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
+        """A 2-D slide's explicit step collapsed to h [s] (events.StepCollapse): LAUNCH_METHOD for the rest of the
+        mode if a decaying mode held it at the method's stability bound, else the explicit method on, unwatched."""
+        stiff, _ = stability_bound(fun, t, x, h, span)
+        self.stats["rhs_evals"] += len(x) + 1
+        self.resting = LAUNCH_METHOD if stiff else ""
+        if stiff:
+            self.stats["resting_switches"] = self.stats.get("resting_switches", 0) + 1
+        self.next_step = h
+
+    def _new_mode(self) -> None:
+        """Forget the method choices made for the mode that ends (auto's, a slide's coming to rest)."""
+        self.auto_state = self.resting = None
+
     def _diagnose(self, sol, plan: ModePlan, fun, method: str) -> str:
         """Why a segment failed, as far as the state at the failure says."""
         t, x = float(sol.t[-1]), sol.y[:, -1]
@@ -236,15 +267,20 @@ class HybridRun:
         return ""
 
     def _method(self, modes: list[ContactMode], method: str) -> str:
-        """The segment's method, but a stiff-capable one while a 2-D slip launches from rest.
+        """The segment's method, but a stiff-capable one while a 2-D slip launches from rest or comes to rest.
 
         Near v_t = 0 the direction of 2-D Coulomb friction relaxes at a rate ∝ μ F/(m |v_t|)
         (m: the arm's smallest tangential inertia): stiff for an explicit method until the
-        slip has grown, worst when the push is just at the cone (thousands of tiny steps).
-        LSODA switches to BDF while that lasts; the segment ends at the next event.
+        slip has grown, worst when the push is just at the cone (thousands of tiny steps), and
+        again as a slide comes to rest (its last 50 ms took the 5-DOF writer's DOP853 7265 calls,
+        LSODA 899). LSODA switches to BDF while that lasts; the segment ends at the next event.
+        A slide coming to rest is seen by its explicit steps collapsing (``resting``,
+        :meth:`_collapse_check`).
         """
-        if method not in IMPLICIT and any(m.from_rest and len(m.slip) == 2 and not m.stuck for m in modes):
+        if method not in IMPLICIT and _launching(modes):
             return LAUNCH_METHOD
+        if method not in IMPLICIT and method not in FIXED and self.resting:  # the slide coming to rest: the same
+            return self.resting
         return method
 
     def _max_step(self, modes: list[ContactMode], method: str) -> float:
@@ -279,3 +315,13 @@ class HybridRun:
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T}
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _sliding_2d(modes: list[ContactMode]) -> bool:
+    """Does a contact slide with 2-D friction (its direction stiff near rest)?"""
+    return any(m.touching and not m.stuck and len(m.slip) == 2 for m in modes)
+
+
+def _launching(modes: list[ContactMode]) -> bool:
+    """Does a 2-D slip start from rest (its direction stiff until the slip has grown)?"""
+    return any(m.from_rest and len(m.slip) == 2 and not m.stuck for m in modes)

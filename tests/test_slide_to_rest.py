@@ -1,0 +1,42 @@
+"""A 2-D slide coming to rest: DOP853's steps collapse, the rest of the mode runs on LSODA (contactdyn.hybrid)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from contactdyn import hybrid, simulate
+from contactdyn.events import StepCollapse
+
+
+def test_step_collapse_fires_at_the_end_of_the_counted_short_step():
+    """+1 until the end of the 3rd step shorter than ¼ of the longest so far, −1 from there on; values asked
+    inside a step (root location) neither count nor move it."""
+    watch = StepCollapse(0.25, 3)
+    ends = [0.0, 1.0, 2.0, 2.2, 2.3, 2.8, 2.9, 3.0]  # steps 1, 1, 0.2, 0.1, 0.5, 0.1, 0.1
+    values = []
+    for t in ends:
+        values.append(watch(t, np.zeros(1)))
+        assert watch(t - 0.01, np.zeros(1)) == (1.0 if t - 0.01 < 2.9 else -1.0)  # inside the step: no count
+    assert values == [1.0] * 6 + [-1.0, -1.0]
+    assert watch.t_fire == 2.9 and math.isinf(StepCollapse(0.25, 3).t_fire)
+
+
+def test_the_writers_slide_to_rest_finishes_on_lsoda_with_dop853s_result(monkeypatch):
+    """The 5-DOF writer's circle ends at 4.5 s and the pencil's slide comes to rest (|v_t| falls to the stick band
+    at 4.49996 s): its direction relaxes at a rate ∝ 1/|v_t| and DOP853's steps collapse. After COLLAPSE_STEPS
+    short steps the stiffness check sends the rest of that mode to LSODA at RESTING_TOL × the tolerances: a fifth
+    fewer calls, the same events, and the run equals DOP853's alone far within its own error against the rtol
+    1e-11 reference (6e-6 N, 3.4e-10 m; benchmarks/scenes.py)."""
+    switched = simulate("case2_writer5dof")
+    monkeypatch.setattr(hybrid, "COLLAPSE_STEPS", 10**9)  # no collapse is ever seen: DOP853 to the end
+    explicit = simulate("case2_writer5dof")
+    assert switched.stats["resting_switches"] == 1 and "resting_switches" not in explicit.stats
+    assert switched.stats["segments_by_method"]["LSODA"] == explicit.stats["segments_by_method"]["LSODA"] + 1
+    assert switched.stats["rhs_evals"] < 0.85 * explicit.stats["rhs_evals"]  # measured 20236 against 25430
+    kinds = [(e["kind"], e["name"]) for e in explicit.events]
+    assert [(e["kind"], e["name"]) for e in switched.events] == kinds and ("stop", "pencil") in kinds
+    for a, b in zip(switched.events, explicit.events, strict=True):  # the stop: 6e-10 s and 3.1e-8 s from the
+        assert a["t"] == pytest.approx(b["t"], abs=1e-7)  # reference's (|v_t| = 1e-9 m/s, ~1e-10 m/s per 3e-8 s)
+    for key, tol in (("contact.pencil.F_n", 1e-8), ("tip", 1e-10), ("q", 1e-9)):  # measured 4e-11, 1.4e-11, 4.5e-11
+        assert float(np.abs(switched[key] - explicit[key]).max()) < tol
