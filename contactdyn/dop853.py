@@ -326,7 +326,8 @@ class _Core:
             h_step = self.last_t - self.steps.t[-1]
             self.rejected, self.ending = (h_step, self.error_norm(h_step)), True
             return self.nan
-        x = x.copy()  # the core passes a view of its workspace: nothing may keep that past the run
+        if since == _N:  # the step end's (FSAL) call, whose state the events read after the core moved on: a
+            x = x.copy()  # copy (the core passes views of its workspace, which its next stages overwrite)
         self.last_t, self.last_x = t, x
         self.calls += 1
         try:
