@@ -20,7 +20,8 @@ from numba import njit
 
 from .trajectory import move_rows, move_table, ramp_rows, ramp_table
 
-__all__ = ["phi_function", "write_phi", "write_frame", "frame_motion", "frame_constants", "LWA"]
+__all__ = ["phi_function", "write_phi", "write_phi_only", "write_frame", "frame_motion", "joint_terms",
+           "frame_constants", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
