@@ -146,6 +146,7 @@ class HybridRun:
             until = phase.spec.until
             t_end = min(T, until) if isinstance(until, float) else T
             if t_end <= t:
+                self._new_mode()
                 phase = self._next_phase(phase, t, x)
                 continue
             corner = phase.next_corner(t, t_end) if self.at_corners else None
@@ -199,18 +200,19 @@ class HybridRun:
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
-            if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
-                events = [*events, StepBudget(STEP_BUDGET)]
-            if self.resting is None and method in EXPLICIT and method not in FIXED and _sliding_2d(modes):
-                events = [*events, StepCollapse(COLLAPSE_RATIO, COLLAPSE_STEPS)]
+            events += self._watches(modes, method)
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
+            finishing = method == self.resting and method != scene_method and not _launching(modes)  # (to rest)
+            scale = RESTING_TOL if finishing else 1.0
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
-                k = RESTING_TOL if method == self.resting != scene_method else 1.0
-                sol = integrate(rhs, (t, t_end), x, method, rtol=k * self.solver.rtol, atol=k * self.solver.atol,
-                                max_step=self._max_step(modes, method), events=events, first_step=h0, jac=jac)
+                sol = integrate(rhs, (t, t_end), x, method, rtol=scale * self.solver.rtol,
+                                atol=scale * self.solver.atol, max_step=self._max_step(modes, method), events=events,
+                                first_step=h0, jac=jac)
             self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
             if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
-                break  # else a failed launch method: retry with the scene's
+                break  # else a failed launch or finishing method: retry with the scene's
+            if finishing:
+                self.resting = ""  # and keep the scene's for the rest of the mode
         by = self.stats.setdefault("segments_by_method", {})
         by[method] = by.get(method, 0) + 1
         self.stats["steps"] += len(sol.t) - 1
@@ -233,6 +235,16 @@ class HybridRun:
             self.stats["auto_switches"] = self.stats.get("auto_switches", 0) + 1
         else:
             self.next_step = h
+
+    def _watches(self, modes: list[ContactMode], method: str) -> list:
+        """The segment's method-choice events: ``auto``'s step budget, a 2-D slide's collapse watch."""
+        out: list = []
+        if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
+            out.append(StepBudget(STEP_BUDGET))
+        if self.resting is None and method in EXPLICIT and method not in FIXED and _sliding_2d(modes) \
+                and not _launching(modes):
+            out.append(StepCollapse(COLLAPSE_RATIO, COLLAPSE_STEPS))
+        return out
 
     def _collapse_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
         """A 2-D slide's explicit step collapsed to h [s] (events.StepCollapse): LAUNCH_METHOD for the rest of the

@@ -212,7 +212,7 @@ def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, 
     if method in COMPILED:
         return dop853.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
                             first_step=first_step)
-    if method == "LSODA" and lsoda.available():  # solve_ivp's steps without its per-step Python
+    if method == "LSODA" and jac is None and lsoda.available():  # solve_ivp's steps without its per-step Python
         return lsoda.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
                            first_step=first_step)
     return solve_ivp(fun, t_span, y0, method=solver_class(method), rtol=rtol, atol=atol, max_step=max_step,

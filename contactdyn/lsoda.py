@@ -19,7 +19,6 @@ and f(b) must have different signs" in ``solve_ivp``). Verified against ``solve_
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -30,17 +29,11 @@ from .dop853 import Solution, _EventWatch
 
 __all__ = ["solve", "available"]
 
-_JT_FD_FULL = 2  #: the core's Jacobian kind: full, by finite differences (solve_ivp's without jac)
 _ONE_STEP = 5  #: the core's itask: one step, not past rwork[0] = t_end (solve_ivp's)
-#: a run is ended after this many non-finite derivatives in a row: scipy 1.17's core retries such a step for ever
-#: (y' = y² past its blow-up hangs solve_ivp's LSODA); a trial state's occasional nan is rejected by the core
-_STUCK_CALLS = 100
-
-
-class _Stuck(Exception):
-    def __init__(self, t: float):
-        super().__init__(t)
-        self.t = t
+#: a run is ended after this many steps in a row that do not advance t: where the derivatives overflow, scipy 1.17's
+#: core accepts steps of length 0 for ever (y' = y² past its blow-up hangs solve_ivp's LSODA); a step shorter than
+#: t's resolution is otherwise rare (a handful in a row where its steps collapse)
+_STALLED_STEPS = 1000
 
 
 def available() -> bool:
@@ -77,15 +70,16 @@ class _Steps:
         return got
 
     def at(self, i: int, t: float) -> np.ndarray:
-        """The state at t [s] on step i's interpolant (its ends: the step's own states)."""
-        if t == self.t[i]:
-            return self.ys[i]
+        """The state at t [s] on step i's interpolant (its ends: the step's own states; a step shorter than t's
+        resolution: its end's)."""
         if t == self.t[i + 1]:
             return self.ys[i + 1]
+        if t == self.t[i]:
+            return self.ys[i]
         return self.interpolant(i)(t)
 
 
-class DenseSolution:
+class LsodaSolution:
     """y(t) on [t0, t_end] from the steps' interpolants (as ``OdeSolution`` for LSODA: at a step end, the next
     step's)."""
 
@@ -116,15 +110,11 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     own estimate) as in ``solve_ivp``. Events are terminal if their ``terminal`` attribute is."""
     t0, t_end = float(t_span[0]), float(t_span[1])
     y = np.array(y0, float)
-    calls, bad = [0], [0]  # calls made; non-finite derivatives in a row
+    calls = [0]
 
     def counted(t, x):
         calls[0] += 1
-        xd = fun(t, x)
-        bad[0] = 0 if math.isfinite(xd.dot(xd)) else bad[0] + 1
-        if bad[0] >= _STUCK_CALLS:
-            raise _Stuck(t)
-        return xd
+        return fun(t, x)
 
     integ = _ode.lsoda(rtol=rtol, atol=atol, max_step=0.0 if max_step == np.inf else max_step,
                        first_step=first_step or 0.0)
@@ -134,16 +124,21 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     steps, watch = _Steps(t0, y.copy()), _EventWatch(events or [], t0, y)
     t, status, message = t0, 0, "The solver successfully reached the end of the integration interval."
     work = y.copy()  # the core's state array, which it updates in place
+    stalled = 0  # steps in a row that did not advance t
     while t < t_end:
-        try:
-            work, t = integ.run(counted, None, work, t, t_end, (), ())
-        except _Stuck as stuck:
-            status, message = -1, (f"LSODA (compiled): the right-hand side was not finite in {_STUCK_CALLS} calls "
-                                   f"in a row at t = {stuck.t:.9g} s")
+        t_old = t
+        work, t = integ.run(counted, None, work, t, t_end, (), ())
+        stalled = stalled + 1 if t == t_old else 0
+        if stalled >= _STALLED_STEPS:
+            status, message = -1, (f"LSODA (compiled): {_STALLED_STEPS} steps in a row did not advance t = {t:.9g} s "
+                                   "(derivatives that overflow there?)")
             break
         if not integ.success:
             why = integ.messages.get(integ.istate, f"istate {integ.istate}")
             status, message = -1, f"LSODA (compiled): {why} at t = {t:.9g} s"
+            break
+        if not np.isfinite(work).all():  # the core accepts a step from a nan derivative and carries it on
+            status, message = -1, f"LSODA (compiled): the state is not finite at t = {t:.9g} s"
             break
         y = work.copy()
         steps.add(t, y, integ.rwork, integ.iwork)
@@ -155,7 +150,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
 
 def _solution(steps: _Steps, watch: _EventWatch, status: int, message: str, calls: int) -> Solution:
     t_stop = watch.hits[-1][0] if status == 1 else steps.t[-1]
-    dense = DenseSolution(steps, t_stop)
+    dense = LsodaSolution(steps, t_stop)
     ts, ys = np.array(steps.t), np.column_stack(steps.ys)
     if status == 1:
         ts[-1] = t_stop

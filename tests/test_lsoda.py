@@ -70,10 +70,43 @@ def test_a_crossing_within_the_interpolation_error_of_a_step_start_is_located():
 
 
 def test_a_blow_up_ends_the_run_with_its_time():
-    """y' = y² from y(0) = 1 blows up at t = 1: past it every derivative overflows and scipy's core retries for
-    ever (solve_ivp's LSODA hangs there); the run ends with status −1 and says where."""
+    """y' = y² from y(0) = 1 blows up at t = 1: past it the derivatives overflow and scipy's core accepts steps of
+    length 0 for ever (solve_ivp's LSODA hangs there); the run ends with status −1 and says where."""
     with np.errstate(over="ignore", invalid="ignore"):
         got = lsoda.solve(lambda t, y: y * y, (0.0, 2.0), np.array([1.0]), rtol=1e-8, atol=1e-10)
     assert got.status == -1 and not got.success
-    assert "not finite" in got.message and "t = 0.99999" in got.message
+    assert "did not advance" in got.message and "t = 0.99999" in got.message
     assert 0.999 < got.t[-1] <= 1.0
+
+
+def test_a_nan_derivative_ends_the_run_where_the_state_turns_nan():
+    """One nan derivative (a trial state the model cannot solve): scipy's core accepts the step and carries the nan
+    on to the end, reporting success (as solve_ivp's LSODA does); here the run ends there with status −1."""
+    calls = [0]
+
+    def once_nan(t, y):
+        calls[0] += 1
+        return np.array([np.nan]) if calls[0] == 30 else -y
+
+    got = lsoda.solve(once_nan, (0.0, 1.0), np.array([1.0]), rtol=1e-8, atol=1e-10)
+    assert got.status == -1 and "not finite" in got.message
+    assert got.t[-1] < 1.0 and np.all(np.isfinite(got.y))
+
+
+def test_an_event_in_a_step_shorter_than_t_resolution_is_located_at_its_end():
+    """At t = 1e6 s a step of 1e-11 s is below t's resolution (1.2e-10 s): such a step has t_old = t. An event
+    crossing in it is located at t (no bracket to search), with the step's end state, where it has crossed."""
+    t0 = 1e6
+
+    def shrinking(t, y):  # y' = −1e-3 / y: y reaches 0 at t0 + 5e-4 s, its steps collapsing
+        return np.array([-1e-3 / y[0]]) if y[0] > 0 else np.array([np.nan])
+
+    kw = dict(rtol=1e-10, atol=1e-14)
+    steps = lsoda.solve(shrinking, (t0, t0 + 1.0), np.array([1e-3]), **kw).sol.steps
+    k = next(k for k in range(len(steps.history))
+             if steps.t[k + 1] == steps.t[k] and steps.ys[k + 1][0] < steps.ys[k][0])
+    level = 0.5 * (steps.ys[k][0] + steps.ys[k + 1][0])
+    got = lsoda.solve(shrinking, (t0, t0 + 1.0), np.array([1e-3]), events=[event(lambda t, y: y[0] - level, True, -1)],
+                      **kw)
+    assert got.status == 1 and got.t[-1] == steps.t[k] == got.t_events[0][0]
+    assert got.y[0, -1] == steps.ys[k + 1][0] < level

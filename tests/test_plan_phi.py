@@ -30,13 +30,14 @@ def test_frame_motion_is_pinocchios_frame_jacobian_acceleration_and_placement(na
     data = model.createData()
     rng = np.random.default_rng(len(name))
     frames = range(model.nframes)
-    for _ in range(3):
+    views = {fid: (joint_terms(model, data, fid), frame_constants(model, fid)) for fid in frames}  # read once, as
+    for _ in range(3):  # the plans do: Pinocchio's data updated in place
         lo, hi = np.clip(model.lowerPositionLimit, -3.0, 3.0), np.clip(model.upperPositionLimit, -3.0, 3.0)
         q = pin.normalize(model, rng.uniform(lo, hi))
         v = rng.normal(size=model.nv)
         pin.computeAllTerms(model, data, q, v)
         for fid in frames:
-            J6, a6, p, R = frame_motion(*joint_terms(model, data, fid), *frame_constants(model, fid))
+            J6, a6, p, R = frame_motion(*views[fid][0], *views[fid][1])
             pin.updateFramePlacement(model, data, fid)
             J_ref = pin.getFrameJacobian(model, data, fid, LWA).reshape(6, model.nv)
             a_ref = pin.getFrameClassicalAcceleration(model, data, fid, LWA).vector

@@ -7,6 +7,7 @@ import pytest
 
 from contactdyn import hybrid, simulate
 from contactdyn.events import StepCollapse
+from contactdyn.integrators import integrate
 
 
 def test_step_collapse_fires_at_the_end_of_the_counted_short_step():
@@ -40,3 +41,28 @@ def test_the_writers_slide_to_rest_finishes_on_lsoda_with_dop853s_result(monkeyp
         assert a["t"] == pytest.approx(b["t"], abs=1e-7)  # reference's (|v_t| = 1e-9 m/s, ~1e-10 m/s per 3e-8 s)
     for key, tol in (("contact.pencil.F_n", 1e-8), ("tip", 1e-10), ("q", 1e-9)):  # measured 4e-11, 1.4e-11, 4.5e-11
         assert float(np.abs(switched[key] - explicit[key]).max()) < tol
+
+
+def test_where_lsoda_fails_to_finish_the_slide_the_scene_method_does_it_once_for_the_mode(monkeypatch):
+    """LSODA made to fail whenever it finishes a slide: the segment is redone by the scene's method and the rest of
+    the mode stays on it (no second switch, no second try), the run ends with the same events as DOP853's alone;
+    the launches' LSODA segments never run at the finishing tolerance."""
+    rtol = 1e-7  # the scene's
+    tries = []
+
+    def failing_to_finish(fun, span, y0, method, **kw):
+        if method == "LSODA":
+            tries.append(kw["rtol"])
+        if method == "LSODA" and kw["rtol"] < rtol:  # finishing a slide (RESTING_TOL × the scene's)
+            sol = integrate(fun, (span[0], span[0] + 1e-4), y0, method, **{**kw, "events": None})
+            sol.status, sol.message = -1, "made to fail"
+            return sol
+        return integrate(fun, span, y0, method, **kw)
+
+    monkeypatch.setattr(hybrid, "integrate", failing_to_finish)
+    got = simulate("case2_writer5dof")
+    assert got.stats["resting_switches"] == 1
+    assert tries.count(hybrid.RESTING_TOL * rtol) == 1 and tries.count(rtol) == 2  # one finish tried; the launches
+    monkeypatch.setattr(hybrid, "COLLAPSE_STEPS", 10**9)
+    explicit = simulate("case2_writer5dof")
+    assert [(e["kind"], e["name"]) for e in got.events] == [(e["kind"], e["name"]) for e in explicit.events]
