@@ -221,7 +221,7 @@ class StepBudget:
 class StepCollapse:
     """A 2-D slide's guard: a terminal event at the end of the ``count``-th step shorter than ``ratio`` times the
     longest of the segment so far (the hybrid loop then checks whether a stiff mode holds the step: a slide
-    coming to rest, its direction relaxing at a rate ∝ 1/|v_t|; :meth:`~contactdyn.hybrid.HybridRun._method`).
+    coming to rest, its direction relaxing at a rate ∝ 1/|v_t|; :meth:`~contactdyn.hybrid.HybridRun._collapse_check`).
     Called at the step ends with increasing t, as :class:`StepBudget`."""
 
     terminal = True

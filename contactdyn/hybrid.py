@@ -71,7 +71,7 @@ LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest or co
 COLLAPSE_RATIO, COLLAPSE_STEPS = 1.0 / 8.0, 50
 #: [-] LAUNCH_METHOD finishing a slide that comes to rest runs at this × the scene's tolerances: its error is then
 #: about DOP853's at the scene's own (5-DOF writer against its rtol 1e-11 reference: tip 1.1e-9 m at 1×, 3.4e-10 m
-#: at 0.1×, as DOP853 alone); where it fails there, the scene's method takes the segment over
+#: at 0.1×, as DOP853 alone); where it fails there, the scene's method takes over for the rest of the mode
 RESTING_TOL = 0.1
 #: [-] an explicit step while chain ends relax after a separation is at most this × their time constant
 #: b / k: the relaxation is then resolved, and so are the gap and the re-touch located on it (at 1e-2 s
@@ -202,7 +202,8 @@ class HybridRun:
             events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
             events += self._watches(modes, method)
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
-            finishing = method == self.resting and method != scene_method and not _launching(modes)  # (to rest)
+            # LSODA finishing a slide that comes to rest (HybridRun._collapse_check): at RESTING_TOL × the tolerances
+            finishing = method == self.resting and method != scene_method and not _launching(modes)
             scale = RESTING_TOL if finishing else 1.0
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
                 sol = integrate(rhs, (t, t_end), x, method, rtol=scale * self.solver.rtol,
