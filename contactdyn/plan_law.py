@@ -419,7 +419,7 @@ def operational_command(plan):
         ref = reference_at(s, phase, t, x) if referenced else None
         set_points = [ramp.at(t)[0] for ramp in ramps]  # F_d [N]
         J = Js[tf]
-        if orient:  # the 6 rows of the tip's Jacobian and J̇q̇ (φ holds the linear 3: the same bits)
+        if orient:  # the 6 rows of the tip's Jacobian and J̇q̇ (φ holds the linear 3, to rounding: plan_phi)
             R_tip = placement(model, data, fid).rotation
             J_tip = jacobian(model, data, fid, LWA).reshape(6, nv)
             drift_tip = acceleration(model, data, fid, LWA).vector

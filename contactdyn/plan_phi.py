@@ -4,10 +4,10 @@
     e = [x, p_f, ṗ_f per frame f, the reference's and force ramps' time terms, 1]
 
 Per call: Pinocchio's ``computeAllTerms`` at (q, q̇); everything else is written into one buffer by one
-compiled call, :func:`write_phi`, the first frame's terms included: its Jacobian, J̇q̇, position and rotation
-from its joint's placement and motion and the joint Jacobians (:func:`frame_motion`, as Pinocchio's
-``getFrameJacobian`` and ``getFrameClassicalAcceleration`` in LOCAL_WORLD_ALIGNED, to rounding; two binding
-calls fewer). A further frame's terms come from those two Pinocchio calls, written by :func:`write_frame`.
+compiled call, :func:`write_phi`, the first frame's terms included. A frame's Jacobian, J̇q̇, position and
+rotation come from its joint's placement and motion and the joint Jacobians (:func:`frame_motion`, as
+Pinocchio's ``getFrameJacobian`` and ``getFrameClassicalAcceleration`` in LOCAL_WORLD_ALIGNED, to rounding;
+two binding calls fewer); a further frame's are written by :func:`write_frame` after Pinocchio's call.
 A compiled caller (:mod:`contactdyn.plan_kernel`) runs :func:`write_phi` and its own call in one function.
 Units: H [kg·m²], h, g [N·m or N], p [m], ṗ [m/s], J̇q̇ [m/s²].
 """
@@ -44,13 +44,14 @@ def phi_function(plan):
     phi = np.zeros(plan.P.shape[1])
     phi[-1] = 1.0  # e's trailing 1
     Js = tuple(phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J)
-    compute, jacobian, accel = pin.computeAllTerms, pin.getFrameJacobian, pin.getFrameClassicalAcceleration
+    compute = pin.computeAllTerms
     g = data.g if plan.with_g else np.zeros(0)
     terms = (data.M, data.nle, g, *joint_terms(model, data, fids[0]))
     #: per frame: where x's v, its J (3 rows), J̇q̇, p and ṗ go in φ; the first frame's also where h (then g) and x go
     ats = [np.array([nQ, plan.i_J[f], plan.i_dr[f], plan.i_e + plan.e_frame[f]]
                     + ([plan.i_h, plan.i_e] if f == 0 else []), dtype=np.intp) for f in range(len(fids))]
-    more = [(fids[f], data.oMf[fids[f]].translation, ats[f]) for f in range(1, len(fids))]
+    #: the further frames: their joints' views, their constants, where their terms go
+    more = [(joint_terms(model, data, fids[f]), frame_constants(model, fids[f]), ats[f]) for f in range(1, len(fids))]
     tables = (ats[0], *_time_tables(plan), *frame_constants(model, fids[0]))
     #: a law that reads the tip's orientation: the tip's 6-row Jacobian, J̇q̇ (linear, angular) and rotation of the
     #: last call
@@ -59,11 +60,11 @@ def phi_function(plan):
 
     def pinocchio(x):
         compute(model, data, x[:nv], x[nQ:nQ + nv])
-        for f, (fid, p, at) in enumerate(more, start=1):
-            J6, a6 = jacobian(model, data, fid, LWA).reshape(6, nv), accel(model, data, fid, LWA).vector
+        for f, (joint, constants, at) in enumerate(more, start=1):
+            J6, a6, p, R_f = frame_motion(*joint, *constants)
             write_frame(phi, J6, a6, p, x, at)
             if f == tip:
-                tip6[:] = J6, a6, data.oMf[fid].rotation
+                tip6[:] = J6, a6, R_f
 
     H, h, g, R, pj, vj, aj, Jw = terms
     at, moves, move_slots, ramps, ramp_slots, frame, support = tables
@@ -189,8 +190,8 @@ def frame_motion(R, pj, vj, aj, Jw, frame, support):
 @njit(cache=True)
 def write_frame(phi, J6, a6, p, x, at):
     """φ's terms of one frame: its J's translation rows (3, nv) from at[1], J̇q̇'s linear part [m/s²] from at[2],
-    p [m] and ṗ = J v [m/s] from at[3] (J6, a6: Pinocchio's 6-row Jacobian and classical acceleration; v:
-    x[at[0]:at[0] + nv])."""
+    p [m] and ṗ = J v [m/s] from at[3] (J6, a6: the frame's 6-row Jacobian and classical acceleration,
+    :func:`frame_motion`; v: x[at[0]:at[0] + nv])."""
     nv = J6.shape[1]
     for r in range(3):
         phi[at[2] + r] = a6[r]

@@ -156,9 +156,9 @@ def test_a_call_writes_phi_in_place_and_phi_at_returns_its_own_array():
 
 @pytest.mark.parametrize("scene, duration", [("b1", 0.3), ("case2_writer_motors", 1.0)])
 def test_a_contact_on_another_frame_than_the_tip_runs_compiled_as_the_readable_model(scene, duration):
-    """The contact on link2's frame, the controller on the tip's: φ carries two frames (the second written by
-    plan_phi.write_frame after Pinocchio's calls for it), on the plain plan (B1) and in the motors' kernel
-    (writer_motors' task PD through its DC motors); the run is the readable model's."""
+    """The contact on link2's frame, the controller on the tip's: φ carries two frames (the second's terms by
+    plan_phi.frame_motion after Pinocchio's call, written by write_frame), on the plain plan (B1) and in the
+    motors' kernel (writer_motors' task PD through its DC motors); the run is the readable model's."""
     overrides = {"duration": duration, "contact.tip.frame": "link2"}
     compiled_system = System(load_scene(scene, overrides))
     compiled = run_system(compiled_system)
