@@ -336,5 +336,6 @@ def _sliding_2d(modes: list[ContactMode]) -> bool:
 
 
 def _launching(modes: list[ContactMode]) -> bool:
-    """Does a 2-D slip start from rest (its direction stiff until the slip has grown)?"""
+    """Does a 2-D slip start from rest (its direction stiff until the slip has grown)? (The loop's rule as it was:
+    unlike :func:`~contactdyn.friction.launching` it also counts a contact that separated while launching.)"""
     return any(m.from_rest and len(m.slip) == 2 and not m.stuck for m in modes)
