@@ -44,10 +44,11 @@ TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
 #: compiled function's call costs ~0.06 µs per argument): float arrays, then int arrays, by these indices
 P_VAL, M_, U_VAL, U_C, L_, L_TAU, D_A, D_F, D_Z, ROTOR, D_CTL, K_NULL, F_FF = range(13)  # floats
 T_MOVES, T_R, T_CIRCLE, T_TERMS, T_START, T_RAMPS = range(13, 19)  # floats: the time part's tables
-PHI_MOVES, PHI_RAMPS, PHI_FRAME = 19, 20, 21  # floats: φ's time tables, its first frame (plan_phi.write_phi)
-P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(22, 29)  # ints (P: CSR values, columns, row starts)
-U_COL, U_ROW = 29, 30  # ints: the state map's U_x by rows (U_VAL its values, U_C its constant column)
-PHI_AT, PHI_MSLOTS, PHI_RSLOTS, PHI_SUPPORT = 31, 32, 33, 34  # ints: φ's layout, time slots, first frame's support
+#: floats: φ's time tables, its first frame, the robot's table (plan_phi.write_phi, contactdyn.rigid_body)
+PHI_MOVES, PHI_RAMPS, PHI_FRAME, PHI_RIGID = 19, 20, 21, 22
+P_COL, P_ROW, INTS, FRAMES, FORCES, COLS, REACH = range(23, 30)  # ints (P: CSR values, columns, row starts)
+U_COL, U_ROW = 30, 31  # ints: the state map's U_x by rows (U_VAL its values, U_C its constant column)
+PHI_AT, PHI_MSLOTS, PHI_RSLOTS, PHI_SUPPORT = 32, 33, 34, 35  # ints: φ's layout, time slots, first frame's support
 #: INTS, in this order (TIMED: the tip law's time part is computed in the call, plan_law.write_time_part, from
 #: the reference's tables T_* of kind T_KIND and the ramps, F_d written from u[I_SET])
 M, NQ, NV, I_H, I_J, I_DR, TIP, U_F, ZS, SWAP, N_LIM, O_Y0, O_Y1, X_Z0, X_Z1, W0, KIND, O_G, TIMED, I_SET, T_KIND = \
@@ -211,7 +212,7 @@ def call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi, u, fb, ib, out):
     right-hand side."""
     write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, vector_of(ib, ib, PHI_AT), matrix_of(fb, ib, PHI_MOVES),
               vector_of(ib, ib, PHI_MSLOTS), matrix_of(fb, ib, PHI_RAMPS), vector_of(ib, ib, PHI_RSLOTS),
-              vector_of(fb, ib, PHI_FRAME), vector_of(ib, ib, PHI_SUPPORT))
+              vector_of(fb, ib, PHI_FRAME), vector_of(ib, ib, PHI_SUPPORT), matrix_of(fb, ib, PHI_RIGID))
     return call(t, phi, x, u, fb, ib, out)
 
 
@@ -364,5 +365,5 @@ def _tip_law_constants(plan, ctl, meta, reach, inputs) -> tuple[np.ndarray, np.n
 
 def pack_with_phi(plan, floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
     """:func:`pack` of a call's constants followed by φ's layout and time tables (:func:`call_at`)."""
-    at, moves, move_slots, ramps, ramp_slots, frame, support = plan.phi.tables
-    return pack([*floats, moves, ramps, frame], [*ints, at, move_slots, ramp_slots, support])
+    at, moves, move_slots, ramps, ramp_slots, frame, support, rigid = plan.phi.tables
+    return pack([*floats, moves, ramps, frame, rigid], [*ints, at, move_slots, ramp_slots, support])

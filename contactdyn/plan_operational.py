@@ -38,12 +38,12 @@ __all__ = ["call", "call_at", "operational_kernel_of"]
 
 #: the constants of a plan's call in :func:`~contactdyn.plan_kernel.pack`'s two buffers, by these indices
 P_VAL, D_CTL, TILT_F, TILT_T, TILT_BODY, RATES_F, AXES, FORCED, KP, KD, TOOL_AXIS, TARGET, SCALARS = range(13)
-#: floats of :func:`call_at`: the reference's tables (plan_law.reference_tables), the force ramps, φ's time tables
-#: and its first frame in its joint's (plan_phi.write_phi)
-REF_MOVES, REF_R, REF_CIRCLE, REF_TERMS, REF_START, RAMPS, PHI_MOVES, PHI_RAMPS, PHI_FRAME = range(13, 22)
-P_COL, P_ROW, INTS, TILT_I, RATES_I = range(22, 27)  # ints (P: CSR columns, row starts)
+#: floats of :func:`call_at`: the reference's tables (plan_law.reference_tables), the force ramps, φ's time tables,
+#: its first frame in its joint's and the robot's table (plan_phi.write_phi)
+REF_MOVES, REF_R, REF_CIRCLE, REF_TERMS, REF_START, RAMPS, PHI_MOVES, PHI_RAMPS, PHI_FRAME, PHI_RIGID = range(13, 23)
+P_COL, P_ROW, INTS, TILT_I, RATES_I = range(23, 28)  # ints (P: CSR columns, row starts)
 #: ints of :func:`call_at`: [the reference's kind, −1 none]; φ's layout, time slots and the first frame's support
-REF_KIND, PHI_AT, PHI_MSLOTS, PHI_RSLOTS, PHI_SUPPORT = range(27, 32)
+REF_KIND, PHI_AT, PHI_MSLOTS, PHI_RSLOTS, PHI_SUPPORT = range(28, 33)
 
 
 @njit(cache=True)
@@ -143,7 +143,8 @@ def call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi, fb, ib, out):
     J6, a6, R_tip = write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, vector_of(ib, ib, PHI_AT),
                               matrix_of(fb, ib, PHI_MOVES), vector_of(ib, ib, PHI_MSLOTS),
                               matrix_of(fb, ib, PHI_RAMPS), vector_of(ib, ib, PHI_RSLOTS),
-                              vector_of(fb, ib, PHI_FRAME), vector_of(ib, ib, PHI_SUPPORT))
+                              vector_of(fb, ib, PHI_FRAME), vector_of(ib, ib, PHI_SUPPORT),
+                              matrix_of(fb, ib, PHI_RIGID))
     kind = vector_of(ib, ib, REF_KIND)[0]
     ref = np.empty(0) if kind < 0 else reference_of(t, kind, matrix_of(fb, ib, REF_MOVES), matrix_of(fb, ib, REF_R),
                                                      vector_of(fb, ib, REF_CIRCLE), matrix_of(fb, ib, REF_TERMS),

@@ -3,8 +3,10 @@
     φ = [H (column by column), J_f (3 rows), J̇q̇_f per frame f, h, (g), e],
     e = [x, p_f, ṗ_f per frame f, the reference's and force ramps' time terms, 1]
 
-Per call: Pinocchio's ``computeAllTerms`` at (q, q̇); everything else is written into one buffer by one
-compiled call, :func:`write_phi`, the first frame's terms included. A frame's Jacobian, J̇q̇, position and
+Per call: the robot's terms at (q, q̇), computed in the compiled call :func:`write_phi` itself for a plan of one
+frame on a robot of revolute and prismatic joints (:mod:`contactdyn.rigid_body`, written into Pinocchio's
+data), else by Pinocchio's ``computeAllTerms``; everything else is written into one buffer by
+:func:`write_phi`, the first frame's terms included. A frame's Jacobian, J̇q̇, position and
 rotation come from its joint's placement and motion and the joint Jacobians (:func:`frame_motion`, as
 Pinocchio's ``getFrameJacobian`` and ``getFrameClassicalAcceleration`` in LOCAL_WORLD_ALIGNED, to rounding;
 two binding calls fewer); a further frame's are written by :func:`write_frame` after Pinocchio's call.
@@ -18,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
+from .rigid_body import NO_TABLE, rigid_table, rigid_terms
 from .trajectory import move_rows, move_table, ramp_rows, ramp_table
 
 __all__ = ["phi_function", "write_phi", "write_phi_only", "write_frame", "frame_motion", "joint_terms",
@@ -30,11 +33,12 @@ def phi_function(plan):
     """phi(t, x) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x.
 
     φ and the Jacobians are views of one buffer the next call overwrites (``plan.phi_at`` hands out copies).
-    Attributes for a compiled caller: ``phi.pinocchio(x)`` runs Pinocchio's calls (further frames' terms
-    written), ``phi.terms`` = (H, h, g, R, p_j, v_j, a_j, J_w): the views of Pinocchio's data :func:`write_phi`
-    reads (Pinocchio keeps their memory for its lifetime), ``phi.buffer`` and its Jacobians' views
+    Attributes for a compiled caller: ``phi.pinocchio(x)`` runs Pinocchio's calls (none where :func:`write_phi`
+    computes the robot's terms; further frames' terms written), ``phi.terms`` = (H, h, g, R, p_j, v_j, a_j, J_w):
+    the views of Pinocchio's data :func:`write_phi` reads (and then writes first; Pinocchio keeps their memory
+    for its lifetime), ``phi.buffer`` and its Jacobians' views
     ``phi.jacobians``, and ``phi.tables`` (:func:`write_phi`'s at, moves, move_slots, ramps, ramp_slots, frame,
-    support). ``plan.tip6`` = [J (6, nv), J̇q̇ (6), R] of the tip at the last call, for a law reading its
+    support, rigid). ``plan.tip6`` = [J (6, nv), J̇q̇ (6), R] of the tip at the last call, for a law reading its
     orientation.
     """
     s = plan.system
@@ -44,22 +48,28 @@ def phi_function(plan):
     phi = np.zeros(plan.P.shape[1])
     phi[-1] = 1.0  # e's trailing 1
     Js = tuple(phi[i:i + 3 * nv].reshape(3, nv) for i in plan.i_J)
-    compute = pin.computeAllTerms
     g = data.g if plan.with_g else np.zeros(0)
     terms = (data.M, data.nle, g, *joint_terms(model, data, fids[0]))
-    #: per frame: where x's v, its J (3 rows), J̇q̇, p and ṗ go in φ; the first frame's also where h (then g) and x go
+    #: the robot's terms computed in write_phi (contactdyn.rigid_body) where it can, for one frame (further frames'
+    #: terms are written from Python between Pinocchio's call and the plan's); else Pinocchio's call
+    rigid = rigid_table(model) if len(fids) == 1 else None
+    compute = pin.computeAllTerms if rigid is None else None
+    #: per frame: where x's v, its J (3 rows), J̇q̇, p and ṗ go in φ; the first frame's also where h (then g) and x go,
+    #: and its joint
     ats = [np.array([nQ, plan.i_J[f], plan.i_dr[f], plan.i_e + plan.e_frame[f]]
-                    + ([plan.i_h, plan.i_e] if f == 0 else []), dtype=np.intp) for f in range(len(fids))]
+                    + ([plan.i_h, plan.i_e, model.frames[fids[0]].parentJoint] if f == 0 else []), dtype=np.intp)
+           for f in range(len(fids))]
     #: the further frames: their joints' views, their constants, where their terms go
     more = [(joint_terms(model, data, fids[f]), frame_constants(model, fids[f]), ats[f]) for f in range(1, len(fids))]
-    tables = (ats[0], *_time_tables(plan), *frame_constants(model, fids[0]))
+    tables = (ats[0], *_time_tables(plan), *frame_constants(model, fids[0]), NO_TABLE if rigid is None else rigid)
     #: a law that reads the tip's orientation: the tip's 6-row Jacobian, J̇q̇ (linear, angular) and rotation of the
     #: last call
     tip6 = plan.tip6 = [None, None, None]
     tip = plan.tip_frame if plan.phase.controller.reads_orientation else None
 
     def pinocchio(x):
-        compute(model, data, x[:nv], x[nQ:nQ + nv])
+        if compute is not None:
+            compute(model, data, x[:nv], x[nQ:nQ + nv])
         for f, (joint, constants, at) in enumerate(more, start=1):
             J6, a6, p, R_f = frame_motion(*joint, *constants)
             write_frame(phi, J6, a6, p, x, at)
@@ -67,16 +77,16 @@ def phi_function(plan):
                 tip6[:] = J6, a6, R_f
 
     H, h, g, R, pj, vj, aj, Jw = terms
-    at, moves, move_slots, ramps, ramp_slots, frame, support = tables
+    at, moves, move_slots, ramps, ramp_slots, frame, support, table = tables
 
     def phi_of(t, x):
         pinocchio(x)
         if tip == 0:
             tip6[:] = write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots,
-                                frame, support)
+                                frame, support, table)
         else:
             write_phi_only(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots, frame,
-                           support)
+                           support, table)
         return phi, Js
 
     phi_of.pinocchio, phi_of.terms, phi_of.buffer, phi_of.tables = pinocchio, terms, phi, tables
@@ -115,11 +125,15 @@ def _time_tables(plan) -> tuple:
 
 
 @njit(cache=True)
-def write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots, frame, support):
-    """φ at (t, x): H column by column from 0, h (then g, if any) from at[4], x from at[5], the first frame's
-    terms (:func:`frame_motion` from its joint's R, pj, vj, aj and Jw, :func:`write_frame`), the time terms at
-    t [s] at their slots (:func:`_time_tables`). Returns the first frame's (J (6, nv), J̇q̇ (6), R)."""
+def write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots, frame, support, rigid):
+    """φ at (t, x): the robot's terms first if ``rigid`` has rows (:func:`~contactdyn.rigid_body.rigid_terms`
+    into H, h, g, Jw and the frame's joint at[6]'s R, pj, vj, aj; else Pinocchio's call wrote them), then H column
+    by column from 0, h (then g, if any) from at[4], x from at[5], the first frame's terms (:func:`frame_motion`,
+    :func:`write_frame`), the time terms at t [s] at their slots (:func:`_time_tables`). Returns the first
+    frame's (J (6, nv), J̇q̇ (6), R)."""
     nv = h.size
+    if rigid.shape[0]:
+        rigid_terms(x[:nv], x[at[0]:at[0] + nv], rigid, at[6], H, h, g, R, pj, vj, aj, Jw)
     for j in range(nv):
         for i in range(nv):
             phi[j * nv + i] = H[i, j]
@@ -146,9 +160,10 @@ def write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramp
 
 
 @njit(cache=True)
-def write_phi_only(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots, frame, support):
+def write_phi_only(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots, frame, support,
+                   rigid):
     """:func:`write_phi` for a Python caller that needs no frame terms back (an array handed back costs ~0.1 µs)."""
-    write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots, frame, support)
+    write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots, frame, support, rigid)
 
 
 @njit(cache=True)

@@ -1,0 +1,84 @@
+"""The robot's terms computed in the plan's call (contactdyn.rigid_body) against Pinocchio's computeAllTerms."""
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from contactdyn.rigid_body import rigid_table, rigid_terms
+from contactdyn.robot_catalog import example_robots
+
+URDF = Path(__file__).resolve().parent.parent / "urdf"
+
+
+def _tree() -> pin.Model:
+    """A branched tree of every joint kind the table takes: aligned and unaligned revolute and prismatic joints,
+    two branches off the second joint, a rotated placement, bodies with off-axis centres and full inertias."""
+    model = pin.Model()
+    rng = np.random.default_rng(3)
+    joints = [pin.JointModelRZ(), pin.JointModelPY(), pin.JointModelRevoluteUnaligned(np.array([0.6, 0.0, 0.8])),
+              pin.JointModelPrismaticUnaligned(np.array([0.0, 0.6, 0.8])), pin.JointModelRX()]
+    parents = [0, 1, 2, 2, 4]
+    for k, (joint, parent) in enumerate(zip(joints, parents, strict=True)):
+        placement = pin.SE3(pin.rpy.rpyToMatrix(*rng.uniform(-1, 1, 3)), rng.uniform(-0.3, 0.3, 3))
+        jid = model.addJoint(parent, joint, placement, f"j{k}")
+        A = rng.normal(size=(3, 3))
+        model.appendBodyToJoint(jid, pin.Inertia(rng.uniform(0.2, 2.0), rng.uniform(-0.1, 0.1, 3),
+                                                 A @ A.T + 0.1 * np.eye(3)), pin.SE3.Identity())
+    model.armature = np.array([0.0, 0.01, 0.0, 0.2, 0.05])
+    return model
+
+
+def _models():
+    for path in sorted(URDF.glob("*.urdf")):
+        yield path.stem, pin.buildModelFromUrdf(str(path))
+    yield "manipulator", pin.buildSampleModelManipulator()
+    yield "tree", _tree()
+    robots = example_robots()
+    for name in ("ur5", "panda"):
+        if name in robots:
+            yield name, pin.buildModelFromUrdf(str(robots[name]))
+
+
+@pytest.mark.parametrize("name,model", list(_models()), ids=lambda v: v if isinstance(v, str) else "")
+def test_rigid_terms_are_pinocchios(name, model):
+    """M, nle, g, the joint Jacobians and each joint's placement, v and a at q̈ = 0 as computeAllTerms's, to
+    rounding, at random states (the gravity turned off its axis, so every component enters)."""
+    model.gravity = pin.Motion(np.array([1.3, -2.1, -9.5, 0.0, 0.0, 0.0]))
+    data, ref = model.createData(), model.createData()
+    table = rigid_table(model)
+    assert table is not None
+    nv, nj = model.nv, model.njoints
+    M, nle, g, J = np.zeros((nv, nv)), np.zeros(nv), np.zeros(nv), np.zeros((6, nv))
+    rng = np.random.default_rng(nv)
+    for _ in range(3):
+        q = rng.uniform(-2.0, 2.0, nv)
+        v = 3.0 * rng.normal(size=nv)
+        pin.computeAllTerms(model, ref, q, v)
+        pin.computeGeneralizedGravity(model, data, q)
+        scale = 1.0 + np.abs(ref.M).max() + np.abs(ref.nle).max()
+        for j0 in range(1, nj):
+            R, p, vj, aj = np.zeros((3, 3)), np.zeros(3), np.zeros(6), np.zeros(6)
+            rigid_terms(q, v, table, j0, M, nle, g, R, p, vj, aj, J)
+            assert np.abs(R - ref.oMi[j0].rotation).max() < 1e-14
+            assert np.abs(p - ref.oMi[j0].translation).max() < 1e-14 * (1.0 + np.abs(p).max())
+            assert np.abs(vj - ref.v[j0].vector).max() < 1e-13 * (1.0 + np.abs(vj).max())
+            assert np.abs(aj - ref.a[j0].vector).max() < 1e-13 * (1.0 + np.abs(aj).max())
+        assert np.abs(M - ref.M).max() < 1e-13 * scale, name
+        assert np.abs(nle - ref.nle).max() < 1e-13 * scale, name
+        assert np.abs(g - data.g).max() < 1e-13 * scale, name
+        assert np.abs(J - ref.J).max() < 1e-13 * (1.0 + np.abs(J).max()), name
+
+
+def test_what_rigid_terms_does_not_compute_is_left_to_pinocchio():
+    """A free-flyer, a spherical joint, an unbounded revolute joint (q = (cos, sin)): no table."""
+    assert rigid_table(pin.buildSampleModelHumanoid()) is None
+    model = pin.Model()
+    model.addJoint(0, pin.JointModelRUBZ(), pin.SE3.Identity(), "wheel")
+    assert rigid_table(model) is None
+    model = pin.Model()
+    jid = model.addJoint(0, pin.JointModelRZ(), pin.SE3.Identity(), "a")
+    model.addJoint(jid, pin.JointModelSpherical(), pin.SE3.Identity(), "b")
+    assert rigid_table(model) is None
+    assert rigid_table(pin.Model()) is None  # no joint at all
