@@ -258,7 +258,8 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             return DECLINED
         if time_part is not None:
             time_part(t)
-        pinocchio(x)
+        if pinocchio is not None:
+            pinocchio(x)
         return call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi_buffer, u, fb, ib, out)
 
     return calls(plan, one, one_at)
@@ -303,6 +304,7 @@ def calls(plan, one, one_at=None, rates: bool = False):
 
     kernel.samples = samples
     kernel.at = at if one_at is not None else None
+    kernel.one_at, kernel.layout = one_at, (size, n, m, no)  # for a caller that slices ``out`` itself
     kernel.rates = rates  # the call writes the impulse states' rates itself
     return kernel
 

@@ -207,7 +207,8 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     pinocchio, phi_buffer = plan.phi.pinocchio, plan.phi.buffer
 
     def one_at(t, x, out):  # one, with φ, the reference and the set-points computed in the same compiled call
-        pinocchio(x)
+        if pinocchio is not None:
+            pinocchio(x)
         return call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi_buffer, fb, ib, out)
 
     fused = tf == 0 and (tables is not None or not referenced)  # the tip's J, J̇q̇, R are the first frame's

@@ -33,10 +33,10 @@ def phi_function(plan):
     """phi(t, x) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x.
 
     φ and the Jacobians are views of one buffer the next call overwrites (``plan.phi_at`` hands out copies).
-    Attributes for a compiled caller: ``phi.pinocchio(x)`` runs Pinocchio's calls (none where :func:`write_phi`
-    computes the robot's terms; further frames' terms written), ``phi.terms`` = (H, h, g, R, p_j, v_j, a_j, J_w):
-    the views of Pinocchio's data :func:`write_phi` reads (and then writes first; Pinocchio keeps their memory
-    for its lifetime), ``phi.buffer`` and its Jacobians' views
+    Attributes for a compiled caller: ``phi.pinocchio(x)`` runs Pinocchio's calls (further frames' terms written;
+    None where :func:`write_phi` computes the robot's terms and nothing is left to call), ``phi.terms`` =
+    (H, h, g, R, p_j, v_j, a_j, J_w): the views of Pinocchio's data :func:`write_phi` reads (and then writes
+    first; Pinocchio keeps their memory for its lifetime), ``phi.buffer`` and its Jacobians' views
     ``phi.jacobians``, and ``phi.tables`` (:func:`write_phi`'s at, moves, move_slots, ramps, ramp_slots, frame,
     support, rigid). ``plan.tip6`` = [J (6, nv), J̇q̇ (6), R] of the tip at the last call, for a law reading its
     orientation.
@@ -68,8 +68,7 @@ def phi_function(plan):
     tip = plan.tip_frame if plan.phase.controller.reads_orientation else None
 
     def pinocchio(x):
-        if compute is not None:
-            compute(model, data, x[:nv], x[nQ:nQ + nv])
+        compute(model, data, x[:nv], x[nQ:nQ + nv])
         for f, (joint, constants, at) in enumerate(more, start=1):
             J6, a6, p, R_f = frame_motion(*joint, *constants)
             write_frame(phi, J6, a6, p, x, at)
@@ -80,7 +79,8 @@ def phi_function(plan):
     at, moves, move_slots, ramps, ramp_slots, frame, support, table = tables
 
     def phi_of(t, x):
-        pinocchio(x)
+        if compute is not None:
+            pinocchio(x)
         if tip == 0:
             tip6[:] = write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramps, ramp_slots,
                                 frame, support, table)
@@ -89,7 +89,8 @@ def phi_function(plan):
                            support, table)
         return phi, Js
 
-    phi_of.pinocchio, phi_of.terms, phi_of.buffer, phi_of.tables = pinocchio, terms, phi, tables
+    phi_of.pinocchio = pinocchio if compute is not None else None  # None: nothing to call before write_phi
+    phi_of.terms, phi_of.buffer, phi_of.tables = terms, phi, tables
     phi_of.jacobians = Js
     return phi_of
 
