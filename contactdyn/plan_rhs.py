@@ -68,21 +68,6 @@ def make_rhs(plan):
     at = getattr(kernel, "at", None)  # a kernel writing φ in its own compiled call (contactdyn.plan_kernel)
     written = phi_and_jacobians.buffer, phi_and_jacobians.jacobians  # where it writes φ, declining or not
 
-    if at is not None and not impulses:  # the common case with the fewest Python layers per call
-        one_at, (size, n, m_, no) = kernel.one_at, kernel.layout
-
-        def fused(t, x):
-            out = np.empty(size)
-            if one_at(t, x, out):  # declined: the readable way, on the φ the call wrote
-                xd, z, o = numpy_call(t, x, *written)
-            else:
-                xd, z, o = out[:n], out[n:n + m_], out[n + m_:n + m_ + no]
-            ring[0] = ring[1]
-            ring[1] = ring[2]
-            ring[2] = ring[3]
-            ring[3] = (t, x, z, o)
-            return xd
-
     def rhs(t, x):
         if at is not None:
             got = at(t, x)
@@ -121,7 +106,27 @@ def make_rhs(plan):
             xd = cat((x[nQ:2 * nQ], z[:nQ]))
         return xd, z, o
 
-    return fused if at is not None and not impulses else rhs
+    return _fused(kernel, numpy_call, written, ring) if at is not None and not impulses else rhs
+
+
+def _fused(kernel, numpy_call, written, ring):
+    """make_rhs's right-hand side for a kernel that writes φ in its own compiled call and the impulse rates too:
+    the common case, with the fewest Python layers per call."""
+    one_at, (size, n, m, no) = kernel.one_at, kernel.layout
+
+    def fused(t, x):
+        out = np.empty(size)
+        if one_at(t, x, out):  # declined: the readable way, on the φ the call wrote
+            xd, z, o = numpy_call(t, x, *written)
+        else:
+            xd, z, o = out[:n], out[n:n + m], out[n + m:n + m + no]
+        ring[0] = ring[1]
+        ring[1] = ring[2]
+        ring[2] = ring[3]
+        ring[3] = (t, x, z, o)
+        return xd
+
+    return fused
 
 
 def _friction_terms(plan):
