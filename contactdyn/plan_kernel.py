@@ -32,7 +32,7 @@ from scipy import sparse
 from .controllers import computed_torque as law
 from .linalg import lu_solve, mm, mtv, mv, sparse_dot
 from .plan_law import NO_REFERENCE, CompiledLaw, compiled_law, plan_inputs, write_time_part
-from .plan_phi import write_phi
+from .plan_phi import work_terms, write_phi
 from .plan_probe import affine_map
 
 __all__ = ["fold_solve", "kernel_of", "calls", "call", "call_at", "pack", "pack_with_phi",
@@ -206,11 +206,12 @@ def call(t, phi, x, u, fb, ib, out):
 
 
 @njit(cache=True)
-def call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi, u, fb, ib, out):
-    """:func:`call` at (t, x) after writing φ from Pinocchio's terms (plan_phi.write_phi: H, h, g and the first
-    frame's joint R, pj, vj, aj, Jw; φ's layout, time tables and frame packed in fb, ib): one compiled call per
-    right-hand side."""
-    write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, vector_of(ib, ib, PHI_AT), matrix_of(fb, ib, PHI_MOVES),
+def call_at(t, x, work, phi, u, fb, ib, out):
+    """:func:`call` at (t, x) after computing the robot's terms into ``work`` and φ from them (plan_phi.write_phi,
+    plan_phi.work_terms; φ's layout, time tables, frame and the robot's table packed in fb, ib): one compiled call
+    per right-hand side."""
+    at = vector_of(ib, ib, PHI_AT)
+    write_phi(t, x, *work_terms(work, at[7], at[8]), phi, at, matrix_of(fb, ib, PHI_MOVES),
               vector_of(ib, ib, PHI_MSLOTS), matrix_of(fb, ib, PHI_RAMPS), vector_of(ib, ib, PHI_RSLOTS),
               vector_of(fb, ib, PHI_FRAME), vector_of(ib, ib, PHI_SUPPORT), matrix_of(fb, ib, PHI_RIGID))
     return call(t, phi, x, u, fb, ib, out)
@@ -249,20 +250,20 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             time_part(t)
         return call(t, phi, x, u, fb, ib, out)
 
-    H, h, g, R, pj, vj, aj, Jw = plan.phi.terms
-    pinocchio, phi_buffer = plan.phi.pinocchio, plan.phi.buffer
+    work, phi_buffer, refresh = plan.phi.work, plan.phi.buffer, plan.phi.refresh
 
-    def one_at(t, x, out):  # one, with φ written in the same compiled call (a decline leaves φ written too)
+    def one_at(t, x, out):  # one, with the robot's terms and φ in the same compiled call (a decline leaves φ written)
         if fb is None and not ready():
             plan.phi(t, x)
             return DECLINED
         if time_part is not None:
             time_part(t)
-        if pinocchio is not None:
-            pinocchio(x)
-        return call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi_buffer, u, fb, ib, out)
+        if call_at(t, x, work, phi_buffer, u, fb, ib, out):
+            refresh(x)  # Pinocchio's data at x for the readable way
+            return DECLINED
+        return OK
 
-    return calls(plan, one, one_at)
+    return calls(plan, one, one_at if work is not None else None)
 
 
 def calls(plan, one, one_at=None, rates: bool = False):

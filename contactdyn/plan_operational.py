@@ -31,7 +31,7 @@ from .friction import launching
 from .linalg import lu_solve, mtv
 from .plan_kernel import DECLINED, OK, calls, csr_of, kkt_of, matrix_of, pack_with_phi, vector_of, write_out
 from .plan_law import NO_REFERENCE, reference_of, reference_rows, reference_tables
-from .plan_phi import write_phi
+from .plan_phi import work_terms, write_phi
 from .trajectory import ramp_rows, ramp_table
 
 __all__ = ["call", "call_at", "operational_kernel_of"]
@@ -136,11 +136,12 @@ def call(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
 
 
 @njit(cache=True)
-def call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi, fb, ib, out):
-    """:func:`call` at (t, x) with φ written from Pinocchio's terms (plan_phi.write_phi: H, h, g and the tip's joint
-    R, pj, vj, aj, Jw; the tip the plan's first frame) and the reference and the force set-points at t computed
+def call_at(t, x, work, phi, fb, ib, out):
+    """:func:`call` at (t, x) with φ written from the robot's terms computed here (plan_phi.write_phi, into ``work``:
+    plan_phi.work_terms; the tip the plan's first frame) and the reference and the force set-points at t computed
     here from their packed tables: one compiled call per right-hand side."""
-    J6, a6, R_tip = write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, vector_of(ib, ib, PHI_AT),
+    at = vector_of(ib, ib, PHI_AT)
+    J6, a6, R_tip = write_phi(t, x, *work_terms(work, at[7], at[8]), phi, at,
                               matrix_of(fb, ib, PHI_MOVES), vector_of(ib, ib, PHI_MSLOTS),
                               matrix_of(fb, ib, PHI_RAMPS), vector_of(ib, ib, PHI_RSLOTS),
                               vector_of(fb, ib, PHI_FRAME), vector_of(ib, ib, PHI_SUPPORT),
@@ -203,15 +204,16 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     def one(t, x, phi, out):
         return call(phi, x, fb, ib, *inputs(t), out)
 
-    H, h, g, R, pj, vj, aj, Jw = plan.phi.terms
-    pinocchio, phi_buffer = plan.phi.pinocchio, plan.phi.buffer
+    work, phi_buffer, refresh = plan.phi.work, plan.phi.buffer, plan.phi.refresh
 
-    def one_at(t, x, out):  # one, with φ, the reference and the set-points computed in the same compiled call
-        if pinocchio is not None:
-            pinocchio(x)
-        return call_at(t, x, H, h, g, R, pj, vj, aj, Jw, phi_buffer, fb, ib, out)
+    def one_at(t, x, out):  # one, with the robot's terms, φ, the reference and the set-points in one compiled call
+        if call_at(t, x, work, phi_buffer, fb, ib, out):
+            refresh(x)  # Pinocchio's data at x for the readable way
+            return DECLINED
+        return OK
 
-    fused = tf == 0 and (tables is not None or not referenced)  # the tip's J, J̇q̇, R are the first frame's
+    # the robot's terms computed in the call, and the tip's J, J̇q̇, R are the first frame's
+    fused = work is not None and tf == 0 and (tables is not None or not referenced)
     return calls(plan, one, one_at if fused else None, rates=True)
 
 

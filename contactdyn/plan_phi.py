@@ -23,7 +23,7 @@ from numba import njit
 from .rigid_body import NO_TABLE, rigid_table, rigid_terms
 from .trajectory import move_rows, move_table, ramp_rows, ramp_table
 
-__all__ = ["phi_function", "write_phi", "write_phi_only", "write_frame", "frame_motion", "joint_terms",
+__all__ = ["phi_function", "write_phi", "write_phi_only", "work_terms", "write_frame", "frame_motion", "joint_terms",
            "frame_constants", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
@@ -33,10 +33,11 @@ def phi_function(plan):
     """phi(t, x) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x.
 
     φ and the Jacobians are views of one buffer the next call overwrites (``plan.phi_at`` hands out copies).
-    Attributes for a compiled caller: ``phi.pinocchio(x)`` runs Pinocchio's calls (further frames' terms written;
-    None where :func:`write_phi` computes the robot's terms and nothing is left to call), ``phi.terms`` =
-    (H, h, g, R, p_j, v_j, a_j, J_w): the views of Pinocchio's data :func:`write_phi` reads (and then writes
-    first; Pinocchio keeps their memory for its lifetime), ``phi.buffer`` and its Jacobians' views
+    Attributes for a compiled caller: ``phi.work``, where :func:`write_phi` computes the robot's terms (else
+    None), a buffer for them of the caller's own (:func:`work_terms`: one argument in place of Pinocchio's eight
+    views; ``phi.refresh(x)`` brings Pinocchio's data to x for the readable way after such a call), ``phi.terms``
+    = (H, h, g, R, p_j, v_j, a_j, J_w): the views of Pinocchio's data :func:`write_phi` reads (and, with a rigid
+    table, writes first), ``phi.buffer`` and its Jacobians' views
     ``phi.jacobians``, and ``phi.tables`` (:func:`write_phi`'s at, moves, move_slots, ramps, ramp_slots, frame,
     support, rigid). ``plan.tip6`` = [J (6, nv), J̇q̇ (6), R] of the tip at the last call, for a law reading its
     orientation.
@@ -55,10 +56,10 @@ def phi_function(plan):
     rigid = rigid_table(model) if len(fids) == 1 else None
     compute = pin.computeAllTerms if rigid is None else None
     #: per frame: where x's v, its J (3 rows), J̇q̇, p and ṗ go in φ; the first frame's also where h (then g) and x go,
-    #: and its joint
+    #: its joint, nv and g's size (:func:`work_terms`)
     ats = [np.array([nQ, plan.i_J[f], plan.i_dr[f], plan.i_e + plan.e_frame[f]]
-                    + ([plan.i_h, plan.i_e, model.frames[fids[0]].parentJoint] if f == 0 else []), dtype=np.intp)
-           for f in range(len(fids))]
+                    + ([plan.i_h, plan.i_e, model.frames[fids[0]].parentJoint, nv, g.size] if f == 0 else []),
+                    dtype=np.intp) for f in range(len(fids))]
     #: the further frames: their joints' views, their constants, where their terms go
     more = [(joint_terms(model, data, fids[f]), frame_constants(model, fids[f]), ats[f]) for f in range(1, len(fids))]
     tables = (ats[0], *_time_tables(plan), *frame_constants(model, fids[0]), NO_TABLE if rigid is None else rigid)
@@ -89,8 +90,11 @@ def phi_function(plan):
                            support, table)
         return phi, Js
 
-    phi_of.pinocchio = pinocchio if compute is not None else None  # None: nothing to call before write_phi
     phi_of.terms, phi_of.buffer, phi_of.tables = terms, phi, tables
+    #: a compiled caller's own buffer of the robot's terms where write_phi computes them (one argument for Pinocchio's
+    #: eight views); such a caller leaves Pinocchio's data behind, and refreshes it where it declines
+    phi_of.work = np.zeros(nv * nv + 7 * nv + g.size + 24) if rigid is not None else None
+    phi_of.refresh = lambda x: pin.computeAllTerms(model, data, x[:nv], x[nQ:nQ + nv])
     phi_of.jacobians = Js
     return phi_of
 
@@ -158,6 +162,19 @@ def write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramp
         for k in range(ramp_slots.size):
             phi[ramp_slots[k]] = w[2 * k]
     return J6, a6, Rf
+
+
+@njit(cache=True)
+def work_terms(work, nv, ng):
+    """(H, h, g, R, pj, vj, aj, Jw) as views of a compiled caller's own buffer (:func:`phi_function`'s
+    ``phi.work``), in :func:`write_phi`'s argument order: H (nv, nv), h (nv), g (ng), the joint's R (3, 3), p,
+    v, a (3, 6, 6) and the joint Jacobians (6, nv)."""
+    o = nv * nv
+    H = work[:o].reshape((nv, nv))
+    h, g = work[o:o + nv], work[o + nv:o + nv + ng]
+    o += nv + ng
+    R = work[o:o + 9].reshape((3, 3))
+    return H, h, g, R, work[o + 9:o + 12], work[o + 12:o + 18], work[o + 18:o + 24], work[o + 24:].reshape((6, nv))
 
 
 @njit(cache=True)
