@@ -304,9 +304,17 @@ class _ReadableValues:
         return self.cache(t, x).limit_torque
 
 
-def _turn_margin(v: np.ndarray, r: np.ndarray, band: float) -> float:
-    """The ``turn`` function v·r − ½|v| + v_ε [m/s] of a 2-D slip velocity v (|v| as np.linalg.norm's, √(v·v))."""
-    return float(v @ r) - 0.5 * math.sqrt(float(v @ v)) + band
+def _along(v: np.ndarray, r: tuple[float, ...]) -> float:
+    """v·r [m/s]: a slip velocity (1 or 2 tangent components) along the mode's direction r, in Python floats (an
+    event's value at every step end: a NumPy product of two 2-vectors costs more than the rest of the event)."""
+    vs = v.tolist()
+    return vs[0] * r[0] + vs[1] * r[1] if len(r) == 2 else vs[0] * r[0]
+
+
+def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
+    """The ``turn`` function v·r − ½|v| + v_ε [m/s] of a 2-D slip velocity v (|v| = √(v·v))."""
+    v0, v1 = v.tolist()
+    return v0 * r[0] + v1 * r[1] - 0.5 * math.sqrt(v0 * v0 + v1 * v1) + band
 
 
 def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
@@ -334,9 +342,9 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             watches.append(SlipWatch(lambda t, x, i=ci, mu=fr.mu_s: values.cone_margin(i, mu, t, x), name, fr.mu_s))
             out.append(watches[-1])
             continue
-        r = np.asarray(mode.slip, float)
-        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(values.slip(i, t, x) @ r) - b, "stop", name))
-        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: float(values.slip(i, t, x) @ r) + b, "reverse",
+        r = tuple(float(c) for c in mode.slip)
+        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _along(values.slip(i, t, x), r) - b, "stop", name))
+        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _along(values.slip(i, t, x), r) + b, "reverse",
                                   name))
         if len(r) == 2:
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",

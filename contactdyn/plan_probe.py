@@ -121,6 +121,7 @@ class ProbedModel:
         self.o_Fint = out.add("F_int", len(s.contacts))
         self.o_gap = out.add("gap", len(s.contacts))
         self.o_vt = {c.name: out.add(f"vt.{c.name}", len(c.tangents)) for c in s.contacts}
+        self.vt_slices = [self.o_vt[c.name] for c in s.contacts]  #: the same, by contact index
         self.o_visc = {c.name: out.add(f"visc.{c.name}", len(c.tangents)) for c in s.contacts}
         self.o_iface = {f"{c.name}.{dc.label}": out.add(f"iface.{c.name}.{dc.label}")
                         for c in s.contacts for dc in c.tangent_chains}

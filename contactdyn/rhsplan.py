@@ -174,7 +174,7 @@ class ModePlan(ProbedModel, CompiledKKT):
 
     def slip(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
         """Slip velocity of contact ci in its tangent coordinates [m/s]."""
-        return self.values(t, x)[1][self.o_vt[self.system.contacts[ci].name]]
+        return self.values(t, x)[1][self.vt_slices[ci]]
 
     def cone_margin(self, ci: int, mu_s: float, t: float, x: np.ndarray) -> float:
         """μ_s F − |F_f| [N] of a sticking contact ci: the ``slip`` event's function."""

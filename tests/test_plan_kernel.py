@@ -184,6 +184,11 @@ def test_operational_kernel_declines_a_slide_from_rest_inside_the_stick_band():
     x[system.nQ:2 * system.nQ] = 0.0  # robot and surface at rest: no slip
     assert plan.kernel is not None and plan.kernel(t, x, plan.phi_at(t, x)) is None
     ref = system.evaluate(t, x, plan.modes, plan.phase).xdot
+    elsewhere = x.copy()
+    elsewhere[:system.nv] += 0.1
+    system.evaluate(t, elsewhere, plan.modes, plan.phase)  # Pinocchio's data left at another state
+    # the fused call computes the robot's terms itself and declines; the readable way then reads Pinocchio's data,
+    # which the call brings to x first
     assert np.allclose(plan.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * (1.0 + np.abs(ref).max()))
 
 
