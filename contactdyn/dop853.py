@@ -374,13 +374,14 @@ def _first_step(fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, t_end:
 
 def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, float], y0: np.ndarray, *,
           rtol: float, atol: float, max_step: float = np.inf, first_step: float | None = None,
-          events: Sequence[Callable] | None = None) -> Solution:
+          events: Sequence[Callable] | None = None, step: Callable | None = None) -> Solution:
     """Integrate y' = fun(t, y) over t_span by compiled DOP853, locating the events (``solve_ivp``'s contract).
 
     ``atol`` and ``rtol`` are scalars; ``max_step`` [s] (inf: none) and ``first_step`` [s] (None:
     solve_ivp's estimate) as in ``solve_ivp``. Events are terminal if their ``terminal`` attribute is.
     The steps are solve_ivp's: after a rejection the step shrinks by max(MIN_FACTOR, SAFETY err^(−1/8))
-    and the next step may not grow.
+    and the next step may not grow. ``step``: a compiled step attempt of ``fun``'s (:mod:`contactdyn.plan_steps`)
+    that takes the steps in place of scipy's core, with the same step control.
     """
     if _CORE is None:
         raise SceneError("solver.method", "DOP853C: scipy's compiled DOP853 (scipy.integrate._dop.dopri853, "
@@ -396,6 +397,10 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
         return fun(t, y)
 
     h = _first_step(counted, t0, y0, f0, t_end, max_step, rtol, atol, first_step)
+    if step is not None:
+        steps = _Steps(fun, len(y0), [t0], y0.copy(), f0)
+        ierr, nreject, calls[0] = _stepped(step, fun, steps, watch, t_end, h, rtol, atol, max_step, calls[0])
+        return _solution(steps, watch, ierr, t_end, calls[0], nreject)
     core = _Core(fun, t0, y0, f0, watch, rtol, atol, max_step)
     limit, nreject, ierr = None, 0, 1
     while t_end > core.steps.t[-1]:
@@ -412,12 +417,62 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
             h, limit = limit, None
         else:
             break
-    return _solution(core, watch, ierr, t_end, calls[0], nreject)
+    return _solution(core.steps, watch, ierr, t_end, calls[0] + core.calls, nreject)
 
 
-def _solution(core: _Core, watch: _EventWatch, ierr: int, t_end: float, calls: int, nreject: int) -> Solution:
+def _stepped(step: Callable, fun: Callable, steps: _Steps, watch: _EventWatch, t_end: float, h_abs: float,
+             rtol: float, atol: float, max_step: float, calls: int) -> tuple[int, int, int]:
+    """solve_ivp's DOP853 steps (its RK step control) by ``step`` (a compiled attempt, :mod:`contactdyn.plan_steps`;
+    None where it cannot: then :func:`_attempt` by ``fun``): (the core's ierr, rejections, calls)."""
+    nreject = 0
+    while steps.t[-1] < t_end:
+        t, y, f = steps.t[-1], steps.y_old(len(steps.t) - 1), steps.f_old(len(steps.t) - 1)
+        min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+        h_abs = min(max(h_abs, min_step), max_step)
+        rejected = False
+        while True:
+            if h_abs < min_step:
+                return -3, nreject, calls
+            t_new = min(t + h_abs, t_end)
+            h = t_new - t
+            got = step(t, y, f, h, rtol, atol) or _attempt(fun, t, y, f, h, rtol, atol)
+            calls += _N
+            err, y_new, block = got
+            if err < 1.0:
+                factor = MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** _EXPONENT)
+                h_abs = abs(h) * (min(1.0, factor) if rejected else factor)
+                break
+            h_abs = abs(h) * max(MIN_FACTOR, SAFETY * err ** _EXPONENT)
+            rejected, nreject = True, nreject + 1
+        steps.t.append(t_new)
+        steps.blocks.append(block)
+        if watch.events and watch.stop(steps, t_new, y_new):
+            return 2, nreject, calls
+    return 1, nreject, calls
+
+
+def _attempt(fun: Callable, t: float, y: np.ndarray, f: np.ndarray, h: float, rtol: float, atol: float
+             ) -> tuple[float, np.ndarray, np.ndarray]:
+    """One DOP853 step attempt by ``fun`` as solve_ivp's (rk_step, _estimate_error_norm): (error norm, y_new,
+    the stages in the core's layout)."""
+    K = np.empty((_N + 1, len(y)))
+    K[0] = f
+    for s in range(1, _N):
+        K[s] = fun(t + _C[s] * h, y + (K[:s].T @ _A[s, :s]) * h)
+    y_new = y + h * (K[:_N].T @ _coef.B)
+    K[_N] = fun(t + h, y_new)
+    scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+    e5, e3 = ((K.T @ _coef.E5) / scale) ** 2, ((K.T @ _coef.E3) / scale) ** 2
+    s5, s3 = float(e5.sum()), float(e3.sum())
+    err = 0.0 if s5 == 0.0 and s3 == 0.0 else abs(h) * s5 / np.sqrt((s5 + 0.01 * s3) * len(y))
+    block = np.zeros((10, len(y)))
+    block[_F_NEW], block[_S11], block[_S12], block[_Y_NEW] = K[_N], K[10], K[11], y_new
+    block[_STAGES_6_10] = K[5:10]
+    return err, y_new, block
+
+
+def _solution(steps: _Steps, watch: _EventWatch, ierr: int, t_end: float, calls: int, nreject: int) -> Solution:
     """The Solution of a finished integration (core's ierr: 1 end, 2 stopped by an event, < 0 failure)."""
-    steps = core.steps
     t_stop = steps.t[-1]
     if ierr == 1:
         steps.t[-1] = t_stop = t_end  # the core's last step ends at t + (t_end − t), within rounding of t_end
@@ -432,5 +487,4 @@ def _solution(core: _Core, watch: _EventWatch, ierr: int, t_end: float, calls: i
     if status == 1:
         ts[-1] = t_stop
         ys[:, -1] = dense(t_stop)
-    return Solution(ts, ys, dense, watch.t_events(), status, message, calls + core.calls + steps.calls,
-                    len(steps.t) - 1, nreject)
+    return Solution(ts, ys, dense, watch.t_events(), status, message, calls + steps.calls, len(steps.t) - 1, nreject)

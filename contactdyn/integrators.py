@@ -209,9 +209,9 @@ def solver_class(method: str):
 def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, rtol: float, atol: float,
               max_step: float = np.inf, events=None, first_step: float | None = None, jac=None):
     """One smooth segment by the named method, with dense output and events (``solve_ivp``'s result fields)."""
-    if method in COMPILED:
+    if method in COMPILED:  # a plan's right-hand side may bring its compiled step (contactdyn.plan_steps)
         return dop853.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
-                            first_step=first_step)
+                            first_step=first_step, step=getattr(fun, "step", None))
     if method == "LSODA" and jac is None and lsoda.available():  # solve_ivp's steps without its per-step Python
         return lsoda.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
                            first_step=first_step)

@@ -39,6 +39,7 @@ __all__ = ["fold_solve", "kernel_of", "calls", "call", "call_at", "pack", "pack_
            "matrix_of", "vector_of", "csr_of", "kkt_of", "write_out"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
+KERNEL = 1  #: this module's call among the compiled calls a step takes (contactdyn.plan_steps)
 TIP_LAW, TASK_LAW = 0, 1  #: the controller's shape (INTS' kind)
 #: the constants of a plan's call, packed by :func:`pack` into one float and one int buffer (two arguments: a
 #: compiled function's call costs ~0.06 µs per argument): float arrays, then int arrays, by these indices
@@ -263,7 +264,14 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             return DECLINED
         return OK
 
-    return calls(plan, one, one_at if work is not None else None)
+    def step_inputs():  # the compiled call's arguments for a step taken in one compiled call (contactdyn.plan_steps)
+        if (fb is None and not ready()) or time_part is not None:
+            return None
+        return work, phi_buffer, u, fb, ib
+
+    kernel = calls(plan, one, one_at if work is not None else None)
+    kernel.step_inputs, kernel.kind = (step_inputs if work is not None else None), KERNEL
+    return kernel
 
 
 def calls(plan, one, one_at=None, rates: bool = False):

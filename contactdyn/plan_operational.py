@@ -34,7 +34,9 @@ from .plan_law import NO_REFERENCE, reference_of, reference_rows, reference_tabl
 from .plan_phi import work_terms, write_phi
 from .trajectory import ramp_rows, ramp_table
 
-__all__ = ["call", "call_at", "operational_kernel_of"]
+__all__ = ["call", "call_at", "operational_kernel_of", "OPERATIONAL"]
+
+OPERATIONAL = 0  #: this module's call among the compiled calls a step takes (contactdyn.plan_steps)
 
 #: the constants of a plan's call in :func:`~contactdyn.plan_kernel.pack`'s two buffers, by these indices
 P_VAL, D_CTL, TILT_F, TILT_T, TILT_BODY, RATES_F, AXES, FORCED, KP, KD, TOOL_AXIS, TARGET, SCALARS = range(13)
@@ -214,7 +216,11 @@ def operational_kernel_of(plan, impulses: list[tuple]):
 
     # the robot's terms computed in the call, and the tip's J, J̇q̇, R are the first frame's
     fused = work is not None and tf == 0 and (tables is not None or not referenced)
-    return calls(plan, one, one_at if fused else None, rates=True)
+    kernel = calls(plan, one, one_at if fused else None, rates=True)
+    no_u = np.zeros(0)
+    kernel.step_inputs = (lambda: (work, phi_buffer, no_u, fb, ib)) if fused else None  # contactdyn.plan_steps
+    kernel.kind = OPERATIONAL
+    return kernel
 
 
 def _tilt_constants(plan) -> tuple:

@@ -35,6 +35,7 @@ from .plan_kernel import kernel_of
 from .plan_law import compiled_law, operational_command, plan_command
 from .plan_operational import operational_kernel_of
 from .plan_phi import LWA, phi_function
+from .plan_steps import stepper
 
 __all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms"]
 
@@ -106,12 +107,13 @@ def make_rhs(plan):
             xd = cat((x[nQ:2 * nQ], z[:nQ]))
         return xd, z, o
 
-    return _fused(kernel, numpy_call, written, ring) if at is not None and not impulses else rhs
+    return _fused(plan, kernel, numpy_call, written, ring) if at is not None and not impulses else rhs
 
 
-def _fused(kernel, numpy_call, written, ring):
+def _fused(plan, kernel, numpy_call, written, ring):
     """make_rhs's right-hand side for a kernel that writes φ in its own compiled call and the impulse rates too:
-    the common case, with the fewest Python layers per call."""
+    the common case, with the fewest Python layers per call; ``fused.step``: its DOP853 step in one compiled call
+    (:mod:`contactdyn.plan_steps`), None where the kernel has none."""
     one_at, (size, n, m, no) = kernel.one_at, kernel.layout
 
     def fused(t, x):
@@ -126,6 +128,7 @@ def _fused(kernel, numpy_call, written, ring):
         ring[3] = (t, x, z, o)
         return xd
 
+    fused.step = stepper(plan, kernel.kind, kernel.step_inputs, kernel.layout) if kernel.step_inputs else None
     return fused
 
 

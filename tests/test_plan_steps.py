@@ -1,0 +1,87 @@
+"""DOP853 steps taken in one compiled call (contactdyn.plan_steps) against scipy's core and solve_ivp's DOP853."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from contactdyn import dop853
+from contactdyn.rhsplan import _PLANS
+from contactdyn.scene import load_scene
+from contactdyn.simulate import run_system
+from contactdyn.system import System
+
+
+def _sliding(name: str, until: float):
+    """(plan, t, x) of a run's 2-D slide (neither stuck nor launching) at its latest call before ``until``."""
+    system = System(load_scene(name, {"duration": until}))
+    run_system(system)
+    plan = next(p for p in _PLANS[system].values() if not any(m.stuck or m.from_rest for m in p.modes))
+    return plan, plan.ring[3][0], plan.ring[3][1].copy()
+
+
+def _without_step(fun):
+    def plain(t, x):
+        return fun(t, x)
+    return plain
+
+
+@pytest.mark.parametrize("name, duration", [("case2_writer5dof", 0.04), ("case2_writer_ur5", 0.5)])
+def test_compiled_steps_are_solve_ivps_and_the_scipy_cores(name, duration):
+    """A stretch of the writers' slide (~20 steps): the compiled steps are solve_ivp's DOP853 steps (as many
+    accepted and rejected, as many calls, the step ends within 1e-5 of the stretch) and scipy's core's; the states
+    agree within the tolerance (their error estimates cancel to ~1e-7 of themselves, so rounding moves the steps
+    at 1e-8 and the states at the tolerance)."""
+    plan, t, x = _sliding(name, 2.0)
+    fun = plan.rhs
+    assert fun.step is not None
+    span, rtol, atol = (t, t + duration), 1e-7, 1e-9
+    got = dop853.solve(fun, span, x, rtol=rtol, atol=atol, step=fun.step)
+    core = dop853.solve(_without_step(fun), span, x, rtol=rtol, atol=atol)
+    ref = solve_ivp(_without_step(fun), span, x, method="DOP853", rtol=rtol, atol=atol)
+    assert got.naccept == core.naccept == len(ref.t) - 1 > 10 and got.nreject == core.nreject
+    assert got.nfev == ref.nfev
+    assert np.abs(got.t - ref.t).max() <= 1e-5 * duration  # the same steps, moved by rounding
+    tol = 10.0 * (atol + rtol * np.abs(ref.y))
+    assert np.all(np.abs(got.y - ref.y) <= tol) and np.all(np.abs(core.y - ref.y) <= tol)
+    ts = np.linspace(*span, 17)[1:-1]
+    assert np.all(np.abs(got.sol(ts) - core.sol(ts)) <= 10.0 * (atol + rtol * np.abs(core.sol(ts))))
+
+
+def test_a_step_the_compiled_call_cannot_take_is_taken_by_the_right_hand_side(monkeypatch):
+    """Every third attempt made to decline (as a clip or a slide inside the stick band would): those steps are taken
+    by the plan's Python right-hand side (solve_ivp's arithmetic): the same steps, the states within the tolerance."""
+    plan, t, x = _sliding("case2_writer5dof", 2.0)
+    fun, step = plan.rhs, plan.rhs.step
+    tries = []
+
+    def sometimes(*args):
+        tries.append(1)
+        return None if len(tries) % 3 == 0 else step(*args)
+
+    span = (t, t + 0.02)
+    got = dop853.solve(fun, span, x, rtol=1e-7, atol=1e-9, step=sometimes)
+    want = dop853.solve(fun, span, x, rtol=1e-7, atol=1e-9, step=step)
+    assert len(tries) >= 6 and got.naccept == want.naccept and got.nreject == want.nreject
+    assert np.all(np.abs(got.y - want.y) <= 10.0 * (1e-9 + 1e-7 * np.abs(want.y)))
+
+
+def test_compiled_steps_locate_the_events_as_scipys_core():
+    """A terminal event on the slip velocity read off the plan's last call (its ring, which each compiled step's
+    FSAL call enters) crossing a level it reaches mid-run: the same root as with scipy's core, to 1e-9 s."""
+    plan, t, x = _sliding("case2_writer5dof", 2.0)
+    fun = plan.rhs
+    def v_x(t_, x_):  # [m/s] the slip velocity's first component, off the plan's call at (t_, x_)
+        return float(plan.values(t_, x_)[1][plan.vt_slices[0]][0])
+
+    ahead = dop853.solve(_without_step(fun), (t, t + 0.1), x, rtol=1e-7, atol=1e-9)
+    level = 0.5 * (v_x(t, x) + v_x(ahead.t[-1], ahead.y[:, -1].copy()))  # crossed about 50 ms in
+
+    def slip_x(t_, x_):
+        return v_x(t_, x_) - level
+
+    slip_x.terminal = True
+    span = (t, t + 0.1)
+    got = dop853.solve(fun, span, x, rtol=1e-7, atol=1e-9, events=[slip_x], step=fun.step)
+    core = dop853.solve(_without_step(fun), span, x, rtol=1e-7, atol=1e-9, events=[slip_x])
+    assert got.status == core.status == 1 and got.t[-1] < span[1]
+    assert got.t_events[0][0] == pytest.approx(core.t_events[0][0], abs=1e-9)
