@@ -9,14 +9,15 @@ Per scene, CPU medians over ``--repeats`` runs of ``simulate(load_scene(name))``
 - then one instrumented run (each piece wrapped by a CPU timer, ~0.5 µs a reading; the sum of the
   pieces therefore exceeds the uninstrumented run by that times the calls, reported as ``timer``):
   rhs = inside the segment's right-hand side (the plan's call, and a stuck contact's cone margin
-  sampled at each stage); events = the events' values at the step ends and their location
-  (``dop853._EventWatch.stop``); stepping = the rest of the integration (the core's arithmetic, its
-  callbacks, the restarts after a rejected step); output = sampling the channels (``HybridRun._result``);
+  sampled at each stage) and its compiled steps (:mod:`contactdyn.plan_steps`, 12 calls each); events =
+  the events' values at the step ends and their location (``dop853._EventWatch.stop``); stepping = the
+  rest of the integration (the core's arithmetic, its callbacks, the restarts after a rejected step; the
+  compiled steps' control); output = sampling the channels (``HybridRun._result``);
   plans = building the modes' plans; other = the rest (loading, transitions, segment set-up);
 - steps, rejected steps, runs of the compiled core (one per segment, one more per rejection, one
   more where the step after a retry would grow).
 
-Only DOP853C's segments are split (a segment on LSODA, the 2-D launch, counts under rhs and stepping).
+Only DOP853C's segments are split (a segment on LSODA, the 2-D launch or a slide's finish, counts under other).
 Writes benchmarks/out/scene_split.json.
 """
 
@@ -80,19 +81,22 @@ def instrumented(name: str) -> dict:
     calls = {"rhs": 0}
     inside = [False]  #: within a segment's integration (the interpolants the output builds later call f too)
 
-    def timed_solve(fun, *args, **kw):  # the right-hand side as the core sees it
-        def f(t, x):
+    def timed(fun, per_call: int):
+        def f(*args):
             if not inside[0]:
-                return fun(t, x)
+                return fun(*args)
             t0 = CLOCK()
             try:
-                return fun(t, x)
+                return fun(*args)
             finally:
                 split.s["rhs"] = split.s.get("rhs", 0.0) + CLOCK() - t0
-                calls["rhs"] += 1
+                calls["rhs"] += per_call
+        return f
+
+    def timed_solve(fun, *args, step=None, **kw):  # the right-hand side as the core sees it, and a plan's steps
         t0, inside[0] = CLOCK(), True
         try:
-            return solve(f, *args, **kw)
+            return solve(timed(fun, 1), *args, step=timed(step, 12) if step else None, **kw)
         finally:
             inside[0] = False
             split.s["integrate"] = split.s.get("integrate", 0.0) + CLOCK() - t0
