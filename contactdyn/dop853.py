@@ -33,6 +33,7 @@ reading the next step off its first stage time). Stiffness detection is off, as 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -427,7 +428,7 @@ def _stepped(step: Callable, fun: Callable, steps: _Steps, watch: _EventWatch, t
     nreject = 0
     while steps.t[-1] < t_end:
         t, y, f = steps.t[-1], steps.y_old(len(steps.t) - 1), steps.f_old(len(steps.t) - 1)
-        min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+        min_step = 10.0 * abs(math.nextafter(t, math.inf) - t)
         h_abs = min(max(h_abs, min_step), max_step)
         rejected = False
         while True:

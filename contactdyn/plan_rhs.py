@@ -35,7 +35,7 @@ from .plan_kernel import kernel_of
 from .plan_law import compiled_law, operational_command, plan_command
 from .plan_operational import operational_kernel_of
 from .plan_phi import LWA, phi_function
-from .plan_steps import stepper
+from .plan_steps import derivatives, stepper
 
 __all__ = ["make_rhs", "controller_call", "controller_input", "impulse_terms"]
 
@@ -112,8 +112,9 @@ def make_rhs(plan):
 
 def _fused(plan, kernel, numpy_call, written, ring):
     """make_rhs's right-hand side for a kernel that writes φ in its own compiled call and the impulse rates too:
-    the common case, with the fewest Python layers per call; ``fused.step``: its DOP853 step in one compiled call
-    (:mod:`contactdyn.plan_steps`), None where the kernel has none."""
+    the common case, with the fewest Python layers per call; ``fused.step``: its DOP853 step in one compiled call,
+    ``fused.derivatives``: its values at many states in one (:mod:`contactdyn.plan_steps`); None where the kernel
+    has none."""
     one_at, (size, n, m, no) = kernel.one_at, kernel.layout
 
     def fused(t, x):
@@ -128,7 +129,9 @@ def _fused(plan, kernel, numpy_call, written, ring):
         ring[3] = (t, x, z, o)
         return xd
 
-    fused.step = stepper(plan, kernel.kind, kernel.step_inputs, kernel.layout) if kernel.step_inputs else None
+    compiled = kernel.step_inputs is not None
+    fused.step = stepper(plan, kernel.kind, kernel.step_inputs, kernel.layout) if compiled else None
+    fused.derivatives = derivatives(kernel.kind, kernel.step_inputs, kernel.layout, fused) if compiled else None
     return fused
 
 

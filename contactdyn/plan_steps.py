@@ -20,7 +20,7 @@ from . import plan_kernel, plan_operational
 from .plan_kernel import DECLINED, KERNEL, OK
 from .plan_operational import OPERATIONAL
 
-__all__ = ["attempt", "stepper"]
+__all__ = ["attempt", "stepper", "derivatives"]
 _A, _B, _C = np.ascontiguousarray(_coef.A[:12, :12]), _coef.B.copy(), _coef.C[:12].copy()
 _E = np.ascontiguousarray(np.vstack((_coef.E5, _coef.E3)))  #: the error estimators' weights on K's 13 rows
 
@@ -75,6 +75,36 @@ def attempt(kind, work, phi, u, fb, ib, t, y, f, h, rtol, atol, A, B, C, E, out,
     return OK, abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * n)
 
 
+@njit(cache=True)
+def _derivatives(kind, work, phi, u, fb, ib, ts, Y, out, Yd):
+    """Yd[k] = ẋ at (ts[k], Y[k]) by the plan's compiled call, in order; the number of states done (fewer than
+    len(ts) where the call declines the next)."""
+    n = Y.shape[1]
+    for k in range(ts.size):
+        if _call(kind, ts[k], Y[k], work, phi, u, fb, ib, out):
+            return k
+        Yd[k] = out[:n]
+    return ts.size
+
+
+def derivatives(kind: int, inputs, layout: tuple[int, int, int, int], fun):
+    """f(ts, Y) -> Ẋ (N, n): the right-hand side at many states in one compiled call (the dense output's extra
+    stages, :meth:`contactdyn.dop853.DenseSolution.__call__`), bitwise the plan's call; states the compiled call
+    cannot take go to ``fun``, the plan's right-hand side."""
+    size, n, _, _ = layout
+
+    def batch(ts: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        ts, Y = np.ascontiguousarray(ts, dtype=float), np.ascontiguousarray(Y, dtype=float)
+        Yd = np.empty((len(ts), n))
+        args = inputs()
+        done = 0 if args is None else _derivatives(kind, *args, ts, Y, np.empty(size), Yd)
+        for k in range(done, len(ts)):
+            Yd[k] = fun(float(ts[k]), Y[k])
+        return Yd
+
+    return batch
+
+
 def stepper(plan, kind: int, inputs, layout: tuple[int, int, int, int]):
     """step(t, y, f, h, rtol, atol) -> (error norm, y_new, block), or None where the plan's compiled call cannot
     take it (``inputs()`` -> (work, φ, u, fb, ib) or None: a tip law not read yet, a time part in Python; or a
@@ -87,7 +117,7 @@ def stepper(plan, kind: int, inputs, layout: tuple[int, int, int, int]):
         args = inputs()
         if args is None:
             return None
-        out, y_new, block = np.empty(size), np.empty(n), np.zeros((10, n))
+        out, y_new, block = np.empty(size), np.empty(n), np.empty((10, n))  # (block's row 3 is not read)
         status, err = attempt(kind, *args, t, y, f, h, rtol, atol, _A, _B, _C, _E, out, y_new, block)
         if status:
             return None

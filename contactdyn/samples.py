@@ -144,11 +144,15 @@ def _kernel_samples(plan, ts: np.ndarray, X: np.ndarray):
 def plan_derivatives(plan):
     """f(ts, X) -> Ẋ (N, n): the plan's right-hand side at many states at once (φ, the solves and the
     read-out as in :func:`plan_samples`), for the extra stages of the dense output's interpolants
-    (:meth:`~contactdyn.dop853.DenseSolution.__call__`), bitwise the call's: P φ made per state as the call
+    (:meth:`~contactdyn.dop853.DenseSolution.__call__`), bitwise the call's: the compiled call itself where the
+    plan has one, else P φ made per state as the call
     makes it (``exact``), the rest elementwise or the same LAPACK solve. None where the
     samples' arithmetic is not the call's: a slide launching from rest, a fold, a controller called per
     call, drives (a clipping sample takes the readable law, equal only to 1e-10), 2-D sliding (its
     directions and tilt are computed over samples in another order)."""
+    compiled = getattr(plan.rhs, "derivatives", None)  # the plan's compiled call itself (contactdyn.plan_steps)
+    if compiled is not None:
+        return compiled
     two_d = plan.dyn_tilt or any(dT is None for *_, dT, _ in plan.coulomb_terms)
     if plan.launch is not None or getattr(plan, "folded_detail", None) is not None or not plan.affine_ctl \
             or plan.compiled_drives is not None or two_d:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from contactdyn import dop853
+from contactdyn import dop853, plan_steps
 from contactdyn.rhsplan import _PLANS
 from contactdyn.scene import load_scene
 from contactdyn.simulate import run_system
@@ -85,3 +85,21 @@ def test_compiled_steps_locate_the_events_as_scipys_core():
     core = dop853.solve(_without_step(fun), span, x, rtol=1e-7, atol=1e-9, events=[slip_x])
     assert got.status == core.status == 1 and got.t[-1] < span[1]
     assert got.t_events[0][0] == pytest.approx(core.t_events[0][0], abs=1e-9)
+
+
+def test_the_batched_derivatives_are_the_calls_bitwise(monkeypatch):
+    """The dense output's extra stages in one compiled call equal the plan's right-hand side per state to the bit;
+    from a state the compiled call declines on (made to decline the 4th here), the right-hand side takes them."""
+    plan, t, x = _sliding("case2_writer5dof", 2.0)
+    fun = plan.rhs
+    rng = np.random.default_rng(5)
+    X = x + 1e-5 * rng.normal(size=(6, len(x)))
+    ts = t + np.linspace(0.0, 1e-3, 6)
+    want = np.array([fun(float(tk), xk.copy()) for tk, xk in zip(ts, X, strict=True)])
+    assert np.array_equal(fun.derivatives(ts, X), want)
+    calls = []
+    original = plan_steps._derivatives
+    monkeypatch.setattr(plan_steps, "_derivatives", lambda *a: min(original(*a), 3))
+    monkeypatch.setattr(plan, "rhs", lambda t_, x_: calls.append(t_) or fun(t_, x_))
+    batch = plan_steps.derivatives(plan.kernel.kind, plan.kernel.step_inputs, plan.kernel.layout, plan.rhs)
+    assert np.array_equal(batch(ts, X), want) and calls == list(ts[3:])
