@@ -20,7 +20,8 @@ Per row: the compiled plan's rhs per call (or System.evaluate's where the plan d
 (``benchmarks/rhs_cost.py``), in process CPU time, the minimum over batches (contention only
 adds; the medians are in the JSON) — and CPU ms per simulated second of the
 whole run (``simulate``: loading and output included) with solve_ivp's DOP853 and the
-compiled DOP853C (interleaved repeats, medians). CPU time, not wall: this 2-core machine is
+compiled DOP853C (interleaved repeats, medians, after one untimed run of each: the process's one-time
+loading of compiled code apart). CPU time, not wall: this 2-core machine is
 shared and its load average reached 7 during these runs (wall time then measures the others).
 The Pinocchio floor is ``robot_calls``' minimum over samples (wall clock). Writes
 benchmarks/out/scaling.json and .csv, and the plot.
@@ -121,7 +122,10 @@ def measure(scene, repeats: int, robot: tuple | None) -> dict:
         source, frame, options = robot
         calls = robot_calls.measure(source, frame, options, 30, 300)
         row["pinocchio_us"] = calls["raw pinocchio, same calls"]["min"]  # (wall clock: the minimum on a busy machine)
-    times = interleaved({m: lambda m=m: simulate(scene, {"solver.method": m}) for m in METHODS}, repeats)
+    runs = {m: lambda m=m: simulate(scene, {"solver.method": m}) for m in METHODS}
+    for run in runs.values():  # untimed: the process's one-time loading of each method's compiled code
+        run()
+    times = interleaved(runs, repeats)
     for m in METHODS:
         stats = times[m].last.stats
         row[f"{m}_steps"], row[f"{m}_rhs_evals"] = stats["steps"], stats["rhs_evals"]
