@@ -29,6 +29,12 @@ rejected step's error norm is read from the stages left in the workspace, and th
 with solve_ivp's smaller step; the step after it may not grow (solve_ivp's rule, enforced by
 reading the next step off its first stage time). Stiffness detection is off, as in
 ``solve_ivp``. Verified against ``solve_ivp``'s DOP853 in ``tests/test_dop853.py``.
+
+Compiled steps. A right-hand side whose whole step can be one compiled call brings it (``step``, from
+:mod:`contactdyn.plan_steps`: the stages, y_new, the FSAL call and the error norm): then :func:`_stepped`
+takes the steps, with ``solve_ivp``'s RK step control written out (its loop, not the core's), the stages
+kept in the core's layout for the same dense output and events; a step the compiled call declines is taken
+by ``fun`` (:func:`_attempt`, ``solve_ivp``'s arithmetic). Verified in ``tests/test_plan_steps.py``.
 """
 
 from __future__ import annotations

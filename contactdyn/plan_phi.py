@@ -4,9 +4,10 @@
     e = [x, p_f, ṗ_f per frame f, the reference's and force ramps' time terms, 1]
 
 Per call: the robot's terms at (q, q̇), computed in the compiled call :func:`write_phi` itself for a plan of one
-frame on a robot of revolute and prismatic joints (:mod:`contactdyn.rigid_body`, written into Pinocchio's
-data), else by Pinocchio's ``computeAllTerms``; everything else is written into one buffer by
-:func:`write_phi`, the first frame's terms included. A frame's Jacobian, J̇q̇, position and
+frame on a robot of revolute and prismatic joints (:mod:`contactdyn.rigid_body`; into Pinocchio's data from
+Python, into a buffer of the plan's from a compiled caller: :func:`work_terms`), else by Pinocchio's
+``computeAllTerms``; everything else is written into one buffer by :func:`write_phi`, the first frame's terms
+included. A frame's Jacobian, J̇q̇, position and
 rotation come from its joint's placement and motion and the joint Jacobians (:func:`frame_motion`, as
 Pinocchio's ``getFrameJacobian`` and ``getFrameClassicalAcceleration`` in LOCAL_WORLD_ALIGNED, to rounding;
 two binding calls fewer); a further frame's are written by :func:`write_frame` after Pinocchio's call.
