@@ -388,7 +388,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     solve_ivp's estimate) as in ``solve_ivp``. Events are terminal if their ``terminal`` attribute is.
     The steps are solve_ivp's: after a rejection the step shrinks by max(MIN_FACTOR, SAFETY err^(−1/8))
     and the next step may not grow. ``step``: a compiled step attempt of ``fun``'s (:mod:`contactdyn.plan_steps`)
-    that takes the steps in place of scipy's core, with the same step control.
+    that takes the steps in place of scipy's core, with the same step control, where ``step.usable()``.
     """
     if _CORE is None:
         raise SceneError("solver.method", "DOP853C: scipy's compiled DOP853 (scipy.integrate._dop.dopri853, "
@@ -404,7 +404,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
         return fun(t, y)
 
     h = _first_step(counted, t0, y0, f0, t_end, max_step, rtol, atol, first_step)
-    if step is not None:
+    if step is not None and step.usable():
         steps = _Steps(fun, len(y0), [t0], y0.copy(), f0)
         ierr, nreject, calls[0] = _stepped(step, fun, steps, watch, t_end, h, rtol, atol, max_step, calls[0])
         return _solution(steps, watch, ierr, t_end, calls[0], nreject)
@@ -429,8 +429,9 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
 
 def _stepped(step: Callable, fun: Callable, steps: _Steps, watch: _EventWatch, t_end: float, h_abs: float,
              rtol: float, atol: float, max_step: float, calls: int) -> tuple[int, int, int]:
-    """solve_ivp's DOP853 steps (its RK step control) by ``step`` (a compiled attempt, :mod:`contactdyn.plan_steps`;
-    None where it cannot: then :func:`_attempt` by ``fun``): (the core's ierr, rejections, calls)."""
+    """solve_ivp's DOP853 steps (its RK step control; h_abs, max_step [s]) by ``step`` (a compiled attempt,
+    :mod:`contactdyn.plan_steps`; None where it cannot: then :func:`_attempt` by ``fun``): (the core's ierr,
+    rejections, calls)."""
     nreject = 0
     while steps.t[-1] < t_end:
         t, y, f = steps.t[-1], steps.y_old(len(steps.t) - 1), steps.f_old(len(steps.t) - 1)

@@ -36,7 +36,7 @@ from .plan_phi import work_terms, write_phi
 from .plan_probe import affine_map
 
 __all__ = ["fold_solve", "kernel_of", "calls", "call", "call_at", "pack", "pack_with_phi",
-           "matrix_of", "vector_of", "csr_of", "kkt_of", "write_out"]
+           "matrix_of", "vector_of", "csr_of", "kkt_of", "write_out", "KERNEL"]
 
 OK, DECLINED = 0, 1  #: :func:`call`'s status
 KERNEL = 1  #: this module's call among the compiled calls a step takes (contactdyn.plan_steps)
@@ -251,16 +251,20 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             time_part(t)
         return call(t, phi, x, u, fb, ib, out)
 
-    work, phi_buffer, refresh = plan.phi.work, plan.phi.buffer, plan.phi.refresh
+    phi_of = plan.phi
+    work, phi_buffer, refresh, load = phi_of.work, phi_of.buffer, phi_of.refresh, phi_of.load
 
     def one_at(t, x, out):  # one, with the robot's terms and φ in the same compiled call (a decline leaves φ written)
         if fb is None and not ready():
-            plan.phi(t, x)
+            phi_of(t, x)
             return DECLINED
         if time_part is not None:
             time_part(t)
+        if load is not None:
+            load(x)  # the robot's terms by Pinocchio (a robot contactdyn.rigid_body does not compute)
         if call_at(t, x, work, phi_buffer, u, fb, ib, out):
-            refresh(x)  # Pinocchio's data at x for the readable way
+            if load is None:
+                refresh(x)  # Pinocchio's data at x for the readable way
             return DECLINED
         return OK
 
@@ -269,8 +273,8 @@ def kernel_of(plan, meta: list, reach: list[int] | None):
             return None
         return work, phi_buffer, u, fb, ib
 
-    kernel = calls(plan, one, one_at if work is not None else None)
-    kernel.step_inputs, kernel.kind = (step_inputs if work is not None else None), KERNEL
+    kernel = calls(plan, one, one_at)
+    kernel.step_inputs, kernel.kind = (step_inputs if load is None else None), KERNEL
     return kernel
 
 

@@ -206,19 +206,21 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     def one(t, x, phi, out):
         return call(phi, x, fb, ib, *inputs(t), out)
 
-    work, phi_buffer, refresh = plan.phi.work, plan.phi.buffer, plan.phi.refresh
+    work, phi_buffer, refresh, load = plan.phi.work, plan.phi.buffer, plan.phi.refresh, plan.phi.load
 
     def one_at(t, x, out):  # one, with the robot's terms, φ, the reference and the set-points in one compiled call
+        if load is not None:
+            load(x)  # the robot's terms by Pinocchio (a robot contactdyn.rigid_body does not compute)
         if call_at(t, x, work, phi_buffer, fb, ib, out):
-            refresh(x)  # Pinocchio's data at x for the readable way
+            if load is None:
+                refresh(x)  # Pinocchio's data at x for the readable way
             return DECLINED
         return OK
 
-    # the robot's terms computed in the call, and the tip's J, J̇q̇, R are the first frame's
-    fused = work is not None and tf == 0 and (tables is not None or not referenced)
+    fused = tf == 0 and (tables is not None or not referenced)  # the tip's J, J̇q̇, R are the first frame's
     kernel = calls(plan, one, one_at if fused else None, rates=True)
-    no_u = np.zeros(0)
-    kernel.step_inputs = (lambda: (work, phi_buffer, no_u, fb, ib)) if fused else None  # contactdyn.plan_steps
+    no_u = np.zeros(0)  # a step in one compiled call (contactdyn.plan_steps), where the call computes the terms
+    kernel.step_inputs = (lambda: (work, phi_buffer, no_u, fb, ib)) if fused and load is None else None
     kernel.kind = OPERATIONAL
     return kernel
 

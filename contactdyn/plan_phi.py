@@ -24,21 +24,22 @@ from numba import njit
 from .rigid_body import NO_TABLE, rigid_table, rigid_terms
 from .trajectory import move_rows, move_table, ramp_rows, ramp_table
 
-__all__ = ["phi_function", "write_phi", "write_phi_only", "work_terms", "write_frame", "frame_motion", "joint_terms",
-           "frame_constants", "LWA"]
+__all__ = ["phi_function", "write_phi", "write_phi_only", "work_terms", "copy_terms", "write_frame", "frame_motion",
+           "joint_terms", "frame_constants", "LWA"]
 
 LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 def phi_function(plan):
-    """phi(t, x) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x.
+    """phi(t, x) -> (φ, per-frame Jacobians (3, nv)); leaves Pinocchio's data at x (with a rigid table: the eight
+    arrays of :func:`joint_terms` and ``computeAllTerms``' M, nle, g that the plans and their readers read).
 
     φ and the Jacobians are views of one buffer the next call overwrites (``plan.phi_at`` hands out copies).
-    Attributes for a compiled caller: ``phi.work``, where :func:`write_phi` computes the robot's terms (else
-    None), a buffer for them of the caller's own (:func:`work_terms`: one argument in place of Pinocchio's eight
-    views; ``phi.refresh(x)`` brings Pinocchio's data to x for the readable way after such a call), ``phi.terms``
-    = (H, h, g, R, p_j, v_j, a_j, J_w): the views of Pinocchio's data :func:`write_phi` reads (and, with a rigid
-    table, writes first), ``phi.buffer`` and its Jacobians' views
+    Attributes for a compiled caller: ``phi.work``, a buffer of the caller's own for the robot's terms
+    (:func:`work_terms`: one argument in place of Pinocchio's eight views), which :func:`write_phi` fills in the
+    call where it computes the terms (``phi.load`` None; the caller then leaves Pinocchio's data behind, and
+    ``phi.refresh(x)`` brings it to x for the readable way where the call declines), else ``phi.load(x)`` by
+    Pinocchio's call first; ``phi.buffer`` and its Jacobians' views
     ``phi.jacobians``, and ``phi.tables`` (:func:`write_phi`'s at, moves, move_slots, ramps, ramp_slots, frame,
     support, rigid). ``plan.tip6`` = [J (6, nv), J̇q̇ (6), R] of the tip at the last call, for a law reading its
     orientation.
@@ -91,10 +92,14 @@ def phi_function(plan):
                            support, table)
         return phi, Js
 
-    phi_of.terms, phi_of.buffer, phi_of.tables = terms, phi, tables
-    #: a compiled caller's own buffer of the robot's terms where write_phi computes them (one argument for Pinocchio's
-    #: eight views); such a caller leaves Pinocchio's data behind, and refreshes it where it declines
-    phi_of.work = np.zeros(nv * nv + 7 * nv + g.size + 24) if rigid is not None else None
+    work = np.zeros(nv * nv + 7 * nv + g.size + 24)
+
+    def load(x):  # Pinocchio's terms at x into a compiled caller's buffer (further frames' written into φ)
+        pinocchio(x)
+        copy_terms(work, H, h, g, R, pj, vj, aj, Jw)
+
+    phi_of.buffer, phi_of.tables, phi_of.work = phi, tables, work
+    phi_of.load = load if rigid is None else None
     phi_of.refresh = lambda x: pin.computeAllTerms(model, data, x[:nv], x[nQ:nQ + nv])
     phi_of.jacobians = Js
     return phi_of
@@ -168,14 +173,30 @@ def write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramp
 @njit(cache=True)
 def work_terms(work, nv, ng):
     """(H, h, g, R, pj, vj, aj, Jw) as views of a compiled caller's own buffer (:func:`phi_function`'s
-    ``phi.work``), in :func:`write_phi`'s argument order: H (nv, nv), h (nv), g (ng), the joint's R (3, 3), p,
-    v, a (3, 6, 6) and the joint Jacobians (6, nv)."""
+    ``phi.work``), in :func:`write_phi`'s argument order: H (nv, nv) [kg·m²], h, g (nv, ng) [N·m or N], the
+    joint's R (3, 3), p (3) [m], v (6) [m/s, rad/s], a at q̈ = 0 (6) [m/s², rad/s²] and the joint Jacobians
+    (6, nv)."""
     o = nv * nv
     H = work[:o].reshape((nv, nv))
     h, g = work[o:o + nv], work[o + nv:o + nv + ng]
     o += nv + ng
     R = work[o:o + 9].reshape((3, 3))
     return H, h, g, R, work[o + 9:o + 12], work[o + 12:o + 18], work[o + 18:o + 24], work[o + 24:].reshape((6, nv))
+
+
+@njit(cache=True)
+def copy_terms(work, H, h, g, R, pj, vj, aj, Jw):
+    """Pinocchio's terms (M, nle, g and :func:`joint_terms`' views) into a compiled caller's buffer
+    (:func:`work_terms`)."""
+    H_, h_, g_, R_, pj_, vj_, aj_, Jw_ = work_terms(work, h.size, g.size)
+    H_[:] = H
+    h_[:] = h
+    g_[:] = g
+    R_[:] = R
+    pj_[:] = pj
+    vj_[:] = vj
+    aj_[:] = aj
+    Jw_[:] = Jw
 
 
 @njit(cache=True)

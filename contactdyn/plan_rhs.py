@@ -1,9 +1,9 @@
-"""The compiled right-hand side's call: Pinocchio's terms, one product, one small solve.
+"""The compiled right-hand side's call: the robot's terms, one product, one small solve.
 
 Per call at (t, x) in the mode a :class:`~contactdyn.rhsplan.ModePlan` was built for:
 
-1. φ = [H, J_f, J̇q̇_f (per frame f), h, (g), e] from Pinocchio (``computeAllTerms``) and
-   the time terms of the reference and force ramps;
+1. φ = [H, J_f, J̇q̇_f (per frame f), h, (g), e] from the robot's terms (:mod:`contactdyn.plan_phi`: computed in
+   the compiled call, or Pinocchio's ``computeAllTerms``) and the time terms of the reference and force ramps;
 2. y = P φ = [A, b, o]: the KKT matrix, its right-hand side and the affine outputs o
    (:mod:`contactdyn.plan_kkt`, :mod:`contactdyn.plan_probe`);
 3. what is not affine: Coulomb friction −μ max(F, 0) d with 2-D directions d, the column

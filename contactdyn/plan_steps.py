@@ -27,6 +27,8 @@ _E = np.ascontiguousarray(np.vstack((_coef.E5, _coef.E3)))  #: the error estimat
 
 @njit(cache=True)
 def _call(kind, t, x, work, phi, u, fb, ib, out):
+    """The plan's compiled call of this ``kind`` at (t, x): its status, [ẋ, z, o, τ] in ``out`` (u: the tip law's
+    inputs' buffer of a plan_kernel call, unused by the operational one)."""
     if kind == OPERATIONAL:
         return plan_operational.call_at(t, x, work, phi, fb, ib, out)
     assert kind == KERNEL
@@ -108,10 +110,14 @@ def derivatives(kind: int, inputs, layout: tuple[int, int, int, int], fun):
 def stepper(plan, kind: int, inputs, layout: tuple[int, int, int, int]):
     """step(t, y, f, h, rtol, atol) -> (error norm, y_new, block), or None where the plan's compiled call cannot
     take it (``inputs()`` -> (work, φ, u, fb, ib) or None: a tip law not read yet, a time part in Python; or a
-    stage declined): then the caller takes the step by the plan's right-hand side. Each step's FSAL call enters
-    the plan's ring (the events read its values)."""
+    stage declined): then the caller takes the step by the plan's right-hand side; ``step.usable()``: whether
+    inputs are there (a segment whose steps cannot be compiled stays on scipy's core). Each step's FSAL call
+    enters the plan's ring (the events read its values)."""
     size, n, m, no = layout
     ring = plan.ring
+
+    def usable() -> bool:  # can the compiled call take a step now (contactdyn.dop853.solve asks once per segment)
+        return inputs() is not None
 
     def step(t, y, f, h, rtol, atol):
         args = inputs()
@@ -127,4 +133,5 @@ def stepper(plan, kind: int, inputs, layout: tuple[int, int, int, int]):
         ring[3] = (t + h, y_new, out[n:n + m], out[n + m:n + m + no])
         return err, y_new, block
 
+    step.usable = usable
     return step

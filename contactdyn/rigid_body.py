@@ -6,9 +6,11 @@ joint Jacobians (WORLD, 6 × nv) and its frame's joint placement, velocity and a
 do not read; for a tree of one-DOF revolute and prismatic joints (every URDF arm of ours and of
 example-robot-data's fixed-base arms) :func:`rigid_terms` computes the same in the plan's compiled call, with
 Pinocchio's algorithms and conventions (Featherstone's, in each joint's frame; H from the composite inertias
-about the world origin), and writes them into Pinocchio's own data: whoever reads them next (a readable law,
-the frame calls) finds what ``computeAllTerms`` would have left there. Any other joint (free-flyer, spherical,
-an unbounded revolute's (cos, sin)) leaves the terms to Pinocchio (:func:`rigid_table` returns None).
+about the world origin). From Python it writes them into Pinocchio's own arrays (M, nle, g, J and the
+joint's placement, velocity and acceleration: what a readable law and the frame calls read next); from a
+compiled caller into a buffer of the plan's (:func:`contactdyn.plan_phi.work_terms`). Any other joint
+(free-flyer, spherical, an unbounded revolute's (cos, sin)) leaves the terms to Pinocchio (:func:`rigid_table`
+returns None).
 Checked against Pinocchio to rounding in tests/test_rigid_body.py, and by every plan against the readable
 model when built. Units: [m], [rad], [kg], SI throughout.
 """
@@ -68,9 +70,10 @@ def rigid_table(model) -> np.ndarray | None:
 
 @njit(cache=True)
 def rigid_terms(q, v, table, j0, M, nle, g, R, pj, vj, aj, J):
-    """Pinocchio's ``computeAllTerms`` terms at (q, q̇) a plan reads, written in place: M (full), nle, g (if
-    g.size; the generalized gravity), J (WORLD joint Jacobians, 6 × nv) and joint j0's world rotation R and
-    position pj [m], and its velocity vj and acceleration aj at q̈ = 0 (in its frame, [linear, angular])."""
+    """Pinocchio's ``computeAllTerms`` terms at (q, q̇) [rad or m, rad/s or m/s] a plan reads, written in place:
+    M (full) [kg·m²], nle, g (if g.size; the generalized gravity) [N·m or N], J (WORLD joint Jacobians, 6 × nv)
+    and joint j0's world rotation R and position pj [m], and its velocity vj [m/s, rad/s] and acceleration aj at
+    q̈ = 0 [m/s², rad/s²] (in its frame, [linear, angular])."""
     nj = table.shape[0]
     L, W = _kinematics(q, v, table)
     _nonlinear(table, L, W, nle)

@@ -6,7 +6,7 @@ from scipy.integrate import solve_ivp
 
 from contactdyn import dop853, plan_steps
 from contactdyn.rhsplan import _PLANS
-from contactdyn.scene import load_scene
+from contactdyn.scene import load_scene, parse_scene
 from contactdyn.simulate import run_system
 from contactdyn.system import System
 
@@ -17,6 +17,16 @@ def _sliding(name: str, until: float):
     run_system(system)
     plan = next(p for p in _PLANS[system].values() if not any(m.stuck or m.from_rest for m in p.modes))
     return plan, plan.ring[3][0], plan.ring[3][1].copy()
+
+
+def _counted(step, taken: list):
+    """``step``, noting per attempt whether the compiled call took it."""
+    def counted(*args):
+        got = step(*args)
+        taken.append(got is not None)
+        return got
+    counted.usable = step.usable
+    return counted
 
 
 def _without_step(fun):
@@ -33,9 +43,9 @@ def test_compiled_steps_are_solve_ivps_and_the_scipy_cores(name, duration):
     at 1e-8 and the states at the tolerance)."""
     plan, t, x = _sliding(name, 2.0)
     fun = plan.rhs
-    assert fun.step is not None
     span, rtol, atol = (t, t + duration), 1e-7, 1e-9
-    got = dop853.solve(fun, span, x, rtol=rtol, atol=atol, step=fun.step)
+    got = dop853.solve(fun, span, x, rtol=rtol, atol=atol, step=_counted(fun.step, taken := []))
+    assert len(taken) == got.naccept + got.nreject and all(taken)  # every attempt by the compiled call
     core = dop853.solve(_without_step(fun), span, x, rtol=rtol, atol=atol)
     ref = solve_ivp(_without_step(fun), span, x, method="DOP853", rtol=rtol, atol=atol)
     assert got.naccept == core.naccept == len(ref.t) - 1 > 10 and got.nreject == core.nreject
@@ -47,22 +57,23 @@ def test_compiled_steps_are_solve_ivps_and_the_scipy_cores(name, duration):
     assert np.all(np.abs(got.sol(ts) - core.sol(ts)) <= 10.0 * (atol + rtol * np.abs(core.sol(ts))))
 
 
-def test_a_step_the_compiled_call_cannot_take_is_taken_by_the_right_hand_side(monkeypatch):
-    """Every third attempt made to decline (as a clip or a slide inside the stick band would): those steps are taken
-    by the plan's Python right-hand side (solve_ivp's arithmetic): the same steps, the states within the tolerance."""
-    plan, t, x = _sliding("case2_writer5dof", 2.0)
-    fun, step = plan.rhs, plan.rhs.step
-    tries = []
+def test_a_step_the_compiled_call_cannot_take_is_taken_by_the_right_hand_side():
+    """The A7 press of the 2-DOF writer through motors with a 4 V limit clips at its start (test_plan_kernel): the
+    compiled call declines inside the attempt, the step is taken by the plan's Python right-hand side (the
+    readable clip), and the run is scipy's core's (the same steps, the states within the tolerance)."""
+    from test_output_samples import _pressing_writer
+    from test_plan_kernel import _mode_at
 
-    def sometimes(*args):
-        tries.append(1)
-        return None if len(tries) % 3 == 0 else step(*args)
-
-    span = (t, t + 0.02)
-    got = dop853.solve(fun, span, x, rtol=1e-7, atol=1e-9, step=sometimes)
-    want = dop853.solve(fun, span, x, rtol=1e-7, atol=1e-9, step=step)
-    assert len(tries) >= 6 and got.naccept == want.naccept and got.nreject == want.nreject
-    assert np.all(np.abs(got.y - want.y) <= 10.0 * (1e-9 + 1e-7 * np.abs(want.y)))
+    system, plan, _, _ = _mode_at(parse_scene(_pressing_writer(u_max=4.0)), 0.3)
+    fun, t = plan.rhs, plan.phase.t_start
+    x = system.initial_state()[0] + 1e-3 * np.random.default_rng(1).normal(size=system.n)
+    assert plan.kernel(t, x, plan.phi_at(t, x)) is None  # a clipping state
+    span, rtol, atol = (t, t + 0.01), 1e-7, 1e-9
+    got = dop853.solve(fun, span, x, rtol=rtol, atol=atol, step=_counted(fun.step, taken := []))
+    core = dop853.solve(_without_step(fun), span, x, rtol=rtol, atol=atol)
+    assert not all(taken)  # declined in the compiled call, taken by the right-hand side
+    assert got.naccept == core.naccept and got.nreject == core.nreject
+    assert np.all(np.abs(got.y[:, -1] - core.y[:, -1]) <= 10.0 * (atol + rtol * np.abs(core.y[:, -1])))
 
 
 def test_compiled_steps_locate_the_events_as_scipys_core():
@@ -81,9 +92,9 @@ def test_compiled_steps_locate_the_events_as_scipys_core():
 
     slip_x.terminal = True
     span = (t, t + 0.1)
-    got = dop853.solve(fun, span, x, rtol=1e-7, atol=1e-9, events=[slip_x], step=fun.step)
+    got = dop853.solve(fun, span, x, rtol=1e-7, atol=1e-9, events=[slip_x], step=_counted(fun.step, taken := []))
     core = dop853.solve(_without_step(fun), span, x, rtol=1e-7, atol=1e-9, events=[slip_x])
-    assert got.status == core.status == 1 and got.t[-1] < span[1]
+    assert got.status == core.status == 1 and got.t[-1] < span[1] and taken and all(taken)
     assert got.t_events[0][0] == pytest.approx(core.t_events[0][0], abs=1e-9)
 
 
@@ -96,9 +107,12 @@ def test_the_batched_derivatives_are_the_calls_bitwise(monkeypatch):
     X = x + 1e-5 * rng.normal(size=(6, len(x)))
     ts = t + np.linspace(0.0, 1e-3, 6)
     want = np.array([fun(float(tk), xk.copy()) for tk, xk in zip(ts, X, strict=True)])
-    assert np.array_equal(fun.derivatives(ts, X), want)
-    calls = []
+    done = []
     original = plan_steps._derivatives
+    monkeypatch.setattr(plan_steps, "_derivatives", lambda *a: done.append(original(*a)) or done[-1])
+    batch = plan_steps.derivatives(plan.kernel.kind, plan.kernel.step_inputs, plan.kernel.layout, fun)
+    assert np.array_equal(batch(ts, X), want) and done == [len(ts)]  # all six by the compiled call
+    calls = []
     monkeypatch.setattr(plan_steps, "_derivatives", lambda *a: min(original(*a), 3))
     monkeypatch.setattr(plan, "rhs", lambda t_, x_: calls.append(t_) or fun(t_, x_))
     batch = plan_steps.derivatives(plan.kernel.kind, plan.kernel.step_inputs, plan.kernel.layout, plan.rhs)

@@ -82,3 +82,32 @@ def test_what_rigid_terms_does_not_compute_is_left_to_pinocchio():
     model.addJoint(jid, pin.JointModelSpherical(), pin.SE3.Identity(), "b")
     assert rigid_table(model) is None
     assert rigid_table(pin.Model()) is None  # no joint at all
+
+
+def test_a_robot_without_a_table_runs_the_same_call_on_pinocchios_terms(monkeypatch):
+    """With the table withheld (as for a free-flyer), the plans' compiled call takes Pinocchio's terms (loaded into
+    its buffer before the call) and no compiled step: the 5-DOF writer's press and launch are the same run to
+    the tolerance (force to 1e-8 of its scale, the joints to 1e-9 rad)."""
+    from contactdyn import plan_phi
+    from contactdyn.simulate import simulate
+
+    ours = simulate("case2_writer5dof", {"duration": 0.8})
+    monkeypatch.setattr(plan_phi, "rigid_table", lambda model: None)
+    loads = []
+    load_of = plan_phi.phi_function
+
+    def counting(plan):
+        phi = load_of(plan)
+        assert phi.load is not None
+        load = phi.load
+        phi.load = lambda x: loads.append(1) or load(x)
+        return phi
+
+    monkeypatch.setattr(plan_phi, "phi_function", counting)
+    import contactdyn.plan_rhs as plan_rhs
+    monkeypatch.setattr(plan_rhs, "phi_function", counting)
+    theirs = simulate("case2_writer5dof", {"duration": 0.8})
+    assert loads  # the compiled call ran on Pinocchio's terms
+    F = ours["contact.pencil.F_n"]
+    assert np.abs(theirs["contact.pencil.F_n"] - F).max() <= 1e-8 * np.abs(F).max()
+    assert np.abs(theirs["q"] - ours["q"]).max() <= 1e-9
