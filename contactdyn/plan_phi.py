@@ -21,7 +21,7 @@ import numpy as np
 import pinocchio as pin
 from numba import njit
 
-from .rigid_body import NO_TABLE, rigid_table, rigid_terms
+from .rigid_body import NO_TABLE, rigid_terms
 from .trajectory import move_rows, move_table, ramp_rows, ramp_table
 
 __all__ = ["phi_function", "write_phi", "write_phi_only", "work_terms", "copy_terms", "write_frame", "frame_motion",
@@ -55,7 +55,7 @@ def phi_function(plan):
     terms = (data.M, data.nle, g, *joint_terms(model, data, fids[0]))
     #: the robot's terms computed in write_phi (contactdyn.rigid_body) where it can, for one frame (further frames'
     #: terms are written from Python between Pinocchio's call and the plan's); else Pinocchio's call
-    rigid = rigid_table(model) if len(fids) == 1 else None
+    rigid = s.robot.rigid_table if len(fids) == 1 else None
     compute = pin.computeAllTerms if rigid is None else None
     #: per frame: where x's v, its J (3 rows), J̇q̇, p and ṗ go in φ; the first frame's also where h (then g) and x go,
     #: its joint, nv and g's size (:func:`work_terms`)

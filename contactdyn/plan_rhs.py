@@ -82,10 +82,7 @@ def make_rhs(plan):
                 impulse_rates(xd, z, o, modes, None)
         else:
             xd, z, o = numpy_call(t, x, phi, Js)
-        ring[0] = ring[1]
-        ring[1] = ring[2]
-        ring[2] = ring[3]
-        ring[3] = (t, x, z, o)
+        ring.append((t, x, z, o))
         return xd
 
     def numpy_call(t, x, phi, Js):
@@ -123,10 +120,7 @@ def _fused(plan, kernel, numpy_call, written, ring):
             xd, z, o = numpy_call(t, x, *written)
         else:
             xd, z, o = out[:n], out[n:n + m], out[n + m:n + m + no]
-        ring[0] = ring[1]
-        ring[1] = ring[2]
-        ring[2] = ring[3]
-        ring[3] = (t, x, z, o)
+        ring.append((t, x, z, o))
         return xd
 
     compiled = kernel.step_inputs is not None

@@ -127,10 +127,7 @@ def stepper(plan, kind: int, inputs, layout: tuple[int, int, int, int]):
         status, err = attempt(kind, *args, t, y, f, h, rtol, atol, _A, _B, _C, _E, out, y_new, block)
         if status:
             return None
-        ring[0] = ring[1]
-        ring[1] = ring[2]
-        ring[2] = ring[3]
-        ring[3] = (t + h, y_new, out[n:n + m], out[n + m:n + m + no])
+        ring.append((t + h, y_new, out[n:n + m], out[n + m:n + m + no]))
         return err, y_new, block
 
     step.usable = usable

@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 import pickle
 import weakref
+from collections import deque
 
 import numpy as np
 
@@ -47,6 +48,7 @@ __all__ = ["ModePlan", "Samples", "cached_plan", "structure", "affine_map"]  # S
 
 CHECK_RTOL = 1e-9  #: agreement a plan must show with System.evaluate when it is built
 ANY_2D = (0.0, 0.0)  #: a 2-D reference direction in a plan's key (:func:`structure`): never a real one
+_NO_CALL = (None, None, None, None)  #: a ring entry before any call
 
 
 _PLANS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  #: system -> {key: ModePlan}
@@ -80,7 +82,8 @@ class ModePlan(ProbedModel, CompiledKKT):
     def __init__(self, system, modes: list[ContactMode], phase):
         self.system, self.modes, self.phase = system, list(modes), phase
         self.ok, self.reason = False, ""
-        self.ring: list[tuple] = [(None, None, None, None)] * 4  #: the last four calls' (t, x, z, o)
+        #: the last four calls' (t, x, z, o), the latest at [3] (a call appends; the oldest drops out)
+        self.ring: deque[tuple] = deque([_NO_CALL] * 4, maxlen=4)
         reason = self._unsupported()
         if reason:
             self.reason = reason
@@ -118,7 +121,7 @@ class ModePlan(ProbedModel, CompiledKKT):
         self.modes = list(modes)
         if self.ok:  # a declined plan has no call: its modes run on System.evaluate
             self.rhs = make_rhs(self)
-            self.ring[:] = [(None, None, None, None)] * 4
+            self.ring.extend([_NO_CALL] * 4)
 
     # ---- output samples, all at once (contactdyn.samples) ----------------------------------
     def samples(self, ts: np.ndarray, X: np.ndarray, modes: list[ContactMode] | None = None) -> Samples:
@@ -206,5 +209,5 @@ class ModePlan(ProbedModel, CompiledKKT):
                 self.ok = False
                 self.reason = f"{UNDECLARED}disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g}"
                 return
-        self.ring[:] = [(None, None, None, None)] * 4
+        self.ring.extend([_NO_CALL] * 4)
         self.singular = 0

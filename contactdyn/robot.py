@@ -22,6 +22,7 @@ import pinocchio as pin
 
 from .errors import RobotError, close_matches
 from .frames import chain_joints, find_frame
+from .rigid_body import rigid_table
 from .robot_catalog import example_robots, urdf_dir
 from .urdf_check import isolated_build
 from .urdf_model import UrdfModel, build_isolated, build_urdf_model, lock_joints, xml_label
@@ -223,6 +224,12 @@ class Robot:
         if callable(self._visual):
             self._visual = self._visual()
         return self._visual
+
+    @functools.cached_property
+    def rigid_table(self) -> np.ndarray | None:
+        """The model's table for the plans' own dynamics (:func:`contactdyn.rigid_body.rigid_table`; None: a
+        joint it does not compute), built once."""
+        return rigid_table(self.model)
 
     def frame_id(self, name: str) -> int:
         """Index of a named frame (the body's when several share the name); a clear error lists close matches."""

@@ -7,6 +7,7 @@ import pinocchio as pin
 import pytest
 
 from contactdyn.rigid_body import rigid_table, rigid_terms
+from contactdyn.robot import Robot
 from contactdyn.robot_catalog import example_robots
 
 URDF = Path(__file__).resolve().parent.parent / "urdf"
@@ -92,7 +93,7 @@ def test_a_robot_without_a_table_runs_the_same_call_on_pinocchios_terms(monkeypa
     from contactdyn.simulate import simulate
 
     ours = simulate("case2_writer5dof", {"duration": 0.8})
-    monkeypatch.setattr(plan_phi, "rigid_table", lambda model: None)
+    monkeypatch.setattr(Robot, "rigid_table", property(lambda robot: None))
     loads = []
     load_of = plan_phi.phi_function
 
