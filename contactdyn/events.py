@@ -192,58 +192,62 @@ class SlipWatch:
         return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
 
 
-class StepBudget:
-    """``auto``'s budget: a terminal event at the end of DOP853's ``budget``-th step (:mod:`contactdyn.integrators`).
-
-    ``solve_ivp`` calls events once per step end with increasing t (and, while locating a
-    root, inside the last step): the function is +1 before the step end where the budget
-    ran out and −1 from there on, so the segment ends exactly there.
-    """
+class _StepCount:
+    """A terminal event at the end of the ``n``-th step end that counts (:meth:`counts`, given the step's length
+    h [s]; the call at t0 has h = inf). ``solve_ivp`` calls events once per step end with increasing t (and,
+    while locating a root, inside the last step: those calls neither count nor move it): the function is +1
+    before that step end and −1 from there on, so the segment ends exactly there."""
 
     terminal = True
     direction = -1
-    kind = "budget"
     contact = ""
+
+    def __init__(self, n: int):
+        self.left = n
+        self.t_end, self.t_fire = -math.inf, math.inf
+
+    def counts(self, h: float) -> bool:
+        raise NotImplementedError
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        if t > self.t_end:
+            if self.counts(t - self.t_end):
+                self.left -= 1
+                if self.left == 0:
+                    self.t_fire = t
+            self.t_end = t
+        return -1.0 if t >= self.t_fire else 1.0
+
+
+class StepBudget(_StepCount):
+    """``auto``'s budget: a terminal event at the end of DOP853's ``budget``-th step (:mod:`contactdyn.integrators`)."""
+
+    kind = "budget"
 
     def __init__(self, budget: int):
-        self.budget, self.count = budget, 0
-        self.t_end, self.t_fire = -math.inf, math.inf
+        super().__init__(budget + 1)  # the call at t0 counts too
 
-    def __call__(self, t: float, x: np.ndarray) -> float:
-        if t > self.t_end:
-            self.t_end = t
-            self.count += 1
-            if self.count > self.budget and self.t_fire == math.inf:
-                self.t_fire = t
-        return -1.0 if t >= self.t_fire else 1.0
+    def counts(self, h: float) -> bool:
+        return True
 
 
-class StepCollapse:
+class StepCollapse(_StepCount):
     """A 2-D slide's guard: a terminal event at the end of the ``count``-th step shorter than ``ratio`` times the
     longest of the segment so far (the hybrid loop then checks whether a stiff mode holds the step: a slide
-    coming to rest, its direction relaxing at a rate ∝ 1/|v_t|; :meth:`~contactdyn.hybrid.HybridRun._collapse_check`).
-    Called at the step ends with increasing t, as :class:`StepBudget`."""
+    coming to rest, its direction relaxing at a rate ∝ 1/|v_t|;
+    :meth:`~contactdyn.hybrid.HybridRun._collapse_check`)."""
 
-    terminal = True
-    direction = -1
     kind = "collapse"
-    contact = ""
 
     def __init__(self, ratio: float, count: int):
-        self.ratio, self.count, self.longest = ratio, count, 0.0
-        self.t_end, self.t_fire = -math.inf, math.inf
+        super().__init__(count)
+        self.ratio, self.longest = ratio, 0.0  #: [-], [s]
 
-    def __call__(self, t: float, x: np.ndarray) -> float:
-        if t > self.t_end:
-            h = t - self.t_end
-            if h < self.ratio * self.longest:
-                self.count -= 1
-                if self.count == 0:
-                    self.t_fire = t
-            if math.isfinite(h):
-                self.longest = max(self.longest, h)
-            self.t_end = t
-        return -1.0 if t >= self.t_fire else 1.0
+    def counts(self, h: float) -> bool:
+        short = h < self.ratio * self.longest
+        if math.isfinite(h):
+            self.longest = max(self.longest, h)
+        return short
 
 
 #: event kinds whose functions read forces (normal force, friction, limit torque): these jump where the
