@@ -147,7 +147,7 @@ class HybridRun:
             t_end = min(T, until) if isinstance(until, float) else T
             if t_end <= t:
                 self._new_mode()
-                phase = self._next_phase(phase, t, x)
+                x, modes, phase = self._next_phase(phase, t, x, modes)
                 continue
             corner = phase.next_corner(t, t_end) if self.at_corners else None
             if corner is not None and corner.before - t <= min_span(t):  # at it already (an event landed there)
@@ -173,7 +173,7 @@ class HybridRun:
                 x, modes, phase = self.transitions.handle(t, x, modes, phase, fired[0])
             elif t < T:
                 self._new_mode()
-                phase = self._next_phase(phase, t, x)
+                x, modes, phase = self._next_phase(phase, t, x, modes)
         return self._result(time.perf_counter() - wall0)
 
     def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
@@ -304,12 +304,16 @@ class HybridRun:
         tau = min((c.relaxation_time(m) for c, m in zip(self.system.contacts, modes, strict=True)), default=math.inf)
         return min(self.solver.max_step, RELAX_STEP * tau)
 
-    def _next_phase(self, phase: Phase, t: float, x: np.ndarray) -> Phase:
+    def _next_phase(self, phase: Phase, t: float, x: np.ndarray, modes: list[ContactMode]):
+        """The next phase started at t [s]: (x, modes, phase). Its law changes the forces at once, so the modes
+        are decided again under it (:meth:`Transitions.settle`): a stick its new friction leaves outside the
+        cone slips there, a contact it pulls separates, a limit it pulls off is released."""
         nxt = phase.index + 1
         if nxt >= len(self.scene.phases):
-            return replace(phase, spec=replace(phase.spec, until=math.inf))  # the last phase runs on
+            return x, modes, replace(phase, spec=replace(phase.spec, until=math.inf))  # the last phase runs on
         self.log.log(t, "phase", self.scene.phases[nxt].name, check_storm=False)
-        return self.system.start_phase(nxt, t, x, phase)
+        phase = self.system.start_phase(nxt, t, x, phase)
+        return self.transitions.settle(t, x, modes, phase)
 
     # ---- output ---------------------------------------------------------------------
     def _result(self, wall: float) -> Result:

@@ -81,6 +81,12 @@ class Transitions:
             x, modes = self.consistent(t, x, modes, phase, after.rest, after.released)
         return self.release_pulling(t, x, modes, phase)
 
+    def settle(self, t, x, modes, phase):
+        """Decide the modes again at an instant where the law changed but no event fired (a phase start):
+        :meth:`consistent`, then the limits that pull are released. Returns (x, modes, phase)."""
+        x, modes = self.consistent(t, x.copy(), list(modes), phase)
+        return self.release_pulling(t, x, modes, phase)
+
     def release_pulling(self, t, x, modes, phase):
         """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event."""
         limits = self.system.limits
