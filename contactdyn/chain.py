@@ -75,6 +75,10 @@ class ChainStage:
         """Compressive force [N] at compression x [m] and rate ẋ [m/s] (the stage's law)."""
         return self._law.force(self.k, self.b, self.exponent, x, xdot)
 
+    def potential(self, x: float) -> float | None:
+        """Energy [J] stored at compression x [m], None if the law does not say (see StageLaw.potential)."""
+        return self._law.potential(self.k, self.exponent, x)
+
 
 @dataclass
 class Chain:

@@ -3,7 +3,7 @@
 The hybrid loop (:mod:`contactdyn.hybrid`) leaves a list of :class:`Segment` s, each a
 smooth phase with its dense output. The output grid has ``solver.output_rate`` [Hz]
 samples over the duration; at an event time the sample belongs to the segment after the
-event. A compiled segment gives its samples' diagnostics all at once
+event (at the run's end too: an event there leaves a zero-length segment holding its modes). A compiled segment gives its samples' diagnostics all at once
 (:meth:`~contactdyn.rhsplan.ModePlan.samples`); another evaluates each sample fully.
 Channel names and units are documented in the README (``q`` [rad or m], ``contact.<c>.F_n``
 [N], ``stage.<label>.x`` [m]…).
@@ -27,7 +27,7 @@ from .rhsplan import ModePlan
 from .samples import Samples, evaluated_samples, plan_derivatives
 from .system import System
 
-__all__ = ["Segment", "output_grid", "sample_segments", "channels"]
+__all__ = ["Segment", "Held", "output_grid", "sample_segments", "sample_states", "channels"]
 
 
 @dataclass
@@ -42,6 +42,16 @@ class Segment:
     plan: ModePlan
 
 
+class Held:
+    """The dense output of a zero-length segment: the state x held (the modes an event at the run's end set)."""
+
+    def __init__(self, x: np.ndarray):
+        self.x = np.asarray(x, float).copy()
+
+    def __call__(self, t):
+        return self.x.copy() if np.ndim(t) == 0 else np.repeat(self.x[:, None], len(t), axis=1)
+
+
 def output_grid(duration: float, rate: float) -> np.ndarray:
     """Output times [s]: ``rate`` [Hz] samples over [0, duration], at least the two ends."""
     n_out = int(round(duration * rate))
@@ -51,11 +61,15 @@ def output_grid(duration: float, rate: float) -> np.ndarray:
 def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, stats: dict[str, Any]
                     ) -> dict[str, np.ndarray]:
     """The channels of a run at the times ``grid`` (adds the plans' singular solves to ``stats``)."""
-    # the segment of each sample: the first ending at or after it; at an event time, the one after
-    t1 = np.array([seg.t1 for seg in segments])
-    idx = np.minimum(np.searchsorted(t1, grid, side="left"), len(t1) - 1)
-    nxt = np.minimum(idx + 1, len(t1) - 1)
-    idx = np.where((t1[idx] == grid) & (nxt > idx) & (t1[nxt] > grid), nxt, idx)
+    return sample_states(system, segments, grid, stats)[0]
+
+
+def sample_states(system: System, segments: list[Segment], grid: np.ndarray, stats: dict[str, Any]
+                  ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The channels of a run at the times ``grid`` and its states there, (len(grid), n)."""
+    # the segment of each sample: the last starting at or before it (at an event time, the one after)
+    t0 = np.array([seg.t0 for seg in segments])
+    idx = np.maximum(np.searchsorted(t0, grid, side="right") - 1, 0)
     xs = np.empty((len(grid), system.n))
     parts: list[Samples] = []
     modes_of: list[list[ContactMode]] = []
@@ -90,7 +104,7 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
     if system.limits.limits:
         out.update(limit_channels(system, phases_of, samples))
     out.update(drive_channels(system, xs, samples))
-    return out
+    return out, xs
 
 
 def _same_mode_runs(segments: list[Segment], used: np.ndarray) -> list[list[int]]:

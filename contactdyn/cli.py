@@ -162,7 +162,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     result = _simulate_quietly(simulate, scene)
     from .robot_list import run_warnings
 
-    warnings = result.meta.get("warnings", []) + run_warnings(result.meta)  # sanity, then inertia and limits
+    # sanity, then inertia and limits, then the run's physics checks
+    warnings = result.meta.get("warnings", []) + run_warnings(result.meta) + result.meta.get("check_warnings", [])
     if not args.quiet and not args.json:
         for note in warnings:
             print(f"contactdyn: warning: {note}", file=sys.stderr)
@@ -203,13 +204,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _simulate_quietly(simulate, scene):
-    """Simulate without Python's own warning lines (the command prints the sanity warnings itself)."""
+    """Simulate without Python's own warning lines (the command prints the sanity and check warnings itself)."""
     import warnings
 
+    from .physics_checks import PhysicsWarning
     from .sanity import SanityWarning
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SanityWarning)
+        warnings.simplefilter("ignore", PhysicsWarning)
         return simulate(scene)
 
 

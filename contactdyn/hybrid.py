@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .channels import Segment, output_grid, sample_segments
+from .channels import Held, Segment, output_grid, sample_states
 from .contact import ContactMode
 from .errors import SceneError, SimulationError
 from .events import EventLog, StepBudget, StepCollapse, fired_across, segment_events
@@ -53,6 +53,7 @@ from .integrators import (
 )
 from .limits import rate_limit_report
 from .phases import Phase
+from .physics_checks import StartAudit, run_checks, violations
 from .result import Result
 from .rhsplan import ModePlan, cached_plan, structure
 from .system import System
@@ -107,6 +108,7 @@ class HybridRun:
         #: them, "" when none did (no more checks in the mode); None: not checked
         self.resting: str | None = None
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
+        self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.physics_checks)
 
     def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True) -> ModePlan:
         """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``
@@ -174,6 +176,8 @@ class HybridRun:
             elif t < T:
                 self._new_mode()
                 x, modes, phase = self._next_phase(phase, t, x, modes)
+        if self.segments and self.segments[-1].modes != modes:  # an event at the end: its modes are the last sample's
+            self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._plan(modes, phase, count=False)))
         return self._result(time.perf_counter() - wall0)
 
     def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
@@ -200,6 +204,7 @@ class HybridRun:
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
+            self.starts.record(t, x, events)
             events += self._watches(modes, method)
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
             # LSODA finishing a slide that comes to rest (HybridRun._collapse_check): at RESTING_TOL × the tolerances
@@ -319,7 +324,8 @@ class HybridRun:
     def _result(self, wall: float) -> Result:
         system, scene = self.system, self.scene
         T = scene.duration
-        channels = sample_segments(system, self.segments, output_grid(T, self.solver.output_rate), self.stats)
+        channels, xs = sample_states(system, self.segments, output_grid(T, self.solver.output_rate), self.stats)
+        checks = run_checks(system, xs, channels, self.starts, self.impacts)
         rate_stats, rate_warnings = rate_limit_report(system.robot, channels["t"], channels["v"], channels["tau"])
         self.stats["rhs_evals"] += sum(getattr(seg.sol, "late_calls", 0) for seg in self.segments)  # DOP853C's
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
@@ -330,7 +336,7 @@ class HybridRun:
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
                 "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
-                "name": scene.name, "duration": T}
+                "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks)}
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
 
 

@@ -45,7 +45,18 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None)
     notes = sanity_warnings(system)
     result = HybridRun(system).run(wall0)
     result.meta["warnings"] = notes
+    check_warnings(result)
     return result
+
+
+def check_warnings(result: Result) -> None:
+    """Issue the run's violated :mod:`~contactdyn.physics_checks` as PhysicsWarning (never fatal)."""
+    import warnings
+
+    from .physics_checks import PhysicsWarning
+
+    for note in result.meta.get("check_warnings", []):
+        warnings.warn(f"{result.meta['name']}: {note}", PhysicsWarning, stacklevel=3)
 
 
 def sanity_warnings(system: System) -> list[str]:

@@ -37,6 +37,12 @@ class StageLaw:
         """Compressive force [N] at compression x [m] and rate ẋ [m/s]."""
         raise NotImplementedError
 
+    @staticmethod
+    def potential(k: float, n: float, x: float) -> float | None:
+        """Energy [J] stored at compression x [m] (the integral of the law's elastic part), None if not known
+        (the run's energy check then says so: :mod:`contactdyn.physics_checks`)."""
+        return None
+
 
 STAGE_LAWS: dict[str, type[StageLaw]] = {}  #: name -> law, the ``law`` values a scene accepts
 
@@ -56,6 +62,10 @@ class Linear(StageLaw):
     def force(k: float, b: float, n: float, x: float, xdot: float) -> float:
         return k * x + b * xdot
 
+    @staticmethod
+    def potential(k: float, n: float, x: float) -> float:
+        return 0.5 * k * x * x
+
 
 @register_stage_law
 class HuntCrossley(StageLaw):
@@ -68,3 +78,7 @@ class HuntCrossley(StageLaw):
             return 0.0
         xn = x**n
         return max(k * xn + b * xn * xdot, 0.0)
+
+    @staticmethod
+    def potential(k: float, n: float, x: float) -> float:
+        return k * x ** (n + 1.0) / (n + 1.0) if x > 0.0 else 0.0

@@ -114,6 +114,11 @@ class System:
             names.append(name)
         return Drives(specs, coords, names, first_motor_coord)
 
+    @property
+    def rotor_inertias(self) -> np.ndarray:
+        """[kg·m²] (nv,) the rotors reflected on the joints (rigid gears; zero without a motor)."""
+        return self._D
+
     def controller_inertia(self, H: np.ndarray) -> np.ndarray:
         """[kg·m²] The controller's H: the robot's ``H`` (one sample or a stack) with the rotors reflected."""
         return H + self._D_ctl if self.drives.any_motor else H
