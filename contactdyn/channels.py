@@ -3,7 +3,8 @@
 The hybrid loop (:mod:`contactdyn.hybrid`) leaves a list of :class:`Segment` s, each a
 smooth phase with its dense output. The output grid has ``solver.output_rate`` [Hz]
 samples over the duration; at an event time the sample belongs to the segment after the
-event (at the run's end too: an event there leaves a zero-length segment holding its modes). A compiled segment gives its samples' diagnostics all at once
+event (at the run's end too: an event there leaves a zero-length segment holding its modes).
+A compiled segment gives its samples' diagnostics all at once
 (:meth:`~contactdyn.rhsplan.ModePlan.samples`); another evaluates each sample fully.
 Channel names and units are documented in the README (``q`` [rad or m], ``contact.<c>.F_n``
 [N], ``stage.<label>.x`` [m]…).

@@ -179,8 +179,8 @@ def stored_energy(system: System, xs: np.ndarray, ch: dict[str, np.ndarray]) -> 
     energy = np.empty(len(xs))
     for k, x in enumerate(xs):
         q, v, rest = x[:nv], x[nQ:nQ + nv], x[nQ + nv:2 * nQ]
-        energy[k] = robot.kinetic_energy(q, v) + robot.potential_energy(q) + 0.5 * float(system.rotor_inertias @ (v * v)) \
-            + 0.5 * float(system.M_rest @ (rest * rest))
+        rotors = 0.5 * float(system.rotor_inertias @ (v * v)) + 0.5 * float(system.M_rest @ (rest * rest))
+        energy[k] = robot.kinetic_energy(q, v) + robot.potential_energy(q) + rotors
     for c in system.contacts:
         for dc in c.chains:
             for s in dc.chain.stages:
