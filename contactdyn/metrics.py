@@ -15,6 +15,11 @@ set-point), so rows of different runs stack into one table. Names and units:
 ``tracking_rms``                          m       RMS of |tip − tip_ref| over the samples with a reference
 ``max_deformation``                       m       largest |x| over every deformation stage
 ``events``                                -       number of mode-switch events
+``contact.<c>.<check>``                   *       a physics check's value (:mod:`~contactdyn.physics_checks`:
+                                                  ``cone_excess`` [N], ``pull`` [N], ``drift`` [m]...),
+                                                  NaN where it does not apply to the contact
+``energy_residual``                       J       the energy audit's residual (NaN without one)
+``check_violations``                      -       number of checks above their tolerance
 ========================================  ======  ==============================================
 
 RMS values weigh the samples equally (``solver.output_rate`` is uniform).
@@ -26,17 +31,21 @@ import math
 
 import numpy as np
 
+from .physics_checks import CHECKS
 from .result import Result
 
 __all__ = ["metrics", "is_metric", "CONTACT_METRICS", "RUN_METRICS", "UNITS"]
 
 #: metric suffixes under ``contact.<name>.``
-CONTACT_METRICS = ("F_peak", "F_final", "impacts", "impulse_n", "impulse_n_first", "impulse_t", "force_rms")
+CONTACT_CHECKS = tuple(name for name in CHECKS if name != "energy_residual")  #: the physics checks per contact
+CONTACT_METRICS = ("F_peak", "F_final", "impacts", "impulse_n", "impulse_n_first", "impulse_t", "force_rms",
+                   *CONTACT_CHECKS)
 #: metrics of the whole run
-RUN_METRICS = ("tracking_rms", "max_deformation", "events")
+RUN_METRICS = ("tracking_rms", "max_deformation", "events", "energy_residual", "check_violations")
 #: unit of each metric (by its last name part; "" : a count), as in the table above
 UNITS = {"F_peak": "N", "F_final": "N", "impacts": "", "impulse_n": "N·s", "impulse_n_first": "N·s",
-         "impulse_t": "N·s", "force_rms": "N", "tracking_rms": "m", "max_deformation": "m", "events": ""}
+         "impulse_t": "N·s", "force_rms": "N", "tracking_rms": "m", "max_deformation": "m", "events": "",
+         **{name: unit for name, (unit, _) in CHECKS.items()}, "check_violations": ""}
 
 
 def is_metric(name: str) -> bool:
@@ -62,6 +71,9 @@ def metrics(result: Result) -> dict[str, float]:
                                           for imp in hits))  # [N·s]
         F_d = np.asarray(ch.get(f"{p}.F_d", np.full_like(F, np.nan)), float)
         out[f"{p}.force_rms"] = _rms((F - F_d)[np.isfinite(F_d)])  # [N]
+        checks = result.meta.get("checks", {}).get("contacts", {}).get(name, {})
+        for check in CONTACT_CHECKS:
+            out[f"{p}.{check}"] = float(checks[check]["value"]) if check in checks else math.nan
     if "tip_ref" in ch:
         err = np.asarray(ch["tip"], float) - np.asarray(ch["tip_ref"], float)
         rows = np.all(np.isfinite(err), axis=1)
@@ -72,6 +84,9 @@ def metrics(result: Result) -> dict[str, float]:
     out["max_deformation"] = float(max(np.max(s) for s in stages if s.size)) if any(s.size for s in stages) \
         else math.nan  # [m]
     out["events"] = float(result.stats.get("events", len(result.events)))
+    energy = result.meta.get("checks", {}).get("energy_residual")
+    out["energy_residual"] = float(energy["value"]) if energy else math.nan  # [J]
+    out["check_violations"] = float(len(result.meta.get("check_warnings", [])))
     return out
 
 

@@ -31,11 +31,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .system import System
+if TYPE_CHECKING:
+    from .system import System
 
 __all__ = ["CHECKS", "UNITS", "StartAudit", "tolerances", "run_checks", "violations", "PhysicsWarning"]
 

@@ -116,6 +116,9 @@ def _first_run(model: FitModel, parameters: list[Parameter]) -> list[np.ndarray]
         result = simulate(parse_scene(model.document, {**model.fixed, **values}, model.file))
     except ContactdynError as exc:
         raise ContactdynError(f"the run at the scene's values {values} failed: {exc}") from None
+    if result.meta.get("check_warnings"):
+        raise ContactdynError(f"the run at the scene's values {values} breaks its own physics, so a fit cannot "
+                              f"trust it: {'; '.join(result.meta['check_warnings'])}")
     check_columns(result.channels, [c.name for c in model.data.columns], model.data.file)
     return [read_channel(result.channels, c.channel, c.index, c.t) for c in model.data.columns]
 

@@ -54,6 +54,8 @@ def predict(document: dict[str, Any], file: str | None, overrides: dict[str, Any
         result = simulate(parse_scene(document, overrides, file))
     except (ContactdynError, *NUMERICAL) as exc:
         return f"{type(exc).__name__}: {exc}"
+    if result.meta.get("check_warnings"):  # a run that breaks its own physics is no evidence
+        return f"refused: {result.meta['check_warnings'][0]}"
     return [read_channel(result.channels, channel, index, t) for channel, index, t in targets]
 
 
