@@ -48,19 +48,19 @@ def _readable(plan, ts, X):
 def recorded_run(name: str):
     """(result, its CPU time [s], system, segments, output grid) of one run of the scene."""
     seen = {}
-    original = hybrid.sample_segments
+    original = hybrid.sample_states
 
     def record(system, segments, grid, stats):
         seen.update(system=system, segments=segments, grid=grid)
         return original(system, segments, grid, stats)
 
-    hybrid.sample_segments = record
+    hybrid.sample_states = record
     try:
         t0 = time.process_time()
         result = simulate(load_scene(name))
         run_s = time.process_time() - t0
     finally:
-        hybrid.sample_segments = original
+        hybrid.sample_states = original
     return result, run_s, seen["system"], seen["segments"], seen["grid"]
 
 
