@@ -11,7 +11,8 @@ PKG = Path(__file__).resolve().parent.parent / "contactdyn"
 #: the model and the loop, one concept per module (docs/architecture.md's module map)
 CORE = ["elements", "chain", "contact", "layout", "phases", "chain_forces", "friction", "constraints", "impact",
         "dynamics", "drives", "system", "plan_probe", "plan_kkt", "plan_rhs", "rhsplan", "samples", "events",
-        "transitions", "hybrid", "channels", "simulate", "integrators", "fastpath", "stage_laws", "dop853"]
+        "transitions", "hybrid", "channels", "simulate", "integrators", "fastpath", "stage_laws", "dop853",
+        "physics_checks"]
 MAX_CLASS, MAX_FUNCTION = 300, 80  #: [lines]
 
 
@@ -110,7 +111,8 @@ LAYERS = [
     ["chain", "contact", "layout", "phases", "chain_forces", "friction", "constraints", "impact", "dynamics",
      "drives", "controllers", "limits", "posture", "system", "fastpath"],
     ["rhsplan", "plan_probe", "plan_kkt", "plan_rhs", "plan_fold", "plan_law", "plan_drives", "samples"],
-    ["integrators", "dop853", "events", "transitions", "hybrid", "channels", "result", "run_check"],  # the loop
+    ["integrators", "dop853", "events", "transitions", "hybrid", "channels", "result", "run_check",
+     "physics_checks"],  # the loop
     ["simulate", "sanity", "metrics"],
     ["plots", "viewer", "sweep", "identify", "workprecision", "stability", "cli", "starter", "keys"],
 ]
