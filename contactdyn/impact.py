@@ -15,6 +15,13 @@ with every bond, stick and the new contact held at velocity level (Λ the impuls
   sliding assumption is wrong: zero tangential velocity, F_fΔt an unknown; if holding it
   needs more than μ_s FΔt (eqs 35–38) the tip slides where that impulse pushes.
 
+Every other stuck contact holds through its stick rows only while its impulse stays in its
+own cone, |F_fΔt| ≤ μ_s FΔt (FΔt: its normal row's impulse; zero for a compliant normal,
+which carries no impulse): one that would leave it slides from the impact on, where its
+impulse pushed (``Impact.released``), and the impact is solved again without its stick.
+Its friction impulse during the impact is μ_k FΔt folded nowhere: like every sliding contact
+other than the impact's own, its normal column stays untilted (zero for a compliant normal).
+
 A joint reaching its position limit is the same map with the limit's row among the rows
 (:func:`limit_impact`), friction impulses at a sliding contact included.
 
@@ -31,7 +38,7 @@ import numpy as np
 
 from .constraints import impulse_solve, velocity_rows
 from .contact import Contact, ContactMode
-from .friction import CONE_TOL, FORCE_ABS_TOL, slip_velocity
+from .friction import CONE_TOL, FORCE_ABS_TOL, direction_of, slip_velocity
 
 __all__ = ["Impact", "impact", "limit_impact", "project_velocity"]
 
@@ -52,6 +59,8 @@ class Impact:
     slip_after: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
     direction: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: sliding direction d (0: none)
     row_impulses: dict = field(default_factory=dict)  #: (owner, kind, index) -> Λ of every held row [N·s or N·m·s]
+    #: other contacts that were stuck and slide from the impact on (their stick impulse left the cone): name -> d
+    released: dict = field(default_factory=dict)
 
 
 def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact | None,
@@ -75,13 +84,16 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     qd_minus = x[nQ:2 * nQ].copy()
     M = system.mass_matrix()
     name = contact.name if contact is not None else ""
-    fr, k = (contact.friction, len(contact.tangents)) if contact is not None else (None, 0)
+    k = len(contact.tangents) if contact is not None and contact.friction is not None else 0
     kin = system.kinematics(contact, x) if contact is not None else None
     vt_minus = slip_velocity(system, contact, kin, qd_minus) if k else np.zeros(0)
+    held = list(modes)  #: the modes the impact holds: a stick its impulse would push out of the cone slides
+    if k and modes[system.contacts.index(contact)].stuck:  # the impact's own stick: tried jammed, like a rest
+        held[system.contacts.index(contact)] = modes[system.contacts.index(contact)].with_(stuck=False)
     impulses: dict = {}
 
     def solve(slide=None, jam=False):
-        rows = velocity_rows(system, x, modes, slide=(contact, slide) if slide is not None else None,
+        rows = velocity_rows(system, x, held, slide=(contact, slide) if slide is not None else None,
                              jam=contact if jam else None, limits=limits)
         z, _ = impulse_solve(system, M, rows, qd_minus)
         impulses.clear()
@@ -90,33 +102,60 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
         P_t = np.array([impulses.get((name, "t", i), 0.0) for i in range(k)])
         return z[:nQ], P_n, P_t
 
-    jammed = False
-    d = np.zeros(k)
-    if fr is None or not k or modes[system.contacts.index(contact)].stuck:
-        qd_plus, P_n, P_t = solve()
-    else:
-        speed = float(np.linalg.norm(vt_minus))
-        if speed > system.slip_band:
-            d = vt_minus / speed
-            qd_plus, P_n, _ = solve(slide=d)
-            P_t = -fr.mu_k * P_n * d
-            jammed = float(slip_velocity(system, contact, kin, qd_plus) @ d) < 0.0
-        else:
-            jammed = True
-        if jammed:
-            qd_plus, P_n, P_t = solve(jam=True)
-            if float(np.linalg.norm(P_t)) > fr.mu_s * P_n * (1.0 + CONE_TOL) + FORCE_ABS_TOL:
-                # holding needs more than the cone gives: slide where the impulse pushes
-                d = -P_t / float(np.linalg.norm(P_t))
-                qd_plus, P_n, _ = solve(slide=d)
-                P_t = -fr.mu_k * P_n * d
-                jammed = False
+    released: dict[str, tuple[float, ...]] = {}
+    while True:
+        qd_plus, P_n, P_t, d, jammed = _own_contact(system, contact, kin, vt_minus, solve)
+        outside = _sticks_outside_the_cone(system, held, contact, impulses)
+        if not outside:
+            break
+        for j, push in outside:  # slide from rest where the impulse pushed (its friction impulse: see above)
+            held[j] = held[j].with_(stuck=False, slip=direction_of(push), from_rest=True)
+            released[system.contacts[j].name] = held[j].slip
     x_new = x.copy()
     x_new[nQ:2 * nQ] = qd_plus
     energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
     vt_plus = slip_velocity(system, contact, kin, qd_plus) if k else np.zeros(0)
     return x_new, Impact(t, name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d,
-                         dict(impulses))
+                         dict(impulses), released)
+
+
+def _own_contact(system, contact, kin, vt_minus, solve):
+    """The impact's own contact: (Q̇⁺, P_n, P_t, d, jammed) by the sliding or jamming branch (see impact)."""
+    fr, k = (contact.friction, len(contact.tangents)) if contact is not None else (None, 0)
+    d = np.zeros(k)
+    if fr is None or not k:
+        qd_plus, P_n, P_t = solve()
+        return qd_plus, P_n, P_t, d, False
+    speed = float(np.linalg.norm(vt_minus))
+    jammed = True
+    if speed > system.slip_band:
+        d = vt_minus / speed
+        qd_plus, P_n, _ = solve(slide=d)
+        P_t = -fr.mu_k * P_n * d
+        jammed = float(slip_velocity(system, contact, kin, qd_plus) @ d) < 0.0
+    if jammed:
+        qd_plus, P_n, P_t = solve(jam=True)
+        if float(np.linalg.norm(P_t)) > fr.mu_s * P_n * (1.0 + CONE_TOL) + FORCE_ABS_TOL:
+            # holding needs more than the cone gives: slide where the impulse pushes
+            d = -P_t / float(np.linalg.norm(P_t))
+            qd_plus, P_n, _ = solve(slide=d)
+            P_t = -fr.mu_k * P_n * d
+            jammed = False
+    return qd_plus, P_n, P_t, d, jammed
+
+
+def _sticks_outside_the_cone(system, held, contact, impulses) -> list[tuple[int, np.ndarray]]:
+    """The other stuck contacts whose stick impulse |P_t| exceeds μ_s P_n (P_n: their normal row's impulse, 0
+    for a compliant normal, which carries no impulse), with the direction the impulse pushes (−P_t)."""
+    out = []
+    for j, (c, m) in enumerate(zip(system.contacts, held, strict=True)):
+        if c is contact or not m.touching or not m.stuck:
+            continue
+        P_t = np.array([impulses.get((c.name, "t", i), 0.0) for i in range(len(c.tangents))])
+        P_n = max(impulses.get((c.name, "n", 0), 0.0), 0.0)
+        if float(np.linalg.norm(P_t)) > c.friction.mu_s * P_n * (1.0 + CONE_TOL) + FORCE_ABS_TOL:
+            out.append((j, -P_t))
+    return out
 
 
 def limit_impact(system, t: float, x: np.ndarray, modes: list[ContactMode], limits: tuple

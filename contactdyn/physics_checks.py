@@ -15,6 +15,7 @@ were just decided), per contact:
 ``complementarity``      N·m    largest |gap · F_n| of a rigid contact while touching
 ``drift``                m      largest |gap| of a rigid contact while touching (its bond's drift)
 ``stick_speed``          m/s    largest |v_t| while stuck (a stick must not creep)
+``impulse_excess``       N·s    largest |F_fΔt| − μ_s FΔt of the contact's impacts (the cone of impulses)
 =======================  =====  ===============================================================
 
 and, with ``solver.record_energy``, the run's ``energy_residual`` [J]: the largest
@@ -50,6 +51,7 @@ CHECKS = {
     "complementarity": ("N·m", "|gap · F_n| of a rigid contact while touching"),
     "drift": ("m", "|gap| of a rigid contact while touching"),
     "stick_speed": ("m/s", "slip speed while stuck"),
+    "impulse_excess": ("N·s", "|F_fΔt| − μ_s FΔt of an impact"),
     "energy_residual": ("J", "energy balance residual"),
 }
 UNITS = {name: unit for name, (unit, _) in CHECKS.items()}
@@ -98,10 +100,12 @@ class StartAudit:
         self.worst.setdefault((contact, check), Worst()).see(np.array([value]), np.array([t]))
 
 
-def tolerances(system: System, channels: dict[str, np.ndarray]) -> dict[str, dict[str, float]]:
+def tolerances(system: System, channels: dict[str, np.ndarray], impacts: list[dict[str, Any]]
+               ) -> dict[str, dict[str, float]]:
     """Each contact's tolerance per check, from the solver's rtol and atol and the contact's force scale
     F = max(1 N, its peak |F_n|): forces F (FORCE_FLOOR + FORCE_PER_RTOL rtol), power that force times
-    the peak slip speed, gaps and stick speeds DRIFT_PER_ATOL atol, gap·force their product."""
+    the peak slip speed, gaps and stick speeds DRIFT_PER_ATOL atol, gap·force their product; impulses as
+    forces, on the scale of the contact's largest normal impulse (at least 1e-6 N·s)."""
     solver = system.scene.solver
     out: dict[str, dict[str, float]] = {}
     for c in system.contacts:
@@ -110,9 +114,11 @@ def tolerances(system: System, channels: dict[str, np.ndarray]) -> dict[str, dic
         slip = channels.get(f"contact.{c.name}.v_slip")
         speed = max(1e-3, float(np.max(np.abs(slip), initial=0.0))) if slip is not None else 1e-3
         drift = DRIFT_PER_ATOL * solver.atol
+        hits = [imp for imp in impacts if imp["contact"] == c.name]
+        P = max([1e-6] + [abs(imp["normal_impulse"]) for imp in hits])  # [N·s] the impulse scale
         out[c.name] = {"cone_excess": force, "slide_deviation": force, "dissipation_gap": force * speed,
                        "pull": force, "penetration": drift, "complementarity": drift * F, "drift": drift,
-                       "stick_speed": drift}
+                       "stick_speed": drift, "impulse_excess": P * (FORCE_FLOOR + FORCE_PER_RTOL * solver.rtol)}
     return out
 
 
@@ -120,11 +126,13 @@ def run_checks(system: System, xs: np.ndarray, channels: dict[str, np.ndarray], 
                impacts: list[dict[str, Any]]) -> dict[str, Any]:
     """The run's checks: ``{"contacts": {name: {check: {"value", "t", "tol"}}}, "energy_residual": ...}``
     (a check that does not apply to a contact is absent; value 0 where it applies but nothing was seen)."""
-    tol = tolerances(system, channels)
+    tol = tolerances(system, channels, impacts)
     contacts: dict[str, dict[str, dict[str, float]]] = {}
     t = np.asarray(channels["t"], float)
     for c in system.contacts:
         worst = _contact_worst(system, c, channels, t)
+        if c.friction is not None and len(c.tangents):
+            worst["impulse_excess"] = _impulse_worst(c, impacts)
         for (name, check), w in starts.worst.items():
             if name == c.name and check in worst:
                 worst[check].see(np.array([w.value]), np.array([w.t]))
@@ -196,6 +204,16 @@ def stored_energy(system: System, xs: np.ndarray, ch: dict[str, np.ndarray]) -> 
             twist = xs[:, m] / spec.N - xs[:, d.coords[i]] / spec.r
             energy += 0.5 * spec.c * twist * twist
     return energy, ""
+
+
+def _impulse_worst(c, impacts: list[dict[str, Any]]) -> Worst:
+    """The largest |F_fΔt| − μ_s FΔt over the impacts on contact c (the impact's own contact)."""
+    worst = Worst()
+    hits = [imp for imp in impacts if imp["contact"] == c.name]
+    excess = [float(np.linalg.norm(imp["friction_impulse"])) - c.friction.mu_s * max(imp["normal_impulse"], 0.0)
+              for imp in hits]
+    worst.see(np.array(excess), np.array([imp["t"] for imp in hits]))
+    return worst
 
 
 def energy_residual(system: System, xs: np.ndarray, ch: dict[str, np.ndarray],

@@ -156,25 +156,40 @@ class Transitions:
         self.log.events[-1].update(info)  # the joint, side, velocity before and impulse, with the event
         if imp is not None and imp.contact:  # a contact took part (its friction impulse too): recorded as at a touch
             self._after_impact(imp, modes, joint=info["joint"], limit_impulse=info["impulse"])
+        elif imp is not None:
+            self._release(imp, modes)
         return x, phase, True
 
     def _after_impact(self, imp, modes, **extra) -> None:
         """Record an impact on a contact in ``Result.impacts`` and set the contact's mode after it:
-        stuck if it jammed, else sliding along its slip after the impact (or the impact's direction)."""
+        stuck if it jammed, else sliding along its slip after the impact (or the impact's direction); the
+        other sticks it could not hold slide (:meth:`_release`)."""
         system = self.system
         self.impacts.append({"t": imp.t, "contact": imp.contact, "normal_impulse": imp.normal_impulse,
                              "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
                              "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
                              "v_after": imp.v_after.tolist(), "slip_before": imp.slip_before.tolist(),
                              "slip_after": imp.slip_after.tolist(), **extra})
+        self._release(imp, modes)
         i = self._index(imp.contact)
         c = system.contacts[i]
         if imp.jammed:
             modes[i] = modes[i].with_(stuck=True)
         elif c.friction is not None and len(c.tangents):
-            slip = imp.slip_after if np.linalg.norm(imp.slip_after) > system.slip_band else imp.direction
-            if np.any(slip):
+            moving = np.linalg.norm(imp.slip_after) > system.slip_band
+            slip = imp.slip_after if moving else imp.direction
+            if modes[i].stuck:  # a stick the impact could not hold (a limit's impact): it slides from here
+                modes[i] = modes[i].with_(stuck=False, slip=direction_of(slip), from_rest=not moving)
+                self.log.log(imp.t, "slip", c.name)
+            elif np.any(slip):
                 modes[i] = modes[i].with_(slip=direction_of(slip))
+
+    def _release(self, imp, modes) -> None:
+        """The sticks the impact could not hold (their impulse left the cone) slide from it on, logged as slips."""
+        for name, d in imp.released.items():
+            i = self._index(name)
+            modes[i] = modes[i].with_(stuck=False, slip=d, from_rest=True)
+            self.log.log(imp.t, "slip", name)
 
     #: event kind -> handler (see :meth:`handle`)
     HANDLERS = {"limit": _on_limit, "release": _on_limit,

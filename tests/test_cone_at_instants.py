@@ -126,3 +126,51 @@ def test_the_ur10_slide_then_lift_slips_at_the_lift_start():
     assert after.sum() > 5 and np.all(r["contact.table.stuck"][after] == 0)
     F_f, F_n = np.abs(r["contact.table.F_f"][after, 0]), r["contact.table.F_n"][after]
     assert F_f == pytest.approx(0.3 * F_n, rel=1e-9, abs=1e-9)
+
+
+def _slider_pair_urdf(path) -> str:
+    """Two 1 kg carriages on x slides in series (x1, then x2 with lower limit −0.05 m), a 2 kg tip on a z slide."""
+    def link(name: str, mass: float) -> str:
+        return (f'<link name="{name}"><inertial><mass value="{mass}"/>'
+                '<inertia ixx="1e-3" ixy="0" ixz="0" iyy="1e-3" iyz="0" izz="1e-3"/></inertial></link>')
+
+    def joint(name: str, parent: str, child: str, axis: str, lower: float) -> str:
+        return (f'<joint name="{name}" type="prismatic"><parent link="{parent}"/><child link="{child}"/>'
+                f'<axis xyz="{axis}"/><limit lower="{lower}" upper="1.0" effort="1e4" velocity="100"/></joint>')
+
+    path.write_text('<?xml version="1.0"?><robot name="slider_pair"><link name="base"/>'
+                    + link("a", 1.0) + link("b", 1.0) + link("body", M)
+                    + joint("x1", "base", "a", "1 0 0", -1.0) + joint("x2", "a", "b", "1 0 0", -0.05)
+                    + joint("z", "b", "body", "0 0 1", -1.0)
+                    + '<joint name="tip_joint" type="fixed"><parent link="body"/><child link="tip"/></joint>'
+                    + '<link name="tip"/></robot>')
+    return str(path)
+
+
+def test_a_joint_limit_impact_that_loads_the_stick_past_the_cone_slips_it(tmp_path):
+    """Carriage a is pushed with 1.5 μ_s W along +x; the tip is stuck, so x2 = −x1 and the free slide x2 passes
+    nothing to the tip (F_f = 0) until x2 reaches its lower limit at x1 = 0.05 m. From that impact on, the
+    push reaches the ground through the locked slide: more than the cone holds, so the stick breaks there. The
+    impact itself could not be held by friction either (today's bug: the stick took a friction impulse of
+    1.2 N·s with no normal impulse and stopped every body)."""
+    push = 1.5 * MU_S * W  # [N] a PD on x1 towards 10 m with kp = push / 10 m: push − kp x1 ≈ push
+    reference = {"space": "joint", "start": [10.0, 0.0, 0.0]}
+    doc = ground(0.5, [{"name": "push", "reference": reference}],
+                 {"kind": "joint_pd", "kp": [push / 10.0, 0.0, 0.0], "kd": [0.0, 0.0, 0.0]})
+    doc["robot"] = {"urdf": _slider_pair_urdf(tmp_path / "sliders.urdf"), "q0": [0.0, 0.0, 0.0]}
+    r = run(doc)
+    limit = [e["t"] for e in r.events if e["kind"] == "limit"]
+    assert len(limit) == 1
+    before = r.t < limit[0]
+    assert np.all(r["contact.ground.stuck"][before] == 1)
+    assert np.max(np.abs(r["contact.ground.F_f"][before, 0])) < 1e-9  # the free slide passes nothing
+    assert limit[0] in slips(r)
+    after = r.t > limit[0]
+    assert np.all(r["contact.ground.stuck"][after] == 0)
+    # the impact: no normal impulse, so no friction impulse (the cone at impulse level); a moved at v, b and the
+    # tip at rest; after it all three move together: momentum 1 kg · v = (1 + 1 + 2) kg · v⁺
+    (imp,) = r.impacts
+    v = imp["v_before"][0]
+    assert imp["friction_impulse"] == [0.0] and imp["normal_impulse"] == 0.0 and not imp["jammed"]
+    assert imp["v_after"][0] == pytest.approx(v / 4.0, rel=1e-12) and imp["v_after"][1] == pytest.approx(0.0, abs=1e-12)
+    assert imp["energy_loss"] == pytest.approx(0.5 * v**2 - 0.5 * 4.0 * (v / 4.0) ** 2, rel=1e-12)

@@ -189,16 +189,19 @@ def test_a_limit_impact_takes_the_sliding_contacts_friction_impulse_momentum_bal
     assert imp.energy_loss > 0.0 and np.array_equal(x_after[3:6], imp.v_after)  # x = [Q, Q̇, y], nQ = 3
 
 
-def test_a_limit_impact_holds_a_sticking_contact_through_its_stick_rows():
-    """The same arm with its tip stuck (mode): the limit and the stick rows stop everything, the impulses balance
-    M ΔQ̇ with the friction impulse the stick rows' Λ_t (no cone test at an impact of a stuck contact)."""
+def test_a_limit_impact_holds_a_sticking_contact_only_inside_its_cone():
+    """The same arm with its tip stuck (mode) at the limit impact: held through its stick rows the tip would need
+    a friction impulse ~50 N·s on a normal impulse of ~0 (at μ = 1e6 the jammed solve's Λ_n is 6e-5 N·s): far
+    outside the cone even at μ = 5, so the impact slides it where that impulse pushes, |Λ_t| = μ Λ_n, with the
+    momentum balanced (issue 27: the stick rows used to take any impulse, no cone test at an impact)."""
     scene, robot, q, J = slope_scene(T_SLOPE[0] + 0.5 * T_SLOPE[1], mu=5.0)
     system = System(scene)
     x, modes = system.initial_state()
     _, imp, limit = limit_impact(system, 0.0, x, [modes[0].with_(stuck=True)], ((1, -1),))
     assert_momentum_balance(robot.mass_matrix(q), J, imp, limit)
-    assert imp.contact == "slope" and np.linalg.norm(imp.friction_impulse) > 1.0
-    np.testing.assert_allclose(J @ imp.v_after, 0.0, atol=1e-12)  # stuck on the plane, radial slide stopped
+    assert imp.contact == "slope" and not imp.jammed and imp.normal_impulse > 0.0
+    assert np.linalg.norm(imp.friction_impulse) == pytest.approx(5.0 * imp.normal_impulse, rel=1e-12)
+    assert abs(imp.v_after[1]) < 1e-12 and abs(N_SLOPE @ J @ imp.v_after) < 1e-12  # stopped, still on the plane
 
 
 def test_a_run_records_the_limit_impact_with_the_contacts_friction_impulse():

@@ -239,3 +239,19 @@ def test_a_fit_refuses_a_run_that_breaks_its_physics_and_says_why(monkeypatch):
     fine = predict(doc, None, {"phase.1.controller.force": [0.5 * PUSH, 0.0, 0.0]},
                    [("contact.ground.F_n", None, np.array([0.1]))])
     assert fine[0] == pytest.approx([W], rel=1e-12)
+
+
+def test_an_impacts_friction_impulse_outside_the_cone_is_reported():
+    """A sliding impact of the point mass on the ground from 1 m/s down, 0.5 m/s along x: friction impulse
+    μ_k FΔt (inside μ_s); the same impact doctored to twice μ_s FΔt is reported as the excess μ_s FΔt."""
+    doc = point_mass([{"name": "fall"}], 0.1)
+    doc["robot"]["q0"], doc["robot"]["v0"] = [0.0, 0.01], [0.5, -1.0]
+    r = run(doc)
+    (imp,) = r.impacts
+    checks = r.meta["checks"]["contacts"]["ground"]
+    assert checks["impulse_excess"]["value"] == 0.0 and imp["normal_impulse"] > 1.0
+    system = System(parse_scene(copy.deepcopy(doc)))
+    doctored = [{**imp, "friction_impulse": [-2 * MU_S * imp["normal_impulse"]]}]
+    worst = run_checks(system, np.zeros((len(r.t), system.n)), r.channels, StartAudit(), doctored)
+    excess = worst["contacts"]["ground"]["impulse_excess"]
+    assert excess["value"] == pytest.approx(MU_S * imp["normal_impulse"], rel=1e-12) and excess["t"] == imp["t"]
