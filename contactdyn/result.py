@@ -28,8 +28,18 @@ from .run_check import read_channels, read_sidecar
 __all__ = ["Result", "load_result", "run_files", "atomic_path", "atomic_write", "jsonable"]
 
 
-@dataclass
+@dataclass(repr=False)
 class Result:
+    """One run: named channels sampled on the output grid, the events, the impacts, solver statistics.
+
+    ``result["contact.table.F_n"]`` is a channel (names and units: the README's "Result channels");
+    ``result.t`` the sample times [s]; ``result.events`` the mode switches (``t``, ``kind``, ``name``);
+    ``result.impacts`` the impacts' impulses and velocities; ``result.stats`` the solver's counts and
+    wall time; ``result.meta`` the robot, the contacts, the sanity warnings and the run's physics
+    checks (``meta["checks"]``, ``meta["check_warnings"]``). In a notebook: :meth:`to_pandas`,
+    :meth:`show`, and a summary table as the cell's output.
+    """
+
     channels: dict[str, np.ndarray]
     events: list[dict[str, Any]] = field(default_factory=list)
     impacts: list[dict[str, Any]] = field(default_factory=list)
@@ -39,14 +49,67 @@ class Result:
 
     @property
     def t(self) -> np.ndarray:
+        """Sample times [s]."""
         return self.channels["t"]
 
     def __getitem__(self, name: str) -> np.ndarray:
+        """The channel ``name`` (a KeyError names the close ones and lists all)."""
         try:
             return self.channels[name]
         except KeyError:
             close = close_matches(name, self.channels)
             raise KeyError(f"no channel {name!r}; close: {close}; all: {sorted(self.channels)}") from None
+
+    def to_pandas(self):
+        """The channels as a pandas DataFrame indexed by ``t`` [s]: a column per scalar channel and per
+        component of a vector one (``q[0]``, ``contact.table.F_f[0]``, ...)."""
+        import pandas as pd
+
+        columns: dict[str, np.ndarray] = {}
+        for name, values in self.channels.items():
+            values = np.asarray(values)
+            if name == "t":
+                continue
+            if values.ndim == 1:
+                columns[name] = values
+            else:
+                for k in range(values.reshape(len(values), -1).shape[1]):
+                    columns[f"{name}[{k}]"] = values.reshape(len(values), -1)[:, k]
+        return pd.DataFrame(columns, index=pd.Index(np.asarray(self.t), name="t"))
+
+    def summary(self) -> dict[str, Any]:
+        """What the repr shows: scene, duration [s], counts of events and impacts, each contact's peak
+        normal force [N], the warnings (sanity and physics checks)."""
+        peaks = {name: float(np.max(self.channels[f"contact.{name}.F_n"], initial=0.0))
+                 for name in self.meta.get("contacts", []) if f"contact.{name}.F_n" in self.channels}
+        return {"scene": self.meta.get("name", "?"), "duration": float(self.t[-1]) if len(self.t) else 0.0,
+                "events": len(self.events), "impacts": len(self.impacts), "peak_F_n": peaks,
+                "warnings": list(self.meta.get("warnings", [])) + list(self.meta.get("check_warnings", []))}
+
+    def __repr__(self) -> str:
+        s = self.summary()
+        peaks = ", ".join(f"{k} {v:.4g} N" for k, v in s["peak_F_n"].items()) or "none"
+        return (f"<Result {s['scene']}: {s['duration']:g} s, {s['events']} events, {s['impacts']} impacts, "
+                f"peak F_n: {peaks}, {len(s['warnings'])} warnings>")
+
+    def _repr_html_(self) -> str:
+        from html import escape
+
+        s = self.summary()
+        rows = [("scene", s["scene"]), ("duration", f"{s['duration']:g} s"), ("events", s["events"]),
+                ("impacts", s["impacts"])]
+        rows += [(f"peak F_n {k}", f"{v:.4g} N") for k, v in s["peak_F_n"].items()]
+        rows += [("warning", w) for w in s["warnings"]]
+        cells = "".join(f"<tr><th style='text-align:left'>{escape(str(k))}</th><td style='text-align:left'>"
+                        f"{escape(str(v))}</td></tr>" for k, v in rows)
+        return f"<table>{cells}</table>"
+
+    def show(self, speed: float = 1.0, height: int = 480):
+        """The run's 3-D player inline in Jupyter (the page of ``contactdyn view --html``, in an iframe), played
+        at ``speed`` × real time; returns an object a notebook displays."""
+        from .viewer.notebook import inline_player  # the viewer draws; a result only asks it to
+
+        return inline_player(self, speed, height)
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write ``path`` (.npz) and its .json sidecar atomically; return the .npz path."""
