@@ -20,6 +20,8 @@ set-point), so rows of different runs stack into one table. Names and units:
                                                   NaN where it does not apply to the contact
 ``energy_residual``                       J       the energy audit's residual (NaN without one)
 ``check_violations``                      -       number of checks above their tolerance
+``warnings``                              -       number of sanity and outcome warnings (a set-point that
+                                                  never touched, a touch that never came...)
 ========================================  ======  ==============================================
 
 RMS values weigh the samples equally (``solver.output_rate`` is uniform).
@@ -41,11 +43,11 @@ CONTACT_CHECKS = tuple(name for name in CHECKS if name != "energy_residual")  #:
 CONTACT_METRICS = ("F_peak", "F_final", "impacts", "impulse_n", "impulse_n_first", "impulse_t", "force_rms",
                    *CONTACT_CHECKS)
 #: metrics of the whole run
-RUN_METRICS = ("tracking_rms", "max_deformation", "events", "energy_residual", "check_violations")
+RUN_METRICS = ("tracking_rms", "max_deformation", "events", "energy_residual", "check_violations", "warnings")
 #: unit of each metric (by its last name part; "" : a count), as in the table above
 UNITS = {"F_peak": "N", "F_final": "N", "impacts": "", "impulse_n": "N·s", "impulse_n_first": "N·s",
          "impulse_t": "N·s", "force_rms": "N", "tracking_rms": "m", "max_deformation": "m", "events": "",
-         **{name: unit for name, (unit, _) in CHECKS.items()}, "check_violations": ""}
+         **{name: unit for name, (unit, _) in CHECKS.items()}, "check_violations": "", "warnings": ""}
 
 
 def is_metric(name: str) -> bool:
@@ -87,6 +89,7 @@ def metrics(result: Result) -> dict[str, float]:
     energy = result.meta.get("checks", {}).get("energy_residual")
     out["energy_residual"] = float(energy["value"]) if energy else math.nan  # [J]
     out["check_violations"] = float(len(result.meta.get("check_warnings", [])))
+    out["warnings"] = float(len(result.meta.get("warnings", [])))  # sanity and outcome (contactdyn.outcome)
     return out
 
 

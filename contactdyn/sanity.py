@@ -15,7 +15,12 @@ Each check returns plain sentences naming the key to look at. They never stop a 
   along the chain's direction in the start posture);
 - a bonded contact whose tip starts off its surface (the bond then holds it there);
 - a tip starting inside a compliant surface (the surface starts deformed by that depth; inside
-  a rigid one is an error of :meth:`contactdyn.system.System.initial_state`: nothing can be deformed).
+  a rigid one is an error of :meth:`contactdyn.system.System.initial_state`: nothing can be deformed);
+- a tip starting off a surface that the first phase's task-space reference never brings it to (and
+  no force set-point of that phase pushes it there).
+
+What the run then did is judged after it by :mod:`contactdyn.outcome` (a set-point that never
+touched, a touch that never came).
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ __all__ = ["SanityWarning", "MU_MAX", "scene_warnings", "system_warnings"]
 
 MU_MAX = 2.0  #: [-] friction coefficients above this are almost certainly a typo
 GAP_TOL = 1e-9  #: [m] a bonded tip further than this from its surface "starts off it"
+REACH_TOL = 1e-4  #: [m] a reference that stays further than this from a surface never brings the tip there
 
 
 class SanityWarning(UserWarning):
@@ -101,7 +107,29 @@ def system_warnings(system) -> list[str]:
         elif not c.spec.bonded and gap < -GAP_TOL:
             out.append(f"contact.{c.name}: the tip starts {-gap:.3g} m inside the surface (contact.{c.name}.point, "
                        "robot.q0/tip0): the surface starts deformed by that depth and pushes back from t = 0")
+        elif not c.spec.bonded:
+            out += _reach_warnings(system.scene, c.name, c.normal.u, kin.p_tip, kin.p_env)
     return out
+
+
+def _reach_warnings(scene: Scene, contact: str, n: np.ndarray, tip: np.ndarray, point: np.ndarray) -> list[str]:
+    """The first phase's task-space reference (on the ground, straight moves) never comes within REACH_TOL of
+    the surface along its normal n, and no force set-point of that phase pushes the tip there: it never touches
+    (unless it falls or a later phase brings it)."""
+    phase = scene.phases[0]
+    ref = phase.reference
+    if ref is None or ref.space != "task" or ref.body != "ground" or any(f.contact == contact for f in phase.forces) \
+            or any(m.kind in ("circle", "velocity_ramp", "constant_velocity") for m in ref.moves):
+        return []
+    start = np.asarray(ref.start, float) if ref.start is not None else np.asarray(tip, float)
+    path = start + np.cumsum([np.zeros(3)] + [np.asarray(m.delta, float) for m in ref.moves], axis=0)
+    gaps = path @ n - float(point @ n)  # [m] of the reference's corners above the surface
+    closest = float(gaps.min())
+    if closest <= REACH_TOL or float(n @ (tip - point)) <= REACH_TOL:
+        return []
+    return [f"contact.{contact}: the tip starts {float(n @ (tip - point)):.3g} m from the surface and phase[0] "
+            f"({phase.name})'s reference comes no closer than {closest:.3g} m: it never brings the tip there "
+            f"(robot.tip0, contact.{contact}.point, the phase's moves)"]
 
 
 def _period_warnings(where: str, chain, m_tip: float, step: float, rate: float) -> list[str]:

@@ -44,9 +44,22 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None)
     system = System(scene)
     notes = sanity_warnings(system)
     result = HybridRun(system).run(wall0)
-    result.meta["warnings"] = notes
+    result.meta["warnings"] = notes + outcome_notes(system, result)
     check_warnings(result)
     return result
+
+
+def outcome_notes(system: System, result: Result) -> list[str]:
+    """The run's :mod:`~contactdyn.outcome` warnings (what it did not do), issued as SanityWarning."""
+    import warnings
+
+    from .outcome import outcome_warnings
+    from .sanity import SanityWarning
+
+    notes = outcome_warnings(system.scene, result)
+    for note in notes:
+        warnings.warn(f"{system.scene.name}: {note}", SanityWarning, stacklevel=3)
+    return notes
 
 
 def check_warnings(result: Result) -> None:

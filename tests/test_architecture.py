@@ -118,7 +118,7 @@ LAYERS = [
     ["rhsplan", "plan_probe", "plan_kkt", "plan_rhs", "plan_fold", "plan_law", "plan_drives", "samples"],
     ["integrators", "dop853", "events", "transitions", "hybrid", "channels", "result", "run_check",
      "physics_checks"],  # the loop
-    ["simulate", "sanity", "metrics"],
+    ["simulate", "sanity", "outcome", "metrics"],
     ["plots", "viewer", "sweep", "identify", "workprecision", "stability", "cli", "starter", "keys"],
 ]
 #: the scene reads each part's own keys and names to validate a file: the drive table, a controller's
