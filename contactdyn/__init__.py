@@ -1,14 +1,41 @@
-"""contactdyn: dynamics of robot contact tasks on Pinocchio (Potkonjak, Vukobratović, Matijević 1999)."""
+"""contactdyn: dynamics of robot contact tasks on Pinocchio (Potkonjak, Vukobratović, Matijević 1999).
+
+The public names load on first use (PEP 562), so ``contactdyn --help`` and the light commands
+start without importing the simulator (Pinocchio, numba, scipy).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING
 
 from .errors import ContactdynError, RobotError, SceneError, SimulationError
-from .identify import fit
-from .result import Result, load_result
-from .robot import Robot
-from .scene import Scene, load_scene, parse_scene
-from .simulate import simulate
+
+if TYPE_CHECKING:
+    from .identify import fit
+    from .result import Result, load_result
+    from .robot import Robot
+    from .scene import Scene, load_scene, parse_scene
+    from .simulate import simulate
+
+#: public name -> the module that defines it
+_LAZY = {"fit": ".identify", "Result": ".result", "load_result": ".result", "Robot": ".robot", "Scene": ".scene",
+         "load_scene": ".scene", "parse_scene": ".scene", "simulate": ".simulate"}
 
 __all__ = [
     "ContactdynError", "RobotError", "SceneError", "SimulationError", "Result", "load_result", "Robot",
     "Scene", "load_scene", "parse_scene", "simulate", "fit",
 ]
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        value = getattr(import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'contactdyn' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -67,13 +67,14 @@ def _plain(obj: Any) -> Any:
 
 
 # ---- list ------------------------------------------------------------------------------------
-def _catalog() -> dict[str, Any]:
+def _catalog(sections: list[str]) -> dict[str, Any]:
+    """The ``list`` sections asked for (each imports only what it lists)."""
+    return {s: _SECTIONS[s]() for s in sections}
+
+
+def _scenes() -> list[dict[str, str]]:
     from .config import read_toml
-    from .controllers import CONTROLLERS
-    from .errors import SceneError
-    from .integrators import FIXED, IMPLICIT, METHODS
-    from .robot_list import robot_entries
-    from .scene import NORMAL_MODELS, TANGENT_MODELS, scene_dirs
+    from .scene import scene_dirs
 
     scenes, seen = [], set()
     for path in (p for folder in scene_dirs() for p in sorted(folder.glob("*.toml"))):
@@ -85,25 +86,45 @@ def _catalog() -> dict[str, Any]:
         except SceneError as exc:
             description = f"(unreadable: {exc})"
         scenes.append({"name": path.stem, "file": str(path), "description": str(description)})
-    robots = robot_entries()
+    return scenes
+
+
+def _robots() -> list[dict[str, Any]]:
+    from .robot_list import robot_entries
+
+    return robot_entries()
+
+
+def _models() -> dict[str, list[dict[str, str]]]:
+    from .scene import NORMAL_MODELS, TANGENT_MODELS
+
     normal = {"rigid": "constraint, impact at touch", "a": "ground -[k'', b'']- m' -[k', b']- tip (continuous)",
               "b": "ground -[k, b]- m', struck by the tip (impact at touch)", "c": "massless Kelvin-Voigt stage k, b",
               "chain": "explicit stages {k, b} and masses {m}, environment and robot side"}
     tangent = {"free": "no tangential force", "friction": "Coulomb stick/slip (mu or mu_s, mu_k; viscous)",
                "chain": "tangential deformation chain, bonded at touch"}
-    controllers = []
+    return {"normal": [{"name": m, "description": normal.get(m, "")} for m in NORMAL_MODELS],
+            "tangent": [{"name": m, "description": tangent.get(m, "")} for m in TANGENT_MODELS]}
+
+
+def _controllers() -> list[dict[str, str]]:
+    from .controllers import CONTROLLERS
+
+    out = []
     for name in sorted(CONTROLLERS):
         doc = (CONTROLLERS[name].__doc__ or "").strip().splitlines()
-        controllers.append({"name": name, "description": doc[0] if doc else ""})
-    return {
-        "scenes": scenes,
-        "robots": robots,
-        "models": {"normal": [{"name": m, "description": normal.get(m, "")} for m in NORMAL_MODELS],
-                   "tangent": [{"name": m, "description": tangent.get(m, "")} for m in TANGENT_MODELS]},
-        "controllers": controllers,
-        "integrators": [{"name": m, "implicit": m in IMPLICIT, "description": _integrator(m, IMPLICIT, FIXED)}
-                        for m in METHODS],
-    }
+        out.append({"name": name, "description": doc[0] if doc else ""})
+    return out
+
+
+def _integrators() -> list[dict[str, Any]]:
+    from .integrators import FIXED, IMPLICIT, METHODS
+
+    return [{"name": m, "implicit": m in IMPLICIT, "description": _integrator(m, IMPLICIT, FIXED)} for m in METHODS]
+
+
+_SECTIONS = {"scenes": _scenes, "robots": _robots, "models": _models, "controllers": _controllers,
+             "integrators": _integrators}
 
 
 def _integrator(name: str, implicit: tuple[str, ...], fixed: tuple[str, ...]) -> str:
@@ -127,8 +148,8 @@ def _cmd_list(args: argparse.Namespace) -> int:
         from .keys import list_keys
 
         return list_keys(args)
-    catalog = _catalog()
     sections = [args.what] if args.what else list(LIST_SECTIONS)
+    catalog = _catalog(sections)
     if args.json:
         _emit_json({s: catalog[s] for s in sections})
         return EXIT_OK
@@ -473,8 +494,9 @@ def _fit_parser(sub, fmt) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code (never raises for bad input)."""
-    from .sweep import NUMERICAL
+    from .errors import numerical_errors
 
+    NUMERICAL = numerical_errors()  # noqa: N806 (the sweep's name for the same tuple)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -72,3 +72,10 @@ def signal_name(sig: int) -> str:
         return f"{signal.Signals(sig).name} ({sig})"
     except ValueError:
         return f"signal {sig}"
+
+
+def numerical_errors() -> tuple[type[Exception], ...]:
+    """The numerical failures a blow-up raises from numpy inside a run (a failed run, not a bug)."""
+    import numpy as np  # here, not at the top: the command line's light commands need no numpy
+
+    return (np.linalg.LinAlgError, FloatingPointError, OverflowError)

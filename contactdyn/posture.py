@@ -25,7 +25,7 @@ from .robot import Robot
 if TYPE_CHECKING:
     from .scene import RobotSpec
 
-__all__ = ["PostureTask", "Posture", "solve_posture", "start_posture", "check_within_limits"]
+__all__ = ["PostureTask", "Posture", "solve_posture", "start_posture", "check_within_limits", "sampling_bounds"]
 
 POSITION_TOL = 1e-12  #: [m] a solution puts the tip this close to its target
 DIRECTION_TOL = 1e-10  #: [rad] and the tool this close to its direction
@@ -56,7 +56,7 @@ class Posture(NamedTuple):
     from_seed: bool  #: the scene's q_seed led to it
 
 
-def _bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+def sampling_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     """Limits for sampling: finite ones as given, ±π around 0 for unbounded joints."""
     lo, hi = robot.lower.copy(), robot.upper.copy()
     free = ~np.isfinite(lo) | ~np.isfinite(hi)
@@ -100,7 +100,7 @@ def _descend(robot: Robot, fid: int, task: PostureTask, q: np.ndarray) -> tuple[
 
 
 def _quality(robot: Robot, fid: int, task: PostureTask, q: np.ndarray) -> tuple[float, float]:
-    lo, hi = _bounds(robot)
+    lo, hi = sampling_bounds(robot)
     half = 0.5 * (hi - lo)
     margin = np.minimum(q - lo, hi - q) / np.where(half > 0, half, 1.0)
     bounded = np.isfinite(robot.lower) & np.isfinite(robot.upper)
@@ -116,7 +116,7 @@ def solve_posture(robot: Robot, task: PostureTask, seed: np.ndarray | None = Non
                   n_seeds: int = N_SEEDS, rng_seed: int = 0) -> Posture:
     """The start posture for ``task`` (see the module docstring); RobotError when it cannot be reached."""
     fid = robot.frame_id(task.frame)
-    lo, hi = _bounds(robot)
+    lo, hi = sampling_bounds(robot)
     rng = np.random.default_rng(rng_seed)
     seeds = [] if seed is None else [np.asarray(seed, float)]
     seeds += [0.5 * (lo + hi)] + [rng.uniform(lo, hi) for _ in range(n_seeds - 1)]

@@ -1,9 +1,11 @@
 """``contactdyn new NAME``: a commented starter scene, an arm pressing on a table then sliding along it.
 
-The scene is placed from the robot itself: its start posture (a known seed, or the neutral
-posture), the tip position there (forward kinematics), a surface 2 cm below the tip along the
-direction the tip can move in best (the world's z, else y or x), and a slide along the next
-free direction. Three phases: approach until touch, press 20 N, slide 10 cm while pressing.
+The scene is placed from the robot itself: a start posture where the tip moves well along two
+world axes and the joints are away from their limits (:func:`working_posture`: a known seed
+and postures drawn within the limits, the best-conditioned kept), the tip position there
+(forward kinematics), a surface 2 cm below the tip along the axis it moves along best (z on a
+tie), and a slide along the next. A robot whose tip cannot move along two axes is refused
+(exit 2, saying why). Three phases: approach until touch, press 20 N, slide 10 cm while pressing.
 """
 
 from __future__ import annotations
@@ -44,17 +46,53 @@ POSTURES = {
     "ur5": ("tool0", [-0.067689712079, -1.034024205522, 2.673650106542, -3.397374088227, -1.499321539814,
                       -0.363136146495]),
 }
+N_POSTURES = 64  #: postures drawn within the limits when choosing the start (working_posture)
+MIN_QUALITY = 1e-3  #: [m/rad] a start posture worse than this cannot press and slide (working_posture)
+TABLE_BIAS = 0.3  #: [-] the table goes under the tip (normal z) where the tip moves along z this well
 PRESS = 20.0  #: [N] force set-point
 GAP = 0.02  #: [m] tip start above the surface
 SLIDE = 0.10  #: [m] slide length
 
 
-def _inside_limits(arm) -> np.ndarray:
-    """Zero posture moved at least 10 % of each joint's range inside its limits [rad or m]."""
-    span = np.where(np.isfinite(arm.upper - arm.lower), arm.upper - arm.lower, 0.0)
-    lo = np.where(np.isfinite(arm.lower), arm.lower + 0.1 * span, -np.inf)
-    hi = np.where(np.isfinite(arm.upper), arm.upper - 0.1 * span, np.inf)
-    return np.clip(np.zeros(arm.nq), lo, hi)
+def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """A start posture from which the tip can press and slide: (q, normal n, slide direction t, quality).
+
+    The seed (a tried posture) where its quality reaches MIN_QUALITY; else, among the middle of the limits
+    and N_POSTURES postures drawn within them (a fixed random seed: deterministic), the one of largest
+    quality: the smallest singular value of the tip's Jacobian along (n, t) [m/rad] times the smallest
+    normalized limit margin (n, t: :func:`_press_and_slide`). Quality 0: the tip cannot move along two axes."""
+    from .posture import sampling_bounds
+
+    lo, hi = sampling_bounds(arm)
+    rng = np.random.default_rng(0)
+    candidates = [0.5 * (lo + hi)] + [lo + (hi - lo) * rng.random(arm.nq) for _ in range(N_POSTURES)]
+    if seed is not None and len(seed) == arm.nq:
+        candidates.insert(0, np.asarray(seed, float))
+    half = np.where(hi > lo, 0.5 * (hi - lo), 1.0)
+    best = (-1.0, None, None, None)
+    for k, q in enumerate(candidates):
+        quality, n, t = _press_and_slide(arm, tip, q, lo, hi, half)
+        if k == 0 and seed is not None and len(seed) == arm.nq and quality >= MIN_QUALITY:
+            return np.asarray(q, float), n, t, quality  # the tried posture, where it works
+        if quality > best[0]:
+            best = (quality, q, n, t)
+    quality, q, n, t = best
+    return np.asarray(q, float), n, t, max(quality, 0.0)
+
+
+def _press_and_slide(arm, tip: str, q, lo, hi, half) -> tuple[float, np.ndarray, np.ndarray]:
+    """(quality, n, t) of posture q: n the world z if the tip moves along it at least TABLE_BIAS as well as
+    along its best axis (a table under the tip), else that best axis; t the best of the other two."""
+    J = arm.frame_jacobian(q, tip)[:3]  # linear part, world-aligned [m/rad]
+    axes = np.eye(3)[[2, 1, 0]]  # z, y, x
+    mobility = np.array([float(np.linalg.norm(a @ J)) for a in axes])
+    first = 0 if mobility[0] >= TABLE_BIAS * mobility.max() else int(np.argmax(mobility))
+    rest = [i for i in range(3) if i != first]
+    second = max(rest, key=lambda i: mobility[i])
+    n, t = axes[first], axes[second]
+    sigma = float(np.linalg.svd(np.vstack([n @ J, t @ J]), compute_uv=False).min())
+    margin = float(np.min(np.minimum(q - lo, hi - q) / half)) if arm.nq else 0.0
+    return sigma * max(margin, 0.0), n, t
 
 
 def _num(x: float) -> str:
@@ -77,15 +115,6 @@ def _align(text: str, column: int = 40) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _directions(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(normal, slide direction): the first world axis of z, y, x the tip moves along, then the next one."""
-    axes = [np.eye(3)[i] for i in (2, 1, 0)]
-    mobile = [a for a in axes if np.linalg.norm(a @ J) > 1e-3]
-    if len(mobile) < 2:
-        raise SceneError("--robot", "a robot whose tip moves in at least two world directions", "fewer")
-    return mobile[0], mobile[1]
-
-
 def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", friction: bool = False,
                   tip: str | None = None) -> str:
     """The TOML text of a starter scene (see the module docstring)."""
@@ -99,12 +128,17 @@ def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", fricti
     tip = tip or known_tip or TOOL_FRAMES.get(robot) or "tip"
     try:
         arm = Robot.load(robot, tip=tip)  # active joints: the chain to the tip
-        q = np.asarray(q0, float) if q0 is not None and len(q0) == arm.nq else _inside_limits(arm)
-        p0 = arm.frame_position(q, tip)
-        J = arm.frame_jacobian(q, tip)[:3]  # linear part, world-aligned
     except RobotError as exc:
-        raise SceneError("--robot", "a loadable robot and its tip frame (--tip)", exc) from None
-    n, t = _directions(J)
+        hint = "" if "no frame" not in str(exc) else f" (choose the pressing frame with --tip; `contactdyn list " \
+            f"frames {robot}` lists them)"
+        raise SceneError("--robot", f"a loadable robot and its tip frame{hint}", exc) from None
+    q, n, t, quality = working_posture(arm, tip, q0)
+    if quality < MIN_QUALITY:
+        raise SceneError("--robot", "a robot whose tip can move along two world directions (press along one, "
+                         f"slide along the other) away from its joint limits; {robot}'s {tip!r} ({arm.nq} active "
+                         f"joints) cannot in any posture tried (best smallest singular value × limit margin "
+                         f"{quality:.2g} m/rad)", robot)
+    p0 = arm.frame_position(q, tip)
     rest = [a for a in np.eye(3) if abs(a @ n) < 0.5]  # position-controlled axes while pressing
     tangent = (f"tangent.model = \"friction\"              # Coulomb stick/slip along the slide\n"
                f"tangent.directions = [{_vec(t)}]\n"

@@ -10,9 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ..errors import ContactdynError, SceneError
+from ..errors import ContactdynError, SceneError, numerical_errors
 from ..scene import parse_scene
 from .plan import Sweep, check_sweep
 from .store import STATUSES, done_row, lock_out, record_failure, result_row, write_manifest
@@ -21,8 +19,7 @@ from .workers import run_isolated, worker_init
 
 __all__ = ["NUMERICAL", "SweepReport", "run_sweep", "run_chunk", "process_pool", "stop_pool"]
 
-#: numerical failures a blow-up raises from numpy inside a run (a failed run, not a bug)
-NUMERICAL: tuple[type[Exception], ...] = (np.linalg.LinAlgError, FloatingPointError, OverflowError)
+NUMERICAL: tuple[type[Exception], ...] = numerical_errors()  #: (contactdyn.errors.numerical_errors)
 CHUNKS_PER_WORKER = 4  #: aim for this many chunks per worker (load balance vs per-chunk cost)
 MAX_CHUNK = 32  #: runs per chunk at most, so a run's row reaches the summary's part files soon
 SCHEDULER_TIMEOUT = 10.0  #: [s] to connect to a Dask scheduler
