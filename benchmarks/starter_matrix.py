@@ -2,9 +2,9 @@
 
     PYTHONPATH=. python3 benchmarks/starter_matrix.py [ROBOT ...] [--timeout 120] [--out FILE.json]
 
-Per robot (its usual tool frame, else its first leaf frame as `list robots` prints them), in a child
-process with a time limit: the starter scene (`contactdyn.starter.starter_scene`, friction on), or the
-refusal's sentence; then the run: whether the tip touched, the normal force at the end of the press
+Per robot, as `contactdyn new NAME --robot ROBOT --friction` makes it (no --tip: the starter's own
+choice, a known tool frame or the leaf with the longest chain), in a child process with a time limit:
+the starter scene (`contactdyn.starter.starter_scene`), or the refusal's sentence; then the run: whether the tip touched, the normal force at the end of the press
 phase against the 20 N set-point, the warnings, the wall time. A run that applies no force without a
 warning is counted as "silent" (the goal: none).
 """
@@ -65,7 +65,6 @@ def run(robot: str, tip: str | None, timeout: float) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from contactdyn.robot_catalog import TOOL_FRAMES
     from contactdyn.robot_list import robot_entries
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -78,9 +77,7 @@ def main(argv: list[str] | None = None) -> int:
         entries = [e for e in entries if e["name"] in args.robots]
     rows = []
     for e in entries:
-        tips = e.get("end_effectors") or []
-        tip = TOOL_FRAMES.get(e["name"]) or (tips[0] if tips else None)
-        row = run(e["name"], tip, args.timeout)
+        row = run(e["name"], None, args.timeout)
         rows.append(row)
         print(json.dumps(row), flush=True)
     counts = {k: sum(1 for r in rows if r["status"] == k) for k in ("ran", "refused", "failed", "timeout", "crashed")}

@@ -6,6 +6,8 @@ start without importing the simulator (Pinocchio, numba, scipy).
 
 from __future__ import annotations
 
+import sys
+import types
 from importlib import import_module
 from typing import TYPE_CHECKING
 
@@ -39,3 +41,17 @@ def __getattr__(name: str):
 
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """The package: ``contactdyn.simulate`` stays the function when its module ``contactdyn/simulate.py``
+    is imported (Python binds a submodule on its package; the eager ``from .simulate import simulate``
+    this replaces rebound the function)."""
+
+    def __setattr__(self, name: str, value) -> None:
+        if name == "simulate" and isinstance(value, types.ModuleType):
+            value = value.simulate
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

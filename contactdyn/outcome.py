@@ -5,6 +5,7 @@ the run after it, so that a run that silently does nothing is never mistaken for
 worked:
 
 - a force set-point active in a phase whose contact never touched during that phase;
+- a normal force set-point that the phase ends far from (|F − F_d| > MISSED |F_d| at its last sample);
 - a phase ending at ``touch:<contact>`` whose touch never came (it ran out the duration);
 - a contact that force set-points name but that never touched in the whole run.
 
@@ -20,7 +21,9 @@ import numpy as np
 from .result import Result
 from .scene import Scene
 
-__all__ = ["outcome_warnings", "phase_spans"]
+__all__ = ["outcome_warnings", "phase_spans", "MISSED"]
+
+MISSED = 0.5  #: [-] a phase ending with |F − F_d| above this × |F_d| did not reach its set-point
 
 
 def phase_spans(scene: Scene, result: Result) -> list[tuple[int, float, float]]:
@@ -29,6 +32,16 @@ def phase_spans(scene: Scene, result: Result) -> list[tuple[int, float, float]]:
     end = float(result.t[-1]) if len(result.t) else 0.0
     return [(i, t0, starts[i + 1] if i + 1 < len(starts) else end)
             for i, t0 in enumerate(starts[:len(scene.phases)])]
+
+
+def _set_point_missed(result: Result, i: int, phase: str, c: str, inside: np.ndarray) -> list[str]:
+    """A normal set-point whose phase ends with the force off by more than MISSED of the set-point."""
+    F, F_d = result.channels[f"contact.{c}.F_n"][inside], result.channels[f"contact.{c}.F_d"][inside]
+    if not len(F) or not np.isfinite(F_d[-1]) or F_d[-1] == 0.0 or abs(F[-1] - F_d[-1]) <= MISSED * abs(F_d[-1]):
+        return []
+    t_end = float(np.asarray(result.t)[inside][-1])
+    return [f"phase[{i}] ({phase}): the force set-point on contact '{c}' is {F_d[-1]:.4g} N but the contact force "
+            f"ends the phase (t = {t_end:.6g} s) at {F[-1]:.4g} N: the set-point was not reached"]
 
 
 def outcome_warnings(scene: Scene, result: Result) -> list[str]:
@@ -49,6 +62,8 @@ def outcome_warnings(scene: Scene, result: Result) -> list[str]:
             if c in touched and not touched[c][inside].any():
                 out.append(f"phase[{i}] ({phase.name}): the force set-point on contact '{c}' was active from "
                            f"{t0:.6g} s to {t1:.6g} s but the contact never touched then: it applied nothing")
+            elif c in touched:
+                out += _set_point_missed(result, i, phase.name, c, inside)
         if isinstance(phase.until, str) and phase.until.startswith("touch:") and i == len(spans) - 1 \
                 and i + 1 < len(scene.phases):
             out.append(f"phase[{i}] ({phase.name}) ends at {phase.until}, which never came: it ran out the "

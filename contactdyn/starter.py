@@ -48,10 +48,48 @@ POSTURES = {
 }
 N_POSTURES = 64  #: postures drawn within the limits when choosing the start (working_posture)
 MIN_QUALITY = 1e-3  #: [m/rad] a start posture worse than this cannot press and slide (working_posture)
+MARGIN_ENOUGH = 0.3  #: [-] a limit margin (of the half-range) beyond which only the conditioning counts
 TABLE_BIAS = 0.3  #: [-] the table goes under the tip (normal z) where the tip moves along z this well
 PRESS = 20.0  #: [N] force set-point
 GAP = 0.02  #: [m] tip start above the surface
 SLIDE = 0.10  #: [m] slide length
+
+
+def _load_arm(robot: str, tip: str | None):
+    """(the robot with the chain to its tip active, the tip, the scene's inertia line). No tip given: the
+    leaf frame with the most joints above it (a hand, a foot). Inertia data that fail the checks: repaired,
+    and the scene says so (``robot.inertia = "repair"``)."""
+    from .errors import RobotError
+    from .robot import Robot
+
+    inertia = ""
+    try:
+        try:
+            arm = Robot.load(robot) if tip is None else Robot.load(robot, tip=tip)
+        except RobotError as exc:
+            if 'robot.inertia = "repair"' not in str(exc):
+                raise
+            inertia = 'inertia = "repair"  # its inertia data fail the checks: the nearest valid ones\n'
+            arm = Robot.load(robot, inertia="repair") if tip is None else Robot.load(robot, tip=tip, inertia="repair")
+        if tip is None:
+            tip = _longest_leaf(arm)
+            arm = Robot.load(robot, tip=tip, inertia="repair" if inertia else "check")
+    except RobotError as exc:
+        hint = "" if "no frame" not in str(exc) else f" (choose the pressing frame with --tip; `contactdyn list " \
+            f"frames {robot}` lists them)"
+        raise SceneError("--robot", f"a loadable robot and its tip frame{hint}", exc) from None
+    return arm, tip, inertia
+
+
+def _longest_leaf(arm) -> str:
+    """The leaf body frame with the most joints between it and the root (ties: the first listed)."""
+    from .robot_list import end_effectors
+
+    model = arm.model
+    leaves = end_effectors(model)
+    if not leaves:
+        raise SceneError("--robot", "a robot with a moving leaf frame to press with", "none")
+    return max(leaves, key=lambda name: len(model.supports[model.frames[model.getFrameId(name)].parentJoint]))
 
 
 def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -59,8 +97,10 @@ def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.n
 
     The seed (a tried posture) where its quality reaches MIN_QUALITY; else, among the middle of the limits
     and N_POSTURES postures drawn within them (a fixed random seed: deterministic), the one of largest
-    quality: the smallest singular value of the tip's Jacobian along (n, t) [m/rad] times the smallest
-    normalized limit margin (n, t: :func:`_press_and_slide`). Quality 0: the tip cannot move along two axes."""
+    quality: the smallest singular value σ of the tip's linear Jacobian [m/rad] (a robot of two joints: its
+    rows along n and t) times min(margin, MARGIN_ENOUGH) / MARGIN_ENOUGH, the margin the smallest normalized
+    distance of a bounded joint to its limits (so beyond that margin the best-conditioned posture wins; n,
+    t: :func:`_press_and_slide`). Quality 0: the tip cannot move along two axes."""
     from .posture import sampling_bounds
 
     lo, hi = sampling_bounds(arm)
@@ -71,18 +111,20 @@ def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.n
     half = np.where(hi > lo, 0.5 * (hi - lo), 1.0)
     best = (-1.0, None, None, None)
     for k, q in enumerate(candidates):
-        quality, n, t = _press_and_slide(arm, tip, q, lo, hi, half)
-        if k == 0 and seed is not None and len(seed) == arm.nq and quality >= MIN_QUALITY:
-            return np.asarray(q, float), n, t, quality  # the tried posture, where it works
+        sigma, margin, n, t = _press_and_slide(arm, tip, q, lo, hi, half)
+        if k == 0 and seed is not None and len(seed) == arm.nq and sigma * margin >= MIN_QUALITY:
+            return np.asarray(q, float), n, t, sigma * margin  # the tried posture, where it works
+        quality = sigma * min(margin, MARGIN_ENOUGH) / MARGIN_ENOUGH  # far enough from the limits: σ decides
         if quality > best[0]:
             best = (quality, q, n, t)
     quality, q, n, t = best
     return np.asarray(q, float), n, t, max(quality, 0.0)
 
 
-def _press_and_slide(arm, tip: str, q, lo, hi, half) -> tuple[float, np.ndarray, np.ndarray]:
-    """(quality, n, t) of posture q: n the world z if the tip moves along it at least TABLE_BIAS as well as
-    along its best axis (a table under the tip), else that best axis; t the best of the other two."""
+def _press_and_slide(arm, tip: str, q, lo, hi, half) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """(σ_min [m/rad], limit margin [-], n, t) of posture q: n the world z if the tip moves along it at least
+    TABLE_BIAS as well as along its best axis (a table under the tip), else that best axis; t the best of the
+    other two."""
     J = arm.frame_jacobian(q, tip)[:3]  # linear part, world-aligned [m/rad]
     axes = np.eye(3)[[2, 1, 0]]  # z, y, x
     mobility = np.array([float(np.linalg.norm(a @ J)) for a in axes])
@@ -90,9 +132,12 @@ def _press_and_slide(arm, tip: str, q, lo, hi, half) -> tuple[float, np.ndarray,
     rest = [i for i in range(3) if i != first]
     second = max(rest, key=lambda i: mobility[i])
     n, t = axes[first], axes[second]
-    sigma = float(np.linalg.svd(np.vstack([n @ J, t @ J]), compute_uv=False).min())
-    margin = float(np.min(np.minimum(q - lo, hi - q) / half)) if arm.nq else 0.0
-    return sigma * max(margin, 0.0), n, t
+    rows = J if arm.nq >= 3 else np.vstack([n @ J, t @ J])  # 3 joints or more: away from every singularity
+    sigma = float(np.linalg.svd(rows, compute_uv=False).min()) if arm.nq else 0.0
+    bounded = np.isfinite(arm.lower) & np.isfinite(arm.upper)
+    margins = np.minimum(q - lo, hi - q) / half
+    margin = float(margins[bounded].min()) if bounded.any() else 1.0
+    return sigma, max(margin, 0.0), n, t
 
 
 def _num(x: float) -> str:
@@ -118,26 +163,18 @@ def _align(text: str, column: int = 40) -> str:
 def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", friction: bool = False,
                   tip: str | None = None) -> str:
     """The TOML text of a starter scene (see the module docstring)."""
-    from .errors import RobotError
-    from .robot import Robot
     from .robot_catalog import TOOL_FRAMES
 
     if contact not in CONTACT_MODELS:
         raise SceneError("--contact", f"one of {list(CONTACT_MODELS)}", contact)
     known_tip, q0 = POSTURES.get(robot, (None, None))
-    tip = tip or known_tip or TOOL_FRAMES.get(robot) or "tip"
-    try:
-        arm = Robot.load(robot, tip=tip)  # active joints: the chain to the tip
-    except RobotError as exc:
-        hint = "" if "no frame" not in str(exc) else f" (choose the pressing frame with --tip; `contactdyn list " \
-            f"frames {robot}` lists them)"
-        raise SceneError("--robot", f"a loadable robot and its tip frame{hint}", exc) from None
+    arm, tip, inertia = _load_arm(robot, tip or known_tip or TOOL_FRAMES.get(robot))
     q, n, t, quality = working_posture(arm, tip, q0)
     if quality < MIN_QUALITY:
         raise SceneError("--robot", "a robot whose tip can move along two world directions (press along one, "
                          f"slide along the other) away from its joint limits; {robot}'s {tip!r} ({arm.nq} active "
-                         f"joints) cannot in any posture tried (best smallest singular value × limit margin "
-                         f"{quality:.2g} m/rad)", robot)
+                         f"joints) cannot in any posture tried (best: the tip's Jacobian's smallest singular value "
+                         f"{quality:.2g} m/rad, less near a limit; at least {MIN_QUALITY:g} needed)", robot)
     p0 = arm.frame_position(q, tip)
     rest = [a for a in np.eye(3) if abs(a @ n) < 0.5]  # position-controlled axes while pressing
     tangent = (f"tangent.model = \"friction\"              # Coulomb stick/slip along the slide\n"
@@ -157,7 +194,7 @@ duration = 3.0                          # [s] simulated time
 [robot]
 urdf = {toml_value(robot)}                       # a name in urdf/, of example-robot-data, or a path beside this file
 tip = {toml_value(tip)}                          # the controlled frame
-q0 = {_vec(q)}                          # [rad] start posture: tip at {_vec(p0)} m
+{inertia}q0 = {_vec(q)}                          # [rad] start posture: tip at {_vec(p0)} m
 
 [contact.table]                         # the name is yours; frame: robot.tip by default
 point = {_vec(p0 - GAP * n)}            # [m] a point of the table, {GAP * 100:g} cm below the tip

@@ -58,3 +58,38 @@ def test_the_starter_finds_the_tool_frame_and_a_posture_of_an_example_robot(tmp_
     assert main(["new", "arm", "--robot", robot]) == EXIT_OK  # tip: the catalog's tool frame, q0 inside limits
     r = simulate("arm", {"duration": 1.0})
     assert abs(r["contact.table.F_n"][-1] - 20.0) < 1.0  # [N] pressing by the end of the press phase
+
+
+@pytest.mark.parametrize("robot, tip", [("ur10", None), ("solo12", "FL_FOOT"), ("finger_edu", "finger_tip_link")])
+def test_the_starter_posture_is_well_conditioned_and_its_run_presses(robot, tip, tmp_path):
+    """The robots whose starters stood stretched (q0 = 0: singular, never touching) start where the tip's
+    linear Jacobian is well conditioned, and the scene presses its 20 N without a warning."""
+    import tomllib
+    import warnings
+
+    from contactdyn import parse_scene, simulate
+    from contactdyn.robot import Robot
+    from contactdyn.starter import PRESS, starter_scene
+
+    doc = tomllib.loads(starter_scene("s", robot, "b", True, tip))
+    arm = Robot.load(robot, tip=doc["robot"]["tip"])
+    J = arm.frame_jacobian(np.array(doc["robot"]["q0"]), doc["robot"]["tip"])[:3]
+    assert np.linalg.svd(J, compute_uv=False).min() > 0.02  # [m/rad] (the stretched UR10: 0.15; a leg at 0: ~0)
+    doc["duration"] = 1.6
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = simulate(parse_scene(doc))
+    assert r.meta["warnings"] == [] and r.meta["check_warnings"] == []
+    end_of_press = np.searchsorted(r.t, 1.49)  # the press phase ends at 1.5 s (its ramp: 0.2 s)
+    assert r["contact.table.F_n"][end_of_press] == pytest.approx(PRESS, rel=0.1)
+
+
+def test_a_robot_whose_tip_cannot_press_and_slide_is_refused_with_a_sentence(capsys):
+    """The double pendulum's link2 frame sits on its second joint's axis: one direction of motion only."""
+    from contactdyn.cli import main
+
+    assert main(["new", "x", "--robot", "double_pendulum", "--tip", "link2", "--out", "/dev/null", "--force"]) == 2
+    err = capsys.readouterr().err
+    assert "a robot whose tip can move along two world directions" in err and "'link2' (2 active joints)" in err
+    assert main(["new", "x", "--robot", "double_pendulum"]) == 2
+    assert "choose the pressing frame with --tip" in capsys.readouterr().err
