@@ -4,8 +4,9 @@
 
 Per robot, as `contactdyn new NAME --robot ROBOT --friction` makes it (no --tip: the starter's own
 choice, a known tool frame or the leaf with the longest chain), in a child process with a time limit:
-the starter scene (`contactdyn.starter.starter_scene`), or the refusal's sentence; then the run: whether the tip touched, the normal force at the end of the press
-phase against the 20 N set-point, the warnings, the wall time. A run that applies no force without a
+the starter scene (`contactdyn.starter.starter_scene`), or the refusal's sentence; then the run:
+whether the tip touched, the normal force at the end of the press phase against the 20 N set-point,
+the warnings, the wall time. A run that applies no force without a
 warning is counted as "silent" (the goal: none).
 """
 
