@@ -52,6 +52,7 @@ from .integrators import (
     stability_bound,
 )
 from .limits import rate_limit_report
+from .notice import compiling
 from .phases import Phase
 from .physics_checks import StartAudit, run_checks, violations
 from .result import Result
@@ -116,7 +117,8 @@ class HybridRun:
         key = (structure(modes), id(phase))
         plan = self.plans.get(key)
         if plan is None:
-            plan = self.plans[key] = cached_plan(self.system, modes, phase)
+            with compiling("the fast path of this scene's contact modes"):
+                plan = self.plans[key] = cached_plan(self.system, modes, phase)
         plan.use(modes)  # a turn's new reference direction r: data of the same plan
         if count and not plan.ok:
             self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
