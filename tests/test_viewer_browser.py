@@ -197,3 +197,49 @@ def test_default_view_shows_the_tool_and_both_arrows(browser, tmp_path, name, du
         page.close()
     assert not errors, errors
     assert min(counts.values()) >= MIN_PART_PIXELS, f"{name}: pixels per part {counts} (screenshots in {tmp_path})"
+
+
+def test_the_html_opens_at_the_start_and_plays_in_a_loop(browser, b1_run, tmp_path):
+    """Loading takes a while; the page starts playing at t = 0 after it (not at the last frame), and loops."""
+    result, _ = b1_run
+    html = export_html(result, tmp_path / "b1.html")
+    errors: list[str] = []
+    page = open_page(browser, html.as_uri(), "window.contactdyn && window.contactdyn.ready === true", errors)
+    try:
+        assert page.evaluate("viewer.animator.playing")
+        assert page.evaluate("viewer.animator.actions.every(a => a.repetitions >= 1e9)")  # loops
+        page.wait_for_timeout(1500)  # past the run's 1 s: still playing (repetitions 1 would stop on the last frame)
+        assert page.evaluate("viewer.animator.playing")
+        assert page.evaluate("viewer.animator.actions.every(a => !a.paused)")
+    finally:
+        page.close()
+    assert not errors, errors
+
+
+def _plain_screenshot(html: Path, png: Path) -> np.ndarray:
+    """`chromium --headless --screenshot` of the file, no script driving it; RGB array."""
+    from PIL import Image
+
+    subprocess.run([CHROMIUM, "--headless", *FLAGS, f"--screenshot={png}", "--window-size=800,600", html.as_uri()],
+                   check=True, timeout=120, capture_output=True)
+    return np.asarray(Image.open(png).convert("RGB"), dtype=np.int16)
+
+
+def test_a_plain_headless_screenshot_finishes_and_shows_the_robot_and_the_surface(b1_run, tmp_path):
+    """The payload is inflated while the page's script runs, so the scene is drawn before the load event that
+    a plain --screenshot waits for: the shot differs from the empty scene's over the robot and the surface."""
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"{CHROMIUM} missing: install Debian's chromium (.ci/run does)")
+    from contactdyn.viewer.build import build_scene
+    from contactdyn.viewer.export import html_document
+    from contactdyn.viewer.writer import ViewerScene
+
+    result, _ = b1_run
+    scene = build_scene(result)
+    empty = ViewerScene([], scene.duration, scene.speed, scene.legend, scene.notes, scene.groups, scene.scales)
+    (tmp_path / "full.html").write_text(html_document(scene))
+    (tmp_path / "empty.html").write_text(html_document(empty))
+    full = _plain_screenshot(tmp_path / "full.html", tmp_path / "full.png")
+    bare = _plain_screenshot(tmp_path / "empty.html", tmp_path / "empty.png")
+    drawn = np.abs(full - bare).sum(axis=2) > 30
+    assert drawn.sum() > 2 * MIN_ROBOT_PIXELS, f"only {drawn.sum()} pixels drawn (screenshots in {tmp_path})"

@@ -5,7 +5,7 @@ headless (robot from its URDF visuals, surfaces and carts, deformation-chain gau
 force arrows, impact markers, all animated over the run); ``export_html`` writes them
 into one offline HTML player; ``view_result`` / ``view_command`` start a meshcat server
 and print its URL. Playback runs at ``speed`` × real time with meshcat's own controls
-(Open Controls → Animations: play, pause, the time scrubber and its time scale).
+(it opens at t = 0 and loops; Open Controls → Animations: play, pause, the time scrubber and its time scale).
 """
 
 from __future__ import annotations

@@ -2,9 +2,11 @@
 
 Unlike meshcat's own ``static_html`` (one asynchronous ``fetch`` per command, served by a
 running zmq server), the commands travel as one gzip'd payload holding each mesh file once
-(:func:`pack_payload`), which the page inflates with the browser's ``DecompressionStream``
-and applies in order; ``window.contactdyn.ready`` is set when the scene is complete. No
-server, no network and no browser are needed to write it.
+(:func:`pack_payload`), which the page inflates synchronously (``inflate.js``, ours: ~8 MB in
+0.15 s) and applies in order while its script runs, so the scene is drawn before the page's
+load event (a plain headless ``--screenshot`` shows it); then the animation plays from t = 0,
+looping. ``window.contactdyn.ready`` is set when the scene is complete. No server, no network
+and no browser are needed to write it.
 """
 
 from __future__ import annotations
@@ -121,6 +123,7 @@ def html_document(scene: ViewerScene, title: str = "contactdyn run") -> str:
     legend = "<br>".join(html.escape(line) for line in scene.legend + scene.notes)
     info = json.dumps({"duration": scene.duration, "speed": scene.speed, "groups": scene.groups})
     script_js = meshcat_js().replace("</script", "<\\/script")
+    inflate_js = (Path(__file__).parent / "inflate.js").read_text()
     return f"""<!DOCTYPE html>
 <html>
 <head><meta charset="utf-8"><title>{html.escape(title)}</title>
@@ -134,14 +137,14 @@ body {{ margin: 0; }}
 <div id="meshcat-pane"></div>
 <div id="legend">{legend}</div>
 <script>{script_js}</script>
+<script>{inflate_js}</script>
 <script>
 var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
-(async function () {{
+(function () {{  // synchronous: the scene is drawn before the page's load event
   const payload = "{payload}";
   const zipped = Uint8Array.from(atob(payload), ch => ch.charCodeAt(0));
-  const stream = new Blob([zipped]).stream().pipeThrough(new DecompressionStream("gzip"));
-  const buf = new Uint8Array(await new Response(stream).arrayBuffer());
-  const view = new DataView(buf.buffer);
+  const buf = contactdynInflate(zipped);
+  const view = new DataView(buf.buffer, buf.byteOffset, buf.byteLength);
   let pos = 4;  // after the magic "CDV1"
   const meshes = [];
   const nMeshes = view.getUint32(pos, true); pos += 4;
@@ -168,6 +171,8 @@ var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
     pos += 4 + n;
   }}
   viewer.handle_command = handle;
+  viewer.animator.reset();  // open at t = 0 and play, looping (the time spent loading is not played)
+  viewer.animator.play();
   window.contactdyn = Object.assign({info}, {{ready: true}});
 }})();
 </script>

@@ -117,6 +117,9 @@ def add_arrow(writer: SceneWriter, path: str, origins: np.ndarray, vectors: np.n
     writer.track(f"{path}/head", "scale", "vector3", np.column_stack([head, head, head]))
 
 
+LABEL_ORDER = 10  #: labels are drawn last, over the robot, the arrows and the surface
+
+
 def add_label(writer: SceneWriter, path: str, text: str, letter: float, rotation: np.ndarray,
               positions: np.ndarray) -> None:
     """Text of letter height ``letter`` [m] on a plane facing the camera; static, or moving with positions (N, 3).
@@ -126,11 +129,12 @@ def add_label(writer: SceneWriter, path: str, text: str, letter: float, rotation
     """
     font_px = min(40.0, 256.0 / (0.55 * max(len(text), 1)))
     size = letter * 256.0 / font_px
-    material = mg.MeshBasicMaterial(map=TextTexture(text), transparent=True, side=0)  # front side only
-    writer.object(f"{path}/text", Plane(size, size), material)
+    # drawn over everything (no depth test): no link of the robot hides a label
+    material = mg.MeshBasicMaterial(map=TextTexture(text), transparent=True, side=0, depthTest=False)
+    writer.object(f"{path}/text", Plane(size, size), material, render_order=LABEL_ORDER + 1)
     back = f"{path}/back"  # a pale strip behind the black letters, readable on meshcat's blue background
     writer.object(back, Plane(1.02 * len(text) * 0.55 * letter / 0.75, 1.5 * letter),
-                  mg.MeshBasicMaterial(color=0xffffff, opacity=0.6, side=0))
+                  mg.MeshBasicMaterial(color=0xffffff, opacity=0.6, side=0, depthTest=False), render_order=LABEL_ORDER)
     writer.transform(back, translation((0.0, 0.25 * letter, -0.01 * letter)))
     positions = np.atleast_2d(np.asarray(positions, float))
     H = placements(positions, rotation)

@@ -102,6 +102,8 @@ def Cone(height: float, radius: float) -> mg.Cylinder:  # noqa: N802 (a geometry
     """A cone along +y, apex up, centred at the origin."""
     return mg.Cylinder(height, radiusTop=0.0, radiusBottom=radius)
 
+LOOPS = 10**9  #: the animation's repetitions: it loops (meshcat's default, 1, stops on the last frame)
+
 
 class SceneWriter:
     """Collects meshcat commands; ``times`` [s] are the animation's key times."""
@@ -113,11 +115,14 @@ class SceneWriter:
         self.clips: dict[str, list[dict[str, Any]]] = {}
 
     # ---- static ------------------------------------------------------------------------
-    def object(self, path: str, geometry_or_object, material=None) -> None:
+    def object(self, path: str, geometry_or_object, material=None, render_order: int = 0) -> None:
+        """A mesh at ``path``; ``render_order`` > 0 draws it after (over) the others (labels)."""
         if isinstance(geometry_or_object, MeshFileObject):
             cmd = {"type": "set_object", "object": geometry_or_object.lower(), "path": path}
         else:
             cmd = SetObject(geometry_or_object, material, MeshcatPath(tuple(p for p in path.split("/") if p))).lower()
+        if render_order:
+            cmd["object"]["object"]["renderOrder"] = render_order
         self.commands.append(cmd)
 
     def transform(self, path: str, matrix: np.ndarray) -> None:
@@ -148,9 +153,9 @@ class SceneWriter:
         self.track(path, "quaternion", "quaternion", quat * signs[:, None])
 
     def finish(self, play: bool = True) -> list[dict[str, Any]]:
-        """All commands, the animation last (it needs the objects it moves)."""
+        """All commands, the animation last (it needs the objects it moves), playing from t = 0 in a loop."""
         fps = self.speed
         animations = [{"path": path, "clip": {"fps": fps, "name": "default", "tracks": tracks}}
                       for path, tracks in self.clips.items()]
         return [*self.commands, {"type": "set_animation", "animations": animations,
-                                 "options": {"play": play, "repetitions": 1}, "path": ""}]
+                                 "options": {"play": play, "repetitions": LOOPS}, "path": ""}]
