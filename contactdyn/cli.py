@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .errors import ContactdynError, RobotError, RunFileError, SceneError
+from .errors import ContactdynError, RobotError, RunFileError, SceneError, is_plain_name
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
@@ -242,6 +242,10 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     from .sweep import make_sweep, run_sweep
 
     sweep = make_sweep(args.scene, args.set, args.grid, args.range, args.file)
+    if not args.out and not is_plain_name(sweep.name):  # a received scene never chooses where files go
+        raise SceneError("--out", f"a folder for this sweep: its scene's name {sweep.name!r} cannot name one "
+                         "(sweeps/<name> needs letters, digits, '_', '.', '+', '-' only, no leading '.')",
+                         "no --out")
     out = str(Path(args.out or f"sweeps/{sweep.name}").absolute())  # workers may run elsewhere (Dask)
     if (args.plot is None) != (args.over is None):
         raise SceneError("--plot/--over", "both: --plot METRIC --over PARAMETER", args.plot or args.over)
@@ -330,6 +334,31 @@ def _speed(text: str) -> float:
 _speed.__name__ = "speed (a number > 0)"  # argparse: "invalid speed (a number > 0) value: '0'"
 
 
+def _port(text: str) -> int:
+    """A TCP port to listen on: 1 ... 65535."""
+    value = int(text)
+    if not 1 <= value <= 65535:
+        raise ValueError(text)
+    return value
+
+
+_port.__name__ = "port (an integer 1 ... 65535)"
+
+
+def _host(text: str) -> str:
+    """An address this machine can listen on: a name or a literal that resolves."""
+    import socket
+
+    try:
+        socket.getaddrinfo(text, None)
+    except (OSError, UnicodeError):
+        raise ValueError(text) from None
+    return text
+
+
+_host.__name__ = "host (an address of this machine that resolves)"
+
+
 def _csv_list(text: str) -> list[str]:
     return [s.strip() for s in text.split(",") if s.strip()]
 
@@ -373,8 +402,9 @@ def _run_parser(sub, fmt) -> None:
                      help="also print the active and locked joints and how the start posture was found")
     run.add_argument("--view", action="store_true", help="show the run in the meshcat viewer afterwards")
     run.add_argument("--html", help="with --view: write a self-contained HTML player instead of serving")
-    run.add_argument("--port", type=int, help="with --view: meshcat server port")
-    run.add_argument("--host", help="with --view: listen on this address (default 127.0.0.1, this machine only)")
+    run.add_argument("--port", type=_port, help="with --view: meshcat server port")
+    run.add_argument("--host", type=_host,
+                     help="with --view: listen on this address (default 127.0.0.1, this machine only)")
     run.add_argument("--speed", type=_speed, default=1.0,
                      help="with --view: playback speed factor (> 0; 1 = real time)")
     _scripting(run)
@@ -434,8 +464,8 @@ def _view_parser(sub, fmt) -> None:
                           epilog="examples:\n  contactdyn view runs/b1\n  contactdyn view runs/b1 --html b1.html")
     view.add_argument("run", help="saved run (RUN.npz + RUN.json)")
     view.add_argument("--html", metavar="FILE", help="write a self-contained HTML player instead of serving")
-    view.add_argument("--port", type=int, help="meshcat server port")
-    view.add_argument("--host", help="listen on this address (default 127.0.0.1, this machine only)")
+    view.add_argument("--port", type=_port, help="meshcat server port")
+    view.add_argument("--host", type=_host, help="listen on this address (default 127.0.0.1, this machine only)")
     view.add_argument("--speed", type=_speed, default=1.0, help="playback speed factor (> 0; 1 = real time)")
     view.set_defaults(func=_delegate("viewer", "view_command"))
 

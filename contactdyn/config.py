@@ -204,13 +204,15 @@ class Reader:
             raise self.error(name, f"a number <= {hi:g}{_unit(unit)}", value)
         return value
 
-    def int(self, name: str, default: Any = MISSING, *, lo: int | None = None) -> int:
-        self._note(name, "integer", default, lo=lo)
+    def int(self, name: str, default: Any = MISSING, *, lo: int | None = None, hi: int | None = None) -> int:
+        self._note(name, "integer", default, lo=lo, hi=hi)
         value = self.raw(name, default)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, "an integer", value)
         if lo is not None and value < lo:
             raise self.error(name, f"an integer >= {lo}", value)
+        if hi is not None and value > hi:
+            raise self.error(name, f"an integer <= {hi}", value)
         return value
 
     def bool(self, name: str, default: Any = MISSING) -> bool:

@@ -79,3 +79,14 @@ def numerical_errors() -> tuple[type[Exception], ...]:
     import numpy as np  # here, not at the top: the command line's light commands need no numpy
 
     return (np.linalg.LinAlgError, FloatingPointError, OverflowError)
+
+
+#: a name that may become a file or folder name as it is: no path separator, no leading dot, printable
+PLAIN_NAME = r"[A-Za-z0-9_][A-Za-z0-9_.+-]{0,127}"
+
+
+def is_plain_name(name: str) -> bool:
+    """Whether ``name`` can name a file or folder without leaving its parent (PLAIN_NAME)."""
+    import re
+
+    return re.fullmatch(PLAIN_NAME, name) is not None

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ContactdynError
-from .result import Result, load_result, run_files
+from .result import Result, atomic_path, load_result, run_files
 
 __all__ = ["FIGURES", "FORMATS", "plot_result", "plot_command", "figure_names"]
 
@@ -427,7 +427,8 @@ def plot_result(result: Result, out_dir: str | Path, formats: str | Iterable[str
             fig = _draw(spec, panels, result)
             for fmt in fmts:
                 path = out / f"{spec.name}.{fmt}"
-                fig.savefig(path, format=fmt, metadata={"Date": None} if fmt == "svg" else None)
+                meta = {"Date": None} if fmt == "svg" else None
+                atomic_path(path, lambda tmp, f=fig, k=fmt, m=meta: f.savefig(tmp, format=k, metadata=m))
                 written.append(path)
     return written
 

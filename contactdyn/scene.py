@@ -124,6 +124,9 @@ class PhaseSpec:
     forces: tuple[ForceSpec, ...]
 
 
+MAX_EVENTS = 1_000_000  #: solver.max_events at most (each event is kept in the run's log and JSON)
+
+
 @dataclass(frozen=True)
 class SolverSpec:
     method: str = "DOP853C"  #: DOP853 on scipy's compiled core (contactdyn.dop853); "DOP853": solve_ivp's
@@ -199,6 +202,8 @@ def parse_override(text: str) -> tuple[str, Any]:
     if "=" not in text:
         raise SceneError("--set", "key.path=value", text)
     key, value = (part.strip() for part in text.split("=", 1))
+    if "\n" in value or "\r" in value:  # more TOML after the value would be read and dropped
+        raise SceneError(f"--set {key}", "one value on one line (one --set per key)", value)
     try:
         parsed = tomllib.loads(f"v = {value}")["v"]
     except tomllib.TOMLDecodeError:
@@ -266,10 +271,23 @@ def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = Non
     if not phases:
         phases = (_read_phase(Reader({"name": "main"}, "phase[0]", file), default_controller, contacts, duration,
                               bodies),)
+    _check_phase_order(top, phases)
     top.finish()
     scene = Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document)
     check_budget(scene)
     return scene
+
+
+def _check_phase_order(top: Reader, phases: tuple[PhaseSpec, ...]) -> None:
+    """Timed phase ends (``until`` [s] from the scene start) must not decrease: a phase cannot end before an
+    earlier one did (it would end the moment it starts, unnoticed)."""
+    last, where = -math.inf, ""
+    for i, p in enumerate(phases[:-1] if len(phases) > 1 else ()):
+        if isinstance(p.until, float):
+            if p.until < last:
+                raise top.error(f"phase[{i}].until", f"a time no earlier than {where}'s ({last:g} s): phase ends "
+                                "do not decrease", p.until)
+            last, where = p.until, f"phase[{i}].until"
 
 
 def _read_robot(r: Reader) -> RobotSpec:
@@ -423,7 +441,7 @@ def _read_solver(r: Reader) -> SolverSpec:
         max_step=r.float("max_step", math.inf, lo=0.0, lo_open=True, unit="s"),
         output_rate=r.float("output_rate", SolverSpec.output_rate, lo=0.0, lo_open=True, hi=1e7, unit="Hz"),
         record_energy=r.bool("record_energy", False),
-        max_events=r.int("max_events", SolverSpec.max_events, lo=1),
+        max_events=r.int("max_events", SolverSpec.max_events, lo=1, hi=MAX_EVENTS),
         storm_window=r.float("storm_window", SolverSpec.storm_window, lo=0.0, unit="s"),
         storm_count=r.int("storm_count", SolverSpec.storm_count, lo=2),
         stabilization=r.float("stabilization", SolverSpec.stabilization, lo=0.0, unit="1/s"),

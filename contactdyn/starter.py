@@ -237,12 +237,18 @@ kind = "step"
 
 def new_command(args: argparse.Namespace) -> int:
     """``contactdyn new NAME``: write ``sims/NAME.toml`` (or ``--out``), refusing to overwrite."""
+    from .errors import is_plain_name
+    from .result import atomic_write
+
+    if not is_plain_name(args.name):
+        raise SceneError("NAME", "a plain name (letters, digits, '_', '.', '+', '-'; no '/' or leading '.'): the "
+                         "scene goes to sims/NAME.toml (--out chooses another file)", args.name)
     out = Path(args.out) if args.out else Path("sims") / f"{args.name}.toml"
     if out.exists() and not args.force:
         raise SceneError("--out" if args.out else "NAME", "a file that does not exist yet (or --force)", str(out))
     text = starter_scene(args.name, args.robot, args.contact, args.friction, args.tip)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text)
+    atomic_write(out, text)  # a full disk leaves no half-written scene
     run = args.name if not args.out else str(out)
     print(f"wrote {out}; run it: contactdyn run {run}")
     return 0

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import faulthandler
 import hashlib
+import math
 import os
 import signal
 import warnings
@@ -41,7 +42,8 @@ def check_urdf_tree(path: Path) -> ET.Element:
     """Parse ``path`` and check its joints form one tree; return the XML root.
 
     One root link, every joint's parent and child a defined link, no joint whose parent is
-    its child, no link the child of two joints, no cycle, unique link and joint names.
+    its child, no link the child of two joints, no cycle, unique link and joint names, and
+    every number finite (:data:`NUMERIC`: origins, masses, inertias, limits, shapes...).
     """
     size = path.stat().st_size
     if size > MAX_URDF_BYTES:
@@ -82,6 +84,7 @@ def check_urdf_tree(path: Path) -> ET.Element:
     if len(roots) != 1:
         found = f"{len(roots)} ({', '.join(map(_q, roots[:5]))})" if roots else "none (every link has a parent)"
         raise RobotError(f"{path}: expected one root link (a link that is no joint's child), found {found}")
+    _check_numbers(path, root)
     for link in links:  # with one parent per link, a link that never reaches the root sits on a cycle
         seen = [link]
         while seen[-1] in parent_of:
@@ -91,6 +94,32 @@ def check_urdf_tree(path: Path) -> ET.Element:
                 names = " -> ".join(x if len(x) <= 60 else f"{x[:50]}..." for x in loop[:12])
                 raise RobotError(f"{path}: the joints form a cycle through links {names}")
     return root
+
+
+#: the attributes that hold numbers, by element tag (URDF's specification): each must be finite
+NUMERIC = {"origin": ("xyz", "rpy"), "mass": ("value",), "inertia": ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"),
+           "axis": ("xyz",), "limit": ("lower", "upper", "effort", "velocity"), "dynamics": ("damping", "friction"),
+           "box": ("size",), "cylinder": ("radius", "length"), "sphere": ("radius",), "mesh": ("scale",),
+           "color": ("rgba",), "mimic": ("multiplier", "offset"), "calibration": ("rising", "falling"),
+           "safety_controller": ("soft_lower_limit", "soft_upper_limit", "k_position", "k_velocity")}
+
+
+def _check_numbers(path: Path, element: ET.Element, where: str = "") -> None:
+    """Every number the URDF states is finite; else a RobotError naming the element and the attribute."""
+    for child in element:
+        here = f"{child.tag} {_q(child.get('name'))}" if child.tag in ("link", "joint") and not where else \
+            f"{where} <{child.tag}>".strip()
+        for attribute in NUMERIC.get(child.tag, ()):
+            text = child.get(attribute)
+            if text is None:
+                continue
+            try:
+                values = [float(v) for v in text.split()]
+            except ValueError:
+                values = [math.nan]
+            if not values or not all(math.isfinite(v) for v in values):
+                raise RobotError(f"{path}: {here}: {attribute}={_q(text)}: expected finite numbers")
+        _check_numbers(path, child, here)
 
 
 def _link_ref(path: Path, joint: ET.Element, name: str | None, tag: str) -> str:

@@ -91,5 +91,5 @@ def test_a_robot_whose_tip_cannot_press_and_slide_is_refused_with_a_sentence(cap
     assert main(["new", "x", "--robot", "double_pendulum", "--tip", "link2", "--out", "/dev/null", "--force"]) == 2
     err = capsys.readouterr().err
     assert "a robot whose tip can move along two world directions" in err and "'link2' (2 active joints)" in err
-    assert main(["new", "x", "--robot", "double_pendulum"]) == 2
+    assert main(["new", "x", "--robot", "double_pendulum", "--tip", "nope", "--out", "/dev/null", "--force"]) == 2
     assert "choose the pressing frame with --tip" in capsys.readouterr().err

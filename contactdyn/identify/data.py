@@ -75,6 +75,8 @@ def read_csv(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """(t [s], {column: values}) of a CSV log; empty cells are NaN; errors name the row and column."""
     path = Path(path)
     file = str(path)
+    if path.exists() and not path.is_file():  # a FIFO or a device would block or never end
+        raise SceneError("--data", "a regular CSV file", "a FIFO, device or folder", file)
     try:
         with path.open(newline="") as f:
             rows = list(csv.reader(f))

@@ -181,8 +181,13 @@ def make_sweep(scene: str | Path | None, sets: Iterable[str] = (), grids: Iterab
         raise SceneError("scene", "a scene (argument or `scene = ...` in the sweep file)", None,
                          str(sweep_file) if sweep_file else None)
     fixed.update(dict(parse_override(s) for s in sets))
-    axes.update(dict(parse_grid(s) for s in grids))
-    axes.update(dict(parse_range(s) for s in ranges))
+    given = [(parse_grid(s), "--grid") for s in grids] + [(parse_range(s), "--range") for s in ranges]
+    seen: set[str] = set()
+    for (key, _), option in given:  # a key given twice would keep only its last axis, silently
+        if key in seen:
+            raise SceneError(option, f"each key once among --grid and --range ({key} is given twice)", key)
+        seen.add(key)
+    axes.update(dict(axis for axis, _ in given))
     path = find_scene(scene)
     document = read_toml(path)
     return Sweep(document, str(path), fixed, axes, runs)
