@@ -12,13 +12,18 @@ import math
 
 from .errors import SceneError
 
-__all__ = ["MAX_DURATION", "MAX_SAMPLES", "MAX_STEPS", "MAX_MOVES", "check_budget", "available_memory"]
+__all__ = ["MAX_DURATION", "MAX_SAMPLES", "MAX_STEPS", "MAX_MOVES", "MAX_PHASES", "MAX_RUN_MEMORY", "check_budget",
+           "available_memory"]
 
 MAX_DURATION = 1e4  #: [s] simulated at most
 MAX_SAMPLES = 10**7  #: output samples (duration × output_rate) at most
 MAX_STEPS = 10**7  #: integration steps implied by duration / max_step at most
 MAX_MOVES = 64  #: moves of one reference (each adds a kink and a term to every evaluation: cost ~ moves²)
-BYTES_PER_SAMPLE = 8 * 64 * 2  #: [B] float64 × channel columns (a generous count) × (channels + their saved copy)
+MAX_PHASES = 1000  #: phases of a scene (each builds its own controller and plans)
+#: [B] a run's peak memory per output sample (states, channels, their saved copy): 1325 B measured for B1 at
+#: 2e6 samples (output_rate = 1e7 over 0.2 s peaked at 2.65 GB), with a margin
+BYTES_PER_SAMPLE = 1536
+MAX_RUN_MEMORY = 2 * 2**30  #: [B] a run's samples may need at most this (and at most the free memory)
 
 
 def check_budget(scene) -> None:
@@ -40,12 +45,14 @@ def check_budget(scene) -> None:
         moves = len(phase.reference.moves) if phase.reference is not None else 0
         if moves > MAX_MOVES:
             raise SceneError(f"phase[{i}].reference.moves", f"at most {MAX_MOVES} moves", f"{moves} moves", file)
+    if len(scene.phases) > MAX_PHASES:
+        raise SceneError("phase", f"at most {MAX_PHASES} phases", f"{len(scene.phases)} phases", file)
     need = samples * BYTES_PER_SAMPLE
-    free = available_memory()
+    free = min(available_memory(), MAX_RUN_MEMORY)
     if need > free:
         raise SceneError("solver.output_rate", f"a run that fits in memory: {samples:.3g} samples would need "
-                         f"about {need / 2**30:.2g} GiB, {free / 2**30:.2g} GiB are available", solver.output_rate,
-                         file)
+                         f"about {need / 2**30:.2g} GiB, at most {free / 2**30:.2g} GiB are allowed (a run's bound "
+                         f"is {MAX_RUN_MEMORY / 2**30:g} GiB, or the free memory if less)", solver.output_rate, file)
 
 
 def available_memory() -> float:

@@ -234,7 +234,7 @@ def _simulate_quietly(simulate, scene):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SanityWarning)
         warnings.simplefilter("ignore", PhysicsWarning)
-        return simulate(scene)
+        return simulate(scene, progress=True)
 
 
 # ---- sweep -----------------------------------------------------------------------------------

@@ -55,6 +55,7 @@ from .limits import rate_limit_report
 from .notice import compiling
 from .phases import Phase
 from .physics_checks import StartAudit, run_checks, violations
+from .progress import STEPS_BASE, Progress, WorkWatch, step_budget
 from .result import Result
 from .rhsplan import ModePlan, cached_plan, structure
 from .system import System
@@ -110,6 +111,8 @@ class HybridRun:
         self.resting: str | None = None
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.physics_checks)
+        self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
+        self.progress: Progress | None = None  #: shows the simulated time of a long run (contactdyn run sets it)
 
     def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True) -> ModePlan:
         """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``
@@ -168,6 +171,8 @@ class HybridRun:
                 if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
                     self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
                     continue
+                if fired[0].kind == "work":
+                    raise SimulationError(self._over_budget(t, x))
                 if fired[0].kind == "collapse":  # a 2-D slide coming to rest? (same modes, same phase)
                     self._collapse_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
                     continue
@@ -232,6 +237,17 @@ class HybridRun:
         self.stats["segments"] += 1
         return sol, events, fun
 
+    def _over_budget(self, t: float, x: np.ndarray) -> str:
+        """Why a run that reached its step budget stops: where, and the fastest mode if that says why."""
+        seg = self.segments[-1]
+        lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else self.system.rhs(seg.modes, seg.phase), t, x)
+        stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
+                 f"{self.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
+        return (f"{self.scene.name}: stopped at t = {t:.6g} s of {self.scene.duration:g} s after {self.budget} "
+                f"integration steps, its budget ({STEPS_BASE} + solver.steps_per_second = "
+                f"{self.solver.steps_per_second:g} per simulated second){stiff}; a stiff scene runs with "
+                "solver.method = \"Radau\" or \"auto\", or raise solver.steps_per_second")
+
     def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
         """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
         stability-bound by a decaying mode, else DOP853 without a budget (see integrators)."""
@@ -245,8 +261,9 @@ class HybridRun:
             self.next_step = h
 
     def _watches(self, modes: list[ContactMode], method: str) -> list:
-        """The segment's method-choice events: ``auto``'s step budget, a 2-D slide's collapse watch."""
-        out: list = []
+        """The segment's watches: the run's work budget (and progress), ``auto``'s step budget, a 2-D slide's
+        collapse watch."""
+        out: list = [WorkWatch(self.budget - self.stats["steps"], self.progress)]
         if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
             out.append(StepBudget(STEP_BUDGET))
         if self.resting is None and method in EXPLICIT and method not in FIXED and _sliding_2d(modes) \

@@ -28,5 +28,5 @@ TABLE_FIELDS = {
     'phase[].reference': 'space, body, start, moves',
     'phase[].reference.moves[]': 'duration (required), kind, delta, start, accel_fraction, velocity, center, normal, turns',
     'phase[].force[]': 'value (required), contact, start, duration, kind, initial, direction',
-    'solver': 'method, rtol, atol, max_step, output_rate, record_energy, max_events, storm_window, storm_count, stabilization, stick_velocity',
+    'solver': 'method, rtol, atol, max_step, output_rate, record_energy, max_events, steps_per_second, storm_window, storm_count, stabilization, stick_velocity',
 }

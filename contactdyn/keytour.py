@@ -80,6 +80,7 @@ max_step = 0.01
 output_rate = 1000.0
 record_energy = false
 max_events = 10000
+steps_per_second = 100000.0
 storm_window = 1e-9
 storm_count = 50
 stabilization = 20.0

@@ -136,6 +136,8 @@ class SolverSpec:
     output_rate: float = 1000.0  #: [Hz] samples in the Result
     record_energy: bool = False  #: integrate drive work and damper dissipation
     max_events: int = 10000  #: guard against event storms (whole run)
+    #: integration steps a run may take per simulated second (contactdyn.progress: plus a base of 1e5)
+    steps_per_second: float = 100_000.0
     storm_window: float = 1e-9  #: [s] events closer than this count towards a storm
     storm_count: int = 50  #: that many events inside the window stop the run
     stabilization: float = 20.0  #: [1/s] Baumgarte rate ω of bonds, rigid contacts and sticks (0: none)
@@ -442,6 +444,7 @@ def _read_solver(r: Reader) -> SolverSpec:
         output_rate=r.float("output_rate", SolverSpec.output_rate, lo=0.0, lo_open=True, hi=1e7, unit="Hz"),
         record_energy=r.bool("record_energy", False),
         max_events=r.int("max_events", SolverSpec.max_events, lo=1, hi=MAX_EVENTS),
+        steps_per_second=r.float("steps_per_second", SolverSpec.steps_per_second, lo=1.0, hi=1e9, unit="1/s"),
         storm_window=r.float("storm_window", SolverSpec.storm_window, lo=0.0, unit="s"),
         storm_count=r.int("storm_count", SolverSpec.storm_count, lo=2),
         stabilization=r.float("stabilization", SolverSpec.stabilization, lo=0.0, unit="1/s"),

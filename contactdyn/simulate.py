@@ -25,6 +25,7 @@ import numpy as np
 from .contact import ContactMode
 from .hybrid import HybridRun
 from .phases import Phase
+from .progress import Progress
 from .result import Result
 from .scene import Scene, load_scene
 from .system import System
@@ -32,8 +33,9 @@ from .system import System
 __all__ = ["simulate", "run_system", "prepare"]
 
 
-def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None) -> Result:
-    """Run a scene (an object, a path, or a name in ``sims/``) and return its Result."""
+def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None, *, progress: bool = False) -> Result:
+    """Run a scene (an object, a path, or a name in ``sims/``) and return its Result; ``progress``: show the
+    simulated time on stderr once the run has taken a couple of seconds (:mod:`contactdyn.progress`)."""
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
@@ -43,7 +45,14 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None)
     wall0 = time.perf_counter()
     system = System(scene)
     notes = sanity_warnings(system)
-    result = HybridRun(system).run(wall0)
+    loop = HybridRun(system)
+    if progress:
+        loop.progress = Progress(scene.name, scene.duration)
+    try:
+        result = loop.run(wall0)
+    finally:
+        if loop.progress is not None:
+            loop.progress.done()
     result.meta["warnings"] = notes + outcome_notes(system, result)
     check_warnings(result)
     return result

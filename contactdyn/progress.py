@@ -1,0 +1,83 @@
+"""A long run says how far it is, and no run works without bound.
+
+:class:`WorkWatch` is a terminal event of every integration segment (the step-counting
+events of :mod:`contactdyn.events`): it fires when the run's integration steps exceed its
+budget, ``STEPS_BASE + solver.steps_per_second × duration`` (a stiff or mis-set scene, such
+as ``solver.stabilization = 1e9``, stops there with a message naming the cause instead of
+running for hours), and, when a :class:`Progress` is attached (``contactdyn run``), it
+reports the simulated time: after SHOW_AFTER seconds of wall time, a bar on a terminal
+redrawn every REDRAW seconds, else a line every LINE_EVERY seconds.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+__all__ = ["STEPS_BASE", "Progress", "WorkWatch", "step_budget"]
+
+STEPS_BASE = 100_000  #: integration steps every run may take, besides steps_per_second × duration
+SHOW_AFTER = 2.0  #: [s] of wall time before progress is shown
+REDRAW = 0.5  #: [s] between redraws of the bar on a terminal
+LINE_EVERY = 10.0  #: [s] between progress lines when stderr is not a terminal
+
+
+def step_budget(solver, duration: float) -> int:
+    """The run's integration steps at most."""
+    return int(STEPS_BASE + solver.steps_per_second * duration)
+
+
+class Progress:
+    """Simulated time t of T [s], shown on stderr once a run has taken SHOW_AFTER seconds."""
+
+    def __init__(self, name: str, duration: float, stream=None):
+        self.name, self.duration = name, duration
+        self.stream = stream or sys.stderr
+        self.start = time.monotonic()
+        self.next = self.start + SHOW_AFTER
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.shown = False
+
+    def __call__(self, t: float) -> None:
+        now = time.monotonic()
+        if now < self.next:
+            return
+        self.next = now + (REDRAW if self.tty else LINE_EVERY)
+        share = min(max(t / self.duration, 0.0), 1.0) if self.duration > 0 else 1.0
+        text = f"{self.name}: t = {t:.6g} / {self.duration:g} s ({100 * share:.0f} %, {now - self.start:.0f} s)"
+        if self.tty:
+            bar = "#" * int(30 * share)
+            self.stream.write(f"\r{text} [{bar:<30}]")
+        else:
+            self.stream.write(text + "\n")
+        self.stream.flush()
+        self.shown = True
+
+    def done(self) -> None:
+        if self.shown and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+class WorkWatch:
+    """A terminal event (kind ``work``) at the step end where the run's steps reach ``left``; reports progress."""
+
+    terminal = True
+    direction = -1
+    contact = ""
+    kind = "work"
+
+    def __init__(self, left: int, progress: Progress | None = None):
+        self.left, self.progress = left, progress
+        self.t_end, self.t_fire = -math.inf, math.inf
+
+    def __call__(self, t: float, x) -> float:
+        if t > self.t_end:  # a step end (solve_ivp calls events at step ends in increasing t)
+            self.t_end = t
+            self.left -= 1
+            if self.left <= 0 and self.t_fire == math.inf:
+                self.t_fire = t
+            if self.progress is not None:
+                self.progress(t)
+        return -1.0 if t >= self.t_fire else 1.0

@@ -1,0 +1,39 @@
+"""No run works without bound, and a long one says how far it is (contactdyn.progress)."""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+
+import contactdyn.hybrid
+import contactdyn.progress as progress
+from contactdyn import SimulationError, simulate
+
+
+def test_a_run_over_its_step_budget_stops_with_the_cause(monkeypatch):
+    """B1 takes ~240 steps over 2 s; with a budget of 50 steps per simulated second (and no base) it stops at
+    the 100th step, saying where, the budget and the fastest mode."""
+    monkeypatch.setattr(contactdyn.hybrid, "step_budget", lambda solver, duration: 100)
+    with pytest.raises(SimulationError) as info:
+        simulate("b1", {"solver.steps_per_second": 50.0})
+    text = str(info.value)
+    assert "after 100 integration steps, its budget" in text and "fastest mode |λ|" in text
+    assert "solver.steps_per_second" in text
+
+
+def test_the_budget_is_the_base_plus_the_rate_times_the_duration():
+    from contactdyn.scene import load_scene
+
+    scene = load_scene("b1", {"solver.steps_per_second": 1000.0})
+    assert progress.step_budget(scene.solver, scene.duration) == progress.STEPS_BASE + 2000
+
+
+def test_progress_shows_after_a_while_as_lines_off_a_terminal(monkeypatch):
+    clock = iter([0.0, 1.0, 2.5, 3.0, 13.0])
+    monkeypatch.setattr(progress.time, "monotonic", lambda: next(clock))
+    out = io.StringIO()
+    p = progress.Progress("b1", 2.0, out)  # created at 0 s
+    for t in (0.1, 0.5, 0.6, 1.9):  # at 1 s (quiet), 2.5 s (a line), 3 s (too soon), 13 s (a line)
+        p(t)
+    assert out.getvalue().splitlines() == ["b1: t = 0.5 / 2 s (25 %, 2 s)", "b1: t = 1.9 / 2 s (95 %, 13 s)"]
