@@ -531,7 +531,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = parser.parse_args(argv)
     except _Usage as exc:
-        print(f"{exc}\n(see contactdyn --help)", file=sys.stderr)
+        print(f"{exc} (see contactdyn --help)", file=sys.stderr)  # one line, as every bad input
         return EXIT_USAGE
     except SystemExit as exc:  # --help, --version
         return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE

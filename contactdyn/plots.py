@@ -30,8 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ContactdynError
+from .errors import ContactdynError, SceneError
 from .result import Result, atomic_path, load_result, run_files
+from .run_check import check_drawable
 
 __all__ = ["FIGURES", "FORMATS", "plot_result", "plot_command", "figure_names"]
 
@@ -367,8 +368,8 @@ def _parse_formats(formats: str | Iterable[str]) -> list[str]:
     items = [f for f in items if f]
     bad = [f for f in items if f not in FORMATS]
     if bad or not items:
-        raise ContactdynError(f"plot format: expected a comma-separated list of {', '.join(FORMATS)}, found "
-                              f"{','.join(items) if items else 'nothing'}")
+        raise SceneError("--format", f"a comma-separated list of {', '.join(FORMATS)}",
+                         ",".join(items) if items else "nothing")
     return list(dict.fromkeys(items))
 
 
@@ -441,6 +442,7 @@ def plot_command(args: argparse.Namespace) -> int:
     """
     run = Path(args.run)
     result = load_result(run)
+    check_drawable(result)  # what `view` refuses, `plot` refuses too (contactdyn.run_check)
     stem = run_files(run)[0].with_suffix("")
     out = Path(args.out) if getattr(args, "out", None) else stem.parent / f"{stem.name}_figures"
     written = plot_result(result, out, getattr(args, "format", None) or ",".join(FORMATS))

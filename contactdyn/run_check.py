@@ -145,3 +145,33 @@ SIDECAR_FIELDS: dict[str, Callable[[Any], bool]] = {
     "kind": lambda v: isinstance(v, str), "contact": lambda v: isinstance(v, str),
     "duration": lambda v: isinstance(v, int | float) and not isinstance(v, bool),
 }
+
+
+def check_drawable(result) -> Any:
+    """What every command that draws a run (``plot``, ``view``) needs of it, checked the same way: a joint
+    channel ``q`` with finite values, a finite duration, and a scene document that still validates (returned,
+    or None without one); friction channels with one column per tangent. A RunFileError names the run."""
+    from .errors import ContactdynError
+    from .scene import parse_scene
+
+    name = result.meta.get("name", "?")
+    if "q" not in result.channels:
+        raise RunFileError(f"run {name}: no joint channel q, nothing to draw")
+    q = np.asarray(result.channels["q"], float).reshape(len(result.channels["t"]), -1)
+    if not np.all(np.isfinite(q)):
+        raise RunFileError(f"run {name}: channel q holds non-finite values, the robot cannot be drawn")
+    duration = result.meta.get("duration", 0.0)
+    if not isinstance(duration, int | float) or not np.isfinite(duration):
+        raise RunFileError(f"run {name}: its duration {abbreviate(duration)} is not a finite number")
+    if not result.scene:
+        return None
+    try:
+        scene = parse_scene(result.scene)
+    except ContactdynError as exc:
+        raise RunFileError(f"run {name}: its scene document no longer validates, cannot draw it: {exc}") from None
+    for c in scene.contacts.values():
+        for key in (f"contact.{c.name}.F_f", f"contact.{c.name}.v_slip"):
+            if key in result.channels and result.channels[key].reshape(len(q), -1).shape[1] != len(c.tangents):
+                raise RunFileError(f"run {name}: channel {key} has {result.channels[key].reshape(len(q), -1).shape[1]}"
+                                   f" columns but the scene gives contact {c.name!r} {len(c.tangents)} tangents")
+    return scene

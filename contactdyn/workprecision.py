@@ -350,9 +350,12 @@ def _floats(text: str | None, what: str) -> tuple[float, ...] | None:
     if not text:
         return None
     try:
-        return tuple(float(v) for v in text.split(",") if v.strip())
+        values = tuple(float(v) for v in text.split(",") if v.strip())
     except ValueError:
         raise SceneError(what, "comma-separated numbers like 1e-4,1e-6", text) from None
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise SceneError(what, "comma-separated finite numbers > 0 like 1e-4,1e-6", text)
+    return values
 
 
 def _speed_words(ratio: float) -> str:
@@ -376,6 +379,8 @@ def bench_command(args) -> int:
                 steps = _floats(hs.replace("/", ","), "--methods")
         methods = tuple(methods)
     rtols = _floats(args.rtols, "--rtols")
+    if args.repeats < 1:
+        raise SceneError("--repeats", "an integer >= 1 (timings are medians of the repeats)", args.repeats)
     scene = load_scene(args.scene, overrides)
     name = scene.name
     out = Path(args.out) if args.out else Path("out") / "bench" / name

@@ -10,6 +10,7 @@ inputs (a 17 MB scene, a 1000-link URDF, a 16 GiB channel header) are generated 
 from __future__ import annotations
 
 import json
+import math
 import resource
 import subprocess
 import sys
@@ -144,7 +145,7 @@ OVERRIDES: list[tuple[str | list[str], int, str]] = [  # --set value(s), exit co
     ("solver.output_rate=1e7", 0, ""),  # 0.01 s: 1e5 samples, fine
     (["duration=2.0", "solver.output_rate=1e7"], 2,
      "solver.output_rate: expected at most 1e+07 samples over the run (duration"),
-    (["duration=1000.0", "solver.output_rate=5e3"], 2, "fits in memory: 5e+06 samples would need about 4.8 GiB"),
+    (["duration=1000.0", "solver.output_rate=5e3"], 2, "fits in memory: 5e+06 samples would need about 7.2 GiB"),
     ("solver.output_rate=1e12", 2, "solver.output_rate"),
     ("solver.output_rate=0", 2, "solver.output_rate: expected a number > 0"),
     ("solver.output_rate=inf", 2, "solver.output_rate: expected a finite number"),
@@ -233,8 +234,16 @@ def urdf_cases(tmp: Path) -> list[Case]:
         "long_link_negative_mass": (good.replace('"link1"', '"' + "L" * 10**5 + '"').replace(
             '<mass value="3.0"/>', '<mass value="-3.0"/>', 1), "characters)"),
         "negative_mass": (good.replace('<mass value="3.0"/>', '<mass value="-3.0"/>', 1), "mass must be >= 0"),
-        "nan_mass": (good.replace('<mass value="3.0"/>', '<mass value="nan"/>', 1), "mass must be >= 0"),
-        "text_mass": (good.replace('<mass value="3.0"/>', '<mass value="heavy"/>', 1), "must be a number"),
+        "nan_mass": (good.replace('<mass value="3.0"/>', '<mass value="nan"/>', 1),
+                     "link 'link1' <inertial> <mass>: value='nan': expected finite numbers"),
+        "text_mass": (good.replace('<mass value="3.0"/>', '<mass value="heavy"/>', 1),
+                      "<mass>: value='heavy': expected finite numbers"),
+        "nan_inertial_origin": (good.replace("<inertial>", '<inertial><origin xyz="nan 0 0"/>', 1),
+                                "<inertial> <origin>: xyz='nan 0 0': expected finite numbers"),
+        "huge_visual_origin": (good.replace("<link name=\"link1\">",
+                                            '<link name="link1"><visual><origin xyz="1e400 0 0"/>'
+                                            '<geometry><sphere radius="0.1"/></geometry></visual>', 1),
+                               "<visual> <origin>: xyz='1e400 0 0': expected finite numbers"),
         "limits_reversed": (good.replace('lower="-6.283185307180" upper="6.283185307180"', 'lower="1" upper="-1"', 1),
                             "lower limit [1.0] > upper limit [-1.0]"),
         "no_limits": (good.replace(LIMIT, "", 1), "does not specify limits"),
@@ -378,8 +387,68 @@ def run_file_cases(tmp: Path) -> list[Case]:
     return cases
 
 
+# ---- round 2 (issue 33): where files go, silently dropped input, blocking files and ports, one validation ----
+def round2_cases(tmp: Path) -> list[Case]:
+    import os
+
+    def write(name: str, text: str) -> str:
+        path = tmp / name
+        path.write_text(text)
+        return str(path)
+
+    escaped = write("escaped.toml", B1.replace('name = "b1"', 'name = "../../../escaped"'))
+    decreasing = write("decreasing.toml", B1.replace('name = "slide"', 'name = "slide"\nuntil = 1.0', 1)
+                       + '\n[[phase]]\nname = "back"\nuntil = 0.5\n[[phase]]\nname = "last"\n')
+    fifo = tmp / "fifo.csv"
+    os.mkfifo(fifo)
+    good = tmp / "good"
+    contactdyn.simulate("b1", {"duration": 0.01, "solver.output_rate": 200}).save(good)
+    doc = json.loads(good.with_name("good.json").read_text())
+    (tmp / "nan_duration.npz").write_bytes(good.with_name("good.npz").read_bytes())
+    (tmp / "nan_duration.json").write_text(json.dumps({**doc, "meta": {**doc["meta"], "duration": math.nan}}))
+    with open(tmp / "no_q.npz", "wb") as f:
+        np.savez(f, t=np.linspace(0.0, 0.01, 3), tip=np.zeros((3, 3)))
+    (tmp / "no_q.json").write_text(json.dumps(doc))
+    more_toml = 'duration=0.2\n[solver]\nmethod="RK4"'
+    return [
+        ("r2/sweep_name_escapes", ["sweep", escaped, "--grid", "controller.kp=1,2", "--workers", "0", *FAST], 2,
+         "cannot name one"),
+        ("r2/new_name_escapes", ["new", "../../x"], 2, "NAME: expected a plain name"),
+        ("r2/grid_key_twice", ["sweep", "b1", "--grid", "controller.kp=1,2", "--grid", "controller.kp=3",
+                               "--workers", "0", "--out", str(tmp / "sw")], 2, "controller.kp is given twice"),
+        ("r2/set_carries_more_toml", ["run", "b1", "--set", more_toml], 2, "one value on one line"),
+        ("r2/until_decreases", ["run", decreasing, *FAST], 2, "phase ends do not decrease"),
+        ("r2/max_events_unbounded", ["run", "b1", "--set", "solver.max_events=100000000", *FAST], 2,
+         "solver.max_events: expected an integer <= 1000000"),
+        ("r2/fit_data_fifo", ["fit", "b1", "--data", str(fifo), "--params", "contact.tip.tangent.mu"], 2,
+         "expected a regular CSV file"),
+        ("r2/view_port_too_big", ["view", str(good), "--port", "99999"], 2, "invalid port"),
+        ("r2/view_port_negative", ["view", str(good), "--port", "-5"], 2, "invalid port"),
+        ("r2/view_host_unresolvable", ["view", str(good), "--host", "no-such-host.invalid"], 2, "invalid host"),
+        ("r2/plot_format_exe", ["plot", str(good), "--format", "exe", "--out", str(tmp / "f")], 2,
+         "--format: expected a comma-separated list of png, svg"),
+        ("r2/bench_rtols_nan", ["bench", "b1", "--rtols", "nan", "--out", str(tmp / "b")], 2,
+         "--rtols: expected comma-separated finite numbers > 0"),
+        ("r2/bench_repeats_0", ["bench", "b1", "--repeats", "0", "--out", str(tmp / "b")], 2, "--repeats"),
+        ("r2/plot_nan_duration", ["plot", str(tmp / "nan_duration"), "--out", str(tmp / "f2")], 2,
+         "is not a finite number"),
+        ("r2/plot_no_q", ["plot", str(tmp / "no_q"), "--out", str(tmp / "f3")], 2, "no joint channel q"),
+        ("r2/memory_bound", ["run", "b1", "--set", "duration=0.2", "--set", "solver.output_rate=1e7"], 2,
+         "would need about 2.9 GiB"),
+        ("r2/new_name_with_slash", ["new", "a/b"], 2, "NAME: expected a plain name"),
+        ("r2/new_name_hidden", ["new", ".hidden"], 2, "NAME: expected a plain name"),
+        ("r2/set_carriage_return", ["run", "b1", "--set", "duration=0.2\r[solver]"], 2, "one value on one line"),
+        ("r2/view_port_zero", ["view", str(good), "--port", "0"], 2, "invalid port"),
+        ("r2/bench_rtols_negative", ["bench", "b1", "--rtols=-1e-4", "--out", str(tmp / "b")], 2,
+         "finite numbers > 0"),
+        ("r2/grid_and_range_same_key", ["sweep", "b1", "--grid", "controller.kp=1,2", "--range",
+                                        "controller.kp=1:2:3", "--workers", "0", "--out", str(tmp / "sw2")], 2,
+         "given twice"),
+    ]
+
+
 BUILDERS = {"scenes": scene_cases, "overrides": lambda _: override_cases(), "urdfs": urdf_cases,
-            "run_files": run_file_cases}
+            "run_files": run_file_cases, "round2": round2_cases}
 
 
 def test_corpus_has_at_least_100_cases(tmp_path):
@@ -391,6 +460,6 @@ def test_corpus_has_at_least_100_cases(tmp_path):
 
 
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files"])
+@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2"])
 def test_hostile_inputs(tmp_path, kind):
     check(BUILDERS[kind](tmp_path), tmp_path)

@@ -169,7 +169,7 @@ def test_real_run_saved_then_plotted_by_the_command(tmp_path, capsys):
 def small_run() -> Result:
     """Only a tip and its reference: two figures, cheap to draw."""
     full = synthetic_run()
-    return Result({k: full.channels[k] for k in ("t", "tip", "tip_ref")}, meta={"name": "small"})
+    return Result({k: full.channels[k] for k in ("t", "q", "tip", "tip_ref")}, meta={"name": "small"})
 
 
 def test_command_options_and_errors(tmp_path):
@@ -182,7 +182,7 @@ def test_command_options_and_errors(tmp_path):
     assert plot_command(argparse.Namespace(run=str(tmp_path / "syn"), out=str(tmp_path / "figs2"),
                                            format=["png"])) == 0
     assert {p.suffix for p in (tmp_path / "figs2").iterdir()} == {".png"}
-    with pytest.raises(ContactdynError, match="expected a comma-separated list of png, svg, found pdf"):
+    with pytest.raises(ContactdynError, match="expected a comma-separated list of png, svg, found 'pdf'"):
         plot_result(run, tmp_path, "pdf")
     with pytest.raises(ContactdynError, match="not a saved run"):
         plot_command(argparse.Namespace(run=str(tmp_path / "missing"), out=None, format="png"))
@@ -191,7 +191,7 @@ def test_command_options_and_errors(tmp_path):
 
 
 def test_a_run_without_any_plottable_channel_says_so(tmp_path, capsys):
-    empty = Result({"t": np.linspace(0, 1, 3)}, meta={"name": "empty"})
+    empty = Result({"t": np.linspace(0, 1, 3), "q": np.zeros((3, 2))}, meta={"name": "empty"})
     empty.save(tmp_path / "empty")
     assert plot_command(argparse.Namespace(run=str(tmp_path / "empty"), out=None, format="png")) == 1
     assert "no figure applies" in capsys.readouterr().out

@@ -10,7 +10,8 @@ import numpy as np
 from ..errors import ContactdynError, RunFileError
 from ..result import Result
 from ..robot import Robot
-from ..scene import Scene, parse_scene
+from ..run_check import check_drawable
+from ..scene import Scene
 from .camera import frame_view
 from .contact_visuals import (
     STAGE_LENGTH,
@@ -38,15 +39,12 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
     """The meshcat commands drawing ``result``, played at ``speed`` × real time; no server, no browser."""
     if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
         raise ContactdynError(f"view: speed must be a number > 0 (1 = real time), found {speed!r}")
-    if "q" not in result.channels:
-        raise RunFileError(f"run {result.meta.get('name', '?')}: no joint channel q, nothing to draw")
-    scene = _scene_of(result)
+    scene = check_drawable(result)  # the same checks as `plot` (contactdyn.run_check)
     robot = _robot_of(result, scene)
     t_all, q_all = np.asarray(result["t"], float), np.asarray(result["q"], float).reshape(len(result["t"]), -1)
     if q_all.shape[1] != robot.nq:
         raise RunFileError(f"run {result.meta.get('name', '?')}: channel q has {q_all.shape[1]} columns but "
                               f"robot {robot.source} has {robot.nq} active joints {robot.joint_names}")
-    _check_channels(result, scene, q_all)
     idx = _frames(len(t_all), max_frames)
     times, q = t_all[idx], q_all[idx]
     duration = float(times[-1] - times[0]) if len(times) > 1 else 0.0
@@ -110,28 +108,6 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
         if not any(v.spec.body == name for v in views):
             notes.append(f"body {name!r} carries no contact surface: not drawn")
     return ViewerScene(writer.finish(), duration, float(speed), legend, notes, dict(GROUPS), scales)
-
-
-def _check_channels(result: Result, scene: Scene | None, q: np.ndarray) -> None:
-    """What the drawing reads agrees with the scene: finite joints, one friction column per tangent."""
-    name = result.meta.get("name", "?")
-    if not np.all(np.isfinite(q)):
-        raise RunFileError(f"run {name}: channel q holds non-finite values, the robot cannot be drawn")
-    for c in scene.contacts.values() if scene else []:
-        for key in (f"contact.{c.name}.F_f", f"contact.{c.name}.v_slip"):
-            if key in result.channels and result.channels[key].reshape(len(q), -1).shape[1] != len(c.tangents):
-                raise RunFileError(f"run {name}: channel {key} has {result.channels[key].reshape(len(q), -1).shape[1]}"
-                                   f" columns but the scene gives contact {c.name!r} {len(c.tangents)} tangents")
-
-
-def _scene_of(result: Result) -> Scene | None:
-    if not result.scene:
-        return None
-    try:
-        return parse_scene(result.scene)
-    except ContactdynError as exc:
-        raise RunFileError(f"run {result.meta.get('name', '?')}: its scene document no longer validates, "
-                              f"cannot draw it: {exc}") from None
 
 
 def _robot_of(result: Result, scene: Scene | None) -> Robot:
