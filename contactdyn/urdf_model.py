@@ -96,7 +96,7 @@ def _resolve_meshes(root: ET.Element, path: Path, package_dirs: list[str]) -> li
                 continue
             filename = mesh.get("filename", "")
             file = resolve_uri(filename, path, package_dirs)
-            if file is None:
+            if file is None or not _usable_mesh(file):
                 link.remove(visual)
                 missing.append(f"link {link.get('name')!r} ({filename!r})")
                 continue
@@ -104,8 +104,21 @@ def _resolve_meshes(root: ET.Element, path: Path, package_dirs: list[str]) -> li
     if not missing:
         return []
     more = f" and {len(missing) - 2} more" if len(missing) > 2 else ""
-    return [f"{path.name}: {len(missing)} visual mesh(es) not found (searched the URDF's folders, example-robot-data "
-            f"and ROS_PACKAGE_PATH): {', '.join(missing[:2])}{more}; the viewer draws those links without them"]
+    return [f"{path.name}: {len(missing)} visual mesh(es) not found or unusable (searched the URDF's folders, "
+            f"example-robot-data and ROS_PACKAGE_PATH; a mesh is a regular .dae, .stl or .obj file): "
+            f"{', '.join(missing[:2])}{more}; the viewer draws those links without them"]
+
+
+MESH_SUFFIXES = (".dae", ".stl", ".obj")  #: the mesh files meshcat draws
+
+
+def _usable_mesh(file: Path) -> bool:
+    """A regular file with a mesh's suffix (not /etc/passwd, not /proc/self/mem, not a FIFO)."""
+    try:
+        return file.suffix.lower() in MESH_SUFFIXES and file.is_file() and not str(file.resolve()).startswith(
+            ("/proc/", "/sys/", "/dev/"))
+    except OSError:
+        return False
 
 
 def _unbind_continuous(root: ET.Element) -> list[str]:

@@ -260,6 +260,10 @@ def urdf_cases(tmp: Path) -> list[Case]:
     missing_mesh.write_text(good.replace("<geometry>", '<geometry><mesh filename="nope.stl"/>', 1))
     cases.append(("urdf/missing_mesh", ["run", "b1", *FAST, "--set", f'robot.urdf="{missing_mesh}"'], 0,
                   "warning: visual: missing_mesh.urdf: 1 visual mesh(es) not found"))
+    passwd_mesh = tmp / "passwd_mesh.urdf"
+    passwd_mesh.write_text(good.replace("<geometry>", '<geometry><mesh filename="/etc/passwd"/>', 1))
+    cases.append(("urdf/mesh_is_etc_passwd", ["run", "b1", *FAST, "--set", f'robot.urdf="{passwd_mesh}"'], 0,
+                  "1 visual mesh(es) not found or unusable"))
     cases += [("urdf/missing", ["run", "b1", *FAST, "--set", f'robot.urdf="{tmp / "nope.urdf"}"'], 2,
                "no such URDF file"),
               ("urdf/directory", ["run", "b1", *FAST, "--set", f'robot.urdf="{tmp / "adir.urdf"}"'], 2, "robot")]

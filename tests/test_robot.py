@@ -460,11 +460,20 @@ def test_missing_mesh_is_left_out_of_the_drawing_with_a_note(tmp_path):
     visual = '<visual><geometry><mesh filename="package://nowhere/meshes/link1.stl"/></geometry></visual>'
     path = urdf(tmp_path, visual1=visual)
     r = Robot.load(path)
-    assert r.visual_notes == [f"{path.name}: 1 visual mesh(es) not found (searched the URDF's folders, "
-                              "example-robot-data and ROS_PACKAGE_PATH): link 'link1' "
-                              "('package://nowhere/meshes/link1.stl'); the viewer draws those links without them"]
+    assert r.visual_notes == [f"{path.name}: 1 visual mesh(es) not found or unusable (searched the URDF's folders, "
+                              "example-robot-data and ROS_PACKAGE_PATH; a mesh is a regular .dae, .stl or .obj "
+                              "file): link 'link1' ('package://nowhere/meshes/link1.stl'); the viewer draws those "
+                              "links without them"]
     assert r.describe()["visual_notes"] == r.visual_notes
     assert r.visual_model.ngeoms == 0  # the link's only visual was that mesh
+
+
+@pytest.mark.parametrize("target", ["/etc/passwd", "/proc/self/mem"])
+def test_a_mesh_that_is_no_mesh_file_is_left_out_with_the_same_note(tmp_path, target):
+    visual = f'<visual><geometry><mesh filename="{target}"/></geometry></visual>'
+    r = Robot.load(urdf(tmp_path, visual1=visual))
+    assert len(r.visual_notes) == 1 and f"link 'link1' ('{target}')" in r.visual_notes[0]
+    assert r.visual_model.ngeoms == 0
 
 
 def test_relative_mesh_is_resolved(tmp_path):
