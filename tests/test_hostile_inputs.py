@@ -467,3 +467,50 @@ def test_corpus_has_at_least_100_cases(tmp_path):
 @pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2"])
 def test_hostile_inputs(tmp_path, kind):
     check(BUILDERS[kind](tmp_path), tmp_path)
+
+
+# ---- a fuzz of scene files through the command line (fixed seed) ---------------------------------
+def fuzz_cases(tmp: Path, n: int = 36, seed: int = 20261129) -> list[tuple[str, list[str]]]:
+    """``n`` mutants of sims/b1.toml, each a line changed: a value replaced by a hostile one, a line dropped or
+    duplicated, a key renamed, bytes flipped."""
+    rng = np.random.default_rng(seed)
+    lines = B1.splitlines()
+    values = ["nan", "inf", "-inf", "-1", "0", "1e300", "-1e-300", '"x"', "[]", "{}", "true", "[1e9, 1e9, 1e9]",
+              '"../../x"', "1e-30"]
+    cases = []
+    for i in range(n):
+        mutant = list(lines)
+        k = int(rng.integers(len(mutant)))
+        how = int(rng.integers(5))
+        if how == 0 and "=" in mutant[k]:
+            mutant[k] = mutant[k].split("=", 1)[0] + "= " + values[int(rng.integers(len(values)))]
+        elif how == 1:
+            del mutant[k]
+        elif how == 2:
+            mutant.insert(k, mutant[k])
+        elif how == 3 and "=" in mutant[k]:
+            mutant[k] = "z" + mutant[k].lstrip()
+        else:
+            raw = bytearray("\n".join(mutant).encode())
+            for j in rng.integers(len(raw), size=3):
+                raw[j] = int(rng.integers(32, 127))
+            mutant = raw.decode(errors="replace").splitlines()
+        path = tmp / f"mutant{i}.toml"
+        path.write_text("\n".join(mutant) + "\n")
+        cases.append((f"fuzz/{i}", ["run", str(path), "--set", "duration=0.02", "--set", "solver.output_rate=200"]))
+    return cases
+
+
+@pytest.mark.timeout(300)
+def test_a_fuzz_of_scene_files_ends_in_a_result_or_one_line(tmp_path):
+    """Every mutant runs (exit 0), fails with a reason (exit 1) or is bad input (exit 2, one line): no traceback."""
+    cases = fuzz_cases(tmp_path)
+    results = run_batch([(cid, argv, 0, "") for cid, argv in cases], tmp_path)
+    wrong = []
+    for cid, _ in cases:
+        r = results[cid]
+        one_line = r["code"] != 2 or (r["err"].count("\n") == 1 and r["err"].startswith("contactdyn"))
+        if r["code"] not in (0, 1, 2) or "Traceback" in r["err"] or not one_line:
+            wrong.append(f"{cid}: exit {r['code']}: {r['err'][:400]!r}")
+    assert not wrong, "\n".join(wrong)
+    assert {results[cid]["code"] for cid, _ in cases} >= {0, 2}  # the fuzz reaches both kinds of ending
