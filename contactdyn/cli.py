@@ -180,6 +180,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     overrides = dict(parse_override(s) for s in args.set)
     scene = load_scene(args.scene, overrides)
     _out(args, f"scene {scene.name}: {scene.file}")
+    from .user_laws import IMPORTED
+
+    for module, where in IMPORTED.items():  # importing runs code: say what ran
+        _out(args, f"imported {module} from {where}")
     result = _simulate_quietly(simulate, scene)
     from .robot_list import run_warnings
 
@@ -318,6 +322,11 @@ def _scripting(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout (for scripts)")
 
 
+def _imports_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--no-imports", action="store_true",
+                   help="refuse a scene that names modules to import (imports = [...]): for scenes from others")
+
+
 def _set_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key, value read as TOML (repeatable), e.g. contact.tip.normal.k=1e4")
@@ -408,6 +417,7 @@ def _run_parser(sub, fmt) -> None:
     run.add_argument("--speed", type=_speed, default=1.0,
                      help="with --view: playback speed factor (> 0; 1 = real time)")
     _scripting(run)
+    _imports_option(run)
     run.set_defaults(func=_cmd_run)
 
 
@@ -439,6 +449,7 @@ def _sweep_parser(sub, fmt) -> None:
     sw.add_argument("--plot", metavar="METRIC", help="draw this metric of the summary (e.g. contact.tip.F_final) ...")
     sw.add_argument("--over", metavar="KEY", help="... against this swept parameter: OUT/plot_METRIC_over_KEY.png")
     _scripting(sw)
+    _imports_option(sw)
     sw.set_defaults(func=_cmd_sweep)
 
 
@@ -467,6 +478,7 @@ def _view_parser(sub, fmt) -> None:
     view.add_argument("--port", type=_port, help="meshcat server port")
     view.add_argument("--host", type=_host, help="listen on this address (default 127.0.0.1, this machine only)")
     view.add_argument("--speed", type=_speed, default=1.0, help="playback speed factor (> 0; 1 = real time)")
+    _imports_option(view)
     view.set_defaults(func=_delegate("viewer", "view_command"))
 
 
@@ -519,6 +531,7 @@ def _fit_parser(sub, fmt) -> None:
     fit.add_argument("--out", metavar="DIR", help="write fit.json, fit.md and fit.png here")
     fit.add_argument("--save-scene", metavar="FILE.toml", help="write the scene with the fitted values")
     _scripting(fit)
+    _imports_option(fit)
     fit.set_defaults(func=_delegate("identify", "fit_command"))
 
 
@@ -535,6 +548,10 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     except SystemExit as exc:  # --help, --version
         return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
+    if getattr(args, "no_imports", False):
+        from .user_laws import refuse_imports
+
+        refuse_imports()
     try:
         return args.func(args)
     except (SceneError, RobotError, RunFileError) as exc:

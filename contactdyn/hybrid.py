@@ -355,7 +355,8 @@ class HybridRun:
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
                 "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
-                "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks)}
+                "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
+                "scene_file": scene.file}  # where its imports = [...] modules are found again (view, plot)
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
 
 

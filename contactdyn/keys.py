@@ -32,6 +32,8 @@ _SECTIONS = ("", "robot", "body", "contact", "controller", "phase", "solver")
 
 _M = "model"
 MEANINGS: dict[str, str] = {
+    "imports": "modules of your own laws to import first (names, not paths; next to the scene file, then "
+               "sys.path); contactdyn run prints each; --no-imports refuses them",
     # top level
     "name": "scene name (runs and sweeps are named after it)",
     "description": "one line shown by `contactdyn list scenes`",
@@ -199,6 +201,8 @@ MEANINGS: dict[str, str] = {
     "solver.output_rate": "sample rate of the result's channels",
     "solver.record_energy": "integrate drive work and damper dissipation (energy.* channels)",
     "solver.max_events": "most events in a run before it stops (event storm guard)",
+    "solver.steps_per_second": "integration steps a run may take per simulated second, besides a base of 1e5 "
+                               "(beyond, it stops naming the cause)",
     "solver.storm_window": "events closer than this count towards a storm",
     "solver.storm_count": "that many events inside the window stop the run",
     "solver.stabilization": "Baumgarte rate of bonds, rigid contacts and sticks (0: none)",

@@ -17,6 +17,7 @@ tip = "tip"
 '''
 
 _FULL = '''
+imports = []
 name = "tour"
 description = "every key of the robot, a body, a contact, a phase and the solver"
 duration = 1.0

@@ -166,7 +166,8 @@ def check_drawable(result) -> Any:
     if not result.scene:
         return None
     try:
-        scene = parse_scene(result.scene)
+        file = result.meta.get("scene_file")
+        scene = parse_scene(result.scene, file=file if isinstance(file, str) else None)
     except ContactdynError as exc:
         raise RunFileError(f"run {name}: its scene document no longer validates, cannot draw it: {exc}") from None
     for c in scene.contacts.values():

@@ -259,6 +259,7 @@ def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = Non
     check_depth([document, overrides], "<document>", file)
     document = apply_overrides(document, overrides or {}, file)
     top = Reader(document, "", file)
+    _read_imports(top, file)  # first: the user's modules register the laws the rest may name
     name = top.str("name", Path(file).stem if file else "scene")
     description = top.str("description", "")
     duration = top.float("duration", lo=0.0, lo_open=True, unit="s")
@@ -278,6 +279,14 @@ def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = Non
     scene = Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document)
     check_budget(scene)
     return scene
+
+
+def _read_imports(top: Reader, file: str | None) -> None:
+    """``imports``: the user's modules of laws, imported now (:mod:`contactdyn.user_laws`)."""
+    from .user_laws import import_scene_modules
+
+    top._note("imports", "list", [])
+    import_scene_modules(top.raw("imports", []), file)
 
 
 def _check_phase_order(top: Reader, phases: tuple[PhaseSpec, ...]) -> None:
