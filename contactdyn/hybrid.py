@@ -55,7 +55,7 @@ from .limits import rate_limit_report
 from .notice import compiling
 from .phases import Phase
 from .physics_checks import StartAudit, run_checks, violations
-from .progress import STEPS_BASE, Progress, WorkWatch, step_budget
+from .progress import CALLS_PER_STEP, STEPS_BASE, OverBudget, Progress, Work, WorkWatch, step_budget
 from .result import Result
 from .rhsplan import ModePlan, cached_plan, structure
 from .system import System
@@ -112,6 +112,7 @@ class HybridRun:
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
+        self.work = Work(CALLS_PER_STEP * self.budget)  #: right-hand-side calls at most, rejected steps' too
         self.progress: Progress | None = None  #: shows the simulated time of a long run (contactdyn run sets it)
 
     def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True) -> ModePlan:
@@ -139,6 +140,10 @@ class HybridRun:
         """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
         try:
             return self._run(wall0)
+        except OverBudget:
+            t = self.segments[-1].t1 if self.segments else 0.0
+            x = self.segments[-1].sol(t) if self.segments else self.start()[0]
+            raise SimulationError(self._over_budget(t, np.asarray(x, float), calls=True)) from None
         except (np.linalg.LinAlgError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
             t = self.segments[-1].t1 if self.segments else 0.0
             raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
@@ -218,7 +223,7 @@ class HybridRun:
             finishing = method == self.resting and method != scene_method and not _launching(modes)
             scale = RESTING_TOL if finishing else 1.0
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
-                sol = integrate(rhs, (t, t_end), x, method, rtol=scale * self.solver.rtol,
+                sol = integrate(self.work.wrap(rhs), (t, t_end), x, method, rtol=scale * self.solver.rtol,
                                 atol=scale * self.solver.atol, max_step=self._max_step(modes, method), events=events,
                                 first_step=h0, jac=jac)
             self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
@@ -237,14 +242,19 @@ class HybridRun:
         self.stats["segments"] += 1
         return sol, events, fun
 
-    def _over_budget(self, t: float, x: np.ndarray) -> str:
-        """Why a run that reached its step budget stops: where, and the fastest mode if that says why."""
-        seg = self.segments[-1]
-        lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else self.system.rhs(seg.modes, seg.phase), t, x)
+    def _over_budget(self, t: float, x: np.ndarray, calls: bool = False) -> str:
+        """Why a run that reached its step budget (``calls``: its right-hand-side calls' budget) stops: where, and
+        the fastest mode if that says why."""
+        lam = np.zeros(0)
+        if self.segments:
+            seg = self.segments[-1]
+            lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else self.system.rhs(seg.modes, seg.phase), t, x)
         stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
                  f"{self.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
-        return (f"{self.scene.name}: stopped at t = {t:.6g} s of {self.scene.duration:g} s after {self.budget} "
-                f"integration steps, its budget ({STEPS_BASE} + solver.steps_per_second = "
+        spent = f"{self.work.calls} right-hand-side calls ({CALLS_PER_STEP} per budgeted step)" if calls \
+            else f"{self.budget} integration steps"
+        return (f"{self.scene.name}: stopped at t = {t:.6g} s of {self.scene.duration:g} s after {spent}, "
+                f"its budget ({STEPS_BASE} + solver.steps_per_second = "
                 f"{self.solver.steps_per_second:g} per simulated second){stiff}; a stiff scene runs with "
                 "solver.method = \"Radau\" or \"auto\", or raise solver.steps_per_second")
 

@@ -201,7 +201,7 @@ MEANINGS: dict[str, str] = {
     "solver.output_rate": "sample rate of the result's channels",
     "solver.record_energy": "integrate drive work and damper dissipation (energy.* channels)",
     "solver.max_events": "most events in a run before it stops (event storm guard)",
-    "solver.steps_per_second": "integration steps a run may take per simulated second, besides a base of 1e5 "
+    "solver.steps_per_second": "integration steps a run may take per simulated second, besides a base of 2e4 "
                                "(beyond, it stops naming the cause)",
     "solver.storm_window": "events closer than this count towards a storm",
     "solver.storm_count": "that many events inside the window stop the run",

@@ -4,9 +4,11 @@
 events of :mod:`contactdyn.events`): it fires when the run's integration steps exceed its
 budget, ``STEPS_BASE + solver.steps_per_second × duration`` (a stiff or mis-set scene, such
 as ``solver.stabilization = 1e9``, stops there with a message naming the cause instead of
-running for hours), and, when a :class:`Progress` is attached (``contactdyn run``), it
-reports the simulated time: after SHOW_AFTER seconds of wall time, a bar on a terminal
-redrawn every REDRAW seconds, else a line every LINE_EVERY seconds.
+running for hours); :class:`Work` bounds the right-hand-side calls the same way
+(CALLS_PER_STEP per budgeted step: rejected attempts count too), and, when a
+:class:`Progress` is attached (``contactdyn run``), it reports the simulated time: after
+SHOW_AFTER seconds of wall time, a bar on a terminal redrawn every REDRAW seconds, else a line
+every LINE_EVERY seconds.
 """
 
 from __future__ import annotations
@@ -15,12 +17,15 @@ import math
 import sys
 import time
 
-__all__ = ["STEPS_BASE", "Progress", "WorkWatch", "step_budget"]
+__all__ = ["STEPS_BASE", "CALLS_PER_STEP", "Progress", "WorkWatch", "Work", "OverBudget", "step_budget"]
 
-STEPS_BASE = 100_000  #: integration steps every run may take, besides steps_per_second × duration
+STEPS_BASE = 20_000  #: integration steps every run may take, besides steps_per_second × duration
 SHOW_AFTER = 2.0  #: [s] of wall time before progress is shown
 REDRAW = 0.5  #: [s] between redraws of the bar on a terminal
 LINE_EVERY = 10.0  #: [s] between progress lines when stderr is not a terminal
+#: right-hand-side calls a step may take on average (DOP853: 12 per attempt): rejected attempts count too, so a
+#: run whose steps keep failing is bounded as well
+CALLS_PER_STEP = 24
 
 
 def step_budget(solver, duration: float) -> int:
@@ -81,3 +86,35 @@ class WorkWatch:
             if self.progress is not None:
                 self.progress(t)
         return -1.0 if t >= self.t_fire else 1.0
+
+
+class OverBudget(Exception):
+    """The run's right-hand-side calls reached their budget (raised from inside the integration)."""
+
+
+class Work:
+    """Counts a run's right-hand-side calls (a compiled step as 12) and raises OverBudget past ``limit``."""
+
+    def __init__(self, limit: int):
+        self.limit, self.calls = limit, 0
+
+    def count(self, n: int) -> None:
+        self.calls += n
+        if self.calls > self.limit:
+            raise OverBudget
+
+    def wrap(self, fun):
+        """``fun`` counted; its compiled ``step`` (contactdyn.plan_steps), if any, counted as 12 calls."""
+        def counted(t, y):
+            self.count(1)
+            return fun(t, y)
+
+        step = getattr(fun, "step", None)
+        if step is not None:
+            def counted_step(*args, **kwargs):
+                self.count(12)
+                return step(*args, **kwargs)
+
+            counted_step.usable = step.usable
+            counted.step = counted_step
+        return counted

@@ -22,6 +22,19 @@ def test_a_run_over_its_step_budget_stops_with_the_cause(monkeypatch):
     assert "solver.steps_per_second" in text
 
 
+def test_steps_that_keep_failing_are_bounded_by_the_calls(monkeypatch):
+    """The same budget counted in right-hand-side calls (rejected attempts too): B1 needs ~4200 calls; with a
+    budget of 50 steps (1200 calls) it stops inside the integration, naming the calls."""
+    monkeypatch.setattr(contactdyn.hybrid, "step_budget", lambda solver, duration: 50)
+    monkeypatch.setattr(contactdyn.hybrid, "WorkWatch", lambda left, progress: progress_watch(10**9))
+    with pytest.raises(SimulationError, match="right-hand-side calls \\(24 per budgeted step\\)"):
+        simulate("b1")
+
+
+def progress_watch(left: int):
+    return progress.WorkWatch(left)
+
+
 def test_the_budget_is_the_base_plus_the_rate_times_the_duration():
     from contactdyn.scene import load_scene
 
