@@ -251,12 +251,14 @@ class HybridRun:
             lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else self.system.rhs(seg.modes, seg.phase), t, x)
         stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
                  f"{self.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
+        advice = "a stiff scene runs with solver.method = \"Radau\" or \"auto\"" \
+            if self.solver.method not in IMPLICIT else "even the implicit method needs more: check the magnitudes"
         spent = f"{self.work.calls} right-hand-side calls ({CALLS_PER_STEP} per budgeted step)" if calls \
             else f"{self.budget} integration steps"
         return (f"{self.scene.name}: stopped at t = {t:.6g} s of {self.scene.duration:g} s after {spent}, "
                 f"its budget ({STEPS_BASE} + solver.steps_per_second = "
-                f"{self.solver.steps_per_second:g} per simulated second){stiff}; a stiff scene runs with "
-                "solver.method = \"Radau\" or \"auto\", or raise solver.steps_per_second")
+                f"{self.solver.steps_per_second:g} per simulated second){stiff}; {advice}, or raise "
+                "solver.steps_per_second")
 
     def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
         """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
