@@ -182,9 +182,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     _out(args, f"scene {scene.name}: {scene.file}")
     from .user_laws import IMPORTED
 
-    for module, where in IMPORTED.items():  # importing runs code: say what ran
-        _out(args, f"imported {module} from {where}")
-    result = _simulate_quietly(simulate, scene)
+    for module in scene.imports:  # importing runs code: say what ran
+        _out(args, f"imported {module} from {IMPORTED.get(module, '?')}")
+    result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json))
     from .robot_list import run_warnings
 
     # sanity, then inertia and limits, then the run's physics checks
@@ -228,7 +228,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _simulate_quietly(simulate, scene):
+def _simulate_quietly(simulate, scene, progress: bool = True):
     """Simulate without Python's own warning lines (the command prints the sanity and check warnings itself)."""
     import warnings
 
@@ -238,7 +238,7 @@ def _simulate_quietly(simulate, scene):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SanityWarning)
         warnings.simplefilter("ignore", PhysicsWarning)
-        return simulate(scene, progress=True)
+        return simulate(scene, progress=progress)
 
 
 # ---- sweep -----------------------------------------------------------------------------------
@@ -537,9 +537,6 @@ def _fit_parser(sub, fmt) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; return the exit code (never raises for bad input)."""
-    from .errors import numerical_errors
-
-    NUMERICAL = numerical_errors()  # noqa: N806 (the sweep's name for the same tuple)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -548,10 +545,11 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USAGE
     except SystemExit as exc:  # --help, --version
         return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
-    if getattr(args, "no_imports", False):
-        from .user_laws import refuse_imports
+    from .errors import numerical_errors  # (numpy: after --help)
+    from .user_laws import refuse_imports
 
-        refuse_imports()
+    NUMERICAL = numerical_errors()  # noqa: N806 (the sweep's name for the same tuple)
+    refuse_imports(bool(getattr(args, "no_imports", False)))  # this command's policy, not a previous one's
     try:
         return args.func(args)
     except (SceneError, RobotError, RunFileError) as exc:

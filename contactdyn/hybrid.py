@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -140,10 +141,9 @@ class HybridRun:
         """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
         try:
             return self._run(wall0)
-        except OverBudget:
-            t = self.segments[-1].t1 if self.segments else 0.0
-            x = self.segments[-1].sol(t) if self.segments else self.start()[0]
-            raise SimulationError(self._over_budget(t, np.asarray(x, float), calls=True)) from None
+        except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
+            t, x = self.work.last if self.work.last is not None else (0.0, self.start()[0])
+            raise SimulationError(self._over_budget(float(t), np.array(x, float), calls=True)) from None
         except (np.linalg.LinAlgError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
             t = self.segments[-1].t1 if self.segments else 0.0
             raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
@@ -188,6 +188,7 @@ class HybridRun:
             elif t < T:
                 self._new_mode()
                 x, modes, phase = self._next_phase(phase, t, x, modes)
+        self.work.limit = math.inf  # the output's interpolants are not the integration's work
         if self.segments and self.segments[-1].modes != modes:  # an event at the end: its modes are the last sample's
             self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._plan(modes, phase, count=False)))
         return self._result(time.perf_counter() - wall0)
@@ -275,7 +276,10 @@ class HybridRun:
     def _watches(self, modes: list[ContactMode], method: str) -> list:
         """The segment's watches: the run's work budget (and progress), ``auto``'s step budget, a 2-D slide's
         collapse watch."""
-        out: list = [WorkWatch(self.budget - self.stats["steps"], self.progress)]
+        left = self.budget - self.stats["steps"]
+        if left <= 0:  # spent at a segment's end (an event there): stop before the next
+            raise SimulationError(self._over_budget(self.segments[-1].t1, self.segments[-1].sol(self.segments[-1].t1)))
+        out: list = [WorkWatch(left, self.progress)]
         if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
             out.append(StepBudget(STEP_BUDGET))
         if self.resting is None and method in EXPLICIT and method not in FIXED and _sliding_2d(modes) \
@@ -356,7 +360,7 @@ class HybridRun:
         system, scene = self.system, self.scene
         T = scene.duration
         channels, xs = sample_states(system, self.segments, output_grid(T, self.solver.output_rate), self.stats)
-        checks = run_checks(system, xs, channels, self.starts, self.impacts)
+        checks = run_checks(system, xs, channels, self.starts, self.impacts, self.events)
         rate_stats, rate_warnings = rate_limit_report(system.robot, channels["t"], channels["v"], channels["tau"])
         self.stats["rhs_evals"] += sum(getattr(seg.sol, "late_calls", 0) for seg in self.segments)  # DOP853C's
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
@@ -368,7 +372,7 @@ class HybridRun:
                 "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
-                "scene_file": scene.file}  # where its imports = [...] modules are found again (view, plot)
+                "scene_file": str(Path(scene.file).resolve()) if scene.file else None}  # (where it came from)
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
 
 

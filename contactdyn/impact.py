@@ -84,7 +84,7 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     qd_minus = x[nQ:2 * nQ].copy()
     M = system.mass_matrix()
     name = contact.name if contact is not None else ""
-    k = len(contact.tangents) if contact is not None and contact.friction is not None else 0
+    k = len(contact.tangents) if contact is not None else 0
     kin = system.kinematics(contact, x) if contact is not None else None
     vt_minus = slip_velocity(system, contact, kin, qd_minus) if k else np.zeros(0)
     held = list(modes)  #: the modes the impact holds: a stick its impulse would push out of the cone slides

@@ -28,7 +28,7 @@ MISSED = 0.5  #: [-] a phase ending with |F − F_d| above this × |F_d| did not
 
 def phase_spans(scene: Scene, result: Result) -> list[tuple[int, float, float]]:
     """(phase index, start [s], end [s]) of every phase that started, in order (from the ``phase`` events)."""
-    starts = [0.0] + [e["t"] for e in result.events if e["kind"] == "phase"]
+    starts = [0.0] + [e["t"] for e in result.events if e["kind"] == "phase"][:max(len(scene.phases) - 1, 0)]
     end = float(result.t[-1]) if len(result.t) else 0.0
     return [(i, t0, starts[i + 1] if i + 1 < len(starts) else end)
             for i, t0 in enumerate(starts[:len(scene.phases)])]
@@ -55,9 +55,12 @@ def outcome_warnings(scene: Scene, result: Result) -> list[str]:
            for c in sorted(named) if c in touched and not touched[c].any()]
     never = {c for c in named if c in touched and not touched[c].any()}
     spans = phase_spans(scene, result)
-    for i, t0, t1 in spans:
+    for k, (i, t0, t1) in enumerate(spans):
         phase = scene.phases[i]
-        inside = (t >= t0) & (t <= t1)
+        last = k == len(spans) - 1  # a sample at a phase's end belongs to the next phase
+        inside = (t >= t0) & ((t <= t1) if last else (t < t1))
+        if not inside.any():  # a phase shorter than the output step: nothing to judge
+            continue
         for c in sorted({f.contact for f in phase.forces} - never):
             if c in touched and not touched[c][inside].any():
                 out.append(f"phase[{i}] ({phase.name}): the force set-point on contact '{c}' was active from "

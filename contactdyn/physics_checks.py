@@ -59,6 +59,7 @@ UNITS = {name: unit for name, (unit, _) in CHECKS.items()}
 #: error is about rtol; a slip or separation is located where the interpolant crosses, within its error)
 FORCE_PER_RTOL = 1e3
 FORCE_FLOOR = 1e-9  #: [-] relative slack of the force checks at any rtol (the solves' round-off)
+IMPULSE_FLOOR = 1e-12  #: [N·s] the impact's own acceptance of a cone test (friction.FORCE_ABS_TOL)
 DRIFT_PER_ATOL = 1e3  #: [-] slack of the drift checks (gap [m], stick speed [m/s]) per unit of atol
 
 
@@ -74,10 +75,15 @@ class Worst:
     t: float = math.nan
 
     def see(self, values: np.ndarray, times: np.ndarray) -> None:
-        if values.size:
-            k = int(np.argmax(values))
-            if values[k] > self.value:
-                self.value, self.t = float(values[k]), float(times[k])
+        if not values.size or np.isnan(self.value):
+            return
+        if np.isnan(values).any():  # a check that cannot be evaluated is a violation, at its first instant
+            k = int(np.flatnonzero(np.isnan(values))[0])
+            self.value, self.t = math.nan, float(times[k])
+            return
+        k = int(np.argmax(values))
+        if values[k] > self.value:
+            self.value, self.t = float(values[k]), float(times[k])
 
 
 @dataclass
@@ -118,12 +124,13 @@ def tolerances(system: System, channels: dict[str, np.ndarray], impacts: list[di
         P = max([1e-6] + [abs(imp["normal_impulse"]) for imp in hits])  # [N·s] the impulse scale
         out[c.name] = {"cone_excess": force, "slide_deviation": force, "dissipation_gap": force * speed,
                        "pull": force, "penetration": drift, "complementarity": drift * F, "drift": drift,
-                       "stick_speed": drift, "impulse_excess": P * (FORCE_FLOOR + FORCE_PER_RTOL * solver.rtol)}
+                       "stick_speed": drift,
+                       "impulse_excess": P * (FORCE_FLOOR + FORCE_PER_RTOL * solver.rtol) + IMPULSE_FLOOR}
     return out
 
 
 def run_checks(system: System, xs: np.ndarray, channels: dict[str, np.ndarray], starts: StartAudit,
-               impacts: list[dict[str, Any]]) -> dict[str, Any]:
+               impacts: list[dict[str, Any]], events: list[dict[str, Any]] = ()) -> dict[str, Any]:
     """The run's checks: ``{"contacts": {name: {check: {"value", "t", "tol"}}}, "energy_residual": ...}``
     (a check that does not apply to a contact is absent; value 0 where it applies but nothing was seen)."""
     tol = tolerances(system, channels, impacts)
@@ -136,11 +143,11 @@ def run_checks(system: System, xs: np.ndarray, channels: dict[str, np.ndarray], 
         for (name, check), w in starts.worst.items():
             if name == c.name and check in worst:
                 worst[check].see(np.array([w.value]), np.array([w.t]))
-        contacts[c.name] = {check: {"value": w.value if w.value > 0.0 else 0.0, "t": w.t, "tol": tol[c.name][check]}
-                            for check, w in worst.items()}
+        contacts[c.name] = {check: {"value": w.value if not w.value <= 0.0 else 0.0, "t": w.t,
+                                    "tol": tol[c.name][check]} for check, w in worst.items()}
     out: dict[str, Any] = {"contacts": contacts}
     if system.energy_slot >= 0:
-        out["energy_residual"] = energy_residual(system, xs, channels, impacts)
+        out["energy_residual"] = energy_residual(system, xs, channels, impacts, events)
     return out
 
 
@@ -217,7 +224,7 @@ def _impulse_worst(c, impacts: list[dict[str, Any]]) -> Worst:
 
 
 def energy_residual(system: System, xs: np.ndarray, ch: dict[str, np.ndarray],
-                    impacts: list[dict[str, Any]]) -> dict[str, Any]:
+                    impacts: list[dict[str, Any]], events: list[dict[str, Any]] = ()) -> dict[str, Any]:
     """The energy audit's residual [J]: max |E(t) − E(0) − (work − dissipated) + impact losses until t|, E the
     stored energy (:func:`stored_energy`); its tolerance max(DRIFT_PER_ATOL atol, FORCE_PER_RTOL rtol) × the
     audit's scale (1 + the largest |work| + dissipated). NaN where a part's stored energy is not known (``why``)."""
@@ -229,8 +236,11 @@ def energy_residual(system: System, xs: np.ndarray, ch: dict[str, np.ndarray],
         return {"value": math.nan, "t": math.nan, "tol": tol, "why": why}
     t = np.asarray(ch["t"], float)
     impact_loss = np.zeros_like(t)
-    for imp in impacts:
-        impact_loss[t >= imp["t"]] += float(imp.get("energy_loss", 0.0))
+    # every impact's loss once: the contacts' (Result.impacts; a limit's with a contact carries "joint") and the
+    # joint limits' without a contact (their "limit" event)
+    losses = [imp for imp in impacts if "joint" not in imp] + [e for e in events if e.get("kind") == "limit"]
+    for hit in losses:
+        impact_loss[t >= hit["t"]] += float(hit.get("energy_loss", 0.0))
     residual = np.abs(stored - stored[0] - (work - lost) + impact_loss)
     k = int(np.argmax(residual))
     return {"value": float(residual[k]), "t": float(t[k]), "tol": tol}
@@ -241,12 +251,12 @@ def violations(checks: dict[str, Any]) -> list[str]:
     out = []
     for name, by_check in checks.get("contacts", {}).items():
         for check, v in by_check.items():
-            if v["value"] > v["tol"]:
+            if not v["value"] <= v["tol"]:  # NaN: a check that could not be evaluated is a violation
                 unit, meaning = CHECKS[check]
                 out.append(f"physics check: contact {name!r}: {check} = {v['value']:.3g} {unit} at t = {v['t']:.6g} s "
                            f"({meaning}; tolerance {v['tol']:.2g} {unit})")
     e = checks.get("energy_residual")
-    if e is not None and e["value"] > e["tol"]:
+    if e is not None and e["value"] > e["tol"]:  # (NaN: the audit's potential is unknown, said in "why")
         out.append(f"physics check: energy_residual = {e['value']:.3g} J at t = {e['t']:.6g} s "
                    f"(work − dissipation − stored energy; tolerance {e['tol']:.2g} J)")
     return out

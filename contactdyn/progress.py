@@ -78,8 +78,10 @@ class WorkWatch:
         self.t_end, self.t_fire = -math.inf, math.inf
 
     def __call__(self, t: float, x) -> float:
-        if t > self.t_end:  # a step end (solve_ivp calls events at step ends in increasing t)
-            self.t_end = t
+        if t > self.t_end:  # a step end (solve_ivp calls events at step ends in increasing t; first at t0)
+            first, self.t_end = self.t_end == -math.inf, t
+            if first:
+                return 1.0
             self.left -= 1
             if self.left <= 0 and self.t_fire == math.inf:
                 self.t_fire = t
@@ -95,18 +97,21 @@ class OverBudget(Exception):
 class Work:
     """Counts a run's right-hand-side calls (a compiled step as 12) and raises OverBudget past ``limit``."""
 
-    def __init__(self, limit: int):
+    def __init__(self, limit: float):
         self.limit, self.calls = limit, 0
+        self.last: tuple[float, object] | None = None  #: (t [s], state) of the last call counted
 
     def count(self, n: int) -> None:
         self.calls += n
         if self.calls > self.limit:
+            self.limit = math.inf  # spent: what reports it (and samples the run) is not counted again
             raise OverBudget
 
     def wrap(self, fun):
         """``fun`` counted; its compiled ``step`` (contactdyn.plan_steps), if any, counted as 12 calls."""
         def counted(t, y):
             self.count(1)
+            self.last = (t, y)
             return fun(t, y)
 
         step = getattr(fun, "step", None)

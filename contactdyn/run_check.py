@@ -166,8 +166,7 @@ def check_drawable(result) -> Any:
     if not result.scene:
         return None
     try:
-        file = result.meta.get("scene_file")
-        scene = parse_scene(result.scene, file=file if isinstance(file, str) else None)
+        scene = parse_scene(drawing_document(result.scene))
     except ContactdynError as exc:
         raise RunFileError(f"run {name}: its scene document no longer validates, cannot draw it: {exc}") from None
     for c in scene.contacts.values():
@@ -176,3 +175,15 @@ def check_drawable(result) -> Any:
                 raise RunFileError(f"run {name}: channel {key} has {result.channels[key].reshape(len(q), -1).shape[1]}"
                                    f" columns but the scene gives contact {c.name!r} {len(c.tangents)} tangents")
     return scene
+
+
+def drawing_document(document: dict[str, Any]) -> dict[str, Any]:
+    """A saved scene document as drawing reads it: no ``imports`` (viewing or plotting a run received from
+    someone never runs its code) and every controller table emptied (a user's law is not needed to draw)."""
+    doc = {k: v for k, v in document.items() if k != "imports"}
+    if "controller" in doc:
+        doc["controller"] = {}
+    if isinstance(doc.get("phase"), list):
+        doc["phase"] = [{k: v for k, v in p.items() if k != "controller"} if isinstance(p, dict) else p
+                        for p in doc["phase"]]
+    return doc

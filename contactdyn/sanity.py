@@ -112,6 +112,12 @@ def system_warnings(system) -> list[str]:
     return out
 
 
+def _overlapping(moves) -> bool:
+    """Whether moves overlap in time (their sum then is no path of corners; the reach check stays out)."""
+    spans = sorted((m.start, m.start + m.duration) for m in moves)
+    return any(b[0] < a[1] for a, b in zip(spans, spans[1:], strict=False))
+
+
 def _reach_warnings(scene: Scene, contact: str, n: np.ndarray, tip: np.ndarray, point: np.ndarray) -> list[str]:
     """The first phase's task-space reference (on the ground, straight moves) never comes within REACH_TOL of
     the surface along its normal n, and no force set-point of that phase pushes the tip there: it never touches
@@ -119,10 +125,12 @@ def _reach_warnings(scene: Scene, contact: str, n: np.ndarray, tip: np.ndarray, 
     phase = scene.phases[0]
     ref = phase.reference
     if ref is None or ref.space != "task" or ref.body != "ground" or any(f.contact == contact for f in phase.forces) \
-            or any(m.kind in ("circle", "velocity_ramp", "constant_velocity") for m in ref.moves):
+            or any(m.kind in ("circle", "velocity_ramp", "constant_velocity") for m in ref.moves) \
+            or _overlapping(ref.moves):
         return []
     start = np.asarray(ref.start, float) if ref.start is not None else np.asarray(tip, float)
-    path = start + np.cumsum([np.zeros(3)] + [np.asarray(m.delta, float) for m in ref.moves], axis=0)
+    ordered = sorted(ref.moves, key=lambda m: m.start)
+    path = start + np.cumsum([np.zeros(3)] + [np.asarray(m.delta, float) for m in ordered], axis=0)
     gaps = path @ n - float(point @ n)  # [m] of the reference's corners above the surface
     closest = float(gaps.min())
     if closest <= REACH_TOL or float(n @ (tip - point)) <= REACH_TOL:

@@ -157,6 +157,7 @@ class Scene:
     solver: SolverSpec
     file: str | None
     document: dict[str, Any]  #: the raw document after overrides (saved with results)
+    imports: tuple[str, ...] = ()  #: the user's modules this scene imported (contactdyn.user_laws)
 
 
 # ---- locating scenes ---------------------------------------------------------------------
@@ -259,7 +260,7 @@ def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = Non
     check_depth([document, overrides], "<document>", file)
     document = apply_overrides(document, overrides or {}, file)
     top = Reader(document, "", file)
-    _read_imports(top, file)  # first: the user's modules register the laws the rest may name
+    imports = _read_imports(top, file)  # first: the user's modules register the laws the rest may name
     name = top.str("name", Path(file).stem if file else "scene")
     description = top.str("description", "")
     duration = top.float("duration", lo=0.0, lo_open=True, unit="s")
@@ -276,17 +277,17 @@ def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = Non
                               bodies),)
     _check_phase_order(top, phases)
     top.finish()
-    scene = Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document)
+    scene = Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document, imports)
     check_budget(scene)
     return scene
 
 
-def _read_imports(top: Reader, file: str | None) -> None:
+def _read_imports(top: Reader, file: str | None) -> tuple[str, ...]:
     """``imports``: the user's modules of laws, imported now (:mod:`contactdyn.user_laws`)."""
     from .user_laws import import_scene_modules
 
     top._note("imports", "list", [])
-    import_scene_modules(top.raw("imports", []), file)
+    return tuple(import_scene_modules(top.raw("imports", []), file))
 
 
 def _check_phase_order(top: Reader, phases: tuple[PhaseSpec, ...]) -> None:

@@ -109,9 +109,10 @@ def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.n
     if seed is not None and len(seed) == arm.nq:
         candidates.insert(0, np.asarray(seed, float))
     half = np.where(hi > lo, 0.5 * (hi - lo), 1.0)
+    rank = _tip_rank(arm, tip, candidates)
     best = (-1.0, None, None, None)
     for k, q in enumerate(candidates):
-        sigma, margin, n, t = _press_and_slide(arm, tip, q, lo, hi, half)
+        sigma, margin, n, t = _press_and_slide(arm, tip, q, lo, hi, half, rank)
         if k == 0 and seed is not None and len(seed) == arm.nq and sigma * margin >= MIN_QUALITY:
             return np.asarray(q, float), n, t, sigma * margin  # the tried posture, where it works
         quality = sigma * min(margin, MARGIN_ENOUGH) / MARGIN_ENOUGH  # far enough from the limits: σ decides
@@ -121,7 +122,17 @@ def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.n
     return np.asarray(q, float), n, t, max(quality, 0.0)
 
 
-def _press_and_slide(arm, tip: str, q, lo, hi, half) -> tuple[float, float, np.ndarray, np.ndarray]:
+def _tip_rank(arm, tip: str, candidates) -> int:
+    """The directions the tip can move in at all (2: a planar arm, 3: a spatial one): the largest numerical rank
+    of its linear Jacobian over the candidate postures."""
+    ranks = [0]
+    for q in candidates[:16]:
+        s = np.linalg.svd(arm.frame_jacobian(q, tip)[:3], compute_uv=False) if arm.nq else np.zeros(1)
+        ranks.append(int(np.sum(s > 1e-9 * max(float(s[0]), 1e-300))))
+    return max(ranks)
+
+
+def _press_and_slide(arm, tip: str, q, lo, hi, half, rank: int) -> tuple[float, float, np.ndarray, np.ndarray]:
     """(σ_min [m/rad], limit margin [-], n, t) of posture q: n the world z if the tip moves along it at least
     TABLE_BIAS as well as along its best axis (a table under the tip), else that best axis; t the best of the
     other two."""
@@ -132,9 +143,11 @@ def _press_and_slide(arm, tip: str, q, lo, hi, half) -> tuple[float, float, np.n
     rest = [i for i in range(3) if i != first]
     second = max(rest, key=lambda i: mobility[i])
     n, t = axes[first], axes[second]
-    rows = J if arm.nq >= 3 else np.vstack([n @ J, t @ J])  # 3 joints or more: away from every singularity
-    sigma = float(np.linalg.svd(rows, compute_uv=False).min()) if arm.nq else 0.0
-    bounded = np.isfinite(arm.lower) & np.isfinite(arm.upper)
+    s = np.linalg.svd(J, compute_uv=False) if arm.nq else np.zeros(1)
+    # the tip must move along n and t, and away from the singularities of the directions the robot has
+    sigma = min(float(s[rank - 1]), float(np.linalg.svd(np.vstack([n @ J, t @ J]), compute_uv=False).min())) \
+        if rank >= 2 else 0.0
+    bounded = np.isfinite(arm.lower) & np.isfinite(arm.upper) & (arm.upper > arm.lower)  # (a locked joint: none)
     margins = np.minimum(q - lo, hi - q) / half
     margin = float(margins[bounded].min()) if bounded.any() else 1.0
     return sigma, max(margin, 0.0), n, t

@@ -107,12 +107,10 @@ class Transitions:
         modes[i], x = self._touch(t, x, modes, i)
         if c.normal.chain.bonded_when_touching:
             x, imp = impact(system, t, x, modes, c, phase.limits)
-            self._after_impact(imp, modes)
-        if phase.spec.until == f"touch:{c.name}":
-            phase = self.system.start_phase(phase.index + 1, t, x, phase) \
-                if phase.index + 1 < len(self.scene.phases) else phase
-            if phase.index < len(self.scene.phases):
-                self.log.log(t, "phase", phase.spec.name, check_storm=False)
+            self._after_impact(imp, modes, after)
+        if phase.spec.until == f"touch:{c.name}" and phase.index + 1 < len(self.scene.phases):
+            phase = self.system.start_phase(phase.index + 1, t, x, phase)  # (the last phase runs on)
+            self.log.log(t, "phase", phase.spec.name, check_storm=False)
         return x, phase, True
 
     def _on_separate(self, t, x, modes, phase, event, after):
@@ -155,12 +153,12 @@ class Transitions:
         x, phase, info, imp = self.system.limits.switch(self.system, t, x, modes, phase, event)
         self.log.events[-1].update(info)  # the joint, side, velocity before and impulse, with the event
         if imp is not None and imp.contact:  # a contact took part (its friction impulse too): recorded as at a touch
-            self._after_impact(imp, modes, joint=info["joint"], limit_impulse=info["impulse"])
+            self._after_impact(imp, modes, after, joint=info["joint"], limit_impulse=info["impulse"])
         elif imp is not None:
-            self._release(imp, modes)
+            self._release(imp, modes, after)
         return x, phase, True
 
-    def _after_impact(self, imp, modes, **extra) -> None:
+    def _after_impact(self, imp, modes, after: _After, **extra) -> None:
         """Record an impact on a contact in ``Result.impacts`` and set the contact's mode after it:
         stuck if it jammed, else sliding along its slip after the impact (or the impact's direction); the
         other sticks it could not hold slide (:meth:`_release`)."""
@@ -170,7 +168,7 @@ class Transitions:
                              "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
                              "v_after": imp.v_after.tolist(), "slip_before": imp.slip_before.tolist(),
                              "slip_after": imp.slip_after.tolist(), **extra})
-        self._release(imp, modes)
+        self._release(imp, modes, after)
         i = self._index(imp.contact)
         c = system.contacts[i]
         if imp.jammed:
@@ -181,15 +179,18 @@ class Transitions:
             if modes[i].stuck:  # a stick the impact could not hold (a limit's impact): it slides from here
                 modes[i] = modes[i].with_(stuck=False, slip=direction_of(slip), from_rest=not moving)
                 self.log.log(imp.t, "slip", c.name)
+                after.released.add(i)
             elif np.any(slip):
                 modes[i] = modes[i].with_(slip=direction_of(slip))
 
-    def _release(self, imp, modes) -> None:
-        """The sticks the impact could not hold (their impulse left the cone) slide from it on, logged as slips."""
+    def _release(self, imp, modes, after: _After) -> None:
+        """The sticks the impact could not hold (their impulse left the cone) slide from it on, logged as slips
+        (and not stuck again at the same instant)."""
         for name, d in imp.released.items():
             i = self._index(name)
             modes[i] = modes[i].with_(stuck=False, slip=d, from_rest=True)
             self.log.log(imp.t, "slip", name)
+            after.released.add(i)
 
     #: event kind -> handler (see :meth:`handle`)
     HANDLERS = {"limit": _on_limit, "release": _on_limit,

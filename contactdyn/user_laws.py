@@ -34,13 +34,14 @@ _state = {"allowed": True, "entry_points": False}
 
 
 def refuse_imports(refuse: bool = True) -> None:
-    """``--no-imports``: from now on a scene that names modules to import is an error."""
+    """``--no-imports`` (``refuse``): from now on a scene that names modules to import is an error (each command
+    sets it: False allows them again)."""
     _state["allowed"] = not refuse
 
 
 def load_entry_points() -> None:
     """Import every module of the ``contactdyn.laws`` entry points (once per process)."""
-    if _state["entry_points"]:
+    if _state["entry_points"] or not _state["allowed"]:  # --no-imports: no third-party code either
         return
     _state["entry_points"] = True
     from importlib.metadata import entry_points
@@ -66,6 +67,7 @@ def import_scene_modules(names: object, file: str | None) -> list[str]:
     folder = str(Path(file).resolve().parent) if file else None
     for name in names:
         if name in sys.modules:
+            _same_module(name, folder, file)
             IMPORTED.setdefault(name, str(getattr(sys.modules[name], "__file__", "?")))
             continue
         added = folder is not None and folder not in sys.path
@@ -81,3 +83,17 @@ def import_scene_modules(names: object, file: str | None) -> list[str]:
                 sys.path.remove(folder)
         IMPORTED.setdefault(name, str(getattr(module, "__file__", "?")))
     return list(names)
+
+
+def _same_module(name: str, folder: str | None, file: str | None) -> None:
+    """A module already imported under ``name`` must be the one beside this scene, if one is there (a second
+    scene's own ``my_laws.py`` cannot replace the first's in one process)."""
+    if folder is None:
+        return
+    top = name.split(".")[0]
+    here = [Path(folder) / f"{top}.py", Path(folder) / top / "__init__.py"]
+    loaded = getattr(sys.modules[name], "__file__", None)
+    if any(p.exists() for p in here) and loaded and Path(loaded).resolve().parent not in \
+            (Path(folder).resolve(), (Path(folder) / top).resolve()):
+        raise SceneError("imports", f"the module {name} beside the scene file (this process already imported "
+                         f"another {name}, from {loaded})", name, file)

@@ -255,3 +255,16 @@ def test_an_impacts_friction_impulse_outside_the_cone_is_reported():
     worst = run_checks(system, np.zeros((len(r.t), system.n)), r.channels, StartAudit(), doctored)
     excess = worst["contacts"]["ground"]["impulse_excess"]
     assert excess["value"] == pytest.approx(MU_S * imp["normal_impulse"], rel=1e-12) and excess["t"] == imp["t"]
+
+
+def test_a_joint_limit_impact_without_a_contact_closes_the_energy_balance(tmp_path):
+    """The pendulum of test_joint_limits hits its limit (13 J lost, no contact): the audit subtracts the limit's
+    loss from its event, so the residual stays within its tolerance."""
+    from test_joint_limits import pendulum
+
+    doc = dict(pendulum(tmp_path).document)
+    doc["solver"] = dict(doc["solver"], record_energy=True)
+    r = run(doc)
+    assert [e["energy_loss"] > 1.0 for e in r.events if e["kind"] == "limit"] == [True]
+    energy = r.meta["checks"]["energy_residual"]
+    assert energy["value"] <= energy["tol"] and r.meta["check_warnings"] == []

@@ -93,3 +93,22 @@ def test_a_robot_whose_tip_cannot_press_and_slide_is_refused_with_a_sentence(cap
     assert "a robot whose tip can move along two world directions" in err and "'link2' (2 active joints)" in err
     assert main(["new", "x", "--robot", "double_pendulum", "--tip", "nope", "--out", "/dev/null", "--force"]) == 2
     assert "choose the pressing frame with --tip" in capsys.readouterr().err
+
+
+def test_a_planar_arm_of_three_joints_gets_a_starter(tmp_path):
+    """A 3R arm in the x-z plane: its tip moves in two directions only (rank 2), which is enough to press and
+    slide (the table's normal and the slide both in the plane)."""
+    from contactdyn.robot import Robot
+    from contactdyn.starter import working_posture
+
+    links = "".join(f'<link name="l{i}"><inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" '
+                    f'iyy="0.01" iyz="0" izz="0.01"/></inertial></link>' for i in range(1, 4))
+    joints = "".join(f'<joint name="j{i}" type="revolute"><parent link="{"base" if i == 1 else f"l{i - 1}"}"/>'
+                     f'<child link="l{i}"/><origin xyz="{0 if i == 1 else 0.3} 0 0"/><axis xyz="0 1 0"/>'
+                     f'<limit lower="-2.5" upper="2.5" effort="100" velocity="10"/></joint>' for i in range(1, 4))
+    tip = '<link name="tip"/><joint name="tj" type="fixed"><parent link="l3"/><child link="tip"/>' \
+          '<origin xyz="0.3 0 0"/></joint>'
+    (tmp_path / "planar3r.urdf").write_text(f'<robot name="p3"><link name="base"/>{links}{joints}{tip}</robot>')
+    arm = Robot.load(str(tmp_path / "planar3r.urdf"), tip="tip")
+    q, n, t, quality = working_posture(arm, "tip")
+    assert quality > 1e-2 and abs(n @ np.array([0, 1, 0])) < 1e-12 and abs(t @ np.array([0, 1, 0])) < 1e-12

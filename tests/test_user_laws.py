@@ -111,3 +111,20 @@ def test_an_installed_package_of_laws_is_found_by_its_entry_point(monkeypatch, t
     r = run(doc)
     assert r["contact.tip.F_n"][-1] == pytest.approx(K * DEPTH / (1.0 + K / K_SURFACE), rel=1e-4)
     assert "packaged_laws" in user_laws.IMPORTED
+
+
+def test_no_imports_holds_for_its_own_command_only(capsys):
+    assert main(["run", str(SCENE), "--no-imports", "--quiet"]) == 2
+    assert main(["run", str(SCENE), "--quiet"]) == 0  # the next command in the process decides again
+
+
+def test_a_saved_run_is_drawn_without_importing_its_modules(tmp_path, monkeypatch):
+    """view/plot of a run received from someone never runs its code: the scene is read without its imports and
+    controller tables (a module of the same name beside the saved run is not imported)."""
+    assert main(["run", str(SCENE), "--out", str(tmp_path / "r"), "--quiet"]) == 0
+    (tmp_path / "my_laws.py").write_text("raise RuntimeError('this must not run')\\n")
+    sys.modules.pop("my_laws", None)
+    CONTROLLERS.pop("impedance", None)
+    monkeypatch.chdir(tmp_path)
+    assert main(["view", str(tmp_path / "r"), "--html", str(tmp_path / "r.html")]) == 0
+    assert "my_laws" not in sys.modules
