@@ -87,7 +87,7 @@ def metrics(result: Result) -> dict[str, float]:
         else math.nan  # [m]
     out["events"] = float(result.stats.get("events", len(result.events)))
     energy = result.meta.get("checks", {}).get("energy_residual")
-    out["energy_residual"] = float(energy["value"]) if energy else math.nan  # [J]
+    out["energy_residual"] = float(energy["value"]) if energy and energy["value"] is not None else math.nan  # [J]
     out["check_violations"] = float(len(result.meta.get("check_warnings", [])))
     out["warnings"] = float(len(result.meta.get("warnings", [])))  # sanity and outcome (contactdyn.outcome)
     return out

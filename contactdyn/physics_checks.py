@@ -143,12 +143,17 @@ def run_checks(system: System, xs: np.ndarray, channels: dict[str, np.ndarray], 
         for (name, check), w in starts.worst.items():
             if name == c.name and check in worst:
                 worst[check].see(np.array([w.value]), np.array([w.t]))
-        contacts[c.name] = {check: {"value": w.value if not w.value <= 0.0 else 0.0, "t": w.t,
+        contacts[c.name] = {check: {"value": w.value if not w.value <= 0.0 else 0.0, "t": _time(w.t),
                                     "tol": tol[c.name][check]} for check, w in worst.items()}
     out: dict[str, Any] = {"contacts": contacts}
     if system.energy_slot >= 0:
         out["energy_residual"] = energy_residual(system, xs, channels, impacts, events)
     return out
+
+
+def _time(t: float) -> float | None:
+    """[s] when a check's value was seen; None when it saw nothing (the JSON sidecar stays strict JSON)."""
+    return t if math.isfinite(t) else None
 
 
 def _contact_worst(system: System, c, ch: dict[str, np.ndarray], t: np.ndarray) -> dict[str, Worst]:
@@ -227,13 +232,14 @@ def energy_residual(system: System, xs: np.ndarray, ch: dict[str, np.ndarray],
                     impacts: list[dict[str, Any]], events: list[dict[str, Any]] = ()) -> dict[str, Any]:
     """The energy audit's residual [J]: max |E(t) − E(0) − (work − dissipated) + impact losses until t|, E the
     stored energy (:func:`stored_energy`); its tolerance max(DRIFT_PER_ATOL atol, FORCE_PER_RTOL rtol) × the
-    audit's scale (1 + the largest |work| + dissipated). NaN where a part's stored energy is not known (``why``)."""
+    audit's scale (1 + the largest |work| + dissipated). Value None where a part's stored energy is not known
+    (``why``)."""
     stored, why = stored_energy(system, xs, ch)
     work, lost = np.asarray(ch["energy.work"], float), np.asarray(ch["energy.dissipated"], float)
     scale = 1.0 + float(np.max(np.abs(work), initial=0.0) + np.max(np.abs(lost), initial=0.0))
     tol = max(DRIFT_PER_ATOL * system.scene.solver.atol, FORCE_PER_RTOL * system.scene.solver.rtol) * scale
     if stored is None:
-        return {"value": math.nan, "t": math.nan, "tol": tol, "why": why}
+        return {"value": None, "t": None, "tol": tol, "why": why}
     t = np.asarray(ch["t"], float)
     impact_loss = np.zeros_like(t)
     # every impact's loss once: the contacts' (Result.impacts; a limit's with a contact carries "joint") and the
@@ -256,7 +262,7 @@ def violations(checks: dict[str, Any]) -> list[str]:
                 out.append(f"physics check: contact {name!r}: {check} = {v['value']:.3g} {unit} at t = {v['t']:.6g} s "
                            f"({meaning}; tolerance {v['tol']:.2g} {unit})")
     e = checks.get("energy_residual")
-    if e is not None and e["value"] > e["tol"]:  # (NaN: the audit's potential is unknown, said in "why")
+    if e is not None and e["value"] is not None and not e["value"] <= e["tol"]:  # (None: unknown, see "why")
         out.append(f"physics check: energy_residual = {e['value']:.3g} J at t = {e['t']:.6g} s "
                    f"(work − dissipation − stored energy; tolerance {e['tol']:.2g} J)")
     return out
