@@ -278,7 +278,8 @@ class HybridRun:
         collapse watch."""
         left = self.budget - self.stats["steps"]
         if left <= 0:  # spent at a segment's end (an event there): stop before the next
-            raise SimulationError(self._over_budget(self.segments[-1].t1, self.segments[-1].sol(self.segments[-1].t1)))
+            last = self.segments[-1]
+            raise SimulationError(self._over_budget(last.t1, last.sol(last.t1)))
         out: list = [WorkWatch(left, self.progress)]
         if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
             out.append(StepBudget(STEP_BUDGET))

@@ -88,8 +88,9 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     kin = system.kinematics(contact, x) if contact is not None else None
     vt_minus = slip_velocity(system, contact, kin, qd_minus) if k else np.zeros(0)
     held = list(modes)  #: the modes the impact holds: a stick its impulse would push out of the cone slides
-    if k and modes[system.contacts.index(contact)].stuck:  # the impact's own stick: tried jammed, like a rest
-        held[system.contacts.index(contact)] = modes[system.contacts.index(contact)].with_(stuck=False)
+    own = system.contacts.index(contact) if contact is not None else -1
+    if k and modes[own].stuck:  # the impact's own stick: tried jammed, like a contact at rest
+        held[own] = modes[own].with_(stuck=False)
     impulses: dict = {}
 
     def solve(slide=None, jam=False):

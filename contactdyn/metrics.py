@@ -34,6 +34,7 @@ import math
 import numpy as np
 
 from .physics_checks import CHECKS
+from .physics_checks import UNITS as CHECK_UNITS
 from .result import Result
 
 __all__ = ["metrics", "is_metric", "CONTACT_METRICS", "RUN_METRICS", "UNITS"]
@@ -47,7 +48,7 @@ RUN_METRICS = ("tracking_rms", "max_deformation", "events", "energy_residual", "
 #: unit of each metric (by its last name part; "" : a count), as in the table above
 UNITS = {"F_peak": "N", "F_final": "N", "impacts": "", "impulse_n": "N·s", "impulse_n_first": "N·s",
          "impulse_t": "N·s", "force_rms": "N", "tracking_rms": "m", "max_deformation": "m", "events": "",
-         **{name: unit for name, (unit, _) in CHECKS.items()}, "check_violations": "", "warnings": ""}
+         **CHECK_UNITS, "check_violations": "", "warnings": ""}
 
 
 def is_metric(name: str) -> bool:

@@ -50,10 +50,9 @@ def outcome_warnings(scene: Scene, result: Result) -> list[str]:
     touched = {name: np.asarray(result.channels[f"contact.{name}.touching"]) > 0.5
                for name in scene.contacts if f"contact.{name}.touching" in result.channels}
     named = {f.contact for p in scene.phases for f in p.forces}
-    out = [f"contact '{c}' never touched, though force set-points name it ([[phase.force]] contact = \"{c}\"): "
-           f"the run applied no contact force; check robot.tip0 (or q0) and contact.{c}.point"
-           for c in sorted(named) if c in touched and not touched[c].any()]
     never = {c for c in named if c in touched and not touched[c].any()}
+    out = [f"contact '{c}' never touched, though force set-points name it ([[phase.force]] contact = \"{c}\"): "
+           f"the run applied no contact force; check robot.tip0 (or q0) and contact.{c}.point" for c in sorted(never)]
     spans = phase_spans(scene, result)
     for k, (i, t0, t1) in enumerate(spans):
         phase = scene.phases[i]

@@ -36,6 +36,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .friction import FORCE_ABS_TOL
+
 if TYPE_CHECKING:
     from .system import System
 
@@ -59,7 +61,6 @@ UNITS = {name: unit for name, (unit, _) in CHECKS.items()}
 #: error is about rtol; a slip or separation is located where the interpolant crosses, within its error)
 FORCE_PER_RTOL = 1e3
 FORCE_FLOOR = 1e-9  #: [-] relative slack of the force checks at any rtol (the solves' round-off)
-IMPULSE_FLOOR = 1e-12  #: [N·s] the impact's own acceptance of a cone test (friction.FORCE_ABS_TOL)
 DRIFT_PER_ATOL = 1e3  #: [-] slack of the drift checks (gap [m], stick speed [m/s]) per unit of atol
 
 
@@ -106,6 +107,13 @@ class StartAudit:
         self.worst.setdefault((contact, check), Worst()).see(np.array([value]), np.array([t]))
 
 
+def _worst(values: np.ndarray, times: np.ndarray) -> Worst:
+    """The largest of ``values`` and its time [s]."""
+    w = Worst()
+    w.see(values, times)
+    return w
+
+
 def tolerances(system: System, channels: dict[str, np.ndarray], impacts: list[dict[str, Any]]
                ) -> dict[str, dict[str, float]]:
     """Each contact's tolerance per check, from the solver's rtol and atol and the contact's force scale
@@ -125,7 +133,8 @@ def tolerances(system: System, channels: dict[str, np.ndarray], impacts: list[di
         out[c.name] = {"cone_excess": force, "slide_deviation": force, "dissipation_gap": force * speed,
                        "pull": force, "penetration": drift, "complementarity": drift * F, "drift": drift,
                        "stick_speed": drift,
-                       "impulse_excess": P * (FORCE_FLOOR + FORCE_PER_RTOL * solver.rtol) + IMPULSE_FLOOR}
+                       # + the impact's own slack of its cone test (FORCE_ABS_TOL, read in N·s there)
+                       "impulse_excess": P * (FORCE_FLOOR + FORCE_PER_RTOL * solver.rtol) + FORCE_ABS_TOL}
     return out
 
 
@@ -140,9 +149,10 @@ def run_checks(system: System, xs: np.ndarray, channels: dict[str, np.ndarray], 
         worst = _contact_worst(system, c, channels, t)
         if c.friction is not None and len(c.tangents):
             worst["impulse_excess"] = _impulse_worst(c, impacts)
-        for (name, check), w in starts.worst.items():
-            if name == c.name and check in worst:
-                worst[check].see(np.array([w.value]), np.array([w.t]))
+        for check, w in worst.items():
+            start = starts.worst.get((c.name, check))
+            if start is not None:
+                w.see(np.array([start.value]), np.array([start.t]))
         contacts[c.name] = {check: {"value": w.value if not w.value <= 0.0 else 0.0, "t": _time(w.t),
                                     "tol": tol[c.name][check]} for check, w in worst.items()}
     out: dict[str, Any] = {"contacts": contacts}
@@ -163,15 +173,12 @@ def _contact_worst(system: System, c, ch: dict[str, np.ndarray], t: np.ndarray) 
     touching = np.asarray(ch[f"{p}.touching"], float) > 0.5
     worst: dict[str, Worst] = {}
     if not c.spec.bonded:
-        worst["pull"] = Worst()
-        worst["pull"].see(-F_n[touching], t[touching])
+        worst["pull"] = _worst(-F_n[touching], t[touching])
     if c.normal.chain.bonded_when_touching:
         gap = np.asarray(ch[f"{p}.gap"], float)
-        for check in ("penetration", "complementarity", "drift"):
-            worst[check] = Worst()
-        worst["penetration"].see(-gap, t)
-        worst["complementarity"].see(np.abs(gap * F_n)[touching], t[touching])
-        worst["drift"].see(np.abs(gap)[touching], t[touching])
+        worst["penetration"] = _worst(-gap, t)
+        worst["complementarity"] = _worst(np.abs(gap * F_n)[touching], t[touching])
+        worst["drift"] = _worst(np.abs(gap)[touching], t[touching])
     fr = c.friction
     if fr is None or not len(c.tangents):
         return worst
@@ -179,16 +186,15 @@ def _contact_worst(system: System, c, ch: dict[str, np.ndarray], t: np.ndarray) 
     v_t = np.asarray(ch[f"{p}.v_slip"], float).reshape(len(t), -1)
     stuck = touching & (np.asarray(ch[f"{p}.stuck"], float) > 0.5)
     sliding = touching & ~stuck
-    for check in ("cone_excess", "stick_speed", "slide_deviation", "dissipation_gap"):
-        worst[check] = Worst()
-    worst["cone_excess"].see((np.linalg.norm(F_f, axis=1) - fr.mu_s * np.maximum(F_n, 0.0))[stuck], t[stuck])
-    worst["stick_speed"].see(np.linalg.norm(v_t, axis=1)[stuck], t[stuck])
+    speed = np.linalg.norm(v_t, axis=1)  # [m/s]
+    worst["cone_excess"] = _worst((np.linalg.norm(F_f, axis=1) - fr.mu_s * np.maximum(F_n, 0.0))[stuck], t[stuck])
+    worst["stick_speed"] = _worst(speed[stuck], t[stuck])
     coulomb = F_f + fr.viscous * v_t  # the Coulomb part of the friction [N]
     size = np.linalg.norm(coulomb, axis=1)
-    worst["slide_deviation"].see(np.abs(size - fr.mu_k * np.maximum(F_n, 0.0))[sliding], t[sliding])
-    speed = np.linalg.norm(v_t, axis=1)
+    worst["slide_deviation"] = _worst(np.abs(size - fr.mu_k * np.maximum(F_n, 0.0))[sliding], t[sliding])
     moving = sliding & (speed > system.slip_band)  # at rest the direction is the launch's, not the slip's
-    worst["dissipation_gap"].see(np.einsum("ij,ij->i", coulomb, v_t)[moving] + (size * speed)[moving], t[moving])
+    power = np.einsum("ij,ij->i", coulomb, v_t) + size * speed  # [W] 0 when the friction opposes the slip
+    worst["dissipation_gap"] = _worst(power[moving], t[moving])
     return worst
 
 
@@ -200,8 +206,8 @@ def stored_energy(system: System, xs: np.ndarray, ch: dict[str, np.ndarray]) -> 
     energy = np.empty(len(xs))
     for k, x in enumerate(xs):
         q, v, rest = x[:nv], x[nQ:nQ + nv], x[nQ + nv:2 * nQ]
-        rotors = 0.5 * float(system.rotor_inertias @ (v * v)) + 0.5 * float(system.M_rest @ (rest * rest))
-        energy[k] = robot.kinetic_energy(q, v) + robot.potential_energy(q) + rotors
+        others = 0.5 * float(system.rotor_inertias @ (v * v)) + 0.5 * float(system.M_rest @ (rest * rest))
+        energy[k] = robot.kinetic_energy(q, v) + robot.potential_energy(q) + others  # others: rotors, bodies, masses
     for c in system.contacts:
         for dc in c.chains:
             for s in dc.chain.stages:
@@ -220,12 +226,10 @@ def stored_energy(system: System, xs: np.ndarray, ch: dict[str, np.ndarray]) -> 
 
 def _impulse_worst(c, impacts: list[dict[str, Any]]) -> Worst:
     """The largest |F_fΔt| − μ_s FΔt over the impacts on contact c (the impact's own contact)."""
-    worst = Worst()
     hits = [imp for imp in impacts if imp["contact"] == c.name]
     excess = [float(np.linalg.norm(imp["friction_impulse"])) - c.friction.mu_s * max(imp["normal_impulse"], 0.0)
-              for imp in hits]
-    worst.see(np.array(excess), np.array([imp["t"] for imp in hits]))
-    return worst
+              for imp in hits]  # [N·s]
+    return _worst(np.array(excess), np.array([imp["t"] for imp in hits]))
 
 
 def energy_residual(system: System, xs: np.ndarray, ch: dict[str, np.ndarray],

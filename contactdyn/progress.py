@@ -99,19 +99,19 @@ class Work:
 
     def __init__(self, limit: float):
         self.limit, self.calls = limit, 0
-        self.last: tuple[float, object] | None = None  #: (t [s], state) of the last call counted
+        self.last: tuple[float, object] | None = None  #: (t [s], state) of the call that spent the budget
 
-    def count(self, n: int) -> None:
+    def count(self, n: int, t: float = math.nan, y=None) -> None:
         self.calls += n
         if self.calls > self.limit:
             self.limit = math.inf  # spent: what reports it (and samples the run) is not counted again
+            self.last = (t, y) if y is not None else None
             raise OverBudget
 
     def wrap(self, fun):
         """``fun`` counted; its compiled ``step`` (contactdyn.plan_steps), if any, counted as 12 calls."""
         def counted(t, y):
-            self.count(1)
-            self.last = (t, y)
+            self.count(1, t, y)
             return fun(t, y)
 
         step = getattr(fun, "step", None)

@@ -171,9 +171,10 @@ def check_drawable(result) -> Any:
         raise RunFileError(f"run {name}: its scene document no longer validates, cannot draw it: {exc}") from None
     for c in scene.contacts.values():
         for key in (f"contact.{c.name}.F_f", f"contact.{c.name}.v_slip"):
-            if key in result.channels and result.channels[key].reshape(len(q), -1).shape[1] != len(c.tangents):
-                raise RunFileError(f"run {name}: channel {key} has {result.channels[key].reshape(len(q), -1).shape[1]}"
-                                   f" columns but the scene gives contact {c.name!r} {len(c.tangents)} tangents")
+            columns = result.channels[key].reshape(len(q), -1).shape[1] if key in result.channels else None
+            if columns is not None and columns != len(c.tangents):
+                raise RunFileError(f"run {name}: channel {key} has {columns} columns but the scene gives contact "
+                                   f"{c.name!r} {len(c.tangents)} tangents")
     return scene
 
 

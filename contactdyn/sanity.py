@@ -132,10 +132,10 @@ def _reach_warnings(scene: Scene, contact: str, n: np.ndarray, tip: np.ndarray, 
     ordered = sorted(ref.moves, key=lambda m: m.start)
     path = start + np.cumsum([np.zeros(3)] + [np.asarray(m.delta, float) for m in ordered], axis=0)
     gaps = path @ n - float(point @ n)  # [m] of the reference's corners above the surface
-    closest = float(gaps.min())
-    if closest <= REACH_TOL or float(n @ (tip - point)) <= REACH_TOL:
+    closest, start_gap = float(gaps.min()), float(n @ (tip - point))  # [m]
+    if closest <= REACH_TOL or start_gap <= REACH_TOL:
         return []
-    return [f"contact.{contact}: the tip starts {float(n @ (tip - point)):.3g} m from the surface and phase[0] "
+    return [f"contact.{contact}: the tip starts {start_gap:.3g} m from the surface and phase[0] "
             f"({phase.name})'s reference comes no closer than {closest:.3g} m: it never brings the tip there "
             f"(robot.tip0, contact.{contact}.point, the phase's moves)"]
 

@@ -294,7 +294,7 @@ def _check_phase_order(top: Reader, phases: tuple[PhaseSpec, ...]) -> None:
     """Timed phase ends (``until`` [s] from the scene start) must not decrease: a phase cannot end before an
     earlier one did (it would end the moment it starts, unnoticed)."""
     last, where = -math.inf, ""
-    for i, p in enumerate(phases[:-1] if len(phases) > 1 else ()):
+    for i, p in enumerate(phases[:-1]):  # (the last phase's until is the duration by default)
         if isinstance(p.until, float):
             if p.until < last:
                 raise top.error(f"phase[{i}].until", f"a time no earlier than {where}'s ({last:g} s): phase ends "

@@ -60,36 +60,35 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None,
 
 def outcome_notes(system: System, result: Result) -> list[str]:
     """The run's :mod:`~contactdyn.outcome` warnings (what it did not do), issued as SanityWarning."""
-    import warnings
-
     from .outcome import outcome_warnings
     from .sanity import SanityWarning
 
     notes = outcome_warnings(system.scene, result)
-    for note in notes:
-        warnings.warn(f"{system.scene.name}: {note}", SanityWarning, stacklevel=3)
+    _issue(system.scene.name, notes, SanityWarning)
     return notes
 
 
 def check_warnings(result: Result) -> None:
     """Issue the run's violated :mod:`~contactdyn.physics_checks` as PhysicsWarning (never fatal)."""
-    import warnings
-
     from .physics_checks import PhysicsWarning
 
-    for note in result.meta.get("check_warnings", []):
-        warnings.warn(f"{result.meta['name']}: {note}", PhysicsWarning, stacklevel=3)
+    _issue(result.meta["name"], result.meta.get("check_warnings", []), PhysicsWarning)
+
+
+def _issue(name: str, notes: list[str], category: type[Warning]) -> None:
+    """Each note as a Python warning of ``category``, prefixed with the scene's name (the caller's caller's line)."""
+    import warnings
+
+    for note in notes:
+        warnings.warn(f"{name}: {note}", category, stacklevel=4)
 
 
 def sanity_warnings(system: System) -> list[str]:
     """The scene's :mod:`~contactdyn.sanity` warnings, issued as SanityWarning (never fatal)."""
-    import warnings
-
     from .sanity import SanityWarning, scene_warnings, system_warnings
 
     notes = scene_warnings(system.scene) + system_warnings(system)
-    for note in notes:
-        warnings.warn(f"{system.scene.name}: {note}", SanityWarning, stacklevel=3)
+    _issue(system.scene.name, notes, SanityWarning)
     return notes
 
 

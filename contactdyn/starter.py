@@ -62,15 +62,15 @@ def _load_arm(robot: str, tip: str | None):
     from .errors import RobotError
     from .robot import Robot
 
-    inertia = ""
+    inertia, at_tip = "", {"tip": tip} if tip is not None else {}
     try:
         try:
-            arm = Robot.load(robot) if tip is None else Robot.load(robot, tip=tip)
+            arm = Robot.load(robot, **at_tip)
         except RobotError as exc:
             if 'robot.inertia = "repair"' not in str(exc):
                 raise
             inertia = 'inertia = "repair"  # its inertia data fail the checks: the nearest valid ones\n'
-            arm = Robot.load(robot, inertia="repair") if tip is None else Robot.load(robot, tip=tip, inertia="repair")
+            arm = Robot.load(robot, **at_tip, inertia="repair")
         if tip is None:
             tip = _longest_leaf(arm)
             arm = Robot.load(robot, tip=tip, inertia="repair" if inertia else "check")
@@ -97,23 +97,28 @@ def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.n
 
     The seed (a tried posture) where its quality reaches MIN_QUALITY; else, among the middle of the limits
     and N_POSTURES postures drawn within them (a fixed random seed: deterministic), the one of largest
-    quality: the smallest singular value σ of the tip's linear Jacobian [m/rad] (a robot of two joints: its
-    rows along n and t) times min(margin, MARGIN_ENOUGH) / MARGIN_ENOUGH, the margin the smallest normalized
-    distance of a bounded joint to its limits (so beyond that margin the best-conditioned posture wins; n,
-    t: :func:`_press_and_slide`). Quality 0: the tip cannot move along two axes."""
+    quality: the smallest singular value σ [m/rad] of the tip's linear Jacobian over the directions the tip
+    has (:func:`_tip_rank`: two for a planar arm) and along n and t (:func:`_press_and_slide`), times
+    min(margin, MARGIN_ENOUGH) / MARGIN_ENOUGH, the margin the smallest normalized distance of a bounded
+    joint to its limits (beyond that margin the best-conditioned posture wins). Quality 0: the tip cannot
+    move along two axes."""
     from .posture import sampling_bounds
 
     lo, hi = sampling_bounds(arm)
     rng = np.random.default_rng(0)
     candidates = [0.5 * (lo + hi)] + [lo + (hi - lo) * rng.random(arm.nq) for _ in range(N_POSTURES)]
-    if seed is not None and len(seed) == arm.nq:
+    seeded = seed is not None and len(seed) == arm.nq
+    if seeded:
         candidates.insert(0, np.asarray(seed, float))
     half = np.where(hi > lo, 0.5 * (hi - lo), 1.0)
-    rank = _tip_rank(arm, tip, candidates)
+    bounded = np.isfinite(arm.lower) & np.isfinite(arm.upper) & (arm.upper > arm.lower)  # (a locked joint: none)
+    jacobians = [arm.frame_jacobian(q, tip)[:3] for q in candidates]  # linear part, world-aligned [m/rad]
+    rank = _tip_rank(jacobians)
     best = (-1.0, None, None, None)
-    for k, q in enumerate(candidates):
-        sigma, margin, n, t = _press_and_slide(arm, tip, q, lo, hi, half, rank)
-        if k == 0 and seed is not None and len(seed) == arm.nq and sigma * margin >= MIN_QUALITY:
+    for k, (q, J) in enumerate(zip(candidates, jacobians, strict=True)):
+        sigma, n, t = _press_and_slide(J, rank)
+        margin = max(float(np.min((np.minimum(q - lo, hi - q) / half)[bounded])), 0.0) if bounded.any() else 1.0
+        if k == 0 and seeded and sigma * margin >= MIN_QUALITY:
             return np.asarray(q, float), n, t, sigma * margin  # the tried posture, where it works
         quality = sigma * min(margin, MARGIN_ENOUGH) / MARGIN_ENOUGH  # far enough from the limits: σ decides
         if quality > best[0]:
@@ -122,35 +127,31 @@ def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.n
     return np.asarray(q, float), n, t, max(quality, 0.0)
 
 
-def _tip_rank(arm, tip: str, candidates) -> int:
+def _tip_rank(jacobians: list[np.ndarray]) -> int:
     """The directions the tip can move in at all (2: a planar arm, 3: a spatial one): the largest numerical rank
     of its linear Jacobian over the candidate postures."""
     ranks = [0]
-    for q in candidates[:16]:
-        s = np.linalg.svd(arm.frame_jacobian(q, tip)[:3], compute_uv=False) if arm.nq else np.zeros(1)
+    for J in jacobians[:16]:
+        s = np.linalg.svd(J, compute_uv=False) if J.size else np.zeros(1)
         ranks.append(int(np.sum(s > 1e-9 * max(float(s[0]), 1e-300))))
     return max(ranks)
 
 
-def _press_and_slide(arm, tip: str, q, lo, hi, half, rank: int) -> tuple[float, float, np.ndarray, np.ndarray]:
-    """(σ_min [m/rad], limit margin [-], n, t) of posture q: n the world z if the tip moves along it at least
-    TABLE_BIAS as well as along its best axis (a table under the tip), else that best axis; t the best of the
-    other two."""
-    J = arm.frame_jacobian(q, tip)[:3]  # linear part, world-aligned [m/rad]
+def _press_and_slide(J: np.ndarray, rank: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """(σ_min [m/rad], n, t) at a posture whose tip's linear Jacobian is J (3, nq) [m/rad]: n the world z if the
+    tip moves along it at least TABLE_BIAS as well as along its best axis (a table under the tip), else that best
+    axis; t the best of the other two."""
     axes = np.eye(3)[[2, 1, 0]]  # z, y, x
     mobility = np.array([float(np.linalg.norm(a @ J)) for a in axes])
     first = 0 if mobility[0] >= TABLE_BIAS * mobility.max() else int(np.argmax(mobility))
     rest = [i for i in range(3) if i != first]
     second = max(rest, key=lambda i: mobility[i])
     n, t = axes[first], axes[second]
-    s = np.linalg.svd(J, compute_uv=False) if arm.nq else np.zeros(1)
+    if rank < 2:
+        return 0.0, n, t
+    s = np.linalg.svd(J, compute_uv=False)
     # the tip must move along n and t, and away from the singularities of the directions the robot has
-    sigma = min(float(s[rank - 1]), float(np.linalg.svd(np.vstack([n @ J, t @ J]), compute_uv=False).min())) \
-        if rank >= 2 else 0.0
-    bounded = np.isfinite(arm.lower) & np.isfinite(arm.upper) & (arm.upper > arm.lower)  # (a locked joint: none)
-    margins = np.minimum(q - lo, hi - q) / half
-    margin = float(margins[bounded].min()) if bounded.any() else 1.0
-    return sigma, max(margin, 0.0), n, t
+    return min(float(s[rank - 1]), float(np.linalg.svd(np.vstack([n @ J, t @ J]), compute_uv=False).min())), n, t
 
 
 def _num(x: float) -> str:

@@ -78,13 +78,14 @@ class Transitions:
         after = _After()
         x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
         if settle:
-            x, modes = self.consistent(t, x, modes, phase, after.rest, after.released)
+            return self.settle(t, x, modes, phase, after.rest, after.released)
         return self.release_pulling(t, x, modes, phase)
 
-    def settle(self, t, x, modes, phase):
-        """Decide the modes again at an instant where the law changed but no event fired (a phase start):
-        :meth:`consistent`, then the limits that pull are released. Returns (x, modes, phase)."""
-        x, modes = self.consistent(t, x.copy(), list(modes), phase)
+    def settle(self, t, x, modes, phase, rest=frozenset(), released=frozenset()):
+        """Decide the modes at an instant: after an event (``rest``, ``released``: see :meth:`consistent`) or
+        where the law changed but no event fired (a phase start): :meth:`consistent`, then the limits that pull
+        are released. Returns (x, modes, phase)."""
+        x, modes = self.consistent(t, x.copy(), list(modes), phase, rest, released)
         return self.release_pulling(t, x, modes, phase)
 
     def release_pulling(self, t, x, modes, phase):

@@ -52,7 +52,12 @@ def load_entry_points() -> None:
         except Exception as exc:  # noqa: BLE001 (a broken package of laws names itself, it does not crash us)
             raise SceneError(f"entry point {ep.name}", f"an importable module of laws ({ENTRY_POINTS})",
                              f"{ep.value}: {type(exc).__name__}: {exc}") from None
-        IMPORTED.setdefault(ep.module, str(getattr(module, "__file__", "?")))
+        _record(ep.module, module)
+
+
+def _record(name: str, module) -> None:
+    """Remember where ``name`` came from (``contactdyn run`` prints it)."""
+    IMPORTED.setdefault(name, str(getattr(module, "__file__", "?")))
 
 
 def import_scene_modules(names: object, file: str | None) -> list[str]:
@@ -68,7 +73,7 @@ def import_scene_modules(names: object, file: str | None) -> list[str]:
     for name in names:
         if name in sys.modules:
             _same_module(name, folder, file)
-            IMPORTED.setdefault(name, str(getattr(sys.modules[name], "__file__", "?")))
+            _record(name, sys.modules[name])
             continue
         added = folder is not None and folder not in sys.path
         if added:
@@ -81,7 +86,7 @@ def import_scene_modules(names: object, file: str | None) -> list[str]:
         finally:
             if added:
                 sys.path.remove(folder)
-        IMPORTED.setdefault(name, str(getattr(module, "__file__", "?")))
+        _record(name, module)
     return list(names)
 
 

@@ -15,6 +15,7 @@ import socket
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -94,17 +95,23 @@ def check_robot_moves(page, shots: Path, name: str) -> None:
     assert moved > 0.05 * max(counts), f"robot pixels barely differ: {moved} of {counts} (screenshots in {shots})"
 
 
-def test_exported_html_plays_offline(browser, b1_run, tmp_path):
-    result, _ = b1_run
+@contextmanager
+def html_page(browser, result, tmp_path: Path):
+    """The run's exported HTML open in a page, once its scene is complete; no JavaScript error by the end."""
     html = export_html(result, tmp_path / "b1.html")
     errors: list[str] = []
     page = open_page(browser, html.as_uri(), "window.contactdyn && window.contactdyn.ready === true", errors)
     try:
-        assert page.evaluate("viewer.animator.duration") == pytest.approx(1.0)
-        check_robot_moves(page, tmp_path, "html")
+        yield page
     finally:
         page.close()
     assert not errors, errors
+
+
+def test_exported_html_plays_offline(browser, b1_run, tmp_path):
+    with html_page(browser, b1_run[0], tmp_path) as page:
+        assert page.evaluate("viewer.animator.duration") == pytest.approx(1.0)
+        check_robot_moves(page, tmp_path, "html")
 
 
 def free_port() -> int:
@@ -201,19 +208,12 @@ def test_default_view_shows_the_tool_and_both_arrows(browser, tmp_path, name, du
 
 def test_the_html_opens_at_the_start_and_plays_in_a_loop(browser, b1_run, tmp_path):
     """Loading takes a while; the page starts playing at t = 0 after it (not at the last frame), and loops."""
-    result, _ = b1_run
-    html = export_html(result, tmp_path / "b1.html")
-    errors: list[str] = []
-    page = open_page(browser, html.as_uri(), "window.contactdyn && window.contactdyn.ready === true", errors)
-    try:
+    with html_page(browser, b1_run[0], tmp_path) as page:
         assert page.evaluate("viewer.animator.playing")
         assert page.evaluate("viewer.animator.actions.every(a => a.repetitions >= 1e9)")  # loops
         page.wait_for_timeout(1500)  # past the run's 1 s: still playing (repetitions 1 would stop on the last frame)
         assert page.evaluate("viewer.animator.playing")
         assert page.evaluate("viewer.animator.actions.every(a => !a.paused)")
-    finally:
-        page.close()
-    assert not errors, errors
 
 
 def _plain_screenshot(html: Path, png: Path) -> np.ndarray:
