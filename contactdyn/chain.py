@@ -55,12 +55,14 @@ class ChainStage:
     k: float  #: [N/m]
     b: float  #: [N·s/m]
     law: str = "linear"  #: a name in contactdyn.stage_laws.STAGE_LAWS
-    exponent: float = 1.5
+    params: tuple[float, ...] = ()  #: the law's own parameters (its declared order)
     side: str = "environment"
     label: str = ""  #: e.g. "env1" (from the anchor) or "rob1" (from the tip)
 
     def __post_init__(self) -> None:
         self._law = STAGE_LAWS[self.law]
+        #: (K [N/m], B [N·s/m]) of an affine law, F = K x + B ẋ; None for another
+        self.kelvin_voigt = self._law.coefficients(self.k, self.b, self.params) if self._law.affine else None
 
     @property
     def fast_path_gap(self) -> str:
@@ -73,11 +75,11 @@ class ChainStage:
 
     def force(self, x: float, xdot: float) -> float:
         """Compressive force [N] at compression x [m] and rate ẋ [m/s] (the stage's law)."""
-        return self._law.force(self.k, self.b, self.exponent, x, xdot)
+        return self._law.force(self.k, self.b, self.params, x, xdot)
 
     def potential(self, x: float) -> float | None:
         """Energy [J] stored at compression x [m], None if the law does not say (see StageLaw.potential)."""
-        return self._law.potential(self.k, self.exponent, x)
+        return self._law.potential(self.k, self.params, x)
 
 
 @dataclass
@@ -116,9 +118,9 @@ def balanced(stages: list[ChainStage]) -> bool:
     is the algebraic point of an undamped one (b = 0 is τ = 0), not a mode decaying at 1/τ that
     holds an explicit integrator's step to |h / τ| ≲ 6.
     """
-    if any(s.law != "linear" or s.k <= 0.0 for s in stages):
+    if any(s.kelvin_voigt is None or s.kelvin_voigt[0] <= 0.0 for s in stages):
         return False
-    tau = [s.b / s.k for s in stages]
+    tau = [s.kelvin_voigt[1] / s.kelvin_voigt[0] for s in stages]
     return all(math.isclose(t, tau[0], rel_tol=1e-12, abs_tol=0.0) for t in tau)
 
 
@@ -143,7 +145,7 @@ def build_chain(spec: ChainSpec, where: str) -> Chain:
                 lower, upper = (current, new) if side == "environment" else (new, current)
                 n_stages += 1
                 label = f"{side[:3]}{n_stages}"  # env1, env2 ... from the body; rob1 ... from the tip
-                stages.append(ChainStage(lower, upper, element.k, element.b, element.law, element.exponent, side,
+                stages.append(ChainStage(lower, upper, element.k, element.b, element.law, element.params, side,
                                          label))
                 current = new
         return current
@@ -168,6 +170,6 @@ def _check(chain: Chain, where: str) -> None:
                 if chain.nodes[other].kind == NodeKind.FREE and len(chain.stages_of(other)) == 2:
                     raise SceneError(where, "a mass between every two junctions (three stages in a row)",
                                      "adjacent massless junctions")
-                if s.law != "linear":
-                    raise SceneError(where, "linear stages at massless junctions (Hunt–Crossley needs the tip, "
-                                     "a mass or the body on both ends)", s.law)
+                if s.kelvin_voigt is None:
+                    raise SceneError(where, "affine stage laws at massless junctions (a law like Hunt–Crossley "
+                                     "needs the tip, a mass or the body on both ends)", s.law)

@@ -83,20 +83,22 @@ def _node_motion(nQ: int, dc: DirectionalChain, plan: ChainPlan, kin: Kinematics
         num = den = kk = ks = 0.0
         for k in active:
             s = stages[k]
+            K, B = s.kelvin_voigt  # a junction joins affine stages only (chain._check)
             if s.upper in group:  # stage below pushes j up
-                num += s.k * (pos[s.lower] - (y[slot] if slot >= 0 else 0.0)) + s.b * vel[s.lower]
-                ks += s.k * pos[s.lower]
+                num += K * (pos[s.lower] - (y[slot] if slot >= 0 else 0.0)) + B * vel[s.lower]
+                ks += K * pos[s.lower]
             else:  # stage above pushes j down
-                num -= s.k * ((y[slot] if slot >= 0 else 0.0) - pos[s.upper]) - s.b * vel[s.upper]
-                ks += s.k * pos[s.upper]
-            den += s.b
-            kk += s.k
+                num -= K * ((y[slot] if slot >= 0 else 0.0) - pos[s.upper]) - B * vel[s.upper]
+                ks += K * pos[s.upper]
+            den += B
+            kk += K
         if den > 0.0 and not algebraic:
             pos[j], vel[j] = y[slot], num / den
             ydot[slot] = vel[j]
         else:  # undamped or balanced junction: algebraic force balance
             pos[j] = ks / kk if kk > 0 else 0.0
-            vel[j] = sum(stages[k].k * vel[stages[k].lower if stages[k].upper in group else stages[k].upper]
+            vel[j] = sum(stages[k].kelvin_voigt[0] * vel[stages[k].lower if stages[k].upper in group
+                                                         else stages[k].upper]
                          for k in active) / kk if kk > 0 else 0.0
             if den > 0.0:
                 _follow(slot, vel[j], ydot)

@@ -60,7 +60,7 @@ def check_depth(value: Any, where: str, file: str | None = None) -> None:
 
 
 #: a ``str`` key with choices named like this selects a variant of its table (``kind = "task_pd"``)
-VARIANT_KEYS = ("kind", "model")
+VARIANT_KEYS = ("kind", "model", "law")
 
 
 class KeyRead(NamedTuple):
@@ -78,6 +78,7 @@ class KeyRead(NamedTuple):
     lo_open: bool = False
     choices: tuple[str, ...] | None = None
     size: int | None = None
+    meaning: str = ""  #: a declared parameter's own meaning (contactdyn.params), else keys.MEANINGS says
 
 
 class _Recording:
@@ -184,8 +185,8 @@ class Reader:
         return {k: parent.sub(k) for k in parent.data} if parent.data else {}
 
     def float(self, name: str, default: Any = MISSING, *, lo: float | None = None, hi: float | None = None,
-              lo_open: bool = False, unit: str = "") -> float:
-        self._note(name, "number", default, unit=unit, lo=lo, hi=hi, lo_open=lo_open)
+              lo_open: bool = False, unit: str = "", meaning: str = "") -> float:
+        self._note(name, "number", default, unit=unit, lo=lo, hi=hi, lo_open=lo_open, meaning=meaning)
         value = self.raw(name, default)
         if value is None and default is None:
             return None  # type: ignore[return-value]

@@ -177,7 +177,8 @@ class Contact:
             for j, _, slot, _, algebraic in dc.plan(mode.touching, mode.relaxing).junctions:
                 if slot >= 0 and not algebraic:  # a junction integrated as a state
                     stages = (dc.chain.stages[k] for k in dc.chain.stages_of(j))
-                    taus += [s.b / s.k for s in stages if s.k > 0.0]
+                    kvs = (s.kelvin_voigt for s in stages)  # (K, B): a junction joins affine stages only
+                    taus += [B / K for K, B in kvs if K > 0.0]
         return min(taus, default=math.inf)
 
     def surface(self, x: np.ndarray, nQ: int) -> tuple[np.ndarray, np.ndarray]:

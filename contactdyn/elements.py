@@ -19,12 +19,17 @@ __all__ = ["STAGE_LAWS", "Stage", "Mass", "Element", "ChainSpec"]
 
 @dataclass(frozen=True)
 class Stage:
-    """A Kelvin–Voigt deformation stage: F = k x + b ẋ (linear) or k xⁿ + b xⁿ ẋ (Hunt–Crossley)."""
+    """A deformation stage: F = k x + b ẋ (linear), k xⁿ + b xⁿ ẋ (Hunt–Crossley), or another registered law."""
 
     k: float  #: stiffness [N/m] (Hunt–Crossley: [N/mⁿ])
     b: float  #: damping [N·s/m] (Hunt–Crossley: [N·s/mⁿ⁺¹])
     law: str = "linear"  #: a name in STAGE_LAWS (contactdyn.stage_laws)
-    exponent: float = 1.5  #: n, for laws that use it (Hunt–Crossley)
+    params: tuple[float, ...] = ()  #: the law's own parameters, in its declared order (Hunt–Crossley: n)
+
+    def kelvin_voigt(self) -> tuple[float, float] | None:
+        """(K [N/m], B [N·s/m]) when the law is affine, F = K x + B ẋ; None otherwise."""
+        law = STAGE_LAWS[self.law]
+        return law.coefficients(self.k, self.b, self.params) if law.affine else None
 
 
 @dataclass(frozen=True)

@@ -105,8 +105,8 @@ MEANINGS: dict[str, str] = {
     "contact.<contact>.normal.k": "stiffness of the stage (Hunt-Crossley: [N/m^n])",
     "contact.<contact>.normal.b": "damping of the stage",
     "contact.<contact>.normal.m": "equivalent mass m' of the contact zone",
-    "contact.<contact>.normal.law": "stage force law: linear F = k x + b x', hunt_crossley F = k x^n + b x^n x'",
-    "contact.<contact>.normal.exponent": "n of the Hunt-Crossley law",
+    "contact.<contact>.normal.law": "stage force law, a registered name (contactdyn.stage_laws; yours with "
+                                    "imports): linear F = k x + b x', hunt_crossley F = k x^n + b x^n x'",
     "contact.<contact>.normal.k_int": "stiffness k'' between the ground and m'",
     "contact.<contact>.normal.b_int": "damping b'' between the ground and m'",
     "contact.<contact>.normal.k_ext": "stiffness k' between m' and the tip",
@@ -117,8 +117,7 @@ MEANINGS: dict[str, str] = {
     "chain.k": "stiffness of this stage",
     "chain.b": "damping of this stage",
     "chain.m": "an equivalent mass (an element with m is a mass, without it a stage)",
-    "chain.law": "stage force law (linear or hunt_crossley)",
-    "chain.exponent": "n of the Hunt-Crossley law",
+    "chain.law": "stage force law, a registered name (linear, hunt_crossley, yours with imports)",
     "contact.<contact>.tangent": "the tangential directions and their model",
     "contact.<contact>.tangent.model": "free: no tangential force; friction: Coulomb stick/slip; chain: a "
                                        "tangential deformation chain bonded at touch",
@@ -319,6 +318,7 @@ def _rows(reads: list[KeyRead]) -> list[KeyDoc]:
             continue  # a selector read again inside its own variant (tangent chains reuse the normal's reader)
         by_variant.setdefault((_display(r.pattern), r.variant), []).append(r)
     asked_only = {k for k, group in by_variant.items() if all(r.type == "has" for r in group)}
+    declared = {_display(r.pattern): r.meaning for r in reads if r.meaning}  #: a law's parameters (params.Param)
     answered = {k[0] for k in by_variant if k not in asked_only}
     table_variants: dict[str, set[tuple[str, ...]]] = {}
     rendered: dict[tuple, list[tuple[str, ...]]] = {}
@@ -331,7 +331,8 @@ def _rows(reads: list[KeyRead]) -> list[KeyDoc]:
     for (key, type_, unit, default, allowed), variants in rendered.items():
         others = table_variants[key.rpartition(".")[0]] - {()}
         when = "" if () in variants or set(variants) >= others else "; ".join(", ".join(v) for v in variants)
-        rows.append(KeyDoc(key, _merge_when(when), type_, unit, default, allowed, MEANINGS.get(key, "")))
+        rows.append(KeyDoc(key, _merge_when(when), type_, unit, default, allowed,
+                           MEANINGS.get(key) or declared.get(key, "")))
     order = {k: i for i, k in enumerate(dict.fromkeys(_display(r.pattern) for r in reads))}
     return _drive_rows(sorted(rows, key=lambda d: (_SECTIONS.index(_section(d.key)), order[d.key])))
 
@@ -391,11 +392,11 @@ def _section(key: str) -> str:
 @functools.cache
 def reference() -> tuple[KeyDoc, ...]:
     """Every scene key the reader reads, with its meaning (see the module docstring)."""
-    from .keytour import TOUR
+    from .keytour import tour
     from .scene import parse_scene
 
     with recording() as reads:
-        for doc in TOUR:
+        for doc in tour():
             parse_scene(tomllib.loads(doc))
     return tuple(_rows(reads))
 

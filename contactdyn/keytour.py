@@ -7,7 +7,7 @@ documents do not reach makes ``tests/test_keys.py`` fail until a document here r
 
 from __future__ import annotations
 
-__all__ = ["TOUR"]
+__all__ = ["TOUR", "tour"]
 
 _ROBOT = '''
 duration = 1.0
@@ -229,3 +229,26 @@ c = 1e3
 #: the documents, in TOML; every one is a valid scene
 TOUR: tuple[str, ...] = (_FULL, _ROBOT + _NORMALS, _ROBOT + _PD, _ROBOT + _DYNAMIC,
                          _ROBOT.replace('tip = "tip"', 'tip = "tip"' + _TORQUE))
+
+
+def _laws_document() -> str:
+    """A chain with one stage per registered stage law, each with its declared parameters' example values
+    (:mod:`contactdyn.params`): a law added later, a user's included, is toured without an edit here."""
+    from .stage_laws import STAGE_LAWS
+
+    stages = []
+    for name, law in STAGE_LAWS.items():
+        extra = "".join(f", {p.name} = {p.sample()!r}" for p in law.params)
+        stages.append(f'{{ k = 1e4, b = 1.0, law = "{name}"{extra} }}, {{ m = 1.0 }}')
+    return _ROBOT + f'''
+[contact.laws]
+point = [0.0, 0.0, 0.0]
+normal.direction = [0.0, 0.0, 1.0]
+normal.model = "chain"
+normal.environment = [{", ".join(stages)}]
+'''
+
+
+def tour() -> tuple[str, ...]:
+    """Every document of the tour: :data:`TOUR` and those written from the registries' declarations."""
+    return (*TOUR, _laws_document())

@@ -53,7 +53,7 @@ def assign_chain_slots(contacts: list[Contact], nv: int, diag: list[float]) -> t
             for i, node in enumerate(chain.nodes):
                 stages_i = [chain.stages[k] for k in chain.stages_of(i)]
                 relaxes = i in (chain.env_surface, chain.robot_surface) and len(stages_i) == 1 and \
-                    stages_i[0].b > 0.0 and stages_i[0].law == "linear"
+                    stages_i[0].kelvin_voigt is not None and stages_i[0].kelvin_voigt[1] > 0.0
                 if node.kind == NodeKind.FREE and (len(stages_i) == 2 or relaxes):
                     node.state = n_first  # a junction, or a damped surface end relaxing after separation
                     n_first += 1

@@ -141,19 +141,20 @@ def _reach_warnings(scene: Scene, contact: str, n: np.ndarray, tip: np.ndarray, 
 
 
 def _period_warnings(where: str, chain, m_tip: float, step: float, rate: float) -> list[str]:
-    """Linear stages whose period 2π√(m/k) is below the output step; the chain runs ground ... tip."""
+    """Affine stages whose period 2π√(m/k) is below the output step; the chain runs ground ... tip."""
     elements = [*chain.environment, *reversed(chain.robot)]
     masses = [math.inf, *(e.m if isinstance(e, Mass) else None for e in elements), m_tip]  # ground ... tip
     out = []
     for i, e in enumerate(elements):
-        if not isinstance(e, Stage) or e.law != "linear":
+        kv = e.kelvin_voigt() if isinstance(e, Stage) else None
+        if kv is None or kv[0] <= 0.0:
             continue
         inner = next(m for m in reversed(masses[: i + 1]) if m is not None)
         outer = next(m for m in masses[i + 2:] if m is not None)
         m = min(inner, outer)
-        period = 2.0 * math.pi * math.sqrt(m / e.k)  # [s]
+        period = 2.0 * math.pi * math.sqrt(m / kv[0])  # [s]
         if period < step:
-            out.append(f"{where}: stage {i + 1} (from the ground), stiffness {e.k:g} N/m with {m:.3g} kg oscillates "
+            out.append(f"{where}: stage {i + 1} (from the ground), stiffness {kv[0]:g} N/m with {m:.3g} kg oscillates "
                        f"with period {period * 1e3:.3g} ms, shorter than the output step {step * 1e3:.3g} ms "
                        f"(solver.output_rate = {rate:g} Hz): the sampled force aliases; raise solver.output_rate "
                        "or check k")

@@ -25,6 +25,7 @@ from .config import MAX_DEPTH, Reader, check_depth, read_toml
 from .drives import DriveTable, read_drive_table
 from .elements import STAGE_LAWS, ChainSpec, Element, Mass, Stage
 from .errors import SceneError, close_matches
+from .params import read_params
 from .trajectory import PROFILES, RAMP_KINDS, Move, Ramp
 
 __all__ = [
@@ -361,13 +362,14 @@ def _read_elements(r: Reader, name: str) -> tuple[Element, ...]:
 
 
 def _read_stage(e: Reader, k: str = "k", b: str = "b") -> Stage:
+    """A stage: its k and b (under the names given), its law, and the parameters the law declares."""
+    stiffness = e.float(k, lo=0.0, lo_open=True, unit="N/m")
+    damping = e.float(b, 0.0, lo=0.0, unit="N·s/m")
+    saved = e.variant  # the law's own keys are documented under "law = ..."; the table's others are not
     law = e.str("law", "linear", choices=STAGE_LAWS)
-    return Stage(
-        k=e.float(k, lo=0.0, lo_open=True, unit="N/m"),
-        b=e.float(b, 0.0, lo=0.0, unit="N·s/m"),
-        law=law,
-        exponent=e.float("exponent", 1.5, lo=1.0, hi=3.0) if STAGE_LAWS[law].uses_exponent else 1.5,
-    )
+    params = read_params(e, STAGE_LAWS[law].params)
+    e.variant = saved
+    return Stage(k=stiffness, b=damping, law=law, params=params)
 
 
 def _read_chain(r: Reader) -> ChainSpec:

@@ -257,7 +257,8 @@ class Transitions:
 
         (e,) = [s for s in chain.stages if s.upper == chain.env_surface]
         (r,) = [s for s in chain.stages if s.lower == chain.robot_surface]
-        return (e.k * position(e.lower) + r.k * position(r.upper)) / (e.k + r.k)
+        ke, kr = e.kelvin_voigt[0], r.kelvin_voigt[0]  # a junction joins affine stages only (chain._check)
+        return (ke * position(e.lower) + kr * position(r.upper)) / (ke + kr)
 
     def consistent(self, t, x, modes, phase, rest=frozenset(), released=frozenset()):
         """Fix the modes the state contradicts; return (x, modes).

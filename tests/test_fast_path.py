@@ -77,8 +77,12 @@ def test_a_new_affine_stage_law_is_compiled_by_construction():
         name, affine = "doubled", True
 
         @staticmethod
-        def force(k, b, n, x, xdot):
+        def force(k, b, p, x, xdot):
             return 2.0 * k * x + 2.0 * b * xdot
+
+        @staticmethod
+        def coefficients(k, b, p):
+            return 2.0 * k, 2.0 * b
 
     register_stage_law(Doubled)
     try:

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 from contactdyn.errors import SceneError
 from contactdyn.scene import parse_scene, sims_dir
+from contactdyn.stage_laws import STAGE_LAWS
 
 BASE = tomllib.loads((sims_dir() / "b1.toml").read_text())
 FILE = str(sims_dir() / "b1.toml")
@@ -33,9 +34,10 @@ values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=
 
 #: optional keys b1.toml does not use, so that insertions reach their validation too
 KNOWN_KEYS = ["drive", "active_joints", "locked", "tip0", "q_seed", "gravity_compensation", "body", "bonded",
-              "max_step", "record_energy", "max_events", "storm_window", "storm_count", "law", "exponent",
+              "max_step", "record_energy", "max_events", "storm_window", "storm_count", "law",
               "environment", "robot", "k_int", "b_int", "k_ext", "b_ext", "mu_s", "mu_k", "viscous", "until",
-              "space", "start", "accel_fraction", "velocity", "initial", "feedforward", "servo", "axis", "mass"]
+              "space", "start", "accel_fraction", "velocity", "initial", "feedforward", "servo", "axis", "mass",
+              *(p.name for law in STAGE_LAWS.values() for p in law.params)]  # the laws' declared parameters
 
 
 def _paths(node, prefix=()):

@@ -81,15 +81,14 @@ def nominal_from_chain(chain) -> tuple[NominalEnvironment | None, bool]:
     only (exact for a position-based reference, not for A10); rigid or nonlinear: None.
     """
     env, rob = chain.environment, chain.robot
-    if not rob and len(env) == 1 and isinstance(env[0], Stage) and env[0].law == "linear":
-        return NominalEnvironment(env[0].k, env[0].b, 0.0), True
-    if not rob and len(env) == 2 and isinstance(env[0], Stage) and isinstance(env[1], Mass) and \
-            env[0].law == "linear":
-        return NominalEnvironment(env[0].k, env[0].b, env[1].m), True
-    stages = [e for e in (*env, *rob) if isinstance(e, Stage)]
-    if not stages or any(s.law != "linear" for s in stages):
+    stages = [e.kelvin_voigt() for e in (*env, *rob) if isinstance(e, Stage)]
+    if not stages or any(kv is None for kv in stages):
         return None, False
-    return NominalEnvironment(1.0 / sum(1.0 / s.k for s in stages)), False
+    if not rob and len(env) == 1:
+        return NominalEnvironment(*stages[0], 0.0), True
+    if not rob and len(env) == 2 and isinstance(env[1], Mass):
+        return NominalEnvironment(*stages[0], env[1].m), True
+    return NominalEnvironment(1.0 / sum(1.0 / k for k, _ in stages)), False
 
 
 # ---- reading ------------------------------------------------------------------------------
