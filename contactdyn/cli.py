@@ -173,6 +173,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 # ---- run -------------------------------------------------------------------------------------
 def _cmd_run(args: argparse.Namespace) -> int:
+    from .fastpath import slower_paths
     from .metrics import metrics
     from .scene import load_scene, parse_override
     from .simulate import simulate
@@ -202,6 +203,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         _out(args, f"{result.meta['name']}: {result.meta['duration']:g} s simulated in {s['wall_s']:.3f} s "
                    f"(real-time factor {s['real_time_factor']:.1f}), {s['steps']} steps, {s['rhs_evals']} rhs "
                    f"evaluations, {s['events']} events, {len(result.impacts)} impacts")
+        for line in slower_paths(s.get("paths", {})):
+            _out(args, f"  path of {line}")
         if args.verbose:
             from .robot_list import run_details
 

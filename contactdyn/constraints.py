@@ -195,13 +195,13 @@ def solve_folded(system, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zd
     return check, qdd, lam, regular, full, zdot
 
 
-def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray] | None = None, jam: Contact | None = None,
+def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray, float] | None = None, jam: Contact | None = None,
                   limits: tuple = ()):
     """Velocity constraints of the touching contacts (bond rows, sticks, tangential chain bonds) and of
     the joints pressing on ``limits`` (:mod:`contactdyn.limits`).
 
-    ``slide = (contact, d)`` tilts that contact's normal column by the sliding friction
-    −μ_k d; ``jam`` adds stick rows for a contact that is not (yet) stuck.
+    ``slide = (contact, d, μ)`` tilts that contact's normal column by the sliding friction
+    −μ d; ``jam`` adds stick rows for a contact that is not (yet) stuck.
     """
     rows = Rows()
     dummy_f, dummy_y = np.zeros(system.nQ), np.zeros(system.ny)
@@ -213,8 +213,8 @@ def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray] | None = N
         if row is not None:
             col = row
             if slide is not None and slide[0] is c:
-                d = slide[1]
-                col = row - sum(c.friction.mu_k * d[i] * contact_row(system, c, c.tangents[i], kin)
+                d, mu = slide[1], slide[2]
+                col = row - sum(mu * d[i] * contact_row(system, c, c.tangents[i], kin)
                                 for i in range(len(c.tangents)))
             rows.add(row, 0.0, (c.name, "n", 0), col)
         if c.friction is not None and len(c.tangents) and (mode.stuck or jam is c):

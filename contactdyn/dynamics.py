@@ -199,13 +199,12 @@ def _command_and_solve(system, inp: ControlInput, phase: Phase, x: np.ndarray, x
 def _finish_friction(system, ev: Evaluation, pending: list, xdot: np.ndarray, ydot: np.ndarray) -> None:
     """Sliding friction once the normal forces are known; the energy audit's friction power; impulse rates."""
     nQ = system.nQ
-    for c, d, _, visc in pending:
+    for c, d, mu, visc in pending:
         if c.name not in ev.friction:
-            ev.friction[c.name] = -c.friction.mu_k * max(ev.normal_force[c.name], 0.0) * d + visc
+            ev.friction[c.name] = -mu * max(ev.normal_force[c.name], 0.0) * d + visc
     if system.energy_slot >= 0:
-        for c, d, _, _ in pending:
-            ydot[system.energy_slot + 1] += float(c.friction.mu_k * max(ev.normal_force[c.name], 0.0)
-                                                  * (d @ ev.slip[c.name]))
+        for c, d, mu, _ in pending:
+            ydot[system.energy_slot + 1] += float(mu * max(ev.normal_force[c.name], 0.0) * (d @ ev.slip[c.name]))
         xdot[2 * nQ + system.energy_slot + 1] = ydot[system.energy_slot + 1]
     for name, slot in system.impulse_slots.items():
         if name in ev.friction:

@@ -18,6 +18,10 @@ one of them applies to that mode (:func:`mode_gap`). A plan that declines for an
 other reason — its probes find a non-affine part, or its self-check disagrees with the
 readable model — is an undeclared gap: its reason in ``Result.stats["fallback_modes"]``
 starts with ``"undeclared: "``, which the tests treat as a bug.
+
+Which path each mode of a run took (:data:`PATHS`, fastest first), and which law or part kept
+it off the compiled ones, is in ``Result.stats["paths"]`` (:class:`PathLog`); ``contactdyn run``
+prints each such mode once.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY"]
+__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "PATHS", "path_of", "PathLog", "slower_paths"]
 
 UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
 ENERGY = "energy audit (solver.record_energy)"
@@ -49,6 +53,10 @@ def declared_gaps(system) -> list[Gap]:
     if system.energy_slot >= 0:
         gaps.append(Gap("solver.record_energy", ENERGY, "always", lambda modes, phase: True))
     for ci, c in enumerate(system.contacts):
+        if c.friction is not None and not c.friction.constant:
+            gaps.append(Gap(f"contact.{c.name}.tangent", f"friction law {c.friction.law!r}: its coefficient depends "
+                            "on the slip speed", "while the contact slides",
+                            lambda modes, phase, ci=ci: modes[ci].touching and not modes[ci].stuck))
         for dc in c.chains:
             for k, stage in enumerate(dc.chain.stages):
                 if stage.fast_path_gap:
@@ -64,3 +72,64 @@ def mode_gap(system, modes, phase) -> str:
         if gap.applies(modes, phase):
             return gap.reason
     return ""
+
+
+#: the paths a mode's right-hand side can run on, fastest first
+PATHS = {
+    "compiled call": "one numba call per right-hand side: the robot's terms, the law, the solve",
+    "compiled kernel": "Pinocchio's terms, then one numba call: the law and the solve",
+    "compiled plan": "the compiled map P φ and a NumPy solve per call",
+    "compiled plan, law in Python": "the compiled map, the controller's command called in Python per call",
+    "readable model": "System.evaluate per call",
+}
+
+
+def path_of(plan) -> tuple[str, str]:
+    """(path, the law or part that kept it off the compiled ones: "" when none) of a mode's plan. Which compiled
+    path runs a mode is the plan's choice by its parts' shapes (no drives and an affine tip law: the plan's map;
+    motors or the operational law: a kernel), not a law's doing."""
+    if not plan.ok:
+        return "readable model", plan.reason
+    kernel = getattr(plan, "kernel", None)
+    if kernel is not None:
+        return ("compiled call" if getattr(kernel, "at", None) is not None else "compiled kernel"), ""
+    if getattr(plan, "python_command", False):
+        kind = plan.phase.controller.config.kind
+        return "compiled plan, law in Python", f"controller {kind!r} has no compiled command"
+    return "compiled plan", ""
+
+
+def _mode_label(system, modes, phase) -> str:
+    """``press: tip sliding, wall free``: the phase and what each contact does."""
+    def state(c, m) -> str:
+        if not m.touching:
+            return "free"
+        if c.friction is None or not len(c.tangents):
+            return "touching"
+        return "stuck" if m.stuck else "sliding"
+
+    return f"{phase.spec.name}: " + ", ".join(f"{c.name} {state(c, m)}" for c, m in zip(system.contacts, modes,
+                                                                                     strict=True))
+
+
+class PathLog:
+    """Per mode of a run (its label): the path it ran on, why not a faster one, and its segments."""
+
+    def __init__(self) -> None:
+        self.rows: dict[str, dict] = {}
+
+    def record(self, system, modes, phase, plan) -> None:
+        label = _mode_label(system, modes, phase)
+        row = self.rows.get(label)
+        if row is None:
+            path, why = path_of(plan)
+            row = self.rows[label] = {"path": path, "why": why, "segments": 0}
+        row["segments"] += 1
+
+    def table(self) -> dict[str, dict]:
+        return {label: dict(row) for label, row in self.rows.items()}
+
+
+def slower_paths(paths: dict[str, dict]) -> list[str]:
+    """One line per mode that a law kept off the compiled paths, saying which it ran on and why."""
+    return [f"{label}: {row['path']} ({row['why']})" for label, row in paths.items() if row["why"]]

@@ -35,7 +35,8 @@ if TYPE_CHECKING:
     from .phases import Phase
 
 __all__ = ["CONE_TOL", "FORCE_ABS_TOL", "in_cone", "direction_of", "initial_slip", "slip_direction", "slip_velocity",
-           "slip_acceleration", "launching", "launch_directions", "launch_directions_at", "friction_terms"]
+           "slip_acceleration", "kinetic_coefficient", "constant_coefficient", "launching", "launch_directions",
+           "launch_directions_at", "friction_terms"]
 
 CONE_TOL = 1e-10  #: relative slack of the friction-cone tests |F_f| ≤ μ_s F (round-off of the solves)
 FORCE_ABS_TOL = 1e-12  #: [N] absolute slack of the same tests
@@ -71,6 +72,19 @@ def slip_direction(system, vt: np.ndarray, mode: ContactMode) -> np.ndarray:
         if v[0] * r[0] + v[1] * r[1] > system.slip_band:  # v_t·r [m/s]
             return vt / math.sqrt(float(vt @ vt))
     return np.array(r)
+
+
+def kinetic_coefficient(fr, vt: np.ndarray) -> float:
+    """μ(|v_t|) [-] of friction ``fr`` (a :class:`~contactdyn.friction_laws.FrictionSpec`) at slip velocity v_t."""
+    return fr.mu_k if fr.constant else float(fr.mu(math.sqrt(float(vt @ vt))))
+
+
+def constant_coefficient(fr) -> float:
+    """μ_k [-] of a law whose kinetic coefficient does not depend on the slip speed: what the compiled plan holds
+    in its matrices (a contact sliding under another law declines the plan: :mod:`contactdyn.fastpath`)."""
+    if not fr.constant:
+        raise ValueError(f"friction law {fr.law!r} has no constant kinetic coefficient (a declared fast-path gap)")
+    return fr.mu_k
 
 
 def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:
@@ -178,9 +192,10 @@ def friction_terms(system, c: Contact, mode: ContactMode, kin: Kinematics, row: 
     """A friction contact's part of the right-hand side in its mode; returns the normal row's force column.
 
     Sticking: one constraint row per tangent (force unknown). Sliding: with a normal row
-    (its force F unknown) the column tilts by −μ_k d·G_T and the viscous force goes into
-    ``f``; without one (F known from the chain) F_f = −μ_k max(F, 0) d − c v_t goes into
-    ``f`` at once. ``pending`` collects (contact, d, F, viscous force) to finish F_f once
+    (its force F unknown) the column tilts by −μ d·G_T and the viscous force goes into
+    ``f``; without one (F known from the chain) F_f = −μ max(F, 0) d − c v_t goes into
+    ``f`` at once; μ = μ(|v_t|) of the contact's law (:mod:`contactdyn.friction_laws`). ``pending``
+    collects (contact, d, μ, viscous force) to finish F_f once
     the solve gives F (:func:`contactdyn.dynamics.evaluate`).
     """
     nQ, nv = system.nQ, system.nv
@@ -199,15 +214,16 @@ def friction_terms(system, c: Contact, mode: ContactMode, kin: Kinematics, row: 
     elif mode.touching:
         fr = c.friction
         d = slip_direction(system, vt, mode)
+        mu = kinetic_coefficient(fr, vt)
         visc = -fr.viscous * vt if fr.viscous else np.zeros(len(T))
-        if row is not None:  # normal force is an unknown: tilt its column by −μ_k d
-            col = row - fr.mu_k * (d @ R_T)
-            pending.append((c, d, 0.0, visc))
+        if row is not None:  # normal force is an unknown: tilt its column by −μ d
+            col = row - mu * (d @ R_T)
+            pending.append((c, d, mu, visc))
             if fr.viscous:
                 f += visc @ R_T
         else:
-            ff = -fr.mu_k * max(F_n, 0.0) * d + visc
-            pending.append((c, d, F_n, visc))
+            ff = -mu * max(F_n, 0.0) * d + visc
+            pending.append((c, d, mu, visc))
             ev.friction[c.name] = ff
             f += ff @ R_T
         if system.energy_slot >= 0:

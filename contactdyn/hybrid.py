@@ -40,6 +40,7 @@ from .channels import Held, Segment, output_grid, sample_states
 from .contact import ContactMode
 from .errors import SceneError, SimulationError
 from .events import EventLog, StepBudget, StepCollapse, fired_across, segment_events
+from .fastpath import PathLog
 from .integrators import (
     AUTO_EXPLICIT,
     EXPLICIT,
@@ -111,22 +112,30 @@ class HybridRun:
         #: them, "" when none did (no more checks in the mode); None: not checked
         self.resting: str | None = None
         self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
+        self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.fastpath)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
         self.work = Work(CALLS_PER_STEP * self.budget)  #: right-hand-side calls at most, rejected steps' too
         self.progress: Progress | None = None  #: shows the simulated time of a long run (contactdyn run sets it)
 
-    def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True) -> ModePlan:
+    def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True, at: tuple | None = None) -> ModePlan:
         """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``
-        (``count``: a segment runs on it, so a fallback is counted)."""
+        (``count``: a segment runs on it, so a fallback is counted and its path recorded). ``at`` = (t, x): where
+        the mode starts; the first time a run meets the mode, the plan checks itself there against the readable
+        model (:meth:`ModePlan.check_at`)."""
         key = (structure(modes), id(phase))
         plan = self.plans.get(key)
         if plan is None:
             with compiling("the fast path of this scene's contact modes"):
                 plan = self.plans[key] = cached_plan(self.system, modes, phase)
+            plan.use(modes)
+            if at is not None:
+                plan.check_at(*at)
         plan.use(modes)  # a turn's new reference direction r: data of the same plan
-        if count and not plan.ok:
-            self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
+        if count:
+            self.paths.record(self.system, modes, phase, plan)
+            if not plan.ok:
+                self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
         return plan
 
     def start(self) -> tuple[np.ndarray, list[ContactMode], Phase]:
@@ -212,7 +221,7 @@ class HybridRun:
         """Integrate one smooth phase from t towards t_end [s]: (solution, its events, its right-hand side)."""
         system = self.system
         h0 = min(self.next_step, t_end - t) if self.next_step else None
-        plan = self._plan(modes, phase)
+        plan = self._plan(modes, phase, at=(t, x))
         fun = plan.rhs if plan.ok else system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
@@ -367,7 +376,7 @@ class HybridRun:
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
                      compiled_modes=sum(p.ok for p in self.plans.values()),
-                     fallback_modes=dict(self.fallbacks), limits=rate_stats,
+                     fallback_modes=dict(self.fallbacks), paths=self.paths.table(), limits=rate_stats,
                      fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
                 "contacts": [c.name for c in system.contacts],

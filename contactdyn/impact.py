@@ -93,8 +93,8 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
         held[own] = modes[own].with_(stuck=False)
     impulses: dict = {}
 
-    def solve(slide=None, jam=False):
-        rows = velocity_rows(system, x, held, slide=(contact, slide) if slide is not None else None,
+    def solve(slide=None, jam=False):  # slide: (d, μ)
+        rows = velocity_rows(system, x, held, slide=(contact, *slide) if slide is not None else None,
                              jam=contact if jam else None, limits=limits)
         z, _ = impulse_solve(system, M, rows, qd_minus)
         impulses.clear()
@@ -131,16 +131,18 @@ def _own_contact(system, contact, kin, vt_minus, solve):
     jammed = True
     if speed > system.slip_band:
         d = vt_minus / speed
-        qd_plus, P_n, _ = solve(slide=d)
-        P_t = -fr.mu_k * P_n * d
+        mu = float(fr.mu(speed))  # the kinetic coefficient at the slip speed before the impact
+        qd_plus, P_n, _ = solve(slide=(d, mu))
+        P_t = -mu * P_n * d
         jammed = float(slip_velocity(system, contact, kin, qd_plus) @ d) < 0.0
     if jammed:
         qd_plus, P_n, P_t = solve(jam=True)
         if float(np.linalg.norm(P_t)) > fr.mu_s * P_n * (1.0 + CONE_TOL) + FORCE_ABS_TOL:
             # holding needs more than the cone gives: slide where the impulse pushes
             d = -P_t / float(np.linalg.norm(P_t))
-            qd_plus, P_n, _ = solve(slide=d)
-            P_t = -fr.mu_k * P_n * d
+            mu = float(fr.mu(0.0))  # sliding from rest
+            qd_plus, P_n, _ = solve(slide=(d, mu))
+            P_t = -mu * P_n * d
             jammed = False
     return qd_plus, P_n, P_t, d, jammed
 

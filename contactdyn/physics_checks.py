@@ -191,7 +191,8 @@ def _contact_worst(system: System, c, ch: dict[str, np.ndarray], t: np.ndarray) 
     worst["stick_speed"] = _worst(speed[stuck], t[stuck])
     coulomb = F_f + fr.viscous * v_t  # the Coulomb part of the friction [N]
     size = np.linalg.norm(coulomb, axis=1)
-    worst["slide_deviation"] = _worst(np.abs(size - fr.mu_k * np.maximum(F_n, 0.0))[sliding], t[sliding])
+    mu = fr.mu(speed)  # the law's kinetic coefficient at each sample's slip speed
+    worst["slide_deviation"] = _worst(np.abs(size - mu * np.maximum(F_n, 0.0))[sliding], t[sliding])
     moving = sliding & (speed > system.slip_band)  # at rest the direction is the launch's, not the slip's
     power = np.einsum("ij,ij->i", coulomb, v_t) + size * speed  # [W] 0 when the friction opposes the slip
     worst["dissipation_gap"] = _worst(power[moving], t[moving])

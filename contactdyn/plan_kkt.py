@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .friction import constant_coefficient
 from .plan_probe import affine_map
 from .plan_rhs import make_rhs
 
@@ -48,7 +49,7 @@ class CompiledKKT:
         for r, ci in self.tilts:
             c = s.contacts[ci]
             T, consts = self._tangent_terms(c)
-            mu = c.friction.mu_k
+            mu = constant_coefficient(c.friction)
             if len(T) == 1:
                 d = np.asarray(self.modes[ci].slip, float)
                 Qc[self.frame_of[c.fid], r] += mu * (d @ T)
@@ -69,7 +70,7 @@ class CompiledKKT:
         for ci in self.coulomb:
             c = s.contacts[ci]
             T, consts = self._tangent_terms(c)
-            self.coulomb_terms.append((ci, self.o_Fint.start + ci, c.friction.mu_k, T, consts[:, nv:],
+            self.coulomb_terms.append((ci, self.o_Fint.start + ci, constant_coefficient(c.friction), T, consts[:, nv:],
                                        self.frame_of[c.fid]))
         self.z_slice = slice(2 * nQ + self.phase.z_slice.start, 2 * nQ + self.phase.z_slice.stop)
         self.rhs = make_rhs(self)

@@ -26,7 +26,7 @@ import pinocchio as pin
 
 from .controllers import ControlInput
 from .dynamics import set_force_inputs
-from .friction import launch_directions, launching, slip_direction
+from .friction import constant_coefficient, launch_directions, launching, slip_direction
 from .linalg import solve_vector
 from .phases import reference_at
 from .plan_drives import drive_forces
@@ -329,7 +329,8 @@ def impulse_terms(plan) -> list[tuple]:
         one_d = len(c.tangents) == 1
         d0 = float(mode.slip[0]) if one_d and sliding else None
         k_visc = off + plan.o_visc[name].start
-        out.append((2 * nQ + slot, from_z, k_n, sliding, c.friction.mu_k, d0, k_visc, stick, ci))
+        mu = constant_coefficient(c.friction) if sliding else 0.0
+        out.append((2 * nQ + slot, from_z, k_n, sliding, mu, d0, k_visc, stick, ci))
     return out
 
 
@@ -340,6 +341,7 @@ def controller_call(plan):
     make = controller_input(plan)
     command = compiled_law(plan).command
     fast = plan_command(plan) or operational_command(plan)
+    plan.python_command = fast is None  # the path the run reports (contactdyn.fastpath.path_of)
     nQ, nv = plan.system.nQ, plan.system.nv
 
     def call(t, x, q, v, Js, phi, o, tau_contact=None):

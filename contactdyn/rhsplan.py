@@ -196,18 +196,26 @@ class ModePlan(ProbedModel, CompiledKKT):
 
     # ---- self-check ---------------------------------------------------------------------
     def _check(self) -> None:
-        """Agree with System.evaluate at the phase's reference states, or decline."""
+        """Agree with System.evaluate at the run's initial state and a perturbation of it, or decline."""
+        x0, _ = self.system.initial_state()
+        self.check_at(self.phase.t_start + 0.0123, x0)
+
+    def check_at(self, t: float, x: np.ndarray) -> None:
+        """Agree with System.evaluate at (t, x) — where a run starts this mode — and at a perturbation of x, or
+        decline (``ok`` false, an undeclared reason): a law changed on one path only cannot pass unseen."""
+        if not self.ok:
+            return
         s = self.system
         rng = np.random.default_rng(7)
-        x0, _ = s.initial_state()
-        for x in (x0, x0 + 1e-3 * rng.normal(size=s.n)):
-            t = self.phase.t_start + 0.0123
-            ref = s.evaluate(t, x, self.modes, self.phase).xdot
-            got = self.rhs(t, x.copy())
+        scale_x = 1e-3 * (1.0 + np.abs(x))
+        for state in (x, x + scale_x * rng.normal(size=s.n)):
+            ref = s.evaluate(t, state, self.modes, self.phase).xdot
+            got = self.rhs(t, state.copy())
             scale = 1.0 + float(np.abs(ref).max())
             if not np.all(np.isfinite(got)) or float(np.abs(got - ref).max()) > CHECK_RTOL * scale:
                 self.ok = False
-                self.reason = f"{UNDECLARED}disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g}"
-                return
+                self.reason = (f"{UNDECLARED}disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g} "
+                               f"at t = {t:.6g} s")
+                break
         self.ring.extend([_NO_CALL] * 4)
         self.singular = 0

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .friction import launching
+from .friction import constant_coefficient, launching
 from .linalg import solve_vector
 from .phases import reference_positions
 from .plan_fold import contact_torque_of
@@ -451,7 +451,8 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
                 S.F_f[name][:] = Z[:, plan.stick_rows[ci]]
             elif mode.touching:
                 D = slip_directions(plan, ci, O, refs.get(ci))
-                S.F_f[name][:] = -c.friction.mu_k * np.maximum(F_n, 0.0)[:, None] * D + O[:, plan.o_visc[name]]
+                mu = constant_coefficient(c.friction)
+                S.F_f[name][:] = -mu * np.maximum(F_n, 0.0)[:, None] * D + O[:, plan.o_visc[name]]
         for i, dc in enumerate(c.tangent_chains):
             key = f"{name}.{dc.label}"
             rows = [nQ + r for r, row in enumerate(plan.rows) if row.kind == "chain" and row.contact == ci

@@ -25,6 +25,7 @@ from .config import MAX_DEPTH, Reader, check_depth, read_toml
 from .drives import DriveTable, read_drive_table
 from .elements import STAGE_LAWS, ChainSpec, Element, Mass, Stage
 from .errors import SceneError, close_matches
+from .friction_laws import FRICTION_LAWS, FrictionSpec
 from .params import read_params
 from .trajectory import PROFILES, RAMP_KINDS, Move, Ramp
 
@@ -36,15 +37,6 @@ __all__ = [
 
 NORMAL_MODELS = ("rigid", "a", "b", "c", "chain")
 TANGENT_MODELS = ("free", "friction", "chain")
-@dataclass(frozen=True)
-class FrictionSpec:
-    """Coulomb friction with optional viscous term: |F_f| ≤ μ_s F sticking, μ_k F + c|v| sliding."""
-
-    mu_s: float  #: static coefficient [-]
-    mu_k: float  #: kinetic coefficient [-]
-    viscous: float = 0.0  #: viscous coefficient c [N·s/m]
-
-
 @dataclass(frozen=True)
 class ContactSpec:
     name: str
@@ -413,16 +405,9 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
         tangents = np.zeros((0, 3))
     friction = tangent_chain = None
     if model == "friction":
-        mu_k = tangent_r.float("mu_k", None, lo=0.0) if tangent_r.has("mu_k") else None
-        mu = tangent_r.float("mu", None, lo=0.0) if tangent_r.has("mu") else None
-        mu_s = tangent_r.float("mu_s", None, lo=0.0) if tangent_r.has("mu_s") else None
-        if mu is None and mu_k is None:
-            raise tangent_r.error("mu", "a friction coefficient (mu, or mu_s and mu_k)", None)
-        mu_k = mu_k if mu_k is not None else mu
-        mu_s = mu_s if mu_s is not None else (mu if mu is not None else mu_k)
-        if mu_s < mu_k:
-            raise tangent_r.error("mu_s", f"a static coefficient >= mu_k = {mu_k}", mu_s)
-        friction = FrictionSpec(mu_s, mu_k, tangent_r.float("viscous", 0.0, lo=0.0, unit="N·s/m"))
+        saved = tangent_r.variant
+        friction = FRICTION_LAWS[tangent_r.str("law", "coulomb", choices=FRICTION_LAWS)].read(tangent_r)
+        tangent_r.variant = saved
     elif model == "chain":
         tangent_chain = _read_chain(tangent_r)
         if tangent_chain.rigid:
