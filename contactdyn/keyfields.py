@@ -15,7 +15,7 @@ TABLE_FIELDS = {
     'contact': '<contact>',
     'contact.<contact>': 'normal (required), point (required), body, tangent, frame, bonded',
     'contact.<contact>.normal': 'direction (required), environment, robot, model, k, b, law, exponent, m, k_int, b_int, k_ext, b_ext',
-    'contact.<contact>.tangent': 'model, directions, mu_k, mu, mu_s, viscous, environment, robot',
+    'contact.<contact>.tangent': 'model, directions, law, mu, mu_k, mu_s, viscous, environment, robot, v_s',
     'contact.<contact>.normal.environment[]': 'k (required), m, b, law, exponent',
     'contact.<contact>.normal.robot[]': 'k (required), m, b, law, exponent',
     'contact.<contact>.tangent.environment[]': 'k (required), m, b, law, exponent',

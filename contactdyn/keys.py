@@ -123,10 +123,9 @@ MEANINGS: dict[str, str] = {
                                        "tangential deformation chain bonded at touch",
     "contact.<contact>.tangent.directions": "1 or 2 tangent directions, orthogonal to the normal and each other",
     "contact.<contact>.tangent.directions[]": "one tangent direction",
-    "contact.<contact>.tangent.mu": "friction coefficient, static = kinetic",
-    "contact.<contact>.tangent.mu_s": "static friction coefficient (>= mu_k)",
-    "contact.<contact>.tangent.mu_k": "kinetic friction coefficient",
-    "contact.<contact>.tangent.viscous": "viscous friction c: F_f = -mu_k F d - c v",
+    "contact.<contact>.tangent.law": "friction law, a registered name (contactdyn.friction_laws; yours with "
+                                     "imports): coulomb mu(v) = mu_k, stribeck mu(v) = mu_k + (mu_s - mu_k) "
+                                     "exp(-(v/v_s)^2)",
     "contact.<contact>.tangent.environment": "tangential chain elements from the environment (like normal.environment)",
     "contact.<contact>.tangent.robot": "tangential chain elements from the robot",
     # controller

@@ -234,19 +234,29 @@ TOUR: tuple[str, ...] = (_FULL, _ROBOT + _NORMALS, _ROBOT + _PD, _ROBOT + _DYNAM
 def _laws_document() -> str:
     """A chain with one stage per registered stage law, each with its declared parameters' example values
     (:mod:`contactdyn.params`): a law added later, a user's included, is toured without an edit here."""
+    from .friction_laws import FRICTION_LAWS
     from .stage_laws import STAGE_LAWS
 
-    stages = []
-    for name, law in STAGE_LAWS.items():
-        extra = "".join(f", {p.name} = {p.sample()!r}" for p in law.params)
-        stages.append(f'{{ k = 1e4, b = 1.0, law = "{name}"{extra} }}, {{ m = 1.0 }}')
-    return _ROBOT + f'''
+    def own(law) -> str:
+        return "".join(f", {p.name} = {p.sample()!r}" for p in law.params)
+
+    stages = ", ".join(f'{{ k = 1e4, b = 1.0, law = "{name}"{own(law)} }}, {{ m = 1.0 }}'
+                       for name, law in STAGE_LAWS.items())
+    doc = _ROBOT + f'''
 [contact.laws]
 point = [0.0, 0.0, 0.0]
 normal.direction = [0.0, 0.0, 1.0]
 normal.model = "chain"
-normal.environment = [{", ".join(stages)}]
+normal.environment = [{stages}]
 '''
+    for name, law in FRICTION_LAWS.items():
+        doc += f'''
+[contact.{name}]
+point = [0.0, 0.0, 0.0]
+normal.direction = [0.0, 0.0, 1.0]
+tangent = {{ model = "friction", directions = [[1.0, 0.0, 0.0]], law = "{name}", mu_s = 0.5, mu_k = 0.4{own(law)} }}
+'''
+    return doc
 
 
 def tour() -> tuple[str, ...]:

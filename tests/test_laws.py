@@ -1,0 +1,197 @@
+"""Laws as declared things: a stage law's and a friction law's parameters come from their declarations, their
+properties (not their names) decide the physics, friction acts through one interface, each mode's path is
+named, and a law changed on one path only is caught by the plan's self-check where the mode starts."""
+
+from __future__ import annotations
+
+import copy
+import sys
+import tomllib
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import contactdyn.user_laws as user_laws
+from contactdyn import parse_scene, simulate
+from contactdyn.cli import main
+from contactdyn.errors import SceneError
+from contactdyn.friction_laws import FRICTION_LAWS, FrictionSpec
+from contactdyn.keys import markdown, reference
+from contactdyn.scene import sims_dir
+from contactdyn.stage_laws import STAGE_LAWS
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+CUBIC = EXAMPLES / "cubic_press.toml"
+B1 = tomllib.loads((sims_dir() / "b1.toml").read_text())
+
+
+@pytest.fixture(autouse=True)
+def registry(monkeypatch):
+    """Each test imports the user's modules afresh and leaves the registries as they were."""
+    monkeypatch.setattr(user_laws, "_state", {"allowed": True, "entry_points": False})
+    monkeypatch.setattr(user_laws, "IMPORTED", {})
+    saved = dict(STAGE_LAWS)
+    reference.cache_clear()
+    yield
+    STAGE_LAWS.clear()
+    STAGE_LAWS.update(saved)
+    reference.cache_clear()
+    sys.modules.pop("cubic_stage", None)
+
+
+def run(doc: dict, file: Path = CUBIC):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return simulate(parse_scene(copy.deepcopy(doc), file=str(file)))
+
+
+def stribeck_b1(v_s: float, mu_s: float = 0.6, mu_k: float = 0.4) -> dict:
+    doc = copy.deepcopy(B1)
+    doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "law": "stribeck",
+                                        "mu_s": mu_s, "mu_k": mu_k, "v_s": v_s}
+    doc["duration"] = 0.5
+    return doc
+
+
+# ---- a stage law of the user's: declared parameter, property-driven physics ------------------------------------
+def test_the_cubic_law_reads_its_declared_parameter_and_presses_where_its_spring_balances():
+    doc = tomllib.loads(CUBIC.read_text())
+    doc["duration"] = 2.0
+    r = run(doc)
+    k, k3, b = 1e5, 1e9, 300.0
+    x, xd, F = r["stage.tip.n.env1.x"], r["stage.tip.n.env1.xdot"], r["stage.tip.n.env1.F"]
+    np.testing.assert_allclose(F, k * x + k3 * x**3 + b * xd, rtol=0, atol=1e-9 * np.abs(F).max())
+    root = np.roots([k3, 0.0, k, -40.0])  # at rest the stage carries the 40 N set-point: k x + k3 x³ = 40
+    x_rest = float(root[np.isreal(root)].real[0])
+    assert x[-1] == pytest.approx(x_rest, rel=1e-4)
+    assert x_rest < 40.0 / k  # harder than its linear part
+    (row,) = r.stats["paths"].values()
+    assert (row["path"], row["why"]) == ("readable model", "stage law 'cubic' is not affine in (x, ẋ)")
+
+
+def test_the_cubic_law_with_k3_zero_is_the_linear_law():
+    doc = tomllib.loads(CUBIC.read_text())
+    linear = copy.deepcopy(doc)
+    doc["contact"]["tip"]["normal"]["k3"] = 0.0
+    del linear["contact"]["tip"]["normal"]["k3"], linear["contact"]["tip"]["normal"]["law"]
+    mine, builtin = run(doc), run(linear)
+    for channel in ("q", "contact.tip.F_n"):
+        scale = np.abs(builtin[channel]).max()
+        assert np.abs(mine[channel] - builtin[channel]).max() <= 1e-8 * scale, channel
+    assert [row["path"] for row in builtin.stats["paths"].values()] == ["compiled plan"]
+
+
+def test_a_declared_parameter_is_checked_against_its_declaration():
+    doc = tomllib.loads(CUBIC.read_text())
+    doc["contact"]["tip"]["normal"]["k3"] = -1.0
+    with pytest.raises(SceneError, match=r"contact\.tip\.normal\.k3.*>= 0 \[N/m\^3\]"):
+        run(doc)
+    doc["contact"]["tip"]["normal"]["law"] = "linear"  # k3 belongs to the cubic law only
+    with pytest.raises(SceneError, match=r"contact\.tip\.normal\.k3: unknown key"):
+        run(doc)
+
+
+def test_the_key_reference_documents_a_registered_law_from_its_declaration():
+    run(tomllib.loads(CUBIC.read_text()))  # imports cubic_stage, which registers the law
+    rows = {d.key: d for d in reference()}
+    k3 = rows["contact.<contact>.normal.environment[].k3"]
+    assert (k3.unit, k3.default, k3.allowed) == ("N/m^3", "0", ">= 0")
+    assert k3.meaning.startswith("cubic stiffness")
+    assert "cubic" in rows["contact.<contact>.normal.law"].allowed
+
+
+def test_the_committed_key_reference_has_no_user_law():
+    assert "cubic" not in (Path(__file__).resolve().parent.parent / "docs" / "scenes.md").read_text()
+    assert "k3" not in markdown()
+
+
+def test_an_affine_law_is_used_by_its_coefficients_at_a_massless_junction():
+    """Two stages in series with a massless junction between: allowed for an affine law, and the junction sits
+    where the springs of its coefficients (K = 2k), not its k, balance."""
+    from contactdyn.stage_laws import StageLaw, register_stage_law
+
+    @register_stage_law
+    class Doubled(StageLaw):
+        name, affine = "doubled_j", True
+
+        @staticmethod
+        def force(k, b, p, x, xdot):
+            return 2.0 * k * x + 2.0 * b * xdot
+
+        @staticmethod
+        def coefficients(k, b, p):
+            return 2.0 * k, 2.0 * b
+
+    doc = tomllib.loads(CUBIC.read_text())
+    normal = {"direction": [0.0, 1.0, 0.0], "model": "chain", "environment": [
+        {"k": 1e5, "b": 300.0, "law": "doubled_j"}, {"k": 5e4, "b": 150.0, "law": "doubled_j"}]}
+    twin = copy.deepcopy(doc)
+    doc["contact"]["tip"]["normal"] = normal
+    twin["contact"]["tip"]["normal"] = {**normal, "environment": [{"k": 2e5, "b": 600.0}, {"k": 1e5, "b": 300.0}]}
+    mine, builtin = run(doc), run(twin)
+    assert np.abs(mine["contact.tip.F_n"] - builtin["contact.tip.F_n"]).max() <= 1e-9 * 40.0
+
+
+# ---- friction as a law ----------------------------------------------------------------------------------------
+def test_stribeck_slides_with_its_coefficient_at_the_slip_speed():
+    v_s = 0.1  # [m/s], near B1's sliding speed: μ(v) well between μ_k and μ_s
+    r = run(stribeck_b1(v_s), sims_dir() / "b1.toml")
+    speed, F_n, F_f = np.abs(r["contact.tip.v_slip"][:, 0]), r["contact.tip.F_n"], r["contact.tip.F_f"][:, 0]
+    mu = 0.4 + 0.2 * np.exp(-(speed / v_s) ** 2)
+    sliding = r["contact.tip.stuck"] < 0.5
+    np.testing.assert_allclose(np.abs(F_f[sliding]), (mu * F_n)[sliding], rtol=1e-9, atol=1e-9)
+    assert np.ptp(mu[sliding]) > 0.01  # the coefficient did vary along the run
+    assert not r.meta["check_warnings"]  # the physics checks use the same law
+    row = r.stats["paths"]["slide: tip sliding"]
+    assert row["path"] == "readable model" and "stribeck" in row["why"]
+    assert r.stats["paths"]["slide: tip stuck"]["path"] == "compiled plan"  # a stick holds by μ_s: compiled
+
+
+def test_stribeck_with_a_tiny_stribeck_speed_is_coulomb():
+    coulomb = copy.deepcopy(stribeck_b1(1e-9))
+    coulomb["contact"]["tip"]["tangent"] = {**coulomb["contact"]["tip"]["tangent"], "law": "coulomb"}
+    del coulomb["contact"]["tip"]["tangent"]["v_s"]
+    a, b = run(stribeck_b1(1e-9), sims_dir() / "b1.toml"), run(coulomb, sims_dir() / "b1.toml")
+    assert np.abs(a["contact.tip.F_n"] - b["contact.tip.F_n"]).max() <= 1e-6 * 100.0
+
+
+def test_friction_laws_share_one_interface():
+    for name, law in FRICTION_LAWS.items():
+        spec = FrictionSpec(0.6, 0.4, 0.0, name, tuple(p.sample() for p in law.params))
+        speeds = np.array([1e-6, 1e-3, 1.0, 1e3])
+        mu = spec.mu(speeds)
+        assert np.all((0.4 - 1e-12 <= mu) & (mu <= 0.6 + 1e-12)), name  # between μ_k and μ_s
+        assert float(spec.mu(1e3)) == pytest.approx(0.4), name  # fast: the kinetic coefficient
+        assert spec.constant == bool(np.ptp(mu) == 0.0), name
+
+
+def test_a_friction_law_changed_on_the_readable_path_only_is_caught(monkeypatch):
+    """The plan holds μ_k in its matrices; a μ(v) changed in the readable model alone must not pass silently:
+    the plan's self-check where the mode starts disagrees and says so (an undeclared fallback)."""
+    import contactdyn.friction as friction
+    import contactdyn.rhsplan as rhsplan
+
+    monkeypatch.setattr(rhsplan, "_PLANS", type(rhsplan._PLANS)())  # no plan cached from another test
+    monkeypatch.setattr(friction, "kinetic_coefficient", lambda fr, vt: 1.1 * fr.mu_k)
+    r = run(B1, sims_dir() / "b1.toml")
+    assert any(reason.startswith("undeclared: disagrees") for reason in r.stats["fallback_modes"])
+
+
+# ---- the paths ---------------------------------------------------------------------------------------------------
+def test_the_run_prints_the_modes_a_law_kept_off_the_compiled_paths(capsys):
+    assert main(["run", str(CUBIC)]) == 0
+    assert "path of press: tip touching: readable model (stage law 'cubic' is not affine in (x, ẋ))" in \
+        capsys.readouterr().out
+    assert main(["run", "b1"]) == 0
+    assert "path of" not in capsys.readouterr().out
+
+
+def test_a_sweep_runs_the_users_stage_law_in_every_worker(tmp_path):
+    import pandas as pd
+
+    assert main(["sweep", str(CUBIC), "--grid", "contact.tip.normal.k3=0,1e10", "--workers", "2",
+                 "--out", str(tmp_path / "sw"), "--quiet"]) == 0
+    table = pd.read_parquet(tmp_path / "sw" / "summary.parquet")
+    assert list(table["status"]) == ["ok", "ok"]
