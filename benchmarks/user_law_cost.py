@@ -1,11 +1,14 @@
-"""A user's law against its built-in twin on the same scene: examples/my_laws.py's impedance vs task_pd.
+"""The README's example laws against their built-in twins on the same scene, in one process.
 
     PYTHONPATH=. python3 benchmarks/user_law_cost.py [--repeats 7] [--out FILE.json]
 
-Both runs of examples/impedance_press.toml (the twin: task_pd with kp = K, kd = D, gravity
-feedforward, the same run to 1e-9), timed interleaved in one process after an untimed run
-each; CPU medians, their ratio, the largest relative difference of the normal force, and
-whether each ran on the compiled path (``stats["compiled_modes"]``, ``fallback_modes``).
+Three pairs, each the same run to within the solver's tolerance: examples/my_laws.py's impedance
+controller vs ``task_pd`` (kp = K, kd = D, gravity feedforward) on examples/impedance_press.toml;
+examples/cubic_stage.py's cubic law with k3 = 0 vs the linear law on examples/cubic_press.toml;
+the Stribeck friction law with v_s = 1e-9 m/s (μ = μ_k once moving) vs Coulomb on B1 with μ_s = 0.6,
+μ_k = 0.4. Timed interleaved after an untimed run each; CPU medians, each law's ratio to its twin,
+the largest relative difference of the normal force, and the path each law's modes ran on
+(``stats["paths"]``).
 """
 
 from __future__ import annotations
@@ -23,7 +26,34 @@ from timing import interleaved  # noqa: E402
 
 from contactdyn import parse_scene, simulate  # noqa: E402
 
-SCENE = Path(__file__).resolve().parent.parent / "examples" / "impedance_press.toml"
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+SIMS = Path(__file__).resolve().parent.parent / "sims"
+
+
+def pairs() -> dict[str, tuple]:
+    """law -> (its scene, its twin's scene), parsed."""
+    imp = tomllib.loads((EXAMPLES / "impedance_press.toml").read_text())
+    imp_twin = copy.deepcopy(imp)
+    imp_twin["controller"] = {"kind": "task_pd", "kp": 2000.0, "kd": 100.0, "feedforward": "gravity"}
+    cubic = tomllib.loads((EXAMPLES / "cubic_press.toml").read_text())
+    cubic["contact"]["tip"]["normal"]["k3"] = 0.0
+    linear = copy.deepcopy(cubic)
+    del linear["contact"]["tip"]["normal"]["k3"], linear["contact"]["tip"]["normal"]["law"]
+    b1 = tomllib.loads((SIMS / "b1.toml").read_text())
+    tangent = {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu_s": 0.6, "mu_k": 0.4}
+    stribeck, coulomb = copy.deepcopy(b1), copy.deepcopy(b1)
+    stribeck["contact"]["tip"]["tangent"] = {**tangent, "law": "stribeck", "v_s": 1e-9}
+    coulomb["contact"]["tip"]["tangent"] = tangent
+
+    def parsed(doc, file):
+        return parse_scene(doc, file=str(file))
+
+    return {"impedance (user controller) vs task_pd": (parsed(imp, EXAMPLES / "impedance_press.toml"),
+                                                       parsed(imp_twin, EXAMPLES / "impedance_press.toml")),
+            "cubic (user stage law, k3 = 0) vs linear": (parsed(cubic, EXAMPLES / "cubic_press.toml"),
+                                                         parsed(linear, EXAMPLES / "cubic_press.toml")),
+            "stribeck (v_s = 1e-9) vs coulomb on b1": (parsed(stribeck, SIMS / "b1.toml"),
+                                                       parsed(coulomb, SIMS / "b1.toml"))}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -31,21 +61,22 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--out")
     args = p.parse_args(argv)
-    doc = tomllib.loads(SCENE.read_text())
-    twin = copy.deepcopy(doc)
-    twin["controller"] = {"kind": "task_pd", "kp": 2000.0, "kd": 100.0, "feedforward": "gravity"}
-    scenes = {"user_impedance": parse_scene(doc, file=str(SCENE)),
-              "builtin_task_pd": parse_scene(twin, file=str(SCENE))}
+    scenes = {}
+    for name, (law, twin) in pairs().items():
+        scenes[(name, "law")], scenes[(name, "twin")] = law, twin
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for s in scenes.values():
             simulate(s)  # untimed
         times = interleaved({k: (lambda s=s: simulate(s)) for k, s in scenes.items()}, args.repeats)
-    mine, twin_r = times["user_impedance"].last, times["builtin_task_pd"].last
-    F, G = mine["contact.tip.F_n"], twin_r["contact.tip.F_n"]
-    rows = [{"law": k, "cpu_s": times[k].cpu, "ratio_to_builtin": times[k].cpu / times["builtin_task_pd"].cpu,
-             "compiled_modes": times[k].last.stats["compiled_modes"], "fallbacks": str(times[k].last.stats[
-                 "fallback_modes"]), "max_rel_diff_F": float(abs(F - G).max() / abs(G).max())} for k in scenes]
+    rows = []
+    for name in pairs():
+        law, twin = times[(name, "law")], times[(name, "twin")]
+        F, G = law.last["contact.tip.F_n"], twin.last["contact.tip.F_n"]
+        rows.append({"pair": name, "law_cpu_s": law.cpu, "twin_cpu_s": twin.cpu, "ratio": law.cpu / twin.cpu,
+                     "max_rel_diff_F": float(abs(F - G).max() / abs(G).max()),
+                     "law_paths": sorted({r["path"] for r in law.last.stats["paths"].values()}),
+                     "twin_paths": sorted({r["path"] for r in twin.last.stats["paths"].values()})})
     report(rows, args.out)
     return 0
 

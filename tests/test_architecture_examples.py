@@ -68,6 +68,31 @@ def test_stage_law_example_settles_at_its_static_deflection_and_declares_its_gap
     np.testing.assert_allclose(r["contact.tip.F_n"], linear["contact.tip.F_n"], rtol=0, atol=1e-6 * F)
 
 
+def test_friction_law_example_slides_with_its_coefficient_at_the_slip_speed():
+    import tomllib
+
+    from contactdyn.friction_laws import FRICTION_LAWS
+    from contactdyn.scene import sims_dir
+
+    example("friction_law")
+    try:
+        doc = tomllib.loads((sims_dir() / "b1.toml").read_text())
+        doc["duration"] = 0.3
+        doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]],
+                                            "law": "weakening", "mu_s": 0.6, "mu_k": 0.4, "w": 1.0}
+        r = simulate(parse_scene(doc, file=str(sims_dir() / "b1.toml")))
+    finally:
+        del FRICTION_LAWS["weakening"]
+    sliding = r["contact.tip.stuck"] < 0.5
+    speed = np.abs(r["contact.tip.v_slip"][sliding, 0])
+    mu = np.maximum(0.4, 0.6 - 1.0 * speed)  # the example's law, written again here
+    np.testing.assert_allclose(np.abs(r["contact.tip.F_f"][sliding, 0]), mu * r["contact.tip.F_n"][sliding],
+                               rtol=1e-9)
+    assert np.ptp(mu) > 0.01  # the slip speed moved the coefficient
+    assert r.stats["paths"]["slide: tip sliding"]["why"] == "friction law 'weakening': its coefficient depends " \
+                                                         "on the slip speed"
+
+
 def test_controller_example_brakes_the_axis_exponentially_on_the_compiled_path():
     example("controller")
     kd, v0, T = 20.0, -0.5, 0.5  # [N·s/m], [m/s] (moving up, away from the surface), [s]
