@@ -461,13 +461,20 @@ def _new_parser(sub, fmt) -> None:
                          description="Write sims/NAME.toml: the robot's tip approaches a table, presses 20 N and "
                                      "slides 10 cm. It runs as written; edit it from there.",
                          epilog="examples:\n  contactdyn new mine && contactdyn run mine\n"
-                                "  contactdyn new press_ur5 --robot ur5 --contact c --friction")
+                                "  contactdyn new press_ur5 --robot ur5 --contact c --friction\n"
+                                "  contactdyn new cubic --imports cubic_stage --law cubic --friction-law stribeck")
     new.add_argument("name", help="scene name (written to sims/NAME.toml in the working directory)")
     new.add_argument("--robot", default="writer2r", help="robot: a name in urdf/, of example-robot-data, or a path "
                                                         "(default writer2r)")
     new.add_argument("--tip", help="tip frame (default: known for writer2r, planar2r_b1, writer5dof, ur5; else tip)")
     new.add_argument("--contact", default="b", choices=("b", "a", "c", "rigid"), help="normal contact model")
     new.add_argument("--friction", action="store_true", help="Coulomb friction along the slide (mu = 0.3)")
+    new.add_argument("--law", help="the normal's stage law (a registered name; yours with --imports), written with "
+                                   "its declared parameters")
+    new.add_argument("--friction-law", help="friction along the slide under this law (coulomb, stribeck, yours with "
+                                            "--imports), written with its declared parameters")
+    new.add_argument("--imports", action="append", metavar="MODULE[,MODULE]",
+                     help="modules of your laws to import (beside the new scene or on sys.path); the scene names them")
     new.add_argument("--out", metavar="FILE", help="write here instead of sims/NAME.toml")
     new.add_argument("--force", action="store_true", help="overwrite an existing file")
     new.set_defaults(func=_delegate("starter", "new_command"))

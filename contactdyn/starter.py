@@ -174,13 +174,52 @@ def _align(text: str, column: int = 40) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _declared(params) -> str:
+    """A law's declared parameters as scene lines under ``normal.`` / ``tangent.``, with units and meanings."""
+    return "".join(f"{{prefix}}{p.name} = {_num(p.sample())}  # [{p.unit}] {p.meaning}\n" for p in params)
+
+
+def _normal(contact: str, law: str | None) -> str:
+    """The normal's keys of a contact model, with a stage law of the registry (its declared parameters) if given."""
+    from .stage_laws import STAGE_LAWS
+
+    if law is None:
+        return CONTACT_MODELS[contact]
+    if contact == "rigid" or law not in STAGE_LAWS:
+        raise SceneError("--law", f"a registered stage law ({', '.join(STAGE_LAWS)}; yours with --imports) on "
+                         "contact model a, b or c", law if contact != "rigid" else f"{law} on a rigid contact")
+    lines = f'normal.law = "{law}"                   # the stages\' force law (contactdyn.stage_laws)\n'
+    return CONTACT_MODELS[contact] + lines + _declared(STAGE_LAWS[law].params).format(prefix="normal.")
+
+
+def _tangent(friction: bool, friction_law: str | None, t: np.ndarray) -> str:
+    """The tangent's keys: Coulomb with mu = 0.3, another registered law (its declared parameters), or none."""
+    from .friction_laws import FRICTION_LAWS
+
+    if friction_law is not None and friction_law not in FRICTION_LAWS:
+        raise SceneError("--friction-law", f"a registered friction law ({', '.join(FRICTION_LAWS)}; yours with "
+                         "--imports)", friction_law)
+    if not friction and friction_law is None:
+        return "# tangent.model = \"friction\"  # add Coulomb friction: also tangent.directions and tangent.mu\n"
+    head = f"tangent.model = \"friction\"              # stick/slip along the slide\ntangent.directions = [{_vec(t)}]\n"
+    if friction_law in (None, "coulomb"):
+        return head + "tangent.mu = 0.3                        # friction coefficient\n"
+    return (head + f'tangent.law = "{friction_law}"\n'
+            "tangent.mu_s = 0.35                     # static coefficient (the cone)\n"
+            "tangent.mu_k = 0.3                      # kinetic coefficient\n"
+            + _declared(FRICTION_LAWS[friction_law].params).format(prefix="tangent."))
+
+
 def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", friction: bool = False,
-                  tip: str | None = None) -> str:
-    """The TOML text of a starter scene (see the module docstring)."""
+                  tip: str | None = None, law: str | None = None, friction_law: str | None = None,
+                  imports: tuple[str, ...] = ()) -> str:
+    """The TOML text of a starter scene (see the module docstring); ``law``, ``friction_law``: registered laws
+    (a user's from ``imports``, which the caller has imported), written with their declared parameters."""
     from .robot_catalog import TOOL_FRAMES
 
     if contact not in CONTACT_MODELS:
         raise SceneError("--contact", f"one of {list(CONTACT_MODELS)}", contact)
+    normal = _normal(contact, law)
     known_tip, q0 = POSTURES.get(robot, (None, None))
     arm, tip, inertia = _load_arm(robot, tip or known_tip or TOOL_FRAMES.get(robot))
     q, n, t, quality = working_posture(arm, tip, q0)
@@ -191,17 +230,16 @@ def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", fricti
                          f"{quality:.2g} m/rad, less near a limit; at least {MIN_QUALITY:g} needed)", robot)
     p0 = arm.frame_position(q, tip)
     rest = [a for a in np.eye(3) if abs(a @ n) < 0.5]  # position-controlled axes while pressing
-    tangent = (f"tangent.model = \"friction\"              # Coulomb stick/slip along the slide\n"
-               f"tangent.directions = [{_vec(t)}]\n"
-               "tangent.mu = 0.3                        # friction coefficient\n") if friction else \
-        "# tangent.model = \"friction\"  # add Coulomb friction: also tangent.directions and tangent.mu\n"
+    tangent = _tangent(friction, friction_law, t)
+    first = f"imports = {toml_value(list(imports))}  # your laws' modules (beside this file or on sys.path)\n" \
+        if imports else ""
     wrist = "kd_joint = 0.1                          # [N·m·s/rad] damps what the task leaves free (the wrist)\n" \
         if arm.nv > 3 else ""
     return _align(f"""\
 # {name}: a starter scene written by `contactdyn new` (robot {robot}, contact model {contact}).
 # The tip approaches a table, presses {PRESS:g} N on it, then slides {SLIDE * 100:g} cm while pressing.
 # Every key: docs/scenes.md or `contactdyn list keys`. Run: contactdyn run {name}
-name = {toml_value(name)}
+{first}name = {toml_value(name)}
 description = {toml_value(f"{robot} pressing {PRESS:g} N on a model ({contact}) table and sliding {SLIDE * 100:g} cm")}
 duration = 3.0                          # [s] simulated time
 
@@ -213,7 +251,7 @@ tip = {toml_value(tip)}                          # the controlled frame
 [contact.table]                         # the name is yours; frame: robot.tip by default
 point = {_vec(p0 - GAP * n)}            # [m] a point of the table, {GAP * 100:g} cm below the tip
 normal.direction = {_vec(n)}            # outward normal: from the table towards the robot
-{CONTACT_MODELS[contact]}{tangent}
+{normal}{tangent}
 [controller]                            # one controller for every phase; a phase may override keys
 kind = "task_pd"                        # tip-space PD: f = kp (x_d - x) + kd (v_d - v) - F_d n
 kp = 2000.0                             # [N/m]
@@ -260,7 +298,15 @@ def new_command(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else Path("sims") / f"{args.name}.toml"
     if out.exists() and not args.force:
         raise SceneError("--out" if args.out else "NAME", "a file that does not exist yet (or --force)", str(out))
-    text = starter_scene(args.name, args.robot, args.contact, args.friction, args.tip)
+    imports = tuple(m for group in args.imports or () for m in group.split(",") if m)
+    if imports:
+        from .user_laws import IMPORTED, import_scene_modules
+
+        import_scene_modules(list(imports), str(out.resolve()))  # next to the scene to be, then sys.path
+        for module in imports:
+            print(f"imported {module} from {IMPORTED.get(module, '?')}")
+    text = starter_scene(args.name, args.robot, args.contact, args.friction, args.tip, args.law,
+                         args.friction_law, imports)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, text)  # a full disk leaves no half-written scene
     run = args.name if not args.out else str(out)

@@ -195,3 +195,19 @@ def test_a_sweep_runs_the_users_stage_law_in_every_worker(tmp_path):
                  "--out", str(tmp_path / "sw"), "--quiet"]) == 0
     table = pd.read_parquet(tmp_path / "sw" / "summary.parquet")
     assert list(table["status"]) == ["ok", "ok"]
+
+
+def test_new_writes_a_users_laws_with_their_declared_parameters(tmp_path, monkeypatch, capsys):
+    (tmp_path / "cubic_stage.py").write_text((EXAMPLES / "cubic_stage.py").read_text())
+    out = tmp_path / "mine.toml"
+    assert main(["new", "mine", "--imports", "cubic_stage", "--law", "cubic", "--friction-law", "stribeck",
+                 "--out", str(out)]) == 0
+    assert f"imported cubic_stage from {tmp_path / 'cubic_stage.py'}" in capsys.readouterr().out
+    doc = tomllib.loads(out.read_text())
+    assert doc["imports"] == ["cubic_stage"]
+    assert (doc["contact"]["table"]["normal"]["law"], doc["contact"]["table"]["normal"]["k3"]) == ("cubic", 1e9)
+    assert doc["contact"]["table"]["tangent"]["v_s"] == 0.01  # Stribeck's declared example value
+    scene = parse_scene(copy.deepcopy(doc), file=str(out))  # it reads as written
+    assert scene.contacts["table"].friction.law == "stribeck"
+    assert main(["new", "other", "--law", "cubic_x", "--out", str(tmp_path / "o.toml")]) == 2
+    assert "--law" in capsys.readouterr().err
