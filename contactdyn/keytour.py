@@ -232,8 +232,10 @@ TOUR: tuple[str, ...] = (_FULL, _ROBOT + _NORMALS, _ROBOT + _PD, _ROBOT + _DYNAM
 
 
 def _laws_document() -> str:
-    """A chain with one stage per registered stage law, each with its declared parameters' example values
-    (:mod:`contactdyn.params`): a law added later, a user's included, is toured without an edit here."""
+    """A chain with one stage per registered stage law, a contact per friction law and a phase per controller that
+    declares its parameters, each with the declared parameters' example values (:mod:`contactdyn.params`): a law
+    added later, a user's included, is toured without an edit here."""
+    from .controllers import CONTROLLERS
     from .friction_laws import FRICTION_LAWS
     from .stage_laws import STAGE_LAWS
 
@@ -248,6 +250,14 @@ point = [0.0, 0.0, 0.0]
 normal.direction = [0.0, 0.0, 1.0]
 normal.model = "chain"
 normal.environment = [{stages}]
+'''
+    declared = [(name, cls) for name, cls in CONTROLLERS.items() if cls.params]
+    for i, (name, cls) in enumerate(declared):
+        until = f"until = {i + 1}.0\n" if i + 1 < len(declared) else ""
+        doc += f'''
+[[phase]]
+name = "{name}"
+{until}controller = {{ kind = "{name}"{own(cls)} }}
 '''
     for name, law in FRICTION_LAWS.items():
         doc += f'''

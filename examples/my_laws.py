@@ -2,22 +2,16 @@
 
     τ = Jᵀ (K (x_d − x) − D ẋ) + g(q)
 
-K [N/m] and D [N·s/m] are the scene's ``controller.stiffness`` and ``controller.damping``;
-x_d the phase's task reference. A scene uses it with ``imports = ["my_laws"]`` (this file
-beside the scene) and ``controller.kind = "impedance"``; ``contactdyn run`` and ``sweep``
-then run it like a built-in law.
+K [N/m] and D [N·s/m] are the scene's ``controller.stiffness`` and ``controller.damping``,
+declared once below (unit, default, bounds, meaning): the scene reads and checks them from
+there and ``contactdyn list keys`` documents them. x_d is the phase's task reference. A scene
+uses it with ``imports = ["my_laws"]`` (this file beside the scene) and
+``controller.kind = "impedance"``; ``contactdyn run`` and ``sweep`` then run it like a
+built-in law.
 """
 
-from dataclasses import dataclass
-
 from contactdyn.controllers import Controller, register
-
-
-@dataclass(frozen=True)
-class ImpedanceConfig:
-    stiffness: float  #: K [N/m]
-    damping: float  #: D [N·s/m]
-    kind: str = "impedance"
+from contactdyn.params import Param
 
 
 @register
@@ -26,13 +20,10 @@ class Impedance(Controller):
 
     name = "impedance"
     needs_gravity = True  # the system hands g(q) to command() in inp.gravity
-
-    @staticmethod
-    def read(r) -> ImpedanceConfig:  # r: the controller table's reader (it checks types and bounds)
-        return ImpedanceConfig(stiffness=r.float("stiffness", 1000.0, lo=0.0, unit="N/m"),
-                               damping=r.float("damping", 50.0, lo=0.0, unit="N·s/m"))
+    params = (Param("stiffness", "N/m", "K of the impedance law tau = J^T (K (x_d - x) - D x') + g", 1000.0),
+              Param("damping", "N·s/m", "D of the impedance law", 50.0))
 
     def command(self, inp):
-        c = self.config
+        c = self.config  # c.stiffness, c.damping: the declared parameters' values
         force = c.stiffness * (inp.x_d - inp.p_tip) - c.damping * inp.v_tip  # [N] at the tip
         return inp.J.T @ force + inp.gravity, None  # joint torques, no controller states

@@ -211,3 +211,24 @@ def test_new_writes_a_users_laws_with_their_declared_parameters(tmp_path, monkey
     assert scene.contacts["table"].friction.law == "stribeck"
     assert main(["new", "other", "--law", "cubic_x", "--out", str(tmp_path / "o.toml")]) == 2
     assert "--law" in capsys.readouterr().err
+
+
+def test_a_controllers_declared_parameters_are_read_checked_and_documented():
+    import contactdyn.controllers as controllers
+
+    saved = dict(controllers.CONTROLLERS)
+    try:
+        doc = tomllib.loads((EXAMPLES / "impedance_press.toml").read_text())
+        scene = parse_scene(copy.deepcopy(doc), file=str(EXAMPLES / "impedance_press.toml"))
+        config = scene.phases[0].controller
+        assert (config.kind, config.stiffness, config.damping) == ("impedance", 2000.0, 100.0)
+        doc["controller"]["damping"] = -1.0
+        with pytest.raises(SceneError, match=r"controller\.damping.*>= 0 \[N·s/m\]"):
+            parse_scene(copy.deepcopy(doc), file=str(EXAMPLES / "impedance_press.toml"))
+        rows = {d.key: d for d in reference()}
+        assert (rows["controller.stiffness"].when, rows["controller.stiffness"].unit) == ("kind = impedance", "N/m")
+        assert rows["controller.damping"].meaning == "D of the impedance law"
+    finally:
+        controllers.CONTROLLERS.clear()
+        controllers.CONTROLLERS.update(saved)
+        sys.modules.pop("my_laws", None)

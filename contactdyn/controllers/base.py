@@ -21,8 +21,10 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
+from ..params import Param
+
 __all__ = ["ControlInput", "Controller", "BindContext", "TipForceLaw", "CONTROLLERS", "register", "read_controller",
-           "FEEDFORWARD"]
+           "FEEDFORWARD", "DeclaredConfig"]
 
 FEEDFORWARD = ("none", "gravity", "bias")
 
@@ -90,10 +92,30 @@ class BindContext:
     key: str  #: key path of the controller table, for errors (e.g. "phase[1].controller")
 
 
+@dataclass(frozen=True)
+class DeclaredConfig:
+    """The config of a controller that declares its parameters (``Controller.params``): its kind and the values,
+    read as attributes (``config.stiffness``)."""
+
+    kind: str
+    values: tuple[tuple[str, float], ...] = ()
+
+    def __getattr__(self, name: str) -> float:
+        if name.startswith("_") or name == "values":  # (unpickling asks before the fields exist)
+            raise AttributeError(name)
+        for key, value in self.values:
+            if key == name:
+                return value
+        raise AttributeError(f"controller {self.kind!r} declares no parameter {name!r}")
+
+
 class Controller:
-    """Base class: subclasses set ``name``, a ``Config`` and implement :meth:`command`."""
+    """Base class: subclasses set ``name``, their parameters (``params``, or a ``read`` of their own) and
+    implement :meth:`command`."""
 
     name: ClassVar[str] = ""
+    #: the parameters the scene gives this controller (contactdyn.params): the default :meth:`read` reads them
+    params: ClassVar[tuple[Param, ...]] = ()
     n_states: int = 0
     needs_gravity: bool = False
     uses_forces: bool = False  #: reads measured forces (then it must be affine in them)
@@ -104,6 +126,11 @@ class Controller:
     def __init__(self, config: Any, nv: int):
         self.config = config
         self.nv = nv
+
+    @classmethod
+    def read(cls, r) -> Any:
+        """The controller table into a config: by default the declared ``params`` (a :class:`DeclaredConfig`)."""
+        return DeclaredConfig(cls.name, tuple((p.name, p.read(r)) for p in cls.params))
 
     def bind(self, context: BindContext) -> None:
         """Check the scene and resolve defaults (may set ``n_states``); raise SceneError on misuse."""
@@ -140,6 +167,9 @@ CONTROLLERS: dict[str, type] = {}
 
 
 def register(cls: type) -> type:
+    """Make ``cls`` a controller scenes can name (``kind = cls.name``)."""
+    if not cls.name or not cls.name.isidentifier():
+        raise ValueError(f"a controller's name must be an identifier, got {cls.name!r}")
     CONTROLLERS[cls.name] = cls
     return cls
 
