@@ -53,10 +53,6 @@ def declared_gaps(system) -> list[Gap]:
     if system.energy_slot >= 0:
         gaps.append(Gap("solver.record_energy", ENERGY, "always", lambda modes, phase: True))
     for ci, c in enumerate(system.contacts):
-        if c.friction is not None and not c.friction.constant:
-            gaps.append(Gap(f"contact.{c.name}.tangent", f"friction law {c.friction.law!r}: its coefficient depends "
-                            "on the slip speed", "while the contact slides",
-                            lambda modes, phase, ci=ci: modes[ci].touching and not modes[ci].stuck))
         for dc in c.chains:
             for k, stage in enumerate(dc.chain.stages):
                 if stage.fast_path_gap:

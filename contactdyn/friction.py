@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from .phases import Phase
 
 __all__ = ["CONE_TOL", "FORCE_ABS_TOL", "in_cone", "direction_of", "initial_slip", "slip_direction", "slip_velocity",
-           "slip_acceleration", "kinetic_coefficient", "constant_coefficient", "launching", "launch_directions",
+           "slip_acceleration", "kinetic_coefficient", "per_call_coefficient", "launching", "launch_directions",
            "launch_directions_at", "friction_terms"]
 
 CONE_TOL = 1e-10  #: relative slack of the friction-cone tests |F_f| ≤ μ_s F (round-off of the solves)
@@ -79,12 +79,11 @@ def kinetic_coefficient(fr, vt: np.ndarray) -> float:
     return fr.mu_k if fr.constant else float(fr.mu(math.sqrt(float(vt @ vt))))
 
 
-def constant_coefficient(fr) -> float:
-    """μ_k [-] of a law whose kinetic coefficient does not depend on the slip speed: what the compiled plan holds
-    in its matrices (a contact sliding under another law declines the plan: :mod:`contactdyn.fastpath`)."""
-    if not fr.constant:
-        raise ValueError(f"friction law {fr.law!r} has no constant kinetic coefficient (a declared fast-path gap)")
-    return fr.mu_k
+def per_call_coefficient(fr) -> float | None:
+    """μ_k [-] of a law whose kinetic coefficient does not depend on the slip speed, which the compiled plan
+    holds in its matrices; None for another law, whose μ(|v_t|) the plan's call takes per call
+    (:func:`kinetic_coefficient`)."""
+    return fr.mu_k if fr.constant else None
 
 
 def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:

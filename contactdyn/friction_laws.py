@@ -16,9 +16,10 @@ The laws:
 - ``stribeck`` — μ(v) = μ_k + (μ_s − μ_k) exp(−(v/v_s)²), v_s [m/s] the Stribeck speed:
   the coefficient falls from μ_s at rest to μ_k when sliding fast.
 
-A law with a constant kinetic coefficient (``constant = True``) runs on the compiled
-right-hand side, which holds μ_k in its matrices; another declares at load that a contact
-sliding under it runs on the readable model (:mod:`contactdyn.fastpath`). Adding a law:
+A law with a constant kinetic coefficient (``constant = True``) is held in the compiled
+plan's matrices; for another the plan calls its ``kinetic`` per call (the tilt of the normal
+column and the known force, :mod:`contactdyn.plan_rhs`; the samples with an array of speeds),
+and the plan's numba kernels decline such a mode (the law is Python). Adding a law:
 subclass :class:`FrictionLaw` (``name``, ``params``, ``constant``, ``kinetic``) and decorate
 it with :func:`register_friction_law`; the scene then accepts ``tangent.law = "<name>"``
 and the parameters it declares (:class:`~contactdyn.params.Param`).

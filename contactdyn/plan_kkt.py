@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .friction import constant_coefficient
+from .friction import per_call_coefficient
 from .plan_probe import affine_map
 from .plan_rhs import make_rhs
 
@@ -38,7 +38,7 @@ class CompiledKKT:
             A0[:nv, :nv] += np.diag(s._D)  # rotor inertias through rigid gears, n_s n_t J [kg·m²]
         for i in range(3 * nf):  # w = g: the Cartesian force on each frame, an unknown with a trivial row
             A0[nQ + nr + i, nQ + nr + i] = 1.0
-        self.dyn_tilt = []  # 2-D sliding: column tilt computed per call
+        self.dyn_tilt = []  # 2-D sliding, or a speed-dependent friction law: column tilt computed per call
         Qr = np.zeros((nf, nr, 3))  # rows' Cartesian parts, per frame
         Qc = np.zeros((nf, nr, 3))  # columns' Cartesian parts (negated: A holds −Cᵀ)
         for r, row in enumerate(self.rows):
@@ -49,8 +49,8 @@ class CompiledKKT:
         for r, ci in self.tilts:
             c = s.contacts[ci]
             T, consts = self._tangent_terms(c)
-            mu = constant_coefficient(c.friction)
-            if len(T) == 1:
+            mu = per_call_coefficient(c.friction)  # None: μ(|v_t|) per call
+            if len(T) == 1 and mu is not None:
                 d = np.asarray(self.modes[ci].slip, float)
                 Qc[self.frame_of[c.fid], r] += mu * (d @ T)
                 A0[:nQ, nQ + r] += mu * (d @ consts)
@@ -70,7 +70,7 @@ class CompiledKKT:
         for ci in self.coulomb:
             c = s.contacts[ci]
             T, consts = self._tangent_terms(c)
-            self.coulomb_terms.append((ci, self.o_Fint.start + ci, constant_coefficient(c.friction), T, consts[:, nv:],
+            self.coulomb_terms.append((ci, self.o_Fint.start + ci, per_call_coefficient(c.friction), T, consts[:, nv:],
                                        self.frame_of[c.fid]))
         self.z_slice = slice(2 * nQ + self.phase.z_slice.start, 2 * nQ + self.phase.z_slice.stop)
         self.rhs = make_rhs(self)

@@ -168,8 +168,9 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     s, phase = plan.system, plan.phase
     ctl = phase.controller
     if not (isinstance(ctl, OperationalSpace) and plan.compiled_drives is None and not plan.coulomb_terms
-            and phase.carrier is None):
-        return None
+            and phase.carrier is None) or any(mu is None for _, _, mu, *_ in plan.dyn_tilt) \
+            or any(term[4] is None for term in impulses):
+        return None  # (a speed-dependent friction law's μ(|v_t|) is Python: the plan's NumPy call takes it)
     nQ, nv, m = s.nQ, s.nv, plan.m
     tf = plan.tip_frame
     off = m * m + m  # o's start in y

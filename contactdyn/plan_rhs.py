@@ -26,7 +26,7 @@ import pinocchio as pin
 
 from .controllers import ControlInput
 from .dynamics import set_force_inputs
-from .friction import constant_coefficient, launch_directions, launching, slip_direction
+from .friction import kinetic_coefficient, launch_directions, launching, per_call_coefficient, slip_direction
 from .linalg import solve_vector
 from .phases import reference_at
 from .plan_drives import drive_forces
@@ -156,18 +156,24 @@ def _friction_terms(plan):
         return None
     o_vt = [plan.o_vt[c.name] for c in s.contacts]
 
+    friction = [c.friction for c in s.contacts]
+
     def terms(y, Js, modes):
         o = y[m2 + m:]
         dirs = {}
         for i_fn, mu, G, g1, ci in coulomb:
             F_n = y[i_fn]
             if F_n > 0.0:
+                if mu is None:  # a speed-dependent law: μ(|v_t|) per call
+                    mu = kinetic_coefficient(friction[ci], o[o_vt[ci]])
                 if g1 is None:
                     dirs[ci] = d = slip_direction(s, o[o_vt[ci]], modes[ci])
                     y -= (mu * F_n) * d.dot(G)
                 else:
                     y -= (mu * F_n) * g1
         for robot_rows, body_rows, a0, ci, mu, T, consts, j in dyn_tilt:
+            if mu is None:
+                mu = kinetic_coefficient(friction[ci], o[o_vt[ci]])
             dirs[ci] = d = slip_direction(s, o[o_vt[ci]], modes[ci])
             y[robot_rows] += mu * Js[j].T.dot(d.dot(T))
             if body_rows is not None:
@@ -294,6 +300,8 @@ def _impulse_rates(plan):
     s = plan.system
     o_vt = [plan.o_vt[c.name] for c in s.contacts]
 
+    friction = [c.friction for c in s.contacts]
+
     def rates(xd, z, o, modes, dirs):
         for i0, from_z, k_n, sliding, mu, d0, k_visc, stick, ci in impulses:
             F_n = z[k_n] if from_z else o[k_n]
@@ -301,6 +309,8 @@ def _impulse_rates(plan):
             if stick is not None:
                 xd[i0 + 1:i0 + 1 + len(stick)] = z[stick]
             elif sliding:
+                if mu is None:  # a speed-dependent law: μ(|v_t|) per call
+                    mu = kinetic_coefficient(friction[ci], o[o_vt[ci]])
                 Fp = F_n if F_n > 0.0 else 0.0
                 if d0 is not None:  # 1-D
                     xd[i0 + 1] = -mu * Fp * d0 + o[k_visc]
@@ -329,7 +339,7 @@ def impulse_terms(plan) -> list[tuple]:
         one_d = len(c.tangents) == 1
         d0 = float(mode.slip[0]) if one_d and sliding else None
         k_visc = off + plan.o_visc[name].start
-        mu = constant_coefficient(c.friction) if sliding else 0.0
+        mu = per_call_coefficient(c.friction) if sliding else 0.0  # None: μ(|v_t|) per call
         out.append((2 * nQ + slot, from_z, k_n, sliding, mu, d0, k_visc, stick, ci))
     return out
 

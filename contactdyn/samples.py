@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .friction import constant_coefficient, launching
+from .friction import launching
 from .linalg import solve_vector
 from .phases import reference_positions
 from .plan_fold import contact_torque_of
@@ -331,14 +331,16 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
     J_all = [Phi[:, i:i + 3 * nv].reshape(N, 3, nv) for i in plan.i_J]
     w0 = nQ + nr
     refs = _launch_references(plan, ts, X, O) if plan.launch is not None else {}
-    for ci, i_fn, mu, T, consts, j in plan.coulomb_terms:
+    for ci, i_fn, _, T, consts, j in plan.coulomb_terms:
+        mu = _coefficients(plan, ci, O)
         Fp = np.maximum(O[:, i_fn], 0.0)
         D = slip_directions(plan, ci, O, refs.get(ci))
         B[:, w0 + 3 * j:w0 + 3 * j + 3] -= (mu * Fp)[:, None] * (D @ T)
         if nQ > nv:
             B[:, nv:nQ] -= (mu * Fp)[:, None] * (D @ consts)
-    for r, ci, mu, T, consts, j in plan.dyn_tilt:
+    for r, ci, _, T, consts, j in plan.dyn_tilt:
         D = slip_directions(plan, ci, O, refs.get(ci))
+        mu = _coefficients(plan, ci, O)[:, None]
         A[:, :nv, nQ + r] += mu * np.einsum("kiv,ki->kv", J_all[j], D @ T)
         A[:, nv:nQ, nQ + r] = plan.A0[nv:nQ, nQ + r] + mu * (D @ consts)
     drives = plan.compiled_drives
@@ -451,7 +453,7 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
                 S.F_f[name][:] = Z[:, plan.stick_rows[ci]]
             elif mode.touching:
                 D = slip_directions(plan, ci, O, refs.get(ci))
-                mu = constant_coefficient(c.friction)
+                mu = _coefficients(plan, ci, O)[:, None]
                 S.F_f[name][:] = -mu * np.maximum(F_n, 0.0)[:, None] * D + O[:, plan.o_visc[name]]
         for i, dc in enumerate(c.tangent_chains):
             key = f"{name}.{dc.label}"
@@ -460,6 +462,12 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
             S.iface[key][:] = Z[:, rows[0]] if rows else O[:, plan.o_iface[key].start]
     for label, sl in plan.o_stage.items():
         S.stages[label][:] = O[:, sl]
+
+
+def _coefficients(plan, ci: int, O: np.ndarray) -> np.ndarray:
+    """The kinetic coefficient (N,) of contact ci at the samples' outputs O: its law's μ(|v_t|)."""
+    c = plan.system.contacts[ci]
+    return np.broadcast_to(c.friction.mu(np.linalg.norm(O[:, plan.o_vt[c.name]], axis=1)), (len(O),))
 
 
 def slip_directions(plan, ci: int, O: np.ndarray, refs: np.ndarray | None = None) -> np.ndarray:
