@@ -16,6 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from contactdyn.errors import SceneError
+from contactdyn.friction_laws import FRICTION_LAWS
 from contactdyn.scene import parse_scene, sims_dir
 from contactdyn.stage_laws import STAGE_LAWS
 
@@ -37,7 +38,8 @@ KNOWN_KEYS = ["drive", "active_joints", "locked", "tip0", "q_seed", "gravity_com
               "max_step", "record_energy", "max_events", "storm_window", "storm_count", "law",
               "environment", "robot", "k_int", "b_int", "k_ext", "b_ext", "mu_s", "mu_k", "viscous", "until",
               "space", "start", "accel_fraction", "velocity", "initial", "feedforward", "servo", "axis", "mass",
-              *(p.name for law in STAGE_LAWS.values() for p in law.params)]  # the laws' declared parameters
+              *(p.name for laws in (STAGE_LAWS, FRICTION_LAWS) for law in laws.values() for p in law.params)]
+#: (the last line: the registered laws' declared parameters)
 
 
 def _paths(node, prefix=()):
