@@ -27,7 +27,7 @@ and the parameters it declares (:class:`~contactdyn.params.Param`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -51,19 +51,17 @@ class FrictionSpec:
     viscous: float = 0.0  #: viscous coefficient c [N·s/m]
     law: str = "coulomb"  #: a name in FRICTION_LAWS
     params: tuple[float, ...] = ()  #: the law's own parameters, in its declared order
-    _law: type[FrictionLaw] = field(init=False, repr=False, compare=False)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "_law", FRICTION_LAWS[self.law])
+    #: (the law by name, not a class: a spec pickled to a sweep's worker needs the law's module imported there
+    #: first, which reading the scene does)
 
     @property
     def constant(self) -> bool:
         """The kinetic coefficient is μ_k at every slip speed (the compiled plan holds it in its matrices)."""
-        return self._law.constant
+        return FRICTION_LAWS[self.law].constant
 
     def mu(self, speed):
         """Kinetic coefficient [-] at slip speed |v_t| [m/s] (a float, or an array of speeds)."""
-        return self._law.kinetic(self, speed)
+        return FRICTION_LAWS[self.law].kinetic(self, speed)
 
 
 class FrictionLaw:
