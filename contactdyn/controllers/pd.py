@@ -29,7 +29,7 @@ import numpy as np
 
 from ..linalg import contiguous
 from . import task_pd_law as law
-from .base import FEEDFORWARD, ControlInput, Controller, TipForceLaw, register
+from .base import FEEDFORWARD, BindContext, ControlInput, Controller, TipForceLaw, register
 
 __all__ = ["TaskPD", "JointPD", "KP_TASK", "KD_TASK", "read_tool_axis", "read_orientation"]
 
@@ -139,6 +139,14 @@ class TaskPD(Controller):
         self.constants = (c(a), c(np.broadcast_to(config.kp, len(a))), c(np.broadcast_to(config.kd, len(a))), *tool,
                           _NO_ROTATION if config.orientation is None else c(config.orientation),
                           float(config.ko), float(config.do), float(config.kd_joint), float(config.kd_normal))
+
+    def bind(self, context: BindContext) -> None:
+        ref = context.phase.reference
+        if ref is not None and ref.space != "task":
+            from ..errors import SceneError
+
+            raise SceneError(f"phase[{context.index}].reference.space", "'task' (task_pd tracks the tip)", ref.space,
+                             context.scene.file)
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         c = contiguous
