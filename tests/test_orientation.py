@@ -157,3 +157,10 @@ def test_a_free_arm_without_gravity_settles_to_the_commanded_orientation():
     assert angle[-1] < 1e-4  # [rad]
     assert max(angle[200:]) < 1e-3  # after 2 s
     assert np.linalg.norm(result["tip"][-1] - start.translation) < 1e-5  # [m]
+
+
+def test_task_pd_with_a_joint_space_reference_is_a_scene_error():
+    doc = _b2()
+    doc["phase"][0]["reference"] = {"space": "joint", "start": [0.0] * 6}
+    with pytest.raises(SceneError, match=r"phase\[0\].reference.space: expected 'task' \(task_pd tracks the tip\)"):
+        System(parse_scene(doc))
