@@ -144,10 +144,14 @@ MEANINGS: dict[str, str] = {
     "controller.feedforward": "none; gravity: + g(q); bias: + h(q, q')",
     "controller.tool_axis": "tool direction in the tip frame to hold (none: orientation free)",
     "controller.tool_target": "world direction the tool axis is held along",
-    "controller.ko": "tool-axis hold: a stiffness (task_pd) or omega^2 of the tilt's error dynamics "
+    "controller.orientation": "the tip frame's rotation in the world to hold (task_pd), by rows; its moment is "
+                              "ko (1/2) vee(R_d R^T - R R_d^T) - do omega (none: orientation free; not with "
+                              "tool_axis)",
+    "controller.orientation[]": "one row of the rotation matrix",
+    "controller.ko": "tool-axis or orientation hold: a stiffness (task_pd) or omega^2 of the tilt's error dynamics "
                      "(operational_space)",
-    "controller.do": "tool-axis hold: a damping (task_pd) or 2 zeta omega of the tilt's error dynamics "
-                     "(operational_space)",
+    "controller.do": "tool-axis or orientation hold: a damping (task_pd) or 2 zeta omega of the tilt's error "
+                     "dynamics (operational_space)",
     "controller.kd_joint": "joint damping (damps what the task leaves free)",
     "controller.kd_normal": "damping of the tip velocity along each force set-point's direction (zero at rest)",
     "controller.u": "motor voltages, one for every joint or one per joint",
@@ -233,6 +237,7 @@ OVERRIDES: dict[str, dict[str, str]] = {
     "controller.axes": {"type": "list of 3-vectors",
                         "default": "x, y, z (task_pd); every direction orthogonal to the force set-points (hybrid, "
                                    "operational_space)"},
+    "controller.orientation": {"type": "3 x 3 rotation matrix (list of 3 rows)"},
     "controller.kp": {"type": "number or list"},
     "controller.kd": {"type": "number or list"},
     "controller.kv": {"type": "number or list"},

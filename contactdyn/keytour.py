@@ -154,6 +154,10 @@ ko = 50.0
 do = 2.0
 kd_joint = 0.1
 [[phase]]
+[phase.controller]
+kind = "task_pd"
+orientation = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]
+[[phase]]
 controller = { kind = "joint_pd", kp = 100.0, kd = 10.0, feedforward = "none" }
 reference.space = "joint"
 reference.start = [0.1, 0.2]

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from .friction import per_call_coefficient
+from .plan_operational import TASK_PD_LAW, law_in_call
 from .plan_probe import affine_map
 from .plan_rhs import make_rhs
 
@@ -61,7 +62,10 @@ class CompiledKKT:
         self.i_J = [nv * nv + 3 * nv * f for f in range(nf)]
         self.i_dr = [nv * nv + 3 * nv * nf + 3 * f for f in range(nf)]
         self.i_h = nv * nv + 3 * nv * nf + 3 * nf
-        self.with_g = self.feedforward == "gravity"  # then φ carries g(q) after h
+        #: φ carries g(q) after h: the affine task law's feedforward, or a task PD law's that the call computes
+        #: (contactdyn.plan_operational)
+        self.with_g = self.feedforward == "gravity" or (law_in_call(self.phase.controller) == TASK_PD_LAW
+                                                         and self.phase.controller.needs_gravity)
         self.i_e = self.i_h + nv * (2 if self.with_g else 1)
         P = affine_map(self._assemble, self.i_e + self.ne, columns=True)
         self.P = P
