@@ -27,7 +27,7 @@ from enum import IntEnum
 
 from .elements import ChainSpec, Mass, Stage
 from .errors import SceneError
-from .stage_laws import STAGE_LAWS
+from .stage_laws import STAGE_LAWS, kelvin_voigt
 
 __all__ = ["NodeKind", "ChainNode", "ChainStage", "Chain", "build_chain", "balanced"]
 
@@ -62,7 +62,7 @@ class ChainStage:
     def __post_init__(self) -> None:
         self._law = STAGE_LAWS[self.law]
         #: (K [N/m], B [N·s/m]) of an affine law, F = K x + B ẋ; None for another
-        self.kelvin_voigt = self._law.coefficients(self.k, self.b, self.params) if self._law.affine else None
+        self.kelvin_voigt = kelvin_voigt(self.law, self.k, self.b, self.params)
 
     @property
     def fast_path_gap(self) -> str:

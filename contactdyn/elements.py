@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .stage_laws import STAGE_LAWS
+from .stage_laws import STAGE_LAWS, kelvin_voigt
 
 __all__ = ["STAGE_LAWS", "Stage", "Mass", "Element", "ChainSpec"]
 
@@ -28,8 +28,7 @@ class Stage:
 
     def kelvin_voigt(self) -> tuple[float, float] | None:
         """(K [N/m], B [N·s/m]) when the law is affine, F = K x + B ẋ; None otherwise."""
-        law = STAGE_LAWS[self.law]
-        return law.coefficients(self.k, self.b, self.params) if law.affine else None
+        return kelvin_voigt(self.law, self.k, self.b, self.params)
 
 
 @dataclass(frozen=True)

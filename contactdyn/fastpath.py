@@ -19,7 +19,7 @@ other reason — its probes find a non-affine part, or its self-check disagrees 
 readable model — is an undeclared gap: its reason in ``Result.stats["fallback_modes"]``
 starts with ``"undeclared: "``, which the tests treat as a bug.
 
-Which path each mode of a run took (:data:`PATHS`, fastest first), and which law or part kept
+Which path each mode of a run took (:func:`path_of`), and which law or part kept
 it off the compiled ones, is in ``Result.stats["paths"]`` (:class:`PathLog`); ``contactdyn run``
 prints each such mode once.
 """
@@ -29,7 +29,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "PATHS", "path_of", "PathLog", "slower_paths"]
+__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "path_of", "PathLog", "slower_paths"]
 
 UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
 ENERGY = "energy audit (solver.record_energy)"
@@ -70,26 +70,18 @@ def mode_gap(system, modes, phase) -> str:
     return ""
 
 
-#: the paths a mode's right-hand side can run on, fastest first
-PATHS = {
-    "compiled call": "one numba call per right-hand side: the robot's terms, the law, the solve",
-    "compiled kernel": "Pinocchio's terms, then one numba call: the law and the solve",
-    "compiled plan": "the compiled map P φ and a NumPy solve per call",
-    "compiled plan, law in Python": "the compiled map, the controller's command called in Python per call",
-    "readable model": "System.evaluate per call",
-}
-
-
 def path_of(plan) -> tuple[str, str]:
-    """(path, the law or part that kept it off the compiled ones: "" when none) of a mode's plan. Which compiled
-    path runs a mode is the plan's choice by its parts' shapes (no drives and an affine tip law: the plan's map;
-    motors or the operational law: a kernel), not a law's doing."""
+    """(path, the law or part that kept it off the compiled ones: "" when none) of a mode's plan. The paths, fastest
+    first: "compiled call" (one numba call per right-hand side: the robot's terms, the law, the solve), "compiled
+    kernel" (Pinocchio's terms, then one numba call), "compiled plan" (the map P φ and a NumPy solve per call),
+    "compiled plan, law in Python" (the controller's command called per call), "readable model" (System.evaluate).
+    Which compiled path runs a mode is the plan's choice by its parts' shapes (no drives and an affine tip law: the
+    plan's map; motors or a task-space law that is not affine: a kernel), not a law's doing."""
     if not plan.ok:
         return "readable model", plan.reason
-    kernel = getattr(plan, "kernel", None)
-    if kernel is not None:
-        return ("compiled call" if getattr(kernel, "at", None) is not None else "compiled kernel"), ""
-    if getattr(plan, "python_command", False):
+    if plan.kernel is not None:
+        return ("compiled call" if getattr(plan.kernel, "at", None) is not None else "compiled kernel"), ""
+    if plan.python_command:
         kind = plan.phase.controller.config.kind
         return "compiled plan, law in Python", f"controller {kind!r} has no compiled command"
     return "compiled plan", ""

@@ -32,14 +32,15 @@ from typing import ClassVar
 
 import numpy as np
 
-from .params import Param
+from .params import Param, read_params
 
 __all__ = ["FrictionLaw", "FrictionSpec", "FRICTION_LAWS", "register_friction_law", "Coulomb", "Stribeck",
-           "MU_S", "MU_K", "VISCOUS"]
+           "MU", "MU_S", "MU_K", "VISCOUS"]
 
 MU_S = Param("mu_s", "-", "static friction coefficient (>= mu_k): a stuck contact holds while |F_f| <= mu_s F")
 MU_K = Param("mu_k", "-", "kinetic friction coefficient: a sliding contact feels mu_k F (Stribeck: when fast)")
 VISCOUS = Param("viscous", "N·s/m", "viscous friction c: F_f = -mu F d - c v", 0.0)
+MU = Param("mu", "-", "friction coefficient, static and kinetic (mu_s = mu_k = mu)")  #: Coulomb's shorthand
 
 
 @dataclass(frozen=True)
@@ -79,10 +80,14 @@ class FrictionLaw:
     @classmethod
     def read(cls, r) -> FrictionSpec:
         """The contact's ``tangent`` table: μ_s, μ_k (μ_s ≥ μ_k), viscous and the law's own parameters."""
-        mu_s, mu_k = MU_S.read(r), MU_K.read(r)
+        return cls._spec(r, MU_S.read(r), MU_K.read(r))
+
+    @classmethod
+    def _spec(cls, r, mu_s: float, mu_k: float) -> FrictionSpec:
+        """The spec from μ_s ≥ μ_k (checked), the viscous c and the law's own parameters read from ``r``."""
         if mu_s < mu_k:
             raise r.error("mu_s", f"a static coefficient >= mu_k = {mu_k}", mu_s)
-        return FrictionSpec(mu_s, mu_k, VISCOUS.read(r), cls.name, tuple(p.read(r) for p in cls.params))
+        return FrictionSpec(mu_s, mu_k, VISCOUS.read(r), cls.name, read_params(r, cls.params))
 
 
 FRICTION_LAWS: dict[str, type[FrictionLaw]] = {}  #: name -> law, the ``tangent.law`` values a scene accepts
@@ -108,15 +113,12 @@ class Coulomb(FrictionLaw):
     @classmethod
     def read(cls, r) -> FrictionSpec:
         """``mu`` (μ_s = μ_k), or ``mu_s`` and ``mu_k`` (either defaults to ``mu``; μ_s to μ_k)."""
-        mu = Param("mu", "-", "friction coefficient, static and kinetic (mu_s = mu_k = mu)")
-        got = {p.name: p.read(r) if r.has(p.name) else None for p in (mu, MU_K, MU_S)}
+        got = {p.name: p.read(r) if r.has(p.name) else None for p in (MU, MU_K, MU_S)}
         if got["mu"] is None and got["mu_k"] is None:
             raise r.error("mu", "a friction coefficient (mu, or mu_s and mu_k)", None)
         mu_k = got["mu_k"] if got["mu_k"] is not None else got["mu"]
         mu_s = got["mu_s"] if got["mu_s"] is not None else (got["mu"] if got["mu"] is not None else mu_k)
-        if mu_s < mu_k:
-            raise r.error("mu_s", f"a static coefficient >= mu_k = {mu_k}", mu_s)
-        return FrictionSpec(mu_s, mu_k, VISCOUS.read(r), cls.name)
+        return cls._spec(r, mu_s, mu_k)
 
 
 @register_friction_law

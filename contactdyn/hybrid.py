@@ -125,13 +125,13 @@ class HybridRun:
         model (:meth:`ModePlan.check_at`)."""
         key = (structure(modes), id(phase))
         plan = self.plans.get(key)
-        if plan is None:
+        first = plan is None
+        if first:
             with compiling("the fast path of this scene's contact modes"):
                 plan = self.plans[key] = cached_plan(self.system, modes, phase)
-            plan.use(modes)
-            if at is not None:
-                plan.check_at(*at)
         plan.use(modes)  # a turn's new reference direction r: data of the same plan
+        if first and at is not None:
+            plan.check_at(*at)
         if count:
             self.paths.record(self.system, modes, phase, plan)
             if not plan.ok:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from .config import Reader
 
-__all__ = ["Param", "read_params", "example_values"]
+__all__ = ["Param", "read_params"]
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,3 @@ def read_params(r: Reader, params: tuple[Param, ...]) -> tuple[float, ...]:
     """The declared parameters' values, in declaration order."""
     return tuple(p.read(r) for p in params)
 
-
-def example_values(params: tuple[Param, ...]) -> dict[str, float]:
-    """A valid value of each parameter, by name."""
-    return {p.name: p.sample() for p in params}

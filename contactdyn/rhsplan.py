@@ -149,6 +149,8 @@ class ModePlan(ProbedModel, CompiledKKT):
         return np.linalg.lstsq(A, b, rcond=1e-12)[0]
 
     singular = 0  #: calls that needed the least-squares fallback
+    kernel = None  #: the call's compiled kernel, if it has one (set by plan_rhs.make_rhs)
+    python_command = False  #: the controller's command is called in Python per call (plan_rhs.controller_call)
 
     @property
     def last(self) -> tuple:

@@ -119,7 +119,7 @@ def plan_samples(plan, ts: np.ndarray, X: np.ndarray) -> Samples:
     S = Samples(N, plan.system)
     if N == 0:
         return S
-    solved = _kernel_samples(plan, ts, X) if getattr(plan, "kernel", None) is not None else None
+    solved = _kernel_samples(plan, ts, X) if plan.kernel is not None else None
     if solved is None:
         folds = getattr(plan, "folded_detail", None) is not None  # the call folds the command into its solve
         solved = (_solve_folded_samples if folds else _solve_samples)(plan, ts, X)

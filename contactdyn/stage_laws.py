@@ -28,7 +28,7 @@ from typing import ClassVar
 
 from .params import Param
 
-__all__ = ["StageLaw", "STAGE_LAWS", "register_stage_law", "stage_law", "Linear", "HuntCrossley"]
+__all__ = ["StageLaw", "STAGE_LAWS", "register_stage_law", "kelvin_voigt", "Linear", "HuntCrossley"]
 
 
 class StageLaw:
@@ -69,9 +69,11 @@ def register_stage_law(cls: type[StageLaw]) -> type[StageLaw]:
     return cls
 
 
-def stage_law(name: str) -> type[StageLaw]:
-    """The registered law of that name."""
-    return STAGE_LAWS[name]
+def kelvin_voigt(law: str, k: float, b: float, p: tuple[float, ...]) -> tuple[float, float] | None:
+    """(K [N/m], B [N·s/m]) of a stage under the registered law ``law`` when it is affine, F = K x + B ẋ; None
+    otherwise."""
+    cls = STAGE_LAWS[law]
+    return cls.coefficients(k, b, p) if cls.affine else None
 
 
 @register_stage_law

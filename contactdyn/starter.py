@@ -174,9 +174,10 @@ def _align(text: str, column: int = 40) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _declared(params) -> str:
-    """A law's declared parameters as scene lines under ``normal.`` / ``tangent.``, with units and meanings."""
-    return "".join(f"{{prefix}}{p.name} = {_num(p.sample())}  # [{p.unit}] {p.meaning}\n" for p in params)
+def _declared(params, prefix: str) -> str:
+    """A law's declared parameters as scene lines under ``prefix`` (``normal.``, ``tangent.``), with units and
+    meanings."""
+    return "".join(f"{prefix}{p.name} = {_num(p.sample())}  # [{p.unit}] {p.meaning}\n" for p in params)
 
 
 def _normal(contact: str, law: str | None) -> str:
@@ -189,7 +190,7 @@ def _normal(contact: str, law: str | None) -> str:
         raise SceneError("--law", f"a registered stage law ({', '.join(STAGE_LAWS)}; yours with --imports) on "
                          "contact model a, b or c", law if contact != "rigid" else f"{law} on a rigid contact")
     lines = f'normal.law = "{law}"                   # the stages\' force law (contactdyn.stage_laws)\n'
-    return CONTACT_MODELS[contact] + lines + _declared(STAGE_LAWS[law].params).format(prefix="normal.")
+    return CONTACT_MODELS[contact] + lines + _declared(STAGE_LAWS[law].params, "normal.")
 
 
 def _tangent(friction: bool, friction_law: str | None, t: np.ndarray) -> str:
@@ -207,7 +208,7 @@ def _tangent(friction: bool, friction_law: str | None, t: np.ndarray) -> str:
     return (head + f'tangent.law = "{friction_law}"\n'
             "tangent.mu_s = 0.35                     # static coefficient (the cone)\n"
             "tangent.mu_k = 0.3                      # kinetic coefficient\n"
-            + _declared(FRICTION_LAWS[friction_law].params).format(prefix="tangent."))
+            + _declared(FRICTION_LAWS[friction_law].params, "tangent."))
 
 
 def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", friction: bool = False,

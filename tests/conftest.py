@@ -16,3 +16,25 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+@pytest.fixture
+def doubled_law():
+    """An affine stage law twice as stiff and twice as damped as its k and b say, registered as ``doubled`` for
+    the test (F = 2k x + 2b ẋ: coefficients (2k, 2b))."""
+    from contactdyn.stage_laws import STAGE_LAWS, StageLaw, register_stage_law
+
+    class Doubled(StageLaw):
+        name, affine = "doubled", True
+
+        @staticmethod
+        def force(k, b, p, x, xdot):
+            return 2.0 * k * x + 2.0 * b * xdot
+
+        @staticmethod
+        def coefficients(k, b, p):
+            return 2.0 * k, 2.0 * b
+
+    register_stage_law(Doubled)
+    yield Doubled.name
+    STAGE_LAWS.pop(Doubled.name, None)

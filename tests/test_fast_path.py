@@ -13,7 +13,6 @@ from contactdyn.fastpath import ENERGY, UNDECLARED, Gap
 from contactdyn.rhsplan import _PLANS
 from contactdyn.scene import sims_dir
 from contactdyn.simulate import run_system
-from contactdyn.stage_laws import STAGE_LAWS, StageLaw, register_stage_law
 from contactdyn.system import System
 
 HARD = Path(__file__).resolve().parent.parent / "benchmarks" / "hard"
@@ -72,24 +71,9 @@ def test_a_part_that_claims_to_compile_but_does_not_is_reported_as_undeclared(mo
         _assert_only_declared_fallbacks(r)
 
 
-def test_a_new_affine_stage_law_is_compiled_by_construction():
-    class Doubled(StageLaw):  # a stage twice as stiff and twice as damped as its k and b say
-        name, affine = "doubled", True
-
-        @staticmethod
-        def force(k, b, p, x, xdot):
-            return 2.0 * k * x + 2.0 * b * xdot
-
-        @staticmethod
-        def coefficients(k, b, p):
-            return 2.0 * k, 2.0 * b
-
-    register_stage_law(Doubled)
-    try:
-        k, b = 5e4, 1500.0  # [N/m], [N·s/m]
-        doubled = simulate(axis_scene({"model": "chain", "environment": [{"k": k, "b": b, "law": "doubled"}]}, 0.05))
-    finally:
-        del STAGE_LAWS["doubled"]
+def test_a_new_affine_stage_law_is_compiled_by_construction(doubled_law):
+    k, b = 5e4, 1500.0  # [N/m], [N·s/m]
+    doubled = simulate(axis_scene({"model": "chain", "environment": [{"k": k, "b": b, "law": doubled_law}]}, 0.05))
     linear = simulate(axis_scene({"model": "chain", "environment": [{"k": 2 * k, "b": 2 * b}]}, 0.05))
     assert doubled.stats["fast_path_gaps"] == [] and not doubled.stats["fallback_modes"]
     assert doubled.stats["compiled_modes"] == linear.stats["compiled_modes"] >= 2  # approach, then touching

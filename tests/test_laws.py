@@ -107,26 +107,12 @@ def test_the_committed_key_reference_has_no_user_law():
     assert "k3" not in markdown()
 
 
-def test_an_affine_law_is_used_by_its_coefficients_at_a_massless_junction():
+def test_an_affine_law_is_used_by_its_coefficients_at_a_massless_junction(doubled_law):
     """Two stages in series with a massless junction between: allowed for an affine law, and the junction sits
     where the springs of its coefficients (K = 2k), not its k, balance."""
-    from contactdyn.stage_laws import StageLaw, register_stage_law
-
-    @register_stage_law
-    class Doubled(StageLaw):
-        name, affine = "doubled_j", True
-
-        @staticmethod
-        def force(k, b, p, x, xdot):
-            return 2.0 * k * x + 2.0 * b * xdot
-
-        @staticmethod
-        def coefficients(k, b, p):
-            return 2.0 * k, 2.0 * b
-
     doc = tomllib.loads(CUBIC.read_text())
     normal = {"direction": [0.0, 1.0, 0.0], "model": "chain", "environment": [
-        {"k": 1e5, "b": 300.0, "law": "doubled_j"}, {"k": 5e4, "b": 150.0, "law": "doubled_j"}]}
+        {"k": 1e5, "b": 300.0, "law": doubled_law}, {"k": 5e4, "b": 150.0, "law": doubled_law}]}
     twin = copy.deepcopy(doc)
     doc["contact"]["tip"]["normal"] = normal
     twin["contact"]["tip"]["normal"] = {**normal, "environment": [{"k": 2e5, "b": 600.0}, {"k": 1e5, "b": 300.0}]}
