@@ -151,7 +151,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
     sections = [args.what] if args.what else list(LIST_SECTIONS)
     catalog = _catalog(sections)
     if args.json:
-        _emit_json({s: catalog[s] for s in sections})
+        _emit_json(catalog)
         return EXIT_OK
     for s in sections:
         print(f"{s}:")

@@ -44,7 +44,7 @@ from .rhsplan import ModePlan
 from .system import System
 
 __all__ = ["TOUCH_TOL", "terminal_event", "EvaluationCache", "SlipCache", "SlipWatch", "StepBudget", "StepCollapse",
-           "segment_events", "fired_across", "EventLog", "start_storm_cause"]
+           "WorkWatch", "segment_events", "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
 #: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
@@ -217,6 +217,25 @@ class _StepCount:
                     self.t_fire = t
             self.t_end = t
         return -1.0 if t >= self.t_fire else 1.0
+
+
+class WorkWatch(_StepCount):
+    """The run's step budget (:mod:`contactdyn.progress`): a terminal event at the step end where the run's steps
+    reach ``left``; reports the simulated time to ``progress`` at each step end."""
+
+    kind = "work"
+
+    def __init__(self, left: int, progress=None):
+        super().__init__(max(left, 1))
+        self.progress = progress
+
+    def counts(self, h: float) -> bool:
+        return h != math.inf  # not the call at t0
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        if t > self.t_end and self.t_end != -math.inf and self.progress is not None:
+            self.progress(t)
+        return super().__call__(t, x)
 
 
 class StepBudget(_StepCount):

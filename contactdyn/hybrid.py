@@ -38,8 +38,8 @@ import numpy as np
 
 from .channels import Held, Segment, output_grid, sample_states
 from .contact import ContactMode
-from .errors import SceneError, SimulationError
-from .events import EventLog, StepBudget, StepCollapse, fired_across, segment_events
+from .errors import SceneError, SimulationError, numerical_errors
+from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
 from .fastpath import PathLog
 from .integrators import (
     AUTO_EXPLICIT,
@@ -57,7 +57,7 @@ from .limits import rate_limit_report
 from .notice import compiling
 from .phases import Phase
 from .physics_checks import StartAudit, run_checks, violations
-from .progress import CALLS_PER_STEP, STEPS_BASE, OverBudget, Progress, Work, WorkWatch, step_budget
+from .progress import CALLS_PER_STEP, STEPS_BASE, OverBudget, Progress, Work, step_budget
 from .result import Result
 from .rhsplan import ModePlan, cached_plan, structure
 from .system import System
@@ -151,13 +151,23 @@ class HybridRun:
         try:
             return self._run(wall0)
         except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
-            t, x = self.work.last if self.work.last is not None else (0.0, self.start()[0])
-            raise SimulationError(self._over_budget(float(t), np.array(x, float), calls=True)) from None
-        except (np.linalg.LinAlgError, FloatingPointError, OverflowError, ZeroDivisionError) as exc:
+            raise SimulationError(self._over_budget(*self._spent_at(), calls=True)) from None
+        except (*numerical_errors(), ZeroDivisionError) as exc:
             t = self.segments[-1].t1 if self.segments else 0.0
             raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
                                   f"({type(exc).__name__}: {exc}); check the scene's magnitudes "
                                   "(initial velocities, gains, stiffness)") from None
+
+    def _spent_at(self) -> tuple[float, np.ndarray]:
+        """(t [s], x) where the calls' budget was spent: the counted call's, else (a compiled step counts no state)
+        the last finished segment's end, else the start."""
+        if self.work.last is not None:
+            t, x = self.work.last
+            return float(t), np.array(x, float)
+        if self.segments:
+            last = self.segments[-1]
+            return last.t1, np.asarray(last.sol(last.t1), float)
+        return 0.0, self.start()[0]
 
     def _run(self, wall0: float) -> Result:
         T = self.scene.duration

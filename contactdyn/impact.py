@@ -38,7 +38,7 @@ import numpy as np
 
 from .constraints import impulse_solve, velocity_rows
 from .contact import Contact, ContactMode
-from .friction import CONE_TOL, FORCE_ABS_TOL, direction_of, slip_velocity
+from .friction import direction_of, in_cone, slip_velocity
 
 __all__ = ["Impact", "impact", "limit_impact", "project_velocity"]
 
@@ -137,8 +137,7 @@ def _own_contact(system, contact, kin, vt_minus, solve):
         jammed = float(slip_velocity(system, contact, kin, qd_plus) @ d) < 0.0
     if jammed:
         qd_plus, P_n, P_t = solve(jam=True)
-        if float(np.linalg.norm(P_t)) > fr.mu_s * P_n * (1.0 + CONE_TOL) + FORCE_ABS_TOL:
-            # holding needs more than the cone gives: slide where the impulse pushes
+        if not in_cone(P_t, P_n, fr.mu_s):  # holding needs more than the cone gives: slide where the impulse pushes
             d = -P_t / float(np.linalg.norm(P_t))
             mu = float(fr.mu(0.0))  # sliding from rest
             qd_plus, P_n, _ = solve(slide=(d, mu))
@@ -155,8 +154,7 @@ def _sticks_outside_the_cone(system, held, contact, impulses) -> list[tuple[int,
         if c is contact or not m.touching or not m.stuck:
             continue
         P_t = np.array([impulses.get((c.name, "t", i), 0.0) for i in range(len(c.tangents))])
-        P_n = max(impulses.get((c.name, "n", 0), 0.0), 0.0)
-        if float(np.linalg.norm(P_t)) > c.friction.mu_s * P_n * (1.0 + CONE_TOL) + FORCE_ABS_TOL:
+        if not in_cone(P_t, impulses.get((c.name, "n", 0), 0.0), c.friction.mu_s):
             out.append((j, -P_t))
     return out
 

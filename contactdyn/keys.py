@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from .config import MISSING, VARIANT_KEYS, KeyRead, recording
+from .progress import STEPS_BASE
 
 __all__ = ["KeyDoc", "reference", "markdown", "text", "list_keys", "table_field_map", "write_generated",
            "MEANINGS"]
@@ -203,8 +204,8 @@ MEANINGS: dict[str, str] = {
     "solver.output_rate": "sample rate of the result's channels",
     "solver.record_energy": "integrate drive work and damper dissipation (energy.* channels)",
     "solver.max_events": "most events in a run before it stops (event storm guard)",
-    "solver.steps_per_second": "integration steps a run may take per simulated second, besides a base of 2e4 "
-                               "(beyond, it stops naming the cause)",
+    "solver.steps_per_second": f"integration steps a run may take per simulated second, besides a base of "
+                               f"{STEPS_BASE:g} (beyond, it stops naming the cause)",
     "solver.storm_window": "events closer than this count towards a storm",
     "solver.storm_count": "that many events inside the window stop the run",
     "solver.stabilization": "Baumgarte rate of bonds, rigid contacts and sticks (0: none)",

@@ -23,6 +23,10 @@ _said = threading.Event()  #: the line was printed in this process
 @contextmanager
 def compiling(what: str) -> Iterator[None]:
     """Announce ``what`` once if the block runs longer than NOTICE_AFTER seconds."""
+    if _said.is_set():  # said once in this process: no timer
+        yield
+        return
+
     def say() -> None:
         if not _said.is_set():
             _said.set()

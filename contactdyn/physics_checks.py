@@ -61,6 +61,7 @@ UNITS = {name: unit for name, (unit, _) in CHECKS.items()}
 #: error is about rtol; a slip or separation is located where the interpolant crosses, within its error)
 FORCE_PER_RTOL = 1e3
 FORCE_FLOOR = 1e-9  #: [-] relative slack of the force checks at any rtol (the solves' round-off)
+SPEED_FLOOR = 1e-3  #: [m/s] the slip speed that scales the dissipation check at least
 DRIFT_PER_ATOL = 1e3  #: [-] slack of the drift checks (gap [m], stick speed [m/s]) per unit of atol
 
 
@@ -122,11 +123,12 @@ def tolerances(system: System, channels: dict[str, np.ndarray], impacts: list[di
     forces, on the scale of the contact's largest normal impulse (at least 1e-6 N·s)."""
     solver = system.scene.solver
     out: dict[str, dict[str, float]] = {}
+    relative = FORCE_FLOOR + FORCE_PER_RTOL * solver.rtol  # [-] slack of a force per unit of its scale
     for c in system.contacts:
         F = max(1.0, float(np.max(np.abs(channels[f"contact.{c.name}.F_n"]), initial=0.0)))
-        force = F * (FORCE_FLOOR + FORCE_PER_RTOL * solver.rtol)
+        force = F * relative
         slip = channels.get(f"contact.{c.name}.v_slip")
-        speed = max(1e-3, float(np.max(np.abs(slip), initial=0.0))) if slip is not None else 1e-3
+        speed = max(SPEED_FLOOR, float(np.max(np.abs(slip), initial=0.0))) if slip is not None else SPEED_FLOOR
         drift = DRIFT_PER_ATOL * solver.atol
         hits = [imp for imp in impacts if imp["contact"] == c.name]
         P = max([1e-6] + [abs(imp["normal_impulse"]) for imp in hits])  # [N·s] the impulse scale
@@ -134,7 +136,7 @@ def tolerances(system: System, channels: dict[str, np.ndarray], impacts: list[di
                        "pull": force, "penetration": drift, "complementarity": drift * F, "drift": drift,
                        "stick_speed": drift,
                        # + the impact's own slack of its cone test (FORCE_ABS_TOL, read in N·s there)
-                       "impulse_excess": P * (FORCE_FLOOR + FORCE_PER_RTOL * solver.rtol) + FORCE_ABS_TOL}
+                       "impulse_excess": P * relative + FORCE_ABS_TOL}
     return out
 
 

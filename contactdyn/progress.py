@@ -1,8 +1,8 @@
 """A long run says how far it is, and no run works without bound.
 
-:class:`WorkWatch` is a terminal event of every integration segment (the step-counting
-events of :mod:`contactdyn.events`): it fires when the run's integration steps exceed its
-budget, ``STEPS_BASE + solver.steps_per_second × duration`` (a stiff or mis-set scene, such
+:class:`~contactdyn.events.WorkWatch` is a terminal event of every integration segment (a
+step-counting event of :mod:`contactdyn.events`): it fires when the run's integration steps
+exceed its budget, ``STEPS_BASE + solver.steps_per_second × duration`` (a stiff or mis-set scene, such
 as ``solver.stabilization = 1e9``, stops there with a message naming the cause instead of
 running for hours); :class:`Work` bounds the right-hand-side calls the same way
 (CALLS_PER_STEP per budgeted step: rejected attempts count too), and, when a
@@ -17,8 +17,9 @@ import math
 import sys
 import time
 
-__all__ = ["STEPS_BASE", "CALLS_PER_STEP", "Progress", "WorkWatch", "Work", "OverBudget", "step_budget"]
+__all__ = ["STEPS_BASE", "CALLS_PER_STEP", "Progress", "Work", "OverBudget", "step_budget"]
 
+STEP_STAGES = 12  #: right-hand-side calls of one compiled DOP853 step (its stages)
 STEPS_BASE = 20_000  #: integration steps every run may take, besides steps_per_second × duration
 SHOW_AFTER = 2.0  #: [s] of wall time before progress is shown
 REDRAW = 0.5  #: [s] between redraws of the bar on a terminal
@@ -65,31 +66,6 @@ class Progress:
             self.stream.flush()
 
 
-class WorkWatch:
-    """A terminal event (kind ``work``) at the step end where the run's steps reach ``left``; reports progress."""
-
-    terminal = True
-    direction = -1
-    contact = ""
-    kind = "work"
-
-    def __init__(self, left: int, progress: Progress | None = None):
-        self.left, self.progress = left, progress
-        self.t_end, self.t_fire = -math.inf, math.inf
-
-    def __call__(self, t: float, x) -> float:
-        if t > self.t_end:  # a step end (solve_ivp calls events at step ends in increasing t; first at t0)
-            first, self.t_end = self.t_end == -math.inf, t
-            if first:
-                return 1.0
-            self.left -= 1
-            if self.left <= 0 and self.t_fire == math.inf:
-                self.t_fire = t
-            if self.progress is not None:
-                self.progress(t)
-        return -1.0 if t >= self.t_fire else 1.0
-
-
 class OverBudget(Exception):
     """The run's right-hand-side calls reached their budget (raised from inside the integration)."""
 
@@ -104,20 +80,26 @@ class Work:
     def count(self, n: int, t: float = math.nan, y=None) -> None:
         self.calls += n
         if self.calls > self.limit:
-            self.limit = math.inf  # spent: what reports it (and samples the run) is not counted again
-            self.last = (t, y) if y is not None else None
-            raise OverBudget
+            self._spent(t, y)
+
+    def _spent(self, t: float, y) -> None:
+        self.limit = math.inf  # spent: what reports it (and samples the run) is not counted again
+        self.last = (t, y) if y is not None else None
+        raise OverBudget
 
     def wrap(self, fun):
-        """``fun`` counted; its compiled ``step`` (contactdyn.plan_steps), if any, counted as 12 calls."""
+        """``fun`` counted; its compiled ``step`` (contactdyn.plan_steps), if any, counted as its STEP_STAGES
+        calls."""
         def counted(t, y):
-            self.count(1, t, y)
+            self.calls += 1  # (count() inline: this wraps every right-hand-side call)
+            if self.calls > self.limit:
+                self._spent(t, y)
             return fun(t, y)
 
         step = getattr(fun, "step", None)
         if step is not None:
             def counted_step(*args, **kwargs):
-                self.count(12)
+                self.count(STEP_STAGES)
                 return step(*args, **kwargs)
 
             counted_step.usable = step.usable

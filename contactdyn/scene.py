@@ -129,7 +129,7 @@ class SolverSpec:
     output_rate: float = 1000.0  #: [Hz] samples in the Result
     record_energy: bool = False  #: integrate drive work and damper dissipation
     max_events: int = 10000  #: guard against event storms (whole run)
-    #: integration steps a run may take per simulated second (contactdyn.progress: plus a base of 2e4)
+    #: integration steps a run may take per simulated second (contactdyn.progress: plus STEPS_BASE)
     steps_per_second: float = 20_000.0
     storm_window: float = 1e-9  #: [s] events closer than this count towards a storm
     storm_count: int = 50  #: that many events inside the window stop the run

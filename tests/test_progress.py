@@ -6,6 +6,7 @@ import io
 
 import pytest
 
+import contactdyn.events
 import contactdyn.hybrid
 import contactdyn.progress as progress
 from contactdyn import SimulationError, simulate
@@ -32,7 +33,7 @@ def test_steps_that_keep_failing_are_bounded_by_the_calls(monkeypatch):
 
 
 def progress_watch(left: int):
-    return progress.WorkWatch(left)
+    return contactdyn.events.WorkWatch(left)
 
 
 def test_the_budget_is_the_base_plus_the_rate_times_the_duration():
