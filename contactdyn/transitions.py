@@ -178,9 +178,7 @@ class Transitions:
             moving = np.linalg.norm(imp.slip_after) > system.slip_band
             slip = imp.slip_after if moving else imp.direction
             if modes[i].stuck:  # a stick the impact could not hold (a limit's impact): it slides from here
-                modes[i] = modes[i].with_(stuck=False, slip=direction_of(slip), from_rest=not moving)
-                self.log.log(imp.t, "slip", c.name)
-                after.released.add(i)
+                self._slide_from(imp.t, i, direction_of(slip), not moving, modes, after)
             elif np.any(slip):
                 modes[i] = modes[i].with_(slip=direction_of(slip))
 
@@ -188,10 +186,14 @@ class Transitions:
         """The sticks the impact could not hold (their impulse left the cone) slide from it on, logged as slips
         (and not stuck again at the same instant)."""
         for name, d in imp.released.items():
-            i = self._index(name)
-            modes[i] = modes[i].with_(stuck=False, slip=d, from_rest=True)
-            self.log.log(imp.t, "slip", name)
-            after.released.add(i)
+            self._slide_from(imp.t, self._index(name), d, True, modes, after)
+
+    def _slide_from(self, t: float, i: int, d: tuple[float, ...], from_rest: bool, modes, after: _After) -> None:
+        """Contact i, stuck until an impact at t [s], slides along d from it on: logged as a slip, and not stuck
+        again at the same instant."""
+        modes[i] = modes[i].with_(stuck=False, slip=d, from_rest=from_rest)
+        self.log.log(t, "slip", self.system.contacts[i].name)
+        after.released.add(i)
 
     #: event kind -> handler (see :meth:`handle`)
     HANDLERS = {"limit": _on_limit, "release": _on_limit,
