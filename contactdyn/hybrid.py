@@ -151,23 +151,12 @@ class HybridRun:
         try:
             return self._run(wall0)
         except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
-            raise SimulationError(self._over_budget(*self._spent_at(), calls=True)) from None
+            raise SimulationError(self._over_budget(*_spent_at(self), calls=True)) from None
         except (*numerical_errors(), ZeroDivisionError) as exc:
             t = self.segments[-1].t1 if self.segments else 0.0
             raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
                                   f"({type(exc).__name__}: {exc}); check the scene's magnitudes "
                                   "(initial velocities, gains, stiffness)") from None
-
-    def _spent_at(self) -> tuple[float, np.ndarray]:
-        """(t [s], x) where the calls' budget was spent: the counted call's, else (a compiled step counts no state)
-        the last finished segment's end, else the start."""
-        if self.work.last is not None:
-            t, x = self.work.last
-            return float(t), np.array(x, float)
-        if self.segments:
-            last = self.segments[-1]
-            return last.t1, np.asarray(last.sol(last.t1), float)
-        return 0.0, self.start()[0]
 
     def _run(self, wall0: float) -> Result:
         T = self.scene.duration
@@ -394,6 +383,18 @@ class HybridRun:
                 "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
                 "scene_file": str(Path(scene.file).resolve()) if scene.file else None}  # (where it came from)
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
+    """(t [s], x) where a run's calls' budget was spent: the counted call's, else (a compiled step counts no state)
+    the last finished segment's end, else the start."""
+    if run.work.last is not None:
+        t, x = run.work.last
+        return float(t), np.array(x, float)
+    if run.segments:
+        last = run.segments[-1]
+        return last.t1, np.asarray(last.sol(last.t1), float)
+    return 0.0, run.start()[0]
 
 
 def _sliding_2d(modes: list[ContactMode]) -> bool:
