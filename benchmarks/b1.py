@@ -27,9 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import b1_reference  # noqa: E402
 
-from contactdyn.scene import load_scene, parse_override  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.scene.scene_file import load_scene, parse_override  # noqa: E402
 from contactdyn.simulate import run_system, simulate  # noqa: E402
-from contactdyn.system import System  # noqa: E402
 
 
 def run_b1(overrides: dict | None = None, repeats: int = 5) -> dict:

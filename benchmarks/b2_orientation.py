@@ -9,8 +9,8 @@ B2's 1e-8 / 1e-10), three variants run interleaved in this process (every varian
 * ``before``: the law called from Python per right-hand side (the plan's generic call, the tip's R and J_ω from
   Pinocchio) with cd36de1's numpy ``TaskPD.command`` (:func:`_command_cd36de1`, kept verbatim here): the code
   B2.md profiled (the full orientation did not exist there: that scene has no ``before``);
-* ``python``: the same Python path with today's ``TaskPD.command`` (contactdyn.controllers.task_pd_law);
-* ``compiled``: the plan's compiled call (contactdyn.plan_operational with the task PD law; the DOP853 step in
+* ``python``: the same Python path with today's ``TaskPD.command`` (contactdyn.laws.controllers.task_pd_law);
+* ``compiled``: the plan's compiled call (contactdyn.compiled.plan_operational with the task PD law; the DOP853 step in
   one compiled call).
 
 The first two are made by switching ``plan_operational.law_in_call`` off for task_pd (monkeypatched). Each run is
@@ -36,10 +36,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn import plan_kkt, plan_operational  # noqa: E402
-from contactdyn.controllers.pd import TaskPD, _feedforward  # noqa: E402
-from contactdyn.scene import parse_scene  # noqa: E402
+from contactdyn.laws.controllers.pd import TaskPD, _feedforward  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.scene.scene_file import parse_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
-from contactdyn.system import System  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "out" / "b2_orientation.json"

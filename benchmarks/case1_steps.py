@@ -24,9 +24,9 @@ from scenes import CHECK, REFERENCE, errors
 from timing import interleaved, write_report
 
 from contactdyn import simulate
-from contactdyn.integrators import jacobian_eigenvalues
-from contactdyn.rhsplan import ModePlan
-from contactdyn.scene import load_scene
+from contactdyn.compiled.rhsplan import ModePlan
+from contactdyn.numerics.integrators import jacobian_eigenvalues
+from contactdyn.scene.scene_file import load_scene
 
 SCENE = "case1_cart"
 OUT = Path(__file__).parent / "out" / "case1_steps.json"

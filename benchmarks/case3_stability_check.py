@@ -13,7 +13,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from contactdyn.stability import ContactLoop, contact_force_error, contact_phase_scene, envelope_rate, modal_rate
+from contactdyn.analysis.stability import (
+    ContactLoop,
+    contact_force_error,
+    contact_phase_scene,
+    envelope_rate,
+    modal_rate,
+)
 
 OUT = Path(__file__).resolve().parent / "out" / "case3_stability_check.json"
 SOLVER = {"solver.rtol": 1e-9, "solver.atol": 1e-11, "solver.output_rate": 1000.0}

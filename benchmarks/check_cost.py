@@ -1,10 +1,10 @@
-"""Cost of a run's physics checks (contactdyn.physics_checks): whole runs with and without them.
+"""Cost of a run's physics checks (contactdyn.output.physics_checks): whole runs with and without them.
 
     PYTHONPATH=. python3 benchmarks/check_cost.py [SCENE ...] [--repeats 7] [--out FILE.json]
 
 Per scene, after one untimed run (compiled code loaded), the whole ``simulate`` is timed
 interleaved in one process: as shipped, and with the checks switched off (the segment-start
-audit and :func:`~contactdyn.physics_checks.run_checks` replaced by no-ops). CPU medians over
+audit and :func:`~contactdyn.output.physics_checks.run_checks` replaced by no-ops). CPU medians over
 the repeats, their ratio, and the checks' own CPU time inside the checked runs (the audit and
 ``run_checks`` timed where they are called) as a share of the run: on a noisy machine the
 ratio of two whole runs scatters by several per cent, the share inside one run does not.
@@ -25,10 +25,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scene_cost import report  # noqa: E402
 from timing import interleaved  # noqa: E402
 
-import contactdyn.hybrid as hybrid  # noqa: E402
+import contactdyn.hybrid.loop as hybrid  # noqa: E402
 from contactdyn import simulate  # noqa: E402
-from contactdyn.physics_checks import StartAudit  # noqa: E402
-from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.output.physics_checks import StartAudit  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
 
 SCENES = ["b1", "case1_cart", "case2_writer5dof", "case2_writer_ur5", "case2_writer_b", "case2_writer_motors",
           "case3_a_force", "case3_b_force", "energy_b1"]

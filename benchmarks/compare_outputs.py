@@ -28,10 +28,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
 
-from contactdyn.result import jsonable  # noqa: E402
-from contactdyn.scene import load_scene, sims_dir  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.output.result import jsonable  # noqa: E402
+from contactdyn.scene.scene_file import load_scene, sims_dir  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
-from contactdyn.system import System  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 EXTRA = {  # the settings benchmarks/hard_cases.py runs beyond the scenes' own

@@ -30,8 +30,8 @@ import scenes  # noqa: E402
 from timing import interleaved  # noqa: E402
 
 from contactdyn import simulate  # noqa: E402
-from contactdyn.hybrid import HybridRun  # noqa: E402
-from contactdyn.scene import load_scene, sims_dir  # noqa: E402
+from contactdyn.hybrid.loop import HybridRun  # noqa: E402
+from contactdyn.scene.scene_file import load_scene, sims_dir  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
 

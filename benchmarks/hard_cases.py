@@ -25,12 +25,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 from timing import interleaved  # noqa: E402
 
+from contactdyn.analysis.workprecision import errors  # noqa: E402
 from contactdyn.errors import ContactdynError  # noqa: E402
-from contactdyn.result import Result  # noqa: E402
-from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.output.result import Result  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
-from contactdyn.system import System  # noqa: E402
-from contactdyn.workprecision import errors  # noqa: E402
 
 HARD = Path(__file__).resolve().parent / "hard"
 RIGID = {"contact.tip.normal": {"direction": [0.0, 1.0, 0.0], "model": "rigid"}}

@@ -34,9 +34,9 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from timing import interleaved  # noqa: E402
 
-import contactdyn.urdf_check as urdf_check  # noqa: E402
-from contactdyn.robot import Robot, urdf_dir  # noqa: E402
-from contactdyn.scene import load_scene, sims_dir  # noqa: E402
+import contactdyn.robot.urdf_check as urdf_check  # noqa: E402
+from contactdyn.robot.robot import Robot, urdf_dir  # noqa: E402
+from contactdyn.scene.scene_file import load_scene, sims_dir  # noqa: E402
 
 OUT = ROOT / "benchmarks" / "out" / "hardening_cost.json"
 

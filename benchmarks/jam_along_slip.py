@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from contactdyn.posture import PostureTask, solve_posture
-from contactdyn.robot import Robot
+from contactdyn.robot.posture import PostureTask, solve_posture
+from contactdyn.robot.robot import Robot
 
 MU = 0.4  # sec. 5.2
 M_E = 10.0  # [kg] sec. 5.2

@@ -28,9 +28,9 @@ import motor_fastpath  # noqa: E402
 from motor_fastpath import force_error  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
-from contactdyn.fastpath import Gap  # noqa: E402
-from contactdyn.friction import launching  # noqa: E402
-from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.model.friction import launching  # noqa: E402
+from contactdyn.model.paths import Gap  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
 
 SCENES = ["case2_writer5dof", "case2_writer_ur5"]
 #: the gap this branch removed: a mode with a 2-D slide launching from rest runs on System.evaluate

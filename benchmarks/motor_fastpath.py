@@ -23,10 +23,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
-from contactdyn.fastpath import Gap  # noqa: E402
-from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.model.paths import Gap  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
-from contactdyn.system import System  # noqa: E402
 
 SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
           "case3_b_force", "case3_b_force_varied"]

@@ -28,13 +28,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from timing import interleaved  # noqa: E402
 
-from contactdyn.controllers import ControlInput  # noqa: E402
-from contactdyn.phases import reference_at  # noqa: E402
-from contactdyn.rhsplan import ModePlan  # noqa: E402
-from contactdyn.robot_catalog import TOOL_FRAMES  # noqa: E402
-from contactdyn.scene import parse_scene, sims_dir  # noqa: E402
+from contactdyn.compiled.rhsplan import ModePlan  # noqa: E402
+from contactdyn.laws.controllers import ControlInput  # noqa: E402
+from contactdyn.model.phases import reference_at  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.robot.catalog import TOOL_FRAMES  # noqa: E402
+from contactdyn.scene.scene_file import parse_scene, sims_dir  # noqa: E402
 from contactdyn.simulate import prepare, run_system  # noqa: E402
-from contactdyn.system import System  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
 BATCHES = 41

@@ -3,8 +3,8 @@
     PYTHONPATH=. python3 benchmarks/output_cost.py [SCENE ...] [--repeats 5] [--out FILE.json]
 
 Per scene, one run records its segments; then, interleaved per repeat in one process, the
-output pass (:func:`~contactdyn.channels.sample_segments`) over those segments twice: with
-the plans' batched output (:func:`~contactdyn.samples.plan_samples`, as the run does) and
+output pass (:func:`~contactdyn.output.channels.sample_segments`) over those segments twice: with
+the plans' batched output (:func:`~contactdyn.compiled.samples.plan_samples`, as the run does) and
 with every sample from ``System.evaluate(full=True)`` (what motor, elastic and force-reading
 phases did before). CPU µs per sample, medians over the repeats, their ratio, the largest
 relative difference of the channels between the two, and the share of the run's CPU time
@@ -30,12 +30,12 @@ use_tree()
 import b1_reference  # noqa: E402
 import numpy as np  # noqa: E402
 
-import contactdyn.hybrid as hybrid  # noqa: E402
-import contactdyn.rhsplan as rhsplan  # noqa: E402
+import contactdyn.compiled.rhsplan as rhsplan  # noqa: E402
+import contactdyn.hybrid.loop as hybrid  # noqa: E402
 from contactdyn import simulate  # noqa: E402
-from contactdyn.channels import sample_segments  # noqa: E402
-from contactdyn.samples import evaluated_samples  # noqa: E402
-from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.compiled.samples import evaluated_samples  # noqa: E402
+from contactdyn.output.channels import sample_segments  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
 
 SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
           "case3_b_force", "b1"]

@@ -32,8 +32,8 @@ use_tree()
 
 import numpy as np  # noqa: E402
 
-from contactdyn.rhsplan import ModePlan  # noqa: E402
-from contactdyn.scene import Scene, load_scene  # noqa: E402
+from contactdyn.compiled.rhsplan import ModePlan  # noqa: E402
+from contactdyn.scene.scene_file import Scene, load_scene  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
 BATCHES = 41  #: batches per measurement (median over batches)
@@ -57,9 +57,9 @@ def _mode_at(scene: Scene, at: float | None):
     if at is None:
         system, modes, phase, x0 = prepare(scene)
         return system, modes, phase, phase.t_start, x0
-    from contactdyn.rhsplan import _PLANS
+    from contactdyn.compiled.rhsplan import _PLANS
+    from contactdyn.model.system import System
     from contactdyn.simulate import run_system
-    from contactdyn.system import System
 
     system = System(load_scene(scene.file, {"duration": at}) if scene.file else scene)
     run_system(system)

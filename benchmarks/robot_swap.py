@@ -28,8 +28,8 @@ import numpy as np
 
 from contactdyn import Robot, simulate
 from contactdyn.errors import ContactdynError, SceneError
-from contactdyn.robot_catalog import TOOL_FRAMES
-from contactdyn.scene import load_scene
+from contactdyn.robot.catalog import TOOL_FRAMES
+from contactdyn.scene.scene_file import load_scene
 
 OUT = Path(__file__).parent / "out"
 SCENE = "case2_writer_ur5"

@@ -44,7 +44,7 @@ import robot_calls  # noqa: E402
 from timing import interleaved  # noqa: E402
 
 from contactdyn import simulate  # noqa: E402
-from contactdyn.scene import load_scene, parse_scene  # noqa: E402
+from contactdyn.scene.scene_file import load_scene, parse_scene  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
 METHODS = ("DOP853", "DOP853C")

@@ -30,7 +30,7 @@ use_tree()
 import b1_reference  # noqa: E402
 
 from contactdyn import simulate  # noqa: E402
-from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
 
 SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
           "case3_b_force", "case3_b_force_varied"]

@@ -9,7 +9,7 @@ Per scene, CPU medians over ``--repeats`` runs of ``simulate(load_scene(name))``
 - then one instrumented run (each piece wrapped by a CPU timer, ~0.5 µs a reading; the sum of the
   pieces therefore exceeds the uninstrumented run by that times the calls, reported as ``timer``):
   rhs = inside the segment's right-hand side (the plan's call, and a stuck contact's cone margin
-  sampled at each stage) and its compiled steps (:mod:`contactdyn.plan_steps`, 12 calls each); events =
+  sampled at each stage) and its compiled steps (:mod:`contactdyn.compiled.plan_steps`, 12 calls each); events =
   the events' values at the step ends and their location (``dop853._EventWatch.stop``); stepping = the
   rest of the integration (the core's arithmetic, its callbacks, the restarts after a rejected step; the
   compiled steps' control); output = sampling the channels (``HybridRun._result``);
@@ -33,7 +33,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from contactdyn import dop853, hybrid  # noqa: E402
-from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import simulate  # noqa: E402
 
 SCENES = ["b1", "case2_writer_b", "case2_writer_rigid", "case3_a_force", "case1_cart", "case2_writer5dof"]

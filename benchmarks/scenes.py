@@ -38,7 +38,7 @@ import numpy as np
 
 from contactdyn import simulate
 from contactdyn.errors import ContactdynError
-from contactdyn.scene import load_scene, sims_dir
+from contactdyn.scene.scene_file import load_scene, sims_dir
 
 OUT = Path(__file__).parent / "out"
 #: the reference and its check: solve_ivp's DOP853 (whatever the default method) at tight tolerances

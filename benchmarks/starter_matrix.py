@@ -66,7 +66,7 @@ def run(robot: str, tip: str | None, timeout: float) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from contactdyn.robot_list import robot_entries
+    from contactdyn.robot.listing import robot_entries
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("robots", nargs="*")

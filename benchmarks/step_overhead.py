@@ -4,7 +4,7 @@
     PYTHONPATH=. python3 benchmarks/step_overhead.py --baseline TREE [--repeats 5] [--inner 1] [--rtols ...]
 
 For each rtol (atol = rtol/100) and each integrator (``solve_ivp``'s DOP853, the compiled
-``DOP853C`` of contactdyn.dop853), B1 is run on a built system (``run_system``: no robot
+``DOP853C`` of contactdyn.numerics.dop853), B1 is run on a built system (``run_system``: no robot
 loading) at its 1 kHz output and again at 10 Hz output; the hand-written closed-form B1
 (``b1_reference.run``, scipy's ``solve_ivp`` DOP853 — the issue's "hand-written floor") and
 the same closed form on the compiled integrator run in the same loop. All variants are
@@ -46,10 +46,10 @@ import b1_reference  # noqa: E402
 import numpy as np  # noqa: E402
 
 from contactdyn import dop853  # noqa: E402
-from contactdyn.rhsplan import _PLANS  # noqa: E402
-from contactdyn.scene import load_scene  # noqa: E402
+from contactdyn.compiled.rhsplan import _PLANS  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
-from contactdyn.system import System  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
 #: process CPU time: the 2-core machine is shared (load average up to 7 while measuring), and

@@ -1,7 +1,7 @@
 """Plans compiled and CPU time with a plan per 2-D reference direction (before issue 13) and a
 plan per mode structure (a ``turn`` event reuses the plan), in one run.
 
-"Before" is the same code with :func:`contactdyn.rhsplan.structure` replaced by ``tuple``: the
+"Before" is the same code with :func:`contactdyn.compiled.rhsplan.structure` replaced by ``tuple``: the
 plan key is then the full modes, direction included, as it was, and :meth:`ModePlan.use` never
 rebinds (the modes it is given are its own). Scenes: ``benchmarks/friction_cost.py``'s three
 and the 2-D writers ``case2_writer5dof``, ``case2_writer_ur5`` at their own settings. Each run
@@ -28,8 +28,8 @@ from friction_cost import SCENES  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn import hybrid, load_scene, parse_scene, rhsplan  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
-from contactdyn.system import System  # noqa: E402
 
 OUT = Path(__file__).parent / "out" / "turn_plans.json"
 WRITERS = ("case2_writer5dof", "case2_writer_ur5")

@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 
 import contactdyn
-from contactdyn.scene import sims_dir
+from contactdyn.scene.scene_file import sims_dir
 from contactdyn.viewer import build_scene
 from contactdyn.viewer.export import html_document, meshcat_js
 

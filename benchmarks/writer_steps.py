@@ -32,10 +32,10 @@ from scipy.integrate._ivp import dop853_coefficients as dop
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scenes import errors  # noqa: E402
 
-from contactdyn.hybrid import HybridRun  # noqa: E402
-from contactdyn.integrators import jacobian_eigenvalues  # noqa: E402
-from contactdyn.scene import load_scene  # noqa: E402
-from contactdyn.system import System  # noqa: E402
+from contactdyn.hybrid.loop import HybridRun  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.numerics.integrators import jacobian_eigenvalues  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
 WINDOWS = (0.0, 0.5, 0.715, 1.5, 3.7, 4.4, 4.49, 4.5)  #: [s] press | stuck | launch | slide | decel | tail

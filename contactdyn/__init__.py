@@ -15,14 +15,15 @@ from .errors import ContactdynError, RobotError, SceneError, SimulationError
 
 if TYPE_CHECKING:
     from .identify import fit
-    from .result import Result, load_result
-    from .robot import Robot
-    from .scene import Scene, load_scene, parse_scene
+    from .output.result import Result, load_result
+    from .robot.robot import Robot
+    from .scene.scene_file import Scene, load_scene, parse_scene
     from .simulate import simulate
 
 #: public name -> the module that defines it
-_LAZY = {"fit": ".identify", "Result": ".result", "load_result": ".result", "Robot": ".robot", "Scene": ".scene",
-         "load_scene": ".scene", "parse_scene": ".scene", "simulate": ".simulate"}
+_LAZY = {"fit": ".identify", "Result": ".output.result", "load_result": ".output.result", "Robot": ".robot.robot",
+         "Scene": ".scene.scene_file", "load_scene": ".scene.scene_file", "parse_scene": ".scene.scene_file",
+         "simulate": ".simulate"}
 
 __all__ = [
     "ContactdynError", "RobotError", "SceneError", "SimulationError", "Result", "load_result", "Robot",
@@ -32,11 +33,10 @@ __version__ = "0.1.0"
 
 
 def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(import_module(_LAZY[name], __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'contactdyn' has no attribute {name!r}")
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = globals()[name] = getattr(import_module(_LAZY[name], __name__), name)
+    return value
 
 
 def __dir__() -> list[str]:

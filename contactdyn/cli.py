@@ -73,8 +73,8 @@ def _catalog(sections: list[str]) -> dict[str, Any]:
 
 
 def _scenes() -> list[dict[str, str]]:
-    from .config import read_toml
-    from .scene import scene_dirs
+    from .scene.reader import read_toml
+    from .scene.scene_file import scene_dirs
 
     scenes, seen = [], set()
     for path in (p for folder in scene_dirs() for p in sorted(folder.glob("*.toml"))):
@@ -90,13 +90,13 @@ def _scenes() -> list[dict[str, str]]:
 
 
 def _robots() -> list[dict[str, Any]]:
-    from .robot_list import robot_entries
+    from .robot.listing import robot_entries
 
     return robot_entries()
 
 
 def _models() -> dict[str, list[dict[str, str]]]:
-    from .scene import NORMAL_MODELS, TANGENT_MODELS
+    from .scene.scene_file import NORMAL_MODELS, TANGENT_MODELS
 
     normal = {"rigid": "constraint, impact at touch", "a": "ground -[k'', b'']- m' -[k', b']- tip (continuous)",
               "b": "ground -[k, b]- m', struck by the tip (impact at touch)", "c": "massless Kelvin-Voigt stage k, b",
@@ -108,7 +108,7 @@ def _models() -> dict[str, list[dict[str, str]]]:
 
 
 def _controllers() -> list[dict[str, str]]:
-    from .controllers import CONTROLLERS
+    from .laws.controllers import CONTROLLERS
 
     out = []
     for name in sorted(CONTROLLERS):
@@ -118,7 +118,7 @@ def _controllers() -> list[dict[str, str]]:
 
 
 def _integrators() -> list[dict[str, Any]]:
-    from .integrators import FIXED, IMPLICIT, METHODS
+    from .numerics.integrators import FIXED, IMPLICIT, METHODS
 
     return [{"name": m, "implicit": m in IMPLICIT, "description": _integrator(m, IMPLICIT, FIXED)} for m in METHODS]
 
@@ -141,11 +141,11 @@ def _integrator(name: str, implicit: tuple[str, ...], fixed: tuple[str, ...]) ->
 
 def _cmd_list(args: argparse.Namespace) -> int:
     if args.what == "frames":
-        from .robot_list import frames_command
+        from .robot.listing import frames_command
 
         return frames_command(args)
     if args.what == "keys" or args.prefix:
-        from .keys import list_keys
+        from .scene.keys import list_keys
 
         return list_keys(args)
     sections = [args.what] if args.what else list(LIST_SECTIONS)
@@ -161,7 +161,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
                 for m in catalog[s][kind]:
                     print(f"    {m['name']:<8} {m['description']}")
         elif s == "robots":
-            from .robot_list import print_robots
+            from .robot.listing import print_robots
 
             print_robots(catalog[s])
         else:
@@ -173,20 +173,20 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 # ---- run -------------------------------------------------------------------------------------
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .fastpath import slower_paths
-    from .metrics import metrics
-    from .scene import load_scene, parse_override
+    from .model.paths import slower_paths
+    from .output.metrics import metrics
+    from .scene.scene_file import load_scene, parse_override
     from .simulate import simulate
 
     overrides = dict(parse_override(s) for s in args.set)
     scene = load_scene(args.scene, overrides)
     _out(args, f"scene {scene.name}: {scene.file}")
-    from .user_laws import IMPORTED
+    from .scene.user_laws import IMPORTED
 
     for module in scene.imports:  # importing runs code: say what ran
         _out(args, f"imported {module} from {IMPORTED.get(module, '?')}")
     result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json))
-    from .robot_list import run_warnings
+    from .robot.listing import run_warnings
 
     # sanity, then inertia and limits, then the run's physics checks
     warnings = result.meta.get("warnings", []) + run_warnings(result.meta) + result.meta.get("check_warnings", [])
@@ -206,7 +206,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for line in slower_paths(s.get("paths", {})):
             _out(args, f"  path of {line}")
         if args.verbose:
-            from .robot_list import run_details
+            from .robot.listing import run_details
 
             for line in run_details(result.meta):
                 _out(args, line)
@@ -235,8 +235,8 @@ def _simulate_quietly(simulate, scene, progress: bool = True):
     """Simulate without Python's own warning lines (the command prints the sanity and check warnings itself)."""
     import warnings
 
-    from .physics_checks import PhysicsWarning
-    from .sanity import SanityWarning
+    from .output.physics_checks import PhysicsWarning
+    from .scene.sanity import SanityWarning
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SanityWarning)
@@ -313,7 +313,7 @@ def _delegate(module: str, function: str):
 
 
 def _check_saved_run(run: str) -> None:
-    from .result import missing_run_message, run_files
+    from .output.result import missing_run_message, run_files
 
     if not all(f.is_file() for f in run_files(run)):
         raise RunFileError(missing_run_message(run))
@@ -498,7 +498,7 @@ def _plot_parser(sub, fmt) -> None:
     plot.add_argument("run", help="saved run (RUN.npz + RUN.json)")
     plot.add_argument("--out", metavar="DIR", help="output folder")
     plot.add_argument("--format", type=_csv_list, help="comma-separated formats (default png,svg)")
-    plot.set_defaults(func=_delegate("plots", "plot_command"))
+    plot.set_defaults(func=_delegate("output.plots", "plot_command"))
 
 
 def _bench_parser(sub, fmt) -> None:
@@ -515,7 +515,7 @@ def _bench_parser(sub, fmt) -> None:
     bench.add_argument("--repeats", type=int, default=3, help="timing repeats per point (default 3)")
     bench.add_argument("--out", metavar="DIR", help="output folder (default out/bench/SCENE)")
     _set_option(bench)
-    bench.set_defaults(func=_delegate("workprecision", "bench_command"))
+    bench.set_defaults(func=_delegate("analysis.workprecision", "bench_command"))
 
 
 def _fit_parser(sub, fmt) -> None:
@@ -556,7 +556,7 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, --version
         return int(exc.code or 0) if isinstance(exc.code, int | None) else EXIT_USAGE
     from .errors import numerical_errors  # (numpy: after --help)
-    from .user_laws import refuse_imports
+    from .scene.user_laws import refuse_imports
 
     NUMERICAL = numerical_errors()  # noqa: N806 (the sweep's name for the same tuple)
     refuse_imports(bool(getattr(args, "no_imports", False)))  # this command's policy, not a previous one's

@@ -5,13 +5,13 @@
 
 Where the pieces are (see ``docs/architecture.md`` for the module map):
 
-- the hybrid loop (smooth phase → event → transition → next phase): :mod:`contactdyn.hybrid`;
+- the hybrid loop (smooth phase → event → transition → next phase): :mod:`contactdyn.hybrid.loop`;
 - the events (touch, separate, stop, reverse, turn, slip) and the storm guard:
-  :mod:`contactdyn.events`; what each event does to the modes: :mod:`contactdyn.transitions`;
-- the right-hand side: :mod:`contactdyn.dynamics` (readable) and :mod:`contactdyn.rhsplan`
+  :mod:`contactdyn.hybrid.events`; what each event does to the modes: :mod:`contactdyn.hybrid.transitions`;
+- the right-hand side: :mod:`contactdyn.model.dynamics` (readable) and :mod:`contactdyn.compiled.rhsplan`
   (compiled per mode, with ``Result.stats["fallback_modes"]`` saying why a mode was not);
-- friction and the stick band: :mod:`contactdyn.friction`; impacts: :mod:`contactdyn.impact`;
-- the output channels: :mod:`contactdyn.channels`.
+- friction and the stick band: :mod:`contactdyn.model.friction`; impacts: :mod:`contactdyn.model.impact`;
+- the output channels: :mod:`contactdyn.output.channels`.
 """
 
 from __future__ import annotations
@@ -22,24 +22,24 @@ from typing import Any
 
 import numpy as np
 
-from .contact import ContactMode
-from .hybrid import HybridRun
-from .phases import Phase
-from .progress import Progress
-from .result import Result
-from .scene import Scene, load_scene
-from .system import System
+from .hybrid.loop import HybridRun
+from .hybrid.progress import Progress
+from .model.contact import ContactMode
+from .model.phases import Phase
+from .model.system import System
+from .output.result import Result
+from .scene.scene_file import Scene, load_scene
 
 __all__ = ["simulate", "run_system", "prepare"]
 
 
 def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None, *, progress: bool = False) -> Result:
     """Run a scene (an object, a path, or a name in ``sims/``) and return its Result; ``progress``: show the
-    simulated time on stderr once the run has taken a couple of seconds (:mod:`contactdyn.progress`)."""
+    simulated time on stderr once the run has taken a couple of seconds (:mod:`contactdyn.hybrid.progress`)."""
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
-        from .scene import parse_scene
+        from .scene.scene_file import parse_scene
 
         scene = parse_scene(scene.document, overrides, scene.file)
     wall0 = time.perf_counter()
@@ -59,9 +59,9 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None,
 
 
 def outcome_notes(system: System, result: Result) -> list[str]:
-    """The run's :mod:`~contactdyn.outcome` warnings (what it did not do), issued as SanityWarning."""
-    from .outcome import outcome_warnings
-    from .sanity import SanityWarning
+    """The run's :mod:`~contactdyn.output.outcome` warnings (what it did not do), issued as SanityWarning."""
+    from .output.outcome import outcome_warnings
+    from .scene.sanity import SanityWarning
 
     notes = outcome_warnings(system.scene, result)
     _issue(system.scene.name, notes, SanityWarning)
@@ -69,8 +69,8 @@ def outcome_notes(system: System, result: Result) -> list[str]:
 
 
 def check_warnings(result: Result) -> None:
-    """Issue the run's violated :mod:`~contactdyn.physics_checks` as PhysicsWarning (never fatal)."""
-    from .physics_checks import PhysicsWarning
+    """Issue the run's violated :mod:`~contactdyn.output.physics_checks` as PhysicsWarning (never fatal)."""
+    from .output.physics_checks import PhysicsWarning
 
     _issue(result.meta["name"], result.meta.get("check_warnings", []), PhysicsWarning)
 
@@ -84,8 +84,8 @@ def _issue(name: str, notes: list[str], category: type[Warning]) -> None:
 
 
 def sanity_warnings(system: System) -> list[str]:
-    """The scene's :mod:`~contactdyn.sanity` warnings, issued as SanityWarning (never fatal)."""
-    from .sanity import SanityWarning, scene_warnings, system_warnings
+    """The scene's :mod:`~contactdyn.scene.sanity` warnings, issued as SanityWarning (never fatal)."""
+    from .scene.sanity import SanityWarning, scene_warnings, system_warnings
 
     notes = scene_warnings(system.scene) + system_warnings(system)
     _issue(system.scene.name, notes, SanityWarning)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SceneError
-from .toml_writer import format_value as toml_value
+from .scene.toml_writer import format_value as toml_value
 
 __all__ = ["starter_scene", "new_command", "CONTACT_MODELS"]
 
@@ -60,7 +60,7 @@ def _load_arm(robot: str, tip: str | None):
     leaf frame with the most joints above it (a hand, a foot). Inertia data that fail the checks: repaired,
     and the scene says so (``robot.inertia = "repair"``)."""
     from .errors import RobotError
-    from .robot import Robot
+    from .robot.robot import Robot
 
     inertia, at_tip = "", {"tip": tip} if tip is not None else {}
     try:
@@ -83,7 +83,7 @@ def _load_arm(robot: str, tip: str | None):
 
 def _longest_leaf(arm) -> str:
     """The leaf body frame with the most joints between it and the root (ties: the first listed)."""
-    from .robot_list import end_effectors
+    from .robot.listing import end_effectors
 
     model = arm.model
     leaves = end_effectors(model)
@@ -102,7 +102,7 @@ def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.n
     min(margin, MARGIN_ENOUGH) / MARGIN_ENOUGH, the margin the smallest normalized distance of a bounded
     joint to its limits (beyond that margin the best-conditioned posture wins). Quality 0: the tip cannot
     move along two axes."""
-    from .posture import sampling_bounds
+    from .robot.posture import sampling_bounds
 
     lo, hi = sampling_bounds(arm)
     rng = np.random.default_rng(0)
@@ -182,20 +182,20 @@ def _declared(params, prefix: str) -> str:
 
 def _normal(contact: str, law: str | None) -> str:
     """The normal's keys of a contact model, with a stage law of the registry (its declared parameters) if given."""
-    from .stage_laws import STAGE_LAWS
+    from .laws.stage_laws import STAGE_LAWS
 
     if law is None:
         return CONTACT_MODELS[contact]
     if contact == "rigid" or law not in STAGE_LAWS:
         raise SceneError("--law", f"a registered stage law ({', '.join(STAGE_LAWS)}; yours with --imports) on "
                          "contact model a, b or c", law if contact != "rigid" else f"{law} on a rigid contact")
-    lines = f'normal.law = "{law}"                   # the stages\' force law (contactdyn.stage_laws)\n'
+    lines = f'normal.law = "{law}"                   # the stages\' force law (contactdyn.laws.stage_laws)\n'
     return CONTACT_MODELS[contact] + lines + _declared(STAGE_LAWS[law].params, "normal.")
 
 
 def _tangent(friction: bool, friction_law: str | None, t: np.ndarray) -> str:
     """The tangent's keys: Coulomb with mu = 0.3, another registered law (its declared parameters), or none."""
-    from .friction_laws import FRICTION_LAWS
+    from .laws.friction_laws import FRICTION_LAWS
 
     if friction_law is not None and friction_law not in FRICTION_LAWS:
         raise SceneError("--friction-law", f"a registered friction law ({', '.join(FRICTION_LAWS)}; yours with "
@@ -216,7 +216,7 @@ def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", fricti
                   imports: tuple[str, ...] = ()) -> str:
     """The TOML text of a starter scene (see the module docstring); ``law``, ``friction_law``: registered laws
     (a user's from ``imports``, which the caller has imported), written with their declared parameters."""
-    from .robot_catalog import TOOL_FRAMES
+    from .robot.catalog import TOOL_FRAMES
 
     if contact not in CONTACT_MODELS:
         raise SceneError("--contact", f"one of {list(CONTACT_MODELS)}", contact)
@@ -291,7 +291,7 @@ kind = "step"
 def new_command(args: argparse.Namespace) -> int:
     """``contactdyn new NAME``: write ``sims/NAME.toml`` (or ``--out``), refusing to overwrite."""
     from .errors import is_plain_name
-    from .result import atomic_write
+    from .output.result import atomic_write
 
     if not is_plain_name(args.name):
         raise SceneError("NAME", "a plain name (letters, digits, '_', '.', '+', '-'; no '/' or leading '.'): the "
@@ -301,7 +301,7 @@ def new_command(args: argparse.Namespace) -> int:
         raise SceneError("--out" if args.out else "NAME", "a file that does not exist yet (or --force)", str(out))
     imports = tuple(m for group in args.imports or () for m in group.split(",") if m)
     if imports:
-        from .user_laws import IMPORTED, import_scene_modules
+        from .scene.user_laws import IMPORTED, import_scene_modules
 
         import_scene_modules(list(imports), str(out.resolve()))  # next to the scene to be, then sys.path
         for module in imports:

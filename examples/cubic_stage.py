@@ -9,8 +9,7 @@ once below (unit, default, bounds, meaning): the scene reads and checks it from 
 touching modes run on the readable model: the run's stats say so, per mode.
 """
 
-from contactdyn.params import Param
-from contactdyn.stage_laws import StageLaw, register_stage_law
+from contactdyn.laws import Param, StageLaw, register_stage_law
 
 
 @register_stage_law

@@ -10,8 +10,7 @@ uses it with ``imports = ["my_laws"]`` (this file beside the scene) and
 built-in law.
 """
 
-from contactdyn.controllers import Controller, register
-from contactdyn.params import Param
+from contactdyn.laws import Controller, Param, register
 
 
 @register

@@ -22,7 +22,7 @@ def pytest_collection_modifyitems(config, items):
 def doubled_law():
     """An affine stage law twice as stiff and twice as damped as its k and b say, registered as ``doubled`` for
     the test (F = 2k x + 2b ẋ: coefficients (2k, 2b))."""
-    from contactdyn.stage_laws import STAGE_LAWS, StageLaw, register_stage_law
+    from contactdyn.laws.stage_laws import STAGE_LAWS, StageLaw, register_stage_law
 
     class Doubled(StageLaw):
         name, affine = "doubled", True

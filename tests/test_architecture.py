@@ -9,10 +9,12 @@ import pytest
 
 PKG = Path(__file__).resolve().parent.parent / "contactdyn"
 #: the model and the loop, one concept per module (docs/architecture.md's module map)
-CORE = ["elements", "chain", "contact", "layout", "phases", "chain_forces", "friction", "constraints", "impact",
-        "dynamics", "drives", "system", "plan_probe", "plan_kkt", "plan_rhs", "rhsplan", "samples", "events",
-        "transitions", "hybrid", "channels", "simulate", "integrators", "fastpath", "stage_laws", "dop853",
-        "physics_checks"]
+CORE = [f"model/{m}" for m in ("chain", "contact", "layout", "phases", "chain_forces", "friction", "constraints",
+                               "impact", "dynamics", "system", "paths", "limits")] + \
+    [f"compiled/{m}" for m in ("plan_probe", "plan_kkt", "plan_rhs", "rhsplan")] + \
+    [f"hybrid/{m}" for m in ("events", "transitions", "loop")] + \
+    ["compiled/samples", "output/channels", "output/physics_checks", "simulate", "numerics/integrators",
+     "numerics/dop853", "laws/stage_laws", "laws/friction_laws"]
 MAX_CLASS, MAX_FUNCTION = 300, 80  #: [lines]
 
 
@@ -23,7 +25,7 @@ def _module_name(path: Path) -> str:
 
 #: deliberate imports inside a function against the flow, left out of the graph: Result.show() (a notebook's
 #: player) imports the viewer when called; the viewer imports result at load, so no cycle exists at import
-LAZY_UPWARD = {("contactdyn.result", "contactdyn.viewer.notebook")}
+LAZY_UPWARD = {("contactdyn.output.result", "contactdyn.viewer.notebook")}
 
 
 def _import_graph() -> dict[str, set[str]]:
@@ -99,6 +101,20 @@ def test_core_module_is_documented_and_small(module):
     assert _too_long(PKG / f"{module}.py") == []
 
 
+#: the modules at the package's top: the package, its errors, and the entry points (no mechanism)
+TOP_LEVEL = {"__init__", "errors", "simulate", "cli", "starter"}
+MAX_FOLDER = 12  #: modules in one concept folder, its __init__ not counted
+
+
+def test_the_package_is_folders_named_after_concepts():
+    assert {p.stem for p in PKG.glob("*.py")} == TOP_LEVEL
+    for folder in (p for p in PKG.rglob("*") if p.is_dir() and (p / "__init__.py").is_file()):
+        modules = [p.stem for p in folder.glob("*.py") if p.stem != "__init__"]
+        assert len(modules) <= MAX_FOLDER, f"{folder.name}: {len(modules)} modules"
+        doc = ast.get_docstring(ast.parse((folder / "__init__.py").read_text()))
+        assert doc, f"{folder.name}/__init__.py: a docstring stating the folder's concept"
+
+
 def test_no_class_or_function_in_the_package_is_too_long():
     assert [line for path in sorted(PKG.rglob("*.py")) for line in _too_long(path)] == []
 
@@ -110,36 +126,41 @@ def test_the_size_rule_finds_a_long_function(tmp_path):
 
 
 #: the data flow of one run (docs/architecture.md), upstream first; a module imports only from its own
-#: layer or those before it. Modules not listed (robot sources, errors, config, ...) are shared below all.
+#: layer or those before it. A folder stands for its modules; a longer prefix decides first. Every module
+#: of the package is in one layer.
 LAYERS = [
-    ["scene"],
-    ["chain", "contact", "layout", "phases", "chain_forces", "friction", "constraints", "impact", "dynamics",
-     "drives", "controllers", "limits", "posture", "system", "fastpath"],
-    ["rhsplan", "plan_probe", "plan_kkt", "plan_rhs", "plan_fold", "plan_law", "plan_drives", "samples"],
-    ["integrators", "dop853", "events", "transitions", "hybrid", "channels", "result", "run_check",
-     "physics_checks", "notice", "progress"],  # the loop
-    ["simulate", "sanity", "outcome", "metrics"],
-    ["plots", "viewer", "sweep", "identify", "workprecision", "stability", "cli", "starter", "keys"],
+    ["", "errors", "scene.reader", "scene.keyfields", "numerics"],  # shared below all ("": the package's lazy names)
+    ["laws"],  # stage laws, friction laws, drives, controllers, references: no model
+    ["robot", "scene"],  # Pinocchio's robot; a scene file read and checked (it reads the laws' declarations)
+    ["model"],  # the physics: no compiled machinery
+    ["compiled"],  # the model made fast
+    ["output"],  # channels, samples, Result, checks
+    ["hybrid"],  # the loop: nothing below imports it
+    ["simulate", "starter", "analysis"],
+    ["cli", "viewer", "sweep", "identify"],
 ]
-#: the scene reads each part's own keys and names to validate a file: the drive table, a controller's
-#: reader, the integrators' method names. These are the only imports against the flow (besides LAZY_UPWARD).
-SCENE_READS = {("scene", "drives"), ("scene", "controllers"), ("scene", "integrators")}
 
 
 def _layer(module: str) -> tuple[str, int] | None:
-    top = module.removeprefix("contactdyn.").split(".")[0]
-    return next(((top, i) for i, names in enumerate(LAYERS) if top in names), None)
+    name = module.removeprefix("contactdyn").removeprefix(".")
+    found = [(prefix, i) for i, names in enumerate(LAYERS) for prefix in names
+             if name == prefix or prefix and name.startswith(prefix + ".")]
+    return max(found, key=lambda f: len(f[0])) if found else None
 
 
 def _against_the_flow(graph: dict[str, set[str]]) -> list[str]:
-    """Imports from a module to one in a later layer, other than the scene's validation reads."""
+    """Imports from a module to one in a later layer."""
     found = []
     for module, targets in graph.items():
         for target in targets:
             src, dst = _layer(module), _layer(target)
-            if src and dst and dst[1] > src[1] and (src[0], dst[0]) not in SCENE_READS:
+            if src and dst and dst[1] > src[1]:
                 found.append(f"{module} imports {target}")
     return sorted(found)
+
+
+def test_every_module_has_a_layer():
+    assert [m for m in _import_graph() if _layer(m) is None] == []
 
 
 def test_imports_follow_the_data_flow():
@@ -147,7 +168,10 @@ def test_imports_follow_the_data_flow():
 
 
 def test_the_flow_rule_finds_an_import_against_the_flow():
-    graph = {"contactdyn.system": {"contactdyn.hybrid"}, "contactdyn.hybrid": {"contactdyn.system"},
-             "contactdyn.scene": {"contactdyn.integrators"}, "contactdyn.result": {"contactdyn.plots"}}
-    assert _against_the_flow(graph) == ["contactdyn.result imports contactdyn.plots",
-                                        "contactdyn.system imports contactdyn.hybrid"]
+    graph = {"contactdyn.model.system": {"contactdyn.hybrid.loop"},
+             "contactdyn.hybrid.loop": {"contactdyn.model.system"},
+             "contactdyn.laws.drives": {"contactdyn.scene.reader", "contactdyn.model.chain"},
+             "contactdyn.scene.scene_file": {"contactdyn.numerics.integrators"},
+             "contactdyn.output.result": {"contactdyn.output.plots"}}
+    assert _against_the_flow(graph) == ["contactdyn.laws.drives imports contactdyn.model.chain",
+                                        "contactdyn.model.system imports contactdyn.hybrid.loop"]

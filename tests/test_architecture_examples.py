@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from contactdyn import parse_scene, simulate
-from contactdyn.controllers import CONTROLLERS
-from contactdyn.stage_laws import STAGE_LAWS
-from contactdyn.system import System
+from contactdyn.laws.controllers import CONTROLLERS
+from contactdyn.laws.stage_laws import STAGE_LAWS
+from contactdyn.model.system import System
 
 DOC = Path(__file__).resolve().parent.parent / "docs" / "architecture.md"
 AXIS_MASS = 50.0  #: [kg] urdf/cylindrical3.urdf, link 3 (the vertical axis q3, tip z = 1.2 − q3 [m])
@@ -71,8 +71,8 @@ def test_stage_law_example_settles_at_its_static_deflection_and_declares_its_gap
 def test_friction_law_example_slides_with_its_coefficient_at_the_slip_speed():
     import tomllib
 
-    from contactdyn.friction_laws import FRICTION_LAWS
-    from contactdyn.scene import sims_dir
+    from contactdyn.laws.friction_laws import FRICTION_LAWS
+    from contactdyn.scene.scene_file import sims_dir
 
     example("friction_law")
     try:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from contactdyn import transitions
-from contactdyn.scene import load_scene
+from contactdyn.hybrid import transitions
+from contactdyn.model.system import System
+from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import run_system
-from contactdyn.system import System
 
 MU = 0.4
 M_E = 10.0  # [kg] the struck surface mass (sec. 5.2)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from contactdyn.cli import EXIT_FAILED, EXIT_OK, EXIT_USAGE, main
-from contactdyn.result import load_result
+from contactdyn.output.result import load_result
 
 FAST = ["--set", "duration=0.05", "--set", "solver.output_rate=200"]  # ~20 ms runs of b1
 
@@ -152,7 +152,7 @@ def saved_run(tmp_path_factory) -> str:
 
 
 def test_plot_view_bench_dispatch_with_their_arguments(capsys, monkeypatch, saved_run):
-    calls = _fake_module(monkeypatch, "plots", plot_command=0)
+    calls = _fake_module(monkeypatch, "output.plots", plot_command=0)
     assert main(["plot", saved_run, "--out", "figs", "--format", "png,svg"]) == EXIT_OK
     (_, (args,)), = calls
     assert (args.run, args.out, args.format) == (saved_run, "figs", ["png", "svg"])
@@ -162,7 +162,7 @@ def test_plot_view_bench_dispatch_with_their_arguments(capsys, monkeypatch, save
     (_, (args,)), = calls
     assert (args.run, args.html, args.port, args.speed) == (saved_run, "b1.html", 7001, 0.5)
 
-    calls = _fake_module(monkeypatch, "workprecision", bench_command=3)
+    calls = _fake_module(monkeypatch, "analysis.workprecision", bench_command=3)
     assert main(["bench", "b1", "--methods", "DOP853,RK45", "--rtols", "1e-4,1e-6", "--repeats", "2",
                  "--out", "wp", "--set", "duration=0.1"]) == 3
     (_, (args,)), = calls
@@ -187,7 +187,7 @@ def test_plot_and_view_of_a_missing_run_is_bad_input(capsys, tmp_path, command):
                                   ["run", "b1", *FAST, "--view", "--quiet"]])
 def test_missing_module_is_one_line_and_exit_1(capsys, monkeypatch, saved_run, argv):
     argv = [saved_run if a == "SAVED" else a for a in argv]
-    for name in ("plots", "viewer", "workprecision"):
+    for name in ("output.plots", "viewer", "analysis.workprecision"):
         monkeypatch.setitem(sys.modules, f"contactdyn.{name}", None)  # import raises ImportError
     code, _, err = _run(capsys, argv)
     assert code == EXIT_FAILED and "not available yet" in err and len(err.strip().splitlines()) == 1

@@ -6,8 +6,8 @@ import json
 
 import pytest
 
+from contactdyn.analysis.workprecision import _speed_words
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, build_parser, main
-from contactdyn.workprecision import _speed_words
 
 
 def test_every_controller_has_a_description(capsys):

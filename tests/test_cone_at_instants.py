@@ -5,7 +5,7 @@ law changes (a phase start, a corner of a set-point, another contact's touch, a 
 limit's impact) must slip at that instant, recorded as a ``slip`` event there, and slide
 with |F_f| = μ_k F_n from then on. Each scene is the point mass of ``test_friction`` (H = m I,
 the tip is the mass, rigid ground z = 0: F_n = m g exactly) so every force is known in closed
-form; the run's own physics checks (:mod:`contactdyn.physics_checks`) must stay quiet.
+form; the run's own physics checks (:mod:`contactdyn.output.physics_checks`) must stay quiet.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from contactdyn import parse_scene, simulate
-from contactdyn.physics_checks import violations
+from contactdyn.output.physics_checks import violations
 
 M, G = 2.0, 9.81
 W = M * G  #: [N] the normal force on the ground

@@ -8,7 +8,7 @@ from scipy.linalg import expm
 
 import contactdyn
 from contactdyn import Robot, SceneError, parse_scene, simulate
-from contactdyn.sanity import SanityWarning
+from contactdyn.scene.sanity import SanityWarning
 
 TIGHT = {"rtol": 1e-12, "atol": 1e-14}
 
@@ -243,7 +243,7 @@ def test_two_sided_massless_chain_matches_matrix_exponential(b2):
 
 def test_a_junction_is_algebraic_only_with_one_time_constant():
     """chain.balanced: linear stages of one b/k (b = 0 included) keep a junction balanced; others do not."""
-    from contactdyn.chain import ChainStage, balanced
+    from contactdyn.model.chain import ChainStage, balanced
 
     def stage(k, b, law="linear"):
         return ChainStage(0, 1, k, b, law)

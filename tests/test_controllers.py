@@ -7,8 +7,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from contactdyn import Robot, SceneError, parse_scene, simulate
-from contactdyn.system import System
-from contactdyn.trajectory import Move, Ramp, Reference
+from contactdyn.laws.trajectory import Move, Ramp, Reference
+from contactdyn.model.system import System
 
 # case 2's writer and motors (sec. 5.2): N = 160 for speed, N* = 65.12 for torque
 CASE2 = {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": 0.000452, "N": 160.0, "N_star": 65.12}

@@ -13,9 +13,9 @@ from test_contact_layer import axis_scene
 from test_controllers import KP, KV, Q0, critically_damped, writer_doc
 
 from contactdyn import parse_scene, simulate
-from contactdyn.hybrid import HybridRun
-from contactdyn.system import System
-from contactdyn.trajectory import Move, Reference
+from contactdyn.hybrid.loop import HybridRun
+from contactdyn.laws.trajectory import Move, Reference
+from contactdyn.model.system import System
 
 START, DELTA = np.array([0.35, 1.1]), np.array([0.2, -0.3])
 TRAPEZOID = Move(DELTA, 0.05, 0.4, "trapezoid", 0.15)  # corners at 0.05, 0.11, 0.39, 0.45 s

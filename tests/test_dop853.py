@@ -1,4 +1,4 @@
-"""The compiled DOP853 (contactdyn.dop853) against solve_ivp's DOP853 and closed forms."""
+"""The compiled DOP853 (contactdyn.numerics.dop853) against solve_ivp's DOP853 and closed forms."""
 
 import math
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from contactdyn.dop853 import solve
 from contactdyn.errors import SceneError
+from contactdyn.numerics.dop853 import solve
 
 
 def oscillator(t, y):
@@ -99,7 +99,7 @@ def test_error_weights_live_in_the_workspace_rows():
     only: every stage it does not keep has weight 0 in both of DOP853's error estimates."""
     from scipy.integrate._ivp import dop853_coefficients as coef
 
-    from contactdyn.dop853 import _ROW_STAGE
+    from contactdyn.numerics.dop853 import _ROW_STAGE
 
     kept = {s for s in _ROW_STAGE if s is not None}
     dropped = [s for s in range(len(coef.E5)) if s not in kept]
@@ -229,7 +229,7 @@ def test_scenes_agree_with_solve_ivp(scene, duration, force_tol):
 
 
 def test_a_scipy_without_the_compiled_core_is_named(monkeypatch):
-    import contactdyn.dop853 as dop
+    import contactdyn.numerics.dop853 as dop
 
     monkeypatch.setattr(dop, "_CORE", None)
     with pytest.raises(SceneError, match="solver.method.*DOP853C.*scipy"):
@@ -240,7 +240,7 @@ def test_the_stages_states_need_no_copy(monkeypatch):
     """The core hands the right-hand side views of its workspace, which its next stages overwrite; only the step
     end's state is copied (the events read it later). With every state copied, a run with stick, a 2-D launch,
     turns and joint limits (the 5-DOF writer's first 1.2 s) gives the same channels and events bitwise."""
-    import contactdyn.dop853 as dop
+    import contactdyn.numerics.dop853 as dop
     from contactdyn import simulate
 
     own = simulate("case2_writer5dof", {"duration": 1.2})

@@ -7,8 +7,8 @@ import pytest
 from scipy.linalg import expm
 
 from contactdyn import SceneError, parse_scene, simulate
-from contactdyn.drives import DriveSpec
-from contactdyn.system import System
+from contactdyn.laws.drives import DriveSpec
+from contactdyn.model.system import System
 
 TIGHT = {"rtol": 1e-12, "atol": 1e-14}
 AXIS_MASS = 50.0  # [kg] cylindrical3's vertical slide (q3 down, tip z = 1.2 − q3)
@@ -307,6 +307,6 @@ def test_stiff_pd_approach_through_the_elastic_transmission_tracks_like_the_rigi
 
 
 def _trapezoid(t: np.ndarray) -> np.ndarray:
-    from contactdyn.trajectory import profile
+    from contactdyn.laws.trajectory import profile
 
     return np.array([profile("trapezoid", tk, 0.2)[0] for tk in t])

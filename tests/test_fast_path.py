@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from contactdyn import load_scene, parse_scene, simulate
-from contactdyn.chain import ChainStage
-from contactdyn.fastpath import ENERGY, UNDECLARED, Gap
-from contactdyn.rhsplan import _PLANS
-from contactdyn.scene import sims_dir
+from contactdyn.compiled.rhsplan import _PLANS
+from contactdyn.model.chain import ChainStage
+from contactdyn.model.paths import ENERGY, UNDECLARED, Gap
+from contactdyn.model.system import System
+from contactdyn.scene.scene_file import sims_dir
 from contactdyn.simulate import run_system
-from contactdyn.system import System
 
 HARD = Path(__file__).resolve().parent.parent / "benchmarks" / "hard"
 READABLE = Gap("test", "readable model forced by the test", "always", lambda modes, phase: True)
@@ -89,7 +89,7 @@ def test_the_writers_2d_slip_launching_from_rest_runs_on_the_compiled_path(scene
     assert [e["kind"] for e in r.events if e["kind"] != "phase"] == ["stick", "slip"]
     assert r.events[-1]["t"] < 0.8  # the launch segment ran for more than 50 ms
     assert r.stats["fallback_modes"] == {} and r.stats["fast_path_gaps"] == []
-    assert r.stats["segments_by_method"].get("LSODA") == 1  # the launch segment (contactdyn.hybrid)
+    assert r.stats["segments_by_method"].get("LSODA") == 1  # the launch segment (contactdyn.hybrid.loop)
 
 
 def test_a_compiled_launch_from_rest_agrees_with_the_readable_model():
@@ -164,7 +164,7 @@ def test_a_contact_on_another_frame_than_the_tip_runs_compiled_as_the_readable_m
 def test_the_assembly_probed_all_at_once_is_probed_one_by_one():
     """P read off ``_assemble`` with every unit probe as a column of one matrix (plan_probe.affine_map's
     ``columns``) is bitwise P read off one probe at a time, on modes with rows, motors and a folded law."""
-    from contactdyn.plan_probe import affine_map
+    from contactdyn.compiled.plan_probe import affine_map
 
     checked = 0
     for name in ("b1", "case1_cart", "case3_b_force"):

@@ -7,12 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from contactdyn.fastpath import Gap
-from contactdyn.phases import start_phase
-from contactdyn.rhsplan import ModePlan
-from contactdyn.scene import load_scene
+from contactdyn.compiled.rhsplan import ModePlan
+from contactdyn.model.paths import Gap
+from contactdyn.model.phases import start_phase
+from contactdyn.model.system import System
+from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import prepare, run_system
-from contactdyn.system import System
 
 READABLE = Gap("test", "readable model forced by the test", "always", lambda modes, phase: True)
 

@@ -20,8 +20,8 @@ from contactdyn.cli import main
 from contactdyn.identify.data import estimate_noise
 from contactdyn.identify.params import Parameter
 from contactdyn.identify.solver import solve
-from contactdyn.scene import load_scene, sims_dir
-from contactdyn.toml_writer import dumps
+from contactdyn.scene.scene_file import load_scene, sims_dir
+from contactdyn.scene.toml_writer import dumps
 
 K, M, MU, B = "contact.tip.normal.k", "contact.tip.normal.m", "contact.tip.tangent.mu", "contact.tip.normal.b"
 

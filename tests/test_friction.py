@@ -15,9 +15,9 @@ import pytest
 
 import contactdyn
 from contactdyn import SceneError, parse_scene, simulate
-from contactdyn.contact import ContactMode
-from contactdyn.robot import Robot
-from contactdyn.system import System
+from contactdyn.model.contact import ContactMode
+from contactdyn.model.system import System
+from contactdyn.robot.robot import Robot
 
 M = 2.0  #: [kg] mass of the point-mass URDFs
 G = 9.81  #: [m/s²]
@@ -429,14 +429,14 @@ def test_bad_friction_inputs_name_the_key():
         parse_scene(scene(**{"controller.rate": [1.0, 2.0]}))
     with pytest.raises(SceneError, match="mu_s"):
         parse_scene(scene(mu_s=0.2, mu_k=0.4))
-    assert "task_force" in contactdyn.controllers.CONTROLLERS
+    assert "task_force" in contactdyn.laws.controllers.CONTROLLERS
 
 
 def test_2d_coulomb_on_a_moving_body_compiled_equals_the_readable_model():
     """A compliant (chain) contact on a cart with 2-D friction: the plan's Coulomb force, its tip share
     and its reaction on the cart's row (plan_rhs._friction_terms' map G), equals System.evaluate's at
     slips in several directions, and the cart takes the reaction μ_k F_n d_x in closed form."""
-    from contactdyn.rhsplan import cached_plan
+    from contactdyn.compiled.rhsplan import cached_plan
 
     doc = scene(dims=2)
     doc["body"] = {"cart": {"mass": 5.0, "axis": [1.0, 0.0, 0.0]}}

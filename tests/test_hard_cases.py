@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from contactdyn.analysis.workprecision import errors
 from contactdyn.errors import SimulationError
-from contactdyn.scene import load_scene
+from contactdyn.model.system import System
+from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import simulate
-from contactdyn.system import System
-from contactdyn.workprecision import errors
 
 HARD = Path(__file__).resolve().parent.parent / "benchmarks" / "hard"
 RIGID = {"contact.tip.normal": {"direction": [0.0, 1.0, 0.0], "model": "rigid"}}

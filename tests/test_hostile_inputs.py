@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import contactdyn
-from contactdyn.scene import sims_dir
+from contactdyn.scene.scene_file import sims_dir
 
 ROOT = Path(contactdyn.__file__).parent.parent
 RUNNER = Path(__file__).parent / "hostile_runner.py"

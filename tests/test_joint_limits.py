@@ -1,4 +1,4 @@
-"""Joint limits (contactdyn.limits): a position limit is a unilateral constraint located, impacted
+"""Joint limits (contactdyn.model.limits): a position limit is a unilateral constraint located, impacted
 plastically, held while the joint presses and released when its torque vanishes."""
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ from scipy.special import ellipk, ellipkinc
 
 from contactdyn import simulate
 from contactdyn.errors import SceneError
-from contactdyn.impact import limit_impact
-from contactdyn.robot import Robot
-from contactdyn.scene import parse_scene
-from contactdyn.system import System
+from contactdyn.model.impact import limit_impact
+from contactdyn.model.system import System
+from contactdyn.robot.robot import Robot
+from contactdyn.scene.scene_file import parse_scene
 
 M, L, G = 2.0, 0.5, 9.81  #: point mass [kg] on a massless rod [m], gravity [m/s²]
 LOWER, UPPER, THETA0 = 1.0, 3.0, 2.5  #: [rad] limits; start at rest near the top

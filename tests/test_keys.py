@@ -10,29 +10,30 @@ from pathlib import Path
 import pytest
 
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
-from contactdyn.config import recording, table_fields
 from contactdyn.errors import SceneError
-from contactdyn.keys import _display, keyfields_source, markdown, reference
-from contactdyn.scene import load_scene, parse_scene, sims_dir
+from contactdyn.scene.keys import _display, keyfields_source, markdown, reference
+from contactdyn.scene.reader import recording, table_fields
+from contactdyn.scene.scene_file import load_scene, parse_scene, sims_dir
 
 ROOT = Path(__file__).resolve().parent.parent
 #: modules whose Reader calls define scene keys
-READERS = ["scene.py", "drives.py", "controllers/base.py", "controllers/pd.py", "controllers/force.py",
-           "controllers/voltage.py", "controllers/dynamic.py", "controllers/operational.py"]
+READERS = ["scene/scene_file.py", "laws/drives.py", *(f"laws/controllers/{m}.py" for m in
+           ("base", "pd", "force", "voltage", "dynamic", "operational"))]
 READ_METHODS = {"float", "int", "bool", "str", "vector", "raw", "has", "sub", "tables", "named_tables", "error"}
 KEY_HELPERS = {"_gain": slice(1, 2), "_gains": slice(1, 2), "_read_stage": slice(1, 3), "_read_elements": slice(1, 2)}
 
 
 def test_docs_scenes_md_and_keyfields_are_generated_from_the_reader():
-    assert (ROOT / "docs" / "scenes.md").read_text() == markdown(), "docs/scenes.md is stale: python -m contactdyn.keys"
-    assert (ROOT / "contactdyn" / "keyfields.py").read_text() == keyfields_source(), \
-        "contactdyn/keyfields.py is stale: python -m contactdyn.keys"
+    assert (ROOT / "docs" / "scenes.md").read_text() == markdown(),\
+        "docs/scenes.md is stale: python -m contactdyn.scene.keys"
+    assert (ROOT / "contactdyn" / "scene" / "keyfields.py").read_text() == keyfields_source(), \
+        "contactdyn/scene/keyfields.py is stale: python -m contactdyn.scene.keys"
 
 
 def test_every_row_has_a_meaning_type_and_resolved_choices():
     for d in reference():
-        assert d.meaning, f"{d.key}: add a line to contactdyn.keys.MEANINGS"
-        assert d.type != "any", f"{d.key}: the reader reads it raw; give its type in contactdyn.keys.OVERRIDES"
+        assert d.meaning, f"{d.key}: add a line to contactdyn.scene.keys.MEANINGS"
+        assert d.type != "any", f"{d.key}: the reader reads it raw; give its type in contactdyn.scene.keys.OVERRIDES"
         assert "?" not in (d.allowed, d.default), \
             f"{d.key}: choices or default depend on the scene ({d.allowed!r}, {d.default!r}); say so in OVERRIDES"
 
@@ -68,8 +69,8 @@ def _literal_keys(path: Path) -> set[str]:
 
 
 def test_every_key_name_in_the_reader_source_is_in_the_reference():
-    """A key added in a branch the tour does not reach (contactdyn/keytour.py) fails here."""
-    from contactdyn.drives import _PARAMS
+    """A key added in a branch the tour does not reach (contactdyn/scene/keytour.py) fails here."""
+    from contactdyn.laws.drives import _PARAMS
 
     leaves = {d.key.rpartition(".")[2].removesuffix("[]") for d in reference()} | {d.key for d in reference()}
     names = set().union(*(_literal_keys(ROOT / "contactdyn" / m) for m in READERS))
@@ -77,7 +78,7 @@ def test_every_key_name_in_the_reader_source_is_in_the_reference():
     names -= {"a"}  # the reader's own item wrapper ({"a": axis})
     names = {n for n in names if not n.startswith("body.ground")}  # an error key, not a read
     missing = sorted(n for n in names if n not in leaves and "." not in n)
-    assert not missing, f"keys the reader accepts but the reference lacks (extend contactdyn/keytour.py): {missing}"
+    assert not missing, f"keys the reader accepts but the reference lacks (extend contactdyn/scene/keytour.py): {missing}"
 
 
 def test_a_table_error_names_its_fields():
@@ -139,7 +140,7 @@ def test_a_scene_name_is_found_in_the_working_directory_sims_first(tmp_path, mon
 
 
 def test_a_relative_urdf_path_resolves_against_the_scene_file(tmp_path, monkeypatch):
-    from contactdyn.robot import urdf_dir
+    from contactdyn.robot.robot import urdf_dir
 
     (tmp_path / "robots").mkdir()
     (tmp_path / "robots" / "arm.urdf").write_text((urdf_dir() / "planar2r_b1.urdf").read_text())
@@ -152,6 +153,6 @@ def test_a_relative_urdf_path_resolves_against_the_scene_file(tmp_path, monkeypa
     bad = tmp_path / "scenes" / "bad.toml"
     bad.write_text(text)  # robots/arm.urdf beside the scene does not exist: named where it was looked for
     with pytest.raises(SceneError, match="scenes/robots/arm.urdf"):
-        from contactdyn.system import System
+        from contactdyn.model.system import System
 
         System(load_scene(bad))

@@ -13,14 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import contactdyn.user_laws as user_laws
+import contactdyn.scene.user_laws as user_laws
 from contactdyn import parse_scene, simulate
 from contactdyn.cli import main
 from contactdyn.errors import SceneError
-from contactdyn.friction_laws import FRICTION_LAWS, FrictionSpec
-from contactdyn.keys import markdown, reference
-from contactdyn.scene import sims_dir
-from contactdyn.stage_laws import STAGE_LAWS
+from contactdyn.laws.friction_laws import FRICTION_LAWS, FrictionSpec
+from contactdyn.laws.stage_laws import STAGE_LAWS
+from contactdyn.scene.keys import markdown, reference
+from contactdyn.scene.scene_file import sims_dir
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 CUBIC = EXAMPLES / "cubic_press.toml"
@@ -156,8 +156,8 @@ def test_friction_laws_share_one_interface():
 def test_a_friction_law_changed_on_the_readable_path_only_is_caught(monkeypatch):
     """The plan holds μ_k in its matrices; a μ(v) changed in the readable model alone must not pass silently:
     the plan's self-check where the mode starts disagrees and says so (an undeclared fallback)."""
-    import contactdyn.friction as friction
-    import contactdyn.rhsplan as rhsplan
+    import contactdyn.compiled.rhsplan as rhsplan
+    import contactdyn.model.friction as friction
 
     monkeypatch.setattr(rhsplan, "_PLANS", type(rhsplan._PLANS)())  # no plan cached from another test
     monkeypatch.setattr(friction, "kinetic_coefficient", lambda fr, vt: 1.1 * fr.mu_k)
@@ -200,7 +200,7 @@ def test_new_writes_a_users_laws_with_their_declared_parameters(tmp_path, monkey
 
 
 def test_a_controllers_declared_parameters_are_read_checked_and_documented():
-    import contactdyn.controllers as controllers
+    import contactdyn.laws.controllers as controllers
 
     saved = dict(controllers.CONTROLLERS)
     try:

@@ -1,11 +1,11 @@
-"""The compiled LSODA driver (contactdyn.lsoda) against solve_ivp's LSODA."""
+"""The compiled LSODA driver (contactdyn.numerics.lsoda) against solve_ivp's LSODA."""
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from contactdyn import lsoda
-from contactdyn.integrators import integrate
+from contactdyn.numerics import lsoda
+from contactdyn.numerics.integrators import integrate
 
 pytestmark = pytest.mark.skipif(not lsoda.available(), reason="scipy without the compiled LSODA this driver calls")
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from contactdyn.metrics import CONTACT_METRICS, metrics
-from contactdyn.result import Result
+from contactdyn.output.metrics import CONTACT_METRICS, metrics
+from contactdyn.output.result import Result
 
 
 def _result() -> Result:
@@ -56,7 +56,7 @@ def test_undefined_metrics_are_nan():
 
 
 def test_every_metric_has_its_unit():
-    from contactdyn.metrics import CONTACT_METRICS, RUN_METRICS, UNITS
+    from contactdyn.output.metrics import CONTACT_METRICS, RUN_METRICS, UNITS
 
     assert set(UNITS) == set(CONTACT_METRICS) | set(RUN_METRICS)
     assert UNITS["F_peak"] == "N" and UNITS["impulse_n"] == "N·s" and UNITS["events"] == ""

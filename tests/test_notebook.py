@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from contactdyn import simulate
-from contactdyn.result import Result
+from contactdyn.output.result import Result
 
 ROOT = Path(__file__).resolve().parent.parent
 

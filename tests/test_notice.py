@@ -1,10 +1,10 @@
-"""The first run's compilation is announced (contactdyn.notice), once, and only when it is slow."""
+"""The first run's compilation is announced (contactdyn.hybrid.notice), once, and only when it is slow."""
 
 from __future__ import annotations
 
 import time
 
-import contactdyn.notice as notice
+import contactdyn.hybrid.notice as notice
 
 
 def test_a_slow_build_is_announced_once_and_a_fast_one_not(monkeypatch, capsys):

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 from contactdyn import Robot, simulate
-from contactdyn.controllers.base import BindContext, ControlInput
-from contactdyn.controllers.operational import OperationalSpace, OperationalSpaceConfig
+from contactdyn.compiled.rhsplan import ModePlan
 from contactdyn.errors import SceneError, SimulationError
-from contactdyn.rhsplan import ModePlan
-from contactdyn.robot_catalog import TOOL_FRAMES
-from contactdyn.scene import load_scene, parse_scene, sims_dir
+from contactdyn.laws.controllers.base import BindContext, ControlInput
+from contactdyn.laws.controllers.operational import OperationalSpace, OperationalSpaceConfig
+from contactdyn.robot.catalog import TOOL_FRAMES
+from contactdyn.scene.scene_file import load_scene, parse_scene, sims_dir
 from contactdyn.simulate import prepare
 
 KO, DO, K_NULL = 400.0, 40.0, 10.0  #: [1/s², 1/s, 1/s]
@@ -150,8 +150,8 @@ def _writer_variants():
 def test_the_plans_call_reads_the_same_inputs_off_its_slots(what, scene):
     """operational_command calls the law at the plan's own slots (no ControlInput): the same τ as the readable
     command at the plan's ControlInput, to the bit, at random states."""
-    from contactdyn.plan_law import operational_command
-    from contactdyn.plan_rhs import controller_input
+    from contactdyn.compiled.plan_law import operational_command
+    from contactdyn.compiled.plan_rhs import controller_input
 
     system, modes, phase, x0 = prepare(scene)
     plan = ModePlan(system, modes, phase)
@@ -201,7 +201,7 @@ def test_more_task_directions_than_joints_is_a_scene_error():
 def test_the_plans_right_hand_side_builds_no_control_input(monkeypatch):
     """The writer's compiled call runs the law without a ControlInput: with the constructor made to fail, the
     right-hand side gives the same ẋ, to the bit."""
-    import contactdyn.plan_rhs as plan_rhs
+    import contactdyn.compiled.plan_rhs as plan_rhs
 
     system, modes, phase, x0 = prepare(load_scene("case2_writer_ur5"))
     plan = ModePlan(system, modes, phase)
@@ -218,7 +218,7 @@ def test_the_plans_right_hand_side_builds_no_control_input(monkeypatch):
 def test_the_compiled_law_is_the_module_formula():
     """operational_law.torque (run by the readable law and the plan's compiled call) against the formula in numpy:
     τ = J_tᵀ (Λ (a* − J̇_t q̇ + k_null J_t q̇) + f) − k_null H q̇ + h, on random inputs of a 7-joint arm, to 1e-10."""
-    from contactdyn.controllers import operational_law
+    from contactdyn.laws.controllers import operational_law
 
     rng = np.random.default_rng(7)
     nv = 7
@@ -249,7 +249,7 @@ def test_the_compiled_law_is_the_module_formula():
 
 
 def test_the_hadamard_ratio_is_det_over_the_diagonal_and_zero_when_singular():
-    from contactdyn.controllers.operational_law import hadamard_ratio
+    from contactdyn.laws.controllers.operational_law import hadamard_ratio
 
     rng = np.random.default_rng(2)
     for n in (1, 2, 5):

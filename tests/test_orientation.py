@@ -11,14 +11,14 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from contactdyn.controllers import task_pd_law
+from contactdyn.compiled.plan_operational import OPERATIONAL
+from contactdyn.compiled.rhsplan import _PLANS, ModePlan
 from contactdyn.errors import SceneError
-from contactdyn.plan_operational import OPERATIONAL
-from contactdyn.rhsplan import _PLANS, ModePlan
-from contactdyn.robot import Robot
-from contactdyn.scene import parse_scene
+from contactdyn.laws.controllers import task_pd_law
+from contactdyn.model.system import System
+from contactdyn.robot.robot import Robot
+from contactdyn.scene.scene_file import parse_scene
 from contactdyn.simulate import prepare, run_system
-from contactdyn.system import System
 
 B2 = Path(__file__).resolve().parent.parent / "benchmarks" / "b2.toml"  #: /work/shared/bench/B2.md's scene
 R_DOWN = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]  #: B2's tool0: x along x, the tool axis down

@@ -1,4 +1,4 @@
-"""Runs that cannot silently do nothing (contactdyn.outcome, and sanity's reach check before a run)."""
+"""Runs that cannot silently do nothing (contactdyn.output.outcome, and sanity's reach check before a run)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import warnings
 import pytest
 
 from contactdyn import parse_scene, simulate
-from contactdyn.metrics import metrics
-from contactdyn.sanity import SanityWarning
+from contactdyn.output.metrics import metrics
+from contactdyn.scene.sanity import SanityWarning
 
 
 def hover(approach: float, phases: list[dict] | None = None) -> dict:

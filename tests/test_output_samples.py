@@ -1,7 +1,7 @@
 """The batched output of motor, elastic and force-reading phases equals the readable model per sample.
 
 Each scene runs twice on the same integration: once with the plans' batched output
-(:func:`~contactdyn.samples.plan_samples`), once with every output sample from
+(:func:`~contactdyn.compiled.samples.plan_samples`), once with every output sample from
 ``System.evaluate(full=True)``. Every channel must agree to 1e-10 (relative to the channel's scale).
 """
 
@@ -12,17 +12,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import contactdyn.rhsplan as rhsplan
-import contactdyn.samples as samples
+import contactdyn.compiled.rhsplan as rhsplan
+import contactdyn.compiled.samples as samples
 from contactdyn import Robot, parse_scene
-from contactdyn.channels import _per_sample
-from contactdyn.contact import ContactMode
-from contactdyn.rhsplan import _PLANS
-from contactdyn.samples import evaluated_samples, plan_derivatives
-from contactdyn.scene import load_scene
+from contactdyn.compiled.rhsplan import _PLANS
+from contactdyn.compiled.samples import evaluated_samples, plan_derivatives
+from contactdyn.laws.trajectory import profile
+from contactdyn.model.contact import ContactMode
+from contactdyn.model.system import System
+from contactdyn.output.channels import _per_sample
+from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import run_system, simulate
-from contactdyn.system import System
-from contactdyn.trajectory import profile
 
 #: scene -> a duration [s] that holds its phases' kinds (motor, elastic, force-reading, a carried reference)
 SCENES = {"case1_cart": 1.1, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "case3_b_force": 0.3, "b1": 0.3}
@@ -219,7 +219,7 @@ def test_law_over_all_samples_equals_the_per_sample_law(scene, monkeypatch):
 def test_stacked_pseudo_inverse_is_each_sample_s():
     """J⁺ over a stack equals each sample's J⁺ bitwise, and numpy's pinv (rcond 1e-10) to round-off, full rank or
     not (a zero sample: J⁺ = 0)."""
-    from contactdyn.controllers.dynamic import pseudo_inverse
+    from contactdyn.laws.controllers.dynamic import pseudo_inverse
 
     rng = np.random.default_rng(5)
     J = rng.normal(size=(40, 3, 5))

@@ -1,4 +1,4 @@
-"""Every run checks its own physics (contactdyn.physics_checks): each check sees what it claims to see.
+"""Every run checks its own physics (contactdyn.output.physics_checks): each check sees what it claims to see.
 
 A check is tested two ways: on every scene of ``sims/`` and ``benchmarks/hard/`` it stays
 within its tolerance, and on a run whose channels are doctored by a known amount (or whose
@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import contactdyn.transitions
+import contactdyn.hybrid.transitions
 from contactdyn import parse_scene, simulate
 from contactdyn.cli import main
-from contactdyn.physics_checks import CHECKS, PhysicsWarning, StartAudit, energy_residual, run_checks, violations
-from contactdyn.scene import sims_dir
-from contactdyn.system import System
+from contactdyn.model.system import System
+from contactdyn.output.physics_checks import CHECKS, PhysicsWarning, StartAudit, energy_residual, run_checks, violations
+from contactdyn.scene.scene_file import sims_dir
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = sorted(sims_dir().glob("*.toml")) + sorted((ROOT / "benchmarks" / "hard").glob("*.toml"))
@@ -49,7 +49,7 @@ def break_phase_starts(monkeypatch) -> None:
     def settle(self, t, x, modes, phase):
         return x, modes, phase
 
-    monkeypatch.setattr(contactdyn.transitions.Transitions, "settle", settle)
+    monkeypatch.setattr(contactdyn.hybrid.transitions.Transitions, "settle", settle)
 
 
 PUSH = 1.5 * MU_S * W  #: [N] a push out of the cone
@@ -166,7 +166,7 @@ def test_the_energy_residual_closes_on_an_elastic_chain_and_sees_a_leak():
         "controller": {"kind": "joint_pd", "kp": 2000.0, "kd": 100.0},
         "phase": [{"name": "hold", "reference": {"space": "joint", "start": robot_q0}}],
     }
-    from contactdyn.robot import Robot
+    from contactdyn.robot.robot import Robot
 
     doc["contact"]["tip"]["point"] = Robot.load("arm2r_cart").frame_position(np.array(robot_q0), "tip").tolist()
     r = run(doc)
@@ -199,7 +199,7 @@ def _states(result, system: System) -> np.ndarray:
 def test_contactdyn_run_prints_one_line_per_violated_check_and_stores_them(monkeypatch, tmp_path, capsys):
     break_phase_starts(monkeypatch)
     scene = tmp_path / "broken.toml"
-    from contactdyn.toml_writer import dumps
+    from contactdyn.scene.toml_writer import dumps
 
     scene.write_text(dumps(point_mass(STICK_THEN_PUSH)))
     assert main(["run", str(scene), "--out", str(tmp_path / "out")]) == 0
@@ -216,7 +216,7 @@ def test_a_sweep_has_a_column_per_check_and_counts_the_violations(monkeypatch, t
     outside (one)."""
     import pandas as pd
 
-    from contactdyn.toml_writer import dumps
+    from contactdyn.scene.toml_writer import dumps
 
     break_phase_starts(monkeypatch)
     monkeypatch.chdir(tmp_path)

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from contactdyn.dynamics import drive_command
-from contactdyn.plan_drives import CompiledDrives
-from contactdyn.rhsplan import ModePlan
-from contactdyn.scene import load_scene
+from contactdyn.compiled.plan_drives import CompiledDrives
+from contactdyn.compiled.rhsplan import ModePlan
+from contactdyn.model.dynamics import drive_command
+from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import prepare
 
 

@@ -1,4 +1,4 @@
-"""The fold of a force-reading law into the plan's solve (contactdyn.plan_fold): the law's matrix at the plan's
+"""The fold of a force-reading law into the plan's solve (contactdyn.compiled.plan_fold): the law's matrix at the plan's
 own slots gives what the ControlInput path gives."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from test_plan_law import _plan_states
 
-import contactdyn.plan_fold as plan_fold
-from contactdyn.plan_law import compiled_law
-from contactdyn.scene import load_scene
+import contactdyn.compiled.plan_fold as plan_fold
+from contactdyn.compiled.plan_law import compiled_law
+from contactdyn.scene.scene_file import load_scene
 
 
 def _folded(plan, states):

@@ -1,18 +1,19 @@
-"""The compiled kernel of a plan's call (contactdyn.plan_kernel) and its small linear algebra (contactdyn.linalg)."""
+"""The compiled kernel of a plan's call (compiled.plan_kernel) and its small linear algebra (numerics.linalg)."""
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 from test_output_samples import _pressing_writer
 
-from contactdyn import samples, simulate
-from contactdyn.linalg import cholesky, forward_solve, lu_solve, pinv, sparse_dot
-from contactdyn.plan_law import compiled_law
-from contactdyn.rhsplan import _PLANS
-from contactdyn.robot import Robot
-from contactdyn.scene import load_scene, parse_scene
+from contactdyn import simulate
+from contactdyn.compiled import samples
+from contactdyn.compiled.plan_law import compiled_law
+from contactdyn.compiled.rhsplan import _PLANS
+from contactdyn.model.system import System
+from contactdyn.numerics.linalg import cholesky, forward_solve, lu_solve, pinv, sparse_dot
+from contactdyn.robot.robot import Robot
+from contactdyn.scene.scene_file import load_scene, parse_scene
 from contactdyn.simulate import run_system
-from contactdyn.system import System
 
 
 @pytest.mark.parametrize("nv", [1, 2, 3, 5, 7])
@@ -106,8 +107,8 @@ def test_kernel_is_the_readable_model_with_a_reference_carried_by_the_cart(force
     """Case 1's push: A7 tracking a reference carried by the cart, through DC motors. Without force_reference the
     command depends on the cart's acceleration along x (one more folded column, D_a = x); with it (the scene's)
     the reference along the touching normal is the force's depth instead, and that column is zero."""
-    from contactdyn.config import read_toml
-    from contactdyn.scene import find_scene
+    from contactdyn.scene.reader import read_toml
+    from contactdyn.scene.scene_file import find_scene
 
     doc = read_toml(find_scene("case1_cart"))
     doc["phase"][1]["controller"]["force_reference"] = force_reference
@@ -230,8 +231,8 @@ def test_kernel_is_the_readable_model_on_a_redundant_arm():
 def test_operational_kernel_is_the_readable_model_on_a_1d_slide():
     """The 5-DOF writer with 1-D friction along x drawing a line: the pencil stuck, then sliding along its one
     tangent (the kernel's 1-D impulse rate −μ F d + the viscous force, d the mode's fixed direction)."""
-    from contactdyn.config import read_toml
-    from contactdyn.scene import find_scene
+    from contactdyn.scene.reader import read_toml
+    from contactdyn.scene.scene_file import find_scene
 
     doc = read_toml(find_scene("case2_writer5dof"))
     doc["duration"] = 1.0

@@ -1,4 +1,4 @@
-"""The force-reading dynamic laws read off as a matrix (contactdyn.plan_law) equal the readable law."""
+"""The force-reading dynamic laws read off as a matrix (contactdyn.compiled.plan_law) equal the readable law."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import pytest
 from test_controllers import hybrid_doc
 
 from contactdyn import parse_scene
-from contactdyn.constraints import force_columns
-from contactdyn.dynamics import carried_command
-from contactdyn.phases import start_phase
-from contactdyn.plan_law import CompiledLaw, compiled_law, plan_command, plan_inputs
-from contactdyn.plan_rhs import controller_input
-from contactdyn.rhsplan import ModePlan
-from contactdyn.scene import load_scene
+from contactdyn.compiled.plan_law import CompiledLaw, compiled_law, plan_command, plan_inputs
+from contactdyn.compiled.plan_rhs import controller_input
+from contactdyn.compiled.rhsplan import ModePlan
+from contactdyn.model.constraints import force_columns
+from contactdyn.model.dynamics import carried_command
+from contactdyn.model.phases import start_phase
+from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import prepare
 
 
@@ -155,8 +155,8 @@ def test_plan_command_waits_for_the_matrix_and_declines_a_readable_law():
 def test_reference_rows_are_reference_at_bitwise():
     """plan_law's reference as one product over the moves' profiles equals Reference.at bitwise (same sums in the
     same order) for 1–3 moves of every non-circle kind and one circle, before, during and after them."""
-    from contactdyn.plan_law import reference_rows
-    from contactdyn.trajectory import Move, Reference
+    from contactdyn.compiled.plan_law import reference_rows
+    from contactdyn.laws.trajectory import Move, Reference
 
     rng = np.random.default_rng(0)
     kinds = ["trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step", "exponential"]
@@ -178,8 +178,8 @@ def test_write_time_part_writes_the_reference_and_the_ramps():
     """The compiled tip laws' time part (plan_law.write_time_part, in the kernel's call): u[6:15] the reference's
     rows by its tables (a product of moves or one circle; a fixed reference, kind −1, leaves them), then
     (F_d, Ḟ_d) of each ramp from u[i_set], each Ramp.at's bitwise; nothing else of u changes."""
-    from contactdyn.plan_law import NO_REFERENCE, reference_tables, write_time_part
-    from contactdyn.trajectory import Move, Ramp, Reference, ramp_table
+    from contactdyn.compiled.plan_law import NO_REFERENCE, reference_tables, write_time_part
+    from contactdyn.laws.trajectory import Move, Ramp, Reference, ramp_table
 
     circle = Move(np.array([0.01, 0.02, 0.0]), 0.5, 2.0, "circle", 0.1, np.array([0.0, 0.0, 1.0]), 1.5)
     moves = (Move(np.array([0.1, 0.0, -0.2]), 0.2, 1.0, "trapezoid", 0.25),

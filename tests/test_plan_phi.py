@@ -1,4 +1,4 @@
-"""φ's frame terms computed from the joint's (contactdyn.plan_phi.frame_motion) against Pinocchio's own frame calls."""
+"""φ's frame terms computed from the joint's (compiled.plan_phi.frame_motion) against Pinocchio's own frame calls."""
 
 from pathlib import Path
 
@@ -6,7 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from contactdyn.plan_phi import LWA, frame_constants, frame_motion, joint_terms
+from contactdyn.compiled.plan_phi import LWA, frame_constants, frame_motion, joint_terms
 
 URDF = Path(__file__).resolve().parent.parent / "urdf"
 

@@ -1,14 +1,15 @@
-"""DOP853 steps taken in one compiled call (contactdyn.plan_steps) against scipy's core and solve_ivp's DOP853."""
+"""DOP853 steps taken in one compiled call (compiled.plan_steps) against scipy's core and solve_ivp's DOP853."""
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from contactdyn import dop853, plan_steps
-from contactdyn.rhsplan import _PLANS
-from contactdyn.scene import load_scene, parse_scene
+from contactdyn.compiled import plan_steps
+from contactdyn.compiled.rhsplan import _PLANS
+from contactdyn.model.system import System
+from contactdyn.numerics import dop853
+from contactdyn.scene.scene_file import load_scene, parse_scene
 from contactdyn.simulate import run_system
-from contactdyn.system import System
 
 
 def _sliding(name: str, until: float):

@@ -11,8 +11,8 @@ import pytest
 
 from contactdyn import simulate
 from contactdyn.errors import ContactdynError
-from contactdyn.plots import FIGURES, figure_names, plot_command, plot_result
-from contactdyn.result import Result
+from contactdyn.output.plots import FIGURES, figure_names, plot_command, plot_result
+from contactdyn.output.result import Result
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 UNIT = re.compile(r"\[[^\]]+\]")  #: "[N]", "[mm]", "[m/s]" ...

@@ -1,4 +1,4 @@
-"""No run works without bound, and a long one says how far it is (contactdyn.progress)."""
+"""No run works without bound, and a long one says how far it is (contactdyn.hybrid.progress)."""
 
 from __future__ import annotations
 
@@ -6,16 +6,17 @@ import io
 
 import pytest
 
-import contactdyn.events
-import contactdyn.hybrid
-import contactdyn.progress as progress
+import contactdyn.hybrid.events
+import contactdyn.hybrid.loop
+import contactdyn.hybrid.progress as progress
+import contactdyn.scene.budget as budget
 from contactdyn import SimulationError, simulate
 
 
 def test_a_run_over_its_step_budget_stops_with_the_cause(monkeypatch):
     """B1 takes ~240 steps over 2 s; with a budget of 50 steps per simulated second (and no base) it stops at
     the 100th step, saying where, the budget and the fastest mode."""
-    monkeypatch.setattr(contactdyn.hybrid, "step_budget", lambda solver, duration: 100)
+    monkeypatch.setattr(contactdyn.hybrid.loop, "step_budget", lambda solver, duration: 100)
     with pytest.raises(SimulationError) as info:
         simulate("b1", {"solver.steps_per_second": 50.0})
     text = str(info.value)
@@ -26,21 +27,21 @@ def test_a_run_over_its_step_budget_stops_with_the_cause(monkeypatch):
 def test_steps_that_keep_failing_are_bounded_by_the_calls(monkeypatch):
     """The same budget counted in right-hand-side calls (rejected attempts too): B1 needs ~4200 calls; with a
     budget of 50 steps (1200 calls) it stops inside the integration, naming the calls."""
-    monkeypatch.setattr(contactdyn.hybrid, "step_budget", lambda solver, duration: 50)
-    monkeypatch.setattr(contactdyn.hybrid, "WorkWatch", lambda left, progress: progress_watch(10**9))
+    monkeypatch.setattr(contactdyn.hybrid.loop, "step_budget", lambda solver, duration: 50)
+    monkeypatch.setattr(contactdyn.hybrid.loop, "WorkWatch", lambda left, progress: progress_watch(10**9))
     with pytest.raises(SimulationError, match="right-hand-side calls \\(24 per budgeted step\\)"):
         simulate("b1")
 
 
 def progress_watch(left: int):
-    return contactdyn.events.WorkWatch(left)
+    return contactdyn.hybrid.events.WorkWatch(left)
 
 
 def test_the_budget_is_the_base_plus_the_rate_times_the_duration():
-    from contactdyn.scene import load_scene
+    from contactdyn.scene.scene_file import load_scene
 
     scene = load_scene("b1", {"solver.steps_per_second": 1000.0})
-    assert progress.step_budget(scene.solver, scene.duration) == progress.STEPS_BASE + 2000
+    assert budget.step_budget(scene.solver, scene.duration) == budget.STEPS_BASE + 2000
 
 
 def test_progress_shows_after_a_while_as_lines_off_a_terminal(monkeypatch):

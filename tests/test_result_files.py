@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from contactdyn.errors import RunFileError
-from contactdyn.result import Result, atomic_path, load_result, run_files
+from contactdyn.output.result import Result, atomic_path, load_result, run_files
 
 
 def small() -> Result:

@@ -1,4 +1,4 @@
-"""The robot's terms computed in the plan's call (contactdyn.rigid_body) against Pinocchio's computeAllTerms."""
+"""The robot's terms computed in the plan's call (contactdyn.robot.rigid_body) against Pinocchio's computeAllTerms."""
 
 from pathlib import Path
 
@@ -6,9 +6,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from contactdyn.rigid_body import rigid_table, rigid_terms
-from contactdyn.robot import Robot
-from contactdyn.robot_catalog import example_robots
+from contactdyn.robot.catalog import example_robots
+from contactdyn.robot.rigid_body import rigid_table, rigid_terms
+from contactdyn.robot.robot import Robot
 
 URDF = Path(__file__).resolve().parent.parent / "urdf"
 
@@ -89,7 +89,7 @@ def test_a_robot_without_a_table_runs_the_same_call_on_pinocchios_terms(monkeypa
     """With the table withheld (as for a free-flyer), the plans' compiled call takes Pinocchio's terms (loaded into
     its buffer before the call) and no compiled step: the 5-DOF writer's press and launch are the same run to
     the tolerance (force and joints within 10× the scene's rtol and atol: a different rounding)."""
-    from contactdyn import plan_phi
+    from contactdyn.compiled import plan_phi
     from contactdyn.simulate import simulate
 
     ours = simulate("case2_writer5dof", {"duration": 0.8})
@@ -105,7 +105,7 @@ def test_a_robot_without_a_table_runs_the_same_call_on_pinocchios_terms(monkeypa
         return phi
 
     monkeypatch.setattr(plan_phi, "phi_function", counting)
-    import contactdyn.plan_rhs as plan_rhs
+    import contactdyn.compiled.plan_rhs as plan_rhs
     monkeypatch.setattr(plan_rhs, "phi_function", counting)
     theirs = simulate("case2_writer5dof", {"duration": 0.8})
     assert loads  # the compiled call ran on Pinocchio's terms

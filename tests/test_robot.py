@@ -19,7 +19,7 @@ import pinocchio as pin
 import pytest
 
 from contactdyn import Robot, RobotError
-from contactdyn.robot import EXAMPLE_ROBOTS, FrameTerms, urdf_dir
+from contactdyn.robot.robot import EXAMPLE_ROBOTS, FrameTerms, urdf_dir
 
 G = 9.81  # [m/s²], Robot.load's default gravity magnitude
 OUR_URDFS = sorted(p.stem for p in urdf_dir().glob("*.urdf"))
@@ -270,8 +270,8 @@ def test_our_urdfs_load(name):
 
 def _deepest_body(name: str) -> str:
     """The body frame with the most joints above it: a tip every robot has."""
-    from contactdyn.frames import chain_joints
-    from contactdyn.urdf_model import build_urdf_model
+    from contactdyn.robot.frames import chain_joints
+    from contactdyn.robot.urdf_model import build_urdf_model
 
     model = build_urdf_model(name, inertia="trust").model
     bodies = [i for i, f in enumerate(model.frames) if f.type == pin.FrameType.BODY]

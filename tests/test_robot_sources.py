@@ -13,12 +13,12 @@ import pytest
 from contactdyn import Robot, RobotError
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
 from contactdyn.errors import SceneError, SimulationError
-from contactdyn.events import EventLog, start_storm_cause
-from contactdyn.inertia import nearest_valid_moments
-from contactdyn.posture import PostureTask, solve_posture
-from contactdyn.robot_catalog import example_robot_data_share, example_robots
-from contactdyn.scene import parse_scene
-from contactdyn.system import System
+from contactdyn.hybrid.events import EventLog, start_storm_cause
+from contactdyn.model.system import System
+from contactdyn.robot.catalog import example_robot_data_share, example_robots
+from contactdyn.robot.inertia import nearest_valid_moments
+from contactdyn.robot.posture import PostureTask, solve_posture
+from contactdyn.scene.scene_file import parse_scene
 
 LINK = """<link name="{name}"><inertial><mass value="1"/><inertia ixx="{ixx}" iyy="0.01" izz="{izz}" ixy="0" ixz="0"
  iyz="0"/></inertial>{visual}</link>"""

@@ -18,9 +18,9 @@ import pytest
 
 from contactdyn import Robot, simulate
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
-from contactdyn.result import load_result
-from contactdyn.robot_catalog import TOOL_FRAMES
-from contactdyn.scene import sims_dir
+from contactdyn.output.result import load_result
+from contactdyn.robot.catalog import TOOL_FRAMES
+from contactdyn.scene.scene_file import sims_dir
 
 WRITER, UR5 = "case2_writer5dof", "case2_writer_ur5"
 PANDA = {

@@ -11,10 +11,10 @@ import pytest
 
 from contactdyn.cli import EXIT_OK, main
 from contactdyn.errors import SceneError
-from contactdyn.sanity import SanityWarning, scene_warnings, system_warnings
-from contactdyn.scene import load_scene, parse_scene, sims_dir
+from contactdyn.model.system import System
+from contactdyn.scene.sanity import SanityWarning, scene_warnings, system_warnings
+from contactdyn.scene.scene_file import load_scene, parse_scene, sims_dir
 from contactdyn.simulate import simulate
-from contactdyn.system import System
 
 B1 = sims_dir() / "b1.toml"
 

@@ -7,14 +7,14 @@ import math
 import pytest
 
 from contactdyn import SceneError, load_scene, parse_scene, simulate
-from contactdyn.scene import apply_overrides, parse_override
-from contactdyn.system import System
+from contactdyn.model.system import System
+from contactdyn.scene.scene_file import apply_overrides, parse_override
 
 
 def b1_doc() -> dict:
     import tomllib
 
-    from contactdyn.scene import sims_dir
+    from contactdyn.scene.scene_file import sims_dir
 
     return tomllib.loads((sims_dir() / "b1.toml").read_text())
 

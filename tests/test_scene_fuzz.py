@@ -16,9 +16,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from contactdyn.errors import SceneError
-from contactdyn.friction_laws import FRICTION_LAWS
-from contactdyn.scene import parse_scene, sims_dir
-from contactdyn.stage_laws import STAGE_LAWS
+from contactdyn.laws.friction_laws import FRICTION_LAWS
+from contactdyn.laws.stage_laws import STAGE_LAWS
+from contactdyn.scene.scene_file import parse_scene, sims_dir
 
 BASE = tomllib.loads((sims_dir() / "b1.toml").read_text())
 FILE = str(sims_dir() / "b1.toml")
@@ -115,7 +115,7 @@ def test_skeleton_documents(doc):
 def test_valid_mutants_build_a_system_or_raise_the_packages_errors(doc):
     """What parse_scene accepts, System must build or reject with SceneError/RobotError (URDF-level checks)."""
     from contactdyn.errors import RobotError
-    from contactdyn.system import System
+    from contactdyn.model.system import System
 
     try:
         scene = parse_scene(doc, file=FILE)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from contactdyn import simulate
-from contactdyn.scene import load_scene, sims_dir
+from contactdyn.scene.scene_file import load_scene, sims_dir
 
 SCENES = sorted(p.stem for p in sims_dir().glob("*.toml"))
 

@@ -1,13 +1,14 @@
-"""A 2-D slide coming to rest: DOP853's steps collapse, the rest of the mode runs on LSODA (contactdyn.hybrid)."""
+"""A 2-D slide coming to rest: DOP853's steps collapse, the rest of the mode runs on LSODA (contactdyn.hybrid.loop)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from contactdyn import hybrid, simulate
-from contactdyn.events import StepCollapse
-from contactdyn.integrators import integrate
+from contactdyn import simulate
+from contactdyn.hybrid import loop as hybrid
+from contactdyn.hybrid.events import StepCollapse
+from contactdyn.numerics.integrators import integrate
 
 
 def test_step_collapse_fires_at_the_end_of_the_counted_short_step():

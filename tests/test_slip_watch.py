@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from contactdyn.events import SlipWatch
+from contactdyn.hybrid.events import SlipWatch
 
 X = np.zeros(2)
 

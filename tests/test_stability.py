@@ -1,12 +1,12 @@
-"""Linearised contact loops (contactdyn.stability): closed forms, and growth rates against simulation."""
+"""Linearised contact loops (contactdyn.analysis.stability): closed forms, and growth rates against simulation."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from contactdyn.scene import parse_scene
-from contactdyn.stability import ContactLoop, contact_phase_scene, envelope_rate, modal_poles, simulated_growth
+from contactdyn.analysis.stability import ContactLoop, contact_phase_scene, envelope_rate, modal_poles, simulated_growth
+from contactdyn.scene.scene_file import parse_scene
 
 
 def rigid_case3_b_a7(kp: float, kv: float) -> ContactLoop:

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
-from contactdyn.sanity import scene_warnings, system_warnings
-from contactdyn.scene import load_scene
+from contactdyn.model.system import System
+from contactdyn.scene.sanity import scene_warnings, system_warnings
+from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import simulate
-from contactdyn.system import System
 
 
 @pytest.mark.parametrize("contact, friction", [("b", True), ("a", False), ("c", True), ("rigid", False)])
@@ -68,7 +68,7 @@ def test_the_starter_posture_is_well_conditioned_and_its_run_presses(robot, tip,
     import warnings
 
     from contactdyn import parse_scene, simulate
-    from contactdyn.robot import Robot
+    from contactdyn.robot.robot import Robot
     from contactdyn.starter import PRESS, starter_scene
 
     doc = tomllib.loads(starter_scene("s", robot, "b", True, tip))
@@ -98,7 +98,7 @@ def test_a_robot_whose_tip_cannot_press_and_slide_is_refused_with_a_sentence(cap
 def test_a_planar_arm_of_three_joints_gets_a_starter(tmp_path):
     """A 3R arm in the x-z plane: its tip moves in two directions only (rank 2), which is enough to press and
     slide (the table's normal and the slide both in the plane)."""
-    from contactdyn.robot import Robot
+    from contactdyn.robot.robot import Robot
     from contactdyn.starter import working_posture
 
     links = "".join(f'<link name="l{i}"><inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" '

@@ -18,8 +18,8 @@ import pytest
 import contactdyn
 from contactdyn.cli import EXIT_FAILED, EXIT_OK, EXIT_USAGE, main
 from contactdyn.errors import SceneError, SimulationError
-from contactdyn.metrics import metrics
-from contactdyn.result import load_result
+from contactdyn.output.metrics import metrics
+from contactdyn.output.result import load_result
 from contactdyn.sweep import execute as sweep_exec
 from contactdyn.sweep import make_sweep, parse_grid, parse_range, run_id
 
@@ -219,7 +219,7 @@ def test_resume_refuses_another_scene(capsys, tmp_path):
     out = tmp_path / "s"
     assert main(["sweep", "b1", *FAST, "--out", str(out), "--workers", "0", "-q"]) == EXIT_OK
     other = tmp_path / "b1_copy.toml"
-    other.write_text((contactdyn.scene.sims_dir() / "b1.toml").read_text().replace("mu = 0.4", "mu = 0.5"))
+    other.write_text((contactdyn.scene.scene_file.sims_dir() / "b1.toml").read_text().replace("mu = 0.4", "mu = 0.5"))
     assert main(["sweep", str(other), *FAST, "--out", str(out), "--workers", "0", "-q"]) == EXIT_USAGE
     assert "sweep.json" in capsys.readouterr().err
 
@@ -296,7 +296,7 @@ def test_resume_reads_the_summary_and_reruns_damaged_results(capsys, tmp_path, m
     args = ["sweep", "b1", *FAST, *GRID, "--workers", "0", "--quiet"]
     assert main([*args, "--out", str(out)]) == EXIT_OK
     assert main([*args, "--out", str(fresh)]) == EXIT_OK
-    result_mod = sys.modules["contactdyn.result"]
+    result_mod = sys.modules["contactdyn.output.result"]
     with monkeypatch.context() as m:  # finished runs listed in the summary are not reloaded
         m.setattr(result_mod, "load_result", lambda *a: pytest.fail("reloaded a result"))
         assert main([*args, "--out", str(out), "--json"]) == EXIT_OK

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from contactdyn.cli import EXIT_OK, main
-from contactdyn.result import load_result
+from contactdyn.output.result import load_result
 from contactdyn.sweep import result_row
 from contactdyn.sweep import summary as summary_mod
 from contactdyn.sweep.summary import COST_FACTOR, PARTS, SUMMARY_FIXED, Summary
@@ -67,7 +67,7 @@ def test_a_killed_sweeps_parts_reach_the_summary_without_reloading(capsys, tmp_p
         assert main(_sweep(out, 3)) == EXIT_OK
     assert written == [0] and len(pd.read_parquet(out / "summary.parquet")) == 0
     assert len(list((out / PARTS).glob("*.json"))) == 3
-    result_mod = sys.modules["contactdyn.result"]
+    result_mod = sys.modules["contactdyn.output.result"]
     with monkeypatch.context() as m:
         m.setattr(result_mod, "load_result", lambda *a: pytest.fail("reloaded a result"))
         assert main([*_sweep(out, 4), "--json"]) == EXIT_OK  # one more case: one run

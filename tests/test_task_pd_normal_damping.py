@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from contactdyn.controllers.base import ControlInput
-from contactdyn.controllers.pd import TaskPD, TaskPDConfig
+from contactdyn.laws.controllers.base import ControlInput
+from contactdyn.laws.controllers.pd import TaskPD, TaskPDConfig
 
 
 def _input(v_tip: np.ndarray) -> ControlInput:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from contactdyn.trajectory import Move, Ramp, Reference, move_rows, move_table, profile, ramp_rows, ramp_table
+from contactdyn.laws.trajectory import Move, Ramp, Reference, move_rows, move_table, profile, ramp_rows, ramp_table
 
 
 @pytest.mark.parametrize("kind", ["trapezoid", "triangle", "constant_velocity"])

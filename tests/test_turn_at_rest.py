@@ -5,8 +5,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from contactdyn.contact import ContactMode
-from contactdyn.transitions import TURN_AT_REST, Transitions, _After
+from contactdyn.hybrid.transitions import TURN_AT_REST, Transitions, _After
+from contactdyn.model.contact import ContactMode
 
 BAND = 1e-9  #: [m/s] the stick band v_ε
 

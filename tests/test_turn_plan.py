@@ -8,11 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from contactdyn import hybrid, parse_scene, rhsplan
-from contactdyn.contact import ContactMode
-from contactdyn.rhsplan import cached_plan, structure
+from contactdyn import parse_scene
+from contactdyn.compiled import rhsplan
+from contactdyn.compiled.rhsplan import cached_plan, structure
+from contactdyn.hybrid import loop as hybrid
+from contactdyn.model.contact import ContactMode
+from contactdyn.model.system import System
 from contactdyn.simulate import run_system
-from contactdyn.system import System
 
 M, G = 2.0, 9.81  #: [kg], [m/s²] the point mass and gravity
 MU, PUSH, FREQ = 0.4, 10.0, 1.0  #: friction coefficient, push amplitude [N], push frequency [Hz]

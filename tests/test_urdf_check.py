@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from contactdyn.errors import RobotError
-from contactdyn.robot import Robot
-from contactdyn.urdf_check import MAX_URDF_LINKS, MAX_URDF_MOVING_JOINTS, check_urdf_tree, isolated_build
+from contactdyn.robot.robot import Robot
+from contactdyn.robot.urdf_check import MAX_URDF_LINKS, MAX_URDF_MOVING_JOINTS, check_urdf_tree, isolated_build
 
 INERTIAL = '<inertial><mass value="1"/><inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial>'
 

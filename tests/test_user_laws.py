@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import contactdyn.user_laws as user_laws
+import contactdyn.scene.user_laws as user_laws
 from contactdyn import parse_scene, simulate
 from contactdyn.cli import main
-from contactdyn.controllers import CONTROLLERS
 from contactdyn.errors import SceneError
+from contactdyn.laws.controllers import CONTROLLERS
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SCENE = EXAMPLES / "impedance_press.toml"

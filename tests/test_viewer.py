@@ -219,7 +219,7 @@ def test_default_camera_looks_along_the_surface_from_the_robot_side(b1_run):
     assert _in_view(scene, result["tip"], margin=1.5).all()
 
 
-SIMS = sorted(p.stem for p in contactdyn.scene.sims_dir().glob("*.toml"))
+SIMS = sorted(p.stem for p in contactdyn.scene.scene_file.sims_dir().glob("*.toml"))
 
 
 @pytest.mark.parametrize("name", SIMS)

@@ -1,6 +1,6 @@
 """Speed against error: the compiled right-hand side, the integrators, the bench.
 
-- the compiled plan (contactdyn.rhsplan) computes the same derivatives, event values and
+- the compiled plan (contactdyn.compiled.rhsplan) computes the same derivatives, event values and
   output samples as System.evaluate, in every mode of every scene in sims/ and
   benchmarks/hard/ (the plan is measured from the system's own code; this checks the
   measurement and the parts it writes out itself: friction, rows, the task PD law);
@@ -24,13 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from contactdyn.contact import ContactMode
-from contactdyn.errors import SceneError, SimulationError
-from contactdyn.integrators import FiniteDifferenceJacobian, jacobian_eigenvalues, stability_bound
-from contactdyn.rhsplan import ModePlan, Samples
-from contactdyn.scene import load_scene
-from contactdyn.simulate import prepare, simulate
-from contactdyn.workprecision import (
+from contactdyn.analysis.workprecision import (
     WorkPoint,
     bench,
     bench_command,
@@ -39,6 +33,12 @@ from contactdyn.workprecision import (
     recommend,
     write_report,
 )
+from contactdyn.compiled.rhsplan import ModePlan, Samples
+from contactdyn.errors import SceneError, SimulationError
+from contactdyn.model.contact import ContactMode
+from contactdyn.numerics.integrators import FiniteDifferenceJacobian, jacobian_eigenvalues, stability_bound
+from contactdyn.scene.scene_file import load_scene
+from contactdyn.simulate import prepare, simulate
 
 ROOT = Path(__file__).resolve().parent.parent
 DECLINED = ("motors", "a controller reading measured forces", "energy audit")
@@ -230,7 +230,7 @@ def test_rk4_step_beyond_the_stiffest_mode_stops_with_the_cause():
 
 
 def test_rk4_amplification_matches_the_closed_form():
-    from contactdyn.integrators import RK4_RADIUS, rk4_amplification
+    from contactdyn.numerics.integrators import RK4_RADIUS, rk4_amplification
 
     assert RK4_RADIUS < 2.7852935  # the stated bound is inside the real stability interval [-2.7852935, 0]
     got = rk4_amplification(np.array([0.0, -1.0, -2.7852935, -3.0, 2.8j]))
@@ -244,7 +244,7 @@ def test_rk4_rechecks_the_step_when_the_state_grows():
     """y' = -λ(t) y with λ = 1 1/s, then 1000 1/s from t = 1 s: h = 0.01 s is stable at the start only."""
     from scipy.integrate import solve_ivp
 
-    from contactdyn.integrators import RK4
+    from contactdyn.numerics.integrators import RK4
 
     def fun(t, y):
         return -(1.0 if t < 1.0 else 1000.0) * y

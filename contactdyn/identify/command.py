@@ -29,7 +29,7 @@ def parse_noise(items: list[str]) -> dict[str, float]:
 
 
 def fit_command(args: argparse.Namespace) -> int:
-    from ..scene import parse_override
+    from ..scene.scene_file import parse_override
 
     overrides = dict(parse_override(s) for s in args.set)
     result = fit(args.scene, args.data, args.params, overrides=overrides, noise=parse_noise(args.noise),

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ContactdynError, SceneError
-from ..scene import Scene, load_scene, parse_scene
+from ..scene.scene_file import Scene, load_scene, parse_scene
 from .data import Measurements, measurements, read_csv
 from .model import Failure, FitModel, FitSettings, check_columns, read_channel
 from .params import Parameter, parse_params

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ContactdynError, SceneError, close_matches
-from ..scene import SolverSpec
+from ..scene.scene_file import SolverSpec
 from .data import Measurements, split_column
 from .params import Parameter
 
@@ -46,7 +46,7 @@ def predict(document: dict[str, Any], file: str | None, overrides: dict[str, Any
 
     Runs in a pool worker: only plain data goes in and out.
     """
-    from ..scene import parse_scene
+    from ..scene.scene_file import parse_scene
     from ..simulate import simulate
     from ..sweep import NUMERICAL
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..result import atomic_path, atomic_write
+from ..output.result import atomic_path, atomic_write
 from .fitting import FitResult
 
 __all__ = ["as_dict", "text", "markdown", "figure", "write_report", "save_scene"]
@@ -164,8 +164,8 @@ def write_report(res: FitResult, out: str | Path) -> dict[str, Path]:
 
 def save_scene(res: FitResult, path: str | Path) -> Path:
     """The scene document with the fitted values, as TOML (comments list the estimates)."""
-    from ..scene import apply_overrides, urdf_beside_scene
-    from ..toml_writer import dumps
+    from ..scene.scene_file import apply_overrides, urdf_beside_scene
+    from ..scene.toml_writer import dumps
 
     doc = apply_overrides(res.document, res.values, res.scene_file)
     robot = doc.get("robot", {})

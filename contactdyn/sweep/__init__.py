@@ -5,11 +5,11 @@ of the axes (``--grid key=v1,v2``, ``--range key=lo:hi:n[:log]``), optionally ti
 of explicit runs from a sweep file. Each case is one run whose id is a stable hash of its
 overrides (fixed and varied), so the same case always lands in the same files:
 
-- ``OUT/runs/<id>.npz`` + ``.json``: the run's :class:`~contactdyn.result.Result`
+- ``OUT/runs/<id>.npz`` + ``.json``: the run's :class:`~contactdyn.output.result.Result`
   (``<id>.failed.json`` instead, with the error, when the run failed);
 - ``OUT/summary.parquet`` (and ``summary.csv`` on request): one row per run, sorted by the swept parameters:
   the varied parameters, status, error message, wall time [s] and the key metrics
-  (:mod:`contactdyn.metrics`);
+  (:mod:`contactdyn.output.metrics`);
 - ``OUT/sweep.json``: the base scene document, fixed overrides and the cases.
 
 Every file is written atomically; each chunk's rows go to a part file of their own

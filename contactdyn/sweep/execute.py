@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ContactdynError, SceneError, numerical_errors
-from ..scene import parse_scene
+from ..scene.scene_file import parse_scene
 from .plan import Sweep, check_sweep
 from .store import STATUSES, done_row, lock_out, record_failure, result_row, write_manifest
 from .summary import Summary, cached_rows

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Reader, read_toml
 from ..errors import SceneError
-from ..scene import find_scene, parse_override, parse_scene
+from ..scene.reader import Reader, read_toml
+from ..scene.scene_file import find_scene, parse_override, parse_scene
 
 __all__ = ["Sweep", "run_id", "parse_grid", "parse_range", "load_sweep_file", "make_sweep", "check_sweep"]
 
@@ -200,7 +200,7 @@ def check_sweep(sweep: Sweep) -> None:
     its varied values (``contact.tip.normal.b = -1``), then the scene's own message. A robot
     that cannot be found is bad input too.
     """
-    from ..robot import resolve_robot_path
+    from ..robot.robot import resolve_robot_path
 
     first = None
     for _, params, overrides in sweep.cases():

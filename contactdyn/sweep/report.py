@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import SceneError
-from ..result import atomic_path
+from ..output.result import atomic_path
 
 __all__ = ["failures", "failure_lines", "plot_over"]
 
@@ -86,7 +86,7 @@ def plot_over(summary: Path, y: str, x: str, keys: list[str], out: Path) -> Path
 
 
 def _unit(metric: str) -> str:
-    from ..metrics import UNITS
+    from ..output.metrics import UNITS
 
     return {**UNITS, "wall_s": "s"}.get(metric.rpartition(".")[2], "")
 

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ContactdynError, SceneError
-from ..result import atomic_write
+from ..output.result import atomic_write
 from .plan import Sweep
 from .summary import SUMMARY_FIXED
 
@@ -22,7 +22,7 @@ STATUSES = ("ok", "failed", "crashed")
 
 def result_row(rid: str, result) -> dict[str, Any]:
     """Summary row of a finished run: status ``failed`` if its channels hold non-finite values."""
-    from ..metrics import metrics
+    from ..output.metrics import metrics
 
     bad = sorted(k for k, v in result.channels.items()
                  if not k.endswith((".F_d", "tip_ref")) and not np.all(np.isfinite(v)))
@@ -66,7 +66,7 @@ def lock_out(out: Path):
 
 def done_row(runs_dir: Path, rid: str, cache: dict[str, dict[str, Any]]) -> dict[str, Any] | None:
     """The row of a finished run (from the last summary, else from its files); None if it must run."""
-    from ..result import load_result
+    from ..output.result import load_result
 
     failed = runs_dir / f"{rid}.failed.json"
     finished = failed.is_file() or ((runs_dir / f"{rid}.npz").is_file() and (runs_dir / f"{rid}.json").is_file())

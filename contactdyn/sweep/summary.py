@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ..result import atomic_path, atomic_write, jsonable
+from ..output.result import atomic_path, atomic_write, jsonable
 
 __all__ = ["SUMMARY_FIXED", "PARTS", "REFRESH_S", "COST_FACTOR", "Summary", "cached_rows", "write_summary"]
 
@@ -89,7 +89,7 @@ def cached_rows(out: Path) -> dict[str, dict[str, Any]]:
 def _table_rows(path: Path) -> dict[str, dict[str, Any]]:
     import pandas as pd
 
-    from ..metrics import is_metric
+    from ..output.metrics import is_metric
 
     try:
         frame = pd.read_parquet(path)
@@ -103,7 +103,7 @@ def _table_rows(path: Path) -> dict[str, dict[str, Any]]:
 
 def _part_rows(path: Path) -> list[dict[str, Any]]:
     """The rows of one part file; none if it is damaged (those runs are then reloaded from their files)."""
-    from ..metrics import is_metric
+    from ..output.metrics import is_metric
 
     try:
         rows = json.loads(path.read_text())

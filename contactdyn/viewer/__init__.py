@@ -1,6 +1,6 @@
 """See runs in meshcat: live in a browser, or as a self-contained HTML file.
 
-``build_scene(result)`` turns a :class:`~contactdyn.result.Result` into meshcat commands
+``build_scene(result)`` turns a :class:`~contactdyn.output.result.Result` into meshcat commands
 headless (robot from its URDF visuals, surfaces and carts, deformation-chain gauges,
 force arrows, impact markers, all animated over the run); ``export_html`` writes them
 into one offline HTML player; ``view_result`` / ``view_command`` start a meshcat server
@@ -15,7 +15,7 @@ import signal
 import sys
 import threading
 
-from ..result import Result, load_result
+from ..output.result import Result, load_result
 from .build import build_scene
 from .export import export_html
 from .live import LOOPBACK, LiveViewer

@@ -8,20 +8,12 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import ContactdynError, RunFileError
-from ..result import Result
-from ..robot import Robot
-from ..run_check import check_drawable
-from ..scene import Scene
+from ..output.result import Result
+from ..output.run_check import check_drawable
+from ..robot.robot import Robot
+from ..scene.scene_file import Scene
 from .camera import frame_view
-from .contact_visuals import (
-    STAGE_LENGTH,
-    add_environment,
-    add_forces,
-    add_gauges,
-    add_impacts,
-    add_tool,
-    contact_views,
-)
+from .contact_visuals import STAGE_LENGTH, add_environment, add_forces, add_gauges, add_impacts, add_tool, contact_views
 from .robot_visuals import add_robot, geometry_spheres
 from .shapes import add_label
 from .writer import ROOT, SceneWriter, ViewerScene
@@ -39,7 +31,7 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
     """The meshcat commands drawing ``result``, played at ``speed`` × real time; no server, no browser."""
     if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
         raise ContactdynError(f"view: speed must be a number > 0 (1 = real time), found {speed!r}")
-    scene = check_drawable(result)  # the same checks as `plot` (contactdyn.run_check)
+    scene = check_drawable(result)  # the same checks as `plot` (contactdyn.output.run_check)
     robot = _robot_of(result, scene)
     t_all, q_all = np.asarray(result["t"], float), np.asarray(result["q"], float).reshape(len(result["t"]), -1)
     if q_all.shape[1] != robot.nq:

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import meshcat.geometry as mg
 import numpy as np
 
-from ..chain import Chain, NodeKind, build_chain
-from ..scene import ContactSpec, Scene
+from ..model.chain import Chain, NodeKind, build_chain
+from ..scene.scene_file import ContactSpec, Scene
 from .shapes import (
     ON_TOP,
     add_arrow,

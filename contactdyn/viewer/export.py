@@ -24,7 +24,7 @@ from pathlib import Path
 import meshcat
 import umsgpack
 
-from ..result import Result, atomic_write
+from ..output.result import Result, atomic_write
 from .build import build_scene
 from .writer import ViewerScene
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import html
 
-from ..result import Result
+from ..output.result import Result
 from .build import build_scene
 from .export import html_document
 

@@ -1,6 +1,6 @@
 """The robot's visual geometry, from Pinocchio's visual GeometryModel, animated by the run's q.
 
-Why Pinocchio's model and not yourdfpy: :class:`contactdyn.robot.Robot` already builds the
+Why Pinocchio's model and not yourdfpy: :class:`contactdyn.robot.robot.Robot` already builds the
 visual model from the same URDF, with ``package://`` meshes resolved (our robots and
 example-robot-data's) and with the scene's locked joints folded in by
 ``buildReducedModel`` — so the run's ``q`` channel (active joints only) places every
@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 import umsgpack
 
-from ..robot import Robot
+from ..robot.robot import Robot
 from .writer import Cone, MeshFileGeometry, MeshFileObject, SceneWriter, color_int
 
 __all__ = ["add_robot", "geometry_placements", "geometry_spheres", "MESH_FORMATS"]

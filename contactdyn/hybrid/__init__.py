@@ -1,0 +1,2 @@
+"""The hybrid loop: smooth phases integrated between located events, the transitions at events, the
+step budget and the progress line."""

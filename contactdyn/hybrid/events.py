@@ -1,0 +1,386 @@
+"""The events of a smooth phase: touch, separate, stop, reverse, turn, slip; the storm guard.
+
+Within a smooth phase the modes (touching, sticking, sliding direction) and the task
+phase are fixed. Events are zeros of functions of the state, located by ``solve_ivp``
+on its dense output; each is terminal and fires when its function falls through zero:
+
+- ``touch``: a free contact's normal gap [m] reaches zero (then the impact map,
+  :mod:`contactdyn.model.impact`). The function is gap − (min(0, gap at the segment start) −
+  ``TOUCH_TOL``): never zero at the start, so a re-touch right after a separation is seen;
+- ``separate``: a touching, unbonded contact's normal force F [N] reaches zero;
+- ``stop``: a sliding contact's slip velocity along its sliding reference r falls to the
+  stick band, v_t·r = v_ε [m/s] (``solver.stick_velocity``);
+- ``reverse``: a slip from rest runs backwards past −v_ε (v_t·r = −v_ε);
+- ``turn`` (2-D): the slip velocity turned 60° away from r, v_t·r − ½|v_t| + v_ε = 0
+  (r is refreshed, no mode change; near rest it is decided as a stop, ``transitions.TURN_AT_REST``);
+- ``slip``: a sticking contact's friction reaches the cone, g = μ_s F − |F_f| = 0
+  (:class:`SlipWatch`, which also sees inside a step).
+
+What happens at each event is decided in :mod:`contactdyn.hybrid.transitions`. At a corner of the
+set-points, where no step straddles a jump of the forces, :func:`fired_across` finds the
+events whose functions jump through zero there. The storm guard
+(:class:`EventLog`): more than ``storm_count`` events within ``storm_window`` seconds, or
+more than ``max_events`` in the run, stop with a :class:`SimulationError` naming them.
+
+The event functions are written once (:func:`segment_events`) against a source of values:
+the compiled plan's (its last calls', no second solve) or, when the mode is not compiled,
+:meth:`System.evaluate`'s through a small cache shared with the right-hand side.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from ..compiled.rhsplan import ModePlan
+from ..errors import SimulationError
+from ..model.contact import ContactMode
+from ..model.dynamics import Evaluation
+from ..model.friction import slip_velocity
+from ..model.phases import Phase
+from ..model.system import System
+
+__all__ = ["TOUCH_TOL", "terminal_event", "EvaluationCache", "SlipCache", "SlipWatch", "StepBudget", "StepCollapse",
+           "WorkWatch", "segment_events", "fired_across", "EventLog", "start_storm_cause"]
+
+#: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
+#: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
+#: zero at the start misses a re-touch that lifts and returns within one step, and the tip then
+#: passed through the surface unseen (case 2's writer, just after its impact).
+TOUCH_TOL = 1e-13  # well above rounding of positions (~1e-16 m per metre)
+
+
+class EventLog:
+    """The run's event list, with the storm guard: too many events, or too many too close together."""
+
+    def __init__(self, scene_name: str, solver, stats: dict[str, Any]):
+        self.scene_name, self.solver, self.stats = scene_name, solver, stats
+        self.events: list[dict[str, Any]] = []
+        self.recent: deque[float] = deque(maxlen=solver.storm_count)  #: times [s] of the latest events
+
+    def log(self, t: float, kind: str, name: str, check_storm: bool = True, **info) -> None:
+        """Record an event at t [s]; with ``check_storm`` count it and stop a storm."""
+        self.events.append({"t": t, "kind": kind, "name": name, **info})
+        if not check_storm:
+            return
+        self.stats["events"] += 1
+        self.recent.append(t)
+        if self.stats["events"] > self.solver.max_events:
+            raise SimulationError(f"{self.scene_name}: more than {self.solver.max_events} events by t = {t:.9g} s "
+                                  f"(last: {kind} on {name}); " + (start_storm_cause(self.events, name) or
+                                                                   "raise solver.max_events if this is expected"))
+        if len(self.recent) == self.recent.maxlen and self.recent[-1] - self.recent[0] <= self.solver.storm_window:
+            kinds = ", ".join(f"{e['kind']}:{e['name']}" for e in self.events[-5:])
+            raise SimulationError(
+                f"{self.scene_name}: event storm: {self.recent.maxlen} events within "
+                f"{self.recent[-1] - self.recent[0]:.3g} s at t = {t:.9g} s (last: {kinds}); " +
+                (start_storm_cause(self.events, name) or "the contact chatters (grazing or inconsistent "
+                                                          "stick/slip); see solver.storm_count / storm_window"))
+
+
+START_STORM = 1e-3  #: [s] a storm whose contact events began this early started with the run
+
+
+def start_storm_cause(events: list[dict], contact: str) -> str | None:
+    """The likely cause when the events flooding the run are on one contact since t ≈ 0, else None."""
+    on_contact = [e for e in events if e["kind"] != "phase"]
+    if not on_contact or on_contact[0]["t"] > START_STORM or \
+            sum(e["name"] == contact for e in on_contact) < 0.9 * len(on_contact):
+        return None
+    return (f"the events on contact {contact!r} began at t = {on_contact[0]['t']:.3g} s, with the run: the start "
+            "posture does not suit the contact (initial penetration, the tip on the surface while moving or "
+            "pulling away, a posture near a singularity); check robot.tip0, robot.q0 / q_seed and the contact's "
+            "point, and `contactdyn run --verbose` for the posture found")
+
+
+class EvaluationCache:
+    """The latest evaluations at (t, x), shared by the right-hand side and the event functions.
+
+    Four, like the plan's ring: DOP853 evaluates the step's end state (FSAL), then three more
+    stages for its dense output, then the event functions at the step's end.
+    """
+
+    SIZE = 4
+
+    def __init__(self, system: System, modes: list[ContactMode], phase: Phase):
+        self.system, self.modes, self.phase = system, modes, phase
+        self.ring: list[tuple[tuple[float, bytes], Evaluation]] = []
+
+    def __call__(self, t: float, x: np.ndarray) -> Evaluation:
+        key = (t, x.tobytes())
+        for k, value in reversed(self.ring):
+            if k == key:
+                return value
+        value = self.system.evaluate(t, x, self.modes, self.phase)
+        self.ring.append((key, value))
+        if len(self.ring) > self.SIZE:
+            del self.ring[0]
+        return value
+
+
+class SlipCache:
+    """Slip velocities [m/s] of the sliding contacts at (t, x): kinematics only, no linear solve."""
+
+    def __init__(self, system: System, names: list[str]):
+        self.system = system
+        self.contacts = [c for c in system.contacts if c.name in names]
+        self.key: tuple[float, bytes] | None = None
+        self.value: dict[str, np.ndarray] = {}
+
+    def __call__(self, t: float, x: np.ndarray) -> dict[str, np.ndarray]:
+        key = (t, x.tobytes())
+        if key != self.key:
+            system, nQ, nv = self.system, self.system.nQ, self.system.nv
+            system.robot.update(x[:nv], x[nQ:nQ + nv])
+            self.value = {c.name: slip_velocity(system, c, system.kinematics(c, x)) for c in self.contacts}
+            self.key = key
+        return self.value
+
+
+def terminal_event(fn, kind: str, contact: str):
+    """Mark ``fn`` a terminal event of ``kind`` on ``contact`` that fires when it falls through zero."""
+    fn.terminal = True
+    fn.direction = -1
+    fn.kind, fn.contact = kind, contact
+    return fn
+
+
+class SlipWatch:
+    """The ``slip`` event of a stuck contact, g = μ_s F − |F_f|, which also sees inside a step.
+
+    ``solve_ivp`` tests events only at step ends, and a stuck robot's state may hardly move:
+    the friction a push needs can leave the cone and come back within one step unseen. The
+    right-hand side reports g at every Runge–Kutta stage (:meth:`sample`); if a stage inside
+    the step just taken saw g < 0 while the step end did not, the event reports a crossing,
+    and while ``solve_ivp`` locates it on the dense output, g is held negative from that
+    stage's time on, so the root found is the first crossing. A false alarm (a stage state
+    off the final solution) is caught by the handler, which keeps the stick.
+    """
+
+    terminal = True
+    direction = -1
+
+    def __init__(self, value, name: str, mu_s: float):
+        self.value, self.contact, self.mu_s = value, name, mu_s  # value(t, x): g at a state
+        self.kind = "slip"
+        self.t_end = -math.inf  #: last step end seen [s]
+        self.latch = math.inf  #: from this time on g is held negative [s]
+        self.outside: list[float] = []  #: times [s] of the stages since the last step end that saw g < 0
+
+    def g(self, ev: Evaluation) -> float:
+        return self.mu_s * ev.normal_force[self.contact] - float(np.linalg.norm(ev.friction[self.contact]))
+
+    def sample(self, t: float, g: float) -> None:
+        if g < 0.0:
+            self.outside.append(t)
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        g = self.value(t, x)
+        if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
+            t_old, self.t_end = self.t_end, t
+            if not self.outside:
+                return g
+            hidden = [ts for ts in self.outside if t_old < ts < t]
+            self.outside = [ts for ts in self.outside if ts > t]
+            if g > 0.0 and hidden:
+                self.latch = min(hidden)
+                return -1.0
+            return g
+        return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
+
+
+class _StepCount:
+    """A terminal event at the end of the ``n``-th step end that counts (:meth:`counts`, given the step's length
+    h [s]; the call at t0 has h = inf). ``solve_ivp`` calls events once per step end with increasing t (and,
+    while locating a root, inside the last step: those calls neither count nor move it): the function is +1
+    before that step end and −1 from there on, so the segment ends exactly there."""
+
+    terminal = True
+    direction = -1
+    contact = ""
+
+    def __init__(self, n: int):
+        self.left = n
+        self.t_end, self.t_fire = -math.inf, math.inf
+
+    def counts(self, h: float) -> bool:
+        raise NotImplementedError
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        if t > self.t_end:
+            if self.counts(t - self.t_end):
+                self.left -= 1
+                if self.left == 0:
+                    self.t_fire = t
+            self.t_end = t
+        return -1.0 if t >= self.t_fire else 1.0
+
+
+class WorkWatch(_StepCount):
+    """The run's step budget (:mod:`contactdyn.hybrid.progress`): a terminal event at the step end where the run's steps
+    reach ``left``; reports the simulated time to ``progress`` at each step end."""
+
+    kind = "work"
+
+    def __init__(self, left: int, progress=None):
+        super().__init__(max(left, 1))
+        self.progress = progress
+
+    def counts(self, h: float) -> bool:
+        return h != math.inf  # not the call at t0
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        if t > self.t_end and self.t_end != -math.inf and self.progress is not None:
+            self.progress(t)
+        return super().__call__(t, x)
+
+
+class StepBudget(_StepCount):
+    """``auto``'s budget: a terminal event at the end of DOP853's ``budget``-th step (numerics.integrators)."""
+
+    kind = "budget"
+
+    def __init__(self, budget: int):
+        super().__init__(budget + 1)  # the call at t0 counts too
+
+    def counts(self, h: float) -> bool:
+        return True
+
+
+class StepCollapse(_StepCount):
+    """A 2-D slide's guard: a terminal event at the end of the ``count``-th step shorter than ``ratio`` times the
+    longest of the segment so far (the hybrid loop then checks whether a stiff mode holds the step: a slide
+    coming to rest, its direction relaxing at a rate ∝ 1/|v_t|;
+    :meth:`~contactdyn.hybrid.loop.HybridRun._collapse_check`)."""
+
+    kind = "collapse"
+
+    def __init__(self, ratio: float, count: int):
+        super().__init__(count)
+        self.ratio, self.longest = ratio, 0.0  #: [-], [s]
+
+    def counts(self, h: float) -> bool:
+        short = h < self.ratio * self.longest
+        if math.isfinite(h):
+            self.longest = max(self.longest, h)
+        return short
+
+
+#: event kinds whose functions read forces (normal force, friction, limit torque): these jump where the
+#: set-points' acceleration or a force set-point jumps; touch, stop, reverse, turn and limit read the state
+JUMPING = ("separate", "slip", "release")
+
+
+def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray) -> list:
+    """The events whose function falls through zero from (t_before, x) to (t_after, x), in list order.
+
+    At a corner of the set-points (:class:`~contactdyn.laws.trajectory.Corner`) one segment ends at
+    ``t_before`` and the next starts at ``t_after`` with the same state: a force that jumps
+    there (a rigid contact's, with the reference's acceleration) is seen here, as a step
+    straddling the corner would have seen it. Only functions of forces can jump (``JUMPING``):
+    the others read the state alone.
+    """
+    fired = []
+    for e in events:
+        if e.kind not in JUMPING:
+            continue
+        g = e.value if isinstance(e, SlipWatch) else e  # (a SlipWatch's call keeps step-end state)
+        if g(t_before, x) > 0.0 >= g(t_after, x):
+            fired.append(e)
+    return fired
+
+
+class _ReadableValues:
+    """What the event functions read, from :meth:`System.evaluate` (one evaluation per state, shared).
+
+    The compiled plan offers the same methods (:class:`~contactdyn.compiled.rhsplan.ModePlan`); the
+    event functions are written once against either.
+    """
+
+    def __init__(self, system: System, modes: list[ContactMode], phase: Phase):
+        self.names = [c.name for c in system.contacts]
+        self.cache = EvaluationCache(system, modes, phase)
+        self.slips = SlipCache(system, [c.name for c, m in zip(system.contacts, modes, strict=True)
+                                        if m.touching and not m.stuck and c.friction is not None and len(c.tangents)])
+
+    def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
+        return self.cache(t, x).xdot
+
+    def gap(self, ci: int, t: float, x: np.ndarray) -> float:
+        return self.cache(t, x).gap[self.names[ci]]
+
+    def normal_force(self, ci: int, t: float, x: np.ndarray) -> float:
+        return self.cache(t, x).normal_force[self.names[ci]]
+
+    def slip(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
+        return self.slips(t, x)[self.names[ci]]
+
+    def cone_margin(self, ci: int, mu_s: float, t: float, x: np.ndarray) -> float:
+        ev = self.cache(t, x)
+        return mu_s * ev.normal_force[self.names[ci]] - float(np.linalg.norm(ev.friction[self.names[ci]]))
+
+    def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate."""
+        return self.cache(t, x).limit_torque
+
+
+def _along(v: np.ndarray, r: tuple[float, ...]) -> float:
+    """v·r [m/s]: a slip velocity (1 or 2 tangent components) along the mode's direction r, in Python floats (an
+    event's value at every step end: a NumPy product of two 2-vectors costs more than the rest of the event)."""
+    vs = v.tolist()
+    return vs[0] * r[0] + vs[1] * r[1] if len(r) == 2 else vs[0] * r[0]
+
+
+def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
+    """The ``turn`` function v·r − ½|v| + v_ε [m/s] of a 2-D slip velocity v (|v| = √(v·v))."""
+    v0, v1 = v.tolist()
+    return v0 * r[0] + v1 * r[1] - 0.5 * math.sqrt(v0 * v0 + v1 * v1) + band
+
+
+def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
+                   plan: ModePlan | None = None):
+    """The event functions of one segment, and the right-hand side that feeds their stage watches.
+
+    They read the compiled ``plan``'s values when given (its last call's, no second solve),
+    else :meth:`System.evaluate`'s through one shared evaluation per state.
+    """
+    values = plan if plan is not None else _ReadableValues(system, modes, phase)
+    out: list = []
+    watches: list[SlipWatch] = []
+    for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
+        name = c.name
+        if not mode.touching:
+            floor = min(values.gap(ci, t0, x0), 0.0) - TOUCH_TOL  # [m] never zero at the start
+            out.append(terminal_event(lambda t, x, i=ci, g0=floor: values.gap(i, t, x) - g0, "touch", name))
+            continue
+        if not c.spec.bonded:
+            out.append(terminal_event(lambda t, x, i=ci: values.normal_force(i, t, x), "separate", name))
+        if c.friction is None or not len(c.tangents):
+            continue
+        fr, band = c.friction, system.slip_band
+        if mode.stuck:
+            watches.append(SlipWatch(lambda t, x, i=ci, mu=fr.mu_s: values.cone_margin(i, mu, t, x), name, fr.mu_s))
+            out.append(watches[-1])
+            continue
+        r = tuple(float(c) for c in mode.slip)
+        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _along(values.slip(i, t, x), r) - b, "stop", name))
+        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _along(values.slip(i, t, x), r) + b, "reverse",
+                                  name))
+        if len(r) == 2:
+            out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
+                                      name))
+    out += system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # contactdyn.model.limits
+    fun = values.rhs
+    if not watches:
+        return out, fun
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        xd = fun(t, x)
+        for w in watches:
+            w.sample(t, w.value(t, x))  # the same evaluation (plan: its last call): no second solve
+        return xd
+
+    return out, rhs

@@ -1,0 +1,409 @@
+"""The hybrid loop: smooth phase, event, mode transition (impact map), next smooth phase.
+
+A contact task (Part II's description) alternates smooth motions, in which the contact
+modes and the task phase are fixed, and instants at which they change. The loop:
+
+1. integrate the smooth phase from (t, x) with error control (``solve_ivp``, or the compiled
+   DOP853 of :mod:`contactdyn.numerics.dop853`; the method from :mod:`contactdyn.numerics.integrators`) on the
+   mode's right-hand side — the compiled plan
+   (:mod:`contactdyn.compiled.rhsplan`) where it represents the mode, else
+   :meth:`System.evaluate` — with the mode's events (:mod:`contactdyn.hybrid.events`);
+2. at the first event, apply the transition (:mod:`contactdyn.hybrid.transitions`): an impact,
+   a separation, a stick or a slip; or, at a phase's end, start the next phase; at a
+   corner of the phase's set-points (:class:`~contactdyn.laws.trajectory.Corner`: a jump of the
+   reference's acceleration or of a force ramp's rate) go on past it with the same state,
+   so that no step straddles the jump (:meth:`HybridRun._pass_corner`);
+3. repeat until the duration; then sample the segments into channels
+   (:mod:`contactdyn.output.channels`).
+
+Integrator choice per segment: the scene's ``solver.method``; ``auto`` runs DOP853 with a
+step budget and switches to Radau for a segment whose steps are stability-bound; a 2-D
+slip launching from rest runs on LSODA (its direction relaxes at a rate ∝ 1/|v_t|, stiff
+for an explicit method) until the next event; while damped chain ends relax after a
+separation an explicit method's step is at most their time constant (``RELAX_STEP``). After
+a friction event the next segment (or a corner) starts with the step size the solver had
+reached. An integration failure reports what the state says: a singular contact system or
+stiffness.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..compiled.rhsplan import ModePlan, cached_plan, structure
+from ..errors import SceneError, SimulationError, numerical_errors
+from ..laws.trajectory import min_span
+from ..model.contact import ContactMode
+from ..model.limits import rate_limit_report
+from ..model.paths import PathLog
+from ..model.phases import Phase
+from ..model.system import System
+from ..numerics.integrators import (
+    AUTO_EXPLICIT,
+    EXPLICIT,
+    FIXED,
+    IMPLICIT,
+    STABILITY_RADIUS,
+    STEP_BUDGET,
+    FiniteDifferenceJacobian,
+    integrate,
+    jacobian_eigenvalues,
+    stability_bound,
+)
+from ..output.channels import Held, Segment, output_grid, sample_states
+from ..output.physics_checks import StartAudit, run_checks, violations
+from ..output.result import Result
+from ..scene.budget import STEPS_BASE, step_budget
+from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
+from .notice import compiling
+from .progress import CALLS_PER_STEP, OverBudget, Progress, Work
+from .transitions import Transitions
+
+__all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
+
+#: events after which the next segment starts with the step size the solver had reached (friction
+#: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
+RESUME_STEP = ("stop", "reverse", "slip", "turn")
+LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest or comes to rest (see HybridRun._method)
+#: a 2-D slide's explicit steps shorter than COLLAPSE_RATIO × the segment's longest, COLLAPSE_STEPS of them, have
+#: it checked for a stiff mode (events.StepCollapse): the steps shrink ~1/|v_t| as the slide comes to rest; a
+#: short collapse costs the explicit method less than a switch would
+COLLAPSE_RATIO, COLLAPSE_STEPS = 1.0 / 8.0, 50
+#: [-] LAUNCH_METHOD finishing a slide that comes to rest runs at this × the scene's tolerances: its error is then
+#: about DOP853's at the scene's own (5-DOF writer against its rtol 1e-11 reference: tip 1.1e-9 m at 1×, 3.4e-10 m
+#: at 0.1×, as DOP853 alone); where it fails there, the scene's method takes over for the rest of the mode
+RESTING_TOL = 0.1
+#: [-] an explicit step while chain ends relax after a separation is at most this × their time constant
+#: b / k: the relaxation is then resolved, and so are the gap and the re-touch located on it (at 1e-2 s
+#: steps, 10 time constants, case 1's re-touch came out 1e-8 s late at rtol 3e-11)
+RELAX_STEP = 1.0
+
+
+class HybridRun:
+    """One run of a system: the loop, its counters, its segments and events."""
+
+    #: end segments at the corners of the phase's set-points (trajectory.Corner); False only for
+    #: the benchmarks' before/after comparison (benchmarks/corners.py)
+    at_corners = True
+
+    def __init__(self, system: System):
+        self.system = system
+        self.scene = system.scene
+        self.solver = system.scene.solver
+        self.segments: list[Segment] = []
+        self.impacts: list[dict[str, Any]] = []
+        self.next_step: float | None = None  #: [s] first step of the next segment (None: solver's choice)
+        if self.solver.method in FIXED and not math.isfinite(self.solver.max_step):
+            raise SceneError("solver.max_step", f"the step [s] of the fixed-step method {self.solver.method}",
+                             "no max_step", self.scene.file)
+        self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "corners": 0, "singular_solves": 0,
+                      "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
+        self.log = EventLog(self.scene.name, self.solver, self.stats)
+        self.events = self.log.events
+        self.transitions = Transitions(system, self.log, self.stats, self.impacts)
+        self.plans: dict[tuple, ModePlan] = {}
+        self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
+        #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
+        #: them, "" when none did (no more checks in the mode); None: not checked
+        self.resting: str | None = None
+        self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
+        self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
+        self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
+        self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
+        self.work = Work(CALLS_PER_STEP * self.budget)  #: right-hand-side calls at most, rejected steps' too
+        self.progress: Progress | None = None  #: shows the simulated time of a long run (contactdyn run sets it)
+
+    def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True, at: tuple | None = None) -> ModePlan:
+        """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``
+        (``count``: a segment runs on it, so a fallback is counted and its path recorded). ``at`` = (t, x): where
+        the mode starts; the first time a run meets the mode, the plan checks itself there against the readable
+        model (:meth:`ModePlan.check_at`)."""
+        key = (structure(modes), id(phase))
+        plan = self.plans.get(key)
+        first = plan is None
+        if first:
+            with compiling("the fast path of this scene's contact modes"):
+                plan = self.plans[key] = cached_plan(self.system, modes, phase)
+        plan.use(modes)  # a turn's new reference direction r: data of the same plan
+        if first and at is not None:
+            plan.check_at(*at)
+        if count:
+            self.paths.record(self.system, modes, phase, plan)
+            if not plan.ok:
+                self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
+        return plan
+
+    def start(self) -> tuple[np.ndarray, list[ContactMode], Phase]:
+        """Initial state, consistent modes and the first phase at t = 0."""
+        x, modes = self.system.initial_state()
+        phase = self.system.start_phase(0, 0.0, x, None)
+        x, modes = self.transitions.consistent(0.0, x, modes, phase)
+        return x, modes, phase
+
+    # ---- main loop -------------------------------------------------------------------
+    def run(self, wall0: float) -> Result:
+        """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
+        try:
+            return self._run(wall0)
+        except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
+            raise SimulationError(self._over_budget(*_spent_at(self), calls=True)) from None
+        except (*numerical_errors(), ZeroDivisionError) as exc:
+            t = self.segments[-1].t1 if self.segments else 0.0
+            raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
+                                  f"({type(exc).__name__}: {exc}); check the scene's magnitudes "
+                                  "(initial velocities, gains, stiffness)") from None
+
+    def _run(self, wall0: float) -> Result:
+        T = self.scene.duration
+        x, modes, phase = self.start()
+        t = 0.0
+        while t < T:
+            until = phase.spec.until
+            t_end = min(T, until) if isinstance(until, float) else T
+            if t_end <= t:
+                self._new_mode()
+                x, modes, phase = self._next_phase(phase, t, x, modes)
+                continue
+            corner = phase.next_corner(t, t_end) if self.at_corners else None
+            if corner is not None and corner.before - t <= min_span(t):  # at it already (an event landed there)
+                t, x, modes, phase = self._pass_corner(t, corner.after, x, modes, phase)
+                continue
+            sol, events, fun = self._segment(t, corner.before if corner else t_end, x, modes, phase)
+            t, x = float(sol.t[-1]), sol.y[:, -1].copy()
+            h0, self.next_step = self.next_step, None
+            if sol.status == 0 and corner is not None:  # reached the corner: go on past it with the step reached
+                self.next_step = float(sol.t[-2] - sol.t[-3]) if len(sol.t) > 2 else h0
+                t, x, modes, phase = self._pass_corner(t, corner.after, x, modes, phase)
+            elif sol.status == 1:
+                fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
+                if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
+                    self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
+                    continue
+                if fired[0].kind == "work":
+                    raise SimulationError(self._over_budget(t, x))
+                if fired[0].kind == "collapse":  # a 2-D slide coming to rest? (same modes, same phase)
+                    self._collapse_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
+                    continue
+                self._new_mode()
+                if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
+                    self.next_step = float(sol.t[-2] - sol.t[-3])
+                x, modes, phase = self.transitions.handle(t, x, modes, phase, fired[0])
+            elif t < T:
+                self._new_mode()
+                x, modes, phase = self._next_phase(phase, t, x, modes)
+        self.work.limit = math.inf  # the output's interpolants are not the integration's work
+        if self.segments and self.segments[-1].modes != modes:  # an event at the end: its modes are the last sample's
+            self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._plan(modes, phase, count=False)))
+        return self._result(time.perf_counter() - wall0)
+
+    def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
+        """Restart past a corner of the set-points at t_after [s] with the state x reached at t [s]
+        (no event: the same modes, unless a contact force or limit torque jumps through zero there,
+        which is handled as the event a step straddling the corner would have located)."""
+        self.stats["corners"] += 1
+        plan = self._plan(modes, phase, count=False)
+        events, _ = segment_events(self.system, modes, phase, t, x, plan if plan.ok else None)
+        fired = fired_across(events, t, t_after, x)
+        if fired:
+            self._new_mode()
+            if fired[0].kind not in RESUME_STEP:
+                self.next_step = None
+            x, modes, phase = self.transitions.handle(t_after, x, modes, phase, fired[0])
+        return t_after, x, modes, phase
+
+    def _segment(self, t: float, t_end: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
+        """Integrate one smooth phase from t towards t_end [s]: (solution, its events, its right-hand side)."""
+        system = self.system
+        h0 = min(self.next_step, t_end - t) if self.next_step else None
+        plan = self._plan(modes, phase, at=(t, x))
+        fun = plan.rhs if plan.ok else system.rhs(modes, phase)
+        scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
+        for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
+            events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
+            self.starts.record(t, x, events)
+            events += self._watches(modes, method)
+            jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
+            # LSODA finishing a slide that comes to rest (HybridRun._collapse_check): at RESTING_TOL × the tolerances
+            finishing = method == self.resting and method != scene_method and not _launching(modes)
+            scale = RESTING_TOL if finishing else 1.0
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
+                sol = integrate(self.work.wrap(rhs), (t, t_end), x, method, rtol=scale * self.solver.rtol,
+                                atol=scale * self.solver.atol, max_step=self._max_step(modes, method), events=events,
+                                first_step=h0, jac=jac)
+            self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
+            if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
+                break  # else a failed launch or finishing method: retry with the scene's
+            if finishing:
+                self.resting = ""  # and keep the scene's for the rest of the mode
+        by = self.stats.setdefault("segments_by_method", {})
+        by[method] = by.get(method, 0) + 1
+        self.stats["steps"] += len(sol.t) - 1
+        if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
+            why = sol.message if sol.status < 0 else "the state is not finite"  # never "successfully ..."
+            raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s "
+                                  f"({method}): {why}{self._diagnose(sol, plan, fun, method)}")
+        self.segments.append(Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
+        self.stats["segments"] += 1
+        return sol, events, fun
+
+    def _over_budget(self, t: float, x: np.ndarray, calls: bool = False) -> str:
+        """Why a run that reached its step budget (``calls``: its right-hand-side calls' budget) stops: where, and
+        the fastest mode if that says why."""
+        lam = np.zeros(0)
+        if self.segments:
+            seg = self.segments[-1]
+            lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else self.system.rhs(seg.modes, seg.phase), t, x)
+        stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
+                 f"{self.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
+        advice = "a stiff scene runs with solver.method = \"Radau\" or \"auto\"" \
+            if self.solver.method not in IMPLICIT else "even the implicit method needs more: check the magnitudes"
+        spent = f"{self.work.calls} right-hand-side calls ({CALLS_PER_STEP} per budgeted step)" if calls \
+            else f"{self.budget} integration steps"
+        return (f"{self.scene.name}: stopped at t = {t:.6g} s of {self.scene.duration:g} s after {spent}, "
+                f"its budget ({STEPS_BASE} + solver.steps_per_second = "
+                f"{self.solver.steps_per_second:g} per simulated second){stiff}; {advice}, or raise "
+                "solver.steps_per_second")
+
+    def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
+        """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
+        stability-bound by a decaying mode, else DOP853 without a budget (see integrators)."""
+        stiff, lam = stability_bound(fun, t, x, h, span)
+        self.stats["rhs_evals"] += len(x) + 1
+        self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
+        self.auto_state = "Radau" if stiff else AUTO_EXPLICIT
+        if stiff:
+            self.stats["auto_switches"] = self.stats.get("auto_switches", 0) + 1
+        else:
+            self.next_step = h
+
+    def _watches(self, modes: list[ContactMode], method: str) -> list:
+        """The segment's watches: the run's work budget (and progress), ``auto``'s step budget, a 2-D slide's
+        collapse watch."""
+        left = self.budget - self.stats["steps"]
+        if left <= 0:  # spent at a segment's end (an event there): stop before the next
+            last = self.segments[-1]
+            raise SimulationError(self._over_budget(last.t1, last.sol(last.t1)))
+        out: list = [WorkWatch(left, self.progress)]
+        if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
+            out.append(StepBudget(STEP_BUDGET))
+        if self.resting is None and method in EXPLICIT and method not in FIXED and _sliding_2d(modes) \
+                and not _launching(modes):
+            out.append(StepCollapse(COLLAPSE_RATIO, COLLAPSE_STEPS))
+        return out
+
+    def _collapse_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
+        """A 2-D slide's explicit step collapsed to h [s] (events.StepCollapse): LAUNCH_METHOD for the rest of the
+        mode if a decaying mode held it at the method's stability bound, else the explicit method on, unwatched."""
+        stiff, _ = stability_bound(fun, t, x, h, span)
+        self.stats["rhs_evals"] += len(x) + 1
+        self.resting = LAUNCH_METHOD if stiff else ""
+        if stiff:
+            self.stats["resting_switches"] = self.stats.get("resting_switches", 0) + 1
+        self.next_step = h
+
+    def _new_mode(self) -> None:
+        """Forget the method choices made for the mode that ends (auto's, a slide's coming to rest)."""
+        self.auto_state = self.resting = None
+
+    def _diagnose(self, sol, plan: ModePlan, fun, method: str) -> str:
+        """Why a segment failed, as far as the state at the failure says."""
+        t, x = float(sol.t[-1]), sol.y[:, -1]
+        if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
+            return ""
+        if plan.ok:
+            cond = plan.kkt_condition(t, x)
+            if cond > 1e12:
+                return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
+                        f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "
+                        "arm; give the contact a compliant normal model or avoid the pose")
+        lam = jacobian_eigenvalues(fun, t, x)
+        if len(lam) and method in EXPLICIT:
+            fast = float(np.abs(lam).max())
+            return (f"; fastest mode |λ| = {fast:.3g} 1/s (an explicit method needs steps below "
+                    f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = \"Radau\" or \"auto\"")
+        return ""
+
+    def _method(self, modes: list[ContactMode], method: str) -> str:
+        """The segment's method, but a stiff-capable one while a 2-D slip launches from rest or comes to rest.
+
+        Near v_t = 0 the direction of 2-D Coulomb friction relaxes at a rate ∝ μ F/(m |v_t|)
+        (m: the arm's smallest tangential inertia): stiff for an explicit method until the
+        slip has grown, worst when the push is just at the cone (thousands of tiny steps), and
+        again as a slide comes to rest (its last 50 ms took the 5-DOF writer's DOP853 7265 calls,
+        LSODA 899). LSODA switches to BDF while that lasts; the segment ends at the next event.
+        A slide coming to rest is seen by its explicit steps collapsing (``resting``,
+        :meth:`_collapse_check`).
+        """
+        if method not in IMPLICIT and _launching(modes):
+            return LAUNCH_METHOD
+        if method not in IMPLICIT and method not in FIXED and self.resting:  # the slide coming to rest: the same
+            return self.resting
+        return method
+
+    def _max_step(self, modes: list[ContactMode], method: str) -> float:
+        """[s] The scene's max_step, or for an explicit method at most RELAX_STEP relaxation times of
+        the chain ends relaxing after a separation (their stiff decay, resolved)."""
+        if method in IMPLICIT:
+            return self.solver.max_step
+        tau = min((c.relaxation_time(m) for c, m in zip(self.system.contacts, modes, strict=True)), default=math.inf)
+        return min(self.solver.max_step, RELAX_STEP * tau)
+
+    def _next_phase(self, phase: Phase, t: float, x: np.ndarray, modes: list[ContactMode]):
+        """The next phase started at t [s]: (x, modes, phase). Its law changes the forces at once, so the modes
+        are decided again under it (:meth:`Transitions.settle`): a stick its new friction leaves outside the
+        cone slips there, a contact it pulls separates, a limit it pulls off is released."""
+        nxt = phase.index + 1
+        if nxt >= len(self.scene.phases):
+            return x, modes, replace(phase, spec=replace(phase.spec, until=math.inf))  # the last phase runs on
+        self.log.log(t, "phase", self.scene.phases[nxt].name, check_storm=False)
+        phase = self.system.start_phase(nxt, t, x, phase)
+        return self.transitions.settle(t, x, modes, phase)
+
+    # ---- output ---------------------------------------------------------------------
+    def _result(self, wall: float) -> Result:
+        system, scene = self.system, self.scene
+        T = scene.duration
+        channels, xs = sample_states(system, self.segments, output_grid(T, self.solver.output_rate), self.stats)
+        checks = run_checks(system, xs, channels, self.starts, self.impacts, self.events)
+        rate_stats, rate_warnings = rate_limit_report(system.robot, channels["t"], channels["v"], channels["tau"])
+        self.stats["rhs_evals"] += sum(getattr(seg.sol, "late_calls", 0) for seg in self.segments)  # DOP853C's
+        stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
+                     method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
+                     compiled_modes=sum(p.ok for p in self.plans.values()),
+                     fallback_modes=dict(self.fallbacks), paths=self.paths.table(), limits=rate_stats,
+                     fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
+        meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
+                "contacts": [c.name for c in system.contacts],
+                "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
+                "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
+                "scene_file": str(Path(scene.file).resolve()) if scene.file else None}  # (where it came from)
+        return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
+    """(t [s], x) where a run's calls' budget was spent: the counted call's, else (a compiled step counts no state)
+    the last finished segment's end, else the start."""
+    if run.work.last is not None:
+        t, x = run.work.last
+        return float(t), np.array(x, float)
+    if run.segments:
+        last = run.segments[-1]
+        return last.t1, np.asarray(last.sol(last.t1), float)
+    return 0.0, run.start()[0]
+
+
+def _sliding_2d(modes: list[ContactMode]) -> bool:
+    """Does a contact slide with 2-D friction (its direction stiff near rest)?"""
+    return any(m.touching and not m.stuck and len(m.slip) == 2 for m in modes)
+
+
+def _launching(modes: list[ContactMode]) -> bool:
+    """Does a 2-D slip start from rest (its direction stiff until the slip has grown)? (The loop's rule as it was:
+    unlike :func:`~contactdyn.model.friction.launching` it also counts a contact that separated while launching.)"""
+    return any(m.from_rest and len(m.slip) == 2 and not m.stuck for m in modes)

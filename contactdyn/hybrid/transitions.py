@@ -1,0 +1,332 @@
+"""Mode transitions: what a located event does to the contact modes and the state.
+
+At each event of :mod:`contactdyn.hybrid.events` (t fixed, x continuous unless an impact jumps Q̇):
+
+- ``touch``: the contact touches; tangential chains anchor where the tip now is, the
+  interface junction starts where its springs balance; a bonded touch maps velocities
+  by the impact law (:mod:`contactdyn.model.impact`) and the contact slides or jams;
+- ``separate``: the contact lets go; damped surface ends relax from where they are;
+- ``stop`` / ``reverse``: the slide has come to rest (|v_t| ≤ v_ε): decided at rest (below);
+- ``turn``: the 2-D reference direction r is refreshed to the slip's own (no mode change), unless
+  the slip is within ``TURN_AT_REST`` stick bands of rest: then it is a ``stop``;
+- ``slip``: the stick's friction reached the cone |F_f| = μ_s F: it slides from rest where
+  the holding force pushes (−F_f); a stage-only crossing not confirmed at the located point
+  is a false alarm (``slip_check``), still stuck;
+- a phase that ends at ``touch:<contact>`` starts the next phase;
+- ``limit`` / ``release``: a joint reaches a position limit (plastic impact, then it presses)
+  or its limit torque vanishes (:mod:`contactdyn.model.limits`); after any event, a joint whose
+  limit torque pulls is released.
+
+Then :meth:`Transitions.consistent` fixes whatever mode the state contradicts: a pulling
+contact (F < −``FORCE_TOL``) separates; a stick outside the cone slides; a slide at rest
+sticks if the friction needed to hold it is within μ_s F (its residual slip projected away,
+:func:`~contactdyn.model.impact.project_velocity`), else slides where that force pushes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from ..errors import SimulationError
+from ..model.chain import NodeKind
+from ..model.friction import direction_of, in_cone, slip_velocity
+from ..model.impact import impact, project_velocity
+from ..model.system import System
+from .events import EventLog
+
+__all__ = ["Transitions", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
+
+FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
+SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
+#: [-] a turn located with |v_t| ≤ this × v_ε is taken for a slide coming to rest and decided at rest like a
+#: stop. Why: when a slide decelerates to rest, its ``turn`` and ``stop`` tie within a rounding (the 5-DOF
+#: writer's turn fires at |v_t| = 4.1 v_ε); refreshing r there keeps a slide of a few v_ε whose direction relaxes
+#: at a rate ∝ 1/|v_t| (stiff: 10x the steps). 10 leaves that case a margin of ~2.4. Cost: a slide slower than
+#: 10 v_ε that really turns loses its residual slip (≤ 10 v_ε) to the decision at rest and, if the cone cannot
+#: hold it, restarts where the holding force pushes, not along its own slip.
+TURN_AT_REST = 10.0
+
+
+class _After:
+    """What an event handler leaves for the consistency pass: contacts to decide at rest, and released ones."""
+
+    def __init__(self) -> None:
+        self.rest: set[int] = set()  #: contacts to decide at rest (a stop)
+        self.released: set[int] = set()  #: contacts that broke away at this event (not stuck again at once)
+
+
+class Transitions:
+    """The mode decisions of one run: at events (:meth:`handle`) and at any instant (:meth:`consistent`)."""
+
+    def __init__(self, system: System, log: EventLog, stats: dict[str, Any], impacts: list[dict[str, Any]]):
+        self.system, self.scene = system, system.scene
+        self.log, self.stats, self.impacts = log, stats, impacts
+
+    def handle(self, t, x, modes, phase, event):
+        """Apply a located event: (state, modes, phase) right after it.
+
+        The event's kind picks its handler (:attr:`HANDLERS`); a handler changes ``modes`` in
+        place and returns (x, phase, settle); with ``settle`` the modes are then made
+        consistent with the state (:meth:`consistent`). A new kind of event is a new handler.
+        """
+        modes = list(modes)
+        self.log.log(t, event.kind, event.contact)
+        after = _After()
+        x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
+        if settle:
+            return self.settle(t, x, modes, phase, after.rest, after.released)
+        return self.release_pulling(t, x, modes, phase)
+
+    def settle(self, t, x, modes, phase, rest=frozenset(), released=frozenset()):
+        """Decide the modes at an instant: after an event (``rest``, ``released``: see :meth:`consistent`) or
+        where the law changed but no event fired (a phase start): :meth:`consistent`, then the limits that pull
+        are released. Returns (x, modes, phase)."""
+        x, modes = self.consistent(t, x.copy(), list(modes), phase, rest, released)
+        return self.release_pulling(t, x, modes, phase)
+
+    def release_pulling(self, t, x, modes, phase):
+        """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event."""
+        limits = self.system.limits
+        while phase.limits and (pulling := limits.pulling(phase, self.system.evaluate(t, x, modes, phase))):
+            phase = replace(phase, limits=tuple(p for p in phase.limits if p != pulling[0]))
+            self.log.log(t, "release", limits.by_index[pulling[0][0]].name)
+            x, modes = self.consistent(t, x, modes, phase)
+        return x, modes, phase
+
+    def _index(self, name: str) -> int:
+        return next(k for k, c in enumerate(self.system.contacts) if c.name == name)
+
+    def _on_touch(self, t, x, modes, phase, event, after):
+        """Touching; a bonded touch maps velocities (impact) and slides or jams; a phase may end here."""
+        system = self.system
+        i = self._index(event.contact)
+        c = system.contacts[i]
+        modes[i], x = self._touch(t, x, modes, i)
+        if c.normal.chain.bonded_when_touching:
+            x, imp = impact(system, t, x, modes, c, phase.limits)
+            self._after_impact(imp, modes, after)
+        if phase.spec.until == f"touch:{c.name}" and phase.index + 1 < len(self.scene.phases):
+            phase = self.system.start_phase(phase.index + 1, t, x, phase)  # (the last phase runs on)
+            self.log.log(t, "phase", phase.spec.name, check_storm=False)
+        return x, phase, True
+
+    def _on_separate(self, t, x, modes, phase, event, after):
+        """The contact lets go; damped surface ends relax from where they are."""
+        i = self._index(event.contact)
+        x = self.system.separate(t, x, modes, phase, self.system.contacts[i])
+        modes[i] = modes[i].separated()
+        return x, phase, True
+
+    def _on_stop(self, t, x, modes, phase, event, after):
+        """A slide came to rest (``stop``, or ``reverse`` for a slip from rest): decide it at rest."""
+        after.rest.add(self._index(event.contact))
+        return x, phase, True
+
+    def _on_turn(self, t, x, modes, phase, event, after):
+        """2-D: the slip turned 60° from the reference; refresh it (no mode change)."""
+        i = self._index(event.contact)
+        slip = self.system.evaluate(t, x, modes, phase).slip[event.contact]  # [m/s]
+        if float(np.linalg.norm(slip)) <= TURN_AT_REST * self.system.slip_band:
+            return self._on_stop(t, x, modes, phase, event, after)
+        modes[i] = modes[i].with_(slip=direction_of(slip), from_rest=False)
+        return x, phase, False
+
+    def _on_slip(self, t, x, modes, phase, event, after):
+        """The cone is reached: slide from rest where the holding force pushes (or a false alarm)."""
+        i = self._index(event.contact)
+        c = self.system.contacts[i]
+        ev = self.system.evaluate(t, x, modes, phase)
+        self.stats["slips_seen_inside_a_step"] += int(event.latch < math.inf)
+        if event.g(ev) <= SLIP_ALARM * c.friction.mu_s * max(ev.normal_force[c.name], 0.0):
+            modes[i] = modes[i].with_(stuck=False, slip=direction_of(-ev.friction[c.name]), from_rest=True)
+            after.released.add(i)
+        else:  # a stage saw the cone left, the located point does not: a false alarm, still stuck
+            self.log.events[-1]["kind"] = "slip_check"
+            self.stats["slip_false_alarms"] += 1
+        return x, phase, True
+
+    def _on_limit(self, t, x, modes, phase, event, after):
+        """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (model.limits)."""
+        x, phase, info, imp = self.system.limits.switch(self.system, t, x, modes, phase, event)
+        self.log.events[-1].update(info)  # the joint, side, velocity before and impulse, with the event
+        if imp is not None and imp.contact:  # a contact took part (its friction impulse too): recorded as at a touch
+            self._after_impact(imp, modes, after, joint=info["joint"], limit_impulse=info["impulse"])
+        elif imp is not None:
+            self._release(imp, modes, after)
+        return x, phase, True
+
+    def _after_impact(self, imp, modes, after: _After, **extra) -> None:
+        """Record an impact on a contact in ``Result.impacts`` and set the contact's mode after it:
+        stuck if it jammed, else sliding along its slip after the impact (or the impact's direction); the
+        other sticks it could not hold slide (:meth:`_release`)."""
+        system = self.system
+        self.impacts.append({"t": imp.t, "contact": imp.contact, "normal_impulse": imp.normal_impulse,
+                             "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
+                             "energy_loss": imp.energy_loss, "v_before": imp.v_before.tolist(),
+                             "v_after": imp.v_after.tolist(), "slip_before": imp.slip_before.tolist(),
+                             "slip_after": imp.slip_after.tolist(), **extra})
+        self._release(imp, modes, after)
+        i = self._index(imp.contact)
+        c = system.contacts[i]
+        if imp.jammed:
+            modes[i] = modes[i].with_(stuck=True)
+        elif c.friction is not None and len(c.tangents):
+            moving = np.linalg.norm(imp.slip_after) > system.slip_band
+            slip = imp.slip_after if moving else imp.direction
+            if modes[i].stuck:  # a stick the impact could not hold (a limit's impact): it slides from here
+                self._slide_from(imp.t, i, direction_of(slip), not moving, modes, after)
+            elif np.any(slip):
+                modes[i] = modes[i].with_(slip=direction_of(slip))
+
+    def _release(self, imp, modes, after: _After) -> None:
+        """The sticks the impact could not hold (their impulse left the cone) slide from it on, logged as slips
+        (and not stuck again at the same instant)."""
+        for name, d in imp.released.items():
+            self._slide_from(imp.t, self._index(name), d, True, modes, after)
+
+    def _slide_from(self, t: float, i: int, d: tuple[float, ...], from_rest: bool, modes, after: _After) -> None:
+        """Contact i, stuck until an impact at t [s], slides along d from it on: logged as a slip, and not stuck
+        again at the same instant."""
+        modes[i] = modes[i].with_(stuck=False, slip=d, from_rest=from_rest)
+        self.log.log(t, "slip", self.system.contacts[i].name)
+        after.released.add(i)
+
+    #: event kind -> handler (see :meth:`handle`)
+    HANDLERS = {"limit": _on_limit, "release": _on_limit,
+                "touch": _on_touch, "separate": _on_separate, "stop": _on_stop, "reverse": _on_stop,
+                "turn": _on_turn, "slip": _on_slip}
+
+    def _touch(self, t, x, modes, i):
+        """Mode after touch: touching, tangential chains anchored where the tip now is."""
+        system = self.system
+        c = system.contacts[i]
+        nQ = system.nQ
+        system.robot.update(x[:system.nv], x[nQ:nQ + system.nv])
+        kin = system.kinematics(c, x)
+        x = x.copy()
+        offsets = []
+        for k, dc in enumerate(c.tangent_chains):
+            # shift the environment side rigidly so the two surface nodes meet undeformed; on a
+            # re-touch the anchor already carries the previous touch's offset (and its masses too)
+            old = modes[i].offsets[k] if k < len(modes[i].offsets) else 0.0
+            s_tip = float(dc.u @ kin.p_tip)
+            s_env = float(dc.u @ kin.p_env) + old
+            robot_side = [n for n in dc.chain.nodes if n.side == "robot" and n.coord >= 0]
+            env_side = [n for n in dc.chain.nodes if n.side == "environment" and n.coord >= 0]
+            s_r = x[robot_side[-1].coord] if robot_side else s_tip
+            s_e = x[env_side[-1].coord] if env_side else s_env  # the environment's surface node
+            delta = s_r - s_e
+            offsets.append(old + delta)
+            for node in dc.chain.nodes:
+                if node.side == "environment" and node.coord >= 0:
+                    x[node.coord] += delta
+                if node.side == "environment" and node.state >= 0:
+                    x[2 * nQ + node.state] += delta
+            if dc.junction_state >= 0:
+                x[2 * nQ + dc.junction_state] = s_r
+        if c.normal.junction_state >= 0:
+            x[2 * nQ + c.normal.junction_state] = self._junction_at_rest(c.normal, kin, x)
+        vt = slip_velocity(system, c, kin) if len(c.tangents) else np.zeros(0)
+        slip = modes[i].slip
+        if len(vt) and float(np.linalg.norm(vt)) > system.slip_band:
+            slip = direction_of(vt)
+        return modes[i].with_(touching=True, stuck=False, slip=slip, offsets=tuple(offsets), relaxing=False), x
+
+    def _junction_at_rest(self, dc, kin, x) -> float:
+        """[m] where the two surfaces meet: the interface junction's starting position.
+
+        Damped surface ends have states (they relax after a separation): they meet where they
+        are, the touch point. Undamped ends follow their stages at once; there the junction
+        starts where the two interface stages' springs balance (zero compressions on a first
+        touch; on a re-touch both stages share the overlap instead of one taking all of it).
+        """
+        chain, nQ = dc.chain, self.system.nQ
+        ends = [chain.nodes[chain.env_surface].state, chain.nodes[chain.robot_surface].state]
+        if min(ends) >= 0:
+            return 0.5 * float(x[2 * nQ + ends[0]] + x[2 * nQ + ends[1]])
+
+        def position(node: int) -> float:
+            n = chain.nodes[node]
+            if n.coord >= 0:
+                return float(x[n.coord])
+            if n.state >= 0:
+                return float(x[2 * nQ + n.state])
+            return float(dc.u @ (kin.p_tip if n.kind == NodeKind.TIP else kin.p_env))
+
+        (e,) = [s for s in chain.stages if s.upper == chain.env_surface]
+        (r,) = [s for s in chain.stages if s.lower == chain.robot_surface]
+        ke, kr = e.kelvin_voigt[0], r.kelvin_voigt[0]  # a junction joins affine stages only (chain._check)
+        return (ke * position(e.lower) + kr * position(r.upper)) / (ke + kr)
+
+    def consistent(self, t, x, modes, phase, rest=frozenset(), released=frozenset()):
+        """Fix the modes the state contradicts; return (x, modes).
+
+        Pulling contacts separate; a stick whose friction is outside the cone
+        |F_f| ≤ μ_s F slides (from rest, where −F_f points); a slide at rest (|v_t| within
+        the stick band, or a contact in ``rest``: it just stopped) sticks if the friction
+        needed to hold it is within the cone, else slides where that force pushes; in
+        both cases its residual slip is projected away. Contacts in ``released`` (they
+        broke away at a located ``slip`` event) are not stuck again at the same instant.
+        """
+        system = self.system
+        released = set(released)
+        rest = set(rest)
+        for _ in range(4 * len(modes) + 2):
+            changed = False
+            ev = system.evaluate(t, x, modes, phase)
+            if not ev.regular:
+                self.stats["singular_solves"] += 1
+            for i, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
+                if not mode.touching:
+                    continue
+                F_n = ev.normal_force[c.name]
+                if not c.spec.bonded and F_n < -FORCE_TOL * (1.0 + abs(F_n)):
+                    x[:] = system.separate(t, x, modes, phase, c)
+                    modes[i] = mode.separated()
+                    self.log.log(t, "separate", c.name)
+                    changed = True
+                    break
+                if c.friction is None or not len(c.tangents):
+                    continue
+                mu_s = c.friction.mu_s
+                if mode.stuck:
+                    F_f = ev.friction[c.name]
+                    if not in_cone(F_f, F_n, mu_s):
+                        modes[i] = mode.with_(stuck=False, slip=direction_of(-F_f), from_rest=True)
+                        self.log.log(t, "slip", c.name)
+                        released.add(i)
+                        changed = True
+                        break
+                    continue
+                if i in released:
+                    continue
+                vt = ev.slip[c.name]
+                speed = float(np.linalg.norm(vt))
+                if i not in rest and speed > system.slip_band:
+                    if float(vt @ np.asarray(mode.slip)) < 0.5 * speed:  # moving, but not along r: refresh r
+                        modes[i] = mode.with_(slip=direction_of(vt), from_rest=False)
+                    continue
+                # at rest: stick if the cone can hold it, else slide where the holding force pushes
+                rest.discard(i)
+                trial = list(modes)
+                trial[i] = mode.with_(stuck=True)
+                x = project_velocity(system, x, trial, phase.limits)
+                ev2 = system.evaluate(t, x, trial, phase)
+                F_f = ev2.friction[c.name]
+                if in_cone(F_f, ev2.normal_force[c.name], mu_s):
+                    modes[i] = trial[i]
+                    self.log.log(t, "stick", c.name)
+                else:
+                    modes[i] = mode.with_(slip=direction_of(-F_f), from_rest=True)
+                    released.add(i)
+                    self.log.log(t, "slip", c.name)
+                changed = True
+                break
+            if not changed:
+                return x, modes
+        raise SimulationError(f"{self.scene.name}: no consistent contact mode at t = {t:.9g} s "
+                              f"(modes tried: {modes})")

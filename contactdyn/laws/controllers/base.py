@@ -1,0 +1,182 @@
+"""The controller interface: read the state and measured forces, write joint torques.
+
+A controller never reaches into the integrator. It receives a :class:`ControlInput`
+(state, tip kinematics, model terms, references and measured contact forces) and returns
+joint torques [N·m or N] and the rates of its own states (integrators), if it has any.
+Where a joint has a motor the system turns the torque into a voltage by inverting the
+motor model (see :mod:`contactdyn.laws.drives`); a controller with ``outputs = "voltage"``
+returns voltages [V] instead.
+
+Measured forces. Deformable contacts give their force as a function of the state. A bond
+(model b, rigid contact) or a stick has an unknown force that only the system's linear
+solve knows; a controller that reads forces (``uses_forces = True``) must then be affine
+in them (τ = τ₀ + B F, ż = ż₀ + D F) and the system folds B into its linear system, so
+the force it measures is the exact one at the same instant (no delay, no iteration).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, NamedTuple
+
+import numpy as np
+
+from ..params import Param
+
+__all__ = ["ControlInput", "Controller", "BindContext", "TipForceLaw", "CONTROLLERS", "register", "read_controller",
+           "FEEDFORWARD", "DeclaredConfig"]
+
+FEEDFORWARD = ("none", "gravity", "bias")
+
+
+@dataclass
+class ControlInput:
+    t: float  #: scene time [s]
+    q: np.ndarray  #: joint positions [rad or m]
+    v: np.ndarray  #: joint velocities
+    H: np.ndarray  #: inertia matrix of the rigid model, reflected rotor inertias included
+    h: np.ndarray  #: Coriolis, centrifugal and uncompensated gravity
+    gravity: np.ndarray | None  #: uncompensated gravity load g(q), when the controller asked for it
+    p_tip: np.ndarray  #: tip position [m]
+    v_tip: np.ndarray  #: tip velocity [m/s]
+    J: np.ndarray  #: tip Jacobian (3, nv)
+    drift: np.ndarray  #: J̇q̇ [m/s²]
+    x_d: np.ndarray | None  #: reference position (task [m] or joint), None when the phase has none
+    v_d: np.ndarray | None
+    a_d: np.ndarray | None
+    #: measured contact force [N], > 0 pressing: normal per contact name, tangential chain per "<contact>.t1"
+    #: (the compiled plan fills it only for a controller that reads forces, ``uses_forces``)
+    forces: dict[str, float]
+    #: force set-point and its rate [N, N/s]: per contact (normal) or "<contact>.t1" (tangential)
+    force_d: dict[str, tuple[float, float]]
+    #: unit direction of every set-point key (contact normals, "<contact>.t1" tangents); the robot pushes along −u
+    normals: dict[str, np.ndarray]
+    z: np.ndarray  #: controller states
+    R_tip: np.ndarray | None = None  #: tip frame orientation (3, 3)
+    J_ang: np.ndarray | None = None  #: tip angular Jacobian (3, nv)
+    drift_ang: np.ndarray | None = None  #: J̇_ω q̇ of the tip frame [rad/s²]
+    #: measured generalized contact force on the joints, Σ_c J_cᵀ F_c, friction included [N·m or N];
+    #: without forces of constraints on the robot alone (rigid contact or stick on the fixed ground)
+    tau_contact: np.ndarray | None = None
+    #: per contact: a point of the undeformed surface [m] and its velocity [m/s] (world); per "<contact>.t1":
+    #: the tangential chain's anchor (where it is undeformed since the latest touch) and its velocity
+    surfaces: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    touching: dict[str, bool] = field(default_factory=dict)  #: contact modes
+
+    def replaced(self, **changes) -> ControlInput:
+        """A shallow copy with ``changes`` (``dataclasses.replace`` without re-running ``__init__``: the
+        force probes call it per right-hand-side call)."""
+        new = object.__new__(ControlInput)
+        new.__dict__.update(self.__dict__, **changes)
+        return new
+
+
+class TipForceLaw(NamedTuple):
+    """A task-space PD law with force set-points, as data (see :meth:`Controller.tip_force_law`)."""
+
+    kp: np.ndarray  #: (3, 3) [N/m]
+    kd: np.ndarray  #: (3, 3) [N·s/m]
+    feedforward: str = "none"  #: "none", "gravity" (τ += g(q)) or "bias" (τ += h(q, q̇))
+    kd_joint: float = 0.0  #: joint damping [N·m·s/rad]: τ −= k_dj q̇
+
+
+@dataclass(frozen=True)
+class BindContext:
+    """What a controller may check or resolve once the system exists (before any run)."""
+
+    scene: Any  #: the Scene
+    phase: Any  #: the PhaseSpec this controller runs
+    index: int  #: phase index
+    joint_names: list[str]
+    motorized: np.ndarray  #: bool per joint: the joint has a motor (accepts voltages)
+    key: str  #: key path of the controller table, for errors (e.g. "phase[1].controller")
+
+
+@dataclass(frozen=True)
+class DeclaredConfig:
+    """The config of a controller that declares its parameters (``Controller.params``): its kind and the values,
+    read as attributes (``config.stiffness``)."""
+
+    kind: str
+    values: tuple[tuple[str, float], ...] = ()
+
+    def __getattr__(self, name: str) -> float:
+        if name.startswith("_") or name == "values":  # (unpickling asks before the fields exist)
+            raise AttributeError(name)
+        for key, value in self.values:
+            if key == name:
+                return value
+        raise AttributeError(f"controller {self.kind!r} declares no parameter {name!r}")
+
+
+class Controller:
+    """Base class: subclasses set ``name``, their parameters (``params``, or a ``read`` of their own) and
+    implement :meth:`command`."""
+
+    name: ClassVar[str] = ""
+    #: the parameters the scene gives this controller (contactdyn.laws.params): the default :meth:`read` reads them
+    params: ClassVar[tuple[Param, ...]] = ()
+    n_states: int = 0
+    needs_gravity: bool = False
+    uses_forces: bool = False  #: reads measured forces (then it must be affine in them)
+    outputs: str = "torque"  #: "torque" (generalized forces) or "voltage" (motor voltages [V])
+    reads_orientation: bool = True  #: reads R_tip, J_ang and drift_ang (False: the compiled path leaves them None)
+    in_task_space: bool = False  #: command = computed_torque(tip_targets(...)), read as a matrix by plan_law
+
+    def __init__(self, config: Any, nv: int):
+        self.config = config
+        self.nv = nv
+
+    @classmethod
+    def read(cls, r) -> Any:
+        """The controller table into a config: by default the declared ``params`` (a :class:`DeclaredConfig`)."""
+        return DeclaredConfig(cls.name, tuple((p.name, p.read(r)) for p in cls.params))
+
+    def bind(self, context: BindContext) -> None:
+        """Check the scene and resolve defaults (may set ``n_states``); raise SceneError on misuse."""
+
+
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray | None]:
+        """Joint torques and the rates of the controller's states."""
+        raise NotImplementedError
+
+    def a_d_increment(self, inp: ControlInput, axis: np.ndarray, tau: np.ndarray,
+                      zdot: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(Δτ, Δż) of the command (τ, ż) at ``inp`` for one unit [m/s²] more of ẍ_d along ``axis``
+        (a reference carried by a body: the command's part proportional to the body's acceleration)."""
+        tau_b, zdot_b = self.command(inp.replaced(a_d=inp.a_d + axis))
+        return tau_b - tau, None if zdot is None else zdot_b - zdot
+
+    @staticmethod
+    def applies_force_setpoints(config: Any) -> bool:
+        """Whether this controller, so configured, acts on a phase's ``[[phase.force]]`` set-points."""
+        return False
+
+    def tip_force_law(self) -> TipForceLaw | None:
+        """The law as data when the command is exactly
+        τ = Jᵀ(K_p (x_d − p) + K_d (ẋ_d − ṗ) − Σ F_d n) + feedforward − k_dj q̇
+        with the phase's task reference and force set-points; None otherwise.
+
+        The compiled right-hand side (:mod:`contactdyn.compiled.rhsplan`) folds such a law into its
+        affine map instead of calling :meth:`command`.
+        """
+        return None
+
+
+CONTROLLERS: dict[str, type] = {}
+
+
+def register(cls: type) -> type:
+    """Make ``cls`` a controller scenes can name (``kind = cls.name``)."""
+    if not cls.name or not cls.name.isidentifier():
+        raise ValueError(f"a controller's name must be an identifier, got {cls.name!r}")
+    CONTROLLERS[cls.name] = cls
+    return cls
+
+
+def read_controller(reader) -> Any:
+    """Validate a controller table into its kind's config (the kind's ``read`` does the keys)."""
+    kind = reader.str("kind", "task_pd", choices=sorted(CONTROLLERS))
+    config = CONTROLLERS[kind].read(reader)
+    reader.finish()
+    return config

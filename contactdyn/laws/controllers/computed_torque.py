@@ -1,0 +1,80 @@
+"""The computed torque of the task-space dynamic laws (A7, A10, hybrid), compiled once for every path.
+
+    q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇           (k_null only where the robot is redundant, nv > 3)
+    τ  = H q̈* − r ∘ q̈* + h − τ_c + Jᵀ f_swap         [N·m or N]
+    ∂τ = H J⁺ D_a − r ∘ (J⁺ D_a) + Jᵀ D_f             (per column of tip-target changes D_a [m/s²], D_f [N])
+
+H [kg·m²] the model's inertia, r the rotor inertia the law takes out (``inertia = "link"``; empty
+for "model"), J the tip Jacobian (3, nv), J⁺ its pseudo-inverse (:func:`contactdyn.numerics.linalg.pinv`: singular
+values below 1e-10 of the largest dropped, numpy.linalg.pinv's rcond). Written once here and
+compiled by numba: the readable law (:mod:`contactdyn.laws.controllers.dynamic`), the plan's call
+(:mod:`contactdyn.compiled.plan_kernel`) and the output's samples all run these functions. Arguments are
+C-contiguous float64 arrays; "none" is an empty array (r, f_swap: length 0, or (N, 0) for a stack;
+D_f: 0 rows).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ...numerics.linalg import mm, mtm, mtv, mv, pinv
+
+__all__ = ["pinv", "torque", "increments", "pinv_stack", "torque_stack", "increments_stack"]
+
+
+@njit(cache=True)
+def torque(H, rotor, h, tau_c, J, Jp, drift, v, a, f_swap, k_null):
+    """τ of the module docstring [N·m or N] for the tip acceleration a [m/s²] (J̇q̇ = drift, q̇ = v)."""
+    qdd = mv(Jp, a - drift)
+    nv = J.shape[1]
+    if k_null > 0.0 and nv > 3:
+        qdd -= mv(np.eye(nv) - mm(Jp, J), k_null * v)
+    tau = mv(H, qdd)
+    if rotor.size:
+        tau -= rotor * qdd
+    tau += h
+    tau -= tau_c
+    if f_swap.size:
+        tau += mtv(J, f_swap)
+    return tau
+
+
+@njit(cache=True)
+def increments(H, rotor, J, Jp, D_a, D_f):
+    """∂τ of the module docstring, one column per tip-target change [N·m or N per m/s² or N]."""
+    dqdd = mm(Jp, D_a)
+    dtau = mm(H, dqdd)
+    if rotor.size:
+        for i in range(dtau.shape[0]):
+            dtau[i] -= rotor[i] * dqdd[i]
+    if D_f.shape[0]:
+        dtau += mtm(J, D_f)
+    return dtau
+
+
+# ---- a stack of samples (the output's), one sample's arithmetic each ----------------------------
+@njit(cache=True)
+def pinv_stack(J):
+    out = np.empty((J.shape[0], J.shape[2], J.shape[1]))
+    for k in range(J.shape[0]):
+        out[k] = pinv(np.ascontiguousarray(J[k]))
+    return out
+
+
+@njit(cache=True)
+def torque_stack(H, rotor, h, tau_c, J, Jp, drift, v, a, f_swap, k_null):
+    out = np.empty(h.shape)
+    for k in range(h.shape[0]):
+        out[k] = torque(np.ascontiguousarray(H[k]), rotor, h[k], tau_c[k], np.ascontiguousarray(J[k]),
+                        np.ascontiguousarray(Jp[k]), drift[k], v[k], a[k], f_swap[k], k_null)
+    return out
+
+
+@njit(cache=True)
+def increments_stack(H, rotor, J, Jp, D_a, D_f):
+    out = np.empty((H.shape[0], H.shape[1], D_a.shape[1]))
+    for k in range(H.shape[0]):
+        out[k] = increments(np.ascontiguousarray(H[k]), rotor, np.ascontiguousarray(J[k]),
+                            np.ascontiguousarray(Jp[k]), D_a, D_f)
+    return out

@@ -1,0 +1,468 @@
+"""Dynamic control (the paper's Appendix): computed torque with a prescribed error transient.
+
+``position_dynamic`` (A7): τ = H(q) q̈* + h(q, q̇) − τ_c, where τ_c = Σ J_cᵀ F_c is the
+measured contact force on the joints and q̈* makes the tracking error η obey the desired
+transient η̈ = P(η, η̇) = −K_p η − K_v η̇. Joint space: η = q − q_d, q̈* = q̈_d + P. Task
+space: η = x − x_d (tip), a* = ẍ_d + P, q̈* = J⁺(a* − J̇q̇) − (I − J⁺J) k_null q̇. Cancelling
+τ_c decouples the robot from its contacts: with an exact model the error obeys P whatever
+the environment does. Option ``force_reference``: along a contact normal with a force
+set-point the position reference becomes the depth the nominal environment needs for F_d,
+s_d = F_d / k (the position-based way to press); along a tangent with a set-point (a
+tangential chain, case 1's F1) it becomes F_d / k beyond the chain's anchor, the point
+where that chain was undeformed at the latest touch.
+
+``force_dynamic`` (A10): along each contact normal with a force set-point the nominal
+environment F = m s̈ + b ṡ + k s (s the penetration [m]) turns the force target
+F* = F_d + ∫Q(μ) dt, Q(μ) = −K_F μ, μ = F − F_d, into the penetration acceleration
+s̈* = (F* − b ṡ − k s) / m, the tip acceleration −s̈* n; then computed torque
+τ = H q̈* + h − Jᵀ n F* (the appendix's eq. A10 as written: the measured force enters only
+through the integral of μ, "no explicit force feedback"). With exact models the robot then
+moves as commanded only if F = F*; for model (b) that is algebraic (the bond's force is what
+makes the tip follow s̈*), so F = F* and μ = ∫Q(μ) dt, i.e. μ̇ = −K_F μ. A massless nominal
+(m = 0, b > 0) has relative degree one: s̈* = (Ḟ* − k ṡ) / b with Ḟ* = Ḟ_d − K_F μ; on a
+massless true surface e = F − F* then obeys ė = −(b / m_r) e (m_r the robot's mass along n)
+and μ = e + ∫Q(μ) dt. Option ``cancel = "measured"``: τ = H q̈* + h − τ_c cancels the
+measured force instead (our earlier realisation): the robot then follows s̈* whatever F is,
+and on the massless nominal μ̇ = −K_F μ exactly. The other task directions are damped
+(a* = −K_v ẋ), and any measured force along them (friction) is cancelled as in A7. While a
+contact does not touch, its normal is treated like the other directions and its integral is
+frozen.
+
+Option ``inertia`` (A7 and A10): the H the law multiplies by. ``"model"`` (default) is the
+rigid model's, the link plus the rotor inertia a motor reflects through its gear (n_s n_t J);
+``"link"`` is the link alone (eq. 49's m for case 3), the reading of A7/A10 that ignores the
+drive. Through an elastic transmission the two differ by 88 kg on case 3's 50 kg axis.
+
+``hybrid``: A7 along ``axes`` (default: every direction orthogonal to the force normals)
+tracking a task-space reference, A10 along the normals: the position/force split of case 2.
+
+Gains are physical: K_p [1/s²] and K_v [1/s] of the error transient (defaults 400 and 40:
+ω = 20 rad/s, critically damped), K_F [1/s] the force error rate (default 20: time constant
+50 ms), k_null [1/s] the null-space joint damping of redundant robots (default 10). The
+``nominal`` table {k [N/m], b [N·s/m], m [kg]} is the environment the controller believes
+(default: the scene's own contact model when it is (b) or (c); (a) and chains need one).
+
+Measured forces the system cannot know before its linear solve (bonds) enter exactly: these
+laws are affine in them (see :mod:`contactdyn.laws.controllers.base`). Forces of constraints that
+hold the robot alone (a rigid contact on the fixed ground, sticking on it) are not in τ_c:
+cancelling them would leave them undetermined.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...errors import SceneError
+from ...numerics.linalg import contiguous as _c
+from ..elements import Mass, Stage
+from . import computed_torque as compiled
+from .base import BindContext, ControlInput, Controller, register
+
+__all__ = ["NominalEnvironment", "PositionDynamic", "ForceDynamic", "Hybrid", "nominal_from_chain"]
+
+KP, KV, KF, K_NULL = 400.0, 40.0, 20.0, 10.0  #: default gains [1/s², 1/s, 1/s, 1/s]
+
+
+@dataclass(frozen=True)
+class NominalEnvironment:
+    """The environment model a controller believes, along a contact normal: F = m s̈ + b ṡ + k s."""
+
+    k: float  #: [N/m]
+    b: float = 0.0  #: [N·s/m]
+    m: float = 0.0  #: equivalent mass riding with the tip [kg]
+
+
+def nominal_from_chain(chain) -> tuple[NominalEnvironment | None, bool]:
+    """The single-mass equivalent of a contact's normal chain and whether it is exact.
+
+    Model (c) and (b) are exact; other linear chains give their static series stiffness
+    only (exact for a position-based reference, not for A10); rigid or nonlinear: None.
+    """
+    env, rob = chain.environment, chain.robot
+    stages = [e.kelvin_voigt() for e in (*env, *rob) if isinstance(e, Stage)]
+    if not stages or any(kv is None for kv in stages):
+        return None, False
+    if not rob and len(env) == 1:
+        return NominalEnvironment(*stages[0], 0.0), True
+    if not rob and len(env) == 2 and isinstance(env[1], Mass):
+        return NominalEnvironment(*stages[0], env[1].m), True
+    return NominalEnvironment(1.0 / sum(1.0 / k for k, _ in stages)), False
+
+
+# ---- reading ------------------------------------------------------------------------------
+def _gain(r, name: str, default: float, unit: str) -> np.ndarray:
+    if isinstance(r.raw(name, default), list):
+        g = r.vector(name, unit=unit)
+        if np.any(g < 0.0):
+            raise r.error(name, f"gains >= 0 [{unit}]", g.tolist())
+        return g
+    return np.array([r.float(name, default, lo=0.0, unit=unit)])
+
+
+def _nominal(r, need_dynamics: bool) -> NominalEnvironment | None:
+    if not r.has("nominal"):
+        return None
+    n = r.sub("nominal")
+    env = NominalEnvironment(n.float("k", lo=0.0, unit="N/m"), n.float("b", 0.0, lo=0.0, unit="N·s/m"),
+                             n.float("m", 0.0, lo=0.0, unit="kg"))
+    n.finish()
+    if need_dynamics and env.m == 0.0 and env.b == 0.0:
+        raise n.error("m", "m > 0 or b > 0 (A10 turns force into motion through the model's mass or damping)",
+                      0.0)
+    return env
+
+
+def _axes(r) -> np.ndarray | None:
+    if not r.has("axes"):
+        return None
+    raw = r.raw("axes")
+    if not isinstance(raw, list) or not raw or not all(isinstance(a, list) for a in raw):
+        raise r.error("axes", "a list of direction vectors", raw)
+    from ...scene.reader import Reader
+
+    axes = np.array([Reader({"a": a}, r.key("axes"), r.file).vector("a", size=3, unit_norm=True) for a in raw])
+    if np.max(np.abs(axes @ axes.T - np.eye(len(axes)))) > 1e-9:
+        raise r.error("axes", "mutually orthogonal directions", raw)
+    return axes
+
+
+def _inertia(r) -> str:
+    return r.str("inertia", "model", choices=["model", "link"])
+
+
+def _rotor_inertia(context: BindContext, inertia: str) -> np.ndarray:
+    """Per joint, the reflected rotor inertia [kg·m²] to take out of the rigid model's H (``inertia = "link"``);
+    empty for ``"model"`` (none taken out, as computed_torque reads it)."""
+    if inertia == "model":
+        return np.empty(0)
+    names = context.joint_names
+    specs = context.scene.robot.drive.expand(len(names), names)
+    return np.array([s.reflected_inertia for s in specs])
+
+
+def _inertia_times(H: np.ndarray, rotor: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out)."""
+    return H.dot(qdd) - rotor * qdd if rotor.size else H.dot(qdd)
+
+
+# ---- shared task-space pieces ---------------------------------------------------------------
+def _check_gain_size(g: np.ndarray, sizes: tuple[int, ...], key: str, file) -> None:
+    if len(g) not in sizes:
+        raise SceneError(key, f"one gain or {' or '.join(str(s) for s in sizes[1:])} (one per axis or joint)",
+                         g.tolist(), file)
+
+
+def pseudo_inverse(J: np.ndarray) -> np.ndarray:
+    """J⁺ by linalg.pinv (a one-sided Jacobi SVD), singular values below 1e-10 of the largest
+    dropped (numpy.linalg.pinv's rcond); one Jacobian (r, c) or a stack (N, r, c)."""
+    J = _c(J)
+    return compiled.pinv_stack(J) if J.ndim == 3 else compiled.pinv(J)
+
+
+class _Pinv:
+    """J⁺ of the last Jacobian (the command and its force columns read it at one state)."""
+
+    def __init__(self):
+        self.key: bytes = b""
+        self.value = np.zeros((0, 0))
+
+    def __call__(self, J: np.ndarray) -> np.ndarray:
+        if J.ndim == 3:  # a stack of samples: not kept
+            return pseudo_inverse(J)
+        key = J.tobytes()
+        if key != self.key:
+            self.value = pseudo_inverse(J)
+            self.key = key
+        return self.value
+
+
+def _contact_checks(context: BindContext, names: list[str], need_exact: bool, nominal, what: str
+                    ) -> dict[str, NominalEnvironment]:
+    """Resolve each force-controlled contact's nominal environment; the contact must be at the tip frame."""
+    scene, key = context.scene, context.key
+    out = {}
+    for name in names:
+        spec = scene.contacts[name]
+        if spec.frame != scene.robot.tip:
+            raise SceneError(f"contact.{name}.frame", f"the controlled tip frame {scene.robot.tip!r} ({what} "
+                             "uses the tip Jacobian)", spec.frame, scene.file)
+        if nominal is not None:
+            out[name] = nominal
+            continue
+        env, exact = nominal_from_chain(spec.normal_chain)
+        if env is None or (need_exact and not exact):
+            raise SceneError(f"{key}.nominal", f"a nominal environment {{k, b, m}} for contact {name!r} ({what} "
+                             "needs one: its normal model has no exact single-mass equivalent)", None, scene.file)
+        out[name] = env
+    return out
+
+
+def _tangent_nominal(context: BindContext, force, nominal) -> NominalEnvironment:
+    """The nominal stiffness along a tangential set-point: ``nominal``, or the tangential chain's series k."""
+    scene, key = context.scene, context.key
+    spec = scene.contacts[force.contact]
+    if spec.tangent_chain is None:
+        raise SceneError(f"phase[{context.index}].force", f"a tangential set-point on a contact with a tangential "
+                         f"chain (force_reference presses it F_d/k beyond its anchor); contact {force.contact!r} has",
+                         f"tangent.model = {spec.tangent_model!r}", scene.file)
+    if nominal is not None:
+        return nominal
+    env, _ = nominal_from_chain(spec.tangent_chain)
+    if env is None:
+        raise SceneError(f"{key}.nominal", f"a nominal environment {{k}} for the tangential chain of contact "
+                         f"{force.contact!r} (it has no linear series stiffness)", None, scene.file)
+    return env
+
+
+class _ComputedTorque(Controller):
+    """The computed torque shared by A7 (task space), A10 and hybrid, around their tip targets.
+
+    :meth:`tip_targets` gives (a*, f_swap, ż): the desired tip acceleration [m/s²], the tip force
+    swapped into τ [N] (A10's cancel = "target") and the states' rates. They are affine in the
+    tip's motion, the reference, the measured forces, the set-points, the surfaces and z (for a
+    fixed contact mode), so the compiled path reads them off by unit probes
+    (:mod:`contactdyn.compiled.plan_law`); τ follows from them here, on both paths.
+    """
+
+    uses_forces = True
+    reads_orientation = False
+
+    def tip_targets(self, inp: ControlInput) -> tuple:
+        raise NotImplementedError
+
+    def computed_torque(self, inp: ControlInput, a: np.ndarray, f_swap: np.ndarray | None) -> np.ndarray:
+        """τ = H q̈*(a) + h − τ_c (+ Jᵀ f_swap) [N·m or N] at ``inp``."""
+        return self.torque(inp.H, inp.h, inp.tau_contact, inp.J, inp.drift, inp.v, a, f_swap)
+
+    def torque(self, H: np.ndarray, h: np.ndarray, tau_c: np.ndarray, J: np.ndarray, drift: np.ndarray,
+               v: np.ndarray, a: np.ndarray, f_swap: np.ndarray | None) -> np.ndarray:
+        """τ = H q̈* + h − τ_c (+ Jᵀ f_swap) [N·m or N], q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for the tip
+        acceleration a [m/s²], from the model's terms (J: the tip Jacobian (3, nv), drift: J̇q̇ [m/s²], v: q̇;
+        the compiled path passes its own, :meth:`computed_torque` a ControlInput's)."""
+        rotor, k_null = self._rotor, float(self.config.k_null)
+        stack = J.ndim == 3  # a stack of samples: one sample's arithmetic each
+        Jp = self._pinv(J)
+        if f_swap is None:
+            f_swap = np.empty(a.shape[:-1] + (0,))
+        args = (_c(H), rotor, _c(h), _c(tau_c), _c(J), Jp, _c(drift), _c(v), _c(a), _c(f_swap), k_null)
+        return compiled.torque_stack(*args) if stack else compiled.torque(*args)
+
+    def torque_increments(self, inp: ControlInput, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
+        """∂τ for changes of the tip targets, one per column: H J⁺ da (+ Jᵀ df) [N·m or N]."""
+        return self.increments(inp.H, inp.J, da, df)
+
+    def increments(self, H: np.ndarray, J: np.ndarray, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
+        """:meth:`torque_increments` from the model's terms H and J."""
+        D_f = np.empty((0, da.shape[-1])) if df is None else _c(df)
+        args = (_c(H), self._rotor, _c(J), self._pinv(J), _c(da), D_f)
+        return compiled.increments_stack(*args) if J.ndim == 3 else compiled.increments(*args)
+
+
+# ---- A7 -----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PositionDynamicConfig:
+    space: str  #: "joint" or "task"
+    kp: np.ndarray  #: [1/s²], one, or per joint / per world axis
+    kv: np.ndarray  #: [1/s]
+    k_null: float  #: [1/s]
+    force_reference: bool
+    nominal: NominalEnvironment | None
+    inertia: str = "model"  #: "model" (link + reflected rotor) or "link" (link only)
+    kind: str = "position_dynamic"
+
+
+@register
+class PositionDynamic(_ComputedTorque):
+    """A7: tau = H q" + h - tau_c with error dynamics eta" = -kp eta - kv eta', in joint or task space."""
+
+    name = "position_dynamic"
+
+    @staticmethod
+    def applies_force_setpoints(config: PositionDynamicConfig) -> bool:
+        return config.force_reference  # the reference becomes the depth that gives F_d
+
+    @staticmethod
+    def read(r) -> PositionDynamicConfig:
+        return PositionDynamicConfig(
+            space=r.str("space", "task", choices=["joint", "task"]),
+            kp=_gain(r, "kp", KP, "1/s²"), kv=_gain(r, "kv", KV, "1/s"),
+            k_null=r.float("k_null", K_NULL, lo=0.0, unit="1/s"),
+            force_reference=r.bool("force_reference", False),
+            nominal=_nominal(r, need_dynamics=False), inertia=_inertia(r))
+
+    def bind(self, context: BindContext) -> None:
+        self._pinv = _Pinv()
+        self._rotor = _rotor_inertia(context, self.config.inertia)
+        cfg, key, file = self.config, context.key, context.scene.file
+        dims = self.nv if cfg.space == "joint" else 3
+        for name in ("kp", "kv"):
+            _check_gain_size(getattr(cfg, name), (1, dims), f"{key}.{name}", file)
+        ref = context.phase.reference
+        if ref is not None and ref.space != cfg.space:
+            raise SceneError(f"phase[{context.index}].reference.space", f"{cfg.space!r} (the controller's space)",
+                             ref.space, file)
+        self.envs: dict[str, NominalEnvironment] = {}
+        if cfg.force_reference:
+            if cfg.space != "task":
+                raise SceneError(f"{key}.force_reference", "task space (the reference moves along contact normals)",
+                                 "joint space", file)
+            forces = context.phase.forces
+            normals = _contact_checks(context, [f.contact for f in forces if f.direction == "n"], False,
+                                      cfg.nominal, "force_reference")
+            self.envs = {f.key: normals[f.contact] if f.direction == "n" else
+                         _tangent_nominal(context, f, cfg.nominal) for f in forces}
+
+    @property
+    def in_task_space(self) -> bool:
+        return self.config.space == "task"
+
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
+        cfg = self.config
+        if cfg.space == "task":
+            return self.computed_torque(inp, *self.tip_targets(inp)[:2]), None
+        if inp.x_d is None:
+            qdd = -cfg.kv * inp.v
+        else:
+            qdd = inp.a_d - cfg.kp * (inp.q - inp.x_d) - cfg.kv * (inp.v - inp.v_d)
+        return _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact, None
+
+    def tip_targets(self, inp: ControlInput) -> tuple[np.ndarray, None, None]:
+        """(a*, no force swap, no states): the desired tip acceleration [m/s²] of the task-space law."""
+        cfg = self.config
+        if inp.x_d is None:
+            return -cfg.kv * inp.v_tip, None, None
+        x_d, v_d, a_d = inp.x_d, inp.v_d, inp.a_d
+        if self.envs:
+            x_d, v_d, a_d = self._pressing_reference(inp)
+        return a_d - cfg.kp * (inp.p_tip - x_d) - cfg.kv * (inp.v_tip - v_d), None, None
+
+    def _pressing_reference(self, inp: ControlInput):
+        """Along each touching contact's set-point direction n (normal or tangent): F_d/k beyond the
+        undeformed surface or tangential anchor, along −n. The surface's acceleration along n and
+        F̈_d/k are left out (a_d's component along n is 0)."""
+        R = np.array((inp.x_d, inp.v_d, inp.a_d))  # rows x_d, v_d, a_d (copies)
+        target = np.zeros(3)
+        for name, env in self.envs.items():
+            if not inp.touching.get(name.partition(".")[0]) or name not in inp.force_d:
+                continue
+            n = inp.normals[name]
+            p_s, v_s = inp.surfaces[name]
+            F_d, dF_d = inp.force_d[name]
+            target[0] = n.dot(p_s) - F_d / env.k  # along n: x_d = p_s − F_d/k, v_d = v_s − Ḟ_d/k, a_d = 0
+            target[1] = n.dot(v_s) - dF_d / env.k
+            R += np.multiply.outer(target - R.dot(n), n)
+        return R[0], R[1], R[2]
+
+
+# ---- A10 and hybrid ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ForceDynamicConfig:
+    kp: np.ndarray  #: [1/s²] position transient (hybrid) — one, or per world axis
+    kv: np.ndarray  #: [1/s] position transient / damping of the free directions
+    kf: float  #: [1/s] force error rate, Q(μ) = −K_F μ
+    k_null: float  #: [1/s]
+    axes: np.ndarray | None  #: (k, 3) position-controlled directions (hybrid), None: complement of the normals
+    nominal: NominalEnvironment | None
+    cancel: str = "target"  #: along the normals τ −= Jᵀ n F*, F* = F_d + ∫Q ("target", A10) or Jᵀ n F ("measured")
+    inertia: str = "model"  #: "model" (link + reflected rotor) or "link" (link only)
+    kind: str = "force_dynamic"
+
+
+@register
+class ForceDynamic(_ComputedTorque):
+    """A10: the force set-point F* = F_d + integral of -kf (F - F_d) along the normals, via the nominal surface."""
+
+    name = "force_dynamic"
+    tracks_position = False
+    in_task_space = True
+
+    @staticmethod
+    def applies_force_setpoints(config: ForceDynamicConfig) -> bool:
+        return True
+
+    @classmethod
+    def read(cls, r) -> ForceDynamicConfig:
+        return ForceDynamicConfig(
+            kp=_gain(r, "kp", KP, "1/s²") if cls.tracks_position else np.array([KP]),
+            kv=_gain(r, "kv", KV, "1/s"),
+            kf=r.float("kf", KF, lo=0.0, lo_open=True, unit="1/s"),
+            k_null=r.float("k_null", K_NULL, lo=0.0, unit="1/s"),
+            axes=_axes(r) if cls.tracks_position else None,
+            nominal=_nominal(r, need_dynamics=True),
+            cancel=r.str("cancel", "target", choices=["target", "measured"]), inertia=_inertia(r), kind=cls.name)
+
+    def bind(self, context: BindContext) -> None:
+        self._pinv = _Pinv()
+        self._rotor = _rotor_inertia(context, self.config.inertia)
+        cfg, key, file, phase = self.config, context.key, context.scene.file, context.phase
+        for name in ("kp", "kv"):
+            _check_gain_size(getattr(cfg, name), (1, 3), f"{key}.{name}", file)
+        names = [f.contact for f in phase.forces]
+        if not names:
+            raise SceneError(f"phase[{context.index}].force", f"a force set-point ({self.name} controls force "
+                             "along contact normals)", [], file)
+        ref = phase.reference
+        if self.tracks_position and (ref is None or ref.space != "task"):
+            raise SceneError(f"phase[{context.index}].reference", "a task-space reference (hybrid tracks "
+                             "position along its axes)", None if ref is None else ref.space, file)
+        if not self.tracks_position and ref is not None:
+            raise SceneError(f"phase[{context.index}].reference", "no reference (force_dynamic is a pure force "
+                             "law; use hybrid to track position along other directions)", ref.space, file)
+        self.envs = _contact_checks(context, names, True, cfg.nominal, self.name)
+        self.names = names
+        self.n_states = len(names)  # ∫Q(μ) dt per force-controlled contact [N]
+        normals = np.array([context.scene.contacts[n].normal for n in names])
+        if cfg.axes is not None:
+            if np.max(np.abs(cfg.axes @ normals.T)) > 1e-9:
+                raise SceneError(f"{key}.axes", "directions orthogonal to the force-controlled normals "
+                                 f"{normals.tolist()}", cfg.axes.tolist(), file)
+            axes = cfg.axes
+        else:  # the orthogonal complement of the normals
+            _, sv, vt = np.linalg.svd(normals)
+            axes = vt[int(np.sum(sv > 1e-9)):]
+        self.P = axes.T @ axes  #: projector on the position-controlled directions
+
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray]:
+        a, f_swap, zdot = self.tip_targets(inp)
+        return self.computed_torque(inp, a, f_swap), zdot
+
+    def tip_targets(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """(a* [m/s²], the tip force swapped into τ [N] (cancel = "target"; else None), ż [N/s])."""
+        cfg = self.config
+        P = self.P
+        a_force = np.zeros(3)
+        f_swap = np.zeros(3)  # tip force [N]: measured normal forces out, targets F* in (cancel = "target")
+        zdot = np.zeros(self.n_states)
+        for i, name in enumerate(self.names):
+            n = inp.normals[name]
+            if not inp.touching.get(name):
+                P = P + np.outer(n, n)  # not touching yet: like a free direction, integral frozen
+                continue
+            env = self.envs[name]
+            p_s, v_s = inp.surfaces[name]
+            s, sd = n @ (p_s - inp.p_tip), n @ (v_s - inp.v_tip)  # penetration [m], its rate [m/s]
+            F_d, dF_d = inp.force_d[name]
+            mu = inp.forces[name] - F_d  # force error [N]
+            target = F_d + inp.z[i]  # F* = F_d + ∫Q(μ) dt [N]
+            if env.m > 0.0:
+                sdd = (target - env.b * sd - env.k * s) / env.m
+            else:  # Ḟ* = Ḟ_d + Q(μ)
+                sdd = (dF_d - cfg.kf * mu - env.k * sd) / env.b
+            a_force -= sdd * n
+            zdot[i] = -cfg.kf * mu
+            f_swap += (inp.forces[name] - target) * n
+        if self.tracks_position:
+            a_pos = inp.a_d - cfg.kp * (inp.p_tip - inp.x_d) - cfg.kv * (inp.v_tip - inp.v_d)
+        else:
+            a_pos = -cfg.kv * inp.v_tip
+        return P @ a_pos + a_force, (f_swap if cfg.cancel == "target" else None), zdot
+
+
+@register
+class Hybrid(ForceDynamic):
+    """A7 along the position axes and A10 along the force normals (the paper's case 2)."""
+
+    name = "hybrid"
+    tracks_position = True

@@ -1,0 +1,114 @@
+"""The operational_space law's arithmetic (:mod:`.operational`), compiled once for every path.
+
+    J_t = W J_tip,   W = [S 0; 0 E]       S: the position axes and force directions (rows),
+                                          E = [e1; e2]: a basis of the plane ⊥ the tool direction a = R_tip a_tip
+    Λ⁻¹ = J_t H⁻¹ J_tᵀ
+    τ = J_tᵀ (Λ (a* − J̇_t q̇ + k_null ẋ_t) + f) − k_null H q̇ + h       [N·m or N]
+
+a* [m/s², rad/s²] and f [N] as the module :mod:`~contactdyn.laws.controllers.operational` says: per position
+axis n, a* = n·ẍ_d and f = kp n·(x_d − p) + kd n·(ẋ_d − ṗ) (f = −kd n·ṗ without a reference); per force
+direction n, a* = 0 and f = −F_d − kd_normal n·ṗ; on the tilt, a* = E (ko (a × d) − do ω), f = 0.
+k_null = 0 where the task has as many directions as the arm has joints.
+
+Written once here and compiled by numba: the readable law (``OperationalSpace.torque``) and the plan's
+compiled call (:mod:`contactdyn.compiled.plan_operational`) both run :func:`torque`. Λ⁻¹ = Yᵀ Y with Y = L⁻¹ J_tᵀ,
+H = L Lᵀ (:func:`~contactdyn.numerics.linalg.cholesky`), Λ (…) by :func:`~.linalg.lu_solve`: loops, not numba's
+LAPACK bindings. Arguments are C-contiguous float64
+arrays; "none" is an empty array (no reference: x_d, v_d, a_d of size 0; no tool axis: ``tool_axis``,
+``target`` of size 0 and R_tip (0, 3)). :func:`torque` also returns the task's Hadamard ratio
+det(Λ⁻¹) / Π diag(Λ⁻¹), which the caller checks against ``operational.SINGULAR`` (in Python: the error is
+raised there).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ...numerics.linalg import cholesky, forward_solve, lu_solve, mm, mtm, mtv, mv
+
+__all__ = ["perpendicular", "hadamard_ratio", "torque"]
+
+
+@njit(cache=True)
+def perpendicular(a):
+    """(e1, a × e1): an orthonormal basis of the plane perpendicular to the unit 3-vector a."""
+    if abs(a[0]) < 0.9:
+        e1 = np.array([0.0, a[2], -a[1]])  # a × x
+    else:
+        e1 = np.array([-a[2], 0.0, a[0]])  # a × y
+    e1 /= math.sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2])
+    return e1, np.cross(a, e1)
+
+
+@njit(cache=True)
+def hadamard_ratio(S):
+    """det(S) / Π diag(S) of a symmetric positive definite S (the product of its elimination pivots over its
+    diagonal, no pivoting); 0 where a pivot is not positive (S singular or indefinite), nan with a nan in S."""
+    n = S.shape[0]
+    U = S.copy()
+    ratio = 1.0
+    for k in range(n):
+        if not U[k, k] > 0.0:
+            return U[k, k] * 0.0  # 0, or nan
+        ratio *= U[k, k] / S[k, k]
+        for i in range(k + 1, n):
+            f = U[i, k] / U[k, k]
+            for j in range(k + 1, n):
+                U[i, j] -= f * U[k, j]
+    return ratio
+
+
+@njit(cache=True)
+def _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, kd_normal):
+    """(a* [m/s²], f [N]) on the position axes, then the force directions."""
+    k, nf = axes.shape[0], forced.shape[0]
+    a_task = np.zeros(k + nf)
+    f = np.empty(k + nf)
+    if x_d.size:
+        a_task[:k] = mv(axes, a_d)
+        f[:k] = kp * mv(axes, x_d - p_tip) + kd * mv(axes, v_d - v_tip)
+    else:
+        f[:k] = -kd * mv(axes, v_tip)
+    f[k:] = -set_points - kd_normal * mv(forced, v_tip)
+    return a_task, f
+
+
+@njit(cache=True)
+def torque(v, H, h, J_tip, drift_tip, p_tip, v_tip, x_d, v_d, a_d, set_points, R_tip, axes, forced, kp, kd,
+           tool_axis, target, ko, do, k_null, kd_normal):
+    """(τ [N·m or N], the Hadamard ratio of Λ⁻¹) of the module docstring. J_tip, drift_tip: the tip's linear rows
+    (3, nv), (3,) [m/s²], or with a tool axis the 6 rows [J; J_ω], [J̇q̇; J̇_ω q̇] in Pinocchio's order;
+    axes (k, 3), forced (nf, 3) the position and force rows of S; kp, kd [N/m, N·s/m] per axis; ko [1/s²],
+    do [1/s], k_null [1/s] (0: no null-space damping), kd_normal [N·s/m]."""
+    a_pos, f_pos = _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, kd_normal)
+    nS = a_pos.size
+    m = nS + (2 if tool_axis.size else 0)
+    W = np.zeros((m, J_tip.shape[0]))  # the task's rows on the tip's [linear; angular] motion
+    W[:axes.shape[0], :3] = axes
+    W[axes.shape[0]:nS, :3] = forced
+    a_task = np.zeros(m)
+    a_task[:nS] = a_pos
+    f = np.zeros(m)
+    f[:nS] = f_pos
+    if tool_axis.size:
+        a = mv(R_tip, tool_axis)  # current tool direction (world)
+        e1, e2 = perpendicular(a)
+        W[nS, 3:] = e1
+        W[nS + 1, 3:] = e2
+        w = ko * np.cross(a, target) - do * mv(J_tip[3:], v)  # [rad/s²]
+        a_task[nS] = (e1 * w).sum()
+        a_task[nS + 1] = (e2 * w).sum()
+    Jt = mm(W, J_tip)
+    rhs = a_task - mv(W, drift_tip)
+    if k_null > 0.0:
+        rhs += k_null * mv(Jt, v)
+    Y = forward_solve(cholesky(H), np.ascontiguousarray(Jt.T))  # L⁻¹ J_tᵀ, H = L Lᵀ
+    L_inv = mtm(Y, Y)  # Λ⁻¹ = J_t H⁻¹ J_tᵀ
+    ft = lu_solve(L_inv, rhs) + f  # Λ (a* − J̇_t q̇ + k_null ẋ_t) + f
+    tau = mtv(Jt, ft) + h
+    if k_null > 0.0:
+        tau -= k_null * mv(H, v)
+    return tau, hadamard_ratio(L_inv)

@@ -1,0 +1,56 @@
+"""A law's declared parameter: name, unit, default, bounds and meaning, written once.
+
+Stage laws (:mod:`contactdyn.laws.stage_laws`), friction laws (:mod:`contactdyn.laws.friction_laws`)
+and drive kinds (:mod:`contactdyn.laws.drives`) declare their parameters as :class:`Param`
+tuples. The scene reader reads them from the declaration (:func:`read_params`: the bounds
+and the unit in the error message), the key reference (``docs/scenes.md``,
+``contactdyn list keys``) shows their meaning from it, and the tour of the reader
+(:mod:`contactdyn.scene.keytour`) writes an example of each from :attr:`Param.example`. A user's
+law gets all of that by declaring its parameters the same way.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..scene.reader import Reader
+
+__all__ = ["Param", "read_params"]
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of a law, as a scene names it."""
+
+    name: str  #: the scene key
+    unit: str  #: e.g. "N/m", "-" for a pure number
+    meaning: str  #: one line for the key reference
+    default: float | None = None  #: None: the scene must give it
+    lo: float = 0.0  #: lower bound
+    hi: float | None = None  #: upper bound (None: none)
+    lo_open: bool = False  #: the lower bound itself is not allowed
+    example: float | None = None  #: a value for the reader's tour (default: the default, else a value in bounds)
+
+    def read(self, r: Reader, key: str | None = None) -> float:
+        """This parameter's value from the table of ``r`` (under ``key``, default its own name), checked."""
+        from ..scene.reader import MISSING
+
+        return r.float(key or self.name, MISSING if self.default is None else self.default, lo=self.lo, hi=self.hi,
+                       lo_open=self.lo_open, unit="" if self.unit == "-" else self.unit, meaning=self.meaning)
+
+    def sample(self) -> float:
+        """A valid value of this parameter (for the reader's tour and the tests)."""
+        if self.example is not None:
+            return self.example
+        if self.default is not None and math.isfinite(self.default):
+            return self.default
+        return self.lo + 1.0 if self.hi is None else 0.5 * (self.lo + self.hi)
+
+
+def read_params(r: Reader, params: tuple[Param, ...]) -> tuple[float, ...]:
+    """The declared parameters' values, in declaration order."""
+    return tuple(p.read(r) for p in params)
+

@@ -1,0 +1,188 @@
+"""A contact interface: a robot frame meeting an environment point, one model per direction.
+
+Along the normal a :class:`~contactdyn.model.chain.Chain` (rigid when empty); along the
+tangential directions nothing (``free``), Coulomb friction, or a chain per direction that
+bonds at touch (case 1's horizontal deformations). A contact's *mode* says whether it
+touches and, with friction, whether it sticks or in which direction it slides (and, after a
+separation, that its chains' damped ends relax); the mode only changes at located events
+(:mod:`contactdyn.hybrid.events`, :mod:`contactdyn.hybrid.transitions`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..robot.robot import FrameTerms
+from ..scene.scene_file import ContactSpec
+from .chain import Chain, NodeKind, balanced, build_chain
+
+__all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics"]
+
+
+@dataclass(frozen=True)
+class ContactMode:
+    """What a contact is doing during a smooth phase."""
+
+    touching: bool = False
+    stuck: bool = False
+    #: sliding direction in tangent coordinates, fixed for the phase (1-D: ±1);
+    #: 2-D sliding uses the state's own slip direction, this is only its reference.
+    slip: tuple[float, ...] = ()
+    #: anchor offsets of the tangential chains [m], captured at touch
+    offsets: tuple[float, ...] = ()
+    #: the slide started from rest (2-D: until the slip leaves the stick band its direction is
+    #: the consistent one, where the slip accelerates, rather than the fixed reference)
+    from_rest: bool = False
+    #: not touching since a separation: the chains' damped surface ends relax from the deformation
+    #: they had (first-order states, rate 1/τ = k/b). Else (chains start undeformed, a touch ends it)
+    #: they sit at zero compression and follow their stages' other nodes: no state to integrate.
+    relaxing: bool = False
+
+    def with_(self, **changes) -> ContactMode:
+        return replace(self, **changes)
+
+    def separated(self) -> ContactMode:
+        """The mode after the contact lets go: not touching, not stuck, its damped chain ends relaxing."""
+        return replace(self, touching=False, stuck=False, relaxing=True)
+
+
+@dataclass
+class Kinematics:
+    """Tip and environment point kinematics of one contact at one state (world frame)."""
+
+    p_tip: np.ndarray  #: [m]
+    v_tip: np.ndarray  #: [m/s]
+    J: np.ndarray  #: (3, nv)
+    drift: np.ndarray  #: J̇q̇ [m/s²]
+    p_env: np.ndarray  #: [m]
+    v_env: np.ndarray  #: [m/s]
+    frame: FrameTerms | None = None  #: the tip frame's full terms (orientation, angular Jacobian)
+
+
+@dataclass
+class ChainPlan:
+    """How to evaluate one chain in one touching state (compiled once per state)."""
+
+    solid: list[int]
+    aliases: list[tuple[int, int]]  #: (free node, node it follows)
+    #: (node, active neighbour stages, state index or -1, nodes merged into it, algebraic: it sits where
+    #: its springs balance, its state (if any) only following it)
+    junctions: list[tuple[int, list[int], int, frozenset[int], bool]]
+    free_ends: list[tuple[int, int]]  #: (free node, node it rests on)
+    active: list[int]  #: stages carrying force
+    bond: bool
+    interface_stage: int  #: stage whose force is the interface force (-1: bond or none)
+    junction_nodes: frozenset[int]  #: the nodes of ``junctions`` (a membership test per evaluation)
+
+
+def _plan(chain: Chain, touching: bool, junction_state: int, relaxing: bool) -> ChainPlan:
+    nodes, stages = chain.nodes, chain.stages
+    solid = [i for i, n in enumerate(nodes) if n.kind != NodeKind.FREE]
+    aliases: list[tuple[int, int]] = []
+    junction_nodes: list[int] = []
+    es, rs = chain.env_surface, chain.robot_surface
+    if touching:
+        e_free, r_free = nodes[es].kind == NodeKind.FREE, nodes[rs].kind == NodeKind.FREE
+        if e_free and not r_free:
+            aliases.append((es, rs))
+        elif r_free and not e_free:
+            aliases.append((rs, es))
+        elif e_free and r_free:
+            junction_nodes.append(es)
+            aliases.append((rs, es))
+    aliased = {a for a, _ in aliases}
+    interior = [i for i, n in enumerate(nodes)
+                if n.kind == NodeKind.FREE and len(chain.stages_of(i)) == 2 and i not in aliased]
+    junction_nodes += [i for i in interior if i not in junction_nodes]
+    if not touching and relaxing:  # damped surface ends relax on their own: k x + b ẋ = 0
+        junction_nodes += [i for i in (es, rs) if nodes[i].kind == NodeKind.FREE and nodes[i].state >= 0
+                           and i not in junction_nodes]
+    # a node is "loaded" when its position is determined by something other than its stage
+    loaded = set(solid) | aliased | set(junction_nodes)
+    free_ends = []
+    for i, n in enumerate(nodes):
+        if n.kind == NodeKind.FREE and i not in loaded:
+            (s,) = chain.stages_of(i)
+            other = stages[s].lower if stages[s].upper == i else stages[s].upper
+            free_ends.append((i, other))
+    free_set = {i for i, _ in free_ends}
+    active = [k for k, s in enumerate(stages) if s.lower not in free_set and s.upper not in free_set]
+    junctions = []
+    for j in junction_nodes:
+        group = {j} | {a for a, b in aliases if b == j}  # the interface junction is both surface nodes
+        stages_j = sorted({k for n in group for k in chain.stages_of(n) if k in active})
+        slot = junction_state if touching and j in (es, rs) else nodes[j].state
+        algebraic = slot < 0 or (len(stages_j) > 1 and balanced([stages[k] for k in stages_j]))
+        junctions.append((j, stages_j, slot, frozenset(group), algebraic))
+    bond = touching and chain.bonded_when_touching
+    interface_stage = -1
+    if touching and not bond:  # the stage that meets the other side carries the interface force
+        if nodes[es].kind == NodeKind.FREE:
+            interface_stage = next(k for k, s in enumerate(stages) if s.upper == es)
+        else:
+            interface_stage = next(k for k, s in enumerate(stages) if s.lower == rs)
+    return ChainPlan(solid, aliases, junctions, free_ends, active, bond, interface_stage, frozenset(junction_nodes))
+
+
+@dataclass
+class DirectionalChain:
+    """A chain placed along a world direction u of a contact."""
+
+    chain: Chain
+    u: np.ndarray
+    label: str  #: "n", "t1", "t2"
+    junction_state: int = -1  #: state slot of the interface junction (when touching), set by the system
+    plans: dict[tuple[bool, bool], ChainPlan] = field(default_factory=dict)
+    last_positions: list[float] = field(default_factory=list)  #: node positions at the last evaluation [m]
+
+    def plan(self, touching: bool, relaxing: bool = False) -> ChainPlan:
+        """How to evaluate the chain touching or not, with its damped ends relaxing (see ContactMode)."""
+        key = (touching, relaxing and not touching)
+        if key not in self.plans:
+            self.plans[key] = _plan(self.chain, touching, self.junction_state, key[1])
+        return self.plans[key]
+
+
+class Contact:
+    """Runtime of one contact interface; the system gives it coordinates and state slots."""
+
+    def __init__(self, spec: ContactSpec, fid: int, body_index: int, body_axis: np.ndarray):
+        self.spec = spec
+        self.name = spec.name
+        self.fid = fid
+        self.body_index = body_index  #: generalized coordinate of the body (-1: ground)
+        self.body_axis = body_axis  #: unit direction of the body's travel (zero for ground)
+        where = f"contact.{spec.name}"
+        self.normal = DirectionalChain(build_chain(spec.normal_chain, f"{where}.normal"), spec.normal, "n")
+        self.tangent_chains: list[DirectionalChain] = []
+        if spec.tangent_chain is not None:
+            for i, t in enumerate(spec.tangents):
+                self.tangent_chains.append(
+                    DirectionalChain(build_chain(spec.tangent_chain, f"{where}.tangent"), t, f"t{i + 1}")
+                )
+        self.friction = spec.friction
+        self.tangents = spec.tangents
+
+    @property
+    def chains(self) -> list[DirectionalChain]:
+        return [self.normal, *self.tangent_chains]
+
+    def relaxation_time(self, mode: ContactMode) -> float:
+        """[s] The shortest time constant b / k of the damped ends relaxing in this mode (inf: none)."""
+        taus = []
+        for dc in self.chains:
+            for j, _, slot, _, algebraic in dc.plan(mode.touching, mode.relaxing).junctions:
+                if slot >= 0 and not algebraic:  # a junction integrated as a state
+                    stages = (dc.chain.stages[k] for k in dc.chain.stages_of(j))
+                    kvs = (s.kelvin_voigt for s in stages)  # (K, B): a junction joins affine stages only
+                    taus += [B / K for K, B in kvs if K > 0.0]
+        return min(taus, default=math.inf)
+
+    def surface(self, x: np.ndarray, nQ: int) -> tuple[np.ndarray, np.ndarray]:
+        """(p_env [m], v_env [m/s]): the contact point on the environment, carried by its body if any."""
+        if self.body_index >= 0:
+            return self.spec.point + self.body_axis * x[self.body_index], self.body_axis * x[nQ + self.body_index]
+        return self.spec.point, np.zeros(3)

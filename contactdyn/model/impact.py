@@ -1,0 +1,198 @@
+"""The impact map: plastic impacts at touch, sliding or jamming, and velocity projection.
+
+When a contact whose touching makes a constraint row (rigid, or a chain whose surface
+nodes are both solid) touches, velocities jump. Over Δt → 0 the momentum law
+(eqs 27–31, 35–38) gives
+
+    M (Q̇⁺ − Q̇⁻) = Cᵀ Λ,   G Q̇⁺ = 0
+
+with every bond, stick and the new contact held at velocity level (Λ the impulses
+[N·s], M and the rows as in :mod:`contactdyn.model.constraints`). With friction:
+
+- sliding impact (eqs 27–29): the tip slides in its pre-impact slip direction d, the
+  friction impulse is −μ_k FΔt d, folded into the normal column as at acceleration level;
+- jamming (eqs 30–31): if the tangential velocity after the impact points against d the
+  sliding assumption is wrong: zero tangential velocity, F_fΔt an unknown; if holding it
+  needs more than μ_s FΔt (eqs 35–38) the tip slides where that impulse pushes.
+
+Every other stuck contact holds through its stick rows only while its impulse stays in its
+own cone, |F_fΔt| ≤ μ_s FΔt (FΔt: its normal row's impulse; zero for a compliant normal,
+which carries no impulse): one that would leave it slides from the impact on, where its
+impulse pushed (``Impact.released``), and the impact is solved again without its stick.
+Its friction impulse during the impact is μ_k FΔt folded nowhere: like every sliding contact
+other than the impact's own, its normal column stays untilted (zero for a compliant normal).
+
+A joint reaching its position limit is the same map with the limit's row among the rows
+(:func:`limit_impact`), friction impulses at a sliding contact included.
+
+The energy lost [J] is ½ Q̇⁻ᵀ M Q̇⁻ − ½ Q̇⁺ᵀ M Q̇⁺ ≥ 0. :func:`project_velocity` is the same
+law without a new contact: the smallest kinetic-energy-norm change that keeps every
+active constraint (used when a slide stops inside the stick band).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .constraints import impulse_solve, velocity_rows
+from .contact import Contact, ContactMode
+from .friction import direction_of, in_cone, slip_velocity
+
+__all__ = ["Impact", "impact", "limit_impact", "project_velocity"]
+
+
+@dataclass
+class Impact:
+    """A plastic impact at touch: impulses [N·s] and velocities before and after."""
+
+    t: float
+    contact: str
+    normal_impulse: float  #: FΔt
+    friction_impulse: np.ndarray  #: F_fΔt per tangent
+    jammed: bool
+    energy_loss: float  #: [J]
+    v_before: np.ndarray  #: Q̇⁻
+    v_after: np.ndarray  #: Q̇⁺
+    slip_before: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
+    slip_after: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: tangential velocity [m/s]
+    direction: np.ndarray = field(default_factory=lambda: np.zeros(0))  #: sliding direction d (0: none)
+    row_impulses: dict = field(default_factory=dict)  #: (owner, kind, index) -> Λ of every held row [N·s or N·m·s]
+    #: other contacts that were stuck and slide from the impact on (their stick impulse left the cone): name -> d
+    released: dict = field(default_factory=dict)
+
+
+def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact | None,
+           limits: tuple = ()) -> tuple[np.ndarray, Impact]:
+    """Velocity jump when ``contact`` touches (its mode already says touching), or when a joint
+    reaches its position limit (its row the last of ``limits``; ``contact``: the sliding contact
+    whose friction takes part, :func:`limit_impact`, or None).
+
+    Momentum law over Δt → 0 (eqs 27–31, 35–38): M(Q̇⁺ − Q̇⁻) = Cᵀ Λ with every bond,
+    stick, limit and the new contact holding at velocity level, G Q̇⁺ = 0. With friction the
+    tip first slides in its pre-impact slip direction d (friction impulse −μ_k FΔt d,
+    the normal column tilted as in eq. 27). If the tangential velocity after the
+    impact points against d the assumption is wrong and the impact jams (eqs 30–31):
+    zero tangential velocity, friction impulse F_fΔt an unknown. A tip that arrives
+    without slip (|v_t| within the stick band) is tried jammed first; if holding it
+    needs more than μ_s FΔt it slides where that impulse pushes.
+    """
+    nQ, nv = system.nQ, system.nv
+    q, v = x[:nv], x[nQ:nQ + nv]
+    system.robot.update(q, v)
+    qd_minus = x[nQ:2 * nQ].copy()
+    M = system.mass_matrix()
+    name = contact.name if contact is not None else ""
+    k = len(contact.tangents) if contact is not None else 0
+    kin = system.kinematics(contact, x) if contact is not None else None
+    vt_minus = slip_velocity(system, contact, kin, qd_minus) if k else np.zeros(0)
+    held = list(modes)  #: the modes the impact holds: a stick its impulse would push out of the cone slides
+    own = system.contacts.index(contact) if contact is not None else -1
+    if k and modes[own].stuck:  # the impact's own stick: tried jammed, like a contact at rest
+        held[own] = modes[own].with_(stuck=False)
+    impulses: dict = {}
+
+    def solve(slide=None, jam=False):  # slide: (d, μ)
+        rows = velocity_rows(system, x, held, slide=(contact, *slide) if slide is not None else None,
+                             jam=contact if jam else None, limits=limits)
+        z, _ = impulse_solve(system, M, rows, qd_minus)
+        impulses.clear()
+        impulses.update({m: float(z[nQ + j]) for j, m in enumerate(rows.meta)})
+        P_n = impulses.get((name, "n", 0), 0.0)
+        P_t = np.array([impulses.get((name, "t", i), 0.0) for i in range(k)])
+        return z[:nQ], P_n, P_t
+
+    released: dict[str, tuple[float, ...]] = {}
+    while True:
+        qd_plus, P_n, P_t, d, jammed = _own_contact(system, contact, kin, vt_minus, solve)
+        outside = _sticks_outside_the_cone(system, held, contact, impulses)
+        if not outside:
+            break
+        for j, push in outside:  # slide from rest where the impulse pushed (its friction impulse: see above)
+            held[j] = held[j].with_(stuck=False, slip=direction_of(push), from_rest=True)
+            released[system.contacts[j].name] = held[j].slip
+    x_new = x.copy()
+    x_new[nQ:2 * nQ] = qd_plus
+    energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
+    vt_plus = slip_velocity(system, contact, kin, qd_plus) if k else np.zeros(0)
+    return x_new, Impact(t, name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d,
+                         dict(impulses), released)
+
+
+def _own_contact(system, contact, kin, vt_minus, solve):
+    """The impact's own contact: (Q̇⁺, P_n, P_t, d, jammed) by the sliding or jamming branch (see impact)."""
+    fr, k = (contact.friction, len(contact.tangents)) if contact is not None else (None, 0)
+    d = np.zeros(k)
+    if fr is None or not k:
+        qd_plus, P_n, P_t = solve()
+        return qd_plus, P_n, P_t, d, False
+    speed = float(np.linalg.norm(vt_minus))
+    jammed = True
+    if speed > system.slip_band:
+        d = vt_minus / speed
+        mu = float(fr.mu(speed))  # the kinetic coefficient at the slip speed before the impact
+        qd_plus, P_n, _ = solve(slide=(d, mu))
+        P_t = -mu * P_n * d
+        jammed = float(slip_velocity(system, contact, kin, qd_plus) @ d) < 0.0
+    if jammed:
+        qd_plus, P_n, P_t = solve(jam=True)
+        if not in_cone(P_t, P_n, fr.mu_s):  # holding needs more than the cone gives: slide where the impulse pushes
+            d = -P_t / float(np.linalg.norm(P_t))
+            mu = float(fr.mu(0.0))  # sliding from rest
+            qd_plus, P_n, _ = solve(slide=(d, mu))
+            P_t = -mu * P_n * d
+            jammed = False
+    return qd_plus, P_n, P_t, d, jammed
+
+
+def _sticks_outside_the_cone(system, held, contact, impulses) -> list[tuple[int, np.ndarray]]:
+    """The other stuck contacts whose stick impulse |P_t| exceeds μ_s P_n (P_n: their normal row's impulse, 0
+    for a compliant normal, which carries no impulse), with the direction the impulse pushes (−P_t)."""
+    out = []
+    for j, (c, m) in enumerate(zip(system.contacts, held, strict=True)):
+        if c is contact or not m.touching or not m.stuck:
+            continue
+        P_t = np.array([impulses.get((c.name, "t", i), 0.0) for i in range(len(c.tangents))])
+        if not in_cone(P_t, impulses.get((c.name, "n", 0), 0.0), c.friction.mu_s):
+            out.append((j, -P_t))
+    return out
+
+
+def limit_impact(system, t: float, x: np.ndarray, modes: list[ContactMode], limits: tuple
+                 ) -> tuple[np.ndarray, Impact, float]:
+    """A joint reaching its position limit, its row (i, side) the last of ``limits``: (x⁺, the impact,
+    the limit's impulse Λ [N·m·s or N·s]).
+
+    The same momentum law as at a touch (:func:`impact`) with the limit row among the rows. The
+    impact's contact is the first touching one with a normal row (rigid or bonded: its normal
+    impulse is finite), a sliding one with friction first: it takes its friction impulse by the
+    same sliding/jamming branch (with several sliding contacts, the others' normal columns stay
+    untilted); a sticking one holds through its stick rows. Without one, the contact is "".
+    """
+    rowed = [(c, m) for c, m in zip(system.contacts, modes, strict=True)
+             if m.touching and c.normal.chain.bonded_when_touching]
+    sliding = [c for c, m in rowed if not m.stuck and c.friction is not None and len(c.tangents)]
+    contact = sliding[0] if sliding else rowed[0][0] if rowed else None
+    x_new, imp = impact(system, t, x, modes, contact, limits)
+    i = limits[-1][0]
+    return x_new, imp, imp.row_impulses[(system.limits.by_index[i].name, "limit", i)]
+
+
+def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tuple = ()) -> np.ndarray:
+    """x with Q̇ moved onto every active velocity constraint (bonds, rigid contacts, sticks).
+
+    The smallest change in the kinetic-energy norm, M ΔQ̇ = Gᵀ Λ, G Q̇⁺ = 0: an impulse
+    that removes what the constraints forbid (used when a slide stops inside the stick
+    band, where the residual slip is at most ``solver.stick_velocity``).
+    """
+    nQ, nv = system.nQ, system.nv
+    system.robot.update(x[:nv], x[nQ:nQ + nv])
+    rows = velocity_rows(system, x, modes, limits=limits)
+    if not rows:
+        return x
+    M = system.mass_matrix()
+    z, _ = impulse_solve(system, M, rows, x[nQ:2 * nQ])
+    x_new = x.copy()
+    x_new[nQ:2 * nQ] = z[:nQ]
+    return x_new

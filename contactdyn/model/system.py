@@ -1,0 +1,238 @@
+"""The system: the robot and the parts a scene names, assembled once; the model's entry points.
+
+:class:`System` builds, from a scene, the robot (Pinocchio), the contacts with their
+deformation chains and friction (:mod:`contactdyn.model.contact`), the drives
+(:mod:`contactdyn.laws.drives`), one controller per task phase (:mod:`contactdyn.laws.controllers`)
+and the state layout (:mod:`contactdyn.model.layout`). The physics lives in modules named after
+the paper's concepts; the methods here are the entry points the hybrid loop and the tests
+call:
+
+- :meth:`System.evaluate` — the right-hand side in one mode (:mod:`contactdyn.model.dynamics`);
+- :meth:`System.impact` — the plastic impact map (:mod:`contactdyn.model.impact`);
+- :meth:`System.project_velocity` — velocities onto the active constraints (same module);
+- :meth:`System.start_phase` — a task phase at run time (:mod:`contactdyn.model.phases`);
+- the joints' position limits as constraint rows (:attr:`System.limits`, :mod:`contactdyn.model.limits`);
+- the start posture solved from the task (:mod:`contactdyn.robot.posture`);
+- friction's slip velocity and acceleration (:mod:`contactdyn.model.friction`).
+
+Which parts the compiled right-hand side (:mod:`contactdyn.compiled.rhsplan`) covers is declared
+by the parts themselves and collected here at load time: :attr:`System.fast_path_gaps`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import RobotError, SceneError
+from ..laws.controllers import CONTROLLERS
+from ..laws.controllers.base import BindContext
+from ..laws.drives import Drives
+from ..robot.posture import start_posture
+from ..robot.robot import Robot
+from ..scene.scene_file import Scene
+from .chain import NodeKind
+from .contact import Contact, ContactMode, Kinematics
+from .dynamics import Evaluation, evaluate
+from .friction import initial_slip, slip_acceleration, slip_velocity
+from .impact import Impact, impact, project_velocity
+from .layout import assign_chain_slots, assign_first_order_slots
+from .limits import JointLimits
+from .paths import declared_gaps
+from .phases import Phase, reference_at, start_phase
+
+__all__ = ["System", "Phase", "Evaluation", "Impact"]
+
+
+class System:
+    """Build from a scene; evaluate; map impacts."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        self.posture: dict = {}  #: how the start posture was found (see contactdyn.robot.posture.start_posture)
+        self._q_start: np.ndarray | None = None  #: the solved start posture (solved once: ~0.2 s on a 7-DOF arm)
+        rs = scene.robot
+        try:
+            self.robot = Robot.from_spec(rs)
+            self.limits = JointLimits(self.robot, rs.joint_limits == "enforce")
+            self.tip_fid = self.robot.frame_id(rs.tip)
+        except RobotError as exc:
+            raise SceneError("robot", "a loadable robot", exc, scene.file) from None
+        nv = self.nv = self.robot.nv
+        # ---- generalized coordinates: robot, bodies, chain masses, motors (contactdyn.model.layout) ----
+        self.body_names = list(scene.bodies)
+        self.body_index = {name: nv + i for i, name in enumerate(self.body_names)}
+        diag: list[float] = [b.mass for b in scene.bodies.values()]
+        self.contacts = [self._contact_of(spec) for spec in scene.contacts.values()]
+        self.mass_labels, n_first = assign_chain_slots(self.contacts, nv, diag)
+        self.drives = self._build_drives(nv + len(diag))  # elastic transmissions: motor angles after the masses
+        diag += self.drives.motor_inertias
+        self.nQ = nv + len(diag)
+        self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg, kg·m² for motors]
+        self.M_rest[: len(self.body_names)] += self.drives.reflected[nv:]  # rotor inertia through a wheel
+        self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
+        #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (zero: no motor)
+        self._D_ctl = np.diag(self.drives.model_reflected[:nv])
+        self._joint_motors = self.drives.motorized & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
+        # ---- controllers, then the first-order slots after the junctions ----
+        self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
+        for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
+            ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.motorized[:nv].copy(),
+                                 f"phase[{i}].controller"))
+        self.z_slices, self.energy_slot, self.impulse_slots, self.ny = assign_first_order_slots(
+            n_first, [ctl.n_states for ctl in self.controllers], scene.solver.record_energy, self.contacts)
+        self.n = 2 * self.nQ + self.ny
+        self.stabilization = scene.solver.stabilization  #: Baumgarte rate ω of constraint rows [1/s]
+        self._M = np.zeros((self.nQ, self.nQ))
+        self._M[nv:, nv:] = np.diag(self.M_rest)
+        self.servo = [(self.body_index[n], b.servo_velocity, b.servo_gain)
+                      for n, b in scene.bodies.items() if b.servo_velocity is not None]
+        self.stage_labels = [f"{c.name}.{dc.label}.{s.label}" for c in self.contacts for dc in c.chains
+                             for s in dc.chain.stages]
+        #: unit direction of each force set-point key (see ForceSpec.key): the robot pushes along −u
+        self.force_directions = {c.name: c.normal.u for c in self.contacts}
+        self.force_directions.update({f"{c.name}.t{i + 1}": t for c in self.contacts for i, t in enumerate(c.tangents)})
+        self.slip_band = scene.solver.stick_velocity  #: [m/s] stick/slip guard band (see contactdyn.model.friction)
+        #: the parts the compiled right-hand side does not run, as they declare it (contactdyn.model.paths)
+        self.fast_path_gaps = declared_gaps(self)
+
+    def _contact_of(self, spec) -> Contact:
+        try:
+            fid = self.robot.frame_id(spec.frame)
+        except RobotError as exc:
+            raise SceneError(f"contact.{spec.name}.frame", "a frame of the robot", exc, self.scene.file) from None
+        idx = self.body_index.get(spec.body, -1)
+        axis = self.scene.bodies[spec.body].axis if spec.body in self.scene.bodies else np.zeros(3)
+        return Contact(spec, fid, idx, axis)
+
+    def _build_drives(self, first_motor_coord: int) -> Drives:
+        names = list(self.robot.joint_names)
+        specs = self.scene.robot.drive.expand(self.nv, names)
+        coords = list(range(self.nv))
+        for name, b in self.scene.bodies.items():
+            specs += b.drive.expand(1, [name])
+            coords.append(self.body_index[name])
+            names.append(name)
+        return Drives(specs, coords, names, first_motor_coord)
+
+    @property
+    def rotor_inertias(self) -> np.ndarray:
+        """[kg·m²] (nv,) the rotors reflected on the joints (rigid gears; zero without a motor)."""
+        return self._D
+
+    def controller_inertia(self, H: np.ndarray) -> np.ndarray:
+        """[kg·m²] The controller's H: the robot's ``H`` (one sample or a stack) with the rotors reflected."""
+        return H + self._D_ctl if self.drives.any_motor else H
+
+    # ---- initial state ------------------------------------------------------------------
+    def initial_state(self) -> tuple[np.ndarray, list[ContactMode]]:
+        rs, robot = self.scene.robot, self.robot
+        if self._q_start is None:  # every compiled mode's self-check starts here too
+            self._q_start, self.posture = start_posture(robot, rs, self.scene.phases[0].controller, self.scene.file)
+        q = self._q_start.copy()
+        v = rs.v0.copy() if rs.v0 is not None else np.zeros(robot.nv)
+        if len(v) != robot.nv:
+            raise SceneError("robot.v0", f"{robot.nv} joint velocities", rs.v0.tolist(), self.scene.file)
+        x = np.zeros(self.n)
+        nQ, nv = self.nQ, self.nv
+        x[:nv], x[nQ:nQ + nv] = q, v
+        for name, b in self.scene.bodies.items():
+            x[self.body_index[name]], x[nQ + self.body_index[name]] = b.position0, b.velocity0
+        self.drives.initial(x, nQ)
+        robot.update(q, v)
+        modes = []
+        for c in self.contacts:
+            kin = self.kinematics(c, x)
+            gap0 = float(c.normal.u @ (kin.p_tip - kin.p_env))  # chains start undeformed
+            pressed_in = gap0 < -1e-9 and not c.spec.bonded  # a compliant surface starts deformed (a warning)
+            if pressed_in and c.spec.normal_chain.rigid:
+                raise SceneError(f"contact.{c.name}", "a start with the tip on or above the rigid surface (gap >= 0)",
+                                 f"gap {gap0:.6g} m", self.scene.file)
+            touching = c.spec.bonded or gap0 <= 1e-12
+            # masses start at rest where their chain puts them undeformed (zero rest lengths)
+            for dc in c.chains:
+                s_tip, s_anc = float(dc.u @ kin.p_tip), float(dc.u @ kin.p_env)
+                v_tip, v_anc = float(dc.u @ kin.v_tip), float(dc.u @ kin.v_env)
+                for node in dc.chain.nodes:
+                    if node.kind == NodeKind.MASS:
+                        on_robot = node.side == "robot" or pressed_in
+                        x[node.coord] = s_tip if on_robot else s_anc
+                        x[nQ + node.coord] = v_tip if on_robot else v_anc
+                    if node.state >= 0:
+                        x[2 * nQ + node.state] = s_tip if node.side == "robot" else s_anc
+                if dc.junction_state >= 0:
+                    x[2 * nQ + dc.junction_state] = s_anc
+            modes.append(ContactMode(touching=touching, offsets=tuple(0.0 for _ in c.tangent_chains),
+                                     slip=initial_slip(c, kin)))
+        return x, modes
+
+    # ---- phases ---------------------------------------------------------------------------
+    def start_phase(self, index: int, t: float, x: np.ndarray, previous: Phase | None) -> Phase:
+        """Phase ``index`` starting at t [s] in state x (see :func:`contactdyn.model.phases.start_phase`)."""
+        return start_phase(self, index, t, x, previous)
+
+    def reference_at(self, phase: Phase, t: float, x: np.ndarray):
+        """The phase's reference (x_d, v_d, a_d) at (t, x), or Nones (:func:`contactdyn.model.phases.reference_at`)."""
+        return reference_at(self, phase, t, x)
+
+    # ---- kinematics and inertia ------------------------------------------------------------
+    def kinematics(self, c: Contact, x: np.ndarray) -> Kinematics:
+        """Contact kinematics at x; requires ``robot.update`` at x's (q, q̇) first."""
+        ft = self.robot.frame_terms(c.fid)
+        p_env, v_env = c.surface(x, self.nQ)
+        return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env, ft)
+
+    def mass_matrix(self) -> np.ndarray:
+        """M at the last ``robot.update``, a copy: H plus rigid gears' rotor inertias, then the other coordinates."""
+        M = self._M.copy()
+        M[:self.nv, :self.nv] = self.robot.H + np.diag(self._D)
+        return M
+
+    def contact(self, name: str) -> Contact:
+        """The contact named ``name``."""
+        return next(c for c in self.contacts if c.name == name)
+
+    def slip_velocity(self, c: Contact, kin: Kinematics, qd: np.ndarray | None = None) -> np.ndarray:
+        """Tangential tip–environment velocity [m/s] (:func:`contactdyn.model.friction.slip_velocity`)."""
+        return slip_velocity(self, c, kin, qd)
+
+    def slip_acceleration(self, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:
+        """Tangential tip–environment acceleration [m/s²] (:func:`contactdyn.model.friction.slip_acceleration`)."""
+        return slip_acceleration(self, c, x, xdot)
+
+    # ---- the right-hand side, impacts, separation --------------------------------------------
+    def evaluate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
+                 full: bool = False) -> Evaluation:
+        """The right-hand side and its diagnostics (:func:`contactdyn.model.dynamics.evaluate`)."""
+        return evaluate(self, t, x, modes, phase, full)
+
+    def rhs(self, modes: list[ContactMode], phase: Phase):
+        """The function solve_ivp integrates in one mode and phase."""
+
+        def f(t: float, x: np.ndarray) -> np.ndarray:
+            return evaluate(self, t, x, modes, phase).xdot
+
+        return f
+
+    def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact,
+               limits: tuple = ()) -> tuple[np.ndarray, Impact]:
+        """Velocity jump when ``contact`` touches, joints pressing on ``limits`` held
+        (:func:`contactdyn.model.impact.impact`)."""
+        return impact(self, t, x, modes, contact, limits)
+
+    def project_velocity(self, x: np.ndarray, modes: list[ContactMode], limits: tuple = ()) -> np.ndarray:
+        """x with Q̇ moved onto every active velocity constraint, the joints pressing on ``limits`` included
+        (:func:`contactdyn.model.impact.project_velocity`)."""
+        return project_velocity(self, x, modes, limits)
+
+    def separate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, contact: Contact
+                 ) -> np.ndarray:
+        """State at separation: damped surface ends start relaxing from where they are (modes: still touching)."""
+        self.evaluate(t, x, modes, phase)
+        x = x.copy()
+        for dc in contact.chains:
+            chain = dc.chain
+            for node_i in (chain.env_surface, chain.robot_surface):
+                slot = chain.nodes[node_i].state
+                if chain.nodes[node_i].kind == NodeKind.FREE and slot >= 0:
+                    x[2 * self.nQ + slot] = dc.last_positions[node_i]
+        return x

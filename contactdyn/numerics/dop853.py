@@ -1,0 +1,498 @@
+"""DOP853 stepped by scipy's compiled core, with dense output and located events.
+
+``solve_ivp``'s DOP853 is written in Python: every step pays for its stage
+combinations, error norm, step control, dense output and event bookkeeping in NumPy
+calls (65 µs per step with an empty right-hand side, against 8 µs here; ~75 µs on B1
+against ~100 µs of right-hand side; docs/performance.md). Here the steps are
+taken by scipy's compiled DOP853 (``scipy.integrate._dop.dopri853``, the C translation of
+Hairer's code behind ``scipy.integrate.ode("dop853")``), and Python sees each accepted
+step once, in the ``solout`` callback, to test the events.
+
+Dense output. scipy's C wrapper does not pass Hairer's ``CONT`` array to ``solout``, and
+asking for it (``iout = 2``) crashes scipy 1.17 (the core advances its ``nfcn`` pointer
+instead of the count). The stages are still in the workspace the caller owns, laid out as
+Hairer documents (``WORK(21…)``: k1…k10, y1): at each accepted step ``solout`` copies
+them, and the 7th-order interpolant of a step (scipy's coefficient tables, three more
+right-hand-side calls) is built only when something needs it: an event's sign change in
+that step, or output samples falling in it, then for all those steps in one batch.
+
+Events follow ``solve_ivp``'s contract: ``g(t, y)`` at t0 and at every step end in
+increasing t; a sign change in the event's direction is located by ``brentq`` on the
+step's interpolant (xtol = rtol = 4 ε), and the earliest terminal root ends the run there.
+Step control is ``solve_ivp``'s, so both take the same steps. The first step is scipy's
+``select_initial_step`` (the core's own estimate uses other norms). After an accepted step
+the core's rule is solve_ivp's (h·min(MAX_FACTOR, SAFETY err^(−1/8)), no Lund stabilisation).
+After a rejection it is not: scipy's C core shrinks by a fixed factor (a slip in its translation
+of Hairer's code) where solve_ivp shrinks by max(MIN_FACTOR, SAFETY err^(−1/8)), and on B1 that
+cost 26 % more steps (306 against 243). So a rejection ends the core's run (``_Core``), the
+rejected step's error norm is read from the stages left in the workspace, and the run restarts
+with solve_ivp's smaller step; the step after it may not grow (solve_ivp's rule, enforced by
+reading the next step off its first stage time). Stiffness detection is off, as in
+``solve_ivp``. Verified against ``solve_ivp``'s DOP853 in ``tests/test_dop853.py``.
+
+Compiled steps. A right-hand side whose whole step can be one compiled call brings it (``step``, from
+:mod:`contactdyn.compiled.plan_steps`: the stages, y_new, the FSAL call and the error norm): then :func:`_stepped`
+takes the steps, with ``solve_ivp``'s RK step control written out (its loop, not the core's), the stages
+kept in the core's layout for the same dense output and events; a step the compiled call declines is taken
+by ``fun`` (:func:`_attempt`, ``solve_ivp``'s arithmetic). Verified in ``tests/test_plan_steps.py``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy
+from scipy.integrate import _dop
+from scipy.integrate._ivp import dop853_coefficients as _coef
+from scipy.integrate._ivp.common import select_initial_step
+from scipy.integrate._ivp.rk import MAX_FACTOR, MIN_FACTOR, SAFETY
+from scipy.optimize import brentq
+
+from ..errors import SceneError
+
+__all__ = ["solve", "DenseSolution", "Solution"]
+
+#: the core's rejection factor (its fac1). scipy 1.17's C translation shrinks a rejected step by this fixed
+#: factor (it reads facc1/safe where Hairer's Fortran has fac11/safe); solve_ivp by max(MIN_FACTOR,
+#: SAFETY err^(−1/8)). So small that the core's next step is below its minimum: the run returns at
+#: once, and solve() restarts it with solve_ivp's step. It bounds accepted steps' ratios too, never binding.
+_END_AT_REJECTION = 1e-300
+_LIMIT_SLACK = 1e-9  #: relative slack when reading a step size back from a stage time (rounding) [-]
+MAX_STEPS = 10**9  #: step budget of one call (no practical limit; stiffness detection is off)
+_ERROR_ORDER = 7  #: DOP853's error estimator order (solve_ivp's error_estimator_order)
+_EXPONENT = -1.0 / (_ERROR_ORDER + 1)  #: step ratio = SAFETY err^_EXPONENT
+_EPS = np.finfo(float).eps
+_WORK0 = 20  #: k1 starts at work[20] (Hairer's WORK(21))
+# slots of the workspace block k1…k10 after an accepted step (each n long)
+_F_NEW, _S11, _S12, _Y_NEW = 0, 1, 2, 4  # k1 = f(t_new), k2 = stage 11, k3 = stage 12, k5 = y_new
+_STAGES_6_10 = slice(5, 10)  # k6…k10 = stages 6…10
+#: the stage held in each row of the workspace block after a rejected attempt (k1 is still f(t_old);
+#: k4 = Σ b k and k5 = y_new hold no stage): the error norms' weights E5, E3 on those rows (the other
+#: stages have weight 0, tests/test_dop853.py)
+_ROW_STAGE = (0, 10, 11, None, None, 5, 6, 7, 8, 9)
+_ERR_ROWS = np.array([[0.0 if s is None else E[s] for s in _ROW_STAGE] for E in (_coef.E5, _coef.E3)])
+_A, _C, _D = _coef.A, _coef.C, _coef.D
+_N = _coef.N_STAGES  # 12
+_CORE = getattr(_dop, "dopri853", None)  #: scipy's C core (scipy 1.17; older scipy has an f2py one)
+_MESSAGES = {-1: "input is not consistent", -2: "larger nsteps is needed", -3: "step size becomes too small",
+             -4: "problem is probably stiff"}
+
+
+@dataclass
+class _Steps:
+    """Accepted steps of one run: ends, states, stages; interpolants built on demand."""
+
+    fun: Callable
+    n: int
+    t: list[float] = field(default_factory=list)  #: step ends [s], t[0] = t0
+    y0: np.ndarray | None = None
+    f0: np.ndarray | None = None  #: f(t0, y0)
+    blocks: list[np.ndarray] = field(default_factory=list)  #: workspace k1…k10 (10 n) per step
+    coef: dict[int, np.ndarray] = field(default_factory=dict)  #: step -> interpolant coefficients (7, n)
+    calls: int = 0  #: right-hand-side calls made for interpolants
+
+    def y_old(self, i: int) -> np.ndarray:
+        return self.y0 if i == 0 else self.blocks[i - 1][_Y_NEW]
+
+    def f_old(self, i: int) -> np.ndarray:
+        return self.f0 if i == 0 else self.blocks[i - 1][_F_NEW]
+
+    def build(self, steps: np.ndarray, derivatives: Callable | None = None) -> None:
+        """Interpolant coefficients of the given steps (DOP853's stages 14–16, in one batch).
+
+        ``derivatives(ts, Y) -> F``: the right-hand side at all the steps' stage states at once, in place
+        of one call per state (output sampling; :func:`~contactdyn.compiled.samples.plan_derivatives` gives the
+        calls' values bitwise)."""
+        steps = [int(i) for i in steps if int(i) not in self.coef]
+        if not steps:
+            return
+        m = len(steps)
+        t_old = np.array([self.t[i] for i in steps])
+        h = np.array([self.t[i + 1] for i in steps]) - t_old
+        Y0 = np.array([self.y_old(i) for i in steps])
+        B = np.array([self.blocks[i] for i in steps])
+        K = np.zeros((m, _coef.N_STAGES_EXTENDED, self.n))
+        K[:, 0] = [self.f_old(i) for i in steps]
+        K[:, 5:10] = B[:, _STAGES_6_10]
+        K[:, 10], K[:, 11], K[:, _N] = B[:, _S11], B[:, _S12], B[:, _F_NEW]
+        for s in range(_N + 1, _coef.N_STAGES_EXTENDED):
+            Ys = Y0 + h[:, None] * np.einsum("msn,s->mn", K[:, :s], _A[s, :s])
+            ts = t_old + _C[s] * h
+            if derivatives is not None:
+                K[:, s] = derivatives(ts, Ys)
+            else:
+                for k in range(m):
+                    K[k, s] = self.fun(float(ts[k]), Ys[k])
+            self.calls += m
+        dy = B[:, _Y_NEW] - Y0
+        F = np.empty((m, _coef.INTERPOLATOR_POWER, self.n))
+        F[:, 0] = dy
+        F[:, 1] = h[:, None] * K[:, 0] - dy
+        F[:, 2] = 2.0 * dy - h[:, None] * (K[:, _N] + K[:, 0])
+        F[:, 3:] = h[:, None, None] * np.einsum("ds,msn->mdn", _D, K)
+        for k, i in enumerate(steps):
+            self.coef[i] = F[k]
+
+    def at(self, i: int, t: float) -> np.ndarray:
+        """The state at t [s] on step i's own interpolant (built if needed), as solve_ivp's step dense output."""
+        if i not in self.coef:
+            self.build(np.array([i]))
+        t_old = self.t[i]
+        return _horner(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old)) + self.y_old(i)
+
+
+def _horner(F: np.ndarray, s) -> np.ndarray:
+    """y − y_old of interpolants F (..., rows, n) at step fractions s (Horner, as scipy's Dop853DenseOutput)."""
+    y = np.zeros(F.shape[:-2] + F.shape[-1:])
+    for k, row in enumerate(range(F.shape[-2] - 1, -1, -1)):
+        y += F[..., row, :]
+        y *= s if k % 2 == 0 else 1.0 - s
+    return y
+
+
+class DenseSolution:
+    """y(t) on [t0, t_end] from the steps' 7th-order interpolants (like ``OdeSolution``)."""
+
+    def __init__(self, steps: _Steps, t_end: float):
+        self.steps = steps
+        self.t_min, self.t_max = steps.t[0], t_end
+        self.ends = np.array(steps.t[1:])
+        self.calls_counted = steps.calls  #: interpolant calls already in the Solution's nfev
+
+    @property
+    def late_calls(self) -> int:
+        """Right-hand-side calls made for interpolants after the run returned (output sampling)."""
+        return self.steps.calls - self.calls_counted
+
+    def __call__(self, t, derivatives: Callable | None = None) -> np.ndarray:
+        """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t))).
+
+        ``derivatives``: see :meth:`_Steps.build` (the interpolants this call builds; for output samples
+        only: the run's own event location and segment ends use the calls)."""
+        st = self.steps
+        tt = np.atleast_1d(np.asarray(t, float))
+        if not len(self.ends):
+            out = np.repeat(st.y0[:, None], len(tt), axis=1)
+            return out[:, 0] if np.ndim(t) == 0 else out
+        idx = np.minimum(np.searchsorted(self.ends, tt, side="left"), len(self.ends) - 1)
+        steps, at = np.unique(idx, return_inverse=True)  # per step, then per sample
+        st.build(steps, derivatives)
+        ends = np.array(st.t)
+        s = ((tt - ends[idx]) / (ends[idx + 1] - ends[idx]))[:, None]
+        y = _horner(np.array([st.coef[int(i)] for i in steps])[at], s)
+        y += np.array([st.y_old(int(i)) for i in steps])[at]
+        return y[0] if np.ndim(t) == 0 else y.T
+
+
+@dataclass
+class Solution:
+    """What ``solve_ivp`` returns, as far as the hybrid loop reads it."""
+
+    t: np.ndarray
+    y: np.ndarray
+    sol: DenseSolution
+    t_events: list[np.ndarray]
+    status: int  #: 0 end reached, 1 a terminal event, −1 failure
+    message: str
+    nfev: int
+    naccept: int
+    nreject: int
+
+    @property
+    def success(self) -> bool:
+        return self.status >= 0
+
+
+def _active(g_old: float, g_new: float, direction: float) -> bool:
+    """Did g cross zero between two step ends in the event's direction (``solve_ivp``'s test)?"""
+    up = g_old <= 0.0 <= g_new
+    down = g_old >= 0.0 >= g_new
+    return (up and direction > 0) or (down and direction < 0) or ((up or down) and direction == 0)
+
+
+class _EventWatch:
+    """The events' values at the step ends, and their roots (``solve_ivp``'s rules)."""
+
+    def __init__(self, events: Sequence[Callable], t0: float, y0: np.ndarray):
+        self.events = list(events)
+        self.g = [float(e(t0, y0)) for e in self.events]
+        self.direction = [float(getattr(e, "direction", 0.0)) for e in self.events]
+        self.terminal = [bool(getattr(e, "terminal", False)) for e in self.events]
+        self.falling = all(d < 0 for d in self.direction)  #: _active reduces to g_old ≥ 0 ≥ g_new
+        self.hits: list[tuple[float, int]] = []  #: (root [s], event), in time order
+
+    def stop(self, steps: _Steps, t: float, x: np.ndarray) -> bool:
+        """At the step end (t, x): record the roots in the step; True at a terminal one (hits ends with it)."""
+        g_old, g_new = self.g, [float(e(t, x)) for e in self.events]
+        self.g = g_new
+        if self.falling:  # all events fall through zero (the hybrid loop's): one test per event
+            fired = [i for i, (a, b) in enumerate(zip(g_old, g_new, strict=True)) if a >= 0.0 >= b]
+        else:
+            fired = [i for i, (a, b, d) in enumerate(zip(g_old, g_new, self.direction, strict=True))
+                     if _active(a, b, d)]
+        if not fired:
+            return False
+        step, t_old = len(steps.t) - 2, steps.t[-2]
+        for i in fired:  # as solve_ivp: brentq on the step's own interpolant (a step shorter than t's
+            # resolution, LSODA's where its steps collapse: at its end)
+            root = t if t == t_old else brentq(lambda s, e=self.events[i]: e(s, steps.at(step, s)), t_old, t,
+                                               xtol=4 * _EPS, rtol=4 * _EPS)
+            self.hits.append((root, i))
+        self.hits.sort()
+        first = next((k for k, (_, i) in enumerate(self.hits) if self.terminal[i]), None)
+        if first is None:
+            return False
+        del self.hits[first + 1:]
+        return True
+
+    def t_events(self) -> list[np.ndarray]:
+        return [np.array([r for r, k in self.hits if k == i]) for i in range(len(self.events))]
+
+
+class _Core:
+    """Runs of scipy's compiled DOP853 from the last accepted step: its workspace and its two callbacks.
+
+    A run ends at t_end, at a terminal event, or at the first rejected step: with the core's
+    rejection factor at ``_END_AT_REJECTION`` its next step is below its own minimum and it returns
+    (ierr −3) with the rejected attempt's stages still in the workspace, from which
+    :meth:`error_norm` reads solve_ivp's error norm; the driver (:func:`solve`) then restarts it
+    with solve_ivp's smaller step. (At t = 0 the core's minimum is 0 and it tries once more: the
+    new attempt's first call tells, and the run is ended from ``f``.)
+    """
+
+    def __init__(self, fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, events: _EventWatch,
+                 rtol: float, atol: float, max_step: float):
+        n = len(y0)
+        self.fun, self.n, self.watch = fun, n, events
+        self.rtol, self.atol = rtol, atol
+        self.work = np.zeros(11 * n + 21)  # Hairer's layout: 20 parameters, then k1…k10, y1
+        self.block = self.work[_WORK0:_WORK0 + 10 * n].reshape(10, n)  #: view of k1…k10
+        self.iwork = np.zeros(21, dtype=np.int32)
+        self.work[1], self.work[2], self.work[3] = SAFETY, _END_AT_REJECTION, MAX_FACTOR
+        self.work[4] = -1.0  # no Lund stabilisation (beta = 0), as solve_ivp
+        self.work[5] = max_step if np.isfinite(max_step) else 0.0
+        self.steps = _Steps(fun, n, [t0], y0.copy(), f0)
+        self.last_t, self.last_x, self.calls = None, None, 0  # the latest call: at a step end, the FSAL one
+        self.failure: list[BaseException] = []
+        self.nan = np.full(n, np.nan)
+        self.rejected: tuple[float, float] | None = None  #: (step [s], error norm) that ended the run
+        self.grew = False  #: the run was ended because the step after a retried one grew (solve_ivp forbids it)
+        self.ending = False  #: failure, rejected or grew: the run is being ended
+
+    def run(self, t_end: float, h: float, limit: float | None) -> int:
+        """One run of the core from the last accepted step with first step h [s] (the core's ierr).
+
+        ``limit`` [s]: after a rejection, the step following the first accepted one may not exceed it.
+        """
+        steps = self.steps
+        self.limit, self.check_next, self.rejected, self.grew, self.ending = limit, False, None, False, False
+        self.fresh, self.started, self.since = True, False, 0
+        self.work[6] = h
+        self.iwork[:] = 0
+        self.iwork[3] = -1  # no stiffness detection
+        t = steps.t[-1]
+        # the extra-arguments tuple () given explicitly: scipy 1.17's wrapper leaves its optional
+        # fcn_extra_args uninitialized when omitted and may append a stale tuple's items to every call
+        _, _, ierr = _CORE(self.f, t, steps.y_old(len(steps.t) - 1), t_end, self.rtol, self.atol, self.solout,
+                           1, self.work, self.iwork, MAX_STEPS, -1, ())
+        if self.failure:
+            raise self.failure[0]
+        if ierr == -3 and self.since == _N - 1 and self.rejected is None and not self.grew:
+            h_step = self.last_t - steps.t[-1]  # the attempt's last stage is at its end
+            self.rejected = (h_step, self.error_norm(h_step))
+        return int(ierr)
+
+    def error_norm(self, h_step: float) -> float:
+        """solve_ivp's error norm of the attempt whose stages are in the workspace (the rejected one)."""
+        n, block = self.n, self.block
+        y_old = self.steps.y_old(len(self.steps.t) - 1)
+        scale = self.atol + self.rtol * np.maximum(np.abs(y_old), np.abs(block[_Y_NEW]))
+        e5, e3 = (_ERR_ROWS @ block) / scale
+        s5, s3 = float(e5 @ e5), float(e3 @ e3)
+        if s5 == 0.0 and s3 == 0.0:
+            return 0.0
+        return abs(h_step) * s5 / np.sqrt((s5 + 0.01 * s3) * n)
+
+    def f(self, t: float, x: np.ndarray) -> np.ndarray:
+        """The right-hand side as the core calls it."""
+        if self.ending:
+            return self.nan  # the run is being ended (the core stops after this attempt)
+        if self.fresh:  # the core's first call: f at the start, known (f0 or the last FSAL value)
+            self.fresh = False
+            return self.steps.f_old(len(self.steps.t) - 1)
+        since = self.since = self.since + 1
+        if since == 1 and self.check_next:  # the first stage of the step after a retried one
+            self.check_next, limit, self.limit = False, self.limit, None
+            if (t - self.steps.t[-1]) / _C[1] > limit * (1.0 + _LIMIT_SLACK):
+                self.grew = self.ending = True
+                return self.nan
+        elif since == _N and t != self.last_t:  # not the FSAL call: a new attempt (a rejection at t = 0)
+            h_step = self.last_t - self.steps.t[-1]
+            self.rejected, self.ending = (h_step, self.error_norm(h_step)), True
+            return self.nan
+        if since == _N:  # the step end's (FSAL) call, whose state the events read after the core moved on: a
+            x = x.copy()  # copy (the core passes views of its workspace, which its next stages overwrite)
+        self.last_t, self.last_x = t, x
+        self.calls += 1
+        try:
+            return self.fun(t, x)
+        except BaseException as exc:  # raised again after the core returns (it cannot carry it)
+            self.failure.append(exc)
+            self.ending = True
+            return self.nan
+
+    def solout(self, t: float, y: np.ndarray) -> int:
+        """After each accepted step: keep its stages, test the events; −1 stops the core."""
+        try:
+            return self._step_end(t)
+        except BaseException as exc:  # as in f
+            self.failure.append(exc)
+            self.ending = True
+            return -1
+
+    def _step_end(self, t: float) -> int:
+        steps = self.steps
+        if self.failure:
+            return -1
+        if not self.started:  # the call at the run's start
+            self.started = True
+            return 0
+        self.check_next = self.limit is not None  # the run's first accepted step (f clears the limit)
+        self.since = 0
+        steps.t.append(t)
+        steps.blocks.append(self.block.copy())
+        if not self.watch.events:
+            return 0
+        # the FSAL call's own array (the same values): the compiled plan has its results cached
+        x = self.last_x if self.last_t == t else steps.blocks[-1][_Y_NEW]
+        return -1 if self.watch.stop(steps, t, x) else 0  # (the located step's interpolant is built)
+
+
+def _first_step(fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, t_end: float, max_step: float,
+                rtol: float, atol: float, first_step: float | None) -> float:
+    """solve_ivp's first step [s]: the given one (within max_step), else scipy's own estimate (one call)."""
+    if first_step:
+        return min(float(first_step), max_step)
+    return float(select_initial_step(fun, t0, y0, t_end, max_step, f0, 1.0, _ERROR_ORDER, rtol, atol))
+
+
+def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, float], y0: np.ndarray, *,
+          rtol: float, atol: float, max_step: float = np.inf, first_step: float | None = None,
+          events: Sequence[Callable] | None = None, step: Callable | None = None) -> Solution:
+    """Integrate y' = fun(t, y) over t_span by compiled DOP853, locating the events (``solve_ivp``'s contract).
+
+    ``atol`` and ``rtol`` are scalars; ``max_step`` [s] (inf: none) and ``first_step`` [s] (None:
+    solve_ivp's estimate) as in ``solve_ivp``. Events are terminal if their ``terminal`` attribute is.
+    The steps are solve_ivp's: after a rejection the step shrinks by max(MIN_FACTOR, SAFETY err^(−1/8))
+    and the next step may not grow. ``step``: a compiled step attempt of ``fun``'s (compiled.plan_steps)
+    that takes the steps in place of scipy's core, with the same step control, where ``step.usable()``.
+    """
+    if _CORE is None:
+        raise SceneError("solver.method", "DOP853C: scipy's compiled DOP853 (scipy.integrate._dop.dopri853, "
+                         "as in scipy 1.17); or DOP853", f"scipy {scipy.__version__} without it")
+    t0, t_end = float(t_span[0]), float(t_span[1])
+    y0 = np.array(y0, float)
+    watch = _EventWatch(events or [], t0, y0)
+    f0 = np.asarray(fun(t0, y0), float)
+    calls = [1]
+
+    def counted(t, y):
+        calls[0] += 1
+        return fun(t, y)
+
+    h = _first_step(counted, t0, y0, f0, t_end, max_step, rtol, atol, first_step)
+    if step is not None and step.usable():
+        steps = _Steps(fun, len(y0), [t0], y0.copy(), f0)
+        ierr, nreject, calls[0] = _stepped(step, fun, steps, watch, t_end, h, rtol, atol, max_step, calls[0])
+        return _solution(steps, watch, ierr, t_end, calls[0], nreject)
+    core = _Core(fun, t0, y0, f0, watch, rtol, atol, max_step)
+    limit, nreject, ierr = None, 0, 1
+    while t_end > core.steps.t[-1]:
+        t = core.steps.t[-1]
+        if h < 10.0 * abs(np.nextafter(t, np.inf) - t):  # solve_ivp's smallest step
+            ierr = -3
+            break
+        ierr = core.run(t_end, h, limit)
+        if core.rejected:  # solve_ivp's rule: shrink by the error, and the step after may not grow
+            h_step, err = core.rejected
+            h = limit = abs(h_step) * max(MIN_FACTOR, SAFETY * err ** _EXPONENT)
+            nreject += 1
+        elif core.grew:
+            h, limit = limit, None
+        else:
+            break
+    return _solution(core.steps, watch, ierr, t_end, calls[0] + core.calls, nreject)
+
+
+def _stepped(step: Callable, fun: Callable, steps: _Steps, watch: _EventWatch, t_end: float, h_abs: float,
+             rtol: float, atol: float, max_step: float, calls: int) -> tuple[int, int, int]:
+    """solve_ivp's DOP853 steps (its RK step control; h_abs, max_step [s]) by ``step`` (a compiled attempt,
+    :mod:`contactdyn.compiled.plan_steps`; None where it cannot: then :func:`_attempt` by ``fun``): (the core's ierr,
+    rejections, calls)."""
+    nreject = 0
+    while steps.t[-1] < t_end:
+        t, y, f = steps.t[-1], steps.y_old(len(steps.t) - 1), steps.f_old(len(steps.t) - 1)
+        min_step = 10.0 * abs(math.nextafter(t, math.inf) - t)
+        h_abs = min(max(h_abs, min_step), max_step)
+        rejected = False
+        while True:
+            if h_abs < min_step:
+                return -3, nreject, calls
+            t_new = min(t + h_abs, t_end)
+            h = t_new - t
+            got = step(t, y, f, h, rtol, atol) or _attempt(fun, t, y, f, h, rtol, atol)
+            calls += _N
+            err, y_new, block = got
+            if err < 1.0:
+                factor = MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** _EXPONENT)
+                h_abs = abs(h) * (min(1.0, factor) if rejected else factor)
+                break
+            h_abs = abs(h) * max(MIN_FACTOR, SAFETY * err ** _EXPONENT)
+            rejected, nreject = True, nreject + 1
+        steps.t.append(t_new)
+        steps.blocks.append(block)
+        if watch.events and watch.stop(steps, t_new, y_new):
+            return 2, nreject, calls
+    return 1, nreject, calls
+
+
+def _attempt(fun: Callable, t: float, y: np.ndarray, f: np.ndarray, h: float, rtol: float, atol: float
+             ) -> tuple[float, np.ndarray, np.ndarray]:
+    """One DOP853 step attempt by ``fun`` as solve_ivp's (rk_step, _estimate_error_norm): (error norm, y_new,
+    the stages in the core's layout)."""
+    K = np.empty((_N + 1, len(y)))
+    K[0] = f
+    for s in range(1, _N):
+        K[s] = fun(t + _C[s] * h, y + (K[:s].T @ _A[s, :s]) * h)
+    y_new = y + h * (K[:_N].T @ _coef.B)
+    K[_N] = fun(t + h, y_new)
+    scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+    e5, e3 = ((K.T @ _coef.E5) / scale) ** 2, ((K.T @ _coef.E3) / scale) ** 2
+    s5, s3 = float(e5.sum()), float(e3.sum())
+    err = 0.0 if s5 == 0.0 and s3 == 0.0 else abs(h) * s5 / np.sqrt((s5 + 0.01 * s3) * len(y))
+    block = np.zeros((10, len(y)))
+    block[_F_NEW], block[_S11], block[_S12], block[_Y_NEW] = K[_N], K[10], K[11], y_new
+    block[_STAGES_6_10] = K[5:10]
+    return err, y_new, block
+
+
+def _solution(steps: _Steps, watch: _EventWatch, ierr: int, t_end: float, calls: int, nreject: int) -> Solution:
+    """The Solution of a finished integration (core's ierr: 1 end, 2 stopped by an event, < 0 failure)."""
+    t_stop = steps.t[-1]
+    if ierr == 1:
+        steps.t[-1] = t_stop = t_end  # the core's last step ends at t + (t_end − t), within rounding of t_end
+    status, message = 0, "The solver successfully reached the end of the integration interval."
+    if ierr == 2 and watch.hits and watch.terminal[watch.hits[-1][1]]:
+        status, message, t_stop = 1, "A termination event occurred.", watch.hits[-1][0]
+    elif ierr < 0:
+        status, message = -1, f"DOP853 (compiled): {_MESSAGES.get(ierr, f'error {ierr}')} at t = {t_stop:.9g} s"
+    dense = DenseSolution(steps, t_stop)
+    ts = np.array(steps.t)
+    ys = np.column_stack([steps.y0] + [b[_Y_NEW] for b in steps.blocks])
+    if status == 1:
+        ts[-1] = t_stop
+        ys[:, -1] = dense(t_stop)
+    return Solution(ts, ys, dense, watch.t_events(), status, message, calls + steps.calls, len(steps.t) - 1, nreject)

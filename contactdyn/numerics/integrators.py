@@ -1,0 +1,219 @@
+"""Integrators for the smooth phases: scipy's ``solve_ivp`` methods by name, ``auto``, ``RK4``, ``DOP853C``.
+
+``DOP853C`` (the default) is DOP853 stepped by scipy's compiled core (:mod:`contactdyn.numerics.dop853`):
+the same method, the same steps and events as ``solve_ivp``'s ``DOP853`` (which stays selectable),
+at a fraction of its per-step cost.
+
+``RK4`` is the classical fixed-step Runge–Kutta method (4 calls per step) with step
+``solver.max_step`` [s] (required), cubic Hermite dense output and scipy's event location:
+the like-for-like comparison with fixed-step simulators (MuJoCo's RK4, Drake's discrete
+plant). It has no error control: its error is whatever the step gives.
+
+``auto`` detects stiffness by what the explicit method does, as LSODA does, rather than by
+eigenvalues alone (a stiff mode that nothing excites, e.g. a relaxed massless surface end
+of rate k/b = 1e5 1/s, costs an explicit method nothing). A segment starts with DOP853
+(``AUTO_EXPLICIT``: the compiled one) and a budget of ``STEP_BUDGET`` steps. When the
+budget runs out, the eigenvalues λ of the finite-difference Jacobian ∂f/∂x (n + 1 calls of
+the compiled right-hand side) are compared with the step size h the method had reached: if
+some mode decays within the rest of the segment (−Re λ · T ≥ ``DECAY_SPAN``) and h|λ| lies
+in ``STABILITY_BAND`` — the step is held at the edge of DOP853's stability region, not set
+by accuracy — the rest of the segment runs with Radau IIA (order 5, L-stable) and the same
+finite-difference Jacobian; else DOP853 goes on without a budget. A fast mode that does
+not decay (an undamped stiff contact ringing) must be resolved by either method, and
+DOP853's steps are cheaper. Measured (docs/performance.md): near-rigid contact 1e8 N/m, 2
+s: DOP853 1.9 s, Radau 0.32 s; 1e-3 kg equivalent mass: 4.0 s against 0.75 s; on scenes
+without such modes ``auto`` is DOP853 and costs nothing more.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from scipy.integrate import DenseOutput, OdeSolver, solve_ivp
+
+from . import dop853, lsoda
+
+__all__ = ["METHODS", "IMPLICIT", "EXPLICIT", "FIXED", "AUTO_EXPLICIT", "stability_bound", "jacobian_eigenvalues",
+           "FiniteDifferenceJacobian", "RK4", "solver_class", "integrate"]
+
+#: ``auto``, explicit Runge–Kutta methods and the implicit ones for stiff scenes
+METHODS = ("auto", "DOP853", "DOP853C", "RK45", "RK23", "Radau", "BDF", "LSODA", "RK4")
+EXPLICIT = ("DOP853", "DOP853C", "RK45", "RK23", "RK4")
+COMPILED = ("DOP853C",)  #: run by contactdyn.numerics.dop853 rather than solve_ivp
+AUTO_EXPLICIT = "DOP853C"  #: ``auto``'s method until the step budget says a segment is stiff
+FIXED = ("RK4",)  #: fixed-step methods: the step is solver.max_step
+IMPLICIT = ("Radau", "BDF", "LSODA")
+
+STABILITY_RADIUS = 6.0  #: DOP853's stability region reaches about |hλ| ≈ 6 along the negative real axis [-]
+STEP_BUDGET = 1000  #: DOP853 steps in a segment before ``auto`` checks for stiffness
+RK4_RADIUS = 2.78  #: RK4 is stable for real hλ in [-2.78, 0] [-]
+RK4_RECHECK_GROWTH = 1e3  #: the step is checked again once the state has grown this much since the last check
+RK4_GROWTH = 1.001  #: a decaying mode amplified by more than this per step is an instability [-]
+STABILITY_BAND = (0.5, 8.0)  #: h|λ| in this band: the step is stability-bound (measured 1.4–1.6 on stiff scenes)
+DECAY_SPAN = 20.0  #: a mode "decays within the span" when −Re λ · T is at least this [-]
+
+
+class FiniteDifferenceJacobian:
+    """∂f/∂x by forward differences with fixed steps h_j = √ε · max(1, |x_j|): n calls of f.
+
+    Given to Radau/BDF instead of scipy's adaptive ``num_jac``, which keeps enlarging the
+    step of a column whose difference is zero (a state nothing depends on in this mode,
+    such as a relaxation state of a touching contact) until it overflows.
+    """
+
+    def __init__(self, fun: Callable[[float, np.ndarray], np.ndarray]):
+        self.fun = fun
+        self.calls = 0  #: calls of f made for Jacobians
+
+    def __call__(self, t: float, x: np.ndarray, f0: np.ndarray | None = None) -> np.ndarray:
+        if f0 is None:
+            f0 = np.asarray(self.fun(t, x), float)
+            self.calls += 1
+        n = len(x)
+        jac = np.empty((n, n))
+        for j in range(n):
+            h = _SQRT_EPS * max(1.0, abs(float(x[j])))
+            xp = x.copy()
+            xp[j] += h
+            jac[:, j] = (np.asarray(self.fun(t, xp), float) - f0) / h
+        self.calls += n
+        return jac
+
+
+_SQRT_EPS = math.sqrt(np.finfo(float).eps)
+
+
+def jacobian_eigenvalues(fun: Callable[[float, np.ndarray], np.ndarray], t: float, x: np.ndarray) -> np.ndarray:
+    """Eigenvalues [1/s] of the finite-difference Jacobian ∂f/∂x at (t, x) (empty if not finite)."""
+    jac = FiniteDifferenceJacobian(fun)(t, x)
+    if not np.all(np.isfinite(jac)):
+        return np.zeros(0)
+    return np.linalg.eigvals(jac)
+
+
+def stability_bound(fun: Callable[[float, np.ndarray], np.ndarray], t: float, x: np.ndarray, h: float,
+                    span: float) -> tuple[bool, float]:
+    """(is the explicit step h [s] stability-bound by a decaying mode, that mode's |λ| [1/s] or 0).
+
+    ``span`` [s]: what remains of the segment; a mode counts if −Re λ · span ≥ DECAY_SPAN and
+    h|λ| is in STABILITY_BAND.
+    """
+    lam = jacobian_eigenvalues(fun, t, x)
+    if not len(lam) or span <= 0.0 or h <= 0.0:
+        return False, 0.0
+    size = np.abs(lam)
+    stiff = (-lam.real * span >= DECAY_SPAN) & (h * size >= STABILITY_BAND[0]) & (h * size <= STABILITY_BAND[1])
+    return bool(np.any(stiff)), float(size[stiff].max()) if np.any(stiff) else 0.0
+
+
+class _HermiteOutput(DenseOutput):
+    """Cubic Hermite interpolant of one step from the end values and slopes."""
+
+    def __init__(self, t_old: float, t: float, y_old: np.ndarray, f_old: np.ndarray, y: np.ndarray, f: np.ndarray):
+        super().__init__(t_old, t)
+        self.h = t - t_old
+        self.y_old, self.f_old, self.y, self.f = y_old, f_old, y, f
+
+    def _call_impl(self, t):
+        s = (np.asarray(t) - self.t_old) / self.h
+        h00 = (1 + 2 * s) * (1 - s) ** 2
+        h10 = s * (1 - s) ** 2
+        h01 = s * s * (3 - 2 * s)
+        h11 = s * s * (s - 1)
+        if np.ndim(s) == 0:
+            return h00 * self.y_old + h10 * self.h * self.f_old + h01 * self.y + h11 * self.h * self.f
+        return (np.outer(self.y_old, h00) + np.outer(self.h * self.f_old, h10) + np.outer(self.y, h01)
+                + np.outer(self.h * self.f, h11))
+
+
+def rk4_amplification(z: np.ndarray) -> np.ndarray:
+    """|R(z)|: RK4's growth per step of a mode e^{λt} with z = hλ (R = 1 + z + z²/2 + z³/6 + z⁴/24)."""
+    return np.abs(1 + z * (1 + z / 2 * (1 + z / 3 * (1 + z / 4))))
+
+
+def fixed_step_instability(fun: Callable[[float, np.ndarray], np.ndarray], t: float, x: np.ndarray,
+                           h: float) -> str | None:
+    """Why RK4's step h [s] cannot work from (t, x), or None: a mode that does not grow (Re λ ≤ 0)
+    but that the step amplifies by more than RK4_GROWTH per step. Names its period 2π/|λ| [s]."""
+    lam = jacobian_eigenvalues(fun, t, x)
+    bad = lam[(lam.real <= 0.0) & (rk4_amplification(h * lam) > RK4_GROWTH)] if len(lam) else lam
+    if not len(bad):
+        return None
+    fast = bad[np.argmax(np.abs(bad))]
+    size = float(abs(fast))
+    return (f"the step {h:.3g} s is too large for the stiffest mode (|λ| = {size:.3g} 1/s, period "
+            f"{2 * math.pi / size:.3g} s): RK4 amplifies it {float(rk4_amplification(h * fast)):.3g}× per step "
+            f"where it decays; take solver.max_step below {RK4_RADIUS / size:.2g} s or an adaptive method")
+
+
+class RK4(OdeSolver):
+    """Classical 4th-order Runge–Kutta with a fixed step ``max_step`` [s] (the last step is cut to t_bound).
+
+    Before its first step it checks the step against the system's modes at the start
+    (:func:`fixed_step_instability`) and stops with that reason rather than run a blow-up;
+    it checks again whenever the state has grown RK4_RECHECK_GROWTH-fold since the last
+    check, and a step that leaves the finite numbers stops it too.
+    """
+
+    def __init__(self, fun, t0, y0, t_bound, max_step=np.inf, vectorized=False, rtol=None, atol=None,
+                 first_step=None, **extraneous):
+        super().__init__(fun, t0, y0, t_bound, vectorized)
+        if not np.isfinite(max_step) or max_step <= 0.0:
+            raise ValueError("RK4 takes fixed steps of solver.max_step: give solver.max_step [s]")
+        self.h = float(max_step)
+        self.t0 = t0
+        self.k = 0  #: steps taken (t_k = t0 + k h, no accumulated rounding)
+        self.f = self.fun(self.t, self.y)
+        self.y_old = self.f_old = None
+        self.unstable = fixed_step_instability(self.fun, t0, np.asarray(y0, float), self.h)
+        self.checked_size = float(np.max(np.abs(y0), initial=0.0)) + 1.0  #: state size at the last check
+
+    def _step_impl(self):
+        t, y, f, h = self.t, self.y, self.f, self.h
+        if self.unstable:
+            return False, self.unstable
+        t_new = self.t0 + (self.k + 1) * h
+        if self.direction * (t_new - self.t_bound) > 0 or abs(t_new - self.t_bound) < 1e-12 * h:
+            t_new = self.t_bound
+        h = t_new - t
+        k2 = self.fun(t + 0.5 * h, y + 0.5 * h * f)
+        k3 = self.fun(t + 0.5 * h, y + 0.5 * h * k2)
+        k4 = self.fun(t + h, y + h * k3)
+        y_new = y + (h / 6.0) * (f + 2.0 * k2 + 2.0 * k3 + k4)
+        if not np.all(np.isfinite(y_new)):
+            return False, (f"the state left the finite numbers in the step from t = {t:.6g} s "
+                           f"(step {h:.3g} s): too large a step, or a scene that blows up")
+        size = float(np.max(np.abs(y_new), initial=0.0))
+        if size > RK4_RECHECK_GROWTH * self.checked_size:  # grown a lot: the step may have left the region
+            self.checked_size = size
+            self.unstable = fixed_step_instability(self.fun, t_new, y_new, h)
+            if self.unstable:
+                return False, f"at t = {t_new:.6g} s {self.unstable}"
+        self.y_old, self.f_old = y, f
+        self.t, self.y = t_new, y_new
+        self.f = self.fun(t_new, y_new)
+        self.k += 1
+        return True, None
+
+    def _dense_output_impl(self):
+        return _HermiteOutput(self.t_old, self.t, self.y_old, self.f_old, self.y, self.f)
+
+
+def solver_class(method: str):
+    """What ``solve_ivp`` takes as ``method`` for a method name."""
+    return RK4 if method == "RK4" else method
+
+
+def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, rtol: float, atol: float,
+              max_step: float = np.inf, events=None, first_step: float | None = None, jac=None):
+    """One smooth segment by the named method, with dense output and events (``solve_ivp``'s result fields)."""
+    if method in COMPILED:  # a plan's right-hand side may bring its compiled step (contactdyn.compiled.plan_steps)
+        return dop853.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
+                            first_step=first_step, step=getattr(fun, "step", None))
+    if method == "LSODA" and jac is None and lsoda.available():  # solve_ivp's steps without its per-step Python
+        return lsoda.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
+                           first_step=first_step)
+    return solve_ivp(fun, t_span, y0, method=solver_class(method), rtol=rtol, atol=atol, max_step=max_step,
+                     events=events or None, dense_output=True, first_step=first_step, **({"jac": jac} if jac else {}))

@@ -1,0 +1,210 @@
+"""Small dense solves without numpy's Python wrappers.
+
+``numpy.linalg.solve`` checks its arguments in Python before calling its gufunc; on the 2–12-row
+systems of a right-hand side call that check costs more than the solve (~3 µs of ~1 µs). The gufunc
+itself is used here where numpy has it (private but stable since numpy 1.8), the public function
+otherwise. Arguments must be float arrays of matching shapes; a singular matrix gives inf/nan, where
+the fallback raises LinAlgError; callers test.
+
+:func:`lu_solve`, :func:`cholesky`, :func:`forward_solve`, :func:`pinv`, the products :func:`mv`, :func:`mtv`,
+:func:`mm`, :func:`mtm` and :func:`sparse_dot` are compiled (numba) for the compiled kernels
+(compiled.plan_kernel, compiled.plan_operational, laws.controllers.computed_torque,
+:mod:`contactdyn.laws.controllers.operational_law`), written in loops: numba's LAPACK bindings cost
+~0.15 s to load per process, and a BLAS call ~0.1 µs, more than a loop over these 3–12-row arrays.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["solve_vector", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
+           "forward_solve", "sparse_dot", "contiguous"]
+
+try:
+    from numpy.linalg import _umath_linalg
+
+    solve_vector = _umath_linalg.solve1  #: A z = b for a vector b
+except (ImportError, AttributeError):  # pragma: no cover
+    solve_vector = np.linalg.solve
+
+
+def contiguous(a) -> np.ndarray:
+    """``a`` as the compiled functions take it: a C-contiguous float64 array (no copy when it is one)."""
+    return np.ascontiguousarray(a, dtype=float)
+
+
+@njit(cache=True)
+def lu_solve(A, b):
+    """z of A z = b by Gaussian elimination with partial pivoting (LAPACK's dgetf2 order); A, b unchanged;
+    a zero pivot (singular A) gives nan."""
+    n = b.size
+    LU = A.copy()
+    z = b.copy()
+    for k in range(n):
+        p = k
+        for i in range(k + 1, n):
+            if abs(LU[i, k]) > abs(LU[p, k]):
+                p = i
+        if LU[p, k] == 0.0:
+            return np.full(n, np.nan)
+        if p != k:
+            for j in range(n):
+                LU[k, j], LU[p, j] = LU[p, j], LU[k, j]
+            z[k], z[p] = z[p], z[k]
+        for i in range(k + 1, n):
+            if LU[i, k] == 0.0:  # (a KKT matrix is mostly zeros: nothing to eliminate)
+                continue
+            f = LU[i, k] / LU[k, k]
+            for j in range(k + 1, n):
+                LU[i, j] -= f * LU[k, j]
+            z[i] -= f * z[k]
+    for k in range(n - 1, -1, -1):
+        s = z[k]
+        for j in range(k + 1, n):
+            s -= LU[k, j] * z[j]
+        z[k] = s / LU[k, k]
+    return z
+
+
+@njit(cache=True)
+def cholesky(A):
+    """The lower-triangular L of A = L Lᵀ (A symmetric positive definite; nan where a pivot is not positive)."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return np.full((n, n), np.nan)
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    return L
+
+
+@njit(cache=True)
+def forward_solve(L, B):
+    """Y of L Y = B (L lower triangular, B a matrix) by forward substitution."""
+    n, k = B.shape
+    Y = np.empty((n, k))
+    for c in range(k):
+        for i in range(n):
+            s = B[i, c]
+            for j in range(i):
+                s -= L[i, j] * Y[j, c]
+            Y[i, c] = s / L[i, i]
+    return Y
+
+
+@njit(cache=True)
+def sparse_dot(start, columns, values, x):
+    """P x of P by rows (CSR: row i's entries ``values[start[i]:start[i + 1]]`` in ``columns``; scipy.sparse's
+    indptr, indices, data), for the plan's maps P (~1 % nonzeros)."""
+    n = start.size - 1
+    out = np.zeros(n)
+    for i in range(n):
+        acc = 0.0
+        for k in range(start[i], start[i + 1]):
+            acc += values[k] * x[columns[k]]
+        out[i] = acc
+    return out
+
+
+@njit(cache=True)
+def pinv(J):
+    """J⁺ (c, r) of J (r, c) by a one-sided Jacobi SVD of its shorter side (:func:`_jacobi_pinv`; (Jᵀ)⁺ = (J⁺)ᵀ:
+    a 3×2 Jacobian rotates one pair of columns per sweep rather than three)."""
+    if J.shape[1] < J.shape[0]:
+        return np.ascontiguousarray(_jacobi_pinv(np.ascontiguousarray(J.T)).T)
+    return _jacobi_pinv(J)
+
+
+@njit(cache=True)
+def _jacobi_pinv(J):
+    """J⁺ (c, r) of J (r, c), r ≤ c, by a one-sided Jacobi SVD of Jᵀ (its columns made orthogonal by
+    plane rotations: Jᵀ V = [σ_k u_k], J⁺ = Σ_k u_k v_kᵀ / σ_k), singular values ≤ 1e-10 of the largest
+    dropped (numpy.linalg.pinv's rcond); accurate to the precision of J, also near singular poses."""
+    r, c = J.shape
+    A = np.ascontiguousarray(J.T)  # (c, r): its columns are rotated
+    V = np.eye(r)
+    floor = 1e-32 * (J * J).sum()  # a column this small (‖a‖ ≤ 1e-16 ‖J‖) is a dropped singular value: left
+    for _ in range(60):  # sweeps; converges quadratically (a few sweeps for r = 3)
+        rotated = False
+        for p in range(r - 1):
+            for q in range(p + 1, r):
+                alpha = beta = gamma = 0.0
+                for i in range(c):
+                    alpha += A[i, p] * A[i, p]
+                    beta += A[i, q] * A[i, q]
+                    gamma += A[i, p] * A[i, q]
+                if min(alpha, beta) <= floor or abs(gamma) <= 1e-15 * math.sqrt(alpha * beta):
+                    continue
+                rotated = True
+                zeta = (beta - alpha) / (2.0 * gamma)
+                t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
+                cs = 1.0 / math.sqrt(1.0 + t * t)
+                sn = cs * t
+                for i in range(c):
+                    ap, aq = A[i, p], A[i, q]
+                    A[i, p], A[i, q] = cs * ap - sn * aq, sn * ap + cs * aq
+                for i in range(r):
+                    vp, vq = V[i, p], V[i, q]
+                    V[i, p], V[i, q] = cs * vp - sn * vq, sn * vp + cs * vq
+        if not rotated:
+            break
+    sigma2 = np.zeros(r)
+    for k in range(r):
+        for i in range(c):
+            sigma2[k] += A[i, k] * A[i, k]
+    top = math.sqrt(sigma2.max()) if r else 0.0
+    out = np.zeros((c, r))
+    for k in range(r):
+        if top > 0.0 and math.sqrt(sigma2[k]) > 1e-10 * top:
+            for i in range(c):
+                for j in range(r):
+                    out[i, j] += A[i, k] * V[j, k] / sigma2[k]
+    return out
+
+
+@njit(cache=True)
+def mv(A, x):
+    """A x."""
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        acc = 0.0
+        for j in range(A.shape[1]):
+            acc += A[i, j] * x[j]
+        out[i] = acc
+    return out
+
+
+@njit(cache=True)
+def mtv(A, x):
+    """Aᵀ x (:func:`mv` on the transposed view: the same sums)."""
+    return mv(A.T, x)
+
+
+@njit(cache=True)
+def mm(A, B):
+    """A B."""
+    out = np.zeros((A.shape[0], B.shape[1]))
+    for i in range(A.shape[0]):
+        for j in range(B.shape[1]):
+            acc = 0.0
+            for k in range(A.shape[1]):
+                acc += A[i, k] * B[k, j]
+            out[i, j] = acc
+    return out
+
+
+@njit(cache=True)
+def mtm(A, B):
+    """Aᵀ B (:func:`mm` on the transposed view: the same sums)."""
+    return mm(A.T, B)

@@ -1,0 +1,179 @@
+"""A run's output: the integrated segments sampled on the output grid, as named channels.
+
+The hybrid loop (:mod:`contactdyn.hybrid.loop`) leaves a list of :class:`Segment` s, each a
+smooth phase with its dense output. The output grid has ``solver.output_rate`` [Hz]
+samples over the duration; at an event time the sample belongs to the segment after the
+event (at the run's end too: an event there leaves a zero-length segment holding its modes).
+A compiled segment gives its samples' diagnostics all at once
+(:meth:`~contactdyn.compiled.rhsplan.ModePlan.samples`); another evaluates each sample fully.
+Channel names and units are documented in the README (``q`` [rad or m], ``contact.<c>.F_n``
+[N], ``stage.<label>.x`` [m]…).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import partial
+from itertools import groupby
+from typing import Any
+
+import numpy as np
+
+from ..compiled.rhsplan import ModePlan
+from ..compiled.samples import Samples, evaluated_samples, plan_derivatives
+from ..laws.drives import drive_channels
+from ..model.contact import ContactMode
+from ..model.limits import limit_channels
+from ..model.phases import Phase
+from ..model.system import System
+from ..numerics.dop853 import DenseSolution
+
+__all__ = ["Segment", "Held", "output_grid", "sample_segments", "sample_states", "channels"]
+
+
+@dataclass
+class Segment:
+    """One smooth phase of a run: [t0, t1] [s], its modes and task phase, dense output, compiled plan."""
+
+    t0: float
+    t1: float
+    modes: list[ContactMode]
+    phase: Phase
+    sol: Any
+    plan: ModePlan
+
+
+class Held:
+    """The dense output of a zero-length segment: the state x held (the modes an event at the run's end set)."""
+
+    def __init__(self, x: np.ndarray):
+        self.x = np.asarray(x, float).copy()
+
+    def __call__(self, t):
+        return self.x.copy() if np.ndim(t) == 0 else np.repeat(self.x[:, None], len(t), axis=1)
+
+
+def output_grid(duration: float, rate: float) -> np.ndarray:
+    """Output times [s]: ``rate`` [Hz] samples over [0, duration], at least the two ends."""
+    n_out = int(round(duration * rate))
+    return np.linspace(0.0, duration, n_out + 1) if n_out > 0 else np.array([0.0, duration])
+
+
+def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, stats: dict[str, Any]
+                    ) -> dict[str, np.ndarray]:
+    """The channels of a run at the times ``grid`` (adds the plans' singular solves to ``stats``)."""
+    return sample_states(system, segments, grid, stats)[0]
+
+
+def sample_states(system: System, segments: list[Segment], grid: np.ndarray, stats: dict[str, Any]
+                  ) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The channels of a run at the times ``grid`` and its states there, (len(grid), n)."""
+    # the segment of each sample: the last starting at or before it (at an event time, the one after)
+    t0 = np.array([seg.t0 for seg in segments])
+    idx = np.maximum(np.searchsorted(t0, grid, side="right") - 1, 0)
+    xs = np.empty((len(grid), system.n))
+    parts: list[Samples] = []
+    modes_of: list[list[ContactMode]] = []
+    phases_of: list[Phase] = []
+    counted: list[ModePlan] = []
+    for run in _same_mode_runs(segments, np.unique(idx)):  # segments split at corners: one batch
+        seg = segments[run[0]]
+        sel = np.flatnonzero(np.isin(idx, run))
+        ts = grid[sel]
+        derivatives = None
+        if seg.plan.ok:  # the interpolants' extra stages all at once
+            seg.plan.use(seg.modes)
+            derivatives = plan_derivatives(seg.plan)
+        for i in run:
+            at = sel[idx[sel] == i]
+            sol = segments[i].sol
+            if derivatives is not None and isinstance(sol, DenseSolution):
+                sol = partial(sol, derivatives=derivatives)
+            xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
+        X = xs[sel]
+        if seg.plan.ok and seg.plan not in counted:  # a plan serves several segments (every turn): count it once
+            counted.append(seg.plan)
+            stats["singular_solves"] += seg.plan.singular
+        if seg.plan.ok:
+            parts.append(seg.plan.samples(ts, X, seg.modes))  # a plan serves every turn: this segment's r
+        else:
+            parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase))
+        modes_of += [seg.modes] * len(sel)
+        phases_of += [seg.phase] * len(sel)
+    samples = Samples.concatenate(parts, system)
+    out = channels(system, grid, xs, samples, modes_of)
+    if system.limits.limits:
+        out.update(limit_channels(system, phases_of, samples))
+    out.update(drive_channels(system, xs, samples))
+    return out, xs
+
+
+def _same_mode_runs(segments: list[Segment], used: np.ndarray) -> list[list[int]]:
+    """The used segments' indices in runs of consecutive segments on the same modes, phase and plan."""
+    runs: list[list[int]] = []
+    for i in used:
+        seg = segments[i]
+        if runs and runs[-1][-1] == i - 1 and _same_mode(segments[i - 1], seg):
+            runs[-1].append(int(i))
+        else:
+            runs.append([int(i)])
+    return runs
+
+
+def _same_mode(a: Segment, b: Segment) -> bool:
+    return a.plan is b.plan and a.phase is b.phase and a.modes == b.modes
+
+
+def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
+             modes_of: list[list[ContactMode]]) -> dict[str, np.ndarray]:
+    """The Result's named channels at the output times t [s] (names documented in the README)."""
+    nQ, nv = system.nQ, system.nv
+    ch: dict[str, np.ndarray] = {"t": t, "q": xs[:, :nv], "v": xs[:, nQ:nQ + nv], "tau": smp.tau, "tip": smp.tip}
+    if smp.has_x_d:
+        ch["tip_ref"] = smp.x_d
+    for k, name in enumerate(system.body_names):
+        idx = system.body_index[name]
+        ch[f"body.{name}.x"] = xs[:, idx]
+        ch[f"body.{name}.v"] = xs[:, nQ + idx]
+        ch[f"body.{name}.force"] = smp.body_force[:, k]
+    for i, c in enumerate(system.contacts):
+        p = f"contact.{c.name}"
+        ch[f"{p}.F_n"] = smp.F_n[c.name]
+        ch[f"{p}.gap"] = smp.gap[c.name]
+        ch[f"{p}.touching"] = _per_sample(modes_of, lambda m, i=i: m[i].touching)
+        ch[f"{p}.F_d"] = smp.F_d[c.name]
+        if c.friction is not None and len(c.tangents):
+            ch[f"{p}.F_f"] = smp.F_f[c.name]
+            ch[f"{p}.v_slip"] = smp.v_slip[c.name]
+            ch[f"{p}.stuck"] = _per_sample(modes_of, lambda m, i=i: m[i].stuck)
+        for dc in c.tangent_chains:
+            ch[f"{p}.{dc.label}.F"] = smp.iface[f"{c.name}.{dc.label}"]
+        for k in range(len(c.tangents)):
+            key = f"{c.name}.t{k + 1}"
+            if smp.has_F_d.get(key):
+                ch[f"{p}.t{k + 1}.F_d"] = smp.F_d[key]
+    for label in system.stage_labels:
+        ch[f"stage.{label}.x"], ch[f"stage.{label}.xdot"], ch[f"stage.{label}.F"] = smp.stages[label].T
+    k = 0
+    for c in system.contacts:
+        for dc in c.chains:
+            for node in dc.chain.nodes:
+                if node.coord >= 0:
+                    label = system.mass_labels[k]
+                    ch[f"mass.{label}.x"] = xs[:, node.coord]
+                    ch[f"mass.{label}.v"] = xs[:, nQ + node.coord]
+                    k += 1
+    if system.energy_slot >= 0:
+        ch["energy.work"] = xs[:, 2 * nQ + system.energy_slot]
+        ch["energy.dissipated"] = xs[:, 2 * nQ + system.energy_slot + 1]
+    return ch
+
+
+def _per_sample(modes_of: list[list[ContactMode]], value) -> np.ndarray:
+    """float(value(modes)) per sample, evaluated once per run of samples sharing one modes list."""
+    values, counts = [], []
+    for _, run in groupby(modes_of, key=id):
+        same = list(run)
+        values.append(float(value(same[0])))
+        counts.append(len(same))
+    return np.repeat(np.array(values), counts)

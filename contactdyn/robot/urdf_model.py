@@ -1,0 +1,207 @@
+"""From a URDF file to a checked Pinocchio model of all its joints.
+
+The steps, in order: find the file (:mod:`contactdyn.robot.urdf_source`), parse its XML, check the
+links' inertia data (:mod:`contactdyn.robot.inertia`), resolve every visual mesh to an absolute
+file, turn ``continuous`` joints into unbounded revolute joints (one coordinate, the angle
+[rad], instead of Pinocchio's (cos θ, sin θ) pair), and let Pinocchio build the model from the
+rewritten XML. A joint whose limits say lower = upper (double_pendulum's 0, 0) is taken as
+unbounded too: no limits given. The XML tree is checked before Pinocchio sees the file, and
+every Pinocchio builder runs first in a forked probe (:mod:`contactdyn.robot.urdf_check`). Pinocchio
+accepts lower > upper limits silently: that is checked here too.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+from collections.abc import Callable
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import RobotError
+from .inertia import INERTIA_MODES, check_inertias
+from .urdf_check import check_urdf_tree, isolated_build
+from .urdf_source import resolve_robot_path, resolve_uri
+
+__all__ = ["UrdfModel", "build_isolated", "build_urdf_model", "lock_joints", "urdf_call", "xml_label"]
+
+_UNBOUNDED = 1e9  # [rad] placeholder limits of a continuous joint in the rewritten XML; set to ±inf after
+
+
+class UrdfModel(NamedTuple):
+    """A URDF as built: the file, the rewritten XML Pinocchio read, the model of all joints."""
+
+    path: Path
+    xml: str  #: continuous joints as revolute, meshes as absolute paths, inertias as checked/repaired
+    model: pin.Model
+    package_dirs: list[str]
+    notes: list[str]  #: inertia repairs or trusts, one line each
+    unbounded: list[str]  #: joints without position limits (±inf): continuous ones, and lower = upper in the file
+    visual_notes: list[str]  #: the visual meshes not found, dropped from the drawing (one line)
+
+
+def urdf_call(path: Path, build: Callable[[], object]) -> object:
+    """Run a Pinocchio URDF builder; on failure raise RobotError with urdfdom's reason.
+
+    Pinocchio's exception says only "does not contain a valid URDF model"; urdfdom writes
+    the reason to file descriptor 2, which is captured here for the duration of the call.
+    """
+    sys.stderr.flush()
+    with tempfile.TemporaryFile(mode="w+b") as err:
+        saved = os.dup(2)
+        os.dup2(err.fileno(), 2)
+        try:
+            return build()
+        except (ValueError, RuntimeError) as exc:
+            failure: Exception = exc
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        err.seek(0)
+        reason = err.read().decode(errors="replace")
+    lines = [ln.strip().removeprefix("Error:").strip() for ln in reason.splitlines() if ln.strip().startswith("Error")]
+    detail = "; ".join(lines) or str(failure)
+    raise RobotError(f"{path}: not a valid URDF: {detail}")
+
+
+def build_isolated(path: Path, label: str, build: Callable[[], object]) -> object:
+    """Run a Pinocchio builder on (a rewrite of) ``path``: first in a forked probe (a crash there is a
+    RobotError, see contactdyn.robot.urdf_check; once per ``label``, which names the XML's content), then here,
+    with urdfdom's reason on failure."""
+    isolated_build(path, label, build)
+    return urdf_call(path, build)
+
+
+def xml_label(builder: str, xml: str) -> str:
+    """A probe label naming the builder and the rewritten XML's content."""
+    return f"{builder} {hashlib.sha256(xml.encode()).hexdigest()[:16]}"
+
+
+def _resolve_meshes(root: ET.Element, path: Path, package_dirs: list[str]) -> list[str]:
+    """Every visual mesh resolves to a file (not loaded: that is slow); its filename becomes absolute.
+
+    A visual whose mesh is nowhere to be found is dropped, as ROS tools do: the link is drawn without
+    it, and the dynamics never read visuals. Returns one note naming them, or none."""
+    missing = []
+    for link in root.iter("link"):
+        for visual in link.findall("visual"):
+            mesh = visual.find("geometry/mesh")
+            if mesh is None:
+                continue
+            filename = mesh.get("filename", "")
+            file = resolve_uri(filename, path, package_dirs)
+            if file is None or not _usable_mesh(file):
+                link.remove(visual)
+                missing.append(f"link {link.get('name')!r} ({filename!r})")
+                continue
+            mesh.set("filename", str(file.resolve()))
+    if not missing:
+        return []
+    more = f" and {len(missing) - 2} more" if len(missing) > 2 else ""
+    return [f"{path.name}: {len(missing)} visual mesh(es) not found or unusable (searched the URDF's folders, "
+            f"example-robot-data and ROS_PACKAGE_PATH; a mesh is a regular .dae, .stl or .obj file): "
+            f"{', '.join(missing[:2])}{more}; the viewer draws those links without them"]
+
+
+MESH_SUFFIXES = (".dae", ".stl", ".obj")  #: the mesh files meshcat draws
+
+
+def _usable_mesh(file: Path) -> bool:
+    """A regular file with a mesh's suffix (not /etc/passwd, not /proc/self/mem, not a FIFO)."""
+    try:
+        return file.suffix.lower() in MESH_SUFFIXES and file.is_file() and not str(file.resolve()).startswith(
+            ("/proc/", "/sys/", "/dev/"))
+    except OSError:
+        return False
+
+
+def _unbind_continuous(root: ET.Element) -> list[str]:
+    """Rewrite continuous joints as revolute joints with placeholder limits; return their names."""
+    names = []
+    for joint in root.findall("joint"):
+        if joint.get("type") != "continuous":
+            continue
+        joint.set("type", "revolute")
+        limit = joint.find("limit")
+        if limit is None:
+            limit = ET.SubElement(joint, "limit", effort="0", velocity="0")
+        limit.set("lower", repr(-_UNBOUNDED))
+        limit.set("upper", repr(_UNBOUNDED))
+        names.append(joint.get("name", ""))
+    return names
+
+
+def _check_limits(model: pin.Model, path: Path) -> None:
+    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
+    for jid in range(1, model.njoints):
+        sl = slice(model.idx_qs[jid], model.idx_qs[jid] + model.nqs[jid])
+        if np.any(lower[sl] > upper[sl]):
+            raise RobotError(f"{path}: joint {model.names[jid]!r}: "
+                             f"lower limit {lower[sl].tolist()} > upper limit {upper[sl].tolist()}")
+
+
+def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfModel:
+    """Find, check and build a URDF (see the module docstring); ``inertia`` is one of INERTIA_MODES."""
+    if inertia not in INERTIA_MODES:
+        raise RobotError(f"robot.inertia must be one of {list(INERTIA_MODES)}, found {inertia!r}")
+    path, package_dirs = resolve_robot_path(source)
+    root = check_urdf_tree(path)  # one root, no cycle...: before Pinocchio reads anything (it crashes)
+    notes = check_inertias(root, path, inertia)
+    visual_notes = _resolve_meshes(root, path, package_dirs)
+    unbounded = _unbind_continuous(root)
+    xml = ET.tostring(root, encoding="unicode")
+    model: pin.Model = build_isolated(path, xml_label("buildModelFromXML", xml), lambda: pin.buildModelFromXML(xml))
+    lower, upper = model.lowerPositionLimit.copy(), model.upperPositionLimit.copy()
+    for jid in range(1, model.njoints):  # lower = upper (double_pendulum's 0, 0) means "no limits given"
+        i = model.idx_qs[jid]
+        if model.nqs[jid] == 1 and lower[i] == upper[i] and model.names[jid] not in unbounded:
+            unbounded.append(model.names[jid])
+    for name in unbounded:
+        i = model.idx_qs[model.getJointId(name)]
+        lower[i], upper[i] = -np.inf, np.inf
+    model.lowerPositionLimit, model.upperPositionLimit = lower, upper
+    _check_limits(model, path)
+    return UrdfModel(path, xml, model, package_dirs, notes, unbounded, visual_notes)
+
+
+def _origin(joint: ET.Element) -> pin.SE3:
+    el = joint.find("origin")
+    xyz = np.array([float(v) for v in (el.get("xyz", "0 0 0") if el is not None else "0 0 0").split()])
+    rpy = np.array([float(v) for v in (el.get("rpy", "0 0 0") if el is not None else "0 0 0").split()])
+    return pin.SE3(pin.rpy.rpyToMatrix(rpy), xyz)
+
+
+def lock_joints(urdf: UrdfModel, values: dict[str, float]) -> str:
+    """The URDF's XML with each named 1-DOF joint fixed at its value [rad or m].
+
+    A locked joint becomes a fixed joint whose origin includes the joint's motion, so Pinocchio
+    builds the reduced model directly (its ``buildReducedModel`` refuses robots where a link and
+    a joint share a name, as z1's ``gripperStator``).
+    """
+    root = ET.fromstring(urdf.xml)
+    for joint in root.findall("joint"):
+        name = joint.get("name", "")
+        if name not in values:
+            continue
+        axis_el = joint.find("axis")
+        axis = np.array([float(v) for v in (axis_el.get("xyz", "1 0 0") if axis_el is not None else "1 0 0").split()])
+        axis = axis / np.linalg.norm(axis)
+        value = values[name]
+        if joint.get("type") == "prismatic":
+            motion = pin.SE3(np.eye(3), axis * value)
+        else:  # revolute (continuous ones were made revolute)
+            motion = pin.SE3(pin.AngleAxis(value, axis).matrix(), np.zeros(3))
+        placement = _origin(joint) * motion
+        for tag in ("origin", "axis", "limit", "dynamics", "safety_controller", "calibration", "mimic"):
+            for el in joint.findall(tag):
+                joint.remove(el)
+        ET.SubElement(joint, "origin", xyz=" ".join(repr(float(v)) for v in placement.translation),
+                      rpy=" ".join(repr(float(v)) for v in pin.rpy.matrixToRpy(placement.rotation)))
+        joint.set("type", "fixed")
+    return ET.tostring(root, encoding="unicode")

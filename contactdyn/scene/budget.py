@@ -1,0 +1,80 @@
+"""What a run may cost, checked before it starts: samples, steps, duration, reference moves, memory.
+
+Every bound is a named constant, generous for real tasks (the paper's runs are seconds long
+at 1 kHz output) and small enough that a typo (``duration = 1e308``, ``max_step = 1e-300``,
+``output_rate = 1e7``) is a :class:`~contactdyn.errors.SceneError` naming the key, not a run
+that never ends or fills the memory.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..errors import SceneError
+
+__all__ = ["MAX_DURATION", "MAX_SAMPLES", "MAX_STEPS", "MAX_MOVES", "MAX_PHASES", "MAX_RUN_MEMORY", "STEPS_BASE",
+           "check_budget", "available_memory", "step_budget"]
+
+STEPS_BASE = 20_000  #: integration steps every run may take, besides solver.steps_per_second × duration
+
+MAX_DURATION = 1e4  #: [s] simulated at most
+MAX_SAMPLES = 10**7  #: output samples (duration × output_rate) at most
+MAX_STEPS = 10**7  #: integration steps implied by duration / max_step at most
+MAX_MOVES = 64  #: moves of one reference (each adds a kink and a term to every evaluation: cost ~ moves²)
+MAX_PHASES = 1000  #: phases of a scene (each builds its own controller and plans)
+#: [B] a run's peak memory per output sample (states, channels, their saved copy): 1325 B measured for B1 at
+#: 2e6 samples (output_rate = 1e7 over 0.2 s peaked at 2.65 GB), with a margin
+BYTES_PER_SAMPLE = 1536
+MAX_RUN_MEMORY = 2 * 2**30  #: [B] a run's samples may need at most this (and at most the free memory)
+
+
+def check_budget(scene) -> None:
+    """Raise SceneError when the scene would cost more than the bounds (or the free memory) allow."""
+    file = scene.file
+    if scene.duration > MAX_DURATION:
+        raise SceneError("duration", f"a number <= {MAX_DURATION:g} [s] (a run's length is bounded)",
+                         scene.duration, file)
+    solver = scene.solver
+    samples = scene.duration * solver.output_rate + 1
+    if samples > MAX_SAMPLES:
+        raise SceneError("solver.output_rate", f"at most {MAX_SAMPLES:.0e} samples over the run "
+                         f"(duration × output_rate; this is {samples:.3g})", solver.output_rate, file)
+    steps = scene.duration / solver.max_step
+    if steps > MAX_STEPS:
+        raise SceneError("solver.max_step", f"at most {MAX_STEPS:.0e} steps over the run (duration / max_step; "
+                         f"this is {steps:.3g}): a larger step or a shorter run", solver.max_step, file)
+    for i, phase in enumerate(scene.phases):
+        moves = len(phase.reference.moves) if phase.reference is not None else 0
+        if moves > MAX_MOVES:
+            raise SceneError(f"phase[{i}].reference.moves", f"at most {MAX_MOVES} moves", f"{moves} moves", file)
+    if len(scene.phases) > MAX_PHASES:
+        raise SceneError("phase", f"at most {MAX_PHASES} phases", f"{len(scene.phases)} phases", file)
+    need = samples * BYTES_PER_SAMPLE
+    free = min(available_memory(), MAX_RUN_MEMORY)
+    if need > free:
+        raise SceneError("solver.output_rate", f"a run that fits in memory: {samples:.3g} samples would need "
+                         f"about {need / 2**30:.2g} GiB, at most {free / 2**30:.2g} GiB are allowed (a run's bound "
+                         f"is {MAX_RUN_MEMORY / 2**30:g} GiB, or the free memory if less)", solver.output_rate, file)
+
+
+def available_memory() -> float:
+    """[B] memory this process may still use: MemAvailable, or the address-space limit if lower."""
+    import resource
+
+    free = math.inf
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    free = int(line.split()[1]) * 1024
+    except (OSError, ValueError):
+        pass
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft != resource.RLIM_INFINITY:
+        free = min(free, soft / 2)  # about half the address space is already libraries and the heap
+    return free
+
+
+def step_budget(solver, duration: float) -> int:
+    """The run's integration steps at most: STEPS_BASE + solver.steps_per_second × duration [s]."""
+    return int(STEPS_BASE + solver.steps_per_second * duration)

@@ -1,0 +1,522 @@
+"""Scenes: a TOML file validated into typed, frozen objects.
+
+A scene composes a robot, environment bodies (a fixed ground is always there; active
+1-DOF bodies such as a cart are named under ``[body.<name>]``), contact interfaces
+(``[contact.<name>]``), a controller with task phases (``[[phase]]``) and solver
+settings. Every value is checked; an error names the file, the key path, what was
+expected and what was found. Overrides by key path (``contact.tip.normal.k=1e4``) apply
+to the raw document before validation, from Python or the command line.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import SceneError, close_matches
+from ..laws.drives import DriveTable, read_drive_table
+from ..laws.elements import STAGE_LAWS, ChainSpec, Element, Mass, Stage
+from ..laws.friction_laws import FRICTION_LAWS, FrictionSpec
+from ..laws.params import read_params
+from ..laws.trajectory import PROFILES, RAMP_KINDS, Move, Ramp
+from .budget import check_budget
+from .reader import MAX_DEPTH, Reader, check_depth, read_toml
+
+__all__ = [
+    "Scene", "RobotSpec", "BodySpec", "ContactSpec", "ChainSpec", "Stage", "Mass", "FrictionSpec",
+    "PhaseSpec", "ReferenceSpec", "SolverSpec", "load_scene", "parse_scene", "apply_overrides",
+    "parse_override", "sims_dir", "scene_dirs", "find_scene",
+]
+
+NORMAL_MODELS = ("rigid", "a", "b", "c", "chain")
+TANGENT_MODELS = ("free", "friction", "chain")
+@dataclass(frozen=True)
+class ContactSpec:
+    name: str
+    frame: str  #: robot frame whose origin touches (default: the robot's tip frame, ``robot.tip``)
+    body: str  #: "ground" or the name of an active body
+    point: np.ndarray  #: [m] a point of the undeformed surface (world, body at coordinate 0)
+    normal: np.ndarray  #: unit outward surface normal (points from environment to robot)
+    tangents: np.ndarray  #: (k, 3) unit tangential directions, k = 0, 1 or 2
+    normal_chain: ChainSpec
+    tangent_model: str  #: "free", "friction" or "chain"
+    friction: FrictionSpec | None
+    tangent_chain: ChainSpec | None  #: chain used along each tangent (bonded at touch)
+    bonded: bool  #: never separates (e.g. benchmark B1)
+
+
+@dataclass(frozen=True)
+class BodySpec:
+    """An active 1-DOF environment body (a cart) translating along ``axis``."""
+
+    name: str
+    mass: float  #: [kg]
+    axis: np.ndarray  #: unit direction of travel (world)
+    position0: float  #: [m] initial coordinate
+    velocity0: float  #: [m/s] initial velocity
+    servo_velocity: float | None  #: velocity servo set-point [m/s], None: no drive force
+    servo_gain: float  #: [N·s/m], F = gain (v_ref − v), realised by the body's drive
+    drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.laws.drives)
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    source: str  #: URDF path, name in urdf/, or example-robot-data name
+    tip: str
+    active_joints: tuple[str, ...] | None
+    locked: dict[str, float]
+    gravity: np.ndarray  #: [m/s²]
+    gravity_compensation: float  #: fraction in [0, 1]
+    q0: np.ndarray | None  #: [rad or m]
+    v0: np.ndarray | None  #: [rad/s or m/s]
+    tip0: np.ndarray | None  #: [m] initial tip position, solved by inverse kinematics from q0/q_seed
+    q_seed: np.ndarray | None  #: a hint for the start posture (ignored when its size is not the robot's)
+    drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.laws.drives)
+    inertia: str = "check"  #: what a link failing the inertia checks does: "check", "repair", "trust"
+    joint_limits: str = "enforce"  #: "enforce" position limits as unilateral constraints, or "ignore"
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    space: str  #: "task" (tip position) or "joint"
+    start: np.ndarray | None  #: None: continue from the previous phase, or from the state
+    moves: tuple[Move, ...]
+    #: active body the reference rides on ("ground": the world). Then x_d(t) = o(t) + start + Σ moves with
+    #: o = axis · (body coordinate) the body's origin, and its velocity and acceleration join v_d and a_d
+    #: (the paper's task coordinates relative to the cart, eq. 5); ``start`` is relative to o
+    body: str = "ground"
+
+
+@dataclass(frozen=True)
+class ForceSpec:
+    contact: str
+    ramp: Ramp
+    #: "n" presses along the normal; "t1"/"t2" push along −(that tangent), i.e. the force set-point
+    #: compresses the tangential chain (case 1's horizontal force F1)
+    direction: str = "n"
+
+    @property
+    def key(self) -> str:
+        """Set-point name: the contact for the normal, ``<contact>.t1`` for a tangent."""
+        return self.contact if self.direction == "n" else f"{self.contact}.{self.direction}"
+
+
+@dataclass(frozen=True)
+class PhaseSpec:
+    name: str
+    until: float | str  #: end time [s] from the scene start, or "touch:<contact>"
+    controller: Any  #: a controller config (see contactdyn.laws.controllers)
+    reference: ReferenceSpec | None
+    forces: tuple[ForceSpec, ...]
+
+
+MAX_EVENTS = 1_000_000  #: solver.max_events at most (each event is kept in the run's log and JSON)
+
+
+@dataclass(frozen=True)
+class SolverSpec:
+    method: str = "DOP853C"  #: DOP853 on scipy's compiled core (contactdyn.numerics.dop853); "DOP853": solve_ivp's
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    max_step: float = math.inf  #: [s]
+    output_rate: float = 1000.0  #: [Hz] samples in the Result
+    record_energy: bool = False  #: integrate drive work and damper dissipation
+    max_events: int = 10000  #: guard against event storms (whole run)
+    #: integration steps a run may take per simulated second (contactdyn.hybrid.progress: plus STEPS_BASE)
+    steps_per_second: float = 20_000.0
+    storm_window: float = 1e-9  #: [s] events closer than this count towards a storm
+    storm_count: int = 50  #: that many events inside the window stop the run
+    stabilization: float = 20.0  #: [1/s] Baumgarte rate ω of bonds, rigid contacts and sticks (0: none)
+    #: [m/s] slip-speed band of the stick/slip guard: a slide stops when |v_t| falls to it
+    stick_velocity: float = 1e-9
+
+
+@dataclass(frozen=True)
+class Scene:
+    name: str
+    description: str
+    duration: float  #: [s]
+    robot: RobotSpec
+    bodies: dict[str, BodySpec]
+    contacts: dict[str, ContactSpec]
+    phases: tuple[PhaseSpec, ...]
+    solver: SolverSpec
+    file: str | None
+    document: dict[str, Any]  #: the raw document after overrides (saved with results)
+    imports: tuple[str, ...] = ()  #: the user's modules this scene imported (contactdyn.scene.user_laws)
+
+
+# ---- locating scenes ---------------------------------------------------------------------
+def sims_dir() -> Path:
+    """The project's ``sims/`` folder, from a checkout or an installed wheel."""
+    package = Path(__file__).resolve().parents[1]  # contactdyn/
+    packaged = package / "data" / "sims"
+    return packaged if packaged.is_dir() else package.parent / "sims"
+
+
+def scene_dirs() -> list[Path]:
+    """Where scene names are looked up, in order: ``./sims`` of the working directory, then the installed ``sims/``."""
+    local = Path.cwd() / "sims"
+    dirs = [local] if local.is_dir() else []
+    return dirs + [d for d in (sims_dir(),) if not dirs or d.resolve() != local.resolve()]
+
+
+def find_scene(name: str | Path) -> Path:
+    """A scene path, or a scene name (with or without ``.toml``) in :func:`scene_dirs`, the first found."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    for folder in scene_dirs():
+        for candidate in (folder / f"{name}.toml", folder / str(name)):
+            if candidate.is_file():
+                return candidate
+    known = sorted({p.stem for folder in scene_dirs() for p in folder.glob("*.toml")})
+    close = close_matches(name, known)
+    hint = f"; did you mean {', '.join(close)}?" if close else ""
+    raise SceneError("scene", f"a scene file or one of {known}{hint}", str(name))
+
+
+def urdf_beside_scene(source: str, file: str | None) -> str:
+    """A relative URDF path in a scene names a file beside the scene (not in the working directory)."""
+    if file is None or Path(source).is_absolute():
+        return source
+    beside = Path(file).parent / source
+    if beside.is_file() or "/" in source or "\\" in source:
+        return str(beside.resolve())
+    return source  # a name in urdf/ or of example-robot-data
+
+
+# ---- overrides ---------------------------------------------------------------------------
+def parse_override(text: str) -> tuple[str, Any]:
+    """``key.path=value`` with the value read as TOML (``1e4``, ``true``, ``[1, 2]``) or a string."""
+    if "=" not in text:
+        raise SceneError("--set", "key.path=value", text)
+    key, value = (part.strip() for part in text.split("=", 1))
+    if "\n" in value or "\r" in value:  # more TOML after the value would be read and dropped
+        raise SceneError(f"--set {key}", "one value on one line (one --set per key)", value)
+    try:
+        parsed = tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError:
+        parsed = value
+    except RecursionError:
+        raise SceneError(f"--set {key}", f"a value nested at most {MAX_DEPTH} deep", "deeper") from None
+    return key, parsed
+
+
+def apply_overrides(document: dict[str, Any], overrides: dict[str, Any], file: str | None = None) -> dict[str, Any]:
+    """A copy of ``document`` with each ``key.path`` set; array items as ``phase.1.until``."""
+    doc = copy.deepcopy(document)
+    for key, value in overrides.items():
+        indexed = re.search(r"\[(\d+)\]", key)
+        if indexed:  # phase[1].until: the array's item is a path part of its own
+            raise SceneError(key, f"an array item as a path part of its own, e.g. "
+                             f"{key[:indexed.start()]}.{indexed.group(1)}{key[indexed.end():]}", indexed.group(0), file)
+        parts = key.split(".")
+        node: Any = doc
+        for i, part in enumerate(parts[:-1]):
+            here = ".".join(parts[: i + 1])
+            if isinstance(node, list):
+                if not part.isdigit() or int(part) >= len(node):
+                    raise SceneError(here, f"an index < {len(node)}", part, file)
+                node = node[int(part)]
+            elif isinstance(node, dict):
+                node = node.setdefault(part, {})
+            else:
+                raise SceneError(here, "a table", node, file)
+        last = parts[-1]
+        if isinstance(node, list):
+            if not last.isdigit() or int(last) >= len(node):
+                raise SceneError(key, f"an index < {len(node)}", last, file)
+            node[int(last)] = value
+        elif isinstance(node, dict):
+            node[last] = value
+        else:
+            raise SceneError(key, "a table to set a key in", node, file)
+    return doc
+
+
+# ---- loading -----------------------------------------------------------------------------
+def load_scene(path: str | Path, overrides: dict[str, Any] | None = None) -> Scene:
+    """Read, override and validate a scene file (a path or a name in ``sims/``)."""
+    path = find_scene(path)
+    return parse_scene(read_toml(path), overrides, file=str(path))
+
+
+def parse_scene(document: dict[str, Any], overrides: dict[str, Any] | None = None, file: str | None = None) -> Scene:
+    """Validate a scene document (a dict as TOML gives it)."""
+    check_depth([document, overrides], "<document>", file)
+    document = apply_overrides(document, overrides or {}, file)
+    top = Reader(document, "", file)
+    imports = _read_imports(top, file)  # first: the user's modules register the laws the rest may name
+    name = top.str("name", Path(file).stem if file else "scene")
+    description = top.str("description", "")
+    duration = top.float("duration", lo=0.0, lo_open=True, unit="s")
+    robot = _read_robot(top.sub("robot"))
+    bodies = {n: _read_body(n, r) for n, r in top.named_tables("body").items()}
+    if "ground" in bodies:
+        raise top.error("body.ground", "a body name other than 'ground' (the fixed ground always exists)", "ground")
+    contacts = {n: _read_contact(n, r, bodies, robot.tip) for n, r in top.named_tables("contact").items()}
+    solver = _read_solver(top.sub("solver", {}))
+    default_controller = top.sub("controller", {})
+    phases = tuple(_read_phase(r, default_controller, contacts, duration, bodies) for r in top.tables("phase"))
+    if not phases:
+        phases = (_read_phase(Reader({"name": "main"}, "phase[0]", file), default_controller, contacts, duration,
+                              bodies),)
+    _check_phase_order(top, phases)
+    top.finish()
+    scene = Scene(name, description, duration, robot, bodies, contacts, phases, solver, file, document, imports)
+    check_budget(scene)
+    return scene
+
+
+def _read_imports(top: Reader, file: str | None) -> tuple[str, ...]:
+    """``imports``: the user's modules of laws, imported now (:mod:`contactdyn.scene.user_laws`)."""
+    from .user_laws import import_scene_modules
+
+    top._note("imports", "list", [])
+    return tuple(import_scene_modules(top.raw("imports", []), file))
+
+
+def _check_phase_order(top: Reader, phases: tuple[PhaseSpec, ...]) -> None:
+    """Timed phase ends (``until`` [s] from the scene start) must not decrease: a phase cannot end before an
+    earlier one did (it would end the moment it starts, unnoticed)."""
+    last, where = -math.inf, ""
+    for i, p in enumerate(phases[:-1]):  # (the last phase's until is the duration by default)
+        if isinstance(p.until, float):
+            if p.until < last:
+                raise top.error(f"phase[{i}].until", f"a time no earlier than {where}'s ({last:g} s): phase ends "
+                                "do not decrease", p.until)
+            last, where = p.until, f"phase[{i}].until"
+
+
+def _read_robot(r: Reader) -> RobotSpec:
+    active = r.raw("active_joints", None)
+    if active is not None and (not isinstance(active, list) or not all(isinstance(a, str) for a in active)):
+        raise r.error("active_joints", "a list of joint names", active)
+    locked_r = r.sub("locked", {})
+    locked = {k: locked_r.float(k, unit="rad or m") for k in locked_r.data}
+    q0 = r.vector("q0", None) if r.has("q0") else None
+    spec = RobotSpec(
+        source=urdf_beside_scene(r.str("urdf"), r.file),
+        tip=r.str("tip", "tip"),
+        active_joints=tuple(active) if active is not None else None,
+        locked=locked,
+        gravity=r.vector("gravity", [0.0, 0.0, -9.81], size=3, unit="m/s²"),
+        gravity_compensation=r.float("gravity_compensation", 0.0, lo=0.0, hi=1.0),
+        q0=q0,
+        v0=r.vector("v0", None) if r.has("v0") else None,
+        tip0=r.vector("tip0", None, size=3, unit="m") if r.has("tip0") else None,
+        q_seed=r.vector("q_seed", None) if r.has("q_seed") else None,
+        drive=read_drive_table(r.sub("drive", {}), per_joint=True),
+        inertia=r.str("inertia", "check", choices=["check", "repair", "trust"]),
+        joint_limits=r.str("joint_limits", "enforce", choices=["enforce", "ignore"]),
+    )
+    r.finish()
+    return spec
+
+
+def _read_body(name: str, r: Reader) -> BodySpec:
+    servo = r.sub("servo", {})
+    spec = BodySpec(
+        name=name,
+        mass=r.float("mass", lo=0.0, lo_open=True, unit="kg"),
+        axis=r.vector("axis", [1.0, 0.0, 0.0], size=3, unit_norm=True),
+        position0=r.float("position0", 0.0, unit="m"),
+        velocity0=r.float("velocity0", 0.0, unit="m/s"),
+        servo_velocity=servo.float("velocity", None, unit="m/s") if servo.has("velocity") else None,
+        servo_gain=servo.float("gain", 1e3, lo=0.0, unit="N·s/m"),
+        drive=read_drive_table(r.sub("drive", {}), per_joint=False),
+    )
+    servo.finish()
+    r.finish()
+    return spec
+
+
+def _read_elements(r: Reader, name: str) -> tuple[Element, ...]:
+    raw = r.raw(name, [])
+    if not isinstance(raw, list):
+        raise r.error(name, "a list of elements like {k = 1e4, b = 10} or {m = 10}", raw)
+    out: list[Element] = []
+    for i, item in enumerate(raw):
+        e = Reader(item, f"{r.key(name)}[{i}]", r.file)
+        if e.has("m"):
+            out.append(Mass(e.float("m", lo=0.0, lo_open=True, unit="kg")))
+        else:
+            out.append(_read_stage(e))
+        e.finish()
+    return tuple(out)
+
+
+def _read_stage(e: Reader, k: str = "k", b: str = "b") -> Stage:
+    """A stage: its k and b (under the names given), its law, and the parameters the law declares."""
+    stiffness = e.float(k, lo=0.0, lo_open=True, unit="N/m")
+    damping = e.float(b, 0.0, lo=0.0, unit="N·s/m")
+    saved = e.variant  # the law's own keys are documented under "law = ..."; the table's others are not
+    law = e.str("law", "linear", choices=STAGE_LAWS)
+    params = read_params(e, STAGE_LAWS[law].params)
+    e.variant = saved
+    return Stage(k=stiffness, b=damping, law=law, params=params)
+
+
+def _read_chain(r: Reader) -> ChainSpec:
+    """A direction's model: rigid, Part I's (a), (b), (c), or an explicit chain."""
+    model = r.str("model", "chain" if (r.has("environment") or r.has("robot")) else "rigid", choices=NORMAL_MODELS)
+    if model == "rigid":
+        return ChainSpec()
+    if model == "c":  # massless Kelvin–Voigt
+        return ChainSpec(environment=(_read_stage(r),))
+    if model == "b":  # ground —[k, b]— m′, struck by the tip
+        return ChainSpec(environment=(_read_stage(r), Mass(r.float("m", lo=0.0, lo_open=True, unit="kg"))))
+    if model == "a":  # ground —[k″, b″]— m′ —[k′, b′]— tip
+        inner = _read_stage(r, "k_int", "b_int")
+        mass = Mass(r.float("m", lo=0.0, lo_open=True, unit="kg"))
+        return ChainSpec(environment=(inner, mass, _read_stage(r, "k_ext", "b_ext")))
+    chain = ChainSpec(_read_elements(r, "environment"), _read_elements(r, "robot"))
+    return chain
+
+
+def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = "tip") -> ContactSpec:
+    body = r.str("body", "ground", choices=["ground", *bodies])
+    normal_r = r.sub("normal")
+    normal = normal_r.vector("direction", size=3, unit_norm=True)
+    normal_chain = _read_chain(normal_r)
+    normal_r.finish()
+    tangent_r = r.sub("tangent", {})
+    model = tangent_r.str("model", "free", choices=TANGENT_MODELS)
+    if tangent_r.has("directions"):
+        raw = tangent_r.raw("directions")
+        if not isinstance(raw, list) or not 1 <= len(raw) <= 2:
+            raise tangent_r.error("directions", "a list of 1 or 2 direction vectors", raw)
+        tangents = np.array([Reader({str(i): d}, tangent_r.key("directions"), r.file).vector(str(i), size=3,
+                                                                                             unit_norm=True)
+                             for i, d in enumerate(raw)])
+        if np.any(np.abs(tangents @ normal) > 1e-9) or (len(tangents) == 2 and abs(tangents[0] @ tangents[1]) > 1e-9):
+            raise tangent_r.error("directions", "directions orthogonal to the normal and to each other",
+                                  raw)
+    elif model != "free":
+        raise tangent_r.error("directions", "1 or 2 tangential directions (required with friction or chain)", None)
+    else:
+        tangents = np.zeros((0, 3))
+    friction = tangent_chain = None
+    if model == "friction":
+        saved = tangent_r.variant
+        friction = FRICTION_LAWS[tangent_r.str("law", "coulomb", choices=FRICTION_LAWS)].read(tangent_r)
+        tangent_r.variant = saved
+    elif model == "chain":
+        tangent_chain = _read_chain(tangent_r)
+        if tangent_chain.rigid:
+            raise tangent_r.error("environment", "a deformation chain (a rigid tangential bond is a stick)", [])
+    tangent_r.finish()
+    spec = ContactSpec(
+        name=name,
+        frame=r.str("frame", tip),  # default: the robot's tip frame (one line swaps robots)
+        body=body,
+        point=r.vector("point", size=3, unit="m"),
+        normal=normal,
+        tangents=tangents,
+        normal_chain=normal_chain,
+        tangent_model=model,
+        friction=friction,
+        tangent_chain=tangent_chain,
+        bonded=r.bool("bonded", False),
+    )
+    r.finish()
+    return spec
+
+
+def _read_solver(r: Reader) -> SolverSpec:
+    from ..numerics.integrators import METHODS
+
+    spec = SolverSpec(
+        method=r.str("method", SolverSpec.method, choices=METHODS),
+        rtol=r.float("rtol", SolverSpec.rtol, lo=1e-14, hi=1e-1),
+        atol=r.float("atol", SolverSpec.atol, lo=1e-16, hi=1.0),
+        max_step=r.float("max_step", math.inf, lo=0.0, lo_open=True, unit="s"),
+        output_rate=r.float("output_rate", SolverSpec.output_rate, lo=0.0, lo_open=True, hi=1e7, unit="Hz"),
+        record_energy=r.bool("record_energy", False),
+        max_events=r.int("max_events", SolverSpec.max_events, lo=1, hi=MAX_EVENTS),
+        steps_per_second=r.float("steps_per_second", SolverSpec.steps_per_second, lo=1.0, hi=1e9, unit="1/s"),
+        storm_window=r.float("storm_window", SolverSpec.storm_window, lo=0.0, unit="s"),
+        storm_count=r.int("storm_count", SolverSpec.storm_count, lo=2),
+        stabilization=r.float("stabilization", SolverSpec.stabilization, lo=0.0, unit="1/s"),
+        stick_velocity=r.float("stick_velocity", SolverSpec.stick_velocity, lo=0.0, lo_open=True, hi=1.0, unit="m/s"),
+    )
+    r.finish()
+    return spec
+
+
+def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, ContactSpec], duration: float,
+                bodies: dict[str, BodySpec] | None = None) -> PhaseSpec:
+    from ..laws.controllers import read_controller
+
+    name = r.str("name", "main")
+    until_raw = r.raw("until", duration)
+    if isinstance(until_raw, str):
+        kind, _, target = until_raw.partition(":")
+        if kind != "touch" or target not in contacts:
+            raise r.error("until", f"a time [s] or 'touch:<contact>' with a contact in {sorted(contacts)}", until_raw)
+        until: float | str = until_raw
+    else:
+        until = r.float("until", duration, lo=0.0, unit="s")
+    merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
+        else r.raw("controller")
+    controller = read_controller(Reader(merged, r.key("controller"), r.file))
+    reference = _read_reference(r.sub("reference"), bodies or {}) if r.has("reference") else None
+    forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
+    r.finish()
+    return PhaseSpec(name, until, controller, reference, forces)
+
+
+def _read_reference(r: Reader, bodies: dict[str, BodySpec]) -> ReferenceSpec:
+    space = r.str("space", "task", choices=["task", "joint"])
+    body = r.str("body", "ground", choices=["ground", *bodies])
+    if body != "ground" and space != "task":
+        raise r.error("body", "'ground' for a joint-space reference (only a task reference rides on a body)", body)
+    start = r.vector("start", None) if r.has("start") else None
+    moves = []
+    for m in r.tables("moves"):
+        kind = m.str("kind", "trapezoid", choices=PROFILES)
+        duration = m.float("duration", lo=0.0, lo_open=True, unit="s")
+        normal, turns = None, 1.0
+        if kind == "velocity_ramp":
+            delta = m.vector("velocity", unit="m/s or rad/s") * duration
+        elif kind == "circle":
+            delta = m.vector("center", size=3, unit="m")
+            normal = m.vector("normal", [0.0, 0.0, 1.0], size=3, unit_norm=True)
+            turns = m.float("turns", 1.0)
+        else:
+            delta = m.vector("delta", unit="m or rad")
+        moves.append(Move(delta, m.float("start", 0.0, lo=0.0, unit="s"), duration, kind,
+                          m.float("accel_fraction", 0.1, lo=0.0, lo_open=True, hi=0.5), normal, turns))
+        m.finish()
+    sizes = {len(mv.delta) for mv in moves} | ({len(start)} if start is not None else set())
+    if len(sizes) > 1:
+        raise r.error("moves", "start and every move of the same dimension", sorted(sizes))
+    if body != "ground" and sizes - {3}:
+        raise r.error("moves", "3-vectors (a task reference on a body)", sorted(sizes))
+    r.finish()
+    return ReferenceSpec(space, start, tuple(moves), body)
+
+
+def _read_force(r: Reader, contacts: dict[str, ContactSpec]) -> ForceSpec:
+    contact = r.str("contact", next(iter(contacts), ""), choices=list(contacts))
+    ramp = Ramp(
+        value=r.float("value", unit="N"),
+        start=r.float("start", 0.0, lo=0.0, unit="s"),
+        duration=r.float("duration", 0.1, lo=0.0, lo_open=True, unit="s"),
+        kind=r.str("kind", "linear", choices=list(RAMP_KINDS)),
+        initial=r.float("initial", 0.0, unit="N"),
+    )
+    direction = r.str("direction", "n", choices=["n", "t1", "t2"])
+    if direction != "n" and int(direction[1]) > len(contacts[contact].tangents):
+        raise r.error("direction", f"'n' or one of contact {contact!r}'s {len(contacts[contact].tangents)} "
+                      "tangent directions (t1, t2)", direction)
+    r.finish()
+    return ForceSpec(contact, ramp, direction)
