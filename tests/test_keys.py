@@ -78,7 +78,7 @@ def test_every_key_name_in_the_reader_source_is_in_the_reference():
     names -= {"a"}  # the reader's own item wrapper ({"a": axis})
     names = {n for n in names if not n.startswith("body.ground")}  # an error key, not a read
     missing = sorted(n for n in names if n not in leaves and "." not in n)
-    assert not missing, f"keys the reader accepts but the reference lacks (extend contactdyn/scene/keytour.py): {missing}"
+    assert not missing, f"keys the reader accepts but the reference lacks (extend scene/keytour.py): {missing}"
 
 
 def test_a_table_error_names_its_fields():
