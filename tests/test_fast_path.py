@@ -1,4 +1,4 @@
-"""The compiled right-hand side runs every mode unless a part declared at load that it cannot (fastpath)."""
+"""The compiled right-hand side runs every mode unless a part declared at load that it cannot (model.paths)."""
 
 from __future__ import annotations
 
