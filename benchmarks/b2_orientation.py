@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from timing import interleaved, write_report  # noqa: E402
 
-from contactdyn import plan_kkt, plan_operational  # noqa: E402
+from contactdyn.compiled import plan_kkt, plan_operational  # noqa: E402
 from contactdyn.laws.controllers.pd import TaskPD, _feedforward  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
 from contactdyn.scene.scene_file import parse_scene  # noqa: E402

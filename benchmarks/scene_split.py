@@ -32,7 +32,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from contactdyn import dop853, hybrid  # noqa: E402
+from contactdyn.hybrid import loop as hybrid  # noqa: E402
+from contactdyn.numerics import dop853  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import simulate  # noqa: E402
 

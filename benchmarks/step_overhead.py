@@ -45,9 +45,9 @@ use_tree()
 import b1_reference  # noqa: E402
 import numpy as np  # noqa: E402
 
-from contactdyn import dop853  # noqa: E402
 from contactdyn.compiled.rhsplan import _PLANS  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
+from contactdyn.numerics import dop853  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
 

@@ -27,7 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from friction_cost import SCENES  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
-from contactdyn import hybrid, load_scene, parse_scene, rhsplan  # noqa: E402
+from contactdyn import load_scene, parse_scene  # noqa: E402
+from contactdyn.compiled import rhsplan  # noqa: E402
+from contactdyn.hybrid import loop as hybrid  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
 
