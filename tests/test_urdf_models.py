@@ -396,3 +396,21 @@ def test_urdf_xml_conventions(name):
                       [a["ixy"], a["iyy"], a["iyz"]],
                       [a["ixz"], a["iyz"], a["izz"]]])
         check_inertia_tensor(I, f"{name}: link {lname}")
+
+
+def test_a_built_urdf_is_reused_until_its_file_changes(tmp_path, monkeypatch):
+    """A process builds a URDF once per file content (mtime and size); every caller gets its own model."""
+    import contactdyn.robot.urdf_model as urdf_model
+
+    path = tmp_path / "arm.urdf"
+    path.write_text(open(os.path.join(URDF_DIR, "planar2r_b1.urdf")).read())
+    first = urdf_model.build_urdf_model(path)
+    reads, check = [], urdf_model.check_urdf_tree
+    monkeypatch.setattr(urdf_model, "check_urdf_tree", lambda p: reads.append(p) or check(p))
+    second = urdf_model.build_urdf_model(path)
+    assert reads == [] and second.xml == first.xml
+    second.model.gravity.linear = np.array([0.0, 0.0, -1.0])  # a Robot sets its own gravity on its model
+    assert first.model.gravity.linear[2] == pytest.approx(-9.81)
+    path.write_text(path.read_text() + "\n")  # the file changed: read again
+    urdf_model.build_urdf_model(path)
+    assert reads == [path]

@@ -21,13 +21,13 @@ FRAME_PREFERENCE = (_T.BODY, _T.OP_FRAME, _T.FIXED_JOINT, _T.JOINT, _T.SENSOR)
 
 def find_frame(model: pin.Model, name: str, source: str) -> int:
     """Index of the frame called ``name`` (body first when several share it); a clear error lists close matches."""
-    matches = [i for i, f in enumerate(model.frames) if f.name == name]
+    matches = [model.getFrameId(name, t) for t in FRAME_PREFERENCE if model.existFrame(name, t)]
     if not matches:
         names = list(dict.fromkeys(f.name for f in model.frames))
         close = close_matches(name, names, n=5, cutoff=0.5)
         hint = f"; close matches: {', '.join(map(repr, close))}" if close else ""
         raise RobotError(f"{source}: no frame named {name!r}{hint} (contactdyn list frames ROBOT shows them all)")
-    return min(matches, key=lambda i: FRAME_PREFERENCE.index(model.frames[i].type))
+    return matches[0]  # in FRAME_PREFERENCE's order
 
 
 def chain_joints(model: pin.Model, fid: int) -> list[str]:
