@@ -22,8 +22,30 @@ from contactdyn.model import chain_forces as cf
 from contactdyn.simulate import prepare
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "examples"))
-from cubic_stage import Cubic  # noqa: E402
+
+
+def _cubic_law() -> type[StageLaw]:
+    """examples/cubic_stage.py's law, left unregistered (the registry is every test's: see ``_registry``)."""
+    saved = dict(STAGE_LAWS)
+    sys.path.insert(0, str(ROOT / "examples"))
+    from cubic_stage import Cubic
+
+    STAGE_LAWS.clear()
+    STAGE_LAWS.update(saved)
+    return Cubic
+
+
+Cubic = _cubic_law()
+
+
+@pytest.fixture(autouse=True)
+def _registry():
+    """The cubic law registered for a test's scenes; the registry as it was afterwards."""
+    saved = dict(STAGE_LAWS)
+    register_stage_law(Cubic)
+    yield
+    STAGE_LAWS.clear()
+    STAGE_LAWS.update(saved)
 
 K, B = 1e5, 300.0  #: [N/m], [N·s/m]
 XS = np.concatenate([-np.logspace(-6, -2, 7), [0.0], np.logspace(-7, -2, 11)])  #: compressions [m]
@@ -174,7 +196,9 @@ sys.path.insert(0, {examples!r})
 sys.path.insert(0, {tests!r})
 import numba
 assert numba.config.DISABLE_JIT
-from test_law_abi import _evaluations
+from contactdyn.laws.stage_laws import register_stage_law
+from test_law_abi import Cubic, _evaluations
+register_stage_law(Cubic)
 _, out = _evaluations({law!r}, {extra!r})
 print(json.dumps([[list(s.items()), x.tolist()] for s, x in out]))
 """
@@ -198,3 +222,13 @@ def test_registered_laws_compile():
         assert abi.stage_address(law) != 0, law.compiled_reason
     for law in FRICTION_LAWS.values():
         assert abi.friction_address(law) != 0, law.compiled_reason
+
+
+def test_a_pickled_chain_packs_again_in_its_new_process():
+    import pickle
+
+    system, modes, phase, x = prepare(_axis_scene("cubic", {"k3": 1e12}))
+    system.evaluate(0.0, x, modes, phase)
+    dc = system.contacts[0].normal
+    assert dc.arrays  # packed, with the laws' addresses of this process
+    assert pickle.loads(pickle.dumps(dc)).arrays == {}  # another process would pack with its own

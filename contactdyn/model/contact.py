@@ -140,6 +140,11 @@ class DirectionalChain:
     arrays: dict[tuple[bool, bool], object] = field(default_factory=dict)
     last_positions: list[float] = field(default_factory=list)  #: node positions at the last evaluation [m]
 
+    def __getstate__(self) -> dict:
+        """Pickled (or copied) without its packed arrays: they hold laws' machine addresses, valid in this
+        process only; a call packs them again."""
+        return {**self.__dict__, "arrays": {}}
+
     def plan(self, touching: bool, relaxing: bool = False) -> ChainPlan:
         """How to evaluate the chain touching or not, with its damped ends relaxing (see ContactMode)."""
         key = (touching, relaxing and not touching)
