@@ -25,13 +25,17 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _cubic_law() -> type[StageLaw]:
-    """examples/cubic_stage.py's law, left unregistered (the registry is every test's: see ``_registry``)."""
+    """examples/cubic_stage.py's law, left unregistered and its module forgotten, so a scene that imports
+    ``cubic_stage`` registers it again (the registry is every test's: ``_registry``)."""
     saved = dict(STAGE_LAWS)
     sys.path.insert(0, str(ROOT / "examples"))
-    from cubic_stage import Cubic
-
-    STAGE_LAWS.clear()
-    STAGE_LAWS.update(saved)
+    try:
+        from cubic_stage import Cubic
+    finally:
+        sys.path.remove(str(ROOT / "examples"))
+        sys.modules.pop("cubic_stage", None)
+        STAGE_LAWS.clear()
+        STAGE_LAWS.update(saved)
     return Cubic
 
 
@@ -40,10 +44,14 @@ Cubic = _cubic_law()
 
 @pytest.fixture(autouse=True)
 def _registry():
-    """The cubic law registered for a test's scenes; the registry as it was afterwards."""
+    """The cubic law registered for a test's scenes, its module importable (numba imports a law's module to
+    load its cached code); the registry, the path and the modules as they were afterwards."""
     saved = dict(STAGE_LAWS)
     register_stage_law(Cubic)
+    sys.path.insert(0, str(ROOT / "examples"))
     yield
+    sys.path.remove(str(ROOT / "examples"))
+    sys.modules.pop("cubic_stage", None)
     STAGE_LAWS.clear()
     STAGE_LAWS.update(saved)
 
@@ -227,7 +235,7 @@ def test_registered_laws_compile():
 def test_a_pickled_chain_packs_again_in_its_new_process():
     import pickle
 
-    system, modes, phase, x = prepare(_axis_scene("cubic", {"k3": 1e12}))
+    system, modes, phase, x = prepare(_axis_scene("hunt_crossley", {"exponent": 1.5}))
     system.evaluate(0.0, x, modes, phase)
     dc = system.contacts[0].normal
     assert dc.arrays  # packed, with the laws' addresses of this process

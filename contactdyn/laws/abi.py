@@ -12,7 +12,7 @@ every law, built in or a user's, with no kernel per law. The families' C signatu
   μ [-] at slip speed |v_t| [m/s] from μ_s, μ_k [-] and the law's own parameters
   (``FrictionLaw.coefficient(mu_s, mu_k, p, speed)``).
 
-A law is compiled lazily, once per law class (:func:`stage_address`, :func:`friction_address`). One numba
+A law is compiled lazily, once per law class (:func:`stage_address`, :func:`friction_address`). A law numba
 cannot compile keeps the reason on the class (``law.compiled_reason``; "" when compiled) and address 0: its
 caller computes it in Python. The calls have a plain-Python twin: under ``NUMBA_DISABLE_JIT=1`` nothing is
 compiled, an address is a handle of the law's Python function, and the same calling code runs interpreted.
@@ -33,8 +33,10 @@ from llvmlite import ir
 from numba import carray, types
 from numba.extending import intrinsic, overload
 
+from .friction_laws import FrictionLaw
+
 __all__ = ["STAGE_SIGNATURE", "FRICTION_SIGNATURE", "stage_address", "friction_address", "call_stage",
-           "call_friction", "python_law"]
+           "call_friction"]
 
 _P = types.CPointer(types.float64)
 #: double force(double k, double b, double* p, int64 n_p, double x, double xdot)
@@ -62,18 +64,11 @@ def stage_address(law: type) -> int:
 def friction_address(law: type) -> int:
     """The address of friction law ``law``'s compiled ``coefficient``; 0 if it has none numba can compile (a law
     that only overrides ``kinetic(spec, speed)`` is Python), the reason then in ``law.compiled_reason``."""
-    from .friction_laws import FrictionLaw
-
     if law.coefficient is FrictionLaw.coefficient:
         law.compiled_reason = (f"friction law {law.name!r} gives its coefficient by kinetic(spec, speed) only "
                                "(Python): define coefficient(mu_s, mu_k, p, speed) to compile it")
         return 0
     return _address(law, "friction", law.coefficient)
-
-
-def python_law(address: int):
-    """The Python function of the law at ``address`` (compiled or a handle under NUMBA_DISABLE_JIT)."""
-    return _python[address]
 
 
 def _address(law: type, family: str, fn) -> int:
@@ -92,34 +87,38 @@ def _address(law: type, family: str, fn) -> int:
 
 
 def _compile(law: type, family: str, fn) -> tuple[object | None, str]:
-    """(the law's cfunc, "") or (None, why numba cannot compile it)."""
+    """(the law's cfunc, "") or (None, why numba cannot compile it). Cached first; if that fails (a cache that
+    does not load counts too), once more uncached, whose error is the reason."""
     try:
         path = inspect.getfile(fn)
     except TypeError:
         path = "<unknown>"
     name = f"{law.__name__}_{fn.__name__}_abi"
-    try:
-        namespace = {"law": _jit(fn), "carray": carray}
-        exec(compile(_WRAPPERS[family].format(name=name), path, "exec"), namespace)
-        wrapper = namespace[name]
-        wrapper.__module__, wrapper.__qualname__ = fn.__module__, f"{fn.__qualname__}_abi"
-        return _cfunc(wrapper, _SIGNATURES[family]), ""
-    except Exception as exc:  # numba's typing or lowering errors, and whatever the law's code raises in them
-        return None, f"numba cannot compile {fn.__qualname__}: {_first_line(exc)}"
+    namespace = {"carray": carray}
+    exec(compile(_WRAPPERS[family].format(name=name), path, "exec"), namespace)
+    wrapper = namespace[name]
+    wrapper.__module__, wrapper.__qualname__ = fn.__module__, f"{fn.__qualname__}_abi"
+    for cache in (True, False):
+        try:
+            namespace["law"] = _jit(fn, cache)
+            return _cfunc(wrapper, _SIGNATURES[family], cache), ""
+        except Exception as exc:  # numba's typing or lowering errors, and whatever the law's code raises in them
+            reason = f"numba cannot compile {fn.__qualname__}: {_first_line(exc)}"
+    return None, reason
 
 
-def _jit(fn):
+def _jit(fn, cache: bool):
     """The law's function under numba, cached beside its file when it has one."""
     try:
-        return numba.njit(cache=True)(fn)
+        return numba.njit(cache=cache)(fn)
     except RuntimeError:  # "no locator available": a law without a source file (exec'd, a notebook's cell)
         return numba.njit(fn)
 
 
-def _cfunc(wrapper, signature):
+def _cfunc(wrapper, signature, cache: bool):
     """The wrapper compiled to a C function of ``signature``, cached beside the law's file when it has one."""
     try:
-        return numba.cfunc(signature, cache=True)(wrapper)
+        return numba.cfunc(signature, cache=cache)(wrapper)
     except RuntimeError as exc:
         if "locator" not in str(exc):
             raise

@@ -226,9 +226,9 @@ def chain_motion(plan, stages, coef, consts, x, p_tip, v_tip, p_env, v_env, offs
     u = consts[K_U:K_U + 3]
     pos, vel = motion[0], motion[1]
     _solid_nodes(plan, x, dot3(u, p_tip), dot3(u, v_tip), dot3(u, p_env) + offset, dot3(u, v_env), pos, vel)
-    _aliases(plan, H_ALIASES_BEFORE, pos, vel)
+    _aliases(plan, plan[H_ALIASES_BEFORE], pos, vel)
     _junctions(plan, stages, coef, x, ydot, pos, vel)
-    _aliases(plan, H_ALIASES_AFTER, pos, vel)
+    _aliases(plan, plan[H_ALIASES_AFTER], pos, vel)
     _free_ends(plan, ydot, pos, vel)
     _stage_forces(plan, stages, coef, consts, pos, vel, stage_state)
 
@@ -250,9 +250,8 @@ def _solid_nodes(plan, x, s_tip, v_tip, s_anc, v_anc, pos, vel):
 
 
 @njit(cache=True)
-def _aliases(plan, section, pos, vel):
-    """Free surface nodes merged into what they touch move with it."""
-    at = plan[section]
+def _aliases(plan, at, pos, vel):
+    """Free surface nodes merged into what they touch move with it (the section of aliases at ``at``)."""
     for r in range(plan[at]):
         row = at + 1 + ALIAS_ROW * r
         a, b = plan[row], plan[row + 1]
