@@ -54,7 +54,10 @@ def axis_scene(duration: float, *, normal: dict | None = None, controller: dict 
 
 
 def test_stage_law_example_settles_at_its_static_deflection_and_declares_its_gap():
+    from contactdyn.laws import abi
+
     example("stage_law")
+    assert abi.stage_address(STAGE_LAWS["unilateral"]) != 0  # its force compiles: the chain calls it by address
     k, b, F = 1e5, 3000.0, 100.0  # [N/m], [N·s/m] (ζ ≈ 0.67 with the 50 kg axis), push [N]
     stage = {"model": "chain", "environment": [{"k": k, "b": b, "law": "unilateral"}]}
     scene = axis_scene(0.6, normal=stage, v0=0.0, push=F)
@@ -71,10 +74,13 @@ def test_stage_law_example_settles_at_its_static_deflection_and_declares_its_gap
 def test_friction_law_example_slides_with_its_coefficient_at_the_slip_speed():
     import tomllib
 
+    from contactdyn.laws import abi
     from contactdyn.laws.friction_laws import FRICTION_LAWS
     from contactdyn.scene.scene_file import sims_dir
 
     example("friction_law")
+    law = FRICTION_LAWS["weakening"]
+    assert abi.friction_address(law) != 0 and law.compiled_reason == ""  # its coefficient compiles
     try:
         doc = tomllib.loads((sims_dir() / "b1.toml").read_text())
         doc["duration"] = 0.3

@@ -20,7 +20,9 @@ A law with a constant kinetic coefficient (``constant = True``) is held in the c
 plan's matrices; for another the plan calls its ``kinetic`` per call (the tilt of the normal
 column and the known force, :mod:`contactdyn.compiled.plan_rhs`; the samples with an array of speeds),
 and the plan's numba kernels decline such a mode (the law is Python). Adding a law:
-subclass :class:`FrictionLaw` (``name``, ``params``, ``constant``, ``kinetic``) and decorate
+subclass :class:`FrictionLaw` (``name``, ``params``, ``constant``, and ``coefficient(mu_s, mu_k, p, speed)``,
+the numeric form that :mod:`contactdyn.laws.abi` compiles; ``kinetic(spec, speed)`` gives it a contact's
+spec, and a law may override that one instead, in Python only) and decorate
 it with :func:`register_friction_law`; the scene then accepts ``tangent.law = "<name>"``
 and the parameters it declares (:class:`~contactdyn.laws.params.Param`).
 """
@@ -72,10 +74,21 @@ class FrictionLaw:
     params: ClassVar[tuple[Param, ...]] = ()  #: the law's own parameters besides mu_s, mu_k and viscous
     constant: ClassVar[bool] = False  #: μ(v) = μ_k for every v
 
+    #: why numba cannot compile the law's ``coefficient`` ("" when it can; None until first asked,
+    #: :mod:`contactdyn.laws.abi`): the model then calls it in Python
+    compiled_reason: ClassVar[str | None] = None
+
     @staticmethod
-    def kinetic(spec: FrictionSpec, speed):
-        """μ(|v_t|) [-] at slip speed ``speed`` [m/s] (float or array)."""
+    def coefficient(mu_s: float, mu_k: float, p, speed):
+        """μ(|v_t|) [-] at slip speed ``speed`` [m/s] (float or array) from μ_s, μ_k [-] and the law's own
+        parameters ``p`` (declared order): the law's numeric form, compiled for the model (laws.abi)."""
         raise NotImplementedError
+
+    @classmethod
+    def kinetic(cls, spec: FrictionSpec, speed):
+        """μ(|v_t|) [-] at slip speed ``speed`` [m/s] (float or array) of a contact's ``spec``: its
+        :meth:`coefficient`. A law may override this instead (in Python only: it then is not compiled)."""
+        return cls.coefficient(spec.mu_s, spec.mu_k, spec.params, speed)
 
     @classmethod
     def read(cls, r) -> FrictionSpec:
@@ -107,8 +120,8 @@ class Coulomb(FrictionLaw):
     constant = True
 
     @staticmethod
-    def kinetic(spec: FrictionSpec, speed):
-        return spec.mu_k + 0.0 * speed
+    def coefficient(mu_s: float, mu_k: float, p, speed):
+        return mu_k + 0.0 * speed
 
     @classmethod
     def read(cls, r) -> FrictionSpec:
@@ -128,5 +141,5 @@ class Stribeck(FrictionLaw):
                     lo_open=True, example=0.01),)
 
     @staticmethod
-    def kinetic(spec: FrictionSpec, speed):
-        return spec.mu_k + (spec.mu_s - spec.mu_k) * np.exp(-(speed / spec.params[0]) ** 2)
+    def coefficient(mu_s: float, mu_k: float, p, speed):
+        return mu_k + (mu_s - mu_k) * np.exp(-(speed / p[0]) ** 2)

@@ -37,6 +37,9 @@ class StageLaw:
     name: ClassVar[str] = ""
     params: ClassVar[tuple[Param, ...]] = ()  #: the law's parameters besides k and b
     affine: ClassVar[bool] = False  #: F = K x + B ẋ with (K, B) = coefficients(k, b, p): compiled, junction-safe
+    #: why numba cannot compile ``force`` ("" when it can; None until first asked, :mod:`contactdyn.laws.abi`):
+    #: the model then calls it in Python
+    compiled_reason: ClassVar[str | None] = None
 
     @staticmethod
     def force(k: float, b: float, p: tuple[float, ...], x: float, xdot: float) -> float:

@@ -73,6 +73,11 @@ class ChainStage:
         """
         return "" if self._law.affine else f"stage law {self.law!r} is not affine in (x, ẋ)"
 
+    @property
+    def law_class(self) -> type:
+        """The stage's law (a :class:`~contactdyn.laws.stage_laws.StageLaw` subclass)."""
+        return self._law
+
     def force(self, x: float, xdot: float) -> float:
         """Compressive force [N] at compression x [m] and rate ẋ [m/s] (the stage's law)."""
         return self._law.force(self.k, self.b, self.params, x, xdot)

@@ -18,18 +18,124 @@ At a state x, with the chain's touching plan (:class:`~contactdyn.model.contact.
    G Q̈ + γ = 0 on the two surfaces' relative motion, stabilised by Baumgarte,
    ë + 2ω ė + ω² e = 0 on the violation e (ω = ``solver.stabilization`` [1/s]).
 
-The readable right-hand side (:mod:`contactdyn.model.dynamics`) and the compiled plan's probes
-(:mod:`contactdyn.compiled.plan_probe`) both call :func:`chain_forces`: one description of the law.
+Written once, over flat arrays: :func:`pack` lays a chain's plan out for one (touching, relaxing)
+state, once; :func:`chain_call` (numba) is one call over them: node motion, the stage forces (each
+law called by its compiled address, :mod:`contactdyn.laws.abi`), the loads, the energy audit's damper
+power and the bond's γ. A stage whose law numba cannot compile is computed in Python between
+:func:`chain_motion` and :func:`chain_loads`, the two halves of the call. :func:`chain_forces` packs,
+calls and names the outputs; the readable right-hand side (:mod:`contactdyn.model.dynamics`) and the
+compiled plan's probes (:mod:`contactdyn.compiled.plan_probe`) both call it: one description of the law.
+Under ``NUMBA_DISABLE_JIT=1`` the same functions run interpreted.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+from numba import njit
 
+from ..laws.abi import call_stage, stage_address
+from ..numerics.linalg import dot3
 from .chain import NodeKind
-from .contact import ChainPlan, Contact, DirectionalChain, Kinematics
+from .contact import Contact, DirectionalChain, Kinematics
 
-__all__ = ["chain_forces"]
+__all__ = ["chain_forces", "ChainArrays", "pack", "chain_call", "chain_motion", "chain_loads"]
+
+TIP, ANCHOR = int(NodeKind.TIP), int(NodeKind.ANCHOR)
+
+#: the plan's header (int64): constants, then where each section starts (a section: its row count, its rows)
+(H_NQ, H_ENERGY, H_BODY, H_BOND, H_INTERFACE, H_ROBOT_SURFACE, H_ENV_SURFACE, H_ROBOT_KIND, H_ENV_KIND,
+ H_SOLID, H_ALIASES_BEFORE, H_JUNCTIONS, H_ALIASES_AFTER, H_FREE_ENDS, H_ACTIVE, HEADER) = range(16)
+#: the sections' rows: solid (node, kind, coordinate), alias (node, node it follows), free end (node, node it
+#: rests on, its state slot or -1), active (stage); a junction is (node, slot, algebraic, n) then n (stage, below)
+SOLID_ROW, ALIAS_ROW, FREE_END_ROW, JUNCTION_ROW, JUNCTION_STAGE_ROW = 3, 2, 3, 4, 2
+#: a stage's ints: its nodes, its law's address (0: Python), its parameters in ``consts``, where its force acts
+S_LOWER, S_UPPER, S_LAW, S_PARAMS_AT, S_N_PARAMS, S_UPPER_ON, S_LOWER_ON = range(7)
+ON_NOTHING, ON_TIP, ON_ANCHOR = -1, -2, -3  #: where a stage's force acts (a mass: its coordinate, >= 0)
+#: a stage's coefficients: k [N/m], b [N·s/m]; (K, B) of an affine law, F = K x + B ẋ (nan for another)
+C_K, C_B, C_KA, C_BA = range(4)
+#: ``consts``: u (3), u·(the body's axis) [-], Baumgarte's ω [1/s], then the stages' law parameters
+K_U, K_U_AXIS, K_OMEGA, K_PARAMS = 0, 3, 4, 5
+#: a stage's state at the last call: compression x [m], rate ẋ [m/s], force F [N], F at ẋ = 0 [N]
+X, XDOT, F, F_ELASTIC = range(4)
+
+
+@dataclass
+class ChainArrays:
+    """One chain's plan in one (touching, relaxing) state as flat arrays, with its buffers and names."""
+
+    plan: np.ndarray  #: int64: the header, then the sections
+    stages: np.ndarray  #: int64 (stages, 7)
+    coef: np.ndarray  #: float (stages, 4)
+    consts: np.ndarray  #: float: u, u·axis, ω, law parameters
+    motion: np.ndarray  #: float (2, nodes): positions [m] and velocities [m/s] of the nodes at the last call
+    stage_state: np.ndarray  #: float (stages, 4): x, ẋ, F, F at ẋ = 0 at the last call
+    active: list[int]  #: stages carrying force
+    python_stages: list  #: (stage index, ChainStage) of the active stages whose law numba cannot compile
+    labels: list[str]  #: "<contact>.<direction>.<stage>" per stage (``Evaluation.stages``)
+    bond: bool
+
+
+def pack(system, c: Contact, dc: DirectionalChain, touching: bool, relaxing: bool) -> ChainArrays:
+    """The arrays of ``dc``'s plan touching or not, its damped ends relaxing or not (once per state)."""
+    plan = dc.plan(touching, relaxing)
+    chain = dc.chain
+    nodes, stages = chain.nodes, chain.stages
+    junction_rows = [len(plan.junctions)]
+    for j, active, slot, group, algebraic in plan.junctions:
+        junction_rows += [j, slot, int(algebraic), len(active)]
+        for k in active:
+            junction_rows += [k, int(stages[k].upper in group)]  # below j: the stage pushes j up
+    sections = {
+        H_SOLID: _section([(i, int(nodes[i].kind), nodes[i].coord) for i in plan.solid]),
+        H_ALIASES_BEFORE: _section([(a, b) for a, b in plan.aliases if b not in plan.junction_nodes]),
+        H_JUNCTIONS: junction_rows,
+        H_ALIASES_AFTER: _section([(a, b) for a, b in plan.aliases if b in plan.junction_nodes]),
+        H_FREE_ENDS: _section([(a, b, nodes[a].state) for a, b in plan.free_ends]),
+        H_ACTIVE: _section([(k,) for k in plan.active]),
+    }
+    header = [0] * HEADER
+    header[H_NQ], header[H_ENERGY], header[H_BODY] = system.nQ, system.energy_slot, c.body_index
+    header[H_BOND], header[H_INTERFACE] = int(plan.bond), plan.interface_stage
+    header[H_ROBOT_SURFACE], header[H_ENV_SURFACE] = chain.robot_surface, chain.env_surface
+    header[H_ROBOT_KIND], header[H_ENV_KIND] = int(nodes[chain.robot_surface].kind), int(nodes[chain.env_surface].kind)
+    body: list[int] = []
+    for h, rows in sections.items():
+        header[h] = HEADER + len(body)
+        body += rows
+    stage_ints, coef, params = _stage_tables(nodes, stages, dict(plan.aliases))
+    consts = np.array([*dc.u, float(dc.u @ c.body_axis), system.stabilization, *params], dtype=float)
+    python_stages = [(k, stages[k]) for k in plan.active if stage_ints[k, S_LAW] == 0]
+    return ChainArrays(np.array(header + body, dtype=np.int64), stage_ints, coef, consts,
+                       np.zeros((2, len(nodes))), np.zeros((len(stages), 4)), list(plan.active), python_stages,
+                       [f"{c.name}.{dc.label}.{s.label}" for s in stages], plan.bond)
+
+
+def _section(rows: list[tuple[int, ...]]) -> list[int]:
+    return [len(rows)] + [v for row in rows for v in row]
+
+
+def _stage_tables(nodes, stages, alias_of: dict[int, int]) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """(the stages' ints, their coefficients, their laws' parameters in a row)."""
+    ints = np.zeros((len(stages), 7), dtype=np.int64)
+    coef = np.full((len(stages), 4), np.nan)
+    params: list[float] = []
+
+    def acts_on(node: int) -> int:
+        target = alias_of.get(node, node)  # a free surface node merged into what it touches
+        kind = nodes[target].kind
+        return ON_TIP if kind == NodeKind.TIP else ON_ANCHOR if kind == NodeKind.ANCHOR else \
+            nodes[target].coord if kind == NodeKind.MASS else ON_NOTHING
+
+    for k, s in enumerate(stages):
+        ints[k] = (s.lower, s.upper, stage_address(s.law_class), K_PARAMS + len(params), len(s.params),
+                   acts_on(s.upper), acts_on(s.lower))
+        coef[k, C_K], coef[k, C_B] = s.k, s.b
+        if s.kelvin_voigt is not None:
+            coef[k, C_KA], coef[k, C_BA] = s.kelvin_voigt
+        params += s.params
+    return ints, coef, params
 
 
 def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offset: float, kin: Kinematics,
@@ -41,133 +147,230 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
     in ``ev.stages``. ``offset`` [m] shifts the anchor (tangential chains anchored at touch);
     ``relaxing``: the damped surface ends relax after a separation (``ContactMode.relaxing``).
     """
-    plan = dc.plan(touching, relaxing)
-    pos, vel = _node_motion(system.nQ, dc, plan, kin, x, offset, ydot)
-    dc.last_positions = pos
-    tip_F, anchor_F, interface_F = _stage_forces(system, c, dc, plan, pos, vel, f, ydot, ev, full)
-    if c.body_index >= 0 and anchor_F != 0.0:
-        f[c.body_index] += anchor_F * float(dc.u @ c.body_axis)
-    chain = dc.chain
-    row, gamma = _bond_row(system, c, dc, kin) if plan.bond else (None, 0.0)
-    gap = pos[chain.robot_surface] - pos[chain.env_surface]
-    if plan.bond:  # Baumgarte: the violation e obeys ë + 2ω ė + ω² e = 0, zero on the exact manifold
-        w = system.stabilization
-        gamma += 2.0 * w * (vel[chain.robot_surface] - vel[chain.env_surface]) + w * w * gap
+    key = (touching, relaxing and not touching)
+    a = dc.arrays.get(key)
+    if a is None:
+        a = dc.arrays[key] = pack(system, c, dc, touching, key[1])
+    if a.python_stages:
+        chain_motion(a.plan, a.stages, a.coef, a.consts, x, kin.p_tip, kin.v_tip, kin.p_env, kin.v_env, float(offset),
+                     ydot, a.motion, a.stage_state)
+        _python_forces(a, system.energy_slot >= 0)
+        tip_F, gamma, interface_F, gap = chain_loads(a.plan, a.stages, a.consts, kin.drift, f, ydot, a.motion,
+                                                     a.stage_state)
+    else:
+        tip_F, gamma, interface_F, gap = chain_call(a.plan, a.stages, a.coef, a.consts, x, kin.p_tip, kin.v_tip,
+                                                    kin.p_env, kin.v_env, kin.drift, float(offset), f, ydot, a.motion,
+                                                    a.stage_state)
+    dc.last_positions = a.motion[0]
+    if full and ev is not None:
+        _name_stages(a, ev.stages)
+    row = _bond_row(system, c, dc, kin) if a.bond else None
     return tip_F, row, gamma, interface_F, (0.0 if touching else gap)
 
 
-def _node_motion(nQ: int, dc: DirectionalChain, plan: ChainPlan, kin: Kinematics, x: np.ndarray, offset: float,
-                 ydot: np.ndarray) -> tuple[list[float], list[float]]:
-    """Positions [m] and velocities [m/s] of the chain's nodes along u; junction rates into ``ydot``."""
-    chain, u = dc.chain, dc.u
-    nodes, stages = chain.nodes, chain.stages
-    npos = len(nodes)
-    pos = [0.0] * npos
-    vel = [0.0] * npos
-    s_tip, v_tip = float(u @ kin.p_tip), float(u @ kin.v_tip)
-    s_anc, v_anc = float(u @ kin.p_env) + offset, float(u @ kin.v_env)
-    for i in plan.solid:
-        kind = nodes[i].kind
-        if kind == NodeKind.TIP:
-            pos[i], vel[i] = s_tip, v_tip
-        elif kind == NodeKind.ANCHOR:
-            pos[i], vel[i] = s_anc, v_anc
-        else:
-            pos[i], vel[i] = x[nodes[i].coord], x[nQ + nodes[i].coord]
-    junction_nodes = plan.junction_nodes
-    for a, b in plan.aliases:
-        if b not in junction_nodes:
-            pos[a], vel[a] = pos[b], vel[b]
-    y = x[2 * nQ:]
-    for j, active, slot, group, algebraic in plan.junctions:
-        num = den = kk = ks = 0.0
-        for k in active:
-            s = stages[k]
-            K, B = s.kelvin_voigt  # a junction joins affine stages only (chain._check)
-            if s.upper in group:  # stage below pushes j up
-                num += K * (pos[s.lower] - (y[slot] if slot >= 0 else 0.0)) + B * vel[s.lower]
-                ks += K * pos[s.lower]
-            else:  # stage above pushes j down
-                num -= K * ((y[slot] if slot >= 0 else 0.0) - pos[s.upper]) - B * vel[s.upper]
-                ks += K * pos[s.upper]
-            den += B
-            kk += K
-        if den > 0.0 and not algebraic:
-            pos[j], vel[j] = y[slot], num / den
-            ydot[slot] = vel[j]
-        else:  # undamped or balanced junction: algebraic force balance
-            pos[j] = ks / kk if kk > 0 else 0.0
-            vel[j] = sum(stages[k].kelvin_voigt[0] * vel[stages[k].lower if stages[k].upper in group
-                                                         else stages[k].upper]
-                         for k in active) / kk if kk > 0 else 0.0
-            if den > 0.0:
-                _follow(slot, vel[j], ydot)
-    for a, b in plan.aliases:
-        if b in junction_nodes:
-            pos[a], vel[a] = pos[b], vel[b]
-    for a, b in plan.free_ends:
-        pos[a], vel[a] = pos[b], vel[b]
-        _follow(nodes[a].state, vel[a], ydot)
-    return pos, vel
+def _python_forces(a: ChainArrays, energy: bool) -> None:
+    """The forces of the stages whose law numba cannot compile, by their Python function."""
+    st = a.stage_state
+    for k, stage in a.python_stages:
+        xs, xd = float(st[k, X]), float(st[k, XDOT])
+        st[k, F] = stage.force(xs, xd)
+        if energy:
+            st[k, F_ELASTIC] = stage.force(xs, 0.0)
 
 
-def _follow(slot: int, vel: float, ydot: np.ndarray) -> None:
-    """An algebraic node's slot of y (if it has one) moves with it: its position stays ready for the
-    mode that needs it as a state (relaxing after a separation) without a stiff term to integrate."""
-    if slot >= 0:
-        ydot[slot] = vel
+def _name_stages(a: ChainArrays, stages: dict) -> None:
+    """Every stage's (x [m], ẋ [m/s], F [N]) by label: the active ones', then zeros for the others."""
+    st = a.stage_state.tolist()
+    for k in a.active:
+        stages[a.labels[k]] = tuple(st[k][:3])
+    for label in a.labels:
+        if label not in stages:
+            stages[label] = (0.0, 0.0, 0.0)
 
 
-def _stage_forces(system, c: Contact, dc: DirectionalChain, plan: ChainPlan, pos: list[float], vel: list[float],
-                  f: np.ndarray, ydot: np.ndarray, ev, full: bool) -> tuple[float, float, float]:
-    """Sum the active stages' forces on tip, anchor and masses: (tip F, anchor F, interface F) [N]."""
-    chain = dc.chain
-    nodes, stages = chain.nodes, chain.stages
-    alias_of = dict(plan.aliases)
-    tip_F = anchor_F = 0.0
-    interface_F = 0.0
-    for k in plan.active:
-        s = stages[k]
-        xs = pos[s.lower] - pos[s.upper]
-        xd = vel[s.lower] - vel[s.upper]
-        F = s.force(xs, xd)
-        if k == plan.interface_stage:
-            interface_F = F
-        for node, sign in ((s.upper, 1.0), (s.lower, -1.0)):
-            target = alias_of.get(node, node)
-            kind = nodes[target].kind
-            if kind == NodeKind.TIP:
-                tip_F += sign * F
-            elif kind == NodeKind.ANCHOR:
-                anchor_F += sign * F
-            elif kind == NodeKind.MASS:
-                f[nodes[target].coord] += sign * F
-        if system.energy_slot >= 0:
-            ydot[system.energy_slot + 1] += (F - s.force(xs, 0.0)) * xd  # damper power [W]
-        if full and ev is not None:
-            ev.stages[f"{c.name}.{dc.label}.{s.label}"] = (xs, xd, F)
-    if full and ev is not None:
-        for k in range(len(stages)):
-            label = f"{c.name}.{dc.label}.{stages[k].label}"
-            if label not in ev.stages:
-                ev.stages[label] = (0.0, 0.0, 0.0)
-    return tip_F, anchor_F, interface_F
-
-
-def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics) -> tuple[np.ndarray, float]:
-    """Row of the two surfaces' relative motion along u, and its velocity-product term γ (J̇q̇ part)."""
+def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics) -> np.ndarray:
+    """Row of the two surfaces' relative motion along u (its γ is :func:`chain_loads`')."""
     nQ, chain, u = system.nQ, dc.chain, dc.u
     nodes = chain.nodes
     row = np.zeros(nQ)
-    gamma = 0.0
     for node, sign in ((chain.robot_surface, 1.0), (chain.env_surface, -1.0)):
         kind = nodes[node].kind
         if kind == NodeKind.TIP:
             row[: system.nv] += sign * (u @ kin.J)
-            gamma += sign * float(u @ kin.drift)
         elif kind == NodeKind.ANCHOR:
             if c.body_index >= 0:
                 row[c.body_index] += sign * float(u @ c.body_axis)
         else:
             row[nodes[node].coord] += sign
-    return row, gamma
+    return row
+
+
+# ---- one call over the arrays (numba) ----------------------------------------------------------------------------
+
+@njit(cache=True)
+def chain_call(plan, stages, coef, consts, x, p_tip, v_tip, p_env, v_env, drift, offset, f, ydot, motion,
+               stage_state):
+    """One call of a chain whose laws all compile: :func:`chain_motion`, then :func:`chain_loads`."""
+    chain_motion(plan, stages, coef, consts, x, p_tip, v_tip, p_env, v_env, offset, ydot, motion, stage_state)
+    return chain_loads(plan, stages, consts, drift, f, ydot, motion, stage_state)
+
+
+@njit(cache=True)
+def chain_motion(plan, stages, coef, consts, x, p_tip, v_tip, p_env, v_env, offset, ydot, motion, stage_state):
+    """The nodes' positions [m] and velocities [m/s] along u into ``motion``, the junctions' rates into ``ydot``,
+    each active stage's (x, ẋ) and, for the laws that compile, F (and F at ẋ = 0) into ``stage_state``.
+
+    The tip and the anchor move with the robot's frame and the environment's point (p, ṗ [m, m/s], world),
+    the anchor shifted by ``offset`` [m]; masses are coordinates of x = [Q, Q̇, y].
+    """
+    u = consts[K_U:K_U + 3]
+    pos, vel = motion[0], motion[1]
+    _solid_nodes(plan, x, dot3(u, p_tip), dot3(u, v_tip), dot3(u, p_env) + offset, dot3(u, v_env), pos, vel)
+    _aliases(plan, plan[H_ALIASES_BEFORE], pos, vel)
+    _junctions(plan, stages, coef, x, ydot, pos, vel)
+    _aliases(plan, plan[H_ALIASES_AFTER], pos, vel)
+    _free_ends(plan, ydot, pos, vel)
+    _stage_forces(plan, stages, coef, consts, pos, vel, stage_state)
+
+
+@njit(cache=True)
+def _solid_nodes(plan, x, s_tip, v_tip, s_anc, v_anc, pos, vel):
+    """Tip, anchor and masses: positions [m] and velocities [m/s] along u."""
+    nQ = plan[H_NQ]
+    at = plan[H_SOLID]
+    for r in range(plan[at]):
+        row = at + 1 + SOLID_ROW * r
+        node, kind, coord = plan[row], plan[row + 1], plan[row + 2]
+        if kind == TIP:
+            pos[node], vel[node] = s_tip, v_tip
+        elif kind == ANCHOR:
+            pos[node], vel[node] = s_anc, v_anc
+        else:
+            pos[node], vel[node] = x[coord], x[nQ + coord]
+
+
+@njit(cache=True)
+def _aliases(plan, at, pos, vel):
+    """Free surface nodes merged into what they touch move with it (the section of aliases at ``at``)."""
+    for r in range(plan[at]):
+        row = at + 1 + ALIAS_ROW * r
+        a, b = plan[row], plan[row + 1]
+        pos[a], vel[a] = pos[b], vel[b]
+
+
+@njit(cache=True)
+def _junctions(plan, stages, coef, x, ydot, pos, vel):
+    """Massless junctions: a damped one is a state whose rate balances its stages (into ``ydot``); an undamped
+    or balanced one sits where its springs balance, its state slot (if any) following it."""
+    y0 = 2 * plan[H_NQ]
+    at = plan[H_JUNCTIONS]
+    row = at + 1
+    for _ in range(plan[at]):
+        j, slot, algebraic, n = plan[row], plan[row + 1], plan[row + 2], plan[row + 3]
+        first = row + JUNCTION_ROW
+        row = first + JUNCTION_STAGE_ROW * n
+        y_j = x[y0 + slot] if slot >= 0 else 0.0
+        num = den = kk = ks = 0.0
+        for r in range(n):
+            k, below = plan[first + JUNCTION_STAGE_ROW * r], plan[first + JUNCTION_STAGE_ROW * r + 1]
+            K, B = coef[k, C_KA], coef[k, C_BA]  # a junction joins affine stages only (chain._check)
+            lower, upper = stages[k, S_LOWER], stages[k, S_UPPER]
+            if below:  # stage below pushes j up
+                num += K * (pos[lower] - y_j) + B * vel[lower]
+                ks += K * pos[lower]
+            else:  # stage above pushes j down
+                num -= K * (y_j - pos[upper]) - B * vel[upper]
+                ks += K * pos[upper]
+            den += B
+            kk += K
+        if den > 0.0 and not algebraic:
+            pos[j], vel[j] = x[y0 + slot], num / den
+            ydot[slot] = vel[j]
+        else:  # undamped or balanced junction: algebraic force balance
+            pos[j] = ks / kk if kk > 0 else 0.0
+            v = 0.0
+            for r in range(n):
+                k, below = plan[first + JUNCTION_STAGE_ROW * r], plan[first + JUNCTION_STAGE_ROW * r + 1]
+                v += coef[k, C_KA] * vel[stages[k, S_LOWER] if below else stages[k, S_UPPER]]
+            vel[j] = v / kk if kk > 0 else 0.0
+            if den > 0.0 and slot >= 0:  # its slot of y follows it, ready for a mode that needs it as a state
+                ydot[slot] = vel[j]
+
+
+@njit(cache=True)
+def _free_ends(plan, ydot, pos, vel):
+    """A free end rests on its stage's other node (a massless stage carries no force unloaded); its slot of y,
+    if it has one, follows it: its position stays ready for relaxing after a separation, with no stiff term."""
+    at = plan[H_FREE_ENDS]
+    for r in range(plan[at]):
+        row = at + 1 + FREE_END_ROW * r
+        a, b, slot = plan[row], plan[row + 1], plan[row + 2]
+        pos[a], vel[a] = pos[b], vel[b]
+        if slot >= 0:
+            ydot[slot] = vel[a]
+
+
+@njit(cache=True)
+def _stage_forces(plan, stages, coef, consts, pos, vel, stage_state):
+    """Each active stage's compression x [m] and rate ẋ [m/s]; its force F [N] by its law's address (and F at
+    ẋ = 0, the elastic part, for the energy audit); a stage of address 0 is left to Python."""
+    energy = plan[H_ENERGY] >= 0
+    at = plan[H_ACTIVE]
+    for r in range(plan[at]):
+        k = plan[at + 1 + r]
+        xs = pos[stages[k, S_LOWER]] - pos[stages[k, S_UPPER]]
+        xd = vel[stages[k, S_LOWER]] - vel[stages[k, S_UPPER]]
+        stage_state[k, X], stage_state[k, XDOT] = xs, xd
+        law, p_at, n_p = stages[k, S_LAW], stages[k, S_PARAMS_AT], stages[k, S_N_PARAMS]
+        if law != 0:
+            stage_state[k, F] = call_stage(law, coef[k, C_K], coef[k, C_B], consts, p_at, n_p, xs, xd)
+            if energy:
+                stage_state[k, F_ELASTIC] = call_stage(law, coef[k, C_K], coef[k, C_B], consts, p_at, n_p, xs, 0.0)
+
+
+@njit(cache=True)
+def chain_loads(plan, stages, consts, drift, f, ydot, motion, stage_state):
+    """The active stages' forces on the tip, the anchor and the masses (into ``f`` [N], the anchor's on the body),
+    the dampers' power [W] (into ``ydot``'s audit slot); (tip force along u [N], bond γ [m/s²], interface F [N],
+    gap [m]). γ is the surfaces' J̇q̇ along u (``drift`` [m/s²], the tip's) plus Baumgarte's 2ω ė + ω² e."""
+    energy = plan[H_ENERGY]
+    interface = plan[H_INTERFACE]
+    tip_F = anchor_F = interface_F = 0.0
+    at = plan[H_ACTIVE]
+    for r in range(plan[at]):
+        k = plan[at + 1 + r]
+        force = stage_state[k, F]
+        if k == interface:
+            interface_F = force
+        tip_F, anchor_F = _act(stages[k, S_UPPER_ON], 1.0 * force, tip_F, anchor_F, f)
+        tip_F, anchor_F = _act(stages[k, S_LOWER_ON], -1.0 * force, tip_F, anchor_F, f)
+        if energy >= 0:
+            ydot[energy + 1] += (force - stage_state[k, F_ELASTIC]) * stage_state[k, XDOT]  # damper power [W]
+    body = plan[H_BODY]
+    if body >= 0 and anchor_F != 0.0:
+        f[body] += anchor_F * consts[K_U_AXIS]
+    pos, vel = motion[0], motion[1]
+    rs, es = plan[H_ROBOT_SURFACE], plan[H_ENV_SURFACE]
+    gap = pos[rs] - pos[es]
+    gamma = 0.0
+    if plan[H_BOND]:
+        u = consts[K_U:K_U + 3]
+        if plan[H_ROBOT_KIND] == TIP:
+            gamma += 1.0 * dot3(u, drift)
+        if plan[H_ENV_KIND] == TIP:
+            gamma += -1.0 * dot3(u, drift)
+        w = consts[K_OMEGA]  # Baumgarte: the violation e obeys ë + 2ω ė + ω² e = 0, zero on the exact manifold
+        gamma += 2.0 * w * (vel[rs] - vel[es]) + w * w * gap
+    return tip_F, gamma, interface_F, gap
+
+
+@njit(cache=True)
+def _act(on, force, tip_F, anchor_F, f):
+    """A stage's force [N] on one of its nodes: summed on the tip or the anchor, or into a mass's ``f``."""
+    if on == ON_TIP:
+        tip_F += force
+    elif on == ON_ANCHOR:
+        anchor_F += force
+    elif on >= 0:
+        f[on] += force
+    return tip_F, anchor_F

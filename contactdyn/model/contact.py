@@ -136,7 +136,14 @@ class DirectionalChain:
     label: str  #: "n", "t1", "t2"
     junction_state: int = -1  #: state slot of the interface junction (when touching), set by the system
     plans: dict[tuple[bool, bool], ChainPlan] = field(default_factory=dict)
+    #: the plans as flat arrays, what a call reads (:func:`contactdyn.model.chain_forces.pack`), by the same key
+    arrays: dict[tuple[bool, bool], object] = field(default_factory=dict)
     last_positions: list[float] = field(default_factory=list)  #: node positions at the last evaluation [m]
+
+    def __getstate__(self) -> dict:
+        """Pickled (or copied) without its packed arrays: they hold laws' machine addresses, valid in this
+        process only; a call packs them again."""
+        return {**self.__dict__, "arrays": {}}
 
     def plan(self, touching: bool, relaxing: bool = False) -> ChainPlan:
         """How to evaluate the chain touching or not, with its damped ends relaxing (see ContactMode)."""

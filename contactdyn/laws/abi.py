@@ -1,0 +1,189 @@
+"""A law's calling convention (its ABI): the compiled model calls a stage or friction law by address.
+
+A law is one Python function. numba compiles it once into a C function (a ``cfunc``) of one fixed signature
+per family; the function's machine address is a plain int64. The model keeps addresses in its packed arrays
+and calls a law through its address (:func:`call_stage`, :func:`call_friction`), so one compiled model serves
+every law, built in or a user's, with no kernel per law. The families' C signatures:
+
+- stage law:    ``double force(double k, double b, double* p, int64 n_p, double x, double xdot)``:
+  F [N] at compression x [m] and rate ẋ [m/s]; k [N/m] and b [N·s/m] are every stage's, p[0:n_p] the law's
+  own parameters in their declared order (``StageLaw.force(k, b, p, x, xdot)``);
+- friction law: ``double kinetic(double mu_s, double mu_k, double* p, int64 n_p, double speed)``:
+  μ [-] at slip speed |v_t| [m/s] from μ_s, μ_k [-] and the law's own parameters
+  (``FrictionLaw.coefficient(mu_s, mu_k, p, speed)``).
+
+A law is compiled lazily, once per law class (:func:`stage_address`, :func:`friction_address`). A law numba
+cannot compile keeps the reason on the class (``law.compiled_reason``; "" when compiled) and address 0: its
+caller computes it in Python. The calls have a plain-Python twin: under ``NUMBA_DISABLE_JIT=1`` nothing is
+compiled, an address is a handle of the law's Python function, and the same calling code runs interpreted.
+
+Caching: the compiled law is cached on disk by numba (``cache=True``). A cfunc made in a factory as a closure
+is not (numba keys a closure's cache on its pickled cells, and a dispatcher pickles with a new id in every
+process), so the wrapper is a closure-free function generated from source and attributed to the law's own
+file: numba caches it beside the law's module, and an edit of that file recompiles it.
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+
+import numba
+from llvmlite import ir
+from numba import carray, types
+from numba.extending import intrinsic, overload
+
+from .friction_laws import FrictionLaw
+
+__all__ = ["STAGE_SIGNATURE", "FRICTION_SIGNATURE", "stage_address", "friction_address", "call_stage",
+           "call_friction"]
+
+_P = types.CPointer(types.float64)
+#: double force(double k, double b, double* p, int64 n_p, double x, double xdot)
+STAGE_SIGNATURE = types.float64(types.float64, types.float64, _P, types.int64, types.float64, types.float64)
+#: double kinetic(double mu_s, double mu_k, double* p, int64 n_p, double speed)
+FRICTION_SIGNATURE = types.float64(types.float64, types.float64, _P, types.int64, types.float64)
+
+#: the cfunc's body per family: the C arguments to the law's Python arguments (p as an array of n_p)
+_WRAPPERS = {
+    "stage": "def {name}(k, b, p, n_p, x, xdot):\n    return law(k, b, carray(p, (n_p,)), x, xdot)\n",
+    "friction": "def {name}(mu_s, mu_k, p, n_p, speed):\n    return law(mu_s, mu_k, carray(p, (n_p,)), speed)\n",
+}
+_SIGNATURES = {"stage": STAGE_SIGNATURE, "friction": FRICTION_SIGNATURE}
+
+_compiled: dict[type, tuple[int, object]] = {}  #: law class -> (address, its cfunc, kept alive while it is used)
+_python: dict[int, object] = {}  #: address -> the law's Python function (the calls' plain-Python twin)
+
+
+def stage_address(law: type) -> int:
+    """The address of stage law ``law``'s compiled ``force`` (compiled on first use); 0 if numba cannot compile
+    it, the reason then in ``law.compiled_reason``."""
+    return _address(law, "stage", law.force)
+
+
+def friction_address(law: type) -> int:
+    """The address of friction law ``law``'s compiled ``coefficient``; 0 if it has none numba can compile (a law
+    that only overrides ``kinetic(spec, speed)`` is Python), the reason then in ``law.compiled_reason``."""
+    if law.coefficient is FrictionLaw.coefficient:
+        law.compiled_reason = (f"friction law {law.name!r} gives its coefficient by kinetic(spec, speed) only "
+                               "(Python): define coefficient(mu_s, mu_k, p, speed) to compile it")
+        return 0
+    return _address(law, "friction", law.coefficient)
+
+
+def _address(law: type, family: str, fn) -> int:
+    if law in _compiled:
+        return _compiled[law][0]
+    if numba.config.DISABLE_JIT:  # nothing compiles: the address is a handle of the Python function
+        address, cfunc, reason = id(fn), None, ""
+    else:
+        cfunc, reason = _compile(law, family, fn)
+        address = cfunc.address if cfunc is not None else 0
+    law.compiled_reason = reason
+    _compiled[law] = (address, cfunc)
+    if address:
+        _python[address] = fn
+    return address
+
+
+def _compile(law: type, family: str, fn) -> tuple[object | None, str]:
+    """(the law's cfunc, "") or (None, why numba cannot compile it). Cached first; if that fails (a cache that
+    does not load counts too), once more uncached, whose error is the reason."""
+    try:
+        path = inspect.getfile(fn)
+    except TypeError:
+        path = "<unknown>"
+    name = f"{law.__name__}_{fn.__name__}_abi"
+    namespace = {"carray": carray}
+    exec(compile(_WRAPPERS[family].format(name=name), path, "exec"), namespace)
+    wrapper = namespace[name]
+    wrapper.__module__, wrapper.__qualname__ = fn.__module__, f"{fn.__qualname__}_abi"
+    for cache in (True, False):
+        try:
+            namespace["law"] = _jit(fn, cache)
+            return _cfunc(wrapper, _SIGNATURES[family], cache), ""
+        except Exception as exc:  # numba's typing or lowering errors, and whatever the law's code raises in them
+            reason = f"numba cannot compile {fn.__qualname__}: {_first_line(exc)}"
+    return None, reason
+
+
+def _jit(fn, cache: bool):
+    """The law's function under numba, cached beside its file when it has one."""
+    try:
+        return numba.njit(cache=cache)(fn)
+    except RuntimeError:  # "no locator available": a law without a source file (exec'd, a notebook's cell)
+        return numba.njit(fn)
+
+
+def _cfunc(wrapper, signature, cache: bool):
+    """The wrapper compiled to a C function of ``signature``, cached beside the law's file when it has one."""
+    try:
+        return numba.cfunc(signature, cache=cache)(wrapper)
+    except RuntimeError as exc:
+        if "locator" not in str(exc):
+            raise
+        return numba.cfunc(signature)(wrapper)
+
+
+def _first_line(exc: Exception) -> str:
+    """The informative line of a numba error (its first line names the pipeline step only; no terminal colours)."""
+    lines = [line.strip() for line in re.sub(r"\x1b\[[0-9;]*m", "", str(exc)).splitlines() if line.strip()]
+    lines = [line for line in lines if not line.startswith("Failed in ")] or lines or [type(exc).__name__]
+    return lines[0][:200]
+
+
+# ---- the calls: Python twins, and their compiled form by overload ----------------------------------------------
+
+def call_stage(address: int, k: float, b: float, p, at: int, n_p: int, x: float, xdot: float) -> float:
+    """F [N] of the stage law at ``address`` with parameters p[at:at + n_p], at compression x [m], rate ẋ [m/s]."""
+    return _python[address](k, b, p[at:at + n_p], x, xdot)
+
+
+def call_friction(address: int, mu_s: float, mu_k: float, p, at: int, n_p: int, speed: float) -> float:
+    """μ [-] of the friction law at ``address`` with parameters p[at:at + n_p] at slip speed [m/s]."""
+    return _python[address](mu_s, mu_k, p[at:at + n_p], speed)
+
+
+@overload(call_stage)
+def _call_stage_compiled(address, k, b, p, at, n_p, x, xdot):
+    def impl(address, k, b, p, at, n_p, x, xdot):
+        return _call_at_stage(address, k, b, _data_at(p, at), n_p, x, xdot)
+    return impl
+
+
+@overload(call_friction)
+def _call_friction_compiled(address, mu_s, mu_k, p, at, n_p, speed):
+    def impl(address, mu_s, mu_k, p, at, n_p, speed):
+        return _call_at_friction(address, mu_s, mu_k, _data_at(p, at), n_p, speed)
+    return impl
+
+
+def _indirect_call(c_signature):
+    """Codegen of a call to the C function of ``c_signature`` whose address is the first argument."""
+    def codegen(context, builder, signature, args):
+        fnty = ir.FunctionType(context.get_value_type(c_signature.return_type),
+                               [context.get_value_type(t) for t in c_signature.args])
+        return builder.call(builder.inttoptr(args[0], fnty.as_pointer()), args[1:])
+    return codegen
+
+
+@intrinsic
+def _call_at_stage(typingctx, address, k, b, p, n_p, x, xdot):
+    return types.float64(types.int64, *STAGE_SIGNATURE.args), _indirect_call(STAGE_SIGNATURE)
+
+
+@intrinsic
+def _call_at_friction(typingctx, address, mu_s, mu_k, p, n_p, speed):
+    return types.float64(types.int64, *FRICTION_SIGNATURE.args), _indirect_call(FRICTION_SIGNATURE)
+
+
+@intrinsic
+def _data_at(typingctx, arr, at):
+    """&arr[at] of a contiguous 1-D float64 array (a law's parameters inside a packed array)."""
+    if not (isinstance(arr, types.Array) and arr.ndim == 1 and arr.dtype == types.float64 and arr.layout == "C"):
+        return None
+
+    def codegen(context, builder, signature, args):
+        data = context.make_array(signature.args[0])(context, builder, args[0]).data
+        return builder.gep(data, [args[1]])
+    return _P(arr, types.intp), codegen
