@@ -18,7 +18,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+
+from .compile_cache import njit
 
 __all__ = ["solve_vector", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
            "forward_solve", "sparse_dot", "contiguous"]

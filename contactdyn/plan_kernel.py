@@ -26,9 +26,9 @@ written once, there. A tip law's kernel is built when the law has read M (its fi
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from scipy import sparse
 
+from .compile_cache import njit
 from .controllers import computed_torque as law
 from .linalg import lu_solve, mm, mtv, mv, sparse_dot
 from .plan_law import NO_REFERENCE, CompiledLaw, compiled_law, plan_inputs, write_time_part

@@ -30,8 +30,8 @@ import math
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
+from .compile_cache import njit
 from .constraints import force_columns
 from .controllers import ControlInput
 from .controllers.operational import OperationalSpace

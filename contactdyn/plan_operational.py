@@ -24,11 +24,12 @@ stick band (its direction is solved by :func:`contactdyn.friction.launch_directi
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from .compile_cache import njit
 from .controllers import operational_law as law
 from .controllers import task_pd_law
-from .controllers.operational import SINGULAR, OperationalSpace
+from .controllers.operational import OperationalSpace
+from .controllers.operational_law import SINGULAR
 from .controllers.pd import TaskPD
 from .friction import launching
 from .linalg import lu_solve, mtv

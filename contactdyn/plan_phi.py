@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
+from .compile_cache import njit
 from .rigid_body import NO_TABLE, rigid_terms
 from .trajectory import move_rows, move_table, ramp_rows, ramp_table
 

@@ -13,10 +13,10 @@ step by the plan's Python right-hand side instead (:func:`stepper`).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from scipy.integrate._ivp import dop853_coefficients as _coef
 
 from . import plan_kernel, plan_operational
+from .compile_cache import njit
 from .plan_kernel import DECLINED, KERNEL, OK
 from .plan_operational import OPERATIONAL
 
