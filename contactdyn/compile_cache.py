@@ -16,8 +16,10 @@ removed (a directory's mtime is refreshed by each process that uses it).
 
 Compiled modules decorate with :func:`njit` from here instead of numba's: numba's own ``njit``, with
 ``numba.config.CACHE_DIR`` (read when a cached function is decorated) pointed at the directory only
-while the function is decorated, so the user's own numba functions keep caching where they did. This
-module is imported only by compiled modules: ``contactdyn --help`` never imports numba.
+while the function is decorated, so the user's own numba functions keep caching where they did. Every
+numba compile of the package's functions, wherever a run triggers it, is a block of the compile notice
+(:mod:`contactdyn.notice`, by numba's ``numba:compile`` events): a first run says once that it compiles.
+This module is imported only by compiled modules: ``contactdyn --help`` never imports numba.
 """
 
 from __future__ import annotations
@@ -33,10 +35,11 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numba
+from numba.core import event
 
-from . import __version__
+from . import __version__, notice
 
-__all__ = ["njit", "directory", "cache_dir", "key", "compiled_modules", "PACKAGE"]
+__all__ = ["njit", "directory", "cache_dir", "key", "compiled_modules", "CompileNotice", "PACKAGE"]
 
 PACKAGE = Path(__file__).resolve().parent  #: the package's source folder
 HASH_CHARS = 12  #: [hex digits] of the source hash in KEY
@@ -120,3 +123,25 @@ def njit(*signatures, **options) -> Callable:
         function, signatures = signatures[0], ()
         return decorate(function)
     return decorate
+
+
+class CompileNotice(event.Listener):
+    """numba's compiles of the package's functions as blocks of :mod:`contactdyn.notice` (others ignored)."""
+
+    WHAT = "the fast path's kernels"
+
+    @staticmethod
+    def _ours(e: event.Event) -> bool:
+        function = getattr((e.data or {}).get("dispatcher"), "py_func", None)
+        return (getattr(function, "__module__", None) or "").startswith("contactdyn.")
+
+    def on_start(self, e: event.Event) -> None:
+        if self._ours(e):
+            notice.begin(self.WHAT)
+
+    def on_end(self, e: event.Event) -> None:
+        if self._ours(e):
+            notice.end()
+
+
+event.register("numba:compile", CompileNotice())

@@ -117,7 +117,7 @@ LAYERS = [
      "drives", "controllers", "limits", "posture", "system", "fastpath"],
     ["rhsplan", "plan_probe", "plan_kkt", "plan_rhs", "plan_fold", "plan_law", "plan_drives", "samples"],
     ["integrators", "dop853", "events", "transitions", "hybrid", "channels", "result", "run_check",
-     "physics_checks", "notice", "progress"],  # the loop
+     "physics_checks", "progress"],  # the loop (notice: shared, compile_cache reports to it)
     ["simulate", "sanity", "outcome", "metrics"],
     ["plots", "viewer", "sweep", "identify", "workprecision", "stability", "cli", "starter", "keys"],
 ]
