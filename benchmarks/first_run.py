@@ -5,7 +5,8 @@ For each scene (default: b1, then every other ``sims/*.toml``) two fresh process
 temporary folder): the first with ``NUMBA_CACHE_DIR`` pointing at a new empty folder (what a fresh
 ``pip install .`` meets: nothing compiled), the second with the same folder, now filled (a later
 process). Each wall time [s] is measured around the whole process (interpreter start, imports,
-compilation or cache loading, the run). Also: ``contactdyn --help`` (the console script's call,
+compilation or cache loading, the run), and so is its CPU time [s] (user + system: what the process
+itself spent, less inflated by other load on a shared machine). Also: ``contactdyn --help`` (the console script's call,
 ``contactdyn.cli.main``), median of ``--help-repeats`` processes [s], and whether the first run
 printed the compile notice (a stderr line containing "compiling").
 
@@ -25,6 +26,7 @@ import csv
 import json
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -53,12 +55,18 @@ def _environment(cache: str | None) -> dict[str, str]:
     return env
 
 
-def timed(args: list[str], cache: str | None, cwd: str) -> tuple[float, int, str]:
-    """(wall [s], exit code, stderr) of one ``python3 ARGS`` process."""
-    t0 = time.perf_counter()
+def _children_cpu() -> float:
+    """[s] CPU time (user + system) of the finished child processes so far."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def timed(args: list[str], cache: str | None, cwd: str) -> tuple[float, float, int, str]:
+    """(wall [s], CPU [s], exit code, stderr) of one ``python3 ARGS`` process."""
+    t0, c0 = time.perf_counter(), _children_cpu()
     done = subprocess.run([sys.executable, *args], cwd=cwd, env=_environment(cache), capture_output=True, text=True,
                           timeout=TIMEOUT)
-    return time.perf_counter() - t0, done.returncode, done.stderr
+    return time.perf_counter() - t0, _children_cpu() - c0, done.returncode, done.stderr
 
 
 def scene_row(scene: str, work: str) -> dict:
@@ -68,9 +76,10 @@ def scene_row(scene: str, work: str) -> dict:
     args = ["-m", "contactdyn.cli", "run", target, "--quiet"]
     with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
         load = os.getloadavg()[0]
-        first, rc1, err1 = timed(args, cache, work)
-        later, rc2, err2 = timed(args, cache, work)
+        first, first_cpu, rc1, err1 = timed(args, cache, work)
+        later, later_cpu, rc2, err2 = timed(args, cache, work)
     return {"scene": scene, "first_s": round(first, 2), "later_s": round(later, 2),
+            "first_cpu_s": round(first_cpu, 2), "later_cpu_s": round(later_cpu, 2),
             "notice": "compiling" in err1, "exit_codes": [rc1, rc2], "load_before": round(load, 2),
             "stderr_first": err1.strip()[-400:], "stderr_later": err2.strip()[-400:]}
 
@@ -91,12 +100,14 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="first_run_work_") as work:
         helps = help_time(args.help_repeats, work)
         print(f"contactdyn --help: {helps['median_s']:.3f} s (median of {args.help_repeats})", flush=True)
-        print(f"{'scene':24s} {'first [s]':>10s} {'later [s]':>10s}  notice  load", flush=True)
+        heads = ("first [s]", "later [s]", "first CPU", "later CPU")
+        print(f"{'scene':24s} " + " ".join(f"{h:>10s}" for h in heads) + "  notice  load", flush=True)
         for scene in scenes:
             row = scene_row(scene, work)
             rows.append(row)
             flag = "" if row["exit_codes"] == [0, 0] else f"  exit codes {row['exit_codes']}: {row['stderr_first']}"
-            print(f"{scene:24s} {row['first_s']:10.2f} {row['later_s']:10.2f}  {str(row['notice']):6s}  "
+            print(f"{scene:24s} {row['first_s']:10.2f} {row['later_s']:10.2f} {row['first_cpu_s']:10.2f} "
+                  f"{row['later_cpu_s']:10.2f}  {str(row['notice']):6s}  "
                   f"{row['load_before']:.2f}{flag}", flush=True)
     OUT.mkdir(parents=True, exist_ok=True)
     doc = {"help": helps, "scenes": rows, "cpus": os.cpu_count(), "python": platform.python_version(),
@@ -104,7 +115,8 @@ def main() -> None:
                                  text=True).stdout.strip()}
     (OUT / "first_run.json").write_text(json.dumps(doc, indent=1))
     with open(OUT / "first_run.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, ["scene", "first_s", "later_s", "notice", "load_before"], extrasaction="ignore")
+        w = csv.DictWriter(f, ["scene", "first_s", "later_s", "first_cpu_s", "later_cpu_s", "notice", "load_before"],
+                           extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
     print(f"-> {OUT / 'first_run.json'}, {OUT / 'first_run.csv'}")

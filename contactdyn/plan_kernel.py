@@ -74,14 +74,20 @@ def pack(floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
     return fb, ib
 
 
-@njit(cache=True)
-def matrix_of(fb, ib, k):
-    """Float array k of :func:`pack`'s buffers, as a (rows, columns) view."""
+#: the packed buffers' accessors take explicit signatures: their index k is a module constant at each call site,
+#: which numba would type as a literal and compile once per constant (~50 specializations, ~6 s of a first run)
+_FB, _IB = "float64[::1]", "int64[::1]"
+
+
+@njit([f"float64[:, ::1]({_FB}, {_IB}, int64)", f"int64[:, ::1]({_IB}, {_IB}, int64)"], cache=True)
+def matrix_of(buf, ib, k):
+    """Array k of :func:`pack`'s buffers (``buf``: fb for a float array, ib for an int array), as a (rows, columns)
+    view."""
     o, r, c = ib[3 * k], ib[3 * k + 1], ib[3 * k + 2]
-    return fb[o:o + r * c].reshape((r, c))
+    return buf[o:o + r * c].reshape((r, c))
 
 
-@njit(cache=True)
+@njit([f"{_FB}({_FB}, {_IB}, int64)", f"{_IB}({_IB}, {_IB}, int64)"], cache=True)
 def vector_of(buf, ib, k):
     """Array k of :func:`pack`'s buffers (``buf``: fb for a float array, ib for an int array), flat."""
     o, r, c = ib[3 * k], ib[3 * k + 1], ib[3 * k + 2]
@@ -96,7 +102,7 @@ def csr_of(plan) -> sparse.csr_matrix:
     return P
 
 
-@njit(cache=True)
+@njit(f"Tuple(({_FB}, float64[:, ::1], {_FB}, {_FB}))({_FB}, {_FB}, {_IB}, int64, int64, int64, int64)", cache=True)
 def kkt_of(phi, fb, ib, k_val, k_col, k_row, m):
     """(y, A, b, o) of y = P φ = [A, b, o] with P by rows in the packed arrays k_val, k_col, k_row (:func:`csr_of`);
     A (m, m) and b: copies, for the caller to fold into; o: the affine outputs, a view of y."""

@@ -175,13 +175,14 @@ def work_terms(work, nv, ng):
     """(H, h, g, R, pj, vj, aj, Jw) as views of a compiled caller's own buffer (:func:`phi_function`'s
     ``phi.work``), in :func:`write_phi`'s argument order: H (nv, nv) [kg·m²], h, g (nv, ng) [N·m or N], the
     joint's R (3, 3), p (3) [m], v (6) [m/s, rad/s], a at q̈ = 0 (6) [m/s², rad/s²] and the joint Jacobians
-    (6, nv)."""
+    (6, nv). The matrices are stored column by column (views in Fortran order), as Pinocchio's own arrays that a
+    Python caller passes: the functions they go to are compiled once, not once per order."""
     o = nv * nv
-    H = work[:o].reshape((nv, nv))
+    H = work[:o].reshape((nv, nv)).T
     h, g = work[o:o + nv], work[o + nv:o + nv + ng]
     o += nv + ng
-    R = work[o:o + 9].reshape((3, 3))
-    return H, h, g, R, work[o + 9:o + 12], work[o + 12:o + 18], work[o + 18:o + 24], work[o + 24:].reshape((6, nv))
+    R = work[o:o + 9].reshape((3, 3)).T
+    return H, h, g, R, work[o + 9:o + 12], work[o + 12:o + 18], work[o + 18:o + 24], work[o + 24:].reshape((nv, 6)).T
 
 
 @njit(cache=True)
