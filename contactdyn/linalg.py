@@ -33,8 +33,10 @@ except (ImportError, AttributeError):  # pragma: no cover
 
 
 def contiguous(a) -> np.ndarray:
-    """``a`` as the compiled functions take it: a C-contiguous float64 array (no copy when it is one)."""
-    return np.ascontiguousarray(a, dtype=float)
+    """``a`` as the compiled functions take it: a C-contiguous, writeable float64 array (no copy when it is one;
+    numba compiles a function again for a read-only array, e.g. a scene's gains broadcast to the axes)."""
+    a = np.ascontiguousarray(a, dtype=float)
+    return a if a.flags.writeable else a.copy()
 
 
 @njit(cache=True)
