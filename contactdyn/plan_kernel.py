@@ -110,7 +110,7 @@ def kkt_of(phi, fb, ib, k_val, k_col, k_row, m):
     return y, y[:m * m].copy().reshape((m, m)), y[m * m:m * m + m].copy(), y[m * m + m:]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def write_out(out, x, z, y, o, tau, nQ, o_y0, o_y1):
     """[ẋ, z, o, τ] into ``out`` with ẋ = [Q̇, Q̈, ẏ] (ẏ = y[o_y0:o_y1]); returns ẋ (a view) for the caller's
     own slots (a law's ż, impulse rates)."""
@@ -146,7 +146,9 @@ def fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ):
     return lu_solve(A, b), y0, Y
 
 
-@njit(cache=True)
+#: inline="always" (here and below): a helper compiled into its compiled callers, not as a level of its own
+#: (numba compiles each function with all it calls: ~10 s of case1_cart's first run over these helpers)
+@njit(cache=True, inline="always")
 def _tip_law(phi, x, u, A, b, o, fb, ib, c):
     """(τ, B, [a*, f_swap, ż]) of the force-reading tip law: u the inputs' time part, the state part U_x x + u_c
     (U_x by rows: a few nonzeros); c: INTS."""

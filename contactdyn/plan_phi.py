@@ -170,7 +170,9 @@ def write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramp
     return J6, a6, Rf
 
 
-@njit(cache=True)
+#: inline="always" (here and below): a helper compiled into its compiled callers, not as a level of its own
+#: (numba compiles each function with all it calls: ~10 s of case1_cart's first run over these helpers)
+@njit(cache=True, inline="always")
 def work_terms(work, nv, ng):
     """(H, h, g, R, pj, vj, aj, Jw) as views of a compiled caller's own buffer (:func:`phi_function`'s
     ``phi.work``), in :func:`write_phi`'s argument order: H (nv, nv) [kg·m²], h, g (nv, ng) [N·m or N], the
@@ -243,7 +245,7 @@ def frame_motion(R, pj, vj, aj, Jw, frame, support):
     return J6, a6, p, Rf
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def write_frame(phi, J6, a6, p, x, at):
     """φ's terms of one frame: its J's translation rows (3, nv) from at[1], J̇q̇'s linear part [m/s²] from at[2],
     p [m] and ṗ = J v [m/s] from at[3] (J6, a6: the frame's 6-row Jacobian and classical acceleration,
