@@ -202,3 +202,13 @@ def test_a_reader_that_leaves_early_is_not_an_error():
     proc.stdout.close()
     err = proc.stderr.read()
     assert proc.wait(timeout=120) == 0 and "error" not in err, err
+
+
+def test_help_imports_no_simulator():
+    """``contactdyn --help`` stays light (≤ 1 s on a loaded machine): numba, numpy and Pinocchio are not imported."""
+    import subprocess
+
+    code = ("import sys; from contactdyn.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in ('numba', 'numpy', 'pinocchio') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stderr

@@ -1,21 +1,59 @@
-"""The first run's compilation is announced (contactdyn.hybrid.notice), once, and only when it is slow."""
+"""The first run's compilation is announced (contactdyn.numerics.notice), once per process, and only when it is slow.
+
+No test here depends on wall time: the blocks are timed by a replaced clock, and a threshold of 0 says at once.
+"""
 
 from __future__ import annotations
 
-import time
+import numba
+import pytest
 
-import contactdyn.hybrid.notice as notice
+import contactdyn.numerics.compile_cache as compile_cache
+import contactdyn.numerics.notice as notice
+
+LINE = "contactdyn: compiling"
 
 
-def test_a_slow_build_is_announced_once_and_a_fast_one_not(monkeypatch, capsys):
-    monkeypatch.setattr(notice, "NOTICE_AFTER", 0.05)
-    monkeypatch.setattr(notice, "_said", type(notice._said)())
-    with notice.compiling("kernels"):
-        pass
-    time.sleep(0.1)
-    assert capsys.readouterr().err == ""
-    for _ in range(2):
+@pytest.fixture
+def watch(monkeypatch):
+    """A fresh process's watch, its clock at 0 s (advance it by setting ``now[0]``)."""
+    now = [0.0]
+    monkeypatch.setattr(notice, "_watch", notice._Watch())
+    monkeypatch.setattr(notice, "clock", lambda: now[0])
+    return now
+
+
+def test_a_threshold_of_zero_says_once_at_the_first_block(watch, monkeypatch, capsys):
+    monkeypatch.setattr(notice, "NOTICE_AFTER", 0.0)
+    for _ in range(3):
         with notice.compiling("kernels"):
-            time.sleep(0.2)
+            pass
     err = capsys.readouterr().err
-    assert err.count("contactdyn: compiling kernels") == 1 and "cached for later runs" in err
+    assert err.count(LINE) == 1 and f"{LINE} kernels" in err and "cached for later runs" in err
+
+
+def test_short_blocks_say_nothing_until_their_sum_passes_the_threshold(watch, monkeypatch, capsys):
+    monkeypatch.setattr(notice, "NOTICE_AFTER", 100.0)  # [s] of the fake clock; a block's timer waits 40-100 s
+    for start in (0.0, 60.0):
+        with notice.compiling("kernels"):
+            with notice.compiling("a callee"):  # nested: counted once
+                watch[0] = start + 60.0
+        assert capsys.readouterr().err == ""
+    assert notice._watch.spent == 120.0
+    with notice.compiling("the plan"):  # 120 s compiled already: said at once
+        pass
+    assert capsys.readouterr().err.count(f"{LINE} the plan") == 1
+
+
+def test_every_numba_compile_of_the_package_is_a_block_and_others_are_not(watch, monkeypatch, capsys):
+    monkeypatch.setattr(notice, "NOTICE_AFTER", 0.0)
+
+    def add_one(x):
+        return x + 1
+
+    numba.njit(add_one)(1)  # this test module's function: not the package's
+    assert capsys.readouterr().err == ""
+    add_one.__module__ = "contactdyn.a_module_for_the_test"
+    numba.njit(add_one)(1)  # compiled: the listener compile_cache registered says it
+    assert capsys.readouterr().err.count(f"{LINE} {compile_cache.CompileNotice.WHAT}") == 1
+    assert notice._watch.depth == 0

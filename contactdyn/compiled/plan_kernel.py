@@ -26,10 +26,10 @@ written once, there. A tip law's kernel is built when the law has read M (its fi
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from scipy import sparse
 
 from ..laws.controllers import computed_torque as law
+from ..numerics.compile_cache import njit
 from ..numerics.linalg import lu_solve, mm, mtv, mv, sparse_dot
 from .plan_law import NO_REFERENCE, CompiledLaw, compiled_law, plan_inputs, write_time_part
 from .plan_phi import work_terms, write_phi
@@ -74,14 +74,20 @@ def pack(floats: list, ints: list) -> tuple[np.ndarray, np.ndarray]:
     return fb, ib
 
 
-@njit(cache=True)
-def matrix_of(fb, ib, k):
-    """Float array k of :func:`pack`'s buffers, as a (rows, columns) view."""
+#: the packed buffers' accessors take explicit signatures: their index k is a module constant at each call site,
+#: which numba would type as a literal and compile once per constant (~50 specializations, ~6 s of a first run)
+_FB, _IB = "float64[::1]", "int64[::1]"
+
+
+@njit([f"float64[:, ::1]({_FB}, {_IB}, int64)", f"int64[:, ::1]({_IB}, {_IB}, int64)"], cache=True)
+def matrix_of(buf, ib, k):
+    """Array k of :func:`pack`'s buffers (``buf``: fb for a float array, ib for an int array), as a (rows, columns)
+    view."""
     o, r, c = ib[3 * k], ib[3 * k + 1], ib[3 * k + 2]
-    return fb[o:o + r * c].reshape((r, c))
+    return buf[o:o + r * c].reshape((r, c))
 
 
-@njit(cache=True)
+@njit([f"{_FB}({_FB}, {_IB}, int64)", f"{_IB}({_IB}, {_IB}, int64)"], cache=True)
 def vector_of(buf, ib, k):
     """Array k of :func:`pack`'s buffers (``buf``: fb for a float array, ib for an int array), flat."""
     o, r, c = ib[3 * k], ib[3 * k + 1], ib[3 * k + 2]
@@ -96,7 +102,7 @@ def csr_of(plan) -> sparse.csr_matrix:
     return P
 
 
-@njit(cache=True)
+@njit(f"Tuple(({_FB}, float64[:, ::1], {_FB}, {_FB}))({_FB}, {_FB}, {_IB}, int64, int64, int64, int64)", cache=True)
 def kkt_of(phi, fb, ib, k_val, k_col, k_row, m):
     """(y, A, b, o) of y = P φ = [A, b, o] with P by rows in the packed arrays k_val, k_col, k_row (:func:`csr_of`);
     A (m, m) and b: copies, for the caller to fold into; o: the affine outputs, a view of y."""
@@ -104,7 +110,7 @@ def kkt_of(phi, fb, ib, k_val, k_col, k_row, m):
     return y, y[:m * m].copy().reshape((m, m)), y[m * m:m * m + m].copy(), y[m * m + m:]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def write_out(out, x, z, y, o, tau, nQ, o_y0, o_y1):
     """[ẋ, z, o, τ] into ``out`` with ẋ = [Q̇, Q̈, ẏ] (ẏ = y[o_y0:o_y1]); returns ẋ (a view) for the caller's
     own slots (a law's ż, impulse rates)."""
@@ -140,7 +146,9 @@ def fold_solve(A, b, L, L_tau, tau, x, B, cols, nQ):
     return lu_solve(A, b), y0, Y
 
 
-@njit(cache=True)
+#: inline="always" (here and below): a helper compiled into its compiled callers, not as a level of its own
+#: (numba compiles each function with all it calls: ~10 s of case1_cart's first run over these helpers)
+@njit(cache=True, inline="always")
 def _tip_law(phi, x, u, A, b, o, fb, ib, c):
     """(τ, B, [a*, f_swap, ż]) of the force-reading tip law: u the inputs' time part, the state part U_x x + u_c
     (U_x by rows: a few nonzeros); c: INTS."""

@@ -30,7 +30,6 @@ import math
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from ..laws.controllers import ControlInput
 from ..laws.controllers.operational import OperationalSpace
@@ -38,6 +37,7 @@ from ..laws.trajectory import circle_reference, move_rows, move_table, ramp_rows
 from ..model.constraints import force_columns
 from ..model.dynamics import surface_keys, surface_points
 from ..model.phases import reference_at
+from ..numerics.compile_cache import njit
 from ..numerics.linalg import mv
 from .plan_phi import LWA
 from .plan_probe import affine_map

@@ -24,14 +24,15 @@ stick band (its direction is solved by :func:`contactdyn.model.friction.launch_d
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from ..laws.controllers import operational_law as law
 from ..laws.controllers import task_pd_law
-from ..laws.controllers.operational import SINGULAR, OperationalSpace
+from ..laws.controllers.operational import OperationalSpace
+from ..laws.controllers.operational_law import SINGULAR
 from ..laws.controllers.pd import TaskPD
 from ..laws.trajectory import ramp_rows, ramp_table
 from ..model.friction import launching
+from ..numerics.compile_cache import njit
 from ..numerics.linalg import lu_solve, mtv
 from .plan_kernel import DECLINED, OK, calls, csr_of, kkt_of, matrix_of, pack_with_phi, vector_of, write_out
 from .plan_law import NO_REFERENCE, reference_of, reference_rows, reference_tables
@@ -64,7 +65,9 @@ def law_in_call(ctl) -> int:
     return -1
 
 
-@njit(cache=True)
+#: inline="always" (here and below): a helper compiled into its compiled callers, not as a level of its own
+#: (numba compiles each function with all it calls: ~10 s of case1_cart's first run over these helpers)
+@njit(cache=True, inline="always")
 def _slip_direction(vt, r, band):
     """d of :func:`contactdyn.model.friction.slip_direction` for a 2-D slide: v_t/|v_t| while v_t·r > v_ε (``band``),
     else the mode's r."""
@@ -73,7 +76,7 @@ def _slip_direction(vt, r, band):
     return r.copy()
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
     """The column tilt of each 2-D slide into A (in place); False where a slide from rest is inside the band.
     tilt_i: [row r, φ's J_f offset, v_t's offset in o, launching]; tilt_f: [μ, r_mode (2)]; tilt_T: T (2, 3) flat;
@@ -94,7 +97,7 @@ def _tilt(A, o, phi, tilt_i, tilt_f, tilt_T, tilt_body, nQ, nv, band):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _impulse_rates(xd, z, o, rates_i, rates_f, band):
     """The impulse states' rates (∫F dt, ∫F_f dt per contact) into ẋ, as :func:`.plan_rhs.impulse_terms`
     gives them: rates_i = [ẋ slot, F from z?, F's index in z or o, kind (0 free, 1 stuck, 2 sliding 1-D,
@@ -119,7 +122,7 @@ def _impulse_rates(xd, z, o, rates_i, rates_f, band):
                 xd[i0 + 2] = -mu_F * d[1] + o[k_visc + 1]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _operational(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, nQ, nv, i_h, i_J, i_dr, i_p):
     """(τ [N·m or N], the task's Hadamard ratio) of the operational_space law (operational_law.torque)."""
     _, ko, do, k_null, kd_normal = vector_of(fb, ib, SCALARS)
@@ -135,7 +138,7 @@ def _operational(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, nQ, nv, i_h
                       vector_of(fb, ib, KD), tool_axis, vector_of(fb, ib, TARGET), ko, do, k_null, kd_normal)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _task_pd(phi, x, fb, ib, ref, set_points, R_tip, J6, nQ, nv, i_J, i_p, i_ff):
     """τ [N·m or N] of the task PD law (task_pd_law.torque): the tip's J from φ, J_ω and R from the first frame's
     terms (J6, R_tip) where the law holds an orientation; the feedforward φ[i_ff:i_ff + nv] (h or g; −1: none)."""

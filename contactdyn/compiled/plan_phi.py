@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 import pinocchio as pin
-from numba import njit
 
 from ..laws.trajectory import move_rows, move_table, ramp_rows, ramp_table
+from ..numerics.compile_cache import njit
 from ..robot.rigid_body import NO_TABLE, rigid_terms
 
 __all__ = ["phi_function", "write_phi", "write_phi_only", "work_terms", "copy_terms", "write_frame", "frame_motion",
@@ -170,18 +170,21 @@ def write_phi(t, x, H, h, g, R, pj, vj, aj, Jw, phi, at, moves, move_slots, ramp
     return J6, a6, Rf
 
 
-@njit(cache=True)
+#: inline="always" (here and below): a helper compiled into its compiled callers, not as a level of its own
+#: (numba compiles each function with all it calls: ~10 s of case1_cart's first run over these helpers)
+@njit(cache=True, inline="always")
 def work_terms(work, nv, ng):
     """(H, h, g, R, pj, vj, aj, Jw) as views of a compiled caller's own buffer (:func:`phi_function`'s
     ``phi.work``), in :func:`write_phi`'s argument order: H (nv, nv) [kg·m²], h, g (nv, ng) [N·m or N], the
     joint's R (3, 3), p (3) [m], v (6) [m/s, rad/s], a at q̈ = 0 (6) [m/s², rad/s²] and the joint Jacobians
-    (6, nv)."""
+    (6, nv). The matrices are stored column by column (views in Fortran order), as Pinocchio's own arrays that a
+    Python caller passes: the functions they go to are compiled once, not once per order."""
     o = nv * nv
-    H = work[:o].reshape((nv, nv))
+    H = work[:o].reshape((nv, nv)).T
     h, g = work[o:o + nv], work[o + nv:o + nv + ng]
     o += nv + ng
-    R = work[o:o + 9].reshape((3, 3))
-    return H, h, g, R, work[o + 9:o + 12], work[o + 12:o + 18], work[o + 18:o + 24], work[o + 24:].reshape((6, nv))
+    R = work[o:o + 9].reshape((3, 3)).T
+    return H, h, g, R, work[o + 9:o + 12], work[o + 12:o + 18], work[o + 18:o + 24], work[o + 24:].reshape((nv, 6)).T
 
 
 @njit(cache=True)
@@ -242,7 +245,7 @@ def frame_motion(R, pj, vj, aj, Jw, frame, support):
     return J6, a6, p, Rf
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def write_frame(phi, J6, a6, p, x, at):
     """φ's terms of one frame: its J's translation rows (3, nv) from at[1], J̇q̇'s linear part [m/s²] from at[2],
     p [m] and ṗ = J v [m/s] from at[3] (J6, a6: the frame's 6-row Jacobian and classical acceleration,

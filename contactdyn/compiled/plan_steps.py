@@ -13,9 +13,9 @@ step by the plan's Python right-hand side instead (:func:`stepper`).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 from scipy.integrate._ivp import dop853_coefficients as _coef
 
+from ..numerics.compile_cache import njit
 from . import plan_kernel, plan_operational
 from .plan_kernel import DECLINED, KERNEL, OK
 from .plan_operational import OPERATIONAL
@@ -25,18 +25,19 @@ _A, _B, _C = np.ascontiguousarray(_coef.A[:12, :12]), _coef.B.copy(), _coef.C[:1
 _E = np.ascontiguousarray(np.vstack((_coef.E5, _coef.E3)))  #: the error estimators' weights on K's 13 rows
 
 
-@njit(cache=True)
-def _call(kind, t, x, work, phi, u, fb, ib, out):
-    """The plan's compiled call of this ``kind`` at (t, x): its status, [ẋ, z, o, τ] in ``out`` (u: the tip law's
-    inputs' buffer of a plan_kernel call, unused by the operational one)."""
+def _u_of(kind: int, u: np.ndarray) -> np.ndarray | None:
+    """The compiled functions' u for a plan's call of this kind: the tip law's inputs' buffer of a plan_kernel call,
+    None for the operational call. Each compiled function below branches on ``u is None`` itself (no helper
+    between: numba compiles each function with all it calls, so a level less is one compile of both kernels less)
+    and numba drops the branch the None-ness rules out: a step of one kind compiles that kind's call only."""
     if kind == OPERATIONAL:
-        return plan_operational.call_at(t, x, work, phi, fb, ib, out)
+        return None
     assert kind == KERNEL
-    return plan_kernel.call_at(t, x, work, phi, u, fb, ib, out)
+    return u
 
 
 @njit(cache=True)
-def attempt(kind, work, phi, u, fb, ib, t, y, f, h, rtol, atol, A, B, C, E, out, y_new, block):
+def attempt(work, phi, u, fb, ib, t, y, f, h, rtol, atol, A, B, C, E, out, y_new, block):
     """(status, error norm) of one DOP853 step of h [s] from (t, y) with f = f(t, y); y_new and, in the scipy
     core's layout (:mod:`contactdyn.numerics.dop853`: f_new, stages 11, 12, –, y_new, stages 6–10), ``block`` written;
     ``out`` holds the FSAL call's [ẋ, z, o, τ]. Status DECLINED where a stage's call declines."""
@@ -50,7 +51,11 @@ def attempt(kind, work, phi, u, fb, ib, t, y, f, h, rtol, atol, A, B, C, E, out,
             for j in range(s):
                 acc += K[j, i] * A[s, j]
             ys[i] = y[i] + acc * h
-        if _call(kind, t + C[s] * h, ys, work, phi, u, fb, ib, out):
+        if u is None:
+            status = plan_operational.call_at(t + C[s] * h, ys, work, phi, fb, ib, out)
+        else:
+            status = plan_kernel.call_at(t + C[s] * h, ys, work, phi, u, fb, ib, out)
+        if status:
             return DECLINED, 0.0
         K[s] = out[:n]
     for i in range(n):
@@ -58,7 +63,11 @@ def attempt(kind, work, phi, u, fb, ib, t, y, f, h, rtol, atol, A, B, C, E, out,
         for j in range(12):
             acc += K[j, i] * B[j]
         y_new[i] = y[i] + h * acc
-    if _call(kind, t + h, y_new, work, phi, u, fb, ib, out):
+    if u is None:
+        status = plan_operational.call_at(t + h, y_new, work, phi, fb, ib, out)
+    else:
+        status = plan_kernel.call_at(t + h, y_new, work, phi, u, fb, ib, out)
+    if status:
         return DECLINED, 0.0
     K[12] = out[:n]
     e5 = e3 = 0.0
@@ -78,12 +87,16 @@ def attempt(kind, work, phi, u, fb, ib, t, y, f, h, rtol, atol, A, B, C, E, out,
 
 
 @njit(cache=True)
-def _derivatives(kind, work, phi, u, fb, ib, ts, Y, out, Yd):
-    """Yd[k] = ẋ at (ts[k], Y[k]) by the plan's compiled call, in order; the number of states done (fewer than
-    len(ts) where the call declines the next)."""
+def _derivatives(work, phi, u, fb, ib, ts, Y, out, Yd):
+    """Yd[k] = ẋ at (ts[k], Y[k]) by the plan's compiled call (u as :func:`_u_of`'s), in order; the number of
+    states done (fewer than len(ts) where the call declines the next)."""
     n = Y.shape[1]
     for k in range(ts.size):
-        if _call(kind, ts[k], Y[k], work, phi, u, fb, ib, out):
+        if u is None:
+            status = plan_operational.call_at(ts[k], Y[k], work, phi, fb, ib, out)
+        else:
+            status = plan_kernel.call_at(ts[k], Y[k], work, phi, u, fb, ib, out)
+        if status:
             return k
         Yd[k] = out[:n]
     return ts.size
@@ -99,7 +112,11 @@ def derivatives(kind: int, inputs, layout: tuple[int, int, int, int], fun):
         ts, Y = np.ascontiguousarray(ts, dtype=float), np.ascontiguousarray(Y, dtype=float)
         Yd = np.empty((len(ts), n))
         args = inputs()
-        done = 0 if args is None else _derivatives(kind, *args, ts, Y, np.empty(size), Yd)
+        if args is None:
+            done = 0
+        else:
+            work, phi, u, fb, ib = args
+            done = _derivatives(work, phi, _u_of(kind, u), fb, ib, ts, Y, np.empty(size), Yd)
         for k in range(done, len(ts)):
             Yd[k] = fun(float(ts[k]), Y[k])
         return Yd
@@ -124,7 +141,9 @@ def stepper(plan, kind: int, inputs, layout: tuple[int, int, int, int]):
         if args is None:
             return None
         out, y_new, block = np.empty(size), np.empty(n), np.empty((10, n))  # (block's row 3 is not read)
-        status, err = attempt(kind, *args, t, y, f, h, rtol, atol, _A, _B, _C, _E, out, y_new, block)
+        work, phi, u, fb, ib = args
+        status, err = attempt(work, phi, _u_of(kind, u), fb, ib, t, y, f, h, rtol, atol, _A, _B, _C, _E, out, y_new,
+                              block)
         if status:
             return None
         ring.append((t + h, y_new, out[n:n + m], out[n + m:n + m + no]))

@@ -56,12 +56,12 @@ from ..numerics.integrators import (
     jacobian_eigenvalues,
     stability_bound,
 )
+from ..numerics.notice import compiling
 from ..output.channels import Held, Segment, output_grid, sample_states
 from ..output.physics_checks import StartAudit, run_checks, violations
 from ..output.result import Result
 from ..scene.budget import STEPS_BASE, step_budget
 from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
-from .notice import compiling
 from .progress import CALLS_PER_STEP, OverBudget, Progress, Work
 from .transitions import Transitions
 

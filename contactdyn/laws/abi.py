@@ -20,7 +20,8 @@ compiled, an address is a handle of the law's Python function, and the same call
 Caching: the compiled law is cached on disk by numba (``cache=True``). A cfunc made in a factory as a closure
 is not (numba keys a closure's cache on its pickled cells, and a dispatcher pickles with a new id in every
 process), so the wrapper is a closure-free function generated from source and attributed to the law's own
-file: numba caches it beside the law's module, and an edit of that file recompiles it.
+file: numba caches it in the package's compiled-code directory (:mod:`contactdyn.numerics.compile_cache`, keyed
+by this module's source among others), and an edit of the law's file recompiles it.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from llvmlite import ir
 from numba import carray, types
 from numba.extending import intrinsic, overload
 
+from ..numerics.compile_cache import cfunc, njit
 from .friction_laws import FrictionLaw
 
 __all__ = ["STAGE_SIGNATURE", "FRICTION_SIGNATURE", "stage_address", "friction_address", "call_stage",
@@ -108,21 +110,21 @@ def _compile(law: type, family: str, fn) -> tuple[object | None, str]:
 
 
 def _jit(fn, cache: bool):
-    """The law's function under numba, cached beside its file when it has one."""
+    """The law's function under numba, cached (compile_cache's directory) when it has a source file."""
     try:
-        return numba.njit(cache=cache)(fn)
+        return njit(cache=cache)(fn)
     except RuntimeError:  # "no locator available": a law without a source file (exec'd, a notebook's cell)
-        return numba.njit(fn)
+        return njit(fn)
 
 
 def _cfunc(wrapper, signature, cache: bool):
-    """The wrapper compiled to a C function of ``signature``, cached beside the law's file when it has one."""
+    """The wrapper compiled to a C function of ``signature``, cached when the law has a source file."""
     try:
-        return numba.cfunc(signature, cache=cache)(wrapper)
+        return cfunc(signature, cache=cache)(wrapper)
     except RuntimeError as exc:
         if "locator" not in str(exc):
             raise
-        return numba.cfunc(signature)(wrapper)
+        return cfunc(signature)(wrapper)
 
 
 def _first_line(exc: Exception) -> str:

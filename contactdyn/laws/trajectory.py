@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+
+from ..numerics.compile_cache import njit
 
 __all__ = ["Corner", "Move", "Ramp", "Reference", "profile", "profile_corners", "merge_corners",
            "min_span", "move_rows", "move_table", "ramp_rows", "ramp_table", "RAMP_KINDS"]

@@ -33,9 +33,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..laws.abi import call_stage, stage_address
+from ..numerics.compile_cache import njit
 from ..numerics.linalg import dot3
 from .chain import NodeKind
 from .contact import Contact, DirectionalChain, Kinematics

@@ -20,8 +20,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, types
+from numba import types
 from numba.extending import intrinsic, overload
+
+from .compile_cache import njit
 
 __all__ = ["solve_vector", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
            "forward_solve", "sparse_dot", "contiguous", "dot3"]
@@ -35,8 +37,10 @@ except (ImportError, AttributeError):  # pragma: no cover
 
 
 def contiguous(a) -> np.ndarray:
-    """``a`` as the compiled functions take it: a C-contiguous float64 array (no copy when it is one)."""
-    return np.ascontiguousarray(a, dtype=float)
+    """``a`` as the compiled functions take it: a C-contiguous, writeable float64 array (no copy when it is one;
+    numba compiles a function again for a read-only array, e.g. a scene's gains broadcast to the axes)."""
+    a = np.ascontiguousarray(a, dtype=float)
+    return a if a.flags.writeable else a.copy()
 
 
 def dot3(a: np.ndarray, b: np.ndarray) -> float:

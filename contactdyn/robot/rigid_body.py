@@ -18,7 +18,8 @@ model when built. Units: [m], [rad], [kg], SI throughout.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..numerics.compile_cache import njit
 
 __all__ = ["rigid_table", "rigid_terms", "NO_TABLE"]
 

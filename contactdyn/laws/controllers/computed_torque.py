@@ -16,8 +16,8 @@ D_f: 0 rows).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ...numerics.compile_cache import njit
 from ...numerics.linalg import mm, mtm, mtv, mv, pinv
 
 __all__ = ["pinv", "torque", "increments", "pinv_stack", "torque_stack", "increments_stack"]

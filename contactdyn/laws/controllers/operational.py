@@ -37,15 +37,11 @@ from ...numerics.linalg import contiguous
 from . import operational_law as law
 from .base import BindContext, ControlInput, Controller, register
 from .dynamic import K_NULL, KP, KV, _axes, _check_gain_size, _gain
+from .operational_law import SINGULAR
 from .pd import KD_TASK, KP_TASK, read_tool_axis
 
 __all__ = ["OperationalSpace", "OperationalSpaceConfig", "SINGULAR"]
 
-#: smallest det(Λ⁻¹) / Π diag(Λ⁻¹) (Hadamard ratio in (0, 1]: the product of sin² of the angles, in the
-#: metric H⁻¹, between each task direction and the ones before it) the law accepts; below it the task is
-#: singular: one direction within ~1e-4 rad of the others, Λ and the torques beyond what the arm can give
-#: (the writing task runs at 2e-4 on the UR10, 0.013 on the Panda and the 5-DOF writer, 0.27 on the UR5)
-SINGULAR = 1e-8
 _NONE = np.empty(0)  #: no reference, no tool axis (operational_law's "none")
 _NO_ROTATION = np.empty((0, 3))
 

@@ -16,7 +16,7 @@ H = L Lᵀ (:func:`~contactdyn.numerics.linalg.cholesky`), Λ (…) by :func:`~.
 LAPACK bindings. Arguments are C-contiguous float64
 arrays; "none" is an empty array (no reference: x_d, v_d, a_d of size 0; no tool axis: ``tool_axis``,
 ``target`` of size 0 and R_tip (0, 3)). :func:`torque` also returns the task's Hadamard ratio
-det(Λ⁻¹) / Π diag(Λ⁻¹), which the caller checks against ``operational.SINGULAR`` (in Python: the error is
+det(Λ⁻¹) / Π diag(Λ⁻¹), which the caller checks against :data:`SINGULAR` (in Python: the error is
 raised there).
 """
 
@@ -25,11 +25,17 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from ...numerics.compile_cache import njit
 from ...numerics.linalg import cholesky, forward_solve, lu_solve, mm, mtm, mtv, mv
 
-__all__ = ["perpendicular", "hadamard_ratio", "torque"]
+__all__ = ["perpendicular", "hadamard_ratio", "torque", "SINGULAR"]
+
+#: smallest det(Λ⁻¹) / Π diag(Λ⁻¹) (Hadamard ratio in (0, 1]: the product of sin² of the angles, in the
+#: metric H⁻¹, between each task direction and the ones before it) the law accepts; below it the task is
+#: singular: one direction within ~1e-4 rad of the others, Λ and the torques beyond what the arm can give
+#: (the writing task runs at 2e-4 on the UR10, 0.013 on the Panda and the 5-DOF writer, 0.27 on the UR5)
+SINGULAR = 1e-8  # (here, with the compiled code that reads it: contactdyn.numerics.compile_cache)
 
 
 @njit(cache=True)

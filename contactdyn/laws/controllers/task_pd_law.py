@@ -27,8 +27,8 @@ empty; no feedforward: tau_ff of size 0).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ...numerics.compile_cache import njit
 from ...numerics.linalg import mtv, mv
 
 __all__ = ["orientation_error", "moment", "torque"]

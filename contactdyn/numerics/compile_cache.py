@@ -1,0 +1,166 @@
+"""Where the package's compiled code is cached: one directory per build of the package, so no stale code is loaded.
+
+numba's ``cache=True`` checks a cached function only against its own source file (mtime and size): a
+change to a compiled function it calls (in ``linalg.py``, say), or an upgrade that leaves a file's
+size and time alike, would load old machine code. Here the cache directory is keyed instead: KEY =
+``contactdyn-<version>-<hash>``, the hash being the first HASH_CHARS hex digits of SHA-256 over every
+compiled module's path and source (the modules that take :func:`njit` from here). An edit to any of
+them, or another version, starts a fresh directory; nothing ever needs deleting by hand. (numba also
+freezes the global constants a compiled function reads: they live in compiled modules, so the hash
+covers them; ``tests/test_compile_cache.py`` checks that no compiled function reads one from elsewhere.)
+
+The directory: ``$NUMBA_CACHE_DIR/KEY`` when the user set numba's NUMBA_CACHE_DIR, else
+``$XDG_CACHE_HOME/contactdyn/numba/KEY`` (``~/.cache/contactdyn/numba/KEY``), else, where that cannot
+be written, ``<tempdir>/contactdyn-numba-<uid>/KEY``. Sibling keys unused for STALE_AFTER days are
+removed (a directory's mtime is refreshed by each process that uses it).
+
+Compiled modules decorate with :func:`njit` from here instead of numba's: numba's own ``njit``, with
+``numba.config.CACHE_DIR`` (read when a cached function is decorated) pointed at the directory only
+while the function is decorated, so the user's own numba functions keep caching where they did. Every
+numba compile of the package's functions, wherever a run triggers it, is a block of the compile notice
+(:mod:`contactdyn.numerics.notice`, by numba's ``numba:compile`` events): a first run says once that it compiles.
+This module is imported only by compiled modules: ``contactdyn --help`` never imports numba.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import hashlib
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import numba
+from numba.core import event
+
+from .. import __version__
+from . import notice
+
+__all__ = ["njit", "cfunc", "directory", "cache_dir", "key", "compiled_modules", "CompileNotice", "PACKAGE"]
+
+PACKAGE = Path(__file__).resolve().parents[1]  #: the package's source folder (contactdyn/)
+HASH_CHARS = 12  #: [hex digits] of the source hash in KEY
+STALE_AFTER = 30.0  #: [days] a sibling key unused this long is removed
+_MARK = "compile_cache import "  #: an import from here makes a module a compiled one
+
+
+def compiled_modules(package: Path = PACKAGE) -> list[Path]:
+    """The package's modules that compile functions (import :func:`njit` or :func:`cfunc` from here), sorted."""
+    return sorted(p for p in package.rglob("*.py") if p.name != "compile_cache.py" and _MARK in p.read_text("utf-8"))
+
+
+def key(package: Path = PACKAGE, version: str = __version__) -> str:
+    """``contactdyn-<version>-<hash of the compiled modules' paths and sources>``."""
+    digest = hashlib.sha256()
+    for path in compiled_modules(package):
+        digest.update(path.relative_to(package).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return f"contactdyn-{version}-{digest.hexdigest()[:HASH_CHARS]}"
+
+
+def _root(environ: Mapping[str, str]) -> Path:
+    """The folder the keys live in: the user's NUMBA_CACHE_DIR, else the user's cache folder."""
+    if environ.get("NUMBA_CACHE_DIR"):
+        return Path(environ["NUMBA_CACHE_DIR"]).expanduser()
+    user = Path(environ["XDG_CACHE_HOME"]) if environ.get("XDG_CACHE_HOME") else Path.home() / ".cache"
+    return user / "contactdyn" / "numba"
+
+
+def _writable(folder: Path) -> bool:
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
+
+
+def _prune(root: Path, keep: str) -> None:
+    """Remove the keys in ``root`` other than ``keep`` that no process used for STALE_AFTER days."""
+    oldest = time.time() - STALE_AFTER * 86400.0  # [s] since the epoch
+    for entry in root.glob("contactdyn-*"):
+        try:
+            if entry.name != keep and entry.is_dir() and entry.stat().st_mtime < oldest:
+                shutil.rmtree(entry, ignore_errors=True)
+        except OSError:
+            continue
+
+
+def cache_dir(environ: Mapping[str, str], package: Path = PACKAGE) -> Path:
+    """The compiled code's directory for this environment and package (created; see the module's docstring)."""
+    name = key(package)
+    fallback = Path(tempfile.gettempdir()) / f"contactdyn-numba-{getattr(os, 'getuid', str)()}"
+    for root in (_root(environ), fallback):
+        if _writable(root / name):
+            with contextlib.suppress(OSError):
+                os.utime(root / name)  # in use: not stale
+            _prune(root, name)
+            return root / name
+    return fallback / name  # nothing writable: numba falls back to its own locations (as without this module)
+
+
+@functools.cache
+def directory() -> Path:
+    """This process's compiled-code directory (found once)."""
+    return cache_dir(os.environ)
+
+
+@contextlib.contextmanager
+def _cached_here(cache: bool):
+    """numba's cache directory set to :func:`directory` while a cached function is decorated (where numba
+    reads it), then the user's setting again."""
+    if not cache:
+        yield
+        return
+    saved = numba.config.CACHE_DIR
+    numba.config.CACHE_DIR = str(directory())
+    try:
+        yield
+    finally:
+        numba.config.CACHE_DIR = saved
+
+
+def cfunc(signature, **options) -> Callable:
+    """numba's ``cfunc(signature, **options)``; with ``cache=True`` its cache lives in :func:`directory`."""
+    def decorate(function: Callable) -> Callable:
+        with _cached_here(options.get("cache", False)):
+            return numba.cfunc(signature, **options)(function)
+
+    return decorate
+
+
+def njit(*signatures, **options) -> Callable:
+    """numba's ``njit(*signatures, **options)``; with ``cache=True`` its cache lives in :func:`directory`."""
+    def decorate(function: Callable) -> Callable:
+        with _cached_here(options.get("cache", False)):
+            return numba.njit(*signatures, **options)(function)
+
+    if len(signatures) == 1 and callable(signatures[0]) and not options:  # bare @njit
+        function, signatures = signatures[0], ()
+        return decorate(function)
+    return decorate
+
+
+class CompileNotice(event.Listener):
+    """numba's compiles of the package's functions as blocks of :mod:`contactdyn.numerics.notice` (others ignored)."""
+
+    WHAT = "the fast path's kernels"
+
+    @staticmethod
+    def _ours(e: event.Event) -> bool:
+        function = getattr((e.data or {}).get("dispatcher"), "py_func", None)
+        return (getattr(function, "__module__", None) or "").startswith("contactdyn.")
+
+    def on_start(self, e: event.Event) -> None:
+        if self._ours(e):
+            notice.begin(self.WHAT)
+
+    def on_end(self, e: event.Event) -> None:
+        if self._ours(e):
+            notice.end()
+
+
+event.register("numba:compile", CompileNotice())
