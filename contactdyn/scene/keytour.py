@@ -236,10 +236,11 @@ TOUR: tuple[str, ...] = (_FULL, _ROBOT + _NORMALS, _ROBOT + _PD, _ROBOT + _DYNAM
 
 
 def _laws_document() -> str:
-    """A chain with one stage per registered stage law, a contact per friction law and a phase per controller that
-    declares its parameters, each with the declared parameters' example values (:mod:`contactdyn.laws.params`): a law
-    added later, a user's included, is toured without an edit here."""
+    """A chain with one stage per registered stage law, a contact per friction law, a phase per controller that
+    declares its parameters and a body per drive kind, each with the declared parameters' example values
+    (:mod:`contactdyn.laws.params`): a law added later, a user's included, is toured without an edit here."""
     from ..laws.controllers import CONTROLLERS
+    from ..laws.drive_kinds import DRIVE_KINDS
     from ..laws.friction_laws import FRICTION_LAWS
     from ..laws.stage_laws import STAGE_LAWS
 
@@ -269,6 +270,12 @@ name = "{name}"
 point = [0.0, 0.0, 0.0]
 normal.direction = [0.0, 0.0, 1.0]
 tangent = {{ model = "friction", directions = [[1.0, 0.0, 0.0]], law = "{name}", mu_s = 0.5, mu_k = 0.4{own(law)} }}
+'''
+    for name, kind in DRIVE_KINDS.items():
+        doc += f'''
+[body.drive_{name}]
+mass = 1.0
+drive = {{ kind = "{name}"{own(kind)} }}
 '''
     return doc
 
