@@ -280,6 +280,15 @@ drive = {{ kind = "{name}"{own(kind)} }}
     return doc
 
 
+def _drive_documents() -> tuple[str, ...]:
+    """A robot driven by each registered drive kind, its declared parameters at their example values."""
+    from ..laws.drive_kinds import DRIVE_KINDS
+
+    return tuple(_ROBOT + f'[robot.drive]\nkind = "{name}"\n' + "".join(f"{p.name} = {p.sample()!r}\n"
+                                                                       for p in kind.params)
+                 for name, kind in DRIVE_KINDS.items())
+
+
 def tour() -> tuple[str, ...]:
     """Every document of the tour: :data:`TOUR` and those written from the registries' declarations."""
-    return (*TOUR, _laws_document())
+    return (*TOUR, _laws_document(), *_drive_documents())
