@@ -250,22 +250,27 @@ class Drives:
         saturated = np.zeros(n, bool)
         power = dissipation = 0.0
         folded = sat_cmd is not None and sat_cmd is not cmd
-        sat_cmd = cmd if sat_cmd is None else sat_cmd
+        # Python floats: the kinds' arithmetic is the same IEEE double arithmetic, without NumPy's per-scalar cost
+        xs, cmds = x.tolist(), cmd.tolist()
+        sats = sat_cmd.tolist() if folded else cmds
         for i, (to_voltage, force, spec, c, m, has_voltage, u_max) in enumerate(self._laws):
-            qd = x[nQ + c]
-            theta, omega = (x[m], x[nQ + m]) if m >= 0 else (math.nan, math.nan)
+            qd = xs[nQ + c]
+            if m >= 0:
+                theta, omega = xs[m], xs[nQ + m]
+            else:
+                theta = omega = math.nan
             if has_voltage:
                 by_voltage = voltage is not None and voltage[i]
-                ui = cmd[i] if by_voltage else to_voltage(spec, sat_cmd[i], qd, omega)
-                saturated[i] = clip and abs(ui) > u_max
-                if saturated[i]:
+                ui = cmds[i] if by_voltage else to_voltage(spec, sats[i], qd, omega)
+                if clip and abs(ui) > u_max:
+                    saturated[i] = True
                     ui = math.copysign(u_max, ui)
                 elif folded and not by_voltage:
-                    ui = to_voltage(spec, cmd[i], qd, omega)
+                    ui = to_voltage(spec, cmds[i], qd, omega)
                 u[i] = ui
             else:
-                ui = cmd[i]
-            f_coord, f_motor, p, lost = force(spec, ui, x[c], qd, theta, omega)
+                ui = cmds[i]
+            f_coord, f_motor, p, lost = force(spec, ui, xs[c], qd, theta, omega)
             applied[i] = f_coord
             f[c] += f_coord
             if m >= 0:
