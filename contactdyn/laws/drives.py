@@ -46,7 +46,7 @@ class DriveSpec:
     ``DriveSpec("dc_motor", R=0.272, C_M=0.061, J=4.5e-4)``: the parameters not given take their declared defaults.
     Immutable."""
 
-    #: the kind's methods held as values [see DriveKind]
+    #: the kind's transmission figures, each computed once by the kind's method of that name (DriveKind)
     DERIVED = ("n_speed", "n_torque", "motor_inertia", "reflected_inertia", "natural_frequency")
 
     kind: str
