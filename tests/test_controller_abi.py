@@ -83,3 +83,27 @@ def test_layout_and_control_arrays_agree_with_control_input():
     assert set(NOT_IN_LAYOUT) <= set(names)
     layout = layout_of(3, 2)
     assert layout[-1] == 1 + 3 + 3 + 9 + 3 + 3 + 3 + 3 + 9 + 3 + 9 + 2 + 9 + 9 + 3
+
+
+def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedance, monkeypatch):
+    """examples/impedance_press.toml: the mode on the compiled call (the law by address), its run the one of the
+    law's Python command (the address forced to 0) to 1e-9."""
+    import warnings
+
+    from contactdyn import load_scene, simulate
+
+    def run():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return simulate(load_scene(EXAMPLES / "impedance_press.toml"))
+
+    new = run()
+    assert [row["path"] for row in new.stats["paths"].values()] == ["compiled call"]
+    monkeypatch.setattr(abi, "controller_address", lambda cls: 0)
+    from contactdyn.compiled import plan_operational
+    monkeypatch.setattr(plan_operational, "controller_address", lambda cls: 0)
+    old = run()
+    assert [row["path"] for row in old.stats["paths"].values()] == ["compiled plan, law in Python"]
+    for channel in ("q", "contact.tip.F_n"):
+        scale = np.abs(old[channel]).max()
+        assert np.abs(new[channel] - old[channel]).max() <= 1e-9 * scale, channel
