@@ -107,3 +107,11 @@ def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedan
     for channel in ("q", "contact.tip.F_n"):
         scale = np.abs(old[channel]).max()
         assert np.abs(new[channel] - old[channel]).max() <= 1e-9 * scale, channel
+
+
+def test_a_controller_that_reads_its_own_config_is_declared():
+    from contactdyn.laws.controllers.pd import JointPD, TaskPD
+
+    for cls in (JointPD, TaskPD):  # their own read (a staticmethod)
+        assert abi.controller_address(cls) == 0
+        assert "reads its own config" in cls.compiled_reason

@@ -171,7 +171,7 @@ def _declined(cls: type) -> str:
         return f"controller {cls.name!r} has states: not compiled yet"
     if cls.outputs != "torque":
         return f"controller {cls.name!r} outputs {cls.outputs}: not compiled yet"
-    if cls.read.__func__ is not Controller.read.__func__:
+    if getattr(cls.read, "__func__", cls.read) is not Controller.read.__func__:  # (a staticmethod has none)
         return f"controller {cls.name!r} reads its own config (not its declared parameters, Controller.params)"
     return ""
 
