@@ -18,12 +18,23 @@ EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
 @pytest.fixture(scope="module")
 def impedance():
+    """examples/my_laws.py's Impedance; the registries and imports left as they were after this module's tests."""
+    import contactdyn.scene.user_laws as user_laws
+    from contactdyn.laws.controllers import CONTROLLERS
+
+    controllers, imported, state = dict(CONTROLLERS), dict(user_laws.IMPORTED), dict(user_laws._state)
     sys.path.insert(0, str(EXAMPLES))
     try:
         import my_laws
         yield my_laws.Impedance
     finally:
         sys.path.remove(str(EXAMPLES))
+        sys.modules.pop("my_laws", None)
+        CONTROLLERS.clear()
+        CONTROLLERS.update(controllers)
+        user_laws.IMPORTED.clear()
+        user_laws.IMPORTED.update(imported)
+        user_laws._state.update(state)
 
 
 def _random_input(rng, nv: int) -> ControlInput:

@@ -211,7 +211,8 @@ def call(t, phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
     rates, τ the law's command [N·m or N], as plan_kernel.call's ``out``). fb, ib: the plan's constants
     (:func:`.plan_kernel.pack`, indices above); INTS: sizes and φ's offsets of h and the tip's J, J̇q̇,
     p (ṗ after it), ẏ's rows in y; J6, drift6, R_tip: the tip's 6 Jacobian rows, J̇q̇ and its rotation (none
-    without a tool axis); ref = [x_d, ẋ_d, ẍ_d] [m, m/s, m/s²] the reference (none without), F_d [N] the set-points."""
+    without a tool axis); ref = [x_d, ẋ_d, ẍ_d] [m, m/s, m/s²] the reference (none without), F_d [N] the set-points;
+    t [s] the time (a user's controller reads it)."""
     m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1, kind, i_ff = vector_of(ib, ib, INTS)
     band = vector_of(fb, ib, SCALARS)[0]  # v_ε [m/s]
     y, A, b, o = kkt_of(phi, fb, ib, P_VAL, P_COL, P_ROW, m)
