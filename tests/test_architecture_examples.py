@@ -11,6 +11,7 @@ import pytest
 
 from contactdyn import parse_scene, simulate
 from contactdyn.laws.controllers import CONTROLLERS
+from contactdyn.laws.drive_kinds import DRIVE_KINDS
 from contactdyn.laws.stage_laws import STAGE_LAWS
 from contactdyn.model.system import System
 
@@ -29,13 +30,12 @@ def example(name: str) -> dict:
 
 @pytest.fixture(autouse=True)
 def _registries():
-    """Examples register a law or a controller; leave the registries as they were."""
-    laws, controllers = dict(STAGE_LAWS), dict(CONTROLLERS)
+    """Examples register a law, a controller or a drive kind; leave the registries as they were."""
+    saved = [(registry, dict(registry)) for registry in (STAGE_LAWS, CONTROLLERS, DRIVE_KINDS)]
     yield
-    STAGE_LAWS.clear()
-    STAGE_LAWS.update(laws)
-    CONTROLLERS.clear()
-    CONTROLLERS.update(controllers)
+    for registry, entries in saved:
+        registry.clear()
+        registry.update(entries)
 
 
 def axis_scene(duration: float, *, normal: dict | None = None, controller: dict | None = None, v0: float = 0.0,
@@ -106,11 +106,29 @@ def test_controller_example_brakes_the_axis_exponentially_on_the_compiled_path()
     assert r.stats["compiled_modes"] >= 1 and not r.stats["fallback_modes"]
 
 
-def test_drive_example_reflects_the_rotor_inertia_through_its_gear():
-    drive = example("drive")["DC_MOTOR"]
-    system = System(axis_scene(0.1, drive=drive))
+def test_drive_example_reflects_its_rotor_and_runs_compiled_as_its_dc_motor_twin():
+    import copy
+    import tomllib
+
+    from contactdyn.scene.scene_file import sims_dir
+
+    example("drive")
+    J, N = 4.52e-4, 160.0  # [kg·m²], [-] case 2's rotor and speed ratio
+    system = System(axis_scene(0.1, drive={"kind": "current_motor", "J": J, "N": N}))
     x, _ = system.initial_state()
     system.robot.update(x[:1], x[system.nQ:system.nQ + 1])
     reflected = system.mass_matrix()[0, 0] - system.robot.H[0, 0]
-    assert reflected == pytest.approx(drive["N"] * drive["N_star"] * drive["J"], rel=1e-12)  # N N* J [kg]
-    assert system.fast_path_gaps == []  # motors are compiled: the plan calls Drives.apply per call
+    assert reflected == pytest.approx(N * N * J, rel=1e-12)  # N² J [kg]
+    assert system.fast_path_gaps == []  # affine: the plan reads its law by probes
+    # case 2's writer through its approach and impact; the twin: a DC motor with N* = N and no voltage limit
+    doc = tomllib.loads((sims_dir() / "case2_writer_motors.toml").read_text())
+    doc["duration"] = 1.0
+    twin = copy.deepcopy(doc)
+    twin["robot"]["drive"].update(N_star=N, J=J, N=N)
+    doc["robot"]["drive"] = {"kind": "current_motor", "J": J, "N": N}
+    mine, builtin = simulate(parse_scene(doc)), simulate(parse_scene(twin))
+    assert [e["kind"] for e in mine.events] == ["touch", "phase"]  # the impact, with the rotors in the momentum law
+    for channel in ("q", "v", "tau", "contact.tip.F_n"):
+        scale = np.abs(builtin[channel]).max()
+        assert np.abs(mine[channel] - builtin[channel]).max() <= 1e-12 * scale, channel
+    assert {row["path"] for row in mine.stats["paths"].values()} == {"compiled call"}

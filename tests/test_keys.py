@@ -70,11 +70,11 @@ def _literal_keys(path: Path) -> set[str]:
 
 def test_every_key_name_in_the_reader_source_is_in_the_reference():
     """A key added in a branch the tour does not reach (contactdyn/scene/keytour.py) fails here."""
-    from contactdyn.laws.drives import _PARAMS
+    from contactdyn.laws.drive_kinds import DRIVE_KINDS
 
     leaves = {d.key.rpartition(".")[2].removesuffix("[]") for d in reference()} | {d.key for d in reference()}
     names = set().union(*(_literal_keys(ROOT / "contactdyn" / m) for m in READERS))
-    names |= {k for params in _PARAMS.values() for k in params}
+    names |= {p.name for kind in DRIVE_KINDS.values() for p in kind.params}
     names -= {"a"}  # the reader's own item wrapper ({"a": axis})
     names = {n for n in names if not n.startswith("body.ground")}  # an error key, not a read
     missing = sorted(n for n in names if n not in leaves and "." not in n)

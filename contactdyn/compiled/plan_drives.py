@@ -33,21 +33,20 @@ class CompiledDrives:
         s = plan.system
         self.system, self.nQ, self.nv = s, s.nQ, s.nv
         self.vmask = s._joint_motors if plan.phase.controller.outputs == "voltage" else None
-        specs = s.drives.specs
-        self.limited = [i for i, spec in enumerate(specs) if spec.motorized and np.isfinite(spec.u_max)]
-        self.u_max = np.array([specs[i].u_max for i in self.limited])
+        self.limited = [int(i) for i in np.flatnonzero(s.drives.has_voltage & np.isfinite(s.drives.u_max))]
+        self.u_max = s.drives.u_max[self.limited]
         nv, n = s.nv, s.n
         LV = affine_map(lambda e: self._probe(e[nv:nv + n], e[:nv]), nv + n + 1)  # one read of the law for L and V
         k = self.nQ + len(self.limited)
         self.L = LV[:k]  #: [f; u/u_max] = L [τ, x, 1]
-        self.V = LV[k:]  #: u = V [τ, x, 1]: the motorized drives' voltages [V], unclipped (the output's)
+        self.V = LV[k:]  #: u = V [τ, x, 1]: the voltages of the drives with one [V], unclipped (the output's)
         self.L_tau = np.ascontiguousarray(self.L[:, :nv])  #: ∂[f; u/u_max]/∂τ
         self._one = np.ones(1)
 
     def _probe(self, x: np.ndarray, tau: np.ndarray) -> np.ndarray:
-        """[f; u/u_max of the limited drives; u of the motorized ones] at (x, τ), unclipped."""
+        """[f; u/u_max of the limited drives; u of those with a voltage] at (x, τ), unclipped."""
         f, out = self.output(x, tau, clip=False)
-        return np.concatenate((f, out.u[self.limited] / self.u_max, out.u[self.system.drives.motorized]))
+        return np.concatenate((f, out.u[self.limited] / self.u_max, out.u[self.system.drives.has_voltage]))
 
     def _law(self, x: np.ndarray, tau: np.ndarray, clip: bool = True) -> tuple[np.ndarray, np.ndarray]:
         f, out = self.output(x, tau, clip)

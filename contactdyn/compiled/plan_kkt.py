@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.friction import per_call_coefficient
-from .plan_operational import TASK_PD_LAW, law_in_call
+from .plan_operational import CONTROLLER_LAW, TASK_PD_LAW, law_in_call
 from .plan_probe import affine_map
 from .plan_rhs import make_rhs
 
@@ -64,7 +64,8 @@ class CompiledKKT:
         self.i_h = nv * nv + 3 * nv * nf + 3 * nf
         #: φ carries g(q) after h: the affine task law's feedforward, or a task PD law's that the call computes
         #: (contactdyn.compiled.plan_operational)
-        self.with_g = self.feedforward == "gravity" or (law_in_call(self.phase.controller) == TASK_PD_LAW
+        self.with_g = self.feedforward == "gravity" or (law_in_call(self.phase.controller) in (TASK_PD_LAW,
+                                                                                                CONTROLLER_LAW)
                                                          and self.phase.controller.needs_gravity)
         self.i_e = self.i_h + nv * (2 if self.with_g else 1)
         P = affine_map(self._assemble, self.i_e + self.ne, columns=True)

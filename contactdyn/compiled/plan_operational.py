@@ -1,14 +1,16 @@
 """A plan's call after Pinocchio, compiled: a task-space law that is not affine, sliding in 2-D on a normal row.
 
 For a mode whose controller is the operational_space law (:mod:`contactdyn.laws.controllers.operational`:
-Λ depends on q, so it is not a matrix the plan can read off) or a task PD law that is not affine (its tool-axis
-or full-orientation moment, its normal damping: :mod:`contactdyn.laws.controllers.pd`), and that has no drives,
+Λ depends on q, so it is not a matrix the plan can read off), a task PD law that is not affine (its tool-axis
+or full-orientation moment, its normal damping: :mod:`contactdyn.laws.controllers.pd`) or a user's controller
+whose ``command`` numba compiles (called by its address, its inputs in one buffer:
+:mod:`contactdyn.laws.controllers.abi`; without measured forces or states), and that has no drives,
 everything a call does after φ is small dense algebra:
 
     y = P φ = [A, b, o]                          the KKT system and the affine outputs
     per 2-D slide on a normal row r:  d = v_t/|v_t| while v_t·r_mode > v_ε, else the mode's r
         A[:nv, nQ + r] += μ J_fᵀ Tᵀ d;   A[nv:nQ, nQ + r] = A0 + μ constsᵀ d      (the column tilt)
-    τ = operational_law.torque(...) or task_pd_law.torque(...);   b[:nv] += τ;   z = A⁻¹ b
+    τ = operational_law.torque(...), task_pd_law.torque(...) or the controller's;   b[:nv] += τ;   z = A⁻¹ b
     ẋ = [Q̇, Q̈, ẏ]
 
 :func:`call` runs it in one compiled function (numba), the same arithmetic as the readable
@@ -27,6 +29,7 @@ import numpy as np
 
 from ..laws.controllers import operational_law as law
 from ..laws.controllers import task_pd_law
+from ..laws.controllers.abi import FIELD, call_controller, controller_address, layout_of, params_of
 from ..laws.controllers.operational import OperationalSpace
 from ..laws.controllers.operational_law import SINGULAR
 from ..laws.controllers.pd import TaskPD
@@ -39,10 +42,11 @@ from .plan_law import NO_REFERENCE, reference_of, reference_rows, reference_tabl
 from .plan_phi import work_terms, write_phi
 
 __all__ = ["call", "call_at", "operational_kernel_of", "law_in_call", "OPERATIONAL", "OPERATIONAL_LAW",
-           "TASK_PD_LAW"]
+           "TASK_PD_LAW", "CONTROLLER_LAW"]
 
 OPERATIONAL = 0  #: this module's call among the compiled calls a step takes (plan_steps)
-OPERATIONAL_LAW, TASK_PD_LAW = 0, 1  #: the call's law (INTS' LAW)
+#: the call's law (INTS' LAW): a user's controller compiled by address (contactdyn.laws.controllers.abi)
+OPERATIONAL_LAW, TASK_PD_LAW, CONTROLLER_LAW = 0, 1, 2
 
 #: the constants of a plan's call in :func:`~contactdyn.compiled.plan_kernel.pack`'s two buffers, by these indices
 #: (SCALARS: [v_ε, ko, do, k_null (operational_space) or kd_joint (task_pd), kd_normal]; ORIENT: task_pd's R_d)
@@ -51,17 +55,26 @@ P_VAL, D_CTL, TILT_F, TILT_T, TILT_BODY, RATES_F, AXES, FORCED, KP, KD, TOOL_AXI
 #: its first frame in its joint's and the robot's table (plan_phi.write_phi)
 REF_MOVES, REF_R, REF_CIRCLE, REF_TERMS, REF_START, RAMPS, PHI_MOVES, PHI_RAMPS, PHI_FRAME, PHI_RIGID = range(14, 24)
 P_COL, P_ROW, INTS, TILT_I, RATES_I = range(24, 29)  # ints (P: CSR columns, row starts)
-#: ints of :func:`call_at`: [the reference's kind, −1 none]; φ's layout, time slots and the first frame's support
-REF_KIND, PHI_AT, PHI_MSLOTS, PHI_RSLOTS, PHI_SUPPORT = range(29, 34)
+#: ints: [the reference's kind, −1 none] (:func:`call_at`); [the user controller's address, its layout table]
+#: (controllers/abi.layout_of; [0] for the other laws); φ's layout, time slots and the first frame's support
+REF_KIND, CTL_AT, PHI_AT, PHI_MSLOTS, PHI_RSLOTS, PHI_SUPPORT = range(29, 35)
+#: the controller's input fields in its buffer (contactdyn.laws.controllers.abi.LAYOUT)
+F_T, F_Q, F_V, F_H, F_h, F_G, F_P, F_PD, F_J, F_DR, F_XD, F_VD, F_AD, F_Z, F_R, F_JW, F_DW = (
+    FIELD[name] for name in ("t", "q", "v", "H", "h", "gravity", "p_tip", "v_tip", "J", "drift", "x_d", "v_d", "a_d",
+                             "z", "R_tip", "J_ang", "drift_ang"))
 
 
 def law_in_call(ctl) -> int:
     """The law :func:`call` computes for a phase's controller: OPERATIONAL_LAW, TASK_PD_LAW (a task PD law that is
-    not affine: :meth:`~contactdyn.laws.controllers.pd.TaskPD.tip_force_law` None), or −1 (neither)."""
+    not affine: :meth:`~contactdyn.laws.controllers.pd.TaskPD.tip_force_law` None), CONTROLLER_LAW (a controller
+    whose command numba compiles, without measured forces or states, not affine either), or −1 (none of them)."""
     if isinstance(ctl, OperationalSpace):
         return OPERATIONAL_LAW
     if isinstance(ctl, TaskPD) and ctl.tip_force_law() is None:
         return TASK_PD_LAW
+    if (ctl is not None and not ctl.uses_forces and not ctl.n_states and ctl.outputs == "torque"
+            and not ctl.in_task_space and ctl.tip_force_law() is None and controller_address(type(ctl))):
+        return CONTROLLER_LAW
     return -1
 
 
@@ -156,12 +169,53 @@ def _task_pd(phi, x, fb, ib, ref, set_points, R_tip, J6, nQ, nv, i_J, i_p, i_ff)
 
 
 @njit(cache=True)
-def call(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
+def _put(buf, layout, k, values):
+    """Field k of the controller's buffer from ``values`` (flat; nothing for a field the layout leaves empty)."""
+    start = layout[2 + 2 * k]
+    for i in range(layout[3 + 2 * k] - start):
+        buf[start + i] = values[i]
+
+
+@njit(cache=True)
+def _controller(t, phi, x, fb, ib, ref, R_tip, J6, drift6, nQ, nv, i_h, i_J, i_dr, i_p, i_g):
+    """(τ [N·m or N], status: 1 computed) of a user's controller by its address (contactdyn.laws.controllers.abi):
+    its buffer filled from φ (H, h, g when the law needs it at φ[i_g:], the tip's p, ṗ, J, J̇q̇), x (q, q̇), the
+    reference [x_d, ẋ_d, ẍ_d] and the tip's R, J_ω, J̇_ω q̇ (where the layout has them)."""
+    at = vector_of(ib, ib, CTL_AT)
+    layout = at[1:].copy()
+    buf = np.empty(layout[-1])
+    buf[layout[2 + 2 * F_T]] = t
+    _put(buf, layout, F_Q, x[:nv])
+    _put(buf, layout, F_V, x[nQ:nQ + nv])
+    H = (phi[:nv * nv].reshape((nv, nv)).T + matrix_of(fb, ib, D_CTL)).copy()  # φ holds H column by column
+    _put(buf, layout, F_H, H.ravel())
+    _put(buf, layout, F_h, phi[i_h:i_h + nv])
+    if i_g >= 0:
+        _put(buf, layout, F_G, phi[i_g:i_g + nv])
+    _put(buf, layout, F_P, phi[i_p:i_p + 3])
+    _put(buf, layout, F_PD, phi[i_p + 3:i_p + 6])
+    _put(buf, layout, F_J, phi[i_J:i_J + 3 * nv])
+    _put(buf, layout, F_DR, phi[i_dr:i_dr + 3])
+    if ref.size:
+        _put(buf, layout, F_XD, ref[0:3])
+        _put(buf, layout, F_VD, ref[3:6])
+        _put(buf, layout, F_AD, ref[6:9])
+    if R_tip.size:
+        _put(buf, layout, F_R, np.ascontiguousarray(R_tip).ravel())
+        _put(buf, layout, F_JW, np.ascontiguousarray(J6[3:]).ravel())
+        _put(buf, layout, F_DW, drift6[3:6])
+    tau = np.empty(nv)
+    return tau, call_controller(at[0], buf, layout, vector_of(fb, ib, KP).copy(), tau)
+
+
+@njit(cache=True)
+def call(t, phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
     """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (ẋ with the impulse states'
     rates, τ the law's command [N·m or N], as plan_kernel.call's ``out``). fb, ib: the plan's constants
     (:func:`.plan_kernel.pack`, indices above); INTS: sizes and φ's offsets of h and the tip's J, J̇q̇,
     p (ṗ after it), ẏ's rows in y; J6, drift6, R_tip: the tip's 6 Jacobian rows, J̇q̇ and its rotation (none
-    without a tool axis); ref = [x_d, ẋ_d, ẍ_d] [m, m/s, m/s²] the reference (none without), F_d [N] the set-points."""
+    without a tool axis); ref = [x_d, ẋ_d, ẍ_d] [m, m/s, m/s²] the reference (none without), F_d [N] the set-points;
+    t [s] the time (a user's controller reads it)."""
     m, nQ, nv, i_h, i_J, i_dr, i_p, o_y0, o_y1, kind, i_ff = vector_of(ib, ib, INTS)
     band = vector_of(fb, ib, SCALARS)[0]  # v_ε [m/s]
     y, A, b, o = kkt_of(phi, fb, ib, P_VAL, P_COL, P_ROW, m)
@@ -172,8 +226,12 @@ def call(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
         tau, ratio = _operational(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, nQ, nv, i_h, i_J, i_dr, i_p)
         if not ratio >= SINGULAR:  # the readable law raises its error
             return DECLINED
-    else:
+    elif kind == TASK_PD_LAW:
         tau = _task_pd(phi, x, fb, ib, ref, set_points, R_tip, J6, nQ, nv, i_J, i_p, i_ff)
+    else:
+        tau, status = _controller(t, phi, x, fb, ib, ref, R_tip, J6, drift6, nQ, nv, i_h, i_J, i_dr, i_p, i_ff)
+        if status != 1:  # the law raised (its readable command raises its error) or gave no nv torques
+            return DECLINED
     b[:nv] += tau
     z = lu_solve(A, b)
     if not np.isfinite(z.dot(z)):
@@ -201,7 +259,7 @@ def call_at(t, x, work, phi, fb, ib, out):
     ramps = matrix_of(fb, ib, RAMPS)
     w = np.empty(2 * ramps.shape[0])
     ramp_rows(t, ramps, w)
-    return call(phi, x, fb, ib, ref, w[::2].copy(), R_tip, J6, a6, out)
+    return call(t, phi, x, fb, ib, ref, w[::2].copy(), R_tip, J6, a6, out)
 
 
 def operational_kernel_of(plan, impulses: list[tuple]):
@@ -232,7 +290,8 @@ def operational_kernel_of(plan, impulses: list[tuple]):
     tables = reference_tables(phase.reference) if referenced else None  # (no carrier: the reference's own)
     kind, *ref_floats = tables or NO_REFERENCE
     fb, ib = pack_with_phi(plan, [P.data, s._D_ctl, tilt_f, tilt_T, tilt_body, rates_f, *law_floats, *ref_floats,
-                                  ramps], [P.indices, P.indptr, ints, tilt_i, rates_i, [kind]])
+                                  ramps], [P.indices, P.indptr, ints, tilt_i, rates_i, [kind],
+                                           _controller_at(plan, ctl, law_kind)])
     none, no_rotation, no_rows = np.empty(0), np.empty((0, 3)), np.empty((0, nv))
     tip6 = plan.tip6  # this make_rhs's tip terms (a later ModePlan.use makes new ones; this kernel keeps its own)
     ramp_values = np.empty(2 * len(ramps))  # F_d [N], Ḟ_d [N/s] per ramp, rewritten per call
@@ -251,7 +310,7 @@ def operational_kernel_of(plan, impulses: list[tuple]):
         return ref, set_points, rotation, J6, a6
 
     def one(t, x, phi, out):
-        return call(phi, x, fb, ib, *inputs(t), out)
+        return call(t, phi, x, fb, ib, *inputs(t), out)
 
     work, phi_buffer, refresh, load = plan.phi.work, plan.phi.buffer, plan.phi.refresh, plan.phi.load
 
@@ -276,6 +335,12 @@ def _law_constants(plan, ctl, law_kind: int) -> tuple[list, list, int]:
     """(the set-points' keys in F_d's order, the floats AXES … ORIENT, φ's offset of the feedforward torque or −1)
     of the call's law: the operational_space law's or the task PD law's own constants."""
     s = plan.system
+    if law_kind == CONTROLLER_LAW:  # its declared parameters in KP; g in φ after h where it needs it
+        if ctl.needs_gravity and not plan.with_g:
+            raise ValueError("a controller that needs gravity needs φ's g (plan_kkt.with_g)")
+        none = np.zeros((0, 3))
+        return [], [none, none, params_of(ctl.config), [], [], [], [s.slip_band, 0.0, 0.0, 0.0, 0.0], none], \
+            plan.i_h + s.nv if ctl.needs_gravity else -1
     if law_kind == OPERATIONAL_LAW:
         axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
         return ctl.force_keys, [axes, forced, kp, kd, tool_axis, target, [s.slip_band, ko, do, k_null, kd_normal],
@@ -288,6 +353,16 @@ def _law_constants(plan, ctl, law_kind: int) -> tuple[list, list, int]:
         raise ValueError("a task PD law with gravity feedforward needs φ's g (plan_kkt.with_g)")
     i_ff = {"none": -1, "bias": plan.i_h, "gravity": plan.i_h + s.nv}[feedforward]  # h, then g, in φ
     return keys, [axes, forced, kp, kd, tool_axis, target, [s.slip_band, ko, do, kd_joint, kd_normal], R_d], i_ff
+
+
+def _controller_at(plan, ctl, law_kind: int) -> np.ndarray:
+    """CTL_AT: [the controller's address, its layout table] for CONTROLLER_LAW (the inputs the call has: no
+    reference, no g unless the law needs it, no orientation unless it reads it, empty); [0] for the other laws."""
+    if law_kind != CONTROLLER_LAW:
+        return np.zeros(1, dtype=np.int64)
+    absent = (() if plan.phase.reference is not None else ("x_d", "v_d", "a_d")) + \
+        (() if ctl.needs_gravity else ("gravity",)) + (() if ctl.reads_orientation else ("R_tip", "J_ang", "drift_ang"))
+    return np.concatenate(([controller_address(type(ctl))], layout_of(plan.system.nv, 0, absent)))
 
 
 def _tilt_constants(plan) -> tuple:

@@ -363,9 +363,9 @@ def _drive_samples(drives, X: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, 
     E = np.hstack((tau, X, np.ones((len(X), 1))))
     Y = _rows_times(E, drives.L.T)
     F = Y[:, :nQ]
-    motorized = drives.system.drives.motorized
-    U = np.full((len(X), len(motorized)), np.nan)
-    U[:, motorized] = _rows_times(E, drives.V.T)
+    with_voltage = drives.system.drives.has_voltage
+    U = np.full((len(X), len(with_voltage)), np.nan)
+    U[:, with_voltage] = _rows_times(E, drives.V.T)
     clipped = np.flatnonzero(np.abs(Y[:, nQ:]).max(axis=1) > 1.0) if drives.limited else ()
     for k in clipped:
         F[k], out = drives.output(X[k], tau[k])

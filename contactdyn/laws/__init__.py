@@ -1,4 +1,4 @@
-"""The laws: stage laws, friction laws, drives, controllers and reference profiles.
+"""The laws: stage laws, friction laws, drive kinds, controllers and reference profiles.
 
 A law is a class registered by name that declares its parameters once (:class:`Param`); the scene
 reader, the key reference and the model use the declaration. The laws import nothing of the model.
@@ -11,6 +11,7 @@ _PUBLIC = {
     **dict.fromkeys(("Param",), ".params"),
     **dict.fromkeys(("StageLaw", "register_stage_law", "STAGE_LAWS"), ".stage_laws"),
     **dict.fromkeys(("FrictionLaw", "FrictionSpec", "register_friction_law", "FRICTION_LAWS"), ".friction_laws"),
+    **dict.fromkeys(("DriveKind", "register_drive_kind", "DRIVE_KINDS"), ".drive_kinds"),
     **dict.fromkeys(("Controller", "ControlInput", "register", "CONTROLLERS"), ".controllers"),
 }
 __all__ = list(_PUBLIC)

@@ -38,7 +38,7 @@ from ..numerics.compile_cache import cfunc, njit
 from .friction_laws import FrictionLaw
 
 __all__ = ["STAGE_SIGNATURE", "FRICTION_SIGNATURE", "stage_address", "friction_address", "call_stage",
-           "call_friction"]
+           "call_friction", "compile_wrapper"]
 
 _P = types.CPointer(types.float64)
 #: double force(double k, double b, double* p, int64 n_p, double x, double xdot)
@@ -89,21 +89,27 @@ def _address(law: type, family: str, fn) -> int:
 
 
 def _compile(law: type, family: str, fn) -> tuple[object | None, str]:
-    """(the law's cfunc, "") or (None, why numba cannot compile it). Cached first; if that fails (a cache that
-    does not load counts too), once more uncached, whose error is the reason."""
+    """(the law's cfunc, "") or (None, why numba cannot compile it): :func:`compile_wrapper` of the family's wrapper."""
+    name = f"{law.__name__}_{fn.__name__}_abi"
+    return compile_wrapper(fn, name, _WRAPPERS[family].format(name=name), _SIGNATURES[family], {"carray": carray})
+
+
+def compile_wrapper(fn, name: str, source: str, signature, namespace: dict) -> tuple[object | None, str]:
+    """(the cfunc of ``signature`` compiled from ``source``, which defines ``name`` calling the law's function as
+    ``law``, "") or (None, why numba cannot compile it). The source is attributed to ``fn``'s own file (numba
+    caches the cfunc beside it). Cached first; if that fails (a cache that does not load counts too), once more
+    uncached, whose error is the reason."""
     try:
         path = inspect.getfile(fn)
     except TypeError:
         path = "<unknown>"
-    name = f"{law.__name__}_{fn.__name__}_abi"
-    namespace = {"carray": carray}
-    exec(compile(_WRAPPERS[family].format(name=name), path, "exec"), namespace)
+    exec(compile(source, path, "exec"), namespace)
     wrapper = namespace[name]
     wrapper.__module__, wrapper.__qualname__ = fn.__module__, f"{fn.__qualname__}_abi"
     for cache in (True, False):
         try:
             namespace["law"] = _jit(fn, cache)
-            return _cfunc(wrapper, _SIGNATURES[family], cache), ""
+            return _cfunc(wrapper, signature, cache), ""
         except Exception as exc:  # numba's typing or lowering errors, and whatever the law's code raises in them
             reason = f"numba cannot compile {fn.__qualname__}: {_first_line(exc)}"
     return None, reason
@@ -181,11 +187,12 @@ def _call_at_friction(typingctx, address, mu_s, mu_k, p, n_p, speed):
 
 @intrinsic
 def _data_at(typingctx, arr, at):
-    """&arr[at] of a contiguous 1-D float64 array (a law's parameters inside a packed array)."""
-    if not (isinstance(arr, types.Array) and arr.ndim == 1 and arr.dtype == types.float64 and arr.layout == "C"):
+    """&arr[at] of a contiguous 1-D float64 or int64 array (a law's parameters inside a packed array)."""
+    if not (isinstance(arr, types.Array) and arr.ndim == 1 and arr.dtype in (types.float64, types.int64)
+            and arr.layout == "C"):
         return None
 
     def codegen(context, builder, signature, args):
         data = context.make_array(signature.args[0])(context, builder, args[0]).data
         return builder.gep(data, [args[1]])
-    return _P(arr, types.intp), codegen
+    return types.CPointer(arr.dtype)(arr, types.intp), codegen

@@ -1,45 +1,20 @@
-"""Drives: ideal torque sources, DC motors through rigid gears or wheels, elastic transmissions.
+"""Drives: one per driven coordinate, each of a registered kind; the scene's drive tables, and the drives' forces.
 
 A drive acts on one generalized coordinate Q (a robot joint, or an active body such as a
-cart). Kinds:
+cart). What it does is its kind's (:mod:`contactdyn.laws.drive_kinds`: ``torque``, ``dc_motor``,
+``elastic``, and a user's own, registered by :func:`~contactdyn.laws.drive_kinds.register_drive_kind`).
+This module holds what every kind shares:
 
-- ``torque``: an ideal source; the commanded generalized force acts as it is.
-- ``dc_motor``: a DC motor without inductance (eq. 51), M = (C_M/R) u − (C_M C_E/R) θ̇,
-  through a rigid gear of speed ratio N and torque ratio N*, optionally ending on a wheel
-  of radius r that turns rotation into translation (the cart). No state of its own.
-- ``elastic``: the same motor through a harmonic drive with tube stiffness c and damping d
-  (eqs 50–54); the motor angle θ is a second-order coordinate of its own with inertia
-  J + I′ + I″/N² (eq. 53).
-
-Rigid gear, derivation (one coordinate, motor angle θ, output Q; r = 1 for a rotary output):
-
-    kinematics   θ = (N/r) Q                       speed ratio n_s = N/r   [rad per rad or per m]
-    rotor        J θ̈ = M − M_L                     M_L: torque the gear input takes [N·m]
-    gear         Q-force = (N*/r) M_L              torque ratio n_t = N*/r [1 or 1/m]
-
-so the coordinate receives n_t M − n_t n_s J Q̈: the rotor inertia reflects as n_s n_t J
-(N N* J, or N N* J / r² through a wheel), added to the diagonal of the inertia matrix, and
-the back-EMF reflects as a damping n_t n_s C_M C_E / R. With N* = N the gear is ideal and
-these are the familiar N² J and N² C_M C_E / R. With N* < N (case 2: N = 160, N* = 65.12)
-the gear passes a fraction η = N*/N = 0.407 of the power: the output speed follows N, the
-output torque follows N*, and both ratios enter the reflection through their product (not
-N² and not N*²). The lossy gear is a constant-efficiency model in both directions of power
-flow, so the reflected "kinetic energy" ½ n_s n_t J Q̇² is not the rotor's ½ J θ̇²; the energy
-audit counts the work n_t M Q̇ that reaches the coordinate.
-
-Elastic transmission (eqs 53–54, N* = N): tube twist φ = θ/N − Q/r, tube torque
-T = c φ + d φ̇; the motor side feels T/N, the coordinate T/r. As c → ∞ it tends to the rigid
-gear with N* = N and rotor inertia J + I′ + I″/N².
-
-Commands: a controller asks for a generalized force τ_d on each coordinate (the rigid model:
-the force of the motor through its gear, rotor inertia on the controller's side of the
-model). The drive inverts eq. 51 in the rigid model, u = R τ_d / (n_t C_M) + C_E n_s Q̇,
-clips it to ±u_max, and the clipped voltage is what acts. Unclipped, a rigid drive then
-delivers exactly τ_d. An elastic one delivers M = τ_d / n_t + (C_M C_E / R)(n_s Q̇ − θ̇) at
-the motor: the controller ignores the elasticity, so it knows the speed of its coordinate
-only, and the back-EMF keeps damping the twist rate. (Inverting at the measured θ̇ instead
-would cancel the back-EMF damping, nearly all the damping the torsional mode has: case 3's
-transmission would keep ζ ≈ 1e-4 of its 0.14, and a stiff PD approach then goes unstable.)
+- :class:`DriveSpec`: one coordinate's drive, its kind's parameters as attributes;
+- :func:`read_drive_table` and :class:`DriveTable`: a scene's ``robot.drive`` or
+  ``body.<b>.drive`` table, read from the kinds' declarations (a value or one per joint);
+- :class:`Drives`: a system's drives. :meth:`Drives.apply` turns the commands into generalized
+  forces by each kind's law: a kind with a voltage inverts the commanded force to a voltage
+  (:meth:`~contactdyn.laws.drive_kinds.DriveKind.voltage`), the voltage is clipped to its limit
+  here, once for all kinds, and the kind's ``force`` gives the forces at the voltage that acts.
+  Kinds with a motor coordinate get its place in the state (after the system's other
+  coordinates) and their motor's inertia on the mass matrix's diagonal; rigid motors reflect
+  their rotor's inertia onto their coordinate.
 """
 
 from __future__ import annotations
@@ -51,83 +26,76 @@ import numpy as np
 
 from ..errors import SceneError
 from ..scene.reader import Reader
+from .drive_kinds import DRIVE_KINDS, DriveKind
+from .params import Param, with_defaults
 
 __all__ = ["DRIVE_KINDS", "DriveSpec", "DriveTable", "read_drive_table", "Drives", "DriveOutput", "drive_channels"]
 
-DRIVE_KINDS = ("torque", "dc_motor", "elastic")
 
-#: parameter: (unit, lower bound, bound open, default); default None: required; a name: that parameter
-_MOTOR = {
-    "R": ("Ω", 0.0, True, None),
-    "C_M": ("N·m/A", 0.0, True, None),
-    "C_E": ("V·s/rad", 0.0, True, "C_M"),  # SI: the back-EMF constant equals the torque constant
-    "J": ("kg·m²", 0.0, False, None),
-    "N": ("-", 0.0, True, 1.0),
-    "wheel_radius": ("m", 0.0, True, 0.0),  # 0: rotary output (no wheel)
-    "u_max": ("V", 0.0, True, math.inf),
-}
-_PARAMS = {
-    "torque": {},
-    "dc_motor": {**_MOTOR, "N_star": ("-", 0.0, True, "N")},
-    "elastic": {**_MOTOR, "c": ("N·m/rad", 0.0, True, None), "d": ("N·m·s/rad", 0.0, False, 0.0),
-                "I1": ("kg·m²", 0.0, False, 0.0), "I2": ("kg·m²", 0.0, False, 0.0),
-                "twist_damping": ("N·m·s/rad", 0.0, False, 0.0)},
-}
+def kind_of(name: str) -> type[DriveKind]:
+    """The registered kind ``name``; ValueError naming the registered kinds."""
+    try:
+        return DRIVE_KINDS[name]
+    except KeyError:
+        raise ValueError(f"no drive kind {name!r} (registered: {list(DRIVE_KINDS)})") from None
 
 
-@dataclass(frozen=True)
 class DriveSpec:
-    """One coordinate's drive (see the module docstring for the equations)."""
+    """One coordinate's drive: its kind (a name in ``DRIVE_KINDS``) and the kind's parameters, each an attribute
+    (``spec.R``); the kind's transmission figures are computed once, as attributes too (see :data:`DERIVED`).
+    ``DriveSpec("dc_motor", R=0.272, C_M=0.061, J=4.5e-4)``: the parameters not given take their declared defaults.
+    Immutable."""
 
-    kind: str = "torque"
-    R: float = 0.0  #: armature resistance [Ω]
-    C_M: float = 0.0  #: torque constant [N·m/A]
-    C_E: float = 0.0  #: back-EMF constant [V·s/rad]
-    J: float = 0.0  #: rotor inertia [kg·m²]
-    N: float = 1.0  #: speed ratio, motor speed / gear output speed [-]
-    N_star: float = 1.0  #: torque ratio, gear output torque / input torque [-] (elastic: = N)
-    wheel_radius: float = 0.0  #: [m] wheel turning the output rotation into translation; 0: none
-    u_max: float = math.inf  #: voltage limit [V]
-    c: float = 0.0  #: tube stiffness [N·m/rad] (elastic)
-    d: float = 0.0  #: tube damping [N·m·s/rad] (elastic)
-    I1: float = 0.0  #: I′, wave generator inertia on the motor shaft [kg·m²] (elastic)
-    I2: float = 0.0  #: I″, flexspline inertia on the output side [kg·m²] (elastic, enters as I″/N²)
-    #: g, active damping of the twist rate on the motor side, M −= g (θ̇ − n_s Q̇) [N·m·s/rad] (elastic; 0: none)
-    twist_damping: float = 0.0
+    #: the kind's transmission figures, each computed once by the kind's method of that name (DriveKind)
+    DERIVED = ("n_speed", "n_torque", "motor_inertia", "reflected_inertia", "natural_frequency")
+
+    kind: str
+    params: tuple[float, ...]  #: the kind's parameters' values, in its declared order
+    n_speed: float  #: θ̇ / Q̇ [rad/rad or rad/m]
+    n_torque: float  #: generalized force per motor torque [1 or 1/m]
+    motor_inertia: float  #: inertia on the motor shaft [kg·m²]
+    reflected_inertia: float  #: rigid-model inertia the motor adds to its coordinate [kg·m² or kg]
+    natural_frequency: float  #: torsional frequency with the output clamped [rad/s] (inf: rigid)
+
+    def __init__(self, kind: str = "torque", **values: float):
+        law = kind_of(kind)
+        declared = [p.name for p in law.params]
+        unknown = sorted(set(values) - set(declared))
+        if unknown:
+            raise TypeError(f"drive kind {kind!r} has no parameter {unknown} (it declares {declared})")
+        try:
+            full = with_defaults(law.params, values)
+        except KeyError as exc:
+            raise TypeError(f"drive kind {kind!r} needs a value of {exc.args[0]!r}") from None
+        put = object.__setattr__
+        put(self, "kind", kind)
+        put(self, "params", tuple(full.values()))
+        for name, value in full.items():
+            put(self, name, value)
+        for name in self.DERIVED:
+            put(self, name, getattr(law, name)(self))
+
+    @property
+    def law(self) -> type[DriveKind]:
+        """The kind's class."""
+        return DRIVE_KINDS[self.kind]
 
     @property
     def motorized(self) -> bool:
-        return self.kind != "torque"
+        return self.law.motorized
 
-    @property
-    def r(self) -> float:
-        """Output lever [m or 1]: the wheel radius, 1 for a rotary output."""
-        return self.wheel_radius if self.wheel_radius > 0.0 else 1.0
+    def __setattr__(self, name, value):
+        raise AttributeError(f"a DriveSpec is immutable (setting {name!r})")
 
-    @property
-    def n_speed(self) -> float:
-        """θ̇ / Q̇ = N/r [rad/rad or rad/m]."""
-        return self.N / self.r
+    def __eq__(self, other) -> bool:
+        return isinstance(other, DriveSpec) and (self.kind, self.params) == (other.kind, other.params)
 
-    @property
-    def n_torque(self) -> float:
-        """Generalized force per motor torque = N*/r [1 or 1/m] (elastic: N/r)."""
-        return (self.N_star if self.kind == "dc_motor" else self.N) / self.r
+    def __hash__(self) -> int:
+        return hash((self.kind, self.params))
 
-    @property
-    def motor_inertia(self) -> float:
-        """Inertia on the motor shaft [kg·m²]: J, or J + I′ + I″/N² (eq. 53)."""
-        return self.J + self.I1 + self.I2 / self.N**2 if self.kind == "elastic" else self.J
-
-    @property
-    def reflected_inertia(self) -> float:
-        """Rigid-model inertia the motor adds to its coordinate, n_s n_t J_m [kg·m² or kg]."""
-        return self.n_speed * self.n_torque * self.motor_inertia if self.motorized else 0.0
-
-    @property
-    def natural_frequency(self) -> float:
-        """Torsional frequency of the transmission with the output clamped, √(c / (N² J_m)) [rad/s]."""
-        return math.sqrt(self.c / (self.N**2 * self.motor_inertia)) if self.kind == "elastic" else math.inf
+    def __repr__(self) -> str:
+        values = ", ".join(f"{p.name}={getattr(self, p.name)!r}" for p in self.law.params)
+        return f"DriveSpec({self.kind!r}{', ' if values else ''}{values})"
 
 
 @dataclass(frozen=True)
@@ -152,21 +120,15 @@ class DriveTable:
         specs = []
         for i in range(n):
             kind = pick("kind", self.kind, i)
-            if kind == "torque":
-                specs.append(DriveSpec())
-                continue
-            params = {}
-            for key, (_, _, _, default) in _PARAMS[kind].items():
-                params[key] = pick(key, self.values[key], i) if key in self.values else default
-            for key, value in params.items():  # defaults naming another parameter (C_E = C_M, N_star = N)
-                if isinstance(value, str):
-                    params[key] = params[value]
-            specs.append(DriveSpec(kind=kind, **params))
+            given = {p.name: pick(p.name, self.values[p.name], i) for p in DRIVE_KINDS[kind].params
+                     if p.name in self.values}
+            specs.append(DriveSpec(kind, **given))
         return specs
 
 
 def read_drive_table(r: Reader, per_joint: bool) -> DriveTable:
-    """Validate a ``robot.drive`` (``per_joint``: lists allowed) or ``body.<b>.drive`` table."""
+    """Validate a ``robot.drive`` (``per_joint``: lists allowed) or ``body.<b>.drive`` table: its kind(s), then the
+    parameters the kinds present declare (:class:`~contactdyn.laws.params.Param`: unit, bounds, default)."""
     raw_kind = r.raw("kind", "torque")
     if isinstance(raw_kind, list) and per_joint:
         if not raw_kind or not all(isinstance(k, str) for k in raw_kind):
@@ -176,28 +138,34 @@ def read_drive_table(r: Reader, per_joint: bool) -> DriveTable:
         kinds: str | tuple[str, ...] = tuple(raw_kind)
     else:
         kinds = r.str("kind", "torque", choices=DRIVE_KINDS)
-    present = set(kinds) if isinstance(kinds, tuple) else {kinds}
-    allowed: dict[str, tuple] = {}
+    present = [k for k in DRIVE_KINDS if k in (kinds if isinstance(kinds, tuple) else (kinds,))]
+    allowed: dict[str, Param] = {}
     for k in present:
-        allowed.update(_PARAMS[k])
+        for p in DRIVE_KINDS[k].params:
+            allowed.setdefault(p.name, p)
     values: dict[str, float | tuple[float, ...]] = {}
-    for key, (unit, lo, lo_open, default) in allowed.items():
+    for key, p in allowed.items():
         if not r.has(key):
-            if default is None:
-                raise r.error(key, f"a value [{unit}] (required by kind {sorted(present)})", "nothing")
+            if p.default is None and p.same_as is None:
+                raise r.error(key, f"a value [{p.unit}] (required by kind {sorted(present)})", "nothing")
             continue
-        raw = r.raw(key)
-        if isinstance(raw, list) and per_joint:
-            arr = r.vector(key, unit=unit)
-            for x in arr:
-                Reader({key: float(x)}, r.path, r.file).float(key, lo=lo, lo_open=lo_open, unit=unit)
-            values[key] = tuple(float(x) for x in arr)
-        else:
-            values[key] = r.float(key, lo=lo, lo_open=lo_open, unit=unit)
-    if "N_star" in r.data and "N_star" not in allowed:
-        raise r.error("N_star", "no N_star with an elastic transmission (eq. 53 has one ratio N)", r.data["N_star"])
+        values[key] = _read_value(r, p, per_joint)
+    for k in present:
+        for key, why in DRIVE_KINDS[k].refuses.items():
+            if key in r.data and key not in allowed:
+                raise r.error(key, why, r.data[key])
     r.finish()
     return DriveTable(kinds, values, r.path, r.file)
+
+
+def _read_value(r: Reader, p: Param, per_joint: bool) -> float | tuple[float, ...]:
+    """One declared parameter's value from a drive table: a number, or one per joint (``per_joint``), in bounds."""
+    if isinstance(r.raw(p.name), list) and per_joint:
+        arr = r.vector(p.name, unit=p.unit)
+        for x in arr:
+            Reader({p.name: float(x)}, r.path, r.file).float(p.name, lo=p.lo, hi=p.hi, lo_open=p.lo_open, unit=p.unit)
+        return tuple(float(x) for x in arr)
+    return r.float(p.name, lo=p.lo, hi=p.hi, lo_open=p.lo_open, unit=p.unit, meaning=p.meaning)
 
 
 @dataclass
@@ -212,37 +180,44 @@ class DriveOutput:
 
 
 class Drives:
-    """The drives of a system's coordinates: ``coords[i]`` is driven by ``specs[i]``.
+    """The drives of a system's coordinates: ``coords[i]`` is driven by ``specs[i]``, by the law of its kind.
 
-    Elastic drives own a motor coordinate each (``motor_coords[i]``, -1 otherwise), placed
-    by the system after its other coordinates.
+    Kinds with a motor coordinate (the elastic transmission) own one each (``motor_coords[i]``,
+    -1 otherwise), placed by the system after its other coordinates.
     """
 
     def __init__(self, specs: list[DriveSpec], coords: list[int], names: list[str], first_motor_coord: int):
         self.specs, self.coords, self.names = specs, np.asarray(coords, int), names
+        kinds = [s.law for s in specs]
         self.motor_coords = np.full(len(specs), -1, int)
         k = first_motor_coord
-        for i, s in enumerate(specs):
-            if s.kind == "elastic":
+        for i, kind in enumerate(kinds):
+            if kind.motor_coordinate:
                 self.motor_coords[i] = k
                 k += 1
         self.n_motor_coords = k - first_motor_coord
-        self.motor_inertias = [s.motor_inertia for s in specs if s.kind == "elastic"]
-        self.motorized = np.array([s.motorized for s in specs], bool)
-        self.any_motor = bool(self.motorized.any())
-        #: rigid gears: inertia added to the true system's diagonal [kg·m² or kg]
-        self.reflected = np.array([s.reflected_inertia if s.kind == "dc_motor" else 0.0 for s in specs])
-        #: rigid-model inertia the controller adds (rigid and elastic drives)
+        self.motor_inertias = [s.motor_inertia for s, kind in zip(specs, kinds, strict=True) if kind.motor_coordinate]
+        self.motorized = np.array([kind.motorized for kind in kinds], bool)  #: a law between command and coordinate
+        self.has_voltage = np.array([kind.has_voltage for kind in kinds], bool)  #: takes and reports a voltage
+        self.any_motor = bool(self.motorized.any())  #: False: ideal sources only
+        self.u_max = np.array([kind.voltage_limit(s) for s, kind in zip(specs, kinds, strict=True)])  #: [V] inf: none
+        #: rigid motors: inertia added to the true system's diagonal [kg·m² or kg] (a motor coordinate carries its own)
+        self.reflected = np.array([0.0 if kind.motor_coordinate else s.reflected_inertia
+                                   for s, kind in zip(specs, kinds, strict=True)])
+        #: rigid-model inertia the controller adds (every motor)
         self.model_reflected = np.array([s.reflected_inertia for s in specs])
         #: where a commanded force lands and with what gain (folding of measured forces)
         self.targets = np.where(self.motor_coords >= 0, self.motor_coords, self.coords)
+        self.gains = np.array([kind.command_gain(s) for s, kind in zip(specs, kinds, strict=True)])
+        #: what the compiled plan cannot run: (drive, why) for a kind whose law is not affine (contactdyn.model.paths)
+        self.fast_path_gaps = [(i, f"drive kind {s.kind!r} is not affine below its voltage limit")
+                               for i, (s, kind) in enumerate(zip(specs, kinds, strict=True)) if not kind.affine]
         if not np.array_equal(self.coords, np.arange(len(specs))):
             raise ValueError("drives: coordinates must be the system's first ones, in order")
         self._no_u, self._no_sat = np.full(len(specs), np.nan), np.zeros(len(specs), bool)  # shared, read-only
-        self.gains = np.array([1.0 / s.n_torque if s.kind == "elastic" else 1.0 for s in specs])
-        self._consts = [(DRIVE_KINDS.index(s.kind), int(self.coords[i]), int(self.motor_coords[i]), s.n_speed,
-                         s.n_torque, s.R, s.C_M, s.C_E, s.u_max, s.N, s.r, s.c, s.d, s.twist_damping)
-                        for i, s in enumerate(specs)]
+        #: per drive, what apply needs: the kind's law (voltage, force), the spec, coordinates, the voltage and limit
+        self._laws = [(kind.voltage, kind.force, s, int(self.coords[i]), int(self.motor_coords[i]), kind.has_voltage,
+                       float(self.u_max[i])) for i, (s, kind) in enumerate(zip(specs, kinds, strict=True))]
 
     def omega(self, i: int, x: np.ndarray, nQ: int) -> float:
         """Motor speed θ̇ of drive i [rad/s]."""
@@ -250,7 +225,7 @@ class Drives:
         return x[nQ + m] if m >= 0 else s.n_speed * x[nQ + self.coords[i]]
 
     def initial(self, x: np.ndarray, nQ: int) -> None:
-        """Untwisted transmissions: θ = (N/r) Q, θ̇ = (N/r) Q̇."""
+        """Untwisted transmissions: θ = n_s Q, θ̇ = n_s Q̇ (n_s = N/r)."""
         for i, s in enumerate(self.specs):
             m = self.motor_coords[i]
             if m >= 0:
@@ -264,7 +239,7 @@ class Drives:
 
         ``sat_cmd`` (default ``cmd``) decides which voltages clip: the system passes the full
         command there while ``cmd`` lacks the part it folds into its linear solve. ``clip=False``:
-        the law without the voltage limits, affine in (cmd, x) (the compiled plan probes it).
+        the law without the voltage limits, affine in (cmd, x) for an affine kind (the compiled plan probes it).
         """
         n = len(self.specs)
         if not self.any_motor:  # ideal sources only; the coordinates are 0 .. n−1 (joints, then bodies)
@@ -274,40 +249,34 @@ class Drives:
         u = np.full(n, np.nan)
         saturated = np.zeros(n, bool)
         power = dissipation = 0.0
-        sat_cmd = cmd if sat_cmd is None else sat_cmd
-        for i, (kind, c, m, ns, nt, R, C_M, C_E, u_max, N, r, k, d, g) in enumerate(self._consts):
-            qd = x[nQ + c]
-            if kind == 0:  # ideal torque source
-                applied[i] = cmd[i]
-                f[c] += cmd[i]
-                power += cmd[i] * qd
-                continue
-            w = x[nQ + m] if m >= 0 else ns * qd  # motor speed [rad/s]
-            w_model = ns * qd  # the rigid model's motor speed, from the coordinate's own speed
-            M_fast = -g * (w - w_model) if m >= 0 else 0.0  # composite control: damp the twist rate [N·m]
-            if voltage is not None and voltage[i]:
-                ui = cmd[i]
-            else:  # eq. 51 inverted at the rigid model's speed
-                ui = R * (sat_cmd[i] / nt + M_fast) / C_M + C_E * w_model
-            saturated[i] = clip and abs(ui) > u_max
-            if saturated[i]:
-                ui = math.copysign(u_max, ui)
-            elif sat_cmd is not cmd and not (voltage is not None and voltage[i]):
-                ui = R * (cmd[i] / nt + M_fast) / C_M + C_E * w_model
-            u[i] = ui
-            M = C_M / R * (ui - C_E * w)  # eq. 51 [N·m]
-            if m < 0:  # rigid gear
-                applied[i] = nt * M
-                f[c] += applied[i]
-                power += applied[i] * qd
-            else:  # elastic transmission, eqs 53-54
-                twist_rate = x[nQ + m] / N - qd / r
-                T = k * (x[m] / N - x[c] / r) + d * twist_rate  # tube torque [N·m]
-                f[m] += M - T / N
-                applied[i] = T / r
-                f[c] += applied[i]
-                power += M * w
-                dissipation += d * twist_rate * twist_rate
+        folded = sat_cmd is not None and sat_cmd is not cmd
+        # Python floats: the kinds' arithmetic is the same IEEE double arithmetic, without NumPy's per-scalar cost
+        xs, cmds = x.tolist(), cmd.tolist()
+        sats = sat_cmd.tolist() if folded else cmds
+        for i, (to_voltage, force, spec, c, m, has_voltage, u_max) in enumerate(self._laws):
+            qd = xs[nQ + c]
+            if m >= 0:
+                theta, omega = xs[m], xs[nQ + m]
+            else:
+                theta = omega = math.nan
+            if has_voltage:
+                by_voltage = voltage is not None and voltage[i]
+                ui = cmds[i] if by_voltage else to_voltage(spec, sats[i], qd, omega)
+                if clip and abs(ui) > u_max:
+                    saturated[i] = True
+                    ui = math.copysign(u_max, ui)
+                elif folded and not by_voltage:
+                    ui = to_voltage(spec, cmds[i], qd, omega)
+                u[i] = ui
+            else:
+                ui = cmds[i]
+            f_coord, f_motor, p, lost = force(spec, ui, xs[c], qd, theta, omega)
+            applied[i] = f_coord
+            f[c] += f_coord
+            if m >= 0:
+                f[m] += f_motor
+            power += p
+            dissipation += lost
         return DriveOutput(applied, u, saturated, power, dissipation)
 
 
@@ -320,10 +289,10 @@ def drive_channels(system, xs: np.ndarray, samples) -> dict[str, np.ndarray]:
     nv, nQ = system.nv, system.nQ
     ch["tau_cmd"] = samples.tau_cmd
     u = samples.u
-    if drives.motorized[:nv].any():
+    if drives.has_voltage[:nv].any():
         ch["u"] = u[:, :nv]
     for k, name in enumerate(system.body_names):
-        if drives.motorized[nv + k]:
+        if drives.has_voltage[nv + k]:
             ch[f"body.{name}.u"] = u[:, nv + k]
     for i, m in enumerate(drives.motor_coords):
         if m >= 0:

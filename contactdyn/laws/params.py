@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from ..scene.reader import Reader
 
-__all__ = ["Param", "read_params"]
+__all__ = ["Param", "read_params", "with_defaults"]
 
 
 @dataclass(frozen=True)
@@ -33,12 +33,14 @@ class Param:
     hi: float | None = None  #: upper bound (None: none)
     lo_open: bool = False  #: the lower bound itself is not allowed
     example: float | None = None  #: a value for the reader's tour (default: the default, else a value in bounds)
+    same_as: str | None = None  #: default: the value of that parameter of the same law (C_E = C_M); default is None
 
     def read(self, r: Reader, key: str | None = None) -> float:
         """This parameter's value from the table of ``r`` (under ``key``, default its own name), checked."""
         from ..scene.reader import MISSING
 
-        return r.float(key or self.name, MISSING if self.default is None else self.default, lo=self.lo, hi=self.hi,
+        required = self.default is None and self.same_as is None  # a same_as parameter reads None when absent
+        return r.float(key or self.name, MISSING if required else self.default, lo=self.lo, hi=self.hi,
                        lo_open=self.lo_open, unit="" if self.unit == "-" else self.unit, meaning=self.meaning)
 
     def sample(self) -> float:
@@ -52,5 +54,17 @@ class Param:
 
 def read_params(r: Reader, params: tuple[Param, ...]) -> tuple[float, ...]:
     """The declared parameters' values, in declaration order."""
-    return tuple(p.read(r) for p in params)
+    return tuple(with_defaults(params, {p.name: value for p in params if (value := p.read(r)) is not None}).values())
+
+
+def with_defaults(params: tuple[Param, ...], given: dict[str, float]) -> dict[str, float]:
+    """Every declared parameter's value, in declaration order: the given one, else its default, else the value of
+    the parameter it is the same as. A required parameter not given raises KeyError naming it."""
+    values = {p.name: given[p.name] if p.name in given else p.default for p in params}
+    for p in params:
+        if values[p.name] is None and p.same_as is not None:
+            values[p.name] = values[p.same_as]
+        if values[p.name] is None:
+            raise KeyError(p.name)
+    return values
 

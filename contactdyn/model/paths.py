@@ -6,10 +6,13 @@ reads its affine parts off the same functions by unit probes (:mod:`contactdyn.c
 and calls the rest — a controller's ``command`` — with the same inputs. A part therefore
 needs no second implementation to be fast, *if* the plan can represent it. Where it
 cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when compiled):
-a stage law (:class:`~contactdyn.model.chain.ChainStage`), since only the linear law is affine.
-The drives and controllers need none: the plan calls the drive law per call, and folds a
-force-reading law into its solve (:mod:`contactdyn.compiled.plan_fold`); a slip launching from rest
-has its direction solved per call on the plan's own KKT system (:mod:`contactdyn.compiled.plan_rhs`);
+a stage law (:class:`~contactdyn.model.chain.ChainStage`), since only the linear law is affine,
+and a drive kind that is not affine below its voltage limit (its ``affine``,
+:mod:`contactdyn.laws.drive_kinds`; the plan reads the drives' law off by probes).
+Controllers need none: the plan calls a controller's ``command`` per call, and folds a
+force-reading law into its solve (:mod:`contactdyn.compiled.plan_fold`); a slip launching
+from rest has its direction solved per call on the plan's own KKT system
+(:mod:`contactdyn.compiled.plan_rhs`);
 a joint pressing on its position limit is one more row of that system
 (:mod:`contactdyn.compiled.plan_probe`). The system adds its own gap: the energy audit.
 :func:`declared_gaps` collects them when the system is built (``System.fast_path_gaps``,
@@ -59,6 +62,10 @@ def declared_gaps(system) -> list[Gap]:
                     gaps.append(Gap(f"contact.{c.name}.{dc.label}.{stage.label}", stage.fast_path_gap,
                                     "while the stage carries force",
                                     lambda modes, phase, ci=ci, dc=dc, k=k: k in dc.plan(modes[ci].touching).active))
+    for i, reason in system.drives.fast_path_gaps:  # a drive kind that is not affine (the plan probes the drives)
+        name = system.drives.names[i]
+        part = f"robot.drive ({name})" if i < system.nv else f"body.{name}.drive"
+        gaps.append(Gap(part, reason, "always", lambda modes, phase: True))
     return gaps
 
 

@@ -72,11 +72,11 @@ class System:
         self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
         #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (zero: no motor)
         self._D_ctl = np.diag(self.drives.model_reflected[:nv])
-        self._joint_motors = self.drives.motorized & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
+        self._joint_motors = self.drives.has_voltage & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
         # ---- controllers, then the first-order slots after the junctions ----
         self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
         for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
-            ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.motorized[:nv].copy(),
+            ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
                                  f"phase[{i}].controller"))
         self.z_slices, self.energy_slot, self.impulse_slots, self.ny = assign_first_order_slots(
             n_first, [ctl.n_states for ctl in self.controllers], scene.solver.record_energy, self.contacts)

@@ -221,9 +221,8 @@ def stored_energy(system: System, xs: np.ndarray, ch: dict[str, np.ndarray]) -> 
     d = system.drives
     for i, spec in enumerate(d.specs):
         m = d.motor_coords[i]
-        if m >= 0:  # elastic: ½ c φ², φ = θ/N − Q/r
-            twist = xs[:, m] / spec.N - xs[:, d.coords[i]] / spec.r
-            energy += 0.5 * spec.c * twist * twist
+        if m >= 0:  # a transmission's spring (elastic: ½ c φ², φ = θ/N − Q/r)
+            energy += spec.law.potential(spec, xs[:, d.coords[i]], xs[:, m])
     return energy, ""
 
 

@@ -66,22 +66,7 @@ MEANINGS: dict[str, str] = {
     "robot.joint_limits": "enforce: position limits are unilateral constraints (impact, pressing, release); "
                           "ignore: none",
     "robot.drive": "drives of the joints: a kind and its parameters, each a scalar or one per joint",
-    # drives (robot.drive and body.<body>.drive share them)
-    "drive.kind": "torque: ideal torque source; dc_motor: motor through a rigid gear (eq. 51); elastic: through an "
-                  "elastic transmission (eqs 53-54); a list gives one per joint",
-    "drive.R": "armature resistance",
-    "drive.C_M": "motor torque constant",
-    "drive.C_E": "back-EMF constant (default: C_M, SI)",
-    "drive.J": "rotor inertia",
-    "drive.N": "speed ratio, motor speed / output speed",
-    "drive.N_star": "torque ratio, output torque / motor torque (default: N; N* < N is a lossy gear)",
-    "drive.wheel_radius": "radius of a wheel turning rotation into translation (0: rotary output)",
-    "drive.u_max": "voltage limit (commands are clipped to +-u_max)",
-    "drive.c": "stiffness of the transmission tube",
-    "drive.d": "damping of the transmission tube",
-    "drive.I1": "I', wave generator inertia on the motor shaft",
-    "drive.I2": "I'', flexspline inertia on the output side (enters as I''/N^2)",
-    "drive.twist_damping": "active damping of the twist rate on the motor side",
+    # drives: robot.drive.* and body.<body>.drive.* from the kinds' declarations (_drive_rows)
     # bodies
     "body.<body>": "an active body translating along its axis",
     "body.<body>.mass": "mass",
@@ -211,10 +196,8 @@ MEANINGS: dict[str, str] = {
     "solver.stabilization": "Baumgarte rate of bonds, rigid contacts and sticks (0: none)",
     "solver.stick_velocity": "slip-speed band of the stick/slip guard: a slide stops when |v_t| falls to it",
 }
-for _k in list(MEANINGS):  # drive keys serve robot.drive and body.<body>.drive; chain elements every chain
-    if _k.startswith("drive."):
-        MEANINGS["robot." + _k] = MEANINGS["body.<body>." + _k] = MEANINGS.pop(_k)
-    elif _k.startswith("chain."):
+for _k in list(MEANINGS):  # chain elements serve every chain
+    if _k.startswith("chain."):
         for _side in ("normal.environment", "normal.robot", "tangent.environment", "tangent.robot"):
             MEANINGS[f"contact.<contact>.{_side}[].{_k[6:]}"] = MEANINGS[_k]
         del MEANINGS[_k]
@@ -359,25 +342,33 @@ def _render(key: str, group: list[KeyRead]) -> tuple[str, str, str, str, str]:
 
 
 def _drive_rows(rows: list[KeyDoc]) -> list[KeyDoc]:
-    """Drive parameters are read from the table in :mod:`contactdyn.laws.drives`: one row each, its kinds as "when"."""
-    from ..laws.drives import _PARAMS
+    """Drive keys from the kinds' declarations (:mod:`contactdyn.laws.drive_kinds`): ``kind`` names every registered
+    kind, each parameter is one row with the kinds that declare it as "when"."""
+    from ..laws.drive_kinds import DRIVE_KINDS
 
     out: list[KeyDoc] = []
     for d in rows:
         table, _, name = d.key.rpartition(".")
-        if not table.endswith("drive") or name == "kind":
+        if not table.endswith("drive"):
             out.append(d)
+            continue
+        if name == "kind":
+            kinds = "; ".join(f"{k}: {cls.meaning}" if cls.meaning else k for k, cls in DRIVE_KINDS.items())
+            out.append(d._replace(meaning=kinds + "; a list gives one per joint"))
             continue
         if any(o.key == d.key for o in out):
             continue
-        kinds = [k for k, params in _PARAMS.items() if name in params]
-        unit, lo, lo_open, default = _PARAMS[kinds[0]][name]
+        kinds = [k for k, cls in DRIVE_KINDS.items() if any(p.name == name for p in cls.params)]
+        p = next(p for p in DRIVE_KINDS[kinds[0]].params if p.name == name)
+        default = "required" if p.default is None and p.same_as is None else (
+            f"= {p.same_as}" if p.same_as is not None else _fmt(float(p.default)))
+        allowed = f"{'>' if p.lo_open else '>='} {_fmt(float(p.lo))}"
+        if p.hi is not None:
+            allowed += f", <= {_fmt(float(p.hi))}"
         out.append(d._replace(
-            when="kind = " + ", ".join(kinds), unit=unit if unit != "-" else "",
+            when="kind = " + ", ".join(kinds), unit=p.unit if p.unit != "-" else "",
             type="number or list (one per joint)" if table == "robot.drive" else "number",
-            default="required" if default is None else (f"= {default}" if isinstance(default, str)
-                                                        else _fmt(float(default))),
-            allowed=f"{'>' if lo_open else '>='} {_fmt(float(lo))}"))
+            default=default, allowed=allowed, meaning=p.meaning))
     return out
 
 

@@ -236,10 +236,11 @@ TOUR: tuple[str, ...] = (_FULL, _ROBOT + _NORMALS, _ROBOT + _PD, _ROBOT + _DYNAM
 
 
 def _laws_document() -> str:
-    """A chain with one stage per registered stage law, a contact per friction law and a phase per controller that
-    declares its parameters, each with the declared parameters' example values (:mod:`contactdyn.laws.params`): a law
-    added later, a user's included, is toured without an edit here."""
+    """A chain with one stage per registered stage law, a contact per friction law, a phase per controller that
+    declares its parameters and a body per drive kind, each with the declared parameters' example values
+    (:mod:`contactdyn.laws.params`): a law added later, a user's included, is toured without an edit here."""
     from ..laws.controllers import CONTROLLERS
+    from ..laws.drive_kinds import DRIVE_KINDS
     from ..laws.friction_laws import FRICTION_LAWS
     from ..laws.stage_laws import STAGE_LAWS
 
@@ -270,9 +271,24 @@ point = [0.0, 0.0, 0.0]
 normal.direction = [0.0, 0.0, 1.0]
 tangent = {{ model = "friction", directions = [[1.0, 0.0, 0.0]], law = "{name}", mu_s = 0.5, mu_k = 0.4{own(law)} }}
 '''
+    for name, kind in DRIVE_KINDS.items():
+        doc += f'''
+[body.drive_{name}]
+mass = 1.0
+drive = {{ kind = "{name}"{own(kind)} }}
+'''
     return doc
+
+
+def _drive_documents() -> tuple[str, ...]:
+    """A robot driven by each registered drive kind, its declared parameters at their example values."""
+    from ..laws.drive_kinds import DRIVE_KINDS
+
+    return tuple(_ROBOT + f'[robot.drive]\nkind = "{name}"\n' + "".join(f"{p.name} = {p.sample()!r}\n"
+                                                                       for p in kind.params)
+                 for name, kind in DRIVE_KINDS.items())
 
 
 def tour() -> tuple[str, ...]:
     """Every document of the tour: :data:`TOUR` and those written from the registries' declarations."""
-    return (*TOUR, _laws_document())
+    return (*TOUR, _laws_document(), *_drive_documents())

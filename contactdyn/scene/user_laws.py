@@ -1,8 +1,9 @@
 """A researcher's own laws, from their own modules: a scene's ``imports``, and installed packages.
 
-A controller, a stage law or a drive is registered by its module when the module is imported
-(``@register`` of :mod:`contactdyn.laws.controllers`, ``@register_stage_law`` of
-:mod:`contactdyn.laws.stage_laws`). Two ways bring such a module in, everywhere a scene is read
+A controller, a stage law, a friction law or a drive kind is registered by its module when the
+module is imported (``@register`` of :mod:`contactdyn.laws.controllers`, ``@register_stage_law`` of
+:mod:`contactdyn.laws.stage_laws`, ``@register_friction_law``, ``@register_drive_kind`` of
+:mod:`contactdyn.laws.drive_kinds`). Two ways bring such a module in, everywhere a scene is read
 (``run``, every worker of a sweep, ``fit``, ``view``, Python's ``parse_scene``):
 
 - ``imports = ["my_laws"]`` at the top of a scene: module names (never file paths), looked up

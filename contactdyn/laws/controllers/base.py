@@ -88,7 +88,7 @@ class BindContext:
     phase: Any  #: the PhaseSpec this controller runs
     index: int  #: phase index
     joint_names: list[str]
-    motorized: np.ndarray  #: bool per joint: the joint has a motor (accepts voltages)
+    motorized: np.ndarray  #: bool per joint: the joint's drive takes a voltage (a motor)
     key: str  #: key path of the controller table, for errors (e.g. "phase[1].controller")
 
 

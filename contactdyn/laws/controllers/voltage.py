@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import SceneError
+from ..drive_kinds import DRIVE_KINDS
 from .base import BindContext, ControlInput, Controller, register
 
 __all__ = ["ConstantVoltage"]
@@ -20,7 +21,7 @@ class ConstantVoltageConfig:
 
 @register
 class ConstantVoltage(Controller):
-    """u = const on every joint's motor (every joint needs a dc_motor or elastic drive)."""
+    """u = const on every joint's motor (every joint needs a drive that takes a voltage: dc_motor, elastic)."""
 
     name = "voltage"
     outputs = "voltage"
@@ -34,8 +35,9 @@ class ConstantVoltage(Controller):
     def bind(self, context: BindContext) -> None:
         if not context.motorized.all():
             bare = [n for n, m in zip(context.joint_names, context.motorized, strict=True) if not m]
+            kinds = " or ".join(name for name, kind in DRIVE_KINDS.items() if kind.has_voltage)
             raise SceneError(f"{context.key}.kind", "a voltage controller only with a motor on every joint "
-                             "(robot.drive.kind = dc_motor or elastic)", f"no motor on {bare}", context.scene.file)
+                             f"(robot.drive.kind = {kinds})", f"no motor on {bare}", context.scene.file)
         if len(self.config.u) not in (1, self.nv):
             raise SceneError(f"{context.key}.u", f"one voltage or {self.nv} (one per joint)", self.config.u.tolist(),
                              context.scene.file)

@@ -1,0 +1,204 @@
+"""A controller's calling convention (its ABI): the compiled model calls a controller's ``command`` by address.
+
+A user writes ``command(self, inp)`` with attribute access on ``inp`` (a :class:`~.base.ControlInput`) and on
+``self.config``. numba compiles that same function with ``inp`` a :class:`ControlArrays` (a named tuple of arrays
+and floats with ControlInput's field names) and ``self`` a named tuple whose ``config`` is a named tuple of the
+controller's declared parameters (``Controller.params``, in order): attribute access compiles unchanged. The C
+function of a controller, its address a plain int64 (:func:`controller_address`):
+
+    ``int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau)``
+
+- ``buffer``: the inputs, one field after another, each where ``layout`` says;
+- ``layout``: [nv, nz, start_0, stop_0, start_1, stop_1, …, size of the buffer] per field of :data:`LAYOUT`
+  (:func:`layout_of`); a field an input does not have (no reference, no gravity asked, no orientation read) is
+  empty (start = stop), as ControlInput's None: a law that reads it fails there and the call goes Python's way;
+- ``params``: the declared parameters' values in their order (``DeclaredConfig.values``);
+- ``tau``: the joint torques [N·m or N] (nv), written; the status returned: 1 written, 0 not (the law raised:
+  numba's cfunc returns 0 then).
+
+Units are ControlInput's: t [s], q [rad or m], v [rad/s or m/s], H [kg·m² …], h and gravity [N·m or N], p_tip [m],
+v_tip [m/s], J and J_ang (3, nv), drift [m/s²], drift_ang [rad/s²], x_d/v_d/a_d [m, m/s, m/s²], R_tip (3, 3), z
+the controller's states.
+
+What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that reads measured forces
+(``uses_forces``), has states, outputs voltages, has no declared parameters' config, or whose ``command`` numba
+cannot compile (a dict, a Python object, ``inp.forces``): it stays on the Python path.
+
+Caching: the wrapper is generated closure-free and attributed to the controller's own file, as the stage laws'
+(:func:`contactdyn.laws.abi.compile_wrapper`), so numba caches it (in compile_cache's directory; an edit of that file recompiles it).
+"""
+
+from __future__ import annotations
+
+import ctypes
+from collections import namedtuple
+from dataclasses import fields
+
+import numba
+import numpy as np
+from numba import carray, types
+from numba.extending import intrinsic, overload
+
+from ...numerics.compile_cache import njit
+from ..abi import _data_at, _indirect_call, compile_wrapper
+from .base import ControlInput, Controller
+
+__all__ = ["CONTROLLER_SIGNATURE", "LAYOUT", "NOT_IN_LAYOUT", "ControlArrays", "control_arrays", "layout_of",
+           "controller_address", "params_of", "buffer_of", "call_controller"]
+
+_P = types.CPointer(types.float64)
+#: int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau)
+CONTROLLER_SIGNATURE = types.int64(_P, types.CPointer(types.int64), _P, types.int64, _P)
+
+#: the buffer's fields in order: name -> (size as a function of (nv, nz), columns: 0 a float, 1 a vector, else a
+#: matrix of that many columns as a function of nv). A new input is one line here and one in control_arrays.
+LAYOUT = (
+    ("t", lambda nv, nz: 1, 0),
+    ("q", lambda nv, nz: nv, 1),
+    ("v", lambda nv, nz: nv, 1),
+    ("H", lambda nv, nz: nv * nv, lambda nv: nv),
+    ("h", lambda nv, nz: nv, 1),
+    ("gravity", lambda nv, nz: nv, 1),
+    ("p_tip", lambda nv, nz: 3, 1),
+    ("v_tip", lambda nv, nz: 3, 1),
+    ("J", lambda nv, nz: 3 * nv, lambda nv: nv),
+    ("drift", lambda nv, nz: 3, 1),
+    ("x_d", lambda nv, nz: 3, 1),
+    ("v_d", lambda nv, nz: 3, 1),
+    ("a_d", lambda nv, nz: 3, 1),
+    ("z", lambda nv, nz: nz, 1),
+    ("R_tip", lambda nv, nz: 9, lambda nv: 3),
+    ("J_ang", lambda nv, nz: 3 * nv, lambda nv: nv),
+    ("drift_ang", lambda nv, nz: 3, 1),
+)
+FIELD = {name: k for k, (name, _, _) in enumerate(LAYOUT)}  #: a field's index in LAYOUT
+#: ControlInput's fields a compiled controller does not read: the measured forces and what goes with them
+NOT_IN_LAYOUT = ("forces", "force_d", "normals", "tau_contact", "surfaces", "touching")
+
+ControlArrays = namedtuple("ControlArrays", [f.name for f in fields(ControlInput) if f.name not in NOT_IN_LAYOUT])
+
+
+def layout_of(nv: int, nz: int, absent: tuple[str, ...] = ()) -> np.ndarray:
+    """The layout table [nv, nz, (start, stop) per field, size of the buffer] for nv joints and nz states; the fields
+    in ``absent`` empty."""
+    out, at = [nv, nz], 0
+    for name, size, _ in LAYOUT:
+        n = 0 if name in absent else size(nv, nz)
+        out += [at, at + n]
+        at += n
+    return np.array([*out, at], dtype=np.int64)
+
+
+def buffer_of(inp: ControlInput, nz: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(buffer, layout) of a readable ControlInput (its None fields absent): the compiled call's inputs, in Python."""
+    nv = len(inp.q)
+    absent = tuple(name for name, _, _ in LAYOUT if getattr(inp, name) is None)
+    layout = layout_of(nv, nz, absent)
+    buffer = np.empty(layout[-1])
+    for k, (name, _, _) in enumerate(LAYOUT):
+        if name not in absent:
+            buffer[layout[2 + 2 * k]:layout[3 + 2 * k]] = np.ravel(getattr(inp, name))  # matrices row by row
+    return buffer, layout
+
+
+@njit(cache=True)
+def _vector(buf, lay, k):
+    return buf[lay[2 + 2 * k]:lay[3 + 2 * k]]
+
+
+@njit(cache=True)
+def _matrix(buf, lay, k, cols):
+    v = buf[lay[2 + 2 * k]:lay[3 + 2 * k]]
+    return v.reshape((v.size // cols, cols))
+
+
+@njit(cache=True)
+def control_arrays(buf, lay):
+    """The :class:`ControlArrays` of a buffer by its layout table (views, no copies)."""
+    nv = lay[0]
+    return ControlArrays(buf[lay[2]], _vector(buf, lay, 1), _vector(buf, lay, 2), _matrix(buf, lay, 3, nv),
+                         _vector(buf, lay, 4), _vector(buf, lay, 5), _vector(buf, lay, 6), _vector(buf, lay, 7),
+                         _matrix(buf, lay, 8, nv), _vector(buf, lay, 9), _vector(buf, lay, 10),
+                         _vector(buf, lay, 11), _vector(buf, lay, 12), _vector(buf, lay, 13),
+                         _matrix(buf, lay, 14, 3), _matrix(buf, lay, 15, nv), _vector(buf, lay, 16))
+
+
+#: the wrapper's source per controller: {name}, {n_layout}, {params} (p[0], p[1], … of the declared parameters)
+_WRAPPER = """def {name}(buffer, layout, params, n_p, tau):
+    lay = carray(layout, ({n_layout},))
+    nv = lay[0]
+    p = carray(params, (n_p,))
+    out, _ = law(Self(Config({params}), nv), control_arrays(carray(buffer, (lay[{n_layout} - 1],)), lay))
+    if out.shape[0] != nv:
+        return 0
+    t = carray(tau, (nv,))
+    for i in range(nv):
+        t[i] = out[i]
+    return 1
+"""
+
+_compiled: dict[type, tuple[int, object]] = {}  #: controller class -> (address, its cfunc, kept alive)
+
+
+def controller_address(cls: type) -> int:
+    """The address of controller class ``cls``'s compiled ``command`` (compiled on first use); 0 if it has none, the
+    reason then in ``cls.compiled_reason``."""
+    if cls in _compiled:
+        return _compiled[cls][0]
+    reason = _declined(cls)
+    cfunc = None
+    if not reason:
+        names = [p.name for p in cls.params]
+        config = namedtuple(f"{cls.__name__}Config", names)
+        name = f"{cls.__name__}_command_abi"
+        source = _WRAPPER.format(name=name, n_layout=2 + 2 * len(LAYOUT) + 1,
+                                 params=", ".join(f"p[{i}]" for i in range(len(names))))
+        namespace = {"carray": carray, "control_arrays": control_arrays, "Config": config,
+                     "Self": namedtuple(f"{cls.__name__}Self", ["config", "nv"])}
+        cfunc, reason = compile_wrapper(cls.command, name, source, CONTROLLER_SIGNATURE, namespace)
+    cls.compiled_reason = reason
+    address = cfunc.address if cfunc is not None else 0
+    _compiled[cls] = (address, cfunc)
+    return address
+
+
+def _declined(cls: type) -> str:
+    """Why ``cls`` is not compiled before numba tries ("" if it may be)."""
+    if numba.config.DISABLE_JIT:
+        return "numba is disabled (NUMBA_DISABLE_JIT)"
+    if cls.uses_forces:
+        return f"controller {cls.name!r} reads measured forces (uses_forces): not compiled yet"
+    if cls.n_states:
+        return f"controller {cls.name!r} has states: not compiled yet"
+    if cls.outputs != "torque":
+        return f"controller {cls.name!r} outputs {cls.outputs}: not compiled yet"
+    if getattr(cls.read, "__func__", cls.read) is not Controller.read.__func__:  # (a staticmethod has none)
+        return f"controller {cls.name!r} reads its own config (not its declared parameters, Controller.params)"
+    return ""
+
+
+def params_of(config) -> np.ndarray:
+    """The declared parameters' values of a controller's config, in order (the C call's ``params``)."""
+    return np.array([value for _, value in config.values], dtype=float)
+
+
+# ---- the call: its Python twin (by ctypes), and its compiled form by overload ----------------------------------
+
+def call_controller(address: int, buffer, layout, params, tau) -> int:
+    """Status of the controller at ``address`` on ``buffer`` by ``layout`` with ``params``, τ written into ``tau``."""
+    fn = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64,
+                          ctypes.c_void_p)(address)
+    return fn(buffer.ctypes.data, layout.ctypes.data, params.ctypes.data, params.size, tau.ctypes.data)
+
+
+@overload(call_controller)
+def _call_controller_compiled(address, buffer, layout, params, tau):
+    def impl(address, buffer, layout, params, tau):
+        return _call_at_controller(address, _data_at(buffer, 0), _data_at(layout, 0), _data_at(params, 0),
+                                   params.size, _data_at(tau, 0))
+    return impl
+
+
+@intrinsic
+def _call_at_controller(typingctx, address, buffer, layout, params, n_p, tau):
+    return types.int64(types.int64, *CONTROLLER_SIGNATURE.args), _indirect_call(CONTROLLER_SIGNATURE)

@@ -1,0 +1,128 @@
+"""A controller's ABI (contactdyn.laws.controllers.abi): the impedance law by address equals its Python command; a
+controller numba cannot compile is declared with its reason; the layout agrees with ControlInput's fields."""
+
+import sys
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contactdyn.laws import Controller, Param
+from contactdyn.laws.controllers import abi
+from contactdyn.laws.controllers.abi import LAYOUT, NOT_IN_LAYOUT, ControlArrays, buffer_of, layout_of, params_of
+from contactdyn.laws.controllers.base import ControlInput, DeclaredConfig
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+
+
+@pytest.fixture(scope="module")
+def impedance():
+    """examples/my_laws.py's Impedance; the registries and imports left as they were after this module's tests."""
+    import contactdyn.scene.user_laws as user_laws
+    from contactdyn.laws.controllers import CONTROLLERS
+
+    controllers, imported, state = dict(CONTROLLERS), dict(user_laws.IMPORTED), dict(user_laws._state)
+    sys.path.insert(0, str(EXAMPLES))
+    try:
+        import my_laws
+        yield my_laws.Impedance
+    finally:
+        sys.path.remove(str(EXAMPLES))
+        sys.modules.pop("my_laws", None)
+        CONTROLLERS.clear()
+        CONTROLLERS.update(controllers)
+        user_laws.IMPORTED.clear()
+        user_laws.IMPORTED.update(imported)
+        user_laws._state.update(state)
+
+
+def _random_input(rng, nv: int) -> ControlInput:
+    def r(*shape):
+        return rng.standard_normal(shape)
+    return ControlInput(rng.random(), r(nv), r(nv), r(nv, nv), r(nv), r(nv), r(3), r(3), r(3, nv), r(3), r(3), r(3),
+                        r(3), {}, {}, {}, np.zeros(0), R_tip=r(3, 3), J_ang=r(3, nv), drift_ang=r(3))
+
+
+@pytest.mark.parametrize("nv", [2, 6])
+def test_impedance_by_address_equals_its_command(impedance, nv):
+    address = abi.controller_address(impedance)
+    assert address and impedance.compiled_reason == ""
+    rng = np.random.default_rng(nv)
+    config = DeclaredConfig("impedance", (("stiffness", 2000.0), ("damping", 100.0)))
+    for _ in range(20):
+        inp = _random_input(rng, nv)
+        expected, _ = impedance(config, nv).command(inp)
+        buffer, layout = buffer_of(inp)
+        tau = np.full(nv, np.nan)
+        assert abi.call_controller(address, buffer, layout, params_of(config), tau) == 1
+        assert np.allclose(tau, expected, rtol=1e-13, atol=1e-13 * np.abs(expected).max())
+
+
+def test_a_law_that_raises_returns_status_0(impedance):
+    inp = _random_input(np.random.default_rng(0), 2)
+    inp.x_d = None  # no reference: the law's x_d − p fails, as in Python
+    buffer, layout = buffer_of(inp)
+    tau = np.zeros(2)
+    assert abi.call_controller(abi.controller_address(impedance), buffer, layout, np.array([1.0, 2.0]), tau) == 0
+
+
+class _ReadsForces(Controller):
+    name = "reads_forces_abi_test"
+    params = (Param("gain", "1", "a gain", 1.0),)
+
+    def command(self, inp):
+        return self.config.gain * inp.forces["tip"] * inp.J[0], None
+
+
+class _UsesForces(_ReadsForces):
+    name = "uses_forces_abi_test"
+    uses_forces = True
+
+
+def test_a_controller_numba_cannot_compile_is_declared():
+    assert abi.controller_address(_ReadsForces) == 0
+    assert "numba cannot compile" in _ReadsForces.compiled_reason
+    assert abi.controller_address(_UsesForces) == 0
+    assert "measured forces" in _UsesForces.compiled_reason
+
+
+def test_layout_and_control_arrays_agree_with_control_input():
+    names = [f.name for f in fields(ControlInput)]
+    assert [name for name in names if name not in NOT_IN_LAYOUT] == [name for name, _, _ in LAYOUT]
+    assert list(ControlArrays._fields) == [name for name, _, _ in LAYOUT]
+    assert set(NOT_IN_LAYOUT) <= set(names)
+    layout = layout_of(3, 2)
+    assert layout[-1] == 1 + 3 + 3 + 9 + 3 + 3 + 3 + 3 + 9 + 3 + 9 + 2 + 9 + 9 + 3
+
+
+def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedance, monkeypatch):
+    """examples/impedance_press.toml: the mode on the compiled call (the law by address), its run the one of the
+    law's Python command (the address forced to 0) to 1e-9."""
+    import warnings
+
+    from contactdyn import load_scene, simulate
+
+    def run():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return simulate(load_scene(EXAMPLES / "impedance_press.toml"))
+
+    new = run()
+    assert [row["path"] for row in new.stats["paths"].values()] == ["compiled call"]
+    monkeypatch.setattr(abi, "controller_address", lambda cls: 0)
+    from contactdyn.compiled import plan_operational
+    monkeypatch.setattr(plan_operational, "controller_address", lambda cls: 0)
+    old = run()
+    assert [row["path"] for row in old.stats["paths"].values()] == ["compiled plan, law in Python"]
+    for channel in ("q", "contact.tip.F_n"):
+        scale = np.abs(old[channel]).max()
+        assert np.abs(new[channel] - old[channel]).max() <= 1e-9 * scale, channel
+
+
+def test_a_controller_that_reads_its_own_config_is_declared():
+    from contactdyn.laws.controllers.pd import JointPD, TaskPD
+
+    for cls in (JointPD, TaskPD):  # their own read (a staticmethod)
+        assert abi.controller_address(cls) == 0
+        assert "reads its own config" in cls.compiled_reason
