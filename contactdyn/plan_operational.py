@@ -155,7 +155,7 @@ def _task_pd(phi, x, fb, ib, ref, set_points, R_tip, J6, nQ, nv, i_J, i_p, i_ff)
                               kd_normal, tau_ff)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def call(phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
     """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (ẋ with the impulse states'
     rates, τ the law's command [N·m or N], as plan_kernel.call's ``out``). fb, ib: the plan's constants
