@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import resource
 import subprocess
 import sys
@@ -43,7 +44,10 @@ def _cap() -> None:
 def run_batch(cases: list[Case], cwd: Path) -> dict[str, dict]:
     payload = json.dumps([{"id": c[0], "argv": c[1]} for c in cases])
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "HOME": str(cwd), "MPLBACKEND": "Agg",
-           "OPENBLAS_NUM_THREADS": "1"}
+           "OPENBLAS_NUM_THREADS": "1",  # the compiled code's cache: the user's, not the temporary HOME's (cold)
+           "XDG_CACHE_HOME": os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")}
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        env["NUMBA_CACHE_DIR"] = os.environ["NUMBA_CACHE_DIR"]
     proc = subprocess.run([sys.executable, str(RUNNER)], input=payload, capture_output=True, text=True, cwd=cwd,
                           env=env, timeout=BATCH_TIMEOUT, preexec_fn=_cap)
     results = {r["id"]: r for r in map(json.loads, proc.stdout.splitlines())}
