@@ -65,6 +65,17 @@ def test_an_unwritable_place_falls_back_to_the_temp_folder(tmp_path, monkeypatch
     assert where.parent.parent == tmp_path / "tmp" and where.name == cc.key(pkg) and where.is_dir()
 
 
+def test_no_home_falls_back_to_the_temp_folder(tmp_path, monkeypatch):
+    pkg = _package(tmp_path)
+
+    def no_home():
+        raise RuntimeError("Could not determine home directory.")
+
+    monkeypatch.setattr(Path, "home", no_home)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    assert cc.cache_dir({}, pkg).parent.parent == tmp_path / "tmp"
+
+
 def test_keys_unused_for_long_are_removed_and_others_kept(tmp_path):
     pkg = _package(tmp_path)
     root = tmp_path / "user"

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import resource
 import subprocess
 import sys
@@ -21,7 +22,6 @@ import numpy as np
 import pytest
 
 import contactdyn
-import contactdyn.numerics.compile_cache as compile_cache
 from contactdyn.scene.scene_file import sims_dir
 
 ROOT = Path(contactdyn.__file__).parent.parent
@@ -43,9 +43,11 @@ def _cap() -> None:
 
 def run_batch(cases: list[Case], cwd: Path) -> dict[str, dict]:
     payload = json.dumps([{"id": c[0], "argv": c[1]} for c in cases])
-    # a home of its own, but this process's compiled code (compile_cache: the same key under NUMBA_CACHE_DIR)
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "HOME": str(cwd), "MPLBACKEND": "Agg",
-           "OPENBLAS_NUM_THREADS": "1", "NUMBA_CACHE_DIR": str(compile_cache.directory().parent)}
+           "OPENBLAS_NUM_THREADS": "1",  # the compiled code's cache: the user's, not the temporary HOME's (cold)
+           "XDG_CACHE_HOME": os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")}
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        env["NUMBA_CACHE_DIR"] = os.environ["NUMBA_CACHE_DIR"]
     proc = subprocess.run([sys.executable, str(RUNNER)], input=payload, capture_output=True, text=True, cwd=cwd,
                           env=env, timeout=BATCH_TIMEOUT, preexec_fn=_cap)
     results = {r["id"]: r for r in map(json.loads, proc.stdout.splitlines())}

@@ -52,3 +52,11 @@ def test_progress_shows_after_a_while_as_lines_off_a_terminal(monkeypatch):
     for t in (0.1, 0.5, 0.6, 1.9):  # at 1 s (quiet), 2.5 s (a line), 3 s (too soon), 13 s (a line)
         p(t)
     assert out.getvalue().splitlines() == ["b1: t = 0.5 / 2 s (25 %, 2 s)", "b1: t = 1.9 / 2 s (95 %, 13 s)"]
+
+
+def test_a_scene_name_with_escape_codes_is_shown_escaped():
+    stream = io.StringIO()
+    shown = progress.Progress("b1\x1b[31mRED", 2.0, stream)
+    shown.next = 0.0  # due now (no waiting for SHOW_AFTER)
+    shown(1.0)
+    assert "\x1b" not in stream.getvalue() and stream.getvalue().startswith("b1\\x1b[31mRED: t = 1 / 2 s (50 %")

@@ -179,7 +179,7 @@ def _tip_law(phi, x, u, A, b, o, fb, ib, c):
     return tau, B, targets
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def call(t, phi, x, u, fb, ib, out):
     """The status of the module docstring's call at t [s], its [ẋ, z, o, τ] written into ``out`` (τ: the joint
     command [N·m or N; V] at the solution, what the drives make of it); fb, ib: the plan's constants

@@ -208,7 +208,7 @@ def _controller(t, phi, x, fb, ib, ref, R_tip, J6, drift6, nQ, nv, i_h, i_J, i_d
     return tau, call_controller(at[0], buf, layout, vector_of(fb, ib, KP).copy(), tau)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def call(t, phi, x, fb, ib, ref, set_points, R_tip, J6, drift6, out):
     """The status of the module docstring's call, its [ẋ, z, o, τ] written into ``out`` (ẋ with the impulse states'
     rates, τ the law's command [N·m or N], as plan_kernel.call's ``out``). fb, ib: the plan's constants

@@ -32,7 +32,9 @@ class Progress:
     """Simulated time t of T [s], shown on stderr once a run has taken SHOW_AFTER seconds."""
 
     def __init__(self, name: str, duration: float, stream=None):
-        self.name, self.duration = name, duration
+        #: control characters (terminal escape codes in a scene's file name) shown as escapes, not obeyed
+        self.name = "".join(c if c.isprintable() else repr(c)[1:-1] for c in name)
+        self.duration = duration  #: [s]
         self.stream = stream or sys.stderr
         self.start = time.monotonic()
         self.next = self.start + SHOW_AFTER

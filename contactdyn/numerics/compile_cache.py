@@ -61,11 +61,14 @@ def key(package: Path = PACKAGE, version: str = __version__) -> str:
     return f"contactdyn-{version}-{digest.hexdigest()[:HASH_CHARS]}"
 
 
-def _root(environ: Mapping[str, str]) -> Path:
-    """The folder the keys live in: the user's NUMBA_CACHE_DIR, else the user's cache folder."""
+def _root(environ: Mapping[str, str]) -> Path | None:
+    """The folder the keys live in: the user's NUMBA_CACHE_DIR, else the user's cache folder (None: no home)."""
     if environ.get("NUMBA_CACHE_DIR"):
         return Path(environ["NUMBA_CACHE_DIR"]).expanduser()
-    user = Path(environ["XDG_CACHE_HOME"]) if environ.get("XDG_CACHE_HOME") else Path.home() / ".cache"
+    try:
+        user = Path(environ["XDG_CACHE_HOME"]) if environ.get("XDG_CACHE_HOME") else Path.home() / ".cache"
+    except RuntimeError:  # no HOME and no user entry
+        return None
     return user / "contactdyn" / "numba"
 
 
@@ -94,7 +97,7 @@ def cache_dir(environ: Mapping[str, str], package: Path = PACKAGE) -> Path:
     name = key(package)
     fallback = Path(tempfile.gettempdir()) / f"contactdyn-numba-{getattr(os, 'getuid', str)()}"
     for root in (_root(environ), fallback):
-        if _writable(root / name):
+        if root is not None and _writable(root / name):
             with contextlib.suppress(OSError):
                 os.utime(root / name)  # in use: not stale
             _prune(root, name)

@@ -25,7 +25,8 @@ What is not compiled (address 0, the reason in ``cls.compiled_reason``): a contr
 cannot compile (a dict, a Python object, ``inp.forces``): it stays on the Python path.
 
 Caching: the wrapper is generated closure-free and attributed to the controller's own file, as the stage laws'
-(:func:`contactdyn.laws.abi.compile_wrapper`), so numba caches it (in compile_cache's directory; an edit of that file recompiles it).
+(:func:`contactdyn.laws.abi.compile_wrapper`), so numba caches it (compile_cache's directory; an edit of that
+file recompiles it).
 """
 
 from __future__ import annotations
