@@ -126,3 +126,47 @@ def test_a_controller_that_reads_its_own_config_is_declared():
     for cls in (JointPD, TaskPD):  # their own read (a staticmethod)
         assert abi.controller_address(cls) == 0
         assert "reads its own config" in cls.compiled_reason
+
+
+class _Gravity(Controller):
+    """τ = g(q) without asking for it (needs_gravity false): the compiled buffer has no gravity field."""
+
+    name = "gravity_unasked_abi_test"
+    params = (Param("gain", "1", "a gain", 1.0),)
+
+    def command(self, inp):
+        return self.config.gain * inp.gravity[:2].copy(), None
+
+
+def test_a_field_the_input_lacks_fails_the_compiled_call_instead_of_reading_other_memory():
+    inp = _random_input(np.random.default_rng(1), 2)
+    inp.gravity = None  # not asked for: an empty field in the buffer
+    buffer, layout = buffer_of(inp)
+    tau = np.zeros(2)
+    assert abi.call_controller(abi.controller_address(_Gravity), buffer, layout, np.array([1.0]), tau) == 0
+
+
+class _Gains(Controller):
+    name = "gains_abi_test"
+    params = (Param("a", "1", "first gain", 1.0), Param("b", "1", "second gain", 1.0))
+
+    def command(self, inp):
+        return np.full(inp.q.size, self.config.a + 10.0 * self.config.b), None
+
+
+class _SwappedGains(_Gains):
+    """The same command, its parameters declared in the other order."""
+
+    name = "swapped_gains_abi_test"
+    params = (_Gains.params[1], _Gains.params[0])
+
+
+def test_a_subclass_sharing_its_command_gets_code_of_its_own():
+    inp = _random_input(np.random.default_rng(2), 2)
+    buffer, layout = buffer_of(inp)
+    got = []
+    for cls in (_Gains, _SwappedGains):
+        tau = np.zeros(2)
+        assert abi.call_controller(abi.controller_address(cls), buffer, layout, np.array([1.0, 2.0]), tau) == 1
+        got.append(tau[0])
+    assert got == [1.0 + 10.0 * 2.0, 2.0 + 10.0 * 1.0]  # each class's params: (a, b) = (1, 2), then (2, 1)

@@ -240,3 +240,53 @@ def test_a_pickled_chain_packs_again_in_its_new_process():
     dc = system.contacts[0].normal
     assert dc.arrays  # packed, with the laws' addresses of this process
     assert pickle.loads(pickle.dumps(dc)).arrays == {}  # another process would pack with its own
+
+
+@pytest.fixture
+def raising_law():
+    """A law that raises its own error beyond 1 µm of compression, registered as ``raising``."""
+
+    class Raising(StageLaw):
+        name = "raising"
+
+        @staticmethod
+        def force(k, b, p, x, xdot):
+            if x > 1e-6:
+                raise ValueError("raising: compression beyond its range")
+            return k * x + b * xdot
+
+    register_stage_law(Raising)
+    yield Raising
+    STAGE_LAWS.pop(Raising.name, None)
+
+
+def test_a_compiled_law_that_raises_raises_its_own_error_not_a_zero_force(raising_law):
+    assert abi.stage_address(raising_law)  # it compiles: numba compiles the raise
+    system, modes, phase, x = prepare(_axis_scene("raising"))
+    system.evaluate(0.0, x, modes, phase)  # undeformed: a force
+    x[system.nv] -= 1e-4  # the mass moved down [m]: the law's stage compressed beyond its range
+    with pytest.raises(ValueError, match="compression beyond its range"):
+        system.evaluate(0.0, x, modes, phase)
+
+
+def _scaled_law(scale: float) -> type[StageLaw]:
+    """A law made by a factory: its force reads ``scale`` from the factory's closure."""
+
+    class Scaled(StageLaw):
+        name = f"scaled_{scale:g}"
+
+        @staticmethod
+        def force(k, b, p, x, xdot):
+            return scale * k * x
+
+    return Scaled
+
+
+def test_laws_made_by_one_factory_are_compiled_apart():
+    """Same file, same qualified name, another closure: each law its own machine code (no cache shared)."""
+    got = []
+    for scale in (1.0, 2.0, 3.0):
+        out = np.zeros((1, 1))
+        _stage_grid(abi.stage_address(_scaled_law(scale)), 10.0, 0.0, np.zeros(0), np.ones(1), np.zeros(1), out)
+        got.append(out[0, 0])
+    assert got == [10.0, 20.0, 30.0]

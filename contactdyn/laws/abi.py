@@ -26,7 +26,10 @@ by this module's source among others), and an edit of the law's file recompiles 
 
 from __future__ import annotations
 
+import hashlib
 import inspect
+import math
+import os
 import re
 
 import numba
@@ -47,9 +50,12 @@ STAGE_SIGNATURE = types.float64(types.float64, types.float64, _P, types.int64, t
 FRICTION_SIGNATURE = types.float64(types.float64, types.float64, _P, types.int64, types.float64)
 
 #: the cfunc's body per family: the C arguments to the law's Python arguments (p as an array of n_p)
+#: (a law that raises returns NaN: its caller recomputes it in Python, where the law's own error surfaces)
 _WRAPPERS = {
-    "stage": "def {name}(k, b, p, n_p, x, xdot):\n    return law(k, b, carray(p, (n_p,)), x, xdot)\n",
-    "friction": "def {name}(mu_s, mu_k, p, n_p, speed):\n    return law(mu_s, mu_k, carray(p, (n_p,)), speed)\n",
+    "stage": "def {name}(k, b, p, n_p, x, xdot):\n    try:\n        return law(k, b, carray(p, (n_p,)), x, xdot)\n"
+             "    except Exception:\n        return NAN\n",
+    "friction": "def {name}(mu_s, mu_k, p, n_p, speed):\n    try:\n"
+                "        return law(mu_s, mu_k, carray(p, (n_p,)), speed)\n    except Exception:\n        return NAN\n",
 }
 _SIGNATURES = {"stage": STAGE_SIGNATURE, "friction": FRICTION_SIGNATURE}
 
@@ -91,7 +97,8 @@ def _address(law: type, family: str, fn) -> int:
 def _compile(law: type, family: str, fn) -> tuple[object | None, str]:
     """(the law's cfunc, "") or (None, why numba cannot compile it): :func:`compile_wrapper` of the family's wrapper."""
     name = f"{law.__name__}_{fn.__name__}_abi"
-    return compile_wrapper(fn, name, _WRAPPERS[family].format(name=name), _SIGNATURES[family], {"carray": carray})
+    return compile_wrapper(fn, name, _WRAPPERS[family].format(name=name), _SIGNATURES[family],
+                           {"carray": carray, "NAN": math.nan})
 
 
 def compile_wrapper(fn, name: str, source: str, signature, namespace: dict) -> tuple[object | None, str]:
@@ -105,8 +112,13 @@ def compile_wrapper(fn, name: str, source: str, signature, namespace: dict) -> t
         path = "<unknown>"
     exec(compile(source, path, "exec"), namespace)
     wrapper = namespace[name]
-    wrapper.__module__, wrapper.__qualname__ = fn.__module__, f"{fn.__qualname__}_abi"
-    for cache in (True, False):
+    # numba keys a cached function by its file and qualified name, not by the globals it calls: the name carries
+    # the law's class and a digest of the wrapper (two classes sharing an inherited function stay apart), and a
+    # law with closure cells (made in a factory) or without a real file is not cached at all
+    digest = hashlib.sha256(f"{name}\0{source}".encode()).hexdigest()[:12]
+    wrapper.__module__, wrapper.__qualname__ = fn.__module__, f"{fn.__qualname__}_{name}_{digest}"
+    cacheable = os.path.isfile(path) and not fn.__closure__
+    for cache in ((True, False) if cacheable else (False,)):
         try:
             namespace["law"] = _jit(fn, cache)
             return _cfunc(wrapper, signature, cache), ""
@@ -118,9 +130,9 @@ def compile_wrapper(fn, name: str, source: str, signature, namespace: dict) -> t
 def _jit(fn, cache: bool):
     """The law's function under numba, cached (compile_cache's directory) when it has a source file."""
     try:
-        return njit(cache=cache)(fn)
+        return njit(cache=cache, boundscheck=True)(fn)
     except RuntimeError:  # "no locator available": a law without a source file (exec'd, a notebook's cell)
-        return njit(fn)
+        return njit(boundscheck=True)(fn)
 
 
 def _cfunc(wrapper, signature, cache: bool):

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import SimulationError
 from ..laws.abi import call_stage, stage_address
 from ..numerics.compile_cache import njit
 from ..numerics.linalg import dot3
@@ -161,11 +162,28 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
         tip_F, gamma, interface_F, gap = chain_call(a.plan, a.stages, a.coef, a.consts, x, kin.p_tip, kin.v_tip,
                                                     kin.p_env, kin.v_env, kin.drift, float(offset), f, ydot, a.motion,
                                                     a.stage_state)
+        if not np.isfinite(a.stage_state[:, F]).all():  # a compiled law raised (its call gives NaN) or gave NaN
+            _law_error(a, dc)
     dc.last_positions = a.motion[0]
     if full and ev is not None:
         _name_stages(a, ev.stages)
     row = _bond_row(system, c, dc, kin) if a.bond else None
     return tip_F, row, gamma, interface_F, (0.0 if touching else gap)
+
+
+def _law_error(a: ChainArrays, dc: DirectionalChain) -> None:
+    """A stage whose compiled law gave no finite force: its Python law at the same (x, ẋ) raises the law's own
+    error here; a law that gives NaN in Python too keeps it (as a Python law would); one that raised compiled
+    only is an error that says so."""
+    st = a.stage_state
+    for k in a.active:
+        if np.isfinite(st[k, F]):
+            continue
+        stage, xs, xd = dc.chain.stages[k], float(st[k, X]), float(st[k, XDOT])
+        if np.isfinite(stage.force(xs, xd)):
+            raise SimulationError(f"{a.labels[k]}: stage law {stage.law!r} failed in its compiled form at "
+                                  f"x = {xs:.6g} m, ẋ = {xd:.6g} m/s (its Python form gives a force there): "
+                                  "an index past an array's end, or an operation numba treats otherwise")
 
 
 def _python_forces(a: ChainArrays, energy: bool) -> None:

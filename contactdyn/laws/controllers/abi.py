@@ -11,10 +11,12 @@ function of a controller, its address a plain int64 (:func:`controller_address`)
 - ``buffer``: the inputs, one field after another, each where ``layout`` says;
 - ``layout``: [nv, nz, start_0, stop_0, start_1, stop_1, …, size of the buffer] per field of :data:`LAYOUT`
   (:func:`layout_of`); a field an input does not have (no reference, no gravity asked, no orientation read) is
-  empty (start = stop), as ControlInput's None: a law that reads it fails there and the call goes Python's way;
+  empty (start = stop), as ControlInput's None: a law that reads it fails there (bounds-checked) and the call goes
+  Python's way (``inp.x_d is None`` is never true compiled: test ``inp.x_d.size`` in a law meant to compile);
 - ``params``: the declared parameters' values in their order (``DeclaredConfig.values``);
-- ``tau``: the joint torques [N·m or N] (nv), written; the status returned: 1 written, 0 not (the law raised:
-  numba's cfunc returns 0 then).
+- ``tau``: the joint torques [N·m or N] (nv), written; the status returned: 1 written, 0 not (the law raised,
+  read past a field, which the bounds checks catch, or gave the wrong number of torques; or ``n_p`` is not the
+  number of declared parameters): the call then goes Python's way, where the law's own error surfaces.
 
 Units are ControlInput's: t [s], q [rad or m], v [rad/s or m/s], H [kg·m² …], h and gravity [N·m or N], p_tip [m],
 v_tip [m/s], J and J_ang (3, nv), drift [m/s²], drift_ang [rad/s²], x_d/v_d/a_d [m, m/s, m/s²], R_tip (3, 3), z
@@ -125,11 +127,16 @@ def control_arrays(buf, lay):
 
 
 #: the wrapper's source per controller: {name}, {n_layout}, {params} (p[0], p[1], … of the declared parameters)
-_WRAPPER = """def {name}(buffer, layout, params, n_p, tau):
+_WRAPPER = """def {name}(buffer, layout, params, n_p, tau):  # config: {names}
     lay = carray(layout, ({n_layout},))
     nv = lay[0]
+    if n_p != {n_params}:
+        return 0
     p = carray(params, (n_p,))
-    out, _ = law(Self(Config({params}), nv), control_arrays(carray(buffer, (lay[{n_layout} - 1],)), lay))
+    try:
+        out, _ = law(Self(Config({params}), nv), control_arrays(carray(buffer, (lay[{n_layout} - 1],)), lay))
+    except Exception:  # the Python path runs the law again, and its own error surfaces there
+        return 0
     if out.shape[0] != nv:
         return 0
     t = carray(tau, (nv,))
@@ -152,8 +159,8 @@ def controller_address(cls: type) -> int:
         names = [p.name for p in cls.params]
         config = namedtuple(f"{cls.__name__}Config", names)
         name = f"{cls.__name__}_command_abi"
-        source = _WRAPPER.format(name=name, n_layout=2 + 2 * len(LAYOUT) + 1,
-                                 params=", ".join(f"p[{i}]" for i in range(len(names))))
+        source = _WRAPPER.format(name=name, n_layout=2 + 2 * len(LAYOUT) + 1, names=", ".join(names),
+                                 n_params=len(names), params=", ".join(f"p[{i}]" for i in range(len(names))))
         namespace = {"carray": carray, "control_arrays": control_arrays, "Config": config,
                      "Self": namedtuple(f"{cls.__name__}Self", ["config", "nv"])}
         cfunc, reason = compile_wrapper(cls.command, name, source, CONTROLLER_SIGNATURE, namespace)
@@ -186,7 +193,14 @@ def params_of(config) -> np.ndarray:
 # ---- the call: its Python twin (by ctypes), and its compiled form by overload ----------------------------------
 
 def call_controller(address: int, buffer, layout, params, tau) -> int:
-    """Status of the controller at ``address`` on ``buffer`` by ``layout`` with ``params``, τ written into ``tau``."""
+    """Status of the controller at ``address`` on ``buffer`` by ``layout`` with ``params``, τ written into ``tau``
+    (float64 and int64 arrays, contiguous: the C function reads them by pointer)."""
+    if not address:
+        raise ValueError("call_controller: address 0 (the controller is not compiled: see its compiled_reason)")
+    buffer, layout, params = (np.ascontiguousarray(buffer, float), np.ascontiguousarray(layout, np.int64),
+                              np.ascontiguousarray(params, float))
+    if not (tau.dtype == np.float64 and tau.flags.c_contiguous):
+        raise ValueError("call_controller: tau must be a contiguous float64 array (it is written)")
     fn = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64,
                           ctypes.c_void_p)(address)
     return fn(buffer.ctypes.data, layout.ctypes.data, params.ctypes.data, params.size, tau.ctypes.data)
