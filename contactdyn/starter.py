@@ -83,13 +83,17 @@ def _load_arm(robot: str, tip: str | None):
 
 def _longest_leaf(arm) -> str:
     """The leaf body frame with the most joints between it and the root (ties: the first listed)."""
+    from .robot.frames import find_frame
     from .robot.listing import end_effectors
 
     model = arm.model
     leaves = end_effectors(model)
     if not leaves:
         raise SceneError("--robot", "a robot with a moving leaf frame to press with", "none")
-    return max(leaves, key=lambda name: len(model.supports[model.frames[model.getFrameId(name)].parentJoint]))
+    def depth(name: str) -> int:  # joints between the frame and the root
+        return len(model.supports[model.frames[find_frame(model, name, "--robot")].parentJoint])
+
+    return max(leaves, key=depth)
 
 
 def working_posture(arm, tip: str, seed: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

@@ -399,7 +399,7 @@ def test_urdf_xml_conventions(name):
 
 
 def test_a_built_urdf_is_reused_until_its_file_changes(tmp_path, monkeypatch):
-    """A process builds a URDF once per file content (mtime and size); every caller gets its own model."""
+    """A process builds a URDF once per file content; every caller gets its own model."""
     import contactdyn.robot.urdf_model as urdf_model
 
     path = tmp_path / "arm.urdf"

@@ -146,20 +146,19 @@ def _check_limits(model: pin.Model, path: Path) -> None:
                              f"lower limit {lower[sl].tolist()} > upper limit {upper[sl].tolist()}")
 
 
-#: URDFs built in this process: (file, its mtime [ns] and size [B], package dirs, inertia) -> the build
+#: URDFs built in this process: (file, SHA-256 of its content, package dirs, inertia) -> the build
 _BUILT: dict[tuple, UrdfModel] = {}
 
 
 def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfModel:
     """Find, check and build a URDF (see the module docstring); ``inertia`` is one of INERTIA_MODES.
 
-    A file built before in this process, unchanged since (same mtime and size), is not read again
+    A file built before in this process, unchanged since (the same content), is not checked and built again
     (a sweep or a script builds the same robot per run); the caller gets its own copy of the model."""
     if inertia not in INERTIA_MODES:
         raise RobotError(f"robot.inertia must be one of {list(INERTIA_MODES)}, found {inertia!r}")
     path, package_dirs = resolve_robot_path(source)
-    stat = path.stat()
-    key = (str(path), stat.st_mtime_ns, stat.st_size, tuple(package_dirs), inertia)
+    key = (str(path.resolve()), hashlib.sha256(path.read_bytes()).hexdigest(), tuple(package_dirs), inertia)
     if key not in _BUILT:
         _BUILT[key] = _build(path, package_dirs, inertia)
     built = _BUILT[key]
