@@ -131,3 +131,14 @@ def test_no_compiled_function_reads_a_name_from_a_module_the_key_does_not_hash()
                 names = {n.id for n in ast.walk(fn) if isinstance(n, ast.Name)} & set(outside)
                 stale += [f"{path.name}: {fn.name} reads {n} of {outside[n].name}" for n in sorted(names)]
     assert stale == []
+
+
+def _twice(x):
+    return 2 * x
+
+
+def test_njit_called_on_a_function_with_options_gives_the_compiled_function():
+    """``njit(f, cache=False)`` as numba's: the dispatcher, not a decorator waiting for a function."""
+    compiled = cc.njit(_twice, cache=False)
+    assert isinstance(compiled, numba.core.registry.CPUDispatcher) and compiled(21) == 42
+    assert cc.njit(cache=False)(_twice)(4) == 8  # the decorator form as before

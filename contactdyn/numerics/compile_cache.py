@@ -141,7 +141,7 @@ def njit(*signatures, **options) -> Callable:
         with _cached_here(options.get("cache", False)):
             return numba.njit(*signatures, **options)(function)
 
-    if len(signatures) == 1 and callable(signatures[0]) and not options:  # bare @njit
+    if len(signatures) == 1 and callable(signatures[0]):  # @njit, or njit(function, cache=True)
         function, signatures = signatures[0], ()
         return decorate(function)
     return decorate
