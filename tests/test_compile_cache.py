@@ -6,7 +6,6 @@ import ast
 import importlib.util
 import os
 import tempfile
-import time
 from pathlib import Path
 
 import numba
@@ -76,14 +75,16 @@ def test_no_home_falls_back_to_the_temp_folder(tmp_path, monkeypatch):
     assert cc.cache_dir({}, pkg).parent.parent == tmp_path / "tmp"
 
 
-def test_keys_unused_for_long_are_removed_and_others_kept(tmp_path):
+def test_keys_unused_for_long_are_removed_and_others_kept(tmp_path, monkeypatch):
     pkg = _package(tmp_path)
     root = tmp_path / "user"
-    old = time.time() - (cc.STALE_AFTER + 1) * 86400.0  # [s]
-    for name in ("contactdyn-0.0.1-aaaaaaaaaaaa", "contactdyn-0.0.2-bbbbbbbbbbbb", "someone_else"):
+    now = 4.0e9  # [s] since the epoch: the clock the keys' ages are measured against (not the machine's)
+    monkeypatch.setattr(cc, "clock", lambda: now)
+    old, recent = now - (cc.STALE_AFTER + 1) * 86400.0, now - 86400.0  # [s]
+    for name, used in (("contactdyn-0.0.1-aaaaaaaaaaaa", old), ("contactdyn-0.0.2-bbbbbbbbbbbb", recent),
+                       ("someone_else", old)):
         (root / name).mkdir(parents=True)
-    os.utime(root / "contactdyn-0.0.1-aaaaaaaaaaaa", (old, old))
-    os.utime(root / "someone_else", (old, old))
+        os.utime(root / name, (used, used))
     cc.cache_dir({"NUMBA_CACHE_DIR": str(root)}, pkg)
     assert sorted(p.name for p in root.iterdir()) == sorted(["contactdyn-0.0.2-bbbbbbbbbbbb", "someone_else",
                                                              cc.key(pkg)])

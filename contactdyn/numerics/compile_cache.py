@@ -45,6 +45,7 @@ __all__ = ["njit", "cfunc", "directory", "cache_dir", "key", "compiled_modules",
 PACKAGE = Path(__file__).resolve().parents[1]  #: the package's source folder (contactdyn/)
 HASH_CHARS = 12  #: [hex digits] of the source hash in KEY
 STALE_AFTER = 30.0  #: [days] a sibling key unused this long is removed
+clock = time.time  #: [s] since the epoch: the age of a key is measured against it (a test replaces it)
 _MARK = "compile_cache import "  #: an import from here makes a module a compiled one
 
 
@@ -83,7 +84,7 @@ def _writable(folder: Path) -> bool:
 
 def _prune(root: Path, keep: str) -> None:
     """Remove the keys in ``root`` other than ``keep`` that no process used for STALE_AFTER days."""
-    oldest = time.time() - STALE_AFTER * 86400.0  # [s] since the epoch
+    oldest = clock() - STALE_AFTER * 86400.0  # [s] since the epoch
     for entry in root.glob("contactdyn-*"):
         try:
             if entry.name != keep and entry.is_dir() and entry.stat().st_mtime < oldest:
