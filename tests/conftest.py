@@ -19,10 +19,47 @@ def pytest_collection_modifyitems(config, items):
 
 
 @pytest.fixture
-def doubled_law():
+def stage_law_registry():
+    """``register(cls)``: a stage law registered for one test (returned), removed from the registry after it."""
+    from contactdyn.laws.stage_laws import STAGE_LAWS, register_stage_law
+
+    added: list[str] = []
+
+    def register(cls):
+        register_stage_law(cls)
+        added.append(cls.name)
+        return cls
+
+    yield register
+    for name in added:
+        STAGE_LAWS.pop(name, None)
+
+
+@pytest.fixture
+def fresh_user_imports(monkeypatch):
+    """A test that imports a user's law modules afresh (scene ``imports``): the import state, the law
+    registries and the key reference as they were, before and after it."""
+    import contactdyn.scene.user_laws as user_laws
+    from contactdyn.laws.drive_kinds import DRIVE_KINDS
+    from contactdyn.laws.stage_laws import STAGE_LAWS
+    from contactdyn.scene.keys import reference
+
+    monkeypatch.setattr(user_laws, "_state", {"allowed": True, "entry_points": False})
+    monkeypatch.setattr(user_laws, "IMPORTED", {})
+    saved = [(registry, dict(registry)) for registry in (STAGE_LAWS, DRIVE_KINDS)]
+    reference.cache_clear()
+    yield
+    for registry, content in saved:
+        registry.clear()
+        registry.update(content)
+    reference.cache_clear()
+
+
+@pytest.fixture
+def doubled_law(stage_law_registry):
     """An affine stage law twice as stiff and twice as damped as its k and b say, registered as ``doubled`` for
     the test (F = 2k x + 2b ẋ: coefficients (2k, 2b))."""
-    from contactdyn.laws.stage_laws import STAGE_LAWS, StageLaw, register_stage_law
+    from contactdyn.laws.stage_laws import StageLaw
 
     class Doubled(StageLaw):
         name, affine = "doubled", True
@@ -35,6 +72,4 @@ def doubled_law():
         def coefficients(k, b, p):
             return 2.0 * k, 2.0 * b
 
-    register_stage_law(Doubled)
-    yield Doubled.name
-    STAGE_LAWS.pop(Doubled.name, None)
+    return stage_law_registry(Doubled).name

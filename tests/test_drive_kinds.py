@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import contactdyn.scene.user_laws as user_laws
 from contactdyn import parse_scene, simulate
 from contactdyn.errors import SceneError
 from contactdyn.laws import DRIVE_KINDS, DriveKind, Param, register_drive_kind
@@ -66,16 +65,10 @@ class LimitedMotor(DriveKind):
 
 
 @pytest.fixture(autouse=True)
-def registry(monkeypatch):
-    """Each test imports the user's module afresh and leaves the registry and the key reference as they were."""
-    monkeypatch.setattr(user_laws, "_state", {"allowed": True, "entry_points": False})
-    monkeypatch.setattr(user_laws, "IMPORTED", {})
-    saved = dict(DRIVE_KINDS)
-    reference.cache_clear()
+def registry(fresh_user_imports):
+    """Each test imports the user's module afresh and leaves the registry and the key reference as they were
+    (conftest)."""
     yield
-    DRIVE_KINDS.clear()
-    DRIVE_KINDS.update(saved)
-    reference.cache_clear()
     sys.modules.pop("my_drives", None)
 
 

@@ -125,7 +125,7 @@ _SCALE = {"k": 1.0}  #: a Python dict: numba cannot type it as a global
 
 
 @pytest.fixture
-def uncompilable_law():
+def uncompilable_law(stage_law_registry):
     """A linear law numba cannot compile (it reads a Python dict), registered as ``uncompilable``."""
 
     class Uncompilable(StageLaw):
@@ -135,9 +135,7 @@ def uncompilable_law():
         def force(k, b, p, x, xdot):
             return _SCALE["k"] * k * x + b * xdot
 
-    register_stage_law(Uncompilable)
-    yield Uncompilable
-    STAGE_LAWS.pop(Uncompilable.name, None)
+    return stage_law_registry(Uncompilable)
 
 
 def _axis_scene(law: str, extra: dict | None = None):
@@ -243,7 +241,7 @@ def test_a_pickled_chain_packs_again_in_its_new_process():
 
 
 @pytest.fixture
-def raising_law():
+def raising_law(stage_law_registry):
     """A law that raises its own error beyond 1 µm of compression, registered as ``raising``."""
 
     class Raising(StageLaw):
@@ -255,9 +253,7 @@ def raising_law():
                 raise ValueError("raising: compression beyond its range")
             return k * x + b * xdot
 
-    register_stage_law(Raising)
-    yield Raising
-    STAGE_LAWS.pop(Raising.name, None)
+    return stage_law_registry(Raising)
 
 
 def test_a_compiled_law_that_raises_raises_its_own_error_not_a_zero_force(raising_law):

@@ -13,12 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import contactdyn.scene.user_laws as user_laws
 from contactdyn import parse_scene, simulate
 from contactdyn.cli import main
 from contactdyn.errors import SceneError
 from contactdyn.laws.friction_laws import FRICTION_LAWS, FrictionSpec
-from contactdyn.laws.stage_laws import STAGE_LAWS
 from contactdyn.scene.keys import markdown, reference
 from contactdyn.scene.scene_file import sims_dir
 
@@ -28,16 +26,9 @@ B1 = tomllib.loads((sims_dir() / "b1.toml").read_text())
 
 
 @pytest.fixture(autouse=True)
-def registry(monkeypatch):
-    """Each test imports the user's modules afresh and leaves the registries as they were."""
-    monkeypatch.setattr(user_laws, "_state", {"allowed": True, "entry_points": False})
-    monkeypatch.setattr(user_laws, "IMPORTED", {})
-    saved = dict(STAGE_LAWS)
-    reference.cache_clear()
+def registry(fresh_user_imports):
+    """Each test imports the user's modules afresh and leaves the registries as they were (conftest)."""
     yield
-    STAGE_LAWS.clear()
-    STAGE_LAWS.update(saved)
-    reference.cache_clear()
     sys.modules.pop("cubic_stage", None)
 
 
