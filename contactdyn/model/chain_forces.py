@@ -159,10 +159,10 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
         tip_F, gamma, interface_F, gap = chain_loads(a.plan, a.stages, a.consts, kin.drift, f, ydot, a.motion,
                                                      a.stage_state)
     else:
-        tip_F, gamma, interface_F, gap = chain_call(a.plan, a.stages, a.coef, a.consts, x, kin.p_tip, kin.v_tip,
-                                                    kin.p_env, kin.v_env, kin.drift, float(offset), f, ydot, a.motion,
-                                                    a.stage_state)
-        if not np.isfinite(a.stage_state[:, F]).all():  # a compiled law raised (its call gives NaN) or gave NaN
+        tip_F, gamma, interface_F, gap, finite = chain_call(a.plan, a.stages, a.coef, a.consts, x, kin.p_tip,
+                                                            kin.v_tip, kin.p_env, kin.v_env, kin.drift, float(offset),
+                                                            f, ydot, a.motion, a.stage_state)
+        if not finite:  # a compiled law raised (its call gives NaN) or gave NaN
             _law_error(a, dc)
     dc.last_positions = a.motion[0]
     if full and ev is not None:
@@ -228,9 +228,21 @@ def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics) -> np.n
 @njit(cache=True)
 def chain_call(plan, stages, coef, consts, x, p_tip, v_tip, p_env, v_env, drift, offset, f, ydot, motion,
                stage_state):
-    """One call of a chain whose laws all compile: :func:`chain_motion`, then :func:`chain_loads`."""
+    """One call of a chain whose laws all compile: :func:`chain_motion`, then :func:`chain_loads`; with
+    (tip F, γ, interface F, gap), whether every active stage's force is finite (a law that raised gives NaN)."""
     chain_motion(plan, stages, coef, consts, x, p_tip, v_tip, p_env, v_env, offset, ydot, motion, stage_state)
-    return chain_loads(plan, stages, consts, drift, f, ydot, motion, stage_state)
+    tip_F, gamma, interface_F, gap = chain_loads(plan, stages, consts, drift, f, ydot, motion, stage_state)
+    return tip_F, gamma, interface_F, gap, _forces_finite(plan, stage_state)
+
+
+@njit(cache=True, inline="always")
+def _forces_finite(plan, stage_state):
+    """Every active stage's force F [N] is finite."""
+    at = plan[H_ACTIVE]
+    for r in range(plan[at]):
+        if not np.isfinite(stage_state[plan[at + 1 + r], F]):
+            return False
+    return True
 
 
 @njit(cache=True)
