@@ -30,6 +30,7 @@ import numba
 import numpy as np
 
 from ...laws.abi import friction_address
+from ...laws.controllers import Controller
 from ...laws.controllers.abi import controller_address, layout_of, params_of
 from ...laws.friction_laws import FRICTION_LAWS
 from ...laws.trajectory import move_table, ramp_table
@@ -102,7 +103,7 @@ def unsupported(system, modes, phase) -> str:
         return "a reference carried by a body"
     if ctl.uses_forces or ctl.n_states or ctl.outputs != "torque":
         return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
-    if ctl.name != "task_pd" and not controller_address(type(ctl)):
+    if ctl.name != "task_pd" and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
     if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
         return "a circle move"
@@ -115,6 +116,14 @@ def unsupported(system, modes, phase) -> str:
             if pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching).python_stages:
                 return f"a stage law of {c.name}.{dc.label} does not compile"
     return ""
+
+
+def _addressable(cls: type) -> bool:
+    """A controller of the ABI: compiled to its address, or (interpreted) one that reads its declared parameters."""
+    if not numba.config.DISABLE_JIT:
+        return controller_address(cls) != 0
+    cls.compiled_reason = "it reads its own config (not its declared parameters, Controller.params)"
+    return getattr(cls.read, "__func__", cls.read) is Controller.read.__func__
 
 
 class _Builder:
