@@ -23,9 +23,36 @@ from ...laws.controllers.abi import FIELD, call_controller, control_arrays
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
-from .pack import CTL_ABI, CTL_ADDRESS, CTL_KIND, CTL_TASK_PD, FEEDFORWARD, FF_BIAS, FF_GRAVITY, HAS_RD, HAS_TOOL, \
-    I_LAYOUT, I_SERVOS, N_AXES, N_CTL_PARAMS, N_DRIVES, N_FORCES, N_MOVES, N_SERVOS, NQ, NV, PYTHON_CONTROLLERS, \
-    R_CTL, R_RAMPS, R_REF, R_SERVOS, READS_ORIENTATION, REF_DIMS, TIP_FRAME, section
+from .pack import (
+    CTL_ABI,
+    CTL_ADDRESS,
+    CTL_KIND,
+    CTL_TASK_PD,
+    FEEDFORWARD,
+    FF_BIAS,
+    FF_GRAVITY,
+    HAS_RD,
+    HAS_TOOL,
+    I_LAYOUT,
+    I_SERVOS,
+    N_AXES,
+    N_CTL_PARAMS,
+    N_DRIVES,
+    N_FORCES,
+    N_MOVES,
+    N_SERVOS,
+    NQ,
+    NV,
+    PYTHON_CONTROLLERS,
+    R_CTL,
+    R_RAMPS,
+    R_REF,
+    R_SERVOS,
+    READS_ORIENTATION,
+    REF_DIMS,
+    TIP_FRAME,
+    section,
+)
 
 __all__ = ["reference", "set_points", "command", "drives", "command_by_address"]
 

@@ -3,9 +3,10 @@ solve the contacts' forces.
 
 Per contact, in the readable model's order (:func:`contactdyn.model.dynamics._contact_terms`): its chains (the
 normal, then the tangential ones) by :func:`contactdyn.model.chain_forces.chain_call` over the chain's packed plan
-(stage laws by address), each bonded chain's row G and γ; then friction (:func:`contactdyn.model.friction.friction_terms`):
-a stick row per tangent, or a slide's tilt of the normal column −μ d·G_T (μ by the friction law's address, or the
-constant μ_k) or its known force −μ max(F, 0) d − c v_t on the coordinates; then the chains' tip force Jᵀ F [N].
+(stage laws by address), each bonded chain's row G and γ; then friction
+(:func:`contactdyn.model.friction.friction_terms`): a stick row per tangent, or a slide's tilt of the normal
+column −μ d·G_T (μ by the friction law's address, or the constant μ_k) or its known force −μ max(F, 0) d − c v_t
+on the coordinates; then the chains' tip force Jᵀ F [N].
 After the solve (:func:`finish`): normal forces, friction forces, the impulse states' rates, limit torques.
 """
 
@@ -18,12 +19,70 @@ import numpy as np
 from ...laws.abi import call_friction
 from ...numerics.compile_cache import njit
 from ..chain_forces import chain_call
-from .pack import ANCHOR, CH_COEF, CH_CONSTS, CH_ENV_COORD, CH_ENV_KIND, CH_MOTION, CH_NCONSTS, CH_NNODES, CH_NS, \
-    CH_OFFSET, CH_PLAN, CH_ROBOT_COORD, CH_ROBOT_KIND, CH_ROW, CH_STAGES, CH_STATE, CH_W, CI_BODY, CI_FIRST_T, \
-    CI_FP_AT, CI_FRAME, CI_FRICTION, CI_IMPULSE, CI_LAW, CI_N_FP, CI_N_T, CI_NORMAL, CI_NORMAL_ROW, CI_NT, \
-    CI_REALS, CI_STICK_ROW, CI_TOUCHING, CI_W, CR_AXIS, CR_MU_K, CR_MU_S, CR_POINT, CR_R, CR_T, CR_VISCOUS, EV_FF, \
-    EV_FN, EV_GAP, EV_VT, EV_W, FRICTION_SLIDE, FRICTION_STICK, I_CHAINS, I_CONTACTS, I_LIMITS, LI_JOINT, LI_SIDE, \
-    LI_W, N_CHAINS, N_CONTACTS, N_LIMITS, NQ, NV, R_LIMITS, RH_OMEGA, RH_SLIP_BAND, TIP, section
+from .pack import (
+    ANCHOR,
+    CH_COEF,
+    CH_CONSTS,
+    CH_ENV_COORD,
+    CH_ENV_KIND,
+    CH_MOTION,
+    CH_NCONSTS,
+    CH_NNODES,
+    CH_NS,
+    CH_OFFSET,
+    CH_PLAN,
+    CH_ROBOT_COORD,
+    CH_ROBOT_KIND,
+    CH_ROW,
+    CH_STAGES,
+    CH_STATE,
+    CH_W,
+    CI_BODY,
+    CI_FIRST_T,
+    CI_FP_AT,
+    CI_FRAME,
+    CI_FRICTION,
+    CI_IMPULSE,
+    CI_LAW,
+    CI_N_FP,
+    CI_N_T,
+    CI_NORMAL,
+    CI_NORMAL_ROW,
+    CI_NT,
+    CI_REALS,
+    CI_STICK_ROW,
+    CI_TOUCHING,
+    CI_W,
+    CR_AXIS,
+    CR_MU_K,
+    CR_MU_S,
+    CR_POINT,
+    CR_R,
+    CR_T,
+    CR_VISCOUS,
+    EV_FF,
+    EV_FN,
+    EV_GAP,
+    EV_VT,
+    EV_W,
+    FRICTION_SLIDE,
+    FRICTION_STICK,
+    I_CHAINS,
+    I_CONTACTS,
+    I_LIMITS,
+    LI_JOINT,
+    LI_W,
+    N_CHAINS,
+    N_CONTACTS,
+    N_LIMITS,
+    NQ,
+    NV,
+    R_LIMITS,
+    RH_OMEGA,
+    RH_SLIP_BAND,
+    TIP,
+    section,
+)
 
 __all__ = ["contact_terms", "limit_rows", "finish"]
 

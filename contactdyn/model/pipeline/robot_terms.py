@@ -14,8 +14,22 @@ import numpy as np
 
 from ...numerics.compile_cache import njit
 from ...robot.rigid_body import WIDTH, _inertia, _jacobians, _kinematics, _nonlinear
-from .pack import FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W, FR_W, I_FRAMES, N_FRAMES, NEEDS_GRAVITY, NJ, NQ, NV, \
-    R_FRAMES, R_RIGID, section
+from .pack import (
+    FI_JOINT,
+    FI_N_SUPPORT,
+    FI_SUPPORT,
+    FI_W,
+    FR_W,
+    I_FRAMES,
+    N_FRAMES,
+    NEEDS_GRAVITY,
+    NJ,
+    NQ,
+    NV,
+    R_FRAMES,
+    R_RIGID,
+    section,
+)
 
 __all__ = ["robot_terms", "frame_terms", "frame_motion"]
 
