@@ -22,7 +22,7 @@ from .kkt import kkt_solve
 from .pack import EV_FF, EV_FN, EV_GAP, EV_VT, EV_W, N_CONTACTS, N_LIMITS, N_ROWS, NQ, NV, NX, NY, pack, unsupported
 from .robot_terms import frame_terms, robot_terms
 
-__all__ = ["call", "Pipeline"]
+__all__ = ["call", "rates_at", "Pipeline"]
 
 
 @njit(cache=True)
@@ -51,6 +51,18 @@ def call(t, x, ints, reals, work, events):
     finish(ints, lam, xdot, events, pending, first_limit)
     events[events.size - 1] = 1.0 if regular else 0.0
     return xdot
+
+
+@njit(cache=True)
+def rates_at(ts, X, ints, reals, work, events):
+    """ẋ at each (ts[k], X[k]) in one compiled call (the output samples' and a compiled step's way: no Python
+    between calls); the number of states done before a call's status was not 1."""
+    out = np.empty(X.shape)
+    for k in range(ts.size):
+        out[k] = call(ts[k], X[k], ints, reals, work, events)
+        if events[events.size - 1] != 1.0:
+            return out, k
+    return out, ts.size
 
 
 class Pipeline:
