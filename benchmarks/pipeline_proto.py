@@ -59,6 +59,17 @@ def _no_motors(doc: dict) -> None:
     doc["phase"] = doc["phase"][:1]
 
 
+def _tool_pd(doc: dict) -> None:
+    """A pencil writer under task PD holding its tool axis (the twin's compiled operational call: the moment is not
+    affine), its circle made a straight trapezoid."""
+    ctl = doc["controller"]
+    doc["controller"] = {"kind": "task_pd", "kp": ctl["kp"], "kd": ctl["kd"], "axes": ctl["axes"],
+                         "tool_axis": ctl["tool_axis"], "tool_target": ctl["tool_target"], "ko": 5.0, "do": 0.5,
+                         "kd_normal": ctl["kd_normal"], "feedforward": "gravity"}
+    doc["phase"][1]["reference"] = {"moves": [{"kind": "trapezoid", "delta": [-0.03, 0.0, 0.0], "duration": 4.0,
+                                               "accel_fraction": 0.2}]}
+
+
 #: case -> (scene file, an edit of its TOML or None, what to change from its first mode: None, or a function of
 #: (system, modes, phase, x0) giving (modes, phase))
 def _touch(stuck=False, limits=(), phase=None):
@@ -90,6 +101,9 @@ CASES = {
     "hard_stiff": ("benchmarks/hard/stiff.toml", None, None),
     "hard_undamped": ("benchmarks/hard/undamped.toml", None, None),
     "cart_chains_touch": ("sims/case1_cart.toml", _no_motors, _touch()),
+    "writer5dof_tool": ("sims/case2_writer5dof.toml", _tool_pd, None),
+    "writer5dof_tool_slide": ("sims/case2_writer5dof.toml", _tool_pd, _touch(phase=1)),
+    "ur5_tool": ("sims/case2_writer_ur5.toml", _tool_pd, None),
     "cubic_press": ("examples/cubic_press.toml", None, None),
     "impedance_press": ("examples/impedance_press.toml", None, None),
 }

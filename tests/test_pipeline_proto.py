@@ -65,25 +65,37 @@ def test_a_mode_out_of_scope_is_declined_with_its_reason():
 _INTERPRETED = """
 import json, sys
 sys.path.insert(0, {bench!r})
-from pipeline_proto import agreement, case, states
+from pipeline_proto import case, states
 from contactdyn.model.pipeline.pipeline import Pipeline
 out = {{}}
 for name in {names!r}:
     system, modes, phase, t, x0 = case(name)
     pipe = Pipeline(system, modes, phase)
-    out[name] = agreement(pipe, system, modes, phase, t, states(x0, 2))[0]
+    out[name] = [pipe.rhs(t, x).tolist() for x in states(x0, 2)]
 print(json.dumps(out))
 """
+#: interpreted and compiled agree bit for bit but where a law calls exp: numpy's (interpreted) and the C library's
+#: (compiled) differ by an ulp in ~0.4 % of arguments (docs/one_source.md)
+LIBM = {"b1_stribeck"}
 
 
-def test_the_same_source_interpreted_gives_the_readable_rates():
-    """NUMBA_DISABLE_JIT=1: the pipeline's functions, the chain's, the laws (stage, friction, the user's controller)
-    all run as Python, the same source."""
+def test_the_same_source_interpreted_gives_the_compiled_rates():
+    """NUMBA_DISABLE_JIT=1: the pipeline's functions, the chains', the laws (stage, friction, the user's controller)
+    all run as Python, the same source; ẋ equals the compiled call's bit for bit (and the readable model's)."""
     names = ["b1_stribeck", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "cubic_press", "impedance_press"]
     env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(BENCH.parent)}
     done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=names)], env=env,
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
-    worst = json.loads(done.stdout.strip().splitlines()[-1])
-    assert set(worst) == set(names)
-    assert max(worst.values()) <= RTOL, worst
+    interpreted = json.loads(done.stdout.strip().splitlines()[-1])
+    assert set(interpreted) == set(names)
+    for name in names:
+        system, modes, phase, t, x0 = case(name)
+        pipe = Pipeline(system, modes, phase)
+        for x, got in zip(states(x0, 2), interpreted[name], strict=True):
+            compiled, ref = pipe.rhs(t, x), system.evaluate(t, x, modes, phase).xdot
+            if name in LIBM:
+                assert np.abs(np.array(got) - compiled).max() <= 1e-15 * np.abs(compiled).max()
+            else:
+                assert np.array_equal(np.array(got), compiled), name
+            assert np.abs(np.array(got) - ref).max() <= RTOL * np.abs(ref).max()

@@ -91,7 +91,7 @@ def set_points(t, ints, reals):
     F_d = np.empty(n)
     for j in range(n):
         F_d[j] = w[2 * j]
-    return F_d, section(reals, ints[R_RAMPS] + 5 * n, n, 3).copy()
+    return F_d, section(reals, ints[R_RAMPS] + 5 * n, n, 3)
 
 
 @njit(cache=True)
@@ -106,12 +106,12 @@ def _task_pd(x, ints, reals, h, g, J6, p_tip, v_tip, Rf, x_d, v_d, F_d, forced):
     R_d = section(reals, o + 6, 3 * ints[HAS_RD], 3)
     ko, do, kd_joint, kd_normal = reals[o + 15], reals[o + 16], reals[o + 17], reals[o + 18]
     orient = ints[READS_ORIENTATION] != 0
-    J_ang = J6[3:].copy() if orient else np.empty((0, nv))
-    R_tip = Rf.copy() if orient else np.empty((0, 3))
+    J_ang = J6[3:] if orient else np.empty((0, nv))  # (views of C arrays: no copies)
+    R_tip = Rf if orient else np.empty((0, 3))
     ff = ints[FEEDFORWARD]
-    tau_ff = h.copy() if ff == FF_BIAS else g.copy() if ff == FF_GRAVITY else np.empty(0)
-    return torque(x[nQ:nQ + nv].copy(), J6[:3].copy(), J_ang, p_tip.copy(), v_tip.copy(), x_d, v_d, F_d, R_tip,
-                  axes, forced, kp, kd, tool, target, R_d, ko, do, kd_joint, kd_normal, tau_ff)
+    tau_ff = h if ff == FF_BIAS else g if ff == FF_GRAVITY else np.empty(0)
+    return torque(x[nQ:nQ + nv], J6[:3], J_ang, p_tip, v_tip, x_d, v_d, F_d, R_tip, axes, forced, kp, kd, tool,
+                  target, R_d, ko, do, kd_joint, kd_normal, tau_ff)
 
 
 @njit(cache=True)
@@ -137,17 +137,17 @@ def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d,
     _put(buf, lay, F_GRAVITY, g)
     _put(buf, lay, F_P, p_tip)
     _put(buf, lay, F_PD, v_tip)
-    _put(buf, lay, F_J, J6[:3].copy().ravel())
+    _put(buf, lay, F_J, J6[:3].ravel())
     _put(buf, lay, F_DRIFT, a6[:3])
     _put(buf, lay, F_XD, x_d)
     _put(buf, lay, F_VD, v_d)
     _put(buf, lay, F_AD, a_d)
-    _put(buf, lay, F_R, Rf.copy().ravel())
-    _put(buf, lay, F_JANG, J6[3:].copy().ravel())
+    _put(buf, lay, F_R, Rf.ravel())
+    _put(buf, lay, F_JANG, J6[3:].ravel())
     _put(buf, lay, F_DRIFT_ANG, a6[3:])
     tau = np.zeros(nv)
     params = reals[ints[R_CTL]:ints[R_CTL] + ints[N_CTL_PARAMS]]
-    if command_by_address(ints[CTL_ADDRESS], buf, lay.copy(), params.copy(), tau) != 1:
+    if command_by_address(ints[CTL_ADDRESS], buf, lay, params, tau) != 1:
         tau[:] = np.nan
     return tau
 
