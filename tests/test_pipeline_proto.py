@@ -52,6 +52,19 @@ def test_the_event_values_are_the_readable_ones(name):
         assert torque == pytest.approx(ev.limit_torque[i], abs=RTOL * (1.0 + abs(ev.limit_torque[i])))
 
 
+def test_many_states_in_one_call_are_the_single_calls():
+    from contactdyn.model.pipeline.pipeline import rates_at
+
+    system, modes, phase, t, x0 = case("writer_rigid_stick")
+    pipe = Pipeline(system, modes, phase)
+    xs = states(x0, 3)
+    p = pipe.packed
+    batch, done = rates_at(np.full(3, t), np.array(xs), p.ints, p.reals, p.work, p.events)
+    assert done == 3
+    for x, row in zip(xs, batch, strict=True):
+        assert np.array_equal(row, pipe.rhs(t, x))
+
+
 def test_a_mode_out_of_scope_is_declined_with_its_reason():
     from contactdyn.scene.scene_file import load_scene
     from contactdyn.simulate import prepare
