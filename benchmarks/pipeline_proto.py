@@ -95,6 +95,7 @@ CASES = {
     "hard_bounce": ("benchmarks/hard/bounce.toml", None, None),
     "hard_bounce_touch": ("benchmarks/hard/bounce.toml", None, _touch()),
     "hard_fast_mass": ("benchmarks/hard/fast_mass.toml", None, None),
+    "hard_grazing": ("benchmarks/hard/grazing.toml", None, None),
     "hard_mass_ratio": ("benchmarks/hard/mass_ratio.toml", None, None),
     "hard_singular": ("benchmarks/hard/singular.toml", None, None),
     "hard_stickslip": ("benchmarks/hard/stickslip.toml", None, None),
