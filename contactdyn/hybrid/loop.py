@@ -63,6 +63,7 @@ from ..output.result import Result
 from ..scene.budget import STEPS_BASE, step_budget
 from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
 from .progress import CALLS_PER_STEP, OverBudget, Progress, Work
+from .sampling import SampledPhases
 from .transitions import Transitions
 
 __all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
@@ -107,6 +108,7 @@ class HybridRun:
         self.log = EventLog(self.scene.name, self.solver, self.stats)
         self.events = self.log.events
         self.transitions = Transitions(system, self.log, self.stats, self.impacts)
+        self.sampled = SampledPhases(system, self.stats)  #: the samplers of sampled phases (hybrid.sampling)
         self.plans: dict[tuple, ModePlan] = {}
         self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
         #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
@@ -143,6 +145,7 @@ class HybridRun:
         """Initial state, consistent modes and the first phase at t = 0."""
         x, modes = self.system.initial_state()
         phase = self.system.start_phase(0, 0.0, x, None)
+        x = self.sampled.start(0.0, x, modes, phase, None)  # a sampled law's first sample
         x, modes = self.transitions.consistent(0.0, x, modes, phase)
         return x, modes, phase
 
@@ -174,12 +177,18 @@ class HybridRun:
             if corner is not None and corner.before - t <= min_span(t):  # at it already (an event landed there)
                 t, x, modes, phase = self._pass_corner(t, corner.after, x, modes, phase)
                 continue
-            sol, events, fun = self._segment(t, corner.before if corner else t_end, x, modes, phase)
+            t_sample = self.sampled.next_time(phase)  # a sampled law's next sample instant (hybrid.sampling)
+            if t_sample <= t + min_span(t):
+                t, x, modes, phase = self._pass_corner(t, max(t, t_sample), x, modes, phase, sample=True)
+                continue
+            stop = corner.before if corner else t_end
+            sample = t_sample < stop - min_span(stop)
+            sol, events, fun = self._segment(t, t_sample if sample else stop, x, modes, phase)
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
             h0, self.next_step = self.next_step, None
-            if sol.status == 0 and corner is not None:  # reached the corner: go on past it with the step reached
+            if sol.status == 0 and (corner is not None or sample):  # a corner or a sample: past it, the step reached
                 self.next_step = float(sol.t[-2] - sol.t[-3]) if len(sol.t) > 2 else h0
-                t, x, modes, phase = self._pass_corner(t, corner.after, x, modes, phase)
+                t, x, modes, phase = self._pass_corner(t, t if sample else corner.after, x, modes, phase, sample)
             elif sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
                 if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
@@ -202,14 +211,20 @@ class HybridRun:
             self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._plan(modes, phase, count=False)))
         return self._result(time.perf_counter() - wall0)
 
-    def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
-        """Restart past a corner of the set-points at t_after [s] with the state x reached at t [s]
+    def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
+                     sample: bool = False):
+        """Restart past a corner of the set-points at t_after [s] with the state x reached at t [s], or (``sample``)
+        with the state after a sampled law's sample at t_after (its held command jumps: hybrid.sampling)
         (no event: the same modes, unless a contact force or limit torque jumps through zero there,
         which is handled as the event a step straddling the corner would have located)."""
-        self.stats["corners"] += 1
         plan = self._plan(modes, phase, count=False)
-        events, _ = segment_events(self.system, modes, phase, t, x, plan if plan.ok else None)
-        fired = fired_across(events, t, t_after, x)
+        if sample:
+            x, before = self.sampled.take(t_after, x, modes, phase), x
+            fired = self.sampled.jumped(t_after, before, x, modes, phase, plan)
+        else:
+            self.stats["corners"] += 1
+            fired = fired_across(segment_events(self.system, modes, phase, t, x, plan if plan.ok else None)[0],
+                                 t, t_after, x)
         if fired:
             self._new_mode()
             if fired[0].kind not in RESUME_STEP:
@@ -362,7 +377,8 @@ class HybridRun:
         if nxt >= len(self.scene.phases):
             return x, modes, replace(phase, spec=replace(phase.spec, until=math.inf))  # the last phase runs on
         self.log.log(t, "phase", self.scene.phases[nxt].name, check_storm=False)
-        phase = self.system.start_phase(nxt, t, x, phase)
+        phase, previous = self.system.start_phase(nxt, t, x, phase), phase
+        x = self.sampled.start(t, x, modes, phase, previous)  # a sampled law's first sample
         return self.transitions.settle(t, x, modes, phase)
 
     # ---- output ---------------------------------------------------------------------

@@ -25,7 +25,8 @@ import numpy as np
 
 from ..errors import RobotError, SceneError
 from ..laws.controllers import CONTROLLERS
-from ..laws.controllers.base import BindContext
+from ..laws.controllers.base import BindContext, Controller
+from ..laws.controllers.sampled import SampledController
 from ..laws.drives import Drives
 from ..robot.posture import start_posture
 from ..robot.robot import Robot
@@ -74,7 +75,7 @@ class System:
         self._D_ctl = np.diag(self.drives.model_reflected[:nv])
         self._joint_motors = self.drives.has_voltage & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
         # ---- controllers, then the first-order slots after the junctions ----
-        self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
+        self.controllers = [_controller_of(p, nv) for p in scene.phases]
         for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
             ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
                                  f"phase[{i}].controller"))
@@ -236,3 +237,9 @@ class System:
                 if chain.nodes[node_i].kind == NodeKind.FREE and slot >= 0:
                     x[2 * self.nQ + slot] = dc.last_positions[node_i]
         return x
+
+
+def _controller_of(spec, nv: int) -> Controller:
+    """The controller of a phase: its kind's law, wrapped in a zero-order hold when it is sampled."""
+    law = CONTROLLERS[spec.controller.kind](spec.controller, nv)
+    return law if spec.sampling is None else SampledController(law, spec.sampling, nv)
