@@ -99,6 +99,8 @@ class CompiledKKT:
         b[:nv] = -phi[self.i_h:self.i_h + nv]
         if not self.law_via_drives:  # else the law's τ goes through the drives per call (plan_rhs)
             b[:nv] += self._feedforward_torque(phi, e)
+        if self.held is not None and not self.drives_per_call:  # a sampled law's held command, onto the joints
+            b[:nv] += o[self.o_hold]
         b[nv:nQ] = o[self.o_f]
         b[nQ:nQ + nr] = -o[self.o_gam]
         for f in range(len(self.fids)):

@@ -25,6 +25,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..laws.controllers.sampled import SampledController
 from ..model.chain_forces import chain_forces
 from ..model.constraints import Rows
 from ..model.contact import Kinematics
@@ -127,6 +128,11 @@ class ProbedModel:
                         for c in s.contacts for dc in c.tangent_chains}
         self.o_body = out.add("body_force", len(s.body_names))
         self.o_stage = {label: out.add(f"stage.{label}", 3) for label in s.stage_labels}
+        #: a sampled law's held command (contactdyn.laws.controllers.sampled): τ = the state's held slots, affine
+        held = ctl.held if isinstance(ctl, SampledController) else None
+        self.held = None if held is None else slice(2 * nQ + phase.z_slice.start + held.start,
+                                                    2 * nQ + phase.z_slice.start + held.stop)
+        self.o_hold = out.add("tau_hold", nv) if held is not None else None
         self.no = len(out.names)
 
     # ---- the affine map, by probing the system's own code --------------------------------
@@ -201,6 +207,8 @@ class ProbedModel:
             if not self.law_via_drives:
                 g[self.tip_frame] += g_ctl
             o[self.o_gctl] = g_ctl
+        if self.held is not None:
+            o[self.o_hold] = x[self.held]
         o[self.o_f] = f[nv:]
         o[self.o_y] = ydot
         o[self.o_g] = g.ravel()

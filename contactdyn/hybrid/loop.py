@@ -187,7 +187,7 @@ class HybridRun:
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
             h0, self.next_step = self.next_step, None
             if sol.status == 0 and (corner is not None or sample):  # a corner or a sample: past it, the step reached
-                self.next_step = float(sol.t[-2] - sol.t[-3]) if len(sol.t) > 2 else h0
+                self.next_step = _reached(sol, h0, sample)
                 t, x, modes, phase = self._pass_corner(t, t if sample else corner.after, x, modes, phase, sample)
             elif sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
@@ -262,7 +262,7 @@ class HybridRun:
         if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
             why = sol.message if sol.status < 0 else "the state is not finite"  # never "successfully ..."
             raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s "
-                                  f"({method}): {why}{self._diagnose(sol, plan, fun, method)}")
+                                  f"({method}): {why}{_diagnose(self, sol, plan, fun, method)}")
         self.segments.append(Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
         self.stats["segments"] += 1
         return sol, events, fun
@@ -326,24 +326,6 @@ class HybridRun:
         """Forget the method choices made for the mode that ends (auto's, a slide's coming to rest)."""
         self.auto_state = self.resting = None
 
-    def _diagnose(self, sol, plan: ModePlan, fun, method: str) -> str:
-        """Why a segment failed, as far as the state at the failure says."""
-        t, x = float(sol.t[-1]), sol.y[:, -1]
-        if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
-            return ""
-        if plan.ok:
-            cond = plan.kkt_condition(t, x)
-            if cond > 1e12:
-                return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
-                        f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "
-                        "arm; give the contact a compliant normal model or avoid the pose")
-        lam = jacobian_eigenvalues(fun, t, x)
-        if len(lam) and method in EXPLICIT:
-            fast = float(np.abs(lam).max())
-            return (f"; fastest mode |λ| = {fast:.3g} 1/s (an explicit method needs steps below "
-                    f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = \"Radau\" or \"auto\"")
-        return ""
-
     def _method(self, modes: list[ContactMode], method: str) -> str:
         """The segment's method, but a stiff-capable one while a 2-D slip launches from rest or comes to rest.
 
@@ -402,6 +384,25 @@ class HybridRun:
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
 
 
+def _diagnose(run: HybridRun, sol, plan: ModePlan, fun, method: str) -> str:
+    """Why a segment failed, as far as the state at the failure says."""
+    t, x = float(sol.t[-1]), sol.y[:, -1]
+    if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
+        return ""
+    if plan.ok:
+        cond = plan.kkt_condition(t, x)
+        if cond > 1e12:
+            return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
+                    f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "
+                    "arm; give the contact a compliant normal model or avoid the pose")
+    lam = jacobian_eigenvalues(fun, t, x)
+    if len(lam) and method in EXPLICIT:
+        fast = float(np.abs(lam).max())
+        return (f"; fastest mode |λ| = {fast:.3g} 1/s (an explicit method needs steps below "
+                f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = \"Radau\" or \"auto\"")
+    return ""
+
+
 def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
     """(t [s], x) where a run's calls' budget was spent: the counted call's, else (a compiled step counts no state)
     the last finished segment's end, else the start."""
@@ -412,6 +413,16 @@ def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
         last = run.segments[-1]
         return last.t1, np.asarray(last.sol(last.t1), float)
     return 0.0, run.start()[0]
+
+
+def _reached(sol, h0: float | None, sample: bool) -> float | None:
+    """[s] The step size a segment that reached its end had reached: after a corner its last full step (the one
+    before the step cut short by the end); after a sample instant the step the solver proposes next (else its
+    longest): segments one sample period long are often one step, the next starts with it, capped by the period."""
+    if sample:
+        h_next = getattr(sol, "h_next", None)  # the compiled DOP853's proposal (numerics.dop853)
+        return h_next if h_next is not None else float(np.max(np.diff(sol.t))) if len(sol.t) > 1 else h0
+    return float(sol.t[-2] - sol.t[-3]) if len(sol.t) > 2 else h0
 
 
 def _sliding_2d(modes: list[ContactMode]) -> bool:

@@ -72,8 +72,10 @@ class SampledPhases:
                plan) -> list:
         """The events whose function falls through zero from ``before`` to ``after`` at t [s] (a held command's
         jump), in list order; only a mode with a function of forces is checked (:data:`JUMPING`)."""
-        if not any(m.touching for m in modes) and not phase.limits:
-            return []  # (a free robot: the touch events read the state alone)
+        contacts = self.system.contacts
+        if not phase.limits and not any(m.touching and (m.stuck or not c.spec.bonded)
+                                        for c, m in zip(contacts, modes, strict=True)):
+            return []  # (no separate, slip or release event in this mode: the others read the state alone)
         events, _ = segment_events(self.system, modes, phase, t, before, plan if plan.ok else None)
         events = [e for e in events if e.kind in JUMPING]
         return fired_across(events, t, t, before, after) if events else []

@@ -52,7 +52,7 @@ def read_sensor(r) -> SensorSpec:
         force_bias=r.float("force_bias", 0.0, unit="N"),
         force_cutoff=r.float("force_cutoff", math.inf, lo=0.0, lo_open=True, unit="Hz"),
         encoder_resolution=r.float("encoder_resolution", 0.0, lo=0.0, unit="rad or m"),
-        seed=r.int("seed", 0, lo=0, hi=2**63 - 1),
+        seed=r.int("seed", 0, lo=0),
     )
     r.finish()
     return spec
