@@ -223,3 +223,25 @@ def test_a_phase_controller_table_merges_its_sampling_over_the_scenes():
     scene = parse_scene(doc)
     assert scene.phases[0].sampling.rate == 250.0 and scene.phases[0].sampling.delay == 1
     assert parse_scene(b1()).phases[0].sampling is None
+
+
+def test_a_phase_begun_at_a_touch_samples_at_once_and_then_on_the_grid():
+    from contactdyn.scene.scene_file import load_scene
+
+    rate, duration = 500.0, 1.56
+    run = HybridRun(System(load_scene("case3_b_position", {"duration": duration, "controller.sample_rate": rate})))
+    r = run.run(0.0)
+    touch = next(e for e in r.events if e["kind"] == "touch")["t"]
+    assert 1.4 < touch < duration
+    s = run.system
+    first = next(seg for seg in run.segments if seg.phase.index == 1)
+    assert first.t0 == touch
+    z0 = 2 * s.nQ + s.z_slices[1].start
+    assert np.asarray(first.sol(first.t0))[z0] != 0.0  # the press law's first command, held from the touch
+    n = math.ceil(duration * rate)
+    k = np.array([seg.t0 for seg in run.segments]) * rate
+    on_grid = np.abs(k - np.round(k)) <= 1e-9  # (the trapezoid's corners fall on the grid: a float past it)
+    assert set(np.round(k[on_grid]).astype(int)) == set(range(n))  # the grid goes on through the phase change
+    others = {seg.t0 for seg, on in zip(run.segments, on_grid, strict=True) if not on}
+    assert others == {e["t"] for e in r.events} | {touch + 0.1}  # events, the force ramp's end
+    assert r.stats["samples"] == n + 1  # the grid and the press law's first sample at the touch

@@ -107,8 +107,8 @@ class HybridRun:
                       "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
         self.log = EventLog(self.scene.name, self.solver, self.stats)
         self.events = self.log.events
-        self.transitions = Transitions(system, self.log, self.stats, self.impacts)
         self.sampled = SampledPhases(system, self.stats)  #: the samplers of sampled phases (hybrid.sampling)
+        self.transitions = Transitions(system, self.log, self.stats, self.impacts, self.sampled.start)
         self.plans: dict[tuple, ModePlan] = {}
         self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
         #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
