@@ -49,9 +49,14 @@ class _Probe(Controller):
         return -1e-3 * inp.forces["tip"] * np.ones(2), None
 
 
-for _law in (_Clock, _Probe):
-    if _law.name not in CONTROLLERS:
-        register(_law)
+@pytest.fixture(autouse=True)
+def _test_laws():
+    """The test laws registered while a test runs (the key reference lists the registered ones)."""
+    for law in (_Clock, _Probe):
+        register(law)
+    yield
+    for law in (_Clock, _Probe):
+        CONTROLLERS.pop(law.name, None)
 
 
 def b1(duration: float = 0.02, output_rate: float = 20_000.0, **controller) -> dict:
