@@ -250,3 +250,15 @@ def test_a_phase_begun_at_a_touch_samples_at_once_and_then_on_the_grid():
     others = {seg.t0 for seg, on in zip(run.segments, on_grid, strict=True) if not on}
     assert others == {e["t"] for e in r.events} | {touch + 0.1}  # events, the force ramp's end
     assert r.stats["samples"] == n + 1  # the grid and the press law's first sample at the touch
+
+
+def test_autos_step_budget_runs_on_over_the_sample_instants():
+    """benchmarks/hard/fast_mass.toml: a 1 g mass on 1e5 N/m holds DOP853 at its stability bound; ``auto`` switches
+    to Radau after STEP_BUDGET such steps, which 1 ms segments never take one by one."""
+    from contactdyn.numerics.integrators import STEP_BUDGET
+
+    scene = ROOT / "benchmarks" / "hard" / "fast_mass.toml"
+    r = simulate(str(scene), {"duration": 0.25, "controller.sample_rate": RATE})
+    by_method = r.stats["segments_by_method"]
+    assert r.stats.get("auto_switches") == 1 and by_method.get("Radau", 0) > 0
+    assert by_method["DOP853C"] * 20 < STEP_BUDGET < r.stats["steps"]  # the budget spent over many segments

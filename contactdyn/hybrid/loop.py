@@ -184,6 +184,7 @@ class HybridRun:
             stop = corner.before if corner else t_end
             sample = t_sample < stop - min_span(stop)
             sol, events, fun = self._segment(t, t_sample if sample else stop, x, modes, phase)
+            self.sampled.carry(sol, sample)  # auto's step budget runs on over sample instants
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
             h0, self.next_step = self.next_step, None
             if sol.status == 0 and (corner is not None or sample):  # a corner or a sample: past it, the step reached
@@ -306,7 +307,7 @@ class HybridRun:
             raise SimulationError(self._over_budget(last.t1, last.sol(last.t1)))
         out: list = [WorkWatch(left, self.progress)]
         if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
-            out.append(StepBudget(STEP_BUDGET))
+            out.append(StepBudget(max(STEP_BUDGET - self.sampled.carried, 1)))
         if self.resting is None and method in EXPLICIT and method not in FIXED and _sliding_2d(modes) \
                 and not _launching(modes):
             out.append(StepCollapse(COLLAPSE_RATIO, COLLAPSE_STEPS))

@@ -33,9 +33,16 @@ class SampledPhases:
         self.system = system
         self.stats = stats
         self.samplers: dict[int, Sampler] = {}
+        #: steps of the segments since the last boundary that is not a sample instant: ``auto``'s step budget
+        #: (hybrid.events.StepBudget) counts them, as if the samples did not end segments
+        self.carried = 0
         self.any = any(isinstance(c, SampledController) for c in system.controllers)
         if self.any:
             stats["samples"] = 0
+
+    def carry(self, sol, sample: bool) -> None:
+        """After a segment: its steps carried on if it ended at a sample instant, else none."""
+        self.carried = self.carried + len(sol.t) - 1 if sample and sol.status == 0 else 0
 
     def next_time(self, phase: Phase) -> float:
         """[s] The phase's next sample instant (inf: the phase is continuous)."""
