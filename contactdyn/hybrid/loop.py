@@ -28,6 +28,7 @@ stiffness.
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 from dataclasses import replace
@@ -152,6 +153,7 @@ class HybridRun:
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:
         """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
+        gc.freeze()  # the ~1e5 objects made before (modules, compiled code) out of the collector's scans meanwhile
         try:
             return self._run(wall0)
         except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
@@ -161,6 +163,8 @@ class HybridRun:
             raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
                                   f"({type(exc).__name__}: {exc}); check the scene's magnitudes "
                                   "(initial velocities, gains, stiffness)") from None
+        finally:
+            gc.unfreeze()
 
     def _run(self, wall0: float) -> Result:
         T = self.scene.duration
