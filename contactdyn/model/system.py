@@ -12,6 +12,8 @@ call:
 - :meth:`System.project_velocity` — velocities onto the active constraints (same module);
 - :meth:`System.start_phase` — a task phase at run time (:mod:`contactdyn.model.phases`);
 - the joints' position limits as constraint rows (:attr:`System.limits`, :mod:`contactdyn.model.limits`);
+- the joints' damping and dry friction, a stuck joint a row (:attr:`System.joint_friction`,
+  :mod:`contactdyn.model.joint_friction`);
 - the start posture solved from the task (:mod:`contactdyn.robot.posture`);
 - friction's slip velocity and acceleration (:mod:`contactdyn.model.friction`).
 
@@ -35,6 +37,7 @@ from .contact import Contact, ContactMode, Kinematics
 from .dynamics import Evaluation, evaluate
 from .friction import initial_slip, slip_acceleration, slip_velocity
 from .impact import Impact, impact, project_velocity
+from .joint_friction import JointFriction
 from .layout import assign_chain_slots, assign_first_order_slots
 from .limits import JointLimits
 from .paths import declared_gaps
@@ -54,6 +57,8 @@ class System:
         try:
             self.robot = Robot.from_spec(rs)
             self.limits = JointLimits(self.robot, rs.joint_limits == "enforce")
+            #: the joints' damping and dry friction (contactdyn.model.joint_friction)
+            self.joint_friction = JointFriction(self.robot, rs, scene.file)
             self.tip_fid = self.robot.frame_id(rs.tip)
         except RobotError as exc:
             raise SceneError("robot", "a loadable robot", exc, scene.file) from None
