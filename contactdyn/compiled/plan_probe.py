@@ -187,12 +187,8 @@ class ProbedModel:
         s.limits.add_rows(self.phase.limits, x, nQ, limit_rows, s.stabilization)
         for row, gamma, (_, _, i) in zip(limit_rows.rows, limit_rows.gammas, limit_rows.meta, strict=True):
             rows.append(("limit", -1, i, row, gamma))
-        if self.o_fjoint is not None:  # stuck joints' rows, damping and sliding friction: the readable model's own
-            jf, joint_rows = s.joint_friction, Rows()
-            jf.add_rows(self.phase.joint_modes, self.phase.limits, x, nQ, joint_rows, s.stabilization)
-            for row, gamma, (_, _, i) in zip(joint_rows.rows, joint_rows.gammas, joint_rows.meta, strict=True):
-                rows.append(("joint", -1, i, row, gamma))
-            o[self.o_fjoint] = jf.torques(self.phase.joint_modes, x, nQ, nv)
+        if self.o_fjoint is not None:
+            self._joint_terms(x, o, rows)
         for idx, v_ref, gain in s.servo:
             F = gain * (v_ref - x[nQ + idx])
             if not self.drives_per_call:  # else the servo is a drive command (plan_drives)
@@ -217,6 +213,16 @@ class ProbedModel:
         for label, sl in self.o_stage.items():
             o[sl] = ev.stages.get(label, (0.0, 0.0, 0.0))
         return o, rows
+
+    def _joint_terms(self, x: np.ndarray, o: np.ndarray, rows: list) -> None:
+        """Stuck joints' rows into ``rows``, the damping and sliding friction into o: the readable model's own
+        (:mod:`contactdyn.model.joint_friction`)."""
+        s, phase = self.system, self.phase
+        jf, joint_rows = s.joint_friction, Rows()
+        jf.add_rows(phase.joint_modes, phase.limits, x, s.nQ, joint_rows, s.stabilization)
+        for row, gamma, (_, _, i) in zip(joint_rows.rows, joint_rows.gammas, joint_rows.meta, strict=True):
+            rows.append(("joint", -1, i, row, gamma))
+        o[self.o_fjoint] = jf.torques(phase.joint_modes, x, s.nQ, s.nv)
 
     def _probe_all(self, e: np.ndarray) -> np.ndarray:
         """o at e followed by the rows' γ (their state-dependent part: Baumgarte terms) with J̇q̇ = 0."""

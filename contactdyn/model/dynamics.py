@@ -1,7 +1,7 @@
 """The readable right-hand side: everything the model computes at one (t, x) in one mode.
 
 In a smooth phase (modes and task phase fixed) the state x = [Q, Q̇, y]
-(:mod:`contactdyn.model.layout`) moves by
+(:mod:`contactdyn.model.system`) moves by
 
     d/dt [Q, Q̇, y] = [Q̇, Q̈, ẏ]
 
