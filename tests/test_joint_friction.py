@@ -167,3 +167,38 @@ def test_bad_joint_friction_names_the_key_and_the_file(tmp_path, joint, expected
     with pytest.raises(SceneError) as info:
         System(parse_scene(doc, file=str(path)))
     assert info.value.key == key and expected in info.value.expected and str(path) in str(info.value)
+
+
+def test_the_compiled_plan_is_the_readable_model_in_every_joint_mode(tmp_path):
+    """Damping on both joints, the shoulder stuck (a row) and the elbow sliding (−s τ_k): the compiled plan's
+    right-hand side, its event values and its output samples equal System.evaluate's."""
+    from dataclasses import replace
+
+    from contactdyn.compiled.rhsplan import ModePlan
+    from contactdyn.compiled.samples import evaluated_samples
+
+    doc = scene(arm(tmp_path, 2, damping=0.05), [0.4, 1.2], 1.0, {"kind": "joint_pd", "kp": [0.0], "kd": [0.0]},
+                joint={"j1": {"damping": 0.1, "friction_static": 50.0, "friction_kinetic": 30.0},
+                       "j2": {"damping": 0.05, "friction": 0.5}})
+    system = System(parse_scene(doc))
+    x, modes = system.initial_state()
+    rng = np.random.default_rng(3)
+    for joint_modes in (((0, 0), (1, 1)), ((0, -1), (1, 0)), ((0, 1), (1, -1))):
+        phase = replace(system.start_phase(0, 0.0, x, None), joint_modes=joint_modes)
+        plan = ModePlan(system, modes, phase)
+        assert plan.ok, plan.reason
+        X = x + 0.1 * rng.normal(size=(5, system.n))
+        ts = np.linspace(0.1, 0.5, 5)
+        for t, state in zip(ts, X, strict=True):
+            ev = system.evaluate(t, state, modes, phase, full=True)
+            np.testing.assert_allclose(plan.rhs(t, state.copy()), ev.xdot, rtol=1e-12, atol=1e-12)
+            assert plan.joint_hold(t, state) == pytest.approx(ev.joint_hold, rel=1e-12)
+        fast, slow = plan.samples(ts, X), evaluated_samples(system, ts, X, modes, phase)
+        np.testing.assert_allclose(fast.joint_friction, slow.joint_friction, rtol=1e-12, atol=1e-12)
+        stuck = [i for i, m in joint_modes if m == 0]
+        sliding = [(i, m) for i, m in joint_modes if m != 0]
+        for i, m in sliding:  # damping and the kinetic friction, against the slide
+            kinetic = 30.0 if i == 0 else 0.5
+            np.testing.assert_allclose(slow.joint_friction[:, i], -(0.1 if i == 0 else 0.05) * X[:, system.nQ + i]
+                                       - m * kinetic, rtol=1e-12)
+        assert set(plan.joint_rows) == set(stuck)

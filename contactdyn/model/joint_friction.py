@@ -35,6 +35,11 @@ the impact sets moving slides from it on (above). (A row in the impact map would
 with an unbounded impulse, as a locked joint.) A joint pressing on a position limit
 (:mod:`contactdyn.model.limits`) is held by the limit's row alone: its friction mode is stuck and
 its row is left out (the two would be one row twice); it comes back when the limit releases.
+
+Known limit: stuck joints and other rows (a stuck contact's, a bond's) can over-constrain the robot (all 7 joints
+of an arm at rest stuck while its tool sticks on a surface: 10 rows on 7 coordinates). The hold is then statically
+indeterminate: the solve falls back to the least-squares (minimum-norm) forces (``Result.stats["singular_solves"]``),
+and which joint breaks away first follows that choice, not a law (a complementarity formulation would decide it).
 """
 
 from __future__ import annotations
