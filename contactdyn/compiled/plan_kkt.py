@@ -100,6 +100,8 @@ class CompiledKKT:
         if not self.law_via_drives:  # else the law's τ goes through the drives per call (plan_rhs)
             b[:nv] += self._feedforward_torque(phi, e)
         b[nv:nQ] = o[self.o_f]
+        if self.o_fjoint is not None:  # the joints' damping and sliding friction (contactdyn.model.joint_friction)
+            b[:nv] += o[self.o_fjoint]
         b[nQ:nQ + nr] = -o[self.o_gam]
         for f in range(len(self.fids)):
             J = phi[self.i_J[f]:self.i_J[f] + 3 * nv].reshape((3, nv) + k)

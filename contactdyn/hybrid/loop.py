@@ -69,7 +69,7 @@ __all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
 
 #: events after which the next segment starts with the step size the solver had reached (friction
 #: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
-RESUME_STEP = ("stop", "reverse", "slip", "turn")
+RESUME_STEP = ("stop", "reverse", "slip", "turn", "joint_slip", "joint_stick")
 LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest or comes to rest (see HybridRun._method)
 #: a 2-D slide's explicit steps shorter than COLLAPSE_RATIO × the segment's longest, COLLAPSE_STEPS of them, have
 #: it checked for a stiff mode (events.StepCollapse): the steps shrink ~1/|v_t| as the slide comes to rest; a
@@ -144,7 +144,7 @@ class HybridRun:
         x, modes = self.system.initial_state()
         phase = self.system.start_phase(0, 0.0, x, None)
         x, modes = self.transitions.consistent(0.0, x, modes, phase)
-        return x, modes, phase
+        return self.transitions.settle_joints(0.0, x, modes, phase)
 
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:
@@ -379,6 +379,7 @@ class HybridRun:
                      fallback_modes=dict(self.fallbacks), paths=self.paths.table(), limits=rate_stats,
                      fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
+                "joint_friction": system.joint_friction.describe(),
                 "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
