@@ -188,12 +188,19 @@ def test_a_sampled_mode_runs_on_the_compiled_plan_and_agrees_with_the_readable_m
         np.testing.assert_allclose(plan.rhs(seg.t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
 
 
-def test_a_held_command_through_dc_motors_runs_on_the_compiled_plan():
+def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
+    """The held command is the task law's feedforward term (x's held slots) of the motors' compiled kernel."""
     doc = b1(sample_rate=RATE)
     doc["robot"]["drive"] = {"kind": "dc_motor", "C_M": 0.05, "C_E": 0.05, "R": 1.0, "J": 1e-5, "N": 20.0}
     run, r = run_of(doc)
-    assert r.stats["fallback_modes"] == {}
-    assert {row["path"] for row in r.stats["paths"].values()} == {"compiled plan"}
+    assert r.stats["fallback_modes"] == {}  # (each plan checked itself against the readable model)
+    assert {row["path"] for row in r.stats["paths"].values()} == {"compiled call"}
+    plan = next(iter(run.plans.values()))
+    seg = run.segments[7]
+    x = np.asarray(seg.sol(seg.t0)).copy()
+    x[plan.held] = [3.0, -1.0]
+    ref = run.system.evaluate(seg.t0 + 3e-4, x, seg.modes, seg.phase).xdot
+    np.testing.assert_allclose(plan.rhs(seg.t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
     k = np.floor(r.t * RATE + 1e-9).astype(int)
     for j in range(20):  # the voltages follow the motors' speeds between samples, the command does not
         block, u = r["tau_cmd"][k == j], r["u"][k == j]

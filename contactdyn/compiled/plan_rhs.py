@@ -228,7 +228,7 @@ def _command_function(plan, drives):
     s = plan.system
     nQ, nv = s.nQ, s.nv
     fast, readable = (drives.fast, drives.readable) if drives is not None else (None, None)
-    if plan.held is not None:  # a sampled law's held command (o's tau_hold) through the drives
+    if plan.held is not None:  # a sampled law's held command (x's held slots) through the drives
         return _held_command(plan, fast, readable)
     ctl_call = controller_call(plan)
     if plan.affine_ctl:  # the affine task law through the motors
@@ -258,11 +258,11 @@ def _command_function(plan, drives):
 
 def _held_command(plan, fast, readable):
     """command(t, x, Js, φ, o, b) -> (f_ctl, None) of a sampled law (contactdyn.laws.controllers.sampled): the held
-    command [N·m or N; V], read off the state as the affine output tau_hold, through the drives."""
-    o_hold = plan.o_hold
+    command [N·m or N; V], the state's held slots, through the drives."""
+    slots = plan.held
 
     def held(t, x, Js, phi, o, b):
-        tau = o[o_hold]
+        tau = x[slots]
         f = fast(x, tau)
         return (readable(x, tau) if f is None else f), None
 

@@ -271,7 +271,7 @@ class StepCollapse(_StepCount):
 
 #: event kinds whose functions read forces (normal force, friction, limit torque): these jump where the
 #: set-points' acceleration or a force set-point jumps; touch, stop, reverse, turn and limit read the state
-JUMPING = ("separate", "slip", "release")
+JUMPING = ("separate", "slip", "release", "joint_slip")
 
 
 def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray, x_after: np.ndarray | None = None
@@ -329,6 +329,10 @@ class _ReadableValues:
         """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate."""
         return self.cache(t, x).limit_torque
 
+    def joint_hold(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """Holding torques [N·m or N] of the joints stuck by dry friction, by joint coordinate."""
+        return self.cache(t, x).joint_hold
+
 
 def _along(v: np.ndarray, r: tuple[float, ...]) -> float:
     """v·r [m/s]: a slip velocity (1 or 2 tangent components) along the mode's direction r, in Python floats (an
@@ -376,6 +380,8 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
                                       name))
     out += system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # contactdyn.model.limits
+    if phase.joint_modes:  # contactdyn.model.joint_friction
+        out += system.joint_friction.events(phase.joint_modes, phase.limits, x0, system.nQ, values.joint_hold)
     fun = values.rhs
     if not watches:
         return out, fun

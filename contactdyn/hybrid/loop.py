@@ -71,7 +71,7 @@ __all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
 
 #: events after which the next segment starts with the step size the solver had reached (friction
 #: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
-RESUME_STEP = ("stop", "reverse", "slip", "turn")
+RESUME_STEP = ("stop", "reverse", "slip", "turn", "joint_slip", "joint_stick")
 LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest or comes to rest (see HybridRun._method)
 #: a 2-D slide's explicit steps shorter than COLLAPSE_RATIO × the segment's longest, COLLAPSE_STEPS of them, have
 #: it checked for a stiff mode (events.StepCollapse): the steps shrink ~1/|v_t| as the slide comes to rest; a
@@ -148,7 +148,7 @@ class HybridRun:
         phase = self.system.start_phase(0, 0.0, x, None)
         x = self.sampled.start(0.0, x, modes, phase, None)  # a sampled law's first sample
         x, modes = self.transitions.consistent(0.0, x, modes, phase)
-        return x, modes, phase
+        return self.transitions.settle_joints(0.0, x, modes, phase)
 
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:
@@ -157,7 +157,7 @@ class HybridRun:
         try:
             return self._run(wall0)
         except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
-            raise SimulationError(self._over_budget(*_spent_at(self), calls=True)) from None
+            raise SimulationError(_over_budget(self, *_spent_at(self), calls=True)) from None
         except (*numerical_errors(), ZeroDivisionError) as exc:
             t = self.segments[-1].t1 if self.segments else 0.0
             raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
@@ -200,7 +200,7 @@ class HybridRun:
                     self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
                     continue
                 if fired[0].kind == "work":
-                    raise SimulationError(self._over_budget(t, x))
+                    raise SimulationError(_over_budget(self, t, x))
                 if fired[0].kind == "collapse":  # a 2-D slide coming to rest? (same modes, same phase)
                     self._collapse_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
                     continue
@@ -272,24 +272,6 @@ class HybridRun:
         self.stats["segments"] += 1
         return sol, events, fun
 
-    def _over_budget(self, t: float, x: np.ndarray, calls: bool = False) -> str:
-        """Why a run that reached its step budget (``calls``: its right-hand-side calls' budget) stops: where, and
-        the fastest mode if that says why."""
-        lam = np.zeros(0)
-        if self.segments:
-            seg = self.segments[-1]
-            lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else self.system.rhs(seg.modes, seg.phase), t, x)
-        stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
-                 f"{self.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
-        advice = "a stiff scene runs with solver.method = \"Radau\" or \"auto\"" \
-            if self.solver.method not in IMPLICIT else "even the implicit method needs more: check the magnitudes"
-        spent = f"{self.work.calls} right-hand-side calls ({CALLS_PER_STEP} per budgeted step)" if calls \
-            else f"{self.budget} integration steps"
-        return (f"{self.scene.name}: stopped at t = {t:.6g} s of {self.scene.duration:g} s after {spent}, "
-                f"its budget ({STEPS_BASE} + solver.steps_per_second = "
-                f"{self.solver.steps_per_second:g} per simulated second){stiff}; {advice}, or raise "
-                "solver.steps_per_second")
-
     def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
         """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
         stability-bound by a decaying mode, else DOP853 without a budget (see integrators)."""
@@ -308,7 +290,7 @@ class HybridRun:
         left = self.budget - self.stats["steps"]
         if left <= 0:  # spent at a segment's end (an event there): stop before the next
             last = self.segments[-1]
-            raise SimulationError(self._over_budget(last.t1, last.sol(last.t1)))
+            raise SimulationError(_over_budget(self, last.t1, last.sol(last.t1)))
         out: list = [WorkWatch(left, self.progress)]
         if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
             out.append(StepBudget(max(STEP_BUDGET - self.sampled.carried, 1)))
@@ -382,11 +364,31 @@ class HybridRun:
                      fallback_modes=dict(self.fallbacks), paths=self.paths.table(), limits=rate_stats,
                      fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
+                "joint_friction": system.joint_friction.describe(),
                 "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
                 "scene_file": str(Path(scene.file).resolve()) if scene.file else None}  # (where it came from)
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:
+    """Why a run that reached its step budget (``calls``: its right-hand-side calls' budget) stops: where, and
+    the fastest mode if that says why."""
+    lam = np.zeros(0)
+    if run.segments:
+        seg = run.segments[-1]
+        lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else run.system.rhs(seg.modes, seg.phase), t, x)
+    stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
+             f"{run.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
+    advice = "a stiff scene runs with solver.method = \"Radau\" or \"auto\"" \
+        if run.solver.method not in IMPLICIT else "even the implicit method needs more: check the magnitudes"
+    spent = f"{run.work.calls} right-hand-side calls ({CALLS_PER_STEP} per budgeted step)" if calls \
+        else f"{run.budget} integration steps"
+    return (f"{run.scene.name}: stopped at t = {t:.6g} s of {run.scene.duration:g} s after {spent}, "
+            f"its budget ({STEPS_BASE} + solver.steps_per_second = "
+            f"{run.solver.steps_per_second:g} per simulated second){stiff}; {advice}, or raise "
+            "solver.steps_per_second")
 
 
 def _diagnose(run: HybridRun, sol, plan: ModePlan, fun, method: str) -> str:

@@ -1,7 +1,7 @@
 """The readable right-hand side: everything the model computes at one (t, x) in one mode.
 
 In a smooth phase (modes and task phase fixed) the state x = [Q, Q̇, y]
-(:mod:`contactdyn.model.layout`) moves by
+(:mod:`contactdyn.model.system`) moves by
 
     d/dt [Q, Q̇, y] = [Q̇, Q̈, ẏ]
 
@@ -12,6 +12,7 @@ with Q̈ and the active rows' forces λ from the constraint system
 2. per contact: its chains' stage forces and bond rows (:mod:`contactdyn.model.chain_forces`),
    then friction (:mod:`contactdyn.model.friction`): stick rows, or the Coulomb force, or the
    tilt of the normal column; a row per joint pressing on its limit (:mod:`contactdyn.model.limits`);
+   a row per stuck joint, the joints' damping and sliding friction (:mod:`contactdyn.model.joint_friction`);
 3. the phase's controller reads the state (and, if it asks, the measured forces) and
    commands joint torques [N·m or N] or voltages [V] (:mod:`contactdyn.laws.controllers`);
 4. the drives turn the command into generalized forces (:mod:`contactdyn.laws.drives`);
@@ -62,6 +63,9 @@ class Evaluation:
     tau_cmd: np.ndarray | None = None  #: the controller's command per joint [N·m or N; V for voltage controllers]
     u: np.ndarray | None = None  #: motor voltage per drive (joints, then bodies) [V], NaN for ideal drives
     limit_torque: dict[int, float] = field(default_factory=dict)  #: joint -> limit torque [N·m or N] (pressing)
+    joint_hold: dict[int, float] = field(default_factory=dict)  #: stuck joint -> holding torque [N·m or N]
+    #: per joint: its damping and dry friction torque [N·m or N] (a stuck joint's: its holding torque); None: none
+    joint_friction: np.ndarray | None = None
 
 
 def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
@@ -81,13 +85,21 @@ def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: P
                     np.empty(0), None, {})
     kins, pending = _contact_terms(system, x, modes, f, ydot, rows, ev, full)
     system.limits.add_rows(phase.limits, x, nQ, rows, system.stabilization)  # joints pressing on a limit
+    jf = system.joint_friction
+    if jf.any:  # stuck joints' rows (contactdyn.model.joint_friction)
+        jf.add_rows(phase.joint_modes, phase.limits, x, nQ, rows, system.stabilization)
     inp, ft, x_d, force_d = _control_input(system, t, x, modes, phase, f, kins, ev)
+    if jf.any:  # damping and sliding friction: after the controller read the contacts' torque f + h
+        joint_tau = jf.torques(phase.joint_modes, x, nQ, nv)
+        f[:nv] += joint_tau
     out, qdd, lam, regular, cmd, zdot = _command_and_solve(system, inp, phase, x, x_d, f, rows)
     if zdot is not None:
         ydot[phase.z_slice] = zdot
     if system.energy_slot >= 0:
         ydot[system.energy_slot] = out.power
         ydot[system.energy_slot + 1] += out.dissipation
+        if jf.any:
+            ydot[system.energy_slot + 1] += jf.dissipation(phase.joint_modes, x, nQ, nv)
     xdot = np.concatenate([x[nQ:2 * nQ], qdd, ydot])
     ev.xdot, ev.lam, ev.tau, ev.body_force, ev.p_tip, ev.x_d = xdot, lam, out.applied[:nv], out.applied[nv:], \
         ft.position, x_d
@@ -95,6 +107,10 @@ def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: P
     ev.force_d = {k: val[0] for k, val in force_d.items()}
     ev.regular = regular
     record_row_forces(system, ev, rows, lam)
+    if jf.any:
+        ev.joint_friction = joint_tau
+        for i, value in ev.joint_hold.items():
+            joint_tau[i] += value
     _finish_friction(system, ev, pending, xdot, ydot)
     return ev
 

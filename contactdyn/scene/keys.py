@@ -65,6 +65,15 @@ MEANINGS: dict[str, str] = {
                      "trust (use it, with a warning)",
     "robot.joint_limits": "enforce: position limits are unilateral constraints (impact, pressing, release); "
                           "ignore: none",
+    "robot.joint_friction": "urdf: each joint's damping and dry friction from the URDF's <dynamics damping friction> "
+                            "(static = kinetic); ignore: none from the URDF (robot.joint tables still apply)",
+    "robot.joint": "per joint, its own damping and dry friction, replacing the URDF's: [robot.joint.<joint>]",
+    "robot.joint.<joint>": "that joint's viscous damping and Coulomb friction (keys not given: 0); a stuck joint "
+                           "is held exactly and breaks away where its holding torque reaches friction_static",
+    "robot.joint.<joint>.damping": "viscous damping b: torque -b q'",
+    "robot.joint.<joint>.friction": "dry friction, static = kinetic (not with friction_static)",
+    "robot.joint.<joint>.friction_static": "static limit: the largest torque a stuck joint holds",
+    "robot.joint.<joint>.friction_kinetic": "sliding friction, <= friction_static (default: friction_static)",
     "robot.drive": "drives of the joints: a kind and its parameters, each a scalar or one per joint",
     # drives: robot.drive.* and body.<body>.drive.* from the kinds' declarations (_drive_rows)
     # bodies

@@ -32,6 +32,13 @@ q0 = [0.1, 0.2]
 v0 = [0.0, 0.0]
 tip0 = [0.4, 0.0, 0.0]
 q_seed = [0.1, 0.2]
+joint_friction = "urdf"
+[robot.joint.q1]
+damping = 0.01
+friction = 0.2
+[robot.joint.q2]
+friction_static = 0.3
+friction_kinetic = 0.2
 [robot.drive]
 kind = "dc_motor"
 R = 1.0
