@@ -268,4 +268,5 @@ def test_autos_step_budget_runs_on_over_the_sample_instants():
     r = simulate(str(scene), {"duration": 0.25, "controller.sample_rate": RATE})
     by_method = r.stats["segments_by_method"]
     assert r.stats.get("auto_switches") == 1 and by_method.get("Radau", 0) > 0
-    assert by_method["DOP853C"] * 20 < STEP_BUDGET < r.stats["steps"]  # the budget spent over many segments
+    # the budget spent over many 1 ms segments (the DOP853 ones, with events between): none took it alone
+    assert by_method["DOP853C"] > 100 and STEP_BUDGET < r.stats["steps"]
