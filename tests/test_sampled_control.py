@@ -49,13 +49,26 @@ class _Probe(Controller):
         return -1e-3 * inp.forces["tip"] * np.ones(2), None
 
 
+class _Integrator(Controller):
+    """One state z with ż = 2 − t [1/s]; τ = (z, 0)."""
+
+    name = "_test_integrator"
+    n_states = 1
+
+    def command(self, inp):
+        return np.array([inp.z[0], 0.0]), np.array([2.0 - inp.t])
+
+
+LAWS = (_Clock, _Probe, _Integrator)
+
+
 @pytest.fixture(autouse=True)
 def _test_laws():
     """The test laws registered while a test runs (the key reference lists the registered ones)."""
-    for law in (_Clock, _Probe):
+    for law in LAWS:
         register(law)
     yield
-    for law in (_Clock, _Probe):
+    for law in LAWS:
         CONTROLLERS.pop(law.name, None)
 
 
@@ -118,6 +131,26 @@ def test_a_delay_of_d_samples_shifts_the_command_by_exactly_d_samples():
     np.testing.assert_array_equal(h3[d:], h0[:-d])
     np.testing.assert_array_equal(h3[:d], np.repeat(h0[:1], d, axis=0))  # the line starts full of the first
     assert not np.array_equal(h3, h0)
+
+
+def test_the_laws_own_states_advance_by_forward_euler_once_per_sample():
+    run, _ = run_of(b1(kind="_test_integrator", sample_rate=RATE))
+    z = held_commands(run)[:, 0]  # τ_k = z_k, z_{k+1} = z_k + T (2 − t_k), z_0 = 0
+    T = 1.0 / RATE
+    expected = np.concatenate([[0.0], np.cumsum([T * (2.0 - k * T) for k in range(19)])])
+    np.testing.assert_allclose(z, expected, rtol=1e-14, atol=1e-17)
+
+
+def test_held_voltages_run_through_the_motors_on_the_compiled_call():
+    drive = {"kind": "dc_motor", "C_M": 0.05, "C_E": 0.05, "R": 1.0, "J": 1e-5, "N": 20.0}
+    docs = [b1(kind="voltage", u=[1.0, -0.5], **rate) for rate in ({"sample_rate": RATE}, {})]
+    for doc in docs:
+        doc["robot"]["drive"] = drive
+    sampled, continuous = (simulate(parse_scene(doc)) for doc in docs)
+    assert sampled.stats["fallback_modes"] == {}
+    assert {row["path"] for row in sampled.stats["paths"].values()} == {"compiled call"}
+    np.testing.assert_array_equal(sampled["tau_cmd"], np.tile([1.0, -0.5], (len(sampled.t), 1)))  # [V]
+    np.testing.assert_allclose(sampled["q"], continuous["q"], rtol=0, atol=1e-7)  # a constant law: the same run
 
 
 # ---- sensors -------------------------------------------------------------------------------
