@@ -9,11 +9,12 @@ and holds that command until the next sample (zero-order hold).
 The held command lives in the state: :class:`SampledController` wraps the law, and its states are
 [held command (nv), the law's own states]; all of them have ẏ = 0 between samples, and its command is the held
 slots. So the right-hand side between two samples is an ordinary smooth one (the compiled plan reads the held
-command off the state as an affine output), and the hybrid loop (:mod:`contactdyn.hybrid.sampling`) ends a
+command off the state as an affine term of its feedforward, through the motors' kernel where there are motors:
+:mod:`contactdyn.compiled.plan_kkt`), and the hybrid loop (:mod:`contactdyn.hybrid.sampling`) ends a
 segment at every sample instant, writes the new command into the state there and checks the events its jump
 fires. The law's own states (integrators) advance once per sample, by forward Euler over the period:
 z_{k+1} = z_k + T ż_k. A phase starts sampling at its start (the delay line filled with that first
-measurement) and then on the scene's grid k / rate.
+measurement; a new phase starts a new line and new sensor states) and then on the scene's grid k / rate.
 
 What the law computes on at t_k is the whole input it measured at t_{k−d} (time, state, references, forces),
 with its own states as they are at t_k: a delay of d samples shifts a law of the measured input alone by
@@ -30,7 +31,8 @@ import numpy as np
 from ..sensors import ForceSensor, Sampling
 from .base import BindContext, ControlInput, Controller
 
-__all__ = ["SampledController", "Sampler", "Sampling"]
+__all__ = ["SampledController", "Sampler", "Sampling"]  # Sampling (the keys): contactdyn.laws.sensors
+
 
 class SampledController(Controller):
     """A phase's law run at samples with a zero-order hold: its command is the held slots of its states."""
