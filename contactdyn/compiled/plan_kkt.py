@@ -114,11 +114,14 @@ class CompiledKKT:
         return np.concatenate([A.reshape((m * m,) + k), b, o])
 
     def _feedforward_torque(self, phi: np.ndarray, e: np.ndarray) -> np.ndarray:
-        """The task PD law's joint-space terms: feedforward g(q) or h(q, q̇), and −k_dj q̇."""
+        """The task PD law's joint-space terms: feedforward g(q) or h(q, q̇), and −k_dj q̇; a sampled law's held
+        command (x's held slots, ``held``: contactdyn.laws.controllers.sampled)."""
         nv, nQ = self.system.nv, self.system.nQ
         tau = -self.kd_joint * e[nQ:nQ + nv]
         if self.feedforward == "gravity":
             tau = tau + phi[self.i_h + nv:self.i_h + 2 * nv]
         elif self.feedforward == "bias":
             tau = tau + phi[self.i_h:self.i_h + nv]
+        if self.held is not None:
+            tau = tau + e[self.held]
         return tau

@@ -27,6 +27,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..laws.controllers.sampled import SampledController
 from ..model.chain_forces import chain_forces
 from ..model.constraints import Rows
 from ..model.contact import Kinematics
@@ -96,8 +97,14 @@ class ProbedModel:
         reads = ctl.uses_forces or phase.carrier is not None or ctl.outputs == "voltage"
         law = ctl.tip_force_law() if hasattr(ctl, "tip_force_law") and not reads else None
         self.affine_ctl = law is not None
-        #: an affine task law whose τ = J_tipᵀ g_ctl + feedforward goes through motors (plan_drives), not onto w
-        self.law_via_drives = self.affine_ctl and self.drives_per_call
+        #: a sampled law's held command (contactdyn.laws.controllers.sampled): the state's slots (x's), read as a
+        #: term of the feedforward (plan_kkt._feedforward_torque), affine in e; None for a continuous law
+        hold = ctl.held if isinstance(ctl, SampledController) else None
+        self.held = None if hold is None else slice(2 * s.nQ + phase.z_slice.start + hold.start,
+                                                    2 * s.nQ + phase.z_slice.start + hold.stop)
+        #: an affine task law (or a held command) whose τ = J_tipᵀ g_ctl + feedforward goes through motors
+        #: (plan_drives), not onto w
+        self.law_via_drives = (self.affine_ctl or self.held is not None) and self.drives_per_call
         self.time_moves: list[tuple] = []  # (slot, move)
         self.time_ramps: list[tuple] = []  # (slot, ramp, contact index)
         self.feedforward, self.kd_joint = "none", 0.0

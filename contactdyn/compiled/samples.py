@@ -318,8 +318,9 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
     nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
     m2 = m * m
     Phi = np.empty((N, plan.P.shape[1]))
-    generic = not plan.affine_ctl
-    tau = np.zeros((N, nv))
+    held = plan.held is not None  # a sampled law's held command: in the state, and (without drives) in P φ
+    generic = not plan.affine_ctl and not held
+    tau = X[:, plan.held].copy() if held else np.zeros((N, nv))
     if generic:
         command = _generic_command(plan)
     phi_at = plan.phi_at  # (the call's own φ: as cheap per sample as a batched one)
@@ -348,7 +349,8 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
         A[:, nv:nQ, nQ + r] = plan.A0[nv:nQ, nQ + r] + mu * (D @ consts)
     drives = plan.compiled_drives
     if drives is None:
-        B[:, :nv] += tau
+        if not held:
+            B[:, :nv] += tau
         drive_out = None
     else:  # the command through the drives: their matrix, the law itself where a voltage clips
         if plan.affine_ctl:

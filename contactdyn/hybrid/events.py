@@ -274,8 +274,10 @@ class StepCollapse(_StepCount):
 JUMPING = ("separate", "slip", "release", "joint_slip")
 
 
-def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray) -> list:
-    """The events whose function falls through zero from (t_before, x) to (t_after, x), in list order.
+def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray, x_after: np.ndarray | None = None
+                 ) -> list:
+    """The events whose function falls through zero from (t_before, x) to (t_after, x_after), in list order
+    (``x_after``: x unless given; a held command's jump, :mod:`contactdyn.hybrid.sampling`, changes the state).
 
     At a corner of the set-points (:class:`~contactdyn.laws.trajectory.Corner`) one segment ends at
     ``t_before`` and the next starts at ``t_after`` with the same state: a force that jumps
@@ -284,11 +286,12 @@ def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray) -
     the others read the state alone.
     """
     fired = []
+    x_after = x if x_after is None else x_after
     for e in events:
         if e.kind not in JUMPING:
             continue
         g = e.value if isinstance(e, SlipWatch) else e  # (a SlipWatch's call keeps step-end state)
-        if g(t_before, x) > 0.0 >= g(t_after, x):
+        if g(t_before, x) > 0.0 >= g(t_after, x_after):
             fired.append(e)
     return fired
 

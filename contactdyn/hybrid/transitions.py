@@ -65,9 +65,13 @@ class _After:
 class Transitions:
     """The mode decisions of one run: at events (:meth:`handle`) and at any instant (:meth:`consistent`)."""
 
-    def __init__(self, system: System, log: EventLog, stats: dict[str, Any], impacts: list[dict[str, Any]]):
+    def __init__(self, system: System, log: EventLog, stats: dict[str, Any], impacts: list[dict[str, Any]],
+                 phase_started=None):
         self.system, self.scene = system, system.scene
         self.log, self.stats, self.impacts = log, stats, impacts
+        #: phase_started(t, x, modes, phase, previous) -> x: a phase begun at an event (a sampled law's first
+        #: sample, contactdyn.hybrid.sampling); None: nothing to do
+        self.phase_started = phase_started
 
     def handle(self, t, x, modes, phase, event):
         """Apply a located event: (state, modes, phase) right after it.
@@ -129,8 +133,10 @@ class Transitions:
             x, imp = impact(system, t, x, modes, c, phase.limits)
             self._after_impact(imp, modes, after)
         if phase.spec.until == f"touch:{c.name}" and phase.index + 1 < len(self.scene.phases):
-            phase = self.system.start_phase(phase.index + 1, t, x, phase)  # (the last phase runs on)
+            phase, previous = self.system.start_phase(phase.index + 1, t, x, phase), phase  # (the last runs on)
             self.log.log(t, "phase", phase.spec.name, check_storm=False)
+            if self.phase_started is not None:
+                x = self.phase_started(t, x, modes, phase, previous)
         return x, phase, True
 
     def _on_separate(self, t, x, modes, phase, event, after):

@@ -52,7 +52,8 @@ import numpy as np
 
 from ..errors import RobotError, SceneError
 from ..laws.controllers import CONTROLLERS
-from ..laws.controllers.base import BindContext
+from ..laws.controllers.base import BindContext, Controller
+from ..laws.controllers.sampled import SampledController
 from ..laws.drives import Drives
 from ..robot.posture import start_posture
 from ..robot.robot import Robot
@@ -103,7 +104,7 @@ class System:
         self._D_ctl = np.diag(self.drives.model_reflected[:nv])
         self._joint_motors = self.drives.has_voltage & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
         # ---- controllers, then the first-order slots after the junctions ----
-        self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
+        self.controllers = [_controller_of(p, nv) for p in scene.phases]
         for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
             ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
                                  f"phase[{i}].controller"))
@@ -313,3 +314,9 @@ def assign_first_order_slots(n_first: int, controller_states: list[int], record_
             impulse_slots[c.name] = n_first
             n_first += 1 + len(c.tangents)
     return z_slices, energy_slot, impulse_slots, n_first
+
+
+def _controller_of(spec, nv: int) -> Controller:
+    """The controller of a phase: its kind's law, wrapped in a zero-order hold when it is sampled."""
+    law = CONTROLLERS[spec.controller.kind](spec.controller, nv)
+    return law if spec.sampling is None else SampledController(law, spec.sampling, nv)

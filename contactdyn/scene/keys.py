@@ -163,6 +163,15 @@ MEANINGS: dict[str, str] = {
     "controller.nominal.k": "nominal stiffness",
     "controller.nominal.b": "nominal damping",
     "controller.nominal.m": "nominal mass",
+    "controller.sample_rate": "run the law sampled at this rate with a zero-order hold (none: continuous); the "
+                              "samples are at k / rate from the scene start, and at a phase's start",
+    "controller.delay": "the law computes on what it measured this many samples ago (needs sample_rate)",
+    "controller.sensor": "what a sampled law measures (needs sample_rate): force noise, bias and low-pass, encoders",
+    "controller.sensor.force_noise": "standard deviation of the Gaussian noise on every measured contact force",
+    "controller.sensor.force_bias": "offset of every measured contact force",
+    "controller.sensor.force_cutoff": "cut-off of a first-order low-pass on the measured forces (none: no filter)",
+    "controller.sensor.encoder_resolution": "joint encoders' resolution: q read as the nearest multiple (0: exact)",
+    "controller.sensor.seed": "seed of the force noise's random generator (the same seed: the same run)",
     # phases
     "phase[].name": "phase name (events and plots name it)",
     "phase[].until": "end time from the scene start [s], or 'touch:<contact>' (ends at that contact's first touch)",

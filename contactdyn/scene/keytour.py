@@ -176,6 +176,12 @@ reference.moves = [{ kind = "triangle", delta = [0.1, 0.0], duration = 0.5 },
 controller = { kind = "voltage", u = 1.0 }
 [[phase]]
 [phase.controller]
+kind = "task_pd"
+sample_rate = 1000.0
+delay = 1
+sensor = { force_noise = 0.1, force_bias = 0.0, force_cutoff = 200.0, encoder_resolution = 1e-5, seed = 7 }
+[[phase]]
+[phase.controller]
 kind = "task_force"
 force = [0.0, 0.0, 1.0]
 rate = [0.0, 0.0, 0.0]

@@ -128,6 +128,8 @@ class PhaseSpec:
     controller: Any  #: a controller config (see contactdyn.laws.controllers)
     reference: ReferenceSpec | None
     forces: tuple[ForceSpec, ...]
+    #: the controller's sample rate, delay and sensors (contactdyn.laws.controllers.sampled.Sampling); None: continuous
+    sampling: Any = None
 
 
 MAX_EVENTS = 1_000_000  #: solver.max_events at most (each event is kept in the run's log and JSON)
@@ -500,11 +502,11 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
         until = r.float("until", duration, lo=0.0, unit="s")
     merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
         else r.raw("controller")
-    controller = read_controller(Reader(merged, r.key("controller"), r.file))
+    controller, sampling = read_controller(Reader(merged, r.key("controller"), r.file))
     reference = _read_reference(r.sub("reference"), bodies or {}) if r.has("reference") else None
     forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
     r.finish()
-    return PhaseSpec(name, until, controller, reference, forces)
+    return PhaseSpec(name, until, controller, reference, forces, sampling)
 
 
 def _read_reference(r: Reader, bodies: dict[str, BodySpec]) -> ReferenceSpec:
