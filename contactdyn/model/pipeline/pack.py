@@ -17,9 +17,10 @@ its contact's row, a user controller's in the controller section), so one compil
 index constants below are the one place the layout is written; the call (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-motors and voltage drives, force-reading or stateful controllers, a reference carried by a body, a 2-D slide
-launching from rest, the energy audit, a stage or friction law numba cannot compile, a robot ``rigid_body``
-does not compute, a circle move, controllers other than ``task_pd`` and user laws of the controller ABI.
+motors and voltage drives, joint friction, force-reading or stateful controllers (a sampled law among them), a
+reference carried by a body, a 2-D slide launching from rest, the energy audit, a stage or friction law numba
+cannot compile, a robot ``rigid_body`` does not compute, a circle move, controllers other than ``task_pd`` and user
+laws of the controller ABI.
 """
 
 from __future__ import annotations
@@ -97,6 +98,8 @@ def unsupported(system, modes, phase) -> str:
         return "energy audit"
     if system.drives.any_motor:
         return "motors (drives other than ideal torque sources)"
+    if system.joint_friction.any:
+        return "joint friction (its stuck rows and torques are not packed yet)"
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if phase.carrier is not None:
