@@ -182,9 +182,10 @@ class SampledLoop:
     def __init__(self, loop: ContactLoop):
         self.loop = loop
 
-    def linearize(self) -> SampledLinearization:
+    def linearize(self, x_guess: np.ndarray | None = None) -> SampledLinearization:
+        """The pieces about the continuous loop's equilibrium (the hold keeps it), Newton from ``x_guess``."""
         loop = self.loop
-        lin = loop.linearize()  # the continuous loop's equilibrium (the hold keeps it)
+        lin = loop.linearize(x_guess)
         x = lin.x
         system, phase = loop.system, loop.phase
         nQ, nv = system.nQ, system.nv
