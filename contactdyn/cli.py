@@ -205,6 +205,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
                    f"evaluations, {s['events']} events, {len(result.impacts)} impacts")
         for line in slower_paths(s.get("paths", {})):
             _out(args, f"  path of {line}")
+        from .model.joint_friction import summary
+
+        if summary(result.meta.get("joint_friction", {})):
+            _out(args, "  " + summary(result.meta["joint_friction"]))
         if args.verbose:
             from .robot.listing import run_details
 

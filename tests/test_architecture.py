@@ -9,7 +9,7 @@ import pytest
 
 PKG = Path(__file__).resolve().parent.parent / "contactdyn"
 #: the model and the loop, one concept per module (docs/architecture.md's module map)
-CORE = [f"model/{m}" for m in ("chain", "contact", "layout", "phases", "chain_forces", "friction", "constraints",
+CORE = [f"model/{m}" for m in ("chain", "contact", "phases", "chain_forces", "friction", "constraints",
                                "impact", "dynamics", "system", "paths", "limits")] + \
     [f"compiled/{m}" for m in ("plan_probe", "plan_kkt", "plan_rhs", "rhsplan")] + \
     [f"hybrid/{m}" for m in ("events", "transitions", "loop")] + \

@@ -56,7 +56,10 @@ def test_the_starter_writes_valid_toml_for_a_name_with_quotes():
 def test_the_starter_finds_the_tool_frame_and_a_posture_of_an_example_robot(tmp_path, monkeypatch, robot):
     monkeypatch.chdir(tmp_path)
     assert main(["new", "arm", "--robot", robot]) == EXIT_OK  # tip: the catalog's tool frame, q0 inside limits
-    r = simulate("arm", {"duration": 1.0})
+    # xarm7's URDF gives every joint 2-10 N·m·s/rad of damping and 1 N·m of dry friction: stuck joints and a stuck
+    # contact together over-constrain the arm (a statically indeterminate hold, contactdyn.model.joint_friction), and
+    # the press settles inside the friction band (18.2 N). This test is about the starter: without the URDF's friction
+    r = simulate("arm", {"duration": 1.0, "robot.joint_friction": "ignore"})
     assert abs(r["contact.table.F_n"][-1] - 20.0) < 1.0  # [N] pressing by the end of the press phase
 
 

@@ -98,8 +98,9 @@ def _matrix_fold(plan, drives):
 
 
 def row_meta(plan) -> list[tuple]:
-    """The plan's rows as a controller's force columns read them: (owner, "n" | "t" | "limit" | label, index)."""
-    kinds = {"normal": "n", "stick": "t", "limit": "limit"}
+    """The plan's rows as a controller's force columns read them: (owner, kind, index), kind "n" | "t" | "limit" |
+    "joint" | a chain's label."""
+    kinds = {"normal": "n", "stick": "t", "limit": "limit", "joint": "joint"}
     return [(row.owner, kinds.get(row.kind, row.label), row.index) for row in plan.rows]
 
 

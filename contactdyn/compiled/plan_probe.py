@@ -13,7 +13,9 @@ by evaluating them at unit vectors e_k (:func:`affine_map`), and checks it at ra
 a law that is not affine (Hunt–Crossley) is refused there. The constraint rows are
 ``a·J_f + const`` with γ = a·J̇q̇ + Baumgarte terms, read off the same way (:meth:`ProbedModel._rows`);
 a joint pressing on its position limit is one more row, e_i with its Baumgarte γ, written by
-:meth:`~contactdyn.model.limits.JointLimits.add_rows` as in the readable model.
+:meth:`~contactdyn.model.limits.JointLimits.add_rows` as in the readable model; a joint stuck by dry friction
+too (:meth:`~contactdyn.model.joint_friction.JointFriction.add_rows`), and the joints' damping and sliding
+friction are an output (``f_joint``) of :meth:`~contactdyn.model.joint_friction.JointFriction.torques`.
 
 So a stage law, a servo or a tip-force law is written once, in the readable model, and
 the compiled plan (:mod:`contactdyn.compiled.rhsplan`) gets it by construction.
@@ -25,6 +27,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..laws.controllers.sampled import SampledController
 from ..model.chain_forces import chain_forces
 from ..model.constraints import Rows
 from ..model.contact import Kinematics
@@ -94,8 +97,14 @@ class ProbedModel:
         reads = ctl.uses_forces or phase.carrier is not None or ctl.outputs == "voltage"
         law = ctl.tip_force_law() if hasattr(ctl, "tip_force_law") and not reads else None
         self.affine_ctl = law is not None
-        #: an affine task law whose τ = J_tipᵀ g_ctl + feedforward goes through motors (plan_drives), not onto w
-        self.law_via_drives = self.affine_ctl and self.drives_per_call
+        #: a sampled law's held command (contactdyn.laws.controllers.sampled): the state's slots (x's), read as a
+        #: term of the feedforward (plan_kkt._feedforward_torque), affine in e; None for a continuous law
+        hold = ctl.held if isinstance(ctl, SampledController) else None
+        self.held = None if hold is None else slice(2 * s.nQ + phase.z_slice.start + hold.start,
+                                                    2 * s.nQ + phase.z_slice.start + hold.stop)
+        #: an affine task law (or a held command) whose τ = J_tipᵀ g_ctl + feedforward goes through motors
+        #: (plan_drives), not onto w
+        self.law_via_drives = (self.affine_ctl or self.held is not None) and self.drives_per_call
         self.time_moves: list[tuple] = []  # (slot, move)
         self.time_ramps: list[tuple] = []  # (slot, ramp, contact index)
         self.feedforward, self.kd_joint = "none", 0.0
@@ -127,6 +136,8 @@ class ProbedModel:
                         for c in s.contacts for dc in c.tangent_chains}
         self.o_body = out.add("body_force", len(s.body_names))
         self.o_stage = {label: out.add(f"stage.{label}", 3) for label in s.stage_labels}
+        #: the joints' damping and sliding friction [N·m or N] (contactdyn.model.joint_friction), None without any
+        self.o_fjoint = out.add("f_joint", nv) if s.joint_friction.any else None
         self.no = len(out.names)
 
     # ---- the affine map, by probing the system's own code --------------------------------
@@ -183,6 +194,8 @@ class ProbedModel:
         s.limits.add_rows(self.phase.limits, x, nQ, limit_rows, s.stabilization)
         for row, gamma, (_, _, i) in zip(limit_rows.rows, limit_rows.gammas, limit_rows.meta, strict=True):
             rows.append(("limit", -1, i, row, gamma))
+        if self.o_fjoint is not None:
+            self._joint_terms(x, o, rows)
         for idx, v_ref, gain in s.servo:
             F = gain * (v_ref - x[nQ + idx])
             if not self.drives_per_call:  # else the servo is a drive command (plan_drives)
@@ -207,6 +220,16 @@ class ProbedModel:
         for label, sl in self.o_stage.items():
             o[sl] = ev.stages.get(label, (0.0, 0.0, 0.0))
         return o, rows
+
+    def _joint_terms(self, x: np.ndarray, o: np.ndarray, rows: list) -> None:
+        """Stuck joints' rows into ``rows``, the damping and sliding friction into o: the readable model's own
+        (:mod:`contactdyn.model.joint_friction`)."""
+        s, phase = self.system, self.phase
+        jf, joint_rows = s.joint_friction, Rows()
+        jf.add_rows(phase.joint_modes, phase.limits, x, s.nQ, joint_rows, s.stabilization)
+        for row, gamma, (_, _, i) in zip(joint_rows.rows, joint_rows.gammas, joint_rows.meta, strict=True):
+            rows.append(("joint", -1, i, row, gamma))
+        o[self.o_fjoint] = jf.torques(phase.joint_modes, x, s.nQ, s.nv)
 
     def _probe_all(self, e: np.ndarray) -> np.ndarray:
         """o at e followed by the rows' γ (their state-dependent part: Baumgarte terms) with J̇q̇ = 0."""
@@ -240,9 +263,9 @@ class ProbedModel:
         self.rows = []
         for r, (kind, ci, i, const, gamma0) in enumerate(rows0):
             a = np.array([probes[k][r][4] - gamma0 for k in range(3)])
-            if kind == "limit":  # joint coordinate i on its limit: no Cartesian part (a = 0)
+            if kind in ("limit", "joint"):  # joint coordinate i on its limit or stuck: no Cartesian part (a = 0)
                 self.rows.append(SimpleNamespace(kind=kind, contact=-1, index=i, a=a, const=np.array(const, float),
-                                                 frame=0, label=None, owner=s.limits.by_index[i].name))
+                                                 frame=0, label=None, owner=s.robot.joint_names[i]))
                 continue
             c = s.contacts[ci]
             self.rows.append(SimpleNamespace(kind=kind, contact=ci, index=i, a=a, const=np.array(const, float),
@@ -257,6 +280,8 @@ class ProbedModel:
                 self.stick_rows.setdefault(row.contact, []).append(nQ + r)
         #: joint coordinate -> index in z of its limit torque [N·m or N] (joints pressing on a limit)
         self.limit_rows = {row.index: nQ + r for r, row in enumerate(self.rows) if row.kind == "limit"}
+        #: joint coordinate -> index in z of its holding torque [N·m or N] (joints stuck by dry friction)
+        self.joint_rows = {row.index: nQ + r for r, row in enumerate(self.rows) if row.kind == "joint"}
         # sliding friction: tilt of the normal row's column, or an explicit force
         self.tilts = []  # (row, contact, 1-D?)
         self.coulomb = []  # (contact index, frame) for sliding without a normal row

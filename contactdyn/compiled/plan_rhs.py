@@ -223,12 +223,14 @@ def _command_function(plan, drives):
     """command(t, x, Js, φ, o, b) -> (f_ctl, ż): the controller's command as generalized forces, through
     the drives if any ([N·m or N] on the first len(f_ctl) coordinates); None when the task law is all in
     the map P (no motors)."""
-    if plan.affine_ctl and drives is None:
+    if (plan.affine_ctl or plan.held is not None) and drives is None:
         return None
     s = plan.system
     nQ, nv = s.nQ, s.nv
-    ctl_call = controller_call(plan)
     fast, readable = (drives.fast, drives.readable) if drives is not None else (None, None)
+    if plan.held is not None:  # a sampled law's held command (x's held slots) through the drives
+        return _held_command(plan, fast, readable)
+    ctl_call = controller_call(plan)
     if plan.affine_ctl:  # the affine task law through the motors
         tf, o_gctl, i_e, feedforward = plan.tip_frame, plan.o_gctl, plan.i_e, plan._feedforward_torque
         joint_terms = plan.feedforward != "none" or plan.kd_joint != 0.0  # else the feedforward is 0
@@ -252,6 +254,19 @@ def _command_function(plan, drives):
         return (readable(x, tau) if f is None else f), zdot
 
     return generic
+
+
+def _held_command(plan, fast, readable):
+    """command(t, x, Js, φ, o, b) -> (f_ctl, None) of a sampled law (contactdyn.laws.controllers.sampled): the held
+    command [N·m or N; V], the state's held slots, through the drives."""
+    slots = plan.held
+
+    def held(t, x, Js, phi, o, b):
+        tau = x[slots]
+        f = fast(x, tau)
+        return (readable(x, tau) if f is None else f), None
+
+    return held
 
 
 def _launch(plan, friction, solve):

@@ -66,7 +66,8 @@ def cached_plan(system, modes: list[ContactMode], phase) -> ModePlan:
     modes' :func:`structure` and the phase's content (index, start, reference, set-points), not the
     Phase object, which every run makes anew."""
     content = pickle.dumps((phase.index, phase.t_start, phase.spec.name, phase.reference, phase.forces,
-                            getattr(phase, "carrier", None), getattr(phase, "limits", ())))
+                            getattr(phase, "carrier", None), getattr(phase, "limits", ()),
+                            getattr(phase, "joint_modes", ())))
     key = (structure(modes), content)
     plans = _PLANS.setdefault(system, {})
     plan = plans.get(key)
@@ -190,6 +191,11 @@ class ModePlan(ProbedModel, CompiledKKT):
         """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate (the ``release`` event's)."""
         z, _ = self.values(t, x)
         return {i: float(z[k]) for i, k in self.limit_rows.items()}
+
+    def joint_hold(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """Holding torques [N·m or N] of the joints stuck by dry friction, by joint coordinate (``joint_slip``'s)."""
+        z, _ = self.values(t, x)
+        return {i: float(z[k]) for i, k in self.joint_rows.items()}
 
     def stick_force(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
         """Friction force of a sticking contact ci in tangent coordinates [N]."""

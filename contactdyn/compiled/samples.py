@@ -46,6 +46,7 @@ class Samples:
         self.tau_cmd = np.zeros((n, nv))  #: the controller's command [N·m or N; V for voltage controllers]
         self.u = np.full((n, len(system.drives.specs)), np.nan)  #: voltage per drive [V], NaN for ideal drives
         self.limit_torque = np.zeros((n, nv))  #: per joint [N·m or N], 0 unless pressing on a limit
+        self.joint_friction = np.zeros((n, nv))  #: per joint: damping and dry friction [N·m or N]
         self.tip = np.zeros((n, 3))
         self.x_d = np.full((n, 3), np.nan)
         self.has_x_d = False
@@ -64,7 +65,7 @@ class Samples:
         if len(parts) == 1:
             return parts[0]
         out = cls(0, system)
-        for name in ("tau", "tau_cmd", "u", "limit_torque", "tip", "x_d", "body_force"):
+        for name in ("tau", "tau_cmd", "u", "limit_torque", "joint_friction", "tip", "x_d", "body_force"):
             setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
         out.has_x_d = any(p.has_x_d for p in parts)
         out.has_F_d = {key: any(p.has_F_d[key] for p in parts) for key in out.has_F_d}
@@ -81,6 +82,8 @@ class Samples:
         self.u[k] = ev.u
         for i, value in ev.limit_torque.items():
             self.limit_torque[k, i] = value
+        if ev.joint_friction is not None:
+            self.joint_friction[k] = ev.joint_friction
         self.tip[k] = ev.p_tip
         if ev.x_d is not None and len(ev.x_d) == 3:
             self.x_d[k] = ev.x_d
@@ -315,8 +318,9 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
     nQ, nv, nr, m = s.nQ, s.nv, plan.nr, plan.m
     m2 = m * m
     Phi = np.empty((N, plan.P.shape[1]))
-    generic = not plan.affine_ctl
-    tau = np.zeros((N, nv))
+    held = plan.held is not None  # a sampled law's held command: in the state, and (without drives) in P φ
+    generic = not plan.affine_ctl and not held
+    tau = X[:, plan.held].copy() if held else np.zeros((N, nv))
     if generic:
         command = _generic_command(plan)
     phi_at = plan.phi_at  # (the call's own φ: as cheap per sample as a batched one)
@@ -345,7 +349,8 @@ def _solve_samples(plan, ts: np.ndarray, X: np.ndarray, exact: bool = False):
         A[:, nv:nQ, nQ + r] = plan.A0[nv:nQ, nQ + r] + mu * (D @ consts)
     drives = plan.compiled_drives
     if drives is None:
-        B[:, :nv] += tau
+        if not held:
+            B[:, :nv] += tau
         drive_out = None
     else:  # the command through the drives: their matrix, the law itself where a voltage clips
         if plan.affine_ctl:
@@ -436,6 +441,10 @@ def _read_out(plan, S: Samples, ts: np.ndarray, X: np.ndarray, Phi: np.ndarray, 
             S.has_x_d = True
     for i, k in plan.limit_rows.items():
         S.limit_torque[:, i] = Z[:, k]
+    if plan.o_fjoint is not None:  # damping and sliding friction, a stuck joint's holding torque
+        S.joint_friction[:] = O[:, plan.o_fjoint]
+        for i, k in plan.joint_rows.items():
+            S.joint_friction[:, i] += Z[:, k]
     slots = {key: slot for slot, _, key in plan.time_ramps}
     for key, ramp in phase.forces.items():
         S.F_d[key][:] = Phi[:, plan.i_e + slots[key]] if key in slots else ramp.values(ts)

@@ -271,11 +271,13 @@ class StepCollapse(_StepCount):
 
 #: event kinds whose functions read forces (normal force, friction, limit torque): these jump where the
 #: set-points' acceleration or a force set-point jumps; touch, stop, reverse, turn and limit read the state
-JUMPING = ("separate", "slip", "release")
+JUMPING = ("separate", "slip", "release", "joint_slip")
 
 
-def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray) -> list:
-    """The events whose function falls through zero from (t_before, x) to (t_after, x), in list order.
+def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray, x_after: np.ndarray | None = None
+                 ) -> list:
+    """The events whose function falls through zero from (t_before, x) to (t_after, x_after), in list order
+    (``x_after``: x unless given; a held command's jump, :mod:`contactdyn.hybrid.sampling`, changes the state).
 
     At a corner of the set-points (:class:`~contactdyn.laws.trajectory.Corner`) one segment ends at
     ``t_before`` and the next starts at ``t_after`` with the same state: a force that jumps
@@ -284,11 +286,12 @@ def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray) -
     the others read the state alone.
     """
     fired = []
+    x_after = x if x_after is None else x_after
     for e in events:
         if e.kind not in JUMPING:
             continue
         g = e.value if isinstance(e, SlipWatch) else e  # (a SlipWatch's call keeps step-end state)
-        if g(t_before, x) > 0.0 >= g(t_after, x):
+        if g(t_before, x) > 0.0 >= g(t_after, x_after):
             fired.append(e)
     return fired
 
@@ -325,6 +328,10 @@ class _ReadableValues:
     def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
         """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate."""
         return self.cache(t, x).limit_torque
+
+    def joint_hold(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """Holding torques [N·m or N] of the joints stuck by dry friction, by joint coordinate."""
+        return self.cache(t, x).joint_hold
 
 
 def _along(v: np.ndarray, r: tuple[float, ...]) -> float:
@@ -373,6 +380,8 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
                                       name))
     out += system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # contactdyn.model.limits
+    if phase.joint_modes:  # contactdyn.model.joint_friction
+        out += system.joint_friction.events(phase.joint_modes, phase.limits, x0, system.nQ, values.joint_hold)
     fun = values.rhs
     if not watches:
         return out, fun

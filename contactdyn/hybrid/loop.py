@@ -28,6 +28,7 @@ stiffness.
 
 from __future__ import annotations
 
+import gc
 import math
 import time
 from dataclasses import replace
@@ -63,13 +64,14 @@ from ..output.result import Result
 from ..scene.budget import STEPS_BASE, step_budget
 from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
 from .progress import CALLS_PER_STEP, OverBudget, Progress, Work
+from .sampling import SampledPhases
 from .transitions import Transitions
 
 __all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
 
 #: events after which the next segment starts with the step size the solver had reached (friction
 #: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
-RESUME_STEP = ("stop", "reverse", "slip", "turn")
+RESUME_STEP = ("stop", "reverse", "slip", "turn", "joint_slip", "joint_stick")
 LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest or comes to rest (see HybridRun._method)
 #: a 2-D slide's explicit steps shorter than COLLAPSE_RATIO × the segment's longest, COLLAPSE_STEPS of them, have
 #: it checked for a stiff mode (events.StepCollapse): the steps shrink ~1/|v_t| as the slide comes to rest; a
@@ -106,7 +108,8 @@ class HybridRun:
                       "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
         self.log = EventLog(self.scene.name, self.solver, self.stats)
         self.events = self.log.events
-        self.transitions = Transitions(system, self.log, self.stats, self.impacts)
+        self.sampled = SampledPhases(system, self.stats)  #: the samplers of sampled phases (hybrid.sampling)
+        self.transitions = Transitions(system, self.log, self.stats, self.impacts, self.sampled.start)
         self.plans: dict[tuple, ModePlan] = {}
         self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
         #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
@@ -143,21 +146,25 @@ class HybridRun:
         """Initial state, consistent modes and the first phase at t = 0."""
         x, modes = self.system.initial_state()
         phase = self.system.start_phase(0, 0.0, x, None)
+        x = self.sampled.start(0.0, x, modes, phase, None)  # a sampled law's first sample
         x, modes = self.transitions.consistent(0.0, x, modes, phase)
-        return x, modes, phase
+        return self.transitions.settle_joints(0.0, x, modes, phase)
 
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:
         """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
+        gc.freeze()  # the ~1e5 objects made before (modules, compiled code) out of the collector's scans meanwhile
         try:
             return self._run(wall0)
         except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
-            raise SimulationError(self._over_budget(*_spent_at(self), calls=True)) from None
+            raise SimulationError(_over_budget(self, *_spent_at(self), calls=True)) from None
         except (*numerical_errors(), ZeroDivisionError) as exc:
             t = self.segments[-1].t1 if self.segments else 0.0
             raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
                                   f"({type(exc).__name__}: {exc}); check the scene's magnitudes "
                                   "(initial velocities, gains, stiffness)") from None
+        finally:
+            gc.unfreeze()
 
     def _run(self, wall0: float) -> Result:
         T = self.scene.duration
@@ -174,19 +181,26 @@ class HybridRun:
             if corner is not None and corner.before - t <= min_span(t):  # at it already (an event landed there)
                 t, x, modes, phase = self._pass_corner(t, corner.after, x, modes, phase)
                 continue
-            sol, events, fun = self._segment(t, corner.before if corner else t_end, x, modes, phase)
+            t_sample = self.sampled.next_time(phase)  # a sampled law's next sample instant (hybrid.sampling)
+            if t_sample <= t + min_span(t):
+                t, x, modes, phase = self._pass_corner(t, max(t, t_sample), x, modes, phase, sample=True)
+                continue
+            stop = corner.before if corner else t_end
+            sample = t_sample < stop - min_span(stop)
+            sol, events, fun = self._segment(t, t_sample if sample else stop, x, modes, phase)
+            self.sampled.carry(sol, sample)  # auto's step budget runs on over sample instants
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
             h0, self.next_step = self.next_step, None
-            if sol.status == 0 and corner is not None:  # reached the corner: go on past it with the step reached
-                self.next_step = float(sol.t[-2] - sol.t[-3]) if len(sol.t) > 2 else h0
-                t, x, modes, phase = self._pass_corner(t, corner.after, x, modes, phase)
+            if sol.status == 0 and (corner is not None or sample):  # a corner or a sample: past it, the step reached
+                self.next_step = _reached(sol, h0, sample)
+                t, x, modes, phase = self._pass_corner(t, t if sample else corner.after, x, modes, phase, sample)
             elif sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
                 if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
                     self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
                     continue
                 if fired[0].kind == "work":
-                    raise SimulationError(self._over_budget(t, x))
+                    raise SimulationError(_over_budget(self, t, x))
                 if fired[0].kind == "collapse":  # a 2-D slide coming to rest? (same modes, same phase)
                     self._collapse_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
                     continue
@@ -202,14 +216,20 @@ class HybridRun:
             self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._plan(modes, phase, count=False)))
         return self._result(time.perf_counter() - wall0)
 
-    def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
-        """Restart past a corner of the set-points at t_after [s] with the state x reached at t [s]
+    def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
+                     sample: bool = False):
+        """Restart past a corner of the set-points at t_after [s] with the state x reached at t [s], or (``sample``)
+        with the state after a sampled law's sample at t_after (its held command jumps: hybrid.sampling)
         (no event: the same modes, unless a contact force or limit torque jumps through zero there,
         which is handled as the event a step straddling the corner would have located)."""
-        self.stats["corners"] += 1
         plan = self._plan(modes, phase, count=False)
-        events, _ = segment_events(self.system, modes, phase, t, x, plan if plan.ok else None)
-        fired = fired_across(events, t, t_after, x)
+        if sample:
+            x, before = self.sampled.take(t_after, x, modes, phase), x
+            fired = self.sampled.jumped(t_after, before, x, modes, phase, plan)
+        else:
+            self.stats["corners"] += 1
+            fired = fired_across(segment_events(self.system, modes, phase, t, x, plan if plan.ok else None)[0],
+                                 t, t_after, x)
         if fired:
             self._new_mode()
             if fired[0].kind not in RESUME_STEP:
@@ -247,28 +267,10 @@ class HybridRun:
         if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
             why = sol.message if sol.status < 0 else "the state is not finite"  # never "successfully ..."
             raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s "
-                                  f"({method}): {why}{self._diagnose(sol, plan, fun, method)}")
+                                  f"({method}): {why}{_diagnose(self, sol, plan, fun, method)}")
         self.segments.append(Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
         self.stats["segments"] += 1
         return sol, events, fun
-
-    def _over_budget(self, t: float, x: np.ndarray, calls: bool = False) -> str:
-        """Why a run that reached its step budget (``calls``: its right-hand-side calls' budget) stops: where, and
-        the fastest mode if that says why."""
-        lam = np.zeros(0)
-        if self.segments:
-            seg = self.segments[-1]
-            lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else self.system.rhs(seg.modes, seg.phase), t, x)
-        stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
-                 f"{self.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
-        advice = "a stiff scene runs with solver.method = \"Radau\" or \"auto\"" \
-            if self.solver.method not in IMPLICIT else "even the implicit method needs more: check the magnitudes"
-        spent = f"{self.work.calls} right-hand-side calls ({CALLS_PER_STEP} per budgeted step)" if calls \
-            else f"{self.budget} integration steps"
-        return (f"{self.scene.name}: stopped at t = {t:.6g} s of {self.scene.duration:g} s after {spent}, "
-                f"its budget ({STEPS_BASE} + solver.steps_per_second = "
-                f"{self.solver.steps_per_second:g} per simulated second){stiff}; {advice}, or raise "
-                "solver.steps_per_second")
 
     def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
         """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
@@ -288,10 +290,10 @@ class HybridRun:
         left = self.budget - self.stats["steps"]
         if left <= 0:  # spent at a segment's end (an event there): stop before the next
             last = self.segments[-1]
-            raise SimulationError(self._over_budget(last.t1, last.sol(last.t1)))
+            raise SimulationError(_over_budget(self, last.t1, last.sol(last.t1)))
         out: list = [WorkWatch(left, self.progress)]
         if self.solver.method == "auto" and method == AUTO_EXPLICIT and self.auto_state is None:
-            out.append(StepBudget(STEP_BUDGET))
+            out.append(StepBudget(max(STEP_BUDGET - self.sampled.carried, 1)))
         if self.resting is None and method in EXPLICIT and method not in FIXED and _sliding_2d(modes) \
                 and not _launching(modes):
             out.append(StepCollapse(COLLAPSE_RATIO, COLLAPSE_STEPS))
@@ -310,24 +312,6 @@ class HybridRun:
     def _new_mode(self) -> None:
         """Forget the method choices made for the mode that ends (auto's, a slide's coming to rest)."""
         self.auto_state = self.resting = None
-
-    def _diagnose(self, sol, plan: ModePlan, fun, method: str) -> str:
-        """Why a segment failed, as far as the state at the failure says."""
-        t, x = float(sol.t[-1]), sol.y[:, -1]
-        if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
-            return ""
-        if plan.ok:
-            cond = plan.kkt_condition(t, x)
-            if cond > 1e12:
-                return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
-                        f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "
-                        "arm; give the contact a compliant normal model or avoid the pose")
-        lam = jacobian_eigenvalues(fun, t, x)
-        if len(lam) and method in EXPLICIT:
-            fast = float(np.abs(lam).max())
-            return (f"; fastest mode |λ| = {fast:.3g} 1/s (an explicit method needs steps below "
-                    f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = \"Radau\" or \"auto\"")
-        return ""
 
     def _method(self, modes: list[ContactMode], method: str) -> str:
         """The segment's method, but a stiff-capable one while a 2-D slip launches from rest or comes to rest.
@@ -362,7 +346,8 @@ class HybridRun:
         if nxt >= len(self.scene.phases):
             return x, modes, replace(phase, spec=replace(phase.spec, until=math.inf))  # the last phase runs on
         self.log.log(t, "phase", self.scene.phases[nxt].name, check_storm=False)
-        phase = self.system.start_phase(nxt, t, x, phase)
+        phase, previous = self.system.start_phase(nxt, t, x, phase), phase
+        x = self.sampled.start(t, x, modes, phase, previous)  # a sampled law's first sample
         return self.transitions.settle(t, x, modes, phase)
 
     # ---- output ---------------------------------------------------------------------
@@ -379,11 +364,50 @@ class HybridRun:
                      fallback_modes=dict(self.fallbacks), paths=self.paths.table(), limits=rate_stats,
                      fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
+                "joint_friction": system.joint_friction.describe(),
                 "contacts": [c.name for c in system.contacts],
                 "bodies": system.body_names, "robot": str(system.robot.source), "tip": scene.robot.tip,
                 "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
                 "scene_file": str(Path(scene.file).resolve()) if scene.file else None}  # (where it came from)
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:
+    """Why a run that reached its step budget (``calls``: its right-hand-side calls' budget) stops: where, and
+    the fastest mode if that says why."""
+    lam = np.zeros(0)
+    if run.segments:
+        seg = run.segments[-1]
+        lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else run.system.rhs(seg.modes, seg.phase), t, x)
+    stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
+             f"{run.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
+    advice = "a stiff scene runs with solver.method = \"Radau\" or \"auto\"" \
+        if run.solver.method not in IMPLICIT else "even the implicit method needs more: check the magnitudes"
+    spent = f"{run.work.calls} right-hand-side calls ({CALLS_PER_STEP} per budgeted step)" if calls \
+        else f"{run.budget} integration steps"
+    return (f"{run.scene.name}: stopped at t = {t:.6g} s of {run.scene.duration:g} s after {spent}, "
+            f"its budget ({STEPS_BASE} + solver.steps_per_second = "
+            f"{run.solver.steps_per_second:g} per simulated second){stiff}; {advice}, or raise "
+            "solver.steps_per_second")
+
+
+def _diagnose(run: HybridRun, sol, plan: ModePlan, fun, method: str) -> str:
+    """Why a segment failed, as far as the state at the failure says."""
+    t, x = float(sol.t[-1]), sol.y[:, -1]
+    if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
+        return ""
+    if plan.ok:
+        cond = plan.kkt_condition(t, x)
+        if cond > 1e12:
+            return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
+                    f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "
+                    "arm; give the contact a compliant normal model or avoid the pose")
+    lam = jacobian_eigenvalues(fun, t, x)
+    if len(lam) and method in EXPLICIT:
+        fast = float(np.abs(lam).max())
+        return (f"; fastest mode |λ| = {fast:.3g} 1/s (an explicit method needs steps below "
+                f"~{STABILITY_RADIUS / fast:.2g} s); for a stiff scene use solver.method = \"Radau\" or \"auto\"")
+    return ""
 
 
 def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
@@ -396,6 +420,16 @@ def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
         last = run.segments[-1]
         return last.t1, np.asarray(last.sol(last.t1), float)
     return 0.0, run.start()[0]
+
+
+def _reached(sol, h0: float | None, sample: bool) -> float | None:
+    """[s] The step size a segment that reached its end had reached: after a corner its last full step (the one
+    before the step cut short by the end); after a sample instant the step the solver proposes next (else its
+    longest): segments one sample period long are often one step, the next starts with it, capped by the period."""
+    if sample:
+        h_next = getattr(sol, "h_next", None)  # the compiled DOP853's proposal (numerics.dop853)
+        return h_next if h_next is not None else float(np.max(np.diff(sol.t))) if len(sol.t) > 1 else h0
+    return float(sol.t[-2] - sol.t[-3]) if len(sol.t) > 2 else h0
 
 
 def _sliding_2d(modes: list[ContactMode]) -> bool:

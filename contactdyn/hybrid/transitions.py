@@ -15,7 +15,10 @@ At each event of :mod:`contactdyn.hybrid.events` (t fixed, x continuous unless a
 - a phase that ends at ``touch:<contact>`` starts the next phase;
 - ``limit`` / ``release``: a joint reaches a position limit (plastic impact, then it presses)
   or its limit torque vanishes (:mod:`contactdyn.model.limits`); after any event, a joint whose
-  limit torque pulls is released.
+  limit torque pulls is released;
+- ``joint_slip`` / ``joint_stick``: a stuck joint's holding torque reaches its static limit (it slides),
+  or a sliding joint comes to rest (it sticks or reverses) (:mod:`contactdyn.model.joint_friction`);
+  after any event, a stuck joint beyond its limit, or set moving by an impact, slides.
 
 Then :meth:`Transitions.consistent` fixes whatever mode the state contradicts: a pulling
 contact (F < −``FORCE_TOL``) separates; a stick outside the cone slides; a slide at rest
@@ -62,9 +65,13 @@ class _After:
 class Transitions:
     """The mode decisions of one run: at events (:meth:`handle`) and at any instant (:meth:`consistent`)."""
 
-    def __init__(self, system: System, log: EventLog, stats: dict[str, Any], impacts: list[dict[str, Any]]):
+    def __init__(self, system: System, log: EventLog, stats: dict[str, Any], impacts: list[dict[str, Any]],
+                 phase_started=None):
         self.system, self.scene = system, system.scene
         self.log, self.stats, self.impacts = log, stats, impacts
+        #: phase_started(t, x, modes, phase, previous) -> x: a phase begun at an event (a sampled law's first
+        #: sample, contactdyn.hybrid.sampling); None: nothing to do
+        self.phase_started = phase_started
 
     def handle(self, t, x, modes, phase, event):
         """Apply a located event: (state, modes, phase) right after it.
@@ -89,13 +96,29 @@ class Transitions:
         return self.release_pulling(t, x, modes, phase)
 
     def release_pulling(self, t, x, modes, phase):
-        """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event."""
+        """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event; then the joint
+        friction modes the state contradicts (:meth:`settle_joints`)."""
         limits = self.system.limits
         while phase.limits and (pulling := limits.pulling(phase, self.system.evaluate(t, x, modes, phase))):
             phase = replace(phase, limits=tuple(p for p in phase.limits if p != pulling[0]))
             self.log.log(t, "release", limits.by_index[pulling[0][0]].name)
             x, modes = self.consistent(t, x, modes, phase)
-        return x, modes, phase
+        return self.settle_joints(t, x, modes, phase)
+
+    def settle_joints(self, t, x, modes, phase):
+        """Change, one at a time, the joint friction modes the state contradicts (a stuck joint beyond its static
+        limit or moving slips; :meth:`~contactdyn.model.joint_friction.JointFriction.contradicted`), the contact modes
+        decided again after each. Returns (x, modes, phase)."""
+        for _ in range(2 * len(phase.joint_modes) + 1):
+            change = self.system.joint_friction.contradicted(self.system, t, x, modes, phase) \
+                if phase.joint_modes else None
+            if change is None:
+                return x, modes, phase
+            kind, joint, x, phase = change
+            self.log.log(t, kind, joint)
+            x, modes = self.consistent(t, x, modes, phase)
+        raise SimulationError(f"{self.scene.name}: no consistent joint friction mode at t = {t:.9g} s "
+                              f"(modes: {phase.joint_modes})")
 
     def _index(self, name: str) -> int:
         return next(k for k, c in enumerate(self.system.contacts) if c.name == name)
@@ -110,8 +133,10 @@ class Transitions:
             x, imp = impact(system, t, x, modes, c, phase.limits)
             self._after_impact(imp, modes, after)
         if phase.spec.until == f"touch:{c.name}" and phase.index + 1 < len(self.scene.phases):
-            phase = self.system.start_phase(phase.index + 1, t, x, phase)  # (the last phase runs on)
+            phase, previous = self.system.start_phase(phase.index + 1, t, x, phase), phase  # (the last runs on)
             self.log.log(t, "phase", phase.spec.name, check_storm=False)
+            if self.phase_started is not None:
+                x = self.phase_started(t, x, modes, phase, previous)
         return x, phase, True
 
     def _on_separate(self, t, x, modes, phase, event, after):
@@ -195,8 +220,14 @@ class Transitions:
         self.log.log(t, "slip", self.system.contacts[i].name)
         after.released.add(i)
 
+    def _on_joint(self, t, x, modes, phase, event, after):
+        """A stuck joint breaks away, or a sliding one comes to rest: sticks or reverses (model.joint_friction)."""
+        x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event)
+        self.log.events[-1].update(info)
+        return x, phase, True
+
     #: event kind -> handler (see :meth:`handle`)
-    HANDLERS = {"limit": _on_limit, "release": _on_limit,
+    HANDLERS = {"limit": _on_limit, "release": _on_limit, "joint_slip": _on_joint, "joint_stick": _on_joint,
                 "touch": _on_touch, "separate": _on_separate, "stop": _on_stop, "reverse": _on_stop,
                 "turn": _on_turn, "slip": _on_slip}
 
@@ -314,7 +345,8 @@ class Transitions:
                 rest.discard(i)
                 trial = list(modes)
                 trial[i] = mode.with_(stuck=True)
-                x = project_velocity(system, x, trial, phase.limits)
+                x = project_velocity(system, x, trial, phase.limits,
+                                     system.joint_friction.held(phase.joint_modes, phase.limits))
                 ev2 = system.evaluate(t, x, trial, phase)
                 F_f = ev2.friction[c.name]
                 if in_cone(F_f, ev2.normal_force[c.name], mu_s):

@@ -21,7 +21,9 @@ column, its γ and who owns it, ``meta = (owner, kind, index)``. The kinds in us
 - ``(contact, "t", i)``: a sticking contact's tangent i (force = friction F_f,i);
 - ``(contact, "t1" | "t2", i)``: a bonded tangential chain (force = its interface force);
 - ``(joint, "limit", i)``: joint coordinate i pressing on its position limit (force = the limit's
-  torque [N·m or N], :mod:`contactdyn.model.limits`).
+  torque [N·m or N], :mod:`contactdyn.model.limits`);
+- ``(joint, "joint", i)``: joint coordinate i stuck by its dry friction (force = the holding torque
+  [N·m or N], :mod:`contactdyn.model.joint_friction`).
 
 A new kind of row (a bilateral bond, ...) is a new ``rows.add(...)`` in the
 evaluation plus a branch in :func:`record_row_forces` that says where its force goes.
@@ -85,6 +87,8 @@ def record_row_forces(system, ev, rows: Rows, lam: np.ndarray) -> None:
             ev.friction.setdefault(name, np.zeros(len(system.contact(name).tangents)))[i] = value
         elif kind == "limit":
             ev.limit_torque[i] = float(value)
+        elif kind == "joint":
+            ev.joint_hold[i] = float(value)
         elif kind[:1] == "t" and kind[1:].isdigit():  # a tangential chain's bond ("t1", "t2")
             ev.interface[f"{name}.{kind}"] = float(value)
 
@@ -196,9 +200,10 @@ def solve_folded(system, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zd
 
 
 def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray, float] | None = None, jam: Contact | None = None,
-                  limits: tuple = ()):
-    """Velocity constraints of the touching contacts (bond rows, sticks, tangential chain bonds) and of
-    the joints pressing on ``limits`` (:mod:`contactdyn.model.limits`).
+                  limits: tuple = (), joints: tuple = ()):
+    """Velocity constraints of the touching contacts (bond rows, sticks, tangential chain bonds), of
+    the joints pressing on ``limits`` (:mod:`contactdyn.model.limits`) and of the stuck ``joints`` (their
+    coordinates, :mod:`contactdyn.model.joint_friction`).
 
     ``slide = (contact, d, μ)`` tilts that contact's normal column by the sliding friction
     −μ d; ``jam`` adds stick rows for a contact that is not (yet) stuck.
@@ -227,6 +232,10 @@ def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray, float] | N
             if trow is not None:
                 rows.add(trow, 0.0, (c.name, dc.label, i))
     system.limits.add_rows(limits, x, system.nQ, rows, 0.0)
+    for i in joints:
+        row = np.zeros(system.nQ)
+        row[i] = 1.0
+        rows.add(row, 0.0, (system.robot.joint_names[i], "joint", i))
     return rows
 
 

@@ -1,7 +1,7 @@
 """The readable right-hand side: everything the model computes at one (t, x) in one mode.
 
 In a smooth phase (modes and task phase fixed) the state x = [Q, Q̇, y]
-(:mod:`contactdyn.model.layout`) moves by
+(:mod:`contactdyn.model.system`) moves by
 
     d/dt [Q, Q̇, y] = [Q̇, Q̈, ẏ]
 
@@ -12,6 +12,7 @@ with Q̈ and the active rows' forces λ from the constraint system
 2. per contact: its chains' stage forces and bond rows (:mod:`contactdyn.model.chain_forces`),
    then friction (:mod:`contactdyn.model.friction`): stick rows, or the Coulomb force, or the
    tilt of the normal column; a row per joint pressing on its limit (:mod:`contactdyn.model.limits`);
+   a row per stuck joint, the joints' damping and sliding friction (:mod:`contactdyn.model.joint_friction`);
 3. the phase's controller reads the state (and, if it asks, the measured forces) and
    commands joint torques [N·m or N] or voltages [V] (:mod:`contactdyn.laws.controllers`);
 4. the drives turn the command into generalized forces (:mod:`contactdyn.laws.drives`);
@@ -29,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..laws.controllers import ControlInput
+from ..laws.sensors import quantise
 from .chain_forces import chain_forces
 from .constraints import Rows, kkt_solve, record_row_forces, solve_folded
 from .contact import Contact, ContactMode, Kinematics
@@ -36,7 +38,7 @@ from .friction import friction_terms, launch_directions_at, launching
 from .phases import Phase, reference_at
 
 __all__ = ["Evaluation", "evaluate", "carried_command", "command_of", "drive_command", "set_force_inputs",
-           "surface_keys", "surface_points", "carried_terms"]
+           "surface_keys", "surface_points", "carried_terms", "sample_input"]
 
 
 @dataclass
@@ -61,6 +63,9 @@ class Evaluation:
     tau_cmd: np.ndarray | None = None  #: the controller's command per joint [N·m or N; V for voltage controllers]
     u: np.ndarray | None = None  #: motor voltage per drive (joints, then bodies) [V], NaN for ideal drives
     limit_torque: dict[int, float] = field(default_factory=dict)  #: joint -> limit torque [N·m or N] (pressing)
+    joint_hold: dict[int, float] = field(default_factory=dict)  #: stuck joint -> holding torque [N·m or N]
+    #: per joint: its damping and dry friction torque [N·m or N] (a stuck joint's: its holding torque); None: none
+    joint_friction: np.ndarray | None = None
 
 
 def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
@@ -80,13 +85,21 @@ def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: P
                     np.empty(0), None, {})
     kins, pending = _contact_terms(system, x, modes, f, ydot, rows, ev, full)
     system.limits.add_rows(phase.limits, x, nQ, rows, system.stabilization)  # joints pressing on a limit
+    jf = system.joint_friction
+    if jf.any:  # stuck joints' rows (contactdyn.model.joint_friction)
+        jf.add_rows(phase.joint_modes, phase.limits, x, nQ, rows, system.stabilization)
     inp, ft, x_d, force_d = _control_input(system, t, x, modes, phase, f, kins, ev)
+    if jf.any:  # damping and sliding friction: after the controller read the contacts' torque f + h
+        joint_tau = jf.torques(phase.joint_modes, x, nQ, nv)
+        f[:nv] += joint_tau
     out, qdd, lam, regular, cmd, zdot = _command_and_solve(system, inp, phase, x, x_d, f, rows)
     if zdot is not None:
         ydot[phase.z_slice] = zdot
     if system.energy_slot >= 0:
         ydot[system.energy_slot] = out.power
         ydot[system.energy_slot + 1] += out.dissipation
+        if jf.any:
+            ydot[system.energy_slot + 1] += jf.dissipation(phase.joint_modes, x, nQ, nv)
     xdot = np.concatenate([x[nQ:2 * nQ], qdd, ydot])
     ev.xdot, ev.lam, ev.tau, ev.body_force, ev.p_tip, ev.x_d = xdot, lam, out.applied[:nv], out.applied[nv:], \
         ft.position, x_d
@@ -94,6 +107,10 @@ def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: P
     ev.force_d = {k: val[0] for k, val in force_d.items()}
     ev.regular = regular
     record_row_forces(system, ev, rows, lam)
+    if jf.any:
+        ev.joint_friction = joint_tau
+        for i, value in ev.joint_hold.items():
+            joint_tau[i] += value
     _finish_friction(system, ev, pending, xdot, ydot)
     return ev
 
@@ -134,27 +151,95 @@ def _contact_terms(system, x: np.ndarray, modes: list[ContactMode], f: np.ndarra
 
 
 def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, f: np.ndarray,
-                   kins: list[Kinematics], ev: Evaluation):
-    """What the phase's controller reads: (ControlInput, tip frame terms, x_d, force set-points)."""
+                   kins: list, ev: Evaluation, ctl=None, z: np.ndarray | None = None, set_forces: bool = True):
+    """What the phase's controller (or ``ctl``, with states ``z``) reads: (ControlInput, tip frame terms, x_d,
+    force set-points)."""
     nQ, nv = system.nQ, system.nv
     q, v = x[:nv], x[nQ:nQ + nv]
     robot = system.robot
-    ft = next((k.frame for c, k in zip(system.contacts, kins, strict=True) if c.fid == system.tip_fid), None)
+    tip = system.tip_fid
+    ft = next((k.frame for c, k in zip(system.contacts, kins, strict=True) if k is not None and c.fid == tip), None)
     if ft is None:
         ft = robot.frame_terms(system.tip_fid)
     p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
     x_d, v_d, a_d = reference_at(system, phase, t, x)
     force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
-    ctl = phase.controller
-    z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
+    if ctl is None:
+        ctl = phase.controller
+        z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
     inp = ControlInput(t, q, v, system.controller_inertia(robot.H), robot.h,
                        robot.gravity_torque(q) if ctl.needs_gravity else None,
                        p_tip, v_tip, J, drift, x_d, v_d, a_d, {**ev.normal_force, **ev.interface}, force_d,
                        system.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian,
                        drift_ang=ft.angular_drift)
-    if ctl.uses_forces:
+    if ctl.uses_forces and set_forces:
         set_force_inputs(system, inp, x, modes, f[:nv] + robot.h)
     return inp, ft, x_d, force_d
+
+
+def sample_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
+                 resolution: float = 0.0) -> ControlInput:
+    """What a sampled phase's law (``phase.controller.inner``) measures at a sample instant (t [s], x).
+
+    A law that reads forces gets them from the readable model evaluated there under the command held so far
+    (a rigid contact's and a stick's too), and the contacts' generalized force on the joints as the continuous
+    model gives it (deformable and friction forces, plus the rows that reach beyond the robot); a reference
+    carried by a body gets the body's acceleration. No fold: the command is held, not a function of the forces.
+    The kinematics are computed at the joint positions quantised to the encoders' ``resolution`` [rad or m]
+    (0: exact). A law that reads no force sees none (as on the compiled path)."""
+    nQ, nv = system.nQ, system.nv
+    ctl = phase.controller
+    law = ctl.inner
+    ev = tau_c = None
+    if law.uses_forces or phase.carrier is not None:
+        ev = evaluate(system, t, x, modes, phase)
+    if law.uses_forces:
+        tau_c = _contact_torque(system, t, x, modes, phase, ev)
+    xq = x
+    if resolution > 0.0:
+        xq = x.copy()
+        xq[:nv] = quantise(x[:nv], resolution)
+    system.robot.update(xq[:nv], xq[nQ:nQ + nv])
+    z_law = x[2 * nQ + phase.z_slice.start + ctl.inner_states.start: 2 * nQ + phase.z_slice.stop].copy()
+    forces = ev if ev is not None and law.uses_forces else _NO_FORCES
+    inp, _, _, _ = _control_input(system, t, xq, modes, phase, np.zeros(nQ), [None] * len(system.contacts),
+                                  forces, law, z_law, set_forces=False)
+    if inp.a_d is not None and phase.carrier is not None:  # the carrier's acceleration, known after the solve
+        i_b, axis = phase.carrier
+        inp.a_d = inp.a_d + axis * ev.xdot[nQ + i_b]
+    if law.uses_forces:
+        set_force_inputs(system, inp, x, modes, tau_c)
+    return inp
+
+
+class _NoForces:
+    normal_force: dict = {}
+    interface: dict = {}
+
+
+_NO_FORCES = _NoForces()
+
+
+def _contact_torque(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
+                    ev: Evaluation) -> np.ndarray:
+    """[N·m or N] the contacts' generalized force on the joints at a solved evaluation ``ev``, as the continuous
+    model measures it: the deformable and friction forces, plus the rows' forces λ that reach beyond the robot
+    (:func:`~contactdyn.model.constraints.force_columns`)."""
+    nQ, nv = system.nQ, system.nv
+    robot = system.robot
+    if any(launching(m) for m in modes):
+        modes = launch_directions_at(system, t, x, modes, phase)
+    robot.update(x[:nv], x[nQ:nQ + nv])
+    f = np.zeros(nQ)
+    rows = Rows()
+    scratch = Evaluation(np.empty(0), np.empty(0), rows.meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),
+                         np.empty(0), None, {})
+    _contact_terms(system, x, modes, f, np.zeros(system.ny), rows, scratch, False)
+    tau = f[:nv].copy()
+    for col, lam in zip(rows.cols, ev.lam, strict=False):  # the contacts' rows come first in ev.lam
+        if np.any(col[nv:]):
+            tau += col[:nv] * lam
+    return tau
 
 
 def set_force_inputs(system, inp: ControlInput, x: np.ndarray, modes: list[ContactMode],

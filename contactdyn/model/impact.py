@@ -23,7 +23,8 @@ Its friction impulse during the impact is μ_k FΔt folded nowhere: like every s
 other than the impact's own, its normal column stays untilted (zero for a compliant normal).
 
 A joint reaching its position limit is the same map with the limit's row among the rows
-(:func:`limit_impact`), friction impulses at a sliding contact included.
+(:func:`limit_impact`), friction impulses at a sliding contact included. A joint stuck by dry friction
+holds no impulse (its torque is bounded): it is not a row here (:mod:`contactdyn.model.joint_friction`).
 
 The energy lost [J] is ½ Q̇⁻ᵀ M Q̇⁻ − ½ Q̇⁺ᵀ M Q̇⁺ ≥ 0. :func:`project_velocity` is the same
 law without a new contact: the smallest kinetic-energy-norm change that keeps every
@@ -179,8 +180,10 @@ def limit_impact(system, t: float, x: np.ndarray, modes: list[ContactMode], limi
     return x_new, imp, imp.row_impulses[(system.limits.by_index[i].name, "limit", i)]
 
 
-def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tuple = ()) -> np.ndarray:
-    """x with Q̇ moved onto every active velocity constraint (bonds, rigid contacts, sticks).
+def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tuple = (), joints: tuple = ()
+                     ) -> np.ndarray:
+    """x with Q̇ moved onto every active velocity constraint (bonds, rigid contacts, sticks, the joints pressing
+    on ``limits``, the stuck ``joints``: coordinates held by dry friction).
 
     The smallest change in the kinetic-energy norm, M ΔQ̇ = Gᵀ Λ, G Q̇⁺ = 0: an impulse
     that removes what the constraints forbid (used when a slide stops inside the stick
@@ -188,7 +191,7 @@ def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tu
     """
     nQ, nv = system.nQ, system.nv
     system.robot.update(x[:nv], x[nQ:nQ + nv])
-    rows = velocity_rows(system, x, modes, limits=limits)
+    rows = velocity_rows(system, x, modes, limits=limits, joints=joints)
     if not rows:
         return x
     M = system.mass_matrix()

@@ -39,6 +39,8 @@ class Phase:
     limits: tuple[tuple[int, int], ...] = ()
     #: the corners of its reference and force set-points, in time order (absolute times)
     corners: tuple[Corner, ...] = ()
+    #: the dry-friction joints' modes: (coordinate, 0 stuck / ±1 sliding sign), see contactdyn.model.joint_friction
+    joint_modes: tuple[tuple[int, int], ...] = ()
 
     def next_corner(self, t: float, t_end: float) -> Corner | None:
         """The first corner not yet passed at t [s] that comes before t_end [s] (by more than min_span), or None."""
@@ -86,8 +88,9 @@ def start_phase(system, index: int, t: float, x: np.ndarray, previous: Phase | N
               for f in spec.forces}
     corners = merge_corners([*(reference.corners() if reference is not None else ()),
                              *(c for ramp in forces.values() for c in ramp.corners())])
+    joint_modes = previous.joint_modes if previous is not None else system.joint_friction.initial_modes(x, system.nQ)
     return Phase(spec, index, t, controller, system.z_slices[index], reference, forces, carrier,
-                 previous.limits if previous is not None else (), corners)
+                 previous.limits if previous is not None else (), corners, joint_modes)
 
 
 def reference_at(system, phase: Phase, t: float, x: np.ndarray):

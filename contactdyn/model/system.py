@@ -3,7 +3,7 @@
 :class:`System` builds, from a scene, the robot (Pinocchio), the contacts with their
 deformation chains and friction (:mod:`contactdyn.model.contact`), the drives
 (:mod:`contactdyn.laws.drives`), one controller per task phase (:mod:`contactdyn.laws.controllers`)
-and the state layout (:mod:`contactdyn.model.layout`). The physics lives in modules named after
+and the state layout (below). The physics lives in modules named after
 the paper's concepts; the methods here are the entry points the hybrid loop and the tests
 call:
 
@@ -12,8 +12,35 @@ call:
 - :meth:`System.project_velocity` — velocities onto the active constraints (same module);
 - :meth:`System.start_phase` — a task phase at run time (:mod:`contactdyn.model.phases`);
 - the joints' position limits as constraint rows (:attr:`System.limits`, :mod:`contactdyn.model.limits`);
+- the joints' damping and dry friction, a stuck joint a row (:attr:`System.joint_friction`,
+  :mod:`contactdyn.model.joint_friction`);
 - the start posture solved from the task (:mod:`contactdyn.robot.posture`);
 - friction's slip velocity and acceleration (:mod:`contactdyn.model.friction`).
+
+The state layout: which part of the scene owns which slot of the state x
+(:func:`assign_chain_slots`, :func:`assign_first_order_slots`; :class:`System` keeps the sizes
+``nv``, ``nQ``, ``ny``, ``n = 2 nQ + ny``; a part the scene does not name has no slot):
+
+    x = [Q, Q̇, y]
+
+Q [m, rad] holds the second-order coordinates, in this order:
+
+1. the robot's active joints (nv of them);
+2. one coordinate per active environment body (a cart), along its axis [m];
+3. one per equivalent mass of a deformation chain (Part I's models a, b), along the
+   chain's direction [m];
+4. one motor angle per elastic transmission [rad] (:mod:`contactdyn.laws.drives`).
+
+y holds first-order states, in this order:
+
+1. massless chain junctions (two damped stages meeting, or a damped surface end that
+   relaxes after a separation) [m];
+2. each phase's controller states (integrators of force errors, …);
+3. on request (``solver.record_energy``) the energy audit: work done by the drives and
+   energy dissipated [J];
+4. per friction contact the impulses ∫F dt, ∫F_f dt [N·s] (normal, then one per tangent):
+   a stuck robot's state may not move at all; their error control keeps the step size
+   following the contact forces the ``slip`` event watches (:mod:`contactdyn.hybrid.events`).
 
 Which parts the compiled right-hand side (:mod:`contactdyn.compiled.rhsplan`) covers is declared
 by the parts themselves and collected here at load time: :attr:`System.fast_path_gaps`.
@@ -25,7 +52,8 @@ import numpy as np
 
 from ..errors import RobotError, SceneError
 from ..laws.controllers import CONTROLLERS
-from ..laws.controllers.base import BindContext
+from ..laws.controllers.base import BindContext, Controller
+from ..laws.controllers.sampled import SampledController
 from ..laws.drives import Drives
 from ..robot.posture import start_posture
 from ..robot.robot import Robot
@@ -35,12 +63,12 @@ from .contact import Contact, ContactMode, Kinematics
 from .dynamics import Evaluation, evaluate
 from .friction import initial_slip, slip_acceleration, slip_velocity
 from .impact import Impact, impact, project_velocity
-from .layout import assign_chain_slots, assign_first_order_slots
+from .joint_friction import JointFriction
 from .limits import JointLimits
 from .paths import declared_gaps
 from .phases import Phase, reference_at, start_phase
 
-__all__ = ["System", "Phase", "Evaluation", "Impact"]
+__all__ = ["System", "Phase", "Evaluation", "Impact", "assign_chain_slots", "assign_first_order_slots"]
 
 
 class System:
@@ -54,11 +82,13 @@ class System:
         try:
             self.robot = Robot.from_spec(rs)
             self.limits = JointLimits(self.robot, rs.joint_limits == "enforce")
+            #: the joints' damping and dry friction (contactdyn.model.joint_friction)
+            self.joint_friction = JointFriction(self.robot, rs, scene.file)
             self.tip_fid = self.robot.frame_id(rs.tip)
         except RobotError as exc:
             raise SceneError("robot", "a loadable robot", exc, scene.file) from None
         nv = self.nv = self.robot.nv
-        # ---- generalized coordinates: robot, bodies, chain masses, motors (contactdyn.model.layout) ----
+        # ---- generalized coordinates: robot, bodies, chain masses, motors (the state layout, below) ----
         self.body_names = list(scene.bodies)
         self.body_index = {name: nv + i for i, name in enumerate(self.body_names)}
         diag: list[float] = [b.mass for b in scene.bodies.values()]
@@ -74,7 +104,7 @@ class System:
         self._D_ctl = np.diag(self.drives.model_reflected[:nv])
         self._joint_motors = self.drives.has_voltage & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
         # ---- controllers, then the first-order slots after the junctions ----
-        self.controllers = [CONTROLLERS[p.controller.kind](p.controller, nv) for p in scene.phases]
+        self.controllers = [_controller_of(p, nv) for p in scene.phases]
         for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
             ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
                                  f"phase[{i}].controller"))
@@ -236,3 +266,57 @@ class System:
                 if chain.nodes[node_i].kind == NodeKind.FREE and slot >= 0:
                     x[2 * self.nQ + slot] = dc.last_positions[node_i]
         return x
+
+
+# ---- the state layout (see the module docstring) --------------------------------------------------------
+def assign_chain_slots(contacts: list[Contact], nv: int, diag: list[float]) -> tuple[list[str], int]:
+    """Give every chain mass a coordinate of Q and every chain junction a slot of y.
+
+    ``diag`` holds the inertias of Q's non-robot coordinates so far (the bodies' masses
+    [kg]); each chain mass appends its own. Returns (mass labels, number of junction slots).
+    """
+    mass_labels: list[str] = []
+    n_first = 0
+    for c in contacts:
+        for dc in c.chains:
+            for node in dc.chain.nodes:
+                if node.kind == NodeKind.MASS:
+                    node.coord = nv + len(diag)
+                    diag.append(node.mass)
+                    mass_labels.append(f"{c.name}.{dc.label}.m{len(mass_labels) + 1}")
+            chain = dc.chain
+            for i, node in enumerate(chain.nodes):
+                stages_i = [chain.stages[k] for k in chain.stages_of(i)]
+                relaxes = i in (chain.env_surface, chain.robot_surface) and len(stages_i) == 1 and \
+                    stages_i[0].kelvin_voigt is not None and stages_i[0].kelvin_voigt[1] > 0.0
+                if node.kind == NodeKind.FREE and (len(stages_i) == 2 or relaxes):
+                    node.state = n_first  # a junction, or a damped surface end relaxing after separation
+                    n_first += 1
+            if chain.junction_when_touching:
+                es_state = chain.nodes[chain.env_surface].state
+                dc.junction_state = es_state if es_state >= 0 else n_first
+                n_first += 0 if es_state >= 0 else 1
+    return mass_labels, n_first
+
+
+def assign_first_order_slots(n_first: int, controller_states: list[int], record_energy: bool,
+                             contacts: list[Contact]) -> tuple[list[slice], int, dict[str, int], int]:
+    """Slots of y after the junctions: (controller slices, energy slot or −1, impulse slots, ny)."""
+    z_slices = []
+    for n_states in controller_states:
+        z_slices.append(slice(n_first, n_first + n_states))
+        n_first += n_states
+    energy_slot = n_first if record_energy else -1
+    n_first += 2 if record_energy else 0
+    impulse_slots: dict[str, int] = {}
+    for c in contacts:
+        if c.friction is not None and len(c.tangents):
+            impulse_slots[c.name] = n_first
+            n_first += 1 + len(c.tangents)
+    return z_slices, energy_slot, impulse_slots, n_first
+
+
+def _controller_of(spec, nv: int) -> Controller:
+    """The controller of a phase: its kind's law, wrapped in a zero-order hold when it is sampled."""
+    law = CONTROLLERS[spec.controller.kind](spec.controller, nv)
+    return law if spec.sampling is None else SampledController(law, spec.sampling, nv)

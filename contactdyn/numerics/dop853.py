@@ -174,7 +174,7 @@ class DenseSolution:
         only: the run's own event location and segment ends use the calls)."""
         st = self.steps
         tt = np.atleast_1d(np.asarray(t, float))
-        if not len(self.ends):
+        if not len(self.ends) or (tt == st.t[0]).all():  # (at the start: y0, what the interpolant gives there)
             out = np.repeat(st.y0[:, None], len(tt), axis=1)
             return out[:, 0] if np.ndim(t) == 0 else out
         idx = np.minimum(np.searchsorted(self.ends, tt, side="left"), len(self.ends) - 1)
@@ -200,6 +200,8 @@ class Solution:
     nfev: int
     naccept: int
     nreject: int
+    #: [s] the step solve_ivp's control proposes after the last accepted one (None: the run did not reach its end)
+    h_next: float | None = None
 
     @property
     def success(self) -> bool:
@@ -395,8 +397,8 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
                          "as in scipy 1.17); or DOP853", f"scipy {scipy.__version__} without it")
     t0, t_end = float(t_span[0]), float(t_span[1])
     y0 = np.array(y0, float)
+    f0 = np.asarray(fun(t0, y0), float)  # (first: the events' values at the start then read this call's)
     watch = _EventWatch(events or [], t0, y0)
-    f0 = np.asarray(fun(t0, y0), float)
     calls = [1]
 
     def counted(t, y):
@@ -407,7 +409,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     if step is not None and step.usable():
         steps = _Steps(fun, len(y0), [t0], y0.copy(), f0)
         ierr, nreject, calls[0] = _stepped(step, fun, steps, watch, t_end, h, rtol, atol, max_step, calls[0])
-        return _solution(steps, watch, ierr, t_end, calls[0], nreject)
+        return _solution(steps, watch, ierr, t_end, calls[0], nreject, rtol, atol)
     core = _Core(fun, t0, y0, f0, watch, rtol, atol, max_step)
     limit, nreject, ierr = None, 0, 1
     while t_end > core.steps.t[-1]:
@@ -424,7 +426,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
             h, limit = limit, None
         else:
             break
-    return _solution(core.steps, watch, ierr, t_end, calls[0] + core.calls, nreject)
+    return _solution(core.steps, watch, ierr, t_end, calls[0] + core.calls, nreject, rtol, atol)
 
 
 def _stepped(step: Callable, fun: Callable, steps: _Steps, watch: _EventWatch, t_end: float, h_abs: float,
@@ -479,7 +481,8 @@ def _attempt(fun: Callable, t: float, y: np.ndarray, f: np.ndarray, h: float, rt
     return err, y_new, block
 
 
-def _solution(steps: _Steps, watch: _EventWatch, ierr: int, t_end: float, calls: int, nreject: int) -> Solution:
+def _solution(steps: _Steps, watch: _EventWatch, ierr: int, t_end: float, calls: int, nreject: int, rtol: float,
+              atol: float) -> Solution:
     """The Solution of a finished integration (core's ierr: 1 end, 2 stopped by an event, < 0 failure)."""
     t_stop = steps.t[-1]
     if ierr == 1:
@@ -495,4 +498,23 @@ def _solution(steps: _Steps, watch: _EventWatch, ierr: int, t_end: float, calls:
     if status == 1:
         ts[-1] = t_stop
         ys[:, -1] = dense(t_stop)
-    return Solution(ts, ys, dense, watch.t_events(), status, message, calls + steps.calls, len(steps.t) - 1, nreject)
+    h_next = _proposal(steps, rtol, atol) if status == 0 and len(steps.t) > 1 else None
+    return Solution(ts, ys, dense, watch.t_events(), status, message, calls + steps.calls, len(steps.t) - 1, nreject,
+                    h_next)
+
+
+def _proposal(steps: _Steps, rtol: float, atol: float) -> float:
+    """[s] The step after the last accepted one by solve_ivp's control: h min(MAX_FACTOR, SAFETY err^(−1/8)) with
+    that step's error norm, from its stages (k1 of its block is f(t_new): f(t_old) from the step before)."""
+    i = len(steps.t) - 2
+    h = steps.t[-1] - steps.t[-2]
+    block = steps.blocks[i].copy()
+    block[_F_NEW] = steps.f_old(i)  # the row of stage 0 in _ROW_STAGE's layout
+    y_old = steps.y_old(i)
+    scale = atol + rtol * np.maximum(np.abs(y_old), np.abs(steps.blocks[i][_Y_NEW]))
+    e5, e3 = (_ERR_ROWS @ block) / scale
+    s5, s3 = float(e5 @ e5), float(e3 @ e3)
+    if s5 == 0.0 and s3 == 0.0:
+        return h * MAX_FACTOR
+    err = abs(h) * s5 / np.sqrt((s5 + 0.01 * s3) * len(y_old))
+    return h * (MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** _EXPONENT))

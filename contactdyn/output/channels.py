@@ -21,8 +21,10 @@ import numpy as np
 
 from ..compiled.rhsplan import ModePlan
 from ..compiled.samples import Samples, evaluated_samples, plan_derivatives
+from ..laws.controllers.sampled import SampledController
 from ..laws.drives import drive_channels
 from ..model.contact import ContactMode
+from ..model.joint_friction import joint_friction_channels
 from ..model.limits import limit_channels
 from ..model.phases import Phase
 from ..model.system import System
@@ -104,7 +106,11 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
     out = channels(system, grid, xs, samples, modes_of)
     if system.limits.limits:
         out.update(limit_channels(system, phases_of, samples))
+    if system.joint_friction.any:
+        out.update(joint_friction_channels(system, phases_of, samples))
     out.update(drive_channels(system, xs, samples))
+    if "tau_cmd" not in out and any(isinstance(c, SampledController) for c in system.controllers):
+        out["tau_cmd"] = samples.tau_cmd  # a sampled law's held command (with motors: the drives' channel)
     return out, xs
 
 

@@ -65,6 +65,15 @@ MEANINGS: dict[str, str] = {
                      "trust (use it, with a warning)",
     "robot.joint_limits": "enforce: position limits are unilateral constraints (impact, pressing, release); "
                           "ignore: none",
+    "robot.joint_friction": "urdf: each joint's damping and dry friction from the URDF's <dynamics damping friction> "
+                            "(static = kinetic); ignore: none from the URDF (robot.joint tables still apply)",
+    "robot.joint": "per joint, its own damping and dry friction, replacing the URDF's: [robot.joint.<joint>]",
+    "robot.joint.<joint>": "that joint's viscous damping and Coulomb friction (keys not given: 0); a stuck joint "
+                           "is held exactly and breaks away where its holding torque reaches friction_static",
+    "robot.joint.<joint>.damping": "viscous damping b: torque -b q'",
+    "robot.joint.<joint>.friction": "dry friction, static = kinetic (not with friction_static)",
+    "robot.joint.<joint>.friction_static": "static limit: the largest torque a stuck joint holds",
+    "robot.joint.<joint>.friction_kinetic": "sliding friction, <= friction_static (default: friction_static)",
     "robot.drive": "drives of the joints: a kind and its parameters, each a scalar or one per joint",
     # drives: robot.drive.* and body.<body>.drive.* from the kinds' declarations (_drive_rows)
     # bodies
@@ -154,6 +163,15 @@ MEANINGS: dict[str, str] = {
     "controller.nominal.k": "nominal stiffness",
     "controller.nominal.b": "nominal damping",
     "controller.nominal.m": "nominal mass",
+    "controller.sample_rate": "run the law sampled at this rate with a zero-order hold (none: continuous); the "
+                              "samples are at k / rate from the scene start, and at a phase's start",
+    "controller.delay": "the law computes on what it measured this many samples ago (needs sample_rate)",
+    "controller.sensor": "what a sampled law measures (needs sample_rate): force noise, bias and low-pass, encoders",
+    "controller.sensor.force_noise": "standard deviation of the Gaussian noise on every measured contact force",
+    "controller.sensor.force_bias": "offset of every measured contact force",
+    "controller.sensor.force_cutoff": "cut-off of a first-order low-pass on the measured forces (none: no filter)",
+    "controller.sensor.encoder_resolution": "joint encoders' resolution: q read as the nearest multiple (0: exact)",
+    "controller.sensor.seed": "seed of the force noise's random generator (the same seed: the same run)",
     # phases
     "phase[].name": "phase name (events and plots name it)",
     "phase[].until": "end time from the scene start [s], or 'touch:<contact>' (ends at that contact's first touch)",

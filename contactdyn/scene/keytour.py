@@ -32,6 +32,13 @@ q0 = [0.1, 0.2]
 v0 = [0.0, 0.0]
 tip0 = [0.4, 0.0, 0.0]
 q_seed = [0.1, 0.2]
+joint_friction = "urdf"
+[robot.joint.q1]
+damping = 0.01
+friction = 0.2
+[robot.joint.q2]
+friction_static = 0.3
+friction_kinetic = 0.2
 [robot.drive]
 kind = "dc_motor"
 R = 1.0
@@ -167,6 +174,12 @@ reference.moves = [{ kind = "triangle", delta = [0.1, 0.0], duration = 0.5 },
                    { kind = "exponential", delta = [0.1, 0.0], duration = 0.5 }]
 [[phase]]
 controller = { kind = "voltage", u = 1.0 }
+[[phase]]
+[phase.controller]
+kind = "task_pd"
+sample_rate = 1000.0
+delay = 1
+sensor = { force_noise = 0.1, force_bias = 0.0, force_cutoff = 200.0, encoder_resolution = 1e-5, seed = 7 }
 [[phase]]
 [phase.controller]
 kind = "task_force"

@@ -30,7 +30,7 @@ from .budget import check_budget
 from .reader import MAX_DEPTH, Reader, check_depth, read_toml
 
 __all__ = [
-    "Scene", "RobotSpec", "BodySpec", "ContactSpec", "ChainSpec", "Stage", "Mass", "FrictionSpec",
+    "Scene", "RobotSpec", "JointDynamicsSpec", "BodySpec", "ContactSpec", "ChainSpec", "Stage", "Mass", "FrictionSpec",
     "PhaseSpec", "ReferenceSpec", "SolverSpec", "load_scene", "parse_scene", "apply_overrides",
     "parse_override", "sims_dir", "scene_dirs", "find_scene",
 ]
@@ -67,6 +67,15 @@ class BodySpec:
 
 
 @dataclass(frozen=True)
+class JointDynamicsSpec:
+    """A joint's damping and dry friction as a scene gives them (``[robot.joint.<joint>]``)."""
+
+    damping: float  #: b [N·m·s/rad or N·s/m]
+    static: float  #: τ_s, the static (break-away) limit [N·m or N]
+    kinetic: float  #: τ_k ≤ τ_s, the sliding friction [N·m or N]
+
+
+@dataclass(frozen=True)
 class RobotSpec:
     source: str  #: URDF path, name in urdf/, or example-robot-data name
     tip: str
@@ -81,6 +90,10 @@ class RobotSpec:
     drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.laws.drives)
     inertia: str = "check"  #: what a link failing the inertia checks does: "check", "repair", "trust"
     joint_limits: str = "enforce"  #: "enforce" position limits as unilateral constraints, or "ignore"
+    #: "urdf": each joint's damping and dry friction from the URDF's <dynamics>; "ignore": none from the URDF
+    joint_friction: str = "urdf"
+    #: per joint name, the scene's own damping and friction (replacing the URDF's; see contactdyn.model.joint_friction)
+    joints: dict[str, JointDynamicsSpec] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -115,6 +128,8 @@ class PhaseSpec:
     controller: Any  #: a controller config (see contactdyn.laws.controllers)
     reference: ReferenceSpec | None
     forces: tuple[ForceSpec, ...]
+    #: the controller's sample rate, delay and sensors (contactdyn.laws.controllers.sampled.Sampling); None: continuous
+    sampling: Any = None
 
 
 MAX_EVENTS = 1_000_000  #: solver.max_events at most (each event is kept in the run's log and JSON)
@@ -317,9 +332,29 @@ def _read_robot(r: Reader) -> RobotSpec:
         drive=read_drive_table(r.sub("drive", {}), per_joint=True),
         inertia=r.str("inertia", "check", choices=["check", "repair", "trust"]),
         joint_limits=r.str("joint_limits", "enforce", choices=["enforce", "ignore"]),
+        joint_friction=r.str("joint_friction", "urdf", choices=["urdf", "ignore"]),
+        joints={name: _read_joint_dynamics(j) for name, j in r.named_tables("joint").items()},
     )
     r.finish()
     return spec
+
+
+def _read_joint_dynamics(r: Reader) -> JointDynamicsSpec:
+    """``[robot.joint.<joint>]``: damping, and ``friction`` (static = kinetic) or ``friction_static`` with
+    ``friction_kinetic`` (≤ static; default: the static value). Keys not given are 0."""
+    damping = r.float("damping", 0.0, lo=0.0, unit="N·m·s/rad or N·s/m")
+    if r.has("friction") and (r.has("friction_static") or r.has("friction_kinetic")):
+        raise r.error("friction", "friction alone (static = kinetic) or friction_static with friction_kinetic, "
+                      "not both", r.data["friction"])
+    if r.has("friction_kinetic") and not r.has("friction_static"):
+        raise r.error("friction_static", "a static limit with friction_kinetic (kinetic <= static)", "nothing")
+    static = r.float("friction", 0.0, lo=0.0, unit="N·m or N") if r.has("friction") else \
+        r.float("friction_static", 0.0, lo=0.0, unit="N·m or N")
+    kinetic = static if not r.has("friction_kinetic") else r.float("friction_kinetic", lo=0.0, unit="N·m or N")
+    if kinetic > static:
+        raise r.error("friction_kinetic", f"a kinetic friction <= friction_static ({static:g} N·m or N)", kinetic)
+    r.finish()
+    return JointDynamicsSpec(damping, static, kinetic)
 
 
 def _read_body(name: str, r: Reader) -> BodySpec:
@@ -467,11 +502,11 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
         until = r.float("until", duration, lo=0.0, unit="s")
     merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
         else r.raw("controller")
-    controller = read_controller(Reader(merged, r.key("controller"), r.file))
+    controller, sampling = read_controller(Reader(merged, r.key("controller"), r.file))
     reference = _read_reference(r.sub("reference"), bodies or {}) if r.has("reference") else None
     forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
     r.finish()
-    return PhaseSpec(name, until, controller, reference, forces)
+    return PhaseSpec(name, until, controller, reference, forces, sampling)
 
 
 def _read_reference(r: Reader, bodies: dict[str, BodySpec]) -> ReferenceSpec:

@@ -22,6 +22,7 @@ from typing import Any, ClassVar, NamedTuple
 import numpy as np
 
 from ..params import Param
+from ..sensors import read_sampling
 
 __all__ = ["ControlInput", "Controller", "BindContext", "TipForceLaw", "CONTROLLERS", "register", "read_controller",
            "FEEDFORWARD", "DeclaredConfig"]
@@ -174,9 +175,12 @@ def register(cls: type) -> type:
     return cls
 
 
-def read_controller(reader) -> Any:
-    """Validate a controller table into its kind's config (the kind's ``read`` does the keys)."""
+def read_controller(reader) -> tuple[Any, Any]:
+    """Validate a controller table into (its kind's config, its sampling or None): the sampling keys
+    (``sample_rate``, ``delay``, ``sensor``: :func:`~contactdyn.laws.sensors.read_sampling`) are read
+    first, for every kind, then the kind's ``read`` does its own keys."""
     kind = reader.str("kind", "task_pd", choices=sorted(CONTROLLERS))
+    sampling = read_sampling(reader)
     config = CONTROLLERS[kind].read(reader)
     reader.finish()
-    return config
+    return config, sampling

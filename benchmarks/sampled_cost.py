@@ -1,0 +1,110 @@
+"""What a sampled controller costs: each scene continuous against its controller sampled at a rate (1 kHz).
+
+    PYTHONPATH=. python3 benchmarks/sampled_cost.py [--repeats 5] [--rate 1000] [--profile] [scene ...]
+
+Per scene (default: b1, case1_cart, case3_a_force), the continuous run and the same scene with
+``controller.sample_rate`` set (every phase's controller sampled: a zero-order hold), interleaved repeat by repeat in
+this process; cost = the median process CPU time around ``simulate`` (loading and output included; CPU because the
+machine is shared), and the ratio sampled / continuous. Also: steps, right-hand-side calls, segments, samples, the
+paths the modes ran on, the CPU per sample beyond the continuous run, and the sampled run's difference from the
+continuous one (tip [m] and contact force [N], max over the output samples: the hold's own effect, first order in
+1/rate, not an error of the integration).
+
+Every sample instant ends a segment, so a scene whose continuous steps are longer than the sample period takes at
+least one step per period (B1: 243 steps over 2 s continuous, >= 2000 at 1 kHz): its ratio is bound by that.
+``--profile``: cProfile of the first scene's sampled run (the 25 costliest functions, cumulative).
+
+Writes benchmarks/out/sampled_cost.json and .csv.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import csv
+import pstats
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from timing import interleaved, write_report  # noqa: E402
+
+from contactdyn import simulate  # noqa: E402
+
+OUT = Path(__file__).parent / "out"
+SCENES = ("b1", "case1_cart", "case3_a_force")
+
+
+def _call(name: str, overrides: dict):
+    return lambda: simulate(name, overrides)
+
+
+def _difference(a, b) -> dict:
+    """Max |a − b| of the tip [m] and of every contact's normal force [N] over the output samples."""
+    forces = [k for k in a.channels if k.endswith(".F_n")]
+    return {"tip_m": float(abs(a["tip"] - b["tip"]).max()),
+            "force_N": max((float(abs(a[k] - b[k]).max()) for k in forces), default=0.0)}
+
+
+def compare(name: str, rate: float, repeats: int) -> dict:
+    times = interleaved({"continuous": _call(name, {}), "sampled": _call(name, {"controller.sample_rate": rate})},
+                        repeats)
+    row: dict = {"scene": name, "rate_hz": rate}
+    for label, timing in times.items():
+        r = timing.last
+        row[label] = {"cpu_s": timing.cpu, "steps": r.stats["steps"], "rhs_evals": r.stats["rhs_evals"],
+                      "segments": r.stats["segments"], "samples": r.stats.get("samples", 0),
+                      "paths": sorted({p["path"] for p in r.stats["paths"].values()}),
+                      "fallbacks": r.stats["fallback_modes"]}
+    c, s = row["continuous"], row["sampled"]
+    row["ratio"] = s["cpu_s"] / c["cpu_s"]
+    row["us_per_sample"] = (s["cpu_s"] - c["cpu_s"]) / max(s["samples"], 1) * 1e6
+    row["rhs_per_sample"] = (s["rhs_evals"] - c["rhs_evals"]) / max(s["samples"], 1)
+    row["difference"] = _difference(times["sampled"].last, times["continuous"].last)
+    return row
+
+
+def profile(name: str, rate: float) -> None:
+    overrides = {"controller.sample_rate": rate}
+    simulate(name, overrides)  # compiled and cached first
+    prof = cProfile.Profile()
+    prof.runcall(simulate, name, overrides)
+    pstats.Stats(prof).sort_stats("cumulative").print_stats(25)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenes", nargs="*", default=list(SCENES))
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--rate", type=float, default=1000.0, help="[Hz] the sample rate")
+    ap.add_argument("--profile", action="store_true")
+    args = ap.parse_args()
+    rows = []
+    print(f"{'scene':16s} {'cont. CPU [s]':>13s} {'sampled [s]':>11s} {'ratio':>6s} {'steps c/s':>11s} "
+          f"{'us/sample':>9s} {'calls/sample':>12s} {'tip diff [m]':>12s} {'F diff [N]':>10s}  sampled paths")
+    for name in args.scenes:
+        simulate(name, {"controller.sample_rate": args.rate})  # (compiled and cached before the timing)
+        row = compare(name, args.rate, args.repeats)
+        rows.append(row)
+        c, s = row["continuous"], row["sampled"]
+        print(f"{name:16s} {c['cpu_s']:13.3f} {s['cpu_s']:11.3f} {row['ratio']:6.2f} "
+              f"{c['steps']:5d}/{s['steps']:<5d} {row['us_per_sample']:9.0f} {row['rhs_per_sample']:12.1f} "
+              f"{row['difference']['tip_m']:12.3g} {row['difference']['force_N']:10.3g}  {', '.join(s['paths'])}")
+    write_report(OUT / "sampled_cost.json", {"rate_hz": args.rate, "repeats": args.repeats}, rows)
+    with (OUT / "sampled_cost.csv").open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["scene", "rate_hz", "cpu_continuous_s", "cpu_sampled_s", "ratio", "steps_continuous",
+                    "steps_sampled", "samples", "us_per_sample", "rhs_per_sample", "tip_diff_m", "force_diff_N"])
+        for row in rows:
+            c, s = row["continuous"], row["sampled"]
+            w.writerow([row["scene"], row["rate_hz"], c["cpu_s"], s["cpu_s"], row["ratio"], c["steps"], s["steps"],
+                        s["samples"], row["us_per_sample"], row["rhs_per_sample"], row["difference"]["tip_m"],
+                        row["difference"]["force_N"]])
+    if args.profile:
+        profile(args.scenes[0], args.rate)
+
+
+if __name__ == "__main__":
+    main()

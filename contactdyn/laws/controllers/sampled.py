@@ -1,0 +1,112 @@
+"""Sampled-data control: a controller running at a fixed rate with a zero-order hold, delayed measurements
+and sensor models.
+
+A phase whose controller table sets ``sample_rate`` [Hz] runs its law (any kind: built-in or a user's) as a
+real controller would: at the sample instants t_k = k / rate [s] it measures (:mod:`contactdyn.laws.sensors`),
+pushes the measurement into a delay line, computes its command from the measurement of ``delay`` samples ago
+and holds that command until the next sample (zero-order hold).
+
+The held command lives in the state: :class:`SampledController` wraps the law, and its states are
+[held command (nv), the law's own states]; all of them have ẏ = 0 between samples, and its command is the held
+slots. So the right-hand side between two samples is an ordinary smooth one (the compiled plan reads the held
+command off the state as an affine term of its feedforward, through the motors' kernel where there are motors:
+:mod:`contactdyn.compiled.plan_kkt`), and the hybrid loop (:mod:`contactdyn.hybrid.sampling`) ends a
+segment at every sample instant, writes the new command into the state there and checks the events its jump
+fires. The law's own states (integrators) advance once per sample, by forward Euler over the period:
+z_{k+1} = z_k + T ż_k. A phase starts sampling at its start (the delay line filled with that first
+measurement; a new phase starts a new line and new sensor states) and then on the scene's grid k / rate.
+
+What the law computes on at t_k is the whole input it measured at t_{k−d} (time, state, references, forces),
+with its own states as they are at t_k: a delay of d samples shifts a law of the measured input alone by
+exactly d samples.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from ..sensors import ForceSensor, Sampling
+from .base import BindContext, ControlInput, Controller
+
+__all__ = ["SampledController", "Sampler", "Sampling"]  # Sampling (the keys): contactdyn.laws.sensors
+
+
+class SampledController(Controller):
+    """A phase's law run at samples with a zero-order hold: its command is the held slots of its states."""
+
+    name = ""  # (not registered: it wraps a registered law)
+    uses_forces = False  # the held command reads no force between samples
+    needs_gravity = False
+    reads_orientation = False
+
+    def __init__(self, inner: Controller, sampling: Sampling, nv: int):
+        super().__init__(inner.config, nv)
+        self.inner, self.sampling = inner, sampling
+        self.outputs = inner.outputs
+
+    def bind(self, context: BindContext) -> None:
+        self.inner.bind(context)
+        self.n_states = self.nv + self.inner.n_states
+
+    @property
+    def held(self) -> slice:
+        """The held command's slots within the controller's states."""
+        return slice(0, self.nv)
+
+    @property
+    def inner_states(self) -> slice:
+        """The law's own states within the controller's states."""
+        return slice(self.nv, self.n_states)
+
+    def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray | None]:
+        """τ = the held command [N·m or N; V]; ẏ = 0 for every slot."""
+        return inp.z[: self.nv].copy(), np.zeros(self.n_states) if self.n_states else None
+
+
+class Sampler:
+    """One run of a sampled phase: the sample counter, the delay line and the sensors."""
+
+    def __init__(self, controller: SampledController, stream: int = 0):
+        self.controller = controller
+        s = controller.sampling
+        self.rate, self.period, self.delay = s.rate, s.period, s.delay
+        self.force_sensor = ForceSensor(s.sensor, s.period, stream)
+        self.line: deque[ControlInput] = deque(maxlen=s.delay + 1)  #: the latest delay + 1 measurements
+        self.count = 0  #: samples taken
+        self.next_index = 0  #: k of the next sample instant k / rate on the grid
+
+    @property
+    def resolution(self) -> float:
+        """[rad or m] the joint encoders' resolution (0: exact)."""
+        return self.controller.sampling.sensor.encoder_resolution
+
+    def next_time(self) -> float:
+        """[s] the next sample instant on the grid."""
+        return self.next_index / self.rate
+
+    def passed(self, t: float) -> None:
+        """A sample taken at t [s]: the next on the grid comes after it."""
+        self.next_index = max(self.next_index, math.floor(t * self.rate) + 1)
+        while self.next_index / self.rate <= t:  # (floor of a rounded product)
+            self.next_index += 1
+
+    def measure(self, inp: ControlInput) -> ControlInput:
+        """The sensors' reading of the true input ``inp`` (joint positions already quantised by the caller)."""
+        forces = self.force_sensor.read(inp.forces)
+        return inp if forces is inp.forces else inp.replaced(forces=forces)
+
+    def update(self, inp: ControlInput, z_law: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """At a sample: push the measured input, compute on the one of ``delay`` samples ago with the law's states
+        ``z_law`` as they are now; (the new held command, the law's new states)."""
+        if not self.line:  # a phase's first sample: the line filled with it
+            self.line.extend([inp] * (self.delay + 1))
+        else:
+            self.line.append(inp)
+        self.count += 1
+        seen = self.line[0].replaced(z=z_law)
+        tau, zdot = self.controller.inner.command(seen)
+        z_new = z_law + self.period * zdot if zdot is not None and len(z_law) else z_law.copy()
+        return np.asarray(tau, float), z_new

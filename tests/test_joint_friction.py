@@ -1,0 +1,204 @@
+"""Joint damping and Coulomb joint friction with true stick (contactdyn.model.joint_friction): a stuck joint is
+held exactly, breaks away where its holding torque reaches the static limit, slides with the kinetic one and
+sticks again at rest; the closed forms of a ramp, a hold and a pendulum."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from contactdyn import simulate
+from contactdyn.errors import SceneError
+from contactdyn.model.system import System
+from contactdyn.scene.scene_file import parse_scene
+
+M, L, G = 2.0, 0.5, 9.81  #: point mass [kg] on a massless rod [m], gravity [m/s²]
+MGL = M * G * L  #: [N·m] the pendulum's largest gravity torque
+EVENT_TOL = 1e-9  #: [s] events located at rtol 1e-10, atol 1e-12
+
+LINK = """  <joint name="{name}" type="continuous"><parent link="{parent}"/><child link="{child}"/><axis xyz="0 1 0"/>
+    {origin}<dynamics damping="{damping}" friction="{friction}"/></joint>
+  <link name="{child}"><inertial><origin xyz="0 0 {z}"/><mass value="{m}"/>
+    <inertia ixx="0" iyy="0" izz="0" ixy="0" ixz="0" iyz="0"/></inertial></link>
+"""
+
+
+def arm(tmp_path, links: int = 1, damping: float = 0.0, friction: float = 0.0) -> str:
+    """A planar chain of ``links`` point masses M on massless rods L (joints about y, θ = 0 hanging down) as a URDF
+    with the given <dynamics> on every joint; its path."""
+    body = "".join(LINK.format(name=f"j{k + 1}", parent="base" if k == 0 else f"link{k}", child=f"link{k + 1}",
+                               origin="" if k == 0 else f'<origin xyz="0 0 {-L}"/>', damping=damping,
+                               friction=friction, z=-L, m=M) for k in range(links))
+    tip = f'  <joint name="tip_joint" type="fixed"><parent link="link{links}"/><child link="tip"/>' \
+          f'<origin xyz="0 0 {-L}"/></joint>\n  <link name="tip"/>\n'
+    path = tmp_path / f"arm{links}.urdf"
+    path.write_text(f'<?xml version="1.0"?>\n<robot name="arm">\n  <link name="base"/>\n{body}{tip}</robot>\n')
+    return str(path)
+
+
+def scene(urdf: str, q0: list[float], duration: float, controller: dict | None = None, gravity: bool = True,
+          **robot) -> dict:
+    return {"duration": duration, "solver": {"rtol": 1e-10, "atol": 1e-12, "output_rate": 1000.0},
+            "robot": {"urdf": urdf, "q0": q0, "gravity": [0.0, 0.0, -G if gravity else 0.0], **robot},
+            "controller": controller or {"kind": "joint_pd", "kp": [0.0], "kd": [0.0]}}
+
+
+def events(r, kind: str) -> list[dict]:
+    return [e for e in r.events if e["kind"] == kind]
+
+
+def test_a_growing_load_breaks_the_joint_away_at_the_static_limit(tmp_path):
+    """No gravity; a joint PD of stiffness k with a reference moving at a constant rate: while the joint is stuck
+    its torque is k·δ·t/T exactly, so it breaks away at t = τ_s T / (k δ); then the friction is the kinetic one."""
+    k, delta, T, tau_s, tau_k = 100.0, 0.1, 1.0, 2.0, 1.2  # [N·m/rad], [rad], [s], [N·m], [N·m]
+    ctl = {"kind": "joint_pd", "kp": [k], "kd": [0.0]}
+    doc = scene(arm(tmp_path), [0.3], 0.3, ctl, gravity=False,
+                joint={"j1": {"friction_static": tau_s, "friction_kinetic": tau_k}})
+    doc["phase"] = [{"name": "ramp", "reference": {"space": "joint", "moves": [
+        {"kind": "constant_velocity", "delta": [delta], "duration": T}]}}]
+    r = simulate(parse_scene(doc))
+    (slip,) = events(r, "joint_slip")
+    t_break = tau_s * T / (k * delta)
+    assert slip["name"] == "j1" and slip["t"] == pytest.approx(t_break, abs=EVENT_TOL)
+    assert slip["torque"] == pytest.approx(-tau_s, rel=1e-9)  # the holding torque opposes the load
+    before, after = r.t < t_break, (r.t > t_break) & (r.t < t_break + 0.03)
+    assert np.all(r["v"][before, 0] == 0.0) and np.all(r["q"][before, 0] == 0.3)  # held exactly
+    np.testing.assert_allclose(r["joint_friction"][before, 0], -k * delta * r.t[before] / T, rtol=0, atol=1e-12)
+    assert np.all(r["joint_stuck"][before, 0] == 1.0) and np.all(r["joint_stuck"][after, 0] == 0.0)
+    assert np.all(r["v"][after, 0] > 0.0)  # it slides along the load, against −τ_k
+    np.testing.assert_array_equal(r["joint_friction"][after, 0], -tau_k)  # static 2.0 drops to kinetic 1.2
+    assert r.stats["fallback_modes"] == {} and r.stats["compiled_modes"] >= 2
+
+
+def test_a_joint_loaded_below_its_limit_never_creeps(tmp_path):
+    """A double pendulum whose shoulder holds (τ_s above any load the swinging elbow gives it) for the whole run:
+    the shoulder's velocity stays exactly 0 (no creep), its holding torque balances the load."""
+    q0 = [0.4, 1.2]  # [rad]
+    doc = scene(arm(tmp_path, 2), q0, 1.0, {"kind": "joint_pd", "kp": [0.0, 0.0], "kd": [0.0, 0.0]},
+                joint={"j1": {"friction": 100.0}})
+    r = simulate(parse_scene(doc))
+    creep = float(np.abs(r["v"][:, 0]).max())  # [rad/s]
+    print(f"largest |q̇| of the stuck shoulder: {creep:.3g} rad/s")
+    assert creep < 1e-12  # roundoff of the solve (q̈₁ ~ 1e-16 of the elbow's), pulled back by the row's ω q̇₁
+    assert float(np.abs(r["q"][:, 0] - q0[0]).max()) < 1e-14 and np.all(r["joint_stuck"][:, 0] == 1.0)
+    assert not events(r, "joint_slip") and not events(r, "joint_stick")
+    assert np.ptp(r["q"][:, 1]) > 1.0  # the elbow swings
+    assert np.all(r["joint_stuck"][:, 1] == 0.0) and np.all(r["joint_friction"][:, 1] == 0.0)  # no friction there
+    # the shoulder's holding torque = its whole load: the elbow's reaction and both masses' gravity (checked on the
+    # readable model at a few samples: λ₁ = −(f₁ − H₁₂ q̈₂) with q̈₁ = 0)
+    system = System(parse_scene(doc))
+    for k in (0, 333, 999):
+        system.robot.update(r["q"][k], r["v"][k])
+        H, h = system.robot.H, system.robot.h
+        qdd2 = -h[1] / H[1, 1]  # the elbow swings freely on a fixed shoulder
+        assert r["joint_friction"][k, 0] == pytest.approx(h[0] + H[0, 1] * qdd2, rel=1e-9, abs=1e-12)
+    assert r.stats["fallback_modes"] == {}
+
+
+def pendulum_stop(theta0: float, tau_s: float, tau_k: float) -> tuple[float, int]:
+    """Where a pendulum released at rest from θ0 with dry joint friction stops, and after how many half swings.
+
+    A half swing from rest at θ_k (moving towards −sign θ_k, the friction torque ±τ_k constant) conserves
+    U = −m g l cos θ − τ_k θ sign(θ_k): its turning point θ_{k+1} is the other root of m g l (cos θ_{k+1} − cos θ_k)
+    = τ_k |θ_k − θ_{k+1}|, beyond U's minimum at θ_e = sign(θ_k) asin(τ_k / m g l). It stops at the first turning
+    point where the static limit holds gravity, |m g l sin θ| ≤ τ_s."""
+    theta, swings = theta0, 0
+    while abs(MGL * math.sin(theta)) > tau_s:
+        s = math.copysign(1.0, theta)
+        a = abs(theta)
+        theta_e = math.asin(tau_k / MGL)
+        turning = brentq(lambda th, a=a: MGL * (math.cos(th) - math.cos(a)) - tau_k * (a - th), -a, theta_e,
+                         xtol=1e-15)
+        theta, swings = s * turning, swings + 1
+    return theta, swings
+
+
+def test_pendulum_with_dry_joint_friction_stops_at_the_closed_form_angle(tmp_path):
+    theta0, tau_s, tau_k = 1.0, 2.0, 1.5  # [rad], [N·m], [N·m]
+    doc = scene(arm(tmp_path), [theta0], 3.0, joint={"j1": {"friction_static": tau_s, "friction_kinetic": tau_k}})
+    r = simulate(parse_scene(doc))
+    theta_stop, swings = pendulum_stop(theta0, tau_s, tau_k)
+    assert swings == 3  # the parameters' case: two reversals, then it sticks
+    assert [e["kind"] for e in r.events] == ["joint_slip"] + ["joint_reverse"] * (swings - 1) + ["joint_stick"]
+    t_stick = r.events[-1]["t"]
+    assert r.events[0]["t"] == 0.0  # gravity beyond the static limit at the start: it slides at once
+    stuck = r.t >= t_stick
+    assert np.all(r["v"][stuck, 0] == 0.0) and np.all(r["joint_stuck"][stuck, 0] == 1.0)
+    assert r["q"][-1, 0] == pytest.approx(theta_stop, abs=1e-9)  # [rad]
+    assert r["joint_friction"][-1, 0] == pytest.approx(MGL * math.sin(theta_stop), rel=1e-9)  # holds gravity
+    assert r.stats["fallback_modes"] == {}
+
+
+def test_damping_from_the_urdf_decays_a_free_swing(tmp_path):
+    """The URDF's damping alone: a small free swing (θ0 = 1e-3 rad) is the damped oscillator of the linearized
+    pendulum, θ = θ0 e^(−βt) (cos ω_d t + β/ω_d sin ω_d t) with β = b / (2 m l²), ω_d² = g/l − β² (the nonlinearity
+    ~θ0²/16 of the frequency: < 1e-9 rad over the run); the run says it used the URDF's value;
+    ``joint_friction = "ignore"`` drops it."""
+    b, theta0 = 0.2, 1e-3  # [N·m·s/rad], [rad]
+    doc = scene(arm(tmp_path, damping=b), [theta0], 2.0)
+    r = simulate(parse_scene(doc))
+    assert r.meta["joint_friction"] == {"j1": {"damping": b, "friction_static": 0.0, "friction_kinetic": 0.0,
+                                               "source": "urdf", "unit": "N·m"}}
+    np.testing.assert_allclose(r["joint_friction"][:, 0], -b * r["v"][:, 0], rtol=1e-12, atol=1e-15)
+    beta = b / (2 * M * L * L)
+    w = math.sqrt(G / L - beta * beta)
+    closed = theta0 * np.exp(-beta * r.t) * (np.cos(w * r.t) + beta / w * np.sin(w * r.t))
+    np.testing.assert_allclose(r["q"][:, 0], closed, rtol=0, atol=2e-9)
+    assert not events(r, "joint_slip") and "joint_stuck" in r.channels
+    ignored = simulate(parse_scene({**doc, "robot": {**doc["robot"], "joint_friction": "ignore"}}))
+    assert ignored.meta["joint_friction"] == {} and "joint_friction" not in ignored.channels
+
+
+@pytest.mark.parametrize("joint, expected, key", [
+    ({"elbow": {"damping": 1.0}}, "an active joint of the robot (j1)", "robot.joint.elbow"),
+    ({"j1": {"damping": -1.0}}, "a number >= 0", "robot.joint.j1.damping"),
+    ({"j1": {"friction": math.nan}}, "a finite number", "robot.joint.j1.friction"),
+    ({"j1": {"friction_static": 1.0, "friction_kinetic": 2.0}}, "a kinetic friction <= friction_static",
+     "robot.joint.j1.friction_kinetic"),
+    ({"j1": {"friction": 1.0, "friction_static": 1.0}}, "friction alone", "robot.joint.j1.friction"),
+    ({"j1": {"friction_kinetic": 1.0}}, "a static limit", "robot.joint.j1.friction_static"),
+])
+def test_bad_joint_friction_names_the_key_and_the_file(tmp_path, joint, expected, key):
+    path = tmp_path / "bad.toml"
+    doc = scene(arm(tmp_path), [0.0], 0.1, joint=joint)
+    with pytest.raises(SceneError) as info:
+        System(parse_scene(doc, file=str(path)))
+    assert info.value.key == key and expected in info.value.expected and str(path) in str(info.value)
+
+
+def test_the_compiled_plan_is_the_readable_model_in_every_joint_mode(tmp_path):
+    """Damping on both joints, the shoulder stuck (a row) and the elbow sliding (−s τ_k): the compiled plan's
+    right-hand side, its event values and its output samples equal System.evaluate's."""
+    from dataclasses import replace
+
+    from contactdyn.compiled.rhsplan import ModePlan
+    from contactdyn.compiled.samples import evaluated_samples
+
+    doc = scene(arm(tmp_path, 2, damping=0.05), [0.4, 1.2], 1.0, {"kind": "joint_pd", "kp": [0.0], "kd": [0.0]},
+                joint={"j1": {"damping": 0.1, "friction_static": 50.0, "friction_kinetic": 30.0},
+                       "j2": {"damping": 0.05, "friction": 0.5}})
+    system = System(parse_scene(doc))
+    x, modes = system.initial_state()
+    rng = np.random.default_rng(3)
+    for joint_modes in (((0, 0), (1, 1)), ((0, -1), (1, 0)), ((0, 1), (1, -1))):
+        phase = replace(system.start_phase(0, 0.0, x, None), joint_modes=joint_modes)
+        plan = ModePlan(system, modes, phase)
+        assert plan.ok, plan.reason
+        X = x + 0.1 * rng.normal(size=(5, system.n))
+        ts = np.linspace(0.1, 0.5, 5)
+        for t, state in zip(ts, X, strict=True):
+            ev = system.evaluate(t, state, modes, phase, full=True)
+            np.testing.assert_allclose(plan.rhs(t, state.copy()), ev.xdot, rtol=1e-12, atol=1e-12)
+            assert plan.joint_hold(t, state) == pytest.approx(ev.joint_hold, rel=1e-12)
+        fast, slow = plan.samples(ts, X), evaluated_samples(system, ts, X, modes, phase)
+        np.testing.assert_allclose(fast.joint_friction, slow.joint_friction, rtol=1e-12, atol=1e-12)
+        stuck = [i for i, m in joint_modes if m == 0]
+        sliding = [(i, m) for i, m in joint_modes if m != 0]
+        for i, m in sliding:  # damping and the kinetic friction, against the slide
+            kinetic = 30.0 if i == 0 else 0.5
+            np.testing.assert_allclose(slow.joint_friction[:, i], -(0.1 if i == 0 else 0.05) * X[:, system.nQ + i]
+                                       - m * kinetic, rtol=1e-12)
+        assert set(plan.joint_rows) == set(stuck)

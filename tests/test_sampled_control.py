@@ -1,0 +1,305 @@
+"""Sampled-data control: a law run at sample instants with a zero-order hold, delayed, through sensor models.
+
+The scenes are short pieces of B1 (sims/b1.toml: a planar 2R pressing and sliding on a model (b) surface, no
+gravity, continuous task PD) with the controller sampled; a few test laws of the measured input alone make the
+hold and the delay line exact to compare.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contactdyn import parse_scene, simulate
+from contactdyn.errors import SceneError
+from contactdyn.hybrid.loop import HybridRun
+from contactdyn.laws.controllers import CONTROLLERS, Controller, register
+from contactdyn.laws.controllers.sampled import SampledController
+from contactdyn.laws.sensors import ForceSensor, SensorSpec
+from contactdyn.model.system import System
+
+ROOT = Path(__file__).resolve().parents[1]
+B1 = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
+RATE = 1000.0  #: [Hz]
+
+
+class _Clock(Controller):
+    """τ = (sin 50 t, cos 30 t) [N·m] of the measured time alone: a delay shifts it exactly."""
+
+    name = "_test_clock"
+
+    def command(self, inp):
+        return np.array([math.sin(50.0 * inp.t), math.cos(30.0 * inp.t)]), None
+
+
+class _Probe(Controller):
+    """A small force-reading law that keeps what it was given (inputs: (t, q, forces))."""
+
+    name = "_test_probe"
+    uses_forces = True
+    seen: list = []
+
+    def command(self, inp):
+        _Probe.seen.append((inp.t, inp.q.copy(), dict(inp.forces)))
+        return -1e-3 * inp.forces["tip"] * np.ones(2), None
+
+
+class _Integrator(Controller):
+    """One state z with ż = 2 − t [1/s]; τ = (z, 0)."""
+
+    name = "_test_integrator"
+    n_states = 1
+
+    def command(self, inp):
+        return np.array([inp.z[0], 0.0]), np.array([2.0 - inp.t])
+
+
+LAWS = (_Clock, _Probe, _Integrator)
+
+
+@pytest.fixture(autouse=True)
+def _test_laws():
+    """The test laws registered while a test runs (the key reference lists the registered ones)."""
+    for law in LAWS:
+        register(law)
+    yield
+    for law in LAWS:
+        CONTROLLERS.pop(law.name, None)
+
+
+def b1(duration: float = 0.02, output_rate: float = 20_000.0, **controller) -> dict:
+    doc = copy.deepcopy(B1)
+    doc["duration"] = duration
+    doc["solver"]["output_rate"] = output_rate
+    if "kind" in controller:  # another law: its own table
+        doc["controller"] = {}
+    doc["controller"].update(controller)
+    return doc
+
+
+def run_of(doc: dict) -> tuple[HybridRun, object]:
+    run = HybridRun(System(parse_scene(doc)))
+    return run, run.run(0.0)
+
+
+def held_commands(run: HybridRun) -> np.ndarray:
+    """The held command at each segment's start (each sample's, in a run without events)."""
+    s = run.system
+    z0 = 2 * s.nQ + s.z_slices[0].start
+    return np.array([np.asarray(seg.sol(seg.t0))[z0:z0 + s.nv] for seg in run.segments])
+
+
+# ---- the hold ------------------------------------------------------------------------------
+def test_the_command_is_piecewise_constant_with_jumps_exactly_at_the_samples():
+    run, r = run_of(b1(sample_rate=RATE))
+    assert isinstance(run.system.controllers[0], SampledController)
+    starts = np.array([seg.t0 for seg in run.segments])
+    np.testing.assert_array_equal(starts, np.arange(20) / RATE)  # a segment per sample period, starting at k/rate
+    assert r.stats["samples"] == 20
+    k = np.floor(r.t * RATE + 1e-9).astype(int)  # the sample in force at each output time
+    tau = r["tau_cmd"]
+    np.testing.assert_array_equal(tau, r["tau"])  # (ideal drives: the applied torque is the command)
+    for j in range(20):
+        block = tau[k == j]
+        assert len(block) >= 19 and np.array_equal(block, np.repeat(block[:1], len(block), axis=0))
+    firsts = np.array([tau[k == j][0] for j in range(20)])
+    assert np.all(np.abs(np.diff(firsts, axis=0)).max(axis=1) > 1e-6)  # it jumps at every sample
+
+
+def test_the_held_command_is_the_continuous_law_at_the_sample():
+    run, _ = run_of(b1(sample_rate=RATE))
+    held = held_commands(run)
+    continuous = System(parse_scene(b1()))
+    phase = continuous.start_phase(0, 0.0, run.segments[0].sol(0.0)[:continuous.n], None)
+    for seg, tau in zip(run.segments[:5], held[:5], strict=True):
+        x = np.asarray(seg.sol(seg.t0))
+        xc = np.concatenate([x[:2 * run.system.nQ], x[2 * run.system.nQ + 2:]])  # without the held slots
+        modes = seg.modes
+        np.testing.assert_allclose(tau, continuous.evaluate(seg.t0, xc, modes, phase).tau_cmd, rtol=1e-13, atol=1e-12)
+
+
+def test_a_delay_of_d_samples_shifts_the_command_by_exactly_d_samples():
+    d = 3
+    run0, _ = run_of(b1(kind="_test_clock", sample_rate=RATE))
+    run3, _ = run_of(b1(kind="_test_clock", sample_rate=RATE, delay=d))
+    h0, h3 = held_commands(run0), held_commands(run3)
+    np.testing.assert_array_equal(h3[d:], h0[:-d])
+    np.testing.assert_array_equal(h3[:d], np.repeat(h0[:1], d, axis=0))  # the line starts full of the first
+    assert not np.array_equal(h3, h0)
+
+
+def test_the_laws_own_states_advance_by_forward_euler_once_per_sample():
+    run, _ = run_of(b1(kind="_test_integrator", sample_rate=RATE))
+    z = held_commands(run)[:, 0]  # τ_k = z_k, z_{k+1} = z_k + T (2 − t_k), z_0 = 0
+    T = 1.0 / RATE
+    expected = np.concatenate([[0.0], np.cumsum([T * (2.0 - k * T) for k in range(19)])])
+    np.testing.assert_allclose(z, expected, rtol=1e-14, atol=1e-17)
+
+
+def test_held_voltages_run_through_the_motors_on_the_compiled_call():
+    drive = {"kind": "dc_motor", "C_M": 0.05, "C_E": 0.05, "R": 1.0, "J": 1e-5, "N": 20.0}
+    docs = [b1(kind="voltage", u=[1.0, -0.5], **rate) for rate in ({"sample_rate": RATE}, {})]
+    for doc in docs:
+        doc["robot"]["drive"] = drive
+    sampled, continuous = (simulate(parse_scene(doc)) for doc in docs)
+    assert sampled.stats["fallback_modes"] == {}
+    assert {row["path"] for row in sampled.stats["paths"].values()} == {"compiled call"}
+    np.testing.assert_array_equal(sampled["tau_cmd"], np.tile([1.0, -0.5], (len(sampled.t), 1)))  # [V]
+    np.testing.assert_allclose(sampled["q"], continuous["q"], rtol=0, atol=1e-7)  # a constant law: the same run
+
+
+# ---- sensors -------------------------------------------------------------------------------
+def test_the_low_pass_step_response_is_the_closed_form_at_the_samples():
+    fc, period, U = 30.0, 1e-3, 7.0
+    sensor = ForceSensor(SensorSpec(force_cutoff=fc), period)
+    readings = [sensor.read({"c": 0.0 if k == 0 else U})["c"] for k in range(60)]
+    closed = [0.0] + [U * (1.0 - math.exp(-2.0 * math.pi * fc * (k - 1) * period)) for k in range(1, 60)]
+    np.testing.assert_allclose(readings, closed, rtol=1e-13, atol=1e-13)
+
+
+def test_noise_and_bias_are_the_seeded_draws():
+    spec = SensorSpec(force_noise=2.0, force_bias=0.5, seed=11)
+    sensor = ForceSensor(spec, 1e-3, stream=0)
+    got = [sensor.read({"b": 10.0, "a": 1.0}) for _ in range(3)]
+    draws = np.random.default_rng([11, 0]).normal(0.0, 2.0, 6).reshape(3, 2)  # keys in sorted order: a, b
+    np.testing.assert_array_equal([[g["a"], g["b"]] for g in got], np.array([1.5, 10.5]) + draws)
+
+
+def test_the_encoders_quantise_q_to_their_resolution():
+    res = 1e-3
+    _Probe.seen.clear()
+    run, _ = run_of(b1(kind="_test_probe", sample_rate=RATE, sensor={"encoder_resolution": res}))
+    assert len(_Probe.seen) == len(run.segments)
+    for (t, q, _), seg in zip(_Probe.seen, run.segments, strict=True):
+        assert t == seg.t0
+        np.testing.assert_allclose(q / res, np.round(q / res), rtol=0, atol=1e-9)
+        assert np.all(np.abs(q - np.asarray(seg.sol(t))[:2]) <= 0.5 * res + 1e-15)
+    assert {round(float(qi / res)) for _, q, _ in _Probe.seen for qi in q} != set()
+
+
+def test_the_same_seed_gives_a_bit_identical_run_and_another_seed_another():
+    def run(seed):
+        return simulate(parse_scene(b1(kind="_test_probe", sample_rate=RATE, sensor={"force_noise": 5.0,
+                                                                                       "seed": seed})))
+
+    a, b, c = run(1), run(1), run(2)
+    for name in a.channels:
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+    assert not np.array_equal(a["tau"], c["tau"])
+
+
+# ---- convergence, paths ----------------------------------------------------------------------
+def test_a_sampled_run_converges_to_the_continuous_one_at_first_order():
+    duration = 0.2
+    continuous = simulate(parse_scene(b1(duration, 1000.0)))
+
+    def error(rate):
+        r = simulate(parse_scene(b1(duration, 1000.0, sample_rate=rate)))
+        return np.abs(r["tip"] - continuous["tip"]).max()
+
+    e1, e2 = error(1000.0), error(4000.0)
+    assert e2 < e1
+    assert 3.0 <= e1 / e2 <= 5.0  # ∝ 1/rate: a ZOH's error is half a period's lag
+
+
+def test_a_sampled_mode_runs_on_the_compiled_plan_and_agrees_with_the_readable_model():
+    run, r = run_of(b1(sample_rate=RATE))
+    assert r.stats["fallback_modes"] == {}
+    assert {row["path"] for row in r.stats["paths"].values()} == {"compiled plan"}
+    plan = next(iter(run.plans.values()))
+    assert plan.ok and not plan.python_command and plan.held is not None
+    seg = run.segments[7]
+    x = np.asarray(seg.sol(seg.t0)).copy()
+    for held in (x[plan.held], np.array([30.0, -12.0])):
+        x[plan.held] = held
+        ref = run.system.evaluate(seg.t0 + 3e-4, x, seg.modes, seg.phase).xdot
+        np.testing.assert_allclose(plan.rhs(seg.t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+
+
+def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
+    """The held command is the task law's feedforward term (x's held slots) of the motors' compiled kernel."""
+    doc = b1(sample_rate=RATE)
+    doc["robot"]["drive"] = {"kind": "dc_motor", "C_M": 0.05, "C_E": 0.05, "R": 1.0, "J": 1e-5, "N": 20.0}
+    run, r = run_of(doc)
+    assert r.stats["fallback_modes"] == {}  # (each plan checked itself against the readable model)
+    assert {row["path"] for row in r.stats["paths"].values()} == {"compiled call"}
+    plan = next(iter(run.plans.values()))
+    seg = run.segments[7]
+    x = np.asarray(seg.sol(seg.t0)).copy()
+    x[plan.held] = [3.0, -1.0]
+    ref = run.system.evaluate(seg.t0 + 3e-4, x, seg.modes, seg.phase).xdot
+    np.testing.assert_allclose(plan.rhs(seg.t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+    k = np.floor(r.t * RATE + 1e-9).astype(int)
+    for j in range(20):  # the voltages follow the motors' speeds between samples, the command does not
+        block, u = r["tau_cmd"][k == j], r["u"][k == j]
+        assert np.array_equal(block, np.repeat(block[:1], len(block), axis=0))
+        assert np.abs(np.diff(u, axis=0)).max() > 0.0
+
+
+# ---- keys ----------------------------------------------------------------------------------
+@pytest.mark.parametrize("controller, key, expected", [
+    ({"delay": 2}, "controller.delay", "set sample_rate"),
+    ({"sensor": {"force_noise": 1.0}}, "controller.sensor", "set sample_rate"),
+    ({"sample_rate": 0.0}, "controller.sample_rate", "a number > 0"),
+    ({"sample_rate": -5.0}, "controller.sample_rate", "a number > 0"),
+    ({"sample_rate": 1e3, "delay": -1}, "controller.delay", "an integer >= 0"),
+    ({"sample_rate": 1e3, "delay": 1.5}, "controller.delay", "an integer"),
+    ({"sample_rate": "fast"}, "controller.sample_rate", "a number"),
+    ({"sample_rate": 1e3, "sensor": {"force_noise": -1.0}}, "controller.sensor.force_noise", "a number >= 0"),
+    ({"sample_rate": 1e3, "sensor": {"force_cutoff": 0.0}}, "controller.sensor.force_cutoff", "a number > 0"),
+    ({"sample_rate": 1e3, "sensor": {"seed": -1}}, "controller.sensor.seed", "an integer >= 0"),
+    ({"sample_rate": 1e3, "sensor": {"force_nois": 1.0}}, "controller.sensor.force_nois", "force_noise"),
+])
+def test_bad_sampling_keys_are_named_with_the_file(tmp_path, controller, key, expected):
+    with pytest.raises(SceneError) as err:
+        parse_scene(b1(**controller), file=str(tmp_path / "s.toml"))
+    message = str(err.value)
+    assert key in message and expected in message and "s.toml" in message
+
+
+def test_a_phase_controller_table_merges_its_sampling_over_the_scenes():
+    doc = b1(sample_rate=RATE)
+    doc["phase"][0]["controller"] = {"sample_rate": 250.0, "delay": 1}
+    scene = parse_scene(doc)
+    assert scene.phases[0].sampling.rate == 250.0 and scene.phases[0].sampling.delay == 1
+    assert parse_scene(b1()).phases[0].sampling is None
+
+
+def test_a_phase_begun_at_a_touch_samples_at_once_and_then_on_the_grid():
+    from contactdyn.scene.scene_file import load_scene
+
+    rate, duration = 500.0, 1.56
+    run = HybridRun(System(load_scene("case3_b_position", {"duration": duration, "controller.sample_rate": rate})))
+    r = run.run(0.0)
+    touch = next(e for e in r.events if e["kind"] == "touch")["t"]
+    assert 1.4 < touch < duration
+    s = run.system
+    first = next(seg for seg in run.segments if seg.phase.index == 1)
+    assert first.t0 == touch
+    z0 = 2 * s.nQ + s.z_slices[1].start
+    assert np.asarray(first.sol(first.t0))[z0] != 0.0  # the press law's first command, held from the touch
+    n = math.ceil(duration * rate)
+    k = np.array([seg.t0 for seg in run.segments]) * rate
+    on_grid = np.abs(k - np.round(k)) <= 1e-9  # (the trapezoid's corners fall on the grid: a float past it)
+    assert set(np.round(k[on_grid]).astype(int)) == set(range(n))  # the grid goes on through the phase change
+    others = {seg.t0 for seg, on in zip(run.segments, on_grid, strict=True) if not on}
+    assert others == {e["t"] for e in r.events} | {touch + 0.1}  # events, the force ramp's end
+    assert r.stats["samples"] == n + 1  # the grid and the press law's first sample at the touch
+
+
+def test_autos_step_budget_runs_on_over_the_sample_instants():
+    """benchmarks/hard/fast_mass.toml: a 1 g mass on 1e5 N/m holds DOP853 at its stability bound; ``auto`` switches
+    to Radau after STEP_BUDGET such steps, which 1 ms segments never take one by one."""
+    from contactdyn.numerics.integrators import STEP_BUDGET
+
+    scene = ROOT / "benchmarks" / "hard" / "fast_mass.toml"
+    r = simulate(str(scene), {"duration": 0.25, "controller.sample_rate": RATE})
+    by_method = r.stats["segments_by_method"]
+    assert r.stats.get("auto_switches") == 1 and by_method.get("Radau", 0) > 0
+    # the budget spent over many 1 ms segments (the DOP853 ones, with events between): none took it alone
+    assert by_method["DOP853C"] > 100 and STEP_BUDGET < r.stats["steps"]
