@@ -1,48 +1,74 @@
-"""Stability of a sampled, delayed contact loop: the z-domain poles of the simulator's own linearisation.
+"""Stability of a sampled, delayed contact loop: the z-domain poles of the simulator's own sampled control.
 
-A sampled controller (``controller.sample_rate`` [Hz], ``controller.delay`` [samples]) evaluates its
-law at the sample instants t_k = k h (h = 1 / rate [s]) on the measurement of t_{k−d} and holds the
-command until t_{k+1} (zero-order hold). About the contact phase's equilibrium (the continuous loop's,
-:class:`~contactdyn.analysis.stability.ContactLoop`: the hold changes nothing at a fixed point) the
-loop is linear time-invariant in the sample index, in three pieces, each read off the simulator's own
-functions by central differences:
+A sampled controller (``controller.sample_rate`` [Hz], ``controller.delay`` [samples];
+:mod:`contactdyn.laws.controllers.sampled`) evaluates its law at the sample instants t_k = k h (h = 1 / rate [s])
+on what it measured at t_{k−d} and holds the command until t_{k+1} (zero-order hold); the held command is
+a slot of the state. About the contact phase's equilibrium (the continuous loop's,
+:class:`~contactdyn.analysis.stability.ContactLoop`: the hold changes nothing at a fixed point) the loop is
+linear time-invariant in the sample index, in three pieces, each read off the simulator's own functions (the
+scene run sampled) by central differences:
 
-- the plant with the command held, ẋ = A x + B u: ``System.evaluate`` with the phase's controller
-  replaced by one that returns u (:class:`HeldCommand`); A = ∂f/∂x, B = ∂f/∂u. Its states are the
-  ones something depends on (accumulators and the controller's own states, frozen between samples,
-  drop out), as in :mod:`~contactdyn.analysis.stability`;
-- the controller: what it reads at t_k (:func:`measured_input`: the state and the contact forces
-  with the command *held from the previous sample*, the force a sensor reads at t_k) through its own
-  ``command``: (τ, ż) = G(m, z) with the measurement m = (x, u_prev); K = ∂τ/∂m, K_z = ∂τ/∂z and
-  L = ∂ż/∂m, L_z = ∂ż/∂z. Its states advance once per sample, z_{k+1} = z_k + h ż (forward Euler);
-  a state nothing reads (A10's integral under a massless nominal) is left out, as an accumulator;
+- the plant with the command held, ẋ = A x + B u: ``System.evaluate`` of the sampled phase, whose command is
+  the held slots u of the state; A = ∂f/∂x, B = ∂f/∂u. Its states are the ones something depends on
+  (accumulators, the held slots and the law's own states, constant between samples, drop out), as in
+  :mod:`~contactdyn.analysis.stability`;
+- the law at a sample: what it measures at t_k (:func:`~contactdyn.model.dynamics.sample_input`, the one
+  the hybrid loop calls: the state, and the contact forces under the command held so far, u_{k−1}) through its
+  own ``command``: (τ, ż) = G(m, z) with the measurement m = (x, u_prev); K = ∂τ/∂m, K_z = ∂τ/∂z and
+  L = ∂ż/∂m, L_z = ∂ż/∂z. Its states advance once per sample, z_{k+1} = z_k + h ż (forward Euler, as
+  ``Sampler.update``); a state nothing reads (A10's integral under a massless nominal) is left out;
 - the exact zero-order-hold discretisation (:func:`zoh`): Φ = e^{Ah}, Γ = ∫₀ʰ e^{As} ds B from one
   matrix exponential of [[A, B], [0, 0]] h.
 
-The delay is d blocks of the state, a shift register of past measurements (:func:`closed_loop`):
-ξ_k = [x_k, u_{k−1}, z_k, m_{k−1}, …, m_{k−d}], u_k = K m_{k−d} + K_z z_k, x_{k+1} = Φ x_k + Γ u_k.
-The loop's z-domain poles are the eigenvalues of that map, without the bonds' constraint-drift
-modes (e^{−ωh}, ω = ``stability.BAUMGARTE``: uncontrollable, they stay where Φ puts them); it is
-stable when every |z| < 1, and σ = ln|z_max| / h [1/s] is its decay rate (negative: decays),
-comparable with a continuous pole's real part (and with a run's, :func:`measured_rate`).
+The delay is d blocks of the state, a shift register of past measurements (:func:`closed_loop`, the
+sampler's delay line): ξ_k = [x_k, u_{k−1}, z_k, m_{k−1}, …, m_{k−d}], u_k = K m_{k−d} + K_z z_k,
+x_{k+1} = Φ x_k + Γ u_k. The loop's z-domain poles are the eigenvalues of that map, without the bonds'
+constraint-drift modes (e^{−ωh}, ω = ``stability.BAUMGARTE``: uncontrollable, they stay where Φ puts them); it
+is stable when every |z| < 1, and σ = ln|z_max| / h [1/s] is its decay rate (negative: decays), comparable with
+a continuous pole's real part and with a run's (:func:`measured_rate`). The pieces do not depend on the rate
+or the delay, so one linearisation gives the whole map. The sensors must measure exactly (a filter or noise
+is not in the model).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import copy
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import expm
 
-from ..laws.controllers import Controller
-from ..model import dynamics
-from ..model.constraints import Rows
+from ..laws.controllers.sampled import SampledController
+from ..model.dynamics import sample_input
+from ..model.system import System
+from ..output.result import Result
+from ..scene.scene_file import Scene, parse_scene
+from ..simulate import run_system
 from .stability import BAUMGARTE, ContactLoop, modal_poles
 
-__all__ = ["HeldCommand", "SampledLinearization", "SampledLoop", "zoh", "closed_loop", "decay_rate",
-           "measured_input", "measured_rate"]
+__all__ = ["SampledLinearization", "SampledLoop", "zoh", "closed_loop", "decay_rate", "measured_rate",
+           "sampled_scene", "continuous_scene", "with_tip_velocity", "run_from",
+           "linear_window"]
 
 _FD_STEP = 1e-6  #: relative central-difference step (as stability.py's)
+_SAMPLING_KEYS = ("sample_rate", "delay", "sensor")
+
+
+def continuous_scene(scene: Scene) -> Scene:
+    """The scene with its controllers continuous (every table's ``sample_rate``, ``delay`` and ``sensor`` gone)."""
+    doc = copy.deepcopy(scene.document)
+    for table in [doc.get("controller"), *(p.get("controller") for p in doc.get("phase", []))]:
+        if isinstance(table, dict):
+            for key in _SAMPLING_KEYS:
+                table.pop(key, None)
+    return parse_scene(doc, None, scene.file)
+
+
+def sampled_scene(scene: Scene, rate: float, delay: int = 0) -> Scene:
+    """The scene with its controller sampled at ``rate`` [Hz] with ``delay`` [samples] (the phases' own
+    controller tables keep theirs)."""
+    return parse_scene(scene.document, {"controller.sample_rate": float(rate), "controller.delay": int(delay)},
+                       scene.file)
 
 
 def zoh(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
@@ -95,52 +121,15 @@ def decay_rate(z: complex, h: float) -> float:
     return float(np.log(max(abs(z), 1e-300)) / h)
 
 
-class HeldCommand(Controller):
-    """A controller that returns a fixed command (the held one) and freezes the law's own states."""
-
-    name = "held_command"
-
-    def __init__(self, tau: np.ndarray, n_states: int, outputs: str = "torque"):
-        super().__init__(None, len(tau))
-        self.tau = np.asarray(tau, float)
-        self.n_states = n_states
-        self.outputs = outputs
-
-    def command(self, inp):
-        return self.tau.copy(), (np.zeros(self.n_states) if self.n_states else None)
-
-
-def measured_input(loop: ContactLoop, t: float, x: np.ndarray, held: np.ndarray):
-    """The controller's input at (t, x) with the command ``held`` acting: the state as it is and the
-    contact forces the held command makes (a bond's force comes from the linear solve, so it depends
-    on the command that acts, the previous sample's), the contacts' generalized force on the joints
-    τ_c = H q̈ + h − τ [N·m or N] from the same solve (robot with ideal drives, no limits pressing)."""
-    system, phase, modes = loop.system, loop.phase, loop.modes
-    held_phase = replace(phase, controller=HeldCommand(held, phase.controller.n_states, phase.controller.outputs))
-    ev = system.evaluate(t, x, modes, held_phase)
-    nQ, nv = system.nQ, system.nv
-    system.robot.update(x[:nv], x[nQ:nQ + nv])
-    f = np.zeros(nQ)
-    f[:nv] = -system.robot.h
-    pre = dynamics.Evaluation(np.empty(0), np.empty(0), [], {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),
-                              np.empty(0), None, {})
-    kins, _ = dynamics._contact_terms(system, x, modes, f, np.zeros(system.ny), Rows(), pre, False)
-    inp, *_ = dynamics._control_input(system, t, x, modes, phase, f, kins, pre)
-    inp.forces = {**ev.normal_force, **ev.interface}
-    if phase.controller.uses_forces:
-        qdd = ev.xdot[nQ:nQ + nv]
-        inp.tau_contact = system.robot.H @ qdd + system.robot.h - ev.tau
-    return inp
-
-
 @dataclass(frozen=True)
 class SampledLinearization:
     """The pieces of the sampled loop about the equilibrium (deviation variables)."""
 
-    x: np.ndarray  #: equilibrium state (all slots)
+    x: np.ndarray  #: equilibrium state of the sampled scene (all slots, the held command's too)
     u: np.ndarray  #: equilibrium command [N·m or N]
     plant: np.ndarray  #: indices of the plant's states (something depends on them)
-    zs: np.ndarray  #: indices of the controller's own states
+    held: np.ndarray  #: indices of the held command's slots
+    zs: np.ndarray  #: indices of the law's own states that it reads
     A: np.ndarray  #: ∂ẋ/∂x on the plant's states, command held [1/s...]
     B: np.ndarray  #: ∂ẋ/∂u
     K: np.ndarray  #: ∂τ/∂m, m = [x (plant), u_prev]
@@ -157,15 +146,16 @@ class SampledLinearization:
         return closed_loop(Phi, Gamma, self.K, self.K_z, self.L, self.L_z, h, delay)
 
     def poles(self, rate: float, delay: int) -> np.ndarray:
-        """z-domain poles at ``rate`` [Hz] and ``delay`` [samples], the constraint-drift ones dropped."""
+        """z-domain poles at ``rate`` [Hz] and ``delay`` [samples], the constraint-drift ones dropped, largest
+        modulus first."""
         z = np.linalg.eigvals(self.transition(rate, delay))
         drift = np.argsort(np.abs(z - np.exp(-BAUMGARTE / rate)))[: self.n_drift]
-        return np.delete(z, drift)
+        z = np.delete(z, drift)
+        return z[np.argsort(-np.abs(z), kind="stable")]
 
     def dominant(self, rate: float, delay: int) -> complex:
         """The pole of largest modulus."""
-        z = self.poles(rate, delay)
-        return complex(z[int(np.argmax(np.abs(z)))])
+        return complex(self.poles(rate, delay)[0])
 
     def sigma(self, rate: float, delay: int) -> float:
         """Decay rate σ = ln|z_max| · rate [1/s] (negative: decays)."""
@@ -177,87 +167,135 @@ class SampledLinearization:
 
 
 class SampledLoop:
-    """A scene's contact phase (:class:`ContactLoop`) linearised as a sampled loop."""
+    """A scene's contact phase (see :func:`~contactdyn.analysis.stability.contact_phase_scene`) run sampled,
+    linearised as a sampled loop. The scene may be sampled or not: the pieces do not depend on the rate or the
+    delay (a continuous scene is linearised at 1 kHz, its own controller's sensors)."""
 
-    def __init__(self, loop: ContactLoop):
-        self.loop = loop
+    def __init__(self, scene: Scene, t_eq: float = 10.0):
+        if scene.phases[-1].sampling is None:
+            scene = sampled_scene(scene, 1000.0)
+        sensor = scene.phases[-1].sampling.sensor
+        if not sensor.exact_forces or sensor.encoder_resolution > 0.0:
+            raise ValueError("SampledLoop: the sensors must measure exactly (no force noise, bias or filter, "
+                             f"no encoder quantum): {sensor}")
+        self.loop = ContactLoop(scene, t_eq)  #: the sampled phase (its state has the held command)
+        self.continuous = ContactLoop(continuous_scene(scene), t_eq)  #: the same phase continuous
+        assert isinstance(self.loop.phase.controller, SampledController)
+
+    def equilibrium(self, x_guess: np.ndarray | None = None):
+        """(the continuous loop's Linearization from ``x_guess`` (its layout), that equilibrium in the sampled
+        layout with the held command its fixed point u = G(m(x, u)))."""
+        lin = self.continuous.linearize(x_guess)
+        system, phase = self.loop.system, self.loop.phase
+        ctl = phase.controller
+        at = 2 * system.nQ + self.continuous.phase.z_slice.start  # the held slots come first in the phase's states
+        x = np.insert(lin.x, at, np.zeros(ctl.nv))
+        assert len(x) == system.n and at == 2 * system.nQ + phase.z_slice.start
+        held = np.arange(at, at + ctl.nv)
+        x[held] = self._command(x)[0]
+        for _ in range(50):  # the forces measured under the command itself: a fixed point
+            u_new = self._command(x)[0]
+            done = np.max(np.abs(u_new - x[held])) <= 1e-12 * max(1.0, float(np.max(np.abs(u_new))))
+            x[held] = u_new
+            if done:
+                break
+        return lin, x
 
     def linearize(self, x_guess: np.ndarray | None = None) -> SampledLinearization:
-        """The pieces about the continuous loop's equilibrium (the hold keeps it), Newton from ``x_guess``."""
-        loop = self.loop
-        lin = loop.linearize(x_guess)
-        x = lin.x
-        system, phase = loop.system, loop.phase
-        nQ, nv = system.nQ, system.nv
+        """The pieces about the continuous loop's equilibrium (the hold keeps it), Newton from ``x_guess``
+        (the continuous scene's layout)."""
+        lin, x = self.equilibrium(x_guess)
+        phase = self.loop.phase
         ctl = phase.controller
-        z0 = 2 * nQ + phase.z_slice.start
-        zs = np.arange(z0, z0 + ctl.n_states)
-        u = self._command(x, np.zeros(nv))[0]  # first pass: the forces of some held command...
-        for _ in range(50):  # ...then of the command itself (a fixed point: u = G(x, u))
-            u_new = self._command(x, u)[0]
-            if np.max(np.abs(u_new - u)) <= 1e-12 * max(1.0, float(np.max(np.abs(u)))):
-                break
-            u = u_new
-        A_full, B_full = self._plant_jacobians(x, u)
-        plant = np.setdiff1d(np.flatnonzero(np.any(A_full != 0.0, axis=0)), zs)  # accumulators: no column
-        A, B = A_full[np.ix_(plant, plant)], B_full[plant]
-        K, K_z, L, L_z = self._controller_jacobians(x, u, plant, zs)
-        read = np.flatnonzero(np.any(K_z != 0.0, axis=0) | np.any(L_z != 0.0, axis=0))  # states the law reads
-        zs, K_z, L, L_z = zs[read], K_z[:, read], L[read], L_z[np.ix_(read, read)]
-        return SampledLinearization(x, u, plant, zs, A, B, K, K_z, L, L_z, 2 * loop.n_bond_rows, lin.poles)
+        z0 = 2 * self.loop.system.nQ + phase.z_slice.start
+        held = np.arange(z0 + ctl.held.start, z0 + ctl.held.stop)
+        zs = np.arange(z0 + ctl.inner_states.start, z0 + ctl.inner_states.stop)
+        A_full = self._jacobian(lambda xv: self.loop.rate(xv), x, np.arange(len(x)))
+        plant = np.setdiff1d(np.flatnonzero(np.any(A_full != 0.0, axis=0)), np.concatenate([held, zs]))
+        A, B = A_full[np.ix_(plant, plant)], A_full[np.ix_(plant, held)]
+        read = np.concatenate([plant, held, zs])
+        D_tau = self._jacobian(lambda xv: self._command(xv)[0], x, read)
+        D_zdot = self._jacobian(lambda xv: self._command(xv)[1], x, read)
+        m = len(plant) + len(held)
+        K, K_z, L, L_z = D_tau[:, :m], D_tau[:, m:], D_zdot[:, :m], D_zdot[:, m:]
+        used = np.flatnonzero(np.any(K_z != 0.0, axis=0) | np.any(L_z != 0.0, axis=0))  # states the law reads
+        return SampledLinearization(x, x[held].copy(), plant, held, zs[used], A, B, K, K_z[:, used], L[used],
+                                    L_z[np.ix_(used, used)], 2 * self.loop.n_bond_rows, lin.poles)
 
-    def _held_rate(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    def _command(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(τ, ż) of the sampled law on what it measures at (t_eq, x) (the held slots of x acting)."""
         loop = self.loop
         ctl = loop.phase.controller
-        phase = replace(loop.phase, controller=HeldCommand(u, ctl.n_states, ctl.outputs))
-        return loop.system.evaluate(loop.t_eq, x, loop.modes, phase).xdot
+        inp = sample_input(loop.system, loop.t_eq, x, loop.modes, loop.phase)
+        tau, zdot = ctl.inner.command(inp)
+        return np.asarray(tau, float)[: ctl.nv], (np.zeros(0) if zdot is None else np.asarray(zdot, float))
 
-    def _command(self, x: np.ndarray, held: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(τ, ż) of the phase's controller on the measurement at (t_eq, x) with ``held`` acting."""
-        ctl = self.loop.phase.controller
-        tau, zdot = ctl.command(measured_input(self.loop, self.loop.t_eq, x, held))
-        return np.asarray(tau, float)[: len(held)], (np.zeros(0) if zdot is None else np.asarray(zdot, float))
-
-    def _plant_jacobians(self, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        n, p = len(x), len(u)
-        A, B = np.empty((n, n)), np.empty((n, p))
-        for j in range(n):
-            step = _FD_STEP * max(1.0, abs(x[j]))
+    @staticmethod
+    def _jacobian(fun, x: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """∂fun/∂x[columns] by central differences."""
+        out = None
+        for c, i in enumerate(columns):
+            step = _FD_STEP * max(1.0, abs(x[i]))
             xp, xm = x.copy(), x.copy()
-            xp[j] += step
-            xm[j] -= step
-            A[:, j] = (self._held_rate(xp, u) - self._held_rate(xm, u)) / (2.0 * step)
-        for j in range(p):
-            step = _FD_STEP * max(1.0, abs(u[j]))
-            up, um = u.copy(), u.copy()
-            up[j] += step
-            um[j] -= step
-            B[:, j] = (self._held_rate(x, up) - self._held_rate(x, um)) / (2.0 * step)
-        return A, B
-
-    def _controller_jacobians(self, x: np.ndarray, u: np.ndarray, plant: np.ndarray, zs: np.ndarray):
-        """K, K_z, L, L_z: the command's and the states' rates' derivatives by the measurement [x (plant),
-        u_prev] and by the controller's states."""
-        p, r = len(u), len(zs)
-        columns = [("x", int(i)) for i in plant] + [("u", j) for j in range(p)] + [("x", int(i)) for i in zs]
-        D_tau, D_zdot = np.empty((p, len(columns))), np.empty((r, len(columns)))
-        for c, (what, i) in enumerate(columns):
-            base = x if what == "x" else u
-            step = _FD_STEP * max(1.0, abs(base[i]))
-            outs = []
-            for sign in (1.0, -1.0):
-                xv, uv = x.copy(), u.copy()
-                (xv if what == "x" else uv)[i] += sign * step
-                outs.append(self._command(xv, uv))
-            D_tau[:, c] = (outs[0][0] - outs[1][0]) / (2.0 * step)
-            D_zdot[:, c] = (outs[0][1] - outs[1][1]) / (2.0 * step)
-        m = len(plant) + p
-        return D_tau[:, :m], D_tau[:, m:], D_zdot[:, :m], D_zdot[:, m:]
+            xp[i] += step
+            xm[i] -= step
+            col = (np.asarray(fun(xp)) - np.asarray(fun(xm))) / (2.0 * step)
+            if out is None:
+                out = np.empty((len(col), len(columns)))
+            out[:, c] = col
+        return out
 
 
-def measured_rate(t: np.ndarray, err: np.ndarray, z: complex, h: float) -> float:
-    """Decay rate [1/s] of the run's own mode (matrix pencil, :func:`stability.modal_poles`) whose
-    frequency is nearest the z-domain pole z's (angle(z) / h), from a signal sampled at the period h [s]."""
+def measured_rate(t: np.ndarray, err: np.ndarray, z: complex, h: float) -> tuple[float, float]:
+    """(decay rate [1/s], frequency [Hz]) of the run's own mode (matrix pencil, :func:`stability.modal_poles`)
+    whose frequency is nearest the z-domain pole z's (|angle(z)| / h), from a signal sampled at the period h [s]."""
     found = modal_poles(t, err)
     w = abs(np.angle(z)) / h
-    return float(found[int(np.argmin(np.abs(np.abs(found.imag) - w)))].real)
+    pole = found[int(np.argmin(np.abs(np.abs(found.imag) - w)))]
+    return float(pole.real), float(abs(pole.imag) / (2.0 * np.pi))
+
+
+def with_tip_velocity(loop: ContactLoop, x: np.ndarray, v_tip: np.ndarray) -> np.ndarray:
+    """x with the robot's joint velocities those that move the tip at ``v_tip`` [m/s] (least squares on the tip's
+    Jacobian at x's joint positions): an equilibrium of a frozen reference started sliding with a moving one."""
+    system = loop.system
+    nQ, nv = system.nQ, system.nv
+    out = x.copy()
+    system.robot.update(x[:nv], np.zeros(nv))
+    J = system.robot.frame_terms(system.tip_fid).jacobian
+    out[nQ:nQ + nv] = np.linalg.lstsq(J, np.asarray(v_tip, float), rcond=None)[0]
+    return out
+
+
+def run_from(scene: Scene, x0: np.ndarray) -> Result:
+    """A run of ``scene`` started from the state ``x0`` (the scene's layout) with the modes its own start finds
+    (the hybrid loop then makes them consistent and, sampled, takes its first sample there)."""
+    system = System(scene)
+    own_start = system.initial_state
+
+    def initial_state():
+        x, modes = own_start()
+        if len(x) != len(x0):
+            raise ValueError(f"run_from: a state of {len(x)} slots for this scene, got {len(x0)}")
+        return np.array(x0, float), modes
+
+    system.initial_state = initial_state
+    return run_system(system)
+
+
+def linear_window(result: Result, t_fit: float, limit: float) -> tuple[np.ndarray, np.ndarray]:
+    """(t [s], F_n − F_d [N]) of a run's first contact from ``t_fit`` [s] up to the first sample where the loop
+    stops being the linearised one: the error beyond ``limit`` [N], the contact lost, stuck, or its slip
+    velocity turned (Coulomb's force then changes sign: the force loop's oscillation moves the tip along the
+    surface too, so a slow slide reverses at a small force error)."""
+    name = next(c.split(".")[1] for c in result.channels if c.startswith("contact.") and c.endswith(".F_n"))
+    err = result[f"contact.{name}.F_n"] - result[f"contact.{name}.F_d"]
+    keep = (np.abs(err) <= limit) & (result[f"contact.{name}.touching"] > 0.5)
+    if f"contact.{name}.stuck" in result.channels:
+        keep &= result[f"contact.{name}.stuck"] < 0.5
+        slip = np.asarray(result[f"contact.{name}.v_slip"]).reshape(len(err), -1)
+        keep &= np.all(slip * slip[:1] > 0.0, axis=1)  # every tangent's slip as at the start
+    keep |= result.t < t_fit
+    end = int(np.argmin(keep)) if not np.all(keep) else len(err)
+    sel = np.flatnonzero(result.t[:end] >= t_fit)
+    return result.t[sel], err[sel]
