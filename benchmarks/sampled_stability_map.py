@@ -16,7 +16,7 @@ loop's oscillation under the hold moves the tip along the surface as well (the t
 of force error), so a slide at B1's own speed scale reverses, and the contact sticks, once the error grows past a
 few newtons; and the loop's poles move with the pose (σ by ~4 % per cm along x), so the slide must not carry the
 tip far in the fit window (``SPEED`` · 2 s = 0.4 mm). Writes benchmarks/out/sampled_stability_map.png and .json,
-prints the poles, a table, and the diagnosis of the earlier runs' low readings (:func:`diagnose`) (~1 min).
+prints the poles, a table, and the diagnosis of the earlier runs' low readings (:func:`diagnose`) (~15 s).
 
     PYTHONPATH=$PWD python3 benchmarks/sampled_stability_map.py [--no-runs]
 """
