@@ -107,7 +107,8 @@ def main() -> None:
         s = steady(r.t, r["contact.tip.F_n"])
         paths = ", ".join(sorted({p["path"] for p in r.stats["paths"].values()}))
         if "diverged_at" in s:
-            print(f"{label:40s} {'diverged at t = %.3f s' % s['diverged_at']:>40s} {cpu:8.2f}  {paths}")
+            diverged = f"diverged at t = {s['diverged_at']:.3f} s"
+            print(f"{label:40s} {diverged:>40s} {cpu:8.2f}  {paths}")
         else:
             print(f"{label:40s} {s['amplitude']:14.3f} {s['period']:11.4f} {s['mean']:13.3f} {cpu:8.2f}  {paths}")
     figure(results)
