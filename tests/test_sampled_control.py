@@ -59,7 +59,16 @@ class _Integrator(Controller):
         return np.array([inp.z[0], 0.0]), np.array([2.0 - inp.t])
 
 
-LAWS = (_Clock, _Probe, _Integrator)
+class _Ramp(Controller):
+    """τ = (20 t, 0) [N·m] of the measured time alone: a held staircase that grows by 20 N·m/s."""
+
+    name = "_test_ramp"
+
+    def command(self, inp):
+        return np.array([20.0 * inp.t, 0.0]), None
+
+
+LAWS = (_Clock, _Probe, _Integrator, _Ramp)
 
 
 @pytest.fixture(autouse=True)
@@ -303,3 +312,24 @@ def test_autos_step_budget_runs_on_over_the_sample_instants():
     assert r.stats.get("auto_switches") == 1 and by_method.get("Radau", 0) > 0
     # the budget spent over many 1 ms segments (the DOP853 ones, with events between): none took it alone
     assert by_method["DOP853C"] > 100 and STEP_BUDGET < r.stats["steps"]
+
+
+# ---- with joint friction -------------------------------------------------------------------------------------
+
+
+def test_a_stuck_joint_breaks_away_at_the_first_sample_whose_held_command_passes_its_static_limit():
+    """B1 at rest, its tip bonded on a frictionless surface, both joints stuck by dry friction: the held command
+    (20 t_k, 0) [N·m] jumps at each sample and the joint's holding torque with it, so q1 (τ_s = 0.51 N·m) breaks
+    away at the first sample past 0.51 N·m, t = 0.026 s at 1 kHz (no step of the segments sees it: the jump does)."""
+    doc = b1(duration=0.04, output_rate=1000.0, kind="_test_ramp", sample_rate=RATE)
+    doc["robot"]["v0"] = [0.0, 0.0]
+    doc["robot"]["joint"] = {"q1": {"friction": 0.51}, "q2": {"friction": 0.5}}
+    doc["contact"]["tip"]["tangent"] = {"model": "free"}
+    doc["phase"][0].pop("force")
+    result = simulate(parse_scene(doc))
+    slips = [e for e in result.events if e["kind"] == "joint_slip"]
+    assert slips and slips[0]["name"] == "q1"
+    assert slips[0]["torque"] == pytest.approx(-0.52, rel=1e-8)  # the holding torque opposes the held 20 t_k
+    assert slips[0]["t"] == pytest.approx(0.026, abs=1e-12)
+    stuck = result["joint_stuck"][:, 0]
+    assert np.all(stuck[result.t < 0.026 - 1e-9] == 1.0) and np.all(stuck[result.t > 0.026 + 1e-9] == 0.0)

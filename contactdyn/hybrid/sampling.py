@@ -5,7 +5,8 @@ state between samples. The loop (:mod:`contactdyn.hybrid.loop`) ends a segment a
 t_k = k / rate [s] (no step straddles the hold's jump) and calls :meth:`SampledPhases.take` there: what the law
 measures at (t_k, x) (:func:`~contactdyn.model.dynamics.sample_input`, through the sensors), its command from
 the measurement of ``delay`` samples ago written into the held slots, its own states advanced by one period.
-The events that the command's jump fires (a contact force or a limit torque through zero) are then handled as
+The events that the command's jump fires (a contact force or a limit torque through zero, a stuck joint's
+holding torque past its static limit) are then handled as
 at a corner of the set-points (:func:`~contactdyn.hybrid.events.fired_across`). A sampled phase also samples at
 its start, its held slots first set to the command in force just before (the previous phase's), so that what
 it measures there is what acts.
@@ -20,6 +21,7 @@ import numpy as np
 from ..laws.controllers.sampled import SampledController, Sampler
 from ..model.contact import ContactMode
 from ..model.dynamics import sample_input
+from ..model.joint_friction import STUCK
 from ..model.phases import Phase
 from .events import JUMPING, fired_across, segment_events
 
@@ -80,9 +82,10 @@ class SampledPhases:
         """The events whose function falls through zero from ``before`` to ``after`` at t [s] (a held command's
         jump), in list order; only a mode with a function of forces is checked (:data:`JUMPING`)."""
         contacts = self.system.contacts
-        if not phase.limits and not any(m.touching and (m.stuck or not c.spec.bonded)
-                                        for c, m in zip(contacts, modes, strict=True)):
-            return []  # (no separate, slip or release event in this mode: the others read the state alone)
+        stuck_joint = any(mode == STUCK for _, mode in phase.joint_modes)  # its holding torque jumps with τ
+        if not phase.limits and not stuck_joint and not any(m.touching and (m.stuck or not c.spec.bonded)
+                                                            for c, m in zip(contacts, modes, strict=True)):
+            return []  # (no separate, slip, release or joint_slip event in this mode: the others read the state alone)
         events, _ = segment_events(self.system, modes, phase, t, before, plan if plan.ok else None)
         events = [e for e in events if e.kind in JUMPING]
         return fired_across(events, t, t, before, after) if events else []
