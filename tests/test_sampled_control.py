@@ -254,8 +254,7 @@ def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
 @pytest.mark.parametrize("controller, key, expected", [
     ({"delay": 2}, "controller.delay", "set sample_rate"),
     ({"sensor": {"force_noise": 1.0}}, "controller.sensor", "set sample_rate"),
-    ({"sample_rate": 0.0}, "controller.sample_rate", "a number > 0"),
-    ({"sample_rate": -5.0}, "controller.sample_rate", "a number > 0"),
+    ({"sample_rate": -5.0}, "controller.sample_rate", "a number >= 0"),
     ({"sample_rate": 1e3, "delay": -1}, "controller.delay", "an integer >= 0"),
     ({"sample_rate": 1e3, "delay": 1.5}, "controller.delay", "an integer"),
     ({"sample_rate": "fast"}, "controller.sample_rate", "a number"),
@@ -269,6 +268,17 @@ def test_bad_sampling_keys_are_named_with_the_file(tmp_path, controller, key, ex
         parse_scene(b1(**controller), file=str(tmp_path / "s.toml"))
     message = str(err.value)
     assert key in message and expected in message and "s.toml" in message
+
+
+def test_a_sample_rate_of_zero_turns_a_scenes_sampled_loop_off_by_one_override():
+    """``--set controller.sample_rate=0`` on a sampled scene with a delay and sensors: the continuous law, bit for bit
+    the scene without the three keys."""
+    sampled = b1(sample_rate=RATE, delay=2, sensor={"force_noise": 1.0, "seed": 3})
+    off = simulate(parse_scene(sampled, {"controller.sample_rate": 0.0}))
+    continuous = simulate(parse_scene(b1()))
+    assert "samples" not in off.stats
+    for channel in ("contact.tip.F_n", "q"):
+        assert np.array_equal(off[channel], continuous[channel])
 
 
 def test_a_phase_controller_table_merges_its_sampling_over_the_scenes():
