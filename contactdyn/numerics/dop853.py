@@ -517,11 +517,12 @@ def solution_status(ierr: int, watch: _EventWatch, t_last: float) -> tuple[int, 
     return 0, "The solver successfully reached the end of the integration interval.", t_last
 
 
-def _proposal(steps: _Steps, rtol: float, atol: float) -> float:
-    """[s] The step after the last accepted one by solve_ivp's control: h min(MAX_FACTOR, SAFETY err^(−1/8)) with
-    that step's error norm, from its stages (k1 of its block is f(t_new): f(t_old) from the step before)."""
-    i = len(steps.t) - 2
-    h = steps.t[-1] - steps.t[-2]
+def _proposal(steps: _Steps, rtol: float, atol: float, i: int = -1) -> float:
+    """[s] The step after accepted step i (−1: the last) by solve_ivp's control: h min(MAX_FACTOR, SAFETY
+    err^(−1/8)) with that step's error norm, from its stages (k1 of its block is f(t_new): f(t_old) from the step
+    before)."""
+    i = len(steps.t) - 2 if i < 0 else i
+    h = steps.t[i + 1] - steps.t[i]
     block = steps.blocks[i].copy()
     block[_F_NEW] = steps.f_old(i)  # the row of stage 0 in _ROW_STAGE's layout
     y_old = steps.y_old(i)

@@ -123,7 +123,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
             break
         piece.t[-1] = t = stop  # (the core's last step ends within rounding of it)
         before = piece.end_x if piece.end_x is not None else piece.blocks[-1][_Y_NEW]
-        h = _proposal(piece, rtol, atol)
+        h = _carried(piece, h, rtol, atol)
         y = np.asarray(hold.take(t, before), float)
         f = np.asarray(fun(t, y), float)  # the FSAL value was before the jump
         calls[0] += 1
@@ -131,6 +131,18 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
             ierr, after = 2, y
             break
     return _solution(pieces, watch, ierr, t_end, after, calls[0] + (core.calls if core else 0), nreject, rtol, atol)
+
+
+def _carried(piece: _Steps, h_start: float, rtol: float, atol: float) -> float:
+    """[s] The step to go on with after a piece that ended at a sample instant: its last step was clipped to land
+    there, so where that step's own error lets the step grow, the proposal it was clipped from (made after the step
+    before, or the piece's first step ``h_start`` [s]), if larger; else the clipped step's own proposal."""
+    h_last = piece.t[-1] - piece.t[-2]
+    own = _proposal(piece, rtol, atol)
+    if own < h_last:  # the clipped step's error already asks for a shorter one
+        return own
+    before = h_start if len(piece.t) == 2 else _proposal(piece, rtol, atol, len(piece.t) - 3)
+    return max(own, before)
 
 
 def _solution(pieces: list[_Steps], watch: _EventWatch, ierr: int, t_end: float, after: np.ndarray | None,
