@@ -2,7 +2,9 @@
 
 ``DOP853C`` (the default) is DOP853 stepped by scipy's compiled core (:mod:`contactdyn.numerics.dop853`):
 the same method, the same steps and events as ``solve_ivp``'s ``DOP853`` (which stays selectable),
-at a fraction of its per-step cost.
+at a fraction of its per-step cost. It alone takes a sampled controller's sample instants as step boundaries
+inside one run (``integrate``'s ``hold``, :mod:`contactdyn.numerics.held_steps`); the hybrid loop ends a
+segment at each for the other methods.
 
 ``RK4`` is the classical fixed-step Runge–Kutta method (4 calls per step) with step
 ``solver.max_step`` [s] (required), cubic Hermite dense output and scipy's event location:
