@@ -22,6 +22,7 @@ from contactdyn.laws.controllers import CONTROLLERS, Controller, register
 from contactdyn.laws.controllers.sampled import SampledController
 from contactdyn.laws.sensors import ForceSensor, SensorSpec
 from contactdyn.model.system import System
+from contactdyn.numerics.held_steps import PiecewiseDense
 
 ROOT = Path(__file__).resolve().parents[1]
 B1 = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
@@ -96,19 +97,28 @@ def run_of(doc: dict) -> tuple[HybridRun, object]:
     return run, run.run(0.0)
 
 
+def starts(run: HybridRun) -> list[tuple[float, object]]:
+    """(t [s], segment) of each segment's start and each sample instant a segment's steps carried inside
+    (numerics.held_steps: a piece of steps starts there)."""
+    return [(float(t0), seg) for seg in run.segments
+            for t0 in (seg.sol.starts if isinstance(seg.sol, PiecewiseDense) else [seg.t0])]
+
+
 def held_commands(run: HybridRun) -> np.ndarray:
-    """The held command at each segment's start (each sample's, in a run without events)."""
+    """The held command at each segment's and each carried sample's start (each sample's, in a run without
+    events)."""
     s = run.system
     z0 = 2 * s.nQ + s.z_slices[0].start
-    return np.array([np.asarray(seg.sol(seg.t0))[z0:z0 + s.nv] for seg in run.segments])
+    return np.array([np.asarray(seg.sol(t0))[z0:z0 + s.nv] for t0, seg in starts(run)])
 
 
 # ---- the hold ------------------------------------------------------------------------------
 def test_the_command_is_piecewise_constant_with_jumps_exactly_at_the_samples():
     run, r = run_of(b1(sample_rate=RATE))
     assert isinstance(run.system.controllers[0], SampledController)
-    starts = np.array([seg.t0 for seg in run.segments])
-    np.testing.assert_array_equal(starts, np.arange(20) / RATE)  # a segment per sample period, starting at k/rate
+    assert len(run.segments) == 1  # one segment: the compiled DOP853 takes the samples as step boundaries
+    begun = np.array([t0 for t0, _ in starts(run)])
+    np.testing.assert_array_equal(begun, np.arange(20) / RATE)  # a piece of steps per period, starting at k/rate
     assert r.stats["samples"] == 20
     k = np.floor(r.t * RATE + 1e-9).astype(int)  # the sample in force at each output time
     tau = r["tau_cmd"]
@@ -125,11 +135,11 @@ def test_the_held_command_is_the_continuous_law_at_the_sample():
     held = held_commands(run)
     continuous = System(parse_scene(b1()))
     phase = continuous.start_phase(0, 0.0, run.segments[0].sol(0.0)[:continuous.n], None)
-    for seg, tau in zip(run.segments[:5], held[:5], strict=True):
-        x = np.asarray(seg.sol(seg.t0))
+    for (t0, seg), tau in zip(starts(run)[:5], held[:5], strict=True):
+        x = np.asarray(seg.sol(t0))
         xc = np.concatenate([x[:2 * run.system.nQ], x[2 * run.system.nQ + 2:]])  # without the held slots
         modes = seg.modes
-        np.testing.assert_allclose(tau, continuous.evaluate(seg.t0, xc, modes, phase).tau_cmd, rtol=1e-13, atol=1e-12)
+        np.testing.assert_allclose(tau, continuous.evaluate(t0, xc, modes, phase).tau_cmd, rtol=1e-13, atol=1e-12)
 
 
 def test_a_delay_of_d_samples_shifts_the_command_by_exactly_d_samples():
@@ -183,9 +193,9 @@ def test_the_encoders_quantise_q_to_their_resolution():
     res = 1e-3
     _Probe.seen.clear()
     run, _ = run_of(b1(kind="_test_probe", sample_rate=RATE, sensor={"encoder_resolution": res}))
-    assert len(_Probe.seen) == len(run.segments)
-    for (t, q, _), seg in zip(_Probe.seen, run.segments, strict=True):
-        assert t == seg.t0
+    assert len(_Probe.seen) == len(starts(run))
+    for (t, q, _), (t0, seg) in zip(_Probe.seen, starts(run), strict=True):
+        assert t == t0
         np.testing.assert_allclose(q / res, np.round(q / res), rtol=0, atol=1e-9)
         assert np.all(np.abs(q - np.asarray(seg.sol(t))[:2]) <= 0.5 * res + 1e-15)
     assert {round(float(qi / res)) for _, q, _ in _Probe.seen for qi in q} != set()
@@ -222,12 +232,12 @@ def test_a_sampled_mode_runs_on_the_compiled_plan_and_agrees_with_the_readable_m
     assert {row["path"] for row in r.stats["paths"].values()} == {"compiled plan"}
     plan = next(iter(run.plans.values()))
     assert plan.ok and not plan.python_command and plan.held is not None
-    seg = run.segments[7]
-    x = np.asarray(seg.sol(seg.t0)).copy()
+    t0, seg = starts(run)[7]
+    x = np.asarray(seg.sol(t0)).copy()
     for held in (x[plan.held], np.array([30.0, -12.0])):
         x[plan.held] = held
-        ref = run.system.evaluate(seg.t0 + 3e-4, x, seg.modes, seg.phase).xdot
-        np.testing.assert_allclose(plan.rhs(seg.t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+        ref = run.system.evaluate(t0 + 3e-4, x, seg.modes, seg.phase).xdot
+        np.testing.assert_allclose(plan.rhs(t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
 
 
 def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
@@ -238,11 +248,11 @@ def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
     assert r.stats["fallback_modes"] == {}  # (each plan checked itself against the readable model)
     assert {row["path"] for row in r.stats["paths"].values()} == {"compiled call"}
     plan = next(iter(run.plans.values()))
-    seg = run.segments[7]
-    x = np.asarray(seg.sol(seg.t0)).copy()
+    t0, seg = starts(run)[7]
+    x = np.asarray(seg.sol(t0)).copy()
     x[plan.held] = [3.0, -1.0]
-    ref = run.system.evaluate(seg.t0 + 3e-4, x, seg.modes, seg.phase).xdot
-    np.testing.assert_allclose(plan.rhs(seg.t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+    ref = run.system.evaluate(t0 + 3e-4, x, seg.modes, seg.phase).xdot
+    np.testing.assert_allclose(plan.rhs(t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
     k = np.floor(r.t * RATE + 1e-9).astype(int)
     for j in range(20):  # the voltages follow the motors' speeds between samples, the command does not
         block, u = r["tau_cmd"][k == j], r["u"][k == j]
@@ -303,10 +313,11 @@ def test_a_phase_begun_at_a_touch_samples_at_once_and_then_on_the_grid():
     z0 = 2 * s.nQ + s.z_slices[1].start
     assert np.asarray(first.sol(first.t0))[z0] != 0.0  # the press law's first command, held from the touch
     n = math.ceil(duration * rate)
-    k = np.array([seg.t0 for seg in run.segments]) * rate
+    begun = [t0 for t0, _ in starts(run)]
+    k = np.array(begun) * rate
     on_grid = np.abs(k - np.round(k)) <= 1e-9  # (the trapezoid's corners fall on the grid: a float past it)
     assert set(np.round(k[on_grid]).astype(int)) == set(range(n))  # the grid goes on through the phase change
-    others = {seg.t0 for seg, on in zip(run.segments, on_grid, strict=True) if not on}
+    others = {t0 for t0, on in zip(begun, on_grid, strict=True) if not on}
     assert others == {e["t"] for e in r.events} | {touch + 0.1}  # events, the force ramp's end
     assert r.stats["samples"] == n + 1  # the grid and the press law's first sample at the touch
 
@@ -320,8 +331,9 @@ def test_autos_step_budget_runs_on_over_the_sample_instants():
     r = simulate(str(scene), {"duration": 0.25, "controller.sample_rate": RATE})
     by_method = r.stats["segments_by_method"]
     assert r.stats.get("auto_switches") == 1 and by_method.get("Radau", 0) > 0
-    # the budget spent over many 1 ms segments (the DOP853 ones, with events between): none took it alone
-    assert by_method["DOP853C"] > 100 and STEP_BUDGET < r.stats["steps"]
+    # the budget spent over the sample instants: the DOP853 segments carry them as step boundaries (a few segments,
+    # events between, for 250 samples), the Radau ones end at each
+    assert by_method["DOP853C"] < 10 and r.stats["samples"] == 250 and STEP_BUDGET < r.stats["steps"]
 
 
 # ---- with joint friction -------------------------------------------------------------------------------------
