@@ -10,8 +10,17 @@ paths the modes ran on, the CPU per sample beyond the continuous run, and the sa
 continuous one (tip [m] and contact force [N], max over the output samples: the hold's own effect, first order in
 1/rate, not an error of the integration).
 
-Every sample instant ends a segment, so a scene whose continuous steps are longer than the sample period takes at
-least one step per period (B1: 243 steps over 2 s continuous, >= 2000 at 1 kHz): its ratio is bound by that.
+With the compiled DOP853 a sample instant is a step boundary inside one segment (numerics.held_steps: the step
+that reaches it is clipped to land on it, the held command jumps, f is evaluated again there); with other methods
+it ends a segment. Either way a scene whose continuous steps are longer than the sample period takes at least one
+step per period (B1: 243 steps over 2 s continuous, >= 2000 at 1 kHz): its ratio is bound by that. Only where the
+continuous steps are already about as short as the period (``stiff_force``: B1 on a 1e7 N/m surface with a 0.1 kg
+surface mass, benchmarks/stiff_force.toml) can a sampled run cost little more than the continuous one.
+
+The CPU per sample beyond the continuous run is split into: ``steps`` (the extra steps at the continuous run's CPU
+per step: output and set-up included, so an upper estimate), ``take`` (the sample itself: the measurement through
+the readable model or the plan, the sensors, the law; timed around SampledPhases.take) and ``rest`` (what remains:
+the re-evaluation of f after the jump, the events across it, the pieces' bookkeeping and output).
 ``--profile``: cProfile of the first scene's sampled run (the 25 costliest functions, cumulative).
 
 Writes benchmarks/out/sampled_cost.json and .csv.
@@ -24,6 +33,7 @@ import cProfile
 import csv
 import pstats
 import sys
+import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -32,13 +42,32 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn import simulate  # noqa: E402
+from contactdyn.hybrid.sampling import SampledPhases  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
-SCENES = ("b1", "case1_cart", "case3_a_force")
+HERE = Path(__file__).parent
+SCENES = ("b1", "case1_cart", "case3_a_force", "stiff_force")
+FILES = {"stiff_force": str(HERE / "stiff_force.toml")}  #: scenes of benchmarks/ by name
+_TAKEN = [0.0]  #: [s] CPU inside SampledPhases.take since the last reset
+
+
+def _timed_take(take):
+    def timed(self, *args, **kwargs):
+        c0 = time.process_time()
+        try:
+            return take(self, *args, **kwargs)
+        finally:
+            _TAKEN[0] += time.process_time() - c0
+    return timed
 
 
 def _call(name: str, overrides: dict):
-    return lambda: simulate(name, overrides)
+    def run():
+        _TAKEN[0] = 0.0
+        result = simulate(FILES.get(name, name), overrides)
+        result.stats["take_cpu_s"] = _TAKEN[0]
+        return result
+    return run
 
 
 def _difference(a, b) -> dict:
@@ -61,6 +90,11 @@ def compare(name: str, rate: float, repeats: int) -> dict:
     c, s = row["continuous"], row["sampled"]
     row["ratio"] = s["cpu_s"] / c["cpu_s"]
     row["us_per_sample"] = (s["cpu_s"] - c["cpu_s"]) / max(s["samples"], 1) * 1e6
+    per_step = c["cpu_s"] / max(c["steps"], 1)  # [s] the continuous run's CPU per step, all included
+    n = max(s["samples"], 1)
+    steps_us = (s["steps"] - c["steps"]) * per_step / n * 1e6
+    take_us = times["sampled"].last.stats["take_cpu_s"] / n * 1e6
+    row["per_sample_us"] = {"steps": steps_us, "take": take_us, "rest": row["us_per_sample"] - steps_us - take_us}
     row["rhs_per_sample"] = (s["rhs_evals"] - c["rhs_evals"]) / max(s["samples"], 1)
     row["difference"] = _difference(times["sampled"].last, times["continuous"].last)
     return row
@@ -68,9 +102,9 @@ def compare(name: str, rate: float, repeats: int) -> dict:
 
 def profile(name: str, rate: float) -> None:
     overrides = {"controller.sample_rate": rate}
-    simulate(name, overrides)  # compiled and cached first
+    simulate(FILES.get(name, name), overrides)  # compiled and cached first
     prof = cProfile.Profile()
-    prof.runcall(simulate, name, overrides)
+    prof.runcall(simulate, FILES.get(name, name), overrides)
     pstats.Stats(prof).sort_stats("cumulative").print_stats(25)
 
 
@@ -81,16 +115,19 @@ def main() -> None:
     ap.add_argument("--rate", type=float, default=1000.0, help="[Hz] the sample rate")
     ap.add_argument("--profile", action="store_true")
     args = ap.parse_args()
+    SampledPhases.take = _timed_take(SampledPhases.take)
     rows = []
     print(f"{'scene':16s} {'cont. CPU [s]':>13s} {'sampled [s]':>11s} {'ratio':>6s} {'steps c/s':>11s} "
-          f"{'us/sample':>9s} {'calls/sample':>12s} {'tip diff [m]':>12s} {'F diff [N]':>10s}  sampled paths")
+          f"{'us/sample':>9s} {'(steps':>6s} {'take':>5s} {'rest)':>6s} {'calls/sample':>12s} {'tip diff [m]':>12s} "
+          f"{'F diff [N]':>10s}  sampled paths")
     for name in args.scenes:
-        simulate(name, {"controller.sample_rate": args.rate})  # (compiled and cached before the timing)
+        simulate(FILES.get(name, name), {"controller.sample_rate": args.rate})  # (compiled and cached first)
         row = compare(name, args.rate, args.repeats)
         rows.append(row)
-        c, s = row["continuous"], row["sampled"]
+        c, s, part = row["continuous"], row["sampled"], row["per_sample_us"]
         print(f"{name:16s} {c['cpu_s']:13.3f} {s['cpu_s']:11.3f} {row['ratio']:6.2f} "
-              f"{c['steps']:5d}/{s['steps']:<5d} {row['us_per_sample']:9.0f} {row['rhs_per_sample']:12.1f} "
+              f"{c['steps']:5d}/{s['steps']:<5d} {row['us_per_sample']:9.0f} {part['steps']:6.0f} {part['take']:5.0f} "
+              f"{part['rest']:6.0f} {row['rhs_per_sample']:12.1f} "
               f"{row['difference']['tip_m']:12.3g} {row['difference']['force_N']:10.3g}  {', '.join(s['paths'])}")
     write_report(OUT / "sampled_cost.json", {"rate_hz": args.rate, "repeats": args.repeats}, rows)
     with (OUT / "sampled_cost.csv").open("w", newline="") as f:

@@ -50,11 +50,11 @@ class _Recorded(HybridRun):
         super().__init__(system)
         self.switch, self.switch_method, self.record, self._t0 = switch, method, [], 0.0
 
-    def _segment(self, t, t_end, x, modes, phase):
+    def _segment(self, t, t_end, x, modes, phase, t_sample=None):
         self._t0 = t
-        sol, events, fun = super()._segment(t, t_end, x, modes, phase)
+        sol, events, fun, held = super()._segment(t, t_end, x, modes, phase, t_sample)
         self.record.append((sol, fun))
-        return sol, events, fun
+        return sol, events, fun, held
 
     def _method(self, modes, method):
         if self.switch is not None and self._t0 >= self.switch:

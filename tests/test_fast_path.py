@@ -175,3 +175,19 @@ def test_the_assembly_probed_all_at_once_is_probed_one_by_one():
             assert np.array_equal(one_by_one, plan.P)
             checked += 1
     assert checked >= 5
+
+
+def test_the_self_check_holds_each_rate_to_the_size_of_its_terms_not_of_its_value_at_an_equilibrium():
+    """At an equilibrium a law's integral state has a rate of ~1e-7 made of forces of 50 N times a gain of
+    400/s: the plan and the readable model differ there by rounding (~1e-9), which a tolerance relative to the
+    rate's own value called a disagreement and ran the mode on the readable model. The perturbed state of the
+    check shows the terms' size; a law changed on one path only is still caught
+    (test_laws.test_a_friction_law_changed_on_the_readable_path_only_is_caught)."""
+    from contactdyn.scene.reader import read_toml
+
+    document = read_toml(sims_dir() / "force_loop_real_cell.toml")
+    for key in ("sample_rate", "delay"):  # the scene's continuous twin: its law acts at every instant
+        document["controller"].pop(key, None)
+    r = run_system(System(parse_scene(document, file=str(sims_dir() / "force_loop_real_cell.toml"))))
+    assert r.stats["fallback_modes"] == {}
+    assert all(row["path"] != "readable model" for row in r.stats["paths"].values())

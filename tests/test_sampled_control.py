@@ -22,6 +22,7 @@ from contactdyn.laws.controllers import CONTROLLERS, Controller, register
 from contactdyn.laws.controllers.sampled import SampledController
 from contactdyn.laws.sensors import ForceSensor, SensorSpec
 from contactdyn.model.system import System
+from contactdyn.numerics.held_steps import PiecewiseDense
 
 ROOT = Path(__file__).resolve().parents[1]
 B1 = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
@@ -59,7 +60,16 @@ class _Integrator(Controller):
         return np.array([inp.z[0], 0.0]), np.array([2.0 - inp.t])
 
 
-LAWS = (_Clock, _Probe, _Integrator)
+class _Ramp(Controller):
+    """τ = (20 t, 0) [N·m] of the measured time alone: a held staircase that grows by 20 N·m/s."""
+
+    name = "_test_ramp"
+
+    def command(self, inp):
+        return np.array([20.0 * inp.t, 0.0]), None
+
+
+LAWS = (_Clock, _Probe, _Integrator, _Ramp)
 
 
 @pytest.fixture(autouse=True)
@@ -87,19 +97,28 @@ def run_of(doc: dict) -> tuple[HybridRun, object]:
     return run, run.run(0.0)
 
 
+def starts(run: HybridRun) -> list[tuple[float, object]]:
+    """(t [s], segment) of each segment's start and each sample instant a segment's steps carried inside
+    (numerics.held_steps: a piece of steps starts there)."""
+    return [(float(t0), seg) for seg in run.segments
+            for t0 in (seg.sol.starts if isinstance(seg.sol, PiecewiseDense) else [seg.t0])]
+
+
 def held_commands(run: HybridRun) -> np.ndarray:
-    """The held command at each segment's start (each sample's, in a run without events)."""
+    """The held command at each segment's and each carried sample's start (each sample's, in a run without
+    events)."""
     s = run.system
     z0 = 2 * s.nQ + s.z_slices[0].start
-    return np.array([np.asarray(seg.sol(seg.t0))[z0:z0 + s.nv] for seg in run.segments])
+    return np.array([np.asarray(seg.sol(t0))[z0:z0 + s.nv] for t0, seg in starts(run)])
 
 
 # ---- the hold ------------------------------------------------------------------------------
 def test_the_command_is_piecewise_constant_with_jumps_exactly_at_the_samples():
     run, r = run_of(b1(sample_rate=RATE))
     assert isinstance(run.system.controllers[0], SampledController)
-    starts = np.array([seg.t0 for seg in run.segments])
-    np.testing.assert_array_equal(starts, np.arange(20) / RATE)  # a segment per sample period, starting at k/rate
+    assert len(run.segments) == 1  # one segment: the compiled DOP853 takes the samples as step boundaries
+    begun = np.array([t0 for t0, _ in starts(run)])
+    np.testing.assert_array_equal(begun, np.arange(20) / RATE)  # a piece of steps per period, starting at k/rate
     assert r.stats["samples"] == 20
     k = np.floor(r.t * RATE + 1e-9).astype(int)  # the sample in force at each output time
     tau = r["tau_cmd"]
@@ -116,11 +135,11 @@ def test_the_held_command_is_the_continuous_law_at_the_sample():
     held = held_commands(run)
     continuous = System(parse_scene(b1()))
     phase = continuous.start_phase(0, 0.0, run.segments[0].sol(0.0)[:continuous.n], None)
-    for seg, tau in zip(run.segments[:5], held[:5], strict=True):
-        x = np.asarray(seg.sol(seg.t0))
+    for (t0, seg), tau in zip(starts(run)[:5], held[:5], strict=True):
+        x = np.asarray(seg.sol(t0))
         xc = np.concatenate([x[:2 * run.system.nQ], x[2 * run.system.nQ + 2:]])  # without the held slots
         modes = seg.modes
-        np.testing.assert_allclose(tau, continuous.evaluate(seg.t0, xc, modes, phase).tau_cmd, rtol=1e-13, atol=1e-12)
+        np.testing.assert_allclose(tau, continuous.evaluate(t0, xc, modes, phase).tau_cmd, rtol=1e-13, atol=1e-12)
 
 
 def test_a_delay_of_d_samples_shifts_the_command_by_exactly_d_samples():
@@ -174,9 +193,9 @@ def test_the_encoders_quantise_q_to_their_resolution():
     res = 1e-3
     _Probe.seen.clear()
     run, _ = run_of(b1(kind="_test_probe", sample_rate=RATE, sensor={"encoder_resolution": res}))
-    assert len(_Probe.seen) == len(run.segments)
-    for (t, q, _), seg in zip(_Probe.seen, run.segments, strict=True):
-        assert t == seg.t0
+    assert len(_Probe.seen) == len(starts(run))
+    for (t, q, _), (t0, seg) in zip(_Probe.seen, starts(run), strict=True):
+        assert t == t0
         np.testing.assert_allclose(q / res, np.round(q / res), rtol=0, atol=1e-9)
         assert np.all(np.abs(q - np.asarray(seg.sol(t))[:2]) <= 0.5 * res + 1e-15)
     assert {round(float(qi / res)) for _, q, _ in _Probe.seen for qi in q} != set()
@@ -213,12 +232,12 @@ def test_a_sampled_mode_runs_on_the_compiled_plan_and_agrees_with_the_readable_m
     assert {row["path"] for row in r.stats["paths"].values()} == {"compiled plan"}
     plan = next(iter(run.plans.values()))
     assert plan.ok and not plan.python_command and plan.held is not None
-    seg = run.segments[7]
-    x = np.asarray(seg.sol(seg.t0)).copy()
+    t0, seg = starts(run)[7]
+    x = np.asarray(seg.sol(t0)).copy()
     for held in (x[plan.held], np.array([30.0, -12.0])):
         x[plan.held] = held
-        ref = run.system.evaluate(seg.t0 + 3e-4, x, seg.modes, seg.phase).xdot
-        np.testing.assert_allclose(plan.rhs(seg.t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+        ref = run.system.evaluate(t0 + 3e-4, x, seg.modes, seg.phase).xdot
+        np.testing.assert_allclose(plan.rhs(t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
 
 
 def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
@@ -229,11 +248,11 @@ def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
     assert r.stats["fallback_modes"] == {}  # (each plan checked itself against the readable model)
     assert {row["path"] for row in r.stats["paths"].values()} == {"compiled call"}
     plan = next(iter(run.plans.values()))
-    seg = run.segments[7]
-    x = np.asarray(seg.sol(seg.t0)).copy()
+    t0, seg = starts(run)[7]
+    x = np.asarray(seg.sol(t0)).copy()
     x[plan.held] = [3.0, -1.0]
-    ref = run.system.evaluate(seg.t0 + 3e-4, x, seg.modes, seg.phase).xdot
-    np.testing.assert_allclose(plan.rhs(seg.t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+    ref = run.system.evaluate(t0 + 3e-4, x, seg.modes, seg.phase).xdot
+    np.testing.assert_allclose(plan.rhs(t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
     k = np.floor(r.t * RATE + 1e-9).astype(int)
     for j in range(20):  # the voltages follow the motors' speeds between samples, the command does not
         block, u = r["tau_cmd"][k == j], r["u"][k == j]
@@ -245,8 +264,7 @@ def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
 @pytest.mark.parametrize("controller, key, expected", [
     ({"delay": 2}, "controller.delay", "set sample_rate"),
     ({"sensor": {"force_noise": 1.0}}, "controller.sensor", "set sample_rate"),
-    ({"sample_rate": 0.0}, "controller.sample_rate", "a number > 0"),
-    ({"sample_rate": -5.0}, "controller.sample_rate", "a number > 0"),
+    ({"sample_rate": -5.0}, "controller.sample_rate", "a number >= 0"),
     ({"sample_rate": 1e3, "delay": -1}, "controller.delay", "an integer >= 0"),
     ({"sample_rate": 1e3, "delay": 1.5}, "controller.delay", "an integer"),
     ({"sample_rate": "fast"}, "controller.sample_rate", "a number"),
@@ -260,6 +278,17 @@ def test_bad_sampling_keys_are_named_with_the_file(tmp_path, controller, key, ex
         parse_scene(b1(**controller), file=str(tmp_path / "s.toml"))
     message = str(err.value)
     assert key in message and expected in message and "s.toml" in message
+
+
+def test_a_sample_rate_of_zero_turns_a_scenes_sampled_loop_off_by_one_override():
+    """``--set controller.sample_rate=0`` on a sampled scene with a delay and sensors: the continuous law, bit for bit
+    the scene without the three keys."""
+    sampled = b1(sample_rate=RATE, delay=2, sensor={"force_noise": 1.0, "seed": 3})
+    off = simulate(parse_scene(sampled, {"controller.sample_rate": 0.0}))
+    continuous = simulate(parse_scene(b1()))
+    assert "samples" not in off.stats
+    for channel in ("contact.tip.F_n", "q"):
+        assert np.array_equal(off[channel], continuous[channel])
 
 
 def test_a_phase_controller_table_merges_its_sampling_over_the_scenes():
@@ -284,10 +313,11 @@ def test_a_phase_begun_at_a_touch_samples_at_once_and_then_on_the_grid():
     z0 = 2 * s.nQ + s.z_slices[1].start
     assert np.asarray(first.sol(first.t0))[z0] != 0.0  # the press law's first command, held from the touch
     n = math.ceil(duration * rate)
-    k = np.array([seg.t0 for seg in run.segments]) * rate
+    begun = [t0 for t0, _ in starts(run)]
+    k = np.array(begun) * rate
     on_grid = np.abs(k - np.round(k)) <= 1e-9  # (the trapezoid's corners fall on the grid: a float past it)
     assert set(np.round(k[on_grid]).astype(int)) == set(range(n))  # the grid goes on through the phase change
-    others = {seg.t0 for seg, on in zip(run.segments, on_grid, strict=True) if not on}
+    others = {t0 for t0, on in zip(begun, on_grid, strict=True) if not on}
     assert others == {e["t"] for e in r.events} | {touch + 0.1}  # events, the force ramp's end
     assert r.stats["samples"] == n + 1  # the grid and the press law's first sample at the touch
 
@@ -301,5 +331,27 @@ def test_autos_step_budget_runs_on_over_the_sample_instants():
     r = simulate(str(scene), {"duration": 0.25, "controller.sample_rate": RATE})
     by_method = r.stats["segments_by_method"]
     assert r.stats.get("auto_switches") == 1 and by_method.get("Radau", 0) > 0
-    # the budget spent over many 1 ms segments (the DOP853 ones, with events between): none took it alone
-    assert by_method["DOP853C"] > 100 and STEP_BUDGET < r.stats["steps"]
+    # the budget spent over the sample instants: the DOP853 segments carry them as step boundaries (a few segments,
+    # events between, for 250 samples), the Radau ones end at each
+    assert by_method["DOP853C"] < 10 and r.stats["samples"] == 250 and STEP_BUDGET < r.stats["steps"]
+
+
+# ---- with joint friction -------------------------------------------------------------------------------------
+
+
+def test_a_stuck_joint_breaks_away_at_the_first_sample_whose_held_command_passes_its_static_limit():
+    """B1 at rest, its tip bonded on a frictionless surface, both joints stuck by dry friction: the held command
+    (20 t_k, 0) [N·m] jumps at each sample and the joint's holding torque with it, so q1 (τ_s = 0.51 N·m) breaks
+    away at the first sample past 0.51 N·m, t = 0.026 s at 1 kHz (no step of the segments sees it: the jump does)."""
+    doc = b1(duration=0.04, output_rate=1000.0, kind="_test_ramp", sample_rate=RATE)
+    doc["robot"]["v0"] = [0.0, 0.0]
+    doc["robot"]["joint"] = {"q1": {"friction": 0.51}, "q2": {"friction": 0.5}}
+    doc["contact"]["tip"]["tangent"] = {"model": "free"}
+    doc["phase"][0].pop("force")
+    result = simulate(parse_scene(doc))
+    slips = [e for e in result.events if e["kind"] == "joint_slip"]
+    assert slips and slips[0]["name"] == "q1"
+    assert slips[0]["torque"] == pytest.approx(-0.52, rel=1e-8)  # the holding torque opposes the held 20 t_k
+    assert slips[0]["t"] == pytest.approx(0.026, abs=1e-12)
+    stuck = result["joint_stuck"][:, 0]
+    assert np.all(stuck[result.t < 0.026 - 1e-9] == 1.0) and np.all(stuck[result.t > 0.026 + 1e-9] == 0.0)

@@ -53,6 +53,7 @@ from ..numerics.integrators import (
     STABILITY_RADIUS,
     STEP_BUDGET,
     FiniteDifferenceJacobian,
+    carries_hold,
     integrate,
     jacobian_eigenvalues,
     stability_bound,
@@ -187,7 +188,8 @@ class HybridRun:
                 continue
             stop = corner.before if corner else t_end
             sample = t_sample < stop - min_span(stop)
-            sol, events, fun = self._segment(t, t_sample if sample else stop, x, modes, phase)
+            sol, events, fun, held = self._segment(t, stop, x, modes, phase, t_sample if sample else None)
+            sample = sample and not held  # the segment ended at the sample (else the integrator took it)
             self.sampled.carry(sol, sample)  # auto's step budget runs on over sample instants
             t, x = float(sol.t[-1]), sol.y[:, -1].copy()
             h0, self.next_step = self.next_step, None
@@ -237,14 +239,20 @@ class HybridRun:
             x, modes, phase = self.transitions.handle(t_after, x, modes, phase, fired[0])
         return t_after, x, modes, phase
 
-    def _segment(self, t: float, t_end: float, x: np.ndarray, modes: list[ContactMode], phase: Phase):
-        """Integrate one smooth phase from t towards t_end [s]: (solution, its events, its right-hand side)."""
+    def _segment(self, t: float, t_end: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
+                 t_sample: float | None = None):
+        """Integrate one smooth phase from t towards t_end [s]: (solution, its events, its right-hand side, held).
+        ``t_sample`` [s]: a sampled law's next sample instant before t_end; a method that carries the hold takes it
+        and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
-        h0 = min(self.next_step, t_end - t) if self.next_step else None
         plan = self._plan(modes, phase, at=(t, x))
         fun = plan.rhs if plan.ok else system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
+            held = t_sample is not None and carries_hold(method)
+            end = t_sample if t_sample is not None and not held else t_end
+            h0 = min(self.next_step, end - t) if self.next_step else None
+            hold = self.sampled.hold(modes, phase, t_end) if held else None
             events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
             self.starts.record(t, x, events)
             events += self._watches(modes, method)
@@ -253,9 +261,9 @@ class HybridRun:
             finishing = method == self.resting and method != scene_method and not _launching(modes)
             scale = RESTING_TOL if finishing else 1.0
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
-                sol = integrate(self.work.wrap(rhs), (t, t_end), x, method, rtol=scale * self.solver.rtol,
+                sol = integrate(self.work.wrap(rhs), (t, end), x, method, rtol=scale * self.solver.rtol,
                                 atol=scale * self.solver.atol, max_step=self._max_step(modes, method), events=events,
-                                first_step=h0, jac=jac)
+                                first_step=h0, jac=jac, hold=hold)
             self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
             if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
                 break  # else a failed launch or finishing method: retry with the scene's
@@ -270,7 +278,7 @@ class HybridRun:
                                   f"({method}): {why}{_diagnose(self, sol, plan, fun, method)}")
         self.segments.append(Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
         self.stats["segments"] += 1
-        return sol, events, fun
+        return sol, events, fun, held
 
     def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
         """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was

@@ -1,11 +1,14 @@
-"""The hybrid loop's side of sampled-data control: sample instants as segment boundaries.
+"""The hybrid loop's side of sampled-data control: sample instants as step or segment boundaries.
 
 A phase whose controller is sampled (:mod:`contactdyn.laws.controllers.sampled`) holds its command in the
-state between samples. The loop (:mod:`contactdyn.hybrid.loop`) ends a segment at every sample instant
-t_k = k / rate [s] (no step straddles the hold's jump) and calls :meth:`SampledPhases.take` there: what the law
+state between samples. With the compiled DOP853 the integrator takes the sample instants t_k = k / rate [s] as
+step boundaries (:class:`Hold`, :mod:`contactdyn.numerics.held_steps`: no step straddles the hold's jump, one
+segment carries many samples); with any other method the loop (:mod:`contactdyn.hybrid.loop`) ends a segment at
+every t_k. Either way :meth:`SampledPhases.take` runs there: what the law
 measures at (t_k, x) (:func:`~contactdyn.model.dynamics.sample_input`, through the sensors), its command from
 the measurement of ``delay`` samples ago written into the held slots, its own states advanced by one period.
-The events that the command's jump fires (a contact force or a limit torque through zero) are then handled as
+The events that the command's jump fires (a contact force or a limit torque through zero, a stuck joint's
+holding torque past its static limit) are then handled as
 at a corner of the set-points (:func:`~contactdyn.hybrid.events.fired_across`). A sampled phase also samples at
 its start, its held slots first set to the command in force just before (the previous phase's), so that what
 it measures there is what acts.
@@ -18,12 +21,14 @@ import math
 import numpy as np
 
 from ..laws.controllers.sampled import SampledController, Sampler
+from ..laws.trajectory import min_span
 from ..model.contact import ContactMode
 from ..model.dynamics import sample_input
+from ..model.joint_friction import STUCK
 from ..model.phases import Phase
-from .events import JUMPING, fired_across, segment_events
+from .events import JUMPING, SlipWatch, fired_across, segment_events
 
-__all__ = ["SampledPhases"]
+__all__ = ["SampledPhases", "Hold"]
 
 
 class SampledPhases:
@@ -75,14 +80,23 @@ class SampledPhases:
         self.stats["samples"] += 1
         return x
 
+    def hold(self, modes: list[ContactMode], phase: Phase, stop: float) -> Hold:
+        """The phase's samples before ``stop`` [s] as step boundaries of one integration (numerics.held_steps)."""
+        return Hold(self, modes, phase, stop)
+
+    def jumps(self, modes: list[ContactMode], phase: Phase) -> bool:
+        """Can a held command's jump fire an event in this mode: a separate, slip, release or joint_slip event
+        (the others read the state alone)?"""
+        stuck_joint = any(mode == STUCK for _, mode in phase.joint_modes)  # its holding torque jumps with τ
+        return bool(phase.limits) or stuck_joint or any(m.touching and (m.stuck or not c.spec.bonded)
+                                                        for c, m in zip(self.system.contacts, modes, strict=True))
+
     def jumped(self, t: float, before: np.ndarray, after: np.ndarray, modes: list[ContactMode], phase: Phase,
                plan) -> list:
         """The events whose function falls through zero from ``before`` to ``after`` at t [s] (a held command's
         jump), in list order; only a mode with a function of forces is checked (:data:`JUMPING`)."""
-        contacts = self.system.contacts
-        if not phase.limits and not any(m.touching and (m.stuck or not c.spec.bonded)
-                                        for c, m in zip(contacts, modes, strict=True)):
-            return []  # (no separate, slip or release event in this mode: the others read the state alone)
+        if not self.jumps(modes, phase):
+            return []  # (no separate, slip, release or joint_slip event in this mode: the others read the state alone)
         events, _ = segment_events(self.system, modes, phase, t, before, plan if plan.ok else None)
         events = [e for e in events if e.kind in JUMPING]
         return fired_across(events, t, t, before, after) if events else []
@@ -91,3 +105,30 @@ class SampledPhases:
         """The slots of x of ``part`` of the phase's controller states."""
         z0 = 2 * self.system.nQ + phase.z_slice.start
         return slice(z0 + part.start, z0 + part.stop)
+
+
+class Hold:
+    """A sampled phase's samples inside one integration (:mod:`contactdyn.numerics.held_steps`): the instants
+    before a segment's stop [s] (one at the stop itself the loop takes, as at a corner), the jump of the held
+    command there, and which events the jump can fire (:data:`~contactdyn.hybrid.events.JUMPING`)."""
+
+    def __init__(self, sampled: SampledPhases, modes: list[ContactMode], phase: Phase, stop: float):
+        self.sampled, self.modes, self.phase = sampled, modes, phase
+        self.sampler = sampled.samplers[phase.index]
+        self.last = stop - min_span(stop)  #: [s] samples strictly before this
+        self.any_jumps = sampled.jumps(modes, phase)
+
+    def next_time(self) -> float:
+        """[s] The next sample instant within the segment (inf: none left)."""
+        t_k = self.sampler.next_time()
+        return t_k if t_k < self.last else math.inf
+
+    def take(self, t: float, x: np.ndarray) -> np.ndarray:
+        """The state after the sample at t [s] (:meth:`SampledPhases.take`)."""
+        return self.sampled.take(t, x, self.modes, self.phase)
+
+    def event_value(self, event):
+        """The function whose fall through zero across a jump fires ``event`` (fired_across's), or None."""
+        if not self.any_jumps or getattr(event, "kind", "") not in JUMPING:
+            return None
+        return event.value if isinstance(event, SlipWatch) else event

@@ -113,11 +113,14 @@ class Sampling:
 
 def read_sampling(r) -> Sampling | None:
     """``sample_rate``, ``delay`` and the ``sensor`` table of a controller table (``r``: its Reader), read before
-    the kind's own keys; None for a continuous controller."""
-    rate = r.float("sample_rate", None, lo=0.0, lo_open=True, hi=MAX_SAMPLE_RATE, unit="Hz")
+    the kind's own keys; None for a continuous controller. ``sample_rate = 0`` turns a scene's sampled loop off
+    (one override, ``--set controller.sample_rate=0``: its delay and sensors are still checked, and unused)."""
+    rate = r.float("sample_rate", None, lo=0.0, hi=MAX_SAMPLE_RATE, unit="Hz")
     delay = r.int("delay", 0, lo=0, hi=MAX_DELAY)
     has_sensor = r.has("sensor")
     sensor = read_sensor(r.sub("sensor", {}))
+    if rate == 0.0:
+        return None
     if rate is None:
         if delay:
             raise r.error("delay", "no delay for a continuous controller (a delay counts samples: set sample_rate)",

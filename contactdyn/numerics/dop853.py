@@ -93,6 +93,7 @@ class _Steps:
     blocks: list[np.ndarray] = field(default_factory=list)  #: workspace k1…k10 (10 n) per step
     coef: dict[int, np.ndarray] = field(default_factory=dict)  #: step -> interpolant coefficients (7, n)
     calls: int = 0  #: right-hand-side calls made for interpolants
+    end_x: np.ndarray | None = None  #: the last step end's state as the FSAL call got it (None: not kept)
 
     def y_old(self, i: int) -> np.ndarray:
         return self.y0 if i == 0 else self.blocks[i - 1][_Y_NEW]
@@ -366,6 +367,7 @@ class _Core:
         self.since = 0
         steps.t.append(t)
         steps.blocks.append(self.block.copy())
+        steps.end_x = self.last_x if self.last_t == t else None
         if not self.watch.events:
             return 0
         # the FSAL call's own array (the same values): the compiled plan has its results cached
@@ -411,6 +413,13 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
         ierr, nreject, calls[0] = _stepped(step, fun, steps, watch, t_end, h, rtol, atol, max_step, calls[0])
         return _solution(steps, watch, ierr, t_end, calls[0], nreject, rtol, atol)
     core = _Core(fun, t0, y0, f0, watch, rtol, atol, max_step)
+    ierr, nreject = core_steps(core, t_end, h)
+    return _solution(core.steps, watch, ierr, t_end, calls[0] + core.calls, nreject, rtol, atol)
+
+
+def core_steps(core: _Core, t_end: float, h: float) -> tuple[int, int]:
+    """Runs of the core from its last accepted step to t_end [s] with first step h [s], restarted after each
+    rejection with solve_ivp's smaller step: (the core's ierr, rejections)."""
     limit, nreject, ierr = None, 0, 1
     while t_end > core.steps.t[-1]:
         t = core.steps.t[-1]
@@ -426,7 +435,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
             h, limit = limit, None
         else:
             break
-    return _solution(core.steps, watch, ierr, t_end, calls[0] + core.calls, nreject, rtol, atol)
+    return ierr, nreject
 
 
 def _stepped(step: Callable, fun: Callable, steps: _Steps, watch: _EventWatch, t_end: float, h_abs: float,
@@ -456,6 +465,7 @@ def _stepped(step: Callable, fun: Callable, steps: _Steps, watch: _EventWatch, t
             rejected, nreject = True, nreject + 1
         steps.t.append(t_new)
         steps.blocks.append(block)
+        steps.end_x = y_new
         if watch.events and watch.stop(steps, t_new, y_new):
             return 2, nreject, calls
     return 1, nreject, calls
@@ -484,14 +494,9 @@ def _attempt(fun: Callable, t: float, y: np.ndarray, f: np.ndarray, h: float, rt
 def _solution(steps: _Steps, watch: _EventWatch, ierr: int, t_end: float, calls: int, nreject: int, rtol: float,
               atol: float) -> Solution:
     """The Solution of a finished integration (core's ierr: 1 end, 2 stopped by an event, < 0 failure)."""
-    t_stop = steps.t[-1]
     if ierr == 1:
-        steps.t[-1] = t_stop = t_end  # the core's last step ends at t + (t_end − t), within rounding of t_end
-    status, message = 0, "The solver successfully reached the end of the integration interval."
-    if ierr == 2 and watch.hits and watch.terminal[watch.hits[-1][1]]:
-        status, message, t_stop = 1, "A termination event occurred.", watch.hits[-1][0]
-    elif ierr < 0:
-        status, message = -1, f"DOP853 (compiled): {_MESSAGES.get(ierr, f'error {ierr}')} at t = {t_stop:.9g} s"
+        steps.t[-1] = t_end  # the core's last step ends at t + (t_end − t), within rounding of t_end
+    status, message, t_stop = solution_status(ierr, watch, steps.t[-1])
     dense = DenseSolution(steps, t_stop)
     ts = np.array(steps.t)
     ys = np.column_stack([steps.y0] + [b[_Y_NEW] for b in steps.blocks])
@@ -503,11 +508,21 @@ def _solution(steps: _Steps, watch: _EventWatch, ierr: int, t_end: float, calls:
                     h_next)
 
 
-def _proposal(steps: _Steps, rtol: float, atol: float) -> float:
-    """[s] The step after the last accepted one by solve_ivp's control: h min(MAX_FACTOR, SAFETY err^(−1/8)) with
-    that step's error norm, from its stages (k1 of its block is f(t_new): f(t_old) from the step before)."""
-    i = len(steps.t) - 2
-    h = steps.t[-1] - steps.t[-2]
+def solution_status(ierr: int, watch: _EventWatch, t_last: float) -> tuple[int, str, float]:
+    """(status, message, where the solution stops [s]) of a run that ended with the core's ierr at t_last [s]."""
+    if ierr == 2 and watch.hits and watch.terminal[watch.hits[-1][1]]:
+        return 1, "A termination event occurred.", watch.hits[-1][0]
+    if ierr < 0:
+        return -1, f"DOP853 (compiled): {_MESSAGES.get(ierr, f'error {ierr}')} at t = {t_last:.9g} s", t_last
+    return 0, "The solver successfully reached the end of the integration interval.", t_last
+
+
+def _proposal(steps: _Steps, rtol: float, atol: float, i: int = -1) -> float:
+    """[s] The step after accepted step i (−1: the last) by solve_ivp's control: h min(MAX_FACTOR, SAFETY
+    err^(−1/8)) with that step's error norm, from its stages (k1 of its block is f(t_new): f(t_old) from the step
+    before)."""
+    i = len(steps.t) - 2 if i < 0 else i
+    h = steps.t[i + 1] - steps.t[i]
     block = steps.blocks[i].copy()
     block[_F_NEW] = steps.f_old(i)  # the row of stage 0 in _ROW_STAGE's layout
     y_old = steps.y_old(i)

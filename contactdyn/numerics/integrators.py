@@ -2,7 +2,9 @@
 
 ``DOP853C`` (the default) is DOP853 stepped by scipy's compiled core (:mod:`contactdyn.numerics.dop853`):
 the same method, the same steps and events as ``solve_ivp``'s ``DOP853`` (which stays selectable),
-at a fraction of its per-step cost.
+at a fraction of its per-step cost. It alone takes a sampled controller's sample instants as step boundaries
+inside one run (``integrate``'s ``hold``, :mod:`contactdyn.numerics.held_steps`); the hybrid loop ends a
+segment at each for the other methods.
 
 ``RK4`` is the classical fixed-step Runge–Kutta method (4 calls per step) with step
 ``solver.max_step`` [s] (required), cubic Hermite dense output and scipy's event location:
@@ -33,10 +35,10 @@ from collections.abc import Callable
 import numpy as np
 from scipy.integrate import DenseOutput, OdeSolver, solve_ivp
 
-from . import dop853, lsoda
+from . import dop853, held_steps, lsoda
 
 __all__ = ["METHODS", "IMPLICIT", "EXPLICIT", "FIXED", "AUTO_EXPLICIT", "stability_bound", "jacobian_eigenvalues",
-           "FiniteDifferenceJacobian", "RK4", "solver_class", "integrate"]
+           "FiniteDifferenceJacobian", "RK4", "solver_class", "integrate", "carries_hold"]
 
 #: ``auto``, explicit Runge–Kutta methods and the implicit ones for stiff scenes
 METHODS = ("auto", "DOP853", "DOP853C", "RK45", "RK23", "Radau", "BDF", "LSODA", "RK4")
@@ -201,14 +203,27 @@ class RK4(OdeSolver):
         return _HermiteOutput(self.t_old, self.t, self.y_old, self.f_old, self.y, self.f)
 
 
+def carries_hold(method: str) -> bool:
+    """Does the method take a sampled controller's sample instants as step boundaries (``integrate``'s hold)?"""
+    return method in COMPILED
+
+
 def solver_class(method: str):
     """What ``solve_ivp`` takes as ``method`` for a method name."""
     return RK4 if method == "RK4" else method
 
 
 def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, rtol: float, atol: float,
-              max_step: float = np.inf, events=None, first_step: float | None = None, jac=None):
-    """One smooth segment by the named method, with dense output and events (``solve_ivp``'s result fields)."""
+              max_step: float = np.inf, events=None, first_step: float | None = None, jac=None, hold=None):
+    """One smooth segment by the named method, with dense output and events (``solve_ivp``'s result fields).
+
+    ``hold``: a sampled controller's hold whose sample instants are step boundaries inside the run
+    (:mod:`contactdyn.numerics.held_steps`); the compiled DOP853 (``COMPILED``) only: ``carries_hold``."""
+    if hold is not None:
+        if method not in COMPILED:
+            raise ValueError(f"{method} does not carry a hold: its segments end at the sample instants")
+        return held_steps.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
+                                first_step=first_step, step=getattr(fun, "step", None), hold=hold)
     if method in COMPILED:  # a plan's right-hand side may bring its compiled step (contactdyn.compiled.plan_steps)
         return dop853.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
                             first_step=first_step, step=getattr(fun, "step", None))

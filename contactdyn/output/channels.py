@@ -29,6 +29,7 @@ from ..model.limits import limit_channels
 from ..model.phases import Phase
 from ..model.system import System
 from ..numerics.dop853 import DenseSolution
+from ..numerics.held_steps import PiecewiseDense
 
 __all__ = ["Segment", "Held", "output_grid", "sample_segments", "sample_states", "channels"]
 
@@ -89,7 +90,7 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
         for i in run:
             at = sel[idx[sel] == i]
             sol = segments[i].sol
-            if derivatives is not None and isinstance(sol, DenseSolution):
+            if derivatives is not None and isinstance(sol, (DenseSolution, PiecewiseDense)):
                 sol = partial(sol, derivatives=derivatives)
             xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
         X = xs[sel]

@@ -163,8 +163,9 @@ MEANINGS: dict[str, str] = {
     "controller.nominal.k": "nominal stiffness",
     "controller.nominal.b": "nominal damping",
     "controller.nominal.m": "nominal mass",
-    "controller.sample_rate": "run the law sampled at this rate with a zero-order hold (none: continuous); the "
-                              "samples are at k / rate from the scene start, and at a phase's start",
+    "controller.sample_rate": "run the law sampled at this rate with a zero-order hold (none or 0: continuous, "
+                              "so --set controller.sample_rate=0 turns a scene's sampled loop off); the samples are at "
+                              "k / rate from the scene start, and at a phase's start",
     "controller.delay": "the law computes on what it measured this many samples ago (needs sample_rate)",
     "controller.sensor": "what a sampled law measures (needs sample_rate): force noise, bias and low-pass, encoders",
     "controller.sensor.force_noise": "standard deviation of the Gaussian noise on every measured contact force",
