@@ -38,8 +38,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .pipeline.pipeline import Pipeline
 from .pipeline.pack import unsupported
+from .pipeline.pipeline import Pipeline
 
 __all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "PIPELINE", "path_of", "PathLog",
            "slower_paths", "disagreement", "LivePipelines", "CHECK_RTOL"]
@@ -102,7 +102,8 @@ def disagreement(system, modes, phase, rhs: Callable, t: float, x: np.ndarray) -
     for state, ref in zip(states, refs, strict=True):
         got = rhs(t, state.copy())
         if not np.all(np.isfinite(got)) or np.any(np.abs(got - ref) > CHECK_RTOL * scale):
-            return f"{UNDECLARED}disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g} at t = {t:.6g} s"
+            return (f"{UNDECLARED}disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g} "
+                    f"at t = {t:.6g} s")
     return ""
 
 
