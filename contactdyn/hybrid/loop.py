@@ -141,21 +141,6 @@ class HybridRun:
             plan.check_at(*at)
         return plan
 
-    def _segment_rhs(self, modes: list[ContactMode], phase: Phase, plan: ModePlan, t: float, x: np.ndarray):
-        """The right-hand side a segment from (t [s], x) integrates: the plan's, else the one pipeline's where it
-        runs the mode (:class:`~contactdyn.model.paths.LivePipelines`), else System.evaluate's (None: the events'
-        own); its path recorded, a declined plan counted."""
-        if plan.ok:
-            fast, why = plan.rhs, ""
-        else:
-            with compiling("the one pipeline"):
-                fast, why = self.pipelines.rhs(modes, phase, plan, t, x)
-        self.paths.record(self.system, modes, phase, plan, pipeline=fast is not None and not plan.ok)
-        for reason in (plan.reason, why) if not plan.ok else ():
-            if reason:
-                self.fallbacks[reason] = self.fallbacks.get(reason, 0) + 1
-        return fast
-
     def start(self) -> tuple[np.ndarray, list[ContactMode], Phase]:
         """Initial state, consistent modes and the first phase at t = 0."""
         x, modes = self.system.initial_state()
@@ -259,7 +244,7 @@ class HybridRun:
         and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
         plan = self._plan(modes, phase, at=(t, x))
-        fast = self._segment_rhs(modes, phase, plan, t, x)
+        fast = _segment_rhs(self, modes, phase, plan, t, x)
         fun = fast or system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
@@ -393,6 +378,22 @@ class HybridRun:
                 "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
                 "scene_file": str(Path(scene.file).resolve()) if scene.file else None}  # (where it came from)
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _segment_rhs(run: HybridRun, modes: list[ContactMode], phase: Phase, plan: ModePlan, t: float, x: np.ndarray):
+    """The right-hand side a segment of ``run`` from (t [s], x) integrates: the plan's, else the one pipeline's where
+    it runs the mode (:class:`~contactdyn.model.paths.LivePipelines`), else None (System.evaluate's: the events'
+    own); its path recorded, a declined plan counted."""
+    if plan.ok:
+        fast, why = plan.rhs, ""
+    else:
+        with compiling("the one pipeline"):
+            fast, why = run.pipelines.rhs(modes, phase, plan, t, x)
+    run.paths.record(run.system, modes, phase, plan, pipeline=fast is not None and not plan.ok)
+    for reason in (plan.reason, why) if not plan.ok else ():
+        if reason:
+            run.fallbacks[reason] = run.fallbacks.get(reason, 0) + 1
+    return fast
 
 
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:
