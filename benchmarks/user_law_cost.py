@@ -8,7 +8,9 @@ examples/cubic_stage.py's cubic law with k3 = 0 vs the linear law on examples/cu
 the Stribeck friction law with v_s = 1e-9 m/s (μ = μ_k once moving) vs Coulomb on B1 with μ_s = 0.6,
 μ_k = 0.4. Timed interleaved after an untimed run each; CPU medians, each law's ratio to its twin,
 the largest relative difference of the normal force, and the path each law's modes ran on
-(``stats["paths"]``).
+(``stats["paths"]``). Each law also runs with the one pipeline switched off (``LivePipelines.use``: the
+modes the plan declines on the readable model, as before it was live), in the same interleaved rounds:
+``off_cpu_s`` and ``off_ratio`` (to the twin), ``off_paths``.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from scene_cost import report  # noqa: E402
 from timing import interleaved  # noqa: E402
 
 from contactdyn import parse_scene, simulate  # noqa: E402
+from contactdyn.model.paths import LivePipelines  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SIMS = Path(__file__).resolve().parent.parent / "sims"
@@ -63,22 +66,34 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     scenes = {}
     for name, (law, twin) in pairs().items():
-        scenes[(name, "law")], scenes[(name, "twin")] = law, twin
+        scenes[(name, "law")], scenes[(name, "twin")], scenes[(name, "off")] = law, twin, law
+    runs = {k: (lambda s=s, off=k[1] == "off": _simulate(s, pipeline=not off)) for k, s in scenes.items()}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for s in scenes.values():
-            simulate(s)  # untimed
-        times = interleaved({k: (lambda s=s: simulate(s)) for k, s in scenes.items()}, args.repeats)
+        for run in runs.values():
+            run()  # untimed
+        times = interleaved(runs, args.repeats)
     rows = []
     for name in pairs():
-        law, twin = times[(name, "law")], times[(name, "twin")]
+        law, twin, off = times[(name, "law")], times[(name, "twin")], times[(name, "off")]
         F, G = law.last["contact.tip.F_n"], twin.last["contact.tip.F_n"]
         rows.append({"pair": name, "law_cpu_s": law.cpu, "twin_cpu_s": twin.cpu, "ratio": law.cpu / twin.cpu,
                      "max_rel_diff_F": float(abs(F - G).max() / abs(G).max()),
                      "law_paths": sorted({r["path"] for r in law.last.stats["paths"].values()}),
-                     "twin_paths": sorted({r["path"] for r in twin.last.stats["paths"].values()})})
+                     "twin_paths": sorted({r["path"] for r in twin.last.stats["paths"].values()}),
+                     "off_cpu_s": off.cpu, "off_ratio": off.cpu / twin.cpu,
+                     "off_paths": sorted({r["path"] for r in off.last.stats["paths"].values()})})
     report(rows, args.out)
     return 0
+
+
+def _simulate(scene, pipeline: bool):
+    """simulate(scene) with the one pipeline on or off (contactdyn.model.paths.LivePipelines)."""
+    LivePipelines.use = pipeline
+    try:
+        return simulate(scene)
+    finally:
+        LivePipelines.use = True
 
 
 if __name__ == "__main__":

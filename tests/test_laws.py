@@ -59,7 +59,7 @@ def test_the_cubic_law_reads_its_declared_parameter_and_presses_where_its_spring
     assert x[-1] == pytest.approx(x_rest, rel=1e-4)
     assert x_rest < 40.0 / k  # harder than its linear part
     (row,) = r.stats["paths"].values()
-    assert (row["path"], row["why"]) == ("readable model", "stage law 'cubic' is not affine in (x, ẋ)")
+    assert (row["path"], row["why"]) == ("one pipeline", "stage law 'cubic' is not affine in (x, ẋ)")
 
 
 def test_the_cubic_law_with_k3_zero_is_the_linear_law():
@@ -159,7 +159,7 @@ def test_a_friction_law_changed_on_the_readable_path_only_is_caught(monkeypatch)
 # ---- the paths ---------------------------------------------------------------------------------------------------
 def test_the_run_prints_the_modes_a_law_kept_off_the_compiled_paths(capsys):
     assert main(["run", str(CUBIC)]) == 0
-    assert "path of press: tip touching: readable model (stage law 'cubic' is not affine in (x, ẋ))" in \
+    assert "path of press: tip touching: one pipeline (stage law 'cubic' is not affine in (x, ẋ))" in \
         capsys.readouterr().out
     assert main(["run", "b1"]) == 0
     assert "path of" not in capsys.readouterr().out

@@ -38,7 +38,7 @@ from collections import deque
 import numpy as np
 
 from ..model.contact import ContactMode
-from ..model.paths import UNDECLARED, mode_gap
+from ..model.paths import UNDECLARED, disagreement, mode_gap
 from .plan_kkt import CompiledKKT
 from .plan_probe import ProbedModel, affine_map
 from .plan_rhs import controller_call, make_rhs
@@ -46,7 +46,6 @@ from .samples import Samples, plan_samples
 
 __all__ = ["ModePlan", "Samples", "cached_plan", "structure", "affine_map"]  # Samples: from contactdyn.compiled.samples
 
-CHECK_RTOL = 1e-9  #: agreement a plan must show with System.evaluate when it is built
 ANY_2D = (0.0, 0.0)  #: a 2-D reference direction in a plan's key (:func:`structure`): never a real one
 _NO_CALL = (None, None, None, None)  #: a ring entry before any call
 
@@ -210,24 +209,12 @@ class ModePlan(ProbedModel, CompiledKKT):
 
     def check_at(self, t: float, x: np.ndarray) -> None:
         """Agree with System.evaluate at (t, x) — where a run starts this mode — and at a perturbation of x, or
-        decline (``ok`` false, an undeclared reason): a law changed on one path only cannot pass unseen.
-
-        Each component of ẋ is held to CHECK_RTOL × (1 + its largest magnitude at the two states): at an
-        equilibrium a rate is ~0 but the terms it is made of are not (the perturbed state shows their size)."""
+        decline (``ok`` false, an undeclared reason): a law changed on one path only cannot pass unseen
+        (:func:`~contactdyn.model.paths.disagreement`: to CHECK_RTOL × (1 + each rate's largest magnitude))."""
         if not self.ok:
             return
-        s = self.system
-        rng = np.random.default_rng(7)
-        scale_x = 1e-3 * (1.0 + np.abs(x))
-        states = (x, x + scale_x * rng.normal(size=s.n))
-        refs = [s.evaluate(t, state, self.modes, self.phase).xdot for state in states]
-        scale = 1.0 + np.maximum(np.abs(refs[0]), np.abs(refs[1]))
-        for state, ref in zip(states, refs, strict=True):
-            got = self.rhs(t, state.copy())
-            if not np.all(np.isfinite(got)) or np.any(np.abs(got - ref) > CHECK_RTOL * scale):
-                self.ok = False
-                self.reason = (f"{UNDECLARED}disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g} "
-                               f"at t = {t:.6g} s")
-                break
+        reason = disagreement(self.system, self.modes, self.phase, self.rhs, t, x)
+        if reason:
+            self.ok, self.reason = False, reason
         self.ring.extend([_NO_CALL] * 4)
         self.singular = 0

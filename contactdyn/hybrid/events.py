@@ -348,11 +348,13 @@ def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
 
 
 def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
-                   plan: ModePlan | None = None):
+                   plan: ModePlan | None = None, fun=None):
     """The event functions of one segment, and the right-hand side that feeds their stage watches.
 
     They read the compiled ``plan``'s values when given (its last call's, no second solve),
-    else :meth:`System.evaluate`'s through one shared evaluation per state.
+    else :meth:`System.evaluate`'s through one shared evaluation per state. ``fun``: the right-hand side to
+    integrate when it is not the values' own (the one pipeline's, :class:`~contactdyn.model.paths.LivePipelines`:
+    its events still read System.evaluate, once per state they are evaluated at).
     """
     values = plan if plan is not None else _ReadableValues(system, modes, phase)
     out: list = []
@@ -382,7 +384,7 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     out += system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # contactdyn.model.limits
     if phase.joint_modes:  # contactdyn.model.joint_friction
         out += system.joint_friction.events(phase.joint_modes, phase.limits, x0, system.nQ, values.joint_hold)
-    fun = values.rhs
+    fun = fun or values.rhs
     if not watches:
         return out, fun
 

@@ -42,7 +42,7 @@ from ..errors import SceneError, SimulationError, numerical_errors
 from ..laws.trajectory import min_span
 from ..model.contact import ContactMode
 from ..model.limits import rate_limit_report
-from ..model.paths import PathLog
+from ..model.paths import LivePipelines, PathLog
 from ..model.phases import Phase
 from ..model.system import System
 from ..numerics.integrators import (
@@ -116,18 +116,20 @@ class HybridRun:
         #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
         #: them, "" when none did (no more checks in the mode); None: not checked
         self.resting: str | None = None
-        self.fallbacks: dict[str, int] = {}  #: reasons a mode ran on System.evaluate, with counts
+        #: reasons the plan declined a mode (it ran on the one pipeline or System.evaluate: ``paths`` says which) and
+        #: the pipeline's undeclared ones, with counts
+        self.fallbacks: dict[str, int] = {}
+        self.pipelines = LivePipelines(system)  #: the modes the plan declines that the one pipeline runs
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
         self.work = Work(CALLS_PER_STEP * self.budget)  #: right-hand-side calls at most, rejected steps' too
         self.progress: Progress | None = None  #: shows the simulated time of a long run (contactdyn run sets it)
 
-    def _plan(self, modes: list[ContactMode], phase: Phase, count: bool = True, at: tuple | None = None) -> ModePlan:
-        """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``
-        (``count``: a segment runs on it, so a fallback is counted and its path recorded). ``at`` = (t, x): where
-        the mode starts; the first time a run meets the mode, the plan checks itself there against the readable
-        model (:meth:`ModePlan.check_at`)."""
+    def _plan(self, modes: list[ContactMode], phase: Phase, at: tuple | None = None) -> ModePlan:
+        """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``.
+        ``at`` = (t, x): where the mode starts; the first time a run meets the mode, the plan checks itself there
+        against the readable model (:meth:`ModePlan.check_at`)."""
         key = (structure(modes), id(phase))
         plan = self.plans.get(key)
         first = plan is None
@@ -137,10 +139,6 @@ class HybridRun:
         plan.use(modes)  # a turn's new reference direction r: data of the same plan
         if first and at is not None:
             plan.check_at(*at)
-        if count:
-            self.paths.record(self.system, modes, phase, plan)
-            if not plan.ok:
-                self.fallbacks[plan.reason] = self.fallbacks.get(plan.reason, 0) + 1
         return plan
 
     def start(self) -> tuple[np.ndarray, list[ContactMode], Phase]:
@@ -215,7 +213,7 @@ class HybridRun:
                 x, modes, phase = self._next_phase(phase, t, x, modes)
         self.work.limit = math.inf  # the output's interpolants are not the integration's work
         if self.segments and self.segments[-1].modes != modes:  # an event at the end: its modes are the last sample's
-            self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._plan(modes, phase, count=False)))
+            self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._plan(modes, phase)))
         return self._result(time.perf_counter() - wall0)
 
     def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
@@ -224,7 +222,7 @@ class HybridRun:
         with the state after a sampled law's sample at t_after (its held command jumps: hybrid.sampling)
         (no event: the same modes, unless a contact force or limit torque jumps through zero there,
         which is handled as the event a step straddling the corner would have located)."""
-        plan = self._plan(modes, phase, count=False)
+        plan = self._plan(modes, phase)
         if sample:
             x, before = self.sampled.take(t_after, x, modes, phase), x
             fired = self.sampled.jumped(t_after, before, x, modes, phase, plan)
@@ -246,14 +244,16 @@ class HybridRun:
         and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
         plan = self._plan(modes, phase, at=(t, x))
-        fun = plan.rhs if plan.ok else system.rhs(modes, phase)
+        fast = _segment_rhs(self, modes, phase, plan, t, x)
+        fun = fast or system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             held = t_sample is not None and carries_hold(method)
             end = t_sample if t_sample is not None and not held else t_end
             h0 = min(self.next_step, end - t) if self.next_step else None
             hold = self.sampled.hold(modes, phase, t_end) if held else None
-            events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
+            events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None,
+                                         None if plan.ok else fast)
             self.starts.record(t, x, events)
             events += self._watches(modes, method)
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
@@ -378,6 +378,22 @@ class HybridRun:
                 "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
                 "scene_file": str(Path(scene.file).resolve()) if scene.file else None}  # (where it came from)
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _segment_rhs(run: HybridRun, modes: list[ContactMode], phase: Phase, plan: ModePlan, t: float, x: np.ndarray):
+    """The right-hand side a segment of ``run`` from (t [s], x) integrates: the plan's, else the one pipeline's where
+    it runs the mode (:class:`~contactdyn.model.paths.LivePipelines`), else None (System.evaluate's: the events'
+    own); its path recorded, a declined plan counted."""
+    if plan.ok:
+        fast, why = plan.rhs, ""
+    else:
+        with compiling("the one pipeline"):
+            fast, why = run.pipelines.rhs(modes, phase, plan, t, x)
+    run.paths.record(run.system, modes, phase, plan, pipeline=fast is not None and not plan.ok)
+    for reason in (plan.reason, why) if not plan.ok else ():
+        if reason:
+            run.fallbacks[reason] = run.fallbacks.get(reason, 0) + 1
+    return fast
 
 
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:

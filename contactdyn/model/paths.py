@@ -22,6 +22,10 @@ other reason — its probes find a non-affine part, or its self-check disagrees 
 readable model — is an undeclared gap: its reason in ``Result.stats["fallback_modes"]``
 starts with ``"undeclared: "``, which the tests treat as a bug.
 
+A mode the plan declines for a declared gap runs on the one pipeline (:mod:`contactdyn.model.pipeline`) where
+:func:`~contactdyn.model.pipeline.pack.unsupported` accepts it (:class:`LivePipelines`, the path ``PIPELINE``),
+checked where it starts against the readable model as a plan is (:func:`disagreement`); else on the readable model.
+
 Which path each mode of a run took (:func:`path_of`), and which law or part kept
 it off the compiled ones, is in ``Result.stats["paths"]`` (:class:`PathLog`); ``contactdyn run``
 prints each such mode once.
@@ -32,10 +36,18 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "path_of", "PathLog", "slower_paths"]
+import numpy as np
+
+from .pipeline.pack import unsupported
+from .pipeline.pipeline import Pipeline
+
+__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "PIPELINE", "path_of", "PathLog",
+           "slower_paths", "disagreement", "LivePipelines", "CHECK_RTOL"]
 
 UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
 ENERGY = "energy audit (solver.record_energy)"
+PIPELINE = "one pipeline"  #: the path of a mode the plan declines for a declared gap and the pipeline runs
+CHECK_RTOL = 1e-9  #: agreement a fast right-hand side must show with System.evaluate where a mode starts
 
 
 class Gap(NamedTuple):
@@ -77,15 +89,70 @@ def mode_gap(system, modes, phase) -> str:
     return ""
 
 
-def path_of(plan) -> tuple[str, str]:
+def disagreement(system, modes, phase, rhs: Callable, t: float, x: np.ndarray) -> str:
+    """"" when ``rhs`` (a fast right-hand side of (modes, phase)) agrees with System.evaluate at (t [s], x) — where a
+    run starts the mode — and at a perturbation of x, else the undeclared reason: a law changed on one path only
+    cannot pass unseen. Each component of ẋ is held to CHECK_RTOL × (1 + its largest magnitude at the two states):
+    at an equilibrium a rate is ~0 but the terms it is made of are not (the perturbed state shows their size)."""
+    rng = np.random.default_rng(7)
+    scale_x = 1e-3 * (1.0 + np.abs(x))
+    states = (x, x + scale_x * rng.normal(size=system.n))
+    refs = [system.evaluate(t, state, modes, phase).xdot for state in states]
+    scale = 1.0 + np.maximum(np.abs(refs[0]), np.abs(refs[1]))
+    for state, ref in zip(states, refs, strict=True):
+        got = rhs(t, state.copy())
+        if not np.all(np.isfinite(got)) or np.any(np.abs(got - ref) > CHECK_RTOL * scale):
+            return (f"{UNDECLARED}disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g} "
+                    f"at t = {t:.6g} s")
+    return ""
+
+
+class LivePipelines:
+    """The one pipeline (:class:`~contactdyn.model.pipeline.pipeline.Pipeline`) for the modes of a run whose plan
+    declines for a declared gap (a stage law that is not affine, ...) and that the pipeline packs: one per modes
+    and phase, checked against System.evaluate where the run first starts it (:func:`disagreement`).
+
+    On this path only the integrator's right-hand side is the pipeline's: the event functions and the output
+    samples read the readable model (System.evaluate) as on the "readable model" path; the pipeline's own event
+    values come when it replaces the plan (docs/one_source.md)."""
+
+    use = True  #: False only for the benchmarks' and tests' before/after comparison: those modes on System.evaluate
+
+    def __init__(self, system) -> None:
+        self.system = system
+        self.pipes: dict[tuple, Pipeline | str] = {}  #: (modes, id(phase)) -> its pipeline, or why not (undeclared)
+
+    def rhs(self, modes, phase, plan, t: float, x: np.ndarray) -> tuple[Callable | None, str]:
+        """(the pipeline's right-hand side for a mode starting at (t [s], x), or None; an undeclared reason when
+        its check disagreed, else "")."""
+        if not self.use or plan.ok or plan.reason.startswith(UNDECLARED) or _watched(self.system, modes) \
+                or unsupported(self.system, modes, phase):
+            return None, ""
+        key = (tuple(modes), id(phase))
+        pipe = self.pipes.get(key)
+        if pipe is None:
+            pipe = Pipeline(self.system, modes, phase)
+            pipe = self.pipes[key] = disagreement(self.system, modes, phase, pipe.rhs, t, x) or pipe
+        return (None, pipe) if isinstance(pipe, str) else (pipe.rhs, "")
+
+
+def _watched(system, modes) -> bool:
+    """Does a contact stick with friction? Its slip watch reads the readable model at every call
+    (:class:`~contactdyn.hybrid.events.SlipWatch`): the pipeline's call would only add to it."""
+    return any(m.touching and m.stuck and c.friction is not None and len(c.tangents)
+               for c, m in zip(system.contacts, modes, strict=True))
+
+
+def path_of(plan, pipeline: bool = False) -> tuple[str, str]:
     """(path, the law or part that kept it off the compiled ones: "" when none) of a mode's plan. The paths, fastest
     first: "compiled call" (one numba call per right-hand side: the robot's terms, the law, the solve), "compiled
     kernel" (Pinocchio's terms, then one numba call), "compiled plan" (the map P φ and a NumPy solve per call),
-    "compiled plan, law in Python" (the controller's command called per call), "readable model" (System.evaluate).
+    "compiled plan, law in Python" (the controller's command called per call), PIPELINE (``pipeline``: a mode the
+    plan declines runs on the one pipeline's call, :class:`LivePipelines`), "readable model" (System.evaluate).
     Which compiled path runs a mode is the plan's choice by its parts' shapes (no drives and an affine tip law: the
     plan's map; motors or a task-space law that is not affine: a kernel), not a law's doing."""
     if not plan.ok:
-        return "readable model", plan.reason
+        return (PIPELINE if pipeline else "readable model"), plan.reason
     if plan.kernel is not None:
         return ("compiled call" if getattr(plan.kernel, "at", None) is not None else "compiled kernel"), ""
     if plan.python_command:
@@ -113,11 +180,11 @@ class PathLog:
     def __init__(self) -> None:
         self.rows: dict[str, dict] = {}
 
-    def record(self, system, modes, phase, plan) -> None:
+    def record(self, system, modes, phase, plan, pipeline: bool = False) -> None:
         label = _mode_label(system, modes, phase)
         row = self.rows.get(label)
         if row is None:
-            path, why = path_of(plan)
+            path, why = path_of(plan, pipeline)
             row = self.rows[label] = {"path": path, "why": why, "segments": 0}
         row["segments"] += 1
 

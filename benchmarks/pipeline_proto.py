@@ -1,0 +1,250 @@
+"""Issue 29's prototype pipeline (contactdyn/model/pipeline/) against the probed twin and the readable model, per call.
+
+    PYTHONPATH=. python3 benchmarks/pipeline_proto.py [CASE ...] [--calls 2000] [--repeats 7] [--compile]
+        [--out FILE.json]
+
+Per in-scope mode (:func:`cases`: the sims, benchmarks/hard and examples scenes the prototype runs, in their first
+mode and in modes set by hand: touching, sticking, a joint on its limit, a later phase), the median time of one
+right-hand-side call [µs] of the pipeline (``Pipeline.rhs``), the twin's compiled call
+(``cached_plan(system, modes, phase).rhs``; "-" where the plan declines) and ``System.evaluate``; timed
+interleaved (every variant once per repeat, each a batch of ``--calls`` calls over 16 states near the mode's
+start), in one process, after an untimed warm-up. Also per call inside one compiled loop (no Python between
+calls: the pipeline's ``rates_at``, the twin's ``rhs.derivatives`` where its call is one compiled kernel, as a
+compiled DOP853 step calls it), and the largest relative difference of ẋ against
+``System.evaluate`` over the states. ``--compile``: the compile time of the pipeline's and of the twin's first
+call from a cold cache, each in a child process with a fresh NUMBA_CACHE_DIR (import and ``prepare`` first, then
+the first call), and the pipeline's again warm (the same directory, a new process), on b1 and impedance_press.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from timing import interleaved, write_report  # noqa: E402
+
+from contactdyn import parse_scene  # noqa: E402
+from contactdyn.simulate import prepare  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _scene(path: str, edit=None):
+    doc = tomllib.loads((ROOT / path).read_text())
+    if edit is not None:
+        edit(doc)
+    return parse_scene(doc, file=str(ROOT / path))
+
+
+def _stribeck(doc: dict) -> None:
+    doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu_s": 0.6,
+                                        "mu_k": 0.4, "law": "stribeck", "v_s": 0.01}
+
+
+def _no_motors(doc: dict) -> None:
+    """case1_cart with ideal torque drives (its DC motors dropped), its approach phase only (task PD)."""
+    del doc["robot"]["drive"], doc["body"]["cart"]["drive"]
+    doc["phase"] = doc["phase"][:1]
+
+
+def _tool_pd(doc: dict) -> None:
+    """A pencil writer under task PD holding its tool axis (the twin's compiled operational call: the moment is not
+    affine), its circle made a straight trapezoid."""
+    ctl = doc["controller"]
+    doc["controller"] = {"kind": "task_pd", "kp": ctl["kp"], "kd": ctl["kd"], "axes": ctl["axes"],
+                         "tool_axis": ctl["tool_axis"], "tool_target": ctl["tool_target"], "ko": 5.0, "do": 0.5,
+                         "kd_normal": ctl["kd_normal"], "feedforward": "gravity"}
+    doc["phase"][1]["reference"] = {"moves": [{"kind": "trapezoid", "delta": [-0.03, 0.0, 0.0], "duration": 4.0,
+                                               "accel_fraction": 0.2}]}
+
+
+#: case -> (scene file, an edit of its TOML or None, what to change from its first mode: None, or a function of
+#: (system, modes, phase, x0) giving (modes, phase))
+def _touch(stuck=False, limits=(), phase=None):
+    def change(system, modes, ph, x0):
+        if phase is not None:
+            ph = system.start_phase(phase, ph.t_start + 1.0, x0, ph)
+        m = [mm.with_(touching=True, stuck=stuck, offsets=tuple(0.0 for _ in c.tangent_chains))
+             for c, mm in zip(system.contacts, modes, strict=True)]
+        return m, replace(ph, limits=tuple(limits))
+    return change
+
+
+CASES = {
+    "b1": ("sims/b1.toml", None, None),
+    "b1_stick": ("sims/b1.toml", None, _touch(stuck=True)),
+    "b1_limit": ("sims/b1.toml", None, _touch(limits=((1, -1),))),
+    "b1_stribeck": ("sims/b1.toml", _stribeck, None),
+    "writer_b_approach": ("sims/case2_writer_b.toml", None, None),
+    "writer_b_write": ("sims/case2_writer_b.toml", None, _touch(phase=1)),
+    "writer_rigid_approach": ("sims/case2_writer_rigid.toml", None, None),
+    "writer_rigid_write": ("sims/case2_writer_rigid.toml", None, _touch(phase=1)),
+    "writer_rigid_stick": ("sims/case2_writer_rigid.toml", None, _touch(stuck=True, phase=1)),
+    "hard_bounce": ("benchmarks/hard/bounce.toml", None, None),
+    "hard_bounce_touch": ("benchmarks/hard/bounce.toml", None, _touch()),
+    "hard_fast_mass": ("benchmarks/hard/fast_mass.toml", None, None),
+    "hard_grazing": ("benchmarks/hard/grazing.toml", None, None),
+    "hard_mass_ratio": ("benchmarks/hard/mass_ratio.toml", None, None),
+    "hard_singular": ("benchmarks/hard/singular.toml", None, None),
+    "hard_stickslip": ("benchmarks/hard/stickslip.toml", None, None),
+    "hard_stiff": ("benchmarks/hard/stiff.toml", None, None),
+    "hard_undamped": ("benchmarks/hard/undamped.toml", None, None),
+    "cart_chains_touch": ("sims/case1_cart.toml", _no_motors, _touch()),
+    "writer5dof_tool": ("sims/case2_writer5dof.toml", _tool_pd, None),
+    "writer5dof_tool_slide": ("sims/case2_writer5dof.toml", _tool_pd, _touch(phase=1)),
+    "ur5_tool": ("sims/case2_writer_ur5.toml", _tool_pd, None),
+    "cubic_press": ("examples/cubic_press.toml", None, None),
+    "impedance_press": ("examples/impedance_press.toml", None, None),
+}
+
+
+def case(name: str):
+    """(system, modes, phase, t, x0) of a case: its scene's first mode at its start, changed as CASES says."""
+    path, edit, change = CASES[name]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        system, modes, phase, x0 = prepare(_scene(path, edit))
+    if change is not None:
+        modes, phase = change(system, modes, phase, x0)
+    return system, modes, phase, phase.t_start + 0.0123, x0
+
+
+def states(x0: np.ndarray, count: int, seed: int = 7) -> list[np.ndarray]:
+    """x0 and count − 1 random states near it (x0 + 1e-3 (1 + |x0|) N(0, 1), as ModePlan.check_at)."""
+    rng = np.random.default_rng(seed)
+    return [x0.copy()] + [x0 + 1e-3 * (1.0 + np.abs(x0)) * rng.normal(size=x0.size) for _ in range(count - 1)]
+
+
+def agreement(pipeline, system, modes, phase, t: float, xs: list[np.ndarray]) -> tuple[float, int]:
+    """(largest ‖ẋ − ẋ_readable‖∞ / ‖ẋ_readable‖∞ over the states, how many agree bit for bit)."""
+    worst, bitwise = 0.0, 0
+    for x in xs:
+        ref = system.evaluate(t, x, modes, phase).xdot
+        got = pipeline.rhs(t, x)
+        worst = max(worst, float(np.abs(got - ref).max() / np.abs(ref).max()))
+        bitwise += int(np.array_equal(got, ref))
+    return worst, bitwise
+
+
+def _batch(fn, t: float, xs: list[np.ndarray], calls: int):
+    def run():
+        for k in range(calls):
+            fn(t, xs[k % len(xs)])
+    return run
+
+
+def _many(rates, ts: np.ndarray, X: np.ndarray):
+    def run():
+        rates(ts, X)
+    return run
+
+
+def measure(name: str, calls: int, repeats: int) -> dict:
+    """One case's row: per-call medians [µs] of the pipeline, the twin and evaluate; the agreement."""
+    from contactdyn.compiled.rhsplan import cached_plan
+    from contactdyn.model.pipeline.pipeline import Pipeline, rates_at
+
+    system, modes, phase, t, x0 = case(name)
+    xs = states(x0, 16)
+    pipe = Pipeline(system, modes, phase)
+    plan = cached_plan(system, modes, phase)
+    variants = {"pipeline": _batch(pipe.rhs, t, xs, calls)}
+    if plan.ok:
+        variants["twin"] = _batch(plan.rhs, t, xs, calls)
+    variants["evaluate"] = _batch(lambda t_, x: system.evaluate(t_, x, modes, phase), t, xs, max(calls // 10, 1))
+    # inside compiled code (no Python per call): the pipeline's rates_at, the twin's batch where its call has one
+    ts, X = np.full(calls, t), np.array([xs[k % len(xs)] for k in range(calls)])
+    pk = pipe.packed
+    variants["pipeline_compiled"] = _many(lambda ts_, X_: rates_at(ts_, X_, pk.ints, pk.reals, pk.work, pk.events),
+                                          ts, X)
+    if plan.ok and getattr(plan.rhs, "derivatives", None) is not None:
+        variants["twin_compiled"] = _many(plan.rhs.derivatives, ts, X)
+    for run in variants.values():
+        run()  # untimed
+    times = interleaved(variants, repeats)
+    worst, bitwise = agreement(pipe, system, modes, phase, t, xs)
+    per = {"pipeline": calls, "twin": calls, "evaluate": max(calls // 10, 1), "pipeline_compiled": calls,
+           "twin_compiled": calls}
+    us = {k: v.cpu / per[k] * 1e6 for k, v in times.items()}
+    return {"case": name, "pipeline_us": us["pipeline"], "twin_us": us.get("twin"), "evaluate_us": us["evaluate"],
+            "pipeline_over_twin": us["pipeline"] / us["twin"] if "twin" in us else None,
+            "pipeline_compiled_us": us["pipeline_compiled"], "twin_compiled_us": us.get("twin_compiled"),
+            "twin": "compiled" if plan.ok else f"declines: {plan.reason}", "max_rel_diff": worst,
+            "bitwise_states": f"{bitwise}/{len(xs)}", "fallbacks": pipe.fallbacks}
+
+
+_CHILD = """
+import time, warnings
+w0, c0 = time.perf_counter(), time.process_time()
+import sys; sys.path.insert(0, {bench!r})
+from pipeline_proto import case
+system, modes, phase, t, x0 = case({name!r})
+w1, c1 = time.perf_counter(), time.process_time()
+if {twin!r}:
+    from contactdyn.compiled.rhsplan import cached_plan
+    cached_plan(system, modes, phase).rhs(t, x0)
+else:
+    from contactdyn.model.pipeline.pipeline import Pipeline
+    Pipeline(system, modes, phase).rhs(t, x0)
+w2, c2 = time.perf_counter(), time.process_time()
+print(w1 - w0, c1 - c0, w2 - w1, c2 - c1)
+"""
+
+
+def compile_times(name: str = "b1") -> dict:
+    """[s] wall and CPU of import + prepare, then of the first call (the pipeline's: pack + call; the twin's:
+    cached_plan, its probes and self-check + rhs), each in a child with a fresh NUMBA_CACHE_DIR (cold), then the
+    pipeline's again in a second child on its directory (warm)."""
+    out = {}
+    for who in ("pipeline", "twin"):
+        with tempfile.TemporaryDirectory() as cache:
+            env = {**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": str(ROOT)}
+            for label in ("cold", "warm") if who == "pipeline" else ("cold",):
+                code = _CHILD.format(bench=str(ROOT / "benchmarks"), name=name, twin=who == "twin")
+                got = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                                     check=True).stdout.split()[-4:]
+                out[f"{who}_{label}"] = {"prepare_wall_s": float(got[0]), "prepare_cpu_s": float(got[1]),
+                                         "first_call_wall_s": float(got[2]), "first_call_cpu_s": float(got[3])}
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("cases", nargs="*", default=list(CASES))
+    p.add_argument("--calls", type=int, default=2000)
+    p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--compile", action="store_true")
+    p.add_argument("--out")
+    args = p.parse_args(argv)
+    rows = []
+    for name in args.cases:
+        t0 = time.perf_counter()
+        rows.append(measure(name, args.calls, args.repeats))
+        r = rows[-1]
+        print(f"{name:22s} pipeline {r['pipeline_us']:6.2f} us  twin {r['twin_us'] or float('nan'):6.2f} us  "
+              f"evaluate {r['evaluate_us']:6.1f} us  compiled loop: pipeline {r['pipeline_compiled_us']:5.2f} us  "
+              f"twin {r['twin_compiled_us'] or float('nan'):5.2f} us  rel diff {r['max_rel_diff']:.1e}  "
+              f"bitwise {r['bitwise_states']}  ({r['twin'][:50]}; {time.perf_counter() - t0:.0f} s)", flush=True)
+    head = {"benchmark": "pipeline_proto", "calls": args.calls, "repeats": args.repeats}
+    if args.compile:
+        head["compile"] = {name: compile_times(name) for name in ("b1", "impedance_press")}
+        print("compile [s]:", json.dumps(head["compile"]))
+    if args.out:
+        write_report(Path(args.out), head, rows)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,199 @@
+"""The pipeline's actuation stage over the packed arrays: the phase's reference and set-points, the controller, the
+torque drives.
+
+The reference x_d, v_d, a_d at t [s] (the start plus each move's profile, ``laws.trajectory.move_rows``, as
+``Reference.at``), the force set-points F_d [N] (``ramp_rows``); then the controller by its kind: the task PD law
+compiled in (``laws.controllers.task_pd_law.torque``, as ``TaskPD.command`` calls it), or a controller of the
+controller ABI called by its address (:mod:`contactdyn.laws.controllers.abi`: its inputs written into one buffer by
+the layout table packed with the mode). Ideal torque drives add the command, the joints' τ and the servo forces
+of the bodies, to the generalized forces (``Drives.apply`` without motors).
+
+Under ``NUMBA_DISABLE_JIT=1`` a controller's "address" is a handle of its class (:data:`.pack.PYTHON_CONTROLLERS`)
+and :func:`command_by_address` runs its Python ``command`` on the same buffer: the same source, interpreted.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+from numba.extending import overload
+
+from ...laws.controllers.abi import FIELD, call_controller, control_arrays
+from ...laws.controllers.task_pd_law import torque
+from ...laws.trajectory import move_rows, ramp_rows
+from ...numerics.compile_cache import njit
+from .pack import (
+    CTL_ABI,
+    CTL_ADDRESS,
+    CTL_KIND,
+    CTL_TASK_PD,
+    FEEDFORWARD,
+    FF_BIAS,
+    FF_GRAVITY,
+    HAS_RD,
+    HAS_TOOL,
+    I_LAYOUT,
+    I_SERVOS,
+    N_AXES,
+    N_CTL_PARAMS,
+    N_DRIVES,
+    N_FORCES,
+    N_MOVES,
+    N_SERVOS,
+    NQ,
+    NV,
+    PYTHON_CONTROLLERS,
+    R_CTL,
+    R_RAMPS,
+    R_REF,
+    R_SERVOS,
+    READS_ORIENTATION,
+    REF_DIMS,
+    TIP_FRAME,
+    section,
+)
+
+__all__ = ["reference", "set_points", "command", "drives", "command_by_address"]
+
+#: the controller ABI's fields (its LAYOUT's order)
+(F_T, F_Q, F_V, F_H, F_HB, F_GRAVITY, F_P, F_PD, F_J, F_DRIFT, F_XD, F_VD, F_AD, F_Z, F_R, F_JANG, F_DRIFT_ANG) = (
+    FIELD[k] for k in ("t", "q", "v", "H", "h", "gravity", "p_tip", "v_tip", "J", "drift", "x_d", "v_d", "a_d", "z",
+                       "R_tip", "J_ang", "drift_ang"))
+N_LAYOUT = 2 + 2 * len(FIELD) + 1  #: the layout table's length (layout_of)
+
+
+@njit(cache=True)
+def reference(t, ints, reals):
+    """(x_d, v_d, a_d) at t [s]: the start plus Σ_k (σ_k, σ'_k/T_k, σ''_k/T_k²) Δ_k (empty without a reference)."""
+    dims, n_moves, at = ints[REF_DIMS], ints[N_MOVES], ints[R_REF]
+    x_d, v_d, a_d = reals[at:at + dims].copy(), np.zeros(dims), np.zeros(dims)
+    if n_moves:
+        moves = section(reals, at + dims, n_moves, 4)
+        deltas = section(reals, at + dims + 4 * n_moves, n_moves, dims)
+        w = np.empty(3 * n_moves)
+        move_rows(t, moves, w)
+        for k in range(n_moves):
+            for i in range(dims):
+                x_d[i] += w[3 * k] * deltas[k, i]
+                v_d[i] += w[3 * k + 1] * deltas[k, i]
+                a_d[i] += w[3 * k + 2] * deltas[k, i]
+    return x_d, v_d, a_d
+
+
+@njit(cache=True)
+def set_points(t, ints, reals):
+    """(F_d [N] per set-point, its direction (n, 3)) at t [s], in the phase's order."""
+    n = ints[N_FORCES]
+    ramps = section(reals, ints[R_RAMPS], n, 5)
+    w = np.empty(2 * n)
+    ramp_rows(t, ramps, w)
+    F_d = np.empty(n)
+    for j in range(n):
+        F_d[j] = w[2 * j]
+    return F_d, section(reals, ints[R_RAMPS] + 5 * n, n, 3)
+
+
+@njit(cache=True)
+def _task_pd(x, ints, reals, h, g, J6, p_tip, v_tip, Rf, x_d, v_d, F_d, forced):
+    """τ of the task PD law (TaskPD.command's arguments from the packed constants)."""
+    nv, nQ, k = ints[NV], ints[NQ], ints[N_AXES]
+    at = ints[R_CTL]
+    axes = section(reals, at, k, 3)
+    kp, kd = reals[at + 3 * k:at + 4 * k], reals[at + 4 * k:at + 5 * k]
+    o = at + 5 * k
+    tool, target = reals[o:o + 3 * ints[HAS_TOOL]], reals[o + 3:o + 3 + 3 * ints[HAS_TOOL]]
+    R_d = section(reals, o + 6, 3 * ints[HAS_RD], 3)
+    ko, do, kd_joint, kd_normal = reals[o + 15], reals[o + 16], reals[o + 17], reals[o + 18]
+    orient = ints[READS_ORIENTATION] != 0
+    J_ang = J6[3:] if orient else np.empty((0, nv))  # (views of C arrays: no copies)
+    R_tip = Rf if orient else np.empty((0, 3))
+    ff = ints[FEEDFORWARD]
+    tau_ff = h if ff == FF_BIAS else g if ff == FF_GRAVITY else np.empty(0)
+    return torque(x[nQ:nQ + nv], J6[:3], J_ang, p_tip, v_tip, x_d, v_d, F_d, R_tip, axes, forced, kp, kd, tool,
+                  target, R_d, ko, do, kd_joint, kd_normal, tau_ff)
+
+
+@njit(cache=True)
+def _put(buf, lay, field, values):
+    """A field's values (a flat array) into the controller's buffer where the layout puts it (none if absent)."""
+    start = lay[2 + 2 * field]
+    for i in range(lay[3 + 2 * field] - start):
+        buf[start + i] = values[i]
+
+
+@njit(cache=True)
+def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
+    """τ of a controller of the ABI, by its address: its inputs written into its buffer (NaNs and status 0: the law
+    failed; the readable model's error surfaces there)."""
+    nv, nQ = ints[NV], ints[NQ]
+    lay = ints[ints[I_LAYOUT]:ints[I_LAYOUT] + N_LAYOUT]
+    buf = np.zeros(lay[lay.size - 1])
+    buf[lay[2 + 2 * F_T]] = t
+    _put(buf, lay, F_Q, x[:nv])
+    _put(buf, lay, F_V, x[nQ:nQ + nv])
+    _put(buf, lay, F_H, H.ravel())
+    _put(buf, lay, F_HB, h)
+    _put(buf, lay, F_GRAVITY, g)
+    _put(buf, lay, F_P, p_tip)
+    _put(buf, lay, F_PD, v_tip)
+    _put(buf, lay, F_J, J6[:3].ravel())
+    _put(buf, lay, F_DRIFT, a6[:3])
+    _put(buf, lay, F_XD, x_d)
+    _put(buf, lay, F_VD, v_d)
+    _put(buf, lay, F_AD, a_d)
+    _put(buf, lay, F_R, Rf.ravel())
+    _put(buf, lay, F_JANG, J6[3:].ravel())
+    _put(buf, lay, F_DRIFT_ANG, a6[3:])
+    tau = np.zeros(nv)
+    params = reals[ints[R_CTL]:ints[R_CTL] + ints[N_CTL_PARAMS]]
+    if command_by_address(ints[CTL_ADDRESS], buf, lay, params, tau) != 1:
+        tau[:] = np.nan
+    return tau
+
+
+@njit(cache=True)
+def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
+    """The controller's τ [N·m or N] at (t, x) (zero without a controller)."""
+    fi = ints[TIP_FRAME]
+    x_d, v_d, a_d = reference(t, ints, reals)
+    if ints[CTL_KIND] == CTL_TASK_PD:
+        F_d, forced = set_points(t, ints, reals)
+        return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)
+    if ints[CTL_KIND] == CTL_ABI:
+        return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
+    return np.zeros(ints[NV])
+
+
+@njit(cache=True)
+def drives(x, ints, reals, tau, f):
+    """Ideal torque drives: the command per drive (the joints' τ, the bodies' servo forces g (v_ref − v) [N]) added
+    to f, as Drives.apply without motors; the command returned."""
+    nQ, n = ints[NQ], ints[N_DRIVES]
+    cmd = np.zeros(n)
+    cmd[:tau.size] = tau
+    servo = reals[ints[R_SERVOS]:]
+    for k in range(ints[N_SERVOS]):
+        idx = ints[ints[I_SERVOS] + k]
+        cmd[idx] = servo[2 * k + 1] * (servo[2 * k] - x[nQ + idx])
+    for i in range(n):
+        f[i] += cmd[i]
+    return cmd
+
+
+def command_by_address(address, buffer, layout, params, tau) -> int:
+    """The controller at ``address`` on its buffer (the ABI's call); interpreted, a handle's Python ``command``."""
+    cls = PYTHON_CONTROLLERS.get(int(address))
+    if cls is None:
+        return call_controller(address, buffer, layout, params, tau)
+    config = namedtuple("Config", [p.name for p in cls.params])(*params)
+    out, _ = cls.command(namedtuple("Self", ["config", "nv"])(config, int(layout[0])), control_arrays(buffer, layout))
+    tau[:] = out
+    return 1
+
+
+@overload(command_by_address)
+def _command_by_address_compiled(address, buffer, layout, params, tau):
+    def impl(address, buffer, layout, params, tau):
+        return call_controller(address, buffer, layout, params, tau)
+    return impl

@@ -1,0 +1,271 @@
+"""The pipeline's contact stages over the packed arrays: chains, bond rows, friction rows, limit rows, and after the
+solve the contacts' forces.
+
+Per contact, in the readable model's order (:func:`contactdyn.model.dynamics._contact_terms`): its chains (the
+normal, then the tangential ones) by :func:`contactdyn.model.chain_forces.chain_call` over the chain's packed plan
+(stage laws by address), each bonded chain's row G and γ; then friction
+(:func:`contactdyn.model.friction.friction_terms`): a stick row per tangent, or a slide's tilt of the normal
+column −μ d·G_T (μ by the friction law's address, or the constant μ_k) or its known force −μ max(F, 0) d − c v_t
+on the coordinates; then the chains' tip force Jᵀ F [N].
+After the solve (:func:`finish`): normal forces, friction forces, the impulse states' rates, limit torques.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...laws.abi import call_friction
+from ...numerics.compile_cache import njit
+from ..chain_forces import chain_call
+from .pack import (
+    ANCHOR,
+    CH_COEF,
+    CH_CONSTS,
+    CH_ENV_COORD,
+    CH_ENV_KIND,
+    CH_MOTION,
+    CH_NCONSTS,
+    CH_NNODES,
+    CH_NS,
+    CH_OFFSET,
+    CH_PLAN,
+    CH_ROBOT_COORD,
+    CH_ROBOT_KIND,
+    CH_ROW,
+    CH_STAGES,
+    CH_STATE,
+    CH_W,
+    CI_BODY,
+    CI_FIRST_T,
+    CI_FP_AT,
+    CI_FRAME,
+    CI_FRICTION,
+    CI_IMPULSE,
+    CI_LAW,
+    CI_N_FP,
+    CI_N_T,
+    CI_NORMAL,
+    CI_NORMAL_ROW,
+    CI_NT,
+    CI_REALS,
+    CI_STICK_ROW,
+    CI_TOUCHING,
+    CI_W,
+    CR_AXIS,
+    CR_MU_K,
+    CR_MU_S,
+    CR_POINT,
+    CR_R,
+    CR_T,
+    CR_VISCOUS,
+    EV_FF,
+    EV_FN,
+    EV_GAP,
+    EV_VT,
+    EV_W,
+    FRICTION_SLIDE,
+    FRICTION_STICK,
+    I_CHAINS,
+    I_CONTACTS,
+    I_LIMITS,
+    LI_JOINT,
+    LI_W,
+    N_CHAINS,
+    N_CONTACTS,
+    N_LIMITS,
+    NQ,
+    NV,
+    R_LIMITS,
+    RH_OMEGA,
+    RH_SLIP_BAND,
+    TIP,
+    section,
+)
+
+__all__ = ["contact_terms", "limit_rows", "finish"]
+
+#: per contact, what finishes a slide once its normal force is solved: μ [-], d (2), the viscous force (2) [N]
+P_MU, P_D, P_VISC, P_W = 0, 1, 3, 5
+
+
+@njit(cache=True)
+def _chain(x, ints, reals, work, k, p_tip, v_tip, p_env, v_env, drift, f, ydot):
+    """Chain k's call over its packed plan: (tip F along u [N], γ [m/s²], interface F [N], gap [m], finite)."""
+    ch = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k]
+    ns, nn = ch[CH_NS], ch[CH_NNODES]
+    plan = ints[ch[CH_PLAN]:ch[CH_STAGES]]
+    stages = section(ints, ch[CH_STAGES], ns, 7)
+    coef = section(reals, ch[CH_COEF], ns, 4)
+    consts = reals[ch[CH_CONSTS]:ch[CH_CONSTS] + ch[CH_NCONSTS]]
+    motion = section(work, ch[CH_MOTION], 2, nn)
+    state = section(work, ch[CH_STATE], ns, 4)
+    return chain_call(plan, stages, coef, consts, x, p_tip, v_tip, p_env, v_env, drift, reals[ch[CH_OFFSET]], f,
+                      ydot, motion, state)
+
+
+@njit(cache=True)
+def _bond_row(ints, reals, k, J, body, G, C):
+    """Chain k's bond row (model.chain_forces._bond_row): the two surfaces' relative motion along u."""
+    ch = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k]
+    r = ch[CH_ROW]
+    u = reals[ch[CH_CONSTS]:ch[CH_CONSTS] + 3]
+    u_axis = reals[ch[CH_CONSTS] + 3]
+    for kind, coord, sign in ((ch[CH_ROBOT_KIND], ch[CH_ROBOT_COORD], 1.0), (ch[CH_ENV_KIND], ch[CH_ENV_COORD], -1.0)):
+        if kind == TIP:
+            for c in range(J.shape[1]):
+                G[r, c] += sign * (u[0] * J[0, c] + u[1] * J[1, c] + u[2] * J[2, c])
+        elif kind == ANCHOR:
+            if body >= 0:
+                G[r, body] += sign * u_axis
+        else:
+            G[r, coord] += sign
+    C[r, :] = G[r, :]
+
+
+@njit(cache=True)
+def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, events, pending):
+    """Every contact's chains, rows and friction into f, ydot, G, C, γ, events; False if a stage law gave no force."""
+    nQ = ints[NQ]
+    cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
+    for ci in range(cs.shape[0]):
+        row = cs[ci]
+        cr = reals[row[CI_REALS]:]
+        fi, body = row[CI_FRAME], row[CI_BODY]
+        J = FJ[fi, :3]
+        p_env, v_env = cr[CR_POINT:CR_POINT + 3].copy(), np.zeros(3)
+        if body >= 0:
+            for i in range(3):
+                p_env[i] = cr[CR_POINT + i] + cr[CR_AXIS + i] * x[body]
+                v_env[i] = cr[CR_AXIS + i] * x[nQ + body]
+        tip_force = np.zeros(3)
+        F_n = 0.0
+        for k in range(row[CI_NORMAL], row[CI_FIRST_T] + row[CI_N_T]):
+            tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, k, Fp[fi], Fv[fi], p_env, v_env,
+                                                          Fa[fi, :3], f, ydot)
+            if not finite:
+                return False
+            u0 = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k, CH_CONSTS]
+            for i in range(3):
+                tip_force[i] += tip_F * reals[u0 + i]
+            if k == row[CI_NORMAL]:
+                F_n = interface_F
+                events[EV_W * ci + EV_GAP] = 0.0 if row[CI_TOUCHING] else gap
+            if section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k, CH_ROW] >= 0:
+                _bond_row(ints, reals, k, J, body, G, C)
+                gamma[section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k, CH_ROW]] = gam
+        events[EV_W * ci + EV_FN] = F_n
+        if row[CI_NT]:
+            _friction(x, ints, reals, ci, row, cr, J, Fa[fi, :3], Fv[fi], v_env, F_n, f, G, C, gamma, events,
+                      pending)
+        if tip_force[0] != 0.0 or tip_force[1] != 0.0 or tip_force[2] != 0.0:
+            for c in range(J.shape[1]):
+                f[c] += J[0, c] * tip_force[0] + J[1, c] * tip_force[1] + J[2, c] * tip_force[2]
+    return True
+
+
+@njit(cache=True)
+def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, F_n, f, G, C, gamma, events, pending):
+    """A friction contact's slip velocity, and its stick rows, or its slide (the tilt of its normal column or its
+    known force on the coordinates), as model.friction.friction_terms."""
+    nv, nQ, nt, body = ints[NV], ints[NQ], row[CI_NT], row[CI_BODY]
+    T = cr[CR_T:CR_T + 3 * nt].reshape((nt, 3))
+    ev = events[EV_W * ci:EV_W * (ci + 1)]
+    vt = np.zeros(nt)
+    for i in range(nt):
+        vt[i] = T[i, 0] * (v_tip[0] - v_env[0]) + T[i, 1] * (v_tip[1] - v_env[1]) + T[i, 2] * (v_tip[2] - v_env[2])
+        ev[EV_VT + i] = vt[i]
+        ev[EV_FF + i] = 0.0
+    if row[CI_FRICTION] != FRICTION_STICK and row[CI_FRICTION] != FRICTION_SLIDE:
+        return
+    R_T = np.zeros((nt, nQ))  # generalized rows of the tangential slip
+    for i in range(nt):
+        for c in range(nv):
+            R_T[i, c] = T[i, 0] * J[0, c] + T[i, 1] * J[1, c] + T[i, 2] * J[2, c]
+        if body >= 0:
+            R_T[i, body] -= T[i, 0] * cr[CR_AXIS] + T[i, 1] * cr[CR_AXIS + 1] + T[i, 2] * cr[CR_AXIS + 2]
+    if row[CI_FRICTION] == FRICTION_STICK:
+        w = reals[RH_OMEGA]
+        for i in range(nt):
+            r = row[CI_STICK_ROW] + i
+            G[r, :] = R_T[i]
+            C[r, :] = R_T[i]
+            gamma[r] = T[i, 0] * drift[0] + T[i, 1] * drift[1] + T[i, 2] * drift[2] + w * vt[i]
+        return
+    d = _slip_direction(reals, cr, vt)
+    speed = math.sqrt(vt[0] * vt[0] + vt[1] * vt[1]) if nt == 2 else math.sqrt(vt[0] * vt[0])
+    mu = cr[CR_MU_K] if row[CI_LAW] == 0 else \
+        call_friction(row[CI_LAW], cr[CR_MU_S], cr[CR_MU_K], reals, row[CI_FP_AT], row[CI_N_FP], speed)
+    visc = -cr[CR_VISCOUS] * vt
+    p = pending[ci]
+    p[P_MU] = mu
+    for i in range(nt):
+        p[P_D + i], p[P_VISC + i] = d[i], visc[i]
+    nr = row[CI_NORMAL_ROW]
+    force = np.zeros(nt)  # on the coordinates: the viscous force with a normal row, else the whole known force
+    for i in range(nt):
+        force[i] = visc[i] if nr >= 0 else -mu * max(F_n, 0.0) * d[i] + visc[i]
+        if nr < 0:
+            ev[EV_FF + i] = force[i]
+    for c in range(nQ):
+        s = 0.0
+        for i in range(nt):
+            s += d[i] * R_T[i, c]
+        if nr >= 0:
+            C[nr, c] = G[nr, c] - mu * s
+        if nr < 0 or cr[CR_VISCOUS] != 0.0:
+            s = 0.0
+            for i in range(nt):
+                s += force[i] * R_T[i, c]
+            f[c] += s
+
+
+@njit(cache=True)
+def _slip_direction(reals, cr, vt):
+    """model.friction.slip_direction: 2-D, the slip's own direction once ahead of the reference r by the stick band,
+    else r; 1-D, r (±1)."""
+    d = cr[CR_R:CR_R + vt.size].copy()
+    if vt.size == 2 and vt[0] * d[0] + vt[1] * d[1] > reals[RH_SLIP_BAND]:
+        return vt / math.sqrt(vt[0] * vt[0] + vt[1] * vt[1])
+    return d
+
+
+@njit(cache=True)
+def limit_rows(x, ints, reals, first_row, G, C, gamma):
+    """A row per joint pressing on its limit (model.limits.JointLimits.add_rows): e_i Q̈ + 2ω q̇_i + ω² (q_i − limit)."""
+    nQ, w = ints[NQ], reals[RH_OMEGA]
+    lims = section(ints, ints[I_LIMITS], ints[N_LIMITS], LI_W)
+    for k in range(lims.shape[0]):
+        i, r = lims[k, LI_JOINT], first_row + k
+        G[r, i] = C[r, i] = 1.0
+        gamma[r] = 2.0 * w * x[nQ + i] + w * w * (x[i] - reals[ints[R_LIMITS] + k])
+
+
+@njit(cache=True)
+def finish(ints, lam, xdot, events, pending, first_limit_row):
+    """After the solve: normal forces of the rows, stick forces, a slide's friction −μ max(F, 0) d + visc, the
+    impulse states' rates [N], the limits' torques (into ``events``)."""
+    nQ = ints[NQ]
+    cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
+    for ci in range(cs.shape[0]):
+        row = cs[ci]
+        ev = events[EV_W * ci:EV_W * (ci + 1)]
+        nt = row[CI_NT]
+        if row[CI_NORMAL_ROW] >= 0:
+            ev[EV_FN] = lam[row[CI_NORMAL_ROW]]
+        if row[CI_FRICTION] == FRICTION_STICK:
+            for i in range(nt):
+                ev[EV_FF + i] = lam[row[CI_STICK_ROW] + i]
+        elif row[CI_FRICTION] == FRICTION_SLIDE and row[CI_NORMAL_ROW] >= 0:
+            p = pending[ci]
+            for i in range(nt):
+                ev[EV_FF + i] = -p[P_MU] * max(ev[EV_FN], 0.0) * p[P_D + i] + p[P_VISC + i]
+        slot = row[CI_IMPULSE]
+        if slot >= 0:
+            xdot[2 * nQ + slot] = ev[EV_FN]
+            for i in range(nt):
+                xdot[2 * nQ + slot + 1 + i] = ev[EV_FF + i]
+    base = EV_W * cs.shape[0]
+    for k in range(ints[N_LIMITS]):
+        events[base + k] = lam[first_limit_row + k]

@@ -1,0 +1,66 @@
+"""The pipeline's KKT stage over arrays: the assembly of [[M, −Cᵀ], [G, 0]] [Q̈; λ] = [f; −γ] and its solve.
+
+M is the robot's H [kg·m²] (no motors in this prototype: no reflected rotor inertia) and the diagonal inertias
+of the bodies and chain masses [kg] (the packed ``M_rest``); G the rows, C their force columns (a slide's tilt),
+γ [m/s²] their velocity-product and Baumgarte terms (:mod:`contactdyn.model.constraints`' ``kkt_solve``). The solve
+is ``numerics.linalg.lu_solve`` (partial pivoting) with the readable model's residual test: a singular matrix
+returns status 0 and the caller takes the readable model's least squares (``constraints.solve_linear``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...numerics.compile_cache import njit
+from ...numerics.linalg import lu_solve
+from .pack import NQ, NV, R_MREST
+
+__all__ = ["kkt_solve", "residual_ok"]
+
+
+@njit(cache=True)
+def residual_ok(A, z, b):
+    """z is finite and ‖A z − b‖ ≤ 1e-9 (1 + ‖b‖) (constraints.solve_linear's test)."""
+    r2 = b2 = 0.0
+    for i in range(b.size):
+        if not math.isfinite(z[i]):
+            return False
+        s = 0.0
+        for j in range(b.size):
+            s += A[i, j] * z[j]
+        r2 += (s - b[i]) ** 2
+        b2 += b[i] * b[i]
+    return math.sqrt(r2) <= 1e-9 * (1.0 + math.sqrt(b2))
+
+
+@njit(cache=True)
+def kkt_solve(ints, reals, H, f, G, C, gamma):
+    """(Q̈ [m/s², rad/s²], λ [N], regular): the KKT system's solve, or with no rows H q̈ = f and the other
+    coordinates' f / m."""
+    nv, nQ, nr = ints[NV], ints[NQ], gamma.size
+    m_rest = reals[ints[R_MREST]:ints[R_MREST] + nQ - nv]
+    if nr == 0:
+        qdd = np.empty(nQ)
+        b = f[:nv].copy()
+        z = lu_solve(H, b)
+        qdd[:nv] = z
+        for i in range(nQ - nv):
+            qdd[nv + i] = f[nv + i] / m_rest[i]
+        return qdd, np.empty(0), residual_ok(H, z, b)
+    m = nQ + nr
+    A = np.zeros((m, m))
+    A[:nv, :nv] = H
+    for i in range(nQ - nv):
+        A[nv + i, nv + i] = m_rest[i]
+    for r in range(nr):
+        for c in range(nQ):
+            A[c, nQ + r] = -C[r, c]
+            A[nQ + r, c] = G[r, c]
+    b = np.empty(m)
+    b[:nQ] = f
+    for r in range(nr):
+        b[nQ + r] = -gamma[r]
+    z = lu_solve(A, b)
+    return z[:nQ], z[nQ:], residual_ok(A, z, b)

@@ -1,0 +1,332 @@
+"""A mode packed for the pipeline: every table one right-hand-side call reads, as flat arrays (once per mode).
+
+:func:`pack` (Python) lays out one (modes, phase) of a system as
+
+- ``ints`` (int64): a header (the sizes and where each section starts, the slots named below), then the sections:
+  frames, contacts, chains (each chain's own plan, :func:`contactdyn.model.chain_forces.pack`, copied in), pressing
+  limits, servos, the controller's layout table (the controller ABI's, :mod:`contactdyn.laws.controllers.abi`);
+- ``reals`` (float64): Baumgarte's ω [1/s] and the stick band [m/s], then the rigid-body table
+  (:mod:`contactdyn.robot.rigid_body`), the frames' placements in their joints, the non-robot inertias [kg],
+  the contacts' points, axes, tangents, slip references and friction coefficients, the chains' coefficients and
+  law parameters, the limits [rad or m], the servos, the reference and its moves, the force ramps, the controller's
+  constants or declared parameters;
+- ``work`` (float64): the chains' node motion and stage states of the last call (scratch the call writes).
+
+A law enters by its address (an int64 of ``ints``: a stage law's in its chain's stage table, a friction law's in
+its contact's row, a user controller's in the controller section), so one compiled call serves every law. The
+index constants below are the one place the layout is written; the call (:mod:`.pipeline`) reads nothing else.
+
+What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
+motors and voltage drives, joint friction, force-reading or stateful controllers (a sampled law among them), a
+reference carried by a body, a 2-D slide launching from rest, the energy audit, a stage or friction law numba
+cannot compile, a robot ``rigid_body`` does not compute, a circle move, controllers other than ``task_pd`` and user
+laws of the controller ABI.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from ...laws.abi import friction_address
+from ...laws.controllers import Controller
+from ...laws.controllers.abi import controller_address, layout_of, params_of
+from ...laws.friction_laws import FRICTION_LAWS
+from ...laws.trajectory import move_table, ramp_table
+from ...numerics.compile_cache import njit
+from ..chain import NodeKind
+from ..chain_forces import pack as pack_chain
+
+__all__ = ["Packed", "pack", "unsupported", "section"]
+
+# ---- the header of ``ints``: sizes, switches, then where each section starts -------------------------------------
+(NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
+ FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
+ I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
+ R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, HEADER) = range(41)
+#: ``reals``' first slots
+RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
+#: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
+CTL_NONE, CTL_TASK_PD, CTL_ABI = 0, 1, 2
+FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
+#: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
+FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
+FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
+#: a contact's ints (friction: FRICTION_* below; rows: -1 none; law: the friction law's address, 0 constant μ_k)
+(CI_FRAME, CI_BODY, CI_TOUCHING, CI_FRICTION, CI_NT, CI_LAW, CI_N_FP, CI_FP_AT, CI_NORMAL, CI_FIRST_T, CI_N_T,
+ CI_NORMAL_ROW, CI_STICK_ROW, CI_IMPULSE, CI_REALS, CI_W) = range(16)
+FRICTION_NONE, FRICTION_STICK, FRICTION_SLIDE, FRICTION_APART = 0, 1, 2, 3
+#: a contact's reals: point [m], body axis, tangents (2 rows of 3), slip reference r, μ_s, μ_k, viscous [N·s/m]
+CR_POINT, CR_AXIS, CR_T, CR_R, CR_MU_S, CR_MU_K, CR_VISCOUS, CR_W = 0, 3, 6, 12, 14, 15, 16, 17
+#: a chain's ints: where its plan, stage table, coefficients and constants are (ints, reals), its buffers (work),
+#: its bond row (-1: none) and the bond's two surface nodes (kind, coordinate), its anchor offset (reals)
+(CH_PLAN, CH_STAGES, CH_NS, CH_COEF, CH_CONSTS, CH_NCONSTS, CH_MOTION, CH_NNODES, CH_STATE, CH_ROW, CH_ROBOT_KIND,
+ CH_ROBOT_COORD, CH_ENV_KIND, CH_ENV_COORD, CH_OFFSET, CH_W) = range(16)
+LI_JOINT, LI_SIDE, LI_W = 0, 1, 2  #: a pressing limit's ints (its value [rad or m] in reals)
+#: the event values the call writes (``events``): per contact its gap [m], normal force [N], slip velocity [m/s]
+#: and friction force [N] in tangent coordinates; then each pressing limit's torque [N·m or N]; then the status
+EV_GAP, EV_FN, EV_VT, EV_FF, EV_W = 0, 1, 2, 4, 6
+#: status: 1 the call is complete; 0 the KKT matrix is singular (the readable model's least squares is needed)
+TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
+
+
+@njit(cache=True, inline="always")
+def section(arr, at, rows, width):
+    """The rows × width table stored flat in ``arr`` from ``at`` (a view)."""
+    return arr[at:at + rows * width].reshape((rows, width))
+
+
+@dataclass
+class Packed:
+    """One mode's arrays and what names their outputs."""
+
+    ints: np.ndarray
+    reals: np.ndarray
+    work: np.ndarray
+    events: np.ndarray  #: the call's event values (EV_* per contact, the limits' torques, the status)
+    row_meta: list[tuple[str, str, int]]  #: (owner, kind, index) per KKT row, as contactdyn.model.constraints
+    contacts: list[str]
+    limits: list[int]  #: the pressing joints' coordinates, in the order of their torques
+
+
+def unsupported(system, modes, phase) -> str:
+    """Why this prototype cannot pack (modes, phase) ("" when it can)."""
+    ctl = phase.controller
+    if system.energy_slot >= 0:
+        return "energy audit"
+    if system.drives.any_motor:
+        return "motors (drives other than ideal torque sources)"
+    if system.joint_friction.any:
+        return "joint friction (its stuck rows and torques are not packed yet)"
+    if system.robot.rigid_table is None:
+        return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
+    if phase.carrier is not None:
+        return "a reference carried by a body"
+    if ctl.uses_forces or ctl.n_states or ctl.outputs != "torque":
+        return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
+    if ctl.name != "task_pd" and not _addressable(type(ctl)):
+        return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
+    if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
+        return "a circle move"
+    for c, m in zip(system.contacts, modes, strict=True):
+        if m.from_rest and len(m.slip) == 2 and m.touching and not m.stuck:
+            return "a 2-D slide launching from rest"
+        if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
+            return f"friction law {c.friction.law!r} does not compile"
+        for dc in c.chains:
+            if pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching).python_stages:
+                return f"a stage law of {c.name}.{dc.label} does not compile"
+    return ""
+
+
+def _addressable(cls: type) -> bool:
+    """A controller of the ABI: compiled to its address, or (interpreted) one that reads its declared parameters."""
+    if not numba.config.DISABLE_JIT:
+        return controller_address(cls) != 0
+    cls.compiled_reason = "it reads its own config (not its declared parameters, Controller.params)"
+    return getattr(cls.read, "__func__", cls.read) is Controller.read.__func__
+
+
+class _Builder:
+    """Appends sections to ``ints`` and ``reals``; the header's slots point at them."""
+
+    def __init__(self) -> None:
+        self.ints: list[int] = [0] * HEADER
+        self.reals: list[float] = [0.0] * RH_SIZE
+        self.work = 0
+
+    def int_section(self, slot: int | None, values) -> int:
+        at = len(self.ints)
+        if slot is not None:
+            self.ints[slot] = at
+        self.ints += [int(v) for v in values]
+        return at
+
+    def real_section(self, slot: int | None, values) -> int:
+        at = len(self.reals)
+        if slot is not None:
+            self.ints[slot] = at
+        self.reals += [float(v) for v in np.ravel(values)]
+        return at
+
+
+def pack(system, modes, phase) -> Packed:
+    """The arrays of (modes, phase) (:func:`unsupported` must be "")."""
+    b = _Builder()
+    h = b.ints
+    nv, nQ = system.nv, system.nQ
+    h[NV], h[NQ], h[NY], h[NX], h[N_DRIVES] = nv, nQ, system.ny, system.n, len(system.drives.specs)
+    b.reals[RH_OMEGA], b.reals[RH_SLIP_BAND] = system.stabilization, system.slip_band
+    table = system.robot.rigid_table
+    h[NJ] = table.shape[0]
+    b.real_section(R_RIGID, table)
+    b.real_section(R_MREST, system.M_rest)
+    fids = list(dict.fromkeys([system.tip_fid, *(c.fid for c in system.contacts)]))
+    _frames(b, system, fids)
+    h[TIP_FRAME] = 0
+    meta = _contacts(b, system, modes, fids)
+    h[N_LIMITS] = len(phase.limits)
+    b.int_section(I_LIMITS, [v for i, side in phase.limits for v in (i, side)])
+    b.real_section(R_LIMITS, [system.limits.by_index[i].lower if side > 0 else system.limits.by_index[i].upper
+                              for i, side in phase.limits])
+    meta += [(system.limits.by_index[i].name, "limit", i) for i, _ in phase.limits]
+    h[N_ROWS] = len(meta)
+    h[N_SERVOS] = len(system.servo)
+    b.int_section(I_SERVOS, [idx for idx, _, _ in system.servo])
+    b.real_section(R_SERVOS, [v for _, v_ref, gain in system.servo for v in (v_ref, gain)])
+    _reference(b, system, phase)
+    _controller(b, system, phase)
+    h[W_SIZE] = b.work
+    n_events = EV_W * len(system.contacts) + len(phase.limits) + 1
+    return Packed(np.array(h, dtype=np.int64), np.array(b.reals), np.zeros(max(b.work, 1)), np.zeros(n_events),
+                  meta, [c.name for c in system.contacts], [i for i, _ in phase.limits])
+
+
+def _frames(b: _Builder, system, fids: list[int]) -> None:
+    """Per frame its joint, the columns that move it and its placement in its joint (plan_phi.frame_constants)."""
+    model = system.robot.model
+    b.ints[N_FRAMES] = len(fids)
+    rows, supports, consts = [], [], []
+    for fid in fids:
+        frame = model.frames[fid]
+        cols = [k for jj in model.supports[frame.parentJoint][1:]
+                for k in range(model.joints[jj].idx_v, model.joints[jj].idx_v + model.joints[jj].nv)]
+        rows.append((frame.parentJoint, len(cols), len(supports)))
+        supports += cols
+        consts += [*frame.placement.translation, *frame.placement.rotation.ravel()]
+    at = b.int_section(I_FRAMES, [0] * (FI_W * len(fids)))
+    support_at = b.int_section(None, supports)
+    for k, (joint, n, start) in enumerate(rows):
+        b.ints[at + FI_W * k:at + FI_W * (k + 1)] = [joint, n, support_at + start]
+    b.real_section(R_FRAMES, consts)
+
+
+def _contacts(b: _Builder, system, modes, fids: list[int]) -> list[tuple[str, str, int]]:
+    """The contacts' and chains' rows; the KKT rows' meta in the readable model's order (per contact: its tangential
+    chains' bonds, its stick rows, its normal row)."""
+    h = b.ints
+    h[N_CONTACTS] = len(system.contacts)
+    chains = [(c, m, dc, i - 1) for c, m in zip(system.contacts, modes, strict=True) for i, dc in enumerate(c.chains)]
+    h[N_CHAINS] = len(chains)
+    contact_at = b.int_section(I_CONTACTS, [0] * (CI_W * len(system.contacts)))
+    chain_at = b.int_section(I_CHAINS, [0] * (CH_W * len(chains)))
+    meta: list[tuple[str, str, int]] = []
+    k = 0
+    for ci, (c, m) in enumerate(zip(system.contacts, modes, strict=True)):
+        first = k
+        rows_of = {}
+        for i, dc in enumerate(c.tangent_chains):
+            rows_of[k + 1 + i] = _tangent_row(meta, c, dc, m, i)
+        nt = len(c.tangents) if c.friction is not None else 0
+        stick_row = len(meta) if nt and m.touching and m.stuck else -1
+        if stick_row >= 0:
+            meta += [(c.name, "t", i) for i in range(nt)]
+        normal_row = len(meta) if m.touching and c.normal.chain.bonded_when_touching else -1
+        if normal_row >= 0:
+            meta.append((c.name, "n", 0))
+        rows_of[first] = normal_row
+        for _ in c.chains:
+            _chain(b, system, *chains[k][:3], chains[k][3], chain_at + CH_W * k, rows_of.get(k, -1))
+            k += 1
+        friction = FRICTION_NONE if not nt else FRICTION_APART if not m.touching else \
+            FRICTION_STICK if m.stuck else FRICTION_SLIDE
+        fr = c.friction
+        law = friction_address(FRICTION_LAWS[fr.law]) if nt and not fr.constant else 0
+        fp_at = b.real_section(None, fr.params if nt else ())
+        T = np.zeros((2, 3))
+        T[:nt] = c.tangents[:nt]
+        r = np.zeros(2)
+        r[:len(m.slip)] = m.slip
+        reals_at = b.real_section(None, [*c.spec.point, *c.body_axis, *T.ravel(), *r,
+                                         *((fr.mu_s, fr.mu_k, fr.viscous) if nt else (0.0, 0.0, 0.0))])
+        h[contact_at + CI_W * ci:contact_at + CI_W * (ci + 1)] = [
+            fids.index(c.fid), c.body_index, int(m.touching), friction, nt, law, len(fr.params) if nt else 0, fp_at,
+            first, first + 1, len(c.tangent_chains), normal_row, stick_row, system.impulse_slots.get(c.name, -1),
+            reals_at]
+    return meta
+
+
+def _tangent_row(meta: list, c, dc, m, i: int) -> int:
+    """The row of tangential chain ``dc`` (its bond, while touching) appended to ``meta``; -1 without one."""
+    if not (m.touching and dc.chain.bonded_when_touching):
+        return -1
+    meta.append((c.name, dc.label, i))
+    return len(meta) - 1
+
+
+def _chain(b: _Builder, system, c, m, dc, tangent: int, at: int, row: int) -> None:
+    """One chain's arrays (its plan in the mode, chain_forces.pack) copied into ints, reals and work."""
+    a = pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching)
+    chain = dc.chain
+    plan_at = b.int_section(None, a.plan)
+    stages_at = b.int_section(None, a.stages.ravel())
+    coef_at = b.real_section(None, a.coef)
+    consts_at = b.real_section(None, a.consts)
+    offset_at = b.real_section(None, [m.offsets[tangent] if tangent >= 0 else 0.0])
+    motion_at, state_at = b.work, b.work + a.motion.size
+    b.work += a.motion.size + a.stage_state.size
+
+    def surface(node: int) -> tuple[int, int]:
+        n = chain.nodes[node]
+        return int(n.kind), (c.body_index if n.kind == NodeKind.ANCHOR else n.coord)
+
+    b.ints[at:at + CH_W] = [plan_at, stages_at, len(chain.stages), coef_at, consts_at, a.consts.size, motion_at,
+                            len(chain.nodes), state_at, row, *surface(chain.robot_surface),
+                            *surface(chain.env_surface), offset_at]
+
+
+def _reference(b: _Builder, system, phase) -> None:
+    """The reference's start and moves (trajectory.move_table, then each move's Δ), the force ramps and the
+    set-points' directions (the controller's normals), in the phase's order."""
+    h = b.ints
+    ref = phase.reference
+    h[REF_DIMS] = len(ref.start) if ref is not None else 0
+    h[N_MOVES] = len(ref.moves) if ref is not None else 0
+    if ref is not None:
+        b.real_section(R_REF, [*ref.start, *move_table(ref.moves).ravel(), *(v for mv in ref.moves for v in mv.delta)])
+    else:
+        h[R_REF] = len(b.reals)
+    keys = list(phase.forces)
+    h[N_FORCES] = len(keys)
+    b.real_section(R_RAMPS, [*ramp_table([phase.forces[k] for k in keys]).ravel(),
+                             *(v for k in keys for v in system.force_directions[k])])
+
+
+def _controller(b: _Builder, system, phase) -> None:
+    """task PD: its constants (TaskPD.constants) and feedforward; a controller of the ABI: its address, the layout
+    of its inputs and its declared parameters."""
+    h = b.ints
+    ctl = phase.controller
+    h[READS_ORIENTATION], h[NEEDS_GRAVITY] = int(ctl.reads_orientation), int(ctl.needs_gravity)
+    if ctl.name == "task_pd":
+        axes, kp, kd, tool_axis, target, R_d, ko, do, kd_joint, kd_normal = ctl.constants
+        h[CTL_KIND], h[N_AXES], h[HAS_TOOL], h[HAS_RD] = CTL_TASK_PD, len(axes), int(tool_axis.size > 0), \
+            int(R_d.shape[0] > 0)
+        h[FEEDFORWARD] = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}[ctl.config.feedforward]
+        h[NEEDS_GRAVITY] = int(h[FEEDFORWARD] == FF_GRAVITY)
+        tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
+        b.real_section(R_CTL, [*axes.ravel(), *kp, *kd, *tool[0], *tool[1],
+                               *(R_d.ravel() if R_d.shape[0] else np.zeros(9)), ko, do, kd_joint, kd_normal])
+        b.int_section(I_LAYOUT, ())
+        return
+    h[CTL_KIND] = CTL_ABI
+    cls = type(ctl)
+    h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
+    absent = (*(("gravity",) if not ctl.needs_gravity else ()),
+              *(("x_d", "v_d", "a_d") if phase.reference is None else ()),
+              *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()))
+    b.int_section(I_LAYOUT, layout_of(system.nv, 0, absent))
+    params = params_of(ctl.config)
+    h[N_CTL_PARAMS] = params.size
+    b.real_section(R_CTL, params)
+
+
+#: handle -> controller class: the controller's Python ``command`` under NUMBA_DISABLE_JIT (the address's twin)
+PYTHON_CONTROLLERS: dict[int, type] = {}
+
+
+def _handle(cls: type) -> int:
+    PYTHON_CONTROLLERS[id(cls)] = cls
+    return id(cls)

@@ -1,0 +1,103 @@
+"""The one pipeline runs the modes the compiled plan declines for a declared gap (contactdyn.model.paths.LivePipelines).
+
+Each run is compared with the same run with the path switched off (``LivePipelines.use = False``: those modes on
+System.evaluate): outputs within 1e-9 relative, the same events at the same times, the paths table naming it.
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+import tomllib
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_fast_path import axis_scene  # noqa: E402
+
+from contactdyn import parse_scene, simulate  # noqa: E402
+from contactdyn.model.paths import PIPELINE, UNDECLARED, LivePipelines  # noqa: E402
+from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+
+CUBIC = Path(__file__).resolve().parent.parent / "examples" / "cubic_press.toml"
+CUBIC_GAP = "stage law 'cubic' is not affine in (x, ẋ)"
+HC_GAP = "stage law 'hunt_crossley' is not affine in (x, ẋ)"
+#: a Hunt–Crossley stage soft enough in damping that the falling axis bounces off (a separation on the pipeline)
+HUNT_CROSSLEY = {"model": "chain", "environment": [{"k": 1e7, "b": 1e5, "law": "hunt_crossley", "exponent": 1.5}]}
+
+
+@pytest.fixture(autouse=True)
+def registry(fresh_user_imports):
+    """The cubic example imports the user's module; each test leaves the registries as they were (conftest)."""
+    yield
+    sys.modules.pop("cubic_stage", None)
+
+
+def cubic_scene():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return parse_scene(copy.deepcopy(tomllib.loads(CUBIC.read_text())), file=str(CUBIC))
+
+
+def both_ways(scene, monkeypatch):
+    """(the run with the one pipeline, the run without it)."""
+    live = simulate(scene)
+    monkeypatch.setattr(LivePipelines, "use", False)
+    readable = simulate(scene)
+    monkeypatch.setattr(LivePipelines, "use", True)
+    return live, readable
+
+
+def assert_same_run(live, readable, channels) -> None:
+    for channel in channels:
+        scale = np.abs(readable[channel]).max()
+        assert np.abs(live[channel] - readable[channel]).max() <= 1e-9 * scale, channel
+    assert [(e["kind"], e.get("contact")) for e in live.events] == \
+        [(e["kind"], e.get("contact")) for e in readable.events]
+    np.testing.assert_allclose([e["t"] for e in live.events], [e["t"] for e in readable.events], rtol=0, atol=1e-12)
+
+
+def test_the_cubic_stage_runs_on_the_pipeline_as_on_the_readable_model(monkeypatch):
+    live, readable = both_ways(cubic_scene(), monkeypatch)
+    assert {label: (row["path"], row["why"]) for label, row in live.stats["paths"].items()} == \
+        {"press: tip touching": (PIPELINE, CUBIC_GAP)}
+    assert [row["path"] for row in readable.stats["paths"].values()] == ["readable model"]
+    assert set(live.stats["fallback_modes"]) == {CUBIC_GAP}  # the plan declined it: a declared gap
+    assert_same_run(live, readable, ("q", "v", "tau", "contact.tip.F_n", "stage.tip.n.env1.x"))
+    assert live.stats["rhs_evals"] > 100
+
+
+def test_a_hunt_crossley_bounce_runs_on_the_pipeline_and_separates_at_the_same_time(monkeypatch):
+    live, readable = both_ways(axis_scene(HUNT_CROSSLEY, duration=0.1), monkeypatch)
+    assert [e["kind"] for e in live.events] == ["touch", "separate"]  # the separation: on the pipeline's mode
+    assert live.stats["paths"]["main: tip touching"] == {"path": PIPELINE, "why": HC_GAP, "segments": 1}
+    assert live.stats["paths"]["main: tip free"]["path"] == "compiled plan"  # the flight: the plan runs it
+    assert_same_run(live, readable, ("q", "v", "contact.tip.F_n"))
+
+
+def test_a_pipeline_that_disagrees_where_the_mode_starts_leaves_it_to_the_readable_model(monkeypatch):
+    honest = simulate(axis_scene(HUNT_CROSSLEY, duration=0.05))
+    wrong = Pipeline.rhs
+    monkeypatch.setattr(Pipeline, "rhs", lambda self, t, x: wrong(self, t, x) * (1.0 + 1e-6))
+    r = simulate(axis_scene(HUNT_CROSSLEY, duration=0.05))
+    assert r.stats["paths"]["main: tip touching"]["path"] == "readable model"
+    undeclared = [k for k in r.stats["fallback_modes"] if k.startswith(UNDECLARED)]
+    assert len(undeclared) == 1 and "disagrees with System.evaluate" in undeclared[0]
+    np.testing.assert_array_equal(r["q"], honest["q"])  # the readable model's run: the same as the pipeline's here
+    assert honest.stats["paths"]["main: tip touching"]["path"] == PIPELINE
+
+
+def test_a_stuck_contact_stays_on_the_readable_model(monkeypatch):
+    """A stuck contact's slip watch reads System.evaluate at every call: the pipeline would only add to it."""
+    doc = tomllib.loads(CUBIC.read_text())
+    doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu_s": 0.9,
+                                        "mu_k": 0.8}
+    doc["duration"] = 0.05
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = simulate(parse_scene(doc, file=str(CUBIC)))
+    paths = {label: row["path"] for label, row in r.stats["paths"].items()}
+    assert paths["press: tip stuck"] == "readable model", paths
