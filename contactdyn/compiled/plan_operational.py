@@ -29,7 +29,7 @@ import numpy as np
 
 from ..laws.controllers import operational_law as law
 from ..laws.controllers import task_pd_law
-from ..laws.controllers.abi import FIELD, call_controller, controller_address, layout_of, params_of
+from ..laws.controllers.abi import FIELD, call_controller, controller_address, layout_of, params_of, put_field
 from ..laws.controllers.operational import OperationalSpace
 from ..laws.controllers.operational_law import SINGULAR
 from ..laws.controllers.pd import TaskPD
@@ -169,14 +169,6 @@ def _task_pd(phi, x, fb, ib, ref, set_points, R_tip, J6, nQ, nv, i_J, i_p, i_ff)
 
 
 @njit(cache=True)
-def _put(buf, layout, k, values):
-    """Field k of the controller's buffer from ``values`` (flat; nothing for a field the layout leaves empty)."""
-    start = layout[2 + 2 * k]
-    for i in range(layout[3 + 2 * k] - start):
-        buf[start + i] = values[i]
-
-
-@njit(cache=True)
 def _controller(t, phi, x, fb, ib, ref, R_tip, J6, drift6, nQ, nv, i_h, i_J, i_dr, i_p, i_g):
     """(τ [N·m or N], status: 1 computed) of a user's controller by its address (contactdyn.laws.controllers.abi):
     its buffer filled from φ (H, h, g when the law needs it at φ[i_g:], the tip's p, ṗ, J, J̇q̇), x (q, q̇), the
@@ -185,25 +177,25 @@ def _controller(t, phi, x, fb, ib, ref, R_tip, J6, drift6, nQ, nv, i_h, i_J, i_d
     layout = at[1:].copy()
     buf = np.empty(layout[-1])
     buf[layout[2 + 2 * F_T]] = t
-    _put(buf, layout, F_Q, x[:nv])
-    _put(buf, layout, F_V, x[nQ:nQ + nv])
+    put_field(buf, layout, F_Q, x[:nv])
+    put_field(buf, layout, F_V, x[nQ:nQ + nv])
     H = (phi[:nv * nv].reshape((nv, nv)).T + matrix_of(fb, ib, D_CTL)).copy()  # φ holds H column by column
-    _put(buf, layout, F_H, H.ravel())
-    _put(buf, layout, F_h, phi[i_h:i_h + nv])
+    put_field(buf, layout, F_H, H.ravel())
+    put_field(buf, layout, F_h, phi[i_h:i_h + nv])
     if i_g >= 0:
-        _put(buf, layout, F_G, phi[i_g:i_g + nv])
-    _put(buf, layout, F_P, phi[i_p:i_p + 3])
-    _put(buf, layout, F_PD, phi[i_p + 3:i_p + 6])
-    _put(buf, layout, F_J, phi[i_J:i_J + 3 * nv])
-    _put(buf, layout, F_DR, phi[i_dr:i_dr + 3])
+        put_field(buf, layout, F_G, phi[i_g:i_g + nv])
+    put_field(buf, layout, F_P, phi[i_p:i_p + 3])
+    put_field(buf, layout, F_PD, phi[i_p + 3:i_p + 6])
+    put_field(buf, layout, F_J, phi[i_J:i_J + 3 * nv])
+    put_field(buf, layout, F_DR, phi[i_dr:i_dr + 3])
     if ref.size:
-        _put(buf, layout, F_XD, ref[0:3])
-        _put(buf, layout, F_VD, ref[3:6])
-        _put(buf, layout, F_AD, ref[6:9])
+        put_field(buf, layout, F_XD, ref[0:3])
+        put_field(buf, layout, F_VD, ref[3:6])
+        put_field(buf, layout, F_AD, ref[6:9])
     if R_tip.size:
-        _put(buf, layout, F_R, np.ascontiguousarray(R_tip).ravel())
-        _put(buf, layout, F_JW, np.ascontiguousarray(J6[3:]).ravel())
-        _put(buf, layout, F_DW, drift6[3:6])
+        put_field(buf, layout, F_R, np.ascontiguousarray(R_tip).ravel())
+        put_field(buf, layout, F_JW, np.ascontiguousarray(J6[3:]).ravel())
+        put_field(buf, layout, F_DW, drift6[3:6])
     tau = np.empty(nv)
     return tau, call_controller(at[0], buf, layout, vector_of(fb, ib, KP).copy(), tau)
 

@@ -22,7 +22,7 @@ import pinocchio as pin
 
 from ..laws.trajectory import move_rows, move_table, ramp_rows, ramp_table
 from ..numerics.compile_cache import njit
-from ..robot.rigid_body import NO_TABLE, rigid_terms
+from ..robot.rigid_body import NO_TABLE, frame_motion_into, rigid_terms
 
 __all__ = ["phi_function", "write_phi", "write_phi_only", "work_terms", "copy_terms", "write_frame", "frame_motion",
            "joint_terms", "frame_constants", "LWA"]
@@ -218,30 +218,8 @@ def frame_motion(R, pj, vj, aj, Jw, frame, support):
     p = p_j + R r;  J's column c = [v_c + ω_c × p, ω_c] of the joint Jacobians (WORLD, at the origin);
     J̇q̇ = R (a + α × r + ω × (v + ω × r)) and R α, with (v, ω), (a, α) the joint's own [linear, angular]."""
     nv = Jw.shape[1]
-    p, Rf = np.empty(3), np.empty((3, 3))
-    r0, r1, r2 = frame[0], frame[1], frame[2]
-    for i in range(3):
-        p[i] = pj[i] + R[i, 0] * r0 + R[i, 1] * r1 + R[i, 2] * r2
-        for k in range(3):
-            Rf[i, k] = R[i, 0] * frame[3 + k] + R[i, 1] * frame[6 + k] + R[i, 2] * frame[9 + k]
-    J6 = np.zeros((6, nv))
-    for c in support:
-        wx, wy, wz = Jw[3, c], Jw[4, c], Jw[5, c]
-        J6[0, c] = Jw[0, c] + (wy * p[2] - wz * p[1])
-        J6[1, c] = Jw[1, c] + (wz * p[0] - wx * p[2])
-        J6[2, c] = Jw[2, c] + (wx * p[1] - wy * p[0])
-        J6[3, c], J6[4, c], J6[5, c] = wx, wy, wz
-    wx, wy, wz = vj[3], vj[4], vj[5]
-    vx = vj[0] + (wy * r2 - wz * r1)  # the point's velocity, in the joint's frame [m/s]
-    vy = vj[1] + (wz * r0 - wx * r2)
-    vz = vj[2] + (wx * r1 - wy * r0)
-    ax = aj[0] + (aj[4] * r2 - aj[5] * r1) + (wy * vz - wz * vy)  # its classical acceleration [m/s²]
-    ay = aj[1] + (aj[5] * r0 - aj[3] * r2) + (wz * vx - wx * vz)
-    az = aj[2] + (aj[3] * r1 - aj[4] * r0) + (wx * vy - wy * vx)
-    a6 = np.empty(6)
-    for i in range(3):
-        a6[i] = R[i, 0] * ax + R[i, 1] * ay + R[i, 2] * az
-        a6[3 + i] = R[i, 0] * aj[3] + R[i, 1] * aj[4] + R[i, 2] * aj[5]
+    p, Rf, J6, a6 = np.empty(3), np.empty((3, 3)), np.zeros((6, nv)), np.empty(6)
+    frame_motion_into(R, pj, vj, aj, Jw, frame, support, J6, a6, p, Rf)
     return J6, a6, p, Rf
 
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..numerics.compile_cache import njit
 
-__all__ = ["rigid_table", "rigid_terms", "NO_TABLE"]
+__all__ = ["rigid_table", "rigid_terms", "NO_TABLE", "frame_motion_into"]
 
 REVOLUTE, PRISMATIC = 0.0, 1.0
 #: one row per joint (row 0, the universe: −gravity [m/s²] in AXIS): parent, kind, velocity index, the axis in
@@ -288,3 +288,34 @@ def _composite_times(C, j, vx, vy, vz, wx, wy, wz):
     return (hx, hy, hz, cy * vz - cz * vy + I[0] * wx + I[1] * wy + I[2] * wz,
             cz * vx - cx * vz + I[3] * wx + I[4] * wy + I[5] * wz,
             cx * vy - cy * vx + I[6] * wx + I[7] * wy + I[8] * wz)
+
+
+@njit(cache=True, inline="always")
+def frame_motion_into(R, pj, vj, aj, Jw, frame, support, J6, a6, p, Rf):
+    """A frame's J6 (its support's columns), a6, p [m] and R_f written into the given arrays, in LOCAL_WORLD_ALIGNED
+    as Pinocchio's getFrameJacobian (6 × nv, rows linear then angular) and getFrameClassicalAcceleration at q̈ = 0
+    [m/s², rad/s²], from its joint's R, p_j, (v, ω), (a, α) (the joint's own [linear, angular]) and the joint
+    Jacobians Jw (WORLD, at the origin); ``frame`` = [r, rotation by rows] in the joint's frame, ``support`` the
+    joints' columns that move it: p = p_j + R r;  J's column c = [v_c + ω_c × p, ω_c];
+    J̇q̇ = R (a + α × r + ω × (v + ω × r)) and R α."""
+    r0, r1, r2 = frame[0], frame[1], frame[2]
+    for i in range(3):
+        p[i] = pj[i] + R[i, 0] * r0 + R[i, 1] * r1 + R[i, 2] * r2
+        for k in range(3):
+            Rf[i, k] = R[i, 0] * frame[3 + k] + R[i, 1] * frame[6 + k] + R[i, 2] * frame[9 + k]
+    for c in support:
+        wx, wy, wz = Jw[3, c], Jw[4, c], Jw[5, c]
+        J6[0, c] = Jw[0, c] + (wy * p[2] - wz * p[1])
+        J6[1, c] = Jw[1, c] + (wz * p[0] - wx * p[2])
+        J6[2, c] = Jw[2, c] + (wx * p[1] - wy * p[0])
+        J6[3, c], J6[4, c], J6[5, c] = wx, wy, wz
+    wx, wy, wz = vj[3], vj[4], vj[5]
+    vx = vj[0] + (wy * r2 - wz * r1)  # the point's velocity, in the joint's frame [m/s]
+    vy = vj[1] + (wz * r0 - wx * r2)
+    vz = vj[2] + (wx * r1 - wy * r0)
+    ax = aj[0] + (aj[4] * r2 - aj[5] * r1) + (wy * vz - wz * vy)  # its classical acceleration [m/s²]
+    ay = aj[1] + (aj[5] * r0 - aj[3] * r2) + (wz * vx - wx * vz)
+    az = aj[2] + (aj[3] * r1 - aj[4] * r0) + (wx * vy - wy * vx)
+    for i in range(3):
+        a6[i] = R[i, 0] * ax + R[i, 1] * ay + R[i, 2] * az
+        a6[3 + i] = R[i, 0] * aj[3] + R[i, 1] * aj[4] + R[i, 2] * aj[5]

@@ -47,7 +47,7 @@ from ..abi import _data_at, _indirect_call, compile_wrapper
 from .base import ControlInput, Controller
 
 __all__ = ["CONTROLLER_SIGNATURE", "LAYOUT", "NOT_IN_LAYOUT", "ControlArrays", "control_arrays", "layout_of",
-           "controller_address", "params_of", "buffer_of", "call_controller"]
+           "put_field", "controller_address", "params_of", "buffer_of", "call_controller"]
 
 _P = types.CPointer(types.float64)
 #: int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau)
@@ -102,6 +102,15 @@ def buffer_of(inp: ControlInput, nz: int = 0) -> tuple[np.ndarray, np.ndarray]:
         if name not in absent:
             buffer[layout[2 + 2 * k]:layout[3 + 2 * k]] = np.ravel(getattr(inp, name))  # matrices row by row
     return buffer, layout
+
+
+@njit(cache=True)
+def put_field(buf, lay, k, values):
+    """Field k of a controller's buffer from ``values`` (flat) where the layout table ``lay`` puts it (nothing for a
+    field the layout leaves empty): how a compiled caller fills the buffer it passes by address."""
+    start = lay[2 + 2 * k]
+    for i in range(lay[3 + 2 * k] - start):
+        buf[start + i] = values[i]
 
 
 @njit(cache=True)

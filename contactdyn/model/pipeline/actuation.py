@@ -19,7 +19,7 @@ from collections import namedtuple
 import numpy as np
 from numba.extending import overload
 
-from ...laws.controllers.abi import FIELD, call_controller, control_arrays
+from ...laws.controllers.abi import FIELD, call_controller, control_arrays, put_field
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
@@ -115,14 +115,6 @@ def _task_pd(x, ints, reals, h, g, J6, p_tip, v_tip, Rf, x_d, v_d, F_d, forced):
 
 
 @njit(cache=True)
-def _put(buf, lay, field, values):
-    """A field's values (a flat array) into the controller's buffer where the layout puts it (none if absent)."""
-    start = lay[2 + 2 * field]
-    for i in range(lay[3 + 2 * field] - start):
-        buf[start + i] = values[i]
-
-
-@njit(cache=True)
 def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
     """τ of a controller of the ABI, by its address: its inputs written into its buffer (NaNs and status 0: the law
     failed; the readable model's error surfaces there)."""
@@ -130,21 +122,21 @@ def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d,
     lay = ints[ints[I_LAYOUT]:ints[I_LAYOUT] + N_LAYOUT]
     buf = np.zeros(lay[lay.size - 1])
     buf[lay[2 + 2 * F_T]] = t
-    _put(buf, lay, F_Q, x[:nv])
-    _put(buf, lay, F_V, x[nQ:nQ + nv])
-    _put(buf, lay, F_H, H.ravel())
-    _put(buf, lay, F_HB, h)
-    _put(buf, lay, F_GRAVITY, g)
-    _put(buf, lay, F_P, p_tip)
-    _put(buf, lay, F_PD, v_tip)
-    _put(buf, lay, F_J, J6[:3].ravel())
-    _put(buf, lay, F_DRIFT, a6[:3])
-    _put(buf, lay, F_XD, x_d)
-    _put(buf, lay, F_VD, v_d)
-    _put(buf, lay, F_AD, a_d)
-    _put(buf, lay, F_R, Rf.ravel())
-    _put(buf, lay, F_JANG, J6[3:].ravel())
-    _put(buf, lay, F_DRIFT_ANG, a6[3:])
+    put_field(buf, lay, F_Q, x[:nv])
+    put_field(buf, lay, F_V, x[nQ:nQ + nv])
+    put_field(buf, lay, F_H, H.ravel())
+    put_field(buf, lay, F_HB, h)
+    put_field(buf, lay, F_GRAVITY, g)
+    put_field(buf, lay, F_P, p_tip)
+    put_field(buf, lay, F_PD, v_tip)
+    put_field(buf, lay, F_J, J6[:3].ravel())
+    put_field(buf, lay, F_DRIFT, a6[:3])
+    put_field(buf, lay, F_XD, x_d)
+    put_field(buf, lay, F_VD, v_d)
+    put_field(buf, lay, F_AD, a_d)
+    put_field(buf, lay, F_R, Rf.ravel())
+    put_field(buf, lay, F_JANG, J6[3:].ravel())
+    put_field(buf, lay, F_DRIFT_ANG, a6[3:])
     tau = np.zeros(nv)
     params = reals[ints[R_CTL]:ints[R_CTL] + ints[N_CTL_PARAMS]]
     if command_by_address(ints[CTL_ADDRESS], buf, lay, params, tau) != 1:

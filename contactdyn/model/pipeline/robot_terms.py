@@ -3,9 +3,8 @@
 H [kg·m²], h and g [N·m or N] and the joint Jacobians (WORLD, 6 × nv) by :mod:`contactdyn.robot.rigid_body`'s
 algorithms (as its ``rigid_terms``, every joint's placement and motion kept); then each packed frame's J (6 × nv,
 LOCAL_WORLD_ALIGNED, linear rows first), J̇q̇ (6) [m/s², rad/s²], p [m], ṗ = J q̇ [m/s] and R, by
-:func:`frame_motion`, the arithmetic of ``contactdyn.compiled.plan_phi.frame_motion`` over the joints' table W
-(the model may not import the compiled twin; wiring the pipeline in moves that function here and plan_phi
-imports it: one source).
+:func:`frame_motion` over the joints' table W (:func:`contactdyn.robot.rigid_body.frame_motion_into`, the
+compiled twin's arithmetic too: one source).
 """
 
 from __future__ import annotations
@@ -13,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...robot.rigid_body import WIDTH, _inertia, _jacobians, _kinematics, _nonlinear
+from ...robot.rigid_body import WIDTH, _inertia, _jacobians, _kinematics, _nonlinear, frame_motion_into
 from .pack import (
     FI_JOINT,
     FI_N_SUPPORT,
@@ -71,26 +70,6 @@ def frame_terms(x, ints, reals, W, Jw):
 @njit(cache=True)
 def frame_motion(W, j, Jw, frame, support, J6, a6, p, Rf):
     """J6, a6, p, Rf of a frame on joint j (W[j]: its R by rows, p, v, a at q̈ = 0), placed by ``frame`` = [r,
-    rotation by rows] in the joint's frame: plan_phi.frame_motion's arithmetic, written into the given arrays."""
-    r0, r1, r2 = frame[0], frame[1], frame[2]
-    for i in range(3):
-        p[i] = W[j, 9 + i] + W[j, 3 * i] * r0 + W[j, 3 * i + 1] * r1 + W[j, 3 * i + 2] * r2
-        for k in range(3):
-            Rf[i, k] = W[j, 3 * i] * frame[3 + k] + W[j, 3 * i + 1] * frame[6 + k] + W[j, 3 * i + 2] * frame[9 + k]
-    for c in support:
-        wx, wy, wz = Jw[3, c], Jw[4, c], Jw[5, c]
-        J6[0, c] = Jw[0, c] + (wy * p[2] - wz * p[1])
-        J6[1, c] = Jw[1, c] + (wz * p[0] - wx * p[2])
-        J6[2, c] = Jw[2, c] + (wx * p[1] - wy * p[0])
-        J6[3, c], J6[4, c], J6[5, c] = wx, wy, wz
-    vj, aj = W[j, 12:18], W[j, 18:24]
-    wx, wy, wz = vj[3], vj[4], vj[5]
-    vx = vj[0] + (wy * r2 - wz * r1)  # the point's velocity, in the joint's frame [m/s]
-    vy = vj[1] + (wz * r0 - wx * r2)
-    vz = vj[2] + (wx * r1 - wy * r0)
-    ax = aj[0] + (aj[4] * r2 - aj[5] * r1) + (wy * vz - wz * vy)  # its classical acceleration [m/s²]
-    ay = aj[1] + (aj[5] * r0 - aj[3] * r2) + (wz * vx - wx * vz)
-    az = aj[2] + (aj[3] * r1 - aj[4] * r0) + (wx * vy - wy * vx)
-    for i in range(3):
-        a6[i] = W[j, 3 * i] * ax + W[j, 3 * i + 1] * ay + W[j, 3 * i + 2] * az
-        a6[3 + i] = W[j, 3 * i] * aj[3] + W[j, 3 * i + 1] * aj[4] + W[j, 3 * i + 2] * aj[5]
+    rotation by rows] in the joint's frame: robot.rigid_body.frame_motion_into."""
+    frame_motion_into(W[j, 0:9].reshape((3, 3)), W[j, 9:12], W[j, 12:18], W[j, 18:24], Jw, frame, support, J6, a6, p,
+                      Rf)
