@@ -18,12 +18,16 @@ shoulder's voltage is clipped and a joint is stuck; a run whose |F_n| passes 100
 its CPU time and path. Draws F_n over time into docs/figures/real_cell/force_loop_real_cell.png (the whole run,
 and a zoom on the last 0.2 s).
 
-What else was tried (2026-11, 8 s runs): with the first version's 3 and 1.5 N·m of joint friction the cycle exists
-but the runs from this start reach it only in a narrow window (K_F = 650/s with the limit at 25.6 N·m: a 22.7 N
-cycle; at 620 or 680/s, or a 0.12 s ramp, the friction's stick holds the loop at rest, hunting by < 2 N). With 2
-and 1 N·m the scene reaches the cycle with a 0.08, 0.1 or 0.12 s ramp, at K_F = 550 to 580/s and a limit of 30 to
-31 N·m; at K_F = 520/s or 29 N·m it does not (the hunting decays below 1 N). Without the voltage limit the sampled
-loop with joint friction ends in an event storm (stick/slip checks of the shoulder at 0.19 s).
+What else was tried (8 s runs from the scene's start; the limit as the torque at standstill, u_max N* C_M / R):
+with 3 and 1.5 N·m of joint friction (the first version's) or 2.5 and 1.25 N·m, this scene does not reach the cycle:
+the friction's stick holds the oscillation, the loop hunts about the set-point with a decaying amplitude (half
+peak-to-peak 4.2 N at 4-4.5 s, 1.8 N at 7.5-8 s) and the voltage never clips. A cycle exists with that friction
+(K_F = 650/s, limit 25.6 N·m: 22.7 N, exactly periodic at 38.5 Hz, the contact down to 21 N) but the runs reach it
+only in a narrow window (not at 620/s, at 25.2 or 25.8 N·m, or with a 0.12 s ramp: the loop ends at rest). With
+2 and 1 N·m the scene reaches its cycle with a 0.08, 0.1 or 0.12 s ramp, at K_F = 550 to 580/s and a limit of 30 to
+30.8 N·m; at K_F = 520/s or 29.2 N·m it does not (the hunting decays below 1 N): the scene is 3-6 % above that edge.
+Without the voltage limit the sampled loop diverges within its ramp without joint friction (|F_n| > 1 kN at
+0.1 s) and ends in an event storm with it (stick/slip checks of the shoulder at 0.19 s).
 
     PYTHONPATH=$PWD python3 benchmarks/real_cell_demo.py [--duration 10.0]
 """
