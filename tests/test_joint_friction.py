@@ -202,3 +202,16 @@ def test_the_compiled_plan_is_the_readable_model_in_every_joint_mode(tmp_path):
             np.testing.assert_allclose(slow.joint_friction[:, i], -(0.1 if i == 0 else 0.05) * X[:, system.nQ + i]
                                        - m * kinetic, rtol=1e-12)
         assert set(plan.joint_rows) == set(stuck)
+
+
+def test_a_storm_of_one_joints_events_is_said_to_be_that_joints_not_a_contacts():
+    """The storm guard's words follow its events: a joint's slip checks name the joint and a divergence; a contact's
+    (or a mix) keep the contact's chatter."""
+    from contactdyn.hybrid.events import _storm_cause
+
+    check, slip = {"t": 0.2, "kind": "joint_slip_check", "name": "q2"}, {"t": 0.2, "kind": "joint_slip", "name": "q2"}
+    joint = [check] * 4 + [slip]
+    said = _storm_cause(joint)
+    assert "joint q2" in said and "diverged" in said and "contact" not in said
+    mixed = joint + [{"t": 0.2, "kind": "slip_check", "name": "tip"}]
+    assert "the contact chatters" in _storm_cause(mixed)

@@ -77,8 +77,17 @@ class EventLog:
             raise SimulationError(
                 f"{self.scene_name}: event storm: {self.recent.maxlen} events within "
                 f"{self.recent[-1] - self.recent[0]:.3g} s at t = {t:.9g} s (last: {kinds}); " +
-                (start_storm_cause(self.events, name) or "the contact chatters (grazing or inconsistent "
-                                                          "stick/slip); see solver.storm_count / storm_window"))
+                (start_storm_cause(self.events, name) or _storm_cause(self.events[-self.recent.maxlen:])))
+
+
+def _storm_cause(events: list[dict]) -> str:
+    """What a storm of these events says: a joint's stick and slip, or a contact's, chatter (or the state ran away)."""
+    joints = sorted({e["name"] for e in events if e["kind"].startswith("joint_")})
+    if joints and len(joints) == len({e["name"] for e in events}):
+        return (f"the stick and slip of joint {', '.join(joints)} chatter (its holding torque at its static limit), or "
+                "the run diverged before it (a loop its gains, rate or delay make unstable); see "
+                "solver.storm_count / storm_window")
+    return "the contact chatters (grazing or inconsistent stick/slip); see solver.storm_count / storm_window"
 
 
 START_STORM = 1e-3  #: [s] a storm whose contact events began this early started with the run
