@@ -414,3 +414,30 @@ def test_a_built_urdf_is_reused_until_its_file_changes(tmp_path, monkeypatch):
     path.write_text(path.read_text() + "\n")  # the file changed: read again
     urdf_model.build_urdf_model(path)
     assert reads == [path]
+
+
+def test_the_process_keeps_the_latest_built_urdfs_only(tmp_path, monkeypatch):
+    """A process that builds many robots (a sweep over URDFs) keeps the BUILT_MAX most recently used builds: the
+    oldest is dropped and built again when asked for, one used since is kept."""
+    import contactdyn.robot.urdf_model as urdf_model
+
+    monkeypatch.setattr(urdf_model, "_BUILT", type(urdf_model._BUILT)())
+    monkeypatch.setattr(urdf_model, "BUILT_MAX", 3)
+    text = open(os.path.join(URDF_DIR, "planar2r_b1.urdf")).read()
+    paths = []
+    for k in range(5):
+        paths.append(tmp_path / f"arm{k}.urdf")
+        paths[-1].write_text(text + f"<!-- {k} -->\n")  # another content: another build
+    for p in paths[:3]:
+        urdf_model.build_urdf_model(p)
+    urdf_model.build_urdf_model(paths[0])  # used again: the most recent
+    for p in paths[3:]:
+        urdf_model.build_urdf_model(p)
+    assert len(urdf_model._BUILT) == 3
+    kept = {os.path.basename(key[0]) for key in urdf_model._BUILT}
+    assert kept == {"arm0.urdf", "arm3.urdf", "arm4.urdf"}
+    reads, check = [], urdf_model.check_urdf_tree
+    monkeypatch.setattr(urdf_model, "check_urdf_tree", lambda p: reads.append(p) or check(p))
+    urdf_model.build_urdf_model(paths[1])  # dropped: built again (and arm0, now the oldest, dropped)
+    urdf_model.build_urdf_model(paths[4])  # kept: not
+    assert reads == [paths[1]]

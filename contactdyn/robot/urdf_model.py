@@ -17,6 +17,7 @@ import os
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
+from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
@@ -146,8 +147,10 @@ def _check_limits(model: pin.Model, path: Path) -> None:
                              f"lower limit {lower[sl].tolist()} > upper limit {upper[sl].tolist()}")
 
 
-#: URDFs built in this process: (file, SHA-256 of its content, package dirs, inertia) -> the build
-_BUILT: dict[tuple, UrdfModel] = {}
+#: URDFs built in this process: (file, SHA-256 of its content, package dirs, inertia) -> the build, the most
+#: recently used last; at most BUILT_MAX kept (a process that loads many robots keeps the latest ones)
+_BUILT: OrderedDict[tuple, UrdfModel] = OrderedDict()
+BUILT_MAX = 16
 
 
 def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfModel:
@@ -161,6 +164,9 @@ def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfM
     key = (str(path.resolve()), hashlib.sha256(path.read_bytes()).hexdigest(), tuple(package_dirs), inertia)
     if key not in _BUILT:
         _BUILT[key] = _build(path, package_dirs, inertia)
+        while len(_BUILT) > BUILT_MAX:
+            _BUILT.popitem(last=False)
+    _BUILT.move_to_end(key)
     built = _BUILT[key]
     return built._replace(model=pin.Model(built.model), package_dirs=list(built.package_dirs),
                           notes=list(built.notes), unbounded=list(built.unbounded),
