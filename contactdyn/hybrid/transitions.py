@@ -345,8 +345,7 @@ class Transitions:
                 rest.discard(i)
                 trial = list(modes)
                 trial[i] = mode.with_(stuck=True)
-                x = project_velocity(system, x, trial, phase.limits,
-                                     system.joint_friction.held(phase.joint_modes, phase.limits))
+                x = project_velocity(system, x, trial, phase.limits, phase.joint_modes)
                 ev2 = system.evaluate(t, x, trial, phase)
                 F_f = ev2.friction[c.name]
                 if in_cone(F_f, ev2.normal_force[c.name], mu_s):

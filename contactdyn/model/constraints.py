@@ -200,10 +200,10 @@ def solve_folded(system, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zd
 
 
 def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray, float] | None = None, jam: Contact | None = None,
-                  limits: tuple = (), joints: tuple = ()):
+                  limits: tuple = (), joint_modes: tuple = ()):
     """Velocity constraints of the touching contacts (bond rows, sticks, tangential chain bonds), of
-    the joints pressing on ``limits`` (:mod:`contactdyn.model.limits`) and of the stuck ``joints`` (their
-    coordinates, :mod:`contactdyn.model.joint_friction`).
+    the joints pressing on ``limits`` (:mod:`contactdyn.model.limits`) and of the joints stuck in
+    ``joint_modes`` (:mod:`contactdyn.model.joint_friction`).
 
     ``slide = (contact, d, μ)`` tilts that contact's normal column by the sliding friction
     −μ d; ``jam`` adds stick rows for a contact that is not (yet) stuck.
@@ -232,10 +232,7 @@ def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray, float] | N
             if trow is not None:
                 rows.add(trow, 0.0, (c.name, dc.label, i))
     system.limits.add_rows(limits, x, system.nQ, rows, 0.0)
-    for i in joints:
-        row = np.zeros(system.nQ)
-        row[i] = 1.0
-        rows.add(row, 0.0, (system.robot.joint_names[i], "joint", i))
+    system.joint_friction.add_rows(joint_modes, limits, x, system.nQ, rows, 0.0)
     return rows
 
 

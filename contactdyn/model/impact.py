@@ -180,10 +180,10 @@ def limit_impact(system, t: float, x: np.ndarray, modes: list[ContactMode], limi
     return x_new, imp, imp.row_impulses[(system.limits.by_index[i].name, "limit", i)]
 
 
-def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tuple = (), joints: tuple = ()
+def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tuple = (), joint_modes: tuple = ()
                      ) -> np.ndarray:
     """x with Q̇ moved onto every active velocity constraint (bonds, rigid contacts, sticks, the joints pressing
-    on ``limits``, the stuck ``joints``: coordinates held by dry friction).
+    on ``limits``, the joints stuck by dry friction in ``joint_modes``).
 
     The smallest change in the kinetic-energy norm, M ΔQ̇ = Gᵀ Λ, G Q̇⁺ = 0: an impulse
     that removes what the constraints forbid (used when a slide stops inside the stick
@@ -191,7 +191,7 @@ def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tu
     """
     nQ, nv = system.nQ, system.nv
     system.robot.update(x[:nv], x[nQ:nQ + nv])
-    rows = velocity_rows(system, x, modes, limits=limits, joints=joints)
+    rows = velocity_rows(system, x, modes, limits=limits, joint_modes=joint_modes)
     if not rows:
         return x
     M = system.mass_matrix()
