@@ -10,11 +10,12 @@ The held command lives in the state: :class:`SampledController` wraps the law, a
 [held command (nv), the law's own states]; all of them have ẏ = 0 between samples, and its command is the held
 slots. So the right-hand side between two samples is an ordinary smooth one (the compiled plan reads the held
 command off the state as an affine term of its feedforward, through the motors' kernel where there are motors:
-:mod:`contactdyn.compiled.plan_kkt`), and the hybrid loop (:mod:`contactdyn.hybrid.sampling`) ends a
-segment at every sample instant, writes the new command into the state there and checks the events its jump
-fires. The law's own states (integrators) advance once per sample, by forward Euler over the period:
-z_{k+1} = z_k + T ż_k. A phase starts sampling at its start (the delay line filled with that first
-measurement; a new phase starts a new line and new sensor states) and then on the scene's grid k / rate.
+:mod:`contactdyn.compiled.plan_kkt`), and at every sample instant (a step boundary of the compiled DOP853,
+a segment boundary for other methods: :mod:`contactdyn.hybrid.sampling`) the new command is written into the
+state and the events its jump fires are checked. The law's own states (integrators) advance once per sample,
+by forward Euler over the period: z_{k+1} = z_k + T ż_k. A phase starts sampling at its start (the delay line
+filled with that first measurement; a new phase starts a new line and new sensor states) and then on the scene's
+grid k / rate.
 
 What the law computes on at t_k is the whole input it measured at t_{k−d} (time, state, references, forces),
 with its own states as they are at t_k: a delay of d samples shifts a law of the measured input alone by
@@ -75,7 +76,6 @@ class Sampler:
         self.rate, self.period, self.delay = s.rate, s.period, s.delay
         self.force_sensor = ForceSensor(s.sensor, s.period, stream)
         self.line: deque[ControlInput] = deque(maxlen=s.delay + 1)  #: the latest delay + 1 measurements
-        self.count = 0  #: samples taken
         self.next_index = 0  #: k of the next sample instant k / rate on the grid
 
     @property
@@ -105,7 +105,6 @@ class Sampler:
             self.line.extend([inp] * (self.delay + 1))
         else:
             self.line.append(inp)
-        self.count += 1
         seen = self.line[0].replaced(z=z_law)
         tau, zdot = self.controller.inner.command(seen)
         z_new = z_law + self.period * zdot if zdot is not None and len(z_law) else z_law.copy()
