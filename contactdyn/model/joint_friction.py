@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from itertools import groupby
 from typing import Any
 
 import numpy as np
@@ -221,11 +222,9 @@ def joint_friction_channels(system: Any, phases_of: list, samples: Any) -> dict[
     output ``samples``) and ``joint_stuck`` (per joint, 1 stuck, 0 sliding or without dry friction)."""
     stuck = np.zeros((len(phases_of), system.nv))
     k = 0
-    while k < len(phases_of):
-        end = k
-        while end < len(phases_of) and phases_of[end] is phases_of[k]:
-            end += 1
-        for i, m in phases_of[k].joint_modes:
-            stuck[k:end, i] = float(m == STUCK)
-        k = end
+    for _, run in groupby(phases_of, key=id):  # a run of samples in one phase: its modes at once
+        run = list(run)
+        for i, m in run[0].joint_modes:
+            stuck[k:k + len(run), i] = float(m == STUCK)
+        k += len(run)
     return {"joint_friction": samples.joint_friction.copy(), "joint_stuck": stuck}
