@@ -116,7 +116,7 @@ def read_sampling(r) -> Sampling | None:
     the kind's own keys; None for a continuous controller. ``sample_rate = 0`` turns a scene's sampled loop off
     (one override, ``--set controller.sample_rate=0``: its delay and sensors are still checked, and unused)."""
     rate = r.float("sample_rate", None, lo=0.0, hi=MAX_SAMPLE_RATE, unit="Hz")
-    delay = r.int("delay", 0, lo=0, hi=MAX_DELAY)
+    delay = r.int("delay", 0, lo=0, hi=MAX_DELAY, unit="samples")
     has_sensor = r.has("sensor")
     sensor = read_sensor(r.sub("sensor", {}))
     if rate == 0.0:

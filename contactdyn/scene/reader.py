@@ -205,8 +205,9 @@ class Reader:
             raise self.error(name, f"a number <= {hi:g}{_unit(unit)}", value)
         return value
 
-    def int(self, name: str, default: Any = MISSING, *, lo: int | None = None, hi: int | None = None) -> int:
-        self._note(name, "integer", default, lo=lo, hi=hi)
+    def int(self, name: str, default: Any = MISSING, *, lo: int | None = None, hi: int | None = None,
+            unit: str = "") -> int:
+        self._note(name, "integer", default, unit=unit, lo=lo, hi=hi)
         value = self.raw(name, default)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, "an integer", value)
