@@ -70,6 +70,16 @@ def _tool_pd(doc: dict) -> None:
                                                "accel_fraction": 0.2}]}
 
 
+def _real_cell_drives(kp: float):
+    """force_loop_real_cell's motors (24 V limit) under task PD (its sampled force law and joint friction dropped:
+    another helper's kinds), its reference 1 cm off along x so that kp [N/m] sets how far the voltages clip."""
+    def edit(doc: dict) -> None:
+        doc["controller"] = {"kind": "task_pd", "axes": [[1.0, 0.0, 0.0]], "kp": kp, "kd": 100.0}
+        del doc["robot"]["joint"]
+        doc["phase"][0]["reference"]["start"] = [0.46, -0.15, 0.0]
+    return edit
+
+
 #: case -> (scene file, an edit of its TOML or None, what to change from its first mode: None, or a function of
 #: (system, modes, phase, x0) giving (modes, phase))
 def _touch(stuck=False, limits=(), phase=None):
@@ -107,6 +117,17 @@ CASES = {
     "ur5_tool": ("sims/case2_writer_ur5.toml", _tool_pd, None),
     "cubic_press": ("examples/cubic_press.toml", None, None),
     "impedance_press": ("examples/impedance_press.toml", None, None),
+    "cart_motors": ("sims/case1_cart.toml", None, None),
+    "cart_motors_touch": ("sims/case1_cart.toml", None, _touch()),
+    "writer_motors_approach": ("sims/case2_writer_motors.toml", None, None),
+    "writer_motors_write": ("sims/case2_writer_motors.toml", None, _touch(phase=1)),
+    "writer_motors_stick": ("sims/case2_writer_motors.toml", None, _touch(stuck=True, phase=1)),
+    "case3a_approach": ("sims/case3_a_position.toml", None, None),
+    "case3a_touch": ("sims/case3_a_position.toml", None, _touch()),
+    "case3b_approach": ("sims/case3_b_position.toml", None, None),
+    "case3b_touch": ("sims/case3_b_position.toml", None, _touch()),
+    "real_cell_drives": ("sims/force_loop_real_cell.toml", _real_cell_drives(2000.0), None),
+    "real_cell_clip": ("sims/force_loop_real_cell.toml", _real_cell_drives(2e4), None),
 }
 
 

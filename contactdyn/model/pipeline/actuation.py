@@ -5,8 +5,9 @@ The reference x_d, v_d, a_d at t [s] (the start plus each move's profile, ``laws
 ``Reference.at``), the force set-points F_d [N] (``ramp_rows``); then the controller by its kind: the task PD law
 compiled in (``laws.controllers.task_pd_law.torque``, as ``TaskPD.command`` calls it), or a controller of the
 controller ABI called by its address (:mod:`contactdyn.laws.controllers.abi`: its inputs written into one buffer by
-the layout table packed with the mode). Ideal torque drives add the command, the joints' τ and the servo forces
-of the bodies, to the generalized forces (``Drives.apply`` without motors).
+the layout table packed with the mode). The drives turn the command, the joints' τ and the servo forces of the
+bodies, into generalized forces: ideal torque sources add it (``Drives.apply`` without motors), motors by their
+kinds' laws (:mod:`.drives`).
 
 Under ``NUMBA_DISABLE_JIT=1`` a controller's "address" is a handle of its class (:data:`.pack.PYTHON_CONTROLLERS`)
 and :func:`command_by_address` runs its Python ``command`` on the same buffer: the same source, interpreted.
@@ -23,7 +24,9 @@ from ...laws.controllers.abi import FIELD, call_controller, control_arrays, put_
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
+from .drives import DI_W, apply_drives
 from .pack import (
+    ANY_MOTOR,
     CTL_ABI,
     CTL_ADDRESS,
     CTL_KIND,
@@ -33,6 +36,7 @@ from .pack import (
     FF_GRAVITY,
     HAS_RD,
     HAS_TOOL,
+    I_DRIVES,
     I_LAYOUT,
     I_SERVOS,
     N_AXES,
@@ -45,12 +49,14 @@ from .pack import (
     NV,
     PYTHON_CONTROLLERS,
     R_CTL,
+    R_DRIVES,
     R_RAMPS,
     R_REF,
     R_SERVOS,
     READS_ORIENTATION,
     REF_DIMS,
     TIP_FRAME,
+    W_DRIVES,
     section,
 )
 
@@ -158,9 +164,10 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
 
 
 @njit(cache=True)
-def drives(x, ints, reals, tau, f):
-    """Ideal torque drives: the command per drive (the joints' τ, the bodies' servo forces g (v_ref − v) [N]) added
-    to f, as Drives.apply without motors; the command returned."""
+def drives(x, ints, reals, work, tau, f):
+    """The command per drive (the joints' τ, the bodies' servo forces g (v_ref − v) [N]) through the drives into f:
+    added as it is by ideal sources only (Drives.apply without motors), else by each drive's law
+    (:func:`.drives.apply_drives`, its outputs into ``work``); False where a kind's compiled law failed."""
     nQ, n = ints[NQ], ints[N_DRIVES]
     cmd = np.zeros(n)
     cmd[:tau.size] = tau
@@ -168,9 +175,12 @@ def drives(x, ints, reals, tau, f):
     for k in range(ints[N_SERVOS]):
         idx = ints[ints[I_SERVOS] + k]
         cmd[idx] = servo[2 * k + 1] * (servo[2 * k] - x[nQ + idx])
+    if ints[ANY_MOTOR]:
+        rows = section(ints, ints[I_DRIVES], n, DI_W)
+        return apply_drives(x, nQ, rows, reals[ints[R_DRIVES]:], cmd, f, work[ints[W_DRIVES]:])
     for i in range(n):
         f[i] += cmd[i]
-    return cmd
+    return True
 
 
 def command_by_address(address, buffer, layout, params, tau) -> int:

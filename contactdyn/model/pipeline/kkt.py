@@ -1,8 +1,9 @@
 """The pipeline's KKT stage over arrays: the assembly of [[M, −Cᵀ], [G, 0]] [Q̈; λ] = [f; −γ] and its solve.
 
-M is the robot's H [kg·m²] (no motors in this prototype: no reflected rotor inertia) and the diagonal inertias
-of the bodies and chain masses [kg] (the packed ``M_rest``); G the rows, C their force columns (a slide's tilt),
-γ [m/s²] their velocity-product and Baumgarte terms (:mod:`contactdyn.model.constraints`' ``kkt_solve``). The solve
+M is the robot's H [kg·m²] with the rotors reflected through rigid gears on its diagonal (``.drives.inertias``)
+and the diagonal inertias of the bodies, chain masses and motor coordinates [kg, kg·m²] (the packed ``M_rest``);
+G the rows, C their force columns (a slide's tilt), γ [m/s²] their velocity-product and Baumgarte terms
+(:mod:`contactdyn.model.constraints`' ``kkt_solve``). The solve
 is ``numerics.linalg.lu_solve`` (partial pivoting) with the readable model's residual test: a singular matrix
 returns status 0 and the caller takes the readable model's least squares (``constraints.solve_linear``).
 """
@@ -38,7 +39,7 @@ def residual_ok(A, z, b):
 @njit(cache=True)
 def kkt_solve(ints, reals, H, f, G, C, gamma):
     """(Q̈ [m/s², rad/s²], λ [N], regular): the KKT system's solve, or with no rows H q̈ = f and the other
-    coordinates' f / m."""
+    coordinates' f / m (H: M's robot block)."""
     nv, nQ, nr = ints[NV], ints[NQ], gamma.size
     m_rest = reals[ints[R_MREST]:ints[R_MREST] + nQ - nv]
     if nr == 0:

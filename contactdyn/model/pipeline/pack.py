@@ -4,23 +4,26 @@
 
 - ``ints`` (int64): a header (the sizes and where each section starts, the slots named below), then the sections:
   frames, contacts, chains (each chain's own plan, :func:`contactdyn.model.chain_forces.pack`, copied in), pressing
-  limits, servos, the controller's layout table (the controller ABI's, :mod:`contactdyn.laws.controllers.abi`);
+  limits, servos, the controller's layout table (the controller ABI's, :mod:`contactdyn.laws.controllers.abi`),
+  the drive table (:mod:`.drives`: per drive its coordinates and its kind's addresses);
 - ``reals`` (float64): Baumgarte's ω [1/s] and the stick band [m/s], then the rigid-body table
   (:mod:`contactdyn.robot.rigid_body`), the frames' placements in their joints, the non-robot inertias [kg],
   the contacts' points, axes, tangents, slip references and friction coefficients, the chains' coefficients and
   law parameters, the limits [rad or m], the servos, the reference and its moves, the force ramps, the controller's
-  constants or declared parameters;
-- ``work`` (float64): the chains' node motion and stage states of the last call (scratch the call writes).
+  constants or declared parameters, per drive its voltage limit [V] and its kind's values, the rotors reflected on
+  the joints [kg·m²];
+- ``work`` (float64): the chains' node motion and stage states, the drives' outputs of the last call (scratch the
+  call writes).
 
 A law enters by its address (an int64 of ``ints``: a stage law's in its chain's stage table, a friction law's in
 its contact's row, a user controller's in the controller section), so one compiled call serves every law. The
 index constants below are the one place the layout is written; the call (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-motors and voltage drives, joint friction, force-reading or stateful controllers (a sampled law among them), a
-reference carried by a body, a 2-D slide launching from rest, the energy audit, a stage or friction law numba
-cannot compile, a robot ``rigid_body`` does not compute, a circle move, controllers other than ``task_pd`` and user
-laws of the controller ABI.
+a drive kind numba cannot compile, a controller that outputs voltages, joint friction, force-reading or stateful
+controllers (a sampled law among them), a reference carried by a body, a 2-D slide launching from rest, the energy
+audit, a stage or friction law numba cannot compile, a robot ``rigid_body`` does not compute, a circle move,
+controllers other than ``task_pd`` and user laws of the controller ABI.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from ...laws.trajectory import move_table, ramp_table
 from ...numerics.compile_cache import njit
 from ..chain import NodeKind
 from ..chain_forces import pack as pack_chain
+from .drives import DW_W, drive_table, drives_unsupported
 
 __all__ = ["Packed", "pack", "unsupported", "section"]
 
@@ -45,7 +49,8 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
 (NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
- R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, HEADER) = range(41)
+ R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, I_DRIVES, R_DRIVES, R_REFLECTED, W_DRIVES, ANY_MOTOR,
+ HEADER) = range(46)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -96,8 +101,8 @@ def unsupported(system, modes, phase) -> str:
     ctl = phase.controller
     if system.energy_slot >= 0:
         return "energy audit"
-    if system.drives.any_motor:
-        return "motors (drives other than ideal torque sources)"
+    if reason := drives_unsupported(system):
+        return reason
     if system.joint_friction.any:
         return "joint friction (its stuck rows and torques are not packed yet)"
     if system.robot.rigid_table is None:
@@ -178,6 +183,7 @@ def pack(system, modes, phase) -> Packed:
     b.real_section(R_SERVOS, [v for _, v_ref, gain in system.servo for v in (v_ref, gain)])
     _reference(b, system, phase)
     _controller(b, system, phase)
+    _drives(b, system, phase)
     h[W_SIZE] = b.work
     n_events = EV_W * len(system.contacts) + len(phase.limits) + 1
     return Packed(np.array(h, dtype=np.int64), np.array(b.reals), np.zeros(max(b.work, 1)), np.zeros(n_events),
@@ -321,6 +327,17 @@ def _controller(b: _Builder, system, phase) -> None:
     params = params_of(ctl.config)
     h[N_CTL_PARAMS] = params.size
     b.real_section(R_CTL, params)
+
+
+def _drives(b: _Builder, system, phase) -> None:
+    """The drive table (.drives.drive_table): its rows, values and reflected rotor inertias; its outputs in work."""
+    rows, reals, reflected = drive_table(system, phase)
+    b.ints[ANY_MOTOR] = int(system.drives.any_motor)
+    b.int_section(I_DRIVES, rows.ravel())
+    b.real_section(R_DRIVES, reals)
+    b.real_section(R_REFLECTED, reflected)
+    b.ints[W_DRIVES] = b.work
+    b.work += DW_W * len(system.drives.specs) + 2
 
 
 #: handle -> controller class: the controller's Python ``command`` under NUMBA_DISABLE_JIT (the address's twin)

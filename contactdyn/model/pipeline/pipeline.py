@@ -7,8 +7,9 @@
 laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`); under
 ``NUMBA_DISABLE_JIT=1`` the same source runs interpreted. :class:`Pipeline` packs a mode once and calls it; its
 ``events`` name the event values (gaps [m], normal forces [N], slip velocities [m/s], friction or stick forces
-[N], limit torques [N·m or N]). A call whose KKT matrix is singular (status 0), or whose compiled stage law gave no
-force (status -1), is answered by the readable model (:meth:`System.evaluate`), and counted.
+[N], limit torques [N·m or N]). A call whose KKT matrix is singular (status 0), or whose compiled law (a stage
+law, a drive kind) gave no force (status -1), is answered by the readable model (:meth:`System.evaluate`), and
+counted.
 """
 
 from __future__ import annotations
@@ -18,8 +19,28 @@ import numpy as np
 from ...numerics.compile_cache import njit
 from .actuation import command, drives
 from .contacts import contact_terms, finish, limit_rows
+from .drives import drive_values, inertias
 from .kkt import kkt_solve
-from .pack import EV_FF, EV_FN, EV_GAP, EV_VT, EV_W, N_CONTACTS, N_LIMITS, N_ROWS, NQ, NV, NX, NY, pack, unsupported
+from .pack import (
+    ANY_MOTOR,
+    EV_FF,
+    EV_FN,
+    EV_GAP,
+    EV_VT,
+    EV_W,
+    N_CONTACTS,
+    N_DRIVES,
+    N_LIMITS,
+    N_ROWS,
+    NQ,
+    NV,
+    NX,
+    NY,
+    R_REFLECTED,
+    W_DRIVES,
+    pack,
+    unsupported,
+)
 from .robot_terms import frame_terms, robot_terms
 
 __all__ = ["call", "rates_at", "Pipeline"]
@@ -30,6 +51,7 @@ def call(t, x, ints, reals, work, events):
     """ẋ at (t [s], x) of the packed mode; the event values and the status (last) into ``events``."""
     nv, nQ, nr, nc = ints[NV], ints[NQ], ints[N_ROWS], ints[N_CONTACTS]
     H, h, g, Jw, W = robot_terms(x, ints, reals)
+    M, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:])  # rotors reflected: the true M, the law's H
     FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
     f = np.zeros(nQ)
     f[:nv] = -h
@@ -42,9 +64,11 @@ def call(t, x, ints, reals, work, events):
         return xdot
     first_limit = nr - ints[N_LIMITS]
     limit_rows(x, ints, reals, first_limit, G, C, gamma)
-    tau = command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR)
-    drives(x, ints, reals, tau, f)
-    qdd, lam, regular = kkt_solve(ints, reals, H, f, G, C, gamma)
+    tau = command(t, x, ints, reals, Hc, h, g, FJ, Fa, Fp, Fv, FR)
+    if not drives(x, ints, reals, work, tau, f):
+        events[events.size - 1] = -1.0
+        return xdot
+    qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma)
     xdot[:nQ] = x[nQ:2 * nQ]
     xdot[nQ:2 * nQ] = qdd
     xdot[2 * nQ:] = ydot
@@ -86,11 +110,14 @@ class Pipeline:
         return xdot
 
     def values(self) -> dict[str, object]:
-        """The last call's event values by name: per contact gap [m], F_n [N], v_t [m/s], F_f [N]; limit torques."""
+        """The last call's event values by name: per contact gap [m], F_n [N], v_t [m/s], F_f [N]; limit torques; with
+        motors, the drives' outputs (``.drives.drive_values``)."""
         p, out = self.packed, {}
         for ci, name in enumerate(p.contacts):
             ev = p.events[EV_W * ci:EV_W * (ci + 1)]
             out[name] = {"gap": ev[EV_GAP], "F_n": ev[EV_FN], "v_t": ev[EV_VT:EV_VT + 2].copy(),
                          "F_f": ev[EV_FF:EV_FF + 2].copy()}
         out["limit"] = {i: p.events[EV_W * len(p.contacts) + k] for k, i in enumerate(p.limits)}
+        if p.ints[ANY_MOTOR]:
+            out["drives"] = drive_values(p.work[p.ints[W_DRIVES]:], p.ints[N_DRIVES])
         return out

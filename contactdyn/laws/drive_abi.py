@@ -1,0 +1,160 @@
+"""A drive kind's calling convention (its ABI): the compiled model calls a kind's ``voltage`` and ``force`` by address.
+
+A drive kind (:mod:`contactdyn.laws.drive_kinds`) writes its law as two functions of the drive's
+:class:`~contactdyn.laws.drives.DriveSpec` (its parameters and transmission figures as attributes, ``spec.R``,
+``spec.n_speed``). numba compiles those same functions with ``spec`` a named tuple of the kind's declared
+parameters (in order) followed by the figures of ``DriveSpec.DERIVED``, so attribute access compiles unchanged.
+The two C functions of a kind, each address a plain int64 (:func:`drive_addresses`):
+
+- ``double voltage(double* p, int64 n_p, double tau, double qd, double omega)``: the voltage u [V] asking for the
+  generalized force τ [N·m or N] at coordinate speed q̇ and motor speed ω [rad/s] (kinds with a voltage);
+  NaN when the law raised or ``n_p`` is not the kind's count;
+- ``int64 force(double* p, int64 n_p, double command, double q, double qd, double theta, double omega,
+  double* out)``: out[0:4] = (force on the coordinate [N·m or N], torque on the motor coordinate [N·m], power
+  delivered [W], power dissipated [W]) at the command (a voltage [V] for a kind with one, else a force), the
+  coordinate's (q, q̇) and the motor's (θ, ω) (NaN without a motor coordinate); status 1 written, 0 not (the law
+  raised): the caller then goes Python's way, where the law's own error surfaces.
+
+``p[0:n_p]`` is :func:`spec_values` of the drive. An ideal source (a kind that is not motorized) has no functions:
+its command acts as it is. A kind whose functions numba cannot compile (a helper that is not jittable, a Python
+object) has address 0 and the reason in ``kind.compiled_reason``: the compiled model declines it by that name.
+
+Under ``NUMBA_DISABLE_JIT=1`` nothing is compiled: an address is a handle of the kind's Python function and the
+same calling code runs interpreted (:func:`call_drive_voltage`, :func:`call_drive_force`). Caching: the wrappers
+are generated closure-free and attributed to the kind's own file (:func:`contactdyn.laws.abi.compile_wrapper`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numba
+from numba import carray, types
+from numba.extending import intrinsic, overload, register_jitable
+
+from . import drive_kinds
+from .abi import _data_at, _indirect_call, compile_wrapper
+from .drives import DriveSpec
+
+__all__ = ["VOLTAGE_SIGNATURE", "FORCE_SIGNATURE", "drive_addresses", "spec_values", "call_drive_voltage",
+           "call_drive_force"]
+
+# the built-in kinds' shared helper (the output lever), compiled inline where a kind's law calls it
+register_jitable(drive_kinds._lever)
+
+_P = types.CPointer(types.float64)
+#: double voltage(double* p, int64 n_p, double tau, double qd, double omega)
+VOLTAGE_SIGNATURE = types.float64(_P, types.int64, types.float64, types.float64, types.float64)
+#: int64 force(double* p, int64 n_p, double command, double q, double qd, double theta, double omega, double* out)
+FORCE_SIGNATURE = types.int64(_P, types.int64, types.float64, types.float64, types.float64, types.float64,
+                              types.float64, _P)
+
+_WRAPPERS = {
+    "voltage": """def {name}(p, n_p, tau, qd, omega):
+    if n_p != {n}:
+        return NAN
+    a = carray(p, (n_p,))
+    try:
+        return law(Spec({args}), tau, qd, omega)
+    except Exception:
+        return NAN
+""",
+    "force": """def {name}(p, n_p, command, q, qd, theta, omega, out):
+    if n_p != {n}:
+        return 0
+    a = carray(p, (n_p,))
+    try:
+        r = law(Spec({args}), command, q, qd, theta, omega)
+    except Exception:
+        return 0
+    o = carray(out, (4,))
+    o[0], o[1], o[2], o[3] = r[0], r[1], r[2], r[3]
+    return 1
+""",
+}
+_SIGNATURES = {"voltage": VOLTAGE_SIGNATURE, "force": FORCE_SIGNATURE}
+
+_compiled: dict[type, tuple[int, int, tuple]] = {}  #: kind -> (voltage address, force address, kept alive)
+_python: dict[int, tuple] = {}  #: handle -> (the kind's Python function, its Spec), the calls' plain-Python twin
+
+
+def spec_fields(kind: type) -> list[str]:
+    """The named tuple ``spec`` of a kind's compiled law: its declared parameters, then DriveSpec's figures."""
+    return [p.name for p in kind.params] + list(DriveSpec.DERIVED)
+
+
+def spec_values(spec: DriveSpec) -> list[float]:
+    """``p`` of a drive's calls: its parameters' values in declared order, then its figures (DriveSpec.DERIVED)."""
+    return [float(v) for v in spec.params] + [float(getattr(spec, name)) for name in DriveSpec.DERIVED]
+
+
+def drive_addresses(kind: type) -> tuple[int, int]:
+    """(voltage, force) addresses of motorized kind ``kind`` (compiled on first use; voltage 0 for a kind without
+    one); force 0 if numba cannot compile the kind, the reason then in ``kind.compiled_reason``."""
+    if kind in _compiled:
+        return _compiled[kind][:2]
+    spec = namedtuple(f"{kind.__name__}Spec", spec_fields(kind))
+    families = (("voltage", kind.voltage), ("force", kind.force)) if kind.has_voltage else (("force", kind.force),)
+    found, kept, reason = {}, [], ""
+    for family, fn in families:
+        if numba.config.DISABLE_JIT:  # nothing compiles: a handle of the Python function
+            holder = (fn, spec)
+            kept.append(holder)
+            found[family] = id(holder)
+            _python[id(holder)] = holder
+            continue
+        name = f"{kind.__name__}_{family}_drive_abi"
+        args = ", ".join(f"a[{i}]" for i in range(len(spec._fields)))
+        source = _WRAPPERS[family].format(name=name, n=len(spec._fields), args=args)
+        cfunc, reason = compile_wrapper(fn, name, source, _SIGNATURES[family],
+                                        {"carray": carray, "NAN": math.nan, "Spec": spec})
+        if cfunc is None:
+            found = {}
+            break
+        kept.append(cfunc)
+        found[family] = cfunc.address
+    kind.compiled_reason = reason
+    _compiled[kind] = (found.get("voltage", 0), found.get("force", 0), tuple(kept))
+    return _compiled[kind][:2]
+
+
+# ---- the calls: Python twins (interpreted), and their compiled form by overload --------------------------------
+
+def call_drive_voltage(address: int, p, at: int, n_p: int, tau: float, qd: float, omega: float) -> float:
+    """u [V] of the kind's voltage at ``address`` with the drive's values p[at:at + n_p]."""
+    fn, spec = _python[address]
+    return fn(spec(*p[at:at + n_p]), tau, qd, omega)
+
+
+def call_drive_force(address: int, p, at: int, n_p: int, command: float, q: float, qd: float, theta: float,
+                     omega: float, out) -> int:
+    """Status of the kind's force at ``address`` (out[0:4] written: coordinate force, motor torque, power,
+    dissipation) with the drive's values p[at:at + n_p]."""
+    fn, spec = _python[address]
+    out[:4] = fn(spec(*p[at:at + n_p]), command, q, qd, theta, omega)
+    return 1
+
+
+@overload(call_drive_voltage)
+def _call_drive_voltage_compiled(address, p, at, n_p, tau, qd, omega):
+    def impl(address, p, at, n_p, tau, qd, omega):
+        return _call_at_voltage(address, _data_at(p, at), n_p, tau, qd, omega)
+    return impl
+
+
+@overload(call_drive_force)
+def _call_drive_force_compiled(address, p, at, n_p, command, q, qd, theta, omega, out):
+    def impl(address, p, at, n_p, command, q, qd, theta, omega, out):
+        return _call_at_force(address, _data_at(p, at), n_p, command, q, qd, theta, omega, _data_at(out, 0))
+    return impl
+
+
+@intrinsic
+def _call_at_voltage(typingctx, address, p, n_p, tau, qd, omega):
+    return types.float64(types.int64, *VOLTAGE_SIGNATURE.args), _indirect_call(VOLTAGE_SIGNATURE)
+
+
+@intrinsic
+def _call_at_force(typingctx, address, p, n_p, command, q, qd, theta, omega, out):
+    return types.int64(types.int64, *FORCE_SIGNATURE.args), _indirect_call(FORCE_SIGNATURE)

@@ -1,0 +1,156 @@
+"""Drives and motors in the one pipeline (contactdyn/model/pipeline/drives.py): each drive's output (applied force,
+voltage, clip, power, dissipation) is the readable ``Drives.apply``'s, a kind enters by its address (a user's kind
+too), and a kind numba cannot compile is declined by name. The rates of the motor cases (case 1's cart, case 2's
+writer, case 3's elastic axis, the real cell's clipped motors) are checked against System.evaluate with every other
+case in test_pipeline_proto.py."""
+
+from __future__ import annotations
+
+import sys
+import tomllib
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
+sys.path.insert(0, str(BENCH))
+from pipeline_proto import agreement, case, states  # noqa: E402
+
+from contactdyn import parse_scene  # noqa: E402
+from contactdyn.laws import DriveKind, Param, register_drive_kind  # noqa: E402
+from contactdyn.model.dynamics import drive_command  # noqa: E402
+from contactdyn.model.pipeline.pack import unsupported  # noqa: E402
+from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+from contactdyn.scene.scene_file import sims_dir  # noqa: E402
+from contactdyn.simulate import prepare  # noqa: E402
+
+RTOL = 1e-12  #: as test_pipeline_proto.py: the robot's terms and the LU differ from Pinocchio's and LAPACK's order
+
+
+def _readable_drives(system, ev, x):
+    """The readable DriveOutput at a solved evaluation: Drives.apply on the command the controller gave."""
+    return system.drives.apply(drive_command(system, ev.tau_cmd, x), x, system.nQ, np.zeros(system.nQ))
+
+
+@pytest.mark.parametrize("name", ["cart_motors", "writer_motors_write", "case3a_touch", "real_cell_clip"])
+def test_each_drives_output_is_the_readable_ones(name):
+    """Applied force per drive (joints, then the cart's wheel motor), voltage, clip, power and dissipation."""
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    for x in states(x0, 3):
+        pipe.rhs(t, x)
+        got, ev = pipe.values()["drives"], system.evaluate(t, x, modes, phase)
+        out = _readable_drives(system, ev, x)
+        scale = 1.0 + np.abs(out.applied).max()
+        np.testing.assert_allclose(got["applied"], out.applied, rtol=0, atol=RTOL * scale)
+        np.testing.assert_allclose(got["applied"], np.concatenate((ev.tau, ev.body_force)), rtol=0, atol=RTOL * scale)
+        np.testing.assert_allclose(got["u"], out.u, rtol=0, atol=RTOL * (1.0 + np.nanmax(np.abs(out.u))))
+        assert np.array_equal(got["clipped"], out.saturated)
+        assert got["power"] == pytest.approx(out.power, abs=RTOL * (1.0 + abs(out.power)))
+        assert got["dissipation"] == pytest.approx(out.dissipation, abs=RTOL * (1.0 + abs(out.dissipation)))
+    assert pipe.fallbacks == 0
+
+
+def test_a_clipped_motor_delivers_the_force_of_its_limit():
+    """The real cell's shoulder below its 24 V supply, its elbow clipped: the elbow's torque is eq. 51 at ±24 V, the
+    shoulder's the command itself (a rigid gear unclipped delivers exactly what is asked)."""
+    system, modes, phase, t, x0 = case("real_cell_clip")
+    pipe = Pipeline(system, modes, phase)
+    pipe.rhs(t, x0)
+    got, ev = pipe.values()["drives"], system.evaluate(t, x0, modes, phase)
+    assert got["clipped"].tolist() == [False, True]
+    s, qd = system.drives.specs[1], x0[system.nQ + 1]
+    u = np.copysign(24.0, got["u"][1])
+    assert got["u"][1] == u
+    assert got["applied"][1] == pytest.approx(s.n_torque * s.C_M / s.R * (u - s.C_E * s.n_speed * qd), rel=1e-14)
+    assert got["applied"][0] == pytest.approx(ev.tau_cmd[0], rel=1e-13)
+    assert abs(ev.tau_cmd[1]) > abs(got["applied"][1])  # it asked for more
+
+
+def test_the_rotors_reflect_on_the_mass_matrix():
+    """Case 2's writer: its rotors, N N* J = 4.7 kg·m² per joint, are on M's diagonal (the readable rates); the packed
+    reflection zeroed, the pipeline's joint accelerations change by far more than the tolerance."""
+    from contactdyn.model.pipeline.pack import R_REFLECTED
+
+    system, modes, phase, t, x0 = case("writer_motors_approach")
+    pipe = Pipeline(system, modes, phase)
+    s, nv, nQ = system.drives.specs[0], system.nv, system.nQ
+    assert s.reflected_inertia == pytest.approx(160.0 * 65.12 * 0.000452)
+    np.testing.assert_allclose(system.rotor_inertias, [s.reflected_inertia] * nv)
+    ref = system.evaluate(t, x0, modes, phase).xdot
+    assert np.abs(pipe.rhs(t, x0) - ref).max() <= RTOL * np.abs(ref).max()
+    at = pipe.packed.ints[R_REFLECTED]
+    pipe.packed.reals[at:at + nv] = 0.0  # the true system's reflection only (the controller's stays)
+    qdd = pipe.rhs(t, x0)[nQ:nQ + nv]
+    assert np.abs(qdd - ref[nQ:nQ + nv]).max() > 0.1 * np.abs(ref[nQ:nQ + nv]).max()
+
+
+# ---- a user's drive kinds: one that compiles runs by its address, one that does not is declined by name -------
+
+class Geared(DriveKind):
+    """A current-controlled motor through a rigid gear N, its torque limited: M = clip(τ / N, ±M_max) (not affine)."""
+
+    name, motorized, affine = "geared_test", True, False
+    params = (Param("J", "kg·m²", "rotor inertia", lo=0.0),
+              Param("N", "-", "speed ratio, motor speed / output speed", 1.0, lo=0.0, lo_open=True),
+              Param("M_max", "N·m", "largest motor torque", np.inf, lo=0.0, lo_open=True, example=1.0))
+
+    @staticmethod
+    def n_speed(spec):
+        return spec.N
+
+    n_torque = n_speed
+
+    @staticmethod
+    def motor_inertia(spec):
+        return spec.J
+
+    @staticmethod
+    def force(spec, command, q, qd, theta, omega):
+        M = min(max(command / spec.N, -spec.M_max), spec.M_max)  # [N·m]
+        return spec.N * M, 0.0, spec.N * M * qd, 0.0
+
+
+def _python_helper(command):
+    return command
+
+
+class Opaque(Geared):
+    """The same, its law through a plain Python helper numba cannot compile."""
+
+    name = "opaque_test"
+
+    @staticmethod
+    def force(spec, command, q, qd, theta, omega):
+        return _python_helper(command), 0.0, command * qd, 0.0
+
+
+def _writer(drive: dict):
+    doc = tomllib.loads((sims_dir() / "case2_writer_motors.toml").read_text())
+    doc["robot"]["drive"] = drive
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return prepare(parse_scene(doc, file=str(sims_dir() / "case2_writer_motors.toml")))
+
+
+def test_a_users_kind_runs_by_its_address(fresh_user_imports):
+    register_drive_kind(Geared)
+    system, modes, phase, x0 = _writer({"kind": "geared_test", "J": 4.52e-4, "N": 160.0, "M_max": 0.05})
+    assert unsupported(system, modes, phase) == ""
+    pipe = Pipeline(system, modes, phase)
+    t = phase.t_start + 0.0123
+    worst, _ = agreement(pipe, system, modes, phase, t, states(x0, 3))
+    assert worst <= RTOL and pipe.fallbacks == 0
+    assert np.abs(pipe.values()["drives"]["applied"]).max() == pytest.approx(160.0 * 0.05)  # at its limit
+
+
+def test_a_kind_numba_cannot_compile_is_declined_by_name(fresh_user_imports):
+    register_drive_kind(Opaque)
+    system, modes, phase, _ = _writer({"kind": "opaque_test", "J": 4.52e-4, "N": 160.0})
+    reason = unsupported(system, modes, phase)
+    assert reason.startswith("drive kind 'opaque_test' of q1: numba cannot compile")
+    assert "_python_helper" in reason
+    with pytest.raises(ValueError, match="opaque_test"):
+        Pipeline(system, modes, phase)
