@@ -44,7 +44,7 @@ class LimitedMotor(DriveKind):
               Param("M_max", "N·m", "largest motor torque the amplifier gives", math.inf, lo=0.0, lo_open=True,
                     example=1.0))
     motorized = True
-    affine = False  # the torque limit: the readable model runs it
+    affine = False  # the torque limit: the compiled plan declines it (the one pipeline runs it, by its address)
 
     @staticmethod
     def n_speed(spec):
@@ -149,7 +149,9 @@ def test_below_its_limit_it_runs_as_its_dc_motor_twin(scene_dir):
     assert mine.meta["check_warnings"] == []  # the energy audit balances with the kind's power
 
 
-def test_at_its_limit_the_torque_clips_on_the_readable_model_as_declared(scene_dir):
+def test_at_its_limit_the_torque_clips_off_the_compiled_plan_as_declared(scene_dir):
+    """Declared off the plan (not affine), the kind runs on the one pipeline by its compiled force (checked against
+    the readable model where the mode starts)."""
     m_max = 0.05  # [N·m]: 8 N·m on the joint, below what the approach asks
     r = run(writer(scene_dir, {"kind": "limited_motor", "J": J, "N": N, "M_max": m_max}, duration=0.5))
     tau = np.abs(r["tau"])
@@ -158,7 +160,7 @@ def test_at_its_limit_the_torque_clips_on_the_readable_model_as_declared(scene_d
     why = "drive kind 'limited_motor' is not affine below its voltage limit"
     assert r.stats["fast_path_gaps"] == [{"part": f"robot.drive ({q})", "reason": why, "when": "always"}
                                          for q in ("q1", "q2")]
-    assert {row["path"] for row in r.stats["paths"].values()} == {"readable model"}
+    assert {row["path"] for row in r.stats["paths"].values()} == {"one pipeline"}
 
 
 def test_a_kind_is_checked_when_it_registers():

@@ -53,6 +53,34 @@ def test_each_drives_output_is_the_readable_ones(name):
     assert pipe.fallbacks == 0
 
 
+@pytest.mark.parametrize("kind, values", [
+    ("dc_motor", {"R": 0.272, "C_M": 0.061, "J": 4.52e-4, "N": 160.0, "N_star": 65.12}),
+    ("dc_motor", {"R": 1.3, "C_M": 0.5, "J": 7.9e-4, "wheel_radius": 0.1}),
+    ("elastic", {"R": 0.175, "C_M": 0.0575, "J": 7.9e-4, "N": 50.0, "wheel_radius": 0.15, "c": 1.4e4, "d": 0.0196,
+                 "I1": 1e-5, "I2": 2e-4, "twist_damping": 0.3}),
+])
+def test_each_built_in_kind_through_its_address_is_its_python_law(kind, values):
+    """The compiled voltage and force (by address, the drive's values as the pipeline packs them) equal the kind's
+    Python functions bit for bit."""
+    from contactdyn.laws.drive_abi import call_drive_force, call_drive_voltage, drive_addresses, spec_values
+    from contactdyn.laws.drives import DriveSpec
+
+    spec = DriveSpec(kind, **values)
+    law = spec.law
+    v_addr, f_addr = drive_addresses(law)
+    p = np.array([0.5, *spec_values(spec)])  # at an offset, as in the packed reals
+    out = np.empty(4)
+    for tau, q, qd, theta, omega in np.random.default_rng(3).normal(size=(5, 5)) * [20.0, 1.0, 2.0, 50.0, 100.0]:
+        if law.motor_coordinate is False:
+            theta = omega = np.nan
+        u = call_drive_voltage(v_addr, p, 1, p.size - 1, tau, qd, omega)
+        assert u == law.voltage(spec, tau, qd, omega)
+        assert call_drive_force(f_addr, p, 1, p.size - 1, u, q, qd, theta, omega, out) == 1
+        assert out.tolist() == list(law.force(spec, u, q, qd, theta, omega))
+    assert np.isnan(call_drive_voltage(v_addr, p, 1, p.size - 2, 1.0, 0.0, 0.0))  # a wrong count: no voltage
+    assert call_drive_force(f_addr, p, 1, p.size - 2, 1.0, 0.0, 0.0, 0.0, 0.0, out) == 0
+
+
 def test_a_clipped_motor_delivers_the_force_of_its_limit():
     """The real cell's shoulder below its 24 V supply, its elbow clipped: the elbow's torque is eq. 51 at ±24 V, the
     shoulder's the command itself (a rigid gear unclipped delivers exactly what is asked)."""

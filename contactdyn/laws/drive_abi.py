@@ -20,8 +20,9 @@ its command acts as it is. A kind whose functions numba cannot compile (a helper
 object) has address 0 and the reason in ``kind.compiled_reason``: the compiled model declines it by that name.
 
 Under ``NUMBA_DISABLE_JIT=1`` nothing is compiled: an address is a handle of the kind's Python function and the
-same calling code runs interpreted (:func:`call_drive_voltage`, :func:`call_drive_force`). Caching: the wrappers
-are generated closure-free and attributed to the kind's own file (:func:`contactdyn.laws.abi.compile_wrapper`).
+same calling code runs interpreted (:func:`call_drive_voltage`, :func:`call_drive_force`; from Python with numba
+on, they call the compiled functions). Caching: the wrappers are generated closure-free and attributed to the
+kind's own file (:func:`contactdyn.laws.abi.compile_wrapper`).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import numba
 from numba import carray, types
 from numba.extending import intrinsic, overload, register_jitable
 
+from ..numerics.compile_cache import njit
 from . import drive_kinds
 from .abi import _data_at, _indirect_call, compile_wrapper
 from .drives import DriveSpec
@@ -122,7 +124,10 @@ def drive_addresses(kind: type) -> tuple[int, int]:
 # ---- the calls: Python twins (interpreted), and their compiled form by overload --------------------------------
 
 def call_drive_voltage(address: int, p, at: int, n_p: int, tau: float, qd: float, omega: float) -> float:
-    """u [V] of the kind's voltage at ``address`` with the drive's values p[at:at + n_p]."""
+    """u [V] of the kind's voltage at ``address`` with the drive's values p[at:at + n_p] (float64, contiguous):
+    interpreted, a handle's Python function; from Python with numba on, the compiled function."""
+    if address not in _python:
+        return _voltage_compiled(address, p, at, n_p, tau, qd, omega)
     fn, spec = _python[address]
     return fn(spec(*p[at:at + n_p]), tau, qd, omega)
 
@@ -130,10 +135,22 @@ def call_drive_voltage(address: int, p, at: int, n_p: int, tau: float, qd: float
 def call_drive_force(address: int, p, at: int, n_p: int, command: float, q: float, qd: float, theta: float,
                      omega: float, out) -> int:
     """Status of the kind's force at ``address`` (out[0:4] written: coordinate force, motor torque, power,
-    dissipation) with the drive's values p[at:at + n_p]."""
+    dissipation) with the drive's values p[at:at + n_p]; interpreted, a handle's Python function."""
+    if address not in _python:
+        return _force_compiled(address, p, at, n_p, command, q, qd, theta, omega, out)
     fn, spec = _python[address]
     out[:4] = fn(spec(*p[at:at + n_p]), command, q, qd, theta, omega)
     return 1
+
+
+@njit(cache=True)
+def _voltage_compiled(address, p, at, n_p, tau, qd, omega):
+    return call_drive_voltage(address, p, at, n_p, tau, qd, omega)
+
+
+@njit(cache=True)
+def _force_compiled(address, p, at, n_p, command, q, qd, theta, omega, out):
+    return call_drive_force(address, p, at, n_p, command, q, qd, theta, omega, out)
 
 
 @overload(call_drive_voltage)
