@@ -97,6 +97,30 @@ def test_a_clipped_motor_delivers_the_force_of_its_limit():
     assert abs(ev.tau_cmd[1]) > abs(got["applied"][1])  # it asked for more
 
 
+def test_a_voltage_command_acts_as_the_readable_drives_take_it():
+    """A controller that outputs voltages is not packed yet (declined in test_pipeline_proto.py), but the drive
+    table already takes its voltages as they are (clipped): apply_drives on case 2's motors, u = (30, −2) V with a
+    28 V limit, equals Drives.apply with the voltage mask."""
+    from contactdyn.model.pipeline.drives import DI_BY_VOLTAGE, DW_W, apply_drives, drive_table
+
+    doc = tomllib.loads((sims_dir() / "case2_writer_motors.toml").read_text())
+    doc["robot"]["drive"]["u_max"] = 28.0
+    doc["controller"] = {"kind": "voltage", "u": 1.0}
+    doc["phase"] = [{k: v for k, v in doc["phase"][0].items() if k != "controller"}]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        system, _, phase, x = prepare(parse_scene(doc, file=str(sims_dir() / "case2_writer_motors.toml")))
+    rows, reals, _ = drive_table(system, phase)
+    assert rows[:, DI_BY_VOLTAGE].tolist() == [1, 1]
+    x = states(x, 2)[1]
+    cmd, nQ = np.array([30.0, -2.0]), system.nQ
+    f, f_ref, out = np.zeros(nQ), np.zeros(nQ), np.zeros(DW_W * 2 + 2)
+    assert apply_drives(x, nQ, rows, reals, cmd, f, out)
+    ref = system.drives.apply(cmd, x, nQ, f_ref, voltage=system._joint_motors)
+    assert np.array_equal(f, f_ref) and out[1] == 28.0 and out[4] == -2.0
+    assert ref.saturated.tolist() == [True, False] and out[2] == 1.0 and out[5] == 0.0
+
+
 def test_the_rotors_reflect_on_the_mass_matrix():
     """Case 2's writer: its rotors, N N* J = 4.7 kg·m² per joint, are on M's diagonal (the readable rates); the packed
     reflection zeroed, the pipeline's joint accelerations change by far more than the tolerance."""
