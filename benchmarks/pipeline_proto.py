@@ -80,6 +80,14 @@ def _real_cell_drives(kp: float):
     return edit
 
 
+def _voltages(doc: dict) -> None:
+    """case2_writer_motors under open-loop voltages (30, −2) V against a 28 V limit (the shoulder clips), its first
+    phase only."""
+    doc["robot"]["drive"]["u_max"] = 28.0
+    doc["controller"] = {"kind": "voltage", "u": [30.0, -2.0]}
+    doc["phase"] = [{k: v for k, v in doc["phase"][0].items() if k != "controller"}]
+
+
 #: case -> (scene file, an edit of its TOML or None, what to change from its first mode: None, or a function of
 #: (system, modes, phase, x0) giving (modes, phase))
 def _touch(stuck=False, limits=(), phase=None):
@@ -122,6 +130,7 @@ CASES = {
     "writer_motors_approach": ("sims/case2_writer_motors.toml", None, None),
     "writer_motors_write": ("sims/case2_writer_motors.toml", None, _touch(phase=1)),
     "writer_motors_stick": ("sims/case2_writer_motors.toml", None, _touch(stuck=True, phase=1)),
+    "writer_motors_voltage": ("sims/case2_writer_motors.toml", _voltages, None),
     "case3a_approach": ("sims/case3_a_position.toml", None, None),
     "case3a_touch": ("sims/case3_a_position.toml", None, _touch()),
     "case3b_approach": ("sims/case3_b_position.toml", None, None),

@@ -97,28 +97,24 @@ def test_a_clipped_motor_delivers_the_force_of_its_limit():
     assert abs(ev.tau_cmd[1]) > abs(got["applied"][1])  # it asked for more
 
 
-def test_a_voltage_command_acts_as_the_readable_drives_take_it():
-    """A controller that outputs voltages is not packed yet (declined in test_pipeline_proto.py), but the drive
-    table already takes its voltages as they are (clipped): apply_drives on case 2's motors, u = (30, −2) V with a
-    28 V limit, equals Drives.apply with the voltage mask."""
-    from contactdyn.model.pipeline.drives import DI_BY_VOLTAGE, DW_W, apply_drives, drive_table
+def test_a_voltage_controllers_voltages_act_as_they_are():
+    """Case 2's motors under open-loop voltages (30, −2) V, a 28 V limit: the shoulder's clips, the elbow's acts as
+    it is; the drives' outputs are Drives.apply's with its voltage mask, the rates System.evaluate's."""
+    from contactdyn.model.pipeline.drives import DI_BY_VOLTAGE, drive_table
 
-    doc = tomllib.loads((sims_dir() / "case2_writer_motors.toml").read_text())
-    doc["robot"]["drive"]["u_max"] = 28.0
-    doc["controller"] = {"kind": "voltage", "u": 1.0}
-    doc["phase"] = [{k: v for k, v in doc["phase"][0].items() if k != "controller"}]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        system, _, phase, x = prepare(parse_scene(doc, file=str(sims_dir() / "case2_writer_motors.toml")))
-    rows, reals, _ = drive_table(system, phase)
+    system, modes, phase, t, x0 = case("writer_motors_voltage")
+    rows, _, _ = drive_table(system, phase)
     assert rows[:, DI_BY_VOLTAGE].tolist() == [1, 1]
-    x = states(x, 2)[1]
-    cmd, nQ = np.array([30.0, -2.0]), system.nQ
-    f, f_ref, out = np.zeros(nQ), np.zeros(nQ), np.zeros(DW_W * 2 + 2)
-    assert apply_drives(x, nQ, rows, reals, cmd, f, out)
-    ref = system.drives.apply(cmd, x, nQ, f_ref, voltage=system._joint_motors)
-    assert np.array_equal(f, f_ref) and out[1] == 28.0 and out[4] == -2.0
-    assert ref.saturated.tolist() == [True, False] and out[2] == 1.0 and out[5] == 0.0
+    pipe = Pipeline(system, modes, phase)
+    for x in states(x0, 2):
+        xdot = pipe.rhs(t, x)
+        got, ev = pipe.values()["drives"], system.evaluate(t, x, modes, phase)
+        ref = system.drives.apply(np.array([30.0, -2.0]), x, system.nQ, np.zeros(system.nQ),
+                                  voltage=system._joint_motors)
+        assert got["u"].tolist() == [28.0, -2.0] and got["clipped"].tolist() == [True, False]
+        assert np.array_equal(got["clipped"], ref.saturated)
+        np.testing.assert_allclose(got["applied"], ref.applied, rtol=0, atol=RTOL * np.abs(ref.applied).max())
+        assert np.abs(xdot - ev.xdot).max() <= RTOL * np.abs(ev.xdot).max()
 
 
 def test_the_rotors_reflect_on_the_mass_matrix():

@@ -66,18 +66,17 @@ def test_many_states_in_one_call_are_the_single_calls():
 
 
 def test_a_mode_out_of_scope_is_declined_with_its_reason():
-    """Case 2's writer with its motors under open-loop voltages (a controller that outputs voltages)."""
+    """b1 with the energy audit (solver.record_energy)."""
     import tomllib
 
     from contactdyn import parse_scene
     from contactdyn.simulate import prepare
 
-    path = Path(__file__).resolve().parent.parent / "sims" / "case2_writer_motors.toml"
+    path = Path(__file__).resolve().parent.parent / "sims" / "b1.toml"
     doc = tomllib.loads(path.read_text())
-    doc["controller"] = {"kind": "voltage", "u": 1.0}
-    doc["phase"] = [{k: v for k, v in doc["phase"][0].items() if k != "controller"}]
+    doc["solver"]["record_energy"] = True
     system, modes, phase, _ = prepare(parse_scene(doc, file=str(path)))
-    with pytest.raises(ValueError, match="outputs voltages"):
+    with pytest.raises(ValueError, match="energy audit"):
         Pipeline(system, modes, phase)
 
 
@@ -103,7 +102,7 @@ def test_the_same_source_interpreted_gives_the_compiled_rates():
     the drive kinds: DC motors with a wheel and a clip, the elastic transmission) all run as Python, the same source;
     ẋ equals the compiled call's bit for bit (and the readable model's)."""
     names = ["b1_stribeck", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "cubic_press", "impedance_press",
-             "cart_motors", "case3a_touch", "real_cell_clip"]
+             "cart_motors", "case3a_touch", "real_cell_clip", "writer_motors_voltage"]
     env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(BENCH.parent)}
     done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=names)], env=env,
                           capture_output=True, text=True, timeout=600)

@@ -1,13 +1,13 @@
 """The pipeline's actuation stage over the packed arrays: the phase's reference and set-points, the controller, the
-torque drives.
+drives.
 
 The reference x_d, v_d, a_d at t [s] (the start plus each move's profile, ``laws.trajectory.move_rows``, as
 ``Reference.at``), the force set-points F_d [N] (``ramp_rows``); then the controller by its kind: the task PD law
 compiled in (``laws.controllers.task_pd_law.torque``, as ``TaskPD.command`` calls it), or a controller of the
 controller ABI called by its address (:mod:`contactdyn.laws.controllers.abi`: its inputs written into one buffer by
-the layout table packed with the mode). The drives turn the command, the joints' τ and the servo forces of the
-bodies, into generalized forces: ideal torque sources add it (``Drives.apply`` without motors), motors by their
-kinds' laws (:mod:`.drives`).
+the layout table packed with the mode), or constant voltages (``ConstantVoltage``: the drive table takes them). The
+drives turn the command, the joints' τ and the servo forces of the bodies, into generalized forces: ideal torque
+sources add it (``Drives.apply`` without motors), motors by their kinds' laws (:mod:`.drives`).
 
 Under ``NUMBA_DISABLE_JIT=1`` a controller's "address" is a handle of its class (:data:`.pack.PYTHON_CONTROLLERS`)
 and :func:`command_by_address` runs its Python ``command`` on the same buffer: the same source, interpreted.
@@ -29,6 +29,7 @@ from .pack import (
     ANY_MOTOR,
     CTL_ABI,
     CTL_ADDRESS,
+    CTL_CONSTANT,
     CTL_KIND,
     CTL_TASK_PD,
     FEEDFORWARD,
@@ -152,7 +153,7 @@ def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d,
 
 @njit(cache=True)
 def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
-    """The controller's τ [N·m or N] at (t, x) (zero without a controller)."""
+    """The controller's τ [N·m or N], or its voltages [V], at (t, x) (zero without a controller)."""
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)
     if ints[CTL_KIND] == CTL_TASK_PD:
@@ -160,6 +161,8 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
         return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)
     if ints[CTL_KIND] == CTL_ABI:
         return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
+    if ints[CTL_KIND] == CTL_CONSTANT:  # open-loop voltages [V] (ConstantVoltage)
+        return reals[ints[R_CTL]:ints[R_CTL] + ints[NV]].copy()
     return np.zeros(ints[NV])
 
 

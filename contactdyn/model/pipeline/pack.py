@@ -20,10 +20,10 @@ its contact's row, a user controller's in the controller section), so one compil
 index constants below are the one place the layout is written; the call (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-a drive kind numba cannot compile, a controller that outputs voltages, joint friction, force-reading or stateful
-controllers (a sampled law among them), a reference carried by a body, a 2-D slide launching from rest, the energy
+a drive kind numba cannot compile, joint friction, force-reading or stateful controllers (a sampled law among
+them), a reference carried by a body, a 2-D slide launching from rest, the energy
 audit, a stage or friction law numba cannot compile, a robot ``rigid_body`` does not compute, a circle move,
-controllers other than ``task_pd`` and user laws of the controller ABI.
+controllers other than ``task_pd``, constant voltages and user laws of the controller ABI.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ import numpy as np
 from ...laws.abi import friction_address
 from ...laws.controllers import Controller
 from ...laws.controllers.abi import controller_address, layout_of, params_of
+from ...laws.controllers.voltage import ConstantVoltage
 from ...laws.friction_laws import FRICTION_LAWS
 from ...laws.trajectory import move_table, ramp_table
 from ...numerics.compile_cache import njit
@@ -55,6 +56,7 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
 CTL_NONE, CTL_TASK_PD, CTL_ABI = 0, 1, 2
+CTL_CONSTANT = 3  #: a constant command per joint (open-loop voltages [V], ConstantVoltage), in the controller's reals
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
@@ -109,9 +111,10 @@ def unsupported(system, modes, phase) -> str:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if phase.carrier is not None:
         return "a reference carried by a body"
-    if ctl.uses_forces or ctl.n_states or ctl.outputs != "torque":
+    constant = isinstance(ctl, ConstantVoltage)
+    if ctl.uses_forces or ctl.n_states or ctl.outputs != "torque" and not constant:
         return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
-    if ctl.name != "task_pd" and not _addressable(type(ctl)):
+    if ctl.name != "task_pd" and not constant and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
     if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
         return "a circle move"
@@ -301,8 +304,8 @@ def _reference(b: _Builder, system, phase) -> None:
 
 
 def _controller(b: _Builder, system, phase) -> None:
-    """task PD: its constants (TaskPD.constants) and feedforward; a controller of the ABI: its address, the layout
-    of its inputs and its declared parameters."""
+    """task PD: its constants (TaskPD.constants) and feedforward; constant voltages: one per joint; a controller of
+    the ABI: its address, the layout of its inputs and its declared parameters."""
     h = b.ints
     ctl = phase.controller
     h[READS_ORIENTATION], h[NEEDS_GRAVITY] = int(ctl.reads_orientation), int(ctl.needs_gravity)
@@ -315,6 +318,11 @@ def _controller(b: _Builder, system, phase) -> None:
         tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
         b.real_section(R_CTL, [*axes.ravel(), *kp, *kd, *tool[0], *tool[1],
                                *(R_d.ravel() if R_d.shape[0] else np.zeros(9)), ko, do, kd_joint, kd_normal])
+        b.int_section(I_LAYOUT, ())
+        return
+    if isinstance(ctl, ConstantVoltage):  # its voltages [V] as they are (the drive table takes them)
+        h[CTL_KIND] = CTL_CONSTANT
+        b.real_section(R_CTL, np.broadcast_to(ctl.config.u, (system.nv,)))
         b.int_section(I_LAYOUT, ())
         return
     h[CTL_KIND] = CTL_ABI
