@@ -16,14 +16,15 @@
   call writes).
 
 A law enters by its address (an int64 of ``ints``: a stage law's in its chain's stage table, a friction law's in
-its contact's row, a user controller's in the controller section), so one compiled call serves every law. The
-index constants below are the one place the layout is written; the call (:mod:`.pipeline`) reads nothing else.
+its contact's row, a user controller's in the controller section, a drive kind's in its drive's row), so one
+compiled call serves every law. The index constants below are the one place the layout is written; the call
+(:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
 a drive kind numba cannot compile, joint friction, force-reading or stateful controllers (a sampled law among
-them), a reference carried by a body, a 2-D slide launching from rest, the energy
-audit, a stage or friction law numba cannot compile, a robot ``rigid_body`` does not compute, a circle move,
-controllers other than ``task_pd``, constant voltages and user laws of the controller ABI.
+them), a reference carried by a body, a 2-D slide launching from rest, the energy audit, a stage or friction law
+numba cannot compile, a robot ``rigid_body`` does not compute, a circle move, controllers other than ``task_pd``,
+constant voltages and user laws of the controller ABI.
 """
 
 from __future__ import annotations
@@ -112,7 +113,7 @@ def unsupported(system, modes, phase) -> str:
     if phase.carrier is not None:
         return "a reference carried by a body"
     constant = isinstance(ctl, ConstantVoltage)
-    if ctl.uses_forces or ctl.n_states or ctl.outputs != "torque" and not constant:
+    if ctl.uses_forces or ctl.n_states or (ctl.outputs != "torque" and not constant):
         return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
     if ctl.name != "task_pd" and not constant and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"

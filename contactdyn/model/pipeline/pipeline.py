@@ -4,12 +4,12 @@
     -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] and the event values
 
 :func:`call` is numba-compiled once for every scene and every law (the laws enter by address: stage and friction
-laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`); under
-``NUMBA_DISABLE_JIT=1`` the same source runs interpreted. :class:`Pipeline` packs a mode once and calls it; its
-``events`` name the event values (gaps [m], normal forces [N], slip velocities [m/s], friction or stick forces
-[N], limit torques [N·m or N]). A call whose KKT matrix is singular (status 0), or whose compiled law (a stage
-law, a drive kind) gave no force (status -1), is answered by the readable model (:meth:`System.evaluate`), and
-counted.
+laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`, a drive
+kind through :mod:`contactdyn.laws.drive_abi`); under ``NUMBA_DISABLE_JIT=1`` the same source runs interpreted.
+:class:`Pipeline` packs a mode once and calls it; its ``events`` name the event values (gaps [m], normal forces
+[N], slip velocities [m/s], friction or stick forces [N], limit torques [N·m or N]). A call whose KKT matrix is
+singular (status 0), or whose compiled law (a stage law, a drive kind) gave no force (status -1), is answered by
+the readable model (:meth:`System.evaluate`), and counted.
 """
 
 from __future__ import annotations
