@@ -64,6 +64,7 @@ from ..output.physics_checks import StartAudit, run_checks, violations
 from ..output.result import Result
 from ..scene.budget import STEPS_BASE, step_budget
 from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
+from .pipeline_mode import PipelineMode
 from .progress import CALLS_PER_STEP, OverBudget, Progress, Work
 from .sampling import SampledPhases
 from .transitions import Transitions
@@ -119,7 +120,8 @@ class HybridRun:
         #: reasons the plan declined a mode (it ran on the one pipeline or System.evaluate: ``paths`` says which) and
         #: the pipeline's undeclared ones, with counts
         self.fallbacks: dict[str, int] = {}
-        self.pipelines = LivePipelines(system)  #: the modes the plan declines that the one pipeline runs
+        #: the modes the one pipeline runs (those the plan declines; with LivePipelines.prefer, all it packs)
+        self.pipelines = LivePipelines(system, PipelineMode)
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
@@ -140,6 +142,26 @@ class HybridRun:
         if first and at is not None:
             plan.check_at(*at)
         return plan
+
+    def _runner(self, modes: list[ContactMode], phase: Phase, at: tuple, start: bool = False):
+        """What runs (modes, phase) from at = (t [s], x): the one pipeline's mode where it runs the mode
+        (:class:`~contactdyn.model.paths.LivePipelines`; with ``prefer``, no plan is built for it), else the plan
+        (:meth:`_plan`). ``start``: a segment starts there: the plan's first check is there, the path is recorded
+        and a declined plan's reason counted."""
+        pipes = self.pipelines
+        plan = None if pipes.prefer and pipes.wanted(modes, phase) else self._plan(modes, phase, at if start else None)
+        pipe, why = None, ""
+        if pipes.wanted(modes, phase, plan):
+            with compiling("the one pipeline"):
+                pipe, why = pipes.mode(modes, phase, *at)
+            if pipe is None and plan is None:  # its check disagreed: the plan
+                plan = self._plan(modes, phase, at if start else None)
+        if start:
+            self.paths.record(self.system, modes, phase, plan, pipeline=pipe is not None)
+            for reason in (plan.reason if plan is not None and not plan.ok else "", why):
+                if reason:
+                    self.fallbacks[reason] = self.fallbacks.get(reason, 0) + 1
+        return pipe or plan
 
     def start(self) -> tuple[np.ndarray, list[ContactMode], Phase]:
         """Initial state, consistent modes and the first phase at t = 0."""
@@ -213,7 +235,7 @@ class HybridRun:
                 x, modes, phase = self._next_phase(phase, t, x, modes)
         self.work.limit = math.inf  # the output's interpolants are not the integration's work
         if self.segments and self.segments[-1].modes != modes:  # an event at the end: its modes are the last sample's
-            self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._plan(modes, phase)))
+            self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._runner(modes, phase, (t, x))))
         return self._result(time.perf_counter() - wall0)
 
     def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
@@ -222,7 +244,7 @@ class HybridRun:
         with the state after a sampled law's sample at t_after (its held command jumps: hybrid.sampling)
         (no event: the same modes, unless a contact force or limit torque jumps through zero there,
         which is handled as the event a step straddling the corner would have located)."""
-        plan = self._plan(modes, phase)
+        plan = self._runner(modes, phase, (t, x))
         if sample:
             x, before = self.sampled.take(t_after, x, modes, phase), x
             fired = self.sampled.jumped(t_after, before, x, modes, phase, plan)
@@ -243,17 +265,15 @@ class HybridRun:
         ``t_sample`` [s]: a sampled law's next sample instant before t_end; a method that carries the hold takes it
         and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
-        plan = self._plan(modes, phase, at=(t, x))
-        fast = _segment_rhs(self, modes, phase, plan, t, x)
-        fun = fast or system.rhs(modes, phase)
+        plan = self._runner(modes, phase, (t, x), start=True)  # the twin's plan or the one pipeline's mode
+        fun = plan.rhs if plan.ok else system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             held = t_sample is not None and carries_hold(method)
             end = t_sample if t_sample is not None and not held else t_end
             h0 = min(self.next_step, end - t) if self.next_step else None
             hold = self.sampled.hold(modes, phase, t_end) if held else None
-            events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None,
-                                         None if plan.ok else fast)
+            events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
             self.starts.record(t, x, events)
             events += self._watches(modes, method)
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
@@ -380,22 +400,6 @@ class HybridRun:
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
 
 
-def _segment_rhs(run: HybridRun, modes: list[ContactMode], phase: Phase, plan: ModePlan, t: float, x: np.ndarray):
-    """The right-hand side a segment of ``run`` from (t [s], x) integrates: the plan's, else the one pipeline's where
-    it runs the mode (:class:`~contactdyn.model.paths.LivePipelines`), else None (System.evaluate's: the events'
-    own); its path recorded, a declined plan counted."""
-    if plan.ok:
-        fast, why = plan.rhs, ""
-    else:
-        with compiling("the one pipeline"):
-            fast, why = run.pipelines.rhs(modes, phase, plan, t, x)
-    run.paths.record(run.system, modes, phase, plan, pipeline=fast is not None and not plan.ok)
-    for reason in (plan.reason, why) if not plan.ok else ():
-        if reason:
-            run.fallbacks[reason] = run.fallbacks.get(reason, 0) + 1
-    return fast
-
-
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:
     """Why a run that reached its step budget (``calls``: its right-hand-side calls' budget) stops: where, and
     the fastest mode if that says why."""
@@ -420,7 +424,7 @@ def _diagnose(run: HybridRun, sol, plan: ModePlan, fun, method: str) -> str:
     t, x = float(sol.t[-1]), sol.y[:, -1]
     if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
         return ""
-    if plan.ok:
+    if plan.ok and hasattr(plan, "kkt_condition"):  # (a plan's; not the one pipeline's mode)
         cond = plan.kkt_condition(t, x)
         if cond > 1e12:
             return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
