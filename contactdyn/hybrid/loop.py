@@ -6,7 +6,8 @@ modes and the task phase are fixed, and instants at which they change. The loop:
 1. integrate the smooth phase from (t, x) with error control (``solve_ivp``, or the compiled
    DOP853 of :mod:`contactdyn.numerics.dop853`; the method from :mod:`contactdyn.numerics.integrators`) on the
    mode's right-hand side — the compiled plan
-   (:mod:`contactdyn.compiled.rhsplan`) where it represents the mode, else
+   (:mod:`contactdyn.compiled.rhsplan`) where it represents the mode, else the one pipeline where it packs the
+   mode (:mod:`contactdyn.hybrid.pipeline_mode`; with ``LivePipelines.prefer`` before the plan), else
    :meth:`System.evaluate` — with the mode's events (:mod:`contactdyn.hybrid.events`);
 2. at the first event, apply the transition (:mod:`contactdyn.hybrid.transitions`): an impact,
    a separation, a stick or a slip; or, at a phase's end, start the next phase; at a
@@ -143,26 +144,6 @@ class HybridRun:
             plan.check_at(*at)
         return plan
 
-    def _runner(self, modes: list[ContactMode], phase: Phase, at: tuple, start: bool = False):
-        """What runs (modes, phase) from at = (t [s], x): the one pipeline's mode where it runs the mode
-        (:class:`~contactdyn.model.paths.LivePipelines`; with ``prefer``, no plan is built for it), else the plan
-        (:meth:`_plan`). ``start``: a segment starts there: the plan's first check is there, the path is recorded
-        and a declined plan's reason counted."""
-        pipes = self.pipelines
-        plan = None if pipes.prefer and pipes.wanted(modes, phase) else self._plan(modes, phase, at if start else None)
-        pipe, why = None, ""
-        if pipes.wanted(modes, phase, plan):
-            with compiling("the one pipeline"):
-                pipe, why = pipes.mode(modes, phase, *at)
-            if pipe is None and plan is None:  # its check disagreed: the plan
-                plan = self._plan(modes, phase, at if start else None)
-        if start:
-            self.paths.record(self.system, modes, phase, plan, pipeline=pipe is not None)
-            for reason in (plan.reason if plan is not None and not plan.ok else "", why):
-                if reason:
-                    self.fallbacks[reason] = self.fallbacks.get(reason, 0) + 1
-        return pipe or plan
-
     def start(self) -> tuple[np.ndarray, list[ContactMode], Phase]:
         """Initial state, consistent modes and the first phase at t = 0."""
         x, modes = self.system.initial_state()
@@ -235,7 +216,7 @@ class HybridRun:
                 x, modes, phase = self._next_phase(phase, t, x, modes)
         self.work.limit = math.inf  # the output's interpolants are not the integration's work
         if self.segments and self.segments[-1].modes != modes:  # an event at the end: its modes are the last sample's
-            self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._runner(modes, phase, (t, x))))
+            self.segments.append(Segment(t, t, list(modes), phase, Held(x), _runner(self, modes, phase, (t, x))))
         return self._result(time.perf_counter() - wall0)
 
     def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
@@ -244,7 +225,7 @@ class HybridRun:
         with the state after a sampled law's sample at t_after (its held command jumps: hybrid.sampling)
         (no event: the same modes, unless a contact force or limit torque jumps through zero there,
         which is handled as the event a step straddling the corner would have located)."""
-        plan = self._runner(modes, phase, (t, x))
+        plan = _runner(self, modes, phase, (t, x))
         if sample:
             x, before = self.sampled.take(t_after, x, modes, phase), x
             fired = self.sampled.jumped(t_after, before, x, modes, phase, plan)
@@ -265,7 +246,7 @@ class HybridRun:
         ``t_sample`` [s]: a sampled law's next sample instant before t_end; a method that carries the hold takes it
         and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
-        plan = self._runner(modes, phase, (t, x), start=True)  # the twin's plan or the one pipeline's mode
+        plan = _runner(self, modes, phase, (t, x), start=True)  # the twin's plan or the one pipeline's mode
         fun = plan.rhs if plan.ok else system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
@@ -398,6 +379,27 @@ class HybridRun:
                 "name": scene.name, "duration": T, "checks": checks, "check_warnings": violations(checks),
                 "scene_file": str(Path(scene.file).resolve()) if scene.file else None}  # (where it came from)
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
+
+
+def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, at: tuple, start: bool = False):
+    """What runs (modes, phase) of ``run`` from at = (t [s], x): the one pipeline's mode where it runs the mode
+    (:class:`~contactdyn.model.paths.LivePipelines`; with ``prefer``, no plan is built for it), else the plan
+    (:meth:`HybridRun._plan`). ``start``: a segment starts there: the plan's first check is there, the path is recorded
+    and a declined plan's reason counted."""
+    pipes = run.pipelines
+    plan = None if pipes.prefer and pipes.wanted(modes, phase) else run._plan(modes, phase, at if start else None)
+    pipe, why = None, ""
+    if pipes.wanted(modes, phase, plan):
+        with compiling("the one pipeline"):
+            pipe, why = pipes.mode(modes, phase, *at)
+        if pipe is None and plan is None:  # its check disagreed: the plan
+            plan = run._plan(modes, phase, at if start else None)
+    if start:
+        run.paths.record(run.system, modes, phase, plan, pipeline=pipe is not None)
+        for reason in (plan.reason if plan is not None and not plan.ok else "", why):
+            if reason:
+                run.fallbacks[reason] = run.fallbacks.get(reason, 0) + 1
+    return pipe or plan
 
 
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:

@@ -124,6 +124,7 @@ class LivePipelines:
     def __init__(self, system, wrap: Callable = lambda pipe: pipe) -> None:
         self.system, self.wrap = system, wrap
         self.pipes: dict[tuple, object] = {}  #: (modes, id(phase)) -> its pipeline (wrapped), or why not (undeclared)
+        self.declines: dict[tuple, str] = {}  #: (modes, id(phase)) -> pack.unsupported's reason ("": it packs them)
 
     def wanted(self, modes, phase, plan=None) -> bool:
         """Does the pipeline run (modes, phase)? ``plan``: the mode's plan (None: not built; only ``prefer`` runs
@@ -132,7 +133,10 @@ class LivePipelines:
             return False
         if not self.prefer and (plan is None or plan.ok or plan.reason.startswith(UNDECLARED)):
             return False
-        return not unsupported(self.system, modes, phase)
+        key = (tuple(modes), id(phase))
+        if key not in self.declines:
+            self.declines[key] = unsupported(self.system, modes, phase)
+        return not self.declines[key]
 
     def mode(self, modes, phase, t: float, x: np.ndarray) -> tuple[object | None, str]:
         """(the pipeline of a mode :meth:`wanted` says it runs, starting at (t [s], x), wrapped; or None and the
