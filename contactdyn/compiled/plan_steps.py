@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _coef
 
+from ..model.pipeline.pack import NX
 from ..model.pipeline.pipeline import call as pipeline_call
 from ..model.pipeline.pipeline import rates_at
 from ..numerics.compile_cache import njit
@@ -107,10 +108,11 @@ def attempt(work, phi, u, fb, ib, t, y, f, h, rtol, atol, A, B, C, E, out, y_new
 
 
 @njit(cache=True)
-def pipeline_attempt(ints, reals, work, events, t, y, f, h, rtol, atol, A, B, C, E, y_new, block):
+def pipeline_attempt(ints, reals, work, events, t, y, f, h, rtol, atol, A, B, C, E, y_new, block, Ys, Es):
     """:func:`attempt` over the one pipeline's call (:func:`contactdyn.model.pipeline.pipeline.call`, the one thing
-    that differs): (status, error norm); ``events`` hold the FSAL call's event values. DECLINED where a call's
-    status is not 1 (a singular KKT matrix, a law that gave no force: the step by the Python right-hand side)."""
+    that differs): (status, error norm); ``events`` hold the FSAL call's event values, Ys[s] and Es[s] stage s's
+    state and event values (s = 1 … 12, the FSAL call's last). DECLINED where a call's status is not 1 (a singular
+    KKT matrix, a law that gave no force: the step by the Python right-hand side)."""
     n = y.size
     K = np.empty((13, n))
     K[0] = f
@@ -124,6 +126,8 @@ def pipeline_attempt(ints, reals, work, events, t, y, f, h, rtol, atol, A, B, C,
         K[s] = pipeline_call(t + C[s] * h if s < 12 else t + h, ys, ints, reals, work, events)
         if events[events.size - 1] != 1.0:
             return DECLINED, 0.0
+        Ys[s] = ys
+        Es[s] = events
     return OK, _error_norm(K, y, y_new, h, rtol, atol, E, block)
 
 
@@ -194,20 +198,30 @@ def stepper(plan, kind: int, inputs, layout: tuple[int, int, int, int]):
     return step
 
 
-def pipeline_stepper(packed, ring):
+def pipeline_stepper(packed, ring, on_stage=None):
     """step(t, y, f, h, rtol, atol) -> (error norm, y_new, block), or None where a call of the step declines (then
     the caller takes the step by the pipeline's Python right-hand side), over a mode packed for the one pipeline
     (:class:`~contactdyn.model.pipeline.pack.Packed`); as :func:`stepper`, each step's FSAL call's event values
-    enter ``ring`` as (t, y_new, events)."""
+    enter ``ring`` as (t, y_new, events). ``on_stage(t, y)``: called after an attempt per stage (t [s], its state)
+    with that stage's event values the ring's latest (a stuck contact's slip watch sees every stage, as it sees
+    every call of the Python right-hand side)."""
     ints, reals, work, events = packed.ints, packed.reals, packed.work, packed.events
+    Ys, Es = np.empty((13, packed.ints[NX])), np.empty((13, events.size))
 
     def step(t, y, f, h, rtol, atol):
         y_new, block = np.empty(y.size), np.empty((10, y.size))  # (block's row 3 is not read)
         status, err = pipeline_attempt(ints, reals, work, events, t, y, f, h, rtol, atol, _A, _B, _C, _E, y_new,
-                                       block)
+                                       block, Ys, Es)
         if status:
             return None
+        if on_stage is not None:
+            for s in range(1, 12):
+                ys = Ys[s]
+                ring.append((t + _C[s] * h, ys, Es[s].copy()))
+                on_stage(t + _C[s] * h, ys)
         ring.append((t + h, y_new, events.copy()))
+        if on_stage is not None:
+            on_stage(t + h, y_new)
         return err, y_new, block
 
     step.usable = lambda: True

@@ -398,10 +398,15 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     if not watches:
         return out, fun
 
-    def rhs(t: float, x: np.ndarray) -> np.ndarray:
-        xd = fun(t, x)
+    def sample(t: float, x: np.ndarray) -> None:
         for w in watches:
             w.sample(t, w.value(t, x))  # the same evaluation (plan: its last call): no second solve
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        xd = fun(t, x)
+        sample(t, x)
         return xd
 
+    if fun is getattr(values, "rhs", None) and hasattr(values, "watched_step"):  # the one pipeline's compiled steps,
+        rhs.step = values.watched_step(sample)  # each stage sampled
     return out, rhs

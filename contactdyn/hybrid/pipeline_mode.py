@@ -8,7 +8,8 @@ take either:
 - ``rhs(t, x)`` is the pipeline's call; ``rhs.step`` a whole DOP853 step in one compiled call
   (:func:`~contactdyn.compiled.plan_steps.pipeline_attempt`) and ``rhs.derivatives`` the dense output's extra stages
   in one (``rates_at``);
-- the event functions read the event values of the call at that very state (the last four calls' in ``ring``, as
+- the event functions read the event values of the call at that very state (a stuck contact's slip watch each
+  stage's, :meth:`watched_step`) (the last four calls' in ``ring``, as
   the plan's ring: DOP853's FSAL call, its dense output's stages, then the events at the step end): gaps [m],
   normal forces [N], slip velocities [m/s], stick forces [N], limit torques [N·m or N];
 - :meth:`samples` runs the output samples in one compiled call with the call's diagnostics on (τ, the command,
@@ -84,6 +85,12 @@ class PipelineMode:
         self.rhs = rhs
         self.nt = [len(c.tangents) if c.friction is not None else 0 for c in system.contacts]
         self._stages = self._stage_table()
+
+    def watched_step(self, on_stage):
+        """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
+        slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`)."""
+        step = pipeline_stepper(self.pipe.packed, self.ring, on_stage)
+        return step
 
     @property
     def singular(self) -> int:
