@@ -390,8 +390,11 @@ def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, at: tuple, s
     plan = None if pipes.prefer and pipes.wanted(modes, phase) else run._plan(modes, phase, at if start else None)
     pipe, why = None, ""
     if pipes.wanted(modes, phase, plan):
-        with compiling("the one pipeline"):
+        if pipes.built(modes, phase):
             pipe, why = pipes.mode(modes, phase, *at)
+        else:
+            with compiling("the one pipeline"):  # (a notice's watch: a thread; once per mode)
+                pipe, why = pipes.mode(modes, phase, *at)
         if pipe is None and plan is None:  # its check disagreed: the plan
             plan = run._plan(modes, phase, at if start else None)
     if start:

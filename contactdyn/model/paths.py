@@ -138,6 +138,10 @@ class LivePipelines:
             self.declines[key] = unsupported(self.system, modes, phase)
         return not self.declines[key]
 
+    def built(self, modes, phase) -> bool:
+        """Is the pipeline of (modes, phase) packed and checked already (or its check failed)?"""
+        return (tuple(modes), id(phase)) in self.pipes
+
     def mode(self, modes, phase, t: float, x: np.ndarray) -> tuple[object | None, str]:
         """(the pipeline of a mode :meth:`wanted` says it runs, starting at (t [s], x), wrapped; or None and the
         undeclared reason its check disagreed with)."""
