@@ -10,7 +10,8 @@ the Stribeck friction law with v_s = 1e-9 m/s (μ = μ_k once moving) vs Coulomb
 the largest relative difference of the normal force, and the path each law's modes ran on
 (``stats["paths"]``). Each law also runs with the one pipeline switched off (``LivePipelines.use``: the
 modes the plan declines on the readable model, as before it was live), in the same interleaved rounds:
-``off_cpu_s`` and ``off_ratio`` (to the twin), ``off_paths``.
+``off_cpu_s`` and ``off_ratio`` (to the twin), ``off_paths``. ``--prefer``: every run with ``LivePipelines.prefer``
+(every mode the one pipeline packs on it, the twins' too).
 """
 
 from __future__ import annotations
@@ -63,7 +64,9 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--out")
+    p.add_argument("--prefer", action="store_true", help="LivePipelines.prefer: the modes on the one pipeline")
     args = p.parse_args(argv)
+    LivePipelines.prefer = args.prefer
     scenes = {}
     for name, (law, twin) in pairs().items():
         scenes[(name, "law")], scenes[(name, "twin")], scenes[(name, "off")] = law, twin, law

@@ -66,7 +66,8 @@ def test_a_part_that_claims_to_compile_but_does_not_is_reported_as_undeclared(mo
     assert System(scene).fast_path_gaps == []
     r = simulate(scene)
     assert r.stats["fallback_modes"] and all(k.startswith(UNDECLARED) for k in r.stats["fallback_modes"])
-    np.testing.assert_array_equal(r["q"], honest["q"])  # the readable model still runs those modes
+    # the readable model still runs those modes (the honest run: on the one pipeline's compiled steps, ~1 ulp apart)
+    np.testing.assert_allclose(r["q"], honest["q"], rtol=0, atol=1e-12 * np.abs(honest["q"]).max())
     with pytest.raises(AssertionError):
         _assert_only_declared_fallbacks(r)
 

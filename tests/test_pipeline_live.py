@@ -51,13 +51,14 @@ def both_ways(scene, monkeypatch):
     return live, readable
 
 
-def assert_same_run(live, readable, channels) -> None:
+def assert_same_run(live, readable, channels, event_atol: float = 1e-12) -> None:
     for channel in channels:
         scale = np.abs(readable[channel]).max()
         assert np.abs(live[channel] - readable[channel]).max() <= 1e-9 * scale, channel
     assert [(e["kind"], e.get("contact")) for e in live.events] == \
         [(e["kind"], e.get("contact")) for e in readable.events]
-    np.testing.assert_allclose([e["t"] for e in live.events], [e["t"] for e in readable.events], rtol=0, atol=1e-12)
+    np.testing.assert_allclose([e["t"] for e in live.events], [e["t"] for e in readable.events], rtol=0,
+                               atol=event_atol)
 
 
 def test_the_cubic_stage_runs_on_the_pipeline_as_on_the_readable_model(monkeypatch):
@@ -75,7 +76,10 @@ def test_a_hunt_crossley_bounce_runs_on_the_pipeline_and_separates_at_the_same_t
     assert [e["kind"] for e in live.events] == ["touch", "separate"]  # the separation: on the pipeline's mode
     assert live.stats["paths"]["main: tip touching"] == {"path": PIPELINE, "why": HC_GAP, "segments": 1}
     assert live.stats["paths"]["main: tip free"]["path"] == "compiled plan"  # the flight: the plan runs it
-    assert_same_run(live, readable, ("q", "v", "contact.tip.F_n"))
+    # Hunt–Crossley's force is 0 from x = 0 on: ``separate`` fires at the first step end there, and the pipeline
+    # takes compiled steps (plan_steps' control) where the readable model takes scipy's core: other step ends
+    # (5.8e-8 s apart here; with scipy's core on the pipeline too, the runs are bitwise the same)
+    assert_same_run(live, readable, ("q", "v", "contact.tip.F_n"), event_atol=1e-6)
 
 
 def test_a_pipeline_that_disagrees_where_the_mode_starts_leaves_it_to_the_readable_model(monkeypatch):
@@ -86,18 +90,22 @@ def test_a_pipeline_that_disagrees_where_the_mode_starts_leaves_it_to_the_readab
     assert r.stats["paths"]["main: tip touching"]["path"] == "readable model"
     undeclared = [k for k in r.stats["fallback_modes"] if k.startswith(UNDECLARED)]
     assert len(undeclared) == 1 and "disagrees with System.evaluate" in undeclared[0]
-    np.testing.assert_array_equal(r["q"], honest["q"])  # the readable model's run: the same as the pipeline's here
+    # the readable model's run: the pipeline's (to the rounding of its compiled steps, which scipy's core does not take)
+    np.testing.assert_allclose(r["q"], honest["q"], rtol=0, atol=1e-9 * np.abs(honest["q"]).max())
     assert honest.stats["paths"]["main: tip touching"]["path"] == PIPELINE
 
 
-def test_a_stuck_contact_stays_on_the_readable_model(monkeypatch):
-    """A stuck contact's slip watch reads System.evaluate at every call: the pipeline would only add to it."""
+def test_a_stuck_contact_runs_on_the_pipeline_its_slip_watch_reading_the_pipeline(monkeypatch):
+    """A stuck contact's slip watch reads the pipeline's event values (its stick force, at every stage): the same run
+    as on the readable model."""
     doc = tomllib.loads(CUBIC.read_text())
     doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu_s": 0.9,
                                         "mu_k": 0.8}
     doc["duration"] = 0.05
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        r = simulate(parse_scene(doc, file=str(CUBIC)))
-    paths = {label: row["path"] for label, row in r.stats["paths"].items()}
-    assert paths["press: tip stuck"] == "readable model", paths
+        live, readable = both_ways(parse_scene(doc, file=str(CUBIC)), monkeypatch)
+    paths = {label: row["path"] for label, row in live.stats["paths"].items()}
+    assert paths["press: tip stuck"] == PIPELINE, paths
+    assert {row["path"] for row in readable.stats["paths"].values()} == {"readable model"}
+    assert_same_run(live, readable, ("q", "v", "tau", "contact.tip.F_n", "contact.tip.F_f"))

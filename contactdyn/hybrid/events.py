@@ -23,8 +23,9 @@ events whose functions jump through zero there. The storm guard
 more than ``max_events`` in the run, stop with a :class:`SimulationError` naming them.
 
 The event functions are written once (:func:`segment_events`) against a source of values:
-the compiled plan's (its last calls', no second solve) or, when the mode is not compiled,
-:meth:`System.evaluate`'s through a small cache shared with the right-hand side.
+the compiled plan's or the one pipeline's (:class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`: their last
+calls', no second solve) or, when the mode is not compiled, :meth:`System.evaluate`'s through a small cache shared
+with the right-hand side.
 """
 
 from __future__ import annotations
@@ -360,10 +361,10 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
                    plan: ModePlan | None = None, fun=None):
     """The event functions of one segment, and the right-hand side that feeds their stage watches.
 
-    They read the compiled ``plan``'s values when given (its last call's, no second solve),
-    else :meth:`System.evaluate`'s through one shared evaluation per state. ``fun``: the right-hand side to
-    integrate when it is not the values' own (the one pipeline's, :class:`~contactdyn.model.paths.LivePipelines`:
-    its events still read System.evaluate, once per state they are evaluated at).
+    They read the compiled ``plan``'s values when given (its last call's, no second solve; a plan or the one
+    pipeline's mode, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`), else :meth:`System.evaluate`'s
+    through one shared evaluation per state. ``fun``: the right-hand side to integrate when it is not the values'
+    own.
     """
     values = plan if plan is not None else _ReadableValues(system, modes, phase)
     out: list = []
@@ -397,10 +398,15 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     if not watches:
         return out, fun
 
-    def rhs(t: float, x: np.ndarray) -> np.ndarray:
-        xd = fun(t, x)
+    def sample(t: float, x: np.ndarray) -> None:
         for w in watches:
             w.sample(t, w.value(t, x))  # the same evaluation (plan: its last call): no second solve
+
+    def rhs(t: float, x: np.ndarray) -> np.ndarray:
+        xd = fun(t, x)
+        sample(t, x)
         return xd
 
+    if fun is getattr(values, "rhs", None) and hasattr(values, "watched_step"):  # the one pipeline's compiled steps,
+        rhs.step = values.watched_step(sample)  # each stage sampled
     return out, rhs

@@ -6,7 +6,8 @@ modes and the task phase are fixed, and instants at which they change. The loop:
 1. integrate the smooth phase from (t, x) with error control (``solve_ivp``, or the compiled
    DOP853 of :mod:`contactdyn.numerics.dop853`; the method from :mod:`contactdyn.numerics.integrators`) on the
    mode's right-hand side — the compiled plan
-   (:mod:`contactdyn.compiled.rhsplan`) where it represents the mode, else
+   (:mod:`contactdyn.compiled.rhsplan`) where it represents the mode, else the one pipeline where it packs the
+   mode (:mod:`contactdyn.hybrid.pipeline_mode`; with ``LivePipelines.prefer`` before the plan), else
    :meth:`System.evaluate` — with the mode's events (:mod:`contactdyn.hybrid.events`);
 2. at the first event, apply the transition (:mod:`contactdyn.hybrid.transitions`): an impact,
    a separation, a stick or a slip; or, at a phase's end, start the next phase; at a
@@ -64,6 +65,7 @@ from ..output.physics_checks import StartAudit, run_checks, violations
 from ..output.result import Result
 from ..scene.budget import STEPS_BASE, step_budget
 from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
+from .pipeline_mode import PipelineMode
 from .progress import CALLS_PER_STEP, OverBudget, Progress, Work
 from .sampling import SampledPhases
 from .transitions import Transitions
@@ -119,7 +121,8 @@ class HybridRun:
         #: reasons the plan declined a mode (it ran on the one pipeline or System.evaluate: ``paths`` says which) and
         #: the pipeline's undeclared ones, with counts
         self.fallbacks: dict[str, int] = {}
-        self.pipelines = LivePipelines(system)  #: the modes the plan declines that the one pipeline runs
+        #: the modes the one pipeline runs (those the plan declines; with LivePipelines.prefer, all it packs)
+        self.pipelines = LivePipelines(system, PipelineMode)
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
@@ -213,7 +216,7 @@ class HybridRun:
                 x, modes, phase = self._next_phase(phase, t, x, modes)
         self.work.limit = math.inf  # the output's interpolants are not the integration's work
         if self.segments and self.segments[-1].modes != modes:  # an event at the end: its modes are the last sample's
-            self.segments.append(Segment(t, t, list(modes), phase, Held(x), self._plan(modes, phase)))
+            self.segments.append(Segment(t, t, list(modes), phase, Held(x), _runner(self, modes, phase, (t, x))))
         return self._result(time.perf_counter() - wall0)
 
     def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
@@ -222,7 +225,7 @@ class HybridRun:
         with the state after a sampled law's sample at t_after (its held command jumps: hybrid.sampling)
         (no event: the same modes, unless a contact force or limit torque jumps through zero there,
         which is handled as the event a step straddling the corner would have located)."""
-        plan = self._plan(modes, phase)
+        plan = _runner(self, modes, phase, (t, x))
         if sample:
             x, before = self.sampled.take(t_after, x, modes, phase), x
             fired = self.sampled.jumped(t_after, before, x, modes, phase, plan)
@@ -243,17 +246,15 @@ class HybridRun:
         ``t_sample`` [s]: a sampled law's next sample instant before t_end; a method that carries the hold takes it
         and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
-        plan = self._plan(modes, phase, at=(t, x))
-        fast = _segment_rhs(self, modes, phase, plan, t, x)
-        fun = fast or system.rhs(modes, phase)
+        plan = _runner(self, modes, phase, (t, x), start=True)  # the twin's plan or the one pipeline's mode
+        fun = plan.rhs if plan.ok else system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             held = t_sample is not None and carries_hold(method)
             end = t_sample if t_sample is not None and not held else t_end
             h0 = min(self.next_step, end - t) if self.next_step else None
             hold = self.sampled.hold(modes, phase, t_end) if held else None
-            events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None,
-                                         None if plan.ok else fast)
+            events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
             self.starts.record(t, x, events)
             events += self._watches(modes, method)
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
@@ -380,20 +381,28 @@ class HybridRun:
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
 
 
-def _segment_rhs(run: HybridRun, modes: list[ContactMode], phase: Phase, plan: ModePlan, t: float, x: np.ndarray):
-    """The right-hand side a segment of ``run`` from (t [s], x) integrates: the plan's, else the one pipeline's where
-    it runs the mode (:class:`~contactdyn.model.paths.LivePipelines`), else None (System.evaluate's: the events'
-    own); its path recorded, a declined plan counted."""
-    if plan.ok:
-        fast, why = plan.rhs, ""
-    else:
-        with compiling("the one pipeline"):
-            fast, why = run.pipelines.rhs(modes, phase, plan, t, x)
-    run.paths.record(run.system, modes, phase, plan, pipeline=fast is not None and not plan.ok)
-    for reason in (plan.reason, why) if not plan.ok else ():
-        if reason:
-            run.fallbacks[reason] = run.fallbacks.get(reason, 0) + 1
-    return fast
+def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, at: tuple, start: bool = False):
+    """What runs (modes, phase) of ``run`` from at = (t [s], x): the one pipeline's mode where it runs the mode
+    (:class:`~contactdyn.model.paths.LivePipelines`; with ``prefer``, no plan is built for it), else the plan
+    (:meth:`HybridRun._plan`). ``start``: a segment starts there: the plan's first check is there, the path is recorded
+    and a declined plan's reason counted."""
+    pipes = run.pipelines
+    plan = None if pipes.prefer and pipes.wanted(modes, phase) else run._plan(modes, phase, at if start else None)
+    pipe, why = None, ""
+    if pipes.wanted(modes, phase, plan):
+        if pipes.built(modes, phase):
+            pipe, why = pipes.mode(modes, phase, *at)
+        else:
+            with compiling("the one pipeline"):  # (a notice's watch: a thread; once per mode)
+                pipe, why = pipes.mode(modes, phase, *at)
+        if pipe is None and plan is None:  # its check disagreed: the plan
+            plan = run._plan(modes, phase, at if start else None)
+    if start:
+        run.paths.record(run.system, modes, phase, plan, pipeline=pipe is not None)
+        for reason in (plan.reason if plan is not None and not plan.ok else "", why):
+            if reason:
+                run.fallbacks[reason] = run.fallbacks.get(reason, 0) + 1
+    return pipe or plan
 
 
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:
@@ -420,7 +429,7 @@ def _diagnose(run: HybridRun, sol, plan: ModePlan, fun, method: str) -> str:
     t, x = float(sol.t[-1]), sol.y[:, -1]
     if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
         return ""
-    if plan.ok:
+    if plan.ok and hasattr(plan, "kkt_condition"):  # (a plan's; not the one pipeline's mode)
         cond = plan.kkt_condition(t, x)
         if cond > 1e12:
             return ("; the constraint rows of the touching contacts are linearly dependent (condition number "

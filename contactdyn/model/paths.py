@@ -23,8 +23,9 @@ readable model — is an undeclared gap: its reason in ``Result.stats["fallback_
 starts with ``"undeclared: "``, which the tests treat as a bug.
 
 A mode the plan declines for a declared gap runs on the one pipeline (:mod:`contactdyn.model.pipeline`) where
-:func:`~contactdyn.model.pipeline.pack.unsupported` accepts it (:class:`LivePipelines`, the path ``PIPELINE``),
-checked where it starts against the readable model as a plan is (:func:`disagreement`); else on the readable model.
+:func:`~contactdyn.model.pipeline.pack.unsupported` accepts it (:class:`LivePipelines`, the path ``PIPELINE``; with
+``LivePipelines.prefer`` every mode it accepts), checked where it starts against the readable model as a plan is
+(:func:`disagreement`); else on the readable model.
 
 Which path each mode of a run took (:func:`path_of`), and which law or part kept
 it off the compiled ones, is in ``Result.stats["paths"]`` (:class:`PathLog`); ``contactdyn run``
@@ -109,38 +110,48 @@ def disagreement(system, modes, phase, rhs: Callable, t: float, x: np.ndarray) -
 
 class LivePipelines:
     """The one pipeline (:class:`~contactdyn.model.pipeline.pipeline.Pipeline`) for the modes of a run whose plan
-    declines for a declared gap (a stage law that is not affine, ...) and that the pipeline packs: one per modes
-    and phase, checked against System.evaluate where the run first starts it (:func:`disagreement`).
-
-    On this path only the integrator's right-hand side is the pipeline's: the event functions and the output
-    samples read the readable model (System.evaluate) as on the "readable model" path; the pipeline's own event
-    values come when it replaces the plan (docs/one_source.md)."""
+    declines for a declared gap (a stage law that is not affine, ...) and that the pipeline packs — with ``prefer``,
+    for every mode it packs, before the plan is built: one per modes and phase, checked against System.evaluate
+    where the run first starts it (:func:`disagreement`), kept wrapped by ``wrap`` (the loop's: its event values,
+    compiled steps and output samples, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`)."""
 
     use = True  #: False only for the benchmarks' and tests' before/after comparison: those modes on System.evaluate
+    #: True: every mode ``pack.unsupported`` accepts runs on the pipeline, even where the plan runs it (the tests' and
+    #: benchmarks' switch, benchmarks/pipeline_loop.py); False: the plan first (the default until the pipeline
+    #: covers every mode kind)
+    prefer = False
 
-    def __init__(self, system) -> None:
-        self.system = system
-        self.pipes: dict[tuple, Pipeline | str] = {}  #: (modes, id(phase)) -> its pipeline, or why not (undeclared)
+    def __init__(self, system, wrap: Callable = lambda pipe: pipe) -> None:
+        self.system, self.wrap = system, wrap
+        self.pipes: dict[tuple, object] = {}  #: (modes, id(phase)) -> its pipeline (wrapped), or why not (undeclared)
+        self.declines: dict[tuple, str] = {}  #: (modes, id(phase)) -> pack.unsupported's reason ("": it packs them)
 
-    def rhs(self, modes, phase, plan, t: float, x: np.ndarray) -> tuple[Callable | None, str]:
-        """(the pipeline's right-hand side for a mode starting at (t [s], x), or None; an undeclared reason when
-        its check disagreed, else "")."""
-        if not self.use or plan.ok or plan.reason.startswith(UNDECLARED) or _watched(self.system, modes) \
-                or unsupported(self.system, modes, phase):
-            return None, ""
+    def wanted(self, modes, phase, plan=None) -> bool:
+        """Does the pipeline run (modes, phase)? ``plan``: the mode's plan (None: not built; only ``prefer`` runs
+        such a mode on the pipeline)."""
+        if not self.use:
+            return False
+        if not self.prefer and (plan is None or plan.ok or plan.reason.startswith(UNDECLARED)):
+            return False
+        key = (tuple(modes), id(phase))
+        if key not in self.declines:
+            self.declines[key] = unsupported(self.system, modes, phase)
+        return not self.declines[key]
+
+    def built(self, modes, phase) -> bool:
+        """Is the pipeline of (modes, phase) packed and checked already (or its check failed)?"""
+        return (tuple(modes), id(phase)) in self.pipes
+
+    def mode(self, modes, phase, t: float, x: np.ndarray) -> tuple[object | None, str]:
+        """(the pipeline of a mode :meth:`wanted` says it runs, starting at (t [s], x), wrapped; or None and the
+        undeclared reason its check disagreed with)."""
         key = (tuple(modes), id(phase))
         pipe = self.pipes.get(key)
         if pipe is None:
             pipe = Pipeline(self.system, modes, phase)
-            pipe = self.pipes[key] = disagreement(self.system, modes, phase, pipe.rhs, t, x) or pipe
-        return (None, pipe) if isinstance(pipe, str) else (pipe.rhs, "")
-
-
-def _watched(system, modes) -> bool:
-    """Does a contact stick with friction? Its slip watch reads the readable model at every call
-    (:class:`~contactdyn.hybrid.events.SlipWatch`): the pipeline's call would only add to it."""
-    return any(m.touching and m.stuck and c.friction is not None and len(c.tangents)
-               for c, m in zip(system.contacts, modes, strict=True))
+            reason = disagreement(self.system, modes, phase, pipe.rhs, t, x)
+            pipe = self.pipes[key] = reason or self.wrap(pipe)
+        return (None, pipe) if isinstance(pipe, str) else (pipe, "")
 
 
 def path_of(plan, pipeline: bool = False) -> tuple[str, str]:
@@ -151,8 +162,10 @@ def path_of(plan, pipeline: bool = False) -> tuple[str, str]:
     plan declines runs on the one pipeline's call, :class:`LivePipelines`), "readable model" (System.evaluate).
     Which compiled path runs a mode is the plan's choice by its parts' shapes (no drives and an affine tip law: the
     plan's map; motors or a task-space law that is not affine: a kernel), not a law's doing."""
+    if pipeline:  # (plan None: preferred, not built)
+        return PIPELINE, plan.reason if plan is not None and not plan.ok else ""
     if not plan.ok:
-        return (PIPELINE if pipeline else "readable model"), plan.reason
+        return "readable model", plan.reason
     if plan.kernel is not None:
         return ("compiled call" if getattr(plan.kernel, "at", None) is not None else "compiled kernel"), ""
     if plan.python_command:

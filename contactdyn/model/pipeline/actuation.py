@@ -24,7 +24,7 @@ from ...laws.controllers.abi import FIELD, call_controller, control_arrays, put_
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
-from .drives import DI_W, apply_drives
+from .drives import DI_W, DW_APPLIED, DW_W, apply_drives
 from .pack import (
     ANY_MOTOR,
     CTL_ABI,
@@ -170,7 +170,8 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
 def drives(x, ints, reals, work, tau, f):
     """The command per drive (the joints' τ, the bodies' servo forces g (v_ref − v) [N]) through the drives into f:
     added as it is by ideal sources only (Drives.apply without motors), else by each drive's law
-    (:func:`.drives.apply_drives`, its outputs into ``work``); False where a kind's compiled law failed."""
+    (:func:`.drives.apply_drives`, its outputs into ``work``): (ok, the forces applied on the drives' coordinates
+    [N·m or N]); ok False where a kind's compiled law failed."""
     nQ, n = ints[NQ], ints[N_DRIVES]
     cmd = np.zeros(n)
     cmd[:tau.size] = tau
@@ -180,10 +181,14 @@ def drives(x, ints, reals, work, tau, f):
         cmd[idx] = servo[2 * k + 1] * (servo[2 * k] - x[nQ + idx])
     if ints[ANY_MOTOR]:
         rows = section(ints, ints[I_DRIVES], n, DI_W)
-        return apply_drives(x, nQ, rows, reals[ints[R_DRIVES]:], cmd, f, work[ints[W_DRIVES]:])
+        out = work[ints[W_DRIVES]:]
+        ok = apply_drives(x, nQ, rows, reals[ints[R_DRIVES]:], cmd, f, out)
+        for i in range(n):
+            cmd[i] = out[DW_W * i + DW_APPLIED]
+        return ok, cmd
     for i in range(n):
         f[i] += cmd[i]
-    return True
+    return True, cmd
 
 
 def command_by_address(address, buffer, layout, params, tau) -> int:

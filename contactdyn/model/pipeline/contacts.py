@@ -81,6 +81,7 @@ from .pack import (
     RH_OMEGA,
     RH_SLIP_BAND,
     TIP,
+    W_DIAG,
     section,
 )
 
@@ -146,6 +147,7 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, ev
                                                           Fa[fi, :3], f, ydot)
             if not finite:
                 return False
+            work[ints[W_DIAG] + 1 + k] = interface_F  # (diagnostics: a tangential chain's interface force)
             u0 = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k, CH_CONSTS]
             for i in range(3):
                 tip_force[i] += tip_F * reals[u0 + i]

@@ -13,7 +13,8 @@
   constants or declared parameters, per drive its voltage limit [V] and its kind's values, the rotors reflected on
   the joints [kg·m²];
 - ``work`` (float64): the chains' node motion and stage states, the drives' outputs of the last call (scratch the
-  call writes).
+  call writes), then the diagnostics section (:func:`diag_starts`: what the output samples read, written when its
+  switch is on).
 
 A law enters by its address (an int64 of ``ints``: a stage law's in its chain's stage table, a friction law's in
 its contact's row, a user controller's in the controller section, a drive kind's in its drive's row), so one
@@ -45,14 +46,14 @@ from ..chain import NodeKind
 from ..chain_forces import pack as pack_chain
 from .drives import DW_W, drive_table, drives_unsupported
 
-__all__ = ["Packed", "pack", "unsupported", "section"]
+__all__ = ["Packed", "pack", "unsupported", "section", "diag_starts"]
 
 # ---- the header of ``ints``: sizes, switches, then where each section starts -------------------------------------
 (NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, I_DRIVES, R_DRIVES, R_REFLECTED, W_DRIVES, ANY_MOTOR,
- HEADER) = range(46)
+ W_DIAG, HEADER) = range(47)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -78,6 +79,26 @@ LI_JOINT, LI_SIDE, LI_W = 0, 1, 2  #: a pressing limit's ints (its value [rad or
 EV_GAP, EV_FN, EV_VT, EV_FF, EV_W = 0, 1, 2, 4, 6
 #: status: 1 the call is complete; 0 the KKT matrix is singular (the readable model's least squares is needed)
 TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
+#: the diagnostics section of ``work`` (from ``ints[W_DIAG]``; :mod:`.diagnostics`): its switch (the call writes the
+#: section when it is not 0), then per chain its interface force [N] (written always), then the drives' applied
+#: forces (N_DRIVES) [N·m or N], the controller's τ (NV), the tip's position (3) [m], x_d (REF_DIMS) [m], the force
+#: set-points (N_FORCES) [N] and the rows' forces λ (N_ROWS)
+(D_TAU, D_CMD, D_TIP, D_XD, D_FD, D_LAM, D_END) = range(7)
+
+
+@njit(cache=True)
+def diag_starts(ints):
+    """Where each part of the diagnostics section starts in ``work`` (D_* order, then its end); its interface
+    forces start at ``ints[W_DIAG] + 1``."""
+    at = np.empty(D_END + 1, dtype=np.int64)
+    at[D_TAU] = ints[W_DIAG] + 1 + ints[N_CHAINS]
+    at[D_CMD] = at[D_TAU] + ints[N_DRIVES]
+    at[D_TIP] = at[D_CMD] + ints[NV]
+    at[D_XD] = at[D_TIP] + 3
+    at[D_FD] = at[D_XD] + ints[REF_DIMS]
+    at[D_LAM] = at[D_FD] + ints[N_FORCES]
+    at[D_END] = at[D_LAM] + ints[N_ROWS]
+    return at
 
 
 @njit(cache=True, inline="always")
@@ -188,6 +209,8 @@ def pack(system, modes, phase) -> Packed:
     _reference(b, system, phase)
     _controller(b, system, phase)
     _drives(b, system, phase)
+    h[W_DIAG] = b.work
+    b.work = int(diag_starts(np.array(h, dtype=np.int64))[D_END])
     h[W_SIZE] = b.work
     n_events = EV_W * len(system.contacts) + len(phase.limits) + 1
     return Packed(np.array(h, dtype=np.int64), np.array(b.reals), np.zeros(max(b.work, 1)), np.zeros(n_events),

@@ -19,6 +19,7 @@ import numpy as np
 from ...numerics.compile_cache import njit
 from .actuation import command, drives
 from .contacts import contact_terms, finish, limit_rows
+from .diagnostics import record
 from .drives import drive_values, inertias
 from .kkt import kkt_solve
 from .pack import (
@@ -37,13 +38,15 @@ from .pack import (
     NX,
     NY,
     R_REFLECTED,
+    TIP_FRAME,
+    W_DIAG,
     W_DRIVES,
     pack,
     unsupported,
 )
 from .robot_terms import frame_terms, robot_terms
 
-__all__ = ["call", "rates_at", "Pipeline"]
+__all__ = ["call", "rates_at", "samples_at", "Pipeline"]
 
 
 @njit(cache=True)
@@ -65,7 +68,8 @@ def call(t, x, ints, reals, work, events):
     first_limit = nr - ints[N_LIMITS]
     limit_rows(x, ints, reals, first_limit, G, C, gamma)
     tau = command(t, x, ints, reals, Hc, h, g, FJ, Fa, Fp, Fv, FR)
-    if not drives(x, ints, reals, work, tau, f):
+    ok, applied = drives(x, ints, reals, work, tau, f)
+    if not ok:
         events[events.size - 1] = -1.0
         return xdot
     qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma)
@@ -73,6 +77,8 @@ def call(t, x, ints, reals, work, events):
     xdot[nQ:2 * nQ] = qdd
     xdot[2 * nQ:] = ydot
     finish(ints, lam, xdot, events, pending, first_limit)
+    if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
+        record(t, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam)
     events[events.size - 1] = 1.0 if regular else 0.0
     return xdot
 
@@ -87,6 +93,25 @@ def rates_at(ts, X, ints, reals, work, events):
         if events[events.size - 1] != 1.0:
             return out, k
     return out, ts.size
+
+
+@njit(cache=True)
+def samples_at(ts, X, ints, reals, work, events):
+    """(ẋ, event values, work) at each (ts[k], X[k]) with the diagnostics on (:mod:`.diagnostics`: the output
+    samples' way), and the number of states done before a call's status was not 1 (the rest: the readable model's)."""
+    n = ts.size
+    Xd, E, W = np.empty(X.shape), np.zeros((n, events.size)), np.zeros((n, work.size))
+    work[ints[W_DIAG]] = 1.0
+    done = n
+    for k in range(n):
+        Xd[k] = call(ts[k], X[k], ints, reals, work, events)
+        if events[events.size - 1] != 1.0:
+            done = k
+            break
+        E[k] = events
+        W[k] = work
+    work[ints[W_DIAG]] = 0.0
+    return Xd, E, W, done
 
 
 class Pipeline:

@@ -1,0 +1,102 @@
+"""Whole runs on the one pipeline (``LivePipelines.prefer``) against the same runs on the twin's plans, in one process.
+
+    PYTHONPATH=. python3 benchmarks/pipeline_loop.py [SCENE ...] [--repeats 3] [--out FILE.json]
+
+Per scene whose modes the pipeline packs (:data:`SCENES`, at its own duration and settings): the CPU median of a
+whole run (System built, run, output sampled) with the switch off (every mode on the twin's plan where it has one:
+the default) and on (every mode ``pack.unsupported`` accepts on the pipeline: its compiled steps, event values and
+output samples), timed interleaved after an untimed run of each; the cost per simulated second, the ratio on/off,
+the integration steps of each, the paths the modes of the "on" run took, and the run's agreement: the largest
+relative difference over all channels (max |on − off| / max |off| per channel) and its channel, the events' kinds
+the same and the largest difference of their times [s].
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from timing import interleaved, write_report  # noqa: E402
+
+from contactdyn.model.paths import LivePipelines  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
+from contactdyn.simulate import run_system  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = ["sims/b1.toml", "sims/case2_writer_b.toml", "sims/case2_writer_rigid.toml",
+          *(f"benchmarks/hard/{p.name}" for p in sorted((ROOT / "benchmarks" / "hard").glob("*.toml"))),
+          "benchmarks/b2.toml", "examples/cubic_press.toml", "examples/impedance_press.toml"]
+
+
+def run(scene, prefer: bool):
+    """One whole run of ``scene`` with the switch set (restored after)."""
+    LivePipelines.prefer = prefer
+    try:
+        return run_system(System(scene))
+    finally:
+        LivePipelines.prefer = False
+
+
+def agreement(on, off) -> dict:
+    """The largest relative channel difference (and where), the events' kinds alike, their times' largest gap [s]."""
+    worst, where = 0.0, ""
+    for key, ref in off.channels.items():
+        ref, got = np.asarray(ref, float), np.asarray(on.channels[key], float)
+        if not ref.size or np.all(np.isnan(ref)):
+            continue
+        d = float(np.nanmax(np.abs(got - ref))) / max(float(np.nanmax(np.abs(ref))), 1e-300)
+        if d > worst:
+            worst, where = d, key
+    same = [(e["kind"], e["name"]) for e in on.events] == [(e["kind"], e["name"]) for e in off.events]
+    dt = max((abs(a["t"] - b["t"]) for a, b in zip(on.events, off.events, strict=True)), default=0.0) if same \
+        else float("nan")
+    return {"max_rel_diff": worst, "channel": where, "events_same": same, "events": len(off.events),
+            "max_event_dt_s": dt}
+
+
+def measure(path: str, repeats: int) -> dict:
+    scene = load_scene(ROOT / path)
+    variants = {"off": lambda: run(scene, False), "on": lambda: run(scene, True)}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for call in variants.values():
+            call()  # untimed: compiles, caches
+        times = interleaved(variants, repeats)
+    off, on = times["off"], times["on"]
+    T = scene.duration
+    return {"scene": path, "duration_s": T, "off_cpu_s": off.cpu, "on_cpu_s": on.cpu,
+            "off_per_sim_s": off.cpu / T, "on_per_sim_s": on.cpu / T, "ratio_on_off": on.cpu / off.cpu,
+            "off_steps": off.last.stats["steps"], "on_steps": on.last.stats["steps"],
+            "on_paths": sorted({r["path"] for r in on.last.stats["paths"].values()}),
+            "off_paths": sorted({r["path"] for r in off.last.stats["paths"].values()}),
+            **agreement(on.last, off.last)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenes", nargs="*", default=SCENES)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--out", default=str(ROOT / "benchmarks" / "out" / "pipeline_loop.json"))
+    args = p.parse_args(argv)
+    rows = []
+    print("| scene | off CPU/sim s | on CPU/sim s | on/off | steps off/on | max rel diff (channel) | events | max Δt "
+          "[s] | on paths |\n|---|---|---|---|---|---|---|---|---|")
+    for path in args.scenes:
+        r = measure(path, args.repeats)
+        rows.append(r)
+        print(f"| {Path(path).stem} | {r['off_per_sim_s']:.4f} | {r['on_per_sim_s']:.4f} | {r['ratio_on_off']:.2f} | "
+              f"{r['off_steps']}/{r['on_steps']} | {r['max_rel_diff']:.1e} ({r['channel']}) | "
+              f"{r['events']}{'' if r['events_same'] else ' DIFFER'} | {r['max_event_dt_s']:.1e} | "
+              f"{', '.join(r['on_paths'])} |", flush=True)
+    write_report(Path(args.out), {"repeats": args.repeats, "cpu": "process_time, median"}, rows)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,233 @@
+"""A mode on the one pipeline as the hybrid loop runs it: right-hand side, compiled steps, event values, samples.
+
+:class:`PipelineMode` wraps a mode packed for the one pipeline (:class:`~contactdyn.model.pipeline.pipeline.Pipeline`)
+in the shape of the twin's :class:`~contactdyn.compiled.rhsplan.ModePlan`, so the loop, its event functions
+(:func:`~contactdyn.hybrid.events.segment_events`) and the output (:func:`~contactdyn.output.channels.sample_states`)
+take either:
+
+- ``rhs(t, x)`` is the pipeline's call; ``rhs.step`` a whole DOP853 step in one compiled call
+  (:func:`~contactdyn.compiled.plan_steps.pipeline_attempt`) and ``rhs.derivatives`` the dense output's extra stages
+  in one (``rates_at``);
+- the event functions read the event values of the call at that very state (a stuck contact's slip watch each
+  stage's, :meth:`watched_step`) (the last four calls' in ``ring``, as
+  the plan's ring: DOP853's FSAL call, its dense output's stages, then the events at the step end): gaps [m],
+  normal forces [N], slip velocities [m/s], stick forces [N], limit torques [N·m or N];
+- :meth:`samples` runs the output samples in one compiled call with the call's diagnostics on (τ, the command,
+  the tip, x_d, F_d, λ, the stage states: :mod:`contactdyn.model.pipeline.diagnostics`).
+
+A call whose status is not 1 (a singular KKT matrix, a law that gave no force) is answered by the readable model
+(:meth:`System.evaluate`), its values too; ``singular`` counts them.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from ..compiled.plan_steps import pipeline_derivatives, pipeline_stepper
+from ..compiled.samples import Samples
+from ..model.chain_forces import pack as pack_chain
+from ..model.pipeline.drives import DW_U, DW_W
+from ..model.pipeline.pack import (
+    ANY_MOTOR,
+    CH_STATE,
+    CH_W,
+    D_CMD,
+    D_FD,
+    D_LAM,
+    D_TAU,
+    D_TIP,
+    D_XD,
+    EV_FF,
+    EV_FN,
+    EV_GAP,
+    EV_VT,
+    EV_W,
+    I_CHAINS,
+    N_DRIVES,
+    REF_DIMS,
+    W_DIAG,
+    W_DRIVES,
+    diag_starts,
+)
+from ..model.pipeline.pipeline import Pipeline, call, samples_at
+
+__all__ = ["PipelineMode"]
+
+_NO_CALL = (None, None, None)  #: a ring entry before any call
+
+
+class PipelineMode:
+    """One (modes, phase) on the one pipeline, with the plan's interface (see the module docstring)."""
+
+    ok = True  #: (a plan's: runs compiled)
+    reason = ""
+    kernel = None
+    python_command = False
+
+    def __init__(self, pipe: Pipeline):
+        self.pipe, self.system, self.modes, self.phase = pipe, pipe.system, pipe.modes, pipe.phase
+        self.ring: deque[tuple] = deque([_NO_CALL] * 4, maxlen=4)  #: the last four calls' (t, x, events)
+        p = pipe.packed
+        ints, reals, work, events = p.ints, p.reals, p.work, p.events
+        ring, system, modes, phase = self.ring, self.system, self.modes, self.phase
+
+        def rhs(t: float, x: np.ndarray) -> np.ndarray:
+            xdot = call(float(t), x, ints, reals, work, events)
+            if events[-1] != 1.0:
+                pipe.fallbacks += 1
+                ev = system.evaluate(t, x, modes, phase)
+                ring.append((t, x, self._events_of(ev)))
+                return ev.xdot
+            ring.append((t, x, events.copy()))
+            return xdot
+
+        rhs.step = pipeline_stepper(p, ring)
+        rhs.derivatives = pipeline_derivatives(p, rhs)
+        self.rhs = rhs
+        self.nt = [len(c.tangents) if c.friction is not None else 0 for c in system.contacts]
+        self._stages = self._stage_table()
+
+    def watched_step(self, on_stage):
+        """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
+        slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`)."""
+        step = pipeline_stepper(self.pipe.packed, self.ring, on_stage)
+        return step
+
+    @property
+    def singular(self) -> int:
+        """Calls answered by the readable model (a singular KKT matrix, a law that gave no force)."""
+        return self.pipe.fallbacks
+
+    def use(self, modes) -> None:
+        """(A plan's: run these modes.) A pipeline is packed for its modes only."""
+        if list(modes) != self.modes:
+            raise ValueError(f"a pipeline runs the modes it was packed for: {self.modes}, given {modes}")
+
+    # ---- values the event functions read ----------------------------------------------
+    def values(self, t: float, x: np.ndarray) -> np.ndarray:
+        """The event values at (t, x): the last call's when it was at this very state."""
+        for lt, lx, ev in reversed(self.ring):
+            if lx is x and lt == t:
+                return ev
+        self.rhs(t, x)
+        return self.ring[3][2]
+
+    def gap(self, ci: int, t: float, x: np.ndarray) -> float:
+        """Normal gap of contact ci [m] (0 while touching)."""
+        return float(self.values(t, x)[EV_W * ci + EV_GAP])
+
+    def normal_force(self, ci: int, t: float, x: np.ndarray) -> float:
+        """Normal force of contact ci [N]."""
+        return float(self.values(t, x)[EV_W * ci + EV_FN])
+
+    def slip(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
+        """Slip velocity of contact ci in its tangent coordinates [m/s]."""
+        at = EV_W * ci + EV_VT
+        return self.values(t, x)[at:at + self.nt[ci]]
+
+    def stick_force(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
+        """Friction force of a sticking contact ci in tangent coordinates [N]."""
+        at = EV_W * ci + EV_FF
+        return self.values(t, x)[at:at + self.nt[ci]]
+
+    def cone_margin(self, ci: int, mu_s: float, t: float, x: np.ndarray) -> float:
+        """μ_s F − |F_f| [N] of a sticking contact ci: the ``slip`` event's function."""
+        F_f = self.stick_force(ci, t, x).tolist()
+        return mu_s * self.normal_force(ci, t, x) - math.sqrt(sum(v * v for v in F_f))
+
+    def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate (the ``release`` event's)."""
+        ev, base = self.values(t, x), EV_W * len(self.nt)
+        return {i: float(ev[base + k]) for k, i in enumerate(self.pipe.packed.limits)}
+
+    def joint_hold(self, t: float, x: np.ndarray) -> dict[int, float]:
+        """(No stuck joints: the pipeline declines joint friction, ``pack.unsupported``.)"""
+        return {}
+
+    def _events_of(self, ev) -> np.ndarray:
+        """The event values of a readable Evaluation, in the call's layout (a call answered by the readable model)."""
+        out = np.zeros(self.pipe.packed.events.size)
+        for ci, c in enumerate(self.system.contacts):
+            at, nt = EV_W * ci, self.nt[ci]
+            out[at + EV_GAP], out[at + EV_FN] = ev.gap[c.name], ev.normal_force[c.name]
+            if nt:
+                out[at + EV_VT:at + EV_VT + nt] = ev.slip[c.name]
+                out[at + EV_FF:at + EV_FF + nt] = ev.friction.get(c.name, np.zeros(nt))
+        for k, i in enumerate(self.pipe.packed.limits):
+            out[EV_W * len(self.nt) + k] = ev.limit_torque[i]
+        out[-1] = 1.0
+        return out
+
+    # ---- output samples ------------------------------------------------------------------------
+    def samples(self, ts: np.ndarray, X: np.ndarray, modes=None) -> Samples:
+        """Diagnostics at the states X[k] (times ts[k]) in one compiled call (the readable model's from a state whose
+        call declines on)."""
+        if modes is not None:
+            self.use(modes)
+        p, system = self.pipe.packed, self.system
+        ts, X = np.ascontiguousarray(ts, dtype=float), np.ascontiguousarray(X, dtype=float)
+        _, E, W, done = samples_at(ts, X, p.ints, p.reals, p.work, p.events)
+        S = Samples(len(ts), system)
+        self._read_out(S, E[:done], W[:done])
+        for k in range(done, len(ts)):
+            self.pipe.fallbacks += 1
+            S.fill(k, system.evaluate(float(ts[k]), X[k], self.modes, self.phase, full=True))
+        return S
+
+    def _stage_table(self) -> list[tuple[str, int, int | None]]:
+        """Per stage label of every chain (pack's order): (label, where its (x, ẋ, F) start in ``work``, or None
+        while it carries no force)."""
+        system, ints, out, k = self.system, self.pipe.packed.ints, [], 0
+        for c, m in zip(system.contacts, self.modes, strict=True):
+            for dc in c.chains:
+                a = pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching)
+                state = int(ints[ints[I_CHAINS] + CH_W * k + CH_STATE])
+                out += [(label, state + 4 * s if s in a.active else None) for s, label in enumerate(a.labels)]
+                k += 1
+        return out
+
+    def _read_out(self, S: Samples, E: np.ndarray, W: np.ndarray) -> None:
+        """Rows 0..len(E) of S from the calls' event values E and work W (one row per sample)."""
+        system, p, n = self.system, self.pipe.packed, len(E)
+        if n == 0:
+            return
+        ints, nv = p.ints, system.nv
+        at = diag_starts(ints)
+        S.tau[:n] = W[:, at[D_TAU]:at[D_TAU] + nv]
+        S.body_force[:n] = W[:, at[D_TAU] + nv:at[D_CMD]]
+        S.tau_cmd[:n] = W[:, at[D_CMD]:at[D_CMD] + nv]
+        S.tip[:n] = W[:, at[D_TIP]:at[D_TIP] + 3]
+        if ints[ANY_MOTOR]:  # each drive's voltage [V] (NaN: an ideal source), as the drives wrote it
+            w0 = ints[W_DRIVES]
+            S.u[:n] = W[:, w0 + DW_U:w0 + DW_W * ints[N_DRIVES]:DW_W]
+        if ints[REF_DIMS] == 3:
+            S.x_d[:n], S.has_x_d = W[:, at[D_XD]:at[D_FD]], True
+        for j, key in enumerate(self.phase.forces):
+            S.F_d[key][:n], S.has_F_d[key] = W[:, at[D_FD] + j], True
+        base = EV_W * len(self.nt)
+        for k, i in enumerate(p.limits):
+            S.limit_torque[:n, i] = E[:, base + k]
+        for ci, c in enumerate(system.contacts):
+            e, nt = EV_W * ci, self.nt[ci]
+            S.F_n[c.name][:n], S.gap[c.name][:n] = E[:, e + EV_FN], E[:, e + EV_GAP]
+            if nt:
+                S.F_f[c.name][:n], S.v_slip[c.name][:n] = E[:, e + EV_FF:e + EV_FF + nt], E[:, e + EV_VT:e + EV_VT + nt]
+        self._read_chains(S, W, at, n)
+
+    def _read_chains(self, S: Samples, W: np.ndarray, at: np.ndarray, n: int) -> None:
+        """The tangential chains' interface forces (a bond's λ, else the chain's own) and the stage states."""
+        ints, k = self.pipe.packed.ints, 0
+        rows = {meta: r for r, meta in enumerate(self.pipe.packed.row_meta)}
+        for c in self.system.contacts:
+            for i, dc in enumerate(c.chains):
+                if i > 0:  # (the normal chain first)
+                    r = rows.get((c.name, dc.label, i - 1))
+                    S.iface[f"{c.name}.{dc.label}"][:n] = W[:, at[D_LAM] + r] if r is not None else \
+                        W[:, ints[W_DIAG] + 1 + k]
+                k += 1
+        for label, state in self._stages:
+            if state is not None:
+                S.stages[label][:n] = W[:, state:state + 3]

@@ -1,0 +1,174 @@
+"""The one pipeline as a complete path of the hybrid loop (contactdyn/hybrid/pipeline_mode.py): its output samples equal
+the readable model's at the same states, a run with ``LivePipelines.prefer`` (every mode the pipeline packs on it)
+equals the run on the twin's plans, and a pipeline segment evaluates the readable model nowhere but in its start
+check."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
+sys.path.insert(0, str(BENCH))
+from pipeline_proto import CASES, case, states  # noqa: E402
+
+from contactdyn.compiled.samples import evaluated_samples  # noqa: E402
+from contactdyn.hybrid import loop  # noqa: E402
+from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
+from contactdyn.model.paths import PIPELINE, LivePipelines  # noqa: E402
+from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+from contactdyn.model.system import System  # noqa: E402
+from contactdyn.scene.scene_file import load_scene  # noqa: E402
+from contactdyn.simulate import run_system  # noqa: E402
+
+ROOT = BENCH.parent
+#: the samples' arrays of compiled.samples.Samples, per name (dicts by key)
+FIELDS = ("tau", "tau_cmd", "limit_torque", "tip", "x_d", "body_force", "F_n", "gap", "F_d", "F_f", "v_slip", "iface",
+          "stages")
+#: the output samples' agreement with System.evaluate at the same states, relative to each array's largest
+#: magnitude: the call's own (≤ 1e-12, tests/test_pipeline_proto.py); measured ≤ 4.8e-15 over the 24 cases (UR5)
+SAMPLES_RTOL = 1e-12
+RUN_RTOL = 1e-9  #: a run on the pipeline against the run on the plans: each channel, relative to its largest value
+EVENT_ATOL = 1e-9  #: [s] their events' times (measured ≤ 4e-11 s on these scenes)
+
+
+def _arrays(S) -> dict[str, np.ndarray]:
+    out = {}
+    for name in FIELDS:
+        value = getattr(S, name)
+        for key, arr in (value.items() if isinstance(value, dict) else [("", value)]):
+            out[f"{name}.{key}"] = np.asarray(arr, float)
+    return out
+
+
+def _worst(got: dict, ref: dict) -> tuple[float, str]:
+    worst, where = 0.0, ""
+    for key, r in ref.items():
+        g = got[key]
+        assert g.shape == r.shape, key
+        assert np.array_equal(np.isnan(g), np.isnan(r)), key
+        if not r.size or np.all(np.isnan(r)):
+            continue
+        d = float(np.nanmax(np.abs(g - r))) / max(float(np.nanmax(np.abs(r))), 1e-300)
+        if d > worst:
+            worst, where = d, key
+    return worst, where
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_the_output_samples_are_the_readable_ones(name):
+    system, modes, phase, t, x0 = case(name)
+    pm = PipelineMode(Pipeline(system, modes, phase))
+    X = np.array(states(x0, 4))
+    ts = t + np.linspace(0.0, 0.05, len(X))
+    got, ref = _arrays(pm.samples(ts, X)), _arrays(evaluated_samples(system, ts, X, modes, phase))
+    worst, where = _worst(got, ref)
+    assert worst <= SAMPLES_RTOL, where
+    assert pm.singular == 0
+
+
+def _run(scene: str, duration: float, prefer: bool, monkeypatch):
+    monkeypatch.setattr(LivePipelines, "prefer", prefer)
+    return run_system(System(load_scene(ROOT / scene, {"duration": duration})))
+
+
+#: scenes whose every mode the pipeline packs, short (their events: touch, separate, stop, slip, stick)
+SCENES = [("sims/b1.toml", 0.3), ("sims/case2_writer_rigid.toml", 1.5), ("benchmarks/hard/bounce.toml", 0.5),
+          ("benchmarks/hard/stickslip.toml", 1.0), ("examples/impedance_press.toml", 0.2)]
+
+
+@pytest.mark.parametrize("scene,duration", SCENES)
+def test_a_run_on_the_pipeline_is_the_run_on_the_plans(scene, duration, monkeypatch):
+    on, off = _run(scene, duration, True, monkeypatch), _run(scene, duration, False, monkeypatch)
+    assert {row["path"] for row in on.stats["paths"].values()} == {PIPELINE}
+    assert PIPELINE not in {row["path"] for row in off.stats["paths"].values()}
+    assert set(on.channels) == set(off.channels)
+    for key, ref in off.channels.items():
+        ref, got = np.asarray(ref, float), np.asarray(on.channels[key], float)
+        scale = float(np.nanmax(np.abs(ref))) if ref.size and not np.all(np.isnan(ref)) else 0.0
+        assert np.nanmax(np.abs(got - ref), initial=0.0) <= RUN_RTOL * scale, key
+    assert [(e["kind"], e["name"]) for e in on.events] == [(e["kind"], e["name"]) for e in off.events]
+    np.testing.assert_allclose([e["t"] for e in on.events], [e["t"] for e in off.events], rtol=0, atol=EVENT_ATOL)
+
+
+def test_a_pipeline_segment_evaluates_the_readable_model_only_in_its_start_check(monkeypatch):
+    """Counted calls of System.evaluate: none while the segments integrate (their right-hand side, compiled steps,
+    event values) and none in the output samples; two (:func:`contactdyn.model.paths.disagreement`) per mode started."""
+    calls = {"all": 0, "integrate": 0, "samples": 0}
+    evaluate, integrate, sample_states = System.evaluate, loop.integrate, loop.sample_states
+
+    def counted_evaluate(self, *args, **kwargs):
+        calls["all"] += 1
+        return evaluate(self, *args, **kwargs)
+
+    def inside(name, fn):
+        def wrapped(*args, **kwargs):
+            before = calls["all"]
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                calls[name] += calls["all"] - before
+        return wrapped
+
+    monkeypatch.setattr(System, "evaluate", counted_evaluate)
+    monkeypatch.setattr(loop, "integrate", inside("integrate", integrate))
+    monkeypatch.setattr(loop, "sample_states", inside("samples", sample_states))
+    r = _run("benchmarks/hard/stickslip.toml", 1.0, True, monkeypatch)
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
+    assert len(r.events) > 10 and r.stats["rhs_evals"] > 1000
+    assert calls["integrate"] == 0 and calls["samples"] == 0
+    assert calls["all"] >= 2 * len(r.stats["paths"])
+
+
+_INTERPRETED = """
+import json, sys
+import numpy as np
+sys.path.insert(0, {bench!r})
+from pipeline_proto import case, states
+from contactdyn.model.pipeline.pipeline import Pipeline, samples_at
+out = {{}}
+for name in {names!r}:
+    system, modes, phase, t, x0 = case(name)
+    p = Pipeline(system, modes, phase).packed
+    X = np.array(states(x0, 2))
+    Xd, E, W, done = samples_at(t + np.arange(2) * 0.01, X, p.ints, p.reals, p.work, p.events)
+    out[name] = [Xd.tolist(), E.tolist(), W.tolist(), int(done)]
+print(json.dumps(out))
+"""
+
+
+def test_the_diagnostics_interpreted_are_the_compiled_ones():
+    """NUMBA_DISABLE_JIT=1: samples_at's rates, event values and work (the diagnostics section) bit for bit."""
+    names = ["writer_rigid_stick", "b1_limit", "impedance_press"]
+    env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=names)], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    interpreted = json.loads(done.stdout.strip().splitlines()[-1])
+    from contactdyn.model.pipeline.pipeline import samples_at
+    for name in names:
+        system, modes, phase, t, x0 = case(name)
+        p = Pipeline(system, modes, phase).packed
+        got = samples_at(t + np.arange(2) * 0.01, np.array(states(x0, 2)), p.ints, p.reals, p.work, p.events)
+        for a, b in zip(got[:3], interpreted[name][:3], strict=True):
+            assert np.array_equal(a, np.array(b)), name
+        assert got[3] == interpreted[name][3] == 2
+
+
+@pytest.mark.parametrize("name", ["writer_rigid_stick", "b1_limit", "writer5dof_tool_slide"])
+def test_a_call_answered_by_the_readable_model_gives_its_event_values_in_the_calls_layout(name):
+    """PipelineMode._events_of (a call whose status is not 1: the readable model's values in the ring) lays the
+    Evaluation out as the call lays its events."""
+    system, modes, phase, t, x0 = case(name)
+    pm = PipelineMode(Pipeline(system, modes, phase))
+    x = states(x0, 2)[1]
+    pm.rhs(t, x)
+    got, ref = pm._events_of(system.evaluate(t, x, modes, phase)), pm.values(t, x)
+    assert np.abs(got - ref).max() <= 1e-12 * np.abs(ref).max()
+    assert got[-1] == ref[-1] == 1.0
