@@ -312,9 +312,10 @@ def test_resume_reads_the_summary_and_reruns_damaged_results(capsys, tmp_path, m
 
 def test_ctrl_c_stops_pool_workers_without_tracebacks_and_resumes(capsys, tmp_path):
     out = tmp_path / "s"
-    # 150 runs of 0.3 s: ~3 s of work left when the first is saved, far more than can finish before the signal
-    # even on a loaded machine (150 runs of FAST's 0.03 s once all did: the sweep ended with 0, not 130)
-    args = ["sweep", "b1", "--set", "duration=0.3", "--set", "solver.output_rate=200", "--range",
+    # 150 runs of 1 s: several seconds of work left when the first is saved, far more than can finish before the
+    # signal even on a loaded machine (150 runs of FAST's 0.03 s once all did, and of 0.3 s under a load of 4 on
+    # 2 cores: the sweep ended with 0, not 130)
+    args = ["sweep", "b1", "--set", "duration=1.0", "--set", "solver.output_rate=200", "--range",
             "contact.tip.normal.k=5e4:2e5:150:log", "--workers", "2", "--chunk", "5", "--quiet", "--out", str(out)]
     env = {**os.environ, "PYTHONPATH": f"{ROOT}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
     proc = subprocess.Popen([sys.executable, "-m", "contactdyn.cli", *args], env=env, stdout=subprocess.PIPE,
