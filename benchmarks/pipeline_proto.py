@@ -70,6 +70,19 @@ def _tool_pd(doc: dict) -> None:
                                                "accel_fraction": 0.2}]}
 
 
+def _joint_friction(doc: dict) -> None:
+    """b1 with joint damping and Coulomb joint friction (static above kinetic) on both joints."""
+    doc["robot"]["joint"] = {"q1": {"damping": 0.5, "friction_static": 3.0, "friction_kinetic": 2.0},
+                             "q2": {"damping": 0.2, "friction": 1.5}}
+
+
+def _joint_modes(modes_of_joints, limits=()):
+    """The joints' friction modes set (0 stuck, ±1 sliding), and joints pressing on their limits."""
+    def change(system, modes, ph, x0):
+        return modes, replace(ph, joint_modes=tuple(modes_of_joints), limits=tuple(limits))
+    return change
+
+
 #: case -> (scene file, an edit of its TOML or None, what to change from its first mode: None, or a function of
 #: (system, modes, phase, x0) giving (modes, phase))
 def _touch(stuck=False, limits=(), phase=None):
@@ -87,6 +100,10 @@ CASES = {
     "b1_stick": ("sims/b1.toml", None, _touch(stuck=True)),
     "b1_limit": ("sims/b1.toml", None, _touch(limits=((1, -1),))),
     "b1_stribeck": ("sims/b1.toml", _stribeck, None),
+    "b1_joints_slide": ("sims/b1.toml", _joint_friction, None),
+    "b1_joints_stuck": ("sims/b1.toml", _joint_friction, _joint_modes(((0, 0), (1, 0)))),
+    "b1_joints_mixed": ("sims/b1.toml", _joint_friction, _joint_modes(((0, -1), (1, 0)))),
+    "b1_joints_limit": ("sims/b1.toml", _joint_friction, _joint_modes(((0, 0), (1, 0)), limits=((1, -1),))),
     "writer_b_approach": ("sims/case2_writer_b.toml", None, None),
     "writer_b_write": ("sims/case2_writer_b.toml", None, _touch(phase=1)),
     "writer_rigid_approach": ("sims/case2_writer_rigid.toml", None, None),

@@ -17,7 +17,7 @@ its contact's row, a user controller's in the controller section), so one compil
 index constants below are the one place the layout is written; the call (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-motors and voltage drives, joint friction, force-reading or stateful controllers (a sampled law among them), a
+motors and voltage drives, force-reading or stateful controllers (a sampled law among them), a
 reference carried by a body, a 2-D slide launching from rest, the energy audit, a stage or friction law numba
 cannot compile, a robot ``rigid_body`` does not compute, a circle move, controllers other than ``task_pd`` and user
 laws of the controller ABI.
@@ -45,7 +45,8 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
 (NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
- R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, HEADER) = range(41)
+ R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE,
+ JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, HEADER) = range(46)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -68,6 +69,7 @@ LI_JOINT, LI_SIDE, LI_W = 0, 1, 2  #: a pressing limit's ints (its value [rad or
 #: the event values the call writes (``events``): per contact its gap [m], normal force [N], slip velocity [m/s]
 #: and friction force [N] in tangent coordinates; then each pressing limit's torque [N·m or N]; then the status
 EV_GAP, EV_FN, EV_VT, EV_FF, EV_W = 0, 1, 2, 4, 6
+#: then each held (stuck) joint's holding torque [N·m or N], each sliding joint's speed [rad/s or m/s]
 #: status: 1 the call is complete; 0 the KKT matrix is singular (the readable model's least squares is needed)
 TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
 
@@ -89,6 +91,8 @@ class Packed:
     row_meta: list[tuple[str, str, int]]  #: (owner, kind, index) per KKT row, as contactdyn.model.constraints
     contacts: list[str]
     limits: list[int]  #: the pressing joints' coordinates, in the order of their torques
+    held: list[int]  #: the stuck joints with a row, in the order of their holding torques
+    sliding: list[int]  #: the sliding joints, in the order of their speeds
 
 
 def unsupported(system, modes, phase) -> str:
@@ -98,8 +102,6 @@ def unsupported(system, modes, phase) -> str:
         return "energy audit"
     if system.drives.any_motor:
         return "motors (drives other than ideal torque sources)"
-    if system.joint_friction.any:
-        return "joint friction (its stuck rows and torques are not packed yet)"
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if phase.carrier is not None:
@@ -172,6 +174,8 @@ def pack(system, modes, phase) -> Packed:
     b.real_section(R_LIMITS, [system.limits.by_index[i].lower if side > 0 else system.limits.by_index[i].upper
                               for i, side in phase.limits])
     meta += [(system.limits.by_index[i].name, "limit", i) for i, _ in phase.limits]
+    held = _joint_friction(b, system, phase)
+    meta += [(system.joint_friction.names[i], "joint", i) for i in held]
     h[N_ROWS] = len(meta)
     h[N_SERVOS] = len(system.servo)
     b.int_section(I_SERVOS, [idx for idx, _, _ in system.servo])
@@ -179,9 +183,10 @@ def pack(system, modes, phase) -> Packed:
     _reference(b, system, phase)
     _controller(b, system, phase)
     h[W_SIZE] = b.work
-    n_events = EV_W * len(system.contacts) + len(phase.limits) + 1
+    n_events = EV_W * len(system.contacts) + len(phase.limits) + h[N_HELD] + h[N_SLIDING] + 1
+    sliding = [i for i, m in phase.joint_modes if m != 0]
     return Packed(np.array(h, dtype=np.int64), np.array(b.reals), np.zeros(max(b.work, 1)), np.zeros(n_events),
-                  meta, [c.name for c in system.contacts], [i for i, _ in phase.limits])
+                  meta, [c.name for c in system.contacts], [i for i, _ in phase.limits], held, sliding)
 
 
 def _frames(b: _Builder, system, fids: list[int]) -> None:
@@ -275,6 +280,18 @@ def _chain(b: _Builder, system, c, m, dc, tangent: int, at: int, row: int) -> No
     b.ints[at:at + CH_W] = [plan_at, stages_at, len(chain.stages), coef_at, consts_at, a.consts.size, motion_at,
                             len(chain.nodes), state_at, row, *surface(chain.robot_surface),
                             *surface(chain.env_surface), offset_at]
+
+
+def _joint_friction(b: _Builder, system, phase) -> list[int]:
+    """The joints' damping b (nv) [N·m·s/rad or N·s/m], the stuck joints that carry a row, the sliding ones with
+    (s, τ_k [N·m or N]) (model.joint_friction); the held joints returned, in their rows' order."""
+    jf, h = system.joint_friction, b.ints
+    held = jf.held(phase.joint_modes, phase.limits) if jf.any else []
+    sliding = [(i, m) for i, m in phase.joint_modes if m != 0] if jf.any else []
+    h[JOINT_FRICTION], h[N_HELD], h[N_SLIDING] = int(jf.any), len(held), len(sliding)
+    b.int_section(I_JOINTS, [*held, *(i for i, _ in sliding)])
+    b.real_section(R_JOINTS, [*jf.damping, *(v for i, m in sliding for v in (m, jf.kinetic[i]))])
+    return held
 
 
 def _reference(b: _Builder, system, phase) -> None:

@@ -1,6 +1,7 @@
 """One right-hand-side call, written once over a mode's packed arrays (:mod:`.pack`): the pipeline.
 
-    robot terms -> frames -> contacts (chains, bond rows, friction rows) -> limit rows -> controller -> drives
+    robot terms -> frames -> contacts (chains, bond rows, friction rows) -> limit rows -> stuck joints' rows
+    -> controller -> joint damping and sliding friction -> drives
     -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] and the event values
 
 :func:`call` is numba-compiled once for every scene and every law (the laws enter by address: stage and friction
@@ -18,8 +19,25 @@ import numpy as np
 from ...numerics.compile_cache import njit
 from .actuation import command, drives
 from .contacts import contact_terms, finish, limit_rows
+from .joint_friction import joint_events, joint_rows, joint_torques
 from .kkt import kkt_solve
-from .pack import EV_FF, EV_FN, EV_GAP, EV_VT, EV_W, N_CONTACTS, N_LIMITS, N_ROWS, NQ, NV, NX, NY, pack, unsupported
+from .pack import (
+    EV_FF,
+    EV_FN,
+    EV_GAP,
+    EV_VT,
+    EV_W,
+    N_CONTACTS,
+    N_HELD,
+    N_LIMITS,
+    N_ROWS,
+    NQ,
+    NV,
+    NX,
+    NY,
+    pack,
+    unsupported,
+)
 from .robot_terms import frame_terms, robot_terms
 
 __all__ = ["call", "rates_at", "Pipeline"]
@@ -40,15 +58,19 @@ def call(t, x, ints, reals, work, events):
     if not contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, events, pending):
         events[events.size - 1] = -1.0
         return xdot
-    first_limit = nr - ints[N_LIMITS]
+    first_joint = nr - ints[N_HELD]
+    first_limit = first_joint - ints[N_LIMITS]
     limit_rows(x, ints, reals, first_limit, G, C, gamma)
+    joint_rows(x, ints, reals, first_joint, G, C, gamma)
     tau = command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR)
+    joint_torques(x, ints, reals, f)
     drives(x, ints, reals, tau, f)
     qdd, lam, regular = kkt_solve(ints, reals, H, f, G, C, gamma)
     xdot[:nQ] = x[nQ:2 * nQ]
     xdot[nQ:2 * nQ] = qdd
     xdot[2 * nQ:] = ydot
     finish(ints, lam, xdot, events, pending, first_limit)
+    joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
     events[events.size - 1] = 1.0 if regular else 0.0
     return xdot
 
@@ -86,11 +108,17 @@ class Pipeline:
         return xdot
 
     def values(self) -> dict[str, object]:
-        """The last call's event values by name: per contact gap [m], F_n [N], v_t [m/s], F_f [N]; limit torques."""
+        """The last call's event values by name: per contact gap [m], F_n [N], v_t [m/s], F_f [N]; limit torques,
+        the stuck joints' holding torques [N·m or N] and the sliding joints' speeds [rad/s or m/s], by joint."""
         p, out = self.packed, {}
         for ci, name in enumerate(p.contacts):
             ev = p.events[EV_W * ci:EV_W * (ci + 1)]
             out[name] = {"gap": ev[EV_GAP], "F_n": ev[EV_FN], "v_t": ev[EV_VT:EV_VT + 2].copy(),
                          "F_f": ev[EV_FF:EV_FF + 2].copy()}
-        out["limit"] = {i: p.events[EV_W * len(p.contacts) + k] for k, i in enumerate(p.limits)}
+        base = EV_W * len(p.contacts)
+        out["limit"] = {i: p.events[base + k] for k, i in enumerate(p.limits)}
+        base += len(p.limits)
+        out["joint_hold"] = {i: p.events[base + k] for k, i in enumerate(p.held)}
+        base += len(p.held)
+        out["joint_speed"] = {i: p.events[base + k] for k, i in enumerate(p.sliding)}
         return out

@@ -1,0 +1,78 @@
+"""Issue 29's pipeline, the small mode kinds (contactdyn/model/pipeline/): joint friction, a held sampled command,
+a reference carried by a body, a circle move. Their ẋ against System.evaluate is test_pipeline_proto's (every case
+of benchmarks/pipeline_proto.py); here: their event values, and the same source interpreted."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
+sys.path.insert(0, str(BENCH))
+from pipeline_proto import case, states  # noqa: E402
+
+from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+
+RTOL = 1e-12  #: as test_pipeline_proto's: measured ≤ 2e-15 on these cases
+
+
+@pytest.mark.parametrize("name", ["b1_joints_stuck", "b1_joints_mixed", "b1_joints_limit", "b1_joints_slide"])
+def test_the_joints_event_values_are_the_readable_ones(name):
+    """Holding torques of the stuck joints (none for a joint on its limit: the limit's row holds it), the sliding
+    joints' speeds, the limits' torques."""
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    for x in states(x0, 3):
+        pipe.rhs(t, x)
+        got, ev = pipe.values(), system.evaluate(t, x, modes, phase)
+        assert set(got["joint_hold"]) == set(ev.joint_hold)
+        for i, hold in ev.joint_hold.items():
+            assert got["joint_hold"][i] == pytest.approx(hold, abs=RTOL * (1.0 + abs(hold)))
+        assert got["joint_speed"] == {i: x[system.nQ + i] for i, m in phase.joint_modes if m != 0}
+        for i, torque in ev.limit_torque.items():
+            assert got["limit"][i] == pytest.approx(torque, abs=RTOL * (1.0 + abs(torque)))
+    assert pipe.fallbacks == 0
+
+
+def test_a_joint_on_its_limit_has_no_stuck_row():
+    system, modes, phase, _, _ = case("b1_joints_limit")
+    kinds = [(kind, i) for _, kind, i in Pipeline(system, modes, phase).packed.row_meta]
+    assert kinds[-2:] == [("limit", 1), ("joint", 0)]
+
+
+_INTERPRETED = """
+import json, sys
+sys.path.insert(0, {bench!r})
+from pipeline_proto import case, states
+from contactdyn.model.pipeline.pipeline import Pipeline
+out = {{}}
+for name in {names!r}:
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    out[name] = [pipe.rhs(t, x).tolist() for x in states(x0, 2)]
+print(json.dumps(out))
+"""
+INTERPRETED = ["b1_joints_mixed"]
+
+
+def test_the_same_source_interpreted_gives_the_compiled_rates():
+    """NUMBA_DISABLE_JIT=1: the same functions as Python give ẋ bit for bit (and the readable model's)."""
+    env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(BENCH.parent)}
+    done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=INTERPRETED)], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    interpreted = json.loads(done.stdout.strip().splitlines()[-1])
+    assert set(interpreted) == set(INTERPRETED)
+    for name in INTERPRETED:
+        system, modes, phase, t, x0 = case(name)
+        pipe = Pipeline(system, modes, phase)
+        for x, got in zip(states(x0, 2), interpreted[name], strict=True):
+            compiled, ref = pipe.rhs(t, x), system.evaluate(t, x, modes, phase).xdot
+            assert np.array_equal(np.array(got), compiled), name
+            assert np.abs(np.array(got) - ref).max() <= RTOL * np.abs(ref).max()
