@@ -83,6 +83,19 @@ def _joint_modes(modes_of_joints, limits=()):
     return change
 
 
+def _sampled(doc: dict) -> None:
+    """b1's task PD run sampled at 1 kHz with a zero-order hold (the held command in the state)."""
+    doc["controller"]["sample_rate"] = 1000.0
+
+
+def _holding(tau, joint_modes=None):
+    """x0's held command set to ``tau`` [N·m] (a sampled law's slots, as a sample writes them), the joints' modes."""
+    def change(system, modes, ph, x0):
+        x0[2 * system.nQ + ph.z_slice.start + ph.controller.held.start:][:system.nv] = tau
+        return modes, ph if joint_modes is None else replace(ph, joint_modes=tuple(joint_modes))
+    return change
+
+
 #: case -> (scene file, an edit of its TOML or None, what to change from its first mode: None, or a function of
 #: (system, modes, phase, x0) giving (modes, phase))
 def _touch(stuck=False, limits=(), phase=None):
@@ -100,6 +113,9 @@ CASES = {
     "b1_stick": ("sims/b1.toml", None, _touch(stuck=True)),
     "b1_limit": ("sims/b1.toml", None, _touch(limits=((1, -1),))),
     "b1_stribeck": ("sims/b1.toml", _stribeck, None),
+    "b1_sampled": ("sims/b1.toml", _sampled, _holding((40.0, -25.0))),
+    "b1_sampled_joints": ("sims/b1.toml", lambda d: (_sampled(d), _joint_friction(d)),
+                          _holding((40.0, -25.0), ((0, 0), (1, 1)))),
     "b1_joints_slide": ("sims/b1.toml", _joint_friction, None),
     "b1_joints_stuck": ("sims/b1.toml", _joint_friction, _joint_modes(((0, 0), (1, 0)))),
     "b1_joints_mixed": ("sims/b1.toml", _joint_friction, _joint_modes(((0, -1), (1, 0)))),

@@ -22,7 +22,8 @@ from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 RTOL = 1e-12  #: as test_pipeline_proto's: measured ≤ 2e-15 on these cases
 
 
-@pytest.mark.parametrize("name", ["b1_joints_stuck", "b1_joints_mixed", "b1_joints_limit", "b1_joints_slide"])
+@pytest.mark.parametrize("name", ["b1_joints_stuck", "b1_joints_mixed", "b1_joints_limit", "b1_joints_slide",
+                                  "b1_sampled_joints"])
 def test_the_joints_event_values_are_the_readable_ones(name):
     """Holding torques of the stuck joints (none for a joint on its limit: the limit's row holds it), the sliding
     joints' speeds, the limits' torques."""
@@ -38,6 +39,24 @@ def test_the_joints_event_values_are_the_readable_ones(name):
         for i, torque in ev.limit_torque.items():
             assert got["limit"][i] == pytest.approx(torque, abs=RTOL * (1.0 + abs(torque)))
     assert pipe.fallbacks == 0
+
+
+def test_a_sampled_law_acts_by_its_held_command():
+    """τ is the state's held slots (SampledController.command): another held command gives another Q̈, the readable
+    model's; the held slots' rates stay 0."""
+    system, modes, phase, t, x0 = case("b1_sampled")
+    pipe = Pipeline(system, modes, phase)
+    nQ, nv = system.nQ, system.nv
+    held = 2 * nQ + phase.z_slice.start + phase.controller.held.start
+    x = x0.copy()
+    x[held:held + nv] = 0.0
+    base = pipe.rhs(t, x)
+    x[held] = 1.0  # 1 N·m more on joint 0
+    more = pipe.rhs(t, x)
+    assert np.all(more[2 * nQ + phase.z_slice.start:][:nv] == 0.0)
+    assert np.abs(more[nQ:2 * nQ] - base[nQ:2 * nQ]).max() > 1e-3
+    ev = system.evaluate(t, x, modes, phase)
+    assert np.allclose(more[nQ:2 * nQ], ev.xdot[nQ:2 * nQ], rtol=0, atol=RTOL * np.abs(ev.xdot).max())
 
 
 def test_a_joint_on_its_limit_has_no_stuck_row():
@@ -58,7 +77,7 @@ for name in {names!r}:
     out[name] = [pipe.rhs(t, x).tolist() for x in states(x0, 2)]
 print(json.dumps(out))
 """
-INTERPRETED = ["b1_joints_mixed"]
+INTERPRETED = ["b1_joints_mixed", "b1_sampled"]
 
 
 def test_the_same_source_interpreted_gives_the_compiled_rates():

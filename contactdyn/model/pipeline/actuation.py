@@ -3,9 +3,10 @@ torque drives.
 
 The reference x_d, v_d, a_d at t [s] (the start plus each move's profile, ``laws.trajectory.move_rows``, as
 ``Reference.at``), the force set-points F_d [N] (``ramp_rows``); then the controller by its kind: the task PD law
-compiled in (``laws.controllers.task_pd_law.torque``, as ``TaskPD.command`` calls it), or a controller of the
-controller ABI called by its address (:mod:`contactdyn.laws.controllers.abi`: its inputs written into one buffer by
-the layout table packed with the mode). Ideal torque drives add the command, the joints' τ and the servo forces
+compiled in (``laws.controllers.task_pd_law.torque``, as ``TaskPD.command`` calls it), a sampled law's held
+command (the state's slots, ``SampledController.command``), or a controller of the controller ABI called by its
+address (:mod:`contactdyn.laws.controllers.abi`: its inputs written into one buffer by the layout table packed with
+the mode). Ideal torque drives add the command, the joints' τ and the servo forces
 of the bodies, to the generalized forces (``Drives.apply`` without motors).
 
 Under ``NUMBA_DISABLE_JIT=1`` a controller's "address" is a handle of its class (:data:`.pack.PYTHON_CONTROLLERS`)
@@ -26,6 +27,7 @@ from ...numerics.compile_cache import njit
 from .pack import (
     CTL_ABI,
     CTL_ADDRESS,
+    CTL_HELD,
     CTL_KIND,
     CTL_TASK_PD,
     FEEDFORWARD,
@@ -51,6 +53,7 @@ from .pack import (
     READS_ORIENTATION,
     REF_DIMS,
     TIP_FRAME,
+    X_HELD,
     section,
 )
 
@@ -154,6 +157,8 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
         return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)
     if ints[CTL_KIND] == CTL_ABI:
         return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
+    if ints[CTL_KIND] == CTL_HELD:  # a sampled law's held command (its slots' ẏ = 0: SampledController.command)
+        return x[ints[X_HELD]:ints[X_HELD] + ints[NV]].copy()
     return np.zeros(ints[NV])
 
 

@@ -17,7 +17,7 @@ its contact's row, a user controller's in the controller section), so one compil
 index constants below are the one place the layout is written; the call (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-motors and voltage drives, force-reading or stateful controllers (a sampled law among them), a
+motors and voltage drives, force-reading or stateful controllers (but a sampled law's held command), a
 reference carried by a body, a 2-D slide launching from rest, the energy audit, a stage or friction law numba
 cannot compile, a robot ``rigid_body`` does not compute, a circle move, controllers other than ``task_pd`` and user
 laws of the controller ABI.
@@ -33,6 +33,7 @@ import numpy as np
 from ...laws.abi import friction_address
 from ...laws.controllers import Controller
 from ...laws.controllers.abi import controller_address, layout_of, params_of
+from ...laws.controllers.sampled import SampledController
 from ...laws.friction_laws import FRICTION_LAWS
 from ...laws.trajectory import move_table, ramp_table
 from ...numerics.compile_cache import njit
@@ -46,11 +47,12 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE,
- JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, HEADER) = range(46)
+ JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, HEADER) = range(47)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
-#: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
-CTL_NONE, CTL_TASK_PD, CTL_ABI = 0, 1, 2
+#: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI), a
+#: sampled law's held command (τ = the state's held slots from x[X_HELD], laws.controllers.sampled)
+CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_HELD = 0, 1, 2, 3
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
@@ -106,9 +108,12 @@ def unsupported(system, modes, phase) -> str:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if phase.carrier is not None:
         return "a reference carried by a body"
-    if ctl.uses_forces or ctl.n_states or ctl.outputs != "torque":
+    if isinstance(ctl, SampledController):
+        if ctl.outputs != "torque":
+            return "a sampled law that outputs voltages"
+    elif ctl.uses_forces or ctl.n_states or ctl.outputs != "torque":
         return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
-    if ctl.name != "task_pd" and not _addressable(type(ctl)):
+    elif ctl.name != "task_pd" and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
     if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
         return "a circle move"
@@ -313,10 +318,14 @@ def _reference(b: _Builder, system, phase) -> None:
 
 def _controller(b: _Builder, system, phase) -> None:
     """task PD: its constants (TaskPD.constants) and feedforward; a controller of the ABI: its address, the layout
-    of its inputs and its declared parameters."""
+    of its inputs and its declared parameters; a sampled law: where its held command is in x."""
     h = b.ints
     ctl = phase.controller
     h[READS_ORIENTATION], h[NEEDS_GRAVITY] = int(ctl.reads_orientation), int(ctl.needs_gravity)
+    if isinstance(ctl, SampledController):
+        h[CTL_KIND], h[X_HELD] = CTL_HELD, 2 * system.nQ + phase.z_slice.start + ctl.held.start
+        b.int_section(I_LAYOUT, ())
+        return
     if ctl.name == "task_pd":
         axes, kp, kd, tool_axis, target, R_d, ko, do, kd_joint, kd_normal = ctl.constants
         h[CTL_KIND], h[N_AXES], h[HAS_TOOL], h[HAS_RD] = CTL_TASK_PD, len(axes), int(tool_axis.size > 0), \
