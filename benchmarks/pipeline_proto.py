@@ -59,6 +59,13 @@ def _no_motors(doc: dict) -> None:
     doc["phase"] = doc["phase"][:1]
 
 
+def _carried_pd(doc: dict) -> None:
+    """case1_cart without its motors, its push (the reference carried by the cart) under task PD (x and z)."""
+    del doc["robot"]["drive"], doc["body"]["cart"]["drive"]
+    doc["phase"][1]["controller"] = {"kind": "task_pd", "axes": [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], "kp": 1e5,
+                                     "kd": 6000.0, "feedforward": "gravity"}
+
+
 def _tool_pd(doc: dict) -> None:
     """A pencil writer under task PD holding its tool axis (the twin's compiled operational call: the moment is not
     affine), its circle made a straight trapezoid."""
@@ -135,6 +142,7 @@ CASES = {
     "hard_stiff": ("benchmarks/hard/stiff.toml", None, None),
     "hard_undamped": ("benchmarks/hard/undamped.toml", None, None),
     "cart_chains_touch": ("sims/case1_cart.toml", _no_motors, _touch()),
+    "cart_push_carried": ("sims/case1_cart.toml", _carried_pd, _touch(phase=1)),
     "writer5dof_tool": ("sims/case2_writer5dof.toml", _tool_pd, None),
     "writer5dof_tool_slide": ("sims/case2_writer5dof.toml", _tool_pd, _touch(phase=1)),
     "ur5_tool": ("sims/case2_writer_ur5.toml", _tool_pd, None),

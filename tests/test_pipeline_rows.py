@@ -65,6 +65,34 @@ def test_a_joint_on_its_limit_has_no_stuck_row():
     assert kinds[-2:] == [("limit", 1), ("joint", 0)]
 
 
+def test_the_carried_reference_rides_on_the_cart():
+    """case1_cart's push under task PD: the reference carried by the cart (x_d += axis Q_b, v_d += axis Q̇_b) gives
+    the readable rates; the same mode with the carrier dropped from the packed arrays does not."""
+    from contactdyn.model.pipeline.pack import CARRIER
+
+    system, modes, phase, t, x0 = case("cart_push_carried")
+    assert phase.carrier is not None
+    pipe = Pipeline(system, modes, phase)
+    ref = system.evaluate(t, x0, modes, phase).xdot
+    assert np.abs(pipe.rhs(t, x0) - ref).max() <= RTOL * np.abs(ref).max()
+    pipe.packed.ints[CARRIER] = -1
+    assert np.abs(pipe.rhs(t, x0) - ref).max() > 1e-3 * np.abs(ref).max()
+
+
+def test_a_carried_reference_for_a_law_that_may_read_its_acceleration_is_declined():
+    from pipeline_proto import _scene
+
+    from contactdyn.model.pipeline.pack import unsupported
+    from contactdyn.simulate import prepare
+
+    def no_motors(doc):
+        del doc["robot"]["drive"], doc["body"]["cart"]["drive"]
+
+    system, modes, phase, x0 = prepare(_scene("sims/case1_cart.toml", no_motors))
+    push = system.start_phase(1, 1.0, x0, phase)
+    assert "carried by a body" in unsupported(system, modes, push)
+
+
 _INTERPRETED = """
 import json, sys
 sys.path.insert(0, {bench!r})
@@ -77,7 +105,7 @@ for name in {names!r}:
     out[name] = [pipe.rhs(t, x).tolist() for x in states(x0, 2)]
 print(json.dumps(out))
 """
-INTERPRETED = ["b1_joints_mixed", "b1_sampled"]
+INTERPRETED = ["b1_joints_mixed", "b1_sampled", "cart_push_carried"]
 
 
 def test_the_same_source_interpreted_gives_the_compiled_rates():

@@ -24,6 +24,7 @@ from ...laws.controllers.abi import FIELD, call_controller, control_arrays, put_
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
+from .carried import carry
 from .pack import (
     CTL_ABI,
     CTL_ADDRESS,
@@ -152,6 +153,7 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
     """The controller's τ [N·m or N] at (t, x) (zero without a controller)."""
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)
+    carry(x, ints, reals, x_d, v_d)
     if ints[CTL_KIND] == CTL_TASK_PD:
         F_d, forced = set_points(t, ints, reals)
         return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)

@@ -47,7 +47,7 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE,
- JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, HEADER) = range(47)
+ JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, HEADER) = range(49)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI), a
@@ -106,8 +106,8 @@ def unsupported(system, modes, phase) -> str:
         return "motors (drives other than ideal torque sources)"
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
-    if phase.carrier is not None:
-        return "a reference carried by a body"
+    if phase.carrier is not None and ctl.name != "task_pd" and not isinstance(ctl, SampledController):
+        return "a reference carried by a body, for a law that may read its acceleration (its fold is not packed)"
     if isinstance(ctl, SampledController):
         if ctl.outputs != "torque":
             return "a sampled law that outputs voltages"
@@ -300,8 +300,9 @@ def _joint_friction(b: _Builder, system, phase) -> list[int]:
 
 
 def _reference(b: _Builder, system, phase) -> None:
-    """The reference's start and moves (trajectory.move_table, then each move's Δ), the force ramps and the
-    set-points' directions (the controller's normals), in the phase's order."""
+    """The reference's start and moves (trajectory.move_table, then each move's Δ), the body that carries it
+    (its coordinate, -1 none, and unit axis), the force ramps and the set-points' directions (the controller's
+    normals), in the phase's order."""
     h = b.ints
     ref = phase.reference
     h[REF_DIMS] = len(ref.start) if ref is not None else 0
@@ -310,6 +311,8 @@ def _reference(b: _Builder, system, phase) -> None:
         b.real_section(R_REF, [*ref.start, *move_table(ref.moves).ravel(), *(v for mv in ref.moves for v in mv.delta)])
     else:
         h[R_REF] = len(b.reals)
+    h[CARRIER] = phase.carrier[0] if phase.carrier is not None else -1
+    b.real_section(R_CARRIER, phase.carrier[1] if phase.carrier is not None else np.zeros(3))
     keys = list(phase.forces)
     h[N_FORCES] = len(keys)
     b.real_section(R_RAMPS, [*ramp_table([phase.forces[k] for k in keys]).ravel(),
