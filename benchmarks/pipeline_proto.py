@@ -66,15 +66,18 @@ def _carried_pd(doc: dict) -> None:
                                      "kd": 6000.0, "feedforward": "gravity"}
 
 
-def _tool_pd(doc: dict) -> None:
+def _tool_pd(doc: dict, circle: bool = False) -> None:
     """A pencil writer under task PD holding its tool axis (the twin's compiled operational call: the moment is not
-    affine), its circle made a straight trapezoid."""
+    affine), its circle made a straight trapezoid (``circle``: kept, and a straight move after it)."""
     ctl = doc["controller"]
     doc["controller"] = {"kind": "task_pd", "kp": ctl["kp"], "kd": ctl["kd"], "axes": ctl["axes"],
                          "tool_axis": ctl["tool_axis"], "tool_target": ctl["tool_target"], "ko": 5.0, "do": 0.5,
                          "kd_normal": ctl["kd_normal"], "feedforward": "gravity"}
-    doc["phase"][1]["reference"] = {"moves": [{"kind": "trapezoid", "delta": [-0.03, 0.0, 0.0], "duration": 4.0,
-                                               "accel_fraction": 0.2}]}
+    line = {"kind": "trapezoid", "delta": [-0.03, 0.0, 0.0], "duration": 4.0, "accel_fraction": 0.2}
+    if circle:
+        doc["phase"][1]["reference"]["moves"].append({**line, "delta": [0.0, 0.01, 0.0], "start": 0.005})
+    else:
+        doc["phase"][1]["reference"] = {"moves": [line]}
 
 
 def _joint_friction(doc: dict) -> None:
@@ -145,6 +148,8 @@ CASES = {
     "cart_push_carried": ("sims/case1_cart.toml", _carried_pd, _touch(phase=1)),
     "writer5dof_tool": ("sims/case2_writer5dof.toml", _tool_pd, None),
     "writer5dof_tool_slide": ("sims/case2_writer5dof.toml", _tool_pd, _touch(phase=1)),
+    "writer5dof_circle": ("sims/case2_writer5dof.toml", lambda d: _tool_pd(d, circle=True), _touch(phase=1)),
+    "ur5_circle": ("sims/case2_writer_ur5.toml", lambda d: _tool_pd(d, circle=True), _touch(phase=1)),
     "ur5_tool": ("sims/case2_writer_ur5.toml", _tool_pd, None),
     "cubic_press": ("examples/cubic_press.toml", None, None),
     "impedance_press": ("examples/impedance_press.toml", None, None),

@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -93,6 +94,23 @@ def test_a_carried_reference_for_a_law_that_may_read_its_acceleration_is_decline
     assert "carried by a body" in unsupported(system, modes, push)
 
 
+@pytest.mark.parametrize("with_line", [False, True])
+def test_a_circle_move_is_the_references_own(with_line):
+    """The packed reference with a circle (alone: Reference.at's one-move sum; with a straight move after it) gives
+    x_d, v_d, a_d of Reference.at bit for bit, before, along and after the circle."""
+    from contactdyn.model.pipeline.actuation import reference
+
+    system, modes, phase, t, x0 = case("writer5dof_circle")
+    if not with_line:
+        phase = replace(phase, reference=replace(phase.reference, moves=phase.reference.moves[:1]))
+    assert [m.kind for m in phase.reference.moves] == ["circle", "trapezoid"][:1 + with_line]
+    p = Pipeline(system, modes, phase).packed
+    for tk in phase.t_start + np.array([-0.1, 0.0, 0.3, 0.8, 1.7, 2.9, 3.95, 4.0, 4.2]):
+        got, want = reference(tk, p.ints, p.reals), phase.reference.at(tk)
+        for g, w in zip(got, want, strict=True):
+            assert np.array_equal(g, w), (tk, g, w)
+
+
 _INTERPRETED = """
 import json, sys
 sys.path.insert(0, {bench!r})
@@ -105,7 +123,7 @@ for name in {names!r}:
     out[name] = [pipe.rhs(t, x).tolist() for x in states(x0, 2)]
 print(json.dumps(out))
 """
-INTERPRETED = ["b1_joints_mixed", "b1_sampled", "cart_push_carried"]
+INTERPRETED = ["b1_joints_mixed", "b1_sampled", "cart_push_carried", "ur5_circle"]
 
 
 def test_the_same_source_interpreted_gives_the_compiled_rates():

@@ -25,6 +25,7 @@ from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
 from .carried import carry
+from .circle import CIRCLE_W, add_circle
 from .pack import (
     CTL_ABI,
     CTL_ADDRESS,
@@ -47,6 +48,7 @@ from .pack import (
     NQ,
     NV,
     PYTHON_CONTROLLERS,
+    R_CIRCLES,
     R_CTL,
     R_RAMPS,
     R_REF,
@@ -69,7 +71,8 @@ N_LAYOUT = 2 + 2 * len(FIELD) + 1  #: the layout table's length (layout_of)
 
 @njit(cache=True)
 def reference(t, ints, reals):
-    """(x_d, v_d, a_d) at t [s]: the start plus Σ_k (σ_k, σ'_k/T_k, σ''_k/T_k²) Δ_k (empty without a reference)."""
+    """(x_d, v_d, a_d) at t [s]: the start plus Σ_k (σ_k, σ'_k/T_k, σ''_k/T_k²) Δ_k, a circle's rows its own
+    (:mod:`.circle`); empty without a reference."""
     dims, n_moves, at = ints[REF_DIMS], ints[N_MOVES], ints[R_REF]
     x_d, v_d, a_d = reals[at:at + dims].copy(), np.zeros(dims), np.zeros(dims)
     if n_moves:
@@ -77,7 +80,11 @@ def reference(t, ints, reals):
         deltas = section(reals, at + dims + 4 * n_moves, n_moves, dims)
         w = np.empty(3 * n_moves)
         move_rows(t, moves, w)
+        circles = section(reals, ints[R_CIRCLES], n_moves, CIRCLE_W)
         for k in range(n_moves):
+            if circles[k, 0] != 0.0:
+                add_circle(t, moves[k], circles[k], x_d, v_d, a_d)
+                continue
             for i in range(dims):
                 x_d[i] += w[3 * k] * deltas[k, i]
                 v_d[i] += w[3 * k + 1] * deltas[k, i]

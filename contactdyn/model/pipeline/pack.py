@@ -25,6 +25,7 @@ laws of the controller ABI.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -39,6 +40,7 @@ from ...laws.trajectory import move_table, ramp_table
 from ...numerics.compile_cache import njit
 from ..chain import NodeKind
 from ..chain_forces import pack as pack_chain
+from .circle import CIRCLE_W
 
 __all__ = ["Packed", "pack", "unsupported", "section"]
 
@@ -47,7 +49,8 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE,
- JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, HEADER) = range(49)
+ JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
+ HEADER) = range(50)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI), a
@@ -115,8 +118,6 @@ def unsupported(system, modes, phase) -> str:
         return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
     elif ctl.name != "task_pd" and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
-    if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
-        return "a circle move"
     for c, m in zip(system.contacts, modes, strict=True):
         if m.from_rest and len(m.slip) == 2 and m.touching and not m.stuck:
             return "a 2-D slide launching from rest"
@@ -311,6 +312,9 @@ def _reference(b: _Builder, system, phase) -> None:
         b.real_section(R_REF, [*ref.start, *move_table(ref.moves).ravel(), *(v for mv in ref.moves for v in mv.delta)])
     else:
         h[R_REF] = len(b.reals)
+    moves = ref.moves if ref is not None else ()
+    b.real_section(R_CIRCLES, [[1.0, 2.0 * math.pi * m.turns, *m._circle_terms.ravel()] if m.kind == "circle" else
+                               [0.0] * CIRCLE_W for m in moves])
     h[CARRIER] = phase.carrier[0] if phase.carrier is not None else -1
     b.real_section(R_CARRIER, phase.carrier[1] if phase.carrier is not None else np.zeros(3))
     keys = list(phase.forces)
