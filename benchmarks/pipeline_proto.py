@@ -80,6 +80,18 @@ def _tool_pd(doc: dict, circle: bool = False) -> None:
         doc["phase"][1]["reference"] = {"moves": [line]}
 
 
+def _launch(slip, phase=1):
+    """Touching in a 2-D slide launching from rest along the reference ``slip`` (the robot at rest: x0's velocities
+    zeroed), in phase ``phase``."""
+    def change(system, modes, ph, x0):
+        ph = system.start_phase(phase, ph.t_start + 1.0, x0, ph)
+        x0[system.nQ:2 * system.nQ] = 0.0
+        return [mm.with_(touching=True, stuck=False, from_rest=True, slip=tuple(slip),
+                         offsets=tuple(0.0 for _ in c.tangent_chains))
+                for c, mm in zip(system.contacts, modes, strict=True)], ph
+    return change
+
+
 def _joint_friction(doc: dict) -> None:
     """b1 with joint damping and Coulomb joint friction (static above kinetic) on both joints."""
     doc["robot"]["joint"] = {"q1": {"damping": 0.5, "friction_static": 3.0, "friction_kinetic": 2.0},
@@ -150,6 +162,8 @@ CASES = {
     "writer5dof_tool_slide": ("sims/case2_writer5dof.toml", _tool_pd, _touch(phase=1)),
     "writer5dof_circle": ("sims/case2_writer5dof.toml", lambda d: _tool_pd(d, circle=True), _touch(phase=1)),
     "ur5_circle": ("sims/case2_writer_ur5.toml", lambda d: _tool_pd(d, circle=True), _touch(phase=1)),
+    "writer5dof_launch": ("sims/case2_writer5dof.toml", _tool_pd, _launch((0.6, 0.8))),
+    "ur5_launch": ("sims/case2_writer_ur5.toml", _tool_pd, _launch((-1.0, 0.0))),
     "ur5_tool": ("sims/case2_writer_ur5.toml", _tool_pd, None),
     "cubic_press": ("examples/cubic_press.toml", None, None),
     "impedance_press": ("examples/impedance_press.toml", None, None),

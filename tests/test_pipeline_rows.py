@@ -111,6 +111,38 @@ def test_a_circle_move_is_the_references_own(with_line):
             assert np.array_equal(g, w), (tk, g, w)
 
 
+@pytest.mark.parametrize("name", ["ur5_launch", "writer5dof_launch"])
+def test_a_slide_launching_from_rest_takes_the_readable_direction(name):
+    """At rest (positions near the case's, velocities 0) the UR5's pencil launches along a direction other than its
+    reference (Newton converged), the 5-DOF writer's keeps its reference (Newton gives up: dφ/dθ ≥ 0); ẋ is the
+    readable model's either way."""
+    from contactdyn.model.friction import launch_directions_at
+
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    nQ, turned = system.nQ, 0
+    for x in states(x0, 5):
+        x[nQ:2 * nQ] = 0.0
+        d = launch_directions_at(system, t, x, modes, phase)[0].slip
+        turned += int(np.abs(np.array(d) - modes[0].slip).max() > 1e-3)
+        ref = system.evaluate(t, x, modes, phase).xdot
+        assert np.abs(pipe.rhs(t, x) - ref).max() <= RTOL * np.abs(ref).max()
+    assert (turned > 0) == (name == "ur5_launch")  # (the UR5: 2 of the 5 states)
+    assert pipe.fallbacks == 0
+
+
+def test_two_slides_launching_at_once_are_declined():
+    from contactdyn.model.pipeline.pack import unsupported
+
+    system, modes, phase, _, _ = case("ur5_launch")
+    assert unsupported(system, modes, phase) == ""
+    system.contacts.append(system.contacts[0])  # the pencil twice: two contacts launching
+    try:
+        assert "two 2-D slides launching" in unsupported(system, modes * 2, phase)
+    finally:
+        system.contacts.pop()
+
+
 _INTERPRETED = """
 import json, sys
 sys.path.insert(0, {bench!r})
@@ -123,7 +155,7 @@ for name in {names!r}:
     out[name] = [pipe.rhs(t, x).tolist() for x in states(x0, 2)]
 print(json.dumps(out))
 """
-INTERPRETED = ["b1_joints_mixed", "b1_sampled", "cart_push_carried", "ur5_circle"]
+INTERPRETED = ["b1_joints_mixed", "b1_sampled", "cart_push_carried", "ur5_circle", "ur5_launch"]
 
 
 def test_the_same_source_interpreted_gives_the_compiled_rates():

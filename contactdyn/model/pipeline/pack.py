@@ -40,6 +40,7 @@ from ...laws.trajectory import move_table, ramp_table
 from ...numerics.compile_cache import njit
 from ..chain import NodeKind
 from ..chain_forces import pack as pack_chain
+from ..friction import launching
 from .circle import CIRCLE_W
 
 __all__ = ["Packed", "pack", "unsupported", "section"]
@@ -50,7 +51,7 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE,
  JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
- HEADER) = range(50)
+ N_LAUNCH, I_LAUNCH, HEADER) = range(52)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI), a
@@ -118,9 +119,9 @@ def unsupported(system, modes, phase) -> str:
         return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
     elif ctl.name != "task_pd" and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
+    if sum(launching(m) for m in modes) > 1:
+        return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
     for c, m in zip(system.contacts, modes, strict=True):
-        if m.from_rest and len(m.slip) == 2 and m.touching and not m.stuck:
-            return "a 2-D slide launching from rest"
         if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
             return f"friction law {c.friction.law!r} does not compile"
         for dc in c.chains:
@@ -183,6 +184,9 @@ def pack(system, modes, phase) -> Packed:
     held = _joint_friction(b, system, phase)
     meta += [(system.joint_friction.names[i], "joint", i) for i in held]
     h[N_ROWS] = len(meta)
+    launches = [ci for ci, m in enumerate(modes) if launching(m)]
+    h[N_LAUNCH] = len(launches)
+    b.int_section(I_LAUNCH, launches)
     h[N_SERVOS] = len(system.servo)
     b.int_section(I_SERVOS, [idx for idx, _, _ in system.servo])
     b.real_section(R_SERVOS, [v for _, v_ref, gain in system.servo for v in (v_ref, gain)])

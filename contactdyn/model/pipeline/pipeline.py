@@ -21,6 +21,7 @@ from .actuation import command, drives
 from .contacts import contact_terms, finish, limit_rows
 from .joint_friction import joint_events, joint_rows, joint_torques
 from .kkt import kkt_solve
+from .launch import ST_CONTACT, launch_start, launch_took
 from .pack import (
     EV_FF,
     EV_FN,
@@ -29,6 +30,7 @@ from .pack import (
     EV_W,
     N_CONTACTS,
     N_HELD,
+    N_LAUNCH,
     N_LIMITS,
     N_ROWS,
     NQ,
@@ -45,7 +47,22 @@ __all__ = ["call", "rates_at", "Pipeline"]
 
 @njit(cache=True)
 def call(t, x, ints, reals, work, events):
-    """ẋ at (t [s], x) of the packed mode; the event values and the status (last) into ``events``."""
+    """ẋ at (t [s], x) of the packed mode; the event values and the status (last) into ``events``. A 2-D slide
+    launching from rest first finds its direction (:mod:`.launch`: trial calls on a copy of ``reals``)."""
+    if ints[N_LAUNCH] == 0:
+        return _rates(t, x, ints, reals, work, events)
+    trial, state, FJ, Fa, Fv = launch_start(x, ints, reals)
+    while state[ST_CONTACT] < ints[N_LAUNCH]:
+        xdot = _rates(t, x, ints, trial, work, events)
+        if events[events.size - 1] != 1.0:
+            return xdot
+        launch_took(x, ints, reals, trial, state, FJ, Fa, Fv, xdot)
+    return _rates(t, x, ints, trial, work, events)
+
+
+@njit(cache=True)
+def _rates(t, x, ints, reals, work, events):
+    """ẋ at (t [s], x) with every slide's direction as packed (``call`` without launches)."""
     nv, nQ, nr, nc = ints[NV], ints[NQ], ints[N_ROWS], ints[N_CONTACTS]
     H, h, g, Jw, W = robot_terms(x, ints, reals)
     FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
