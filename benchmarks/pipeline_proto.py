@@ -92,6 +92,22 @@ def _launch(slip, phase=1):
     return change
 
 
+def _energy(doc: dict, joints: bool = True) -> None:
+    """The energy audit on, viscous friction 5 N·s/m on the contact, and (``joints``) b1's joint friction."""
+    doc["solver"]["record_energy"] = True
+    doc["contact"][next(iter(doc["contact"]))]["tangent"]["viscous"] = 5.0
+    if joints:
+        _joint_friction(doc)
+
+
+def _massless(doc: dict) -> None:
+    """b1's surface a massless stage k, b (model c): the normal force known from the stage, no normal row."""
+    tip = doc["contact"]["tip"]
+    tip["normal"] = {"direction": [0.0, 1.0, 0.0], "model": "c", "k": 1e5, "b": 100.0}
+    del tip["bonded"]
+    _energy(doc)
+
+
 def _joint_friction(doc: dict) -> None:
     """b1 with joint damping and Coulomb joint friction (static above kinetic) on both joints."""
     doc["robot"]["joint"] = {"q1": {"damping": 0.5, "friction_static": 3.0, "friction_kinetic": 2.0},
@@ -138,6 +154,11 @@ CASES = {
     "b1_sampled": ("sims/b1.toml", _sampled, _holding((40.0, -25.0))),
     "b1_sampled_joints": ("sims/b1.toml", lambda d: (_sampled(d), _joint_friction(d)),
                           _holding((40.0, -25.0), ((0, 0), (1, 1)))),
+    "b1_energy": ("sims/b1.toml", _energy, None),
+    "b1_energy_stuck": ("sims/b1.toml", _energy, _joint_modes(((0, 0), (1, 0)))),
+    "b1_energy_stick": ("sims/b1.toml", _energy, _touch(stuck=True)),
+    "b1_energy_massless": ("sims/b1.toml", _massless, _touch()),
+    "writer_b_energy": ("sims/case2_writer_b.toml", lambda d: _energy(d, joints=False), _touch(phase=1)),
     "b1_joints_slide": ("sims/b1.toml", _joint_friction, None),
     "b1_joints_stuck": ("sims/b1.toml", _joint_friction, _joint_modes(((0, 0), (1, 0)))),
     "b1_joints_mixed": ("sims/b1.toml", _joint_friction, _joint_modes(((0, -1), (1, 0)))),

@@ -1,6 +1,7 @@
 """Issue 29's pipeline, the small mode kinds (contactdyn/model/pipeline/): joint friction, a held sampled command,
-a reference carried by a body, a circle move. Their ẋ against System.evaluate is test_pipeline_proto's (every case
-of benchmarks/pipeline_proto.py); here: their event values, and the same source interpreted."""
+a reference carried by a body, a circle move, a 2-D slide launching from rest, the energy audit. Their ẋ against
+System.evaluate is test_pipeline_proto's (every case of benchmarks/pipeline_proto.py); here: their event values,
+what each kind changes, and the same source interpreted."""
 
 from __future__ import annotations
 
@@ -143,6 +144,20 @@ def test_two_slides_launching_at_once_are_declined():
         system.contacts.pop()
 
 
+@pytest.mark.parametrize("name", ["b1_energy", "b1_energy_stuck", "b1_energy_stick", "b1_energy_massless",
+                                  "writer_b_energy"])
+def test_the_energy_audits_rates_are_the_readable_ones(name):
+    """The drives' power and the dissipation (dampers, viscous and Coulomb sliding friction with and without a
+    normal row, joint damping and sliding friction) against System.evaluate, each to 1e-12 of itself."""
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    e = 2 * system.nQ + system.energy_slot
+    for x in states(x0, 4)[1:]:  # (moving: x0 of writer_b is at rest, no power)
+        got, ref = pipe.rhs(t, x)[e:e + 2], system.evaluate(t, x, modes, phase).xdot[e:e + 2]
+        assert np.all(ref != 0.0)
+        np.testing.assert_allclose(got, ref, rtol=RTOL, atol=0.0)
+
+
 _INTERPRETED = """
 import json, sys
 sys.path.insert(0, {bench!r})
@@ -155,7 +170,7 @@ for name in {names!r}:
     out[name] = [pipe.rhs(t, x).tolist() for x in states(x0, 2)]
 print(json.dumps(out))
 """
-INTERPRETED = ["b1_joints_mixed", "b1_sampled", "cart_push_carried", "ur5_circle", "ur5_launch"]
+INTERPRETED = ["b1_joints_mixed", "b1_sampled", "cart_push_carried", "ur5_circle", "ur5_launch", "b1_energy"]
 
 
 def test_the_same_source_interpreted_gives_the_compiled_rates():

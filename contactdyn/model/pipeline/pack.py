@@ -51,7 +51,7 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE,
  JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
- N_LAUNCH, I_LAUNCH, HEADER) = range(52)
+ N_LAUNCH, I_LAUNCH, ENERGY, HEADER) = range(53)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI), a
@@ -104,8 +104,6 @@ class Packed:
 def unsupported(system, modes, phase) -> str:
     """Why this prototype cannot pack (modes, phase) ("" when it can)."""
     ctl = phase.controller
-    if system.energy_slot >= 0:
-        return "energy audit"
     if system.drives.any_motor:
         return "motors (drives other than ideal torque sources)"
     if system.robot.rigid_table is None:
@@ -167,6 +165,7 @@ def pack(system, modes, phase) -> Packed:
     h = b.ints
     nv, nQ = system.nv, system.nQ
     h[NV], h[NQ], h[NY], h[NX], h[N_DRIVES] = nv, nQ, system.ny, system.n, len(system.drives.specs)
+    h[ENERGY] = system.energy_slot
     b.reals[RH_OMEGA], b.reals[RH_SLIP_BAND] = system.stabilization, system.slip_band
     table = system.robot.rigid_table
     h[NJ] = table.shape[0]

@@ -2,7 +2,7 @@
 
     robot terms -> frames -> contacts (chains, bond rows, friction rows) -> limit rows -> stuck joints' rows
     -> controller -> joint damping and sliding friction -> drives
-    -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] and the event values
+    -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] (the energy audit's last) and the event values
 
 :func:`call` is numba-compiled once for every scene and every law (the laws enter by address: stage and friction
 laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`); under
@@ -19,6 +19,7 @@ import numpy as np
 from ...numerics.compile_cache import njit
 from .actuation import command, drives
 from .contacts import contact_terms, finish, limit_rows
+from .energy import energy_rates
 from .joint_friction import joint_events, joint_rows, joint_torques
 from .kkt import kkt_solve
 from .launch import ST_CONTACT, launch_start, launch_took
@@ -81,12 +82,13 @@ def _rates(t, x, ints, reals, work, events):
     joint_rows(x, ints, reals, first_joint, G, C, gamma)
     tau = command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR)
     joint_torques(x, ints, reals, f)
-    drives(x, ints, reals, tau, f)
+    cmd = drives(x, ints, reals, tau, f)
     qdd, lam, regular = kkt_solve(ints, reals, H, f, G, C, gamma)
     xdot[:nQ] = x[nQ:2 * nQ]
     xdot[nQ:2 * nQ] = qdd
     xdot[2 * nQ:] = ydot
     finish(ints, lam, xdot, events, pending, first_limit)
+    energy_rates(x, ints, reals, cmd, xdot, events, pending)
     joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
     events[events.size - 1] = 1.0 if regular else 0.0
     return xdot
