@@ -4,12 +4,13 @@
 
 - ``ints`` (int64): a header (the sizes and where each section starts, the slots named below), then the sections:
   frames, contacts, chains (each chain's own plan, :func:`contactdyn.model.chain_forces.pack`, copied in), pressing
-  limits, servos, the controller's layout table (the controller ABI's, :mod:`contactdyn.laws.controllers.abi`);
+  limits, stuck and sliding joints, launching contacts, servos, the controller's layout table (the controller
+  ABI's, :mod:`contactdyn.laws.controllers.abi`);
 - ``reals`` (float64): Baumgarte's ω [1/s] and the stick band [m/s], then the rigid-body table
   (:mod:`contactdyn.robot.rigid_body`), the frames' placements in their joints, the non-robot inertias [kg],
   the contacts' points, axes, tangents, slip references and friction coefficients, the chains' coefficients and
-  law parameters, the limits [rad or m], the servos, the reference and its moves, the force ramps, the controller's
-  constants or declared parameters;
+  law parameters, the limits [rad or m], the joints' damping and sliding friction, the servos, the reference, its
+  moves and circles, the body carrying it, the force ramps, the controller's constants or declared parameters;
 - ``work`` (float64): the chains' node motion and stage states of the last call (scratch the call writes).
 
 A law enters by its address (an int64 of ``ints``: a stage law's in its chain's stage table, a friction law's in
@@ -17,10 +18,11 @@ its contact's row, a user controller's in the controller section), so one compil
 index constants below are the one place the layout is written; the call (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-motors and voltage drives, force-reading or stateful controllers (but a sampled law's held command), a
-reference carried by a body, a 2-D slide launching from rest, the energy audit, a stage or friction law numba
-cannot compile, a robot ``rigid_body`` does not compute, a circle move, controllers other than ``task_pd`` and user
-laws of the controller ABI.
+motors and voltage drives, force-reading or stateful controllers (a sampled law's held command is packed), a
+reference carried by a body for a law that may read its acceleration (its fold), two 2-D slides launching from
+rest at once, a stage or friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot
+loader accepts: every joint it takes is a one-DOF revolute or prismatic), controllers other than ``task_pd`` and
+user laws of the controller ABI.
 """
 
 from __future__ import annotations
