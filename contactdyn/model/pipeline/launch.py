@@ -7,9 +7,11 @@ set to d (its normal column re-tilted, or its known friction force re-aimed, and
 launch in order, each trial with the earlier ones' directions found. A slide already past the band keeps r (its
 own direction from there on, ``contacts._slip_direction``).
 
-The call drives it (:func:`contactdyn.model.pipeline.pipeline.call`): :func:`launch_start` copies ``reals`` (the
-packed mode stays as packed) and sets the first trial, :func:`launch_took` reads each trial's rates and sets the
-next, until ``state[ST_CONTACT]`` passes the last launching contact; the call then runs on the copy.
+The call drives it (:func:`contactdyn.model.pipeline.pipeline.call`, one loop over its body): :func:`launch_start`
+copies ``reals`` (the packed mode stays as packed) and aims the first launching contact, :func:`launch_took` reads
+each pass's rates and frames and aims the next trial, until the direction is found. A contact found past the band
+(known only after its first pass, from that pass's frames) gets r back; a Newton that converges ends on its trial's
+pass, which is then the result; otherwise one more pass runs with the directions found.
 """
 
 from __future__ import annotations
@@ -36,14 +38,13 @@ from .pack import (
     RH_SLIP_BAND,
     section,
 )
-from .robot_terms import frame_terms, robot_terms
 
 __all__ = ["launch_start", "launch_took", "ST_CONTACT"]
 
-#: the Newton's state: the launching contact (its index among them), the pending trial (at θ, at θ + h), updates
-#: done, θ [rad], φ = d × a_t and a_t · d [m/s²] at θ
-ST_CONTACT, ST_STEP, ST_UPDATES, ST_THETA, ST_PHI, ST_AHEAD, ST_W = range(7)
-AT, AT_H = 0, 1
+#: the Newton's state: the launching contact (its index among them), the pending pass (the contact's first, at θ, at
+#: θ + h), updates done, θ [rad], φ = d × a_t and a_t · d [m/s²] at θ, the contact's reference r
+ST_CONTACT, ST_STEP, ST_UPDATES, ST_THETA, ST_PHI, ST_AHEAD, ST_R, ST_W = 0, 1, 2, 3, 4, 5, 6, 8
+FIRST, AT, AT_H = 0, 1, 2
 H = 1e-7  #: [rad] the difference of the derivative dφ/dθ
 MAX_UPDATES = 4
 
@@ -61,41 +62,45 @@ def _aim(ints, trial, j, theta):
 
 
 @njit(cache=True)
-def _next_contact(x, ints, reals, trial, state, FJ, Fv):
-    """From ``state[ST_CONTACT]`` on, the first launching contact still inside the stick band: its first trial set
-    (θ from its reference r); those past the band keep r."""
-    nQ = ints[NQ]
-    j = int(state[ST_CONTACT])
-    while j < ints[N_LAUNCH]:
-        row = _contact(ints, j)
-        cr = reals[row[CI_REALS]:]
-        body = row[CI_BODY]
-        v = Fv[row[CI_FRAME]].copy()
-        if body >= 0:
-            for i in range(3):
-                v[i] -= cr[CR_AXIS + i] * x[nQ + body]
-        T = cr[CR_T:CR_T + 6].reshape((2, 3))
-        ahead = 0.0  # v_t · r [m/s]
-        for k in range(2):
-            ahead += (T[k, 0] * v[0] + T[k, 1] * v[1] + T[k, 2] * v[2]) * cr[CR_R + k]
-        if not ahead > reals[RH_SLIP_BAND]:
-            state[ST_STEP], state[ST_UPDATES] = AT, 0
-            state[ST_THETA] = math.atan2(cr[CR_R + 1], cr[CR_R])
-            _aim(ints, trial, j, state[ST_THETA])
-            break
-        j += 1
+def _begin(ints, trial, state, j):
+    """Launching contact j's first pass aimed at its reference r (θ = atan2(r)); r kept in ``state``."""
     state[ST_CONTACT] = j
+    if j >= ints[N_LAUNCH]:
+        return
+    at = _contact(ints, j)[CI_REALS] + CR_R
+    state[ST_STEP], state[ST_UPDATES] = FIRST, 0
+    state[ST_R], state[ST_R + 1] = trial[at], trial[at + 1]
+    state[ST_THETA] = math.atan2(trial[at + 1], trial[at])
+    _aim(ints, trial, j, state[ST_THETA])
 
 
 @njit(cache=True)
-def launch_start(x, ints, reals):
-    """(trial reals, Newton state, frames' J (nf, 6, nv), J̇q̇ (nf, 6)) with the first trial set."""
-    H_, h, g, Jw, W = robot_terms(x, ints, reals)
-    FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
-    trial = reals.copy()
+def launch_start(ints, reals):
+    """(the reals the call's first pass reads, the Newton's state): ``reals`` itself without a launch, else a copy
+    with the first launching contact aimed."""
     state = np.zeros(ST_W)
-    _next_contact(x, ints, reals, trial, state, FJ, Fv)
-    return trial, state, FJ, Fa, Fv
+    if ints[N_LAUNCH] == 0:
+        return reals, state
+    trial = reals.copy()
+    _begin(ints, trial, state, 0)
+    return trial, state
+
+
+@njit(cache=True)
+def _past_band(x, ints, trial, state, j, Fv):
+    """Contact j's slip already ahead of its reference r by more than the stick band: v_t · r > v_ε [m/s]."""
+    row = _contact(ints, j)
+    cr = trial[row[CI_REALS]:]
+    body = row[CI_BODY]
+    v = Fv[row[CI_FRAME]].copy()
+    if body >= 0:
+        for i in range(3):
+            v[i] -= cr[CR_AXIS + i] * x[ints[NQ] + body]
+    T = cr[CR_T:CR_T + 6].reshape((2, 3))
+    ahead = 0.0
+    for k in range(2):
+        ahead += (T[k, 0] * v[0] + T[k, 1] * v[1] + T[k, 2] * v[2]) * state[ST_R + k]
+    return ahead > trial[RH_SLIP_BAND]
 
 
 @njit(cache=True)
@@ -120,30 +125,32 @@ def _cross(ints, trial, j, xdot, FJ, Fa):
 
 
 @njit(cache=True)
-def launch_took(x, ints, reals, trial, state, FJ, Fa, Fv, xdot):
-    """The rates ``xdot`` of the pending trial read: the Newton's next trial set, or the contact's direction found
-    (d where φ ≈ 0 ahead; r where dφ/dθ ≥ 0 or after MAX_UPDATES) and the next contact's first trial."""
+def launch_took(x, ints, state, trial, FJ, Fa, Fv, xdot):
+    """A pass's rates ``xdot`` and frames read for the pending contact: its next trial aimed, or its direction
+    found (d where φ ≈ 0 ahead; r past the band, where dφ/dθ ≥ 0 or after MAX_UPDATES) and the next contact
+    begun. True when this pass is the result (the last contact's Newton converged on it)."""
     j = int(state[ST_CONTACT])
-    phi, ahead = _cross(ints, trial, j, xdot, FJ, Fa)
     at = _contact(ints, j)[CI_REALS] + CR_R
-    found = False
-    if state[ST_STEP] == AT:
-        if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):
-            found = True  # the trial's d stays
-        else:
-            state[ST_PHI], state[ST_AHEAD], state[ST_STEP] = phi, ahead, AT_H
-            _aim(ints, trial, j, state[ST_THETA] + H)
-            return
-    else:
-        dphi = (phi - state[ST_PHI]) / H
-        if dphi < 0.0:
-            state[ST_THETA] -= min(max(state[ST_PHI] / dphi, -0.5), 0.5)
-            state[ST_UPDATES] += 1
-            if state[ST_UPDATES] < MAX_UPDATES:
-                state[ST_STEP] = AT
-                _aim(ints, trial, j, state[ST_THETA])
-                return
-    if not found:  # no convergence: the reference r
-        trial[at], trial[at + 1] = reals[at], reals[at + 1]
-    state[ST_CONTACT] = j + 1
-    _next_contact(x, ints, reals, trial, state, FJ, Fv)
+    if state[ST_STEP] == FIRST and _past_band(x, ints, trial, state, j, Fv):
+        trial[at], trial[at + 1] = state[ST_R], state[ST_R + 1]  # launched: r, its own direction from here on
+        _begin(ints, trial, state, j + 1)
+        return False
+    phi, ahead = _cross(ints, trial, j, xdot, FJ, Fa)
+    if state[ST_STEP] != AT_H:
+        if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):  # the trial's d stays
+            _begin(ints, trial, state, j + 1)
+            return j + 1 >= ints[N_LAUNCH]
+        state[ST_PHI], state[ST_AHEAD], state[ST_STEP] = phi, ahead, AT_H
+        _aim(ints, trial, j, state[ST_THETA] + H)
+        return False
+    dphi = (phi - state[ST_PHI]) / H
+    if dphi < 0.0:
+        state[ST_THETA] -= min(max(state[ST_PHI] / dphi, -0.5), 0.5)
+        state[ST_UPDATES] += 1
+        if state[ST_UPDATES] < MAX_UPDATES:
+            state[ST_STEP] = AT
+            _aim(ints, trial, j, state[ST_THETA])
+            return False
+    trial[at], trial[at + 1] = state[ST_R], state[ST_R + 1]  # no convergence: the reference r
+    _begin(ints, trial, state, j + 1)
+    return False

@@ -49,49 +49,40 @@ __all__ = ["call", "rates_at", "Pipeline"]
 @njit(cache=True)
 def call(t, x, ints, reals, work, events):
     """ẋ at (t [s], x) of the packed mode; the event values and the status (last) into ``events``. A 2-D slide
-    launching from rest first finds its direction (:mod:`.launch`: trial calls on a copy of ``reals``)."""
-    if ints[N_LAUNCH] == 0:
-        return _rates(t, x, ints, reals, work, events)
-    trial, state, FJ, Fa, Fv = launch_start(x, ints, reals)
-    while state[ST_CONTACT] < ints[N_LAUNCH]:
-        xdot = _rates(t, x, ints, trial, work, events)
-        if events[events.size - 1] != 1.0:
-            return xdot
-        launch_took(x, ints, reals, trial, state, FJ, Fa, Fv, xdot)
-    return _rates(t, x, ints, trial, work, events)
-
-
-@njit(cache=True)
-def _rates(t, x, ints, reals, work, events):
-    """ẋ at (t [s], x) with every slide's direction as packed (``call`` without launches)."""
+    launching from rest first finds its direction (:mod:`.launch`): the loop's trial passes on a copy of ``reals``,
+    then the pass with the directions found (one pass without a launch; one body, compiled once)."""
     nv, nQ, nr, nc = ints[NV], ints[NQ], ints[N_ROWS], ints[N_CONTACTS]
-    H, h, g, Jw, W = robot_terms(x, ints, reals)
-    FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
-    f = np.zeros(nQ)
-    f[:nv] = -h
-    ydot = np.zeros(ints[NY])
-    G, C, gamma = np.zeros((nr, nQ)), np.zeros((nr, nQ)), np.zeros(nr)
-    pending = np.zeros((nc, 5))
-    xdot = np.empty(ints[NX])
-    if not contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, events, pending):
-        events[events.size - 1] = -1.0
-        return xdot
-    first_joint = nr - ints[N_HELD]
-    first_limit = first_joint - ints[N_LIMITS]
-    limit_rows(x, ints, reals, first_limit, G, C, gamma)
-    joint_rows(x, ints, reals, first_joint, G, C, gamma)
-    tau = command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR)
-    joint_torques(x, ints, reals, f)
-    cmd = drives(x, ints, reals, tau, f)
-    qdd, lam, regular = kkt_solve(ints, reals, H, f, G, C, gamma)
-    xdot[:nQ] = x[nQ:2 * nQ]
-    xdot[nQ:2 * nQ] = qdd
-    xdot[2 * nQ:] = ydot
-    finish(ints, lam, xdot, events, pending, first_limit)
-    energy_rates(x, ints, reals, cmd, xdot, events, pending)
-    joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
-    events[events.size - 1] = 1.0 if regular else 0.0
-    return xdot
+    reals, state = launch_start(ints, reals)
+    while True:
+        final = state[ST_CONTACT] >= ints[N_LAUNCH]
+        H, h, g, Jw, W = robot_terms(x, ints, reals)
+        FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
+        f = np.zeros(nQ)
+        f[:nv] = -h
+        ydot = np.zeros(ints[NY])
+        G, C, gamma = np.zeros((nr, nQ)), np.zeros((nr, nQ)), np.zeros(nr)
+        pending = np.zeros((nc, 5))
+        xdot = np.empty(ints[NX])
+        if not contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, events, pending):
+            events[events.size - 1] = -1.0
+            return xdot
+        first_joint = nr - ints[N_HELD]
+        first_limit = first_joint - ints[N_LIMITS]
+        limit_rows(x, ints, reals, first_limit, G, C, gamma)
+        joint_rows(x, ints, reals, first_joint, G, C, gamma)
+        tau = command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR)
+        joint_torques(x, ints, reals, f)
+        cmd = drives(x, ints, reals, tau, f)
+        qdd, lam, regular = kkt_solve(ints, reals, H, f, G, C, gamma)
+        xdot[:nQ] = x[nQ:2 * nQ]
+        xdot[nQ:2 * nQ] = qdd
+        xdot[2 * nQ:] = ydot
+        finish(ints, lam, xdot, events, pending, first_limit)
+        energy_rates(x, ints, reals, cmd, xdot, events, pending)
+        joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
+        events[events.size - 1] = 1.0 if regular else 0.0
+        if final or not regular or launch_took(x, ints, state, reals, FJ, Fa, Fv, xdot):
+            return xdot
 
 
 @njit(cache=True)
