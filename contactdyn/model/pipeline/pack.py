@@ -75,9 +75,9 @@ CR_POINT, CR_AXIS, CR_T, CR_R, CR_MU_S, CR_MU_K, CR_VISCOUS, CR_W = 0, 3, 6, 12,
  CH_ROBOT_COORD, CH_ENV_KIND, CH_ENV_COORD, CH_OFFSET, CH_W) = range(16)
 LI_JOINT, LI_SIDE, LI_W = 0, 1, 2  #: a pressing limit's ints (its value [rad or m] in reals)
 #: the event values the call writes (``events``): per contact its gap [m], normal force [N], slip velocity [m/s]
-#: and friction force [N] in tangent coordinates; then each pressing limit's torque [N·m or N]; then the status
+#: and friction force [N] in tangent coordinates; then each pressing limit's torque [N·m or N], each held (stuck)
+#: joint's holding torque [N·m or N], each sliding joint's speed [rad/s or m/s]; then the status
 EV_GAP, EV_FN, EV_VT, EV_FF, EV_W = 0, 1, 2, 4, 6
-#: then each held (stuck) joint's holding torque [N·m or N], each sliding joint's speed [rad/s or m/s]
 #: status: 1 the call is complete; 0 the KKT matrix is singular (the readable model's least squares is needed)
 TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
 
@@ -182,7 +182,7 @@ def pack(system, modes, phase) -> Packed:
     b.real_section(R_LIMITS, [system.limits.by_index[i].lower if side > 0 else system.limits.by_index[i].upper
                               for i, side in phase.limits])
     meta += [(system.limits.by_index[i].name, "limit", i) for i, _ in phase.limits]
-    held = _joint_friction(b, system, phase)
+    held, sliding = _joint_friction(b, system, phase)
     meta += [(system.joint_friction.names[i], "joint", i) for i in held]
     h[N_ROWS] = len(meta)
     launches = [ci for ci, m in enumerate(modes) if launching(m)]
@@ -194,8 +194,7 @@ def pack(system, modes, phase) -> Packed:
     _reference(b, system, phase)
     _controller(b, system, phase)
     h[W_SIZE] = b.work
-    n_events = EV_W * len(system.contacts) + len(phase.limits) + h[N_HELD] + h[N_SLIDING] + 1
-    sliding = [i for i, m in phase.joint_modes if m != 0]
+    n_events = EV_W * len(system.contacts) + len(phase.limits) + len(held) + len(sliding) + 1
     return Packed(np.array(h, dtype=np.int64), np.array(b.reals), np.zeros(max(b.work, 1)), np.zeros(n_events),
                   meta, [c.name for c in system.contacts], [i for i, _ in phase.limits], held, sliding)
 
@@ -293,16 +292,16 @@ def _chain(b: _Builder, system, c, m, dc, tangent: int, at: int, row: int) -> No
                             *surface(chain.env_surface), offset_at]
 
 
-def _joint_friction(b: _Builder, system, phase) -> list[int]:
+def _joint_friction(b: _Builder, system, phase) -> tuple[list[int], list[int]]:
     """The joints' damping b (nv) [N·m·s/rad or N·s/m], the stuck joints that carry a row, the sliding ones with
-    (s, τ_k [N·m or N]) (model.joint_friction); the held joints returned, in their rows' order."""
+    (s, τ_k [N·m or N]) (model.joint_friction); (the held joints in their rows' order, the sliding ones)."""
     jf, h = system.joint_friction, b.ints
     held = jf.held(phase.joint_modes, phase.limits) if jf.any else []
     sliding = [(i, m) for i, m in phase.joint_modes if m != 0] if jf.any else []
     h[JOINT_FRICTION], h[N_HELD], h[N_SLIDING] = int(jf.any), len(held), len(sliding)
     b.int_section(I_JOINTS, [*held, *(i for i, _ in sliding)])
     b.real_section(R_JOINTS, [*jf.damping, *(v for i, m in sliding for v in (m, jf.kinetic[i]))])
-    return held
+    return held, [i for i, _ in sliding]
 
 
 def _reference(b: _Builder, system, phase) -> None:
