@@ -59,15 +59,79 @@ def _no_motors(doc: dict) -> None:
     doc["phase"] = doc["phase"][:1]
 
 
-def _tool_pd(doc: dict) -> None:
+def _carried_pd(doc: dict) -> None:
+    """case1_cart without its motors, its push (the reference carried by the cart) under task PD (x and z)."""
+    del doc["robot"]["drive"], doc["body"]["cart"]["drive"]
+    doc["phase"][1]["controller"] = {"kind": "task_pd", "axes": [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], "kp": 1e5,
+                                     "kd": 6000.0, "feedforward": "gravity"}
+
+
+def _tool_pd(doc: dict, circle: bool = False) -> None:
     """A pencil writer under task PD holding its tool axis (the twin's compiled operational call: the moment is not
-    affine), its circle made a straight trapezoid."""
+    affine), its circle made a straight trapezoid (``circle``: kept, and a straight move after it)."""
     ctl = doc["controller"]
     doc["controller"] = {"kind": "task_pd", "kp": ctl["kp"], "kd": ctl["kd"], "axes": ctl["axes"],
                          "tool_axis": ctl["tool_axis"], "tool_target": ctl["tool_target"], "ko": 5.0, "do": 0.5,
                          "kd_normal": ctl["kd_normal"], "feedforward": "gravity"}
-    doc["phase"][1]["reference"] = {"moves": [{"kind": "trapezoid", "delta": [-0.03, 0.0, 0.0], "duration": 4.0,
-                                               "accel_fraction": 0.2}]}
+    line = {"kind": "trapezoid", "delta": [-0.03, 0.0, 0.0], "duration": 4.0, "accel_fraction": 0.2}
+    if circle:
+        doc["phase"][1]["reference"]["moves"].append({**line, "delta": [0.0, 0.01, 0.0], "start": 0.005})
+    else:
+        doc["phase"][1]["reference"] = {"moves": [line]}
+
+
+def _launch(slip, phase=1):
+    """Touching in a 2-D slide launching from rest along the reference ``slip`` (the robot at rest: x0's velocities
+    zeroed), in phase ``phase``."""
+    def change(system, modes, ph, x0):
+        ph = system.start_phase(phase, ph.t_start + 1.0, x0, ph)
+        x0[system.nQ:2 * system.nQ] = 0.0
+        return [mm.with_(touching=True, stuck=False, from_rest=True, slip=tuple(slip),
+                         offsets=tuple(0.0 for _ in c.tangent_chains))
+                for c, mm in zip(system.contacts, modes, strict=True)], ph
+    return change
+
+
+def _energy(doc: dict, joints: bool = True) -> None:
+    """The energy audit on, viscous friction 5 N·s/m on the contact, and (``joints``) b1's joint friction."""
+    doc["solver"]["record_energy"] = True
+    doc["contact"][next(iter(doc["contact"]))]["tangent"]["viscous"] = 5.0
+    if joints:
+        _joint_friction(doc)
+
+
+def _massless(doc: dict) -> None:
+    """b1's surface a massless stage k, b (model c): the normal force known from the stage, no normal row."""
+    tip = doc["contact"]["tip"]
+    tip["normal"] = {"direction": [0.0, 1.0, 0.0], "model": "c", "k": 1e5, "b": 100.0}
+    del tip["bonded"]
+    _energy(doc)
+
+
+def _joint_friction(doc: dict) -> None:
+    """b1 with joint damping and Coulomb joint friction (static above kinetic) on both joints."""
+    doc["robot"]["joint"] = {"q1": {"damping": 0.5, "friction_static": 3.0, "friction_kinetic": 2.0},
+                             "q2": {"damping": 0.2, "friction": 1.5}}
+
+
+def _joint_modes(modes_of_joints, limits=()):
+    """The joints' friction modes set (0 stuck, ±1 sliding), and joints pressing on their limits."""
+    def change(system, modes, ph, x0):
+        return modes, replace(ph, joint_modes=tuple(modes_of_joints), limits=tuple(limits))
+    return change
+
+
+def _sampled(doc: dict) -> None:
+    """b1's task PD run sampled at 1 kHz with a zero-order hold (the held command in the state)."""
+    doc["controller"]["sample_rate"] = 1000.0
+
+
+def _holding(tau, joint_modes=None):
+    """x0's held command set to ``tau`` [N·m] (a sampled law's slots, as a sample writes them), the joints' modes."""
+    def change(system, modes, ph, x0):
+        x0[2 * system.nQ + ph.z_slice.start + ph.controller.held.start:][:system.nv] = tau
+        return modes, ph if joint_modes is None else replace(ph, joint_modes=tuple(joint_modes))
+    return change
 
 
 def _real_cell_drives(kp: float):
@@ -105,6 +169,18 @@ CASES = {
     "b1_stick": ("sims/b1.toml", None, _touch(stuck=True)),
     "b1_limit": ("sims/b1.toml", None, _touch(limits=((1, -1),))),
     "b1_stribeck": ("sims/b1.toml", _stribeck, None),
+    "b1_sampled": ("sims/b1.toml", _sampled, _holding((40.0, -25.0))),
+    "b1_sampled_joints": ("sims/b1.toml", lambda d: (_sampled(d), _joint_friction(d)),
+                          _holding((40.0, -25.0), ((0, 0), (1, 1)))),
+    "b1_energy": ("sims/b1.toml", _energy, None),
+    "b1_energy_stuck": ("sims/b1.toml", _energy, _joint_modes(((0, 0), (1, 0)))),
+    "b1_energy_stick": ("sims/b1.toml", _energy, _touch(stuck=True)),
+    "b1_energy_massless": ("sims/b1.toml", _massless, _touch()),
+    "writer_b_energy": ("sims/case2_writer_b.toml", lambda d: _energy(d, joints=False), _touch(phase=1)),
+    "b1_joints_slide": ("sims/b1.toml", _joint_friction, None),
+    "b1_joints_stuck": ("sims/b1.toml", _joint_friction, _joint_modes(((0, 0), (1, 0)))),
+    "b1_joints_mixed": ("sims/b1.toml", _joint_friction, _joint_modes(((0, -1), (1, 0)))),
+    "b1_joints_limit": ("sims/b1.toml", _joint_friction, _joint_modes(((0, 0), (1, 0)), limits=((1, -1),))),
     "writer_b_approach": ("sims/case2_writer_b.toml", None, None),
     "writer_b_write": ("sims/case2_writer_b.toml", None, _touch(phase=1)),
     "writer_rigid_approach": ("sims/case2_writer_rigid.toml", None, None),
@@ -120,8 +196,13 @@ CASES = {
     "hard_stiff": ("benchmarks/hard/stiff.toml", None, None),
     "hard_undamped": ("benchmarks/hard/undamped.toml", None, None),
     "cart_chains_touch": ("sims/case1_cart.toml", _no_motors, _touch()),
+    "cart_push_carried": ("sims/case1_cart.toml", _carried_pd, _touch(phase=1)),
     "writer5dof_tool": ("sims/case2_writer5dof.toml", _tool_pd, None),
     "writer5dof_tool_slide": ("sims/case2_writer5dof.toml", _tool_pd, _touch(phase=1)),
+    "writer5dof_circle": ("sims/case2_writer5dof.toml", lambda d: _tool_pd(d, circle=True), _touch(phase=1)),
+    "ur5_circle": ("sims/case2_writer_ur5.toml", lambda d: _tool_pd(d, circle=True), _touch(phase=1)),
+    "writer5dof_launch": ("sims/case2_writer5dof.toml", _tool_pd, _launch((0.6, 0.8))),
+    "ur5_launch": ("sims/case2_writer_ur5.toml", _tool_pd, _launch((-1.0, 0.0))),
     "ur5_tool": ("sims/case2_writer_ur5.toml", _tool_pd, None),
     "cubic_press": ("examples/cubic_press.toml", None, None),
     "impedance_press": ("examples/impedance_press.toml", None, None),

@@ -109,3 +109,23 @@ def test_a_stuck_contact_runs_on_the_pipeline_its_slip_watch_reading_the_pipelin
     assert paths["press: tip stuck"] == PIPELINE, paths
     assert {row["path"] for row in readable.stats["paths"].values()} == {"readable model"}
     assert_same_run(live, readable, ("q", "v", "tau", "contact.tip.F_n", "contact.tip.F_f"))
+
+
+def test_an_energy_audit_runs_on_the_pipeline_and_balances(monkeypatch):
+    """B1 with the audit (a declared gap of the plan), joint and viscous friction, for 50 ms: every mode on the
+    pipeline, the audit's work and dissipation as on the readable model, the energy residual as small."""
+    path = Path(__file__).resolve().parent.parent / "sims" / "b1.toml"
+    doc = tomllib.loads(path.read_text())
+    doc["duration"] = 0.05
+    doc["solver"]["record_energy"] = True
+    doc["contact"]["tip"]["tangent"]["viscous"] = 5.0
+    doc["robot"]["joint"] = {"q1": {"damping": 0.5, "friction_static": 3.0, "friction_kinetic": 2.0}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = parse_scene(doc, file=str(path))
+    live, readable = both_ways(scene, monkeypatch)
+    assert {row["path"] for row in live.stats["paths"].values()} == {PIPELINE}
+    assert_same_run(live, readable, ("q", "v", "tau", "contact.tip.F_n", "energy.work", "energy.dissipated"))
+    assert live["energy.dissipated"][-1] > 0.1  # [J] friction and damping took some
+    residual = [r.meta["checks"]["energy_residual"]["value"] for r in (live, readable)]
+    assert residual[0] <= 1e-6 * live["energy.work"].max() and residual[0] == pytest.approx(residual[1], abs=1e-9)

@@ -79,7 +79,7 @@ class PipelineMode:
             if events[-1] != 1.0:
                 pipe.fallbacks += 1
                 ev = system.evaluate(t, x, modes, phase)
-                ring.append((t, x, self._events_of(ev)))
+                ring.append((t, x, self._events_of(ev, x)))
                 return ev.xdot
             ring.append((t, x, events.copy()))
             return xdot
@@ -144,10 +144,12 @@ class PipelineMode:
         return {i: float(ev[base + k]) for k, i in enumerate(self.pipe.packed.limits)}
 
     def joint_hold(self, t: float, x: np.ndarray) -> dict[int, float]:
-        """(No stuck joints: the pipeline declines joint friction, ``pack.unsupported``.)"""
-        return {}
+        """Holding torques [N·m or N] of the joints stuck by dry friction, by joint coordinate (after the limits')."""
+        p = self.pipe.packed
+        ev, base = self.values(t, x), EV_W * len(self.nt) + len(p.limits)
+        return {i: float(ev[base + k]) for k, i in enumerate(p.held)}
 
-    def _events_of(self, ev) -> np.ndarray:
+    def _events_of(self, ev, x: np.ndarray) -> np.ndarray:
         """The event values of a readable Evaluation, in the call's layout (a call answered by the readable model)."""
         out = np.zeros(self.pipe.packed.events.size)
         for ci, c in enumerate(self.system.contacts):
@@ -156,8 +158,17 @@ class PipelineMode:
             if nt:
                 out[at + EV_VT:at + EV_VT + nt] = ev.slip[c.name]
                 out[at + EV_FF:at + EV_FF + nt] = ev.friction.get(c.name, np.zeros(nt))
-        for k, i in enumerate(self.pipe.packed.limits):
-            out[EV_W * len(self.nt) + k] = ev.limit_torque[i]
+        p = self.pipe.packed
+        base = EV_W * len(self.nt)
+        for k, i in enumerate(p.limits):
+            out[base + k] = ev.limit_torque[i]
+        base += len(p.limits)
+        for k, i in enumerate(p.held):
+            out[base + k] = ev.joint_hold[i]
+        base += len(p.held)
+        nQ = self.system.nQ
+        for k, i in enumerate(p.sliding):
+            out[base + k] = x[nQ + i]
         out[-1] = 1.0
         return out
 
@@ -171,7 +182,7 @@ class PipelineMode:
         ts, X = np.ascontiguousarray(ts, dtype=float), np.ascontiguousarray(X, dtype=float)
         _, E, W, done = samples_at(ts, X, p.ints, p.reals, p.work, p.events)
         S = Samples(len(ts), system)
-        self._read_out(S, E[:done], W[:done])
+        self._read_out(S, E[:done], W[:done], X[:done])
         for k in range(done, len(ts)):
             self.pipe.fallbacks += 1
             S.fill(k, system.evaluate(float(ts[k]), X[k], self.modes, self.phase, full=True))
@@ -189,8 +200,8 @@ class PipelineMode:
                 k += 1
         return out
 
-    def _read_out(self, S: Samples, E: np.ndarray, W: np.ndarray) -> None:
-        """Rows 0..len(E) of S from the calls' event values E and work W (one row per sample)."""
+    def _read_out(self, S: Samples, E: np.ndarray, W: np.ndarray, X: np.ndarray) -> None:
+        """Rows 0..len(E) of S from the calls' event values E and work W at the states X (one row per sample)."""
         system, p, n = self.system, self.pipe.packed, len(E)
         if n == 0:
             return
@@ -210,6 +221,12 @@ class PipelineMode:
         base = EV_W * len(self.nt)
         for k, i in enumerate(p.limits):
             S.limit_torque[:n, i] = E[:, base + k]
+        if system.joint_friction.any:  # damping and sliding friction at each state, the held joints' torques
+            S.joint_friction[:n] = [system.joint_friction.torques(self.phase.joint_modes, xk, system.nQ, nv)
+                                    for xk in X]
+            base += len(p.limits)
+            for k, i in enumerate(p.held):
+                S.joint_friction[:n, i] += E[:, base + k]
         for ci, c in enumerate(system.contacts):
             e, nt = EV_W * ci, self.nt[ci]
             S.F_n[c.name][:n], S.gap[c.name][:n] = E[:, e + EV_FN], E[:, e + EV_GAP]

@@ -3,11 +3,12 @@ drives.
 
 The reference x_d, v_d, a_d at t [s] (the start plus each move's profile, ``laws.trajectory.move_rows``, as
 ``Reference.at``), the force set-points F_d [N] (``ramp_rows``); then the controller by its kind: the task PD law
-compiled in (``laws.controllers.task_pd_law.torque``, as ``TaskPD.command`` calls it), or a controller of the
-controller ABI called by its address (:mod:`contactdyn.laws.controllers.abi`: its inputs written into one buffer by
-the layout table packed with the mode), or constant voltages (``ConstantVoltage``: the drive table takes them). The
-drives turn the command, the joints' τ and the servo forces of the bodies, into generalized forces: ideal torque
-sources add it (``Drives.apply`` without motors), motors by their kinds' laws (:mod:`.drives`).
+compiled in (``laws.controllers.task_pd_law.torque``, as ``TaskPD.command`` calls it), a sampled law's held
+command (the state's slots, ``SampledController.command``), a controller of the controller ABI called by its
+address (:mod:`contactdyn.laws.controllers.abi`: its inputs written into one buffer by the layout table packed with
+the mode), or constant voltages (``ConstantVoltage``: the drive table takes them). The drives turn the command, the
+joints' τ and the servo forces of the bodies, into generalized forces: ideal torque sources add it (``Drives.apply``
+without motors), motors by their kinds' laws (:mod:`.drives`).
 
 Under ``NUMBA_DISABLE_JIT=1`` a controller's "address" is a handle of its class (:data:`.pack.PYTHON_CONTROLLERS`)
 and :func:`command_by_address` runs its Python ``command`` on the same buffer: the same source, interpreted.
@@ -24,12 +25,15 @@ from ...laws.controllers.abi import FIELD, call_controller, control_arrays, put_
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
+from .carried import carry
+from .circle import CIRCLE_W, add_circle
 from .drives import DI_W, DW_APPLIED, DW_W, apply_drives
 from .pack import (
     ANY_MOTOR,
     CTL_ABI,
     CTL_ADDRESS,
     CTL_CONSTANT,
+    CTL_HELD,
     CTL_KIND,
     CTL_TASK_PD,
     FEEDFORWARD,
@@ -49,6 +53,7 @@ from .pack import (
     NQ,
     NV,
     PYTHON_CONTROLLERS,
+    R_CIRCLES,
     R_CTL,
     R_DRIVES,
     R_RAMPS,
@@ -58,6 +63,7 @@ from .pack import (
     REF_DIMS,
     TIP_FRAME,
     W_DRIVES,
+    X_HELD,
     section,
 )
 
@@ -72,7 +78,8 @@ N_LAYOUT = 2 + 2 * len(FIELD) + 1  #: the layout table's length (layout_of)
 
 @njit(cache=True)
 def reference(t, ints, reals):
-    """(x_d, v_d, a_d) at t [s]: the start plus Σ_k (σ_k, σ'_k/T_k, σ''_k/T_k²) Δ_k (empty without a reference)."""
+    """(x_d, v_d, a_d) at t [s]: the start plus Σ_k (σ_k, σ'_k/T_k, σ''_k/T_k²) Δ_k, a circle's rows its own
+    (:mod:`.circle`); empty without a reference."""
     dims, n_moves, at = ints[REF_DIMS], ints[N_MOVES], ints[R_REF]
     x_d, v_d, a_d = reals[at:at + dims].copy(), np.zeros(dims), np.zeros(dims)
     if n_moves:
@@ -80,7 +87,11 @@ def reference(t, ints, reals):
         deltas = section(reals, at + dims + 4 * n_moves, n_moves, dims)
         w = np.empty(3 * n_moves)
         move_rows(t, moves, w)
+        circles = section(reals, ints[R_CIRCLES], n_moves, CIRCLE_W)
         for k in range(n_moves):
+            if circles[k, 0] != 0.0:
+                add_circle(t, moves[k], circles[k], x_d, v_d, a_d)
+                continue
             for i in range(dims):
                 x_d[i] += w[3 * k] * deltas[k, i]
                 v_d[i] += w[3 * k + 1] * deltas[k, i]
@@ -156,6 +167,7 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
     """The controller's τ [N·m or N], or its voltages [V], at (t, x) (zero without a controller)."""
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)
+    carry(x, ints, reals, x_d, v_d)
     if ints[CTL_KIND] == CTL_TASK_PD:
         F_d, forced = set_points(t, ints, reals)
         return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)
@@ -163,6 +175,8 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
         return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
     if ints[CTL_KIND] == CTL_CONSTANT:  # open-loop voltages [V] (ConstantVoltage)
         return reals[ints[R_CTL]:ints[R_CTL] + ints[NV]].copy()
+    if ints[CTL_KIND] == CTL_HELD:  # a sampled law's held command (its slots' ẏ = 0: SampledController.command)
+        return x[ints[X_HELD]:ints[X_HELD] + ints[NV]].copy()
     return np.zeros(ints[NV])
 
 

@@ -4,14 +4,15 @@
 
 - ``ints`` (int64): a header (the sizes and where each section starts, the slots named below), then the sections:
   frames, contacts, chains (each chain's own plan, :func:`contactdyn.model.chain_forces.pack`, copied in), pressing
-  limits, servos, the controller's layout table (the controller ABI's, :mod:`contactdyn.laws.controllers.abi`),
-  the drive table (:mod:`.drives`: per drive its coordinates and its kind's addresses);
+  limits, stuck and sliding joints, launching contacts, servos, the controller's layout table (the controller
+  ABI's, :mod:`contactdyn.laws.controllers.abi`), the drive table (:mod:`.drives`: per drive its coordinates and its
+  kind's addresses);
 - ``reals`` (float64): Baumgarte's ω [1/s] and the stick band [m/s], then the rigid-body table
   (:mod:`contactdyn.robot.rigid_body`), the frames' placements in their joints, the non-robot inertias [kg],
   the contacts' points, axes, tangents, slip references and friction coefficients, the chains' coefficients and
-  law parameters, the limits [rad or m], the servos, the reference and its moves, the force ramps, the controller's
-  constants or declared parameters, per drive its voltage limit [V] and its kind's values, the rotors reflected on
-  the joints [kg·m²];
+  law parameters, the limits [rad or m], the joints' damping and sliding friction, the servos, the reference, its
+  moves and circles, the body carrying it, the force ramps, the controller's constants or declared parameters, per
+  drive its voltage limit [V] and its kind's values, the rotors reflected on the joints [kg·m²];
 - ``work`` (float64): the chains' node motion and stage states, the drives' outputs of the last call (scratch the
   call writes), then the diagnostics section (:func:`diag_starts`: what the output samples read, written when its
   switch is on).
@@ -22,14 +23,16 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-a drive kind numba cannot compile, joint friction, force-reading or stateful controllers (a sampled law among
-them), a reference carried by a body, a 2-D slide launching from rest, the energy audit, a stage or friction law
-numba cannot compile, a robot ``rigid_body`` does not compute, a circle move, controllers other than ``task_pd``,
-constant voltages and user laws of the controller ABI.
+a drive kind numba cannot compile, the energy audit with motors, force-reading or stateful controllers (a sampled
+law's held command is packed), a reference carried by a body for a law that may read its acceleration (its fold),
+two 2-D slides launching from rest at once, a stage or friction law numba cannot compile, a robot ``rigid_body``
+does not compute (none the robot loader accepts: every joint it takes is a one-DOF revolute or prismatic),
+controllers other than ``task_pd``, constant voltages and user laws of the controller ABI.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -38,12 +41,15 @@ import numpy as np
 from ...laws.abi import friction_address
 from ...laws.controllers import Controller
 from ...laws.controllers.abi import controller_address, layout_of, params_of
+from ...laws.controllers.sampled import SampledController
 from ...laws.controllers.voltage import ConstantVoltage
 from ...laws.friction_laws import FRICTION_LAWS
 from ...laws.trajectory import move_table, ramp_table
 from ...numerics.compile_cache import njit
 from ..chain import NodeKind
 from ..chain_forces import pack as pack_chain
+from ..friction import launching
+from .circle import CIRCLE_W
 from .drives import DW_W, drive_table, drives_unsupported
 
 __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts"]
@@ -53,12 +59,14 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts"]
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, I_DRIVES, R_DRIVES, R_REFLECTED, W_DRIVES, ANY_MOTOR,
- W_DIAG, HEADER) = range(47)
+ W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
+ N_LAUNCH, I_LAUNCH, ENERGY, HEADER) = range(59)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
-#: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
-CTL_NONE, CTL_TASK_PD, CTL_ABI = 0, 1, 2
-CTL_CONSTANT = 3  #: a constant command per joint (open-loop voltages [V], ConstantVoltage), in the controller's reals
+#: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI), a
+#: sampled law's held command (τ = the state's held slots from x[X_HELD], laws.controllers.sampled), a constant
+#: command per joint (open-loop voltages [V], ConstantVoltage, in the controller's reals)
+CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_HELD, CTL_CONSTANT = 0, 1, 2, 3, 4
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
@@ -75,7 +83,8 @@ CR_POINT, CR_AXIS, CR_T, CR_R, CR_MU_S, CR_MU_K, CR_VISCOUS, CR_W = 0, 3, 6, 12,
  CH_ROBOT_COORD, CH_ENV_KIND, CH_ENV_COORD, CH_OFFSET, CH_W) = range(16)
 LI_JOINT, LI_SIDE, LI_W = 0, 1, 2  #: a pressing limit's ints (its value [rad or m] in reals)
 #: the event values the call writes (``events``): per contact its gap [m], normal force [N], slip velocity [m/s]
-#: and friction force [N] in tangent coordinates; then each pressing limit's torque [N·m or N]; then the status
+#: and friction force [N] in tangent coordinates; then each pressing limit's torque [N·m or N], each held (stuck)
+#: joint's holding torque [N·m or N], each sliding joint's speed [rad/s or m/s]; then the status
 EV_GAP, EV_FN, EV_VT, EV_FF, EV_W = 0, 1, 2, 4, 6
 #: status: 1 the call is complete; 0 the KKT matrix is singular (the readable model's least squares is needed)
 TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
@@ -118,31 +127,32 @@ class Packed:
     row_meta: list[tuple[str, str, int]]  #: (owner, kind, index) per KKT row, as contactdyn.model.constraints
     contacts: list[str]
     limits: list[int]  #: the pressing joints' coordinates, in the order of their torques
+    held: list[int]  #: the stuck joints with a row, in the order of their holding torques
+    sliding: list[int]  #: the sliding joints, in the order of their speeds
 
 
 def unsupported(system, modes, phase) -> str:
     """Why this prototype cannot pack (modes, phase) ("" when it can)."""
     ctl = phase.controller
-    if system.energy_slot >= 0:
-        return "energy audit"
     if reason := drives_unsupported(system):
         return reason
-    if system.joint_friction.any:
-        return "joint friction (its stuck rows and torques are not packed yet)"
+    if system.energy_slot >= 0 and system.drives.any_motor:
+        return "the energy audit with motors (the motors' power is not in the pipeline's audit yet)"
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
-    if phase.carrier is not None:
-        return "a reference carried by a body"
+    if phase.carrier is not None and ctl.name != "task_pd" and not isinstance(ctl, SampledController):
+        return "a reference carried by a body, for a law that may read its acceleration (its fold is not packed)"
     constant = isinstance(ctl, ConstantVoltage)
-    if ctl.uses_forces or ctl.n_states or (ctl.outputs != "torque" and not constant):
+    if isinstance(ctl, SampledController):
+        if ctl.outputs != "torque":
+            return "a sampled law that outputs voltages"
+    elif ctl.uses_forces or ctl.n_states or (ctl.outputs != "torque" and not constant):
         return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
-    if ctl.name != "task_pd" and not constant and not _addressable(type(ctl)):
+    elif ctl.name != "task_pd" and not constant and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
-    if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
-        return "a circle move"
+    if sum(launching(m) for m in modes) > 1:
+        return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
     for c, m in zip(system.contacts, modes, strict=True):
-        if m.from_rest and len(m.slip) == 2 and m.touching and not m.stuck:
-            return "a 2-D slide launching from rest"
         if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
             return f"friction law {c.friction.law!r} does not compile"
         for dc in c.chains:
@@ -188,6 +198,7 @@ def pack(system, modes, phase) -> Packed:
     h = b.ints
     nv, nQ = system.nv, system.nQ
     h[NV], h[NQ], h[NY], h[NX], h[N_DRIVES] = nv, nQ, system.ny, system.n, len(system.drives.specs)
+    h[ENERGY] = system.energy_slot
     b.reals[RH_OMEGA], b.reals[RH_SLIP_BAND] = system.stabilization, system.slip_band
     table = system.robot.rigid_table
     h[NJ] = table.shape[0]
@@ -202,7 +213,12 @@ def pack(system, modes, phase) -> Packed:
     b.real_section(R_LIMITS, [system.limits.by_index[i].lower if side > 0 else system.limits.by_index[i].upper
                               for i, side in phase.limits])
     meta += [(system.limits.by_index[i].name, "limit", i) for i, _ in phase.limits]
+    held, sliding = _joint_friction(b, system, phase)
+    meta += [(system.joint_friction.names[i], "joint", i) for i in held]
     h[N_ROWS] = len(meta)
+    launches = [ci for ci, m in enumerate(modes) if launching(m)]
+    h[N_LAUNCH] = len(launches)
+    b.int_section(I_LAUNCH, launches)
     h[N_SERVOS] = len(system.servo)
     b.int_section(I_SERVOS, [idx for idx, _, _ in system.servo])
     b.real_section(R_SERVOS, [v for _, v_ref, gain in system.servo for v in (v_ref, gain)])
@@ -212,9 +228,9 @@ def pack(system, modes, phase) -> Packed:
     h[W_DIAG] = b.work
     b.work = int(diag_starts(np.array(h, dtype=np.int64))[D_END])
     h[W_SIZE] = b.work
-    n_events = EV_W * len(system.contacts) + len(phase.limits) + 1
+    n_events = EV_W * len(system.contacts) + len(phase.limits) + len(held) + len(sliding) + 1
     return Packed(np.array(h, dtype=np.int64), np.array(b.reals), np.zeros(max(b.work, 1)), np.zeros(n_events),
-                  meta, [c.name for c in system.contacts], [i for i, _ in phase.limits])
+                  meta, [c.name for c in system.contacts], [i for i, _ in phase.limits], held, sliding)
 
 
 def _frames(b: _Builder, system, fids: list[int]) -> None:
@@ -310,9 +326,22 @@ def _chain(b: _Builder, system, c, m, dc, tangent: int, at: int, row: int) -> No
                             *surface(chain.env_surface), offset_at]
 
 
+def _joint_friction(b: _Builder, system, phase) -> tuple[list[int], list[int]]:
+    """The joints' damping b (nv) [N·m·s/rad or N·s/m], the stuck joints that carry a row, the sliding ones with
+    (s, τ_k [N·m or N]) (model.joint_friction); (the held joints in their rows' order, the sliding ones)."""
+    jf, h = system.joint_friction, b.ints
+    held = jf.held(phase.joint_modes, phase.limits) if jf.any else []
+    sliding = [(i, m) for i, m in phase.joint_modes if m != 0] if jf.any else []
+    h[JOINT_FRICTION], h[N_HELD], h[N_SLIDING] = int(jf.any), len(held), len(sliding)
+    b.int_section(I_JOINTS, [*held, *(i for i, _ in sliding)])
+    b.real_section(R_JOINTS, [*jf.damping, *(v for i, m in sliding for v in (m, jf.kinetic[i]))])
+    return held, [i for i, _ in sliding]
+
+
 def _reference(b: _Builder, system, phase) -> None:
-    """The reference's start and moves (trajectory.move_table, then each move's Δ), the force ramps and the
-    set-points' directions (the controller's normals), in the phase's order."""
+    """The reference's start and moves (trajectory.move_table, then each move's Δ), the body that carries it
+    (its coordinate, -1 none, and unit axis), the force ramps and the set-points' directions (the controller's
+    normals), in the phase's order."""
     h = b.ints
     ref = phase.reference
     h[REF_DIMS] = len(ref.start) if ref is not None else 0
@@ -321,6 +350,11 @@ def _reference(b: _Builder, system, phase) -> None:
         b.real_section(R_REF, [*ref.start, *move_table(ref.moves).ravel(), *(v for mv in ref.moves for v in mv.delta)])
     else:
         h[R_REF] = len(b.reals)
+    moves = ref.moves if ref is not None else ()
+    b.real_section(R_CIRCLES, [[1.0, 2.0 * math.pi * m.turns, *m._circle_terms.ravel()] if m.kind == "circle" else
+                               [0.0] * CIRCLE_W for m in moves])
+    h[CARRIER] = phase.carrier[0] if phase.carrier is not None else -1
+    b.real_section(R_CARRIER, phase.carrier[1] if phase.carrier is not None else np.zeros(3))
     keys = list(phase.forces)
     h[N_FORCES] = len(keys)
     b.real_section(R_RAMPS, [*ramp_table([phase.forces[k] for k in keys]).ravel(),
@@ -329,10 +363,15 @@ def _reference(b: _Builder, system, phase) -> None:
 
 def _controller(b: _Builder, system, phase) -> None:
     """task PD: its constants (TaskPD.constants) and feedforward; constant voltages: one per joint; a controller of
-    the ABI: its address, the layout of its inputs and its declared parameters."""
+    the ABI: its address, the layout of its inputs and its declared parameters; a sampled law: where its held command
+    is in x."""
     h = b.ints
     ctl = phase.controller
     h[READS_ORIENTATION], h[NEEDS_GRAVITY] = int(ctl.reads_orientation), int(ctl.needs_gravity)
+    if isinstance(ctl, SampledController):
+        h[CTL_KIND], h[X_HELD] = CTL_HELD, 2 * system.nQ + phase.z_slice.start + ctl.held.start
+        b.int_section(I_LAYOUT, ())
+        return
     if ctl.name == "task_pd":
         axes, kp, kd, tool_axis, target, R_d, ko, do, kd_joint, kd_normal = ctl.constants
         h[CTL_KIND], h[N_AXES], h[HAS_TOOL], h[HAS_RD] = CTL_TASK_PD, len(axes), int(tool_axis.size > 0), \

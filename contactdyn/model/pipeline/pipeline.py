@@ -1,7 +1,8 @@
 """One right-hand-side call, written once over a mode's packed arrays (:mod:`.pack`): the pipeline.
 
-    robot terms -> frames -> contacts (chains, bond rows, friction rows) -> limit rows -> controller -> drives
-    -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] and the event values
+    robot terms -> frames -> contacts (chains, bond rows, friction rows) -> limit rows -> stuck joints' rows
+    -> controller -> joint damping and sliding friction -> drives
+    -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] (the energy audit's last) and the event values
 
 :func:`call` is numba-compiled once for every scene and every law (the laws enter by address: stage and friction
 laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`, a drive
@@ -21,7 +22,10 @@ from .actuation import command, drives
 from .contacts import contact_terms, finish, limit_rows
 from .diagnostics import record
 from .drives import drive_values, inertias
+from .energy import energy_rates
+from .joint_friction import joint_events, joint_rows, joint_torques
 from .kkt import kkt_solve
+from .launch import ST_CONTACT, launch_start, launch_took
 from .pack import (
     ANY_MOTOR,
     EV_FF,
@@ -31,6 +35,8 @@ from .pack import (
     EV_W,
     N_CONTACTS,
     N_DRIVES,
+    N_HELD,
+    N_LAUNCH,
     N_LIMITS,
     N_ROWS,
     NQ,
@@ -51,36 +57,47 @@ __all__ = ["call", "rates_at", "samples_at", "Pipeline"]
 
 @njit(cache=True)
 def call(t, x, ints, reals, work, events):
-    """ẋ at (t [s], x) of the packed mode; the event values and the status (last) into ``events``."""
+    """ẋ at (t [s], x) of the packed mode; the event values and the status (last) into ``events``. A 2-D slide
+    launching from rest first finds its direction (:mod:`.launch`): the loop's trial passes on a copy of ``reals``,
+    then the pass with the directions found (one pass without a launch; one body, compiled once)."""
     nv, nQ, nr, nc = ints[NV], ints[NQ], ints[N_ROWS], ints[N_CONTACTS]
-    H, h, g, Jw, W = robot_terms(x, ints, reals)
-    M, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:])  # rotors reflected: the true M, the law's H
-    FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
-    f = np.zeros(nQ)
-    f[:nv] = -h
-    ydot = np.zeros(ints[NY])
-    G, C, gamma = np.zeros((nr, nQ)), np.zeros((nr, nQ)), np.zeros(nr)
-    pending = np.zeros((nc, 5))
-    xdot = np.empty(ints[NX])
-    if not contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, events, pending):
-        events[events.size - 1] = -1.0
-        return xdot
-    first_limit = nr - ints[N_LIMITS]
-    limit_rows(x, ints, reals, first_limit, G, C, gamma)
-    tau = command(t, x, ints, reals, Hc, h, g, FJ, Fa, Fp, Fv, FR)
-    ok, applied = drives(x, ints, reals, work, tau, f)
-    if not ok:
-        events[events.size - 1] = -1.0
-        return xdot
-    qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma)
-    xdot[:nQ] = x[nQ:2 * nQ]
-    xdot[nQ:2 * nQ] = qdd
-    xdot[2 * nQ:] = ydot
-    finish(ints, lam, xdot, events, pending, first_limit)
-    if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
-        record(t, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam)
-    events[events.size - 1] = 1.0 if regular else 0.0
-    return xdot
+    reals, state = launch_start(ints, reals)
+    while True:
+        final = state[ST_CONTACT] >= ints[N_LAUNCH]
+        H, h, g, Jw, W = robot_terms(x, ints, reals)
+        M, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:])  # rotors reflected: the true M, the law's H
+        FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
+        f = np.zeros(nQ)
+        f[:nv] = -h
+        ydot = np.zeros(ints[NY])
+        G, C, gamma = np.zeros((nr, nQ)), np.zeros((nr, nQ)), np.zeros(nr)
+        pending = np.zeros((nc, 5))
+        xdot = np.empty(ints[NX])
+        if not contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, events, pending):
+            events[events.size - 1] = -1.0
+            return xdot
+        first_joint = nr - ints[N_HELD]
+        first_limit = first_joint - ints[N_LIMITS]
+        limit_rows(x, ints, reals, first_limit, G, C, gamma)
+        joint_rows(x, ints, reals, first_joint, G, C, gamma)
+        tau = command(t, x, ints, reals, Hc, h, g, FJ, Fa, Fp, Fv, FR)
+        joint_torques(x, ints, reals, f)
+        ok, applied = drives(x, ints, reals, work, tau, f)
+        if not ok:
+            events[events.size - 1] = -1.0
+            return xdot
+        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma)
+        xdot[:nQ] = x[nQ:2 * nQ]
+        xdot[nQ:2 * nQ] = qdd
+        xdot[2 * nQ:] = ydot
+        finish(ints, lam, xdot, events, pending, first_limit)
+        energy_rates(x, ints, reals, applied, xdot, events, pending)
+        joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
+        if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
+            record(t, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam)
+        events[events.size - 1] = 1.0 if regular else 0.0
+        if final or not regular or launch_took(x, ints, state, reals, FJ, Fa, Fv, xdot):
+            return xdot
 
 
 @njit(cache=True)
@@ -135,14 +152,20 @@ class Pipeline:
         return xdot
 
     def values(self) -> dict[str, object]:
-        """The last call's event values by name: per contact gap [m], F_n [N], v_t [m/s], F_f [N]; limit torques; with
+        """The last call's event values by name: per contact gap [m], F_n [N], v_t [m/s], F_f [N]; limit torques,
+        the stuck joints' holding torques [N·m or N] and the sliding joints' speeds [rad/s or m/s], by joint; with
         motors, the drives' outputs (``.drives.drive_values``)."""
         p, out = self.packed, {}
         for ci, name in enumerate(p.contacts):
             ev = p.events[EV_W * ci:EV_W * (ci + 1)]
             out[name] = {"gap": ev[EV_GAP], "F_n": ev[EV_FN], "v_t": ev[EV_VT:EV_VT + 2].copy(),
                          "F_f": ev[EV_FF:EV_FF + 2].copy()}
-        out["limit"] = {i: p.events[EV_W * len(p.contacts) + k] for k, i in enumerate(p.limits)}
+        base = EV_W * len(p.contacts)
+        out["limit"] = {i: p.events[base + k] for k, i in enumerate(p.limits)}
+        base += len(p.limits)
+        out["joint_hold"] = {i: p.events[base + k] for k, i in enumerate(p.held)}
+        base += len(p.held)
+        out["joint_speed"] = {i: p.events[base + k] for k, i in enumerate(p.sliding)}
         if p.ints[ANY_MOTOR]:
             out["drives"] = drive_values(p.work[p.ints[W_DRIVES]:], p.ints[N_DRIVES])
         return out

@@ -1,0 +1,66 @@
+"""The pipeline's joint friction over the packed arrays (:mod:`contactdyn.model.joint_friction`, issue 31).
+
+Per joint its damping −b q̇ [N·m or N]; per joint with dry friction, in the phase's joint mode: stuck (a row
+eᵢ Q̈ + ω q̇ᵢ = 0 after the limits' rows, its force the holding torque; a joint pressing on a limit has none) or
+sliding with sign s (the known torque −s τ_k). The event values after the limits': the held joints' torques
+[N·m or N], then the sliding joints' speeds [rad/s or m/s]. The packed layout: ``pack._joint_friction``.
+"""
+
+from __future__ import annotations
+
+from ...numerics.compile_cache import njit
+from .pack import I_JOINTS, JOINT_FRICTION, N_HELD, N_SLIDING, NQ, NV, R_JOINTS, RH_OMEGA
+
+__all__ = ["joint_rows", "joint_torques", "joint_events", "joint_dissipation"]
+
+
+@njit(cache=True)
+def joint_rows(x, ints, reals, first_row, G, C, gamma):
+    """A row per held joint from ``first_row`` (JointFriction.add_rows): eᵢ, γ = ω q̇ᵢ [rad/s² or m/s²]."""
+    nQ, w = ints[NQ], reals[RH_OMEGA]
+    for k in range(ints[N_HELD]):
+        i, r = ints[ints[I_JOINTS] + k], first_row + k
+        G[r, i] = C[r, i] = 1.0
+        gamma[r] = w * x[nQ + i]
+
+
+@njit(cache=True)
+def joint_torques(x, ints, reals, f):
+    """The damping and sliding friction −b q̇ − s τ_k [N·m or N] added to f (JointFriction.torques)."""
+    if not ints[JOINT_FRICTION]:
+        return
+    nv, nQ, at = ints[NV], ints[NQ], ints[R_JOINTS]
+    tau = -reals[at:at + nv] * x[nQ:nQ + nv]
+    sliding = ints[I_JOINTS] + ints[N_HELD]
+    for k in range(ints[N_SLIDING]):
+        i = ints[sliding + k]
+        tau[i] -= reals[at + nv + 2 * k] * reals[at + nv + 2 * k + 1]
+    for c in range(nv):
+        f[c] += tau[c]
+
+
+@njit(cache=True)
+def joint_events(x, ints, lam, first_row, events, base):
+    """From ``events[base]``: the held joints' holding torques λ [N·m or N], the sliding joints' speeds."""
+    nQ, n_held = ints[NQ], ints[N_HELD]
+    for k in range(n_held):
+        events[base + k] = lam[first_row + k]
+    for k in range(ints[N_SLIDING]):
+        events[base + n_held + k] = x[nQ + ints[ints[I_JOINTS] + n_held + k]]
+
+
+@njit(cache=True)
+def joint_dissipation(x, ints, reals):
+    """[W] b q̇² + Σ τ_k s q̇ᵢ ≥ 0 (JointFriction.dissipation: the power the joints' damping and sliding take)."""
+    if not ints[JOINT_FRICTION]:
+        return 0.0
+    nv, nQ, at = ints[NV], ints[NQ], ints[R_JOINTS]
+    damped = 0.0
+    for c in range(nv):
+        v = x[nQ + c]
+        damped += reals[at + c] * (v * v)
+    sliding = ints[I_JOINTS] + ints[N_HELD]
+    dry = 0.0
+    for k in range(ints[N_SLIDING]):
+        dry += reals[at + nv + 2 * k + 1] * reals[at + nv + 2 * k] * x[nQ + ints[sliding + k]]
+    return damped + dry

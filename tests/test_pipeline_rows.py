@@ -1,0 +1,190 @@
+"""Issue 29's pipeline, the small mode kinds (contactdyn/model/pipeline/): joint friction, a held sampled command,
+a reference carried by a body, a circle move, a 2-D slide launching from rest, the energy audit. Their ẋ against
+System.evaluate is test_pipeline_proto's (every case of benchmarks/pipeline_proto.py); here: their event values,
+what each kind changes, and the same source interpreted."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
+sys.path.insert(0, str(BENCH))
+from pipeline_proto import case, states  # noqa: E402
+
+from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+
+RTOL = 1e-12  #: as test_pipeline_proto's: measured ≤ 2e-15 on these cases
+
+
+@pytest.mark.parametrize("name", ["b1_joints_stuck", "b1_joints_mixed", "b1_joints_limit", "b1_joints_slide",
+                                  "b1_sampled_joints"])
+def test_the_joints_event_values_are_the_readable_ones(name):
+    """Holding torques of the stuck joints (none for a joint on its limit: the limit's row holds it), the sliding
+    joints' speeds, the limits' torques."""
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    for x in states(x0, 3):
+        pipe.rhs(t, x)
+        got, ev = pipe.values(), system.evaluate(t, x, modes, phase)
+        assert set(got["joint_hold"]) == set(ev.joint_hold)
+        for i, hold in ev.joint_hold.items():
+            assert got["joint_hold"][i] == pytest.approx(hold, abs=RTOL * (1.0 + abs(hold)))
+        assert got["joint_speed"] == {i: x[system.nQ + i] for i, m in phase.joint_modes if m != 0}
+        for i, torque in ev.limit_torque.items():
+            assert got["limit"][i] == pytest.approx(torque, abs=RTOL * (1.0 + abs(torque)))
+    assert pipe.fallbacks == 0
+
+
+def test_a_sampled_law_acts_by_its_held_command():
+    """τ is the state's held slots (SampledController.command): another held command gives another Q̈, the readable
+    model's; the held slots' rates stay 0."""
+    system, modes, phase, t, x0 = case("b1_sampled")
+    pipe = Pipeline(system, modes, phase)
+    nQ, nv = system.nQ, system.nv
+    held = 2 * nQ + phase.z_slice.start + phase.controller.held.start
+    x = x0.copy()
+    x[held:held + nv] = 0.0
+    base = pipe.rhs(t, x)
+    x[held] = 1.0  # 1 N·m more on joint 0
+    more = pipe.rhs(t, x)
+    assert np.all(more[2 * nQ + phase.z_slice.start:][:nv] == 0.0)
+    assert np.abs(more[nQ:2 * nQ] - base[nQ:2 * nQ]).max() > 1e-3
+    ev = system.evaluate(t, x, modes, phase)
+    assert np.allclose(more[nQ:2 * nQ], ev.xdot[nQ:2 * nQ], rtol=0, atol=RTOL * np.abs(ev.xdot).max())
+
+
+def test_a_joint_on_its_limit_has_no_stuck_row():
+    system, modes, phase, _, _ = case("b1_joints_limit")
+    kinds = [(kind, i) for _, kind, i in Pipeline(system, modes, phase).packed.row_meta]
+    assert kinds[-2:] == [("limit", 1), ("joint", 0)]
+
+
+def test_the_carried_reference_rides_on_the_cart():
+    """case1_cart's push under task PD: the reference carried by the cart (x_d += axis Q_b, v_d += axis Q̇_b) gives
+    the readable rates; the same mode with the carrier dropped from the packed arrays does not."""
+    from contactdyn.model.pipeline.pack import CARRIER
+
+    system, modes, phase, t, x0 = case("cart_push_carried")
+    assert phase.carrier is not None
+    pipe = Pipeline(system, modes, phase)
+    ref = system.evaluate(t, x0, modes, phase).xdot
+    assert np.abs(pipe.rhs(t, x0) - ref).max() <= RTOL * np.abs(ref).max()
+    pipe.packed.ints[CARRIER] = -1
+    assert np.abs(pipe.rhs(t, x0) - ref).max() > 1e-3 * np.abs(ref).max()
+
+
+def test_a_carried_reference_for_a_law_that_may_read_its_acceleration_is_declined():
+    from pipeline_proto import _scene
+
+    from contactdyn.model.pipeline.pack import unsupported
+    from contactdyn.simulate import prepare
+
+    def no_motors(doc):
+        del doc["robot"]["drive"], doc["body"]["cart"]["drive"]
+
+    system, modes, phase, x0 = prepare(_scene("sims/case1_cart.toml", no_motors))
+    push = system.start_phase(1, 1.0, x0, phase)
+    assert "carried by a body" in unsupported(system, modes, push)
+
+
+@pytest.mark.parametrize("with_line", [False, True])
+def test_a_circle_move_is_the_references_own(with_line):
+    """The packed reference with a circle (alone: Reference.at's one-move sum; with a straight move after it) gives
+    x_d, v_d, a_d of Reference.at bit for bit, before, along and after the circle."""
+    from contactdyn.model.pipeline.actuation import reference
+
+    system, modes, phase, t, x0 = case("writer5dof_circle")
+    if not with_line:
+        phase = replace(phase, reference=replace(phase.reference, moves=phase.reference.moves[:1]))
+    assert [m.kind for m in phase.reference.moves] == ["circle", "trapezoid"][:1 + with_line]
+    p = Pipeline(system, modes, phase).packed
+    for tk in phase.t_start + np.array([-0.1, 0.0, 0.3, 0.8, 1.7, 2.9, 3.95, 4.0, 4.2]):
+        got, want = reference(tk, p.ints, p.reals), phase.reference.at(tk)
+        for g, w in zip(got, want, strict=True):
+            assert np.array_equal(g, w), (tk, g, w)
+
+
+@pytest.mark.parametrize("name", ["ur5_launch", "writer5dof_launch"])
+def test_a_slide_launching_from_rest_takes_the_readable_direction(name):
+    """At rest (positions near the case's, velocities 0) the UR5's pencil launches along a direction other than its
+    reference (Newton converged), the 5-DOF writer's keeps its reference (Newton gives up: dφ/dθ ≥ 0); ẋ is the
+    readable model's either way."""
+    from contactdyn.model.friction import launch_directions_at
+
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    nQ, turned = system.nQ, 0
+    for x in states(x0, 5):
+        x[nQ:2 * nQ] = 0.0
+        d = launch_directions_at(system, t, x, modes, phase)[0].slip
+        turned += int(np.abs(np.array(d) - modes[0].slip).max() > 1e-3)
+        ref = system.evaluate(t, x, modes, phase).xdot
+        assert np.abs(pipe.rhs(t, x) - ref).max() <= RTOL * np.abs(ref).max()
+    assert (turned > 0) == (name == "ur5_launch")  # (the UR5: 2 of the 5 states)
+    assert pipe.fallbacks == 0
+
+
+def test_two_slides_launching_at_once_are_declined():
+    from contactdyn.model.pipeline.pack import unsupported
+
+    system, modes, phase, _, _ = case("ur5_launch")
+    assert unsupported(system, modes, phase) == ""
+    system.contacts.append(system.contacts[0])  # the pencil twice: two contacts launching
+    try:
+        assert "two 2-D slides launching" in unsupported(system, modes * 2, phase)
+    finally:
+        system.contacts.pop()
+
+
+@pytest.mark.parametrize("name", ["b1_energy", "b1_energy_stuck", "b1_energy_stick", "b1_energy_massless",
+                                  "writer_b_energy"])
+def test_the_energy_audits_rates_are_the_readable_ones(name):
+    """The drives' power and the dissipation (dampers, viscous and Coulomb sliding friction with and without a
+    normal row, joint damping and sliding friction) against System.evaluate, each to 1e-12 of itself."""
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    e = 2 * system.nQ + system.energy_slot
+    for x in states(x0, 4)[1:]:  # (moving: x0 of writer_b is at rest, no power)
+        got, ref = pipe.rhs(t, x)[e:e + 2], system.evaluate(t, x, modes, phase).xdot[e:e + 2]
+        assert np.all(ref != 0.0)
+        np.testing.assert_allclose(got, ref, rtol=RTOL, atol=0.0)
+
+
+_INTERPRETED = """
+import json, sys
+sys.path.insert(0, {bench!r})
+from pipeline_proto import case, states
+from contactdyn.model.pipeline.pipeline import Pipeline
+out = {{}}
+for name in {names!r}:
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    out[name] = [pipe.rhs(t, x).tolist() for x in states(x0, 2)]
+print(json.dumps(out))
+"""
+INTERPRETED = ["b1_joints_mixed", "b1_sampled", "cart_push_carried", "ur5_circle", "ur5_launch", "b1_energy"]
+
+
+def test_the_same_source_interpreted_gives_the_compiled_rates():
+    """NUMBA_DISABLE_JIT=1: the same functions as Python give ẋ bit for bit (and the readable model's)."""
+    env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(BENCH.parent)}
+    done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=INTERPRETED)], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    interpreted = json.loads(done.stdout.strip().splitlines()[-1])
+    assert set(interpreted) == set(INTERPRETED)
+    for name in INTERPRETED:
+        system, modes, phase, t, x0 = case(name)
+        pipe = Pipeline(system, modes, phase)
+        for x, got in zip(states(x0, 2), interpreted[name], strict=True):
+            compiled, ref = pipe.rhs(t, x), system.evaluate(t, x, modes, phase).xdot
+            assert np.array_equal(np.array(got), compiled), name
+            assert np.abs(np.array(got) - ref).max() <= RTOL * np.abs(ref).max()
