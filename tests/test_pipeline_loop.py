@@ -161,7 +161,8 @@ def test_the_diagnostics_interpreted_are_the_compiled_ones():
         assert got[3] == interpreted[name][3] == 2
 
 
-@pytest.mark.parametrize("name", ["writer_rigid_stick", "b1_limit", "writer5dof_tool_slide"])
+@pytest.mark.parametrize("name", ["writer_rigid_stick", "b1_limit", "writer5dof_tool_slide", "b1_joints_mixed",
+                                  "b1_joints_limit"])
 def test_a_call_answered_by_the_readable_model_gives_its_event_values_in_the_calls_layout(name):
     """PipelineMode._events_of (a call whose status is not 1: the readable model's values in the ring) lays the
     Evaluation out as the call lays its events."""
@@ -169,6 +170,6 @@ def test_a_call_answered_by_the_readable_model_gives_its_event_values_in_the_cal
     pm = PipelineMode(Pipeline(system, modes, phase))
     x = states(x0, 2)[1]
     pm.rhs(t, x)
-    got, ref = pm._events_of(system.evaluate(t, x, modes, phase)), pm.values(t, x)
+    got, ref = pm._events_of(system.evaluate(t, x, modes, phase), x), pm.values(t, x)
     assert np.abs(got - ref).max() <= 1e-12 * np.abs(ref).max()
     assert got[-1] == ref[-1] == 1.0

@@ -66,17 +66,18 @@ def test_many_states_in_one_call_are_the_single_calls():
 
 
 def test_a_mode_out_of_scope_is_declined_with_its_reason():
-    """b1 with the energy audit (solver.record_energy)."""
+    """The motor-driven writer with the energy audit (solver.record_energy): the motors' power is not in the
+    pipeline's audit."""
     import tomllib
 
     from contactdyn import parse_scene
     from contactdyn.simulate import prepare
 
-    path = Path(__file__).resolve().parent.parent / "sims" / "b1.toml"
+    path = Path(__file__).resolve().parent.parent / "sims" / "case2_writer_motors.toml"
     doc = tomllib.loads(path.read_text())
-    doc["solver"]["record_energy"] = True
+    doc.setdefault("solver", {})["record_energy"] = True
     system, modes, phase, _ = prepare(parse_scene(doc, file=str(path)))
-    with pytest.raises(ValueError, match="energy audit"):
+    with pytest.raises(ValueError, match="energy audit with motors"):
         Pipeline(system, modes, phase)
 
 

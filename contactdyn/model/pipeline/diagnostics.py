@@ -14,19 +14,23 @@ from __future__ import annotations
 
 from ...numerics.compile_cache import njit
 from .actuation import reference, set_points
+from .carried import carry
 from .pack import D_CMD, D_FD, D_LAM, D_TAU, D_TIP, D_XD, REF_DIMS, diag_starts
 
 __all__ = ["record"]
 
 
 @njit(cache=True)
-def record(t, ints, reals, work, applied, tau, p_tip, lam):
-    """Write the diagnostics of a call at t [s]: applied forces, command, tip [m], x_d [m], F_d [N], λ."""
+def record(t, x, ints, reals, work, applied, tau, p_tip, lam):
+    """Write the diagnostics of a call at (t [s], x): applied forces, command, tip [m], x_d [m] (carried by its body,
+    if one carries it), F_d [N], λ."""
     at = diag_starts(ints)
     work[at[D_TAU]:at[D_TAU] + applied.size] = applied
     work[at[D_CMD]:at[D_CMD] + tau.size] = tau
     work[at[D_TIP]:at[D_TIP] + 3] = p_tip
     if ints[REF_DIMS]:
-        work[at[D_XD]:at[D_FD]] = reference(t, ints, reals)[0]
+        x_d, v_d, _ = reference(t, ints, reals)
+        carry(x, ints, reals, x_d, v_d)
+        work[at[D_XD]:at[D_FD]] = x_d
     work[at[D_FD]:at[D_LAM]] = set_points(t, ints, reals)[0]
     work[at[D_LAM]:at[D_LAM] + lam.size] = lam

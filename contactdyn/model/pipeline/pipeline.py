@@ -94,7 +94,7 @@ def call(t, x, ints, reals, work, events):
         energy_rates(x, ints, reals, applied, xdot, events, pending)
         joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
         if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
-            record(t, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam)
+            record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam)
         events[events.size - 1] = 1.0 if regular else 0.0
         if final or not regular or launch_took(x, ints, state, reals, FJ, Fa, Fv, xdot):
             return xdot
