@@ -70,6 +70,12 @@ def _tool_pd(doc: dict) -> None:
                                                "accel_fraction": 0.2}]}
 
 
+def _straight(doc: dict) -> None:
+    """A writer with its own controller (operational_space), its circle made a straight trapezoid."""
+    doc["phase"][1]["reference"] = {"moves": [{"kind": "trapezoid", "delta": [-0.03, 0.0, 0.0], "duration": 4.0,
+                                               "accel_fraction": 0.2}]}
+
+
 #: case -> (scene file, an edit of its TOML or None, what to change from its first mode: None, or a function of
 #: (system, modes, phase, x0) giving (modes, phase))
 def _touch(stuck=False, limits=(), phase=None):
@@ -105,6 +111,10 @@ CASES = {
     "writer5dof_tool": ("sims/case2_writer5dof.toml", _tool_pd, None),
     "writer5dof_tool_slide": ("sims/case2_writer5dof.toml", _tool_pd, _touch(phase=1)),
     "ur5_tool": ("sims/case2_writer_ur5.toml", _tool_pd, None),
+    "writer5dof_ops": ("sims/case2_writer5dof.toml", None, None),
+    "writer5dof_ops_write": ("sims/case2_writer5dof.toml", _straight, _touch(phase=1)),
+    "ur5_ops": ("sims/case2_writer_ur5.toml", None, None),
+    "ur5_ops_write": ("sims/case2_writer_ur5.toml", _straight, _touch(phase=1)),
     "cubic_press": ("examples/cubic_press.toml", None, None),
     "impedance_press": ("examples/impedance_press.toml", None, None),
 }

@@ -23,10 +23,12 @@ from ...laws.controllers.abi import FIELD, call_controller, control_arrays, put_
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
+from .control_laws import operational_command
 from .pack import (
     CTL_ABI,
     CTL_ADDRESS,
     CTL_KIND,
+    CTL_OPERATIONAL,
     CTL_TASK_PD,
     FEEDFORWARD,
     FF_BIAS,
@@ -152,6 +154,9 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
     if ints[CTL_KIND] == CTL_TASK_PD:
         F_d, forced = set_points(t, ints, reals)
         return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)
+    if ints[CTL_KIND] == CTL_OPERATIONAL:
+        F_d, _ = set_points(t, ints, reals)
+        return operational_command(x, ints, reals, H, h, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d, F_d)
     if ints[CTL_KIND] == CTL_ABI:
         return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
     return np.zeros(ints[NV])

@@ -49,7 +49,7 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
-CTL_NONE, CTL_TASK_PD, CTL_ABI = 0, 1, 2
+CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_OPERATIONAL = 0, 1, 2, 3  #: (and the operational-space law compiled in)
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
@@ -106,7 +106,9 @@ def unsupported(system, modes, phase) -> str:
         return "a reference carried by a body"
     if ctl.uses_forces or ctl.n_states or ctl.outputs != "torque":
         return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
-    if ctl.name != "task_pd" and not _addressable(type(ctl)):
+    if ctl.name == "operational_space" and ctl.force_keys != list(phase.forces):
+        return "operational_space's set-points in another order than the phase's"
+    if ctl.name not in COMPILED_IN and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
     if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
         return "a circle move"
@@ -119,6 +121,10 @@ def unsupported(system, modes, phase) -> str:
             if pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching).python_stages:
                 return f"a stage law of {c.name}.{dc.label} does not compile"
     return ""
+
+
+#: the built-in controllers compiled into the call as kinds (their laws' own compiled functions)
+COMPILED_IN = ("task_pd", "operational_space")
 
 
 def _addressable(cls: type) -> bool:
@@ -309,6 +315,13 @@ def _controller(b: _Builder, system, phase) -> None:
         tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
         b.real_section(R_CTL, [*axes.ravel(), *kp, *kd, *tool[0], *tool[1],
                                *(R_d.ravel() if R_d.shape[0] else np.zeros(9)), ko, do, kd_joint, kd_normal])
+        b.int_section(I_LAYOUT, ())
+        return
+    if ctl.name == "operational_space":
+        from .control_laws import operational_constants
+
+        h[CTL_KIND], h[N_AXES], h[HAS_TOOL] = CTL_OPERATIONAL, len(ctl.constants[0]), int(ctl.constants[4].size > 0)
+        b.real_section(R_CTL, operational_constants(ctl))
         b.int_section(I_LAYOUT, ())
         return
     h[CTL_KIND] = CTL_ABI
