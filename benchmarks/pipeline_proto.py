@@ -117,6 +117,7 @@ CASES = {
     "ur5_ops_write": ("sims/case2_writer_ur5.toml", _straight, _touch(phase=1)),
     "cubic_press": ("examples/cubic_press.toml", None, None),
     "impedance_press": ("examples/impedance_press.toml", None, None),
+    "force_pi_press": ("examples/force_pi_press.toml", None, None),
 }
 
 

@@ -45,7 +45,10 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
 (NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
- R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, HEADER) = range(41)
+ R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, N_Z, Z_AT, READS_FORCES, I_FOLD, HEADER) = range(45)
+#: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
+#: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
+#: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -104,8 +107,10 @@ def unsupported(system, modes, phase) -> str:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if phase.carrier is not None:
         return "a reference carried by a body"
-    if ctl.uses_forces or ctl.n_states or ctl.outputs != "torque":
-        return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
+    if ctl.outputs != "torque":
+        return f"controller {ctl.name!r} outputs {ctl.outputs}"
+    if ctl.uses_forces and any("." in key for key in phase.forces):
+        return f"controller {ctl.name!r} reads forces with a tangential set-point (its chain's force is not kept)"
     if ctl.name == "operational_space" and ctl.force_keys != list(phase.forces):
         return "operational_space's set-points in another order than the phase's"
     if ctl.name not in COMPILED_IN and not _addressable(type(ctl)):
@@ -184,6 +189,7 @@ def pack(system, modes, phase) -> Packed:
     b.real_section(R_SERVOS, [v for _, v_ref, gain in system.servo for v in (v_ref, gain)])
     _reference(b, system, phase)
     _controller(b, system, phase)
+    _fold(b, system, phase, meta)
     h[W_SIZE] = b.work
     n_events = EV_W * len(system.contacts) + len(phase.limits) + 1
     return Packed(np.array(h, dtype=np.int64), np.array(b.reals), np.zeros(max(b.work, 1)), np.zeros(n_events),
@@ -329,11 +335,22 @@ def _controller(b: _Builder, system, phase) -> None:
     h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
     absent = (*(("gravity",) if not ctl.needs_gravity else ()),
               *(("x_d", "v_d", "a_d") if phase.reference is None else ()),
-              *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()))
-    b.int_section(I_LAYOUT, layout_of(system.nv, 0, absent))
+              *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()),
+              *(("force_read",) if any("." in key for key in phase.forces) else ()),
+              *(("tau_contact", "surface_p", "surface_v", "touch") if not ctl.uses_forces else ()))
+    h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
+    b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces)))
     params = params_of(ctl.config)
     h[N_CTL_PARAMS] = params.size
     b.real_section(R_CTL, params)
+
+
+def _fold(b: _Builder, system, phase, meta: list[tuple[str, str, int]]) -> None:
+    """I_FOLD: per set-point the contact whose normal force it reads (-1 for a tangential chain's), then per row the
+    contact whose normal it is (-1: a stick, a tangential bond, a limit)."""
+    names = [c.name for c in system.contacts]
+    b.int_section(I_FOLD, [*(names.index(key) if key in names else -1 for key in phase.forces),
+                           *(names.index(owner) if kind == "n" else -1 for owner, kind, _ in meta)])
 
 
 #: handle -> controller class: the controller's Python ``command`` under NUMBA_DISABLE_JIT (the address's twin)

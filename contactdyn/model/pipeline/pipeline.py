@@ -1,7 +1,7 @@
 """One right-hand-side call, written once over a mode's packed arrays (:mod:`.pack`): the pipeline.
 
-    robot terms -> frames -> contacts (chains, bond rows, friction rows) -> limit rows -> controller -> drives
-    -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] and the event values
+    robot terms -> frames -> contacts (chains, bond rows, friction rows) -> limit rows -> controller (τ, ż and a
+    force-reading law's fold B) -> drives -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] and the event values
 
 :func:`call` is numba-compiled once for every scene and every law (the laws enter by address: stage and friction
 laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`); under
@@ -16,8 +16,9 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from .actuation import command, drives
+from .actuation import drives
 from .contacts import contact_terms, finish, limit_rows
+from .force_fold import controller_terms, fold_rates
 from .kkt import kkt_solve
 from .pack import EV_FF, EV_FN, EV_GAP, EV_VT, EV_W, N_CONTACTS, N_LIMITS, N_ROWS, NQ, NV, NX, NY, pack, unsupported
 from .robot_terms import frame_terms, robot_terms
@@ -42,9 +43,10 @@ def call(t, x, ints, reals, work, events):
         return xdot
     first_limit = nr - ints[N_LIMITS]
     limit_rows(x, ints, reals, first_limit, G, C, gamma)
-    tau = command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR)
+    tau, zdot, B, D = controller_terms(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events)
     drives(x, ints, reals, tau, f)
-    qdd, lam, regular = kkt_solve(ints, reals, H, f, G, C, gamma)
+    qdd, lam, regular = kkt_solve(ints, reals, H, f, G, C, gamma, B)
+    fold_rates(ints, lam, zdot, D, ydot)
     xdot[:nQ] = x[nQ:2 * nQ]
     xdot[nQ:2 * nQ] = qdd
     xdot[2 * nQ:] = ydot
