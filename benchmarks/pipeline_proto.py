@@ -76,6 +76,24 @@ def _straight(doc: dict) -> None:
                                                "accel_fraction": 0.2}]}
 
 
+def _force_dynamic(doc: dict) -> None:
+    """b1_force_loop under A10 as written (F* swapped into τ) on the exact nominal (model b: k, b, m), no reference."""
+    doc["controller"] = {"kind": "force_dynamic", "kv": 40.0, "kf": 50.0, "cancel": "target",
+                         "nominal": {"k": 1e5, "b": 1.0, "m": 10.0}}
+    del doc["phase"][0]["reference"]
+
+
+def _position_dynamic(doc: dict) -> None:
+    """b1_force_loop under A7 in task space, its reference pressed F_d / k into the surface (force_reference)."""
+    doc["controller"] = {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0, "force_reference": True,
+                         "nominal": {"k": 1e5}}
+
+
+def _apart(system, modes, ph, x0):
+    """The first mode with every contact apart (the dynamic laws' free directions, their integrals frozen)."""
+    return [mm.with_(touching=False) for mm in modes], ph
+
+
 #: case -> (scene file, an edit of its TOML or None, what to change from its first mode: None, or a function of
 #: (system, modes, phase, x0) giving (modes, phase))
 def _touch(stuck=False, limits=(), phase=None):
@@ -118,6 +136,11 @@ CASES = {
     "cubic_press": ("examples/cubic_press.toml", None, None),
     "impedance_press": ("examples/impedance_press.toml", None, None),
     "force_pi_press": ("examples/force_pi_press.toml", None, None),
+    "force_loop_hybrid": ("sims/b1_force_loop.toml", None, None),
+    "force_loop_hybrid_stick": ("sims/b1_force_loop.toml", None, _touch(stuck=True)),
+    "force_loop_hybrid_apart": ("sims/b1_force_loop.toml", None, _apart),
+    "b1_force_dynamic": ("sims/b1_force_loop.toml", _force_dynamic, None),
+    "b1_position_dynamic": ("sims/b1_force_loop.toml", _position_dynamic, None),
 }
 
 

@@ -23,10 +23,11 @@ from ...laws.controllers.abi import FIELD, LAYOUT_HEAD, call_controller, control
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
-from .control_laws import operational_command
+from .control_laws import dynamic_command, operational_command
 from .pack import (
     CTL_ABI,
     CTL_ADDRESS,
+    CTL_DYNAMIC,
     CTL_KIND,
     CTL_OPERATIONAL,
     CTL_TASK_PD,
@@ -148,6 +149,8 @@ def abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a
 @njit(cache=True)
 def abi_call(ints, reals, buf, lay, tau, zdot):
     """The ABI's call of the packed controller on ``buf``: τ into ``tau``, ż into ``zdot``; its status (1 written)."""
+    if ints[CTL_KIND] == CTL_DYNAMIC:  # a built-in law of the same shape, compiled in
+        return dynamic_command(ints, reals, buf, lay, tau, zdot)
     params = reals[ints[R_CTL]:ints[R_CTL] + ints[N_CTL_PARAMS]]
     return command_by_address(ints[CTL_ADDRESS], buf, lay, params, tau, zdot)
 
@@ -173,7 +176,7 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
     if ints[CTL_KIND] == CTL_OPERATIONAL:
         F_d, _, _ = set_points(t, ints, reals)
         return operational_command(x, ints, reals, H, h, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d, F_d)
-    if ints[CTL_KIND] == CTL_ABI:
+    if ints[CTL_KIND] == CTL_ABI or ints[CTL_KIND] == CTL_DYNAMIC:
         return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
     return np.zeros(ints[NV])
 

@@ -1,4 +1,4 @@
-"""Built-in controllers compiled into the pipeline as kinds: the operational-space law.
+"""Built-in controllers compiled into the pipeline as kinds: the operational-space law, the dynamic laws.
 
 ``operational_space`` (:mod:`contactdyn.laws.controllers.operational`) reads its own config (its position axes come
 from the phase's force directions at bind time, variable-size tables, not declared float parameters), so it is a
@@ -17,11 +17,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...laws.controllers import computed_torque
+from ...laws.controllers.abi import control_arrays
+from ...laws.controllers.dynamic_law import force_targets, position_targets
 from ...laws.controllers.operational_law import SINGULAR, torque
 from ...numerics.compile_cache import njit
+from ...numerics.linalg import pinv
 from .pack import HAS_TOOL, N_AXES, N_FORCES, NQ, NV, R_CTL, section
 
-__all__ = ["operational_constants", "operational_command"]
+__all__ = ["operational_constants", "operational_command", "DYNAMIC_LAWS", "dynamic_constants", "dynamic_command"]
+
+#: the dynamic laws compiled in (their tip targets: laws.controllers.dynamic_law; τ: computed_torque)
+DYNAMIC_LAWS = ("position_dynamic", "force_dynamic", "hybrid")
+#: a dynamic law's packed constants (from R_CTL): switches, K_F [1/s], k_null [1/s], K_p, K_v (3 each), P (9), then
+#: per set-point the nominal k [N/m], b [N·s/m], m [kg]
+D_FORCE_LAW, D_TRACKS, D_SWAP, D_PRESSING, D_KF, D_KNULL, D_KP, D_KV, D_P, D_ENV = 0, 1, 2, 3, 4, 5, 6, 9, 12, 21
 
 
 def operational_constants(ctl) -> list[float]:
@@ -29,6 +39,49 @@ def operational_constants(ctl) -> list[float]:
     axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
     tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
     return [*axes.ravel(), *forced.ravel(), *kp, *kd, *tool[0], *tool[1], ko, do, k_null, kd_normal]
+
+
+def dynamic_constants(ctl, phase) -> list[float]:
+    """The packed constants of a bound task-space dynamic law (A7, A10, hybrid), per set-point in the phase's order."""
+    cfg = ctl.config
+    kp, kv = ctl._gains3
+    force_law = ctl.name != "position_dynamic"
+    P = ctl.P if force_law else np.zeros((3, 3))
+    envs = [ctl.envs.get(key) for key in phase.forces]
+    env = [v for e in envs for v in ((e.k, e.b, e.m) if e is not None else (1.0, 0.0, 0.0))]
+    return [float(force_law), float(getattr(ctl, "tracks_position", True)),
+            float(force_law and cfg.cancel == "target"), float(bool(ctl.envs) and not force_law),
+            float(getattr(cfg, "kf", 0.0)), float(cfg.k_null), *kp, *kv, *P.ravel(), *env]
+
+
+@njit(cache=True)
+def dynamic_command(ints, reals, buf, lay, tau, zdot):
+    """A dynamic law on its controller buffer (the ABI's layout): τ = H q̈*(a*) + h − τ_c (+ Jᵀ f_swap) around its
+    tip targets, ż; status 1 (the ABI's call, so the fold treats it as a user's law of the same shape)."""
+    inp = control_arrays(buf, lay)
+    c = reals[ints[R_CTL]:]
+    ns = lay[2]
+    kp, kv, P = c[D_KP:D_KP + 3], c[D_KV:D_KV + 3], section(c, D_P, 3, 3)
+    env = section(c, D_ENV, ns, 3)
+    if c[D_FORCE_LAW] != 0.0:
+        a, f_swap, rates = force_targets(P, inp.p_tip, inp.v_tip, inp.x_d, inp.v_d, inp.a_d, kp, kv, c[D_KF],
+                                         inp.force_dir, inp.touch, inp.surface_p, inp.surface_v, inp.force_set,
+                                         inp.force_rate, inp.force_read, inp.z, env, c[D_TRACKS] != 0.0)
+        for i in range(rates.size):
+            zdot[i] = rates[i]
+        if c[D_SWAP] == 0.0:
+            f_swap = np.empty(0)
+    else:
+        a = position_targets(inp.p_tip, inp.v_tip, inp.x_d, inp.v_d, inp.a_d, kp, kv, c[D_PRESSING] != 0.0,
+                             inp.force_dir, inp.touch, inp.surface_p, inp.surface_v, inp.force_set, inp.force_rate,
+                             np.ascontiguousarray(env[:, 0]))
+        f_swap = np.empty(0)
+    J = inp.J
+    out = computed_torque.torque(inp.H, np.empty(0), inp.h, inp.tau_contact, J, pinv(J), inp.drift, inp.v, a,
+                                 f_swap, c[D_KNULL])
+    for i in range(out.size):
+        tau[i] = out[i]
+    return 1
 
 
 @njit(cache=True)

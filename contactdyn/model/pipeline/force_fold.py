@@ -29,6 +29,7 @@ from .pack import (
     CR_AXIS,
     CR_POINT,
     CTL_ABI,
+    CTL_DYNAMIC,
     CTL_KIND,
     EV_FN,
     EV_W,
@@ -140,7 +141,7 @@ def controller_terms(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, event
     zdot = np.zeros(nz)
     fold = ints[READS_FORCES] != 0 and nr > 0
     B, D = np.zeros((nv, nr if fold else 0)), np.zeros((nz, nr if fold else 0))
-    if ints[CTL_KIND] != CTL_ABI:
+    if ints[CTL_KIND] != CTL_ABI and ints[CTL_KIND] != CTL_DYNAMIC:
         return command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR), zdot, B, D
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)

@@ -52,7 +52,8 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
-CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_OPERATIONAL = 0, 1, 2, 3  #: (and the operational-space law compiled in)
+#: (and compiled in: the operational-space law; the dynamic laws, called on the ABI's buffer as a user's law is)
+CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_OPERATIONAL, CTL_DYNAMIC = 0, 1, 2, 3, 4
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
@@ -113,6 +114,10 @@ def unsupported(system, modes, phase) -> str:
         return f"controller {ctl.name!r} reads forces with a tangential set-point (its chain's force is not kept)"
     if ctl.name == "operational_space" and ctl.force_keys != list(phase.forces):
         return "operational_space's set-points in another order than the phase's"
+    if ctl.name in COMPILED_IN[2:] and (ctl.config.space if ctl.name == "position_dynamic" else "task") != "task":
+        return f"controller {ctl.name!r} in joint space"
+    if ctl.name in COMPILED_IN[2:] and ctl._rotor.size:
+        return f"controller {ctl.name!r} with the rotor inertia taken out (inertia = \"link\")"
     if ctl.name not in COMPILED_IN and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
     if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
@@ -129,7 +134,7 @@ def unsupported(system, modes, phase) -> str:
 
 
 #: the built-in controllers compiled into the call as kinds (their laws' own compiled functions)
-COMPILED_IN = ("task_pd", "operational_space")
+COMPILED_IN = ("task_pd", "operational_space", "position_dynamic", "force_dynamic", "hybrid")
 
 
 def _addressable(cls: type) -> bool:
@@ -307,8 +312,9 @@ def _reference(b: _Builder, system, phase) -> None:
 
 
 def _controller(b: _Builder, system, phase) -> None:
-    """task PD: its constants (TaskPD.constants) and feedforward; a controller of the ABI: its address, the layout
-    of its inputs and its declared parameters."""
+    """task PD: its constants (TaskPD.constants) and feedforward; operational space: its constants; a controller
+    of the ABI: the layout of its inputs, its address and its declared parameters; a dynamic law: the same layout
+    and its constants (control_laws.dynamic_constants)."""
     h = b.ints
     ctl = phase.controller
     h[READS_ORIENTATION], h[NEEDS_GRAVITY] = int(ctl.reads_orientation), int(ctl.needs_gravity)
@@ -330,9 +336,6 @@ def _controller(b: _Builder, system, phase) -> None:
         b.real_section(R_CTL, operational_constants(ctl))
         b.int_section(I_LAYOUT, ())
         return
-    h[CTL_KIND] = CTL_ABI
-    cls = type(ctl)
-    h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
     absent = (*(("gravity",) if not ctl.needs_gravity else ()),
               *(("x_d", "v_d", "a_d") if phase.reference is None else ()),
               *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()),
@@ -340,6 +343,15 @@ def _controller(b: _Builder, system, phase) -> None:
               *(("tau_contact", "surface_p", "surface_v", "touch") if not ctl.uses_forces else ()))
     h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
     b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces)))
+    if ctl.name in COMPILED_IN[2:]:  # a dynamic law: compiled in, on the same buffer
+        from .control_laws import dynamic_constants
+
+        h[CTL_KIND] = CTL_DYNAMIC
+        b.real_section(R_CTL, dynamic_constants(ctl, phase))
+        return
+    h[CTL_KIND] = CTL_ABI
+    cls = type(ctl)
+    h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
     params = params_of(ctl.config)
     h[N_CTL_PARAMS] = params.size
     b.real_section(R_CTL, params)
