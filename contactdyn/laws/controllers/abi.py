@@ -6,25 +6,33 @@ and floats with ControlInput's field names) and ``self`` a named tuple whose ``c
 controller's declared parameters (``Controller.params``, in order): attribute access compiles unchanged. The C
 function of a controller, its address a plain int64 (:func:`controller_address`):
 
-    ``int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau)``
+    ``int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau, double* zdot)``
 
 - ``buffer``: the inputs, one field after another, each where ``layout`` says;
-- ``layout``: [nv, nz, start_0, stop_0, start_1, stop_1, …, size of the buffer] per field of :data:`LAYOUT`
-  (:func:`layout_of`); a field an input does not have (no reference, no gravity asked, no orientation read) is
-  empty (start = stop), as ControlInput's None: a law that reads it fails there (bounds-checked) and the call goes
-  Python's way (``inp.x_d is None`` is never true compiled: test ``inp.x_d.size`` in a law meant to compile);
+- ``layout``: [nv, nz, ns, start_0, stop_0, start_1, stop_1, …, size of the buffer] per field of :data:`LAYOUT`
+  (:func:`layout_of`; nz states, ns force set-points); a field an input does not have (no reference, no gravity
+  asked, no orientation read, no measured forces for a law that does not read them) is empty (start = stop), as
+  ControlInput's None: a law that reads it fails there (bounds-checked) and the call goes Python's way
+  (``inp.x_d is None`` is never true compiled: test ``inp.x_d.size`` in a law meant to compile);
 - ``params``: the declared parameters' values in their order (``DeclaredConfig.values``);
-- ``tau``: the joint torques [N·m or N] (nv), written; the status returned: 1 written, 0 not (the law raised,
-  read past a field, which the bounds checks catch, or gave the wrong number of torques; or ``n_p`` is not the
-  number of declared parameters): the call then goes Python's way, where the law's own error surfaces.
+- ``tau``: the joint torques [N·m or N] (nv), written; ``zdot``: the states' rates (nz), written (a law without
+  states returns None for them); the status returned: 1 written, 0 not (the law raised, read past a field, which
+  the bounds checks catch, or gave the wrong number of torques or rates; or ``n_p`` is not the number of declared
+  parameters): the call then goes Python's way, where the law's own error surfaces.
 
 Units are ControlInput's: t [s], q [rad or m], v [rad/s or m/s], H [kg·m² …], h and gravity [N·m or N], p_tip [m],
 v_tip [m/s], J and J_ang (3, nv), drift [m/s²], drift_ang [rad/s²], x_d/v_d/a_d [m, m/s, m/s²], R_tip (3, 3), z
-the controller's states.
+the controller's states, tau_contact [N·m or N]; per force set-point, in the phase's order
+(``ControlInput.SET_POINT_ARRAYS``): force_set F_d [N], force_rate Ḟ_d [N/s], force_dir (ns, 3), force_read the
+measured force of the set-point's key [N], surface_p [m] and surface_v [m/s] (ns, 3), touch (1.0 touching).
+ControlInput's dictionaries (forces, force_d, normals, surfaces, touching) are not in the buffer: a law meant to
+compile reads the arrays, which the readable ControlInput has too (its properties). A law that reads measured
+forces (``uses_forces``) is affine in them: the caller folds it by calling it again at unit forces
+(:mod:`contactdyn.model.pipeline.force_fold`).
 
-What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that reads measured forces
-(``uses_forces``), has states, outputs voltages, has no declared parameters' config, or whose ``command`` numba
-cannot compile (a dict, a Python object, ``inp.forces``): it stays on the Python path.
+What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that outputs voltages, has
+no declared parameters' config, or whose ``command`` numba cannot compile (a dict, a Python object,
+``inp.forces``): it stays on the Python path.
 
 Caching: the wrapper is generated closure-free and attributed to the controller's own file, as the stage laws'
 (:func:`contactdyn.laws.abi.compile_wrapper`), so numba caches it (compile_cache's directory; an edit of that

@@ -8,9 +8,16 @@ calls. A task singular at the state (the Hadamard ratio below ``SINGULAR``, or N
 then fails its residual test (status 0) and the readable model answers, where ``OperationalSpace._guard`` raises
 its error.
 
-Packed constants (from ``R_CTL``): axes (k × 3), force directions (nf × 3), kp (k) [N/m], kd (k) [N·s/m], tool axis
-(3), tool target (3), ko [1/s²], do [1/s], k_null [1/s], kd_normal [N·s/m]; k = ``N_AXES``, nf = ``N_FORCES`` (the
-phase's set-points, in the order of ``OperationalSpace.force_keys``), a tool axis iff ``HAS_TOOL``.
+Its packed constants (from ``R_CTL``, written by ``pack``): axes (k × 3), force directions (nf × 3),
+kp (k) [N/m], kd (k) [N·s/m], tool axis (3), tool target (3), ko [1/s²], do [1/s], k_null [1/s], kd_normal [N·s/m];
+k = ``N_AXES``, nf = ``N_FORCES`` (the phase's set-points, in the order of ``OperationalSpace.force_keys``), a tool
+axis iff ``HAS_TOOL``.
+
+The task-space dynamic laws (A7, A10, hybrid: :mod:`contactdyn.laws.controllers.dynamic`) are called as a user's
+controller of the same shape is, on the controller ABI's buffer (:func:`dynamic_command`, their states' rates its
+second output), so :mod:`.force_fold` folds them the same way; their tip targets are
+:mod:`contactdyn.laws.controllers.dynamic_law`'s and τ :func:`~contactdyn.laws.controllers.computed_torque.torque`,
+the functions their readable ``command`` calls. Their constants: ``pack``'s ``D_*``.
 """
 
 from __future__ import annotations
@@ -23,36 +30,27 @@ from ...laws.controllers.dynamic_law import force_targets, position_targets
 from ...laws.controllers.operational_law import SINGULAR, torque
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import pinv
-from .pack import HAS_TOOL, N_AXES, N_FORCES, NQ, NV, R_CTL, section
+from .pack import (
+    D_ENV,
+    D_FORCE_LAW,
+    D_KF,
+    D_KNULL,
+    D_KP,
+    D_KV,
+    D_P,
+    D_PRESSING,
+    D_SWAP,
+    D_TRACKS,
+    HAS_TOOL,
+    N_AXES,
+    N_FORCES,
+    NQ,
+    NV,
+    R_CTL,
+    section,
+)
 
-__all__ = ["operational_constants", "operational_command", "DYNAMIC_LAWS", "dynamic_constants", "dynamic_command"]
-
-#: the dynamic laws compiled in (their tip targets: laws.controllers.dynamic_law; τ: computed_torque)
-DYNAMIC_LAWS = ("position_dynamic", "force_dynamic", "hybrid")
-#: a dynamic law's packed constants (from R_CTL): switches, K_F [1/s], k_null [1/s], K_p, K_v (3 each), P (9), then
-#: per set-point the nominal k [N/m], b [N·s/m], m [kg]
-D_FORCE_LAW, D_TRACKS, D_SWAP, D_PRESSING, D_KF, D_KNULL, D_KP, D_KV, D_P, D_ENV = 0, 1, 2, 3, 4, 5, 6, 9, 12, 21
-
-
-def operational_constants(ctl) -> list[float]:
-    """The packed constants of a bound ``OperationalSpace`` (its ``constants``, the tool's as zeros without one)."""
-    axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
-    tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
-    return [*axes.ravel(), *forced.ravel(), *kp, *kd, *tool[0], *tool[1], ko, do, k_null, kd_normal]
-
-
-def dynamic_constants(ctl, phase) -> list[float]:
-    """The packed constants of a bound task-space dynamic law (A7, A10, hybrid), per set-point in the phase's order."""
-    cfg = ctl.config
-    kp, kv = ctl._gains3
-    force_law = ctl.name != "position_dynamic"
-    P = ctl.P if force_law else np.zeros((3, 3))
-    envs = [ctl.envs.get(key) for key in phase.forces]
-    env = [v for e in envs for v in ((e.k, e.b, e.m) if e is not None else (1.0, 0.0, 0.0))]
-    return [float(force_law), float(getattr(ctl, "tracks_position", True)),
-            float(force_law and cfg.cancel == "target"), float(bool(ctl.envs) and not force_law),
-            float(getattr(cfg, "kf", 0.0)), float(cfg.k_null), *kp, *kv, *P.ravel(), *env]
-
+__all__ = ["operational_command", "dynamic_command"]
 
 @njit(cache=True)
 def dynamic_command(ints, reals, buf, lay, tau, zdot):

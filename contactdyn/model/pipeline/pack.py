@@ -55,6 +55,10 @@ RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: (and compiled in: the operational-space law; the dynamic laws, called on the ABI's buffer as a user's law is)
 CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_OPERATIONAL, CTL_DYNAMIC = 0, 1, 2, 3, 4
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
+#: a dynamic law's constants (from R_CTL): switches (A10 or hybrid, tracks position, swaps F* into τ, presses its
+#: reference), K_F [1/s], k_null [1/s], K_p [1/s²] and K_v [1/s] (3 each), P (9), then per set-point the nominal
+#: k [N/m], b [N·s/m], m [kg]
+D_FORCE_LAW, D_TRACKS, D_SWAP, D_PRESSING, D_KF, D_KNULL, D_KP, D_KV, D_P, D_ENV = 0, 1, 2, 3, 4, 5, 6, 9, 12, 21
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
@@ -120,6 +124,8 @@ def unsupported(system, modes, phase) -> str:
         return f"controller {ctl.name!r} with the rotor inertia taken out (inertia = \"link\")"
     if ctl.name not in COMPILED_IN and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
+    if ctl.name not in COMPILED_IN[:2] and phase.reference is not None and len(phase.reference.start) != 3:
+        return f"controller {ctl.name!r} with a joint-space reference (the buffer's x_d is the tip's)"
     if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
         return "a circle move"
     for c, m in zip(system.contacts, modes, strict=True):
@@ -329,11 +335,12 @@ def _controller(b: _Builder, system, phase) -> None:
                                *(R_d.ravel() if R_d.shape[0] else np.zeros(9)), ko, do, kd_joint, kd_normal])
         b.int_section(I_LAYOUT, ())
         return
-    if ctl.name == "operational_space":
-        from .control_laws import operational_constants
-
-        h[CTL_KIND], h[N_AXES], h[HAS_TOOL] = CTL_OPERATIONAL, len(ctl.constants[0]), int(ctl.constants[4].size > 0)
-        b.real_section(R_CTL, operational_constants(ctl))
+    if ctl.name == "operational_space":  # OperationalSpace.constants (control_laws.operational_command)
+        axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
+        h[CTL_KIND], h[N_AXES], h[HAS_TOOL] = CTL_OPERATIONAL, len(axes), int(tool_axis.size > 0)
+        tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
+        b.real_section(R_CTL, [*axes.ravel(), *forced.ravel(), *kp, *kd, *tool[0], *tool[1], ko, do, k_null,
+                               kd_normal])
         b.int_section(I_LAYOUT, ())
         return
     absent = (*(("gravity",) if not ctl.needs_gravity else ()),
@@ -344,10 +351,8 @@ def _controller(b: _Builder, system, phase) -> None:
     h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
     b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces)))
     if ctl.name in COMPILED_IN[2:]:  # a dynamic law: compiled in, on the same buffer
-        from .control_laws import dynamic_constants
-
         h[CTL_KIND] = CTL_DYNAMIC
-        b.real_section(R_CTL, dynamic_constants(ctl, phase))
+        b.real_section(R_CTL, _dynamic_constants(ctl, phase))
         return
     h[CTL_KIND] = CTL_ABI
     cls = type(ctl)
@@ -355,6 +360,19 @@ def _controller(b: _Builder, system, phase) -> None:
     params = params_of(ctl.config)
     h[N_CTL_PARAMS] = params.size
     b.real_section(R_CTL, params)
+
+
+def _dynamic_constants(ctl, phase) -> list[float]:
+    """A bound task-space dynamic law's constants (D_*), per set-point in the phase's order."""
+    cfg = ctl.config
+    kp, kv = ctl._gains3
+    force_law = ctl.name != "position_dynamic"
+    P = ctl.P if force_law else np.zeros((3, 3))
+    envs = [ctl.envs.get(key) for key in phase.forces]
+    env = [v for e in envs for v in ((e.k, e.b, e.m) if e is not None else (1.0, 0.0, 0.0))]
+    return [float(force_law), float(getattr(ctl, "tracks_position", True)),
+            float(force_law and cfg.cancel == "target"), float(bool(ctl.envs) and not force_law),
+            float(getattr(cfg, "kf", 0.0)), float(cfg.k_null), *kp, *kv, *P.ravel(), *env]
 
 
 def _fold(b: _Builder, system, phase, meta: list[tuple[str, str, int]]) -> None:
