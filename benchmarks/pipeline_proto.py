@@ -89,6 +89,20 @@ def _position_dynamic(doc: dict) -> None:
                          "nominal": {"k": 1e5}}
 
 
+def _joint_pd(doc: dict) -> None:
+    """b1 under joint PD (bias feedforward) tracking a joint-space trapezoid."""
+    doc["controller"] = {"kind": "joint_pd", "kp": [300.0, 200.0], "kd": 20.0, "feedforward": "bias"}
+    doc["phase"][0]["reference"] = {"space": "joint", "start": [0.33, -1.3],
+                                    "moves": [{"kind": "trapezoid", "delta": [0.2, -0.1], "duration": 1.0}]}
+
+
+def _task_force(doc: dict) -> None:
+    """b1 under an open-loop task force: a ramp and a sinusoid (gravity feedforward: none asked in the plane)."""
+    doc["controller"] = {"kind": "task_force", "force": [0.0, -50.0, 0.0], "rate": [20.0, 0.0, 0.0],
+                         "amplitude": [5.0, 3.0, 0.0], "frequency": 2.0, "phase": [0.0, 0.5, 0.0],
+                         "feedforward": "gravity"}
+
+
 def _apart(system, modes, ph, x0):
     """The first mode with every contact apart (the dynamic laws' free directions, their integrals frozen)."""
     return [mm.with_(touching=False) for mm in modes], ph
@@ -141,6 +155,8 @@ CASES = {
     "force_loop_hybrid_apart": ("sims/b1_force_loop.toml", None, _apart),
     "b1_force_dynamic": ("sims/b1_force_loop.toml", _force_dynamic, None),
     "b1_position_dynamic": ("sims/b1_force_loop.toml", _position_dynamic, None),
+    "b1_joint_pd": ("sims/b1.toml", _joint_pd, None),
+    "b1_task_force": ("sims/b1.toml", _task_force, None),
 }
 
 

@@ -96,7 +96,8 @@ def test_the_same_source_interpreted_gives_the_compiled_rates():
     """NUMBA_DISABLE_JIT=1: the pipeline's functions, the chains', the laws (stage, friction, the user's controller)
     all run as Python, the same source; ẋ equals the compiled call's bit for bit (and the readable model's)."""
     names = ["b1_stribeck", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "cubic_press", "impedance_press",
-             "writer5dof_ops_write", "force_pi_press", "force_loop_hybrid", "b1_force_dynamic", "b1_position_dynamic"]
+             "writer5dof_ops_write", "force_pi_press", "force_loop_hybrid", "b1_force_dynamic", "b1_position_dynamic",
+             "b1_joint_pd", "b1_task_force"]
     env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(BENCH.parent)}
     done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=names)], env=env,
                           capture_output=True, text=True, timeout=600)

@@ -23,13 +23,15 @@ from ...laws.controllers.abi import FIELD, LAYOUT_HEAD, call_controller, control
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
-from .control_laws import dynamic_command, operational_command
+from .control_laws import dynamic_command, joint_pd_command, operational_command, task_force_command
 from .pack import (
     CTL_ABI,
     CTL_ADDRESS,
     CTL_DYNAMIC,
+    CTL_JOINT_PD,
     CTL_KIND,
     CTL_OPERATIONAL,
+    CTL_TASK_FORCE,
     CTL_TASK_PD,
     FEEDFORWARD,
     FF_BIAS,
@@ -173,6 +175,10 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
     if ints[CTL_KIND] == CTL_TASK_PD:
         F_d, forced, _ = set_points(t, ints, reals)
         return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)
+    if ints[CTL_KIND] == CTL_JOINT_PD:
+        return joint_pd_command(x, ints, reals, h, g, x_d, v_d)
+    if ints[CTL_KIND] == CTL_TASK_FORCE:
+        return task_force_command(t, ints, reals, h, g, FJ[fi])
     if ints[CTL_KIND] == CTL_OPERATIONAL:
         F_d, _, _ = set_points(t, ints, reals)
         return operational_command(x, ints, reals, H, h, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d, F_d)

@@ -1,4 +1,4 @@
-"""Built-in controllers compiled into the pipeline as kinds: the operational-space law, the dynamic laws.
+"""Built-in controllers compiled into the pipeline as kinds: operational space, the dynamic laws, joint PD, task force.
 
 ``operational_space`` (:mod:`contactdyn.laws.controllers.operational`) reads its own config (its position axes come
 from the phase's force directions at bind time, variable-size tables, not declared float parameters), so it is a
@@ -18,6 +18,11 @@ controller of the same shape is, on the controller ABI's buffer (:func:`dynamic_
 second output), so :mod:`.force_fold` folds them the same way; their tip targets are
 :mod:`contactdyn.laws.controllers.dynamic_law`'s and τ :func:`~contactdyn.laws.controllers.computed_torque.torque`,
 the functions their readable ``command`` calls. Their constants: ``pack``'s ``D_*``.
+
+``joint_pd`` (:func:`~contactdyn.laws.controllers.pd.joint_pd_torque`; constants K_p, K_d per joint) and
+``task_force`` (:func:`~contactdyn.laws.controllers.force.task_force_torque`; constants force (3) [N], rate (3)
+[N/s], start [s], ramp_time [s], amplitude (3) [N], frequency [Hz], phase (3) [rad], oscillates) read their own
+config too: kinds, their readable ``command`` the same compiled function; feedforward by ``FEEDFORWARD``.
 """
 
 from __future__ import annotations
@@ -27,7 +32,9 @@ import numpy as np
 from ...laws.controllers import computed_torque
 from ...laws.controllers.abi import control_arrays
 from ...laws.controllers.dynamic_law import force_targets, position_targets
+from ...laws.controllers.force import task_force_torque
 from ...laws.controllers.operational_law import SINGULAR, torque
+from ...laws.controllers.pd import joint_pd_torque
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import pinv
 from .pack import (
@@ -41,6 +48,9 @@ from .pack import (
     D_PRESSING,
     D_SWAP,
     D_TRACKS,
+    FEEDFORWARD,
+    FF_BIAS,
+    FF_GRAVITY,
     HAS_TOOL,
     N_AXES,
     N_FORCES,
@@ -50,7 +60,7 @@ from .pack import (
     section,
 )
 
-__all__ = ["operational_command", "dynamic_command"]
+__all__ = ["operational_command", "dynamic_command", "joint_pd_command", "task_force_command"]
 
 @njit(cache=True)
 def dynamic_command(ints, reals, buf, lay, tau, zdot):
@@ -103,3 +113,27 @@ def operational_command(x, ints, reals, H, h, J6, a6, p_tip, v_tip, Rf, x_d, v_d
     if not ratio >= SINGULAR:  # (also NaN) the readable law raises its error there
         tau[:] = np.nan
     return tau
+
+
+@njit(cache=True)
+def _feedforward(ints, h, g):
+    """The feedforward torque (h, g(q), or none: size 0)."""
+    ff = ints[FEEDFORWARD]
+    return h if ff == FF_BIAS else g if ff == FF_GRAVITY else np.empty(0)
+
+
+@njit(cache=True)
+def joint_pd_command(x, ints, reals, h, g, q_d, v_d):
+    """τ [N·m or N] of the joint PD law at the packed gains (q_d, q̇_d of size 0 without a reference)."""
+    nv, nQ = ints[NV], ints[NQ]
+    at = ints[R_CTL]
+    return joint_pd_torque(x[:nv], x[nQ:nQ + nv], q_d, v_d, reals[at:at + nv], reals[at + nv:at + 2 * nv],
+                           _feedforward(ints, h, g))
+
+
+@njit(cache=True)
+def task_force_command(t, ints, reals, h, g, J6):
+    """τ [N·m or N] of the open-loop task force at the packed constants."""
+    c = reals[ints[R_CTL]:]
+    return task_force_torque(t, np.ascontiguousarray(J6[:3]), c[0:3], c[3:6], c[6], c[7], c[8:11], c[11], c[12:15],
+                             c[15] != 0.0, _feedforward(ints, h, g))

@@ -53,7 +53,7 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
 #: (and compiled in: the operational-space law; the dynamic laws, called on the ABI's buffer as a user's law is)
-CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_OPERATIONAL, CTL_DYNAMIC = 0, 1, 2, 3, 4
+CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_OPERATIONAL, CTL_DYNAMIC, CTL_JOINT_PD, CTL_TASK_FORCE = 0, 1, 2, 3, 4, 5, 6
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
 #: a dynamic law's constants (from R_CTL): switches (A10 or hybrid, tracks position, swaps F* into τ, presses its
 #: reference), K_F [1/s], k_null [1/s], K_p [1/s²] and K_v [1/s] (3 each), P (9), then per set-point the nominal
@@ -118,13 +118,16 @@ def unsupported(system, modes, phase) -> str:
         return f"controller {ctl.name!r} reads forces with a tangential set-point (its chain's force is not kept)"
     if ctl.name == "operational_space" and ctl.force_keys != list(phase.forces):
         return "operational_space's set-points in another order than the phase's"
-    if ctl.name in COMPILED_IN[2:] and (ctl.config.space if ctl.name == "position_dynamic" else "task") != "task":
+    if ctl.name in DYNAMIC_LAWS and (ctl.config.space if ctl.name == "position_dynamic" else "task") != "task":
         return f"controller {ctl.name!r} in joint space"
-    if ctl.name in COMPILED_IN[2:] and ctl._rotor.size:
+    if ctl.name in DYNAMIC_LAWS and ctl._rotor.size:
         return f"controller {ctl.name!r} with the rotor inertia taken out (inertia = \"link\")"
     if ctl.name not in COMPILED_IN and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
-    if ctl.name not in COMPILED_IN[:2] and phase.reference is not None and len(phase.reference.start) != 3:
+    dims = len(phase.reference.start) if phase.reference is not None else None
+    if ctl.name == "joint_pd" and dims not in (None, system.nv):
+        return f"controller 'joint_pd' with a reference of {dims} coordinates ({system.nv} joints)"
+    if ctl.name not in ("task_pd", "operational_space", "joint_pd", "task_force") and dims not in (None, 3):
         return f"controller {ctl.name!r} with a joint-space reference (the buffer's x_d is the tip's)"
     if phase.reference is not None and any(m.kind == "circle" for m in phase.reference.moves):
         return "a circle move"
@@ -140,7 +143,9 @@ def unsupported(system, modes, phase) -> str:
 
 
 #: the built-in controllers compiled into the call as kinds (their laws' own compiled functions)
-COMPILED_IN = ("task_pd", "operational_space", "position_dynamic", "force_dynamic", "hybrid")
+COMPILED_IN = ("task_pd", "operational_space", "position_dynamic", "force_dynamic", "hybrid", "joint_pd",
+               "task_force")
+DYNAMIC_LAWS = COMPILED_IN[2:5]  #: (on the controller ABI's buffer)
 
 
 def _addressable(cls: type) -> bool:
@@ -343,6 +348,14 @@ def _controller(b: _Builder, system, phase) -> None:
                                kd_normal])
         b.int_section(I_LAYOUT, ())
         return
+    if ctl.name in ("joint_pd", "task_force"):  # control_laws.joint_pd_command, task_force_command
+        h[CTL_KIND] = CTL_JOINT_PD if ctl.name == "joint_pd" else CTL_TASK_FORCE
+        h[FEEDFORWARD] = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}[ctl.config.feedforward]
+        f, rate, start, ramp, amp, freq, ph, osc = ctl.constants if ctl.name == "task_force" else (None,) * 8
+        b.real_section(R_CTL, [*ctl.gains[0], *ctl.gains[1]] if ctl.name == "joint_pd" else
+                       [*f, *rate, start, ramp, *amp, freq, *ph, float(osc)])
+        b.int_section(I_LAYOUT, ())
+        return
     absent = (*(("gravity",) if not ctl.needs_gravity else ()),
               *(("x_d", "v_d", "a_d") if phase.reference is None else ()),
               *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()),
@@ -350,7 +363,7 @@ def _controller(b: _Builder, system, phase) -> None:
               *(("tau_contact", "surface_p", "surface_v", "touch") if not ctl.uses_forces else ()))
     h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
     b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces)))
-    if ctl.name in COMPILED_IN[2:]:  # a dynamic law: compiled in, on the same buffer
+    if ctl.name in DYNAMIC_LAWS:  # a dynamic law: compiled in, on the same buffer
         h[CTL_KIND] = CTL_DYNAMIC
         b.real_section(R_CTL, _dynamic_constants(ctl, phase))
         return
