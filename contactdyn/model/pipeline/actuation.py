@@ -149,26 +149,26 @@ def abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a
 
 
 @njit(cache=True)
-def abi_call(ints, reals, buf, lay, tau, zdot):
+def abi_call(ints, reals, work, buf, lay, tau, zdot):
     """The ABI's call of the packed controller on ``buf``: τ into ``tau``, ż into ``zdot``; its status (1 written)."""
     if ints[CTL_KIND] == CTL_DYNAMIC:  # a built-in law of the same shape, compiled in
-        return dynamic_command(ints, reals, buf, lay, tau, zdot)
+        return dynamic_command(ints, reals, work, buf, lay, tau, zdot)
     params = reals[ints[R_CTL]:ints[R_CTL] + ints[N_CTL_PARAMS]]
     return command_by_address(ints[CTL_ADDRESS], buf, lay, params, tau, zdot)
 
 
 @njit(cache=True)
-def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
+def _abi_command(t, x, ints, reals, work, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
     """τ of a controller of the ABI, by its address (NaNs: the law failed; the readable model's error surfaces)."""
     buf, lay = abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d)
     tau, zdot = np.zeros(ints[NV]), np.zeros(ints[N_Z])
-    if abi_call(ints, reals, buf, lay, tau, zdot) != 1:
+    if abi_call(ints, reals, work, buf, lay, tau, zdot) != 1:
         tau[:] = np.nan
     return tau
 
 
 @njit(cache=True)
-def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
+def command(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR):
     """The controller's τ [N·m or N] at (t, x) (zero without a controller)."""
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)
@@ -183,7 +183,7 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
         F_d, _, _ = set_points(t, ints, reals)
         return operational_command(x, ints, reals, H, h, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d, F_d)
     if ints[CTL_KIND] == CTL_ABI or ints[CTL_KIND] == CTL_DYNAMIC:
-        return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
+        return _abi_command(t, x, ints, reals, work, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
     return np.zeros(ints[NV])
 
 

@@ -57,13 +57,33 @@ from .pack import (
     NQ,
     NV,
     R_CTL,
+    W_PINV,
     section,
 )
 
 __all__ = ["operational_command", "dynamic_command", "joint_pd_command", "task_force_command"]
 
 @njit(cache=True)
-def dynamic_command(ints, reals, buf, lay, tau, zdot):
+def _pinv_kept(work, at, J):
+    """J⁺ (numerics.linalg.pinv), computed again only where J is not the one kept at ``work[at]`` (the fold calls
+    the law at one state nr + 1 times)."""
+    n = J.size
+    flat = J.ravel()
+    key, kept = work[at + 1:at + 1 + n], work[at + 1 + n:at + 1 + 2 * n]
+    same = work[at] == 1.0
+    for i in range(n):
+        same = same and key[i] == flat[i]
+    if same:
+        return kept.reshape((J.shape[1], J.shape[0]))
+    Jp = pinv(J)
+    key[:] = flat
+    kept[:] = Jp.ravel()
+    work[at] = 1.0
+    return Jp
+
+
+@njit(cache=True)
+def dynamic_command(ints, reals, work, buf, lay, tau, zdot):
     """A dynamic law on its controller buffer (the ABI's layout): τ = H q̈*(a*) + h − τ_c (+ Jᵀ f_swap) around its
     tip targets, ż; status 1 (the ABI's call, so the fold treats it as a user's law of the same shape)."""
     inp = control_arrays(buf, lay)
@@ -85,8 +105,8 @@ def dynamic_command(ints, reals, buf, lay, tau, zdot):
                              np.ascontiguousarray(env[:, 0]))
         f_swap = np.empty(0)
     J = inp.J
-    out = computed_torque.torque(inp.H, np.empty(0), inp.h, inp.tau_contact, J, pinv(J), inp.drift, inp.v, a,
-                                 f_swap, c[D_KNULL])
+    out = computed_torque.torque(inp.H, np.empty(0), inp.h, inp.tau_contact, J, _pinv_kept(work, ints[W_PINV], J),
+                                 inp.drift, inp.v, a, f_swap, c[D_KNULL])
     for i in range(out.size):
         tau[i] = out[i]
     return 1

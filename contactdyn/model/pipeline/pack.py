@@ -45,10 +45,11 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
 (NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
- R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, N_Z, Z_AT, READS_FORCES, I_FOLD, HEADER) = range(45)
+ R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, N_Z, Z_AT, READS_FORCES, I_FOLD, W_PINV, HEADER) = range(46)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
-#: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them
+#: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them; W_PINV: where a
+#: dynamic law keeps J⁺ with the J it is of (``work``: a flag, J (3 nv), J⁺ (nv × 3)), for the fold's calls
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -366,6 +367,7 @@ def _controller(b: _Builder, system, phase) -> None:
     if ctl.name in DYNAMIC_LAWS:  # a dynamic law: compiled in, on the same buffer
         h[CTL_KIND] = CTL_DYNAMIC
         b.real_section(R_CTL, _dynamic_constants(ctl, phase))
+        h[W_PINV], b.work = b.work, b.work + 1 + 6 * system.nv
         return
     h[CTL_KIND] = CTL_ABI
     cls = type(ctl)
