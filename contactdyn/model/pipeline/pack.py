@@ -115,6 +115,8 @@ def unsupported(system, modes, phase) -> str:
         return "a reference carried by a body"
     if ctl.outputs != "torque":
         return f"controller {ctl.name!r} outputs {ctl.outputs}"
+    if hasattr(ctl, "inner"):
+        return f"a sampled controller ({ctl.inner.name!r} held between samples)"
     if ctl.uses_forces and any("." in key for key in phase.forces):
         return f"controller {ctl.name!r} reads forces with a tangential set-point (its chain's force is not kept)"
     if ctl.name == "operational_space" and ctl.force_keys != list(phase.forces):
