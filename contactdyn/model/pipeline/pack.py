@@ -17,10 +17,12 @@ its contact's row, a user controller's in the controller section), so one compil
 index constants below are the one place the layout is written; the call (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-motors and voltage drives, joint friction, force-reading or stateful controllers (a sampled law among them), a
-reference carried by a body, a 2-D slide launching from rest, the energy audit, a stage or friction law numba
-cannot compile, a robot ``rigid_body`` does not compute, a circle move, controllers other than ``task_pd`` and user
-laws of the controller ABI.
+motors and voltage drives, joint friction, a sampled controller, a controller that outputs voltages, joint-space
+A7, a force-reading law with a tangential set-point, a user law numba cannot compile, a reference carried by a
+body, a 2-D slide launching from rest, the energy audit, a stage or friction law numba cannot compile, a robot
+``rigid_body`` does not compute, a circle move. The controllers compiled in as kinds (``COMPILED_IN``: task PD,
+operational space, the dynamic laws, joint PD, task force) and user laws of the controller ABI run; a force-reading
+law is folded (:mod:`.force_fold`).
 """
 
 from __future__ import annotations
