@@ -23,14 +23,12 @@ from ...laws.controllers.abi import FIELD, LAYOUT_HEAD, call_controller, control
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import move_rows, ramp_rows
 from ...numerics.compile_cache import njit
-from .control_laws import dynamic_command, joint_pd_command, operational_command, task_force_command
+from .control_laws import PYTHON_KINDS, joint_pd_command, task_force_command
 from .pack import (
     CTL_ABI,
     CTL_ADDRESS,
-    CTL_DYNAMIC,
     CTL_JOINT_PD,
     CTL_KIND,
-    CTL_OPERATIONAL,
     CTL_TASK_FORCE,
     CTL_TASK_PD,
     FEEDFORWARD,
@@ -149,26 +147,24 @@ def abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a
 
 
 @njit(cache=True)
-def abi_call(ints, reals, work, buf, lay, tau, zdot):
+def abi_call(ints, reals, buf, lay, tau, zdot):
     """The ABI's call of the packed controller on ``buf``: τ into ``tau``, ż into ``zdot``; its status (1 written)."""
-    if ints[CTL_KIND] == CTL_DYNAMIC:  # a built-in law of the same shape, compiled in
-        return dynamic_command(ints, reals, work, buf, lay, tau, zdot)
     params = reals[ints[R_CTL]:ints[R_CTL] + ints[N_CTL_PARAMS]]
     return command_by_address(ints[CTL_ADDRESS], buf, lay, params, tau, zdot)
 
 
 @njit(cache=True)
-def _abi_command(t, x, ints, reals, work, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
+def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
     """τ of a controller of the ABI, by its address (NaNs: the law failed; the readable model's error surfaces)."""
     buf, lay = abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d)
     tau, zdot = np.zeros(ints[NV]), np.zeros(ints[N_Z])
-    if abi_call(ints, reals, work, buf, lay, tau, zdot) != 1:
+    if abi_call(ints, reals, buf, lay, tau, zdot) != 1:
         tau[:] = np.nan
     return tau
 
 
 @njit(cache=True)
-def command(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR):
+def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
     """The controller's τ [N·m or N] at (t, x) (zero without a controller)."""
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)
@@ -176,14 +172,11 @@ def command(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR):
         F_d, forced, _ = set_points(t, ints, reals)
         return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)
     if ints[CTL_KIND] == CTL_JOINT_PD:
-        return joint_pd_command(x, ints, reals, h, g, x_d, v_d)
+        return joint_pd_command(x, ints[NQ], reals[ints[R_CTL]:], h, g, x_d, v_d)
     if ints[CTL_KIND] == CTL_TASK_FORCE:
-        return task_force_command(t, ints, reals, h, g, FJ[fi])
-    if ints[CTL_KIND] == CTL_OPERATIONAL:
-        F_d, _, _ = set_points(t, ints, reals)
-        return operational_command(x, ints, reals, H, h, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d, F_d)
-    if ints[CTL_KIND] == CTL_ABI or ints[CTL_KIND] == CTL_DYNAMIC:
-        return _abi_command(t, x, ints, reals, work, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
+        return task_force_command(t, reals[ints[R_CTL]:], h, g, FJ[fi])
+    if ints[CTL_KIND] == CTL_ABI:
+        return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
     return np.zeros(ints[NV])
 
 
@@ -205,6 +198,9 @@ def drives(x, ints, reals, tau, f):
 
 def command_by_address(address, buffer, layout, params, tau, zdot) -> int:
     """The controller at ``address`` on its buffer (the ABI's call); interpreted, a handle's Python ``command``."""
+    kind = PYTHON_KINDS.get(int(address))
+    if kind is not None:  # a built-in law on the buffer (control_laws)
+        return kind(buffer, layout, params, tau, zdot)
     cls = PYTHON_CONTROLLERS.get(int(address))
     if cls is None:
         return call_controller(address, buffer, layout, params, tau, zdot)

@@ -29,7 +29,6 @@ from .pack import (
     CR_AXIS,
     CR_POINT,
     CTL_ABI,
-    CTL_DYNAMIC,
     CTL_KIND,
     EV_FN,
     EV_W,
@@ -101,7 +100,7 @@ def _set_point_fields(t, x, ints, reals, h, f, events, buf, lay):
 
 
 @njit(cache=True)
-def _fold_columns(ints, reals, work, buf, lay, tau, zdot, C, B, D):
+def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
     """B and D: the law's differences per unit force of each row that reaches it (constraints.force_columns)."""
     nv, ns, nr = ints[NV], ints[N_FORCES], ints[N_ROWS]
     sp = ints[ints[I_FOLD]:ints[I_FOLD] + ns]
@@ -122,7 +121,7 @@ def _fold_columns(ints, reals, work, buf, lay, tau, zdot, C, B, D):
                 buf[at_read + s] = read0[s] + 1.0
         for c in range(nv if fed_back else 0):
             buf[at_tc + c] = tc0[c] + C[j, c]
-        if abi_call(ints, reals, work, buf, lay, tau_j, zdot_j) != 1:
+        if abi_call(ints, reals, buf, lay, tau_j, zdot_j) != 1:
             return False
         for i in range(nv):
             B[i, j] = tau_j[i] - tau[i]
@@ -134,22 +133,22 @@ def _fold_columns(ints, reals, work, buf, lay, tau, zdot, C, B, D):
 
 
 @njit(cache=True)
-def controller_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+def controller_terms(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
     """(τ [N·m or N], ż, B (nv, rows), D (states, rows)) of the phase's controller at (t, x); τ NaN where the law
     failed (the readable model then answers and its error surfaces there)."""
     nv, nr, nz = ints[NV], ints[N_ROWS], ints[N_Z]
     zdot = np.zeros(nz)
     fold = ints[READS_FORCES] != 0 and nr > 0
     B, D = np.zeros((nv, nr if fold else 0)), np.zeros((nz, nr if fold else 0))
-    if ints[CTL_KIND] != CTL_ABI and ints[CTL_KIND] != CTL_DYNAMIC:
-        return command(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR), zdot, B, D
+    if ints[CTL_KIND] != CTL_ABI:
+        return command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR), zdot, B, D
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)
     buf, lay = abi_buffer(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
     _set_point_fields(t, x, ints, reals, h, f, events, buf, lay)
     tau = np.zeros(nv)
-    if abi_call(ints, reals, work, buf, lay, tau, zdot) != 1 or \
-            (fold and not _fold_columns(ints, reals, work, buf, lay, tau, zdot, C, B, D)):
+    if abi_call(ints, reals, buf, lay, tau, zdot) != 1 or \
+            (fold and not _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D)):
         tau[:] = np.nan
     return tau, zdot, B, D
 

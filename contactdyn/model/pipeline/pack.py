@@ -40,6 +40,7 @@ from ...laws.trajectory import move_table, ramp_table
 from ...numerics.compile_cache import njit
 from ..chain import NodeKind
 from ..chain_forces import pack as pack_chain
+from .control_laws import kind_address
 
 __all__ = ["Packed", "pack", "unsupported", "section"]
 
@@ -47,21 +48,16 @@ __all__ = ["Packed", "pack", "unsupported", "section"]
 (NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
  FEEDFORWARD, READS_ORIENTATION, NEEDS_GRAVITY, N_AXES, N_FORCES, N_MOVES, REF_DIMS, HAS_TOOL, HAS_RD, NJ,
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
- R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, N_Z, Z_AT, READS_FORCES, I_FOLD, W_PINV, HEADER) = range(46)
+ R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, N_Z, Z_AT, READS_FORCES, I_FOLD, HEADER) = range(45)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
-#: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them; W_PINV: where a
-#: dynamic law keeps J⁺ with the J it is of (``work``: a flag, J (3 nv), J⁺ (nv × 3)), for the fold's calls
+#: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
-#: (and compiled in: the operational-space law; the dynamic laws, called on the ABI's buffer as a user's law is)
-CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_OPERATIONAL, CTL_DYNAMIC, CTL_JOINT_PD, CTL_TASK_FORCE = 0, 1, 2, 3, 4, 5, 6
-FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
-#: a dynamic law's constants (from R_CTL): switches (A10 or hybrid, tracks position, swaps F* into τ, presses its
-#: reference), K_F [1/s], k_null [1/s], K_p [1/s²] and K_v [1/s] (3 each), P (9), then per set-point the nominal
-#: k [N/m], b [N·s/m], m [kg]
-D_FORCE_LAW, D_TRACKS, D_SWAP, D_PRESSING, D_KF, D_KNULL, D_KP, D_KV, D_P, D_ENV = 0, 1, 2, 3, 4, 5, 6, 9, 12, 21
+#: (operational space and the dynamic laws by their address, as a user's law: control_laws.kind_address)
+CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_JOINT_PD, CTL_TASK_FORCE = 0, 1, 2, 3, 4
+FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward (joint PD's and task force's: their first constant)
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
@@ -150,7 +146,8 @@ def unsupported(system, modes, phase) -> str:
 #: the built-in controllers compiled into the call as kinds (their laws' own compiled functions)
 COMPILED_IN = ("task_pd", "operational_space", "position_dynamic", "force_dynamic", "hybrid", "joint_pd",
                "task_force")
-DYNAMIC_LAWS = COMPILED_IN[2:5]  #: (on the controller ABI's buffer)
+DYNAMIC_LAWS = COMPILED_IN[2:5]
+BY_ADDRESS = COMPILED_IN[1:5]  #: built-in laws of the controller ABI's shape, called by address (control_laws)
 
 
 def _addressable(cls: type) -> bool:
@@ -345,20 +342,12 @@ def _controller(b: _Builder, system, phase) -> None:
                                *(R_d.ravel() if R_d.shape[0] else np.zeros(9)), ko, do, kd_joint, kd_normal])
         b.int_section(I_LAYOUT, ())
         return
-    if ctl.name == "operational_space":  # OperationalSpace.constants (control_laws.operational_command)
-        axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
-        h[CTL_KIND], h[N_AXES], h[HAS_TOOL] = CTL_OPERATIONAL, len(axes), int(tool_axis.size > 0)
-        tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
-        b.real_section(R_CTL, [*axes.ravel(), *forced.ravel(), *kp, *kd, *tool[0], *tool[1], ko, do, k_null,
-                               kd_normal])
-        b.int_section(I_LAYOUT, ())
-        return
     if ctl.name in ("joint_pd", "task_force"):  # control_laws.joint_pd_command, task_force_command
         h[CTL_KIND] = CTL_JOINT_PD if ctl.name == "joint_pd" else CTL_TASK_FORCE
-        h[FEEDFORWARD] = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}[ctl.config.feedforward]
+        ff = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}[ctl.config.feedforward]
         f, rate, start, ramp, amp, freq, ph, osc = ctl.constants if ctl.name == "task_force" else (None,) * 8
-        b.real_section(R_CTL, [*ctl.gains[0], *ctl.gains[1]] if ctl.name == "joint_pd" else
-                       [*f, *rate, start, ramp, *amp, freq, *ph, float(osc)])
+        b.real_section(R_CTL, [ff, *ctl.gains[0], *ctl.gains[1]] if ctl.name == "joint_pd" else
+                       [ff, *f, *rate, start, ramp, *amp, freq, *ph, float(osc)])
         b.int_section(I_LAYOUT, ())
         return
     absent = (*(("gravity",) if not ctl.needs_gravity else ()),
@@ -368,17 +357,24 @@ def _controller(b: _Builder, system, phase) -> None:
               *(("tau_contact", "surface_p", "surface_v", "touch") if not ctl.uses_forces else ()))
     h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
     b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces)))
-    if ctl.name in DYNAMIC_LAWS:  # a dynamic law: compiled in, on the same buffer
-        h[CTL_KIND] = CTL_DYNAMIC
-        b.real_section(R_CTL, _dynamic_constants(ctl, phase))
-        h[W_PINV], b.work = b.work, b.work + 1 + 6 * system.nv
-        return
     h[CTL_KIND] = CTL_ABI
     cls = type(ctl)
-    h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
-    params = params_of(ctl.config)
+    if ctl.name in BY_ADDRESS:  # a built-in law of the ABI's shape (control_laws), its constants the params
+        h[CTL_ADDRESS] = kind_address(ctl.name)
+        params = np.array(_dynamic_constants(ctl, phase) if ctl.name in DYNAMIC_LAWS else _operational_constants(ctl))
+    else:
+        h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
+        params = params_of(ctl.config)
     h[N_CTL_PARAMS] = params.size
     b.real_section(R_CTL, params)
+
+
+def _operational_constants(ctl) -> list[float]:
+    """Operational space's constants (control_laws' O_*), from OperationalSpace.constants."""
+    axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
+    tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
+    return [len(axes), float(tool_axis.size > 0), *axes.ravel(), *forced.ravel(), *kp, *kd, *tool[0], *tool[1], ko,
+            do, k_null, kd_normal]
 
 
 def _dynamic_constants(ctl, phase) -> list[float]:

@@ -43,7 +43,7 @@ def call(t, x, ints, reals, work, events):
         return xdot
     first_limit = nr - ints[N_LIMITS]
     limit_rows(x, ints, reals, first_limit, G, C, gamma)
-    tau, zdot, B, D = controller_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events)
+    tau, zdot, B, D = controller_terms(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events)
     drives(x, ints, reals, tau, f)
     qdd, lam, regular = kkt_solve(ints, reals, H, f, G, C, gamma, B)
     fold_rates(ints, lam, zdot, D, ydot)
