@@ -152,6 +152,44 @@ def _voltages(doc: dict) -> None:
     doc["phase"] = [{k: v for k, v in doc["phase"][0].items() if k != "controller"}]
 
 
+def _straight(doc: dict) -> None:
+    """A writer with its own controller (operational_space), its circle made a straight trapezoid."""
+    doc["phase"][1]["reference"] = {"moves": [{"kind": "trapezoid", "delta": [-0.03, 0.0, 0.0], "duration": 4.0,
+                                               "accel_fraction": 0.2}]}
+
+
+def _force_dynamic(doc: dict) -> None:
+    """b1_force_loop under A10 as written (F* swapped into τ) on the exact nominal (model b: k, b, m), no reference."""
+    doc["controller"] = {"kind": "force_dynamic", "kv": 40.0, "kf": 50.0, "cancel": "target",
+                         "nominal": {"k": 1e5, "b": 1.0, "m": 10.0}}
+    del doc["phase"][0]["reference"]
+
+
+def _position_dynamic(doc: dict) -> None:
+    """b1_force_loop under A7 in task space, its reference pressed F_d / k into the surface (force_reference)."""
+    doc["controller"] = {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0, "force_reference": True,
+                         "nominal": {"k": 1e5}}
+
+
+def _joint_pd(doc: dict) -> None:
+    """b1 under joint PD (bias feedforward) tracking a joint-space trapezoid."""
+    doc["controller"] = {"kind": "joint_pd", "kp": [300.0, 200.0], "kd": 20.0, "feedforward": "bias"}
+    doc["phase"][0]["reference"] = {"space": "joint", "start": [0.33, -1.3],
+                                    "moves": [{"kind": "trapezoid", "delta": [0.2, -0.1], "duration": 1.0}]}
+
+
+def _task_force(doc: dict) -> None:
+    """b1 under an open-loop task force: a ramp and a sinusoid (gravity feedforward: none asked in the plane)."""
+    doc["controller"] = {"kind": "task_force", "force": [0.0, -50.0, 0.0], "rate": [20.0, 0.0, 0.0],
+                         "amplitude": [5.0, 3.0, 0.0], "frequency": 2.0, "phase": [0.0, 0.5, 0.0],
+                         "feedforward": "gravity"}
+
+
+def _apart(system, modes, ph, x0):
+    """The first mode with every contact apart (the dynamic laws' free directions, their integrals frozen)."""
+    return [mm.with_(touching=False) for mm in modes], ph
+
+
 #: case -> (scene file, an edit of its TOML or None, what to change from its first mode: None, or a function of
 #: (system, modes, phase, x0) giving (modes, phase))
 def _touch(stuck=False, limits=(), phase=None):
@@ -204,6 +242,10 @@ CASES = {
     "writer5dof_launch": ("sims/case2_writer5dof.toml", _tool_pd, _launch((0.6, 0.8))),
     "ur5_launch": ("sims/case2_writer_ur5.toml", _tool_pd, _launch((-1.0, 0.0))),
     "ur5_tool": ("sims/case2_writer_ur5.toml", _tool_pd, None),
+    "writer5dof_ops": ("sims/case2_writer5dof.toml", None, None),
+    "writer5dof_ops_write": ("sims/case2_writer5dof.toml", _straight, _touch(phase=1)),
+    "ur5_ops": ("sims/case2_writer_ur5.toml", None, None),
+    "ur5_ops_write": ("sims/case2_writer_ur5.toml", _straight, _touch(phase=1)),
     "cubic_press": ("examples/cubic_press.toml", None, None),
     "impedance_press": ("examples/impedance_press.toml", None, None),
     "cart_motors": ("sims/case1_cart.toml", None, None),
@@ -218,6 +260,14 @@ CASES = {
     "case3b_touch": ("sims/case3_b_position.toml", None, _touch()),
     "real_cell_drives": ("sims/force_loop_real_cell.toml", _real_cell_drives(2000.0), None),
     "real_cell_clip": ("sims/force_loop_real_cell.toml", _real_cell_drives(2e4), None),
+    "force_pi_press": ("examples/force_pi_press.toml", None, None),
+    "force_loop_hybrid": ("sims/b1_force_loop.toml", None, None),
+    "force_loop_hybrid_stick": ("sims/b1_force_loop.toml", None, _touch(stuck=True)),
+    "force_loop_hybrid_apart": ("sims/b1_force_loop.toml", None, _apart),
+    "b1_force_dynamic": ("sims/b1_force_loop.toml", _force_dynamic, None),
+    "b1_position_dynamic": ("sims/b1_force_loop.toml", _position_dynamic, None),
+    "b1_joint_pd": ("sims/b1.toml", _joint_pd, None),
+    "b1_task_force": ("sims/b1.toml", _task_force, None),
 }
 
 

@@ -83,17 +83,49 @@ class _UsesForces(_ReadsForces):
 def test_a_controller_numba_cannot_compile_is_declared():
     assert abi.controller_address(_ReadsForces) == 0
     assert "numba cannot compile" in _ReadsForces.compiled_reason
-    assert abi.controller_address(_UsesForces) == 0
-    assert "measured forces" in _UsesForces.compiled_reason
+    assert abi.controller_address(_UsesForces) == 0  # reads forces, but from the dictionary: not compiled
+    assert "numba cannot compile" in _UsesForces.compiled_reason
 
 
 def test_layout_and_control_arrays_agree_with_control_input():
     names = [f.name for f in fields(ControlInput)]
-    assert [name for name in names if name not in NOT_IN_LAYOUT] == [name for name, _, _ in LAYOUT]
+    in_layout = [*(name for name in names if name not in NOT_IN_LAYOUT), *ControlInput.SET_POINT_ARRAYS]
+    assert in_layout == [name for name, _, _ in LAYOUT]
     assert list(ControlArrays._fields) == [name for name, _, _ in LAYOUT]
     assert set(NOT_IN_LAYOUT) <= set(names)
-    layout = layout_of(3, 2)
-    assert layout[-1] == 1 + 3 + 3 + 9 + 3 + 3 + 3 + 3 + 9 + 3 + 9 + 2 + 9 + 9 + 3
+    layout = layout_of(3, 2, ns=2)
+    assert layout[:3].tolist() == [3, 2, 2]
+    assert layout[-1] == 1 + 3 + 3 + 9 + 3 + 3 + 3 + 3 + 9 + 3 + 9 + 2 + 9 + 9 + 3 + 3 + (2 + 2 + 6 + 2 + 6 + 6 + 2)
+
+
+class _ForceIntegral(Controller):
+    """τ = gain · (F_d − F) J[0] per set-point 0, ż = F_d − F (a force-reading law with a state, over the arrays)."""
+
+    name = "force_integral_abi_test"
+    uses_forces = True
+    n_states = 1
+    params = (Param("gain", "1", "a gain", 1.0),)
+
+    def command(self, inp):
+        error = inp.force_set[0] - inp.force_read[0] + inp.touch[0] * inp.surface_p[0, 1] + inp.tau_contact[0]
+        return self.config.gain * error * inp.J[0], np.array([error * inp.force_dir[0, 1] + inp.z[0]])
+
+
+def test_a_force_reading_law_with_states_by_address_equals_its_command():
+    """The set-points' arrays (ControlInput.SET_POINT_ARRAYS) in the buffer, ż the signature's second output."""
+    inp = _random_input(np.random.default_rng(3), 2)
+    inp.z = np.array([0.25])
+    inp.forces, inp.force_d, inp.normals = {"tip": 3.0}, {"tip": (5.0, 1.0)}, {"tip": np.array([0.0, 1.0, 0.0])}
+    inp.tau_contact, inp.surfaces, inp.touching = np.array([0.5, -0.5]), {"tip": (np.ones(3), np.zeros(3))}, \
+        {"tip": True}
+    config = DeclaredConfig(_ForceIntegral.name, (("gain", 2.0),))
+    expected, rates = _ForceIntegral(config, 2).command(inp)
+    buffer, layout = buffer_of(inp, nz=1)
+    tau, zdot = np.zeros(2), np.zeros(1)
+    assert abi.call_controller(abi.controller_address(_ForceIntegral), buffer, layout, params_of(config), tau,
+                               zdot) == 1
+    assert np.array_equal(tau, expected) and np.array_equal(zdot, rates)
+    assert rates[0] == (5.0 - 3.0 + 1.0 + 0.5) + 0.25
 
 
 def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedance, monkeypatch):

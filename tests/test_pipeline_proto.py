@@ -33,7 +33,8 @@ def test_the_pipeline_gives_the_readable_rates(name):
     assert pipe.fallbacks == 0
 
 
-@pytest.mark.parametrize("name", ["b1", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "hard_stiff"])
+@pytest.mark.parametrize("name", ["b1", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "hard_stiff",
+                                  "force_loop_hybrid", "force_pi_press"])
 def test_the_event_values_are_the_readable_ones(name):
     system, modes, phase, t, x0 = case(name)
     pipe = Pipeline(system, modes, phase)
@@ -50,6 +51,21 @@ def test_the_event_values_are_the_readable_ones(name):
             np.testing.assert_allclose(got[c.name]["F_f"][:nt], ev.friction[c.name], rtol=0, atol=RTOL * scale)
     for i, torque in got["limit"].items():
         assert torque == pytest.approx(ev.limit_torque[i], abs=RTOL * (1.0 + abs(ev.limit_torque[i])))
+
+
+@pytest.mark.parametrize("name", ["force_pi_press", "force_loop_hybrid", "b1_force_dynamic"])
+def test_the_fold_is_what_makes_a_force_reading_law_agree(name):
+    """The law's columns B (τ = τ₀ + B λ) and D (ż = ż₀ + D λ) at unit forces, folded into the solve: without them
+    the measured force is the one before the solve and the rates are far off."""
+    from contactdyn.model.pipeline.pack import READS_FORCES
+
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    x = states(x0, 2)[1]
+    ref = system.evaluate(t, x, modes, phase).xdot
+    assert np.abs(pipe.rhs(t, x) - ref).max() <= RTOL * np.abs(ref).max()
+    pipe.packed.ints[READS_FORCES] = 0
+    assert np.abs(pipe.rhs(t, x) - ref).max() > 1e-3 * np.abs(ref).max()
 
 
 def test_many_states_in_one_call_are_the_single_calls():
@@ -99,11 +115,13 @@ LIBM = {"b1_stribeck"}
 
 
 def test_the_same_source_interpreted_gives_the_compiled_rates():
-    """NUMBA_DISABLE_JIT=1: the pipeline's functions, the chains', the laws (stage, friction, the user's controller,
-    the drive kinds: DC motors with a wheel and a clip, the elastic transmission) all run as Python, the same source;
-    ẋ equals the compiled call's bit for bit (and the readable model's)."""
+    """NUMBA_DISABLE_JIT=1: the pipeline's functions, the chains', the laws (stage, friction, the user's controllers,
+    the built-in laws by address, the drive kinds: DC motors with a wheel and a clip, the elastic transmission) all
+    run as Python, the same source; ẋ equals the compiled call's bit for bit (and the readable model's)."""
     names = ["b1_stribeck", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "cubic_press", "impedance_press",
-             "cart_motors", "case3a_touch", "real_cell_clip", "writer_motors_voltage"]
+             "cart_motors", "case3a_touch", "real_cell_clip", "writer_motors_voltage", "writer5dof_ops_write",
+             "force_pi_press", "force_loop_hybrid", "b1_force_dynamic", "b1_position_dynamic", "b1_joint_pd",
+             "b1_task_force"]
     env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(BENCH.parent)}
     done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=names)], env=env,
                           capture_output=True, text=True, timeout=600)

@@ -29,7 +29,15 @@ import numpy as np
 
 from ..laws.controllers import operational_law as law
 from ..laws.controllers import task_pd_law
-from ..laws.controllers.abi import FIELD, call_controller, controller_address, layout_of, params_of, put_field
+from ..laws.controllers.abi import (
+    FIELD,
+    LAYOUT_HEAD,
+    call_controller,
+    controller_address,
+    layout_of,
+    params_of,
+    put_field,
+)
 from ..laws.controllers.operational import OperationalSpace
 from ..laws.controllers.operational_law import SINGULAR
 from ..laws.controllers.pd import TaskPD
@@ -176,7 +184,7 @@ def _controller(t, phi, x, fb, ib, ref, R_tip, J6, drift6, nQ, nv, i_h, i_J, i_d
     at = vector_of(ib, ib, CTL_AT)
     layout = at[1:].copy()
     buf = np.empty(layout[-1])
-    buf[layout[2 + 2 * F_T]] = t
+    buf[layout[LAYOUT_HEAD + 2 * F_T]] = t
     put_field(buf, layout, F_Q, x[:nv])
     put_field(buf, layout, F_V, x[nQ:nQ + nv])
     H = (phi[:nv * nv].reshape((nv, nv)).T + matrix_of(fb, ib, D_CTL)).copy()  # φ holds H column by column
@@ -197,7 +205,7 @@ def _controller(t, phi, x, fb, ib, ref, R_tip, J6, drift6, nQ, nv, i_h, i_J, i_d
         put_field(buf, layout, F_JW, np.ascontiguousarray(J6[3:]).ravel())
         put_field(buf, layout, F_DW, drift6[3:6])
     tau = np.empty(nv)
-    return tau, call_controller(at[0], buf, layout, vector_of(fb, ib, KP).copy(), tau)
+    return tau, call_controller(at[0], buf, layout, vector_of(fb, ib, KP).copy(), tau, np.empty(0))
 
 
 @njit(cache=True, inline="always")
@@ -353,7 +361,9 @@ def _controller_at(plan, ctl, law_kind: int) -> np.ndarray:
     if law_kind != CONTROLLER_LAW:
         return np.zeros(1, dtype=np.int64)
     absent = (() if plan.phase.reference is not None else ("x_d", "v_d", "a_d")) + \
-        (() if ctl.needs_gravity else ("gravity",)) + (() if ctl.reads_orientation else ("R_tip", "J_ang", "drift_ang"))
+        (() if ctl.needs_gravity else ("gravity",)) + \
+        (() if ctl.reads_orientation else ("R_tip", "J_ang", "drift_ang")) + \
+        ("tau_contact", "surface_p", "surface_v", "touch")  # (no force-reading law here; set-points: ns = 0)
     return np.concatenate(([controller_address(type(ctl))], layout_of(plan.system.nv, 0, absent)))
 
 

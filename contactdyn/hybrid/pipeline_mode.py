@@ -13,7 +13,7 @@ take either:
   the plan's ring: DOP853's FSAL call, its dense output's stages, then the events at the step end): gaps [m],
   normal forces [N], slip velocities [m/s], stick forces [N], limit torques [N·m or N];
 - :meth:`samples` runs the output samples in one compiled call with the call's diagnostics on (τ, the command,
-  the tip, x_d, F_d, λ, the stage states: :mod:`contactdyn.model.pipeline.diagnostics`).
+  the tip, x_d, F_d, λ, the stage states: :func:`contactdyn.model.pipeline.pipeline.record`).
 
 A call whose status is not 1 (a singular KKT matrix, a law that gave no force) is answered by the readable model
 (:meth:`System.evaluate`), its values too; ``singular`` counts them.

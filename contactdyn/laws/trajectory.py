@@ -18,8 +18,8 @@ import numpy as np
 
 from ..numerics.compile_cache import njit
 
-__all__ = ["Corner", "Move", "Ramp", "Reference", "profile", "profile_corners", "merge_corners",
-           "min_span", "move_rows", "move_table", "ramp_rows", "ramp_table", "RAMP_KINDS"]
+__all__ = ["CIRCLE_W", "add_circle", "Corner", "Move", "Ramp", "Reference", "profile", "profile_corners",
+           "merge_corners", "min_span", "move_rows", "move_table", "ramp_rows", "ramp_table", "RAMP_KINDS"]
 
 PROFILES = ("trapezoid", "triangle", "velocity_ramp", "constant_velocity", "step", "circle", "exponential")
 
@@ -372,3 +372,20 @@ def ramp_table(ramps) -> np.ndarray:
     """(J, 5): per ramp its kind's code, value [N], initial [N], start [s] and duration [s] (:func:`ramp_rows`)."""
     return np.array([(_RAMP_CODE[r.kind], r.value, r.initial, r.start, r.duration) for r in ramps],
                     dtype=float).reshape(len(ramps), 5)
+
+
+CIRCLE_W = 14  #: a circle move's packed reals (the pipeline's circle section): flag, span [rad], terms (3 × 4 by rows)
+
+
+@njit(cache=True)
+def add_circle(t, move, circle, x_d, v_d, a_d):
+    """A packed circle move's displacement [m], velocity [m/s] and acceleration [m/s²] at t [s] added to (x_d, v_d,
+    a_d), from :func:`circle_reference`: ``move`` its row of the move table (code, start [s], duration [s], accel
+    fraction), ``circle`` its packed reals (a flag, 1 a circle; the turns' angle [rad]; the (c, u, w, p) terms,
+    ``Move._circle_terms``)."""
+    out = circle_reference(t, move[1], move[2], move[3], circle[1], circle[2:CIRCLE_W].reshape((3, 4)),
+                           np.zeros(0))
+    for i in range(3):
+        x_d[i] += out[i]
+        v_d[i] += out[3 + i]
+        a_d[i] += out[6 + i]

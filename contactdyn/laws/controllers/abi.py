@@ -6,25 +6,33 @@ and floats with ControlInput's field names) and ``self`` a named tuple whose ``c
 controller's declared parameters (``Controller.params``, in order): attribute access compiles unchanged. The C
 function of a controller, its address a plain int64 (:func:`controller_address`):
 
-    ``int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau)``
+    ``int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau, double* zdot)``
 
 - ``buffer``: the inputs, one field after another, each where ``layout`` says;
-- ``layout``: [nv, nz, start_0, stop_0, start_1, stop_1, …, size of the buffer] per field of :data:`LAYOUT`
-  (:func:`layout_of`); a field an input does not have (no reference, no gravity asked, no orientation read) is
-  empty (start = stop), as ControlInput's None: a law that reads it fails there (bounds-checked) and the call goes
-  Python's way (``inp.x_d is None`` is never true compiled: test ``inp.x_d.size`` in a law meant to compile);
+- ``layout``: [nv, nz, ns, start_0, stop_0, start_1, stop_1, …, size of the buffer] per field of :data:`LAYOUT`
+  (:func:`layout_of`; nz states, ns force set-points); a field an input does not have (no reference, no gravity
+  asked, no orientation read, no measured forces for a law that does not read them) is empty (start = stop), as
+  ControlInput's None: a law that reads it fails there (bounds-checked) and the call goes Python's way
+  (``inp.x_d is None`` is never true compiled: test ``inp.x_d.size`` in a law meant to compile);
 - ``params``: the declared parameters' values in their order (``DeclaredConfig.values``);
-- ``tau``: the joint torques [N·m or N] (nv), written; the status returned: 1 written, 0 not (the law raised,
-  read past a field, which the bounds checks catch, or gave the wrong number of torques; or ``n_p`` is not the
-  number of declared parameters): the call then goes Python's way, where the law's own error surfaces.
+- ``tau``: the joint torques [N·m or N] (nv), written; ``zdot``: the states' rates (nz), written (a law without
+  states returns None for them); the status returned: 1 written, 0 not (the law raised, read past a field, which
+  the bounds checks catch, or gave the wrong number of torques or rates; or ``n_p`` is not the number of declared
+  parameters): the call then goes Python's way, where the law's own error surfaces.
 
 Units are ControlInput's: t [s], q [rad or m], v [rad/s or m/s], H [kg·m² …], h and gravity [N·m or N], p_tip [m],
 v_tip [m/s], J and J_ang (3, nv), drift [m/s²], drift_ang [rad/s²], x_d/v_d/a_d [m, m/s, m/s²], R_tip (3, 3), z
-the controller's states.
+the controller's states, tau_contact [N·m or N]; per force set-point, in the phase's order
+(``ControlInput.SET_POINT_ARRAYS``): force_set F_d [N], force_rate Ḟ_d [N/s], force_dir (ns, 3), force_read the
+measured force of the set-point's key [N], surface_p [m] and surface_v [m/s] (ns, 3), touch (1.0 touching).
+ControlInput's dictionaries (forces, force_d, normals, surfaces, touching) are not in the buffer: a law meant to
+compile reads the arrays, which the readable ControlInput has too (its properties). A law that reads measured
+forces (``uses_forces``) is affine in them: the caller folds it by calling it again at unit forces
+(:mod:`contactdyn.model.pipeline.force_fold`).
 
-What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that reads measured forces
-(``uses_forces``), has states, outputs voltages, has no declared parameters' config, or whose ``command`` numba
-cannot compile (a dict, a Python object, ``inp.forces``): it stays on the Python path.
+What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that outputs voltages, has
+no declared parameters' config, or whose ``command`` numba cannot compile (a dict, a Python object,
+``inp.forces``): it stays on the Python path.
 
 Caching: the wrapper is generated closure-free and attributed to the controller's own file, as the stage laws'
 (:func:`contactdyn.laws.abi.compile_wrapper`), so numba caches it (compile_cache's directory; an edit of that
@@ -50,43 +58,55 @@ __all__ = ["CONTROLLER_SIGNATURE", "LAYOUT", "NOT_IN_LAYOUT", "ControlArrays", "
            "put_field", "controller_address", "params_of", "buffer_of", "call_controller"]
 
 _P = types.CPointer(types.float64)
-#: int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau)
-CONTROLLER_SIGNATURE = types.int64(_P, types.CPointer(types.int64), _P, types.int64, _P)
+#: int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau, double* zdot)
+CONTROLLER_SIGNATURE = types.int64(_P, types.CPointer(types.int64), _P, types.int64, _P, _P)
 
-#: the buffer's fields in order: name -> (size as a function of (nv, nz), columns: 0 a float, 1 a vector, else a
-#: matrix of that many columns as a function of nv). A new input is one line here and one in control_arrays.
+#: the buffer's fields in order: name -> (size as a function of (nv, nz, ns), columns: 0 a float, 1 a vector, else
+#: a matrix of that many columns as a function of nv). nz the controller's states, ns the phase's force set-points.
+#: A new input is one line here and one in control_arrays.
 LAYOUT = (
-    ("t", lambda nv, nz: 1, 0),
-    ("q", lambda nv, nz: nv, 1),
-    ("v", lambda nv, nz: nv, 1),
-    ("H", lambda nv, nz: nv * nv, lambda nv: nv),
-    ("h", lambda nv, nz: nv, 1),
-    ("gravity", lambda nv, nz: nv, 1),
-    ("p_tip", lambda nv, nz: 3, 1),
-    ("v_tip", lambda nv, nz: 3, 1),
-    ("J", lambda nv, nz: 3 * nv, lambda nv: nv),
-    ("drift", lambda nv, nz: 3, 1),
-    ("x_d", lambda nv, nz: 3, 1),
-    ("v_d", lambda nv, nz: 3, 1),
-    ("a_d", lambda nv, nz: 3, 1),
-    ("z", lambda nv, nz: nz, 1),
-    ("R_tip", lambda nv, nz: 9, lambda nv: 3),
-    ("J_ang", lambda nv, nz: 3 * nv, lambda nv: nv),
-    ("drift_ang", lambda nv, nz: 3, 1),
+    ("t", lambda nv, nz, ns: 1, 0),
+    ("q", lambda nv, nz, ns: nv, 1),
+    ("v", lambda nv, nz, ns: nv, 1),
+    ("H", lambda nv, nz, ns: nv * nv, lambda nv: nv),
+    ("h", lambda nv, nz, ns: nv, 1),
+    ("gravity", lambda nv, nz, ns: nv, 1),
+    ("p_tip", lambda nv, nz, ns: 3, 1),
+    ("v_tip", lambda nv, nz, ns: 3, 1),
+    ("J", lambda nv, nz, ns: 3 * nv, lambda nv: nv),
+    ("drift", lambda nv, nz, ns: 3, 1),
+    ("x_d", lambda nv, nz, ns: 3, 1),
+    ("v_d", lambda nv, nz, ns: 3, 1),
+    ("a_d", lambda nv, nz, ns: 3, 1),
+    ("z", lambda nv, nz, ns: nz, 1),
+    ("R_tip", lambda nv, nz, ns: 9, lambda nv: 3),
+    ("J_ang", lambda nv, nz, ns: 3 * nv, lambda nv: nv),
+    ("drift_ang", lambda nv, nz, ns: 3, 1),
+    ("tau_contact", lambda nv, nz, ns: nv, 1),
+    ("force_set", lambda nv, nz, ns: ns, 1),
+    ("force_rate", lambda nv, nz, ns: ns, 1),
+    ("force_dir", lambda nv, nz, ns: 3 * ns, lambda nv: 3),
+    ("force_read", lambda nv, nz, ns: ns, 1),
+    ("surface_p", lambda nv, nz, ns: 3 * ns, lambda nv: 3),
+    ("surface_v", lambda nv, nz, ns: 3 * ns, lambda nv: 3),
+    ("touch", lambda nv, nz, ns: ns, 1),
 )
 FIELD = {name: k for k, (name, _, _) in enumerate(LAYOUT)}  #: a field's index in LAYOUT
-#: ControlInput's fields a compiled controller does not read: the measured forces and what goes with them
-NOT_IN_LAYOUT = ("forces", "force_d", "normals", "tau_contact", "surfaces", "touching")
+LAYOUT_HEAD = 3  #: the layout table's header: nv, nz, ns; then (start, stop) per field, then the buffer's size
+#: ControlInput's fields a compiled controller does not read (its dictionaries: their arrays by set-point are
+#: ControlInput.SET_POINT_ARRAYS)
+NOT_IN_LAYOUT = ("forces", "force_d", "normals", "surfaces", "touching")
 
-ControlArrays = namedtuple("ControlArrays", [f.name for f in fields(ControlInput) if f.name not in NOT_IN_LAYOUT])
+ControlArrays = namedtuple("ControlArrays", [*(f.name for f in fields(ControlInput) if f.name not in NOT_IN_LAYOUT),
+                                             *ControlInput.SET_POINT_ARRAYS])
 
 
-def layout_of(nv: int, nz: int, absent: tuple[str, ...] = ()) -> np.ndarray:
-    """The layout table [nv, nz, (start, stop) per field, size of the buffer] for nv joints and nz states; the fields
-    in ``absent`` empty."""
-    out, at = [nv, nz], 0
+def layout_of(nv: int, nz: int, absent: tuple[str, ...] = (), ns: int = 0) -> np.ndarray:
+    """The layout table [nv, nz, ns, (start, stop) per field, size of the buffer] for nv joints, nz states and ns
+    force set-points; the fields in ``absent`` empty."""
+    out, at = [nv, nz, ns], 0
     for name, size, _ in LAYOUT:
-        n = 0 if name in absent else size(nv, nz)
+        n = 0 if name in absent else size(nv, nz, ns)
         out += [at, at + n]
         at += n
     return np.array([*out, at], dtype=np.int64)
@@ -96,11 +116,11 @@ def buffer_of(inp: ControlInput, nz: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(buffer, layout) of a readable ControlInput (its None fields absent): the compiled call's inputs, in Python."""
     nv = len(inp.q)
     absent = tuple(name for name, _, _ in LAYOUT if getattr(inp, name) is None)
-    layout = layout_of(nv, nz, absent)
+    layout = layout_of(nv, nz, absent, len(inp.force_d))
     buffer = np.empty(layout[-1])
     for k, (name, _, _) in enumerate(LAYOUT):
         if name not in absent:
-            buffer[layout[2 + 2 * k]:layout[3 + 2 * k]] = np.ravel(getattr(inp, name))  # matrices row by row
+            buffer[layout[LAYOUT_HEAD + 2 * k]:layout[LAYOUT_HEAD + 1 + 2 * k]] = np.ravel(getattr(inp, name))
     return buffer, layout
 
 
@@ -108,19 +128,19 @@ def buffer_of(inp: ControlInput, nz: int = 0) -> tuple[np.ndarray, np.ndarray]:
 def put_field(buf, lay, k, values):
     """Field k of a controller's buffer from ``values`` (flat) where the layout table ``lay`` puts it (nothing for a
     field the layout leaves empty): how a compiled caller fills the buffer it passes by address."""
-    start = lay[2 + 2 * k]
-    for i in range(lay[3 + 2 * k] - start):
+    start = lay[LAYOUT_HEAD + 2 * k]
+    for i in range(lay[LAYOUT_HEAD + 1 + 2 * k] - start):
         buf[start + i] = values[i]
 
 
 @njit(cache=True)
 def _vector(buf, lay, k):
-    return buf[lay[2 + 2 * k]:lay[3 + 2 * k]]
+    return buf[lay[LAYOUT_HEAD + 2 * k]:lay[LAYOUT_HEAD + 1 + 2 * k]]
 
 
 @njit(cache=True)
 def _matrix(buf, lay, k, cols):
-    v = buf[lay[2 + 2 * k]:lay[3 + 2 * k]]
+    v = buf[lay[LAYOUT_HEAD + 2 * k]:lay[LAYOUT_HEAD + 1 + 2 * k]]
     return v.reshape((v.size // cols, cols))
 
 
@@ -128,22 +148,25 @@ def _matrix(buf, lay, k, cols):
 def control_arrays(buf, lay):
     """The :class:`ControlArrays` of a buffer by its layout table (views, no copies)."""
     nv = lay[0]
-    return ControlArrays(buf[lay[2]], _vector(buf, lay, 1), _vector(buf, lay, 2), _matrix(buf, lay, 3, nv),
+    return ControlArrays(buf[lay[LAYOUT_HEAD]], _vector(buf, lay, 1), _vector(buf, lay, 2), _matrix(buf, lay, 3, nv),
                          _vector(buf, lay, 4), _vector(buf, lay, 5), _vector(buf, lay, 6), _vector(buf, lay, 7),
                          _matrix(buf, lay, 8, nv), _vector(buf, lay, 9), _vector(buf, lay, 10),
                          _vector(buf, lay, 11), _vector(buf, lay, 12), _vector(buf, lay, 13),
-                         _matrix(buf, lay, 14, 3), _matrix(buf, lay, 15, nv), _vector(buf, lay, 16))
+                         _matrix(buf, lay, 14, 3), _matrix(buf, lay, 15, nv), _vector(buf, lay, 16),
+                         _vector(buf, lay, 17), _vector(buf, lay, 18), _vector(buf, lay, 19),
+                         _matrix(buf, lay, 20, 3), _vector(buf, lay, 21), _matrix(buf, lay, 22, 3),
+                         _matrix(buf, lay, 23, 3), _vector(buf, lay, 24))
 
 
 #: the wrapper's source per controller: {name}, {n_layout}, {params} (p[0], p[1], … of the declared parameters)
-_WRAPPER = """def {name}(buffer, layout, params, n_p, tau):  # config: {names}
+_WRAPPER = """def {name}(buffer, layout, params, n_p, tau, zdot):  # config: {names}
     lay = carray(layout, ({n_layout},))
     nv = lay[0]
     if n_p != {n_params}:
         return 0
     p = carray(params, (n_p,))
     try:
-        out, _ = law(Self(Config({params}), nv), control_arrays(carray(buffer, (lay[{n_layout} - 1],)), lay))
+        out, rates = law(Self(Config({params}), nv), control_arrays(carray(buffer, (lay[{n_layout} - 1],)), lay))
     except Exception:  # the Python path runs the law again, and its own error surfaces there
         return 0
     if out.shape[0] != nv:
@@ -151,8 +174,32 @@ _WRAPPER = """def {name}(buffer, layout, params, n_p, tau):  # config: {names}
     t = carray(tau, (nv,))
     for i in range(nv):
         t[i] = out[i]
-    return 1
+    return put_states(rates, zdot, lay[1])
 """
+
+
+def put_states(rates, zdot, nz) -> int:
+    """The law's state rates ż written at ``zdot`` (nz of them; a law without states returns None): status 1, or 0
+    where it gave another number of rates (compiled only: the wrapper's helper)."""
+    raise NotImplementedError("put_states is compiled only (the controller's wrapper)")
+
+
+@overload(put_states)
+def _put_states(rates, zdot, nz):
+    if isinstance(rates, types.NoneType):
+        def none(rates, zdot, nz):
+            return 1 if nz == 0 else 0
+        return none
+
+    def impl(rates, zdot, nz):
+        if rates.shape[0] != nz:
+            return 0
+        z = carray(zdot, (nz,)) if nz else np.empty(0)
+        for i in range(nz):
+            z[i] = rates[i]
+        return 1
+    return impl
+
 
 _compiled: dict[type, tuple[int, object]] = {}  #: controller class -> (address, its cfunc, kept alive)
 
@@ -168,9 +215,9 @@ def controller_address(cls: type) -> int:
         names = [p.name for p in cls.params]
         config = namedtuple(f"{cls.__name__}Config", names)
         name = f"{cls.__name__}_command_abi"
-        source = _WRAPPER.format(name=name, n_layout=2 + 2 * len(LAYOUT) + 1, names=", ".join(names),
+        source = _WRAPPER.format(name=name, n_layout=LAYOUT_HEAD + 2 * len(LAYOUT) + 1, names=", ".join(names),
                                  n_params=len(names), params=", ".join(f"p[{i}]" for i in range(len(names))))
-        namespace = {"carray": carray, "control_arrays": control_arrays, "Config": config,
+        namespace = {"carray": carray, "control_arrays": control_arrays, "Config": config, "put_states": put_states,
                      "Self": namedtuple(f"{cls.__name__}Self", ["config", "nv"])}
         cfunc, reason = compile_wrapper(cls.command, name, source, CONTROLLER_SIGNATURE, namespace)
     cls.compiled_reason = reason
@@ -183,10 +230,6 @@ def _declined(cls: type) -> str:
     """Why ``cls`` is not compiled before numba tries ("" if it may be)."""
     if numba.config.DISABLE_JIT:
         return "numba is disabled (NUMBA_DISABLE_JIT)"
-    if cls.uses_forces:
-        return f"controller {cls.name!r} reads measured forces (uses_forces): not compiled yet"
-    if cls.n_states:
-        return f"controller {cls.name!r} has states: not compiled yet"
     if cls.outputs != "torque":
         return f"controller {cls.name!r} outputs {cls.outputs}: not compiled yet"
     if getattr(cls.read, "__func__", cls.read) is not Controller.read.__func__:  # (a staticmethod has none)
@@ -201,28 +244,32 @@ def params_of(config) -> np.ndarray:
 
 # ---- the call: its Python twin (by ctypes), and its compiled form by overload ----------------------------------
 
-def call_controller(address: int, buffer, layout, params, tau) -> int:
+def call_controller(address: int, buffer, layout, params, tau, zdot=None) -> int:
     """Status of the controller at ``address`` on ``buffer`` by ``layout`` with ``params``, τ written into ``tau``
-    (float64 and int64 arrays, contiguous: the C function reads them by pointer)."""
+    and its states' rates into ``zdot`` (float64 and int64 arrays, contiguous: the C function reads them by
+    pointer; ``zdot`` may be omitted for a law without states)."""
     if not address:
         raise ValueError("call_controller: address 0 (the controller is not compiled: see its compiled_reason)")
     buffer, layout, params = (np.ascontiguousarray(buffer, float), np.ascontiguousarray(layout, np.int64),
                               np.ascontiguousarray(params, float))
-    if not (tau.dtype == np.float64 and tau.flags.c_contiguous):
-        raise ValueError("call_controller: tau must be a contiguous float64 array (it is written)")
+    zdot = np.zeros(max(int(layout[1]), 1)) if zdot is None else zdot
+    for name, out in (("tau", tau), ("zdot", zdot)):
+        if not (out.dtype == np.float64 and out.flags.c_contiguous):
+            raise ValueError(f"call_controller: {name} must be a contiguous float64 array (it is written)")
     fn = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64,
-                          ctypes.c_void_p)(address)
-    return fn(buffer.ctypes.data, layout.ctypes.data, params.ctypes.data, params.size, tau.ctypes.data)
+                          ctypes.c_void_p, ctypes.c_void_p)(address)
+    return fn(buffer.ctypes.data, layout.ctypes.data, params.ctypes.data, params.size, tau.ctypes.data,
+              zdot.ctypes.data)
 
 
 @overload(call_controller)
-def _call_controller_compiled(address, buffer, layout, params, tau):
-    def impl(address, buffer, layout, params, tau):
+def _call_controller_compiled(address, buffer, layout, params, tau, zdot):
+    def impl(address, buffer, layout, params, tau, zdot):
         return _call_at_controller(address, _data_at(buffer, 0), _data_at(layout, 0), _data_at(params, 0),
-                                   params.size, _data_at(tau, 0))
+                                   params.size, _data_at(tau, 0), _data_at(zdot, 0))
     return impl
 
 
 @intrinsic
-def _call_at_controller(typingctx, address, buffer, layout, params, n_p, tau):
+def _call_at_controller(typingctx, address, buffer, layout, params, n_p, tau, zdot):
     return types.int64(types.int64, *CONTROLLER_SIGNATURE.args), _indirect_call(CONTROLLER_SIGNATURE)

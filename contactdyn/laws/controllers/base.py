@@ -64,6 +64,49 @@ class ControlInput:
     surfaces: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     touching: dict[str, bool] = field(default_factory=dict)  #: contact modes
 
+    #: the set-points' inputs as arrays, in the phase's order of set-points (``force_d``'s keys): what a law meant to
+    #: compile reads (the controller ABI's buffer has them, not the dictionaries); read-only views of the fields
+    SET_POINT_ARRAYS: ClassVar[tuple[str, ...]] = ("force_set", "force_rate", "force_dir", "force_read", "surface_p",
+                                                   "surface_v", "touch")
+
+    @property
+    def force_set(self) -> np.ndarray:
+        """F_d [N] per set-point."""
+        return np.array([value for value, _ in self.force_d.values()], dtype=float)
+
+    @property
+    def force_rate(self) -> np.ndarray:
+        """Ḟ_d [N/s] per set-point."""
+        return np.array([rate for _, rate in self.force_d.values()], dtype=float)
+
+    @property
+    def force_dir(self) -> np.ndarray:
+        """(ns, 3): each set-point's unit direction (``normals``)."""
+        return np.array([self.normals[key] for key in self.force_d], dtype=float).reshape(-1, 3)
+
+    @property
+    def force_read(self) -> np.ndarray:
+        """The measured force [N] of each set-point's key (``forces``: a normal force, a tangential chain's)."""
+        return np.array([self.forces[key] for key in self.force_d], dtype=float)
+
+    @property
+    def surface_p(self) -> np.ndarray | None:
+        """(ns, 3) [m]: each set-point's surface point or tangential anchor (``surfaces``); None without them."""
+        return np.array([self.surfaces[key][0] for key in self.force_d], dtype=float).reshape(-1, 3) \
+            if self.surfaces else None
+
+    @property
+    def surface_v(self) -> np.ndarray | None:
+        """(ns, 3) [m/s]: their velocities; None without surfaces."""
+        return np.array([self.surfaces[key][1] for key in self.force_d], dtype=float).reshape(-1, 3) \
+            if self.surfaces else None
+
+    @property
+    def touch(self) -> np.ndarray | None:
+        """1.0 where the set-point's contact touches, else 0.0; None without the contact modes."""
+        return np.array([float(self.touching[key.partition(".")[0]]) for key in self.force_d]) \
+            if self.touching else None
+
     def replaced(self, **changes) -> ControlInput:
         """A shallow copy with ``changes`` (``dataclasses.replace`` without re-running ``__init__``: the
         force probes call it per right-hand-side call)."""

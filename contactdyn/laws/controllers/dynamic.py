@@ -58,6 +58,7 @@ from ...errors import SceneError
 from ...numerics.linalg import contiguous as _c
 from ..elements import Mass, Stage
 from . import computed_torque as compiled
+from . import dynamic_law
 from .base import BindContext, ControlInput, Controller, register
 
 __all__ = ["NominalEnvironment", "PositionDynamic", "ForceDynamic", "Hybrid", "nominal_from_chain"]
@@ -159,6 +160,27 @@ def pseudo_inverse(J: np.ndarray) -> np.ndarray:
     dropped (numpy.linalg.pinv's rcond); one Jacobian (r, c) or a stack (N, r, c)."""
     J = _c(J)
     return compiled.pinv_stack(J) if J.ndim == 3 else compiled.pinv(J)
+
+
+_NONE = np.empty(0)
+#: (normals, touch, p_s, v_s, F_d, Ḟ_d, k) of no set-point (dynamic_law's arguments)
+_NO_SET_POINTS = (np.zeros((0, 3)), _NONE, np.zeros((0, 3)), np.zeros((0, 3)), _NONE, _NONE, _NONE)
+
+
+def _gains3(cfg) -> tuple[np.ndarray, np.ndarray]:
+    """K_p, K_v per world axis (3) [1/s², 1/s]."""
+    return (np.broadcast_to(np.asarray(cfg.kp, float), 3).copy(), np.broadcast_to(np.asarray(cfg.kv, float), 3).copy())
+
+
+def _set_point_arrays(inp: ControlInput, keys: list[str], k: list[float]) -> tuple:
+    """dynamic_law's per-set-point arrays (normals, touch, p_s, v_s, F_d, Ḟ_d, k) of the touching ``keys``."""
+    n = len(keys)
+    normals = np.array([inp.normals[key] for key in keys], dtype=float).reshape(n, 3)
+    p_s = np.array([inp.surfaces[key][0] for key in keys], dtype=float).reshape(n, 3)
+    v_s = np.array([inp.surfaces[key][1] for key in keys], dtype=float).reshape(n, 3)
+    F_d = np.array([inp.force_d[key][0] for key in keys], dtype=float)
+    dF_d = np.array([inp.force_d[key][1] for key in keys], dtype=float)
+    return normals, np.ones(n), p_s, v_s, F_d, dF_d, np.array(k, dtype=float)
 
 
 class _Pinv:
@@ -297,6 +319,7 @@ class PositionDynamic(_ComputedTorque):
         self._rotor = _rotor_inertia(context, self.config.inertia)
         cfg, key, file = self.config, context.key, context.scene.file
         dims = self.nv if cfg.space == "joint" else 3
+        self._gains3 = _gains3(cfg) if cfg.space == "task" else None
         for name in ("kp", "kv"):
             _check_gain_size(getattr(cfg, name), (1, dims), f"{key}.{name}", file)
         ref = context.phase.reference
@@ -329,31 +352,18 @@ class PositionDynamic(_ComputedTorque):
         return _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact, None
 
     def tip_targets(self, inp: ControlInput) -> tuple[np.ndarray, None, None]:
-        """(a*, no force swap, no states): the desired tip acceleration [m/s²] of the task-space law."""
-        cfg = self.config
+        """(a*, no force swap, no states): the desired tip acceleration [m/s²] of the task-space law
+        (:func:`~.dynamic_law.position_targets`). With ``force_reference``, along each touching contact's set-point
+        direction n (normal or tangent) the reference is F_d/k beyond the undeformed surface or tangential anchor,
+        along −n; the surface's acceleration along n and F̈_d/k are left out (a_d's component along n is 0)."""
+        kp, kv = self._gains3
         if inp.x_d is None:
-            return -cfg.kv * inp.v_tip, None, None
-        x_d, v_d, a_d = inp.x_d, inp.v_d, inp.a_d
-        if self.envs:
-            x_d, v_d, a_d = self._pressing_reference(inp)
-        return a_d - cfg.kp * (inp.p_tip - x_d) - cfg.kv * (inp.v_tip - v_d), None, None
-
-    def _pressing_reference(self, inp: ControlInput):
-        """Along each touching contact's set-point direction n (normal or tangent): F_d/k beyond the
-        undeformed surface or tangential anchor, along −n. The surface's acceleration along n and
-        F̈_d/k are left out (a_d's component along n is 0)."""
-        R = np.array((inp.x_d, inp.v_d, inp.a_d))  # rows x_d, v_d, a_d (copies)
-        target = np.zeros(3)
-        for name, env in self.envs.items():
-            if not inp.touching.get(name.partition(".")[0]) or name not in inp.force_d:
-                continue
-            n = inp.normals[name]
-            p_s, v_s = inp.surfaces[name]
-            F_d, dF_d = inp.force_d[name]
-            target[0] = n.dot(p_s) - F_d / env.k  # along n: x_d = p_s − F_d/k, v_d = v_s − Ḟ_d/k, a_d = 0
-            target[1] = n.dot(v_s) - dF_d / env.k
-            R += np.multiply.outer(target - R.dot(n), n)
-        return R[0], R[1], R[2]
+            return dynamic_law.position_targets(_c(inp.p_tip), _c(inp.v_tip), _NONE, _NONE, _NONE, kp, kv, False,
+                                                *_NO_SET_POINTS), None, None
+        keys = [name for name in self.envs if inp.touching.get(name.partition(".")[0]) and name in inp.force_d]
+        set_points = _set_point_arrays(inp, keys, [self.envs[k].k for k in keys]) if keys else _NO_SET_POINTS
+        return dynamic_law.position_targets(_c(inp.p_tip), _c(inp.v_tip), _c(inp.x_d), _c(inp.v_d), _c(inp.a_d), kp,
+                                            kv, bool(keys), *set_points), None, None
 
 
 # ---- A10 and hybrid ---------------------------------------------------------------------------
@@ -422,42 +432,34 @@ class ForceDynamic(_ComputedTorque):
         else:  # the orthogonal complement of the normals
             _, sv, vt = np.linalg.svd(normals)
             axes = vt[int(np.sum(sv > 1e-9)):]
-        self.P = axes.T @ axes  #: projector on the position-controlled directions
+        self.P = _c(axes.T @ axes)  #: projector on the position-controlled directions
+        self._gains3 = _gains3(cfg)
+        self._env = np.array([[self.envs[n].k, self.envs[n].b, self.envs[n].m] for n in names]).reshape(-1, 3)
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray]:
         a, f_swap, zdot = self.tip_targets(inp)
         return self.computed_torque(inp, a, f_swap), zdot
 
     def tip_targets(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        """(a* [m/s²], the tip force swapped into τ [N] (cancel = "target"; else None), ż [N/s])."""
+        """(a* [m/s²], the tip force swapped into τ [N] (cancel = "target"; else None), ż [N/s]):
+        :func:`~.dynamic_law.force_targets` on the set-points' arrays (a contact not touching reads no force)."""
         cfg = self.config
-        P = self.P
-        a_force = np.zeros(3)
-        f_swap = np.zeros(3)  # tip force [N]: measured normal forces out, targets F* in (cancel = "target")
-        zdot = np.zeros(self.n_states)
+        touch = np.array([1.0 if inp.touching.get(name) else 0.0 for name in self.names])
+        ns = len(self.names)
+        normals = np.array([inp.normals[name] for name in self.names], dtype=float).reshape(ns, 3)
+        p_s, v_s, F = np.zeros((ns, 3)), np.zeros((ns, 3)), np.zeros(ns)
+        F_d, dF_d = np.zeros(ns), np.zeros(ns)
         for i, name in enumerate(self.names):
-            n = inp.normals[name]
-            if not inp.touching.get(name):
-                P = P + np.outer(n, n)  # not touching yet: like a free direction, integral frozen
-                continue
-            env = self.envs[name]
-            p_s, v_s = inp.surfaces[name]
-            s, sd = n @ (p_s - inp.p_tip), n @ (v_s - inp.v_tip)  # penetration [m], its rate [m/s]
-            F_d, dF_d = inp.force_d[name]
-            mu = inp.forces[name] - F_d  # force error [N]
-            target = F_d + inp.z[i]  # F* = F_d + ∫Q(μ) dt [N]
-            if env.m > 0.0:
-                sdd = (target - env.b * sd - env.k * s) / env.m
-            else:  # Ḟ* = Ḟ_d + Q(μ)
-                sdd = (dF_d - cfg.kf * mu - env.k * sd) / env.b
-            a_force -= sdd * n
-            zdot[i] = -cfg.kf * mu
-            f_swap += (inp.forces[name] - target) * n
-        if self.tracks_position:
-            a_pos = inp.a_d - cfg.kp * (inp.p_tip - inp.x_d) - cfg.kv * (inp.v_tip - inp.v_d)
-        else:
-            a_pos = -cfg.kv * inp.v_tip
-        return P @ a_pos + a_force, (f_swap if cfg.cancel == "target" else None), zdot
+            if touch[i]:
+                p_s[i], v_s[i] = inp.surfaces[name]
+                F_d[i], dF_d[i] = inp.force_d[name]
+                F[i] = inp.forces[name]
+        ref = (_c(inp.x_d), _c(inp.v_d), _c(inp.a_d)) if self.tracks_position else (_NONE, _NONE, _NONE)
+        kp, kv = self._gains3
+        a, f_swap, zdot = dynamic_law.force_targets(self.P, _c(inp.p_tip), _c(inp.v_tip), *ref, kp, kv,
+                                                    float(cfg.kf), normals, touch, p_s, v_s, F_d, dF_d, F,
+                                                    _c(inp.z), self._env, self.tracks_position)
+        return a, (f_swap if cfg.cancel == "target" else None), zdot
 
 
 @register

@@ -16,9 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...numerics.compile_cache import njit
+from ...numerics.linalg import contiguous, mtv
 from .base import FEEDFORWARD, ControlInput, Controller, register
 
-__all__ = ["TaskForce", "TaskForceConfig"]
+__all__ = ["TaskForce", "TaskForceConfig", "task_force", "task_force_torque"]
 
 
 @dataclass(frozen=True)
@@ -58,17 +60,38 @@ class TaskForce(Controller):
         super().__init__(config, nv)
         self.needs_gravity = config.feedforward == "gravity"
         self._oscillates = bool(np.any(config.amplitude)) and config.frequency > 0.0
+        c, vec = config, lambda a: contiguous(np.asarray(a, float))
+        #: task_force's arguments after t: force, rate, start, ramp_time, amplitude, frequency, phase, oscillates
+        self.constants = (vec(c.force), vec(c.rate), float(c.start), float(c.ramp_time), vec(c.amplitude),
+                          float(c.frequency), vec(c.phase), self._oscillates)
 
     def force(self, t: float) -> np.ndarray:
         """The commanded tip force f(t) [N]."""
-        c = self.config
-        f = c.force + c.rate * min(max(t - c.start, 0.0), c.ramp_time)
-        if self._oscillates:
-            f = f + c.amplitude * np.sin(2.0 * math.pi * c.frequency * t + c.phase)
-        return f
+        return task_force(t, *self.constants)
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
-        tau = inp.J.T @ self.force(inp.t)
         ff = inp.h if self.config.feedforward == "bias" else inp.gravity if self.config.feedforward == "gravity" \
             else None
-        return (tau + ff if ff is not None else tau), None
+        return task_force_torque(float(inp.t), contiguous(inp.J), *self.constants,
+                                 _NONE if ff is None else contiguous(ff)), None
+
+
+_NONE = np.empty(0)
+
+
+@njit(cache=True)
+def task_force(t, force, rate, start, ramp_time, amplitude, frequency, phase, oscillates):
+    """f(t) = force + rate · clip(t − start, 0, ramp_time) [+ amplitude ∘ sin(2π frequency t + phase)] [N]."""
+    f = force + rate * min(max(t - start, 0.0), ramp_time)
+    if oscillates:
+        f = f + amplitude * np.sin(2.0 * math.pi * frequency * t + phase)
+    return f
+
+
+@njit(cache=True)
+def task_force_torque(t, J, force, rate, start, ramp_time, amplitude, frequency, phase, oscillates, tau_ff):
+    """τ = Jᵀ f(t) [+ τ_ff] [N·m or N] (no feedforward: τ_ff of size 0), compiled once for every path."""
+    tau = mtv(J, task_force(t, force, rate, start, ramp_time, amplitude, frequency, phase, oscillates))
+    if tau_ff.size:
+        return tau + tau_ff
+    return tau

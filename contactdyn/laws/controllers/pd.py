@@ -27,11 +27,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...numerics.compile_cache import njit
 from ...numerics.linalg import contiguous
 from . import task_pd_law as law
 from .base import FEEDFORWARD, BindContext, ControlInput, Controller, TipForceLaw, register
 
-__all__ = ["TaskPD", "JointPD", "KP_TASK", "KD_TASK", "read_tool_axis", "read_orientation"]
+__all__ = ["TaskPD", "JointPD", "KP_TASK", "KD_TASK", "read_tool_axis", "read_orientation", "joint_pd_torque"]
 
 _NONE, _NO_ROTATION = np.empty(0), np.empty((0, 3))  #: task_pd_law's "none"
 ROTATION_TOL = 1e-6  #: largest |R Rᵀ − I| accepted of a scene's orientation (then made exactly orthonormal)
@@ -197,9 +198,23 @@ class JointPD(Controller):
                 from ...errors import SceneError
 
                 raise SceneError(f"controller.{name}", f"one gain or {nv} (one per joint)", getattr(config, name))
+        #: K_p, K_d per joint (joint_pd_torque's)
+        self.gains = tuple(np.broadcast_to(np.asarray(g, float), nv).copy() for g in (config.kp, config.kd))
 
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
-        tau = np.zeros(self.nv)
-        if inp.x_d is not None:
-            tau += self.config.kp * (inp.x_d - inp.q) + self.config.kd * (inp.v_d - inp.v)
-        return tau + _feedforward(inp, self.config.feedforward), None
+        ff = _feedforward(inp, self.config.feedforward)
+        ref = (contiguous(inp.x_d), contiguous(inp.v_d)) if inp.x_d is not None else (_NONE, _NONE)
+        return joint_pd_torque(contiguous(inp.q), contiguous(inp.v), *ref, *self.gains,
+                               _NONE if np.isscalar(ff) else contiguous(ff)), None
+
+
+@njit(cache=True)
+def joint_pd_torque(q, v, q_d, v_d, kp, kd, tau_ff):
+    """τ = K_p (q_d − q) + K_d (q̇_d − q̇) [+ τ_ff] [N·m or N]: the joint PD law, compiled once for every path (its
+    readable command, the one pipeline); no reference: q_d, q̇_d of size 0; no feedforward: τ_ff of size 0."""
+    tau = np.zeros(q.size)
+    if q_d.size:
+        tau += kp * (q_d - q) + kd * (v_d - v)
+    if tau_ff.size:
+        return tau + tau_ff
+    return tau + 0.0

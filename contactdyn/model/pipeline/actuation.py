@@ -21,20 +21,22 @@ from collections import namedtuple
 import numpy as np
 from numba.extending import overload
 
-from ...laws.controllers.abi import FIELD, call_controller, control_arrays, put_field
+from ...laws.controllers.abi import FIELD, LAYOUT_HEAD, call_controller, control_arrays, put_field
 from ...laws.controllers.task_pd_law import torque
-from ...laws.trajectory import move_rows, ramp_rows
+from ...laws.trajectory import CIRCLE_W, add_circle, move_rows, ramp_rows
 from ...numerics.compile_cache import njit
-from .carried import carry
-from .circle import CIRCLE_W, add_circle
+from .control_laws import PYTHON_KINDS, joint_pd_command, task_force_command
 from .drives import DI_W, DW_APPLIED, DW_W, apply_drives
 from .pack import (
     ANY_MOTOR,
+    CARRIER,
     CTL_ABI,
     CTL_ADDRESS,
     CTL_CONSTANT,
     CTL_HELD,
+    CTL_JOINT_PD,
     CTL_KIND,
+    CTL_TASK_FORCE,
     CTL_TASK_PD,
     FEEDFORWARD,
     FF_BIAS,
@@ -50,9 +52,11 @@ from .pack import (
     N_FORCES,
     N_MOVES,
     N_SERVOS,
+    N_Z,
     NQ,
     NV,
     PYTHON_CONTROLLERS,
+    R_CARRIER,
     R_CIRCLES,
     R_CTL,
     R_DRIVES,
@@ -64,22 +68,23 @@ from .pack import (
     TIP_FRAME,
     W_DRIVES,
     X_HELD,
+    Z_AT,
     section,
 )
 
-__all__ = ["reference", "set_points", "command", "drives", "command_by_address"]
+__all__ = ["reference", "set_points", "command", "drives", "command_by_address", "abi_buffer", "abi_call"]
 
 #: the controller ABI's fields (its LAYOUT's order)
 (F_T, F_Q, F_V, F_H, F_HB, F_GRAVITY, F_P, F_PD, F_J, F_DRIFT, F_XD, F_VD, F_AD, F_Z, F_R, F_JANG, F_DRIFT_ANG) = (
     FIELD[k] for k in ("t", "q", "v", "H", "h", "gravity", "p_tip", "v_tip", "J", "drift", "x_d", "v_d", "a_d", "z",
                        "R_tip", "J_ang", "drift_ang"))
-N_LAYOUT = 2 + 2 * len(FIELD) + 1  #: the layout table's length (layout_of)
+N_LAYOUT = LAYOUT_HEAD + 2 * len(FIELD) + 1  #: the layout table's length (layout_of)
 
 
 @njit(cache=True)
 def reference(t, ints, reals):
     """(x_d, v_d, a_d) at t [s]: the start plus Σ_k (σ_k, σ'_k/T_k, σ''_k/T_k²) Δ_k, a circle's rows its own
-    (:mod:`.circle`); empty without a reference."""
+    (``laws.trajectory.add_circle``); empty without a reference."""
     dims, n_moves, at = ints[REF_DIMS], ints[N_MOVES], ints[R_REF]
     x_d, v_d, a_d = reals[at:at + dims].copy(), np.zeros(dims), np.zeros(dims)
     if n_moves:
@@ -100,16 +105,31 @@ def reference(t, ints, reals):
 
 
 @njit(cache=True)
+def carry(x, ints, reals, x_d, v_d):
+    """A reference carried by a body (``[phase.reference] body``, ``model.phases.reference_at``): x_d += axis · Q_b
+    [m], v_d += axis · Q̇_b [m/s] in place. Its acceleration axis · Q̈_b is an unknown of the solve, which the
+    readable model folds (``dynamics.carried_command``); the pipeline packs a carried reference only for laws that do
+    not read a_d (task PD, a held command), where that part is zero."""
+    i = ints[CARRIER]
+    if i < 0 or x_d.size == 0:
+        return
+    axis = reals[ints[R_CARRIER]:ints[R_CARRIER] + 3]
+    for k in range(3):
+        x_d[k] = x_d[k] + axis[k] * x[i]
+        v_d[k] = v_d[k] + axis[k] * x[ints[NQ] + i]
+
+
+@njit(cache=True)
 def set_points(t, ints, reals):
-    """(F_d [N] per set-point, its direction (n, 3)) at t [s], in the phase's order."""
+    """(F_d [N] per set-point, its direction (n, 3), Ḟ_d [N/s]) at t [s], in the phase's order."""
     n = ints[N_FORCES]
     ramps = section(reals, ints[R_RAMPS], n, 5)
     w = np.empty(2 * n)
     ramp_rows(t, ramps, w)
-    F_d = np.empty(n)
+    F_d, rate = np.empty(n), np.empty(n)
     for j in range(n):
-        F_d[j] = w[2 * j]
-    return F_d, section(reals, ints[R_RAMPS] + 5 * n, n, 3)
+        F_d[j], rate[j] = w[2 * j], w[2 * j + 1]
+    return F_d, section(reals, ints[R_RAMPS] + 5 * n, n, 3), rate
 
 
 @njit(cache=True)
@@ -133,13 +153,13 @@ def _task_pd(x, ints, reals, h, g, J6, p_tip, v_tip, Rf, x_d, v_d, F_d, forced):
 
 
 @njit(cache=True)
-def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
-    """τ of a controller of the ABI, by its address: its inputs written into its buffer (NaNs and status 0: the law
-    failed; the readable model's error surfaces there)."""
+def abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
+    """(buffer, layout) of a controller of the ABI: its inputs written where the packed layout table puts them (the
+    set-points' fields, the measured forces and what goes with them are :mod:`.force_fold`'s)."""
     nv, nQ = ints[NV], ints[NQ]
     lay = ints[ints[I_LAYOUT]:ints[I_LAYOUT] + N_LAYOUT]
     buf = np.zeros(lay[lay.size - 1])
-    buf[lay[2 + 2 * F_T]] = t
+    buf[lay[LAYOUT_HEAD + 2 * F_T]] = t
     put_field(buf, lay, F_Q, x[:nv])
     put_field(buf, lay, F_V, x[nQ:nQ + nv])
     put_field(buf, lay, F_H, H.ravel())
@@ -152,12 +172,26 @@ def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d,
     put_field(buf, lay, F_XD, x_d)
     put_field(buf, lay, F_VD, v_d)
     put_field(buf, lay, F_AD, a_d)
+    put_field(buf, lay, F_Z, x[2 * nQ + ints[Z_AT]:2 * nQ + ints[Z_AT] + ints[N_Z]])
     put_field(buf, lay, F_R, Rf.ravel())
     put_field(buf, lay, F_JANG, J6[3:].ravel())
     put_field(buf, lay, F_DRIFT_ANG, a6[3:])
-    tau = np.zeros(nv)
+    return buf, lay
+
+
+@njit(cache=True)
+def abi_call(ints, reals, buf, lay, tau, zdot):
+    """The ABI's call of the packed controller on ``buf``: τ into ``tau``, ż into ``zdot``; its status (1 written)."""
     params = reals[ints[R_CTL]:ints[R_CTL] + ints[N_CTL_PARAMS]]
-    if command_by_address(ints[CTL_ADDRESS], buf, lay, params, tau) != 1:
+    return command_by_address(ints[CTL_ADDRESS], buf, lay, params, tau, zdot)
+
+
+@njit(cache=True)
+def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
+    """τ of a controller of the ABI, by its address (NaNs: the law failed; the readable model's error surfaces)."""
+    buf, lay = abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d)
+    tau, zdot = np.zeros(ints[NV]), np.zeros(ints[N_Z])
+    if abi_call(ints, reals, buf, lay, tau, zdot) != 1:
         tau[:] = np.nan
     return tau
 
@@ -169,8 +203,12 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
     x_d, v_d, a_d = reference(t, ints, reals)
     carry(x, ints, reals, x_d, v_d)
     if ints[CTL_KIND] == CTL_TASK_PD:
-        F_d, forced = set_points(t, ints, reals)
+        F_d, forced, _ = set_points(t, ints, reals)
         return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)
+    if ints[CTL_KIND] == CTL_JOINT_PD:
+        return joint_pd_command(x, ints[NQ], reals[ints[R_CTL]:], h, g, x_d, v_d)
+    if ints[CTL_KIND] == CTL_TASK_FORCE:
+        return task_force_command(t, reals[ints[R_CTL]:], h, g, FJ[fi])
     if ints[CTL_KIND] == CTL_ABI:
         return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
     if ints[CTL_KIND] == CTL_CONSTANT:  # open-loop voltages [V] (ConstantVoltage)
@@ -205,19 +243,25 @@ def drives(x, ints, reals, work, tau, f):
     return True, cmd
 
 
-def command_by_address(address, buffer, layout, params, tau) -> int:
+def command_by_address(address, buffer, layout, params, tau, zdot) -> int:
     """The controller at ``address`` on its buffer (the ABI's call); interpreted, a handle's Python ``command``."""
+    kind = PYTHON_KINDS.get(int(address))
+    if kind is not None:  # a built-in law on the buffer (control_laws)
+        return kind(buffer, layout, params, tau, zdot)
     cls = PYTHON_CONTROLLERS.get(int(address))
     if cls is None:
-        return call_controller(address, buffer, layout, params, tau)
+        return call_controller(address, buffer, layout, params, tau, zdot)
     config = namedtuple("Config", [p.name for p in cls.params])(*params)
-    out, _ = cls.command(namedtuple("Self", ["config", "nv"])(config, int(layout[0])), control_arrays(buffer, layout))
+    out, rates = cls.command(namedtuple("Self", ["config", "nv"])(config, int(layout[0])),
+                             control_arrays(buffer, layout))
     tau[:] = out
+    if rates is not None:
+        zdot[:] = rates
     return 1
 
 
 @overload(command_by_address)
-def _command_by_address_compiled(address, buffer, layout, params, tau):
-    def impl(address, buffer, layout, params, tau):
-        return call_controller(address, buffer, layout, params, tau)
+def _command_by_address_compiled(address, buffer, layout, params, tau, zdot):
+    def impl(address, buffer, layout, params, tau, zdot):
+        return call_controller(address, buffer, layout, params, tau, zdot)
     return impl

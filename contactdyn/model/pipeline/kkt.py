@@ -3,7 +3,8 @@
 M is the robot's H [kg·m²] with the rotors reflected through rigid gears on its diagonal (``.drives.inertias``)
 and the diagonal inertias of the bodies, chain masses and motor coordinates [kg, kg·m²] (the packed ``M_rest``);
 G the rows, C their force columns (a slide's tilt), γ [m/s²] their velocity-product and Baumgarte terms
-(:mod:`contactdyn.model.constraints`' ``kkt_solve``). The solve
+(:mod:`contactdyn.model.constraints`' ``kkt_solve``); a force-reading controller's B (τ = τ₀ + B λ,
+:mod:`.force_fold`) folded into the force columns. The solve
 is ``numerics.linalg.lu_solve`` (partial pivoting) with the readable model's residual test: a singular matrix
 returns status 0 and the caller takes the readable model's least squares (``constraints.solve_linear``).
 """
@@ -37,9 +38,10 @@ def residual_ok(A, z, b):
 
 
 @njit(cache=True)
-def kkt_solve(ints, reals, H, f, G, C, gamma):
+def kkt_solve(ints, reals, H, f, G, C, gamma, fold):
     """(Q̈ [m/s², rad/s²], λ [N], regular): the KKT system's solve, or with no rows H q̈ = f and the other
-    coordinates' f / m (H: M's robot block)."""
+    coordinates' f / m (H: M's robot block). ``fold`` (nv, rows, or no columns): a force-reading controller's B,
+    τ = τ₀ + B λ, subtracted from the force columns on the joints (ideal torque drives: :mod:`.force_fold`)."""
     nv, nQ, nr = ints[NV], ints[NQ], gamma.size
     m_rest = reals[ints[R_MREST]:ints[R_MREST] + nQ - nv]
     if nr == 0:
@@ -59,6 +61,8 @@ def kkt_solve(ints, reals, H, f, G, C, gamma):
         for c in range(nQ):
             A[c, nQ + r] = -C[r, c]
             A[nQ + r, c] = G[r, c]
+        for c in range(fold.shape[0] if fold.shape[1] else 0):
+            A[c, nQ + r] -= fold[c, r]
     b = np.empty(m)
     b[:nQ] = f
     for r in range(nr):

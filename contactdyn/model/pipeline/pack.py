@@ -23,11 +23,14 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-a drive kind numba cannot compile, the energy audit with motors, force-reading or stateful controllers (a sampled
-law's held command is packed), a reference carried by a body for a law that may read its acceleration (its fold),
-two 2-D slides launching from rest at once, a stage or friction law numba cannot compile, a robot ``rigid_body``
-does not compute (none the robot loader accepts: every joint it takes is a one-DOF revolute or prismatic),
-controllers other than ``task_pd``, constant voltages and user laws of the controller ABI.
+a drive kind numba cannot compile, the energy audit with motors, a force-reading law through motors (the fold
+takes ideal torque drives), a sampled law that outputs voltages, a controller that outputs voltages (but constant
+ones), joint-space A7, a force-reading law with a tangential set-point, a user law numba cannot compile, a reference
+carried by a body for a law that may read its acceleration, two 2-D slides launching from rest at once, a stage or
+friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
+joint it takes is a one-DOF revolute or prismatic). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
+operational space, the dynamic laws, joint PD, task force), a sampled law's held command, constant voltages and
+user laws of the controller ABI run; a force-reading law is folded (:mod:`.force_fold`).
 """
 
 from __future__ import annotations
@@ -44,12 +47,12 @@ from ...laws.controllers.abi import controller_address, layout_of, params_of
 from ...laws.controllers.sampled import SampledController
 from ...laws.controllers.voltage import ConstantVoltage
 from ...laws.friction_laws import FRICTION_LAWS
-from ...laws.trajectory import move_table, ramp_table
+from ...laws.trajectory import CIRCLE_W, move_table, ramp_table
 from ...numerics.compile_cache import njit
 from ..chain import NodeKind
 from ..chain_forces import pack as pack_chain
 from ..friction import launching
-from .circle import CIRCLE_W
+from .control_laws import kind_address
 from .drives import DW_W, drive_table, drives_unsupported
 
 __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts"]
@@ -60,14 +63,18 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts"]
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, I_DRIVES, R_DRIVES, R_REFLECTED, W_DRIVES, ANY_MOTOR,
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
- N_LAUNCH, I_LAUNCH, ENERGY, HEADER) = range(59)
+ N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, HEADER) = range(63)
+#: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
+#: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
+#: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
-#: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI), a
+#: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
+#: (operational space and the dynamic laws by their address, as a user's law: control_laws.kind_address), a
 #: sampled law's held command (τ = the state's held slots from x[X_HELD], laws.controllers.sampled), a constant
-#: command per joint (open-loop voltages [V], ConstantVoltage, in the controller's reals)
-CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_HELD, CTL_CONSTANT = 0, 1, 2, 3, 4
-FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward
+#: command per joint (open-loop voltages [V], ConstantVoltage, in the controller's reals), joint PD, task force
+CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_HELD, CTL_CONSTANT, CTL_JOINT_PD, CTL_TASK_FORCE = 0, 1, 2, 3, 4, 5, 6
+FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward (joint PD's and task force's: their first constant)
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
@@ -88,8 +95,8 @@ LI_JOINT, LI_SIDE, LI_W = 0, 1, 2  #: a pressing limit's ints (its value [rad or
 EV_GAP, EV_FN, EV_VT, EV_FF, EV_W = 0, 1, 2, 4, 6
 #: status: 1 the call is complete; 0 the KKT matrix is singular (the readable model's least squares is needed)
 TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
-#: the diagnostics section of ``work`` (from ``ints[W_DIAG]``; :mod:`.diagnostics`): its switch (the call writes the
-#: section when it is not 0), then per chain its interface force [N] (written always), then the drives' applied
+#: the diagnostics section of ``work`` (from ``ints[W_DIAG]``; :func:`.pipeline.record`): its switch (the call writes
+#: the section when it is not 0), then per chain its interface force [N] (written always), then the drives' applied
 #: forces (N_DRIVES) [N·m or N], the controller's τ (NV), the tip's position (3) [m], x_d (REF_DIMS) [m], the force
 #: set-points (N_FORCES) [N] and the rows' forces λ (N_ROWS)
 (D_TAU, D_CMD, D_TIP, D_XD, D_FD, D_LAM, D_END) = range(7)
@@ -142,14 +149,11 @@ def unsupported(system, modes, phase) -> str:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if phase.carrier is not None and ctl.name != "task_pd" and not isinstance(ctl, SampledController):
         return "a reference carried by a body, for a law that may read its acceleration (its fold is not packed)"
-    constant = isinstance(ctl, ConstantVoltage)
     if isinstance(ctl, SampledController):
         if ctl.outputs != "torque":
             return "a sampled law that outputs voltages"
-    elif ctl.uses_forces or ctl.n_states or (ctl.outputs != "torque" and not constant):
-        return f"controller {ctl.name!r} reads forces, has states or outputs voltages"
-    elif ctl.name != "task_pd" and not constant and not _addressable(type(ctl)):
-        return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
+    elif reason := _controller_unsupported(system, ctl, phase):
+        return reason
     if sum(launching(m) for m in modes) > 1:
         return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
     for c, m in zip(system.contacts, modes, strict=True):
@@ -158,6 +162,39 @@ def unsupported(system, modes, phase) -> str:
         for dc in c.chains:
             if pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching).python_stages:
                 return f"a stage law of {c.name}.{dc.label} does not compile"
+    return ""
+
+
+#: the built-in controllers compiled into the call as kinds (their laws' own compiled functions)
+COMPILED_IN = ("task_pd", "operational_space", "position_dynamic", "force_dynamic", "hybrid", "joint_pd",
+               "task_force")
+DYNAMIC_LAWS = COMPILED_IN[2:5]
+BY_ADDRESS = COMPILED_IN[1:5]  #: built-in laws of the controller ABI's shape, called by address (control_laws)
+
+
+def _controller_unsupported(system, ctl, phase) -> str:
+    """Why the phase's (not sampled) controller cannot run on the pipeline ("" when it can)."""
+    constant = isinstance(ctl, ConstantVoltage)
+    if ctl.outputs != "torque" and not constant:
+        return f"controller {ctl.name!r} outputs {ctl.outputs}"
+    if ctl.uses_forces and system.drives.any_motor:
+        return f"controller {ctl.name!r} reads forces through motors (the fold takes ideal torque drives)"
+    if ctl.uses_forces and any("." in key for key in phase.forces):
+        return f"controller {ctl.name!r} reads forces with a tangential set-point (its chain's force is not kept)"
+    if ctl.name == "operational_space" and ctl.force_keys != list(phase.forces):
+        return "operational_space's set-points in another order than the phase's"
+    if ctl.name in DYNAMIC_LAWS and (ctl.config.space if ctl.name == "position_dynamic" else "task") != "task":
+        return f"controller {ctl.name!r} in joint space"
+    if ctl.name in DYNAMIC_LAWS and ctl._rotor.size:
+        return f"controller {ctl.name!r} with the rotor inertia taken out (inertia = \"link\")"
+    if ctl.name not in COMPILED_IN and not constant and not _addressable(type(ctl)):
+        return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
+    dims = len(phase.reference.start) if phase.reference is not None else None
+    if ctl.name == "joint_pd" and dims not in (None, system.nv):
+        return f"controller 'joint_pd' with a reference of {dims} coordinates ({system.nv} joints)"
+    if ctl.name not in ("task_pd", "operational_space", "joint_pd", "task_force") and not constant \
+            and dims not in (None, 3):
+        return f"controller {ctl.name!r} with a joint-space reference (the buffer's x_d is the tip's)"
     return ""
 
 
@@ -225,6 +262,7 @@ def pack(system, modes, phase) -> Packed:
     _reference(b, system, phase)
     _controller(b, system, phase)
     _drives(b, system, phase)
+    _fold(b, system, phase, meta)
     h[W_DIAG] = b.work
     b.work = int(diag_starts(np.array(h, dtype=np.int64))[D_END])
     h[W_SIZE] = b.work
@@ -362,9 +400,10 @@ def _reference(b: _Builder, system, phase) -> None:
 
 
 def _controller(b: _Builder, system, phase) -> None:
-    """task PD: its constants (TaskPD.constants) and feedforward; constant voltages: one per joint; a controller of
-    the ABI: its address, the layout of its inputs and its declared parameters; a sampled law: where its held command
-    is in x."""
+    """task PD: its constants (TaskPD.constants) and feedforward; constant voltages: one per joint; operational
+    space: its constants; a controller of the ABI: the layout of its inputs, its address and its declared
+    parameters; a dynamic law: the same layout and its constants (control_laws.dynamic_constants); a sampled law:
+    where its held command is in x."""
     h = b.ints
     ctl = phase.controller
     h[READS_ORIENTATION], h[NEEDS_GRAVITY] = int(ctl.reads_orientation), int(ctl.needs_gravity)
@@ -388,14 +427,29 @@ def _controller(b: _Builder, system, phase) -> None:
         b.real_section(R_CTL, np.broadcast_to(ctl.config.u, (system.nv,)))
         b.int_section(I_LAYOUT, ())
         return
-    h[CTL_KIND] = CTL_ABI
-    cls = type(ctl)
-    h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
+    if ctl.name in ("joint_pd", "task_force"):  # control_laws.joint_pd_command, task_force_command
+        h[CTL_KIND] = CTL_JOINT_PD if ctl.name == "joint_pd" else CTL_TASK_FORCE
+        ff = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}[ctl.config.feedforward]
+        f, rate, start, ramp, amp, freq, ph, osc = ctl.constants if ctl.name == "task_force" else (None,) * 8
+        b.real_section(R_CTL, [ff, *ctl.gains[0], *ctl.gains[1]] if ctl.name == "joint_pd" else
+                       [ff, *f, *rate, start, ramp, *amp, freq, *ph, float(osc)])
+        b.int_section(I_LAYOUT, ())
+        return
     absent = (*(("gravity",) if not ctl.needs_gravity else ()),
               *(("x_d", "v_d", "a_d") if phase.reference is None else ()),
-              *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()))
-    b.int_section(I_LAYOUT, layout_of(system.nv, 0, absent))
-    params = params_of(ctl.config)
+              *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()),
+              *(("force_read",) if any("." in key for key in phase.forces) else ()),
+              *(("tau_contact", "surface_p", "surface_v", "touch") if not ctl.uses_forces else ()))
+    h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
+    b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces)))
+    h[CTL_KIND] = CTL_ABI
+    cls = type(ctl)
+    if ctl.name in BY_ADDRESS:  # a built-in law of the ABI's shape (control_laws), its constants the params
+        h[CTL_ADDRESS] = kind_address(ctl.name)
+        params = np.array(_dynamic_constants(ctl, phase) if ctl.name in DYNAMIC_LAWS else _operational_constants(ctl))
+    else:
+        h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
+        params = params_of(ctl.config)
     h[N_CTL_PARAMS] = params.size
     b.real_section(R_CTL, params)
 
@@ -409,6 +463,35 @@ def _drives(b: _Builder, system, phase) -> None:
     b.real_section(R_REFLECTED, reflected)
     b.ints[W_DRIVES] = b.work
     b.work += DW_W * len(system.drives.specs) + 2
+
+
+def _operational_constants(ctl) -> list[float]:
+    """Operational space's constants (control_laws' O_*), from OperationalSpace.constants."""
+    axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
+    tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
+    return [len(axes), float(tool_axis.size > 0), *axes.ravel(), *forced.ravel(), *kp, *kd, *tool[0], *tool[1], ko,
+            do, k_null, kd_normal]
+
+
+def _dynamic_constants(ctl, phase) -> list[float]:
+    """A bound task-space dynamic law's constants (D_*), per set-point in the phase's order."""
+    cfg = ctl.config
+    kp, kv = ctl._gains3
+    force_law = ctl.name != "position_dynamic"
+    P = ctl.P if force_law else np.zeros((3, 3))
+    envs = [ctl.envs.get(key) for key in phase.forces]
+    env = [v for e in envs for v in ((e.k, e.b, e.m) if e is not None else (1.0, 0.0, 0.0))]
+    return [float(force_law), float(getattr(ctl, "tracks_position", True)),
+            float(force_law and cfg.cancel == "target"), float(bool(ctl.envs) and not force_law),
+            float(getattr(cfg, "kf", 0.0)), float(cfg.k_null), *kp, *kv, *P.ravel(), *env]
+
+
+def _fold(b: _Builder, system, phase, meta: list[tuple[str, str, int]]) -> None:
+    """I_FOLD: per set-point the contact whose normal force it reads (-1 for a tangential chain's), then per row the
+    contact whose normal it is (-1: a stick, a tangential bond, a limit)."""
+    names = [c.name for c in system.contacts]
+    b.int_section(I_FOLD, [*(names.index(key) if key in names else -1 for key in phase.forces),
+                           *(names.index(owner) if kind == "n" else -1 for owner, kind, _ in meta)])
 
 
 #: handle -> controller class: the controller's Python ``command`` under NUMBA_DISABLE_JIT (the address's twin)

@@ -1,7 +1,7 @@
 """One right-hand-side call, written once over a mode's packed arrays (:mod:`.pack`): the pipeline.
 
     robot terms -> frames -> contacts (chains, bond rows, friction rows) -> limit rows -> stuck joints' rows
-    -> controller -> joint damping and sliding friction -> drives
+    -> controller (τ, ż and a force-reading law's fold B) -> joint damping and sliding friction -> drives
     -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] (the energy audit's last) and the event values
 
 :func:`call` is numba-compiled once for every scene and every law (the laws enter by address: stage and friction
@@ -18,16 +18,22 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from .actuation import command, drives
+from .actuation import carry, drives, reference, set_points
 from .contacts import contact_terms, finish, limit_rows
-from .diagnostics import record
 from .drives import drive_values, inertias
 from .energy import energy_rates
+from .force_fold import controller_terms, fold_rates, folded_command
 from .joint_friction import joint_events, joint_rows, joint_torques
 from .kkt import kkt_solve
 from .launch import ST_CONTACT, launch_start, launch_took
 from .pack import (
     ANY_MOTOR,
+    D_CMD,
+    D_FD,
+    D_LAM,
+    D_TAU,
+    D_TIP,
+    D_XD,
     EV_FF,
     EV_FN,
     EV_GAP,
@@ -44,9 +50,11 @@ from .pack import (
     NX,
     NY,
     R_REFLECTED,
+    REF_DIMS,
     TIP_FRAME,
     W_DIAG,
     W_DRIVES,
+    diag_starts,
     pack,
     unsupported,
 )
@@ -80,17 +88,19 @@ def call(t, x, ints, reals, work, events):
         first_limit = first_joint - ints[N_LIMITS]
         limit_rows(x, ints, reals, first_limit, G, C, gamma)
         joint_rows(x, ints, reals, first_joint, G, C, gamma)
-        tau = command(t, x, ints, reals, Hc, h, g, FJ, Fa, Fp, Fv, FR)
+        tau, zdot, B, D = controller_terms(t, x, ints, reals, Hc, h, g, FJ, Fa, Fp, Fv, FR, f, C, events)
         joint_torques(x, ints, reals, f)
         ok, applied = drives(x, ints, reals, work, tau, f)
         if not ok:
             events[events.size - 1] = -1.0
             return xdot
-        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma)
+        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B)
+        fold_rates(ints, lam, zdot, D, ydot)
         xdot[:nQ] = x[nQ:2 * nQ]
         xdot[nQ:2 * nQ] = qdd
         xdot[2 * nQ:] = ydot
         finish(ints, lam, xdot, events, pending, first_limit)
+        folded_command(tau, applied, B, lam)
         energy_rates(x, ints, reals, applied, xdot, events, pending)
         joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
         if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
@@ -98,6 +108,26 @@ def call(t, x, ints, reals, work, events):
         events[events.size - 1] = 1.0 if regular else 0.0
         if final or not regular or launch_took(x, ints, state, reals, FJ, Fa, Fv, xdot):
             return xdot
+
+
+@njit(cache=True)
+def record(t, x, ints, reals, work, applied, tau, p_tip, lam):
+    """The diagnostics of a call at (t [s], x) into ``work``'s section (:func:`.pack.diag_starts`; written when its
+    switch is on: an output sample's call, :func:`samples_at`): the drives' applied forces [N·m or N] (the joints',
+    then the bodies' servo forces [N]), the command [N·m or N], the tip [m], x_d [m] (carried by its body, if one
+    carries it), F_d [N], the rows' forces λ (normal and stick forces [N], limit and holding torques [N·m or N],
+    tangential bonds' interface forces [N]). Each chain's interface force [N] is written by every call
+    (:func:`.contacts.contact_terms`), the stage states (x [m], ẋ [m/s], F [N]) are in ``work`` already."""
+    at = diag_starts(ints)
+    work[at[D_TAU]:at[D_TAU] + applied.size] = applied
+    work[at[D_CMD]:at[D_CMD] + tau.size] = tau
+    work[at[D_TIP]:at[D_TIP] + 3] = p_tip
+    if ints[REF_DIMS]:
+        x_d, v_d, _ = reference(t, ints, reals)
+        carry(x, ints, reals, x_d, v_d)
+        work[at[D_XD]:at[D_FD]] = x_d
+    work[at[D_FD]:at[D_LAM]] = set_points(t, ints, reals)[0]
+    work[at[D_LAM]:at[D_LAM] + lam.size] = lam
 
 
 @njit(cache=True)
@@ -114,7 +144,7 @@ def rates_at(ts, X, ints, reals, work, events):
 
 @njit(cache=True)
 def samples_at(ts, X, ints, reals, work, events):
-    """(ẋ, event values, work) at each (ts[k], X[k]) with the diagnostics on (:mod:`.diagnostics`: the output
+    """(ẋ, event values, work) at each (ts[k], X[k]) with the diagnostics on (:func:`record`: the output
     samples' way), and the number of states done before a call's status was not 1 (the rest: the readable model's)."""
     n = ts.size
     Xd, E, W = np.empty(X.shape), np.zeros((n, events.size)), np.zeros((n, work.size))
