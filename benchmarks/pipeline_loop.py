@@ -1,14 +1,17 @@
 """Whole runs on the one pipeline (``LivePipelines.prefer``) against the same runs on the twin's plans, in one process.
 
-    PYTHONPATH=. python3 benchmarks/pipeline_loop.py [SCENE ...] [--repeats 3] [--out FILE.json]
+    PYTHONPATH=. python3 benchmarks/pipeline_loop.py [SCENE ...] [--repeats 3] [--set KEY=VALUE ...] [--out FILE.json]
 
-Per scene whose modes the pipeline packs (:data:`SCENES`, at its own duration and settings): the CPU median of a
-whole run (System built, run, output sampled) with the switch off (every mode on the twin's plan where it has one:
-the default) and on (every mode ``pack.unsupported`` accepts on the pipeline: its compiled steps, event values and
-output samples), timed interleaved after an untimed run of each; the cost per simulated second, the ratio on/off,
-the integration steps of each, the paths the modes of the "on" run took, and the run's agreement: the largest
-relative difference over all channels (max |on − off| / max |off| per channel) and its channel, the events' kinds
-the same and the largest difference of their times [s].
+Per scene (:data:`SCENES`: every scene of ``sims/``, ``benchmarks/hard/``, ``examples/`` and ``benchmarks/b2.toml``,
+at its own duration and settings; ``--set`` overrides a key in every one, e.g. ``solver.rtol=1e-11``): the CPU median
+of a whole run (System built, run, output sampled; the scene file read once before) with the switch off (every mode
+on the twin's plan where it has one: the default) and on (every mode ``pack.unsupported`` accepts on the pipeline: its
+compiled steps, event values and output samples; a mode it declines keeps its plan or the readable model), and of the
+hand-written closed-form B1 (:mod:`b1_reference`, 2 s simulated: issue 29's floor, as ``scene_cost.py`` times it),
+timed interleaved after an untimed run of each; the cost per simulated second, the ratios on/off and on/floor, the
+integration steps of each, the paths the modes of each run took (per mode in the JSON; the table counts the "on"
+run's modes per path), and the run's agreement: the largest relative difference over all channels (max |on − off| /
+max |off| per channel) and its channel, the events' kinds the same and the largest difference of their times [s].
 """
 
 from __future__ import annotations
@@ -16,22 +19,23 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import b1_reference  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn.model.paths import LivePipelines  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
-from contactdyn.scene.scene_file import load_scene  # noqa: E402
+from contactdyn.scene.scene_file import load_scene, parse_override  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
-SCENES = ["sims/b1.toml", "sims/case2_writer_b.toml", "sims/case2_writer_rigid.toml",
-          *(f"benchmarks/hard/{p.name}" for p in sorted((ROOT / "benchmarks" / "hard").glob("*.toml"))),
-          "benchmarks/b2.toml", "examples/cubic_press.toml", "examples/impedance_press.toml"]
+SCENES = [*(str(p.relative_to(ROOT)) for folder in ("sims", "benchmarks/hard", "examples")
+            for p in sorted((ROOT / folder).glob("*.toml"))), "benchmarks/b2.toml"]
 
 
 def run(scene, prefer: bool):
@@ -60,9 +64,14 @@ def agreement(on, off) -> dict:
             "max_event_dt_s": dt}
 
 
-def measure(path: str, repeats: int) -> dict:
-    scene = load_scene(ROOT / path)
-    variants = {"off": lambda: run(scene, False), "on": lambda: run(scene, True)}
+def paths(result) -> dict:
+    """The path each mode of a run took, by mode."""
+    return {mode: r["path"] for mode, r in result.stats["paths"].items()}
+
+
+def measure(path: str, repeats: int, overrides: dict | None = None) -> dict:
+    scene = load_scene(ROOT / path, overrides)
+    variants = {"off": lambda: run(scene, False), "on": lambda: run(scene, True), "floor": b1_reference.run}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for call in variants.values():
@@ -70,31 +79,40 @@ def measure(path: str, repeats: int) -> dict:
         times = interleaved(variants, repeats)
     off, on = times["off"], times["on"]
     T = scene.duration
+    floor = times["floor"].cpu / b1_reference.T_END  # [s CPU per simulated s] the hand-written B1
     return {"scene": path, "duration_s": T, "off_cpu_s": off.cpu, "on_cpu_s": on.cpu,
             "off_per_sim_s": off.cpu / T, "on_per_sim_s": on.cpu / T, "ratio_on_off": on.cpu / off.cpu,
+            "floor_per_sim_s": floor, "on_x_floor": on.cpu / T / floor, "off_x_floor": off.cpu / T / floor,
             "off_steps": off.last.stats["steps"], "on_steps": on.last.stats["steps"],
-            "on_paths": sorted({r["path"] for r in on.last.stats["paths"].values()}),
-            "off_paths": sorted({r["path"] for r in off.last.stats["paths"].values()}),
+            "on_paths": paths(on.last), "off_paths": paths(off.last),
             **agreement(on.last, off.last)}
+
+
+def path_counts(by_mode: dict) -> str:
+    """'one pipeline 3, compiled call 1': how many modes took each path."""
+    return ", ".join(f"{path} {n}" for path, n in Counter(by_mode.values()).most_common())
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="*", default=SCENES)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key in every scene")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "out" / "pipeline_loop.json"))
     args = p.parse_args(argv)
+    overrides = dict(parse_override(text) for text in args.set)
     rows = []
-    print("| scene | off CPU/sim s | on CPU/sim s | on/off | steps off/on | max rel diff (channel) | events | max Δt "
-          "[s] | on paths |\n|---|---|---|---|---|---|---|---|---|")
+    print("| scene | off CPU/sim s | on CPU/sim s | on/off | on/floor | steps off/on | max rel diff (channel) | events "
+          "| max Δt [s] | on paths (modes) |\n|---|---|---|---|---|---|---|---|---|---|")
     for path in args.scenes:
-        r = measure(path, args.repeats)
+        r = measure(path, args.repeats, overrides)
         rows.append(r)
         print(f"| {Path(path).stem} | {r['off_per_sim_s']:.4f} | {r['on_per_sim_s']:.4f} | {r['ratio_on_off']:.2f} | "
-              f"{r['off_steps']}/{r['on_steps']} | {r['max_rel_diff']:.1e} ({r['channel']}) | "
+              f"{r['on_x_floor']:.2f} | {r['off_steps']}/{r['on_steps']} | {r['max_rel_diff']:.1e} ({r['channel']}) | "
               f"{r['events']}{'' if r['events_same'] else ' DIFFER'} | {r['max_event_dt_s']:.1e} | "
-              f"{', '.join(r['on_paths'])} |", flush=True)
-    write_report(Path(args.out), {"repeats": args.repeats, "cpu": "process_time, median"}, rows)
+              f"{path_counts(r['on_paths'])} |", flush=True)
+    write_report(Path(args.out), {"repeats": args.repeats, "overrides": overrides, "cpu": "process_time, median",
+                                  "floor": "b1_reference.run (hand-written B1), CPU per simulated s"}, rows)
     return 0
 
 
