@@ -28,6 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import b1_reference  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
+from contactdyn.errors import SimulationError  # noqa: E402
 from contactdyn.model.paths import LivePipelines  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
 from contactdyn.scene.scene_file import load_scene, parse_override  # noqa: E402
@@ -105,7 +106,12 @@ def main(argv: list[str] | None = None) -> int:
     print("| scene | off CPU/sim s | on CPU/sim s | on/off | on/floor | steps off/on | max rel diff (channel) | events "
           "| max Δt [s] | on paths (modes) |\n|---|---|---|---|---|---|---|---|---|---|")
     for path in args.scenes:
-        r = measure(path, args.repeats, overrides)
+        try:
+            r = measure(path, args.repeats, overrides)
+        except SimulationError as err:  # (e.g. a step budget under --set): the row says so, the others run
+            rows.append({"scene": path, "error": str(err)})
+            print(f"| {Path(path).stem} | failed: {err} |", flush=True)
+            continue
         rows.append(r)
         print(f"| {Path(path).stem} | {r['off_per_sim_s']:.4f} | {r['on_per_sim_s']:.4f} | {r['ratio_on_off']:.2f} | "
               f"{r['on_x_floor']:.2f} | {r['off_steps']}/{r['on_steps']} | {r['max_rel_diff']:.1e} ({r['channel']}) | "
