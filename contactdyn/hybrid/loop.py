@@ -133,7 +133,7 @@ class HybridRun:
         """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``.
         ``at`` = (t, x): where the mode starts; the first time a run meets the mode, the plan checks itself there
         against the readable model (:meth:`ModePlan.check_at`)."""
-        key = (structure(modes), id(phase))
+        key = (structure(modes), phase.key())
         plan = self.plans.get(key)
         first = plan is None
         if first:

@@ -123,8 +123,8 @@ class LivePipelines:
 
     def __init__(self, system, wrap: Callable = lambda pipe: pipe) -> None:
         self.system, self.wrap = system, wrap
-        self.pipes: dict[tuple, object] = {}  #: (modes, id(phase)) -> its pipeline (wrapped), or why not (undeclared)
-        self.declines: dict[tuple, str] = {}  #: (modes, id(phase)) -> pack.unsupported's reason ("": it packs them)
+        self.pipes: dict[tuple, object] = {}  #: (modes, phase.key()) -> its pipeline (wrapped), or why not (undeclared)
+        self.declines: dict[tuple, str] = {}  #: (modes, phase.key()) -> pack.unsupported's reason ("": it packs them)
 
     def wanted(self, modes, phase, plan=None) -> bool:
         """Does the pipeline run (modes, phase)? ``plan``: the mode's plan (None: not built; only ``prefer`` runs
@@ -133,19 +133,19 @@ class LivePipelines:
             return False
         if not self.prefer and (plan is None or plan.ok or plan.reason.startswith(UNDECLARED)):
             return False
-        key = (tuple(modes), id(phase))
+        key = (tuple(modes), phase.key())
         if key not in self.declines:
             self.declines[key] = unsupported(self.system, modes, phase)
         return not self.declines[key]
 
     def built(self, modes, phase) -> bool:
         """Is the pipeline of (modes, phase) packed and checked already (or its check failed)?"""
-        return (tuple(modes), id(phase)) in self.pipes
+        return (tuple(modes), phase.key()) in self.pipes
 
     def mode(self, modes, phase, t: float, x: np.ndarray) -> tuple[object | None, str]:
         """(the pipeline of a mode :meth:`wanted` says it runs, starting at (t [s], x), wrapped; or None and the
         undeclared reason its check disagreed with)."""
-        key = (tuple(modes), id(phase))
+        key = (tuple(modes), phase.key())
         pipe = self.pipes.get(key)
         if pipe is None:
             pipe = Pipeline(self.system, modes, phase)
