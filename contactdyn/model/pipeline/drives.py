@@ -1,10 +1,11 @@
 """The pipeline's drives: each drive's law by its kind's address, the voltage clip, the rotors reflected on M.
 
 One row per drive (joints, then bodies; :class:`contactdyn.laws.drives.Drives`' order) in ``ints`` (DI_* below)
-and a block of ``reals`` per drive: its voltage limit [V] and its kind's values (``drive_abi.spec_values``: the
-declared parameters, then the transmission figures). :func:`drive_table` lays them out (Python, once per mode);
-:func:`apply_drives` runs them per call, as ``Drives.apply`` does (without a fold: the command is known before the
-solve): a kind with a voltage inverts the command to a voltage (its ``voltage``, eq. 51 inverted), or takes the
+and a block of ``reals`` per drive: its command gain (``DriveKind.command_gain``), its voltage limit [V] and its
+kind's values (``drive_abi.spec_values``: the declared parameters, then the transmission figures).
+:func:`drive_table` lays them out (Python, once per mode); :func:`apply_drives` runs them per call, as
+``Drives.apply`` does (with a fold, the clips decided at the full command: :func:`.force_fold.solve_through_drives`;
+:func:`fold_on_targets` folds through the unclipped drives' gains): a kind with a voltage inverts the command to a voltage (its ``voltage``, eq. 51 inverted), or takes the
 controller's voltage as it is; the voltage is clipped to ±u_max; the kind's ``force`` gives the force on the
 coordinate and the torque on its motor coordinate (an elastic drive's θ, whose rate then comes out of the solve
 with the motor's inertia from ``M_rest``). An ideal source adds its command. Each drive's applied force [N·m or N],
