@@ -5,12 +5,12 @@ and a block of ``reals`` per drive: its command gain (``DriveKind.command_gain``
 kind's values (``drive_abi.spec_values``: the declared parameters, then the transmission figures).
 :func:`drive_table` lays them out (Python, once per mode); :func:`apply_drives` runs them per call, as
 ``Drives.apply`` does (with a fold, the clips decided at the full command: :func:`.force_fold.solve_through_drives`;
-:func:`fold_on_targets` folds through the unclipped drives' gains): a kind with a voltage inverts the command to a voltage (its ``voltage``, eq. 51 inverted), or takes the
-controller's voltage as it is; the voltage is clipped to ±u_max; the kind's ``force`` gives the force on the
-coordinate and the torque on its motor coordinate (an elastic drive's θ, whose rate then comes out of the solve
-with the motor's inertia from ``M_rest``). An ideal source adds its command. Each drive's applied force [N·m or N],
-voltage [V] (NaN: none) and clip flag (1.0 clipped), then the drives' power and dissipation [W], are written
-into ``work`` (DW_* below).
+:func:`fold_on_targets` folds through the unclipped drives' gains): a kind with a voltage inverts the command to
+a voltage (its ``voltage``, eq. 51 inverted), or takes the controller's voltage as it is; the voltage is clipped
+to ±u_max; the kind's ``force`` gives the force on the coordinate and the torque on its motor coordinate (an
+elastic drive's θ, whose rate then comes out of the solve with the motor's inertia from ``M_rest``). An ideal
+source adds its command. Each drive's applied force [N·m or N], voltage [V] (NaN: none) and clip flag (1.0
+clipped), then the drives' power and dissipation [W], are written into ``work`` (DW_* below).
 
 The rotors' inertias reflected through rigid gears go on M's robot block (:func:`inertias`: the true system's
 ``System._D``) and on the controller's H (the rigid model's ``System._D_ctl``, what a law reads as ``inp.H``).
