@@ -250,7 +250,7 @@ def drives(x, ints, reals, work, cmd, sat, f):
         return ok, applied
     for i in range(n):
         f[i] += cmd[i]
-    return True, cmd.copy()
+    return True, cmd
 
 
 def command_by_address(address, buffer, layout, params, tau, zdot) -> int:

@@ -215,6 +215,10 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
     iq = carried_coordinate(ints, bq)
     folding = B.shape[1] > 0 or iq >= 0
     cmd = drive_command(x, ints, reals, tau)
+    if not folding:  # the command known before the solve: one pass (Drives.apply, then the solve)
+        ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
+        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, -1)
+        return ok, applied, qdd, lam, regular
     sat, full, fk = cmd, cmd, f
     rows = section(ints, ints[I_DRIVES], n, DI_W)
     out = work[ints[W_DRIVES]:]
@@ -227,11 +231,8 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
         if not ok:
             return False, applied, qdd, lam, regular
         fold, fold_q = np.zeros((nQ, B.shape[1])), np.zeros(nQ)
-        if folding:
-            fold_on_targets(rows, reals[ints[R_DRIVES]:], out, B, bq, fold, fold_q)
+        fold_on_targets(rows, reals[ints[R_DRIVES]:], out, B, bq, fold, fold_q)
         qdd, lam, regular = kkt_solve(ints, reals, M, fk, G, C, gamma, fold, fold_q, iq)
-        if not folding:
-            break
         full = cmd.copy()
         for i in range(nv):
             s = 0.0
@@ -240,13 +241,16 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
             full[i] += s
             if iq >= 0:
                 full[i] += bq[i] * qdd[iq]
+        if not ints[ANY_MOTOR]:  # ideal sources: nothing clips, the full command acts as it is (one pass)
+            applied = full
+            break
         for i in range(n):
-            clipped[i] = out[DW_W * i + DW_CLIPPED] if ints[ANY_MOTOR] else 0.0
+            clipped[i] = out[DW_W * i + DW_CLIPPED]
         ok, applied = drives(x, ints, reals, work, full, full, np.zeros(nQ))
         if not ok:
             return False, applied, qdd, lam, regular
         same = True
-        for i in range(n if ints[ANY_MOTOR] else 0):
+        for i in range(n):
             same = same and clipped[i] == out[DW_W * i + DW_CLIPPED]
         if same:
             break
