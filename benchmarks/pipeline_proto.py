@@ -185,6 +185,22 @@ def _task_force(doc: dict) -> None:
                          "feedforward": "gravity"}
 
 
+def _clip_at(u_max: float):
+    """The joints' motors limited to ``u_max`` [V] (case1_cart's push asks ~320 and ~290 V at its start, apart
+    ~313 and ~275 V; case3_b's press ~0.2 V before its fold, ~28 V after: the clips' re-check)."""
+    def edit(doc: dict) -> None:
+        doc["robot"]["drive"]["u_max"] = u_max
+    return edit
+
+
+def _pushing(touching: bool):
+    """case1_cart's push phase (its reference carried by the cart), the tip touching or apart."""
+    def change(system, modes, ph, x0):
+        ph = system.start_phase(1, ph.t_start + 1.0, x0, ph)
+        return [mm.with_(touching=touching) for mm in modes], ph
+    return change
+
+
 def _apart(system, modes, ph, x0):
     """The first mode with every contact apart (the dynamic laws' free directions, their integrals frozen)."""
     return [mm.with_(touching=False) for mm in modes], ph
@@ -266,6 +282,15 @@ CASES = {
     "force_loop_hybrid_apart": ("sims/b1_force_loop.toml", None, _apart),
     "b1_force_dynamic": ("sims/b1_force_loop.toml", _force_dynamic, None),
     "b1_position_dynamic": ("sims/b1_force_loop.toml", _position_dynamic, None),
+    "case3a_force_press": ("sims/case3_a_force.toml", None, _touch(phase=1)),
+    "case3b_force_press": ("sims/case3_b_force.toml", None, _touch(phase=1)),
+    "case3b_position_press": ("sims/case3_b_position.toml", None, _touch(phase=1)),
+    "case3a_position_press": ("sims/case3_a_position.toml", None, _touch(phase=1)),
+    "cart_push": ("sims/case1_cart.toml", None, _touch(phase=1)),
+    "cart_push_clip": ("sims/case1_cart.toml", _clip_at(300.0), _touch(phase=1)),
+    "cart_push_apart": ("sims/case1_cart.toml", None, _pushing(False)),
+    "cart_push_apart_clip": ("sims/case1_cart.toml", _clip_at(312.9), _pushing(False)),
+    "case3b_force_press_clip": ("sims/case3_b_force.toml", _clip_at(10.0), _touch(phase=1)),
     "b1_joint_pd": ("sims/b1.toml", _joint_pd, None),
     "b1_task_force": ("sims/b1.toml", _task_force, None),
 }

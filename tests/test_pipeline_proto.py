@@ -34,7 +34,8 @@ def test_the_pipeline_gives_the_readable_rates(name):
 
 
 @pytest.mark.parametrize("name", ["b1", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "hard_stiff",
-                                  "force_loop_hybrid", "force_pi_press"])
+                                  "force_loop_hybrid", "force_pi_press", "case3b_force_press_clip", "cart_push",
+                                  "cart_push_apart_clip"])
 def test_the_event_values_are_the_readable_ones(name):
     system, modes, phase, t, x0 = case(name)
     pipe = Pipeline(system, modes, phase)
@@ -66,6 +67,51 @@ def test_the_fold_is_what_makes_a_force_reading_law_agree(name):
     assert np.abs(pipe.rhs(t, x) - ref).max() <= RTOL * np.abs(ref).max()
     pipe.packed.ints[READS_FORCES] = 0
     assert np.abs(pipe.rhs(t, x) - ref).max() > 1e-3 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("name", ["case3b_force_press_clip", "cart_push_apart_clip"])
+def test_through_motors_the_drives_are_the_readable_ones(name):
+    """A force-reading law through an elastic drive whose voltage clips after the fold (case 3 b's press at 10 V: the
+    clips' re-check), and A7 through DC motors with the reference carried by the cart (its column folded), one
+    joint clipping at some states: per drive the applied force, voltage and clip of the readable model's full
+    command, and its command τ."""
+    from contactdyn.model.pipeline.pack import D_CMD, W_DIAG, diag_starts
+
+    system, modes, phase, t, x0 = case(name)
+    pipe = Pipeline(system, modes, phase)
+    p = pipe.packed
+    clipped = 0
+    for x in states(x0, 8):
+        ev = system.evaluate(t, x, modes, phase)
+        p.work[p.ints[W_DIAG]] = 1.0  # the diagnostics on: the command τ recorded
+        pipe.rhs(t, x)
+        p.work[p.ints[W_DIAG]] = 0.0
+        d = pipe.values()["drives"]
+        scale = np.abs(ev.tau).max()
+        np.testing.assert_allclose(d["applied"][:system.nv], ev.tau, rtol=0, atol=RTOL * scale)
+        np.testing.assert_allclose(d["u"], ev.u, rtol=0, atol=RTOL * np.abs(ev.u).max())
+        at = diag_starts(p.ints)[D_CMD]
+        np.testing.assert_allclose(p.work[at:at + system.nv], ev.tau_cmd, rtol=0,
+                                   atol=RTOL * np.abs(ev.tau_cmd).max())
+        clipped += int(d["clipped"].any())
+    assert clipped > 0  # the case reaches the clip
+
+
+def test_the_carried_column_is_what_makes_the_push_agree(monkeypatch):
+    """case1_cart's push apart: A7 reads a_d, which the cart's acceleration moves (an unknown of the solve). The
+    readable model without its carried term (dynamics.carried_command → None) is far from the pipeline, which
+    agrees with the readable model with it."""
+    from contactdyn.model import dynamics
+
+    system, modes, phase, t, x0 = case("cart_push_apart")
+    pipe = Pipeline(system, modes, phase)
+    x = states(x0, 2)[1]
+    ref = system.evaluate(t, x, modes, phase).xdot
+    got = pipe.rhs(t, x)
+    assert np.abs(got - ref).max() <= RTOL * np.abs(ref).max()
+    monkeypatch.setattr(dynamics, "carried_command", lambda *args, **kw: None)
+    lagged = system.evaluate(t, x, modes, phase).xdot
+    assert np.abs(got - lagged).max() > 1e-6 * np.abs(ref).max()
 
 
 def test_many_states_in_one_call_are_the_single_calls():
@@ -121,7 +167,7 @@ def test_the_same_source_interpreted_gives_the_compiled_rates():
     names = ["b1_stribeck", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "cubic_press", "impedance_press",
              "cart_motors", "case3a_touch", "real_cell_clip", "writer_motors_voltage", "writer5dof_ops_write",
              "force_pi_press", "force_loop_hybrid", "b1_force_dynamic", "b1_position_dynamic", "b1_joint_pd",
-             "b1_task_force"]
+             "b1_task_force", "case3b_force_press_clip", "cart_push_apart_clip", "case3a_force_press"]
     env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(BENCH.parent)}
     done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=names)], env=env,
                           capture_output=True, text=True, timeout=600)

@@ -81,8 +81,10 @@ def test_the_carried_reference_rides_on_the_cart():
     assert np.abs(pipe.rhs(t, x0) - ref).max() > 1e-3 * np.abs(ref).max()
 
 
-def test_a_carried_reference_for_a_law_that_may_read_its_acceleration_is_declined():
-    from pipeline_proto import _scene
+def test_a_carried_reference_for_a_law_that_reads_its_acceleration_runs_folded():
+    """case1_cart's push without motors, apart: A7 reads a_d (once declined: its carried column was not packed);
+    now packed and folded (force_fold's column at a_d + axis), the rates the readable model's."""
+    from pipeline_proto import _scene, states
 
     from contactdyn.model.pipeline.pack import unsupported
     from contactdyn.simulate import prepare
@@ -92,7 +94,11 @@ def test_a_carried_reference_for_a_law_that_may_read_its_acceleration_is_decline
 
     system, modes, phase, x0 = prepare(_scene("sims/case1_cart.toml", no_motors))
     push = system.start_phase(1, 1.0, x0, phase)
-    assert "carried by a body" in unsupported(system, modes, push)
+    assert unsupported(system, modes, push) == ""
+    pipe = Pipeline(system, modes, push)
+    for x in states(x0, 3):
+        ref = system.evaluate(1.0123, x, modes, push).xdot
+        assert np.abs(pipe.rhs(1.0123, x) - ref).max() <= RTOL * np.abs(ref).max()
 
 
 @pytest.mark.parametrize("with_line", [False, True])

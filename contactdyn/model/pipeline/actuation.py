@@ -72,7 +72,8 @@ from .pack import (
     section,
 )
 
-__all__ = ["reference", "set_points", "command", "drives", "command_by_address", "abi_buffer", "abi_call"]
+__all__ = ["reference", "set_points", "command", "drive_command", "drives", "command_by_address", "abi_buffer",
+           "abi_call"]
 
 #: the controller ABI's fields (its LAYOUT's order)
 (F_T, F_Q, F_V, F_H, F_HB, F_GRAVITY, F_P, F_PD, F_J, F_DRIFT, F_XD, F_VD, F_AD, F_Z, F_R, F_JANG, F_DRIFT_ANG) = (
@@ -108,8 +109,8 @@ def reference(t, ints, reals):
 def carry(x, ints, reals, x_d, v_d):
     """A reference carried by a body (``[phase.reference] body``, ``model.phases.reference_at``): x_d += axis · Q_b
     [m], v_d += axis · Q̇_b [m/s] in place. Its acceleration axis · Q̈_b is an unknown of the solve, which the
-    readable model folds (``dynamics.carried_command``); the pipeline packs a carried reference only for laws that do
-    not read a_d (task PD, a held command), where that part is zero."""
+    readable model folds (``dynamics.carried_command``); so does the pipeline, for a law of the ABI
+    (:func:`.force_fold.controller_terms`: the law at a_d + axis)."""
     i = ints[CARRIER]
     if i < 0 or x_d.size == 0:
         return
@@ -219,25 +220,34 @@ def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
 
 
 @njit(cache=True)
-def drives(x, ints, reals, work, tau, f):
-    """The command per drive (the joints' τ, the bodies' servo forces g (v_ref − v) [N]) through the drives into f:
-    added as it is by ideal sources only (Drives.apply without motors), else by each drive's law
-    (:func:`.drives.apply_drives`, its outputs into ``work``): (ok, the forces applied on the drives' coordinates
-    [N·m or N]); ok False where a kind's compiled law failed."""
-    nQ, n = ints[NQ], ints[N_DRIVES]
-    cmd = np.zeros(n)
+def drive_command(x, ints, reals, tau):
+    """The command per drive (joints, then bodies): the joints' τ [N·m or N; V], the bodies' servo forces
+    g (v_ref − v) [N] (``dynamics.drive_command``)."""
+    nQ = ints[NQ]
+    cmd = np.zeros(ints[N_DRIVES])
     cmd[:tau.size] = tau
     servo = reals[ints[R_SERVOS]:]
     for k in range(ints[N_SERVOS]):
         idx = ints[ints[I_SERVOS] + k]
         cmd[idx] = servo[2 * k + 1] * (servo[2 * k] - x[nQ + idx])
+    return cmd
+
+
+@njit(cache=True)
+def drives(x, ints, reals, work, cmd, sat, f):
+    """The command per drive (:func:`drive_command`) through the drives into f: added as it is by ideal sources only
+    (Drives.apply without motors), else by each drive's law (:func:`.drives.apply_drives`, its outputs into
+    ``work``; ``sat`` decides the clips): (ok, the forces applied on the drives' coordinates [N·m or N]); ok False
+    where a kind's compiled law failed."""
+    n = ints[N_DRIVES]
     if ints[ANY_MOTOR]:
         rows = section(ints, ints[I_DRIVES], n, DI_W)
         out = work[ints[W_DRIVES]:]
-        ok = apply_drives(x, nQ, rows, reals[ints[R_DRIVES]:], cmd, f, out)
+        ok = apply_drives(x, ints[NQ], rows, reals[ints[R_DRIVES]:], cmd, sat, f, out)
+        applied = np.empty(n)
         for i in range(n):
-            cmd[i] = out[DW_W * i + DW_APPLIED]
-        return ok, cmd
+            applied[i] = out[DW_W * i + DW_APPLIED]
+        return ok, applied
     for i in range(n):
         f[i] += cmd[i]
     return True, cmd

@@ -17,7 +17,8 @@ Operational space's constants (:data:`O_AXES` …): k, a tool axis (1.0 / 0.0), 
 (ns × 3, the phase's set-points, in the order of ``OperationalSpace.force_keys``), kp (k) [N/m], kd (k) [N·s/m],
 tool axis (3), tool target (3), ko [1/s²], do [1/s], k_null [1/s], kd_normal [N·s/m]. A dynamic law's (``D_*``):
 switches (A10 or hybrid, tracks position, swaps F* into τ, presses its reference), K_F [1/s], k_null [1/s], K_p
-[1/s²] and K_v [1/s] (3 each), P (9), then per set-point the nominal k [N/m], b [N·s/m], m [kg].
+[1/s²] and K_v [1/s] (3 each), P (9), then per set-point the nominal k [N/m], b [N·s/m], m [kg], then (inertia =
+"link") per joint the rotor inertia taken out of H [kg·m²] (none: H as it is).
 
 ``joint_pd`` (:func:`~contactdyn.laws.controllers.pd.joint_pd_torque`) and ``task_force``
 (:func:`~contactdyn.laws.controllers.force.task_force_torque`) are small: compiled into the call as kinds (joint PD
@@ -97,7 +98,8 @@ def dynamic_on_buffer(buf, lay, c, tau, zdot):
                              np.ascontiguousarray(env[:, 0]))
         f_swap = np.empty(0)
     J = inp.J
-    out = computed_torque.torque(inp.H, np.empty(0), inp.h, inp.tau_contact, J, pinv(J), inp.drift, inp.v, a,
+    rotor = np.ascontiguousarray(c[D_ENV + 3 * ns:])  # the rotors taken out of H [kg·m²] (inertia = "link") or none
+    out = computed_torque.torque(inp.H, rotor, inp.h, inp.tau_contact, J, pinv(J), inp.drift, inp.v, a,
                                  f_swap, c[D_KNULL])
     for i in range(out.size):
         tau[i] = out[i]

@@ -1,15 +1,16 @@
 """The pipeline's drives: each drive's law by its kind's address, the voltage clip, the rotors reflected on M.
 
 One row per drive (joints, then bodies; :class:`contactdyn.laws.drives.Drives`' order) in ``ints`` (DI_* below)
-and a block of ``reals`` per drive: its voltage limit [V] and its kind's values (``drive_abi.spec_values``: the
-declared parameters, then the transmission figures). :func:`drive_table` lays them out (Python, once per mode);
-:func:`apply_drives` runs them per call, as ``Drives.apply`` does (without a fold: the command is known before the
-solve): a kind with a voltage inverts the command to a voltage (its ``voltage``, eq. 51 inverted), or takes the
-controller's voltage as it is; the voltage is clipped to ±u_max; the kind's ``force`` gives the force on the
-coordinate and the torque on its motor coordinate (an elastic drive's θ, whose rate then comes out of the solve
-with the motor's inertia from ``M_rest``). An ideal source adds its command. Each drive's applied force [N·m or N],
-voltage [V] (NaN: none) and clip flag (1.0 clipped), then the drives' power and dissipation [W], are written
-into ``work`` (DW_* below).
+and a block of ``reals`` per drive: its command gain (``DriveKind.command_gain``), its voltage limit [V] and its
+kind's values (``drive_abi.spec_values``: the declared parameters, then the transmission figures).
+:func:`drive_table` lays them out (Python, once per mode); :func:`apply_drives` runs them per call, as
+``Drives.apply`` does (with a fold, the clips decided at the full command: :func:`.force_fold.solve_through_drives`;
+:func:`fold_on_targets` folds through the unclipped drives' gains): a kind with a voltage inverts the command to
+a voltage (its ``voltage``, eq. 51 inverted), or takes the controller's voltage as it is; the voltage is clipped
+to ±u_max; the kind's ``force`` gives the force on the coordinate and the torque on its motor coordinate (an
+elastic drive's θ, whose rate then comes out of the solve with the motor's inertia from ``M_rest``). An ideal
+source adds its command. Each drive's applied force [N·m or N], voltage [V] (NaN: none) and clip flag (1.0
+clipped), then the drives' power and dissipation [W], are written into ``work`` (DW_* below).
 
 The rotors' inertias reflected through rigid gears go on M's robot block (:func:`inertias`: the true system's
 ``System._D``) and on the controller's H (the rigid model's ``System._D_ctl``, what a law reads as ``inp.H``).
@@ -26,11 +27,13 @@ import numpy as np
 from ...laws.drive_abi import call_drive_force, call_drive_voltage, drive_addresses, spec_values
 from ...numerics.compile_cache import njit
 
-__all__ = ["drive_table", "drives_unsupported", "apply_drives", "inertias", "drive_values", "DI_W", "DW_W"]
+__all__ = ["drive_table", "drives_unsupported", "apply_drives", "fold_on_targets", "inertias", "drive_values", "DI_W",
+           "DW_W"]
 
 #: a drive's ints: coordinate, motor coordinate (-1: none), its command is a voltage (the controller's), it takes
 #: a voltage, its kind's voltage and force addresses (force 0: an ideal source), the count and start of its values
-#: (relative to the drives' reals: [u_max, values...] per drive)
+#: (relative to the drives' reals: [command gain, u_max, values...] per drive; the gain: the force on its target
+#: coordinate per unit force command below the clip, ``DriveKind.command_gain``, where a fold lands)
 DI_COORD, DI_MOTOR, DI_BY_VOLTAGE, DI_HAS_VOLTAGE, DI_VOLTAGE, DI_FORCE, DI_N_P, DI_P, DI_W = range(9)
 #: a drive's output in ``work``: applied force [N·m or N], voltage [V] (NaN: none), clipped (1.0) — then, after the
 #: drives, the power delivered and dissipated [W]
@@ -59,8 +62,8 @@ def drive_table(system, phase) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         v_addr, f_addr = drive_addresses(kind) if kind.motorized else (0, 0)
         values = spec_values(spec) if kind.motorized else []
         rows.append((drives.coords[i], drives.motor_coords[i], by_voltage[i], kind.has_voltage, v_addr, f_addr,
-                     len(values), len(reals) + 1))
-        reals += [float(drives.u_max[i]), *values]
+                     len(values), len(reals) + 2))
+        reals += [float(drives.gains[i]), float(drives.u_max[i]), *values]
     reflected = [*system.rotor_inertias, *system.drives.model_reflected[:system.nv]]
     return np.array(rows, dtype=np.int64).reshape((-1, DI_W)), np.array(reals), np.array(reflected, dtype=float)
 
@@ -80,10 +83,12 @@ def inertias(H, any_motor, reflected):
 
 
 @njit(cache=True)
-def apply_drives(x, nQ, rows, dreals, cmd, f, out):
+def apply_drives(x, nQ, rows, dreals, cmd, sat, f, out):
     """Each drive's generalized force at its command (cmd: a force per drive [N·m or N], or a voltage [V] where
     its row says so) added to f (and its motor's torque on its motor coordinate); outputs into ``out`` (DW_*).
-    False where a kind's compiled law failed (a NaN voltage, status 0): the readable model answers."""
+    ``sat`` decides which voltages clip (``Drives.apply``'s ``sat_cmd``: the full command of a fold, while ``cmd``
+    lacks the folded part; ``cmd`` itself otherwise). False where a kind's compiled law failed (a NaN voltage,
+    status 0): the readable model answers."""
     power = lost = 0.0
     o4 = np.empty(4)
     n = rows.shape[0]
@@ -101,14 +106,17 @@ def apply_drives(x, nQ, rows, dreals, cmd, f, out):
         p_at, n_p = rows[i, DI_P], rows[i, DI_N_P]
         ui = cmd[i]
         if rows[i, DI_HAS_VOLTAGE]:
+            us = ui
             if not rows[i, DI_BY_VOLTAGE]:
                 ui = call_drive_voltage(rows[i, DI_VOLTAGE], dreals, p_at, n_p, cmd[i], qd, omega)
-                if math.isnan(ui):
+                us = ui if sat[i] == cmd[i] else call_drive_voltage(rows[i, DI_VOLTAGE], dreals, p_at, n_p, sat[i],
+                                                                    qd, omega)
+                if math.isnan(ui) or math.isnan(us):
                     return False
             u_max = dreals[p_at - 1]
-            if abs(ui) > u_max:
+            if abs(us) > u_max:
                 out[at + DW_CLIPPED] = 1.0
-                ui = math.copysign(u_max, ui)
+                ui = math.copysign(u_max, us)
         if call_drive_force(rows[i, DI_FORCE], dreals, p_at, n_p, ui, x[c], qd, theta, omega, o4) != 1:
             return False
         f[c] += o4[0]
@@ -119,6 +127,22 @@ def apply_drives(x, nQ, rows, dreals, cmd, f, out):
         lost += o4[3]
     out[DW_W * n], out[DW_W * n + 1] = power, lost
     return True
+
+
+@njit(cache=True)
+def fold_on_targets(rows, dreals, out, B, bq, fold, fold_q):
+    """A force-reading law's τ = τ₀ + B λ (+ b Q̈_b, a carried reference) through the joints' drives whose voltage
+    did not clip (``out``'s flags): gain_i B_i [and gain_i b_i] added on row i's target coordinate, its motor
+    coordinate if it owns one (``fold`` (nQ, rows), ``fold_q`` (nQ): ``constraints.solve_folded``). A clipped
+    drive's force does not depend on λ."""
+    for i in range(B.shape[0]):
+        if out[DW_W * i + DW_CLIPPED] != 0.0:
+            continue
+        c = rows[i, DI_MOTOR] if rows[i, DI_MOTOR] >= 0 else rows[i, DI_COORD]
+        gain = dreals[rows[i, DI_P] - 2]
+        for j in range(B.shape[1]):
+            fold[c, j] += gain * B[i, j]
+        fold_q[c] += gain * bq[i]
 
 
 def drive_values(out: np.ndarray, n: int) -> dict[str, np.ndarray | float]:

@@ -10,8 +10,13 @@ A force-reading law is affine in the row forces λ the solve returns: τ = τ₀
 law's own differences at unit forces, computed here by calling the same compiled command once more per row that
 reaches the law (:func:`contactdyn.model.constraints.force_columns`: +1 N on the measured normal force of a
 contact's normal row, the row's force column on τ_c where it reaches a coordinate beyond the robot). The KKT solve
-folds B into its force columns (:func:`.kkt.kkt_solve`, ideal torque drives: the command's gain is 1), and
-:func:`fold_rates` adds D λ to ż after it.
+folds B into its force columns through the drives (:func:`solve_through_drives`, as ``constraints.solve_folded``:
+gain_i B_i on each unclipped drive's target coordinate, the clips re-checked at the solved command, ≤ nv + 2
+passes), and :func:`fold_rates` adds D λ to ż after it.
+
+A reference carried by a body (``[phase.reference] body``) makes the command affine in the body's acceleration
+Q̈_b too (its a_d gains axis · Q̈_b): τ += b Q̈_b, ż += d Q̈_b, with (b, d) the law's difference at a_d + axis
+(``dynamics.carried_command``), folded into M's column of the body the same way.
 """
 
 from __future__ import annotations
@@ -20,8 +25,12 @@ import numpy as np
 
 from ...laws.controllers.abi import FIELD, LAYOUT_HEAD
 from ...numerics.compile_cache import njit
-from .actuation import abi_buffer, abi_call, command, reference, set_points
+from .actuation import abi_buffer, abi_call, carry, command, drive_command, drives, reference, set_points
+from .drives import DI_W, DW_CLIPPED, DW_W, fold_on_targets
+from .kkt import kkt_solve
 from .pack import (
+    ANY_MOTOR,
+    CARRIER,
     CI_BODY,
     CI_REALS,
     CI_TOUCHING,
@@ -33,24 +42,31 @@ from .pack import (
     EV_FN,
     EV_W,
     I_CONTACTS,
+    I_DRIVES,
     I_FOLD,
     N_CONTACTS,
+    N_DRIVES,
     N_FORCES,
     N_ROWS,
     N_Z,
     NQ,
     NV,
+    R_CARRIER,
+    R_DRIVES,
+    R_FOLD,
     READS_FORCES,
     TIP_FRAME,
+    W_DIAG,
+    W_DRIVES,
     Z_AT,
     section,
 )
 
-__all__ = ["controller_terms", "fold_rates", "folded_command"]
+__all__ = ["controller_terms", "carried_coordinate", "solve_through_drives", "fold_rates"]
 
-F_SET, F_RATE, F_DIR, F_READ, F_TAU_C, F_SURFACE_P, F_SURFACE_V, F_TOUCH = (
+F_SET, F_RATE, F_DIR, F_READ, F_TAU_C, F_SURFACE_P, F_SURFACE_V, F_TOUCH, F_AD = (
     FIELD[k] for k in ("force_set", "force_rate", "force_dir", "force_read", "tau_contact", "surface_p", "surface_v",
-                       "touch"))
+                       "touch", "a_d"))
 
 
 @njit(cache=True)
@@ -60,11 +76,13 @@ def _at(lay, k):
 
 
 @njit(cache=True)
-def _set_point_fields(t, x, ints, reals, h, f, events, buf, lay):
+def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
     """The set-points' fields of the buffer (those the layout has)."""
-    nQ, ns = ints[NQ], ints[N_FORCES]
+    nQ, ns, nr = ints[NQ], ints[N_FORCES], ints[N_ROWS]
     F_d, dirs, rate = set_points(t, ints, reals)
-    sp = ints[ints[I_FOLD]:ints[I_FOLD] + ns]  # per set-point its contact (normal), -1 a tangential chain's
+    chain = ints[ints[I_FOLD] + ns + nr:ints[I_FOLD] + 2 * ns + nr]  # per set-point its chain (-1: a normal one)
+    owner = ints[ints[I_FOLD] + 2 * ns + nr:ints[I_FOLD] + 3 * ns + nr]  # and its contact
+    shift = section(reals, ints[R_FOLD], ns, 3)
     cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
     at_set, n_set = _at(lay, F_SET)
     at_rate, n_rate = _at(lay, F_RATE)
@@ -80,16 +98,15 @@ def _set_point_fields(t, x, ints, reals, h, f, events, buf, lay):
             buf[at_rate + s] = rate[s]
         for i in range(3 if n_dir else 0):
             buf[at_dir + 3 * s + i] = dirs[s, i]
-        ci = sp[s]
-        if ci < 0:
-            continue
-        if n_read:
-            buf[at_read + s] = events[EV_W * ci + EV_FN]  # the chains' normal force, before the solve
+        ci = owner[s]
+        if n_read:  # the chains' force before the solve: the normal force, or a tangential chain's interface force
+            buf[at_read + s] = events[EV_W * ci + EV_FN] if chain[s] < 0 else work[ints[W_DIAG] + 1 + chain[s]]
         row = cs[ci]
         cr = reals[row[CI_REALS]:]
         body = row[CI_BODY]
-        for i in range(3 if n_p else 0):  # the undeformed surface's point and velocity (Contact.surface)
-            buf[at_p + 3 * s + i] = cr[CR_POINT + i] + cr[CR_AXIS + i] * x[body] if body >= 0 else cr[CR_POINT + i]
+        for i in range(3 if n_p else 0):  # the undeformed surface's point and velocity (dynamics.surface_points)
+            p = cr[CR_POINT + i] + cr[CR_AXIS + i] * x[body] if body >= 0 else cr[CR_POINT + i]
+            buf[at_p + 3 * s + i] = p + shift[s, i]
             buf[at_v + 3 * s + i] = cr[CR_AXIS + i] * x[nQ + body] if body >= 0 else 0.0
         if n_touch:
             buf[at_touch + s] = 1.0 if row[CI_TOUCHING] else 0.0
@@ -133,44 +150,122 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
 
 
 @njit(cache=True)
-def controller_terms(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
-    """(τ [N·m or N], ż, B (nv, rows), D (states, rows)) of the phase's controller at (t, x); τ NaN where the law
-    failed (the readable model then answers and its error surfaces there)."""
+def _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq):
+    """(b, d): the law's differences at one unit [m/s²] more of a_d along the carrier's axis (a_d_increment)."""
+    at, n = _at(lay, F_AD)
+    axis = reals[ints[R_CARRIER]:ints[R_CARRIER] + 3]
+    a0 = buf[at:at + n].copy()
+    for k in range(n):
+        buf[at + k] = a0[k] + axis[k]
+    tau_b, zdot_b = np.empty(tau.size), np.empty(zdot.size)
+    ok = abi_call(ints, reals, buf, lay, tau_b, zdot_b) == 1
+    for i in range(tau.size):
+        bq[i] = tau_b[i] - tau[i]
+    for i in range(zdot.size):
+        dq[i] = zdot_b[i] - zdot[i]
+    buf[at:at + n] = a0
+    return ok
+
+
+@njit(cache=True)
+def controller_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+    """(τ [N·m or N], ż, B (nv, rows), D (states, rows), b (nv), d (states)) of the phase's controller at (t, x):
+    b and d per unit acceleration of a body carrying the reference (zero without one, or for a law that is not of
+    the ABI: task PD and a held command do not read a_d); τ NaN where the law failed (the readable model then
+    answers and its error surfaces there)."""
     nv, nr, nz = ints[NV], ints[N_ROWS], ints[N_Z]
     zdot = np.zeros(nz)
     fold = ints[READS_FORCES] != 0 and nr > 0
     B, D = np.zeros((nv, nr if fold else 0)), np.zeros((nz, nr if fold else 0))
+    bq, dq = np.zeros(nv), np.zeros(nz)
     if ints[CTL_KIND] != CTL_ABI:
-        return command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR), zdot, B, D
+        return command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR), zdot, B, D, bq, dq
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)
+    carry(x, ints, reals, x_d, v_d)
     buf, lay = abi_buffer(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
-    _set_point_fields(t, x, ints, reals, h, f, events, buf, lay)
+    _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay)
     tau = np.zeros(nv)
     if abi_call(ints, reals, buf, lay, tau, zdot) != 1 or \
-            (fold and not _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D)):
+            (fold and not _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D)) or \
+            (ints[CARRIER] >= 0 and a_d.size and not _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq)):
         tau[:] = np.nan
-    return tau, zdot, B, D
+    return tau, zdot, B, D, bq, dq
 
 
 @njit(cache=True)
-def fold_rates(ints, lam, zdot, D, ydot):
-    """ż + D λ into the controller's slots of ẏ."""
+def carried_coordinate(ints, bq):
+    """The coordinate of the body carrying the reference where the command depends on its acceleration (b ≠ 0),
+    else -1 (``dynamics.carried_terms``: no carried term)."""
+    for i in range(bq.size if ints[CARRIER] >= 0 else 0):
+        if bq[i] != 0.0:
+            return ints[CARRIER]
+    return -1
+
+
+@njit(cache=True)
+def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
+    """(ok, the drives' applied forces [N·m or N], Q̈, λ, regular): the command through the drives into f, then the
+    KKT solve (:func:`.kkt.kkt_solve`). With a fold (B's columns, or a carried column b ≠ 0) as
+    ``constraints.solve_folded``: each pass applies τ₀ (the clips decided at the last full command), folds B and b
+    through the unclipped drives (:func:`.drives.fold_on_targets`), solves, and re-applies the full command
+    τ₀ + B λ + b Q̈_b, until the clips agree (≤ nv + 2 passes); τ becomes the full command, the drives' outputs in
+    ``work`` are the full command's. ok False where a drive kind's law failed."""
+    nv, nQ, n = ints[NV], ints[NQ], ints[N_DRIVES]
+    iq = carried_coordinate(ints, bq)
+    folding = B.shape[1] > 0 or iq >= 0
+    cmd = drive_command(x, ints, reals, tau)
+    if not folding:  # the command known before the solve: one pass (Drives.apply, then the solve)
+        ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
+        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, -1)
+        return ok, applied, qdd, lam, regular
+    sat, full, fk = cmd, cmd, f
+    rows = section(ints, ints[I_DRIVES], n, DI_W)
+    out = work[ints[W_DRIVES]:]
+    clipped = np.zeros(n)
+    ok, applied = True, cmd
+    qdd, lam, regular = np.zeros(nQ), np.zeros(gamma.size), True
+    for _ in range(nv + 2):
+        fk = f.copy()
+        ok, applied = drives(x, ints, reals, work, cmd, sat, fk)
+        if not ok:
+            return False, applied, qdd, lam, regular
+        fold, fold_q = np.zeros((nQ, B.shape[1])), np.zeros(nQ)
+        fold_on_targets(rows, reals[ints[R_DRIVES]:], out, B, bq, fold, fold_q)
+        qdd, lam, regular = kkt_solve(ints, reals, M, fk, G, C, gamma, fold, fold_q, iq)
+        full = cmd.copy()
+        for i in range(nv):
+            s = 0.0
+            for j in range(B.shape[1]):
+                s += B[i, j] * lam[j]
+            full[i] += s
+            if iq >= 0:
+                full[i] += bq[i] * qdd[iq]
+        if not ints[ANY_MOTOR]:  # ideal sources: nothing clips, the full command acts as it is (one pass)
+            applied = full
+            break
+        for i in range(n):
+            clipped[i] = out[DW_W * i + DW_CLIPPED]
+        ok, applied = drives(x, ints, reals, work, full, full, np.zeros(nQ))
+        if not ok:
+            return False, applied, qdd, lam, regular
+        same = True
+        for i in range(n):
+            same = same and clipped[i] == out[DW_W * i + DW_CLIPPED]
+        if same:
+            break
+        sat = full
+    f[:] = fk
+    tau[:] = full[:nv]
+    return ok, applied, qdd, lam, regular
+
+
+@njit(cache=True)
+def fold_rates(ints, lam, zdot, D, ydot, dq, qdd, iq):
+    """ż + D λ (+ d Q̈_b, a carried reference's: iq ≥ 0) into the controller's slots of ẏ."""
     at = ints[Z_AT]
     for i in range(zdot.size):
         s = zdot[i]
         for j in range(D.shape[1]):
             s += D[i, j] * lam[j]
-        ydot[at + i] = s
-
-
-@njit(cache=True)
-def folded_command(tau, applied, B, lam):
-    """τ₀ + B λ [N·m or N]: a force-reading law's command at the solved forces, into τ and the joints' applied
-    forces (ideal torque drives: the fold's only drives) in place; nothing without a fold."""
-    for i in range(B.shape[0] if B.shape[1] else 0):
-        s = 0.0
-        for j in range(B.shape[1]):
-            s += B[i, j] * lam[j]
-        tau[i] += s
-        applied[i] += s
+        ydot[at + i] = s + dq[i] * qdd[iq] if iq >= 0 else s

@@ -4,7 +4,7 @@ M is the robot's H [kg·m²] with the rotors reflected through rigid gears on it
 and the diagonal inertias of the bodies, chain masses and motor coordinates [kg, kg·m²] (the packed ``M_rest``);
 G the rows, C their force columns (a slide's tilt), γ [m/s²] their velocity-product and Baumgarte terms
 (:mod:`contactdyn.model.constraints`' ``kkt_solve``); a force-reading controller's B (τ = τ₀ + B λ,
-:mod:`.force_fold`) folded into the force columns. The solve
+:mod:`.force_fold`) folded through its drives into the force columns, a carried reference's column into M's. The solve
 is ``numerics.linalg.lu_solve`` (partial pivoting) with the readable model's residual test: a singular matrix
 returns status 0 and the caller takes the readable model's least squares (``constraints.solve_linear``).
 """
@@ -38,13 +38,15 @@ def residual_ok(A, z, b):
 
 
 @njit(cache=True)
-def kkt_solve(ints, reals, H, f, G, C, gamma, fold):
-    """(Q̈ [m/s², rad/s²], λ [N], regular): the KKT system's solve, or with no rows H q̈ = f and the other
-    coordinates' f / m (H: M's robot block). ``fold`` (nv, rows, or no columns): a force-reading controller's B,
-    τ = τ₀ + B λ, subtracted from the force columns on the joints (ideal torque drives: :mod:`.force_fold`)."""
+def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
+    """(Q̈ [m/s², rad/s²], λ [N], regular): the KKT system's solve, or with no rows (and no carried column) H q̈ = f
+    and the other coordinates' f / m (H: M's robot block). ``fold`` (nQ, rows, or no columns): a force-reading
+    controller's B through its drives (τ = τ₀ + B λ, :mod:`.force_fold`), subtracted from the force columns;
+    ``fold_q`` (nQ): its part per unit acceleration of coordinate ``iq`` (a reference carried by that body; -1 none),
+    subtracted from M's column iq (``constraints.kkt_solve``'s M − fold_q)."""
     nv, nQ, nr = ints[NV], ints[NQ], gamma.size
     m_rest = reals[ints[R_MREST]:ints[R_MREST] + nQ - nv]
-    if nr == 0:
+    if nr == 0 and iq < 0:
         qdd = np.empty(nQ)
         b = f[:nv].copy()
         z = lu_solve(H, b)
@@ -57,6 +59,8 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold):
     A[:nv, :nv] = H
     for i in range(nQ - nv):
         A[nv + i, nv + i] = m_rest[i]
+    for c in range(nQ if iq >= 0 else 0):
+        A[c, iq] -= fold_q[c]
     for r in range(nr):
         for c in range(nQ):
             A[c, nQ + r] = -C[r, c]

@@ -23,14 +23,14 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-a drive kind numba cannot compile, the energy audit with motors, a force-reading law through motors (the fold
-takes ideal torque drives), a sampled law that outputs voltages, a controller that outputs voltages (but constant
-ones), joint-space A7, a force-reading law with a tangential set-point, a user law numba cannot compile, a reference
-carried by a body for a law that may read its acceleration, two 2-D slides launching from rest at once, a stage or
+a drive kind numba cannot compile, the energy audit with motors, a sampled law that outputs voltages, a controller
+that outputs voltages (but constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
+law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
 joint it takes is a one-DOF revolute or prismatic). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
 operational space, the dynamic laws, joint PD, task force), a sampled law's held command, constant voltages and
-user laws of the controller ABI run; a force-reading law is folded (:mod:`.force_fold`).
+user laws of the controller ABI run; a force-reading law and a reference carried by a body are folded through the
+drives (:mod:`.force_fold`).
 """
 
 from __future__ import annotations
@@ -63,10 +63,12 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts"]
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, I_DRIVES, R_DRIVES, R_REFLECTED, W_DRIVES, ANY_MOTOR,
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
- N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, HEADER) = range(63)
+ N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, HEADER) = range(64)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
-#: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them
+#: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
+#: the chain whose interface force it reads (-1: a normal set-point's, the contact's normal force) and its contact;
+#: R_FOLD: per set-point the shift of its surface point from the contact's [m] (a tangential chain's anchor, u·offset)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -147,8 +149,6 @@ def unsupported(system, modes, phase) -> str:
         return "the energy audit with motors (the motors' power is not in the pipeline's audit yet)"
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
-    if phase.carrier is not None and ctl.name != "task_pd" and not isinstance(ctl, SampledController):
-        return "a reference carried by a body, for a law that may read its acceleration (its fold is not packed)"
     if isinstance(ctl, SampledController):
         if ctl.outputs != "torque":
             return "a sampled law that outputs voltages"
@@ -177,16 +177,10 @@ def _controller_unsupported(system, ctl, phase) -> str:
     constant = isinstance(ctl, ConstantVoltage)
     if ctl.outputs != "torque" and not constant:
         return f"controller {ctl.name!r} outputs {ctl.outputs}"
-    if ctl.uses_forces and system.drives.any_motor:
-        return f"controller {ctl.name!r} reads forces through motors (the fold takes ideal torque drives)"
-    if ctl.uses_forces and any("." in key for key in phase.forces):
-        return f"controller {ctl.name!r} reads forces with a tangential set-point (its chain's force is not kept)"
     if ctl.name == "operational_space" and ctl.force_keys != list(phase.forces):
         return "operational_space's set-points in another order than the phase's"
     if ctl.name in DYNAMIC_LAWS and (ctl.config.space if ctl.name == "position_dynamic" else "task") != "task":
         return f"controller {ctl.name!r} in joint space"
-    if ctl.name in DYNAMIC_LAWS and ctl._rotor.size:
-        return f"controller {ctl.name!r} with the rotor inertia taken out (inertia = \"link\")"
     if ctl.name not in COMPILED_IN and not constant and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
     dims = len(phase.reference.start) if phase.reference is not None else None
@@ -262,7 +256,7 @@ def pack(system, modes, phase) -> Packed:
     _reference(b, system, phase)
     _controller(b, system, phase)
     _drives(b, system, phase)
-    _fold(b, system, phase, meta)
+    _fold(b, system, modes, phase, meta)
     h[W_DIAG] = b.work
     b.work = int(diag_starts(np.array(h, dtype=np.int64))[D_END])
     h[W_SIZE] = b.work
@@ -438,7 +432,6 @@ def _controller(b: _Builder, system, phase) -> None:
     absent = (*(("gravity",) if not ctl.needs_gravity else ()),
               *(("x_d", "v_d", "a_d") if phase.reference is None else ()),
               *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()),
-              *(("force_read",) if any("." in key for key in phase.forces) else ()),
               *(("tau_contact", "surface_p", "surface_v", "touch") if not ctl.uses_forces else ()))
     h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
     b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces)))
@@ -483,15 +476,27 @@ def _dynamic_constants(ctl, phase) -> list[float]:
     env = [v for e in envs for v in ((e.k, e.b, e.m) if e is not None else (1.0, 0.0, 0.0))]
     return [float(force_law), float(getattr(ctl, "tracks_position", True)),
             float(force_law and cfg.cancel == "target"), float(bool(ctl.envs) and not force_law),
-            float(getattr(cfg, "kf", 0.0)), float(cfg.k_null), *kp, *kv, *P.ravel(), *env]
+            float(getattr(cfg, "kf", 0.0)), float(cfg.k_null), *kp, *kv, *P.ravel(), *env, *ctl._rotor]
 
 
-def _fold(b: _Builder, system, phase, meta: list[tuple[str, str, int]]) -> None:
+def _fold(b: _Builder, system, modes, phase, meta: list[tuple[str, str, int]]) -> None:
     """I_FOLD: per set-point the contact whose normal force it reads (-1 for a tangential chain's), then per row the
-    contact whose normal it is (-1: a stick, a tangential bond, a limit)."""
+    contact whose normal it is (-1: a stick, a tangential bond, a limit), then per set-point the chain whose
+    interface force it reads (-1: a normal one) and its contact; R_FOLD: per set-point its surface point's shift
+    from the contact's [m] (``dynamics.surface_points``: a tangential chain's anchor u · offset)."""
     names = [c.name for c in system.contacts]
+    first = np.cumsum([0, *(len(c.chains) for c in system.contacts)])
+    chain, owner, shift = [], [], []
+    for key in phase.forces:
+        name, _, label = key.partition(".")
+        ci = names.index(name)
+        i = next((i for i, dc in enumerate(system.contacts[ci].tangent_chains) if dc.label == label), -1)
+        owner.append(ci)
+        chain.append(int(first[ci]) + 1 + i if label else -1)
+        shift.append(system.contacts[ci].tangent_chains[i].u * modes[ci].offsets[i] if label else np.zeros(3))
     b.int_section(I_FOLD, [*(names.index(key) if key in names else -1 for key in phase.forces),
-                           *(names.index(owner) if kind == "n" else -1 for owner, kind, _ in meta)])
+                           *(names.index(owner) if kind == "n" else -1 for owner, kind, _ in meta), *chain, *owner])
+    b.real_section(R_FOLD, shift)
 
 
 #: handle -> controller class: the controller's Python ``command`` under NUMBA_DISABLE_JIT (the address's twin)

@@ -1,8 +1,9 @@
 """One right-hand-side call, written once over a mode's packed arrays (:mod:`.pack`): the pipeline.
 
     robot terms -> frames -> contacts (chains, bond rows, friction rows) -> limit rows -> stuck joints' rows
-    -> controller (τ, ż and a force-reading law's fold B) -> joint damping and sliding friction -> drives
-    -> KKT assembly and solve -> rates ẋ = [Q̇, Q̈, ẏ] (the energy audit's last) and the event values
+    -> controller (τ, ż, a force-reading law's fold B, a carried reference's column) -> joint damping and sliding
+    friction -> drives and the KKT assembly and solve (the fold through the drives, the clips re-checked)
+    -> rates ẋ = [Q̇, Q̈, ẏ] (the energy audit's last) and the event values
 
 :func:`call` is numba-compiled once for every scene and every law (the laws enter by address: stage and friction
 laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`, a drive
@@ -18,13 +19,12 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from .actuation import carry, drives, reference, set_points
+from .actuation import carry, reference, set_points
 from .contacts import contact_terms, finish, limit_rows
 from .drives import drive_values, inertias
 from .energy import energy_rates
-from .force_fold import controller_terms, fold_rates, folded_command
+from .force_fold import carried_coordinate, controller_terms, fold_rates, solve_through_drives
 from .joint_friction import joint_events, joint_rows, joint_torques
-from .kkt import kkt_solve
 from .launch import ST_CONTACT, launch_start, launch_took
 from .pack import (
     ANY_MOTOR,
@@ -88,19 +88,17 @@ def call(t, x, ints, reals, work, events):
         first_limit = first_joint - ints[N_LIMITS]
         limit_rows(x, ints, reals, first_limit, G, C, gamma)
         joint_rows(x, ints, reals, first_joint, G, C, gamma)
-        tau, zdot, B, D = controller_terms(t, x, ints, reals, Hc, h, g, FJ, Fa, Fp, Fv, FR, f, C, events)
+        tau, zdot, B, D, bq, dq = controller_terms(t, x, ints, reals, work, Hc, h, g, FJ, Fa, Fp, Fv, FR, f, C, events)
         joint_torques(x, ints, reals, f)
-        ok, applied = drives(x, ints, reals, work, tau, f)
+        ok, applied, qdd, lam, regular = solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq)
         if not ok:
             events[events.size - 1] = -1.0
             return xdot
-        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B)
-        fold_rates(ints, lam, zdot, D, ydot)
+        fold_rates(ints, lam, zdot, D, ydot, dq, qdd, carried_coordinate(ints, bq))
         xdot[:nQ] = x[nQ:2 * nQ]
         xdot[nQ:2 * nQ] = qdd
         xdot[2 * nQ:] = ydot
         finish(ints, lam, xdot, events, pending, first_limit)
-        folded_command(tau, applied, B, lam)
         energy_rates(x, ints, reals, applied, xdot, events, pending)
         joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
         if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
