@@ -162,12 +162,14 @@ LIBM = {"b1_stribeck"}
 
 def test_the_same_source_interpreted_gives_the_compiled_rates():
     """NUMBA_DISABLE_JIT=1: the pipeline's functions, the chains', the laws (stage, friction, the user's controllers,
-    the built-in laws by address, the drive kinds: DC motors with a wheel and a clip, the elastic transmission) all
-    run as Python, the same source; ẋ equals the compiled call's bit for bit (and the readable model's)."""
+    the built-in laws by address, the drive kinds: DC motors with a wheel and a clip, the elastic transmission; joint
+    friction, a held command, a carried reference, a circle, a launch, the energy audit) all run as Python, the same
+    source; ẋ equals the compiled call's bit for bit (and the readable model's)."""
     names = ["b1_stribeck", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "cubic_press", "impedance_press",
              "cart_motors", "case3a_touch", "real_cell_clip", "writer_motors_voltage", "writer5dof_ops_write",
              "force_pi_press", "force_loop_hybrid", "b1_force_dynamic", "b1_position_dynamic", "b1_joint_pd",
-             "b1_task_force", "case3b_force_press_clip", "cart_push_apart_clip", "case3a_force_press"]
+             "b1_task_force", "case3b_force_press_clip", "cart_push_apart_clip", "case3a_force_press",
+             "b1_joints_mixed", "b1_sampled", "cart_push_carried", "ur5_circle", "ur5_launch", "b1_energy"]
     env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(BENCH.parent)}
     done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=names)], env=env,
                           capture_output=True, text=True, timeout=600)

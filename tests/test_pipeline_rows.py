@@ -5,9 +5,6 @@ what each kind changes, and the same source interpreted."""
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -162,35 +159,3 @@ def test_the_energy_audits_rates_are_the_readable_ones(name):
         got, ref = pipe.rhs(t, x)[e:e + 2], system.evaluate(t, x, modes, phase).xdot[e:e + 2]
         assert np.all(ref != 0.0)
         np.testing.assert_allclose(got, ref, rtol=RTOL, atol=0.0)
-
-
-_INTERPRETED = """
-import json, sys
-sys.path.insert(0, {bench!r})
-from pipeline_proto import case, states
-from contactdyn.model.pipeline.pipeline import Pipeline
-out = {{}}
-for name in {names!r}:
-    system, modes, phase, t, x0 = case(name)
-    pipe = Pipeline(system, modes, phase)
-    out[name] = [pipe.rhs(t, x).tolist() for x in states(x0, 2)]
-print(json.dumps(out))
-"""
-INTERPRETED = ["b1_joints_mixed", "b1_sampled", "cart_push_carried", "ur5_circle", "ur5_launch", "b1_energy"]
-
-
-def test_the_same_source_interpreted_gives_the_compiled_rates():
-    """NUMBA_DISABLE_JIT=1: the same functions as Python give ẋ bit for bit (and the readable model's)."""
-    env = {**os.environ, "NUMBA_DISABLE_JIT": "1", "PYTHONPATH": str(BENCH.parent)}
-    done = subprocess.run([sys.executable, "-c", _INTERPRETED.format(bench=str(BENCH), names=INTERPRETED)], env=env,
-                          capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
-    interpreted = json.loads(done.stdout.strip().splitlines()[-1])
-    assert set(interpreted) == set(INTERPRETED)
-    for name in INTERPRETED:
-        system, modes, phase, t, x0 = case(name)
-        pipe = Pipeline(system, modes, phase)
-        for x, got in zip(states(x0, 2), interpreted[name], strict=True):
-            compiled, ref = pipe.rhs(t, x), system.evaluate(t, x, modes, phase).xdot
-            assert np.array_equal(np.array(got), compiled), name
-            assert np.abs(np.array(got) - ref).max() <= RTOL * np.abs(ref).max()
