@@ -32,6 +32,7 @@ from __future__ import annotations
 import gc
 import math
 import time
+from contextlib import nullcontext
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -390,11 +391,9 @@ def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, at: tuple, s
     plan = None if pipes.prefer and pipes.wanted(modes, phase) else run._plan(modes, phase, at if start else None)
     pipe, why = None, ""
     if pipes.wanted(modes, phase, plan):
-        if pipes.built(modes, phase):
+        # (a notice's watch is a thread: only while the mode's pipeline is first built, once per mode)
+        with nullcontext() if pipes.built(modes, phase) else compiling("the one pipeline"):
             pipe, why = pipes.mode(modes, phase, *at)
-        else:
-            with compiling("the one pipeline"):  # (a notice's watch: a thread; once per mode)
-                pipe, why = pipes.mode(modes, phase, *at)
         if pipe is None and plan is None:  # its check disagreed: the plan
             plan = run._plan(modes, phase, at if start else None)
     if start:
