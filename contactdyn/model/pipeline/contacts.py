@@ -92,9 +92,9 @@ P_MU, P_D, P_VISC, P_W = 0, 1, 3, 5
 
 
 @njit(cache=True)
-def _chain(x, ints, reals, work, k, p_tip, v_tip, p_env, v_env, drift, f, ydot):
-    """Chain k's call over its packed plan: (tip F along u [N], γ [m/s²], interface F [N], gap [m], finite)."""
-    ch = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k]
+def _chain(x, ints, reals, work, ch, p_tip, v_tip, p_env, v_env, drift, f, ydot):
+    """The call of the chain whose ints are ``ch`` over its packed plan: (tip F along u [N], γ [m/s²], interface
+    F [N], gap [m], finite)."""
     ns, nn = ch[CH_NS], ch[CH_NNODES]
     plan = ints[ch[CH_PLAN]:ch[CH_STAGES]]
     stages = section(ints, ch[CH_STAGES], ns, 7)
@@ -107,9 +107,9 @@ def _chain(x, ints, reals, work, k, p_tip, v_tip, p_env, v_env, drift, f, ydot):
 
 
 @njit(cache=True)
-def _bond_row(ints, reals, k, J, body, G, C):
-    """Chain k's bond row (model.chain_forces._bond_row): the two surfaces' relative motion along u."""
-    ch = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k]
+def _bond_row(reals, ch, J, body, G, C):
+    """The bond row of the chain whose ints are ``ch`` (model.chain_forces._bond_row): the two surfaces' relative
+    motion along u."""
     r = ch[CH_ROW]
     u = reals[ch[CH_CONSTS]:ch[CH_CONSTS] + 3]
     u_axis = reals[ch[CH_CONSTS] + 3]
@@ -130,6 +130,7 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, ev
     """Every contact's chains, rows and friction into f, ydot, G, C, γ, events; False if a stage law gave no force."""
     nQ = ints[NQ]
     cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
+    chains = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)
     for ci in range(cs.shape[0]):
         row = cs[ci]
         cr = reals[row[CI_REALS]:]
@@ -143,20 +144,20 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, ev
         tip_force = np.zeros(3)
         F_n = 0.0
         for k in range(row[CI_NORMAL], row[CI_FIRST_T] + row[CI_N_T]):
-            tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, k, Fp[fi], Fv[fi], p_env, v_env,
+            ch = chains[k]
+            tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, Fp[fi], Fv[fi], p_env, v_env,
                                                           Fa[fi, :3], f, ydot)
             if not finite:
                 return False
             work[ints[W_DIAG] + 1 + k] = interface_F  # (diagnostics: a tangential chain's interface force)
-            u0 = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k, CH_CONSTS]
-            for i in range(3):
-                tip_force[i] += tip_F * reals[u0 + i]
+            for i in range(3):  # along the chain's u (its constants' first three)
+                tip_force[i] += tip_F * reals[ch[CH_CONSTS] + i]
             if k == row[CI_NORMAL]:
                 F_n = interface_F
                 events[EV_W * ci + EV_GAP] = 0.0 if row[CI_TOUCHING] else gap
-            if section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k, CH_ROW] >= 0:
-                _bond_row(ints, reals, k, J, body, G, C)
-                gamma[section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)[k, CH_ROW]] = gam
+            if ch[CH_ROW] >= 0:
+                _bond_row(reals, ch, J, body, G, C)
+                gamma[ch[CH_ROW]] = gam
         events[EV_W * ci + EV_FN] = F_n
         if row[CI_NT]:
             _friction(x, ints, reals, ci, row, cr, J, Fa[fi, :3], Fv[fi], v_env, F_n, f, G, C, gamma, events,

@@ -77,6 +77,7 @@ RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: command per joint (open-loop voltages [V], ConstantVoltage, in the controller's reals), joint PD, task force
 CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_HELD, CTL_CONSTANT, CTL_JOINT_PD, CTL_TASK_FORCE = 0, 1, 2, 3, 4, 5, 6
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward (joint PD's and task force's: their first constant)
+FEEDFORWARDS = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}  #: a config's ``feedforward`` -> its code
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
@@ -409,10 +410,9 @@ def _controller(b: _Builder, system, phase) -> None:
         axes, kp, kd, tool_axis, target, R_d, ko, do, kd_joint, kd_normal = ctl.constants
         h[CTL_KIND], h[N_AXES], h[HAS_TOOL], h[HAS_RD] = CTL_TASK_PD, len(axes), int(tool_axis.size > 0), \
             int(R_d.shape[0] > 0)
-        h[FEEDFORWARD] = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}[ctl.config.feedforward]
+        h[FEEDFORWARD] = FEEDFORWARDS[ctl.config.feedforward]
         h[NEEDS_GRAVITY] = int(h[FEEDFORWARD] == FF_GRAVITY)
-        tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
-        b.real_section(R_CTL, [*axes.ravel(), *kp, *kd, *tool[0], *tool[1],
+        b.real_section(R_CTL, [*axes.ravel(), *kp, *kd, *_tool(tool_axis, target),
                                *(R_d.ravel() if R_d.shape[0] else np.zeros(9)), ko, do, kd_joint, kd_normal])
         b.int_section(I_LAYOUT, ())
         return
@@ -423,7 +423,7 @@ def _controller(b: _Builder, system, phase) -> None:
         return
     if ctl.name in ("joint_pd", "task_force"):  # control_laws.joint_pd_command, task_force_command
         h[CTL_KIND] = CTL_JOINT_PD if ctl.name == "joint_pd" else CTL_TASK_FORCE
-        ff = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}[ctl.config.feedforward]
+        ff = FEEDFORWARDS[ctl.config.feedforward]
         f, rate, start, ramp, amp, freq, ph, osc = ctl.constants if ctl.name == "task_force" else (None,) * 8
         b.real_section(R_CTL, [ff, *ctl.gains[0], *ctl.gains[1]] if ctl.name == "joint_pd" else
                        [ff, *f, *rate, start, ramp, *amp, freq, *ph, float(osc)])
@@ -461,9 +461,13 @@ def _drives(b: _Builder, system, phase) -> None:
 def _operational_constants(ctl) -> list[float]:
     """Operational space's constants (control_laws' O_*), from OperationalSpace.constants."""
     axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
-    tool = (tool_axis, target) if tool_axis.size else (np.zeros(3), np.zeros(3))
-    return [len(axes), float(tool_axis.size > 0), *axes.ravel(), *forced.ravel(), *kp, *kd, *tool[0], *tool[1], ko,
-            do, k_null, kd_normal]
+    return [len(axes), float(tool_axis.size > 0), *axes.ravel(), *forced.ravel(), *kp, *kd, *_tool(tool_axis, target),
+            ko, do, k_null, kd_normal]
+
+
+def _tool(tool_axis, target) -> list[float]:
+    """A task law's tool axis and its target direction (3 + 3), zeros without a tool."""
+    return [*tool_axis, *target] if tool_axis.size else [0.0] * 6
 
 
 def _dynamic_constants(ctl, phase) -> list[float]:
