@@ -54,8 +54,8 @@ from ...numerics.compile_cache import njit
 from ..abi import _data_at, _indirect_call, compile_wrapper
 from .base import ControlInput, Controller
 
-__all__ = ["CONTROLLER_SIGNATURE", "LAYOUT", "NOT_IN_LAYOUT", "ControlArrays", "control_arrays", "layout_of",
-           "put_field", "controller_address", "params_of", "buffer_of", "call_controller"]
+__all__ = ["CONTROLLER_SIGNATURE", "LAYOUT", "LAYOUT_SIZE", "NOT_IN_LAYOUT", "ControlArrays", "control_arrays",
+           "layout_of", "put_field", "controller_address", "params_of", "buffer_of", "call_controller"]
 
 _P = types.CPointer(types.float64)
 #: int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau, double* zdot)
@@ -93,6 +93,7 @@ LAYOUT = (
 )
 FIELD = {name: k for k, (name, _, _) in enumerate(LAYOUT)}  #: a field's index in LAYOUT
 LAYOUT_HEAD = 3  #: the layout table's header: nv, nz, ns; then (start, stop) per field, then the buffer's size
+LAYOUT_SIZE = LAYOUT_HEAD + 2 * len(LAYOUT) + 1  #: the layout table's length (layout_of)
 #: ControlInput's fields a compiled controller does not read (its dictionaries: their arrays by set-point are
 #: ControlInput.SET_POINT_ARRAYS)
 NOT_IN_LAYOUT = ("forces", "force_d", "normals", "surfaces", "touching")
@@ -215,7 +216,7 @@ def controller_address(cls: type) -> int:
         names = [p.name for p in cls.params]
         config = namedtuple(f"{cls.__name__}Config", names)
         name = f"{cls.__name__}_command_abi"
-        source = _WRAPPER.format(name=name, n_layout=LAYOUT_HEAD + 2 * len(LAYOUT) + 1, names=", ".join(names),
+        source = _WRAPPER.format(name=name, n_layout=LAYOUT_SIZE, names=", ".join(names),
                                  n_params=len(names), params=", ".join(f"p[{i}]" for i in range(len(names))))
         namespace = {"carray": carray, "control_arrays": control_arrays, "Config": config, "put_states": put_states,
                      "Self": namedtuple(f"{cls.__name__}Self", ["config", "nv"])}

@@ -319,9 +319,9 @@ class PositionDynamic(_ComputedTorque):
         self._rotor = _rotor_inertia(context, self.config.inertia)
         cfg, key, file = self.config, context.key, context.scene.file
         dims = self.nv if cfg.space == "joint" else 3
-        self._gains3 = _gains3(cfg) if cfg.space == "task" else None
         for name in ("kp", "kv"):
             _check_gain_size(getattr(cfg, name), (1, dims), f"{key}.{name}", file)
+        self._gains3 = _gains3(cfg) if cfg.space == "task" else None  # (after the check: its SceneError first)
         ref = context.phase.reference
         if ref is not None and ref.space != cfg.space:
             raise SceneError(f"phase[{context.index}].reference.space", f"{cfg.space!r} (the controller's space)",

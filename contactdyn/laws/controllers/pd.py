@@ -217,4 +217,4 @@ def joint_pd_torque(q, v, q_d, v_d, kp, kd, tau_ff):
         tau += kp * (q_d - q) + kd * (v_d - v)
     if tau_ff.size:
         return tau + tau_ff
-    return tau + 0.0
+    return tau

@@ -21,7 +21,7 @@ from collections import namedtuple
 import numpy as np
 from numba.extending import overload
 
-from ...laws.controllers.abi import FIELD, LAYOUT_HEAD, call_controller, control_arrays, put_field
+from ...laws.controllers.abi import FIELD, LAYOUT_HEAD, LAYOUT_SIZE, call_controller, control_arrays, put_field
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import CIRCLE_W, add_circle, move_rows, ramp_rows
 from ...numerics.compile_cache import njit
@@ -79,7 +79,6 @@ __all__ = ["reference", "set_points", "command", "drive_command", "drives", "com
 (F_T, F_Q, F_V, F_H, F_HB, F_GRAVITY, F_P, F_PD, F_J, F_DRIFT, F_XD, F_VD, F_AD, F_Z, F_R, F_JANG, F_DRIFT_ANG) = (
     FIELD[k] for k in ("t", "q", "v", "H", "h", "gravity", "p_tip", "v_tip", "J", "drift", "x_d", "v_d", "a_d", "z",
                        "R_tip", "J_ang", "drift_ang"))
-N_LAYOUT = LAYOUT_HEAD + 2 * len(FIELD) + 1  #: the layout table's length (layout_of)
 
 
 @njit(cache=True)
@@ -158,7 +157,7 @@ def abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a
     """(buffer, layout) of a controller of the ABI: its inputs written where the packed layout table puts them (the
     set-points' fields, the measured forces and what goes with them are :mod:`.force_fold`'s)."""
     nv, nQ = ints[NV], ints[NQ]
-    lay = ints[ints[I_LAYOUT]:ints[I_LAYOUT] + N_LAYOUT]
+    lay = ints[ints[I_LAYOUT]:ints[I_LAYOUT] + LAYOUT_SIZE]
     buf = np.zeros(lay[lay.size - 1])
     buf[lay[LAYOUT_HEAD + 2 * F_T]] = t
     put_field(buf, lay, F_Q, x[:nv])

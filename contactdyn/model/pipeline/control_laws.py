@@ -32,7 +32,7 @@ import numpy as np
 from numba import carray, cfunc
 
 from ...laws.controllers import computed_torque
-from ...laws.controllers.abi import CONTROLLER_SIGNATURE, FIELD, LAYOUT_HEAD, control_arrays
+from ...laws.controllers.abi import CONTROLLER_SIGNATURE, LAYOUT_SIZE, control_arrays
 from ...laws.controllers.dynamic_law import force_targets, position_targets
 from ...laws.controllers.force import task_force_torque
 from ...laws.controllers.operational_law import SINGULAR, torque
@@ -43,7 +43,6 @@ from ...numerics.linalg import pinv
 __all__ = ["kind_address", "operational_on_buffer", "dynamic_on_buffer", "joint_pd_command", "task_force_command",
            "O_K", "D_FORCE_LAW"]
 
-N_LAYOUT = LAYOUT_HEAD + 2 * len(FIELD) + 1  #: the layout table's length (abi.layout_of)
 O_K, O_TOOL, O_AXES = 0, 1, 2  #: operational space's constants: k, a tool axis, then the tables from O_AXES
 D_FORCE_LAW, D_TRACKS, D_SWAP, D_PRESSING, D_KF, D_KNULL, D_KP, D_KV, D_P, D_ENV = 0, 1, 2, 3, 4, 5, 6, 9, 12, 21
 FF_NONE, FF_GRAVITY, FF_BIAS = 0.0, 1.0, 2.0  #: joint PD's and task force's feedforward (their first constant)
@@ -108,14 +107,14 @@ def dynamic_on_buffer(buf, lay, c, tau, zdot):
 
 # ---- the C functions (closure-free module functions: numba caches them beside this file) -------------------------
 def _operational_abi(buffer, layout, params, n_p, tau, zdot):
-    lay = carray(layout, (N_LAYOUT,))
-    return operational_on_buffer(carray(buffer, (lay[N_LAYOUT - 1],)), lay, carray(params, (n_p,)),
+    lay = carray(layout, (LAYOUT_SIZE,))
+    return operational_on_buffer(carray(buffer, (lay[LAYOUT_SIZE - 1],)), lay, carray(params, (n_p,)),
                                  carray(tau, (lay[0],)), carray(zdot, (lay[1],)))
 
 
 def _dynamic_abi(buffer, layout, params, n_p, tau, zdot):
-    lay = carray(layout, (N_LAYOUT,))
-    return dynamic_on_buffer(carray(buffer, (lay[N_LAYOUT - 1],)), lay, carray(params, (n_p,)),
+    lay = carray(layout, (LAYOUT_SIZE,))
+    return dynamic_on_buffer(carray(buffer, (lay[LAYOUT_SIZE - 1],)), lay, carray(params, (n_p,)),
                              carray(tau, (lay[0],)), carray(zdot, (lay[1],)))
 
 
