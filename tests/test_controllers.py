@@ -268,6 +268,10 @@ def test_controller_configuration_errors_name_the_key():
     gains = writer_doc({"kind": "position_dynamic", "space": "joint", "kp": [1.0, 2.0, 3.0]},
                        {"reference": {"space": "joint", "start": Q0.tolist(), "moves": []}})
     assert _error(gains).key == "phase[0].controller.kp"
+    task_gains = writer_doc({"kind": "position_dynamic", "space": "task", "kp": [1.0, 2.0]},
+                            {"reference": {"start": tip0().tolist(), "moves": []}})
+    err = _error(task_gains)  # (a SceneError naming the key, not numpy's broadcast error)
+    assert err.key == "phase[0].controller.kp" and "one gain or 3" in str(err)
     space = writer_doc({"kind": "position_dynamic", "space": "joint"},
                        {"reference": {"space": "task", "start": tip0().tolist(), "moves": []}})
     assert _error(space).key == "phase[0].reference.space"
