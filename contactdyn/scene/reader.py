@@ -212,9 +212,9 @@ class Reader:
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, "an integer", value)
         if lo is not None and value < lo:
-            raise self.error(name, f"an integer >= {lo}", value)
+            raise self.error(name, f"an integer >= {lo}{_unit(unit)}", value)
         if hi is not None and value > hi:
-            raise self.error(name, f"an integer <= {hi}", value)
+            raise self.error(name, f"an integer <= {hi}{_unit(unit)}", value)
         return value
 
     def bool(self, name: str, default: Any = MISSING) -> bool:
