@@ -126,6 +126,8 @@ def test_the_sampled_loop_is_read_off_the_simulators_own_sampled_phase(b1_sample
     loop, lin = b1_sampled
     ctl = loop.loop.phase.controller
     assert len(lin.held) == ctl.nv and np.array_equal(lin.u, lin.x[lin.held])
+    tau, _ = b1_sampled[0]._command(lin.x)  # the law's command on what it measures under u itself: u again
+    np.testing.assert_allclose(tau, lin.u, rtol=1e-11, atol=0.0)
     other = SampledLoop(contact_phase_scene(B1_SCENE, B1_Q0, {**b1_reference(0.0), "controller.sample_rate": 50.0,
                                                               "controller.delay": 3}), t_eq=0.0).linearize()
     np.testing.assert_allclose(other.poles(200.0, 4), lin.poles(200.0, 4), rtol=1e-9)

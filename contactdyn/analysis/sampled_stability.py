@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
+from ..errors import SimulationError
 from ..laws.controllers.sampled import SampledController
 from ..model.dynamics import sample_input
 from ..model.system import System
@@ -51,6 +52,7 @@ __all__ = ["SampledLinearization", "SampledLoop", "zoh", "closed_loop", "decay_r
            "linear_window"]
 
 _FD_STEP = 1e-6  #: relative central-difference step (as stability.py's)
+FIXED_POINT_ITERATIONS = 20  #: Newton steps for the held command's fixed point (the map is near-affine: 2–3 do)
 _SAMPLING_KEYS = ("sample_rate", "delay", "sensor")
 
 
@@ -193,13 +195,14 @@ class SampledLoop:
         assert len(x) == system.n and at == 2 * system.nQ + phase.z_slice.start
         held = np.arange(at, at + ctl.nv)
         x[held] = self._command(x)[0]
-        for _ in range(50):  # the forces measured under the command itself: a fixed point
-            u_new = self._command(x)[0]
-            done = np.max(np.abs(u_new - x[held])) <= 1e-12 * max(1.0, float(np.max(np.abs(u_new))))
-            x[held] = u_new
-            if done:
-                break
-        return lin, x
+        for _ in range(FIXED_POINT_ITERATIONS):  # the forces measured under the command itself: Newton on u − G(u)
+            residual = self._command(x)[0] - x[held]
+            if np.max(np.abs(residual)) <= 1e-12 * max(1.0, float(np.max(np.abs(x[held])))):
+                return lin, x
+            slope = self._jacobian(lambda xv: self._command(xv)[0], x, held) - np.eye(len(held))
+            x[held] -= np.linalg.solve(slope, residual)
+        raise SimulationError(f"SampledLoop: the held command found no fixed point u = G(m(x, u)) in "
+                              f"{FIXED_POINT_ITERATIONS} Newton steps (last residual {np.max(np.abs(residual)):.3g})")
 
     def linearize(self, x_guess: np.ndarray | None = None) -> SampledLinearization:
         """The pieces about the continuous loop's equilibrium (the hold keeps it), Newton from ``x_guess``

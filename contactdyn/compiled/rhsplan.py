@@ -37,7 +37,7 @@ from collections import deque
 
 import numpy as np
 
-from ..model.contact import ContactMode
+from ..model.contact import ContactMode, structure
 from ..model.paths import UNDECLARED, disagreement, mode_gap
 from .plan_kkt import CompiledKKT
 from .plan_probe import ProbedModel, affine_map
@@ -46,17 +46,10 @@ from .samples import Samples, plan_samples
 
 __all__ = ["ModePlan", "Samples", "cached_plan", "structure", "affine_map"]  # Samples: from contactdyn.compiled.samples
 
-ANY_2D = (0.0, 0.0)  #: a 2-D reference direction in a plan's key (:func:`structure`): never a real one
 _NO_CALL = (None, None, None, None)  #: a ring entry before any call
 
 
 _PLANS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  #: system -> {key: ModePlan}
-
-
-def structure(modes: list[ContactMode]) -> tuple[ContactMode, ...]:
-    """What shapes a plan: the modes with each 2-D reference direction r blanked. r is data the
-    plan's call reads (:meth:`ModePlan.use`): a ``turn`` event refreshes it without a new plan."""
-    return tuple(m.with_(slip=ANY_2D) if len(m.slip) == 2 else m for m in modes)
 
 
 def cached_plan(system, modes: list[ContactMode], phase) -> ModePlan:

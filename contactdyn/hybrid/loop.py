@@ -370,7 +370,7 @@ class HybridRun:
         self.stats["rhs_evals"] += sum(getattr(seg.sol, "late_calls", 0) for seg in self.segments)  # DOP853C's
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
-                     compiled_modes=sum(p.ok for p in self.plans.values()),
+                     compiled_modes=sum(p.ok for p in self.plans.values()) + self.pipelines.count(),
                      fallback_modes=dict(self.fallbacks), paths=self.paths.table(), limits=rate_stats,
                      fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,

@@ -72,13 +72,13 @@ class PipelineMode:
         self.ring: deque[tuple] = deque([_NO_CALL] * 4, maxlen=4)  #: the last four calls' (t, x, events)
         p = pipe.packed
         ints, reals, work, events = p.ints, p.reals, p.work, p.events
-        ring, system, modes, phase = self.ring, self.system, self.modes, self.phase
+        ring, system, phase = self.ring, self.system, self.phase
 
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
             xdot = call(float(t), x, ints, reals, work, events)
             if events[-1] != 1.0:
                 pipe.fallbacks += 1
-                ev = system.evaluate(t, x, modes, phase)
+                ev = system.evaluate(t, x, self.modes, phase)
                 ring.append((t, x, self._events_of(ev, x)))
                 return ev.xdot
             ring.append((t, x, events.copy()))
@@ -102,9 +102,12 @@ class PipelineMode:
         return self.pipe.fallbacks
 
     def use(self, modes) -> None:
-        """(A plan's: run these modes.) A pipeline is packed for its modes only."""
+        """Run with these modes from now on: a turn's new 2-D reference directions r, data of the same packed mode
+        (the last calls' event values were for the old r: forgotten)."""
         if list(modes) != self.modes:
-            raise ValueError(f"a pipeline runs the modes it was packed for: {self.modes}, given {modes}")
+            self.pipe.use(modes)
+            self.modes = self.pipe.modes
+            self.ring.extend([_NO_CALL] * 4)
 
     # ---- values the event functions read ----------------------------------------------
     def values(self, t: float, x: np.ndarray) -> np.ndarray:

@@ -19,7 +19,9 @@ from ..robot.robot import FrameTerms
 from ..scene.scene_file import ContactSpec
 from .chain import Chain, NodeKind, balanced, build_chain
 
-__all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics"]
+__all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics", "structure"]
+
+ANY_2D = (0.0, 0.0)  #: a 2-D reference direction in a mode's :func:`structure`: never a real one
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,12 @@ class ContactMode:
     def separated(self) -> ContactMode:
         """The mode after the contact lets go: not touching, not stuck, its damped chain ends relaxing."""
         return replace(self, touching=False, stuck=False, relaxing=True)
+
+
+def structure(modes) -> tuple[ContactMode, ...]:
+    """What shapes a mode's compiled call: the modes with each 2-D reference direction r blanked. r is data the
+    call reads: a ``turn`` event refreshes it without packing the mode again."""
+    return tuple(m.with_(slip=ANY_2D) if len(m.slip) == 2 else m for m in modes)
 
 
 @dataclass

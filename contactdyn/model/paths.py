@@ -39,6 +39,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .contact import structure
 from .pipeline.pack import unsupported
 from .pipeline.pipeline import Pipeline
 
@@ -119,12 +120,14 @@ class LivePipelines:
     #: True: every mode ``pack.unsupported`` accepts runs on the pipeline, even where the plan runs it (the tests' and
     #: benchmarks' switch, benchmarks/pipeline_loop.py); False: the plan first (the default until the pipeline
     #: covers every mode kind)
-    prefer = False
+    prefer = True
 
     def __init__(self, system, wrap: Callable = lambda pipe: pipe) -> None:
         self.system, self.wrap = system, wrap
-        self.pipes: dict[tuple, object] = {}  #: (modes, phase.key()) -> its pipeline (wrapped), or why not (undeclared)
-        self.declines: dict[tuple, str] = {}  #: (modes, phase.key()) -> pack.unsupported's reason ("": it packs them)
+        #: (structure(modes), phase.key()) -> its pipeline (wrapped), or why not (undeclared); every turn of a 2-D
+        #: slide reuses its pipeline (the reference direction is data)
+        self.pipes: dict[tuple, object] = {}
+        self.declines: dict[tuple, str] = {}  #: the same keys -> pack.unsupported's reason ("": it packs them)
 
     def wanted(self, modes, phase, plan=None) -> bool:
         """Does the pipeline run (modes, phase)? ``plan``: the mode's plan (None: not built; only ``prefer`` runs
@@ -133,25 +136,32 @@ class LivePipelines:
             return False
         if not self.prefer and (plan is None or plan.ok or plan.reason.startswith(UNDECLARED)):
             return False
-        key = (tuple(modes), phase.key())
+        key = (structure(modes), phase.key())
         if key not in self.declines:
             self.declines[key] = unsupported(self.system, modes, phase)
         return not self.declines[key]
 
+    def count(self) -> int:
+        """How many modes run on the pipeline (packed, and their check agreed)."""
+        return sum(not isinstance(pipe, str) for pipe in self.pipes.values())
+
     def built(self, modes, phase) -> bool:
         """Is the pipeline of (modes, phase) packed and checked already (or its check failed)?"""
-        return (tuple(modes), phase.key()) in self.pipes
+        return (structure(modes), phase.key()) in self.pipes
 
     def mode(self, modes, phase, t: float, x: np.ndarray) -> tuple[object | None, str]:
         """(the pipeline of a mode :meth:`wanted` says it runs, starting at (t [s], x), wrapped; or None and the
         undeclared reason its check disagreed with)."""
-        key = (tuple(modes), phase.key())
+        key = (structure(modes), phase.key())
         pipe = self.pipes.get(key)
         if pipe is None:
             pipe = Pipeline(self.system, modes, phase)
             reason = disagreement(self.system, modes, phase, pipe.rhs, t, x)
             pipe = self.pipes[key] = reason or self.wrap(pipe)
-        return (None, pipe) if isinstance(pipe, str) else (pipe, "")
+        if isinstance(pipe, str):
+            return None, pipe
+        pipe.use(modes)  # a turn's new reference direction r: data of the same packed mode
+        return pipe, ""
 
 
 def path_of(plan, pipeline: bool = False) -> tuple[str, str]:

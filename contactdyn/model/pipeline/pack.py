@@ -55,7 +55,7 @@ from ..friction import launching
 from .control_laws import kind_address
 from .drives import DW_W, drive_table, drives_unsupported
 
-__all__ = ["Packed", "pack", "unsupported", "section", "diag_starts"]
+__all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_references"]
 
 # ---- the header of ``ints``: sizes, switches, then where each section starts -------------------------------------
 (NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
@@ -328,6 +328,15 @@ def _contacts(b: _Builder, system, modes, fids: list[int]) -> list[tuple[str, st
             first, first + 1, len(c.tangent_chains), normal_row, stick_row, system.impulse_slots.get(c.name, -1),
             reals_at]
     return meta
+
+
+def set_slip_references(ints: np.ndarray, reals: np.ndarray, modes) -> None:
+    """Write each contact's 2-D slip reference r (tangent coordinates) of ``modes`` into ``reals``: a ``turn``
+    refreshes r in a packed mode (the same :func:`~contactdyn.model.contact.structure`)."""
+    for ci, m in enumerate(modes):
+        if len(m.slip) == 2:
+            at = ints[ints[I_CONTACTS] + CI_W * ci + CI_REALS] + CR_R
+            reals[at:at + 2] = m.slip
 
 
 def _tangent_row(meta: list, c, dc, m, i: int) -> int:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
+from ..contact import structure
 from .actuation import carry, reference, set_points
 from .contacts import contact_terms, finish, limit_rows
 from .drives import drive_values, inertias
@@ -56,6 +57,7 @@ from .pack import (
     W_DRIVES,
     diag_starts,
     pack,
+    set_slip_references,
     unsupported,
 )
 from .robot_terms import frame_terms, robot_terms
@@ -169,6 +171,14 @@ class Pipeline:
         self.system, self.modes, self.phase = system, list(modes), phase
         self.packed = pack(system, modes, phase)
         self.fallbacks = 0  #: calls answered by the readable model (singular KKT matrix, a law that failed)
+
+    def use(self, modes) -> None:
+        """Run with these modes from now on: the same :func:`~contactdyn.model.contact.structure`, their own 2-D
+        reference directions r (written into ``reals``)."""
+        if structure(modes) != structure(self.modes):
+            raise ValueError(f"a pipeline runs modes of its own structure only; packed for {self.modes}, given {modes}")
+        set_slip_references(self.packed.ints, self.packed.reals, modes)
+        self.modes = list(modes)
 
     def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
         """ẋ at (t [s], x)."""
