@@ -22,10 +22,9 @@ events whose functions jump through zero there. The storm guard
 (:class:`EventLog`): more than ``storm_count`` events within ``storm_window`` seconds, or
 more than ``max_events`` in the run, stop with a :class:`SimulationError` naming them.
 
-The event functions are written once (:func:`segment_events`) against a source of values:
-the compiled plan's or the one pipeline's (:class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`: their last
-calls', no second solve) or, when the mode is not compiled, :meth:`System.evaluate`'s through a small cache shared
-with the right-hand side.
+The event functions are written once (:func:`segment_events`) against a source of values: the one pipeline's
+(:class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`: its last calls', no second solve) or, when the mode is not
+compiled, :meth:`System.evaluate`'s through a small cache shared with the right-hand side.
 """
 
 from __future__ import annotations
@@ -36,7 +35,6 @@ from typing import Any
 
 import numpy as np
 
-from ..compiled.rhsplan import ModePlan
 from ..errors import SimulationError
 from ..model.contact import ContactMode
 from ..model.dynamics import Evaluation
@@ -309,7 +307,7 @@ def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray, x
 class _ReadableValues:
     """What the event functions read, from :meth:`System.evaluate` (one evaluation per state, shared).
 
-    The compiled plan offers the same methods (:class:`~contactdyn.compiled.rhsplan.ModePlan`); the
+    A compiled mode offers the same methods (:class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`); the
     event functions are written once against either.
     """
 
@@ -358,11 +356,11 @@ def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
 
 
 def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
-                   plan: ModePlan | None = None, fun=None):
+                   plan=None, fun=None):
     """The event functions of one segment, and the right-hand side that feeds their stage watches.
 
-    They read the compiled ``plan``'s values when given (its last call's, no second solve; a plan or the one
-    pipeline's mode, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`), else :meth:`System.evaluate`'s
+    They read the compiled mode ``plan``'s values when given (its last call's, no second solve: the one pipeline's
+    mode, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`), else :meth:`System.evaluate`'s
     through one shared evaluation per state. ``fun``: the right-hand side to integrate when it is not the values'
     own.
     """

@@ -5,10 +5,9 @@ modes and the task phase are fixed, and instants at which they change. The loop:
 
 1. integrate the smooth phase from (t, x) with error control (``solve_ivp``, or the compiled
    DOP853 of :mod:`contactdyn.numerics.dop853`; the method from :mod:`contactdyn.numerics.integrators`) on the
-   mode's right-hand side — the compiled plan
-   (:mod:`contactdyn.compiled.rhsplan`) where it represents the mode, else the one pipeline where it packs the
-   mode (:mod:`contactdyn.hybrid.pipeline_mode`; with ``LivePipelines.prefer`` before the plan), else
-   :meth:`System.evaluate` — with the mode's events (:mod:`contactdyn.hybrid.events`);
+   mode's right-hand side — the one pipeline where it packs the mode (:mod:`contactdyn.hybrid.pipeline_mode`: one
+   compiled call, its own compiled steps), else :meth:`System.evaluate` — with the mode's events
+   (:mod:`contactdyn.hybrid.events`);
 2. at the first event, apply the transition (:mod:`contactdyn.hybrid.transitions`): an impact,
    a separation, a stick or a slip; or, at a phase's end, start the next phase; at a
    corner of the phase's set-points (:class:`~contactdyn.laws.trajectory.Corner`: a jump of the
@@ -39,12 +38,12 @@ from typing import Any
 
 import numpy as np
 
-from ..compiled.rhsplan import ModePlan, cached_plan, structure
 from ..errors import SceneError, SimulationError, numerical_errors
 from ..laws.trajectory import min_span
 from ..model.contact import ContactMode
+from ..model.dynamics import contact_condition
 from ..model.limits import rate_limit_report
-from ..model.paths import LivePipelines, PathLog
+from ..model.paths import Declined, LivePipelines, PathLog
 from ..model.phases import Phase
 from ..model.system import System
 from ..numerics.integrators import (
@@ -114,7 +113,6 @@ class HybridRun:
         self.events = self.log.events
         self.sampled = SampledPhases(system, self.stats)  #: the samplers of sampled phases (hybrid.sampling)
         self.transitions = Transitions(system, self.log, self.stats, self.impacts, self.sampled.start)
-        self.plans: dict[tuple, ModePlan] = {}
         self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
         #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
         #: them, "" when none did (no more checks in the mode); None: not checked
@@ -129,21 +127,6 @@ class HybridRun:
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
         self.work = Work(CALLS_PER_STEP * self.budget)  #: right-hand-side calls at most, rejected steps' too
         self.progress: Progress | None = None  #: shows the simulated time of a long run (contactdyn run sets it)
-
-    def _plan(self, modes: list[ContactMode], phase: Phase, at: tuple | None = None) -> ModePlan:
-        """The compiled right-hand side of (modes, phase), built once per system and kept, set to run ``modes``.
-        ``at`` = (t, x): where the mode starts; the first time a run meets the mode, the plan checks itself there
-        against the readable model (:meth:`ModePlan.check_at`)."""
-        key = (structure(modes), phase.key())
-        plan = self.plans.get(key)
-        first = plan is None
-        if first:
-            with compiling("the fast path of this scene's contact modes"):
-                plan = self.plans[key] = cached_plan(self.system, modes, phase)
-        plan.use(modes)  # a turn's new reference direction r: data of the same plan
-        if first and at is not None:
-            plan.check_at(*at)
-        return plan
 
     def start(self) -> tuple[np.ndarray, list[ContactMode], Phase]:
         """Initial state, consistent modes and the first phase at t = 0."""
@@ -247,7 +230,7 @@ class HybridRun:
         ``t_sample`` [s]: a sampled law's next sample instant before t_end; a method that carries the hold takes it
         and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
-        plan = _runner(self, modes, phase, (t, x), start=True)  # the twin's plan or the one pipeline's mode
+        plan = _runner(self, modes, phase, (t, x), start=True)  # the one pipeline's mode, or the readable model
         fun = plan.rhs if plan.ok else system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
@@ -277,7 +260,7 @@ class HybridRun:
         if sol.status < 0 or not np.all(np.isfinite(sol.y[:, -1])):
             why = sol.message if sol.status < 0 else "the state is not finite"  # never "successfully ..."
             raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s "
-                                  f"({method}): {why}{_diagnose(self, sol, plan, fun, method)}")
+                                  f"({method}): {why}{_diagnose(self, sol, modes, phase, fun, method)}")
         self.segments.append(Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
         self.stats["segments"] += 1
         return sol, events, fun, held
@@ -370,9 +353,8 @@ class HybridRun:
         self.stats["rhs_evals"] += sum(getattr(seg.sol, "late_calls", 0) for seg in self.segments)  # DOP853C's
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
-                     compiled_modes=sum(p.ok for p in self.plans.values()) + self.pipelines.count(),
-                     fallback_modes=dict(self.fallbacks), paths=self.paths.table(), limits=rate_stats,
-                     fast_path_gaps=[gap.describe() for gap in system.fast_path_gaps])
+                     compiled_modes=self.pipelines.count(), fallback_modes=dict(self.fallbacks),
+                     paths=self.paths.table(), limits=rate_stats)
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
                 "joint_friction": system.joint_friction.describe(),
                 "contacts": [c.name for c in system.contacts],
@@ -383,25 +365,22 @@ class HybridRun:
 
 
 def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, at: tuple, start: bool = False):
-    """What runs (modes, phase) of ``run`` from at = (t [s], x): the one pipeline's mode where it runs the mode
-    (:class:`~contactdyn.model.paths.LivePipelines`; with ``prefer``, no plan is built for it), else the plan
-    (:meth:`HybridRun._plan`). ``start``: a segment starts there: the plan's first check is there, the path is recorded
-    and a declined plan's reason counted."""
+    """What runs (modes, phase) of ``run`` from at = (t [s], x): the one pipeline's mode where it packs the mode
+    (:class:`~contactdyn.model.paths.LivePipelines`), else the readable model
+    (:class:`~contactdyn.model.paths.Declined`, with the reason). ``start``: a segment starts there: the path is
+    recorded and a decline's reason counted."""
     pipes = run.pipelines
-    plan = None if pipes.prefer and pipes.wanted(modes, phase) else run._plan(modes, phase, at if start else None)
-    pipe, why = None, ""
-    if pipes.wanted(modes, phase, plan):
+    pipe, why = None, pipes.declined(modes, phase)
+    if pipes.wanted(modes, phase):
         # (a notice's watch is a thread: only while the mode's pipeline is first built, once per mode)
         with nullcontext() if pipes.built(modes, phase) else compiling("the one pipeline"):
             pipe, why = pipes.mode(modes, phase, *at)
-        if pipe is None and plan is None:  # its check disagreed: the plan
-            plan = run._plan(modes, phase, at if start else None)
+    mode = pipe or Declined(why)
     if start:
-        run.paths.record(run.system, modes, phase, plan, pipeline=pipe is not None)
-        for reason in (plan.reason if plan is not None and not plan.ok else "", why):
-            if reason:
-                run.fallbacks[reason] = run.fallbacks.get(reason, 0) + 1
-    return pipe or plan
+        run.paths.record(run.system, modes, phase, mode)
+        if why:
+            run.fallbacks[why] = run.fallbacks.get(why, 0) + 1
+    return mode
 
 
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:
@@ -423,17 +402,17 @@ def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -
             "solver.steps_per_second")
 
 
-def _diagnose(run: HybridRun, sol, plan: ModePlan, fun, method: str) -> str:
-    """Why a segment failed, as far as the state at the failure says."""
+def _diagnose(run: HybridRun, sol, modes: list[ContactMode], phase: Phase, fun, method: str) -> str:
+    """Why a segment of (modes, phase) failed, as far as the state at the failure says."""
     t, x = float(sol.t[-1]), sol.y[:, -1]
     if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
         return ""
-    if plan.ok and hasattr(plan, "kkt_condition"):  # (a plan's; not the one pipeline's mode)
-        cond = plan.kkt_condition(t, x)
-        if cond > 1e12:
-            return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
-                    f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "
-                    "arm; give the contact a compliant normal model or avoid the pose")
+    with np.errstate(all="ignore"):
+        cond = contact_condition(run.system, t, x, modes, phase)
+    if cond > 1e12:
+        return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
+                f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "
+                "arm; give the contact a compliant normal model or avoid the pose")
     lam = jacobian_eigenvalues(fun, t, x)
     if len(lam) and method in EXPLICIT:
         fast = float(np.abs(lam).max())

@@ -1,17 +1,16 @@
 """A mode on the one pipeline as the hybrid loop runs it: right-hand side, compiled steps, event values, samples.
 
 :class:`PipelineMode` wraps a mode packed for the one pipeline (:class:`~contactdyn.model.pipeline.pipeline.Pipeline`)
-in the shape of the twin's :class:`~contactdyn.compiled.rhsplan.ModePlan`, so the loop, its event functions
-(:func:`~contactdyn.hybrid.events.segment_events`) and the output (:func:`~contactdyn.output.channels.sample_states`)
-take either:
+for the loop, its event functions (:func:`~contactdyn.hybrid.events.segment_events`) and the output
+(:func:`~contactdyn.output.channels.sample_states`):
 
 - ``rhs(t, x)`` is the pipeline's call; ``rhs.step`` a whole DOP853 step in one compiled call
-  (:func:`~contactdyn.compiled.plan_steps.pipeline_attempt`) and ``rhs.derivatives`` the dense output's extra stages
+  (:func:`~contactdyn.hybrid.steps.attempt`) and ``rhs.derivatives`` the dense output's extra stages
   in one (``rates_at``);
 - the event functions read the event values of the call at that very state (a stuck contact's slip watch each
-  stage's, :meth:`watched_step`) (the last four calls' in ``ring``, as
-  the plan's ring: DOP853's FSAL call, its dense output's stages, then the events at the step end): gaps [m],
-  normal forces [N], slip velocities [m/s], stick forces [N], limit torques [N·m or N];
+  stage's, :meth:`watched_step`; the last four calls' in ``ring``: DOP853's FSAL call, its dense output's stages,
+  then the events at the step end): gaps [m], normal forces [N], slip velocities [m/s], stick forces [N], limit
+  torques [N·m or N];
 - :meth:`samples` runs the output samples in one compiled call with the call's diagnostics on (τ, the command,
   the tip, x_d, F_d, λ, the stage states: :func:`contactdyn.model.pipeline.pipeline.record`).
 
@@ -26,8 +25,6 @@ from collections import deque
 
 import numpy as np
 
-from ..compiled.plan_steps import pipeline_derivatives, pipeline_stepper
-from ..compiled.samples import Samples
 from ..model.chain_forces import pack as pack_chain
 from ..model.pipeline.drives import DW_U, DW_W
 from ..model.pipeline.pack import (
@@ -53,6 +50,8 @@ from ..model.pipeline.pack import (
     diag_starts,
 )
 from ..model.pipeline.pipeline import Pipeline, call, samples_at
+from ..output.samples import Samples
+from .steps import derivatives, stepper
 
 __all__ = ["PipelineMode"]
 
@@ -62,10 +61,8 @@ _NO_CALL = (None, None, None)  #: a ring entry before any call
 class PipelineMode:
     """One (modes, phase) on the one pipeline, with the plan's interface (see the module docstring)."""
 
-    ok = True  #: (a plan's: runs compiled)
+    ok = True  #: runs compiled (a Declined mode: False)
     reason = ""
-    kernel = None
-    python_command = False
 
     def __init__(self, pipe: Pipeline):
         self.pipe, self.system, self.modes, self.phase = pipe, pipe.system, pipe.modes, pipe.phase
@@ -84,8 +81,8 @@ class PipelineMode:
             ring.append((t, x, events.copy()))
             return xdot
 
-        rhs.step = pipeline_stepper(p, ring)
-        rhs.derivatives = pipeline_derivatives(p, rhs)
+        rhs.step = stepper(p, ring)
+        rhs.derivatives = derivatives(p, rhs)
         self.rhs = rhs
         self.nt = [len(c.tangents) if c.friction is not None else 0 for c in system.contacts]
         self._stages = self._stage_table()
@@ -93,7 +90,7 @@ class PipelineMode:
     def watched_step(self, on_stage):
         """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
         slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`)."""
-        step = pipeline_stepper(self.pipe.packed, self.ring, on_stage)
+        step = stepper(self.pipe.packed, self.ring, on_stage)
         return step
 
     @property

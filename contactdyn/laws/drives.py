@@ -209,9 +209,6 @@ class Drives:
         #: where a commanded force lands and with what gain (folding of measured forces)
         self.targets = np.where(self.motor_coords >= 0, self.motor_coords, self.coords)
         self.gains = np.array([kind.command_gain(s) for s, kind in zip(specs, kinds, strict=True)])
-        #: what the compiled plan cannot run: (drive, why) for a kind whose law is not affine (contactdyn.model.paths)
-        self.fast_path_gaps = [(i, f"drive kind {s.kind!r} is not affine below its voltage limit")
-                               for i, (s, kind) in enumerate(zip(specs, kinds, strict=True)) if not kind.affine]
         if not np.array_equal(self.coords, np.arange(len(specs))):
             raise ValueError("drives: coordinates must be the system's first ones, in order")
         self._no_u, self._no_sat = np.full(len(specs), np.nan), np.zeros(len(specs), bool)  # shared, read-only

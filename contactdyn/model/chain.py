@@ -65,15 +65,6 @@ class ChainStage:
         self.kelvin_voigt = kelvin_voigt(self.law, self.k, self.b, self.params)
 
     @property
-    def fast_path_gap(self) -> str:
-        """Why the compiled right-hand side cannot run this stage ("" when it can; see contactdyn.model.paths).
-
-        The plan reads stage forces off :func:`~contactdyn.model.chain_forces.chain_forces` by unit
-        probes, which holds for a law affine in (x, ẋ) (:mod:`contactdyn.laws.stage_laws`).
-        """
-        return "" if self._law.affine else f"stage law {self.law!r} is not affine in (x, ẋ)"
-
-    @property
     def law_class(self) -> type:
         """The stage's law (a :class:`~contactdyn.laws.stage_laws.StageLaw` subclass)."""
         return self._law

@@ -102,12 +102,33 @@ def contact_row(system, c: Contact, u: np.ndarray, kin: Kinematics) -> np.ndarra
     return row
 
 
+def mass_matrix(system) -> np.ndarray:
+    """M [kg, kg·m²] of the system's coordinates at the robot's current state: H (and the motors' reflected rotors on
+    its diagonal), then the bodies' masses (the system's own buffer, rewritten)."""
+    nv = system.nv
+    M = system._M
+    M[:nv, :nv] = system.robot.H + np.diag(system._D) if system.drives.any_motor else system.robot.H
+    return M
+
+
+def kkt_condition(system, rows: Rows) -> float:
+    """2-norm condition number of the contact system [[M, −Cᵀ], [G, 0]] at the robot's current state (1.0 without
+    rows): a rigid or sticking contact at a singular pose makes its rows linearly dependent."""
+    if not rows:
+        return 1.0
+    nQ, nr = system.nQ, len(rows)
+    A = np.zeros((nQ + nr, nQ + nr))
+    A[:nQ, :nQ] = mass_matrix(system)
+    A[:nQ, nQ:] = -np.array(rows.cols).T
+    A[nQ:, :nQ] = np.array(rows.rows)
+    return float(np.linalg.cond(A))
+
+
 def kkt_solve(system, f: np.ndarray, rows: Rows, fold: np.ndarray | None,
            fold_q: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
     """Q̈ and the row forces λ of [[M − fold_q, −Cᵀ − fold], [G, 0]] [Q̈; λ] = [f; −γ]."""
     nQ, nv = system.nQ, system.nv
-    M = system._M
-    M[:nv, :nv] = system.robot.H + np.diag(system._D) if system.drives.any_motor else system.robot.H
+    M = mass_matrix(system)
     if rows or fold_q is not None:
         nr = len(rows)
         A = np.zeros((nQ + nr, nQ + nr))

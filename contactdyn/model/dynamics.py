@@ -32,13 +32,13 @@ import numpy as np
 from ..laws.controllers import ControlInput
 from ..laws.sensors import quantise
 from .chain_forces import chain_forces
-from .constraints import Rows, kkt_solve, record_row_forces, solve_folded
+from .constraints import Rows, kkt_condition, kkt_solve, record_row_forces, solve_folded
 from .contact import Contact, ContactMode, Kinematics
 from .friction import friction_terms, launch_directions_at, launching
 from .phases import Phase, reference_at
 
-__all__ = ["Evaluation", "evaluate", "carried_command", "command_of", "drive_command", "set_force_inputs",
-           "surface_keys", "surface_points", "carried_terms", "sample_input"]
+__all__ = ["Evaluation", "evaluate", "contact_condition", "carried_command", "command_of", "drive_command",
+           "set_force_inputs", "surface_keys", "surface_points", "carried_terms", "sample_input"]
 
 
 @dataclass
@@ -72,22 +72,8 @@ def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: P
              full: bool = False) -> Evaluation:
     """The right-hand side and its diagnostics at (t, x) in ``modes`` and ``phase`` (``full``: stage detail)."""
     nQ, nv = system.nQ, system.nv
-    q, v = x[:nv], x[nQ:nQ + nv]
-    robot = system.robot
-    if any(launching(m) for m in modes):
-        modes = launch_directions_at(system, t, x, modes, phase)
-    robot.update(q, v)
-    f = np.zeros(nQ)
-    f[:nv] = -robot.h
-    ydot = np.zeros(system.ny)
-    rows = Rows()
-    ev = Evaluation(np.empty(0), np.empty(0), rows.meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),
-                    np.empty(0), None, {})
-    kins, pending = _contact_terms(system, x, modes, f, ydot, rows, ev, full)
-    system.limits.add_rows(phase.limits, x, nQ, rows, system.stabilization)  # joints pressing on a limit
+    modes, f, ydot, rows, ev, kins, pending = _forces_and_rows(system, t, x, modes, phase, full)
     jf = system.joint_friction
-    if jf.any:  # stuck joints' rows (contactdyn.model.joint_friction)
-        jf.add_rows(phase.joint_modes, phase.limits, x, nQ, rows, system.stabilization)
     inp, ft, x_d, force_d = _control_input(system, t, x, modes, phase, f, kins, ev)
     if jf.any:  # damping and sliding friction: after the controller read the contacts' torque f + h
         joint_tau = jf.torques(phase.joint_modes, x, nQ, nv)
@@ -113,6 +99,32 @@ def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: P
             joint_tau[i] += value
     _finish_friction(system, ev, pending, xdot, ydot)
     return ev
+
+
+def _forces_and_rows(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, full: bool):
+    """The robot's terms at x, then every contact's forces and rows, the limits' and the stuck joints' rows:
+    (modes (a launch's directions found), f, ydot, rows, the Evaluation begun, the kinematics, pending friction)."""
+    nQ, nv = system.nQ, system.nv
+    if any(launching(m) for m in modes):
+        modes = launch_directions_at(system, t, x, modes, phase)
+    system.robot.update(x[:nv], x[nQ:nQ + nv])
+    f = np.zeros(nQ)
+    f[:nv] = -system.robot.h
+    ydot = np.zeros(system.ny)
+    rows = Rows()
+    ev = Evaluation(np.empty(0), np.empty(0), rows.meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),
+                    np.empty(0), None, {})
+    kins, pending = _contact_terms(system, x, modes, f, ydot, rows, ev, full)
+    system.limits.add_rows(phase.limits, x, nQ, rows, system.stabilization)  # joints pressing on a limit
+    if system.joint_friction.any:  # stuck joints' rows (contactdyn.model.joint_friction)
+        system.joint_friction.add_rows(phase.joint_modes, phase.limits, x, nQ, rows, system.stabilization)
+    return modes, f, ydot, rows, ev, kins, pending
+
+
+def contact_condition(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase) -> float:
+    """2-norm condition number of the contact system at (t [s], x) (:func:`~.constraints.kkt_condition`)."""
+    rows = _forces_and_rows(system, t, x, modes, phase, False)[3]
+    return kkt_condition(system, rows)
 
 
 def _contact_terms(system, x: np.ndarray, modes: list[ContactMode], f: np.ndarray, ydot: np.ndarray, rows: Rows,

@@ -1,41 +1,19 @@
-"""Which parts of a scene the compiled right-hand side runs, declared by the parts and known at load.
+"""Which path runs each contact mode of a run, and why a mode is not compiled.
 
-One description of the model serves both paths. The readable right-hand side
-(:mod:`contactdyn.model.dynamics`) is the model; the compiled plan (:mod:`contactdyn.compiled.rhsplan`)
-reads its affine parts off the same functions by unit probes (:mod:`contactdyn.compiled.plan_probe`)
-and calls the rest — a controller's ``command`` — with the same inputs. A part therefore
-needs no second implementation to be fast, *if* the plan can represent it. Where it
-cannot, the part says so itself, with a ``fast_path_gap`` attribute ("" when compiled):
-a stage law (:class:`~contactdyn.model.chain.ChainStage`), since only the linear law is affine,
-and a drive kind that is not affine below its voltage limit (its ``affine``,
-:mod:`contactdyn.laws.drive_kinds`; the plan reads the drives' law off by probes).
-Controllers need none: the plan calls a controller's ``command`` per call, and folds a
-force-reading law into its solve (:mod:`contactdyn.compiled.plan_fold`); a slip launching
-from rest has its direction solved per call on the plan's own KKT system
-(:mod:`contactdyn.compiled.plan_rhs`);
-a joint pressing on its position limit is one more row of that system
-(:mod:`contactdyn.compiled.plan_probe`). The system adds its own gap: the energy audit.
-:func:`declared_gaps` collects them when the system is built (``System.fast_path_gaps``,
-reported in ``Result.stats["fast_path_gaps"]``); the plan of a mode declines exactly when
-one of them applies to that mode (:func:`mode_gap`). A plan that declines for any
-other reason — its probes find a non-affine part, or its self-check disagrees with the
-readable model — is an undeclared gap: its reason in ``Result.stats["fallback_modes"]``
-starts with ``"undeclared: "``, which the tests treat as a bug.
+Every mode runs on the one pipeline (:mod:`contactdyn.model.pipeline`: one compiled call per right-hand side, the
+laws by address) where :func:`~contactdyn.model.pipeline.pack.unsupported` accepts it (:class:`LivePipelines`, the
+path ``PIPELINE``), checked where the run first starts it against the readable model (:func:`disagreement`); else
+on the readable model (:meth:`~contactdyn.model.system.System.evaluate`), with the reason: a law numba cannot
+compile, a part the pipeline does not pack. A pipeline whose check disagrees is an undeclared gap: its reason in
+``Result.stats["fallback_modes"]`` starts with ``"undeclared: "``, which the tests treat as a bug.
 
-A mode the plan declines for a declared gap runs on the one pipeline (:mod:`contactdyn.model.pipeline`) where
-:func:`~contactdyn.model.pipeline.pack.unsupported` accepts it (:class:`LivePipelines`, the path ``PIPELINE``; with
-``LivePipelines.prefer`` every mode it accepts), checked where it starts against the readable model as a plan is
-(:func:`disagreement`); else on the readable model.
-
-Which path each mode of a run took (:func:`path_of`), and which law or part kept
-it off the compiled ones, is in ``Result.stats["paths"]`` (:class:`PathLog`); ``contactdyn run``
-prints each such mode once.
+Which path each mode of a run took (:func:`path_of`), and which law or part kept it off the compiled one, is in
+``Result.stats["paths"]`` (:class:`PathLog`); ``contactdyn run`` prints each such mode once.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
 
 import numpy as np
 
@@ -43,52 +21,13 @@ from .contact import structure
 from .pipeline.pack import unsupported
 from .pipeline.pipeline import Pipeline
 
-__all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "PIPELINE", "path_of", "PathLog",
-           "slower_paths", "disagreement", "LivePipelines", "CHECK_RTOL"]
+__all__ = ["UNDECLARED", "PIPELINE", "READABLE", "path_of", "PathLog", "slower_paths", "disagreement",
+           "LivePipelines", "Declined", "CHECK_RTOL"]
 
-UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
-ENERGY = "energy audit (solver.record_energy)"
-PIPELINE = "one pipeline"  #: the path of a mode the plan declines for a declared gap and the pipeline runs
+UNDECLARED = "undeclared: "  #: prefix of a pipeline's decline that no part declared (its check disagreed)
+PIPELINE = "compiled call"  #: the path of a mode on the one pipeline
+READABLE = "readable model"  #: the path of a mode on System.evaluate
 CHECK_RTOL = 1e-9  #: agreement a fast right-hand side must show with System.evaluate where a mode starts
-
-
-class Gap(NamedTuple):
-    """A part the compiled right-hand side does not run, and in which modes that matters."""
-
-    part: str  #: the part's scene key, e.g. "solver.record_energy", "contact.tip.n.env1"
-    reason: str
-    when: str  #: in words: "always", "in its phase", ...
-    applies: Callable  #: applies(modes, phase) -> bool: the plan of (modes, phase) must decline
-
-    def describe(self) -> dict[str, str]:
-        return {"part": self.part, "reason": self.reason, "when": self.when}
-
-
-def declared_gaps(system) -> list[Gap]:
-    """The parts of ``system`` that declare themselves not compiled, in the order the plan checks them."""
-    gaps = []
-    if system.energy_slot >= 0:
-        gaps.append(Gap("solver.record_energy", ENERGY, "always", lambda modes, phase: True))
-    for ci, c in enumerate(system.contacts):
-        for dc in c.chains:
-            for k, stage in enumerate(dc.chain.stages):
-                if stage.fast_path_gap:
-                    gaps.append(Gap(f"contact.{c.name}.{dc.label}.{stage.label}", stage.fast_path_gap,
-                                    "while the stage carries force",
-                                    lambda modes, phase, ci=ci, dc=dc, k=k: k in dc.plan(modes[ci].touching).active))
-    for i, reason in system.drives.fast_path_gaps:  # a drive kind that is not affine (the plan probes the drives)
-        name = system.drives.names[i]
-        part = f"robot.drive ({name})" if i < system.nv else f"body.{name}.drive"
-        gaps.append(Gap(part, reason, "always", lambda modes, phase: True))
-    return gaps
-
-
-def mode_gap(system, modes, phase) -> str:
-    """Why the plan of (modes, phase) must decline: the first declared gap that applies ("" if none)."""
-    for gap in system.fast_path_gaps:
-        if gap.applies(modes, phase):
-            return gap.reason
-    return ""
 
 
 def disagreement(system, modes, phase, rhs: Callable, t: float, x: np.ndarray) -> str:
@@ -110,36 +49,32 @@ def disagreement(system, modes, phase, rhs: Callable, t: float, x: np.ndarray) -
 
 
 class LivePipelines:
-    """The one pipeline (:class:`~contactdyn.model.pipeline.pipeline.Pipeline`) for the modes of a run whose plan
-    declines for a declared gap (a stage law that is not affine, ...) and that the pipeline packs — with ``prefer``,
-    for every mode it packs, before the plan is built: one per modes and phase, checked against System.evaluate
-    where the run first starts it (:func:`disagreement`), kept wrapped by ``wrap`` (the loop's: its event values,
-    compiled steps and output samples, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`)."""
+    """The one pipeline (:class:`~contactdyn.model.pipeline.pipeline.Pipeline`) for the modes of a run that
+    :func:`~contactdyn.model.pipeline.pack.unsupported` accepts: one per modes' structure and phase (every turn of a
+    2-D slide reuses it: the reference direction is data), checked against System.evaluate where the run first
+    starts it (:func:`disagreement`), kept wrapped by ``wrap`` (the loop's: its event values, compiled steps and
+    output samples, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`)."""
 
-    use = True  #: False only for the benchmarks' and tests' before/after comparison: those modes on System.evaluate
-    #: True: every mode ``pack.unsupported`` accepts runs on the pipeline, even where the plan runs it (the tests' and
-    #: benchmarks' switch, benchmarks/pipeline_loop.py); False: the plan first (the default until the pipeline
-    #: covers every mode kind)
-    prefer = True
+    use = True  #: False only for the benchmarks' and tests' before/after comparison: every mode on System.evaluate
 
     def __init__(self, system, wrap: Callable = lambda pipe: pipe) -> None:
         self.system, self.wrap = system, wrap
-        #: (structure(modes), phase.key()) -> its pipeline (wrapped), or why not (undeclared); every turn of a 2-D
-        #: slide reuses its pipeline (the reference direction is data)
+        #: (structure(modes), phase.key()) -> its pipeline (wrapped), or why not (undeclared)
         self.pipes: dict[tuple, object] = {}
         self.declines: dict[tuple, str] = {}  #: the same keys -> pack.unsupported's reason ("": it packs them)
 
-    def wanted(self, modes, phase, plan=None) -> bool:
-        """Does the pipeline run (modes, phase)? ``plan``: the mode's plan (None: not built; only ``prefer`` runs
-        such a mode on the pipeline)."""
+    def declined(self, modes, phase) -> str:
+        """Why the pipeline does not run (modes, phase) ("" when it does; ``use`` off: "")."""
         if not self.use:
-            return False
-        if not self.prefer and (plan is None or plan.ok or plan.reason.startswith(UNDECLARED)):
-            return False
+            return ""
         key = (structure(modes), phase.key())
         if key not in self.declines:
             self.declines[key] = unsupported(self.system, modes, phase)
-        return not self.declines[key]
+        return self.declines[key]
+
+    def wanted(self, modes, phase) -> bool:
+        """Does the pipeline run (modes, phase)?"""
+        return self.use and not self.declined(modes, phase)
 
     def count(self) -> int:
         """How many modes run on the pipeline (packed, and their check agreed)."""
@@ -164,24 +99,23 @@ class LivePipelines:
         return pipe, ""
 
 
-def path_of(plan, pipeline: bool = False) -> tuple[str, str]:
-    """(path, the law or part that kept it off the compiled ones: "" when none) of a mode's plan. The paths, fastest
-    first: "compiled call" (one numba call per right-hand side: the robot's terms, the law, the solve), "compiled
-    kernel" (Pinocchio's terms, then one numba call), "compiled plan" (the map P φ and a NumPy solve per call),
-    "compiled plan, law in Python" (the controller's command called per call), PIPELINE (``pipeline``: a mode the
-    plan declines runs on the one pipeline's call, :class:`LivePipelines`), "readable model" (System.evaluate).
-    Which compiled path runs a mode is the plan's choice by its parts' shapes (no drives and an affine tip law: the
-    plan's map; motors or a task-space law that is not affine: a kernel), not a law's doing."""
-    if pipeline:  # (plan None: preferred, not built)
-        return PIPELINE, plan.reason if plan is not None and not plan.ok else ""
-    if not plan.ok:
-        return "readable model", plan.reason
-    if plan.kernel is not None:
-        return ("compiled call" if getattr(plan.kernel, "at", None) is not None else "compiled kernel"), ""
-    if plan.python_command:
-        kind = plan.phase.controller.config.kind
-        return "compiled plan, law in Python", f"controller {kind!r} has no compiled command"
-    return "compiled plan", ""
+class Declined:
+    """A mode on the readable model (System.evaluate), and why: the loop's stand-in for a compiled mode."""
+
+    ok = False  #: (a compiled mode's True)
+    singular = 0
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+
+    def use(self, modes) -> None:
+        """(A compiled mode's: run these modes.) The readable model takes the modes per call."""
+
+
+def path_of(mode) -> tuple[str, str]:
+    """(path, the law or part that kept it off the compiled call: "" when none) of a mode's runner: ``PIPELINE``
+    (one compiled call per right-hand side) or ``READABLE`` (System.evaluate)."""
+    return (PIPELINE, "") if mode.ok else (READABLE, mode.reason)
 
 
 def _mode_label(system, modes, phase) -> str:
@@ -203,11 +137,11 @@ class PathLog:
     def __init__(self) -> None:
         self.rows: dict[str, dict] = {}
 
-    def record(self, system, modes, phase, plan, pipeline: bool = False) -> None:
+    def record(self, system, modes, phase, mode) -> None:
         label = _mode_label(system, modes, phase)
         row = self.rows.get(label)
         if row is None:
-            path, why = path_of(plan, pipeline)
+            path, why = path_of(mode)
             row = self.rows[label] = {"path": path, "why": why, "segments": 0}
         row["segments"] += 1
 

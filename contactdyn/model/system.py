@@ -42,8 +42,8 @@ y holds first-order states, in this order:
    a stuck robot's state may not move at all; their error control keeps the step size
    following the contact forces the ``slip`` event watches (:mod:`contactdyn.hybrid.events`).
 
-Which parts the compiled right-hand side (:mod:`contactdyn.compiled.rhsplan`) covers is declared
-by the parts themselves and collected here at load time: :attr:`System.fast_path_gaps`.
+The compiled right-hand side of a mode is the one pipeline (:mod:`contactdyn.model.pipeline`) over this system's
+tables; :mod:`contactdyn.model.paths` says which path each mode takes.
 """
 
 from __future__ import annotations
@@ -65,7 +65,6 @@ from .friction import initial_slip, slip_acceleration, slip_velocity
 from .impact import Impact, impact, project_velocity
 from .joint_friction import JointFriction
 from .limits import JointLimits
-from .paths import declared_gaps
 from .phases import Phase, reference_at, start_phase
 
 __all__ = ["System", "Phase", "Evaluation", "Impact", "assign_chain_slots", "assign_first_order_slots"]
@@ -122,8 +121,6 @@ class System:
         self.force_directions = {c.name: c.normal.u for c in self.contacts}
         self.force_directions.update({f"{c.name}.t{i + 1}": t for c in self.contacts for i, t in enumerate(c.tangents)})
         self.slip_band = scene.solver.stick_velocity  #: [m/s] stick/slip guard band (see contactdyn.model.friction)
-        #: the parts the compiled right-hand side does not run, as they declare it (contactdyn.model.paths)
-        self.fast_path_gaps = declared_gaps(self)
 
     def _contact_of(self, spec) -> Contact:
         try:

@@ -31,7 +31,7 @@ reading the next step off its first stage time). Stiffness detection is off, as 
 ``solve_ivp``. Verified against ``solve_ivp``'s DOP853 in ``tests/test_dop853.py``.
 
 Compiled steps. A right-hand side whose whole step can be one compiled call brings it (``step``, from
-:mod:`contactdyn.compiled.plan_steps`: the stages, y_new, the FSAL call and the error norm): then :func:`_stepped`
+:mod:`contactdyn.hybrid.steps`: the stages, y_new, the FSAL call and the error norm): then :func:`_stepped`
 takes the steps, with ``solve_ivp``'s RK step control written out (its loop, not the core's), the stages
 kept in the core's layout for the same dense output and events; a step the compiled call declines is taken
 by ``fun`` (:func:`_attempt`, ``solve_ivp``'s arithmetic). Verified in ``tests/test_plan_steps.py``.
@@ -105,7 +105,7 @@ class _Steps:
         """Interpolant coefficients of the given steps (DOP853's stages 14–16, in one batch).
 
         ``derivatives(ts, Y) -> F``: the right-hand side at all the steps' stage states at once, in place
-        of one call per state (output sampling; :func:`~contactdyn.compiled.samples.plan_derivatives` gives the
+        of one call per state (output sampling; :func:`~contactdyn.hybrid.steps.derivatives` gives the
         calls' values bitwise)."""
         steps = [int(i) for i in steps if int(i) not in self.coef]
         if not steps:
@@ -441,7 +441,7 @@ def core_steps(core: _Core, t_end: float, h: float) -> tuple[int, int]:
 def _stepped(step: Callable, fun: Callable, steps: _Steps, watch: _EventWatch, t_end: float, h_abs: float,
              rtol: float, atol: float, max_step: float, calls: int) -> tuple[int, int, int]:
     """solve_ivp's DOP853 steps (its RK step control; h_abs, max_step [s]) by ``step`` (a compiled attempt,
-    :mod:`contactdyn.compiled.plan_steps`; None where it cannot: then :func:`_attempt` by ``fun``): (the core's ierr,
+    :mod:`contactdyn.hybrid.steps`; None where it cannot: then :func:`_attempt` by ``fun``): (the core's ierr,
     rejections, calls)."""
     nreject = 0
     while steps.t[-1] < t_end:

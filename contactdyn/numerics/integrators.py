@@ -224,7 +224,7 @@ def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, 
             raise ValueError(f"{method} does not carry a hold: its segments end at the sample instants")
         return held_steps.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
                                 first_step=first_step, step=getattr(fun, "step", None), hold=hold)
-    if method in COMPILED:  # a plan's right-hand side may bring its compiled step (contactdyn.compiled.plan_steps)
+    if method in COMPILED:  # a compiled mode's right-hand side brings its compiled step (contactdyn.hybrid.steps)
         return dop853.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
                             first_step=first_step, step=getattr(fun, "step", None))
     if method == "LSODA" and jac is None and lsoda.available():  # solve_ivp's steps without its per-step Python

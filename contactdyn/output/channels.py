@@ -5,7 +5,7 @@ smooth phase with its dense output. The output grid has ``solver.output_rate`` [
 samples over the duration; at an event time the sample belongs to the segment after the
 event (at the run's end too: an event there leaves a zero-length segment holding its modes).
 A compiled segment gives its samples' diagnostics all at once
-(:meth:`~contactdyn.compiled.rhsplan.ModePlan.samples`); another evaluates each sample fully.
+(:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.samples`); another evaluates each sample fully.
 Channel names and units are documented in the README (``q`` [rad or m], ``contact.<c>.F_n``
 [N], ``stage.<label>.x`` [m]…).
 """
@@ -19,8 +19,6 @@ from typing import Any
 
 import numpy as np
 
-from ..compiled.rhsplan import ModePlan
-from ..compiled.samples import Samples, evaluated_samples, plan_derivatives
 from ..laws.controllers.sampled import SampledController
 from ..laws.drives import drive_channels
 from ..model.contact import ContactMode
@@ -30,20 +28,22 @@ from ..model.phases import Phase
 from ..model.system import System
 from ..numerics.dop853 import DenseSolution
 from ..numerics.held_steps import PiecewiseDense
+from .samples import Samples, evaluated_samples
 
 __all__ = ["Segment", "Held", "output_grid", "sample_segments", "sample_states", "channels"]
 
 
 @dataclass
 class Segment:
-    """One smooth phase of a run: [t0, t1] [s], its modes and task phase, dense output, compiled plan."""
+    """One smooth phase of a run: [t0, t1] [s], its modes and task phase, dense output, and what ran it (a compiled
+    mode, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`, or :class:`~contactdyn.model.paths.Declined`)."""
 
     t0: float
     t1: float
     modes: list[ContactMode]
     phase: Phase
     sol: Any
-    plan: ModePlan
+    plan: Any
 
 
 class Held:
@@ -78,7 +78,7 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
     parts: list[Samples] = []
     modes_of: list[list[ContactMode]] = []
     phases_of: list[Phase] = []
-    counted: list[ModePlan] = []
+    counted: list = []
     for run in _same_mode_runs(segments, np.unique(idx)):  # segments split at corners: one batch
         seg = segments[run[0]]
         sel = np.flatnonzero(np.isin(idx, run))
@@ -86,7 +86,7 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
         derivatives = None
         if seg.plan.ok:  # the interpolants' extra stages all at once
             seg.plan.use(seg.modes)
-            derivatives = plan_derivatives(seg.plan)
+            derivatives = getattr(seg.plan.rhs, "derivatives", None)
         for i in run:
             at = sel[idx[sel] == i]
             sol = segments[i].sol

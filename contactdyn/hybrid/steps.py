@@ -1,0 +1,133 @@
+"""A mode's DOP853 step attempt in one compiled call: the 12 stages through the one pipeline's call
+(:func:`contactdyn.model.pipeline.pipeline.call`), as ``solve_ivp``'s DOP853 takes a step (``rk_step``: the stages,
+y_new, the FSAL call at t + h, and ``_estimate_error_norm``), returning the stages the dense output needs in the
+scipy core's layout; :func:`contactdyn.numerics.dop853.solve` keeps ``solve_ivp``'s step control around it.
+
+With the scipy core each stage crosses from the core into Python and from Python into the compiled call (~2 µs of a
+~6 µs call); here a whole step is one crossing. A stage whose call declines (a singular KKT matrix, a law that gave
+no force) ends the attempt: the driver takes that step by the mode's Python right-hand side instead.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.integrate._ivp import dop853_coefficients as _coef
+
+from ..model.pipeline.pack import NX
+from ..model.pipeline.pipeline import call as pipeline_call
+from ..model.pipeline.pipeline import rates_at
+from ..numerics.compile_cache import njit
+
+__all__ = ["attempt", "stepper", "derivatives"]
+OK, DECLINED = 0, 1  #: :func:`attempt`'s status
+_A, _B, _C = np.ascontiguousarray(_coef.A[:12, :12]), _coef.B.copy(), _coef.C[:12].copy()
+_E = np.ascontiguousarray(np.vstack((_coef.E5, _coef.E3)))  #: the error estimators' weights on K's 13 rows
+
+
+@njit(cache=True, inline="always")
+def _stage_state(K, y, h, A, s, ys):
+    """ys = y + h Σ_{j<s} A[s, j] K[j]: stage s's state (DOP853's tableau, in rk_step's order)."""
+    for i in range(y.size):
+        acc = 0.0
+        for j in range(s):
+            acc += K[j, i] * A[s, j]
+        ys[i] = y[i] + acc * h
+
+
+@njit(cache=True, inline="always")
+def _step_end(K, y, h, B, y_new):
+    """y_new = y + h Σ_j B[j] K[j]."""
+    for i in range(y.size):
+        acc = 0.0
+        for j in range(12):
+            acc += K[j, i] * B[j]
+        y_new[i] = y[i] + h * acc
+
+
+@njit(cache=True, inline="always")
+def _error_norm(K, y, y_new, h, rtol, atol, E, block):
+    """The step's error norm (solve_ivp's DOP853 ``_estimate_error_norm``); the dense output's stages into
+    ``block`` (the scipy core's layout)."""
+    n = y.size
+    e5 = e3 = 0.0
+    for i in range(n):
+        scale = atol + max(abs(y[i]), abs(y_new[i])) * rtol
+        a5 = a3 = 0.0
+        for j in range(13):
+            a5 += K[j, i] * E[0, j]
+            a3 += K[j, i] * E[1, j]
+        e5 += (a5 / scale) ** 2
+        e3 += (a3 / scale) ** 2
+    block[0], block[1], block[2], block[4] = K[12], K[10], K[11], y_new
+    block[5:10] = K[5:10]
+    if e5 == 0.0 and e3 == 0.0:
+        return 0.0
+    return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * n)
+
+
+@njit(cache=True)
+def attempt(ints, reals, work, events, t, y, f, h, rtol, atol, A, B, C, E, y_new, block, Ys, Es):
+    """(status, error norm) of one DOP853 step of h [s] from (t, y) with f = f(t, y) over the packed mode's call;
+    y_new and, in the scipy core's layout (:mod:`contactdyn.numerics.dop853`: f_new, stages 11, 12, –, y_new,
+    stages 6–10), ``block`` written; ``events`` hold the FSAL call's event values, Ys[s] and Es[s] stage s's
+    state and event values (s = 1 … 12, the FSAL call's last). DECLINED where a call's status is not 1 (a singular
+    KKT matrix, a law that gave no force: the step by the Python right-hand side)."""
+    n = y.size
+    K = np.empty((13, n))
+    K[0] = f
+    ys = np.empty(n)
+    for s in range(1, 13):
+        if s < 12:
+            _stage_state(K, y, h, A, s, ys)
+        else:
+            _step_end(K, y, h, B, y_new)
+            ys = y_new
+        K[s] = pipeline_call(t + C[s] * h if s < 12 else t + h, ys, ints, reals, work, events)
+        if events[events.size - 1] != 1.0:
+            return DECLINED, 0.0
+        Ys[s] = ys
+        Es[s] = events
+    return OK, _error_norm(K, y, y_new, h, rtol, atol, E, block)
+
+
+def stepper(packed, ring, on_stage=None):
+    """step(t, y, f, h, rtol, atol) -> (error norm, y_new, block), or None where a call of the step declines (then
+    the caller takes the step by the pipeline's Python right-hand side), over a mode packed for the one pipeline
+    (:class:`~contactdyn.model.pipeline.pack.Packed`); each step's FSAL call's event values enter ``ring`` as
+    (t, y_new, events) (the event functions read them). ``on_stage(t, y)``: called after an attempt per stage
+    (t [s], its state) with that stage's event values the ring's latest (a stuck contact's slip watch sees every
+    stage, as it sees every call of the Python right-hand side)."""
+    ints, reals, work, events = packed.ints, packed.reals, packed.work, packed.events
+    Ys, Es = np.empty((13, packed.ints[NX])), np.empty((13, events.size))
+
+    def step(t, y, f, h, rtol, atol):
+        y_new, block = np.empty(y.size), np.empty((10, y.size))  # (block's row 3 is not read)
+        status, err = attempt(ints, reals, work, events, t, y, f, h, rtol, atol, _A, _B, _C, _E, y_new,
+                                       block, Ys, Es)
+        if status:
+            return None
+        if on_stage is not None:
+            for s in range(1, 12):
+                ys = Ys[s]
+                ring.append((t + _C[s] * h, ys, Es[s].copy()))
+                on_stage(t + _C[s] * h, ys)
+        ring.append((t + h, y_new, events.copy()))
+        if on_stage is not None:
+            on_stage(t + h, y_new)
+        return err, y_new, block
+
+    step.usable = lambda: True
+    return step
+
+
+def derivatives(packed, fun):
+    """f(ts, Y) -> Ẋ (N, n): the pipeline's right-hand side at many states in one compiled call (the dense output's
+    extra stages), bitwise its call; from a state whose call declines on, ``fun`` (its Python right-hand side)."""
+    def batch(ts: np.ndarray, Y: np.ndarray) -> np.ndarray:
+        ts, Y = np.ascontiguousarray(ts, dtype=float), np.ascontiguousarray(Y, dtype=float)
+        Yd, done = rates_at(ts, Y, packed.ints, packed.reals, packed.work, packed.events)
+        for k in range(done, len(ts)):
+            Yd[k] = fun(float(ts[k]), Y[k])
+        return Yd
+
+    return batch

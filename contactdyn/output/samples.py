@@ -1,0 +1,89 @@
+"""A run's diagnostics at its output samples, as arrays: :class:`Samples` (what the Result's channels are made of).
+
+The integrator needs only derivatives; a Result needs, at every output sample, the forces, torques, gaps, slip
+velocities and stage deformations. A mode on the one pipeline computes them for all samples of a segment in one
+compiled batch (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.samples`); a mode on the readable model fills
+them per sample from :class:`~contactdyn.model.dynamics.Evaluation` objects (:func:`evaluated_samples`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["Samples", "evaluated_samples"]
+
+
+class Samples:
+    """Per-sample diagnostics of one segment, as arrays (what Result channels are made of)."""
+
+    def __init__(self, n: int, system):
+        nv, nb = system.nv, len(system.body_names)
+        self.tau = np.zeros((n, nv))  #: the drives' applied joint torques [N·m or N]
+        self.tau_cmd = np.zeros((n, nv))  #: the controller's command [N·m or N; V for voltage controllers]
+        self.u = np.full((n, len(system.drives.specs)), np.nan)  #: voltage per drive [V], NaN for ideal drives
+        self.limit_torque = np.zeros((n, nv))  #: per joint [N·m or N], 0 unless pressing on a limit
+        self.joint_friction = np.zeros((n, nv))  #: per joint: damping and dry friction [N·m or N]
+        self.tip = np.zeros((n, 3))
+        self.x_d = np.full((n, 3), np.nan)
+        self.has_x_d = False
+        self.body_force = np.zeros((n, nb))
+        self.F_n = {c.name: np.zeros(n) for c in system.contacts}
+        self.gap = {c.name: np.zeros(n) for c in system.contacts}
+        self.F_d = {key: np.full(n, np.nan) for key in system.force_directions}  #: per set-point key
+        self.has_F_d = {key: False for key in system.force_directions}
+        self.F_f = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}
+        self.v_slip = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}
+        self.iface = {f"{c.name}.{dc.label}": np.zeros(n) for c in system.contacts for dc in c.tangent_chains}
+        self.stages = {label: np.zeros((n, 3)) for label in system.stage_labels}
+
+    @classmethod
+    def concatenate(cls, parts: list[Samples], system) -> Samples:
+        if len(parts) == 1:
+            return parts[0]
+        out = cls(0, system)
+        for name in ("tau", "tau_cmd", "u", "limit_torque", "joint_friction", "tip", "x_d", "body_force"):
+            setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
+        out.has_x_d = any(p.has_x_d for p in parts)
+        out.has_F_d = {key: any(p.has_F_d[key] for p in parts) for key in out.has_F_d}
+        for name in ("F_n", "gap", "F_d", "F_f", "v_slip", "iface", "stages"):
+            d = getattr(out, name)
+            for key in d:
+                d[key] = np.concatenate([getattr(p, name)[key] for p in parts])
+        return out
+
+    def fill(self, k: int, ev) -> None:
+        """Row k from a full :class:`~contactdyn.model.dynamics.Evaluation`."""
+        self.tau[k] = ev.tau
+        self.tau_cmd[k] = ev.tau_cmd
+        self.u[k] = ev.u
+        for i, value in ev.limit_torque.items():
+            self.limit_torque[k, i] = value
+        if ev.joint_friction is not None:
+            self.joint_friction[k] = ev.joint_friction
+        self.tip[k] = ev.p_tip
+        if ev.x_d is not None and len(ev.x_d) == 3:
+            self.x_d[k] = ev.x_d
+            self.has_x_d = True
+        self.body_force[k] = ev.body_force
+        for key, value in ev.force_d.items():
+            self.F_d[key][k] = value
+            self.has_F_d[key] = True
+        for name in self.F_n:
+            self.F_n[name][k] = ev.normal_force[name]
+            self.gap[name][k] = ev.gap[name]
+            if name in ev.friction:
+                self.F_f[name][k] = ev.friction[name]
+            if name in ev.slip:
+                self.v_slip[name][k] = ev.slip[name]
+        for key in self.iface:
+            self.iface[key][k] = ev.interface.get(key, 0.0)
+        for label in self.stages:
+            self.stages[label][k] = ev.stages.get(label, (0.0, 0.0, 0.0))
+
+
+def evaluated_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> Samples:
+    """Samples at the states X[k] (times ts[k]), each sample by :meth:`System.evaluate`."""
+    S = Samples(len(ts), system)
+    for k, (t, x) in enumerate(zip(ts, X, strict=True)):
+        S.fill(k, system.evaluate(t, x, modes, phase, full=True))
+    return S
