@@ -1,19 +1,17 @@
-"""Issue 29's prototype pipeline (contactdyn/model/pipeline/) against the probed twin and the readable model, per call.
+"""The one pipeline (contactdyn/model/pipeline/) against the readable model, per call; its cold compile.
 
     PYTHONPATH=. python3 benchmarks/pipeline_proto.py [CASE ...] [--calls 2000] [--repeats 7] [--compile]
         [--out FILE.json]
 
-Per in-scope mode (:func:`cases`: the sims, benchmarks/hard and examples scenes the prototype runs, in their first
-mode and in modes set by hand: touching, sticking, a joint on its limit, a later phase), the median time of one
-right-hand-side call [µs] of the pipeline (``Pipeline.rhs``), the twin's compiled call
-(``cached_plan(system, modes, phase).rhs``; "-" where the plan declines) and ``System.evaluate``; timed
-interleaved (every variant once per repeat, each a batch of ``--calls`` calls over 16 states near the mode's
-start), in one process, after an untimed warm-up. Also per call inside one compiled loop (no Python between
-calls: the pipeline's ``rates_at``, the twin's ``rhs.derivatives`` where its call is one compiled kernel, as a
-compiled DOP853 step calls it), and the largest relative difference of ẋ against
-``System.evaluate`` over the states. ``--compile``: the compile time of the pipeline's and of the twin's first
-call from a cold cache, each in a child process with a fresh NUMBA_CACHE_DIR (import and ``prepare`` first, then
-the first call), and the pipeline's again warm (the same directory, a new process), on b1 and impedance_press.
+Per mode (:func:`cases`: the sims, benchmarks/hard and examples scenes, in their first mode and in modes set by
+hand: touching, sticking, a joint on its limit, a later phase), the median time of one right-hand-side call [µs] of
+the pipeline (``Pipeline.rhs``) and of ``System.evaluate``, timed interleaved (every variant once per repeat, each a
+batch of ``--calls`` calls over 16 states near the mode's start), in one process, after an untimed warm-up. Also
+per call inside one compiled loop (no Python between calls: the pipeline's ``rates_at``, as a compiled DOP853 step
+calls it), and the largest relative difference of ẋ against ``System.evaluate`` over the states. ``--compile``: the
+compile time of the pipeline's first call from a cold cache, in a child process with a fresh NUMBA_CACHE_DIR
+(import and ``prepare`` first, then the first call), and again warm (the same directory, a new process), on b1 and
+impedance_press.
 """
 
 from __future__ import annotations
@@ -338,36 +336,27 @@ def _many(rates, ts: np.ndarray, X: np.ndarray):
 
 
 def measure(name: str, calls: int, repeats: int) -> dict:
-    """One case's row: per-call medians [µs] of the pipeline, the twin and evaluate; the agreement."""
-    from contactdyn.compiled.rhsplan import cached_plan
+    """One case's row: per-call medians [µs] of the pipeline and evaluate; the agreement."""
     from contactdyn.model.pipeline.pipeline import Pipeline, rates_at
 
     system, modes, phase, t, x0 = case(name)
     xs = states(x0, 16)
     pipe = Pipeline(system, modes, phase)
-    plan = cached_plan(system, modes, phase)
     variants = {"pipeline": _batch(pipe.rhs, t, xs, calls)}
-    if plan.ok:
-        variants["twin"] = _batch(plan.rhs, t, xs, calls)
     variants["evaluate"] = _batch(lambda t_, x: system.evaluate(t_, x, modes, phase), t, xs, max(calls // 10, 1))
-    # inside compiled code (no Python per call): the pipeline's rates_at, the twin's batch where its call has one
+    # inside compiled code (no Python per call): the pipeline's rates_at
     ts, X = np.full(calls, t), np.array([xs[k % len(xs)] for k in range(calls)])
     pk = pipe.packed
     variants["pipeline_compiled"] = _many(lambda ts_, X_: rates_at(ts_, X_, pk.ints, pk.reals, pk.work, pk.events),
                                           ts, X)
-    if plan.ok and getattr(plan.rhs, "derivatives", None) is not None:
-        variants["twin_compiled"] = _many(plan.rhs.derivatives, ts, X)
     for run in variants.values():
         run()  # untimed
     times = interleaved(variants, repeats)
     worst, bitwise = agreement(pipe, system, modes, phase, t, xs)
-    per = {"pipeline": calls, "twin": calls, "evaluate": max(calls // 10, 1), "pipeline_compiled": calls,
-           "twin_compiled": calls}
+    per = {"pipeline": calls, "evaluate": max(calls // 10, 1), "pipeline_compiled": calls}
     us = {k: v.cpu / per[k] * 1e6 for k, v in times.items()}
-    return {"case": name, "pipeline_us": us["pipeline"], "twin_us": us.get("twin"), "evaluate_us": us["evaluate"],
-            "pipeline_over_twin": us["pipeline"] / us["twin"] if "twin" in us else None,
-            "pipeline_compiled_us": us["pipeline_compiled"], "twin_compiled_us": us.get("twin_compiled"),
-            "twin": "compiled" if plan.ok else f"declines: {plan.reason}", "max_rel_diff": worst,
+    return {"case": name, "pipeline_us": us["pipeline"], "evaluate_us": us["evaluate"],
+            "pipeline_compiled_us": us["pipeline_compiled"], "max_rel_diff": worst,
             "bitwise_states": f"{bitwise}/{len(xs)}", "fallbacks": pipe.fallbacks}
 
 
@@ -378,31 +367,25 @@ import sys; sys.path.insert(0, {bench!r})
 from pipeline_proto import case
 system, modes, phase, t, x0 = case({name!r})
 w1, c1 = time.perf_counter(), time.process_time()
-if {twin!r}:
-    from contactdyn.compiled.rhsplan import cached_plan
-    cached_plan(system, modes, phase).rhs(t, x0)
-else:
-    from contactdyn.model.pipeline.pipeline import Pipeline
-    Pipeline(system, modes, phase).rhs(t, x0)
+from contactdyn.model.pipeline.pipeline import Pipeline
+Pipeline(system, modes, phase).rhs(t, x0)
 w2, c2 = time.perf_counter(), time.process_time()
 print(w1 - w0, c1 - c0, w2 - w1, c2 - c1)
 """
 
 
 def compile_times(name: str = "b1") -> dict:
-    """[s] wall and CPU of import + prepare, then of the first call (the pipeline's: pack + call; the twin's:
-    cached_plan, its probes and self-check + rhs), each in a child with a fresh NUMBA_CACHE_DIR (cold), then the
-    pipeline's again in a second child on its directory (warm)."""
+    """[s] wall and CPU of import + prepare, then of the first call (pack + call), in a child with a fresh
+    NUMBA_CACHE_DIR (cold), then again in a second child on its directory (warm)."""
     out = {}
-    for who in ("pipeline", "twin"):
-        with tempfile.TemporaryDirectory() as cache:
-            env = {**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": str(ROOT)}
-            for label in ("cold", "warm") if who == "pipeline" else ("cold",):
-                code = _CHILD.format(bench=str(ROOT / "benchmarks"), name=name, twin=who == "twin")
-                got = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
-                                     check=True).stdout.split()[-4:]
-                out[f"{who}_{label}"] = {"prepare_wall_s": float(got[0]), "prepare_cpu_s": float(got[1]),
-                                         "first_call_wall_s": float(got[2]), "first_call_cpu_s": float(got[3])}
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": str(ROOT)}
+        for label in ("cold", "warm"):
+            code = _CHILD.format(bench=str(ROOT / "benchmarks"), name=name)
+            got = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                                 check=True).stdout.split()[-4:]
+            out[f"pipeline_{label}"] = {"prepare_wall_s": float(got[0]), "prepare_cpu_s": float(got[1]),
+                                        "first_call_wall_s": float(got[2]), "first_call_cpu_s": float(got[3])}
     return out
 
 
@@ -419,10 +402,9 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         rows.append(measure(name, args.calls, args.repeats))
         r = rows[-1]
-        print(f"{name:22s} pipeline {r['pipeline_us']:6.2f} us  twin {r['twin_us'] or float('nan'):6.2f} us  "
-              f"evaluate {r['evaluate_us']:6.1f} us  compiled loop: pipeline {r['pipeline_compiled_us']:5.2f} us  "
-              f"twin {r['twin_compiled_us'] or float('nan'):5.2f} us  rel diff {r['max_rel_diff']:.1e}  "
-              f"bitwise {r['bitwise_states']}  ({r['twin'][:50]}; {time.perf_counter() - t0:.0f} s)", flush=True)
+        print(f"{name:22s} pipeline {r['pipeline_us']:6.2f} us  evaluate {r['evaluate_us']:6.1f} us  "
+              f"compiled loop {r['pipeline_compiled_us']:5.2f} us  rel diff {r['max_rel_diff']:.1e}  "
+              f"bitwise {r['bitwise_states']}  ({time.perf_counter() - t0:.0f} s)", flush=True)
     head = {"benchmark": "pipeline_proto", "calls": args.calls, "repeats": args.repeats}
     if args.compile:
         head["compile"] = {name: compile_times(name) for name in ("b1", "impedance_press")}

@@ -11,9 +11,10 @@ PKG = Path(__file__).resolve().parent.parent / "contactdyn"
 #: the model and the loop, one concept per module (docs/architecture.md's module map)
 CORE = [f"model/{m}" for m in ("chain", "contact", "phases", "chain_forces", "friction", "constraints",
                                "impact", "dynamics", "system", "paths", "limits")] + \
-    [f"compiled/{m}" for m in ("plan_probe", "plan_kkt", "plan_rhs", "rhsplan")] + \
-    [f"hybrid/{m}" for m in ("events", "transitions", "loop")] + \
-    ["compiled/samples", "output/channels", "output/physics_checks", "simulate", "numerics/integrators",
+    [f"model/pipeline/{m}" for m in ("pack", "pipeline", "robot_terms", "contacts", "kkt", "actuation",
+                                     "force_fold", "control_laws", "drives", "launch", "energy", "joint_friction")] + \
+    [f"hybrid/{m}" for m in ("events", "transitions", "loop", "pipeline_mode", "steps")] + \
+    ["output/samples", "output/channels", "output/physics_checks", "simulate", "numerics/integrators",
      "numerics/dop853", "laws/stage_laws", "laws/friction_laws"]
 MAX_CLASS, MAX_FUNCTION = 300, 80  #: [lines]
 
@@ -132,8 +133,7 @@ LAYERS = [
     ["", "errors", "scene.reader", "scene.keyfields", "numerics"],  # shared below all ("": the package's lazy names)
     ["laws"],  # stage laws, friction laws, drives, controllers, references: no model
     ["robot", "scene"],  # Pinocchio's robot; a scene file read and checked (it reads the laws' declarations)
-    ["model"],  # the physics: no compiled machinery
-    ["compiled"],  # the model made fast
+    ["model"],  # the physics (the one pipeline's call compiled by numba: no second description)
     ["output"],  # channels, samples, Result, checks
     ["hybrid"],  # the loop: nothing below imports it
     ["simulate", "starter", "analysis"],

@@ -12,6 +12,7 @@ from contactdyn.laws import Controller, Param
 from contactdyn.laws.controllers import abi
 from contactdyn.laws.controllers.abi import LAYOUT, NOT_IN_LAYOUT, ControlArrays, buffer_of, layout_of, params_of
 from contactdyn.laws.controllers.base import ControlInput, DeclaredConfig
+from contactdyn.model.paths import PIPELINE, READABLE
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -130,7 +131,7 @@ def test_a_force_reading_law_with_states_by_address_equals_its_command():
 
 def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedance, monkeypatch):
     """examples/impedance_press.toml: the mode on the compiled call (the law by address), its run the one of the
-    law's Python command (the address forced to 0) to 1e-9."""
+    law's Python command on the readable model (the address forced to 0: the pipeline declines the law) to 1e-9."""
     import warnings
 
     from contactdyn import load_scene, simulate
@@ -141,12 +142,12 @@ def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedan
             return simulate(load_scene(EXAMPLES / "impedance_press.toml"))
 
     new = run()
-    assert [row["path"] for row in new.stats["paths"].values()] == ["compiled call"]
+    assert [row["path"] for row in new.stats["paths"].values()] == [PIPELINE]
     monkeypatch.setattr(abi, "controller_address", lambda cls: 0)
-    from contactdyn.compiled import plan_operational
-    monkeypatch.setattr(plan_operational, "controller_address", lambda cls: 0)
+    from contactdyn.model.pipeline import pack
+    monkeypatch.setattr(pack, "controller_address", lambda cls: 0)
     old = run()
-    assert [row["path"] for row in old.stats["paths"].values()] == ["compiled plan, law in Python"]
+    assert [row["path"] for row in old.stats["paths"].values()] == [READABLE]
     for channel in ("q", "contact.tip.F_n"):
         scale = np.abs(old[channel]).max()
         assert np.abs(new[channel] - old[channel]).max() <= 1e-9 * scale, channel

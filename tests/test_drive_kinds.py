@@ -17,6 +17,7 @@ from contactdyn import parse_scene, simulate
 from contactdyn.errors import SceneError
 from contactdyn.laws import DRIVE_KINDS, DriveKind, Param, register_drive_kind
 from contactdyn.laws.drives import DriveSpec
+from contactdyn.model.paths import PIPELINE
 from contactdyn.model.system import System
 from contactdyn.scene.keys import markdown, reference
 from contactdyn.scene.keytour import tour
@@ -44,7 +45,6 @@ class LimitedMotor(DriveKind):
               Param("M_max", "N·m", "largest motor torque the amplifier gives", math.inf, lo=0.0, lo_open=True,
                     example=1.0))
     motorized = True
-    affine = False  # the torque limit: the compiled plan declines it (the one pipeline runs it, by its address)
 
     @staticmethod
     def n_speed(spec):
@@ -139,7 +139,7 @@ def test_the_key_reference_and_the_tour_document_the_users_kind(scene_dir):
 
 def test_below_its_limit_it_runs_as_its_dc_motor_twin(scene_dir):
     """M_max = inf: the command acts as it is, which a DC motor with N* = N and no voltage limit delivers too. Both on
-    the readable model (the energy audit) where the kind runs anyway: it is not affine."""
+    the readable model (the energy audit with motors is not on the compiled call)."""
     mine = run(writer(scene_dir, {"kind": "limited_motor", "J": J, "N": N}, record_energy=True))
     twin = run(writer(scene_dir, {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": J, "N": N}, record_energy=True))
     assert [e["kind"] for e in mine.events] == ["touch", "phase"]
@@ -149,18 +149,15 @@ def test_below_its_limit_it_runs_as_its_dc_motor_twin(scene_dir):
     assert mine.meta["check_warnings"] == []  # the energy audit balances with the kind's power
 
 
-def test_at_its_limit_the_torque_clips_off_the_compiled_plan_as_declared(scene_dir):
-    """Declared off the plan (not affine), the kind runs on the one pipeline by its compiled force (checked against
-    the readable model where the mode starts)."""
+def test_at_its_limit_the_torque_clips_on_the_compiled_call(scene_dir):
+    """The kind runs on the compiled call by its compiled force (checked against the readable model where the mode
+    starts)."""
     m_max = 0.05  # [N·m]: 8 N·m on the joint, below what the approach asks
     r = run(writer(scene_dir, {"kind": "limited_motor", "J": J, "N": N, "M_max": m_max}, duration=0.5))
     tau = np.abs(r["tau"])
     assert tau.max() == pytest.approx(N * m_max, rel=1e-12) and np.mean(tau >= N * m_max * (1 - 1e-12)) > 0.05
     assert np.abs(r["tau_cmd"]).max() > 2.0 * N * m_max  # the controller asked for more
-    why = "drive kind 'limited_motor' is not affine below its voltage limit"
-    assert r.stats["fast_path_gaps"] == [{"part": f"robot.drive ({q})", "reason": why, "when": "always"}
-                                         for q in ("q1", "q2")]
-    assert {row["path"] for row in r.stats["paths"].values()} == {"one pipeline"}
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE} and r.stats["fallback_modes"] == {}
 
 
 def test_a_kind_is_checked_when_it_registers():

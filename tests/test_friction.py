@@ -433,10 +433,10 @@ def test_bad_friction_inputs_name_the_key():
 
 
 def test_2d_coulomb_on_a_moving_body_compiled_equals_the_readable_model():
-    """A compliant (chain) contact on a cart with 2-D friction: the plan's Coulomb force, its tip share
-    and its reaction on the cart's row (plan_rhs._friction_terms' map G), equals System.evaluate's at
-    slips in several directions, and the cart takes the reaction μ_k F_n d_x in closed form."""
-    from contactdyn.compiled.rhsplan import cached_plan
+    """A compliant (chain) contact on a cart with 2-D friction: the compiled call's Coulomb force, its tip share
+    and its reaction on the cart's row equal System.evaluate's at slips in several directions, and the cart takes
+    the reaction μ_k F_n d_x in closed form."""
+    from contactdyn.model.pipeline.pipeline import Pipeline
 
     doc = scene(dims=2)
     doc["body"] = {"cart": {"mass": 5.0, "axis": [1.0, 0.0, 0.0]}}
@@ -446,8 +446,7 @@ def test_2d_coulomb_on_a_moving_body_compiled_equals_the_readable_model():
     x0, _ = system.initial_state()
     phase = system.start_phase(0, 0.0, x0, None)
     modes = [ContactMode(touching=True, slip=(1.0, 0.0))]
-    plan = cached_plan(system, modes, phase)
-    assert plan.ok, plan.reason
+    plan = Pipeline(system, modes, phase)
     assert system.nQ > system.nv  # the cart's coordinate: G's body columns are in play
     nQ, nv = system.nQ, system.nv
     got = {}

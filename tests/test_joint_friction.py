@@ -169,13 +169,14 @@ def test_bad_joint_friction_names_the_key_and_the_file(tmp_path, joint, expected
     assert info.value.key == key and expected in info.value.expected and str(path) in str(info.value)
 
 
-def test_the_compiled_plan_is_the_readable_model_in_every_joint_mode(tmp_path):
-    """Damping on both joints, the shoulder stuck (a row) and the elbow sliding (−s τ_k): the compiled plan's
+def test_the_compiled_call_is_the_readable_model_in_every_joint_mode(tmp_path):
+    """Damping on both joints, the shoulder stuck (a row) and the elbow sliding (−s τ_k): the compiled call's
     right-hand side, its event values and its output samples equal System.evaluate's."""
     from dataclasses import replace
 
-    from contactdyn.compiled.rhsplan import ModePlan
-    from contactdyn.compiled.samples import evaluated_samples
+    from contactdyn.hybrid.pipeline_mode import PipelineMode
+    from contactdyn.model.pipeline.pipeline import Pipeline
+    from contactdyn.output.samples import evaluated_samples
 
     doc = scene(arm(tmp_path, 2, damping=0.05), [0.4, 1.2], 1.0, {"kind": "joint_pd", "kp": [0.0], "kd": [0.0]},
                 joint={"j1": {"damping": 0.1, "friction_static": 50.0, "friction_kinetic": 30.0},
@@ -185,8 +186,7 @@ def test_the_compiled_plan_is_the_readable_model_in_every_joint_mode(tmp_path):
     rng = np.random.default_rng(3)
     for joint_modes in (((0, 0), (1, 1)), ((0, -1), (1, 0)), ((0, 1), (1, -1))):
         phase = replace(system.start_phase(0, 0.0, x, None), joint_modes=joint_modes)
-        plan = ModePlan(system, modes, phase)
-        assert plan.ok, plan.reason
+        plan = PipelineMode(Pipeline(system, modes, phase))
         X = x + 0.1 * rng.normal(size=(5, system.n))
         ts = np.linspace(0.1, 0.5, 5)
         for t, state in zip(ts, X, strict=True):
@@ -201,7 +201,7 @@ def test_the_compiled_plan_is_the_readable_model_in_every_joint_mode(tmp_path):
             kinetic = 30.0 if i == 0 else 0.5
             np.testing.assert_allclose(slow.joint_friction[:, i], -(0.1 if i == 0 else 0.05) * X[:, system.nQ + i]
                                        - m * kinetic, rtol=1e-12)
-        assert set(plan.joint_rows) == set(stuck)
+        assert set(plan.pipe.packed.held) == set(stuck)
 
 
 def test_a_storm_of_one_joints_events_is_said_to_be_that_joints_not_a_contacts():

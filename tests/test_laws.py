@@ -17,6 +17,7 @@ from contactdyn import parse_scene, simulate
 from contactdyn.cli import main
 from contactdyn.errors import SceneError
 from contactdyn.laws.friction_laws import FRICTION_LAWS, FrictionSpec
+from contactdyn.model.paths import PIPELINE
 from contactdyn.scene.keys import markdown, reference
 from contactdyn.scene.scene_file import sims_dir
 
@@ -59,7 +60,7 @@ def test_the_cubic_law_reads_its_declared_parameter_and_presses_where_its_spring
     assert x[-1] == pytest.approx(x_rest, rel=1e-4)
     assert x_rest < 40.0 / k  # harder than its linear part
     (row,) = r.stats["paths"].values()
-    assert (row["path"], row["why"]) == ("one pipeline", "stage law 'cubic' is not affine in (x, ẋ)")
+    assert (row["path"], row["why"]) == (PIPELINE, "")  # the law by address, as a built-in one
 
 
 def test_the_cubic_law_with_k3_zero_is_the_linear_law():
@@ -71,7 +72,7 @@ def test_the_cubic_law_with_k3_zero_is_the_linear_law():
     for channel in ("q", "contact.tip.F_n"):
         scale = np.abs(builtin[channel]).max()
         assert np.abs(mine[channel] - builtin[channel]).max() <= 1e-8 * scale, channel
-    assert [row["path"] for row in builtin.stats["paths"].values()] == ["compiled plan"]
+    assert [row["path"] for row in builtin.stats["paths"].values()] == [PIPELINE]
 
 
 def test_a_declared_parameter_is_checked_against_its_declaration():
@@ -121,8 +122,8 @@ def test_stribeck_slides_with_its_coefficient_at_the_slip_speed():
     np.testing.assert_allclose(np.abs(F_f[sliding]), (mu * F_n)[sliding], rtol=1e-9, atol=1e-9)
     assert np.ptp(mu[sliding]) > 0.01  # the coefficient did vary along the run
     assert not r.meta["check_warnings"]  # the physics checks use the same law
-    assert {row["path"] for row in r.stats["paths"].values()} == {"compiled plan"}  # μ(|v_t|) per call
-    assert not r.stats["fallback_modes"]  # and each plan agreed with the readable model where its mode started
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}  # μ(|v_t|) by address
+    assert not r.stats["fallback_modes"]  # and each mode's call agreed with the readable model where its mode started
     assert "slide: tip stuck" in r.stats["paths"]  # it stuck on the way, and slipped again
 
 
@@ -145,23 +146,22 @@ def test_friction_laws_share_one_interface():
 
 
 def test_a_friction_law_changed_on_the_readable_path_only_is_caught(monkeypatch):
-    """The plan holds μ_k in its matrices; a μ(v) changed in the readable model alone must not pass silently:
-    the plan's self-check where the mode starts disagrees and says so (an undeclared fallback)."""
-    import contactdyn.compiled.rhsplan as rhsplan
+    """The compiled call takes μ from the law by address; a μ(v) changed in the readable model alone must not pass
+    silently: the call's self-check where the mode starts disagrees and says so (an undeclared fallback)."""
     import contactdyn.model.friction as friction
 
-    monkeypatch.setattr(rhsplan, "_PLANS", type(rhsplan._PLANS)())  # no plan cached from another test
     monkeypatch.setattr(friction, "kinetic_coefficient", lambda fr, vt: 1.1 * fr.mu_k)
     r = run(B1, sims_dir() / "b1.toml")
     assert any(reason.startswith("undeclared: disagrees") for reason in r.stats["fallback_modes"])
 
 
 # ---- the paths ---------------------------------------------------------------------------------------------------
-def test_the_run_prints_the_modes_a_law_kept_off_the_compiled_paths(capsys):
-    assert main(["run", str(CUBIC)]) == 0
-    assert "path of press: tip touching: one pipeline (stage law 'cubic' is not affine in (x, ẋ))" in \
-        capsys.readouterr().out
-    assert main(["run", "b1"]) == 0
+def test_the_run_prints_the_modes_a_part_kept_off_the_compiled_call(capsys):
+    """The energy audit with motors is not on the compiled call: each such mode is printed once, with why."""
+    assert main(["run", "case2_writer_motors", "--set", "duration=0.2", "--set", "solver.record_energy=true"]) == 0
+    out = capsys.readouterr().out
+    assert "path of approach: tip free: readable model (the energy audit with motors" in out
+    assert main(["run", str(CUBIC)]) == 0  # a user's law: compiled, nothing to say
     assert "path of" not in capsys.readouterr().out
 
 

@@ -1,6 +1,6 @@
-"""The one pipeline runs the modes the compiled plan declines for a declared gap (contactdyn.model.paths.LivePipelines).
+"""The one pipeline runs every mode it packs (contactdyn.model.paths.LivePipelines): a user's laws by address.
 
-Each run is compared with the same run with the path switched off (``LivePipelines.use = False``: those modes on
+Each run is compared with the same run with the path switched off (``LivePipelines.use = False``: every mode on
 System.evaluate): outputs within 1e-9 relative, the same events at the same times, the paths table naming it.
 """
 
@@ -15,16 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_fast_path import axis_scene  # noqa: E402
-
-from contactdyn import parse_scene, simulate  # noqa: E402
-from contactdyn.model.paths import PIPELINE, UNDECLARED, LivePipelines  # noqa: E402
-from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+from contactdyn import parse_scene, simulate
+from contactdyn.model.paths import PIPELINE, READABLE, UNDECLARED, LivePipelines
+from contactdyn.model.pipeline.pipeline import Pipeline
 
 CUBIC = Path(__file__).resolve().parent.parent / "examples" / "cubic_press.toml"
-CUBIC_GAP = "stage law 'cubic' is not affine in (x, ẋ)"
-HC_GAP = "stage law 'hunt_crossley' is not affine in (x, ẋ)"
 #: a Hunt–Crossley stage soft enough in damping that the falling axis bounces off (a separation on the pipeline)
 HUNT_CROSSLEY = {"model": "chain", "environment": [{"k": 1e7, "b": 1e5, "law": "hunt_crossley", "exponent": 1.5}]}
 
@@ -34,6 +29,17 @@ def registry(fresh_user_imports):
     """The cubic example imports the user's module; each test leaves the registries as they were (conftest)."""
     yield
     sys.modules.pop("cubic_stage", None)
+
+
+def axis_scene(normal: dict, duration: float):
+    """The cylindrical robot's vertical axis (1 DOF) falling at 0.5 m/s onto a surface 1 mm below its tip."""
+    return parse_scene({
+        "duration": duration, "solver": {"rtol": 1e-10, "atol": 1e-13},
+        "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.999],
+                  "v0": [0.5]},
+        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], **normal}}},
+        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0},
+    })
 
 
 def cubic_scene():
@@ -64,9 +70,9 @@ def assert_same_run(live, readable, channels, event_atol: float = 1e-12) -> None
 def test_the_cubic_stage_runs_on_the_pipeline_as_on_the_readable_model(monkeypatch):
     live, readable = both_ways(cubic_scene(), monkeypatch)
     assert {label: (row["path"], row["why"]) for label, row in live.stats["paths"].items()} == \
-        {"press: tip touching": (PIPELINE, CUBIC_GAP)}
-    assert [row["path"] for row in readable.stats["paths"].values()] == ["readable model"]
-    assert set(live.stats["fallback_modes"]) == {CUBIC_GAP}  # the plan declined it: a declared gap
+        {"press: tip touching": (PIPELINE, "")}
+    assert [row["path"] for row in readable.stats["paths"].values()] == [READABLE]
+    assert live.stats["fallback_modes"] == {}
     assert_same_run(live, readable, ("q", "v", "tau", "contact.tip.F_n", "stage.tip.n.env1.x"))
     assert live.stats["rhs_evals"] > 100
 
@@ -74,10 +80,10 @@ def test_the_cubic_stage_runs_on_the_pipeline_as_on_the_readable_model(monkeypat
 def test_a_hunt_crossley_bounce_runs_on_the_pipeline_and_separates_at_the_same_time(monkeypatch):
     live, readable = both_ways(axis_scene(HUNT_CROSSLEY, duration=0.1), monkeypatch)
     assert [e["kind"] for e in live.events] == ["touch", "separate"]  # the separation: on the pipeline's mode
-    assert live.stats["paths"]["main: tip touching"] == {"path": PIPELINE, "why": HC_GAP, "segments": 1}
-    assert live.stats["paths"]["main: tip free"]["path"] == "compiled plan"  # the flight: the plan runs it
+    assert live.stats["paths"]["main: tip touching"] == {"path": PIPELINE, "why": "", "segments": 1}
+    assert live.stats["paths"]["main: tip free"]["path"] == PIPELINE
     # Hunt–Crossley's force is 0 from x = 0 on: ``separate`` fires at the first step end there, and the pipeline
-    # takes compiled steps (plan_steps' control) where the readable model takes scipy's core: other step ends
+    # takes compiled steps (hybrid.steps) where the readable model takes scipy's core: other step ends
     # (5.8e-8 s apart here; with scipy's core on the pipeline too, the runs are bitwise the same)
     assert_same_run(live, readable, ("q", "v", "contact.tip.F_n"), event_atol=1e-6)
 
@@ -87,9 +93,9 @@ def test_a_pipeline_that_disagrees_where_the_mode_starts_leaves_it_to_the_readab
     wrong = Pipeline.rhs
     monkeypatch.setattr(Pipeline, "rhs", lambda self, t, x: wrong(self, t, x) * (1.0 + 1e-6))
     r = simulate(axis_scene(HUNT_CROSSLEY, duration=0.05))
-    assert r.stats["paths"]["main: tip touching"]["path"] == "readable model"
-    undeclared = [k for k in r.stats["fallback_modes"] if k.startswith(UNDECLARED)]
-    assert len(undeclared) == 1 and "disagrees with System.evaluate" in undeclared[0]
+    assert {row["path"] for row in r.stats["paths"].values()} == {READABLE}  # every mode: each its own check
+    assert len(r.stats["fallback_modes"]) == 3  # free, touching, apart (its chain relaxing; labelled "free" too)
+    assert all(k.startswith(UNDECLARED + "disagrees with System.evaluate") for k in r.stats["fallback_modes"])
     # the readable model's run: the pipeline's (to the rounding of its compiled steps, which scipy's core does not take)
     np.testing.assert_allclose(r["q"], honest["q"], rtol=0, atol=1e-9 * np.abs(honest["q"]).max())
     assert honest.stats["paths"]["main: tip touching"]["path"] == PIPELINE
@@ -107,12 +113,12 @@ def test_a_stuck_contact_runs_on_the_pipeline_its_slip_watch_reading_the_pipelin
         live, readable = both_ways(parse_scene(doc, file=str(CUBIC)), monkeypatch)
     paths = {label: row["path"] for label, row in live.stats["paths"].items()}
     assert paths["press: tip stuck"] == PIPELINE, paths
-    assert {row["path"] for row in readable.stats["paths"].values()} == {"readable model"}
+    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
     assert_same_run(live, readable, ("q", "v", "tau", "contact.tip.F_n", "contact.tip.F_f"))
 
 
 def test_an_energy_audit_runs_on_the_pipeline_and_balances(monkeypatch):
-    """B1 with the audit (a declared gap of the plan), joint and viscous friction, for 50 ms: every mode on the
+    """B1 with the audit, joint and viscous friction, for 50 ms: every mode on the
     pipeline, the audit's work and dissipation as on the readable model, the energy residual as small."""
     path = Path(__file__).resolve().parent.parent / "sims" / "b1.toml"
     doc = tomllib.loads(path.read_text())

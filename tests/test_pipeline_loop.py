@@ -1,6 +1,6 @@
 """The one pipeline as a complete path of the hybrid loop (contactdyn/hybrid/pipeline_mode.py): its output samples equal
-the readable model's at the same states, a run with ``LivePipelines.prefer`` (every mode the pipeline packs on it)
-equals the run on the twin's plans, and a pipeline segment evaluates the readable model nowhere but in its start
+the readable model's at the same states, a run on it equals the run on the readable model (``LivePipelines.use`` off),
+and a pipeline segment evaluates the readable model nowhere but in its start
 check."""
 
 from __future__ import annotations
@@ -18,23 +18,23 @@ BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
 sys.path.insert(0, str(BENCH))
 from pipeline_proto import CASES, case, states  # noqa: E402
 
-from contactdyn.compiled.samples import evaluated_samples  # noqa: E402
 from contactdyn.hybrid import loop  # noqa: E402
 from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
-from contactdyn.model.paths import PIPELINE, LivePipelines  # noqa: E402
+from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
+from contactdyn.output.samples import evaluated_samples  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
 
 ROOT = BENCH.parent
-#: the samples' arrays of compiled.samples.Samples, per name (dicts by key)
+#: the samples' arrays of output.samples.Samples, per name (dicts by key)
 FIELDS = ("tau", "tau_cmd", "limit_torque", "tip", "x_d", "body_force", "F_n", "gap", "F_d", "F_f", "v_slip", "iface",
           "stages")
 #: the output samples' agreement with System.evaluate at the same states, relative to each array's largest
 #: magnitude: the call's own (≤ 1e-12, tests/test_pipeline_proto.py); measured ≤ 4.8e-15 over the 24 cases (UR5)
 SAMPLES_RTOL = 1e-12
-RUN_RTOL = 1e-9  #: a run on the pipeline against the run on the plans: each channel, relative to its largest value
+RUN_RTOL = 1e-9  #: a run on the pipeline against the readable model's: each channel, relative to its largest value
 EVENT_ATOL = 1e-9  #: [s] their events' times (measured ≤ 4e-11 s on these scenes)
 
 
@@ -73,8 +73,8 @@ def test_the_output_samples_are_the_readable_ones(name):
     assert pm.singular == 0
 
 
-def _run(scene: str, duration: float, prefer: bool, monkeypatch):
-    monkeypatch.setattr(LivePipelines, "prefer", prefer)
+def _run(scene: str, duration: float, compiled: bool, monkeypatch):
+    monkeypatch.setattr(LivePipelines, "use", compiled)
     return run_system(System(load_scene(ROOT / scene, {"duration": duration})))
 
 
@@ -84,10 +84,10 @@ SCENES = [("sims/b1.toml", 0.3), ("sims/case2_writer_rigid.toml", 1.5), ("benchm
 
 
 @pytest.mark.parametrize("scene,duration", SCENES)
-def test_a_run_on_the_pipeline_is_the_run_on_the_plans(scene, duration, monkeypatch):
+def test_a_run_on_the_pipeline_is_the_run_on_the_readable_model(scene, duration, monkeypatch):
     on, off = _run(scene, duration, True, monkeypatch), _run(scene, duration, False, monkeypatch)
     assert {row["path"] for row in on.stats["paths"].values()} == {PIPELINE}
-    assert PIPELINE not in {row["path"] for row in off.stats["paths"].values()}
+    assert {row["path"] for row in off.stats["paths"].values()} == {READABLE}
     assert set(on.channels) == set(off.channels)
     for key, ref in off.channels.items():
         ref, got = np.asarray(ref, float), np.asarray(on.channels[key], float)
