@@ -11,6 +11,7 @@ import warnings
 import numpy as np
 
 from contactdyn import parse_scene, simulate
+from contactdyn.model.paths import PIPELINE
 from contactdyn.scene.scene_file import sims_dir
 
 SCENE = sims_dir() / "force_loop_real_cell.toml"
@@ -53,4 +54,4 @@ def test_the_sampled_loop_cycles_with_a_steady_amplitude_bounded_by_the_voltage_
     clipped = np.mean(np.abs(r["u"][last, 0]) >= u_max - 1e-9)
     assert 0.1 < clipped < 0.6  # the shoulder's voltage clips in every cycle, not always
     assert not np.any(r["joint_stuck"][last] > 0.5)  # the joints slide through the cycle
-    assert {p["path"] for p in r.stats["paths"].values()} == {"compiled call"}
+    assert {p["path"] for p in r.stats["paths"].values()} == {PIPELINE}

@@ -85,30 +85,18 @@ def test_what_rigid_terms_does_not_compute_is_left_to_pinocchio():
     assert rigid_table(pin.Model()) is None  # no joint at all
 
 
-def test_a_robot_without_a_table_runs_the_same_call_on_pinocchios_terms(monkeypatch):
-    """With the table withheld (as for a free-flyer), the plans' compiled call takes Pinocchio's terms (loaded into
-    its buffer before the call) and no compiled step: the 5-DOF writer's press and launch are the same run to
-    the tolerance (force and joints within 10× the scene's rtol and atol: a different rounding)."""
-    from contactdyn.compiled import plan_phi
+def test_a_robot_without_a_table_runs_on_the_readable_model_on_pinocchios_terms(monkeypatch):
+    """With the table withheld (as for a free-flyer), the compiled call declines the robot (it computes its terms
+    from the table) and the readable model runs it on Pinocchio's terms: the 5-DOF writer's press and launch are
+    the same run to the tolerance (force and joints within 10× the scene's rtol and atol: a different rounding)."""
+    from contactdyn.model.paths import READABLE
     from contactdyn.simulate import simulate
 
     ours = simulate("case2_writer5dof", {"duration": 0.8})
     monkeypatch.setattr(Robot, "rigid_table", property(lambda robot: None))
-    loads = []
-    load_of = plan_phi.phi_function
-
-    def counting(plan):
-        phi = load_of(plan)
-        assert phi.load is not None
-        load = phi.load
-        phi.load = lambda x: loads.append(1) or load(x)
-        return phi
-
-    monkeypatch.setattr(plan_phi, "phi_function", counting)
-    import contactdyn.compiled.plan_rhs as plan_rhs
-    monkeypatch.setattr(plan_rhs, "phi_function", counting)
     theirs = simulate("case2_writer5dof", {"duration": 0.8})
-    assert loads  # the compiled call ran on Pinocchio's terms
+    assert {row["path"] for row in theirs.stats["paths"].values()} == {READABLE}
+    assert all("rigid" in why or "table" in why for why in theirs.stats["fallback_modes"]), theirs.stats
     # two roundings of one model at the scene's rtol 1e-7, atol 1e-9: the runs agree to ~the tolerances
     rtol, atol = ours.stats["rtol"], ours.stats["atol"]
     F = ours["contact.pencil.F_n"]

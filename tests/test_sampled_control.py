@@ -21,6 +21,7 @@ from contactdyn.hybrid.loop import HybridRun
 from contactdyn.laws.controllers import CONTROLLERS, Controller, register
 from contactdyn.laws.controllers.sampled import SampledController
 from contactdyn.laws.sensors import ForceSensor, SensorSpec
+from contactdyn.model.paths import PIPELINE
 from contactdyn.model.system import System
 from contactdyn.numerics.held_steps import PiecewiseDense
 
@@ -97,6 +98,13 @@ def run_of(doc: dict) -> tuple[HybridRun, object]:
     return run, run.run(0.0)
 
 
+def compiled_mode(run: HybridRun):
+    """(the run's one compiled mode, the indices of its state's held command)."""
+    (mode,) = run.pipelines.pipes.values()
+    ctl, z0 = mode.phase.controller, 2 * run.system.nQ + mode.phase.z_slice.start
+    return mode, np.arange(z0 + ctl.held.start, z0 + ctl.held.stop)
+
+
 def starts(run: HybridRun) -> list[tuple[float, object]]:
     """(t [s], segment) of each segment's start and each sample instant a segment's steps carried inside
     (numerics.held_steps: a piece of steps starts there)."""
@@ -167,7 +175,7 @@ def test_held_voltages_run_through_the_motors_on_the_compiled_call():
         doc["robot"]["drive"] = drive
     sampled, continuous = (simulate(parse_scene(doc)) for doc in docs)
     assert sampled.stats["fallback_modes"] == {}
-    assert {row["path"] for row in sampled.stats["paths"].values()} == {"compiled call"}
+    assert {row["path"] for row in sampled.stats["paths"].values()} == {PIPELINE}
     np.testing.assert_array_equal(sampled["tau_cmd"], np.tile([1.0, -0.5], (len(sampled.t), 1)))  # [V]
     np.testing.assert_allclose(sampled["q"], continuous["q"], rtol=0, atol=1e-7)  # a constant law: the same run
 
@@ -226,31 +234,30 @@ def test_a_sampled_run_converges_to_the_continuous_one_at_first_order():
     assert 3.0 <= e1 / e2 <= 5.0  # ∝ 1/rate: a ZOH's error is half a period's lag
 
 
-def test_a_sampled_mode_runs_on_the_compiled_plan_and_agrees_with_the_readable_model():
+def test_a_sampled_mode_runs_on_the_compiled_call_and_agrees_with_the_readable_model():
     run, r = run_of(b1(sample_rate=RATE))
     assert r.stats["fallback_modes"] == {}
-    assert {row["path"] for row in r.stats["paths"].values()} == {"compiled plan"}
-    plan = next(iter(run.plans.values()))
-    assert plan.ok and not plan.python_command and plan.held is not None
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
+    plan, held_slots = compiled_mode(run)
     t0, seg = starts(run)[7]
     x = np.asarray(seg.sol(t0)).copy()
-    for held in (x[plan.held], np.array([30.0, -12.0])):
-        x[plan.held] = held
+    for held in (x[held_slots], np.array([30.0, -12.0])):
+        x[held_slots] = held
         ref = run.system.evaluate(t0 + 3e-4, x, seg.modes, seg.phase).xdot
         np.testing.assert_allclose(plan.rhs(t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
 
 
 def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
-    """The held command is the task law's feedforward term (x's held slots) of the motors' compiled kernel."""
+    """The held command (x's held slots) through the motors, on the compiled call."""
     doc = b1(sample_rate=RATE)
     doc["robot"]["drive"] = {"kind": "dc_motor", "C_M": 0.05, "C_E": 0.05, "R": 1.0, "J": 1e-5, "N": 20.0}
     run, r = run_of(doc)
     assert r.stats["fallback_modes"] == {}  # (each plan checked itself against the readable model)
-    assert {row["path"] for row in r.stats["paths"].values()} == {"compiled call"}
-    plan = next(iter(run.plans.values()))
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
+    plan, held_slots = compiled_mode(run)
     t0, seg = starts(run)[7]
     x = np.asarray(seg.sol(t0)).copy()
-    x[plan.held] = [3.0, -1.0]
+    x[held_slots] = [3.0, -1.0]
     ref = run.system.evaluate(t0 + 3e-4, x, seg.modes, seg.phase).xdot
     np.testing.assert_allclose(plan.rhs(t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
     k = np.floor(r.t * RATE + 1e-9).astype(int)

@@ -22,13 +22,14 @@ its contact's row, a user controller's in the controller section, a drive kind's
 compiled call serves every law. The index constants below are the one place the layout is written; the call
 (:mod:`.pipeline`) reads nothing else.
 
-What this prototype does not pack (:func:`unsupported` names it, and the mode stays on the readable model):
-a drive kind numba cannot compile, the energy audit with motors, a sampled law that outputs voltages, a controller
-that outputs voltages (but constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
+What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
+a drive kind numba cannot compile, the energy audit with motors, a continuous controller that outputs voltages (but
+constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
 law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
 joint it takes is a one-DOF revolute or prismatic). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
-operational space, the dynamic laws, joint PD, task force), a sampled law's held command, constant voltages and
+operational space, the dynamic laws, joint PD, task force), a sampled law's held command (torques or voltages),
+constant voltages and
 user laws of the controller ABI run; a force-reading law and a reference carried by a body are folded through the
 drives (:mod:`.force_fold`).
 """
@@ -150,10 +151,7 @@ def unsupported(system, modes, phase) -> str:
         return "the energy audit with motors (the motors' power is not in the pipeline's audit yet)"
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
-    if isinstance(ctl, SampledController):
-        if ctl.outputs != "torque":
-            return "a sampled law that outputs voltages"
-    elif reason := _controller_unsupported(system, ctl, phase):
+    if not isinstance(ctl, SampledController) and (reason := _controller_unsupported(system, ctl, phase)):
         return reason
     if sum(launching(m) for m in modes) > 1:
         return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"

@@ -1,4 +1,4 @@
-"""A 2-D slide's ``turn`` events reuse its compiled plan: the reference direction r is data of the call."""
+"""A 2-D slide's ``turn`` events reuse its compiled mode: the reference direction r is data of the call."""
 
 from __future__ import annotations
 
@@ -9,10 +9,9 @@ import numpy as np
 import pytest
 
 from contactdyn import parse_scene
-from contactdyn.compiled import rhsplan
-from contactdyn.compiled.rhsplan import cached_plan, structure
-from contactdyn.hybrid import loop as hybrid
-from contactdyn.model.contact import ContactMode
+from contactdyn.model import paths
+from contactdyn.model.contact import ContactMode, structure
+from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.model.system import System
 from contactdyn.simulate import run_system
 
@@ -36,15 +35,14 @@ def circle(normal: dict | None = None) -> dict:
                            "phase": [math.pi / 2, 0.0, 0.0]}}
 
 
-def test_every_turn_of_the_circle_runs_on_one_plan_and_gives_what_a_plan_per_direction_gave(monkeypatch):
+def test_every_turn_of_the_circle_runs_on_one_compiled_mode_and_gives_what_one_per_direction_gave(monkeypatch):
     doc = circle()
     reused = run_system(System(parse_scene(copy.deepcopy(doc))))
     turns = [e for e in reused.events if e["kind"] == "turn"]
     assert len(turns) >= 8 and len(turns) == len(reused.events)
     assert reused.stats["compiled_modes"] == 1  # one sliding mode, every direction
     assert reused.stats["fallback_modes"] == {}
-    for module in (rhsplan, hybrid):  # the former key: a plan per reference direction
-        monkeypatch.setattr(module, "structure", tuple)
+    monkeypatch.setattr(paths, "structure", tuple)  # a mode packed per reference direction
     per_direction = run_system(System(parse_scene(copy.deepcopy(doc))))
     assert per_direction.stats["compiled_modes"] == len(turns) + 1
     assert [e["t"] for e in per_direction.events] == pytest.approx([e["t"] for e in turns], rel=1e-12)
@@ -54,16 +52,16 @@ def test_every_turn_of_the_circle_runs_on_one_plan_and_gives_what_a_plan_per_dir
 
 
 @pytest.mark.parametrize("normal", [None, COMPLIANT], ids=["rigid", "compliant"])
-def test_a_plan_reused_after_a_turn_equals_the_readable_model_at_the_new_direction(normal):
+def test_a_mode_reused_after_a_turn_equals_the_readable_model_at_the_new_direction(normal):
     """Rigid ground: d enters the KKT matrix (the normal row's column tilt); compliant: the Coulomb force.
     At rest and at a slip perpendicular to the new r (inside the stick band along it) the force follows r."""
     system = System(parse_scene(circle(normal)))
     x0, _ = system.initial_state()
     phase = system.start_phase(0, 0.0, x0, None)
     before, after = [ContactMode(touching=True, slip=(1.0, 0.0))], [ContactMode(touching=True, slip=(0.0, 1.0))]
-    plan = cached_plan(system, before, phase)
-    assert plan.ok, plan.reason
-    assert cached_plan(system, after, phase) is plan and plan.modes == after
+    plan = Pipeline(system, before, phase)
+    plan.use(after)
+    assert plan.modes == after
     nQ = system.nQ
     states = []
     for v in ([0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.2, 0.5, 0.0]):  # at rest; across r; ahead of r
@@ -80,23 +78,13 @@ def test_a_plan_reused_after_a_turn_equals_the_readable_model_at_the_new_directi
     assert np.abs(old - plan.rhs(t, states[0].copy())).max() > 1e-3
 
 
-def test_a_plan_refuses_modes_of_another_structure():
+def test_a_compiled_mode_refuses_modes_of_another_structure():
     system = System(parse_scene(circle()))
     x0, _ = system.initial_state()
     phase = system.start_phase(0, 0.0, x0, None)
     sliding = [ContactMode(touching=True, slip=(1.0, 0.0))]
-    plan = cached_plan(system, sliding, phase)
+    plan = Pipeline(system, sliding, phase)
     assert structure([ContactMode(touching=True, slip=(0.6, 0.8))]) == structure(sliding)
     assert structure([ContactMode(touching=True, stuck=True, slip=(1.0, 0.0))]) != structure(sliding)
     with pytest.raises(ValueError, match="its own structure"):
         plan.use([ContactMode(touching=True, stuck=True, slip=(1.0, 0.0))])
-
-
-def test_a_declined_plan_takes_every_turn_too():
-    """The energy audit declines the plan (a declared gap): the turns still reuse it, on System.evaluate."""
-    doc = circle()
-    doc["duration"] = 0.5
-    doc["solver"]["record_energy"] = True
-    result = run_system(System(parse_scene(doc)))
-    assert sum(e["kind"] == "turn" for e in result.events) >= 2
-    assert result.stats["compiled_modes"] == 0 and result.stats["fallback_modes"]
