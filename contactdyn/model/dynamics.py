@@ -19,8 +19,8 @@ with Q̈ and the active rows' forces λ from the constraint system
 5. one solve gives Q̈ and λ (a force-reading controller folded in);
 6. the forces are recorded per contact, the impulse and energy states get their rates.
 
-:class:`~contactdyn.compiled.rhsplan.ModePlan` compiles the same model for the integrator; it
-reads the affine parts off the functions named above, so they are written once.
+The one pipeline (:mod:`contactdyn.model.pipeline`) is the same model over packed arrays, compiled for the
+integrator: the laws by address, the chains' and the dynamic laws' compiled functions shared with this module.
 """
 
 from __future__ import annotations
@@ -310,23 +310,20 @@ def _finish_friction(system, ev: Evaluation, pending: list, xdot: np.ndarray, yd
             xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
 
 
-def command_of(system, inp: ControlInput, phase: Phase, x: np.ndarray, ctl=None) -> tuple:
-    """(drive command, ż, carried reference) of the phase's controller (or ``ctl``, the same law read off as
-    a matrix: contactdyn.compiled.plan_law) at ``inp``: its τ through :func:`drive_command`, and :func:`carried_command`
-    (the readable model and the plan's fold share it)."""
-    ctl = phase.controller if ctl is None else ctl
-    tau, zdot = ctl.command(inp)
-    return drive_command(system, tau, x), zdot, carried_command(inp, phase, tau, zdot, ctl)
+def command_of(system, inp: ControlInput, phase: Phase, x: np.ndarray) -> tuple:
+    """(drive command, ż, carried reference) of the phase's controller at ``inp``: its τ through
+    :func:`drive_command`, and :func:`carried_command`."""
+    tau, zdot = phase.controller.command(inp)
+    return drive_command(system, tau, x), zdot, carried_command(inp, phase, tau, zdot)
 
 
-def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot, ctl=None) -> tuple | None:
+def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot) -> tuple | None:
     """(i_b, ∂τ/∂Q̈_b, ∂ż/∂Q̈_b) of a reference carried by body coordinate i_b: the command's part
     proportional to the body's acceleration, an unknown of the solve; None if there is none."""
     if phase.carrier is None or inp.x_d is None:
         return None
     i_b, axis = phase.carrier
-    ctl = phase.controller if ctl is None else ctl
-    return carried_terms(i_b, *ctl.a_d_increment(inp, axis, tau, zdot), zdot)
+    return carried_terms(i_b, *phase.controller.a_d_increment(inp, axis, tau, zdot), zdot)
 
 
 def carried_terms(i_b: int, dtau: np.ndarray, dzdot, zdot) -> tuple | None:

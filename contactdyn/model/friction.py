@@ -113,8 +113,8 @@ def launch_directions(system, modes: list[ContactMode], slip_of, acceleration_of
 
     Written once for both right-hand sides, which give what it reads: ``slip_of(i)`` the
     slip velocity of contact i [m/s], ``acceleration_of(trial, i)`` its tangential
-    acceleration [m/s²] in the modes ``trial`` (the readable model: :func:`launch_directions_at`;
-    the compiled plan: from its own KKT data, :mod:`contactdyn.compiled.plan_rhs`). A slide already
+    acceleration [m/s²] in the modes ``trial`` (the readable model: :func:`launch_directions_at`; the one
+    pipeline finds the same directions compiled, :mod:`contactdyn.model.pipeline.launch`). A slide already
     past the stick band is launched: its own direction from here on.
     """
     out = list(modes)

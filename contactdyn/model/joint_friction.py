@@ -124,8 +124,8 @@ class JointFriction:
 
     # ---- forces and rows ----------------------------------------------------------------------
     def torques(self, modes: tuple, x: np.ndarray, nQ: int, nv: int) -> np.ndarray:
-        """The joints' damping and sliding friction −b q̇ − s τ_k [N·m or N] (nv,), affine in x (the compiled plan
-        probes it; a stuck joint's torque is its row's force)."""
+        """The joints' damping and sliding friction −b q̇ − s τ_k [N·m or N] (nv,) (a stuck joint's torque is its
+        row's force)."""
         tau = -self.damping * x[nQ:nQ + nv]
         for i, m in modes:
             if m != STUCK:

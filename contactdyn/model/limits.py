@@ -15,8 +15,8 @@ A position limit of an active joint is handled like a rigid contact (``robot.joi
 - ``release`` event: λ reaches zero (the joint stops pressing) and the joint is free again.
 
 The joints pressing on a limit are part of the run's :class:`~contactdyn.model.system.Phase`
-(``Phase.limits``), so every segment knows its constraint rows; the compiled plans carry
-them as rows of their KKT system (:mod:`contactdyn.compiled.plan_probe`). Continuous joints (and
+(``Phase.limits``), so every segment knows its constraint rows; the one pipeline carries
+them as rows of its KKT system (:func:`contactdyn.model.pipeline.contacts.limit_rows`). Continuous joints (and
 limits given as lower = upper) have no position limit. Velocity and effort limits of the URDF (0: none given)
 are checked on the run's samples: count and first time per joint in ``Result.stats["limits"]``,
 a warning per joint in ``Result.meta["limit_warnings"]``.
@@ -123,7 +123,7 @@ class JointLimits:
 
 def limit_channels(system: Any, phases_of: list, samples: Any) -> dict[str, np.ndarray]:
     """``limit.torque`` [N·m or N] (per joint, 0 when free; from the output ``samples``,
-    :class:`~contactdyn.compiled.samples.Samples`) and ``limit.side`` (+1 lower, −1 upper, 0 free)."""
+    :class:`~contactdyn.output.samples.Samples`) and ``limit.side`` (+1 lower, −1 upper, 0 free)."""
     side = np.zeros((len(phases_of), system.nv))
     k = 0
     for _, run in groupby(phases_of, key=id):  # a run of samples in one phase: its sides at once

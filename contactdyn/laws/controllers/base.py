@@ -17,14 +17,14 @@ the force it measures is the exact one at the same instant (no delay, no iterati
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ..params import Param
 from ..sensors import read_sampling
 
-__all__ = ["ControlInput", "Controller", "BindContext", "TipForceLaw", "CONTROLLERS", "register", "read_controller",
+__all__ = ["ControlInput", "Controller", "BindContext", "CONTROLLERS", "register", "read_controller",
            "FEEDFORWARD", "DeclaredConfig"]
 
 FEEDFORWARD = ("none", "gravity", "bias")
@@ -115,15 +115,6 @@ class ControlInput:
         return new
 
 
-class TipForceLaw(NamedTuple):
-    """A task-space PD law with force set-points, as data (see :meth:`Controller.tip_force_law`)."""
-
-    kp: np.ndarray  #: (3, 3) [N/m]
-    kd: np.ndarray  #: (3, 3) [N·s/m]
-    feedforward: str = "none"  #: "none", "gravity" (τ += g(q)) or "bias" (τ += h(q, q̇))
-    kd_joint: float = 0.0  #: joint damping [N·m·s/rad]: τ −= k_dj q̇
-
-
 @dataclass(frozen=True)
 class BindContext:
     """What a controller may check or resolve once the system exists (before any run)."""
@@ -195,16 +186,6 @@ class Controller:
     def applies_force_setpoints(config: Any) -> bool:
         """Whether this controller, so configured, acts on a phase's ``[[phase.force]]`` set-points."""
         return False
-
-    def tip_force_law(self) -> TipForceLaw | None:
-        """The law as data when the command is exactly
-        τ = Jᵀ(K_p (x_d − p) + K_d (ẋ_d − ṗ) − Σ F_d n) + feedforward − k_dj q̇
-        with the phase's task reference and force set-points; None otherwise.
-
-        The compiled right-hand side (:mod:`contactdyn.compiled.rhsplan`) folds such a law into its
-        affine map instead of calling :meth:`command`.
-        """
-        return None
 
 
 CONTROLLERS: dict[str, type] = {}

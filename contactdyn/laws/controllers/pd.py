@@ -30,7 +30,7 @@ import numpy as np
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import contiguous
 from . import task_pd_law as law
-from .base import FEEDFORWARD, BindContext, ControlInput, Controller, TipForceLaw, register
+from .base import FEEDFORWARD, BindContext, ControlInput, Controller, register
 
 __all__ = ["TaskPD", "JointPD", "KP_TASK", "KD_TASK", "read_tool_axis", "read_orientation", "joint_pd_torque"]
 
@@ -163,12 +163,6 @@ class TaskPD(Controller):
                          set_points, c(inp.R_tip) if orient else _NO_ROTATION, axes, forced, kp, kd, tool_axis, target,
                          R_d, ko, do, kd_joint, kd_normal, _NONE if np.isscalar(ff) else c(ff))
         return tau, None
-
-    def tip_force_law(self) -> TipForceLaw | None:
-        cfg = self.config
-        if self.reads_orientation or cfg.kd_normal:  # the orientation moment is not affine in the state,
-            return None                              # the normal damping is not in the data law
-        return TipForceLaw(self._kp, self._kd, cfg.feedforward, float(cfg.kd_joint))
 
 
 @dataclass(frozen=True)
