@@ -8,8 +8,9 @@ Where the pieces are (see ``docs/architecture.md`` for the module map):
 - the hybrid loop (smooth phase → event → transition → next phase): :mod:`contactdyn.hybrid.loop`;
 - the events (touch, separate, stop, reverse, turn, slip) and the storm guard:
   :mod:`contactdyn.hybrid.events`; what each event does to the modes: :mod:`contactdyn.hybrid.transitions`;
-- the right-hand side: :mod:`contactdyn.model.dynamics` (readable) and :mod:`contactdyn.compiled.rhsplan`
-  (compiled per mode, with ``Result.stats["fallback_modes"]`` saying why a mode was not);
+- the right-hand side: :mod:`contactdyn.model.dynamics` (readable) and the one pipeline,
+  :mod:`contactdyn.model.pipeline` (compiled, one call for every mode and law; ``Result.stats["paths"]`` says which
+  mode ran where, ``Result.stats["fallback_modes"]`` why a mode was not compiled);
 - friction and the stick band: :mod:`contactdyn.model.friction`; impacts: :mod:`contactdyn.model.impact`;
 - the output channels: :mod:`contactdyn.output.channels`.
 """

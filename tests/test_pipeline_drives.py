@@ -140,7 +140,7 @@ def test_the_rotors_reflect_on_the_mass_matrix():
 class Geared(DriveKind):
     """A current-controlled motor through a rigid gear N, its torque limited: M = clip(τ / N, ±M_max) (not affine)."""
 
-    name, motorized, affine = "geared_test", True, False
+    name, motorized = "geared_test", True
     params = (Param("J", "kg·m²", "rotor inertia", lo=0.0),
               Param("N", "-", "speed ratio, motor speed / output speed", 1.0, lo=0.0, lo_open=True),
               Param("M_max", "N·m", "largest motor torque", np.inf, lo=0.0, lo_open=True, example=1.0))

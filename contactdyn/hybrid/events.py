@@ -107,7 +107,7 @@ def start_storm_cause(events: list[dict], contact: str) -> str | None:
 class EvaluationCache:
     """The latest evaluations at (t, x), shared by the right-hand side and the event functions.
 
-    Four, like the plan's ring: DOP853 evaluates the step's end state (FSAL), then three more
+    Four, like a compiled mode's ring: DOP853 evaluates the step's end state (FSAL), then three more
     stages for its dense output, then the event functions at the step's end.
     """
 

@@ -59,7 +59,7 @@ _NO_CALL = (None, None, None)  #: a ring entry before any call
 
 
 class PipelineMode:
-    """One (modes, phase) on the one pipeline, with the plan's interface (see the module docstring)."""
+    """One (modes, phase) on the one pipeline, as the loop runs it (see the module docstring)."""
 
     ok = True  #: runs compiled (a Declined mode: False)
     reason = ""

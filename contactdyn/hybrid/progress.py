@@ -84,7 +84,7 @@ class Work:
         raise OverBudget
 
     def wrap(self, fun):
-        """``fun`` counted; its compiled ``step`` (contactdyn.compiled.plan_steps), if any, counted as its STEP_STAGES
+        """``fun`` counted; its compiled ``step`` (contactdyn.hybrid.steps), if any, counted as its STEP_STAGES
         calls."""
         def counted(t, y):
             self.calls += 1  # (count() inline: this wraps every right-hand-side call)

@@ -12,10 +12,6 @@ law. Its properties decide the physics, never its name:
   elastic transmission), with inertia ``motor_inertia``;
 - ``has_voltage``: the kind takes a voltage command and reports its voltage u [V], clipped to
   ±``voltage_limit`` (a ``voltage`` controller drives it; ``u`` channels record it);
-- ``affine``: below its voltage limit the law is affine in (command, state), so the compiled
-  plan reads it by unit probes; a kind that is not (a torque limit, a nonlinear friction)
-  declares itself off the compiled path at load (:mod:`contactdyn.model.paths`) and runs on
-  the readable model.
 
 The built-in kinds:
 
@@ -106,7 +102,6 @@ class DriveKind:
     motorized: ClassVar[bool] = False  #: a law between command and coordinate (False: an ideal source)
     motor_coordinate: ClassVar[bool] = False  #: owns a motor angle θ, a second-order coordinate
     has_voltage: ClassVar[bool] = False  #: takes a voltage command, reports u [V], clips it to ±voltage_limit
-    affine: ClassVar[bool] = True  #: affine in (command, state) below the voltage limit: the compiled plan probes it
     refuses: ClassVar[dict[str, str]] = {}  #: another kind's key this kind refuses -> what the error says instead
 
     # ---- the transmission, once per drive (DriveSpec holds the values) ----------------------------------------

@@ -236,7 +236,7 @@ class Drives:
 
         ``sat_cmd`` (default ``cmd``) decides which voltages clip: the system passes the full
         command there while ``cmd`` lacks the part it folds into its linear solve. ``clip=False``:
-        the law without the voltage limits, affine in (cmd, x) for an affine kind (the compiled plan probes it).
+        the law without the voltage limits.
         """
         n = len(self.specs)
         if not self.any_motor:  # ideal sources only; the coordinates are 0 .. n−1 (joints, then bodies)

@@ -16,10 +16,9 @@ The laws:
 - ``stribeck`` — μ(v) = μ_k + (μ_s − μ_k) exp(−(v/v_s)²), v_s [m/s] the Stribeck speed:
   the coefficient falls from μ_s at rest to μ_k when sliding fast.
 
-A law with a constant kinetic coefficient (``constant = True``) is held in the compiled
-plan's matrices; for another the plan calls its ``kinetic`` per call (the tilt of the normal
-column and the known force, :mod:`contactdyn.compiled.plan_rhs`; the samples with an array of speeds),
-and the plan's numba kernels decline such a mode (the law is Python). Adding a law:
+A law with a constant kinetic coefficient (``constant = True``) is a constant of the compiled call; another is
+called by address per call (its ``coefficient`` compiled, :mod:`contactdyn.laws.abi`); one numba cannot compile
+keeps its modes on the readable model. Adding a law:
 subclass :class:`FrictionLaw` (``name``, ``params``, ``constant``, and ``coefficient(mu_s, mu_k, p, speed)``,
 the numeric form that :mod:`contactdyn.laws.abi` compiles; ``kinetic(spec, speed)`` gives it a contact's
 spec, and a law may override that one instead, in Python only) and decorate

@@ -13,12 +13,11 @@ reads them from the declaration. The laws (``law = "<name>"`` on a stage in a sc
 
 Adding a law: subclass :class:`StageLaw` (``name``, ``params``, ``affine``, a ``force``)
 and decorate it with :func:`register_stage_law`; the scene then accepts its name and its
-parameters. Its properties decide the physics, never its name: an ``affine`` law (F = K x +
-B ẋ, :meth:`StageLaw.coefficients`) runs on the compiled right-hand side by construction
-(its force is read off by unit probes, :mod:`contactdyn.compiled.plan_probe`), may sit at a massless
-junction, and gives the dynamic laws and the sanity check their nominal model; another
-declares so at load (:mod:`contactdyn.model.paths`), its touching modes run on the readable
-model, and it needs a solid node (tip, mass or body) at both ends of its stage.
+parameters. Its properties decide the physics, never its name: every law whose ``force`` numba compiles runs on
+the compiled call by address (:mod:`contactdyn.laws.abi`; one that does not keeps its touching modes on the readable
+model); an ``affine`` law (F = K x + B ẋ, :meth:`StageLaw.coefficients`) may also sit at a massless junction and
+gives the dynamic laws and the sanity check their nominal model; another needs a solid node (tip, mass or body) at
+both ends of its stage.
 See ``docs/architecture.md`` for a worked example.
 """
 
@@ -36,7 +35,7 @@ class StageLaw:
 
     name: ClassVar[str] = ""
     params: ClassVar[tuple[Param, ...]] = ()  #: the law's parameters besides k and b
-    affine: ClassVar[bool] = False  #: F = K x + B ẋ with (K, B) = coefficients(k, b, p): compiled, junction-safe
+    affine: ClassVar[bool] = False  #: F = K x + B ẋ with (K, B) = coefficients(k, b, p): junction-safe
     #: why numba cannot compile ``force`` ("" when it can; None until first asked, :mod:`contactdyn.laws.abi`):
     #: the model then calls it in Python
     compiled_reason: ClassVar[str | None] = None

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from .phases import Phase
 
 __all__ = ["CONE_TOL", "FORCE_ABS_TOL", "in_cone", "direction_of", "initial_slip", "slip_direction", "slip_velocity",
-           "slip_acceleration", "kinetic_coefficient", "per_call_coefficient", "launching", "launch_directions",
+           "slip_acceleration", "kinetic_coefficient", "launching", "launch_directions",
            "launch_directions_at", "friction_terms"]
 
 CONE_TOL = 1e-10  #: relative slack of the friction-cone tests |F_f| ≤ μ_s F (round-off of the solves)
@@ -77,13 +77,6 @@ def slip_direction(system, vt: np.ndarray, mode: ContactMode) -> np.ndarray:
 def kinetic_coefficient(fr, vt: np.ndarray) -> float:
     """μ(|v_t|) [-] of friction ``fr`` (a :class:`~contactdyn.laws.friction_laws.FrictionSpec`) at slip velocity v_t."""
     return fr.mu_k if fr.constant else float(fr.mu(math.sqrt(float(vt @ vt))))
-
-
-def per_call_coefficient(fr) -> float | None:
-    """μ_k [-] of a law whose kinetic coefficient does not depend on the slip speed, which the compiled plan
-    holds in its matrices; None for another law, whose μ(|v_t|) the plan's call takes per call
-    (:func:`kinetic_coefficient`)."""
-    return fr.mu_k if fr.constant else None
 
 
 def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:

@@ -370,7 +370,7 @@ class _Core:
         steps.end_x = self.last_x if self.last_t == t else None
         if not self.watch.events:
             return 0
-        # the FSAL call's own array (the same values): the compiled plan has its results cached
+        # the FSAL call's own array (the same values): a compiled mode has its results cached
         x = self.last_x if self.last_t == t else steps.blocks[-1][_Y_NEW]
         return -1 if self.watch.stop(steps, t, x) else 0  # (the located step's interpolant is built)
 
@@ -391,7 +391,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     ``atol`` and ``rtol`` are scalars; ``max_step`` [s] (inf: none) and ``first_step`` [s] (None:
     solve_ivp's estimate) as in ``solve_ivp``. Events are terminal if their ``terminal`` attribute is.
     The steps are solve_ivp's: after a rejection the step shrinks by max(MIN_FACTOR, SAFETY err^(−1/8))
-    and the next step may not grow. ``step``: a compiled step attempt of ``fun``'s (compiled.plan_steps)
+    and the next step may not grow. ``step``: a compiled step attempt of ``fun``'s (hybrid.steps)
     that takes the steps in place of scipy's core, with the same step control, where ``step.usable()``.
     """
     if _CORE is None:

@@ -3,7 +3,7 @@
 A sampled controller (:mod:`contactdyn.laws.controllers.sampled`) holds its command in the state and changes it
 only at the sample instants t_k [s]. Ending a segment at every t_k costs a new segment each time (the hybrid
 loop's set-up, a first-step estimate, no FSAL). Here one run of :func:`contactdyn.numerics.dop853.solve`'s steps
-(scipy's core or the plan's compiled steps) carries the hold (``hold``: ``next_time() -> t_k`` [s], inf: none
+(scipy's core or a compiled mode's steps) carries the hold (``hold``: ``next_time() -> t_k`` [s], inf: none
 left in the run; ``take(t, y) -> y_new``, the state with the new held command; ``event_value(event)``: the
 function whose fall through zero across a jump fires that event, None where the jump cannot fire it):
 

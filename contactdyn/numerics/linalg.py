@@ -7,8 +7,8 @@ otherwise. Arguments must be float arrays of matching shapes; a singular matrix 
 the fallback raises LinAlgError; callers test.
 
 :func:`lu_solve`, :func:`cholesky`, :func:`forward_solve`, :func:`pinv`, the products :func:`mv`, :func:`mtv`,
-:func:`mm`, :func:`mtm` and :func:`sparse_dot` are compiled (numba) for the compiled kernels
-(compiled.plan_kernel, compiled.plan_operational, laws.controllers.computed_torque,
+:func:`mm` and :func:`mtm` are compiled (numba) for the compiled laws
+(the one pipeline, laws.controllers.computed_torque,
 :mod:`contactdyn.laws.controllers.operational_law`), written in loops: numba's LAPACK bindings cost
 ~0.15 s to load per process, and a BLAS call ~0.1 µs, more than a loop over these 3–12-row arrays.
 :func:`dot3` is a 3-vector's dot product that numpy and numba form alike (so the readable model's numbers
@@ -26,7 +26,7 @@ from numba.extending import intrinsic, overload
 from .compile_cache import njit
 
 __all__ = ["solve_vector", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
-           "forward_solve", "sparse_dot", "contiguous", "dot3"]
+           "forward_solve", "contiguous", "dot3"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -130,20 +130,6 @@ def forward_solve(L, B):
                 s -= L[i, j] * Y[j, c]
             Y[i, c] = s / L[i, i]
     return Y
-
-
-@njit(cache=True)
-def sparse_dot(start, columns, values, x):
-    """P x of P by rows (CSR: row i's entries ``values[start[i]:start[i + 1]]`` in ``columns``; scipy.sparse's
-    indptr, indices, data), for the plan's maps P (~1 % nonzeros)."""
-    n = start.size - 1
-    out = np.zeros(n)
-    for i in range(n):
-        acc = 0.0
-        for k in range(start[i], start[i + 1]):
-            acc += values[k] * x[columns[k]]
-        out[i] = acc
-    return out
 
 
 @njit(cache=True)

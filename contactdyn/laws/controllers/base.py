@@ -46,7 +46,7 @@ class ControlInput:
     v_d: np.ndarray | None
     a_d: np.ndarray | None
     #: measured contact force [N], > 0 pressing: normal per contact name, tangential chain per "<contact>.t1"
-    #: (the compiled plan fills it only for a controller that reads forces, ``uses_forces``)
+    #: (filled only for a controller that reads forces, ``uses_forces``)
     forces: dict[str, float]
     #: force set-point and its rate [N, N/s]: per contact (normal) or "<contact>.t1" (tangential)
     force_d: dict[str, tuple[float, float]]
@@ -156,7 +156,6 @@ class Controller:
     uses_forces: bool = False  #: reads measured forces (then it must be affine in them)
     outputs: str = "torque"  #: "torque" (generalized forces) or "voltage" (motor voltages [V])
     reads_orientation: bool = True  #: reads R_tip, J_ang and drift_ang (False: the compiled path leaves them None)
-    in_task_space: bool = False  #: command = computed_torque(tip_targets(...)), read as a matrix by plan_law
 
     def __init__(self, config: Any, nv: int):
         self.config = config

@@ -7,8 +7,8 @@
 H [kg·m²] the model's inertia, r the rotor inertia the law takes out (``inertia = "link"``; empty
 for "model"), J the tip Jacobian (3, nv), J⁺ its pseudo-inverse (:func:`contactdyn.numerics.linalg.pinv`: singular
 values below 1e-10 of the largest dropped, numpy.linalg.pinv's rcond). Written once here and
-compiled by numba: the readable law (:mod:`contactdyn.laws.controllers.dynamic`), the plan's call
-(:mod:`contactdyn.compiled.plan_kernel`) and the output's samples all run these functions. Arguments are
+compiled by numba: the readable law (:mod:`contactdyn.laws.controllers.dynamic`) and the one pipeline's call
+(:mod:`contactdyn.model.pipeline.control_laws`) both run these functions. Arguments are
 C-contiguous float64 arrays; "none" is an empty array (r, f_swap: length 0, or (N, 0) for a stack;
 D_f: 0 rows).
 """

@@ -244,8 +244,8 @@ class _ComputedTorque(Controller):
     :meth:`tip_targets` gives (a*, f_swap, ż): the desired tip acceleration [m/s²], the tip force
     swapped into τ [N] (A10's cancel = "target") and the states' rates. They are affine in the
     tip's motion, the reference, the measured forces, the set-points, the surfaces and z (for a
-    fixed contact mode), so the compiled path reads them off by unit probes
-    (:mod:`contactdyn.compiled.plan_law`); τ follows from them here, on both paths.
+    fixed contact mode): the solve folds the measured forces in. The targets are compiled once
+    (:mod:`contactdyn.laws.controllers.dynamic_law`), here and in the one pipeline's call.
     """
 
     uses_forces = True
@@ -337,10 +337,6 @@ class PositionDynamic(_ComputedTorque):
             self.envs = {f.key: normals[f.contact] if f.direction == "n" else
                          _tangent_nominal(context, f, cfg.nominal) for f in forces}
 
-    @property
-    def in_task_space(self) -> bool:
-        return self.config.space == "task"
-
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         cfg = self.config
         if cfg.space == "task":
@@ -386,7 +382,6 @@ class ForceDynamic(_ComputedTorque):
 
     name = "force_dynamic"
     tracks_position = False
-    in_task_space = True
 
     @staticmethod
     def applies_force_setpoints(config: ForceDynamicConfig) -> bool:

@@ -134,9 +134,8 @@ class OperationalSpace(Controller):
         the 6 rows [J; J_ω], [J̇q̇; J̇_ω q̇ [rad/s²]] in Pinocchio's order, and the tip's rotation R_tip,
         else None), p_tip [m], v_tip [m/s], the reference ``ref`` = (x_d, ẋ_d, ẍ_d) or None and the
         set-points F_d [N] in the order of ``force_keys``. The arithmetic is
-        :func:`contactdyn.laws.controllers.operational_law.torque`, which the plan's compiled call
-        (:mod:`contactdyn.compiled.plan_operational`) runs too; the readable ``command`` and the plan's other calls
-        (:func:`~contactdyn.compiled.plan_law.operational_command`) come here."""
+        :func:`contactdyn.laws.controllers.operational_law.torque`, which the one pipeline's call
+        (:mod:`contactdyn.model.pipeline.control_laws`) runs too; the readable ``command`` comes here."""
         c = contiguous
         x_d, v_d, a_d = (_NONE, _NONE, _NONE) if ref is None else (c(ref[0]), c(ref[1]), c(ref[2]))
         tau, ratio = law.torque(v, c(H), h, c(J_tip), drift_tip, p_tip, v_tip, x_d, v_d, a_d,

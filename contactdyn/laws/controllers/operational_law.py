@@ -10,8 +10,8 @@ axis n, a* = n·ẍ_d and f = kp n·(x_d − p) + kd n·(ẋ_d − ṗ) (f = −
 direction n, a* = 0 and f = −F_d − kd_normal n·ṗ; on the tilt, a* = E (ko (a × d) − do ω), f = 0.
 k_null = 0 where the task has as many directions as the arm has joints.
 
-Written once here and compiled by numba: the readable law (``OperationalSpace.torque``) and the plan's
-compiled call (:mod:`contactdyn.compiled.plan_operational`) both run :func:`torque`. Λ⁻¹ = Yᵀ Y with Y = L⁻¹ J_tᵀ,
+Written once here and compiled by numba: the readable law (``OperationalSpace.torque``) and the one pipeline's
+call (:mod:`contactdyn.model.pipeline.control_laws`) both run :func:`torque`. Λ⁻¹ = Yᵀ Y with Y = L⁻¹ J_tᵀ,
 H = L Lᵀ (:func:`~contactdyn.numerics.linalg.cholesky`), Λ (…) by :func:`~.linalg.lu_solve`: loops, not numba's
 LAPACK bindings. Arguments are C-contiguous float64
 arrays; "none" is an empty array (no reference: x_d, v_d, a_d of size 0; no tool axis: ``tool_axis``,

@@ -17,7 +17,7 @@ Optionally the task PD also holds the tip's orientation, τ += J_ωᵀ m with J_
   why this error and not the log map: :mod:`contactdyn.laws.controllers.task_pd_law`).
 
 The arithmetic of τ is :func:`contactdyn.laws.controllers.task_pd_law.torque`, compiled once for this readable law and
-the plan's compiled call. Joint space: τ = K_p (q_d − q) + K_d (q̇_d − q̇) [+ feedforward]. Feedforward:
+the one pipeline's call. Joint space: τ = K_p (q_d − q) + K_d (q̇_d − q̇) [+ feedforward]. Feedforward:
 ``none``, ``gravity`` (the uncompensated gravity load g(q)) or ``bias`` (h(q, q̇)).
 """
 

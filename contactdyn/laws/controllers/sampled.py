@@ -8,9 +8,9 @@ and holds that command until the next sample (zero-order hold).
 
 The held command lives in the state: :class:`SampledController` wraps the law, and its states are
 [held command (nv), the law's own states]; all of them have ẏ = 0 between samples, and its command is the held
-slots. So the right-hand side between two samples is an ordinary smooth one (the compiled plan reads the held
-command off the state as an affine term of its feedforward, through the motors' kernel where there are motors:
-:mod:`contactdyn.compiled.plan_kkt`), and at every sample instant (a step boundary of the compiled DOP853,
+slots. So the right-hand side between two samples is an ordinary smooth one (the one pipeline's call reads the
+held command off the state, torques or voltages, through the drives where there are motors), and at every sample
+instant (a step boundary of the compiled DOP853,
 a segment boundary for other methods: :mod:`contactdyn.hybrid.sampling`) the new command is written into the
 state and the events its jump fires are checked. The law's own states (integrators) advance once per sample,
 by forward Euler over the period: z_{k+1} = z_k + T ż_k. A phase starts sampling at its start (the delay line

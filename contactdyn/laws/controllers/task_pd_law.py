@@ -18,8 +18,8 @@ nothing). The moment m (none without an orientation to hold):
   θ = π), needs no trigonometry, equals it to O(θ³), and is the tool-axis moment a × d summed over the three
   axes (halved).
 
-Written once here and compiled by numba: the readable law (``TaskPD.command``) and the plan's compiled call
-(:mod:`contactdyn.compiled.plan_operational`) both run :func:`torque`. Arguments are C-contiguous float64 arrays; "none"
+Written once here and compiled by numba: the readable law (``TaskPD.command``) and the one pipeline's call
+(:mod:`contactdyn.model.pipeline.actuation`) both run :func:`torque`. Arguments are C-contiguous float64 arrays; "none"
 is an empty array (no reference: x_d, v_d of size 0; no orientation: R_tip (0, 3) and tool_axis, target, R_d
 empty; no feedforward: tau_ff of size 0).
 """
