@@ -21,11 +21,13 @@ from test_output_samples import pressing_writer  # noqa: E402
 from contactdyn import Robot, parse_scene  # noqa: E402
 from contactdyn.hybrid.loop import HybridRun  # noqa: E402
 from contactdyn.laws.trajectory import Move, Ramp, Reference  # noqa: E402
+from contactdyn.model.phases import start_phase  # noqa: E402
 from contactdyn.model.pipeline.actuation import reference, set_points  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline, call  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
 from contactdyn.scene.reader import read_toml  # noqa: E402
 from contactdyn.scene.scene_file import find_scene, load_scene  # noqa: E402
+from contactdyn.simulate import prepare  # noqa: E402
 
 #: a call against System.evaluate at a run's states, relative to 1 + |ẋ|'s largest entry (the twin's kernel tests'
 #: bound, kept); measured ≤ 7.0e-13 over these scenes' states
@@ -134,3 +136,21 @@ def test_the_packed_set_points_are_ramp_at_bitwise():
         for t in np.concatenate([np.linspace(-0.5, 3.0, 36), np.ravel(ramp.corners())]):
             F_d, _, rate = set_points(float(t), p.ints, p.reals)
             assert (F_d[0], rate[0]) == tuple(ramp.at(float(t))), t
+
+
+@pytest.mark.parametrize("scene", ["case3_a_position", "case3_b_force"])  # position_dynamic; force_dynamic, a row
+def test_a_force_reading_law_is_folded_into_the_call_as_in_the_readable_model(scene):
+    """The press phase's law reads the measured force (folded into the KKT solve): at states near the start, every
+    contact touching, the call is System.evaluate's to 1e-12 of 1 + |ẋ| (measured ≤ 1.4e-16), none handed to the
+    readable model."""
+    system, modes, phase, x0 = prepare(load_scene(scene))
+    press = start_phase(system, 1, 0.0, x0, phase)
+    assert press.controller.uses_forces
+    touching = [replace(m, touching=True) for m in modes]
+    pipe = Pipeline(system, touching, press)
+    rng = np.random.default_rng(5)
+    for k in range(3):
+        t, x = 0.02 * k, x0 + 1e-3 * rng.normal(size=system.n)
+        ref = system.evaluate(t, x, touching, press).xdot
+        assert np.abs(pipe.rhs(t, x) - ref).max() <= 1e-12 * (1.0 + np.abs(ref).max())
+    assert pipe.fallbacks == 0
