@@ -3,7 +3,7 @@ compiled call) equals the readable model per sample.
 
 Each scene runs twice on the same integration: once with the pipeline's batched output, once with every output
 sample from ``System.evaluate(full=True)`` (:func:`~contactdyn.output.samples.evaluated_samples`). Every channel must
-agree to 1e-10 (relative to 1 + the channel's largest magnitude).
+agree to 1e-10 (relative to 1 + the channel's largest magnitude; measured ≤ 4.6e-15, case1_cart's τ).
 """
 
 from __future__ import annotations
