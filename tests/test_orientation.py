@@ -1,8 +1,9 @@
 """task_pd's orientation holds (the tool axis, the full orientation): the law's closed forms, one law on both paths
-(the readable command and the plan's compiled call), and benchmark B2 on the compiled call."""
+(the readable command and the one pipeline's call), and benchmark B2 on the pipeline."""
 
 from __future__ import annotations
 
+import time
 import tomllib
 from pathlib import Path
 
@@ -11,10 +12,11 @@ import pinocchio as pin
 import pytest
 from scipy.integrate import solve_ivp
 
-from contactdyn.compiled.plan_operational import OPERATIONAL
-from contactdyn.compiled.rhsplan import _PLANS, ModePlan
 from contactdyn.errors import SceneError
+from contactdyn.hybrid.loop import HybridRun
 from contactdyn.laws.controllers import task_pd_law
+from contactdyn.model.paths import PIPELINE
+from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.model.system import System
 from contactdyn.robot.robot import Robot
 from contactdyn.scene.scene_file import parse_scene
@@ -106,37 +108,35 @@ def test_an_orientation_is_a_rotation_and_not_with_a_tool_axis():
 
 @pytest.mark.parametrize("what", ["tool axis (B2)", "full orientation"])
 def test_the_compiled_call_is_the_readable_model(what):
-    """B2's first mode (the tool sliding on the table, bonded, 2-D friction) runs the plan's compiled call with the
-    task PD law in it, and along 10 ms of the run its ẋ is System.evaluate's (the readable TaskPD.command, the tip's
-    rotation and angular Jacobian from Pinocchio) to 1e-10 relative: one law on both paths."""
+    """B2's first mode (the tool sliding on the table, bonded, 2-D friction) on the one pipeline with the task PD law
+    in its call: along 10 ms of the run its ẋ is System.evaluate's (the readable TaskPD.command, the tip's rotation
+    and angular Jacobian from Pinocchio) to 1e-10 relative (measured ≤ 1.6e-15), no call handed to the readable
+    model: one law on both paths."""
     system, modes, phase, x0 = prepare(parse_scene(_b2(**(B2_FULL if "full" in what else {}))))
-    plan = ModePlan(system, modes, phase)
-    assert plan.ok, plan.reason
-    assert plan.kernel is not None and plan.kernel.kind == OPERATIONAL and plan.kernel.step_inputs is not None
-    sol = solve_ivp(plan.rhs, (0.0, 0.01), x0, method="DOP853", rtol=1e-8, atol=1e-10)
+    pipe = Pipeline(system, modes, phase)
+    sol = solve_ivp(pipe.rhs, (0.0, 0.01), x0, method="DOP853", rtol=1e-8, atol=1e-10)
+    assert len(sol.t) >= 3
     for t, x in zip(sol.t[:40], sol.y.T[:40], strict=True):
-        got = plan.kernel.at(t, x)
-        assert got is not None
         ref = system.evaluate(t, x, modes, phase).xdot
-        np.testing.assert_allclose(got[0], ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+        np.testing.assert_allclose(pipe.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
+    assert pipe.fallbacks == 0
 
 
 @pytest.mark.parametrize("what", ["tool axis (B2)", "full orientation"])
 def test_b2_runs_on_the_compiled_call(what):
-    """B2 (0.2 s of it): no mode falls back, and every plan of the run has the compiled call and its compiled DOP853
-    step (the law is not called from Python per right-hand side)."""
-    system = System(parse_scene(_b2(**(B2_FULL if "full" in what else {})), {"duration": 0.2}))
-    result = run_system(system)
+    """B2 (0.2 s of it): every mode on the one pipeline (no mode on the readable model, no call handed to it)."""
+    run = HybridRun(System(parse_scene(_b2(**(B2_FULL if "full" in what else {})), {"duration": 0.2})))
+    result = run.run(time.perf_counter())
     assert result.stats["fallback_modes"] == {}
-    plans = list(_PLANS[system].values())
-    assert plans and all(p.kernel is not None and p.kernel.step_inputs is not None for p in plans)
+    assert {row["path"] for row in result.stats["paths"].values()} == {PIPELINE}
+    assert run.pipelines.pipes and all(mode.singular == 0 for mode in run.pipelines.pipes.values())
     assert np.all(result["contact.tool.F_n"][20:] > 10.0)  # [N] pressing throughout
 
 
 def test_a_free_arm_without_gravity_settles_to_the_commanded_orientation():
     """A UR5 without gravity or contact, the tip held at its start position and at an orientation 0.3 rad away from
     its start (about a skew axis): the energy-based moment and its damping turn it there (2.5e-5 rad left after
-    3 s, from 0.3 rad), on the compiled call."""
+    3 s, from 0.3 rad), on the one pipeline."""
     q0 = [0.1004, -1.3488, 2.3093, -2.5313, -1.5708, -1.4704]  # [rad] B2's start
     robot = Robot.load("ur5", tip="tool0")
     start = robot.frame_placement(np.array(q0), "tool0")
@@ -148,10 +148,9 @@ def test_a_free_arm_without_gravity_settles_to_the_commanded_orientation():
            "controller": {"kind": "task_pd", "kp": 2000.0, "kd": 100.0, "orientation": R_d.tolist(), "ko": 50.0,
                           "do": 2.0},
            "phase": [{"name": "hold", "reference": {"start": start.translation.tolist()}}]}
-    system = System(parse_scene(doc))
-    result = run_system(system)
+    result = run_system(System(parse_scene(doc)))
     assert result.stats["fallback_modes"] == {}
-    assert all(p.kernel is not None for p in _PLANS[system].values())
+    assert {row["path"] for row in result.stats["paths"].values()} == {PIPELINE}
     angle = [np.linalg.norm(pin.log3(R_d.T @ robot.frame_placement(q, "tool0").rotation)) for q in result["q"]]
     assert angle[0] == pytest.approx(0.3, abs=1e-12)
     assert angle[-1] < 1e-4  # [rad]

@@ -1,0 +1,68 @@
+"""The compiled call's small linear algebra (contactdyn.numerics.linalg) against numpy and scipy, and the dynamic laws'
+stacked pseudo-inverse (laws.controllers.dynamic.pseudo_inverse) against the per-sample one."""
+
+import numpy as np
+import pytest
+
+from contactdyn.numerics.linalg import cholesky, forward_solve, lu_solve, pinv
+
+
+@pytest.mark.parametrize("nv", [1, 2, 3, 5, 7])
+def test_pinv_is_numpys_pinv_with_its_rcond(nv):
+    """J⁺ of tip Jacobians (3, nv): full rank, a repeated column, a zero row, all zero; against numpy's SVD pinv."""
+    rng = np.random.default_rng(nv)
+    for k in range(60):
+        J = rng.normal(size=(3, nv)) * 10.0 ** rng.uniform(-3, 3)
+        if k % 3 == 1 and nv > 1:
+            J[:, 1] = 2.0 * J[:, 0]
+        if k % 4 == 2:
+            J[2] = 0.0
+        if k == 59:
+            J[:] = 0.0
+        ref = np.linalg.pinv(J, rcond=1e-10)
+        assert np.allclose(pinv(J), ref, rtol=1e-12, atol=1e-12 * (1.0 + np.abs(ref).max()))
+
+
+def test_pinv_near_a_singular_pose_keeps_the_small_singular_value():
+    """σ₂/σ₁ = 1e-8 (above the 1e-10 cut): J⁺ has the 1e8 entries numpy's has, to 1e-7 relative."""
+    u, _ = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))
+    v, _ = np.linalg.qr(np.random.default_rng(4).normal(size=(2, 2)))
+    J = u[:, :2] @ np.diag([1.0, 1e-8]) @ v.T
+    ref = np.linalg.pinv(J, rcond=1e-10)
+    assert np.abs(ref).max() > 1e7
+    assert np.allclose(pinv(J), ref, rtol=1e-7, atol=0.0)
+
+
+def test_lu_solve_is_a_solve_and_nan_when_singular():
+    rng = np.random.default_rng(5)
+    for n in (1, 3, 7, 12):
+        A, b = rng.normal(size=(n, n)), rng.normal(size=n)
+        assert np.allclose(A @ lu_solve(A, b), b, rtol=0.0, atol=1e-11 * np.abs(A).max() * (1 + np.abs(b).max()))
+    assert np.all(np.isnan(lu_solve(np.array([[1.0, 2.0], [2.0, 4.0]]), np.ones(2))))
+
+
+def test_cholesky_and_forward_solve():
+    """L Lᵀ = A and L Y = B to round-off, nan for an indefinite A."""
+    rng = np.random.default_rng(6)
+    for n in (1, 4, 7):
+        B = rng.normal(size=(n, n))
+        A = B @ B.T + 0.1 * np.eye(n)
+        L = cholesky(A)
+        assert np.allclose(np.tril(L), L) and np.allclose(L @ L.T, A, rtol=0, atol=1e-13 * np.abs(A).max())
+        R = rng.normal(size=(n, 3))
+        assert np.allclose(L @ forward_solve(L, R), R, rtol=0, atol=1e-12 * (1 + np.abs(R).max()))
+    assert np.all(np.isnan(cholesky(np.array([[1.0, 2.0], [2.0, 1.0]]))))
+
+
+def test_stacked_pseudo_inverse_is_each_sample_s():
+    """J⁺ over a stack equals each sample's J⁺ bitwise, and numpy's pinv (rcond 1e-10) to round-off, full rank or
+    not (a zero sample: J⁺ = 0)."""
+    from contactdyn.laws.controllers.dynamic import pseudo_inverse
+
+    rng = np.random.default_rng(5)
+    J = rng.normal(size=(40, 3, 5))
+    for stack in (J, np.concatenate((J, np.zeros((1, 3, 5))))):
+        want = np.array([pseudo_inverse(j) for j in stack])
+        got = pseudo_inverse(stack)
+        assert np.array_equal(got, want)
+        assert np.allclose(got, np.linalg.pinv(stack, rcond=1e-10), rtol=0, atol=1e-12)
