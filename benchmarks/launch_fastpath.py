@@ -3,9 +3,10 @@
     PYTHONPATH=. python3 benchmarks/launch_fastpath.py [--repeats 5] [scene ...]
 
 For each scene (default: the two writers, whose pencil sticks, then breaks away into a 2-D
-slide from rest): the run as it is now (every mode compiled, the launch direction solved per
-call on the plan's KKT system) and the run as it was before (the same, but the launching
-modes declined, so ``System.evaluate`` integrates them: what the declared gap did), and the
+slide from rest): the run as it is (every mode on the one pipeline's compiled call, the launch
+direction solved per call on its KKT system) and the run as it was before the launch was compiled
+(the same, but the launching modes declined, :func:`motor_fastpath.run` with ``decline``, so
+``System.evaluate`` integrates them: what the declared gap did), and the
 hand-written closed-form B1 (``benchmarks/b1_reference.py`` at rtol 1e-8), interleaved,
 ``--repeats`` times each. Reported: the median wall per simulated second [ms/s] (building the
 system and the output included), its ratio to the hand-written B1's, and the force error
@@ -29,19 +30,20 @@ from motor_fastpath import force_error  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn.model.friction import launching  # noqa: E402
-from contactdyn.model.paths import Gap  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 
 SCENES = ["case2_writer5dof", "case2_writer_ur5"]
-#: the gap this branch removed: a mode with a 2-D slide launching from rest runs on System.evaluate
-BEFORE = Gap("benchmark", "a 2-D slip launching from rest (as before)", "while it launches",
-             lambda modes, phase: any(launching(m) for m in modes))
 OUT = Path(__file__).resolve().parent / "out" / "launch_fastpath.json"
+
+
+def launches(modes, phase) -> bool:
+    """The gap a former branch removed: a mode with a 2-D slide launching from rest ran on System.evaluate."""
+    return any(launching(m) for m in modes)
 
 
 def run(scene: str, before: bool, overrides: dict | None = None):
     """The Result of building and running the scene (``before``: the launching modes declined)."""
-    return motor_fastpath.run(scene, before, overrides, gap=BEFORE)
+    return motor_fastpath.run(scene, before, overrides, decline=launches)
 
 
 def measure(scene: str, repeats: int) -> dict:
