@@ -44,7 +44,7 @@ PHASE_TIMES = (0.5, 2.0)  #: [s] one state in the approach, one in the push
 
 
 def eigenvalues(at: float, n_show: int = 4) -> list[complex]:
-    """The fastest eigenvalues [1/s] of the compiled call's (the one pipeline's) finite-difference Jacobian at ``at``."""
+    """The fastest eigenvalues [1/s] of the one pipeline's finite-difference Jacobian at ``at``."""
     system, modes, phase, t, x = _mode_at(load_scene(SCENE), at)
     lam = jacobian_eigenvalues(PipelineMode(Pipeline(system, modes, phase)).rhs, t, x)
     return sorted(lam, key=lambda w: -abs(w))[:n_show]

@@ -306,7 +306,7 @@ def case(name: str):
 
 
 def states(x0: np.ndarray, count: int, seed: int = 7) -> list[np.ndarray]:
-    """x0 and count − 1 random states near it (x0 + 1e-3 (1 + |x0|) N(0, 1), as ModePlan.check_at)."""
+    """x0 and count − 1 random states near it (x0 + 1e-3 (1 + |x0|) N(0, 1), as paths.disagreement perturbs)."""
     rng = np.random.default_rng(seed)
     return [x0.copy()] + [x0 + 1e-3 * (1.0 + np.abs(x0)) * rng.normal(size=x0.size) for _ in range(count - 1)]
 

@@ -1,4 +1,4 @@
-"""Cost of one right-hand-side evaluation (the function the integrator calls): the compiled call against System.evaluate.
+"""Cost of one right-hand-side evaluation (what the integrator calls): the compiled call against System.evaluate.
 
     python benchmarks/rhs_cost.py [SCENE[@T] ...] [--calls 20000] [--out FILE.csv]
     python benchmarks/rhs_cost.py SCENE[@T] ... --baseline TREE [--repeats 5] [--out FILE.csv]
