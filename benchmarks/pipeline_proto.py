@@ -65,8 +65,8 @@ def _carried_pd(doc: dict) -> None:
 
 
 def _tool_pd(doc: dict, circle: bool = False) -> None:
-    """A pencil writer under task PD holding its tool axis (the twin's compiled operational call: the moment is not
-    affine), its circle made a straight trapezoid (``circle``: kept, and a straight move after it)."""
+    """A pencil writer under task PD holding its tool axis (the deleted twin needed a compiled operational call:
+    the moment is not affine), its circle made a straight trapezoid (``circle``: kept, and a straight move after it)."""
     ctl = doc["controller"]
     doc["controller"] = {"kind": "task_pd", "kp": ctl["kp"], "kd": ctl["kd"], "axes": ctl["axes"],
                          "tool_axis": ctl["tool_axis"], "tool_target": ctl["tool_target"], "ko": 5.0, "do": 0.5,
