@@ -18,7 +18,7 @@ contactdyn at rtol 1e-12, atol 1e-14 (the physics must agree before anything is 
 Cost: per rtol (atol = rtol / 100 on both sides, as b2.toml's 1e-8 / 1e-10), interleaved in this process (every
 variant once per repeat after one untimed run; medians of process CPU time [s] and wall [s]): the floor (its model
 built once); ``contactdyn.simulate.simulate`` on benchmarks/b2.toml (the scene parsed once per rtol; building the
-System — URDF, plans — is inside, as a user's call pays it); and ``run_system`` on a System built once. The ratio
+System — URDF, pipelines — is inside, as a user's call pays it); and ``run_system`` on a System built once. The ratio
 contactdyn / floor at max |ΔF_n| = 1e-2 N, read two ways (the errors are not monotone in rtol at loose
 tolerances): each side's cost interpolated on log-log axes between the loosest rtol from which every tighter run is
 under 1e-2 N and the next looser one; and each side's cheapest run under 1e-2 N. The floor's column "output" is its
@@ -171,7 +171,7 @@ def measure(rtols: list[float], repeats: int, ref: dict) -> list[dict]:
         variants = {"floor": lambda r=rtol, a=atol: floor_run(r, a),
                     "contactdyn simulate": lambda s=scene: channels(simulate(s)),
                     "contactdyn run_system": lambda s=system: channels(run_system(s))}
-        for call in variants.values():  # untimed: compiled code loaded, plans built
+        for call in variants.values():  # untimed: compiled code loaded, pipelines packed
             call()
         times = interleaved(variants, repeats)
         for name, tm in times.items():

@@ -24,7 +24,8 @@ from scenes import CHECK, REFERENCE, errors
 from timing import interleaved, write_report
 
 from contactdyn import simulate
-from contactdyn.compiled.rhsplan import ModePlan
+from contactdyn.hybrid.pipeline_mode import PipelineMode
+from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.numerics.integrators import jacobian_eigenvalues
 from contactdyn.scene.scene_file import load_scene
 
@@ -43,9 +44,9 @@ PHASE_TIMES = (0.5, 2.0)  #: [s] one state in the approach, one in the push
 
 
 def eigenvalues(at: float, n_show: int = 4) -> list[complex]:
-    """The fastest eigenvalues [1/s] of the compiled right-hand side's finite-difference Jacobian at ``at``."""
+    """The fastest eigenvalues [1/s] of the one pipeline's finite-difference Jacobian at ``at``."""
     system, modes, phase, t, x = _mode_at(load_scene(SCENE), at)
-    lam = jacobian_eigenvalues(ModePlan(system, modes, phase).rhs, t, x)
+    lam = jacobian_eigenvalues(PipelineMode(Pipeline(system, modes, phase)).rhs, t, x)
     return sorted(lam, key=lambda w: -abs(w))[:n_show]
 
 

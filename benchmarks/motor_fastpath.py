@@ -2,10 +2,11 @@
 
     PYTHONPATH=. python3 benchmarks/motor_fastpath.py [--repeats 3] [--error] [scene ...]
 
-For each scene with DC motors or elastic transmissions: the run as it is (compiled plans
-wherever no part declares a gap) and the same run with every plan declined (the readable
-``System.evaluate`` integrates every mode, which is what a motor scene did before motors
-were compiled), interleaved, ``--repeats`` times each; the median walls [s] and their ratio.
+For each scene with DC motors or elastic transmissions: the run as it is (every mode the one
+pipeline packs on its compiled call) and the same run with ``LivePipelines.use = False`` (the
+readable ``System.evaluate`` integrates every mode, which is what a motor scene did before motors
+were compiled), interleaved after an untimed run of each, ``--repeats`` times each; the median walls [s] and
+their ratio.
 With ``--error``: both default runs' force error max |F_n − F_n,ref| [N] against a compiled
 reference at rtol 1e-11, atol 1e-13, away from ±2 samples of every event (the two paths
 differ by round-off only, so the errors should agree). Writes benchmarks/out/motor_fastpath.json.
@@ -23,24 +24,33 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
-from contactdyn.model.paths import Gap  # noqa: E402
+from contactdyn.model.paths import LivePipelines  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
 
 SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
           "case3_b_force", "case3_b_force_varied"]
-READABLE = Gap("benchmark", "readable model (benchmark)", "always", lambda modes, phase: True)
 OUT = Path(__file__).resolve().parent / "out" / "motor_fastpath.json"
 
 
-def run(scene: str, readable: bool, overrides: dict | None = None, gap: Gap = READABLE):
-    """Build the scene's system and run it (with ``gap`` declining every mode it matches if
-    ``readable``: those run on the readable model); the Result."""
+def run(scene: str, readable: bool, overrides: dict | None = None, decline=None):
+    """Build the scene's system and run it; the Result. ``readable``: every mode on the readable model
+    (``LivePipelines.use`` off), or with ``decline`` (a predicate of (modes, phase)) only the modes it matches
+    (``LivePipelines.declined`` answers for them, reason "benchmark"); both restored after."""
     system = System(load_scene(scene, overrides or {}))
-    if readable:
-        system.fast_path_gaps = [gap]
-    return run_system(system)
+    if not readable:
+        return run_system(system)
+    declined = LivePipelines.declined
+    if decline is None:
+        LivePipelines.use = False
+    else:
+        LivePipelines.declined = lambda pipes, modes, phase: ("benchmark" if decline(modes, phase)
+                                                              else declined(pipes, modes, phase))
+    try:
+        return run_system(system)
+    finally:
+        LivePipelines.use, LivePipelines.declined = True, declined
 
 
 def force_error(result, ref) -> float:
@@ -56,8 +66,10 @@ def force_error(result, ref) -> float:
 
 
 def measure(scene: str, repeats: int, error: bool) -> dict:
-    times = interleaved({readable: lambda readable=readable: run(scene, readable) for readable in (False, True)},
-                        repeats)
+    variants = {readable: lambda readable=readable: run(scene, readable) for readable in (False, True)}
+    for call in variants.values():
+        call()  # untimed: numba's compile (or cache load) of the pipeline for this scene's laws
+    times = interleaved(variants, repeats)
     results = {readable: t.last for readable, t in times.items()}
     row = {"scene": scene, "compiled_s": times[False].wall, "readable_s": times[True].wall,
            "compiled_modes": results[False].stats["compiled_modes"],

@@ -1,12 +1,13 @@
-"""Cost of a run's output per sample: the plans' batched output against the readable model per sample.
+"""Cost of a run's output per sample: the compiled call's batched output against the readable model per sample.
 
     PYTHONPATH=. python3 benchmarks/output_cost.py [SCENE ...] [--repeats 5] [--out FILE.json]
 
 Per scene, one run records its segments; then, interleaved per repeat in one process, the
 output pass (:func:`~contactdyn.output.channels.sample_segments`) over those segments twice: with
-the plans' batched output (:func:`~contactdyn.compiled.samples.plan_samples`, as the run does) and
-with every sample from ``System.evaluate(full=True)`` (what motor, elastic and force-reading
-phases did before). CPU µs per sample, medians over the repeats, their ratio, the largest
+the one pipeline's batched output (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.samples`, as
+the run does) and with every sample from ``System.evaluate(full=True)``
+(:func:`~contactdyn.output.samples.evaluated_samples`, what a mode on the readable model gets; the
+states are interpolated alike in both). CPU µs per sample, medians over the repeats, their ratio, the largest
 relative difference of the channels between the two, and the share of the run's CPU time
 the output takes. The hand-written B1 (:mod:`b1_reference`) runs in the same loop so the
 per-sample cost can be read against its cost per simulated second.
@@ -30,19 +31,20 @@ use_tree()
 import b1_reference  # noqa: E402
 import numpy as np  # noqa: E402
 
-import contactdyn.compiled.rhsplan as rhsplan  # noqa: E402
 import contactdyn.hybrid.loop as hybrid  # noqa: E402
 from contactdyn import simulate  # noqa: E402
-from contactdyn.compiled.samples import evaluated_samples  # noqa: E402
+from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
 from contactdyn.output.channels import sample_segments  # noqa: E402
+from contactdyn.output.samples import evaluated_samples  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 
 SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_force", "case3_b_position",
           "case3_b_force", "b1"]
 
 
-def _readable(plan, ts, X):
-    return evaluated_samples(plan.system, ts, X, plan.modes, plan.phase)
+def _readable(mode, ts, X, modes=None):
+    """PipelineMode.samples' stand-in: every sample from System.evaluate(full=True)."""
+    return evaluated_samples(mode.system, ts, X, modes if modes is not None else mode.modes, mode.phase)
 
 
 def recorded_run(name: str):
@@ -66,13 +68,13 @@ def recorded_run(name: str):
 
 def _output(system, segments, grid, readable: bool) -> dict:
     """The channels of the output pass, batched or readable."""
-    batched = rhsplan.plan_samples
+    batched = PipelineMode.samples
     if readable:
-        rhsplan.plan_samples = _readable
+        PipelineMode.samples = _readable
     try:
         return sample_segments(system, segments, grid, {"singular_solves": 0})
     finally:
-        rhsplan.plan_samples = batched
+        PipelineMode.samples = batched
 
 
 def _difference(a: dict, b: dict) -> float:

@@ -1,17 +1,20 @@
-"""Whole runs on the one pipeline (``LivePipelines.prefer``) against the same runs on the twin's plans, in one process.
+"""Whole runs' cost per simulated second against the hand-written B1 floor, in one process; optionally against the
+readable model for agreement.
 
-    PYTHONPATH=. python3 benchmarks/pipeline_loop.py [SCENE ...] [--repeats 3] [--set KEY=VALUE ...] [--out FILE.json]
+    PYTHONPATH=. python3 benchmarks/pipeline_loop.py [SCENE ...] [--repeats 3] [--readable] [--set KEY=VALUE ...]
+        [--out FILE.json]
 
 Per scene (:data:`SCENES`: every scene of ``sims/``, ``benchmarks/hard/``, ``examples/`` and ``benchmarks/b2.toml``,
 at its own duration and settings; ``--set`` overrides a key in every one, e.g. ``solver.rtol=1e-11``): the CPU median
-of a whole run (System built, run, output sampled; the scene file read once before) with the switch off (every mode
-on the twin's plan where it has one: the default) and on (every mode ``pack.unsupported`` accepts on the pipeline: its
-compiled steps, event values and output samples; a mode it declines keeps its plan or the readable model), and of the
-hand-written closed-form B1 (:mod:`b1_reference`, 2 s simulated: issue 29's floor, as ``scene_cost.py`` times it),
-timed interleaved after an untimed run of each; the cost per simulated second, the ratios on/off and on/floor, the
-integration steps of each, the paths the modes of each run took (per mode in the JSON; the table counts the "on"
-run's modes per path), and the run's agreement: the largest relative difference over all channels (max |on − off| /
-max |off| per channel) and its channel, the events' kinds the same and the largest difference of their times [s].
+of a whole run as it is (System built, run, output sampled; the scene file read once before: every mode the one
+pipeline packs on its compiled call, its compiled steps, event values and output samples, the others on the readable
+model) and of the hand-written closed-form B1 (:mod:`b1_reference`, 2 s simulated: issue 29's floor, as
+``scene_cost.py`` times it), timed interleaved after an untimed run of each; the cost per simulated second, its ratio
+to the floor's, the integration steps and the paths the modes took (per mode in the JSON; the table counts them per
+path). ``--readable``: the same run with ``LivePipelines.use = False`` (every mode on ``System.evaluate``, slow: for
+short scenes) joins the interleaved variants: its cost, the ratio compiled/readable, and the runs' agreement: the
+largest relative difference over all channels (max |compiled − readable| / max |readable| per channel) and its
+channel, the events' kinds the same and the largest difference of their times [s].
 """
 
 from __future__ import annotations
@@ -39,16 +42,16 @@ SCENES = [*(str(p.relative_to(ROOT)) for folder in ("sims", "benchmarks/hard", "
             for p in sorted((ROOT / folder).glob("*.toml"))), "benchmarks/b2.toml"]
 
 
-def run(scene, prefer: bool):
-    """One whole run of ``scene`` with the switch set (restored after)."""
-    LivePipelines.prefer = prefer
+def run(scene, compiled: bool = True):
+    """One whole run of ``scene`` (``compiled`` False: every mode on the readable model; the switch restored after)."""
+    LivePipelines.use = compiled
     try:
         return run_system(System(scene))
     finally:
-        LivePipelines.prefer = False
+        LivePipelines.use = True
 
 
-def agreement(on, off) -> dict:
+def agreement(on, off) -> dict:  # (on: the compiled run; off: the readable one)
     """The largest relative channel difference (and where), the events' kinds alike, their times' largest gap [s]."""
     worst, where = 0.0, ""
     for key, ref in off.channels.items():
@@ -70,27 +73,29 @@ def paths(result) -> dict:
     return {mode: r["path"] for mode, r in result.stats["paths"].items()}
 
 
-def measure(path: str, repeats: int, overrides: dict | None = None) -> dict:
+def measure(path: str, repeats: int, overrides: dict | None = None, readable: bool = False) -> dict:
     scene = load_scene(ROOT / path, overrides)
-    variants = {"off": lambda: run(scene, False), "on": lambda: run(scene, True), "floor": b1_reference.run}
+    variants = {"compiled": lambda: run(scene), "floor": b1_reference.run}
+    if readable:
+        variants["readable"] = lambda: run(scene, False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for call in variants.values():
             call()  # untimed: compiles, caches
         times = interleaved(variants, repeats)
-    off, on = times["off"], times["on"]
-    T = scene.duration
+    on, T = times["compiled"], scene.duration
     floor = times["floor"].cpu / b1_reference.T_END  # [s CPU per simulated s] the hand-written B1
-    return {"scene": path, "duration_s": T, "off_cpu_s": off.cpu, "on_cpu_s": on.cpu,
-            "off_per_sim_s": off.cpu / T, "on_per_sim_s": on.cpu / T, "ratio_on_off": on.cpu / off.cpu,
-            "floor_per_sim_s": floor, "on_x_floor": on.cpu / T / floor, "off_x_floor": off.cpu / T / floor,
-            "off_steps": off.last.stats["steps"], "on_steps": on.last.stats["steps"],
-            "on_paths": paths(on.last), "off_paths": paths(off.last),
-            **agreement(on.last, off.last)}
+    row = {"scene": path, "duration_s": T, "cpu_s": on.cpu, "per_sim_s": on.cpu / T, "floor_per_sim_s": floor,
+           "x_floor": on.cpu / T / floor, "steps": on.last.stats["steps"], "paths": paths(on.last)}
+    if readable:
+        off = times["readable"]
+        row.update({"readable_cpu_s": off.cpu, "readable_per_sim_s": off.cpu / T, "ratio_compiled_readable":
+                    on.cpu / off.cpu, "readable_steps": off.last.stats["steps"], **agreement(on.last, off.last)})
+    return row
 
 
 def path_counts(by_mode: dict) -> str:
-    """'one pipeline 3, compiled call 1': how many modes took each path."""
+    """'compiled call 3, readable model 1': how many modes took each path."""
     return ", ".join(f"{path} {n}" for path, n in Counter(by_mode.values()).most_common())
 
 
@@ -98,26 +103,32 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="*", default=SCENES)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--readable", action="store_true", help="also every run on the readable model (agreement)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key in every scene")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "out" / "pipeline_loop.json"))
     args = p.parse_args(argv)
     overrides = dict(parse_override(text) for text in args.set)
     rows = []
-    print("| scene | off CPU/sim s | on CPU/sim s | on/off | on/floor | steps off/on | max rel diff (channel) | events "
-          "| max Δt [s] | on paths (modes) |\n|---|---|---|---|---|---|---|---|---|---|")
+    extra = " readable CPU/sim s | compiled/readable | max rel diff (channel) | events | max Δt [s] |"
+    print("| scene | CPU/sim s | floor CPU/sim s | × floor | steps | paths (modes) |" + (extra if args.readable else "")
+          + "\n|---|---|---|---|---|---|" + ("---|---|---|---|---|" if args.readable else ""))
     for path in args.scenes:
         try:
-            r = measure(path, args.repeats, overrides)
+            r = measure(path, args.repeats, overrides, args.readable)
         except SimulationError as err:  # (e.g. a step budget under --set): the row says so, the others run
             rows.append({"scene": path, "error": str(err)})
             print(f"| {Path(path).stem} | failed: {err} |", flush=True)
             continue
         rows.append(r)
-        print(f"| {Path(path).stem} | {r['off_per_sim_s']:.4f} | {r['on_per_sim_s']:.4f} | {r['ratio_on_off']:.2f} | "
-              f"{r['on_x_floor']:.2f} | {r['off_steps']}/{r['on_steps']} | {r['max_rel_diff']:.1e} ({r['channel']}) | "
-              f"{r['events']}{'' if r['events_same'] else ' DIFFER'} | {r['max_event_dt_s']:.1e} | "
-              f"{path_counts(r['on_paths'])} |", flush=True)
-    write_report(Path(args.out), {"repeats": args.repeats, "overrides": overrides, "cpu": "process_time, median",
+        line = (f"| {Path(path).stem} | {r['per_sim_s']:.4f} | {r['floor_per_sim_s']:.4f} | {r['x_floor']:.2f} | "
+                f"{r['steps']} | {path_counts(r['paths'])} |")
+        if args.readable:
+            line += (f" {r['readable_per_sim_s']:.4f} | {r['ratio_compiled_readable']:.3f} | {r['max_rel_diff']:.1e} "
+                     f"({r['channel']}) | {r['events']}{'' if r['events_same'] else ' DIFFER'} | "
+                     f"{r['max_event_dt_s']:.1e} |")
+        print(line, flush=True)
+    write_report(Path(args.out), {"repeats": args.repeats, "overrides": overrides, "readable": args.readable,
+                                  "cpu": "process_time, median",
                                   "floor": "b1_reference.run (hand-written B1), CPU per simulated s"}, rows)
     return 0
 

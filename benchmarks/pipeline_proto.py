@@ -65,8 +65,8 @@ def _carried_pd(doc: dict) -> None:
 
 
 def _tool_pd(doc: dict, circle: bool = False) -> None:
-    """A pencil writer under task PD holding its tool axis (the twin's compiled operational call: the moment is not
-    affine), its circle made a straight trapezoid (``circle``: kept, and a straight move after it)."""
+    """A pencil writer under task PD holding its tool axis (the deleted twin needed a compiled operational call:
+    the moment is not affine), its circle made a straight trapezoid (``circle``: kept, and a straight move after it)."""
     ctl = doc["controller"]
     doc["controller"] = {"kind": "task_pd", "kp": ctl["kp"], "kd": ctl["kd"], "axes": ctl["axes"],
                          "tool_axis": ctl["tool_axis"], "tool_target": ctl["tool_target"], "ko": 5.0, "do": 0.5,
@@ -306,7 +306,7 @@ def case(name: str):
 
 
 def states(x0: np.ndarray, count: int, seed: int = 7) -> list[np.ndarray]:
-    """x0 and count − 1 random states near it (x0 + 1e-3 (1 + |x0|) N(0, 1), as ModePlan.check_at)."""
+    """x0 and count − 1 random states near it (x0 + 1e-3 (1 + |x0|) N(0, 1), as paths.disagreement perturbs)."""
     rng = np.random.default_rng(seed)
     return [x0.copy()] + [x0 + 1e-3 * (1.0 + np.abs(x0)) * rng.normal(size=x0.size) for _ in range(count - 1)]
 

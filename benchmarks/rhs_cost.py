@@ -1,4 +1,4 @@
-"""Cost of one right-hand-side evaluation (the function the integrator calls).
+"""Cost of one right-hand-side evaluation (what the integrator calls): the compiled call against System.evaluate.
 
     python benchmarks/rhs_cost.py [SCENE[@T] ...] [--calls 20000] [--out FILE.csv]
     python benchmarks/rhs_cost.py SCENE[@T] ... --baseline TREE [--repeats 5] [--out FILE.csv]
@@ -6,8 +6,10 @@
 Default scene: b1 (2 DOF + one deformable frictional contact: a bonded model-(b) surface
 mass and sliding Coulomb friction), the budget case (≤ 10 µs median). Each scene is
 built, its initial modes made consistent, and the integrator's function called on the
-states of a short run (so the timing covers real states, not one cached point). Reports
-the median and the 10th/90th percentiles over batches of calls, wall and CPU time, and
+states of a short run (so the timing covers real states, not one cached point): the one
+pipeline's compiled call as the loop wraps it (:class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`'s
+``rhs``; a mode the pipeline does not pack: the readable model's ``System.rhs``, its ``path`` says why).
+Reports the median and the 10th/90th percentiles over batches of calls, wall and CPU time, and
 the cost of the full ``System.evaluate`` (all diagnostics) for comparison.
 
 ``SCENE@T``: the mode the run is in at time T [s] (e.g. ``case3_a_position@2`` for the
@@ -32,7 +34,9 @@ use_tree()
 
 import numpy as np  # noqa: E402
 
-from contactdyn.compiled.rhsplan import ModePlan  # noqa: E402
+from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
+from contactdyn.model.pipeline.pack import unsupported  # noqa: E402
+from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 from contactdyn.scene.scene_file import Scene, load_scene  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
@@ -57,15 +61,14 @@ def _mode_at(scene: Scene, at: float | None):
     if at is None:
         system, modes, phase, x0 = prepare(scene)
         return system, modes, phase, phase.t_start, x0
-    from contactdyn.compiled.rhsplan import _PLANS
+    from contactdyn.hybrid.loop import HybridRun
     from contactdyn.model.system import System
-    from contactdyn.simulate import run_system
 
     system = System(load_scene(scene.file, {"duration": at}) if scene.file else scene)
-    run_system(system)
-    plan = max(_PLANS[system].values(), key=lambda p: -1.0 if p.ring[3][0] is None else p.ring[3][0])
-    t, x, _, _ = plan.ring[3]
-    return system, plan.modes, plan.phase, t, x.copy()
+    run = HybridRun(system)
+    run.run(time.perf_counter())
+    seg = max((s for s in run.segments if s.t1 > s.t0), key=lambda s: s.t1)  # the last segment of nonzero length
+    return system, list(seg.modes), seg.phase, seg.t1, np.array(seg.sol(seg.t1), dtype=float)
 
 
 def measure(scene: str | Scene, calls: int = 20000, at: float | None = None) -> dict:
@@ -74,8 +77,8 @@ def measure(scene: str | Scene, calls: int = 20000, at: float | None = None) -> 
     scene = load_scene(scene) if isinstance(scene, str) else scene
     scene_name = scene.name if at is None else f"{scene.name}@{at:g}"
     system, modes, phase, t0, x0 = _mode_at(scene, at)
-    plan = ModePlan(system, modes, phase)
-    f = plan.rhs if plan.ok else system.rhs(modes, phase)
+    why = unsupported(system, modes, phase)
+    f = system.rhs(modes, phase) if why else PipelineMode(Pipeline(system, modes, phase)).rhs
     # states along a short stretch of the real trajectory (this mode's physics only)
     from scipy.integrate import solve_ivp
 
@@ -92,7 +95,7 @@ def measure(scene: str | Scene, calls: int = 20000, at: float | None = None) -> 
     full_cpu = _batches(lambda t, x: system.evaluate(t, x, modes, phase), states, max(calls // 10, BATCHES),
                         time.process_time)
     q = statistics.quantiles(wall, n=10)
-    return {"scene": scene_name, "n_states": system.n, "path": "compiled" if plan.ok else f"evaluate ({plan.reason})",
+    return {"scene": scene_name, "n_states": system.n, "path": f"evaluate ({why})" if why else "compiled",
             "rhs_median_us": statistics.median(wall) * 1e6,
             "rhs_p10_us": q[0] * 1e6, "rhs_p90_us": q[-1] * 1e6, "rhs_cpu_median_us": statistics.median(cpu) * 1e6,
             "evaluate_median_us": statistics.median(full) * 1e6,

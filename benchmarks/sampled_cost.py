@@ -1,6 +1,6 @@
 """What a sampled controller costs: each scene continuous against its controller sampled at a rate (1 kHz).
 
-    PYTHONPATH=. python3 benchmarks/sampled_cost.py [--repeats 5] [--rate 1000] [--prefer] [--profile] [scene ...]
+    PYTHONPATH=. python3 benchmarks/sampled_cost.py [--repeats 5] [--rate 1000] [--profile] [scene ...]
 
 Per scene (default: b1, case1_cart, case3_a_force), the continuous run and the same scene with
 ``controller.sample_rate`` set (every phase's controller sampled: a zero-order hold), interleaved repeat by repeat in
@@ -19,13 +19,13 @@ surface mass, benchmarks/stiff_force.toml) can a sampled run cost little more th
 
 The CPU per sample beyond the continuous run is split into: ``steps`` (the extra steps at the continuous run's CPU
 per step: output and set-up included, so an upper estimate), ``take`` (the sample itself: the measurement through
-the readable model or the plan, the sensors, the law; timed around SampledPhases.take) and ``rest`` (what remains:
-the re-evaluation of f after the jump, the events across it, the pieces' bookkeeping and output).
-``--prefer``: both runs with ``LivePipelines.prefer = True`` (every mode ``pack.unsupported`` accepts on the one
-pipeline rather than the twin's plan; the paths column says where each went).
+the readable model or the compiled call, the sensors, the law; timed around SampledPhases.take) and ``rest`` (what
+remains: the re-evaluation of f after the jump, the events across it, the pieces' bookkeeping and output).
+Every mode the one pipeline packs runs on its compiled call, the others on the readable model (the paths column
+says where each went).
 ``--profile``: cProfile of the first scene's sampled run (the 25 costliest functions, cumulative).
 
-Writes benchmarks/out/sampled_cost.json and .csv (sampled_cost_prefer.* with ``--prefer``).
+Writes benchmarks/out/sampled_cost.json and .csv.
 """
 
 from __future__ import annotations
@@ -45,7 +45,6 @@ from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn import simulate  # noqa: E402
 from contactdyn.hybrid.sampling import SampledPhases  # noqa: E402
-from contactdyn.model.paths import LivePipelines  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
 HERE = Path(__file__).parent
@@ -116,11 +115,9 @@ def main() -> None:
     ap.add_argument("scenes", nargs="*", default=list(SCENES))
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--rate", type=float, default=1000.0, help="[Hz] the sample rate")
-    ap.add_argument("--prefer", action="store_true", help="every run with LivePipelines.prefer (the one pipeline)")
     ap.add_argument("--profile", action="store_true")
     args = ap.parse_args()
-    LivePipelines.prefer = args.prefer  # for the whole process: every run, the untimed ones and the profile alike
-    stem = "sampled_cost_prefer" if args.prefer else "sampled_cost"
+    stem = "sampled_cost"
     SampledPhases.take = _timed_take(SampledPhases.take)
     rows = []
     print(f"{'scene':16s} {'cont. CPU [s]':>13s} {'sampled [s]':>11s} {'ratio':>6s} {'steps c/s':>11s} "
@@ -135,7 +132,7 @@ def main() -> None:
               f"{c['steps']:5d}/{s['steps']:<5d} {row['us_per_sample']:9.0f} {part['steps']:6.0f} {part['take']:5.0f} "
               f"{part['rest']:6.0f} {row['rhs_per_sample']:12.1f} "
               f"{row['difference']['tip_m']:12.3g} {row['difference']['force_N']:10.3g}  {', '.join(s['paths'])}")
-    write_report(OUT / f"{stem}.json", {"rate_hz": args.rate, "repeats": args.repeats, "prefer": args.prefer}, rows)
+    write_report(OUT / f"{stem}.json", {"rate_hz": args.rate, "repeats": args.repeats}, rows)
     with (OUT / f"{stem}.csv").open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["scene", "rate_hz", "cpu_continuous_s", "cpu_sampled_s", "ratio", "steps_continuous",

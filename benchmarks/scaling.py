@@ -14,8 +14,8 @@ Three series, each a family of scenes that differ in one thing:
 - **chain stages** (1–4): B1 with its surface a chain of N stage–mass pairs
   (k·N, b·N, m/N each: the same static stiffness and mass, faster internal modes).
 
-Per row: the compiled plan's rhs per call (or System.evaluate's where the plan declines:
-``path``), System.evaluate per call, the raw Pinocchio calls of the plan per call
+Per row: the compiled call's rhs per call (the one pipeline's; System.evaluate's where it declines:
+``path``), System.evaluate per call, the raw Pinocchio calls of the same terms per call
 (``benchmarks/robot_calls.py``; DOF series) — medians over batches on states of a short run
 (``benchmarks/rhs_cost.py``), in process CPU time, the minimum over batches (contention only
 adds; the medians are in the JSON) — and CPU ms per simulated second of the
@@ -146,7 +146,7 @@ def plot(rows: list[dict], path: Path) -> None:
         sel = [r for r in rows if r["series"] == name]
         x = [r["x"] for r in sel]
         ax = axes[0, k]
-        ax.plot(x, [r["rhs_us"] for r in sel], "o-", label="rhs call (compiled plan)")
+        ax.plot(x, [r["rhs_us"] for r in sel], "o-", label="rhs call (compiled call)")
         ax.plot(x, [r["evaluate_us"] for r in sel], "s--", label="System.evaluate")
         if name == "dof":
             ax.plot(x, [r["pinocchio_us"] for r in sel], "^:", label="Pinocchio terms alone")

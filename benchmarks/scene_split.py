@@ -1,5 +1,5 @@
 """Where a scene's run goes: the right-hand side, the step ends' event tests, the core and its restarts,
-the output, the plans.
+the output, building the modes' pipelines.
 
     PYTHONPATH=. python3 benchmarks/scene_split.py [SCENE ...] [--repeats 5] [--out FILE.json]
 
@@ -8,14 +8,16 @@ Per scene, CPU medians over ``--repeats`` runs of ``simulate(load_scene(name))``
 - run [ms]: the whole run, uninstrumented;
 - then one instrumented run (each piece wrapped by a CPU timer, ~0.5 µs a reading; the sum of the
   pieces therefore exceeds the uninstrumented run by that times the calls, reported as ``timer``):
-  rhs = inside the segment's right-hand side (the plan's call, and a stuck contact's cone margin
-  sampled at each stage) and its compiled steps (:mod:`contactdyn.compiled.plan_steps`, 12 calls each); events =
+  rhs = inside the segment's right-hand side (the one pipeline's compiled call, and a stuck contact's cone margin
+  sampled at each stage) and its compiled steps (:mod:`contactdyn.hybrid.steps`, 12 calls each); events =
   the events' values at the step ends and their location (``dop853._EventWatch.stop``); stepping = the
   rest of the integration (the core's arithmetic, its callbacks, the restarts after a rejected step; the
   compiled steps' control); output = sampling the channels (``HybridRun._result``);
-  plans = building the modes' plans; other = the rest (loading, transitions, segment set-up);
+  pipelines = a mode's pipeline where the run starts it (``LivePipelines.mode``: packed and checked against
+  the readable model the first time, looked up after); other = the rest (loading, transitions, segment set-up);
 - steps, rejected steps, runs of the compiled core (one per segment, one more per rejection, one
-  more where the step after a retry would grow).
+  more where the step after a retry would grow; 0 where a compiled mode takes every step in one compiled call,
+  :mod:`contactdyn.hybrid.steps`, which does not run the core).
 
 Only DOP853C's segments are split (a segment on LSODA, the 2-D launch or a slide's finish, counts under other).
 Writes benchmarks/out/scene_split.json.
@@ -33,6 +35,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from contactdyn.hybrid import loop as hybrid  # noqa: E402
+from contactdyn.model.paths import LivePipelines  # noqa: E402
 from contactdyn.numerics import dop853  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import simulate  # noqa: E402
@@ -82,7 +85,7 @@ def instrumented(name: str) -> dict:
     calls = {"rhs": 0}
     inside = [False]  #: within a segment's integration (the interpolants the output builds later call f too)
 
-    def timed(fun, per_call: int):
+    def timed(fun, per_call: int):  # (a compiled step keeps its ``usable``)
         def f(*args):
             if not inside[0]:
                 return fun(*args)
@@ -92,9 +95,11 @@ def instrumented(name: str) -> dict:
             finally:
                 split.s["rhs"] = split.s.get("rhs", 0.0) + CLOCK() - t0
                 calls["rhs"] += per_call
+        if hasattr(fun, "usable"):
+            f.usable = fun.usable
         return f
 
-    def timed_solve(fun, *args, step=None, **kw):  # the right-hand side as the core sees it, and a plan's steps
+    def timed_solve(fun, *args, step=None, **kw):  # the rhs as the core sees it, and a compiled mode's steps
         t0, inside[0] = CLOCK(), True
         try:
             return solve(timed(fun, 1), *args, step=timed(step, 12) if step else None, **kw)
@@ -105,7 +110,7 @@ def instrumented(name: str) -> dict:
     split.wrap(dop853._EventWatch, "stop", "events")
     split.wrap(dop853._Core, "run", "core_runs")
     split.wrap(hybrid.HybridRun, "_result", "output")
-    split.wrap(hybrid.HybridRun, "_plan", "plans")
+    split.wrap(LivePipelines, "mode", "pipelines")
     try:
         t0 = CLOCK()
         res = simulate(load_scene(name))
@@ -117,9 +122,9 @@ def instrumented(name: str) -> dict:
     timer = 2 * timer_cost() * (calls["rhs"] + sum(split.calls.values()))
     stepping = s.get("integrate", 0.0) - s.get("rhs", 0.0) - s.get("events", 0.0)
     ms = {k: 1e3 * v for k, v in {"rhs": s.get("rhs", 0.0), "events": s.get("events", 0.0), "stepping": stepping,
-                                  "output": s.get("output", 0.0), "plans": s.get("plans", 0.0),
+                                  "output": s.get("output", 0.0), "pipelines": s.get("pipelines", 0.0),
                                   "other": total - s.get("integrate", 0.0) - s.get("output", 0.0)
-                                  - s.get("plans", 0.0), "timer": timer}.items()}
+                                  - s.get("pipelines", 0.0), "timer": timer}.items()}
     return {**ms, "steps": res.stats["steps"], "rhs_calls": calls["rhs"],
             "core_runs": split.calls.get("core_runs", 0), "step_ends": split.calls.get("events", 0)}
 
@@ -141,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default=str(Path(__file__).resolve().parent / "out" / "scene_split.json"))
     args = p.parse_args(argv)
     rows = [measure(name, args.repeats) for name in args.scenes]
-    cols = ["scene", "run", "rhs", "events", "stepping", "output", "plans", "other", "timer", "steps", "rhs_calls",
+    cols = ["scene", "run", "rhs", "events", "stepping", "output", "pipelines", "other", "timer", "steps", "rhs_calls",
             "core_runs"]
     print("CPU ms (run: median, uninstrumented; the rest: one instrumented run)")
     print(" | ".join(cols) + " | events µs/step | stepping µs/step")

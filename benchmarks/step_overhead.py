@@ -10,9 +10,11 @@ loading) at its 1 kHz output and again at 10 Hz output; the hand-written closed-
 the same closed form on the compiled integrator run in the same loop. All variants are
 interleaved, repeat by repeat; times are medians of process CPU time (see CLOCK). Split of one run:
 
-- rhs [ms] = time spent inside the compiled plan's right-hand side, summed call by call in
-  a separate instrumented run of the same system (the timer's own cost, measured on an
-  empty function, is taken off both sides);
+- rhs [ms] = time spent inside the compiled call's right-hand side (the one pipeline's, as the loop
+  wraps it: ``PipelineMode.rhs``), summed call by call in a separate instrumented run of the same
+  system (the timer's own cost, measured on an empty function, is taken off both sides; the timed
+  right-hand side has no ``step`` attribute, so DOP853C calls it per stage there instead of taking a
+  whole step in one compiled call);
 - output [ms] = CPU time at 1 kHz − CPU time at 10 Hz (sampling the channels, and for DOP853C the
   interpolants it builds only for steps that hold samples);
 - integrator [µs per step] = (CPU time at 10 Hz − rhs) / accepted steps, both from the instrumented
@@ -45,7 +47,8 @@ use_tree()
 import b1_reference  # noqa: E402
 import numpy as np  # noqa: E402
 
-from contactdyn.compiled.rhsplan import _PLANS  # noqa: E402
+import contactdyn.hybrid.loop as hybrid  # noqa: E402
+from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
 from contactdyn.numerics import dop853  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
@@ -83,19 +86,25 @@ def _timer_cost() -> float:
 
 
 def _instrumented(system: System) -> tuple[float, float, int]:
-    """(CPU time [s], time inside the rhs [s], rhs calls) of one run with every compiled plan timed."""
-    run_system(system)  # compiles the plans
+    """(CPU time [s], time inside the rhs [s], rhs calls) of one run with every compiled mode's rhs timed (each run
+    builds its own modes, :class:`~contactdyn.model.paths.LivePipelines`: the loop's wrap is swapped for one that
+    times the wrapped mode's ``rhs``)."""
+    run_system(system)  # compiles the pipeline (numba's cache)
     timers = []
-    for plan in _PLANS[system].values():  # the plans run_system uses (cached per system)
-        timers.append(_Timed(plan.rhs))
-        plan.rhs = timers[-1]
+
+    def timed_mode(pipe):
+        mode = PipelineMode(pipe)
+        timers.append(_Timed(mode.rhs))
+        mode.rhs = timers[-1]
+        return mode
+
+    hybrid.PipelineMode = timed_mode
     try:
         t0 = CLOCK()
         run_system(system)
         wall = CLOCK() - t0
     finally:
-        for plan, timer in zip(_PLANS[system].values(), timers, strict=True):
-            plan.rhs = timer.fun
+        hybrid.PipelineMode = PipelineMode
     return wall, sum(t.inside for t in timers), sum(t.calls for t in timers)
 
 

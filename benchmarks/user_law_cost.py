@@ -8,10 +8,10 @@ examples/cubic_stage.py's cubic law with k3 = 0 vs the linear law on examples/cu
 the Stribeck friction law with v_s = 1e-9 m/s (μ = μ_k once moving) vs Coulomb on B1 with μ_s = 0.6,
 μ_k = 0.4. Timed interleaved after an untimed run each; CPU medians, each law's ratio to its twin,
 the largest relative difference of the normal force, and the path each law's modes ran on
-(``stats["paths"]``). Each law also runs with the one pipeline switched off (``LivePipelines.use``: the
-modes the plan declines on the readable model, as before it was live), in the same interleaved rounds:
-``off_cpu_s`` and ``off_ratio`` (to the twin), ``off_paths``. ``--prefer``: every run with ``LivePipelines.prefer``
-(every mode the one pipeline packs on it, the twins' too).
+(``stats["paths"]``: every mode the one pipeline packs on its compiled call, the others on the readable model).
+Each law also runs with the one pipeline switched off (``LivePipelines.use = False``: every mode on the readable
+model), in the same interleaved rounds: ``off_cpu_s`` and ``off_ratio`` (to the twin), ``off_paths``. ("Twin" here
+is the built-in law a user law is compared with, not the deleted probed twin.)
 """
 
 from __future__ import annotations
@@ -64,9 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--out")
-    p.add_argument("--prefer", action="store_true", help="LivePipelines.prefer: the modes on the one pipeline")
     args = p.parse_args(argv)
-    LivePipelines.prefer = args.prefer
     scenes = {}
     for name, (law, twin) in pairs().items():
         scenes[(name, "law")], scenes[(name, "twin")], scenes[(name, "off")] = law, twin, law
