@@ -120,7 +120,7 @@ class HybridRun:
         #: reasons the plan declined a mode (it ran on the one pipeline or System.evaluate: ``paths`` says which) and
         #: the pipeline's undeclared ones, with counts
         self.fallbacks: dict[str, int] = {}
-        #: the modes the one pipeline runs (those the plan declines; with LivePipelines.prefer, all it packs)
+        #: the modes the compiled call runs (every one it packs; the others on the readable model)
         self.pipelines = LivePipelines(system, PipelineMode)
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)

@@ -34,7 +34,7 @@ Compiled steps. A right-hand side whose whole step can be one compiled call brin
 :mod:`contactdyn.hybrid.steps`: the stages, y_new, the FSAL call and the error norm): then :func:`_stepped`
 takes the steps, with ``solve_ivp``'s RK step control written out (its loop, not the core's), the stages
 kept in the core's layout for the same dense output and events; a step the compiled call declines is taken
-by ``fun`` (:func:`_attempt`, ``solve_ivp``'s arithmetic). Verified in ``tests/test_plan_steps.py``.
+by ``fun`` (:func:`_attempt`, ``solve_ivp``'s arithmetic). Verified in ``tests/test_compiled_steps.py``.
 """
 
 from __future__ import annotations
