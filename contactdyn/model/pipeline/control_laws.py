@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from numba import carray, cfunc
+from numba import carray
 
 from ...laws.controllers import computed_torque
 from ...laws.controllers.abi import CONTROLLER_SIGNATURE, LAYOUT_SIZE, control_arrays
@@ -37,7 +37,7 @@ from ...laws.controllers.dynamic_law import force_targets, position_targets
 from ...laws.controllers.force import task_force_torque
 from ...laws.controllers.operational_law import SINGULAR, torque
 from ...laws.controllers.pd import joint_pd_torque
-from ...numerics.compile_cache import njit
+from ...numerics.compile_cache import cfunc, njit
 from ...numerics.linalg import pinv
 
 __all__ = ["kind_address", "operational_on_buffer", "dynamic_on_buffer", "joint_pd_command", "task_force_command",
