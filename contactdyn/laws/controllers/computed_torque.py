@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import mm, mtm, mtv, mv, pinv
+from ...numerics.linalg import mm, mtm, mv, pinv
 
 __all__ = ["pinv", "torque", "increments", "pinv_stack", "torque_stack", "increments_stack"]
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import dot3, mv
+from ...numerics.linalg import dot3
 
 __all__ = ["force_targets", "position_targets", "pressing_reference"]
 
