@@ -125,7 +125,7 @@ def buffer_of(inp: ControlInput, nz: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return buffer, layout
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def put_field(buf, lay, k, values):
     """Field k of a controller's buffer from ``values`` (flat) where the layout table ``lay`` puts it (nothing for a
     field the layout leaves empty): how a compiled caller fills the buffer it passes by address."""

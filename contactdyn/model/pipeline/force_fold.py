@@ -69,7 +69,7 @@ F_SET, F_RATE, F_DIR, F_READ, F_TAU_C, F_SURFACE_P, F_SURFACE_V, F_TOUCH, F_AD =
                        "touch", "a_d"))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _at(lay, k):
     """Where field k starts in the buffer, and its size (0: absent)."""
     return lay[LAYOUT_HEAD + 2 * k], lay[LAYOUT_HEAD + 1 + 2 * k] - lay[LAYOUT_HEAD + 2 * k]
