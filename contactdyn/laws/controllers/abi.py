@@ -169,7 +169,7 @@ def _matrix_at(buf, lay, k, cols):
     return carray(_data_at(buf, start), ((lay[LAYOUT_HEAD + 1 + 2 * k] - start) // cols, cols))
 
 
-@overload(control_arrays)
+@overload(control_arrays, inline="always")
 def _control_arrays_compiled(buf, lay):
     def impl(buf, lay):
         nv = lay[0]
@@ -289,7 +289,7 @@ def call_controller(address: int, buffer, layout, params, tau, zdot=None) -> int
               zdot.ctypes.data)
 
 
-@overload(call_controller)
+@overload(call_controller, inline="always")
 def _call_controller_compiled(address, buffer, layout, params, tau, zdot):
     def impl(address, buffer, layout, params, tau, zdot):
         return _call_at_controller(address, _data_at(buffer, 0), _data_at(layout, 0), _data_at(params, 0),

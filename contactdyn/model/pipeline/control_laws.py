@@ -48,7 +48,7 @@ D_FORCE_LAW, D_TRACKS, D_SWAP, D_PRESSING, D_KF, D_KNULL, D_KP, D_KV, D_P, D_ENV
 FF_NONE, FF_GRAVITY, FF_BIAS = 0.0, 1.0, 2.0  #: joint PD's and task force's feedforward (their first constant)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def operational_on_buffer(buf, lay, c, tau, zdot):
     """Operational space's τ [N·m or N] from the ABI's buffer at constants ``c``; status 0: the task is singular."""
     inp = control_arrays(buf, lay)
@@ -75,7 +75,7 @@ def operational_on_buffer(buf, lay, c, tau, zdot):
     return 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def dynamic_on_buffer(buf, lay, c, tau, zdot):
     """A dynamic law's τ = H q̈*(a*) + h − τ_c (+ Jᵀ f_swap) [N·m or N] around its tip targets, and ż, from the ABI's
     buffer at constants ``c`` (D_*); status 1."""
