@@ -18,25 +18,39 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import mm, mtm, mtv, mv, pinv
+from ...numerics.linalg import mm, mtm, mv, pinv
 
 __all__ = ["pinv", "torque", "increments", "pinv_stack", "torque_stack", "increments_stack"]
 
 
 @njit(cache=True)
 def torque(H, rotor, h, tau_c, J, Jp, drift, v, a, f_swap, k_null):
-    """τ of the module docstring [N·m or N] for the tip acceleration a [m/s²] (J̇q̇ = drift, q̇ = v)."""
-    qdd = mv(Jp, a - drift)
+    """τ of the module docstring [N·m or N] for the tip acceleration a [m/s²] (J̇q̇ = drift, q̇ = v). Per component
+    (no temporaries but q̈* and τ), each sum in :func:`~contactdyn.numerics.linalg.mv`'s order: mv's values."""
     nv = J.shape[1]
+    qdd = np.empty(nv)
+    for i in range(nv):
+        acc = 0.0
+        for j in range(a.size):
+            acc += Jp[i, j] * (a[j] - drift[j])
+        qdd[i] = acc
     if k_null > 0.0 and nv > 3:
         qdd -= mv(np.eye(nv) - mm(Jp, J), k_null * v)
-    tau = mv(H, qdd)
-    if rotor.size:
-        tau -= rotor * qdd
-    tau += h
-    tau -= tau_c
-    if f_swap.size:
-        tau += mtv(J, f_swap)
+    tau = np.empty(nv)
+    for i in range(nv):
+        acc = 0.0
+        for j in range(nv):
+            acc += H[i, j] * qdd[j]
+        if rotor.size:
+            acc -= rotor[i] * qdd[i]
+        acc += h[i]
+        acc -= tau_c[i]
+        if f_swap.size:
+            s = 0.0
+            for j in range(f_swap.size):
+                s += J[j, i] * f_swap[j]
+            acc += s
+        tau[i] = acc
     return tau
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import dot3, mv
+from ...numerics.linalg import dot3
 
 __all__ = ["force_targets", "position_targets", "pressing_reference"]
 
@@ -29,53 +29,70 @@ __all__ = ["force_targets", "position_targets", "pressing_reference"]
 @njit(cache=True)
 def force_targets(P, p_tip, v_tip, x_d, v_d, a_d, kp, kv, kf, normals, touch, p_s, v_s, F_d, dF_d, F, z, env,
                   tracks_position):
-    """(a* [m/s²], f_swap [N], ż [N/s]) of A10 (``tracks_position`` False) or the hybrid law (True)."""
+    """(a* [m/s²], f_swap [N], ż [N/s]) of A10 (``tracks_position`` False) or the hybrid law (True). Written per
+    component, without temporaries (the law runs per call and once more per fold row: its small arrays were most
+    of its cost); the order of operations is the vector form's of the module docstring, so the values are too."""
     ns = normals.shape[0]
-    P = P.copy()
-    a_force, f_swap, zdot = np.zeros(3), np.zeros(3), np.zeros(ns)
+    a, f_swap, zdot = np.zeros(3), np.zeros(3), np.zeros(ns)  # a holds the force part first
+    d = np.empty(3)
     for i in range(ns):
-        n = normals[i]
-        if touch[i] == 0.0:  # like a free direction, integral frozen
-            for r in range(3):
-                for c in range(3):
-                    P[r, c] += n[r] * n[c]
+        if touch[i] == 0.0:  # like a free direction (n nᵀ added to P below), integral frozen
             continue
+        n = normals[i]
         k, b, m = env[i, 0], env[i, 1], env[i, 2]
-        s, sd = dot3(n, p_s[i] - p_tip), dot3(n, v_s[i] - v_tip)  # penetration [m], its rate [m/s]
+        for r in range(3):
+            d[r] = p_s[i, r] - p_tip[r]
+        s = dot3(n, d)  # penetration [m]
+        for r in range(3):
+            d[r] = v_s[i, r] - v_tip[r]
+        sd = dot3(n, d)  # its rate [m/s]
         mu = F[i] - F_d[i]  # force error [N]
         target = F_d[i] + z[i]  # F* [N]
         if m > 0.0:
             sdd = (target - b * sd - k * s) / m
         else:  # Ḟ* = Ḟ_d + Q(μ)
             sdd = (dF_d[i] - kf * mu - k * sd) / b
-        a_force -= sdd * n
         zdot[i] = -kf * mu
-        f_swap += (F[i] - target) * n
-    if tracks_position:
-        a_pos = a_d - kp * (p_tip - x_d) - kv * (v_tip - v_d)
-    else:
-        a_pos = -kv * v_tip
-    return mv(P, a_pos) + a_force, f_swap, zdot
+        for r in range(3):
+            a[r] -= sdd * n[r]
+            f_swap[r] += (F[i] - target) * n[r]
+    for r in range(3):  # a* = P' a_pos + a_force, P' = P + Σ_free n nᵀ (each entry summed in the set-points' order)
+        acc = 0.0
+        for c in range(3):
+            p_rc = P[r, c]
+            for i in range(ns):
+                if touch[i] == 0.0:
+                    p_rc += normals[i, r] * normals[i, c]
+            if tracks_position:
+                a_pos = a_d[c] - kp[c] * (p_tip[c] - x_d[c]) - kv[c] * (v_tip[c] - v_d[c])
+            else:
+                a_pos = -kv[c] * v_tip[c]
+            acc += p_rc * a_pos
+        a[r] = acc + a[r]
+    return a, f_swap, zdot
 
 
 @njit(cache=True)
 def pressing_reference(x_d, v_d, a_d, normals, touch, p_s, v_s, F_d, dF_d, k):
     """(x_d, ẋ_d, ẍ_d) pressed along each touching set-point's n: x_d·n = p_s·n − F_d/k, ẋ_d·n = ṗ_s·n − Ḟ_d/k,
-    ẍ_d·n = 0 (the surface's acceleration and F̈_d/k left out)."""
+    ẍ_d·n = 0 (the surface's acceleration and F̈_d/k left out). Row by row (each row's update reads that row only):
+    the vector form's values without its temporaries."""
     R = np.empty((3, 3))
     R[0], R[1], R[2] = x_d, v_d, a_d
-    target = np.zeros(3)
     for i in range(normals.shape[0]):
         if touch[i] == 0.0:
             continue
         n = normals[i]
-        target[0] = dot3(n, p_s[i]) - F_d[i] / k[i]
-        target[1] = dot3(n, v_s[i]) - dF_d[i] / k[i]
-        d = target - mv(R, n)
         for r in range(3):
+            target = dot3(n, p_s[i]) - F_d[i] / k[i] if r == 0 else dot3(n, v_s[i]) - dF_d[i] / k[i] if r == 1 \
+                else 0.0
+            acc = 0.0
             for c in range(3):
-                R[r, c] += d[r] * n[c]
-    return R[0].copy(), R[1].copy(), R[2].copy()
+                acc += R[r, c] * n[c]
+            d = target - acc
+            for c in range(3):
+                R[r, c] += d * n[c]
+    return R[0], R[1], R[2]
 
 
 @njit(cache=True)

@@ -68,17 +68,31 @@ def hadamard_ratio(S):
 
 
 @njit(cache=True)
-def _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, kd_normal):
-    """(a* [m/s²], f [N]) on the position axes, then the force directions."""
+def _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, kd_normal, m):
+    """(a* [m/s²], f [N]) on the position axes, then the force directions (m entries, the rest 0: the tilt's).
+    Per component, each n·y summed as :func:`~contactdyn.numerics.linalg.mv` sums it (no temporaries)."""
     k, nf = axes.shape[0], forced.shape[0]
-    a_task = np.zeros(k + nf)
-    f = np.empty(k + nf)
-    if x_d.size:
-        a_task[:k] = mv(axes, a_d)
-        f[:k] = kp * mv(axes, x_d - p_tip) + kd * mv(axes, v_d - v_tip)
-    else:
-        f[:k] = -kd * mv(axes, v_tip)
-    f[k:] = -set_points - kd_normal * mv(forced, v_tip)
+    a_task, f = np.zeros(m), np.zeros(m)
+    for i in range(k):
+        n = axes[i]
+        if x_d.size:
+            acc_a = acc_x = acc_v = 0.0
+            for j in range(3):
+                acc_a += n[j] * a_d[j]
+                acc_x += n[j] * (x_d[j] - p_tip[j])
+                acc_v += n[j] * (v_d[j] - v_tip[j])
+            a_task[i] = acc_a
+            f[i] = kp[i] * acc_x + kd[i] * acc_v
+        else:
+            acc_v = 0.0
+            for j in range(3):
+                acc_v += n[j] * v_tip[j]
+            f[i] = -kd[i] * acc_v
+    for i in range(nf):
+        acc_v = 0.0
+        for j in range(3):
+            acc_v += forced[i, j] * v_tip[j]
+        f[k + i] = -set_points[i] - kd_normal * acc_v
     return a_task, f
 
 
@@ -89,16 +103,12 @@ def torque(v, H, h, J_tip, drift_tip, p_tip, v_tip, x_d, v_d, a_d, set_points, R
     (3, nv), (3,) [m/s²], or with a tool axis the 6 rows [J; J_ω], [J̇q̇; J̇_ω q̇] in Pinocchio's order;
     axes (k, 3), forced (nf, 3) the position and force rows of S; kp, kd [N/m, N·s/m] per axis; ko [1/s²],
     do [1/s], k_null [1/s] (0: no null-space damping), kd_normal [N·s/m]."""
-    a_pos, f_pos = _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, kd_normal)
-    nS = a_pos.size
+    nS = axes.shape[0] + forced.shape[0]
     m = nS + (2 if tool_axis.size else 0)
+    a_task, f = _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, kd_normal, m)
     W = np.zeros((m, J_tip.shape[0]))  # the task's rows on the tip's [linear; angular] motion
     W[:axes.shape[0], :3] = axes
     W[axes.shape[0]:nS, :3] = forced
-    a_task = np.zeros(m)
-    a_task[:nS] = a_pos
-    f = np.zeros(m)
-    f[:nS] = f_pos
     if tool_axis.size:
         a = mv(R_tip, tool_axis)  # current tool direction (world)
         e1, e2 = perpendicular(a)

@@ -152,7 +152,7 @@ def _task_pd(x, ints, reals, h, g, J6, p_tip, v_tip, Rf, x_d, v_d, F_d, forced):
                   target, R_d, ko, do, kd_joint, kd_normal, tau_ff)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
     """(buffer, layout) of a controller of the ABI: its inputs written where the packed layout table puts them (the
     set-points' fields, the measured forces and what goes with them are :mod:`.force_fold`'s)."""
@@ -179,7 +179,7 @@ def abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a
     return buf, lay
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def abi_call(ints, reals, buf, lay, tau, zdot):
     """The ABI's call of the packed controller on ``buf``: τ into ``tau``, ż into ``zdot``; its status (1 written)."""
     params = reals[ints[R_CTL]:ints[R_CTL] + ints[N_CTL_PARAMS]]
@@ -269,7 +269,7 @@ def command_by_address(address, buffer, layout, params, tau, zdot) -> int:
     return 1
 
 
-@overload(command_by_address)
+@overload(command_by_address, inline="always")
 def _command_by_address_compiled(address, buffer, layout, params, tau, zdot):
     def impl(address, buffer, layout, params, tau, zdot):
         return call_controller(address, buffer, layout, params, tau, zdot)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from numba import carray, cfunc
+from numba import carray
 
 from ...laws.controllers import computed_torque
 from ...laws.controllers.abi import CONTROLLER_SIGNATURE, LAYOUT_SIZE, control_arrays
@@ -37,7 +37,7 @@ from ...laws.controllers.dynamic_law import force_targets, position_targets
 from ...laws.controllers.force import task_force_torque
 from ...laws.controllers.operational_law import SINGULAR, torque
 from ...laws.controllers.pd import joint_pd_torque
-from ...numerics.compile_cache import njit
+from ...numerics.compile_cache import cfunc, njit
 from ...numerics.linalg import pinv
 
 __all__ = ["kind_address", "operational_on_buffer", "dynamic_on_buffer", "joint_pd_command", "task_force_command",
@@ -48,7 +48,7 @@ D_FORCE_LAW, D_TRACKS, D_SWAP, D_PRESSING, D_KF, D_KNULL, D_KP, D_KV, D_P, D_ENV
 FF_NONE, FF_GRAVITY, FF_BIAS = 0.0, 1.0, 2.0  #: joint PD's and task force's feedforward (their first constant)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def operational_on_buffer(buf, lay, c, tau, zdot):
     """Operational space's τ [N·m or N] from the ABI's buffer at constants ``c``; status 0: the task is singular."""
     inp = control_arrays(buf, lay)
@@ -75,7 +75,7 @@ def operational_on_buffer(buf, lay, c, tau, zdot):
     return 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def dynamic_on_buffer(buf, lay, c, tau, zdot):
     """A dynamic law's τ = H q̈*(a*) + h − τ_c (+ Jᵀ f_swap) [N·m or N] around its tip targets, and ż, from the ABI's
     buffer at constants ``c`` (D_*); status 1."""

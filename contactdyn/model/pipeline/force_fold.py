@@ -69,13 +69,13 @@ F_SET, F_RATE, F_DIR, F_READ, F_TAU_C, F_SURFACE_P, F_SURFACE_V, F_TOUCH, F_AD =
                        "touch", "a_d"))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _at(lay, k):
     """Where field k starts in the buffer, and its size (0: absent)."""
     return lay[LAYOUT_HEAD + 2 * k], lay[LAYOUT_HEAD + 1 + 2 * k] - lay[LAYOUT_HEAD + 2 * k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
     """The set-points' fields of the buffer (those the layout has)."""
     nQ, ns, nr = ints[NQ], ints[N_FORCES], ints[N_ROWS]
@@ -116,7 +116,7 @@ def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
     return n_read, n_tc
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
     """B and D: the law's differences per unit force of each row that reaches it (constraints.force_columns)."""
     nv, ns, nr = ints[NV], ints[N_FORCES], ints[N_ROWS]
@@ -149,7 +149,7 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq):
     """(b, d): the law's differences at one unit [m/s²] more of a_d along the carrier's axis (a_d_increment)."""
     at, n = _at(lay, F_AD)
