@@ -8,13 +8,15 @@ process). Each wall time [s] is measured around the whole process (interpreter s
 compilation or cache loading, the run), and so is its CPU time [s] (user + system: what the process
 itself spent, less inflated by other load on a shared machine). Also: ``contactdyn --help`` (the console script's call,
 ``contactdyn.cli.main``), median of ``--help-repeats`` processes [s], and whether the first run
-printed the compile notice (a stderr line containing "compiling").
+printed the compile notice (a stderr line containing "compiling"). ``--prefer``: every process with
+CONTACTDYN_PIPELINE=1 (``LivePipelines.prefer``: every mode the one pipeline packs runs on it, the twin's plans
+unbuilt); the results then go to first_run_prefer.json and .csv.
 
 The processes run this checkout's package (``PYTHONPATH`` = the checkout). The 1-minute load
 average before each run is recorded: on a shared machine a load above the core count means the
 times are inflated.
 
-    python3 benchmarks/first_run.py [SCENE ...] [--help-repeats 5]
+    python3 benchmarks/first_run.py [SCENE ...] [--help-repeats 5] [--prefer]
 
 Prints a table and writes benchmarks/out/first_run.json and benchmarks/out/first_run.csv.
 """
@@ -46,8 +48,11 @@ def default_scenes() -> list[str]:
     return ["b1"] + [n for n in names if n != "b1"]
 
 
+PREFER = {}  #: extra environment of every child (--prefer: the one pipeline preferred)
+
+
 def _environment(cache: str | None) -> dict[str, str]:
-    env = dict(os.environ)
+    env = {**os.environ, **PREFER}
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     env.pop("NUMBA_CACHE_DIR", None)
     if cache is not None:
@@ -72,6 +77,7 @@ def timed(args: list[str], cache: str | None, cwd: str) -> tuple[float, float, i
 def scene_row(scene: str, work: str) -> dict:
     """The first (empty cache) and later (warm cache) run of one scene."""
     path = ROOT / "sims" / f"{scene}.toml"
+    path = path if path.is_file() else ROOT / scene  # a scene name of sims/, or a path in the checkout
     target = str(path) if path.is_file() else scene
     args = ["-m", "contactdyn.cli", "run", target, "--quiet"]
     with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
@@ -92,9 +98,14 @@ def help_time(repeats: int, work: str) -> dict:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("scenes", nargs="*", help="scene names in sims/ (default: b1 and every sims/*.toml)")
+    p.add_argument("scenes", nargs="*", help="scene names in sims/ or paths in the checkout (default: b1 and every "
+                   "sims/*.toml)")
     p.add_argument("--help-repeats", type=int, default=5, help="processes timed for contactdyn --help")
+    p.add_argument("--prefer", action="store_true", help="CONTACTDYN_PIPELINE=1: every mode on the one pipeline")
     args = p.parse_args()
+    if args.prefer:
+        PREFER["CONTACTDYN_PIPELINE"] = "1"
+    stem = "first_run_prefer" if args.prefer else "first_run"
     scenes = args.scenes or default_scenes()
     rows = []
     with tempfile.TemporaryDirectory(prefix="first_run_work_") as work:
@@ -113,13 +124,14 @@ def main() -> None:
     doc = {"help": helps, "scenes": rows, "cpus": os.cpu_count(), "python": platform.python_version(),
            "git": subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                                  text=True).stdout.strip()}
-    (OUT / "first_run.json").write_text(json.dumps(doc, indent=1))
-    with open(OUT / "first_run.csv", "w", newline="") as f:
+    doc["prefer"] = args.prefer
+    (OUT / f"{stem}.json").write_text(json.dumps(doc, indent=1))
+    with open(OUT / f"{stem}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, ["scene", "first_s", "later_s", "first_cpu_s", "later_cpu_s", "notice", "load_before"],
                            extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    print(f"-> {OUT / 'first_run.json'}, {OUT / 'first_run.csv'}")
+    print(f"-> {OUT / (stem + '.json')}, {OUT / (stem + '.csv')}")
 
 
 if __name__ == "__main__":

@@ -34,6 +34,7 @@ prints each such mode once.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from typing import NamedTuple
 
@@ -48,6 +49,7 @@ __all__ = ["Gap", "declared_gaps", "mode_gap", "UNDECLARED", "ENERGY", "PIPELINE
 UNDECLARED = "undeclared: "  #: prefix of a plan's decline that no part declared
 ENERGY = "energy audit (solver.record_energy)"
 PIPELINE = "one pipeline"  #: the path of a mode the plan declines for a declared gap and the pipeline runs
+PREFER_ENV = "CONTACTDYN_PIPELINE"  #: "1": LivePipelines.prefer for the process (a hidden switch, no scene key)
 CHECK_RTOL = 1e-9  #: agreement a fast right-hand side must show with System.evaluate where a mode starts
 
 
@@ -118,8 +120,9 @@ class LivePipelines:
     use = True  #: False only for the benchmarks' and tests' before/after comparison: those modes on System.evaluate
     #: True: every mode ``pack.unsupported`` accepts runs on the pipeline, even where the plan runs it (the tests' and
     #: benchmarks' switch, benchmarks/pipeline_loop.py); False: the plan first (the default until the pipeline
-    #: covers every mode kind)
-    prefer = False
+    #: covers every mode kind). The environment variable CONTACTDYN_PIPELINE=1 sets it at import, for a whole
+    #: process (``contactdyn run`` included: benchmarks/first_run.py --prefer; docs/one_source.md)
+    prefer = os.environ.get(PREFER_ENV, "") == "1"
 
     def __init__(self, system, wrap: Callable = lambda pipe: pipe) -> None:
         self.system, self.wrap = system, wrap
