@@ -61,7 +61,7 @@ def main() -> None:
     sys.path.insert(0, str(ROOT))
     from numba.core import event
 
-    from contactdyn.scene import load_scene, parse_override
+    from contactdyn.scene.scene_file import load_scene, parse_override
     from contactdyn.simulate import simulate
 
     rec = Recorder()

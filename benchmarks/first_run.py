@@ -72,6 +72,7 @@ def timed(args: list[str], cache: str | None, cwd: str) -> tuple[float, float, i
 def scene_row(scene: str, work: str) -> dict:
     """The first (empty cache) and later (warm cache) run of one scene."""
     path = ROOT / "sims" / f"{scene}.toml"
+    path = path if path.is_file() else ROOT / scene  # a scene name of sims/, or a path in the checkout
     target = str(path) if path.is_file() else scene
     args = ["-m", "contactdyn.cli", "run", target, "--quiet"]
     with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
@@ -92,9 +93,11 @@ def help_time(repeats: int, work: str) -> dict:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("scenes", nargs="*", help="scene names in sims/ (default: b1 and every sims/*.toml)")
+    p.add_argument("scenes", nargs="*", help="scene names in sims/ or paths in the checkout (default: b1 and every "
+                   "sims/*.toml)")
     p.add_argument("--help-repeats", type=int, default=5, help="processes timed for contactdyn --help")
     args = p.parse_args()
+    stem = "first_run"
     scenes = args.scenes or default_scenes()
     rows = []
     with tempfile.TemporaryDirectory(prefix="first_run_work_") as work:
@@ -113,13 +116,14 @@ def main() -> None:
     doc = {"help": helps, "scenes": rows, "cpus": os.cpu_count(), "python": platform.python_version(),
            "git": subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                                  text=True).stdout.strip()}
-    (OUT / "first_run.json").write_text(json.dumps(doc, indent=1))
-    with open(OUT / "first_run.csv", "w", newline="") as f:
+    doc["prefer"] = args.prefer
+    (OUT / f"{stem}.json").write_text(json.dumps(doc, indent=1))
+    with open(OUT / f"{stem}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, ["scene", "first_s", "later_s", "first_cpu_s", "later_cpu_s", "notice", "load_before"],
                            extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    print(f"-> {OUT / 'first_run.json'}, {OUT / 'first_run.csv'}")
+    print(f"-> {OUT / (stem + '.json')}, {OUT / (stem + '.csv')}")
 
 
 if __name__ == "__main__":

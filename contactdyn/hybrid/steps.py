@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _coef
 
-from ..model.pipeline.pack import NX
-from ..model.pipeline.pipeline import call as pipeline_call
+from ..model.pipeline.pack import A_CALL, NX
 from ..model.pipeline.pipeline import rates_at
 from ..numerics.compile_cache import njit
+from ..numerics.native_call import call_at
 
 __all__ = ["attempt", "stepper", "derivatives"]
 OK, DECLINED = 0, 1  #: :func:`attempt`'s status
@@ -59,7 +59,8 @@ def _error_norm(K, y, y_new, h, rtol, atol, E, block):
         e5 += (a5 / scale) ** 2
         e3 += (a3 / scale) ** 2
     block[0], block[1], block[2], block[4] = K[12], K[10], K[11], y_new
-    block[5:10] = K[5:10]
+    for r in range(5, 10):  # (row by row: a 2-D slice assignment compiles numba's shape check and its message)
+        block[r] = K[r]
     if e5 == 0.0 and e3 == 0.0:
         return 0.0
     return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * n)
@@ -82,7 +83,8 @@ def attempt(ints, reals, work, events, t, y, f, h, rtol, atol, A, B, C, E, y_new
         else:
             _step_end(K, y, h, B, y_new)
             ys = y_new
-        K[s] = pipeline_call(t + C[s] * h if s < 12 else t + h, ys, ints, reals, work, events)
+        at = t + C[s] * h if s < 12 else t + h
+        K[s] = call_at(ints[A_CALL], "pipeline.call", (at, ys, ints, reals, work, events))  # (not linked in)
         if events[events.size - 1] != 1.0:
             return DECLINED, 0.0
         Ys[s] = ys

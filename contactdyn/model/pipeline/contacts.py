@@ -122,7 +122,8 @@ def _bond_row(reals, ch, J, body, G, C):
                 G[r, body] += sign * u_axis
         else:
             G[r, coord] += sign
-    C[r, :] = G[r, :]
+    for c in range(G.shape[1]):  # (element by element: a slice assignment compiles numba's shape check and message)
+        C[r, c] = G[r, c]
 
 
 @njit(cache=True)
@@ -192,8 +193,8 @@ def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, F_n, f, G, C,
         w = reals[RH_OMEGA]
         for i in range(nt):
             r = row[CI_STICK_ROW] + i
-            G[r, :] = R_T[i]
-            C[r, :] = R_T[i]
+            for c in range(nQ):
+                G[r, c] = C[r, c] = R_T[i, c]
             gamma[r] = T[i, 0] * drift[0] + T[i, 1] * drift[1] + T[i, 2] * drift[2] + w * vt[i]
         return
     d = _slip_direction(reals, cr, vt)

@@ -56,7 +56,9 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
         return qdd, np.empty(0), residual_ok(H, z, b)
     m = nQ + nr
     A = np.zeros((m, m))
-    A[:nv, :nv] = H
+    for r in range(nv):  # (element by element: a 2-D slice assignment compiles numba's shape check and message)
+        for c in range(nv):
+            A[r, c] = H[r, c]
     for i in range(nQ - nv):
         A[nv + i, nv + i] = m_rest[i]
     for c in range(nQ if iq >= 0 else 0):

@@ -64,12 +64,16 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_
  I_FRAMES, I_CONTACTS, I_CHAINS, I_LIMITS, I_SERVOS, I_LAYOUT, R_RIGID, R_FRAMES, R_MREST, R_LIMITS, R_SERVOS,
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, I_DRIVES, R_DRIVES, R_REFLECTED, W_DRIVES, ANY_MOTOR,
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
- N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, HEADER) = range(64)
+ N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, A_CALL, A_CONTROLLER, A_SOLVE,
+ A_LAUNCH_START, A_LAUNCH, A_ENERGY, HEADER) = range(70)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
 #: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
 #: the chain whose interface force it reads (-1: a normal set-point's, the contact's normal force) and its contact;
 #: R_FOLD: per set-point the shift of its surface point from the contact's [m] (a tangential chain's anchor, u·offset)
+#: A_*: the addresses of the call and of its stages compiled on their own (:func:`.pipeline.stage_addresses`, filled
+#: by ``Pipeline``): the call itself, the controller's kind, the solve (direct or through a fold), a launch's start
+#: and Newton, the energy audit (0 where the mode has none)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)

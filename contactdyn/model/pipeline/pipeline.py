@@ -17,24 +17,43 @@ the readable model (:meth:`System.evaluate`), and counted.
 from __future__ import annotations
 
 import numpy as np
+from numba import types
 
 from ...numerics.compile_cache import njit
+from ...numerics.native_call import address, call_at, declare
 from ..contact import structure
-from .actuation import carry, reference, set_points
+from .actuation import _task_pd, carry, drive_command, drives, reference, set_points
 from .contacts import contact_terms, finish, limit_rows
+from .control_laws import joint_pd_command, task_force_command
 from .drives import drive_values, inertias
 from .energy import energy_rates
 from .force_fold import carried_coordinate, controller_terms, fold_rates, solve_through_drives
 from .joint_friction import joint_events, joint_rows, joint_torques
-from .launch import ST_CONTACT, launch_start, launch_took
+from .kkt import kkt_solve
+from .launch import ST_CONTACT, ST_W, launch_start, launch_took
 from .pack import (
+    A_CALL,
+    A_CONTROLLER,
+    A_ENERGY,
+    A_LAUNCH,
+    A_LAUNCH_START,
+    A_SOLVE,
     ANY_MOTOR,
+    CARRIER,
+    CTL_ABI,
+    CTL_CONSTANT,
+    CTL_HELD,
+    CTL_JOINT_PD,
+    CTL_KIND,
+    CTL_TASK_FORCE,
+    CTL_TASK_PD,
     D_CMD,
     D_FD,
     D_LAM,
     D_TAU,
     D_TIP,
     D_XD,
+    ENERGY,
     EV_FF,
     EV_FN,
     EV_GAP,
@@ -46,15 +65,19 @@ from .pack import (
     N_LAUNCH,
     N_LIMITS,
     N_ROWS,
+    N_Z,
     NQ,
     NV,
     NX,
     NY,
+    R_CTL,
     R_REFLECTED,
+    READS_FORCES,
     REF_DIMS,
     TIP_FRAME,
     W_DIAG,
     W_DRIVES,
+    X_HELD,
     diag_starts,
     pack,
     set_slip_references,
@@ -62,16 +85,21 @@ from .pack import (
 )
 from .robot_terms import frame_terms, robot_terms
 
-__all__ = ["call", "rates_at", "samples_at", "Pipeline"]
+__all__ = ["call", "rates_at", "samples_at", "stage_addresses", "Pipeline"]
 
 
 @njit(cache=True)
 def call(t, x, ints, reals, work, events):
     """ẋ at (t [s], x) of the packed mode; the event values and the status (last) into ``events``. A 2-D slide
     launching from rest first finds its direction (:mod:`.launch`): the loop's trial passes on a copy of ``reals``,
-    then the pass with the directions found (one pass without a launch; one body, compiled once)."""
+    then the pass with the directions found (one pass without a launch; one body, compiled once). The controller's
+    kind, the solve through a fold, a launch's Newton and the energy audit are stages reached by address
+    (:func:`stage_addresses`: compiled on their own, for the scenes that have them)."""
     nv, nQ, nr, nc = ints[NV], ints[NQ], ints[N_ROWS], ints[N_CONTACTS]
-    reals, state = launch_start(ints, reals)
+    if ints[N_LAUNCH]:
+        reals, state = call_at(ints[A_LAUNCH_START], "pipeline.launch_start", (ints, reals))
+    else:
+        state = np.zeros(ST_W)
     while True:
         final = state[ST_CONTACT] >= ints[N_LAUNCH]
         H, h, g, Jw, W = robot_terms(x, ints, reals)
@@ -90,9 +118,11 @@ def call(t, x, ints, reals, work, events):
         first_limit = first_joint - ints[N_LIMITS]
         limit_rows(x, ints, reals, first_limit, G, C, gamma)
         joint_rows(x, ints, reals, first_joint, G, C, gamma)
-        tau, zdot, B, D, bq, dq = controller_terms(t, x, ints, reals, work, Hc, h, g, FJ, Fa, Fp, Fv, FR, f, C, events)
+        tau, zdot, B, D, bq, dq = call_at(ints[A_CONTROLLER], "pipeline.controller",
+                                          (t, x, ints, reals, work, Hc, h, g, FJ, Fa, Fp, Fv, FR, f, C, events))
         joint_torques(x, ints, reals, f)
-        ok, applied, qdd, lam, regular = solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq)
+        ok, applied, qdd, lam, regular = call_at(ints[A_SOLVE], "pipeline.solve",
+                                                 (x, ints, reals, work, M, f, G, C, gamma, tau, B, bq))
         if not ok:
             events[events.size - 1] = -1.0
             return xdot
@@ -101,12 +131,14 @@ def call(t, x, ints, reals, work, events):
         xdot[nQ:2 * nQ] = qdd
         xdot[2 * nQ:] = ydot
         finish(ints, lam, xdot, events, pending, first_limit)
-        energy_rates(x, ints, reals, applied, xdot, events, pending)
+        if ints[ENERGY] >= 0:
+            call_at(ints[A_ENERGY], "pipeline.energy", (x, ints, reals, applied, xdot, events, pending))
         joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
         if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
             record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam)
         events[events.size - 1] = 1.0 if regular else 0.0
-        if final or not regular or launch_took(x, ints, state, reals, FJ, Fa, Fv, xdot):
+        if final or not regular or call_at(ints[A_LAUNCH], "pipeline.launch_took",
+                                           (x, ints, state, reals, FJ, Fa, Fv, xdot)):
             return xdot
 
 
@@ -136,7 +168,7 @@ def rates_at(ts, X, ints, reals, work, events):
     between calls); the number of states done before a call's status was not 1."""
     out = np.empty(X.shape)
     for k in range(ts.size):
-        out[k] = call(ts[k], X[k], ints, reals, work, events)
+        out[k] = call_at(ints[A_CALL], "pipeline.call", (ts[k], X[k], ints, reals, work, events))
         if events[events.size - 1] != 1.0:
             return out, k
     return out, ts.size
@@ -151,7 +183,7 @@ def samples_at(ts, X, ints, reals, work, events):
     work[ints[W_DIAG]] = 1.0
     done = n
     for k in range(n):
-        Xd[k] = call(ts[k], X[k], ints, reals, work, events)
+        Xd[k] = call_at(ints[A_CALL], "pipeline.call", (ts[k], X[k], ints, reals, work, events))
         if events[events.size - 1] != 1.0:
             done = k
             break
@@ -159,6 +191,101 @@ def samples_at(ts, X, ints, reals, work, events):
         W[k] = work
     work[ints[W_DIAG]] = 0.0
     return Xd, E, W, done
+
+
+# ---- the stages reached by address (numerics.native_call): compiled on their own, for the modes that have them -----
+# The controller's kinds: each a stage of controller_terms' signature and result (τ, ż, B, D, b, d), so a scene
+# compiles its own kind only. task PD, joint PD, task force, a held command and constant voltages are
+# actuation.command's branches one by one (the same calls); a law of the ABI is force_fold.controller_terms.
+# (Note for the merge with the per-call work on force_fold/actuation: controller_terms' first branch and
+# actuation.command, _abi_command are not reached from the call any more; deleting them saves their compile in the
+# ABI's stage.)
+@njit(cache=True)
+def _plain(ints, tau):
+    """(τ, ż, B, D, b, d) of a law without states, fold or carried column (controller_terms' first branch)."""
+    nv, nz = ints[NV], ints[N_Z]
+    return tau, np.zeros(nz), np.zeros((nv, 0)), np.zeros((nz, 0)), np.zeros(nv), np.zeros(nz)
+
+
+@njit(cache=True)
+def task_pd_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+    """The task PD law compiled in (actuation.command's CTL_TASK_PD)."""
+    fi = ints[TIP_FRAME]
+    x_d, v_d, _ = reference(t, ints, reals)
+    carry(x, ints, reals, x_d, v_d)
+    F_d, forced, _ = set_points(t, ints, reals)
+    return _plain(ints, _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced))
+
+
+@njit(cache=True)
+def joint_pd_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+    """Joint PD (actuation.command's CTL_JOINT_PD)."""
+    x_d, v_d, _ = reference(t, ints, reals)
+    carry(x, ints, reals, x_d, v_d)
+    return _plain(ints, joint_pd_command(x, ints[NQ], reals[ints[R_CTL]:], h, g, x_d, v_d))
+
+
+@njit(cache=True)
+def task_force_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+    """The open-loop task force (actuation.command's CTL_TASK_FORCE)."""
+    return _plain(ints, task_force_command(t, reals[ints[R_CTL]:], h, g, FJ[ints[TIP_FRAME]]))
+
+
+@njit(cache=True)
+def open_loop_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+    """Constant voltages [V], a sampled law's held command, or none (τ = 0): actuation.command's last branches."""
+    if ints[CTL_KIND] == CTL_CONSTANT:
+        return _plain(ints, reals[ints[R_CTL]:ints[R_CTL] + ints[NV]].copy())
+    if ints[CTL_KIND] == CTL_HELD:
+        return _plain(ints, x[ints[X_HELD]:ints[X_HELD] + ints[NV]].copy())
+    return _plain(ints, np.zeros(ints[NV]))
+
+
+@njit(cache=True)
+def solve_direct(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
+    """force_fold.solve_through_drives where nothing folds (no force-reading law, no carried column): the command
+    through the drives into f, then one KKT solve."""
+    cmd = drive_command(x, ints, reals, tau)
+    ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
+    qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, -1)
+    return ok, applied, qdd, lam, regular
+
+
+_F1, _F2, _F3, _I1, _F = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1], types.int64[::1], \
+    types.float64
+_CONTROLLER = types.Tuple((_F1, _F1, _F2, _F2, _F1, _F1))(_F, _F1, _I1, _F1, _F1, _F2, _F1, _F1, _F3, _F2, _F2, _F2,
+                                                          _F3, _F1, _F2, _F1)
+_SOLVE = types.Tuple((types.boolean, _F1, _F1, _F1, types.boolean))(_F1, _I1, _F1, _F1, _F2, _F1, _F2, _F2, _F1, _F1,
+                                                                    _F2, _F1)
+declare("pipeline.call", call, _F1(_F, _F1, _I1, _F1, _F1, _F1))
+declare("pipeline.controller", controller_terms, _CONTROLLER)  # (the declared name of every controller stage)
+CONTROLLER_STAGES = {CTL_ABI: controller_terms, CTL_TASK_PD: task_pd_terms, CTL_JOINT_PD: joint_pd_terms,
+                     CTL_TASK_FORCE: task_force_terms}  #: the controller's kind -> its stage (else open_loop_terms)
+declare("pipeline.solve", solve_through_drives, _SOLVE)
+declare("pipeline.launch_start", launch_start, types.Tuple((_F1, _F1))(_I1, _F1))
+declare("pipeline.launch_took", launch_took, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F1))
+declare("pipeline.energy", energy_rates, types.none(_F1, _I1, _F1, _F1, _F1, _F1, _F2))
+
+
+def stage_addresses(ints: np.ndarray) -> None:
+    """The addresses of the call and of the stages the packed mode ``ints`` needs, into its A_* slots (each stage
+    compiled, or loaded from the cache, at its first use in the process)."""
+    ints[A_CALL] = address("pipeline.call")
+    kind = int(ints[CTL_KIND])
+    ints[A_CONTROLLER] = _address_of("pipeline.controller", CONTROLLER_STAGES.get(kind, open_loop_terms), _CONTROLLER)
+    folds = kind == CTL_ABI and (ints[READS_FORCES] != 0 or ints[CARRIER] >= 0)
+    ints[A_SOLVE] = _address_of("pipeline.solve", solve_through_drives if folds else solve_direct, _SOLVE)
+    if ints[N_LAUNCH]:
+        ints[A_LAUNCH_START], ints[A_LAUNCH] = address("pipeline.launch_start"), address("pipeline.launch_took")
+    if ints[ENERGY] >= 0:
+        ints[A_ENERGY] = address("pipeline.energy")
+
+
+def _address_of(name: str, function, signature) -> int:
+    """The address of one of the functions a call site ``name`` may reach (they share its declared signature)."""
+    own = f"{name}.{getattr(function, 'py_func', function).__name__}"
+    declare(own, function, signature)
+    return address(own)
 
 
 class Pipeline:
@@ -170,6 +297,7 @@ class Pipeline:
             raise ValueError(f"the pipeline prototype does not run this mode: {reason}")
         self.system, self.modes, self.phase = system, list(modes), phase
         self.packed = pack(system, modes, phase)
+        stage_addresses(self.packed.ints)
         self.fallbacks = 0  #: calls answered by the readable model (singular KKT matrix, a law that failed)
 
     def use(self, modes) -> None:

@@ -1,0 +1,91 @@
+"""Compiled functions called by address: each compiled on its own at its first use and cached, so a caller's code
+does not hold theirs.
+
+numba compiles a function together with everything it calls: each callee's code is linked into the caller's and
+optimized again there, and again in each caller of that caller; and every branch is compiled, taken or not. A
+function the caller reaches by address instead is compiled once, on its own, for the one signature declared with
+it, when :func:`address` first asks for it (from Python: a scene that never needs it never compiles it), and cached
+on disk as any function of the package (:mod:`.compile_cache`). The caller's code holds a call through a pointer
+(the address an int64 the caller reads from its data): its arguments, result and exceptions are numba's own, as in
+a direct call (the native calling convention, not a C one), so the function keeps its ordinary source.
+
+    declare("name", function, signature)       # once, where the function is imported (numba's Signature)
+    ints[SLOT] = address("name")                # from Python: compiled (or loaded) here
+    result = call_at(ints[SLOT], "name", (a, b, c))    # in compiled code: the arguments as one tuple
+
+The tuple's types must be the declared signature's (a typing error names both otherwise): the function was
+compiled for those. Under NUMBA_DISABLE_JIT the address is a handle of the Python function and :func:`call_at`
+calls it: the same source, interpreted. An address is valid in the process that asked for it only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numba
+from numba import types
+from numba.core import cgutils, errors
+from numba.extending import intrinsic, overload
+
+from .compile_cache import directory  # noqa: F401  (a compiled module: this source is in the cache's key)
+
+__all__ = ["declare", "address", "call_at"]
+
+_DECLARED: dict[str, tuple[object, object]] = {}  #: name -> (numba dispatcher, its declared signature)
+_HANDLES: dict[int, Callable] = {}  #: interpreted: handle -> the Python function
+
+
+def declare(name: str, function, signature) -> None:
+    """``function`` (a numba dispatcher) callable by address as ``name``, compiled for ``signature`` (numba's
+    ``Signature``: its return type and the argument types its callers pass)."""
+    _DECLARED[name] = (function, signature)
+
+
+def address(name: str) -> int:
+    """The address of ``name``'s function (compiled, or loaded from the cache, at its first use in the process);
+    interpreted (NUMBA_DISABLE_JIT), a handle of its Python function."""
+    function, signature = _DECLARED[name]
+    if numba.config.DISABLE_JIT:
+        python = getattr(function, "py_func", function)
+        _HANDLES[id(python)] = python
+        return id(python)
+    function.compile(signature)
+    compiled = function.overloads[signature.args]
+    return compiled.library.get_pointer_to_function(compiled.fndesc.llvm_func_name)
+
+
+def call_at(at: int, name: str, args: tuple):
+    """``name``'s function at address ``at`` called with the arguments ``args``; interpreted, the handle's."""
+    return _HANDLES[int(at)](*args)
+
+
+@overload(call_at, prefer_literal=True)
+def _call_at_compiled(at, name, args):
+    if not isinstance(name, types.StringLiteral):
+        return None
+    key = name.literal_value
+    _, signature = _DECLARED[key]
+    if tuple(args) != tuple(signature.args):
+        raise errors.TypingError(f"call_at {key!r}: the arguments are ({', '.join(map(str, args))}), "
+                                 f"the declared signature's ({', '.join(map(str, signature.args))})")
+
+    def impl(at, name, args):
+        return _native_call(at, key, args)  # (key: the name as a constant, a literal to the intrinsic)
+    return impl
+
+
+@intrinsic
+def _native_call(typingctx, at, name, args):
+    if not isinstance(name, types.StringLiteral):  # (numba tries the plain string first)
+        return None
+    _, signature = _DECLARED[name.literal_value]
+    restype, argtypes = signature.return_type, signature.args
+
+    def codegen(context, builder, sig, llargs):
+        pointer = builder.inttoptr(llargs[0], context.call_conv.get_function_type(restype, argtypes).as_pointer())
+        status, result = context.call_conv.call_function(builder, pointer, restype, argtypes,
+                                                         cgutils.unpack_tuple(builder, llargs[2]))
+        with cgutils.if_unlikely(builder, status.is_error):
+            context.call_conv.return_status_propagate(builder, status)
+        return result
+    return restype(at, name, args), codegen
