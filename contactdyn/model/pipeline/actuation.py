@@ -30,14 +30,10 @@ from .drives import DI_W, DW_APPLIED, DW_W, apply_drives
 from .pack import (
     ANY_MOTOR,
     CARRIER,
-    CTL_ABI,
     CTL_ADDRESS,
     CTL_CONSTANT,
     CTL_HELD,
-    CTL_JOINT_PD,
     CTL_KIND,
-    CTL_TASK_FORCE,
-    CTL_TASK_PD,
     FEEDFORWARD,
     FF_BIAS,
     FF_GRAVITY,
@@ -72,7 +68,8 @@ from .pack import (
     section,
 )
 
-__all__ = ["reference", "set_points", "command", "drive_command", "drives", "command_by_address", "abi_buffer",
+__all__ = ["reference", "set_points", "task_pd_terms", "joint_pd_terms", "task_force_terms", "open_loop_terms",
+           "drive_command", "drives", "command_by_address", "abi_buffer",
            "abi_call"]
 
 #: the controller ABI's fields (its LAYOUT's order)
@@ -186,36 +183,47 @@ def abi_call(ints, reals, buf, lay, tau, zdot):
     return command_by_address(ints[CTL_ADDRESS], buf, lay, params, tau, zdot)
 
 
+# ---- the controller's kinds compiled in, each a stage of the call (pipeline.stage_addresses): (τ [N·m or N] or
+# voltages [V], ż, B, D, b, d) at (t, x), of force_fold.controller_terms' signature -------------------------------
 @njit(cache=True)
-def _abi_command(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
-    """τ of a controller of the ABI, by its address (NaNs: the law failed; the readable model's error surfaces)."""
-    buf, lay = abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d)
-    tau, zdot = np.zeros(ints[NV]), np.zeros(ints[N_Z])
-    if abi_call(ints, reals, buf, lay, tau, zdot) != 1:
-        tau[:] = np.nan
-    return tau
+def _plain(ints, tau):
+    """(τ, ż, B, D, b, d) of a law without states, fold or carried column."""
+    nv, nz = ints[NV], ints[N_Z]
+    return tau, np.zeros(nz), np.zeros((nv, 0)), np.zeros((nz, 0)), np.zeros(nv), np.zeros(nz)
 
 
 @njit(cache=True)
-def command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR):
-    """The controller's τ [N·m or N], or its voltages [V], at (t, x) (zero without a controller)."""
+def task_pd_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+    """The task PD law."""
     fi = ints[TIP_FRAME]
-    x_d, v_d, a_d = reference(t, ints, reals)
+    x_d, v_d, _ = reference(t, ints, reals)
     carry(x, ints, reals, x_d, v_d)
-    if ints[CTL_KIND] == CTL_TASK_PD:
-        F_d, forced, _ = set_points(t, ints, reals)
-        return _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced)
-    if ints[CTL_KIND] == CTL_JOINT_PD:
-        return joint_pd_command(x, ints[NQ], reals[ints[R_CTL]:], h, g, x_d, v_d)
-    if ints[CTL_KIND] == CTL_TASK_FORCE:
-        return task_force_command(t, reals[ints[R_CTL]:], h, g, FJ[fi])
-    if ints[CTL_KIND] == CTL_ABI:
-        return _abi_command(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
-    if ints[CTL_KIND] == CTL_CONSTANT:  # open-loop voltages [V] (ConstantVoltage)
-        return reals[ints[R_CTL]:ints[R_CTL] + ints[NV]].copy()
-    if ints[CTL_KIND] == CTL_HELD:  # a sampled law's held command (its slots' ẏ = 0: SampledController.command)
-        return x[ints[X_HELD]:ints[X_HELD] + ints[NV]].copy()
-    return np.zeros(ints[NV])
+    F_d, forced, _ = set_points(t, ints, reals)
+    return _plain(ints, _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced))
+
+
+@njit(cache=True)
+def joint_pd_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+    """Joint PD."""
+    x_d, v_d, _ = reference(t, ints, reals)
+    carry(x, ints, reals, x_d, v_d)
+    return _plain(ints, joint_pd_command(x, ints[NQ], reals[ints[R_CTL]:], h, g, x_d, v_d))
+
+
+@njit(cache=True)
+def task_force_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+    """The open-loop task force."""
+    return _plain(ints, task_force_command(t, reals[ints[R_CTL]:], h, g, FJ[ints[TIP_FRAME]]))
+
+
+@njit(cache=True)
+def open_loop_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
+    """Constant voltages [V], a sampled law's held command, or none (τ = 0)."""
+    if ints[CTL_KIND] == CTL_CONSTANT:
+        return _plain(ints, reals[ints[R_CTL]:ints[R_CTL] + ints[NV]].copy())
+    if ints[CTL_KIND] == CTL_HELD:
+        return _plain(ints, x[ints[X_HELD]:ints[X_HELD] + ints[NV]].copy())
+    return _plain(ints, np.zeros(ints[NV]))
 
 
 @njit(cache=True)

@@ -25,7 +25,7 @@ import numpy as np
 
 from ...laws.controllers.abi import FIELD, LAYOUT_HEAD
 from ...numerics.compile_cache import njit
-from .actuation import abi_buffer, abi_call, carry, command, drive_command, drives, reference, set_points
+from .actuation import abi_buffer, abi_call, carry, drive_command, drives, reference, set_points
 from .drives import DI_W, DW_CLIPPED, DW_W, fold_on_targets
 from .kkt import kkt_solve
 from .pack import (
@@ -37,8 +37,6 @@ from .pack import (
     CI_W,
     CR_AXIS,
     CR_POINT,
-    CTL_ABI,
-    CTL_KIND,
     EV_FN,
     EV_W,
     I_CONTACTS,
@@ -169,17 +167,15 @@ def _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq):
 
 @njit(cache=True)
 def controller_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
-    """(τ [N·m or N], ż, B (nv, rows), D (states, rows), b (nv), d (states)) of the phase's controller at (t, x):
-    b and d per unit acceleration of a body carrying the reference (zero without one, or for a law that is not of
-    the ABI: task PD and a held command do not read a_d); τ NaN where the law failed (the readable model then
+    """(τ [N·m or N], ż, B (nv, rows), D (states, rows), b (nv), d (states)) of the phase's controller of the ABI at
+    (t, x) (the kinds compiled in are .actuation's stages): b and d per unit acceleration of a body carrying the
+    reference (zero without one); τ NaN where the law failed (the readable model then
     answers and its error surfaces there)."""
     nv, nr, nz = ints[NV], ints[N_ROWS], ints[N_Z]
     zdot = np.zeros(nz)
     fold = ints[READS_FORCES] != 0 and nr > 0
     B, D = np.zeros((nv, nr if fold else 0)), np.zeros((nz, nr if fold else 0))
     bq, dq = np.zeros(nv), np.zeros(nz)
-    if ints[CTL_KIND] != CTL_ABI:
-        return command(t, x, ints, reals, H, h, g, FJ, Fa, Fp, Fv, FR), zdot, B, D, bq, dq
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)
     carry(x, ints, reals, x_d, v_d)

@@ -22,9 +22,18 @@ from numba import types
 from ...numerics.compile_cache import njit
 from ...numerics.native_call import address, call_at, declare
 from ..contact import structure
-from .actuation import _task_pd, carry, drive_command, drives, reference, set_points
+from .actuation import (
+    carry,
+    drive_command,
+    drives,
+    joint_pd_terms,
+    open_loop_terms,
+    reference,
+    set_points,
+    task_force_terms,
+    task_pd_terms,
+)
 from .contacts import contact_terms, finish, limit_rows
-from .control_laws import joint_pd_command, task_force_command
 from .drives import drive_values, inertias
 from .energy import energy_rates
 from .force_fold import carried_coordinate, controller_terms, fold_rates, solve_through_drives
@@ -41,8 +50,6 @@ from .pack import (
     ANY_MOTOR,
     CARRIER,
     CTL_ABI,
-    CTL_CONSTANT,
-    CTL_HELD,
     CTL_JOINT_PD,
     CTL_KIND,
     CTL_TASK_FORCE,
@@ -65,19 +72,16 @@ from .pack import (
     N_LAUNCH,
     N_LIMITS,
     N_ROWS,
-    N_Z,
     NQ,
     NV,
     NX,
     NY,
-    R_CTL,
     R_REFLECTED,
     READS_FORCES,
     REF_DIMS,
     TIP_FRAME,
     W_DIAG,
     W_DRIVES,
-    X_HELD,
     diag_starts,
     pack,
     set_slip_references,
@@ -194,53 +198,9 @@ def samples_at(ts, X, ints, reals, work, events):
 
 
 # ---- the stages reached by address (numerics.native_call): compiled on their own, for the modes that have them -----
-# The controller's kinds: each a stage of controller_terms' signature and result (τ, ż, B, D, b, d), so a scene
-# compiles its own kind only. task PD, joint PD, task force, a held command and constant voltages are
-# actuation.command's branches one by one (the same calls); a law of the ABI is force_fold.controller_terms.
-# (Note for the merge with the per-call work on force_fold/actuation: controller_terms' first branch and
-# actuation.command, _abi_command are not reached from the call any more; deleting them saves their compile in the
-# ABI's stage.)
-@njit(cache=True)
-def _plain(ints, tau):
-    """(τ, ż, B, D, b, d) of a law without states, fold or carried column (controller_terms' first branch)."""
-    nv, nz = ints[NV], ints[N_Z]
-    return tau, np.zeros(nz), np.zeros((nv, 0)), np.zeros((nz, 0)), np.zeros(nv), np.zeros(nz)
-
-
-@njit(cache=True)
-def task_pd_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
-    """The task PD law compiled in (actuation.command's CTL_TASK_PD)."""
-    fi = ints[TIP_FRAME]
-    x_d, v_d, _ = reference(t, ints, reals)
-    carry(x, ints, reals, x_d, v_d)
-    F_d, forced, _ = set_points(t, ints, reals)
-    return _plain(ints, _task_pd(x, ints, reals, h, g, FJ[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, F_d, forced))
-
-
-@njit(cache=True)
-def joint_pd_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
-    """Joint PD (actuation.command's CTL_JOINT_PD)."""
-    x_d, v_d, _ = reference(t, ints, reals)
-    carry(x, ints, reals, x_d, v_d)
-    return _plain(ints, joint_pd_command(x, ints[NQ], reals[ints[R_CTL]:], h, g, x_d, v_d))
-
-
-@njit(cache=True)
-def task_force_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
-    """The open-loop task force (actuation.command's CTL_TASK_FORCE)."""
-    return _plain(ints, task_force_command(t, reals[ints[R_CTL]:], h, g, FJ[ints[TIP_FRAME]]))
-
-
-@njit(cache=True)
-def open_loop_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
-    """Constant voltages [V], a sampled law's held command, or none (τ = 0): actuation.command's last branches."""
-    if ints[CTL_KIND] == CTL_CONSTANT:
-        return _plain(ints, reals[ints[R_CTL]:ints[R_CTL] + ints[NV]].copy())
-    if ints[CTL_KIND] == CTL_HELD:
-        return _plain(ints, x[ints[X_HELD]:ints[X_HELD] + ints[NV]].copy())
-    return _plain(ints, np.zeros(ints[NV]))
-
-
+# The controller's kinds (.actuation: task PD, joint PD, task force, open loop; a law of the ABI:
+# .force_fold.controller_terms), each a stage of one signature and result (τ, ż, B, D, b, d): a scene compiles its
+# own kind only.
 @njit(cache=True)
 def solve_direct(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
     """force_fold.solve_through_drives where nothing folds (no force-reading law, no carried column): the command
