@@ -15,9 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from contactdyn import parse_scene, simulate
-from contactdyn.model.paths import PIPELINE, READABLE, UNDECLARED, LivePipelines
-from contactdyn.model.pipeline.pipeline import Pipeline
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_compiled_path import axis_scene  # noqa: E402
+
+from contactdyn import parse_scene, simulate  # noqa: E402
+from contactdyn.model.paths import PIPELINE, READABLE, UNDECLARED, LivePipelines  # noqa: E402
+from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 
 CUBIC = Path(__file__).resolve().parent.parent / "examples" / "cubic_press.toml"
 #: a Hunt–Crossley stage soft enough in damping that the falling axis bounces off (a separation on the pipeline)
@@ -29,17 +32,6 @@ def registry(fresh_user_imports):
     """The cubic example imports the user's module; each test leaves the registries as they were (conftest)."""
     yield
     sys.modules.pop("cubic_stage", None)
-
-
-def axis_scene(normal: dict, duration: float):
-    """The cylindrical robot's vertical axis (1 DOF) falling at 0.5 m/s onto a surface 1 mm below its tip."""
-    return parse_scene({
-        "duration": duration, "solver": {"rtol": 1e-10, "atol": 1e-13},
-        "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.999],
-                  "v0": [0.5]},
-        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], **normal}}},
-        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0},
-    })
 
 
 def cubic_scene():
