@@ -97,7 +97,6 @@ def main() -> None:
                    "sims/*.toml)")
     p.add_argument("--help-repeats", type=int, default=5, help="processes timed for contactdyn --help")
     args = p.parse_args()
-    stem = "first_run"
     scenes = args.scenes or default_scenes()
     rows = []
     with tempfile.TemporaryDirectory(prefix="first_run_work_") as work:
@@ -116,14 +115,13 @@ def main() -> None:
     doc = {"help": helps, "scenes": rows, "cpus": os.cpu_count(), "python": platform.python_version(),
            "git": subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                                  text=True).stdout.strip()}
-    doc["prefer"] = args.prefer
-    (OUT / f"{stem}.json").write_text(json.dumps(doc, indent=1))
-    with open(OUT / f"{stem}.csv", "w", newline="") as f:
+    (OUT / "first_run.json").write_text(json.dumps(doc, indent=1))
+    with open(OUT / "first_run.csv", "w", newline="") as f:
         w = csv.DictWriter(f, ["scene", "first_s", "later_s", "first_cpu_s", "later_cpu_s", "notice", "load_before"],
                            extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    print(f"-> {OUT / (stem + '.json')}, {OUT / (stem + '.csv')}")
+    print(f"-> {OUT / 'first_run.json'}, {OUT / 'first_run.csv'}")
 
 
 if __name__ == "__main__":
