@@ -43,9 +43,9 @@ def assert_calls_are_the_readable_model(scene, per_segment: int = 6) -> tuple:
     run.run(time.perf_counter())
     assert run.segments
     for seg in run.segments:
-        assert seg.plan.ok, seg.plan.reason  # on the pipeline
-        seg.plan.use(seg.modes)
-        p = seg.plan.pipe.packed
+        assert seg.runner.ok, seg.runner.reason  # on the pipeline
+        seg.runner.use(seg.modes)
+        p = seg.runner.pipe.packed
         for t in np.linspace(seg.t0, seg.t1, per_segment):
             x = seg.sol(t)
             got = call(float(t), x.copy(), p.ints, p.reals, p.work, p.events)
