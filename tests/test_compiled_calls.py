@@ -29,8 +29,8 @@ from contactdyn.scene.reader import read_toml  # noqa: E402
 from contactdyn.scene.scene_file import find_scene, load_scene  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
-#: a call against System.evaluate at a run's states, relative to 1 + |ẋ|'s largest entry (the twin's kernel tests'
-#: bound, kept); measured ≤ 7.0e-13 over these scenes' states
+#: a call against System.evaluate at a run's states, relative to 1 + |ẋ|'s largest entry (the bound the
+#: deleted twin's tests held); measured ≤ 7.0e-13 over these scenes' states
 CALL_RTOL = 1e-10
 
 

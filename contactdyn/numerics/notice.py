@@ -3,8 +3,8 @@
 A fresh install's first run compiles the package's kernels (numba; cached for later processes, see
 :mod:`contactdyn.numerics.compile_cache`): seconds to minutes on a loaded machine, during which nothing else
 would be printed. Every compile is a block: each numba compile of the package's functions (hooked by
-``compile_cache`` on numba's compile events, so no call site is missed) and each plan the loop builds
-(:func:`compiling`). Once this process's blocks have run NOTICE_AFTER seconds in all, one line goes to
+``compile_cache`` on numba's compile events, so no call site is missed) and each mode's pipeline the loop
+builds (:func:`compiling`). Once this process's blocks have run NOTICE_AFTER seconds in all, one line goes to
 stderr, once per process, so a first run never looks like a hang; a run whose code is cached compiles
 nothing and prints nothing.
 """
