@@ -36,7 +36,6 @@ def _counted(step, taken: list):
         got = step(*args)
         taken.append(got is not None)
         return got
-    counted.usable = step.usable
     return counted
 
 
