@@ -371,7 +371,7 @@ def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, at: tuple, s
     recorded and a decline's reason counted."""
     pipes = run.pipelines
     pipe, why = None, pipes.declined(modes, phase)
-    if pipes.wanted(modes, phase):
+    if pipes.use and not why:
         # (a notice's watch is a thread: only while the mode's pipeline is first built, once per mode)
         with nullcontext() if pipes.built(modes, phase) else compiling("the one pipeline"):
             pipe, why = pipes.mode(modes, phase, *at)
