@@ -85,7 +85,7 @@ def instrumented(name: str) -> dict:
     calls = {"rhs": 0}
     inside = [False]  #: within a segment's integration (the interpolants the output builds later call f too)
 
-    def timed(fun, per_call: int):  # (a compiled step keeps its ``usable``)
+    def timed(fun, per_call: int):
         def f(*args):
             if not inside[0]:
                 return fun(*args)
@@ -95,8 +95,6 @@ def instrumented(name: str) -> dict:
             finally:
                 split.s["rhs"] = split.s.get("rhs", 0.0) + CLOCK() - t0
                 calls["rhs"] += per_call
-        if hasattr(fun, "usable"):
-            f.usable = fun.usable
         return f
 
     def timed_solve(fun, *args, step=None, **kw):  # the rhs as the core sees it, and a compiled mode's steps

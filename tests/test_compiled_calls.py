@@ -29,8 +29,8 @@ from contactdyn.scene.reader import read_toml  # noqa: E402
 from contactdyn.scene.scene_file import find_scene, load_scene  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
-#: a call against System.evaluate at a run's states, relative to 1 + |ẋ|'s largest entry (the twin's kernel tests'
-#: bound, kept); measured ≤ 7.0e-13 over these scenes' states
+#: a call against System.evaluate at a run's states, relative to 1 + |ẋ|'s largest entry (the bound the
+#: deleted twin's tests held); measured ≤ 7.0e-13 over these scenes' states
 CALL_RTOL = 1e-10
 
 
@@ -43,9 +43,9 @@ def assert_calls_are_the_readable_model(scene, per_segment: int = 6) -> tuple:
     run.run(time.perf_counter())
     assert run.segments
     for seg in run.segments:
-        assert seg.plan.ok, seg.plan.reason  # on the pipeline
-        seg.plan.use(seg.modes)
-        p = seg.plan.pipe.packed
+        assert seg.runner.ok, seg.runner.reason  # on the pipeline
+        seg.runner.use(seg.modes)
+        p = seg.runner.pipe.packed
         for t in np.linspace(seg.t0, seg.t1, per_segment):
             x = seg.sol(t)
             got = call(float(t), x.copy(), p.ints, p.reals, p.work, p.events)

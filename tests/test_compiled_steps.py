@@ -24,10 +24,10 @@ def _sliding(name: str, until: float):
     run.run(time.perf_counter())
     seg = next(s for s in reversed(run.segments)
                if all(m.touching and not m.stuck and not m.from_rest for m in s.modes))
-    assert isinstance(seg.plan, PipelineMode)
-    seg.plan.use(seg.modes)
+    assert isinstance(seg.runner, PipelineMode)
+    seg.runner.use(seg.modes)
     t = 0.5 * (seg.t0 + seg.t1)
-    return seg.plan, t, seg.sol(t)
+    return seg.runner, t, seg.sol(t)
 
 
 def _counted(step, taken: list):
@@ -36,7 +36,6 @@ def _counted(step, taken: list):
         got = step(*args)
         taken.append(got is not None)
         return got
-    counted.usable = step.usable
     return counted
 
 

@@ -1,6 +1,6 @@
 """Laws as declared things: a stage law's and a friction law's parameters come from their declarations, their
 properties (not their names) decide the physics, friction acts through one interface, each mode's path is
-named, and a law changed on one path only is caught by the plan's self-check where the mode starts."""
+named, and a law changed on one path only is caught by the pipeline's check where the mode starts."""
 
 from __future__ import annotations
 

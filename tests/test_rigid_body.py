@@ -1,4 +1,4 @@
-"""The robot's terms computed in the plan's call (contactdyn.robot.rigid_body) against Pinocchio's computeAllTerms."""
+"""The robot's terms computed in the one call (contactdyn.robot.rigid_body) against Pinocchio's computeAllTerms."""
 
 from pathlib import Path
 

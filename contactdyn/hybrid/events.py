@@ -356,15 +356,15 @@ def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
 
 
 def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
-                   plan=None, fun=None):
+                   runner=None, fun=None):
     """The event functions of one segment, and the right-hand side that feeds their stage watches.
 
-    They read the compiled mode ``plan``'s values when given (its last call's, no second solve: the one pipeline's
+    They read the compiled mode ``runner``'s values when given (its last call's, no second solve: the one pipeline's
     mode, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`), else :meth:`System.evaluate`'s
     through one shared evaluation per state. ``fun``: the right-hand side to integrate when it is not the values'
     own.
     """
-    values = plan if plan is not None else _ReadableValues(system, modes, phase)
+    values = runner if runner is not None else _ReadableValues(system, modes, phase)
     out: list = []
     watches: list[SlipWatch] = []
     for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
@@ -398,7 +398,7 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
 
     def sample(t: float, x: np.ndarray) -> None:
         for w in watches:
-            w.sample(t, w.value(t, x))  # the same evaluation (plan: its last call): no second solve
+            w.sample(t, w.value(t, x))  # the same evaluation (runner: its last call): no second solve
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         xd = fun(t, x)

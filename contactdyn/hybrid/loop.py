@@ -117,8 +117,8 @@ class HybridRun:
         #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
         #: them, "" when none did (no more checks in the mode); None: not checked
         self.resting: str | None = None
-        #: reasons the plan declined a mode (it ran on the one pipeline or System.evaluate: ``paths`` says which) and
-        #: the pipeline's undeclared ones, with counts
+        #: why a mode ran on System.evaluate, with counts: pack.unsupported's reason, or the undeclared disagreement
+        #: of its pipeline's check (``paths`` says which path each mode took)
         self.fallbacks: dict[str, int] = {}
         #: the modes the compiled call runs (every one it packs; the others on the readable model)
         self.pipelines = LivePipelines(system, PipelineMode)
@@ -209,13 +209,13 @@ class HybridRun:
         with the state after a sampled law's sample at t_after (its held command jumps: hybrid.sampling)
         (no event: the same modes, unless a contact force or limit torque jumps through zero there,
         which is handled as the event a step straddling the corner would have located)."""
-        plan = _runner(self, modes, phase, (t, x))
+        runner = _runner(self, modes, phase, (t, x))
         if sample:
             x, before = self.sampled.take(t_after, x, modes, phase), x
-            fired = self.sampled.jumped(t_after, before, x, modes, phase, plan)
+            fired = self.sampled.jumped(t_after, before, x, modes, phase, runner)
         else:
             self.stats["corners"] += 1
-            fired = fired_across(segment_events(self.system, modes, phase, t, x, plan if plan.ok else None)[0],
+            fired = fired_across(segment_events(self.system, modes, phase, t, x, runner if runner.ok else None)[0],
                                  t, t_after, x)
         if fired:
             self._new_mode()
@@ -230,22 +230,22 @@ class HybridRun:
         ``t_sample`` [s]: a sampled law's next sample instant before t_end; a method that carries the hold takes it
         and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
-        plan = _runner(self, modes, phase, (t, x), start=True)  # the one pipeline's mode, or the readable model
-        fun = plan.rhs if plan.ok else system.rhs(modes, phase)
+        runner = _runner(self, modes, phase, (t, x), start=True)  # the one pipeline's mode, or the readable model
+        fun = runner.rhs if runner.ok else system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             held = t_sample is not None and carries_hold(method)
             end = t_sample if t_sample is not None and not held else t_end
             h0 = min(self.next_step, end - t) if self.next_step else None
             hold = self.sampled.hold(modes, phase, t_end) if held else None
-            events, rhs = segment_events(system, modes, phase, t, x, plan if plan.ok else None)
+            events, rhs = segment_events(system, modes, phase, t, x, runner if runner.ok else None)
             self.starts.record(t, x, events)
             events += self._watches(modes, method)
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
             # LSODA finishing a slide that comes to rest (HybridRun._collapse_check): at RESTING_TOL × the tolerances
             finishing = method == self.resting and method != scene_method and not _launching(modes)
             scale = RESTING_TOL if finishing else 1.0
-            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # the plan catches these
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # a singular call: see PipelineMode
                 sol = integrate(self.work.wrap(rhs), (t, end), x, method, rtol=scale * self.solver.rtol,
                                 atol=scale * self.solver.atol, max_step=self._max_step(modes, method), events=events,
                                 first_step=h0, jac=jac, hold=hold)
@@ -261,7 +261,7 @@ class HybridRun:
             why = sol.message if sol.status < 0 else "the state is not finite"  # never "successfully ..."
             raise SimulationError(f"{self.scene.name}: integration failed at t = {sol.t[-1]:.9g} s "
                                   f"({method}): {why}{_diagnose(self, sol, modes, phase, fun, method)}")
-        self.segments.append(Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, plan))
+        self.segments.append(Segment(t, float(sol.t[-1]), list(modes), phase, sol.sol, runner))
         self.stats["segments"] += 1
         return sol, events, fun, held
 
@@ -371,7 +371,7 @@ def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, at: tuple, s
     recorded and a decline's reason counted."""
     pipes = run.pipelines
     pipe, why = None, pipes.declined(modes, phase)
-    if pipes.wanted(modes, phase):
+    if pipes.use and not why:
         # (a notice's watch is a thread: only while the mode's pipeline is first built, once per mode)
         with nullcontext() if pipes.built(modes, phase) else compiling("the one pipeline"):
             pipe, why = pipes.mode(modes, phase, *at)
@@ -389,7 +389,7 @@ def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -
     lam = np.zeros(0)
     if run.segments:
         seg = run.segments[-1]
-        lam = jacobian_eigenvalues(seg.plan.rhs if seg.plan.ok else run.system.rhs(seg.modes, seg.phase), t, x)
+        lam = jacobian_eigenvalues(seg.runner.rhs if seg.runner.ok else run.system.rhs(seg.modes, seg.phase), t, x)
     stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
              f"{run.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
     advice = "a stiff scene runs with solver.method = \"Radau\" or \"auto\"" \

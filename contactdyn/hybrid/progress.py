@@ -98,6 +98,5 @@ class Work:
                 self.count(STEP_STAGES)
                 return step(*args, **kwargs)
 
-            counted_step.usable = step.usable
             counted.step = counted_step
         return counted

@@ -92,12 +92,12 @@ class SampledPhases:
                                                         for c, m in zip(self.system.contacts, modes, strict=True))
 
     def jumped(self, t: float, before: np.ndarray, after: np.ndarray, modes: list[ContactMode], phase: Phase,
-               plan) -> list:
+               runner) -> list:
         """The events whose function falls through zero from ``before`` to ``after`` at t [s] (a held command's
         jump), in list order; only a mode with a function of forces is checked (:data:`JUMPING`)."""
         if not self.jumps(modes, phase):
             return []  # (no separate, slip, release or joint_slip event in this mode: the others read the state alone)
-        events, _ = segment_events(self.system, modes, phase, t, before, plan if plan.ok else None)
+        events, _ = segment_events(self.system, modes, phase, t, before, runner if runner.ok else None)
         events = [e for e in events if e.kind in JUMPING]
         return fired_across(events, t, t, before, after) if events else []
 

@@ -104,8 +104,8 @@ def stepper(packed, ring, on_stage=None):
 
     def step(t, y, f, h, rtol, atol):
         y_new, block = np.empty(y.size), np.empty((10, y.size))  # (block's row 3 is not read)
-        status, err = attempt(ints, reals, work, events, t, y, f, h, rtol, atol, _A, _B, _C, _E, y_new,
-                                       block, Ys, Es)
+        status, err = attempt(ints, reals, work, events, t, y, f, h, rtol, atol, _A, _B, _C, _E, y_new, block,
+                              Ys, Es)
         if status:
             return None
         if on_stage is not None:
@@ -118,7 +118,6 @@ def stepper(packed, ring, on_stage=None):
             on_stage(t + h, y_new)
         return err, y_new, block
 
-    step.usable = lambda: True
     return step
 
 

@@ -58,7 +58,7 @@ class FrictionSpec:
 
     @property
     def constant(self) -> bool:
-        """The kinetic coefficient is μ_k at every slip speed (the compiled plan holds it in its matrices)."""
+        """The kinetic coefficient is μ_k at every slip speed (both paths then read μ_k, no law call)."""
         return FRICTION_LAWS[self.law].constant
 
     def mu(self, speed):

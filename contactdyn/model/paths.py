@@ -72,10 +72,6 @@ class LivePipelines:
             self.declines[key] = unsupported(self.system, modes, phase)
         return self.declines[key]
 
-    def wanted(self, modes, phase) -> bool:
-        """Does the pipeline run (modes, phase)?"""
-        return self.use and not self.declined(modes, phase)
-
     def count(self) -> int:
         """How many modes run on the pipeline (packed, and their check agreed)."""
         return sum(not isinstance(pipe, str) for pipe in self.pipes.values())
@@ -85,7 +81,7 @@ class LivePipelines:
         return (structure(modes), phase.key()) in self.pipes
 
     def mode(self, modes, phase, t: float, x: np.ndarray) -> tuple[object | None, str]:
-        """(the pipeline of a mode :meth:`wanted` says it runs, starting at (t [s], x), wrapped; or None and the
+        """(the pipeline of a mode :meth:`declined` lets it run, starting at (t [s], x), wrapped; or None and the
         undeclared reason its check disagreed with)."""
         key = (structure(modes), phase.key())
         pipe = self.pipes.get(key)

@@ -46,7 +46,7 @@ class Phase:
         """What tells this phase's compiled modes apart: the phase itself (its index, its start [s], its bound
         controller) and the joints pressing on a limit and the dry-friction joints' modes. A copy made for a limit or
         a joint's friction mode (``dataclasses.replace``) that returns to an earlier set has the earlier key, so its
-        plans and pipelines are found again instead of packed and checked anew."""
+        pipelines are found again instead of packed and checked anew."""
         return self.index, self.t_start, id(self.controller), self.limits, self.joint_modes
 
     def next_corner(self, t: float, t_end: float) -> Corner | None:

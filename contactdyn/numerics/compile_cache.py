@@ -151,7 +151,7 @@ def njit(*signatures, **options) -> Callable:
 class CompileNotice(event.Listener):
     """numba's compiles of the package's functions as blocks of :mod:`contactdyn.numerics.notice` (others ignored)."""
 
-    WHAT = "the fast path's kernels"
+    WHAT = "the compiled call and its laws"
 
     @staticmethod
     def _ours(e: event.Event) -> bool:

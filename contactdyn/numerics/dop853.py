@@ -392,7 +392,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     solve_ivp's estimate) as in ``solve_ivp``. Events are terminal if their ``terminal`` attribute is.
     The steps are solve_ivp's: after a rejection the step shrinks by max(MIN_FACTOR, SAFETY err^(−1/8))
     and the next step may not grow. ``step``: a compiled step attempt of ``fun``'s (hybrid.steps)
-    that takes the steps in place of scipy's core, with the same step control, where ``step.usable()``.
+    that takes the steps in place of scipy's core, with the same step control.
     """
     if _CORE is None:
         raise SceneError("solver.method", "DOP853C: scipy's compiled DOP853 (scipy.integrate._dop.dopri853, "
@@ -408,7 +408,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
         return fun(t, y)
 
     h = _first_step(counted, t0, y0, f0, t_end, max_step, rtol, atol, first_step)
-    if step is not None and step.usable():
+    if step is not None:
         steps = _Steps(fun, len(y0), [t0], y0.copy(), f0)
         ierr, nreject, calls[0] = _stepped(step, fun, steps, watch, t_end, h, rtol, atol, max_step, calls[0])
         return _solution(steps, watch, ierr, t_end, calls[0], nreject, rtol, atol)

@@ -104,7 +104,7 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
         return fun(t, x)
 
     h = _first_step(counted, t0, y, f, min(t_end, hold.next_time()), max_step, rtol, atol, first_step)
-    compiled = step is not None and step.usable()
+    compiled = step is not None
     core = None if compiled else _Core(fun, t0, y, f, watch, rtol, atol, max_step)
     pieces: list[_Steps] = []
     t, nreject, after = t0, 0, None

@@ -1,10 +1,10 @@
 """A line on the terminal while something slow and silent happens: compiling the fast path.
 
-A fresh install's first run compiles the package's kernels (numba; cached for later processes, see
+A fresh install's first run compiles the package's numba functions (cached for later processes, see
 :mod:`contactdyn.numerics.compile_cache`): seconds to minutes on a loaded machine, during which nothing else
 would be printed. Every compile is a block: each numba compile of the package's functions (hooked by
-``compile_cache`` on numba's compile events, so no call site is missed) and each plan the loop builds
-(:func:`compiling`). Once this process's blocks have run NOTICE_AFTER seconds in all, one line goes to
+``compile_cache`` on numba's compile events, so no call site is missed) and each mode's pipeline the loop
+builds (:func:`compiling`). Once this process's blocks have run NOTICE_AFTER seconds in all, one line goes to
 stderr, once per process, so a first run never looks like a hang; a run whose code is cached compiles
 nothing and prints nothing.
 """
@@ -28,7 +28,7 @@ class _Watch:
 
     def __init__(self) -> None:
         self.lock = threading.RLock()
-        self.depth = 0  #: blocks open (nested: a kernel compiled while a plan is built)
+        self.depth = 0  #: blocks open (nested: a function compiled while a mode's pipeline is built)
         self.spent = 0.0  #: [s] in the closed outermost blocks
         self.started = 0.0  #: [s] clock() at the open outermost block's start
         self.said = False  #: the line was printed in this process

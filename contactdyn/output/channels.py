@@ -43,7 +43,7 @@ class Segment:
     modes: list[ContactMode]
     phase: Phase
     sol: Any
-    plan: Any
+    runner: Any  #: what ran it: the one pipeline's mode (PipelineMode) or the readable model (paths.Declined)
 
 
 class Held:
@@ -64,7 +64,7 @@ def output_grid(duration: float, rate: float) -> np.ndarray:
 
 def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, stats: dict[str, Any]
                     ) -> dict[str, np.ndarray]:
-    """The channels of a run at the times ``grid`` (adds the plans' singular solves to ``stats``)."""
+    """The channels of a run at the times ``grid`` (adds the compiled modes' singular solves to ``stats``)."""
     return sample_states(system, segments, grid, stats)[0]
 
 
@@ -84,9 +84,9 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
         sel = np.flatnonzero(np.isin(idx, run))
         ts = grid[sel]
         derivatives = None
-        if seg.plan.ok:  # the interpolants' extra stages all at once
-            seg.plan.use(seg.modes)
-            derivatives = getattr(seg.plan.rhs, "derivatives", None)
+        if seg.runner.ok:  # the interpolants' extra stages all at once
+            seg.runner.use(seg.modes)
+            derivatives = getattr(seg.runner.rhs, "derivatives", None)
         for i in run:
             at = sel[idx[sel] == i]
             sol = segments[i].sol
@@ -94,11 +94,11 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
                 sol = partial(sol, derivatives=derivatives)
             xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
         X = xs[sel]
-        if seg.plan.ok and seg.plan not in counted:  # a plan serves several segments (every turn): count it once
-            counted.append(seg.plan)
-            stats["singular_solves"] += seg.plan.singular
-        if seg.plan.ok:
-            parts.append(seg.plan.samples(ts, X, seg.modes))  # a plan serves every turn: this segment's r
+        if seg.runner.ok and seg.runner not in counted:  # one serves several segments (every turn): count it once
+            counted.append(seg.runner)
+            stats["singular_solves"] += seg.runner.singular
+        if seg.runner.ok:
+            parts.append(seg.runner.samples(ts, X, seg.modes))  # it serves every turn: this segment's r
         else:
             parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase))
         modes_of += [seg.modes] * len(sel)
@@ -116,7 +116,7 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
 
 
 def _same_mode_runs(segments: list[Segment], used: np.ndarray) -> list[list[int]]:
-    """The used segments' indices in runs of consecutive segments on the same modes, phase and plan."""
+    """The used segments' indices in runs of consecutive segments on the same modes, phase and runner."""
     runs: list[list[int]] = []
     for i in used:
         seg = segments[i]
@@ -128,7 +128,7 @@ def _same_mode_runs(segments: list[Segment], used: np.ndarray) -> list[list[int]
 
 
 def _same_mode(a: Segment, b: Segment) -> bool:
-    return a.plan is b.plan and a.phase is b.phase and a.modes == b.modes
+    return a.runner is b.runner and a.phase is b.phase and a.modes == b.modes
 
 
 def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,

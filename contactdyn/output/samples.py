@@ -23,18 +23,19 @@ class Samples:
         self.u = np.full((n, len(system.drives.specs)), np.nan)  #: voltage per drive [V], NaN for ideal drives
         self.limit_torque = np.zeros((n, nv))  #: per joint [N·m or N], 0 unless pressing on a limit
         self.joint_friction = np.zeros((n, nv))  #: per joint: damping and dry friction [N·m or N]
-        self.tip = np.zeros((n, 3))
-        self.x_d = np.full((n, 3), np.nan)
-        self.has_x_d = False
-        self.body_force = np.zeros((n, nb))
-        self.F_n = {c.name: np.zeros(n) for c in system.contacts}
-        self.gap = {c.name: np.zeros(n) for c in system.contacts}
-        self.F_d = {key: np.full(n, np.nan) for key in system.force_directions}  #: per set-point key
+        self.tip = np.zeros((n, 3))  #: the controlled tip's position [m]
+        self.x_d = np.full((n, 3), np.nan)  #: the tip's reference [m], NaN where the law has none
+        self.has_x_d = False  #: some sample has a reference
+        self.body_force = np.zeros((n, nb))  #: the drive force on each active body [N]
+        self.F_n = {c.name: np.zeros(n) for c in system.contacts}  #: normal force [N], > 0 pressing
+        self.gap = {c.name: np.zeros(n) for c in system.contacts}  #: normal gap [m], 0 while touching
+        self.F_d = {key: np.full(n, np.nan) for key in system.force_directions}  #: set-point force [N] (NaN: none)
         self.has_F_d = {key: False for key in system.force_directions}
-        self.F_f = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}
-        self.v_slip = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}
+        self.F_f = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}  #: friction [N], tangent coords
+        self.v_slip = {c.name: np.zeros((n, len(c.tangents))) for c in system.contacts}  #: slip [m/s], tangent coords
+        #: a tangential chain's interface force [N], per "contact.t1"
         self.iface = {f"{c.name}.{dc.label}": np.zeros(n) for c in system.contacts for dc in c.tangent_chains}
-        self.stages = {label: np.zeros((n, 3)) for label in system.stage_labels}
+        self.stages = {label: np.zeros((n, 3)) for label in system.stage_labels}  #: (x [m], ẋ [m/s], F [N])
 
     @classmethod
     def concatenate(cls, parts: list[Samples], system) -> Samples:

@@ -1,6 +1,6 @@
-"""The robot's rigid-body terms inside a plan's compiled call, as Pinocchio's ``computeAllTerms`` gives them.
+"""The robot's rigid-body terms inside the one pipeline's call, as Pinocchio's ``computeAllTerms`` gives them.
 
-A plan's call needs, per right-hand side, H(q) (CRBA), h(q, q̇) (RNEA at q̈ = 0, with the model's gravity), the
+The call needs, per right-hand side, H(q) (CRBA), h(q, q̇) (RNEA at q̈ = 0, with the model's gravity), the
 joint Jacobians (WORLD, 6 × nv) and its frame's joint placement, velocity and acceleration at q̈ = 0 (local,
 [linear, angular]). Pinocchio's binding call costs ~2.3 µs at 5 DOF, most of it the crossing and the terms we
 do not read; for a tree of one-DOF revolute and prismatic joints (every URDF arm of ours and of
@@ -21,7 +21,7 @@ import numpy as np
 
 from ..numerics.compile_cache import njit
 
-__all__ = ["rigid_table", "rigid_terms", "NO_TABLE", "frame_motion_into"]
+__all__ = ["rigid_table", "rigid_terms", "frame_motion_into"]
 
 REVOLUTE, PRISMATIC = 0.0, 1.0
 #: one row per joint (row 0, the universe: −gravity [m/s²] in AXIS): parent, kind, velocity index, the axis in
@@ -29,7 +29,6 @@ REVOLUTE, PRISMATIC = 0.0, 1.0
 #: body's mass [kg], centre of mass [m] and rotational inertia about it [kg·m²] (by rows), the armature
 PARENT, KIND, IDX_V, AXIS, PLACEMENT_R, PLACEMENT_P, MASS, LEVER, INERTIA, ARMATURE, WIDTH = \
     0, 1, 2, 3, 6, 15, 18, 19, 22, 31, 32
-NO_TABLE = np.zeros((0, WIDTH))  #: a plan whose robot's terms come from Pinocchio
 _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 
 
@@ -71,7 +70,7 @@ def rigid_table(model) -> np.ndarray | None:
 
 @njit(cache=True)
 def rigid_terms(q, v, table, j0, M, nle, g, R, pj, vj, aj, J):
-    """Pinocchio's ``computeAllTerms`` terms at (q, q̇) [rad or m, rad/s or m/s] a plan reads, written in place:
+    """Pinocchio's ``computeAllTerms`` terms at (q, q̇) [rad or m, rad/s or m/s] the pipeline reads, written in place:
     M (full) [kg·m²], nle, g (if g.size; the generalized gravity) [N·m or N], J (WORLD joint Jacobians, 6 × nv)
     and joint j0's world rotation R and position pj [m], and its velocity vj [m/s, rad/s] and acceleration aj at
     q̈ = 0 [m/s², rad/s²] (in its frame, [linear, angular])."""

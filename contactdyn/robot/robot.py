@@ -227,7 +227,7 @@ class Robot:
 
     @functools.cached_property
     def rigid_table(self) -> np.ndarray | None:
-        """The model's table for the plans' own dynamics (:func:`contactdyn.robot.rigid_body.rigid_table`; None: a
+        """The model's table for the pipeline's own dynamics (:func:`contactdyn.robot.rigid_body.rigid_table`; None: a
         joint it does not compute), built once."""
         return rigid_table(self.model)
 

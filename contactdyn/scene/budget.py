@@ -21,7 +21,7 @@ MAX_DURATION = 1e4  #: [s] simulated at most
 MAX_SAMPLES = 10**7  #: output samples (duration × output_rate) at most
 MAX_STEPS = 10**7  #: integration steps implied by duration / max_step at most
 MAX_MOVES = 64  #: moves of one reference (each adds a kink and a term to every evaluation: cost ~ moves²)
-MAX_PHASES = 1000  #: phases of a scene (each builds its own controller and plans)
+MAX_PHASES = 1000  #: phases of a scene (each builds its own controller and pipelines)
 #: [B] a run's peak memory per output sample (states, channels, their saved copy): 1325 B measured for B1 at
 #: 2e6 samples (output_rate = 1e7 over 0.2 s peaked at 2.65 GB), with a margin
 BYTES_PER_SAMPLE = 1536

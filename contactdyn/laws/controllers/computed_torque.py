@@ -2,15 +2,13 @@
 
     q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇           (k_null only where the robot is redundant, nv > 3)
     τ  = H q̈* − r ∘ q̈* + h − τ_c + Jᵀ f_swap         [N·m or N]
-    ∂τ = H J⁺ D_a − r ∘ (J⁺ D_a) + Jᵀ D_f             (per column of tip-target changes D_a [m/s²], D_f [N])
 
 H [kg·m²] the model's inertia, r the rotor inertia the law takes out (``inertia = "link"``; empty
 for "model"), J the tip Jacobian (3, nv), J⁺ its pseudo-inverse (:func:`contactdyn.numerics.linalg.pinv`: singular
 values below 1e-10 of the largest dropped, numpy.linalg.pinv's rcond). Written once here and
 compiled by numba: the readable law (:mod:`contactdyn.laws.controllers.dynamic`) and the one pipeline's call
 (:mod:`contactdyn.model.pipeline.control_laws`) both run these functions. Arguments are
-C-contiguous float64 arrays; "none" is an empty array (r, f_swap: length 0, or (N, 0) for a stack;
-D_f: 0 rows).
+C-contiguous float64 arrays; "none" is an empty array (r, f_swap: length 0, or (N, 0) for a stack).
 """
 
 from __future__ import annotations
@@ -18,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import mm, mtm, mv, pinv
+from ...numerics.linalg import mm, mv, pinv
 
-__all__ = ["pinv", "torque", "increments", "pinv_stack", "torque_stack", "increments_stack"]
+__all__ = ["pinv", "torque", "pinv_stack", "torque_stack"]
 
 
 @njit(cache=True)
@@ -54,19 +52,6 @@ def torque(H, rotor, h, tau_c, J, Jp, drift, v, a, f_swap, k_null):
     return tau
 
 
-@njit(cache=True)
-def increments(H, rotor, J, Jp, D_a, D_f):
-    """∂τ of the module docstring, one column per tip-target change [N·m or N per m/s² or N]."""
-    dqdd = mm(Jp, D_a)
-    dtau = mm(H, dqdd)
-    if rotor.size:
-        for i in range(dtau.shape[0]):
-            dtau[i] -= rotor[i] * dqdd[i]
-    if D_f.shape[0]:
-        dtau += mtm(J, D_f)
-    return dtau
-
-
 # ---- a stack of samples (the output's), one sample's arithmetic each ----------------------------
 @njit(cache=True)
 def pinv_stack(J):
@@ -82,13 +67,4 @@ def torque_stack(H, rotor, h, tau_c, J, Jp, drift, v, a, f_swap, k_null):
     for k in range(h.shape[0]):
         out[k] = torque(np.ascontiguousarray(H[k]), rotor, h[k], tau_c[k], np.ascontiguousarray(J[k]),
                         np.ascontiguousarray(Jp[k]), drift[k], v[k], a[k], f_swap[k], k_null)
-    return out
-
-
-@njit(cache=True)
-def increments_stack(H, rotor, J, Jp, D_a, D_f):
-    out = np.empty((H.shape[0], H.shape[1], D_a.shape[1]))
-    for k in range(H.shape[0]):
-        out[k] = increments(np.ascontiguousarray(H[k]), rotor, np.ascontiguousarray(J[k]),
-                            np.ascontiguousarray(Jp[k]), D_a, D_f)
     return out

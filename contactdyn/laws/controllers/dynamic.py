@@ -262,7 +262,7 @@ class _ComputedTorque(Controller):
                v: np.ndarray, a: np.ndarray, f_swap: np.ndarray | None) -> np.ndarray:
         """τ = H q̈* + h − τ_c (+ Jᵀ f_swap) [N·m or N], q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇ for the tip
         acceleration a [m/s²], from the model's terms (J: the tip Jacobian (3, nv), drift: J̇q̇ [m/s²], v: q̇;
-        the compiled path passes its own, :meth:`computed_torque` a ControlInput's)."""
+        :meth:`computed_torque` passes a ControlInput's: one sample, or a stack of the output's samples)."""
         rotor, k_null = self._rotor, float(self.config.k_null)
         stack = J.ndim == 3  # a stack of samples: one sample's arithmetic each
         Jp = self._pinv(J)
@@ -270,16 +270,6 @@ class _ComputedTorque(Controller):
             f_swap = np.empty(a.shape[:-1] + (0,))
         args = (_c(H), rotor, _c(h), _c(tau_c), _c(J), Jp, _c(drift), _c(v), _c(a), _c(f_swap), k_null)
         return compiled.torque_stack(*args) if stack else compiled.torque(*args)
-
-    def torque_increments(self, inp: ControlInput, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
-        """∂τ for changes of the tip targets, one per column: H J⁺ da (+ Jᵀ df) [N·m or N]."""
-        return self.increments(inp.H, inp.J, da, df)
-
-    def increments(self, H: np.ndarray, J: np.ndarray, da: np.ndarray, df: np.ndarray | None) -> np.ndarray:
-        """:meth:`torque_increments` from the model's terms H and J."""
-        D_f = np.empty((0, da.shape[-1])) if df is None else _c(df)
-        args = (_c(H), self._rotor, _c(J), self._pinv(J), _c(da), D_f)
-        return compiled.increments_stack(*args) if J.ndim == 3 else compiled.increments(*args)
 
 
 # ---- A7 -----------------------------------------------------------------------------------------

@@ -269,7 +269,8 @@ def pack(system, modes, phase) -> Packed:
 
 
 def _frames(b: _Builder, system, fids: list[int]) -> None:
-    """Per frame its joint, the columns that move it and its placement in its joint (plan_phi.frame_constants)."""
+    """Per frame its joint, the columns that move it and its placement in its joint (translation [m], rotation by
+    rows), as :func:`.robot_terms.frame_terms` reads them."""
     model = system.robot.model
     b.ints[N_FRAMES] = len(fids)
     rows, supports, consts = [], [], []

@@ -3,8 +3,8 @@
 H [kg·m²], h and g [N·m or N] and the joint Jacobians (WORLD, 6 × nv) by :mod:`contactdyn.robot.rigid_body`'s
 algorithms (as its ``rigid_terms``, every joint's placement and motion kept); then each packed frame's J (6 × nv,
 LOCAL_WORLD_ALIGNED, linear rows first), J̇q̇ (6) [m/s², rad/s²], p [m], ṗ = J q̇ [m/s] and R, by
-:func:`frame_motion` over the joints' table W (:func:`contactdyn.robot.rigid_body.frame_motion_into`, the
-compiled twin's arithmetic too: one source).
+:func:`frame_motion` over the joints' table W (:func:`contactdyn.robot.rigid_body.frame_motion_into`: one
+source).
 """
 
 from __future__ import annotations
