@@ -69,7 +69,8 @@ F_SET, F_RATE, F_DIR, F_READ, F_TAU_C, F_SURFACE_P, F_SURFACE_V, F_TOUCH, F_AD =
 
 @njit(cache=True, inline="always")
 def _at(lay, k):
-    """Where field k starts in the buffer, and its size (0: absent)."""
+    """Where field k starts in the buffer, and its size (0: absent). (Callers pass k as np.int64: a literal would
+    compile this once per field.)"""
     return lay[LAYOUT_HEAD + 2 * k], lay[LAYOUT_HEAD + 1 + 2 * k] - lay[LAYOUT_HEAD + 2 * k]
 
 
@@ -82,13 +83,13 @@ def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
     owner = ints[ints[I_FOLD] + 2 * ns + nr:ints[I_FOLD] + 3 * ns + nr]  # and its contact
     shift = section(reals, ints[R_FOLD], ns, 3)
     cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
-    at_set, n_set = _at(lay, F_SET)
-    at_rate, n_rate = _at(lay, F_RATE)
-    at_dir, n_dir = _at(lay, F_DIR)
-    at_read, n_read = _at(lay, F_READ)
-    at_p, n_p = _at(lay, F_SURFACE_P)
-    at_v, n_v = _at(lay, F_SURFACE_V)
-    at_touch, n_touch = _at(lay, F_TOUCH)
+    at_set, n_set = _at(lay, np.int64(F_SET))
+    at_rate, n_rate = _at(lay, np.int64(F_RATE))
+    at_dir, n_dir = _at(lay, np.int64(F_DIR))
+    at_read, n_read = _at(lay, np.int64(F_READ))
+    at_p, n_p = _at(lay, np.int64(F_SURFACE_P))
+    at_v, n_v = _at(lay, np.int64(F_SURFACE_V))
+    at_touch, n_touch = _at(lay, np.int64(F_TOUCH))
     for s in range(ns):
         if n_set:
             buf[at_set + s] = F_d[s]
@@ -108,7 +109,7 @@ def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
             buf[at_v + 3 * s + i] = cr[CR_AXIS + i] * x[nQ + body] if body >= 0 else 0.0
         if n_touch:
             buf[at_touch + s] = 1.0 if row[CI_TOUCHING] else 0.0
-    at_tc, n_tc = _at(lay, F_TAU_C)
+    at_tc, n_tc = _at(lay, np.int64(F_TAU_C))
     for c in range(n_tc):
         buf[at_tc + c] = f[c] + h[c]  # the contacts' generalized force on the joints (f holds −h)
     return n_read, n_tc
@@ -120,8 +121,8 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
     nv, ns, nr = ints[NV], ints[N_FORCES], ints[N_ROWS]
     sp = ints[ints[I_FOLD]:ints[I_FOLD] + ns]
     row_contact = ints[ints[I_FOLD] + ns:ints[I_FOLD] + ns + nr]
-    at_read, n_read = _at(lay, F_READ)
-    at_tc, _ = _at(lay, F_TAU_C)
+    at_read, n_read = _at(lay, np.int64(F_READ))
+    at_tc, _ = _at(lay, np.int64(F_TAU_C))
     read0, tc0 = buf[at_read:at_read + n_read].copy(), buf[at_tc:at_tc + nv].copy()
     tau_j, zdot_j = np.empty(nv), np.empty(zdot.size)
     for j in range(nr):
@@ -150,7 +151,7 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
 @njit(cache=True, inline="always")
 def _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq):
     """(b, d): the law's differences at one unit [m/s²] more of a_d along the carrier's axis (a_d_increment)."""
-    at, n = _at(lay, F_AD)
+    at, n = _at(lay, np.int64(F_AD))
     axis = reals[ints[R_CARRIER]:ints[R_CARRIER] + 3]
     a0 = buf[at:at + n].copy()
     for k in range(n):
