@@ -25,6 +25,7 @@ import numpy as np
 
 from ...laws.controllers.abi import FIELD, LAYOUT_HEAD
 from ...numerics.compile_cache import njit
+from ...numerics.linalg import put
 from .actuation import abi_buffer, abi_call, carry, drive_command, drives, reference, set_points
 from .drives import DI_W, DW_CLIPPED, DW_W, fold_on_targets
 from .kkt import kkt_solve
@@ -143,8 +144,8 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
             B[i, j] = tau_j[i] - tau[i]
         for i in range(zdot.size):
             D[i, j] = zdot_j[i] - zdot[i]
-        buf[at_read:at_read + n_read] = read0
-        buf[at_tc:at_tc + nv] = tc0
+        put(buf, at_read, read0)  # (put: no array assignment, see numerics.linalg.put)
+        put(buf, at_tc, tc0)
     return True
 
 
@@ -162,7 +163,7 @@ def _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq):
         bq[i] = tau_b[i] - tau[i]
     for i in range(zdot.size):
         dq[i] = zdot_b[i] - zdot[i]
-    buf[at:at + n] = a0
+    put(buf, at, a0)
     return ok
 
 
@@ -214,7 +215,7 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
     cmd = drive_command(x, ints, reals, tau)
     if not folding:  # the command known before the solve: one pass (Drives.apply, then the solve)
         ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
-        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, -1)
+        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, np.int64(-1))  # (-1: compiled again)
         return ok, applied, qdd, lam, regular
     sat, full, fk = cmd, cmd, f
     rows = section(ints, ints[I_DRIVES], n, DI_W)
@@ -252,8 +253,8 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
         if same:
             break
         sat = full
-    f[:] = fk
-    tau[:] = full[:nv]
+    put(f, 0, fk)
+    put(tau, 0, full[:nv])
     return ok, applied, qdd, lam, regular
 
 

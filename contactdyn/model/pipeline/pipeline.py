@@ -210,7 +210,7 @@ def solve_direct(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
     through the drives into f, then one KKT solve."""
     cmd = drive_command(x, ints, reals, tau)
     ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
-    qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, -1)
+    qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, np.int64(-1))  # (-1: compiled again)
     return ok, applied, qdd, lam, regular
 
 
