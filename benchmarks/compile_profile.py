@@ -31,10 +31,12 @@ class Recorder:
     def __init__(self) -> None:
         self.stack: list[list] = []  # [name, start, children's time, argument types]
         self.table: dict[str, list] = defaultdict(lambda: [0, 0.0, 0.0, [], None])
+        self.dispatchers: dict[str, object] = {}  #: name -> its dispatcher (for :func:`array_setitems`)
 
     def on_start(self, event) -> None:
         d = event.data["dispatcher"]
         name = f"{d.py_func.__module__.removeprefix('contactdyn.')}.{d.py_func.__qualname__}"
+        self.dispatchers[name] = d
         self.stack.append([name, time.process_time(), 0.0, event.data["args"]])
 
     def on_end(self, event) -> None:
@@ -51,11 +53,30 @@ class Recorder:
             self.stack[-1][2] += incl
 
 
+def array_setitems(dispatchers: dict[str, object]) -> list[str]:
+    """Each array stored into an array (``a[i:j] = b``, ``A[k] = row``: numba checks the shapes and compiles the
+    check's message once per process, ~1.5–2 s) in the package's compiled functions, as "file:line function"."""
+    from numba.core import ir, types
+
+    found = set()
+    for name, d in dispatchers.items():
+        if not d.py_func.__module__.startswith("contactdyn"):
+            continue
+        for cres in d.overloads.values():
+            calltypes = getattr(cres.type_annotation, "calltypes", None) or {}  # (the fndesc's: cleared by the cache)
+            for inst, sig in calltypes.items():
+                if isinstance(inst, (ir.SetItem, ir.StaticSetItem)) and sig is not None \
+                        and isinstance(sig.args[-1], types.Array):
+                    found.add(f"{inst.loc.filename.split('contactdyn/')[-1]}:{inst.loc.line} {name}")
+    return sorted(found)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scene")
     p.add_argument("--top", type=int, default=25)
     p.add_argument("--set", action="append", default=[], help="override KEY=VALUE (TOML value)")
+    p.add_argument("--setitems", action="store_true", help="list the arrays stored into arrays (shape checks)")
     args = p.parse_args()
     os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="compile_profile_")
     sys.path.insert(0, str(ROOT))
@@ -82,6 +103,10 @@ def main() -> None:
             print(f"\n{name}: {n} specializations ({own:.2f} s own)")
             for s in sigs:
                 print(f"  ({s})")
+    if args.setitems:
+        print("\narrays stored into arrays (each compiles numba's shape-check message, once per process):")
+        for line in array_setitems(rec.dispatchers):
+            print(f"  {line}")
 
 
 if __name__ == "__main__":

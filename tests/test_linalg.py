@@ -1,10 +1,31 @@
 """The compiled call's small linear algebra (contactdyn.numerics.linalg) against numpy and scipy, and the dynamic laws'
 stacked pseudo-inverse (laws.controllers.dynamic.pseudo_inverse) against the per-sample one."""
 
+import numba
 import numpy as np
 import pytest
 
-from contactdyn.numerics.linalg import cholesky, forward_solve, lu_solve, pinv
+from contactdyn.numerics.linalg import cholesky, forward_solve, lu_solve, mtv, mv, pinv, put
+
+
+@numba.njit
+def _put_twice(dst, src):
+    put(dst, 0, src)  # (a literal at)
+    put(dst, 3, src[1:])  # (a non-contiguous source: every other element)
+    return dst
+
+
+def test_put_stores_in_place_and_is_not_compiled_again_for_a_literal():
+    """put(dst, at, src) is dst[at:at + src.size] = src; the literal 0 and a strided source use its two signatures."""
+    src = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    got = _put_twice(np.zeros(6), src[::2])
+    assert np.array_equal(got, [1.0, 3.0, 5.0, 3.0, 5.0, 0.0])
+    assert not any(isinstance(a, numba.types.Literal) for sig in put.signatures for a in sig)
+
+
+def test_mtv_is_mv_of_the_transpose_bit_for_bit():
+    A, x = np.random.default_rng(5).normal(size=(4, 3)), np.random.default_rng(6).normal(size=4)
+    assert np.array_equal(mtv(A, x), mv(np.ascontiguousarray(A.T), x))
 
 
 @pytest.mark.parametrize("nv", [1, 2, 3, 5, 7])

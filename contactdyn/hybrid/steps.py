@@ -16,6 +16,7 @@ from scipy.integrate._ivp import dop853_coefficients as _coef
 from ..model.pipeline.pack import A_CALL, NX
 from ..model.pipeline.pipeline import rates_at
 from ..numerics.compile_cache import njit
+from ..numerics.linalg import put
 from ..numerics.native_call import call_at
 
 __all__ = ["attempt", "stepper", "derivatives"]
@@ -58,9 +59,11 @@ def _error_norm(K, y, y_new, h, rtol, atol, E, block):
             a3 += K[j, i] * E[1, j]
         e5 += (a5 / scale) ** 2
         e3 += (a3 / scale) ** 2
-    block[0], block[1], block[2], block[4] = K[12], K[10], K[11], y_new
-    for r in range(5, 10):  # (row by row: a 2-D slice assignment compiles numba's shape check and its message)
-        block[r] = K[r]
+    for r, k in ((0, 12), (1, 10), (2, 11)):  # (put: no array assignment, see numerics.linalg.put)
+        put(block[r], 0, K[k])
+    put(block[4], 0, y_new)
+    for r in range(5, 10):
+        put(block[r], 0, K[r])
     if e5 == 0.0 and e3 == 0.0:
         return 0.0
     return abs(h) * e5 / np.sqrt((e5 + 0.01 * e3) * n)
@@ -75,7 +78,7 @@ def attempt(ints, reals, work, events, t, y, f, h, rtol, atol, A, B, C, E, y_new
     KKT matrix, a law that gave no force: the step by the Python right-hand side)."""
     n = y.size
     K = np.empty((13, n))
-    K[0] = f
+    put(K[0], 0, f)  # (put: no array assignment, see numerics.linalg.put)
     ys = np.empty(n)
     for s in range(1, 13):
         if s < 12:
@@ -84,11 +87,11 @@ def attempt(ints, reals, work, events, t, y, f, h, rtol, atol, A, B, C, E, y_new
             _step_end(K, y, h, B, y_new)
             ys = y_new
         at = t + C[s] * h if s < 12 else t + h
-        K[s] = call_at(ints[A_CALL], "pipeline.call", (at, ys, ints, reals, work, events))  # (not linked in)
+        put(K[s], 0, call_at(ints[A_CALL], "pipeline.call", (at, ys, ints, reals, work, events)))  # (not linked in)
         if events[events.size - 1] != 1.0:
             return DECLINED, 0.0
-        Ys[s] = ys
-        Es[s] = events
+        put(Ys[s], 0, ys)
+        put(Es[s], 0, events)
     return OK, _error_norm(K, y, y_new, h, rtol, atol, E, block)
 
 

@@ -11,8 +11,9 @@ the fallback raises LinAlgError; callers test.
 (the one pipeline, laws.controllers.computed_torque,
 :mod:`contactdyn.laws.controllers.operational_law`), written in loops: numba's LAPACK bindings cost
 ~0.15 s to load per process, and a BLAS call ~0.1 µs, more than a loop over these 3–12-row arrays.
-:func:`dot3` is a 3-vector's dot product that numpy and numba form alike (so the readable model's numbers
-do not move when a computation moves into numba).
+:func:`put` copies a vector into a vector element by element (an array's slice assignment compiles numba's
+shape check and its message, ~1.5–2 s once per process). :func:`dot3` is a 3-vector's dot product that numpy
+and numba form alike (so the readable model's numbers do not move when a computation moves into numba).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from numba.extending import intrinsic, overload
 from .compile_cache import njit
 
 __all__ = ["solve_vector", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
-           "forward_solve", "contiguous", "dot3"]
+           "forward_solve", "contiguous", "dot3", "put"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -188,6 +189,15 @@ def _jacobi_pinv(J):
     return out
 
 
+@njit(["void(float64[::1], int64, float64[::1])", "void(float64[::1], int64, float64[:])"], cache=True)
+def put(dst, at, src):
+    """``dst[at:at + src.size] = src`` (1-D arrays), element by element: without numba's shape check, whose message
+    compiles once per process (~1.5–2 s of a cold first run); the caller sizes ``dst``. (Its signatures given: a
+    literal ``at`` would compile it again.)"""
+    for i in range(src.size):
+        dst[at + i] = src[i]
+
+
 @njit(cache=True)
 def mv(A, x):
     """A x."""
@@ -202,8 +212,14 @@ def mv(A, x):
 
 @njit(cache=True)
 def mtv(A, x):
-    """Aᵀ x (:func:`mv` on the transposed view: the same sums)."""
-    return mv(A.T, x)
+    """Aᵀ x (:func:`mv`'s sums on the columns; not mv(A.T), which compiles mv again, for 'F')."""
+    out = np.zeros(A.shape[1])
+    for i in range(A.shape[1]):
+        acc = 0.0
+        for j in range(A.shape[0]):
+            acc += A[j, i] * x[j]
+        out[i] = acc
+    return out
 
 
 @njit(cache=True)

@@ -25,7 +25,7 @@ from collections.abc import Callable
 import numba
 from numba import types
 from numba.core import cgutils, errors
-from numba.extending import intrinsic, overload
+from numba.extending import lower_builtin, type_callable
 
 from .compile_cache import directory  # noqa: F401  (a compiled module: this source is in the cache's key)
 
@@ -59,33 +59,30 @@ def call_at(at: int, name: str, args: tuple):
     return _HANDLES[int(at)](*args)
 
 
-@overload(call_at, prefer_literal=True)
-def _call_at_compiled(at, name, args):
-    if not isinstance(name, types.StringLiteral):
-        return None
-    key = name.literal_value
-    _, signature = _DECLARED[key]
-    if tuple(args) != tuple(signature.args):
-        raise errors.TypingError(f"call_at {key!r}: the arguments are ({', '.join(map(str, args))}), "
-                                 f"the declared signature's ({', '.join(map(str, signature.args))})")
+# Compiled, call_at is typed and lowered in place (numba's lower-level extension API, not an @overload whose
+# implementation would be one more compiled function per call site's name: ~0.05 s each of a cold first run).
+@type_callable(call_at)
+def _type_call_at(context):
+    def typer(at, name, args):
+        if not isinstance(name, types.StringLiteral):  # (numba tries the plain string first)
+            return None
+        key = name.literal_value
+        _, signature = _DECLARED[key]
+        if tuple(args) != tuple(signature.args):
+            raise errors.TypingError(f"call_at {key!r}: the arguments are ({', '.join(map(str, args))}), "
+                                     f"the declared signature's ({', '.join(map(str, signature.args))})")
+        return signature.return_type
+    return typer
 
-    def impl(at, name, args):
-        return _native_call(at, key, args)  # (key: the name as a constant, a literal to the intrinsic)
-    return impl
 
-
-@intrinsic
-def _native_call(typingctx, at, name, args):
-    if not isinstance(name, types.StringLiteral):  # (numba tries the plain string first)
-        return None
-    _, signature = _DECLARED[name.literal_value]
+@lower_builtin(call_at, types.Integer, types.StringLiteral, types.BaseTuple)
+def _lower_call_at(context, builder, sig, llargs):
+    """The pointer ``at`` called with numba's own calling convention; its exception, if any, propagated."""
+    _, signature = _DECLARED[sig.args[1].literal_value]
     restype, argtypes = signature.return_type, signature.args
-
-    def codegen(context, builder, sig, llargs):
-        pointer = builder.inttoptr(llargs[0], context.call_conv.get_function_type(restype, argtypes).as_pointer())
-        status, result = context.call_conv.call_function(builder, pointer, restype, argtypes,
-                                                         cgutils.unpack_tuple(builder, llargs[2]))
-        with cgutils.if_unlikely(builder, status.is_error):
-            context.call_conv.return_status_propagate(builder, status)
-        return result
-    return restype(at, name, args), codegen
+    pointer = builder.inttoptr(llargs[0], context.call_conv.get_function_type(restype, argtypes).as_pointer())
+    status, result = context.call_conv.call_function(builder, pointer, restype, argtypes,
+                                                     cgutils.unpack_tuple(builder, llargs[2]))
+    with cgutils.if_unlikely(builder, status.is_error):
+        context.call_conv.return_status_propagate(builder, status)
+    return result

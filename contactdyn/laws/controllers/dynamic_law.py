@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import dot3
+from ...numerics.linalg import dot3, put
 
 __all__ = ["force_targets", "position_targets", "pressing_reference"]
 
@@ -78,7 +78,8 @@ def pressing_reference(x_d, v_d, a_d, normals, touch, p_s, v_s, F_d, dF_d, k):
     ẍ_d·n = 0 (the surface's acceleration and F̈_d/k left out). Row by row (each row's update reads that row only):
     the vector form's values without its temporaries."""
     R = np.empty((3, 3))
-    R[0], R[1], R[2] = x_d, v_d, a_d
+    for r, row in enumerate((x_d, v_d, a_d)):  # (put: no array assignment, see numerics.linalg.put)
+        put(R[r], 0, row)
     for i in range(normals.shape[0]):
         if touch[i] == 0.0:
             continue

@@ -43,8 +43,10 @@ def _cross(a, b):
 def orientation_error(R, R_d):
     """e = ½ Σ_c r_c × r_d,c = ½ vee(R_d Rᵀ − R R_dᵀ) (world; −sin θ k for R = exp(θ [k]ₓ) R_d) [rad, to O(θ³)]."""
     e = np.zeros(3)
-    for c in range(3):
-        e += _cross(R[:, c], R_d[:, c])
+    for c in range(3):  # (by component, e += r_c × r_d,c: _cross on the columns would compile it again, for 'A')
+        e[0] += R[1, c] * R_d[2, c] - R[2, c] * R_d[1, c]
+        e[1] += R[2, c] * R_d[0, c] - R[0, c] * R_d[2, c]
+        e[2] += R[0, c] * R_d[1, c] - R[1, c] * R_d[0, c]
     return 0.5 * e
 
 

@@ -25,6 +25,7 @@ from ...laws.controllers.abi import FIELD, LAYOUT_HEAD, LAYOUT_SIZE, call_contro
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import CIRCLE_W, add_circle, move_rows, ramp_rows
 from ...numerics.compile_cache import njit
+from ...numerics.linalg import put
 from .control_laws import PYTHON_KINDS, joint_pd_command, task_force_command
 from .drives import DI_W, DW_APPLIED, DW_W, apply_drives
 from .pack import (
@@ -152,27 +153,28 @@ def _task_pd(x, ints, reals, h, g, J6, p_tip, v_tip, Rf, x_d, v_d, F_d, forced):
 @njit(cache=True, inline="always")
 def abi_buffer(t, x, ints, reals, H, h, g, J6, a6, p_tip, v_tip, Rf, x_d, v_d, a_d):
     """(buffer, layout) of a controller of the ABI: its inputs written where the packed layout table puts them (the
-    set-points' fields, the measured forces and what goes with them are :mod:`.force_fold`'s)."""
+    set-points' fields, the measured forces and what goes with them are :mod:`.force_fold`'s). (Each field's index
+    as np.int64: a literal would compile put_field once per field.)"""
     nv, nQ = ints[NV], ints[NQ]
     lay = ints[ints[I_LAYOUT]:ints[I_LAYOUT] + LAYOUT_SIZE]
     buf = np.zeros(lay[lay.size - 1])
     buf[lay[LAYOUT_HEAD + 2 * F_T]] = t
-    put_field(buf, lay, F_Q, x[:nv])
-    put_field(buf, lay, F_V, x[nQ:nQ + nv])
-    put_field(buf, lay, F_H, H.ravel())
-    put_field(buf, lay, F_HB, h)
-    put_field(buf, lay, F_GRAVITY, g)
-    put_field(buf, lay, F_P, p_tip)
-    put_field(buf, lay, F_PD, v_tip)
-    put_field(buf, lay, F_J, J6[:3].ravel())
-    put_field(buf, lay, F_DRIFT, a6[:3])
-    put_field(buf, lay, F_XD, x_d)
-    put_field(buf, lay, F_VD, v_d)
-    put_field(buf, lay, F_AD, a_d)
-    put_field(buf, lay, F_Z, x[2 * nQ + ints[Z_AT]:2 * nQ + ints[Z_AT] + ints[N_Z]])
-    put_field(buf, lay, F_R, Rf.ravel())
-    put_field(buf, lay, F_JANG, J6[3:].ravel())
-    put_field(buf, lay, F_DRIFT_ANG, a6[3:])
+    put_field(buf, lay, np.int64(F_Q), x[:nv])
+    put_field(buf, lay, np.int64(F_V), x[nQ:nQ + nv])
+    put_field(buf, lay, np.int64(F_H), H.ravel())
+    put_field(buf, lay, np.int64(F_HB), h)
+    put_field(buf, lay, np.int64(F_GRAVITY), g)
+    put_field(buf, lay, np.int64(F_P), p_tip)
+    put_field(buf, lay, np.int64(F_PD), v_tip)
+    put_field(buf, lay, np.int64(F_J), J6[:3].ravel())
+    put_field(buf, lay, np.int64(F_DRIFT), a6[:3])
+    put_field(buf, lay, np.int64(F_XD), x_d)
+    put_field(buf, lay, np.int64(F_VD), v_d)
+    put_field(buf, lay, np.int64(F_AD), a_d)
+    put_field(buf, lay, np.int64(F_Z), x[2 * nQ + ints[Z_AT]:2 * nQ + ints[Z_AT] + ints[N_Z]])
+    put_field(buf, lay, np.int64(F_R), Rf.ravel())
+    put_field(buf, lay, np.int64(F_JANG), J6[3:].ravel())
+    put_field(buf, lay, np.int64(F_DRIFT_ANG), a6[3:])
     return buf, lay
 
 
@@ -232,7 +234,7 @@ def drive_command(x, ints, reals, tau):
     g (v_ref − v) [N] (``dynamics.drive_command``)."""
     nQ = ints[NQ]
     cmd = np.zeros(ints[N_DRIVES])
-    cmd[:tau.size] = tau
+    put(cmd, 0, tau)
     servo = reals[ints[R_SERVOS]:]
     for k in range(ints[N_SERVOS]):
         idx = ints[ints[I_SERVOS] + k]

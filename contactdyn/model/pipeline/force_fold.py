@@ -25,6 +25,7 @@ import numpy as np
 
 from ...laws.controllers.abi import FIELD, LAYOUT_HEAD
 from ...numerics.compile_cache import njit
+from ...numerics.linalg import put
 from .actuation import abi_buffer, abi_call, carry, drive_command, drives, reference, set_points
 from .drives import DI_W, DW_CLIPPED, DW_W, fold_on_targets
 from .kkt import kkt_solve
@@ -69,7 +70,8 @@ F_SET, F_RATE, F_DIR, F_READ, F_TAU_C, F_SURFACE_P, F_SURFACE_V, F_TOUCH, F_AD =
 
 @njit(cache=True, inline="always")
 def _at(lay, k):
-    """Where field k starts in the buffer, and its size (0: absent)."""
+    """Where field k starts in the buffer, and its size (0: absent). (Callers pass k as np.int64: a literal would
+    compile this once per field.)"""
     return lay[LAYOUT_HEAD + 2 * k], lay[LAYOUT_HEAD + 1 + 2 * k] - lay[LAYOUT_HEAD + 2 * k]
 
 
@@ -82,13 +84,13 @@ def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
     owner = ints[ints[I_FOLD] + 2 * ns + nr:ints[I_FOLD] + 3 * ns + nr]  # and its contact
     shift = section(reals, ints[R_FOLD], ns, 3)
     cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
-    at_set, n_set = _at(lay, F_SET)
-    at_rate, n_rate = _at(lay, F_RATE)
-    at_dir, n_dir = _at(lay, F_DIR)
-    at_read, n_read = _at(lay, F_READ)
-    at_p, n_p = _at(lay, F_SURFACE_P)
-    at_v, n_v = _at(lay, F_SURFACE_V)
-    at_touch, n_touch = _at(lay, F_TOUCH)
+    at_set, n_set = _at(lay, np.int64(F_SET))
+    at_rate, n_rate = _at(lay, np.int64(F_RATE))
+    at_dir, n_dir = _at(lay, np.int64(F_DIR))
+    at_read, n_read = _at(lay, np.int64(F_READ))
+    at_p, n_p = _at(lay, np.int64(F_SURFACE_P))
+    at_v, n_v = _at(lay, np.int64(F_SURFACE_V))
+    at_touch, n_touch = _at(lay, np.int64(F_TOUCH))
     for s in range(ns):
         if n_set:
             buf[at_set + s] = F_d[s]
@@ -108,7 +110,7 @@ def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
             buf[at_v + 3 * s + i] = cr[CR_AXIS + i] * x[nQ + body] if body >= 0 else 0.0
         if n_touch:
             buf[at_touch + s] = 1.0 if row[CI_TOUCHING] else 0.0
-    at_tc, n_tc = _at(lay, F_TAU_C)
+    at_tc, n_tc = _at(lay, np.int64(F_TAU_C))
     for c in range(n_tc):
         buf[at_tc + c] = f[c] + h[c]  # the contacts' generalized force on the joints (f holds −h)
     return n_read, n_tc
@@ -120,8 +122,8 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
     nv, ns, nr = ints[NV], ints[N_FORCES], ints[N_ROWS]
     sp = ints[ints[I_FOLD]:ints[I_FOLD] + ns]
     row_contact = ints[ints[I_FOLD] + ns:ints[I_FOLD] + ns + nr]
-    at_read, n_read = _at(lay, F_READ)
-    at_tc, _ = _at(lay, F_TAU_C)
+    at_read, n_read = _at(lay, np.int64(F_READ))
+    at_tc, _ = _at(lay, np.int64(F_TAU_C))
     read0, tc0 = buf[at_read:at_read + n_read].copy(), buf[at_tc:at_tc + nv].copy()
     tau_j, zdot_j = np.empty(nv), np.empty(zdot.size)
     for j in range(nr):
@@ -142,15 +144,15 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
             B[i, j] = tau_j[i] - tau[i]
         for i in range(zdot.size):
             D[i, j] = zdot_j[i] - zdot[i]
-        buf[at_read:at_read + n_read] = read0
-        buf[at_tc:at_tc + nv] = tc0
+        put(buf, at_read, read0)  # (put: no array assignment, see numerics.linalg.put)
+        put(buf, at_tc, tc0)
     return True
 
 
 @njit(cache=True, inline="always")
 def _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq):
     """(b, d): the law's differences at one unit [m/s²] more of a_d along the carrier's axis (a_d_increment)."""
-    at, n = _at(lay, F_AD)
+    at, n = _at(lay, np.int64(F_AD))
     axis = reals[ints[R_CARRIER]:ints[R_CARRIER] + 3]
     a0 = buf[at:at + n].copy()
     for k in range(n):
@@ -161,7 +163,7 @@ def _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq):
         bq[i] = tau_b[i] - tau[i]
     for i in range(zdot.size):
         dq[i] = zdot_b[i] - zdot[i]
-    buf[at:at + n] = a0
+    put(buf, at, a0)
     return ok
 
 
@@ -213,7 +215,7 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
     cmd = drive_command(x, ints, reals, tau)
     if not folding:  # the command known before the solve: one pass (Drives.apply, then the solve)
         ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
-        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, -1)
+        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, np.int64(-1))  # (-1: compiled again)
         return ok, applied, qdd, lam, regular
     sat, full, fk = cmd, cmd, f
     rows = section(ints, ints[I_DRIVES], n, DI_W)
@@ -251,8 +253,8 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
         if same:
             break
         sat = full
-    f[:] = fk
-    tau[:] = full[:nv]
+    put(f, 0, fk)
+    put(tau, 0, full[:nv])
     return ok, applied, qdd, lam, regular
 
 

@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import lu_solve
+from ...numerics.linalg import lu_solve, put
 from .pack import NQ, NV, R_MREST
 
 __all__ = ["kkt_solve", "residual_ok"]
@@ -50,7 +50,7 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
         qdd = np.empty(nQ)
         b = f[:nv].copy()
         z = lu_solve(H, b)
-        qdd[:nv] = z
+        put(qdd, 0, z)
         for i in range(nQ - nv):
             qdd[nv + i] = f[nv + i] / m_rest[i]
         return qdd, np.empty(0), residual_ok(H, z, b)
@@ -70,7 +70,7 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
         for c in range(fold.shape[0] if fold.shape[1] else 0):
             A[c, nQ + r] -= fold[c, r]
     b = np.empty(m)
-    b[:nQ] = f
+    put(b, 0, f)
     for r in range(nr):
         b[nQ + r] = -gamma[r]
     z = lu_solve(A, b)

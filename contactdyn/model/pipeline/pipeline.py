@@ -20,6 +20,7 @@ import numpy as np
 from numba import types
 
 from ...numerics.compile_cache import njit
+from ...numerics.linalg import put
 from ...numerics.native_call import address, call_at, declare
 from ..contact import structure
 from .actuation import (
@@ -110,7 +111,8 @@ def call(t, x, ints, reals, work, events):
         M, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:])  # rotors reflected: the true M, the law's H
         FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
         f = np.zeros(nQ)
-        f[:nv] = -h
+        for i in range(nv):
+            f[i] = -h[i]
         ydot = np.zeros(ints[NY])
         G, C, gamma = np.zeros((nr, nQ)), np.zeros((nr, nQ)), np.zeros(nr)
         pending = np.zeros((nc, 5))
@@ -131,9 +133,10 @@ def call(t, x, ints, reals, work, events):
             events[events.size - 1] = -1.0
             return xdot
         fold_rates(ints, lam, zdot, D, ydot, dq, qdd, carried_coordinate(ints, bq))
-        xdot[:nQ] = x[nQ:2 * nQ]
-        xdot[nQ:2 * nQ] = qdd
-        xdot[2 * nQ:] = ydot
+        for i in range(nQ):
+            xdot[i] = x[nQ + i]
+        put(xdot, nQ, qdd)
+        put(xdot, 2 * nQ, ydot)
         finish(ints, lam, xdot, events, pending, first_limit)
         if ints[ENERGY] >= 0:
             call_at(ints[A_ENERGY], "pipeline.energy", (x, ints, reals, applied, xdot, events, pending))
@@ -154,16 +157,16 @@ def record(t, x, ints, reals, work, applied, tau, p_tip, lam):
     carries it), F_d [N], the rows' forces λ (normal and stick forces [N], limit and holding torques [N·m or N],
     tangential bonds' interface forces [N]). Each chain's interface force [N] is written by every call
     (:func:`.contacts.contact_terms`), the stage states (x [m], ẋ [m/s], F [N]) are in ``work`` already."""
-    at = diag_starts(ints)
-    work[at[D_TAU]:at[D_TAU] + applied.size] = applied
-    work[at[D_CMD]:at[D_CMD] + tau.size] = tau
-    work[at[D_TIP]:at[D_TIP] + 3] = p_tip
+    at = diag_starts(ints)  # (put: no slice assignment, see numerics.linalg.put)
+    put(work, at[D_TAU], applied)
+    put(work, at[D_CMD], tau)
+    put(work, at[D_TIP], p_tip)
     if ints[REF_DIMS]:
         x_d, v_d, _ = reference(t, ints, reals)
         carry(x, ints, reals, x_d, v_d)
-        work[at[D_XD]:at[D_FD]] = x_d
-    work[at[D_FD]:at[D_LAM]] = set_points(t, ints, reals)[0]
-    work[at[D_LAM]:at[D_LAM] + lam.size] = lam
+        put(work, at[D_XD], x_d)
+    put(work, at[D_FD], set_points(t, ints, reals)[0])
+    put(work, at[D_LAM], lam)
 
 
 @njit(cache=True)
@@ -172,7 +175,7 @@ def rates_at(ts, X, ints, reals, work, events):
     between calls); the number of states done before a call's status was not 1."""
     out = np.empty(X.shape)
     for k in range(ts.size):
-        out[k] = call_at(ints[A_CALL], "pipeline.call", (ts[k], X[k], ints, reals, work, events))
+        put(out[k], 0, call_at(ints[A_CALL], "pipeline.call", (ts[k], X[k], ints, reals, work, events)))
         if events[events.size - 1] != 1.0:
             return out, k
     return out, ts.size
@@ -187,12 +190,12 @@ def samples_at(ts, X, ints, reals, work, events):
     work[ints[W_DIAG]] = 1.0
     done = n
     for k in range(n):
-        Xd[k] = call_at(ints[A_CALL], "pipeline.call", (ts[k], X[k], ints, reals, work, events))
+        put(Xd[k], 0, call_at(ints[A_CALL], "pipeline.call", (ts[k], X[k], ints, reals, work, events)))
         if events[events.size - 1] != 1.0:
             done = k
             break
-        E[k] = events
-        W[k] = work
+        put(E[k], 0, events)
+        put(W[k], 0, work)
     work[ints[W_DIAG]] = 0.0
     return Xd, E, W, done
 
@@ -207,7 +210,7 @@ def solve_direct(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
     through the drives into f, then one KKT solve."""
     cmd = drive_command(x, ints, reals, tau)
     ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
-    qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, -1)
+    qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, np.int64(-1))  # (-1: compiled again)
     return ok, applied, qdd, lam, regular
 
 
