@@ -357,7 +357,7 @@ def measure(name: str, calls: int, repeats: int) -> dict:
     us = {k: v.cpu / per[k] * 1e6 for k, v in times.items()}
     return {"case": name, "pipeline_us": us["pipeline"], "evaluate_us": us["evaluate"],
             "pipeline_compiled_us": us["pipeline_compiled"], "max_rel_diff": worst,
-            "bitwise_states": f"{bitwise}/{len(xs)}", "fallbacks": pipe.fallbacks}
+            "bitwise_states": f"{bitwise}/{len(xs)}", "readable_calls": pipe.readable_calls}
 
 
 _CHILD = """

@@ -153,4 +153,4 @@ def test_a_force_reading_law_is_folded_into_the_call_as_in_the_readable_model(sc
         t, x = 0.02 * k, x0 + 1e-3 * rng.normal(size=system.n)
         ref = system.evaluate(t, x, touching, press).xdot
         assert np.abs(pipe.rhs(t, x) - ref).max() <= 1e-12 * (1.0 + np.abs(ref).max())
-    assert pipe.fallbacks == 0
+    assert pipe.readable_calls == 0

@@ -135,7 +135,7 @@ def test_the_compiled_right_hand_side_calls_the_same_law(robot):
     for t, x in zip(sol.t, sol.y.T, strict=True):
         ref = system.evaluate(t, x, modes, phase).xdot
         np.testing.assert_allclose(pipe.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
-    assert pipe.fallbacks == 0
+    assert pipe.readable_calls == 0
 
 
 def test_a_singular_task_is_a_clear_error():

@@ -50,7 +50,7 @@ def test_each_drives_output_is_the_readable_ones(name):
         assert np.array_equal(got["clipped"], out.saturated)
         assert got["power"] == pytest.approx(out.power, abs=RTOL * (1.0 + abs(out.power)))
         assert got["dissipation"] == pytest.approx(out.dissipation, abs=RTOL * (1.0 + abs(out.dissipation)))
-    assert pipe.fallbacks == 0
+    assert pipe.readable_calls == 0
 
 
 @pytest.mark.parametrize("kind, values", [
@@ -190,7 +190,7 @@ def test_a_users_kind_runs_by_its_address(fresh_user_imports):
     pipe = Pipeline(system, modes, phase)
     t = phase.t_start + 0.0123
     worst, _ = agreement(pipe, system, modes, phase, t, states(x0, 3))
-    assert worst <= RTOL and pipe.fallbacks == 0
+    assert worst <= RTOL and pipe.readable_calls == 0
     assert np.abs(pipe.values()["drives"]["applied"]).max() == pytest.approx(160.0 * 0.05)  # at its limit
 
 

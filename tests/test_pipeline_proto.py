@@ -30,7 +30,7 @@ def test_the_pipeline_gives_the_readable_rates(name):
     pipe = Pipeline(system, modes, phase)
     worst, _ = agreement(pipe, system, modes, phase, t, states(x0, 4))
     assert worst <= RTOL
-    assert pipe.fallbacks == 0
+    assert pipe.readable_calls == 0
 
 
 @pytest.mark.parametrize("name", ["b1", "writer_rigid_stick", "b1_limit", "cart_chains_touch", "hard_stiff",

@@ -37,7 +37,7 @@ def test_the_joints_event_values_are_the_readable_ones(name):
         assert got["joint_speed"] == {i: x[system.nQ + i] for i, m in phase.joint_modes if m != 0}
         for i, torque in ev.limit_torque.items():
             assert got["limit"][i] == pytest.approx(torque, abs=RTOL * (1.0 + abs(torque)))
-    assert pipe.fallbacks == 0
+    assert pipe.readable_calls == 0
 
 
 def test_a_sampled_law_acts_by_its_held_command():
@@ -132,7 +132,7 @@ def test_a_slide_launching_from_rest_takes_the_readable_direction(name):
         ref = system.evaluate(t, x, modes, phase).xdot
         assert np.abs(pipe.rhs(t, x) - ref).max() <= RTOL * np.abs(ref).max()
     assert (turned > 0) == (name == "ur5_launch")  # (the UR5: 2 of the 5 states)
-    assert pipe.fallbacks == 0
+    assert pipe.readable_calls == 0
 
 
 def test_two_slides_launching_at_once_are_declined():

@@ -74,7 +74,7 @@ class PipelineMode:
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
             xdot = call(float(t), x, ints, reals, work, events)
             if events[-1] != 1.0:
-                pipe.fallbacks += 1
+                pipe.readable_calls += 1
                 ev = system.evaluate(t, x, self.modes, phase)
                 ring.append((t, x, self._events_of(ev, x)))
                 return ev.xdot
@@ -96,7 +96,7 @@ class PipelineMode:
     @property
     def singular(self) -> int:
         """Calls answered by the readable model (a singular KKT matrix, a law that gave no force)."""
-        return self.pipe.fallbacks
+        return self.pipe.readable_calls
 
     def use(self, modes) -> None:
         """Run with these modes from now on: a turn's new 2-D reference directions r, data of the same packed mode
@@ -184,7 +184,7 @@ class PipelineMode:
         S = Samples(len(ts), system)
         self._read_out(S, E[:done], W[:done], X[:done])
         for k in range(done, len(ts)):
-            self.pipe.fallbacks += 1
+            self.pipe.readable_calls += 1
             S.fill(k, system.evaluate(float(ts[k]), X[k], self.modes, self.phase, full=True))
         return S
 

@@ -257,11 +257,11 @@ class Pipeline:
     def __init__(self, system, modes, phase):
         reason = unsupported(system, modes, phase)
         if reason:
-            raise ValueError(f"the pipeline prototype does not run this mode: {reason}")
+            raise ValueError(f"the compiled call does not run this mode: {reason}")
         self.system, self.modes, self.phase = system, list(modes), phase
         self.packed = pack(system, modes, phase)
         stage_addresses(self.packed.ints)
-        self.fallbacks = 0  #: calls answered by the readable model (singular KKT matrix, a law that failed)
+        self.readable_calls = 0  #: calls answered by the readable model (singular KKT matrix, a law that failed)
 
     def use(self, modes) -> None:
         """Run with these modes from now on: the same :func:`~contactdyn.model.contact.structure`, their own 2-D
@@ -276,7 +276,7 @@ class Pipeline:
         p = self.packed
         xdot = call(float(t), x, p.ints, p.reals, p.work, p.events)
         if p.events[-1] != 1.0:
-            self.fallbacks += 1
+            self.readable_calls += 1
             return self.system.evaluate(t, x, self.modes, self.phase).xdot
         return xdot
 
