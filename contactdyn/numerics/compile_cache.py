@@ -151,7 +151,7 @@ def njit(*signatures, **options) -> Callable:
 class CompileNotice(event.Listener):
     """numba's compiles of the package's functions as blocks of :mod:`contactdyn.numerics.notice` (others ignored)."""
 
-    WHAT = "the compiled call and its laws"
+    WHAT = "the simulator's compiled code and this scene's laws"
 
     @staticmethod
     def _ours(e: event.Event) -> bool:
