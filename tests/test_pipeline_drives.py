@@ -138,7 +138,7 @@ def test_the_rotors_reflect_on_the_mass_matrix():
 # ---- a user's drive kinds: one that compiles runs by its address, one that does not is declined by name -------
 
 class Geared(DriveKind):
-    """A current-controlled motor through a rigid gear N, its torque limited: M = clip(τ / N, ±M_max) (not affine)."""
+    """A current-controlled motor through a rigid gear N, its torque limited: M = clip(τ / N, ±M_max) [N·m]."""
 
     name, motorized = "geared_test", True
     params = (Param("J", "kg·m²", "rotor inertia", lo=0.0),

@@ -140,13 +140,13 @@ class PipelineMode:
 
     def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
         """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate (the ``release`` event's)."""
-        ev, base = self.values(t, x), EV_W * len(self.nt)
+        ev, base = self.values(t, x), self.pipe.packed.joint_event_starts()[0]
         return {i: float(ev[base + k]) for k, i in enumerate(self.pipe.packed.limits)}
 
     def joint_hold(self, t: float, x: np.ndarray) -> dict[int, float]:
         """Holding torques [N·m or N] of the joints stuck by dry friction, by joint coordinate (after the limits')."""
         p = self.pipe.packed
-        ev, base = self.values(t, x), EV_W * len(self.nt) + len(p.limits)
+        ev, base = self.values(t, x), p.joint_event_starts()[1]
         return {i: float(ev[base + k]) for k, i in enumerate(p.held)}
 
     def _events_of(self, ev, x: np.ndarray) -> np.ndarray:
@@ -159,16 +159,14 @@ class PipelineMode:
                 out[at + EV_VT:at + EV_VT + nt] = ev.slip[c.name]
                 out[at + EV_FF:at + EV_FF + nt] = ev.friction.get(c.name, np.zeros(nt))
         p = self.pipe.packed
-        base = EV_W * len(self.nt)
+        at_limit, at_held, at_sliding = p.joint_event_starts()
         for k, i in enumerate(p.limits):
-            out[base + k] = ev.limit_torque[i]
-        base += len(p.limits)
+            out[at_limit + k] = ev.limit_torque[i]
         for k, i in enumerate(p.held):
-            out[base + k] = ev.joint_hold[i]
-        base += len(p.held)
+            out[at_held + k] = ev.joint_hold[i]
         nQ = self.system.nQ
         for k, i in enumerate(p.sliding):
-            out[base + k] = x[nQ + i]
+            out[at_sliding + k] = x[nQ + i]
         out[-1] = 1.0
         return out
 
@@ -218,15 +216,14 @@ class PipelineMode:
             S.x_d[:n], S.has_x_d = W[:, at[D_XD]:at[D_FD]], True
         for j, key in enumerate(self.phase.forces):
             S.F_d[key][:n], S.has_F_d[key] = W[:, at[D_FD] + j], True
-        base = EV_W * len(self.nt)
+        at_limit, at_held, _ = p.joint_event_starts()
         for k, i in enumerate(p.limits):
-            S.limit_torque[:n, i] = E[:, base + k]
+            S.limit_torque[:n, i] = E[:, at_limit + k]
         if system.joint_friction.any:  # damping and sliding friction at each state, the held joints' torques
             S.joint_friction[:n] = [system.joint_friction.torques(self.phase.joint_modes, xk, system.nQ, nv)
                                     for xk in X]
-            base += len(p.limits)
             for k, i in enumerate(p.held):
-                S.joint_friction[:n, i] += E[:, base + k]
+                S.joint_friction[:n, i] += E[:, at_held + k]
         for ci, c in enumerate(system.contacts):
             e, nt = EV_W * ci, self.nt[ci]
             S.F_n[c.name][:n], S.gap[c.name][:n] = E[:, e + EV_FN], E[:, e + EV_GAP]

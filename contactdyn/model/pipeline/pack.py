@@ -145,6 +145,13 @@ class Packed:
     held: list[int]  #: the stuck joints with a row, in the order of their holding torques
     sliding: list[int]  #: the sliding joints, in the order of their speeds
 
+    def joint_event_starts(self) -> tuple[int, int, int]:
+        """Where in ``events`` the pressing limits' torques, the held joints' torques and the sliding joints' speeds
+        start (after every contact's EV_W values; the status last)."""
+        limits = EV_W * len(self.contacts)
+        held = limits + len(self.limits)
+        return limits, held, held + len(self.held)
+
 
 def unsupported(system, modes, phase) -> str:
     """Why this prototype cannot pack (modes, phase) ("" when it can)."""

@@ -289,12 +289,10 @@ class Pipeline:
             ev = p.events[EV_W * ci:EV_W * (ci + 1)]
             out[name] = {"gap": ev[EV_GAP], "F_n": ev[EV_FN], "v_t": ev[EV_VT:EV_VT + 2].copy(),
                          "F_f": ev[EV_FF:EV_FF + 2].copy()}
-        base = EV_W * len(p.contacts)
-        out["limit"] = {i: p.events[base + k] for k, i in enumerate(p.limits)}
-        base += len(p.limits)
-        out["joint_hold"] = {i: p.events[base + k] for k, i in enumerate(p.held)}
-        base += len(p.held)
-        out["joint_speed"] = {i: p.events[base + k] for k, i in enumerate(p.sliding)}
+        at_limit, at_held, at_sliding = p.joint_event_starts()
+        out["limit"] = {i: p.events[at_limit + k] for k, i in enumerate(p.limits)}
+        out["joint_hold"] = {i: p.events[at_held + k] for k, i in enumerate(p.held)}
+        out["joint_speed"] = {i: p.events[at_sliding + k] for k, i in enumerate(p.sliding)}
         if p.ints[ANY_MOTOR]:
             out["drives"] = drive_values(p.work[p.ints[W_DRIVES]:], p.ints[N_DRIVES])
         return out
