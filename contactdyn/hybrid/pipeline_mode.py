@@ -113,7 +113,7 @@ class PipelineMode:
             if lx is x and lt == t:
                 return ev
         self.rhs(t, x)
-        return self.ring[3][2]
+        return self.ring[-1][2]
 
     def gap(self, ci: int, t: float, x: np.ndarray) -> float:
         """Normal gap of contact ci [m] (0 while touching)."""

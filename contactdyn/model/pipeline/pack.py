@@ -154,7 +154,7 @@ class Packed:
 
 
 def unsupported(system, modes, phase) -> str:
-    """Why this prototype cannot pack (modes, phase) ("" when it can)."""
+    """Why the compiled call cannot pack (modes, phase) ("" when it can): the mode then runs on the readable model."""
     ctl = phase.controller
     if reason := drives_unsupported(system):
         return reason
