@@ -1,10 +1,14 @@
 """The first run of a fresh install against a later one: `contactdyn run SCENE` with an empty cache, then warm.
 
-For each scene (default: b1, then every other ``sims/*.toml``) two fresh processes run
+For each scene (default: b1, then every other ``sims/*.toml``) fresh processes run
 ``contactdyn run SCENE --quiet`` (no plots, no viewer, nothing saved; the working directory a
-temporary folder): the first with ``NUMBA_CACHE_DIR`` pointing at a new empty folder (what a fresh
-``pip install .`` meets: nothing compiled), the second with the same folder, now filled (a later
-process). Each wall time [s] is measured around the whole process (interpreter start, imports,
+temporary folder; the default path ``auto``, contactdyn.first_run), all with ``NUMBA_CACHE_DIR`` pointing at
+one new empty folder (what a fresh ``pip install .`` meets: nothing compiled): the first (the readable model;
+it starts the background build), one right after it (``during``: the build still runs, so the readable model
+again), then, once the build ended (``build``: seconds waited for it after the second run), a later one (the
+compiled call, its code loaded from the cache). ``--compiled-first``: also a first run with ``--path compiled``
+in another empty folder (compiling in the foreground: what every first run cost before).
+Each wall time [s] is measured around the whole process (interpreter start, imports,
 compilation or cache loading, the run), and so is its CPU time [s] (user + system: what the process
 itself spent, less inflated by other load on a shared machine). Also: ``contactdyn --help`` (the console script's call,
 ``contactdyn.cli.main``), median of ``--help-repeats`` processes [s], and whether the first run
@@ -50,6 +54,7 @@ def _environment(cache: str | None) -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     env.pop("NUMBA_CACHE_DIR", None)
+    env.pop("CONTACTDYN_PATH", None)  # the command's default path: auto
     if cache is not None:
         env["NUMBA_CACHE_DIR"] = cache
     return env
@@ -69,20 +74,40 @@ def timed(args: list[str], cache: str | None, cwd: str) -> tuple[float, float, i
     return time.perf_counter() - t0, _children_cpu() - c0, done.returncode, done.stderr
 
 
-def scene_row(scene: str, work: str) -> dict:
-    """The first (empty cache) and later (warm cache) run of one scene."""
+def _wait_for_build(cache: str) -> tuple[float, bool]:
+    """([s] until the background build of ``contactdyn.first_run`` ended, whether it marked its kind built)."""
+    t0 = time.perf_counter()
+    while time.perf_counter() - t0 < TIMEOUT:
+        if not list(Path(cache).glob("*/kinds/*.building")):
+            break
+        time.sleep(0.5)
+    return time.perf_counter() - t0, bool(list(Path(cache).glob("*/kinds/*.built")))
+
+
+def scene_row(scene: str, work: str, compiled_first: bool) -> dict:
+    """The first run of one scene (empty cache, path ``auto``: the readable model, then the background build),
+    a run while the build runs, the later run once it ended (the compiled call); ``compiled_first``: also the
+    first run with ``--path compiled`` in another empty cache (compiling in the foreground)."""
     path = ROOT / "sims" / f"{scene}.toml"
     path = path if path.is_file() else ROOT / scene  # a scene name of sims/, or a path in the checkout
     target = str(path) if path.is_file() else scene
     args = ["-m", "contactdyn.cli", "run", target, "--quiet"]
+    row: dict = {"scene": scene, "load_before": round(os.getloadavg()[0], 2)}
     with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
-        load = os.getloadavg()[0]
         first, first_cpu, rc1, err1 = timed(args, cache, work)
-        later, later_cpu, rc2, err2 = timed(args, cache, work)
-    return {"scene": scene, "first_s": round(first, 2), "later_s": round(later, 2),
-            "first_cpu_s": round(first_cpu, 2), "later_cpu_s": round(later_cpu, 2),
-            "notice": "compiling" in err1, "exit_codes": [rc1, rc2], "load_before": round(load, 2),
-            "stderr_first": err1.strip()[-400:], "stderr_later": err2.strip()[-400:]}
+        during, during_cpu, rc2, _ = timed(args, cache, work)
+        build_s, marked = _wait_for_build(cache)
+        later, later_cpu, rc3, err3 = timed(args, cache, work)
+    row.update(first_s=round(first, 2), first_cpu_s=round(first_cpu, 2), during_s=round(during, 2),
+               build_wait_s=round(build_s, 1), built=marked, later_s=round(later, 2), later_cpu_s=round(later_cpu, 2),
+               notice="compiling" in err1, exit_codes=[rc1, rc2, rc3], stderr_first=err1.strip()[-400:],
+               stderr_later=err3.strip()[-400:])
+    if compiled_first:
+        with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
+            compiled, compiled_cpu, rc4, _ = timed([*args, "--path", "compiled"], cache, work)
+        row.update(compiled_first_s=round(compiled, 2), compiled_first_cpu_s=round(compiled_cpu, 2))
+        row["exit_codes"].append(rc4)
+    return row
 
 
 def help_time(repeats: int, work: str) -> dict:
@@ -96,28 +121,31 @@ def main() -> None:
     p.add_argument("scenes", nargs="*", help="scene names in sims/ or paths in the checkout (default: b1 and every "
                    "sims/*.toml)")
     p.add_argument("--help-repeats", type=int, default=5, help="processes timed for contactdyn --help")
+    p.add_argument("--compiled-first", action="store_true",
+                   help="also time a first run with --path compiled (compiling in the foreground)")
     args = p.parse_args()
     scenes = args.scenes or default_scenes()
     rows = []
     with tempfile.TemporaryDirectory(prefix="first_run_work_") as work:
         helps = help_time(args.help_repeats, work)
         print(f"contactdyn --help: {helps['median_s']:.3f} s (median of {args.help_repeats})", flush=True)
-        heads = ("first [s]", "later [s]", "first CPU", "later CPU")
-        print(f"{'scene':24s} " + " ".join(f"{h:>10s}" for h in heads) + "  notice  load", flush=True)
+        heads = ("first [s]", "during [s]", "build [s]", "later [s]", "first CPU", "later CPU", "compiled 1st")
+        print(f"{'scene':24s} " + " ".join(f"{h:>12s}" for h in heads) + "  built  load", flush=True)
         for scene in scenes:
-            row = scene_row(scene, work)
+            row = scene_row(scene, work, args.compiled_first)
             rows.append(row)
-            flag = "" if row["exit_codes"] == [0, 0] else f"  exit codes {row['exit_codes']}: {row['stderr_first']}"
-            print(f"{scene:24s} {row['first_s']:10.2f} {row['later_s']:10.2f} {row['first_cpu_s']:10.2f} "
-                  f"{row['later_cpu_s']:10.2f}  {str(row['notice']):6s}  "
-                  f"{row['load_before']:.2f}{flag}", flush=True)
+            flag = "" if not any(row["exit_codes"]) else f"  exit codes {row['exit_codes']}: {row['stderr_first']}"
+            print(f"{scene:24s} " + " ".join(f"{row.get(k, float('nan')):12.2f}" for k in (
+                "first_s", "during_s", "build_wait_s", "later_s", "first_cpu_s", "later_cpu_s", "compiled_first_s"))
+                + f"  {str(row['built']):5s}  {row['load_before']:.2f}{flag}", flush=True)
     OUT.mkdir(parents=True, exist_ok=True)
     doc = {"help": helps, "scenes": rows, "cpus": os.cpu_count(), "python": platform.python_version(),
            "git": subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
                                  text=True).stdout.strip()}
     (OUT / "first_run.json").write_text(json.dumps(doc, indent=1))
     with open(OUT / "first_run.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, ["scene", "first_s", "later_s", "first_cpu_s", "later_cpu_s", "notice", "load_before"],
+        w = csv.DictWriter(f, ["scene", "first_s", "during_s", "build_wait_s", "built", "later_s", "first_cpu_s",
+                               "later_cpu_s", "compiled_first_s", "compiled_first_cpu_s", "notice", "load_before"],
                            extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)

@@ -185,7 +185,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     for module in scene.imports:  # importing runs code: say what ran
         _out(args, f"imported {module} from {IMPORTED.get(module, '?')}")
-    result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json))
+    from .first_run import build_in_background, choose, default_path
+
+    choice = choose(scene, args.path or default_path())
+    if choice.line() and not (args.quiet or args.json):
+        print(choice.line(), file=sys.stderr, flush=True)
+    result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled)
+    if choice.build:
+        build_in_background(scene)
     from .robot.listing import run_warnings
 
     # sanity, then inertia and limits, then the run's physics checks
@@ -235,7 +242,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _simulate_quietly(simulate, scene, progress: bool = True):
+def _simulate_quietly(simulate, scene, progress: bool = True, compiled: bool = True):
     """Simulate without Python's own warning lines (the command prints the sanity and check warnings itself)."""
     import warnings
 
@@ -245,7 +252,7 @@ def _simulate_quietly(simulate, scene, progress: bool = True):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SanityWarning)
         warnings.simplefilter("ignore", PhysicsWarning)
-        return simulate(scene, progress=progress)
+        return simulate(scene, progress=progress, compiled=compiled)
 
 
 # ---- sweep -----------------------------------------------------------------------------------
@@ -423,6 +430,10 @@ def _run_parser(sub, fmt) -> None:
                      help="with --view: listen on this address (default 127.0.0.1, this machine only)")
     run.add_argument("--speed", type=_speed, default=1.0,
                      help="with --view: playback speed factor (> 0; 1 = real time)")
+    run.add_argument("--path", choices=("auto", "compiled", "readable"),
+                     help="auto (default, or $CONTACTDYN_PATH): the compiled call once this kind of scene was "
+                          "compiled, else the readable model while it compiles in the background; compiled: "
+                          "compile now if needed; readable: never compile the call")
     _scripting(run)
     _imports_option(run)
     run.set_defaults(func=_cmd_run)

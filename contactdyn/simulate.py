@@ -34,9 +34,12 @@ from .scene.scene_file import Scene, load_scene
 __all__ = ["simulate", "run_system", "prepare"]
 
 
-def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None, *, progress: bool = False) -> Result:
+def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None, *, progress: bool = False,
+             compiled: bool = True) -> Result:
     """Run a scene (an object, a path, or a name in ``sims/``) and return its Result; ``progress``: show the
-    simulated time on stderr once the run has taken a couple of seconds (:mod:`contactdyn.hybrid.progress`)."""
+    simulated time on stderr once the run has taken a couple of seconds (:mod:`contactdyn.hybrid.progress`);
+    ``compiled=False``: every mode on the readable model, nothing of the compiled call compiled
+    (:mod:`contactdyn.first_run`)."""
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
@@ -46,7 +49,7 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None,
     wall0 = time.perf_counter()
     system = System(scene)
     notes = sanity_warnings(system)
-    loop = HybridRun(system)
+    loop = HybridRun(system, compiled)
     if progress:
         loop.progress = Progress(scene.name, scene.duration)
     try:

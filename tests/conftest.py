@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# `contactdyn run` in a test takes the compiled call, never starting a background build (contactdyn.first_run);
+# tests/test_first_run.py tests the path ``auto`` itself
+os.environ.setdefault("CONTACTDYN_PATH", "compiled")
 
 
 def pytest_addoption(parser):

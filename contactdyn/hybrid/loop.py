@@ -97,7 +97,7 @@ class HybridRun:
     #: the benchmarks' before/after comparison (benchmarks/corners.py)
     at_corners = True
 
-    def __init__(self, system: System):
+    def __init__(self, system: System, compiled: bool = True):
         self.system = system
         self.scene = system.scene
         self.solver = system.scene.solver
@@ -122,6 +122,8 @@ class HybridRun:
         self.fallbacks: dict[str, int] = {}
         #: the modes the compiled call runs (every one it packs; the others on the readable model)
         self.pipelines = LivePipelines(system, PipelineMode)
+        if not compiled:  # this run on the readable model only (contactdyn.first_run)
+            self.pipelines.use = False
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)

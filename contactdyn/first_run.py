@@ -1,0 +1,179 @@
+"""A scene's first run: on the readable model while its compiled code is built in the background.
+
+Compiling what a scene runs on (the compiled call, its controller's and laws' stages; numba, cached
+after: :mod:`contactdyn.numerics.compile_cache`) takes 20–40 s of CPU on a fresh install, while the
+readable model (``System.evaluate``: the same physics, agreeing with the compiled call to 1e-9,
+``tests/test_both_ways.py``) runs any scene of ``sims/`` in 1–5 s. So ``contactdyn run`` with the
+path ``auto`` (the default) decides per run:
+
+- the scene's *kind* was built by this build of the package (a marker in its compile cache): the
+  compiled call;
+- else the readable model, and after the run one background process (``python -m
+  contactdyn.first_run FILE``, low priority, detached, silent) runs the same scene on the compiled
+  call, so that it compiles and caches what the scene needs, and marks the kind built. One line says so.
+
+A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
+kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
+time, never correctness: a kind marked built whose code is not all cached compiles the rest in the
+foreground (the compile notice says so); a kind not marked runs on the readable model. ``--path
+compiled`` (or ``CONTACTDYN_PATH=compiled``) always takes the compiled call, compiling in the
+foreground; ``--path readable`` never compiles it. ``Result.stats["paths"]`` names each mode's path.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from .errors import SceneError
+from .scene.scene_file import Scene
+
+__all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "main"]
+
+PATHS = ("auto", "compiled", "readable")  #: what ``--path`` takes
+ENV = "CONTACTDYN_PATH"  #: the environment variable that sets the default path (else ``auto``)
+BUILD_TIMEOUT = 1800.0  #: [s] a background build older than this is taken as dead (its lock is stale)
+
+
+class Choice:
+    """A run's path: ``compiled`` (bool) and ``build`` (the kind's background build is due after the run)."""
+
+    def __init__(self, compiled: bool, build: bool = False) -> None:
+        self.compiled, self.build = compiled, build
+
+    def line(self) -> str:
+        """What the command says before a run that builds in the background ("" for the others)."""
+        return ("contactdyn: no compiled code for this kind of scene yet: this run takes the readable model (the "
+                "same physics; the two agree to 1e-9) and then builds it in the background for the next runs "
+                "(--path compiled compiles it now)") if self.build else ""
+
+
+def default_path(environ=os.environ) -> str:
+    """``$CONTACTDYN_PATH`` if set (checked), else ``auto``."""
+    path = environ.get(ENV, "auto")
+    if path not in PATHS:
+        raise SceneError(ENV, f"one of {', '.join(PATHS)}", path)
+    return path
+
+
+def _blank(value: Any) -> Any:
+    """A document with its numbers blanked (booleans and strings kept)."""
+    if isinstance(value, dict):
+        return {k: _blank(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_blank(v) for v in value]
+    if isinstance(value, bool | str) or value is None:
+        return value
+    return type(value).__name__  # int, float: the type decides a key's meaning, not the value
+
+
+def kind(scene: Scene) -> str:
+    """The scene's kind: 16 hex digits of SHA-256 over its document (after overrides) with the numbers blanked."""
+    text = json.dumps(_blank(scene.document), sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _folder() -> Path:
+    """Where this build's markers live: ``kinds/`` in its compiled-code directory (numba imported here)."""
+    from .numerics.compile_cache import directory
+
+    return directory() / "kinds"
+
+
+def built(scene: Scene) -> bool:
+    """Has this build compiled a scene of this kind (its background build finished)?"""
+    return (_folder() / f"{kind(scene)}.built").is_file()
+
+
+def choose(scene: Scene, path: str) -> Choice:
+    """The run's path for ``path`` (``auto``, ``compiled`` or ``readable``)."""
+    if path == "compiled":
+        return Choice(True)
+    if path == "readable":
+        return Choice(False)
+    if built(scene):
+        return Choice(True)
+    return Choice(False, build=_buildable(scene))
+
+
+def _buildable(scene: Scene) -> bool:
+    """A background process can run the scene again: it comes from a file."""
+    return bool(scene.file) and Path(scene.file).is_file()
+
+
+def _lock(folder: Path, name: str) -> bool:
+    """Take the kind's build lock (False: a build of it runs already, or the folder cannot be written)."""
+    lock = folder / f"{name}.building"
+    for _ in range(2):
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+            return True
+        except FileExistsError:
+            try:
+                if time.time() - lock.stat().st_mtime < BUILD_TIMEOUT:
+                    return False
+                lock.unlink()  # a build that died: take over
+            except OSError:
+                return False
+        except OSError:
+            return False
+    return False
+
+
+def build_in_background(scene: Scene) -> bool:
+    """Start the kind's background build (False: not started, one runs already or the scene has no file)."""
+    if not _buildable(scene):
+        return False
+    folder, name = _folder(), kind(scene)
+    if not _lock(folder, name):
+        return False
+    try:
+        child = subprocess.Popen([sys.executable, "-m", __name__, str(scene.file), str(folder / name)],
+                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                 start_new_session=True)
+        with child.stdin:
+            child.stdin.write(json.dumps(scene.document, default=str).encode())
+    except OSError:
+        (folder / f"{name}.building").unlink(missing_ok=True)
+        return False
+    return True
+
+
+def build(file: str, document: dict, marker: str) -> None:
+    """Run the scene (its document, read relative to ``file``) on the compiled call; mark its kind built."""
+    import warnings
+
+    from .scene.scene_file import parse_scene
+    from .simulate import simulate
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        simulate(parse_scene(document, None, file), compiled=True)
+    Path(f"{marker}.built").touch()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m contactdyn.first_run FILE MARKER`` (the scene's document on stdin): the background build."""
+    file, marker = argv or sys.argv[1:3]
+    try:
+        os.nice(10)
+    except (AttributeError, OSError):
+        pass
+    try:
+        build(file, json.loads(sys.stdin.read()), marker)
+        return 0
+    except Exception:  # noqa: BLE001 (a build that fails leaves no marker: the next run is readable again)
+        return 1
+    finally:
+        Path(f"{marker}.building").unlink(missing_ok=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

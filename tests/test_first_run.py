@@ -1,0 +1,103 @@
+"""A scene's first run (contactdyn.first_run): the readable model while its kind is not built, the compiled call after;
+the kind ignores values, not laws; one background build per kind; a failed build leaves no marker."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import sys
+
+import pytest
+
+from contactdyn import first_run
+from contactdyn.cli import EXIT_OK, main
+from contactdyn.errors import SceneError
+from contactdyn.model.paths import PIPELINE, READABLE
+from contactdyn.scene.scene_file import load_scene
+
+FAST = ["--set", "duration=0.05", "--set", "solver.output_rate=200"]
+
+
+@pytest.fixture
+def markers(tmp_path, monkeypatch):
+    """The kinds' markers in a folder of this test (not the build's compile cache)."""
+    monkeypatch.setattr(first_run, "_folder", lambda: tmp_path / "kinds")
+    return tmp_path / "kinds"
+
+
+def test_a_kind_ignores_the_values_and_sees_the_laws():
+    base = load_scene("b1")
+    assert first_run.kind(base) == first_run.kind(load_scene("b1", {"contact.tip.normal.k": 3.3e4, "duration": 0.7}))
+    assert first_run.kind(base) != first_run.kind(load_scene("b1", {"solver.method": "Radau"}))
+    assert first_run.kind(base) != first_run.kind(load_scene("b1_force_loop"))
+
+
+def test_auto_is_readable_until_the_kind_is_built_then_compiled(markers):
+    scene = load_scene("b1")
+    choice = first_run.choose(scene, "auto")
+    assert (choice.compiled, choice.build) == (False, True) and "background" in choice.line()
+    markers.mkdir()
+    (markers / f"{first_run.kind(scene)}.built").touch()
+    choice = first_run.choose(scene, "auto")
+    assert (choice.compiled, choice.build, choice.line()) == (True, False, "")
+    assert not first_run.choose(scene, "readable").compiled
+    assert first_run.choose(load_scene("case1_cart"), "compiled").compiled
+
+
+def test_one_build_per_kind_at_a_time_and_a_dead_one_is_taken_over(markers):
+    assert first_run._lock(markers, "k")
+    assert not first_run._lock(markers, "k")  # a build of the kind runs
+    old = first_run.time.time() - first_run.BUILD_TIMEOUT - 1.0
+    os.utime(markers / "k.building", (old, old))
+    assert first_run._lock(markers, "k")  # that one died long ago
+
+
+def test_the_command_runs_readable_says_so_and_asks_for_one_build(markers, monkeypatch, capsys):
+    asked = []
+    monkeypatch.setattr(first_run, "build_in_background", asked.append)
+    code = main(["run", "b1", *FAST, "--path", "auto", "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == EXIT_OK and len(asked) == 1 and asked[0].name == "b1"
+    assert {row["path"] for row in doc["stats"]["paths"].values()} == {READABLE}
+    main(["run", "b1", *FAST, "--path", "auto"])
+    assert "builds it in the background" in capsys.readouterr().err
+
+
+def test_the_build_runs_compiled_and_marks_the_kind(markers, monkeypatch):
+    scene = load_scene("b1", {"duration": 0.05})
+    ran = []
+    monkeypatch.setattr(sys.modules["contactdyn.simulate"], "simulate",
+                        lambda s, compiled: ran.append((s.document, compiled)))
+    markers.mkdir()
+    (markers / "x.building").touch()
+    monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps(scene.document)))
+    monkeypatch.setattr("os.nice", lambda n: 0)
+    assert first_run.main([scene.file, str(markers / "x")]) == 0
+    assert ran == [(scene.document, True)] and (markers / "x.built").is_file() and not (markers / "x.building").exists()
+
+
+def test_a_failed_build_leaves_no_marker_and_no_lock(markers, monkeypatch):
+    markers.mkdir()
+    (markers / "y.building").touch()
+    monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps({"duration": "not a number"})))
+    monkeypatch.setattr("os.nice", lambda n: 0)
+    assert first_run.main(["nowhere.toml", str(markers / "y")]) == 1
+    assert list(markers.iterdir()) == []
+
+
+def test_the_readable_run_and_the_compiled_run_agree():
+    from contactdyn import simulate
+
+    readable = simulate("b1", {"duration": 0.2}, compiled=False)
+    compiled = simulate("b1", {"duration": 0.2})
+    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
+    assert {row["path"] for row in compiled.stats["paths"].values()} == {PIPELINE}
+    F_r, F_c = readable["contact.tip.F_n"], compiled["contact.tip.F_n"]
+    assert abs(F_r - F_c).max() <= 1e-6 * abs(F_c).max()
+
+
+def test_a_bad_default_path_is_named():
+    with pytest.raises(SceneError, match="CONTACTDYN_PATH.*auto, compiled, readable.*fast"):
+        first_run.default_path({"CONTACTDYN_PATH": "fast"})
+    assert first_run.default_path({}) == "auto"
