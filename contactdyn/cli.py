@@ -188,11 +188,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .first_run import build_in_background, choose, default_path
 
     choice = choose(scene, args.path or default_path())
-    if choice.line() and not (args.quiet or args.json):
-        print(choice.line(), file=sys.stderr, flush=True)
     result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled)
-    if choice.build:
-        build_in_background(scene)
+    if choice.build and build_in_background(scene) and not (args.quiet or args.json):
+        print(choice.line(), file=sys.stderr, flush=True)
     from .robot.listing import run_warnings
 
     # sanity, then inertia and limits, then the run's physics checks

@@ -10,7 +10,8 @@ path ``auto`` (the default) decides per run:
   compiled call;
 - else the readable model, and after the run one background process (``python -m
   contactdyn.first_run FILE``, low priority, detached, silent) runs the same scene on the compiled
-  call, so that it compiles and caches what the scene needs, and marks the kind built. One line says so.
+  call, so that it compiles and caches what the scene needs, and marks the kind built. One line says so
+  after the run.
 
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
@@ -48,10 +49,10 @@ class Choice:
         self.compiled, self.build = compiled, build
 
     def line(self) -> str:
-        """What the command says before a run that builds in the background ("" for the others)."""
-        return ("contactdyn: no compiled code for this kind of scene yet: this run takes the readable model (the "
-                "same physics; the two agree to 1e-9) and then builds it in the background for the next runs "
-                "(--path compiled compiles it now)") if self.build else ""
+        """What the command says after a run whose build it started ("" for the others)."""
+        return ("contactdyn: this kind of scene had no compiled code yet: it ran on the readable model (the same "
+                "physics; the two agree to 1e-9); its compiled code is now built in the background for the next "
+                "runs (--path compiled compiles in the foreground)") if self.build else ""
 
 
 def default_path(environ=os.environ) -> str:

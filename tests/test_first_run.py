@@ -55,13 +55,22 @@ def test_one_build_per_kind_at_a_time_and_a_dead_one_is_taken_over(markers):
 
 def test_the_command_runs_readable_says_so_and_asks_for_one_build(markers, monkeypatch, capsys):
     asked = []
-    monkeypatch.setattr(first_run, "build_in_background", asked.append)
+    monkeypatch.setattr(first_run, "build_in_background", lambda scene: asked.append(scene) or True)
     code = main(["run", "b1", *FAST, "--path", "auto", "--json"])
     doc = json.loads(capsys.readouterr().out)
     assert code == EXIT_OK and len(asked) == 1 and asked[0].name == "b1"
     assert {row["path"] for row in doc["stats"]["paths"].values()} == {READABLE}
     main(["run", "b1", *FAST, "--path", "auto"])
-    assert "builds it in the background" in capsys.readouterr().err
+    assert "built in the background" in capsys.readouterr().err
+    assert main(["run", "b1", *FAST, "--path", "auto", "--set", "robot.q0=[0.1]"]) == 2  # bad input: no build
+    assert len(asked) == 2 and capsys.readouterr().err.count("\n") == 1
+
+
+def test_a_bad_path_in_the_environment_is_one_message(monkeypatch, capsys):
+    monkeypatch.setenv("CONTACTDYN_PATH", "fast")
+    assert main(["run", "b1", *FAST]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "CONTACTDYN_PATH" in err and "fast" in err
 
 
 def test_the_build_runs_compiled_and_marks_the_kind(markers, monkeypatch):

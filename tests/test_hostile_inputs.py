@@ -44,7 +44,8 @@ def _cap() -> None:
 def run_batch(cases: list[Case], cwd: Path) -> dict[str, dict]:
     payload = json.dumps([{"id": c[0], "argv": c[1]} for c in cases])
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "HOME": str(cwd), "MPLBACKEND": "Agg",
-           "OPENBLAS_NUM_THREADS": "1",  # the compiled code's cache: the user's, not the temporary HOME's (cold)
+           "OPENBLAS_NUM_THREADS": "1", "CONTACTDYN_PATH": "compiled",  # no background build (first_run)
+           # the compiled code's cache: the user's, not the temporary HOME's (cold)
            "XDG_CACHE_HOME": os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")}
     if os.environ.get("NUMBA_CACHE_DIR"):
         env["NUMBA_CACHE_DIR"] = os.environ["NUMBA_CACHE_DIR"]
