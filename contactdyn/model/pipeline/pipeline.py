@@ -59,6 +59,7 @@ from .pack import (
     D_FD,
     D_LAM,
     D_TAU,
+    D_TC,
     D_TIP,
     D_XD,
     ENERGY,
@@ -122,6 +123,10 @@ def call(t, x, ints, reals, work, events):
             return xdot
         first_joint = nr - ints[N_HELD]
         first_limit = first_joint - ints[N_LIMITS]
+        if work[ints[W_DIAG]] != 0.0:  # (diagnostics: the contacts' generalized force on the joints, f holds −h)
+            at_tc = diag_starts(ints)[D_TC]
+            for i in range(nv):
+                work[at_tc + i] = f[i] + h[i]
         limit_rows(x, ints, reals, first_limit, G, C, gamma)
         joint_rows(x, ints, reals, first_joint, G, C, gamma)
         tau, zdot, B, D, bq, dq = call_at(ints[A_CONTROLLER], "pipeline.controller",
@@ -142,7 +147,7 @@ def call(t, x, ints, reals, work, events):
             call_at(ints[A_ENERGY], "pipeline.energy", (x, ints, reals, applied, xdot, events, pending))
         joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
         if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
-            record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam)
+            record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam, C, first_limit)
         events[events.size - 1] = 1.0 if regular else 0.0
         if final or not regular or call_at(ints[A_LAUNCH], "pipeline.launch_took",
                                            (x, ints, state, reals, FJ, Fa, Fv, xdot)):
@@ -150,12 +155,15 @@ def call(t, x, ints, reals, work, events):
 
 
 @njit(cache=True)
-def record(t, x, ints, reals, work, applied, tau, p_tip, lam):
+def record(t, x, ints, reals, work, applied, tau, p_tip, lam, C, first_limit):
     """The diagnostics of a call at (t [s], x) into ``work``'s section (:func:`.pack.diag_starts`; written when its
     switch is on: an output sample's call, :func:`samples_at`): the drives' applied forces [N·m or N] (the joints',
     then the bodies' servo forces [N]), the command [N·m or N], the tip [m], x_d [m] (carried by its body, if one
     carries it), F_d [N], the rows' forces λ (normal and stick forces [N], limit and holding torques [N·m or N],
-    tangential bonds' interface forces [N]). Each chain's interface force [N] is written by every call
+    tangential bonds' interface forces [N]), and the contacts' generalized force on the joints as a sampled law
+    measures it [N·m or N]: the deformable and friction forces (written by the call after the contacts), plus the
+    forces λ of the contacts' rows (before ``first_limit``) whose columns C reach beyond the robot
+    (``dynamics.measurement``). Each chain's interface force [N] is written by every call
     (:func:`.contacts.contact_terms`), the stage states (x [m], ẋ [m/s], F [N]) are in ``work`` already."""
     at = diag_starts(ints)  # (put: no slice assignment, see numerics.linalg.put)
     put(work, at[D_TAU], applied)
@@ -167,6 +175,13 @@ def record(t, x, ints, reals, work, applied, tau, p_tip, lam):
         put(work, at[D_XD], x_d)
     put(work, at[D_FD], set_points(t, ints, reals)[0])
     put(work, at[D_LAM], lam)
+    nv = ints[NV]
+    for r in range(first_limit):
+        reaches = False
+        for c in range(nv, C.shape[1]):
+            reaches = reaches or C[r, c] != 0.0
+        for c in range(nv if reaches else 0):
+            work[at[D_TC] + c] += C[r, c] * lam[r]
 
 
 @njit(cache=True)

@@ -1,0 +1,142 @@
+"""A sampled law's measurement off the compiled call (``PipelineMode.measurement``) against the readable model's
+(``dynamics.measurement``): the normal and interface forces [N], the contacts' generalized force on the joints
+[N·m or N] (the deformable and friction forces, plus the rows' λ whose columns reach beyond the robot) and a
+carrier's acceleration, and the whole input ``sample_input`` builds from either, at a few states of a touching mode.
+
+Each quantity is held to 1e-12 relative to its largest magnitude over the states (at least 1): the two paths do the
+same arithmetic in another order (f holds −h before the contacts on the compiled call), rounding apart.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contactdyn import parse_scene
+from contactdyn.hybrid.pipeline_mode import PipelineMode
+from contactdyn.hybrid.sampling import SampledPhases
+from contactdyn.model.dynamics import measurement, measures, sample_input
+from contactdyn.model.pipeline.pack import unsupported
+from contactdyn.model.pipeline.pipeline import Pipeline
+from contactdyn.simulate import prepare
+
+ROOT = Path(__file__).resolve().parents[1]
+RTOL = 1e-12
+
+
+def _rigid_on_the_cart(doc: dict) -> None:
+    """case1_cart's tip on a rigid cart top with Coulomb friction: its normal row's column reaches the cart."""
+    tip = doc["contact"]["tip"]
+    for key in [k for k in tip if k.startswith(("normal", "tangent"))]:
+        del tip[key]
+    tip["normal"] = {"direction": [0.0, 0.0, 1.0], "model": "rigid"}
+    tip["tangent"] = {"model": "friction", "directions": [[-1.0, 0.0, 0.0]], "mu_s": 0.6, "mu_k": 0.4}
+    doc["phase"][1]["force"] = [f for f in doc["phase"][1]["force"] if f["direction"] == "n"]
+
+
+#: case -> (scene, phase index, an edit of its TOML or None)
+CASES = {
+    "force_law": ("sims/b1_force_loop.toml", 0, None),  # hybrid A7/A10: reads F_n and τ_contact
+    "real_cell": ("sims/force_loop_real_cell.toml", 0, None),  # motors, joint friction, a force law
+    "no_force_law": ("sims/b1.toml", 0, None),  # task PD: reads no force
+    "carrier_chains": ("sims/case1_cart.toml", 1, None),  # A7 on the cart: forces, interface, a_d
+    "carrier_rigid": ("sims/case1_cart.toml", 1, _rigid_on_the_cart),  # λ of a row reaching the cart
+}
+
+
+def _touching_mode(case: str):
+    """(system, touching modes, the sampled phase at 1 kHz, x0) of a case."""
+    path, index, edit = CASES[case]
+    doc = tomllib.loads((ROOT / path).read_text())
+    doc.setdefault("controller", {})["sample_rate"] = 1000.0
+    if edit is not None:
+        edit(doc)
+    system, modes, phase, x0 = prepare(parse_scene(doc, file=str(ROOT / path)))
+    if index:
+        phase = system.start_phase(index, phase.t_start + 1.0, x0, phase)
+    modes = [m.with_(touching=True, offsets=tuple(0.0 for _ in c.tangent_chains))
+             for c, m in zip(system.contacts, modes, strict=True)]
+    assert unsupported(system, modes, phase) == ""
+    return system, modes, phase, x0
+
+
+def _states(x0: np.ndarray) -> list[np.ndarray]:
+    """x0 and two perturbations of it (1e-3 relative)."""
+    rng = np.random.default_rng(11)
+    return [x0, *(x0 + 1e-3 * (1.0 + np.abs(x0)) * rng.normal(size=x0.size) for _ in range(2))]
+
+
+def _close(got: list, ref: list, what: str) -> None:
+    """Each of got matches ref to RTOL × the largest |ref| over the states (at least 1)."""
+    scale = max(1.0, max(float(np.max(np.abs(r))) if np.size(r) else 0.0 for r in ref))
+    for g, r in zip(got, ref, strict=True):
+        np.testing.assert_allclose(g, r, rtol=0.0, atol=RTOL * scale, err_msg=what)
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_compiled_calls_measurement_is_the_readable_models(case):
+    system, modes, phase, x0 = _touching_mode(case)
+    mode = PipelineMode(Pipeline(system, modes, phase))
+    t = phase.t_start + 0.013
+    got = [mode.measurement(t, x) for x in _states(x0)]
+    ref = [measurement(system, t, x, modes, phase) for x in _states(x0)]
+    for c in system.contacts:
+        _close([g.normal_force[c.name] for g in got], [r.normal_force[c.name] for r in ref], f"{c.name} F_n")
+        assert any(abs(r.normal_force[c.name]) > 1.0 for r in ref)  # [N] the contact carries a force
+    assert all(g.interface.keys() == r.interface.keys() for g, r in zip(got, ref, strict=True))
+    for key in ref[0].interface:
+        _close([g.interface[key] for g in got], [r.interface[key] for r in ref], key)
+    if phase.controller.inner.uses_forces:
+        _close([g.tau_contact for g in got], [r.tau_contact for r in ref], "tau_contact")
+    if phase.carrier is not None:
+        _close([g.carrier_acc for g in got], [r.carrier_acc for r in ref], "the carrier's acceleration")
+        assert any(abs(r.carrier_acc) > 0.1 for r in ref)  # [m/s²] it accelerates
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_the_input_a_sample_builds_from_the_compiled_measurement_is_the_readable_ones(case):
+    """sample_input with the compiled call's measurement against sample_input measuring on the readable model:
+    every field the law reads (the forces, τ_contact, a_d with the carrier's acceleration, the kinematics)."""
+    system, modes, phase, x0 = _touching_mode(case)
+    mode = PipelineMode(Pipeline(system, modes, phase))
+    t = phase.t_start + 0.013
+    got = [sample_input(system, t, x, modes, phase, 0.0, mode.measurement(t, x)) for x in _states(x0)]
+    ref = [sample_input(system, t, x, modes, phase) for x in _states(x0)]
+    for name in ("q", "v", "H", "h", "p_tip", "v_tip", "J", "drift", "x_d", "v_d", "a_d", "z", "tau_contact"):
+        if getattr(ref[0], name) is None:
+            assert all(getattr(g, name) is None for g in got), name
+            continue
+        _close([getattr(g, name) for g in got], [getattr(r, name) for r in ref], name)
+    assert all(g.forces.keys() == r.forces.keys() for g, r in zip(got, ref, strict=True))
+    for key in ref[0].forces:
+        _close([g.forces[key] for g in got], [r.forces[key] for r in ref], key)
+    assert bool(ref[0].forces) == phase.controller.inner.uses_forces  # a law that reads no force sees none
+
+
+def test_a_sample_measures_on_the_runner_only_where_the_law_needs_a_solved_call():
+    """take asks the compiled call for a measurement for a force-reading law (and a carrier), never for one that
+    reads none; a Declined runner (ok False) is not asked."""
+    asked = []
+
+    class Runner:
+        ok = True
+
+        def measurement(self, t, x):
+            asked.append(t)
+            return None  # (the call declined there: the readable model measures)
+
+    for case, expected in (("no_force_law", 0), ("force_law", 1)):
+        system, modes, phase, x0 = _touching_mode(case)
+        assert measures(phase) == bool(expected)
+        sampled = SampledPhases(system, {})
+        x = sampled.start(0.0, x0, modes, phase, None)
+        asked.clear()
+        sampled.take(1e-3, x, modes, phase, Runner())
+        assert len(asked) == expected
+        Runner.ok = False
+        sampled.take(2e-3, x, modes, phase, Runner())
+        assert len(asked) == expected
+        Runner.ok = True
