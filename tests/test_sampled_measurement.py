@@ -1,7 +1,8 @@
 """A sampled law's measurement off the compiled call (``PipelineMode.measurement``) against the readable model's
 (``dynamics.measurement``): the normal and interface forces [N], the contacts' generalized force on the joints
 [N·m or N] (the deformable and friction forces, plus the rows' λ whose columns reach beyond the robot) and a
-carrier's acceleration, and the whole input ``sample_input`` builds from either, at a few states of a touching mode.
+carrier's acceleration; and the whole input ``sample_input`` builds on either path (the robot's and the phase's
+terms too: ``PipelineMode.sample_terms``), at a few states of a touching mode.
 
 Each quantity is held to 1e-12 relative to its largest magnitude over the states (at least 1): the two paths do the
 same arithmetic in another order (f holds −h before the contacts on the compiled call), rounding apart.
@@ -96,24 +97,43 @@ def test_the_compiled_calls_measurement_is_the_readable_models(case):
         assert any(abs(r.carrier_acc) > 0.1 for r in ref)  # [m/s²] it accelerates
 
 
+FIELDS = ("q", "v", "H", "h", "gravity", "p_tip", "v_tip", "J", "drift", "R_tip", "J_ang", "drift_ang", "x_d", "v_d",
+          "a_d", "z", "tau_contact")  #: the ControlInput's arrays
+
+
+def _copied(inp):
+    """The input with its arrays copied (the readable model's H, h and Jacobians are Pinocchio's buffers, rewritten
+    at the next state)."""
+    for name in FIELDS:
+        if getattr(inp, name) is not None:
+            setattr(inp, name, np.array(getattr(inp, name)))
+    return inp
+
+
+@pytest.mark.parametrize("resolution", [0.0, 1e-4])  # [rad] exact joint positions, and encoders' counts
 @pytest.mark.parametrize("case", list(CASES))
-def test_the_input_a_sample_builds_from_the_compiled_measurement_is_the_readable_ones(case):
-    """sample_input with the compiled call's measurement against sample_input measuring on the readable model:
-    every field the law reads (the forces, τ_contact, a_d with the carrier's acceleration, the kinematics)."""
+def test_the_input_a_sample_builds_on_the_compiled_call_is_the_readable_ones(case, resolution):
+    """sample_input with the compiled call's measurement and terms (at the quantised joint positions) against
+    sample_input on the readable model: every field the law reads (the forces, τ_contact, the set-points, a_d with
+    the carrier's acceleration, H, h, g, the tip's kinematics)."""
     system, modes, phase, x0 = _touching_mode(case)
     mode = PipelineMode(Pipeline(system, modes, phase))
     t = phase.t_start + 0.013
-    got = [sample_input(system, t, x, modes, phase, 0.0, mode.measurement(t, x)) for x in _states(x0)]
-    ref = [sample_input(system, t, x, modes, phase) for x in _states(x0)]
-    for name in ("q", "v", "H", "h", "p_tip", "v_tip", "J", "drift", "x_d", "v_d", "a_d", "z", "tau_contact"):
+    got = [_copied(sample_input(system, t, x, modes, phase, resolution, mode.measurement(t, x), mode.sample_terms))
+           for x in _states(x0)]
+    ref = [_copied(sample_input(system, t, x, modes, phase, resolution)) for x in _states(x0)]
+    for name in FIELDS:
         if getattr(ref[0], name) is None:
             assert all(getattr(g, name) is None for g in got), name
             continue
         _close([getattr(g, name) for g in got], [getattr(r, name) for r in ref], name)
-    assert all(g.forces.keys() == r.forces.keys() for g, r in zip(got, ref, strict=True))
-    for key in ref[0].forces:
-        _close([g.forces[key] for g in got], [r.forces[key] for r in ref], key)
+    for name in ("forces", "force_d"):
+        assert all(getattr(g, name).keys() == getattr(r, name).keys() for g, r in zip(got, ref, strict=True))
+        for key in getattr(ref[0], name):
+            _close([getattr(g, name)[key] for g in got], [getattr(r, name)[key] for r in ref], f"{name} {key}")
     assert bool(ref[0].forces) == phase.controller.inner.uses_forces  # a law that reads no force sees none
+    assert (ref[0].gravity is not None) == phase.controller.inner.needs_gravity
+    assert resolution == 0.0 or np.any(ref[0].q != x0[:system.nv])  # (quantised)
 
 
 def test_a_sample_measures_on_the_runner_only_where_the_law_needs_a_solved_call():
@@ -130,6 +150,7 @@ def test_a_sample_measures_on_the_runner_only_where_the_law_needs_a_solved_call(
 
     for case, expected in (("no_force_law", 0), ("force_law", 1)):
         system, modes, phase, x0 = _touching_mode(case)
+        Runner.sample_terms = PipelineMode(Pipeline(system, modes, phase)).sample_terms
         assert measures(phase) == bool(expected)
         sampled = SampledPhases(system, {})
         x = sampled.start(0.0, x0, modes, phase, None)

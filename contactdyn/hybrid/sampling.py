@@ -71,11 +71,14 @@ class SampledPhases:
 
     def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, runner=None) -> np.ndarray:
         """The sample at t [s] of the phase's law: the state with its new held command and states. ``runner``: the
-        mode's compiled call (a PipelineMode) measures the forces, else (None, or a Declined) the readable model."""
+        mode's compiled call (a PipelineMode) measures the forces and gives the robot's terms, else (None, or a
+        Declined) the readable model."""
         sampler = self.samplers[phase.index]
         ctl = phase.controller
-        measured = runner.measurement(t, x) if runner is not None and runner.ok and measures(phase) else None
-        inp = sampler.measure(sample_input(self.system, t, x, modes, phase, sampler.resolution, measured))
+        compiled = runner is not None and runner.ok
+        measured = runner.measurement(t, x) if compiled and measures(phase) else None
+        inp = sampler.measure(sample_input(self.system, t, x, modes, phase, sampler.resolution, measured,
+                                           runner.sample_terms if compiled else None))
         tau, z_law = sampler.update(inp, inp.z)
         x = x.copy()
         x[self._slots(phase, ctl.held)] = tau

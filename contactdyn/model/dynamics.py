@@ -39,7 +39,7 @@ from .phases import Phase, reference_at
 
 __all__ = ["Evaluation", "evaluate", "contact_condition", "carried_command", "command_of", "drive_command",
            "set_force_inputs", "surface_keys", "surface_points", "carried_terms", "sample_input",
-           "Measurement", "measures", "measurement"]
+           "Measurement", "SampleTerms", "measures", "measurement"]
 
 
 @dataclass
@@ -202,6 +202,28 @@ class Measurement:
     carrier_acc: float = 0.0  #: the acceleration of the body carrying the reference [m/s² or rad/s²]
 
 
+@dataclass
+class SampleTerms:
+    """What a sampled law reads of the robot and its phase at (t, x), besides the measured forces: from the readable
+    model (Pinocchio, the phase's reference) or from the compiled call
+    (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.sample_terms`)."""
+
+    H: np.ndarray  #: the law's inertia matrix, reflected rotors included [kg·m²]
+    h: np.ndarray  #: Coriolis, centrifugal and uncompensated gravity [N·m or N]
+    gravity: np.ndarray | None  #: the uncompensated gravity load [N·m or N], where the law asks
+    p_tip: np.ndarray  #: [m]
+    v_tip: np.ndarray  #: [m/s]
+    J: np.ndarray  #: the tip's Jacobian (3, nv)
+    drift: np.ndarray  #: J̇q̇ [m/s²]
+    R_tip: np.ndarray  #: the tip frame's orientation (3, 3)
+    J_ang: np.ndarray  #: the tip's angular Jacobian (3, nv)
+    drift_ang: np.ndarray  #: J̇_ω q̇ [rad/s²]
+    x_d: np.ndarray | None  #: the reference (carried by its body, if one carries it); None: the phase has none
+    v_d: np.ndarray | None
+    a_d: np.ndarray | None  #: (without a carrier's acceleration: the Measurement's)
+    force_d: dict[str, tuple[float, float]]  #: per set-point (F_d [N], Ḟ_d [N/s])
+
+
 def measures(phase: Phase) -> bool:
     """Does the sampled phase's law measure a solved right-hand side: does it read forces, or is its reference
     carried by a body (its acceleration)?"""
@@ -217,7 +239,7 @@ def measurement(system, t: float, x: np.ndarray, modes: list[ContactMode], phase
 
 
 def sample_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
-                 resolution: float = 0.0, measured: Measurement | None = None) -> ControlInput:
+                 resolution: float = 0.0, measured: Measurement | None = None, terms_at=None) -> ControlInput:
     """What a sampled phase's law (``phase.controller.inner``) measures at a sample instant (t [s], x).
 
     A law that reads forces gets them from the right-hand side solved there under the command held so far
@@ -225,6 +247,8 @@ def sample_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phas
     model gives it (deformable and friction forces, plus the rows that reach beyond the robot); a reference
     carried by a body gets the body's acceleration. No fold: the command is held, not a function of the forces.
     ``measured``: those (:class:`Measurement`) from the compiled call; None: from the readable model.
+    ``terms_at(t, x)``: the robot's and the phase's terms there (:class:`SampleTerms`) from the compiled call;
+    None: Pinocchio's and the phase's own.
     The kinematics are computed at the joint positions quantised to the encoders' ``resolution`` [rad or m]
     (0: exact). A law that reads no force sees none (as on the compiled path)."""
     nQ, nv = system.nQ, system.nv
@@ -236,11 +260,17 @@ def sample_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phas
     if resolution > 0.0:
         xq = x.copy()
         xq[:nv] = quantise(x[:nv], resolution)
-    system.robot.update(xq[:nv], xq[nQ:nQ + nv])
     z_law = x[2 * nQ + phase.z_slice.start + ctl.inner_states.start: 2 * nQ + phase.z_slice.stop].copy()
     forces = measured if law.uses_forces else _NO_FORCES
-    inp, _, _, _ = _control_input(system, t, xq, modes, phase, np.zeros(nQ), [None] * len(system.contacts),
-                                  forces, law, z_law, set_forces=False)
+    if terms_at is None:
+        system.robot.update(xq[:nv], xq[nQ:nQ + nv])
+        inp, _, _, _ = _control_input(system, t, xq, modes, phase, np.zeros(nQ), [None] * len(system.contacts),
+                                      forces, law, z_law, set_forces=False)
+    else:
+        T = terms_at(t, xq)
+        inp = ControlInput(t, xq[:nv], xq[nQ:nQ + nv], T.H, T.h, T.gravity, T.p_tip, T.v_tip, T.J, T.drift, T.x_d,
+                           T.v_d, T.a_d, {**forces.normal_force, **forces.interface}, T.force_d,
+                           system.force_directions, z_law, R_tip=T.R_tip, J_ang=T.J_ang, drift_ang=T.drift_ang)
     if inp.a_d is not None and phase.carrier is not None:  # the carrier's acceleration, known after the solve
         inp.a_d = inp.a_d + phase.carrier[1] * measured.carrier_acc
     if law.uses_forces:

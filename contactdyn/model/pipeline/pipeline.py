@@ -74,6 +74,7 @@ from .pack import (
     N_LAUNCH,
     N_LIMITS,
     N_ROWS,
+    NEEDS_GRAVITY,
     NQ,
     NV,
     NX,
@@ -91,7 +92,7 @@ from .pack import (
 )
 from .robot_terms import frame_terms, robot_terms
 
-__all__ = ["call", "rates_at", "samples_at", "stage_addresses", "Pipeline"]
+__all__ = ["call", "rates_at", "samples_at", "sample_terms", "stage_addresses", "Pipeline"]
 
 
 @njit(cache=True)
@@ -213,6 +214,25 @@ def samples_at(ts, X, ints, reals, work, events):
         put(W[k], 0, work)
     work[ints[W_DIAG]] = 0.0
     return Xd, E, W, done
+
+
+@njit(cache=True)
+def sample_terms(t, x, ints, reals, gravity):
+    """What a sampled law reads of the robot and the phase at (t [s], x) besides the measured forces (the terms of
+    ``dynamics.sample_input``'s ControlInput), by the call's own stages: the law's H (rotors reflected) [kg·m²], h,
+    g (empty unless ``gravity``) [N·m or N]; the tip frame's J (6, nv, linear rows first), J̇q̇ (6) [m/s², rad/s²],
+    p [m], ṗ [m/s], R; the reference x_d, v_d, a_d (carried by its body, if one carries it); F_d [N] and Ḟ_d
+    [N/s] per set-point."""
+    own = ints.copy()  # (g as the law asks: a sampled mode's call computes none)
+    own[NEEDS_GRAVITY] = gravity
+    H, h, g, Jw, W = robot_terms(x, own, reals)
+    _, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:])
+    FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
+    fi = ints[TIP_FRAME]
+    x_d, v_d, a_d = reference(t, ints, reals)
+    carry(x, ints, reals, x_d, v_d)
+    F_d, _, rate = set_points(t, ints, reals)
+    return Hc, h, g, FJ[fi].copy(), Fa[fi].copy(), Fp[fi].copy(), Fv[fi].copy(), FR[fi].copy(), x_d, v_d, a_d, F_d, rate
 
 
 # ---- the stages reached by address (numerics.native_call): compiled on their own, for the modes that have them -----
