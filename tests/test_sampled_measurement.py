@@ -161,3 +161,19 @@ def test_a_sample_measures_on_the_runner_only_where_the_law_needs_a_solved_call(
         sampled.take(2e-3, x, modes, phase, Runner())
         assert len(asked) == expected
         Runner.ok = True
+
+
+@pytest.mark.parametrize("case", ["force_law", "real_cell"])  # (without motors H is Pinocchio's too; with, h only)
+def test_a_sample_keeps_its_own_H_and_h_after_the_next_samples(case):
+    """A delayed law computes on the input of d samples ago: its H and h are those of that sample's state, not
+    rewritten by the next sample's (the readable model's H and h are Pinocchio's buffers)."""
+    system, modes, phase, x0 = _touching_mode(case)
+    mode = PipelineMode(Pipeline(system, modes, phase))
+    x1, x2 = _states(x0)[1:]
+    for terms_at in (None, mode.sample_terms):
+        first = sample_input(system, 0.01, x1, modes, phase, 0.0, None, terms_at)
+        H1, h1 = first.H.copy(), first.h.copy()
+        second = sample_input(system, 0.011, x2, modes, phase, 0.0, None, terms_at)
+        assert np.abs(second.h - h1).max() > 1e-6 * np.abs(h1).max()  # (another state: another h)
+        np.testing.assert_array_equal(first.H, H1)
+        np.testing.assert_array_equal(first.h, h1)

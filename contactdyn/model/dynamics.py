@@ -266,6 +266,7 @@ def sample_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phas
         system.robot.update(xq[:nv], xq[nQ:nQ + nv])
         inp, _, _, _ = _control_input(system, t, xq, modes, phase, np.zeros(nQ), [None] * len(system.contacts),
                                       forces, law, z_law, set_forces=False)
+        inp.H, inp.h = np.array(inp.H), np.array(inp.h)  # (Pinocchio's buffers: a delayed sample keeps its own)
     else:
         T = terms_at(t, xq)
         inp = ControlInput(t, xq[:nv], xq[nQ:nQ + nv], T.H, T.h, T.gravity, T.p_tip, T.v_tip, T.J, T.drift, T.x_d,
