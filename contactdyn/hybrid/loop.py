@@ -213,7 +213,7 @@ class HybridRun:
         which is handled as the event a step straddling the corner would have located)."""
         runner = _runner(self, modes, phase, (t, x))
         if sample:
-            x, before = self.sampled.take(t_after, x, modes, phase), x
+            x, before = self.sampled.take(t_after, x, modes, phase, runner), x
             fired = self.sampled.jumped(t_after, before, x, modes, phase, runner)
         else:
             self.stats["corners"] += 1
@@ -239,7 +239,7 @@ class HybridRun:
             held = t_sample is not None and carries_hold(method)
             end = t_sample if t_sample is not None and not held else t_end
             h0 = min(self.next_step, end - t) if self.next_step else None
-            hold = self.sampled.hold(modes, phase, t_end) if held else None
+            hold = self.sampled.hold(modes, phase, t_end, runner) if held else None
             events, rhs = segment_events(system, modes, phase, t, x, runner if runner.ok else None)
             self.starts.record(t, x, events)
             events += self._watches(modes, method)

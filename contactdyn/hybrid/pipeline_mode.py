@@ -12,7 +12,9 @@ for the loop, its event functions (:func:`~contactdyn.hybrid.events.segment_even
   then the events at the step end): gaps [m], normal forces [N], slip velocities [m/s], stick forces [N], limit
   torques [N·m or N];
 - :meth:`samples` runs the output samples in one compiled call with the call's diagnostics on (τ, the command,
-  the tip, x_d, F_d, λ, the stage states: :func:`contactdyn.model.pipeline.pipeline.record`).
+  the tip, x_d, F_d, λ, the stage states: :func:`contactdyn.model.pipeline.pipeline.record`);
+  :meth:`measurement` reads what a sampled law measures at a sample instant off one such call, and
+  :meth:`sample_terms` what it reads of the robot and the phase there.
 
 A call whose status is not 1 (a singular KKT matrix, a law that gave no force) is answered by the readable model
 (:meth:`System.evaluate`), its values too; ``singular`` counts them.
@@ -26,6 +28,7 @@ from collections import deque
 import numpy as np
 
 from ..model.chain_forces import pack as pack_chain
+from ..model.dynamics import Measurement, SampleTerms
 from ..model.pipeline.drives import DW_U, DW_W
 from ..model.pipeline.pack import (
     ANY_MOTOR,
@@ -35,6 +38,7 @@ from ..model.pipeline.pack import (
     D_FD,
     D_LAM,
     D_TAU,
+    D_TC,
     D_TIP,
     D_XD,
     EV_FF,
@@ -49,7 +53,7 @@ from ..model.pipeline.pack import (
     W_DRIVES,
     diag_starts,
 )
-from ..model.pipeline.pipeline import Pipeline, call, samples_at
+from ..model.pipeline.pipeline import Pipeline, call, sample_terms, samples_at
 from ..output.samples import Samples
 from .steps import derivatives, stepper
 
@@ -86,6 +90,7 @@ class PipelineMode:
         self.rhs = rhs
         self.nt = [len(c.tangents) if c.friction is not None else 0 for c in system.contacts]
         self._stages = self._stage_table()
+        self._ifaces = self._interface_table()
 
     def watched_step(self, on_stage):
         """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
@@ -186,6 +191,47 @@ class PipelineMode:
             S.fill(k, system.evaluate(float(ts[k]), X[k], self.modes, self.phase, full=True))
         return S
 
+    def measurement(self, t: float, x: np.ndarray) -> Measurement | None:
+        """What a sampled law measures at (t [s], x) (:class:`~contactdyn.model.dynamics.Measurement`), off one
+        compiled call with the diagnostics on (as an output sample's); None where the call declines there (the
+        readable model measures)."""
+        p, system = self.pipe.packed, self.system
+        Xd, E, W, done = samples_at(np.array([float(t)]), np.ascontiguousarray(x, dtype=float)[None, :], p.ints,
+                                    p.reals, p.work, p.events)
+        if done == 0:
+            self.pipe.readable_calls += 1
+            return None
+        e, w = E[0], W[0]
+        at = diag_starts(p.ints)[D_TC]
+        i_b = self.phase.carrier[0] if self.phase.carrier is not None else -1
+        return Measurement({c.name: float(e[EV_W * ci + EV_FN]) for ci, c in enumerate(system.contacts)},
+                           {key: float(w[k]) for key, k in self._ifaces}, w[at:at + system.nv].copy(),
+                           float(Xd[0, system.nQ + i_b]) if i_b >= 0 else 0.0)
+
+    def sample_terms(self, t: float, x: np.ndarray) -> SampleTerms:
+        """What the sampled phase's law reads of the robot and the phase at (t [s], x) besides the forces
+        (:class:`~contactdyn.model.dynamics.SampleTerms`), by the call's own stages in one compiled call."""
+        p, phase = self.pipe.packed, self.phase
+        H, h, g, J6, a6, p_tip, v_tip, R, x_d, v_d, a_d, F_d, rate = sample_terms(
+            float(t), x, p.ints, p.reals, int(phase.controller.inner.needs_gravity))
+        ref = phase.reference is not None
+        return SampleTerms(H, h, g if g.size else None, p_tip, v_tip, J6[:3], a6[:3], R, J6[3:], a6[3:],
+                           x_d if ref else None, v_d if ref else None, a_d if ref else None,
+                           {key: (float(F_d[j]), float(rate[j])) for j, key in enumerate(phase.forces)})
+
+    def _interface_table(self) -> list[tuple[str, int]]:
+        """Per tangential chain ("contact.t1") where its interface force is in ``work``: its bond's λ while bonded,
+        else the chain's own (pack's order)."""
+        ints, at, k, out = self.pipe.packed.ints, diag_starts(self.pipe.packed.ints), 0, []
+        rows = {meta: r for r, meta in enumerate(self.pipe.packed.row_meta)}
+        for c in self.system.contacts:
+            for i, dc in enumerate(c.chains):
+                if i > 0:  # (the normal chain first)
+                    r = rows.get((c.name, dc.label, i - 1))
+                    out.append((f"{c.name}.{dc.label}", int(at[D_LAM] + r if r is not None else ints[W_DIAG] + 1 + k)))
+                k += 1
+        return out
+
     def _stage_table(self) -> list[tuple[str, int, int | None]]:
         """Per stage label of every chain (pack's order): (label, where its (x, ẋ, F) start in ``work``, or None
         while it carries no force)."""
@@ -229,19 +275,12 @@ class PipelineMode:
             S.F_n[c.name][:n], S.gap[c.name][:n] = E[:, e + EV_FN], E[:, e + EV_GAP]
             if nt:
                 S.F_f[c.name][:n], S.v_slip[c.name][:n] = E[:, e + EV_FF:e + EV_FF + nt], E[:, e + EV_VT:e + EV_VT + nt]
-        self._read_chains(S, W, at, n)
+        self._read_chains(S, W, n)
 
-    def _read_chains(self, S: Samples, W: np.ndarray, at: np.ndarray, n: int) -> None:
+    def _read_chains(self, S: Samples, W: np.ndarray, n: int) -> None:
         """The tangential chains' interface forces (a bond's λ, else the chain's own) and the stage states."""
-        ints, k = self.pipe.packed.ints, 0
-        rows = {meta: r for r, meta in enumerate(self.pipe.packed.row_meta)}
-        for c in self.system.contacts:
-            for i, dc in enumerate(c.chains):
-                if i > 0:  # (the normal chain first)
-                    r = rows.get((c.name, dc.label, i - 1))
-                    S.iface[f"{c.name}.{dc.label}"][:n] = W[:, at[D_LAM] + r] if r is not None else \
-                        W[:, ints[W_DIAG] + 1 + k]
-                k += 1
+        for key, k in self._ifaces:
+            S.iface[key][:n] = W[:, k]
         for label, state in self._stages:
             if state is not None:
                 S.stages[label][:n] = W[:, state:state + 3]

@@ -5,7 +5,9 @@ state between samples. With the compiled DOP853 the integrator takes the sample 
 step boundaries (:class:`Hold`, :mod:`contactdyn.numerics.held_steps`: no step straddles the hold's jump, one
 segment carries many samples); with any other method the loop (:mod:`contactdyn.hybrid.loop`) ends a segment at
 every t_k. Either way :meth:`SampledPhases.take` runs there: what the law
-measures at (t_k, x) (:func:`~contactdyn.model.dynamics.sample_input`, through the sensors), its command from
+measures at (t_k, x) (:func:`~contactdyn.model.dynamics.sample_input`, through the sensors; the forces, the
+contacts' torque on the joints and a carrier's acceleration off the compiled call where the mode runs on it,
+:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.measurement`), its command from
 the measurement of ``delay`` samples ago written into the held slots, its own states advanced by one period.
 The events that the command's jump fires (a contact force or a limit torque through zero, a stuck joint's
 holding torque past its static limit) are then handled as
@@ -23,7 +25,7 @@ import numpy as np
 from ..laws.controllers.sampled import SampledController, Sampler
 from ..laws.trajectory import min_span
 from ..model.contact import ContactMode
-from ..model.dynamics import sample_input
+from ..model.dynamics import measures, sample_input
 from ..model.joint_friction import STUCK
 from ..model.phases import Phase
 from .events import JUMPING, SlipWatch, fired_across, segment_events
@@ -67,11 +69,16 @@ class SampledPhases:
             x[held] = self.system.evaluate(t, x, modes, previous).tau_cmd
         return self.take(t, x, modes, phase)
 
-    def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase) -> np.ndarray:
-        """The sample at t [s] of the phase's law: the state with its new held command and states."""
+    def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, runner=None) -> np.ndarray:
+        """The sample at t [s] of the phase's law: the state with its new held command and states. ``runner``: the
+        mode's compiled call (a PipelineMode) measures the forces and gives the robot's terms, else (None, or a
+        Declined) the readable model."""
         sampler = self.samplers[phase.index]
         ctl = phase.controller
-        inp = sampler.measure(sample_input(self.system, t, x, modes, phase, sampler.resolution))
+        compiled = runner is not None and runner.ok
+        measured = runner.measurement(t, x) if compiled and measures(phase) else None
+        inp = sampler.measure(sample_input(self.system, t, x, modes, phase, sampler.resolution, measured,
+                                           runner.sample_terms if compiled else None))
         tau, z_law = sampler.update(inp, inp.z)
         x = x.copy()
         x[self._slots(phase, ctl.held)] = tau
@@ -80,9 +87,10 @@ class SampledPhases:
         self.stats["samples"] += 1
         return x
 
-    def hold(self, modes: list[ContactMode], phase: Phase, stop: float) -> Hold:
-        """The phase's samples before ``stop`` [s] as step boundaries of one integration (numerics.held_steps)."""
-        return Hold(self, modes, phase, stop)
+    def hold(self, modes: list[ContactMode], phase: Phase, stop: float, runner=None) -> Hold:
+        """The phase's samples before ``stop`` [s] as step boundaries of one integration (numerics.held_steps),
+        measured on ``runner`` (:meth:`take`)."""
+        return Hold(self, modes, phase, stop, runner)
 
     def jumps(self, modes: list[ContactMode], phase: Phase) -> bool:
         """Can a held command's jump fire an event in this mode: a separate, slip, release or joint_slip event
@@ -112,8 +120,8 @@ class Hold:
     before a segment's stop [s] (one at the stop itself the loop takes, as at a corner), the jump of the held
     command there, and which events the jump can fire (:data:`~contactdyn.hybrid.events.JUMPING`)."""
 
-    def __init__(self, sampled: SampledPhases, modes: list[ContactMode], phase: Phase, stop: float):
-        self.sampled, self.modes, self.phase = sampled, modes, phase
+    def __init__(self, sampled: SampledPhases, modes: list[ContactMode], phase: Phase, stop: float, runner=None):
+        self.sampled, self.modes, self.phase, self.runner = sampled, modes, phase, runner
         self.sampler = sampled.samplers[phase.index]
         self.last = stop - min_span(stop)  #: [s] samples strictly before this
         self.any_jumps = sampled.jumps(modes, phase)
@@ -125,7 +133,7 @@ class Hold:
 
     def take(self, t: float, x: np.ndarray) -> np.ndarray:
         """The state after the sample at t [s] (:meth:`SampledPhases.take`)."""
-        return self.sampled.take(t, x, self.modes, self.phase)
+        return self.sampled.take(t, x, self.modes, self.phase, self.runner)
 
     def event_value(self, event):
         """The function whose fall through zero across a jump fires ``event`` (fired_across's), or None."""

@@ -38,7 +38,8 @@ from .friction import friction_terms, launch_directions_at, launching
 from .phases import Phase, reference_at
 
 __all__ = ["Evaluation", "evaluate", "contact_condition", "carried_command", "command_of", "drive_command",
-           "set_force_inputs", "surface_keys", "surface_points", "carried_terms", "sample_input"]
+           "set_force_inputs", "surface_keys", "surface_points", "carried_terms", "sample_input",
+           "Measurement", "SampleTerms", "measures", "measurement"]
 
 
 @dataclass
@@ -189,38 +190,92 @@ def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], ph
     return inp, ft, x_d, force_d
 
 
+@dataclass
+class Measurement:
+    """What a sampled law measures of a solved right-hand side at one (t, x), beyond the kinematics: from the readable
+    model (:func:`measurement`) or from the compiled call
+    (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.measurement`)."""
+
+    normal_force: dict[str, float]  #: per contact [N], > 0 pressing
+    interface: dict[str, float]  #: per "contact.t1": a tangential chain's interface force [N]
+    tau_contact: np.ndarray | None  #: the contacts' generalized force on the joints [N·m or N] (None: not read)
+    carrier_acc: float = 0.0  #: the acceleration of the body carrying the reference [m/s² or rad/s²]
+
+
+@dataclass
+class SampleTerms:
+    """What a sampled law reads of the robot and its phase at (t, x), besides the measured forces: from the readable
+    model (Pinocchio, the phase's reference) or from the compiled call
+    (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.sample_terms`)."""
+
+    H: np.ndarray  #: the law's inertia matrix, reflected rotors included [kg·m²]
+    h: np.ndarray  #: Coriolis, centrifugal and uncompensated gravity [N·m or N]
+    gravity: np.ndarray | None  #: the uncompensated gravity load [N·m or N], where the law asks
+    p_tip: np.ndarray  #: [m]
+    v_tip: np.ndarray  #: [m/s]
+    J: np.ndarray  #: the tip's Jacobian (3, nv)
+    drift: np.ndarray  #: J̇q̇ [m/s²]
+    R_tip: np.ndarray  #: the tip frame's orientation (3, 3)
+    J_ang: np.ndarray  #: the tip's angular Jacobian (3, nv)
+    drift_ang: np.ndarray  #: J̇_ω q̇ [rad/s²]
+    x_d: np.ndarray | None  #: the reference (carried by its body, if one carries it); None: the phase has none
+    v_d: np.ndarray | None
+    a_d: np.ndarray | None  #: (without a carrier's acceleration: the Measurement's)
+    force_d: dict[str, tuple[float, float]]  #: per set-point (F_d [N], Ḟ_d [N/s])
+
+
+def measures(phase: Phase) -> bool:
+    """Does the sampled phase's law measure a solved right-hand side: does it read forces, or is its reference
+    carried by a body (its acceleration)?"""
+    return phase.controller.inner.uses_forces or phase.carrier is not None
+
+
+def measurement(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase) -> Measurement:
+    """The readable model's :class:`Measurement` at (t [s], x) of a sampled phase (:func:`measures`)."""
+    ev = evaluate(system, t, x, modes, phase)
+    tau_c = _contact_torque(system, t, x, modes, phase, ev) if phase.controller.inner.uses_forces else None
+    carrier_acc = float(ev.xdot[system.nQ + phase.carrier[0]]) if phase.carrier is not None else 0.0
+    return Measurement(ev.normal_force, ev.interface, tau_c, carrier_acc)
+
+
 def sample_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
-                 resolution: float = 0.0) -> ControlInput:
+                 resolution: float = 0.0, measured: Measurement | None = None, terms_at=None) -> ControlInput:
     """What a sampled phase's law (``phase.controller.inner``) measures at a sample instant (t [s], x).
 
-    A law that reads forces gets them from the readable model evaluated there under the command held so far
+    A law that reads forces gets them from the right-hand side solved there under the command held so far
     (a rigid contact's and a stick's too), and the contacts' generalized force on the joints as the continuous
     model gives it (deformable and friction forces, plus the rows that reach beyond the robot); a reference
     carried by a body gets the body's acceleration. No fold: the command is held, not a function of the forces.
+    ``measured``: those (:class:`Measurement`) from the compiled call; None: from the readable model.
+    ``terms_at(t, x)``: the robot's and the phase's terms there (:class:`SampleTerms`) from the compiled call;
+    None: Pinocchio's and the phase's own.
     The kinematics are computed at the joint positions quantised to the encoders' ``resolution`` [rad or m]
     (0: exact). A law that reads no force sees none (as on the compiled path)."""
     nQ, nv = system.nQ, system.nv
     ctl = phase.controller
     law = ctl.inner
-    ev = tau_c = None
-    if law.uses_forces or phase.carrier is not None:
-        ev = evaluate(system, t, x, modes, phase)
-    if law.uses_forces:
-        tau_c = _contact_torque(system, t, x, modes, phase, ev)
+    if measured is None and measures(phase):
+        measured = measurement(system, t, x, modes, phase)
     xq = x
     if resolution > 0.0:
         xq = x.copy()
         xq[:nv] = quantise(x[:nv], resolution)
-    system.robot.update(xq[:nv], xq[nQ:nQ + nv])
     z_law = x[2 * nQ + phase.z_slice.start + ctl.inner_states.start: 2 * nQ + phase.z_slice.stop].copy()
-    forces = ev if ev is not None and law.uses_forces else _NO_FORCES
-    inp, _, _, _ = _control_input(system, t, xq, modes, phase, np.zeros(nQ), [None] * len(system.contacts),
-                                  forces, law, z_law, set_forces=False)
+    forces = measured if law.uses_forces else _NO_FORCES
+    if terms_at is None:
+        system.robot.update(xq[:nv], xq[nQ:nQ + nv])
+        inp, _, _, _ = _control_input(system, t, xq, modes, phase, np.zeros(nQ), [None] * len(system.contacts),
+                                      forces, law, z_law, set_forces=False)
+        inp.H, inp.h = np.array(inp.H), np.array(inp.h)  # (Pinocchio's buffers: a delayed sample keeps its own)
+    else:
+        T = terms_at(t, xq)
+        inp = ControlInput(t, xq[:nv], xq[nQ:nQ + nv], T.H, T.h, T.gravity, T.p_tip, T.v_tip, T.J, T.drift, T.x_d,
+                           T.v_d, T.a_d, {**forces.normal_force, **forces.interface}, T.force_d,
+                           system.force_directions, z_law, R_tip=T.R_tip, J_ang=T.J_ang, drift_ang=T.drift_ang)
     if inp.a_d is not None and phase.carrier is not None:  # the carrier's acceleration, known after the solve
-        i_b, axis = phase.carrier
-        inp.a_d = inp.a_d + axis * ev.xdot[nQ + i_b]
+        inp.a_d = inp.a_d + phase.carrier[1] * measured.carrier_acc
     if law.uses_forces:
-        set_force_inputs(system, inp, x, modes, tau_c)
+        set_force_inputs(system, inp, x, modes, measured.tau_contact)
     return inp
 
 

@@ -106,8 +106,9 @@ TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
 #: the diagnostics section of ``work`` (from ``ints[W_DIAG]``; :func:`.pipeline.record`): its switch (the call writes
 #: the section when it is not 0), then per chain its interface force [N] (written always), then the drives' applied
 #: forces (N_DRIVES) [N·m or N], the controller's τ (NV), the tip's position (3) [m], x_d (REF_DIMS) [m], the force
-#: set-points (N_FORCES) [N] and the rows' forces λ (N_ROWS)
-(D_TAU, D_CMD, D_TIP, D_XD, D_FD, D_LAM, D_END) = range(7)
+#: set-points (N_FORCES) [N], the rows' forces λ (N_ROWS) and the contacts' generalized force on the joints as a
+#: sampled law measures it (NV) [N·m or N] (``dynamics.measurement``)
+(D_TAU, D_CMD, D_TIP, D_XD, D_FD, D_LAM, D_TC, D_END) = range(8)
 
 
 @njit(cache=True)
@@ -121,7 +122,8 @@ def diag_starts(ints):
     at[D_XD] = at[D_TIP] + 3
     at[D_FD] = at[D_XD] + ints[REF_DIMS]
     at[D_LAM] = at[D_FD] + ints[N_FORCES]
-    at[D_END] = at[D_LAM] + ints[N_ROWS]
+    at[D_TC] = at[D_LAM] + ints[N_ROWS]
+    at[D_END] = at[D_TC] + ints[NV]
     return at
 
 

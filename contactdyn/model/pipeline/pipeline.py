@@ -59,6 +59,7 @@ from .pack import (
     D_FD,
     D_LAM,
     D_TAU,
+    D_TC,
     D_TIP,
     D_XD,
     ENERGY,
@@ -73,6 +74,7 @@ from .pack import (
     N_LAUNCH,
     N_LIMITS,
     N_ROWS,
+    NEEDS_GRAVITY,
     NQ,
     NV,
     NX,
@@ -90,7 +92,7 @@ from .pack import (
 )
 from .robot_terms import frame_terms, robot_terms
 
-__all__ = ["call", "rates_at", "samples_at", "stage_addresses", "Pipeline"]
+__all__ = ["call", "rates_at", "samples_at", "sample_terms", "stage_addresses", "Pipeline"]
 
 
 @njit(cache=True)
@@ -122,6 +124,10 @@ def call(t, x, ints, reals, work, events):
             return xdot
         first_joint = nr - ints[N_HELD]
         first_limit = first_joint - ints[N_LIMITS]
+        if work[ints[W_DIAG]] != 0.0:  # (diagnostics: the contacts' generalized force on the joints, f holds −h)
+            at_tc = diag_starts(ints)[D_TC]
+            for i in range(nv):
+                work[at_tc + i] = f[i] + h[i]
         limit_rows(x, ints, reals, first_limit, G, C, gamma)
         joint_rows(x, ints, reals, first_joint, G, C, gamma)
         tau, zdot, B, D, bq, dq = call_at(ints[A_CONTROLLER], "pipeline.controller",
@@ -142,7 +148,7 @@ def call(t, x, ints, reals, work, events):
             call_at(ints[A_ENERGY], "pipeline.energy", (x, ints, reals, applied, xdot, events, pending))
         joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
         if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
-            record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam)
+            record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam, C, first_limit)
         events[events.size - 1] = 1.0 if regular else 0.0
         if final or not regular or call_at(ints[A_LAUNCH], "pipeline.launch_took",
                                            (x, ints, state, reals, FJ, Fa, Fv, xdot)):
@@ -150,12 +156,15 @@ def call(t, x, ints, reals, work, events):
 
 
 @njit(cache=True)
-def record(t, x, ints, reals, work, applied, tau, p_tip, lam):
+def record(t, x, ints, reals, work, applied, tau, p_tip, lam, C, first_limit):
     """The diagnostics of a call at (t [s], x) into ``work``'s section (:func:`.pack.diag_starts`; written when its
     switch is on: an output sample's call, :func:`samples_at`): the drives' applied forces [N·m or N] (the joints',
     then the bodies' servo forces [N]), the command [N·m or N], the tip [m], x_d [m] (carried by its body, if one
     carries it), F_d [N], the rows' forces λ (normal and stick forces [N], limit and holding torques [N·m or N],
-    tangential bonds' interface forces [N]). Each chain's interface force [N] is written by every call
+    tangential bonds' interface forces [N]), and the contacts' generalized force on the joints as a sampled law
+    measures it [N·m or N]: the deformable and friction forces (written by the call after the contacts), plus the
+    forces λ of the contacts' rows (before ``first_limit``) whose columns C reach beyond the robot
+    (``dynamics.measurement``). Each chain's interface force [N] is written by every call
     (:func:`.contacts.contact_terms`), the stage states (x [m], ẋ [m/s], F [N]) are in ``work`` already."""
     at = diag_starts(ints)  # (put: no slice assignment, see numerics.linalg.put)
     put(work, at[D_TAU], applied)
@@ -167,6 +176,13 @@ def record(t, x, ints, reals, work, applied, tau, p_tip, lam):
         put(work, at[D_XD], x_d)
     put(work, at[D_FD], set_points(t, ints, reals)[0])
     put(work, at[D_LAM], lam)
+    nv = ints[NV]
+    for r in range(first_limit):
+        reaches = False
+        for c in range(nv, C.shape[1]):
+            reaches = reaches or C[r, c] != 0.0
+        for c in range(nv if reaches else 0):
+            work[at[D_TC] + c] += C[r, c] * lam[r]
 
 
 @njit(cache=True)
@@ -198,6 +214,25 @@ def samples_at(ts, X, ints, reals, work, events):
         put(W[k], 0, work)
     work[ints[W_DIAG]] = 0.0
     return Xd, E, W, done
+
+
+@njit(cache=True)
+def sample_terms(t, x, ints, reals, gravity):
+    """What a sampled law reads of the robot and the phase at (t [s], x) besides the measured forces (the terms of
+    ``dynamics.sample_input``'s ControlInput), by the call's own stages: the law's H (rotors reflected) [kg·m²], h,
+    g (empty unless ``gravity``) [N·m or N]; the tip frame's J (6, nv, linear rows first), J̇q̇ (6) [m/s², rad/s²],
+    p [m], ṗ [m/s], R; the reference x_d, v_d, a_d (carried by its body, if one carries it); F_d [N] and Ḟ_d
+    [N/s] per set-point."""
+    own = ints.copy()  # (g as the law asks: a sampled mode's call computes none)
+    own[NEEDS_GRAVITY] = gravity
+    H, h, g, Jw, W = robot_terms(x, own, reals)
+    _, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:])
+    FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
+    fi = ints[TIP_FRAME]
+    x_d, v_d, a_d = reference(t, ints, reals)
+    carry(x, ints, reals, x_d, v_d)
+    F_d, _, rate = set_points(t, ints, reals)
+    return Hc, h, g, FJ[fi].copy(), Fa[fi].copy(), Fp[fi].copy(), Fv[fi].copy(), FR[fi].copy(), x_d, v_d, a_d, F_d, rate
 
 
 # ---- the stages reached by address (numerics.native_call): compiled on their own, for the modes that have them -----
