@@ -185,11 +185,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     for module in scene.imports:  # importing runs code: say what ran
         _out(args, f"imported {module} from {IMPORTED.get(module, '?')}")
-    from .first_run import build_in_background, choose, default_path
+    from .first_run import build_in_background, choose, default_path, mark_built
 
     choice = choose(scene, args.path or default_path())
     result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled)
-    if choice.build and build_in_background(scene) and not (args.quiet or args.json):
+    if choice.compiled:
+        mark_built(scene)
+    elif choice.build and build_in_background(scene) and not (args.quiet or args.json):
         print(choice.line(), file=sys.stderr, flush=True)
     from .robot.listing import run_warnings
 

@@ -11,7 +11,7 @@ path ``auto`` (the default) decides per run:
 - else the readable model, and after the run one background process (``python -m
   contactdyn.first_run FILE``, low priority, detached, silent) runs the same scene on the compiled
   call, so that it compiles and caches what the scene needs, and marks the kind built. One line says so
-  after the run.
+  after the run. A run the command takes on the compiled call (``--path compiled``) marks its kind too.
 
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
@@ -35,7 +35,7 @@ from typing import Any
 from .errors import SceneError
 from .scene.scene_file import Scene
 
-__all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "main"]
+__all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "mark_built", "main"]
 
 PATHS = ("auto", "compiled", "readable")  #: what ``--path`` takes
 ENV = "CONTACTDYN_PATH"  #: the environment variable that sets the default path (else ``auto``)
@@ -71,7 +71,7 @@ def _blank(value: Any) -> Any:
         return [_blank(v) for v in value]
     if isinstance(value, bool | str) or value is None:
         return value
-    return type(value).__name__  # int, float: the type decides a key's meaning, not the value
+    return "#"  # a number (1 and 1.0 alike)
 
 
 def kind(scene: Scene) -> str:
@@ -145,6 +145,16 @@ def build_in_background(scene: Scene) -> bool:
         (folder / f"{name}.building").unlink(missing_ok=True)
         return False
     return True
+
+
+def mark_built(scene: Scene) -> None:
+    """After a run on the compiled call: the scene's kind is built (its code compiled and cached)."""
+    try:
+        folder = _folder()
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / f"{kind(scene)}.built").touch()
+    except OSError:  # an unwritable cache: the next run is readable again, as if never built
+        pass
 
 
 def build(file: str, document: dict, marker: str) -> None:

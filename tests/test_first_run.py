@@ -29,6 +29,7 @@ def markers(tmp_path, monkeypatch):
 def test_a_kind_ignores_the_values_and_sees_the_laws():
     base = load_scene("b1")
     assert first_run.kind(base) == first_run.kind(load_scene("b1", {"contact.tip.normal.k": 3.3e4, "duration": 0.7}))
+    assert first_run.kind(base) == first_run.kind(load_scene("b1", {"solver.output_rate": 200}))  # an int as well
     assert first_run.kind(base) != first_run.kind(load_scene("b1", {"solver.method": "Radau"}))
     assert first_run.kind(base) != first_run.kind(load_scene("b1_force_loop"))
 
@@ -110,3 +111,10 @@ def test_a_bad_default_path_is_named():
     with pytest.raises(SceneError, match="CONTACTDYN_PATH.*auto, compiled, readable.*fast"):
         first_run.default_path({"CONTACTDYN_PATH": "fast"})
     assert first_run.default_path({}) == "auto"
+
+
+def test_a_run_on_the_compiled_call_marks_its_kind(markers, capsys):
+    scene = load_scene("b1", {"duration": 0.05, "solver.output_rate": 200.0})
+    assert not first_run.built(scene)
+    assert main(["run", "b1", *FAST, "--path", "compiled", "--quiet"]) == EXIT_OK
+    assert first_run.built(scene) and first_run.choose(scene, "auto").compiled
