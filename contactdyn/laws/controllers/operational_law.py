@@ -147,8 +147,11 @@ def torque(v, H, h, J_tip, drift_tip, p_tip, v_tip, x_d, v_d, a_d, set_points, R
     m = nS + (2 if tool_axis.size else 0)
     a_task, f = _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, kd_normal, m)
     W = np.zeros((m, J_tip.shape[0]))  # the task's rows on the tip's [linear; angular] motion
-    W[:axes.shape[0], :3] = axes
-    W[axes.shape[0]:nS, :3] = forced
+    for j in range(3):  # (element by element: no slice assignment's broadcast and checks)
+        for i in range(axes.shape[0]):
+            W[i, j] = axes[i, j]
+        for i in range(forced.shape[0]):
+            W[axes.shape[0] + i, j] = forced[i, j]
     if tool_axis.size:
         _tilt_terms(R_tip, tool_axis, target, J_tip[3:], v, ko, do, W, a_task, nS)
     Jt = mm(W, J_tip)
