@@ -135,6 +135,54 @@ def test_a_slide_launching_from_rest_takes_the_readable_direction(name):
     assert pipe.readable_calls == 0
 
 
+@pytest.mark.parametrize("name", ["ur5_launch", "writer5dof_launch"])
+def test_a_launch_already_past_the_stick_band_takes_no_trial_pass(name):
+    """A slide launching from rest whose tip already slips along r faster than the stick band keeps r: launch_settled
+    gives r back before any pass (from the frames alone) and the call is the launched mode's (from_rest False) bit for
+    bit; at rest it does not (the Newton's passes follow)."""
+    from contactdyn.model.pipeline.launch import launch_settled, launch_start
+    from contactdyn.model.pipeline.robot_terms import frame_terms, robot_terms
+
+    system, modes, phase, t, x0 = case(name)
+    c, mode, nQ, nv = system.contacts[0], modes[0], system.nQ, system.nv
+    pipe, launched = Pipeline(system, modes, phase), Pipeline(system, [mode.with_(from_rest=False)], phase)
+    for speed in (0.0, 10.0 * system.slip_band):  # [m/s] the tip along r in the surface's plane
+        x = x0.copy()
+        x[nQ:2 * nQ] = 0.0
+        system.robot.update(x[:nv], x[nQ:nQ + nv])
+        J = system.kinematics(c, x).J
+        x[nQ:nQ + nv] = np.linalg.pinv(J) @ (np.asarray(c.tangents).T @ np.asarray(mode.slip) * speed)
+        p = pipe.packed
+        trial, state = launch_start(p.ints, p.reals)
+        _, _, _, Jw, W = robot_terms(x, p.ints, trial)
+        past = launch_settled(x, p.ints, state, trial, frame_terms(x, p.ints, trial, W, Jw)[3])
+        assert past == (speed > 0.0)
+        if past:
+            assert np.array_equal(trial, p.reals)  # r exactly, not its cos/sin round trip
+            assert np.array_equal(pipe.rhs(t, x), launched.rhs(t, x))
+    assert pipe.readable_calls == 0
+
+
+def test_the_readable_launch_is_kept_for_the_same_state(monkeypatch):
+    """launch_directions_at asked again at the same (t, x, modes, phase) answers from System.launch_kept without an
+    evaluation (the same modes); another state, time or phase is solved again."""
+    from contactdyn.model.friction import launch_directions_at
+
+    system, modes, phase, t, x0 = case("ur5_launch")
+    x = x0.copy()
+    x[system.nQ:2 * system.nQ] = 0.0
+    first = launch_directions_at(system, t, x, modes, phase)
+    calls = []
+    evaluate = type(system).evaluate
+    monkeypatch.setattr(type(system), "evaluate", lambda *a, **k: calls.append(1) or evaluate(*a, **k))
+    assert launch_directions_at(system, t, x.copy(), modes, phase) == first and not calls
+    for t2, x2, phase2 in ((t + 1e-3, x, phase), (t, x + 1e-9, phase), (t, x, replace(phase))):
+        launch_directions_at(system, t, x, modes, phase)  # (kept again)
+        calls.clear()
+        launch_directions_at(system, t2, x2, modes, phase2)
+        assert calls
+
+
 def test_two_slides_launching_at_once_are_declined():
     from contactdyn.model.pipeline.pack import unsupported
 

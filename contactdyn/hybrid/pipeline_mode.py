@@ -114,6 +114,9 @@ class PipelineMode:
     # ---- values the event functions read ----------------------------------------------
     def values(self, t: float, x: np.ndarray) -> np.ndarray:
         """The event values at (t, x): the last call's when it was at this very state."""
+        lt, lx, ev = self.ring[-1]  # (the newest first: a step end's, which every event function reads)
+        if lx is x and lt == t:
+            return ev
         for lt, lx, ev in reversed(self.ring):
             if lx is x and lt == t:
                 return ev

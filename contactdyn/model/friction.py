@@ -144,7 +144,20 @@ def launch_directions(system, modes: list[ContactMode], slip_of, acceleration_of
 
 def launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
                          ) -> list[ContactMode]:
-    """:func:`launch_directions` on the readable model: ``System.evaluate`` per trial direction."""
+    """:func:`launch_directions` on the readable model: ``System.evaluate`` per trial direction. The last answer is
+    kept on the system: the same (t, x, modes, phase) asked again (a mode's check against the compiled call where it
+    starts, just after the transition that chose it) is answered without its ~8 evaluations."""
+    key = (t, x.tobytes(), tuple(modes))
+    kept = getattr(system, "launch_kept", None)
+    if kept is not None and kept[1] is phase and kept[0] == key:
+        return list(kept[2])
+    out = _launch_directions_at(system, t, x, modes, phase)
+    system.launch_kept = (key, phase, tuple(out))
+    return out
+
+
+def _launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
+                          ) -> list[ContactMode]:
     nQ, nv = system.nQ, system.nv
     contacts = system.contacts
 

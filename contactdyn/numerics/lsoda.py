@@ -48,25 +48,33 @@ class _Steps:
     def __init__(self, t0: float, y0: np.ndarray):
         self.t = [t0]  #: step ends [s], t[0] = t0
         self.ys = [y0]  #: the states there
-        self.history: list[tuple[float, int, np.ndarray]] = []  #: (h [s], order, yh) per step
+        #: per step: (h [s], order, the core's Nordsieck history flat, the order falls next, the step taken [s])
+        self.history: list[tuple[float, int, np.ndarray, bool, float]] = []
         self.dense: dict[int, LsodaDenseOutput] = {}
 
     def add(self, t: float, y: np.ndarray, rwork: np.ndarray, iwork: np.ndarray) -> None:
-        """Keep the step ending at (t, y), read off the core's work arrays as ``solve_ivp``'s dense output does."""
-        n, order = len(y), int(iwork[13])  # the order of the step just taken
-        h = float(rwork[11])  # the next step's size: the history's scale
-        yh = np.reshape(rwork[20:20 + (order + 1) * n], (n, order + 1), order="F").copy()
-        if iwork[14] < order:  # the order falls next: the last column not updated, rescaled to h
-            yh[:, -1] *= (h / rwork[10]) ** order
+        """Keep the step ending at (t, y) with the core's history as it stands (its columns laid out when an
+        interpolant asks for them, :meth:`history_of`: most steps' never are)."""
+        order = int(iwork[13])  # the order of the step just taken
         self.t.append(t)
         self.ys.append(y)
-        self.history.append((h, order, yh))
+        self.history.append((float(rwork[11]), order, rwork[20:20 + (order + 1) * len(y)].copy(),
+                             int(iwork[14]) < order, float(rwork[10])))
+
+    def history_of(self, i: int) -> tuple[float, int, np.ndarray]:
+        """Step i's (h [s], order, yh), read off the core's work arrays as ``solve_ivp``'s dense output does: h the
+        next step's size (the history's scale); where the order falls next, the last column (not updated) rescaled
+        to h."""
+        h, order, flat, falls, h_used = self.history[i]
+        yh = np.reshape(flat, (len(self.ys[0]), order + 1), order="F").copy()
+        if falls:
+            yh[:, -1] *= (h / h_used) ** order
+        return h, order, yh
 
     def interpolant(self, i: int) -> LsodaDenseOutput:
         got = self.dense.get(i)
         if got is None:
-            h, order, yh = self.history[i]
-            got = self.dense[i] = LsodaDenseOutput(self.t[i], self.t[i + 1], h, order, yh)
+            got = self.dense[i] = LsodaDenseOutput(self.t[i], self.t[i + 1], *self.history_of(i))
         return got
 
     def at(self, i: int, t: float) -> np.ndarray:

@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import cholesky, forward_solve, lu_solve, mm, mtm, mtv, mv
+from ...numerics.linalg import cholesky, forward_solve, lu_solve, mm, mtm, mtv
 
 __all__ = ["perpendicular", "hadamard_ratio", "torque", "SINGULAR"]
 
@@ -97,34 +97,88 @@ def _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, k
 
 
 @njit(cache=True)
+def _tilt_terms(R_tip, tool_axis, target, J_ang, v, ko, do, W, a_task, nS):
+    """The tilt's rows of W (e1, e2 on the angular columns) and its a* = E (ko (a × d) − do ω) [rad/s²] into
+    a_task[nS:nS + 2], a = R_tip a_tip [-], in scalars: each value summed and multiplied as mv, perpendicular,
+    np.cross and ``(e * w).sum()`` do it (no temporaries)."""
+    a0 = a1 = a2 = 0.0
+    for j in range(3):
+        a0 += R_tip[0, j] * tool_axis[j]
+        a1 += R_tip[1, j] * tool_axis[j]
+        a2 += R_tip[2, j] * tool_axis[j]
+    if abs(a0) < 0.9:  # (perpendicular)
+        e10, e11, e12 = 0.0, a2, -a1
+    else:
+        e10, e11, e12 = -a2, 0.0, a0
+    norm = math.sqrt(e10 * e10 + e11 * e11 + e12 * e12)
+    e10, e11, e12 = e10 / norm, e11 / norm, e12 / norm
+    e20, e21, e22 = a1 * e12 - a2 * e11, a2 * e10 - a0 * e12, a0 * e11 - a1 * e10
+    om0 = om1 = om2 = 0.0  # ω = J_ω q̇ [rad/s]
+    for j in range(v.size):
+        om0 += J_ang[0, j] * v[j]
+        om1 += J_ang[1, j] * v[j]
+        om2 += J_ang[2, j] * v[j]
+    w0 = ko * (a1 * target[2] - a2 * target[1]) - do * om0
+    w1 = ko * (a2 * target[0] - a0 * target[2]) - do * om1
+    w2 = ko * (a0 * target[1] - a1 * target[0]) - do * om2
+    W[nS, 3], W[nS, 4], W[nS, 5] = e10, e11, e12
+    W[nS + 1, 3], W[nS + 1, 4], W[nS + 1, 5] = e20, e21, e22
+    acc = 0.0
+    acc += e10 * w0
+    acc += e11 * w1
+    acc += e12 * w2
+    a_task[nS] = acc
+    acc = 0.0
+    acc += e20 * w0
+    acc += e21 * w1
+    acc += e22 * w2
+    a_task[nS + 1] = acc
+
+
+@njit(cache=True)
 def torque(v, H, h, J_tip, drift_tip, p_tip, v_tip, x_d, v_d, a_d, set_points, R_tip, axes, forced, kp, kd,
            tool_axis, target, ko, do, k_null, kd_normal):
     """(τ [N·m or N], the Hadamard ratio of Λ⁻¹) of the module docstring. J_tip, drift_tip: the tip's linear rows
     (3, nv), (3,) [m/s²], or with a tool axis the 6 rows [J; J_ω], [J̇q̇; J̇_ω q̇] in Pinocchio's order;
     axes (k, 3), forced (nf, 3) the position and force rows of S; kp, kd [N/m, N·s/m] per axis; ko [1/s²],
-    do [1/s], k_null [1/s] (0: no null-space damping), kd_normal [N·s/m]."""
+    do [1/s], k_null [1/s] (0: no null-space damping), kd_normal [N·s/m]. The sums are :mod:`~contactdyn.numerics.
+    linalg`'s (mv, mtv), written in place: a call of the one pipeline runs this (few temporaries)."""
     nS = axes.shape[0] + forced.shape[0]
     m = nS + (2 if tool_axis.size else 0)
     a_task, f = _task_terms(v_tip, p_tip, x_d, v_d, a_d, set_points, axes, forced, kp, kd, kd_normal, m)
     W = np.zeros((m, J_tip.shape[0]))  # the task's rows on the tip's [linear; angular] motion
-    W[:axes.shape[0], :3] = axes
-    W[axes.shape[0]:nS, :3] = forced
+    for j in range(3):  # (element by element: no slice assignment's broadcast and checks)
+        for i in range(axes.shape[0]):
+            W[i, j] = axes[i, j]
+        for i in range(forced.shape[0]):
+            W[axes.shape[0] + i, j] = forced[i, j]
     if tool_axis.size:
-        a = mv(R_tip, tool_axis)  # current tool direction (world)
-        e1, e2 = perpendicular(a)
-        W[nS, 3:] = e1
-        W[nS + 1, 3:] = e2
-        w = ko * np.cross(a, target) - do * mv(J_tip[3:], v)  # [rad/s²]
-        a_task[nS] = (e1 * w).sum()
-        a_task[nS + 1] = (e2 * w).sum()
+        _tilt_terms(R_tip, tool_axis, target, J_tip[3:], v, ko, do, W, a_task, nS)
     Jt = mm(W, J_tip)
-    rhs = a_task - mv(W, drift_tip)
+    rhs = a_task  # a* − J̇_t q̇ (+ k_null ẋ_t)
+    for i in range(m):
+        acc = 0.0
+        for j in range(W.shape[1]):
+            acc += W[i, j] * drift_tip[j]
+        rhs[i] = rhs[i] - acc
     if k_null > 0.0:
-        rhs += k_null * mv(Jt, v)
+        for i in range(m):
+            acc = 0.0
+            for j in range(v.size):
+                acc += Jt[i, j] * v[j]
+            rhs[i] += k_null * acc
     Y = forward_solve(cholesky(H), np.ascontiguousarray(Jt.T))  # L⁻¹ J_tᵀ, H = L Lᵀ
     L_inv = mtm(Y, Y)  # Λ⁻¹ = J_t H⁻¹ J_tᵀ
-    ft = lu_solve(L_inv, rhs) + f  # Λ (a* − J̇_t q̇ + k_null ẋ_t) + f
-    tau = mtv(Jt, ft) + h
+    ft = lu_solve(L_inv, rhs)  # Λ (a* − J̇_t q̇ + k_null ẋ_t) + f
+    for i in range(m):
+        ft[i] = ft[i] + f[i]
+    tau = mtv(Jt, ft)
+    for i in range(tau.size):
+        tau[i] = tau[i] + h[i]
     if k_null > 0.0:
-        tau -= k_null * mv(H, v)
+        for i in range(tau.size):
+            acc = 0.0
+            for j in range(v.size):
+                acc += H[i, j] * v[j]
+            tau[i] -= k_null * acc
     return tau, hadamard_ratio(L_inv)

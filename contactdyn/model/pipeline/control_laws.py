@@ -61,9 +61,14 @@ def operational_on_buffer(buf, lay, c, tau, zdot):
     n_tool = 3 if tool else 0
     tool_axis, target = c[o:o + n_tool], c[o + 3:o + 3 + n_tool]
     J_tip, drift_tip = np.empty((3 + n_tool, nv)), np.empty(3 + n_tool)  # [J; J_ω], [J̇q̇; J̇_ω q̇] with a tool
-    J_tip[:3], drift_tip[:3] = inp.J, inp.drift
-    if tool:
-        J_tip[3:], drift_tip[3:] = inp.J_ang, inp.drift_ang
+    for r in range(3):  # (element by element: a slice assignment compiles numba's broadcast and its checks)
+        drift_tip[r] = inp.drift[r]
+        for j in range(nv):
+            J_tip[r, j] = inp.J[r, j]
+    for r in range(n_tool):
+        drift_tip[3 + r] = inp.drift_ang[r]
+        for j in range(nv):
+            J_tip[3 + r, j] = inp.J_ang[r, j]
     R_tip = inp.R_tip if tool else np.empty((0, 3))
     out, ratio = torque(inp.v, inp.H, inp.h, J_tip, drift_tip, inp.p_tip, inp.v_tip, inp.x_d, inp.v_d, inp.a_d,
                         inp.force_set, R_tip, axes, forced, kp, kd, tool_axis, target, c[o + 6], c[o + 7], c[o + 8],

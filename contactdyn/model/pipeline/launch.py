@@ -9,9 +9,10 @@ own direction from there on, ``contacts._slip_direction``).
 
 The call drives it (:func:`contactdyn.model.pipeline.pipeline.call`, one loop over its body): :func:`launch_start`
 copies ``reals`` (the packed mode stays as packed) and aims the first launching contact, :func:`launch_took` reads
-each pass's rates and frames and aims the next trial, until the direction is found. A contact found past the band
-(known only after its first pass, from that pass's frames) gets r back; a Newton that converges ends on its trial's
-pass, which is then the result; otherwise one more pass runs with the directions found.
+each pass's rates and frames and aims the next trial, until the direction is found. A contact past the band gets r
+back before its pass (:func:`launch_settled`: its slip is the frames', which no trial direction changes, so no pass
+is run for it: a slide past the band, most of a launch mode's calls, costs one pass); a Newton that converges ends on
+its trial's pass, which is then the result; otherwise one more pass runs with the directions found.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from .pack import (
     section,
 )
 
-__all__ = ["launch_start", "launch_took", "ST_CONTACT"]
+__all__ = ["launch_start", "launch_settled", "launch_took", "ST_CONTACT"]
 
 #: the Newton's state: the launching contact (its index among them), the pending pass (the contact's first, at θ, at
 #: θ + h), updates done, θ [rad], φ = d × a_t and a_t · d [m/s²] at θ, the contact's reference r
@@ -84,6 +85,22 @@ def launch_start(ints, reals):
     trial = reals.copy()
     _begin(ints, trial, state, 0)
     return trial, state
+
+
+@njit(cache=True)
+def launch_settled(x, ints, state, trial, Fv):
+    """Before a pass, from its frames (Fv: their velocities [m/s], the same under any trial direction): each pending
+    contact about to take its first pass whose slip is already past the band gets its r back and the next contact
+    begins (as :func:`launch_took` would have done after that pass, whose rates it would not have read). True when
+    no contact is left to launch: the pass about to run is the result."""
+    while state[ST_CONTACT] < ints[N_LAUNCH] and state[ST_STEP] == FIRST:
+        j = int(state[ST_CONTACT])
+        if not _past_band(x, ints, trial, state, j, Fv):
+            break
+        at = _contact(ints, j)[CI_REALS] + CR_R
+        trial[at], trial[at + 1] = state[ST_R], state[ST_R + 1]  # launched: r, its own direction from here on
+        _begin(ints, trial, state, j + 1)
+    return state[ST_CONTACT] >= ints[N_LAUNCH]
 
 
 @njit(cache=True)

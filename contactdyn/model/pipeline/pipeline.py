@@ -40,12 +40,13 @@ from .energy import energy_rates
 from .force_fold import carried_coordinate, controller_terms, fold_rates, solve_through_drives
 from .joint_friction import joint_events, joint_rows, joint_torques
 from .kkt import kkt_solve
-from .launch import ST_CONTACT, ST_W, launch_start, launch_took
+from .launch import ST_CONTACT, ST_W, launch_settled, launch_start, launch_took
 from .pack import (
     A_CALL,
     A_CONTROLLER,
     A_ENERGY,
     A_LAUNCH,
+    A_LAUNCH_SETTLED,
     A_LAUNCH_START,
     A_SOLVE,
     ANY_MOTOR,
@@ -112,6 +113,8 @@ def call(t, x, ints, reals, work, events):
         H, h, g, Jw, W = robot_terms(x, ints, reals)
         M, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:])  # rotors reflected: the true M, the law's H
         FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
+        if not final:  # a contact already past the stick band: its r back before a pass (no trial pass for it)
+            final = call_at(ints[A_LAUNCH_SETTLED], "pipeline.launch_settled", (x, ints, state, reals, Fv))
         f = np.zeros(nQ)
         for i in range(nv):
             f[i] = -h[i]
@@ -262,6 +265,7 @@ CONTROLLER_STAGES = {CTL_ABI: controller_terms, CTL_TASK_PD: task_pd_terms, CTL_
 declare("pipeline.solve", solve_through_drives, _SOLVE)
 declare("pipeline.launch_start", launch_start, types.Tuple((_F1, _F1))(_I1, _F1))
 declare("pipeline.launch_took", launch_took, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F1))
+declare("pipeline.launch_settled", launch_settled, types.boolean(_F1, _I1, _F1, _F1, _F2))
 declare("pipeline.energy", energy_rates, types.none(_F1, _I1, _F1, _F1, _F1, _F1, _F2))
 
 
@@ -275,6 +279,7 @@ def stage_addresses(ints: np.ndarray) -> None:
     ints[A_SOLVE] = _address_of("pipeline.solve", solve_through_drives if folds else solve_direct, _SOLVE)
     if ints[N_LAUNCH]:
         ints[A_LAUNCH_START], ints[A_LAUNCH] = address("pipeline.launch_start"), address("pipeline.launch_took")
+        ints[A_LAUNCH_SETTLED] = address("pipeline.launch_settled")
     if ints[ENERGY] >= 0:
         ints[A_ENERGY] = address("pipeline.energy")
 
