@@ -65,8 +65,7 @@ class _Watch:
             if self.said:
                 return
             self.said = True
-        print(f"contactdyn: compiling {what} (first run with these laws only: ~10 s to 1 min; "
-              "cached for later runs)...", file=sys.stderr, flush=True)
+        print(f"contactdyn: compiling {what} (once: cached for later runs)...", file=sys.stderr, flush=True)
 
 
 _watch = _Watch()
