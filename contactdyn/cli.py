@@ -191,8 +191,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled)
     if choice.compiled:
         mark_built(scene)
-    elif choice.build and build_in_background(scene) and not (args.quiet or args.json):
-        print(choice.line(), file=sys.stderr, flush=True)
+    building = choice.build and build_in_background(scene)
     from .robot.listing import run_warnings
 
     # sanity, then inertia and limits, then the run's physics checks
@@ -234,6 +233,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 _out(args, f"  joint limit t = {e['t']:.6g} s: {e['name']} {what}")
         if saved:
             _out(args, f"  saved {saved} and {saved.removesuffix('.npz')}.json")
+    if building and not (args.quiet or args.json):
+        print(choice.line(), file=sys.stderr, flush=True)
     if args.view:
         view_result = _lazy("viewer", "view_result")
         if view_result is None:
