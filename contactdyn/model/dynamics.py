@@ -111,6 +111,7 @@ def _forces_and_rows(system, t: float, x: np.ndarray, modes: list[ContactMode], 
     system.robot.update(x[:nv], x[nQ:nQ + nv])
     f = np.zeros(nQ)
     f[:nv] = -system.robot.h
+    f[nv:] = system.weights  # the bodies' weights m g·axis [N]
     ydot = np.zeros(system.ny)
     rows = Rows()
     ev = Evaluation(np.empty(0), np.empty(0), rows.meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),

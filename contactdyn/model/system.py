@@ -97,6 +97,10 @@ class System:
         diag += self.drives.motor_inertias
         self.nQ = nv + len(diag)
         self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg, kg·m² for motors]
+        #: [N] the non-robot coordinates' weights: a body's m g·axis (g the world's, robot.gravity), 0 for the others
+        self.weights = np.zeros(len(diag))
+        self.weights[: len(self.body_names)] = [b.mass * float(scene.robot.gravity @ b.axis)
+                                               for b in scene.bodies.values()]
         self.M_rest[: len(self.body_names)] += self.drives.reflected[nv:]  # rotor inertia through a wheel
         self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
         #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (zero: no motor)

@@ -77,7 +77,7 @@ MEANINGS: dict[str, str] = {
     "robot.drive": "drives of the joints: a kind and its parameters, each a scalar or one per joint",
     # drives: robot.drive.* and body.<body>.drive.* from the kinds' declarations (_drive_rows)
     # bodies
-    "body.<body>": "an active body translating along its axis",
+    "body.<body>": "an active body translating along its axis; its weight m g·axis acts on it (g = robot.gravity)",
     "body.<body>.mass": "mass",
     "body.<body>.axis": "direction of travel in the world",
     "body.<body>.position0": "initial coordinate",

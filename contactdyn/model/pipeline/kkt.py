@@ -5,8 +5,10 @@ and the diagonal inertias of the bodies, chain masses and motor coordinates [kg,
 G the rows, C their force columns (a slide's tilt), γ [m/s²] their velocity-product and Baumgarte terms
 (:mod:`contactdyn.model.constraints`' ``kkt_solve``); a force-reading controller's B (τ = τ₀ + B λ,
 :mod:`.force_fold`) folded through its drives into the force columns, a carried reference's column into M's. The solve
-is ``numerics.linalg.lu_solve`` (partial pivoting) with the readable model's residual test: a singular matrix
-returns status 0 and the caller takes the readable model's least squares (``constraints.solve_linear``).
+is ``numerics.linalg.lu_solve`` (partial pivoting) with the readable model's residual test; a singular matrix
+whose rows are redundant but consistent (two sticks holding one body) is solved by the same minimum-norm least
+squares as the readable model's (``constraints.solve_linear``); one still singular returns status 0 and the
+caller takes the readable model.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from ...numerics.compile_cache import njit
 from ...numerics.linalg import lu_solve, put
 from .pack import NQ, NV, R_MREST
 
-__all__ = ["kkt_solve", "residual_ok"]
+__all__ = ["kkt_solve", "residual_ok", "least_squares"]
 
 
 @njit(cache=True)
@@ -74,4 +76,14 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
     for r in range(nr):
         b[nQ + r] = -gamma[r]
     z = lu_solve(A, b)
+    if residual_ok(A, z, b):
+        return z[:nQ], z[nQ:], True
+    z = least_squares(A, b)  # redundant rows (two sticks holding one body): the minimum-norm forces
     return z[:nQ], z[nQ:], residual_ok(A, z, b)
+
+
+@njit(cache=True)
+def least_squares(A, b):
+    """The minimum-norm least-squares z of A z = b (LAPACK's gelsd, singular values below 1e-12 of the largest
+    dropped: ``constraints.solve_linear``'s fallback): a consistent system with redundant rows solved exactly."""
+    return np.linalg.lstsq(A, b, 1e-12)[0]

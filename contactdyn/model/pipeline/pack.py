@@ -65,7 +65,7 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, I_DRIVES, R_DRIVES, R_REFLECTED, W_DRIVES, ANY_MOTOR,
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
  N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, A_CALL, A_CONTROLLER, A_SOLVE,
- A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, HEADER) = range(71)
+ A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, HEADER) = range(72)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
 #: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
@@ -247,6 +247,7 @@ def pack(system, modes, phase) -> Packed:
     h[NJ] = table.shape[0]
     b.real_section(R_RIGID, table)
     b.real_section(R_MREST, system.M_rest)
+    b.real_section(R_WEIGHTS, system.weights)  # [N] the non-robot coordinates' weights (a body's m g·axis)
     fids = list(dict.fromkeys([system.tip_fid, *(c.fid for c in system.contacts)]))
     _frames(b, system, fids)
     h[TIP_FRAME] = 0

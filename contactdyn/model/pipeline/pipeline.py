@@ -81,6 +81,7 @@ from .pack import (
     NX,
     NY,
     R_REFLECTED,
+    R_WEIGHTS,
     READS_FORCES,
     REF_DIMS,
     TIP_FRAME,
@@ -118,6 +119,9 @@ def call(t, x, ints, reals, work, events):
         f = np.zeros(nQ)
         for i in range(nv):
             f[i] = -h[i]
+        weights = ints[R_WEIGHTS]
+        for i in range(nQ - nv):  # the bodies' weights m g·axis [N] (0 for the other coordinates)
+            f[nv + i] = reals[weights + i]
         ydot = np.zeros(ints[NY])
         G, C, gamma = np.zeros((nr, nQ)), np.zeros((nr, nQ)), np.zeros(nr)
         pending = np.zeros((nc, 5))
