@@ -10,7 +10,7 @@ from contactdyn import parse_scene
 from contactdyn.hybrid import steps
 from contactdyn.hybrid.loop import HybridRun
 from contactdyn.hybrid.pipeline_mode import PipelineMode
-from contactdyn.model.pipeline.pipeline import Pipeline
+from contactdyn.model.pipeline.pipeline import Pipeline, call
 from contactdyn.model.system import System
 from contactdyn.numerics import dop853
 from contactdyn.scene.scene_file import load_scene
@@ -73,19 +73,38 @@ def test_compiled_steps_are_solve_ivps_and_the_scipy_cores(name, duration):
     assert np.all(np.abs(got.sol(ts) - core.sol(ts)) <= 10.0 * (atol + rtol * np.abs(core.sol(ts))))
 
 
-def test_a_step_the_compiled_call_cannot_take_is_taken_by_the_right_hand_side():
-    """cylindrical3 sliding on a frictionless rigid table through two contacts at the same point: their rows are the
-    same, the KKT matrix singular, the compiled call declines inside every attempt (status 0), each step is taken by
-    the mode's Python right-hand side (the readable model's least squares), and the run is scipy's core's (the same
-    steps; the states within the tolerance, measured bitwise equal)."""
+def _two_tables(shift: float):
+    """cylindrical3 sliding on two frictionless rigid tables at the same height, the second ``shift`` [m] above the
+    first (negative: below): the same rows, their Baumgarte terms apart by the shift; the mode with both touching."""
     rigid = {"direction": [0, 0, 1], "model": "rigid"}
     doc = {"duration": 0.3, "robot": {"urdf": "cylindrical3", "q0": [0.3, 0.2, 1.0], "v0": [0.5, -0.3, 0.0]},
            "contact": {"a": {"point": [1.0, 0.0, 0.2], "normal": rigid},
-                       "b": {"point": [1.0, 0.0, 0.2], "normal": rigid}},
+                       "b": {"point": [1.0, 0.0, 0.2 + shift], "normal": rigid}},
            "controller": {"kind": "task_pd", "kp": 1e4, "kd": 20.0},
            "phase": [{"name": "main", "reference": {"start": [0.9, 0.1, 0.2]}}]}
     system, modes, phase, x = prepare(parse_scene(doc))
-    modes = [m.with_(touching=True) for m in modes]
+    return system, [m.with_(touching=True) for m in modes], phase, x
+
+
+def test_redundant_rows_that_agree_are_solved_in_the_call():
+    """Two tables at one height: the KKT matrix singular but its system consistent; the call solves it by the
+    minimum-norm least squares (status 1), the readable model's forces and rates to rounding."""
+    system, modes, phase, x = _two_tables(0.0)
+    pipe = Pipeline(system, modes, phase)
+    p = pipe.packed
+    got = call(0.0, x.copy(), p.ints, p.reals, p.work, p.events)
+    assert p.events[-1] == 1.0
+    ref = system.evaluate(0.0, x, modes, phase)
+    assert np.abs(got - ref.xdot).max() <= 1e-10 * (1.0 + np.abs(ref.xdot).max())
+    assert ref.normal_force["a"] == pytest.approx(ref.normal_force["b"], rel=1e-9)  # the load split evenly
+
+
+def test_a_step_the_compiled_call_cannot_take_is_taken_by_the_right_hand_side():
+    """cylindrical3 on two rigid tables, the second 1 mm below, both touching: their rows are the same and their
+    Baumgarte terms are not, so the KKT system has no solution; the compiled call declines inside every attempt
+    (status 0), each step is taken by the mode's Python right-hand side (the readable model's least squares), and the
+    run is scipy's core's (the same steps; the states within the tolerance, measured bitwise equal)."""
+    system, modes, phase, x = _two_tables(-1e-3)
     mode = PipelineMode(Pipeline(system, modes, phase))
     fun = mode.rhs
     span, rtol, atol = (0.0, 0.3), 1e-10, 1e-12

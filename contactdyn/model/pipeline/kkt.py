@@ -76,10 +76,22 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
     for r in range(nr):
         b[nQ + r] = -gamma[r]
     z = lu_solve(A, b)
-    if residual_ok(A, z, b):
-        return z[:nQ], z[nQ:], True
+    if residual_ok(A, z, b) or not finite(A, b):
+        return z[:nQ], z[nQ:], residual_ok(A, z, b)
     z = least_squares(A, b)  # redundant rows (two sticks holding one body): the minimum-norm forces
     return z[:nQ], z[nQ:], residual_ok(A, z, b)
+
+
+@njit(cache=True)
+def finite(A, b):
+    """Every entry of A and b finite (a law's nan or inf: no least squares, the call declines)."""
+    for i in range(b.size):
+        if not math.isfinite(b[i]):
+            return False
+        for j in range(b.size):
+            if not math.isfinite(A[i, j]):
+                return False
+    return True
 
 
 @njit(cache=True)

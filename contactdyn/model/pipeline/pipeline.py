@@ -9,9 +9,11 @@
 laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`, a drive
 kind through :mod:`contactdyn.laws.drive_abi`); under ``NUMBA_DISABLE_JIT=1`` the same source runs interpreted.
 :class:`Pipeline` packs a mode once and calls it; its ``events`` name the event values (gaps [m], normal forces
-[N], slip velocities [m/s], friction or stick forces [N], limit torques [N·m or N]). A call whose KKT matrix is
-singular (status 0), or whose compiled law (a stage law, a drive kind) gave no force (status -1), is answered by
-the readable model (:meth:`System.evaluate`), and counted.
+[N], slip velocities [m/s], friction or stick forces [N], limit torques [N·m or N]). A singular KKT matrix whose
+rows are redundant but consistent (two sticks holding one body) is solved in the call by the minimum-norm least
+squares (:func:`.kkt.least_squares`); a call whose KKT system still has no solution (status 0), or whose compiled
+law (a stage law, a drive kind) gave no force (status -1), is answered by the readable model
+(:meth:`System.evaluate`), and counted.
 """
 
 from __future__ import annotations
