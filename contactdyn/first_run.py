@@ -9,9 +9,10 @@ path ``auto`` (the default) decides per run:
 - the scene's *kind* was built by this build of the package (a marker in its compile cache): the
   compiled call;
 - else the readable model, and after the run one background process (``python -m
-  contactdyn.first_run FILE``, low priority, detached, silent) runs the same scene on the compiled
-  call, so that it compiles and caches what the scene needs, and marks the kind built. One line says so
-  after the run. A run the command takes on the compiled call (``--path compiled``) marks its kind too.
+  contactdyn.first_run FILE MARKER``, the scene's document on stdin; low priority, detached, silent)
+  runs the same scene on the compiled call, so that it compiles and caches what the scene needs, and
+  marks the kind built. One line says so after the run. A run the command takes on the compiled call
+  (``--path compiled``) marks its kind too.
 
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
