@@ -233,7 +233,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 _out(args, f"  joint limit t = {e['t']:.6g} s: {e['name']} {what}")
         if saved:
             _out(args, f"  saved {saved} and {saved.removesuffix('.npz')}.json")
-    if building and not (args.quiet or args.json):
+    if (building or choice.failed is not None) and not (args.quiet or args.json):
         print(choice.line(), file=sys.stderr, flush=True)
     if args.view:
         view_result = _lazy("viewer", "view_result")

@@ -41,19 +41,24 @@ __all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "m
 PATHS = ("auto", "compiled", "readable")  #: what ``--path`` takes
 ENV = "CONTACTDYN_PATH"  #: the environment variable that sets the default path (else ``auto``)
 BUILD_TIMEOUT = 1800.0  #: [s] a background build older than this is taken as dead (its lock is stale)
+BUILD_DURATION = 60.0  #: [s] simulated by a background build at most
 
 
 class Choice:
-    """A run's path: ``compiled`` (bool) and ``build`` (the kind's background build is due after the run)."""
+    """A run's path: ``compiled`` (bool), ``build`` (the kind's background build is due after the run), ``failed``
+    (the kind's build failed: its record)."""
 
-    def __init__(self, compiled: bool, build: bool = False) -> None:
-        self.compiled, self.build = compiled, build
+    def __init__(self, compiled: bool, build: bool = False, failed: Path | None = None) -> None:
+        self.compiled, self.build, self.failed = compiled, build, failed
 
     def line(self) -> str:
-        """What the command says after a run whose build it started ("" for the others)."""
-        return ("contactdyn: this kind of scene had no compiled code yet: it ran on the readable model (the same "
-                "physics; the two agree to 1e-9); its compiled code is now built in the background for the next "
-                "runs (--path compiled compiles in the foreground)") if self.build else ""
+        """What the command says after a run whose build it started, or of a kind whose build failed ("" else)."""
+        if self.failed is not None:
+            return (f"contactdyn: this kind of scene's compiled call failed to build in the background ({self.failed}"
+                    "): it ran on the readable model; --path compiled builds it in the foreground and says why")
+        return ("contactdyn: this kind of scene's compiled call was not built yet: it ran on the readable model (the "
+                "same physics; the two agree to 1e-9); the call is being built in the background for the next runs "
+                "(--path compiled builds it in the foreground)") if self.build else ""
 
 
 def default_path(environ=os.environ) -> str:
@@ -101,12 +106,37 @@ def choose(scene: Scene, path: str) -> Choice:
         return Choice(False)
     if built(scene):
         return Choice(True)
+    failed = _folder() / f"{kind(scene)}.failed"
+    if failed.is_file():
+        return Choice(False, failed=failed)
     return Choice(False, build=_buildable(scene))
 
 
 def _buildable(scene: Scene) -> bool:
-    """A background process can run the scene again: it comes from a file."""
-    return bool(scene.file) and Path(scene.file).is_file()
+    """A background process can run the scene again: it comes from a regular file."""
+    return bool(scene.file) and Path(scene.file).resolve().is_file()
+
+
+def _alive(pid: int) -> bool:
+    """Does process ``pid`` run (POSIX; elsewhere: taken as running)?"""
+    if os.name != "posix":
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's: it runs
+        return True
+    return True
+
+
+def _stale(lock: Path) -> bool:
+    """Is the build that holds ``lock`` gone (its process ended without removing it, or it is BUILD_TIMEOUT old)?"""
+    age = time.time() - lock.stat().st_mtime  # [s]
+    text = lock.read_text().strip()
+    if not text.isdigit():  # (its process not written yet: a build just starting)
+        return age > BUILD_TIMEOUT
+    return not _alive(int(text)) or age > BUILD_TIMEOUT
 
 
 def _lock(folder: Path, name: str) -> bool:
@@ -119,7 +149,7 @@ def _lock(folder: Path, name: str) -> bool:
             return True
         except FileExistsError:
             try:
-                if time.time() - lock.stat().st_mtime < BUILD_TIMEOUT:
+                if not _stale(lock):
                     return False
                 lock.unlink()  # a build that died: take over
             except OSError:
@@ -129,6 +159,15 @@ def _lock(folder: Path, name: str) -> bool:
     return False
 
 
+def _child_environment() -> dict[str, str]:
+    """This process's environment with this package's folder first on PYTHONPATH: the build imports the same
+    contactdyn (with ``-P``, not one in the working directory)."""
+    env = dict(os.environ)
+    root = str(Path(__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join([root, *([env["PYTHONPATH"]] if env.get("PYTHONPATH") else [])])
+    return env
+
+
 def build_in_background(scene: Scene) -> bool:
     """Start the kind's background build (False: not started, one runs already or the scene has no file)."""
     if not _buildable(scene):
@@ -136,14 +175,18 @@ def build_in_background(scene: Scene) -> bool:
     folder, name = _folder(), kind(scene)
     if not _lock(folder, name):
         return False
+    lock = folder / f"{name}.building"
+    flags = getattr(subprocess, "DETACHED_PROCESS", 0) | getattr(subprocess, "CREATE_NEW_PROCESS_GROUP", 0)
+    detached = {"start_new_session": True} if os.name == "posix" else {"creationflags": flags}  # (Windows)
     try:
-        child = subprocess.Popen([sys.executable, "-m", __name__, str(scene.file), str(folder / name)],
-                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                 start_new_session=True)
+        child = subprocess.Popen([sys.executable, "-P", "-m", __name__, str(Path(scene.file).resolve()),
+                                  str(folder / name)], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL, env=_child_environment(), **detached)
+        lock.write_text(str(child.pid))
         with child.stdin:
             child.stdin.write(json.dumps(scene.document, default=str).encode())
     except OSError:
-        (folder / f"{name}.building").unlink(missing_ok=True)
+        lock.unlink(missing_ok=True)
         return False
     return True
 
@@ -154,25 +197,29 @@ def mark_built(scene: Scene) -> None:
         folder = _folder()
         folder.mkdir(parents=True, exist_ok=True)
         (folder / f"{kind(scene)}.built").touch()
+        (folder / f"{kind(scene)}.failed").unlink(missing_ok=True)
     except OSError:  # an unwritable cache: the next run is readable again, as if never built
         pass
 
 
 def build(file: str, document: dict, marker: str) -> None:
-    """Run the scene (its document, read relative to ``file``) on the compiled call; mark its kind built."""
+    """Run the scene (its document, read relative to ``file``) on the compiled call, for BUILD_DURATION simulated
+    seconds at most (what a longer run reaches later compiles then, in the foreground); mark its kind built."""
     import warnings
 
     from .scene.scene_file import parse_scene
     from .simulate import simulate
 
+    scene = parse_scene(document, None, file)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        simulate(parse_scene(document, None, file), compiled=True)
+        simulate(scene, {"duration": min(scene.duration, BUILD_DURATION)}, compiled=True)
     Path(f"{marker}.built").touch()
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m contactdyn.first_run FILE MARKER`` (the scene's document on stdin): the background build."""
+    """``python -m contactdyn.first_run FILE MARKER`` (the scene's document on stdin): the background build. A build
+    that fails writes MARKER.failed (its error): later runs of the kind take the readable model and say why."""
     file, marker = argv or sys.argv[1:3]
     try:
         os.nice(10)
@@ -181,10 +228,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         build(file, json.loads(sys.stdin.read()), marker)
         return 0
-    except Exception:  # noqa: BLE001 (a build that fails leaves no marker: the next run is readable again)
+    except Exception as exc:  # noqa: BLE001 (any failure of the build is recorded, none raised: nobody reads it)
+        Path(f"{marker}.failed").write_text(f"{type(exc).__name__}: {exc}\n")
         return 1
     finally:
-        Path(f"{marker}.building").unlink(missing_ok=True)
+        lock = Path(f"{marker}.building")
+        if lock.is_file() and lock.read_text().strip() in ("", str(os.getpid())):  # its own lock only
+            lock.unlink(missing_ok=True)
 
 
 if __name__ == "__main__":

@@ -6,7 +6,9 @@ from __future__ import annotations
 import io
 import json
 import os
+import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -48,10 +50,35 @@ def test_auto_is_readable_until_the_kind_is_built_then_compiled(markers):
 
 def test_one_build_per_kind_at_a_time_and_a_dead_one_is_taken_over(markers):
     assert first_run._lock(markers, "k")
-    assert not first_run._lock(markers, "k")  # a build of the kind runs
+    assert not first_run._lock(markers, "k")  # a build of the kind is starting (no process written yet)
+    (markers / "k.building").write_text(str(os.getpid()))
+    assert not first_run._lock(markers, "k")  # its process runs
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    (markers / "k.building").write_text(dead.stdout.strip())
+    assert first_run._lock(markers, "k")  # its process ended without removing the lock: taken over
     old = first_run.time.time() - first_run.BUILD_TIMEOUT - 1.0
     os.utime(markers / "k.building", (old, old))
-    assert first_run._lock(markers, "k")  # that one died long ago
+    assert first_run._lock(markers, "k")  # a lock BUILD_TIMEOUT old: taken over
+
+
+def test_the_build_is_started_detached_on_this_package_with_the_file_it_was_read_from(markers, monkeypatch):
+    started = []
+
+    class Popen:
+        def __init__(self, argv, **options):
+            started.append((argv, options))
+            self.pid, self.stdin = os.getpid(), io.BytesIO()  # (a process that runs)
+
+    monkeypatch.setattr(first_run.subprocess, "Popen", Popen)
+    scene = load_scene("b1")
+    assert first_run.build_in_background(scene)
+    (argv, options), = started
+    assert argv[1:4] == ["-P", "-m", "contactdyn.first_run"]  # -P: not a contactdyn of the working directory
+    assert argv[4] == str(Path(scene.file).resolve()) and argv[5].endswith(first_run.kind(scene))
+    package_root = str(Path(first_run.__file__).resolve().parents[1])
+    assert options["env"]["PYTHONPATH"].split(os.pathsep)[0] == package_root
+    assert (markers / f"{first_run.kind(scene)}.building").read_text() == str(os.getpid())
+    assert not first_run.build_in_background(scene)  # one at a time
 
 
 def test_the_command_runs_readable_says_so_and_asks_for_one_build(markers, monkeypatch, capsys):
@@ -74,26 +101,34 @@ def test_a_bad_path_in_the_environment_is_one_message(monkeypatch, capsys):
     assert err.count("\n") == 1 and "CONTACTDYN_PATH" in err and "fast" in err
 
 
-def test_the_build_runs_compiled_and_marks_the_kind(markers, monkeypatch):
-    scene = load_scene("b1", {"duration": 0.05})
+@pytest.mark.parametrize("duration, built_for", [(0.05, 0.05), (600.0, 60.0)])  # [s]: a long one for a minute
+def test_the_build_runs_compiled_and_marks_the_kind(markers, monkeypatch, duration, built_for):
+    scene = load_scene("b1", {"duration": duration})
     ran = []
     monkeypatch.setattr(sys.modules["contactdyn.simulate"], "simulate",
-                        lambda s, compiled: ran.append((s.document, compiled)))
+                        lambda s, overrides, compiled: ran.append((s.document, overrides, compiled)))
     markers.mkdir()
     (markers / "x.building").touch()
     monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps(scene.document)))
     monkeypatch.setattr("os.nice", lambda n: 0)
     assert first_run.main([scene.file, str(markers / "x")]) == 0
-    assert ran == [(scene.document, True)] and (markers / "x.built").is_file() and not (markers / "x.building").exists()
+    assert ran == [(scene.document, {"duration": built_for}, True)]
+    assert (markers / "x.built").is_file() and not (markers / "x.building").exists()
 
 
-def test_a_failed_build_leaves_no_marker_and_no_lock(markers, monkeypatch):
+def test_a_failed_build_is_recorded_and_said_and_not_retried(markers, monkeypatch):
     markers.mkdir()
     (markers / "y.building").touch()
     monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps({"duration": "not a number"})))
     monkeypatch.setattr("os.nice", lambda n: 0)
     assert first_run.main(["nowhere.toml", str(markers / "y")]) == 1
-    assert list(markers.iterdir()) == []
+    assert [p.name for p in markers.iterdir()] == ["y.failed"] and "duration" in (markers / "y.failed").read_text()
+    scene = load_scene("b1")
+    (markers / f"{first_run.kind(scene)}.failed").write_text("SceneError: ...")
+    choice = first_run.choose(scene, "auto")
+    assert (choice.compiled, choice.build) == (False, False) and "failed to build" in choice.line()
+    first_run.mark_built(scene)  # (a run with --path compiled)
+    assert first_run.choose(scene, "auto").compiled and not (markers / f"{first_run.kind(scene)}.failed").exists()
 
 
 def test_the_readable_run_and_the_compiled_run_agree():
@@ -118,3 +153,14 @@ def test_a_run_on_the_compiled_call_marks_its_kind(markers, capsys):
     assert not first_run.built(scene)
     assert main(["run", "b1", *FAST, "--path", "compiled", "--quiet"]) == EXIT_OK
     assert first_run.built(scene) and first_run.choose(scene, "auto").compiled
+
+
+def test_a_failure_on_the_compiled_call_is_diagnosed_in_one_line(capsys):
+    """case1_cart run for 20 s fails at ~12.3 s (its contact turns stiff); on the compiled call, as on the readable
+    model, the command prints one line with the cause (the diagnosis evaluates the failure's state: a strided
+    column of the solution once reached the compiled call as a new array layout and failed to compile)."""
+    for path in ("compiled", "readable"):
+        code = main(["run", "case1_cart", "--set", "duration=20", "--path", path, "--quiet"])
+        err = capsys.readouterr().err
+        assert code == 1 and err.count("\n") == 1 and "integration failed at t = 12.34" in err, (path, err[-300:])
+        assert "Traceback" not in err and "fastest mode" in err

@@ -406,7 +406,7 @@ def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -
 
 def _diagnose(run: HybridRun, sol, modes: list[ContactMode], phase: Phase, fun, method: str) -> str:
     """Why a segment of (modes, phase) failed, as far as the state at the failure says."""
-    t, x = float(sol.t[-1]), sol.y[:, -1]
+    t, x = float(sol.t[-1]), sol.y[:, -1].copy()  # (contiguous: the compiled call takes no strided state)
     if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
         return ""
     with np.errstate(all="ignore"):

@@ -76,8 +76,9 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
     for r in range(nr):
         b[nQ + r] = -gamma[r]
     z = lu_solve(A, b)
-    if residual_ok(A, z, b) or not finite(A, b):
-        return z[:nQ], z[nQ:], residual_ok(A, z, b)
+    solved = residual_ok(A, z, b)
+    if solved or not finite(A, b):
+        return z[:nQ], z[nQ:], solved
     z = least_squares(A, b)  # redundant rows (two sticks holding one body): the minimum-norm forces
     return z[:nQ], z[nQ:], residual_ok(A, z, b)
 
