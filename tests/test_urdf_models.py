@@ -20,8 +20,7 @@ import pytest
 URDF_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "urdf")
 # the point-mass test bodies have massless carriages by design (H = m I); tests/test_friction.py checks them
 TEST_BODIES = {"point_mass_xz.urdf", "point_mass_xyz.urdf"}
-ENVIRONMENT_BODIES = {"part_cylinder.urdf"}  #: a scene's [body.<name>] urdf (contactdyn.robot.body), no robot
-ALL_URDFS = sorted(f for f in os.listdir(URDF_DIR) if f.endswith(".urdf") and f not in TEST_BODIES | ENVIRONMENT_BODIES)
+ALL_URDFS = sorted(f for f in os.listdir(URDF_DIR) if f.endswith(".urdf") and f not in TEST_BODIES)
 EXPECTED = {"arm2r_cart.urdf", "writer2r.urdf", "writer5dof.urdf",
             "cylindrical3.urdf", "planar2r_b1.urdf"}
 

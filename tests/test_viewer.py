@@ -430,7 +430,7 @@ def test_view_on_another_host_warns(b1_run, capsys, monkeypatch):
 
 
 def test_a_body_from_a_urdf_is_drawn_with_its_visuals_and_its_path():
-    """pinch_hold's part (urdf/part_cylinder.urdf): its cylinder under /meshcat/bodies/part, placed where the body
+    """pinch_hold's part (sims/part_cylinder.urdf): its cylinder under /meshcat/bodies/part, placed where the body
     is (its coordinate along z), and no box drawn for it under its surfaces; opened, the fingers let it fall and
     the cylinder's track follows the body's coordinate."""
     result = contactdyn.simulate("pinch_hold", {"duration": 0.2, "solver.output_rate": 50, "robot.q0": [0.0, 0.0],
