@@ -4,6 +4,8 @@ weight m g·axis acts on it (free fall, and the energy audit)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -60,3 +62,38 @@ def test_a_part_let_go_falls_freely_with_its_weight():
     assert violations(r.meta["checks"]) == []
     audit = r.meta["checks"]["energy_residual"]  # the weight's potential −W x in the stored energy: closes to 1e-7 J
     assert audit["value"] is not None and audit["value"] <= audit["tol"]
+
+
+def test_the_part_is_a_body_read_off_its_urdf():
+    """[body.part] urdf = "part_cylinder.urdf" (beside the scene): the mass of its links after the joint, the joint's
+    axis in the world; the run equals the one with that mass and axis given as keys, bit for bit."""
+    scene = load_scene("pinch_hold")
+    part = scene.bodies["part"]
+    assert part.mass == 0.045 and part.axis.tolist() == [0.0, 0.0, 1.0]
+    assert part.urdf.endswith("sims/part_cylinder.urdf")
+    doc = dict(scene.document)
+    doc["body"] = {"part": {"mass": 0.045, "axis": [0.0, 0.0, 1.0]}}
+    keys = simulate(parse_scene(doc, {"duration": 0.5}, scene.file))
+    urdf = simulate("pinch_hold", {"duration": 0.5})
+    assert np.array_equal(keys["body.part.x"], urdf["body.part.x"])
+    assert np.array_equal(keys["contact.left.F_f"], urdf["contact.left.F_f"])
+
+
+@pytest.mark.parametrize("body, key, words", [
+    ({"urdf": "point_mass_xz"}, "body.part.urdf", "one prismatic joint"),  # two joints
+    ({"urdf": "REVOLUTE"}, "body.part.urdf", "revolute"),
+    ({"urdf": "part_cylinder.urdf", "mass": 1.0}, "body.part.mass", "no mass or axis beside urdf"),
+    ({"urdf": "no_such_body"}, "body.part.urdf", "no_such_body"),
+])
+def test_a_body_urdf_that_is_not_one_prismatic_joint_is_one_clear_error(tmp_path, body, key, words):
+    from contactdyn.errors import SceneError
+
+    if body["urdf"] == "REVOLUTE":
+        text = (Path(__file__).parent.parent / "sims" / "part_cylinder.urdf").read_text()
+        body = {"urdf": str(tmp_path / "spun.urdf")}
+        Path(body["urdf"]).write_text(text.replace('type="prismatic"', 'type="revolute"'))
+    doc = dict(load_scene("pinch_hold").document)
+    doc["body"] = {"part": body}
+    with pytest.raises(SceneError) as err:
+        parse_scene(doc, None, load_scene("pinch_hold").file)
+    assert key in str(err.value) and words in str(err.value)

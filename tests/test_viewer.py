@@ -427,3 +427,18 @@ def test_view_on_another_host_warns(b1_run, capsys, monkeypatch):
     with pytest.raises(Stop):
         viewer.view_result(b1_run[1], argparse.Namespace(html=None, port=None, speed=1.0, host="127.0.0.2"))
     assert "warning: the viewer listens on 127.0.0.2" in capsys.readouterr().err
+
+
+def test_a_body_from_a_urdf_is_drawn_with_its_visuals_and_its_path():
+    """pinch_hold's part (sims/part_cylinder.urdf): its cylinder under /meshcat/bodies/part, placed where the body
+    is (its coordinate along z), and no box drawn for it under its surfaces; opened, the fingers let it fall and
+    the cylinder's track follows the body's coordinate."""
+    result = contactdyn.simulate("pinch_hold", {"duration": 0.2, "solver.output_rate": 50, "robot.q0": [0.0, 0.0],
+                                                "phase.0.reference.start": [0.0, 0.0]})
+    scene = build_scene(result)
+    paths = [c["path"] for c in scene.commands if c["type"] == "set_object"]
+    part = [p for p in paths if p.startswith("/meshcat/bodies/part/")]
+    assert part and not [p for p in paths if "/cart_" in p]
+    track = next(clip(scene, p.rsplit("/", 1)[0]) for p in part)["position"]
+    assert values(track)[:, 2] == pytest.approx(result["body.part.x"], abs=1e-6)  # (float32 in the scene)
+    assert result["body.part.x"][-1] < -0.1  # it fell ~0.2 m in 0.2 s

@@ -166,7 +166,8 @@ def check_drawable(result) -> Any:
     if not result.scene:
         return None
     try:
-        scene = parse_scene(drawing_document(result.scene))
+        where = result.meta.get("scene_file")  # paths in it (a body's URDF) read beside the scene, as the run did
+        scene = parse_scene(drawing_document(result.scene), None, where if isinstance(where, str) else None)
     except ContactdynError as exc:
         raise RunFileError(f"run {name}: its scene document no longer validates, cannot draw it: {exc}") from None
     for c in scene.contacts.values():

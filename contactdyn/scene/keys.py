@@ -78,6 +78,8 @@ MEANINGS: dict[str, str] = {
     # drives: robot.drive.* and body.<body>.drive.* from the kinds' declarations (_drive_rows)
     # bodies
     "body.<body>": "an active body translating along its axis; its weight m g·axis acts on it (g = robot.gravity)",
+    "body.<body>.urdf": "the body from a URDF whose one joint is prismatic: its mass, axis and visuals (then no "
+                        "mass or axis; a path beside the scene or a name in urdf/)",
     "body.<body>.mass": "mass",
     "body.<body>.axis": "direction of travel in the world",
     "body.<body>.position0": "initial coordinate",
@@ -228,6 +230,8 @@ OVERRIDES: dict[str, dict[str, str]] = {
     "robot.active_joints": {"type": "list of strings", "default": "all joints"},
     "robot.q0": {"type": "list of numbers", "default": "neutral"},
     "robot.v0": {"default": "zero"},
+    "body.<body>.urdf": {"type": "string", "default": "none: mass and axis given"},
+    "body.<body>.mass": {"default": "required without urdf"},
     "robot.drive.kind": {"type": "string or list of strings", "default": "torque"},
     "contact.<contact>.normal.model": {"default": "rigid; chain when environment or robot is given"},
     "contact.<contact>.tangent.directions": {"type": "list of 3-vectors", "default": "required with friction or chain"},

@@ -54,7 +54,8 @@ class ContactSpec:
 
 @dataclass(frozen=True)
 class BodySpec:
-    """An active 1-DOF environment body (a cart) translating along ``axis``."""
+    """An active 1-DOF environment body (a cart) translating along ``axis``: its mass and axis given, or read off
+    a URDF with one prismatic joint (``urdf``, :mod:`contactdyn.robot.body`)."""
 
     name: str
     mass: float  #: [kg]
@@ -64,6 +65,7 @@ class BodySpec:
     servo_velocity: float | None  #: velocity servo set-point [m/s], None: no drive force
     servo_gain: float  #: [N·s/m], F = gain (v_ref − v), realised by the body's drive
     drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.laws.drives)
+    urdf: str | None = None  #: the URDF the mass and axis come from (its visuals drawn by the viewer), or None
 
 
 @dataclass(frozen=True)
@@ -359,19 +361,41 @@ def _read_joint_dynamics(r: Reader) -> JointDynamicsSpec:
 
 def _read_body(name: str, r: Reader) -> BodySpec:
     servo = r.sub("servo", {})
+    urdf = urdf_beside_scene(r.str("urdf"), r.file) if r.has("urdf") else None
+    if urdf is not None:
+        mass, axis = _urdf_body(r, urdf)
+    else:
+        mass = r.float("mass", lo=0.0, lo_open=True, unit="kg")
+        axis = r.vector("axis", [1.0, 0.0, 0.0], size=3, unit_norm=True)
     spec = BodySpec(
         name=name,
-        mass=r.float("mass", lo=0.0, lo_open=True, unit="kg"),
-        axis=r.vector("axis", [1.0, 0.0, 0.0], size=3, unit_norm=True),
+        mass=mass,
+        axis=axis,
         position0=r.float("position0", 0.0, unit="m"),
         velocity0=r.float("velocity0", 0.0, unit="m/s"),
         servo_velocity=servo.float("velocity", None, unit="m/s") if servo.has("velocity") else None,
         servo_gain=servo.float("gain", 1e3, lo=0.0, unit="N·s/m"),
         drive=read_drive_table(r.sub("drive", {}), per_joint=False),
+        urdf=urdf,
     )
     servo.finish()
     r.finish()
     return spec
+
+
+def _urdf_body(r: Reader, urdf: str) -> tuple[float, np.ndarray]:
+    """(mass [kg], axis) of a body read off its URDF (``urdf``; then no ``mass`` or ``axis`` of its own)."""
+    from ..errors import RobotError
+    from ..robot.body import load_body
+
+    for key in ("mass", "axis"):
+        if r.has(key):
+            raise r.error(key, "no mass or axis beside urdf (the URDF gives them)", r.raw(key))
+    try:
+        body = load_body(urdf)
+    except RobotError as exc:
+        raise r.error("urdf", "a URDF whose one joint is prismatic", exc) from None
+    return body.mass, body.axis
 
 
 def _read_elements(r: Reader, name: str) -> tuple[Element, ...]:

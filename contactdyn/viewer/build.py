@@ -14,7 +14,7 @@ from ..robot.robot import Robot
 from ..scene.scene_file import Scene
 from .camera import frame_view
 from .contact_visuals import STAGE_LENGTH, add_environment, add_forces, add_gauges, add_impacts, add_tool, contact_views
-from .robot_visuals import add_robot, geometry_spheres
+from .robot_visuals import add_body, add_robot, geometry_spheres
 from .shapes import add_label
 from .writer import ROOT, SceneWriter, ViewerScene
 
@@ -23,7 +23,7 @@ __all__ = ["build_scene", "MAX_FRAMES"]
 MAX_FRAMES = 2000  #: animation keys per track at most (the run's samples are thinned to this)
 IMPACT_HOLD = 0.25  #: [s of playback] an impact marker stays large this long
 GROUPS = {"robot": f"{ROOT}/robot", "environment": f"{ROOT}/environment", "chains": f"{ROOT}/chains",
-          "forces": f"{ROOT}/forces", "tool": f"{ROOT}/tool", "labels": f"{ROOT}/labels"}
+          "forces": f"{ROOT}/forces", "tool": f"{ROOT}/tool", "labels": f"{ROOT}/labels", "bodies": f"{ROOT}/bodies"}
 ARROW_UNIT = 0.2  #: drawn length of one arrow scale step, in view radii (the typical force spans ~3 steps)
 
 
@@ -48,6 +48,9 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
 
     contacts = list(scene.contacts.values()) if scene else []
     bodies = scene.bodies if scene else {}
+    drawn = frozenset(name for name, b in bodies.items() if b.urdf is not None and ch(f"body.{name}.x") is not None)
+    for name in sorted(drawn):  # a body from a URDF: its own visuals, moving with its coordinate
+        notes += add_body(writer, bodies[name].urdf, ch(f"body.{name}.x"), f"{GROUPS['bodies']}/{name}")
     tips = {c.name: _frame_positions(robot, q, c.frame) for c in contacts}
     disp = {name: np.outer(ch(f"body.{name}.x") if f"body.{name}.x" in result.channels else np.zeros(len(idx)),
                            b.axis) for name, b in bodies.items()}
@@ -66,7 +69,7 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
               f"({len(idx)} frames of {len(t_all)} samples)"]
     scales = {"size": L, "stage_length": STAGE_LENGTH * L}
     if views:
-        add_environment(writer, views, disp, L)
+        add_environment(writer, views, disp, L, drawn)
         S, chain_notes = add_gauges(writer, views, ch, L, GROUPS["chains"], label_rotation)
         notes += chain_notes
         scales["magnification"] = S

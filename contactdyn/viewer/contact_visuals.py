@@ -84,8 +84,10 @@ def contact_views(scene: Scene, tips: dict[str, np.ndarray], disp: dict[str, np.
     return views
 
 
-def add_environment(writer: SceneWriter, views: list[ContactView], disp: dict[str, np.ndarray], L: float) -> None:
-    """Surface plates (semi-transparent) and, under those on a cart, the cart's body."""
+def add_environment(writer: SceneWriter, views: list[ContactView], disp: dict[str, np.ndarray], L: float,
+                    drawn: frozenset[str] = frozenset()) -> None:
+    """Surface plates (semi-transparent) and, under those on a cart, the cart's body (a box; not for the bodies in
+    ``drawn``, whose URDF visuals are drawn)."""
     thickness = 0.02 * L
     moved = set()
     for v in views:
@@ -98,9 +100,10 @@ def add_environment(writer: SceneWriter, views: list[ContactView], disp: dict[st
         if v.spec.body != "ground":
             depth = 0.06 * L
             H[:3, 3] -= (0.5 * thickness + 0.5 * depth) * v.u
-            writer.object(f"{v.body_path}/cart_{v.spec.name}", mg.Box([*size, depth]),
-                          mg.MeshPhongMaterial(color=COLORS["cart"]))
-            writer.transform(f"{v.body_path}/cart_{v.spec.name}", H)
+            if v.spec.body not in drawn:
+                writer.object(f"{v.body_path}/cart_{v.spec.name}", mg.Box([*size, depth]),
+                              mg.MeshPhongMaterial(color=COLORS["cart"]))
+                writer.transform(f"{v.body_path}/cart_{v.spec.name}", H)
             if v.spec.body not in moved:
                 moved.add(v.spec.body)
                 writer.track(v.body_path, "position", "vector3", disp[v.spec.body])

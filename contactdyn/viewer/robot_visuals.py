@@ -23,7 +23,7 @@ import umsgpack
 from ..robot.robot import Robot
 from .writer import Cone, MeshFileGeometry, MeshFileObject, SceneWriter, color_int
 
-__all__ = ["add_robot", "geometry_placements", "geometry_spheres", "MESH_FORMATS"]
+__all__ = ["add_robot", "add_body", "geometry_placements", "geometry_spheres", "MESH_FORMATS"]
 
 MESH_FORMATS = {".dae": "dae", ".obj": "obj", ".stl": "stl"}
 _RX90 = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])  # meshcat's y axis -> z
@@ -72,6 +72,14 @@ def add_robot(writer: SceneWriter, robot: Robot, q: np.ndarray, root: str) -> li
             writer.transform(f"{path}/{sub}", matrix)
         writer.placement(path, placements[i])
     return notes
+
+
+def add_body(writer: SceneWriter, urdf: str, x: np.ndarray, root: str) -> list[str]:
+    """A body's URDF visuals (:mod:`contactdyn.robot.body`) under ``root``, its joint at the body's coordinate
+    ``x`` [m] per frame; notes on what could not be drawn."""
+    from ..robot.body import load_body
+
+    return add_robot(writer, load_body(urdf).robot, np.asarray(x, float)[:, None], root)
 
 
 def _shape_parts(geom: pin.GeometryObject) -> list[tuple[str, object, object, np.ndarray]]:
