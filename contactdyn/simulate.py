@@ -18,6 +18,7 @@ Where the pieces are (see ``docs/architecture.md`` for the module map):
 from __future__ import annotations
 
 import time
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +29,7 @@ from .hybrid.progress import Progress
 from .model.contact import ContactMode
 from .model.phases import Phase
 from .model.system import System
+from .numerics import notice
 from .output.result import Result
 from .scene.scene_file import Scene, load_scene
 
@@ -52,8 +54,11 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None,
     loop = HybridRun(system, compiled)
     if progress:
         loop.progress = Progress(scene.name, scene.duration)
+    readable = nullcontext() if compiled else notice.about("the arithmetic the readable model shares with the "
+                                                            "compiled call")
     try:
-        result = loop.run(wall0)
+        with readable:
+            result = loop.run(wall0)
     finally:
         if loop.progress is not None:
             loop.progress.done()

@@ -57,3 +57,28 @@ def test_every_numba_compile_of_the_package_is_a_block_and_others_are_not(watch,
     numba.njit(add_one)(1)  # compiled: the listener compile_cache registered says it
     assert capsys.readouterr().err.count(f"{LINE} {compile_cache.CompileNotice.WHAT}") == 1
     assert notice._watch.depth == 0
+
+
+def test_a_run_on_the_readable_model_names_what_it_compiles(watch, monkeypatch, capsys):
+    """Within ``about``, a compile of the package is announced as what the block says (a readable run compiles only
+    the arithmetic it shares with the compiled call), outside it as the default; ``simulate(compiled=False)`` runs
+    in such a block, the compiled path outside any."""
+    monkeypatch.setattr(notice, "NOTICE_AFTER", 0.0)
+
+    def add_two(x):
+        return x + 2
+
+    add_two.__module__ = "contactdyn.a_module_for_the_test"
+    with notice.about("the shared arithmetic"):
+        assert notice.subject("default") == "the shared arithmetic"
+        numba.njit(add_two)(1)
+    assert notice.subject("default") == "default"
+    assert f"{LINE} the shared arithmetic" in capsys.readouterr().err
+    from contactdyn import simulate
+
+    seen = []
+    real = notice.about
+    monkeypatch.setattr(notice, "about", lambda what: seen.append(what) or real(what))
+    simulate("b1", {"duration": 0.01}, compiled=False)
+    simulate("b1", {"duration": 0.01})
+    assert len(seen) == 1 and "readable model" in seen[0]

@@ -160,7 +160,7 @@ class CompileNotice(event.Listener):
 
     def on_start(self, e: event.Event) -> None:
         if self._ours(e):
-            notice.begin(self.WHAT)
+            notice.begin(notice.subject(self.WHAT))
 
     def on_end(self, e: event.Event) -> None:
         if self._ours(e):

@@ -17,7 +17,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-__all__ = ["compiling", "begin", "end", "NOTICE_AFTER"]
+__all__ = ["compiling", "begin", "end", "about", "subject", "NOTICE_AFTER"]
 
 NOTICE_AFTER = 2.0  #: [s] of compiling in one process before it is announced
 clock = time.monotonic  #: [s] the clock the blocks are timed by (a test replaces it)
@@ -89,3 +89,22 @@ def compiling(what: str) -> Iterator[None]:
         yield
     finally:
         end()
+
+
+_SUBJECTS: list[str] = []  #: what a run names the package's numba compiles (innermost last; none: the default)
+
+
+def subject(default: str) -> str:
+    """What the package's numba compiles are announced as now: the innermost :func:`about`, else ``default``."""
+    return _SUBJECTS[-1] if _SUBJECTS else default
+
+
+@contextmanager
+def about(what: str) -> Iterator[None]:
+    """Within the block, the package's numba compiles are announced as ``what`` (a run on the readable model
+    compiles only the arithmetic it shares with the compiled call: it says so)."""
+    _SUBJECTS.append(what)
+    try:
+        yield
+    finally:
+        _SUBJECTS.pop()
