@@ -104,9 +104,10 @@ def choose(scene: Scene, path: str) -> Choice:
         return Choice(True)
     if path == "readable":
         return Choice(False)
-    if built(scene):
+    folder, name = _folder(), kind(scene)
+    if (folder / f"{name}.built").is_file():
         return Choice(True)
-    failed = _folder() / f"{kind(scene)}.failed"
+    failed = folder / f"{name}.failed"
     if failed.is_file():
         return Choice(False, failed=failed)
     return Choice(False, build=_buildable(scene))
@@ -194,10 +195,10 @@ def build_in_background(scene: Scene) -> bool:
 def mark_built(scene: Scene) -> None:
     """After a run on the compiled call: the scene's kind is built (its code compiled and cached)."""
     try:
-        folder = _folder()
+        folder, name = _folder(), kind(scene)
         folder.mkdir(parents=True, exist_ok=True)
-        (folder / f"{kind(scene)}.built").touch()
-        (folder / f"{kind(scene)}.failed").unlink(missing_ok=True)
+        (folder / f"{name}.built").touch()
+        (folder / f"{name}.failed").unlink(missing_ok=True)
     except OSError:  # an unwritable cache: the next run is readable again, as if never built
         pass
 

@@ -17,9 +17,8 @@ M, G, MU, KP, KD = 0.045, 9.81, 0.7, 1200.0, 20.0  #: the scene's part [kg], g [
 
 
 def _scene(overrides: dict | None = None, **doc_changes):
-    doc = load_scene("pinch_hold").document
-    doc = {**doc, **doc_changes}
-    return parse_scene(doc, overrides, load_scene("pinch_hold").file)
+    base = load_scene("pinch_hold")
+    return parse_scene({**base.document, **doc_changes}, overrides, base.file)
 
 
 def test_the_part_is_held_without_creeping_for_ten_seconds():

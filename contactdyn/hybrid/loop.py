@@ -121,9 +121,7 @@ class HybridRun:
         #: of its pipeline's check (``paths`` says which path each mode took)
         self.fallbacks: dict[str, int] = {}
         #: the modes the compiled call runs (every one it packs; the others on the readable model)
-        self.pipelines = LivePipelines(system, PipelineMode)
-        if not compiled:  # this run on the readable model only (contactdyn.first_run)
-            self.pipelines.use = False
+        self.pipelines = LivePipelines(system, PipelineMode, use=compiled)  # (not: the readable model only)
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)

@@ -57,8 +57,9 @@ class LivePipelines:
 
     use = True  #: False only for the benchmarks' and tests' before/after comparison: every mode on System.evaluate
 
-    def __init__(self, system, wrap: Callable = lambda pipe: pipe) -> None:
+    def __init__(self, system, wrap: Callable = lambda pipe: pipe, use: bool = True) -> None:
         self.system, self.wrap = system, wrap
+        self.use = use and type(self).use  #: this run's modes on the pipeline (``use``: False, a readable run)
         #: (structure(modes), phase.key()) -> its pipeline (wrapped), or why not (undeclared)
         self.pipes: dict[tuple, object] = {}
         self.declines: dict[tuple, str] = {}  #: the same keys -> pack.unsupported's reason ("": it packs them)

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SceneError, close_matches
+from ..errors import RobotError, SceneError, close_matches
 from ..laws.drives import DriveTable, read_drive_table
 from ..laws.elements import STAGE_LAWS, ChainSpec, Element, Mass, Stage
 from ..laws.friction_laws import FRICTION_LAWS, FrictionSpec
@@ -385,8 +385,7 @@ def _read_body(name: str, r: Reader) -> BodySpec:
 
 def _urdf_body(r: Reader, urdf: str) -> tuple[float, np.ndarray]:
     """(mass [kg], axis) of a body read off its URDF (``urdf``; then no ``mass`` or ``axis`` of its own)."""
-    from ..errors import RobotError
-    from ..robot.body import load_body
+    from ..robot.body import load_body  # (Pinocchio: imported for a scene that has such a body only)
 
     for key in ("mass", "axis"):
         if r.has(key):
