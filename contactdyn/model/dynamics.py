@@ -220,8 +220,8 @@ class SampleTerms:
     J_ang: np.ndarray  #: the tip's angular Jacobian (3, nv)
     drift_ang: np.ndarray  #: J̇_ω q̇ [rad/s²]
     x_d: np.ndarray | None  #: the reference (carried by its body, if one carries it); None: the phase has none
-    v_d: np.ndarray | None
-    a_d: np.ndarray | None  #: (without a carrier's acceleration: the Measurement's)
+    v_d: np.ndarray | None  #: the reference's velocity [m/s]
+    a_d: np.ndarray | None  #: the reference's acceleration [m/s²] (without a carrier's: the Measurement's)
     force_d: dict[str, tuple[float, float]]  #: per set-point (F_d [N], Ḟ_d [N/s])
 
 

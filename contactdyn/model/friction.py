@@ -148,7 +148,7 @@ def launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMod
     kept on the system: the same (t, x, modes, phase) asked again (a mode's check against the compiled call where it
     starts, just after the transition that chose it) is answered without its ~8 evaluations."""
     key = (t, x.tobytes(), tuple(modes))
-    kept = getattr(system, "launch_kept", None)
+    kept = system.launch_kept
     if kept is not None and kept[1] is phase and kept[0] == key:
         return list(kept[2])
     out = _launch_directions_at(system, t, x, modes, phase)
