@@ -79,18 +79,23 @@ def test_the_part_is_a_body_read_off_its_urdf():
 
 
 @pytest.mark.parametrize("body, key, words", [
-    ({"urdf": "point_mass_xz"}, "body.part.urdf", "one prismatic joint"),  # two joints
+    ({"urdf": "SKEWED"}, "body.part.urdf", "mutually orthogonal"),  # two prismatic joints at 45°
     ({"urdf": "REVOLUTE"}, "body.part.urdf", "revolute"),
     ({"urdf": "part_cylinder.urdf", "mass": 1.0}, "body.part.mass", "no mass or axis beside urdf"),
     ({"urdf": "no_such_body"}, "body.part.urdf", "no_such_body"),
 ])
-def test_a_body_urdf_that_is_not_one_prismatic_joint_is_one_clear_error(tmp_path, body, key, words):
+def test_a_body_urdf_that_is_not_orthogonal_prismatic_joints_is_one_clear_error(tmp_path, body, key, words):
     from contactdyn.errors import SceneError
 
+    sims = Path(__file__).parent.parent / "sims"
     if body["urdf"] == "REVOLUTE":
-        text = (Path(__file__).parent.parent / "sims" / "part_cylinder.urdf").read_text()
+        text = (sims / "part_cylinder.urdf").read_text()
         body = {"urdf": str(tmp_path / "spun.urdf")}
         Path(body["urdf"]).write_text(text.replace('type="prismatic"', 'type="revolute"'))
+    elif body["urdf"] == "SKEWED":
+        text = (sims / "box_xz.urdf").read_text()
+        body = {"urdf": str(tmp_path / "skewed.urdf")}
+        Path(body["urdf"]).write_text(text.replace('<axis xyz="0 0 1"/>', '<axis xyz="1 0 1"/>'))
     doc = dict(load_scene("pinch_hold").document)
     doc["body"] = {"part": body}
     with pytest.raises(SceneError) as err:

@@ -46,18 +46,21 @@ __all__ = ["chain_forces", "ChainArrays", "pack", "chain_call", "chain_motion", 
 TIP, ANCHOR = int(NodeKind.TIP), int(NodeKind.ANCHOR)
 
 #: the plan's header (int64): constants, then where each section starts (a section: its row count, its rows)
-(H_NQ, H_ENERGY, H_BODY, H_BOND, H_INTERFACE, H_ROBOT_SURFACE, H_ENV_SURFACE, H_ROBOT_KIND, H_ENV_KIND,
+(H_NQ, H_ENERGY, H_COORDS, H_BOND, H_INTERFACE, H_ROBOT_SURFACE, H_ENV_SURFACE, H_ROBOT_KIND, H_ENV_KIND,
  H_SOLID, H_ALIASES_BEFORE, H_JUNCTIONS, H_ALIASES_AFTER, H_FREE_ENDS, H_ACTIVE, HEADER) = range(16)
-#: the sections' rows: solid (node, kind, coordinate), alias (node, node it follows), free end (node, node it
-#: rests on, its state slot or -1), active (stage); a junction is (node, slot, algebraic, n) then n (stage, below)
-SOLID_ROW, ALIAS_ROW, FREE_END_ROW, JUNCTION_ROW, JUNCTION_STAGE_ROW = 3, 2, 3, 4, 2
+#: the sections' rows: body coordinates (coordinate, the side it carries: ON_TIP or ON_ANCHOR, its u·axis in
+#: ``consts[K_UA + slot]``: slot), solid (node, kind, coordinate), alias (node, node it follows), free end (node,
+#: node it rests on, its state slot or -1), active (stage); a junction is (node, slot, algebraic, n) then n
+#: (stage, below)
+COORD_ROW, SOLID_ROW, ALIAS_ROW, FREE_END_ROW, JUNCTION_ROW, JUNCTION_STAGE_ROW = 3, 3, 2, 3, 4, 2
 #: a stage's ints: its nodes, its law's address (0: Python), its parameters in ``consts``, where its force acts
 S_LOWER, S_UPPER, S_LAW, S_PARAMS_AT, S_N_PARAMS, S_UPPER_ON, S_LOWER_ON = range(7)
 ON_NOTHING, ON_TIP, ON_ANCHOR = -1, -2, -3  #: where a stage's force acts (a mass: its coordinate, >= 0)
 #: a stage's coefficients: k [N/m], b [N·s/m]; (K, B) of an affine law, F = K x + B ẋ (nan for another)
 C_K, C_B, C_KA, C_BA = range(4)
-#: ``consts``: u (3), u·(the body's axis) [-], Baumgarte's ω [1/s], then the stages' law parameters
-K_U, K_U_AXIS, K_OMEGA, K_PARAMS = 0, 3, 4, 5
+#: ``consts``: u (3), u·axis [-] of the touching body's coordinates (3 slots) and the surface body's (3), Baumgarte's
+#: ω [1/s], then the stages' law parameters
+K_U, K_UA, K_OMEGA, K_PARAMS = 0, 3, 9, 10
 #: a stage's state at the last call: compression x [m], rate ẋ [m/s], force F [N], F at ẋ = 0 [N]
 X, XDOT, F, F_ELASTIC = range(4)
 
@@ -88,7 +91,15 @@ def pack(system, c: Contact, dc: DirectionalChain, touching: bool, relaxing: boo
         junction_rows += [j, slot, int(algebraic), len(active)]
         for k in active:
             junction_rows += [k, int(stages[k].upper in group)]  # below j: the stage pushes j up
+    sides = ((c.touch_coords, ON_TIP, 0), (c.surface_coords, ON_ANCHOR, 3))
+    ua = np.zeros(6)
+    coords = []
+    for side, on, first in sides:
+        for k, (i, axis) in enumerate(side):
+            ua[first + k] = float(dc.u @ axis)
+            coords.append((i, on, first + k))
     sections = {
+        H_COORDS: _section(coords),
         H_SOLID: _section([(i, int(nodes[i].kind), nodes[i].coord) for i in plan.solid]),
         H_ALIASES_BEFORE: _section([(a, b) for a, b in plan.aliases if b not in plan.junction_nodes]),
         H_JUNCTIONS: junction_rows,
@@ -97,7 +108,7 @@ def pack(system, c: Contact, dc: DirectionalChain, touching: bool, relaxing: boo
         H_ACTIVE: _section([(k,) for k in plan.active]),
     }
     header = [0] * HEADER
-    header[H_NQ], header[H_ENERGY], header[H_BODY] = system.nQ, system.energy_slot, c.body_index
+    header[H_NQ], header[H_ENERGY] = system.nQ, system.energy_slot
     header[H_BOND], header[H_INTERFACE] = int(plan.bond), plan.interface_stage
     header[H_ROBOT_SURFACE], header[H_ENV_SURFACE] = chain.robot_surface, chain.env_surface
     header[H_ROBOT_KIND], header[H_ENV_KIND] = int(nodes[chain.robot_surface].kind), int(nodes[chain.env_surface].kind)
@@ -106,7 +117,7 @@ def pack(system, c: Contact, dc: DirectionalChain, touching: bool, relaxing: boo
         header[h] = HEADER + len(body)
         body += rows
     stage_ints, coef, params = _stage_tables(nodes, stages, dict(plan.aliases))
-    consts = np.array([*dc.u, float(dc.u @ c.body_axis), system.stabilization, *params], dtype=float)
+    consts = np.array([*dc.u, *ua, system.stabilization, *params], dtype=float)
     python_stages = [(k, stages[k]) for k in plan.active if stage_ints[k, S_LAW] == 0]
     return ChainArrays(np.array(header + body, dtype=np.int64), stage_ints, coef, consts,
                        np.zeros((2, len(nodes))), np.zeros((len(stages), 4)), list(plan.active), python_stages,
@@ -215,9 +226,11 @@ def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics) -> np.n
         kind = nodes[node].kind
         if kind == NodeKind.TIP:
             row[: system.nv] += sign * (u @ kin.J)
+            for i, axis in c.touch_coords:
+                row[i] += sign * float(u @ axis)
         elif kind == NodeKind.ANCHOR:
-            if c.body_index >= 0:
-                row[c.body_index] += sign * float(u @ c.body_axis)
+            for i, axis in c.surface_coords:
+                row[i] += sign * float(u @ axis)
         else:
             row[nodes[node].coord] += sign
     return row
@@ -376,9 +389,12 @@ def chain_loads(plan, stages, consts, drift, f, ydot, motion, stage_state):
         tip_F, anchor_F = _act(stages[k, S_LOWER_ON], -1.0 * force, tip_F, anchor_F, f)
         if energy >= 0:
             ydot[energy + 1] += (force - stage_state[k, F_ELASTIC]) * stage_state[k, XDOT]  # damper power [W]
-    body = plan[H_BODY]
-    if body >= 0 and anchor_F != 0.0:
-        f[body] += anchor_F * consts[K_U_AXIS]
+    at = plan[H_COORDS]
+    for r in range(plan[at]):  # the bodies' coordinates carrying the tip (a touching body) or the anchor
+        i, on, slot = plan[at + 1 + COORD_ROW * r], plan[at + 2 + COORD_ROW * r], plan[at + 3 + COORD_ROW * r]
+        force = tip_F if on == ON_TIP else anchor_F
+        if force != 0.0:
+            f[i] += force * consts[K_UA + slot]
     pos, vel = motion[0], motion[1]
     rs, es = plan[H_ROBOT_SURFACE], plan[H_ENV_SURFACE]
     gap = pos[rs] - pos[es]

@@ -97,8 +97,7 @@ def contact_row(system, c: Contact, u: np.ndarray, kin: Kinematics) -> np.ndarra
     """Generalized row [m/m or m/rad] of the relative tip–environment motion along the unit direction u."""
     row = np.zeros(system.nQ)
     row[: system.nv] = u @ kin.J
-    if c.body_index >= 0:
-        row[c.body_index] -= u @ c.body_axis
+    c.add_columns(row[None], u[None])
     return row
 
 

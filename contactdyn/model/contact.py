@@ -162,14 +162,19 @@ class DirectionalChain:
 
 
 class Contact:
-    """Runtime of one contact interface; the system gives it coordinates and state slots."""
+    """Runtime of one contact interface; the system gives it coordinates and state slots.
 
-    def __init__(self, spec: ContactSpec, fid: int, body_index: int, body_axis: np.ndarray):
+    Its two sides: the touching one, a robot frame (``fid``) or a body's point (``fid`` −1, the spec's
+    ``frame_point``), and the surface, the ground or a body. A body side moves by its coordinates:
+    ``touch_coords`` and ``surface_coords`` list each (index in Q, unit axis), so a point of it is its place at
+    the coordinates 0 plus Σ axis Q [m]."""
+
+    def __init__(self, spec: ContactSpec, fid: int, touch_coords: list, surface_coords: list):
         self.spec = spec
         self.name = spec.name
         self.fid = fid
-        self.body_index = body_index  #: generalized coordinate of the body (-1: ground)
-        self.body_axis = body_axis  #: unit direction of the body's travel (zero for ground)
+        self.touch_coords = tuple(touch_coords)  #: the touching body's (coordinate, axis); () for a robot frame
+        self.surface_coords = tuple(surface_coords)  #: the surface body's (coordinate, axis); () for the ground
         where = f"contact.{spec.name}"
         self.normal = DirectionalChain(build_chain(spec.normal_chain, f"{where}.normal"), spec.normal, "n")
         self.tangent_chains: list[DirectionalChain] = []
@@ -198,6 +203,36 @@ class Contact:
 
     def surface(self, x: np.ndarray, nQ: int) -> tuple[np.ndarray, np.ndarray]:
         """(p_env [m], v_env [m/s]): the contact point on the environment, carried by its body if any."""
-        if self.body_index >= 0:
-            return self.spec.point + self.body_axis * x[self.body_index], self.body_axis * x[nQ + self.body_index]
-        return self.spec.point, np.zeros(3)
+        return _carried(self.spec.point, self.surface_coords, x, nQ)
+
+    def toucher(self, x: np.ndarray, nQ: int) -> tuple[np.ndarray, np.ndarray]:
+        """(p [m], v [m/s]) of a touching body's point (``fid`` −1)."""
+        return _carried(self.spec.frame_point, self.touch_coords, x, nQ)
+
+    def add_columns(self, rows: np.ndarray, U: np.ndarray) -> None:
+        """Add to ``rows`` (k, nQ) the body coordinates' part of the relative motion (touching side − surface) along
+        the unit directions U (k, 3) [m/m] (the robot's part is U J)."""
+        for coords, sign in ((self.touch_coords, 1.0), (self.surface_coords, -1.0)):
+            for i, axis in coords:
+                rows[:, i] += sign * (U @ axis)
+
+    def rates(self, qd: np.ndarray) -> tuple[np.ndarray | None, np.ndarray]:
+        """(the touching body's point's velocity or None, the surface point's) [m/s] at coordinate rates ``qd``
+        (Q̇, or Q̈ for the accelerations [m/s²]: the axes are fixed)."""
+        def moved(coords):
+            v = np.zeros(3)
+            for i, axis in coords:
+                v = v + axis * qd[i]
+            return v
+        return (moved(self.touch_coords) if self.touch_coords else None), moved(self.surface_coords)
+
+
+def _carried(point: np.ndarray, coords, x: np.ndarray, nQ: int) -> tuple[np.ndarray, np.ndarray]:
+    """(p [m], v [m/s]) of a point that is ``point`` at the coordinates 0 and moves with ``coords``."""
+    if not coords:
+        return point, np.zeros(3)
+    (i, axis), *more = coords
+    p, v = point + axis * x[i], axis * x[nQ + i]
+    for i, axis in more:
+        p, v = p + axis * x[i], v + axis * x[nQ + i]
+    return p, v

@@ -85,8 +85,9 @@ def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np
     system.robot.update(x[:nv], x[nQ:nQ + nv])
     kin = system.kinematics(c, x)
     qdd = xdot[nQ:2 * nQ]
-    a_env = c.body_axis * qdd[c.body_index] if c.body_index >= 0 else np.zeros(3)
-    return c.tangents @ (kin.J @ qdd[:nv] + kin.drift - a_env)
+    a_touch, a_env = c.rates(qdd)
+    a_tip = kin.J @ qdd[:nv] + kin.drift
+    return c.tangents @ ((a_tip if a_touch is None else a_tip + a_touch) - a_env)
 
 
 def launching(mode: ContactMode) -> bool:
@@ -177,8 +178,9 @@ def slip_velocity(system, c: Contact, kin: Kinematics, qd: np.ndarray | None = N
     """Tangential tip–environment velocity [m/s] in tangent coordinates (at Q̇ = qd if given)."""
     if qd is None:
         return c.tangents @ (kin.v_tip - kin.v_env)
-    v_env = c.body_axis * qd[c.body_index] if c.body_index >= 0 else np.zeros(3)
-    return c.tangents @ (kin.J @ qd[: system.nv] - v_env)
+    v_touch, v_env = c.rates(qd)
+    v_tip = kin.J @ qd[: system.nv]
+    return c.tangents @ ((v_tip if v_touch is None else v_tip + v_touch) - v_env)
 
 
 def initial_slip(c: Contact, kin: Kinematics) -> tuple[float, ...]:
@@ -211,8 +213,7 @@ def friction_terms(system, c: Contact, mode: ContactMode, kin: Kinematics, row: 
     if mode.touching:
         R_T = np.zeros((len(T), nQ))  # generalized rows of the tangential slip
         R_T[:, :nv] = T @ kin.J
-        if c.body_index >= 0:
-            R_T[:, c.body_index] -= T @ c.body_axis
+        c.add_columns(R_T, T)
     if mode.touching and mode.stuck:
         for i in range(len(T)):
             rows.add(R_T[i], float(T[i] @ kin.drift) + system.stabilization * float(vt[i]), (c.name, "t", i))

@@ -26,7 +26,8 @@ The state layout: which part of the scene owns which slot of the state x
 Q [m, rad] holds the second-order coordinates, in this order:
 
 1. the robot's active joints (nv of them);
-2. one coordinate per active environment body (a cart), along its axis [m];
+2. per active environment body its coordinates (one for a cart; up to three orthogonal ones), along their
+   axes [m];
 3. one per equivalent mass of a deformation chain (Part I's models a, b), along the
    chain's direction [m];
 4. one motor angle per elastic transmission [rad] (:mod:`contactdyn.laws.drives`).
@@ -89,8 +90,17 @@ class System:
         nv = self.nv = self.robot.nv
         # ---- generalized coordinates: robot, bodies, chain masses, motors (the state layout, below) ----
         self.body_names = list(scene.bodies)
-        self.body_index = {name: nv + i for i, name in enumerate(self.body_names)}
-        diag: list[float] = [b.mass for b in scene.bodies.values()]
+        #: per body, its coordinates' (index in Q, unit axis): one for a cart, up to three orthogonal ones
+        self.body_coords: dict[str, list[tuple[int, np.ndarray]]] = {}
+        coords = [(name, c) for name, b in scene.bodies.items() for c in b.coordinates]
+        for i, (name, c) in enumerate(coords):
+            self.body_coords.setdefault(name, []).append((nv + i, c.axis))
+        self.body_index = {name: cs[0][0] for name, cs in self.body_coords.items()}  #: a body's first coordinate
+        #: per body coordinate: (its channels' prefix, index in Q): body.<b> for a one-coordinate body, else
+        #: body.<b>.<joint>
+        self.body_channels = [(f"body.{name}" if len(scene.bodies[name].coordinates) == 1 else
+                               f"body.{name}.{c.joint}", nv + i) for i, (name, c) in enumerate(coords)]
+        diag: list[float] = [c.mass for _, c in coords]
         self.contacts = [self._contact_of(spec) for spec in scene.contacts.values()]
         self.mass_labels, n_first = assign_chain_slots(self.contacts, nv, diag)
         self.drives = self._build_drives(nv + len(diag))  # elastic transmissions: motor angles after the masses
@@ -99,9 +109,8 @@ class System:
         self.M_rest = np.asarray(diag, float)  #: inertia of the non-robot coordinates [kg, kg·m² for motors]
         #: [N] the non-robot coordinates' weights: a body's m g·axis (g the world's, robot.gravity), 0 for the others
         self.weights = np.zeros(len(diag))
-        self.weights[: len(self.body_names)] = [b.mass * float(scene.robot.gravity @ b.axis)
-                                               for b in scene.bodies.values()]
-        self.M_rest[: len(self.body_names)] += self.drives.reflected[nv:]  # rotor inertia through a wheel
+        self.weights[: len(coords)] = [c.mass * float(scene.robot.gravity @ c.axis) for _, c in coords]
+        self.M_rest[: len(coords)] += self.drives.reflected[nv:]  # rotor inertia through a wheel
         self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
         #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (zero: no motor)
         self._D_ctl = np.diag(self.drives.model_reflected[:nv])
@@ -129,21 +138,24 @@ class System:
         self.launch_kept: tuple | None = None
 
     def _contact_of(self, spec) -> Contact:
+        """A contact: its touching side a robot frame or a body's point (``frame_point``), its surface the ground
+        or a body, each body side by its coordinates."""
+        if spec.frame_point is not None:  # a body touches
+            return Contact(spec, -1, self.body_coords[spec.frame], self.body_coords.get(spec.body, []))
         try:
             fid = self.robot.frame_id(spec.frame)
         except RobotError as exc:
             raise SceneError(f"contact.{spec.name}.frame", "a frame of the robot", exc, self.scene.file) from None
-        idx = self.body_index.get(spec.body, -1)
-        axis = self.scene.bodies[spec.body].axis if spec.body in self.scene.bodies else np.zeros(3)
-        return Contact(spec, fid, idx, axis)
+        return Contact(spec, fid, [], self.body_coords.get(spec.body, []))
 
     def _build_drives(self, first_motor_coord: int) -> Drives:
         names = list(self.robot.joint_names)
         specs = self.scene.robot.drive.expand(self.nv, names)
         coords = list(range(self.nv))
-        for name, b in self.scene.bodies.items():
-            specs += b.drive.expand(1, [name])
-            coords.append(self.body_index[name])
+        for prefix, index in self.body_channels:
+            name = prefix.removeprefix("body.")
+            specs += self.scene.bodies[name.split(".")[0]].drive.expand(1, [name])
+            coords.append(index)
             names.append(name)
         return Drives(specs, coords, names, first_motor_coord)
 
@@ -169,7 +181,8 @@ class System:
         nQ, nv = self.nQ, self.nv
         x[:nv], x[nQ:nQ + nv] = q, v
         for name, b in self.scene.bodies.items():
-            x[self.body_index[name]], x[nQ + self.body_index[name]] = b.position0, b.velocity0
+            for (i, _), c in zip(self.body_coords[name], b.coordinates, strict=True):
+                x[i], x[nQ + i] = c.position0, c.velocity0
         self.drives.initial(x, nQ)
         robot.update(q, v)
         modes = []
@@ -210,8 +223,11 @@ class System:
     # ---- kinematics and inertia ------------------------------------------------------------
     def kinematics(self, c: Contact, x: np.ndarray) -> Kinematics:
         """Contact kinematics at x; requires ``robot.update`` at x's (q, q̇) first."""
-        ft = self.robot.frame_terms(c.fid)
         p_env, v_env = c.surface(x, self.nQ)
+        if c.fid < 0:  # a body's point touches: no robot joint moves it
+            p_tip, v_tip = c.toucher(x, self.nQ)
+            return Kinematics(p_tip, v_tip, np.zeros((3, self.nv)), np.zeros(3), p_env, v_env)
+        ft = self.robot.frame_terms(c.fid)
         return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env, ft)
 
     def mass_matrix(self) -> np.ndarray:

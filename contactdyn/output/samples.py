@@ -17,7 +17,7 @@ class Samples:
     """Per-sample diagnostics of one segment, as arrays (what Result channels are made of)."""
 
     def __init__(self, n: int, system):
-        nv, nb = system.nv, len(system.body_names)
+        nv, nb = system.nv, len(system.body_channels)  # (one per body coordinate)
         self.tau = np.zeros((n, nv))  #: the drives' applied joint torques [N·m or N]
         self.tau_cmd = np.zeros((n, nv))  #: the controller's command [N·m or N; V for voltage controllers]
         self.u = np.full((n, len(system.drives.specs)), np.nan)  #: voltage per drive [V], NaN for ideal drives
@@ -26,7 +26,7 @@ class Samples:
         self.tip = np.zeros((n, 3))  #: the controlled tip's position [m]
         self.x_d = np.full((n, 3), np.nan)  #: the tip's reference [m], NaN where the law has none
         self.has_x_d = False  #: some sample has a reference
-        self.body_force = np.zeros((n, nb))  #: the drive force on each active body [N]
+        self.body_force = np.zeros((n, nb))  #: the drive force on each body coordinate [N]
         self.F_n = {c.name: np.zeros(n) for c in system.contacts}  #: normal force [N], > 0 pressing
         self.gap = {c.name: np.zeros(n) for c in system.contacts}  #: normal gap [m], 0 while touching
         self.F_d = {key: np.full(n, np.nan) for key in system.force_directions}  #: set-point force [N] (NaN: none)

@@ -30,7 +30,8 @@ from .budget import check_budget
 from .reader import MAX_DEPTH, Reader, check_depth, read_toml
 
 __all__ = [
-    "Scene", "RobotSpec", "JointDynamicsSpec", "BodySpec", "ContactSpec", "ChainSpec", "Stage", "Mass", "FrictionSpec",
+    "Scene", "RobotSpec", "JointDynamicsSpec", "BodySpec", "BodyCoordinate", "ContactSpec", "ChainSpec", "Stage",
+    "Mass", "FrictionSpec",
     "PhaseSpec", "ReferenceSpec", "SolverSpec", "load_scene", "parse_scene", "apply_overrides",
     "parse_override", "sims_dir", "scene_dirs", "find_scene",
 ]
@@ -50,22 +51,44 @@ class ContactSpec:
     friction: FrictionSpec | None
     tangent_chain: ChainSpec | None  #: chain used along each tangent (bonded at touch)
     bonded: bool  #: never separates (e.g. benchmark B1)
+    #: [m] when ``frame`` names a body: its touching point (world, at the body's coordinates 0); else None
+    frame_point: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class BodyCoordinate:
+    """One coordinate of a body: a direction it translates along."""
+
+    joint: str  #: its name: the URDF's joint ("" for a body given by mass and axis)
+    axis: np.ndarray  #: unit direction of travel (world)
+    mass: float  #: [kg] the mass moving along it
+    position0: float  #: [m] initial value
+    velocity0: float  #: [m/s] initial rate
 
 
 @dataclass(frozen=True)
 class BodySpec:
-    """An active 1-DOF environment body (a cart) translating along ``axis``: its mass and axis given, or read off
-    a URDF with one prismatic joint (``urdf``, :mod:`contactdyn.robot.body`)."""
+    """An active environment body translating along one axis (a cart: its mass and axis given, or read off a URDF
+    with one prismatic joint), or along two or three orthogonal axes (a URDF whose joints are all prismatic):
+    one coordinate per axis (:mod:`contactdyn.robot.body`)."""
 
     name: str
-    mass: float  #: [kg]
-    axis: np.ndarray  #: unit direction of travel (world)
-    position0: float  #: [m] initial coordinate
-    velocity0: float  #: [m/s] initial velocity
-    servo_velocity: float | None  #: velocity servo set-point [m/s], None: no drive force
+    mass: float  #: [kg] the body's mass (all its links)
+    coordinates: tuple[BodyCoordinate, ...]  #: one per axis, in the URDF's joint order
+    servo_velocity: float | None  #: velocity servo set-point [m/s], None: no drive force (one coordinate only)
     servo_gain: float  #: [N·s/m], F = gain (v_ref − v), realised by the body's drive
     drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.laws.drives)
-    urdf: str | None = None  #: the URDF the mass and axis come from (its visuals drawn by the viewer), or None
+    urdf: str | None = None  #: the URDF the mass and axes come from (its visuals drawn by the viewer), or None
+
+    @property
+    def axis(self) -> np.ndarray:
+        """The unit direction of travel of a body with one coordinate (the first one's otherwise)."""
+        return self.coordinates[0].axis
+
+    @property
+    def axes(self) -> np.ndarray:
+        """(k, 3) the coordinates' unit directions (world)."""
+        return np.array([c.axis for c in self.coordinates])
 
 
 @dataclass(frozen=True)
@@ -363,16 +386,25 @@ def _read_body(name: str, r: Reader) -> BodySpec:
     servo = r.sub("servo", {})
     urdf = urdf_beside_scene(r.str("urdf"), r.file) if r.has("urdf") else None
     if urdf is not None:
-        mass, axis = _urdf_body(r, urdf)
+        mass, joints = _urdf_body(r, urdf)
     else:
         mass = r.float("mass", lo=0.0, lo_open=True, unit="kg")
-        axis = r.vector("axis", [1.0, 0.0, 0.0], size=3, unit_norm=True)
+        joints = [("", r.vector("axis", [1.0, 0.0, 0.0], size=3, unit_norm=True), mass)]
+    k = len(joints)
+    if k == 1:
+        p0, v0 = [r.float("position0", 0.0, unit="m")], [r.float("velocity0", 0.0, unit="m/s")]
+    else:  # one value per coordinate
+        p0 = r.vector("position0", np.zeros(k), size=k, unit="m").tolist()
+        v0 = r.vector("velocity0", np.zeros(k), size=k, unit="m/s").tolist()
+        for key in ("servo", "drive"):
+            if r.has(key):
+                raise r.error(key, f"no {key} on a body with {k} coordinates (a drive acts on a one-coordinate "
+                              "body)", r.raw(key))
     spec = BodySpec(
         name=name,
         mass=mass,
-        axis=axis,
-        position0=r.float("position0", 0.0, unit="m"),
-        velocity0=r.float("velocity0", 0.0, unit="m/s"),
+        coordinates=tuple(BodyCoordinate(j, axis, m, p, v) for (j, axis, m), p, v in zip(joints, p0, v0,
+                                                                                          strict=True)),
         servo_velocity=servo.float("velocity", None, unit="m/s") if servo.has("velocity") else None,
         servo_gain=servo.float("gain", 1e3, lo=0.0, unit="N·s/m"),
         drive=read_drive_table(r.sub("drive", {}), per_joint=False),
@@ -383,8 +415,9 @@ def _read_body(name: str, r: Reader) -> BodySpec:
     return spec
 
 
-def _urdf_body(r: Reader, urdf: str) -> tuple[float, np.ndarray]:
-    """(mass [kg], axis) of a body read off its URDF (``urdf``; then no ``mass`` or ``axis`` of its own)."""
+def _urdf_body(r: Reader, urdf: str) -> tuple[float, list[tuple[str, np.ndarray, float]]]:
+    """(mass [kg], per joint (name, unit axis, the mass moving along it [kg])) of a body read off its URDF
+    (``urdf``; then no ``mass`` or ``axis`` of its own)."""
     from ..robot.body import load_body  # (Pinocchio: imported for a scene that has such a body only)
 
     for key in ("mass", "axis"):
@@ -393,8 +426,8 @@ def _urdf_body(r: Reader, urdf: str) -> tuple[float, np.ndarray]:
     try:
         body = load_body(urdf)
     except RobotError as exc:
-        raise r.error("urdf", "a URDF whose one joint is prismatic", exc) from None
-    return body.mass, body.axis
+        raise r.error("urdf", "a URDF whose joints are prismatic and mutually orthogonal", exc) from None
+    return body.mass, list(zip(body.joints, body.axes, body.masses, strict=True))
 
 
 def _read_elements(r: Reader, name: str) -> tuple[Element, ...]:
@@ -472,9 +505,19 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
         if tangent_chain.rigid:
             raise tangent_r.error("environment", "a deformation chain (a rigid tangential bond is a stick)", [])
     tangent_r.finish()
+    frame = r.str("frame", tip)  # default: the robot's tip frame (one line swaps robots)
+    frame_point = None
+    if frame in bodies:  # a body's point touches
+        if frame == body:
+            raise r.error("frame", f"a frame of another body than the surface's ({body!r})", frame)
+        frame_point = r.vector("frame_point", size=3, unit="m")
+    elif r.has("frame_point"):
+        raise r.error("frame_point", f"no frame_point: frame {frame!r} is a robot frame (frame_point places a "
+                      f"body's touching point; bodies: {list(bodies)})", r.raw("frame_point"))
     spec = ContactSpec(
         name=name,
-        frame=r.str("frame", tip),  # default: the robot's tip frame (one line swaps robots)
+        frame=frame,
+        frame_point=frame_point,
         body=body,
         point=r.vector("point", size=3, unit="m"),
         normal=normal,
@@ -537,6 +580,8 @@ def _read_reference(r: Reader, bodies: dict[str, BodySpec]) -> ReferenceSpec:
     body = r.str("body", "ground", choices=["ground", *bodies])
     if body != "ground" and space != "task":
         raise r.error("body", "'ground' for a joint-space reference (only a task reference rides on a body)", body)
+    if body != "ground" and len(bodies[body].coordinates) > 1:
+        raise r.error("body", "'ground' or a body with one coordinate (a reference rides along one axis)", body)
     start = r.vector("start", None) if r.has("start") else None
     moves = []
     for m in r.tables("moves"):

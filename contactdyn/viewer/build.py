@@ -48,12 +48,14 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
 
     contacts = list(scene.contacts.values()) if scene else []
     bodies = scene.bodies if scene else {}
-    drawn = frozenset(name for name, b in bodies.items() if b.urdf is not None and ch(f"body.{name}.x") is not None)
-    for name in sorted(drawn):  # a body from a URDF: its own visuals, moving with its coordinate
-        notes += add_body(writer, bodies[name].urdf, ch(f"body.{name}.x"), f"{GROUPS['bodies']}/{name}")
-    tips = {c.name: _frame_positions(robot, q, c.frame) for c in contacts}
-    disp = {name: np.outer(ch(f"body.{name}.x") if f"body.{name}.x" in result.channels else np.zeros(len(idx)),
-                           b.axis) for name, b in bodies.items()}
+    coords = {name: _coordinates(result, name, b, idx) for name, b in bodies.items()}
+    drawn = frozenset(name for name, b in bodies.items() if b.urdf is not None and coords[name] is not None)
+    for name in sorted(drawn):  # a body from a URDF: its own visuals, moving with its coordinates
+        notes += add_body(writer, bodies[name].urdf, coords[name], f"{GROUPS['bodies']}/{name}")
+    disp = {name: (np.zeros((len(idx), 3)) if coords[name] is None else coords[name] @ b.axes)
+            for name, b in bodies.items()}
+    tips = {c.name: disp[c.frame] + c.frame_point if c.frame_point is not None else
+            _frame_positions(robot, q, c.frame) for c in contacts}
     body, body_radii = geometry_spheres(robot, q[:: max(1, len(q) // 50)])
     points = [body, *tips.values(), *(c.point[None] for c in contacts)]
     cloud = np.concatenate(points) if points else np.zeros((1, 3))
@@ -89,13 +91,18 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
                   + ("" if both else f" / {per['tangent']:g} N"), 0.04 * V, label_rotation,
                   v0.tip.mean(axis=0) + 0.5 * V * v0.u - 0.5 * V * v0.e1)
 
+        def offset_at(body: str, t: float) -> np.ndarray:
+            """[m] a body's displacement at t (0 for the ground or a body without channels)."""
+            x = _coordinates(result, body, bodies[body], slice(None)) if body in bodies else None
+            return np.zeros(3) if x is None else np.array([np.interp(t, t_all, col) for col in x.T]) @ \
+                bodies[body].axes
+
         def tips_at(name: str, t: float) -> tuple[np.ndarray, np.ndarray]:
-            qt = np.array([np.interp(t, t_all, q_all[:, j]) for j in range(q_all.shape[1])])
             spec = scene.contacts[name]
-            d = np.zeros(3)
-            if spec.body in bodies and f"body.{spec.body}.x" in result.channels:
-                d = np.interp(t, t_all, result[f"body.{spec.body}.x"]) * bodies[spec.body].axis
-            return robot.frame_position(qt, spec.frame), d
+            if spec.frame_point is not None:  # a body's point touches
+                return spec.frame_point + offset_at(spec.frame, t), offset_at(spec.body, t)
+            qt = np.array([np.interp(t, t_all, q_all[:, j]) for j in range(q_all.shape[1])])
+            return robot.frame_position(qt, spec.frame), offset_at(spec.body, t)
 
         legend += add_impacts(writer, views, result.impacts, tips_at, L, IMPACT_HOLD * speed, float(times[-1]),
                               GROUPS["environment"])
@@ -127,6 +134,15 @@ def _frames(n: int, max_frames: int) -> np.ndarray:
     stride = max(1, math.ceil(n / max(max_frames, 2)))
     idx = np.arange(0, n, stride)
     return idx if idx[-1] == n - 1 else np.append(idx, n - 1)
+
+
+def _coordinates(result: Result, name: str, body, idx) -> np.ndarray | None:
+    """(frames, k) a body's coordinates [m] at the samples ``idx`` (None when the run has no channel of them)."""
+    one = len(body.coordinates) == 1
+    names = [f"body.{name}.x" if one else f"body.{name}.{c.joint}.x" for c in body.coordinates]
+    if any(n not in result.channels for n in names):
+        return None
+    return np.column_stack([np.asarray(result.channels[n])[idx] for n in names])
 
 
 def _frame_positions(robot: Robot, q: np.ndarray, frame: str) -> np.ndarray:

@@ -75,11 +75,12 @@ def add_robot(writer: SceneWriter, robot: Robot, q: np.ndarray, root: str) -> li
 
 
 def add_body(writer: SceneWriter, urdf: str, x: np.ndarray, root: str) -> list[str]:
-    """A body's URDF visuals (:mod:`contactdyn.robot.body`) under ``root``, its joint at the body's coordinate
-    ``x`` [m] per frame; notes on what could not be drawn."""
+    """A body's URDF visuals (:mod:`contactdyn.robot.body`) under ``root``, its joints at the body's coordinates
+    ``x`` [m] per frame ((frames,) or (frames, k)); notes on what could not be drawn."""
     from ..robot.body import load_body
 
-    return add_robot(writer, load_body(urdf).robot, np.asarray(x, float)[:, None], root)
+    x = np.asarray(x, float)
+    return add_robot(writer, load_body(urdf).robot, x[:, None] if x.ndim == 1 else x, root)
 
 
 def _shape_parts(geom: pin.GeometryObject) -> list[tuple[str, object, object, np.ndarray]]:

@@ -18,7 +18,7 @@ import numpy as np
 
 from ...laws.abi import call_friction
 from ...numerics.compile_cache import njit
-from ..chain_forces import chain_call
+from ..chain_forces import COORD_ROW, H_COORDS, K_U, K_UA, ON_ANCHOR, ON_TIP, chain_call
 from .pack import (
     ANCHOR,
     CH_COEF,
@@ -37,10 +37,8 @@ from .pack import (
     CH_STAGES,
     CH_STATE,
     CH_W,
-    CI_BODY,
     CI_FIRST_T,
     CI_FP_AT,
-    CI_FRAME,
     CI_FRICTION,
     CI_IMPULSE,
     CI_LAW,
@@ -53,10 +51,8 @@ from .pack import (
     CI_STICK_ROW,
     CI_TOUCHING,
     CI_W,
-    CR_AXIS,
     CR_MU_K,
     CR_MU_S,
-    CR_POINT,
     CR_R,
     CR_T,
     CR_VISCOUS,
@@ -84,6 +80,7 @@ from .pack import (
     W_DIAG,
     section,
 )
+from .sides import add_coordinates, contact_sides
 
 __all__ = ["contact_terms", "limit_rows", "finish"]
 
@@ -107,21 +104,25 @@ def _chain(x, ints, reals, work, ch, p_tip, v_tip, p_env, v_env, drift, f, ydot)
 
 
 @njit(cache=True)
-def _bond_row(reals, ch, J, body, G, C):
+def _bond_row(ints, reals, ch, J, G, C):
     """The bond row of the chain whose ints are ``ch`` (model.chain_forces._bond_row): the two surfaces' relative
-    motion along u."""
+    motion along u (the tip's and the anchor's body coordinates: the plan's H_COORDS, their u·axis in its
+    constants)."""
     r = ch[CH_ROW]
-    u = reals[ch[CH_CONSTS]:ch[CH_CONSTS] + 3]
-    u_axis = reals[ch[CH_CONSTS] + 3]
+    consts = reals[ch[CH_CONSTS]:ch[CH_CONSTS] + ch[CH_NCONSTS]]
+    plan = ints[ch[CH_PLAN]:ch[CH_STAGES]]
+    at = plan[H_COORDS]
     for kind, coord, sign in ((ch[CH_ROBOT_KIND], ch[CH_ROBOT_COORD], 1.0), (ch[CH_ENV_KIND], ch[CH_ENV_COORD], -1.0)):
         if kind == TIP:
             for c in range(J.shape[1]):
-                G[r, c] += sign * (u[0] * J[0, c] + u[1] * J[1, c] + u[2] * J[2, c])
-        elif kind == ANCHOR:
-            if body >= 0:
-                G[r, body] += sign * u_axis
-        else:
+                G[r, c] += sign * (consts[K_U] * J[0, c] + consts[K_U + 1] * J[1, c] + consts[K_U + 2] * J[2, c])
+        elif kind != ANCHOR:
             G[r, coord] += sign
+        if kind == TIP or kind == ANCHOR:  # the body coordinates that carry this node
+            on = ON_TIP if kind == TIP else ON_ANCHOR
+            for k in range(plan[at]):
+                if plan[at + 2 + COORD_ROW * k] == on:
+                    G[r, plan[at + 1 + COORD_ROW * k]] += sign * consts[K_UA + plan[at + 3 + COORD_ROW * k]]
     for c in range(G.shape[1]):  # (element by element: a slice assignment compiles numba's shape check and message)
         C[r, c] = G[r, c]
 
@@ -129,25 +130,18 @@ def _bond_row(reals, ch, J, body, G, C):
 @njit(cache=True)
 def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, events, pending):
     """Every contact's chains, rows and friction into f, ydot, G, C, γ, events; False if a stage law gave no force."""
-    nQ = ints[NQ]
     cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
     chains = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)
     for ci in range(cs.shape[0]):
         row = cs[ci]
         cr = reals[row[CI_REALS]:]
-        fi, body = row[CI_FRAME], row[CI_BODY]
-        J = FJ[fi, :3]
-        p_env, v_env = cr[CR_POINT:CR_POINT + 3].copy(), np.zeros(3)
-        if body >= 0:
-            for i in range(3):
-                p_env[i] = cr[CR_POINT + i] + cr[CR_AXIS + i] * x[body]
-                v_env[i] = cr[CR_AXIS + i] * x[nQ + body]
+        J, p_tip, v_tip, drift, p_env, v_env = contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv)
         tip_force = np.zeros(3)
         F_n = 0.0
         for k in range(row[CI_NORMAL], row[CI_FIRST_T] + row[CI_N_T]):
             ch = chains[k]
-            tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, Fp[fi], Fv[fi], p_env, v_env,
-                                                          Fa[fi, :3], f, ydot)
+            tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, p_tip, v_tip, p_env, v_env,
+                                                          drift, f, ydot)
             if not finite:
                 return False
             work[ints[W_DIAG] + 1 + k] = interface_F  # (diagnostics: a tangential chain's interface force)
@@ -157,12 +151,11 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, ev
                 F_n = interface_F
                 events[EV_W * ci + EV_GAP] = 0.0 if row[CI_TOUCHING] else gap
             if ch[CH_ROW] >= 0:
-                _bond_row(reals, ch, J, body, G, C)
+                _bond_row(ints, reals, ch, J, G, C)
                 gamma[ch[CH_ROW]] = gam
         events[EV_W * ci + EV_FN] = F_n
         if row[CI_NT]:
-            _friction(x, ints, reals, ci, row, cr, J, Fa[fi, :3], Fv[fi], v_env, F_n, f, G, C, gamma, events,
-                      pending)
+            _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, F_n, f, G, C, gamma, events, pending)
         if tip_force[0] != 0.0 or tip_force[1] != 0.0 or tip_force[2] != 0.0:
             for c in range(J.shape[1]):
                 f[c] += J[0, c] * tip_force[0] + J[1, c] * tip_force[1] + J[2, c] * tip_force[2]
@@ -173,7 +166,7 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, ev
 def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, F_n, f, G, C, gamma, events, pending):
     """A friction contact's slip velocity, and its stick rows, or its slide (the tilt of its normal column or its
     known force on the coordinates), as model.friction.friction_terms."""
-    nv, nQ, nt, body = ints[NV], ints[NQ], row[CI_NT], row[CI_BODY]
+    nv, nQ, nt = ints[NV], ints[NQ], row[CI_NT]
     T = cr[CR_T:CR_T + 3 * nt].reshape((nt, 3))
     ev = events[EV_W * ci:EV_W * (ci + 1)]
     vt = np.zeros(nt)
@@ -187,8 +180,7 @@ def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, F_n, f, G, C,
     for i in range(nt):
         for c in range(nv):
             R_T[i, c] = T[i, 0] * J[0, c] + T[i, 1] * J[1, c] + T[i, 2] * J[2, c]
-        if body >= 0:
-            R_T[i, body] -= T[i, 0] * cr[CR_AXIS] + T[i, 1] * cr[CR_AXIS + 1] + T[i, 2] * cr[CR_AXIS + 2]
+    add_coordinates(ints, row, cr, T, R_T)
     if row[CI_FRICTION] == FRICTION_STICK:
         w = reals[RH_OMEGA]
         for i in range(nt):

@@ -32,12 +32,9 @@ from .kkt import kkt_solve
 from .pack import (
     ANY_MOTOR,
     CARRIER,
-    CI_BODY,
     CI_REALS,
     CI_TOUCHING,
     CI_W,
-    CR_AXIS,
-    CR_POINT,
     EV_FN,
     EV_W,
     I_CONTACTS,
@@ -60,6 +57,7 @@ from .pack import (
     Z_AT,
     section,
 )
+from .sides import surface_point
 
 __all__ = ["controller_terms", "carried_coordinate", "solve_through_drives", "fold_rates"]
 
@@ -78,7 +76,7 @@ def _at(lay, k):
 @njit(cache=True, inline="always")
 def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
     """The set-points' fields of the buffer (those the layout has)."""
-    nQ, ns, nr = ints[NQ], ints[N_FORCES], ints[N_ROWS]
+    ns, nr = ints[N_FORCES], ints[N_ROWS]
     F_d, dirs, rate = set_points(t, ints, reals)
     chain = ints[ints[I_FOLD] + ns + nr:ints[I_FOLD] + 2 * ns + nr]  # per set-point its chain (-1: a normal one)
     owner = ints[ints[I_FOLD] + 2 * ns + nr:ints[I_FOLD] + 3 * ns + nr]  # and its contact
@@ -103,11 +101,11 @@ def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
             buf[at_read + s] = events[EV_W * ci + EV_FN] if chain[s] < 0 else work[ints[W_DIAG] + 1 + chain[s]]
         row = cs[ci]
         cr = reals[row[CI_REALS]:]
-        body = row[CI_BODY]
-        for i in range(3 if n_p else 0):  # the undeformed surface's point and velocity (dynamics.surface_points)
-            p = cr[CR_POINT + i] + cr[CR_AXIS + i] * x[body] if body >= 0 else cr[CR_POINT + i]
-            buf[at_p + 3 * s + i] = p + shift[s, i]
-            buf[at_v + 3 * s + i] = cr[CR_AXIS + i] * x[nQ + body] if body >= 0 else 0.0
+        if n_p:  # the undeformed surface's point and velocity (dynamics.surface_points)
+            p_env, v_env = surface_point(x, ints, row, cr)
+            for i in range(3):
+                buf[at_p + 3 * s + i] = p_env[i] + shift[s, i]
+                buf[at_v + 3 * s + i] = v_env[i]
         if n_touch:
             buf[at_touch + s] = 1.0 if row[CI_TOUCHING] else 0.0
     at_tc, n_tc = _at(lay, np.int64(F_TAU_C))

@@ -23,11 +23,9 @@ import numpy as np
 
 from ...numerics.compile_cache import njit
 from .pack import (
-    CI_BODY,
     CI_FRAME,
     CI_REALS,
     CI_W,
-    CR_AXIS,
     CR_R,
     CR_T,
     I_CONTACTS,
@@ -39,6 +37,7 @@ from .pack import (
     RH_SLIP_BAND,
     section,
 )
+from .sides import add_coordinate_rates, relative_velocity
 
 __all__ = ["launch_start", "launch_settled", "launch_took", "ST_CONTACT"]
 
@@ -108,11 +107,7 @@ def _past_band(x, ints, trial, state, j, Fv):
     """Contact j's slip already ahead of its reference r by more than the stick band: v_t · r > v_ε [m/s]."""
     row = _contact(ints, j)
     cr = trial[row[CI_REALS]:]
-    body = row[CI_BODY]
-    v = Fv[row[CI_FRAME]].copy()
-    if body >= 0:
-        for i in range(3):
-            v[i] -= cr[CR_AXIS + i] * x[ints[NQ] + body]
+    v = relative_velocity(x, ints, row, cr, Fv)
     T = cr[CR_T:CR_T + 6].reshape((2, 3))
     ahead = 0.0
     for k in range(2):
@@ -127,13 +122,12 @@ def _cross(ints, trial, j, xdot, FJ, Fa):
     nv, nQ = ints[NV], ints[NQ]
     row = _contact(ints, j)
     cr = trial[row[CI_REALS]:]
-    fi, body = row[CI_FRAME], row[CI_BODY]
+    fi = row[CI_FRAME]
     acc = Fa[fi, :3].copy()
     for r in range(3):
         for c in range(nv):
             acc[r] += FJ[fi, r, c] * xdot[nQ + c]
-        if body >= 0:
-            acc[r] -= cr[CR_AXIS + r] * xdot[nQ + body]
+    add_coordinate_rates(ints, row, cr, xdot[nQ:2 * nQ], acc)
     a = np.zeros(2)
     for k in range(2):
         a[k] = cr[CR_T + 3 * k] * acc[0] + cr[CR_T + 3 * k + 1] * acc[1] + cr[CR_T + 3 * k + 2] * acc[2]

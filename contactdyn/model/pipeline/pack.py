@@ -86,12 +86,15 @@ FEEDFORWARDS = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}  #: a c
 #: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
-#: a contact's ints (friction: FRICTION_* below; rows: -1 none; law: the friction law's address, 0 constant μ_k)
-(CI_FRAME, CI_BODY, CI_TOUCHING, CI_FRICTION, CI_NT, CI_LAW, CI_N_FP, CI_FP_AT, CI_NORMAL, CI_FIRST_T, CI_N_T,
+#: a contact's ints (frame: its packed frame, the zero frame after them for a body's point; coords: where its
+#: bodies' coordinates are in ints, [n touching side, n surface side, their indices]; friction: FRICTION_* below;
+#: rows: -1 none; law: the friction law's address, 0 constant μ_k)
+(CI_FRAME, CI_COORDS, CI_TOUCHING, CI_FRICTION, CI_NT, CI_LAW, CI_N_FP, CI_FP_AT, CI_NORMAL, CI_FIRST_T, CI_N_T,
  CI_NORMAL_ROW, CI_STICK_ROW, CI_IMPULSE, CI_REALS, CI_W) = range(16)
 FRICTION_NONE, FRICTION_STICK, FRICTION_SLIDE, FRICTION_APART = 0, 1, 2, 3
-#: a contact's reals: point [m], body axis, tangents (2 rows of 3), slip reference r, μ_s, μ_k, viscous [N·s/m]
-CR_POINT, CR_AXIS, CR_T, CR_R, CR_MU_S, CR_MU_K, CR_VISCOUS, CR_W = 0, 3, 6, 12, 14, 15, 16, 17
+#: a contact's reals: surface point [m], a touching body's point [m] (else 0), tangents (2 rows of 3), slip
+#: reference r, μ_s, μ_k, viscous [N·s/m], then its bodies' coordinates' unit axes (3 each, as in CI_COORDS)
+CR_POINT, CR_TOUCH, CR_T, CR_R, CR_MU_S, CR_MU_K, CR_VISCOUS, CR_AXES = 0, 3, 6, 12, 14, 15, 16, 17
 #: a chain's ints: where its plan, stage table, coefficients and constants are (ints, reals), its buffers (work),
 #: its bond row (-1: none) and the bond's two surface nodes (kind, coordinate), its anchor offset (reals)
 (CH_PLAN, CH_STAGES, CH_NS, CH_COEF, CH_CONSTS, CH_NCONSTS, CH_MOTION, CH_NNODES, CH_STATE, CH_ROW, CH_ROBOT_KIND,
@@ -248,7 +251,7 @@ def pack(system, modes, phase) -> Packed:
     b.real_section(R_RIGID, table)
     b.real_section(R_MREST, system.M_rest)
     b.real_section(R_WEIGHTS, system.weights)  # [N] the non-robot coordinates' weights (a body's m g·axis)
-    fids = list(dict.fromkeys([system.tip_fid, *(c.fid for c in system.contacts)]))
+    fids = list(dict.fromkeys([system.tip_fid, *(c.fid for c in system.contacts if c.fid >= 0)]))
     _frames(b, system, fids)
     h[TIP_FRAME] = 0
     meta = _contacts(b, system, modes, fids)
@@ -334,10 +337,15 @@ def _contacts(b: _Builder, system, modes, fids: list[int]) -> list[tuple[str, st
         T[:nt] = c.tangents[:nt]
         r = np.zeros(2)
         r[:len(m.slip)] = m.slip
-        reals_at = b.real_section(None, [*c.spec.point, *c.body_axis, *T.ravel(), *r,
-                                         *((fr.mu_s, fr.mu_k, fr.viscous) if nt else (0.0, 0.0, 0.0))])
+        coords = [*c.touch_coords, *c.surface_coords]
+        coords_at = b.int_section(None, [len(c.touch_coords), len(c.surface_coords), *(i for i, _ in coords)])
+        touch = c.spec.frame_point if c.fid < 0 else np.zeros(3)
+        reals_at = b.real_section(None, [*c.spec.point, *touch, *T.ravel(), *r,
+                                         *((fr.mu_s, fr.mu_k, fr.viscous) if nt else (0.0, 0.0, 0.0)),
+                                         *(v for _, axis in coords for v in axis)])
+        frame = fids.index(c.fid) if c.fid >= 0 else len(fids)  # a body's point: the zero frame after the others
         h[contact_at + CI_W * ci:contact_at + CI_W * (ci + 1)] = [
-            fids.index(c.fid), c.body_index, int(m.touching), friction, nt, law, len(fr.params) if nt else 0, fp_at,
+            frame, coords_at, int(m.touching), friction, nt, law, len(fr.params) if nt else 0, fp_at,
             first, first + 1, len(c.tangent_chains), normal_row, stick_row, system.impulse_slots.get(c.name, -1),
             reals_at]
     return meta
@@ -374,7 +382,7 @@ def _chain(b: _Builder, system, c, m, dc, tangent: int, at: int, row: int) -> No
 
     def surface(node: int) -> tuple[int, int]:
         n = chain.nodes[node]
-        return int(n.kind), (c.body_index if n.kind == NodeKind.ANCHOR else n.coord)
+        return int(n.kind), n.coord  # (a tip's and an anchor's coordinates: the plan's H_COORDS)
 
     b.ints[at:at + CH_W] = [plan_at, stages_at, len(chain.stages), coef_at, consts_at, a.consts.size, motion_at,
                             len(chain.nodes), state_at, row, *surface(chain.robot_surface),

@@ -50,12 +50,13 @@ def robot_terms(x, ints, reals):
 
 @njit(cache=True)
 def frame_terms(x, ints, reals, W, Jw):
-    """Per packed frame: J (nf, 6, nv), J̇q̇ (nf, 6), p (nf, 3) [m], ṗ (nf, 3) [m/s], R (nf, 3, 3)."""
+    """Per packed frame: J (nf, 6, nv), J̇q̇ (nf, 6), p (nf, 3) [m], ṗ (nf, 3) [m/s], R (nf, 3, 3); then one zero
+    frame (row nf: what a body's touching point has of the robot)."""
     nv, nQ, nf = ints[NV], ints[NQ], ints[N_FRAMES]
     rows = section(ints, ints[I_FRAMES], nf, FI_W)
     consts = section(reals, ints[R_FRAMES], nf, FR_W)
-    FJ, Fa, Fp, Fv, FR = np.zeros((nf, 6, nv)), np.zeros((nf, 6)), np.zeros((nf, 3)), np.zeros((nf, 3)), \
-        np.zeros((nf, 3, 3))
+    FJ, Fa, Fp, Fv, FR = np.zeros((nf + 1, 6, nv)), np.zeros((nf + 1, 6)), np.zeros((nf + 1, 3)), \
+        np.zeros((nf + 1, 3)), np.zeros((nf + 1, 3, 3))
     for k in range(nf):
         support = ints[rows[k, FI_SUPPORT]:rows[k, FI_SUPPORT] + rows[k, FI_N_SUPPORT]]
         frame_motion(W, rows[k, FI_JOINT], Jw, consts[k], support, FJ[k], Fa[k], Fp[k], FR[k])
