@@ -442,3 +442,19 @@ def test_a_body_from_a_urdf_is_drawn_with_its_visuals_and_its_path():
     track = next(clip(scene, p.rsplit("/", 1)[0]) for p in part)["position"]
     assert values(track)[:, 2] == pytest.approx(result["body.part.x"], abs=1e-6)  # (float32 in the scene)
     assert result["body.part.x"][-1] < -0.1  # it fell ~0.2 m in 0.2 s
+
+
+def test_a_body_with_two_coordinates_is_drawn_moving_with_both_and_its_path_traced():
+    """push_box's box (sims/box_xz.urdf, x and z slides): its cube's track follows both coordinates, its path is a
+    trace under /meshcat/bodies, and its bottom's contact point (a body's point touching) is drawn where it is."""
+    result = contactdyn.simulate("push_box", {"solver.output_rate": 50})
+    scene = build_scene(result)
+    paths = [c["path"] for c in scene.commands if c["type"] == "set_object"]
+    box = [p for p in paths if p.startswith("/meshcat/bodies/box/")]
+    assert box and "/meshcat/bodies/box_path" in paths
+    track = values(next(clip(scene, p.rsplit("/", 1)[0]) for p in box)["position"])
+    assert track[:, 0] == pytest.approx(0.3 + result["body.box.slide.x"], abs=1e-6)  # (float32 in the scene)
+    assert track[:, 2] == pytest.approx(0.05 + result["body.box.lift.x"], abs=1e-6)  # (its visual 50 mm up)
+    assert np.ptp(result["body.box.slide.x"]) > 0.15
+    floor = values(clip(scene, "/meshcat/tool/floor/ball")["position"])
+    assert floor[:, 0] == pytest.approx(0.3 + result["body.box.slide.x"], abs=1e-6)

@@ -174,10 +174,9 @@ def _body_velocity(result: Result) -> list[Panel] | None:
     bodies = result.meta.get("bodies") or sorted({k.split(".")[1] for k in result.channels
                                                   if k.startswith("body.") and k.endswith(".v")})
     lines = []
-    for b in bodies:
-        if f"body.{b}.v" not in result.channels:
-            continue
-        lines.append(Line(result.t, result[f"body.{b}.v"], f"v_{b}"))
+    for b in bodies:  # one line per coordinate: body.<b>.v, or body.<b>.<joint>.v for a body with several
+        for key in sorted(k for k in result.channels if k.startswith(f"body.{b}.") and k.endswith(".v")):
+            lines.append(Line(result.t, result[key], "v_" + key[len("body."):-len(".v")]))
         servo = result.scene.get("body", {}).get(b, {}).get("servo", {})
         if isinstance(servo, dict) and "velocity" in servo:
             lines.append(Line(result.t, np.full_like(result.t, float(servo["velocity"])), f"v_{b} set-point", "--"))

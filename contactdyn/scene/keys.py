@@ -77,20 +77,24 @@ MEANINGS: dict[str, str] = {
     "robot.drive": "drives of the joints: a kind and its parameters, each a scalar or one per joint",
     # drives: robot.drive.* and body.<body>.drive.* from the kinds' declarations (_drive_rows)
     # bodies
-    "body.<body>": "an active body translating along its axis; its weight m g·axis acts on it (g = robot.gravity)",
-    "body.<body>.urdf": "the body from a URDF whose one joint is prismatic: its mass, axis and visuals (then no "
-                        "mass or axis; a path beside the scene or a name in urdf/)",
+    "body.<body>": "an active body translating along its axis (or its URDF's two or three orthogonal axes, one "
+                   "coordinate each); its weight m g·axis acts on each coordinate (g = robot.gravity)",
+    "body.<body>.urdf": "the body from a URDF whose one to three joints are prismatic and orthogonal: its masses, "
+                        "axes and visuals (then no mass or axis; a path beside the scene or a name in urdf/)",
     "body.<body>.mass": "mass",
     "body.<body>.axis": "direction of travel in the world",
-    "body.<body>.position0": "initial coordinate",
-    "body.<body>.velocity0": "initial velocity",
+    "body.<body>.position0": "initial coordinate (one per coordinate for a body with several)",
+    "body.<body>.velocity0": "initial velocity (one per coordinate for a body with several)",
     "body.<body>.servo": "velocity servo: F = gain (velocity - v), realised by the body's drive",
     "body.<body>.servo.velocity": "velocity set-point (none: no servo force)",
     "body.<body>.servo.gain": "servo gain",
     "body.<body>.drive": "the body's drive (same keys as robot.drive, scalars only)",
     # contacts
-    "contact.<contact>": "a contact between a robot frame and a surface",
-    "contact.<contact>.frame": "robot frame whose origin touches (default: robot.tip)",
+    "contact.<contact>": "a contact between a robot frame (or a body's point) and a surface",
+    "contact.<contact>.frame": "robot frame whose origin touches (default: robot.tip), or a body whose point "
+                               "frame_point touches",
+    "contact.<contact>.frame_point": "the touching point [m] of the body named by frame (world, at the body's "
+                                     "coordinates 0)",
     "contact.<contact>.body": "what carries the surface: the fixed ground or an active body",
     "contact.<contact>.point": "a point of the undeformed surface (world; on a body at coordinate 0)",
     "contact.<contact>.bonded": "the tip never separates (stays on the surface)",
@@ -236,6 +240,9 @@ OVERRIDES: dict[str, dict[str, str]] = {
     "contact.<contact>.normal.model": {"default": "rigid; chain when environment or robot is given"},
     "contact.<contact>.tangent.directions": {"type": "list of 3-vectors", "default": "required with friction or chain"},
     "contact.<contact>.frame": {"default": "robot.tip"},
+    "contact.<contact>.frame_point": {"type": "3-vector", "default": "required when frame is a body"},
+    "body.<body>.position0": {"type": "number, or list of numbers", "default": "0"},
+    "body.<body>.velocity0": {"type": "number, or list of numbers", "default": "0"},
     "contact.<contact>.body": {"allowed": "ground or a body name"},
     "contact.<contact>.normal.environment": {"type": "list of elements"},
     "contact.<contact>.normal.robot": {"type": "list of elements"},

@@ -13,7 +13,17 @@ from ..output.run_check import check_drawable
 from ..robot.robot import Robot
 from ..scene.scene_file import Scene
 from .camera import frame_view
-from .contact_visuals import STAGE_LENGTH, add_environment, add_forces, add_gauges, add_impacts, add_tool, contact_views
+from .contact_visuals import (
+    STAGE_LENGTH,
+    add_environment,
+    add_forces,
+    add_gauges,
+    add_impacts,
+    add_tool,
+    add_trace,
+    contact_views,
+    force_arrows,
+)
 from .robot_visuals import add_body, add_robot, geometry_spheres
 from .shapes import add_label
 from .writer import ROOT, SceneWriter, ViewerScene
@@ -48,12 +58,8 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
 
     contacts = list(scene.contacts.values()) if scene else []
     bodies = scene.bodies if scene else {}
-    coords = {name: _coordinates(result, name, b, idx) for name, b in bodies.items()}
-    drawn = frozenset(name for name, b in bodies.items() if b.urdf is not None and coords[name] is not None)
-    for name in sorted(drawn):  # a body from a URDF: its own visuals, moving with its coordinates
-        notes += add_body(writer, bodies[name].urdf, coords[name], f"{GROUPS['bodies']}/{name}")
-    disp = {name: (np.zeros((len(idx), 3)) if coords[name] is None else coords[name] @ b.axes)
-            for name, b in bodies.items()}
+    disp, drawn, body_notes = _draw_bodies(writer, result, bodies, contacts, idx)
+    notes += body_notes
     tips = {c.name: disp[c.frame] + c.frame_point if c.frame_point is not None else
             _frame_positions(robot, q, c.frame) for c in contacts}
     body, body_radii = geometry_spheres(robot, q[:: max(1, len(q) // 50)])
@@ -64,8 +70,10 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
 
     views = contact_views(scene, tips, disp, L, GROUPS["environment"]) if scene else []
     v0 = views[0] if views else None
-    label_rotation, V = frame_view(writer, cloud, radii, v0.u if v0 else None, v0.e1 if v0 else None,
-                                   body.mean(axis=0) - v0.tip.mean(axis=0) if v0 and len(body) else None)
+    arrows, per = force_arrows(views, ch) if views else ([], {})
+    label_rotation, V = _frame_with_arrows(writer, cloud, radii, arrows, v0.u if v0 else None,
+                                           v0.e1 if v0 else None,
+                                           body.mean(axis=0) - v0.tip.mean(axis=0) if v0 and len(body) else None)
     add_tool(writer, tips, V, GROUPS["tool"])
     legend = [f"run {result.meta.get('name', '?')}: {duration:g} s at {speed:g} × real time "
               f"({len(idx)} frames of {len(t_all)} samples)"]
@@ -79,7 +87,7 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
             legend.append(f"deformation chains: gauges beside the surface, compressions magnified ×{S:g}, "
                           f"{STAGE_LENGTH * L:.3g} m per stage at rest")
         unit = ARROW_UNIT * V  # [m] drawn length of one scale step
-        per = add_forces(writer, views, ch, unit, GROUPS["forces"])
+        add_forces(writer, arrows, unit, GROUPS["forces"])
         scales["arrow"] = unit / per["normal"]
         scales["arrow_tangent"] = unit / per["tangent"]
         both = per["normal"] == per["tangent"]
@@ -90,26 +98,65 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
         add_label(writer, f"{GROUPS['labels']}/forces", f"arrows: {unit:.2g} m = {per['normal']:g} N"
                   + ("" if both else f" / {per['tangent']:g} N"), 0.04 * V, label_rotation,
                   v0.tip.mean(axis=0) + 0.5 * V * v0.u - 0.5 * V * v0.e1)
-
-        def offset_at(body: str, t: float) -> np.ndarray:
-            """[m] a body's displacement at t (0 for the ground or a body without channels)."""
-            x = _coordinates(result, body, bodies[body], slice(None)) if body in bodies else None
-            return np.zeros(3) if x is None else np.array([np.interp(t, t_all, col) for col in x.T]) @ \
-                bodies[body].axes
-
-        def tips_at(name: str, t: float) -> tuple[np.ndarray, np.ndarray]:
-            spec = scene.contacts[name]
-            if spec.frame_point is not None:  # a body's point touches
-                return spec.frame_point + offset_at(spec.frame, t), offset_at(spec.body, t)
-            qt = np.array([np.interp(t, t_all, q_all[:, j]) for j in range(q_all.shape[1])])
-            return robot.frame_position(qt, spec.frame), offset_at(spec.body, t)
-
-        legend += add_impacts(writer, views, result.impacts, tips_at, L, IMPACT_HOLD * speed, float(times[-1]),
-                              GROUPS["environment"])
+        legend += add_impacts(writer, views, result.impacts, _tips_at(result, scene, robot), L, IMPACT_HOLD * speed,
+                              float(times[-1]), GROUPS["environment"])
     for name in bodies:
         if not any(v.spec.body == name for v in views):
             notes.append(f"body {name!r} carries no contact surface: not drawn")
     return ViewerScene(writer.finish(), duration, float(speed), legend, notes, dict(GROUPS), scales)
+
+
+def _draw_bodies(writer: SceneWriter, result: Result, bodies: dict, contacts: list, idx
+                 ) -> tuple[dict[str, np.ndarray], frozenset[str], list[str]]:
+    """Each body from a URDF drawn with its visuals moving with its coordinates, and each body's path (its contact
+    points' centre); (its displacement (frames, 3) [m] per body, the bodies drawn, notes)."""
+    coords = {name: _coordinates(result, name, b, idx) for name, b in bodies.items()}
+    drawn = frozenset(name for name, b in bodies.items() if b.urdf is not None and coords[name] is not None)
+    notes: list[str] = []
+    for name in sorted(drawn):
+        notes += add_body(writer, bodies[name].urdf, coords[name], f"{GROUPS['bodies']}/{name}")
+    disp = {name: (np.zeros((len(idx), 3)) if coords[name] is None else coords[name] @ b.axes)
+            for name, b in bodies.items()}
+    for name in sorted(n for n in bodies if coords[n] is not None):
+        at = [c.point for c in contacts if c.body == name] + [c.frame_point for c in contacts if c.frame == name]
+        add_trace(writer, disp[name] + (np.mean(at, axis=0) if at else np.zeros(3)),
+                  f"{GROUPS['bodies']}/{name}_path")
+    return disp, drawn, notes
+
+
+def _frame_with_arrows(writer: SceneWriter, cloud: np.ndarray, radii: np.ndarray, arrows: list, *view
+                       ) -> tuple[np.ndarray, float]:
+    """:func:`frame_view` of ``cloud`` and of the force arrows' tails: an arrow's length scales with the view
+    radius V (ARROW_UNIT · V a step), so V is found by a few passes on a scratch writer (each pass's tails inside the
+    next's view: V grows by less each time)."""
+    tips = np.concatenate([v.tip for _, _, v, _, _ in arrows]) if arrows else np.zeros((0, 3))
+    steps = np.concatenate([F for _, _, _, F, _ in arrows]) if arrows else np.zeros((0, 3))
+    points, sizes = cloud, radii
+    for _ in range(3 if arrows else 0):
+        V = frame_view(SceneWriter(np.zeros(1), 1.0), points, sizes, *view)[1]
+        points = np.concatenate([cloud, tips - steps * (ARROW_UNIT * V)])
+        sizes = np.concatenate([radii, np.zeros(len(tips))])
+    return frame_view(writer, points, sizes, *view)
+
+
+def _tips_at(result: Result, scene: Scene, robot: Robot):
+    """(t [s], contact) -> (its touching point [m], its surface body's displacement [m]) at t, interpolated."""
+    t_all, q_all = np.asarray(result["t"], float), np.asarray(result["q"], float).reshape(len(result["t"]), -1)
+    bodies = scene.bodies
+
+    def offset_at(body: str, t: float) -> np.ndarray:
+        """[m] a body's displacement at t (0 for the ground or a body without channels)."""
+        x = _coordinates(result, body, bodies[body], slice(None)) if body in bodies else None
+        return np.zeros(3) if x is None else np.array([np.interp(t, t_all, col) for col in x.T]) @ bodies[body].axes
+
+    def tips_at(name: str, t: float) -> tuple[np.ndarray, np.ndarray]:
+        spec = scene.contacts[name]
+        if spec.frame_point is not None:  # a body's point touches
+            return spec.frame_point + offset_at(spec.frame, t), offset_at(spec.body, t)
+        qt = np.array([np.interp(t, t_all, q_all[:, j]) for j in range(q_all.shape[1])])
+        return robot.frame_position(qt, spec.frame), offset_at(spec.body, t)
+
+    return tips_at
 
 
 def _robot_of(result: Result, scene: Scene | None) -> Robot:

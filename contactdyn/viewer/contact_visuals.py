@@ -32,7 +32,8 @@ from .shapes import (
 )
 from .writer import TINY, SceneWriter
 
-__all__ = ["ContactView", "contact_views", "add_environment", "add_gauges", "add_forces", "add_tool", "add_impacts",
+__all__ = ["ContactView", "contact_views", "add_environment", "add_gauges", "force_arrows", "add_forces", "add_tool",
+           "add_trace", "add_impacts",
            "COLORS"]
 
 STAGE_LENGTH = 0.1  #: ℓ, a stage's drawn length at zero compression [L]
@@ -189,15 +190,12 @@ def _draw_chain(writer: SceneWriter, path: str, chain: Chain, x: dict[str, np.nd
         writer.track(np_, "position", "vector3", np.column_stack([np.zeros(n), y[i], np.zeros(n)]))
 
 
-def add_forces(writer: SceneWriter, views: list[ContactView], ch: Channel, unit: float, root: str
-               ) -> dict[str, float]:
-    """Arrows of the normal and tangential force on the robot, ending at each contact point.
-
-    ``unit`` [m] is the drawn length of one scale step. Return the newtons per step of the normal
-    and the tangential arrows: each the 1-2-5 number putting the :data:`PERCENTILE` of its force at
-    ≤ 3 steps (peaks such as impacts may draw longer), the tangential one on its own scale when
-    its forces are below 1/:data:`SHARED_SCALE` of the normal ones (else both share the normal scale).
-    """
+def force_arrows(views: list[ContactView], ch: Channel) -> tuple[list[tuple], dict[str, float]]:
+    """The normal and tangential force on the robot at each contact, in scale steps: ((kind, name, view, force
+    (frames, 3) in steps, color) per arrow, the newtons per step of the normal and the tangential arrows). Each
+    scale is the 1-2-5 number putting the :data:`PERCENTILE` of its force at ≤ 3 steps (peaks such as impacts may
+    draw longer), the tangential one on its own scale when its forces are below 1/:data:`SHARED_SCALE` of the normal
+    ones (else both share the normal scale)."""
     forces: list[tuple[str, str, ContactView, np.ndarray, int]] = []
     for v in views:
         name = v.spec.name
@@ -219,11 +217,16 @@ def add_forces(writer: SceneWriter, views: list[ContactView], ch: Channel, unit:
     per = {kind: nice_ceil(f / 3.0) if f > 0 else 1.0 for kind, f in typical.items()}  # [N] per step
     if typical["normal"] > 0 and typical["tangent"] >= typical["normal"] / SHARED_SCALE:
         per["tangent"] = per["normal"]
-    for kind, name, v, F, color in forces:  # the force on the robot, its head at the contact point
-        vectors = F * (unit / per[kind])
+    return [(kind, name, v, F / per[kind], color) for kind, name, v, F, color in forces], per
+
+
+def add_forces(writer: SceneWriter, arrows: list[tuple], unit: float, root: str) -> None:
+    """The arrows of :func:`force_arrows`, ``unit`` [m] the drawn length of one scale step, each ending at its
+    contact point (the force on the robot)."""
+    for kind, name, v, steps, color in arrows:
+        vectors = steps * unit
         add_arrow(writer, f"{root}/{name}", v.tip - vectors, vectors, ARROW_RADIUS * unit, color,
                   order=ON_TOP + (2 if kind == "normal" else 1))  # the normal over the tangential
-    return per
 
 
 def add_tool(writer: SceneWriter, tips: dict[str, np.ndarray], size: float, root: str) -> None:
@@ -233,8 +236,13 @@ def add_tool(writer: SceneWriter, tips: dict[str, np.ndarray], size: float, root
         writer.object(f"{path}/ball", mg.Sphere(TOOL_RADIUS * size), on_top_material(COLORS["tool"]))
         writer.prop(f"{path}/ball", "renderOrder", ON_TOP + 3)
         writer.placement(f"{path}/ball", placements(tip))
-        points = np.asarray(tip, np.float32).T
-        writer.object(f"{path}/trace", mg.Line(mg.PointsGeometry(points), mg.LineBasicMaterial(color=COLORS["trace"])))
+        add_trace(writer, tip, f"{path}/trace")
+
+
+def add_trace(writer: SceneWriter, points: np.ndarray, path: str) -> None:
+    """A path through ``points`` (frames, 3) [m] as a line in :data:`COLORS` ``trace``."""
+    xyz = np.asarray(points, np.float32).T
+    writer.object(path, mg.Line(mg.PointsGeometry(xyz), mg.LineBasicMaterial(color=COLORS["trace"])))
 
 
 def add_impacts(writer: SceneWriter, views: list[ContactView], impacts: list[dict], tips_at: Callable,

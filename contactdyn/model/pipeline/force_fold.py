@@ -27,6 +27,7 @@ from ...laws.controllers.abi import FIELD, LAYOUT_HEAD
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
 from .actuation import abi_buffer, abi_call, carry, drive_command, drives, reference, set_points
+from .contacts import surface_point
 from .drives import DI_W, DW_CLIPPED, DW_W, fold_on_targets
 from .kkt import kkt_solve
 from .pack import (
@@ -57,7 +58,6 @@ from .pack import (
     Z_AT,
     section,
 )
-from .sides import surface_point
 
 __all__ = ["controller_terms", "carried_coordinate", "solve_through_drives", "fold_rates"]
 

@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from ...numerics.compile_cache import njit
+from .contacts import add_coordinate_rates, relative_velocity
 from .pack import (
     CI_FRAME,
     CI_REALS,
@@ -37,7 +38,6 @@ from .pack import (
     RH_SLIP_BAND,
     section,
 )
-from .sides import add_coordinate_rates, relative_velocity
 
 __all__ = ["launch_start", "launch_settled", "launch_took", "ST_CONTACT"]
 
