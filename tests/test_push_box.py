@@ -9,6 +9,8 @@ distance still to go μ g (t_stop − t)² / 2, both to the event tolerance.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -17,6 +19,7 @@ from contactdyn.errors import SceneError
 from contactdyn.model.paths import PIPELINE
 
 MU, G, M_BOX = 0.3, 9.81, 1.0  #: the scene's μ, gravity [m/s²] and the box's mass [kg]
+BAND = 1e-9  #: [m/s] the stick band v_ε (solver.stick_velocity's default): a stop event is where |v_t| falls to it
 
 
 @pytest.fixture(scope="module")
@@ -36,9 +39,10 @@ def test_the_released_box_slides_and_stops_where_the_closed_form_says(run):
     x_stop = x[-1]
     sliding = (r.t > t_release) & (r.t < t_stop)
     assert sliding.sum() >= 5
-    tau = t_stop - r.t[sliding]  # [s] still to go
-    np.testing.assert_allclose(v[sliding], MU * G * tau, rtol=0, atol=1e-8)  # v = μ g (t_stop − t)
-    np.testing.assert_allclose(x_stop - x[sliding], MU * G * tau ** 2 / 2, rtol=0, atol=1e-9)  # v² / (2 μ g)
+    tau = t_stop - r.t[sliding]  # [s] still to go (the stop event: at the stick band v_ε, then held)
+    np.testing.assert_allclose(v[sliding], BAND + MU * G * tau, rtol=0, atol=1e-12)  # v = μ g (t_stop − t)
+    np.testing.assert_allclose(x_stop - x[sliding], BAND * tau + MU * G * tau ** 2 / 2, rtol=0,
+                               atol=1e-12)  # v² / (2 μ g)
     stopped = r.t > t_stop
     assert np.all(v[stopped] == 0.0) and np.all(x[stopped] == x_stop)  # stuck: exactly at rest
     v_release = MU * G * (t_stop - t_release)  # [m/s] what the box left the tool with
@@ -90,3 +94,77 @@ def test_a_body_with_two_coordinates_has_their_masses_axes_and_channels(run):
     assert [c.joint for c in box.coordinates] == ["slide", "lift"] and box.mass == 1.0
     assert box.axes.tolist() == [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] and [c.mass for c in box.coordinates] == [1.0, 1.0]
     assert {"body.box.slide.x", "body.box.lift.v"} <= set(run.channels) and "body.box.x" not in run.channels
+
+
+def _stacked(tmp_path, mu_top: float):
+    """push_box with a second 1 kg box on top of the first (a contact between two bodies: the top's bottom point
+    on the lower box's top face, friction ``mu_top``)."""
+    sims = Path(__file__).parent.parent / "sims"
+    urdf = tmp_path / "top.urdf"
+    urdf.write_text((sims / "box_xz.urdf").read_text().replace('<origin xyz="0.3 0 0" rpy="0 0 0"/>',
+                                                               '<origin xyz="0.3 0 0.1" rpy="0 0 0"/>'))
+    doc, file = _doc()
+    doc = {**doc, "body": {**doc["body"], "top": {"urdf": str(urdf)}},
+           "contact": {**doc["contact"], "stack": {
+               "frame": "top", "frame_point": [0.3, 0.0, 0.1], "body": "box", "point": [0.3, 0.0, 0.1],
+               "normal": {"direction": [0.0, 0.0, 1.0]},
+               "tangent": {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu": mu_top}}}}
+    return parse_scene(doc, None, file)
+
+
+def test_a_box_on_a_box_is_left_behind_by_the_impact_dragged_at_mu_g_then_rides_stuck(tmp_path):
+    """Two bodies in contact. The tool's impact on the lower box passes no impulse to the top one (friction with a
+    finite normal force m g carries none): the top stays at rest, is dragged at μ_top g exactly until it sticks,
+    then rides stuck (its place on the lower box fixed) through the stop (the pair decelerates at μ g = 2.94 m/s²
+    < μ_top g). The lower box's top carries m g, the table 2 m g, and the pair stops v² / (2 μ g) after the
+    release as one box would."""
+    r = simulate(_stacked(tmp_path, 0.5))
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
+    (impact,) = r.impacts
+    assert impact["v_after"][2] > 0.05 and impact["v_after"][4] == 0.0  # [robot x, z, box x, z, top x, z]
+    t_impact, t_ride = impact["t"], _instant(r, "stick", "stack", impact["t"])
+    dragged = (r.t > t_impact) & (r.t < t_ride)
+    assert dragged.sum() >= 5
+    np.testing.assert_allclose(r["body.top.slide.v"][dragged], 0.5 * G * (r.t[dragged] - t_impact), rtol=0,
+                               atol=1e-9)
+    riding = r.t > t_ride
+    offset = r["body.top.slide.x"][riding] - r["body.box.slide.x"][riding]
+    assert np.ptp(offset) < 1e-12 and r["contact.stack.stuck"][riding].all()
+    np.testing.assert_allclose(r["contact.stack.F_n"], M_BOX * G, rtol=1e-9)
+    np.testing.assert_allclose(r["contact.floor.F_n"], 2 * M_BOX * G, rtol=1e-9)
+    t_release = _instant(r, "separate", "push")
+    t_stop = _instant(r, "stick", "floor", t_release)
+    sliding = (r.t > t_release) & (r.t < t_stop)
+    tau = t_stop - r.t[sliding]
+    x = r["body.box.slide.x"]
+    np.testing.assert_allclose(x[-1] - x[sliding], BAND * tau + MU * G * tau ** 2 / 2, rtol=0, atol=1e-12)
+
+
+def test_a_box_on_a_slippery_box_slides_off_at_the_stop_decelerating_at_mu_top_g(tmp_path):
+    """μ_top = 0.1: when the tool stops, the lower box decelerates faster than μ_top g; the top slides forward on
+    it with friction −μ_top m g the whole way, on the moving box and then on the stopped one: its speed is
+    μ_top g (t_end − t) from its slip to its stop."""
+    r = simulate(_stacked(tmp_path, 0.1))
+    t_slip = _instant(r, "slip", "stack", 0.5)
+    t_end = _instant(r, "stop", "stack", t_slip)
+    assert _instant(r, "stick", "floor", t_slip) < t_end  # the lower box stopped first
+    sliding = (r.t > t_slip) & (r.t < t_end)
+    assert sliding.sum() >= 20
+    np.testing.assert_allclose(r["body.top.slide.v"][sliding], BAND + 0.1 * G * (t_end - r.t[sliding]), rtol=0,
+                               atol=1e-12)
+    np.testing.assert_allclose(r["contact.stack.F_f"][sliding, 0], -0.1 * M_BOX * G, rtol=1e-9)  # on the top
+
+
+def test_two_bodies_in_contact_run_the_same_on_the_readable_model(tmp_path):
+    """The slippery stack (impact, slides, sticks, body on body) on the compiled call and on the readable model,
+    the whole run at rtol 1e-11: the same events, each channel within 1e-9 of its largest value (+1e-10)."""
+    scene = _stacked(tmp_path, 0.1)
+    scene = parse_scene({**scene.document, "solver": {**scene.document["solver"], "rtol": 1e-11, "atol": 1e-13}},
+                        None, scene.file)
+    fast, readable = simulate(scene), simulate(scene, compiled=False)
+    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in readable.events]
+    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in readable.events], rtol=0, atol=1e-9)
+    for key, ref in readable.channels.items():
+        ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
+        scale = float(np.nanmax(np.abs(ref))) if ref.size and not np.all(np.isnan(ref)) else 0.0
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9 * scale + 1e-10, err_msg=key)
