@@ -40,7 +40,8 @@ MEANINGS: dict[str, str] = {
     "description": "one line shown by `contactdyn list scenes`",
     "duration": "simulated time",
     "robot": "the robot: its URDF, tip frame, initial posture and drives",
-    "body": "active environment bodies (1-DOF carts), one table per body: [body.<name>]",
+    "body": "active environment bodies (carts; bodies on up to three orthogonal slides), one table per body: "
+            "[body.<name>]",
     "contact": "contact interfaces, one table per contact: [contact.<name>]",
     "controller": "the controller of every phase; a phase's own [phase.controller] table overrides its keys",
     "phase": "task phases, in order ([[phase]]); none: one phase 'main' over the whole run",

@@ -1,7 +1,7 @@
 """Scenes: a TOML file validated into typed, frozen objects.
 
 A scene composes a robot, environment bodies (a fixed ground is always there; active
-1-DOF bodies such as a cart are named under ``[body.<name>]``), contact interfaces
+bodies such as a cart, or a box on two slides, are named under ``[body.<name>]``), contact interfaces
 (``[contact.<name>]``), a controller with task phases (``[[phase]]``) and solver
 settings. Every value is checked; an error names the file, the key path, what was
 expected and what was found. Overrides by key path (``contact.tip.normal.k=1e4``) apply
