@@ -168,3 +168,48 @@ def test_two_bodies_in_contact_run_the_same_on_the_readable_model(tmp_path):
         ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
         scale = float(np.nanmax(np.abs(ref))) if ref.size and not np.all(np.isnan(ref)) else 0.0
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9 * scale + 1e-10, err_msg=key)
+
+
+def _compliant(floor: dict | None = None, push: dict | None = None):
+    """push_box with a deformation model on the floor's normal (the box's point touching: its chain's tip is the
+    box) or on the push's (its anchor on the box's face)."""
+    doc, file = _doc()
+    contact = {k: dict(v) for k, v in doc["contact"].items()}
+    for name, model in (("floor", floor), ("push", push)):
+        if model:
+            contact[name]["normal"] = {**contact[name]["normal"], **model}
+    return parse_scene({**doc, "contact": contact}, None, file)
+
+
+def test_a_box_on_a_compliant_table_sinks_m_g_over_k_and_slides_on_the_chain_s_force():
+    """The floor a Kelvin–Voigt surface (model c, k = 2e5 N/m): the box (the chain's touching side) rests
+    m g / k = 49 µm deep, its friction while sliding is −μ F_n of the chain's force at every sample, and it still
+    stops where the closed form says."""
+    k = 2e5
+    r = simulate(_compliant(floor={"model": "c", "k": k, "b": 400.0}))
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
+    z, F_n = r["body.box.lift.x"], r["contact.floor.F_n"]
+    np.testing.assert_allclose(z[-5:], -M_BOX * G / k, rtol=1e-9)  # at rest, stuck, at the end
+    np.testing.assert_allclose(F_n[-5:], M_BOX * G, rtol=1e-9)
+    slid = np.abs(r["contact.floor.v_slip"][:, 0]) > 1e-6
+    np.testing.assert_allclose(r["contact.floor.F_f"][slid, 0], -MU * F_n[slid], rtol=1e-12)
+
+
+@pytest.mark.parametrize("floor, push", [
+    ({"model": "c", "k": 2e5, "b": 400.0}, None),
+    (None, {"model": "b", "k": 5e4, "b": 50.0, "m": 0.01}),  # the pad's mass between the tool and the box
+], ids=["compliant_floor", "padded_tool"])
+def test_chains_on_a_body_s_contacts_run_the_same_on_the_readable_model(floor, push):
+    """A chain whose tip is a body's point, and one whose anchor is on a body with two coordinates: the compiled
+    call and the readable model agree over the whole run (rtol 1e-12; events, every channel within 1e-9 of its
+    largest value, plus 1e-7 in SI units: a stage force is k times a compression, and the step control amplifies
+    the two paths' rounding to a few rtol·|x| in the states (~1e-12 m), ×5e4 N/m for the pad)."""
+    scene = _compliant(floor, push)
+    scene = parse_scene({**scene.document, "solver": {**scene.document["solver"], "rtol": 1e-12, "atol": 1e-14}},
+                        None, scene.file)
+    fast, readable = simulate(scene), simulate(scene, compiled=False)
+    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in readable.events]
+    for key, ref in readable.channels.items():
+        ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
+        scale = float(np.nanmax(np.abs(ref))) if ref.size and not np.all(np.isnan(ref)) else 0.0
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9 * scale + 1e-7, err_msg=key)
