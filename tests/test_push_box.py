@@ -17,6 +17,7 @@ import pytest
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.errors import SceneError
 from contactdyn.model.paths import PIPELINE
+from contactdyn.output.physics_checks import violations
 
 MU, G, M_BOX = 0.3, 9.81, 1.0  #: the scene's μ, gravity [m/s²] and the box's mass [kg]
 BAND = 1e-9  #: [m/s] the stick band v_ε (solver.stick_velocity's default): a stop event is where |v_t| falls to it
@@ -71,10 +72,12 @@ def _doc():
 
 
 @pytest.mark.parametrize("edit, key, words", [
-    (lambda d: d["contact"]["push"].update(frame_point=[0.0, 0.0, 0.0]), "contact.push.frame_point",
-     "robot frame"),
-    (lambda d: d["contact"]["floor"].pop("frame_point"), "contact.floor.frame_point", "required"),
-    (lambda d: d["contact"]["floor"].update(body="box"), "contact.floor.frame", "another body"),
+    (lambda d: d["contact"]["push"].update(frame_point=[0.0, 0.0, 0.0]), "contact.push.frame",
+     "a body beside frame_point"),
+    (lambda d: d["contact"]["floor"].pop("frame_point"), "contact.floor.frame", "with frame_point"),
+    (lambda d: d["contact"]["floor"].update(body="box"), "contact.floor.frame", "other than the surface"),
+    (lambda d: d["contact"]["floor"].update(frame_point=[0.3, float("nan"), 0.0]), "contact.floor.frame_point",
+     "finite"),
     (lambda d: d["body"]["box"].update(servo={"velocity": 0.1}), "body.box.servo", "2 coordinates"),
     (lambda d: d["body"]["box"].update(position0=0.1), "body.box.position0", "2"),
     (lambda d: d["phase"][0]["reference"].update(body="box"), "phase[0].reference.body", "one coordinate"),
@@ -85,7 +88,7 @@ def test_a_body_contact_or_coordinate_given_wrong_is_one_clear_error(edit, key, 
            "phase": [{**p, "reference": dict(p["reference"])} for p in doc["phase"]]}
     edit(doc)
     with pytest.raises(SceneError) as err:
-        parse_scene(doc, None, file)
+        simulate(parse_scene(doc, None, file))  # (a robot frame is resolved with the robot: at the run's start)
     assert key in str(err.value) and words in str(err.value), str(err.value)
 
 
@@ -213,3 +216,24 @@ def test_chains_on_a_body_s_contacts_run_the_same_on_the_readable_model(floor, p
         ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
         scale = float(np.nanmax(np.abs(ref))) if ref.size and not np.all(np.isnan(ref)) else 0.0
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9 * scale + 1e-7, err_msg=key)
+
+
+def test_the_energy_audit_closes_with_bodies_rubbing_on_bodies(tmp_path):
+    """The slippery stack with the audit on: the drives' work, the impact's loss and the friction between the boxes
+    and on the table balance the bodies' and the tool's energy to 1e-9 J."""
+    scene = _stacked(tmp_path, 0.1)
+    r = simulate(parse_scene({**scene.document, "solver": {**scene.document["solver"], "record_energy": True}},
+                             None, scene.file))
+    audit = r.meta["checks"]["energy_residual"]
+    assert audit["value"] is not None and audit["value"] < 1e-9 and violations(r.meta["checks"]) == []
+    assert r.impacts and r.impacts[0]["energy_loss"] > 1e-3  # the impact's loss is in it
+
+
+def test_a_frame_named_like_a_body_and_a_robot_frame_is_one_clear_error():
+    doc, file = _doc()
+    doc = {**doc, "body": {"tip": doc["body"]["box"]},
+           "contact": {k: {**v, "body": "tip"} if v.get("body") == "box" else
+                       {**v, "frame": "tip"} if v.get("frame") == "box" else v for k, v in doc["contact"].items()}}
+    with pytest.raises(SceneError) as err:
+        simulate(parse_scene(doc, None, file))
+    assert "contact.floor.frame" in str(err.value) and "both" in str(err.value), str(err.value)

@@ -141,11 +141,17 @@ class System:
         """A contact: its touching side a robot frame or a body's point (``frame_point``), its surface the ground
         or a body, each body side by its coordinates."""
         if spec.frame_point is not None:  # a body touches
+            if self.robot.model.existFrame(spec.frame):
+                raise SceneError(f"contact.{spec.name}.frame", "a name that is a body's or a robot frame's, not "
+                                 "both (rename the body)", f"{spec.frame!r}, both", self.scene.file)
             return Contact(spec, -1, self.body_coords[spec.frame], self.body_coords.get(spec.body, []))
         try:
             fid = self.robot.frame_id(spec.frame)
         except RobotError as exc:
-            raise SceneError(f"contact.{spec.name}.frame", "a frame of the robot", exc, self.scene.file) from None
+            hint = f" (a body's point touches with frame_point = [x, y, z] beside frame = {spec.frame!r})" \
+                if spec.frame in self.body_coords else ""
+            raise SceneError(f"contact.{spec.name}.frame", f"a frame of the robot{hint}", exc,
+                             self.scene.file) from None
         return Contact(spec, fid, [], self.body_coords.get(spec.body, []))
 
     def _build_drives(self, first_motor_coord: int) -> Drives:

@@ -507,13 +507,13 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
     tangent_r.finish()
     frame = r.str("frame", tip)  # default: the robot's tip frame (one line swaps robots)
     frame_point = None
-    if frame in bodies:  # a body's point touches
+    if r.has("frame_point"):  # a body's point touches
+        if frame not in bodies:
+            raise r.error("frame", f"a body beside frame_point (frame_point places a body's touching point; "
+                          f"bodies: {list(bodies)})", frame)
         if frame == body:
-            raise r.error("frame", f"a frame of another body than the surface's ({body!r})", frame)
+            raise r.error("frame", f"a body other than the surface's ({body!r})", frame)
         frame_point = r.vector("frame_point", size=3, unit="m")
-    elif r.has("frame_point"):
-        raise r.error("frame_point", f"no frame_point: frame {frame!r} is a robot frame (frame_point places a "
-                      f"body's touching point; bodies: {list(bodies)})", r.raw("frame_point"))
     spec = ContactSpec(
         name=name,
         frame=frame,
