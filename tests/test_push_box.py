@@ -237,3 +237,11 @@ def test_a_frame_named_like_a_body_and_a_robot_frame_is_one_clear_error():
     with pytest.raises(SceneError) as err:
         simulate(parse_scene(doc, None, file))
     assert "contact.floor.frame" in str(err.value) and "both" in str(err.value), str(err.value)
+
+
+def test_the_body_velocity_figure_has_a_line_per_coordinate(run):
+    from contactdyn.output.plots import FIGURES
+
+    (panel,) = next(s for s in FIGURES if s.name == "fig10b_body_velocity").build(run)
+    assert [line.label for line in panel.lines] == ["v_box.lift", "v_box.slide"]
+    assert np.array_equal(panel.lines[1].y, run["body.box.slide.v"])

@@ -175,8 +175,10 @@ def _body_velocity(result: Result) -> list[Panel] | None:
                                                   if k.startswith("body.") and k.endswith(".v")})
     lines = []
     for b in bodies:  # one line per coordinate: body.<b>.v, or body.<b>.<joint>.v for a body with several
-        for key in sorted(k for k in result.channels if k.startswith(f"body.{b}.") and k.endswith(".v")):
-            lines.append(Line(result.t, result[key], "v_" + key[len("body."):-len(".v")]))
+        keys = sorted(k for k in result.channels if k.startswith(f"body.{b}.") and k.endswith(".v"))
+        if not keys:
+            continue
+        lines += [Line(result.t, result[key], "v_" + key[len("body."):-len(".v")]) for key in keys]
         servo = result.scene.get("body", {}).get(b, {}).get("servo", {})
         if isinstance(servo, dict) and "velocity" in servo:
             lines.append(Line(result.t, np.full_like(result.t, float(servo["velocity"])), f"v_{b} set-point", "--"))
