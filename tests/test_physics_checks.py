@@ -186,10 +186,9 @@ def _states(result, system: System) -> np.ndarray:
     nQ, nv = system.nQ, system.nv
     xs = np.zeros((len(result.t), system.n))
     xs[:, :nv], xs[:, nQ:nQ + nv] = result["q"], result["v"]
-    for name in system.body_names:
-        i = system.body_index[name]
+    for name, i in system.body_channels:
         xs[:, i], xs[:, nQ + i] = result[f"body.{name}.x"], result[f"body.{name}.v"]
-    k = nv + len(system.body_names)
+    k = nv + len(system.body_channels)
     for label in system.mass_labels:
         xs[:, k], xs[:, nQ + k] = result[f"mass.{label}.x"], result[f"mass.{label}.v"]
         k += 1

@@ -288,9 +288,9 @@ def drive_channels(system, xs: np.ndarray, samples) -> dict[str, np.ndarray]:
     u = samples.u
     if drives.has_voltage[:nv].any():
         ch["u"] = u[:, :nv]
-    for k, (prefix, _) in enumerate(system.body_channels):
+    for k, (name, _) in enumerate(system.body_channels):
         if drives.has_voltage[nv + k]:
-            ch[f"{prefix}.u"] = u[:, nv + k]
+            ch[f"body.{name}.u"] = u[:, nv + k]
     for i, m in enumerate(drives.motor_coords):
         if m >= 0:
             ch[f"drive.{drives.names[i]}.theta"] = xs[:, m]

@@ -4,16 +4,17 @@ Part I's contact-zone models (a), (b), (c) and their generalisations are chains 
 Kelvin–Voigt stages and equivalent masses along one direction u (:mod:`contactdyn.model.chain`).
 At a state x, with the chain's touching plan (:class:`~contactdyn.model.contact.ChainPlan`):
 
-1. node motion: the tip and the anchor move with the robot and the environment body
-   (s = u·p [m], ṡ = u·ṗ [m/s]); masses are coordinates of Q; a damped junction j is a
-   first-order state whose rate balances its stages,
+1. node motion: the tip and the anchor move with the contact's two sides, the touching one (a robot frame or
+   a body's point) and the surface (the ground or a body) (s = u·p [m], ṡ = u·ṗ [m/s]); masses are
+   coordinates of Q; a damped junction j is a first-order state whose rate balances its stages,
    Σ_below (k (s_lower − s_j) + b (ṡ_lower − ṡ_j)) = Σ_above (k (s_j − s_upper) + b (ṡ_j − ṡ_upper)),
    an undamped one, or one whose stages share a time constant b/k (:func:`~contactdyn.model.chain.balanced`),
    sits where its springs balance; a damped free end is a state only while it relaxes after a
    separation, else it follows its stage's other node;
 2. stage forces F = k x + b ẋ [N] at compression x = s_lower − s_upper (or the
    Hunt–Crossley law) push the upper node along +u and the lower one back; their sums act
-   on the tip (a Cartesian force along u), the masses and the environment body;
+   on the tip (a Cartesian force along u; on a touching body's coordinates too), the masses and the
+   surface's body;
 3. with both surface nodes solid and touching, the chain is *bonded*: a constraint row
    G Q̈ + γ = 0 on the two surfaces' relative motion, stabilised by Baumgarte,
    ë + 2ω ė + ω² e = 0 on the violation e (ω = ``solver.stabilization`` [1/s]).
@@ -41,7 +42,7 @@ from ..numerics.linalg import dot3
 from .chain import NodeKind
 from .contact import Contact, DirectionalChain, Kinematics
 
-__all__ = ["chain_forces", "ChainArrays", "pack", "chain_call", "chain_motion", "chain_loads"]
+__all__ = ["chain_forces", "ChainArrays", "pack", "chain_call", "chain_motion", "chain_loads", "coordinate_row"]
 
 TIP, ANCHOR = int(NodeKind.TIP), int(NodeKind.ANCHOR)
 
@@ -154,7 +155,7 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
                  x: np.ndarray, f: np.ndarray, ydot: np.ndarray, ev, full: bool, relaxing: bool = False):
     """Apply a chain's stage forces; return (tip force along u [N], bond row or None, γ, interface F, gap).
 
-    Adds the stages' forces on masses and the body to ``f`` [N], junction rates and the
+    Adds the stages' forces on masses and the bodies' coordinates to ``f`` [N], junction rates and the
     energy audit's damper power to ``ydot``; with ``full`` records every stage's (x, ẋ, F)
     in ``ev.stages``. ``offset`` [m] shifts the anchor (tangential chains anchored at touch);
     ``relaxing``: the damped surface ends relax after a separation (``ContactMode.relaxing``).
@@ -373,7 +374,8 @@ def _stage_forces(plan, stages, coef, consts, pos, vel, stage_state):
 
 @njit(cache=True)
 def chain_loads(plan, stages, consts, drift, f, ydot, motion, stage_state):
-    """The active stages' forces on the tip, the anchor and the masses (into ``f`` [N], the anchor's on the body),
+    """The active stages' forces on the tip, the anchor and the masses (into ``f`` [N]; the tip's and the anchor's on
+    the bodies' coordinates that carry them, H_COORDS),
     the dampers' power [W] (into ``ydot``'s audit slot); (tip force along u [N], bond γ [m/s²], interface F [N],
     gap [m]). γ is the surfaces' J̇q̇ along u (``drift`` [m/s²], the tip's) plus Baumgarte's 2ω ė + ω² e."""
     energy = plan[H_ENERGY]
@@ -389,9 +391,8 @@ def chain_loads(plan, stages, consts, drift, f, ydot, motion, stage_state):
         tip_F, anchor_F = _act(stages[k, S_LOWER_ON], -1.0 * force, tip_F, anchor_F, f)
         if energy >= 0:
             ydot[energy + 1] += (force - stage_state[k, F_ELASTIC]) * stage_state[k, XDOT]  # damper power [W]
-    at = plan[H_COORDS]
-    for r in range(plan[at]):  # the bodies' coordinates carrying the tip (a touching body) or the anchor
-        i, on, slot = plan[at + 1 + COORD_ROW * r], plan[at + 2 + COORD_ROW * r], plan[at + 3 + COORD_ROW * r]
+    for r in range(plan[plan[H_COORDS]]):  # the bodies' coordinates carrying the tip (a touching body) or the anchor
+        i, on, slot = coordinate_row(plan, r)
         force = tip_F if on == ON_TIP else anchor_F
         if force != 0.0:
             f[i] += force * consts[K_UA + slot]
@@ -408,6 +409,14 @@ def chain_loads(plan, stages, consts, drift, f, ydot, motion, stage_state):
         w = consts[K_OMEGA]  # Baumgarte: the violation e obeys ë + 2ω ė + ω² e = 0, zero on the exact manifold
         gamma += 2.0 * w * (vel[rs] - vel[es]) + w * w * gap
     return tip_F, gamma, interface_F, gap
+
+
+@njit(cache=True)
+def coordinate_row(plan, r):
+    """Row r of the plan's H_COORDS section: (a body coordinate, the node it carries: ON_TIP or ON_ANCHOR, the slot
+    of its u·axis in the chain's constants, K_UA + slot)."""
+    at = plan[H_COORDS] + 1 + COORD_ROW * r
+    return plan[at], plan[at + 1], plan[at + 2]
 
 
 @njit(cache=True)

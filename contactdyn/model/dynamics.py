@@ -56,7 +56,7 @@ class Evaluation:
     stages: dict[str, tuple[float, float, float]]  #: label -> (x [m], ẋ [m/s], F [N])
     interface: dict[str, float]  #: tangential chain interface forces per "contact.t1" [N]
     tau: np.ndarray  #: joint torques [N·m or N]
-    body_force: np.ndarray  #: drive force on each active body [N]
+    body_force: np.ndarray  #: drive force on each body coordinate [N]
     p_tip: np.ndarray  #: controlled tip position [m]
     x_d: np.ndarray | None  #: reference
     force_d: dict[str, float]

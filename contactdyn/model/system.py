@@ -96,10 +96,9 @@ class System:
         for i, (name, c) in enumerate(coords):
             self.body_coords.setdefault(name, []).append((nv + i, c.axis))
         self.body_index = {name: cs[0][0] for name, cs in self.body_coords.items()}  #: a body's first coordinate
-        #: per body coordinate: (its channels' prefix, index in Q): body.<b> for a one-coordinate body, else
-        #: body.<b>.<joint>
-        self.body_channels = [(f"body.{name}" if len(scene.bodies[name].coordinates) == 1 else
-                               f"body.{name}.{c.joint}", nv + i) for i, (name, c) in enumerate(coords)]
+        #: per body coordinate: (its name: <b> for a one-coordinate body, else <b>.<joint>; its index in Q); its
+        #: channels are body.<name>.*
+        self.body_channels = _coordinate_names(scene, nv)
         diag: list[float] = [c.mass for _, c in coords]
         self.contacts = [self._contact_of(spec) for spec in scene.contacts.values()]
         self.mass_labels, n_first = assign_chain_slots(self.contacts, nv, diag)
@@ -144,7 +143,14 @@ class System:
             if self.robot.model.existFrame(spec.frame):
                 raise SceneError(f"contact.{spec.name}.frame", "a name that is a body's or a robot frame's, not "
                                  "both (rename the body)", f"{spec.frame!r}, both", self.scene.file)
-            return Contact(spec, -1, self.body_coords[spec.frame], self.body_coords.get(spec.body, []))
+            contact = Contact(spec, -1, self.body_coords[spec.frame], self.body_coords.get(spec.body, []))
+            row = np.zeros((1, self.nv + len(self.body_channels)))
+            contact.add_columns(row, spec.normal[None])
+            if not np.any(np.abs(row) > 1e-12):
+                raise SceneError(f"contact.{spec.name}.normal.direction", "a normal along which a side moves (the "
+                                 "bodies' axes are all orthogonal to it: nothing would carry its force)",
+                                 spec.normal.tolist(), self.scene.file)
+            return contact
         try:
             fid = self.robot.frame_id(spec.frame)
         except RobotError as exc:
@@ -158,12 +164,15 @@ class System:
         names = list(self.robot.joint_names)
         specs = self.scene.robot.drive.expand(self.nv, names)
         coords = list(range(self.nv))
-        for prefix, index in self.body_channels:
-            name = prefix.removeprefix("body.")
-            specs += self.scene.bodies[name.split(".")[0]].drive.expand(1, [name])
+        for (name, index), body in zip(self.body_channels, self._coordinate_bodies(), strict=True):
+            specs += body.drive.expand(1, [name])  # (a body with several coordinates: no drive, an ideal one each)
             coords.append(index)
             names.append(name)
         return Drives(specs, coords, names, first_motor_coord)
+
+    def _coordinate_bodies(self) -> list:
+        """The BodySpec of each body coordinate, in Q's order."""
+        return [b for b in self.scene.bodies.values() for _ in b.coordinates]
 
     @property
     def rotor_inertias(self) -> np.ndarray:
@@ -294,6 +303,21 @@ class System:
 
 
 # ---- the state layout (see the module docstring) --------------------------------------------------------
+def _coordinate_names(scene: Scene, nv: int) -> list[tuple[str, int]]:
+    """Per body coordinate (its name, its index in Q): the body's for a one-coordinate body, else <body>.<joint>;
+    two that would share a name (a body "a.b" beside a body "a" with a joint "b") are one SceneError."""
+    out: list[tuple[str, int]] = []
+    for name, b in scene.bodies.items():
+        for c in b.coordinates:
+            label = name if len(b.coordinates) == 1 else f"{name}.{c.joint}"
+            if any(label == other for other, _ in out):
+                raise SceneError(f"body.{name}", "body names whose coordinates' channels differ",
+                                 f"two coordinates named {label!r} (body.{label}.x)", scene.file)
+            out.append((label, nv + len(out)))
+    return out
+
+
+
 def assign_chain_slots(contacts: list[Contact], nv: int, diag: list[float]) -> tuple[list[str], int]:
     """Give every chain mass a coordinate of Q and every chain junction a slot of y.
 

@@ -138,10 +138,10 @@ def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
     ch: dict[str, np.ndarray] = {"t": t, "q": xs[:, :nv], "v": xs[:, nQ:nQ + nv], "tau": smp.tau, "tip": smp.tip}
     if smp.has_x_d:
         ch["tip_ref"] = smp.x_d
-    for k, (prefix, idx) in enumerate(system.body_channels):  # per body coordinate
-        ch[f"{prefix}.x"] = xs[:, idx]
-        ch[f"{prefix}.v"] = xs[:, nQ + idx]
-        ch[f"{prefix}.force"] = smp.body_force[:, k]
+    for k, (name, idx) in enumerate(system.body_channels):  # per body coordinate
+        ch[f"body.{name}.x"] = xs[:, idx]
+        ch[f"body.{name}.v"] = xs[:, nQ + idx]
+        ch[f"body.{name}.force"] = smp.body_force[:, k]
     for i, c in enumerate(system.contacts):
         p = f"contact.{c.name}"
         ch[f"{p}.F_n"] = smp.F_n[c.name]

@@ -93,21 +93,27 @@ def system_warnings(system) -> list[str]:
     out = []
     for c in system.contacts:
         kin = system.kinematics(c, x)
+        body_point = c.fid < 0  # a body's point touches: its coordinates' masses move it
         for dc in c.chains:
-            J_u = dc.u @ kin.J
-            mobility = float(J_u @ H_inv @ J_u)  # [1/kg] of the tip along u
+            if body_point:
+                mobility = sum(float(dc.u @ axis) ** 2 / system.M_rest[i - nv] for i, axis in c.touch_coords)
+            else:
+                J_u = dc.u @ kin.J
+                mobility = float(J_u @ H_inv @ J_u)  # [1/kg] of the tip along u
             m_tip = 1.0 / mobility if mobility > 1e-12 else math.inf  # effective mass [kg]
             spec = c.spec.normal_chain if dc.label == "n" else c.spec.tangent_chain
             out += _period_warnings(f"contact.{c.name}.{'normal' if dc.label == 'n' else 'tangent'}", spec, m_tip,
                                     step, system.scene.solver.output_rate)
         gap = float(c.normal.u @ (kin.p_tip - kin.p_env))  # [m]
+        tip, where = ("the body's point", f"frame_point, body.{c.spec.frame}.position0") if body_point else \
+            ("the tip", "point, robot.q0/tip0")
         if c.spec.bonded and abs(gap) > GAP_TOL:
-            out.append(f"contact.{c.name}: bonded, but the tip starts {gap:+.3g} m off the surface "
-                       f"(contact.{c.name}.point, robot.q0/tip0): the bond holds it there, not on the surface")
+            out.append(f"contact.{c.name}: bonded, but {tip} starts {gap:+.3g} m off the surface "
+                       f"(contact.{c.name}.{where}): the bond holds it there, not on the surface")
         elif not c.spec.bonded and gap < -GAP_TOL:
-            out.append(f"contact.{c.name}: the tip starts {-gap:.3g} m inside the surface (contact.{c.name}.point, "
-                       "robot.q0/tip0): the surface starts deformed by that depth and pushes back from t = 0")
-        elif not c.spec.bonded:
+            out.append(f"contact.{c.name}: {tip} starts {-gap:.3g} m inside the surface (contact.{c.name}.{where}): "
+                       "the surface starts deformed by that depth and pushes back from t = 0")
+        elif not c.spec.bonded and not body_point:  # (the reference moves the robot's tip, not a body)
             out += _reach_warnings(system.scene, c.name, c.normal.u, kin.p_tip, kin.p_env)
     return out
 

@@ -41,7 +41,8 @@ TANGENT_MODELS = ("free", "friction", "chain")
 @dataclass(frozen=True)
 class ContactSpec:
     name: str
-    frame: str  #: robot frame whose origin touches (default: the robot's tip frame, ``robot.tip``)
+    frame: str  #: robot frame whose origin touches (default: the robot's tip frame, ``robot.tip``), or a body
+    #: whose point ``frame_point`` touches
     body: str  #: "ground" or the name of an active body
     point: np.ndarray  #: [m] a point of the undeformed surface (world, body at coordinate 0)
     normal: np.ndarray  #: unit outward surface normal (points from environment to robot)
@@ -426,7 +427,7 @@ def _urdf_body(r: Reader, urdf: str) -> tuple[float, list[tuple[str, np.ndarray,
     try:
         body = load_body(urdf)
     except RobotError as exc:
-        raise r.error("urdf", "a URDF whose joints are prismatic and mutually orthogonal", exc) from None
+        raise r.error("urdf", "a loadable URDF of one to three orthogonal prismatic joints", exc) from None
     return body.mass, list(zip(body.joints, body.axes, body.masses, strict=True))
 
 
@@ -617,6 +618,9 @@ def _read_force(r: Reader, contacts: dict[str, ContactSpec]) -> ForceSpec:
         kind=r.str("kind", "linear", choices=list(RAMP_KINDS)),
         initial=r.float("initial", 0.0, unit="N"),
     )
+    if contacts[contact].frame_point is not None:
+        raise r.error("contact", f"a contact the robot touches (contact {contact!r}'s touching side is body "
+                      f"{contacts[contact].frame!r}: no controller sets its force)", contact)
     direction = r.str("direction", "n", choices=["n", "t1", "t2"])
     if direction != "n" and int(direction[1]) > len(contacts[contact].tangents):
         raise r.error("direction", f"'n' or one of contact {contact!r}'s {len(contacts[contact].tangents)} "

@@ -101,7 +101,7 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
         legend += add_impacts(writer, views, result.impacts, _tips_at(result, scene, robot), L, IMPACT_HOLD * speed,
                               float(times[-1]), GROUPS["environment"])
     for name in bodies:
-        if not any(v.spec.body == name for v in views):
+        if name not in drawn and not any(v.spec.body == name or v.spec.frame == name for v in views):
             notes.append(f"body {name!r} carries no contact surface: not drawn")
     return ViewerScene(writer.finish(), duration, float(speed), legend, notes, dict(GROUPS), scales)
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ...laws.abi import call_friction
 from ...numerics.compile_cache import njit
-from ..chain_forces import COORD_ROW, H_COORDS, K_U, K_UA, ON_ANCHOR, ON_TIP, chain_call
+from ..chain_forces import H_COORDS, K_U, K_UA, ON_ANCHOR, ON_TIP, chain_call, coordinate_row
 from .pack import (
     ANCHOR,
     CH_COEF,
@@ -132,14 +132,22 @@ def surface_point(x, ints, row, cr):
 
 
 @njit(cache=True)
-def contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv):
-    """(J (3, nv) of the robot's frame, p_tip [m], v_tip [m/s], J̇q̇ [m/s²], p_env [m], v_env [m/s]); a body's
-    touching point has the zero frame's J and J̇q̇ (the frames' last row)."""
+def _touching_point(x, ints, row, cr, Fp, Fv):
+    """(p_tip [m], v_tip [m/s]): the robot frame's, or a body's touching point carried by its coordinates."""
     fi = row[CI_FRAME]
     p_tip, v_tip = Fp[fi], Fv[fi]
     if ints[row[CI_COORDS]]:  # a body's point touches
         p_tip, v_tip = cr[CR_TOUCH:CR_TOUCH + 3].copy(), np.zeros(3)
         _carry(x, ints, row, cr, TOUCHING, p_tip, v_tip)
+    return p_tip, v_tip
+
+
+@njit(cache=True)
+def contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv):
+    """(J (3, nv) of the robot's frame, p_tip [m], v_tip [m/s], J̇q̇ [m/s²], p_env [m], v_env [m/s]); a body's
+    touching point has the zero frame's J and J̇q̇ (the frames' last row)."""
+    fi = row[CI_FRAME]
+    p_tip, v_tip = _touching_point(x, ints, row, cr, Fp, Fv)
     p_env, v_env = surface_point(x, ints, row, cr)
     return FJ[fi, :3], p_tip, v_tip, Fa[fi, :3], p_env, v_env
 
@@ -163,11 +171,7 @@ def add_coordinates(ints, row, cr, U, out):
 @njit(cache=True)
 def relative_velocity(x, ints, row, cr, Fv):
     """v_tip − v_env [m/s] of the contact (the robot frame's velocity from ``Fv``)."""
-    v_tip = Fv[row[CI_FRAME]]
-    if ints[row[CI_COORDS]]:  # a body's point touches
-        p, v_tip = cr[CR_TOUCH:CR_TOUCH + 3].copy(), np.zeros(3)
-        _carry(x, ints, row, cr, TOUCHING, p, v_tip)
-    return v_tip - surface_point(x, ints, row, cr)[1]
+    return _touching_point(x, ints, row, cr, Fv, Fv)[1] - surface_point(x, ints, row, cr)[1]  # (positions unused)
 
 
 @njit(cache=True)
@@ -209,7 +213,6 @@ def _bond_row(ints, reals, ch, J, G, C):
     r = ch[CH_ROW]
     consts = reals[ch[CH_CONSTS]:ch[CH_CONSTS] + ch[CH_NCONSTS]]
     plan = ints[ch[CH_PLAN]:ch[CH_STAGES]]
-    at = plan[H_COORDS]
     for kind, coord, sign in ((ch[CH_ROBOT_KIND], ch[CH_ROBOT_COORD], 1.0), (ch[CH_ENV_KIND], ch[CH_ENV_COORD], -1.0)):
         if kind == TIP:
             for c in range(J.shape[1]):
@@ -217,10 +220,10 @@ def _bond_row(ints, reals, ch, J, G, C):
         elif kind != ANCHOR:
             G[r, coord] += sign
         if kind == TIP or kind == ANCHOR:  # the body coordinates that carry this node
-            on = ON_TIP if kind == TIP else ON_ANCHOR
-            for k in range(plan[at]):
-                if plan[at + 2 + COORD_ROW * k] == on:
-                    G[r, plan[at + 1 + COORD_ROW * k]] += sign * consts[K_UA + plan[at + 3 + COORD_ROW * k]]
+            for k in range(plan[plan[H_COORDS]]):
+                i, on, slot = coordinate_row(plan, k)
+                if on == (ON_TIP if kind == TIP else ON_ANCHOR):
+                    G[r, i] += sign * consts[K_UA + slot]
     for c in range(G.shape[1]):  # (element by element: a slice assignment compiles numba's shape check and message)
         C[r, c] = G[r, c]
 
