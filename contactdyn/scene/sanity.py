@@ -100,7 +100,7 @@ def system_warnings(system) -> list[str]:
             spec = c.spec.normal_chain if dc.label == "n" else c.spec.tangent_chain
             out += _period_warnings(f"contact.{c.name}.{'normal' if dc.label == 'n' else 'tangent'}", spec, m_tip,
                                     step, system.scene.solver.output_rate)
-        gap = float(c.normal.u @ (kin.p_tip - kin.p_env))  # [m]
+        gap = float(kin.normal @ (kin.p_tip - kin.p_env))  # [m]
         if c.spec.bonded and abs(gap) > GAP_TOL:
             out.append(f"contact.{c.name}: bonded, but the tip starts {gap:+.3g} m off the surface "
                        f"(contact.{c.name}.point, robot.q0/tip0): the bond holds it there, not on the surface")
@@ -108,7 +108,7 @@ def system_warnings(system) -> list[str]:
             out.append(f"contact.{c.name}: the tip starts {-gap:.3g} m inside the surface (contact.{c.name}.point, "
                        "robot.q0/tip0): the surface starts deformed by that depth and pushes back from t = 0")
         elif not c.spec.bonded:
-            out += _reach_warnings(system.scene, c.name, c.normal.u, kin.p_tip, kin.p_env)
+            out += _reach_warnings(system.scene, c.name, kin.normal, kin.p_tip, kin.p_env)
     return out
 
 

@@ -172,6 +172,8 @@ def unsupported(system, modes, phase) -> str:
     if sum(launching(m) for m in modes) > 1:
         return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
     for c, m in zip(system.contacts, modes, strict=True):
+        if c.surface_fid >= 0:
+            return f"contact {c.name!r}: a surface carried by a robot frame (not compiled yet)"
         if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
             return f"friction law {c.friction.law!r} does not compile"
         for dc in c.chains:
