@@ -543,7 +543,8 @@ def _surface_frame(r: Reader, body: str, normal_chain: ChainSpec, tangent_model:
     and at most one friction tangent (a chain or a 2-D slide on a turning surface: not supported yet)."""
     if body != "robot":
         if r.has("surface_frame"):
-            raise r.error("surface_frame", 'a surface carried by the robot only (body = "robot")', r.raw("surface_frame"))
+            raise r.error("surface_frame", 'a surface carried by the robot only (body = "robot")',
+                          r.raw("surface_frame"))
         return None
     if not r.has("surface_frame"):
         raise r.error("surface_frame", 'the robot frame carrying the surface (required with body = "robot")', None)
