@@ -17,7 +17,7 @@ import pytest
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.errors import SceneError
 from contactdyn.model.contact import turning_surface
-from contactdyn.model.paths import PIPELINE
+from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines
 from contactdyn.model.system import System
 
 MU, G, M_PART = 0.4, 9.81, 0.2  #: the scene's μ, gravity [m/s²] and the part's mass [kg]
@@ -74,8 +74,23 @@ def test_it_slides_down_on_the_tray_with_mu_times_the_normal_force_and_the_energ
     assert residual["value"] <= residual["tol"], residual
 
 
-def test_the_tilt_runs_on_the_compiled_call(run):
+def test_the_tilt_runs_on_the_compiled_call_and_the_readable_model_agrees_through_the_slide(run, monkeypatch):
+    """The whole run (test_both_ways runs 0.2 s: the stick only) on both paths, at test_both_ways' tight tolerances
+    (rtol 1e-11): every channel to 1e-8 of its largest value (measured: 1.6e-9, the tray's joint velocity in the
+    PD's start transient, t ≈ 0.4 s, where the step control amplifies the two paths' rounding; the contact's
+    forces and slip to 1e-11), the events' times to 1e-9 s."""
     assert {row["path"] for row in run.stats["paths"].values()} == {PIPELINE}
+    tight = {"solver.rtol": 1e-11, "solver.atol": 1e-13}
+    fast = simulate("tilt_tray", tight)
+    monkeypatch.setattr(LivePipelines, "use", False)
+    readable = simulate("tilt_tray", tight)
+    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
+    for key, ref in readable.channels.items():
+        ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
+        if ref.size and not np.all(np.isnan(ref)):
+            assert float(np.nanmax(np.abs(got - ref))) <= 1e-8 * float(np.nanmax(np.abs(ref))) + 1e-10, key
+    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in readable.events]
+    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in readable.events], rtol=0, atol=1e-9)
 
 
 # ---- the rows of a turning surface, by finite differences ----------------------------------------------------------
