@@ -30,7 +30,7 @@ def b1_doc() -> dict:
         ({"duration": 0.0}, "duration", "> 0"),
         ({"robot.q0": [0.1]}, "robot.q0", "2 joint values"),
         ({"robot.gravity_compensation": 1.5}, "robot.gravity_compensation", "<= 1"),
-        ({"contact.tip.body": "cart"}, "contact.tip.body", "one of ['ground']"),
+        ({"contact.tip.body": "cart"}, "contact.tip.body", "one of ['ground', 'robot']"),
         ({"solver.method": "euler"}, "solver.method", "one of"),
         ({"phase.0.until": "touch:nope"}, "phase[0].until", "touch:<contact>"),
         ({"contact.tip.tangent.mu_s": 0.1}, "contact.tip.tangent.mu_s", ">= mu_k"),

@@ -42,7 +42,8 @@ from ..numerics.linalg import dot3
 from .chain import NodeKind
 from .contact import Contact, DirectionalChain, Kinematics
 
-__all__ = ["chain_forces", "ChainArrays", "pack", "chain_call", "chain_motion", "chain_loads", "coordinate_row"]
+__all__ = ["chain_forces", "ChainArrays", "pack", "chain_call", "chain_motion", "chain_loads", "coordinate_row",
+           "orient"]
 
 TIP, ANCHOR = int(NodeKind.TIP), int(NodeKind.ANCHOR)
 
@@ -164,6 +165,9 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
     a = dc.arrays.get(key)
     if a is None:
         a = dc.arrays[key] = pack(system, c, dc, touching, key[1])
+    u = kin.normal if dc is c.normal and kin.normal is not None else dc.u
+    if u is not dc.u:  # a surface turning with a robot frame: the state's normal
+        orient(a.plan, a.consts, u, np.array([axis for _, axis in c.touch_coords]).reshape(-1, 3))
     if a.python_stages:
         chain_motion(a.plan, a.stages, a.coef, a.consts, x, kin.p_tip, kin.v_tip, kin.p_env, kin.v_env, float(offset),
                      ydot, a.motion, a.stage_state)
@@ -179,7 +183,7 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
     dc.last_positions = a.motion[0]
     if full and ev is not None:
         _name_stages(a, ev.stages)
-    row = _bond_row(system, c, dc, kin) if a.bond else None
+    row = _bond_row(system, c, dc, kin, u) if a.bond else None
     return tip_F, row, gamma, interface_F, (0.0 if touching else gap)
 
 
@@ -218,9 +222,10 @@ def _name_stages(a: ChainArrays, stages: dict) -> None:
             stages[label] = (0.0, 0.0, 0.0)
 
 
-def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics) -> np.ndarray:
-    """Row of the two surfaces' relative motion along u (its γ is :func:`chain_loads`')."""
-    nQ, chain, u = system.nQ, dc.chain, dc.u
+def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics, u: np.ndarray) -> np.ndarray:
+    """Row of the two surfaces' relative motion along u (the chain's, or a turning surface's normal at this state;
+    its γ is :func:`chain_loads`')."""
+    nQ, chain = system.nQ, dc.chain
     nodes = chain.nodes
     row = np.zeros(nQ)
     for node, sign in ((chain.robot_surface, 1.0), (chain.env_surface, -1.0)):
@@ -238,6 +243,20 @@ def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics) -> np.n
 
 
 # ---- one call over the arrays (numba) ----------------------------------------------------------------------------
+
+@njit(cache=True)
+def orient(plan, consts, u, touch_axes):
+    """Point a packed chain along the unit direction u (a surface turning with a robot frame: its normal at this
+    state): u into ``consts`` and u·axis [-] of the touching body's coordinates (``touch_axes`` (k, 3), the plan's
+    H_COORDS rows on the tip; a surface carried by the robot has no body coordinates of its own)."""
+    for i in range(3):
+        consts[K_U + i] = u[i]
+    at = plan[H_COORDS]
+    for r in range(plan[at]):
+        on, slot = plan[at + 2 + COORD_ROW * r], plan[at + 3 + COORD_ROW * r]
+        if on == ON_TIP:
+            consts[K_UA + slot] = dot3(u, touch_axes[slot])
+
 
 @njit(cache=True)
 def chain_call(plan, stages, coef, consts, x, p_tip, v_tip, p_env, v_env, drift, offset, f, ydot, motion,

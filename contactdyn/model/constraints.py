@@ -237,11 +237,11 @@ def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray, float] | N
             col = row
             if slide is not None and slide[0] is c:
                 d, mu = slide[1], slide[2]
-                col = row - sum(mu * d[i] * contact_row(system, c, c.tangents[i], kin)
+                col = row - sum(mu * d[i] * contact_row(system, c, kin.tangents[i], kin)
                                 for i in range(len(c.tangents)))
             rows.add(row, 0.0, (c.name, "n", 0), col)
         if c.friction is not None and len(c.tangents) and (mode.stuck or jam is c):
-            for i, t_dir in enumerate(c.tangents):
+            for i, t_dir in enumerate(kin.tangents):
                 r = contact_row(system, c, t_dir, kin)
                 rows.add(r, 0.0, (c.name, "t", i))
         for i, dc in enumerate(c.tangent_chains):

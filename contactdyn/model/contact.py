@@ -15,11 +15,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..numerics.compile_cache import njit
 from ..robot.robot import FrameTerms
 from ..scene.scene_file import ContactSpec
 from .chain import Chain, NodeKind, balanced, build_chain
 
-__all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics", "structure"]
+__all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics", "structure", "turning_surface"]
 
 ANY_2D = (0.0, 0.0)  #: a 2-D reference direction in a mode's :func:`structure`: never a real one
 
@@ -59,7 +60,11 @@ def structure(modes) -> tuple[ContactMode, ...]:
 
 @dataclass
 class Kinematics:
-    """Tip and environment point kinematics of one contact at one state (world frame)."""
+    """Tip and environment point kinematics of one contact at one state (world frame).
+
+    On a surface carried by a robot frame (:func:`turning_surface`) ``J`` and ``drift`` are the relative motion's
+    (touching point − the surface's material point under it), ``v_env`` that material point's velocity; the robot's
+    part of a row along u is then u J, its γ u·drift, for any direction u."""
 
     p_tip: np.ndarray  #: [m]
     v_tip: np.ndarray  #: [m/s]
@@ -68,6 +73,8 @@ class Kinematics:
     p_env: np.ndarray  #: [m]
     v_env: np.ndarray  #: [m/s]
     frame: FrameTerms | None = None  #: the tip frame's full terms (orientation, angular Jacobian)
+    normal: np.ndarray | None = None  #: the world normal n at this state (unit)
+    tangents: np.ndarray | None = None  #: (k, 3) the world tangents T at this state (unit)
 
 
 @dataclass
@@ -169,10 +176,12 @@ class Contact:
     ``touch_coords`` and ``surface_coords`` list each (index in Q, unit axis), so a point of it is its place at
     the coordinates 0 plus Σ axis Q [m]."""
 
-    def __init__(self, spec: ContactSpec, fid: int, touch_coords: list, surface_coords: list):
+    def __init__(self, spec: ContactSpec, fid: int, touch_coords: list, surface_coords: list, surface_fid: int = -1):
         self.spec = spec
         self.name = spec.name
         self.fid = fid
+        #: the robot frame carrying the surface (``body = "robot"``: point, normal, tangents in its coordinates); -1
+        self.surface_fid = surface_fid
         self.touch_coords = tuple(touch_coords)  #: the touching body's (coordinate, axis); () for a robot frame
         self.surface_coords = tuple(surface_coords)  #: the surface body's (coordinate, axis); () for the ground
         where = f"contact.{spec.name}"
@@ -236,3 +245,50 @@ def _carried(point: np.ndarray, coords, x: np.ndarray, nQ: int) -> tuple[np.ndar
     for i, axis in more:
         p, v = p + axis * x[i], v + axis * x[nQ + i]
     return p, v
+
+
+@njit(cache=True)
+def turning_surface(p, v, J, a, o, v_o, J_o, a_o, R, w, J_w, alpha, p0, n0, T0):
+    """The relative motion of a touching point on a surface carried by a robot frame (it moves and turns).
+
+    In: the touching point p [m], v [m/s], its Jacobian J (3, nv) and J̇q̇ a [m/s²] (a body's point: zeros); the
+    surface frame's origin o, v_o, linear Jacobian J_o, J̇_o q̇ a_o, rotation R, angular velocity ω = w [rad/s], its
+    Jacobian J_w and J̇_w q̇ α = alpha [rad/s²] (world-aligned, as FrameTerms); the surface's point p0 [m], normal n0
+    and tangents T0 (k, 3) in the frame's coordinates.
+    Out: (J_rel (3, nv), a_rel [m/s²], p_s [m], v_m [m/s], n, T (k, 3)).
+
+    World n = R n0, T = R T0, p_s = o + R p0. With r = p − o the material point under p moves with
+    v_m = v_o + ω × r, and v_rel = v − v_m = J_rel q̇ (+ the bodies' coordinates' part), J_rel = J − J_o + [r]× J_ω
+    (u·(ω × r) = (r × u)·ω, so a row along u is u J − u J_o − (r × u)·J_ω). The gap g = n·(p − p_s) has
+    ġ = n·v_rel (ṅ·(p − p_s) = −n·(ω × (p − p_s)) completes v_m). Differentiating u·v_rel with q̈ = 0, u̇ = ω × u
+    and ṙ = v − v_o:
+        d/dt (u·v_rel) = (ω × u)·v_rel + u·(a − a_o − α × r − ω × (v − v_o))
+                       = u·[a − (a_o + α × r + ω × (ω × r)) − 2 ω × v_rel] = u·a_rel,
+    the material point's acceleration and Coriolis' term: one vector for every u, so the rows' γ are u·a_rel plus
+    Baumgarte's terms as on a fixed surface (tests/test_tilt_tray.py checks it by finite differences).
+    """
+    nv = J.shape[1]
+    r = p - o
+    n, p_s = np.zeros(3), o.copy()
+    T = np.zeros((T0.shape[0], 3))
+    for i in range(3):
+        for j in range(3):
+            n[i] += R[i, j] * n0[j]
+            p_s[i] += R[i, j] * p0[j]
+            for k in range(T0.shape[0]):
+                T[k, i] += R[i, j] * T0[k, j]
+    v_m = v_o + _cross(w, r)
+    v_rel = v - v_m
+    a_rel = a - (a_o + _cross(alpha, r) + _cross(w, _cross(w, r))) - 2.0 * _cross(w, v_rel)
+    J_rel = np.empty((3, nv))
+    for c in range(nv):
+        rxJ = _cross(r, J_w[:, c])  # [r]× J_ω's column c
+        for i in range(3):
+            J_rel[i, c] = J[i, c] - J_o[i, c] + rxJ[i]
+    return J_rel, a_rel, p_s, v_m, n, T
+
+
+@njit(cache=True, inline="always")
+def _cross(a, b):
+    """a × b of two 3-vectors."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])

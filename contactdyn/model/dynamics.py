@@ -142,7 +142,7 @@ def _contact_terms(system, x: np.ndarray, modes: list[ContactMode], f: np.ndarra
         # normal
         tip_F, row, gamma, F_n, gap = chain_forces(system, c, c.normal, mode.touching, 0.0, kin, x, f, ydot, ev,
                                                    full, mode.relaxing)
-        tip_force += tip_F * c.normal.u
+        tip_force += tip_F * kin.normal
         ev.gap[c.name] = gap
         # tangential chains (bonded while the normal touches)
         for i, dc in enumerate(c.tangent_chains):

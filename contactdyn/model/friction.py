@@ -87,7 +87,7 @@ def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np
     qdd = xdot[nQ:2 * nQ]
     a_touch, a_env = c.rates(qdd)
     a_tip = kin.J @ qdd[:nv] + kin.drift
-    return c.tangents @ ((a_tip if a_touch is None else a_tip + a_touch) - a_env)
+    return kin.tangents @ ((a_tip if a_touch is None else a_tip + a_touch) - a_env)
 
 
 def launching(mode: ContactMode) -> bool:
@@ -175,19 +175,20 @@ def _launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMo
 
 
 def slip_velocity(system, c: Contact, kin: Kinematics, qd: np.ndarray | None = None) -> np.ndarray:
-    """Tangential tip–environment velocity [m/s] in tangent coordinates (at Q̇ = qd if given)."""
+    """Tangential tip–environment velocity [m/s] in tangent coordinates (at Q̇ = qd if given): along the state's
+    tangents, relative to the surface's material point (:class:`~contactdyn.model.contact.Kinematics`)."""
     if qd is None:
-        return c.tangents @ (kin.v_tip - kin.v_env)
+        return kin.tangents @ (kin.v_tip - kin.v_env)
     v_touch, v_env = c.rates(qd)
     v_tip = kin.J @ qd[: system.nv]
-    return c.tangents @ ((v_tip if v_touch is None else v_tip + v_touch) - v_env)
+    return kin.tangents @ ((v_tip if v_touch is None else v_tip + v_touch) - v_env)
 
 
 def initial_slip(c: Contact, kin: Kinematics) -> tuple[float, ...]:
     """Reference sliding direction of a contact at the start: its slip velocity's (1-D: its sign)."""
     if c.friction is None:
         return ()
-    vt = c.tangents @ (kin.v_tip - kin.v_env)
+    vt = kin.tangents @ (kin.v_tip - kin.v_env)
     norm = float(np.linalg.norm(vt))
     if norm == 0.0:
         return tuple(np.eye(len(vt))[0]) if len(vt) else ()
@@ -207,7 +208,7 @@ def friction_terms(system, c: Contact, mode: ContactMode, kin: Kinematics, row: 
     """
     nQ, nv = system.nQ, system.nv
     col = row
-    T = c.tangents
+    T = kin.tangents
     vt = slip_velocity(system, c, kin)
     ev.slip[c.name] = vt
     if mode.touching:

@@ -60,7 +60,7 @@ from ..robot.posture import start_posture
 from ..robot.robot import Robot
 from ..scene.scene_file import Scene
 from .chain import NodeKind
-from .contact import Contact, ContactMode, Kinematics
+from .contact import Contact, ContactMode, Kinematics, turning_surface
 from .dynamics import Evaluation, evaluate
 from .friction import initial_slip, slip_acceleration, slip_velocity
 from .impact import Impact, impact, project_velocity
@@ -137,19 +137,22 @@ class System:
         self.launch_kept: tuple | None = None
 
     def _contact_of(self, spec) -> Contact:
-        """A contact: its touching side a robot frame or a body's point (``frame_point``), its surface the ground
-        or a body, each body side by its coordinates."""
+        """A contact: its touching side a robot frame or a body's point (``frame_point``), its surface the ground,
+        a body (each body side by its coordinates) or a robot frame (``surface_frame``)."""
+        surface_coords = self.body_coords.get(spec.body, [])
+        surface_fid = self._surface_fid(spec)
         if spec.frame_point is not None:  # a body touches
             if self.robot.model.existFrame(spec.frame):
                 raise SceneError(f"contact.{spec.name}.frame", "a name that is a body's or a robot frame's, not "
                                  "both (rename the body)", f"{spec.frame!r}, both", self.scene.file)
-            contact = Contact(spec, -1, self.body_coords[spec.frame], self.body_coords.get(spec.body, []))
-            row = np.zeros((1, self.nv + len(self.body_channels)))
-            contact.add_columns(row, spec.normal[None])
-            if not np.any(np.abs(row) > 1e-12):
-                raise SceneError(f"contact.{spec.name}.normal.direction", "a normal along which a side moves (the "
-                                 "bodies' axes are all orthogonal to it: nothing would carry its force)",
-                                 spec.normal.tolist(), self.scene.file)
+            contact = Contact(spec, -1, self.body_coords[spec.frame], surface_coords, surface_fid)
+            if surface_fid < 0:  # both sides bodies (or the ground): their axes alone carry the normal
+                row = np.zeros((1, self.nv + len(self.body_channels)))
+                contact.add_columns(row, spec.normal[None])
+                if not np.any(np.abs(row) > 1e-12):
+                    raise SceneError(f"contact.{spec.name}.normal.direction", "a normal along which a side moves "
+                                     "(the bodies' axes are all orthogonal to it: nothing would carry its force)",
+                                     spec.normal.tolist(), self.scene.file)
             return contact
         try:
             fid = self.robot.frame_id(spec.frame)
@@ -158,7 +161,20 @@ class System:
                 if spec.frame in self.body_coords else ""
             raise SceneError(f"contact.{spec.name}.frame", f"a frame of the robot{hint}", exc,
                              self.scene.file) from None
-        return Contact(spec, fid, [], self.body_coords.get(spec.body, []))
+        if fid == surface_fid:
+            raise SceneError(f"contact.{spec.name}.surface_frame", "a robot frame other than the touching one",
+                             spec.surface_frame, self.scene.file)
+        return Contact(spec, fid, [], surface_coords, surface_fid)
+
+    def _surface_fid(self, spec) -> int:
+        """The robot frame carrying the contact's surface (``body = "robot"``), -1 for the ground or a body."""
+        if spec.surface_frame is None:
+            return -1
+        try:
+            return self.robot.frame_id(spec.surface_frame)
+        except RobotError as exc:
+            raise SceneError(f"contact.{spec.name}.surface_frame", "a frame of the robot", exc,
+                             self.scene.file) from None
 
     def _build_drives(self, first_motor_coord: int) -> Drives:
         names = list(self.robot.joint_names)
@@ -203,7 +219,7 @@ class System:
         modes = []
         for c in self.contacts:
             kin = self.kinematics(c, x)
-            gap0 = float(c.normal.u @ (kin.p_tip - kin.p_env))  # chains start undeformed
+            gap0 = float(kin.normal @ (kin.p_tip - kin.p_env))  # chains start undeformed
             pressed_in = gap0 < -1e-9 and not c.spec.bonded  # a compliant surface starts deformed (a warning)
             if pressed_in and c.spec.normal_chain.rigid:
                 raise SceneError(f"contact.{c.name}", "a start with the tip on or above the rigid surface (gap >= 0)",
@@ -238,12 +254,22 @@ class System:
     # ---- kinematics and inertia ------------------------------------------------------------
     def kinematics(self, c: Contact, x: np.ndarray) -> Kinematics:
         """Contact kinematics at x; requires ``robot.update`` at x's (q, q̇) first."""
-        p_env, v_env = c.surface(x, self.nQ)
         if c.fid < 0:  # a body's point touches: no robot joint moves it
             p_tip, v_tip = c.toucher(x, self.nQ)
-            return Kinematics(p_tip, v_tip, np.zeros((3, self.nv)), np.zeros(3), p_env, v_env)
-        ft = self.robot.frame_terms(c.fid)
-        return Kinematics(ft.position, ft.velocity, ft.jacobian, ft.drift, p_env, v_env, ft)
+            J, drift, ft = np.zeros((3, self.nv)), np.zeros(3), None
+        else:
+            ft = self.robot.frame_terms(c.fid)
+            p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
+        if c.surface_fid < 0:
+            p_env, v_env = c.surface(x, self.nQ)
+            return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, c.normal.u, c.tangents)
+        fs = self.robot.frame_terms(c.surface_fid)  # the surface turns with a robot frame
+        spec = c.spec
+        J, drift, p_env, v_env, n, T = turning_surface(
+            p_tip, v_tip, J, drift, fs.position, fs.velocity, fs.jacobian, fs.drift, fs.rotation,
+            fs.angular_jacobian @ x[self.nQ:self.nQ + self.nv], fs.angular_jacobian, fs.angular_drift, spec.point,
+            spec.normal, spec.tangents)
+        return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, n, T)
 
     def mass_matrix(self) -> np.ndarray:
         """M at the last ``robot.update``, a copy: H plus rigid gears' rotor inertias, then the other coordinates."""

@@ -96,8 +96,13 @@ MEANINGS: dict[str, str] = {
                                "frame_point touches",
     "contact.<contact>.frame_point": "the touching point [m] of the body named by frame (world, at the body's "
                                      "coordinates 0)",
-    "contact.<contact>.body": "what carries the surface: the fixed ground or an active body",
-    "contact.<contact>.point": "a point of the undeformed surface (world; on a body at coordinate 0)",
+    "contact.<contact>.body": "what carries the surface: the fixed ground, an active body, or the robot (robot: "
+                              "a robot frame, surface_frame, carries it: it moves and turns with that frame)",
+    "contact.<contact>.surface_frame": "the robot frame carrying the surface when body = \"robot\": point, "
+                                       "normal.direction and tangent.directions are then in that frame's own "
+                                       "coordinates (a rigid normal, at most one friction tangent for now)",
+    "contact.<contact>.point": "a point of the undeformed surface (world; on a body at coordinate 0; on the robot "
+                               "in surface_frame's coordinates)",
     "contact.<contact>.bonded": "the tip never separates (stays on the surface)",
     "contact.<contact>.normal": "the normal direction and its deformation model",
     "contact.<contact>.normal.direction": "outward surface normal, from the environment towards the robot",
@@ -244,7 +249,8 @@ OVERRIDES: dict[str, dict[str, str]] = {
     "contact.<contact>.frame_point": {"type": "3-vector", "default": "required when frame is a body"},
     "body.<body>.position0": {"type": "number (a list, one per coordinate, for a body with several)", "default": "0"},
     "body.<body>.velocity0": {"type": "number (a list, one per coordinate, for a body with several)", "default": "0"},
-    "contact.<contact>.body": {"allowed": "ground or a body name"},
+    "contact.<contact>.body": {"allowed": "ground, robot or a body name"},
+    "contact.<contact>.surface_frame": {"type": "string (a robot frame)", "default": "required when body = \"robot\""},
     "contact.<contact>.normal.environment": {"type": "list of elements"},
     "contact.<contact>.normal.robot": {"type": "list of elements"},
     "contact.<contact>.tangent.environment": {"type": "list of elements"},

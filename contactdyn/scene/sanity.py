@@ -104,7 +104,7 @@ def system_warnings(system) -> list[str]:
             spec = c.spec.normal_chain if dc.label == "n" else c.spec.tangent_chain
             out += _period_warnings(f"contact.{c.name}.{'normal' if dc.label == 'n' else 'tangent'}", spec, m_tip,
                                     step, system.scene.solver.output_rate)
-        gap = float(c.normal.u @ (kin.p_tip - kin.p_env))  # [m]
+        gap = float(kin.normal @ (kin.p_tip - kin.p_env))  # [m]
         tip, where = ("the body's point", f"frame_point, body.{c.spec.frame}.position0") if body_point else \
             ("the tip", "point, robot.q0/tip0")
         if c.spec.bonded and abs(gap) > GAP_TOL:
@@ -114,7 +114,7 @@ def system_warnings(system) -> list[str]:
             out.append(f"contact.{c.name}: {tip} starts {-gap:.3g} m inside the surface (contact.{c.name}.{where}): "
                        "the surface starts deformed by that depth and pushes back from t = 0")
         elif not c.spec.bonded and not body_point:  # (the reference moves the robot's tip, not a body)
-            out += _reach_warnings(system.scene, c.name, c.normal.u, kin.p_tip, kin.p_env)
+            out += _reach_warnings(system.scene, c.name, kin.normal, kin.p_tip, kin.p_env)
     return out
 
 

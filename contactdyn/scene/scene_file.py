@@ -54,6 +54,9 @@ class ContactSpec:
     bonded: bool  #: never separates (e.g. benchmark B1)
     #: [m] when ``frame`` names a body: its touching point (world, at the body's coordinates 0); else None
     frame_point: np.ndarray | None = None
+    #: with ``body = "robot"``: the robot frame carrying the surface (``point``, ``normal`` and ``tangents`` then in
+    #: that frame's own coordinates: the surface moves and turns with it); else None
+    surface_frame: str | None = None
 
 
 @dataclass(frozen=True)
@@ -475,7 +478,7 @@ def _read_chain(r: Reader) -> ChainSpec:
 
 
 def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = "tip") -> ContactSpec:
-    body = r.str("body", "ground", choices=["ground", *bodies])
+    body = r.str("body", "ground", choices=["ground", "robot", *bodies])
     normal_r = r.sub("normal")
     normal = normal_r.vector("direction", size=3, unit_norm=True)
     normal_chain = _read_chain(normal_r)
@@ -515,6 +518,7 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
         if frame == body:
             raise r.error("frame", f"a body other than the surface's ({body!r})", frame)
         frame_point = r.vector("frame_point", size=3, unit="m")
+    surface_frame = _surface_frame(r, body, normal_chain, model, tangents)
     spec = ContactSpec(
         name=name,
         frame=frame,
@@ -528,9 +532,34 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
         friction=friction,
         tangent_chain=tangent_chain,
         bonded=r.bool("bonded", False),
+        surface_frame=surface_frame,
     )
     r.finish()
     return spec
+
+
+def _surface_frame(r: Reader, body: str, normal_chain: ChainSpec, tangent_model: str, tangents: np.ndarray
+                   ) -> str | None:
+    """The robot frame carrying a ``body = "robot"`` surface (None for another body); on it, for now, a rigid normal
+    and at most one friction tangent (a chain or a 2-D slide on a turning surface: not supported yet)."""
+    if body != "robot":
+        if r.has("surface_frame"):
+            raise r.error("surface_frame", 'a surface carried by the robot only (body = "robot")',
+                          r.raw("surface_frame"))
+        return None
+    if not r.has("surface_frame"):
+        raise r.error("surface_frame", 'the robot frame carrying the surface (required with body = "robot")', None)
+    turning = 'on a surface carried by the robot (body = "robot"'
+    if not normal_chain.rigid:
+        raise r.error("normal.model", f"a rigid normal {turning}; a deformation chain there is not supported yet)",
+                      r.data["normal"].get("model", "chain"))
+    if tangent_model == "chain":
+        raise r.error("tangent.model", f"free or friction {turning}; a chain there is not supported yet)",
+                      tangent_model)
+    if len(tangents) > 1:
+        raise r.error("tangent.directions", f"one tangential direction {turning}; a 2-D slide there is not "
+                      "supported yet)", tangents.tolist())
+    return r.str("surface_frame")
 
 
 def _read_solver(r: Reader) -> SolverSpec:

@@ -20,7 +20,8 @@ import numpy as np
 
 from ...laws.abi import call_friction
 from ...numerics.compile_cache import njit
-from ..chain_forces import H_COORDS, K_U, K_UA, ON_ANCHOR, ON_TIP, chain_call, coordinate_row
+from ..chain_forces import H_COORDS, K_U, K_UA, ON_ANCHOR, ON_TIP, chain_call, coordinate_row, orient
+from ..contact import turning_surface
 from .pack import (
     ANCHOR,
     CH_COEF,
@@ -53,11 +54,13 @@ from .pack import (
     CI_NT,
     CI_REALS,
     CI_STICK_ROW,
+    CI_SURFACE,
     CI_TOUCHING,
     CI_W,
     CR_AXES,
     CR_MU_K,
     CR_MU_S,
+    CR_N,
     CR_POINT,
     CR_R,
     CR_T,
@@ -88,7 +91,8 @@ from .pack import (
     section,
 )
 
-__all__ = ["contact_terms", "limit_rows", "finish", "contact_sides", "surface_point", "relative_velocity",
+__all__ = ["contact_terms", "limit_rows", "finish", "contact_sides", "turning_sides", "surface_point",
+           "relative_velocity",
            "add_coordinates", "add_coordinate_rates"]
 
 #: per contact, what finishes a slide once its normal force is solved: μ [-], d (2), the viscous force (2) [N]
@@ -150,6 +154,20 @@ def contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv):
     p_tip, v_tip = _touching_point(x, ints, row, cr, Fp, Fv)
     p_env, v_env = surface_point(x, ints, row, cr)
     return FJ[fi, :3], p_tip, v_tip, Fa[fi, :3], p_env, v_env
+
+
+@njit(cache=True)
+def turning_sides(x, ints, row, cr, J, p_tip, v_tip, drift, FJ, Fa, Fp, Fv, FR):
+    """On a surface carried by a robot frame (the packed frame ``row[CI_SURFACE]``): (J_rel (3, nv), a_rel [m/s²],
+    p_env [m], v_env [m/s], n, T (nt, 3)) of the relative motion at this state (model.contact.turning_surface), the
+    touching side's J, p, v, J̇q̇ from :func:`contact_sides`."""
+    nv, nQ, nt, s = ints[NV], ints[NQ], row[CI_NT], row[CI_SURFACE]
+    w = np.zeros(3)  # the frame's angular velocity [rad/s]
+    for r in range(3):
+        for c in range(nv):
+            w[r] += FJ[s, 3 + r, c] * x[nQ + c]
+    return turning_surface(p_tip, v_tip, J, drift, Fp[s], Fv[s], FJ[s, :3], Fa[s, :3], FR[s], w, FJ[s, 3:], Fa[s, 3:],
+                           cr[CR_POINT:CR_POINT + 3], cr[CR_N:CR_N + 3], cr[CR_T:CR_T + 3 * nt].reshape((nt, 3)))
 
 
 @njit(cache=True)
@@ -229,7 +247,7 @@ def _bond_row(ints, reals, ch, J, G, C):
 
 
 @njit(cache=True)
-def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, events, pending):
+def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma, events, pending):
     """Every contact's chains, rows and friction into f, ydot, G, C, γ, events; False if a stage law gave no force."""
     cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
     chains = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)
@@ -237,10 +255,19 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, ev
         row = cs[ci]
         cr = reals[row[CI_REALS]:]
         J, p_tip, v_tip, drift, p_env, v_env = contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv)
+        n, T = cr[CR_N:CR_N + 3], cr[CR_T:CR_T + 3 * row[CI_NT]].reshape((row[CI_NT], 3))
+        turning = row[CI_SURFACE] >= 0
+        if turning:  # the surface turns with a robot frame: the relative motion, along this state's n and T
+            J, drift, p_env, v_env, n, T = turning_sides(x, ints, row, cr, J, p_tip, v_tip, drift, FJ, Fa, Fp, Fv,
+                                                         FR)
         tip_force = np.zeros(3)
         F_n = 0.0
         for k in range(row[CI_NORMAL], row[CI_FIRST_T] + row[CI_N_T]):
             ch = chains[k]
+            if turning:  # (its only chain: a rigid normal)
+                n_touch = ints[row[CI_COORDS]]
+                orient(ints[ch[CH_PLAN]:ch[CH_STAGES]], reals[ch[CH_CONSTS]:ch[CH_CONSTS] + ch[CH_NCONSTS]], n,
+                       cr[CR_AXES:CR_AXES + 3 * n_touch].reshape((n_touch, 3)))
             tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, p_tip, v_tip, p_env, v_env,
                                                           drift, f, ydot)
             if not finite:
@@ -256,7 +283,7 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, ev
                 gamma[ch[CH_ROW]] = gam
         events[EV_W * ci + EV_FN] = F_n
         if row[CI_NT]:
-            _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, F_n, f, G, C, gamma, events, pending)
+            _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G, C, gamma, events, pending)
         if tip_force[0] != 0.0 or tip_force[1] != 0.0 or tip_force[2] != 0.0:
             for c in range(J.shape[1]):
                 f[c] += J[0, c] * tip_force[0] + J[1, c] * tip_force[1] + J[2, c] * tip_force[2]
@@ -264,11 +291,10 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, ev
 
 
 @njit(cache=True)
-def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, F_n, f, G, C, gamma, events, pending):
-    """A friction contact's slip velocity, and its stick rows, or its slide (the tilt of its normal column or its
-    known force on the coordinates), as model.friction.friction_terms."""
+def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G, C, gamma, events, pending):
+    """A friction contact's slip velocity along its tangents T (nt, 3), and its stick rows, or its slide (the tilt
+    of its normal column or its known force on the coordinates), as model.friction.friction_terms."""
     nv, nQ, nt = ints[NV], ints[NQ], row[CI_NT]
-    T = cr[CR_T:CR_T + 3 * nt].reshape((nt, 3))
     ev = events[EV_W * ci:EV_W * (ci + 1)]
     vt = np.zeros(nt)
     for i in range(nt):

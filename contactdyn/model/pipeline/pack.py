@@ -88,13 +88,15 @@ FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
 #: a contact's ints (frame: its packed frame, the zero frame after them for a body's point; coords: where its
 #: bodies' coordinates are in ints, [n touching side, n surface side, their indices]; friction: FRICTION_* below;
-#: rows: -1 none; law: the friction law's address, 0 constant μ_k)
+#: rows: -1 none; law: the friction law's address, 0 constant μ_k; surface: the packed frame carrying the surface,
+#: -1 for the ground or a body)
 (CI_FRAME, CI_COORDS, CI_TOUCHING, CI_FRICTION, CI_NT, CI_LAW, CI_N_FP, CI_FP_AT, CI_NORMAL, CI_FIRST_T, CI_N_T,
- CI_NORMAL_ROW, CI_STICK_ROW, CI_IMPULSE, CI_REALS, CI_W) = range(16)
+ CI_NORMAL_ROW, CI_STICK_ROW, CI_IMPULSE, CI_REALS, CI_SURFACE, CI_W) = range(17)
 FRICTION_NONE, FRICTION_STICK, FRICTION_SLIDE, FRICTION_APART = 0, 1, 2, 3
 #: a contact's reals: surface point [m], a touching body's point [m] (else 0), tangents (2 rows of 3), slip
-#: reference r, μ_s, μ_k, viscous [N·s/m], then its bodies' coordinates' unit axes (3 each, as in CI_COORDS)
-CR_POINT, CR_TOUCH, CR_T, CR_R, CR_MU_S, CR_MU_K, CR_VISCOUS, CR_AXES = 0, 3, 6, 12, 14, 15, 16, 17
+#: reference r, μ_s, μ_k, viscous [N·s/m], the normal, then its bodies' coordinates' unit axes (3 each, as in
+#: CI_COORDS); on a surface carried by a robot frame the point, tangents and normal are in that frame's coordinates
+CR_POINT, CR_TOUCH, CR_T, CR_R, CR_MU_S, CR_MU_K, CR_VISCOUS, CR_N, CR_AXES = 0, 3, 6, 12, 14, 15, 16, 17, 20
 #: a chain's ints: where its plan, stage table, coefficients and constants are (ints, reals), its buffers (work),
 #: its bond row (-1: none) and the bond's two surface nodes (kind, coordinate), its anchor offset (reals)
 (CH_PLAN, CH_STAGES, CH_NS, CH_COEF, CH_CONSTS, CH_NCONSTS, CH_MOTION, CH_NNODES, CH_STATE, CH_ROW, CH_ROBOT_KIND,
@@ -172,6 +174,8 @@ def unsupported(system, modes, phase) -> str:
     if sum(launching(m) for m in modes) > 1:
         return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
     for c, m in zip(system.contacts, modes, strict=True):
+        if c.surface_fid >= 0 and (ctl.uses_forces or getattr(ctl, "inner", ctl).uses_forces):
+            return f"contact {c.name!r}: a surface carried by a robot frame under a force-reading controller"
         if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
             return f"friction law {c.friction.law!r} does not compile"
         for dc in c.chains:
@@ -251,7 +255,8 @@ def pack(system, modes, phase) -> Packed:
     b.real_section(R_RIGID, table)
     b.real_section(R_MREST, system.M_rest)
     b.real_section(R_WEIGHTS, system.weights)  # [N] the non-robot coordinates' weights (a body's m g·axis)
-    fids = list(dict.fromkeys([system.tip_fid, *(c.fid for c in system.contacts if c.fid >= 0)]))
+    fids = list(dict.fromkeys([system.tip_fid, *(c.fid for c in system.contacts if c.fid >= 0),
+                               *(c.surface_fid for c in system.contacts if c.surface_fid >= 0)]))
     _frames(b, system, fids)
     h[TIP_FRAME] = 0
     meta = _contacts(b, system, modes, fids)
@@ -342,12 +347,12 @@ def _contacts(b: _Builder, system, modes, fids: list[int]) -> list[tuple[str, st
         touch = c.spec.frame_point if c.fid < 0 else np.zeros(3)
         reals_at = b.real_section(None, [*c.spec.point, *touch, *T.ravel(), *r,
                                          *((fr.mu_s, fr.mu_k, fr.viscous) if nt else (0.0, 0.0, 0.0)),
-                                         *(v for _, axis in coords for v in axis)])
+                                         *c.spec.normal, *(v for _, axis in coords for v in axis)])
         frame = fids.index(c.fid) if c.fid >= 0 else len(fids)  # a body's point: the zero frame after the others
         h[contact_at + CI_W * ci:contact_at + CI_W * (ci + 1)] = [
             frame, coords_at, int(m.touching), friction, nt, law, len(fr.params) if nt else 0, fp_at,
             first, first + 1, len(c.tangent_chains), normal_row, stick_row, system.impulse_slots.get(c.name, -1),
-            reals_at]
+            reals_at, fids.index(c.surface_fid) if c.surface_fid >= 0 else -1]
     return meta
 
 

@@ -128,7 +128,7 @@ def call(t, x, ints, reals, work, events):
         G, C, gamma = np.zeros((nr, nQ)), np.zeros((nr, nQ)), np.zeros(nr)
         pending = np.zeros((nc, 5))
         xdot = np.empty(ints[NX])
-        if not contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, f, ydot, G, C, gamma, events, pending):
+        if not contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma, events, pending):
             events[events.size - 1] = -1.0
             return xdot
         first_joint = nr - ints[N_HELD]
