@@ -167,3 +167,31 @@ def test_a_robot_carried_surface_given_wrong_or_unsupported_is_one_clear_error(e
     with pytest.raises(SceneError) as err:
         simulate(parse_scene(doc, None, file))  # (the frame is resolved with the robot: at the run's start)
     assert key in str(err.value) and words in str(err.value), str(err.value)
+
+
+def test_the_viewer_turns_the_force_arrows_with_the_tray():
+    """The normal force's arrow on the part stays along the tray's normal as the tray tilts: from its tail to the
+    contact point it points along the tray frame's z turned by the joint's angle θ, (0, −sin θ, cos θ)."""
+    from contactdyn.viewer.build import build_scene
+
+    r = simulate("tilt_tray", {"solver.output_rate": 20.0, "duration": 3.0})
+    scene = build_scene(r)
+    tracks = {a["path"]: {t["name"][1:]: np.array([k["value"] for k in t["keys"]]) for t in a["clip"]["tracks"]}
+              for a in scene.commands[-1]["animations"]}
+    tail = tracks["/meshcat/forces/rest_normal"]["position"]
+    tip = tracks["/meshcat/tool/rest/ball"]["position"] if "/meshcat/tool/rest/ball" in tracks else \
+        np.zeros_like(tail)  # (the part rests on the axis: its ball may not move)
+    theta = np.interp(np.linspace(0.0, 3.0, len(tail)), r.t, r["q"][:, 0])
+    arrow = (tip - tail) / np.linalg.norm(tip - tail, axis=1)[:, None]
+    np.testing.assert_allclose(arrow, np.column_stack([0 * theta, -np.sin(theta), np.cos(theta)]), atol=1e-5)
+    assert theta[-1] > 0.25  # it did turn
+
+
+def test_a_force_set_point_on_a_turning_surface_is_one_clear_error():
+    doc, file = _doc()
+    rest = {k: v for k, v in doc["contact"]["rest"].items() if k != "frame_point"}
+    doc = {**doc, "contact": {"rest": {**rest, "frame": "tip"}},  # a robot frame on a surface the robot carries
+           "phase": [{**doc["phase"][0], "force": [{"contact": "rest", "value": 1.0}]}]}
+    with pytest.raises(SceneError) as err:
+        parse_scene(doc, None, file)
+    assert "phase[0].force[0].contact" in str(err.value) and "does not turn" in str(err.value), str(err.value)

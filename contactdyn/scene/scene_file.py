@@ -650,6 +650,9 @@ def _read_force(r: Reader, contacts: dict[str, ContactSpec]) -> ForceSpec:
     if contacts[contact].frame_point is not None:
         raise r.error("contact", f"a contact the robot touches (contact {contact!r}'s touching side is body "
                       f"{contacts[contact].frame!r}: no controller sets its force)", contact)
+    if contacts[contact].surface_frame is not None:
+        raise r.error("contact", f"a contact whose surface does not turn (contact {contact!r}'s turns with robot "
+                      f"frame {contacts[contact].surface_frame!r}: a set-point along it is not supported yet)", contact)
     direction = r.str("direction", "n", choices=["n", "t1", "t2"])
     if direction != "n" and int(direction[1]) > len(contacts[contact].tangents):
         raise r.error("direction", f"'n' or one of contact {contact!r}'s {len(contacts[contact].tangents)} "

@@ -68,7 +68,9 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
     radii = np.concatenate([body_radii, np.zeros(len(cloud) - len(body))])  # [m] what reaches beyond each point
     L = max(float(np.max(np.linalg.norm(cloud, axis=1))), 0.1)  # [m] scene size
 
-    views = contact_views(scene, tips, disp, L, GROUPS["environment"]) if scene else []
+    turning = {c.name: np.array([robot.frame_placement(qk, c.surface_frame).rotation for qk in q])
+               for c in contacts if c.body == "robot"}  # a surface carried by a robot frame turns with it
+    views = contact_views(scene, tips, disp, L, GROUPS["environment"], turning) if scene else []
     v0 = views[0] if views else None
     arrows, per = force_arrows(views, ch) if views else ([], {})
     label_rotation, V = _frame_with_arrows(writer, cloud, radii, arrows, v0.u if v0 else None,

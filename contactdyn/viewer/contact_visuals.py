@@ -62,6 +62,18 @@ class ContactView:
     range1: tuple[float, float]  #: plate extent along e1 [m], from the contact point
     range2: tuple[float, float]  #: plate extent along e2 [m]
     body_path: str
+    #: a surface carried by a robot frame: its rotation per frame (N, 3, 3), turning the spec's normal and tangents
+    #: (given in that frame) into the world's; None for a surface that does not turn
+    turning: np.ndarray | None = None
+
+    def normals(self) -> np.ndarray:
+        """(N, 3) or (3,) the world normal per frame."""
+        return self.u if self.turning is None else self.turning @ self.u
+
+    def tangent_dirs(self) -> np.ndarray:
+        """(N, k, 3) or (k, 3) the world tangents per frame."""
+        T = self.spec.tangents
+        return T if self.turning is None else np.einsum("nij,kj->nki", self.turning, T)
 
     @property
     def edge_w(self) -> float:
@@ -70,7 +82,9 @@ class ContactView:
 
 
 def contact_views(scene: Scene, tips: dict[str, np.ndarray], disp: dict[str, np.ndarray], L: float,
-                  env_root: str) -> list[ContactView]:
+                  env_root: str, turning: dict[str, np.ndarray] | None = None) -> list[ContactView]:
+    """Each contact's view; ``turning``: per contact on a surface carried by a robot frame, its rotations (N, 3, 3)."""
+    turning = turning or {}
     views = []
     for spec in scene.contacts.values():
         u = spec.normal
@@ -81,7 +95,7 @@ def contact_views(scene: Scene, tips: dict[str, np.ndarray], disp: dict[str, np.
         rel = tips[spec.name] - d - spec.point
         a1, a2 = rel @ e1, rel @ e2
         views.append(ContactView(spec, u, e1, e2, w, tips[spec.name], d, _extent(a1, L), _extent(a2, L),
-                                 f"{env_root}/{spec.body}"))
+                                 f"{env_root}/{spec.body}", turning.get(spec.name)))
     return views
 
 
@@ -203,15 +217,17 @@ def force_arrows(views: list[ContactView], ch: Channel) -> tuple[list[tuple], di
         name = v.spec.name
         F_n = ch(f"contact.{name}.F_n")
         if F_n is not None:
-            forces.append(("normal", f"{name}_normal", v, np.outer(F_n, v.u), COLORS["normal"]))
+            forces.append(("normal", f"{name}_normal", v, np.asarray(F_n)[:, None] * v.normals(), COLORS["normal"]))
         F_f = ch(f"contact.{name}.F_f")
         tangential = np.zeros_like(v.tip)
+        T = v.tangent_dirs()  # (k, 3), or (N, k, 3) on a turning surface
         if F_f is not None:
-            tangential += np.asarray(F_f).reshape(len(v.tip), -1) @ v.spec.tangents
-        for i, t in enumerate(v.spec.tangents):
+            F = np.asarray(F_f).reshape(len(v.tip), -1)
+            tangential += F @ T if T.ndim == 2 else np.einsum("nk,nki->ni", F, T)
+        for i in range(len(v.spec.tangents)):
             F_t = ch(f"contact.{name}.t{i + 1}.F")
             if F_t is not None:
-                tangential += np.outer(F_t, t)
+                tangential += np.asarray(F_t)[:, None] * T[..., i, :]
         if F_f is not None or v.spec.tangent_chain is not None:
             forces.append(("tangent", f"{name}_tangent", v, tangential, COLORS["friction"]))
     typical = {kind: max((float(np.percentile(np.linalg.norm(F, axis=1), PERCENTILE)) for k, _, _, F, _ in forces
