@@ -38,6 +38,7 @@ KNOWN_KEYS = ["drive", "active_joints", "locked", "tip0", "q_seed", "gravity_com
               "max_step", "record_energy", "max_events", "storm_window", "storm_count", "law",
               "environment", "robot", "k_int", "b_int", "k_ext", "b_ext", "mu_s", "mu_k", "viscous", "until",
               "space", "start", "accel_fraction", "velocity", "initial", "feedforward", "servo", "axis", "mass",
+              "frame_point", "surface_frame", "urdf", "position0", "velocity0",
               *(p.name for laws in (STAGE_LAWS, FRICTION_LAWS) for law in laws.values() for p in law.params)]
 #: (the last line: the registered laws' declared parameters)
 
@@ -57,8 +58,8 @@ def _get(doc, path):
 
 
 @st.composite
-def mutated(draw):
-    doc = copy.deepcopy(BASE)
+def mutated(draw, base=BASE):
+    doc = copy.deepcopy(base)
     for _ in range(draw(st.integers(1, 4))):
         spots = list(_paths(doc))
         if not spots:
@@ -125,3 +126,35 @@ def test_valid_mutants_build_a_system_or_raise_the_packages_errors(doc):
         System(scene)
     except (SceneError, RobotError):
         pass
+
+
+#: scenes with objects: bodies from URDFs beside them (several coordinates), a body's point touching, a surface
+#: carried by the robot
+OBJECTS = {name: (tomllib.loads((sims_dir() / f"{name}.toml").read_text()), str(sims_dir() / f"{name}.toml"))
+           for name in ("push_box", "tilt_tray")}
+
+
+@pytest.mark.parametrize("name", sorted(OBJECTS))
+def test_mutated_object_scenes_validate_build_or_raise_the_packages_errors(name):
+    """The object scenes mutated as b1 is: parse_scene validates or raises SceneError, and what it accepts System
+    builds or rejects with SceneError/RobotError."""
+    from contactdyn.errors import RobotError
+    from contactdyn.model.system import System
+
+    base, file = OBJECTS[name]
+
+    @settings(max_examples=120, deadline=None,
+              suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+    @given(mutated(base))
+    def check(doc):
+        try:
+            scene = parse_scene(doc, file=file)
+        except SceneError as exc:
+            assert exc.file == file and exc.key, f"SceneError without file or key path: {exc}"
+            return
+        try:
+            System(scene)
+        except (SceneError, RobotError):
+            pass
+
+    check()
