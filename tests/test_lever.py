@@ -135,7 +135,7 @@ def test_held_it_stays_stuck_at_rest():
 def test_the_rows_and_gamma_on_the_bar_are_the_derivatives_of_the_gap_and_the_slip():
     """Along a smooth motion of the tool and the bar (Q, Q̇, Q̈ given), the normal row n·Q̇ is ġ and the slip row's
     rate with γ is d/dt of the slip velocity (central differences, h = 1e-5 s); the same for the bar's point."""
-    for edits in (_hold(0.3), _bar_point()):
+    for edits in (_hold(0.3), _bar_point(), _bar_point(on_tool=True)):
         system = _system(**edits)
         c = system.contacts[0]
         x0, _, _, _ = _start(system)
@@ -167,14 +167,16 @@ def _row(system, c, u, kin):
     return contact_row(system, c, u, kin)
 
 
-def _bar_point() -> dict:
+def _bar_point(on_tool: bool = False) -> dict:
     """Edits: the bar's lower end (a point of its frame, ``body_frame``) over the table, friction along x (for its
     rows: its one coordinate moves the end along the normal and the tangent at once, so a run holds it frictionless),
-    the bar at 0.5 rad."""
+    the bar at 0.5 rad; ``on_tool``: over a surface carried by the tool's frame instead (body = "robot")."""
     doc, _ = _doc()
     contact = {"frame": "lever", "body_frame": "bar", "frame_point": [0.0, 0.0, -0.5], "body": "ground",
                "point": [0.0, 0.0, 0.0], "normal": {"direction": [0.0, 0.0, 1.0]},
                "tangent": {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu": 0.3}}
+    if on_tool:
+        contact.update(body="robot", surface_frame="tip", point=[0.0, 0.0, -0.2])
     return {"body": {"lever": {**doc["body"]["lever"], "position0": 0.5}}, "contact": {"table": contact}}
 
 

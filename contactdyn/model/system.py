@@ -287,7 +287,7 @@ class System:
             p_tip, v_tip, J, drift, fs.position, fs.velocity, fs.jacobian, fs.drift, fs.rotation,
             fs.angular_jacobian @ x[self.nQ:self.nQ + self.nv], fs.angular_jacobian, fs.angular_drift, spec.point,
             spec.normal, spec.tangents)
-        return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, n, T)
+        return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, n, T, columns)
 
     def update_bodies(self, x: np.ndarray) -> None:
         """The articulated bodies' terms at x (H_b, h_b, their frames; each skipped when its state is unchanged)."""

@@ -54,8 +54,9 @@ class ContactSpec:
     bonded: bool  #: never separates (e.g. benchmark B1)
     #: [m] when ``frame`` names a body: its touching point (world, at the body's coordinates 0); else None
     frame_point: np.ndarray | None = None
-    #: with ``body = "robot"``: the robot frame carrying the surface (``point``, ``normal`` and ``tangents`` then in
-    #: that frame's own coordinates: the surface moves and turns with it); else None
+    #: with ``body = "robot"``: the robot frame carrying the surface, with ``body`` an articulated body: that body's
+    #: frame (``point``, ``normal`` and ``tangents`` then in that frame's own coordinates: the surface moves and turns
+    #: with it); else None
     surface_frame: str | None = None
     #: with ``frame`` an articulated body: the frame of that body (a link's, or any URDF frame) in whose coordinates
     #: ``frame_point`` is given (the point moves and turns with it); else None
