@@ -59,8 +59,9 @@ def load_body(source: str) -> UrdfBody:
                    f"{model.names[j - 1]}" for j in range(1, model.njoints) if model.parents[j] != j - 1), "")
     if not 1 <= model.njoints - 1 <= 3 or branch or \
             any(model.joints[j].shortname() not in _PRISMATIC for j in range(1, model.njoints)):
-        raise RobotError(f"{robot.source}: a body's URDF has one to three prismatic joints in one chain (revolute "
-                         f"or free-flying bodies are not supported yet); found {found or 'no joint'}{branch}")
+        raise RobotError(f"{robot.source}: a body's URDF has one to three prismatic joints in one chain (with a "
+                         f"revolute joint among them, any tree: an articulated body); found "
+                         f"{found or 'no joint'}{branch}")
     data = model.createData()
     pin.computeJointJacobians(model, data, pin.neutral(model))
     J = np.asarray(pin.getJointJacobian(model, data, model.njoints - 1, pin.ReferenceFrame.WORLD)).reshape(6, model.nv)
