@@ -25,8 +25,10 @@ from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import run_system
 
 ROOT = Path(__file__).resolve().parent.parent
+#: scenes whose every mode the compiled call declines (pack.unsupported), with its reason: nothing to compare
+READABLE_ONLY = {"sims/lever.toml": "a body with revolute joints (the readable model computes its terms)"}
 SCENES = sorted(str(p.relative_to(ROOT)) for folder in ("sims", "benchmarks/hard")
-                for p in (ROOT / folder).glob("*.toml"))
+                for p in (ROOT / folder).glob("*.toml") if str(p.relative_to(ROOT)) not in READABLE_ONLY)
 DURATION = 0.2  #: [s] of each scene
 RTOL, FLOOR = 1e-9, 1e-10  #: explicit runs: relative to each channel's largest value, plus an absolute floor
 NEWTON = 50.0  #: runs with Radau segments: this many times the scene's rtol·|value| + atol

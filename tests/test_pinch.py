@@ -80,7 +80,8 @@ def test_the_part_is_a_body_read_off_its_urdf():
 
 @pytest.mark.parametrize("body, key, words", [
     ({"urdf": "SKEWED"}, "body.part.urdf", "mutually orthogonal"),  # two prismatic joints at 45°
-    ({"urdf": "REVOLUTE"}, "body.part.urdf", "revolute"),
+    # a revolute joint makes it an articulated body (tests/test_lever.py): its surfaces then name its frame
+    ({"urdf": "REVOLUTE"}, "contact.left.surface_frame", "required with body = 'part'"),
     ({"urdf": "part_cylinder.urdf", "mass": 1.0}, "body.part.mass", "no mass or axis beside urdf"),
     ({"urdf": "no_such_body"}, "body.part.urdf", "no_such_body"),
 ])

@@ -234,6 +234,8 @@ def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics, u: np.n
             row[: system.nv] += sign * (u @ kin.J)
             for i, axis in c.touch_coords:
                 row[i] += sign * float(u @ axis)
+            for i, col in kin.columns:  # an articulated side's (both sides' relative: its chains are rigid)
+                row[i] += sign * float(u @ col)
         elif kind == NodeKind.ANCHOR:
             for i, axis in c.surface_coords:
                 row[i] += sign * float(u @ axis)

@@ -9,8 +9,8 @@ come from one linear system
 where G Q̈ + γ = 0 are the acceleration-level constraints (rows) and C their force
 columns: a row's own direction, tilted by sliding friction −μ_k d (eq. 27) when the row
 is a sliding contact's normal. M is the mass matrix: the robot's H (plus rotor inertias
-reflected through rigid gears) and the diagonal inertias of bodies, chain masses and
-motors; f the generalized forces: −h (Coriolis, centrifugal, gravity), stage forces,
+reflected through rigid gears), an articulated body's H_b, and the diagonal inertias of bodies, chain masses and
+motors; f the generalized forces: −h and −h_b (Coriolis, centrifugal, gravity), stage forces,
 friction, drives. At impulse level (impacts, :mod:`contactdyn.model.impact`) the same matrix
 gives the velocity jump: M Q̇⁺ − Cᵀ Λ = M Q̇⁻, G Q̇⁺ = 0 (Λ [N·s]).
 
@@ -98,6 +98,7 @@ def contact_row(system, c: Contact, u: np.ndarray, kin: Kinematics) -> np.ndarra
     row = np.zeros(system.nQ)
     row[: system.nv] = u @ kin.J
     c.add_columns(row[None], u[None])
+    kin.add_columns(row[None], u[None])
     return row
 
 
@@ -107,6 +108,8 @@ def mass_matrix(system) -> np.ndarray:
     nv = system.nv
     M = system._M
     M[:nv, :nv] = system.robot.H + np.diag(system._D) if system.drives.any_motor else system.robot.H
+    for body in system.articulated.values():  # an articulated body's H_b (at its last update)
+        M[body.first:body.first + body.nb, body.first:body.first + body.nb] = body.H
     return M
 
 
@@ -128,7 +131,7 @@ def kkt_solve(system, f: np.ndarray, rows: Rows, fold: np.ndarray | None,
     """Q̈ and the row forces λ of [[M − fold_q, −Cᵀ − fold], [G, 0]] [Q̈; λ] = [f; −γ]."""
     nQ, nv = system.nQ, system.nv
     M = mass_matrix(system)
-    if rows or fold_q is not None:
+    if rows or fold_q is not None or system.articulated:  # (else M is H beside a diagonal)
         nr = len(rows)
         A = np.zeros((nQ + nr, nQ + nr))
         A[:nQ, :nQ] = M if fold_q is None else M - fold_q

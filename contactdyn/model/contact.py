@@ -75,6 +75,23 @@ class Kinematics:
     frame: FrameTerms | None = None  #: the tip frame's full terms (orientation, angular Jacobian)
     normal: np.ndarray | None = None  #: the world normal n at this state (unit)
     tangents: np.ndarray | None = None  #: (k, 3) the world tangents T at this state (unit)
+    #: per coordinate of a body with revolute joints on either side: (its index in Q, the relative motion's
+    #: (touching − surface) column at this state [m/rad or m/m]); the translating bodies' constant axes are the
+    #: Contact's (:meth:`Contact.add_columns`), their J̇q̇ part in ``drift``
+    columns: tuple = ()
+
+    def add_columns(self, rows: np.ndarray, U: np.ndarray) -> None:
+        """Add to ``rows`` (k, nQ) the articulated bodies' part of the relative motion along U (k, 3) [m/m]."""
+        for i, col in self.columns:
+            rows[:, i] += U @ col
+
+    def column_rates(self, qd: np.ndarray) -> np.ndarray:
+        """The articulated bodies' part of the relative velocity [m/s] at coordinate rates ``qd`` (Q̇; Q̈ for the
+        accelerations [m/s²], their J̇q̇ being in ``drift``)."""
+        v = np.zeros(3)
+        for i, col in self.columns:
+            v = v + col * qd[i]
+        return v
 
 
 @dataclass
@@ -172,12 +189,19 @@ class Contact:
     """Runtime of one contact interface; the system gives it coordinates and state slots.
 
     Its two sides: the touching one, a robot frame (``fid``) or a body's point (``fid`` −1, the spec's
-    ``frame_point``), and the surface, the ground or a body. A body side moves by its coordinates:
+    ``frame_point``), and the surface, the ground or a body. An articulated body's side (``touch_link``,
+    ``surface_link``) moves by its joints, its columns the state's (:attr:`Kinematics.columns`). A translating body
+    side moves by its coordinates:
     ``touch_coords`` and ``surface_coords`` list each (index in Q, unit axis), so a point of it is its place at
     the coordinates 0 plus Σ axis Q [m]."""
 
-    def __init__(self, spec: ContactSpec, fid: int, touch_coords: list, surface_coords: list, surface_fid: int = -1):
+    def __init__(self, spec: ContactSpec, fid: int, touch_coords: list, surface_coords: list, surface_fid: int = -1,
+                 touch_link: tuple | None = None, surface_link: tuple | None = None):
         self.spec = spec
+        #: (ArticulatedBody, its frame id) whose point ``frame_point`` touches (``body_frame``), or None
+        self.touch_link = touch_link
+        #: (ArticulatedBody, its frame id) carrying the surface (``surface_frame`` on such a body), or None
+        self.surface_link = surface_link
         self.name = spec.name
         self.fid = fid
         #: the robot frame carrying the surface (``body = "robot"``: point, normal, tangents in its coordinates); -1

@@ -112,6 +112,7 @@ def _forces_and_rows(system, t: float, x: np.ndarray, modes: list[ContactMode], 
     f = np.zeros(nQ)
     f[:nv] = -system.robot.h
     f[nv:] = system.weights  # the bodies' weights m g·axis [N]
+    system.body_forces(x, f)  # an articulated body's −h_b
     ydot = np.zeros(system.ny)
     rows = Rows()
     ev = Evaluation(np.empty(0), np.empty(0), rows.meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),

@@ -86,7 +86,7 @@ def slip_acceleration(system, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np
     kin = system.kinematics(c, x)
     qdd = xdot[nQ:2 * nQ]
     a_touch, a_env = c.rates(qdd)
-    a_tip = kin.J @ qdd[:nv] + kin.drift
+    a_tip = kin.J @ qdd[:nv] + kin.drift + kin.column_rates(qdd)
     return kin.tangents @ ((a_tip if a_touch is None else a_tip + a_touch) - a_env)
 
 
@@ -180,7 +180,7 @@ def slip_velocity(system, c: Contact, kin: Kinematics, qd: np.ndarray | None = N
     if qd is None:
         return kin.tangents @ (kin.v_tip - kin.v_env)
     v_touch, v_env = c.rates(qd)
-    v_tip = kin.J @ qd[: system.nv]
+    v_tip = kin.J @ qd[: system.nv] + kin.column_rates(qd)
     return kin.tangents @ ((v_tip if v_touch is None else v_tip + v_touch) - v_env)
 
 
@@ -215,6 +215,7 @@ def friction_terms(system, c: Contact, mode: ContactMode, kin: Kinematics, row: 
         R_T = np.zeros((len(T), nQ))  # generalized rows of the tangential slip
         R_T[:, :nv] = T @ kin.J
         c.add_columns(R_T, T)
+        kin.add_columns(R_T, T)
     if mode.touching and mode.stuck:
         for i in range(len(T)):
             rows.add(R_T[i], float(T[i] @ kin.drift) + system.stabilization * float(vt[i]), (c.name, "t", i))

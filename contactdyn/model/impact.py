@@ -82,6 +82,7 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     nQ, nv = system.nQ, system.nv
     q, v = x[:nv], x[nQ:nQ + nv]
     system.robot.update(q, v)
+    system.update_bodies(x)
     qd_minus = x[nQ:2 * nQ].copy()
     M = system.mass_matrix()
     name = contact.name if contact is not None else ""
@@ -194,6 +195,7 @@ def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tu
     rows = velocity_rows(system, x, modes, limits=limits, joint_modes=joint_modes)
     if not rows:
         return x
+    system.update_bodies(x)
     M = system.mass_matrix()
     z, _ = impulse_solve(system, M, rows, x[nQ:2 * nQ])
     x_new = x.copy()

@@ -56,6 +56,7 @@ from ..laws.controllers import CONTROLLERS
 from ..laws.controllers.base import BindContext, Controller
 from ..laws.controllers.sampled import SampledController
 from ..laws.drives import Drives
+from ..robot.body import ArticulatedBody
 from ..robot.posture import start_posture
 from ..robot.robot import Robot
 from ..scene.scene_file import Scene
@@ -99,6 +100,9 @@ class System:
         #: per body coordinate: (its name: <b> for a one-coordinate body, else <b>.<joint>; its index in Q); its
         #: channels are body.<name>.*
         self.body_channels = _coordinate_names(scene, nv)
+        #: the bodies with revolute joints, by name (their H_b, h_b and frames: contactdyn.robot.body.ArticulatedBody)
+        self.articulated = {name: _articulated(scene, name, b, self.body_coords[name][0][0])
+                            for name, b in scene.bodies.items() if b.articulated}
         diag: list[float] = [c.mass for _, c in coords]
         self.contacts = [self._contact_of(spec) for spec in scene.contacts.values()]
         self.mass_labels, n_first = assign_chain_slots(self.contacts, nv, diag)
@@ -138,15 +142,19 @@ class System:
 
     def _contact_of(self, spec) -> Contact:
         """A contact: its touching side a robot frame or a body's point (``frame_point``), its surface the ground,
-        a body (each body side by its coordinates) or a robot frame (``surface_frame``)."""
-        surface_coords = self.body_coords.get(spec.body, [])
-        surface_fid = self._surface_fid(spec)
+        a body (each body side by its coordinates; an articulated one by a frame of it) or a robot frame
+        (``surface_frame``)."""
+        surface_link = _link(self, spec, spec.body, "surface_frame", spec.surface_frame)
+        surface_coords = [] if surface_link else self.body_coords.get(spec.body, [])
+        surface_fid = -1 if surface_link else self._surface_fid(spec)
         if spec.frame_point is not None:  # a body touches
             if self.robot.model.existFrame(spec.frame):
                 raise SceneError(f"contact.{spec.name}.frame", "a name that is a body's or a robot frame's, not "
                                  "both (rename the body)", f"{spec.frame!r}, both", self.scene.file)
-            contact = Contact(spec, -1, self.body_coords[spec.frame], surface_coords, surface_fid)
-            if surface_fid < 0:  # both sides bodies (or the ground): their axes alone carry the normal
+            touch_link = _link(self, spec, spec.frame, "body_frame", spec.body_frame)
+            contact = Contact(spec, -1, [] if touch_link else self.body_coords[spec.frame], surface_coords,
+                              surface_fid, touch_link, surface_link)
+            if surface_fid < 0 and not touch_link and not surface_link:  # their axes alone carry the normal
                 row = np.zeros((1, self.nv + len(self.body_channels)))
                 contact.add_columns(row, spec.normal[None])
                 if not np.any(np.abs(row) > 1e-12):
@@ -164,7 +172,7 @@ class System:
         if fid == surface_fid:
             raise SceneError(f"contact.{spec.name}.surface_frame", "a robot frame other than the touching one",
                              spec.surface_frame, self.scene.file)
-        return Contact(spec, fid, [], surface_coords, surface_fid)
+        return Contact(spec, fid, [], surface_coords, surface_fid, None, surface_link)
 
     def _surface_fid(self, spec) -> int:
         """The robot frame carrying the contact's surface (``body = "robot"``), -1 for the ground or a body."""
@@ -253,28 +261,52 @@ class System:
 
     # ---- kinematics and inertia ------------------------------------------------------------
     def kinematics(self, c: Contact, x: np.ndarray) -> Kinematics:
-        """Contact kinematics at x; requires ``robot.update`` at x's (q, q̇) first."""
-        if c.fid < 0:  # a body's point touches: no robot joint moves it
+        """Contact kinematics at x; requires ``robot.update`` at x's (q, q̇) first (an articulated body's side is
+        computed here at x's coordinates)."""
+        columns: tuple = ()
+        if c.touch_link is not None:  # an articulated body's point touches: its joints move it
+            body, fid = c.touch_link
+            body.update(x, self.nQ)
+            p_tip, v_tip, J_b, drift = body.point(fid, c.spec.frame_point)
+            J, ft = np.zeros((3, self.nv)), None
+            columns = tuple((i, J_b[:, k]) for k, i in enumerate(body.indices))
+        elif c.fid < 0:  # a body's point touches: no robot joint moves it
             p_tip, v_tip = c.toucher(x, self.nQ)
             J, drift, ft = np.zeros((3, self.nv)), np.zeros(3), None
         else:
             ft = self.robot.frame_terms(c.fid)
             p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
+        if c.surface_link is not None:
+            return _on_body_frame(self, c, x, p_tip, v_tip, J, drift, ft, columns)
         if c.surface_fid < 0:
             p_env, v_env = c.surface(x, self.nQ)
-            return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, c.normal.u, c.tangents)
+            return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, c.normal.u, c.tangents, columns)
         fs = self.robot.frame_terms(c.surface_fid)  # the surface turns with a robot frame
         spec = c.spec
         J, drift, p_env, v_env, n, T = turning_surface(
             p_tip, v_tip, J, drift, fs.position, fs.velocity, fs.jacobian, fs.drift, fs.rotation,
             fs.angular_jacobian @ x[self.nQ:self.nQ + self.nv], fs.angular_jacobian, fs.angular_drift, spec.point,
             spec.normal, spec.tangents)
-        return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, n, T)
+        return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, n, T, columns)
+
+    def update_bodies(self, x: np.ndarray) -> None:
+        """The articulated bodies' terms at x (H_b, h_b, their frames; each skipped when its state is unchanged)."""
+        for body in self.articulated.values():
+            body.update(x, self.nQ)
+
+    def body_forces(self, x: np.ndarray, f: np.ndarray) -> None:
+        """Add to f the articulated bodies' −h_b(q_b, q̇_b) [N·m or N]: Coriolis, centrifugal and gravity."""
+        for body in self.articulated.values():
+            body.update(x, self.nQ)
+            f[body.first:body.first + body.nb] -= body.h
 
     def mass_matrix(self) -> np.ndarray:
-        """M at the last ``robot.update``, a copy: H plus rigid gears' rotor inertias, then the other coordinates."""
+        """M at the last ``robot.update`` (and ``update_bodies``), a copy: H plus rigid gears' rotor inertias, then
+        the other coordinates, an articulated body's H_b its block."""
         M = self._M.copy()
         M[:self.nv, :self.nv] = self.robot.H + np.diag(self._D)
+        for body in self.articulated.values():
+            M[body.first:body.first + body.nb, body.first:body.first + body.nb] = body.H
         return M
 
     def contact(self, name: str) -> Contact:
@@ -326,6 +358,51 @@ class System:
                 if chain.nodes[node_i].kind == NodeKind.FREE and slot >= 0:
                     x[2 * self.nQ + slot] = dc.last_positions[node_i]
         return x
+
+
+# ---- articulated bodies (bodies with revolute joints) ------------------------------------------------------
+def _articulated(scene: Scene, name: str, spec, first: int) -> ArticulatedBody:
+    """The run-time model of body ``name``, whose URDF has revolute joints (gravity the world's), its first
+    coordinate at ``first`` in Q."""
+    try:
+        robot = Robot.load(spec.urdf, gravity=tuple(scene.robot.gravity))
+    except RobotError as exc:
+        raise SceneError(f"body.{name}.urdf", "a loadable URDF", exc, scene.file) from None
+    return ArticulatedBody(name, robot, first)
+
+
+def _link(system: System, spec, body: str, key: str, frame: str | None) -> tuple | None:
+    """(ArticulatedBody, frame id) of ``frame`` on ``body`` if it is articulated (``key``: the contact's key naming
+    the frame), else None."""
+    if body not in system.articulated:
+        return None
+    art = system.articulated[body]
+    try:
+        return art, art.robot.frame_id(frame)
+    except RobotError as exc:
+        raise SceneError(f"contact.{spec.name}.{key}", f"a frame of body {body!r}", exc,
+                         system.scene.file) from None
+
+
+def _on_body_frame(system: System, c: Contact, x: np.ndarray, p_tip, v_tip, J, drift, ft, columns: tuple
+                   ) -> Kinematics:
+    """A surface carried by a frame of an articulated body: :func:`turning_surface` over the robot's joints and the
+    body's, the Jacobians side by side ([robot | body]); the body's part of J_rel its columns (``columns``: the
+    touching side's so far)."""
+    body, fid = c.surface_link
+    nQ, nv, nb = system.nQ, system.nv, body.nb
+    body.update(x, nQ)
+    fs = body.frame(fid)
+    w = fs.angular_jacobian @ x[nQ + body.first:nQ + body.first + nb]  # ω [rad/s]
+    J_ext = np.hstack([J, np.zeros((3, nb))])
+    J_o = np.hstack([np.zeros((3, nv)), fs.jacobian])
+    J_w = np.hstack([np.zeros((3, nv)), fs.angular_jacobian])
+    spec = c.spec
+    J_rel, a_rel, p_env, v_env, n, T = turning_surface(
+        p_tip, v_tip, J_ext, drift, fs.position, fs.velocity, J_o, fs.drift, fs.rotation, w, J_w, fs.angular_drift,
+        spec.point, spec.normal, spec.tangents)
+    columns = columns + tuple((i, J_rel[:, nv + k]) for k, i in enumerate(body.indices))
+    return Kinematics(p_tip, v_tip, J_rel[:, :nv].copy(), a_rel, p_env, v_env, ft, n, T, columns)
 
 
 # ---- the state layout (see the module docstring) --------------------------------------------------------

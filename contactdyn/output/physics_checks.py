@@ -202,15 +202,18 @@ def _contact_worst(system: System, c, ch: dict[str, np.ndarray], t: np.ndarray) 
 
 
 def stored_energy(system: System, xs: np.ndarray, ch: dict[str, np.ndarray]) -> tuple[np.ndarray | None, str]:
-    """[J] per sample: ½ Q̇ᵀ M Q̇ (the robot's H, rotors reflected on the joints, the other coordinates' inertias)
-    + the robot's and the bodies' gravity potential + the stages' and elastic transmissions' springs; (None, why)
-    where a stage's law does not state its potential."""
+    """[J] per sample: ½ Q̇ᵀ M Q̇ (the robot's H, rotors reflected on the joints, an articulated body's H_b, the other
+    coordinates' inertias) + the robot's and the bodies' gravity potential + the stages' and elastic transmissions'
+    springs; (None, why) where a stage's law does not state its potential."""
     nQ, nv, robot = system.nQ, system.nv, system.robot
     energy = np.empty(len(xs))
     for k, x in enumerate(xs):
         q, v, rest = x[:nv], x[nQ:nQ + nv], x[nQ + nv:2 * nQ]
         others = 0.5 * float(system.rotor_inertias @ (v * v)) + 0.5 * float(system.M_rest @ (rest * rest)) \
             - float(system.weights @ x[nv:nQ])  # the bodies' weights' potential −W·Q [J]
+        for body in system.articulated.values():  # (its coordinates' M_rest and weights are zeros)
+            idx = slice(body.first, body.first + body.nb)
+            others += body.energy(x[idx], x[nQ:][idx])
         energy[k] = robot.kinetic_energy(q, v) + robot.potential_energy(q) + others  # others: rotors, bodies, masses
     for c in system.contacts:
         for dc in c.chains:

@@ -1,4 +1,4 @@
-"""An environment body from a URDF: its prismatic joints, the mass that moves with each, its visuals.
+"""An environment body from a URDF: its joints, the mass that moves with each, its visuals.
 
 ``[body.<name>] urdf = "..."`` names a URDF (a path beside the scene, a name in ``urdf/``) whose root is
 fixed in the world and whose joints (one to three) are prismatic, in one chain, and mutually orthogonal: the
@@ -6,7 +6,12 @@ body translates, one coordinate per joint, its value [m]. Joint k moves the link
 coordinate k [kg] is theirs summed, and with orthogonal axes the body's mass matrix is that diagonal, exactly
 (Σ_l m_l a_i·a_j vanishes off it). Inertias are checked as a robot's (:mod:`contactdyn.robot.inertia`); an
 axis is the joint's direction in the world at q = 0. The cart of the paper is the one-joint case, with a box
-for a visual. Revolute joints or a free-flyer are not bodies yet (issue 32).
+for a visual.
+
+A URDF with any revolute joint (beside prismatic ones, in a tree fixed in the world) is an *articulated body*: its
+joints are coordinates of the system (angles [rad], lengths [m]) whose mass matrix H_b(q_b) and bias h_b(q_b, q̇_b)
+(gravity the world's) come from its own Pinocchio model, :class:`ArticulatedBody` at run time. A free-flyer (or
+any joint of several coordinates: planar, spherical) is not a body yet (issue 32).
 """
 
 from __future__ import annotations
@@ -16,19 +21,24 @@ import pinocchio as pin
 
 from ..errors import RobotError
 from .robot import Robot
+from .urdf_model import build_urdf_model
 
-__all__ = ["UrdfBody", "load_body"]
+__all__ = ["UrdfBody", "ArticulatedBody", "load_body"]
 
 _PRISMATIC = ("JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned")
+_REVOLUTE = ("JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned")
 
 
 class UrdfBody:
     """A body's URDF loaded: ``robot`` (its joints active, for its visuals), ``mass`` [kg] (all its links),
     per joint its name (``joints``), unit axis in the world (``axes``, (k, 3)) and the mass moving along it
-    (``masses`` [kg])."""
+    (``masses`` [kg]). An articulated body (``articulated``): ``axes`` its joints' axes in the world at q = 0
+    (rotation or travel), ``masses`` zeros (its mass matrix is H_b(q_b), :class:`ArticulatedBody`)."""
 
-    def __init__(self, robot: Robot, mass: float, joints: list[str], axes: np.ndarray, masses: np.ndarray) -> None:
+    def __init__(self, robot: Robot, mass: float, joints: list[str], axes: np.ndarray, masses: np.ndarray,
+                 articulated: bool = False) -> None:
         self.robot, self.mass, self.joints, self.axes, self.masses = robot, mass, joints, axes, masses
+        self.articulated = articulated
 
     @property
     def axis(self) -> np.ndarray:
@@ -37,17 +47,21 @@ class UrdfBody:
 
 
 def load_body(source: str) -> UrdfBody:
-    """The body of a URDF whose joints are prismatic, chained and orthogonal (a RobotError says what the file
-    has instead)."""
-    robot = Robot.load(source)
+    """The body of a URDF whose joints are prismatic, chained and orthogonal, or articulated (a revolute joint
+    among them; a RobotError says what the file has instead)."""
+    robot = _load(source)
     model = robot.model
+    kinds = [model.joints[j].shortname() for j in range(1, model.njoints)]
+    if any(k in _REVOLUTE for k in kinds):
+        return _articulated(robot)
     found = ", ".join(f"{model.names[j]} ({model.joints[j].shortname()})" for j in range(1, model.njoints))
     branch = next((f"; joint {model.names[j]}'s parent is {model.names[model.parents[j]]}, not "
                    f"{model.names[j - 1]}" for j in range(1, model.njoints) if model.parents[j] != j - 1), "")
     if not 1 <= model.njoints - 1 <= 3 or branch or \
             any(model.joints[j].shortname() not in _PRISMATIC for j in range(1, model.njoints)):
-        raise RobotError(f"{robot.source}: a body's URDF has one to three prismatic joints in one chain (revolute "
-                         f"or free-flying bodies are not supported yet); found {found or 'no joint'}{branch}")
+        raise RobotError(f"{robot.source}: a body's URDF has one to three prismatic joints in one chain (with a "
+                         f"revolute joint among them, any tree: an articulated body); found "
+                         f"{found or 'no joint'}{branch}")
     data = model.createData()
     pin.computeJointJacobians(model, data, pin.neutral(model))
     J = np.asarray(pin.getJointJacobian(model, data, model.njoints - 1, pin.ReferenceFrame.WORLD)).reshape(6, model.nv)
@@ -62,3 +76,91 @@ def load_body(source: str) -> UrdfBody:
     if not masses[-1] > 0.0:
         raise RobotError(f"{robot.source}: a body's links after its last joint carry no mass")
     return UrdfBody(robot, float(masses[0]), [model.names[j] for j in range(1, model.njoints)], axes, masses)
+
+
+def _load(source: str) -> Robot:
+    """The body's Robot; a joint of several coordinates (a free-flyer, planar, spherical) is one RobotError."""
+    urdf = build_urdf_model(source)
+    model = urdf.model
+    several = [f"{model.names[j]} ({model.joints[j].shortname()})" for j in range(1, model.njoints)
+               if model.joints[j].nq != 1 or model.joints[j].nv != 1]
+    if several:
+        raise RobotError(f"{urdf.path}: a body's joints are revolute or prismatic, one coordinate each (a "
+                         f"free-flying body is not supported yet: issue 32); found {', '.join(several)}")
+    return Robot.load(source)
+
+
+def _articulated(robot: Robot) -> UrdfBody:
+    """An articulated body: its joints' names, their axes in the world at q = 0, its mass [kg]."""
+    model = robot.model
+    other = [f"{model.names[j]} ({model.joints[j].shortname()})" for j in range(1, model.njoints)
+             if model.joints[j].shortname() not in _REVOLUTE + _PRISMATIC]
+    if other:
+        raise RobotError(f"{robot.source}: a body's joints are revolute or prismatic; found {', '.join(other)}")
+    data = model.createData()
+    pin.computeJointJacobians(model, data, pin.neutral(model))
+    axes = np.zeros((model.nv, 3))
+    for j in range(1, model.njoints):
+        J = np.asarray(pin.getJointJacobian(model, data, j, pin.ReferenceFrame.WORLD)).reshape(6, model.nv)
+        k = model.joints[j].idx_v
+        revolute = model.joints[j].shortname() in _REVOLUTE
+        axes[k] = J[3:, k] if revolute else J[:3, k]
+    mass = float(sum(model.inertias[j].mass for j in range(1, model.njoints)))
+    return UrdfBody(robot, mass, list(robot.joint_names), axes, np.zeros(model.nv), articulated=True)
+
+
+class ArticulatedBody:
+    """An articulated body at run time: its Pinocchio model (gravity the world's) and where its coordinates sit
+    in Q (``first``, ``nb`` of them, in the URDF's joint order).
+
+    :meth:`update` computes its terms at the state's (q_b, q̇_b) once per state (the last one kept): H_b
+    [kg·m², kg], h_b [N·m, N] (Coriolis, centrifugal, gravity), and the frames' terms of :meth:`frame`."""
+
+    def __init__(self, name: str, robot: Robot, first: int) -> None:
+        self.name, self.robot, self.first, self.nb = name, robot, first, robot.nv
+        self._key: bytes | None = None
+        self._v = np.zeros(self.nb)  #: q̇_b at the last update [rad/s or m/s]
+
+    @property
+    def indices(self) -> range:
+        """The body's coordinates' indices in Q."""
+        return range(self.first, self.first + self.nb)
+
+    def update(self, x: np.ndarray, nQ: int) -> None:
+        """The body's terms at the state x (its q_b [rad or m] and q̇_b [rad/s or m/s]); nothing when unchanged."""
+        q, v = x[self.first:self.first + self.nb], x[nQ + self.first:nQ + self.first + self.nb]
+        key = q.tobytes() + v.tobytes()
+        if key != self._key:
+            self._v = np.array(v, float)
+            self.robot.update(np.array(q, float), self._v)
+            self._key = key
+
+    @property
+    def H(self) -> np.ndarray:
+        """H_b [kg·m², kg] at the last update."""
+        return self.robot.H
+
+    @property
+    def h(self) -> np.ndarray:
+        """h_b [N·m, N] at the last update: Coriolis, centrifugal and gravity."""
+        return self.robot.h
+
+    def frame(self, fid: int):
+        """The frame's FrameTerms at the last update (Jacobians over the body's nb coordinates)."""
+        return self.robot.frame_terms(fid)
+
+    def point(self, fid: int, p0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(p [m], v [m/s], J (3, nb) [m/rad or m/m], J̇q̇ [m/s²]) of the point p0 [m] fixed in frame fid (its
+        coordinates) at the last update: r = R p0, p = o + r, v = v_o + ω × r, J = J_o − [r]× J_ω,
+        J̇q̇ = a_o + α × r + ω × (ω × r)."""
+        ft = self.robot.frame_terms(fid)
+        r = ft.rotation @ p0
+        w = ft.angular_jacobian @ self._v  # ω [rad/s]
+        skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+        J = ft.jacobian - skew @ ft.angular_jacobian
+        drift = ft.drift + np.cross(ft.angular_drift, r) + np.cross(w, np.cross(w, r))
+        return ft.position + r, ft.velocity + np.cross(w, r), J, drift
+
+    def energy(self, q: np.ndarray, v: np.ndarray) -> float:
+        """[J] its kinetic energy ½ q̇_bᵀ H_b q̇_b and its gravity potential at (q_b, q̇_b)."""
+        return self.robot.kinetic_energy(q, v) + self.robot.potential_energy(q)

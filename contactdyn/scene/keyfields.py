@@ -15,7 +15,7 @@ TABLE_FIELDS = {
     'body.<body>.servo': 'velocity, gain',
     'body.<body>.drive': 'kind, R, C_M, C_E, J, N, wheel_radius, u_max, c, d, I1, I2, twist_damping, N_star',
     'contact': '<contact>',
-    'contact.<contact>': 'normal (required), point (required), body, tangent, frame, frame_point, surface_frame, bonded',
+    'contact.<contact>': 'normal (required), point (required), body, tangent, frame, frame_point, body_frame, surface_frame, bonded',
     'contact.<contact>.normal': 'direction (required), environment, robot, model, k, b, law, exponent, m, k_int, b_int, k_ext, b_ext',
     'contact.<contact>.tangent': 'model, directions, law, mu, mu_k, mu_s, viscous, environment, robot, v_s',
     'contact.<contact>.normal.environment[]': 'k (required), m, b, law, exponent',

@@ -79,12 +79,16 @@ MEANINGS: dict[str, str] = {
     # drives: robot.drive.* and body.<body>.drive.* from the kinds' declarations (_drive_rows)
     # bodies
     "body.<body>": "an active body translating along its axis (or its URDF's two or three orthogonal axes, one "
-                   "coordinate each); its weight m g·axis acts on each coordinate (g = robot.gravity)",
+                   "coordinate each); its weight m g·axis acts on each coordinate (g = robot.gravity); or an "
+                   "articulated body (a URDF with revolute joints): one coordinate per joint, its own dynamics",
     "body.<body>.urdf": "the body from a URDF whose one to three joints are prismatic and orthogonal: its masses, "
-                        "axes and visuals (then no mass or axis; a path beside the scene or a name in urdf/)",
+                        "axes and visuals (then no mass or axis; a path beside the scene or a name in urdf/); or "
+                        "whose joints, revolute and prismatic, form a tree fixed in the world: an articulated body, "
+                        "its H_b and h_b its own (no free-flyer yet; no servo or drive; the readable model runs it)",
     "body.<body>.mass": "mass",
     "body.<body>.axis": "direction of travel in the world",
-    "body.<body>.position0": "initial coordinate (one per coordinate for a body with several)",
+    "body.<body>.position0": "initial coordinate (one per coordinate for a body with several; rad for a revolute "
+                             "joint)",
     "body.<body>.velocity0": "initial velocity (one per coordinate for a body with several)",
     "body.<body>.servo": "velocity servo: F = gain (velocity - v), realised by the body's drive",
     "body.<body>.servo.velocity": "velocity set-point (none: no servo force)",
@@ -95,14 +99,18 @@ MEANINGS: dict[str, str] = {
     "contact.<contact>.frame": "robot frame whose origin touches (default: robot.tip), or a body whose point "
                                "frame_point touches",
     "contact.<contact>.frame_point": "the touching point [m] of the body named by frame (world, at the body's "
-                                     "coordinates 0)",
+                                     "coordinates 0; for an articulated body in body_frame's coordinates)",
+    "contact.<contact>.body_frame": "for an articulated touching body: its frame (a link's or any URDF frame) in "
+                                    "whose coordinates frame_point is given; the point moves and turns with it (a "
+                                    "rigid normal, at most one friction tangent for now)",
     "contact.<contact>.body": "what carries the surface: the fixed ground, an active body, or the robot (robot: "
                               "a robot frame, surface_frame, carries it: it moves and turns with that frame)",
-    "contact.<contact>.surface_frame": "the robot frame carrying the surface when body = \"robot\": point, "
-                                       "normal.direction and tangent.directions are then in that frame's own "
-                                       "coordinates (a rigid normal, at most one friction tangent for now)",
+    "contact.<contact>.surface_frame": "the robot frame carrying the surface when body = \"robot\", or the "
+                                       "articulated body's frame when body names one: point, normal.direction and "
+                                       "tangent.directions are then in that frame's own coordinates (a rigid "
+                                       "normal, at most one friction tangent for now)",
     "contact.<contact>.point": "a point of the undeformed surface (world; on a body at coordinate 0; on the robot "
-                               "in surface_frame's coordinates)",
+                               "or an articulated body in surface_frame's coordinates)",
     "contact.<contact>.bonded": "the tip never separates (stays on the surface)",
     "contact.<contact>.normal": "the normal direction and its deformation model",
     "contact.<contact>.normal.direction": "outward surface normal, from the environment towards the robot",
@@ -250,7 +258,10 @@ OVERRIDES: dict[str, dict[str, str]] = {
     "body.<body>.position0": {"type": "number (a list, one per coordinate, for a body with several)", "default": "0"},
     "body.<body>.velocity0": {"type": "number (a list, one per coordinate, for a body with several)", "default": "0"},
     "contact.<contact>.body": {"allowed": "ground, robot or a body name"},
-    "contact.<contact>.surface_frame": {"type": "string (a robot frame)", "default": "required when body = \"robot\""},
+    "contact.<contact>.surface_frame": {"type": "string (a robot frame, or the articulated body's)",
+                                        "default": "required when body = \"robot\" or an articulated body"},
+    "contact.<contact>.body_frame": {"type": "string (a frame of the touching body)",
+                                     "default": "required when frame is an articulated body"},
     "contact.<contact>.normal.environment": {"type": "list of elements"},
     "contact.<contact>.normal.robot": {"type": "list of elements"},
     "contact.<contact>.tangent.environment": {"type": "list of elements"},

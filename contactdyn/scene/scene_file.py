@@ -54,9 +54,13 @@ class ContactSpec:
     bonded: bool  #: never separates (e.g. benchmark B1)
     #: [m] when ``frame`` names a body: its touching point (world, at the body's coordinates 0); else None
     frame_point: np.ndarray | None = None
-    #: with ``body = "robot"``: the robot frame carrying the surface (``point``, ``normal`` and ``tangents`` then in
-    #: that frame's own coordinates: the surface moves and turns with it); else None
+    #: with ``body = "robot"``: the robot frame carrying the surface, with ``body`` an articulated body: that body's
+    #: frame (``point``, ``normal`` and ``tangents`` then in that frame's own coordinates: the surface moves and turns
+    #: with it); else None
     surface_frame: str | None = None
+    #: with ``frame`` an articulated body: the frame of that body (a link's, or any URDF frame) in whose coordinates
+    #: ``frame_point`` is given (the point moves and turns with it); else None
+    body_frame: str | None = None
 
 
 @dataclass(frozen=True)
@@ -74,7 +78,8 @@ class BodyCoordinate:
 class BodySpec:
     """An active environment body translating along one axis (a cart: its mass and axis given, or read off a URDF
     with one prismatic joint), or along two or three orthogonal axes (a URDF whose joints are all prismatic):
-    one coordinate per axis (:mod:`contactdyn.robot.body`)."""
+    one coordinate per axis (:mod:`contactdyn.robot.body`); or an articulated body (a URDF with revolute joints:
+    one coordinate per joint, its angle [rad] or length [m]; its masses and axes then only informative)."""
 
     name: str
     mass: float  #: [kg] the body's mass (all its links)
@@ -83,6 +88,7 @@ class BodySpec:
     servo_gain: float  #: [N·s/m], F = gain (v_ref − v), realised by the body's drive
     drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.laws.drives)
     urdf: str | None = None  #: the URDF the mass and axes come from (its visuals drawn by the viewer), or None
+    articulated: bool = False  #: a URDF with revolute joints: its dynamics its own Pinocchio model's
 
     @property
     def axis(self) -> np.ndarray:
@@ -389,21 +395,25 @@ def _read_joint_dynamics(r: Reader) -> JointDynamicsSpec:
 def _read_body(name: str, r: Reader) -> BodySpec:
     servo = r.sub("servo", {})
     urdf = urdf_beside_scene(r.str("urdf"), r.file) if r.has("urdf") else None
+    articulated = False
     if urdf is not None:
-        mass, joints = _urdf_body(r, urdf)
+        mass, joints, articulated = _urdf_body(r, urdf)
     else:
         mass = r.float("mass", lo=0.0, lo_open=True, unit="kg")
         joints = [("", r.vector("axis", [1.0, 0.0, 0.0], size=3, unit_norm=True), mass)]
     k = len(joints)
+    unit = "rad or m" if articulated else "m"
     if k == 1:
-        p0, v0 = [r.float("position0", 0.0, unit="m")], [r.float("velocity0", 0.0, unit="m/s")]
+        p0, v0 = [r.float("position0", 0.0, unit=unit)], [r.float("velocity0", 0.0, unit=f"{unit}/s")]
     else:  # one value per coordinate
-        p0 = r.vector("position0", np.zeros(k), size=k, unit="m").tolist()
-        v0 = r.vector("velocity0", np.zeros(k), size=k, unit="m/s").tolist()
+        p0 = r.vector("position0", np.zeros(k), size=k, unit=unit).tolist()
+        v0 = r.vector("velocity0", np.zeros(k), size=k, unit=f"{unit}/s").tolist()
+    if k > 1 or articulated:
         for key in ("servo", "drive"):
             if r.has(key):
-                raise r.error(key, f"no {key} on a body with {k} coordinates (a drive acts on a one-coordinate "
-                              "body)", r.raw(key))
+                what = "a body with revolute joints" if articulated else f"a body with {k} coordinates"
+                raise r.error(key, f"no {key} on {what} (a drive acts on a one-coordinate translating body)",
+                              r.raw(key))
     spec = BodySpec(
         name=name,
         mass=mass,
@@ -413,15 +423,16 @@ def _read_body(name: str, r: Reader) -> BodySpec:
         servo_gain=servo.float("gain", 1e3, lo=0.0, unit="N·s/m"),
         drive=read_drive_table(r.sub("drive", {}), per_joint=False),
         urdf=urdf,
+        articulated=articulated,
     )
     servo.finish()
     r.finish()
     return spec
 
 
-def _urdf_body(r: Reader, urdf: str) -> tuple[float, list[tuple[str, np.ndarray, float]]]:
-    """(mass [kg], per joint (name, unit axis, the mass moving along it [kg])) of a body read off its URDF
-    (``urdf``; then no ``mass`` or ``axis`` of its own)."""
+def _urdf_body(r: Reader, urdf: str) -> tuple[float, list[tuple[str, np.ndarray, float]], bool]:
+    """(mass [kg], per joint (name, unit axis, the mass moving along it [kg]), articulated) of a body read off its
+    URDF (``urdf``; then no ``mass`` or ``axis`` of its own)."""
     from ..robot.body import load_body  # (Pinocchio: imported for a scene that has such a body only)
 
     for key in ("mass", "axis"):
@@ -430,8 +441,9 @@ def _urdf_body(r: Reader, urdf: str) -> tuple[float, list[tuple[str, np.ndarray,
     try:
         body = load_body(urdf)
     except RobotError as exc:
-        raise r.error("urdf", "a loadable URDF of one to three orthogonal prismatic joints", exc) from None
-    return body.mass, list(zip(body.joints, body.axes, body.masses, strict=True))
+        raise r.error("urdf", "a loadable URDF of one to three orthogonal prismatic joints, or of revolute (and "
+                      "prismatic) joints fixed in the world", exc) from None
+    return body.mass, list(zip(body.joints, body.axes, body.masses, strict=True)), body.articulated
 
 
 def _read_elements(r: Reader, name: str) -> tuple[Element, ...]:
@@ -518,11 +530,13 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
         if frame == body:
             raise r.error("frame", f"a body other than the surface's ({body!r})", frame)
         frame_point = r.vector("frame_point", size=3, unit="m")
-    surface_frame = _surface_frame(r, body, normal_chain, model, tangents)
+    body_frame = _body_frame(r, frame, bodies, normal_chain, model, tangents)
+    surface_frame = _surface_frame(r, body, bodies, normal_chain, model, tangents)
     spec = ContactSpec(
         name=name,
         frame=frame,
         frame_point=frame_point,
+        body_frame=body_frame,
         body=body,
         point=r.vector("point", size=3, unit="m"),
         normal=normal,
@@ -538,28 +552,58 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
     return spec
 
 
-def _surface_frame(r: Reader, body: str, normal_chain: ChainSpec, tangent_model: str, tangents: np.ndarray
-                   ) -> str | None:
-    """The robot frame carrying a ``body = "robot"`` surface (None for another body); on it, for now, a rigid normal
-    and at most one friction tangent (a chain or a 2-D slide on a turning surface: not supported yet)."""
-    if body != "robot":
+def _surface_frame(r: Reader, body: str, bodies: dict[str, BodySpec], normal_chain: ChainSpec, tangent_model: str,
+                   tangents: np.ndarray) -> str | None:
+    """The frame carrying the surface: a robot frame (``body = "robot"``) or a frame of an articulated body (required
+    there); None for the ground or a translating body. On it, for now, a rigid normal and at most one friction
+    tangent (:func:`_turning_limits`)."""
+    articulated = body in bodies and bodies[body].articulated
+    if body != "robot" and not articulated:
         if r.has("surface_frame"):
-            raise r.error("surface_frame", 'a surface carried by the robot only (body = "robot")',
-                          r.raw("surface_frame"))
+            raise r.error("surface_frame", 'a surface carried by the robot (body = "robot") or by a body with '
+                          "revolute joints only", r.raw("surface_frame"))
         return None
+    owner = "the robot" if body == "robot" else f"body {body!r}"
     if not r.has("surface_frame"):
-        raise r.error("surface_frame", 'the robot frame carrying the surface (required with body = "robot")', None)
-    turning = 'on a surface carried by the robot (body = "robot"'
+        raise r.error("surface_frame", f"the frame of {owner} carrying the surface (required with body = {body!r})",
+                      None)
+    where = 'on a surface carried by the robot (body = "robot"' if body == "robot" else \
+        f"on a surface carried by a body with revolute joints (body = {body!r}"
+    _turning_limits(r, where, normal_chain, tangent_model, tangents)
+    return r.str("surface_frame")
+
+
+def _body_frame(r: Reader, frame: str, bodies: dict[str, BodySpec], normal_chain: ChainSpec, tangent_model: str,
+                tangents: np.ndarray) -> str | None:
+    """The frame of an articulated touching body in whose coordinates ``frame_point`` is given (required there;
+    None otherwise). On it, for now, a rigid normal and at most one friction tangent (:func:`_turning_limits`)."""
+    articulated = r.has("frame_point") and frame in bodies and bodies[frame].articulated
+    if not articulated:
+        if r.has("body_frame"):
+            raise r.error("body_frame", "a frame of a body with revolute joints whose point touches (frame = "
+                          "<body>, frame_point)", r.raw("body_frame"))
+        return None
+    if not r.has("body_frame"):
+        raise r.error("body_frame", f"the frame of body {frame!r} in whose coordinates frame_point is given "
+                      "(required: the body turns)", None)
+    _turning_limits(r, f"on a touching body with revolute joints (frame = {frame!r}", normal_chain, tangent_model,
+                    tangents)
+    return r.str("body_frame")
+
+
+def _turning_limits(r: Reader, where: str, normal_chain: ChainSpec, tangent_model: str, tangents: np.ndarray
+                    ) -> None:
+    """A side that turns supports, for now, a rigid normal and free or friction along at most one tangent: one
+    SceneError each otherwise (``where``: the side, its closing parenthesis left to this)."""
     if not normal_chain.rigid:
-        raise r.error("normal.model", f"a rigid normal {turning}; a deformation chain there is not supported yet)",
+        raise r.error("normal.model", f"a rigid normal {where}; a deformation chain there is not supported yet)",
                       r.data["normal"].get("model", "chain"))
     if tangent_model == "chain":
-        raise r.error("tangent.model", f"free or friction {turning}; a chain there is not supported yet)",
+        raise r.error("tangent.model", f"free or friction {where}; a chain there is not supported yet)",
                       tangent_model)
     if len(tangents) > 1:
-        raise r.error("tangent.directions", f"one tangential direction {turning}; a 2-D slide there is not "
+        raise r.error("tangent.directions", f"one tangential direction {where}; a 2-D slide there is not "
                       "supported yet)", tangents.tolist())
-    return r.str("surface_frame")
 
 
 def _read_solver(r: Reader) -> SolverSpec:
@@ -610,6 +654,9 @@ def _read_reference(r: Reader, bodies: dict[str, BodySpec]) -> ReferenceSpec:
     body = r.str("body", "ground", choices=["ground", *bodies])
     if body != "ground" and space != "task":
         raise r.error("body", "'ground' for a joint-space reference (only a task reference rides on a body)", body)
+    if body != "ground" and bodies[body].articulated:
+        raise r.error("body", "'ground' or a translating body (a reference does not ride on a body with revolute "
+                      "joints yet)", body)
     if body != "ground" and len(bodies[body].coordinates) > 1:
         raise r.error("body", "'ground' or a body with one coordinate (a reference rides along one axis)", body)
     start = r.vector("start", None) if r.has("start") else None

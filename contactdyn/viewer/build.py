@@ -117,9 +117,9 @@ def _draw_bodies(writer: SceneWriter, result: Result, bodies: dict, contacts: li
     notes: list[str] = []
     for name in sorted(drawn):
         notes += add_body(writer, bodies[name].urdf, coords[name], f"{GROUPS['bodies']}/{name}")
-    disp = {name: (np.zeros((len(idx), 3)) if coords[name] is None else coords[name] @ b.axes)
-            for name, b in bodies.items()}
-    for name in sorted(n for n in bodies if coords[n] is not None):
+    disp = {name: (np.zeros((len(idx), 3)) if coords[name] is None or b.articulated else coords[name] @ b.axes)
+            for name, b in bodies.items()}  # (an articulated body turns: its visuals show it, no path drawn)
+    for name in sorted(n for n, b in bodies.items() if coords[n] is not None and not b.articulated):
         at = [c.point for c in contacts if c.body == name] + [c.frame_point for c in contacts if c.frame == name]
         add_trace(writer, disp[name] + (np.mean(at, axis=0) if at else np.zeros(3)),
                   f"{GROUPS['bodies']}/{name}_path")

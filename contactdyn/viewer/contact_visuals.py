@@ -106,8 +106,8 @@ def add_environment(writer: SceneWriter, views: list[ContactView], disp: dict[st
     thickness = 0.02 * L
     moved = set()
     for v in views:
-        if v.spec.body == "robot":  # a surface carried by a robot frame: the robot's own visuals draw it, turning
-            continue
+        if v.spec.surface_frame is not None:  # carried by a robot frame or an articulated body's: its visuals draw
+            continue  # it, turning
         c1, c2 = 0.5 * sum(v.range1), 0.5 * sum(v.range2)
         size = [v.range1[1] - v.range1[0], v.range2[1] - v.range2[0]]
         H = frame_matrix(v.e1, v.e2, v.spec.point + c1 * v.e1 + c2 * v.e2 - 0.5 * thickness * v.u)
