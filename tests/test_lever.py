@@ -256,3 +256,25 @@ def test_a_free_flying_body_is_one_clear_error(tmp_path):
         parse_scene(doc, None, tmp_path / "scene.toml")
     assert "body.lever.urdf" in str(err.value) and "free-flying body is not supported yet" in str(err.value), \
         str(err.value)
+
+
+def test_the_viewer_turns_the_push_s_arrows_with_the_bar():
+    """The normal force's arrow on the tool stays along the bar's face normal as the bar swings: from its tail to
+    the contact point it points along the bar frame's x turned by the bar's angle (the body's own model)."""
+    from pathlib import Path
+
+    from contactdyn.robot.body import load_body
+    from contactdyn.viewer.build import build_scene
+
+    r = simulate("lever", {"solver.output_rate": 50.0})
+    scene = build_scene(r)
+    tracks = {a["path"]: {t["name"][1:]: np.array([k["value"] for k in t["keys"]]) for t in a["clip"]["tracks"]}
+              for a in scene.commands[-1]["animations"]}
+    tail = tracks["/meshcat/forces/push_normal"]["position"]
+    tip = tracks["/meshcat/tool/push/ball"]["position"]
+    pressing = r["contact.push.F_n"] > 1e-3
+    bar = load_body(str(Path(__file__).parent.parent / "sims" / "lever.urdf")).robot
+    normal = np.array([bar.frame_placement(np.array([th]), "bar").rotation[:, 0] for th in r["body.lever.x"]])
+    arrow = (tip - tail)[pressing] / np.linalg.norm((tip - tail)[pressing], axis=1)[:, None]
+    np.testing.assert_allclose(arrow, normal[pressing], atol=1e-5)
+    assert np.ptp(r["body.lever.x"][pressing]) > 0.1  # the bar did swing while pressed

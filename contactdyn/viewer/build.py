@@ -60,16 +60,15 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
     bodies = scene.bodies if scene else {}
     disp, drawn, body_notes = _draw_bodies(writer, result, bodies, contacts, idx)
     notes += body_notes
-    tips = {c.name: disp[c.frame] + c.frame_point if c.frame_point is not None else
-            _frame_positions(robot, q, c.frame) for c in contacts}
+    on_frames, turning = _turning_frames(result, bodies, contacts, idx, robot, q)
+    tips = {c.name: on_frames[c.name] if c.name in on_frames else disp[c.frame] + c.frame_point
+            if c.frame_point is not None else _frame_positions(robot, q, c.frame) for c in contacts}
     body, body_radii = geometry_spheres(robot, q[:: max(1, len(q) // 50)])
     points = [body, *tips.values(), *(c.point[None] for c in contacts)]
     cloud = np.concatenate(points) if points else np.zeros((1, 3))
     radii = np.concatenate([body_radii, np.zeros(len(cloud) - len(body))])  # [m] what reaches beyond each point
     L = max(float(np.max(np.linalg.norm(cloud, axis=1))), 0.1)  # [m] scene size
 
-    turning = {c.name: np.array([robot.frame_placement(qk, c.surface_frame).rotation for qk in q])
-               for c in contacts if c.body == "robot"}  # a surface carried by a robot frame turns with it
     views = contact_views(scene, tips, disp, L, GROUPS["environment"], turning) if scene else []
     v0 = views[0] if views else None
     arrows, per = force_arrows(views, ch) if views else ([], {})
@@ -124,6 +123,32 @@ def _draw_bodies(writer: SceneWriter, result: Result, bodies: dict, contacts: li
         add_trace(writer, disp[name] + (np.mean(at, axis=0) if at else np.zeros(3)),
                   f"{GROUPS['bodies']}/{name}_path")
     return disp, drawn, notes
+
+
+def _turning_frames(result: Result, bodies: dict, contacts: list, idx, robot: Robot, q: np.ndarray
+                    ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """What turns with a frame, per contact and animation frame: (the touching point [m] (N, 3) of an articulated
+    body's frame (``body_frame``, ``frame_point`` in its coordinates), the rotation (N, 3, 3) of the frame carrying
+    its surface (``surface_frame``: the robot's, or an articulated body's))."""
+    from ..robot.body import load_body
+
+    def placements(owner: str, frame: str) -> list | None:
+        if owner == "robot":
+            return [robot.frame_placement(qk, frame) for qk in q]
+        b = bodies.get(owner)
+        x = _coordinates(result, owner, b, idx) if b is not None and b.articulated else None
+        if x is None:
+            return None
+        model = load_body(b.urdf).robot  # (the body's joints in its coordinates' order)
+        return [model.frame_placement(xk, frame) for xk in x]
+
+    points, turning = {}, {}
+    for c in contacts:
+        if c.body_frame is not None and (P := placements(c.frame, c.body_frame)) is not None:
+            points[c.name] = np.array([Pk.act(c.frame_point) for Pk in P])
+        if c.surface_frame is not None and (P := placements(c.body, c.surface_frame)) is not None:
+            turning[c.name] = np.array([Pk.rotation for Pk in P])
+    return points, turning
 
 
 def _frame_with_arrows(writer: SceneWriter, cloud: np.ndarray, radii: np.ndarray, arrows: list, *view
