@@ -116,7 +116,7 @@ def _draw_bodies(writer: SceneWriter, result: Result, bodies: dict, contacts: li
     drawn = frozenset(name for name, b in bodies.items() if b.urdf is not None and coords[name] is not None)
     notes: list[str] = []
     for name in sorted(drawn):
-        notes += add_body(writer, bodies[name].urdf, coords[name], f"{GROUPS['bodies']}/{name}")
+        notes += add_body(writer, bodies[name].urdf, coords[name], f"{GROUPS['bodies']}/{name}", bodies[name].free)
     disp = {name: (np.zeros((len(idx), 3)) if coords[name] is None or b.articulated else coords[name] @ b.axes)
             for name, b in bodies.items()}  # (an articulated body turns: its visuals show it, no path drawn)
     for name in sorted(n for n, b in bodies.items() if coords[n] is not None and not b.articulated):
