@@ -3,9 +3,9 @@ its centre along its principal axes) whose root link has six coordinates of the 
 centre, then its ZYX Euler angles yaw, pitch, roll [rad] (R = Rz(yaw) Ry(pitch) Rx(roll)). Closed forms: thrown
 free, its centre follows p0 + v0 t + g t²/2, its rotational energy ½ ωᵀ I ω and its angular momentum in the world
 R I Rᵀ ω stay constant (a spin about a principal axis; about the intermediate axis, perturbed, too: the flip is
-allowed); dropped flat on a table on its four corners, the impact is plastic (its loss ½ m v²) and it rests, the
-normal forces summing to m g; started resting flat, m g / 4 each (the least-squares minimum norm). Pitch at ±90°
-(the parametrization's singularity) stops a run with one message; bad inputs are one SceneError each.
+allowed); dropped flat on a table, its four corners touch at once: one plastic impact (m v / 4 each, the loss
+½ m v²), then it rests on them, m g / 4 each (the least-squares minimum norm), as when started resting flat. Pitch
+at ±90° (the parametrization's singularity) stops a run with one message; bad inputs are one SceneError each.
 """
 
 from __future__ import annotations
@@ -101,18 +101,22 @@ def test_spinning_about_the_intermediate_axis_it_flips_and_keeps_its_energy_and_
 
 
 def test_dropped_flat_the_impact_is_plastic_and_it_rests_on_the_table():
+    """Its four corners touch at once (one impact holds them all, transitions.CO_TOUCH): each takes m v / 4, the
+    loss ½ m v², the box stops dead; at rest the four carry m g / 4 each (the minimum norm)."""
     r = simulate("drop_box")
     v = np.sqrt(2 * G * 0.1)  # [m/s] after the 0.1 m fall
-    hits = r.impacts
-    assert hits and all(abs(h["t"] - hits[0]["t"]) < 1e-9 for h in hits)
-    assert hits[0]["t"] == pytest.approx(np.sqrt(2 * 0.1 / G), abs=1e-9)
-    assert sum(h["energy_loss"] for h in hits) == pytest.approx(0.5 * M * v**2, abs=1e-9)
-    assert np.abs(hits[-1]["v_after"]).max() < 1e-9  # the box stops dead
-    after = r["t"] > hits[-1]["t"]
+    (hit,) = r.impacts
+    assert hit["t"] == pytest.approx(np.sqrt(2 * 0.1 / G), abs=1e-9)
+    assert hit["normal_impulse"] == pytest.approx(M * v / 4, abs=1e-9)
+    assert hit["energy_loss"] == pytest.approx(0.5 * M * v**2, abs=1e-9)
+    assert np.abs(hit["v_after"]).max() < 1e-9  # the box stops dead
+    assert [e["name"] for e in r.events if e["kind"] == "touch"] == ["c1", "c2", "c3", "c4"]
+    after = r["t"] > hit["t"]
     assert np.abs(r["body.box.z.v"][after]).max() < 1e-9
     np.testing.assert_allclose(r["body.box.z.x"][after], 0.15, rtol=0, atol=1e-9)
-    total = sum(r[f"contact.c{k}.F_n"] for k in range(1, 5))
-    np.testing.assert_allclose(total[after], M * G, rtol=0, atol=1e-9)
+    for k in range(1, 5):
+        assert r[f"contact.c{k}.touching"][after].all()
+        np.testing.assert_allclose(r[f"contact.c{k}.F_n"][after], M * G / 4, rtol=0, atol=1e-9)
     residual = r.meta["checks"]["energy_residual"]
     assert residual["value"] <= residual["tol"], residual
 
