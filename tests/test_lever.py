@@ -249,13 +249,12 @@ def test_a_body_with_revolute_joints_given_wrong_or_unsupported_is_one_clear_err
     assert key in str(err.value) and words in str(err.value), str(err.value)
 
 
-def test_a_free_flying_body_is_one_clear_error(tmp_path):
+def test_a_free_flying_body_without_free_true_is_one_clear_error(tmp_path):
     (tmp_path / "flyer.urdf").write_text(FREE_FLYER)
     doc, _ = _doc(body={"lever": {"urdf": str(tmp_path / "flyer.urdf")}}, contact={})
     with pytest.raises(SceneError) as err:
         parse_scene(doc, None, tmp_path / "scene.toml")
-    assert "body.lever.urdf" in str(err.value) and "free-flying body is not supported yet" in str(err.value), \
-        str(err.value)
+    assert "body.lever.urdf" in str(err.value) and "is declared free = true" in str(err.value), str(err.value)
 
 
 def test_the_viewer_turns_the_push_s_arrows_with_the_bar():

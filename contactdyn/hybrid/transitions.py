@@ -4,7 +4,9 @@ At each event of :mod:`contactdyn.hybrid.events` (t fixed, x continuous unless a
 
 - ``touch``: the contact touches; tangential chains anchor where the tip now is, the
   interface junction starts where its springs balance; a bonded touch maps velocities
-  by the impact law (:mod:`contactdyn.model.impact`) and the contact slides or jams;
+  by the impact law (:mod:`contactdyn.model.impact`) and the contact slides or jams; every
+  other rigid contact within ``CO_TOUCH`` of its surface and closing touches with it (logged
+  as its own touch), the one impact holding them all;
 - ``separate``: the contact lets go; damped surface ends relax from where they are;
 - ``stop`` / ``reverse``: the slide has come to rest (|v_t| ≤ v_ε): decided at rest (below);
 - ``turn``: the 2-D reference direction r is refreshed to the slip's own (no mode change), unless
@@ -44,6 +46,9 @@ from .events import EventLog
 __all__ = ["Transitions", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
+#: [m] another rigid contact within this gap, closing, at a touch touches with it (one impact holds both): the
+#: start's own touching test (contactdyn.model.system.System.initial_state)
+CO_TOUCH = 1e-12
 SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
 #: [-] a turn located with |v_t| ≤ this × v_ε is taken for a slide coming to rest and decided at rest like a
 #: stop. Why: when a slide decelerates to rest, its ``turn`` and ``stop`` tie within a rounding (the 5-DOF
@@ -128,7 +133,8 @@ class Transitions:
         system = self.system
         i = self._index(event.contact)
         c = system.contacts[i]
-        modes[i], x = self._touch(t, x, modes, i)
+        for j in [i] + (_touching_too(system, self.log, t, x, modes, i) if c.normal.chain.bonded_when_touching else []):
+            modes[j], x = self._touch(t, x, modes, j)  # (others touching with it: one impact holds them all)
         if c.normal.chain.bonded_when_touching:
             x, imp = impact(system, t, x, modes, c, phase.limits)
             self._after_impact(imp, modes, after)
@@ -361,3 +367,22 @@ class Transitions:
                 return x, modes
         raise SimulationError(f"{self.scene.name}: no consistent contact mode at t = {t:.9g} s "
                               f"(modes tried: {modes})")
+
+
+def _touching_too(system: System, log: EventLog, t: float, x: np.ndarray, modes, i: int) -> list[int]:
+    """The other rigid contacts that touch at contact i's touch at t [s] (each logged as a touch): not touching yet,
+    their gap within CO_TOUCH [m] and closing (the normal velocity < 0). Located one at a time, simultaneous
+    touches (a flat landing) would take their impacts in turn, and a contact reaching its gap 0 a rounding after
+    another's impact stopped it would never cross it: the impact holds them together."""
+    nQ = system.nQ
+    out = []
+    for j, c in enumerate(system.contacts):
+        if j == i or modes[j].touching or c.spec.bonded or not c.normal.chain.bonded_when_touching:
+            continue
+        system.robot.update(x[:system.nv], x[nQ:nQ + system.nv])
+        kin = system.kinematics(c, x)
+        gap, closing = float(kin.normal @ (kin.p_tip - kin.p_env)), float(kin.normal @ (kin.v_tip - kin.v_env))
+        if gap <= CO_TOUCH and closing < 0.0:
+            log.log(t, "touch", c.name, check_storm=False)
+            out.append(j)
+    return out

@@ -10,8 +10,14 @@ for a visual.
 
 A URDF with any revolute joint (beside prismatic ones, in a tree fixed in the world) is an *articulated body*: its
 joints are coordinates of the system (angles [rad], lengths [m]) whose mass matrix H_b(q_b) and bias h_b(q_b, q̇_b)
-(gravity the world's) come from its own Pinocchio model, :class:`ArticulatedBody` at run time. A free-flyer (or
-any joint of several coordinates: planar, spherical) is not a body yet (issue 32).
+(gravity the world's) come from its own Pinocchio model, :class:`ArticulatedBody` at run time.
+
+A *free* body (``free = true``; its URDF's root link is the body, or a ``floating`` joint joins a massless world
+link to it) is an articulated body whose root link has six coordinates of its own, nq = nv: x, y, z [m] of the
+root frame's origin in the world, then its ZYX Euler angles yaw, pitch, roll [rad] (R = Rz(yaw) Ry(pitch)
+Rx(roll)), one-coordinate joints of the rewritten URDF (:func:`contactdyn.robot.urdf_model.add_free_joints`). At
+pitch = ±90° yaw and roll turn about one axis (H_b singular): a run stops there (:meth:`ArticulatedBody.update`).
+Any other joint of several coordinates (planar, spherical) is not a body (issue 32).
 """
 
 from __future__ import annotations
@@ -19,9 +25,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..errors import RobotError
+from ..errors import RobotError, SimulationError
 from .robot import Robot
-from .urdf_model import build_urdf_model
+from .urdf_model import FREE_COORDINATES, build_urdf_model
 
 __all__ = ["UrdfBody", "ArticulatedBody", "load_body"]
 
@@ -46,10 +52,10 @@ class UrdfBody:
         return self.axes[0]
 
 
-def load_body(source: str) -> UrdfBody:
+def load_body(source: str, free: bool = False) -> UrdfBody:
     """The body of a URDF whose joints are prismatic, chained and orthogonal, or articulated (a revolute joint
-    among them; a RobotError says what the file has instead)."""
-    robot = _load(source)
+    among them, or ``free``: its root link moves freely; a RobotError says what the file has instead)."""
+    robot = _load(source, free)
     model = robot.model
     kinds = [model.joints[j].shortname() for j in range(1, model.njoints)]
     if any(k in _REVOLUTE for k in kinds):
@@ -78,16 +84,17 @@ def load_body(source: str) -> UrdfBody:
     return UrdfBody(robot, float(masses[0]), [model.names[j] for j in range(1, model.njoints)], axes, masses)
 
 
-def _load(source: str) -> Robot:
+def _load(source: str, free: bool = False) -> Robot:
     """The body's Robot; a joint of several coordinates (a free-flyer, planar, spherical) is one RobotError."""
-    urdf = build_urdf_model(source)
+    urdf = build_urdf_model(source, free=free)
     model = urdf.model
     several = [f"{model.names[j]} ({model.joints[j].shortname()})" for j in range(1, model.njoints)
                if model.joints[j].nq != 1 or model.joints[j].nv != 1]
     if several:
         raise RobotError(f"{urdf.path}: a body's joints are revolute or prismatic, one coordinate each (a "
-                         f"free-flying body is not supported yet: issue 32); found {', '.join(several)}")
-    return Robot.load(source)
+                         f"free-flying body, a floating joint from a world link or none, is declared free = true); "
+                         f"found {', '.join(several)}")
+    return Robot.load(source, free=free)
 
 
 def _articulated(robot: Robot) -> UrdfBody:
@@ -109,6 +116,9 @@ def _articulated(robot: Robot) -> UrdfBody:
     return UrdfBody(robot, mass, list(robot.joint_names), axes, np.zeros(model.nv), articulated=True)
 
 
+PITCH_LIMIT = 1e-6  #: [rad] a free body's run stops when |cos(pitch)| falls below this (ZYX singularity)
+
+
 class ArticulatedBody:
     """An articulated body at run time: its Pinocchio model (gravity the world's) and where its coordinates sit
     in Q (``first``, ``nb`` of them, in the URDF's joint order).
@@ -116,8 +126,10 @@ class ArticulatedBody:
     :meth:`update` computes its terms at the state's (q_b, q̇_b) once per state (the last one kept): H_b
     [kg·m², kg], h_b [N·m, N] (Coriolis, centrifugal, gravity), and the frames' terms of :meth:`frame`."""
 
-    def __init__(self, name: str, robot: Robot, first: int) -> None:
+    def __init__(self, name: str, robot: Robot, first: int, free: bool = False) -> None:
         self.name, self.robot, self.first, self.nb = name, robot, first, robot.nv
+        #: a free body's pitch's index in q_b (its coordinates FREE_COORDINATES first), else None
+        self.pitch = FREE_COORDINATES.index("pitch") if free else None
         self._key: bytes | None = None
         self._v = np.zeros(self.nb)  #: q̇_b at the last update [rad/s or m/s]
 
@@ -127,10 +139,15 @@ class ArticulatedBody:
         return range(self.first, self.first + self.nb)
 
     def update(self, x: np.ndarray, nQ: int) -> None:
-        """The body's terms at the state x (its q_b [rad or m] and q̇_b [rad/s or m/s]); nothing when unchanged."""
+        """The body's terms at the state x (its q_b [rad or m] and q̇_b [rad/s or m/s]); nothing when unchanged. A
+        free body's pitch within PITCH_LIMIT of ±90° (its Euler angles' singularity) is a SimulationError."""
         q, v = x[self.first:self.first + self.nb], x[nQ + self.first:nQ + self.first + self.nb]
         key = q.tobytes() + v.tobytes()
         if key != self._key:
+            if self.pitch is not None and abs(np.cos(q[self.pitch])) < PITCH_LIMIT:
+                raise SimulationError(f"body {self.name!r}: pitch {q[self.pitch]:.9g} rad is within {PITCH_LIMIT:g} "
+                                      f"of ±90°, where its ZYX Euler angles are singular (yaw and roll turn about "
+                                      f"one axis): start it further from there, or turn its URDF's frame")
             self._v = np.array(v, float)
             self.robot.update(np.array(q, float), self._v)
             self._key = key

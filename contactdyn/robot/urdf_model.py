@@ -30,7 +30,8 @@ from .inertia import INERTIA_MODES, check_inertias
 from .urdf_check import check_urdf_tree, isolated_build
 from .urdf_source import resolve_robot_path, resolve_uri
 
-__all__ = ["UrdfModel", "build_isolated", "build_urdf_model", "lock_joints", "urdf_call", "xml_label"]
+__all__ = ["FREE_COORDINATES", "UrdfModel", "add_free_joints", "build_isolated", "build_urdf_model", "lock_joints",
+           "urdf_call", "xml_label"]
 
 _UNBOUNDED = 1e9  # [rad] placeholder limits of a continuous joint in the rewritten XML; set to ±inf after
 
@@ -153,8 +154,9 @@ _BUILT: OrderedDict[tuple, UrdfModel] = OrderedDict()
 BUILT_MAX = 16
 
 
-def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfModel:
-    """Find, check and build a URDF (see the module docstring); ``inertia`` is one of INERTIA_MODES.
+def build_urdf_model(source: str | os.PathLike, inertia: str = "check", free: bool = False) -> UrdfModel:
+    """Find, check and build a URDF (see the module docstring); ``inertia`` is one of INERTIA_MODES; ``free``: its
+    root link moves freely in the world, by six coordinates (:func:`add_free_joints`).
 
     A file built before in this process, unchanged since (the same content), is not checked and built again
     (a sweep or a script builds the same robot per run); the caller gets its own copy of the model."""
@@ -162,8 +164,9 @@ def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfM
         raise RobotError(f"robot.inertia must be one of {list(INERTIA_MODES)}, found {inertia!r}")
     path, package_dirs = resolve_robot_path(source)
     key = (str(path.resolve()), hashlib.sha256(path.read_bytes()).hexdigest(), tuple(package_dirs), inertia)
+    key += ("free",) if free else ()
     if key not in _BUILT:
-        _BUILT[key] = _build(path, package_dirs, inertia)
+        _BUILT[key] = _build(path, package_dirs, inertia, free)
         while len(_BUILT) > BUILT_MAX:
             _BUILT.popitem(last=False)
     _BUILT.move_to_end(key)
@@ -173,10 +176,12 @@ def build_urdf_model(source: str | os.PathLike, inertia: str = "check") -> UrdfM
                           visual_notes=list(built.visual_notes))
 
 
-def _build(path: Path, package_dirs: list[str], inertia: str) -> UrdfModel:
+def _build(path: Path, package_dirs: list[str], inertia: str, free: bool = False) -> UrdfModel:
     root = check_urdf_tree(path)  # one root, no cycle...: before Pinocchio reads anything (it crashes)
     notes = check_inertias(root, path, inertia)
     visual_notes = _resolve_meshes(root, path, package_dirs)
+    if free:
+        add_free_joints(root, path)
     unbounded = _unbind_continuous(root)
     xml = ET.tostring(root, encoding="unicode")
     model: pin.Model = build_isolated(path, xml_label("buildModelFromXML", xml), lambda: pin.buildModelFromXML(xml))
@@ -191,6 +196,56 @@ def _build(path: Path, package_dirs: list[str], inertia: str) -> UrdfModel:
     model.lowerPositionLimit, model.upperPositionLimit = lower, upper
     _check_limits(model, path)
     return UrdfModel(path, xml, model, package_dirs, notes, unbounded, visual_notes)
+
+
+#: a free body's six coordinates, in order: the root frame's origin in the world [m], then its ZYX Euler angles
+#: [rad] (R = Rz(yaw) Ry(pitch) Rx(roll)); each a joint of the rewritten URDF, chained in this order
+FREE_COORDINATES = ("x", "y", "z", "yaw", "pitch", "roll")
+_FREE_AXES = ("1 0 0", "0 1 0", "0 0 1", "0 0 1", "0 1 0", "1 0 0")
+
+
+def add_free_joints(root: ET.Element, path: Path) -> None:
+    """Make the URDF's root link free: a massless world link, then six one-coordinate joints (FREE_COORDINATES:
+    prismatic along the world's x, y, z, then revolute about z, the new y, the newer x), the root link the last
+    one's child. nq = nv = 6 (Pinocchio's free-flyer, a quaternion, has nq 7). A ``floating`` joint from a
+    massless root link (a "world" link) is that link's own free motion: it and the link are dropped first."""
+    _drop_floating(root, path)
+    children = {j.find("child").get("link") for j in root.findall("joint") if j.find("child") is not None}
+    links = [link.get("name") for link in root.findall("link")]
+    base = next(name for name in links if name not in children)
+    clash = sorted({j.get("name") for j in root.findall("joint")} & set(FREE_COORDINATES))
+    if clash:
+        raise RobotError(f"{path}: a free body's URDF names no joint {', '.join(FREE_COORDINATES)} (its six "
+                         f"coordinates); found {', '.join(clash)}")
+    chain = [f"{base}__free_world"] + [f"{base}__free_{c}" for c in FREE_COORDINATES[:-1]] + [base]
+    for name in chain[:-1]:
+        root.insert(0, ET.Element("link", name=name))
+    for k, (coordinate, axis) in enumerate(zip(FREE_COORDINATES, _FREE_AXES, strict=True)):
+        kind = "prismatic" if k < 3 else "continuous"  # lower = upper = 0 below: unbounded (see _build)
+        joint = ET.SubElement(root, "joint", name=coordinate, type=kind)
+        ET.SubElement(joint, "parent", link=chain[k])
+        ET.SubElement(joint, "child", link=chain[k + 1])
+        ET.SubElement(joint, "axis", xyz=axis)
+        if k < 3:
+            ET.SubElement(joint, "limit", lower="0", upper="0", effort="0", velocity="0")
+
+
+def _drop_floating(root: ET.Element, path: Path) -> None:
+    """Remove a ``floating`` joint from the root link and that link (massless: a world link); a floating joint
+    elsewhere, or from a link with mass, is one RobotError."""
+    floating = [j for j in root.findall("joint") if j.get("type") == "floating"]
+    if not floating:
+        return
+    children = {j.find("child").get("link") for j in root.findall("joint") if j.find("child") is not None}
+    joint = floating[0]
+    parent = joint.find("parent").get("link")
+    link = next(el for el in root.findall("link") if el.get("name") == parent)
+    if len(floating) > 1 or parent in children or link.find("inertial") is not None or \
+            sum(j.find("parent").get("link") == parent for j in root.findall("joint")) > 1:
+        raise RobotError(f"{path}: a free body's floating joint (at most one) joins a root link without mass or "
+                         f"other joints (a world link) to the body; found {joint.get('name')!r} from {parent!r}")
+    root.remove(joint)
+    root.remove(link)
 
 
 def _origin(joint: ET.Element) -> pin.SE3:

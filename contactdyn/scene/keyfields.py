@@ -11,7 +11,7 @@ TABLE_FIELDS = {
     'robot.joint': '<joint>',
     'robot.joint.<joint>': 'damping, friction, friction_static, friction_kinetic',
     'body': '<body>',
-    'body.<body>': 'servo, urdf, mass, axis, position0, velocity0, drive',
+    'body.<body>': 'servo, urdf, free, mass, axis, position0, velocity0, drive',
     'body.<body>.servo': 'velocity, gain',
     'body.<body>.drive': 'kind, R, C_M, C_E, J, N, wheel_radius, u_max, c, d, I1, I2, twist_damping, N_star',
     'contact': '<contact>',

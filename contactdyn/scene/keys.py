@@ -84,7 +84,10 @@ MEANINGS: dict[str, str] = {
     "body.<body>.urdf": "the body from a URDF whose one to three joints are prismatic and orthogonal: its masses, "
                         "axes and visuals (then no mass or axis; a path beside the scene or a name in urdf/); or "
                         "whose joints, revolute and prismatic, form a tree fixed in the world: an articulated body, "
-                        "its H_b and h_b its own (no free-flyer yet; no servo or drive; the readable model runs it)",
+                        "its H_b and h_b its own (no servo or drive; the readable model runs it)",
+    "body.<body>.free": "the URDF's root link moves freely (a floating joint from a world link, or none): six "
+                        "coordinates x, y, z [m] of its frame, then ZYX Euler angles yaw, pitch, roll [rad] (a run "
+                        "stops within 1e-6 of pitch = +-90 deg, their singularity); an articulated body",
     "body.<body>.mass": "mass",
     "body.<body>.axis": "direction of travel in the world",
     "body.<body>.position0": "initial coordinate (one per coordinate for a body with several; rad for a revolute "
@@ -250,6 +253,7 @@ OVERRIDES: dict[str, dict[str, str]] = {
     "robot.v0": {"default": "zero"},
     "body.<body>.urdf": {"type": "string", "default": "none: mass and axis given"},
     "body.<body>.mass": {"default": "required without urdf"},
+    "body.<body>.free": {"type": "boolean", "default": "false (only with urdf)"},
     "robot.drive.kind": {"type": "string or list of strings", "default": "torque"},
     "contact.<contact>.normal.model": {"default": "rigid; chain when environment or robot is given"},
     "contact.<contact>.tangent.directions": {"type": "list of 3-vectors", "default": "required with friction or chain"},

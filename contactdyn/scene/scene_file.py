@@ -89,6 +89,9 @@ class BodySpec:
     drive: DriveTable = field(default_factory=DriveTable)  #: validated drive table (see contactdyn.laws.drives)
     urdf: str | None = None  #: the URDF the mass and axes come from (its visuals drawn by the viewer), or None
     articulated: bool = False  #: a URDF with revolute joints: its dynamics its own Pinocchio model's
+    #: an articulated body whose root link moves freely: its first six coordinates x, y, z [m], yaw, pitch, roll
+    #: [rad] (contactdyn.robot.body)
+    free: bool = False
 
     @property
     def axis(self) -> np.ndarray:
@@ -396,8 +399,11 @@ def _read_body(name: str, r: Reader) -> BodySpec:
     servo = r.sub("servo", {})
     urdf = urdf_beside_scene(r.str("urdf"), r.file) if r.has("urdf") else None
     articulated = False
+    free = r.bool("free", False) if urdf is not None or r.has("free") else False
+    if free and urdf is None:
+        raise r.error("free", "free = true beside urdf (a free body's links come from its URDF)", True)
     if urdf is not None:
-        mass, joints, articulated = _urdf_body(r, urdf)
+        mass, joints, articulated = _urdf_body(r, urdf, free)
     else:
         mass = r.float("mass", lo=0.0, lo_open=True, unit="kg")
         joints = [("", r.vector("axis", [1.0, 0.0, 0.0], size=3, unit_norm=True), mass)]
@@ -411,7 +417,8 @@ def _read_body(name: str, r: Reader) -> BodySpec:
     if k > 1 or articulated:
         for key in ("servo", "drive"):
             if r.has(key):
-                what = "a body with revolute joints" if articulated else f"a body with {k} coordinates"
+                what = "a free body" if free else "a body with revolute joints" if articulated else \
+                    f"a body with {k} coordinates"
                 raise r.error(key, f"no {key} on {what} (a drive acts on a one-coordinate translating body)",
                               r.raw(key))
     spec = BodySpec(
@@ -424,25 +431,26 @@ def _read_body(name: str, r: Reader) -> BodySpec:
         drive=read_drive_table(r.sub("drive", {}), per_joint=False),
         urdf=urdf,
         articulated=articulated,
+        free=free,
     )
     servo.finish()
     r.finish()
     return spec
 
 
-def _urdf_body(r: Reader, urdf: str) -> tuple[float, list[tuple[str, np.ndarray, float]], bool]:
+def _urdf_body(r: Reader, urdf: str, free: bool = False) -> tuple[float, list[tuple[str, np.ndarray, float]], bool]:
     """(mass [kg], per joint (name, unit axis, the mass moving along it [kg]), articulated) of a body read off its
-    URDF (``urdf``; then no ``mass`` or ``axis`` of its own)."""
+    URDF (``urdf``; then no ``mass`` or ``axis`` of its own; ``free``: its root link moves freely)."""
     from ..robot.body import load_body  # (Pinocchio: imported for a scene that has such a body only)
 
     for key in ("mass", "axis"):
         if r.has(key):
             raise r.error(key, "no mass or axis beside urdf (the URDF gives them)", r.raw(key))
     try:
-        body = load_body(urdf)
+        body = load_body(urdf, free)
     except RobotError as exc:
         raise r.error("urdf", "a loadable URDF of one to three orthogonal prismatic joints, or of revolute (and "
-                      "prismatic) joints fixed in the world", exc) from None
+                      "prismatic) joints fixed in the world (or free = true: its root link free)", exc) from None
     return body.mass, list(zip(body.joints, body.axes, body.masses, strict=True)), body.articulated
 
 
@@ -655,8 +663,8 @@ def _read_reference(r: Reader, bodies: dict[str, BodySpec]) -> ReferenceSpec:
     if body != "ground" and space != "task":
         raise r.error("body", "'ground' for a joint-space reference (only a task reference rides on a body)", body)
     if body != "ground" and bodies[body].articulated:
-        raise r.error("body", "'ground' or a translating body (a reference does not ride on a body with revolute "
-                      "joints yet)", body)
+        what = "a free body" if bodies[body].free else "a body with revolute joints"
+        raise r.error("body", f"'ground' or a translating body (a reference does not ride on {what} yet)", body)
     if body != "ground" and len(bodies[body].coordinates) > 1:
         raise r.error("body", "'ground' or a body with one coordinate (a reference rides along one axis)", body)
     start = r.vector("start", None) if r.has("start") else None

@@ -15,6 +15,7 @@ from ..scene.scene_file import Scene
 from .camera import frame_view
 from .contact_visuals import (
     STAGE_LENGTH,
+    TOOL_RADIUS,
     add_environment,
     add_forces,
     add_gauges,
@@ -66,8 +67,12 @@ def build_scene(result: Result, speed: float = 1.0, max_frames: int = MAX_FRAMES
     body, body_radii = geometry_spheres(robot, q[:: max(1, len(q) // 50)])
     points = [body, *tips.values(), *(c.point[None] for c in contacts)]
     cloud = np.concatenate(points) if points else np.zeros((1, 3))
-    radii = np.concatenate([body_radii, np.zeros(len(cloud) - len(body))])  # [m] what reaches beyond each point
     L = max(float(np.max(np.linalg.norm(cloud, axis=1))), 0.1)  # [m] scene size
+    # [m] what reaches beyond each point: a mesh's bounds; a contact point's ball (a body's corner may be the scene's
+    # extreme: its ball stays inside, TOOL_RADIUS of the view's radius, ~ half the scene's size L)
+    n_tips = sum(len(p) for p in tips.values())
+    radii = np.concatenate([body_radii, np.full(n_tips, 0.5 * TOOL_RADIUS * L),
+                            np.zeros(len(cloud) - len(body) - n_tips)])
 
     views = contact_views(scene, tips, disp, L, GROUPS["environment"], turning) if scene else []
     v0 = views[0] if views else None
@@ -115,7 +120,7 @@ def _draw_bodies(writer: SceneWriter, result: Result, bodies: dict, contacts: li
     drawn = frozenset(name for name, b in bodies.items() if b.urdf is not None and coords[name] is not None)
     notes: list[str] = []
     for name in sorted(drawn):
-        notes += add_body(writer, bodies[name].urdf, coords[name], f"{GROUPS['bodies']}/{name}")
+        notes += add_body(writer, bodies[name].urdf, coords[name], f"{GROUPS['bodies']}/{name}", bodies[name].free)
     disp = {name: (np.zeros((len(idx), 3)) if coords[name] is None or b.articulated else coords[name] @ b.axes)
             for name, b in bodies.items()}  # (an articulated body turns: its visuals show it, no path drawn)
     for name in sorted(n for n, b in bodies.items() if coords[n] is not None and not b.articulated):
@@ -139,7 +144,7 @@ def _turning_frames(result: Result, bodies: dict, contacts: list, idx, robot: Ro
         x = _coordinates(result, owner, b, idx) if b is not None and b.articulated else None
         if x is None:
             return None
-        model = load_body(b.urdf).robot  # (the body's joints in its coordinates' order)
+        model = load_body(b.urdf, b.free).robot  # (the body's joints in its coordinates' order)
         return [model.frame_placement(xk, frame) for xk in x]
 
     points, turning = {}, {}

@@ -74,13 +74,14 @@ def add_robot(writer: SceneWriter, robot: Robot, q: np.ndarray, root: str) -> li
     return notes
 
 
-def add_body(writer: SceneWriter, urdf: str, x: np.ndarray, root: str) -> list[str]:
+def add_body(writer: SceneWriter, urdf: str, x: np.ndarray, root: str, free: bool = False) -> list[str]:
     """A body's URDF visuals (:mod:`contactdyn.robot.body`) under ``root``, its joints at the body's coordinates
-    ``x`` [m] per frame ((frames,) or (frames, k)); notes on what could not be drawn."""
+    ``x`` [m or rad] per frame ((frames,) or (frames, k); ``free``: its root link's six first); notes on what could
+    not be drawn."""
     from ..robot.body import load_body
 
     x = np.asarray(x, float)
-    return add_robot(writer, load_body(urdf).robot, x[:, None] if x.ndim == 1 else x, root)
+    return add_robot(writer, load_body(urdf, free).robot, x[:, None] if x.ndim == 1 else x, root)
 
 
 def _shape_parts(geom: pin.GeometryObject) -> list[tuple[str, object, object, np.ndarray]]:

@@ -164,7 +164,8 @@ def unsupported(system, modes, phase) -> str:
     """Why the compiled call cannot pack (modes, phase) ("" when it can): the mode then runs on the readable model."""
     ctl = phase.controller
     if system.articulated:
-        return "a body with revolute joints (the readable model computes its terms)"
+        free = any(body.pitch is not None for body in system.articulated.values())
+        return f"{'a free body' if free else 'a body with revolute joints'} (the readable model computes its terms)"
     if reason := drives_unsupported(system):
         return reason
     if system.energy_slot >= 0 and system.drives.any_motor:
