@@ -224,8 +224,6 @@ FREE_FLYER = """<?xml version="1.0"?>
      "not supported yet"),
     (lambda: _edit_push(tangent={"model": "chain", "directions": [[0.0, 0.0, 1.0]], "environment": [{"k": 1e4}]}),
      "contact.push.tangent.model", "not supported yet"),
-    (lambda: _edit_push(tangent={"model": "friction", "directions": [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]], "mu": 0.3}),
-     "contact.push.tangent.directions", "2-D slide there is not supported yet"),
     (lambda: _edit_push(surface_frame=None), "contact.push.surface_frame", "required"),
     (lambda: _edit_push(surface_frame="nowhere"), "contact.push.surface_frame", "a frame of body 'lever'"),
     (lambda: _edit_push(body_frame="bar"), "contact.push.body_frame", "a frame of a body with revolute joints"),
@@ -277,3 +275,17 @@ def test_the_viewer_turns_the_push_s_arrows_with_the_bar():
     arrow = (tip - tail)[pressing] / np.linalg.norm((tip - tail)[pressing], axis=1)[:, None]
     np.testing.assert_allclose(arrow, normal[pressing], atol=1e-5)
     assert np.ptp(r["body.lever.x"][pressing]) > 0.1  # the bar did swing while pressed
+
+
+def test_with_2d_friction_along_the_bar_the_lever_moves_as_with_1d():
+    """Friction along the bar and across it (the bar's z and y): the same events, the bar's angle and the normal
+    force as the 1-D run's (1e-9), the slip and friction across the bar exactly 0 (nothing moves along y)."""
+    scene = load_scene("lever")
+    doc = dict(scene.document)
+    push = {**doc["contact"]["push"], "tangent": {**doc["contact"]["push"]["tangent"],
+                                                  "directions": [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]}}
+    two, one = simulate(parse_scene({**doc, "contact": {"push": push}}, None, scene.file)), simulate("lever")
+    assert [(e["kind"], e["name"]) for e in two.events] == [(e["kind"], e["name"]) for e in one.events]
+    np.testing.assert_allclose(two["body.lever.x"], one["body.lever.x"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(two["contact.push.F_n"], one["contact.push.F_n"], rtol=1e-8, atol=1e-9)
+    assert np.all(two["contact.push.v_slip"][:, 1] == 0.0) and np.all(two["contact.push.F_f"][:, 1] == 0.0)

@@ -153,8 +153,6 @@ def _doc():
     (lambda c: c["normal"].update(model="c", k=1e4), "contact.rest.normal.model", "not supported yet"),
     (lambda c: c.update(tangent={"model": "chain", "directions": [[0.0, 1.0, 0.0]], "environment": [{"k": 1e4}]}),
      "contact.rest.tangent.model", "not supported yet"),
-    (lambda c: c["tangent"].update(directions=[[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]), "contact.rest.tangent.directions",
-     "2-D slide there is not supported yet"),
     (lambda c: c.pop("surface_frame"), "contact.rest.surface_frame", "required"),
     (lambda c: c.update(body="ground"), "contact.rest.surface_frame", 'body = "robot"'),
     (lambda c: c.update(surface_frame="nowhere"), "contact.rest.surface_frame", "a frame of the robot"),
@@ -195,3 +193,19 @@ def test_a_force_set_point_on_a_turning_surface_is_one_clear_error():
     with pytest.raises(SceneError) as err:
         parse_scene(doc, None, file)
     assert "phase[0].force[0].contact" in str(err.value) and "does not turn" in str(err.value), str(err.value)
+
+
+def test_with_2d_friction_the_part_slides_straight_down_the_slope_as_with_1d():
+    """The tray's x and y both friction directions: the part slips at the same instant (1e-9 s) and slides straight
+    down the slope, its slip and friction along the tray's x exactly 0, its motion the 1-D run's to 1e-9 m; the slide
+    launching from rest runs on the readable model (the compiled launch reads fixed tangents), with that reason."""
+    doc, file = _doc()
+    rest = {**doc["contact"]["rest"], "tangent": {**doc["contact"]["rest"]["tangent"],
+                                                  "directions": [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]}}
+    two, one = simulate(parse_scene({**doc, "contact": {"rest": rest}}, None, file)), simulate("tilt_tray")
+    assert [(e["kind"], e["name"]) for e in two.events] == [(e["kind"], e["name"]) for e in one.events]
+    assert abs(two.events[-1]["t"] - one.events[-1]["t"]) < 1e-9
+    for key in ("body.part.slide.x", "body.part.lift.x"):
+        np.testing.assert_allclose(two[key], one[key], rtol=0, atol=1e-9)
+    assert np.all(two["contact.rest.v_slip"][:, 1] == 0.0) and np.all(two["contact.rest.F_f"][:, 1] == 0.0)
+    assert "fixed tangents" in two.stats["paths"]["tilt: rest sliding"]["why"]

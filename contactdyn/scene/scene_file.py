@@ -563,8 +563,8 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
 def _surface_frame(r: Reader, body: str, bodies: dict[str, BodySpec], normal_chain: ChainSpec, tangent_model: str,
                    tangents: np.ndarray) -> str | None:
     """The frame carrying the surface: a robot frame (``body = "robot"``) or a frame of an articulated body (required
-    there); None for the ground or a translating body. On it, for now, a rigid normal and at most one friction
-    tangent (:func:`_turning_limits`)."""
+    there); None for the ground or a translating body. On it, for now, a rigid normal and no chain
+    (:func:`_turning_limits`)."""
     articulated = body in bodies and bodies[body].articulated
     if body != "robot" and not articulated:
         if r.has("surface_frame"):
@@ -584,7 +584,7 @@ def _surface_frame(r: Reader, body: str, bodies: dict[str, BodySpec], normal_cha
 def _body_frame(r: Reader, frame: str, bodies: dict[str, BodySpec], normal_chain: ChainSpec, tangent_model: str,
                 tangents: np.ndarray) -> str | None:
     """The frame of an articulated touching body in whose coordinates ``frame_point`` is given (required there;
-    None otherwise). On it, for now, a rigid normal and at most one friction tangent (:func:`_turning_limits`)."""
+    None otherwise). On it, for now, a rigid normal and no chain (:func:`_turning_limits`)."""
     articulated = r.has("frame_point") and frame in bodies and bodies[frame].articulated
     if not articulated:
         if r.has("body_frame"):
@@ -601,17 +601,14 @@ def _body_frame(r: Reader, frame: str, bodies: dict[str, BodySpec], normal_chain
 
 def _turning_limits(r: Reader, where: str, normal_chain: ChainSpec, tangent_model: str, tangents: np.ndarray
                     ) -> None:
-    """A side that turns supports, for now, a rigid normal and free or friction along at most one tangent: one
-    SceneError each otherwise (``where``: the side, its closing parenthesis left to this)."""
+    """A side that turns supports, for now, a rigid normal and free or friction (1-D or 2-D): one SceneError each
+    otherwise (``where``: the side, its closing parenthesis left to this)."""
     if not normal_chain.rigid:
         raise r.error("normal.model", f"a rigid normal {where}; a deformation chain there is not supported yet)",
                       r.data["normal"].get("model", "chain"))
     if tangent_model == "chain":
         raise r.error("tangent.model", f"free or friction {where}; a chain there is not supported yet)",
                       tangent_model)
-    if len(tangents) > 1:
-        raise r.error("tangent.directions", f"one tangential direction {where}; a 2-D slide there is not "
-                      "supported yet)", tangents.tolist())
 
 
 def _read_solver(r: Reader) -> SolverSpec:

@@ -179,6 +179,9 @@ def unsupported(system, modes, phase) -> str:
     for c, m in zip(system.contacts, modes, strict=True):
         if c.surface_fid >= 0 and (ctl.uses_forces or getattr(ctl, "inner", ctl).uses_forces):
             return f"contact {c.name!r}: a surface carried by a robot frame under a force-reading controller"
+        if c.surface_fid >= 0 and launching(m):
+            return f"contact {c.name!r}: a 2-D slide launching from rest on a turning surface (the compiled launch " \
+                   "reads fixed tangents)"
         if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
             return f"friction law {c.friction.law!r} does not compile"
         for dc in c.chains:
