@@ -48,6 +48,13 @@ def test_auto_is_readable_until_the_kind_is_built_then_compiled(markers):
     assert first_run.choose(load_scene("case1_cart"), "compiled").compiled
 
 
+@pytest.mark.parametrize("name", ["lever", "drop_box"])
+def test_a_scene_the_compiled_call_declines_starts_no_build_and_says_nothing(markers, name):
+    """Bodies with revolute joints or free: the compiled call declines every mode, so no build and no line."""
+    choice = first_run.choose(load_scene(name), "auto")
+    assert (choice.compiled, choice.build, choice.line()) == (False, False, "")
+
+
 def test_one_build_per_kind_at_a_time_and_a_dead_one_is_taken_over(markers):
     assert first_run._lock(markers, "k")
     assert not first_run._lock(markers, "k")  # a build of the kind is starting (no process written yet)

@@ -105,7 +105,10 @@ def test_dropped_flat_the_impact_is_plastic_and_it_rests_on_the_table():
     loss ½ m v², the box stops dead; at rest the four carry m g / 4 each (the minimum norm)."""
     r = simulate("drop_box")
     v = np.sqrt(2 * G * 0.1)  # [m/s] after the 0.1 m fall
-    (hit,) = r.impacts
+    hit, *others = r.impacts  # the located corner's impact, then each corner that touched with it
+    assert [o["contact"] for o in others] == ["c2", "c3", "c4"] and {o["with"] for o in others} == {"c1"}
+    for o in others:  # each its own share of the one impact
+        assert o["t"] == hit["t"] and o["normal_impulse"] == pytest.approx(M * v / 4, abs=1e-9)
     assert hit["t"] == pytest.approx(np.sqrt(2 * 0.1 / G), abs=1e-9)
     assert hit["normal_impulse"] == pytest.approx(M * v / 4, abs=1e-9)
     assert hit["energy_loss"] == pytest.approx(0.5 * M * v**2, abs=1e-9)
@@ -135,6 +138,16 @@ def test_near_pitch_90_degrees_the_run_stops_with_the_parametrization_s_reason()
     doc, file = _doc(duration=0.1, contact={})
     body = {**doc["body"]["box"], "position0": [0.0, 0.0, 1.0, 0.0, np.pi / 2 - 1e-7, 0.0]}
     with pytest.raises(SimulationError, match="ZYX Euler angles are singular"):
+        simulate(parse_scene({**doc, "body": {"box": body}}, None, file))
+
+
+def test_a_spin_that_carries_the_pitch_across_90_degrees_stops_the_run_with_that_reason():
+    """Spinning about its pitch axis at 5 rad/s from pitch 0, the box's pitch crosses 90° at ~0.31 s: whatever the
+    steps, the run stops there with the parametrization's reason (not later, not silently)."""
+    doc, file = _doc(duration=1.0, contact={})
+    body = {**doc["body"]["box"], "position0": [0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+            "velocity0": [0.0, 0.0, 0.0, 0.0, 5.0, 0.0]}
+    with pytest.raises(SimulationError, match="pitch reached ±90°"):
         simulate(parse_scene({**doc, "body": {"box": body}}, None, file))
 
 
@@ -186,3 +199,26 @@ def test_a_reference_riding_on_a_free_body_is_one_scene_error():
                                                                        "duration": 1.0}]}}
     with pytest.raises(SceneError, match="a free body"):
         parse_scene({**doc, "phase": [phase]}, None, file)
+
+
+def test_a_phase_until_a_corner_touches_ends_when_it_touches_with_another():
+    """``until = "touch:c3"``: c3 touches with c1 (one impact): the next phase starts there."""
+    doc, file = _doc()
+    doc["phase"] = [{**doc["phase"][0], "until": "touch:c3"}, {**doc["phase"][0], "name": "resting"}]
+    r = simulate(parse_scene(doc, None, file))
+    started = [e for e in r.events if e["kind"] == "phase"]
+    assert [e["name"] for e in started] == ["resting"]
+    assert started[0]["t"] == pytest.approx(np.sqrt(2 * 0.1 / G), abs=1e-9)
+
+
+def test_corners_with_friction_are_located_one_at_a_time():
+    """A corner with friction does not touch along with another (the impact law slides or jams the located contact
+    only): each is located on its own, the box still stops falling, and the energy audit closes."""
+    doc, file = _doc()
+    doc["contact"] = {k: {**v, "tangent": {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu": 0.3}}
+                      for k, v in doc["contact"].items()}
+    r = simulate(parse_scene(doc, None, file))
+    assert all("with" not in hit for hit in r.impacts) and len(r.impacts) >= 1
+    assert abs(r["body.box.z.v"][-1]) < 1e-9
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual

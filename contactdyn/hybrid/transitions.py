@@ -130,15 +130,16 @@ class Transitions:
 
     def _on_touch(self, t, x, modes, phase, event, after):
         """Touching; a bonded touch maps velocities (impact) and slides or jams; a phase may end here."""
-        system = self.system
-        i = self._index(event.contact)
-        c = system.contacts[i]
-        for j in [i] + (_touching_too(system, self.log, t, x, modes, i) if c.normal.chain.bonded_when_touching else []):
-            modes[j], x = self._touch(t, x, modes, j)  # (others touching with it: one impact holds them all)
-        if c.normal.chain.bonded_when_touching:
-            x, imp = impact(system, t, x, modes, c, phase.limits)
+        i, contacts = self._index(event.contact), self.system.contacts
+        touched = [i] + _touching_too(self.system, self.log, t, x, modes, i)  # (one impact holds them all)
+        for j in touched:
+            modes[j], x = self._touch(t, x, modes, j)
+        names = [contacts[j].name for j in touched]
+        if contacts[i].normal.chain.bonded_when_touching:
+            x, imp = impact(self.system, t, x, modes, contacts[i], phase.limits)
             self._after_impact(imp, modes, after)
-        if phase.spec.until == f"touch:{c.name}" and phase.index + 1 < len(self.scene.phases):
+            self.impacts += _co_impacts(imp, names[1:])
+        if phase.spec.until in {f"touch:{n}" for n in names} and phase.index + 1 < len(self.scene.phases):
             phase, previous = self.system.start_phase(phase.index + 1, t, x, phase), phase  # (the last runs on)
             self.log.log(t, "phase", phase.spec.name, check_storm=False)
             if self.phase_started is not None:
@@ -191,9 +192,8 @@ class Transitions:
         return x, phase, True
 
     def _after_impact(self, imp, modes, after: _After, **extra) -> None:
-        """Record an impact on a contact in ``Result.impacts`` and set the contact's mode after it:
-        stuck if it jammed, else sliding along its slip after the impact (or the impact's direction); the
-        other sticks it could not hold slide (:meth:`_release`)."""
+        """Record an impact in ``Result.impacts``; the contact after it: stuck if it jammed, else sliding along its
+        slip after the impact (or the impact's direction); the sticks it could not hold slide (:meth:`_release`)."""
         system = self.system
         self.impacts.append({"t": imp.t, "contact": imp.contact, "normal_impulse": imp.normal_impulse,
                              "friction_impulse": imp.friction_impulse.tolist(), "jammed": imp.jammed,
@@ -370,19 +370,32 @@ class Transitions:
 
 
 def _touching_too(system: System, log: EventLog, t: float, x: np.ndarray, modes, i: int) -> list[int]:
-    """The other rigid contacts that touch at contact i's touch at t [s] (each logged as a touch): not touching yet,
-    their gap within CO_TOUCH [m] and closing (the normal velocity < 0). Located one at a time, simultaneous
-    touches (a flat landing) would take their impacts in turn, and a contact reaching its gap 0 a rounding after
-    another's impact stopped it would never cross it: the impact holds them together."""
+    """The other rigid, frictionless contacts that touch at rigid contact i's touch at t [s] (each logged as a touch):
+    not touching yet, |gap| within CO_TOUCH [m] and closing (the normal velocity < 0). Located one at a time,
+    simultaneous touches (a flat landing) would take their impacts in turn, and a contact reaching its gap 0 a
+    rounding after another's impact stopped it would never cross it: the impact holds them together. (A contact
+    with friction is left to be located on its own: the impact law slides or jams the located contact only.)"""
+    if not system.contacts[i].normal.chain.bonded_when_touching:
+        return []
     nQ = system.nQ
     out = []
     for j, c in enumerate(system.contacts):
-        if j == i or modes[j].touching or c.spec.bonded or not c.normal.chain.bonded_when_touching:
+        if j == i or modes[j].touching or c.spec.bonded or not c.normal.chain.bonded_when_touching or \
+                (c.friction is not None and len(c.tangents)):
             continue
         system.robot.update(x[:system.nv], x[nQ:nQ + system.nv])
         kin = system.kinematics(c, x)
         gap, closing = float(kin.normal @ (kin.p_tip - kin.p_env)), float(kin.normal @ (kin.v_tip - kin.v_env))
-        if gap <= CO_TOUCH and closing < 0.0:
+        if abs(gap) <= CO_TOUCH and closing < 0.0:
             log.log(t, "touch", c.name, check_storm=False)
             out.append(j)
     return out
+
+
+def _co_impacts(imp, names: list[str]) -> list[dict]:
+    """``Result.impacts`` entries of the contacts that touched with ``imp``'s own, each its normal impulse [N·s] in
+    the one impact (its loss and velocities are on the located contact's entry, ``with`` names it)."""
+    return [{"t": imp.t, "contact": name, "normal_impulse": float(imp.row_impulses.get((name, "n", 0), 0.0)),
+             "friction_impulse": [], "jammed": False, "energy_loss": 0.0, "v_before": imp.v_before.tolist(),
+             "v_after": imp.v_after.tolist(), "slip_before": [], "slip_after": [], "with": imp.contact}
+            for name in names]

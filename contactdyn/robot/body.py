@@ -132,6 +132,7 @@ class ArticulatedBody:
         self.pitch = FREE_COORDINATES.index("pitch") if free else None
         self._key: bytes | None = None
         self._v = np.zeros(self.nb)  #: q̇_b at the last update [rad/s or m/s]
+        self._cos_pitch = 0.0  #: a free body's cos(pitch) at the last update (0: none yet)
 
     @property
     def indices(self) -> range:
@@ -140,17 +141,25 @@ class ArticulatedBody:
 
     def update(self, x: np.ndarray, nQ: int) -> None:
         """The body's terms at the state x (its q_b [rad or m] and q̇_b [rad/s or m/s]); nothing when unchanged. A
-        free body's pitch within PITCH_LIMIT of ±90° (its Euler angles' singularity) is a SimulationError."""
+        free body's pitch within PITCH_LIMIT of ±90°, or across it since the last state asked (cos pitch changed
+        sign: a step over it), is a SimulationError: there its ZYX Euler angles are singular."""
         q, v = x[self.first:self.first + self.nb], x[nQ + self.first:nQ + self.first + self.nb]
         key = q.tobytes() + v.tobytes()
         if key != self._key:
-            if self.pitch is not None and abs(np.cos(q[self.pitch])) < PITCH_LIMIT:
-                raise SimulationError(f"body {self.name!r}: pitch {q[self.pitch]:.9g} rad is within {PITCH_LIMIT:g} "
-                                      f"of ±90°, where its ZYX Euler angles are singular (yaw and roll turn about "
-                                      f"one axis): start it further from there, or turn its URDF's frame")
+            if self.pitch is not None:
+                self._check_pitch(float(q[self.pitch]))
             self._v = np.array(v, float)
             self.robot.update(np.array(q, float), self._v)
             self._key = key
+
+    def _check_pitch(self, pitch: float) -> None:
+        """A SimulationError when ``pitch`` [rad] is within PITCH_LIMIT of ±90° or the last one was across it."""
+        cos = float(np.cos(pitch))
+        if abs(cos) < PITCH_LIMIT or cos * self._cos_pitch < 0.0:
+            raise SimulationError(f"body {self.name!r}: its pitch reached ±90° (now {pitch:.9g} rad), where its ZYX "
+                                  f"Euler angles are singular (yaw and roll turn about one axis): turn its URDF's "
+                                  f"frame so that its motion keeps away from it")
+        self._cos_pitch = cos
 
     @property
     def H(self) -> np.ndarray:
