@@ -222,3 +222,15 @@ def test_corners_with_friction_are_located_one_at_a_time():
     assert abs(r["body.box.z.v"][-1]) < 1e-9
     residual = r.meta["checks"]["energy_residual"]
     assert residual["value"] <= residual["tol"], residual
+
+
+def test_the_command_line_names_each_corner_s_share_of_the_one_impact(tmp_path, capsys, monkeypatch):
+    """`contactdyn run drop_box`: one line per corner of the landing, the co-touched ones naming the located one,
+    impulses rounded."""
+    from contactdyn.cli import EXIT_OK, main
+
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "drop_box", "--out", str(tmp_path / "run")]) == EXIT_OK
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.strip().startswith("impact")]
+    assert len(lines) == 4 and "on c1:" in lines[0]
+    assert all(f"on c{k} (touching with c1): FΔt = 0.350179 N·s, F_fΔt = [] N·s" in lines[k - 1] for k in (2, 3, 4))
