@@ -253,9 +253,8 @@ def orient(plan, consts, u, touch_axes):
     H_COORDS rows on the tip; a surface carried by the robot has no body coordinates of its own)."""
     for i in range(3):
         consts[K_U + i] = u[i]
-    at = plan[H_COORDS]
-    for r in range(plan[at]):
-        on, slot = plan[at + 2 + COORD_ROW * r], plan[at + 3 + COORD_ROW * r]
+    for r in range(plan[plan[H_COORDS]]):
+        _, on, slot = coordinate_row(plan, r)
         if on == ON_TIP:
             consts[K_UA + slot] = dot3(u, touch_axes[slot])
 

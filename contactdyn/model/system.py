@@ -61,6 +61,7 @@ from ..robot.posture import start_posture
 from ..robot.robot import Robot
 from ..scene.scene_file import Scene
 from .chain import NodeKind
+from .constraints import mass_matrix as constraints_mass_matrix
 from .contact import Contact, ContactMode, Kinematics, turning_surface
 from .dynamics import Evaluation, evaluate
 from .friction import initial_slip, slip_acceleration, slip_velocity
@@ -301,13 +302,9 @@ class System:
             f[body.first:body.first + body.nb] -= body.h
 
     def mass_matrix(self) -> np.ndarray:
-        """M at the last ``robot.update`` (and ``update_bodies``), a copy: H plus rigid gears' rotor inertias, then
-        the other coordinates, an articulated body's H_b its block."""
-        M = self._M.copy()
-        M[:self.nv, :self.nv] = self.robot.H + np.diag(self._D)
-        for body in self.articulated.values():
-            M[body.first:body.first + body.nb, body.first:body.first + body.nb] = body.H
-        return M
+        """M [kg, kg·m²] at the last ``robot.update`` (and ``update_bodies``), a copy of
+        :func:`contactdyn.model.constraints.mass_matrix`'s."""
+        return constraints_mass_matrix(self).copy()
 
     def contact(self, name: str) -> Contact:
         """The contact named ``name``."""

@@ -116,7 +116,7 @@ def _articulated(robot: Robot) -> UrdfBody:
     return UrdfBody(robot, mass, list(robot.joint_names), axes, np.zeros(model.nv), articulated=True)
 
 
-PITCH_LIMIT = 1e-6  #: [rad] a free body's run stops when |cos(pitch)| falls below this (ZYX singularity)
+PITCH_LIMIT = 1e-6  #: [-] a free body's run stops when |cos(pitch)| falls below this (ZYX singularity)
 
 
 class ArticulatedBody:

@@ -174,16 +174,12 @@ def turning_sides(x, ints, row, cr, J, p_tip, v_tip, drift, FJ, Fa, Fp, Fv, FR):
 def add_coordinates(ints, row, cr, U, out):
     """Add to ``out`` (k, nQ) the bodies' part of the relative motion (touching side − surface) along the unit
     directions U (k, 3) [m/m]: + U·axis on the touching body's coordinates, − on the surface body's."""
-    for side in (TOUCHING, SURFACE):
+    for side, sign in ((TOUCHING, 1.0), (SURFACE, -1.0)):
         at, first, n = _span(ints, row, side)
         for k in range(n):
             i, a = ints[at + k], CR_AXES + 3 * (first + k)
             for j in range(U.shape[0]):
-                ua = U[j, 0] * cr[a] + U[j, 1] * cr[a + 1] + U[j, 2] * cr[a + 2]
-                if side == TOUCHING:
-                    out[j, i] += ua
-                else:
-                    out[j, i] -= ua
+                out[j, i] += sign * (U[j, 0] * cr[a] + U[j, 1] * cr[a + 1] + U[j, 2] * cr[a + 2])
 
 
 @njit(cache=True)
@@ -195,15 +191,12 @@ def relative_velocity(x, ints, row, cr, Fv):
 @njit(cache=True)
 def add_coordinate_rates(ints, row, cr, rates, acc):
     """acc [m/s²] (3) plus the touching body's Σ axis Q̈ minus the surface body's, Q̈ = ``rates`` (nQ)."""
-    for side in (TOUCHING, SURFACE):
+    for side, sign in ((TOUCHING, 1.0), (SURFACE, -1.0)):
         at, first, n = _span(ints, row, side)
         for k in range(n):
             i, a = ints[at + k], CR_AXES + 3 * (first + k)
             for r in range(3):
-                if side == TOUCHING:
-                    acc[r] += cr[a + r] * rates[i]
-                else:
-                    acc[r] -= cr[a + r] * rates[i]
+                acc[r] += sign * (cr[a + r] * rates[i])
 
 # ---- the contacts' stages ----------------------------------------------------------------------------------------
 
