@@ -43,7 +43,7 @@ from .chain import NodeKind
 from .contact import Contact, DirectionalChain, Kinematics
 
 __all__ = ["chain_forces", "ChainArrays", "pack", "chain_call", "chain_motion", "chain_loads", "coordinate_row",
-           "orient"]
+           "orient", "relative_sides"]
 
 TIP, ANCHOR = int(NodeKind.TIP), int(NodeKind.ANCHOR)
 
@@ -166,18 +166,21 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
     if a is None:
         a = dc.arrays[key] = pack(system, c, dc, touching, key[1])
     u = kin.normal if dc is c.normal and kin.normal is not None else dc.u
-    if u is not dc.u:  # a surface turning with a robot frame: the state's normal
+    p_tip, v_tip, p_env, v_env = kin.p_tip, kin.v_tip, kin.p_env, kin.v_env
+    if u is not dc.u:  # a turning surface: along the state's normal, from the surface (relative_sides)
         orient(a.plan, a.consts, u, np.array([axis for _, axis in c.touch_coords]).reshape(-1, 3))
+        if dc.chain.stages:  # (a rigid bond's gap is the same either way: its rounding kept as it was)
+            p_tip, v_tip, p_env, v_env = relative_sides(p_tip, v_tip, p_env, v_env)
     if a.python_stages:
-        chain_motion(a.plan, a.stages, a.coef, a.consts, x, kin.p_tip, kin.v_tip, kin.p_env, kin.v_env, float(offset),
-                     ydot, a.motion, a.stage_state)
+        chain_motion(a.plan, a.stages, a.coef, a.consts, x, p_tip, v_tip, p_env, v_env, float(offset), ydot, a.motion,
+                     a.stage_state)
         _python_forces(a, system.energy_slot >= 0)
         tip_F, gamma, interface_F, gap = chain_loads(a.plan, a.stages, a.consts, kin.drift, f, ydot, a.motion,
                                                      a.stage_state)
     else:
-        tip_F, gamma, interface_F, gap, finite = chain_call(a.plan, a.stages, a.coef, a.consts, x, kin.p_tip,
-                                                            kin.v_tip, kin.p_env, kin.v_env, kin.drift, float(offset),
-                                                            f, ydot, a.motion, a.stage_state)
+        tip_F, gamma, interface_F, gap, finite = chain_call(a.plan, a.stages, a.coef, a.consts, x, p_tip, v_tip,
+                                                            p_env, v_env, kin.drift, float(offset), f, ydot, a.motion,
+                                                            a.stage_state)
         if not finite:  # a compiled law raised (its call gives NaN) or gave NaN
             _law_error(a, dc)
     dc.last_positions = a.motion[0]
@@ -245,6 +248,15 @@ def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics, u: np.n
 
 
 # ---- one call over the arrays (numba) ----------------------------------------------------------------------------
+
+@njit(cache=True)
+def relative_sides(p_tip, v_tip, p_env, v_env):
+    """A chain on a turning surface measures its nodes from the surface: (p_tip − p_env [m], v_tip − v_env [m/s],
+    zeros, zeros). Along the state's normal n, n·(p_tip − p_env) is the gap and n·(v_tip − v_env) its rate exactly
+    (v_env is the velocity of the material point under the tip, :func:`~contactdyn.model.contact.turning_surface`),
+    so the junctions' states are deformations, not positions that the turning n would shift."""
+    return p_tip - p_env, v_tip - v_env, np.zeros(3), np.zeros(3)
+
 
 @njit(cache=True)
 def orient(plan, consts, u, touch_axes):

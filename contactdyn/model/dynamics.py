@@ -162,6 +162,8 @@ def _contact_terms(system, x: np.ndarray, modes: list[ContactMode], f: np.ndarra
         ev.normal_force[c.name] = F_n
         if np.any(tip_force):
             f[:nv] += kin.J.T @ tip_force
+            for i, col in kin.columns:  # an articulated side's coordinates (the relative motion's columns)
+                f[i] += col @ tip_force
     return kins, pending
 
 

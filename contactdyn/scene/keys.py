@@ -104,14 +104,14 @@ MEANINGS: dict[str, str] = {
     "contact.<contact>.frame_point": "the touching point [m] of the body named by frame (world, at the body's "
                                      "coordinates 0; for an articulated body in body_frame's coordinates)",
     "contact.<contact>.body_frame": "for an articulated touching body: its frame (a link's or any URDF frame) in "
-                                    "whose coordinates frame_point is given; the point moves and turns with it (a "
-                                    "rigid normal, no deformation chain for now)",
+                                    "whose coordinates frame_point is given; the point moves and turns with it (any "
+                                    "normal and tangential model)",
     "contact.<contact>.body": "what carries the surface: the fixed ground, an active body, or the robot (robot: "
                               "a robot frame, surface_frame, carries it: it moves and turns with that frame)",
     "contact.<contact>.surface_frame": "the robot frame carrying the surface when body = \"robot\", or the "
                                        "articulated body's frame when body names one: point, normal.direction and "
-                                       "tangent.directions are then in that frame's own coordinates (a rigid "
-                                       "normal, no deformation chain for now)",
+                                       "tangent.directions are then in that frame's own coordinates (a rigid or "
+                                       "massless normal, free or friction along the tangents, for now)",
     "contact.<contact>.point": "a point of the undeformed surface (world; on a body at coordinate 0; on the robot "
                                "or an articulated body in surface_frame's coordinates)",
     "contact.<contact>.bonded": "the tip never separates (stays on the surface)",

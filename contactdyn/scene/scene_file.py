@@ -538,8 +538,8 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
         if frame == body:
             raise r.error("frame", f"a body other than the surface's ({body!r})", frame)
         frame_point = r.vector("frame_point", size=3, unit="m")
-    body_frame = _body_frame(r, frame, bodies, normal_chain, model, tangents)
-    surface_frame = _surface_frame(r, body, bodies, normal_chain, model, tangents)
+    body_frame = _body_frame(r, frame, bodies)
+    surface_frame = _surface_frame(r, body, bodies, normal_chain, model)
     spec = ContactSpec(
         name=name,
         frame=frame,
@@ -560,11 +560,11 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
     return spec
 
 
-def _surface_frame(r: Reader, body: str, bodies: dict[str, BodySpec], normal_chain: ChainSpec, tangent_model: str,
-                   tangents: np.ndarray) -> str | None:
+def _surface_frame(r: Reader, body: str, bodies: dict[str, BodySpec], normal_chain: ChainSpec, tangent_model: str
+                   ) -> str | None:
     """The frame carrying the surface: a robot frame (``body = "robot"``) or a frame of an articulated body (required
-    there); None for the ground or a translating body. On it, for now, a rigid normal and no chain
-    (:func:`_turning_limits`)."""
+    there); None for the ground or a translating body. On it, for now, a rigid or massless normal and no tangential
+    chain (:func:`_turning_limits`)."""
     articulated = body in bodies and bodies[body].articulated
     if body != "robot" and not articulated:
         if r.has("surface_frame"):
@@ -577,14 +577,13 @@ def _surface_frame(r: Reader, body: str, bodies: dict[str, BodySpec], normal_cha
                       None)
     where = 'on a surface carried by the robot (body = "robot"' if body == "robot" else \
         f"on a surface carried by a body with revolute joints (body = {body!r}"
-    _turning_limits(r, where, normal_chain, tangent_model, tangents)
+    _turning_limits(r, where, normal_chain, tangent_model)
     return r.str("surface_frame")
 
 
-def _body_frame(r: Reader, frame: str, bodies: dict[str, BodySpec], normal_chain: ChainSpec, tangent_model: str,
-                tangents: np.ndarray) -> str | None:
+def _body_frame(r: Reader, frame: str, bodies: dict[str, BodySpec]) -> str | None:
     """The frame of an articulated touching body in whose coordinates ``frame_point`` is given (required there;
-    None otherwise). On it, for now, a rigid normal and no chain (:func:`_turning_limits`)."""
+    None otherwise)."""
     articulated = r.has("frame_point") and frame in bodies and bodies[frame].articulated
     if not articulated:
         if r.has("body_frame"):
@@ -594,20 +593,18 @@ def _body_frame(r: Reader, frame: str, bodies: dict[str, BodySpec], normal_chain
     if not r.has("body_frame"):
         raise r.error("body_frame", f"the frame of body {frame!r} in whose coordinates frame_point is given "
                       "(required: the body turns)", None)
-    _turning_limits(r, f"on a touching body with revolute joints (frame = {frame!r}", normal_chain, tangent_model,
-                    tangents)
     return r.str("body_frame")
 
 
-def _turning_limits(r: Reader, where: str, normal_chain: ChainSpec, tangent_model: str, tangents: np.ndarray
-                    ) -> None:
-    """A side that turns supports, for now, a rigid normal and free or friction (1-D or 2-D): one SceneError each
-    otherwise (``where``: the side, its closing parenthesis left to this)."""
-    if not normal_chain.rigid:
-        raise r.error("normal.model", f"a rigid normal {where}; a deformation chain there is not supported yet)",
-                      r.data["normal"].get("model", "chain"))
+def _turning_limits(r: Reader, where: str, normal_chain: ChainSpec, tangent_model: str) -> None:
+    """A surface that turns carries, for now, a rigid normal or a chain without equivalent masses (its stages
+    deform along the surface's normal at the state; a mass would ride the turning surface), and free or friction
+    (1-D or 2-D): one SceneError each otherwise (``where``: the side, its closing parenthesis left to this)."""
+    if any(isinstance(e, Mass) for e in normal_chain.environment + normal_chain.robot):
+        raise r.error("normal.model", f"a rigid normal or a chain without masses {where}; a mass there would ride "
+                      "the turning surface, not supported yet)", "a chain with a mass")
     if tangent_model == "chain":
-        raise r.error("tangent.model", f"free or friction {where}; a chain there is not supported yet)",
+        raise r.error("tangent.model", f"free or friction {where}; a tangential chain there is not supported yet)",
                       tangent_model)
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ...laws.abi import call_friction
 from ...numerics.compile_cache import njit
-from ..chain_forces import H_COORDS, K_U, K_UA, ON_ANCHOR, ON_TIP, chain_call, coordinate_row, orient
+from ..chain_forces import H_COORDS, K_U, K_UA, ON_ANCHOR, ON_TIP, chain_call, coordinate_row, orient, relative_sides
 from ..contact import turning_surface
 from .pack import (
     ANCHOR,
@@ -257,12 +257,17 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma
         F_n = 0.0
         for k in range(row[CI_NORMAL], row[CI_FIRST_T] + row[CI_N_T]):
             ch = chains[k]
-            if turning:  # (its only chain: a rigid normal)
+            if turning:  # (its only chain: the normal, rigid or massless) along n
                 n_touch = ints[row[CI_COORDS]]
                 orient(ints[ch[CH_PLAN]:ch[CH_STAGES]], reals[ch[CH_CONSTS]:ch[CH_CONSTS] + ch[CH_NCONSTS]], n,
                        cr[CR_AXES:CR_AXES + 3 * n_touch].reshape((n_touch, 3)))
-            tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, p_tip, v_tip, p_env, v_env,
-                                                          drift, f, ydot)
+            if turning and ch[CH_NS] > 0:  # stages: from the surface (a rigid bond's gap is the same either way)
+                p_rel, v_rel, p_0, v_0 = relative_sides(p_tip, v_tip, p_env, v_env)
+                tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, p_rel, v_rel, p_0, v_0, drift,
+                                                              f, ydot)
+            else:
+                tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, p_tip, v_tip, p_env, v_env,
+                                                              drift, f, ydot)
             if not finite:
                 return False
             work[ints[W_DIAG] + 1 + k] = interface_F  # (diagnostics: a tangential chain's interface force)

@@ -1,0 +1,146 @@
+"""Deformation chains where a side turns (issue 32): a massless chain on a surface that turns with a robot frame or
+an articulated body, and any chain, masses included, under an articulated body's touching point.
+
+On a turning surface a chain runs along the state's normal n and measures its nodes from the surface
+(:func:`contactdyn.model.chain_forces.relative_sides`): its compression is the gap n·(p − p_s), its rate n·v_rel, so
+a damped junction's state is a deformation the turning n does not shift. Closed forms: the tilting tray's part on a
+Kelvin–Voigt normal carries m g cos θ at a sink F/k while it sticks and slips at tan θ = μ; undamped and carried
+around the axis, the energy audit closes; the bar's end strikes a model-(b) chain with the plastic impact of two
+masses (the bar's effective mass at its end, m′) and rests on it with m g d / L; the tool pressed into a
+Kelvin–Voigt face of the bar holds it at rest with m g d sin θ / a. Both paths agree where the compiled call runs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_lever import ARM, I_O, KP, M_BAR, PIVOT_Z, D, G, L
+
+from contactdyn import load_scene, parse_scene, simulate
+from contactdyn.model.paths import PIPELINE, READABLE
+from contactdyn.model.system import System
+
+MU, M_PART = 0.4, 0.2  #: the tilting tray's μ and part [kg]
+K, B = 1e5, 100.0  #: [N/m], [N·s/m] our Kelvin–Voigt normal
+
+
+def _scene(name: str, **edits) -> tuple[dict, str]:
+    scene = load_scene(name)
+    doc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in scene.document.items()}
+    doc.update(edits)
+    return doc, scene.file
+
+
+def _tray(k: float = K, b: float = B, y0: float = 0.0, **edits):
+    """The tilting tray with a Kelvin–Voigt normal (k [N/m], b [N·s/m]), the part ``y0`` [m] from the axis."""
+    doc, file = _scene("tilt_tray", **edits)
+    rest = {**doc["contact"]["rest"], "normal": {"direction": [0.0, 0.0, 1.0], "model": "c", "k": k, "b": b}}
+    doc["contact"] = {"rest": rest}
+    doc["body"] = {"part": {**doc["body"]["part"], "position0": [y0, 0.0]}}
+    doc["solver"] = {**doc["solver"], "output_rate": 1000.0}
+    return parse_scene(doc, None, file)
+
+
+@pytest.fixture(scope="module")
+def tray():
+    return simulate(_tray())
+
+
+def test_on_the_tilting_tray_the_part_sinks_f_over_k_and_carries_m_g_cos_theta_while_it_sticks(tray):
+    r = tray
+    theta, t = r["q"][:, 0], r["t"]
+    settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)  # (the chain starts undeformed: a decay first)
+    assert settled.sum() > 2500
+    F_n = r["contact.rest.F_n"]
+    np.testing.assert_allclose(F_n[settled], M_PART * G * np.cos(theta[settled]), rtol=0, atol=1e-6)
+    y, z = r["body.part.slide.x"], r["body.part.lift.x"]
+    sink = -np.sin(theta) * y + np.cos(theta) * z  # [m] along the tray's normal
+    np.testing.assert_allclose(sink[settled], -F_n[settled] / K, rtol=0, atol=1e-8)
+
+
+def test_on_the_tilting_tray_the_part_slips_where_tan_theta_is_mu_and_the_energy_closes(tray):
+    (slip,) = [e["t"] for e in tray.events if e["kind"] == "slip"]
+    assert slip == pytest.approx(np.arctan(MU) / 0.1, abs=1e-3)  # the tray tilts at 0.1 rad/s from level
+    residual = tray.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual
+
+
+def test_the_chain_on_the_tray_runs_compiled_and_the_readable_model_agrees(tray):
+    assert {row["path"] for row in tray.stats["paths"].values()} == {PIPELINE}
+    readable = simulate(_tray(), compiled=False)
+    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
+    for key in ("contact.rest.F_n", "contact.rest.F_f", "body.part.slide.x", "body.part.lift.x", "q"):
+        ref = np.asarray(readable[key], float)
+        np.testing.assert_allclose(tray[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
+
+
+def test_undamped_and_off_the_axis_the_part_rides_the_tray_and_the_energy_audit_closes():
+    """b = 0: the part, 0.1 m from the axis, falls onto the spring and rings as the tray carries it around (the
+    material point under it moves and turns; only the tray's PD damps the ringing): the audit's residual is the
+    model's consistency."""
+    r = simulate(_tray(b=0.0, y0=0.1, duration=2.0))
+    assert r["contact.rest.touching"].all()
+    assert r["contact.rest.F_n"].max() > 1.5 * M_PART * G  # it rang (the tray's PD damps it through the tilt)
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual
+
+
+def _bar_onto(normal: dict, theta0: float = 1.2, duration: float = 1.0):
+    """The lever's bar released at θ0 [rad], its lower end (0.5 m from the pivot) over a frictionless table 0.4 m
+    below the pivot, the table's normal ``normal``; the tool far aside."""
+    doc, file = _scene("lever", duration=duration)
+    table = {"frame": "lever", "body_frame": "bar", "frame_point": [0.0, 0.0, -L], "body": "ground",
+             "point": [0.0, 0.0, PIVOT_Z - 0.4], "normal": {"direction": [0.0, 0.0, 1.0], **normal},
+             "tangent": {"model": "free"}}
+    doc["body"] = {"lever": {**doc["body"]["lever"], "position0": theta0}}
+    doc["contact"] = {"table": table}
+    doc["robot"] = {**doc["robot"], "q0": [1.0, 0.2]}
+    return simulate(parse_scene(doc, None, file))
+
+
+def test_the_bar_s_end_strikes_a_model_b_chain_as_two_masses_and_rests_on_it_with_m_g_d_over_l():
+    """The end meets m′ at θ_c = arccos(0.8) moving at v = L sin θ_c θ̇ (θ̇ from the swing's energy); its mass along
+    the normal there is I_O / (L sin θ_c)²: the plastic impact keeps v m_eff / (m_eff + m′) and loses
+    ½ m_eff m′ v² / (m_eff + m′). At rest the chain carries m g d / L whatever the angle (moments about the
+    pivot: m g d sin θ = F L sin θ)."""
+    m_prime = 0.05
+    r = _bar_onto({"model": "b", "k": 1e4, "b": 60.0, "m": m_prime}, duration=2.0)
+    hit = r.impacts[0]  # (the first: the bar rebounds off the chain and strikes it again, less each time)
+    assert hit["contact"] == "table"
+    theta_c, theta0 = np.arccos(0.8), 1.2
+    omega = np.sqrt(2 * M_BAR * G * D * (np.cos(theta_c) - np.cos(theta0)) / I_O)
+    v, m_eff = L * np.sin(theta_c) * omega, I_O / (L * np.sin(theta_c)) ** 2
+    assert hit["energy_loss"] == pytest.approx(0.5 * m_eff * m_prime * v**2 / (m_eff + m_prime), rel=1e-6)
+    assert r["contact.table.F_n"][-1] == pytest.approx(M_BAR * G * D / L, rel=1e-6)
+    assert abs(r["body.lever.v"][-1]) < 1e-6
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual
+
+
+def test_a_tool_pressed_into_a_kelvin_voigt_face_of_the_bar_holds_it_at_rest():
+    """The bar at θ, the tool sunk F/k into its face at the arm a with F = m g d sin θ / a (the static hold's), its
+    spring's reference set to balance F: nothing accelerates, the chain's force acts on the bar's coordinate
+    through the face's turning normal."""
+    theta, k = 0.3, 2e4
+    doc, file = _scene("lever")
+    n = np.array([np.cos(theta), -np.sin(theta)])  # the face's normal in (x, z)
+    F_n = M_BAR * G * D * np.sin(theta) / ARM
+    face = np.array([-ARM * np.sin(theta), PIVOT_Z - ARM * np.cos(theta)])
+    tool = face - F_n / k * n  # sunk into the face
+    ref = tool - F_n * n / KP
+    push = {**doc["contact"]["push"], "normal": {"direction": [1.0, 0.0, 0.0], "model": "c", "k": k, "b": 40.0},
+            "tangent": {"model": "free"}}
+    doc.update(body={"lever": {**doc["body"]["lever"], "position0": theta}}, contact={"push": push},
+               robot={**doc["robot"], "q0": tool.tolist()},
+               phase=[{"name": "hold", "reference": {"start": [ref[0], 0.0, ref[1]], "moves": []}}])
+    system = System(parse_scene(doc, None, file))
+    x, modes = system.initial_state()
+    modes = [m.with_(touching=True) for m in modes]
+    ev = system.evaluate(0.0, x, modes, system.start_phase(0, 0.0, x, None))
+    assert ev.normal_force["push"] == pytest.approx(F_n, rel=1e-9)
+    np.testing.assert_allclose(ev.xdot[system.nQ:2 * system.nQ], 0.0, rtol=0, atol=1e-9)
+    doc["duration"] = 0.3
+    r = simulate(parse_scene(doc, None, file))  # and held so for a while
+    assert r["contact.push.touching"].all()
+    np.testing.assert_allclose(r["body.lever.x"], theta, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(r["contact.push.F_n"], F_n, rtol=1e-7)
