@@ -362,7 +362,7 @@ def _articulated(scene: Scene, name: str, spec, first: int) -> ArticulatedBody:
     """The run-time model of body ``name``, whose URDF has revolute joints (gravity the world's), its first
     coordinate at ``first`` in Q."""
     try:
-        robot = Robot.load(spec.urdf, gravity=tuple(scene.robot.gravity), free=spec.free)
+        robot = Robot.load(spec.urdf, gravity=tuple(scene.robot.gravity), free=spec.free, body=True)
     except RobotError as exc:
         raise SceneError(f"body.{name}.urdf", "a loadable URDF", exc, scene.file) from None
     return ArticulatedBody(name, robot, first, spec.free)

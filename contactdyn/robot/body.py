@@ -17,7 +17,9 @@ link to it) is an articulated body whose root link has six coordinates of its ow
 root frame's origin in the world, then its ZYX Euler angles yaw, pitch, roll [rad] (R = Rz(yaw) Ry(pitch)
 Rx(roll)), one-coordinate joints of the rewritten URDF (:func:`contactdyn.robot.urdf_model.add_free_joints`). At
 pitch = ±90° yaw and roll turn about one axis (H_b singular): a run stops there (:meth:`ArticulatedBody.update`).
-Any other joint of several coordinates (planar, spherical) is not a body (issue 32).
+A ``planar`` joint <j> becomes three one-coordinate joints <j>_x, <j>_y [m] (in the plane) and <j>_yaw [rad] (about
+its normal, the joint's ``<axis>``; :func:`contactdyn.robot.urdf_model.split_planar_joints`): an articulated body.
+Any other joint of several coordinates (spherical, a floating joint below the root) is one RobotError naming it.
 """
 
 from __future__ import annotations
@@ -85,16 +87,17 @@ def load_body(source: str, free: bool = False) -> UrdfBody:
 
 
 def _load(source: str, free: bool = False) -> Robot:
-    """The body's Robot; a joint of several coordinates (a free-flyer, planar, spherical) is one RobotError."""
-    urdf = build_urdf_model(source, free=free)
+    """The body's Robot (its planar joints split in three); a joint of several coordinates left (a free-flyer,
+    spherical) is one RobotError."""
+    urdf = build_urdf_model(source, free=free, body=True)
     model = urdf.model
     several = [f"{model.names[j]} ({model.joints[j].shortname()})" for j in range(1, model.njoints)
                if model.joints[j].nq != 1 or model.joints[j].nv != 1]
     if several:
-        raise RobotError(f"{urdf.path}: a body's joints are revolute or prismatic, one coordinate each (a "
-                         f"free-flying body, a floating joint from a world link or none, is declared free = true); "
-                         f"found {', '.join(several)}")
-    return Robot.load(source, free=free)
+        raise RobotError(f"{urdf.path}: a body's joints are revolute, prismatic or planar (a planar one becomes three "
+                         f"joints of one coordinate each; a free-flying body, a floating joint from a world link or "
+                         f"none, is declared free = true); found {', '.join(several)}")
+    return Robot.load(source, free=free, body=True)
 
 
 def _articulated(robot: Robot) -> UrdfBody:
