@@ -16,7 +16,9 @@ A *free* body (``free = true``; its URDF's root link is the body, or a ``floatin
 link to it) is an articulated body whose root link has six coordinates of its own, nq = nv: x, y, z [m] of the
 root frame's origin in the world, then its ZYX Euler angles yaw, pitch, roll [rad] (R = Rz(yaw) Ry(pitch)
 Rx(roll)), one-coordinate joints of the rewritten URDF (:func:`contactdyn.robot.urdf_model.add_free_joints`). At
-pitch = ±90° yaw and roll turn about one axis (H_b singular): a run stops there (:meth:`ArticulatedBody.update`).
+pitch = ±90° yaw and roll turn about one axis (H_b singular): the angles then run in a second chart, R = Rz Ry Rx(b)
+· C (:mod:`contactdyn.robot.free_chart`; its own Pinocchio model, the same frames), switched by the hybrid loop's
+``chart`` event (:mod:`contactdyn.hybrid.charts`); the chart in use is a slot of the state (:class:`ArticulatedBody`).
 A ``planar`` joint <j> becomes three one-coordinate joints <j>_x, <j>_y [m] (in the plane) and <j>_yaw [rad] (about
 its normal, the joint's ``<axis>``; :func:`contactdyn.robot.urdf_model.split_planar_joints`): an articulated body.
 Any other joint of several coordinates (spherical, a floating joint below the root) is one RobotError naming it.
