@@ -4,8 +4,11 @@ centre, then its ZYX Euler angles yaw, pitch, roll [rad] (R = Rz(yaw) Ry(pitch) 
 free, its centre follows p0 + v0 t + g t²/2, its rotational energy ½ ωᵀ I ω and its angular momentum in the world
 R I Rᵀ ω stay constant (a spin about a principal axis; about the intermediate axis, perturbed, too: the flip is
 allowed); dropped flat on a table, its four corners touch at once: one plastic impact (m v / 4 each, the loss
-½ m v²), then it rests on them, m g / 4 each (the least-squares minimum norm), as when started resting flat. Pitch
-at ±90° (the parametrization's singularity) stops a run with one message; bad inputs are one SceneError each.
+½ m v²), then it rests on them, m g / 4 each (the least-squares minimum norm), as when started resting flat.
+Near pitch ±90° (chart A's singularity) the angles switch to chart B (R = Rz Ry Rx(b) · C,
+:mod:`contactdyn.robot.free_chart`) and back: a tumble keeps its momentum, energy and parabola across the switches,
+a switch keeps the pose and velocities, a landing after one closes its energy audit; bad inputs are one SceneError
+each.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import pytest
 from test_lever import FREE_FLYER
 
 from contactdyn import load_scene, parse_scene, simulate
-from contactdyn.errors import SceneError, SimulationError
+from contactdyn.errors import SceneError
 from contactdyn.model.system import System
 
 pytestmark = pytest.mark.filterwarnings("ignore:.*the scene has no contacts")
@@ -134,21 +137,116 @@ def test_resting_flat_each_corner_carries_a_quarter_of_its_weight():
     np.testing.assert_allclose(r["body.box.z.x"], 0.15, rtol=0, atol=1e-12)
 
 
-def test_near_pitch_90_degrees_the_run_stops_with_the_parametrization_s_reason():
+def _tumble(duration: float):
+    """A box thrown tumbling (tilted, about its intermediate axis y, perturbed about x): its x and y axes each turn
+    vertical in turn, so both charts' pitches pass ±90° (the switches go both ways)."""
+    angles = np.array([0.3, 0.7, 1.0])
+    omega = _R(*angles) @ np.array([3.0, 10.0, 0.1])  # [rad/s]
+    return _thrown([0.0, 0.0, 1.0], [0.3, 0.0, 2.0], angles, omega, duration), omega
+
+
+def test_a_tumbling_box_switches_charts_both_ways_and_keeps_its_momentum_energy_and_parabola():
+    """Torque-free in free fall: R I Rᵀ ω and ½ ωᵀ R I Rᵀ ω stay (R from the recorded chart-A angles, ω its own
+    channels) across every switch, to 1e-9 relative; its centre follows p0 + v0 t + g t²/2."""
+    r, omega = _tumble(3.0)
+    switches = [e for e in r.events if e["kind"] == "chart"]
+    assert {e["to"] for e in switches} == {"A", "B"} and len(switches) >= 4, switches
+    assert abs(np.diff(r["body.box.chart"])).sum() >= 4
+    pitch = r["body.box.pitch.x"]
+    assert np.abs(np.cos(pitch)).min() < 0.2  # chart A's pitch came near ±90° (while B ran)
+    t = r["t"]
+    centre = np.column_stack([r[f"body.box.{a}.x"] for a in "xyz"])
+    p0, v0 = np.array([0.0, 0.0, 1.0]), np.array([0.3, 0.0, 2.0])
+    np.testing.assert_allclose(centre, p0 + np.outer(t, v0) + 0.5 * np.outer(t**2, [0, 0, -G]), rtol=0, atol=1e-9)
+    w = np.column_stack([r[f"body.box.omega_{a}"] for a in "xyz"])
+    np.testing.assert_allclose(w[0], omega, rtol=0, atol=1e-12)
+    Rs = [_R(*a) for a in np.column_stack([r[f"body.box.{a}.x"] for a in AXES[3:]])]
+    L = np.array([R @ I_BODY @ R.T @ wi for R, wi in zip(Rs, w, strict=True)])  # [kg·m²/s]
+    E = 0.5 * np.einsum("ij,ij->i", w, L)  # [J]
+    np.testing.assert_allclose(L, np.broadcast_to(L[0], L.shape), rtol=0, atol=1e-9 * np.linalg.norm(L[0]))
+    np.testing.assert_allclose(E, E[0], rtol=1e-9, atol=0)
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual
+
+
+def test_chart_a_s_angles_and_their_rates_describe_the_motion_in_either_chart():
+    """The recorded yaw, pitch, roll are chart A's (from R while B runs): their rates give ω by chart A's
+    E(yaw, pitch) wherever pitch keeps from ±90°."""
+    r, _ = _tumble(1.5)
+    a = np.column_stack([r[f"body.box.{k}.x"] for k in AXES[3:]])
+    ad = np.column_stack([r[f"body.box.{k}.v"] for k in AXES[3:]])
+    w = np.column_stack([r[f"body.box.omega_{k}"] for k in "xyz"])
+    away = np.abs(np.cos(a[:, 1])) > 0.1
+    assert r["body.box.chart"][away].any()
+    for ai, adi, wi in zip(a[away], ad[away], w[away], strict=True):
+        np.testing.assert_allclose(_E(*ai[:2]) @ adi, wi, rtol=0, atol=1e-9)
+
+
+def test_a_switch_keeps_the_position_rotation_and_velocities():
+    """Right before and right after a switch (either way): the box frame's position [m], rotation, velocity [m/s]
+    and ω [rad/s] the same to 1e-12 (its own frame in each chart's model, the same id); a corner's too; the
+    kinetic energy the same to rounding."""
+    doc, file = _doc()
+    system = System(parse_scene({**doc, "body": {"box": {**doc["body"]["box"]}}}, None, file))
+    body, nQ = system.articulated["box"], system.nQ
+    fid = body.robot.frame_id("box")
+    assert body.robots[1].frame_id("box") == fid and body.robots[1].model.nframes == body.robots[0].model.nframes
+    corner = np.array([0.05, 0.1, -0.15])
+    rng = np.random.default_rng(3)
+    for pitch in (1.0472, -1.0472, 0.3, 2.0):
+        x = np.zeros(system.n)
+        x[body.first:body.first + 6] = [*rng.normal(size=3), rng.uniform(-3, 3), pitch, rng.uniform(-3, 3)]
+        x[nQ + body.first:nQ + body.first + 6] = rng.normal(size=6) * 3.0
+        for chart in (0, 1):
+            x[body.chart_index] = chart
+            y = body.switched(x, nQ)
+            assert body.chart_of(y) == 1 - chart
+            seen = []
+            for state in (x, y):
+                body.update(state, nQ)
+                ft = body.frame(fid)
+                w = ft.angular_jacobian @ state[nQ + body.first:nQ + body.first + 6]
+                p, v, _, _ = body.point(fid, corner)
+                q_b, v_b = state[body.first:body.first + 6], state[nQ + body.first:nQ + body.first + 6]
+                seen.append((ft.position, ft.rotation, ft.velocity, w, p, v,
+                             body.energy(q_b, v_b, body.chart_of(state))))
+            for before, after in zip(*seen, strict=True):
+                np.testing.assert_allclose(after, before, rtol=1e-12, atol=1e-12)
+            assert np.allclose(y[body.first:body.first + 3], x[body.first:body.first + 3], rtol=0, atol=0)
+
+
+def test_a_start_near_pitch_90_degrees_runs_in_chart_b():
+    """Started at pitch 90° − 1e-7 (chart A singular there), the box starts in chart B and falls freely."""
     doc, file = _doc(duration=0.1, contact={})
-    body = {**doc["body"]["box"], "position0": [0.0, 0.0, 1.0, 0.0, np.pi / 2 - 1e-7, 0.0]}
-    with pytest.raises(SimulationError, match="ZYX Euler angles are singular"):
-        simulate(parse_scene({**doc, "body": {"box": body}}, None, file))
+    body = {**doc["body"]["box"], "position0": [0.0, 0.0, 1.0, 0.2, np.pi / 2 - 1e-7, 0.1]}
+    r = simulate(parse_scene({**doc, "body": {"box": body}}, None, file))
+    assert (r["body.box.chart"] == 1).all()
+    R0 = _R(0.2, np.pi / 2 - 1e-7, 0.1)
+    for k in range(0, len(r["t"]), 5):
+        R = _R(*(r[f"body.box.{a}.x"][k] for a in AXES[3:]))
+        np.testing.assert_allclose(R, R0, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(r["body.box.z.x"], 1.0 - 0.5 * G * r["t"]**2, rtol=0, atol=1e-12)
 
 
-def test_a_spin_that_carries_the_pitch_across_90_degrees_stops_the_run_with_that_reason():
-    """Spinning about its pitch axis at 5 rad/s from pitch 0, the box's pitch crosses 90° at ~0.31 s: whatever the
-    steps, the run stops there with the parametrization's reason (not later, not silently)."""
-    doc, file = _doc(duration=1.0, contact={})
-    body = {**doc["body"]["box"], "position0": [0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
-            "velocity0": [0.0, 0.0, 0.0, 0.0, 5.0, 0.0]}
-    with pytest.raises(SimulationError, match="pitch reached ±90°"):
-        simulate(parse_scene({**doc, "body": {"box": body}}, None, file))
+def test_a_box_landing_after_a_tumble_through_pitch_90_degrees_closes_its_energy_audit():
+    """Thrown spinning about its y axis, it turns past pitch 90° in the air (chart B) and lands on the corners of
+    its top face (rigid, frictionless: plastic impacts), then rocks on the table: the run finishes, contacts on
+    the box are located and its impacts taken in chart B, and its energy audit closes."""
+    doc, file = _doc(duration=0.8)
+    contacts = dict(doc["contact"])
+    for k, (sx, sy) in enumerate(((1, 1), (-1, 1), (-1, -1), (1, -1)), start=5):  # the top face's corners
+        contacts[f"c{k}"] = {**contacts["c1"], "frame_point": [0.05 * sx, 0.1 * sy, 0.15]}
+    body = {**doc["body"]["box"], "position0": [0.0, 0.0, 0.5, 0.0, 0.9, 0.0],
+            "velocity0": [0.0, 0.0, 0.0, 0.0, 4.0, 0.0]}
+    r = simulate(parse_scene({**doc, "contact": contacts, "body": {"box": body}}, None, file))
+    kinds = [(e["kind"], e.get("to")) for e in r.events]
+    assert ("chart", "B") in kinds and kinds.index(("chart", "B")) < kinds.index(("touch", None))
+    assert r.impacts and all(h["t"] > next(e["t"] for e in r.events if e["kind"] == "chart") for h in r.impacts)
+    on_b = r["body.box.chart"] == 1
+    touching = np.column_stack([r[f"contact.c{k}.touching"] for k in range(1, 9)]).any(axis=1)
+    assert (on_b & touching).any()
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual
 
 
 def test_a_floating_joint_from_a_world_link_is_a_free_body_whose_joints_follow_its_six(tmp_path):

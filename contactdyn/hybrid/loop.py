@@ -64,6 +64,7 @@ from ..output.channels import Held, Segment, output_grid, sample_states
 from ..output.physics_checks import StartAudit, run_checks, violations
 from ..output.result import Result
 from ..scene.budget import STEPS_BASE, step_budget
+from .charts import chart_events
 from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
 from .pipeline_mode import PipelineMode
 from .progress import CALLS_PER_STEP, OverBudget, Progress, Work
@@ -73,8 +74,9 @@ from .transitions import Transitions
 __all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
 
 #: events after which the next segment starts with the step size the solver had reached (friction
-#: mode switches change the forces, not the time scales; an impact or a separation does, so they restart)
-RESUME_STEP = ("stop", "reverse", "slip", "turn", "joint_slip", "joint_stick")
+#: mode switches change the forces, not the time scales; an impact or a separation does, so they restart; a free
+#: body's chart switch changes its coordinates only)
+RESUME_STEP = ("stop", "reverse", "slip", "turn", "joint_slip", "joint_stick", "chart")
 LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest or comes to rest (see HybridRun._method)
 #: a 2-D slide's explicit steps shorter than COLLAPSE_RATIO × the segment's longest, COLLAPSE_STEPS of them, have
 #: it checked for a stiff mode (events.StepCollapse): the steps shrink ~1/|v_t| as the slide comes to rest; a
@@ -240,7 +242,7 @@ class HybridRun:
             hold = self.sampled.hold(modes, phase, t_end, runner) if held else None
             events, rhs = segment_events(system, modes, phase, t, x, runner if runner.ok else None)
             self.starts.record(t, x, events)
-            events += self._watches(modes, method)
+            events += self._watches(modes, method) + chart_events(system)  # (hybrid.charts)
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
             # LSODA finishing a slide that comes to rest (HybridRun._collapse_check): at RESTING_TOL × the tolerances
             finishing = method == self.resting and method != scene_method and not _launching(modes)

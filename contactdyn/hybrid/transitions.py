@@ -41,6 +41,7 @@ from ..model.chain import NodeKind
 from ..model.friction import direction_of, in_cone, slip_velocity
 from ..model.impact import impact, project_velocity
 from ..model.system import System
+from .charts import on_chart
 from .events import EventLog
 
 __all__ = ["Transitions", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
@@ -86,7 +87,7 @@ class Transitions:
         consistent with the state (:meth:`consistent`). A new kind of event is a new handler.
         """
         modes = list(modes)
-        self.log.log(t, event.kind, event.contact)
+        self.log.log(t, event.kind, event.contact, check_storm=event.kind != "chart")  # (a chart: no storm)
         after = _After()
         x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
         if settle:
@@ -235,7 +236,7 @@ class Transitions:
     #: event kind -> handler (see :meth:`handle`)
     HANDLERS = {"limit": _on_limit, "release": _on_limit, "joint_slip": _on_joint, "joint_stick": _on_joint,
                 "touch": _on_touch, "separate": _on_separate, "stop": _on_stop, "reverse": _on_stop,
-                "turn": _on_turn, "slip": _on_slip}
+                "turn": _on_turn, "slip": _on_slip, "chart": on_chart}
 
     def _touch(self, t, x, modes, i):
         """Mode after touch: touching, tangential chains anchored where the tip now is."""

@@ -126,6 +126,8 @@ class System:
                                  f"phase[{i}].controller"))
         self.z_slices, self.energy_slot, self.impulse_slots, self.ny = assign_first_order_slots(
             n_first, [ctl.n_states for ctl in self.controllers], scene.solver.record_energy, self.contacts)
+        for body in (b for b in self.articulated.values() if b.pitch is not None):  # a free body's chart: one slot
+            body.chart_index, self.ny = 2 * self.nQ + self.ny, self.ny + 1
         self.n = 2 * self.nQ + self.ny
         self.stabilization = scene.solver.stabilization  #: Baumgarte rate ω of constraint rows [1/s]
         self._M = np.zeros((self.nQ, self.nQ))
@@ -223,6 +225,8 @@ class System:
         for name, b in self.scene.bodies.items():
             for (i, _), c in zip(self.body_coords[name], b.coordinates, strict=True):
                 x[i], x[nQ + i] = c.position0, c.velocity0
+        for body in self.articulated.values():  # a free body near pitch ±90° starts in chart B
+            x = body.start_chart(x, nQ)
         self.drives.initial(x, nQ)
         robot.update(q, v)
         modes = []
@@ -362,7 +366,7 @@ def _articulated(scene: Scene, name: str, spec, first: int) -> ArticulatedBody:
     """The run-time model of body ``name``, whose URDF has revolute joints (gravity the world's), its first
     coordinate at ``first`` in Q."""
     try:
-        robot = Robot.load(spec.urdf, gravity=tuple(scene.robot.gravity), free=spec.free)
+        robot = Robot.load(spec.urdf, gravity=tuple(scene.robot.gravity), free=spec.free, body=True)
     except RobotError as exc:
         raise SceneError(f"body.{name}.urdf", "a loadable URDF", exc, scene.file) from None
     return ArticulatedBody(name, robot, first, spec.free)

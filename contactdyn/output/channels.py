@@ -28,6 +28,7 @@ from ..model.phases import Phase
 from ..model.system import System
 from ..numerics.dop853 import DenseSolution
 from ..numerics.held_steps import PiecewiseDense
+from ..robot.free_chart import chart_a_angles
 from .samples import Samples, evaluated_samples
 
 __all__ = ["Segment", "Held", "output_grid", "sample_segments", "sample_states", "channels"]
@@ -142,6 +143,7 @@ def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
         ch[f"body.{name}.x"] = xs[:, idx]
         ch[f"body.{name}.v"] = xs[:, nQ + idx]
         ch[f"body.{name}.force"] = smp.body_force[:, k]
+    ch.update(free_body_channels(system, xs))
     for i, c in enumerate(system.contacts):
         p = f"contact.{c.name}"
         ch[f"{p}.F_n"] = smp.F_n[c.name]
@@ -173,6 +175,26 @@ def channels(system: System, t: np.ndarray, xs: np.ndarray, smp: Samples,
         ch["energy.work"] = xs[:, 2 * nQ + system.energy_slot]
         ch["energy.dissipated"] = xs[:, 2 * nQ + system.energy_slot + 1]
     return ch
+
+
+def free_body_channels(system: System, xs: np.ndarray) -> dict[str, np.ndarray]:
+    """A free body's angle channels in chart A whatever chart ran (:mod:`contactdyn.robot.free_chart`): yaw, pitch,
+    roll [rad] of its world rotation (as integrated in chart A; from R in chart B, pitch in [−π/2, π/2]) and their
+    rates [rad/s] (unbounded near pitch ±90°); and its angular velocity ω [rad/s] in the world, ``omega_x`` ...
+    (chart-free); its chart, ``chart`` (0: A, 1: B)."""
+    nQ, out = system.nQ, {}
+    for name, body in system.articulated.items():
+        if body.pitch is None:
+            continue
+        sl = slice(body.first + 3, body.first + 6)
+        rows = [chart_a_angles(x[sl], x[nQ:][sl], body.chart_of(x)) for x in xs]
+        a, ad, w = (np.array([r[k] for r in rows]).reshape(len(xs), 3) for k in range(3))
+        for k, (joint, _) in enumerate(system.body_channels[body.first - system.nv + 3:][:3]):
+            out[f"body.{joint}.x"], out[f"body.{joint}.v"] = a[:, k], ad[:, k]
+        for k, axis in enumerate("xyz"):
+            out[f"body.{name}.omega_{axis}"] = w[:, k]
+        out[f"body.{name}.chart"] = np.array([body.chart_of(x) for x in xs], float)
+    return out
 
 
 def _per_sample(modes_of: list[list[ContactMode]], value) -> np.ndarray:

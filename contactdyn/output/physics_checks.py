@@ -213,7 +213,7 @@ def stored_energy(system: System, xs: np.ndarray, ch: dict[str, np.ndarray]) -> 
             - float(system.weights @ x[nv:nQ])  # the bodies' weights' potential −W·Q [J]
         for body in system.articulated.values():  # (its coordinates' M_rest and weights are zeros)
             idx = slice(body.first, body.first + body.nb)
-            others += body.energy(x[idx], x[nQ:][idx])
+            others += body.energy(x[idx], x[nQ:][idx], body.chart_of(x))
         energy[k] = robot.kinetic_energy(q, v) + robot.potential_energy(q) + others  # others: rotors, bodies, masses
     for c in system.contacts:
         for dc in c.chains:

@@ -16,8 +16,12 @@ A *free* body (``free = true``; its URDF's root link is the body, or a ``floatin
 link to it) is an articulated body whose root link has six coordinates of its own, nq = nv: x, y, z [m] of the
 root frame's origin in the world, then its ZYX Euler angles yaw, pitch, roll [rad] (R = Rz(yaw) Ry(pitch)
 Rx(roll)), one-coordinate joints of the rewritten URDF (:func:`contactdyn.robot.urdf_model.add_free_joints`). At
-pitch = ±90° yaw and roll turn about one axis (H_b singular): a run stops there (:meth:`ArticulatedBody.update`).
-Any other joint of several coordinates (planar, spherical) is not a body (issue 32).
+pitch = ±90° yaw and roll turn about one axis (H_b singular): the angles then run in a second chart, R = Rz Ry Rx(b)
+· C (:mod:`contactdyn.robot.free_chart`; its own Pinocchio model, the same frames), switched by the hybrid loop's
+``chart`` event (:mod:`contactdyn.hybrid.charts`); the chart in use is a slot of the state (:class:`ArticulatedBody`).
+A ``planar`` joint <j> becomes three one-coordinate joints <j>_x, <j>_y [m] (in the plane) and <j>_yaw [rad] (about
+its normal, the joint's ``<axis>``; :func:`contactdyn.robot.urdf_model.split_planar_joints`): an articulated body.
+Any other joint of several coordinates (spherical, a floating joint below the root) is one RobotError naming it.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import RobotError, SimulationError
+from .free_chart import SWITCH_COS, switch, turned_model
 from .robot import Robot
 from .urdf_model import FREE_COORDINATES, build_urdf_model
 
@@ -85,16 +90,17 @@ def load_body(source: str, free: bool = False) -> UrdfBody:
 
 
 def _load(source: str, free: bool = False) -> Robot:
-    """The body's Robot; a joint of several coordinates (a free-flyer, planar, spherical) is one RobotError."""
-    urdf = build_urdf_model(source, free=free)
+    """The body's Robot (its planar joints split in three); a joint of several coordinates left (a free-flyer,
+    spherical) is one RobotError."""
+    urdf = build_urdf_model(source, free=free, body=True)
     model = urdf.model
     several = [f"{model.names[j]} ({model.joints[j].shortname()})" for j in range(1, model.njoints)
                if model.joints[j].nq != 1 or model.joints[j].nv != 1]
     if several:
-        raise RobotError(f"{urdf.path}: a body's joints are revolute or prismatic, one coordinate each (a "
-                         f"free-flying body, a floating joint from a world link or none, is declared free = true); "
-                         f"found {', '.join(several)}")
-    return Robot.load(source, free=free)
+        raise RobotError(f"{urdf.path}: a body's joints are revolute, prismatic or planar (a planar one becomes three "
+                         f"joints of one coordinate each; a free-flying body, a floating joint from a world link or "
+                         f"none, is declared free = true); found {', '.join(several)}")
+    return Robot.load(source, free=free, body=True)
 
 
 def _articulated(robot: Robot) -> UrdfBody:
@@ -116,50 +122,76 @@ def _articulated(robot: Robot) -> UrdfBody:
     return UrdfBody(robot, mass, list(robot.joint_names), axes, np.zeros(model.nv), articulated=True)
 
 
-PITCH_LIMIT = 1e-6  #: [-] a free body's run stops when |cos(pitch)| falls below this (ZYX singularity)
+PITCH_LIMIT = 1e-6  #: [-] a free body's |cos(pitch)| of its active chart below this: its chart switch was missed
 
 
 class ArticulatedBody:
     """An articulated body at run time: its Pinocchio model (gravity the world's) and where its coordinates sit
-    in Q (``first``, ``nb`` of them, in the URDF's joint order).
+    in Q (``first``, ``nb`` of them, in the URDF's joint order). A free body has two models, one per chart
+    (:mod:`contactdyn.robot.free_chart`: ``robots``, the same frames and ids), the one in use read from the state
+    (``chart_index``: its slot in x, 0 chart A, 1 chart B; a discrete state, constant between events).
 
     :meth:`update` computes its terms at the state's (q_b, q̇_b) once per state (the last one kept): H_b
     [kg·m², kg], h_b [N·m, N] (Coriolis, centrifugal, gravity), and the frames' terms of :meth:`frame`."""
 
     def __init__(self, name: str, robot: Robot, first: int, free: bool = False) -> None:
-        self.name, self.robot, self.first, self.nb = name, robot, first, robot.nv
+        self.name, self.first, self.nb = name, first, robot.nv
         #: a free body's pitch's index in q_b (its coordinates FREE_COORDINATES first), else None
         self.pitch = FREE_COORDINATES.index("pitch") if free else None
+        self.robots = (robot,)  #: per chart its model (a free body: A, then B turned by free_chart.C)
+        if free:
+            turned = turned_model(robot.model, robot.model.getJointId(FREE_COORDINATES[-1]))
+            self.robots = (robot, Robot(turned, robot.source))
+        self.chart = 0  #: the chart of the last update (0: A, 1: B)
+        self.chart_index = -1  #: a free body's chart's index in the state x (System sets it), else −1
         self._key: bytes | None = None
         self._v = np.zeros(self.nb)  #: q̇_b at the last update [rad/s or m/s]
-        self._cos_pitch = 0.0  #: a free body's cos(pitch) at the last update (0: none yet)
+
+    @property
+    def robot(self) -> Robot:
+        """The model of the chart in use (the last update's)."""
+        return self.robots[self.chart]
 
     @property
     def indices(self) -> range:
         """The body's coordinates' indices in Q."""
         return range(self.first, self.first + self.nb)
 
+    def chart_of(self, x: np.ndarray) -> int:
+        """The chart (0: A, 1: B) the state x is in; 0 for a body that is not free."""
+        return int(x[self.chart_index]) if self.chart_index >= 0 else 0
+
     def update(self, x: np.ndarray, nQ: int) -> None:
-        """The body's terms at the state x (its q_b [rad or m] and q̇_b [rad/s or m/s]); nothing when unchanged. A
-        free body's pitch within PITCH_LIMIT of ±90°, or across it since the last state asked (cos pitch changed
-        sign: a step over it), is a SimulationError: there its ZYX Euler angles are singular."""
+        """The body's terms at the state x (its q_b [rad or m] and q̇_b [rad/s or m/s], a free body's chart); nothing
+        when unchanged. A free body's pitch within PITCH_LIMIT of ±90° in its chart is a SimulationError: its chart
+        switch (at |cos pitch| = free_chart.SWITCH_COS) was missed."""
         q, v = x[self.first:self.first + self.nb], x[nQ + self.first:nQ + self.first + self.nb]
-        key = q.tobytes() + v.tobytes()
+        chart = self.chart_of(x)
+        key = q.tobytes() + v.tobytes() + bytes([chart])
         if key != self._key:
-            if self.pitch is not None:
-                self._check_pitch(float(q[self.pitch]))
+            if self.pitch is not None and abs(float(np.cos(q[self.pitch]))) < PITCH_LIMIT:
+                raise SimulationError(f"body {self.name!r}: its pitch reached ±90° in chart {'AB'[chart]} (now "
+                                      f"{float(q[self.pitch]):.9g} rad), where its Euler angles are singular: its "
+                                      f"chart switch was missed (a step across it); lower solver.max_step")
+            self.chart = chart
             self._v = np.array(v, float)
             self.robot.update(np.array(q, float), self._v)
             self._key = key
 
-    def _check_pitch(self, pitch: float) -> None:
-        """A SimulationError when ``pitch`` [rad] is within PITCH_LIMIT of ±90° or the last one was across it."""
-        cos = float(np.cos(pitch))
-        if abs(cos) < PITCH_LIMIT or cos * self._cos_pitch < 0.0:
-            raise SimulationError(f"body {self.name!r}: its pitch reached ±90° (now {pitch:.9g} rad), where its ZYX "
-                                  f"Euler angles are singular (yaw and roll turn about one axis): turn its URDF's "
-                                  f"frame so that its motion keeps away from it")
-        self._cos_pitch = cos
+    def switched(self, x: np.ndarray, nQ: int) -> np.ndarray:
+        """x with a free body's six coordinates re-expressed in its other chart (the same position, rotation R, ω
+        [rad/s] and origin velocity [m/s]: :func:`contactdyn.robot.free_chart.switch`), and that chart's flag."""
+        sl, chart = slice(self.first, self.first + 6), self.chart_of(x)
+        x = np.array(x, float)
+        x[sl], x[nQ:][sl] = switch(x[sl], x[nQ:][sl], chart)
+        x[self.chart_index] = 1 - chart
+        return x
+
+    def start_chart(self, x: np.ndarray, nQ: int) -> np.ndarray:
+        """x in the chart a free body starts in: A, or B where |cos pitch_A| < free_chart.SWITCH_COS."""
+        if self.pitch is None or abs(float(np.cos(x[self.first + self.pitch]))) >= SWITCH_COS:
+            return x
+        return self.switched(x, nQ)
 
     @property
     def H(self) -> np.ndarray:
@@ -187,6 +219,7 @@ class ArticulatedBody:
         drift = ft.drift + np.cross(ft.angular_drift, r) + np.cross(w, np.cross(w, r))
         return ft.position + r, ft.velocity + np.cross(w, r), J, drift
 
-    def energy(self, q: np.ndarray, v: np.ndarray) -> float:
-        """[J] its kinetic energy ½ q̇_bᵀ H_b q̇_b and its gravity potential at (q_b, q̇_b)."""
-        return self.robot.kinetic_energy(q, v) + self.robot.potential_energy(q)
+    def energy(self, q: np.ndarray, v: np.ndarray, chart: int = 0) -> float:
+        """[J] its kinetic energy ½ q̇_bᵀ H_b q̇_b and its gravity potential at (q_b, q̇_b) in ``chart`` (0: A)."""
+        robot = self.robots[chart]
+        return robot.kinetic_energy(q, v) + robot.potential_energy(q)

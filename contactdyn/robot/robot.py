@@ -177,6 +177,7 @@ class Robot:
         gravity_compensation: float = 0.0,
         inertia: str = "check",
         free: bool = False,
+        body: bool = False,
     ) -> Robot:
         """Load a robot; keep ``active_joints`` (default: the chain to ``tip``, else all) and lock the rest.
 
@@ -185,12 +186,13 @@ class Robot:
         ``gravity_compensation`` is the fraction of the gravity load removed by a static
         compensator (0 ≤ c ≤ 1; case 1 uses 0.7). ``inertia``: "check", "repair" or "trust"
         (see :mod:`contactdyn.robot.inertia`). ``free``: the URDF's root link moves freely, by six coordinates
-        (:func:`contactdyn.robot.urdf_model.add_free_joints`). Visual meshes are checked to exist now but loaded on
+        (:func:`contactdyn.robot.urdf_model.add_free_joints`); ``body``: a scene body's URDF (its planar joints split,
+        :func:`contactdyn.robot.urdf_model.split_planar_joints`). Visual meshes are checked to exist now but loaded on
         first use of :attr:`visual_model`.
         """
         if not 0.0 <= gravity_compensation <= 1.0:
             raise RobotError(f"gravity_compensation must be in [0, 1], found {gravity_compensation}")
-        urdf = build_urdf_model(source, inertia, free)
+        urdf = build_urdf_model(source, inertia, free, body)
         full, path = urdf.model, urdf.path
         locked = dict(locked or {})
         active = _active_names(urdf, tip, active_joints, locked)

@@ -30,8 +30,8 @@ from .inertia import INERTIA_MODES, check_inertias
 from .urdf_check import check_urdf_tree, isolated_build
 from .urdf_source import resolve_robot_path, resolve_uri
 
-__all__ = ["FREE_COORDINATES", "UrdfModel", "add_free_joints", "build_isolated", "build_urdf_model", "lock_joints",
-           "urdf_call", "xml_label"]
+__all__ = ["FREE_COORDINATES", "PLANAR_SUFFIXES", "UrdfModel", "add_free_joints", "build_isolated",
+           "build_urdf_model", "lock_joints", "split_planar_joints", "urdf_call", "xml_label"]
 
 _UNBOUNDED = 1e9  # [rad] placeholder limits of a continuous joint in the rewritten XML; set to ±inf after
 
@@ -154,9 +154,11 @@ _BUILT: OrderedDict[tuple, UrdfModel] = OrderedDict()
 BUILT_MAX = 16
 
 
-def build_urdf_model(source: str | os.PathLike, inertia: str = "check", free: bool = False) -> UrdfModel:
+def build_urdf_model(source: str | os.PathLike, inertia: str = "check", free: bool = False,
+                     body: bool = False) -> UrdfModel:
     """Find, check and build a URDF (see the module docstring); ``inertia`` is one of INERTIA_MODES; ``free``: its
-    root link moves freely in the world, by six coordinates (:func:`add_free_joints`).
+    root link moves freely in the world, by six coordinates (:func:`add_free_joints`); ``body``: a scene body's
+    URDF, its planar joints three one-coordinate joints each (:func:`split_planar_joints`; a robot's stay whole).
 
     A file built before in this process, unchanged since (the same content), is not checked and built again
     (a sweep or a script builds the same robot per run); the caller gets its own copy of the model."""
@@ -164,9 +166,9 @@ def build_urdf_model(source: str | os.PathLike, inertia: str = "check", free: bo
         raise RobotError(f"robot.inertia must be one of {list(INERTIA_MODES)}, found {inertia!r}")
     path, package_dirs = resolve_robot_path(source)
     key = (str(path.resolve()), hashlib.sha256(path.read_bytes()).hexdigest(), tuple(package_dirs), inertia)
-    key += ("free",) if free else ()
+    key += (("free",) if free else ()) + (("body",) if body else ())
     if key not in _BUILT:
-        _BUILT[key] = _build(path, package_dirs, inertia, free)
+        _BUILT[key] = _build(path, package_dirs, inertia, free, body)
         while len(_BUILT) > BUILT_MAX:
             _BUILT.popitem(last=False)
     _BUILT.move_to_end(key)
@@ -176,10 +178,12 @@ def build_urdf_model(source: str | os.PathLike, inertia: str = "check", free: bo
                           visual_notes=list(built.visual_notes))
 
 
-def _build(path: Path, package_dirs: list[str], inertia: str, free: bool = False) -> UrdfModel:
+def _build(path: Path, package_dirs: list[str], inertia: str, free: bool = False, body: bool = False) -> UrdfModel:
     root = check_urdf_tree(path)  # one root, no cycle...: before Pinocchio reads anything (it crashes)
     notes = check_inertias(root, path, inertia)
     visual_notes = _resolve_meshes(root, path, package_dirs)
+    if body:
+        split_planar_joints(root, path)
     if free:
         add_free_joints(root, path)
     unbounded = _unbind_continuous(root)
@@ -228,6 +232,60 @@ def add_free_joints(root: ET.Element, path: Path) -> None:
         ET.SubElement(joint, "axis", xyz=axis)
         if k < 3:
             ET.SubElement(joint, "limit", lower="0", upper="0", effort="0", velocity="0")
+
+
+#: a body's planar joint <j> becomes joints <j>_x, <j>_y (prismatic, in the plane) and <j>_yaw (revolute about its
+#: normal), chained in this order at the planar joint's origin
+PLANAR_SUFFIXES = ("_x", "_y", "_yaw")
+
+
+def split_planar_joints(root: ET.Element, path: Path) -> None:
+    """Rewrite each ``planar`` joint <j> as three one-coordinate joints at its origin (PLANAR_SUFFIXES): <j>_x and
+    <j>_y prismatic along two in-plane unit axes a1, a2 [m], then <j>_yaw continuous about the plane's normal n
+    [rad], (a1, a2, n) right-handed; two massless links <j>__planar_x, <j>__planar_y between them. The normal is the
+    joint's ``<axis>`` (URDF's planar joint), z when none is given; n = z gives a1 = x, a2 = y: Pinocchio's
+    JointModelPlanar (q = (x, y, cos θ, sin θ), which translates in its frame's x-y, then turns about z; its URDF
+    reader ignores ``<axis>``: its plane is always x-y). Joint limits are dropped (unbounded). A new name that is
+    taken already is one RobotError naming it."""
+    names = {j.get("name") for j in root.findall("joint")} | {link.get("name") for link in root.findall("link")}
+    for joint in [j for j in root.findall("joint") if j.get("type") == "planar"]:
+        name = joint.get("name", "")
+        new = [name + s for s in PLANAR_SUFFIXES] + [f"{name}__planar_x", f"{name}__planar_y"]
+        taken = sorted(set(new) & names)
+        if taken:
+            raise RobotError(f"{path}: planar joint {name!r} becomes joints {', '.join(new[:3])} (and links "
+                             f"{', '.join(new[3:])}); the URDF has {', '.join(repr(t) for t in taken)} already")
+        names |= set(new)
+        axis = joint.find("axis")
+        n = np.array([float(v) for v in axis.get("xyz", "0 0 1").split()]) if axis is not None else np.eye(3)[2]
+        if not np.linalg.norm(n) > 0.0:
+            raise RobotError(f"{path}: planar joint {name!r}: its axis (the plane's normal) is zero")
+        R = _turning_z_to(n / np.linalg.norm(n))  # columns a1, a2, n
+        parent, child = joint.find("parent").get("link"), joint.find("child").get("link")
+        origin = joint.find("origin")
+        root.remove(joint)
+        chain = [parent, new[3], new[4], child]
+        for link in new[3:]:
+            root.append(ET.Element("link", name=link))
+        for k, (kind, column) in enumerate((("prismatic", 0), ("prismatic", 1), ("continuous", 2))):
+            part = ET.SubElement(root, "joint", name=new[k], type=kind)
+            if k == 0 and origin is not None:
+                part.append(origin)
+            ET.SubElement(part, "parent", link=chain[k])
+            ET.SubElement(part, "child", link=chain[k + 1])
+            ET.SubElement(part, "axis", xyz=" ".join(repr(float(c)) for c in R[:, column]))
+            if kind == "prismatic":  # lower = upper = 0: unbounded (see _build)
+                ET.SubElement(part, "limit", lower="0", upper="0", effort="0", velocity="0")
+
+
+def _turning_z_to(n: np.ndarray) -> np.ndarray:
+    """The rotation [-] turning z onto the unit vector n by the shortest way (about z × n); identity for n = z."""
+    c = float(n[2])
+    if c < -1.0 + 1e-12:
+        return np.diag([1.0, -1.0, -1.0])  # n = −z: half a turn about x
+    k = np.cross([0.0, 0.0, 1.0], n)
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + K + K @ K / (1.0 + c)
 
 
 def _drop_floating(root: ET.Element, path: Path) -> None:
