@@ -150,7 +150,7 @@ def _doc():
 
 
 @pytest.mark.parametrize("edit, key, words", [
-    (lambda c: c["normal"].update(model="b", k=1e4, m=1e-3), "contact.rest.normal.model", "not supported yet"),
+    (lambda c: c["normal"].update(robot=[{"k": 1e4}, {"m": 1e-3}]), "contact.rest.normal.robot", "no mass on"),
     (lambda c: c.update(tangent={"model": "chain", "directions": [[0.0, 1.0, 0.0]], "environment": [{"k": 1e4}]}),
      "contact.rest.tangent.model", "not supported yet"),
     (lambda c: c.pop("surface_frame"), "contact.rest.surface_frame", "required"),

@@ -1,5 +1,5 @@
-"""Deformation chains where a side turns (issue 32): a massless chain on a surface that turns with a robot frame or
-an articulated body, and any chain, masses included, under an articulated body's touching point.
+"""Deformation chains where a side turns (issue 32): a chain on a surface that turns with a robot frame or an
+articulated body (its masses riding the surface), and any chain under an articulated body's touching point.
 
 On a turning surface a chain runs along the state's normal n and measures its nodes from the surface
 (:func:`contactdyn.model.chain_forces.relative_sides`): its compression is the gap n·(p − p_s), its rate n·v_rel, so
@@ -8,13 +8,17 @@ Kelvin–Voigt normal carries m g cos θ at a sink F/k while it sticks and slips
 around the axis, the energy audit closes; the bar's end strikes a model-(b) chain with the plastic impact of two
 masses (the bar's effective mass at its end, m′) and rests on it with m g d / L; the tool pressed into a
 Kelvin–Voigt face of the bar holds it at rest with m g d sin θ / a. Both paths agree where the compiled call runs.
+A chain's mass on a turning surface rides it (:class:`contactdyn.model.contact.RidingMass`): M and the bias are
+Pinocchio's for a prismatic joint carrying a point mass; an impulse along its line moves it alone.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
-from test_lever import ARM, I_O, KP, M_BAR, PIVOT_Z, D, G, L
+from test_lever import ARM, I_O, KP, M_BAR, M_TOOL, PIVOT_Z, D, G, L
 
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.model.paths import PIPELINE, READABLE
@@ -144,3 +148,89 @@ def test_a_tool_pressed_into_a_kelvin_voigt_face_of_the_bar_holds_it_at_rest():
     assert r["contact.push.touching"].all()
     np.testing.assert_allclose(r["body.lever.x"], theta, rtol=0, atol=1e-9)
     np.testing.assert_allclose(r["contact.push.F_n"], F_n, rtol=1e-7)
+
+
+# ---- a chain's mass riding a turning surface (contact.RidingMass) ---------------------------------------------------
+
+def _tray_b(k: float = K, b: float = B, m: float = 0.01, **contact):
+    """The tilting tray with a model-(b) normal: ground —[k, b]— m′, the part striking m′ (a mass riding the tray)."""
+    doc, file = _scene("tilt_tray")
+    rest = {**doc["contact"]["rest"], "normal": {"direction": [0.0, 0.0, 1.0], "model": "b", "k": k, "b": b, "m": m},
+            **contact}
+    doc["contact"] = {"rest": rest}
+    doc["solver"] = {**doc["solver"], "output_rate": 1000.0}
+    return parse_scene(doc, None, file)
+
+
+RIDER = """<joint name="xi" type="prismatic"><parent link="tray"/><child link="rider"/>
+  <origin xyz="{p[0]!r} {p[1]!r} {p[2]!r}"/><axis xyz="{n[0]!r} {n[1]!r} {n[2]!r}"/>
+  <limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
+<link name="rider"><inertial><mass value="{m!r}"/><inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>
+  </inertial></link>
+</robot>"""
+
+
+def test_a_riding_mass_is_a_prismatic_joint_of_what_carries_the_surface():
+    """M and the bias of the tray and m′ are Pinocchio's for the tray with a prismatic joint at the surface's point
+    along its normal carrying a point mass m′ (no gravity on m′: the chain's masses are weightless), at a state
+    with every term awake: the tray tilted and turning, m′ off the point and moving."""
+    import pinocchio as pin
+
+    p0, n0, m = np.array([0.02, 0.1, 0.03]), np.array([0.0, 0.6, 0.8]), 0.05
+    system = System(_tray_b(m=m, point=p0.tolist(), normal={"direction": n0.tolist(), "model": "b", "k": K, "b": B,
+                                                                "m": m},
+                            tangent={"model": "friction", "directions": [[0.0, 0.8, -0.6]], "mu": MU}))
+    (rm,) = system.riding
+    nQ, i = system.nQ, rm.coord
+    x, _ = system.initial_state()
+    x[0], x[nQ], x[i], x[nQ + i] = 0.3, 0.7, 0.04, -0.4  # [rad, rad/s, m, m/s]
+    system.robot.update(x[:1], x[nQ:nQ + 1])
+    system.update_bodies(x)
+    M = system.mass_matrix()[np.ix_([0, i], [0, i])]
+    f = np.zeros(nQ)
+    system.body_forces(x, f)
+    bias = -(f[[0, i]] + [system.robot.h[0], 0.0])  # the rider's part of the bias
+    xml = (Path(__file__).parents[1] / "urdf" / "tilt_tray.urdf").read_text().replace("</robot>", "")
+    model = pin.buildModelFromXML(xml + RIDER.format(p=p0.tolist(), n=n0.tolist(), m=m))
+    alone = pin.buildModelFromXML(xml + "</robot>")
+    model.gravity.linear[:] = alone.gravity.linear[:] = 0.0
+    q, v = np.array([0.3, 0.04]), np.array([0.7, -0.4])
+    data, data_alone = model.createData(), alone.createData()
+    expected_M = pin.crba(model, data, q)
+    expected_M = np.triu(expected_M) + np.triu(expected_M, 1).T
+    np.testing.assert_allclose(M, expected_M, rtol=0, atol=1e-13)
+    expected_bias = pin.rnea(model, data, q, v, np.zeros(2)) - [pin.rnea(alone, data_alone, q[:1], v[:1],
+                                                                          np.zeros(1))[0], 0.0]
+    np.testing.assert_allclose(bias, expected_bias, rtol=0, atol=1e-13)
+
+
+def test_on_the_tilting_tray_a_model_b_chain_carries_m_g_cos_theta_and_the_audit_closes():
+    r = simulate(_tray_b())
+    assert {row["path"] for row in r.stats["paths"].values()} == {READABLE}
+    assert "riding a turning surface" in next(iter(r.stats["paths"].values()))["why"]
+    theta, t = r["q"][:, 0], r["t"]
+    settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)
+    assert settled.sum() > 2500
+    np.testing.assert_allclose(r["contact.rest.F_n"][settled], M_PART * G * np.cos(theta[settled]), rtol=0,
+                               atol=1e-6)
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual
+
+
+def test_the_tool_strikes_a_mass_riding_the_bar_s_face_and_the_bar_feels_no_impulse():
+    """m′ rides the bar on a prismatic line along the face's normal: an impulse along that line moves m′ alone. The
+    tool (2 kg) strikes it plastically: the loss ½ m_t m′ v² / (m_t + m′), the bar still at rest just after."""
+    m_prime = 0.1
+    doc, file = _scene("lever", duration=0.3)
+    push = {**doc["contact"]["push"], "normal": {"direction": [1.0, 0.0, 0.0], "model": "b", "k": 2e4, "b": 50.0,
+                                                 "m": m_prime}}
+    doc["contact"] = {"push": push}
+    r = simulate(parse_scene(doc, None, file))
+    hit = r.impacts[0]
+    v = -float(hit["v_before"][0]) if "v_before" in hit else None
+    assert hit["contact"] == "push" and v is not None and v > 0.0, hit
+    assert hit["energy_loss"] == pytest.approx(0.5 * M_TOOL * m_prime * v**2 / (M_TOOL + m_prime), rel=1e-9)
+    bar = 2  # (Q: the tool's x and z, the bar's angle, m′'s ξ)
+    assert abs(hit["v_after"][bar]) < 1e-15 and hit["v_after"][-1] == pytest.approx(hit["v_after"][0], rel=1e-12)
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual

@@ -104,12 +104,17 @@ def contact_row(system, c: Contact, u: np.ndarray, kin: Kinematics) -> np.ndarra
 
 def mass_matrix(system) -> np.ndarray:
     """M [kg, kg·m²] of the system's coordinates at the robot's current state: H (and the motors' reflected rotors on
-    its diagonal), then the bodies' masses (the system's own buffer, rewritten)."""
+    its diagonal), then the bodies' masses, an articulated body's H_b, a riding mass's coupling with what carries it
+    (at their last update; the system's own buffer, rewritten)."""
     nv = system.nv
     M = system._M
     M[:nv, :nv] = system.robot.H + np.diag(system._D) if system.drives.any_motor else system.robot.H
     for body in system.articulated.values():  # an articulated body's H_b (at its last update)
         M[body.first:body.first + body.nb, body.first:body.first + body.nb] = body.H
+    for rm in system.riding:  # a point mass on its carrier: [J | n]ᵀ m [J | n] (its own m already on the diagonal)
+        c, i = rm.carrier, rm.coord
+        M[np.ix_(c, c)] += rm.mass * (rm.J.T @ rm.J)
+        M[c, i] = M[i, c] = rm.mass * (rm.J.T @ rm.n)
     return M
 
 
@@ -131,7 +136,7 @@ def kkt_solve(system, f: np.ndarray, rows: Rows, fold: np.ndarray | None,
     """Q̈ and the row forces λ of [[M − fold_q, −Cᵀ − fold], [G, 0]] [Q̈; λ] = [f; −γ]."""
     nQ, nv = system.nQ, system.nv
     M = mass_matrix(system)
-    if rows or fold_q is not None or system.articulated:  # (else M is H beside a diagonal)
+    if rows or fold_q is not None or system.articulated or system.riding:  # (else M is H beside a diagonal)
         nr = len(rows)
         A = np.zeros((nQ + nr, nQ + nr))
         A[:nQ, :nQ] = M if fold_q is None else M - fold_q

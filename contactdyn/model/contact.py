@@ -20,7 +20,8 @@ from ..robot.robot import FrameTerms
 from ..scene.scene_file import ContactSpec
 from .chain import Chain, NodeKind, balanced, build_chain
 
-__all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics", "structure", "turning_surface"]
+__all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics", "RidingMass", "riding_masses", "riding_terms",
+           "structure", "turning_surface"]
 
 ANY_2D = (0.0, 0.0)  #: a 2-D reference direction in a mode's :func:`structure`: never a real one
 
@@ -316,3 +317,51 @@ def turning_surface(p, v, J, a, o, v_o, J_o, a_o, R, w, J_w, alpha, p0, n0, T0):
 def _cross(a, b):
     """a × b of two 3-vectors."""
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@dataclass
+class RidingMass:
+    """A chain's equivalent mass on a turning surface (``contact``'s normal chain, its environment side): a point mass
+    ``mass`` [kg] on the line through the surface's point along its normal, its place ξ [m] along it its coordinate
+    ``coord`` in Q, as a prismatic joint of what carries the surface would be (the robot, or an articulated body:
+    ``carrier``, their coordinates' indices in Q). Its kinetic energy is that of the point, ½ m |v|²: the coupling
+    with the carrier is in M and f (:func:`riding_terms`, at the last state asked)."""
+
+    contact: Contact
+    coord: int
+    mass: float
+    carrier: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    J: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))  #: ∂p/∂(carrier) (3, k) [m/rad or m/m]
+    drift: np.ndarray = field(default_factory=lambda: np.zeros(3))  #: the point's acceleration at Q̈ = 0 [m/s²]
+    n: np.ndarray = field(default_factory=lambda: np.zeros(3))  #: the surface's normal, ∂p/∂ξ [-]
+
+    def velocity(self, carrier_rates: np.ndarray, xi_dot: float) -> np.ndarray:
+        """The point's velocity [m/s] at the carrier's rates [rad/s or m/s] and ξ̇ [m/s] (the last terms')."""
+        return self.J @ carrier_rates + xi_dot * self.n
+
+
+def riding_masses(contacts: list[Contact]) -> list[RidingMass]:
+    """The masses of the normal chains on turning surfaces (a surface carried by a robot frame or an articulated
+    body); the scene allows them on the chain's environment side only."""
+    return [RidingMass(c, node.coord, node.mass) for c in contacts
+            if c.surface_fid >= 0 or c.surface_link is not None
+            for node in c.normal.chain.nodes if node.kind == NodeKind.MASS]
+
+
+def riding_terms(rm: RidingMass, carrier: np.ndarray, frame: FrameTerms, w: np.ndarray, xi: float,
+                 xi_dot: float) -> None:
+    """Set ``rm``'s terms at a state: the carrying frame's terms ``frame`` (Jacobians over the carrier's coordinates,
+    indices ``carrier`` in Q), its angular velocity ω = ``w`` [rad/s], the mass's ξ [m] and ξ̇ [m/s].
+
+    With r = R p0 + ξ n from the frame's origin o (p0 the surface's point, n = R n0 its normal, in the frame):
+    p = o + r, v = v_o + ω × r + ξ̇ n, so J = J_o − [r]× J_ω and, at Q̈ = 0,
+    a = J̇_o q̇ + α × r + ω × (ω × r) + 2 ξ̇ ω × n (α = J̇_ω q̇)."""
+    spec = rm.contact.spec
+    R = frame.rotation
+    n = R @ spec.normal
+    r = R @ spec.point + xi * n
+    skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    rm.carrier, rm.n = carrier, n
+    rm.J = frame.jacobian - skew @ frame.angular_jacobian
+    rm.drift = frame.drift + np.cross(frame.angular_drift, r) + np.cross(w, np.cross(w, r)) + \
+        2.0 * xi_dot * np.cross(w, n)

@@ -62,7 +62,7 @@ from ..robot.robot import Robot
 from ..scene.scene_file import Scene
 from .chain import NodeKind
 from .constraints import mass_matrix as constraints_mass_matrix
-from .contact import Contact, ContactMode, Kinematics, turning_surface
+from .contact import Contact, ContactMode, Kinematics, riding_masses, riding_terms, turning_surface
 from .dynamics import Evaluation, evaluate
 from .friction import initial_slip, slip_acceleration, slip_velocity
 from .impact import Impact, impact, project_velocity
@@ -107,6 +107,7 @@ class System:
         diag: list[float] = [c.mass for _, c in coords]
         self.contacts = [self._contact_of(spec) for spec in scene.contacts.values()]
         self.mass_labels, n_first = assign_chain_slots(self.contacts, nv, diag)
+        self.riding = riding_masses(self.contacts)  #: chain masses riding turning surfaces (contact.RidingMass)
         self.drives = self._build_drives(nv + len(diag))  # elastic transmissions: motor angles after the masses
         diag += self.drives.motor_inertias
         self.nQ = nv + len(diag)
@@ -295,15 +296,22 @@ class System:
         return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, n, T, columns)
 
     def update_bodies(self, x: np.ndarray) -> None:
-        """The articulated bodies' terms at x (H_b, h_b, their frames; each skipped when its state is unchanged)."""
+        """The articulated bodies' terms at x (H_b, h_b, their frames; each skipped when its state is unchanged) and
+        the riding masses' (after ``robot.update`` at x)."""
         for body in self.articulated.values():
             body.update(x, self.nQ)
+        _update_riding(self, x)
 
     def body_forces(self, x: np.ndarray, f: np.ndarray) -> None:
-        """Add to f the articulated bodies' −h_b(q_b, q̇_b) [N·m or N]: Coriolis, centrifugal and gravity."""
+        """Add to f the articulated bodies' −h_b(q_b, q̇_b) [N·m or N]: Coriolis, centrifugal and gravity; and the
+        riding masses' −m Jᵀ a on their carriers and −m n·a on their ξ (a: the point's drift)."""
         for body in self.articulated.values():
             body.update(x, self.nQ)
             f[body.first:body.first + body.nb] -= body.h
+        _update_riding(self, x)
+        for rm in self.riding:
+            f[rm.carrier] -= rm.mass * (rm.J.T @ rm.drift)
+            f[rm.coord] -= rm.mass * float(rm.n @ rm.drift)
 
     def mass_matrix(self) -> np.ndarray:
         """M [kg, kg·m²] at the last ``robot.update`` (and ``update_bodies``), a copy of
@@ -383,6 +391,21 @@ def _link(system: System, spec, body: str, key: str, frame: str | None) -> tuple
     except RobotError as exc:
         raise SceneError(f"contact.{spec.name}.{key}", f"a frame of body {body!r}", exc,
                          system.scene.file) from None
+
+
+def _update_riding(system: System, x: np.ndarray) -> None:
+    """The riding masses' terms at x (:func:`~contactdyn.model.contact.riding_terms`; the robot updated at x)."""
+    nQ = system.nQ
+    for rm in system.riding:
+        c = rm.contact
+        if c.surface_link is not None:
+            body, fid = c.surface_link
+            body.update(x, nQ)
+            frame, carrier = body.frame(fid), np.arange(body.first, body.first + body.nb)
+        else:
+            frame, carrier = system.robot.frame_terms(c.surface_fid), np.arange(system.nv)
+        w = frame.angular_jacobian @ x[nQ + carrier]  # ω [rad/s]
+        riding_terms(rm, carrier, frame, w, float(x[rm.coord]), float(x[nQ + rm.coord]))
 
 
 def _on_body_frame(system: System, c: Contact, x: np.ndarray, p_tip, v_tip, J, drift, ft, columns: tuple

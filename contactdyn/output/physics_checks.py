@@ -214,6 +214,11 @@ def stored_energy(system: System, xs: np.ndarray, ch: dict[str, np.ndarray]) -> 
         for body in system.articulated.values():  # (its coordinates' M_rest and weights are zeros)
             idx = slice(body.first, body.first + body.nb)
             others += body.energy(x[idx], x[nQ:][idx], body.chart_of(x))
+        if system.riding:  # a riding mass's ½ m |v|² beyond its ½ m ξ̇² (in M_rest's sum)
+            robot.update(q, v)
+            system.update_bodies(x)
+            others += sum(0.5 * rm.mass * (float(np.sum(rm.velocity(x[nQ + rm.carrier], x[nQ + rm.coord]) ** 2))
+                                           - x[nQ + rm.coord] ** 2) for rm in system.riding)
         energy[k] = robot.kinetic_energy(q, v) + robot.potential_energy(q) + others  # others: rotors, bodies, masses
     for c in system.contacts:
         for dc in c.chains:

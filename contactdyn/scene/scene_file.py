@@ -597,12 +597,12 @@ def _body_frame(r: Reader, frame: str, bodies: dict[str, BodySpec]) -> str | Non
 
 
 def _turning_limits(r: Reader, where: str, normal_chain: ChainSpec, tangent_model: str) -> None:
-    """A surface that turns carries, for now, a rigid normal or a chain without equivalent masses (its stages
-    deform along the surface's normal at the state; a mass would ride the turning surface), and free or friction
-    (1-D or 2-D): one SceneError each otherwise (``where``: the side, its closing parenthesis left to this)."""
-    if any(isinstance(e, Mass) for e in normal_chain.environment + normal_chain.robot):
-        raise r.error("normal.model", f"a rigid normal or a chain without masses {where}; a mass there would ride "
-                      "the turning surface, not supported yet)", "a chain with a mass")
+    """A surface that turns carries, for now, any normal model whose masses are on its environment side (they ride
+    the surface: contact.RidingMass), and free or friction (1-D or 2-D): one SceneError each otherwise (``where``:
+    the side, its closing parenthesis left to this)."""
+    if any(isinstance(e, Mass) for e in normal_chain.robot):
+        raise r.error("normal.robot", f"no mass on the chain's robot side {where}; its masses ride the surface, "
+                      "on its environment side)", "a mass on the robot's side")
     if tangent_model == "chain":
         raise r.error("tangent.model", f"free or friction {where}; a tangential chain there is not supported yet)",
                       tangent_model)

@@ -166,6 +166,9 @@ def unsupported(system, modes, phase) -> str:
     if system.articulated:
         free = any(body.pitch is not None for body in system.articulated.values())
         return f"{'a free body' if free else 'a body with revolute joints'} (the readable model computes its terms)"
+    if system.riding:
+        return f"a chain's mass riding a turning surface (contact {system.riding[0].contact.name!r}: the readable " \
+               "model computes its inertia)"
     if reason := drives_unsupported(system):
         return reason
     if system.energy_slot >= 0 and system.drives.any_motor:
