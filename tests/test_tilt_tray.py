@@ -151,8 +151,8 @@ def _doc():
 
 @pytest.mark.parametrize("edit, key, words", [
     (lambda c: c["normal"].update(robot=[{"k": 1e4}, {"m": 1e-3}]), "contact.rest.normal.robot", "no mass on"),
-    (lambda c: c.update(tangent={"model": "chain", "directions": [[0.0, 1.0, 0.0]], "environment": [{"k": 1e4}]}),
-     "contact.rest.tangent.model", "not supported yet"),
+    (lambda c: c.update(tangent={"model": "chain", "directions": [[0.0, 1.0, 0.0]], "environment": [{"k": 1e4}],
+                                 "robot": [{"k": 1e4}, {"m": 1e-3}]}), "contact.rest.tangent.robot", "no mass on"),
     (lambda c: c.pop("surface_frame"), "contact.rest.surface_frame", "required"),
     (lambda c: c.update(body="ground"), "contact.rest.surface_frame", 'body = "robot"'),
     (lambda c: c.update(surface_frame="nowhere"), "contact.rest.surface_frame", "a frame of the robot"),

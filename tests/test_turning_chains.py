@@ -9,7 +9,8 @@ around the axis, the energy audit closes; the bar's end strikes a model-(b) chai
 masses (the bar's effective mass at its end, m′) and rests on it with m g d / L; the tool pressed into a
 Kelvin–Voigt face of the bar holds it at rest with m g d sin θ / a. Both paths agree where the compiled call runs.
 A chain's mass on a turning surface rides it (:class:`contactdyn.model.contact.RidingMass`): M and the bias are
-Pinocchio's for a prismatic joint carrying a point mass; an impulse along its line moves it alone.
+Pinocchio's for a prismatic joint carrying a point mass; an impulse along its line moves it alone. A tangential chain
+along the tray's slope holds the part where k x + b ẋ balances m g sin θ.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from contactdyn.model.system import System
 
 MU, M_PART = 0.4, 0.2  #: the tilting tray's μ and part [kg]
 K, B = 1e5, 100.0  #: [N/m], [N·s/m] our Kelvin–Voigt normal
+K_T, B_T = 2e4, 40.0  #: [N/m], [N·s/m] our tangential Kelvin–Voigt stage
 
 
 def _scene(name: str, **edits) -> tuple[dict, str]:
@@ -170,17 +172,24 @@ RIDER = """<joint name="xi" type="prismatic"><parent link="tray"/><child link="r
 </robot>"""
 
 
-def test_a_riding_mass_is_a_prismatic_joint_of_what_carries_the_surface():
+@pytest.mark.parametrize("chain", ["normal", "tangent"])
+def test_a_riding_mass_is_a_prismatic_joint_of_what_carries_the_surface(chain):
     """M and the bias of the tray and m′ are Pinocchio's for the tray with a prismatic joint at the surface's point
-    along its normal carrying a point mass m′ (no gravity on m′: the chain's masses are weightless), at a state
-    with every term awake: the tray tilted and turning, m′ off the point and moving."""
+    along the chain's direction (its normal, or a tangent) carrying a point mass m′ (no gravity on m′: the chain's
+    masses are weightless), at a state with every term awake: the tray tilted and turning, m′ off the point and
+    moving."""
     import pinocchio as pin
 
-    p0, n0, m = np.array([0.02, 0.1, 0.03]), np.array([0.0, 0.6, 0.8]), 0.05
-    system = System(_tray_b(m=m, point=p0.tolist(), normal={"direction": n0.tolist(), "model": "b", "k": K, "b": B,
-                                                                "m": m},
-                            tangent={"model": "friction", "directions": [[0.0, 0.8, -0.6]], "mu": MU}))
+    p0, n0, t0, m = np.array([0.02, -0.1, -0.03]), np.array([0.0, 0.6, 0.8]), np.array([0.0, 0.8, -0.6]), 0.05
+    if chain == "normal":
+        normal = {"direction": n0.tolist(), "model": "b", "k": K, "b": B, "m": m}
+        tangent = {"model": "friction", "directions": [t0.tolist()], "mu": MU}
+    else:
+        normal = {"direction": n0.tolist()}
+        tangent = {"model": "chain", "directions": [t0.tolist()], "environment": [{"k": K_T}, {"m": m}]}
+    system = System(_tray_b(point=p0.tolist(), normal=normal, tangent=tangent))
     (rm,) = system.riding
+    np.testing.assert_array_equal(rm.direction, n0 if chain == "normal" else t0)
     nQ, i = system.nQ, rm.coord
     x, _ = system.initial_state()
     x[0], x[nQ], x[i], x[nQ + i] = 0.3, 0.7, 0.04, -0.4  # [rad, rad/s, m, m/s]
@@ -191,7 +200,7 @@ def test_a_riding_mass_is_a_prismatic_joint_of_what_carries_the_surface():
     system.body_forces(x, f)
     bias = -(f[[0, i]] + [system.robot.h[0], 0.0])  # the rider's part of the bias
     xml = (Path(__file__).parents[1] / "urdf" / "tilt_tray.urdf").read_text().replace("</robot>", "")
-    model = pin.buildModelFromXML(xml + RIDER.format(p=p0.tolist(), n=n0.tolist(), m=m))
+    model = pin.buildModelFromXML(xml + RIDER.format(p=p0.tolist(), n=rm.direction.tolist(), m=m))
     alone = pin.buildModelFromXML(xml + "</robot>")
     model.gravity.linear[:] = alone.gravity.linear[:] = 0.0
     q, v = np.array([0.3, 0.04]), np.array([0.7, -0.4])
@@ -234,3 +243,44 @@ def test_the_tool_strikes_a_mass_riding_the_bar_s_face_and_the_bar_feels_no_impu
     assert abs(hit["v_after"][bar]) < 1e-15 and hit["v_after"][-1] == pytest.approx(hit["v_after"][0], rel=1e-12)
     residual = r.meta["checks"]["energy_residual"]
     assert residual["value"] <= residual["tol"], residual
+
+
+# ---- a tangential chain on a turning surface -------------------------------------------------------------------------
+
+def _tray_t(**environment):
+    """The tilting tray, its part held along the slope by a tangential Kelvin–Voigt chain (rigid normal)."""
+    doc, file = _scene("tilt_tray")
+    stage = {"k": K_T, "b": B_T, **environment}
+    rest = {**doc["contact"]["rest"], "tangent": {"model": "chain", "directions": [[0.0, 1.0, 0.0]],
+                                                   "environment": [stage]}}
+    doc["contact"] = {"rest": rest}
+    doc["solver"] = {**doc["solver"], "output_rate": 1000.0}
+    return parse_scene(doc, None, file)
+
+
+@pytest.fixture(scope="module")
+def held():
+    return simulate(_tray_t())
+
+
+def test_a_tangential_chain_holds_the_part_on_the_tilting_tray_m_g_sin_theta_over_k_down_the_slope(held):
+    r = held
+    theta, t = r["q"][:, 0], r["t"]
+    late = (t > 1.0) & (t < 5.0)  # (the chain starts undeformed: a decay first; at 5 s the tilt stops)
+    assert r["contact.rest.touching"].all() and not [e for e in r.events if e["kind"] in ("separate", "slip")]
+    y, z = r["body.part.slide.x"], r["body.part.lift.x"]
+    along = np.cos(theta) * y + np.sin(theta) * z  # [m] along the tray's y: up the slope
+    F, F_dot = M_PART * G * np.sin(theta), M_PART * G * np.cos(theta) * r["v"][:, 0]  # the slope's pull [N], [N/s]
+    quasi_static = -(F - B_T / K_T * F_dot) / K_T  # k x + b ẋ = −F, x ≈ −F/k + b Ḟ / k² [m]
+    np.testing.assert_allclose(along[late], quasi_static[late], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(r["contact.rest.F_n"][late], M_PART * G * np.cos(theta[late]), rtol=0, atol=1e-6)
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual
+
+
+def test_the_tangential_chain_on_the_tray_runs_compiled_and_the_readable_model_agrees(held):
+    assert {row["path"] for row in held.stats["paths"].values()} == {PIPELINE}
+    readable = simulate(_tray_t(), compiled=False)
+    for key in ("contact.rest.F_n", "body.part.slide.x", "body.part.lift.x", "q"):
+        ref = np.asarray(readable[key], float)
+        np.testing.assert_allclose(held[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)

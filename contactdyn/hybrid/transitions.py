@@ -38,6 +38,7 @@ import numpy as np
 
 from ..errors import SimulationError
 from ..model.chain import NodeKind
+from ..model.chain_forces import chain_sides
 from ..model.friction import direction_of, in_cone, slip_velocity
 from ..model.impact import impact, project_velocity
 from ..model.system import System
@@ -251,8 +252,8 @@ class Transitions:
             # shift the environment side rigidly so the two surface nodes meet undeformed; on a
             # re-touch the anchor already carries the previous touch's offset (and its masses too)
             old = modes[i].offsets[k] if k < len(modes[i].offsets) else 0.0
-            s_tip = float(dc.u @ kin.p_tip)
-            s_env = float(dc.u @ kin.p_env) + old
+            u, p_tip, _, p_env, _ = chain_sides(c, dc, kin)
+            s_tip, s_env = float(u @ p_tip), float(u @ p_env) + old
             robot_side = [n for n in dc.chain.nodes if n.side == "robot" and n.coord >= 0]
             env_side = [n for n in dc.chain.nodes if n.side == "environment" and n.coord >= 0]
             s_r = x[robot_side[-1].coord] if robot_side else s_tip
@@ -267,38 +268,12 @@ class Transitions:
             if dc.junction_state >= 0:
                 x[2 * nQ + dc.junction_state] = s_r
         if c.normal.junction_state >= 0:
-            x[2 * nQ + c.normal.junction_state] = self._junction_at_rest(c.normal, kin, x)
+            x[2 * nQ + c.normal.junction_state] = _junction_at_rest(system, c, kin, x)
         vt = slip_velocity(system, c, kin) if len(c.tangents) else np.zeros(0)
         slip = modes[i].slip
         if len(vt) and float(np.linalg.norm(vt)) > system.slip_band:
             slip = direction_of(vt)
         return modes[i].with_(touching=True, stuck=False, slip=slip, offsets=tuple(offsets), relaxing=False), x
-
-    def _junction_at_rest(self, dc, kin, x) -> float:
-        """[m] where the two surfaces meet: the interface junction's starting position.
-
-        Damped surface ends have states (they relax after a separation): they meet where they
-        are, the touch point. Undamped ends follow their stages at once; there the junction
-        starts where the two interface stages' springs balance (zero compressions on a first
-        touch; on a re-touch both stages share the overlap instead of one taking all of it).
-        """
-        chain, nQ = dc.chain, self.system.nQ
-        ends = [chain.nodes[chain.env_surface].state, chain.nodes[chain.robot_surface].state]
-        if min(ends) >= 0:
-            return 0.5 * float(x[2 * nQ + ends[0]] + x[2 * nQ + ends[1]])
-
-        def position(node: int) -> float:
-            n = chain.nodes[node]
-            if n.coord >= 0:
-                return float(x[n.coord])
-            if n.state >= 0:
-                return float(x[2 * nQ + n.state])
-            return float(dc.u @ (kin.p_tip if n.kind == NodeKind.TIP else kin.p_env))
-
-        (e,) = [s for s in chain.stages if s.upper == chain.env_surface]
-        (r,) = [s for s in chain.stages if s.lower == chain.robot_surface]
-        ke, kr = e.kelvin_voigt[0], r.kelvin_voigt[0]  # a junction joins affine stages only (chain._check)
-        return (ke * position(e.lower) + kr * position(r.upper)) / (ke + kr)
 
     def consistent(self, t, x, modes, phase, rest=frozenset(), released=frozenset()):
         """Fix the modes the state contradicts; return (x, modes).
@@ -368,6 +343,35 @@ class Transitions:
                 return x, modes
         raise SimulationError(f"{self.scene.name}: no consistent contact mode at t = {t:.9g} s "
                               f"(modes tried: {modes})")
+
+
+def _junction_at_rest(system: System, c, kin, x: np.ndarray) -> float:
+    """[m] where the two surfaces of contact c's normal chain meet: the interface junction's starting position.
+
+    Damped surface ends have states (they relax after a separation): they meet where they
+    are, the touch point. Undamped ends follow their stages at once; there the junction
+    starts where the two interface stages' springs balance (zero compressions on a first
+    touch; on a re-touch both stages share the overlap instead of one taking all of it).
+    """
+    dc = c.normal
+    chain, nQ = dc.chain, system.nQ
+    ends = [chain.nodes[chain.env_surface].state, chain.nodes[chain.robot_surface].state]
+    if min(ends) >= 0:
+        return 0.5 * float(x[2 * nQ + ends[0]] + x[2 * nQ + ends[1]])
+    u, p_tip, _, p_env, _ = chain_sides(c, dc, kin)
+
+    def position(node: int) -> float:
+        n = chain.nodes[node]
+        if n.coord >= 0:
+            return float(x[n.coord])
+        if n.state >= 0:
+            return float(x[2 * nQ + n.state])
+        return float(u @ (p_tip if n.kind == NodeKind.TIP else p_env))
+
+    (e,) = [s for s in chain.stages if s.upper == chain.env_surface]
+    (r,) = [s for s in chain.stages if s.lower == chain.robot_surface]
+    ke, kr = e.kelvin_voigt[0], r.kelvin_voigt[0]  # a junction joins affine stages only (chain._check)
+    return (ke * position(e.lower) + kr * position(r.upper)) / (ke + kr)
 
 
 def _touching_too(system: System, log: EventLog, t: float, x: np.ndarray, modes, i: int) -> list[int]:

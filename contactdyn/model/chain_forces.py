@@ -42,8 +42,8 @@ from ..numerics.linalg import dot3
 from .chain import NodeKind
 from .contact import Contact, DirectionalChain, Kinematics
 
-__all__ = ["chain_forces", "ChainArrays", "pack", "chain_call", "chain_motion", "chain_loads", "coordinate_row",
-           "orient", "relative_sides"]
+__all__ = ["chain_forces", "chain_axis", "chain_sides", "ChainArrays", "pack", "chain_call", "chain_motion",
+           "chain_loads", "coordinate_row", "orient", "relative_sides"]
 
 TIP, ANCHOR = int(NodeKind.TIP), int(NodeKind.ANCHOR)
 
@@ -165,12 +165,9 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
     a = dc.arrays.get(key)
     if a is None:
         a = dc.arrays[key] = pack(system, c, dc, touching, key[1])
-    u = kin.normal if dc is c.normal and kin.normal is not None else dc.u
-    p_tip, v_tip, p_env, v_env = kin.p_tip, kin.v_tip, kin.p_env, kin.v_env
-    if u is not dc.u:  # a turning surface: along the state's normal, from the surface (relative_sides)
+    u, p_tip, v_tip, p_env, v_env = chain_sides(c, dc, kin)
+    if c.turning:
         orient(a.plan, a.consts, u, np.array([axis for _, axis in c.touch_coords]).reshape(-1, 3))
-        if dc.chain.stages:  # (a rigid bond's gap is the same either way: its rounding kept as it was)
-            p_tip, v_tip, p_env, v_env = relative_sides(p_tip, v_tip, p_env, v_env)
     if a.python_stages:
         chain_motion(a.plan, a.stages, a.coef, a.consts, x, p_tip, v_tip, p_env, v_env, float(offset), ydot, a.motion,
                      a.stage_state)
@@ -188,6 +185,24 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
         _name_stages(a, ev.stages)
     row = _bond_row(system, c, dc, kin, u) if a.bond else None
     return tip_F, row, gamma, interface_F, (0.0 if touching else gap)
+
+
+def chain_axis(c: Contact, dc: DirectionalChain, kin: Kinematics) -> np.ndarray:
+    """The unit direction [-] the chain runs along at this state: its own, or on a turning surface the state's
+    normal or tangent."""
+    if not c.turning:
+        return dc.u
+    return kin.normal if dc is c.normal else kin.tangents[c.tangent_chains.index(dc)]
+
+
+def chain_sides(c: Contact, dc: DirectionalChain, kin: Kinematics):
+    """(u, p_tip [m], v_tip [m/s], p_env, v_env) a chain reads at this state: its direction (:func:`chain_axis`) and
+    its two sides; on a turning surface measured from the surface (:func:`relative_sides`; a rigid bond's gap is
+    the same either way: its rounding kept as it was)."""
+    u = chain_axis(c, dc, kin)
+    if c.turning and dc.chain.stages:
+        return (u, *relative_sides(kin.p_tip, kin.v_tip, kin.p_env, kin.v_env))
+    return u, kin.p_tip, kin.v_tip, kin.p_env, kin.v_env
 
 
 def _law_error(a: ChainArrays, dc: DirectionalChain) -> None:

@@ -224,6 +224,11 @@ class Contact:
     def chains(self) -> list[DirectionalChain]:
         return [self.normal, *self.tangent_chains]
 
+    @property
+    def turning(self) -> bool:
+        """Its surface turns: carried by a robot frame or an articulated body's (its directions the state's)."""
+        return self.surface_fid >= 0 or self.surface_link is not None
+
     def relaxation_time(self, mode: ContactMode) -> float:
         """[s] The shortest time constant b / k of the damped ends relaxing in this mode (inf: none)."""
         taus = []
@@ -321,19 +326,21 @@ def _cross(a, b):
 
 @dataclass
 class RidingMass:
-    """A chain's equivalent mass on a turning surface (``contact``'s normal chain, its environment side): a point mass
-    ``mass`` [kg] on the line through the surface's point along its normal, its place ξ [m] along it its coordinate
-    ``coord`` in Q, as a prismatic joint of what carries the surface would be (the robot, or an articulated body:
-    ``carrier``, their coordinates' indices in Q). Its kinetic energy is that of the point, ½ m |v|²: the coupling
-    with the carrier is in M and f (:func:`riding_terms`, at the last state asked)."""
+    """A chain's equivalent mass on a turning surface (a chain of ``contact``, on its environment side): a point mass
+    ``mass`` [kg] on the line through the surface's point along the chain's direction (the normal or a tangent,
+    ``direction`` in the carrying frame), its place ξ [m] along it its coordinate ``coord`` in Q, as a prismatic
+    joint of what carries the surface would be (the robot, or an articulated body: ``carrier``, their coordinates'
+    indices in Q). Its kinetic energy is that of the point, ½ m |v|²: the coupling with the carrier is in M and f
+    (:func:`riding_terms`, at the last state asked)."""
 
     contact: Contact
     coord: int
     mass: float
+    direction: np.ndarray  #: the line's unit direction in the carrying frame [-]
     carrier: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     J: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))  #: ∂p/∂(carrier) (3, k) [m/rad or m/m]
     drift: np.ndarray = field(default_factory=lambda: np.zeros(3))  #: the point's acceleration at Q̈ = 0 [m/s²]
-    n: np.ndarray = field(default_factory=lambda: np.zeros(3))  #: the surface's normal, ∂p/∂ξ [-]
+    n: np.ndarray = field(default_factory=lambda: np.zeros(3))  #: the line's direction in the world, ∂p/∂ξ [-]
 
     def velocity(self, carrier_rates: np.ndarray, xi_dot: float) -> np.ndarray:
         """The point's velocity [m/s] at the carrier's rates [rad/s or m/s] and ξ̇ [m/s] (the last terms')."""
@@ -341,11 +348,14 @@ class RidingMass:
 
 
 def riding_masses(contacts: list[Contact]) -> list[RidingMass]:
-    """The masses of the normal chains on turning surfaces (a surface carried by a robot frame or an articulated
-    body); the scene allows them on the chain's environment side only."""
-    return [RidingMass(c, node.coord, node.mass) for c in contacts
-            if c.surface_fid >= 0 or c.surface_link is not None
-            for node in c.normal.chain.nodes if node.kind == NodeKind.MASS]
+    """The masses of the chains on turning surfaces (a surface carried by a robot frame or an articulated body); the
+    scene allows them on a chain's environment side only."""
+    out = []
+    for c in (c for c in contacts if c.turning):
+        directions = [c.spec.normal, *c.spec.tangents[:len(c.tangent_chains)]]  # each chain's, in the frame
+        for dc, d in zip(c.chains, directions, strict=True):
+            out += [RidingMass(c, node.coord, node.mass, d) for node in dc.chain.nodes if node.kind == NodeKind.MASS]
+    return out
 
 
 def riding_terms(rm: RidingMass, carrier: np.ndarray, frame: FrameTerms, w: np.ndarray, xi: float,
@@ -353,12 +363,13 @@ def riding_terms(rm: RidingMass, carrier: np.ndarray, frame: FrameTerms, w: np.n
     """Set ``rm``'s terms at a state: the carrying frame's terms ``frame`` (Jacobians over the carrier's coordinates,
     indices ``carrier`` in Q), its angular velocity ω = ``w`` [rad/s], the mass's ξ [m] and ξ̇ [m/s].
 
-    With r = R p0 + ξ n from the frame's origin o (p0 the surface's point, n = R n0 its normal, in the frame):
+    With r = R p0 + ξ n from the frame's origin o (p0 the surface's point, n = R d0 the line's direction, in the
+    frame):
     p = o + r, v = v_o + ω × r + ξ̇ n, so J = J_o − [r]× J_ω and, at Q̈ = 0,
     a = J̇_o q̇ + α × r + ω × (ω × r) + 2 ξ̇ ω × n (α = J̇_ω q̇)."""
     spec = rm.contact.spec
     R = frame.rotation
-    n = R @ spec.normal
+    n = R @ rm.direction
     r = R @ spec.point + xi * n
     skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
     rm.carrier, rm.n = carrier, n

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..laws.controllers import ControlInput
 from ..laws.sensors import quantise
-from .chain_forces import chain_forces
+from .chain_forces import chain_axis, chain_forces
 from .constraints import Rows, kkt_condition, kkt_solve, record_row_forces, solve_folded
 from .contact import Contact, ContactMode, Kinematics
 from .friction import friction_terms, launch_directions_at, launching
@@ -149,7 +149,7 @@ def _contact_terms(system, x: np.ndarray, modes: list[ContactMode], f: np.ndarra
         for i, dc in enumerate(c.tangent_chains):
             tF, trow, tgamma, tint, _ = chain_forces(system, c, dc, mode.touching, mode.offsets[i], kin, x, f, ydot,
                                                      ev, full, mode.relaxing)
-            tip_force += tF * dc.u
+            tip_force += tF * chain_axis(c, dc, kin)
             ev.interface[f"{c.name}.{dc.label}"] = tint
             if trow is not None:
                 rows.add(trow, tgamma, (c.name, dc.label, i))

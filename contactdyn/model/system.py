@@ -61,6 +61,7 @@ from ..robot.posture import start_posture
 from ..robot.robot import Robot
 from ..scene.scene_file import Scene
 from .chain import NodeKind
+from .chain_forces import chain_sides
 from .constraints import mass_matrix as constraints_mass_matrix
 from .contact import Contact, ContactMode, Kinematics, riding_masses, riding_terms, turning_surface
 from .dynamics import Evaluation, evaluate
@@ -241,8 +242,8 @@ class System:
             touching = c.spec.bonded or gap0 <= 1e-12
             # masses start at rest where their chain puts them undeformed (zero rest lengths)
             for dc in c.chains:
-                s_tip, s_anc = float(dc.u @ kin.p_tip), float(dc.u @ kin.p_env)
-                v_tip, v_anc = float(dc.u @ kin.v_tip), float(dc.u @ kin.v_env)
+                u, p_tip, v_tip, p_env, v_env = chain_sides(c, dc, kin)
+                s_tip, s_anc, v_tip, v_anc = float(u @ p_tip), float(u @ p_env), float(u @ v_tip), float(u @ v_env)
                 for node in dc.chain.nodes:
                     if node.kind == NodeKind.MASS:
                         on_robot = node.side == "robot" or pressed_in

@@ -160,8 +160,8 @@ def contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv):
 def turning_sides(x, ints, row, cr, J, p_tip, v_tip, drift, FJ, Fa, Fp, Fv, FR):
     """On a surface carried by a robot frame (the packed frame ``row[CI_SURFACE]``): (J_rel (3, nv), a_rel [m/s²],
     p_env [m], v_env [m/s], n, T (nt, 3)) of the relative motion at this state (model.contact.turning_surface), the
-    touching side's J, p, v, J̇q̇ from :func:`contact_sides`."""
-    nv, nQ, nt, s = ints[NV], ints[NQ], row[CI_NT], row[CI_SURFACE]
+    touching side's J, p, v, J̇q̇ from :func:`contact_sides`; T the tangents of its friction or its tangential chains."""
+    nv, nQ, nt, s = ints[NV], ints[NQ], max(row[CI_NT], row[CI_N_T]), row[CI_SURFACE]
     w = np.zeros(3)  # the frame's angular velocity [rad/s]
     for r in range(3):
         for c in range(nv):
@@ -257,9 +257,10 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma
         F_n = 0.0
         for k in range(row[CI_NORMAL], row[CI_FIRST_T] + row[CI_N_T]):
             ch = chains[k]
-            if turning:  # (its only chain: the normal, rigid or massless) along n
+            if turning:  # along this state's n (the normal) or T's row (a tangential chain)
                 n_touch = ints[row[CI_COORDS]]
-                orient(ints[ch[CH_PLAN]:ch[CH_STAGES]], reals[ch[CH_CONSTS]:ch[CH_CONSTS] + ch[CH_NCONSTS]], n,
+                u = n if k == row[CI_NORMAL] else T[k - row[CI_FIRST_T]]
+                orient(ints[ch[CH_PLAN]:ch[CH_STAGES]], reals[ch[CH_CONSTS]:ch[CH_CONSTS] + ch[CH_NCONSTS]], u,
                        cr[CR_AXES:CR_AXES + 3 * n_touch].reshape((n_touch, 3)))
             if turning and ch[CH_NS] > 0:  # stages: from the surface (a rigid bond's gap is the same either way)
                 p_rel, v_rel, p_0, v_0 = relative_sides(p_tip, v_tip, p_env, v_env)

@@ -347,8 +347,8 @@ def _contacts(b: _Builder, system, modes, fids: list[int]) -> list[tuple[str, st
         fr = c.friction
         law = friction_address(FRICTION_LAWS[fr.law]) if nt and not fr.constant else 0
         fp_at = b.real_section(None, fr.params if nt else ())
-        T = np.zeros((2, 3))
-        T[:nt] = c.tangents[:nt]
+        T = np.zeros((2, 3))  # the tangents of its friction or of its tangential chains
+        T[:len(c.tangents)] = c.tangents
         r = np.zeros(2)
         r[:len(m.slip)] = m.slip
         coords = [*c.touch_coords, *c.surface_coords]
