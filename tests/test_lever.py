@@ -199,7 +199,7 @@ def test_the_bar_s_end_swings_onto_the_table_and_stops_dead():
     assert residual["value"] <= residual["tol"], residual
 
 
-# ---- what a body with revolute joints does not support yet, or was given wrong: one clear error each ---------------
+# ---- what a body with revolute joints does not support yet, or was given wrong: one clear error each -----------------
 
 def _edit_push(**changes):
     doc, _ = _doc()
@@ -220,11 +220,6 @@ FREE_FLYER = """<?xml version="1.0"?>
 
 
 @pytest.mark.parametrize("edits, key, words", [
-    (lambda: _edit_push(normal={"direction": [1.0, 0.0, 0.0], "robot": [{"k": 1e4}, {"m": 1e-3}]}),
-     "contact.push.normal.robot", "no mass on"),
-    (lambda: _edit_push(tangent={"model": "chain", "directions": [[0.0, 0.0, 1.0]],
-                                 "robot": [{"k": 1e4}, {"m": 1e-3}]}),
-     "contact.push.tangent.robot", "no mass on"),
     (lambda: _edit_push(surface_frame=None), "contact.push.surface_frame", "required"),
     (lambda: _edit_push(surface_frame="nowhere"), "contact.push.surface_frame", "a frame of body 'lever'"),
     (lambda: _edit_push(body_frame="bar"), "contact.push.body_frame", "a frame of a body with revolute joints"),

@@ -142,7 +142,7 @@ def test_the_rows_and_their_gamma_are_the_derivatives_of_the_gap_and_the_relativ
         np.testing.assert_allclose((r_plus - r_minus) / (2 * h), accelerations, rtol=0, atol=1e-7)
 
 
-# ---- what a surface carried by the robot does not support yet: one clear error ---------------------------------------
+# ---- a surface carried by the robot, given wrong: one clear error ----------------------------------------------------
 
 def _doc():
     scene = load_scene("tilt_tray")
@@ -150,9 +150,6 @@ def _doc():
 
 
 @pytest.mark.parametrize("edit, key, words", [
-    (lambda c: c["normal"].update(robot=[{"k": 1e4}, {"m": 1e-3}]), "contact.rest.normal.robot", "no mass on"),
-    (lambda c: c.update(tangent={"model": "chain", "directions": [[0.0, 1.0, 0.0]], "environment": [{"k": 1e4}],
-                                 "robot": [{"k": 1e4}, {"m": 1e-3}]}), "contact.rest.tangent.robot", "no mass on"),
     (lambda c: c.pop("surface_frame"), "contact.rest.surface_frame", "required"),
     (lambda c: c.update(body="ground"), "contact.rest.surface_frame", 'body = "robot"'),
     (lambda c: c.update(surface_frame="nowhere"), "contact.rest.surface_frame", "a frame of the robot"),

@@ -284,3 +284,18 @@ def test_the_tangential_chain_on_the_tray_runs_compiled_and_the_readable_model_a
     for key in ("contact.rest.F_n", "body.part.slide.x", "body.part.lift.x", "q"):
         ref = np.asarray(readable[key], float)
         np.testing.assert_allclose(held[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
+
+
+def test_a_chain_with_a_mass_on_its_robot_side_rides_the_tray_too_and_the_audit_closes():
+    """tip —[k, b]— m′ —[k, b]— surface: a chain is one line, carried by its surface (as a fixed surface's is by the
+    world): m′ rides the tray like an environment-side mass. The part held by the tray's friction: F_n m g cos θ
+    through the two stages in series, the audit closing."""
+    stage = {"k": 2 * K, "b": 2 * B}  # (two in series: K, B)
+    r = simulate(_tray_b(normal={"direction": [0.0, 0.0, 1.0], "robot": [stage, {"m": 0.01}, stage]}))
+    theta, t = r["q"][:, 0], r["t"]
+    settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)
+    assert settled.sum() > 2500
+    np.testing.assert_allclose(r["contact.rest.F_n"][settled], M_PART * G * np.cos(theta[settled]), rtol=0,
+                               atol=1e-6)
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual

@@ -326,12 +326,13 @@ def _cross(a, b):
 
 @dataclass
 class RidingMass:
-    """A chain's equivalent mass on a turning surface (a chain of ``contact``, on its environment side): a point mass
-    ``mass`` [kg] on the line through the surface's point along the chain's direction (the normal or a tangent,
-    ``direction`` in the carrying frame), its place ξ [m] along it its coordinate ``coord`` in Q, as a prismatic
-    joint of what carries the surface would be (the robot, or an articulated body: ``carrier``, their coordinates'
-    indices in Q). Its kinetic energy is that of the point, ½ m |v|²: the coupling with the carrier is in M and f
-    (:func:`riding_terms`, at the last state asked)."""
+    """A chain's equivalent mass on a turning surface (a chain of ``contact``): a point mass ``mass`` [kg] on the line
+    through the surface's point along the chain's direction (the normal or a tangent, ``direction`` in the carrying
+    frame), its place ξ [m] along it its coordinate ``coord`` in Q, as a prismatic joint of what carries the surface
+    would be (the robot, or an articulated body: ``carrier``, their coordinates' indices in Q). A chain is one line,
+    carried by its surface as a fixed surface's is by the world: its masses on either side ride it. Its kinetic
+    energy is that of the point, ½ m |v|²: the coupling with the carrier is in M and f (:func:`riding_terms`, at the
+    last state asked)."""
 
     contact: Contact
     coord: int
@@ -348,8 +349,7 @@ class RidingMass:
 
 
 def riding_masses(contacts: list[Contact]) -> list[RidingMass]:
-    """The masses of the chains on turning surfaces (a surface carried by a robot frame or an articulated body); the
-    scene allows them on a chain's environment side only."""
+    """The masses of the chains on turning surfaces (a surface carried by a robot frame or an articulated body)."""
     out = []
     for c in (c for c in contacts if c.turning):
         directions = [c.spec.normal, *c.spec.tangents[:len(c.tangent_chains)]]  # each chain's, in the frame

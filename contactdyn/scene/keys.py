@@ -111,7 +111,7 @@ MEANINGS: dict[str, str] = {
     "contact.<contact>.surface_frame": "the robot frame carrying the surface when body = \"robot\", or the "
                                        "articulated body's frame when body names one: point, normal.direction and "
                                        "tangent.directions are then in that frame's own coordinates (any model; "
-                                       "a chain's masses on its environment side, riding the surface)",
+                                       "a chain's masses ride the surface)",
     "contact.<contact>.point": "a point of the undeformed surface (world; on a body at coordinate 0; on the robot "
                                "or an articulated body in surface_frame's coordinates)",
     "contact.<contact>.bonded": "the tip never separates (stays on the surface)",

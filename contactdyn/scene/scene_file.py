@@ -539,7 +539,7 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
             raise r.error("frame", f"a body other than the surface's ({body!r})", frame)
         frame_point = r.vector("frame_point", size=3, unit="m")
     body_frame = _body_frame(r, frame, bodies)
-    surface_frame = _surface_frame(r, body, bodies, normal_chain, tangent_chain)
+    surface_frame = _surface_frame(r, body, bodies)
     spec = ContactSpec(
         name=name,
         frame=frame,
@@ -560,11 +560,10 @@ def _read_contact(name: str, r: Reader, bodies: dict[str, BodySpec], tip: str = 
     return spec
 
 
-def _surface_frame(r: Reader, body: str, bodies: dict[str, BodySpec], normal_chain: ChainSpec,
-                   tangent_chain: ChainSpec | None) -> str | None:
+def _surface_frame(r: Reader, body: str, bodies: dict[str, BodySpec]) -> str | None:
     """The frame carrying the surface: a robot frame (``body = "robot"``) or a frame of an articulated body (required
-    there); None for the ground or a translating body. On it, chains' masses on their environment side only
-    (:func:`_turning_limits`)."""
+    there); None for the ground or a translating body. A chain there runs along its turning directions, its masses
+    riding it (contact.RidingMass)."""
     articulated = body in bodies and bodies[body].articulated
     if body != "robot" and not articulated:
         if r.has("surface_frame"):
@@ -575,9 +574,6 @@ def _surface_frame(r: Reader, body: str, bodies: dict[str, BodySpec], normal_cha
     if not r.has("surface_frame"):
         raise r.error("surface_frame", f"the frame of {owner} carrying the surface (required with body = {body!r})",
                       None)
-    where = 'on a surface carried by the robot (body = "robot"' if body == "robot" else \
-        f"on a surface carried by a body with revolute joints (body = {body!r}"
-    _turning_limits(r, where, normal_chain, tangent_chain)
     return r.str("surface_frame")
 
 
@@ -594,16 +590,6 @@ def _body_frame(r: Reader, frame: str, bodies: dict[str, BodySpec]) -> str | Non
         raise r.error("body_frame", f"the frame of body {frame!r} in whose coordinates frame_point is given "
                       "(required: the body turns)", None)
     return r.str("body_frame")
-
-
-def _turning_limits(r: Reader, where: str, normal_chain: ChainSpec, tangent_chain: ChainSpec | None) -> None:
-    """A surface that turns carries any chain whose masses are on its environment side (they ride the surface:
-    contact.RidingMass): a mass on a chain's robot side is one SceneError (``where``: the side, its closing
-    parenthesis left to this)."""
-    for key, chain in (("normal", normal_chain), ("tangent", tangent_chain)):
-        if chain is not None and any(isinstance(e, Mass) for e in chain.robot):
-            raise r.error(f"{key}.robot", f"no mass on the chain's robot side {where}; its masses ride the "
-                          "surface, on its environment side)", "a mass on the robot's side")
 
 
 def _read_solver(r: Reader) -> SolverSpec:
