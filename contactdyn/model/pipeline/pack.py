@@ -27,7 +27,11 @@ a drive kind numba cannot compile, the energy audit with motors, a continuous co
 constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
 law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
-joint it takes is a one-DOF revolute or prismatic). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
+joint it takes is a one-DOF revolute or prismatic), a free body (two charts, the chart's slot in the state), a chain's
+mass riding a turning surface, a surface turning with a frame (the robot's or an articulated body's) under a
+force-reading law or under a 2-D slide launching from rest. An articulated body's joints are appended to the
+robot's in the rigid-body table (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or
+a point of it a packed frame as a robot frame is. The controllers compiled in as kinds (``COMPILED_IN``: task PD,
 operational space, the dynamic laws, joint PD, task force), a sampled law's held command (torques or voltages),
 constant voltages and
 user laws of the controller ABI run; a force-reading law and a reference carried by a body are folded through the
@@ -86,7 +90,8 @@ RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_HELD, CTL_CONSTANT, CTL_JOINT_PD, CTL_TASK_FORCE = 0, 1, 2, 3, 4, 5, 6
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward (joint PD's and task force's: their first constant)
 FEEDFORWARDS = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}  #: a config's ``feedforward`` -> its code
-#: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
+#: a frame's ints: its joint (its row in the rigid-body table), the count and start (in ``ints``) of the velocity
+#: columns (indices in Q) that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
 #: a contact's ints (frame: its packed frame, the zero frame after them for a body's point; coords: where its
