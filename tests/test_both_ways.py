@@ -26,8 +26,7 @@ from contactdyn.simulate import run_system
 
 ROOT = Path(__file__).resolve().parent.parent
 #: scenes whose every mode the compiled call declines (pack.unsupported), with its reason: nothing to compare
-READABLE_ONLY = {"sims/lever.toml": "a body with revolute joints (the readable model computes its terms)",
-                 "sims/drop_box.toml": "a free body (the readable model computes its terms)"}
+READABLE_ONLY = {"sims/drop_box.toml": "a free body (the readable model computes its terms)"}
 SCENES = sorted(str(p.relative_to(ROOT)) for folder in ("sims", "benchmarks/hard")
                 for p in (ROOT / folder).glob("*.toml") if str(p.relative_to(ROOT)) not in READABLE_ONLY)
 DURATION = 0.2  #: [s] of each scene

@@ -4,7 +4,9 @@ coordinate of the system, its H_b and h_b from its own Pinocchio model. A point-
 at the arm a = 0.4 m, lifts it by sliding along it (Coulomb, μ = 0.3) and holds it. Closed forms: the free swing's
 θ̈ = −m g d sin θ / I_O and its energy; the strike's plastic impulse from the angular momentum about the pivot;
 a static hold's normal force m g d sin θ / a; the energy audit closing; the rows by finite differences. The
-compiled call declines the scene (its reason in the paths table). Unsupported inputs are one SceneError each.
+scene runs on the compiled call (the bar's joint appended to the tool's in the rigid-body table,
+``rigid_body.forest_table``), its right-hand side the readable model's to rounding; a free body is still declined
+(its reason in the paths table). Unsupported inputs are one SceneError each.
 """
 
 from __future__ import annotations
@@ -14,13 +16,15 @@ import pytest
 
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.errors import SceneError
-from contactdyn.model.paths import READABLE
+from contactdyn.model.paths import PIPELINE, READABLE
+from contactdyn.model.pipeline.pack import unsupported
+from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.model.system import System
 
 G, M_BAR, L, M_TOOL, ARM, PIVOT_Z = 9.81, 1.0, 0.5, 2.0, 0.4, 0.6  #: the scene's numbers (SI)
 D, I_O = L / 2, M_BAR * L**2 / 3  #: [m] the pivot to the centre of mass, [kg·m²] the inertia about the pivot
 KP = 1e4  #: [N/m] the tool's stiffness (the scene's controller)
-WHY = "a body with revolute joints (the readable model computes its terms)"
+FREE = "a free body (the readable model computes its terms)"  #: the compiled call's reason for a free body
 
 
 @pytest.fixture(scope="module")
@@ -90,8 +94,9 @@ def test_the_strike_is_plastic_with_the_impulse_the_angular_momentum_gives(run):
                                                - 0.5 * I_O * omega**2, rel=1e-9)
 
 
-def test_the_scene_runs_on_the_readable_model_and_its_energy_closes(run):
-    assert {(row["path"], row["why"]) for row in run.stats["paths"].values()} == {(READABLE, WHY)}
+def test_the_scene_runs_on_the_compiled_call_and_its_energy_closes(run):
+    assert {row["path"] for row in run.stats["paths"].values()} == {PIPELINE}
+    assert run.stats["fallback_modes"] == {}
     residual = run.meta["checks"]["energy_residual"]
     assert residual["value"] <= residual["tol"], residual
     kinds = [(e["kind"], e["name"]) for e in run.events]
@@ -285,3 +290,32 @@ def test_with_2d_friction_along_the_bar_the_lever_moves_as_with_1d():
     np.testing.assert_allclose(two["body.lever.x"], one["body.lever.x"], rtol=0, atol=1e-9)
     np.testing.assert_allclose(two["contact.push.F_n"], one["contact.push.F_n"], rtol=1e-8, atol=1e-9)
     assert np.all(two["contact.push.v_slip"][:, 1] == 0.0) and np.all(two["contact.push.F_f"][:, 1] == 0.0)
+
+
+@pytest.mark.parametrize("edits, stuck", [({}, False), ({}, True), (_hold(0.6, 1.5), True), (_bar_point(), False),
+                                          (_bar_point(on_tool=True), False)])
+def test_the_compiled_call_gives_the_readable_model_s_rates(edits, stuck):
+    """At states off the start (the tool and the bar moved and moving), touching or not, sliding or stuck: the
+    compiled call's ẋ is the readable model's to rounding (the bar's H_b, h_b, its frame and its point from the
+    rigid-body table)."""
+    system = _system(**edits)
+    x0, modes, phase, _ = _start(system, stuck)
+    nQ = system.nQ
+    rng = np.random.default_rng(3)
+    for touching in (False, True):
+        ms = [m.with_(touching=touching) for m in modes]
+        assert unsupported(system, ms, phase) == ""
+        pipeline = Pipeline(system, ms, phase)
+        for _ in range(3):
+            x = x0.copy()
+            x[:nQ] += 0.02 * rng.standard_normal(nQ)
+            x[nQ:2 * nQ] += 0.5 * rng.standard_normal(nQ)
+            want = system.evaluate(0.1, x, ms, phase).xdot
+            np.testing.assert_allclose(pipeline.rhs(0.1, x), want, rtol=0, atol=1e-12 * (1 + np.abs(want).max()))
+            assert pipeline.readable_calls == 0
+
+
+def test_a_free_body_is_still_declined_with_its_reason():
+    """A free body (two charts, the chart's slot in the state): every mode on the readable model, the reason named."""
+    r = simulate("drop_box", {"duration": 0.05})
+    assert {(row["path"], row["why"]) for row in r.stats["paths"].values()} == {(READABLE, FREE)}

@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 
 from contactdyn.robot.catalog import example_robots
-from contactdyn.robot.rigid_body import rigid_table, rigid_terms
+from contactdyn.robot.rigid_body import forest_table, rigid_table, rigid_terms
 from contactdyn.robot.robot import Robot
 
 URDF = Path(__file__).resolve().parent.parent / "urdf"
@@ -102,3 +102,30 @@ def test_a_robot_without_a_table_runs_on_the_readable_model_on_pinocchios_terms(
     F = ours["contact.pencil.F_n"]
     assert np.abs(theirs["contact.pencil.F_n"] - F).max() <= 10.0 * rtol * np.abs(F).max()
     assert np.abs(theirs["q"] - ours["q"]).max() <= 10.0 * (atol + rtol * np.abs(ours["q"]).max())
+
+
+def test_a_forest_of_two_trees_gives_each_tree_s_terms_side_by_side():
+    """The branched tree as the robot and a manipulator as an articulated body whose coordinates start at 7 in Q
+    (two coordinates between, a translating body's: their columns zero): H block-diagonal with each model's CRBA, h
+    each one's RNEA at q̈ = 0, the Jacobians' columns each one's (Pinocchio's, to 1e-12)."""
+    robot, body = _tree(), pin.buildSampleModelManipulator()
+    table, starts = forest_table(rigid_table(robot), [(rigid_table(body), robot.nv + 2)])
+    assert starts == [robot.njoints]
+    n = robot.nv + 2 + body.nv
+    rng = np.random.default_rng(5)
+    q, v = rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)
+    M, nle, g, J = np.zeros((n, n)), np.zeros(n), np.zeros(n), np.zeros((6, n))
+    rigid_terms(q, v, table, 1, M, nle, g, np.zeros((3, 3)), np.zeros(3), np.zeros(6), np.zeros(6), J)
+    cols = (np.arange(robot.nv), np.arange(robot.nv + 2, n))
+    want = np.zeros((n, n))
+    for model, c in zip((robot, body), cols, strict=True):
+        data = model.createData()
+        pin.computeAllTerms(model, data, q[c], v[c])
+        want[np.ix_(c, c)] = pin.crba(model, data, q[c])  # (the armature on its diagonal)
+        np.testing.assert_allclose(nle[c], pin.nonLinearEffects(model, data, q[c], v[c]), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(g[c], pin.computeGeneralizedGravity(model, data, q[c]), rtol=0, atol=1e-12)
+        pin.computeJointJacobians(model, data, q[c])
+        np.testing.assert_allclose(J[:, c], data.J, rtol=0, atol=1e-12)
+    want = np.triu(want) + np.triu(want, 1).T
+    np.testing.assert_allclose(M, want, rtol=0, atol=1e-12)
+    assert not nle[robot.nv:robot.nv + 2].any() and not J[:, robot.nv:robot.nv + 2].any()

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..numerics.compile_cache import njit
 
-__all__ = ["rigid_table", "rigid_terms", "frame_motion_into"]
+__all__ = ["rigid_table", "forest_table", "rigid_terms", "frame_motion_into"]
 
 REVOLUTE, PRISMATIC = 0.0, 1.0
 #: one row per joint (row 0, the universe: −gravity [m/s²] in AXIS): parent, kind, velocity index, the axis in
@@ -66,6 +66,25 @@ def rigid_table(model) -> np.ndarray | None:
         table[j, INERTIA:INERTIA + 9] = inertia.inertia.ravel()
         table[j, ARMATURE] = model.armature[joint.idx_v]
     return table
+
+
+def forest_table(table: np.ndarray, bodies: list[tuple[np.ndarray, int]]) -> tuple[np.ndarray, list[int]]:
+    """One table for the robot and other trees fixed in the world (articulated bodies): each body's joints (its
+    table's rows after the universe, ``bodies``: (its table, its first coordinate's index in Q)) appended after the
+    robot's, their parents re-indexed (a root's parent the universe, row 0) and IDX_V their indices in Q; (the
+    table, per body the row of its joint 1). The trees share the universe's row (the robot's gravity): H, h and J
+    of the forest are the robot's and each body's side by side (no joint supports another tree's)."""
+    rows, starts = [table], []
+    at = table.shape[0]
+    for own, first in bodies:
+        extra = own[1:].copy()
+        parents = extra[:, PARENT]
+        extra[:, PARENT] = np.where(parents > 0, parents + at - 1, 0.0)
+        extra[:, IDX_V] += first
+        rows.append(extra)
+        starts.append(at)
+        at += extra.shape[0]
+    return np.vstack(rows), starts
 
 
 @njit(cache=True)

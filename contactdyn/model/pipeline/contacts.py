@@ -8,8 +8,10 @@ normal, then the tangential ones) by :func:`contactdyn.model.chain_forces.chain_
 column −μ d·G_T (μ by the friction law's address, or the constant μ_k) or its known force −μ max(F, 0) d − c v_t
 on the coordinates; then the chains' tip force Jᵀ F [N].
 After the solve (:func:`finish`): normal forces, friction forces, the impulse states' rates, limit torques.
-A contact's two sides (:func:`contact_sides`): the touching one a robot frame or a body's point, the surface the
-ground or a body, a body side moved by its coordinates.
+A contact's two sides (:func:`contact_sides`): the touching one a packed frame (a robot frame, an articulated body's
+point) or a translating body's point, the surface the ground, a body, or turning with a packed frame (a robot
+frame, an articulated body's); a translating body's side moved by its coordinates, a packed frame's by the
+rigid-body table's columns (the robot's joints, then the articulated bodies' coordinates: J (3, NF)).
 """
 
 from __future__ import annotations
@@ -82,7 +84,6 @@ from .pack import (
     N_CONTACTS,
     N_LIMITS,
     NQ,
-    NV,
     R_LIMITS,
     RH_OMEGA,
     RH_SLIP_BAND,
@@ -158,13 +159,14 @@ def contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv):
 
 @njit(cache=True)
 def turning_sides(x, ints, row, cr, J, p_tip, v_tip, drift, FJ, Fa, Fp, Fv, FR):
-    """On a surface carried by a robot frame (the packed frame ``row[CI_SURFACE]``): (J_rel (3, nv), a_rel [m/s²],
-    p_env [m], v_env [m/s], n, T (nt, 3)) of the relative motion at this state (model.contact.turning_surface), the
-    touching side's J, p, v, J̇q̇ from :func:`contact_sides`; T the tangents of its friction or its tangential chains."""
-    nv, nQ, nt, s = ints[NV], ints[NQ], max(row[CI_NT], row[CI_N_T]), row[CI_SURFACE]
+    """On a surface carried by a robot frame or an articulated body's (the packed frame ``row[CI_SURFACE]``):
+    (J_rel (3, NF), a_rel [m/s²], p_env [m], v_env [m/s], n, T (nt, 3)) of the relative motion at this state
+    (model.contact.turning_surface), the touching side's J, p, v, J̇q̇ from :func:`contact_sides`; T the tangents
+    of its friction or its tangential chains."""
+    nQ, nt, s = ints[NQ], max(row[CI_NT], row[CI_N_T]), row[CI_SURFACE]
     w = np.zeros(3)  # the frame's angular velocity [rad/s]
     for r in range(3):
-        for c in range(nv):
+        for c in range(FJ.shape[2]):
             w[r] += FJ[s, 3 + r, c] * x[nQ + c]
     return turning_surface(p_tip, v_tip, J, drift, Fp[s], Fv[s], FJ[s, :3], Fa[s, :3], FR[s], w, FJ[s, 3:], Fa[s, 3:],
                            cr[CR_POINT:CR_POINT + 3], cr[CR_N:CR_N + 3], cr[CR_T:CR_T + 3 * nt].reshape((nt, 3)))
@@ -250,7 +252,7 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma
         J, p_tip, v_tip, drift, p_env, v_env = contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv)
         n, T = cr[CR_N:CR_N + 3], cr[CR_T:CR_T + 3 * row[CI_NT]].reshape((row[CI_NT], 3))
         turning = row[CI_SURFACE] >= 0
-        if turning:  # the surface turns with a robot frame: the relative motion, along this state's n and T
+        if turning:  # the surface turns with a packed frame: the relative motion, along this state's n and T
             J, drift, p_env, v_env, n, T = turning_sides(x, ints, row, cr, J, p_tip, v_tip, drift, FJ, Fa, Fp, Fv,
                                                          FR)
         tip_force = np.zeros(3)
@@ -293,7 +295,7 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma
 def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G, C, gamma, events, pending):
     """A friction contact's slip velocity along its tangents T (nt, 3), and its stick rows, or its slide (the tilt
     of its normal column or its known force on the coordinates), as model.friction.friction_terms."""
-    nv, nQ, nt = ints[NV], ints[NQ], row[CI_NT]
+    nQ, nt = ints[NQ], row[CI_NT]
     ev = events[EV_W * ci:EV_W * (ci + 1)]
     vt = np.zeros(nt)
     for i in range(nt):
@@ -304,7 +306,7 @@ def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G,
         return
     R_T = np.zeros((nt, nQ))  # generalized rows of the tangential slip
     for i in range(nt):
-        for c in range(nv):
+        for c in range(J.shape[1]):  # (the robot's joints, then the articulated bodies' coordinates)
             R_T[i, c] = T[i, 0] * J[0, c] + T[i, 1] * J[1, c] + T[i, 2] * J[2, c]
     add_coordinates(ints, row, cr, T, R_T)
     if row[CI_FRICTION] == FRICTION_STICK:

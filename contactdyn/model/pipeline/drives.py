@@ -69,12 +69,11 @@ def drive_table(system, phase) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
-def inertias(H, any_motor, reflected):
-    """(M's robot block, the controller's H) [kg·m²]: H with the rotors reflected on its diagonal (rigid gears), the
-    true system's and the rigid model's; H itself for both without motors."""
+def inertias(H, any_motor, reflected, nv):
+    """(M's rigid-body block, the controller's H) [kg·m²]: H with the rotors reflected on the robot's nv joints'
+    diagonal (rigid gears), the true system's and the rigid model's; H itself for both without motors."""
     if not any_motor:
         return H, H
-    nv = H.shape[0]
     M, Hc = H.copy(), H.copy()
     for i in range(nv):
         M[i, i] += reflected[i]

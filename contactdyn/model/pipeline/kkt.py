@@ -19,7 +19,7 @@ import numpy as np
 
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import lu_solve, put
-from .pack import NQ, NV, R_MREST
+from .pack import NF, NQ, NV, R_MREST
 
 __all__ = ["kkt_solve", "residual_ok", "least_squares"]
 
@@ -41,14 +41,15 @@ def residual_ok(A, z, b):
 
 @njit(cache=True)
 def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
-    """(Q̈ [m/s², rad/s²], λ [N], regular): the KKT system's solve, or with no rows (and no carried column) H q̈ = f
-    and the other coordinates' f / m (H: M's robot block). ``fold`` (nQ, rows, or no columns): a force-reading
+    """(Q̈ [m/s², rad/s²], λ [N], regular): the KKT system's solve, or with no rows (no carried column, no
+    articulated body) H q̈ = f and the other coordinates' f / m (H: M's rigid-body block, NF × NF: the robot's
+    joints, then the articulated bodies' coordinates). ``fold`` (nQ, rows, or no columns): a force-reading
     controller's B through its drives (τ = τ₀ + B λ, :mod:`.force_fold`), subtracted from the force columns;
     ``fold_q`` (nQ): its part per unit acceleration of coordinate ``iq`` (a reference carried by that body; -1 none),
     subtracted from M's column iq (``constraints.kkt_solve``'s M − fold_q)."""
     nv, nQ, nr = ints[NV], ints[NQ], gamma.size
     m_rest = reals[ints[R_MREST]:ints[R_MREST] + nQ - nv]
-    if nr == 0 and iq < 0:
+    if nr == 0 and iq < 0 and ints[NF] == nv:
         qdd = np.empty(nQ)
         b = f[:nv].copy()
         z = lu_solve(H, b)
@@ -58,11 +59,11 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
         return qdd, np.empty(0), residual_ok(H, z, b)
     m = nQ + nr
     A = np.zeros((m, m))
-    for r in range(nv):  # (element by element: a 2-D slice assignment compiles numba's shape check and message)
-        for c in range(nv):
+    for r in range(H.shape[0]):  # (element by element: a 2-D slice assignment compiles numba's shape check)
+        for c in range(H.shape[0]):
             A[r, c] = H[r, c]
-    for i in range(nQ - nv):
-        A[nv + i, nv + i] = m_rest[i]
+    for i in range(nQ - nv):  # (0 on an articulated body's coordinates: its H_b is H's block)
+        A[nv + i, nv + i] += m_rest[i]
     for c in range(nQ if iq >= 0 else 0):
         A[c, iq] -= fold_q[c]
     for r in range(nr):

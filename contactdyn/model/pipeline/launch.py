@@ -34,7 +34,6 @@ from .pack import (
     N_CONTACTS,
     N_LAUNCH,
     NQ,
-    NV,
     RH_SLIP_BAND,
     section,
 )
@@ -119,13 +118,13 @@ def _past_band(x, ints, trial, state, j, Fv):
 def _cross(ints, trial, j, xdot, FJ, Fa):
     """(d × a_t, a_t · d) [m/s²] of launching contact j under its trial d: a_t = T (J Q̈ + J̇q̇ − axis Q̈_body)
     (friction.slip_acceleration)."""
-    nv, nQ = ints[NV], ints[NQ]
+    nQ = ints[NQ]
     row = _contact(ints, j)
     cr = trial[row[CI_REALS]:]
     fi = row[CI_FRAME]
     acc = Fa[fi, :3].copy()
     for r in range(3):
-        for c in range(nv):
+        for c in range(FJ.shape[2]):  # (the rigid-body table's columns)
             acc[r] += FJ[fi, r, c] * xdot[nQ + c]
     add_coordinate_rates(ints, row, cr, xdot[nQ:2 * nQ], acc)
     a = np.zeros(2)

@@ -27,7 +27,11 @@ a drive kind numba cannot compile, the energy audit with motors, a continuous co
 constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
 law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
-joint it takes is a one-DOF revolute or prismatic). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
+joint it takes is a one-DOF revolute or prismatic), a free body (two charts, the chart's slot in the state), a chain's
+mass riding a turning surface, a surface turning with a frame (the robot's or an articulated body's) under a
+force-reading law or under a 2-D slide launching from rest. An articulated body's joints are appended to the
+robot's in the rigid-body table (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or
+a point of it a packed frame as a robot frame is. The controllers compiled in as kinds (``COMPILED_IN``: task PD,
 operational space, the dynamic laws, joint PD, task force), a sampled law's held command (torques or voltages),
 constant voltages and
 user laws of the controller ABI run; a force-reading law and a reference carried by a body are folded through the
@@ -50,6 +54,7 @@ from ...laws.controllers.voltage import ConstantVoltage
 from ...laws.friction_laws import FRICTION_LAWS
 from ...laws.trajectory import CIRCLE_W, move_table, ramp_table
 from ...numerics.compile_cache import njit
+from ...robot.rigid_body import forest_table
 from ..chain import NodeKind
 from ..chain_forces import pack as pack_chain
 from ..friction import launching
@@ -65,7 +70,7 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, I_DRIVES, R_DRIVES, R_REFLECTED, W_DRIVES, ANY_MOTOR,
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
  N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, A_CALL, A_CONTROLLER, A_SOLVE,
- A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, HEADER) = range(72)
+ A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, NF, HEADER) = range(73)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
 #: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
@@ -74,6 +79,8 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_
 #: A_*: the addresses of the call and of its stages compiled on their own (:func:`.pipeline.stage_addresses`, filled
 #: by ``Pipeline``): the call itself, the controller's kind, the solve (direct or through a fold), a launch's start
 #: and Newton, the energy audit (0 where the mode has none)
+#: NF: the rigid-body table's columns (the robot's nv, then through the last articulated body's coordinates: H, h
+#: and the frames' J span Q[:NF]; :func:`contactdyn.robot.rigid_body.forest_table`)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -83,7 +90,8 @@ RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_HELD, CTL_CONSTANT, CTL_JOINT_PD, CTL_TASK_FORCE = 0, 1, 2, 3, 4, 5, 6
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward (joint PD's and task force's: their first constant)
 FEEDFORWARDS = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}  #: a config's ``feedforward`` -> its code
-#: a frame's ints: its joint, the count and start (in ``ints``) of the velocity columns that move it
+#: a frame's ints: its joint (its row in the rigid-body table), the count and start (in ``ints``) of the velocity
+#: columns (indices in Q) that move it
 FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
 #: a contact's ints (frame: its packed frame, the zero frame after them for a body's point; coords: where its
@@ -163,9 +171,8 @@ class Packed:
 def unsupported(system, modes, phase) -> str:
     """Why the compiled call cannot pack (modes, phase) ("" when it can): the mode then runs on the readable model."""
     ctl = phase.controller
-    if system.articulated:
-        free = any(body.pitch is not None for body in system.articulated.values())
-        return f"{'a free body' if free else 'a body with revolute joints'} (the readable model computes its terms)"
+    if reason := _bodies_unsupported(system, phase):
+        return reason
     if system.riding:
         return f"a chain's mass riding a turning surface (contact {system.riding[0].contact.name!r}: the readable " \
                "model computes its inertia)"
@@ -180,9 +187,9 @@ def unsupported(system, modes, phase) -> str:
     if sum(launching(m) for m in modes) > 1:
         return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
     for c, m in zip(system.contacts, modes, strict=True):
-        if c.surface_fid >= 0 and (ctl.uses_forces or getattr(ctl, "inner", ctl).uses_forces):
+        if c.turning and (ctl.uses_forces or getattr(ctl, "inner", ctl).uses_forces):
             return f"contact {c.name!r}: a surface carried by a robot frame under a force-reading controller"
-        if c.surface_fid >= 0 and launching(m):
+        if c.turning and launching(m):
             return f"contact {c.name!r}: a 2-D slide launching from rest on a turning surface (the compiled launch " \
                    "reads fixed tangents)"
         if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
@@ -190,6 +197,21 @@ def unsupported(system, modes, phase) -> str:
         for dc in c.chains:
             if pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching).python_stages:
                 return f"a stage law of {c.name}.{dc.label} does not compile"
+    return ""
+
+
+def _bodies_unsupported(system, phase) -> str:
+    """Why the articulated bodies keep the mode on the readable model ("" when their joints join the robot's in the
+    rigid-body table: :func:`contactdyn.robot.rigid_body.forest_table`)."""
+    for name, body in system.articulated.items():
+        if body.pitch is not None:  # two charts, the chart's slot in the state
+            return "a free body (the readable model computes its terms)"
+        if body.robot.rigid_table is None:
+            return f"body {name!r}: a joint rigid_body does not compute (the readable model computes its terms)"
+        if not np.array_equal(body.robot.model.gravity.linear, system.robot.model.gravity.linear):
+            return f"body {name!r}: its model's gravity is not the robot's (one universe row in the rigid-body table)"
+        if phase.carrier is not None and phase.carrier[0] in body.indices:
+            return f"a reference carried by the articulated body {name!r} (the pipeline carries it along an axis)"
     return ""
 
 
@@ -259,16 +281,20 @@ def pack(system, modes, phase) -> Packed:
     h[NV], h[NQ], h[NY], h[NX], h[N_DRIVES] = nv, nQ, system.ny, system.n, len(system.drives.specs)
     h[ENERGY] = system.energy_slot
     b.reals[RH_OMEGA], b.reals[RH_SLIP_BAND] = system.stabilization, system.slip_band
-    table = system.robot.rigid_table
-    h[NJ] = table.shape[0]
+    bodies = system.articulated.values()
+    table, starts = forest_table(system.robot.rigid_table, [(body.robot.rigid_table, body.first) for body in bodies])
+    h[NJ], h[NF] = table.shape[0], max([nv, *(body.first + body.nb for body in bodies)])
     b.real_section(R_RIGID, table)
-    b.real_section(R_MREST, system.M_rest)
+    m_rest = system.M_rest.copy()
+    for body in bodies:  # H_b is M's block there (constraints.mass_matrix writes it over the diagonal)
+        m_rest[body.first - nv:body.first - nv + body.nb] = 0.0
+    b.real_section(R_MREST, m_rest)
     b.real_section(R_WEIGHTS, system.weights)  # [N] the non-robot coordinates' weights (a body's m g·axis)
-    fids = list(dict.fromkeys([system.tip_fid, *(c.fid for c in system.contacts if c.fid >= 0),
-                               *(c.surface_fid for c in system.contacts if c.surface_fid >= 0)]))
-    _frames(b, system, fids)
+    frames = [k for k in dict.fromkeys([system.tip_fid, *(_touch_frame(c) for c in system.contacts),
+                                        *(_surface_frame(c) for c in system.contacts)]) if k is not None]
+    _frames(b, system, frames, dict(zip(system.articulated, starts, strict=True)))
     h[TIP_FRAME] = 0
-    meta = _contacts(b, system, modes, fids)
+    meta = _contacts(b, system, modes, frames)
     h[N_LIMITS] = len(phase.limits)
     b.int_section(I_LIMITS, [v for i, side in phase.limits for v in (i, side)])
     b.real_section(R_LIMITS, [system.limits.by_index[i].lower if side > 0 else system.limits.by_index[i].upper
@@ -295,27 +321,50 @@ def pack(system, modes, phase) -> Packed:
                   meta, [c.name for c in system.contacts], [i for i, _ in phase.limits], held, sliding)
 
 
-def _frames(b: _Builder, system, fids: list[int]) -> None:
-    """Per frame its joint, the columns that move it and its placement in its joint (translation [m], rotation by
-    rows), as :func:`.robot_terms.frame_terms` reads them."""
-    model = system.robot.model
-    b.ints[N_FRAMES] = len(fids)
+def _touch_frame(c):
+    """The packed frame's key of a contact's touching side: its robot frame's id, an articulated body's point
+    (body, frame id, the point in that frame [m]), or None (a translating body's point)."""
+    if c.touch_link is not None:
+        return c.touch_link[0].name, c.touch_link[1], tuple(float(v) for v in c.spec.frame_point)
+    return c.fid if c.fid >= 0 else None
+
+
+def _surface_frame(c):
+    """The packed frame's key of the frame carrying a contact's surface: a robot frame's id, an articulated body's
+    frame (body, frame id, its origin), or None (the ground, a translating body)."""
+    if c.surface_link is not None:
+        return c.surface_link[0].name, c.surface_link[1], (0.0, 0.0, 0.0)
+    return c.surface_fid if c.surface_fid >= 0 else None
+
+
+def _frames(b: _Builder, system, keys: list, starts: dict[str, int]) -> None:
+    """Per frame its joint (its row in the rigid-body table), the columns that move it (indices in Q) and its
+    placement in its joint (translation [m], rotation by rows), as :func:`.robot_terms.frame_terms` reads them. A
+    robot frame by its id; an articulated body's point (body, frame id, point [m]) as a frame of its joint placed at
+    that point (``starts``: each body's first row in the table)."""
+    b.ints[N_FRAMES] = len(keys)
     rows, supports, consts = [], [], []
-    for fid in fids:
+    for key in keys:
+        body, fid, point = (None, key, None) if isinstance(key, int) else key
+        art = system.articulated[body] if body is not None else None
+        model = art.robot.model if art is not None else system.robot.model
+        first, row0 = (art.first, starts[body] - 1) if art is not None else (0, 0)
         frame = model.frames[fid]
-        cols = [k for jj in model.supports[frame.parentJoint][1:]
+        cols = [first + k for jj in model.supports[frame.parentJoint][1:]
                 for k in range(model.joints[jj].idx_v, model.joints[jj].idx_v + model.joints[jj].nv)]
-        rows.append((frame.parentJoint, len(cols), len(supports)))
+        rows.append((row0 + frame.parentJoint, len(cols), len(supports)))
         supports += cols
-        consts += [*frame.placement.translation, *frame.placement.rotation.ravel()]
-    at = b.int_section(I_FRAMES, [0] * (FI_W * len(fids)))
+        r = frame.placement.translation if point is None else \
+            frame.placement.translation + frame.placement.rotation @ np.array(point)
+        consts += [*r, *frame.placement.rotation.ravel()]
+    at = b.int_section(I_FRAMES, [0] * (FI_W * len(keys)))
     support_at = b.int_section(None, supports)
     for k, (joint, n, start) in enumerate(rows):
         b.ints[at + FI_W * k:at + FI_W * (k + 1)] = [joint, n, support_at + start]
     b.real_section(R_FRAMES, consts)
 
 
-def _contacts(b: _Builder, system, modes, fids: list[int]) -> list[tuple[str, str, int]]:
+def _contacts(b: _Builder, system, modes, frames: list) -> list[tuple[str, str, int]]:
     """The contacts' and chains' rows; the KKT rows' meta in the readable model's order (per contact: its tangential
     chains' bonds, its stick rows, its normal row)."""
     h = b.ints
@@ -357,11 +406,12 @@ def _contacts(b: _Builder, system, modes, fids: list[int]) -> list[tuple[str, st
         reals_at = b.real_section(None, [*c.spec.point, *touch, *T.ravel(), *r,
                                          *((fr.mu_s, fr.mu_k, fr.viscous) if nt else (0.0, 0.0, 0.0)),
                                          *c.spec.normal, *(v for _, axis in coords for v in axis)])
-        frame = fids.index(c.fid) if c.fid >= 0 else len(fids)  # a body's point: the zero frame after the others
+        touching = _touch_frame(c)  # a translating body's point: the zero frame after the others
+        frame = frames.index(touching) if touching is not None else len(frames)
         h[contact_at + CI_W * ci:contact_at + CI_W * (ci + 1)] = [
             frame, coords_at, int(m.touching), friction, nt, law, len(fr.params) if nt else 0, fp_at,
             first, first + 1, len(c.tangent_chains), normal_row, stick_row, system.impulse_slots.get(c.name, -1),
-            reals_at, fids.index(c.surface_fid) if c.surface_fid >= 0 else -1]
+            reals_at, frames.index(_surface_frame(c)) if _surface_frame(c) is not None else -1]
     return meta
 
 

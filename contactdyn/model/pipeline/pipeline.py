@@ -78,6 +78,7 @@ from .pack import (
     N_LIMITS,
     N_ROWS,
     NEEDS_GRAVITY,
+    NF,
     NQ,
     NV,
     NX,
@@ -94,7 +95,7 @@ from .pack import (
     set_slip_references,
     unsupported,
 )
-from .robot_terms import frame_terms, robot_terms
+from .robot_terms import frame_terms, robot_part, robot_terms
 
 __all__ = ["call", "rates_at", "samples_at", "sample_terms", "stage_addresses", "Pipeline"]
 
@@ -113,8 +114,8 @@ def call(t, x, ints, reals, work, events):
         state = np.zeros(ST_W)
     while True:
         final = state[ST_CONTACT] >= ints[N_LAUNCH]
-        H, h, g, Jw, W = robot_terms(x, ints, reals)
-        M, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:])  # rotors reflected: the true M, the law's H
+        H, h, g, Jw, W = robot_terms(x, ints, reals)  # (over the robot's and the articulated bodies' columns)
+        M, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:], nv)  # rotors reflected: true M, the law's H
         FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
         if not final:  # a contact already past the stick band: its r back before a pass (no trial pass for it)
             final = call_at(ints[A_LAUNCH_SETTLED], "pipeline.launch_settled", (x, ints, state, reals, Fv))
@@ -124,6 +125,8 @@ def call(t, x, ints, reals, work, events):
         weights = ints[R_WEIGHTS]
         for i in range(nQ - nv):  # the bodies' weights m g·axis [N] (0 for the other coordinates)
             f[nv + i] = reals[weights + i]
+        for i in range(nv, ints[NF]):  # the articulated bodies' −h_b (0 for a translating body's coordinate)
+            f[i] -= h[i]
         ydot = np.zeros(ints[NY])
         G, C, gamma = np.zeros((nr, nQ)), np.zeros((nr, nQ)), np.zeros(nr)
         pending = np.zeros((nc, 5))
@@ -139,8 +142,9 @@ def call(t, x, ints, reals, work, events):
                 work[at_tc + i] = f[i] + h[i]
         limit_rows(x, ints, reals, first_limit, G, C, gamma)
         joint_rows(x, ints, reals, first_joint, G, C, gamma)
+        Hr, hr, gr, FJr = robot_part(ints, Hc, h, g, FJ)  # the controller sees the robot alone
         tau, zdot, B, D, bq, dq = call_at(ints[A_CONTROLLER], "pipeline.controller",
-                                          (t, x, ints, reals, work, Hc, h, g, FJ, Fa, Fp, Fv, FR, f, C, events))
+                                          (t, x, ints, reals, work, Hr, hr, gr, FJr, Fa, Fp, Fv, FR, f, C, events))
         joint_torques(x, ints, reals, f)
         ok, applied, qdd, lam, regular = call_at(ints[A_SOLVE], "pipeline.solve",
                                                  (x, ints, reals, work, M, f, G, C, gamma, tau, B, bq))
@@ -235,8 +239,9 @@ def sample_terms(t, x, ints, reals, gravity):
     own = ints.copy()  # (g as the law asks: a sampled mode's call computes none)
     own[NEEDS_GRAVITY] = gravity
     H, h, g, Jw, W = robot_terms(x, own, reals)
-    _, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:])
+    _, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:], ints[NV])
     FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
+    Hc, h, g, FJ = robot_part(own, Hc, h, g, FJ)  # the law sees the robot alone
     fi = ints[TIP_FRAME]
     x_d, v_d, a_d = reference(t, ints, reals)
     carry(x, ints, reals, x_d, v_d)

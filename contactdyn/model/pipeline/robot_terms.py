@@ -1,10 +1,12 @@
 """The pipeline's first stage: the robot's terms and its frames' kinematics at (q, q̇), over the packed arrays.
 
-H [kg·m²], h and g [N·m or N] and the joint Jacobians (WORLD, 6 × nv) by :mod:`contactdyn.robot.rigid_body`'s
-algorithms (as its ``rigid_terms``, every joint's placement and motion kept); then each packed frame's J (6 × nv,
+H [kg·m²], h and g [N·m or N] and the joint Jacobians (WORLD, 6 × nf) by :mod:`contactdyn.robot.rigid_body`'s
+algorithms (as its ``rigid_terms``, every joint's placement and motion kept), over the rigid-body table's nf = NF
+columns: the robot's nv, then the articulated bodies' coordinates (one forest,
+:func:`contactdyn.robot.rigid_body.forest_table`; nf = nv without one); then each packed frame's J (6 × nf,
 LOCAL_WORLD_ALIGNED, linear rows first), J̇q̇ (6) [m/s², rad/s²], p [m], ṗ = J q̇ [m/s] and R, by
 :func:`frame_motion` over the joints' table W (:func:`contactdyn.robot.rigid_body.frame_motion_into`: one
-source).
+source). The controller sees the robot alone (:func:`robot_part`: H, h, g and the frames' J over its nv joints).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from .pack import (
     I_FRAMES,
     N_FRAMES,
     NEEDS_GRAVITY,
+    NF,
     NJ,
     NQ,
     NV,
@@ -30,18 +33,19 @@ from .pack import (
     section,
 )
 
-__all__ = ["robot_terms", "frame_terms", "frame_motion"]
+__all__ = ["robot_terms", "frame_terms", "frame_motion", "robot_part"]
 
 
 @njit(cache=True)
 def robot_terms(x, ints, reals):
-    """(H (nv, nv), h (nv), g (nv, or empty when nobody asks), J (6, nv) per joint column, W: every joint's world
-    rotation and position, velocity and acceleration at q̈ = 0 (rigid_body's table))."""
-    nv, nQ = ints[NV], ints[NQ]
+    """(H (nf, nf), h (nf), g (nf, or empty when nobody asks), J (6, nf) per joint column, W: every joint's world
+    rotation and position, velocity and acceleration at q̈ = 0 (rigid_body's table)); nf = NF, the table's
+    columns (the robot's, then the articulated bodies')."""
+    nf, nQ = ints[NF], ints[NQ]
     table = section(reals, ints[R_RIGID], ints[NJ], WIDTH)
-    L, W = _kinematics(x[:nv], x[nQ:nQ + nv], table)
-    H, h, J = np.zeros((nv, nv)), np.zeros(nv), np.zeros((6, nv))
-    g = np.zeros(nv if ints[NEEDS_GRAVITY] else 0)
+    L, W = _kinematics(x[:nf], x[nQ:nQ + nf], table)
+    H, h, J = np.zeros((nf, nf)), np.zeros(nf), np.zeros((6, nf))
+    g = np.zeros(nf if ints[NEEDS_GRAVITY] else 0)
     _nonlinear(table, L, W, h)
     _jacobians(table, W, J)
     _inertia(table, W, J, H, g)
@@ -50,19 +54,19 @@ def robot_terms(x, ints, reals):
 
 @njit(cache=True)
 def frame_terms(x, ints, reals, W, Jw):
-    """Per packed frame: J (nf, 6, nv), J̇q̇ (nf, 6), p (nf, 3) [m], ṗ (nf, 3) [m/s], R (nf, 3, 3); then one zero
-    frame (row nf: what a body's touching point has of the robot)."""
-    nv, nQ, nf = ints[NV], ints[NQ], ints[N_FRAMES]
+    """Per packed frame: J (nf, 6, NF) (its columns the rigid-body table's), J̇q̇ (nf, 6), p (nf, 3) [m], ṗ (nf, 3)
+    [m/s], R (nf, 3, 3); then one zero frame (row nf: what a translating body's touching point has of the table)."""
+    nc, nQ, nf = ints[NF], ints[NQ], ints[N_FRAMES]
     rows = section(ints, ints[I_FRAMES], nf, FI_W)
     consts = section(reals, ints[R_FRAMES], nf, FR_W)
-    FJ, Fa, Fp, Fv, FR = np.zeros((nf + 1, 6, nv)), np.zeros((nf + 1, 6)), np.zeros((nf + 1, 3)), \
+    FJ, Fa, Fp, Fv, FR = np.zeros((nf + 1, 6, nc)), np.zeros((nf + 1, 6)), np.zeros((nf + 1, 3)), \
         np.zeros((nf + 1, 3)), np.zeros((nf + 1, 3, 3))
     for k in range(nf):
         support = ints[rows[k, FI_SUPPORT]:rows[k, FI_SUPPORT] + rows[k, FI_N_SUPPORT]]
         frame_motion(W, rows[k, FI_JOINT], Jw, consts[k], support, FJ[k], Fa[k], Fp[k], FR[k])
         for r in range(3):
             pd = 0.0
-            for c in range(nv):
+            for c in range(nc):
                 pd += FJ[k, r, c] * x[nQ + c]
             Fv[k, r] = pd
     return FJ, Fa, Fp, Fv, FR
@@ -74,3 +78,13 @@ def frame_motion(W, j, Jw, frame, support, J6, a6, p, Rf):
     rotation by rows] in the joint's frame: robot.rigid_body.frame_motion_into."""
     frame_motion_into(W[j, 0:9].reshape((3, 3)), W[j, 9:12], W[j, 12:18], W[j, 18:24], Jw, frame, support, J6, a6, p,
                       Rf)
+
+
+@njit(cache=True)
+def robot_part(ints, H, h, g, FJ):
+    """What the controller reads of the terms: (H, h, g, FJ) of the robot alone (its nv joints' block, its frames'
+    columns); the arrays themselves when the table is the robot's (NF = nv)."""
+    nv = ints[NV]
+    if ints[NF] == nv:
+        return H, h, g, FJ
+    return H[:nv, :nv].copy(), h[:nv].copy(), g[:min(nv, g.size)].copy(), FJ[:, :, :nv].copy()
