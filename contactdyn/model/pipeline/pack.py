@@ -188,7 +188,7 @@ def unsupported(system, modes, phase) -> str:
         return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
     for c, m in zip(system.contacts, modes, strict=True):
         if c.turning and (ctl.uses_forces or getattr(ctl, "inner", ctl).uses_forces):
-            return f"contact {c.name!r}: a surface carried by a robot frame under a force-reading controller"
+            return f"contact {c.name!r}: a turning surface (carried by a frame) under a force-reading controller"
         if c.turning and launching(m):
             return f"contact {c.name!r}: a 2-D slide launching from rest on a turning surface (the compiled launch " \
                    "reads fixed tangents)"
