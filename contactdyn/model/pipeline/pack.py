@@ -27,11 +27,12 @@ a drive kind numba cannot compile, the energy audit with motors, a continuous co
 constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
 law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
-joint it takes is a one-DOF revolute or prismatic), a free body (two charts, the chart's slot in the state), a chain's
-mass riding a turning surface, a surface turning with a frame (the robot's or an articulated body's) under a
-force-reading law or under a 2-D slide launching from rest. An articulated body's joints are appended to the
-robot's in the rigid-body table (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or
-a point of it a packed frame as a robot frame is. The controllers compiled in as kinds (``COMPILED_IN``: task PD,
+joint it takes is a one-DOF revolute or prismatic), a chain's mass riding a turning surface, a surface turning with
+a frame (the robot's or an articulated body's) under a force-reading law or under a 2-D slide launching from rest.
+An articulated body's joints are appended to the robot's in the rigid-body table
+(:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
+robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
+chart x holds (:func:`.robot_terms.table_at`). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
 operational space, the dynamic laws, joint PD, task force), a sampled law's held command (torques or voltages),
 constant voltages and
 user laws of the controller ABI run; a force-reading law and a reference carried by a body are folded through the
