@@ -104,8 +104,6 @@ def choose(scene: Scene, path: str) -> Choice:
         return Choice(True)
     if path == "readable":
         return Choice(False)
-    if any(b.free for b in scene.bodies.values()):  # the compiled call declines a free body's every mode: no build
-        return Choice(False)
     folder, name = _folder(), kind(scene)
     if (folder / f"{name}.built").is_file():
         return Choice(True)

@@ -8,7 +8,9 @@ allowed); dropped flat on a table, its four corners touch at once: one plastic i
 Near pitch ±90° (chart A's singularity) the angles switch to chart B (R = Rz Ry Rx(b) · C,
 :mod:`contactdyn.robot.free_chart`) and back: a tumble keeps its momentum, energy and parabola across the switches,
 a switch keeps the pose and velocities, a landing after one closes its energy audit; bad inputs are one SceneError
-each.
+each. Every mode runs on the compiled call (:mod:`contactdyn.model.pipeline`) in either chart: the body's chart-B
+rows of the rigid-body table and its frames' chart-B placements are picked by the state's chart slot, the
+readable model's rates to rounding.
 """
 
 from __future__ import annotations
@@ -19,7 +21,10 @@ from test_lever import FREE_FLYER
 
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.errors import SceneError
+from contactdyn.model.paths import PIPELINE, LivePipelines
+from contactdyn.model.pipeline.pipeline import Pipeline, call
 from contactdyn.model.system import System
+from contactdyn.simulate import prepare
 
 pytestmark = pytest.mark.filterwarnings("ignore:.*the scene has no contacts")
 
@@ -60,6 +65,12 @@ def _thrown(p0, v0, angles, omega, duration):
     rates = np.linalg.solve(_E(*angles[:2]), omega)
     body = {**doc["body"]["box"], "position0": [*p0, *angles], "velocity0": [*v0, *rates]}
     return simulate(parse_scene({**doc, "body": {"box": body}}, None, file))
+
+
+def _compiled(r) -> None:
+    """Every mode of the run on the compiled call, none answered by the readable model."""
+    assert r.stats["fallback_modes"] == {}, r.stats["fallback_modes"]
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}, r.stats["paths"]
 
 
 def _spin(r):
@@ -107,6 +118,7 @@ def test_dropped_flat_the_impact_is_plastic_and_it_rests_on_the_table():
     """Its four corners touch at once (one impact holds them all, transitions.CO_TOUCH): each takes m v / 4, the
     loss ½ m v², the box stops dead; at rest the four carry m g / 4 each (the minimum norm)."""
     r = simulate("drop_box")
+    _compiled(r)
     v = np.sqrt(2 * G * 0.1)  # [m/s] after the 0.1 m fall
     hit, *others = r.impacts  # the located corner's impact, then each corner that touched with it
     assert [o["contact"] for o in others] == ["c2", "c3", "c4"] and {o["with"] for o in others} == {"c1"}
@@ -149,6 +161,7 @@ def test_a_tumbling_box_switches_charts_both_ways_and_keeps_its_momentum_energy_
     """Torque-free in free fall: R I Rᵀ ω and ½ ωᵀ R I Rᵀ ω stay (R from the recorded chart-A angles, ω its own
     channels) across every switch, to 1e-9 relative; its centre follows p0 + v0 t + g t²/2."""
     r, omega = _tumble(3.0)
+    _compiled(r)
     switches = [e for e in r.events if e["kind"] == "chart"]
     assert {e["to"] for e in switches} == {"A", "B"} and len(switches) >= 4, switches
     assert abs(np.diff(r["body.box.chart"])).sum() >= 4
@@ -239,6 +252,7 @@ def test_a_box_landing_after_a_tumble_through_pitch_90_degrees_closes_its_energy
     body = {**doc["body"]["box"], "position0": [0.0, 0.0, 0.5, 0.0, 0.9, 0.0],
             "velocity0": [0.0, 0.0, 0.0, 0.0, 4.0, 0.0]}
     r = simulate(parse_scene({**doc, "contact": contacts, "body": {"box": body}}, None, file))
+    _compiled(r)
     kinds = [(e["kind"], e.get("to")) for e in r.events]
     assert ("chart", "B") in kinds and kinds.index(("chart", "B")) < kinds.index(("touch", None))
     assert r.impacts and all(h["t"] > next(e["t"] for e in r.events if e["kind"] == "chart") for h in r.impacts)
@@ -247,6 +261,47 @@ def test_a_box_landing_after_a_tumble_through_pitch_90_degrees_closes_its_energy
     assert (on_b & touching).any()
     residual = r.meta["checks"]["energy_residual"]
     assert residual["value"] <= residual["tol"], residual
+
+
+@pytest.mark.parametrize("touching", [False, True])
+def test_the_compiled_call_gives_the_readable_model_s_rates_in_either_chart(touching):
+    """The drop_box mode packed once, called at random poses and velocities in chart A and in chart B (the box's
+    rows of the rigid-body table and its corners' placements turned by free_chart.C): the readable model's ẋ to
+    1e-12 relative; read in the other chart's table it would be far off."""
+    system, modes, phase, x = prepare(load_scene("drop_box"))
+    modes = [m.with_(touching=touching) for m in modes]
+    body, nQ = system.articulated["box"], system.nQ
+    p = Pipeline(system, modes, phase).packed
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        y = x.copy()
+        y[body.first:body.first + 6] += rng.normal(size=6) * 0.3
+        y[nQ + body.first:nQ + body.first + 6] = rng.normal(size=6) * 2.0
+        refs = []
+        for chart in (0, 1):
+            y[body.chart_index] = chart
+            got = call(0.0, y.copy(), p.ints, p.reals, p.work, p.events)
+            refs.append(system.evaluate(0.0, y, modes, phase).xdot)
+            assert p.events[-1] == 1.0
+            assert np.abs(got - refs[-1]).max() <= 1e-12 * (1.0 + np.abs(refs[-1]).max())
+        assert np.abs(refs[1] - refs[0]).max() > 1e-3  # (the charts' rates differ: both were checked)
+
+
+def test_a_tumble_through_both_charts_runs_the_same_compiled_and_readable(monkeypatch):
+    """The tumble's first 1.5 s (a switch to B and back to A) on the compiled call and on the readable model: every
+    channel within 1e-9 of its largest value plus 1e-10 (SI units), the switches at the same instants to 1e-9 s."""
+    runs = {}
+    for use in (True, False):
+        monkeypatch.setattr(LivePipelines, "use", use)
+        runs[use] = _tumble(1.5)[0]
+    fast, readable = runs[True], runs[False]
+    _compiled(fast)
+    assert [e.get("to") for e in fast.events] == [e.get("to") for e in readable.events] == ["B", "A"]
+    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in readable.events], rtol=0, atol=1e-9)
+    for key, ref in readable.channels.items():
+        ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
+        if ref.size and not np.all(np.isnan(ref)):
+            assert np.nanmax(np.abs(got - ref)) <= 1e-9 * np.nanmax(np.abs(ref)) + 1e-10, key
 
 
 def test_a_floating_joint_from_a_world_link_is_a_free_body_whose_joints_follow_its_six(tmp_path):
@@ -259,6 +314,7 @@ def test_a_floating_joint_from_a_world_link_is_a_free_body_whose_joints_follow_i
     system = System(parse_scene({**doc, "body": {"flyer": body}}, None, tmp_path / "scene.toml"))
     assert [name for name, _ in system.body_channels] == [f"flyer.{a}" for a in (*AXES, "hinge")]
     r = simulate(system.scene)
+    _compiled(r)  # (its hinge's row in chart B: its placement on the turned roll link)
     flyer = system.articulated["flyer"]
     q = np.column_stack([r[f"body.flyer.{a}.x"] for a in (*AXES, "hinge")])
     v = np.column_stack([r[f"body.flyer.{a}.v"] for a in (*AXES, "hinge")])

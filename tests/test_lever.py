@@ -5,8 +5,8 @@ at the arm a = 0.4 m, lifts it by sliding along it (Coulomb, μ = 0.3) and holds
 θ̈ = −m g d sin θ / I_O and its energy; the strike's plastic impulse from the angular momentum about the pivot;
 a static hold's normal force m g d sin θ / a; the energy audit closing; the rows by finite differences. The
 scene runs on the compiled call (the bar's joint appended to the tool's in the rigid-body table,
-``rigid_body.forest_table``), its right-hand side the readable model's to rounding; a free body is still declined
-(its reason in the paths table). Unsupported inputs are one SceneError each.
+``rigid_body.forest_table``), its right-hand side the readable model's to rounding (a free body's too:
+tests/test_free_body.py). Unsupported inputs are one SceneError each.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import pytest
 
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.errors import SceneError
-from contactdyn.model.paths import PIPELINE, READABLE
+from contactdyn.model.paths import PIPELINE
 from contactdyn.model.pipeline.pack import unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.model.system import System
@@ -24,7 +24,6 @@ from contactdyn.model.system import System
 G, M_BAR, L, M_TOOL, ARM, PIVOT_Z = 9.81, 1.0, 0.5, 2.0, 0.4, 0.6  #: the scene's numbers (SI)
 D, I_O = L / 2, M_BAR * L**2 / 3  #: [m] the pivot to the centre of mass, [kg·m²] the inertia about the pivot
 KP = 1e4  #: [N/m] the tool's stiffness (the scene's controller)
-FREE = "a free body (the readable model computes its terms)"  #: the compiled call's reason for a free body
 
 
 @pytest.fixture(scope="module")
@@ -313,9 +312,3 @@ def test_the_compiled_call_gives_the_readable_model_s_rates(edits, stuck):
             want = system.evaluate(0.1, x, ms, phase).xdot
             np.testing.assert_allclose(pipeline.rhs(0.1, x), want, rtol=0, atol=1e-12 * (1 + np.abs(want).max()))
             assert pipeline.readable_calls == 0
-
-
-def test_a_free_body_is_still_declined_with_its_reason():
-    """A free body (two charts, the chart's slot in the state): every mode on the readable model, the reason named."""
-    r = simulate("drop_box", {"duration": 0.05})
-    assert {(row["path"], row["why"]) for row in r.stats["paths"].values()} == {(READABLE, FREE)}

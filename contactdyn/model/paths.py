@@ -33,13 +33,22 @@ CHECK_RTOL = 1e-9  #: agreement a fast right-hand side must show with System.eva
 def disagreement(system, modes, phase, rhs: Callable, t: float, x: np.ndarray) -> str:
     """"" when ``rhs`` (a fast right-hand side of (modes, phase)) agrees with System.evaluate at (t [s], x) — where a
     run starts the mode — and at a perturbation of x, else the undeclared reason: a law changed on one path only
-    cannot pass unseen. Each component of ẋ is held to CHECK_RTOL × (1 + its largest magnitude at the two states):
-    at an equilibrium a rate is ~0 but the terms it is made of are not (the perturbed state shows their size)."""
+    cannot pass unseen. Each component of ẋ is held to CHECK_RTOL × (1 + its largest magnitude at the states):
+    at an equilibrium a rate is ~0 but the terms it is made of are not (the perturbed state shows their size).
+    A free body's chart (a discrete slot of x) is not perturbed; x with every chart flipped is checked too (its
+    angles read in the other chart: another pose), since one packed mode runs in either chart."""
     rng = np.random.default_rng(7)
     scale_x = 1e-3 * (1.0 + np.abs(x))
-    states = (x, x + scale_x * rng.normal(size=system.n))
+    step = scale_x * rng.normal(size=system.n)
+    charts = [body.chart_index for body in system.articulated.values() if body.chart_index >= 0]
+    step[charts] = 0.0
+    states = [x, x + step]
+    if charts:
+        flipped = np.array(x, float)
+        flipped[charts] = 1.0 - np.trunc(flipped[charts])  # (0: A, 1: B, as ArticulatedBody.chart_of reads it)
+        states.append(flipped)
     refs = [system.evaluate(t, state, modes, phase).xdot for state in states]
-    scale = 1.0 + np.maximum(np.abs(refs[0]), np.abs(refs[1]))
+    scale = 1.0 + np.max(np.abs(refs), axis=0)
     for state, ref in zip(states, refs, strict=True):
         got = rhs(t, state.copy())
         if not np.all(np.isfinite(got)) or np.any(np.abs(got - ref) > CHECK_RTOL * scale):

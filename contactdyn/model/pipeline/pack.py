@@ -27,11 +27,12 @@ a drive kind numba cannot compile, the energy audit with motors, a continuous co
 constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
 law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
-joint it takes is a one-DOF revolute or prismatic), a free body (two charts, the chart's slot in the state), a chain's
-mass riding a turning surface, a surface turning with a frame (the robot's or an articulated body's) under a
-force-reading law or under a 2-D slide launching from rest. An articulated body's joints are appended to the
-robot's in the rigid-body table (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or
-a point of it a packed frame as a robot frame is. The controllers compiled in as kinds (``COMPILED_IN``: task PD,
+joint it takes is a one-DOF revolute or prismatic), a chain's mass riding a turning surface, a surface turning with
+a frame (the robot's or an articulated body's) under a force-reading law or under a 2-D slide launching from rest.
+An articulated body's joints are appended to the robot's in the rigid-body table
+(:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
+robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
+chart x holds (:func:`.robot_terms.table_at`). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
 operational space, the dynamic laws, joint PD, task force), a sampled law's held command (torques or voltages),
 constant voltages and
 user laws of the controller ABI run; a force-reading law and a reference carried by a body are folded through the
@@ -70,7 +71,8 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_
  R_REF, R_RAMPS, R_CTL, N_CTL_PARAMS, CTL_ADDRESS, W_SIZE, I_DRIVES, R_DRIVES, R_REFLECTED, W_DRIVES, ANY_MOTOR,
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
  N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, A_CALL, A_CONTROLLER, A_SOLVE,
- A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, NF, HEADER) = range(73)
+ A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, NF, N_CHARTS, I_CHARTS, R_FRAMES_B,
+ HEADER) = range(76)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
 #: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
@@ -81,6 +83,8 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_
 #: and Newton, the energy audit (0 where the mode has none)
 #: NF: the rigid-body table's columns (the robot's nv, then through the last articulated body's coordinates: H, h
 #: and the frames' J span Q[:NF]; :func:`contactdyn.robot.rigid_body.forest_table`)
+#: N_CHARTS: the free bodies (two charts each, :mod:`contactdyn.robot.free_chart`), I_CHARTS their rows (CHT_*
+#: below), R_FRAMES_B the packed frames' placements in chart B (N_FRAMES rows of FR_W; only with a free body)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -91,8 +95,13 @@ CTL_NONE, CTL_TASK_PD, CTL_ABI, CTL_HELD, CTL_CONSTANT, CTL_JOINT_PD, CTL_TASK_F
 FF_NONE, FF_GRAVITY, FF_BIAS = 0, 1, 2  #: task PD's feedforward (joint PD's and task force's: their first constant)
 FEEDFORWARDS = {"none": FF_NONE, "gravity": FF_GRAVITY, "bias": FF_BIAS}  #: a config's ``feedforward`` -> its code
 #: a frame's ints: its joint (its row in the rigid-body table), the count and start (in ``ints``) of the velocity
-#: columns (indices in Q) that move it
-FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_W = 0, 1, 2, 3
+#: columns (indices in Q) that move it, the slot in x of its free body's chart (-1: a frame of no free body; in
+#: chart B its placement is R_FRAMES_B's row)
+FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_CHART, FI_W = 0, 1, 2, 3, 4
+#: a free body's ints: the slot in x of its chart (0: A, 1: B, as ``ArticulatedBody.chart_of`` reads it), its
+#: joints' first row in the rigid-body table and their count, where its chart-B rows start in reals (the same rows
+#: of its model turned by free_chart.C: ``free_chart.turned_model``)
+CHT_SLOT, CHT_ROW, CHT_N, CHT_REALS, CHT_W = 0, 1, 2, 3, 4
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
 #: a contact's ints (frame: its packed frame, the zero frame after them for a body's point; coords: where its
 #: bodies' coordinates are in ints, [n touching side, n surface side, their indices]; friction: FRICTION_* below;
@@ -204,11 +213,9 @@ def _bodies_unsupported(system, phase) -> str:
     """Why the articulated bodies keep the mode on the readable model ("" when their joints join the robot's in the
     rigid-body table: :func:`contactdyn.robot.rigid_body.forest_table`)."""
     for name, body in system.articulated.items():
-        if body.pitch is not None:  # two charts, the chart's slot in the state
-            return "a free body (the readable model computes its terms)"
-        if body.robot.rigid_table is None:
+        if any(robot.rigid_table is None for robot in body.robots):  # (a free body: both charts' models)
             return f"body {name!r}: a joint rigid_body does not compute (the readable model computes its terms)"
-        if not np.array_equal(body.robot.model.gravity.linear, system.robot.model.gravity.linear):
+        if not np.array_equal(body.robots[0].model.gravity.linear, system.robot.model.gravity.linear):
             return f"body {name!r}: its model's gravity is not the robot's (one universe row in the rigid-body table)"
         if phase.carrier is not None and phase.carrier[0] in body.indices:
             return f"a reference carried by the articulated body {name!r} (the pipeline carries it along an axis)"
@@ -282,9 +289,12 @@ def pack(system, modes, phase) -> Packed:
     h[ENERGY] = system.energy_slot
     b.reals[RH_OMEGA], b.reals[RH_SLIP_BAND] = system.stabilization, system.slip_band
     bodies = system.articulated.values()
-    table, starts = forest_table(system.robot.rigid_table, [(body.robot.rigid_table, body.first) for body in bodies])
+    table, starts = forest_table(system.robot.rigid_table, [(body.robots[0].rigid_table, body.first)
+                                                            for body in bodies])  # (chart A's: robots[0])
     h[NJ], h[NF] = table.shape[0], max([nv, *(body.first + body.nb for body in bodies)])
     b.real_section(R_RIGID, table)
+    starts = dict(zip(system.articulated, starts, strict=True))
+    _charts(b, system, starts)
     m_rest = system.M_rest.copy()
     for body in bodies:  # H_b is M's block there (constraints.mass_matrix writes it over the diagonal)
         m_rest[body.first - nv:body.first - nv + body.nb] = 0.0
@@ -292,7 +302,7 @@ def pack(system, modes, phase) -> Packed:
     b.real_section(R_WEIGHTS, system.weights)  # [N] the non-robot coordinates' weights (a body's m g·axis)
     frames = [k for k in dict.fromkeys([system.tip_fid, *(_touch_frame(c) for c in system.contacts),
                                         *(_surface_frame(c) for c in system.contacts)]) if k is not None]
-    _frames(b, system, frames, dict(zip(system.articulated, starts, strict=True)))
+    _frames(b, system, frames, starts)
     h[TIP_FRAME] = 0
     meta = _contacts(b, system, modes, frames)
     h[N_LIMITS] = len(phase.limits)
@@ -337,31 +347,57 @@ def _surface_frame(c):
     return c.surface_fid if c.surface_fid >= 0 else None
 
 
+def _charts(b: _Builder, system, starts: dict[str, int]) -> None:
+    """Per free body its chart's slot in x and its joints' rows in the rigid-body table (chart A's there), and those
+    rows in chart B (its model turned by free_chart.C: the roll link's inertia, its children's placements), which
+    :func:`.robot_terms.table_at` puts in while x is in chart B (``starts``: each body's first row in the table)."""
+    free = [(name, body) for name, body in system.articulated.items() if body.pitch is not None]
+    b.ints[N_CHARTS] = len(free)
+    rows = []
+    for name, body in free:
+        turned, _ = forest_table(system.robot.rigid_table, [(other.robots[-1 if other is body else 0].rigid_table,
+                                                             other.first) for other in system.articulated.values()])
+        row = starts[name]
+        rows += [body.chart_index, row, body.nb, b.real_section(None, turned[row:row + body.nb])]
+    b.int_section(I_CHARTS, rows)
+
+
 def _frames(b: _Builder, system, keys: list, starts: dict[str, int]) -> None:
-    """Per frame its joint (its row in the rigid-body table), the columns that move it (indices in Q) and its
-    placement in its joint (translation [m], rotation by rows), as :func:`.robot_terms.frame_terms` reads them. A
-    robot frame by its id; an articulated body's point (body, frame id, point [m]) as a frame of its joint placed at
-    that point (``starts``: each body's first row in the table)."""
+    """Per frame its joint (its row in the rigid-body table), the columns that move it (indices in Q), its free
+    body's chart slot (-1: none) and its placement in its joint (translation [m], rotation by rows; a free body's
+    frame also its chart B's, R_FRAMES_B), as :func:`.robot_terms.frame_terms` reads them. A robot frame by its id;
+    an articulated body's point (body, frame id, point [m]) as a frame of its joint placed at that point
+    (``starts``: each body's first row in the table)."""
     b.ints[N_FRAMES] = len(keys)
-    rows, supports, consts = [], [], []
+    rows, supports, consts, turned = [], [], [], []
     for key in keys:
         body, fid, point = (None, key, None) if isinstance(key, int) else key
         art = system.articulated[body] if body is not None else None
-        model = art.robot.model if art is not None else system.robot.model
+        models = [robot.model for robot in art.robots] if art is not None else [system.robot.model]
         first, row0 = (art.first, starts[body] - 1) if art is not None else (0, 0)
-        frame = model.frames[fid]
-        cols = [first + k for jj in model.supports[frame.parentJoint][1:]
-                for k in range(model.joints[jj].idx_v, model.joints[jj].idx_v + model.joints[jj].nv)]
-        rows.append((row0 + frame.parentJoint, len(cols), len(supports)))
+        frame = models[0].frames[fid]  # (the joints and supports are the same in either chart)
+        cols = [first + k for jj in models[0].supports[frame.parentJoint][1:]
+                for k in range(models[0].joints[jj].idx_v, models[0].joints[jj].idx_v + models[0].joints[jj].nv)]
+        chart = art.chart_index if art is not None and art.pitch is not None else -1
+        rows.append((row0 + frame.parentJoint, len(cols), len(supports), chart))
         supports += cols
-        r = frame.placement.translation if point is None else \
-            frame.placement.translation + frame.placement.rotation @ np.array(point)
-        consts += [*r, *frame.placement.rotation.ravel()]
+        consts += _placement(models[0].frames[fid], point)
+        turned += _placement(models[-1].frames[fid], point)  # (chart B's: its frames on the roll joint turned by C)
     at = b.int_section(I_FRAMES, [0] * (FI_W * len(keys)))
     support_at = b.int_section(None, supports)
-    for k, (joint, n, start) in enumerate(rows):
-        b.ints[at + FI_W * k:at + FI_W * (k + 1)] = [joint, n, support_at + start]
+    for k, (joint, n, start, chart) in enumerate(rows):
+        b.ints[at + FI_W * k:at + FI_W * (k + 1)] = [joint, n, support_at + start, chart]
     b.real_section(R_FRAMES, consts)
+    if b.ints[N_CHARTS]:
+        b.real_section(R_FRAMES_B, turned)
+
+
+def _placement(frame, point) -> list[float]:
+    """A packed frame's reals: its placement in its joint, translation [m] (moved to ``point`` [m] in the frame, a
+    body's point) and rotation by rows."""
+    r = frame.placement.translation if point is None else \
+        frame.placement.translation + frame.placement.rotation @ np.array(point)
+    return [*r, *frame.placement.rotation.ravel()]
 
 
 def _contacts(b: _Builder, system, modes, frames: list) -> list[tuple[str, str, int]]:
