@@ -365,14 +365,19 @@ def test_a_phase_until_a_corner_touches_ends_when_it_touches_with_another():
     assert started[0]["t"] == pytest.approx(np.sqrt(2 * 0.1 / G), abs=1e-9)
 
 
-def test_corners_with_friction_are_located_one_at_a_time():
-    """A corner with friction does not touch along with another (the impact law slides or jams the located contact
-    only): each is located on its own, the box still stops falling, and the energy audit closes."""
+def test_corners_with_friction_touch_together_and_hold_by_their_sticks():
+    """Corners with friction arriving without slip touch along with the located one, each held by its stick in the
+    one impact: m v / 4 each, no friction impulse (the landing is straight down), no pulling; the box stops falling
+    and the energy audit closes."""
     doc, file = _doc()
     doc["contact"] = {k: {**v, "tangent": {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu": 0.3}}
                       for k, v in doc["contact"].items()}
     r = simulate(parse_scene(doc, None, file))
-    assert all("with" not in hit for hit in r.impacts) and len(r.impacts) >= 1
+    landing = [hit for hit in r.impacts if hit["t"] == r.impacts[0]["t"]]
+    assert len(landing) == 4 and sum("with" in hit for hit in landing) == 3
+    v = np.sqrt(2 * G * 0.1)  # [m/s] after the 0.1 m fall
+    np.testing.assert_allclose([hit["normal_impulse"] for hit in landing], M * v / 4, rtol=1e-6)
+    np.testing.assert_allclose([f for hit in landing for f in hit["friction_impulse"]], 0.0, rtol=0, atol=1e-12)
     assert abs(r["body.box.z.v"][-1]) < 1e-9
     residual = r.meta["checks"]["energy_residual"]
     assert residual["value"] <= residual["tol"], residual

@@ -135,7 +135,7 @@ class Transitions:
         i, contacts = self._index(event.contact), self.system.contacts
         touched = [i] + _touching_too(self.system, self.log, t, x, modes, i)  # (one impact holds them all)
         for j in touched:
-            modes[j], x = self._touch(t, x, modes, j)
+            modes[j], x = self._touch(t, x, modes, j, co=j != i)
         names = [contacts[j].name for j in touched]
         if contacts[i].normal.chain.bonded_when_touching:
             x, imp = impact(self.system, t, x, modes, contacts[i], phase.limits)
@@ -203,6 +203,9 @@ class Transitions:
                              "v_after": imp.v_after.tolist(), "slip_before": imp.slip_before.tolist(),
                              "slip_after": imp.slip_after.tolist(), **extra})
         self._release(imp, modes, after)
+        for name in imp.separated:  # holding it would have pulled: it lets go at the impact
+            modes[self._index(name)] = modes[self._index(name)].separated()
+            self.log.log(imp.t, "separate", name, check_storm=False)
         i = self._index(imp.contact)
         c = system.contacts[i]
         if imp.jammed:
@@ -239,8 +242,9 @@ class Transitions:
                 "touch": _on_touch, "separate": _on_separate, "stop": _on_stop, "reverse": _on_stop,
                 "turn": _on_turn, "slip": _on_slip, "chart": on_chart}
 
-    def _touch(self, t, x, modes, i):
-        """Mode after touch: touching, tangential chains anchored where the tip now is."""
+    def _touch(self, t, x, modes, i, co=False):
+        """Mode after touch: touching, tangential chains anchored where the tip now is; touching with another
+        (``co``) without slip, stuck (its stick holds in their impact)."""
         system = self.system
         c = system.contacts[i]
         nQ = system.nQ
@@ -270,10 +274,11 @@ class Transitions:
         if c.normal.junction_state >= 0:
             x[2 * nQ + c.normal.junction_state] = _junction_at_rest(system, c, kin, x)
         vt = slip_velocity(system, c, kin) if len(c.tangents) else np.zeros(0)
-        slip = modes[i].slip
-        if len(vt) and float(np.linalg.norm(vt)) > system.slip_band:
+        slip, moving = modes[i].slip, len(vt) and float(np.linalg.norm(vt)) > system.slip_band
+        if moving:
             slip = direction_of(vt)
-        return modes[i].with_(touching=True, stuck=False, slip=slip, offsets=tuple(offsets), relaxing=False), x
+        stuck = co and c.friction is not None and len(vt) > 0 and not moving
+        return modes[i].with_(touching=True, stuck=stuck, slip=slip, offsets=tuple(offsets), relaxing=False), x
 
     def consistent(self, t, x, modes, phase, rest=frozenset(), released=frozenset()):
         """Fix the modes the state contradicts; return (x, modes).
@@ -375,18 +380,19 @@ def _junction_at_rest(system: System, c, kin, x: np.ndarray) -> float:
 
 
 def _touching_too(system: System, log: EventLog, t: float, x: np.ndarray, modes, i: int) -> list[int]:
-    """The other rigid, frictionless contacts that touch at rigid contact i's touch at t [s] (each logged as a touch):
-    not touching yet, |gap| within CO_TOUCH [m] and closing (the normal velocity < 0). Located one at a time,
-    simultaneous touches (a flat landing) would take their impacts in turn, and a contact reaching its gap 0 a
-    rounding after another's impact stopped it would never cross it: the impact holds them together. (A contact
-    with friction is left to be located on its own: the impact law slides or jams the located contact only.)"""
+    """The other rigid contacts that touch at rigid contact i's touch at t [s] (each logged as a touch): not touching
+    yet, |gap| within CO_TOUCH [m] and closing (the normal velocity < 0). Located one at a time, simultaneous touches
+    (a flat landing) would take their impacts in turn, each pulling on the last (an impact is unilateral: that one
+    lets go, and touches again a rounding later): the impact holds them together. With friction, one arriving
+    without slip holds by its stick (the impact's cone check lets it slide if it cannot); one sliding slides through
+    the impact as any other sliding contact does (its normal column untilted: the impact law slides or jams the
+    located contact only)."""
     if not system.contacts[i].normal.chain.bonded_when_touching:
         return []
     nQ = system.nQ
     out = []
     for j, c in enumerate(system.contacts):
-        if j == i or modes[j].touching or c.spec.bonded or not c.normal.chain.bonded_when_touching or \
-                (c.friction is not None and len(c.tangents)):
+        if j == i or modes[j].touching or c.spec.bonded or not c.normal.chain.bonded_when_touching:
             continue
         system.robot.update(x[:system.nv], x[nQ:nQ + system.nv])
         kin = system.kinematics(c, x)
@@ -401,6 +407,7 @@ def _co_impacts(imp, names: list[str]) -> list[dict]:
     """``Result.impacts`` entries of the contacts that touched with ``imp``'s own, each its normal impulse [N·s] in
     the one impact (its loss and velocities are on the located contact's entry, ``with`` names it)."""
     return [{"t": imp.t, "contact": name, "normal_impulse": float(imp.row_impulses.get((name, "n", 0), 0.0)),
-             "friction_impulse": [], "jammed": False, "energy_loss": 0.0, "v_before": imp.v_before.tolist(),
+             "friction_impulse": [v for (who, kind, _), v in imp.row_impulses.items() if who == name and kind == "t"],
+             "jammed": False, "energy_loss": 0.0, "v_before": imp.v_before.tolist(),
              "v_after": imp.v_after.tolist(), "slip_before": [], "slip_after": [], "with": imp.contact}
             for name in names]

@@ -15,6 +15,11 @@ with every bond, stick and the new contact held at velocity level (Λ the impuls
   sliding assumption is wrong: zero tangential velocity, F_fΔt an unknown; if holding it
   needs more than μ_s FΔt (eqs 35–38) the tip slides where that impulse pushes.
 
+The impact is unilateral: every other touching contact with a normal row (rigid, or a bonded chain's) holds
+only while its normal impulse pushes, Λ_n ≥ 0; one that would pull lets go (``Impact.separated``: its gap opens
+from the impact on), and one let go whose normal velocity after it would approach is held again, one at a time
+(an active set: the plastic impact of several unilateral contacts, Λ_n ≥ 0, v_n⁺ ≥ 0, Λ_n v_n⁺ = 0).
+
 Every other stuck contact holds through its stick rows only while its impulse stays in its
 own cone, |F_fΔt| ≤ μ_s FΔt (FΔt: its normal row's impulse; zero for a compliant normal,
 which carries no impulse): one that would leave it slides from the impact on, where its
@@ -37,7 +42,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .constraints import impulse_solve, velocity_rows
+from ..errors import SimulationError
+from .constraints import contact_row, impulse_solve, velocity_rows
 from .contact import Contact, ContactMode
 from .friction import direction_of, in_cone, slip_velocity
 
@@ -62,6 +68,12 @@ class Impact:
     row_impulses: dict = field(default_factory=dict)  #: (owner, kind, index) -> Λ of every held row [N·s or N·m·s]
     #: other contacts that were stuck and slide from the impact on (their stick impulse left the cone): name -> d
     released: dict = field(default_factory=dict)
+    #: other contacts that let go at the impact (holding them would have pulled: Λ_n < 0), by name
+    separated: tuple = ()
+
+#: [-] a normal impulse below −IMPULSE_TOL (1 + Σ|Λ|) pulls; a let-go contact's normal velocity below
+#: −IMPULSE_TOL (1 + max|Q̇⁺|) approaches (rounding of the momentum law's solve)
+IMPULSE_TOL = 1e-12
 
 
 def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact | None,
@@ -106,20 +118,54 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
         return z[:nQ], P_n, P_t
 
     released: dict[str, tuple[float, ...]] = {}
-    while True:
+    for _ in range(4 * len(system.contacts) + 4):
         qd_plus, P_n, P_t, d, jammed = _own_contact(system, contact, kin, vt_minus, solve)
+        j = _unilateral_change(system, x, modes, held, contact, impulses, qd_plus)
+        if j is not None:  # let go a pulling contact, or hold again one let go that would approach
+            held[j] = modes[j] if not held[j].touching else held[j].separated()
+            continue
         outside = _sticks_outside_the_cone(system, held, contact, impulses)
         if not outside:
             break
         for j, push in outside:  # slide from rest where the impulse pushed (its friction impulse: see above)
             held[j] = held[j].with_(stuck=False, slip=direction_of(push), from_rest=True)
             released[system.contacts[j].name] = held[j].slip
+    else:
+        raise SimulationError(f"impact at t = {t:.9g} s: no set of the touching contacts holds with pushing "
+                              "impulses only (the active set cycles)")
+    separated = tuple(c.name for c, m, h in zip(system.contacts, modes, held, strict=True)
+                      if m.touching and not h.touching)
     x_new = x.copy()
     x_new[nQ:2 * nQ] = qd_plus
     energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
     vt_plus = slip_velocity(system, contact, kin, qd_plus) if k else np.zeros(0)
     return x_new, Impact(t, name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d,
-                         dict(impulses), released)
+                         dict(impulses), released, separated)
+
+
+def _unilateral_change(system, x, modes, held, contact, impulses, qd_plus) -> int | None:
+    """The contact whose normal the impact must let go or hold again, else None: the most pulling other touching
+    contact with a normal row (its impulse Λ_n < 0); else the most approaching one let go (v_n⁺ < 0). A bonded
+    contact never lets go."""
+    pulling = -IMPULSE_TOL * (1.0 + sum(abs(v) for v in impulses.values()))
+    found = None
+    for j, (c, m) in enumerate(zip(system.contacts, held, strict=True)):
+        if c is contact or not m.touching or c.spec.bonded or not c.normal.chain.bonded_when_touching:
+            continue
+        P_n = impulses.get((c.name, "n", 0), 0.0)
+        if P_n < pulling:
+            pulling, found = P_n, j
+    if found is not None:
+        return found
+    approaching = -IMPULSE_TOL * (1.0 + float(np.abs(qd_plus).max()))
+    for j, (m, h) in enumerate(zip(modes, held, strict=True)):
+        if m.touching and not h.touching:
+            c = system.contacts[j]
+            kin = system.kinematics(c, x)
+            v_n = float(contact_row(system, c, kin.normal, kin) @ qd_plus)
+            if v_n < approaching:
+                approaching, found = v_n, j
+    return found
 
 
 def _own_contact(system, contact, kin, vt_minus, solve):
