@@ -37,14 +37,19 @@ def _scene(name: str, **edits) -> tuple[dict, str]:
     return doc, scene.file
 
 
-def _tray(k: float = K, b: float = B, y0: float = 0.0, **edits):
-    """The tilting tray with a Kelvin–Voigt normal (k [N/m], b [N·s/m]), the part ``y0`` [m] from the axis."""
+def _tray_scene(contact: dict, y0: float = 0.0, **edits):
+    """The tilting tray, its contact's keys ``contact`` replaced, the part ``y0`` [m] from the axis, output at 1 kHz
+    (``edits``: top-level keys)."""
     doc, file = _scene("tilt_tray", **edits)
-    rest = {**doc["contact"]["rest"], "normal": {"direction": [0.0, 0.0, 1.0], "model": "c", "k": k, "b": b}}
-    doc["contact"] = {"rest": rest}
+    doc["contact"] = {"rest": {**doc["contact"]["rest"], **contact}}
     doc["body"] = {"part": {**doc["body"]["part"], "position0": [y0, 0.0]}}
     doc["solver"] = {**doc["solver"], "output_rate": 1000.0}
     return parse_scene(doc, None, file)
+
+
+def _tray(k: float = K, b: float = B, y0: float = 0.0, **edits):
+    """The tilting tray with a Kelvin–Voigt normal (k [N/m], b [N·s/m]), the part ``y0`` [m] from the axis."""
+    return _tray_scene({"normal": {"direction": [0.0, 0.0, 1.0], "model": "c", "k": k, "b": b}}, y0, **edits)
 
 
 @pytest.fixture(scope="module")
@@ -156,12 +161,7 @@ def test_a_tool_pressed_into_a_kelvin_voigt_face_of_the_bar_holds_it_at_rest():
 
 def _tray_b(k: float = K, b: float = B, m: float = 0.01, **contact):
     """The tilting tray with a model-(b) normal: ground —[k, b]— m′, the part striking m′ (a mass riding the tray)."""
-    doc, file = _scene("tilt_tray")
-    rest = {**doc["contact"]["rest"], "normal": {"direction": [0.0, 0.0, 1.0], "model": "b", "k": k, "b": b, "m": m},
-            **contact}
-    doc["contact"] = {"rest": rest}
-    doc["solver"] = {**doc["solver"], "output_rate": 1000.0}
-    return parse_scene(doc, None, file)
+    return _tray_scene({"normal": {"direction": [0.0, 0.0, 1.0], "model": "b", "k": k, "b": b, "m": m}, **contact})
 
 
 RIDER = """<joint name="xi" type="prismatic"><parent link="tray"/><child link="rider"/>
@@ -247,15 +247,10 @@ def test_the_tool_strikes_a_mass_riding_the_bar_s_face_and_the_bar_feels_no_impu
 
 # ---- a tangential chain on a turning surface -------------------------------------------------------------------------
 
-def _tray_t(**environment):
+def _tray_t():
     """The tilting tray, its part held along the slope by a tangential Kelvin–Voigt chain (rigid normal)."""
-    doc, file = _scene("tilt_tray")
-    stage = {"k": K_T, "b": B_T, **environment}
-    rest = {**doc["contact"]["rest"], "tangent": {"model": "chain", "directions": [[0.0, 1.0, 0.0]],
-                                                   "environment": [stage]}}
-    doc["contact"] = {"rest": rest}
-    doc["solver"] = {**doc["solver"], "output_rate": 1000.0}
-    return parse_scene(doc, None, file)
+    return _tray_scene({"tangent": {"model": "chain", "directions": [[0.0, 1.0, 0.0]],
+                                    "environment": [{"k": K_T, "b": B_T}]}})
 
 
 @pytest.fixture(scope="module")
