@@ -34,6 +34,7 @@ from contactdyn.analysis.workprecision import (
 from contactdyn.errors import SceneError, SimulationError
 from contactdyn.hybrid.pipeline_mode import PipelineMode
 from contactdyn.model.contact import ContactMode
+from contactdyn.model.dynamics import contact_condition
 from contactdyn.model.pipeline.pack import unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.numerics.integrators import FiniteDifferenceJacobian, jacobian_eigenvalues, stability_bound
@@ -77,7 +78,11 @@ def _mode_variants(system, modes):
 
 @pytest.mark.parametrize("path", SCENES, ids=lambda p: Path(p).stem)
 def test_compiled_call_agrees_with_evaluate(path):
-    """Derivatives, event values and output samples of the compiled call equal System.evaluate's (rtol 1e-9)."""
+    """Derivatives, event values and output samples of the compiled call equal System.evaluate's (rtol 1e-9). Where
+    the rows hold one body twice (a box on four corners: the contact system's condition number beyond 1e12) and the
+    solve went through a pivot of rounding size (not the minimum-norm least squares of an exactly singular system,
+    two fingers' sticks: compared), only their resultant is determined, in the derivatives: each row's force is
+    then the solve's own rounding (not compared)."""
     system, modes, phase, x0 = prepare(load_scene(path, {"duration": 0.1}))
     rng = np.random.default_rng(3)
     pressing = replace(phase, limits=((0, 1),)) if 0 in system.limits.by_index else phase  # joint 0 on its limit
@@ -92,26 +97,31 @@ def test_compiled_call_agrees_with_evaluate(path):
         ts = np.array([0.01, 0.05, 0.09])
         samples = plan.samples(ts, np.array(states))
         ref_samples = Samples(len(ts), system)
+        redundant = False
         for k, (t, x) in enumerate(zip(ts, states, strict=True)):
             ev = system.evaluate(t, x, variant, phase, full=True)
             ref_samples.fill(k, ev)
             got = plan.rhs(t, x)
             scale = 1.0 + np.abs(ev.xdot).max()
             assert np.abs(got - ev.xdot).max() <= 1e-9 * scale
+            # (rows that hold one body twice, solved through a pivot of rounding size rather than least squares)
+            redundant = redundant or (ev.regular and contact_condition(system, t, x, variant, phase) > 1e12)
             for ci, c in enumerate(system.contacts):
                 F = ev.normal_force[c.name]
-                assert plan.normal_force(ci, t, x) == pytest.approx(F, rel=1e-9, abs=1e-9 * scale)
+                if not redundant:
+                    assert plan.normal_force(ci, t, x) == pytest.approx(F, rel=1e-9, abs=1e-9 * scale)
                 if not variant[ci].touching:
                     assert plan.gap(ci, t, x) == pytest.approx(ev.gap[c.name], rel=1e-9, abs=1e-12)
                 if c.name in ev.slip:
                     np.testing.assert_allclose(plan.slip(ci, t, x), ev.slip[c.name], rtol=1e-9, atol=1e-12)
-                if variant[ci].touching and variant[ci].stuck:
+                if variant[ci].touching and variant[ci].stuck and not redundant:
                     np.testing.assert_allclose(plan.stick_force(ci, t, x), ev.friction[c.name], rtol=1e-8,
                                                atol=1e-9 * scale)
             assert plan.limit_torque(t, x) == pytest.approx(ev.limit_torque, rel=1e-9, abs=1e-9 * scale)
         for name in ("tau", "tip", "body_force", "limit_torque"):
             np.testing.assert_allclose(getattr(samples, name), getattr(ref_samples, name), rtol=1e-8, atol=1e-8)
-        for field in ("F_n", "gap", "F_d", "F_f", "v_slip", "iface", "stages"):
+        for field in ("gap", "F_d", "v_slip", "stages") if redundant else ("F_n", "gap", "F_d", "F_f", "v_slip",
+                                                                             "iface", "stages"):
             for key, val in getattr(ref_samples, field).items():
                 np.testing.assert_allclose(getattr(samples, field)[key], val, rtol=1e-8, atol=1e-8,
                                            err_msg=f"{field}[{key}]")
