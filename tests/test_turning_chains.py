@@ -159,9 +159,11 @@ def test_a_tool_pressed_into_a_kelvin_voigt_face_of_the_bar_holds_it_at_rest():
 
 # ---- a chain's mass riding a turning surface (contact.RidingMass) ---------------------------------------------------
 
-def _tray_b(k: float = K, b: float = B, m: float = 0.01, **contact):
-    """The tilting tray with a model-(b) normal: ground —[k, b]— m′, the part striking m′ (a mass riding the tray)."""
-    return _tray_scene({"normal": {"direction": [0.0, 0.0, 1.0], "model": "b", "k": k, "b": b, "m": m}, **contact})
+def _tray_b(k: float = K, b: float = B, m: float = 0.01, duration: float = 2.0, **contact):
+    """The tilting tray with a model-(b) normal: ground —[k, b]— m′, the part striking m′ (a mass riding the tray);
+    ``duration`` [s] (the readable model runs it)."""
+    return _tray_scene({"normal": {"direction": [0.0, 0.0, 1.0], "model": "b", "k": k, "b": b, "m": m}, **contact},
+                       duration=duration)
 
 
 RIDER = """<joint name="xi" type="prismatic"><parent link="tray"/><child link="rider"/>
@@ -219,7 +221,7 @@ def test_on_the_tilting_tray_a_model_b_chain_carries_m_g_cos_theta_and_the_audit
     assert "riding a turning surface" in next(iter(r.stats["paths"].values()))["why"]
     theta, t = r["q"][:, 0], r["t"]
     settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)
-    assert settled.sum() > 2500
+    assert settled.sum() > 900
     np.testing.assert_allclose(r["contact.rest.F_n"][settled], M_PART * G * np.cos(theta[settled]), rtol=0,
                                atol=1e-6)
     residual = r.meta["checks"]["energy_residual"]
@@ -285,11 +287,11 @@ def test_a_chain_with_a_mass_on_its_robot_side_rides_the_tray_too_and_the_audit_
     """tip —[k, b]— m′ —[k, b]— surface: a chain is one line, carried by its surface (as a fixed surface's is by the
     world): m′ rides the tray like an environment-side mass. The part held by the tray's friction: F_n m g cos θ
     through the two stages in series, the audit closing."""
-    stage = {"k": 2 * K, "b": 2 * B}  # (two in series: K, B)
-    r = simulate(_tray_b(normal={"direction": [0.0, 0.0, 1.0], "robot": [stage, {"m": 0.01}, stage]}))
+    stage = {"k": 2e4, "b": 20.0}  # (our choice: m′ = 0.1 kg rings at 630 rad/s, ζ = 0.3: an explicit step's pace)
+    r = simulate(_tray_b(normal={"direction": [0.0, 0.0, 1.0], "robot": [stage, {"m": 0.1}, stage]}))
     theta, t = r["q"][:, 0], r["t"]
     settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)
-    assert settled.sum() > 2500
+    assert settled.sum() > 900
     np.testing.assert_allclose(r["contact.rest.F_n"][settled], M_PART * G * np.cos(theta[settled]), rtol=0,
                                atol=1e-6)
     residual = r.meta["checks"]["energy_residual"]
