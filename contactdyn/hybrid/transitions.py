@@ -390,13 +390,13 @@ def _touching_too(system: System, log: EventLog, t: float, x: np.ndarray, modes,
     if not system.contacts[i].normal.chain.bonded_when_touching:
         return []
     nQ = system.nQ
+    system.robot.update(x[:system.nv], x[nQ:nQ + system.nv])
     out = []
     for j, c in enumerate(system.contacts):
         if j == i or modes[j].touching or c.spec.bonded or not c.normal.chain.bonded_when_touching:
             continue
-        system.robot.update(x[:system.nv], x[nQ:nQ + system.nv])
         kin = system.kinematics(c, x)
-        gap, closing = float(kin.normal @ (kin.p_tip - kin.p_env)), float(kin.normal @ (kin.v_tip - kin.v_env))
+        gap, closing = kin.gap, float(kin.normal @ (kin.v_tip - kin.v_env))
         if abs(gap) <= CO_TOUCH and closing < 0.0:
             log.log(t, "touch", c.name, check_storm=False)
             out.append(j)

@@ -167,7 +167,7 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
         a = dc.arrays[key] = pack(system, c, dc, touching, key[1])
     u, p_tip, v_tip, p_env, v_env = chain_sides(c, dc, kin)
     if c.turning:
-        orient(a.plan, a.consts, u, np.array([axis for _, axis in c.touch_coords]).reshape(-1, 3))
+        orient(a.plan, a.consts, u, c.touch_axes)
     if a.python_stages:
         chain_motion(a.plan, a.stages, a.coef, a.consts, x, p_tip, v_tip, p_env, v_env, float(offset), ydot, a.motion,
                      a.stage_state)
@@ -252,7 +252,7 @@ def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics, u: np.n
             row[: system.nv] += sign * (u @ kin.J)
             for i, axis in c.touch_coords:
                 row[i] += sign * float(u @ axis)
-            for i, col in kin.columns:  # an articulated side's (both sides' relative: its chains are rigid)
+            for i, col in kin.columns:  # an articulated side's (the relative motion's columns)
                 row[i] += sign * float(u @ col)
         elif kind == NodeKind.ANCHOR:
             for i, axis in c.surface_coords:
@@ -275,9 +275,9 @@ def relative_sides(p_tip, v_tip, p_env, v_env):
 
 @njit(cache=True)
 def orient(plan, consts, u, touch_axes):
-    """Point a packed chain along the unit direction u (a surface turning with a robot frame: its normal at this
-    state): u into ``consts`` and u·axis [-] of the touching body's coordinates (``touch_axes`` (k, 3), the plan's
-    H_COORDS rows on the tip; a surface carried by the robot has no body coordinates of its own)."""
+    """Point a packed chain along the unit direction u (on a turning surface: its normal or tangent at this state):
+    u into ``consts`` and u·axis [-] of the touching body's coordinates (``touch_axes`` (k, 3), the plan's H_COORDS
+    rows on the tip; a turning surface's carrier has no translating coordinates of its own)."""
     for i in range(3):
         consts[K_U + i] = u[i]
     for r in range(plan[plan[H_COORDS]]):

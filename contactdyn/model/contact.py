@@ -81,6 +81,11 @@ class Kinematics:
     #: Contact's (:meth:`Contact.add_columns`), their J̇q̇ part in ``drift``
     columns: tuple = ()
 
+    @property
+    def gap(self) -> float:
+        """[m] n·(p_tip − p_env): the touching point's height over the undeformed surface (< 0: pressed in)."""
+        return float(self.normal @ (self.p_tip - self.p_env))
+
     def add_columns(self, rows: np.ndarray, U: np.ndarray) -> None:
         """Add to ``rows`` (k, nQ) the articulated bodies' part of the relative motion along U (k, 3) [m/m]."""
         for i, col in self.columns:
@@ -208,6 +213,8 @@ class Contact:
         #: the robot frame carrying the surface (``body = "robot"``: point, normal, tangents in its coordinates); -1
         self.surface_fid = surface_fid
         self.touch_coords = tuple(touch_coords)  #: the touching body's (coordinate, axis); () for a robot frame
+        #: (k, 3) the touching body's axes [-], in touch_coords' order (what a chain on a turning surface reorients)
+        self.touch_axes = np.array([axis for _, axis in self.touch_coords], float).reshape(-1, 3)
         self.surface_coords = tuple(surface_coords)  #: the surface body's (coordinate, axis); () for the ground
         where = f"contact.{spec.name}"
         self.normal = DirectionalChain(build_chain(spec.normal_chain, f"{where}.normal"), spec.normal, "n")
@@ -363,16 +370,10 @@ def riding_terms(rm: RidingMass, carrier: np.ndarray, frame: FrameTerms, w: np.n
     """Set ``rm``'s terms at a state: the carrying frame's terms ``frame`` (Jacobians over the carrier's coordinates,
     indices ``carrier`` in Q), its angular velocity ω = ``w`` [rad/s], the mass's ξ [m] and ξ̇ [m/s].
 
-    With r = R p0 + ξ n from the frame's origin o (p0 the surface's point, n = R d0 the line's direction, in the
-    frame):
-    p = o + r, v = v_o + ω × r + ξ̇ n, so J = J_o − [r]× J_ω and, at Q̈ = 0,
-    a = J̇_o q̇ + α × r + ω × (ω × r) + 2 ξ̇ ω × n (α = J̇_ω q̇)."""
-    spec = rm.contact.spec
-    R = frame.rotation
-    n = R @ rm.direction
-    r = R @ spec.point + xi * n
-    skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    With r = R p0 + ξ n from the frame's origin (p0 the surface's point, n = R d0 the line's direction, in the
+    frame), the point fixed in the frame at r (:meth:`FrameTerms.point`: J and its J̇q̇) moving along n at ξ̇:
+    v = v_o + ω × r + ξ̇ n, and at Q̈ = 0 its acceleration adds Coriolis' 2 ξ̇ ω × n."""
+    n = frame.rotation @ rm.direction
+    _, _, rm.J, drift = frame.point(frame.rotation @ rm.contact.spec.point + xi * n, w)
     rm.carrier, rm.n = carrier, n
-    rm.J = frame.jacobian - skew @ frame.angular_jacobian
-    rm.drift = frame.drift + np.cross(frame.angular_drift, r) + np.cross(w, np.cross(w, r)) + \
-        2.0 * xi_dot * np.cross(w, n)
+    rm.drift = drift + 2.0 * xi_dot * np.cross(w, n)

@@ -234,7 +234,7 @@ class System:
         modes = []
         for c in self.contacts:
             kin = self.kinematics(c, x)
-            gap0 = float(kin.normal @ (kin.p_tip - kin.p_env))  # chains start undeformed
+            gap0 = kin.gap  # chains start undeformed
             pressed_in = gap0 < -1e-9 and not c.spec.bonded  # a compliant surface starts deformed (a warning)
             if pressed_in and c.spec.normal_chain.rigid:
                 raise SceneError(f"contact.{c.name}", "a start with the tip on or above the rigid surface (gap >= 0)",
@@ -443,7 +443,6 @@ def _coordinate_names(scene: Scene, nv: int) -> list[tuple[str, int]]:
                                  f"two coordinates named {label!r} (body.{label}.x)", scene.file)
             out.append((label, nv + len(out)))
     return out
-
 
 
 def assign_chain_slots(contacts: list[Contact], nv: int, diag: list[float]) -> tuple[list[str], int]:

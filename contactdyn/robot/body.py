@@ -209,15 +209,9 @@ class ArticulatedBody:
 
     def point(self, fid: int, p0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(p [m], v [m/s], J (3, nb) [m/rad or m/m], J̇q̇ [m/s²]) of the point p0 [m] fixed in frame fid (its
-        coordinates) at the last update: r = R p0, p = o + r, v = v_o + ω × r, J = J_o − [r]× J_ω,
-        J̇q̇ = a_o + α × r + ω × (ω × r)."""
+        coordinates) at the last update (:meth:`FrameTerms.point` at r = R p0)."""
         ft = self.robot.frame_terms(fid)
-        r = ft.rotation @ p0
-        w = ft.angular_jacobian @ self._v  # ω [rad/s]
-        skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
-        J = ft.jacobian - skew @ ft.angular_jacobian
-        drift = ft.drift + np.cross(ft.angular_drift, r) + np.cross(w, np.cross(w, r))
-        return ft.position + r, ft.velocity + np.cross(w, r), J, drift
+        return ft.point(ft.rotation @ p0, ft.angular_jacobian @ self._v)
 
     def energy(self, q: np.ndarray, v: np.ndarray, chart: int = 0) -> float:
         """[J] its kinetic energy ½ q̇_bᵀ H_b q̇_b and its gravity potential at (q_b, q̇_b) in ``chart`` (0: A)."""

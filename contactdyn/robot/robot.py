@@ -122,6 +122,15 @@ class FrameTerms(NamedTuple):
     angular_jacobian: np.ndarray  #: ω = J_ω q̇ [rad/s per joint unit], shape (3, nv)
     angular_drift: np.ndarray  #: J̇_ω q̇ [rad/s²], shape (3,)
 
+    def point(self, r: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(p [m], v [m/s], J (3, nv) [m/rad or m/m], J̇q̇ [m/s²]) of the point fixed in the frame at r [m] from its
+        origin (world-aligned), the frame turning at ω = ``w`` [rad/s]: p = o + r, v = v_o + ω × r,
+        J = J_o − [r]× J_ω, J̇q̇ = a_o + α × r + ω × (ω × r)."""
+        skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+        J = self.jacobian - skew @ self.angular_jacobian
+        drift = self.drift + np.cross(self.angular_drift, r) + np.cross(w, np.cross(w, r))
+        return self.position + r, self.velocity + np.cross(w, r), J, drift
+
 
 class Robot:
     """A fixed-base robot with only its active joints as degrees of freedom.

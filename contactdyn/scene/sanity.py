@@ -104,7 +104,7 @@ def system_warnings(system) -> list[str]:
             spec = c.spec.normal_chain if dc.label == "n" else c.spec.tangent_chain
             out += _period_warnings(f"contact.{c.name}.{'normal' if dc.label == 'n' else 'tangent'}", spec, m_tip,
                                     step, system.scene.solver.output_rate)
-        gap = float(kin.normal @ (kin.p_tip - kin.p_env))  # [m]
+        gap = kin.gap  # [m]
         tip, where = ("the body's point", f"frame_point, body.{c.spec.frame}.position0") if body_point else \
             ("the tip", "point, robot.q0/tip0")
         if c.spec.bonded and abs(gap) > GAP_TOL:
