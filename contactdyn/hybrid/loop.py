@@ -106,6 +106,7 @@ class HybridRun:
         self.segments: list[Segment] = []
         self.impacts: list[dict[str, Any]] = []
         self.next_step: float | None = None  #: [s] first step of the next segment (None: solver's choice)
+        self.chart_events = chart_events(system)  #: every segment's free-body chart switches (hybrid.charts)
         if self.solver.method in FIXED and not math.isfinite(self.solver.max_step):
             raise SceneError("solver.max_step", f"the step [s] of the fixed-step method {self.solver.method}",
                              "no max_step", self.scene.file)
@@ -242,7 +243,7 @@ class HybridRun:
             hold = self.sampled.hold(modes, phase, t_end, runner) if held else None
             events, rhs = segment_events(system, modes, phase, t, x, runner if runner.ok else None)
             self.starts.record(t, x, events)
-            events += self._watches(modes, method) + chart_events(system)  # (hybrid.charts)
+            events += self._watches(modes, method) + self.chart_events
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
             # LSODA finishing a slide that comes to rest (HybridRun._collapse_check): at RESTING_TOL × the tolerances
             finishing = method == self.resting and method != scene_method and not _launching(modes)

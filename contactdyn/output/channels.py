@@ -29,6 +29,7 @@ from ..model.system import System
 from ..numerics.dop853 import DenseSolution
 from ..numerics.held_steps import PiecewiseDense
 from ..robot.free_chart import chart_a_angles
+from ..robot.urdf_model import FREE_COORDINATES
 from .samples import Samples, evaluated_samples
 
 __all__ = ["Segment", "Held", "output_grid", "sample_segments", "sample_states", "channels"]
@@ -181,19 +182,20 @@ def free_body_channels(system: System, xs: np.ndarray) -> dict[str, np.ndarray]:
     """A free body's angle channels in chart A whatever chart ran (:mod:`contactdyn.robot.free_chart`): yaw, pitch,
     roll [rad] of its world rotation (as integrated in chart A; from R in chart B, pitch in [−π/2, π/2]) and their
     rates [rad/s] (unbounded near pitch ±90°); and its angular velocity ω [rad/s] in the world, ``omega_x`` ...
-    (chart-free); its chart, ``chart`` (0: A, 1: B)."""
+    (chart-free); its chart, ``chart`` (0: A, 1: B). The angles' channels replace the coordinates' own."""
     nQ, out = system.nQ, {}
     for name, body in system.articulated.items():
         if body.pitch is None:
             continue
         sl = slice(body.first + 3, body.first + 6)
-        rows = [chart_a_angles(x[sl], x[nQ:][sl], body.chart_of(x)) for x in xs]
-        a, ad, w = (np.array([r[k] for r in rows]).reshape(len(xs), 3) for k in range(3))
-        for k, (joint, _) in enumerate(system.body_channels[body.first - system.nv + 3:][:3]):
-            out[f"body.{joint}.x"], out[f"body.{joint}.v"] = a[:, k], ad[:, k]
+        charts = [body.chart_of(x) for x in xs]
+        rows = [chart_a_angles(x[sl], x[nQ:][sl], chart) for x, chart in zip(xs, charts, strict=True)]
+        a, ad, w = (np.array([r[k] for r in rows]).reshape(len(xs), 3) for k in range(3))  # (none: (0, 3))
+        for k, angle in enumerate(FREE_COORDINATES[3:]):  # its joints' names (urdf_model.add_free_joints)
+            out[f"body.{name}.{angle}.x"], out[f"body.{name}.{angle}.v"] = a[:, k], ad[:, k]
         for k, axis in enumerate("xyz"):
             out[f"body.{name}.omega_{axis}"] = w[:, k]
-        out[f"body.{name}.chart"] = np.array([body.chart_of(x) for x in xs], float)
+        out[f"body.{name}.chart"] = np.array(charts, float)
     return out
 
 

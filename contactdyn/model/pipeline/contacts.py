@@ -252,25 +252,27 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma
         J, p_tip, v_tip, drift, p_env, v_env = contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv)
         n, T = cr[CR_N:CR_N + 3], cr[CR_T:CR_T + 3 * row[CI_NT]].reshape((row[CI_NT], 3))
         turning = row[CI_SURFACE] >= 0
+        # a chain's sides: as they are, or on a turning surface measured from it (model.chain_forces.chain_sides)
+        sides = (p_tip, v_tip, p_env, v_env)
         if turning:  # the surface turns with a packed frame: the relative motion, along this state's n and T
             J, drift, p_env, v_env, n, T = turning_sides(x, ints, row, cr, J, p_tip, v_tip, drift, FJ, Fa, Fp, Fv,
                                                          FR)
+            sides = relative_sides(p_tip, v_tip, p_env, v_env)
+            n_touch = ints[row[CI_COORDS]]
+            touch_axes = cr[CR_AXES:CR_AXES + 3 * n_touch].reshape((n_touch, 3))
         tip_force = np.zeros(3)
         F_n = 0.0
         for k in range(row[CI_NORMAL], row[CI_FIRST_T] + row[CI_N_T]):
             ch = chains[k]
+            s_tip, s_vtip, s_env, s_venv = p_tip, v_tip, p_env, v_env
             if turning:  # along this state's n (the normal) or T's row (a tangential chain)
-                n_touch = ints[row[CI_COORDS]]
                 u = n if k == row[CI_NORMAL] else T[k - row[CI_FIRST_T]]
                 orient(ints[ch[CH_PLAN]:ch[CH_STAGES]], reals[ch[CH_CONSTS]:ch[CH_CONSTS] + ch[CH_NCONSTS]], u,
-                       cr[CR_AXES:CR_AXES + 3 * n_touch].reshape((n_touch, 3)))
-            if turning and ch[CH_NS] > 0:  # stages: from the surface (a rigid bond's gap is the same either way)
-                p_rel, v_rel, p_0, v_0 = relative_sides(p_tip, v_tip, p_env, v_env)
-                tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, p_rel, v_rel, p_0, v_0, drift,
-                                                              f, ydot)
-            else:
-                tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, p_tip, v_tip, p_env, v_env,
-                                                              drift, f, ydot)
+                       touch_axes)
+                if ch[CH_NS] > 0:  # stages: from the surface (a rigid bond's gap is the same either way)
+                    s_tip, s_vtip, s_env, s_venv = sides
+            tip_F, gam, interface_F, gap, finite = _chain(x, ints, reals, work, ch, s_tip, s_vtip, s_env, s_venv,
+                                                          drift, f, ydot)
             if not finite:
                 return False
             work[ints[W_DIAG] + 1 + k] = interface_F  # (diagnostics: a tangential chain's interface force)

@@ -353,10 +353,10 @@ def _charts(b: _Builder, system, starts: dict[str, int]) -> None:
     :func:`.robot_terms.table_at` puts in while x is in chart B (``starts``: each body's first row in the table)."""
     free = [(name, body) for name, body in system.articulated.items() if body.pitch is not None]
     b.ints[N_CHARTS] = len(free)
-    rows = []
+    rows = []  # (each body's rows depend on its own table only: one forest of every body's last chart serves all)
+    turned, _ = forest_table(system.robot.rigid_table, [(body.robots[-1].rigid_table, body.first)
+                                                        for body in system.articulated.values()])
     for name, body in free:
-        turned, _ = forest_table(system.robot.rigid_table, [(other.robots[-1 if other is body else 0].rigid_table,
-                                                             other.first) for other in system.articulated.values()])
         row = starts[name]
         rows += [body.chart_index, row, body.nb, b.real_section(None, turned[row:row + body.nb])]
     b.int_section(I_CHARTS, rows)

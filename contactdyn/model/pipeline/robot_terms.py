@@ -66,11 +66,11 @@ def robot_terms(x, ints, reals):
 @njit(cache=True)
 def table_at(x, ints, reals):
     """The rigid-body table at the state x: the packed one (chart A's), each free body's rows replaced by its chart
-    B's while x is in chart B (a copy then; the packed table itself without a free body)."""
+    B's while x is in chart B (a copy then; the packed table itself while every free body is in chart A)."""
     table = section(reals, ints[R_RIGID], ints[NJ], WIDTH)
-    if ints[N_CHARTS] == 0:
-        return table
     charts = section(ints, ints[I_CHARTS], ints[N_CHARTS], CHT_W)
+    if not any_in_chart_b(x, charts):
+        return table
     out = table.copy()
     for k in range(charts.shape[0]):
         if in_chart_b(x, charts[k, CHT_SLOT]):
@@ -79,6 +79,15 @@ def table_at(x, ints, reals):
                 for c in range(WIDTH):
                     out[charts[k, CHT_ROW] + r, c] = turned[r, c]
     return out
+
+
+@njit(cache=True, inline="always")
+def any_in_chart_b(x, charts):
+    """Is any free body of ``charts`` (the packed rows, CHT_W wide) in chart B at the state x?"""
+    for k in range(charts.shape[0]):
+        if in_chart_b(x, charts[k, CHT_SLOT]):
+            return True
+    return False
 
 
 @njit(cache=True, inline="always")
