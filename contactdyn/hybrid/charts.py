@@ -25,7 +25,7 @@ def chart_events(system: System) -> list:
     """The ``chart`` event of each free body (its name the event's ``contact``)."""
     out = []
     for name, body in system.articulated.items():
-        if body.pitch is not None:
+        if body.free:
             i = body.first + body.pitch
             out.append(terminal_event(lambda t, x, i=i: abs(math.cos(float(x[i]))) - SWITCH_COS, "chart", name))
     return out

@@ -128,7 +128,7 @@ class System:
                                  f"phase[{i}].controller"))
         self.z_slices, self.energy_slot, self.impulse_slots, self.ny = assign_first_order_slots(
             n_first, [ctl.n_states for ctl in self.controllers], scene.solver.record_energy, self.contacts)
-        for body in (b for b in self.articulated.values() if b.pitch is not None):  # a free body's chart: one slot
+        for body in (b for b in self.articulated.values() if b.free):  # a free body's chart: one slot
             body.chart_index, self.ny = 2 * self.nQ + self.ny, self.ny + 1
         self.n = 2 * self.nQ + self.ny
         self.stabilization = scene.solver.stabilization  #: Baumgarte rate ω of constraint rows [1/s]

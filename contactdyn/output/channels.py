@@ -185,7 +185,7 @@ def free_body_channels(system: System, xs: np.ndarray) -> dict[str, np.ndarray]:
     (chart-free); its chart, ``chart`` (0: A, 1: B). The angles' channels replace the coordinates' own."""
     nQ, out = system.nQ, {}
     for name, body in system.articulated.items():
-        if body.pitch is None:
+        if not body.free:
             continue
         sl = slice(body.first + 3, body.first + 6)
         charts = [body.chart_of(x) for x in xs]

@@ -136,6 +136,7 @@ class ArticulatedBody:
 
     def __init__(self, name: str, robot: Robot, first: int, free: bool = False) -> None:
         self.name, self.first, self.nb = name, first, robot.nv
+        self.free = free  #: its root link moves freely: six coordinates, two charts (contactdyn.robot.free_chart)
         #: a free body's pitch's index in q_b (its coordinates FREE_COORDINATES first), else None
         self.pitch = FREE_COORDINATES.index("pitch") if free else None
         self.robots = (robot,)  #: per chart its model (a free body: A, then B turned by free_chart.C)
@@ -169,7 +170,7 @@ class ArticulatedBody:
         chart = self.chart_of(x)
         key = q.tobytes() + v.tobytes() + bytes([chart])
         if key != self._key:
-            if self.pitch is not None and abs(float(np.cos(q[self.pitch]))) < PITCH_LIMIT:
+            if self.free and abs(float(np.cos(q[self.pitch]))) < PITCH_LIMIT:
                 raise SimulationError(f"body {self.name!r}: its pitch reached ±90° in chart {'AB'[chart]} (now "
                                       f"{float(q[self.pitch]):.9g} rad), where its Euler angles are singular: its "
                                       f"chart switch was missed (a step across it); lower solver.max_step")
@@ -189,7 +190,7 @@ class ArticulatedBody:
 
     def start_chart(self, x: np.ndarray, nQ: int) -> np.ndarray:
         """x in the chart a free body starts in: A, or B where |cos pitch_A| < free_chart.SWITCH_COS."""
-        if self.pitch is None or abs(float(np.cos(x[self.first + self.pitch]))) >= SWITCH_COS:
+        if not self.free or abs(float(np.cos(x[self.first + self.pitch]))) >= SWITCH_COS:
             return x
         return self.switched(x, nQ)
 

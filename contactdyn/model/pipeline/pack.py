@@ -351,7 +351,7 @@ def _charts(b: _Builder, system, starts: dict[str, int]) -> None:
     """Per free body its chart's slot in x and its joints' rows in the rigid-body table (chart A's there), and those
     rows in chart B (its model turned by free_chart.C: the roll link's inertia, its children's placements), which
     :func:`.robot_terms.table_at` puts in while x is in chart B (``starts``: each body's first row in the table)."""
-    free = [(name, body) for name, body in system.articulated.items() if body.pitch is not None]
+    free = [(name, body) for name, body in system.articulated.items() if body.free]
     b.ints[N_CHARTS] = len(free)
     rows = []  # (each body's rows depend on its own table only: one forest of every body's last chart serves all)
     turned, _ = forest_table(system.robot.rigid_table, [(body.robots[-1].rigid_table, body.first)
@@ -378,7 +378,7 @@ def _frames(b: _Builder, system, keys: list, starts: dict[str, int]) -> None:
         frame = models[0].frames[fid]  # (the joints and supports are the same in either chart)
         cols = [first + k for jj in models[0].supports[frame.parentJoint][1:]
                 for k in range(models[0].joints[jj].idx_v, models[0].joints[jj].idx_v + models[0].joints[jj].nv)]
-        chart = art.chart_index if art is not None and art.pitch is not None else -1
+        chart = art.chart_index if art is not None and art.free else -1
         rows.append((row0 + frame.parentJoint, len(cols), len(supports), chart))
         supports += cols
         consts += _placement(models[0].frames[fid], point)
