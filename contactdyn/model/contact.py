@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..numerics.compile_cache import njit
+from ..numerics.linalg import cross3
 from ..robot.robot import FrameTerms
 from ..scene.scene_file import ContactSpec
 from .chain import Chain, NodeKind, balanced, build_chain
@@ -376,4 +377,4 @@ def riding_terms(rm: RidingMass, carrier: np.ndarray, frame: FrameTerms, w: np.n
     n = frame.rotation @ rm.direction
     _, _, rm.J, drift = frame.point(frame.rotation @ rm.contact.spec.point + xi * n, w)
     rm.carrier, rm.n = carrier, n
-    rm.drift = drift + 2.0 * xi_dot * np.cross(w, n)
+    rm.drift = drift + 2.0 * xi_dot * cross3(w, n)

@@ -21,6 +21,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import RobotError, close_matches
+from ..numerics.linalg import cross3
 from .catalog import example_robots, urdf_dir
 from .frames import chain_joints, find_frame
 from .rigid_body import rigid_table
@@ -128,8 +129,9 @@ class FrameTerms(NamedTuple):
         J = J_o − [r]× J_ω, J̇q̇ = a_o + α × r + ω × (ω × r)."""
         skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
         J = self.jacobian - skew @ self.angular_jacobian
-        drift = self.drift + np.cross(self.angular_drift, r) + np.cross(w, np.cross(w, r))
-        return self.position + r, self.velocity + np.cross(w, r), J, drift
+        w_r = cross3(w, r)
+        drift = self.drift + cross3(self.angular_drift, r) + cross3(w, w_r)
+        return self.position + r, self.velocity + w_r, J, drift
 
 
 class Robot:
