@@ -206,6 +206,8 @@ class Transitions:
         for name in imp.separated:  # holding it would have pulled: it lets go at the impact
             modes[self._index(name)] = modes[self._index(name)].separated()
             self.log.log(imp.t, "separate", name, check_storm=False)
+        for name in imp.jammed_too:  # it slid into the impact, which stopped its slip
+            modes[self._index(name)] = modes[self._index(name)].with_(stuck=True)
         i = self._index(imp.contact)
         c = system.contacts[i]
         if imp.jammed:
@@ -384,9 +386,8 @@ def _touching_too(system: System, log: EventLog, t: float, x: np.ndarray, modes,
     yet, |gap| within CO_TOUCH [m] and closing (the normal velocity < 0). Located one at a time, simultaneous touches
     (a flat landing) would take their impacts in turn, each pulling on the last (an impact is unilateral: that one
     lets go, and touches again a rounding later): the impact holds them together. With friction, one arriving
-    without slip holds by its stick (the impact's cone check lets it slide if it cannot); one sliding slides through
-    the impact as any other sliding contact does (its normal column untilted: the impact law slides or jams the
-    located contact only)."""
+    without slip holds by its stick (the impact's cone check lets it slide if it cannot); one sliding slides or jams
+    through the impact as any other sliding contact does (:func:`~contactdyn.model.impact.impact`)."""
     if not system.contacts[i].normal.chain.bonded_when_touching:
         return []
     nQ = system.nQ
@@ -404,10 +405,15 @@ def _touching_too(system: System, log: EventLog, t: float, x: np.ndarray, modes,
 
 
 def _co_impacts(imp, names: list[str]) -> list[dict]:
-    """``Result.impacts`` entries of the contacts that touched with ``imp``'s own, each its normal impulse [N·s] in
-    the one impact (its loss and velocities are on the located contact's entry, ``with`` names it)."""
+    """``Result.impacts`` entries of the contacts that touched with ``imp``'s own, each its normal and friction
+    impulses [N·s] in the one impact, jammed if its slide stopped there (its loss and velocities are on the located
+    contact's entry, ``with`` names it)."""
+    def friction(name):
+        held = [v for (who, kind, _), v in imp.row_impulses.items() if who == name and kind == "t"]
+        return imp.slid.get(name, held)
+
     return [{"t": imp.t, "contact": name, "normal_impulse": float(imp.row_impulses.get((name, "n", 0), 0.0)),
-             "friction_impulse": [v for (who, kind, _), v in imp.row_impulses.items() if who == name and kind == "t"],
-             "jammed": False, "energy_loss": 0.0, "v_before": imp.v_before.tolist(),
+             "friction_impulse": friction(name), "jammed": name in imp.jammed_too, "energy_loss": 0.0,
+             "v_before": imp.v_before.tolist(),
              "v_after": imp.v_after.tolist(), "slip_before": [], "slip_after": [], "with": imp.contact}
             for name in names]

@@ -225,13 +225,13 @@ def solve_folded(system, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zd
     return check, qdd, lam, regular, full, zdot
 
 
-def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray, float] | None = None, jam: Contact | None = None,
-                  limits: tuple = (), joint_modes: tuple = ()):
+def velocity_rows(system, x, modes, slides: dict[str, tuple[np.ndarray, float]] | None = None,
+                  jam: Contact | None = None, limits: tuple = (), joint_modes: tuple = ()):
     """Velocity constraints of the touching contacts (bond rows, sticks, tangential chain bonds), of
     the joints pressing on ``limits`` (:mod:`contactdyn.model.limits`) and of the joints stuck in
     ``joint_modes`` (:mod:`contactdyn.model.joint_friction`).
 
-    ``slide = (contact, d, μ)`` tilts that contact's normal column by the sliding friction
+    ``slides`` (contact name -> (d, μ)) tilts each such contact's normal column by its sliding friction
     −μ d; ``jam`` adds stick rows for a contact that is not (yet) stuck.
     """
     rows = Rows()
@@ -243,8 +243,8 @@ def velocity_rows(system, x, modes, slide: tuple[Contact, np.ndarray, float] | N
         _, row, _, _, _ = chain_forces(system, c, c.normal, True, 0.0, kin, x, dummy_f, dummy_y, None, False)
         if row is not None:
             col = row
-            if slide is not None and slide[0] is c:
-                d, mu = slide[1], slide[2]
+            if slides and c.name in slides:
+                d, mu = slides[c.name]
                 col = row - sum(mu * d[i] * contact_row(system, c, kin.tangents[i], kin)
                                 for i in range(len(c.tangents)))
             rows.add(row, 0.0, (c.name, "n", 0), col)

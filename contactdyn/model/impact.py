@@ -20,12 +20,19 @@ only while its normal impulse pushes, Λ_n ≥ 0; one that would pull lets go (`
 from the impact on), and one let go whose normal velocity after it would approach is held again, one at a time
 (an active set: the plastic impact of several unilateral contacts, Λ_n ≥ 0, v_n⁺ ≥ 0, Λ_n v_n⁺ = 0).
 
-Every other stuck contact holds through its stick rows only while its impulse stays in its
-own cone, |F_fΔt| ≤ μ_s FΔt (FΔt: its normal row's impulse; zero for a compliant normal,
-which carries no impulse): one that would leave it slides from the impact on, where its
-impulse pushed (``Impact.released``), and the impact is solved again without its stick.
-Its friction impulse during the impact is μ_k FΔt folded nowhere: like every sliding contact
-other than the impact's own, its normal column stays untilted (zero for a compliant normal).
+Every other touching contact with friction takes its friction impulse by the same law:
+
+- one sliding into the impact (its slip beyond the stick band) slides in its own pre-impact slip
+  direction d, its normal column tilted by −μ_k d (μ_k at that slip speed); if its tangential
+  velocity after the impact points against d it jams instead (``Impact.jammed_too``): held by
+  stick rows from then on, cone-checked as below;
+- a stuck one holds through its stick rows only while its impulse stays in its own cone,
+  |F_fΔt| ≤ μ_s FΔt (FΔt: its normal row's impulse; zero for a compliant normal, which carries
+  no impulse): one that would leave it slides from the impact on, where its impulse pushed
+  (``Impact.released``), its column tilted by −μ_k(0) d, and the impact is solved again.
+
+A box landing flat while it slides thus loses μ_k v_n of its sliding speed at once, its four corners'
+friction impulses −μ_k FΔt d each (``Impact.slid``).
 
 A joint reaching its position limit is the same map with the limit's row among the rows
 (:func:`limit_impact`), friction impulses at a sliding contact included. A joint stuck by dry friction
@@ -70,6 +77,10 @@ class Impact:
     released: dict = field(default_factory=dict)
     #: other contacts that let go at the impact (holding them would have pulled: Λ_n < 0), by name
     separated: tuple = ()
+    #: other contacts that slid into the impact and jammed (their slip after it would have reversed), by name
+    jammed_too: tuple = ()
+    #: other contacts that slid through the impact: name -> their friction impulse −μ_k FΔt d per tangent [N·s]
+    slid: dict = field(default_factory=dict)
 
 #: [-] a normal impulse below −IMPULSE_TOL (1 + Σ|Λ|) pulls; a let-go contact's normal velocity below
 #: −IMPULSE_TOL (1 + max|Q̇⁺|) approaches (rounding of the momentum law's solve)
@@ -105,11 +116,14 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     own = system.contacts.index(contact) if contact is not None else -1
     if k and modes[own].stuck:  # the impact's own stick: tried jammed, like a contact at rest
         held[own] = modes[own].with_(stuck=False)
+    others = _sliding_into(system, x, modes, contact, qd_minus)  #: index -> (d, μ_k) of the others sliding
     impulses: dict = {}
 
-    def solve(slide=None, jam=False):  # slide: (d, μ)
-        rows = velocity_rows(system, x, held, slide=(contact, *slide) if slide is not None else None,
-                             jam=contact if jam else None, limits=limits)
+    def solve(slide=None, jam=False):  # slide: (d, μ) of the impact's own contact
+        slides = {system.contacts[j].name: s for j, s in others.items() if held[j].touching and not held[j].stuck}
+        if slide is not None:
+            slides[name] = slide
+        rows = velocity_rows(system, x, held, slides=slides, jam=contact if jam else None, limits=limits)
         z, _ = impulse_solve(system, M, rows, qd_minus)
         impulses.clear()
         impulses.update({m: float(z[nQ + j]) for j, m in enumerate(rows.meta)})
@@ -124,23 +138,62 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
         if j is not None:  # let go a pulling contact, or hold again one let go that would approach
             held[j] = modes[j] if not held[j].touching else held[j].separated()
             continue
+        j = _reversed_slide(system, x, held, others, released, qd_plus)
+        if j is not None:  # its slide would reverse: it jams (held by its sticks, cone-checked next)
+            held[j] = held[j].with_(stuck=True)
+            continue
         outside = _sticks_outside_the_cone(system, held, contact, impulses)
         if not outside:
             break
-        for j, push in outside:  # slide from rest where the impulse pushed (its friction impulse: see above)
+        for j, push in outside:  # slide from rest where the impulse pushed, with the kinetic friction at rest
+            c = system.contacts[j]
             held[j] = held[j].with_(stuck=False, slip=direction_of(push), from_rest=True)
-            released[system.contacts[j].name] = held[j].slip
+            others[j] = (np.array(held[j].slip), float(c.friction.mu(0.0)))
+            released[c.name] = held[j].slip
     else:
         raise SimulationError(f"impact at t = {t:.9g} s: no set of the touching contacts holds with pushing "
                               "impulses only (the active set cycles)")
     separated = tuple(c.name for c, m, h in zip(system.contacts, modes, held, strict=True)
                       if m.touching and not h.touching)
+    jammed_too = tuple(system.contacts[j].name for j in others if held[j].stuck and not modes[j].stuck)
+    slid = {system.contacts[j].name: (-mu * impulses.get((system.contacts[j].name, "n", 0), 0.0) * d).tolist()
+            for j, (d, mu) in others.items() if held[j].touching and not held[j].stuck}
     x_new = x.copy()
     x_new[nQ:2 * nQ] = qd_plus
     energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
     vt_plus = slip_velocity(system, contact, kin, qd_plus) if k else np.zeros(0)
     return x_new, Impact(t, name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d,
-                         dict(impulses), released, separated)
+                         dict(impulses), released, separated, jammed_too, slid)
+
+
+def _sliding_into(system, x, modes, contact, qd_minus) -> dict[int, tuple[np.ndarray, float]]:
+    """Index -> (d, μ_k) of every touching contact other than ``contact`` that slides into the impact with a normal
+    row and friction: d its slip direction before it (tangent coordinates), μ_k at that slip speed; one within the
+    stick band slides on untilted (its direction is not defined)."""
+    out = {}
+    for j, (c, m) in enumerate(zip(system.contacts, modes, strict=True)):
+        if (c is contact or not m.touching or m.stuck or c.friction is None or not len(c.tangents)
+                or not c.normal.chain.bonded_when_touching):
+            continue
+        vt = slip_velocity(system, c, system.kinematics(c, x), qd_minus)
+        speed = float(np.linalg.norm(vt))
+        if speed > system.slip_band:
+            out[j] = (vt / speed, float(c.friction.mu(speed)))
+    return out
+
+
+def _reversed_slide(system, x, held, others, released, qd_plus) -> int | None:
+    """The other contact sliding through the impact (not one it released) whose slip after it points most against
+    its direction d (v_t⁺ · d < 0: the slide assumption is wrong, it jams), else None."""
+    found, most = None, 0.0
+    for j, (d, _) in others.items():
+        c = system.contacts[j]
+        if not held[j].touching or held[j].stuck or c.name in released:
+            continue
+        along = float(slip_velocity(system, c, system.kinematics(c, x), qd_plus) @ d)
+        if along < most:
+            found, most = j, along
+    return found
 
 
 def _unilateral_change(system, x, modes, held, contact, impulses, qd_plus) -> int | None:
@@ -215,8 +268,8 @@ def limit_impact(system, t: float, x: np.ndarray, modes: list[ContactMode], limi
     The same momentum law as at a touch (:func:`impact`) with the limit row among the rows. The
     impact's contact is the first touching one with a normal row (rigid or bonded: its normal
     impulse is finite), a sliding one with friction first: it takes its friction impulse by the
-    same sliding/jamming branch (with several sliding contacts, the others' normal columns stay
-    untilted); a sticking one holds through its stick rows. Without one, the contact is "".
+    same sliding/jamming branch (the other sliding contacts too, see :func:`impact`); a sticking one
+    holds through its stick rows. Without one, the contact is "".
     """
     rowed = [(c, m) for c, m in zip(system.contacts, modes, strict=True)
              if m.touching and c.normal.chain.bonded_when_touching]
