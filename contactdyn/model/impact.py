@@ -184,8 +184,9 @@ def _sliding_into(system, x, modes, contact, qd_minus) -> dict[int, tuple[np.nda
 
 def _reversed_slide(system, x, held, others, released, qd_plus) -> int | None:
     """The other contact sliding through the impact (not one it released) whose slip after it points most against
-    its direction d (v_t⁺ · d < 0: the slide assumption is wrong, it jams), else None."""
-    found, most = None, 0.0
+    its direction d (v_t⁺ · d < −v_ε, the stick band: the slide assumption is wrong, it jams), else None; one
+    ending within the band slides on, to be decided at rest after the impact."""
+    found, most = None, -system.slip_band
     for j, (d, _) in others.items():
         c = system.contacts[j]
         if not held[j].touching or held[j].stuck or c.name in released:
