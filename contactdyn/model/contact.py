@@ -315,21 +315,15 @@ def turning_surface(p, v, J, a, o, v_o, J_o, a_o, R, w, J_w, alpha, p0, n0, T0):
             p_s[i] += R[i, j] * p0[j]
             for k in range(T0.shape[0]):
                 T[k, i] += R[i, j] * T0[k, j]
-    v_m = v_o + _cross(w, r)
+    v_m = v_o + cross3(w, r)
     v_rel = v - v_m
-    a_rel = a - (a_o + _cross(alpha, r) + _cross(w, _cross(w, r))) - 2.0 * _cross(w, v_rel)
+    a_rel = a - (a_o + cross3(alpha, r) + cross3(w, cross3(w, r))) - 2.0 * cross3(w, v_rel)
     J_rel = np.empty((3, nv))
     for c in range(nv):
-        rxJ = _cross(r, J_w[:, c])  # [r]× J_ω's column c
+        rxJ = cross3(r, J_w[:, c])  # [r]× J_ω's column c
         for i in range(3):
             J_rel[i, c] = J[i, c] - J_o[i, c] + rxJ[i]
     return J_rel, a_rel, p_s, v_m, n, T
-
-
-@njit(cache=True, inline="always")
-def _cross(a, b):
-    """a × b of two 3-vectors."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 @dataclass

@@ -52,10 +52,17 @@ def dot3(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b of two 3-vectors, as ``np.cross`` forms it (a₁b₂ − a₂b₁, …)."""
+    """a × b of two 3-vectors, as ``np.cross`` forms it (a₁b₂ − a₂b₁, …); compiled, the same operations."""
     a0, a1, a2 = a.tolist()
     b0, b1, b2 = b.tolist()
     return np.array((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0))
+
+
+@overload(cross3, inline="always")
+def _cross3_compiled(a, b):
+    def impl(a, b):
+        return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    return impl
 
 
 @overload(dot3)

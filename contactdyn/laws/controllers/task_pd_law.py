@@ -29,21 +29,16 @@ from __future__ import annotations
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import mtv, mv
+from ...numerics.linalg import cross3, mtv, mv
 
 __all__ = ["orientation_error", "moment", "torque"]
-
-
-@njit(cache=True)
-def _cross(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 @njit(cache=True)
 def orientation_error(R, R_d):
     """e = ½ Σ_c r_c × r_d,c = ½ vee(R_d Rᵀ − R R_dᵀ) (world; −sin θ k for R = exp(θ [k]ₓ) R_d) [rad, to O(θ³)]."""
     e = np.zeros(3)
-    for c in range(3):  # (by component, e += r_c × r_d,c: _cross on the columns would compile it again, for 'A')
+    for c in range(3):  # (by component, e += r_c × r_d,c: cross3 on the columns would compile it again, for 'A')
         e[0] += R[1, c] * R_d[2, c] - R[2, c] * R_d[1, c]
         e[1] += R[2, c] * R_d[0, c] - R[0, c] * R_d[2, c]
         e[2] += R[0, c] * R_d[1, c] - R[1, c] * R_d[0, c]
@@ -58,7 +53,7 @@ def moment(R_tip, omega, tool_axis, target, R_d, ko, do):
         return ko * orientation_error(R_tip, R_d) - do * omega
     a = mv(R_tip, tool_axis)  # the tool direction (world)
     omega_perp = omega - (omega[0] * a[0] + omega[1] * a[1] + omega[2] * a[2]) * a
-    return ko * _cross(a, target) - do * omega_perp
+    return ko * cross3(a, target) - do * omega_perp
 
 
 @njit(cache=True)
