@@ -161,7 +161,7 @@ def test_a_tool_pressed_into_a_kelvin_voigt_face_of_the_bar_holds_it_at_rest():
 
 def _tray_b(k: float = K, b: float = B, m: float = 0.01, duration: float = 2.0, **contact):
     """The tilting tray with a model-(b) normal: ground —[k, b]— m′, the part striking m′ (a mass riding the tray);
-    ``duration`` [s] (the readable model runs it)."""
+    ``duration`` [s]."""
     return _tray_scene({"normal": {"direction": [0.0, 0.0, 1.0], "model": "b", "k": k, "b": b, "m": m}, **contact},
                        duration=duration)
 
@@ -215,10 +215,13 @@ def test_a_riding_mass_is_a_prismatic_joint_of_what_carries_the_surface(chain):
     np.testing.assert_allclose(bias, expected_bias, rtol=0, atol=1e-13)
 
 
-def test_on_the_tilting_tray_a_model_b_chain_carries_m_g_cos_theta_and_the_audit_closes():
-    r = simulate(_tray_b())
-    assert {row["path"] for row in r.stats["paths"].values()} == {READABLE}
-    assert "riding a turning surface" in next(iter(r.stats["paths"].values()))["why"]
+@pytest.fixture(scope="module")
+def riding():
+    return simulate(_tray_b())
+
+
+def test_on_the_tilting_tray_a_model_b_chain_carries_m_g_cos_theta_and_the_audit_closes(riding):
+    r = riding
     theta, t = r["q"][:, 0], r["t"]
     settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)
     assert settled.sum() > 900
@@ -226,6 +229,19 @@ def test_on_the_tilting_tray_a_model_b_chain_carries_m_g_cos_theta_and_the_audit
                                atol=1e-6)
     residual = r.meta["checks"]["energy_residual"]
     assert residual["value"] <= residual["tol"], residual
+
+
+def test_a_riding_mass_runs_on_the_compiled_call_and_the_readable_model_agrees(riding):
+    """The mass's coupling with the tray (contact.riding_point, one function for both paths) in the compiled call's M
+    and f: the runs agree to 1e-9 of each channel's largest value."""
+    assert {row["path"] for row in riding.stats["paths"].values()} == {PIPELINE}
+    readable = simulate(_tray_b(), compiled=False)
+    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
+    for key in ("contact.rest.F_n", "contact.rest.F_f", "body.part.slide.x", "body.part.lift.x", "q", "v"):
+        ref = np.asarray(readable[key], float)
+        np.testing.assert_allclose(riding[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
+    assert [(e["kind"], e["t"]) for e in riding.events] == pytest.approx(
+        [(e["kind"], e["t"]) for e in readable.events], abs=1e-9)
 
 
 def test_the_tool_strikes_a_mass_riding_the_bar_s_face_and_the_bar_feels_no_impulse():

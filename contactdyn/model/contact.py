@@ -16,13 +16,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..numerics.compile_cache import njit
-from ..numerics.linalg import cross3
+from ..numerics.linalg import contiguous, cross3
 from ..robot.robot import FrameTerms
 from ..scene.scene_file import ContactSpec
 from .chain import Chain, NodeKind, balanced, build_chain
 
 __all__ = ["Contact", "ContactMode", "ChainPlan", "Kinematics", "RidingMass", "riding_masses", "riding_terms",
-           "structure", "turning_surface"]
+           "riding_point", "structure", "turning_surface"]
 
 ANY_2D = (0.0, 0.0)  #: a 2-D reference direction in a mode's :func:`structure`: never a real one
 
@@ -366,9 +366,33 @@ def riding_terms(rm: RidingMass, carrier: np.ndarray, frame: FrameTerms, w: np.n
     indices ``carrier`` in Q), its angular velocity ω = ``w`` [rad/s], the mass's ξ [m] and ξ̇ [m/s].
 
     With r = R p0 + ξ n from the frame's origin (p0 the surface's point, n = R d0 the line's direction, in the
-    frame), the point fixed in the frame at r (:meth:`FrameTerms.point`: J and its J̇q̇) moving along n at ξ̇:
-    v = v_o + ω × r + ξ̇ n, and at Q̈ = 0 its acceleration adds Coriolis' 2 ξ̇ ω × n."""
-    n = frame.rotation @ rm.direction
-    _, _, rm.J, drift = frame.point(frame.rotation @ rm.contact.spec.point + xi * n, w)
-    rm.carrier, rm.n = carrier, n
-    rm.drift = drift + 2.0 * xi_dot * cross3(w, n)
+    frame), the point fixed in the frame at r moving along n at ξ̇: v = v_o + ω × r + ξ̇ n, and at Q̈ = 0 its
+    acceleration adds Coriolis' 2 ξ̇ ω × n (:func:`riding_point`, the compiled call's too)."""
+    rm.J, rm.n, rm.drift = riding_point(contiguous(frame.jacobian), contiguous(frame.angular_jacobian), frame.drift,
+                                        frame.angular_drift, contiguous(frame.rotation), w, rm.direction,
+                                        rm.contact.spec.point, xi, xi_dot)
+    rm.carrier = carrier
+
+
+@njit(cache=True)
+def riding_point(J_o, J_w, a_o, alpha, R, w, d0, p0, xi, xi_dot):
+    """(J (3, k), n, drift [m/s²]) of a mass riding a frame's line (the frame's J_o, J_ω over k coordinates, its
+    J̇q̇ = (a_o, α), rotation R, angular velocity ω = ``w`` [rad/s]; the line through p0 [m] along d0, both in the
+    frame; the mass at ξ [m] on it, moving at ξ̇ [m/s]): n = R d0, r = R p0 + ξ n, J = J_o − [r]× J_ω (the point
+    fixed in the frame at r), drift = a_o + α × r + ω × (ω × r) + 2 ξ̇ ω × n (its acceleration at Q̈ = 0, Coriolis'
+    term included); one source for the readable model and the compiled call."""
+    n, r = np.zeros(3), np.zeros(3)
+    for i in range(3):
+        for j in range(3):
+            n[i] += R[i, j] * d0[j]
+    for i in range(3):
+        for j in range(3):
+            r[i] += R[i, j] * p0[j]
+        r[i] += xi * n[i]
+    J = np.empty((3, J_o.shape[1]))
+    for c in range(J_o.shape[1]):
+        rxJ = cross3(r, J_w[:, c])
+        for i in range(3):
+            J[i, c] = J_o[i, c] - rxJ[i]
+    drift = a_o + cross3(alpha, r) + cross3(w, cross3(w, r)) + 2.0 * xi_dot * cross3(w, n)
+    return J, n, drift

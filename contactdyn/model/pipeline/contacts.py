@@ -8,6 +8,7 @@ normal, then the tangential ones) by :func:`contactdyn.model.chain_forces.chain_
 column −μ d·G_T (μ by the friction law's address, or the constant μ_k) or its known force −μ max(F, 0) d − c v_t
 on the coordinates; then the chains' tip force Jᵀ F [N].
 After the solve (:func:`finish`): normal forces, friction forces, the impulse states' rates, limit torques.
+A chain's mass riding a turning surface couples with what carries it (:func:`add_riding`: its M and bias terms).
 A contact's two sides (:func:`contact_sides`): the touching one a packed frame (a robot frame, an articulated body's
 point) or a translating body's point, the surface the ground, a body, or turning with a packed frame (a robot
 frame, an articulated body's); a translating body's side moved by its coordinates, a packed frame's by the
@@ -23,7 +24,7 @@ import numpy as np
 from ...laws.abi import call_friction
 from ...numerics.compile_cache import njit
 from ..chain_forces import H_COORDS, K_U, K_UA, ON_ANCHOR, ON_TIP, chain_call, coordinate_row, orient, relative_sides
-from ..contact import turning_surface
+from ..contact import riding_point, turning_surface
 from .pack import (
     ANCHOR,
     CH_COEF,
@@ -78,15 +79,25 @@ from .pack import (
     I_CHAINS,
     I_CONTACTS,
     I_LIMITS,
+    I_RIDING,
     LI_JOINT,
     LI_W,
     N_CHAINS,
     N_CONTACTS,
     N_LIMITS,
+    N_RIDING,
     NQ,
     R_LIMITS,
+    R_RIDING,
     RH_OMEGA,
     RH_SLIP_BAND,
+    RI_COORD,
+    RI_FRAME,
+    RI_W,
+    RR_DIR,
+    RR_MASS,
+    RR_POINT,
+    RR_W,
     TIP,
     W_DIAG,
     section,
@@ -94,7 +105,7 @@ from .pack import (
 
 __all__ = ["contact_terms", "limit_rows", "finish", "contact_sides", "turning_sides", "surface_point",
            "relative_velocity",
-           "add_coordinates", "add_coordinate_rates"]
+           "add_coordinates", "add_coordinate_rates", "add_riding"]
 
 #: per contact, what finishes a slide once its normal force is solved: μ [-], d (2), the viscous force (2) [N]
 P_MU, P_D, P_VISC, P_W = 0, 1, 3, 5
@@ -395,3 +406,40 @@ def finish(ints, lam, xdot, events, pending, first_limit_row):
     base = EV_W * cs.shape[0]
     for k in range(ints[N_LIMITS]):
         events[base + k] = lam[first_limit_row + k]
+
+
+@njit(cache=True)
+def add_riding(x, ints, reals, FJ, Fa, FR, M, f):
+    """M (nQ, nQ) with each chain mass riding a turning surface coupled to what carries it, m [J | n]ᵀ [J | n] beyond
+    its own m (M_rest's diagonal), and its bias −m [J | n]ᵀ a in f (J, n, a: :func:`contactdyn.model.contact.
+    riding_point` at its carrying frame, over the table's NF columns; ``constraints.mass_matrix`` and
+    ``System.body_forces``); M itself (NF × NF) when no mass rides."""
+    n_r = ints[N_RIDING]
+    if n_r == 0:
+        return M
+    nQ, nf = ints[NQ], M.shape[0]
+    Mx = np.zeros((nQ, nQ))
+    for r in range(nf):
+        for c in range(nf):
+            Mx[r, c] = M[r, c]
+    rows, consts = section(ints, ints[I_RIDING], n_r, RI_W), section(reals, ints[R_RIDING], n_r, RR_W)
+    for k in range(n_r):
+        fi, i, m = rows[k, RI_FRAME], rows[k, RI_COORD], consts[k, RR_MASS]
+        w = np.zeros(3)  # the frame's ω [rad/s]
+        for a in range(3):
+            for c in range(nf):
+                w[a] += FJ[fi, 3 + a, c] * x[nQ + c]
+        J, n, drift = riding_point(FJ[fi, :3], FJ[fi, 3:], Fa[fi, :3], Fa[fi, 3:], FR[fi], w,
+                                   consts[k, RR_DIR:RR_DIR + 3], consts[k, RR_POINT:RR_POINT + 3], x[i], x[nQ + i])
+        for a in range(nf):
+            Jn = Ja = 0.0
+            for r in range(3):
+                Jn += J[r, a] * n[r]
+                Ja += J[r, a] * drift[r]
+            Mx[a, i] += m * Jn
+            Mx[i, a] += m * Jn
+            f[a] -= m * Ja
+            for c in range(nf):
+                Mx[a, c] += m * (J[0, a] * J[0, c] + J[1, a] * J[1, c] + J[2, a] * J[2, c])
+        f[i] -= m * (n[0] * drift[0] + n[1] * drift[1] + n[2] * drift[2])
+    return Mx

@@ -19,7 +19,7 @@ import numpy as np
 
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import lu_solve, put
-from .pack import NF, NQ, NV, R_MREST
+from .pack import NQ, NV, R_MREST
 
 __all__ = ["kkt_solve", "residual_ok", "least_squares"]
 
@@ -42,14 +42,15 @@ def residual_ok(A, z, b):
 @njit(cache=True)
 def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
     """(Q̈ [m/s², rad/s²], λ [N], regular): the KKT system's solve, or with no rows (no carried column, no
-    articulated body) H q̈ = f and the other coordinates' f / m (H: M's rigid-body block, NF × NF: the robot's
-    joints, then the articulated bodies' coordinates). ``fold`` (nQ, rows, or no columns): a force-reading
+    articulated body, no riding mass) H q̈ = f and the other coordinates' f / m (H: M's rigid-body block, NF × NF:
+    the robot's joints, then the articulated bodies' coordinates; nQ × nQ with a chain's mass riding a turning
+    surface, :func:`.contacts.add_riding`). ``fold`` (nQ, rows, or no columns): a force-reading
     controller's B through its drives (τ = τ₀ + B λ, :mod:`.force_fold`), subtracted from the force columns;
     ``fold_q`` (nQ): its part per unit acceleration of coordinate ``iq`` (a reference carried by that body; -1 none),
     subtracted from M's column iq (``constraints.kkt_solve``'s M − fold_q)."""
     nv, nQ, nr = ints[NV], ints[NQ], gamma.size
     m_rest = reals[ints[R_MREST]:ints[R_MREST] + nQ - nv]
-    if nr == 0 and iq < 0 and ints[NF] == nv:
+    if nr == 0 and iq < 0 and H.shape[0] == nv:
         qdd = np.empty(nQ)
         b = f[:nv].copy()
         z = lu_solve(H, b)

@@ -27,8 +27,10 @@ a drive kind numba cannot compile, the energy audit with motors, a continuous co
 constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
 law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
-joint it takes is a one-DOF revolute or prismatic), a chain's mass riding a turning surface, a surface turning with
-a frame (the robot's or an articulated body's) under a force-reading law or under a 2-D slide launching from rest.
+joint it takes is a one-DOF revolute or prismatic), a surface turning with a frame (the robot's or an articulated
+body's) under a force-reading law or under a 2-D slide launching from rest. A chain's mass riding a turning surface
+is packed with its frame (``N_RIDING``): the call adds its coupling to M and its bias to f
+(:func:`.contacts.add_riding`).
 An articulated body's joints are appended to the robot's in the rigid-body table
 (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
 robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
@@ -72,7 +74,7 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
  N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, A_CALL, A_CONTROLLER, A_SOLVE,
  A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, NF, N_CHARTS, I_CHARTS, R_FRAMES_B,
- HEADER) = range(76)
+ N_RIDING, I_RIDING, R_RIDING, HEADER) = range(79)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
 #: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
@@ -85,6 +87,8 @@ __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_
 #: and the frames' J span Q[:NF]; :func:`contactdyn.robot.rigid_body.forest_table`)
 #: N_CHARTS: the free bodies (two charts each, :mod:`contactdyn.robot.free_chart`), I_CHARTS their rows (CHT_*
 #: below), R_FRAMES_B the packed frames' placements in chart B (N_FRAMES rows of FR_W; only with a free body)
+#: N_RIDING: the chain masses riding turning surfaces (``contact.RidingMass``), I_RIDING their ints (RI_*), R_RIDING
+#: their reals (RR_*)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -103,6 +107,10 @@ FI_JOINT, FI_N_SUPPORT, FI_SUPPORT, FI_CHART, FI_W = 0, 1, 2, 3, 4
 #: of its model turned by free_chart.C: ``free_chart.turned_model``)
 CHT_SLOT, CHT_ROW, CHT_N, CHT_REALS, CHT_W = 0, 1, 2, 3, 4
 FR_W = 12  #: a frame's reals: its placement in its joint's frame, r (3) [m] and rotation (9, by rows)
+#: a riding mass's ints: the packed frame carrying its line, its ξ's index in Q; its reals: its mass [kg], the line's
+#: direction d0 (3) and point p0 (3) [m] in that frame
+RI_FRAME, RI_COORD, RI_W = 0, 1, 2
+RR_MASS, RR_DIR, RR_POINT, RR_W = 0, 1, 4, 7
 #: a contact's ints (frame: its packed frame, the zero frame after them for a body's point; coords: where its
 #: bodies' coordinates are in ints, [n touching side, n surface side, their indices]; friction: FRICTION_* below;
 #: rows: -1 none; law: the friction law's address, 0 constant μ_k; surface: the packed frame carrying the surface,
@@ -182,9 +190,6 @@ def unsupported(system, modes, phase) -> str:
     ctl = phase.controller
     if reason := _bodies_unsupported(system, phase):
         return reason
-    if system.riding:
-        return f"a chain's mass riding a turning surface (contact {system.riding[0].contact.name!r}: the readable " \
-               "model computes its inertia)"
     if reason := drives_unsupported(system):
         return reason
     if system.energy_slot >= 0 and system.drives.any_motor:
@@ -305,6 +310,7 @@ def pack(system, modes, phase) -> Packed:
     _frames(b, system, frames, starts)
     h[TIP_FRAME] = 0
     meta = _contacts(b, system, modes, frames)
+    _riding(b, system, frames)
     h[N_LIMITS] = len(phase.limits)
     b.int_section(I_LIMITS, [v for i, side in phase.limits for v in (i, side)])
     b.real_section(R_LIMITS, [system.limits.by_index[i].lower if side > 0 else system.limits.by_index[i].upper
@@ -345,6 +351,14 @@ def _surface_frame(c):
     if c.surface_link is not None:
         return c.surface_link[0].name, c.surface_link[1], (0.0, 0.0, 0.0)
     return c.surface_fid if c.surface_fid >= 0 else None
+
+
+def _riding(b: _Builder, system, frames: list) -> None:
+    """Per chain mass riding a turning surface its carrying frame (its index among the packed ``frames``) and ξ's
+    index in Q (ints), its mass [kg], the line's direction and point in that frame [m] (reals)."""
+    b.ints[N_RIDING] = len(system.riding)
+    b.int_section(I_RIDING, [v for rm in system.riding for v in (frames.index(_surface_frame(rm.contact)), rm.coord)])
+    b.real_section(R_RIDING, [v for rm in system.riding for v in (rm.mass, *rm.direction, *rm.contact.spec.point)])
 
 
 def _charts(b: _Builder, system, starts: dict[str, int]) -> None:

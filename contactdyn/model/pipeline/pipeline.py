@@ -36,7 +36,7 @@ from .actuation import (
     task_force_terms,
     task_pd_terms,
 )
-from .contacts import contact_terms, finish, limit_rows
+from .contacts import add_riding, contact_terms, finish, limit_rows
 from .drives import drive_values, inertias
 from .energy import energy_rates
 from .force_fold import carried_coordinate, controller_terms, fold_rates, solve_through_drives
@@ -127,6 +127,7 @@ def call(t, x, ints, reals, work, events):
             f[nv + i] = reals[weights + i]
         for i in range(nv, ints[NF]):  # the articulated bodies' −h_b (0 for a translating body's coordinate)
             f[i] -= h[i]
+        M = add_riding(x, ints, reals, FJ, Fa, FR, M, f)  # (a chain's mass riding a turning surface: M over Q)
         ydot = np.zeros(ints[NY])
         G, C, gamma = np.zeros((nr, nQ)), np.zeros((nr, nQ)), np.zeros(nr)
         pending = np.zeros((nc, 5))
