@@ -155,7 +155,8 @@ def test_a_launch_already_past_the_stick_band_takes_no_trial_pass(name):
         p = pipe.packed
         trial, state = launch_start(p.ints, p.reals)
         _, _, _, Jw, W = robot_terms(x, p.ints, trial)
-        past = launch_settled(x, p.ints, state, trial, frame_terms(x, p.ints, trial, W, Jw)[3])
+        FJ, Fa, Fp, Fv, FR = frame_terms(x, p.ints, trial, W, Jw)
+        past = launch_settled(x, p.ints, state, trial, FJ, Fa, Fp, Fv, FR)
         assert past == (speed > 0.0)
         if past:
             assert np.array_equal(trial, p.reals)  # r exactly, not its cos/sin round trip

@@ -11,6 +11,8 @@ smooth motion of a 5-joint arm.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -195,14 +197,59 @@ def test_a_force_set_point_on_a_turning_surface_is_one_clear_error():
 def test_with_2d_friction_the_part_slides_straight_down_the_slope_as_with_1d():
     """The tray's x and y both friction directions: the part slips at the same instant (1e-9 s) and slides straight
     down the slope, its slip and friction along the tray's x exactly 0, its motion the 1-D run's to 1e-9 m; the slide
-    launching from rest runs on the readable model (the compiled launch reads fixed tangents), with that reason."""
+    launching from rest runs on the compiled call (its slip and acceleration along the turning tangents,
+    ``pipeline.contacts.tangential_motion``) and the readable model agrees to 1e-9."""
     doc, file = _doc()
     rest = {**doc["contact"]["rest"], "tangent": {**doc["contact"]["rest"]["tangent"],
                                                   "directions": [[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]}}
-    two, one = simulate(parse_scene({**doc, "contact": {"rest": rest}}, None, file)), simulate("tilt_tray")
+    scene = parse_scene({**doc, "contact": {"rest": rest}}, None, file)
+    two, one = simulate(scene), simulate("tilt_tray")
+    assert {row["path"] for row in two.stats["paths"].values()} == {PIPELINE}
+    readable = simulate(scene, compiled=False)
+    for key in ("body.part.slide.x", "body.part.lift.x", "contact.rest.F_n", "contact.rest.F_f", "q"):
+        ref = np.asarray(readable[key], float)
+        np.testing.assert_allclose(two[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
     assert [(e["kind"], e["name"]) for e in two.events] == [(e["kind"], e["name"]) for e in one.events]
     assert abs(two.events[-1]["t"] - one.events[-1]["t"]) < 1e-9
     for key in ("body.part.slide.x", "body.part.lift.x"):
         np.testing.assert_allclose(two[key], one[key], rtol=0, atol=1e-9)
     assert np.all(two["contact.rest.v_slip"][:, 1] == 0.0) and np.all(two["contact.rest.F_f"][:, 1] == 0.0)
-    assert "fixed tangents" in two.stats["paths"]["tilt: rest sliding"]["why"]
+
+
+PART_XYZ = (Path(__file__).resolve().parents[1] / "sims" / "part_yz.urdf").read_text().replace(
+    '<joint name="slide"', '<joint name="across" type="prismatic"><parent link="base"/><child link="sled"/>'
+    '<axis xyz="1 0 0"/><limit lower="-10" upper="10" effort="1e4" velocity="100"/></joint><link name="sled"/>'
+    '<joint name="slide"').replace('<parent link="base"/>\n    <child link="carriage"/>',
+                                   '<parent link="sled"/>\n    <child link="carriage"/>')
+
+
+def test_with_2d_friction_along_turned_tangents_the_launch_finds_the_slope_on_both_paths(tmp_path):
+    """The part on three slides (x too) and tangents at 53° to the slope, (0.6, 0.8, 0) and (−0.8, 0.6, 0) in the
+    tray's frame: the slide launching from rest must find d = (0.8, 0.6) (down the slope) by its Newton over the
+    turning tangents. The compiled call and the readable model agree to 1e-9, and the part's motion is the 1-D
+    run's to 1e-9 m (the same physics; nothing pushes it along x). At rtol 1e-11, as the 1-D comparison above. The
+    friction force differs by up to 3e-8 of its largest value at the sample inside the launch (slip within the stick
+    band, d the Newton's): each path's Newton stops at its own tolerance."""
+    (tmp_path / "part_xyz.urdf").write_text(PART_XYZ)
+    doc, _ = _doc()
+    doc["solver"] = {**doc["solver"], "rtol": 1e-11, "atol": 1e-13}
+    rest = {**doc["contact"]["rest"], "tangent": {**doc["contact"]["rest"]["tangent"],
+                                                  "directions": [[0.6, 0.8, 0.0], [-0.8, 0.6, 0.0]]}}
+    body = {"part": {**doc["body"]["part"], "urdf": "part_xyz.urdf"}}
+    scene = parse_scene({**doc, "contact": {"rest": rest}, "body": body}, None, tmp_path / "tray.toml")
+    two, one, readable = simulate(scene), simulate("tilt_tray"), simulate(scene, compiled=False)
+    assert {row["path"] for row in two.stats["paths"].values()} == {PIPELINE}
+    for key, tol in (("body.part.slide.x", 1e-9), ("body.part.lift.x", 1e-9), ("contact.rest.F_n", 1e-9),
+                     ("contact.rest.F_f", 1e-7), ("q", 1e-9)):
+        ref = np.asarray(readable[key], float)
+        np.testing.assert_allclose(two[key], ref, rtol=0, atol=tol * np.abs(ref).max(), err_msg=key)
+    for key in ("body.part.slide.x", "body.part.lift.x"):
+        np.testing.assert_allclose(two[key], one[key], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(two["body.part.across.x"], 0.0, atol=1e-12)
+    sliding = ~two["contact.rest.stuck"].astype(bool)
+    slip = two["contact.rest.v_slip"][sliding]
+    moving = np.linalg.norm(slip, axis=1) > 1e-6
+    assert moving.sum() > 50
+    directions = slip[moving] / np.linalg.norm(slip[moving], axis=1)[:, None]
+    np.testing.assert_allclose(directions, np.tile([-0.8, -0.6], (len(directions), 1)), rtol=0,
+                               atol=1e-8)  # down the slope: −y of the tray (just launched: the Newton's 3e-9)

@@ -104,8 +104,7 @@ from .pack import (
 )
 
 __all__ = ["contact_terms", "limit_rows", "finish", "contact_sides", "turning_sides", "surface_point",
-           "relative_velocity",
-           "add_coordinates", "add_coordinate_rates", "add_riding"]
+           "tangential_motion", "add_coordinates", "add_coordinate_rates", "add_riding"]
 
 #: per contact, what finishes a slide once its normal force is solved: μ [-], d (2), the viscous force (2) [N]
 P_MU, P_D, P_VISC, P_W = 0, 1, 3, 5
@@ -196,9 +195,15 @@ def add_coordinates(ints, row, cr, U, out):
 
 
 @njit(cache=True)
-def relative_velocity(x, ints, row, cr, Fv):
-    """v_tip − v_env [m/s] of the contact (the robot frame's velocity from ``Fv``)."""
-    return _touching_point(x, ints, row, cr, Fv, Fv)[1] - surface_point(x, ints, row, cr)[1]  # (positions unused)
+def tangential_motion(x, ints, row, cr, FJ, Fa, Fp, Fv, FR):
+    """(J (3, NF), J̇q̇ [m/s²], v_tip − v_env [m/s], T (nt, 3)) of a contact's relative motion: its touching side's
+    (:func:`contact_sides`), or on a turning surface the relative motion along this state's tangents
+    (:func:`turning_sides`); a translating body's coordinates add their axes (:func:`add_coordinate_rates`)."""
+    J, p_tip, v_tip, drift, p_env, v_env = contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv)
+    T = cr[CR_T:CR_T + 3 * row[CI_NT]].reshape((row[CI_NT], 3))
+    if row[CI_SURFACE] >= 0:
+        J, drift, p_env, v_env, _, T = turning_sides(x, ints, row, cr, J, p_tip, v_tip, drift, FJ, Fa, Fp, Fv, FR)
+    return J, drift, v_tip - v_env, T
 
 
 @njit(cache=True)

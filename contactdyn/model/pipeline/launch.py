@@ -5,7 +5,8 @@ d = (cos θ, sin θ) with a_t(d) ∥ d ahead, found by Newton on θ (at most 4 u
 difference; the reference r where it does not converge), each trial the whole call with that contact's direction
 set to d (its normal column re-tilted, or its known friction force re-aimed, and the KKT re-solved). Contacts
 launch in order, each trial with the earlier ones' directions found. A slide already past the band keeps r (its
-own direction from there on, ``contacts._slip_direction``).
+own direction from there on, ``contacts._slip_direction``). Slip and acceleration are the relative motion's along
+the state's tangents (:func:`.contacts.tangential_motion`: on a turning surface they turn with it).
 
 The call drives it (:func:`contactdyn.model.pipeline.pipeline.call`, one loop over its body): :func:`launch_start`
 copies ``reals`` (the packed mode stays as packed) and aims the first launching contact, :func:`launch_took` reads
@@ -22,13 +23,11 @@ import math
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from .contacts import add_coordinate_rates, relative_velocity
+from .contacts import add_coordinate_rates, tangential_motion
 from .pack import (
-    CI_FRAME,
     CI_REALS,
     CI_W,
     CR_R,
-    CR_T,
     I_CONTACTS,
     I_LAUNCH,
     N_CONTACTS,
@@ -86,14 +85,14 @@ def launch_start(ints, reals):
 
 
 @njit(cache=True)
-def launch_settled(x, ints, state, trial, Fv):
-    """Before a pass, from its frames (Fv: their velocities [m/s], the same under any trial direction): each pending
+def launch_settled(x, ints, state, trial, FJ, Fa, Fp, Fv, FR):
+    """Before a pass, from its frames (the same under any trial direction): each pending
     contact about to take its first pass whose slip is already past the band gets its r back and the next contact
     begins (as :func:`launch_took` would have done after that pass, whose rates it would not have read). True when
     no contact is left to launch: the pass about to run is the result."""
     while state[ST_CONTACT] < ints[N_LAUNCH] and state[ST_STEP] == FIRST:
         j = int(state[ST_CONTACT])
-        if not _past_band(x, ints, trial, state, j, Fv):
+        if not _past_band(x, ints, trial, state, j, FJ, Fa, Fp, Fv, FR):
             break
         at = _contact(ints, j)[CI_REALS] + CR_R
         trial[at], trial[at + 1] = state[ST_R], state[ST_R + 1]  # launched: r, its own direction from here on
@@ -102,12 +101,12 @@ def launch_settled(x, ints, state, trial, Fv):
 
 
 @njit(cache=True)
-def _past_band(x, ints, trial, state, j, Fv):
-    """Contact j's slip already ahead of its reference r by more than the stick band: v_t · r > v_ε [m/s]."""
+def _past_band(x, ints, trial, state, j, FJ, Fa, Fp, Fv, FR):
+    """Contact j's slip already ahead of its reference r by more than the stick band: v_t · r > v_ε [m/s] (v_t
+    along this state's tangents: a turning surface's turn with it)."""
     row = _contact(ints, j)
     cr = trial[row[CI_REALS]:]
-    v = relative_velocity(x, ints, row, cr, Fv)
-    T = cr[CR_T:CR_T + 6].reshape((2, 3))
+    _, _, v, T = tangential_motion(x, ints, row, cr, FJ, Fa, Fp, Fv, FR)
     ahead = 0.0
     for k in range(2):
         ahead += (T[k, 0] * v[0] + T[k, 1] * v[1] + T[k, 2] * v[2]) * state[ST_R + k]
@@ -115,37 +114,37 @@ def _past_band(x, ints, trial, state, j, Fv):
 
 
 @njit(cache=True)
-def _cross(ints, trial, j, xdot, FJ, Fa):
-    """(d × a_t, a_t · d) [m/s²] of launching contact j under its trial d: a_t = T (J Q̈ + J̇q̇ − axis Q̈_body)
-    (friction.slip_acceleration)."""
+def _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR):
+    """(d × a_t, a_t · d) [m/s²] of launching contact j under its trial d: a_t = T (J Q̈ + J̇q̇ + axis Q̈_body), the
+    relative motion's along this state's tangents (friction.slip_acceleration)."""
     nQ = ints[NQ]
     row = _contact(ints, j)
     cr = trial[row[CI_REALS]:]
-    fi = row[CI_FRAME]
-    acc = Fa[fi, :3].copy()
+    J, drift, _, T = tangential_motion(x, ints, row, cr, FJ, Fa, Fp, Fv, FR)
+    acc = drift.copy()
     for r in range(3):
-        for c in range(FJ.shape[2]):  # (the rigid-body table's columns)
-            acc[r] += FJ[fi, r, c] * xdot[nQ + c]
+        for c in range(J.shape[1]):  # (the rigid-body table's columns)
+            acc[r] += J[r, c] * xdot[nQ + c]
     add_coordinate_rates(ints, row, cr, xdot[nQ:2 * nQ], acc)
     a = np.zeros(2)
     for k in range(2):
-        a[k] = cr[CR_T + 3 * k] * acc[0] + cr[CR_T + 3 * k + 1] * acc[1] + cr[CR_T + 3 * k + 2] * acc[2]
+        a[k] = T[k, 0] * acc[0] + T[k, 1] * acc[1] + T[k, 2] * acc[2]
     d0, d1 = cr[CR_R], cr[CR_R + 1]
     return d0 * a[1] - d1 * a[0], a[0] * d0 + a[1] * d1
 
 
 @njit(cache=True)
-def launch_took(x, ints, state, trial, FJ, Fa, Fv, xdot):
+def launch_took(x, ints, state, trial, FJ, Fa, Fp, Fv, FR, xdot):
     """A pass's rates ``xdot`` and frames read for the pending contact: its next trial aimed, or its direction
     found (d where φ ≈ 0 ahead; r past the band, where dφ/dθ ≥ 0 or after MAX_UPDATES) and the next contact
     begun. True when this pass is the result (the last contact's Newton converged on it)."""
     j = int(state[ST_CONTACT])
     at = _contact(ints, j)[CI_REALS] + CR_R
-    if state[ST_STEP] == FIRST and _past_band(x, ints, trial, state, j, Fv):
+    if state[ST_STEP] == FIRST and _past_band(x, ints, trial, state, j, FJ, Fa, Fp, Fv, FR):
         trial[at], trial[at + 1] = state[ST_R], state[ST_R + 1]  # launched: r, its own direction from here on
         _begin(ints, trial, state, j + 1)
         return False
-    phi, ahead = _cross(ints, trial, j, xdot, FJ, Fa)
+    phi, ahead = _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR)
     if state[ST_STEP] != AT_H:
         if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):  # the trial's d stays
             _begin(ints, trial, state, j + 1)

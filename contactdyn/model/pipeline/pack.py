@@ -28,7 +28,7 @@ constant ones), joint-space A7, a force-reading law with a tangential set-point,
 law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
 joint it takes is a one-DOF revolute or prismatic), a surface turning with a frame (the robot's or an articulated
-body's) under a force-reading law or under a 2-D slide launching from rest. A chain's mass riding a turning surface
+body's) under a force-reading law. A chain's mass riding a turning surface
 is packed with its frame (``N_RIDING``): the call adds its coupling to M and its bias to f
 (:func:`.contacts.add_riding`).
 An articulated body's joints are appended to the robot's in the rigid-body table
@@ -203,9 +203,6 @@ def unsupported(system, modes, phase) -> str:
     for c, m in zip(system.contacts, modes, strict=True):
         if c.turning and (ctl.uses_forces or getattr(ctl, "inner", ctl).uses_forces):
             return f"contact {c.name!r}: a turning surface (carried by a frame) under a force-reading controller"
-        if c.turning and launching(m):
-            return f"contact {c.name!r}: a 2-D slide launching from rest on a turning surface (the compiled launch " \
-                   "reads fixed tangents)"
         if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
             return f"friction law {c.friction.law!r} does not compile"
         for dc in c.chains:

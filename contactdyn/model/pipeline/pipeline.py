@@ -118,7 +118,8 @@ def call(t, x, ints, reals, work, events):
         M, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:], nv)  # rotors reflected: true M, the law's H
         FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
         if not final:  # a contact already past the stick band: its r back before a pass (no trial pass for it)
-            final = call_at(ints[A_LAUNCH_SETTLED], "pipeline.launch_settled", (x, ints, state, reals, Fv))
+            final = call_at(ints[A_LAUNCH_SETTLED], "pipeline.launch_settled", (x, ints, state, reals, FJ, Fa, Fp, Fv,
+                                                                                FR))
         f = np.zeros(nQ)
         for i in range(nv):
             f[i] = -h[i]
@@ -165,7 +166,7 @@ def call(t, x, ints, reals, work, events):
             record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam, C, first_limit)
         events[events.size - 1] = 1.0 if regular else 0.0
         if final or not regular or call_at(ints[A_LAUNCH], "pipeline.launch_took",
-                                           (x, ints, state, reals, FJ, Fa, Fv, xdot)):
+                                           (x, ints, state, reals, FJ, Fa, Fp, Fv, FR, xdot)):
             return xdot
 
 
@@ -276,8 +277,8 @@ CONTROLLER_STAGES = {CTL_ABI: controller_terms, CTL_TASK_PD: task_pd_terms, CTL_
                      CTL_TASK_FORCE: task_force_terms}  #: the controller's kind -> its stage (else open_loop_terms)
 declare("pipeline.solve", solve_through_drives, _SOLVE)
 declare("pipeline.launch_start", launch_start, types.Tuple((_F1, _F1))(_I1, _F1))
-declare("pipeline.launch_took", launch_took, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F1))
-declare("pipeline.launch_settled", launch_settled, types.boolean(_F1, _I1, _F1, _F1, _F2))
+declare("pipeline.launch_took", launch_took, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F2, _F3, _F1))
+declare("pipeline.launch_settled", launch_settled, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F2, _F3))
 declare("pipeline.energy", energy_rates, types.none(_F1, _I1, _F1, _F1, _F1, _F1, _F2))
 
 
