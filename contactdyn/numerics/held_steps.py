@@ -34,6 +34,7 @@ from .dop853 import (
     _stepped,
     _Steps,
     core_steps,
+    dense_states,
     solution_status,
 )
 
@@ -57,14 +58,22 @@ class PiecewiseDense:
     def __call__(self, t, derivatives: Callable | None = None) -> np.ndarray:
         """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t)))."""
         tt = np.atleast_1d(np.asarray(t, float))
-        idx = np.clip(np.searchsorted(self.starts, tt, side="right") - 1, 0, len(self.parts) - 1)
         if np.ndim(t) == 0:
-            return self.parts[int(idx[0])](float(tt[0]), derivatives)
-        out = np.empty((len(self.parts[0].steps.y0), len(tt)))
-        for i in np.unique(idx):
-            at = idx == i
-            out[:, at] = self.parts[int(i)](tt[at], derivatives)
-        return out
+            return self.parts[self.part_of(tt)[0]](float(tt[0]), derivatives)
+        out = np.empty((len(tt), len(self.parts[0].steps.y0)))
+        split = self.split(tt)
+        for (_, at), y in zip(split, dense_states([(part, tt[at]) for part, at in split], derivatives), strict=True):
+            out[at] = y
+        return out.T
+
+    def part_of(self, tt: np.ndarray) -> np.ndarray:
+        """The piece of each time tt [s] (a piece's start belongs to it)."""
+        return np.clip(np.searchsorted(self.starts, tt, side="right") - 1, 0, len(self.parts) - 1)
+
+    def split(self, tt: np.ndarray) -> list[tuple[DenseSolution, np.ndarray]]:
+        """(piece, the positions in tt of its times) per piece that has times tt [s], in piece order."""
+        idx = self.part_of(tt)
+        return [(self.parts[i], np.flatnonzero(idx == i)) for i in sorted(set(idx.tolist()))]
 
 
 def _jump(watch: _EventWatch, t: float, before: np.ndarray, after: np.ndarray, value_of: Callable) -> bool:

@@ -13,7 +13,6 @@ Channel names and units are documented in the README (``q`` [rad or m], ``contac
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
 from itertools import groupby
 from typing import Any
 
@@ -26,7 +25,7 @@ from ..model.joint_friction import joint_friction_channels
 from ..model.limits import limit_channels
 from ..model.phases import Phase
 from ..model.system import System
-from ..numerics.dop853 import DenseSolution
+from ..numerics.dop853 import DenseSolution, dense_states
 from ..numerics.held_steps import PiecewiseDense
 from ..robot.free_chart import chart_a_angles
 from ..robot.urdf_model import FREE_COORDINATES
@@ -72,29 +71,25 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
 
 def sample_states(system: System, segments: list[Segment], grid: np.ndarray, stats: dict[str, Any]
                   ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """The channels of a run at the times ``grid`` and its states there, (len(grid), n)."""
+    """The channels of a run at the times ``grid`` (increasing) and its states there, (len(grid), n)."""
     # the segment of each sample: the last starting at or before it (at an event time, the one after)
     t0 = np.array([seg.t0 for seg in segments])
     idx = np.maximum(np.searchsorted(t0, grid, side="right") - 1, 0)
+    bounds = np.searchsorted(idx, np.arange(len(segments) + 1)).tolist()  # segment i's samples: bounds[i]:bounds[i + 1]
     xs = np.empty((len(grid), system.n))
     parts: list[Samples] = []
     modes_of: list[list[ContactMode]] = []
     phases_of: list[Phase] = []
     counted: list = []
-    for run in _same_mode_runs(segments, np.unique(idx)):  # segments split at corners: one batch
+    for run in _same_mode_runs(segments, sorted(set(idx.tolist()))):  # segments split at corners: one batch
         seg = segments[run[0]]
-        sel = np.flatnonzero(np.isin(idx, run))
+        sel = slice(bounds[run[0]], bounds[run[-1] + 1])
         ts = grid[sel]
         derivatives = None
         if seg.runner.ok:  # the interpolants' extra stages all at once
             seg.runner.use(seg.modes)
             derivatives = getattr(seg.runner.rhs, "derivatives", None)
-        for i in run:
-            at = sel[idx[sel] == i]
-            sol = segments[i].sol
-            if derivatives is not None and isinstance(sol, (DenseSolution, PiecewiseDense)):
-                sol = partial(sol, derivatives=derivatives)
-            xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
+        _run_states(segments, run, bounds, grid, xs, derivatives)
         X = xs[sel]
         if seg.runner.ok and seg.runner not in counted:  # one serves several segments (every turn): count it once
             counted.append(seg.runner)
@@ -103,8 +98,8 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
             parts.append(seg.runner.samples(ts, X, seg.modes))  # it serves every turn: this segment's r
         else:
             parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase))
-        modes_of += [seg.modes] * len(sel)
-        phases_of += [seg.phase] * len(sel)
+        modes_of += [seg.modes] * len(ts)
+        phases_of += [seg.phase] * len(ts)
     samples = Samples.concatenate(parts, system)
     out = channels(system, grid, xs, samples, modes_of)
     if system.limits.limits:
@@ -117,16 +112,39 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
     return out, xs
 
 
-def _same_mode_runs(segments: list[Segment], used: np.ndarray) -> list[list[int]]:
+def _same_mode_runs(segments: list[Segment], used: list[int]) -> list[list[int]]:
     """The used segments' indices in runs of consecutive segments on the same modes, phase and runner."""
     runs: list[list[int]] = []
     for i in used:
         seg = segments[i]
         if runs and runs[-1][-1] == i - 1 and _same_mode(segments[i - 1], seg):
-            runs[-1].append(int(i))
+            runs[-1].append(i)
         else:
-            runs.append([int(i)])
+            runs.append([i])
     return runs
+
+
+def _run_states(segments: list[Segment], run: list[int], bounds: list[int], grid: np.ndarray, xs: np.ndarray,
+                derivatives) -> None:
+    """xs at the samples of a run of segments (segment i's: bounds[i]:bounds[i + 1] of ``grid``): the compiled
+    DOP853's dense outputs (their pieces') all at once, their interpolants built in one batch (``derivatives``:
+    the mode's right-hand side at many states, :func:`~contactdyn.hybrid.steps.derivatives`), others each alone."""
+    dense: list[tuple[DenseSolution, np.ndarray]] = []
+    where: list[np.ndarray] = []
+    for i in run:
+        at = np.arange(bounds[i], bounds[i + 1])
+        sol = segments[i].sol
+        if isinstance(sol, PiecewiseDense):
+            for part, k in sol.split(grid[at]):
+                dense.append((part, grid[at[k]]))
+                where.append(at[k])
+        elif isinstance(sol, DenseSolution):
+            dense.append((sol, grid[at]))
+            where.append(at)
+        else:
+            xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
+    for at, y in zip(where, dense_states(dense, derivatives), strict=True):
+        xs[at] = y
 
 
 def _same_mode(a: Segment, b: Segment) -> bool:
