@@ -47,3 +47,12 @@ def test_one_batch_for_several_runs_gives_each_runs_own_states():
         assert same_bits(got, np.ascontiguousarray(run.sol(tt).T))
         assert same_bits(got[5], run.sol(float(tt[5])))
     assert [run.sol.late_calls for run in runs] == [run.sol.late_calls for run in alone]
+
+
+def test_one_time_gives_the_array_calls_numbers():
+    """DenseSolution.state (one time, no arrays) and the array call: the same step, the same bits, at step ends too."""
+    run = solve(oscillator, (0.0, 5.0), [1.0, 0.0], rtol=1e-8, atol=1e-10)
+    alone = solve(oscillator, (0.0, 5.0), [1.0, 0.0], rtol=1e-8, atol=1e-10)
+    tt = np.concatenate([run.t, np.linspace(0.0, 5.0, 23)])
+    for t in tt:
+        assert same_bits(run.sol(float(t)), np.ascontiguousarray(alone.sol(np.array([t]))[:, 0]))

@@ -40,6 +40,7 @@ by ``fun`` (:func:`_attempt`, ``solve_ivp``'s arithmetic). Verified in ``tests/t
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -172,8 +173,21 @@ class DenseSolution:
 
         ``derivatives``: see :meth:`_Steps.build` (the interpolants this call builds; for output samples
         only: the run's own event location and segment ends use the calls)."""
+        if np.ndim(t) == 0:
+            return self.state(float(t), derivatives)
         (y,) = dense_states([(self, np.atleast_1d(np.asarray(t, float)))], derivatives)
-        return y[0] if np.ndim(t) == 0 else y.T
+        return y.T
+
+    def state(self, t: float, derivatives: Callable | None = None) -> np.ndarray:
+        """The state at one time t [s]: :meth:`locate`'s step and fraction, without its arrays (the same numbers)."""
+        st = self.steps
+        if not len(self.ends) or t == st.t[0]:
+            return st.y0.copy()
+        i = min(bisect_left(st.t, t, 1) - 1, len(self.ends) - 1)  # (np.searchsorted(self.ends, t, "left"))
+        if i not in st.coef:
+            build_interpolants([(st, i)], derivatives)
+        t_old = st.t[i]
+        return horner_at(st.coef[i], (t - t_old) / (st.t[i + 1] - t_old), st.y_old(i))
 
     def locate(self, tt: np.ndarray) -> tuple[list[int], np.ndarray, np.ndarray] | None:
         """Where the times tt [s] fall: (their steps, sorted; each time's position in that list; its step fraction
