@@ -77,30 +77,37 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
     idx = np.maximum(np.searchsorted(t0, grid, side="right") - 1, 0)
     bounds = np.searchsorted(idx, np.arange(len(segments) + 1)).tolist()  # segment i's samples: bounds[i]:bounds[i + 1]
     xs = np.empty((len(grid), system.n))
-    parts: list[Samples] = []
+    runs = _same_mode_runs(segments, sorted(set(idx.tolist())))  # segments split at corners: one batch
     modes_of: list[list[ContactMode]] = []
     phases_of: list[Phase] = []
+    for run in runs:
+        seg, n = segments[run[0]], bounds[run[-1] + 1] - bounds[run[0]]
+        modes_of += [seg.modes] * n
+        phases_of += [seg.phase] * n
+    parts: list[Samples] = []
+    rows: list[np.ndarray] = []
     counted: list = []
-    for run in _same_mode_runs(segments, sorted(set(idx.tolist()))):  # segments split at corners: one batch
-        seg = segments[run[0]]
-        sel = slice(bounds[run[0]], bounds[run[-1] + 1])
-        ts = grid[sel]
+    for group in _mode_groups(segments, runs):  # the runs of one compiled mode, wherever they are: one batch
+        seg = segments[group[0][0]]
+        at = [np.arange(bounds[run[0]], bounds[run[-1] + 1]) for run in group]
         derivatives = None
         if seg.runner.ok:  # the interpolants' extra stages all at once
             seg.runner.use(seg.modes)
             derivatives = getattr(seg.runner.rhs, "derivatives", None)
-        _run_states(segments, run, bounds, grid, xs, derivatives)
-        X = xs[sel]
-        if seg.runner.ok and seg.runner not in counted:  # one serves several segments (every turn): count it once
+        rest = group
+        if seg.runner.ok and seg.runner not in counted:  # one serves several modes (every turn): count it once,
+            _run_states(segments, group[0], bounds, grid, xs, derivatives)  # after its first run's states
             counted.append(seg.runner)
             stats["singular_solves"] += seg.runner.singular
-        if seg.runner.ok:
-            parts.append(seg.runner.samples(ts, X, seg.modes))  # it serves every turn: this segment's r
+            rest = group[1:]
+        _run_states(segments, [i for run in rest for i in run], bounds, grid, xs, derivatives)
+        at_all = np.concatenate(at)
+        if seg.runner.ok:  # it serves every turn: this group's r
+            parts.append(seg.runner.samples(grid[at_all], xs[at_all], seg.modes, [len(a) for a in at]))
         else:
-            parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase))
-        modes_of += [seg.modes] * len(ts)
-        phases_of += [seg.phase] * len(ts)
-    samples = Samples.concatenate(parts, system)
+            parts.append(evaluated_samples(system, grid[at_all], xs[at_all], seg.modes, seg.phase))
+        rows.append(at_all)
+    samples = parts[0] if len(parts) == 1 else Samples.scattered(parts, rows, system)
     out = channels(system, grid, xs, samples, modes_of)
     if system.limits.limits:
         out.update(limit_channels(system, phases_of, samples))
@@ -145,6 +152,23 @@ def _run_states(segments: list[Segment], run: list[int], bounds: list[int], grid
             xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
     for at, y in zip(where, dense_states(dense, derivatives), strict=True):
         xs[at] = y
+
+
+def _mode_groups(segments: list[Segment], runs: list[list[int]]) -> list[list[list[int]]]:
+    """The runs grouped by compiled mode and modes (a readable one's alone), groups in order of first appearance: a
+    compiled mode's samples and interpolants are its call's per state, whatever else is in the batch."""
+    groups: list[list[list[int]]] = []
+    of_mode: dict[tuple, list[list[int]]] = {}  # (runner, modes): its group
+    for run in runs:
+        seg = segments[run[0]]
+        key = (seg.runner, tuple(seg.modes))
+        if not seg.runner.ok:
+            groups.append([run])
+        elif key in of_mode:
+            of_mode[key].append(run)
+        else:
+            groups.append(of_mode.setdefault(key, [run]))
+    return groups
 
 
 def _same_mode(a: Segment, b: Segment) -> bool:
