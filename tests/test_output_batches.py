@@ -72,3 +72,28 @@ def test_scattered_puts_each_part_at_its_rows():
     rows = [np.array([0, 3, 6]), np.array([1, 2]), np.array([4, 5])]
     parts = [pm.samples(ts[r], X[r]) for r in rows]
     assert _bits(Samples.scattered(parts, rows, system)) == _bits(whole)
+
+
+def test_last_evaluation_solves_an_instant_once():
+    """LastEvaluation: the same (t, x bit for bit, modes, phase object) again is the kept Evaluation; any other
+    argument (a -0.0 for a 0.0, another phase object) solves again, equal to System.evaluate's."""
+    from contactdyn.hybrid.transitions import LastEvaluation
+
+    system, modes, phase, t, x0 = case("b1_sampled_joints")
+    calls = []
+    evaluate = system.evaluate
+
+    class Counting:
+        def evaluate(self, *args):
+            calls.append(args)
+            return evaluate(*args)
+
+    last = LastEvaluation(Counting())
+    first = last(t, x0, modes, phase)
+    assert last(t, x0.copy(), list(modes), phase) is first and len(calls) == 1
+    zeroed = x0.copy()
+    zeroed[zeroed == 0.0] = -0.0
+    last(t, zeroed, modes, phase)
+    other = last(t, x0, modes, type(phase)(**vars(phase)))
+    assert len(calls) == 3 - (not np.any(x0 == 0.0))
+    assert np.array_equal(other.xdot, evaluate(t, x0, modes, phase).xdot)
