@@ -103,7 +103,7 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
         _run_states(segments, [i for run in rest for i in run], bounds, grid, xs, derivatives)
         at_all = np.concatenate(at)
         if seg.runner.ok:  # it serves every turn: this group's r
-            parts.append(seg.runner.samples(grid[at_all], xs[at_all], seg.modes, [len(a) for a in at]))
+            parts.append(seg.runner.samples(grid[at_all], xs[at_all], seg.modes, runs=[len(a) for a in at]))
         else:
             parts.append(evaluated_samples(system, grid[at_all], xs[at_all], seg.modes, seg.phase))
         rows.append(at_all)
