@@ -309,8 +309,11 @@ class Transitions:
         needed to hold it is within the cone, else slides where that force pushes; in
         both cases its residual slip is projected away. Contacts in ``released`` (they
         broke away at a located ``slip`` event) are not stuck again at the same instant.
+        Where no touching contact's mode is decided by its forces, nothing is solved.
         """
         system = self.system
+        if not any(m.touching and _decided_by_forces(c) for c, m in zip(system.contacts, modes, strict=True)):
+            return x, modes  # (a joint friction event of an arm on a bonded, frictionless contact)
         released = set(released)
         rest = set(rest)
         for _ in range(4 * len(modes) + 2):
@@ -368,6 +371,11 @@ class Transitions:
                 return x, modes
         raise SimulationError(f"{self.scene.name}: no consistent contact mode at t = {t:.9g} s "
                               f"(modes tried: {modes})")
+
+
+def _decided_by_forces(c) -> bool:
+    """Is a touching contact's mode decided by its forces: can it pull off (not bonded), or stick and slip?"""
+    return not c.spec.bonded or (c.friction is not None and len(c.tangents) > 0)
 
 
 def _junction_at_rest(system: System, c, kin, x: np.ndarray) -> float:
