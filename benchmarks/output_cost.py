@@ -42,8 +42,8 @@ SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_forc
           "case3_b_force", "b1"]
 
 
-def _readable(mode, ts, X, modes=None):
-    """PipelineMode.samples' stand-in: every sample from System.evaluate(full=True)."""
+def _readable(mode, ts, X, modes=None, runs=None):
+    """PipelineMode.samples' stand-in: every sample from System.evaluate(full=True) (``runs``: one at a time here)."""
     return evaluated_samples(mode.system, ts, X, modes if modes is not None else mode.modes, mode.phase)
 
 

@@ -23,8 +23,8 @@ from contactdyn.simulate import simulate
 SCENES = {"case1_cart": 1.1, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "case3_b_force": 0.3, "b1": 0.3}
 
 
-def _readable(mode, ts, X, modes=None):
-    """PipelineMode.samples by System.evaluate per sample."""
+def _readable(mode, ts, X, modes=None, runs=None):
+    """PipelineMode.samples by System.evaluate per sample (``runs``: its batches' runs, one sample at a time here)."""
     return evaluated_samples(mode.system, ts, X, modes if modes is not None else mode.modes, mode.phase)
 
 

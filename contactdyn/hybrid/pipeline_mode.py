@@ -179,14 +179,19 @@ class PipelineMode:
         return out
 
     # ---- output samples ------------------------------------------------------------------------
-    def samples(self, ts: np.ndarray, X: np.ndarray, modes=None) -> Samples:
+    def samples(self, ts: np.ndarray, X: np.ndarray, modes=None, runs: list[int] | None = None) -> Samples:
         """Diagnostics at the states X[k] (times ts[k]) in one compiled call (the readable model's from a state whose
-        call declines on)."""
+        call declines on). ``runs``: the rows' lengths of runs of segments, one batch; where a call declines each run
+        is sampled on its own (the rows after the declined one within its run on the readable model)."""
         if modes is not None:
             self.use(modes)
         p, system = self.pipe.packed, self.system
         ts, X = np.ascontiguousarray(ts, dtype=float), np.ascontiguousarray(X, dtype=float)
         _, E, W, done = samples_at(ts, X, p.ints, p.reals, p.work, p.events)
+        if done < len(ts) and runs is not None and len(runs) > 1:
+            ends = np.cumsum(runs)
+            return Samples.concatenate([self.samples(ts[e - n:e], X[e - n:e]) for n, e in zip(runs, ends, strict=True)],
+                                       system)
         S = Samples(len(ts), system)
         self._read_out(S, E[:done], W[:done], X[:done])
         for k in range(done, len(ts)):

@@ -45,7 +45,7 @@ from ..model.system import System
 from .charts import on_chart
 from .events import EventLog
 
-__all__ = ["Transitions", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
+__all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
 #: [m] another rigid contact within this gap, closing, at a touch touches with it (one impact holds both): the
@@ -69,6 +69,25 @@ class _After:
         self.released: set[int] = set()  #: contacts that broke away at this event (not stuck again at once)
 
 
+class LastEvaluation:
+    """System.evaluate at an event instant, its last (t, x, modes, phase) and result kept: asked again at the same
+    ones (the same t, x bit for bit, equal modes, the same phase object), the same Evaluation, not a second solve.
+    Where a decision leaves everything as it was tried (a stick decided at rest, then the next consistency pass; a
+    joint's stuck trial, then its stick; the last pass, then the joints' check) the evaluation repeats exactly."""
+
+    def __init__(self, system: System):
+        self.system = system
+        self.key: tuple | None = None  #: (t [s], x's bytes, modes, phase) of ``ev``
+        self.ev = None
+
+    def __call__(self, t: float, x: np.ndarray, modes, phase):
+        key = (t, x.tobytes(), tuple(modes), phase)
+        last = self.key
+        if last is None or last[3] is not phase or last[0] != t or last[1] != key[1] or last[2] != key[2]:
+            self.key, self.ev = key, self.system.evaluate(t, x, modes, phase)
+        return self.ev
+
+
 class Transitions:
     """The mode decisions of one run: at events (:meth:`handle`) and at any instant (:meth:`consistent`)."""
 
@@ -79,6 +98,7 @@ class Transitions:
         #: phase_started(t, x, modes, phase, previous) -> x: a phase begun at an event (a sampled law's first
         #: sample, contactdyn.hybrid.sampling); None: nothing to do
         self.phase_started = phase_started
+        self.evaluate = LastEvaluation(system)  #: System.evaluate, the same instant's not twice
 
     def handle(self, t, x, modes, phase, event):
         """Apply a located event: (state, modes, phase) right after it.
@@ -106,7 +126,7 @@ class Transitions:
         """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event; then the joint
         friction modes the state contradicts (:meth:`settle_joints`)."""
         limits = self.system.limits
-        while phase.limits and (pulling := limits.pulling(phase, self.system.evaluate(t, x, modes, phase))):
+        while phase.limits and (pulling := limits.pulling(phase, self.evaluate(t, x, modes, phase))):
             phase = replace(phase, limits=tuple(p for p in phase.limits if p != pulling[0]))
             self.log.log(t, "release", limits.by_index[pulling[0][0]].name)
             x, modes = self.consistent(t, x, modes, phase)
@@ -117,7 +137,7 @@ class Transitions:
         limit or moving slips; :meth:`~contactdyn.model.joint_friction.JointFriction.contradicted`), the contact modes
         decided again after each. Returns (x, modes, phase)."""
         for _ in range(2 * len(phase.joint_modes) + 1):
-            change = self.system.joint_friction.contradicted(self.system, t, x, modes, phase) \
+            change = self.system.joint_friction.contradicted(self.system, t, x, modes, phase, self.evaluate) \
                 if phase.joint_modes else None
             if change is None:
                 return x, modes, phase
@@ -163,7 +183,7 @@ class Transitions:
     def _on_turn(self, t, x, modes, phase, event, after):
         """2-D: the slip turned 60° from the reference; refresh it (no mode change)."""
         i = self._index(event.contact)
-        slip = self.system.evaluate(t, x, modes, phase).slip[event.contact]  # [m/s]
+        slip = self.evaluate(t, x, modes, phase).slip[event.contact]  # [m/s]
         if float(np.linalg.norm(slip)) <= TURN_AT_REST * self.system.slip_band:
             return self._on_stop(t, x, modes, phase, event, after)
         modes[i] = modes[i].with_(slip=direction_of(slip), from_rest=False)
@@ -173,7 +193,7 @@ class Transitions:
         """The cone is reached: slide from rest where the holding force pushes (or a false alarm)."""
         i = self._index(event.contact)
         c = self.system.contacts[i]
-        ev = self.system.evaluate(t, x, modes, phase)
+        ev = self.evaluate(t, x, modes, phase)
         self.stats["slips_seen_inside_a_step"] += int(event.latch < math.inf)
         if event.g(ev) <= SLIP_ALARM * c.friction.mu_s * max(ev.normal_force[c.name], 0.0):
             modes[i] = modes[i].with_(stuck=False, slip=direction_of(-ev.friction[c.name]), from_rest=True)
@@ -235,7 +255,7 @@ class Transitions:
 
     def _on_joint(self, t, x, modes, phase, event, after):
         """A stuck joint breaks away, or a sliding one comes to rest: sticks or reverses (model.joint_friction)."""
-        x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event)
+        x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event, self.evaluate)
         self.log.events[-1].update(info)
         return x, phase, True
 
@@ -291,13 +311,16 @@ class Transitions:
         needed to hold it is within the cone, else slides where that force pushes; in
         both cases its residual slip is projected away. Contacts in ``released`` (they
         broke away at a located ``slip`` event) are not stuck again at the same instant.
+        Where no touching contact's mode is decided by its forces, nothing is solved.
         """
         system = self.system
+        if not any(m.touching and _decided_by_forces(c) for c, m in zip(system.contacts, modes, strict=True)):
+            return x, modes  # (a joint friction event of an arm on a bonded, frictionless contact)
         released = set(released)
         rest = set(rest)
         for _ in range(4 * len(modes) + 2):
             changed = False
-            ev = system.evaluate(t, x, modes, phase)
+            ev = self.evaluate(t, x, modes, phase)
             if not ev.regular:
                 self.stats["singular_solves"] += 1
             for i, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
@@ -335,7 +358,7 @@ class Transitions:
                 trial = list(modes)
                 trial[i] = mode.with_(stuck=True)
                 x = project_velocity(system, x, trial, phase.limits, phase.joint_modes)
-                ev2 = system.evaluate(t, x, trial, phase)
+                ev2 = self.evaluate(t, x, trial, phase)
                 F_f = ev2.friction[c.name]
                 if in_cone(F_f, ev2.normal_force[c.name], mu_s):
                     modes[i] = trial[i]
@@ -350,6 +373,11 @@ class Transitions:
                 return x, modes
         raise SimulationError(f"{self.scene.name}: no consistent contact mode at t = {t:.9g} s "
                               f"(modes tried: {modes})")
+
+
+def _decided_by_forces(c) -> bool:
+    """Is a touching contact's mode decided by its forces: can it pull off (not bonded), or stick and slip?"""
+    return not c.spec.bonded or (c.friction is not None and len(c.tangents) > 0)
 
 
 def _junction_at_rest(system: System, c, kin, x: np.ndarray) -> float:

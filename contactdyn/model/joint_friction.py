@@ -156,28 +156,31 @@ class JointFriction:
         return out
 
     # ---- switching ------------------------------------------------------------------------------
-    def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event) -> tuple:
+    def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event, evaluate=None) -> tuple:
         """Apply a ``joint_slip`` or ``joint_stick`` event: (x, phase, info); ``info["kind"]`` renames the event
-        where it is a false alarm (``joint_slip_check``) or a reversal (``joint_reverse``)."""
+        where it is a false alarm (``joint_slip_check``) or a reversal (``joint_reverse``). ``evaluate``:
+        System.evaluate (None) or one with its arguments (:class:`~contactdyn.hybrid.transitions.LastEvaluation`)."""
         i, nQ = event.index, system.nQ
+        evaluate = evaluate or system.evaluate
         if event.kind == "joint_slip":  # slides from rest where the load pushes (−sign λ), unless a false alarm
-            hold = system.evaluate(t, x, modes, phase).joint_hold.get(i, 0.0)
+            hold = evaluate(t, x, modes, phase).joint_hold.get(i, 0.0)
             if self.breaks_away(i, hold, SLIP_ALARM):
                 return x, self.with_mode(phase, i, -1 if hold > 0.0 else 1), {"torque": hold}
             return x, phase, {"torque": hold, "kind": "joint_slip_check"}
         x = x.copy()
         x[nQ + i] = 0.0  # at rest, exactly: stuck, or sliding back from rest
         trial = self.with_mode(phase, i, STUCK)
-        hold = system.evaluate(t, x, modes, trial).joint_hold.get(i, 0.0)
+        hold = evaluate(t, x, modes, trial).joint_hold.get(i, 0.0)
         if self.breaks_away(i, hold):
             return x, self.with_mode(phase, i, -1 if hold > 0.0 else 1), {"torque": hold, "kind": "joint_reverse"}
         return x, trial, {"torque": hold}
 
-    def contradicted(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any) -> tuple | None:
+    def contradicted(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, evaluate=None
+                     ) -> tuple | None:
         """The first joint mode the state contradicts, as (kind, joint, x, phase) with it changed, else None (x: its
         stuck joints' velocities within ``STICK_TOL`` set to exactly 0): a sliding joint pressing on a limit is
         stuck (the limit holds it); a stuck joint that moves (an impact's velocity) slides along it; a stuck joint
-        whose holding torque exceeds τ_s slides where the load pushes."""
+        whose holding torque exceeds τ_s slides where the load pushes. ``evaluate``: as :meth:`switch`'s."""
         nQ = system.nQ
         pressing = {i for i, _ in phase.limits}
         for i, m in phase.joint_modes:
@@ -193,7 +196,7 @@ class JointFriction:
                 x[nQ + i] = 0.0
         if not held:
             return None
-        ev = system.evaluate(t, x, modes, phase)
+        ev = (evaluate or system.evaluate)(t, x, modes, phase)
         for i in held:
             hold = ev.joint_hold[i]
             if self.breaks_away(i, hold):

@@ -40,6 +40,7 @@ by ``fun`` (:func:`_attempt`, ``solve_ivp``'s arithmetic). Verified in ``tests/t
 from __future__ import annotations
 
 import math
+from bisect import bisect_left
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -52,8 +53,9 @@ from scipy.integrate._ivp.rk import MAX_FACTOR, MIN_FACTOR, SAFETY
 from scipy.optimize import brentq
 
 from ..errors import SceneError
+from .dense_output import horner_at, horner_rows
 
-__all__ = ["solve", "DenseSolution", "Solution"]
+__all__ = ["solve", "DenseSolution", "Solution", "build_interpolants", "dense_states"]
 
 #: the core's rejection factor (its fac1). scipy 1.17's C translation shrinks a rejected step by this fixed
 #: factor (it reads facc1/safe where Hairer's Fortran has fac11/safe); solve_ivp by max(MIN_FACTOR,
@@ -102,56 +104,54 @@ class _Steps:
         return self.f0 if i == 0 else self.blocks[i - 1][_F_NEW]
 
     def build(self, steps: np.ndarray, derivatives: Callable | None = None) -> None:
-        """Interpolant coefficients of the given steps (DOP853's stages 14–16, in one batch).
+        """Interpolant coefficients of the given steps (DOP853's stages 14–16, one batch: :func:`build_interpolants`).
 
         ``derivatives(ts, Y) -> F``: the right-hand side at all the steps' stage states at once, in place
         of one call per state (output sampling; :func:`~contactdyn.hybrid.steps.derivatives` gives the
         calls' values bitwise)."""
-        steps = [int(i) for i in steps if int(i) not in self.coef]
-        if not steps:
-            return
-        m = len(steps)
-        t_old = np.array([self.t[i] for i in steps])
-        h = np.array([self.t[i + 1] for i in steps]) - t_old
-        Y0 = np.array([self.y_old(i) for i in steps])
-        B = np.array([self.blocks[i] for i in steps])
-        K = np.zeros((m, _coef.N_STAGES_EXTENDED, self.n))
-        K[:, 0] = [self.f_old(i) for i in steps]
-        K[:, 5:10] = B[:, _STAGES_6_10]
-        K[:, 10], K[:, 11], K[:, _N] = B[:, _S11], B[:, _S12], B[:, _F_NEW]
-        for s in range(_N + 1, _coef.N_STAGES_EXTENDED):
-            Ys = Y0 + h[:, None] * np.einsum("msn,s->mn", K[:, :s], _A[s, :s])
-            ts = t_old + _C[s] * h
-            if derivatives is not None:
-                K[:, s] = derivatives(ts, Ys)
-            else:
-                for k in range(m):
-                    K[k, s] = self.fun(float(ts[k]), Ys[k])
-            self.calls += m
-        dy = B[:, _Y_NEW] - Y0
-        F = np.empty((m, _coef.INTERPOLATOR_POWER, self.n))
-        F[:, 0] = dy
-        F[:, 1] = h[:, None] * K[:, 0] - dy
-        F[:, 2] = 2.0 * dy - h[:, None] * (K[:, _N] + K[:, 0])
-        F[:, 3:] = h[:, None, None] * np.einsum("ds,msn->mdn", _D, K)
-        for k, i in enumerate(steps):
-            self.coef[i] = F[k]
+        build_interpolants([(self, int(i)) for i in steps if int(i) not in self.coef], derivatives)
 
     def at(self, i: int, t: float) -> np.ndarray:
         """The state at t [s] on step i's own interpolant (built if needed), as solve_ivp's step dense output."""
         if i not in self.coef:
-            self.build(np.array([i]))
+            build_interpolants([(self, i)])
         t_old = self.t[i]
-        return _horner(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old)) + self.y_old(i)
+        return horner_at(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old), self.y_old(i))
 
 
-def _horner(F: np.ndarray, s) -> np.ndarray:
-    """y − y_old of interpolants F (..., rows, n) at step fractions s (Horner, as scipy's Dop853DenseOutput)."""
-    y = np.zeros(F.shape[:-2] + F.shape[-1:])
-    for k, row in enumerate(range(F.shape[-2] - 1, -1, -1)):
-        y += F[..., row, :]
-        y *= s if k % 2 == 0 else 1.0 - s
-    return y
+def build_interpolants(wanted: list[tuple[_Steps, int]], derivatives: Callable | None = None) -> None:
+    """Interpolant coefficients of steps (steps, i) of one or several runs, in one batch: each step's row is its
+    own arithmetic (the batch's other rows do not change its numbers). ``derivatives``: see :meth:`_Steps.build`
+    (the runs' right-hand side, one for all; None: each run's ``fun``, one call per state)."""
+    if not wanted:
+        return
+    m, n = len(wanted), wanted[0][0].n
+    t_old = np.array([st.t[i] for st, i in wanted])
+    h = np.array([st.t[i + 1] for st, i in wanted]) - t_old
+    Y0 = np.array([st.y_old(i) for st, i in wanted])
+    B = np.array([st.blocks[i] for st, i in wanted])
+    K = np.zeros((m, _coef.N_STAGES_EXTENDED, n))
+    K[:, 0] = [st.f_old(i) for st, i in wanted]
+    K[:, 5:10] = B[:, _STAGES_6_10]
+    K[:, 10], K[:, 11], K[:, _N] = B[:, _S11], B[:, _S12], B[:, _F_NEW]
+    for s in range(_N + 1, _coef.N_STAGES_EXTENDED):
+        Ys = Y0 + h[:, None] * np.einsum("msn,s->mn", K[:, :s], _A[s, :s])
+        ts = t_old + _C[s] * h
+        if derivatives is not None:
+            K[:, s] = derivatives(ts, Ys)
+        else:
+            for k, (st, _) in enumerate(wanted):
+                K[k, s] = st.fun(float(ts[k]), Ys[k])
+        for st, _ in wanted:
+            st.calls += 1
+    dy = B[:, _Y_NEW] - Y0
+    F = np.empty((m, _coef.INTERPOLATOR_POWER, n))
+    F[:, 0] = dy
+    F[:, 1] = h[:, None] * K[:, 0] - dy
+    F[:, 2] = 2.0 * dy - h[:, None] * (K[:, _N] + K[:, 0])
+    F[:, 3:] = h[:, None, None] * np.einsum("ds,msn->mdn", _D, K)
+    for k, (st, i) in enumerate(wanted):
+        st.coef[i] = F[k]
 
 
 class DenseSolution:
@@ -173,19 +173,50 @@ class DenseSolution:
 
         ``derivatives``: see :meth:`_Steps.build` (the interpolants this call builds; for output samples
         only: the run's own event location and segment ends use the calls)."""
+        if np.ndim(t) == 0:
+            return self.state(float(t), derivatives)
+        (y,) = dense_states([(self, np.atleast_1d(np.asarray(t, float)))], derivatives)
+        return y.T
+
+    def state(self, t: float, derivatives: Callable | None = None) -> np.ndarray:
+        """The state at one time t [s]: :meth:`locate`'s step and fraction, without its arrays (the same numbers)."""
         st = self.steps
-        tt = np.atleast_1d(np.asarray(t, float))
+        if not len(self.ends) or t == st.t[0]:
+            return st.y0.copy()
+        i = min(bisect_left(st.t, t, 1) - 1, len(self.ends) - 1)  # (np.searchsorted(self.ends, t, "left"))
+        if i not in st.coef:
+            build_interpolants([(st, i)], derivatives)
+        t_old = st.t[i]
+        return horner_at(st.coef[i], (t - t_old) / (st.t[i + 1] - t_old), st.y_old(i))
+
+    def locate(self, tt: np.ndarray) -> tuple[list[int], np.ndarray, np.ndarray] | None:
+        """Where the times tt [s] fall: (their steps, sorted; each time's position in that list; its step fraction
+        [-]), or None where the state is y0 at all of them (no step, or all at the start)."""
+        st = self.steps
         if not len(self.ends) or (tt == st.t[0]).all():  # (at the start: y0, what the interpolant gives there)
-            out = np.repeat(st.y0[:, None], len(tt), axis=1)
-            return out[:, 0] if np.ndim(t) == 0 else out
+            return None
         idx = np.minimum(np.searchsorted(self.ends, tt, side="left"), len(self.ends) - 1)
-        steps, at = np.unique(idx, return_inverse=True)  # per step, then per sample
-        st.build(steps, derivatives)
+        steps = sorted(set(idx.tolist()))  # per step, then per sample (np.unique's, without its cost on ~3 items)
         ends = np.array(st.t)
-        s = ((tt - ends[idx]) / (ends[idx + 1] - ends[idx]))[:, None]
-        y = _horner(np.array([st.coef[int(i)] for i in steps])[at], s)
-        y += np.array([st.y_old(int(i)) for i in steps])[at]
-        return y[0] if np.ndim(t) == 0 else y.T
+        return steps, np.searchsorted(steps, idx), (tt - ends[idx]) / (ends[idx + 1] - ends[idx])
+
+    def states(self, tt: np.ndarray, where) -> np.ndarray:
+        """The states (len(tt), n) at the times tt [s] located at ``where`` (:meth:`locate`; interpolants built)."""
+        st = self.steps
+        if where is None:
+            return np.repeat(st.y0[None, :], len(tt), axis=0)
+        steps, at, s = where
+        return horner_rows(np.array([st.coef[i] for i in steps]), at, s, np.array([st.y_old(i) for i in steps]))
+
+
+def dense_states(parts: list[tuple[DenseSolution, np.ndarray]], derivatives: Callable | None = None
+                 ) -> list[np.ndarray]:
+    """The states (len(tt), n) of dense outputs at their times tt [s], (dense, tt) per part (each dense once), the
+    interpolants they need built in one batch (:func:`build_interpolants`; ``derivatives``: :meth:`_Steps.build`'s)."""
+    where = [dense.locate(tt) for dense, tt in parts]
+    build_interpolants([(dense.steps, i) for (dense, _), w in zip(parts, where, strict=True) if w is not None
+                        for i in w[0] if i not in dense.steps.coef], derivatives)
+    return [dense.states(tt, w) for (dense, tt), w in zip(parts, where, strict=True)]
 
 
 @dataclass

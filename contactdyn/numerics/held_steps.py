@@ -19,6 +19,7 @@ function whose fall through zero across a jump fires that event, None where the 
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -34,6 +35,7 @@ from .dop853 import (
     _stepped,
     _Steps,
     core_steps,
+    dense_states,
     solution_status,
 )
 
@@ -46,7 +48,8 @@ class PiecewiseDense:
 
     def __init__(self, pieces: list[_Steps], t_end: float):
         self.parts = [DenseSolution(p, p.t[-1]) for p in pieces[:-1]] + [DenseSolution(pieces[-1], t_end)]
-        self.starts = np.array([p.t[0] for p in pieces])
+        self.start_list = [p.t[0] for p in pieces]  #: [s] where each piece starts
+        self.starts = np.array(self.start_list)
         self.t_min, self.t_max = pieces[0].t[0], t_end
 
     @property
@@ -57,14 +60,23 @@ class PiecewiseDense:
     def __call__(self, t, derivatives: Callable | None = None) -> np.ndarray:
         """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t)))."""
         tt = np.atleast_1d(np.asarray(t, float))
-        idx = np.clip(np.searchsorted(self.starts, tt, side="right") - 1, 0, len(self.parts) - 1)
         if np.ndim(t) == 0:
-            return self.parts[int(idx[0])](float(tt[0]), derivatives)
-        out = np.empty((len(self.parts[0].steps.y0), len(tt)))
-        for i in np.unique(idx):
-            at = idx == i
-            out[:, at] = self.parts[int(i)](tt[at], derivatives)
-        return out
+            piece = min(max(bisect_right(self.start_list, float(t)) - 1, 0), len(self.parts) - 1)  # (part_of's)
+            return self.parts[piece].state(float(t), derivatives)
+        out = np.empty((len(tt), len(self.parts[0].steps.y0)))
+        split = self.split(tt)
+        for (_, at), y in zip(split, dense_states([(part, tt[at]) for part, at in split], derivatives), strict=True):
+            out[at] = y
+        return out.T
+
+    def part_of(self, tt: np.ndarray) -> np.ndarray:
+        """The piece of each time tt [s] (a piece's start belongs to it)."""
+        return np.clip(np.searchsorted(self.starts, tt, side="right") - 1, 0, len(self.parts) - 1)
+
+    def split(self, tt: np.ndarray) -> list[tuple[DenseSolution, np.ndarray]]:
+        """(piece, the positions in tt of its times) per piece that has times tt [s], in piece order."""
+        idx = self.part_of(tt)
+        return [(self.parts[i], np.flatnonzero(idx == i)) for i in sorted(set(idx.tolist()))]
 
 
 def _jump(watch: _EventWatch, t: float, before: np.ndarray, after: np.ndarray, value_of: Callable) -> bool:

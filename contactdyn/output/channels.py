@@ -13,7 +13,6 @@ Channel names and units are documented in the README (``q`` [rad or m], ``contac
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import partial
 from itertools import groupby
 from typing import Any
 
@@ -26,7 +25,7 @@ from ..model.joint_friction import joint_friction_channels
 from ..model.limits import limit_channels
 from ..model.phases import Phase
 from ..model.system import System
-from ..numerics.dop853 import DenseSolution
+from ..numerics.dop853 import DenseSolution, dense_states
 from ..numerics.held_steps import PiecewiseDense
 from ..robot.free_chart import chart_a_angles
 from ..robot.urdf_model import FREE_COORDINATES
@@ -72,40 +71,43 @@ def sample_segments(system: System, segments: list[Segment], grid: np.ndarray, s
 
 def sample_states(system: System, segments: list[Segment], grid: np.ndarray, stats: dict[str, Any]
                   ) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """The channels of a run at the times ``grid`` and its states there, (len(grid), n)."""
+    """The channels of a run at the times ``grid`` (increasing) and its states there, (len(grid), n)."""
     # the segment of each sample: the last starting at or before it (at an event time, the one after)
     t0 = np.array([seg.t0 for seg in segments])
     idx = np.maximum(np.searchsorted(t0, grid, side="right") - 1, 0)
+    bounds = np.searchsorted(idx, np.arange(len(segments) + 1)).tolist()  # segment i's samples: bounds[i]:bounds[i + 1]
     xs = np.empty((len(grid), system.n))
-    parts: list[Samples] = []
+    runs = _same_mode_runs(segments, sorted(set(idx.tolist())))  # segments split at corners: one batch
     modes_of: list[list[ContactMode]] = []
     phases_of: list[Phase] = []
+    for run in runs:
+        seg, n = segments[run[0]], bounds[run[-1] + 1] - bounds[run[0]]
+        modes_of += [seg.modes] * n
+        phases_of += [seg.phase] * n
+    parts: list[Samples] = []
+    rows: list[np.ndarray] = []
     counted: list = []
-    for run in _same_mode_runs(segments, np.unique(idx)):  # segments split at corners: one batch
-        seg = segments[run[0]]
-        sel = np.flatnonzero(np.isin(idx, run))
-        ts = grid[sel]
+    for group in _mode_groups(segments, runs):  # the runs of one compiled mode, wherever they are: one batch
+        seg = segments[group[0][0]]
+        at = [np.arange(bounds[run[0]], bounds[run[-1] + 1]) for run in group]
         derivatives = None
         if seg.runner.ok:  # the interpolants' extra stages all at once
             seg.runner.use(seg.modes)
             derivatives = getattr(seg.runner.rhs, "derivatives", None)
-        for i in run:
-            at = sel[idx[sel] == i]
-            sol = segments[i].sol
-            if derivatives is not None and isinstance(sol, (DenseSolution, PiecewiseDense)):
-                sol = partial(sol, derivatives=derivatives)
-            xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
-        X = xs[sel]
-        if seg.runner.ok and seg.runner not in counted:  # one serves several segments (every turn): count it once
+        rest = group
+        if seg.runner.ok and seg.runner not in counted:  # one serves several modes (every turn): count it once,
+            _run_states(segments, group[0], bounds, grid, xs, derivatives)  # after its first run's states
             counted.append(seg.runner)
             stats["singular_solves"] += seg.runner.singular
-        if seg.runner.ok:
-            parts.append(seg.runner.samples(ts, X, seg.modes))  # it serves every turn: this segment's r
+            rest = group[1:]
+        _run_states(segments, [i for run in rest for i in run], bounds, grid, xs, derivatives)
+        at_all = np.concatenate(at)
+        if seg.runner.ok:  # it serves every turn: this group's r
+            parts.append(seg.runner.samples(grid[at_all], xs[at_all], seg.modes, runs=[len(a) for a in at]))
         else:
-            parts.append(evaluated_samples(system, ts, X, seg.modes, seg.phase))
-        modes_of += [seg.modes] * len(sel)
-        phases_of += [seg.phase] * len(sel)
-    samples = Samples.concatenate(parts, system)
+            parts.append(evaluated_samples(system, grid[at_all], xs[at_all], seg.modes, seg.phase))
+        rows.append(at_all)
+    samples = parts[0] if len(parts) == 1 else Samples.scattered(parts, rows, system)
     out = channels(system, grid, xs, samples, modes_of)
     if system.limits.limits:
         out.update(limit_channels(system, phases_of, samples))
@@ -117,16 +119,56 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
     return out, xs
 
 
-def _same_mode_runs(segments: list[Segment], used: np.ndarray) -> list[list[int]]:
+def _same_mode_runs(segments: list[Segment], used: list[int]) -> list[list[int]]:
     """The used segments' indices in runs of consecutive segments on the same modes, phase and runner."""
     runs: list[list[int]] = []
     for i in used:
         seg = segments[i]
         if runs and runs[-1][-1] == i - 1 and _same_mode(segments[i - 1], seg):
-            runs[-1].append(int(i))
+            runs[-1].append(i)
         else:
-            runs.append([int(i)])
+            runs.append([i])
     return runs
+
+
+def _run_states(segments: list[Segment], run: list[int], bounds: list[int], grid: np.ndarray, xs: np.ndarray,
+                derivatives) -> None:
+    """xs at the samples of a run of segments (segment i's: bounds[i]:bounds[i + 1] of ``grid``): the compiled
+    DOP853's dense outputs (their pieces') all at once, their interpolants built in one batch (``derivatives``:
+    the mode's right-hand side at many states, :func:`~contactdyn.hybrid.steps.derivatives`), others each alone."""
+    dense: list[tuple[DenseSolution, np.ndarray]] = []
+    where: list[np.ndarray] = []
+    for i in run:
+        at = np.arange(bounds[i], bounds[i + 1])
+        sol = segments[i].sol
+        if isinstance(sol, PiecewiseDense):
+            for part, k in sol.split(grid[at]):
+                dense.append((part, grid[at[k]]))
+                where.append(at[k])
+        elif isinstance(sol, DenseSolution):
+            dense.append((sol, grid[at]))
+            where.append(at)
+        else:
+            xs[at] = np.atleast_2d(sol(grid[at]).T) if len(at) > 1 else sol(grid[at[0]])
+    for at, y in zip(where, dense_states(dense, derivatives), strict=True):
+        xs[at] = y
+
+
+def _mode_groups(segments: list[Segment], runs: list[list[int]]) -> list[list[list[int]]]:
+    """The runs grouped by compiled mode and modes (a readable one's alone), groups in order of first appearance: a
+    compiled mode's samples and interpolants are its call's per state, whatever else is in the batch."""
+    groups: list[list[list[int]]] = []
+    of_mode: dict[tuple, list[list[int]]] = {}  # (runner, modes): its group
+    for run in runs:
+        seg = segments[run[0]]
+        key = (seg.runner, tuple(seg.modes))
+        if not seg.runner.ok:
+            groups.append([run])
+        elif key in of_mode:
+            of_mode[key].append(run)
+        else:
+            groups.append(of_mode.setdefault(key, [run]))
+    return groups
 
 
 def _same_mode(a: Segment, b: Segment) -> bool:

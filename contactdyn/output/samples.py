@@ -12,6 +12,9 @@ import numpy as np
 
 __all__ = ["Samples", "evaluated_samples"]
 
+_ARRAYS = ("tau", "tau_cmd", "u", "limit_torque", "joint_friction", "tip", "x_d", "body_force")  #: per-sample arrays
+_DICTS = ("F_n", "gap", "F_d", "F_f", "v_slip", "iface", "stages")  #: per-sample arrays by name
+
 
 class Samples:
     """Per-sample diagnostics of one segment, as arrays (what Result channels are made of)."""
@@ -41,15 +44,23 @@ class Samples:
     def concatenate(cls, parts: list[Samples], system) -> Samples:
         if len(parts) == 1:
             return parts[0]
-        out = cls(0, system)
-        for name in ("tau", "tau_cmd", "u", "limit_torque", "joint_friction", "tip", "x_d", "body_force"):
-            setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
+        return cls.scattered(parts, np.split(np.arange(sum(p.tau.shape[0] for p in parts)),
+                                             np.cumsum([p.tau.shape[0] for p in parts])[:-1]), system)
+
+    @classmethod
+    def scattered(cls, parts: list[Samples], rows: list[np.ndarray], system) -> Samples:
+        """One Samples whose rows ``rows[k]`` are those of ``parts[k]`` (all the rows 0 … n − 1, each once)."""
+        out = cls(sum(len(r) for r in rows), system)
+        for name in _ARRAYS:
+            whole = getattr(out, name)
+            for part, at in zip(parts, rows, strict=True):
+                whole[at] = getattr(part, name)
         out.has_x_d = any(p.has_x_d for p in parts)
         out.has_F_d = {key: any(p.has_F_d[key] for p in parts) for key in out.has_F_d}
-        for name in ("F_n", "gap", "F_d", "F_f", "v_slip", "iface", "stages"):
-            d = getattr(out, name)
-            for key in d:
-                d[key] = np.concatenate([getattr(p, name)[key] for p in parts])
+        for name in _DICTS:
+            for key, whole in getattr(out, name).items():
+                for part, at in zip(parts, rows, strict=True):
+                    whole[at] = getattr(part, name)[key]
         return out
 
     def fill(self, k: int, ev) -> None:
