@@ -79,3 +79,22 @@ def doubled_law(stage_law_registry):
             return 2.0 * k, 2.0 * b
 
     return stage_law_registry(Doubled).name
+
+
+_SCALE = {"k": 1.0}  #: a Python dict: numba cannot type it as a global
+
+
+@pytest.fixture
+def uncompilable_law(stage_law_registry):
+    """A linear law numba cannot compile (it reads a Python dict), registered as ``uncompilable`` for the test: a
+    declared Python stage, its modes on the readable model."""
+    from contactdyn.laws.stage_laws import StageLaw
+
+    class Uncompilable(StageLaw):
+        name = "uncompilable"
+
+        @staticmethod
+        def force(k, b, p, x, xdot):
+            return _SCALE["k"] * k * x + b * xdot
+
+    return stage_law_registry(Uncompilable)

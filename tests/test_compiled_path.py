@@ -16,7 +16,7 @@ from contactdyn.scene.scene_file import load_scene, sims_dir
 from contactdyn.simulate import run_system
 
 HARD = Path(__file__).resolve().parent.parent / "benchmarks" / "hard"
-MOTORS_AUDIT = "the energy audit with motors (the motors' power is not in the pipeline's audit yet)"
+PYTHON_STAGE = "a stage law of tip.n does not compile"
 
 
 def axis_scene(normal: dict, duration: float):
@@ -56,15 +56,31 @@ def test_every_scene_runs_every_mode_on_the_pipeline(path):
     _all_compiled(result)
 
 
-def test_a_mode_the_pipeline_does_not_pack_runs_on_the_readable_model_with_its_reason():
-    """The energy audit through DC motors is not in the pipeline's audit: the writer's approach runs on the readable
-    model, the paths table and fallback_modes naming the pipeline's reason (declared, not undeclared); the same
-    audit without motors (B1) runs on the pipeline."""
-    _all_compiled(simulate("b1", {"solver.record_energy": True, "duration": 0.05}))
-    r = simulate("case2_writer_motors", {"solver.record_energy": True, "duration": 0.05})
-    assert r.stats["fallback_modes"] == {MOTORS_AUDIT: 1}
-    assert r.stats["paths"] == {"approach: tip free": {"path": READABLE, "why": MOTORS_AUDIT, "segments": 1}}
+def test_a_mode_the_pipeline_does_not_pack_runs_on_the_readable_model_with_its_reason(uncompilable_law):
+    """A stage law numba cannot compile (a declared Python stage) keeps its modes on the readable model, the paths
+    table and fallback_modes naming the pipeline's reason (declared, not undeclared); the mode before the touch,
+    without the chain's stages, runs on the pipeline."""
+    chain = {"model": "chain", "environment": [{"k": 5e4, "b": 1500.0, "law": uncompilable_law.name}]}
+    r = simulate(axis_scene(chain, 0.05))
+    assert r.stats["fallback_modes"] == {PYTHON_STAGE: 1}
+    assert r.stats["paths"]["main: tip touching"] == {"path": READABLE, "why": PYTHON_STAGE, "segments": 1}
+    assert r.stats["paths"]["main: tip free"]["path"] == PIPELINE
     assert not any(reason.startswith(UNDECLARED) for reason in r.stats["fallback_modes"])
+
+
+def test_the_energy_audit_through_motors_runs_on_the_compiled_call_and_agrees_with_the_readable_model():
+    """The DC-motor writer with the energy audit: the drives' own power and the motors' losses (as each kind's law
+    gives them) in the audit's rates on the compiled call; the work and dissipated energy the readable model's to
+    1e-9 of their largest value, the audit closing."""
+    settings = {"solver.record_energy": True, "duration": 0.3}
+    fast = simulate("case2_writer_motors", settings)
+    _all_compiled(fast)
+    readable = simulate("case2_writer_motors", settings, compiled=False)
+    for key in ("energy.work", "energy.dissipated", "q", "contact.tip.F_n"):
+        ref = np.asarray(readable[key], float)
+        np.testing.assert_allclose(fast[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
+    assert np.abs(fast["energy.work"]).max() > 0.0
+    assert fast.meta["check_warnings"] == []
 
 
 def test_a_new_affine_stage_law_runs_on_the_pipeline_by_its_address(doubled_law):

@@ -139,7 +139,7 @@ def test_the_key_reference_and_the_tour_document_the_users_kind(scene_dir):
 
 def test_below_its_limit_it_runs_as_its_dc_motor_twin(scene_dir):
     """M_max = inf: the command acts as it is, which a DC motor with N* = N and no voltage limit delivers too. Both on
-    the readable model (the energy audit with motors is not on the compiled call)."""
+    the compiled call, the energy audit's too."""
     mine = run(writer(scene_dir, {"kind": "limited_motor", "J": J, "N": N}, record_energy=True))
     twin = run(writer(scene_dir, {"kind": "dc_motor", "R": 0.272, "C_M": 0.061, "J": J, "N": N}, record_energy=True))
     assert [e["kind"] for e in mine.events] == ["touch", "phase"]

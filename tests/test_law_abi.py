@@ -121,23 +121,6 @@ def test_a_friction_law_given_by_kinetic_only_is_declared_python():
     assert "kinetic(spec, speed) only" in Old.compiled_reason
 
 
-_SCALE = {"k": 1.0}  #: a Python dict: numba cannot type it as a global
-
-
-@pytest.fixture
-def uncompilable_law(stage_law_registry):
-    """A linear law numba cannot compile (it reads a Python dict), registered as ``uncompilable``."""
-
-    class Uncompilable(StageLaw):
-        name = "uncompilable"
-
-        @staticmethod
-        def force(k, b, p, x, xdot):
-            return _SCALE["k"] * k * x + b * xdot
-
-    return stage_law_registry(Uncompilable)
-
-
 def _axis_scene(law: str, extra: dict | None = None):
     """The cylindrical robot's vertical axis on a chain anchor —[law]— mass —[linear]— surface, bonded."""
     inner = {"k": K, "b": B, "law": law, **(extra or {})}

@@ -1,18 +1,21 @@
 """The energy audit's rates over the packed arrays (``solver.record_energy``, ``System.energy_slot``).
 
 Two states from the slot e of y (``dynamics.evaluate``): the drives' work, ẏ_e = the power they deliver [W] (ideal
-torque sources: Σ cmd_i q̇_i, ``Drives.apply``; motors are not packed yet), and the energy dissipated, ẏ_{e+1} [W]:
-the chains' dampers (written by the chains, ``chain_forces``), the sliding contacts' viscous friction c |v_t|² and
-Coulomb friction μ max(F, 0) d · v_t (``friction_terms``, ``dynamics._finish_friction``), the joints' damping and
-sliding friction (``JointFriction.dissipation``).
+torque sources: Σ cmd_i q̇_i; with motors, each kind's own power as :func:`.drives.apply_drives` wrote it, as
+``Drives.apply``), and the energy dissipated, ẏ_{e+1} [W]: the motors' losses (a tube's damper), the chains'
+dampers (written by the chains, ``chain_forces``), the sliding contacts' viscous friction c |v_t|² and Coulomb
+friction μ max(F, 0) d · v_t (``friction_terms``, ``dynamics._finish_friction``), the joints' damping and sliding
+friction (``JointFriction.dissipation``).
 """
 
 from __future__ import annotations
 
 from ...numerics.compile_cache import njit
 from .contacts import P_D, P_MU
+from .drives import DW_W
 from .joint_friction import joint_dissipation
 from .pack import (
+    ANY_MOTOR,
     CI_FRICTION,
     CI_NT,
     CI_REALS,
@@ -27,6 +30,7 @@ from .pack import (
     N_CONTACTS,
     N_DRIVES,
     NQ,
+    W_DRIVES,
     section,
 )
 
@@ -34,16 +38,20 @@ __all__ = ["energy_rates"]
 
 
 @njit(cache=True)
-def energy_rates(x, ints, reals, cmd, xdot, events, pending):
+def energy_rates(x, ints, reals, work, cmd, xdot, events, pending):
     """The audit's two rates into ``xdot`` (after the solve: the normal forces are known); nothing without one."""
     e = ints[ENERGY]
     if e < 0:
         return
-    nQ = ints[NQ]
-    power = 0.0
-    for i in range(ints[N_DRIVES]):
-        power += cmd[i] * x[nQ + i]
+    nQ, n = ints[NQ], ints[N_DRIVES]
     lost = xdot[2 * nQ + e + 1]  # the chains' dampers
+    power = 0.0
+    if ints[ANY_MOTOR]:  # the drives' laws wrote their power and losses after the forces
+        at = ints[W_DRIVES] + DW_W * n
+        power, lost = work[at], lost + work[at + 1]
+    else:
+        for i in range(n):
+            power += cmd[i] * x[nQ + i]
     cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
     for ci in range(cs.shape[0]):
         if cs[ci, CI_FRICTION] == FRICTION_SLIDE:

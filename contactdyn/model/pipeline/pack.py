@@ -23,7 +23,7 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
-a drive kind numba cannot compile, the energy audit with motors, a continuous controller that outputs voltages (but
+a drive kind numba cannot compile, a continuous controller that outputs voltages (but
 constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
 law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
@@ -192,8 +192,6 @@ def unsupported(system, modes, phase) -> str:
         return reason
     if reason := drives_unsupported(system):
         return reason
-    if system.energy_slot >= 0 and system.drives.any_motor:
-        return "the energy audit with motors (the motors' power is not in the pipeline's audit yet)"
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if not isinstance(ctl, SampledController) and (reason := _controller_unsupported(system, ctl, phase)):

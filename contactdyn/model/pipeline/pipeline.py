@@ -160,7 +160,7 @@ def call(t, x, ints, reals, work, events):
         put(xdot, 2 * nQ, ydot)
         finish(ints, lam, xdot, events, pending, first_limit)
         if ints[ENERGY] >= 0:
-            call_at(ints[A_ENERGY], "pipeline.energy", (x, ints, reals, applied, xdot, events, pending))
+            call_at(ints[A_ENERGY], "pipeline.energy", (x, ints, reals, work, applied, xdot, events, pending))
         joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
         if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
             record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam, C, first_limit)
@@ -279,7 +279,7 @@ declare("pipeline.solve", solve_through_drives, _SOLVE)
 declare("pipeline.launch_start", launch_start, types.Tuple((_F1, _F1))(_I1, _F1))
 declare("pipeline.launch_took", launch_took, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F2, _F3, _F1))
 declare("pipeline.launch_settled", launch_settled, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F2, _F3))
-declare("pipeline.energy", energy_rates, types.none(_F1, _I1, _F1, _F1, _F1, _F1, _F2))
+declare("pipeline.energy", energy_rates, types.none(_F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2))
 
 
 def stage_addresses(ints: np.ndarray) -> None:
