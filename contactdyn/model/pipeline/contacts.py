@@ -198,7 +198,8 @@ def add_coordinates(ints, row, cr, U, out):
 def tangential_motion(x, ints, row, cr, FJ, Fa, Fp, Fv, FR):
     """(J (3, NF), J̇q̇ [m/s²], v_tip − v_env [m/s], T (nt, 3)) of a contact's relative motion: its touching side's
     (:func:`contact_sides`), or on a turning surface the relative motion along this state's tangents
-    (:func:`turning_sides`); a translating body's coordinates add their axes (:func:`add_coordinate_rates`)."""
+    (:func:`turning_sides`). The velocity includes the translating bodies' coordinates; their part of the
+    acceleration, axis · Q̈, is the caller's (:func:`add_coordinate_rates`)."""
     J, p_tip, v_tip, drift, p_env, v_env = contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv)
     T = cr[CR_T:CR_T + 3 * row[CI_NT]].reshape((row[CI_NT], 3))
     if row[CI_SURFACE] >= 0:

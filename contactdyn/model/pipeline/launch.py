@@ -115,8 +115,8 @@ def _past_band(x, ints, trial, state, j, FJ, Fa, Fp, Fv, FR):
 
 @njit(cache=True)
 def _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR):
-    """(d × a_t, a_t · d) [m/s²] of launching contact j under its trial d: a_t = T (J Q̈ + J̇q̇ + axis Q̈_body), the
-    relative motion's along this state's tangents (friction.slip_acceleration)."""
+    """(d × a_t, a_t · d) [m/s²] of launching contact j under its trial d: a_t = T (J Q̈ + J̇q̇ ± axis Q̈ of the
+    bodies' coordinates), the relative motion's along this state's tangents (friction.slip_acceleration)."""
     nQ = ints[NQ]
     row = _contact(ints, j)
     cr = trial[row[CI_REALS]:]
