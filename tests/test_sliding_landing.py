@@ -10,7 +10,8 @@ takes P/4 (1 + s_x μ h d_x / a + s_y μ h d_y / b) (the four rows are one too m
 linear over the corners, the one the solve gives by symmetry), and ½ m (u² + v²) − ½ m (u − μ v)² is lost. Before,
 only the located corner took friction (u⁺ = u − μ P/4 or less).
 If μ v ≥ u the slide stops in the impact: everything at rest, all four stuck, the friction impulses summing to −m u
-d, each inside its own cone.
+d, each inside its own cone. Fast and with high friction the tall box trips over its front edge instead: the
+angular momentum about that edge is kept.
 """
 
 from __future__ import annotations
@@ -76,3 +77,22 @@ def test_a_slow_slide_stops_in_the_impact_and_the_box_stays_stuck():
         assert r[f"contact.{name}.touching"][-1]
     np.testing.assert_allclose([r["body.box.x.v"][-1], r["body.box.y.v"][-1]], 0.0, atol=1e-9)
     assert not any(e["kind"] in {"slip", "separate"} for e in r.events)
+
+
+def test_a_fast_slide_with_high_friction_trips_the_box_over_its_front_edge():
+    """μ = 0.9, 1 m/s along x: the front corners jam (their impulse inside the cone), the rear ones let go, and the
+    box turns about its front edge. The impulses act on that edge, so the angular momentum about it is kept:
+    ω = m (h u − a v) / I_edge, I_edge = I_yy + m (a² + h²), the centre moving at ω × r (r from the edge to the centre,
+    (−a, 0, h)). Before every corner took its friction impulse this run ended in more than 10,000 events."""
+    mu, u = 0.9, 1.0
+    r, hits, hit = _landing(mu, u, (1.0, 0.0))
+    I_yy = M * (0.1**2 + 0.3**2) / 12  # [kg·m²] (sims/free_box.urdf: 0.1 × 0.2 × 0.3 m)
+    omega = M * (H * u - A * V) / (I_yy + M * (A**2 + H**2))
+    nQ = 2
+    np.testing.assert_allclose(hit["v_after"][nQ:], [omega * H, 0.0, omega * A, 0.0, omega, 0.0], rtol=0, atol=1e-9)
+    assert {name for name, h in hits.items() if h["jammed"]} == {"c1", "c4"}  # the front pair, at x = +a
+    assert {e["name"] for e in r.events if e["kind"] == "separate"} == {"c2", "c3"}
+    for name in ("c1", "c4"):
+        assert np.linalg.norm(hits[name]["friction_impulse"]) <= mu * hits[name]["normal_impulse"]
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual
