@@ -28,6 +28,7 @@ from contactdyn.model.system import System
 MU, M_PART = 0.4, 0.2  #: the tilting tray's μ and part [kg]
 K, B = 1e5, 100.0  #: [N/m], [N·s/m] our Kelvin–Voigt normal
 K_T, B_T = 2e4, 40.0  #: [N/m], [N·s/m] our tangential Kelvin–Voigt stage
+TRAY_CHANNELS = ("contact.rest.F_n", "contact.rest.F_f", "body.part.slide.x", "body.part.lift.x", "q")  #: compared
 
 
 def _scene(name: str, **edits) -> tuple[dict, str]:
@@ -52,6 +53,30 @@ def _tray(k: float = K, b: float = B, y0: float = 0.0, **edits):
     return _tray_scene({"normal": {"direction": [0.0, 0.0, 1.0], "model": "c", "k": k, "b": b}}, y0, **edits)
 
 
+def _audit_closes(r) -> None:
+    """The run's energy audit closes within its tolerance."""
+    residual = r.meta["checks"]["energy_residual"]
+    assert residual["value"] <= residual["tol"], residual
+
+
+def _carries_m_g_cos_theta(r, settled_samples: int) -> np.ndarray:
+    """While the part sticks (after the first second's decay: the chain starts undeformed; more than
+    ``settled_samples`` samples), its normal force is m g cos θ to 1e-6 N; those samples' mask."""
+    theta, t = r["q"][:, 0], r["t"]
+    settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)
+    assert settled.sum() > settled_samples
+    np.testing.assert_allclose(r["contact.rest.F_n"][settled], M_PART * G * np.cos(theta[settled]), rtol=0,
+                               atol=1e-6)
+    return settled
+
+
+def _agree(readable, fast, keys) -> None:
+    """Each channel of ``keys`` of the compiled run ``fast`` within 1e-9 of its largest value on the readable run."""
+    for key in keys:
+        ref = np.asarray(readable[key], float)
+        np.testing.assert_allclose(fast[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
+
+
 @pytest.fixture(scope="module")
 def tray():
     return simulate(_tray())
@@ -59,11 +84,8 @@ def tray():
 
 def test_on_the_tilting_tray_the_part_sinks_f_over_k_and_carries_m_g_cos_theta_while_it_sticks(tray):
     r = tray
-    theta, t = r["q"][:, 0], r["t"]
-    settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)  # (the chain starts undeformed: a decay first)
-    assert settled.sum() > 2500
-    F_n = r["contact.rest.F_n"]
-    np.testing.assert_allclose(F_n[settled], M_PART * G * np.cos(theta[settled]), rtol=0, atol=1e-6)
+    settled = _carries_m_g_cos_theta(r, settled_samples=2500)
+    theta, F_n = r["q"][:, 0], r["contact.rest.F_n"]
     y, z = r["body.part.slide.x"], r["body.part.lift.x"]
     sink = -np.sin(theta) * y + np.cos(theta) * z  # [m] along the tray's normal
     np.testing.assert_allclose(sink[settled], -F_n[settled] / K, rtol=0, atol=1e-8)
@@ -72,17 +94,14 @@ def test_on_the_tilting_tray_the_part_sinks_f_over_k_and_carries_m_g_cos_theta_w
 def test_on_the_tilting_tray_the_part_slips_where_tan_theta_is_mu_and_the_energy_closes(tray):
     (slip,) = [e["t"] for e in tray.events if e["kind"] == "slip"]
     assert slip == pytest.approx(np.arctan(MU) / 0.1, abs=1e-3)  # the tray tilts at 0.1 rad/s from level
-    residual = tray.meta["checks"]["energy_residual"]
-    assert residual["value"] <= residual["tol"], residual
+    _audit_closes(tray)
 
 
 def test_the_chain_on_the_tray_runs_compiled_and_the_readable_model_agrees(tray):
     assert {row["path"] for row in tray.stats["paths"].values()} == {PIPELINE}
     readable = simulate(_tray(), compiled=False)
     assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
-    for key in ("contact.rest.F_n", "contact.rest.F_f", "body.part.slide.x", "body.part.lift.x", "q"):
-        ref = np.asarray(readable[key], float)
-        np.testing.assert_allclose(tray[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
+    _agree(readable, tray, TRAY_CHANNELS)
 
 
 def test_undamped_and_off_the_axis_the_part_rides_the_tray_and_the_energy_audit_closes():
@@ -92,8 +111,7 @@ def test_undamped_and_off_the_axis_the_part_rides_the_tray_and_the_energy_audit_
     r = simulate(_tray(b=0.0, y0=0.1, duration=2.0))
     assert r["contact.rest.touching"].all()
     assert r["contact.rest.F_n"].max() > 1.5 * M_PART * G  # it rang (the tray's PD damps it through the tilt)
-    residual = r.meta["checks"]["energy_residual"]
-    assert residual["value"] <= residual["tol"], residual
+    _audit_closes(r)
 
 
 def _bar_onto(normal: dict, theta0: float = 1.2, duration: float = 1.0):
@@ -124,8 +142,7 @@ def test_the_bar_s_end_strikes_a_model_b_chain_as_two_masses_and_rests_on_it_wit
     assert hit["energy_loss"] == pytest.approx(0.5 * m_eff * m_prime * v**2 / (m_eff + m_prime), rel=1e-6)
     assert r["contact.table.F_n"][-1] == pytest.approx(M_BAR * G * D / L, rel=1e-6)
     assert abs(r["body.lever.v"][-1]) < 1e-6
-    residual = r.meta["checks"]["energy_residual"]
-    assert residual["value"] <= residual["tol"], residual
+    _audit_closes(r)
 
 
 def test_a_tool_pressed_into_a_kelvin_voigt_face_of_the_bar_holds_it_at_rest():
@@ -222,13 +239,8 @@ def riding():
 
 def test_on_the_tilting_tray_a_model_b_chain_carries_m_g_cos_theta_and_the_audit_closes(riding):
     r = riding
-    theta, t = r["q"][:, 0], r["t"]
-    settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)
-    assert settled.sum() > 900
-    np.testing.assert_allclose(r["contact.rest.F_n"][settled], M_PART * G * np.cos(theta[settled]), rtol=0,
-                               atol=1e-6)
-    residual = r.meta["checks"]["energy_residual"]
-    assert residual["value"] <= residual["tol"], residual
+    _carries_m_g_cos_theta(r, settled_samples=900)
+    _audit_closes(r)
 
 
 def test_a_riding_mass_runs_on_the_compiled_call_and_the_readable_model_agrees(riding):
@@ -237,9 +249,7 @@ def test_a_riding_mass_runs_on_the_compiled_call_and_the_readable_model_agrees(r
     assert {row["path"] for row in riding.stats["paths"].values()} == {PIPELINE}
     readable = simulate(_tray_b(), compiled=False)
     assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
-    for key in ("contact.rest.F_n", "contact.rest.F_f", "body.part.slide.x", "body.part.lift.x", "q", "v"):
-        ref = np.asarray(readable[key], float)
-        np.testing.assert_allclose(riding[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
+    _agree(readable, riding, (*TRAY_CHANNELS, "v"))
     assert [e["kind"] for e in riding.events] == [e["kind"] for e in readable.events]
     np.testing.assert_allclose([e["t"] for e in riding.events], [e["t"] for e in readable.events], rtol=0, atol=1e-9)
 
@@ -259,8 +269,7 @@ def test_the_tool_strikes_a_mass_riding_the_bar_s_face_and_the_bar_feels_no_impu
     assert hit["energy_loss"] == pytest.approx(0.5 * M_TOOL * m_prime * v**2 / (M_TOOL + m_prime), rel=1e-9)
     bar = 2  # (Q: the tool's x and z, the bar's angle, m′'s ξ)
     assert abs(hit["v_after"][bar]) < 1e-15 and hit["v_after"][-1] == pytest.approx(hit["v_after"][0], rel=1e-12)
-    residual = r.meta["checks"]["energy_residual"]
-    assert residual["value"] <= residual["tol"], residual
+    _audit_closes(r)
 
 
 # ---- a tangential chain on a turning surface -------------------------------------------------------------------------
@@ -287,16 +296,13 @@ def test_a_tangential_chain_holds_the_part_on_the_tilting_tray_m_g_sin_theta_ove
     quasi_static = -(F - B_T / K_T * F_dot) / K_T  # k x + b ẋ = −F, x ≈ −F/k + b Ḟ / k² [m]
     np.testing.assert_allclose(along[late], quasi_static[late], rtol=0, atol=1e-11)
     np.testing.assert_allclose(r["contact.rest.F_n"][late], M_PART * G * np.cos(theta[late]), rtol=0, atol=1e-6)
-    residual = r.meta["checks"]["energy_residual"]
-    assert residual["value"] <= residual["tol"], residual
+    _audit_closes(r)
 
 
 def test_the_tangential_chain_on_the_tray_runs_compiled_and_the_readable_model_agrees(held):
     assert {row["path"] for row in held.stats["paths"].values()} == {PIPELINE}
     readable = simulate(_tray_t(), compiled=False)
-    for key in ("contact.rest.F_n", "body.part.slide.x", "body.part.lift.x", "q"):
-        ref = np.asarray(readable[key], float)
-        np.testing.assert_allclose(held[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
+    _agree(readable, held, ("contact.rest.F_n", "body.part.slide.x", "body.part.lift.x", "q"))
 
 
 def test_a_chain_with_a_mass_on_its_robot_side_rides_the_tray_too_and_the_audit_closes():
@@ -305,10 +311,5 @@ def test_a_chain_with_a_mass_on_its_robot_side_rides_the_tray_too_and_the_audit_
     through the two stages in series, the audit closing."""
     stage = {"k": 2e4, "b": 20.0}  # (our choice: m′ = 0.1 kg rings at 630 rad/s, ζ = 0.3: an explicit step's pace)
     r = simulate(_tray_b(normal={"direction": [0.0, 0.0, 1.0], "robot": [stage, {"m": 0.1}, stage]}))
-    theta, t = r["q"][:, 0], r["t"]
-    settled = r["contact.rest.stuck"].astype(bool) & (t > 1.0)
-    assert settled.sum() > 900
-    np.testing.assert_allclose(r["contact.rest.F_n"][settled], M_PART * G * np.cos(theta[settled]), rtol=0,
-                               atol=1e-6)
-    residual = r.meta["checks"]["energy_residual"]
-    assert residual["value"] <= residual["tol"], residual
+    _carries_m_g_cos_theta(r, settled_samples=900)
+    _audit_closes(r)
