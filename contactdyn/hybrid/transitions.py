@@ -108,7 +108,7 @@ class Transitions:
         consistent with the state (:meth:`consistent`). A new kind of event is a new handler.
         """
         modes = list(modes)
-        self.log.log(t, event.kind, event.contact, check_storm=event.kind != "chart")  # (a chart: no storm)
+        self.log.log(t, event.kind, event.contact, check_storm=event.kind not in self.UNCOUNTED)
         after = _After()
         x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
         if settle:
@@ -224,10 +224,12 @@ class Transitions:
                              "slip_after": imp.slip_after.tolist(), **extra})
         self._release(imp, modes, after)
         for name in imp.separated:  # holding it would have pulled: it lets go at the impact
-            modes[self._index(name)] = modes[self._index(name)].separated()
+            j = self._index(name)
+            modes[j] = modes[j].separated()
             self.log.log(imp.t, "separate", name, check_storm=False)
         for name in imp.jammed_too:  # it slid into the impact, which stopped its slip
-            modes[self._index(name)] = modes[self._index(name)].with_(stuck=True)
+            j = self._index(name)
+            modes[j] = modes[j].with_(stuck=True)
         i = self._index(imp.contact)
         c = system.contacts[i]
         if imp.jammed:
@@ -263,6 +265,7 @@ class Transitions:
     HANDLERS = {"limit": _on_limit, "release": _on_limit, "joint_slip": _on_joint, "joint_stick": _on_joint,
                 "touch": _on_touch, "separate": _on_separate, "stop": _on_stop, "reverse": _on_stop,
                 "turn": _on_turn, "slip": _on_slip, "chart": on_chart}
+    UNCOUNTED = frozenset({"chart"})  #: event kinds that change coordinates, not motion: no event storm counts them
 
     def _touch(self, t, x, modes, i, co=False):
         """Mode after touch: touching, tangential chains anchored where the tip now is; touching with another
@@ -436,9 +439,10 @@ def _co_impacts(imp, names: list[str]) -> list[dict]:
     """``Result.impacts`` entries of the contacts that touched with ``imp``'s own, each its normal and friction
     impulses [N·s] in the one impact, jammed if its slide stopped there (its loss and velocities are on the located
     contact's entry, ``with`` names it)."""
-    def friction(name):
-        held = [v for (who, kind, _), v in imp.row_impulses.items() if who == name and kind == "t"]
-        return imp.slid.get(name, held)
+    def friction(name):  # a slide's −μ_k FΔt d, else its sticks' impulses
+        if name in imp.slid:
+            return imp.slid[name]
+        return [v for (who, kind, _), v in imp.row_impulses.items() if who == name and kind == "t"]
 
     return [{"t": imp.t, "contact": name, "normal_impulse": float(imp.row_impulses.get((name, "n", 0), 0.0)),
              "friction_impulse": friction(name), "jammed": name in imp.jammed_too, "energy_loss": 0.0,

@@ -156,12 +156,11 @@ class JointFriction:
         return out
 
     # ---- switching ------------------------------------------------------------------------------
-    def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event, evaluate=None) -> tuple:
+    def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event, evaluate) -> tuple:
         """Apply a ``joint_slip`` or ``joint_stick`` event: (x, phase, info); ``info["kind"]`` renames the event
-        where it is a false alarm (``joint_slip_check``) or a reversal (``joint_reverse``). ``evaluate``:
-        System.evaluate (None) or one with its arguments (:class:`~contactdyn.hybrid.transitions.LastEvaluation`)."""
+        where it is a false alarm (``joint_slip_check``) or a reversal (``joint_reverse``). ``evaluate(t, x, modes,
+        phase)``: System.evaluate's Evaluation (the transitions' ``LastEvaluation``)."""
         i, nQ = event.index, system.nQ
-        evaluate = evaluate or system.evaluate
         if event.kind == "joint_slip":  # slides from rest where the load pushes (−sign λ), unless a false alarm
             hold = evaluate(t, x, modes, phase).joint_hold.get(i, 0.0)
             if self.breaks_away(i, hold, SLIP_ALARM):
@@ -175,7 +174,7 @@ class JointFriction:
             return x, self.with_mode(phase, i, -1 if hold > 0.0 else 1), {"torque": hold, "kind": "joint_reverse"}
         return x, trial, {"torque": hold}
 
-    def contradicted(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, evaluate=None
+    def contradicted(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, evaluate
                      ) -> tuple | None:
         """The first joint mode the state contradicts, as (kind, joint, x, phase) with it changed, else None (x: its
         stuck joints' velocities within ``STICK_TOL`` set to exactly 0): a sliding joint pressing on a limit is
@@ -196,7 +195,7 @@ class JointFriction:
                 x[nQ + i] = 0.0
         if not held:
             return None
-        ev = (evaluate or system.evaluate)(t, x, modes, phase)
+        ev = evaluate(t, x, modes, phase)
         for i in held:
             hold = ev.joint_hold[i]
             if self.breaks_away(i, hold):

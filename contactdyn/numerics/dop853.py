@@ -103,26 +103,22 @@ class _Steps:
     def f_old(self, i: int) -> np.ndarray:
         return self.f0 if i == 0 else self.blocks[i - 1][_F_NEW]
 
-    def build(self, steps: np.ndarray, derivatives: Callable | None = None) -> None:
-        """Interpolant coefficients of the given steps (DOP853's stages 14–16, one batch: :func:`build_interpolants`).
-
-        ``derivatives(ts, Y) -> F``: the right-hand side at all the steps' stage states at once, in place
-        of one call per state (output sampling; :func:`~contactdyn.hybrid.steps.derivatives` gives the
-        calls' values bitwise)."""
-        build_interpolants([(self, int(i)) for i in steps if int(i) not in self.coef], derivatives)
-
-    def at(self, i: int, t: float) -> np.ndarray:
-        """The state at t [s] on step i's own interpolant (built if needed), as solve_ivp's step dense output."""
+    def at(self, i: int, t: float, derivatives: Callable | None = None) -> np.ndarray:
+        """The state at t [s] on step i's own interpolant (built if needed: ``derivatives``, see
+        :func:`build_interpolants`), as solve_ivp's step dense output."""
         if i not in self.coef:
-            build_interpolants([(self, i)])
+            build_interpolants([(self, i)], derivatives)
         t_old = self.t[i]
         return horner_at(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old), self.y_old(i))
 
 
 def build_interpolants(wanted: list[tuple[_Steps, int]], derivatives: Callable | None = None) -> None:
-    """Interpolant coefficients of steps (steps, i) of one or several runs, in one batch: each step's row is its
-    own arithmetic (the batch's other rows do not change its numbers). ``derivatives``: see :meth:`_Steps.build`
-    (the runs' right-hand side, one for all; None: each run's ``fun``, one call per state)."""
+    """Interpolant coefficients of steps (steps, i) of one or several runs (DOP853's stages 14–16), in one batch:
+    each step's row is its own arithmetic (the batch's other rows do not change its numbers).
+
+    ``derivatives(ts, Y) -> F``: the runs' right-hand side at all the steps' stage states at once, in place of one
+    call per state (output sampling; :func:`~contactdyn.hybrid.steps.derivatives` gives the calls' values bitwise);
+    None: each run's ``fun``, one call per state."""
     if not wanted:
         return
     m, n = len(wanted), wanted[0][0].n
@@ -160,7 +156,8 @@ class DenseSolution:
     def __init__(self, steps: _Steps, t_end: float):
         self.steps = steps
         self.t_min, self.t_max = steps.t[0], t_end
-        self.ends = np.array(steps.t[1:])
+        self._t = np.array(steps.t)  #: the step ends [s], t0 first (fixed: the run has returned)
+        self.ends = self._t[1:]
         self.calls_counted = steps.calls  #: interpolant calls already in the Solution's nfev
 
     @property
@@ -171,7 +168,7 @@ class DenseSolution:
     def __call__(self, t, derivatives: Callable | None = None) -> np.ndarray:
         """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t))).
 
-        ``derivatives``: see :meth:`_Steps.build` (the interpolants this call builds; for output samples
+        ``derivatives``: see :func:`build_interpolants` (the interpolants this call builds; for output samples
         only: the run's own event location and segment ends use the calls)."""
         if np.ndim(t) == 0:
             return self.state(float(t), derivatives)
@@ -184,10 +181,7 @@ class DenseSolution:
         if not len(self.ends) or t == st.t[0]:
             return st.y0.copy()
         i = min(bisect_left(st.t, t, 1) - 1, len(self.ends) - 1)  # (np.searchsorted(self.ends, t, "left"))
-        if i not in st.coef:
-            build_interpolants([(st, i)], derivatives)
-        t_old = st.t[i]
-        return horner_at(st.coef[i], (t - t_old) / (st.t[i + 1] - t_old), st.y_old(i))
+        return st.at(i, t, derivatives)
 
     def locate(self, tt: np.ndarray) -> tuple[list[int], np.ndarray, np.ndarray] | None:
         """Where the times tt [s] fall: (their steps, sorted; each time's position in that list; its step fraction
@@ -197,7 +191,7 @@ class DenseSolution:
             return None
         idx = np.minimum(np.searchsorted(self.ends, tt, side="left"), len(self.ends) - 1)
         steps = sorted(set(idx.tolist()))  # per step, then per sample (np.unique's, without its cost on ~3 items)
-        ends = np.array(st.t)
+        ends = self._t
         return steps, np.searchsorted(steps, idx), (tt - ends[idx]) / (ends[idx + 1] - ends[idx])
 
     def states(self, tt: np.ndarray, where) -> np.ndarray:
@@ -212,7 +206,7 @@ class DenseSolution:
 def dense_states(parts: list[tuple[DenseSolution, np.ndarray]], derivatives: Callable | None = None
                  ) -> list[np.ndarray]:
     """The states (len(tt), n) of dense outputs at their times tt [s], (dense, tt) per part (each dense once), the
-    interpolants they need built in one batch (:func:`build_interpolants`; ``derivatives``: :meth:`_Steps.build`'s)."""
+    interpolants they need built in one batch (:func:`build_interpolants`, with ``derivatives``)."""
     where = [dense.locate(tt) for dense, tt in parts]
     build_interpolants([(dense.steps, i) for (dense, _), w in zip(parts, where, strict=True) if w is not None
                         for i in w[0] if i not in dense.steps.coef], derivatives)

@@ -48,8 +48,8 @@ class PiecewiseDense:
 
     def __init__(self, pieces: list[_Steps], t_end: float):
         self.parts = [DenseSolution(p, p.t[-1]) for p in pieces[:-1]] + [DenseSolution(pieces[-1], t_end)]
-        self.start_list = [p.t[0] for p in pieces]  #: [s] where each piece starts
-        self.starts = np.array(self.start_list)
+        self.start_list = [p.t[0] for p in pieces]  #: [s] where each piece starts (bisect's, for one time)
+        self.starts = np.array(self.start_list)  #: the same, as an array (searchsorted's, for many)
         self.t_min, self.t_max = pieces[0].t[0], t_end
 
     @property
@@ -59,10 +59,10 @@ class PiecewiseDense:
 
     def __call__(self, t, derivatives: Callable | None = None) -> np.ndarray:
         """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t)))."""
-        tt = np.atleast_1d(np.asarray(t, float))
         if np.ndim(t) == 0:
             piece = min(max(bisect_right(self.start_list, float(t)) - 1, 0), len(self.parts) - 1)  # (part_of's)
             return self.parts[piece].state(float(t), derivatives)
+        tt = np.atleast_1d(np.asarray(t, float))
         out = np.empty((len(tt), len(self.parts[0].steps.y0)))
         split = self.split(tt)
         for (_, at), y in zip(split, dense_states([(part, tt[at]) for part, at in split], derivatives), strict=True):

@@ -230,14 +230,14 @@ def free_body_channels(system: System, xs: np.ndarray) -> dict[str, np.ndarray]:
         if not body.free:
             continue
         sl = slice(body.first + 3, body.first + 6)
-        charts = [body.chart_of(x) for x in xs]
-        rows = [chart_a_angles(x[sl], x[nQ:][sl], chart) for x, chart in zip(xs, charts, strict=True)]
+        chart = xs[:, body.chart_index].astype(int)  # (ArticulatedBody.chart_of per sample: 0 A, 1 B)
+        rows = [chart_a_angles(x[sl], x[nQ:][sl], c) for x, c in zip(xs, chart.tolist(), strict=True)]
         a, ad, w = (np.array([r[k] for r in rows]).reshape(len(xs), 3) for k in range(3))  # (none: (0, 3))
         for k, angle in enumerate(FREE_COORDINATES[3:]):  # its joints' names (urdf_model.add_free_joints)
             out[f"body.{name}.{angle}.x"], out[f"body.{name}.{angle}.v"] = a[:, k], ad[:, k]
         for k, axis in enumerate("xyz"):
             out[f"body.{name}.omega_{axis}"] = w[:, k]
-        out[f"body.{name}.chart"] = np.array(charts, float)
+        out[f"body.{name}.chart"] = chart.astype(float)
     return out
 
 
