@@ -340,7 +340,7 @@ class RidingMass:
     coord: int
     mass: float
     direction: np.ndarray  #: the line's unit direction in the carrying frame [-]
-    carrier: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    carrier: np.ndarray  #: the carrier's coordinates' indices in Q (the robot's joints, or the body's)
     J: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))  #: ∂p/∂(carrier) (3, k) [m/rad or m/m]
     drift: np.ndarray = field(default_factory=lambda: np.zeros(3))  #: the point's acceleration at Q̈ = 0 [m/s²]
     n: np.ndarray = field(default_factory=lambda: np.zeros(3))  #: the line's direction in the world, ∂p/∂ξ [-]
@@ -350,20 +350,23 @@ class RidingMass:
         return self.J @ carrier_rates + xi_dot * self.n
 
 
-def riding_masses(contacts: list[Contact]) -> list[RidingMass]:
-    """The masses of the chains on turning surfaces (a surface carried by a robot frame or an articulated body)."""
+def riding_masses(contacts: list[Contact], nv: int) -> list[RidingMass]:
+    """The masses of the chains on turning surfaces (a surface carried by a robot frame, its carrier the robot's nv
+    joints, or by an articulated body, its coordinates)."""
     out = []
     for c in (c for c in contacts if c.turning):
         directions = [c.spec.normal, *c.spec.tangents[:len(c.tangent_chains)]]  # each chain's, in the frame
+        body = c.surface_link[0] if c.surface_link is not None else None
+        carrier = np.arange(body.first, body.first + body.nb) if body is not None else np.arange(nv)
         for dc, d in zip(c.chains, directions, strict=True):
-            out += [RidingMass(c, node.coord, node.mass, d) for node in dc.chain.nodes if node.kind == NodeKind.MASS]
+            out += [RidingMass(c, node.coord, node.mass, d, carrier) for node in dc.chain.nodes
+                    if node.kind == NodeKind.MASS]
     return out
 
 
-def riding_terms(rm: RidingMass, carrier: np.ndarray, frame: FrameTerms, w: np.ndarray, xi: float,
-                 xi_dot: float) -> None:
+def riding_terms(rm: RidingMass, frame: FrameTerms, w: np.ndarray, xi: float, xi_dot: float) -> None:
     """Set ``rm``'s terms at a state: the carrying frame's terms ``frame`` (Jacobians over the carrier's coordinates,
-    indices ``carrier`` in Q), its angular velocity ω = ``w`` [rad/s], the mass's ξ [m] and ξ̇ [m/s].
+    ``rm.carrier``), its angular velocity ω = ``w`` [rad/s], the mass's ξ [m] and ξ̇ [m/s].
 
     With r = R p0 + ξ n from the frame's origin (p0 the surface's point, n = R d0 the line's direction, in the
     frame), the point fixed in the frame at r moving along n at ξ̇: v = v_o + ω × r + ξ̇ n, and at Q̈ = 0 its
@@ -371,7 +374,6 @@ def riding_terms(rm: RidingMass, carrier: np.ndarray, frame: FrameTerms, w: np.n
     rm.J, rm.n, rm.drift = riding_point(contiguous(frame.jacobian), contiguous(frame.angular_jacobian), frame.drift,
                                         frame.angular_drift, contiguous(frame.rotation), w, rm.direction,
                                         rm.contact.spec.point, xi, xi_dot)
-    rm.carrier = carrier
 
 
 @njit(cache=True)

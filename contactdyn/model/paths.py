@@ -40,12 +40,13 @@ def disagreement(system, modes, phase, rhs: Callable, t: float, x: np.ndarray) -
     rng = np.random.default_rng(7)
     scale_x = 1e-3 * (1.0 + np.abs(x))
     step = scale_x * rng.normal(size=system.n)
-    charts = [body.chart_index for body in system.articulated.values() if body.chart_index >= 0]
-    step[charts] = 0.0
+    free = [body for body in system.articulated.values() if body.chart_index >= 0]
+    step[[body.chart_index for body in free]] = 0.0
     states = [x, x + step]
-    if charts:
+    if free:
         flipped = np.array(x, float)
-        flipped[charts] = 1.0 - np.trunc(flipped[charts])  # (0: A, 1: B, as ArticulatedBody.chart_of reads it)
+        for body in free:
+            flipped[body.chart_index] = 1 - body.chart_of(x)
         states.append(flipped)
     refs = [system.evaluate(t, state, modes, phase).xdot for state in states]
     scale = 1.0 + np.max(np.abs(refs), axis=0)

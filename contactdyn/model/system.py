@@ -108,7 +108,7 @@ class System:
         diag: list[float] = [c.mass for _, c in coords]
         self.contacts = [self._contact_of(spec) for spec in scene.contacts.values()]
         self.mass_labels, n_first = assign_chain_slots(self.contacts, nv, diag)
-        self.riding = riding_masses(self.contacts)  #: chain masses riding turning surfaces (contact.RidingMass)
+        self.riding = riding_masses(self.contacts, nv)  #: chain masses riding turning surfaces (contact.RidingMass)
         self.drives = self._build_drives(nv + len(diag))  # elastic transmissions: motor angles after the masses
         diag += self.drives.motor_inertias
         self.nQ = nv + len(diag)
@@ -306,10 +306,9 @@ class System:
     def body_forces(self, x: np.ndarray, f: np.ndarray) -> None:
         """Add to f the articulated bodies' −h_b(q_b, q̇_b) [N·m or N]: Coriolis, centrifugal and gravity; and the
         riding masses' −m Jᵀ a on their carriers and −m n·a on their ξ (a: the point's drift)."""
+        self.update_bodies(x)
         for body in self.articulated.values():
-            body.update(x, self.nQ)
             f[body.first:body.first + body.nb] -= body.h
-        _update_riding(self, x)
         for rm in self.riding:
             f[rm.carrier] -= rm.mass * (rm.J.T @ rm.drift)
             f[rm.coord] -= rm.mass * float(rm.n @ rm.drift)
@@ -395,18 +394,15 @@ def _link(system: System, spec, body: str, key: str, frame: str | None) -> tuple
 
 
 def _update_riding(system: System, x: np.ndarray) -> None:
-    """The riding masses' terms at x (:func:`~contactdyn.model.contact.riding_terms`; the robot updated at x)."""
+    """The riding masses' terms at x (:func:`~contactdyn.model.contact.riding_terms`; the robot and the articulated
+    bodies updated at x)."""
     nQ = system.nQ
     for rm in system.riding:
         c = rm.contact
-        if c.surface_link is not None:
-            body, fid = c.surface_link
-            body.update(x, nQ)
-            frame, carrier = body.frame(fid), np.arange(body.first, body.first + body.nb)
-        else:
-            frame, carrier = system.robot.frame_terms(c.surface_fid), np.arange(system.nv)
-        w = frame.angular_jacobian @ x[nQ + carrier]  # ω [rad/s]
-        riding_terms(rm, carrier, frame, w, float(x[rm.coord]), float(x[nQ + rm.coord]))
+        frame = c.surface_link[0].frame(c.surface_link[1]) if c.surface_link is not None else \
+            system.robot.frame_terms(c.surface_fid)
+        w = frame.angular_jacobian @ x[nQ + rm.carrier]  # ω [rad/s]
+        riding_terms(rm, frame, w, float(x[rm.coord]), float(x[nQ + rm.coord]))
 
 
 def _on_body_frame(system: System, c: Contact, x: np.ndarray, p_tip, v_tip, J, drift, ft, columns: tuple

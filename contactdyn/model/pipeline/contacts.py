@@ -104,14 +104,15 @@ from .pack import (
 )
 
 __all__ = ["contact_terms", "limit_rows", "finish", "contact_sides", "turning_sides", "surface_point",
-           "tangential_motion", "add_coordinates", "add_coordinate_rates", "add_riding"]
+           "tangential_motion", "frame_omega", "add_coordinates", "add_coordinate_rates", "add_riding"]
 
 #: per contact, what finishes a slide once its normal force is solved: μ [-], d (2), the viscous force (2) [N]
 P_MU, P_D, P_VISC, P_W = 0, 1, 3, 5
 
-# ---- a contact's two sides: the touching one (a robot frame, or a body's point) and the surface (the ground, or a
-# body), each carried by its body's coordinates (model.contact.Contact). A body translates: a point of it is its
-# place at the coordinates 0 plus Σ axis Q [m], its velocity Σ axis Q̇, its acceleration Σ axis Q̈ (no drift).
+# ---- a contact's two sides: the touching one (a packed frame: a robot frame or an articulated body's point; or a
+# translating body's point) and the surface (the ground, a translating body, or turning with a packed frame:
+# turning_sides). A translating body's point is its place at the coordinates 0 plus Σ axis Q [m], its velocity
+# Σ axis Q̇, its acceleration Σ axis Q̈ (no drift).
 
 TOUCHING, SURFACE = 0, 1  #: the sides
 
@@ -148,7 +149,8 @@ def surface_point(x, ints, row, cr):
 
 @njit(cache=True)
 def _touching_point(x, ints, row, cr, Fp, Fv):
-    """(p_tip [m], v_tip [m/s]): the robot frame's, or a body's touching point carried by its coordinates."""
+    """(p_tip [m], v_tip [m/s]): its packed frame's, or a translating body's touching point carried by its
+    coordinates."""
     fi = row[CI_FRAME]
     p_tip, v_tip = Fp[fi], Fv[fi]
     if ints[row[CI_COORDS]]:  # a body's point touches
@@ -159,12 +161,23 @@ def _touching_point(x, ints, row, cr, Fp, Fv):
 
 @njit(cache=True)
 def contact_sides(x, ints, row, cr, FJ, Fa, Fp, Fv):
-    """(J (3, nv) of the robot's frame, p_tip [m], v_tip [m/s], J̇q̇ [m/s²], p_env [m], v_env [m/s]); a body's
-    touching point has the zero frame's J and J̇q̇ (the frames' last row)."""
+    """(J (3, NF) of its packed frame, p_tip [m], v_tip [m/s], J̇q̇ [m/s²], p_env [m], v_env [m/s]); a translating
+    body's touching point has the zero frame's J and J̇q̇ (the frames' last row)."""
     fi = row[CI_FRAME]
     p_tip, v_tip = _touching_point(x, ints, row, cr, Fp, Fv)
     p_env, v_env = surface_point(x, ints, row, cr)
     return FJ[fi, :3], p_tip, v_tip, Fa[fi, :3], p_env, v_env
+
+
+@njit(cache=True)
+def frame_omega(x, ints, FJ, s):
+    """ω [rad/s] (world) of packed frame s at the state x: its J_ω q̇ over the rigid-body table's columns."""
+    nQ = ints[NQ]
+    w = np.zeros(3)
+    for r in range(3):
+        for c in range(FJ.shape[2]):
+            w[r] += FJ[s, 3 + r, c] * x[nQ + c]
+    return w
 
 
 @njit(cache=True)
@@ -173,11 +186,8 @@ def turning_sides(x, ints, row, cr, J, p_tip, v_tip, drift, FJ, Fa, Fp, Fv, FR):
     (J_rel (3, NF), a_rel [m/s²], p_env [m], v_env [m/s], n, T (nt, 3)) of the relative motion at this state
     (model.contact.turning_surface), the touching side's J, p, v, J̇q̇ from :func:`contact_sides`; T the tangents
     of its friction or its tangential chains."""
-    nQ, nt, s = ints[NQ], max(row[CI_NT], row[CI_N_T]), row[CI_SURFACE]
-    w = np.zeros(3)  # the frame's angular velocity [rad/s]
-    for r in range(3):
-        for c in range(FJ.shape[2]):
-            w[r] += FJ[s, 3 + r, c] * x[nQ + c]
+    nt, s = max(row[CI_NT], row[CI_N_T]), row[CI_SURFACE]
+    w = frame_omega(x, ints, FJ, s)
     return turning_surface(p_tip, v_tip, J, drift, Fp[s], Fv[s], FJ[s, :3], Fa[s, :3], FR[s], w, FJ[s, 3:], Fa[s, 3:],
                            cr[CR_POINT:CR_POINT + 3], cr[CR_N:CR_N + 3], cr[CR_T:CR_T + 3 * nt].reshape((nt, 3)))
 
@@ -423,21 +433,17 @@ def add_riding(x, ints, reals, FJ, Fa, FR, M, f):
     n_r = ints[N_RIDING]
     if n_r == 0:
         return M
-    nQ, nf = ints[NQ], M.shape[0]
+    nQ, ncol = ints[NQ], M.shape[0]  # (ncol: the rigid-body table's NF columns)
     Mx = np.zeros((nQ, nQ))
-    for r in range(nf):
-        for c in range(nf):
+    for r in range(ncol):
+        for c in range(ncol):
             Mx[r, c] = M[r, c]
     rows, consts = section(ints, ints[I_RIDING], n_r, RI_W), section(reals, ints[R_RIDING], n_r, RR_W)
     for k in range(n_r):
         fi, i, m = rows[k, RI_FRAME], rows[k, RI_COORD], consts[k, RR_MASS]
-        w = np.zeros(3)  # the frame's ω [rad/s]
-        for a in range(3):
-            for c in range(nf):
-                w[a] += FJ[fi, 3 + a, c] * x[nQ + c]
-        J, n, drift = riding_point(FJ[fi, :3], FJ[fi, 3:], Fa[fi, :3], Fa[fi, 3:], FR[fi], w,
+        J, n, drift = riding_point(FJ[fi, :3], FJ[fi, 3:], Fa[fi, :3], Fa[fi, 3:], FR[fi], frame_omega(x, ints, FJ, fi),
                                    consts[k, RR_DIR:RR_DIR + 3], consts[k, RR_POINT:RR_POINT + 3], x[i], x[nQ + i])
-        for a in range(nf):
+        for a in range(ncol):
             Jn = Ja = 0.0
             for r in range(3):
                 Jn += J[r, a] * n[r]
@@ -445,7 +451,7 @@ def add_riding(x, ints, reals, FJ, Fa, FR, M, f):
             Mx[a, i] += m * Jn
             Mx[i, a] += m * Jn
             f[a] -= m * Ja
-            for c in range(nf):
+            for c in range(ncol):
                 Mx[a, c] += m * (J[0, a] * J[0, c] + J[1, a] * J[1, c] + J[2, a] * J[2, c])
         f[i] -= m * (n[0] * drift[0] + n[1] * drift[1] + n[2] * drift[2])
     return Mx

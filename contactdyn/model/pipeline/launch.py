@@ -136,14 +136,11 @@ def _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR):
 @njit(cache=True)
 def launch_took(x, ints, state, trial, FJ, Fa, Fp, Fv, FR, xdot):
     """A pass's rates ``xdot`` and frames read for the pending contact: its next trial aimed, or its direction
-    found (d where φ ≈ 0 ahead; r past the band, where dφ/dθ ≥ 0 or after MAX_UPDATES) and the next contact
-    begun. True when this pass is the result (the last contact's Newton converged on it)."""
+    found (d where φ ≈ 0 ahead; r where dφ/dθ ≥ 0 or after MAX_UPDATES) and the next contact begun. True when this
+    pass is the result (the last contact's Newton converged on it). (A contact past the stick band never gets here:
+    :func:`launch_settled` gave it r before the pass, from the same frames.)"""
     j = int(state[ST_CONTACT])
     at = _contact(ints, j)[CI_REALS] + CR_R
-    if state[ST_STEP] == FIRST and _past_band(x, ints, trial, state, j, FJ, Fa, Fp, Fv, FR):
-        trial[at], trial[at + 1] = state[ST_R], state[ST_R + 1]  # launched: r, its own direction from here on
-        _begin(ints, trial, state, j + 1)
-        return False
     phi, ahead = _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR)
     if state[ST_STEP] != AT_H:
         if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):  # the trial's d stays

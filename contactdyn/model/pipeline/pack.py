@@ -390,7 +390,7 @@ def _frames(b: _Builder, system, keys: list, starts: dict[str, int]) -> None:
         chart = art.chart_index if art is not None and art.free else -1
         rows.append((row0 + frame.parentJoint, len(cols), len(supports), chart))
         supports += cols
-        consts += _placement(models[0].frames[fid], point)
+        consts += _placement(frame, point)
         turned += _placement(models[-1].frames[fid], point)  # (chart B's: its frames on the roll joint turned by C)
     at = b.int_section(I_FRAMES, [0] * (FI_W * len(keys)))
     support_at = b.int_section(None, supports)
@@ -451,12 +451,12 @@ def _contacts(b: _Builder, system, modes, frames: list) -> list[tuple[str, str, 
         reals_at = b.real_section(None, [*c.spec.point, *touch, *T.ravel(), *r,
                                          *((fr.mu_s, fr.mu_k, fr.viscous) if nt else (0.0, 0.0, 0.0)),
                                          *c.spec.normal, *(v for _, axis in coords for v in axis)])
-        touching = _touch_frame(c)  # a translating body's point: the zero frame after the others
-        frame = frames.index(touching) if touching is not None else len(frames)
+        touching, surface = _touch_frame(c), _surface_frame(c)  # (a translating body's point: the zero frame after
+        frame = frames.index(touching) if touching is not None else len(frames)  # the others; the ground: none)
         h[contact_at + CI_W * ci:contact_at + CI_W * (ci + 1)] = [
             frame, coords_at, int(m.touching), friction, nt, law, len(fr.params) if nt else 0, fp_at,
             first, first + 1, len(c.tangent_chains), normal_row, stick_row, system.impulse_slots.get(c.name, -1),
-            reals_at, frames.index(_surface_frame(c)) if _surface_frame(c) is not None else -1]
+            reals_at, frames.index(surface) if surface is not None else -1]
     return meta
 
 
