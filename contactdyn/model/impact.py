@@ -111,12 +111,15 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     name = contact.name if contact is not None else ""
     k = len(contact.tangents) if contact is not None else 0
     kin = system.kinematics(contact, x) if contact is not None else None
+    #: the touching contacts' kinematics at x (fixed through the impact: only Q̇⁺ changes between its passes)
+    kins = {j: system.kinematics(c, x) for j, (c, m) in enumerate(zip(system.contacts, modes, strict=True))
+            if m.touching}
     vt_minus = slip_velocity(system, contact, kin, qd_minus) if k else np.zeros(0)
     held = list(modes)  #: the modes the impact holds: a stick its impulse would push out of the cone slides
     own = system.contacts.index(contact) if contact is not None else -1
     if k and modes[own].stuck:  # the impact's own stick: tried jammed, like a contact at rest
         held[own] = modes[own].with_(stuck=False)
-    others = _sliding_into(system, x, modes, contact, qd_minus)  #: index -> (d, μ_k) of the others sliding
+    others = _sliding_into(system, kins, modes, contact, qd_minus)  #: index -> (d, μ_k) of the others sliding
     impulses: dict = {}
 
     def solve(slide=None, jam=False):  # slide: (d, μ) of the impact's own contact
@@ -134,11 +137,11 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     released: dict[str, tuple[float, ...]] = {}
     for _ in range(4 * len(system.contacts) + 4):
         qd_plus, P_n, P_t, d, jammed = _own_contact(system, contact, kin, vt_minus, solve)
-        j = _unilateral_change(system, x, modes, held, contact, impulses, qd_plus)
+        j = _unilateral_change(system, kins, modes, held, contact, impulses, qd_plus)
         if j is not None:  # let go a pulling contact, or hold again one let go that would approach
             held[j] = modes[j] if not held[j].touching else held[j].separated()
             continue
-        j = _reversed_slide(system, x, held, others, released, qd_plus)
+        j = _reversed_slide(system, kins, held, others, released, qd_plus)
         if j is not None:  # its slide would reverse: it jams (held by its sticks, cone-checked next)
             held[j] = held[j].with_(stuck=True)
             continue
@@ -166,7 +169,7 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
                          dict(impulses), released, separated, jammed_too, slid)
 
 
-def _sliding_into(system, x, modes, contact, qd_minus) -> dict[int, tuple[np.ndarray, float]]:
+def _sliding_into(system, kins, modes, contact, qd_minus) -> dict[int, tuple[np.ndarray, float]]:
     """Index -> (d, μ_k) of every touching contact other than ``contact`` that slides into the impact with a normal
     row and friction: d its slip direction before it (tangent coordinates), μ_k at that slip speed; one within the
     stick band slides on untilted (its direction is not defined)."""
@@ -175,14 +178,14 @@ def _sliding_into(system, x, modes, contact, qd_minus) -> dict[int, tuple[np.nda
         if (c is contact or not m.touching or m.stuck or c.friction is None or not len(c.tangents)
                 or not c.normal.chain.bonded_when_touching):
             continue
-        vt = slip_velocity(system, c, system.kinematics(c, x), qd_minus)
+        vt = slip_velocity(system, c, kins[j], qd_minus)
         speed = float(np.linalg.norm(vt))
         if speed > system.slip_band:
             out[j] = (vt / speed, float(c.friction.mu(speed)))
     return out
 
 
-def _reversed_slide(system, x, held, others, released, qd_plus) -> int | None:
+def _reversed_slide(system, kins, held, others, released, qd_plus) -> int | None:
     """The other contact sliding through the impact (not one it released) whose slip after it points most against
     its direction d (v_t⁺ · d < −v_ε, the stick band: the slide assumption is wrong, it jams), else None; one
     ending within the band slides on, to be decided at rest after the impact."""
@@ -191,13 +194,13 @@ def _reversed_slide(system, x, held, others, released, qd_plus) -> int | None:
         c = system.contacts[j]
         if not held[j].touching or held[j].stuck or c.name in released:
             continue
-        along = float(slip_velocity(system, c, system.kinematics(c, x), qd_plus) @ d)
+        along = float(slip_velocity(system, c, kins[j], qd_plus) @ d)
         if along < most:
             found, most = j, along
     return found
 
 
-def _unilateral_change(system, x, modes, held, contact, impulses, qd_plus) -> int | None:
+def _unilateral_change(system, kins, modes, held, contact, impulses, qd_plus) -> int | None:
     """The contact whose normal the impact must let go or hold again, else None: the most pulling other touching
     contact with a normal row (its impulse Λ_n < 0); else the most approaching one let go (v_n⁺ < 0). A bonded
     contact never lets go."""
@@ -215,7 +218,7 @@ def _unilateral_change(system, x, modes, held, contact, impulses, qd_plus) -> in
     for j, (m, h) in enumerate(zip(modes, held, strict=True)):
         if m.touching and not h.touching:
             c = system.contacts[j]
-            kin = system.kinematics(c, x)
+            kin = kins[j]
             v_n = float(contact_row(system, c, kin.normal, kin) @ qd_plus)
             if v_n < approaching:
                 approaching, found = v_n, j
