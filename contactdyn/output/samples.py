@@ -42,10 +42,11 @@ class Samples:
 
     @classmethod
     def concatenate(cls, parts: list[Samples], system) -> Samples:
+        """One Samples of the parts' rows, one part after the other."""
         if len(parts) == 1:
             return parts[0]
-        return cls.scattered(parts, np.split(np.arange(sum(p.tau.shape[0] for p in parts)),
-                                             np.cumsum([p.tau.shape[0] for p in parts])[:-1]), system)
+        edges = np.cumsum([0, *(p.tau.shape[0] for p in parts)])
+        return cls.scattered(parts, [np.arange(a, b) for a, b in zip(edges[:-1], edges[1:], strict=True)], system)
 
     @classmethod
     def scattered(cls, parts: list[Samples], rows: list[np.ndarray], system) -> Samples:
