@@ -20,6 +20,8 @@ from pipeline_proto import CASES, case, states  # noqa: E402
 
 from contactdyn.hybrid import loop  # noqa: E402
 from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
+from contactdyn.model import paths  # noqa: E402
+from contactdyn.model.dynamics import evaluate as readable_evaluate  # noqa: E402
 from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
@@ -97,10 +99,11 @@ def test_a_run_on_the_pipeline_is_the_run_on_the_readable_model(scene, duration,
     np.testing.assert_allclose([e["t"] for e in on.events], [e["t"] for e in off.events], rtol=0, atol=EVENT_ATOL)
 
 
-def test_a_pipeline_segment_evaluates_the_readable_model_only_in_its_start_check(monkeypatch):
+def test_a_pipeline_run_evaluates_the_readable_model_only_in_its_start_checks(monkeypatch):
     """Counted calls of System.evaluate: none while the segments integrate (their right-hand side, compiled steps,
-    event values) and none in the output samples; two (:func:`contactdyn.model.paths.disagreement`) per mode started."""
-    calls = {"all": 0, "integrate": 0, "samples": 0}
+    event values), none in the output samples, none in the transitions (their decisions read the call that
+    integrates: PipelineMode.evaluation); only in :func:`contactdyn.model.paths.disagreement`, two per mode packed."""
+    calls = {"all": 0, "integrate": 0, "samples": 0, "checks": 0}
     evaluate, integrate, sample_states = System.evaluate, loop.integrate, loop.sample_states
 
     def counted_evaluate(self, *args, **kwargs):
@@ -119,11 +122,47 @@ def test_a_pipeline_segment_evaluates_the_readable_model_only_in_its_start_check
     monkeypatch.setattr(System, "evaluate", counted_evaluate)
     monkeypatch.setattr(loop, "integrate", inside("integrate", integrate))
     monkeypatch.setattr(loop, "sample_states", inside("samples", sample_states))
+    monkeypatch.setattr(paths, "disagreement", inside("checks", paths.disagreement))
     r = _run("benchmarks/hard/stickslip.toml", 1.0, True, monkeypatch)
     assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
     assert len(r.events) > 10 and r.stats["rhs_evals"] > 1000
     assert calls["integrate"] == 0 and calls["samples"] == 0
-    assert calls["all"] >= 2 * len(r.stats["paths"])
+    assert calls["all"] == calls["checks"] >= 2 * len(r.stats["paths"])
+
+
+EVENT_FIELDS = ("normal_force", "gap", "friction", "slip", "limit_torque", "joint_hold", "force_d", "interface")
+ARRAY_FIELDS = ("xdot", "lam", "tau", "tau_cmd", "p_tip", "body_force", "joint_friction", "x_d")
+
+
+def _stacked(named: dict[str, list]) -> dict[str, np.ndarray]:
+    return {k: np.array(v, float) for k, v in named.items()}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_an_instants_evaluation_off_the_call_is_the_readable_models(name):
+    """PipelineMode.evaluation (what the transitions decide on) against the readable model at the same states: ẋ,
+    λ, the event values by name, τ, the command, the tip, the stage states, each to SAMPLES_RTOL of its largest
+    magnitude over the states (the same names present on both; None on both or neither)."""
+    system, modes, phase, t, x0 = case(name)
+    pm = PipelineMode(Pipeline(system, modes, phase))
+    got, ref = {}, {}
+    for x in states(x0, 3):
+        mine, theirs = pm.evaluation(t, x), readable_evaluate(system, t, x, modes, phase, full=True)
+        assert mine.stages.keys() <= theirs.stages.keys()  # (a stage carrying no force: the readable model's zeros)
+        for f in ARRAY_FIELDS:
+            a, b = getattr(mine, f), getattr(theirs, f)
+            assert (a is None) == (b is None), f
+            if b is not None:
+                got.setdefault(f, []).append(a)
+                ref.setdefault(f, []).append(b)
+        for f in (*EVENT_FIELDS, "stages"):
+            a, b = getattr(mine, f), getattr(theirs, f)
+            assert f == "stages" or set(a) == set(b), f
+            for k, value in b.items():
+                got.setdefault(f"{f}.{k}", []).append(a.get(k, (0.0, 0.0, 0.0)))
+                ref.setdefault(f"{f}.{k}", []).append(value)
+    worst, where = _worst(_stacked(got), _stacked(ref))
+    assert worst <= SAMPLES_RTOL, where
 
 
 _INTERPRETED = """

@@ -27,22 +27,26 @@ def test_step_collapse_fires_at_the_end_of_the_counted_short_step():
 def test_the_writers_slide_to_rest_finishes_on_lsoda_with_dop853s_result(monkeypatch):
     """The 5-DOF writer's circle ends at 4.5 s and the pencil's slide comes to rest (|v_t| falls to the stick band
     at 4.49996 s): its direction relaxes at a rate ∝ 1/|v_t| and DOP853's steps collapse. After COLLAPSE_STEPS
-    short steps the stiffness check sends the rest of that mode to LSODA at RESTING_TOL × the tolerances: a fifth
-    fewer calls, the same events, and the run equals DOP853's alone far within its own error against the rtol
-    1e-11 reference (6e-6 N, 3.4e-10 m; benchmarks/scenes.py): 2.9e-8 N, 5.6e-11 m, 1.8e-10 rad measured on the
-    compiled call (4e-11 N, 1.4e-11 m, 4.5e-11 rad on the probed twin, whose DOP853 took scipy's core)."""
+    short steps the stiffness check sends the rest of that mode to LSODA at RESTING_TOL × the tolerances: a tenth
+    to a fifth fewer calls, the same events, and the run equals DOP853's alone within its own error against the
+    rtol 1e-11 reference (6e-6 N, 3.4e-10 m; benchmarks/scenes.py): up to 1e-7 N, 2e-10 m, 6.3e-10 rad measured."""
     switched = simulate("case2_writer5dof")
     monkeypatch.setattr(hybrid, "COLLAPSE_STEPS", 10**9)  # no collapse is ever seen: DOP853 to the end
     explicit = simulate("case2_writer5dof")
     assert switched.stats["resting_switches"] == 1 and "resting_switches" not in explicit.stats
     assert switched.stats["segments_by_method"]["LSODA"] == explicit.stats["segments_by_method"]["LSODA"] + 1
-    assert switched.stats["rhs_evals"] < 0.85 * explicit.stats["rhs_evals"]  # measured 20236 against 25430
+    # measured 21311 against 23873; the ratio moves with the last bit of the start: 0.81-0.89 over 1-ulp changes of
+    # robot.tip0 on the code before the transitions read the compiled call, 0.81-0.89 after (a fifth to a tenth saved)
+    assert switched.stats["rhs_evals"] < 0.92 * explicit.stats["rhs_evals"]
     kinds = [(e["kind"], e["name"]) for e in explicit.events]
     assert _slide_ends_as_one(switched.events) == _slide_ends_as_one(explicit.events)
     assert ("stick", "pencil") == kinds[-2] and kinds[-3] in (("stop", "pencil"), ("turn", "pencil"))
-    for a, b in zip(switched.events, explicit.events, strict=True):  # the stop: 6e-10 s and 3.1e-8 s from the
-        assert a["t"] == pytest.approx(b["t"], abs=1e-7)  # reference's (|v_t| = 1e-9 m/s, ~1e-10 m/s per 3e-8 s)
-    for key, tol in (("contact.pencil.F_n", 1e-7), ("tip", 3e-10), ("q", 1e-9)):  # ≥ 3× what was measured
+    # The bounds: ~3x the largest difference measured over 1-ulp changes of robot.tip0 (the runs' last bits decide
+    # where the slow stop crossing lands: |v_t| = 1e-9 m/s, ~1e-10 m/s per 3e-8 s): the stop 2.3e-8 to 1.6e-7 s
+    # apart, F_n 6.5e-9 to 1e-7 N, the tip 1.2e-11 to 2e-10 m, q 3.8e-11 to 6.3e-10 rad
+    for a, b in zip(switched.events, explicit.events, strict=True):
+        assert a["t"] == pytest.approx(b["t"], abs=5e-7)
+    for key, tol in (("contact.pencil.F_n", 3e-7), ("tip", 5e-10), ("q", 2e-9)):
         assert float(np.abs(switched[key] - explicit[key]).max()) < tol
 
 

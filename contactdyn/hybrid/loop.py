@@ -114,8 +114,13 @@ class HybridRun:
                       "slips_seen_inside_a_step": 0, "slip_false_alarms": 0}
         self.log = EventLog(self.scene.name, self.solver, self.stats)
         self.events = self.log.events
-        self.sampled = SampledPhases(system, self.stats)  #: the samplers of sampled phases (hybrid.sampling)
-        self.transitions = Transitions(system, self.log, self.stats, self.impacts, self.sampled.start)
+
+        def runner(modes, phase, t, x):  # (what runs a mode: the transitions and samples read the model through it)
+            return _runner(self, modes, phase, (t, x))
+
+        #: the samplers of sampled phases (hybrid.sampling)
+        self.sampled = SampledPhases(system, self.stats, runner)
+        self.transitions = Transitions(system, self.log, self.stats, self.impacts, self.sampled.start, runner)
         self.auto_state: str | None = None  #: ``auto``: the method fixed for the current mode (None: not yet)
         #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
         #: them, "" when none did (no more checks in the mode); None: not checked

@@ -28,7 +28,7 @@ from collections import deque
 import numpy as np
 
 from ..model.chain_forces import pack as pack_chain
-from ..model.dynamics import Measurement, SampleTerms
+from ..model.dynamics import Evaluation, Measurement, SampleTerms
 from ..model.pipeline.drives import DW_U, DW_W
 from ..model.pipeline.pack import (
     ANY_MOTOR,
@@ -177,6 +177,34 @@ class PipelineMode:
             out[at_sliding + k] = x[nQ + i]
         out[-1] = 1.0
         return out
+
+    # ---- an instant's evaluation -------------------------------------------------------------------
+    def evaluation(self, t: float, x: np.ndarray) -> Evaluation | None:
+        """What System.evaluate gives at (t [s], x), off one call with the diagnostics on (as an output sample's):
+        ẋ, λ, the event values by name, τ, the command, the tip, the stage states; None where the call declines
+        there (a singular KKT matrix, a law that gave no force: the readable model answers)."""
+        p, system = self.pipe.packed, self.system
+        X = np.ascontiguousarray(x, dtype=float)[None, :]
+        Xd, E, W, done = samples_at(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
+        if done == 0:
+            self.pipe.readable_calls += 1
+            return None
+        S = Samples(1, system)
+        self._read_out(S, E, W, X)
+        e, at = E[0], diag_starts(p.ints)
+        at_limit, at_held, _ = p.joint_event_starts()
+        named = [(c.name, nt) for c, nt in zip(system.contacts, self.nt, strict=True)]
+        return Evaluation(
+            Xd[0], W[0, at[D_LAM]:at[D_TC]].copy(), p.row_meta, {k: float(v[0]) for k, v in S.F_n.items()},
+            {name: S.F_f[name][0] for name, nt in named if nt}, {name: S.v_slip[name][0] for name, nt in named if nt},
+            {k: float(v[0]) for k, v in S.gap.items()},
+            {label: tuple(S.stages[label][0].tolist()) for label, state in self._stages if state is not None},
+            {k: float(v[0]) for k, v in S.iface.items()}, S.tau[0], S.body_force[0], S.tip[0],
+            W[0, at[D_XD]:at[D_FD]].copy() if p.ints[REF_DIMS] else None,
+            {key: float(S.F_d[key][0]) for key in self.phase.forces}, tau_cmd=S.tau_cmd[0], u=S.u[0],
+            limit_torque={i: float(e[at_limit + k]) for k, i in enumerate(p.limits)},
+            joint_hold={i: float(e[at_held + k]) for k, i in enumerate(p.held)},
+            joint_friction=S.joint_friction[0] if system.joint_friction.any else None)
 
     # ---- output samples ------------------------------------------------------------------------
     def samples(self, ts: np.ndarray, X: np.ndarray, modes=None, runs: list[int] | None = None) -> Samples:

@@ -36,8 +36,10 @@ __all__ = ["SampledPhases", "Hold"]
 class SampledPhases:
     """One run's samplers, one per sampled phase (by phase index), and its sample count."""
 
-    def __init__(self, system, stats: dict):
+    def __init__(self, system, stats: dict, runner=None):
         self.system = system
+        #: runner(modes, phase, t, x): the run's mode runner (a PipelineMode, or a Declined: the readable model's)
+        self.runner = runner
         self.stats = stats
         self.samplers: dict[int, Sampler] = {}
         #: steps of the segments since the last boundary that is not a sample instant: ``auto``'s step budget
@@ -65,9 +67,10 @@ class SampledPhases:
         self.samplers[phase.index] = Sampler(ctl, stream=phase.index)
         if previous is not None:  # what acts until this first sample: the previous phase's command
             x = x.copy()
-            held = self._slots(phase, ctl.held)
-            x[held] = self.system.evaluate(t, x, modes, previous).tau_cmd
-        return self.take(t, x, modes, phase)
+            before = self.runner(modes, previous, t, x) if self.runner is not None else None
+            ev = before.evaluation(t, x) if before is not None and before.ok else None
+            x[self._slots(phase, ctl.held)] = (ev or self.system.evaluate(t, x, modes, previous)).tau_cmd
+        return self.take(t, x, modes, phase, self.runner(modes, phase, t, x) if self.runner is not None else None)
 
     def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, runner=None) -> np.ndarray:
         """The sample at t [s] of the phase's law: the state with its new held command and states. ``runner``: the

@@ -70,13 +70,16 @@ class _After:
 
 
 class LastEvaluation:
-    """System.evaluate at an event instant, its last (t, x, modes, phase) and result kept: asked again at the same
-    ones (the same t, x bit for bit, equal modes, the same phase object), the same Evaluation, not a second solve.
-    Where a decision leaves everything as it was tried (a stick decided at rest, then the next consistency pass; a
-    joint's stuck trial, then its stick; the last pass, then the joints' check) the evaluation repeats exactly."""
+    """The model's Evaluation at an event instant: off the call that integrates the mode (``runner(modes, phase, t,
+    x)``: the run's mode runner, :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`), else System.evaluate
+    (a mode on the readable model, a call that declines there). Its last (t, x, modes, phase) and result kept: asked
+    again at the same ones (the same t, x bit for bit, equal modes, the same phase object), the same Evaluation, not
+    a second solve. Where a decision leaves everything as it was tried (a stick decided at rest, then the next
+    consistency pass; a joint's stuck trial, then its stick; the last pass, then the joints' check) the evaluation
+    repeats exactly."""
 
-    def __init__(self, system: System):
-        self.system = system
+    def __init__(self, system: System, runner=None):
+        self.system, self.runner = system, runner
         self.key: tuple | None = None  #: (t [s], x's bytes, modes, phase) of ``ev``
         self.ev = None
 
@@ -84,21 +87,27 @@ class LastEvaluation:
         key = (t, x.tobytes(), tuple(modes), phase)
         last = self.key
         if last is None or last[3] is not phase or last[0] != t or last[1] != key[1] or last[2] != key[2]:
-            self.key, self.ev = key, self.system.evaluate(t, x, modes, phase)
+            self.key, self.ev = key, self._evaluate(t, x, modes, phase)
         return self.ev
+
+    def _evaluate(self, t: float, x: np.ndarray, modes, phase):
+        mode = self.runner(modes, phase, t, x) if self.runner is not None else None
+        ev = mode.evaluation(t, x) if mode is not None and mode.ok else None
+        return ev if ev is not None else self.system.evaluate(t, x, modes, phase)
 
 
 class Transitions:
     """The mode decisions of one run: at events (:meth:`handle`) and at any instant (:meth:`consistent`)."""
 
     def __init__(self, system: System, log: EventLog, stats: dict[str, Any], impacts: list[dict[str, Any]],
-                 phase_started=None):
+                 phase_started=None, runner=None):
         self.system, self.scene = system, system.scene
         self.log, self.stats, self.impacts = log, stats, impacts
         #: phase_started(t, x, modes, phase, previous) -> x: a phase begun at an event (a sampled law's first
         #: sample, contactdyn.hybrid.sampling); None: nothing to do
         self.phase_started = phase_started
-        self.evaluate = LastEvaluation(system)  #: System.evaluate, the same instant's not twice
+        #: the model at an instant (``runner``: the run's mode runners, LastEvaluation), the same instant's not twice
+        self.evaluate = LastEvaluation(system, runner)
 
     def handle(self, t, x, modes, phase, event):
         """Apply a located event: (state, modes, phase) right after it.
