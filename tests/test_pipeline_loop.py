@@ -130,7 +130,8 @@ def test_a_pipeline_run_evaluates_the_readable_model_only_in_its_start_checks(mo
     assert calls["all"] == calls["checks"] >= 2 * len(r.stats["paths"])
 
 
-EVENT_FIELDS = ("normal_force", "gap", "friction", "slip", "limit_torque", "joint_hold", "force_d", "interface")
+EVENT_FIELDS = ("normal_force", "gap", "friction", "slip", "limit_torque", "joint_hold", "force_d", "interface",
+                "node_positions")
 ARRAY_FIELDS = ("xdot", "lam", "tau", "tau_cmd", "p_tip", "body_force", "joint_friction", "x_d")
 
 

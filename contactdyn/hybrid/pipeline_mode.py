@@ -32,6 +32,8 @@ from ..model.dynamics import Evaluation, Measurement, SampleTerms
 from ..model.pipeline.drives import DW_U, DW_W
 from ..model.pipeline.pack import (
     ANY_MOTOR,
+    CH_MOTION,
+    CH_NNODES,
     CH_STATE,
     CH_W,
     D_CMD,
@@ -91,6 +93,7 @@ class PipelineMode:
         self.nt = [len(c.tangents) if c.friction is not None else 0 for c in system.contacts]
         self._stages = self._stage_table()
         self._ifaces = self._interface_table()
+        self._nodes = self._node_table()
 
     def watched_step(self, on_stage):
         """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
@@ -204,7 +207,8 @@ class PipelineMode:
             {key: float(S.F_d[key][0]) for key in self.phase.forces}, tau_cmd=S.tau_cmd[0], u=S.u[0],
             limit_torque={i: float(e[at_limit + k]) for k, i in enumerate(p.limits)},
             joint_hold={i: float(e[at_held + k]) for k, i in enumerate(p.held)},
-            joint_friction=S.joint_friction[0] if system.joint_friction.any else None)
+            joint_friction=S.joint_friction[0] if system.joint_friction.any else None,
+            node_positions={key: W[0, at:at + n].copy() for key, at, n in self._nodes})
 
     # ---- output samples ------------------------------------------------------------------------
     def samples(self, ts: np.ndarray, X: np.ndarray, modes=None, runs: list[int] | None = None) -> Samples:
@@ -265,6 +269,16 @@ class PipelineMode:
                 if i > 0:  # (the normal chain first)
                     r = rows.get((c.name, dc.label, i - 1))
                     out.append((f"{c.name}.{dc.label}", int(at[D_LAM] + r if r is not None else ints[W_DIAG] + 1 + k)))
+                k += 1
+        return out
+
+    def _node_table(self) -> list[tuple[str, int, int]]:
+        """Per chain ("contact.label", pack's order): where its nodes' positions start in ``work``, how many."""
+        ints, out, k = self.pipe.packed.ints, [], 0
+        for c in self.system.contacts:
+            for dc in c.chains:
+                row = ints[ints[I_CHAINS] + CH_W * k:]
+                out.append((f"{c.name}.{dc.label}", int(row[CH_MOTION]), int(row[CH_NNODES])))
                 k += 1
         return out
 

@@ -180,7 +180,7 @@ class Transitions:
     def _on_separate(self, t, x, modes, phase, event, after):
         """The contact lets go; damped surface ends relax from where they are."""
         i = self._index(event.contact)
-        x = self.system.separate(t, x, modes, phase, self.system.contacts[i])
+        x = self.system.separate(x, self.system.contacts[i], self.evaluate(t, x, modes, phase))
         modes[i] = modes[i].separated()
         return x, phase, True
 
@@ -340,7 +340,7 @@ class Transitions:
                     continue
                 F_n = ev.normal_force[c.name]
                 if not c.spec.bonded and F_n < -FORCE_TOL * (1.0 + abs(F_n)):
-                    x[:] = system.separate(t, x, modes, phase, c)
+                    x[:] = system.separate(x, c, ev)
                     modes[i] = mode.separated()
                     self.log.log(t, "separate", c.name)
                     changed = True

@@ -180,7 +180,8 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
                                                             a.stage_state)
         if not finite:  # a compiled law raised (its call gives NaN) or gave NaN
             _law_error(a, dc)
-    dc.last_positions = a.motion[0]
+    if ev is not None:
+        ev.node_positions[f"{c.name}.{dc.label}"] = a.motion[0].copy()
     if full and ev is not None:
         _name_stages(a, ev.stages)
     row = _bond_row(system, c, dc, kin, u) if a.bond else None

@@ -177,7 +177,6 @@ class DirectionalChain:
     plans: dict[tuple[bool, bool], ChainPlan] = field(default_factory=dict)
     #: the plans as flat arrays, what a call reads (:func:`contactdyn.model.chain_forces.pack`), by the same key
     arrays: dict[tuple[bool, bool], object] = field(default_factory=dict)
-    last_positions: list[float] = field(default_factory=list)  #: node positions at the last evaluation [m]
 
     def __getstate__(self) -> dict:
         """Pickled (or copied) without its packed arrays: they hold laws' machine addresses, valid in this

@@ -67,6 +67,8 @@ class Evaluation:
     joint_hold: dict[int, float] = field(default_factory=dict)  #: stuck joint -> holding torque [N·m or N]
     #: per joint: its damping and dry friction torque [N·m or N] (a stuck joint's: its holding torque); None: none
     joint_friction: np.ndarray | None = None
+    #: per chain ("contact.label"): its nodes' positions [m] (where damped ends start relaxing at a separation)
+    node_positions: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,

@@ -355,17 +355,16 @@ class System:
         (:func:`contactdyn.model.impact.project_velocity`)."""
         return project_velocity(self, x, modes, limits)
 
-    def separate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, contact: Contact
-                 ) -> np.ndarray:
-        """State at separation: damped surface ends start relaxing from where they are (modes: still touching)."""
-        self.evaluate(t, x, modes, phase)
+    def separate(self, x: np.ndarray, contact: Contact, ev: Evaluation) -> np.ndarray:
+        """State at separation: damped surface ends start relaxing from where they are (``ev``: the model at x in
+        the modes before, still touching)."""
         x = x.copy()
         for dc in contact.chains:
-            chain = dc.chain
+            chain, positions = dc.chain, ev.node_positions[f"{contact.name}.{dc.label}"]
             for node_i in (chain.env_surface, chain.robot_surface):
                 slot = chain.nodes[node_i].state
                 if chain.nodes[node_i].kind == NodeKind.FREE and slot >= 0:
-                    x[2 * self.nQ + slot] = dc.last_positions[node_i]
+                    x[2 * self.nQ + slot] = positions[node_i]
         return x
 
 
