@@ -23,22 +23,21 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
-a drive kind numba cannot compile, a continuous controller that outputs voltages (but
-constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
-law numba cannot compile, two 2-D slides launching from rest at once, a stage or
-friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
-joint it takes is a one-DOF revolute or prismatic), a surface turning with a frame (the robot's or an articulated
-body's) under a force-reading law. A chain's mass riding a turning surface
+a drive kind numba cannot compile, a user law numba cannot compile (a controller, a stage or friction law), two 2-D
+slides launching from rest at once, a robot or articulated body ``rigid_body`` does not compute (none the robot
+loader accepts: every joint it takes is a one-DOF revolute or prismatic), an articulated body under another gravity
+than the robot's or carrying the reference, a surface turning with a frame (the robot's or an articulated body's)
+under a force-reading law. A chain's mass riding a turning surface
 is packed with its frame (``N_RIDING``): the call adds its coupling to M and its bias to f
 (:func:`.contacts.add_riding`).
 An articulated body's joints are appended to the robot's in the rigid-body table
 (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
 robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
 chart x holds (:func:`.robot_terms.table_at`). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
-operational space, the dynamic laws, joint PD, task force), a sampled law's held command (torques or voltages),
-constant voltages and
-user laws of the controller ABI run; a force-reading law and a reference carried by a body are folded through the
-drives (:mod:`.force_fold`).
+operational space, the dynamic laws (A7 in task or joint space), joint PD, task force), a sampled law's held command
+(torques or voltages), constant voltages and user laws of the controller ABI (their command torques or voltages
+[V], a task or a joint-space reference) run; a force-reading law and a reference carried by a body are folded
+through the drives (:mod:`.force_fold`).
 """
 
 from __future__ import annotations
@@ -524,9 +523,10 @@ def _reference(b: _Builder, system, phase) -> None:
 
 def _controller(b: _Builder, system, phase) -> None:
     """task PD: its constants (TaskPD.constants) and feedforward; constant voltages: one per joint; operational
-    space: its constants; a controller of the ABI: the layout of its inputs, its address and its declared
-    parameters; a dynamic law: the same layout and its constants (control_laws.dynamic_constants); a sampled law:
-    where its held command is in x."""
+    space: its constants; a controller of the ABI: the layout of its inputs (x_d, v_d, a_d of the reference's
+    coordinates: 3 or nv), its address and its declared parameters; a dynamic law: the same layout and its constants
+    (:func:`_dynamic_constants`; A7 in joint space: K_p, K_v per joint and the rotors taken out of H); a sampled
+    law: where its held command is in x."""
     h = b.ints
     ctl = phase.controller
     h[READS_ORIENTATION], h[NEEDS_GRAVITY] = int(ctl.reads_orientation), int(ctl.needs_gravity)
