@@ -166,3 +166,16 @@ def test_a_run_takes_the_compiled_call_and_gives_the_readable_run(name, monkeypa
         assert np.abs(live[channel] - readable[channel]).max() <= 1e-9 * scale, channel
     assert [(e["kind"], e.get("contact")) for e in live.events] == \
         [(e["kind"], e.get("contact")) for e in readable.events]
+
+
+def test_joint_pd_on_a_tip_reference_of_a_two_joint_robot_is_a_scene_error():
+    """The decline 'joint_pd with a reference of 3 coordinates (2 joints)' is gone: the readable law raised a
+    broadcast error there, the scene's bind now names the key."""
+    from contactdyn.errors import SceneError
+    from contactdyn.model.system import System
+
+    def edit(doc: dict) -> None:
+        doc["controller"] = {"kind": "joint_pd", "kp": 100.0, "kd": 10.0}
+
+    with pytest.raises(SceneError, match=r"phase\[0\]\.reference\.space.*'joint' \(joint_pd tracks the 2 joints\)"):
+        System(_scene("sims/b1.toml", edit))
