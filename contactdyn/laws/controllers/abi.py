@@ -15,14 +15,16 @@ function of a controller, its address a plain int64 (:func:`controller_address`)
   ControlInput's None: a law that reads it fails there (bounds-checked) and the call goes Python's way
   (``inp.x_d is None`` is never true compiled: test ``inp.x_d.size`` in a law meant to compile);
 - ``params``: the declared parameters' values in their order (``DeclaredConfig.values``);
-- ``tau``: the joint torques [N·m or N] (nv), written; ``zdot``: the states' rates (nz), written (a law without
-  states returns None for them); the status returned: 1 written, 0 not (the law raised, read past a field, which
-  the bounds checks catch, or gave the wrong number of torques or rates; or ``n_p`` is not the number of declared
-  parameters): the call then goes Python's way, where the law's own error surfaces.
+- ``tau``: the joint torques [N·m or N] (nv; voltages [V] for a law with ``outputs = "voltage"``), written;
+  ``zdot``: the states' rates (nz), written (a law without states returns None for them); the status returned:
+  1 written, 0 not (the law raised, read past a field, which the bounds checks catch, or gave the wrong number of
+  torques or rates; or ``n_p`` is not the number of declared parameters): the call then goes Python's way, where
+  the law's own error surfaces.
 
 Units are ControlInput's: t [s], q [rad or m], v [rad/s or m/s], H [kg·m² …], h and gravity [N·m or N], p_tip [m],
-v_tip [m/s], J and J_ang (3, nv), drift [m/s²], drift_ang [rad/s²], x_d/v_d/a_d [m, m/s, m/s²], R_tip (3, 3), z
-the controller's states, tau_contact [N·m or N]; per force set-point, in the phase's order
+v_tip [m/s], J and J_ang (3, nv), drift [m/s²], drift_ang [rad/s²], x_d/v_d/a_d [m, m/s, m/s²] (a joint-space
+reference's: nv each [rad or m, /s, /s²]), R_tip (3, 3), z the controller's states, tau_contact [N·m or N]; per
+force set-point, in the phase's order
 (``ControlInput.SET_POINT_ARRAYS``): force_set F_d [N], force_rate Ḟ_d [N/s], force_dir (ns, 3), force_read the
 measured force of the set-point's key [N], surface_p [m] and surface_v [m/s] (ns, 3), touch (1.0 touching).
 ControlInput's dictionaries (forces, force_d, normals, surfaces, touching) are not in the buffer: a law meant to
@@ -30,9 +32,10 @@ compile reads the arrays, which the readable ControlInput has too (its propertie
 forces (``uses_forces``) is affine in them: the caller folds it by calling it again at unit forces
 (:mod:`contactdyn.model.pipeline.force_fold`).
 
-What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that outputs voltages, has
-no declared parameters' config, or whose ``command`` numba cannot compile (a dict, a Python object,
-``inp.forces``): it stays on the Python path.
+What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that has no declared
+parameters' config, or whose ``command`` numba cannot compile (a dict, a Python object, ``inp.forces``): it stays on
+the Python path. A controller that outputs voltages (``outputs = "voltage"``) compiles as one of torques: ``tau``
+then holds the joints' voltages [V], which the drives take as they are.
 
 Caching: the wrapper is generated closure-free and attributed to the controller's own file, as the stage laws'
 (:func:`contactdyn.laws.abi.compile_wrapper`), so numba caches it (compile_cache's directory; an edit of that
@@ -61,35 +64,36 @@ _P = types.CPointer(types.float64)
 #: int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau, double* zdot)
 CONTROLLER_SIGNATURE = types.int64(_P, types.CPointer(types.int64), _P, types.int64, _P, _P)
 
-#: the buffer's fields in order: name -> (size as a function of (nv, nz, ns), columns: 0 a float, 1 a vector, else
-#: a matrix of that many columns as a function of nv). nz the controller's states, ns the phase's force set-points.
+#: the buffer's fields in order: name -> (size as a function of (nv, nz, ns, nr), columns: 0 a float, 1 a vector,
+#: else a matrix of that many columns as a function of nv). nz the controller's states, ns the phase's force
+#: set-points, nr the reference's coordinates (3: a task reference [m]; nv: a joint one [rad or m]).
 #: A new input is one line here and one in control_arrays.
 LAYOUT = (
-    ("t", lambda nv, nz, ns: 1, 0),
-    ("q", lambda nv, nz, ns: nv, 1),
-    ("v", lambda nv, nz, ns: nv, 1),
-    ("H", lambda nv, nz, ns: nv * nv, lambda nv: nv),
-    ("h", lambda nv, nz, ns: nv, 1),
-    ("gravity", lambda nv, nz, ns: nv, 1),
-    ("p_tip", lambda nv, nz, ns: 3, 1),
-    ("v_tip", lambda nv, nz, ns: 3, 1),
-    ("J", lambda nv, nz, ns: 3 * nv, lambda nv: nv),
-    ("drift", lambda nv, nz, ns: 3, 1),
-    ("x_d", lambda nv, nz, ns: 3, 1),
-    ("v_d", lambda nv, nz, ns: 3, 1),
-    ("a_d", lambda nv, nz, ns: 3, 1),
-    ("z", lambda nv, nz, ns: nz, 1),
-    ("R_tip", lambda nv, nz, ns: 9, lambda nv: 3),
-    ("J_ang", lambda nv, nz, ns: 3 * nv, lambda nv: nv),
-    ("drift_ang", lambda nv, nz, ns: 3, 1),
-    ("tau_contact", lambda nv, nz, ns: nv, 1),
-    ("force_set", lambda nv, nz, ns: ns, 1),
-    ("force_rate", lambda nv, nz, ns: ns, 1),
-    ("force_dir", lambda nv, nz, ns: 3 * ns, lambda nv: 3),
-    ("force_read", lambda nv, nz, ns: ns, 1),
-    ("surface_p", lambda nv, nz, ns: 3 * ns, lambda nv: 3),
-    ("surface_v", lambda nv, nz, ns: 3 * ns, lambda nv: 3),
-    ("touch", lambda nv, nz, ns: ns, 1),
+    ("t", lambda nv, nz, ns, nr: 1, 0),
+    ("q", lambda nv, nz, ns, nr: nv, 1),
+    ("v", lambda nv, nz, ns, nr: nv, 1),
+    ("H", lambda nv, nz, ns, nr: nv * nv, lambda nv: nv),
+    ("h", lambda nv, nz, ns, nr: nv, 1),
+    ("gravity", lambda nv, nz, ns, nr: nv, 1),
+    ("p_tip", lambda nv, nz, ns, nr: 3, 1),
+    ("v_tip", lambda nv, nz, ns, nr: 3, 1),
+    ("J", lambda nv, nz, ns, nr: 3 * nv, lambda nv: nv),
+    ("drift", lambda nv, nz, ns, nr: 3, 1),
+    ("x_d", lambda nv, nz, ns, nr: nr, 1),
+    ("v_d", lambda nv, nz, ns, nr: nr, 1),
+    ("a_d", lambda nv, nz, ns, nr: nr, 1),
+    ("z", lambda nv, nz, ns, nr: nz, 1),
+    ("R_tip", lambda nv, nz, ns, nr: 9, lambda nv: 3),
+    ("J_ang", lambda nv, nz, ns, nr: 3 * nv, lambda nv: nv),
+    ("drift_ang", lambda nv, nz, ns, nr: 3, 1),
+    ("tau_contact", lambda nv, nz, ns, nr: nv, 1),
+    ("force_set", lambda nv, nz, ns, nr: ns, 1),
+    ("force_rate", lambda nv, nz, ns, nr: ns, 1),
+    ("force_dir", lambda nv, nz, ns, nr: 3 * ns, lambda nv: 3),
+    ("force_read", lambda nv, nz, ns, nr: ns, 1),
+    ("surface_p", lambda nv, nz, ns, nr: 3 * ns, lambda nv: 3),
+    ("surface_v", lambda nv, nz, ns, nr: 3 * ns, lambda nv: 3),
+    ("touch", lambda nv, nz, ns, nr: ns, 1),
 )
 FIELD = {name: k for k, (name, _, _) in enumerate(LAYOUT)}  #: a field's index in LAYOUT
 LAYOUT_HEAD = 3  #: the layout table's header: nv, nz, ns; then (start, stop) per field, then the buffer's size
@@ -102,12 +106,12 @@ ControlArrays = namedtuple("ControlArrays", [*(f.name for f in fields(ControlInp
                                              *ControlInput.SET_POINT_ARRAYS])
 
 
-def layout_of(nv: int, nz: int, absent: tuple[str, ...] = (), ns: int = 0) -> np.ndarray:
-    """The layout table [nv, nz, ns, (start, stop) per field, size of the buffer] for nv joints, nz states and ns
-    force set-points; the fields in ``absent`` empty."""
+def layout_of(nv: int, nz: int, absent: tuple[str, ...] = (), ns: int = 0, nr: int = 3) -> np.ndarray:
+    """The layout table [nv, nz, ns, (start, stop) per field, size of the buffer] for nv joints, nz states, ns
+    force set-points and a reference of nr coordinates; the fields in ``absent`` empty."""
     out, at = [nv, nz, ns], 0
     for name, size, _ in LAYOUT:
-        n = 0 if name in absent else size(nv, nz, ns)
+        n = 0 if name in absent else size(nv, nz, ns, nr)
         out += [at, at + n]
         at += n
     return np.array([*out, at], dtype=np.int64)
@@ -117,7 +121,7 @@ def buffer_of(inp: ControlInput, nz: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(buffer, layout) of a readable ControlInput (its None fields absent): the compiled call's inputs, in Python."""
     nv = len(inp.q)
     absent = tuple(name for name, _, _ in LAYOUT if getattr(inp, name) is None)
-    layout = layout_of(nv, nz, absent, len(inp.force_d))
+    layout = layout_of(nv, nz, absent, len(inp.force_d), len(inp.x_d) if inp.x_d is not None else 3)
     buffer = np.empty(layout[-1])
     for k, (name, _, _) in enumerate(LAYOUT):
         if name not in absent:
@@ -257,8 +261,6 @@ def _declined(cls: type) -> str:
     """Why ``cls`` is not compiled before numba tries ("" if it may be)."""
     if numba.config.DISABLE_JIT:
         return "numba is disabled (NUMBA_DISABLE_JIT)"
-    if cls.outputs != "torque":
-        return f"controller {cls.name!r} outputs {cls.outputs}: not compiled yet"
     if getattr(cls.read, "__func__", cls.read) is not Controller.read.__func__:  # (a staticmethod has none)
         return f"controller {cls.name!r} reads its own config (not its declared parameters, Controller.params)"
     return ""

@@ -2,6 +2,7 @@
 
     q̈* = J⁺(a − J̇q̇) − (I − J⁺J) k_null q̇           (k_null only where the robot is redundant, nv > 3)
     τ  = H q̈* − r ∘ q̈* + h − τ_c + Jᵀ f_swap         [N·m or N]
+    (A7 in joint space: q̈* the joint law's, :func:`joint_torque`)
 
 H [kg·m²] the model's inertia, r the rotor inertia the law takes out (``inertia = "link"``; empty
 for "model"), J the tip Jacobian (3, nv), J⁺ its pseudo-inverse (:func:`contactdyn.numerics.linalg.pinv`: singular
@@ -18,7 +19,7 @@ import numpy as np
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import mm, mv, pinv
 
-__all__ = ["pinv", "torque", "pinv_stack", "torque_stack"]
+__all__ = ["pinv", "torque", "joint_torque", "pinv_stack", "torque_stack"]
 
 
 @njit(cache=True)
@@ -34,6 +35,19 @@ def torque(H, rotor, h, tau_c, J, Jp, drift, v, a, f_swap, k_null):
         qdd[i] = acc
     if k_null > 0.0 and nv > 3:
         qdd -= mv(np.eye(nv) - mm(Jp, J), k_null * v)
+    return _inverse_dynamics(H, rotor, h, tau_c, J, f_swap, qdd)
+
+
+@njit(cache=True)
+def joint_torque(H, rotor, h, tau_c, qdd):
+    """τ = H q̈* − r ∘ q̈* + h − τ_c [N·m or N] of A7 in joint space (q̈* from ``dynamic_law.joint_targets``)."""
+    return _inverse_dynamics(H, rotor, h, tau_c, np.empty((0, qdd.size)), np.empty(0), qdd)
+
+
+@njit(cache=True)
+def _inverse_dynamics(H, rotor, h, tau_c, J, f_swap, qdd):
+    """H q̈* − r ∘ q̈* + h − τ_c + Jᵀ f_swap [N·m or N], per component."""
+    nv = qdd.size
     tau = np.empty(nv)
     for i in range(nv):
         acc = 0.0

@@ -143,11 +143,6 @@ def _rotor_inertia(context: BindContext, inertia: str) -> np.ndarray:
     return np.array([s.reflected_inertia for s in specs])
 
 
-def _inertia_times(H: np.ndarray, rotor: np.ndarray, qdd: np.ndarray) -> np.ndarray:
-    """H q̈* with the law's reading of H: the rigid model's, or the link's alone (rotor taken out)."""
-    return H.dot(qdd) - rotor * qdd if rotor.size else H.dot(qdd)
-
-
 # ---- shared task-space pieces ---------------------------------------------------------------
 def _check_gain_size(g: np.ndarray, sizes: tuple[int, ...], key: str, file) -> None:
     if len(g) not in sizes:
@@ -312,6 +307,9 @@ class PositionDynamic(_ComputedTorque):
         for name in ("kp", "kv"):
             _check_gain_size(getattr(cfg, name), (1, dims), f"{key}.{name}", file)
         self._gains3 = _gains3(cfg) if cfg.space == "task" else None  # (after the check: its SceneError first)
+        #: K_p [1/s²], K_v [1/s] per joint (joint space; dynamic_law.joint_targets')
+        self.joint_gains = tuple(np.broadcast_to(np.asarray(g, float), self.nv).copy() for g in (cfg.kp, cfg.kv)) \
+            if cfg.space == "joint" else None
         ref = context.phase.reference
         if ref is not None and ref.space != cfg.space:
             raise SceneError(f"phase[{context.index}].reference.space", f"{cfg.space!r} (the controller's space)",
@@ -331,11 +329,9 @@ class PositionDynamic(_ComputedTorque):
         cfg = self.config
         if cfg.space == "task":
             return self.computed_torque(inp, *self.tip_targets(inp)[:2]), None
-        if inp.x_d is None:
-            qdd = -cfg.kv * inp.v
-        else:
-            qdd = inp.a_d - cfg.kp * (inp.q - inp.x_d) - cfg.kv * (inp.v - inp.v_d)
-        return _inertia_times(inp.H, self._rotor, qdd) + inp.h - inp.tau_contact, None
+        ref = (_c(inp.x_d), _c(inp.v_d), _c(inp.a_d)) if inp.x_d is not None else (_NONE, _NONE, _NONE)
+        qdd = dynamic_law.joint_targets(_c(inp.q), _c(inp.v), *ref, *self.joint_gains)
+        return compiled.joint_torque(_c(inp.H), self._rotor, _c(inp.h), _c(inp.tau_contact), qdd), None
 
     def tip_targets(self, inp: ControlInput) -> tuple[np.ndarray, None, None]:
         """(a*, no force swap, no states): the desired tip acceleration [m/s²] of the task-space law

@@ -8,12 +8,13 @@
         a* += P (ẍ_d − K_p (p − x_d) − K_v (ṗ − ẋ_d))   (hybrid),   P (−K_v ṗ)   (A10)
     A7 in task space:  a* = ẍ_d − K_p (p − x_d) − K_v (ṗ − ẋ_d)   (−K_v ṗ without a reference), the reference
       pressed F_d / k beyond the surface along each touching set-point's n (``force_reference``).
+    A7 in joint space: q̈* = q̈_d − K_p (q − q_d) − K_v (q̇ − q̇_d)   (−K_v q̇ without a reference), per joint.
 
-The readable laws (``ForceDynamic.tip_targets``, ``PositionDynamic.tip_targets``) call these functions with their
-inputs as arrays (per set-point, in the phase's order), and the one pipeline calls them on its controller buffer
-(:mod:`contactdyn.model.pipeline.control_laws`): one source. Arguments are C-contiguous float64 arrays; kp, kv
-[1/s², 1/s] one per world axis (3); "no reference" is x_d, v_d, a_d of size 0; env (ns, 3) the nominal k [N/m],
-b [N·s/m], m [kg] per set-point; touch 1.0 / 0.0 per set-point.
+The readable laws (``ForceDynamic.tip_targets``, ``PositionDynamic.tip_targets`` and ``command``) call these
+functions with their inputs as arrays (per set-point, in the phase's order), and the one pipeline calls them on its
+controller buffer (:mod:`contactdyn.model.pipeline.control_laws`): one source. Arguments are C-contiguous float64
+arrays; kp, kv [1/s², 1/s] one per world axis (3), or per joint (nv) in joint space; "no reference" is x_d, v_d, a_d
+of size 0; env (ns, 3) the nominal k [N/m], b [N·s/m], m [kg] per set-point; touch 1.0 / 0.0 per set-point.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import dot3, put
 
-__all__ = ["force_targets", "position_targets", "pressing_reference"]
+__all__ = ["force_targets", "position_targets", "pressing_reference", "joint_targets"]
 
 
 @njit(cache=True)
@@ -104,3 +105,16 @@ def position_targets(p_tip, v_tip, x_d, v_d, a_d, kp, kv, pressing, normals, tou
     if pressing:
         x_d, v_d, a_d = pressing_reference(x_d, v_d, a_d, normals, touch, p_s, v_s, F_d, dF_d, k)
     return a_d - kp * (p_tip - x_d) - kv * (v_tip - v_d)
+
+
+@njit(cache=True)
+def joint_targets(q, v, q_d, v_d, a_d, kp, kv):
+    """q̈* [rad/s² or m/s²] of A7 in joint space at q [rad or m], q̇ (kp [1/s²], kv [1/s] per joint; no reference:
+    q_d of size 0). Per component: numpy's elementwise values."""
+    qdd = np.empty(q.size)
+    for i in range(q.size):
+        if q_d.size:
+            qdd[i] = a_d[i] - kp[i] * (q[i] - q_d[i]) - kv[i] * (v[i] - v_d[i])
+        else:
+            qdd[i] = -kv[i] * v[i]
+    return qdd

@@ -195,6 +195,14 @@ class JointPD(Controller):
         #: K_p, K_d per joint (joint_pd_torque's)
         self.gains = tuple(np.broadcast_to(np.asarray(g, float), nv).copy() for g in (config.kp, config.kd))
 
+    def bind(self, context: BindContext) -> None:
+        ref = context.phase.reference
+        if ref is not None and ref.space != "joint" and self.nv != 3:  # (a tip's 3 coordinates for nv joints)
+            from ...errors import SceneError
+
+            raise SceneError(f"phase[{context.index}].reference.space", f"'joint' (joint_pd tracks the {self.nv} "
+                             "joints)", ref.space, context.scene.file)
+
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         ff = _feedforward(inp, self.config.feedforward)
         ref = (contiguous(inp.x_d), contiguous(inp.v_d)) if inp.x_d is not None else (_NONE, _NONE)

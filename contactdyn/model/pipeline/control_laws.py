@@ -13,16 +13,19 @@ way (:mod:`.force_fold`); a scene that does not use it does not compile it. A si
 Hadamard ratio below ``SINGULAR``, or NaN) returns status 0: the readable model answers, where
 ``OperationalSpace._guard`` raises its error.
 
-Operational space's constants (:data:`O_AXES` …): k, a tool axis (1.0 / 0.0), axes (k × 3), force directions
-(ns × 3, the phase's set-points, in the order of ``OperationalSpace.force_keys``), kp (k) [N/m], kd (k) [N·s/m],
+Operational space's constants (:data:`O_AXES` …): k, a tool axis (1.0 / 0.0), axes (k × 3), force directions (ns × 3,
+the phase's set-points in its order, as the buffer's F_d: pack orders them by key), kp (k) [N/m], kd (k) [N·s/m],
 tool axis (3), tool target (3), ko [1/s²], do [1/s], k_null [1/s], kd_normal [N·s/m]. A dynamic law's (``D_*``):
 switches (A10 or hybrid, tracks position, swaps F* into τ, presses its reference), K_F [1/s], k_null [1/s], K_p
 [1/s²] and K_v [1/s] (3 each), P (9), then per set-point the nominal k [N/m], b [N·s/m], m [kg], then (inertia =
-"link") per joint the rotor inertia taken out of H [kg·m²] (none: H as it is).
+"link") per joint the rotor inertia taken out of H [kg·m²] (none: H as it is). A7 in joint space is a kind of its own
+(:data:`JOINT_DYNAMIC`, :func:`joint_dynamic_on_buffer`:
+:func:`~contactdyn.laws.controllers.dynamic_law.joint_targets` and
+:func:`~contactdyn.laws.controllers.computed_torque.joint_torque`, as its readable ``command``), its buffer's
+reference the joints' (the ABI's x_d of nv coordinates).
 
 ``joint_pd`` (:func:`~contactdyn.laws.controllers.pd.joint_pd_torque`) and ``task_force``
-(:func:`~contactdyn.laws.controllers.force.task_force_torque`) are small: compiled into the call as kinds (joint PD
-reads a joint-space reference, which the ABI's buffer does not hold).
+(:func:`~contactdyn.laws.controllers.force.task_force_torque`) are small: compiled into the call as kinds.
 """
 
 from __future__ import annotations
@@ -33,15 +36,15 @@ from numba import carray
 
 from ...laws.controllers import computed_torque
 from ...laws.controllers.abi import CONTROLLER_SIGNATURE, LAYOUT_SIZE, control_arrays
-from ...laws.controllers.dynamic_law import force_targets, position_targets
+from ...laws.controllers.dynamic_law import force_targets, joint_targets, position_targets
 from ...laws.controllers.force import task_force_torque
 from ...laws.controllers.operational_law import SINGULAR, torque
 from ...laws.controllers.pd import joint_pd_torque
 from ...numerics.compile_cache import cfunc, njit
 from ...numerics.linalg import pinv
 
-__all__ = ["kind_address", "operational_on_buffer", "dynamic_on_buffer", "joint_pd_command", "task_force_command",
-           "O_K", "D_FORCE_LAW"]
+__all__ = ["kind_address", "operational_on_buffer", "dynamic_on_buffer", "joint_dynamic_on_buffer", "joint_pd_command",
+           "task_force_command", "O_K", "D_FORCE_LAW", "JOINT_DYNAMIC"]
 
 O_K, O_TOOL, O_AXES = 0, 1, 2  #: operational space's constants: k, a tool axis, then the tables from O_AXES
 D_FORCE_LAW, D_TRACKS, D_SWAP, D_PRESSING, D_KF, D_KNULL, D_KP, D_KV, D_P, D_ENV = 0, 1, 2, 3, 4, 5, 6, 9, 12, 21
@@ -110,6 +113,20 @@ def dynamic_on_buffer(buf, lay, c, tau, zdot):
     return 1
 
 
+@njit(cache=True, inline="always")
+def joint_dynamic_on_buffer(buf, lay, c, tau, zdot):
+    """A7 in joint space, τ = H q̈* − r ∘ q̈* + h − τ_c [N·m or N], from the ABI's buffer (its x_d, v_d, a_d the
+    joint reference's, nv each, or empty) at constants c = [K_p (nv) [1/s²], K_v (nv) [1/s], the rotors taken out of
+    H (nv, inertia = "link"; none: H as it is) [kg·m²]]; status 1."""
+    inp = control_arrays(buf, lay)
+    nv = lay[0]
+    qdd = joint_targets(inp.q, inp.v, inp.x_d, inp.v_d, inp.a_d, c[:nv], c[nv:2 * nv])
+    out = computed_torque.joint_torque(inp.H, np.ascontiguousarray(c[2 * nv:]), inp.h, inp.tau_contact, qdd)
+    for i in range(nv):
+        tau[i] = out[i]
+    return 1
+
+
 # ---- the C functions (closure-free module functions: numba caches them beside this file) -------------------------
 def _operational_abi(buffer, layout, params, n_p, tau, zdot):
     lay = carray(layout, (LAYOUT_SIZE,))
@@ -123,8 +140,16 @@ def _dynamic_abi(buffer, layout, params, n_p, tau, zdot):
                              carray(tau, (lay[0],)), carray(zdot, (lay[1],)))
 
 
+def _joint_dynamic_abi(buffer, layout, params, n_p, tau, zdot):
+    lay = carray(layout, (LAYOUT_SIZE,))
+    return joint_dynamic_on_buffer(carray(buffer, (lay[LAYOUT_SIZE - 1],)), lay, carray(params, (n_p,)),
+                                   carray(tau, (lay[0],)), carray(zdot, (lay[1],)))
+
+
+JOINT_DYNAMIC = "position_dynamic_joint"  #: the kind of A7 in joint space (position_dynamic with space = "joint")
 _KINDS = {"operational_space": (_operational_abi, operational_on_buffer),
-          **{name: (_dynamic_abi, dynamic_on_buffer) for name in ("position_dynamic", "force_dynamic", "hybrid")}}
+          **{name: (_dynamic_abi, dynamic_on_buffer) for name in ("position_dynamic", "force_dynamic", "hybrid")},
+          JOINT_DYNAMIC: (_joint_dynamic_abi, joint_dynamic_on_buffer)}
 _compiled: dict[str, tuple[int, object]] = {}  #: kind -> (address, its cfunc, kept alive)
 #: handle -> the kind's function on the buffer (interpreted, NUMBA_DISABLE_JIT: the address's twin)
 PYTHON_KINDS: dict[int, object] = {}

@@ -23,22 +23,21 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
-a drive kind numba cannot compile, a continuous controller that outputs voltages (but
-constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
-law numba cannot compile, two 2-D slides launching from rest at once, a stage or
-friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
-joint it takes is a one-DOF revolute or prismatic), a surface turning with a frame (the robot's or an articulated
-body's) under a force-reading law. A chain's mass riding a turning surface
+a drive kind numba cannot compile, a user law numba cannot compile (a controller, a stage or friction law), two 2-D
+slides launching from rest at once, a robot or articulated body ``rigid_body`` does not compute (none the robot
+loader accepts: every joint it takes is a one-DOF revolute or prismatic), an articulated body under another gravity
+than the robot's or carrying the reference, a surface turning with a frame (the robot's or an articulated body's)
+under a force-reading law. A chain's mass riding a turning surface
 is packed with its frame (``N_RIDING``): the call adds its coupling to M and its bias to f
 (:func:`.contacts.add_riding`).
 An articulated body's joints are appended to the robot's in the rigid-body table
 (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
 robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
 chart x holds (:func:`.robot_terms.table_at`). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
-operational space, the dynamic laws, joint PD, task force), a sampled law's held command (torques or voltages),
-constant voltages and
-user laws of the controller ABI run; a force-reading law and a reference carried by a body are folded through the
-drives (:mod:`.force_fold`).
+operational space, the dynamic laws (A7 in task or joint space), joint PD, task force), a sampled law's held command
+(torques or voltages), constant voltages and user laws of the controller ABI (their command torques or voltages
+[V], a task or a joint-space reference) run; a force-reading law and a reference carried by a body are folded
+through the drives (:mod:`.force_fold`).
 """
 
 from __future__ import annotations
@@ -61,7 +60,7 @@ from ...robot.rigid_body import forest_table
 from ..chain import NodeKind
 from ..chain_forces import pack as pack_chain
 from ..friction import launching
-from .control_laws import kind_address
+from .control_laws import JOINT_DYNAMIC, kind_address
 from .drives import DW_W, drive_table, drives_unsupported
 
 __all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_references"]
@@ -194,7 +193,7 @@ def unsupported(system, modes, phase) -> str:
         return reason
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
-    if not isinstance(ctl, SampledController) and (reason := _controller_unsupported(system, ctl, phase)):
+    if not isinstance(ctl, SampledController) and (reason := _controller_unsupported(ctl)):
         return reason
     if sum(launching(m) for m in modes) > 1:
         return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
@@ -229,23 +228,12 @@ DYNAMIC_LAWS = COMPILED_IN[2:5]
 BY_ADDRESS = COMPILED_IN[1:5]  #: built-in laws of the controller ABI's shape, called by address (control_laws)
 
 
-def _controller_unsupported(system, ctl, phase) -> str:
-    """Why the phase's (not sampled) controller cannot run on the pipeline ("" when it can)."""
-    constant = isinstance(ctl, ConstantVoltage)
-    if ctl.outputs != "torque" and not constant:
-        return f"controller {ctl.name!r} outputs {ctl.outputs}"
-    if ctl.name == "operational_space" and ctl.force_keys != list(phase.forces):
-        return "operational_space's set-points in another order than the phase's"
-    if ctl.name in DYNAMIC_LAWS and (ctl.config.space if ctl.name == "position_dynamic" else "task") != "task":
-        return f"controller {ctl.name!r} in joint space"
-    if ctl.name not in COMPILED_IN and not constant and not _addressable(type(ctl)):
+def _controller_unsupported(ctl) -> str:
+    """Why the phase's (not sampled) controller cannot run on the pipeline ("" when it can): a user's law that does
+    not compile. (Voltages [V] go to the drives as a torque command does, ``drives.drive_table``; a joint-space
+    reference fills the ABI's x_d, v_d, a_d with its nv coordinates.)"""
+    if ctl.name not in COMPILED_IN and not isinstance(ctl, ConstantVoltage) and not _addressable(type(ctl)):
         return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
-    dims = len(phase.reference.start) if phase.reference is not None else None
-    if ctl.name == "joint_pd" and dims not in (None, system.nv):
-        return f"controller 'joint_pd' with a reference of {dims} coordinates ({system.nv} joints)"
-    if ctl.name not in ("task_pd", "operational_space", "joint_pd", "task_force") and not constant \
-            and dims not in (None, 3):
-        return f"controller {ctl.name!r} with a joint-space reference (the buffer's x_d is the tip's)"
     return ""
 
 
@@ -535,9 +523,10 @@ def _reference(b: _Builder, system, phase) -> None:
 
 def _controller(b: _Builder, system, phase) -> None:
     """task PD: its constants (TaskPD.constants) and feedforward; constant voltages: one per joint; operational
-    space: its constants; a controller of the ABI: the layout of its inputs, its address and its declared
-    parameters; a dynamic law: the same layout and its constants (control_laws.dynamic_constants); a sampled law:
-    where its held command is in x."""
+    space: its constants; a controller of the ABI: the layout of its inputs (x_d, v_d, a_d of the reference's
+    coordinates: 3 or nv), its address and its declared parameters; a dynamic law: the same layout and its constants
+    (:func:`_dynamic_constants`; A7 in joint space: K_p, K_v per joint and the rotors taken out of H); a sampled
+    law: where its held command is in x."""
     h = b.ints
     ctl = phase.controller
     h[READS_ORIENTATION], h[NEEDS_GRAVITY] = int(ctl.reads_orientation), int(ctl.needs_gravity)
@@ -573,12 +562,17 @@ def _controller(b: _Builder, system, phase) -> None:
               *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()),
               *(("tau_contact", "surface_p", "surface_v", "touch") if not ctl.uses_forces else ()))
     h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
-    b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces)))
+    dims = len(phase.reference.start) if phase.reference is not None else 3  # (3: x_d absent, its size unread)
+    b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces), dims))
     h[CTL_KIND] = CTL_ABI
     cls = type(ctl)
-    if ctl.name in BY_ADDRESS:  # a built-in law of the ABI's shape (control_laws), its constants the params
+    if ctl.name == "position_dynamic" and ctl.config.space == "joint":  # A7 in joint space (its own kind)
+        h[CTL_ADDRESS] = kind_address(JOINT_DYNAMIC)
+        params = np.array([*ctl.joint_gains[0], *ctl.joint_gains[1], *ctl._rotor])
+    elif ctl.name in BY_ADDRESS:  # a built-in law of the ABI's shape (control_laws), its constants the params
         h[CTL_ADDRESS] = kind_address(ctl.name)
-        params = np.array(_dynamic_constants(ctl, phase) if ctl.name in DYNAMIC_LAWS else _operational_constants(ctl))
+        params = np.array(_dynamic_constants(ctl, phase) if ctl.name in DYNAMIC_LAWS else
+                          _operational_constants(ctl, phase))
     else:
         h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
         params = params_of(ctl.config)
@@ -597,9 +591,11 @@ def _drives(b: _Builder, system, phase) -> None:
     b.work += DW_W * len(system.drives.specs) + 2
 
 
-def _operational_constants(ctl) -> list[float]:
-    """Operational space's constants (control_laws' O_*), from OperationalSpace.constants."""
+def _operational_constants(ctl, phase) -> list[float]:
+    """Operational space's constants (control_laws' O_*), from OperationalSpace.constants: its force directions in
+    the phase's order of set-points (the buffer's F_d's; the law's are in ``force_keys``' order)."""
     axes, forced, kp, kd, tool_axis, target, ko, do, k_null, kd_normal = ctl.constants
+    forced = forced[[ctl.force_keys.index(key) for key in phase.forces]].reshape(-1, 3)
     return [len(axes), float(tool_axis.size > 0), *axes.ravel(), *forced.ravel(), *kp, *kd, *_tool(tool_axis, target),
             ko, do, k_null, kd_normal]
 
