@@ -30,8 +30,8 @@ compute (none the robot loader accepts: every joint it takes is a one-DOF revolu
 with a frame (the robot's or an articulated body's) under a force-reading law. A stage or friction law numba cannot
 compile is packed as a declared Python stage (:func:`python_stages` names them): the address of a ctypes callback
 of its Python function where its cfunc's would be (:func:`contactdyn.laws.abi.python_stage_address`).
-A chain's mass riding a turning surface is packed with its frame (``N_RIDING``): the call adds its coupling to M and its bias to f
-(:func:`.contacts.add_riding`).
+A chain's mass riding a turning surface is packed with its frame (``N_RIDING``): the call adds its coupling to M
+and its bias to f (:func:`.contacts.add_riding`).
 An articulated body's joints are appended to the robot's in the rigid-body table
 (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
 robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
