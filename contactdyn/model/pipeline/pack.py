@@ -23,13 +23,14 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
-a drive kind numba cannot compile, a continuous controller that outputs voltages (but
+a continuous controller that outputs voltages (but
 constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
 controller numba cannot compile, two 2-D slides launching from rest at once, a robot ``rigid_body`` does not
 compute (none the robot loader accepts: every joint it takes is a one-DOF revolute or prismatic), a surface turning
-with a frame (the robot's or an articulated body's) under a force-reading law. A stage or friction law numba cannot
-compile is packed as a declared Python stage (:func:`python_stages` names them): the address of a ctypes callback
-of its Python function where its cfunc's would be (:func:`contactdyn.laws.abi.python_stage_address`).
+with a frame (the robot's or an articulated body's) under a force-reading law. A stage law, friction law or drive
+kind numba cannot compile is packed as a declared Python stage (:func:`python_stages` names them): the address of
+a ctypes callback of its Python function where its cfunc's would be (:func:`contactdyn.laws.abi.python_stage_address`,
+:func:`contactdyn.laws.drive_abi.python_drive_addresses`).
 A chain's mass riding a turning surface is packed with its frame (``N_RIDING``): the call adds its coupling to M
 and its bias to f (:func:`.contacts.add_riding`).
 An articulated body's joints are appended to the robot's in the rigid-body table
@@ -64,7 +65,7 @@ from ..chain_forces import S_LAW
 from ..chain_forces import pack as pack_chain
 from ..friction import launching
 from .control_laws import kind_address
-from .drives import DW_W, drive_table, drives_unsupported
+from .drives import DW_W, drive_table, python_drives
 
 __all__ = ["Packed", "pack", "unsupported", "python_stages", "section", "diag_starts", "set_slip_references"]
 
@@ -192,8 +193,6 @@ def unsupported(system, modes, phase) -> str:
     ctl = phase.controller
     if reason := _bodies_unsupported(system, phase):
         return reason
-    if reason := drives_unsupported(system):
-        return reason
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if not isinstance(ctl, SampledController) and (reason := _controller_unsupported(system, ctl, phase)):
@@ -207,8 +206,9 @@ def unsupported(system, modes, phase) -> str:
 
 
 def python_stages(system, modes, phase) -> list[str]:
-    """The laws of (modes, phase) numba cannot compile, each run in the compiled call as a declared Python stage
-    (called back through ctypes, :func:`contactdyn.laws.abi.python_stage_address`), named with numba's reason."""
+    """The laws of (modes, phase) numba cannot compile (stage, friction, drive kinds), each run in the compiled call
+    as a declared Python stage (called back through ctypes, :func:`contactdyn.laws.abi.python_stage_address`), named
+    with numba's reason."""
     out = []
     for c, m in zip(system.contacts, modes, strict=True):
         for dc in c.chains:
@@ -220,7 +220,7 @@ def python_stages(system, modes, phase) -> list[str]:
             law = FRICTION_LAWS[fr.law]
             if not friction_address(law):
                 out.append(f"friction law {fr.law!r} of {c.name} is a Python stage ({law.compiled_reason})")
-    return list(dict.fromkeys(out))
+    return list(dict.fromkeys(out + python_drives(system)))
 
 
 def _bodies_unsupported(system, phase) -> str:
