@@ -87,7 +87,7 @@ _SCALE = {"k": 1.0}  #: a Python dict: numba cannot type it as a global
 @pytest.fixture
 def uncompilable_law(stage_law_registry):
     """A linear law numba cannot compile (it reads a Python dict), registered as ``uncompilable`` for the test: a
-    declared Python stage, its modes on the readable model."""
+    declared Python stage, called back from the compiled call (contactdyn.laws.abi.python_stage_address)."""
     from contactdyn.laws.stage_laws import StageLaw
 
     class Uncompilable(StageLaw):
@@ -98,3 +98,23 @@ def uncompilable_law(stage_law_registry):
             return _SCALE["k"] * k * x + b * xdot
 
     return stage_law_registry(Uncompilable)
+
+
+@pytest.fixture
+def uncompilable_controller():
+    """A controller numba cannot compile (τ = 0 times a Python dict's gain), registered as ``uncompilable_ctl`` for
+    the test: the pipeline declines its modes (they run on the readable model, the reason named)."""
+    from contactdyn.laws.controllers.base import CONTROLLERS, Controller, register
+    from contactdyn.laws.params import Param
+
+    class UncompilableController(Controller):
+        name = "uncompilable_ctl"
+        params = (Param("gain", "1", "a gain", 1.0),)
+        reads_orientation = False
+
+        def command(self, inp):
+            return _SCALE["k"] * self.config.gain * 0.0 * inp.q, None
+
+    register(UncompilableController)
+    yield UncompilableController
+    CONTROLLERS.pop(UncompilableController.name, None)

@@ -16,7 +16,7 @@ from contactdyn.scene.scene_file import load_scene, sims_dir
 from contactdyn.simulate import run_system
 
 HARD = Path(__file__).resolve().parent.parent / "benchmarks" / "hard"
-PYTHON_STAGE = "a stage law of tip.n does not compile"
+UNCOMPILED_CONTROLLER = "controller 'uncompilable_ctl': numba cannot compile"
 
 
 def axis_scene(normal: dict, duration: float):
@@ -56,16 +56,30 @@ def test_every_scene_runs_every_mode_on_the_pipeline(path):
     _all_compiled(result)
 
 
-def test_a_mode_the_pipeline_does_not_pack_runs_on_the_readable_model_with_its_reason(uncompilable_law):
-    """A stage law numba cannot compile (a declared Python stage) keeps its modes on the readable model, the paths
-    table and fallback_modes naming the pipeline's reason (declared, not undeclared); the mode before the touch,
-    without the chain's stages, runs on the pipeline."""
-    chain = {"model": "chain", "environment": [{"k": 5e4, "b": 1500.0, "law": uncompilable_law.name}]}
-    r = simulate(axis_scene(chain, 0.05))
-    assert r.stats["fallback_modes"] == {PYTHON_STAGE: 1}
-    assert r.stats["paths"]["main: tip touching"] == {"path": READABLE, "why": PYTHON_STAGE, "segments": 1}
-    assert r.stats["paths"]["main: tip free"]["path"] == PIPELINE
+def test_a_mode_the_pipeline_does_not_pack_runs_on_the_readable_model_with_its_reason(uncompilable_controller):
+    """A controller numba cannot compile keeps its modes on the readable model, the paths table and fallback_modes
+    naming the pipeline's reason (declared, not undeclared)."""
+    r = simulate(parse_scene({
+        "duration": 0.05, "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "q0": [0.999], "v0": [0.5]},
+        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], "model": "chain",
+                                                                  "environment": [{"k": 5e4, "b": 1500.0}]}}},
+        "controller": {"kind": uncompilable_controller.name}}))
+    assert r.stats["fallback_modes"] and all(why.startswith(UNCOMPILED_CONTROLLER) for why in r.stats["fallback_modes"])
+    assert {row["path"] for row in r.stats["paths"].values()} == {READABLE}
+    assert all(row["why"].startswith(UNCOMPILED_CONTROLLER) for row in r.stats["paths"].values())
     assert not any(reason.startswith(UNDECLARED) for reason in r.stats["fallback_modes"])
+
+
+def test_a_stage_law_numba_cannot_compile_keeps_its_mode_on_the_compiled_call(uncompilable_law):
+    """A stage law numba cannot compile is a declared Python stage of the compiled call (tests/test_python_stages):
+    no mode on the readable model, the touching one naming the law."""
+    r = simulate(axis_scene({"model": "chain", "environment": [{"k": 5e4, "b": 1500.0, "law": uncompilable_law.name}]},
+                            0.05))
+    assert r.stats["fallback_modes"] == {}
+    assert r.stats["paths"]["main: tip touching"]["path"] == PIPELINE
+    why = r.stats["paths"]["main: tip touching"]["why"]
+    assert why.startswith("stage law 'uncompilable' of tip.n is a Python stage"), why
+    assert r.stats["paths"]["main: tip free"] == {"path": PIPELINE, "why": "", "segments": 1}
 
 
 def test_the_energy_audit_through_motors_runs_on_the_compiled_call_and_agrees_with_the_readable_model():

@@ -183,3 +183,50 @@ def test_a_kind_is_checked_when_it_registers():
     assert DriveSpec("gain", gain=2.0).gain == 2.0
     with pytest.raises(TypeError, match="no parameter"):
         DriveSpec("gain", R=1.0)
+
+
+_GAIN = {"s": 1.0}  #: a Python dict: numba cannot type it, so the kind below does not compile
+
+
+class _PythonLimitedMotor(DriveKind):
+    """limited_motor's law reading a dict: numba cannot compile it (a declared Python stage of the compiled call)."""
+
+    name = "python_limited_motor"
+    meaning = "limited_motor in Python only (the test's)"
+    params = (Param("J", "kg·m²", "rotor inertia", lo=0.0),
+              Param("N", "-", "speed ratio, motor speed / output speed", 1.0, lo=0.0, lo_open=True),
+              Param("M_max", "N·m", "largest motor torque the amplifier gives", math.inf, lo=0.0, lo_open=True,
+                    example=1.0))
+    motorized = True
+
+    @staticmethod
+    def n_speed(spec):
+        return spec.N
+
+    n_torque = n_speed
+
+    @staticmethod
+    def motor_inertia(spec):
+        return spec.J
+
+    @staticmethod
+    def force(spec, command, q, qd, theta, omega):
+        M = min(max(_GAIN["s"] * command / spec.N, -spec.M_max), spec.M_max)  # [N·m]
+        applied = spec.N * M
+        return applied, 0.0, applied * qd, 0.0
+
+
+def test_a_kind_numba_cannot_compile_runs_in_the_compiled_call_as_a_python_stage(scene_dir):
+    """The kind's force called back in Python from the compiled call: the run of its compiled twin (limited_motor,
+    the same law; to 1e-12, the energy audit's too), every mode on the compiled call naming it per joint."""
+    register_drive_kind(_PythonLimitedMotor)
+    drive = {"J": J, "N": N, "M_max": 0.05}
+    mine = run(writer(scene_dir, {"kind": "python_limited_motor", **drive}, duration=0.3, record_energy=True))
+    twin = run(writer(scene_dir, {"kind": "limited_motor", **drive}, duration=0.3, record_energy=True))
+    assert {row["path"] for row in mine.stats["paths"].values()} == {PIPELINE} and mine.stats["fallback_modes"] == {}
+    for row in mine.stats["paths"].values():
+        assert row["why"].startswith("drive kind 'python_limited_motor' of q1 is a Python stage (numba cannot compile")
+        assert "; drive kind 'python_limited_motor' of q2 is a Python stage" in row["why"]
+    for channel in ("q", "v", "tau", "contact.tip.F_n", "energy.work"):
+        scale = np.abs(twin[channel]).max()
+        assert np.abs(mine[channel] - twin[channel]).max() <= 1e-12 * scale, channel

@@ -156,12 +156,14 @@ def test_a_friction_law_changed_on_the_readable_path_only_is_caught(monkeypatch)
 
 
 # ---- the paths ---------------------------------------------------------------------------------------------------
-def test_the_run_prints_the_modes_a_part_kept_off_the_compiled_call(capsys, uncompilable_law):
-    """A stage law numba cannot compile keeps its mode off the compiled call: each such mode is printed once, with
-    why."""
+def test_the_run_prints_the_modes_a_python_stage_slows(capsys, uncompilable_law):
+    """A stage law numba cannot compile runs as a declared Python stage of the compiled call: each such mode is
+    printed once, naming the law and numba's reason."""
     assert main(["run", "b1", "--set", "duration=0.2", "--set", f"contact.tip.normal.law={uncompilable_law.name}"]) == 0
     out = capsys.readouterr().out
-    assert out.count("readable model (a stage law of tip.n does not compile)") == 1, out
+    assert out.count("compiled call (stage law 'uncompilable' of tip.n is a Python stage (numba cannot compile") \
+        == 1, out
+    assert "readable model" not in out, out
     assert main(["run", str(CUBIC)]) == 0  # a user's law: compiled, nothing to say
     assert "path of" not in capsys.readouterr().out
 

@@ -194,11 +194,14 @@ def test_a_users_kind_runs_by_its_address(fresh_user_imports):
     assert np.abs(pipe.values()["drives"]["applied"]).max() == pytest.approx(160.0 * 0.05)  # at its limit
 
 
-def test_a_kind_numba_cannot_compile_is_declined_by_name(fresh_user_imports):
+def test_a_kind_numba_cannot_compile_is_a_declared_python_stage(fresh_user_imports):
+    """Its force called back in Python from the compiled call (laws.drive_abi.python_drive_addresses), named with
+    numba's reason; the rates the readable model's."""
     register_drive_kind(Opaque)
-    system, modes, phase, _ = _writer({"kind": "opaque_test", "J": 4.52e-4, "N": 160.0})
-    reason = unsupported(system, modes, phase)
-    assert reason.startswith("drive kind 'opaque_test' of q1: numba cannot compile")
-    assert "_python_helper" in reason
-    with pytest.raises(ValueError, match="opaque_test"):
-        Pipeline(system, modes, phase)
+    system, modes, phase, x0 = _writer({"kind": "opaque_test", "J": 4.52e-4, "N": 160.0})
+    assert unsupported(system, modes, phase) == ""
+    pipe = Pipeline(system, modes, phase)
+    assert pipe.python_stages[0].startswith("drive kind 'opaque_test' of q1 is a Python stage (numba cannot compile")
+    assert "_python_helper" in pipe.python_stages[0] and len(pipe.python_stages) == 2  # q1 and q2
+    worst, _ = agreement(pipe, system, modes, phase, phase.t_start + 0.0123, states(x0, 3))
+    assert worst <= RTOL and pipe.readable_calls == 0

@@ -127,19 +127,18 @@ def test_many_states_in_one_call_are_the_single_calls():
         assert np.array_equal(row, pipe.rhs(t, x))
 
 
-def test_a_mode_out_of_scope_is_declined_with_its_reason(uncompilable_law):
-    """A mode with a stage law numba cannot compile (a declared Python stage): the pipeline declines it, naming the
-    stage."""
+def test_a_mode_out_of_scope_is_declined_with_its_reason(uncompilable_controller):
+    """A mode under a controller numba cannot compile: the pipeline declines it, naming the controller."""
     from contactdyn import parse_scene
     from contactdyn.simulate import prepare
 
-    chain = {"model": "chain", "environment": [{"k": 5e4, "b": 1500.0, "law": uncompilable_law.name}]}
+    chain = {"model": "chain", "environment": [{"k": 5e4, "b": 1500.0}]}
     system, modes, phase, _ = prepare(parse_scene({
         "duration": 0.05, "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "q0": [0.999]},
         "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], **chain}}},
-        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0}}))
+        "controller": {"kind": uncompilable_controller.name}}))
     modes = [m.with_(touching=True) for m in modes]
-    with pytest.raises(ValueError, match="a stage law of tip.n does not compile"):
+    with pytest.raises(ValueError, match="controller 'uncompilable_ctl': numba cannot compile"):
         Pipeline(system, modes, phase)
 
 

@@ -27,6 +27,7 @@ from collections import deque
 
 import numpy as np
 
+from ..laws.abi import raise_python_stage_error
 from ..model.chain_forces import pack as pack_chain
 from ..model.dynamics import Evaluation, Measurement, SampleTerms
 from ..model.pipeline.drives import DW_U, DW_W
@@ -68,10 +69,10 @@ class PipelineMode:
     """One (modes, phase) on the one pipeline, as the loop runs it (see the module docstring)."""
 
     ok = True  #: runs compiled (a Declined mode: False)
-    reason = ""
 
     def __init__(self, pipe: Pipeline):
         self.pipe, self.system, self.modes, self.phase = pipe, pipe.system, pipe.modes, pipe.phase
+        self.reason = "; ".join(pipe.python_stages)  #: its declared Python stages ("": none)
         self.ring: deque[tuple] = deque([_NO_CALL] * 4, maxlen=4)  #: the last four calls' (t, x, events)
         p = pipe.packed
         ints, reals, work, events = p.ints, p.reals, p.work, p.events
@@ -80,6 +81,7 @@ class PipelineMode:
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
             xdot = call(float(t), x, ints, reals, work, events)
             if events[-1] != 1.0:
+                raise_python_stage_error()  # a Python stage's own error
                 pipe.readable_calls += 1
                 ev = system.evaluate(t, x, self.modes, phase)
                 ring.append((t, x, self._events_of(ev, x)))
@@ -226,6 +228,8 @@ class PipelineMode:
                                        system)
         S = Samples(len(ts), system)
         self._read_out(S, E[:done], W[:done], X[:done])
+        if done < len(ts):
+            raise_python_stage_error()
         for k in range(done, len(ts)):
             self.pipe.readable_calls += 1
             S.fill(k, system.evaluate(float(ts[k]), X[k], self.modes, self.phase, full=True))
@@ -239,6 +243,7 @@ class PipelineMode:
         Xd, E, W, done = samples_at(np.array([float(t)]), np.ascontiguousarray(x, dtype=float)[None, :], p.ints,
                                     p.reals, p.work, p.events)
         if done == 0:
+            raise_python_stage_error()
             self.pipe.readable_calls += 1
             return None
         e, w = E[0], W[0]

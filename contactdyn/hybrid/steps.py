@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _coef
 
+from ..laws.abi import raise_python_stage_error
 from ..model.pipeline.pack import A_CALL, NX
 from ..model.pipeline.pipeline import rates_at
 from ..numerics.compile_cache import njit
@@ -110,6 +111,7 @@ def stepper(packed, ring, on_stage=None):
         status, err = attempt(ints, reals, work, events, t, y, f, h, rtol, atol, _A, _B, _C, _E, y_new, block,
                               Ys, Es)
         if status:
+            raise_python_stage_error()  # a Python stage's own error
             return None
         if on_stage is not None:
             for s in range(1, 12):

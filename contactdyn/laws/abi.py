@@ -13,9 +13,15 @@ every law, built in or a user's, with no kernel per law. The families' C signatu
   (``FrictionLaw.coefficient(mu_s, mu_k, p, speed)``).
 
 A law is compiled lazily, once per law class (:func:`stage_address`, :func:`friction_address`). A law numba
-cannot compile keeps the reason on the class (``law.compiled_reason``; "" when compiled) and address 0: its
-caller computes it in Python. The calls have a plain-Python twin: under ``NUMBA_DISABLE_JIT=1`` nothing is
-compiled, an address is a handle of the law's Python function, and the same calling code runs interpreted.
+cannot compile keeps the reason on the class (``law.compiled_reason``; "" when compiled) and address 0: the
+readable model computes it in Python. The compiled call runs it as a declared Python stage: a C function of the
+same signature made by ``ctypes`` around its Python function (:func:`python_stage_address`,
+:func:`python_friction_address`), its address where the cfunc's would be; the compiled code calls back into
+Python for that law only (it holds the GIL). A Python stage's exception is kept (:func:`python_stage_failed`),
+its call gives NaN (the call's status then -1), and :func:`raise_python_stage_error` re-raises it where the
+caller reads that status: the user sees the law's own error. The calls have a plain-Python twin: under
+``NUMBA_DISABLE_JIT=1`` nothing is compiled, an address is a handle of the law's Python function, and the same
+calling code runs interpreted.
 
 Caching: the compiled law is cached on disk by numba (``cache=True``). A cfunc made in a factory as a closure
 is not (numba keys a closure's cache on its pickled cells, and a dispatcher pickles with a new id in every
@@ -26,6 +32,7 @@ by this module's source among others), and an edit of the law's file recompiles 
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import inspect
 import math
@@ -41,7 +48,8 @@ from ..numerics.compile_cache import cfunc, njit
 from .friction_laws import FrictionLaw
 
 __all__ = ["STAGE_SIGNATURE", "FRICTION_SIGNATURE", "stage_address", "friction_address", "call_stage",
-           "call_friction", "compile_wrapper"]
+           "call_friction", "compile_wrapper", "python_stage_address", "python_friction_address",
+           "python_stage_failed", "raise_python_stage_error"]
 
 _P = types.CPointer(types.float64)
 #: double force(double k, double b, double* p, int64 n_p, double x, double xdot)
@@ -91,6 +99,78 @@ def _address(law: type, family: str, fn) -> int:
     _compiled[law] = (address, cfunc)
     if address:
         _python[address] = fn
+    return address
+
+
+# ---- declared Python stages: a law numba cannot compile, called back by the compiled code through ctypes ---------
+
+_C_P = ctypes.POINTER(ctypes.c_double)
+_STAGE_CTYPE = ctypes.CFUNCTYPE(ctypes.c_double, ctypes.c_double, ctypes.c_double, _C_P, ctypes.c_int64,
+                                ctypes.c_double, ctypes.c_double)
+_FRICTION_CTYPE = ctypes.CFUNCTYPE(ctypes.c_double, ctypes.c_double, ctypes.c_double, _C_P, ctypes.c_int64,
+                                   ctypes.c_double)
+#: law class (stage) or FrictionSpec (friction) -> (address, its ctypes callback): kept alive for the process, as
+#: the cfuncs are (a packed mode holds the address only)
+_callbacks: dict[object, tuple[int, object]] = {}
+_raised: list[BaseException] = []  #: the exception a Python stage raised in a compiled call, until re-raised
+
+
+def python_stage_failed(exc: BaseException) -> None:
+    """Keep ``exc`` (raised by a Python stage inside a compiled call) for :func:`raise_python_stage_error`."""
+    _raised.append(exc)
+
+
+def raise_python_stage_error() -> None:
+    """Re-raise the first exception a Python stage raised since the last such call (the caller read a status that
+    is not 1); nothing when none did."""
+    if _raised:
+        exc = _raised[0]
+        _raised.clear()
+        raise exc
+
+
+def python_stage_address(law: type) -> int:
+    """The address of a C function (``STAGE_SIGNATURE``) calling stage law ``law``'s Python ``force`` with p as a
+    tuple (as the readable model calls it): its declared Python stage. Interpreted, the law's handle."""
+    if stage_address(law) or law in _callbacks:
+        return stage_address(law) or _callbacks[law][0]
+
+    def force(k, b, p, n_p, x, xdot):
+        try:
+            return float(law.force(k, b, tuple(p[:n_p]), x, xdot))
+        except BaseException as exc:  # (ctypes would print it and return 0)
+            python_stage_failed(exc)
+            return math.nan
+
+    return _keep(law, _STAGE_CTYPE(force))
+
+
+def python_friction_address(spec) -> int:
+    """The address of a C function (``FRICTION_SIGNATURE``) giving μ [-] of a contact's friction ``spec`` (a
+    FrictionSpec) by its Python ``spec.mu(speed)``, as the readable model does: its law's declared Python stage.
+    Interpreted, a handle of the same function."""
+    if spec in _callbacks:
+        return _callbacks[spec][0]
+
+    def mu(mu_s, mu_k, p, n_p, speed):
+        try:
+            return float(spec.mu(speed))
+        except BaseException as exc:
+            python_stage_failed(exc)
+            return math.nan
+
+    if numba.config.DISABLE_JIT:  # the twin's call: (mu_s, mu_k, p[at:at + n_p], speed)
+        def twin(mu_s, mu_k, p, speed):
+            return float(spec.mu(speed))
+        _python[id(twin)] = twin
+        _callbacks[spec] = (id(twin), twin)
+        return id(twin)
+    return _keep(spec, _FRICTION_CTYPE(mu))
+
+
+def _keep(key, callback) -> int:
+    address = ctypes.cast(callback, ctypes.c_void_p).value
+    _callbacks[key] = (address, callback)
     return address
 
 

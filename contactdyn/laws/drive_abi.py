@@ -17,7 +17,9 @@ The two C functions of a kind, each address a plain int64 (:func:`drive_addresse
 
 ``p[0:n_p]`` is :func:`spec_values` of the drive. An ideal source (a kind that is not motorized) has no functions:
 its command acts as it is. A kind whose functions numba cannot compile (a helper that is not jittable, a Python
-object) has address 0 and the reason in ``kind.compiled_reason``: the compiled model declines it by that name.
+object) has address 0 and the reason in ``kind.compiled_reason``: the compiled model runs it as a declared Python
+stage, a ctypes callback of each function for the drive's own spec (:func:`python_drive_addresses`; its exception
+kept and re-raised after the call, :func:`contactdyn.laws.abi.raise_python_stage_error`).
 
 Under ``NUMBA_DISABLE_JIT=1`` nothing is compiled: an address is a handle of the kind's Python function and the
 same calling code runs interpreted (:func:`call_drive_voltage`, :func:`call_drive_force`; from Python with numba
@@ -27,6 +29,7 @@ kind's own file (:func:`contactdyn.laws.abi.compile_wrapper`).
 
 from __future__ import annotations
 
+import ctypes
 import math
 from collections import namedtuple
 
@@ -36,11 +39,11 @@ from numba.extending import intrinsic, overload, register_jitable
 
 from ..numerics.compile_cache import njit
 from . import drive_kinds
-from .abi import _data_at, _indirect_call, compile_wrapper
+from .abi import _data_at, _indirect_call, compile_wrapper, python_stage_failed
 from .drives import DriveSpec
 
-__all__ = ["VOLTAGE_SIGNATURE", "FORCE_SIGNATURE", "drive_addresses", "spec_values", "call_drive_voltage",
-           "call_drive_force"]
+__all__ = ["VOLTAGE_SIGNATURE", "FORCE_SIGNATURE", "drive_addresses", "python_drive_addresses", "spec_values",
+           "call_drive_voltage", "call_drive_force"]
 
 # the built-in kinds' shared helper (the output lever), compiled inline where a kind's law calls it
 register_jitable(drive_kinds._lever)
@@ -119,6 +122,43 @@ def drive_addresses(kind: type) -> tuple[int, int]:
     kind.compiled_reason = reason
     _compiled[kind] = (found.get("voltage", 0), found.get("force", 0), tuple(kept))
     return _compiled[kind][:2]
+
+
+_C_P = ctypes.POINTER(ctypes.c_double)
+_VOLTAGE_CTYPE = ctypes.CFUNCTYPE(ctypes.c_double, _C_P, ctypes.c_int64, ctypes.c_double, ctypes.c_double,
+                                  ctypes.c_double)
+_FORCE_CTYPE = ctypes.CFUNCTYPE(ctypes.c_int64, _C_P, ctypes.c_int64, ctypes.c_double, ctypes.c_double,
+                                ctypes.c_double, ctypes.c_double, ctypes.c_double, _C_P)
+_callbacks: dict[DriveSpec, tuple[int, int, tuple]] = {}  #: spec -> (voltage, force addresses, callbacks kept)
+
+
+def python_drive_addresses(spec: DriveSpec) -> tuple[int, int]:
+    """(voltage, force) addresses of C functions (the ABI's signatures) calling the Python ``voltage`` and ``force``
+    of ``spec``'s kind with ``spec`` itself, as the readable model does (``Drives.apply``): the declared Python
+    stage of a kind numba cannot compile (voltage 0 for a kind without one)."""
+    if spec in _callbacks:
+        return _callbacks[spec][:2]
+    kind = spec.law
+
+    def voltage(p, n_p, tau, qd, omega):
+        try:
+            return float(kind.voltage(spec, tau, qd, omega))
+        except BaseException as exc:  # (ctypes would print it and return 0)
+            python_stage_failed(exc)
+            return math.nan
+
+    def force(p, n_p, command, q, qd, theta, omega, out):
+        try:
+            out[0], out[1], out[2], out[3] = kind.force(spec, command, q, qd, theta, omega)
+            return 1
+        except BaseException as exc:
+            python_stage_failed(exc)
+            return 0
+
+    kept = (_VOLTAGE_CTYPE(voltage), _FORCE_CTYPE(force))
+    v_addr, f_addr = (ctypes.cast(c, ctypes.c_void_p).value for c in kept)
+    _callbacks[spec] = (v_addr if kind.has_voltage else 0, f_addr, kept)
+    return _callbacks[spec][:2]
 
 
 # ---- the calls: Python twins (interpreted), and their compiled form by overload --------------------------------

@@ -18,7 +18,7 @@ The laws:
 
 A law with a constant kinetic coefficient (``constant = True``) is a constant of the compiled call; another is
 called by address per call (its ``coefficient`` compiled, :mod:`contactdyn.laws.abi`); one numba cannot compile
-keeps its modes on the readable model. Adding a law:
+is a declared Python stage of the compiled call (called back through ctypes). Adding a law:
 subclass :class:`FrictionLaw` (``name``, ``params``, ``constant``, and ``coefficient(mu_s, mu_k, p, speed)``,
 the numeric form that :mod:`contactdyn.laws.abi` compiles; ``kinetic(spec, speed)`` gives it a contact's
 spec, and a law may override that one instead, in Python only) and decorate

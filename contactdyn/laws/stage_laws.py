@@ -14,10 +14,10 @@ reads them from the declaration. The laws (``law = "<name>"`` on a stage in a sc
 Adding a law: subclass :class:`StageLaw` (``name``, ``params``, ``affine``, a ``force``)
 and decorate it with :func:`register_stage_law`; the scene then accepts its name and its
 parameters. Its properties decide the physics, never its name: every law whose ``force`` numba compiles runs on
-the compiled call by address (:mod:`contactdyn.laws.abi`; one that does not keeps its touching modes on the readable
-model); an ``affine`` law (F = K x + B ẋ, :meth:`StageLaw.coefficients`) may also sit at a massless junction and
-gives the dynamic laws and the sanity check their nominal model; another needs a solid node (tip, mass or body) at
-both ends of its stage.
+the compiled call by address (:mod:`contactdyn.laws.abi`; one that does not is a declared Python stage of it,
+called back through ctypes); an ``affine`` law (F = K x + B ẋ, :meth:`StageLaw.coefficients`) may also sit at a
+massless junction and gives the dynamic laws and the sanity check their nominal model; another needs a solid node
+(tip, mass or body) at both ends of its stage.
 See ``docs/architecture.md`` for a worked example.
 """
 

@@ -3,12 +3,16 @@
 Every mode runs on the one pipeline (:mod:`contactdyn.model.pipeline`: one compiled call per right-hand side, the
 laws by address) where :func:`~contactdyn.model.pipeline.pack.unsupported` accepts it (:class:`LivePipelines`, the
 path ``PIPELINE``), checked where the run first starts it against the readable model (:func:`disagreement`); else
-on the readable model (:meth:`~contactdyn.model.system.System.evaluate`), with the reason: a law numba cannot
-compile, a part the pipeline does not pack. A pipeline whose check disagrees is an undeclared gap: its reason in
-``Result.stats["fallback_modes"]`` starts with ``"undeclared: "``, which the tests treat as a bug.
+on the readable model (:meth:`~contactdyn.model.system.System.evaluate`), with the reason: a part the pipeline
+does not pack. A stage law, friction law or drive kind numba cannot compile does not keep its mode off the
+pipeline: it runs there as a declared Python stage (called back through ctypes, :mod:`contactdyn.laws.abi`),
+named in its row.
+A pipeline whose check disagrees is an undeclared gap: its reason in ``Result.stats["fallback_modes"]`` starts
+with ``"undeclared: "``, which the tests treat as a bug.
 
-Which path each mode of a run took (:func:`path_of`), and which law or part kept it off the compiled one, is in
-``Result.stats["paths"]`` (:class:`PathLog`); ``contactdyn run`` prints each such mode once.
+Which path each mode of a run took (:func:`path_of`), and which law or part kept it off the compiled one or ran
+in it as a Python stage, is in ``Result.stats["paths"]`` (:class:`PathLog`); ``contactdyn run`` prints each such
+mode once.
 """
 
 from __future__ import annotations
@@ -120,9 +124,10 @@ class Declined:
 
 
 def path_of(mode) -> tuple[str, str]:
-    """(path, the law or part that kept it off the compiled call: "" when none) of a mode's runner: ``PIPELINE``
-    (one compiled call per right-hand side) or ``READABLE`` (System.evaluate)."""
-    return (PIPELINE, "") if mode.ok else (READABLE, mode.reason)
+    """(path, why it is slower: "" when nothing makes it so) of a mode's runner: ``PIPELINE`` (one compiled call per
+    right-hand side; why: its declared Python stages, the laws numba cannot compile, called back from it) or
+    ``READABLE`` (System.evaluate; why: the law or part that kept it off the compiled call)."""
+    return (PIPELINE if mode.ok else READABLE), mode.reason
 
 
 def _mode_label(system, modes, phase) -> str:
@@ -157,5 +162,6 @@ class PathLog:
 
 
 def slower_paths(paths: dict[str, dict]) -> list[str]:
-    """One line per mode that a law kept off the compiled paths, saying which it ran on and why."""
+    """One line per mode that a law kept off the compiled paths or slowed there (a Python stage), saying which path
+    it ran on and why."""
     return [f"{label}: {row['path']} ({row['why']})" for label, row in paths.items() if row["why"]]

@@ -270,7 +270,8 @@ def _bond_row(ints, reals, ch, J, G, C):
 
 @njit(cache=True)
 def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma, events, pending):
-    """Every contact's chains, rows and friction into f, ydot, G, C, γ, events; False if a stage law gave no force."""
+    """Every contact's chains, rows and friction into f, ydot, G, C, γ, events; False if a stage or friction law
+    gave no force (NaN: it raised)."""
     cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
     chains = section(ints, ints[I_CHAINS], ints[N_CHAINS], CH_W)
     for ci in range(cs.shape[0]):
@@ -312,8 +313,9 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma
                 _bond_row(ints, reals, ch, J, G, C)
                 gamma[ch[CH_ROW]] = gam
         events[EV_W * ci + EV_FN] = F_n
-        if row[CI_NT]:
-            _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G, C, gamma, events, pending)
+        if row[CI_NT] and not _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G, C,
+                                        gamma, events, pending):
+            return False
         if tip_force[0] != 0.0 or tip_force[1] != 0.0 or tip_force[2] != 0.0:
             for c in range(J.shape[1]):
                 f[c] += J[0, c] * tip_force[0] + J[1, c] * tip_force[1] + J[2, c] * tip_force[2]
@@ -323,7 +325,8 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma
 @njit(cache=True)
 def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G, C, gamma, events, pending):
     """A friction contact's slip velocity along its tangents T (nt, 3), and its stick rows, or its slide (the tilt
-    of its normal column or its known force on the coordinates), as model.friction.friction_terms."""
+    of its normal column or its known force on the coordinates), as model.friction.friction_terms; False where its
+    law gave no μ (NaN: it raised)."""
     nQ, nt = ints[NQ], row[CI_NT]
     ev = events[EV_W * ci:EV_W * (ci + 1)]
     vt = np.zeros(nt)
@@ -332,7 +335,7 @@ def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G,
         ev[EV_VT + i] = vt[i]
         ev[EV_FF + i] = 0.0
     if row[CI_FRICTION] != FRICTION_STICK and row[CI_FRICTION] != FRICTION_SLIDE:
-        return
+        return True
     R_T = np.zeros((nt, nQ))  # generalized rows of the tangential slip
     for i in range(nt):
         for c in range(J.shape[1]):  # (the robot's joints, then the articulated bodies' coordinates)
@@ -345,11 +348,13 @@ def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G,
             for c in range(nQ):
                 G[r, c] = C[r, c] = R_T[i, c]
             gamma[r] = T[i, 0] * drift[0] + T[i, 1] * drift[1] + T[i, 2] * drift[2] + w * vt[i]
-        return
+        return True
     d = _slip_direction(reals, cr, vt)
     speed = math.sqrt(vt[0] * vt[0] + vt[1] * vt[1]) if nt == 2 else math.sqrt(vt[0] * vt[0])
     mu = cr[CR_MU_K] if row[CI_LAW] == 0 else \
         call_friction(row[CI_LAW], cr[CR_MU_S], cr[CR_MU_K], reals, row[CI_FP_AT], row[CI_N_FP], speed)
+    if not math.isfinite(mu):
+        return False
     visc = -cr[CR_VISCOUS] * vt
     p = pending[ci]
     p[P_MU] = mu
@@ -372,6 +377,7 @@ def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G,
             for i in range(nt):
                 s += force[i] * R_T[i, c]
             f[c] += s
+    return True
 
 
 @njit(cache=True)

@@ -15,7 +15,7 @@ clipped), then the drives' power and dissipation [W], are written into ``work`` 
 The rotors' inertias reflected through rigid gears go on M's robot block (:func:`inertias`: the true system's
 ``System._D``) and on the controller's H (the rigid model's ``System._D_ctl``, what a law reads as ``inp.H``).
 A kind is called by address (:mod:`contactdyn.laws.drive_abi`), so a user's registered kind costs what a built-in
-one costs; one numba cannot compile is declined by name (:func:`drives_unsupported`).
+one costs; one numba cannot compile runs as a declared Python stage, named (:func:`python_drives`).
 """
 
 from __future__ import annotations
@@ -24,10 +24,16 @@ import math
 
 import numpy as np
 
-from ...laws.drive_abi import call_drive_force, call_drive_voltage, drive_addresses, spec_values
+from ...laws.drive_abi import (
+    call_drive_force,
+    call_drive_voltage,
+    drive_addresses,
+    python_drive_addresses,
+    spec_values,
+)
 from ...numerics.compile_cache import njit
 
-__all__ = ["drive_table", "drives_unsupported", "apply_drives", "fold_on_targets", "inertias", "drive_values", "DI_W",
+__all__ = ["drive_table", "python_drives", "apply_drives", "fold_on_targets", "inertias", "drive_values", "DI_W",
            "DW_W"]
 
 #: a drive's ints: coordinate, motor coordinate (-1: none), its command is a voltage (the controller's), it takes
@@ -40,14 +46,13 @@ DI_COORD, DI_MOTOR, DI_BY_VOLTAGE, DI_HAS_VOLTAGE, DI_VOLTAGE, DI_FORCE, DI_N_P,
 DW_APPLIED, DW_U, DW_CLIPPED, DW_W = 0, 1, 2, 3
 
 
-def drives_unsupported(system) -> str:
-    """Why the pipeline cannot run ``system``'s drives ("" when it can): a motorized kind numba cannot compile."""
+def python_drives(system) -> list[str]:
+    """The motorized kinds of ``system``'s drives numba cannot compile, each run in the compiled call as a declared
+    Python stage (:func:`contactdyn.laws.drive_abi.python_drive_addresses`), named with numba's reason."""
     drives = system.drives
-    for name, spec in zip(drives.names, drives.specs, strict=True):
-        kind = spec.law
-        if kind.motorized and not drive_addresses(kind)[1]:
-            return f"drive kind {kind.name!r} of {name}: {kind.compiled_reason}"
-    return ""
+    return [f"drive kind {spec.law.name!r} of {name} is a Python stage ({spec.law.compiled_reason})"
+            for name, spec in zip(drives.names, drives.specs, strict=True)
+            if spec.law.motorized and not drive_addresses(spec.law)[1]]
 
 
 def drive_table(system, phase) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -60,6 +65,8 @@ def drive_table(system, phase) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     for i, spec in enumerate(drives.specs):
         kind = spec.law
         v_addr, f_addr = drive_addresses(kind) if kind.motorized else (0, 0)
+        if kind.motorized and not f_addr:  # numba cannot compile it: its declared Python stage
+            v_addr, f_addr = python_drive_addresses(spec)
         values = spec_values(spec) if kind.motorized else []
         rows.append((drives.coords[i], drives.motor_coords[i], by_voltage[i], kind.has_voltage, v_addr, f_addr,
                      len(values), len(reals) + 2))

@@ -23,13 +23,15 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
-a drive kind numba cannot compile, a user law numba cannot compile (a controller, a stage or friction law), two 2-D
+a user controller numba cannot compile (a declared Python stage would need its whole ``ControlInput``), two 2-D
 slides launching from rest at once, a robot or articulated body ``rigid_body`` does not compute (none the robot
 loader accepts: every joint it takes is a one-DOF revolute or prismatic), an articulated body under another gravity
 than the robot's or carrying the reference, a surface turning with a frame (the robot's or an articulated body's)
-under a force-reading law. A chain's mass riding a turning surface
-is packed with its frame (``N_RIDING``): the call adds its coupling to M and its bias to f
-(:func:`.contacts.add_riding`).
+under a force-reading law. A stage law, friction law or drive kind numba cannot compile is packed as a declared
+Python stage (:func:`python_stages` names them): the address of a ctypes callback of its Python function where its
+cfunc's would be (:func:`contactdyn.laws.abi.python_stage_address`,
+:func:`contactdyn.laws.drive_abi.python_drive_addresses`). A chain's mass riding a turning surface is packed with
+its frame (``N_RIDING``): the call adds its coupling to M and its bias to f (:func:`.contacts.add_riding`).
 An articulated body's joints are appended to the robot's in the rigid-body table
 (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
 robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
@@ -48,7 +50,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from ...laws.abi import friction_address
+from ...laws.abi import friction_address, python_friction_address, python_stage_address
 from ...laws.controllers import Controller
 from ...laws.controllers.abi import controller_address, layout_of, params_of
 from ...laws.controllers.sampled import SampledController
@@ -58,12 +60,13 @@ from ...laws.trajectory import CIRCLE_W, move_table, ramp_table
 from ...numerics.compile_cache import njit
 from ...robot.rigid_body import forest_table
 from ..chain import NodeKind
+from ..chain_forces import S_LAW
 from ..chain_forces import pack as pack_chain
 from ..friction import launching
 from .control_laws import JOINT_DYNAMIC, kind_address
-from .drives import DW_W, drive_table, drives_unsupported
+from .drives import DW_W, drive_table, python_drives
 
-__all__ = ["Packed", "pack", "unsupported", "section", "diag_starts", "set_slip_references"]
+__all__ = ["Packed", "pack", "unsupported", "python_stages", "section", "diag_starts", "set_slip_references"]
 
 # ---- the header of ``ints``: sizes, switches, then where each section starts -------------------------------------
 (NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
@@ -189,23 +192,34 @@ def unsupported(system, modes, phase) -> str:
     ctl = phase.controller
     if reason := _bodies_unsupported(system, phase):
         return reason
-    if reason := drives_unsupported(system):
-        return reason
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if not isinstance(ctl, SampledController) and (reason := _controller_unsupported(ctl)):
         return reason
     if sum(launching(m) for m in modes) > 1:
         return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
-    for c, m in zip(system.contacts, modes, strict=True):
+    for c in system.contacts:
         if c.turning and (ctl.uses_forces or getattr(ctl, "inner", ctl).uses_forces):
             return f"contact {c.name!r}: a turning surface (carried by a frame) under a force-reading controller"
-        if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
-            return f"friction law {c.friction.law!r} does not compile"
-        for dc in c.chains:
-            if pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching).python_stages:
-                return f"a stage law of {c.name}.{dc.label} does not compile"
     return ""
+
+
+def python_stages(system, modes, phase) -> list[str]:
+    """The laws of (modes, phase) numba cannot compile (stage, friction, drive kinds), each run in the compiled call
+    as a declared Python stage (called back through ctypes, :func:`contactdyn.laws.abi.python_stage_address`), named
+    with numba's reason."""
+    out = []
+    for c, m in zip(system.contacts, modes, strict=True):
+        for dc in c.chains:
+            for _, stage in pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching).python_stages:
+                out.append(f"stage law {stage.law!r} of {c.name}.{dc.label} is a Python stage "
+                           f"({stage.law_class.compiled_reason})")
+        fr = c.friction
+        if fr is not None and not fr.constant and m.touching and not m.stuck and len(c.tangents):
+            law = FRICTION_LAWS[fr.law]
+            if not friction_address(law):
+                out.append(f"friction law {fr.law!r} of {c.name} is a Python stage ({law.compiled_reason})")
+    return list(dict.fromkeys(out + python_drives(system)))
 
 
 def _bodies_unsupported(system, phase) -> str:
@@ -427,7 +441,8 @@ def _contacts(b: _Builder, system, modes, frames: list) -> list[tuple[str, str, 
         friction = FRICTION_NONE if not nt else FRICTION_APART if not m.touching else \
             FRICTION_STICK if m.stuck else FRICTION_SLIDE
         fr = c.friction
-        law = friction_address(FRICTION_LAWS[fr.law]) if nt and not fr.constant else 0
+        law = (friction_address(FRICTION_LAWS[fr.law]) or python_friction_address(fr)) if nt and not fr.constant \
+            else 0
         fp_at = b.real_section(None, fr.params if nt else ())
         T = np.zeros((2, 3))  # the tangents of its friction or of its tangential chains
         T[:len(c.tangents)] = c.tangents
@@ -470,7 +485,10 @@ def _chain(b: _Builder, system, c, m, dc, tangent: int, at: int, row: int) -> No
     a = pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching)
     chain = dc.chain
     plan_at = b.int_section(None, a.plan)
-    stages_at = b.int_section(None, a.stages.ravel())
+    stages = a.stages.copy()
+    for k, stage in a.python_stages:  # a law numba cannot compile: its declared Python stage's address
+        stages[k, S_LAW] = python_stage_address(stage.law_class)
+    stages_at = b.int_section(None, stages.ravel())
     coef_at = b.real_section(None, a.coef)
     consts_at = b.real_section(None, a.consts)
     offset_at = b.real_section(None, [m.offsets[tangent] if tangent >= 0 else 0.0])

@@ -12,8 +12,9 @@ kind through :mod:`contactdyn.laws.drive_abi`); under ``NUMBA_DISABLE_JIT=1`` th
 [N], slip velocities [m/s], friction or stick forces [N], limit torques [N·m or N]). A singular KKT matrix whose
 rows are redundant but consistent (two sticks holding one body) is solved in the call by the minimum-norm least
 squares (:func:`.kkt.least_squares`); a call whose KKT system still has no solution (status 0), or whose compiled
-law (a stage law, a drive kind) gave no force (status -1), is answered by the readable model
-(:meth:`System.evaluate`), and counted.
+law (a stage or friction law, a drive kind) gave no force (status -1), is answered by the readable model
+(:meth:`System.evaluate`), and counted; where a law run as a declared Python stage (one numba cannot compile,
+called back through ctypes: :mod:`contactdyn.laws.abi`) raised, its own exception is raised instead.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import types
 
+from ...laws.abi import raise_python_stage_error
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
 from ...numerics.native_call import address, call_at, declare
@@ -92,6 +94,7 @@ from .pack import (
     W_DRIVES,
     diag_starts,
     pack,
+    python_stages,
     set_slip_references,
     unsupported,
 )
@@ -315,6 +318,8 @@ class Pipeline:
         self.packed = pack(system, modes, phase)
         stage_addresses(self.packed.ints)
         self.readable_calls = 0  #: calls answered by the readable model (singular KKT matrix, a law that failed)
+        #: the laws run as declared Python stages (numba cannot compile them), with numba's reasons
+        self.python_stages = python_stages(system, modes, phase)
 
     def use(self, modes) -> None:
         """Run with these modes from now on: the same :func:`~contactdyn.model.contact.structure`, their own 2-D
@@ -329,6 +334,7 @@ class Pipeline:
         p = self.packed
         xdot = call(float(t), x, p.ints, p.reals, p.work, p.events)
         if p.events[-1] != 1.0:
+            raise_python_stage_error()  # a Python stage's own error
             self.readable_calls += 1
             return self.system.evaluate(t, x, self.modes, self.phase).xdot
         return xdot
