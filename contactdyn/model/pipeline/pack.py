@@ -24,21 +24,22 @@ compiled call serves every law. The index constants below are the one place the 
 
 What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
 a drive kind numba cannot compile, a continuous controller that outputs voltages (but
-constant ones), joint-space A7, a force-reading law with a tangential set-point, a user
+constant ones), joint-space A7, a user
 law numba cannot compile, two 2-D slides launching from rest at once, a stage or
 friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
-joint it takes is a one-DOF revolute or prismatic), a surface turning with a frame (the robot's or an articulated
-body's) under a force-reading law. A chain's mass riding a turning surface
+joint it takes is a one-DOF revolute or prismatic). A chain's mass riding a turning surface
 is packed with its frame (``N_RIDING``): the call adds its coupling to M and its bias to f
-(:func:`.contacts.add_riding`).
+(:func:`.contacts.add_riding`). A force-reading law over a turning surface (a robot frame's or an articulated
+body's) folds as over a fixed one: the surface's rows are the state's (:func:`.contacts.turning_sides`), and those
+that reach a body's coordinates enter the measured τ_c the fold probes (:mod:`.force_fold`).
 An articulated body's joints are appended to the robot's in the rigid-body table
 (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
 robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
 chart x holds (:func:`.robot_terms.table_at`). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
 operational space, the dynamic laws, joint PD, task force), a sampled law's held command (torques or voltages),
 constant voltages and
-user laws of the controller ABI run; a force-reading law and a reference carried by a body are folded through the
-drives (:mod:`.force_fold`).
+user laws of the controller ABI run; a force-reading law (its set-points along a contact's normal or a tangential
+chain's direction) and a reference carried by a body are folded through the drives (:mod:`.force_fold`).
 """
 
 from __future__ import annotations
@@ -199,8 +200,6 @@ def unsupported(system, modes, phase) -> str:
     if sum(launching(m) for m in modes) > 1:
         return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
     for c, m in zip(system.contacts, modes, strict=True):
-        if c.turning and (ctl.uses_forces or getattr(ctl, "inner", ctl).uses_forces):
-            return f"contact {c.name!r}: a turning surface (carried by a frame) under a force-reading controller"
         if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
             return f"friction law {c.friction.law!r} does not compile"
         for dc in c.chains:

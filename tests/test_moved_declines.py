@@ -1,0 +1,160 @@
+"""Modes the compiled call used to decline, now packed (issue 29: the readable model's assembly must become
+deletable), each against the readable model's own assembly (``contactdyn.model.dynamics.evaluate``, not
+``System.evaluate``, which may itself run on the pipeline): ẋ at a few states of the mode, and a short whole run
+whose every mode takes the compiled call, its channels and events the readable run's.
+
+- A force-reading law with a turning surface: the lever's face (a surface on an articulated body's frame) and the
+  tilting tray (a surface on a robot frame, a body's point on it), under examples/force_law.py's force PI law
+  (τ = Jᵀ f − ½ τ_c): the turning contact's rows reach a body's coordinates, so they enter the measured contact
+  torque τ_c and the fold (τ = τ₀ + B λ) probes them. Its set-point is on a second, fixed contact (a force
+  set-point on a turning contact is a SceneError).
+"""
+
+from __future__ import annotations
+
+import tomllib
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contactdyn import parse_scene, simulate
+from contactdyn.hybrid.pipeline_mode import PipelineMode
+from contactdyn.model.dynamics import evaluate, measurement
+from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines
+from contactdyn.model.pipeline.pack import READS_FORCES, unsupported
+from contactdyn.model.pipeline.pipeline import Pipeline
+from contactdyn.scene.user_laws import import_scene_modules
+from contactdyn.simulate import prepare
+
+ROOT = Path(__file__).resolve().parents[1]
+RTOL = 1e-9  #: each component of ẋ to RTOL × (1 + its largest magnitude over the states), as paths.disagreement
+#: a whole run's channels to RUN_RTOL of their largest magnitude (+1e-12 absolute) at the solver's rtol 1e-10
+RUN_RTOL = 1e-9
+FORCE_PI = {"kind": "force_pi", "stiffness": 1e4, "damping": 300.0, "damping_n": 50.0, "ki": 20.0, "cancel": 0.5}
+
+
+def _doc(path: str) -> dict:
+    return tomllib.loads((ROOT / path).read_text())
+
+
+def _parse(doc: dict, path: str):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (the sanity notes: force_pi's set-point, a surface starting pressed)
+        return parse_scene(doc, file=str(ROOT / path))
+
+
+def _force_pi(doc: dict, floor: dict, duration: float) -> dict:
+    """The scene under the force PI law (examples/force_law.py) with a Kelvin–Voigt contact ``floor`` at the tip
+    carrying its 20 N set-point."""
+    import_scene_modules(["force_law"], str(ROOT / "examples" / "force_pi_press.toml"))
+    doc["imports"], doc["duration"], doc["controller"] = ["force_law"], duration, dict(FORCE_PI)
+    doc["solver"]["record_energy"] = False
+    doc["contact"]["floor"] = {"normal": {"direction": [0.0, 0.0, 1.0], "model": "c", "k": 1e5, "b": 100.0},
+                               **floor}
+    doc["phase"][0]["force"] = [{"contact": "floor", "value": 20.0, "kind": "step"}]
+    return doc
+
+
+def lever_pi(duration: float = 0.3):
+    """sims/lever.toml (its face turns with the bar) under force PI, the tool on a floor 1 mm into it (μ 0.2)."""
+    floor = {"frame": "tip", "point": [0.0, 0.0, 0.201],
+             "tangent": {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu": 0.2}}
+    return _parse(_force_pi(_doc("sims/lever.toml"), floor, duration), "sims/lever.toml")
+
+
+def tray_pi(duration: float = 0.3):
+    """sims/tilt_tray.toml (its surface turns with the robot's tray frame), the part 5 cm off the axis, under force
+    PI (a task reference at the tray's origin; the set-point on a Kelvin–Voigt contact at it)."""
+    doc = _force_pi(_doc("sims/tilt_tray.toml"), {"frame": "tray", "point": [0.0, 0.0, 0.0]}, duration)
+    doc["body"]["part"]["position0"] = [0.05, 0.0]
+    doc["phase"][0]["reference"] = {"start": [0.0, 0.0, 0.0]}
+    return _parse(doc, "sims/tilt_tray.toml")
+
+
+def _touching(scene, stuck: bool):
+    """(system, every contact touching, stuck or sliding, phase, t [s], x0)."""
+    system, modes, phase, x0 = prepare(scene)
+    modes = [m.with_(touching=True, stuck=stuck, offsets=tuple(0.0 for _ in c.tangent_chains))
+             for c, m in zip(system.contacts, modes, strict=True)]
+    return system, modes, phase, phase.t_start + 0.0123, x0
+
+
+def _states(x0: np.ndarray, count: int = 4) -> list[np.ndarray]:
+    rng = np.random.default_rng(5)
+    return [x0.copy(), *(x0 + 1e-3 * (1.0 + np.abs(x0)) * rng.normal(size=x0.size) for _ in range(count - 1))]
+
+
+def _assert_rates_agree(pipe, system, modes, phase, t, xs) -> np.ndarray:
+    """The pipeline's ẋ is the readable model's at each state (RTOL per component); the readable ẋ's."""
+    refs = np.array([evaluate(system, t, x, modes, phase).xdot for x in xs])
+    got = np.array([pipe.rhs(t, x.copy()) for x in xs])
+    assert pipe.readable_calls == 0  # (no call fell back: each ẋ is the pipeline's own)
+    scale = 1.0 + np.abs(refs).max(axis=0)
+    worst = float((np.abs(got - refs) / scale).max())
+    assert worst <= RTOL, worst
+    return refs
+
+
+def _assert_runs_agree(fast, readable) -> None:
+    """Every mode of ``fast`` on the compiled call, of ``readable`` on the readable model; channels and events the
+    same (RUN_RTOL; the events' times to 1e-9 s)."""
+    assert {row["path"] for row in fast.stats["paths"].values()} == {PIPELINE}, fast.stats["paths"]
+    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
+    for key, ref in readable.channels.items():
+        ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
+        if ref.size and not np.all(np.isnan(ref)):
+            assert float(np.nanmax(np.abs(got - ref))) <= RUN_RTOL * float(np.nanmax(np.abs(ref))) + 1e-12, key
+    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in readable.events]
+    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in readable.events], rtol=0, atol=1e-9)
+
+
+def _both_ways(scene_of, monkeypatch):
+    fast = simulate(scene_of())
+    monkeypatch.setattr(LivePipelines, "use", False)
+    return fast, simulate(scene_of())
+
+
+# ---- a force-reading law with a turning surface ------------------------------------------------------------------
+
+@pytest.mark.parametrize("scene_of", [lever_pi, tray_pi], ids=["lever_face", "tilting_tray"])
+@pytest.mark.parametrize("stuck", [False, True], ids=["sliding", "stuck"])
+def test_a_force_reading_law_with_a_turning_surface_runs_compiled_with_the_readable_rates(scene_of, stuck):
+    """ẋ the readable model's; and the fold is what makes it so: without B the rates are off (the turning
+    contact's rows reach a body, so the law reads their force through τ_c)."""
+    system, modes, phase, t, x0 = _touching(scene_of(), stuck)
+    assert any(c.turning for c in system.contacts) and phase.controller.uses_forces
+    assert unsupported(system, modes, phase) == ""
+    pipe = Pipeline(system, modes, phase)
+    xs = _states(x0)
+    refs = _assert_rates_agree(pipe, system, modes, phase, t, xs)
+    pipe.packed.ints[READS_FORCES] = 0  # (no fold: the law reads the forces before the solve)
+    unfolded = np.array([pipe.rhs(t, x.copy()) for x in xs])
+    assert float(np.abs(unfolded - refs).max()) > 1e-6 * float(np.abs(refs).max())
+
+
+def test_a_sampled_force_law_measures_a_turning_contact_on_the_compiled_call_as_the_readable_model():
+    """The lever under force PI sampled at 1 kHz: the measured forces and τ_c (the rows of the turning face reach
+    the bar) off the compiled call are the readable model's."""
+    scene = lever_pi()
+    doc = dict(scene.document)
+    doc["controller"] = {**doc["controller"], "sample_rate": 1000.0}
+    system, modes, phase, t, x0 = _touching(_parse(doc, "sims/lever.toml"), stuck=False)
+    assert unsupported(system, modes, phase) == ""
+    mode = PipelineMode(Pipeline(system, modes, phase))
+    for x in _states(x0, 3):
+        got, ref = mode.measurement(t, x), measurement(system, t, x, modes, phase)
+        scale = 1.0 + float(np.abs(ref.tau_contact).max())
+        np.testing.assert_allclose(got.tau_contact, ref.tau_contact, rtol=0, atol=1e-12 * scale)
+        for c in system.contacts:
+            assert got.normal_force[c.name] == pytest.approx(ref.normal_force[c.name], abs=1e-12 * scale)
+    assert np.any(ref.tau_contact != 0.0)
+
+
+def test_the_lever_under_a_force_reading_law_runs_compiled_and_the_readable_run_agrees(monkeypatch):
+    """0.3 s: the tool sticks then slides on the floor, strikes the bar's face and slides along it; every mode on
+    the compiled call, the run the readable one's (measured: ≤ 1.5e-10 of each channel's largest value)."""
+    fast, readable = _both_ways(lever_pi, monkeypatch)
+    assert any(e["kind"] == "touch" and e["name"] == "push" for e in fast.events)
+    _assert_runs_agree(fast, readable)
