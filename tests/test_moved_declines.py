@@ -8,12 +8,17 @@ whose every mode takes the compiled call, its channels and events the readable r
   (τ = Jᵀ f − ½ τ_c): the turning contact's rows reach a body's coordinates, so they enter the measured contact
   torque τ_c and the fold (τ = τ₀ + B λ) probes them. Its set-point is on a second, fixed contact (a force
   set-point on a turning contact is a SceneError).
+- A reference carried by an articulated body: a cart (prismatic along x) carrying a pendulum, the tool's
+  reference riding the cart's coordinate (x_d = axis · Q_cart + reference, its acceleration folded as M's column
+  of that coordinate, which the cart shares with the pendulum in H_b). A scene cannot name such a body yet
+  (``reference.body``: a SceneError), so the tests set the phase's reference body on the parsed scene.
 """
 
 from __future__ import annotations
 
 import tomllib
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +28,7 @@ from contactdyn import parse_scene, simulate
 from contactdyn.hybrid.pipeline_mode import PipelineMode
 from contactdyn.model.dynamics import evaluate, measurement
 from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines
-from contactdyn.model.pipeline.pack import READS_FORCES, unsupported
+from contactdyn.model.pipeline.pack import CARRIER, READS_FORCES, unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.scene.user_laws import import_scene_modules
 from contactdyn.simulate import prepare
@@ -156,5 +161,75 @@ def test_the_lever_under_a_force_reading_law_runs_compiled_and_the_readable_run_
     """0.3 s: the tool sticks then slides on the floor, strikes the bar's face and slides along it; every mode on
     the compiled call, the run the readable one's (measured: ≤ 1.5e-10 of each channel's largest value)."""
     fast, readable = _both_ways(lever_pi, monkeypatch)
+    assert fast.stats["singular_solves"] == 0
     assert any(e["kind"] == "touch" and e["name"] == "push" for e in fast.events)
+    _assert_runs_agree(fast, readable)
+
+
+# ---- a reference carried by an articulated body ------------------------------------------------------------------
+
+CART_PENDULUM = """<?xml version="1.0"?>
+<robot name="cart_pendulum">
+  <link name="base"/>
+  <joint name="slide" type="prismatic"><parent link="base"/><child link="cart"/>
+    <origin xyz="0 0 0.6" rpy="0 0 0"/><axis xyz="1 0 0"/>
+    <limit lower="-10.0" upper="10.0" effort="1e4" velocity="100.0"/></joint>
+  <link name="cart"><inertial><origin xyz="0 0 0" rpy="0 0 0"/><mass value="2.0"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="pivot" type="revolute"><parent link="cart"/><child link="bar"/>
+    <origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-3.0" upper="3.0" effort="1e4" velocity="100.0"/></joint>
+  <link name="bar"><inertial><origin xyz="0 0 -0.25" rpy="0 0 0"/><mass value="1.0"/>
+    <inertia ixx="0.0208333333333333" ixy="0" ixz="0" iyy="0.0208333333333333" iyz="0" izz="1e-6"/></inertial>
+  </link>
+</robot>
+"""  #: a 2 kg cart 0.6 m up on a slide along x [m], the lever's 1 kg, 0.5 m bar hanging from it on a pivot [rad]
+OPERATIONAL = {"kind": "operational_space", "axes": [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], "kp": 1e4, "kd": 300.0}
+POSITION_DYNAMIC = {"kind": "position_dynamic", "kp": 400.0, "kv": 40.0}
+
+
+@pytest.fixture(scope="module")
+def cart_urdf(tmp_path_factory) -> str:
+    path = tmp_path_factory.mktemp("cart") / "cart_pendulum.urdf"
+    path.write_text(CART_PENDULUM)
+    return str(path)
+
+
+def cart_carried(urdf: str, controller: dict, duration: float = 0.3):
+    """sims/lever.toml with the bar hanging from a cart (``urdf``), under ``controller``, the tool's reference
+    riding the cart (set on the parsed scene: the reader refuses a body with revolute joints)."""
+    doc = _doc("sims/lever.toml")
+    doc["body"]["lever"] = {"urdf": urdf, "position0": [0.0, 0.0]}
+    doc["controller"], doc["duration"] = dict(controller), duration
+    scene = _parse(doc, "sims/lever.toml")
+    phase = scene.phases[0]
+    return replace(scene, phases=(replace(phase, reference=replace(phase.reference, body="lever")),))
+
+
+@pytest.mark.parametrize("controller", [OPERATIONAL, POSITION_DYNAMIC], ids=["operational_space", "A7"])
+@pytest.mark.parametrize("touching", [False, True], ids=["apart", "sliding"])
+def test_a_reference_carried_by_an_articulated_body_runs_compiled_with_the_readable_rates(cart_urdf, controller,
+                                                                                        touching):
+    """ẋ the readable model's; and the carrier is what makes it so: without it the rates are off."""
+    system, modes, phase, x0 = prepare(cart_carried(cart_urdf, controller))
+    modes = [m.with_(touching=touching) for m in modes]
+    body = system.articulated["lever"]
+    assert phase.carrier is not None and phase.carrier[0] == body.first and len(body.indices) == 2
+    assert unsupported(system, modes, phase) == ""
+    pipe, t, xs = Pipeline(system, modes, phase), phase.t_start + 0.0123, _states(x0)
+    refs = _assert_rates_agree(pipe, system, modes, phase, t, xs)
+    pipe.packed.ints[CARRIER] = -1  # (the reference no longer rides: neither its position nor its acceleration)
+    fixed = np.array([pipe.rhs(t, x.copy()) for x in xs])
+    assert float(np.abs(fixed - refs).max()) > 1e-6 * float(np.abs(refs).max())
+
+
+def test_a_reference_carried_by_a_cart_with_a_pendulum_runs_compiled_and_the_readable_run_agrees(cart_urdf,
+                                                                                               monkeypatch):
+    """0.3 s under operational space: the tool strikes the bar, sticks, then slides along it, the cart pushed
+    along; every mode on the compiled call (no call answered by the readable model), the run the readable one's
+    (measured: ≤ 1e-13 of each channel's largest value)."""
+    fast, readable = _both_ways(lambda: cart_carried(cart_urdf, OPERATIONAL), monkeypatch)
+    assert fast.stats["singular_solves"] == 0
+    assert [(e["kind"], e["name"]) for e in fast.events] == [("touch", "push"), ("slip", "push")]
+    assert float(np.abs(fast["body.lever.slide.x"]).max()) > 1e-4  # [m] the cart moves, and the reference with it
     _assert_runs_agree(fast, readable)

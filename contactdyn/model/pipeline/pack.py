@@ -39,7 +39,8 @@ chart x holds (:func:`.robot_terms.table_at`). The controllers compiled in as ki
 operational space, the dynamic laws, joint PD, task force), a sampled law's held command (torques or voltages),
 constant voltages and
 user laws of the controller ABI run; a force-reading law (its set-points along a contact's normal or a tangential
-chain's direction) and a reference carried by a body are folded through the drives (:mod:`.force_fold`).
+chain's direction) and a reference carried by a body (along the axis of its first coordinate, a translating body's or
+an articulated body's, as ``phases.reference_at``) are folded through the drives (:mod:`.force_fold`).
 """
 
 from __future__ import annotations
@@ -216,8 +217,6 @@ def _bodies_unsupported(system, phase) -> str:
             return f"body {name!r}: a joint rigid_body does not compute (the readable model computes its terms)"
         if not np.array_equal(body.robots[0].model.gravity.linear, system.robot.model.gravity.linear):
             return f"body {name!r}: its model's gravity is not the robot's (one universe row in the rigid-body table)"
-        if phase.carrier is not None and phase.carrier[0] in body.indices:
-            return f"a reference carried by the articulated body {name!r} (the pipeline carries it along an axis)"
     return ""
 
 
