@@ -12,6 +12,8 @@ whose every mode takes the compiled call, its channels and events the readable r
   reference riding the cart's coordinate (x_d = axis · Q_cart + reference, its acceleration folded as M's column
   of that coordinate, which the cart shares with the pendulum in H_b). A scene cannot name such a body yet
   (``reference.body``: a SceneError), so the tests set the phase's reference body on the parsed scene.
+- Two 2-D slides launching from rest at once: the UR5's pencil on the table and its wrist on a wall, the compiled
+  launch nesting the later contact's Newton inside each trial of the earlier one's, as the readable model does.
 """
 
 from __future__ import annotations
@@ -27,6 +29,13 @@ import pytest
 from contactdyn import parse_scene, simulate
 from contactdyn.hybrid.pipeline_mode import PipelineMode
 from contactdyn.model.dynamics import evaluate, measurement
+from contactdyn.model.friction import (
+    launch_directions,
+    launch_directions_at,
+    launching,
+    slip_acceleration,
+    slip_velocity,
+)
 from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines
 from contactdyn.model.pipeline.pack import CARRIER, READS_FORCES, unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
@@ -232,4 +241,83 @@ def test_a_reference_carried_by_a_cart_with_a_pendulum_runs_compiled_and_the_rea
     assert fast.stats["singular_solves"] == 0
     assert [(e["kind"], e["name"]) for e in fast.events] == [("touch", "push"), ("slip", "push")]
     assert float(np.abs(fast["body.lever.slide.x"]).max()) > 1e-4  # [m] the cart moves, and the reference with it
+    _assert_runs_agree(fast, readable)
+
+
+# ---- two 2-D slides launching from rest at once ------------------------------------------------------------------
+
+UR5 = "sims/case2_writer_ur5.toml"
+
+
+def _ur5_doc() -> dict:
+    """The UR5 writer under task PD holding its pencil (benchmarks/pipeline_proto.py's ``_tool_pd``)."""
+    doc = _doc(UR5)
+    ctl = doc["controller"]
+    doc["controller"] = {"kind": "task_pd", "kp": ctl["kp"], "kd": ctl["kd"], "axes": ctl["axes"],
+                         "tool_axis": ctl["tool_axis"], "tool_target": ctl["tool_target"], "ko": 5.0, "do": 0.5,
+                         "kd_normal": ctl["kd_normal"], "feedforward": "gravity"}
+    line = {"kind": "trapezoid", "delta": [-0.03, 0.0, 0.0], "duration": 4.0, "accel_fraction": 0.2}
+    doc["phase"][1]["reference"] = {"moves": [line]}
+    return doc
+
+
+def ur5_wall(mu_pencil: float = 0.4, mu_wall: float = 0.5, duration: float = 4.5):
+    """The UR5 writer whose wrist_1_link also presses a wall 5 mm deep at its start pose (normal world x,
+    Kelvin–Voigt 1e4 N/m: 50 N), 2-D friction on both contacts (μ as given)."""
+    system, _, _, x0 = prepare(_parse(_ur5_doc(), UR5))
+    p = system.robot.frame_position(x0[:system.nv], system.robot.frame_id("wrist_1_link"))
+    doc = _ur5_doc()
+    doc["duration"] = duration
+    doc["contact"]["pencil"]["tangent"]["mu"] = mu_pencil
+    doc["contact"]["wall"] = {"frame": "wrist_1_link", "point": (p + [5e-3, 0.0, 0.0]).tolist(),
+                              "normal": {"direction": [1.0, 0.0, 0.0], "model": "c", "k": 1e4, "b": 10.0},
+                              "tangent": {"model": "friction", "directions": [[0.0, -1.0, 0.0], [0.0, 0.0, -1.0]],
+                                          "mu": mu_wall}}
+    return _parse(doc, UR5)
+
+
+def _in_order(system, t: float, x: np.ndarray, modes, phase) -> np.ndarray:
+    """ẋ with the directions found contact after contact, each Newton with the later contacts sliding along their
+    r (not launched inside its trials: the order the compiled call launched in before nesting)."""
+    nQ, nv = system.nQ, system.nv
+
+    def slip_of(i: int) -> np.ndarray:
+        system.robot.update(x[:nv], x[nQ:nQ + nv])
+        return slip_velocity(system, system.contacts[i], system.kinematics(system.contacts[i], x))
+
+    def acceleration_of(trial, i: int) -> np.ndarray:
+        flat = [m.with_(from_rest=False) for m in trial]
+        return slip_acceleration(system, system.contacts[i], x, evaluate(system, t, x, flat, phase).xdot)
+
+    return evaluate(system, t, x, launch_directions(system, modes, slip_of, acceleration_of), phase).xdot
+
+
+def test_two_slides_launching_at_once_run_compiled_with_the_readable_rates():
+    """The pencil and the wrist on the wall, both sliding from rest (the robot at rest) along r = (1, 0) and
+    (cos 60°, sin 60°): both Newtons converge off r at x0 (the pencil to (0.9996, 0.0281), the wrist to
+    (0.4373, 0.8993)). The call nests them as the readable model does (each trial of the pencil's launches the wrist
+    first): ẋ the readable model's at x0 and near it; launched in order instead, ẋ misses by ~1e-2 at x0."""
+    system, modes, phase, x0 = prepare(ur5_wall())
+    phase = system.start_phase(1, phase.t_start + 1.0, x0, phase)
+    slips = ((1.0, 0.0), (0.5, float(np.sqrt(0.75))))
+    modes = [m.with_(touching=True, stuck=False, from_rest=True, slip=s) for m, s in zip(modes, slips, strict=True)]
+    assert sum(launching(m) for m in modes) == 2 and unsupported(system, modes, phase) == ""
+    t, xs = phase.t_start + 0.0123, _states(x0)
+    for x in xs:
+        x[system.nQ:2 * system.nQ] = 0.0  # at rest: both inside the stick band
+    found = launch_directions_at(system, t, xs[0], modes, phase)
+    assert all(np.abs(np.subtract(f.slip, s)).max() > 1e-2 for f, s in zip(found, slips, strict=True))
+    refs = _assert_rates_agree(Pipeline(system, modes, phase), system, modes, phase, t, xs)
+    in_order = _in_order(system, t, xs[0], modes, phase)
+    assert float((np.abs(in_order - refs[0]) / (1.0 + np.abs(refs).max(axis=0))).max()) > 1e-4
+
+
+def test_two_slides_launching_at_once_from_the_start_run_compiled_and_the_readable_run_agrees(monkeypatch):
+    """μ 0.05 on both: at t = 0 neither can stick, both slide from rest (two launches in one mode) for 25 ms; the
+    mode on the compiled call, the run the readable one's. The nested Newton takes the readable model's trials in
+    its order, so the two agree to rounding, not only to the Newton's 1e-9 (measured: ≤ 3.3e-10 of each channel's
+    largest value, the pencil's model-(b) stage)."""
+    fast, readable = _both_ways(lambda: ur5_wall(0.05, 0.05, 0.025), monkeypatch)
+    assert [(e["kind"], e["name"], e["t"]) for e in fast.events] == [("slip", "pencil", 0.0), ("slip", "wall", 0.0)]
+    assert fast.stats["singular_solves"] == 0
     _assert_runs_agree(fast, readable)

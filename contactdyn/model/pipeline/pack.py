@@ -23,15 +23,14 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
-a drive kind numba cannot compile, a continuous controller that outputs voltages (but
-constant ones), joint-space A7, a user
-law numba cannot compile, two 2-D slides launching from rest at once, a stage or
-friction law numba cannot compile, a robot ``rigid_body`` does not compute (none the robot loader accepts: every
-joint it takes is a one-DOF revolute or prismatic). A chain's mass riding a turning surface
-is packed with its frame (``N_RIDING``): the call adds its coupling to M and its bias to f
+a drive kind numba cannot compile, a continuous controller that outputs voltages (but constant ones), joint-space
+A7, a user law numba cannot compile, a stage or friction law numba cannot compile, a robot ``rigid_body`` does not
+compute (none the robot loader accepts: every joint it takes is a one-DOF revolute or prismatic). A chain's mass
+riding a turning surface is packed with its frame (``N_RIDING``): the call adds its coupling to M and its bias to f
 (:func:`.contacts.add_riding`). A force-reading law over a turning surface (a robot frame's or an articulated
 body's) folds as over a fixed one: the surface's rows are the state's (:func:`.contacts.turning_sides`), and those
-that reach a body's coordinates enter the measured τ_c the fold probes (:mod:`.force_fold`).
+that reach a body's coordinates enter the measured τ_c the fold probes (:mod:`.force_fold`). Several 2-D slides
+launching from rest at once nest their Newtons as the readable model does (:mod:`.launch`).
 An articulated body's joints are appended to the robot's in the rigid-body table
 (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
 robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
@@ -198,8 +197,6 @@ def unsupported(system, modes, phase) -> str:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if not isinstance(ctl, SampledController) and (reason := _controller_unsupported(system, ctl, phase)):
         return reason
-    if sum(launching(m) for m in modes) > 1:
-        return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
     for c, m in zip(system.contacts, modes, strict=True):
         if c.friction is not None and not c.friction.constant and not friction_address(FRICTION_LAWS[c.friction.law]):
             return f"friction law {c.friction.law!r} does not compile"
