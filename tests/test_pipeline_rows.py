@@ -184,18 +184,6 @@ def test_the_readable_launch_is_kept_for_the_same_state(monkeypatch):
         assert calls
 
 
-def test_two_slides_launching_at_once_are_declined():
-    from contactdyn.model.pipeline.pack import unsupported
-
-    system, modes, phase, _, _ = case("ur5_launch")
-    assert unsupported(system, modes, phase) == ""
-    system.contacts.append(system.contacts[0])  # the pencil twice: two contacts launching
-    try:
-        assert "two 2-D slides launching" in unsupported(system, modes * 2, phase)
-    finally:
-        system.contacts.pop()
-
-
 @pytest.mark.parametrize("name", ["b1_energy", "b1_energy_stuck", "b1_energy_stick", "b1_energy_massless",
                                   "writer_b_energy"])
 def test_the_energy_audits_rates_are_the_readable_ones(name):

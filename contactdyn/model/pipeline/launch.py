@@ -1,19 +1,26 @@
-"""A 2-D slide launching from rest over the packed arrays (:func:`contactdyn.model.friction.launch_directions`).
+"""2-D slides launching from rest over the packed arrays (:func:`contactdyn.model.friction.launch_directions`).
 
 A touching 2-D slide started from rest, still inside the stick band (v_t · r ≤ v_ε), slides where it accelerates:
 d = (cos θ, sin θ) with a_t(d) ∥ d ahead, found by Newton on θ (at most 4 updates; the derivative by a 1e-7 rad
 difference; the reference r where it does not converge), each trial the whole call with that contact's direction
-set to d (its normal column re-tilted, or its known friction force re-aimed, and the KKT re-solved). Contacts
-launch in order, each trial with the earlier ones' directions found. A slide already past the band keeps r (its
-own direction from there on, ``contacts._slip_direction``). Slip and acceleration are the relative motion's along
-the state's tangents (:func:`.contacts.tangential_motion`: on a turning surface they turn with it).
+set to d (its normal column re-tilted, or its known friction force re-aimed, and the KKT re-solved). A slide already
+past the band keeps r (its own direction from there on, ``contacts._slip_direction``). Slip and acceleration are the
+relative motion's along the state's tangents (:func:`.contacts.tangential_motion`: on a turning surface they turn
+with it).
+
+Several contacts launching at once nest as on the readable model (``friction.launch_directions_at``: each trial of
+one evaluates the model, which launches the later ones first): level k's Newton reads, per trial, the pass in which
+every later level has found its direction for that trial. The levels' states are one stack (LV_* per launching
+contact); a pass's rates go to the deepest level first, and a level done (converged: its trial's pass is its
+result; or given up: one more round with r) hands the same rates up to the one before it. A level that aims a new
+trial starts the later levels again from their references.
 
 The call drives it (:func:`contactdyn.model.pipeline.pipeline.call`, one loop over its body): :func:`launch_start`
-copies ``reals`` (the packed mode stays as packed) and aims the first launching contact, :func:`launch_took` reads
-each pass's rates and frames and aims the next trial, until the direction is found. A contact past the band gets r
-back before its pass (:func:`launch_settled`: its slip is the frames', which no trial direction changes, so no pass
-is run for it: a slide past the band, most of a launch mode's calls, costs one pass); a Newton that converges ends on
-its trial's pass, which is then the result; otherwise one more pass runs with the directions found.
+copies ``reals`` (the packed mode stays as packed) and aims every launching contact at its reference's angle,
+:func:`launch_settled` gives each contact already past the band its r back before the first pass (its slip is the
+frames', which no trial direction changes: no Newton for it, and when every one is, the first pass is the result),
+:func:`launch_took` reads each pass's rates and frames and aims the next trial, until level 0 is done: that pass is
+the result.
 """
 
 from __future__ import annotations
@@ -37,12 +44,15 @@ from .pack import (
     section,
 )
 
-__all__ = ["launch_start", "launch_settled", "launch_took", "ST_CONTACT"]
+__all__ = ["launch_start", "launch_settled", "launch_took", "ST_DONE", "ST_HEAD"]
 
-#: the Newton's state: the launching contact (its index among them), the pending pass (the contact's first, at θ, at
-#: θ + h), updates done, θ [rad], φ = d × a_t and a_t · d [m/s²] at θ, the contact's reference r
-ST_CONTACT, ST_STEP, ST_UPDATES, ST_THETA, ST_PHI, ST_AHEAD, ST_R, ST_W = 0, 1, 2, 3, 4, 5, 6, 8
-FIRST, AT, AT_H = 0, 1, 2
+#: the launch state's header: ST_DONE N_LAUNCH when every launching contact is past the band (the first pass is the
+#: result; 0 otherwise), ST_CHECKED 1 once launch_settled has looked; then per launching contact its level (LV_*)
+ST_DONE, ST_CHECKED, ST_HEAD = 0, 1, 2
+#: a level: its pending pass (its first, at θ, at θ + h; or DONE_R: given up, r aimed; PAST: past the band, r
+#: aimed), updates done, θ [rad], φ = d × a_t and a_t · d [m/s²] at θ, the contact's reference r
+LV_STEP, LV_UPDATES, LV_THETA, LV_PHI, LV_AHEAD, LV_R, LV_W = 0, 1, 2, 3, 4, 5, 7
+FIRST, AT, AT_H, DONE_R, PAST = 0, 1, 2, 3, 4
 H = 1e-7  #: [rad] the difference of the derivative dφ/dθ
 MAX_UPDATES = 4
 
@@ -53,6 +63,12 @@ def _contact(ints, j):
 
 
 @njit(cache=True)
+def _level(state, j):
+    """Launching contact j's level in the state (a view)."""
+    return state[ST_HEAD + LV_W * j:ST_HEAD + LV_W * (j + 1)]
+
+
+@njit(cache=True)
 def _aim(ints, trial, j, theta):
     """The trial direction d = (cos θ, sin θ) of launching contact j into ``trial``."""
     at = _contact(ints, j)[CI_REALS] + CR_R
@@ -60,48 +76,64 @@ def _aim(ints, trial, j, theta):
 
 
 @njit(cache=True)
-def _begin(ints, trial, state, j):
-    """Launching contact j's first pass aimed at its reference r (θ = atan2(r)); r kept in ``state``."""
-    state[ST_CONTACT] = j
-    if j >= ints[N_LAUNCH]:
-        return
+def _aim_r(ints, trial, level, j):
+    """Launching contact j's reference r itself into ``trial`` (not its cos/sin round trip)."""
     at = _contact(ints, j)[CI_REALS] + CR_R
-    state[ST_STEP], state[ST_UPDATES] = FIRST, 0
-    state[ST_R], state[ST_R + 1] = trial[at], trial[at + 1]
-    state[ST_THETA] = math.atan2(trial[at + 1], trial[at])
-    _aim(ints, trial, j, state[ST_THETA])
+    trial[at], trial[at + 1] = level[LV_R], level[LV_R + 1]
+
+
+@njit(cache=True)
+def _restart(ints, trial, state, j):
+    """Levels j.. begun again (a past-band one keeps r): each aimed at its reference (θ = atan2(r)), first pass."""
+    for k in range(j, ints[N_LAUNCH]):
+        level = _level(state, k)
+        if level[LV_STEP] == PAST:
+            continue
+        level[LV_STEP], level[LV_UPDATES] = FIRST, 0
+        level[LV_THETA] = math.atan2(level[LV_R + 1], level[LV_R])
+        _aim(ints, trial, k, level[LV_THETA])
 
 
 @njit(cache=True)
 def launch_start(ints, reals):
-    """(the reals the call's first pass reads, the Newton's state): ``reals`` itself without a launch, else a copy
-    with the first launching contact aimed."""
-    state = np.zeros(ST_W)
-    if ints[N_LAUNCH] == 0:
+    """(the reals the call's first pass reads, the launch state): ``reals`` itself without a launch, else a copy
+    with every launching contact aimed at its reference's angle (its r kept in its level)."""
+    n = ints[N_LAUNCH]
+    state = np.zeros(ST_HEAD + LV_W * n)
+    if n == 0:
         return reals, state
     trial = reals.copy()
-    _begin(ints, trial, state, 0)
+    for j in range(n):
+        at = _contact(ints, j)[CI_REALS] + CR_R
+        level = _level(state, j)
+        level[LV_R], level[LV_R + 1] = trial[at], trial[at + 1]
+    _restart(ints, trial, state, 0)
     return trial, state
 
 
 @njit(cache=True)
 def launch_settled(x, ints, state, trial, FJ, Fa, Fp, Fv, FR):
-    """Before a pass, from its frames (the same under any trial direction): each pending
-    contact about to take its first pass whose slip is already past the band gets its r back and the next contact
-    begins (as :func:`launch_took` would have done after that pass, whose rates it would not have read). True when
-    no contact is left to launch: the pass about to run is the result."""
-    while state[ST_CONTACT] < ints[N_LAUNCH] and state[ST_STEP] == FIRST:
-        j = int(state[ST_CONTACT])
-        if not _past_band(x, ints, trial, state, j, FJ, Fa, Fp, Fv, FR):
-            break
-        at = _contact(ints, j)[CI_REALS] + CR_R
-        trial[at], trial[at + 1] = state[ST_R], state[ST_R + 1]  # launched: r, its own direction from here on
-        _begin(ints, trial, state, j + 1)
-    return state[ST_CONTACT] >= ints[N_LAUNCH]
+    """Before the first pass, from its frames (the same under any trial direction): each contact whose slip is
+    already past the band gets its r back for good (launched: no Newton). True when every one is: the pass about to
+    run is the result. (Later passes: False at once.)"""
+    if state[ST_CHECKED] != 0.0:
+        return False
+    state[ST_CHECKED] = 1.0
+    n = ints[N_LAUNCH]
+    past = 0
+    for j in range(n):
+        level = _level(state, j)
+        if _past_band(x, ints, trial, level, j, FJ, Fa, Fp, Fv, FR):
+            level[LV_STEP] = PAST
+            _aim_r(ints, trial, level, j)
+            past += 1
+    if past == n:
+        state[ST_DONE] = n
+    return past == n
 
 
 @njit(cache=True)
-def _past_band(x, ints, trial, state, j, FJ, Fa, Fp, Fv, FR):
+def _past_band(x, ints, trial, level, j, FJ, Fa, Fp, Fv, FR):
     """Contact j's slip already ahead of its reference r by more than the stick band: v_t · r > v_ε [m/s] (v_t
     along this state's tangents: a turning surface's turn with it)."""
     row = _contact(ints, j)
@@ -109,7 +141,7 @@ def _past_band(x, ints, trial, state, j, FJ, Fa, Fp, Fv, FR):
     _, _, v, T = tangential_motion(x, ints, row, cr, FJ, Fa, Fp, Fv, FR)
     ahead = 0.0
     for k in range(2):
-        ahead += (T[k, 0] * v[0] + T[k, 1] * v[1] + T[k, 2] * v[2]) * state[ST_R + k]
+        ahead += (T[k, 0] * v[0] + T[k, 1] * v[1] + T[k, 2] * v[2]) * level[LV_R + k]
     return ahead > trial[RH_SLIP_BAND]
 
 
@@ -135,28 +167,33 @@ def _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR):
 
 @njit(cache=True)
 def launch_took(x, ints, state, trial, FJ, Fa, Fp, Fv, FR, xdot):
-    """A pass's rates ``xdot`` and frames read for the pending contact: its next trial aimed, or its direction
-    found (d where φ ≈ 0 ahead; r where dφ/dθ ≥ 0 or after MAX_UPDATES) and the next contact begun. True when this
-    pass is the result (the last contact's Newton converged on it). (A contact past the stick band never gets here:
-    :func:`launch_settled` gave it r before the pass, from the same frames.)"""
-    j = int(state[ST_CONTACT])
-    at = _contact(ints, j)[CI_REALS] + CR_R
-    phi, ahead = _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR)
-    if state[ST_STEP] != AT_H:
-        if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):  # the trial's d stays
-            _begin(ints, trial, state, j + 1)
-            return j + 1 >= ints[N_LAUNCH]
-        state[ST_PHI], state[ST_AHEAD], state[ST_STEP] = phi, ahead, AT_H
-        _aim(ints, trial, j, state[ST_THETA] + H)
-        return False
-    dphi = (phi - state[ST_PHI]) / H
-    if dphi < 0.0:
-        state[ST_THETA] -= min(max(state[ST_PHI] / dphi, -0.5), 0.5)
-        state[ST_UPDATES] += 1
-        if state[ST_UPDATES] < MAX_UPDATES:
-            state[ST_STEP] = AT
-            _aim(ints, trial, j, state[ST_THETA])
+    """A pass's rates ``xdot`` and frames, read level by level from the deepest: a level done with them (its trial's
+    d where φ ≈ 0 ahead; given up or past the band: r) hands them up, a level that needs another trial aims it (the
+    next θ or θ + h; r where dφ/dθ ≥ 0 or after MAX_UPDATES), begins the later levels again and asks for a pass
+    (False). True when level 0 is done: this pass is the result."""
+    for j in range(ints[N_LAUNCH] - 1, -1, -1):
+        level = _level(state, j)
+        if level[LV_STEP] == DONE_R or level[LV_STEP] == PAST:
+            continue
+        phi, ahead = _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR)
+        if level[LV_STEP] != AT_H:
+            if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):  # the trial's d stays
+                continue
+            level[LV_PHI], level[LV_AHEAD], level[LV_STEP] = phi, ahead, AT_H
+            _aim(ints, trial, j, level[LV_THETA] + H)
+            _restart(ints, trial, state, j + 1)
             return False
-    trial[at], trial[at + 1] = state[ST_R], state[ST_R + 1]  # no convergence: the reference r
-    _begin(ints, trial, state, j + 1)
-    return False
+        dphi = (phi - level[LV_PHI]) / H
+        if dphi < 0.0:
+            level[LV_THETA] -= min(max(level[LV_PHI] / dphi, -0.5), 0.5)
+            level[LV_UPDATES] += 1
+            if level[LV_UPDATES] < MAX_UPDATES:
+                level[LV_STEP] = AT
+                _aim(ints, trial, j, level[LV_THETA])
+                _restart(ints, trial, state, j + 1)
+                return False
+        level[LV_STEP] = DONE_R  # no convergence: the reference r, the later levels found again under it
+        _aim_r(ints, trial, level, j)
+        _restart(ints, trial, state, j + 1)
+        return False
+    return True

@@ -23,23 +23,27 @@ compiled call serves every law. The index constants below are the one place the 
 (:mod:`.pipeline`) reads nothing else.
 
 What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
-a user controller numba cannot compile (a declared Python stage would need its whole ``ControlInput``), two 2-D
-slides launching from rest at once, a robot or articulated body ``rigid_body`` does not compute (none the robot
-loader accepts: every joint it takes is a one-DOF revolute or prismatic), an articulated body under another gravity
-than the robot's or carrying the reference, a surface turning with a frame (the robot's or an articulated body's)
-under a force-reading law. A stage law, friction law or drive kind numba cannot compile is packed as a declared
-Python stage (:func:`python_stages` names them): the address of a ctypes callback of its Python function where its
-cfunc's would be (:func:`contactdyn.laws.abi.python_stage_address`,
-:func:`contactdyn.laws.drive_abi.python_drive_addresses`). A chain's mass riding a turning surface is packed with
-its frame (``N_RIDING``): the call adds its coupling to M and its bias to f (:func:`.contacts.add_riding`).
+a user controller numba cannot compile (a declared Python stage would need its whole ``ControlInput``), a robot or
+articulated body ``rigid_body`` does not compute (none the robot loader accepts: every joint it takes is a one-DOF
+revolute or prismatic), an articulated body under another gravity than the robot's. A stage law, friction law or
+drive kind numba cannot compile is packed as a declared Python stage (:func:`python_stages` names them): the
+address of a ctypes callback of its Python function where its cfunc's would be
+(:func:`contactdyn.laws.abi.python_stage_address`, :func:`contactdyn.laws.drive_abi.python_drive_addresses`). A
+chain's mass riding a turning surface is packed with its frame (``N_RIDING``): the call adds its coupling to M and
+its bias to f (:func:`.contacts.add_riding`). A force-reading law over a turning surface (a robot frame's or an
+articulated body's) folds as over a fixed one: the surface's rows are the state's (:func:`.contacts.turning_sides`),
+and those that reach a body's coordinates enter the measured τ_c the fold probes (:mod:`.force_fold`). Several 2-D
+slides launching from rest at once nest their Newtons as the readable model does (:mod:`.launch`).
 An articulated body's joints are appended to the robot's in the rigid-body table
 (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
 robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
 chart x holds (:func:`.robot_terms.table_at`). The controllers compiled in as kinds (``COMPILED_IN``: task PD,
 operational space, the dynamic laws (A7 in task or joint space), joint PD, task force), a sampled law's held command
 (torques or voltages), constant voltages and user laws of the controller ABI (their command torques or voltages
-[V], a task or a joint-space reference) run; a force-reading law and a reference carried by a body are folded
-through the drives (:mod:`.force_fold`).
+[V], a task or a joint-space reference) run; a force-reading law (its set-points along a contact's normal or a
+tangential chain's direction) and a reference carried by a body (along the axis of its first coordinate, a
+translating body's or an articulated body's, as ``phases.reference_at``) are folded through the drives
+(:mod:`.force_fold`).
 """
 
 from __future__ import annotations
@@ -196,11 +200,6 @@ def unsupported(system, modes, phase) -> str:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
     if not isinstance(ctl, SampledController) and (reason := _controller_unsupported(ctl)):
         return reason
-    if sum(launching(m) for m in modes) > 1:
-        return "two 2-D slides launching from rest at once (the readable model launches the later inside each trial)"
-    for c in system.contacts:
-        if c.turning and (ctl.uses_forces or getattr(ctl, "inner", ctl).uses_forces):
-            return f"contact {c.name!r}: a turning surface (carried by a frame) under a force-reading controller"
     return ""
 
 
@@ -230,8 +229,6 @@ def _bodies_unsupported(system, phase) -> str:
             return f"body {name!r}: a joint rigid_body does not compute (the readable model computes its terms)"
         if not np.array_equal(body.robots[0].model.gravity.linear, system.robot.model.gravity.linear):
             return f"body {name!r}: its model's gravity is not the robot's (one universe row in the rigid-body table)"
-        if phase.carrier is not None and phase.carrier[0] in body.indices:
-            return f"a reference carried by the articulated body {name!r} (the pipeline carries it along an axis)"
     return ""
 
 

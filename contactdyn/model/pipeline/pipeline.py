@@ -44,7 +44,7 @@ from .energy import energy_rates
 from .force_fold import carried_coordinate, controller_terms, fold_rates, solve_through_drives
 from .joint_friction import joint_events, joint_rows, joint_torques
 from .kkt import kkt_solve
-from .launch import ST_CONTACT, ST_W, launch_settled, launch_start, launch_took
+from .launch import ST_DONE, ST_HEAD, launch_settled, launch_start, launch_took
 from .pack import (
     A_CALL,
     A_CONTROLLER,
@@ -114,13 +114,13 @@ def call(t, x, ints, reals, work, events):
     if ints[N_LAUNCH]:
         reals, state = call_at(ints[A_LAUNCH_START], "pipeline.launch_start", (ints, reals))
     else:
-        state = np.zeros(ST_W)
+        state = np.zeros(ST_HEAD)
     while True:
-        final = state[ST_CONTACT] >= ints[N_LAUNCH]
+        final = state[ST_DONE] >= ints[N_LAUNCH]
         H, h, g, Jw, W = robot_terms(x, ints, reals)  # (over the robot's and the articulated bodies' columns)
         M, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:], nv)  # rotors reflected: true M, the law's H
         FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
-        if not final:  # a contact already past the stick band: its r back before a pass (no trial pass for it)
+        if not final:  # (before the first pass: a contact already past the stick band gets its r back, no Newton)
             final = call_at(ints[A_LAUNCH_SETTLED], "pipeline.launch_settled", (x, ints, state, reals, FJ, Fa, Fp, Fv,
                                                                                 FR))
         f = np.zeros(nQ)
