@@ -34,6 +34,8 @@ def b1_doc() -> dict:
         ({"solver.method": "euler"}, "solver.method", "one of"),
         ({"phase.0.until": "touch:nope"}, "phase[0].until", "touch:<contact>"),
         ({"contact.tip.tangent.mu_s": 0.1}, "contact.tip.tangent.mu_s", ">= mu_k"),
+        ({"phase.0.force": [{"contact": "tip", "direction": "t1", "value": 5.0}]}, "phase[0].force[0].direction",
+         "contact 'tip' has tangent.model = 'friction', not 'chain'"),  # (an IndexError inside the model before)
     ],
 )
 def test_bad_values_name_key_expected_and_found(override, key, expected):

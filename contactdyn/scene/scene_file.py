@@ -690,5 +690,8 @@ def _read_force(r: Reader, contacts: dict[str, ContactSpec]) -> ForceSpec:
     if direction != "n" and int(direction[1]) > len(contacts[contact].tangents):
         raise r.error("direction", f"'n' or one of contact {contact!r}'s {len(contacts[contact].tangents)} "
                       "tangent directions (t1, t2)", direction)
+    if direction != "n" and contacts[contact].tangent_model != "chain":
+        raise r.error("direction", f"'n' (a set-point along a tangent reads that tangent's chain force: contact "
+                      f"{contact!r} has tangent.model = {contacts[contact].tangent_model!r}, not 'chain')", direction)
     r.finish()
     return ForceSpec(contact, ramp, direction)
