@@ -21,6 +21,9 @@ from test_lever import FREE_FLYER
 
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.errors import SceneError
+from contactdyn.hybrid.loop import HybridRun
+from contactdyn.hybrid.pipeline_mode import PipelineMode
+from contactdyn.model import dynamics
 from contactdyn.model.paths import PIPELINE, LivePipelines
 from contactdyn.model.pipeline.pipeline import Pipeline, call
 from contactdyn.model.system import System
@@ -393,3 +396,31 @@ def test_the_command_line_names_each_corner_s_share_of_the_one_impact(tmp_path, 
     lines = [line for line in capsys.readouterr().out.splitlines() if line.strip().startswith("impact")]
     assert len(lines) == 4 and "on c1:" in lines[0]
     assert all(f"on c{k} (touching with c1): FΔt = 0.350179 N·s, F_fΔt = [] N·s" in lines[k - 1] for k in (2, 3, 4))
+
+
+def test_resting_on_four_corners_the_call_solves_the_singular_system_as_the_readable_model():
+    """At rest on its four corners (12 coordinates, the box's 6 held by 4 rows: the KKT matrix singular, its system
+    consistent): the call takes the readable model's minimum-norm least squares (status 1, counted, not regular),
+    ẋ and each corner's m g / 4 as ``dynamics.evaluate``'s; a whole resting run counts its calls in
+    ``singular_solves`` and answers none by the readable model."""
+    system, modes, phase, x = prepare(load_scene("drop_box"))
+    modes = [m.with_(touching=True) for m in modes]
+    x[system.nv + 2] = 0.15  # [m] the box's centre: its bottom on the table
+    pipe = Pipeline(system, modes, phase)
+    p = pipe.packed
+    got = call(0.0, x.copy(), p.ints, p.reals, p.work, p.events)
+    ref = dynamics.evaluate(system, 0.0, x, modes, phase)
+    assert p.events[-1] == 1.0 and pipe.least_squares == 1 and not ref.regular
+    assert np.abs(got - ref.xdot).max() <= 1e-9 * (1.0 + np.abs(ref.xdot).max())
+    ev = PipelineMode(pipe).evaluation(0.0, x)
+    assert not ev.regular and pipe.readable_calls == 0
+    for name in ("c1", "c2", "c3", "c4"):
+        assert ev.normal_force[name] == pytest.approx(ref.normal_force[name], rel=1e-9) \
+            == pytest.approx(M * G / 4, rel=1e-9)
+    doc, file = _doc(duration=0.1)
+    body = {**doc["body"]["box"], "position0": [0.0, 0.0, 0.15, 0.0, 0.0, 0.0]}
+    run = HybridRun(System(parse_scene({**doc, "body": {"box": body}}, None, file)))
+    r = run.run(0.0)
+    modes_run = [m for m in run.pipelines.pipes.values() if not isinstance(m, str)]
+    assert modes_run and sum(m.pipe.readable_calls for m in modes_run) == 0
+    assert r.stats["singular_solves"] > 0  # (before: 0, the call's least squares not counted)

@@ -16,8 +16,9 @@ for the loop, its event functions (:func:`~contactdyn.hybrid.events.segment_even
   :meth:`measurement` reads what a sampled law measures at a sample instant off one such call, and
   :meth:`sample_terms` what it reads of the robot and the phase there.
 
-A call whose status is not 1 (a singular KKT matrix, a law that gave no force) is answered by the readable model
-(:meth:`System.evaluate`), its values too; ``singular`` counts them.
+A call whose status is not 1 (a KKT system with a non-finite entry, a law that gave no force) is answered by the
+readable model (:meth:`System.evaluate`), its values too; a singular KKT matrix is solved in the call by least squares
+(:func:`contactdyn.model.pipeline.kkt.solve_linear`, an evaluation's ``regular`` False); ``singular`` counts both.
 """
 
 from __future__ import annotations
@@ -105,8 +106,9 @@ class PipelineMode:
 
     @property
     def singular(self) -> int:
-        """Calls answered by the readable model (a singular KKT matrix, a law that gave no force)."""
-        return self.pipe.readable_calls
+        """Calls solved by least squares (a singular KKT matrix: ``Pipeline.least_squares``) or answered by the
+        readable model (a non-finite KKT system, a law that gave no force): ``Result.stats["singular_solves"]``."""
+        return self.pipe.least_squares + self.pipe.readable_calls
 
     def use(self, modes) -> None:
         """Run with these modes from now on: a turn's new 2-D reference directions r, data of the same packed mode
@@ -186,10 +188,12 @@ class PipelineMode:
     # ---- an instant's evaluation -------------------------------------------------------------------
     def evaluation(self, t: float, x: np.ndarray) -> Evaluation | None:
         """What System.evaluate gives at (t [s], x), off one call with the diagnostics on (as an output sample's):
-        ẋ, λ, the event values by name, τ, the command, the tip, the stage states; None where the call declines
-        there (a singular KKT matrix, a law that gave no force: the readable model answers)."""
+        ẋ, λ, the event values by name, τ, the command, the tip, the stage states, ``regular`` (False: the KKT
+        matrix singular, solved by least squares); None where the call declines there (a non-finite KKT system, a
+        law that gave no force: the readable model answers)."""
         p, system = self.pipe.packed, self.system
         X = np.ascontiguousarray(x, dtype=float)[None, :]
+        least_squares_before = self.pipe.least_squares
         Xd, E, W, done = samples_at(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
         if done == 0:
             self.pipe.readable_calls += 1
@@ -210,7 +214,8 @@ class PipelineMode:
             limit_torque={i: float(e[at_limit + k]) for k, i in enumerate(p.limits)},
             joint_hold={i: float(e[at_held + k]) for k, i in enumerate(p.held)},
             joint_friction=S.joint_friction[0] if system.joint_friction.any else None,
-            node_positions={key: W[0, at:at + n].copy() for key, at, n in self._nodes})
+            node_positions={key: W[0, at:at + n].copy() for key, at, n in self._nodes},
+            regular=self.pipe.least_squares == least_squares_before)
 
     # ---- output samples ------------------------------------------------------------------------
     def samples(self, ts: np.ndarray, X: np.ndarray, modes=None, runs: list[int] | None = None) -> Samples:

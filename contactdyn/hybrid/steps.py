@@ -4,8 +4,9 @@ y_new, the FSAL call at t + h, and ``_estimate_error_norm``), returning the stag
 scipy core's layout; :func:`contactdyn.numerics.dop853.solve` keeps ``solve_ivp``'s step control around it.
 
 With the scipy core each stage crosses from the core into Python and from Python into the compiled call (~2 µs of a
-~6 µs call); here a whole step is one crossing. A stage whose call declines (a singular KKT matrix, a law that gave
-no force) ends the attempt: the driver takes that step by the mode's Python right-hand side instead.
+~6 µs call); here a whole step is one crossing. A stage whose call declines (a KKT system with a non-finite entry, a
+law that gave no force) ends the attempt: the driver takes that step by the mode's Python right-hand side instead; a
+singular KKT matrix does not (the call solves it by least squares and counts it, ``Pipeline.least_squares``).
 """
 
 from __future__ import annotations
@@ -75,8 +76,8 @@ def attempt(ints, reals, work, events, t, y, f, h, rtol, atol, A, B, C, E, y_new
     """(status, error norm) of one DOP853 step of h [s] from (t, y) with f = f(t, y) over the packed mode's call;
     y_new and, in the scipy core's layout (:mod:`contactdyn.numerics.dop853`: f_new, stages 11, 12, –, y_new,
     stages 6–10), ``block`` written; ``events`` hold the FSAL call's event values, Ys[s] and Es[s] stage s's
-    state and event values (s = 1 … 12, the FSAL call's last). DECLINED where a call's status is not 1 (a singular
-    KKT matrix, a law that gave no force: the step by the Python right-hand side)."""
+    state and event values (s = 1 … 12, the FSAL call's last). DECLINED where a call's status is not 1 (a
+    non-finite KKT system, a law that gave no force: the step by the Python right-hand side)."""
     n = y.size
     K = np.empty((13, n))
     put(K[0], 0, f)  # (put: no array assignment, see numerics.linalg.put)

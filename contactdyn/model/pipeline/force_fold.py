@@ -29,7 +29,7 @@ from ...numerics.linalg import put
 from .actuation import abi_buffer, abi_call, carry, drive_command, drives, reference, set_points
 from .contacts import surface_point
 from .drives import DI_W, DW_CLIPPED, DW_W, fold_on_targets
-from .kkt import kkt_solve
+from .kkt import REGULAR, kkt_solve
 from .pack import (
     ANY_MOTOR,
     CARRIER,
@@ -201,34 +201,34 @@ def carried_coordinate(ints, bq):
 
 @njit(cache=True)
 def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
-    """(ok, the drives' applied forces [N·m or N], Q̈, λ, regular): the command through the drives into f, then the
-    KKT solve (:func:`.kkt.kkt_solve`). With a fold (B's columns, or a carried column b ≠ 0) as
-    ``constraints.solve_folded``: each pass applies τ₀ (the clips decided at the last full command), folds B and b
-    through the unclipped drives (:func:`.drives.fold_on_targets`), solves, and re-applies the full command
-    τ₀ + B λ + b Q̈_b, until the clips agree (≤ nv + 2 passes); τ becomes the full command, the drives' outputs in
-    ``work`` are the full command's. ok False where a drive kind's law failed."""
+    """(ok, the drives' applied forces [N·m or N], Q̈, λ, the solve's outcome): the command through the drives into f,
+    then the KKT solve (:func:`.kkt.kkt_solve`; its outcome :func:`.kkt.solve_linear`'s). With a fold (B's columns, or a
+    carried column b ≠ 0) as ``constraints.solve_folded``: each pass applies τ₀ (the clips decided at the last full
+    command), folds B and b through the unclipped drives (:func:`.drives.fold_on_targets`), solves, and re-applies the
+    full command τ₀ + B λ + b Q̈_b, until the clips agree (≤ nv + 2 passes); τ becomes the full command, the drives'
+    outputs in ``work`` are the full command's. ok False where a drive kind's law failed."""
     nv, nQ, n = ints[NV], ints[NQ], ints[N_DRIVES]
     iq = carried_coordinate(ints, bq)
     folding = B.shape[1] > 0 or iq >= 0
     cmd = drive_command(x, ints, reals, tau)
     if not folding:  # the command known before the solve: one pass (Drives.apply, then the solve)
         ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
-        qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, np.int64(-1))  # (-1: compiled again)
-        return ok, applied, qdd, lam, regular
+        qdd, lam, outcome = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, np.int64(-1))  # (-1: compiled again)
+        return ok, applied, qdd, lam, outcome
     sat, full, fk = cmd, cmd, f
     rows = section(ints, ints[I_DRIVES], n, DI_W)
     out = work[ints[W_DRIVES]:]
     clipped = np.zeros(n)
     ok, applied = True, cmd
-    qdd, lam, regular = np.zeros(nQ), np.zeros(gamma.size), True
+    qdd, lam, outcome = np.zeros(nQ), np.zeros(gamma.size), REGULAR
     for _ in range(nv + 2):
         fk = f.copy()
         ok, applied = drives(x, ints, reals, work, cmd, sat, fk)
         if not ok:
-            return False, applied, qdd, lam, regular
+            return False, applied, qdd, lam, outcome
         fold, fold_q = np.zeros((nQ, B.shape[1])), np.zeros(nQ)
         fold_on_targets(rows, reals[ints[R_DRIVES]:], out, B, bq, fold, fold_q)
-        qdd, lam, regular = kkt_solve(ints, reals, M, fk, G, C, gamma, fold, fold_q, iq)
+        qdd, lam, outcome = kkt_solve(ints, reals, M, fk, G, C, gamma, fold, fold_q, iq)
         full = cmd.copy()
         for i in range(nv):
             s = 0.0
@@ -244,7 +244,7 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
             clipped[i] = out[DW_W * i + DW_CLIPPED]
         ok, applied = drives(x, ints, reals, work, full, full, np.zeros(nQ))
         if not ok:
-            return False, applied, qdd, lam, regular
+            return False, applied, qdd, lam, outcome
         same = True
         for i in range(n):
             same = same and clipped[i] == out[DW_W * i + DW_CLIPPED]
@@ -253,7 +253,7 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
         sat = full
     put(f, 0, fk)
     put(tau, 0, full[:nv])
-    return ok, applied, qdd, lam, regular
+    return ok, applied, qdd, lam, outcome
 
 
 @njit(cache=True)

@@ -5,10 +5,11 @@ and the diagonal inertias of the bodies, chain masses and motor coordinates [kg,
 G the rows, C their force columns (a slide's tilt), γ [m/s²] their velocity-product and Baumgarte terms
 (:mod:`contactdyn.model.constraints`' ``kkt_solve``); a force-reading controller's B (τ = τ₀ + B λ,
 :mod:`.force_fold`) folded through its drives into the force columns, a carried reference's column into M's. The solve
-is ``numerics.linalg.lu_solve`` (partial pivoting) with the readable model's residual test; a singular matrix
-whose rows are redundant but consistent (two sticks holding one body) is solved by the same minimum-norm least
-squares as the readable model's (``constraints.solve_linear``); one still singular returns status 0 and the
-caller takes the readable model.
+is :func:`solve_linear`, ``constraints.solve_linear`` over arrays: ``numerics.linalg.lu_solve`` (partial pivoting)
+with the readable model's residual test, else (a singular matrix: redundant rows, consistent as two sticks holding
+one body or not as two tables 1 mm apart) the same minimum-norm least squares (LAPACK's gelsd, rcond 1e-12), its
+outcome LEAST_SQUARES (the readable model's ``Evaluation.regular = False``). Only a KKT system with a non-finite
+entry (a law's nan or inf) is left unsolved (NOT_FINITE): the call declines (status 0).
 """
 
 from __future__ import annotations
@@ -21,7 +22,9 @@ from ...numerics.compile_cache import njit
 from ...numerics.linalg import lu_solve, put
 from .pack import NQ, NV, R_MREST
 
-__all__ = ["kkt_solve", "residual_ok", "least_squares"]
+__all__ = ["kkt_solve", "solve_linear", "residual_ok", "least_squares", "NOT_FINITE", "REGULAR", "LEAST_SQUARES"]
+
+NOT_FINITE, REGULAR, LEAST_SQUARES = 0, 1, 2  #: a solve's outcome: no solve (non-finite), LU, least squares
 
 
 @njit(cache=True)
@@ -41,23 +44,23 @@ def residual_ok(A, z, b):
 
 @njit(cache=True)
 def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
-    """(Q̈ [m/s², rad/s²], λ [N], regular): the KKT system's solve, or with no rows (no carried column, no
-    articulated body, no riding mass) H q̈ = f and the other coordinates' f / m (H: M's rigid-body block, NF × NF:
-    the robot's joints, then the articulated bodies' coordinates; nQ × nQ with a chain's mass riding a turning
-    surface, :func:`.contacts.add_riding`). ``fold`` (nQ, rows, or no columns): a force-reading
-    controller's B through its drives (τ = τ₀ + B λ, :mod:`.force_fold`), subtracted from the force columns;
-    ``fold_q`` (nQ): its part per unit acceleration of coordinate ``iq`` (a reference carried by that body; -1 none),
-    subtracted from M's column iq (``constraints.kkt_solve``'s M − fold_q)."""
+    """(Q̈ [m/s², rad/s²], λ [N], :func:`solve_linear`'s outcome): the KKT system's solve, or with no rows (no carried
+    column, no articulated body, no riding mass) H q̈ = f and the other coordinates' f / m (H: M's rigid-body block, NF
+    × NF: the robot's joints, then the articulated bodies' coordinates; nQ × nQ with a chain's mass riding a turning
+    surface, :func:`.contacts.add_riding`). ``fold`` (nQ, rows, or no columns): a force-reading controller's B through
+    its drives (τ = τ₀ + B λ, :mod:`.force_fold`), subtracted from the force columns; ``fold_q`` (nQ): its part per unit
+    acceleration of coordinate ``iq`` (a reference carried by that body; -1 none), subtracted from M's column iq
+    (``constraints.kkt_solve``'s M − fold_q)."""
     nv, nQ, nr = ints[NV], ints[NQ], gamma.size
     m_rest = reals[ints[R_MREST]:ints[R_MREST] + nQ - nv]
     if nr == 0 and iq < 0 and H.shape[0] == nv:
         qdd = np.empty(nQ)
         b = f[:nv].copy()
-        z = lu_solve(H, b)
+        z, outcome = solve_linear(H, b)
         put(qdd, 0, z)
         for i in range(nQ - nv):
             qdd[nv + i] = f[nv + i] / m_rest[i]
-        return qdd, np.empty(0), residual_ok(H, z, b)
+        return qdd, np.empty(0), outcome
     m = nQ + nr
     A = np.zeros((m, m))
     for r in range(H.shape[0]):  # (element by element: a 2-D slice assignment compiles numba's shape check)
@@ -77,12 +80,21 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
     put(b, 0, f)
     for r in range(nr):
         b[nQ + r] = -gamma[r]
+    z, outcome = solve_linear(A, b)
+    return z[:nQ], z[nQ:], outcome
+
+
+@njit(cache=True)
+def solve_linear(A, b):
+    """(z, outcome) of A z = b as ``constraints.solve_linear``: LU's z where it passes the residual test (REGULAR),
+    else the minimum-norm least squares (LEAST_SQUARES: A singular, the system consistent or not); LU's z where an
+    entry of A or b is not finite (NOT_FINITE: no least squares, the call declines)."""
     z = lu_solve(A, b)
-    solved = residual_ok(A, z, b)
-    if solved or not finite(A, b):
-        return z[:nQ], z[nQ:], solved
-    z = least_squares(A, b)  # redundant rows (two sticks holding one body): the minimum-norm forces
-    return z[:nQ], z[nQ:], residual_ok(A, z, b)
+    if residual_ok(A, z, b):
+        return z, REGULAR
+    if not finite(A, b):
+        return z, NOT_FINITE
+    return least_squares(A, b), LEAST_SQUARES
 
 
 @njit(cache=True)
@@ -100,5 +112,6 @@ def finite(A, b):
 @njit(cache=True)
 def least_squares(A, b):
     """The minimum-norm least-squares z of A z = b (LAPACK's gelsd, singular values below 1e-12 of the largest
-    dropped: ``constraints.solve_linear``'s fallback): a consistent system with redundant rows solved exactly."""
+    dropped: ``constraints.solve_linear``'s fallback): redundant rows that agree solved exactly, rows that disagree
+    (the same row, other γ) in the least-squares sense."""
     return np.linalg.lstsq(A, b, 1e-12)[0]

@@ -80,7 +80,7 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "section", "diag_st
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
  N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, A_CALL, A_CONTROLLER, A_SOLVE,
  A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, NF, N_CHARTS, I_CHARTS, R_FRAMES_B,
- N_RIDING, I_RIDING, R_RIDING, HEADER) = range(79)
+ N_RIDING, I_RIDING, R_RIDING, W_LEAST_SQUARES, HEADER) = range(80)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
 #: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
@@ -95,6 +95,8 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "section", "diag_st
 #: below), R_FRAMES_B the packed frames' placements in chart B (N_FRAMES rows of FR_W; only with a free body)
 #: N_RIDING: the chain masses riding turning surfaces (``contact.RidingMass``), I_RIDING their ints (RI_*), R_RIDING
 #: their reals (RR_*)
+#: W_LEAST_SQUARES: the slot of ``work`` counting the calls whose KKT matrix was singular (solved by the minimum-norm
+#: least squares, :func:`.kkt.solve_linear`: the readable model's ``Evaluation.regular = False``), since the packing
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -137,7 +139,9 @@ LI_JOINT, LI_SIDE, LI_W = 0, 1, 2  #: a pressing limit's ints (its value [rad or
 #: and friction force [N] in tangent coordinates; then each pressing limit's torque [N·m or N], each held (stuck)
 #: joint's holding torque [N·m or N], each sliding joint's speed [rad/s or m/s]; then the status
 EV_GAP, EV_FN, EV_VT, EV_FF, EV_W = 0, 1, 2, 4, 6
-#: status: 1 the call is complete; 0 the KKT matrix is singular (the readable model's least squares is needed)
+#: status: 1 the call is complete (a singular KKT matrix too: solved by least squares, counted at
+#: work[ints[W_LEAST_SQUARES]]); 0 its KKT system has a non-finite entry, -1 a compiled law gave no force (the
+#: readable model answers)
 TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
 #: the diagnostics section of ``work`` (from ``ints[W_DIAG]``; :func:`.pipeline.record`): its switch (the call writes
 #: the section when it is not 0), then per chain its interface force [N] (written always), then the drives' applied
@@ -323,7 +327,8 @@ def pack(system, modes, phase) -> Packed:
     _controller(b, system, phase)
     _drives(b, system, phase)
     _fold(b, system, modes, phase, meta)
-    h[W_DIAG] = b.work
+    h[W_LEAST_SQUARES] = b.work  # (one slot: the count)
+    h[W_DIAG] = b.work = b.work + 1
     b.work = int(diag_starts(np.array(h, dtype=np.int64))[D_END])
     h[W_SIZE] = b.work
     n_events = EV_W * len(system.contacts) + len(phase.limits) + len(held) + len(sliding) + 1

@@ -9,12 +9,13 @@
 laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`, a drive
 kind through :mod:`contactdyn.laws.drive_abi`); under ``NUMBA_DISABLE_JIT=1`` the same source runs interpreted.
 :class:`Pipeline` packs a mode once and calls it; its ``events`` name the event values (gaps [m], normal forces
-[N], slip velocities [m/s], friction or stick forces [N], limit torques [N·m or N]). A singular KKT matrix whose
-rows are redundant but consistent (two sticks holding one body) is solved in the call by the minimum-norm least
-squares (:func:`.kkt.least_squares`); a call whose KKT system still has no solution (status 0), or whose compiled
-law (a stage or friction law, a drive kind) gave no force (status -1), is answered by the readable model
-(:meth:`System.evaluate`), and counted; where a law run as a declared Python stage (one numba cannot compile,
-called back through ctypes: :mod:`contactdyn.laws.abi`) raised, its own exception is raised instead.
+[N], slip velocities [m/s], friction or stick forces [N], limit torques [N·m or N]). A singular KKT matrix
+(redundant rows, consistent or not) is solved in the call by the readable model's minimum-norm least squares
+(:func:`.kkt.solve_linear`), and counted (``Pipeline.least_squares``: ``Result.stats["singular_solves"]``); a call
+whose KKT system has a non-finite entry (status 0), or whose compiled law (a stage or friction law, a drive kind)
+gave no force (status -1), is answered by the readable model (:meth:`System.evaluate`), and counted; where a law
+run as a declared Python stage (one numba cannot compile, called back through ctypes: :mod:`contactdyn.laws.abi`)
+raised, its own exception is raised instead.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from .drives import drive_values, inertias
 from .energy import energy_rates
 from .force_fold import carried_coordinate, controller_terms, fold_rates, solve_through_drives
 from .joint_friction import joint_events, joint_rows, joint_torques
-from .kkt import kkt_solve
+from .kkt import LEAST_SQUARES, NOT_FINITE, kkt_solve
 from .launch import ST_DONE, ST_HEAD, launch_settled, launch_start, launch_took
 from .pack import (
     A_CALL,
@@ -92,6 +93,7 @@ from .pack import (
     TIP_FRAME,
     W_DIAG,
     W_DRIVES,
+    W_LEAST_SQUARES,
     diag_starts,
     pack,
     python_stages,
@@ -151,7 +153,7 @@ def call(t, x, ints, reals, work, events):
         tau, zdot, B, D, bq, dq = call_at(ints[A_CONTROLLER], "pipeline.controller",
                                           (t, x, ints, reals, work, Hr, hr, gr, FJr, Fa, Fp, Fv, FR, f, C, events))
         joint_torques(x, ints, reals, f)
-        ok, applied, qdd, lam, regular = call_at(ints[A_SOLVE], "pipeline.solve",
+        ok, applied, qdd, lam, outcome = call_at(ints[A_SOLVE], "pipeline.solve",
                                                  (x, ints, reals, work, M, f, G, C, gamma, tau, B, bq))
         if not ok:
             events[events.size - 1] = -1.0
@@ -167,9 +169,11 @@ def call(t, x, ints, reals, work, events):
         joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
         if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
             record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam, C, first_limit)
-        events[events.size - 1] = 1.0 if regular else 0.0
-        if final or not regular or call_at(ints[A_LAUNCH], "pipeline.launch_took",
-                                           (x, ints, state, reals, FJ, Fa, Fp, Fv, FR, xdot)):
+        events[events.size - 1] = 0.0 if outcome == NOT_FINITE else 1.0
+        if final or outcome == NOT_FINITE or call_at(ints[A_LAUNCH], "pipeline.launch_took",
+                                                     (x, ints, state, reals, FJ, Fa, Fp, Fv, FR, xdot)):
+            if outcome == LEAST_SQUARES:  # (the result's pass only: a launch's trials are not counted)
+                work[ints[W_LEAST_SQUARES]] += 1.0
             return xdot
 
 
@@ -264,15 +268,15 @@ def solve_direct(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
     through the drives into f, then one KKT solve."""
     cmd = drive_command(x, ints, reals, tau)
     ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
-    qdd, lam, regular = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, np.int64(-1))  # (-1: compiled again)
-    return ok, applied, qdd, lam, regular
+    qdd, lam, outcome = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, np.int64(-1))  # (-1: compiled again)
+    return ok, applied, qdd, lam, outcome
 
 
 _F1, _F2, _F3, _I1, _F = types.float64[::1], types.float64[:, ::1], types.float64[:, :, ::1], types.int64[::1], \
     types.float64
 _CONTROLLER = types.Tuple((_F1, _F1, _F2, _F2, _F1, _F1))(_F, _F1, _I1, _F1, _F1, _F2, _F1, _F1, _F3, _F2, _F2, _F2,
                                                           _F3, _F1, _F2, _F1)
-_SOLVE = types.Tuple((types.boolean, _F1, _F1, _F1, types.boolean))(_F1, _I1, _F1, _F1, _F2, _F1, _F2, _F2, _F1, _F1,
+_SOLVE = types.Tuple((types.boolean, _F1, _F1, _F1, types.int64))(_F1, _I1, _F1, _F1, _F2, _F1, _F2, _F2, _F1, _F1,
                                                                     _F2, _F1)
 declare("pipeline.call", call, _F1(_F, _F1, _I1, _F1, _F1, _F1))
 declare("pipeline.controller", controller_terms, _CONTROLLER)  # (the declared name of every controller stage)
@@ -317,9 +321,15 @@ class Pipeline:
         self.system, self.modes, self.phase = system, list(modes), phase
         self.packed = pack(system, modes, phase)
         stage_addresses(self.packed.ints)
-        self.readable_calls = 0  #: calls answered by the readable model (singular KKT matrix, a law that failed)
+        self.readable_calls = 0  #: calls answered by the readable model (a non-finite KKT system, a law that failed)
         #: the laws run as declared Python stages (numba cannot compile them), with numba's reasons
         self.python_stages = python_stages(system, modes, phase)
+
+    @property
+    def least_squares(self) -> int:
+        """The calls whose KKT matrix was singular, solved in the call by the minimum-norm least squares (the
+        readable model's ``Evaluation.regular = False``; every call since the packing, compiled steps' too)."""
+        return int(self.packed.work[self.packed.ints[W_LEAST_SQUARES]])
 
     def use(self, modes) -> None:
         """Run with these modes from now on: the same :func:`~contactdyn.model.contact.structure`, their own 2-D
