@@ -45,6 +45,7 @@ file recompiles it).
 from __future__ import annotations
 
 import ctypes
+import functools
 from collections import namedtuple
 from dataclasses import dataclass, field, fields
 
@@ -300,20 +301,40 @@ _OPTIONAL = ("gravity", "x_d", "v_d", "a_d", "R_tip", "J_ang", "drift_ang", "tau
 def control_input(buf: np.ndarray, lay: np.ndarray, keys: InputKeys) -> ControlInput:
     """The readable model's ControlInput (``dynamics._control_input``) of a buffer by its layout table: the same
     fields, shapes, values and dictionaries (by ``keys``); arrays are views of ``buf``."""
-    arrays = control_arrays(buf, lay)
-    values = {name: None if name in _OPTIONAL and getattr(arrays, name).size == 0 else getattr(arrays, name)
-              for name in ControlArrays._fields[1:] if name not in ControlInput.SET_POINT_ARRAYS}
-    rows = _matrix(buf, lay, FIELD["keys"], KEY_W)
-    force = dict(zip(keys.keys, (float(f) for f in rows[:, KEY_FORCE]), strict=True))
+    fields_at, (at_set, at_rate, at_keys, nk) = _input_plan(lay.tobytes())
+    values = {name: None if shape is None else buf[a:b] if shape == () else buf[a:b].reshape(shape)
+              for name, a, b, shape in fields_at}
+    rows = buf[at_keys:at_keys + KEY_W * nk].reshape(nk, KEY_W)
+    force = dict(zip(keys.keys, rows[:, KEY_FORCE].tolist(), strict=True))
     forces = {**{name: force[name] for name in keys.contacts}, **{k: f for k, f in force.items()
                                                                   if k not in keys.contacts}}
-    force_d = {key: (float(value), float(rate)) for key, value, rate in
-               zip(keys.set_points, arrays.force_set, arrays.force_rate, strict=True)}
-    inp = ControlInput(float(arrays.t), forces=forces, force_d=force_d, normals=keys.normals, **values)
+    ns = len(keys.set_points)
+    force_d = dict(zip(keys.set_points, zip(buf[at_set:at_set + ns].tolist(), buf[at_rate:at_rate + ns].tolist(),
+                                            strict=True), strict=True))
+    inp = ControlInput(float(buf[lay[LAYOUT_HEAD]]), forces=forces, force_d=force_d, normals=keys.normals, **values)
     if keys.uses_forces:
         inp.surfaces = {k: (row[KEY_P:KEY_P + 3], row[KEY_V:KEY_V + 3]) for k, row in zip(keys.keys, rows, strict=True)}
         inp.touching = {k: bool(row[KEY_TOUCH]) for k, row in zip(keys.keys, rows, strict=True) if k in keys.contacts}
     return inp
+
+
+@functools.lru_cache(maxsize=256)
+def _input_plan(layout: bytes) -> tuple:
+    """Per layout table (its bytes): ((name, start, stop, shape: () a vector, None an empty optional field) per
+    ControlInput array field, (where F_d, Ḟ_d and the keys start, the number of keys)): :func:`control_input`'s
+    slices, found once."""
+    lay = np.frombuffer(layout, dtype=np.int64)
+    nv = int(lay[0])
+    out = []
+    for k, (name, _, cols) in enumerate(LAYOUT[1:], start=1):
+        a, b = int(lay[LAYOUT_HEAD + 2 * k]), int(lay[LAYOUT_HEAD + 1 + 2 * k])
+        if name in ControlInput.SET_POINT_ARRAYS or name in PYTHON_STAGE_FIELDS:
+            continue
+        shape = None if a == b and name in _OPTIONAL else ((b - a) // cols(nv), cols(nv)) if callable(cols) else ()
+        out.append((name, a, b, shape))
+    start = {name: int(lay[LAYOUT_HEAD + 2 * FIELD[name]]) for name in ("force_set", "force_rate", "keys")}
+    n_keys = (int(lay[LAYOUT_HEAD + 1 + 2 * FIELD["keys"]]) - start["keys"]) // KEY_W
+    return tuple(out), (start["force_set"], start["force_rate"], start["keys"], n_keys)
 
 
 _CONTROLLER_CTYPE = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
@@ -354,7 +375,7 @@ def python_controller_address(ctl: Controller, keys: InputKeys) -> int:
 
 def _c_array(pointer: int, ctype, n: int) -> np.ndarray:
     """The n values at ``pointer`` as an array over that memory."""
-    return np.ctypeslib.as_array(ctypes.cast(pointer, ctypes.POINTER(ctype)), (n,)) if n else np.empty(0)
+    return np.frombuffer((ctype * n).from_address(pointer), dtype=ctype) if n else np.empty(0)
 
 
 # ---- the call: its Python twin (by ctypes), and its compiled form by overload ----------------------------------

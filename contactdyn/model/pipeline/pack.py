@@ -22,13 +22,15 @@ its contact's row, a user controller's in the controller section, a drive kind's
 compiled call serves every law. The index constants below are the one place the layout is written; the call
 (:mod:`.pipeline`) reads nothing else.
 
-What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
-a user controller numba cannot compile (a declared Python stage would need its whole ``ControlInput``), a robot or
-articulated body ``rigid_body`` does not compute (none the robot loader accepts: every joint it takes is a one-DOF
-revolute or prismatic), an articulated body under another gravity than the robot's. A stage law, friction law or
-drive kind numba cannot compile is packed as a declared Python stage (:func:`python_stages` names them): the
-address of a ctypes callback of its Python function where its cfunc's would be
-(:func:`contactdyn.laws.abi.python_stage_address`, :func:`contactdyn.laws.drive_abi.python_drive_addresses`). A
+What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model): a robot
+or articulated body ``rigid_body`` does not compute (none the robot loader accepts: every joint it takes is a one-DOF
+revolute or prismatic), an articulated body under another gravity than the robot's. A stage law, friction law,
+drive kind or user controller numba cannot compile is packed as a declared Python stage (:func:`python_stages` names
+them): the address of a ctypes callback of its Python function where its cfunc's would be
+(:func:`contactdyn.laws.abi.python_stage_address`, :func:`contactdyn.laws.drive_abi.python_drive_addresses`,
+:func:`contactdyn.laws.controllers.abi.python_controller_address`: the controller's own ``command`` on the
+ControlInput the readable model gives, rebuilt from its buffer, whose "keys" field (I_KEYS) holds what the
+dictionaries need). A
 chain's mass riding a turning surface is packed with its frame (``N_RIDING``): the call adds its coupling to M and
 its bias to f (:func:`.contacts.add_riding`). A force-reading law over a turning surface (a robot frame's or an
 articulated body's) folds as over a fixed one: the surface's rows are the state's (:func:`.contacts.turning_sides`),
@@ -206,9 +208,9 @@ def unsupported(system, modes, phase) -> str:
 
 
 def python_stages(system, modes, phase) -> list[str]:
-    """The laws of (modes, phase) numba cannot compile (stage, friction, drive kinds), each run in the compiled call
-    as a declared Python stage (called back through ctypes, :func:`contactdyn.laws.abi.python_stage_address`), named
-    with numba's reason."""
+    """The laws of (modes, phase) numba cannot compile (stage, friction, drive kinds, the controller), each run in the
+    compiled call as a declared Python stage (called back through ctypes,
+    :func:`contactdyn.laws.abi.python_stage_address`), named with numba's reason."""
     out = []
     for c, m in zip(system.contacts, modes, strict=True):
         for dc in c.chains:
