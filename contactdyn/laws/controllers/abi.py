@@ -33,8 +33,11 @@ forces (``uses_forces``) is affine in them: the caller folds it by calling it ag
 (:mod:`contactdyn.model.pipeline.force_fold`).
 
 What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that has no declared
-parameters' config, or whose ``command`` numba cannot compile (a dict, a Python object, ``inp.forces``): it stays on
-the Python path. A controller that outputs voltages (``outputs = "voltage"``) compiles as one of torques: ``tau``
+parameters' config, or whose ``command`` numba cannot compile (a dict, a Python object, ``inp.forces``). The
+compiled call runs it as a declared Python stage (:func:`python_controller_address`): a ctypes callback of this
+signature rebuilds from the buffer the ControlInput the readable model gives (:func:`control_input`: the
+dictionaries by key from the "keys" field and :class:`InputKeys`), calls the controller's own ``command`` (its real
+``self``) and writes τ and ż; its exception is kept and re-raised after the call. A controller that outputs voltages (``outputs = "voltage"``) compiles as one of torques: ``tau``
 then holds the joints' voltages [V], which the drives take as they are.
 
 Caching: the wrapper is generated closure-free and attributed to the controller's own file, as the stage laws'
