@@ -37,8 +37,9 @@ parameters' config, or whose ``command`` numba cannot compile (a dict, a Python 
 compiled call runs it as a declared Python stage (:func:`python_controller_address`): a ctypes callback of this
 signature rebuilds from the buffer the ControlInput the readable model gives (:func:`control_input`: the
 dictionaries by key from the "keys" field and :class:`InputKeys`), calls the controller's own ``command`` (its real
-``self``) and writes τ and ż; its exception is kept and re-raised after the call. A controller that outputs voltages (``outputs = "voltage"``) compiles as one of torques: ``tau``
-then holds the joints' voltages [V], which the drives take as they are.
+``self``) and writes τ and ż; its exception is kept and re-raised after the call. A controller that outputs
+voltages (``outputs = "voltage"``) compiles as one of torques: ``tau`` then holds the joints' voltages [V], which the
+drives take as they are.
 
 Caching: the wrapper is generated closure-free and attributed to the controller's own file, as the stage laws'
 (:func:`contactdyn.laws.abi.compile_wrapper`), so numba caches it (compile_cache's directory; an edit of that
