@@ -1,5 +1,7 @@
 """What a declared Python stage costs per call: one compiled right-hand-side call of a mode whose stage law numba
-cannot compile (called back through ctypes, contactdyn.laws.abi) against the same mode with the built-in linear law.
+cannot compile (called back through ctypes, contactdyn.laws.abi) against the same mode with the built-in linear law;
+and of a mode whose controller numba cannot compile (contactdyn.laws.controllers.abi.python_controller_address)
+against its compiled twin.
 
     PYTHONPATH=. python3 benchmarks/python_stage_cost.py [--repeats 7] [--calls 20000] [--out FILE.json]
 
@@ -9,6 +11,11 @@ energy audit (each stage's force also at ẋ = 0: two callbacks per call). The l
 (``contactdyn.model.dynamics.evaluate``) of the Python-stage mode. Each variant times ``--calls`` calls of
 ``Pipeline.rhs`` at the same state; the variants interleaved ``--repeats`` times in one process, CPU medians [µs per
 call], each ratio to ``linear``.
+
+The controller: examples/force_pi_press.toml (a bonded surface: the force-reading law folded, its callback called
+once more per row) under ``force_pi`` (examples/force_law.py, compiled, by address: the twin) and ``dict_force_pi``
+(the same law reading ControlInput's dictionaries and a Python dict: a Python stage), and the readable model of the
+Python-stage mode; ratios to ``force_pi``.
 """
 
 from __future__ import annotations
@@ -16,16 +23,24 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
+import tomllib
+import warnings
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn import parse_scene  # noqa: E402
+from contactdyn.laws import Controller, Param, register  # noqa: E402
 from contactdyn.laws.stage_laws import StageLaw, register_stage_law  # noqa: E402
 from contactdyn.model import dynamics  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+from contactdyn.scene.user_laws import import_scene_modules  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 K, B = 5e4, 1500.0  #: [N/m], [N·s/m]
 _SCALE = {"k": 1.0}  #: a Python dict: numba cannot type it
@@ -54,6 +69,56 @@ def bonded(law: str):
     })
 
 
+@register
+class DictForcePI(Controller):
+    """examples/force_law.py's ForcePI reading ControlInput's dictionaries (and a Python dict): a Python stage."""
+
+    name, uses_forces, n_states = "dict_force_pi", True, 1
+    params = (Param("stiffness", "N/m", "K", 2000.0), Param("damping", "N·s/m", "D", 100.0),
+              Param("damping_n", "N·s/m", "D_n", 50.0), Param("ki", "1/s", "k_i", 20.0),
+              Param("cancel", "-", "c", 0.5, hi=1.0))
+
+    def command(self, inp):
+        c = self.config
+        key = next(iter(inp.force_d))
+        n, F_d = inp.normals[key], inp.force_d[key][0]
+        f = c.stiffness * (inp.x_d - inp.p_tip) - c.damping * inp.v_tip
+        f = f - (f * n).sum() * n
+        rate_n = (n * (inp.v_tip - inp.surfaces[key][1])).sum()
+        f = f - (c.damping_n * rate_n + F_d + inp.z[0]) * n
+        tau = _SCALE["k"] * (inp.J.T @ f) - c.cancel * inp.tau_contact
+        return tau, np.array([float(inp.touching[key]) * c.ki * (F_d - inp.forces[key])])
+
+
+def press(kind: str):
+    """examples/force_pi_press.toml under controller ``kind``, its bonded surface touching."""
+    path = ROOT / "examples" / "force_pi_press.toml"
+    doc = tomllib.loads(path.read_text())
+    doc["controller"]["kind"] = kind
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return parse_scene(doc, file=str(path))
+
+
+def controller_variants(calls: int) -> tuple[dict, dict, dict]:
+    """(variants, calls per variant, Python stages) of the controller comparison."""
+    import_scene_modules(["force_law"], str(ROOT / "examples" / "force_pi_press.toml"))
+    variants, n_calls, stages = {}, {}, {}
+    for kind in ("force_pi", "dict_force_pi"):
+        system, modes, phase, x = prepare(press(kind))
+        modes = [m.with_(touching=True) for m in modes]
+        pipe = Pipeline(system, modes, phase)
+        stages[kind] = pipe.python_stages
+        pipe.rhs(0.01, x)
+        variants[kind], n_calls[kind] = (lambda pipe=pipe, x=x, n=calls: [pipe.rhs(0.01, x) for _ in range(n)][-1]), \
+            calls
+        if kind == "dict_force_pi":
+            n_calls["readable_ctl"] = max(calls // 20, 1)
+            variants["readable_ctl"] = (lambda s=system, m=modes, ph=phase, x=x, n=n_calls["readable_ctl"]:
+                                        [dynamics.evaluate(s, 0.01, x, m, ph) for _ in range(n)][-1].xdot)
+    return variants, n_calls, stages
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeats", type=int, default=7)
@@ -73,17 +138,23 @@ def main(argv: list[str] | None = None) -> int:
             n_readable = max(args.calls // 20, 1)
             variants["readable"] = (lambda s=system, m=modes, ph=phase, x=x, n=n_readable:
                                     [dynamics.evaluate(s, 0.0, x, m, ph) for _ in range(n)][-1].xdot)
-    times = interleaved(variants, args.repeats)
-    calls = {"linear": args.calls, "python_linear": args.calls, "readable": max(args.calls // 20, 1)}
+    ctl_variants, ctl_calls, ctl_stages = controller_variants(args.calls)
+    times = interleaved({**variants, **ctl_variants}, args.repeats)
+    calls = {"linear": args.calls, "python_linear": args.calls, "readable": max(args.calls // 20, 1), **ctl_calls}
+    stages.update(ctl_stages)
     us = {k: 1e6 * statistics.median(t.cpu_s) / calls[k] for k, t in times.items()}
     diff = float(abs(times["python_linear"].last - times["linear"].last).max())
-    rows = [{"variant": k, "us_per_call": round(v, 3), "ratio_to_linear": round(v / us["linear"], 3),
-             "python_stages": stages.get(k, [])} for k, v in us.items()]
-    for row in rows:
-        print(f"{row['variant']:>14}: {row['us_per_call']:9.3f} µs/call  ×{row['ratio_to_linear']:.2f} linear")
-    print(f"python_linear vs linear: max |Δẋ| = {diff:.3g}")
+    ctl_diff = float(abs(times["dict_force_pi"].last - times["force_pi"].last).max())
+    rows = []
+    for k, v in us.items():
+        base = "force_pi" if k in ctl_variants else "linear"
+        rows.append({"variant": k, "us_per_call": round(v, 3), "ratio_to": base, "ratio": round(v / us[base], 3),
+                     "python_stages": stages.get(k, [])})
+        print(f"{k:>14}: {v:9.3f} µs/call  ×{v / us[base]:.2f} {base}")
+    print(f"python_linear vs linear: max |Δẋ| = {diff:.3g}; dict_force_pi vs force_pi: max |Δẋ| = {ctl_diff:.3g}")
     if args.out:
-        write_report(Path(args.out), {"calls": args.calls, "repeats": args.repeats, "max_abs_diff_xdot": diff}, rows)
+        write_report(Path(args.out), {"calls": args.calls, "repeats": args.repeats, "max_abs_diff_xdot": diff,
+                                      "max_abs_diff_xdot_controller": ctl_diff}, rows)
     return 0
 
 

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from contactdyn import parse_scene, simulate
-from contactdyn.model.paths import PIPELINE, READABLE, UNDECLARED
+from contactdyn.model.paths import PIPELINE, READABLE
 from contactdyn.model.system import System
 from contactdyn.scene.reader import read_toml
 from contactdyn.scene.scene_file import load_scene, sims_dir
 from contactdyn.simulate import run_system
 
 HARD = Path(__file__).resolve().parent.parent / "benchmarks" / "hard"
-UNCOMPILED_CONTROLLER = "controller 'uncompilable_ctl': numba cannot compile"
+PYTHON_STAGE_CONTROLLER = "controller 'uncompilable_ctl' is a Python stage (numba cannot compile"
 
 
 def axis_scene(normal: dict, duration: float):
@@ -56,18 +56,17 @@ def test_every_scene_runs_every_mode_on_the_pipeline(path):
     _all_compiled(result)
 
 
-def test_a_mode_the_pipeline_does_not_pack_runs_on_the_readable_model_with_its_reason(uncompilable_controller):
-    """A controller numba cannot compile keeps its modes on the readable model, the paths table and fallback_modes
-    naming the pipeline's reason (declared, not undeclared)."""
+def test_a_controller_numba_cannot_compile_keeps_its_modes_on_the_compiled_call(uncompilable_controller):
+    """A controller numba cannot compile is a declared Python stage of the compiled call
+    (tests/test_python_controller): no mode on the readable model, each naming the controller and numba's reason."""
     r = simulate(parse_scene({
         "duration": 0.05, "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "q0": [0.999], "v0": [0.5]},
         "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], "model": "chain",
                                                                   "environment": [{"k": 5e4, "b": 1500.0}]}}},
         "controller": {"kind": uncompilable_controller.name}}))
-    assert r.stats["fallback_modes"] and all(why.startswith(UNCOMPILED_CONTROLLER) for why in r.stats["fallback_modes"])
-    assert {row["path"] for row in r.stats["paths"].values()} == {READABLE}
-    assert all(row["why"].startswith(UNCOMPILED_CONTROLLER) for row in r.stats["paths"].values())
-    assert not any(reason.startswith(UNDECLARED) for reason in r.stats["fallback_modes"])
+    assert r.stats["fallback_modes"] == {}
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
+    assert all(row["why"].startswith(PYTHON_STAGE_CONTROLLER) for row in r.stats["paths"].values())
 
 
 def test_a_stage_law_numba_cannot_compile_keeps_its_mode_on_the_compiled_call(uncompilable_law):

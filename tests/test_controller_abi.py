@@ -10,7 +10,16 @@ import pytest
 
 from contactdyn.laws import Controller, Param
 from contactdyn.laws.controllers import abi
-from contactdyn.laws.controllers.abi import LAYOUT, NOT_IN_LAYOUT, ControlArrays, buffer_of, layout_of, params_of
+from contactdyn.laws.controllers.abi import (
+    KEY_W,
+    LAYOUT,
+    NOT_IN_LAYOUT,
+    PYTHON_STAGE_FIELDS,
+    ControlArrays,
+    buffer_of,
+    layout_of,
+    params_of,
+)
 from contactdyn.laws.controllers.base import ControlInput, DeclaredConfig
 from contactdyn.model.paths import PIPELINE, READABLE
 
@@ -91,12 +100,13 @@ def test_a_controller_numba_cannot_compile_is_declared():
 def test_layout_and_control_arrays_agree_with_control_input():
     names = [f.name for f in fields(ControlInput)]
     in_layout = [*(name for name in names if name not in NOT_IN_LAYOUT), *ControlInput.SET_POINT_ARRAYS]
-    assert in_layout == [name for name, _, _ in LAYOUT]
-    assert list(ControlArrays._fields) == [name for name, _, _ in LAYOUT]
+    assert [*in_layout, *PYTHON_STAGE_FIELDS] == [name for name, _, _ in LAYOUT]
+    assert list(ControlArrays._fields) == in_layout
     assert set(NOT_IN_LAYOUT) <= set(names)
     layout = layout_of(3, 2, ns=2)
     assert layout[:3].tolist() == [3, 2, 2]
     assert layout[-1] == 1 + 3 + 3 + 9 + 3 + 3 + 3 + 3 + 9 + 3 + 9 + 2 + 9 + 9 + 3 + 3 + (2 + 2 + 6 + 2 + 6 + 6 + 2)
+    assert layout_of(3, 2, ns=2, nk=3)[-1] == layout[-1] + 3 * KEY_W  # a Python stage's keys
 
 
 class _ForceIntegral(Controller):
@@ -131,7 +141,8 @@ def test_a_force_reading_law_with_states_by_address_equals_its_command():
 
 def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedance, monkeypatch):
     """examples/impedance_press.toml: the mode on the compiled call (the law by address), its run the one of the
-    law's Python command on the readable model (the address forced to 0: the pipeline declines the law) to 1e-9."""
+    law's Python command (the address forced to 0: the compiled call runs it as a declared Python stage) and the
+    readable model's (every mode on it) to 1e-9."""
     import warnings
 
     from contactdyn import load_scene, simulate
@@ -146,11 +157,17 @@ def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedan
     monkeypatch.setattr(abi, "controller_address", lambda cls: 0)
     from contactdyn.model.pipeline import pack
     monkeypatch.setattr(pack, "controller_address", lambda cls: 0)
+    python_stage = run()
+    assert [row["path"] for row in python_stage.stats["paths"].values()] == [PIPELINE]
+    assert "is a Python stage" in next(iter(python_stage.stats["paths"].values()))["why"]
+    from contactdyn.model.paths import LivePipelines
+    monkeypatch.setattr(LivePipelines, "use", False)
     old = run()
     assert [row["path"] for row in old.stats["paths"].values()] == [READABLE]
     for channel in ("q", "contact.tip.F_n"):
         scale = np.abs(old[channel]).max()
         assert np.abs(new[channel] - old[channel]).max() <= 1e-9 * scale, channel
+        assert np.abs(python_stage[channel] - old[channel]).max() <= 1e-9 * scale, channel
 
 
 def test_a_controller_that_reads_its_own_config_is_declared():

@@ -127,9 +127,11 @@ def test_many_states_in_one_call_are_the_single_calls():
         assert np.array_equal(row, pipe.rhs(t, x))
 
 
-def test_a_mode_out_of_scope_is_declined_with_its_reason(uncompilable_controller):
-    """A mode under a controller numba cannot compile: the pipeline declines it, naming the controller."""
+def test_a_mode_out_of_scope_is_declined_with_its_reason(uncompilable_controller, monkeypatch):
+    """A controller numba cannot compile packs (a declared Python stage, named); a mode the pipeline does not pack
+    (here a robot whose terms rigid_body would not compute, made so) is declined, its reason named."""
     from contactdyn import parse_scene
+    from contactdyn.robot.robot import Robot
     from contactdyn.simulate import prepare
 
     chain = {"model": "chain", "environment": [{"k": 5e4, "b": 1500.0}]}
@@ -138,7 +140,10 @@ def test_a_mode_out_of_scope_is_declined_with_its_reason(uncompilable_controller
         "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], **chain}}},
         "controller": {"kind": uncompilable_controller.name}}))
     modes = [m.with_(touching=True) for m in modes]
-    with pytest.raises(ValueError, match="controller 'uncompilable_ctl': numba cannot compile"):
+    assert Pipeline(system, modes, phase).python_stages[0].startswith(
+        "controller 'uncompilable_ctl' is a Python stage (numba cannot compile")
+    monkeypatch.setattr(Robot, "rigid_table", property(lambda robot: None))
+    with pytest.raises(ValueError, match="a robot rigid_body does not compute"):
         Pipeline(system, modes, phase)
 
 

@@ -4,9 +4,9 @@ Every mode runs on the one pipeline (:mod:`contactdyn.model.pipeline`: one compi
 laws by address) where :func:`~contactdyn.model.pipeline.pack.unsupported` accepts it (:class:`LivePipelines`, the
 path ``PIPELINE``), checked where the run first starts it against the readable model (:func:`disagreement`); else
 on the readable model (:meth:`~contactdyn.model.system.System.evaluate`), with the reason: a part the pipeline
-does not pack. A stage law, friction law or drive kind numba cannot compile does not keep its mode off the
-pipeline: it runs there as a declared Python stage (called back through ctypes, :mod:`contactdyn.laws.abi`),
-named in its row.
+does not pack. A stage law, friction law, drive kind or user controller numba cannot compile does not keep its
+mode off the pipeline: it runs there as a declared Python stage (called back through ctypes,
+:mod:`contactdyn.laws.abi`), named in its row.
 A pipeline whose check disagrees is an undeclared gap: its reason in ``Result.stats["fallback_modes"]`` starts
 with ``"undeclared: "``, which the tests treat as a bug.
 

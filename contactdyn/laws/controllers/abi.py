@@ -33,9 +33,13 @@ forces (``uses_forces``) is affine in them: the caller folds it by calling it ag
 (:mod:`contactdyn.model.pipeline.force_fold`).
 
 What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that has no declared
-parameters' config, or whose ``command`` numba cannot compile (a dict, a Python object, ``inp.forces``): it stays on
-the Python path. A controller that outputs voltages (``outputs = "voltage"``) compiles as one of torques: ``tau``
-then holds the joints' voltages [V], which the drives take as they are.
+parameters' config, or whose ``command`` numba cannot compile (a dict, a Python object, ``inp.forces``). The
+compiled call runs it as a declared Python stage (:func:`python_controller_address`): a ctypes callback of this
+signature rebuilds from the buffer the ControlInput the readable model gives (:func:`control_input`: the
+dictionaries by key from the "keys" field and :class:`InputKeys`), calls the controller's own ``command`` (its real
+``self``) and writes τ and ż; its exception is kept and re-raised after the call. A controller that outputs
+voltages (``outputs = "voltage"``) compiles as one of torques: ``tau`` then holds the joints' voltages [V], which the
+drives take as they are.
 
 Caching: the wrapper is generated closure-free and attributed to the controller's own file, as the stage laws'
 (:func:`contactdyn.laws.abi.compile_wrapper`), so numba caches it (compile_cache's directory; an edit of that
@@ -45,8 +49,9 @@ file recompiles it).
 from __future__ import annotations
 
 import ctypes
+import functools
 from collections import namedtuple
-from dataclasses import fields
+from dataclasses import dataclass, field, fields
 
 import numba
 import numpy as np
@@ -54,64 +59,73 @@ from numba import carray, types
 from numba.extending import intrinsic, overload
 
 from ...numerics.compile_cache import njit
-from ..abi import _data_at, _indirect_call, compile_wrapper
+from ..abi import _data_at, _indirect_call, compile_wrapper, python_stage_failed
 from .base import ControlInput, Controller
 
 __all__ = ["CONTROLLER_SIGNATURE", "LAYOUT", "LAYOUT_SIZE", "NOT_IN_LAYOUT", "ControlArrays", "control_arrays",
-           "layout_of", "put_field", "controller_address", "params_of", "buffer_of", "call_controller"]
+           "layout_of", "put_field", "controller_address", "params_of", "buffer_of", "call_controller", "InputKeys",
+           "control_input", "python_controller_address", "PYTHON_STAGE_FIELDS", "KEY_W"]
 
 _P = types.CPointer(types.float64)
 #: int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau, double* zdot)
 CONTROLLER_SIGNATURE = types.int64(_P, types.CPointer(types.int64), _P, types.int64, _P, _P)
 
-#: the buffer's fields in order: name -> (size as a function of (nv, nz, ns, nr), columns: 0 a float, 1 a vector,
+#: the buffer's fields in order: name -> (size as a function of (nv, nz, ns, nr, nk), columns: 0 a float, 1 a vector,
 #: else a matrix of that many columns as a function of nv). nz the controller's states, ns the phase's force
-#: set-points, nr the reference's coordinates (3: a task reference [m]; nv: a joint one [rad or m]).
+#: set-points, nr the reference's coordinates (3: a task reference [m]; nv: a joint one [rad or m]), nk the keys of
+#: ControlInput's dictionaries (a declared Python stage's only: :data:`PYTHON_STAGE_FIELDS`).
 #: A new input is one line here and one in control_arrays.
 LAYOUT = (
-    ("t", lambda nv, nz, ns, nr: 1, 0),
-    ("q", lambda nv, nz, ns, nr: nv, 1),
-    ("v", lambda nv, nz, ns, nr: nv, 1),
-    ("H", lambda nv, nz, ns, nr: nv * nv, lambda nv: nv),
-    ("h", lambda nv, nz, ns, nr: nv, 1),
-    ("gravity", lambda nv, nz, ns, nr: nv, 1),
-    ("p_tip", lambda nv, nz, ns, nr: 3, 1),
-    ("v_tip", lambda nv, nz, ns, nr: 3, 1),
-    ("J", lambda nv, nz, ns, nr: 3 * nv, lambda nv: nv),
-    ("drift", lambda nv, nz, ns, nr: 3, 1),
-    ("x_d", lambda nv, nz, ns, nr: nr, 1),
-    ("v_d", lambda nv, nz, ns, nr: nr, 1),
-    ("a_d", lambda nv, nz, ns, nr: nr, 1),
-    ("z", lambda nv, nz, ns, nr: nz, 1),
-    ("R_tip", lambda nv, nz, ns, nr: 9, lambda nv: 3),
-    ("J_ang", lambda nv, nz, ns, nr: 3 * nv, lambda nv: nv),
-    ("drift_ang", lambda nv, nz, ns, nr: 3, 1),
-    ("tau_contact", lambda nv, nz, ns, nr: nv, 1),
-    ("force_set", lambda nv, nz, ns, nr: ns, 1),
-    ("force_rate", lambda nv, nz, ns, nr: ns, 1),
-    ("force_dir", lambda nv, nz, ns, nr: 3 * ns, lambda nv: 3),
-    ("force_read", lambda nv, nz, ns, nr: ns, 1),
-    ("surface_p", lambda nv, nz, ns, nr: 3 * ns, lambda nv: 3),
-    ("surface_v", lambda nv, nz, ns, nr: 3 * ns, lambda nv: 3),
-    ("touch", lambda nv, nz, ns, nr: ns, 1),
+    ("t", lambda nv, nz, ns, nr, nk: 1, 0),
+    ("q", lambda nv, nz, ns, nr, nk: nv, 1),
+    ("v", lambda nv, nz, ns, nr, nk: nv, 1),
+    ("H", lambda nv, nz, ns, nr, nk: nv * nv, lambda nv: nv),
+    ("h", lambda nv, nz, ns, nr, nk: nv, 1),
+    ("gravity", lambda nv, nz, ns, nr, nk: nv, 1),
+    ("p_tip", lambda nv, nz, ns, nr, nk: 3, 1),
+    ("v_tip", lambda nv, nz, ns, nr, nk: 3, 1),
+    ("J", lambda nv, nz, ns, nr, nk: 3 * nv, lambda nv: nv),
+    ("drift", lambda nv, nz, ns, nr, nk: 3, 1),
+    ("x_d", lambda nv, nz, ns, nr, nk: nr, 1),
+    ("v_d", lambda nv, nz, ns, nr, nk: nr, 1),
+    ("a_d", lambda nv, nz, ns, nr, nk: nr, 1),
+    ("z", lambda nv, nz, ns, nr, nk: nz, 1),
+    ("R_tip", lambda nv, nz, ns, nr, nk: 9, lambda nv: 3),
+    ("J_ang", lambda nv, nz, ns, nr, nk: 3 * nv, lambda nv: nv),
+    ("drift_ang", lambda nv, nz, ns, nr, nk: 3, 1),
+    ("tau_contact", lambda nv, nz, ns, nr, nk: nv, 1),
+    ("force_set", lambda nv, nz, ns, nr, nk: ns, 1),
+    ("force_rate", lambda nv, nz, ns, nr, nk: ns, 1),
+    ("force_dir", lambda nv, nz, ns, nr, nk: 3 * ns, lambda nv: 3),
+    ("force_read", lambda nv, nz, ns, nr, nk: ns, 1),
+    ("surface_p", lambda nv, nz, ns, nr, nk: 3 * ns, lambda nv: 3),
+    ("surface_v", lambda nv, nz, ns, nr, nk: 3 * ns, lambda nv: 3),
+    ("touch", lambda nv, nz, ns, nr, nk: ns, 1),
+    ("keys", lambda nv, nz, ns, nr, nk: KEY_W * nk, lambda nv: KEY_W),
 )
+#: per key of the readable ControlInput's dictionaries (per contact, then its tangential chains: dynamics.surface_keys)
+#: in the "keys" field: the measured force [N], touching (1.0), the surface point [m] (3) and its velocity [m/s] (3)
+KEY_FORCE, KEY_TOUCH, KEY_P, KEY_V, KEY_W = 0, 1, 2, 5, 8
 FIELD = {name: k for k, (name, _, _) in enumerate(LAYOUT)}  #: a field's index in LAYOUT
 LAYOUT_HEAD = 3  #: the layout table's header: nv, nz, ns; then (start, stop) per field, then the buffer's size
 LAYOUT_SIZE = LAYOUT_HEAD + 2 * len(LAYOUT) + 1  #: the layout table's length (layout_of)
 #: ControlInput's fields a compiled controller does not read (its dictionaries: their arrays by set-point are
 #: ControlInput.SET_POINT_ARRAYS)
 NOT_IN_LAYOUT = ("forces", "force_d", "normals", "surfaces", "touching")
+#: the fields only a declared Python stage reads (python_controller_address: it rebuilds the dictionaries from them);
+#: not in ControlArrays (a compiled law's inputs), empty in the layout of a compiled law
+PYTHON_STAGE_FIELDS = ("keys",)
 
 ControlArrays = namedtuple("ControlArrays", [*(f.name for f in fields(ControlInput) if f.name not in NOT_IN_LAYOUT),
                                              *ControlInput.SET_POINT_ARRAYS])
 
 
-def layout_of(nv: int, nz: int, absent: tuple[str, ...] = (), ns: int = 0, nr: int = 3) -> np.ndarray:
+def layout_of(nv: int, nz: int, absent: tuple[str, ...] = (), ns: int = 0, nr: int = 3, nk: int = 0) -> np.ndarray:
     """The layout table [nv, nz, ns, (start, stop) per field, size of the buffer] for nv joints, nz states, ns
-    force set-points and a reference of nr coordinates; the fields in ``absent`` empty."""
+    force set-points, a reference of nr coordinates and nk dictionary keys; the fields in ``absent`` empty."""
     out, at = [nv, nz, ns], 0
     for name, size, _ in LAYOUT:
-        n = 0 if name in absent else size(nv, nz, ns, nr)
+        n = 0 if name in absent else size(nv, nz, ns, nr, nk)
         out += [at, at + n]
         at += n
     return np.array([*out, at], dtype=np.int64)
@@ -120,7 +134,7 @@ def layout_of(nv: int, nz: int, absent: tuple[str, ...] = (), ns: int = 0, nr: i
 def buffer_of(inp: ControlInput, nz: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(buffer, layout) of a readable ControlInput (its None fields absent): the compiled call's inputs, in Python."""
     nv = len(inp.q)
-    absent = tuple(name for name, _, _ in LAYOUT if getattr(inp, name) is None)
+    absent = tuple(name for name, _, _ in LAYOUT if getattr(inp, name, None) is None)
     layout = layout_of(nv, nz, absent, len(inp.force_d), len(inp.x_d) if inp.x_d is not None else 3)
     buffer = np.empty(layout[-1])
     for k, (name, _, _) in enumerate(LAYOUT):
@@ -153,7 +167,7 @@ def control_arrays(buf, lay):
     slices and reshapes cost 0.44 µs); the same arrays, shapes and values."""
     nv = lay[0]
     return ControlArrays(buf[lay[LAYOUT_HEAD]], *(_matrix(buf, lay, k, _COLUMNS[k](nv)) if k in _COLUMNS else
-                                                  _vector(buf, lay, k) for k in range(1, len(LAYOUT))))
+                                                  _vector(buf, lay, k) for k in range(1, len(ControlArrays._fields))))
 
 
 _COLUMNS = {k: cols for k, (_, _, cols) in enumerate(LAYOUT) if callable(cols)}  #: a matrix field -> its columns
@@ -269,6 +283,103 @@ def _declined(cls: type) -> str:
 def params_of(config) -> np.ndarray:
     """The declared parameters' values of a controller's config, in order (the C call's ``params``)."""
     return np.array([value for _, value in config.values], dtype=float)
+
+
+# ---- a declared Python stage: a controller numba cannot compile, called back by the compiled code through ctypes --
+
+@dataclass(frozen=True)
+class InputKeys:
+    """The keys of the readable ControlInput's dictionaries, which the buffer's fields hold by position: what a
+    declared Python stage needs, beyond the buffer, to rebuild that ControlInput (:func:`control_input`)."""
+
+    keys: tuple[str, ...]  #: the "keys" field's rows: per contact its name, then "<contact>.<label>" per chain
+    contacts: tuple[str, ...]  #: the contacts' names (``forces`` lists them first, then the chains; ``touching``)
+    set_points: tuple[str, ...]  #: ``force_d``'s keys: the phase's set-points in order
+    normals: dict = field(compare=False)  #: ``normals`` itself (the system's force directions, as the readable's)
+    uses_forces: bool = False  #: ``surfaces`` and ``touching`` filled (the readable's set_force_inputs)
+
+
+_OPTIONAL = ("gravity", "x_d", "v_d", "a_d", "R_tip", "J_ang", "drift_ang", "tau_contact")  #: None when empty
+
+
+def control_input(buf: np.ndarray, lay: np.ndarray, keys: InputKeys) -> ControlInput:
+    """The readable model's ControlInput (``dynamics._control_input``) of a buffer by its layout table: the same
+    fields, shapes, values and dictionaries (by ``keys``); arrays are views of ``buf``."""
+    fields_at, (at_set, at_rate, at_keys, nk) = _input_plan(lay.tobytes())
+    values = {name: None if shape is None else buf[a:b] if shape == () else buf[a:b].reshape(shape)
+              for name, a, b, shape in fields_at}
+    rows = buf[at_keys:at_keys + KEY_W * nk].reshape(nk, KEY_W)
+    force = dict(zip(keys.keys, rows[:, KEY_FORCE].tolist(), strict=True))
+    forces = {**{name: force[name] for name in keys.contacts}, **{k: f for k, f in force.items()
+                                                                  if k not in keys.contacts}}
+    ns = len(keys.set_points)
+    force_d = dict(zip(keys.set_points, zip(buf[at_set:at_set + ns].tolist(), buf[at_rate:at_rate + ns].tolist(),
+                                            strict=True), strict=True))
+    inp = ControlInput(float(buf[lay[LAYOUT_HEAD]]), forces=forces, force_d=force_d, normals=keys.normals, **values)
+    if keys.uses_forces:
+        inp.surfaces = {k: (row[KEY_P:KEY_P + 3], row[KEY_V:KEY_V + 3]) for k, row in zip(keys.keys, rows, strict=True)}
+        inp.touching = {k: bool(row[KEY_TOUCH]) for k, row in zip(keys.keys, rows, strict=True) if k in keys.contacts}
+    return inp
+
+
+@functools.lru_cache(maxsize=256)
+def _input_plan(layout: bytes) -> tuple:
+    """Per layout table (its bytes): ((name, start, stop, shape: () a vector, None an empty optional field) per
+    ControlInput array field, (where F_d, Ḟ_d and the keys start, the number of keys)): :func:`control_input`'s
+    slices, found once."""
+    lay = np.frombuffer(layout, dtype=np.int64)
+    nv = int(lay[0])
+    out = []
+    for k, (name, _, cols) in enumerate(LAYOUT[1:], start=1):
+        a, b = int(lay[LAYOUT_HEAD + 2 * k]), int(lay[LAYOUT_HEAD + 1 + 2 * k])
+        if name in ControlInput.SET_POINT_ARRAYS or name in PYTHON_STAGE_FIELDS:
+            continue
+        shape = None if a == b and name in _OPTIONAL else ((b - a) // cols(nv), cols(nv)) if callable(cols) else ()
+        out.append((name, a, b, shape))
+    start = {name: int(lay[LAYOUT_HEAD + 2 * FIELD[name]]) for name in ("force_set", "force_rate", "keys")}
+    n_keys = (int(lay[LAYOUT_HEAD + 1 + 2 * FIELD["keys"]]) - start["keys"]) // KEY_W
+    return tuple(out), (start["force_set"], start["force_rate"], start["keys"], n_keys)
+
+
+_CONTROLLER_CTYPE = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
+                                     ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p)
+#: (id of the controller, id of its normals, its keys) -> (the controller, its keys, address, ctypes callback): kept
+#: alive for the process, as the compiled laws are (a packed mode holds the address only)
+_python_stages: dict[tuple, tuple] = {}
+
+
+def python_controller_address(ctl: Controller, keys: InputKeys) -> int:
+    """The address of a C function (``CONTROLLER_SIGNATURE``) running controller ``ctl``'s own Python ``command``
+    (its real ``self``) on the ControlInput the readable model would give (:func:`control_input`): its declared
+    Python stage. τ and ż are written as the readable model writes them (a wrong shape raises there as here); an
+    exception is kept (``laws.abi.python_stage_failed``) and the status is 0, the caller re-raising it."""
+    key = (id(ctl), id(keys.normals), keys)
+    if key in _python_stages:
+        return _python_stages[key][2]
+
+    def command(buffer, layout, params, n_p, tau, zdot):
+        try:
+            lay = _c_array(layout, ctypes.c_int64, LAYOUT_SIZE)
+            nv, nz = int(lay[0]), int(lay[1])
+            buf = _c_array(buffer, ctypes.c_double, int(lay[LAYOUT_SIZE - 1])).copy()  # (the caller's is freed)
+            out, rates = ctl.command(control_input(buf, lay, keys))
+            _c_array(tau, ctypes.c_double, nv)[:] = out
+            if nz:
+                _c_array(zdot, ctypes.c_double, nz)[:] = 0.0 if rates is None else rates
+            return 1
+        except BaseException as exc:  # (ctypes would print it and return 0)
+            python_stage_failed(exc)
+            return 0
+
+    callback = _CONTROLLER_CTYPE(command)
+    address = ctypes.cast(callback, ctypes.c_void_p).value
+    _python_stages[key] = (ctl, keys, address, callback)
+    return address
+
+
+def _c_array(pointer: int, ctype, n: int) -> np.ndarray:
+    """The n values at ``pointer`` as an array over that memory."""
+    return np.frombuffer((ctype * n).from_address(pointer), dtype=ctype) if n else np.empty(0)
 
 
 # ---- the call: its Python twin (by ctypes), and its compiled form by overload ----------------------------------

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...laws.controllers.abi import FIELD, LAYOUT_HEAD
+from ...laws.controllers.abi import FIELD, KEY_FORCE, KEY_P, KEY_TOUCH, KEY_V, KEY_W, LAYOUT_HEAD
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
 from .actuation import abi_buffer, abi_call, carry, drive_command, drives, reference, set_points
@@ -41,6 +41,7 @@ from .pack import (
     I_CONTACTS,
     I_DRIVES,
     I_FOLD,
+    I_KEYS,
     N_CONTACTS,
     N_DRIVES,
     N_FORCES,
@@ -51,6 +52,7 @@ from .pack import (
     R_CARRIER,
     R_DRIVES,
     R_FOLD,
+    R_KEYS,
     READS_FORCES,
     TIP_FRAME,
     W_DIAG,
@@ -59,11 +61,11 @@ from .pack import (
     section,
 )
 
-__all__ = ["controller_terms", "carried_coordinate", "solve_through_drives", "fold_rates"]
+__all__ = ["controller_terms", "key_fields", "carried_coordinate", "solve_through_drives", "fold_rates"]
 
-F_SET, F_RATE, F_DIR, F_READ, F_TAU_C, F_SURFACE_P, F_SURFACE_V, F_TOUCH, F_AD = (
+F_SET, F_RATE, F_DIR, F_READ, F_TAU_C, F_SURFACE_P, F_SURFACE_V, F_TOUCH, F_AD, F_KEYS = (
     FIELD[k] for k in ("force_set", "force_rate", "force_dir", "force_read", "tau_contact", "surface_p", "surface_v",
-                       "touch", "a_d"))
+                       "touch", "a_d", "keys"))
 
 
 @njit(cache=True, inline="always")
@@ -115,6 +117,38 @@ def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
 
 
 @njit(cache=True, inline="always")
+def key_fields(x, ints, reals, work, events, buf, lay):
+    """A declared Python stage's "keys" field (empty for a compiled law): per key of the readable ControlInput's
+    dictionaries (I_KEYS) its measured force before the solve [N] (the contact's normal force, or the tangential
+    chain's interface force), whether its contact touches, its surface point [m] and velocity [m/s]
+    (``dynamics.surface_points``: a chain's anchor shifted by u·offset)."""
+    at, n = _at(lay, np.int64(F_KEYS))
+    nk = n // KEY_W
+    keys, shift = section(ints, ints[I_KEYS], nk, 2), section(reals, ints[R_KEYS], nk, 3)
+    cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
+    for k in range(nk):
+        ci, chain = keys[k, 0], keys[k, 1]
+        row = cs[ci]
+        o = at + KEY_W * k
+        buf[o + KEY_FORCE] = events[EV_W * ci + EV_FN] if chain < 0 else work[ints[W_DIAG] + 1 + chain]
+        buf[o + KEY_TOUCH] = 1.0 if row[CI_TOUCHING] else 0.0
+        p_env, v_env = surface_point(x, ints, row, reals[row[CI_REALS]:])
+        for i in range(3):
+            buf[o + KEY_P + i] = p_env[i] + shift[k, i]
+            buf[o + KEY_V + i] = v_env[i]
+
+
+@njit(cache=True, inline="always")
+def _bump_key_force(ints, buf, lay, ci, by):
+    """+by [N] on the "keys" field's force of contact ci's normal (a Python stage's ``forces[name]``)."""
+    at, n = _at(lay, np.int64(F_KEYS))
+    keys = section(ints, ints[I_KEYS], n // KEY_W, 2)
+    for k in range(n // KEY_W):
+        if keys[k, 0] == ci and keys[k, 1] < 0:
+            buf[at + KEY_W * k + KEY_FORCE] += by
+
+
+@njit(cache=True, inline="always")
 def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
     """B and D: the law's differences per unit force of each row that reaches it (constraints.force_columns)."""
     nv, ns, nr = ints[NV], ints[N_FORCES], ints[N_ROWS]
@@ -134,6 +168,8 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
         for s in range(n_read if ci >= 0 else 0):
             if sp[s] == ci:
                 buf[at_read + s] = read0[s] + 1.0
+        if ci >= 0:
+            _bump_key_force(ints, buf, lay, ci, 1.0)
         for c in range(nv if fed_back else 0):
             buf[at_tc + c] = tc0[c] + C[j, c]
         if abi_call(ints, reals, buf, lay, tau_j, zdot_j) != 1:
@@ -144,6 +180,8 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
             D[i, j] = zdot_j[i] - zdot[i]
         put(buf, at_read, read0)  # (put: no array assignment, see numerics.linalg.put)
         put(buf, at_tc, tc0)
+        if ci >= 0:
+            _bump_key_force(ints, buf, lay, ci, -1.0)
     return True
 
 
@@ -181,6 +219,7 @@ def controller_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C,
     carry(x, ints, reals, x_d, v_d)
     buf, lay = abi_buffer(t, x, ints, reals, H, h, g, FJ[fi], Fa[fi], Fp[fi], Fv[fi], FR[fi], x_d, v_d, a_d)
     _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay)
+    key_fields(x, ints, reals, work, events, buf, lay)
     tau = np.zeros(nv)
     if abi_call(ints, reals, buf, lay, tau, zdot) != 1 or \
             (fold and not _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D)) or \

@@ -22,13 +22,15 @@ its contact's row, a user controller's in the controller section, a drive kind's
 compiled call serves every law. The index constants below are the one place the layout is written; the call
 (:mod:`.pipeline`) reads nothing else.
 
-What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model):
-a user controller numba cannot compile (a declared Python stage would need its whole ``ControlInput``), a robot or
-articulated body ``rigid_body`` does not compute (none the robot loader accepts: every joint it takes is a one-DOF
-revolute or prismatic), an articulated body under another gravity than the robot's. A stage law, friction law or
-drive kind numba cannot compile is packed as a declared Python stage (:func:`python_stages` names them): the
-address of a ctypes callback of its Python function where its cfunc's would be
-(:func:`contactdyn.laws.abi.python_stage_address`, :func:`contactdyn.laws.drive_abi.python_drive_addresses`). A
+What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model): a robot
+or articulated body ``rigid_body`` does not compute (none the robot loader accepts: every joint it takes is a one-DOF
+revolute or prismatic), an articulated body under another gravity than the robot's. A stage law, friction law,
+drive kind or user controller numba cannot compile is packed as a declared Python stage (:func:`python_stages` names
+them): the address of a ctypes callback of its Python function where its cfunc's would be
+(:func:`contactdyn.laws.abi.python_stage_address`, :func:`contactdyn.laws.drive_abi.python_drive_addresses`,
+:func:`contactdyn.laws.controllers.abi.python_controller_address`: the controller's own ``command`` on the
+ControlInput the readable model gives, rebuilt from its buffer, whose "keys" field (I_KEYS) holds what the
+dictionaries need). A
 chain's mass riding a turning surface is packed with its frame (``N_RIDING``): the call adds its coupling to M and
 its bias to f (:func:`.contacts.add_riding`). A force-reading law over a turning surface (a robot frame's or an
 articulated body's) folds as over a fixed one: the surface's rows are the state's (:func:`.contacts.turning_sides`),
@@ -56,7 +58,7 @@ import numpy as np
 
 from ...laws.abi import friction_address, python_friction_address, python_stage_address
 from ...laws.controllers import Controller
-from ...laws.controllers.abi import controller_address, layout_of, params_of
+from ...laws.controllers.abi import InputKeys, controller_address, layout_of, params_of, python_controller_address
 from ...laws.controllers.sampled import SampledController
 from ...laws.controllers.voltage import ConstantVoltage
 from ...laws.friction_laws import FRICTION_LAWS
@@ -70,7 +72,8 @@ from ..friction import launching
 from .control_laws import JOINT_DYNAMIC, kind_address
 from .drives import DW_W, drive_table, python_drives
 
-__all__ = ["Packed", "pack", "unsupported", "python_stages", "section", "diag_starts", "set_slip_references"]
+__all__ = ["Packed", "pack", "unsupported", "python_stages", "python_controller", "section", "diag_starts",
+           "set_slip_references"]
 
 # ---- the header of ``ints``: sizes, switches, then where each section starts -------------------------------------
 (NV, NQ, NY, NX, N_DRIVES, N_FRAMES, N_CONTACTS, N_CHAINS, N_ROWS, N_LIMITS, N_SERVOS, TIP_FRAME, CTL_KIND,
@@ -80,7 +83,7 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "section", "diag_st
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
  N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, A_CALL, A_CONTROLLER, A_SOLVE,
  A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, NF, N_CHARTS, I_CHARTS, R_FRAMES_B,
- N_RIDING, I_RIDING, R_RIDING, W_LEAST_SQUARES, HEADER) = range(80)
+ N_RIDING, I_RIDING, R_RIDING, W_LEAST_SQUARES, I_KEYS, R_KEYS, HEADER) = range(82)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
 #: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
@@ -96,7 +99,11 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "section", "diag_st
 #: N_RIDING: the chain masses riding turning surfaces (``contact.RidingMass``), I_RIDING their ints (RI_*), R_RIDING
 #: their reals (RR_*)
 #: W_LEAST_SQUARES: the slot of ``work`` counting the calls whose KKT matrix was singular (solved by the minimum-norm
-#: least squares, :func:`.kkt.solve_linear`: the readable model's ``Evaluation.regular = False``), since the packing
+#: least squares, :func:`.kkt.solve_linear`: the readable model's ``Evaluation.regular = False``) since the packing
+#: I_KEYS: per key of the readable ControlInput's dictionaries (``dynamics.surface_keys``: per contact, then its
+#: tangential chains) its contact and its chain (-1: the contact's normal); R_KEYS: per key the shift of its surface
+#: point from the contact's [m] (u·offset: a tangential chain's anchor). A declared Python stage's "keys" field
+#: (:func:`.force_fold.key_fields`)
 #: ``reals``' first slots
 RH_OMEGA, RH_SLIP_BAND, RH_SIZE = 0, 1, 2
 #: controller kinds: none (τ = 0), the task PD law compiled in, a controller called by its address (its ABI)
@@ -197,20 +204,17 @@ class Packed:
 
 def unsupported(system, modes, phase) -> str:
     """Why the compiled call cannot pack (modes, phase) ("" when it can): the mode then runs on the readable model."""
-    ctl = phase.controller
     if reason := _bodies_unsupported(system, phase):
         return reason
     if system.robot.rigid_table is None:
         return "a robot rigid_body does not compute (its terms would be copied in from Pinocchio)"
-    if not isinstance(ctl, SampledController) and (reason := _controller_unsupported(ctl)):
-        return reason
     return ""
 
 
 def python_stages(system, modes, phase) -> list[str]:
-    """The laws of (modes, phase) numba cannot compile (stage, friction, drive kinds), each run in the compiled call
-    as a declared Python stage (called back through ctypes, :func:`contactdyn.laws.abi.python_stage_address`), named
-    with numba's reason."""
+    """The laws of (modes, phase) numba cannot compile (stage, friction, drive kinds, the controller), each run in the
+    compiled call as a declared Python stage (called back through ctypes,
+    :func:`contactdyn.laws.abi.python_stage_address`), named with numba's reason."""
     out = []
     for c, m in zip(system.contacts, modes, strict=True):
         for dc in c.chains:
@@ -222,6 +226,9 @@ def python_stages(system, modes, phase) -> list[str]:
             law = FRICTION_LAWS[fr.law]
             if not friction_address(law):
                 out.append(f"friction law {fr.law!r} of {c.name} is a Python stage ({law.compiled_reason})")
+    ctl = phase.controller
+    if python_controller(ctl):
+        out.append(f"controller {ctl.name!r} is a Python stage ({type(ctl).compiled_reason})")
     return list(dict.fromkeys(out + python_drives(system)))
 
 
@@ -243,13 +250,12 @@ DYNAMIC_LAWS = COMPILED_IN[2:5]
 BY_ADDRESS = COMPILED_IN[1:5]  #: built-in laws of the controller ABI's shape, called by address (control_laws)
 
 
-def _controller_unsupported(ctl) -> str:
-    """Why the phase's (not sampled) controller cannot run on the pipeline ("" when it can): a user's law that does
-    not compile. (Voltages [V] go to the drives as a torque command does, ``drives.drive_table``; a joint-space
-    reference fills the ABI's x_d, v_d, a_d with its nv coordinates.)"""
-    if ctl.name not in COMPILED_IN and not isinstance(ctl, ConstantVoltage) and not _addressable(type(ctl)):
-        return f"controller {ctl.name!r}: {type(ctl).compiled_reason}"
-    return ""
+def python_controller(ctl) -> bool:
+    """Is the phase's controller a user's law numba cannot compile (its reason in ``compiled_reason``), run in the
+    compiled call as a declared Python stage (:func:`contactdyn.laws.controllers.abi.python_controller_address`)?
+    (A sampled law's runs between samples in Python; the kinds compiled in and constant voltages are not the ABI's.)"""
+    return not isinstance(ctl, (SampledController, ConstantVoltage)) and ctl.name not in COMPILED_IN and \
+        not _addressable(type(ctl))
 
 
 def _addressable(cls: type) -> bool:
@@ -577,16 +583,24 @@ def _controller(b: _Builder, system, phase) -> None:
                        [ff, *f, *rate, start, ramp, *amp, freq, *ph, float(osc)])
         b.int_section(I_LAYOUT, ())
         return
+    in_python = python_controller(ctl)  # its declared Python stage reads what the readable ControlInput has
     absent = (*(("gravity",) if not ctl.needs_gravity else ()),
               *(("x_d", "v_d", "a_d") if phase.reference is None else ()),
-              *(("R_tip", "J_ang", "drift_ang") if not ctl.reads_orientation else ()),
+              *(("R_tip", "J_ang", "drift_ang") if not (ctl.reads_orientation or in_python) else ()),
               *(("tau_contact", "surface_p", "surface_v", "touch") if not ctl.uses_forces else ()))
     h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
     dims = len(phase.reference.start) if phase.reference is not None else 3  # (3: x_d absent, its size unread)
-    b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces), dims))
+    keys = _key_names(system)
+    b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces), dims,
+                                      len(keys) if in_python else 0))
     h[CTL_KIND] = CTL_ABI
     cls = type(ctl)
-    if ctl.name == "position_dynamic" and ctl.config.space == "joint":  # A7 in joint space (its own kind)
+    if in_python:
+        h[CTL_ADDRESS] = python_controller_address(ctl, InputKeys(
+            tuple(keys), tuple(c.name for c in system.contacts), tuple(phase.forces), system.force_directions,
+            ctl.uses_forces))
+        params = np.zeros(0)
+    elif ctl.name == "position_dynamic" and ctl.config.space == "joint":  # A7 in joint space (its own kind)
         h[CTL_ADDRESS] = kind_address(JOINT_DYNAMIC)
         params = np.array([*ctl.joint_gains[0], *ctl.joint_gains[1], *ctl._rotor])
     elif ctl.name in BY_ADDRESS:  # a built-in law of the ABI's shape (control_laws), its constants the params
@@ -598,6 +612,12 @@ def _controller(b: _Builder, system, phase) -> None:
         params = params_of(ctl.config)
     h[N_CTL_PARAMS] = params.size
     b.real_section(R_CTL, params)
+
+
+def _key_names(system) -> list[str]:
+    """The keys of the readable ControlInput's dictionaries, I_KEYS' order: per contact its name, then
+    "<contact>.<label>" per tangential chain (``dynamics.surface_keys``)."""
+    return [key for c in system.contacts for key in (c.name, *(f"{c.name}.{dc.label}" for dc in c.tangent_chains))]
 
 
 def _drives(b: _Builder, system, phase) -> None:
@@ -656,6 +676,10 @@ def _fold(b: _Builder, system, modes, phase, meta: list[tuple[str, str, int]]) -
     b.int_section(I_FOLD, [*(names.index(key) if key in names else -1 for key in phase.forces),
                            *(names.index(owner) if kind == "n" else -1 for owner, kind, _ in meta), *chain, *owner])
     b.real_section(R_FOLD, shift)
+    keys = [(ci, int(first[ci]) + 1 + i if i >= 0 else -1, c.tangent_chains[i].u * modes[ci].offsets[i] if i >= 0
+             else np.zeros(3)) for ci, c in enumerate(system.contacts) for i in range(-1, len(c.tangent_chains))]
+    b.int_section(I_KEYS, [v for ci, chain_at, _ in keys for v in (ci, chain_at)])  # (dynamics.surface_keys' order)
+    b.real_section(R_KEYS, [v for _, _, shift_k in keys for v in shift_k])
 
 
 #: handle -> controller class: the controller's Python ``command`` under NUMBA_DISABLE_JIT (the address's twin)
