@@ -84,12 +84,13 @@ def test_a_bad_carrier_names_the_key(reference, match):
 
 
 def test_a_tangential_force_reference_needs_a_tangential_chain():
-    """force_reference presses F_d/k beyond a tangential chain's anchor; a friction tangent has none."""
+    """force_reference presses F_d/k beyond a tangential chain's anchor; a friction tangent has none (the scene
+    reader refuses any tangential set-point there)."""
     p0 = tip0()
     d = doc([{"name": "main", "reference": {"start": p0.tolist()}, "force": [{"contact": "c", "direction": "t1",
                                                                                "value": 10.0}]}],
             {"kind": "position_dynamic", "force_reference": True})
     d["contact"] = {"c": {"point": p0.tolist(), "normal": {"direction": [0, 0, 1], "model": "c", "k": 1e4},
                           "tangent": {"model": "friction", "directions": [[1, 0, 0]], "mu": 0.3}}}
-    with pytest.raises(SceneError, match=r"phase\[0\]\.force.*tangential chain.*'friction'"):
+    with pytest.raises(SceneError, match=r"phase\[0\]\.force\[0\]\.direction.*chain force.*'friction'"):
         simulate(parse_scene(d))

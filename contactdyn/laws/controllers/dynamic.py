@@ -219,11 +219,7 @@ def _contact_checks(context: BindContext, names: list[str], need_exact: bool, no
 def _tangent_nominal(context: BindContext, force, nominal) -> NominalEnvironment:
     """The nominal stiffness along a tangential set-point: ``nominal``, or the tangential chain's series k."""
     scene, key = context.scene, context.key
-    spec = scene.contacts[force.contact]
-    if spec.tangent_chain is None:
-        raise SceneError(f"phase[{context.index}].force", f"a tangential set-point on a contact with a tangential "
-                         f"chain (force_reference presses it F_d/k beyond its anchor); contact {force.contact!r} has",
-                         f"tangent.model = {spec.tangent_model!r}", scene.file)
+    spec = scene.contacts[force.contact]  # (a tangential set-point has a chain: the scene reader asks for it)
     if nominal is not None:
         return nominal
     env, _ = nominal_from_chain(spec.tangent_chain)
