@@ -11,9 +11,9 @@ namespace, a copy in which every function of the package is again its twin. So `
 ``call`` and everything it reaches as plain Python, nothing compiled, the real modules untouched (the compiled
 path in the same process is unaffected). Two exceptions:
 
-- the **leaves** (:data:`LEAVES`: the rigid-body algorithms of :mod:`contactdyn.robot.rigid_body`, most of an
-  interpreted call's time, self-contained and robot-independent) stay numba dispatchers: compiled once per
-  install (seconds, cached), called from the twins;
+- the **leaves** (:data:`LEAVES`: the rigid-body algorithms of :mod:`contactdyn.robot.rigid_body` and the dense
+  linear algebra of :mod:`.linalg`, most of an interpreted call's time, self-contained and the same for every
+  scene) stay numba dispatchers: compiled once per install (seconds, cached), called from the twins;
 - the **handle tables**: interpreted, a stage reached by address (:mod:`.native_call`, the laws' ABIs, the
   controllers) is a *handle* (the Python function's id, given by the address functions while
   :func:`.native_call.giving_handles` is on: the mode is packed that way), looked up in a table; in the shadows
@@ -40,9 +40,12 @@ from numba.core.dispatcher import Dispatcher
 __all__ = ["Twins", "LEAVES"]
 
 PACKAGE = "contactdyn."
-#: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms
-LEAVES = frozenset(f"contactdyn.robot.rigid_body.{n}" for n in
-                   ("_kinematics", "_nonlinear", "_jacobians", "_inertia", "frame_motion_into"))
+#: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms and the dense
+#: linear algebra (numerics.linalg)
+LEAVES = frozenset([*(f"contactdyn.robot.rigid_body.{n}" for n in
+                      ("_kinematics", "_nonlinear", "_jacobians", "_inertia", "frame_motion_into")),
+                    *(f"contactdyn.numerics.linalg.{n}" for n in
+                      ("mv", "mtv", "mm", "mtm", "lu_solve", "cholesky", "forward_solve", "pinv", "put"))])
 #: module -> its tables handle -> Python function (or controller class) that must give twins
 HANDLE_TABLES = {
     "contactdyn.numerics.native_call": ("_HANDLES",),
