@@ -60,7 +60,7 @@ from ..numerics.integrators import (
     stability_bound,
 )
 from ..numerics.notice import compiling
-from ..numerics.twins import Twins
+from ..numerics.twins import Twins, running
 from ..output.channels import Held, Segment, output_grid, sample_states
 from ..output.physics_checks import StartAudit, run_checks, violations
 from ..output.result import Result
@@ -152,7 +152,8 @@ class HybridRun:
         """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
         gc.freeze()  # the ~1e5 objects made before (modules, compiled code) out of the collector's scans meanwhile
         try:
-            return self._run(wall0)
+            with running(self.pipelines.twins):  # (interpreted: the readable helpers the loop calls too, twins.current)
+                return self._run(wall0)
         except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
             raise SimulationError(_over_budget(self, *_spent_at(self), calls=True)) from None
         except (*numerical_errors(), ZeroDivisionError) as exc:

@@ -7,7 +7,8 @@ in this process where numba is on, while the compiled code is built in the backg
 How. A numba function keeps its Python source as ``py_func``; its globals are its module's namespace, where the
 functions it calls are numba dispatchers (called from Python, a dispatcher compiles). :class:`Twins` makes the
 *twin* of a function of the package: the same code object with its globals rebound to a *shadow* of its module's
-namespace, a copy in which every function of the package is again its twin. So ``Twins().of(call)(...)`` runs
+namespace, a copy in which every function of the package is again its twin (and every module of the package its
+shadow). So ``Twins().of(call)(...)`` runs
 ``call`` and everything it reaches as plain Python, nothing compiled, the real modules untouched (the compiled
 path in the same process is unaffected). Two exceptions:
 
@@ -24,20 +25,25 @@ operations): a run on the twins gives the compiled run's outputs bit for bit (``
 Where it is used: :class:`contactdyn.model.pipeline.pipeline.Pipeline` (``twins=``: the mode packed with handles,
 its call and the loop's compiled steps and samples run as twins, :meth:`~.pipeline.Pipeline.of`).
 
+Outside the pipeline, the loop's Python calls a few numba functions of the readable model's (a transition's
+velocity projection calls the chains' ``chain_call``): such a call site asks :func:`current` for the function, its
+twin while an interpreted run runs (:func:`running`, around ``HybridRun.run``), so a first run compiles none of it.
+
 Not twinned (run as they are, so they compile if they are numba functions): methods of classes, a function held in
 a closure cell, a default argument or a container other than the handle tables below; the tests check that an
-interpreted run compiles the leaves only.
+interpreted run compiles the leaves only (and the integrator's dense-output polynomials).
 """
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import types
 from collections.abc import Mapping
 
 from numba.core.dispatcher import Dispatcher
 
-__all__ = ["Twins", "LEAVES"]
+__all__ = ["Twins", "LEAVES", "current", "running"]
 
 PACKAGE = "contactdyn."
 #: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms and the dense
@@ -94,6 +100,8 @@ class Twins:
         got = self.made.get(id(value))
         if got is not None:
             return got
+        if isinstance(value, types.ModuleType):  # (``module.function(...)``: the module's shadow)
+            return self._module(value)
         python = value.py_func if isinstance(value, Dispatcher) else value
         if not isinstance(python, types.FunctionType):
             return value
@@ -112,6 +120,17 @@ class Twins:
         self.keep.append(value)  # (its id stays its own)
         return twin
 
+    def _module(self, module: types.ModuleType):
+        """A module of the package as its shadow (a module object whose namespace is the shadow); others as they are."""
+        name = module.__name__
+        if not name.startswith(PACKAGE) or sys.modules.get(name) is not module:
+            return module
+        twin = types.ModuleType(name)
+        self.made[id(module)] = twin
+        self.keep.append(module)
+        twin.__dict__.update(self._shadow(name))
+        return twin
+
     def _shadow(self, module: str) -> dict:
         """The shadow of ``module``'s namespace: its functions' twins, its handle tables through :class:`_TwinMap`."""
         shadow = self.shadows.get(module)
@@ -123,3 +142,25 @@ class Twins:
             for name in HANDLE_TABLES.get(module, ()):
                 shadow[name] = _TwinMap(original[name], self)
         return shadow
+
+
+_RUNNING: list[Twins] = []  #: the twins of the interpreted run in progress (innermost last)
+
+
+def current(function):
+    """``function`` (of the package, called from Python outside the pipeline) as the run in progress runs it: its
+    twin during an interpreted run (:func:`running`), else itself."""
+    return _RUNNING[-1].of(function) if _RUNNING else function
+
+
+@contextlib.contextmanager
+def running(twins: Twins | None):
+    """An interpreted run with ``twins`` runs meanwhile (None: a compiled or readable one, nothing changes)."""
+    if twins is None:
+        yield
+        return
+    _RUNNING.append(twins)
+    try:
+        yield
+    finally:
+        _RUNNING.pop()
