@@ -8,9 +8,8 @@ How. A numba function keeps its Python source as ``py_func``; its globals are it
 functions it calls are numba dispatchers (called from Python, a dispatcher compiles). :class:`Twins` makes the
 *twin* of a function of the package: the same code object with its globals rebound to a *shadow* of its module's
 namespace, a copy in which every function of the package is again its twin (and every module of the package its
-shadow). So ``Twins().of(call)(...)`` runs
-``call`` and everything it reaches as plain Python, nothing compiled, the real modules untouched (the compiled
-path in the same process is unaffected). Two exceptions:
+shadow). So ``Twins().of(call)(...)`` runs ``call`` and everything it reaches as plain Python, nothing compiled,
+the real modules untouched (the compiled path in the same process is unaffected). Two exceptions:
 
 - the **leaves** (:data:`LEAVES`: the rigid-body algorithms of :mod:`contactdyn.robot.rigid_body` and the dense
   linear algebra of :mod:`.linalg`, most of an interpreted call's time, self-contained and the same for every
@@ -20,8 +19,9 @@ path in the same process is unaffected). Two exceptions:
   :func:`.native_call.giving_handles` is on: the mode is packed that way), looked up in a table; in the shadows
   those tables are seen through :class:`_TwinMap`, so a handle gives the twin.
 
-The arithmetic is the compiled call's, operation for operation (numba does not reorder or fuse float
-operations): a run on the twins gives the compiled run's outputs bit for bit (``tests/test_interpreted_run.py``).
+The arithmetic is the compiled call's, operation for operation (no fastmath: numba keeps the float operations and
+their order): a run on the twins gives the compiled run's outputs bit for bit (``tests/test_interpreted_run.py``,
+``benchmarks/compare_outputs.py --interpreted``).
 Where it is used: :class:`contactdyn.model.pipeline.pipeline.Pipeline` (``twins=``: the mode packed with handles,
 its call and the loop's compiled steps and samples run as twins, :meth:`~.pipeline.Pipeline.of`).
 
