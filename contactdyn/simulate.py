@@ -56,7 +56,7 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None,
     if progress:
         loop.progress = Progress(scene.name, scene.duration)
     if interpreted:
-        about = notice.about("the few leaves the interpreted call runs compiled (the rigid-body algorithms)")
+        about = notice.about("the leaves the interpreted call runs compiled (rigid-body algorithms, linear algebra)")
     else:
         about = nullcontext() if compiled else notice.about("the arithmetic the readable model shares with the "
                                                              "compiled call")
