@@ -4,6 +4,7 @@ it compiles nothing but its leaves (numba's compile events), and the readable mo
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,20 @@ class _Compiles(event.Listener):
 
     def on_end(self, e) -> None:
         pass
+
+
+@pytest.fixture(autouse=True)
+def user_laws(fresh_user_imports):
+    """The examples' law modules imported afresh, the registries (stage laws, drive kinds, controllers) left as they
+    were (conftest's fresh_user_imports)."""
+    from contactdyn.laws.controllers import CONTROLLERS
+
+    controllers = dict(CONTROLLERS)
+    yield
+    for module in ("cubic_stage", "my_laws", "force_law"):
+        sys.modules.pop(module, None)
+    CONTROLLERS.clear()
+    CONTROLLERS.update(controllers)
 
 
 def _same(interpreted, compiled) -> None:
