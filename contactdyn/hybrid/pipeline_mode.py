@@ -76,9 +76,7 @@ class PipelineMode:
     def __init__(self, pipe: Pipeline):
         self.pipe, self.system, self.modes, self.phase = pipe, pipe.system, pipe.modes, pipe.phase
         self.interpreted = pipe.twins is not None  #: the pipeline's functions run as their twins
-        of = pipe.of
-        self._samples_at, self._sample_terms, self._stepper = of(samples_at), of(sample_terms), of(stepper)
-        self._diag_starts = of(diag_starts)
+        of = pipe.of  # (the module's functions looked up at each use: a test replaces one)
         call_ = of(call)
         self.reason = "; ".join(pipe.python_stages)  #: its declared Python stages ("": none)
         self.ring: deque[tuple] = deque([_NO_CALL] * 4, maxlen=4)  #: the last four calls' (t, x, events)
@@ -97,7 +95,7 @@ class PipelineMode:
             ring.append((t, x, events.copy()))
             return xdot
 
-        rhs.step = self._stepper(p, ring)
+        rhs.step = self.pipe.of(stepper)(p, ring)
         rhs.derivatives = of(derivatives)(p, rhs)
         self.rhs = rhs
         self.nt = [len(c.tangents) if c.friction is not None else 0 for c in system.contacts]
@@ -108,7 +106,7 @@ class PipelineMode:
     def watched_step(self, on_stage):
         """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
         slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`)."""
-        step = self._stepper(self.pipe.packed, self.ring, on_stage)
+        step = self.pipe.of(stepper)(self.pipe.packed, self.ring, on_stage)
         return step
 
     @property
@@ -198,13 +196,13 @@ class PipelineMode:
         there (a singular KKT matrix, a law that gave no force: the readable model answers)."""
         p, system = self.pipe.packed, self.system
         X = np.ascontiguousarray(x, dtype=float)[None, :]
-        Xd, E, W, done = self._samples_at(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
+        Xd, E, W, done = self.pipe.of(samples_at)(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
         if done == 0:
             self.pipe.readable_calls += 1
             return None
         S = Samples(1, system)
         self._read_out(S, E, W, X)
-        e, at = E[0], self._diag_starts(p.ints)
+        e, at = E[0], self.pipe.of(diag_starts)(p.ints)
         at_limit, at_held, _ = p.joint_event_starts()
         named = [(c.name, nt) for c, nt in zip(system.contacts, self.nt, strict=True)]
         return Evaluation(
@@ -229,7 +227,7 @@ class PipelineMode:
             self.use(modes)
         p, system = self.pipe.packed, self.system
         ts, X = np.ascontiguousarray(ts, dtype=float), np.ascontiguousarray(X, dtype=float)
-        _, E, W, done = self._samples_at(ts, X, p.ints, p.reals, p.work, p.events)
+        _, E, W, done = self.pipe.of(samples_at)(ts, X, p.ints, p.reals, p.work, p.events)
         if done < len(ts) and runs is not None and len(runs) > 1:
             ends = np.cumsum(runs)
             return Samples.concatenate([self.samples(ts[e - n:e], X[e - n:e]) for n, e in zip(runs, ends, strict=True)],
@@ -248,14 +246,14 @@ class PipelineMode:
         compiled call with the diagnostics on (as an output sample's); None where the call declines there (the
         readable model measures)."""
         p, system = self.pipe.packed, self.system
-        Xd, E, W, done = self._samples_at(np.array([float(t)]), np.ascontiguousarray(x, dtype=float)[None, :],
+        Xd, E, W, done = self.pipe.of(samples_at)(np.array([float(t)]), np.ascontiguousarray(x, dtype=float)[None, :],
                                           p.ints, p.reals, p.work, p.events)
         if done == 0:
             raise_python_stage_error()
             self.pipe.readable_calls += 1
             return None
         e, w = E[0], W[0]
-        at = self._diag_starts(p.ints)[D_TC]
+        at = self.pipe.of(diag_starts)(p.ints)[D_TC]
         i_b = self.phase.carrier[0] if self.phase.carrier is not None else -1
         return Measurement({c.name: float(e[EV_W * ci + EV_FN]) for ci, c in enumerate(system.contacts)},
                            {key: float(w[k]) for key, k in self._ifaces}, w[at:at + system.nv].copy(),
@@ -265,7 +263,7 @@ class PipelineMode:
         """What the sampled phase's law reads of the robot and the phase at (t [s], x) besides the forces
         (:class:`~contactdyn.model.dynamics.SampleTerms`), by the call's own stages in one compiled call."""
         p, phase = self.pipe.packed, self.phase
-        H, h, g, J6, a6, p_tip, v_tip, R, x_d, v_d, a_d, F_d, rate = self._sample_terms(
+        H, h, g, J6, a6, p_tip, v_tip, R, x_d, v_d, a_d, F_d, rate = self.pipe.of(sample_terms)(
             float(t), x, p.ints, p.reals, int(phase.controller.inner.needs_gravity))
         ref = phase.reference is not None
         return SampleTerms(H, h, g if g.size else None, p_tip, v_tip, J6[:3], a6[:3], R, J6[3:], a6[3:],
@@ -275,7 +273,7 @@ class PipelineMode:
     def _interface_table(self) -> list[tuple[str, int]]:
         """Per tangential chain ("contact.t1") where its interface force is in ``work``: its bond's λ while bonded,
         else the chain's own (pack's order)."""
-        ints, at, k, out = self.pipe.packed.ints, self._diag_starts(self.pipe.packed.ints), 0, []
+        ints, at, k, out = self.pipe.packed.ints, self.pipe.of(diag_starts)(self.pipe.packed.ints), 0, []
         rows = {meta: r for r, meta in enumerate(self.pipe.packed.row_meta)}
         for c in self.system.contacts:
             for i, dc in enumerate(c.chains):
@@ -313,7 +311,7 @@ class PipelineMode:
         if n == 0:
             return
         ints, nv = p.ints, system.nv
-        at = self._diag_starts(ints)
+        at = self.pipe.of(diag_starts)(ints)
         S.tau[:n] = W[:, at[D_TAU]:at[D_TAU] + nv]
         S.body_force[:n] = W[:, at[D_TAU] + nv:at[D_CMD]]
         S.tau_cmd[:n] = W[:, at[D_CMD]:at[D_CMD] + nv]
