@@ -1,7 +1,7 @@
 """Save every scene's outputs, or compare a run against outputs saved before a change.
 
     python benchmarks/compare_outputs.py save DIR [SCENE ...]
-    python benchmarks/compare_outputs.py compare DIR [SCENE ...] [--rtol 1e-12]
+    python benchmarks/compare_outputs.py compare DIR [SCENE ...] [--rtol 1e-12] [--interpreted]
 
 Runs every scene in ``sims/`` and ``benchmarks/hard/``, plus the extra settings that
 ``benchmarks/hard_cases.py`` runs (``stiff_1e10``, ``grazing_first_touch``), each at its
@@ -13,7 +13,9 @@ largest relative difference over all channels,
 
 (NaN equal to NaN), and checks that the events (kind, name, time) and impacts are the same
 (times to the same relative tolerance). Exit 1 if any scene differs by more than ``--rtol``
-or a scene fails to run. Refactors of the model must keep every scene within 1e-12.
+or a scene fails to run. Refactors of the model must keep every scene within 1e-12. ``--interpreted``: the runs take
+the compiled call's functions interpreted (:mod:`contactdyn.numerics.twins`, a scene kind's first run): against
+outputs saved on the compiled call, what the first run gives that a later one would not.
 """
 
 from __future__ import annotations
@@ -28,10 +30,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
 
+from contactdyn.hybrid.loop import HybridRun  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
 from contactdyn.output.result import jsonable  # noqa: E402
 from contactdyn.scene.scene_file import load_scene, sims_dir  # noqa: E402
-from contactdyn.simulate import run_system  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 EXTRA = {  # the settings benchmarks/hard_cases.py runs beyond the scenes' own
@@ -51,9 +53,9 @@ def cases() -> dict[str, tuple[object, dict]]:
     return out
 
 
-def run_case(scene, overrides: dict) -> tuple[dict[str, np.ndarray], dict]:
-    """(channels, {"events", "impacts"}) of one run."""
-    result = run_system(System(load_scene(scene, overrides)))
+def run_case(scene, overrides: dict, interpreted: bool = False) -> tuple[dict[str, np.ndarray], dict]:
+    """(channels, {"events", "impacts"}) of one run (``interpreted``: on the interpreted call)."""
+    result = HybridRun(System(load_scene(scene, overrides)), interpreted=interpreted).run(time.perf_counter())
     return dict(result.channels), {"events": result.events, "impacts": result.impacts}
 
 
@@ -135,6 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("dir", type=Path)
     ap.add_argument("scenes", nargs="*", help="subset of case names (default: all)")
     ap.add_argument("--rtol", type=float, default=1e-12)
+    ap.add_argument("--interpreted", action="store_true", help="run on the interpreted call (numerics.twins)")
     args = ap.parse_args(argv)
     todo = cases()
     names = args.scenes or list(todo)
@@ -149,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
         scene, overrides = todo[name]
         t0 = time.perf_counter()
         try:
-            channels, doc = run_case(scene, overrides)
+            channels, doc = run_case(scene, overrides, args.interpreted)
         except Exception as exc:  # report and go on: a broken scene must not hide the others
             print(f"{name:32s} FAILED: {type(exc).__name__}: {exc}")
             failed += 1

@@ -1,18 +1,21 @@
 """The first run of a fresh install against a later one: `contactdyn run SCENE` with an empty cache, then warm.
 
 For each scene (default: b1, then every other ``sims/*.toml``) fresh processes run
-``contactdyn run SCENE --quiet`` (no plots, no viewer, nothing saved; the working directory a
+``contactdyn run SCENE --json`` (no plots, no viewer, nothing saved; the working directory a
 temporary folder; the default path ``auto``, contactdyn.first_run), all with ``NUMBA_CACHE_DIR`` pointing at
-one new empty folder (what a fresh ``pip install .`` meets: nothing compiled): the first (the readable model;
-it starts the background build), one right after it (``during``: the build still runs, so the readable model
-again), then, once the build ended (``build``: seconds waited for it after the second run), a later one (the
-compiled call, its code loaded from the cache). ``--compiled-first``: also a first run with ``--path compiled``
-in another empty folder (compiling in the foreground: what every first run cost before).
+one new empty folder (what a fresh ``pip install .`` meets: nothing compiled): the first (the compiled call's
+functions interpreted, :mod:`contactdyn.numerics.twins`, compiling only its leaves, the rigid-body algorithms and
+the dense linear algebra; it starts the background build), one right after it (``during``: the build still runs,
+so interpreted again, its leaves cached), then, once the build ended (``build``: seconds waited for it after the
+second run), a later one (the compiled call, its code loaded from the cache). ``--compiled-first``: also a first
+run with ``--path compiled`` in another empty folder (compiling in the foreground: what every first run cost
+before).
 Each wall time [s] is measured around the whole process (interpreter start, imports,
 compilation or cache loading, the run), and so is its CPU time [s] (user + system: what the process
 itself spent, less inflated by other load on a shared machine). Also: ``contactdyn --help`` (the console script's call,
 ``contactdyn.cli.main``), median of ``--help-repeats`` processes [s], and whether the first run
-printed the compile notice (a stderr line containing "compiling").
+printed the compile notice (a stderr line containing "compiling"), and which path each run took (``paths``:
+the first and the later run's ``Result.stats["paths"]``, from ``--json``).
 
 The processes run this checkout's package (``PYTHONPATH`` = the checkout). The 1-minute load
 average before each run is recorded: on a shared machine a load above the core count means the
@@ -67,11 +70,20 @@ def _children_cpu() -> float:
 
 
 def timed(args: list[str], cache: str | None, cwd: str) -> tuple[float, float, int, str]:
-    """(wall [s], CPU [s], exit code, stderr) of one ``python3 ARGS`` process."""
+    """(wall [s], CPU [s], exit code, stderr) of one ``python3 ARGS`` process (its stdout in ``timed.out``)."""
     t0, c0 = time.perf_counter(), _children_cpu()
     done = subprocess.run([sys.executable, *args], cwd=cwd, env=_environment(cache), capture_output=True, text=True,
                           timeout=TIMEOUT)
+    timed.out = done.stdout
     return time.perf_counter() - t0, _children_cpu() - c0, done.returncode, done.stderr
+
+
+def _paths() -> list[str]:
+    """The paths the last timed ``run --json`` took (``Result.stats["paths"]``), sorted."""
+    try:
+        return sorted({row["path"] for row in json.loads(timed.out)["stats"]["paths"].values()})
+    except (ValueError, KeyError, TypeError):
+        return []
 
 
 def _wait_for_build(cache: str) -> tuple[float, bool]:
@@ -91,13 +103,15 @@ def scene_row(scene: str, work: str, compiled_first: bool) -> dict:
     path = ROOT / "sims" / f"{scene}.toml"
     path = path if path.is_file() else ROOT / scene  # a scene name of sims/, or a path in the checkout
     target = str(path) if path.is_file() else scene
-    args = ["-m", "contactdyn.cli", "run", target, "--quiet"]
+    args = ["-m", "contactdyn.cli", "run", target, "--json"]
     row: dict = {"scene": scene, "load_before": round(os.getloadavg()[0], 2)}
     with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
         first, first_cpu, rc1, err1 = timed(args, cache, work)
+        first_paths = _paths()
         during, during_cpu, rc2, _ = timed(args, cache, work)
         build_s, marked = _wait_for_build(cache)
         later, later_cpu, rc3, err3 = timed(args, cache, work)
+        row["paths"] = [first_paths, _paths()]
     row.update(first_s=round(first, 2), first_cpu_s=round(first_cpu, 2), during_s=round(during, 2),
                build_wait_s=round(build_s, 1), built=marked, later_s=round(later, 2), later_cpu_s=round(later_cpu, 2),
                notice="compiling" in err1, exit_codes=[rc1, rc2, rc3], stderr_first=err1.strip()[-400:],
@@ -137,7 +151,7 @@ def main() -> None:
             flag = "" if not any(row["exit_codes"]) else f"  exit codes {row['exit_codes']}: {row['stderr_first']}"
             print(f"{scene:24s} " + " ".join(f"{row.get(k, float('nan')):12.2f}" for k in (
                 "first_s", "during_s", "build_wait_s", "later_s", "first_cpu_s", "later_cpu_s", "compiled_first_s"))
-                + f"  {str(row['built']):5s}  {row['load_before']:.2f}{flag}", flush=True)
+                + f"  {str(row['built']):5s}  {row['load_before']:.2f}  {row['paths']}{flag}", flush=True)
     OUT.mkdir(parents=True, exist_ok=True)
     doc = {"help": helps, "scenes": rows, "cpus": os.cpu_count(), "python": platform.python_version(),
            "git": subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,

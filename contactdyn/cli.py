@@ -188,7 +188,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .first_run import build_in_background, choose, default_path, mark_built
 
     choice = choose(scene, args.path or default_path())
-    result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled)
+    result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled,
+                               interpreted=choice.interpreted)
     if choice.compiled:
         mark_built(scene)
     building = choice.build and build_in_background(scene)
@@ -245,7 +246,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _simulate_quietly(simulate, scene, progress: bool = True, compiled: bool = True):
+def _simulate_quietly(simulate, scene, progress: bool = True, compiled: bool = True, interpreted: bool = False):
     """Simulate without Python's own warning lines (the command prints the sanity and check warnings itself)."""
     import warnings
 
@@ -255,7 +256,7 @@ def _simulate_quietly(simulate, scene, progress: bool = True, compiled: bool = T
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SanityWarning)
         warnings.simplefilter("ignore", PhysicsWarning)
-        return simulate(scene, progress=progress, compiled=compiled)
+        return simulate(scene, progress=progress, compiled=compiled, interpreted=interpreted)
 
 
 # ---- sweep -----------------------------------------------------------------------------------
@@ -433,10 +434,11 @@ def _run_parser(sub, fmt) -> None:
                      help="with --view: listen on this address (default 127.0.0.1, this machine only)")
     run.add_argument("--speed", type=_speed, default=1.0,
                      help="with --view: playback speed factor (> 0; 1 = real time)")
-    run.add_argument("--path", choices=("auto", "compiled", "readable"),
+    run.add_argument("--path", choices=("auto", "compiled", "interpreted", "readable"),
                      help="auto (default, or $CONTACTDYN_PATH): the compiled call once this kind of scene was "
-                          "compiled, else the readable model while it compiles in the background; compiled: "
-                          "compile now if needed; readable: never compile the call")
+                          "compiled, else the same call interpreted while it compiles in the background; compiled: "
+                          "compile now if needed; interpreted: the call's functions interpreted (its rigid-body "
+                          "leaves compiled); readable: the readable model")
     _scripting(run)
     _imports_option(run)
     run.set_defaults(func=_cmd_run)

@@ -1,25 +1,27 @@
-"""A scene's first run: on the readable model while its compiled code is built in the background.
+"""A scene's first run: the compiled call's own functions run interpreted while its code is built in the background.
 
 Compiling what a scene runs on (the compiled call, its controller's and laws' stages; numba, cached
-after: :mod:`contactdyn.numerics.compile_cache`) takes 20–40 s of CPU on a fresh install, while the
-readable model (``System.evaluate``: the same physics, agreeing with the compiled call to 1e-9,
-``tests/test_both_ways.py``) runs any scene of ``sims/`` in 1–5 s. So ``contactdyn run`` with the
-path ``auto`` (the default) decides per run:
+after: :mod:`contactdyn.numerics.compile_cache`) takes 20–40 s of CPU on a fresh install. The same functions
+run interpreted (:mod:`contactdyn.numerics.twins`: their Python twins, only the rigid-body algorithms compiled,
+a few seconds once per install) give the compiled run's outputs bit for bit, ~20× slower per call: any scene of
+``sims/`` in seconds. So ``contactdyn run`` with the path ``auto`` (the default) decides per run:
 
 - the scene's *kind* was built by this build of the package (a marker in its compile cache): the
   compiled call;
-- else the readable model, and after the run one background process (``python -m
-  contactdyn.first_run FILE MARKER``, the scene's document on stdin; low priority, detached, silent)
-  runs the same scene on the compiled call, so that it compiles and caches what the scene needs, and
-  marks the kind built. One line says so after the run. A run the command takes on the compiled call
-  (``--path compiled``) marks its kind too.
+- else the interpreted call (``Result.stats["paths"]``: "interpreted call"), and after the run one background
+  process (``python -m contactdyn.first_run FILE MARKER``, the scene's document on stdin; low priority, detached,
+  silent) runs the same scene on the compiled call, so that it compiles and caches what the scene needs, and
+  marks the kind built. One line says so after the run (and, while the leaves compile, the compile notice says
+  that it compiles). A run the command takes on the compiled call (``--path compiled``) marks its kind too.
 
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
 time, never correctness: a kind marked built whose code is not all cached compiles the rest in the
-foreground (the compile notice says so); a kind not marked runs on the readable model. ``--path
-compiled`` (or ``CONTACTDYN_PATH=compiled``) always takes the compiled call, compiling in the
-foreground; ``--path readable`` never compiles it. ``Result.stats["paths"]`` names each mode's path.
+foreground (the compile notice says so); a kind not marked runs interpreted (a kind whose build failed too,
+without a new build). ``--path compiled`` (or ``CONTACTDYN_PATH=compiled``) always takes the compiled call,
+compiling in the foreground; ``--path interpreted`` always the interpreted one; ``--path readable`` the readable
+model (``System.evaluate``, the second description of the physics, kept for now). ``Result.stats["paths"]``
+names each mode's path.
 """
 
 from __future__ import annotations
@@ -38,26 +40,34 @@ from .scene.scene_file import Scene
 
 __all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "mark_built", "main"]
 
-PATHS = ("auto", "compiled", "readable")  #: what ``--path`` takes
+PATHS = ("auto", "compiled", "interpreted", "readable")  #: what ``--path`` takes
 ENV = "CONTACTDYN_PATH"  #: the environment variable that sets the default path (else ``auto``)
 BUILD_TIMEOUT = 1800.0  #: [s] a background build older than this is taken as dead (its lock is stale)
 BUILD_DURATION = 60.0  #: [s] simulated by a background build at most
 
 
 class Choice:
-    """A run's path: ``compiled`` (bool), ``build`` (the kind's background build is due after the run), ``failed``
-    (the kind's build failed: its record)."""
+    """A run's path (``compiled``, ``interpreted`` or ``readable``), ``build`` (the kind's background build is due
+    after the run), ``failed`` (the kind's build failed: its record)."""
 
-    def __init__(self, compiled: bool, build: bool = False, failed: Path | None = None) -> None:
-        self.compiled, self.build, self.failed = compiled, build, failed
+    def __init__(self, path: str, build: bool = False, failed: Path | None = None) -> None:
+        self.path, self.build, self.failed = path, build, failed
+
+    @property
+    def compiled(self) -> bool:
+        return self.path == "compiled"
+
+    @property
+    def interpreted(self) -> bool:
+        return self.path == "interpreted"
 
     def line(self) -> str:
         """What the command says after a run whose build it started, or of a kind whose build failed ("" else)."""
         if self.failed is not None:
             return (f"contactdyn: this kind of scene's compiled call failed to build in the background ({self.failed}"
-                    "): it ran on the readable model; --path compiled builds it in the foreground and says why")
-        return ("contactdyn: this kind of scene's compiled call was not built yet: it ran on the readable model (the "
-                "same physics; the two agree to 1e-9); the call is being built in the background for the next runs "
+                    "): it ran interpreted; --path compiled builds it in the foreground and says why")
+        return ("contactdyn: this kind of scene's compiled call was not built yet: it ran interpreted (the same "
+                "functions, the same results); the call is being built in the background for the next runs "
                 "(--path compiled builds it in the foreground)") if self.build else ""
 
 
@@ -99,18 +109,16 @@ def built(scene: Scene) -> bool:
 
 
 def choose(scene: Scene, path: str) -> Choice:
-    """The run's path for ``path`` (``auto``, ``compiled`` or ``readable``)."""
-    if path == "compiled":
-        return Choice(True)
-    if path == "readable":
-        return Choice(False)
+    """The run's path for ``path`` (one of :data:`PATHS`)."""
+    if path != "auto":
+        return Choice(path)
     folder, name = _folder(), kind(scene)
     if (folder / f"{name}.built").is_file():
-        return Choice(True)
+        return Choice("compiled")
     failed = folder / f"{name}.failed"
     if failed.is_file():
-        return Choice(False, failed=failed)
-    return Choice(False, build=_buildable(scene))
+        return Choice("interpreted", failed=failed)
+    return Choice("interpreted", build=_buildable(scene))
 
 
 def _buildable(scene: Scene) -> bool:

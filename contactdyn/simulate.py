@@ -37,11 +37,12 @@ __all__ = ["simulate", "run_system", "prepare"]
 
 
 def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None, *, progress: bool = False,
-             compiled: bool = True) -> Result:
+             compiled: bool = True, interpreted: bool = False) -> Result:
     """Run a scene (an object, a path, or a name in ``sims/``) and return its Result; ``progress``: show the
     simulated time on stderr once the run has taken a couple of seconds (:mod:`contactdyn.hybrid.progress`);
-    ``compiled=False``: every mode on the readable model, nothing of the compiled call compiled
-    (:mod:`contactdyn.first_run`)."""
+    ``interpreted=True``: the compiled call's modes run interpreted, as its Python twins, only its small leaves
+    compiled (:mod:`contactdyn.numerics.twins`; a scene kind's first run, :mod:`contactdyn.first_run`);
+    ``compiled=False`` (and not interpreted): every mode on the readable model."""
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
@@ -51,13 +52,16 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None,
     wall0 = time.perf_counter()
     system = System(scene)
     notes = sanity_warnings(system)
-    loop = HybridRun(system, compiled)
+    loop = HybridRun(system, compiled, interpreted)
     if progress:
         loop.progress = Progress(scene.name, scene.duration)
-    readable = nullcontext() if compiled else notice.about("the arithmetic the readable model shares with the "
-                                                            "compiled call")
+    if interpreted:
+        about = notice.about("the leaves the interpreted call runs compiled (rigid-body algorithms, linear algebra)")
+    else:
+        about = nullcontext() if compiled else notice.about("the arithmetic the readable model shares with the "
+                                                             "compiled call")
     try:
-        with readable:
+        with about:
             result = loop.run(wall0)
     finally:
         if loop.progress is not None:

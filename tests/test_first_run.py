@@ -1,4 +1,5 @@
-"""A scene's first run (contactdyn.first_run): the readable model while its kind is not built, the compiled call after;
+"""A scene's first run (contactdyn.first_run): the compiled call's functions interpreted while its kind is not built,
+the compiled call after;
 the kind ignores values, not laws; one background build per kind; a failed build leaves no marker."""
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import pytest
 from contactdyn import first_run
 from contactdyn.cli import EXIT_OK, main
 from contactdyn.errors import SceneError
-from contactdyn.model.paths import PIPELINE, READABLE
+from contactdyn.model.paths import INTERPRETED, PIPELINE, READABLE
 from contactdyn.scene.scene_file import load_scene
 
 FAST = ["--set", "duration=0.05", "--set", "solver.output_rate=200"]
@@ -36,15 +37,17 @@ def test_a_kind_ignores_the_values_and_sees_the_laws():
     assert first_run.kind(base) != first_run.kind(load_scene("b1_force_loop"))
 
 
-def test_auto_is_readable_until_the_kind_is_built_then_compiled(markers):
+def test_auto_is_interpreted_until_the_kind_is_built_then_compiled(markers):
     scene = load_scene("b1")
     choice = first_run.choose(scene, "auto")
-    assert (choice.compiled, choice.build) == (False, True) and "background" in choice.line()
+    assert (choice.path, choice.interpreted, choice.build) == ("interpreted", True, True)
+    assert "background" in choice.line() and "interpreted" in choice.line()
     markers.mkdir()
     (markers / f"{first_run.kind(scene)}.built").touch()
     choice = first_run.choose(scene, "auto")
     assert (choice.compiled, choice.build, choice.line()) == (True, False, "")
-    assert not first_run.choose(scene, "readable").compiled
+    assert first_run.choose(scene, "readable").path == "readable"
+    assert first_run.choose(scene, "interpreted").interpreted
     assert first_run.choose(load_scene("case1_cart"), "compiled").compiled
 
 
@@ -53,7 +56,7 @@ def test_a_scene_with_an_articulated_or_free_body_starts_a_build_as_any_other(ma
     so their first runs start a build as any other scene's."""
     for name in ("lever", "drop_box"):
         choice = first_run.choose(load_scene(name), "auto")
-        assert (choice.compiled, choice.build) == (False, True), name
+        assert (choice.path, choice.build) == ("interpreted", True), name
 
 
 def test_one_build_per_kind_at_a_time_and_a_dead_one_is_taken_over(markers):
@@ -88,13 +91,13 @@ def test_the_build_is_started_detached_on_this_package_with_the_file_it_was_read
     assert not first_run.build_in_background(scene)  # one at a time
 
 
-def test_the_command_runs_readable_says_so_and_asks_for_one_build(markers, monkeypatch, capsys):
+def test_the_command_runs_interpreted_says_so_and_asks_for_one_build(markers, monkeypatch, capsys):
     asked = []
     monkeypatch.setattr(first_run, "build_in_background", lambda scene: asked.append(scene) or True)
     code = main(["run", "b1", *FAST, "--path", "auto", "--json"])
     doc = json.loads(capsys.readouterr().out)
     assert code == EXIT_OK and len(asked) == 1 and asked[0].name == "b1"
-    assert {row["path"] for row in doc["stats"]["paths"].values()} == {READABLE}
+    assert {row["path"] for row in doc["stats"]["paths"].values()} == {INTERPRETED}
     main(["run", "b1", *FAST, "--path", "auto"])
     assert "built in the background" in capsys.readouterr().err
     assert main(["run", "b1", *FAST, "--path", "auto", "--set", "robot.q0=[0.1]"]) == 2  # bad input: no build
@@ -133,7 +136,7 @@ def test_a_failed_build_is_recorded_and_said_and_not_retried(markers, monkeypatc
     scene = load_scene("b1")
     (markers / f"{first_run.kind(scene)}.failed").write_text("SceneError: ...")
     choice = first_run.choose(scene, "auto")
-    assert (choice.compiled, choice.build) == (False, False) and "failed to build" in choice.line()
+    assert (choice.path, choice.build) == ("interpreted", False) and "failed to build" in choice.line()
     first_run.mark_built(scene)  # (a run with --path compiled)
     assert first_run.choose(scene, "auto").compiled and not (markers / f"{first_run.kind(scene)}.failed").exists()
 
@@ -150,7 +153,7 @@ def test_the_readable_run_and_the_compiled_run_agree():
 
 
 def test_a_bad_default_path_is_named():
-    with pytest.raises(SceneError, match="CONTACTDYN_PATH.*auto, compiled, readable.*fast"):
+    with pytest.raises(SceneError, match="CONTACTDYN_PATH.*auto, compiled, interpreted, readable.*fast"):
         first_run.default_path({"CONTACTDYN_PATH": "fast"})
     assert first_run.default_path({}) == "auto"
 

@@ -301,3 +301,14 @@ def test_the_python_stage_keys_rebuild_the_dictionaries():
     assert list(inp.surfaces) == ["a", "a.t1", "b"] and np.array_equal(inp.surfaces["b"][1], rows[2, 5:8])
     assert inp.touching == {"a": True, "b": True} and inp.gravity is None and inp.x_d is None
     assert inp.force_d == {"a.t1": (inp.force_set[0], inp.force_rate[0])} and inp.H.shape == (nv, nv)
+
+
+@pytest.mark.parametrize("scene_of", [lambda: force_pi_press(0.2), lambda: cart_push(1.2)],
+                         ids=["force_pi_press", "cart_push"])
+def test_an_interpreted_run_of_a_python_stage_controller_is_the_compiled_run(scene_of):
+    """A scene kind's first run (the call interpreted, contactdyn.numerics.twins) with a controller that reads the
+    ControlInput's dictionaries: the compiled run bit for bit."""
+    fast, first = simulate(scene_of()), simulate(scene_of(), interpreted=True)
+    assert set(first.channels) == set(fast.channels)
+    for key, values in fast.channels.items():
+        assert np.array_equal(np.asarray(first.channels[key]), np.asarray(values), equal_nan=True), key

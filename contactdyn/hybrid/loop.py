@@ -60,6 +60,7 @@ from ..numerics.integrators import (
     stability_bound,
 )
 from ..numerics.notice import compiling
+from ..numerics.twins import Twins, running
 from ..output.channels import Held, Segment, output_grid, sample_states
 from ..output.physics_checks import StartAudit, run_checks, violations
 from ..output.result import Result
@@ -99,7 +100,7 @@ class HybridRun:
     #: the benchmarks' before/after comparison (benchmarks/corners.py)
     at_corners = True
 
-    def __init__(self, system: System, compiled: bool = True):
+    def __init__(self, system: System, compiled: bool = True, interpreted: bool = False):
         self.system = system
         self.scene = system.scene
         self.solver = system.scene.solver
@@ -128,8 +129,10 @@ class HybridRun:
         #: why a mode ran on System.evaluate, with counts: pack.unsupported's reason, or the undeclared disagreement
         #: of its pipeline's check (``paths`` says which path each mode took)
         self.fallbacks: dict[str, int] = {}
-        #: the modes the compiled call runs (every one it packs; the others on the readable model)
-        self.pipelines = LivePipelines(system, PipelineMode, use=compiled)  # (not: the readable model only)
+        #: the modes the compiled call runs (every one it packs; the others on the readable model); ``interpreted``:
+        #: the same call run as its twins (numerics.twins: a scene kind's first run); neither: the readable model only
+        self.pipelines = LivePipelines(system, PipelineMode, use=compiled or interpreted,
+                                       twins=Twins() if interpreted else None)
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
@@ -149,7 +152,8 @@ class HybridRun:
         """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
         gc.freeze()  # the ~1e5 objects made before (modules, compiled code) out of the collector's scans meanwhile
         try:
-            return self._run(wall0)
+            with running(self.pipelines.twins):  # (interpreted: the readable helpers the loop calls too, twins.current)
+                return self._run(wall0)
         except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
             raise SimulationError(_over_budget(self, *_spent_at(self), calls=True)) from None
         except (*numerical_errors(), ZeroDivisionError) as exc:

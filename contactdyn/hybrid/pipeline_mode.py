@@ -16,6 +16,9 @@ for the loop, its event functions (:func:`~contactdyn.hybrid.events.segment_even
   :meth:`measurement` reads what a sampled law measures at a sample instant off one such call, and
   :meth:`sample_terms` what it reads of the robot and the phase there.
 
+A pipeline given twins (:mod:`contactdyn.numerics.twins`, a scene kind's first run) runs all of these, its steps and
+samples too, as its twins (``pipe.of``): the same functions interpreted.
+
 A call whose status is not 1 (a KKT system with a non-finite entry, a law that gave no force) is answered by the
 readable model (:meth:`System.evaluate`), its values too; a singular KKT matrix is solved in the call by least squares
 (:func:`contactdyn.model.pipeline.kkt.solve_linear`, an evaluation's ``regular`` False); ``singular`` counts both.
@@ -69,10 +72,13 @@ _NO_CALL = (None, None, None)  #: a ring entry before any call
 class PipelineMode:
     """One (modes, phase) on the one pipeline, as the loop runs it (see the module docstring)."""
 
-    ok = True  #: runs compiled (a Declined mode: False)
+    ok = True  #: runs on the pipeline (a Declined mode: False)
 
     def __init__(self, pipe: Pipeline):
         self.pipe, self.system, self.modes, self.phase = pipe, pipe.system, pipe.modes, pipe.phase
+        self.interpreted = pipe.twins is not None  #: the pipeline's functions run as their twins
+        of = pipe.of  # (the module's functions looked up at each use: a test replaces one)
+        call_ = of(call)
         self.reason = "; ".join(pipe.python_stages)  #: its declared Python stages ("": none)
         self.ring: deque[tuple] = deque([_NO_CALL] * 4, maxlen=4)  #: the last four calls' (t, x, events)
         p = pipe.packed
@@ -80,7 +86,7 @@ class PipelineMode:
         ring, system, phase = self.ring, self.system, self.phase
 
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
-            xdot = call(float(t), x, ints, reals, work, events)
+            xdot = call_(float(t), x, ints, reals, work, events)
             if events[-1] != 1.0:
                 raise_python_stage_error()  # a Python stage's own error
                 pipe.readable_calls += 1
@@ -90,8 +96,8 @@ class PipelineMode:
             ring.append((t, x, events.copy()))
             return xdot
 
-        rhs.step = stepper(p, ring)
-        rhs.derivatives = derivatives(p, rhs)
+        rhs.step = self.pipe.of(stepper)(p, ring)
+        rhs.derivatives = of(derivatives)(p, rhs)
         self.rhs = rhs
         self.nt = [len(c.tangents) if c.friction is not None else 0 for c in system.contacts]
         self._stages = self._stage_table()
@@ -101,7 +107,7 @@ class PipelineMode:
     def watched_step(self, on_stage):
         """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
         slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`)."""
-        step = stepper(self.pipe.packed, self.ring, on_stage)
+        step = self.pipe.of(stepper)(self.pipe.packed, self.ring, on_stage)
         return step
 
     @property
@@ -194,13 +200,13 @@ class PipelineMode:
         p, system = self.pipe.packed, self.system
         X = np.ascontiguousarray(x, dtype=float)[None, :]
         least_squares_before = self.pipe.least_squares
-        Xd, E, W, done = samples_at(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
+        Xd, E, W, done = self.pipe.of(samples_at)(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
         if done == 0:
             self.pipe.readable_calls += 1
             return None
         S = Samples(1, system)
         self._read_out(S, E, W, X)
-        e, at = E[0], diag_starts(p.ints)
+        e, at = E[0], self.pipe.of(diag_starts)(p.ints)
         at_limit, at_held, _ = p.joint_event_starts()
         named = [(c.name, nt) for c, nt in zip(system.contacts, self.nt, strict=True)]
         return Evaluation(
@@ -226,7 +232,7 @@ class PipelineMode:
             self.use(modes)
         p, system = self.pipe.packed, self.system
         ts, X = np.ascontiguousarray(ts, dtype=float), np.ascontiguousarray(X, dtype=float)
-        _, E, W, done = samples_at(ts, X, p.ints, p.reals, p.work, p.events)
+        _, E, W, done = self.pipe.of(samples_at)(ts, X, p.ints, p.reals, p.work, p.events)
         if done < len(ts) and runs is not None and len(runs) > 1:
             ends = np.cumsum(runs)
             return Samples.concatenate([self.samples(ts[e - n:e], X[e - n:e]) for n, e in zip(runs, ends, strict=True)],
@@ -245,14 +251,14 @@ class PipelineMode:
         compiled call with the diagnostics on (as an output sample's); None where the call declines there (the
         readable model measures)."""
         p, system = self.pipe.packed, self.system
-        Xd, E, W, done = samples_at(np.array([float(t)]), np.ascontiguousarray(x, dtype=float)[None, :], p.ints,
-                                    p.reals, p.work, p.events)
+        Xd, E, W, done = self.pipe.of(samples_at)(np.array([float(t)]), np.ascontiguousarray(x, dtype=float)[None, :],
+                                          p.ints, p.reals, p.work, p.events)
         if done == 0:
             raise_python_stage_error()
             self.pipe.readable_calls += 1
             return None
         e, w = E[0], W[0]
-        at = diag_starts(p.ints)[D_TC]
+        at = self.pipe.of(diag_starts)(p.ints)[D_TC]
         i_b = self.phase.carrier[0] if self.phase.carrier is not None else -1
         return Measurement({c.name: float(e[EV_W * ci + EV_FN]) for ci, c in enumerate(system.contacts)},
                            {key: float(w[k]) for key, k in self._ifaces}, w[at:at + system.nv].copy(),
@@ -262,7 +268,7 @@ class PipelineMode:
         """What the sampled phase's law reads of the robot and the phase at (t [s], x) besides the forces
         (:class:`~contactdyn.model.dynamics.SampleTerms`), by the call's own stages in one compiled call."""
         p, phase = self.pipe.packed, self.phase
-        H, h, g, J6, a6, p_tip, v_tip, R, x_d, v_d, a_d, F_d, rate = sample_terms(
+        H, h, g, J6, a6, p_tip, v_tip, R, x_d, v_d, a_d, F_d, rate = self.pipe.of(sample_terms)(
             float(t), x, p.ints, p.reals, int(phase.controller.inner.needs_gravity))
         ref = phase.reference is not None
         return SampleTerms(H, h, g if g.size else None, p_tip, v_tip, J6[:3], a6[:3], R, J6[3:], a6[3:],
@@ -272,7 +278,7 @@ class PipelineMode:
     def _interface_table(self) -> list[tuple[str, int]]:
         """Per tangential chain ("contact.t1") where its interface force is in ``work``: its bond's λ while bonded,
         else the chain's own (pack's order)."""
-        ints, at, k, out = self.pipe.packed.ints, diag_starts(self.pipe.packed.ints), 0, []
+        ints, at, k, out = self.pipe.packed.ints, self.pipe.of(diag_starts)(self.pipe.packed.ints), 0, []
         rows = {meta: r for r, meta in enumerate(self.pipe.packed.row_meta)}
         for c in self.system.contacts:
             for i, dc in enumerate(c.chains):
@@ -298,7 +304,7 @@ class PipelineMode:
         system, ints, out, k = self.system, self.pipe.packed.ints, [], 0
         for c, m in zip(system.contacts, self.modes, strict=True):
             for dc in c.chains:
-                a = pack_chain(system, c, dc, m.touching, m.relaxing and not m.touching)
+                a = self.pipe.of(pack_chain)(system, c, dc, m.touching, m.relaxing and not m.touching)
                 state = int(ints[ints[I_CHAINS] + CH_W * k + CH_STATE])
                 out += [(label, state + 4 * s if s in a.active else None) for s, label in enumerate(a.labels)]
                 k += 1
@@ -310,7 +316,7 @@ class PipelineMode:
         if n == 0:
             return
         ints, nv = p.ints, system.nv
-        at = diag_starts(ints)
+        at = self.pipe.of(diag_starts)(ints)
         S.tau[:n] = W[:, at[D_TAU]:at[D_TAU] + nv]
         S.body_force[:n] = W[:, at[D_TAU] + nv:at[D_CMD]]
         S.tau_cmd[:n] = W[:, at[D_CMD]:at[D_CMD] + nv]

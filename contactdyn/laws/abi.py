@@ -39,12 +39,12 @@ import math
 import os
 import re
 
-import numba
 from llvmlite import ir
 from numba import carray, types
 from numba.extending import intrinsic, overload
 
 from ..numerics.compile_cache import cfunc, njit
+from ..numerics.native_call import handles
 from .friction_laws import FrictionLaw
 
 __all__ = ["STAGE_SIGNATURE", "FRICTION_SIGNATURE", "stage_address", "friction_address", "call_stage",
@@ -67,7 +67,8 @@ _WRAPPERS = {
 }
 _SIGNATURES = {"stage": STAGE_SIGNATURE, "friction": FRICTION_SIGNATURE}
 
-_compiled: dict[type, tuple[int, object]] = {}  #: law class -> (address, its cfunc, kept alive while it is used)
+#: (law class, handles()) -> (address, its cfunc, kept alive while it is used, the compiled_reason)
+_compiled: dict[tuple, tuple[int, object, str]] = {}
 _python: dict[int, object] = {}  #: address -> the law's Python function (the calls' plain-Python twin)
 
 
@@ -88,15 +89,17 @@ def friction_address(law: type) -> int:
 
 
 def _address(law: type, family: str, fn) -> int:
-    if law in _compiled:
-        return _compiled[law][0]
-    if numba.config.DISABLE_JIT:  # nothing compiles: the address is a handle of the Python function
+    key = (law, handles())  # (a process runs compiled and interpreted pipelines: numerics.twins)
+    if key in _compiled:
+        law.compiled_reason = _compiled[key][2]
+        return _compiled[key][0]
+    if key[1]:  # nothing compiles: the address is a handle of the Python function
         address, cfunc, reason = id(fn), None, ""
     else:
         cfunc, reason = _compile(law, family, fn)
         address = cfunc.address if cfunc is not None else 0
     law.compiled_reason = reason
-    _compiled[law] = (address, cfunc)
+    _compiled[key] = (address, cfunc, reason)
     if address:
         _python[address] = fn
     return address
@@ -149,8 +152,8 @@ def python_friction_address(spec) -> int:
     """The address of a C function (``FRICTION_SIGNATURE``) giving μ [-] of a contact's friction ``spec`` (a
     FrictionSpec) by its Python ``spec.mu(speed)``, as the readable model does: its law's declared Python stage.
     Interpreted, a handle of the same function."""
-    if spec in _callbacks:
-        return _callbacks[spec][0]
+    if (spec, handles()) in _callbacks:
+        return _callbacks[spec, handles()][0]
 
     def mu(mu_s, mu_k, p, n_p, speed):
         try:
@@ -159,13 +162,13 @@ def python_friction_address(spec) -> int:
             python_stage_failed(exc)
             return math.nan
 
-    if numba.config.DISABLE_JIT:  # the twin's call: (mu_s, mu_k, p[at:at + n_p], speed)
+    if handles():  # the twin's call: (mu_s, mu_k, p[at:at + n_p], speed)
         def twin(mu_s, mu_k, p, speed):
             return float(spec.mu(speed))
         _python[id(twin)] = twin
-        _callbacks[spec] = (id(twin), twin)
+        _callbacks[spec, True] = (id(twin), twin)
         return id(twin)
-    return _keep(spec, _FRICTION_CTYPE(mu))
+    return _keep((spec, False), _FRICTION_CTYPE(mu))
 
 
 def _keep(key, callback) -> int:

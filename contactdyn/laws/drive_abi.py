@@ -33,11 +33,11 @@ import ctypes
 import math
 from collections import namedtuple
 
-import numba
 from numba import carray, types
 from numba.extending import intrinsic, overload, register_jitable
 
 from ..numerics.compile_cache import njit
+from ..numerics.native_call import handles
 from . import drive_kinds
 from .abi import _data_at, _indirect_call, compile_wrapper, python_stage_failed
 from .drives import DriveSpec
@@ -80,7 +80,8 @@ _WRAPPERS = {
 }
 _SIGNATURES = {"voltage": VOLTAGE_SIGNATURE, "force": FORCE_SIGNATURE}
 
-_compiled: dict[type, tuple[int, int, tuple]] = {}  #: kind -> (voltage address, force address, kept alive)
+#: (kind, handles()) -> (voltage address, force address, kept alive, compiled_reason)
+_compiled: dict[tuple, tuple[int, int, tuple, str]] = {}
 _python: dict[int, tuple] = {}  #: handle -> (the kind's Python function, its Spec), the calls' plain-Python twin
 
 
@@ -97,13 +98,15 @@ def spec_values(spec: DriveSpec) -> list[float]:
 def drive_addresses(kind: type) -> tuple[int, int]:
     """(voltage, force) addresses of motorized kind ``kind`` (compiled on first use; voltage 0 for a kind without
     one); force 0 if numba cannot compile the kind, the reason then in ``kind.compiled_reason``."""
-    if kind in _compiled:
-        return _compiled[kind][:2]
+    key = (kind, handles())  # (a process runs compiled and interpreted pipelines: numerics.twins)
+    if key in _compiled:
+        kind.compiled_reason = _compiled[key][3]
+        return _compiled[key][:2]
     spec = namedtuple(f"{kind.__name__}Spec", spec_fields(kind))
     families = (("voltage", kind.voltage), ("force", kind.force)) if kind.has_voltage else (("force", kind.force),)
     found, kept, reason = {}, [], ""
     for family, fn in families:
-        if numba.config.DISABLE_JIT:  # nothing compiles: a handle of the Python function
+        if key[1]:  # nothing compiles: a handle of the Python function
             holder = (fn, spec)
             kept.append(holder)
             found[family] = id(holder)
@@ -120,8 +123,8 @@ def drive_addresses(kind: type) -> tuple[int, int]:
         kept.append(cfunc)
         found[family] = cfunc.address
     kind.compiled_reason = reason
-    _compiled[kind] = (found.get("voltage", 0), found.get("force", 0), tuple(kept))
-    return _compiled[kind][:2]
+    _compiled[key] = (found.get("voltage", 0), found.get("force", 0), tuple(kept), reason)
+    return _compiled[key][:2]
 
 
 _C_P = ctypes.POINTER(ctypes.c_double)

@@ -39,6 +39,7 @@ from ..errors import SimulationError
 from ..laws.abi import call_stage, stage_address
 from ..numerics.compile_cache import njit
 from ..numerics.linalg import dot3
+from ..numerics.twins import current
 from .chain import NodeKind
 from .contact import Contact, DirectionalChain, Kinematics
 
@@ -175,9 +176,9 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
         tip_F, gamma, interface_F, gap = chain_loads(a.plan, a.stages, a.consts, kin.drift, f, ydot, a.motion,
                                                      a.stage_state)
     else:
-        tip_F, gamma, interface_F, gap, finite = chain_call(a.plan, a.stages, a.coef, a.consts, x, p_tip, v_tip,
-                                                            p_env, v_env, kin.drift, float(offset), f, ydot, a.motion,
-                                                            a.stage_state)
+        call = current(chain_call)  # (its twin in an interpreted run: numerics.twins)
+        tip_F, gamma, interface_F, gap, finite = call(a.plan, a.stages, a.coef, a.consts, x, p_tip, v_tip, p_env, v_env,
+                                                      kin.drift, float(offset), f, ydot, a.motion, a.stage_state)
         if not finite:  # a compiled law raised (its call gives NaN) or gave NaN
             _law_error(a, dc)
     if ev is not None:

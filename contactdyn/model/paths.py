@@ -7,6 +7,9 @@ on the readable model (:meth:`~contactdyn.model.system.System.evaluate`), with t
 does not pack. A stage law, friction law, drive kind or user controller numba cannot compile does not keep its
 mode off the pipeline: it runs there as a declared Python stage (called back through ctypes,
 :mod:`contactdyn.laws.abi`), named in its row.
+A run may take the pipeline interpreted instead (``twins``: a scene kind's first run, while its compiled code is
+built in the background, :mod:`contactdyn.first_run`; the path ``INTERPRETED``): the same functions run as their
+Python twins (:mod:`contactdyn.numerics.twins`), unchecked (they are the compiled call's own source).
 A pipeline whose check disagrees is an undeclared gap: its reason in ``Result.stats["fallback_modes"]`` starts
 with ``"undeclared: "``, which the tests treat as a bug.
 
@@ -18,18 +21,21 @@ mode once.
 from __future__ import annotations
 
 from collections.abc import Callable
+from contextlib import nullcontext
 
 import numpy as np
 
+from ..numerics.native_call import giving_handles
 from .contact import structure
 from .pipeline.pack import unsupported
 from .pipeline.pipeline import Pipeline
 
-__all__ = ["UNDECLARED", "PIPELINE", "READABLE", "path_of", "PathLog", "slower_paths", "disagreement",
+__all__ = ["UNDECLARED", "PIPELINE", "INTERPRETED", "READABLE", "path_of", "PathLog", "slower_paths", "disagreement",
            "LivePipelines", "Declined", "CHECK_RTOL"]
 
 UNDECLARED = "undeclared: "  #: prefix of a pipeline's decline that no part declared (its check disagreed)
 PIPELINE = "compiled call"  #: the path of a mode on the one pipeline
+INTERPRETED = "interpreted call"  #: the path of a mode on the one pipeline run as its twins (numerics.twins)
 READABLE = "readable model"  #: the path of a mode on System.evaluate
 CHECK_RTOL = 1e-9  #: agreement a fast right-hand side must show with System.evaluate where a mode starts
 
@@ -67,12 +73,14 @@ class LivePipelines:
     :func:`~contactdyn.model.pipeline.pack.unsupported` accepts: one per modes' structure and phase (every turn of a
     2-D slide reuses it: the reference direction is data), checked against System.evaluate where the run first
     starts it (:func:`disagreement`), kept wrapped by ``wrap`` (the loop's: its event values, compiled steps and
-    output samples, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`)."""
+    output samples, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`). ``twins``
+    (:class:`~contactdyn.numerics.twins.Twins`): the pipelines run interpreted, not checked (the path
+    ``INTERPRETED``)."""
 
     use = True  #: False only for the benchmarks' and tests' before/after comparison: every mode on System.evaluate
 
-    def __init__(self, system, wrap: Callable = lambda pipe: pipe, use: bool = True) -> None:
-        self.system, self.wrap = system, wrap
+    def __init__(self, system, wrap: Callable = lambda pipe: pipe, use: bool = True, twins=None) -> None:
+        self.system, self.wrap, self.twins = system, wrap, twins
         self.use = use and type(self).use  #: this run's modes on the pipeline (``use``: False, a readable run)
         #: (structure(modes), phase.key()) -> its pipeline (wrapped), or why not (undeclared)
         self.pipes: dict[tuple, object] = {}
@@ -84,7 +92,8 @@ class LivePipelines:
             return ""
         key = (structure(modes), phase.key())
         if key not in self.declines:
-            self.declines[key] = unsupported(self.system, modes, phase)
+            with giving_handles() if self.twins is not None else nullcontext():  # (interpreted: nothing compiled)
+                self.declines[key] = self._of(unsupported)(self.system, modes, phase)
         return self.declines[key]
 
     def count(self) -> int:
@@ -101,13 +110,16 @@ class LivePipelines:
         key = (structure(modes), phase.key())
         pipe = self.pipes.get(key)
         if pipe is None:
-            pipe = Pipeline(self.system, modes, phase)
-            reason = disagreement(self.system, modes, phase, pipe.rhs, t, x)
+            pipe = Pipeline(self.system, modes, phase, self.twins)
+            reason = "" if self.twins is not None else disagreement(self.system, modes, phase, pipe.rhs, t, x)
             pipe = self.pipes[key] = reason or self.wrap(pipe)
         if isinstance(pipe, str):
             return None, pipe
         pipe.use(modes)  # a turn's new reference direction r: data of the same packed mode
         return pipe, ""
+
+    def _of(self, function):
+        return function if self.twins is None else self.twins.of(function)
 
 
 class Declined:
@@ -125,9 +137,12 @@ class Declined:
 
 def path_of(mode) -> tuple[str, str]:
     """(path, why it is slower: "" when nothing makes it so) of a mode's runner: ``PIPELINE`` (one compiled call per
-    right-hand side; why: its declared Python stages, the laws numba cannot compile, called back from it) or
-    ``READABLE`` (System.evaluate; why: the law or part that kept it off the compiled call)."""
-    return (PIPELINE if mode.ok else READABLE), mode.reason
+    right-hand side; why: its declared Python stages, the laws numba cannot compile, called back from it),
+    ``INTERPRETED`` (the same call run as its twins) or ``READABLE`` (System.evaluate; why: the law or part that kept
+    it off the compiled call)."""
+    if not mode.ok:
+        return READABLE, mode.reason
+    return (INTERPRETED if getattr(mode, "interpreted", False) else PIPELINE), mode.reason
 
 
 def _mode_label(system, modes, phase) -> str:

@@ -14,12 +14,14 @@ a direct call (the native calling convention, not a C one), so the function keep
     result = call_at(ints[SLOT], "name", (a, b, c))    # in compiled code: the arguments as one tuple
 
 The tuple's types must be the declared signature's (a typing error names both otherwise): the function was
-compiled for those. Under NUMBA_DISABLE_JIT the address is a handle of the Python function and :func:`call_at`
+compiled for those. Under NUMBA_DISABLE_JIT, and while :func:`giving_handles` is on (a mode packed for the
+pipeline run interpreted, :mod:`.twins`), the address is a handle of the Python function and :func:`call_at`
 calls it: the same source, interpreted. An address is valid in the process that asked for it only.
 """
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 
 import numba
@@ -29,10 +31,27 @@ from numba.extending import lower_builtin, type_callable
 
 from .compile_cache import directory  # noqa: F401  (a compiled module: this source is in the cache's key)
 
-__all__ = ["declare", "address", "call_at"]
+__all__ = ["declare", "address", "call_at", "handles", "giving_handles"]
 
 _DECLARED: dict[str, tuple[object, object]] = {}  #: name -> (numba dispatcher, its declared signature)
 _HANDLES: dict[int, Callable] = {}  #: interpreted: handle -> the Python function
+_GIVING = [False]  #: giving_handles is on
+
+
+def handles() -> bool:
+    """Do the address functions (here, the laws' and controllers' ABIs) give handles of Python functions instead of
+    compiling: under NUMBA_DISABLE_JIT, and inside :func:`giving_handles`?"""
+    return bool(numba.config.DISABLE_JIT or _GIVING[0])
+
+
+@contextlib.contextmanager
+def giving_handles():
+    """The address functions give handles meanwhile (a mode packed for the pipeline run interpreted, :mod:`.twins`)."""
+    saved, _GIVING[0] = _GIVING[0], True
+    try:
+        yield
+    finally:
+        _GIVING[0] = saved
 
 
 def declare(name: str, function, signature) -> None:
@@ -43,9 +62,9 @@ def declare(name: str, function, signature) -> None:
 
 def address(name: str) -> int:
     """The address of ``name``'s function (compiled, or loaded from the cache, at its first use in the process);
-    interpreted (NUMBA_DISABLE_JIT), a handle of its Python function."""
+    interpreted (:func:`handles`), a handle of its Python function."""
     function, signature = _DECLARED[name]
-    if numba.config.DISABLE_JIT:
+    if handles():
         python = getattr(function, "py_func", function)
         _HANDLES[id(python)] = python
         return id(python)

@@ -53,12 +53,12 @@ import functools
 from collections import namedtuple
 from dataclasses import dataclass, field, fields
 
-import numba
 import numpy as np
 from numba import carray, types
 from numba.extending import intrinsic, overload
 
 from ...numerics.compile_cache import njit
+from ...numerics.native_call import handles
 from ..abi import _data_at, _indirect_call, compile_wrapper, python_stage_failed
 from .base import ControlInput, Controller
 
@@ -246,14 +246,16 @@ def _put_states(rates, zdot, nz):
     return impl
 
 
-_compiled: dict[type, tuple[int, object]] = {}  #: controller class -> (address, its cfunc, kept alive)
+_compiled: dict[tuple, tuple[int, object, str]] = {}  #: (controller class, handles()) -> (address, cfunc, reason)
 
 
 def controller_address(cls: type) -> int:
     """The address of controller class ``cls``'s compiled ``command`` (compiled on first use); 0 if it has none, the
     reason then in ``cls.compiled_reason``."""
-    if cls in _compiled:
-        return _compiled[cls][0]
+    key = (cls, handles())  # (a process runs compiled and interpreted pipelines: numerics.twins)
+    if key in _compiled:
+        cls.compiled_reason = _compiled[key][2]
+        return _compiled[key][0]
     reason = _declined(cls)
     cfunc = None
     if not reason:
@@ -267,14 +269,14 @@ def controller_address(cls: type) -> int:
         cfunc, reason = compile_wrapper(cls.command, name, source, CONTROLLER_SIGNATURE, namespace)
     cls.compiled_reason = reason
     address = cfunc.address if cfunc is not None else 0
-    _compiled[cls] = (address, cfunc)
+    _compiled[key] = (address, cfunc, reason)
     return address
 
 
 def _declined(cls: type) -> str:
     """Why ``cls`` is not compiled before numba tries ("" if it may be)."""
-    if numba.config.DISABLE_JIT:
-        return "numba is disabled (NUMBA_DISABLE_JIT)"
+    if handles():
+        return "numba is disabled (NUMBA_DISABLE_JIT), or the pipeline runs interpreted"
     if getattr(cls.read, "__func__", cls.read) is not Controller.read.__func__:  # (a staticmethod has none)
         return f"controller {cls.name!r} reads its own config (not its declared parameters, Controller.params)"
     return ""
@@ -397,7 +399,7 @@ def call_controller(address: int, buffer, layout, params, tau, zdot=None) -> int
         if not (out.dtype == np.float64 and out.flags.c_contiguous):
             raise ValueError(f"call_controller: {name} must be a contiguous float64 array (it is written)")
     fn = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64,
-                          ctypes.c_void_p, ctypes.c_void_p)(address)
+                          ctypes.c_void_p, ctypes.c_void_p)(int(address))
     return fn(buffer.ctypes.data, layout.ctypes.data, params.ctypes.data, params.size, tau.ctypes.data,
               zdot.ctypes.data)
 

@@ -30,7 +30,6 @@ reference the joints' (the ABI's x_d of nv coordinates).
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 from numba import carray
 
@@ -42,6 +41,7 @@ from ...laws.controllers.operational_law import SINGULAR, torque
 from ...laws.controllers.pd import joint_pd_torque
 from ...numerics.compile_cache import cfunc, njit
 from ...numerics.linalg import pinv
+from ...numerics.native_call import handles
 
 __all__ = ["kind_address", "operational_on_buffer", "dynamic_on_buffer", "joint_dynamic_on_buffer", "joint_pd_command",
            "task_force_command", "O_K", "D_FORCE_LAW", "JOINT_DYNAMIC"]
@@ -159,7 +159,7 @@ def kind_address(name: str) -> int:
     """The address of built-in controller ``name``'s C function (compiled at its first use); interpreted, a handle
     of its Python function in :data:`PYTHON_KINDS`."""
     wrapper, on_buffer = _KINDS[name]
-    if numba.config.DISABLE_JIT:
+    if handles():
         PYTHON_KINDS[id(on_buffer)] = on_buffer
         return id(on_buffer)
     if name not in _compiled:

@@ -53,17 +53,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
 from ...laws.abi import friction_address, python_friction_address, python_stage_address
-from ...laws.controllers import Controller
 from ...laws.controllers.abi import InputKeys, controller_address, layout_of, params_of, python_controller_address
 from ...laws.controllers.sampled import SampledController
 from ...laws.controllers.voltage import ConstantVoltage
 from ...laws.friction_laws import FRICTION_LAWS
 from ...laws.trajectory import CIRCLE_W, move_table, ramp_table
 from ...numerics.compile_cache import njit
+from ...numerics.native_call import handles
 from ...robot.rigid_body import forest_table
 from ..chain import NodeKind
 from ..chain_forces import S_LAW
@@ -259,11 +258,13 @@ def python_controller(ctl) -> bool:
 
 
 def _addressable(cls: type) -> bool:
-    """A controller of the ABI: compiled to its address, or (interpreted) one that reads its declared parameters."""
-    if not numba.config.DISABLE_JIT:
+    """A controller of the ABI compiled to its address. Interpreted (handles, a first run), none: every user law runs
+    its own ``command`` on the readable ControlInput, as a declared Python stage does (whether numba would compile it
+    is not asked: that would compile it)."""
+    if not handles():
         return controller_address(cls) != 0
-    cls.compiled_reason = "it reads its own config (not its declared parameters, Controller.params)"
-    return getattr(cls.read, "__func__", cls.read) is Controller.read.__func__
+    cls.compiled_reason = "the call runs interpreted"
+    return False
 
 
 class _Builder:
@@ -608,7 +609,7 @@ def _controller(b: _Builder, system, phase) -> None:
         params = np.array(_dynamic_constants(ctl, phase) if ctl.name in DYNAMIC_LAWS else
                           _operational_constants(ctl, phase))
     else:
-        h[CTL_ADDRESS] = _handle(cls) if numba.config.DISABLE_JIT else controller_address(cls)
+        h[CTL_ADDRESS] = _handle(cls) if handles() else controller_address(cls)
         params = params_of(ctl.config)
     h[N_CTL_PARAMS] = params.size
     b.real_section(R_CTL, params)

@@ -7,7 +7,9 @@
 
 :func:`call` is numba-compiled once for every scene and every law (the laws enter by address: stage and friction
 laws through :mod:`contactdyn.laws.abi`, a user controller through :mod:`contactdyn.laws.controllers.abi`, a drive
-kind through :mod:`contactdyn.laws.drive_abi`); under ``NUMBA_DISABLE_JIT=1`` the same source runs interpreted.
+kind through :mod:`contactdyn.laws.drive_abi`); under ``NUMBA_DISABLE_JIT=1`` the same source runs interpreted, and
+so it does in a process where numba is on for a :class:`Pipeline` given ``twins`` (:mod:`contactdyn.numerics.twins`:
+a scene kind's first run, :mod:`contactdyn.first_run`).
 :class:`Pipeline` packs a mode once and calls it; its ``events`` name the event values (gaps [m], normal forces
 [N], slip velocities [m/s], friction or stick forces [N], limit torques [N·m or N]). A singular KKT matrix
 (redundant rows, consistent or not) is solved in the call by the readable model's minimum-norm least squares
@@ -20,13 +22,15 @@ raised, its own exception is raised instead.
 
 from __future__ import annotations
 
+from contextlib import nullcontext
+
 import numpy as np
 from numba import types
 
 from ...laws.abi import raise_python_stage_error
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
-from ...numerics.native_call import address, call_at, declare
+from ...numerics.native_call import address, call_at, declare, giving_handles
 from ..contact import structure
 from .actuation import (
     carry,
@@ -312,18 +316,28 @@ def _address_of(name: str, function, signature) -> int:
 
 
 class Pipeline:
-    """One mode packed and its call: ``rhs(t, x)`` the integrator's function, ``values()`` the last call's events."""
+    """One mode packed and its call: ``rhs(t, x)`` the integrator's function, ``values()`` the last call's events.
+    ``twins`` (:class:`~contactdyn.numerics.twins.Twins`): the call runs interpreted, as its twins (the mode packed
+    with handles, nothing of it compiled but the twins' leaves); :meth:`of` gives a function of the package as this
+    pipeline runs it."""
 
-    def __init__(self, system, modes, phase):
-        reason = unsupported(system, modes, phase)
-        if reason:
-            raise ValueError(f"the compiled call does not run this mode: {reason}")
+    def __init__(self, system, modes, phase, twins=None):
+        self.twins = twins
         self.system, self.modes, self.phase = system, list(modes), phase
-        self.packed = pack(system, modes, phase)
-        stage_addresses(self.packed.ints)
+        with giving_handles() if twins is not None else nullcontext():
+            reason = self.of(unsupported)(system, modes, phase)
+            if reason:
+                raise ValueError(f"the compiled call does not run this mode: {reason}")
+            self.packed = self.of(pack)(system, modes, phase)
+            self.of(stage_addresses)(self.packed.ints)
+            #: the laws run as declared Python stages (numba cannot compile them), with numba's reasons
+            self.python_stages = [] if twins is not None else python_stages(system, modes, phase)
         self.readable_calls = 0  #: calls answered by the readable model (a non-finite KKT system, a law that failed)
-        #: the laws run as declared Python stages (numba cannot compile them), with numba's reasons
-        self.python_stages = python_stages(system, modes, phase)
+        self._call = self.of(call)
+
+    def of(self, function):
+        """``function`` (of the package) as this pipeline runs it: itself, or interpreted its twin."""
+        return function if self.twins is None else self.twins.of(function)
 
     @property
     def least_squares(self) -> int:
@@ -342,7 +356,7 @@ class Pipeline:
     def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
         """ẋ at (t [s], x)."""
         p = self.packed
-        xdot = call(float(t), x, p.ints, p.reals, p.work, p.events)
+        xdot = self._call(float(t), x, p.ints, p.reals, p.work, p.events)
         if p.events[-1] != 1.0:
             raise_python_stage_error()  # a Python stage's own error
             self.readable_calls += 1

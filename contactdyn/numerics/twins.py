@@ -1,0 +1,166 @@
+"""The one pipeline run interpreted: its own functions as Python twins, a few small leaves compiled.
+
+Why. Compiling the pipeline (:mod:`contactdyn.model.pipeline`) takes a fresh install tens of seconds; a scene
+kind's first run (:mod:`contactdyn.first_run`) cannot wait for it. It runs the same functions interpreted instead,
+in this process where numba is on, while the compiled code is built in the background: one source of the physics.
+
+How. A numba function keeps its Python source as ``py_func``; its globals are its module's namespace, where the
+functions it calls are numba dispatchers (called from Python, a dispatcher compiles). :class:`Twins` makes the
+*twin* of a function of the package: the same code object with its globals rebound to a *shadow* of its module's
+namespace, a copy in which every function of the package is again its twin (and every module of the package its
+shadow). So ``Twins().of(call)(...)`` runs ``call`` and everything it reaches as plain Python, nothing compiled,
+the real modules untouched (the compiled path in the same process is unaffected). Two exceptions:
+
+- the **leaves** (:data:`LEAVES`: the rigid-body algorithms of :mod:`contactdyn.robot.rigid_body` and the dense
+  linear algebra of :mod:`.linalg`, most of an interpreted call's time, self-contained and the same for every
+  scene) stay numba dispatchers: compiled once per install (seconds, cached), called from the twins;
+- the **handle tables**: interpreted, a stage reached by address (:mod:`.native_call`, the laws' ABIs, the
+  controllers) is a *handle* (the Python function's id, given by the address functions while
+  :func:`.native_call.giving_handles` is on: the mode is packed that way), looked up in a table; in the shadows
+  those tables are seen through :class:`_TwinMap`, so a handle gives the twin.
+
+The arithmetic is the compiled call's, operation for operation (no fastmath: numba keeps the float operations and
+their order): a run on the twins gives the compiled run's outputs bit for bit (``tests/test_interpreted_run.py``,
+``benchmarks/compare_outputs.py --interpreted``).
+Where it is used: :class:`contactdyn.model.pipeline.pipeline.Pipeline` (``twins=``: the mode packed with handles,
+its call and the loop's compiled steps and samples run as twins, :meth:`~.pipeline.Pipeline.of`).
+
+Outside the pipeline, the loop's Python calls a few numba functions of the readable model's (a transition's
+velocity projection calls the chains' ``chain_call``): such a call site asks :func:`current` for the function, its
+twin while an interpreted run runs (:func:`running`, around ``HybridRun.run``), so a first run compiles none of it.
+
+Not twinned (run as they are, so they compile if they are numba functions): methods of classes, a function held in
+a closure cell, a default argument or a container other than the handle tables below; the tests check that an
+interpreted run compiles the leaves only (and the integrator's dense-output polynomials).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import types
+from collections.abc import Mapping
+
+from numba.core.dispatcher import Dispatcher
+
+__all__ = ["Twins", "LEAVES", "current", "running"]
+
+PACKAGE = "contactdyn."
+#: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms and the dense
+#: linear algebra (numerics.linalg)
+LEAVES = frozenset([*(f"contactdyn.robot.rigid_body.{n}" for n in
+                      ("_kinematics", "_nonlinear", "_jacobians", "_inertia", "frame_motion_into")),
+                    *(f"contactdyn.numerics.linalg.{n}" for n in
+                      ("mv", "mtv", "mm", "mtm", "lu_solve", "cholesky", "forward_solve", "pinv", "put"))])
+#: module -> its tables handle -> Python function (or controller class) that must give twins
+HANDLE_TABLES = {
+    "contactdyn.numerics.native_call": ("_HANDLES",),
+    "contactdyn.model.pipeline.control_laws": ("PYTHON_KINDS",),
+    "contactdyn.model.pipeline.actuation": ("PYTHON_KINDS",),
+    "contactdyn.laws.abi": ("_python",),
+}
+
+
+class _TwinMap(Mapping):
+    """A handle table seen through the twins: ``table[h]`` is the twin of what the table holds (writes go through)."""
+
+    def __init__(self, table: dict, twins: Twins) -> None:
+        self._table, self._twins = table, twins
+
+    def __getitem__(self, key):
+        return self._twins.of(self._table[key])
+
+    def get(self, key, default=None):
+        return self._twins.of(self._table[key]) if key in self._table else default
+
+    def __setitem__(self, key, value) -> None:  # (an address function's twin registering a handle)
+        self._table[key] = value
+
+    def __contains__(self, key) -> bool:
+        return key in self._table
+
+    def __iter__(self):
+        return iter(self._table)
+
+    def __len__(self) -> int:
+        return len(self._table)
+
+
+class Twins:
+    """The package's functions as interpreted twins, :data:`LEAVES` (or ``leaves``) compiled (see the module)."""
+
+    def __init__(self, leaves=LEAVES) -> None:
+        self.leaves = frozenset(leaves)
+        self.shadows: dict[str, dict] = {}  #: module name -> its shadow namespace
+        self.made: dict[int, object] = {}  #: id(function) -> its twin (the functions kept alive in ``keep``)
+        self.keep: list = []
+
+    def of(self, value):
+        """The twin of a function of the package (a numba dispatcher or a plain function); anything else itself."""
+        got = self.made.get(id(value))
+        if got is not None:
+            return got
+        if isinstance(value, types.ModuleType):  # (``module.function(...)``: the module's shadow)
+            return self._module(value)
+        python = value.py_func if isinstance(value, Dispatcher) else value
+        if not isinstance(python, types.FunctionType):
+            return value
+        module = python.__module__ or ""
+        if not module.startswith(PACKAGE) or module not in sys.modules:
+            return value
+        if isinstance(value, Dispatcher) and f"{module}.{python.__qualname__}" in self.leaves:
+            twin = value  # a leaf: compiled
+        elif python.__globals__ is not sys.modules[module].__dict__:  # (generated code: exec'd wrappers) as it is
+            twin = python
+        else:
+            twin = types.FunctionType(python.__code__, self._shadow(module), python.__name__, python.__defaults__,
+                                      python.__closure__)
+            twin.__kwdefaults__, twin.__qualname__ = python.__kwdefaults__, python.__qualname__
+        self.made[id(value)] = twin
+        self.keep.append(value)  # (its id stays its own)
+        return twin
+
+    def _module(self, module: types.ModuleType):
+        """A module of the package as its shadow (a module object whose namespace is the shadow); others as they are."""
+        name = module.__name__
+        if not name.startswith(PACKAGE) or sys.modules.get(name) is not module:
+            return module
+        twin = types.ModuleType(name)
+        self.made[id(module)] = twin
+        self.keep.append(module)
+        twin.__dict__.update(self._shadow(name))
+        return twin
+
+    def _shadow(self, module: str) -> dict:
+        """The shadow of ``module``'s namespace: its functions' twins, its handle tables through :class:`_TwinMap`."""
+        shadow = self.shadows.get(module)
+        if shadow is None:
+            original = sys.modules[module].__dict__
+            shadow = self.shadows[module] = dict(original)  # (registered first: the twins made below hold it)
+            for name, value in original.items():
+                shadow[name] = self.of(value)
+            for name in HANDLE_TABLES.get(module, ()):
+                shadow[name] = _TwinMap(original[name], self)
+        return shadow
+
+
+_RUNNING: list[Twins] = []  #: the twins of the interpreted run in progress (innermost last)
+
+
+def current(function):
+    """``function`` (of the package, called from Python outside the pipeline) as the run in progress runs it: its
+    twin during an interpreted run (:func:`running`), else itself."""
+    return _RUNNING[-1].of(function) if _RUNNING else function
+
+
+@contextlib.contextmanager
+def running(twins: Twins | None):
+    """An interpreted run with ``twins`` runs meanwhile (None: a compiled or readable one, nothing changes)."""
+    if twins is None:
+        yield
+        return
+    _RUNNING.append(twins)
+    try:
+        yield
+    finally:
+        _RUNNING.pop()

@@ -1,0 +1,97 @@
+"""The compiled call run interpreted (contactdyn.numerics.twins, a scene kind's first run): its outputs are the
+compiled run's bit for bit, for B1 and for scenes with a user's stage law, controller and force-reading law;
+it compiles nothing but its leaves (numba's compile events), and the readable model is not called."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from numba.core import event
+
+from contactdyn.model import system as system_module
+from contactdyn.model.paths import INTERPRETED, PIPELINE
+from contactdyn.numerics.twins import LEAVES, Twins
+from contactdyn.simulate import simulate
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+#: modules whose functions may compile in an interpreted run: the leaves' (and their callees'), and what the loop
+#: calls outside the pipeline (the dense output's interpolants, a law's cfunc at bind, the readable parts of a
+#: transition: the impact's projection)
+OUTSIDE = ("contactdyn.robot.rigid_body", "contactdyn.numerics.linalg", "contactdyn.numerics.dop853",
+           "contactdyn.numerics.dense_output", "contactdyn.laws.", "contactdyn.model.chain_forces")
+
+
+class _Compiles(event.Listener):
+    def __init__(self) -> None:
+        self.modules: list[str] = []
+
+    def on_start(self, e) -> None:
+        function = getattr((e.data or {}).get("dispatcher"), "py_func", None)
+        self.modules.append(getattr(function, "__module__", "") or "")
+
+    def on_end(self, e) -> None:
+        pass
+
+
+@pytest.fixture(autouse=True)
+def user_laws(fresh_user_imports):
+    """The examples' law modules imported afresh, the registries (stage laws, drive kinds, controllers) left as they
+    were (conftest's fresh_user_imports)."""
+    from contactdyn.laws.controllers import CONTROLLERS
+
+    controllers = dict(CONTROLLERS)
+    yield
+    for module in ("cubic_stage", "my_laws", "force_law"):
+        sys.modules.pop(module, None)
+    CONTROLLERS.clear()
+    CONTROLLERS.update(controllers)
+
+
+def _same(interpreted, compiled) -> None:
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}
+    assert {row["path"] for row in compiled.stats["paths"].values()} == {PIPELINE}
+    assert interpreted.channels.keys() == compiled.channels.keys()
+    for name, values in compiled.channels.items():
+        assert np.array_equal(np.asarray(interpreted.channels[name]), np.asarray(values), equal_nan=True), name
+    assert [(e["kind"], e["t"]) for e in interpreted.events] == [(e["kind"], e["t"]) for e in compiled.events]
+    assert interpreted.stats["rhs_evals"] == compiled.stats["rhs_evals"]
+
+
+@pytest.mark.parametrize("scene, overrides", [
+    ("b1", {"duration": 0.3}),
+    (EXAMPLES / "cubic_press.toml", {"duration": 0.1}),  # a user's stage law (examples/cubic_stage.py)
+    (EXAMPLES / "impedance_press.toml", {"duration": 0.2}),  # a user's controller (examples/my_laws.py)
+    (EXAMPLES / "force_pi_press.toml", {"duration": 0.2}),  # a user's force-reading law (examples/force_law.py)
+])
+def test_the_interpreted_run_is_the_compiled_run(scene, overrides, monkeypatch):
+    compiled = simulate(scene, overrides)
+    seen = _Compiles()
+    event.register("numba:compile", seen)
+
+    def refused(*args, **kwargs):
+        raise AssertionError("the interpreted run called the readable model")
+
+    monkeypatch.setattr(system_module, "evaluate", refused)  # (System.evaluate: dynamics.evaluate)
+    try:
+        interpreted = simulate(scene, overrides, interpreted=True)
+    finally:
+        event.unregister("numba:compile", seen)
+    assert all(module.startswith(OUTSIDE) for module in seen.modules), seen.modules
+    _same(interpreted, compiled)
+
+
+def test_the_twins_are_the_package_functions_with_their_own_namespaces():
+    from contactdyn.model.pipeline import pipeline, robot_terms
+    from contactdyn.robot import rigid_body
+
+    twins = Twins()
+    twin = twins.of(pipeline.call)
+    assert twin.__code__ is pipeline.call.py_func.__code__ and twin.__globals__ is not vars(pipeline)
+    assert twin.__globals__["robot_terms"].__globals__ is twins.shadows["contactdyn.model.pipeline.robot_terms"]
+    assert twins.of(robot_terms.robot_terms).__globals__["_kinematics"] is rigid_body._kinematics  # a leaf
+    assert "contactdyn.robot.rigid_body._kinematics" in LEAVES
+    assert vars(pipeline)["robot_terms"] is robot_terms.robot_terms  # the module itself untouched
+    assert twins.of(np.zeros) is np.zeros and twins.of(3) == 3
