@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 
 import pytest
 
@@ -58,6 +59,31 @@ def fresh_user_imports(monkeypatch):
     for registry, content in saved:
         registry.clear()
         registry.update(content)
+    reference.cache_clear()
+
+
+@pytest.fixture(scope="module")
+def user_laws_after_module():
+    """A module whose cases import the examples' law modules (scene ``imports``) once and keep them for its tests:
+    after it, the law registries, the import record, those modules and the key reference as they were before (a
+    later module sees no user law: tests/test_laws.py checks that)."""
+    import contactdyn.scene.user_laws as user_laws
+    from contactdyn.laws.controllers import CONTROLLERS
+    from contactdyn.laws.drive_kinds import DRIVE_KINDS
+    from contactdyn.laws.friction_laws import FRICTION_LAWS
+    from contactdyn.laws.stage_laws import STAGE_LAWS
+    from contactdyn.scene.keys import reference
+
+    saved = [(registry, dict(registry)) for registry in (STAGE_LAWS, FRICTION_LAWS, DRIVE_KINDS, CONTROLLERS)]
+    imported = dict(user_laws.IMPORTED)
+    yield
+    for registry, content in saved:
+        registry.clear()
+        registry.update(content)
+    for name in set(user_laws.IMPORTED) - set(imported):  # (imported afresh by the next scene that names it)
+        sys.modules.pop(name, None)
+    user_laws.IMPORTED.clear()
+    user_laws.IMPORTED.update(imported)
     reference.cache_clear()
 
 

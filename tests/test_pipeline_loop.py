@@ -29,6 +29,8 @@ from contactdyn.output.samples import evaluated_samples  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
 
+pytestmark = pytest.mark.usefixtures("user_laws_after_module")  # (its cases import the examples' laws)
+
 ROOT = BENCH.parent
 #: the samples' arrays of output.samples.Samples, per name (dicts by key)
 FIELDS = ("tau", "tau_cmd", "limit_torque", "tip", "x_d", "body_force", "F_n", "gap", "F_d", "F_f", "v_slip", "iface",

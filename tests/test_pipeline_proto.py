@@ -19,6 +19,8 @@ from pipeline_proto import CASES, agreement, case, states  # noqa: E402
 
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 
+pytestmark = pytest.mark.usefixtures("user_laws_after_module")  # (its cases import the examples' laws)
+
 #: ‖ẋ − ẋ_readable‖∞ ≤ RTOL ‖ẋ_readable‖∞: the robot's terms come from rigid_body (Pinocchio's algorithms, its
 #: rounding differs), the KKT solve is an LU of another order than LAPACK's; measured ≤ 4e-15
 RTOL = 1e-12
