@@ -13,9 +13,10 @@ energy audit (each stage's force also at ẋ = 0: two callbacks per call). The l
 call], each ratio to ``linear``.
 
 The controller: examples/force_pi_press.toml (a bonded surface: the force-reading law folded, its callback called
-once more per row) under ``force_pi`` (examples/force_law.py, compiled, by address: the twin) and ``dict_force_pi``
-(the same law reading ControlInput's dictionaries and a Python dict: a Python stage), and the readable model of the
-Python-stage mode; ratios to ``force_pi``.
+once more per row) under ``force_pi`` (examples/force_law.py, compiled, by address: the twin) and
+``dict_force_pi_test`` (tests/test_python_controller.py's DictForcePI: the same law reading ControlInput's
+dictionaries and a Python dict, a Python stage), and the readable model of the Python-stage mode; ratios to
+``force_pi``.
 """
 
 from __future__ import annotations
@@ -27,13 +28,14 @@ import tomllib
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from test_python_controller import DictForcePI  # noqa: E402  (the tests' scene and law: one source)
+from test_python_stages import _bonded as bonded  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn import parse_scene  # noqa: E402
-from contactdyn.laws import Controller, Param, register  # noqa: E402
+from contactdyn.laws import register  # noqa: E402
 from contactdyn.laws.stage_laws import StageLaw, register_stage_law  # noqa: E402
 from contactdyn.model import dynamics  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
@@ -42,7 +44,6 @@ from contactdyn.simulate import prepare  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
-K, B = 5e4, 1500.0  #: [N/m], [N·s/m]
 _SCALE = {"k": 1.0}  #: a Python dict: numba cannot type it
 
 
@@ -55,39 +56,6 @@ class PythonLinear(StageLaw):
     @staticmethod
     def force(k, b, p, x, xdot):
         return _SCALE["k"] * k * x + b * xdot
-
-
-def bonded(law: str):
-    chain = {"model": "chain", "environment": [{"k": K, "b": B, "law": law}, {"m": 2.0}, {"k": 2 * K, "b": 2 * B}]}
-    return parse_scene({
-        "duration": 0.01, "solver": {"rtol": 1e-10, "atol": 1e-13, "record_energy": True},
-        "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, -9.81], "q0": [1.0],
-                  "v0": [0.3]},
-        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], **chain},
-                            "bonded": True}},
-        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0, "axes": [[1.0, 0.0, 0.0]]},
-    })
-
-
-@register
-class DictForcePI(Controller):
-    """examples/force_law.py's ForcePI reading ControlInput's dictionaries (and a Python dict): a Python stage."""
-
-    name, uses_forces, n_states = "dict_force_pi", True, 1
-    params = (Param("stiffness", "N/m", "K", 2000.0), Param("damping", "N·s/m", "D", 100.0),
-              Param("damping_n", "N·s/m", "D_n", 50.0), Param("ki", "1/s", "k_i", 20.0),
-              Param("cancel", "-", "c", 0.5, hi=1.0))
-
-    def command(self, inp):
-        c = self.config
-        key = next(iter(inp.force_d))
-        n, F_d = inp.normals[key], inp.force_d[key][0]
-        f = c.stiffness * (inp.x_d - inp.p_tip) - c.damping * inp.v_tip
-        f = f - (f * n).sum() * n
-        rate_n = (n * (inp.v_tip - inp.surfaces[key][1])).sum()
-        f = f - (c.damping_n * rate_n + F_d + inp.z[0]) * n
-        tau = _SCALE["k"] * (inp.J.T @ f) - c.cancel * inp.tau_contact
-        return tau, np.array([float(inp.touching[key]) * c.ki * (F_d - inp.forces[key])])
 
 
 def press(kind: str):
@@ -103,8 +71,9 @@ def press(kind: str):
 def controller_variants(calls: int) -> tuple[dict, dict, dict]:
     """(variants, calls per variant, Python stages) of the controller comparison."""
     import_scene_modules(["force_law"], str(ROOT / "examples" / "force_pi_press.toml"))
+    register(DictForcePI)
     variants, n_calls, stages = {}, {}, {}
-    for kind in ("force_pi", "dict_force_pi"):
+    for kind in ("force_pi", DictForcePI.name):
         system, modes, phase, x = prepare(press(kind))
         modes = [m.with_(touching=True) for m in modes]
         pipe = Pipeline(system, modes, phase)
@@ -112,7 +81,7 @@ def controller_variants(calls: int) -> tuple[dict, dict, dict]:
         pipe.rhs(0.01, x)
         variants[kind], n_calls[kind] = (lambda pipe=pipe, x=x, n=calls: [pipe.rhs(0.01, x) for _ in range(n)][-1]), \
             calls
-        if kind == "dict_force_pi":
+        if kind == DictForcePI.name:
             n_calls["readable_ctl"] = max(calls // 20, 1)
             variants["readable_ctl"] = (lambda s=system, m=modes, ph=phase, x=x, n=n_calls["readable_ctl"]:
                                         [dynamics.evaluate(s, 0.01, x, m, ph) for _ in range(n)][-1].xdot)
@@ -144,14 +113,14 @@ def main(argv: list[str] | None = None) -> int:
     stages.update(ctl_stages)
     us = {k: 1e6 * statistics.median(t.cpu_s) / calls[k] for k, t in times.items()}
     diff = float(abs(times["python_linear"].last - times["linear"].last).max())
-    ctl_diff = float(abs(times["dict_force_pi"].last - times["force_pi"].last).max())
+    ctl_diff = float(abs(times[DictForcePI.name].last - times["force_pi"].last).max())
     rows = []
     for k, v in us.items():
         base = "force_pi" if k in ctl_variants else "linear"
         rows.append({"variant": k, "us_per_call": round(v, 3), "ratio_to": base, "ratio": round(v / us[base], 3),
                      "python_stages": stages.get(k, [])})
         print(f"{k:>14}: {v:9.3f} µs/call  ×{v / us[base]:.2f} {base}")
-    print(f"python_linear vs linear: max |Δẋ| = {diff:.3g}; dict_force_pi vs force_pi: max |Δẋ| = {ctl_diff:.3g}")
+    print(f"python_linear vs linear: max |Δẋ| = {diff:.3g}; {DictForcePI.name} vs force_pi: max |Δẋ| = {ctl_diff:.3g}")
     if args.out:
         write_report(Path(args.out), {"calls": args.calls, "repeats": args.repeats, "max_abs_diff_xdot": diff,
                                       "max_abs_diff_xdot_controller": ctl_diff}, rows)

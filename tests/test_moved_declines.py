@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from run_agreement import assert_runs_agree
 
 from contactdyn import parse_scene, simulate
 from contactdyn.hybrid.pipeline_mode import PipelineMode
@@ -36,7 +37,7 @@ from contactdyn.model.friction import (
     slip_acceleration,
     slip_velocity,
 )
-from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines
+from contactdyn.model.paths import LivePipelines
 from contactdyn.model.pipeline.pack import CARRIER, READS_FORCES, unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.scene.user_laws import import_scene_modules
@@ -44,8 +45,6 @@ from contactdyn.simulate import prepare
 
 ROOT = Path(__file__).resolve().parents[1]
 RTOL = 1e-9  #: each component of ẋ to RTOL × (1 + its largest magnitude over the states), as paths.disagreement
-#: a whole run's channels to RUN_RTOL of their largest magnitude (+1e-12 absolute) at the solver's rtol 1e-10
-RUN_RTOL = 1e-9
 FORCE_PI = {"kind": "force_pi", "stiffness": 1e4, "damping": 300.0, "damping_n": 50.0, "ki": 20.0, "cancel": 0.5}
 
 
@@ -111,19 +110,6 @@ def _assert_rates_agree(pipe, system, modes, phase, t, xs) -> np.ndarray:
     return refs
 
 
-def _assert_runs_agree(fast, readable) -> None:
-    """Every mode of ``fast`` on the compiled call, of ``readable`` on the readable model; channels and events the
-    same (RUN_RTOL; the events' times to 1e-9 s)."""
-    assert {row["path"] for row in fast.stats["paths"].values()} == {PIPELINE}, fast.stats["paths"]
-    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
-    for key, ref in readable.channels.items():
-        ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
-        if ref.size and not np.all(np.isnan(ref)):
-            assert float(np.nanmax(np.abs(got - ref))) <= RUN_RTOL * float(np.nanmax(np.abs(ref))) + 1e-12, key
-    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in readable.events]
-    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in readable.events], rtol=0, atol=1e-9)
-
-
 def _both_ways(scene_of, monkeypatch):
     fast = simulate(scene_of())
     monkeypatch.setattr(LivePipelines, "use", False)
@@ -172,7 +158,7 @@ def test_the_lever_under_a_force_reading_law_runs_compiled_and_the_readable_run_
     fast, readable = _both_ways(lever_pi, monkeypatch)
     assert fast.stats["singular_solves"] == 0
     assert any(e["kind"] == "touch" and e["name"] == "push" for e in fast.events)
-    _assert_runs_agree(fast, readable)
+    assert_runs_agree(fast, readable)
 
 
 # ---- a reference carried by an articulated body ------------------------------------------------------------------
@@ -241,7 +227,7 @@ def test_a_reference_carried_by_a_cart_with_a_pendulum_runs_compiled_and_the_rea
     assert fast.stats["singular_solves"] == 0
     assert [(e["kind"], e["name"]) for e in fast.events] == [("touch", "push"), ("slip", "push")]
     assert float(np.abs(fast["body.lever.slide.x"]).max()) > 1e-4  # [m] the cart moves, and the reference with it
-    _assert_runs_agree(fast, readable)
+    assert_runs_agree(fast, readable)
 
 
 # ---- two 2-D slides launching from rest at once ------------------------------------------------------------------
@@ -320,4 +306,4 @@ def test_two_slides_launching_at_once_from_the_start_run_compiled_and_the_readab
     fast, readable = _both_ways(lambda: ur5_wall(0.05, 0.05, 0.025), monkeypatch)
     assert [(e["kind"], e["name"], e["t"]) for e in fast.events] == [("slip", "pencil", 0.0), ("slip", "wall", 0.0)]
     assert fast.stats["singular_solves"] == 0
-    _assert_runs_agree(fast, readable)
+    assert_runs_agree(fast, readable)
