@@ -294,9 +294,10 @@ CASES = {
 }
 
 
-def case(name: str):
-    """(system, modes, phase, t, x0) of a case: its scene's first mode at its start, changed as CASES says."""
-    path, edit, change = CASES[name]
+def case(name: str, cases: dict | None = None):
+    """(system, modes, phase, t, x0) of a case of ``cases`` (CASES unless given): its scene's first mode at its
+    start, changed as the case says."""
+    path, edit, change = (CASES if cases is None else cases)[name]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         system, modes, phase, x0 = prepare(_scene(path, edit))

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
-from pipeline_proto import _scene, _touch, states  # noqa: E402
+from pipeline_proto import _scene, _touch, case, states  # noqa: E402
 
 from contactdyn import simulate  # noqa: E402
 from contactdyn.laws import Controller, Param  # noqa: E402
@@ -23,7 +23,6 @@ from contactdyn.model import dynamics  # noqa: E402
 from contactdyn.model.paths import PIPELINE, LivePipelines  # noqa: E402
 from contactdyn.model.pipeline.pack import unsupported  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
-from contactdyn.simulate import prepare  # noqa: E402
 
 RTOL = 1e-9  #: ‖ẋ − ẋ_readable‖∞ ≤ RTOL ‖ẋ_readable‖∞ (measured ≤ 1e-15)
 
@@ -123,19 +122,9 @@ CASES = {
 }
 
 
-def _case(name: str):
-    path, edit, change = CASES[name]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        system, modes, phase, x0 = prepare(_scene(path, edit))
-    if change is not None:
-        modes, phase = change(system, modes, phase, x0)
-    return system, modes, phase, phase.t_start + 0.0123, x0
-
-
 @pytest.mark.parametrize("name", list(CASES))
 def test_the_pipeline_gives_the_readable_rates(name):
-    system, modes, phase, t, x0 = _case(name)
+    system, modes, phase, t, x0 = case(name, CASES)
     assert unsupported(system, modes, phase) == ""
     pipe = Pipeline(system, modes, phase)
     for x in states(x0, 4):
