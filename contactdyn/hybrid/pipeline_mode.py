@@ -96,7 +96,7 @@ class PipelineMode:
             ring.append((t, x, events.copy()))
             return xdot
 
-        rhs.step = self.pipe.of(stepper)(p, ring)
+        rhs.step = of(stepper)(p, ring)
         rhs.derivatives = of(derivatives)(p, rhs)
         self.rhs = rhs
         self.nt = [len(c.tangents) if c.friction is not None else 0 for c in system.contacts]
@@ -107,8 +107,7 @@ class PipelineMode:
     def watched_step(self, on_stage):
         """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
         slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`)."""
-        step = self.pipe.of(stepper)(self.pipe.packed, self.ring, on_stage)
-        return step
+        return self.pipe.of(stepper)(self.pipe.packed, self.ring, on_stage)
 
     @property
     def singular(self) -> int:

@@ -45,7 +45,7 @@ from ..model.system import System
 from .charts import on_chart
 from .events import EventLog
 
-__all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
+__all__ = ["Transitions", "LastEvaluation", "model_at", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
 #: [m] another rigid contact within this gap, closing, at a touch touches with it (one impact holds both): the
@@ -91,9 +91,16 @@ class LastEvaluation:
         return self.ev
 
     def _evaluate(self, t: float, x: np.ndarray, modes, phase):
-        mode = self.runner(modes, phase, t, x) if self.runner is not None else None
-        ev = mode.evaluation(t, x) if mode is not None and mode.ok else None
-        return ev if ev is not None else self.system.evaluate(t, x, modes, phase)
+        return model_at(self.system, self.runner, t, x, modes, phase)
+
+
+def model_at(system: System, runner, t: float, x: np.ndarray, modes, phase):
+    """The model's Evaluation at (t [s], x): off the mode's call (``runner(modes, phase, t, x)``, a PipelineMode:
+    its :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`), else (no runner, a Declined mode, a call
+    that declines there) System.evaluate."""
+    mode = runner(modes, phase, t, x) if runner is not None else None
+    ev = mode.evaluation(t, x) if mode is not None and mode.ok else None
+    return ev if ev is not None else system.evaluate(t, x, modes, phase)
 
 
 class Transitions:
