@@ -199,9 +199,8 @@ class PipelineMode:
         p, system = self.pipe.packed, self.system
         X = np.ascontiguousarray(x, dtype=float)[None, :]
         least_squares_before = self.pipe.least_squares
-        Xd, E, W, done = self.pipe.of(samples_at)(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
-        if done == 0:
-            self.pipe.readable_calls += 1
+        Xd, E, W = self._one_call(t, X)
+        if Xd is None:
             return None
         S = Samples(1, system)
         self._read_out(S, E, W, X)
@@ -245,16 +244,24 @@ class PipelineMode:
             S.fill(k, system.evaluate(float(ts[k]), X[k], self.modes, self.phase, full=True))
         return S
 
+    def _one_call(self, t: float, X: np.ndarray) -> tuple:
+        """(ẋ, event values, work) of one call at (t [s], X[0]) with the diagnostics on, each with one row; (None,
+        None, None) where the call declines there (a Python stage's own error raised first; counted)."""
+        p = self.pipe.packed
+        Xd, E, W, done = self.pipe.of(samples_at)(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
+        if done == 0:
+            raise_python_stage_error()
+            self.pipe.readable_calls += 1
+            return None, None, None
+        return Xd, E, W
+
     def measurement(self, t: float, x: np.ndarray) -> Measurement | None:
         """What a sampled law measures at (t [s], x) (:class:`~contactdyn.model.dynamics.Measurement`), off one
         compiled call with the diagnostics on (as an output sample's); None where the call declines there (the
         readable model measures)."""
         p, system = self.pipe.packed, self.system
-        Xd, E, W, done = self.pipe.of(samples_at)(np.array([float(t)]), np.ascontiguousarray(x, dtype=float)[None, :],
-                                          p.ints, p.reals, p.work, p.events)
-        if done == 0:
-            raise_python_stage_error()
-            self.pipe.readable_calls += 1
+        Xd, E, W = self._one_call(t, np.ascontiguousarray(x, dtype=float)[None, :])
+        if Xd is None:
             return None
         e, w = E[0], W[0]
         at = self.pipe.of(diag_starts)(p.ints)[D_TC]
