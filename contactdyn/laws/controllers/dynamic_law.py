@@ -112,9 +112,10 @@ def joint_targets(q, v, q_d, v_d, a_d, kp, kv):
     """q̈* [rad/s² or m/s²] of A7 in joint space at q [rad or m], q̇ (kp [1/s²], kv [1/s] per joint; no reference:
     q_d of size 0). Per component: numpy's elementwise values."""
     qdd = np.empty(q.size)
-    for i in range(q.size):
-        if q_d.size:
-            qdd[i] = a_d[i] - kp[i] * (q[i] - q_d[i]) - kv[i] * (v[i] - v_d[i])
-        else:
+    if q_d.size == 0:
+        for i in range(q.size):
             qdd[i] = -kv[i] * v[i]
+        return qdd
+    for i in range(q.size):
+        qdd[i] = a_d[i] - kp[i] * (q[i] - q_d[i]) - kv[i] * (v[i] - v_d[i])
     return qdd
