@@ -135,8 +135,9 @@ def raise_python_stage_error() -> None:
 def python_stage_address(law: type) -> int:
     """The address of a C function (``STAGE_SIGNATURE``) calling stage law ``law``'s Python ``force`` with p as a
     tuple (as the readable model calls it): its declared Python stage. Interpreted, the law's handle."""
-    if stage_address(law) or law in _callbacks:
-        return stage_address(law) or _callbacks[law][0]
+    address = stage_address(law)
+    if address or law in _callbacks:
+        return address or _callbacks[law][0]
 
     def force(k, b, p, n_p, x, xdot):
         try:

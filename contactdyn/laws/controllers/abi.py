@@ -398,8 +398,7 @@ def call_controller(address: int, buffer, layout, params, tau, zdot=None) -> int
     for name, out in (("tau", tau), ("zdot", zdot)):
         if not (out.dtype == np.float64 and out.flags.c_contiguous):
             raise ValueError(f"call_controller: {name} must be a contiguous float64 array (it is written)")
-    fn = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int64,
-                          ctypes.c_void_p, ctypes.c_void_p)(int(address))
+    fn = _CONTROLLER_CTYPE(int(address))
     return fn(buffer.ctypes.data, layout.ctypes.data, params.ctypes.data, params.size, tau.ctypes.data,
               zdot.ctypes.data)
 

@@ -67,6 +67,7 @@ from ...robot.rigid_body import forest_table
 from ..chain import NodeKind
 from ..chain_forces import S_LAW
 from ..chain_forces import pack as pack_chain
+from ..dynamics import surface_keys
 from ..friction import launching
 from .control_laws import JOINT_DYNAMIC, kind_address
 from .drives import DW_W, drive_table, python_drives
@@ -591,7 +592,7 @@ def _controller(b: _Builder, system, phase) -> None:
               *(("tau_contact", "surface_p", "surface_v", "touch") if not ctl.uses_forces else ()))
     h[N_Z], h[Z_AT], h[READS_FORCES] = ctl.n_states, phase.z_slice.start, int(ctl.uses_forces)
     dims = len(phase.reference.start) if phase.reference is not None else 3  # (3: x_d absent, its size unread)
-    keys = _key_names(system)
+    keys = surface_keys(system)  # (the readable ControlInput's dictionaries' keys, I_KEYS' order)
     b.int_section(I_LAYOUT, layout_of(system.nv, ctl.n_states, absent, len(phase.forces), dims,
                                       len(keys) if in_python else 0))
     h[CTL_KIND] = CTL_ABI
@@ -613,12 +614,6 @@ def _controller(b: _Builder, system, phase) -> None:
         params = params_of(ctl.config)
     h[N_CTL_PARAMS] = params.size
     b.real_section(R_CTL, params)
-
-
-def _key_names(system) -> list[str]:
-    """The keys of the readable ControlInput's dictionaries, I_KEYS' order: per contact its name, then
-    "<contact>.<label>" per tangential chain (``dynamics.surface_keys``)."""
-    return [key for c in system.contacts for key in (c.name, *(f"{c.name}.{dc.label}" for dc in c.tangent_chains))]
 
 
 def _drives(b: _Builder, system, phase) -> None:
