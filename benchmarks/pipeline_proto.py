@@ -307,7 +307,7 @@ def case(name: str, cases: dict | None = None):
 
 
 def states(x0: np.ndarray, count: int, seed: int = 7) -> list[np.ndarray]:
-    """x0 and count − 1 random states near it (x0 + 1e-3 (1 + |x0|) N(0, 1), as paths.disagreement perturbs)."""
+    """x0 and count − 1 random states near it (x0 + 1e-3 (1 + |x0|) N(0, 1))."""
     rng = np.random.default_rng(seed)
     return [x0.copy()] + [x0 + 1e-3 * (1.0 + np.abs(x0)) * rng.normal(size=x0.size) for _ in range(count - 1)]
 

@@ -11,7 +11,6 @@ import pytest
 from contactdyn import parse_scene, simulate
 from contactdyn.model.paths import PIPELINE, READABLE
 from contactdyn.model.system import System
-from contactdyn.scene.reader import read_toml
 from contactdyn.scene.scene_file import load_scene, sims_dir
 from contactdyn.simulate import run_system
 
@@ -117,15 +116,3 @@ def test_the_writers_2d_slip_launching_from_rest_runs_on_the_pipeline(scene):
     assert r.events[-1]["t"] < 0.8  # the launch segment ran for more than 50 ms
     _all_compiled(r)
     assert r.stats["segments_by_method"].get("LSODA") == 1  # the launch segment (contactdyn.hybrid.loop)
-
-
-def test_the_start_check_holds_each_rate_to_the_size_of_its_terms_not_of_its_value_at_an_equilibrium():
-    """At an equilibrium a law's integral state has a rate of ~1e-7 made of forces of 50 N times a gain of
-    400/s: the pipeline and the readable model differ there by rounding (~1e-9), which a tolerance relative to the
-    rate's own value would call a disagreement (paths.disagreement) and run the mode on the readable model. The
-    perturbed state of the check shows the terms' size; a law changed on one path only is still caught
-    (test_laws.test_a_friction_law_changed_on_the_readable_path_only_is_caught)."""
-    document = read_toml(sims_dir() / "force_loop_real_cell.toml")
-    for key in ("sample_rate", "delay"):  # the scene's continuous twin: its law acts at every instant
-        document["controller"].pop(key, None)
-    _all_compiled(run_system(System(parse_scene(document, file=str(sims_dir() / "force_loop_real_cell.toml")))))

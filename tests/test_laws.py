@@ -145,16 +145,6 @@ def test_friction_laws_share_one_interface():
         assert spec.constant == bool(np.ptp(mu) == 0.0), name
 
 
-def test_a_friction_law_changed_on_the_readable_path_only_is_caught(monkeypatch):
-    """The compiled call takes μ from the law by address; a μ(v) changed in the readable model alone must not pass
-    silently: the call's self-check where the mode starts disagrees and says so (an undeclared fallback)."""
-    import contactdyn.model.friction as friction
-
-    monkeypatch.setattr(friction, "kinetic_coefficient", lambda fr, vt: 1.1 * fr.mu_k)
-    r = run(B1, sims_dir() / "b1.toml")
-    assert any(reason.startswith("undeclared: disagrees") for reason in r.stats["fallback_modes"])
-
-
 # ---- the paths ---------------------------------------------------------------------------------------------------
 def test_the_run_prints_the_modes_a_python_stage_slows(capsys, uncompilable_law):
     """A stage law numba cannot compile runs as a declared Python stage of the compiled call: each such mode is

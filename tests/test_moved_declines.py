@@ -44,7 +44,7 @@ from contactdyn.scene.user_laws import import_scene_modules
 from contactdyn.simulate import prepare
 
 ROOT = Path(__file__).resolve().parents[1]
-RTOL = 1e-9  #: each component of ẋ to RTOL × (1 + its largest magnitude over the states), as paths.disagreement
+RTOL = 1e-9  #: each component of ẋ to RTOL × (1 + its largest magnitude over the states)
 FORCE_PI = {"kind": "force_pi", "stiffness": 1e4, "damping": 300.0, "damping_n": 50.0, "ki": 20.0, "cancel": 0.5}
 
 

@@ -19,8 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_compiled_path import axis_scene  # noqa: E402
 
 from contactdyn import parse_scene, simulate  # noqa: E402
-from contactdyn.model.paths import PIPELINE, READABLE, UNDECLARED, LivePipelines  # noqa: E402
-from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines  # noqa: E402
 
 CUBIC = Path(__file__).resolve().parent.parent / "examples" / "cubic_press.toml"
 #: a Hunt–Crossley stage soft enough in damping that the falling axis bounces off (a separation on the pipeline)
@@ -78,19 +77,6 @@ def test_a_hunt_crossley_bounce_runs_on_the_pipeline_and_separates_at_the_same_t
     # takes compiled steps (hybrid.steps) where the readable model takes scipy's core: other step ends
     # (5.8e-8 s apart here; with scipy's core on the pipeline too, the runs are bitwise the same)
     assert_same_run(live, readable, ("q", "v", "contact.tip.F_n"), event_atol=1e-6)
-
-
-def test_a_pipeline_that_disagrees_where_the_mode_starts_leaves_it_to_the_readable_model(monkeypatch):
-    honest = simulate(axis_scene(HUNT_CROSSLEY, duration=0.05))
-    wrong = Pipeline.rhs
-    monkeypatch.setattr(Pipeline, "rhs", lambda self, t, x: wrong(self, t, x) * (1.0 + 1e-6))
-    r = simulate(axis_scene(HUNT_CROSSLEY, duration=0.05))
-    assert {row["path"] for row in r.stats["paths"].values()} == {READABLE}  # every mode: each its own check
-    assert len(r.stats["fallback_modes"]) == 3  # free, touching, apart (its chain relaxing; labelled "free" too)
-    assert all(k.startswith(UNDECLARED + "disagrees with System.evaluate") for k in r.stats["fallback_modes"])
-    # the readable model's run: the pipeline's (to the rounding of its compiled steps, which scipy's core does not take)
-    np.testing.assert_allclose(r["q"], honest["q"], rtol=0, atol=1e-9 * np.abs(honest["q"]).max())
-    assert honest.stats["paths"]["main: tip touching"]["path"] == PIPELINE
 
 
 def test_a_stuck_contact_runs_on_the_pipeline_its_slip_watch_reading_the_pipeline(monkeypatch):

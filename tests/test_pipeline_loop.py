@@ -20,7 +20,6 @@ from pipeline_proto import CASES, case, states  # noqa: E402
 
 from contactdyn.hybrid import loop  # noqa: E402
 from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
-from contactdyn.model import paths  # noqa: E402
 from contactdyn.model.dynamics import evaluate as readable_evaluate  # noqa: E402
 from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
@@ -39,6 +38,10 @@ FIELDS = ("tau", "tau_cmd", "limit_torque", "tip", "x_d", "body_force", "F_n", "
 #: magnitude: the call's own (≤ 1e-12, tests/test_pipeline_proto.py); measured ≤ 4.8e-15 over the 24 cases (UR5)
 SAMPLES_RTOL = 1e-12
 RUN_RTOL = 1e-9  #: a run on the pipeline against the readable model's: each channel, relative to its largest value
+#: the runs' tolerances: the two right-hand sides differ by rounding, which the step control amplifies up to a fraction
+#: of the tolerance (the rigid writer's v_slip at its own rtol: 4.3e-9 on this round's AMD EPYC, below 1e-9 on the
+#: machine CI ran it on before); at these, ≤ 1.6e-11 (measured on the EPYC)
+TIGHT = {"solver.rtol": 1e-11, "solver.atol": 1e-13}
 EVENT_ATOL = 1e-9  #: [s] their events' times (measured ≤ 4e-11 s on these scenes)
 
 
@@ -79,7 +82,7 @@ def test_the_output_samples_are_the_readable_ones(name):
 
 def _run(scene: str, duration: float, compiled: bool, monkeypatch):
     monkeypatch.setattr(LivePipelines, "use", compiled)
-    return run_system(System(load_scene(ROOT / scene, {"duration": duration})))
+    return run_system(System(load_scene(ROOT / scene, {"duration": duration, **TIGHT})))
 
 
 #: scenes whose every mode the pipeline packs, short (their events: touch, separate, stop, slip, stick)
@@ -101,11 +104,11 @@ def test_a_run_on_the_pipeline_is_the_run_on_the_readable_model(scene, duration,
     np.testing.assert_allclose([e["t"] for e in on.events], [e["t"] for e in off.events], rtol=0, atol=EVENT_ATOL)
 
 
-def test_a_pipeline_run_evaluates_the_readable_model_only_in_its_start_checks(monkeypatch):
+def test_a_pipeline_run_never_evaluates_the_readable_model(monkeypatch):
     """Counted calls of System.evaluate: none while the segments integrate (their right-hand side, compiled steps,
     event values), none in the output samples, none in the transitions (their decisions read the call that
-    integrates: PipelineMode.evaluation); only in :func:`contactdyn.model.paths.disagreement`, two per mode packed."""
-    calls = {"all": 0, "integrate": 0, "samples": 0, "checks": 0}
+    integrates: PipelineMode.evaluation), none where a mode starts (no check against it: one source)."""
+    calls = {"all": 0, "integrate": 0, "samples": 0}
     evaluate, integrate, sample_states = System.evaluate, loop.integrate, loop.sample_states
 
     def counted_evaluate(self, *args, **kwargs):
@@ -124,12 +127,10 @@ def test_a_pipeline_run_evaluates_the_readable_model_only_in_its_start_checks(mo
     monkeypatch.setattr(System, "evaluate", counted_evaluate)
     monkeypatch.setattr(loop, "integrate", inside("integrate", integrate))
     monkeypatch.setattr(loop, "sample_states", inside("samples", sample_states))
-    monkeypatch.setattr(paths, "disagreement", inside("checks", paths.disagreement))
     r = _run("benchmarks/hard/stickslip.toml", 1.0, True, monkeypatch)
     assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
     assert len(r.events) > 10 and r.stats["rhs_evals"] > 1000
-    assert calls["integrate"] == 0 and calls["samples"] == 0
-    assert calls["all"] == calls["checks"] >= 2 * len(r.stats["paths"])
+    assert calls == {"all": 0, "integrate": 0, "samples": 0}
 
 
 EVENT_FIELDS = ("normal_force", "gap", "friction", "slip", "limit_torque", "joint_hold", "force_d", "interface",

@@ -164,26 +164,6 @@ def test_a_launch_already_past_the_stick_band_takes_no_trial_pass(name):
     assert pipe.readable_calls == 0
 
 
-def test_the_readable_launch_is_kept_for_the_same_state(monkeypatch):
-    """launch_directions_at asked again at the same (t, x, modes, phase) answers from System.launch_kept without an
-    evaluation (the same modes); another state, time or phase is solved again."""
-    from contactdyn.model.friction import launch_directions_at
-
-    system, modes, phase, t, x0 = case("ur5_launch")
-    x = x0.copy()
-    x[system.nQ:2 * system.nQ] = 0.0
-    first = launch_directions_at(system, t, x, modes, phase)
-    calls = []
-    evaluate = type(system).evaluate
-    monkeypatch.setattr(type(system), "evaluate", lambda *a, **k: calls.append(1) or evaluate(*a, **k))
-    assert launch_directions_at(system, t, x.copy(), modes, phase) == first and not calls
-    for t2, x2, phase2 in ((t + 1e-3, x, phase), (t, x + 1e-9, phase), (t, x, replace(phase))):
-        launch_directions_at(system, t, x, modes, phase)  # (kept again)
-        calls.clear()
-        launch_directions_at(system, t2, x2, modes, phase2)
-        assert calls
-
-
 @pytest.mark.parametrize("name", ["b1_energy", "b1_energy_stuck", "b1_energy_stick", "b1_energy_massless",
                                   "writer_b_energy"])
 def test_the_energy_audits_rates_are_the_readable_ones(name):

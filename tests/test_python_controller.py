@@ -28,7 +28,7 @@ from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.simulate import prepare
 
 ROOT = Path(__file__).resolve().parents[1]
-RTOL = 1e-9  #: each component of ẋ to RTOL × (1 + its largest magnitude over the states), as paths.disagreement
+RTOL = 1e-9  #: each component of ẋ to RTOL × (1 + its largest magnitude over the states)
 _GAIN = {"k": 1.0}  #: a Python dict: numba cannot type it as a global
 
 

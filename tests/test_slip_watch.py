@@ -4,6 +4,7 @@ and located at its first stage; stages of other steps do not count."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from contactdyn.hybrid.events import SlipWatch
 
@@ -47,3 +48,33 @@ def test_a_negative_step_end_is_returned_as_it_is():
     w(0.0, X)
     w.sample(0.2, -1.0)
     assert w(0.5, X) == -3.0  # the end itself crossed: the root finder locates it on the interpolant
+
+
+def test_a_stick_decided_inside_the_cones_slack_slips_as_its_load_grows():
+    """A stick decided at the cone's edge with g = μ_s F − |F_f| = −2e-12 N (inside in_cone's round-off slack) and a
+    load growing at 1 N/s: g never crosses zero from above, so without its floor the watch would never fire and the
+    contact would stay stuck outside the cone (tests/test_pinch.py saw 0.44 N on an AMD EPYC). With the floor g(t0)
+    the event is g − g(t0) through zero: it fires at the first step end and is located at the segment's start."""
+    from contactdyn.model.friction import in_cone
+    from contactdyn.numerics.dop853 import solve
+
+    g0, mu, F = -2e-12, 0.5, 1.0
+    assert in_cone(np.array([mu * F - g0]), F, mu)  # the stick the transitions decided
+    w = SlipWatch(lambda t, x: g0 - t, "tip", mu, floor=min(g0, 0.0))
+    sol = solve(lambda t, x: np.zeros(1), (0.0, 1.0), np.zeros(1), rtol=1e-9, atol=1e-12, events=[w])
+    assert sol.status == 1 and sol.t_events[0][0] == pytest.approx(0.0, abs=1e-12)
+    unfloored = SlipWatch(lambda t, x: g0 - t, "tip", mu)
+    sol = solve(lambda t, x: np.zeros(1), (0.0, 1.0), np.zeros(1), rtol=1e-9, atol=1e-12, events=[unfloored])
+    assert sol.status == 0 and len(sol.t_events[0]) == 0  # the gap the floor closes
+
+
+def test_a_slide_from_rest_sticks_again_only_strictly_inside_the_cone():
+    """in_cone's hysteresis: at the edge (|F_f| = μ_s F within the slack) a stick holds (the lenient test) but a slide
+    from rest is not stuck again (the strict one), so the two decisions cannot chatter at one instant."""
+    from contactdyn.model.friction import CONE_TOL, in_cone
+
+    mu, F = 0.7, 0.315
+    edge = np.array([mu * F * (1.0 + 0.5 * CONE_TOL)])
+    assert in_cone(edge, F, mu) and not in_cone(edge, F, mu, strictly=True)
+    inside = np.array([mu * F * (1.0 - 3.0 * CONE_TOL)])
+    assert in_cone(inside, F, mu, strictly=True)

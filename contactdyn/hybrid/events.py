@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import SimulationError
 from ..model.contact import ContactMode
 from ..model.dynamics import Evaluation
-from ..model.friction import slip_velocity
+from ..model.friction import cone_slack, slip_velocity
 from ..model.phases import Phase
 from ..model.system import System
 
@@ -166,13 +166,19 @@ class SlipWatch:
     and while ``solve_ivp`` locates it on the dense output, g is held negative from that
     stage's time on, so the root found is the first crossing. A false alarm (a stage state
     off the final solution) is caught by the handler, which keeps the stick.
+
+    ``floor`` [N]: g where the segment starts if that is below 0 within the round-off slack of ``friction.in_cone``
+    (a stick decided at the cone's edge), else 0; the event is g − floor through zero, so such a stick slips as
+    soon as its load grows, never held outside the cone unseen (a grip opening with μ_s = μ_k: both pads at the
+    edge at once). A stick further outside is a wrong decision, left to the physics checks to report.
     """
 
     terminal = True
     direction = -1
 
-    def __init__(self, value, name: str, mu_s: float):
+    def __init__(self, value, name: str, mu_s: float, floor: float = 0.0):
         self.value, self.contact, self.mu_s = value, name, mu_s  # value(t, x): g at a state
+        self.floor = floor
         self.kind = "slip"
         self.t_end = -math.inf  #: last step end seen [s]
         self.latch = math.inf  #: from this time on g is held negative [s]
@@ -182,11 +188,11 @@ class SlipWatch:
         return self.mu_s * ev.normal_force[self.contact] - float(np.linalg.norm(ev.friction[self.contact]))
 
     def sample(self, t: float, g: float) -> None:
-        if g < 0.0:
+        if g - self.floor < 0.0:
             self.outside.append(t)
 
     def __call__(self, t: float, x: np.ndarray) -> float:
-        g = self.value(t, x)
+        g = self.value(t, x) - self.floor
         if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
             t_old, self.t_end = self.t_end, t
             if not self.outside:
@@ -379,7 +385,9 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             continue
         fr, band = c.friction, system.slip_band
         if mode.stuck:
-            watches.append(SlipWatch(lambda t, x, i=ci, mu=fr.mu_s: values.cone_margin(i, mu, t, x), name, fr.mu_s))
+            margin = lambda t, x, i=ci, mu=fr.mu_s: values.cone_margin(i, mu, t, x)  # noqa: E731
+            g0, slack = margin(t0, x0), cone_slack(values.normal_force(ci, t0, x0), fr.mu_s)
+            watches.append(SlipWatch(margin, name, fr.mu_s, g0 if -slack <= g0 < 0.0 else 0.0))
             out.append(watches[-1])
             continue
         r = tuple(float(c) for c in mode.slip)

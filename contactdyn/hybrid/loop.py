@@ -116,8 +116,8 @@ class HybridRun:
         self.log = EventLog(self.scene.name, self.solver, self.stats)
         self.events = self.log.events
 
-        def runner(modes, phase, t, x):  # (what runs a mode: the transitions and samples read the model through it)
-            return _runner(self, modes, phase, (t, x))
+        def runner(modes, phase):  # (what runs a mode: the transitions and samples read the model through it)
+            return _runner(self, modes, phase)
 
         #: the samplers of sampled phases (hybrid.sampling)
         self.sampled = SampledPhases(system, self.stats, runner)
@@ -126,8 +126,8 @@ class HybridRun:
         #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
         #: them, "" when none did (no more checks in the mode); None: not checked
         self.resting: str | None = None
-        #: why a mode ran on System.evaluate, with counts: pack.unsupported's reason, or the undeclared disagreement
-        #: of its pipeline's check (``paths`` says which path each mode took)
+        #: why a mode ran on System.evaluate, with counts: pack.unsupported's reason (``paths`` says which path each
+        #: mode took)
         self.fallbacks: dict[str, int] = {}
         #: the modes the compiled call runs (every one it packs; the others on the readable model); ``interpreted``:
         #: the same call run as its twins (numerics.twins: a scene kind's first run); neither: the readable model only
@@ -212,7 +212,7 @@ class HybridRun:
                 x, modes, phase = self._next_phase(phase, t, x, modes)
         self.work.limit = math.inf  # the output's interpolants are not the integration's work
         if self.segments and self.segments[-1].modes != modes:  # an event at the end: its modes are the last sample's
-            self.segments.append(Segment(t, t, list(modes), phase, Held(x), _runner(self, modes, phase, (t, x))))
+            self.segments.append(Segment(t, t, list(modes), phase, Held(x), _runner(self, modes, phase)))
         return self._result(time.perf_counter() - wall0)
 
     def _pass_corner(self, t: float, t_after: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
@@ -221,7 +221,7 @@ class HybridRun:
         with the state after a sampled law's sample at t_after (its held command jumps: hybrid.sampling)
         (no event: the same modes, unless a contact force or limit torque jumps through zero there,
         which is handled as the event a step straddling the corner would have located)."""
-        runner = _runner(self, modes, phase, (t, x))
+        runner = _runner(self, modes, phase)
         if sample:
             x, before = self.sampled.take(t_after, x, modes, phase, runner), x
             fired = self.sampled.jumped(t_after, before, x, modes, phase, runner)
@@ -242,7 +242,7 @@ class HybridRun:
         ``t_sample`` [s]: a sampled law's next sample instant before t_end; a method that carries the hold takes it
         and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
-        runner = _runner(self, modes, phase, (t, x), start=True)  # the one pipeline's mode, or the readable model
+        runner = _runner(self, modes, phase, start=True)  # the one pipeline's mode, or the readable model
         fun = runner.rhs if runner.ok else system.rhs(modes, phase)
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
@@ -376,8 +376,8 @@ class HybridRun:
         return Result(channels, self.events, self.impacts, stats, scene.document, meta)
 
 
-def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, at: tuple, start: bool = False):
-    """What runs (modes, phase) of ``run`` from at = (t [s], x): the one pipeline's mode where it packs the mode
+def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, start: bool = False):
+    """What runs (modes, phase) of ``run``: the one pipeline's mode where it packs the mode
     (:class:`~contactdyn.model.paths.LivePipelines`), else the readable model
     (:class:`~contactdyn.model.paths.Declined`, with the reason). ``start``: a segment starts there: the path is
     recorded and a decline's reason counted."""
@@ -386,7 +386,7 @@ def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, at: tuple, s
     if pipes.use and not why:
         # (a notice's watch is a thread: only while the mode's pipeline is first built, once per mode)
         with nullcontext() if pipes.built(modes, phase) else compiling("the one pipeline"):
-            pipe, why = pipes.mode(modes, phase, *at)
+            pipe = pipes.mode(modes, phase)
     mode = pipe or Declined(why)
     if start:
         run.paths.record(run.system, modes, phase, mode)

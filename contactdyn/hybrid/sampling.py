@@ -39,7 +39,7 @@ class SampledPhases:
 
     def __init__(self, system, stats: dict, runner=None):
         self.system = system
-        #: runner(modes, phase, t, x): the run's mode runner (a PipelineMode, or a Declined: the readable model's)
+        #: runner(modes, phase): the run's mode runner (a PipelineMode, or a Declined: the readable model's)
         self.runner = runner
         self.stats = stats
         self.samplers: dict[int, Sampler] = {}
@@ -69,7 +69,7 @@ class SampledPhases:
         if previous is not None:  # what acts until this first sample: the previous phase's command
             x = x.copy()
             x[self._slots(phase, ctl.held)] = model_at(self.system, self.runner, t, x, modes, previous).tau_cmd
-        return self.take(t, x, modes, phase, self.runner(modes, phase, t, x) if self.runner is not None else None)
+        return self.take(t, x, modes, phase, self.runner(modes, phase) if self.runner is not None else None)
 
     def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, runner=None) -> np.ndarray:
         """The sample at t [s] of the phase's law: the state with its new held command and states. ``runner``: the

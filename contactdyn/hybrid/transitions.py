@@ -70,8 +70,8 @@ class _After:
 
 
 class LastEvaluation:
-    """The model's Evaluation at an event instant: off the call that integrates the mode (``runner(modes, phase, t,
-    x)``: the run's mode runner, :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`), else System.evaluate
+    """The model's Evaluation at an event instant: off the call that integrates the mode (``runner(modes, phase)``:
+    the run's mode runner, :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`), else System.evaluate
     (a mode on the readable model, a call that declines there). Its last (t, x, modes, phase) and result kept: asked
     again at the same ones (the same t, x bit for bit, equal modes, the same phase object), the same Evaluation, not
     a second solve. Where a decision leaves everything as it was tried (a stick decided at rest, then the next
@@ -95,10 +95,10 @@ class LastEvaluation:
 
 
 def model_at(system: System, runner, t: float, x: np.ndarray, modes, phase):
-    """The model's Evaluation at (t [s], x): off the mode's call (``runner(modes, phase, t, x)``, a PipelineMode:
+    """The model's Evaluation at (t [s], x): off the mode's call (``runner(modes, phase)``, a PipelineMode:
     its :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`), else (no runner, a Declined mode, a call
     that declines there) System.evaluate."""
-    mode = runner(modes, phase, t, x) if runner is not None else None
+    mode = runner(modes, phase) if runner is not None else None
     ev = mode.evaluation(t, x) if mode is not None and mode.ok else None
     return ev if ev is not None else system.evaluate(t, x, modes, phase)
 
@@ -372,14 +372,15 @@ class Transitions:
                     if float(vt @ np.asarray(mode.slip)) < 0.5 * speed:  # moving, but not along r: refresh r
                         modes[i] = mode.with_(slip=direction_of(vt), from_rest=False)
                     continue
-                # at rest: stick if the cone can hold it, else slide where the holding force pushes
+                # at rest: stick if the cone can hold it, else slide where the holding force pushes; a slide from rest
+                # (it broke away, not launched yet) sticks again only strictly inside (friction.in_cone's hysteresis)
                 rest.discard(i)
                 trial = list(modes)
                 trial[i] = mode.with_(stuck=True)
                 x = project_velocity(system, x, trial, phase.limits, phase.joint_modes)
                 ev2 = self.evaluate(t, x, trial, phase)
                 F_f = ev2.friction[c.name]
-                if in_cone(F_f, ev2.normal_force[c.name], mu_s):
+                if in_cone(F_f, ev2.normal_force[c.name], mu_s, strictly=mode.from_rest):
                     modes[i] = trial[i]
                     self.log.log(t, "stick", c.name)
                 else:

@@ -34,17 +34,27 @@ if TYPE_CHECKING:
     from .constraints import Rows
     from .phases import Phase
 
-__all__ = ["CONE_TOL", "FORCE_ABS_TOL", "in_cone", "direction_of", "initial_slip", "slip_direction", "slip_velocity",
-           "slip_acceleration", "kinetic_coefficient", "launching", "launch_directions",
+__all__ = ["CONE_TOL", "FORCE_ABS_TOL", "in_cone", "cone_slack", "direction_of", "initial_slip", "slip_direction",
+           "slip_velocity", "slip_acceleration", "kinetic_coefficient", "launching", "launch_directions",
            "launch_directions_at", "friction_terms"]
 
 CONE_TOL = 1e-10  #: relative slack of the friction-cone tests |F_f| ≤ μ_s F (round-off of the solves)
 FORCE_ABS_TOL = 1e-12  #: [N] absolute slack of the same tests
 
 
-def in_cone(F_f: np.ndarray, F_n: float, mu_s: float) -> bool:
-    """|F_f| ≤ μ_s F within round-off (a pulling contact holds nothing)."""
+def in_cone(F_f: np.ndarray, F_n: float, mu_s: float, strictly: bool = False) -> bool:
+    """|F_f| ≤ μ_s F within round-off (a pulling contact holds nothing); ``strictly``: inside by that slack,
+    |F_f| ≤ μ_s F (1 − CONE_TOL) − FORCE_ABS_TOL, the test a slide at rest must pass to stick. The band between the
+    two is hysteresis: a stick at the cone's very edge whose load leaves the cone (a grip opening with μ_s = μ_k) is
+    released by the lenient test and not stuck again by the strict one at the same instant (they would chatter)."""
+    if strictly:
+        return float(np.linalg.norm(F_f)) <= mu_s * max(F_n, 0.0) * (1.0 - CONE_TOL) - FORCE_ABS_TOL
     return float(np.linalg.norm(F_f)) <= mu_s * max(F_n, 0.0) * (1.0 + CONE_TOL) + FORCE_ABS_TOL
+
+
+def cone_slack(F_n: float, mu_s: float) -> float:
+    """[N] The round-off slack of :func:`in_cone` at normal force F_n [N]: μ_s F CONE_TOL + FORCE_ABS_TOL."""
+    return mu_s * max(F_n, 0.0) * CONE_TOL + FORCE_ABS_TOL
 
 
 def direction_of(vec: np.ndarray) -> tuple[float, ...]:
@@ -145,20 +155,7 @@ def launch_directions(system, modes: list[ContactMode], slip_of, acceleration_of
 
 def launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
                          ) -> list[ContactMode]:
-    """:func:`launch_directions` on the readable model: ``System.evaluate`` per trial direction. The last answer is
-    kept on the system: the same (t, x, modes, phase) asked again (a mode's check against the compiled call where it
-    starts, just after the transition that chose it) is answered without its ~8 evaluations."""
-    key = (t, x.tobytes(), tuple(modes))
-    kept = system.launch_kept
-    if kept is not None and kept[1] is phase and kept[0] == key:
-        return list(kept[2])
-    out = _launch_directions_at(system, t, x, modes, phase)
-    system.launch_kept = (key, phase, tuple(out))
-    return out
-
-
-def _launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
-                          ) -> list[ContactMode]:
+    """:func:`launch_directions` on the readable model: ``System.evaluate`` per trial direction."""
     nQ, nv = system.nQ, system.nv
     contacts = system.contacts
 

@@ -2,16 +2,15 @@
 
 Every mode runs on the one pipeline (:mod:`contactdyn.model.pipeline`: one compiled call per right-hand side, the
 laws by address) where :func:`~contactdyn.model.pipeline.pack.unsupported` accepts it (:class:`LivePipelines`, the
-path ``PIPELINE``), checked where the run first starts it against the readable model (:func:`disagreement`); else
-on the readable model (:meth:`~contactdyn.model.system.System.evaluate`), with the reason: a part the pipeline
-does not pack. A stage law, friction law, drive kind or user controller numba cannot compile does not keep its
-mode off the pipeline: it runs there as a declared Python stage (called back through ctypes,
-:mod:`contactdyn.laws.abi`), named in its row.
+path ``PIPELINE``); else on the readable model (:meth:`~contactdyn.model.system.System.evaluate`), with the reason:
+a part the pipeline does not pack. A mode is not checked against the readable model where it starts: the compiled
+call and the interpreted one run the same functions (``tests/test_both_ways.py`` holds every scene to that).
+A stage law, friction law, drive kind or user controller numba cannot compile does not keep its mode off the
+pipeline: it runs there as a declared Python stage (called back through ctypes, :mod:`contactdyn.laws.abi`), named
+in its row.
 A run may take the pipeline interpreted instead (``twins``: a scene kind's first run, while its compiled code is
 built in the background, :mod:`contactdyn.first_run`; the path ``INTERPRETED``): the same functions run as their
-Python twins (:mod:`contactdyn.numerics.twins`), unchecked (they are the compiled call's own source).
-A pipeline whose check disagrees is an undeclared gap: its reason in ``Result.stats["fallback_modes"]`` starts
-with ``"undeclared: "``, which the tests treat as a bug.
+Python twins (:mod:`contactdyn.numerics.twins`).
 
 Which path each mode of a run took (:func:`path_of`), and which law or part kept it off the compiled one or ran
 in it as a Python stage, is in ``Result.stats["paths"]`` (:class:`PathLog`); ``contactdyn run`` prints each such
@@ -23,67 +22,31 @@ from __future__ import annotations
 from collections.abc import Callable
 from contextlib import nullcontext
 
-import numpy as np
-
 from ..numerics.native_call import giving_handles
 from .contact import structure
 from .pipeline.pack import unsupported
 from .pipeline.pipeline import Pipeline
 
-__all__ = ["UNDECLARED", "PIPELINE", "INTERPRETED", "READABLE", "path_of", "PathLog", "slower_paths", "disagreement",
-           "LivePipelines", "Declined", "CHECK_RTOL"]
+__all__ = ["PIPELINE", "INTERPRETED", "READABLE", "path_of", "PathLog", "slower_paths", "LivePipelines", "Declined"]
 
-UNDECLARED = "undeclared: "  #: prefix of a pipeline's decline that no part declared (its check disagreed)
 PIPELINE = "compiled call"  #: the path of a mode on the one pipeline
 INTERPRETED = "interpreted call"  #: the path of a mode on the one pipeline run as its twins (numerics.twins)
 READABLE = "readable model"  #: the path of a mode on System.evaluate
-CHECK_RTOL = 1e-9  #: agreement a fast right-hand side must show with System.evaluate where a mode starts
-
-
-def disagreement(system, modes, phase, rhs: Callable, t: float, x: np.ndarray) -> str:
-    """"" when ``rhs`` (a fast right-hand side of (modes, phase)) agrees with System.evaluate at (t [s], x) — where a
-    run starts the mode — and at a perturbation of x, else the undeclared reason: a law changed on one path only
-    cannot pass unseen. Each component of ẋ is held to CHECK_RTOL × (1 + its largest magnitude at the states):
-    at an equilibrium a rate is ~0 but the terms it is made of are not (the perturbed state shows their size).
-    A free body's chart (a discrete slot of x) is not perturbed; x with every chart flipped is checked too (its
-    angles read in the other chart: another pose), since one packed mode runs in either chart."""
-    rng = np.random.default_rng(7)
-    scale_x = 1e-3 * (1.0 + np.abs(x))
-    step = scale_x * rng.normal(size=system.n)
-    free = [body for body in system.articulated.values() if body.chart_index >= 0]
-    step[[body.chart_index for body in free]] = 0.0
-    states = [x, x + step]
-    if free:
-        flipped = np.array(x, float)
-        for body in free:
-            flipped[body.chart_index] = 1 - body.chart_of(x)
-        states.append(flipped)
-    refs = [system.evaluate(t, state, modes, phase).xdot for state in states]
-    scale = 1.0 + np.max(np.abs(refs), axis=0)
-    for state, ref in zip(states, refs, strict=True):
-        got = rhs(t, state.copy())
-        if not np.all(np.isfinite(got)) or np.any(np.abs(got - ref) > CHECK_RTOL * scale):
-            return (f"{UNDECLARED}disagrees with System.evaluate by {float(np.abs(got - ref).max()):.3g} "
-                    f"at t = {t:.6g} s")
-    return ""
 
 
 class LivePipelines:
     """The one pipeline (:class:`~contactdyn.model.pipeline.pipeline.Pipeline`) for the modes of a run that
     :func:`~contactdyn.model.pipeline.pack.unsupported` accepts: one per modes' structure and phase (every turn of a
-    2-D slide reuses it: the reference direction is data), checked against System.evaluate where the run first
-    starts it (:func:`disagreement`), kept wrapped by ``wrap`` (the loop's: its event values, compiled steps and
-    output samples, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`). ``twins``
-    (:class:`~contactdyn.numerics.twins.Twins`): the pipelines run interpreted, not checked (the path
-    ``INTERPRETED``)."""
+    2-D slide reuses it: the reference direction is data), kept wrapped by ``wrap`` (the loop's: its event values,
+    compiled steps and output samples, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`). ``twins``
+    (:class:`~contactdyn.numerics.twins.Twins`): the pipelines run interpreted (the path ``INTERPRETED``)."""
 
     use = True  #: False only for the benchmarks' and tests' before/after comparison: every mode on System.evaluate
 
     def __init__(self, system, wrap: Callable = lambda pipe: pipe, use: bool = True, twins=None) -> None:
         self.system, self.wrap, self.twins = system, wrap, twins
         self.use = use and type(self).use  #: this run's modes on the pipeline (``use``: False, a readable run)
-        #: (structure(modes), phase.key()) -> its pipeline (wrapped), or why not (undeclared)
-        self.pipes: dict[tuple, object] = {}
+        self.pipes: dict[tuple, object] = {}  #: (structure(modes), phase.key()) -> its pipeline (wrapped)
         self.declines: dict[tuple, str] = {}  #: the same keys -> pack.unsupported's reason ("": it packs them)
 
     def declined(self, modes, phase) -> str:
@@ -97,26 +60,21 @@ class LivePipelines:
         return self.declines[key]
 
     def count(self) -> int:
-        """How many modes run on the pipeline (packed, and their check agreed)."""
-        return sum(not isinstance(pipe, str) for pipe in self.pipes.values())
+        """How many modes run on the pipeline (packed)."""
+        return len(self.pipes)
 
     def built(self, modes, phase) -> bool:
-        """Is the pipeline of (modes, phase) packed and checked already (or its check failed)?"""
+        """Is the pipeline of (modes, phase) packed already?"""
         return (structure(modes), phase.key()) in self.pipes
 
-    def mode(self, modes, phase, t: float, x: np.ndarray) -> tuple[object | None, str]:
-        """(the pipeline of a mode :meth:`declined` lets it run, starting at (t [s], x), wrapped; or None and the
-        undeclared reason its check disagreed with)."""
+    def mode(self, modes, phase):
+        """The pipeline of a mode :meth:`declined` lets it run, wrapped."""
         key = (structure(modes), phase.key())
         pipe = self.pipes.get(key)
         if pipe is None:
-            pipe = Pipeline(self.system, modes, phase, self.twins)
-            reason = "" if self.twins is not None else disagreement(self.system, modes, phase, pipe.rhs, t, x)
-            pipe = self.pipes[key] = reason or self.wrap(pipe)
-        if isinstance(pipe, str):
-            return None, pipe
+            pipe = self.pipes[key] = self.wrap(Pipeline(self.system, modes, phase, self.twins))
         pipe.use(modes)  # a turn's new reference direction r: data of the same packed mode
-        return pipe, ""
+        return pipe
 
     def _of(self, function):
         return function if self.twins is None else self.twins.of(function)

@@ -142,8 +142,6 @@ class System:
         self.force_directions = {c.name: c.normal.u for c in self.contacts}
         self.force_directions.update({f"{c.name}.t{i + 1}": t for c in self.contacts for i, t in enumerate(c.tangents)})
         self.slip_band = scene.solver.stick_velocity  #: [m/s] stick/slip guard band (see contactdyn.model.friction)
-        #: friction.launch_directions_at's last answer: ((t, x's bytes, modes), phase, the modes it found)
-        self.launch_kept: tuple | None = None
 
     def _contact_of(self, spec) -> Contact:
         """A contact: its touching side a robot frame or a body's point (``frame_point``), its surface the ground,
