@@ -32,6 +32,7 @@ from ...laws.abi import raise_python_stage_error
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
 from ...numerics.native_call import address, call_at, declare, giving_handles
+from ...numerics.twins import Twins
 from ..contact import structure
 from .actuation import (
     carry,
@@ -362,9 +363,13 @@ class Pipeline:
 
     def failed_call(self, t: float, x: np.ndarray) -> np.ndarray:
         """ẋ where the call at (t [s], x) gave no answer (its status not 1): a law's own error is raised there (a
-        Python stage's; the controller's where its command was not finite, :meth:`controller_failed`); else the
-        contact system was not finite (an overflowed trial state): NaN rates, which the step control rejects."""
+        Python stage's; a compiled law's, which its cfunc cannot carry out (status -1): the same call run once
+        interpreted at (t, x) raises it from the law's source; the controller's where its command was not finite,
+        :meth:`controller_failed`); else the contact system was not finite (an overflowed trial state): NaN rates,
+        which the step control rejects."""
         raise_python_stage_error()
+        if self.packed.events[-1] < 0.0 and self.twins is None:
+            Pipeline(self.system, self.modes, self.phase, Twins()).rhs(t, np.array(x, float))
         why = self.controller_failed(t, x)
         if why:
             raise SimulationError(why)
