@@ -9,10 +9,11 @@ specialization and its signatures (a duplicate from differing argument types: in
 read-only or non-contiguous arrays, ...). Also the run's time and the sum of own times. All times are
 this process's CPU time [s] (compiling is single-threaded: on a shared machine, less noisy than wall time).
 
-    python3 benchmarks/compile_profile.py SCENE [--top 25] [--set KEY=VALUE ...] [--readable]
+    python3 benchmarks/compile_profile.py SCENE [--top 25] [--set KEY=VALUE ...] [--interpreted]
 
-``--readable``: the run on the readable model (``simulate(..., compiled=False)``: what a first ``contactdyn run``
-takes, contactdyn.first_run): what that path still compiles.
+``--interpreted``: the run on the same call interpreted (``simulate(..., compiled=False)``, its Python twins: what a
+first ``contactdyn run`` takes, contactdyn.first_run): what that path still compiles (its leaves). It replaces
+``--readable``, the readable model's run: a path that no longer exists.
 """
 
 from __future__ import annotations
@@ -80,7 +81,7 @@ def main() -> None:
     p.add_argument("--top", type=int, default=25)
     p.add_argument("--set", action="append", default=[], help="override KEY=VALUE (TOML value)")
     p.add_argument("--setitems", action="store_true", help="list the arrays stored into arrays (shape checks)")
-    p.add_argument("--readable", action="store_true", help="the run on the readable model (a first run's path)")
+    p.add_argument("--interpreted", action="store_true", help="the run interpreted (a first run's path)")
     args = p.parse_args()
     os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="compile_profile_")
     sys.path.insert(0, str(ROOT))
@@ -94,7 +95,7 @@ def main() -> None:
                                              "on_end": lambda s, e: rec.on_end(e)})()
     event.register("numba:compile", listener)
     t0 = time.process_time()
-    simulate(load_scene(args.scene, dict(parse_override(s) for s in args.set)), compiled=not args.readable)
+    simulate(load_scene(args.scene, dict(parse_override(s) for s in args.set)), compiled=not args.interpreted)
     wall = time.process_time() - t0
     rows = sorted(rec.table.items(), key=lambda kv: -kv[1][1])
     print(f"{args.scene}: run {wall:.1f} s (CPU), compiling (own, summed) {sum(r[1] for _, r in rows):.1f} s, "

@@ -1,15 +1,14 @@
-"""Motor scenes on the compiled path against the readable model, timed in the same process.
+"""Motor scenes on the compiled path against the same call interpreted, timed in the same process.
 
     PYTHONPATH=. python3 benchmarks/motor_fastpath.py [--repeats 3] [--error] [scene ...]
 
 For each scene with DC motors or elastic transmissions: the run as it is (every mode the one
-pipeline packs on its compiled call) and the same run with ``LivePipelines.use = False`` (the
-readable ``System.evaluate`` integrates every mode, which is what a motor scene did before motors
-were compiled), interleaved after an untimed run of each, ``--repeats`` times each; the median walls [s] and
-their ratio.
+pipeline packs on its compiled call) and the same run with ``LivePipelines.use = False`` (every mode on
+the same call interpreted, its Python twins: :mod:`contactdyn.numerics.twins`), interleaved after an untimed run
+of each, ``--repeats`` times each; the median walls [s] and their ratio.
 With ``--error``: both default runs' force error max |F_n − F_n,ref| [N] against a compiled
 reference at rtol 1e-11, atol 1e-13, away from ±2 samples of every event (the two paths
-differ by round-off only, so the errors should agree). Writes benchmarks/out/motor_fastpath.json.
+run the same functions, so the errors should agree). Writes benchmarks/out/motor_fastpath.json.
 """
 
 from __future__ import annotations
@@ -24,8 +23,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 from timing import interleaved, write_report  # noqa: E402
 
+from contactdyn.model.contact import structure  # noqa: E402
 from contactdyn.model.paths import LivePipelines  # noqa: E402
+from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
+from contactdyn.numerics.twins import Twins  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
 
@@ -34,23 +36,34 @@ SCENES = ["case1_cart", "case2_writer_motors", "case3_a_position", "case3_a_forc
 OUT = Path(__file__).resolve().parent / "out" / "motor_fastpath.json"
 
 
-def run(scene: str, readable: bool, overrides: dict | None = None, decline=None):
-    """Build the scene's system and run it; the Result. ``readable``: every mode on the readable model
-    (``LivePipelines.use`` off), or with ``decline`` (a predicate of (modes, phase)) only the modes it matches
-    (``LivePipelines.declined`` answers for them, reason "benchmark"); both restored after."""
+def run(scene: str, interpreted: bool, overrides: dict | None = None, interpret=None):
+    """Build the scene's system and run it; the Result. ``interpreted``: every mode on the same call interpreted
+    (``LivePipelines.use`` off), or with ``interpret`` (a predicate of (modes, phase)) only the modes it matches
+    (their pipelines given twins, the path "interpreted call" in ``stats["paths"]``); both restored after."""
     system = System(load_scene(scene, overrides or {}))
-    if not readable:
+    if not interpreted:
         return run_system(system)
-    declined = LivePipelines.declined
-    if decline is None:
+    compiled_mode = LivePipelines.mode
+    if interpret is None:
         LivePipelines.use = False
     else:
-        LivePipelines.declined = lambda pipes, modes, phase: ("benchmark" if decline(modes, phase)
-                                                              else declined(pipes, modes, phase))
+        twins = Twins()
+
+        def mode(pipes, modes, phase):
+            if not interpret(modes, phase):
+                return compiled_mode(pipes, modes, phase)
+            key = ("interpreted", structure(modes), phase.key())
+            pipe = pipes.pipes.get(key)
+            if pipe is None:
+                pipe = pipes.pipes[key] = pipes.wrap(Pipeline(pipes.system, modes, phase, twins))
+            pipe.use(modes)
+            return pipe
+
+        LivePipelines.mode = mode
     try:
         return run_system(system)
     finally:
-        LivePipelines.use, LivePipelines.declined = True, declined
+        LivePipelines.use, LivePipelines.mode = True, compiled_mode
 
 
 def force_error(result, ref) -> float:
@@ -66,19 +79,18 @@ def force_error(result, ref) -> float:
 
 
 def measure(scene: str, repeats: int, error: bool) -> dict:
-    variants = {readable: lambda readable=readable: run(scene, readable) for readable in (False, True)}
+    variants = {interpreted: lambda interpreted=interpreted: run(scene, interpreted) for interpreted in (False, True)}
     for call in variants.values():
         call()  # untimed: numba's compile (or cache load) of the pipeline for this scene's laws
     times = interleaved(variants, repeats)
-    results = {readable: t.last for readable, t in times.items()}
-    row = {"scene": scene, "compiled_s": times[False].wall, "readable_s": times[True].wall,
-           "compiled_modes": results[False].stats["compiled_modes"],
-           "fallback_modes": results[False].stats["fallback_modes"]}
-    row["speedup"] = row["readable_s"] / row["compiled_s"]
+    results = {interpreted: t.last for interpreted, t in times.items()}
+    row = {"scene": scene, "compiled_s": times[False].wall, "interpreted_s": times[True].wall,
+           "compiled_modes": results[False].stats["compiled_modes"]}
+    row["speedup"] = row["interpreted_s"] / row["compiled_s"]
     if error:
         ref = run(scene, False, {"solver.rtol": 1e-11, "solver.atol": 1e-13})
         row["F_err_compiled"] = force_error(results[False], ref)
-        row["F_err_readable"] = force_error(results[True], ref)
+        row["F_err_interpreted"] = force_error(results[True], ref)
     return row
 
 
@@ -89,13 +101,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--error", action="store_true")
     args = ap.parse_args(argv)
     rows = []
-    print(f"{'scene':24s} {'compiled [s]':>12s} {'readable [s]':>12s} {'speed-up':>9s}  F err compiled / readable [N]")
+    print(f"{'scene':24s} {'compiled [s]':>12s} {'interpreted [s]':>15s} {'speed-up':>9s}  "
+          "F err compiled / interpreted [N]")
     for scene in args.scenes:
         row = measure(scene, args.repeats, args.error)
         rows.append(row)
-        err = f"  {row['F_err_compiled']:.3g} / {row['F_err_readable']:.3g}" if args.error else ""
-        print(f"{scene:24s} {row['compiled_s']:12.3f} {row['readable_s']:12.3f} {row['speedup']:8.2f}x{err}"
-              f"   (compiled modes {row['compiled_modes']}, fallbacks {sum(row['fallback_modes'].values())})")
+        err = f"  {row['F_err_compiled']:.3g} / {row['F_err_interpreted']:.3g}" if args.error else ""
+        print(f"{scene:24s} {row['compiled_s']:12.3f} {row['interpreted_s']:15.3f} {row['speedup']:8.2f}x{err}"
+              f"   (compiled modes {row['compiled_modes']})")
     write_report(OUT, {"repeats": args.repeats, "error": args.error}, rows)
     return 0
 

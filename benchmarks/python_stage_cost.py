@@ -7,15 +7,16 @@ against its compiled twin.
 
 The scene: tests/test_python_stages.py's bonded chain, anchor —[law]— mass —[linear]— surface, touching, with the
 energy audit (each stage's force also at ẋ = 0: two callbacks per call). The laws: ``linear`` (compiled, by address),
-``python_linear`` (the same F = k x + b ẋ reading a Python dict: a Python stage), and, for scale, the readable model
-(``contactdyn.model.dynamics.evaluate``) of the Python-stage mode. Each variant times ``--calls`` calls of
+``python_linear`` (the same F = k x + b ẋ reading a Python dict: a Python stage), and, for scale, the same call
+interpreted (its Python twins, :mod:`contactdyn.numerics.twins`: what ``compiled=False`` runs; once the readable
+model) of the Python-stage mode. Each variant times ``--calls`` calls of
 ``Pipeline.rhs`` at the same state; the variants interleaved ``--repeats`` times in one process, CPU medians [µs per
 call], each ratio to ``linear``.
 
 The controller: examples/force_pi_press.toml (a bonded surface: the force-reading law folded, its callback called
 once more per row) under ``force_pi`` (examples/force_law.py, compiled, by address: the twin) and
 ``dict_force_pi_test`` (tests/test_python_controller.py's DictForcePI: the same law reading ControlInput's
-dictionaries and a Python dict, a Python stage), and the readable model of the Python-stage mode; ratios to
+dictionaries and a Python dict, a Python stage), and the Python-stage mode's call interpreted; ratios to
 ``force_pi``.
 """
 
@@ -37,8 +38,8 @@ from timing import interleaved, write_report  # noqa: E402
 from contactdyn import parse_scene  # noqa: E402
 from contactdyn.laws import register  # noqa: E402
 from contactdyn.laws.stage_laws import StageLaw, register_stage_law  # noqa: E402
-from contactdyn.model import dynamics  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+from contactdyn.numerics.twins import Twins  # noqa: E402
 from contactdyn.scene.user_laws import import_scene_modules  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
@@ -82,9 +83,10 @@ def controller_variants(calls: int) -> tuple[dict, dict, dict]:
         variants[kind], n_calls[kind] = (lambda pipe=pipe, x=x, n=calls: [pipe.rhs(0.01, x) for _ in range(n)][-1]), \
             calls
         if kind == DictForcePI.name:
-            n_calls["readable_ctl"] = max(calls // 20, 1)
-            variants["readable_ctl"] = (lambda s=system, m=modes, ph=phase, x=x, n=n_calls["readable_ctl"]:
-                                        [dynamics.evaluate(s, 0.01, x, m, ph) for _ in range(n)][-1].xdot)
+            n_calls["interpreted_ctl"] = max(calls // 20, 1)
+            slow = Pipeline(system, modes, phase, Twins())
+            variants["interpreted_ctl"] = (lambda slow=slow, x=x, n=n_calls["interpreted_ctl"]:
+                                           [slow.rhs(0.01, x) for _ in range(n)][-1])
     return variants, n_calls, stages
 
 
@@ -104,12 +106,13 @@ def main(argv: list[str] | None = None) -> int:
         pipe.rhs(0.0, x)  # compiled, or loaded, before timing
         variants[law] = (lambda pipe=pipe, x=x, n=args.calls: [pipe.rhs(0.0, x) for _ in range(n)][-1])
         if law == "python_linear":
-            n_readable = max(args.calls // 20, 1)
-            variants["readable"] = (lambda s=system, m=modes, ph=phase, x=x, n=n_readable:
-                                    [dynamics.evaluate(s, 0.0, x, m, ph) for _ in range(n)][-1].xdot)
+            n_interpreted = max(args.calls // 20, 1)
+            slow = Pipeline(system, modes, phase, Twins())
+            variants["interpreted"] = (lambda slow=slow, x=x, n=n_interpreted:
+                                       [slow.rhs(0.0, x) for _ in range(n)][-1])
     ctl_variants, ctl_calls, ctl_stages = controller_variants(args.calls)
     times = interleaved({**variants, **ctl_variants}, args.repeats)
-    calls = {"linear": args.calls, "python_linear": args.calls, "readable": max(args.calls // 20, 1), **ctl_calls}
+    calls = {"linear": args.calls, "python_linear": args.calls, "interpreted": max(args.calls // 20, 1), **ctl_calls}
     stages.update(ctl_stages)
     us = {k: 1e6 * statistics.median(t.cpu_s) / calls[k] for k, t in times.items()}
     diff = float(abs(times["python_linear"].last - times["linear"].last).max())

@@ -1,4 +1,4 @@
-"""Cost of one right-hand-side evaluation (what the integrator calls): the compiled call against System.evaluate.
+"""Cost of one right-hand-side evaluation (what the integrator calls): the compiled call, and with its diagnostics.
 
     python benchmarks/rhs_cost.py [SCENE[@T] ...] [--calls 20000] [--out FILE.csv]
     python benchmarks/rhs_cost.py SCENE[@T] ... --baseline TREE [--repeats 5] [--out FILE.csv]
@@ -8,9 +8,10 @@ mass and sliding Coulomb friction), the budget case (≤ 10 µs median). Each sc
 built, its initial modes made consistent, and the integrator's function called on the
 states of a short run (so the timing covers real states, not one cached point): the one
 pipeline's compiled call as the loop wraps it (:class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`'s
-``rhs``; a mode the pipeline does not pack: the readable model's ``System.rhs``, its ``path`` says why).
+``rhs``, from :func:`~contactdyn.hybrid.pipeline_mode.mode_runner`; a mode the pipeline does not pack stops it).
 Reports the median and the 10th/90th percentiles over batches of calls, wall and CPU time, and
-the cost of the full ``System.evaluate`` (all diagnostics) for comparison.
+the cost of the model at an instant with all its diagnostics (``PipelineMode.evaluation``: one call with the
+diagnostics on, an Evaluation; it took the readable ``System.evaluate`` once) for comparison.
 
 ``SCENE@T``: the mode the run is in at time T [s] (e.g. ``case3_a_position@2`` for the
 press after the approach) instead of the first. ``--baseline TREE``: before/after, the
@@ -34,9 +35,7 @@ use_tree()
 
 import numpy as np  # noqa: E402
 
-from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
-from contactdyn.model.pipeline.pack import unsupported  # noqa: E402
-from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+from contactdyn.hybrid.pipeline_mode import mode_runner  # noqa: E402
 from contactdyn.scene.scene_file import Scene, load_scene  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
@@ -72,35 +71,34 @@ def _mode_at(scene: Scene, at: float | None):
 
 
 def measure(scene: str | Scene, calls: int = 20000, at: float | None = None) -> dict:
-    """Median cost [µs] of one rhs call and of one full evaluate on a scene's mode at time ``at``
+    """Median cost [µs] of one rhs call and of one full evaluation on a scene's mode at time ``at``
     (None: its first mode; ``scene``: a name or a Scene)."""
     scene = load_scene(scene) if isinstance(scene, str) else scene
     scene_name = scene.name if at is None else f"{scene.name}@{at:g}"
     system, modes, phase, t0, x0 = _mode_at(scene, at)
-    why = unsupported(system, modes, phase)
-    f = system.rhs(modes, phase) if why else PipelineMode(Pipeline(system, modes, phase)).rhs
+    mode = mode_runner(system)(modes, phase)
+    f, evaluation = mode.rhs, mode.evaluation
     # states along a short stretch of the real trajectory (this mode's physics only)
     from scipy.integrate import solve_ivp
 
     sol = solve_ivp(f, (t0, t0 + 0.01), x0, method="DOP853", rtol=1e-8, atol=1e-10)
     states = [(float(t), sol.y[:, i].copy()) for i, t in enumerate(sol.t)]
     for t, x in states[:50]:  # the lean path must agree with the full evaluation
-        ref = system.evaluate(t, x, modes, phase).xdot
+        ref = evaluation(t, x).xdot
         if not np.allclose(f(t, x), ref, rtol=1e-10, atol=1e-10 * (1 + np.abs(ref).max())):
-            raise SystemExit(f"{scene_name}: rhs disagrees with System.evaluate at t = {t}")
+            raise SystemExit(f"{scene_name}: rhs disagrees with the full evaluation at t = {t}")
     wall = _batches(f, states, calls, time.perf_counter)
     cpu = _batches(f, states, calls, time.process_time)
-    full = _batches(lambda t, x: system.evaluate(t, x, modes, phase), states, max(calls // 10, BATCHES),
-                    time.perf_counter)
-    full_cpu = _batches(lambda t, x: system.evaluate(t, x, modes, phase), states, max(calls // 10, BATCHES),
-                        time.process_time)
+    full = _batches(evaluation, states, max(calls // 10, BATCHES), time.perf_counter)
+    full_cpu = _batches(evaluation, states, max(calls // 10, BATCHES), time.process_time)
     q = statistics.quantiles(wall, n=10)
-    return {"scene": scene_name, "n_states": system.n, "path": f"evaluate ({why})" if why else "compiled",
+    path = f"compiled ({mode.reason})" if mode.reason else "compiled"  # (its Python stages, if any)
+    return {"scene": scene_name, "n_states": system.n, "path": path,
             "rhs_median_us": statistics.median(wall) * 1e6,
             "rhs_p10_us": q[0] * 1e6, "rhs_p90_us": q[-1] * 1e6, "rhs_cpu_median_us": statistics.median(cpu) * 1e6,
-            "evaluate_median_us": statistics.median(full) * 1e6,
-            "evaluate_cpu_median_us": statistics.median(full_cpu) * 1e6,
-            "rhs_cpu_min_us": min(cpu) * 1e6, "evaluate_cpu_min_us": min(full_cpu) * 1e6}
+            "evaluation_median_us": statistics.median(full) * 1e6,
+            "evaluation_cpu_median_us": statistics.median(full_cpu) * 1e6,
+            "rhs_cpu_min_us": min(cpu) * 1e6, "evaluation_cpu_min_us": min(full_cpu) * 1e6}
 
 
 def _scene_at(arg: str) -> tuple[str, float | None]:

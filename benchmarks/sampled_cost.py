@@ -19,10 +19,9 @@ surface mass, benchmarks/stiff_force.toml) can a sampled run cost little more th
 
 The CPU per sample beyond the continuous run is split into: ``steps`` (the extra steps at the continuous run's CPU
 per step: output and set-up included, so an upper estimate), ``take`` (the sample itself: the measurement through
-the readable model or the compiled call, the sensors, the law; timed around SampledPhases.take) and ``rest`` (what
+the compiled call, the sensors, the law; timed around SampledPhases.take) and ``rest`` (what
 remains: the re-evaluation of f after the jump, the events across it, the pieces' bookkeeping and output).
-Every mode the one pipeline packs runs on its compiled call, the others on the readable model (the paths column
-says where each went).
+Every mode runs on the one pipeline's compiled call (the paths column says so).
 ``--profile``: cProfile of the first scene's sampled run (the 25 costliest functions, cumulative).
 
 Writes benchmarks/out/sampled_cost.json and .csv.
@@ -87,8 +86,7 @@ def compare(name: str, rate: float, repeats: int) -> dict:
         r = timing.last
         row[label] = {"cpu_s": timing.cpu, "steps": r.stats["steps"], "rhs_evals": r.stats["rhs_evals"],
                       "segments": r.stats["segments"], "samples": r.stats.get("samples", 0),
-                      "paths": sorted({p["path"] for p in r.stats["paths"].values()}),
-                      "fallbacks": r.stats["fallback_modes"]}
+                      "paths": sorted({p["path"] for p in r.stats["paths"].values()})}
     c, s = row["continuous"], row["sampled"]
     row["ratio"] = s["cpu_s"] / c["cpu_s"]
     row["us_per_sample"] = (s["cpu_s"] - c["cpu_s"]) / max(s["samples"], 1) * 1e6

@@ -14,8 +14,9 @@ Three series, each a family of scenes that differ in one thing:
 - **chain stages** (1–4): B1 with its surface a chain of N stage–mass pairs
   (k·N, b·N, m/N each: the same static stiffness and mass, faster internal modes).
 
-Per row: the compiled call's rhs per call (the one pipeline's; System.evaluate's where it declines:
-``path``), System.evaluate per call, the raw Pinocchio calls of the same terms per call
+Per row: the compiled call's rhs per call (the one pipeline's; ``path``: its Python stages, if any), the same
+call with all its diagnostics per call (``PipelineMode.evaluation``, an Evaluation; once System.evaluate's), the raw
+Pinocchio calls of the same terms per call
 (``benchmarks/robot_calls.py``; DOF series) — medians over batches on states of a short run
 (``benchmarks/rhs_cost.py``), in process CPU time, the minimum over batches (contention only
 adds; the medians are in the JSON) — and CPU ms per simulated second of the
@@ -116,8 +117,8 @@ def series() -> list[tuple[str, str, int, object, tuple | None]]:
 def measure(scene, repeats: int, robot: tuple | None) -> dict:
     cost = rhs_cost.measure(scene, 8000)
     row = {"path": cost["path"], "n_states": cost["n_states"], "rhs_us": cost["rhs_cpu_min_us"],
-           "evaluate_us": cost["evaluate_cpu_min_us"], "rhs_cpu_median_us": cost["rhs_cpu_median_us"],
-           "evaluate_cpu_median_us": cost["evaluate_cpu_median_us"]}
+           "evaluation_us": cost["evaluation_cpu_min_us"], "rhs_cpu_median_us": cost["rhs_cpu_median_us"],
+           "evaluation_cpu_median_us": cost["evaluation_cpu_median_us"]}
     if robot is not None:
         source, frame, options = robot
         calls = robot_calls.measure(source, frame, options, 30, 300)
@@ -129,7 +130,6 @@ def measure(scene, repeats: int, robot: tuple | None) -> dict:
     for m in METHODS:
         stats = times[m].last.stats
         row[f"{m}_steps"], row[f"{m}_rhs_evals"] = stats["steps"], stats["rhs_evals"]
-        row["fallback_modes"] = stats.get("fallback_modes", {})
         row[f"{m}_ms_per_s"] = times[m].cpu / scene.duration * 1e3
     return row
 
@@ -147,7 +147,7 @@ def plot(rows: list[dict], path: Path) -> None:
         x = [r["x"] for r in sel]
         ax = axes[0, k]
         ax.plot(x, [r["rhs_us"] for r in sel], "o-", label="rhs call (compiled call)")
-        ax.plot(x, [r["evaluate_us"] for r in sel], "s--", label="System.evaluate")
+        ax.plot(x, [r["evaluation_us"] for r in sel], "s--", label="the call with its diagnostics")
         if name == "dof":
             ax.plot(x, [r["pinocchio_us"] for r in sel], "^:", label="Pinocchio terms alone")
         ax.set_yscale("log")
@@ -177,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--figure", default=str(OUT / "scaling.png"))
     args = p.parse_args(argv)
     rows = []
-    print("| series | scene | x | states | path | rhs [µs] | evaluate [µs] | Pinocchio [µs] | "
+    print("| series | scene | x | states | path | rhs [µs] | evaluation [µs] | Pinocchio [µs] | "
           + " | ".join(f"{m} [ms/sim-s] | {m} steps" for m in METHODS) + " |")
     print("|---|---|---|---|---|---|---|---|" + "---|---|" * len(METHODS))
     for name, label, x, scene, robot in series():
@@ -185,11 +185,11 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(row)
         pin_us = f"{row['pinocchio_us']:.1f}" if "pinocchio_us" in row else ""
         print(f"| {name} | {label} | {x} | {row['n_states']} | {row['path']} | {row['rhs_us']:.1f} | "
-              f"{row['evaluate_us']:.1f} | {pin_us} | "
+              f"{row['evaluation_us']:.1f} | {pin_us} | "
               + " | ".join(f"{row[f'{m}_ms_per_s']:.0f} | {row[f'{m}_steps']}" for m in METHODS) + " |", flush=True)
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "scaling.json").write_text(json.dumps({"repeats": args.repeats, "rows": rows}, indent=1))
-    keys = [k for k in rows[0] if k != "fallback_modes"] + ["pinocchio_us"]
+    keys = [*rows[0], "pinocchio_us"]
     with open(OUT / "scaling.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(dict.fromkeys(keys)), extrasaction="ignore")
         w.writeheader()

@@ -8,9 +8,10 @@ examples/cubic_stage.py's cubic law with k3 = 0 vs the linear law on examples/cu
 the Stribeck friction law with v_s = 1e-9 m/s (μ = μ_k once moving) vs Coulomb on B1 with μ_s = 0.6,
 μ_k = 0.4. Timed interleaved after an untimed run each; CPU medians, each law's ratio to its twin,
 the largest relative difference of the normal force, and the path each law's modes ran on
-(``stats["paths"]``: every mode the one pipeline packs on its compiled call, the others on the readable model).
-Each law also runs with the one pipeline switched off (``LivePipelines.use = False``: every mode on the readable
-model), in the same interleaved rounds: ``off_cpu_s`` and ``off_ratio`` (to the twin), ``off_paths``. ("Twin" here
+(``stats["paths"]``: every mode on the one pipeline's compiled call, a law numba cannot compile a Python stage in
+it). Each law also runs with the one pipeline interpreted (``LivePipelines.use = False``: every mode on the same call
+run as its Python twins), in the same interleaved rounds: ``off_cpu_s`` and ``off_ratio`` (to the twin),
+``off_paths``. ("Twin" here
 is the built-in law a user law is compared with, not the deleted probed twin.)
 """
 
@@ -89,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _simulate(scene, pipeline: bool):
-    """simulate(scene) with the one pipeline on or off (contactdyn.model.paths.LivePipelines)."""
+    """simulate(scene) with the one pipeline compiled or interpreted (contactdyn.model.paths.LivePipelines)."""
     LivePipelines.use = pipeline
     try:
         return simulate(scene)

@@ -434,11 +434,11 @@ def _run_parser(sub, fmt) -> None:
                      help="with --view: listen on this address (default 127.0.0.1, this machine only)")
     run.add_argument("--speed", type=_speed, default=1.0,
                      help="with --view: playback speed factor (> 0; 1 = real time)")
-    run.add_argument("--path", choices=("auto", "compiled", "interpreted", "readable"),
+    run.add_argument("--path", choices=("auto", "compiled", "interpreted"),
                      help="auto (default, or $CONTACTDYN_PATH): the compiled call once this kind of scene was "
                           "compiled, else the same call interpreted while it compiles in the background; compiled: "
                           "compile now if needed; interpreted: the call's functions interpreted (its rigid-body "
-                          "leaves compiled); readable: the readable model")
+                          "leaves compiled)")
     _scripting(run)
     _imports_option(run)
     run.set_defaults(func=_cmd_run)

@@ -19,9 +19,8 @@ kinds, robot and which keys are set decide what is compiled, the values do not. 
 time, never correctness: a kind marked built whose code is not all cached compiles the rest in the
 foreground (the compile notice says so); a kind not marked runs interpreted (a kind whose build failed too,
 without a new build). ``--path compiled`` (or ``CONTACTDYN_PATH=compiled``) always takes the compiled call,
-compiling in the foreground; ``--path interpreted`` always the interpreted one; ``--path readable`` the readable
-model (``System.evaluate``, the second description of the physics, kept for now). ``Result.stats["paths"]``
-names each mode's path.
+compiling in the foreground; ``--path interpreted`` always the interpreted one (the same functions as Python: the
+one to read or step through). ``Result.stats["paths"]`` names each mode's path.
 """
 
 from __future__ import annotations
@@ -40,14 +39,14 @@ from .scene.scene_file import Scene
 
 __all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "mark_built", "main"]
 
-PATHS = ("auto", "compiled", "interpreted", "readable")  #: what ``--path`` takes
+PATHS = ("auto", "compiled", "interpreted")  #: what ``--path`` takes
 ENV = "CONTACTDYN_PATH"  #: the environment variable that sets the default path (else ``auto``)
 BUILD_TIMEOUT = 1800.0  #: [s] a background build older than this is taken as dead (its lock is stale)
 BUILD_DURATION = 60.0  #: [s] simulated by a background build at most
 
 
 class Choice:
-    """A run's path (``compiled``, ``interpreted`` or ``readable``), ``build`` (the kind's background build is due
+    """A run's path (``compiled`` or ``interpreted``), ``build`` (the kind's background build is due
     after the run), ``failed`` (the kind's build failed: its record)."""
 
     def __init__(self, path: str, build: bool = False, failed: Path | None = None) -> None:
@@ -207,7 +206,7 @@ def mark_built(scene: Scene) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         (folder / f"{name}.built").touch()
         (folder / f"{name}.failed").unlink(missing_ok=True)
-    except OSError:  # an unwritable cache: the next run is readable again, as if never built
+    except OSError:  # an unwritable cache: the next run is interpreted again, as if never built
         pass
 
 
@@ -228,7 +227,7 @@ def build(file: str, document: dict, marker: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """``python -m contactdyn.first_run FILE MARKER`` (the scene's document on stdin): the background build. A build
-    that fails writes MARKER.failed (its error): later runs of the kind take the readable model and say why."""
+    that fails writes MARKER.failed (its error): later runs of the kind run interpreted and say why."""
     file, marker = argv or sys.argv[1:3]
     try:
         os.nice(10)

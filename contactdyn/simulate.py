@@ -8,9 +8,8 @@ Where the pieces are (see ``docs/architecture.md`` for the module map):
 - the hybrid loop (smooth phase → event → transition → next phase): :mod:`contactdyn.hybrid.loop`;
 - the events (touch, separate, stop, reverse, turn, slip) and the storm guard:
   :mod:`contactdyn.hybrid.events`; what each event does to the modes: :mod:`contactdyn.hybrid.transitions`;
-- the right-hand side: :mod:`contactdyn.model.dynamics` (readable) and the one pipeline,
-  :mod:`contactdyn.model.pipeline` (compiled, one call for every mode and law; ``Result.stats["paths"]`` says which
-  mode ran where, ``Result.stats["fallback_modes"]`` why a mode was not compiled);
+- the right-hand side: the one pipeline, :mod:`contactdyn.model.pipeline` (one call for every mode and law, compiled
+  or interpreted; ``Result.stats["paths"]`` says which mode ran where and which laws ran as Python stages);
 - friction and the stick band: :mod:`contactdyn.model.friction`; impacts: :mod:`contactdyn.model.impact`;
 - the output channels: :mod:`contactdyn.output.channels`.
 """
@@ -41,8 +40,8 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None,
     """Run a scene (an object, a path, or a name in ``sims/``) and return its Result; ``progress``: show the
     simulated time on stderr once the run has taken a couple of seconds (:mod:`contactdyn.hybrid.progress`);
     ``interpreted=True``: the compiled call's modes run interpreted, as its Python twins, only its small leaves
-    compiled (:mod:`contactdyn.numerics.twins`; a scene kind's first run, :mod:`contactdyn.first_run`);
-    ``compiled=False`` (and not interpreted): every mode on the readable model."""
+    compiled (:mod:`contactdyn.numerics.twins`; a scene kind's first run, :mod:`contactdyn.first_run`); so does
+    ``compiled=False``."""
     if not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
@@ -55,11 +54,10 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None,
     loop = HybridRun(system, compiled, interpreted)
     if progress:
         loop.progress = Progress(scene.name, scene.duration)
-    if interpreted:
+    if interpreted or not compiled:
         about = notice.about("the leaves the interpreted call runs compiled (rigid-body algorithms, linear algebra)")
     else:
-        about = nullcontext() if compiled else notice.about("the arithmetic the readable model shares with the "
-                                                             "compiled call")
+        about = nullcontext()
     try:
         with about:
             result = loop.run(wall0)

@@ -1,5 +1,5 @@
 """The one pipeline's call (contactdyn.model.pipeline) at the states a run passes through equals the readable model's
-(System.evaluate), on modes the per-call cases of tests/test_pipeline_proto.py do not hold: the hybrid law, a
+(dynamics.evaluate), on modes the per-call cases of tests/test_pipeline_proto.py do not hold: the hybrid law, a
 redundant arm's null-space damping, a clipping voltage, the writers' stick, launch and slide, a 1-D slide; and the
 packed reference and force set-points are the readable ones bitwise."""
 
@@ -19,7 +19,9 @@ from test_output_samples import pressing_writer  # noqa: E402
 
 from contactdyn import Robot, parse_scene  # noqa: E402
 from contactdyn.hybrid.loop import HybridRun  # noqa: E402
+from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
 from contactdyn.laws.trajectory import Move, Ramp, Reference  # noqa: E402
+from contactdyn.model.dynamics import evaluate as readable_evaluate  # noqa: E402
 from contactdyn.model.phases import start_phase  # noqa: E402
 from contactdyn.model.pipeline.actuation import reference, set_points  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline, call  # noqa: E402
@@ -28,28 +30,28 @@ from contactdyn.scene.reader import read_toml  # noqa: E402
 from contactdyn.scene.scene_file import find_scene, load_scene  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
-#: a call against System.evaluate at a run's states, relative to 1 + |ẋ|'s largest entry (the bound the
-#: deleted twin's tests held); measured ≤ 7.0e-13 over these scenes' states
+#: a call against the readable model (dynamics.evaluate) at a run's states, relative to 1 + |ẋ|'s largest entry
+#: (the bound the deleted twin's tests held); measured ≤ 7.0e-13 over these scenes' states
 CALL_RTOL = 1e-10
 
 
 def assert_calls_are_the_readable_model(scene, per_segment: int = 6) -> tuple:
     """Run ``scene``; at ``per_segment`` states along each segment (its dense output) the segment's pipeline call
-    answers (status 1: not handed to the readable model) and its ẋ is System.evaluate's. Every segment on the
-    pipeline. Returns (the system, the run's segments)."""
+    answers (status 1: an answer, not NaN rates) and its ẋ is the readable model's (dynamics.evaluate). Every
+    segment on the pipeline's compiled call. Returns (the system, the run's segments)."""
     system = System(scene)
     run = HybridRun(system)
     run.run(0.0)
     assert run.segments
     for seg in run.segments:
-        assert seg.runner.ok, seg.runner.reason  # on the pipeline
+        assert isinstance(seg.runner, PipelineMode) and not seg.runner.interpreted  # on the compiled call
         seg.runner.use(seg.modes)
         p = seg.runner.pipe.packed
         for t in np.linspace(seg.t0, seg.t1, per_segment):
             x = seg.sol(t)
             got = call(float(t), x.copy(), p.ints, p.reals, p.work, p.events)
             assert p.events[-1] == 1.0, (seg.modes, t)
-            ref = system.evaluate(float(t), x, seg.modes, seg.phase).xdot
+            ref = readable_evaluate(system, float(t), x, seg.modes, seg.phase).xdot
             assert np.abs(got - ref).max() <= CALL_RTOL * (1.0 + np.abs(ref).max()), (seg.modes, t)
     return system, run.segments
 
@@ -68,7 +70,7 @@ def test_a7_pressing_a_bonded_wall_through_motors_clipped_or_not(u_max):
     system, segments = assert_calls_are_the_readable_model(parse_scene(pressing_writer(u_max=u_max)))
     if u_max is not None:
         seg = segments[0]
-        ev = system.evaluate(seg.t0, seg.sol(seg.t0), seg.modes, seg.phase, full=True)
+        ev = readable_evaluate(system, seg.t0, seg.sol(seg.t0), seg.modes, seg.phase, full=True)
         assert np.abs(ev.u).max() == u_max  # [V] the clipping branch ran
 
 
@@ -140,8 +142,8 @@ def test_the_packed_set_points_are_ramp_at_bitwise():
 @pytest.mark.parametrize("scene", ["case3_a_position", "case3_b_force"])  # position_dynamic; force_dynamic, a row
 def test_a_force_reading_law_is_folded_into_the_call_as_in_the_readable_model(scene):
     """The press phase's law reads the measured force (folded into the KKT solve): at states near the start, every
-    contact touching, the call is System.evaluate's to 1e-12 of 1 + |ẋ| (measured ≤ 1.4e-16), none handed to the
-    readable model."""
+    contact touching, the call is the readable model's (dynamics.evaluate) to 1e-12 of 1 + |ẋ| (measured
+    ≤ 1.4e-16), every call with an answer."""
     system, modes, phase, x0 = prepare(load_scene(scene))
     press = start_phase(system, 1, 0.0, x0, phase)
     assert press.controller.uses_forces
@@ -150,6 +152,6 @@ def test_a_force_reading_law_is_folded_into_the_call_as_in_the_readable_model(sc
     rng = np.random.default_rng(5)
     for k in range(3):
         t, x = 0.02 * k, x0 + 1e-3 * rng.normal(size=system.n)
-        ref = system.evaluate(t, x, touching, press).xdot
+        ref = readable_evaluate(system, t, x, touching, press).xdot
         assert np.abs(pipe.rhs(t, x) - ref).max() <= 1e-12 * (1.0 + np.abs(ref).max())
-    assert pipe.readable_calls == 0
+    assert pipe.failed_calls == 0

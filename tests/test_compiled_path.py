@@ -1,5 +1,6 @@
-"""Which path runs each mode (contactdyn.model.paths): the one pipeline for every mode of every scene, else the
-readable model with the pipeline's own reason (pack.unsupported), never an undeclared one."""
+"""Which path runs each mode (contactdyn.model.paths): the one pipeline's compiled call for every mode of every scene
+(a mode it cannot pack stops the run with the pipeline's own reason, pack.unsupported: tests/test_rigid_body.py),
+a law numba cannot compile a declared Python stage in it."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from contactdyn import parse_scene, simulate
-from contactdyn.model.paths import PIPELINE, READABLE
+from contactdyn.model.paths import INTERPRETED, PIPELINE
 from contactdyn.model.system import System
 from contactdyn.scene.scene_file import load_scene, sims_dir
 from contactdyn.simulate import run_system
@@ -34,62 +35,51 @@ def _paths(result) -> set[str]:
 
 
 def _all_compiled(result) -> None:
-    assert result.stats["fallback_modes"] == {}, result.stats["fallback_modes"]
     assert _paths(result) == {PIPELINE}, result.stats["paths"]
-
-
-#: shipped scenes whose every mode the compiled call declines, with its reason (they run on the readable model)
-READABLE_ONLY: dict[str, str] = {}  #: (none now: a free body, drop_box, runs compiled in either chart)
 
 
 @pytest.mark.parametrize("path", sorted(sims_dir().glob("*.toml")) + sorted(HARD.glob("*.toml")),
                          ids=lambda p: p.stem)
 def test_every_scene_runs_every_mode_on_the_pipeline(path):
-    """Every shipped scene, full length (≤ 3.6 s each, ~15 s for all 22 on this machine once compiled); a scene
-    of READABLE_ONLY every mode on the readable model with its stated reason."""
-    result = run_system(System(load_scene(path)))
-    if path.stem in READABLE_ONLY:
-        assert {(row["path"], row["why"]) for row in result.stats["paths"].values()} == \
-            {(READABLE, READABLE_ONLY[path.stem])}
-        return
-    _all_compiled(result)
+    """Every shipped scene, full length (≤ 3.6 s each, ~15 s for all 22 on this machine once compiled)."""
+    _all_compiled(run_system(System(load_scene(path))))
 
 
 def test_a_controller_numba_cannot_compile_keeps_its_modes_on_the_compiled_call(uncompilable_controller):
     """A controller numba cannot compile is a declared Python stage of the compiled call
-    (tests/test_python_controller): no mode on the readable model, each naming the controller and numba's reason."""
+    (tests/test_python_controller): every mode on the compiled call, each naming the controller and numba's
+    reason."""
     r = simulate(parse_scene({
         "duration": 0.05, "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "q0": [0.999], "v0": [0.5]},
         "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], "model": "chain",
                                                                   "environment": [{"k": 5e4, "b": 1500.0}]}}},
         "controller": {"kind": uncompilable_controller.name}}))
-    assert r.stats["fallback_modes"] == {}
     assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
     assert all(row["why"].startswith(PYTHON_STAGE_CONTROLLER) for row in r.stats["paths"].values())
 
 
 def test_a_stage_law_numba_cannot_compile_keeps_its_mode_on_the_compiled_call(uncompilable_law):
     """A stage law numba cannot compile is a declared Python stage of the compiled call (tests/test_python_stages):
-    no mode on the readable model, the touching one naming the law."""
+    every mode on the compiled call, the touching one naming the law."""
     r = simulate(axis_scene({"model": "chain", "environment": [{"k": 5e4, "b": 1500.0, "law": uncompilable_law.name}]},
                             0.05))
-    assert r.stats["fallback_modes"] == {}
     assert r.stats["paths"]["main: tip touching"]["path"] == PIPELINE
     why = r.stats["paths"]["main: tip touching"]["why"]
     assert why.startswith("stage law 'uncompilable' of tip.n is a Python stage"), why
     assert r.stats["paths"]["main: tip free"] == {"path": PIPELINE, "why": "", "segments": 1}
 
 
-def test_the_energy_audit_through_motors_runs_on_the_compiled_call_and_agrees_with_the_readable_model():
+def test_the_energy_audit_through_motors_runs_on_the_compiled_call_and_agrees_with_the_interpreted_run():
     """The DC-motor writer with the energy audit: the drives' own power and the motors' losses (as each kind's law
-    gives them) in the audit's rates on the compiled call; the work and dissipated energy the readable model's to
-    1e-9 of their largest value, the audit closing."""
+    gives them) in the audit's rates on the compiled call; the work and dissipated energy the interpreted run's (the
+    same call as its Python twins, ``compiled=False``) to 1e-9 of their largest value, the audit closing."""
     settings = {"solver.record_energy": True, "duration": 0.3}
     fast = simulate("case2_writer_motors", settings)
     _all_compiled(fast)
-    readable = simulate("case2_writer_motors", settings, compiled=False)
+    interpreted = simulate("case2_writer_motors", settings, compiled=False)
+    assert _paths(interpreted) == {INTERPRETED}
     for key in ("energy.work", "energy.dissipated", "q", "contact.tip.F_n"):
-        ref = np.asarray(readable[key], float)
+        ref = np.asarray(interpreted[key], float)
         np.testing.assert_allclose(fast[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
     assert np.abs(fast["energy.work"]).max() > 0.0
     assert fast.meta["check_warnings"] == []

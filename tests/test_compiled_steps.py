@@ -104,7 +104,7 @@ def test_redundant_rows_that_agree_are_solved_in_the_call():
 def test_rows_that_disagree_are_solved_in_the_call_by_least_squares():
     """cylindrical3 on two rigid tables, the second 1 mm below, both touching: their rows are the same and their
     Baumgarte terms are not, so the KKT system has no solution. The call answers with the readable model's
-    minimum-norm least squares (status 1, not 0: the readable model no longer answers): ẋ and λ as
+    minimum-norm least squares (status 1, not 0: not a call with no answer, failed_calls 0): ẋ and λ as
     ``dynamics.evaluate``'s to 1e-9, ``regular`` False on both paths, the call counted."""
     system, modes, phase, x = _two_tables(-1e-3)
     pipe = Pipeline(system, modes, phase)
@@ -114,25 +114,25 @@ def test_rows_that_disagree_are_solved_in_the_call_by_least_squares():
         ref = dynamics.evaluate(system, t, state, modes, phase)
         assert p.events[-1] == 1.0 and not ref.regular
         assert np.abs(got - ref.xdot).max() <= 1e-9 * np.abs(ref.xdot).max()
-    assert pipe.least_squares == 2 and pipe.readable_calls == 0
+    assert pipe.least_squares == 2 and pipe.failed_calls == 0
     mode = PipelineMode(pipe)
     ev = mode.evaluation(0.0, x)
     ref = dynamics.evaluate(system, 0.0, x, modes, phase)
-    assert not ev.regular and mode.singular == 3 and pipe.readable_calls == 0
+    assert not ev.regular and mode.singular == 3 and pipe.failed_calls == 0
     assert np.abs(ev.lam - ref.lam).max() <= 1e-9 * np.abs(ref.lam).max()  # (min-norm: λ unique too)
     assert ev.normal_force == pytest.approx(ref.normal_force, rel=1e-9)
 
 
 def test_a_run_on_rows_that_disagree_takes_every_step_in_the_call():
     """The same two tables 1 mm apart through 0.3 s (every call singular; before, each attempt declined and each step
-    was the readable model's): every DOP853 attempt is taken by the compiled call, no call by the readable model, and
+    was the readable model's): every DOP853 attempt is taken by the compiled call, no call without an answer, and
     the run is the readable model's (scipy's core on ``dynamics.evaluate``) within the tolerance."""
     system, modes, phase, x = _two_tables(-1e-3)
     mode = PipelineMode(Pipeline(system, modes, phase))
     fun = mode.rhs
     span, rtol, atol = (0.0, 0.3), 1e-10, 1e-12
     got = dop853.solve(fun, span, x, rtol=rtol, atol=atol, step=_counted(fun.step, taken := []))
-    assert mode.pipe.readable_calls == 0 and mode.singular == got.nfev
+    assert mode.pipe.failed_calls == 0 and mode.singular == got.nfev
     assert got.status == 0 and taken and all(taken)  # every attempt in the call
 
     def readable(t, x_):

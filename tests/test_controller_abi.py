@@ -21,7 +21,7 @@ from contactdyn.laws.controllers.abi import (
     params_of,
 )
 from contactdyn.laws.controllers.base import ControlInput, DeclaredConfig
-from contactdyn.model.paths import PIPELINE, READABLE
+from contactdyn.model.paths import INTERPRETED, PIPELINE
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 
@@ -142,7 +142,7 @@ def test_a_force_reading_law_with_states_by_address_equals_its_command():
 def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedance, monkeypatch):
     """examples/impedance_press.toml: the mode on the compiled call (the law by address), its run the one of the
     law's Python command (the address forced to 0: the compiled call runs it as a declared Python stage) and the
-    readable model's (every mode on it) to 1e-9."""
+    interpreted run's (every mode on the same call interpreted) to 1e-9."""
     import warnings
 
     from contactdyn import load_scene, simulate
@@ -163,7 +163,7 @@ def test_impedance_press_runs_in_the_compiled_call_as_on_the_python_path(impedan
     from contactdyn.model.paths import LivePipelines
     monkeypatch.setattr(LivePipelines, "use", False)
     old = run()
-    assert [row["path"] for row in old.stats["paths"].values()] == [READABLE]
+    assert [row["path"] for row in old.stats["paths"].values()] == [INTERPRETED]
     for channel in ("q", "contact.tip.F_n"):
         scale = np.abs(old[channel]).max()
         assert np.abs(new[channel] - old[channel]).max() <= 1e-9 * scale, channel

@@ -2,7 +2,7 @@
 compiled kind), a user's law of the ABI outputting voltages, a user's law reading a joint-space reference, and
 operational space bound with its set-points in another order than the phase's. Per case, the pipeline's ẋ against
 the readable model's (``contactdyn.model.dynamics.evaluate``) at a few states; whole runs on the compiled call
-against the same runs on the readable model (``LivePipelines.use = False``)."""
+against the same runs interpreted (``LivePipelines.use = False``)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from contactdyn import simulate  # noqa: E402
 from contactdyn.laws import Controller, Param  # noqa: E402
 from contactdyn.laws.controllers import CONTROLLERS  # noqa: E402
 from contactdyn.model import dynamics  # noqa: E402
-from contactdyn.model.paths import PIPELINE, LivePipelines  # noqa: E402
+from contactdyn.model.paths import INTERPRETED, PIPELINE, LivePipelines  # noqa: E402
 from contactdyn.model.pipeline.pack import unsupported  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 
@@ -131,13 +131,13 @@ def test_the_pipeline_gives_the_readable_rates(name):
         ref = dynamics.evaluate(system, t, x, modes, phase).xdot
         got = pipe.rhs(t, x)
         assert np.abs(got - ref).max() <= RTOL * np.abs(ref).max()
-    assert pipe.readable_calls == 0
+    assert pipe.failed_calls == 0
 
 
 @pytest.mark.parametrize("name", ["a7_joint_link_motors", "voltage_law_motors"])
-def test_a_run_takes_the_compiled_call_and_gives_the_readable_run(name, monkeypatch):
+def test_a_run_takes_the_compiled_call_and_gives_the_interpreted_run(name, monkeypatch):
     """case2_writer_motors' approach and the start of its write (0.6 s): every mode on the compiled call (no
-    reason), q, v and the drives' voltages the readable run's to 1e-9, the same events."""
+    reason), q, v and the drives' voltages the interpreted run's to 1e-9, the same events."""
     path, edit, _ = CASES[name]
 
     def scene():
@@ -147,14 +147,14 @@ def test_a_run_takes_the_compiled_call_and_gives_the_readable_run(name, monkeypa
 
     live = simulate(scene())
     monkeypatch.setattr(LivePipelines, "use", False)
-    readable = simulate(scene())
+    interpreted = simulate(scene())
     assert {(row["path"], row["why"]) for row in live.stats["paths"].values()} == {(PIPELINE, "")}
-    assert {row["path"] for row in readable.stats["paths"].values()} != {PIPELINE}
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}
     for channel in ("q", "v", "tau", "tau_cmd", "u"):
-        scale = np.abs(readable[channel]).max()
-        assert np.abs(live[channel] - readable[channel]).max() <= 1e-9 * scale, channel
+        scale = np.abs(interpreted[channel]).max()
+        assert np.abs(live[channel] - interpreted[channel]).max() <= 1e-9 * scale, channel
     assert [(e["kind"], e.get("contact")) for e in live.events] == \
-        [(e["kind"], e.get("contact")) for e in readable.events]
+        [(e["kind"], e.get("contact")) for e in interpreted.events]
 
 
 def test_joint_pd_on_a_tip_reference_of_a_two_joint_robot_is_a_scene_error():

@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -16,7 +17,7 @@ import pytest
 from contactdyn import first_run
 from contactdyn.cli import EXIT_OK, main
 from contactdyn.errors import SceneError
-from contactdyn.model.paths import INTERPRETED, PIPELINE, READABLE
+from contactdyn.model.paths import INTERPRETED, PIPELINE
 from contactdyn.scene.scene_file import load_scene
 
 FAST = ["--set", "duration=0.05", "--set", "solver.output_rate=200"]
@@ -46,7 +47,6 @@ def test_auto_is_interpreted_until_the_kind_is_built_then_compiled(markers):
     (markers / f"{first_run.kind(scene)}.built").touch()
     choice = first_run.choose(scene, "auto")
     assert (choice.compiled, choice.build, choice.line()) == (True, False, "")
-    assert first_run.choose(scene, "readable").path == "readable"
     assert first_run.choose(scene, "interpreted").interpreted
     assert first_run.choose(load_scene("case1_cart"), "compiled").compiled
 
@@ -104,6 +104,23 @@ def test_the_command_runs_interpreted_says_so_and_asks_for_one_build(markers, mo
     assert len(asked) == 2 and capsys.readouterr().err.count("\n") == 1
 
 
+def test_the_readable_path_is_gone(monkeypatch, capsys):
+    """``--path readable`` (the readable model's run) no longer exists: argparse rejects it in one line naming the
+    paths there are, and so does ``CONTACTDYN_PATH=readable``."""
+    assert first_run.PATHS == ("auto", "compiled", "interpreted")
+    assert main(["run", "b1", *FAST, "--path", "readable"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    # (argparse quotes the choices with repr in older Pythons, not in newer ones)
+    assert re.search(r"argument --path: invalid choice: 'readable' \(choose from '?auto'?, '?compiled'?, "
+                     r"'?interpreted'?\)", err), err
+    monkeypatch.setenv("CONTACTDYN_PATH", "readable")
+    assert main(["run", "b1", *FAST]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "CONTACTDYN_PATH: expected one of auto, compiled, interpreted, found 'readable'" \
+        in err, err
+
+
 def test_a_bad_path_in_the_environment_is_one_message(monkeypatch, capsys):
     monkeypatch.setenv("CONTACTDYN_PATH", "fast")
     assert main(["run", "b1", *FAST]) == 2
@@ -141,19 +158,19 @@ def test_a_failed_build_is_recorded_and_said_and_not_retried(markers, monkeypatc
     assert first_run.choose(scene, "auto").compiled and not (markers / f"{first_run.kind(scene)}.failed").exists()
 
 
-def test_the_readable_run_and_the_compiled_run_agree():
+def test_the_interpreted_run_and_the_compiled_run_agree():
     from contactdyn import simulate
 
-    readable = simulate("b1", {"duration": 0.2}, compiled=False)
+    interpreted = simulate("b1", {"duration": 0.2}, compiled=False)
     compiled = simulate("b1", {"duration": 0.2})
-    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}
     assert {row["path"] for row in compiled.stats["paths"].values()} == {PIPELINE}
-    F_r, F_c = readable["contact.tip.F_n"], compiled["contact.tip.F_n"]
-    assert abs(F_r - F_c).max() <= 1e-6 * abs(F_c).max()
+    F_i, F_c = interpreted["contact.tip.F_n"], compiled["contact.tip.F_n"]
+    assert abs(F_i - F_c).max() <= 1e-6 * abs(F_c).max()
 
 
 def test_a_bad_default_path_is_named():
-    with pytest.raises(SceneError, match="CONTACTDYN_PATH.*auto, compiled, interpreted, readable.*fast"):
+    with pytest.raises(SceneError, match="CONTACTDYN_PATH.*auto, compiled, interpreted, found 'fast'"):
         first_run.default_path({"CONTACTDYN_PATH": "fast"})
     assert first_run.default_path({}) == "auto"
 
@@ -166,10 +183,10 @@ def test_a_run_on_the_compiled_call_marks_its_kind(markers, capsys):
 
 
 def test_a_failure_on_the_compiled_call_is_diagnosed_in_one_line(capsys):
-    """case1_cart run for 20 s fails at ~12.3 s (its contact turns stiff); on the compiled call, as on the readable
-    model, the command prints one line with the cause (the diagnosis evaluates the failure's state: a strided
+    """case1_cart run for 20 s fails at ~12.3 s (its contact turns stiff); on the compiled call, as on the same call
+    interpreted, the command prints one line with the cause (the diagnosis evaluates the failure's state: a strided
     column of the solution once reached the compiled call as a new array layout and failed to compile)."""
-    for path in ("compiled", "readable"):
+    for path in ("compiled", "interpreted"):
         code = main(["run", "case1_cart", "--set", "duration=20", "--path", path, "--quiet"])
         err = capsys.readouterr().err
         assert code == 1 and err.count("\n") == 1 and "integration failed at t = 12.34" in err, (path, err[-300:])

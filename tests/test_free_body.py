@@ -24,7 +24,7 @@ from contactdyn.errors import SceneError
 from contactdyn.hybrid.loop import HybridRun
 from contactdyn.hybrid.pipeline_mode import PipelineMode
 from contactdyn.model import dynamics
-from contactdyn.model.paths import PIPELINE, LivePipelines
+from contactdyn.model.paths import INTERPRETED, PIPELINE, LivePipelines
 from contactdyn.model.pipeline.pipeline import Pipeline, call
 from contactdyn.model.system import System
 from contactdyn.simulate import prepare
@@ -71,8 +71,7 @@ def _thrown(p0, v0, angles, omega, duration):
 
 
 def _compiled(r) -> None:
-    """Every mode of the run on the compiled call, none answered by the readable model."""
-    assert r.stats["fallback_modes"] == {}, r.stats["fallback_modes"]
+    """Every mode of the run on the compiled call."""
     assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}, r.stats["paths"]
 
 
@@ -284,24 +283,25 @@ def test_the_compiled_call_gives_the_readable_model_s_rates_in_either_chart(touc
         for chart in (0, 1):
             y[body.chart_index] = chart
             got = call(0.0, y.copy(), p.ints, p.reals, p.work, p.events)
-            refs.append(system.evaluate(0.0, y, modes, phase).xdot)
+            refs.append(dynamics.evaluate(system, 0.0, y, modes, phase).xdot)
             assert p.events[-1] == 1.0
             assert np.abs(got - refs[-1]).max() <= 1e-12 * (1.0 + np.abs(refs[-1]).max())
         assert np.abs(refs[1] - refs[0]).max() > 1e-3  # (the charts' rates differ: both were checked)
 
 
-def test_a_tumble_through_both_charts_runs_the_same_compiled_and_readable(monkeypatch):
-    """The tumble's first 1.5 s (a switch to B and back to A) on the compiled call and on the readable model: every
+def test_a_tumble_through_both_charts_runs_the_same_compiled_and_interpreted(monkeypatch):
+    """The tumble's first 1.5 s (a switch to B and back to A) on the compiled call and interpreted: every
     channel within 1e-9 of its largest value plus 1e-10 (SI units), the switches at the same instants to 1e-9 s."""
     runs = {}
     for use in (True, False):
         monkeypatch.setattr(LivePipelines, "use", use)
         runs[use] = _tumble(1.5)[0]
-    fast, readable = runs[True], runs[False]
+    fast, interpreted = runs[True], runs[False]
     _compiled(fast)
-    assert [e.get("to") for e in fast.events] == [e.get("to") for e in readable.events] == ["B", "A"]
-    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in readable.events], rtol=0, atol=1e-9)
-    for key, ref in readable.channels.items():
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}, interpreted.stats["paths"]
+    assert [e.get("to") for e in fast.events] == [e.get("to") for e in interpreted.events] == ["B", "A"]
+    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in interpreted.events], rtol=0, atol=1e-9)
+    for key, ref in interpreted.channels.items():
         ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
         if ref.size and not np.all(np.isnan(ref)):
             assert np.nanmax(np.abs(got - ref)) <= 1e-9 * np.nanmax(np.abs(ref)) + 1e-10, key
@@ -402,7 +402,7 @@ def test_resting_on_four_corners_the_call_solves_the_singular_system_as_the_read
     """At rest on its four corners (12 coordinates, the box's 6 held by 4 rows: the KKT matrix singular, its system
     consistent): the call takes the readable model's minimum-norm least squares (status 1, counted, not regular),
     ẋ and each corner's m g / 4 as ``dynamics.evaluate``'s; a whole resting run counts its calls in
-    ``singular_solves`` and answers none by the readable model."""
+    ``singular_solves`` and has no call without an answer (``failed_calls``)."""
     system, modes, phase, x = prepare(load_scene("drop_box"))
     modes = [m.with_(touching=True) for m in modes]
     x[system.nv + 2] = 0.15  # [m] the box's centre: its bottom on the table
@@ -413,7 +413,7 @@ def test_resting_on_four_corners_the_call_solves_the_singular_system_as_the_read
     assert p.events[-1] == 1.0 and pipe.least_squares == 1 and not ref.regular
     assert np.abs(got - ref.xdot).max() <= 1e-9 * (1.0 + np.abs(ref.xdot).max())
     ev = PipelineMode(pipe).evaluation(0.0, x)
-    assert not ev.regular and pipe.readable_calls == 0
+    assert not ev.regular and pipe.failed_calls == 0
     for name in ("c1", "c2", "c3", "c4"):
         assert ev.normal_force[name] == pytest.approx(ref.normal_force[name], rel=1e-9) \
             == pytest.approx(M * G / 4, rel=1e-9)
@@ -422,5 +422,5 @@ def test_resting_on_four_corners_the_call_solves_the_singular_system_as_the_read
     run = HybridRun(System(parse_scene({**doc, "body": {"box": body}}, None, file)))
     r = run.run(0.0)
     modes_run = [m for m in run.pipelines.pipes.values() if not isinstance(m, str)]
-    assert modes_run and sum(m.pipe.readable_calls for m in modes_run) == 0
+    assert modes_run and sum(m.pipe.failed_calls for m in modes_run) == 0
     assert r.stats["singular_solves"] > 0  # (before: 0, the call's least squares not counted)

@@ -15,7 +15,9 @@ import pytest
 
 import contactdyn
 from contactdyn import SceneError, parse_scene, simulate
+from contactdyn.hybrid.pipeline_mode import mode_runner
 from contactdyn.model.contact import ContactMode
+from contactdyn.model.dynamics import evaluate as readable_evaluate
 from contactdyn.model.system import System
 from contactdyn.robot.robot import Robot
 
@@ -129,16 +131,19 @@ def test_kinetic_friction_exact_and_inside_the_cone():
 
 
 def test_no_hidden_regularisation_at_tiny_slip():
-    """Sliding at 1e-7 m/s still gives the full μ_k F (no tanh(v/ε) in the right-hand side), 1-D and 2-D."""
+    """Sliding at 1e-7 m/s still gives the full μ_k F (no tanh(v/ε) in the right-hand side), 1-D and 2-D (the
+    model as a run takes it: the compiled call)."""
     system = System(parse_scene(scene()))
+    runner = mode_runner(system)
     x, _ = system.initial_state()
     phase = system.start_phase(0, 0.0, x, None)
     for v in (1e-7, -1e-7, 3.0):
         x[system.nQ] = v
-        ev = system.evaluate(0.0, x, [ContactMode(touching=True, slip=(math.copysign(1.0, v),))], phase)
+        ev = runner([ContactMode(touching=True, slip=(math.copysign(1.0, v),))], phase).evaluation(0.0, x)
         assert ev.friction["ground"][0] == -math.copysign(0.4 * W, v)
         assert ev.xdot[system.nQ] == pytest.approx(-math.copysign(0.4 * G, v), rel=1e-14)
     system = System(parse_scene(scene(dims=2)))
+    runner = mode_runner(system)
     x, _ = system.initial_state()
     phase = system.start_phase(0, 0.0, x, None)
     for v in (1e-7 * np.array([0.6, -0.8]), np.array([-2.0, 1.0])):
@@ -146,7 +151,7 @@ def test_no_hidden_regularisation_at_tiny_slip():
         c45 = math.sqrt(0.5)
         u = v / np.linalg.norm(v)
         r = (c45 * (u[0] - u[1]), c45 * (u[0] + u[1]))  # a reference 45° off: the force follows v itself
-        ev = system.evaluate(0.0, x, [ContactMode(touching=True, slip=r)], phase)
+        ev = runner([ContactMode(touching=True, slip=r)], phase).evaluation(0.0, x)
         assert ev.friction["ground"] == pytest.approx(-0.4 * W * v / np.linalg.norm(v), rel=1e-15, abs=1e-14)
 
 
@@ -434,8 +439,8 @@ def test_bad_friction_inputs_name_the_key():
 
 def test_2d_coulomb_on_a_moving_body_compiled_equals_the_readable_model():
     """A compliant (chain) contact on a cart with 2-D friction: the compiled call's Coulomb force, its tip share
-    and its reaction on the cart's row equal System.evaluate's at slips in several directions, and the cart takes
-    the reaction μ_k F_n d_x in closed form."""
+    and its reaction on the cart's row equal the readable model's (``dynamics.evaluate``) at slips in several
+    directions, and the cart takes the reaction μ_k F_n d_x in closed form."""
     from contactdyn.model.pipeline.pipeline import Pipeline
 
     doc = scene(dims=2)
@@ -454,7 +459,7 @@ def test_2d_coulomb_on_a_moving_body_compiled_equals_the_readable_model():
         x = x0.copy()
         x[2] = -W / 1e6  # [m] pressed in: the compliant ground bears the weight
         x[nQ:nQ + 2] = v
-        ref = system.evaluate(0.1, x, modes, phase).xdot
+        ref = readable_evaluate(system, 0.1, x, modes, phase).xdot
         got[tuple(v)] = out = plan.rhs(0.1, x.copy())
         assert np.abs(out - ref).max() <= 1e-10 * (1.0 + np.abs(ref).max())
     for v, xdot in got.items():  # the cart (5 kg, free along x) takes the reaction μ_k F_n d_x, F_n = W

@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 
 from contactdyn import parse_scene
+from contactdyn.hybrid.pipeline_mode import mode_runner
 from contactdyn.laws import abi
 from contactdyn.laws.friction_laws import FRICTION_LAWS, Coulomb, FrictionLaw, FrictionSpec, Stribeck
 from contactdyn.laws.stage_laws import STAGE_LAWS, HuntCrossley, Linear, StageLaw, register_stage_law
 from contactdyn.model import chain_forces as cf
+from contactdyn.model.dynamics import evaluate as readable_evaluate
 from contactdyn.simulate import prepare
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -143,7 +145,7 @@ def _evaluations(law: str, extra: dict | None = None, states: int = 3):
         xi = x.copy()
         xi[system.nv] += 1e-4 * i  # the mass [m]
         xi[system.nQ] += 0.05 * i  # the axis' speed [m/s]
-        ev = system.evaluate(0.0, xi, modes, phase, full=True)
+        ev = readable_evaluate(system, 0.0, xi, modes, phase, full=True)
         out.append((dict(ev.stages), ev.xdot.copy()))
     return system, out
 
@@ -164,13 +166,13 @@ def test_a_law_numba_cannot_compile_is_declared_and_computed_in_python(uncompila
 def test_the_chain_calls_each_law_through_the_address_in_its_arrays():
     system, modes, phase, x = prepare(_axis_scene("cubic", {"k3": 1e12}))
     x[system.nv], x[system.nQ] = x[system.nv] + 1e-4, 0.05  # the mass moved [m], the axis moving [m/s]
-    declared = system.evaluate(0.0, x, modes, phase, full=True).stages
+    declared = readable_evaluate(system, 0.0, x, modes, phase, full=True).stages
     (a,) = system.contacts[0].normal.arrays.values()
     laws = a.stages[:, cf.S_LAW].copy()
     assert list(laws) == [abi.stage_address(Cubic), abi.stage_address(Linear)]
     law_columns = [cf.S_LAW, cf.S_PARAMS_AT, cf.S_N_PARAMS]  # a law's address and where its parameters are
     a.stages[:, law_columns] = a.stages[::-1, law_columns].copy()  # the two laws swapped in the table
-    swapped = system.evaluate(0.0, x, modes, phase, full=True).stages
+    swapped = readable_evaluate(system, 0.0, x, modes, phase, full=True).stages
     (x0, xd0, F0), (x1, xd1, F1) = swapped["tip.n.env1"], swapped["tip.n.env2"]
     assert x0 * x1 != 0.0  # both stages deformed
     assert F0 == Linear.force(K, B, (), x0, xd0)  # stage 1's k and b under the linear law
@@ -217,7 +219,7 @@ def test_a_pickled_chain_packs_again_in_its_new_process():
     import pickle
 
     system, modes, phase, x = prepare(_axis_scene("hunt_crossley", {"exponent": 1.5}))
-    system.evaluate(0.0, x, modes, phase)
+    readable_evaluate(system, 0.0, x, modes, phase)
     dc = system.contacts[0].normal
     assert dc.arrays  # packed, with the laws' addresses of this process
     assert pickle.loads(pickle.dumps(dc)).arrays == {}  # another process would pack with its own
@@ -240,12 +242,21 @@ def raising_law(stage_law_registry):
 
 
 def test_a_compiled_law_that_raises_raises_its_own_error_not_a_zero_force(raising_law):
+    """The readable model and the interpreted call raise the law's own error; so does the compiled call, whose cfunc
+    cannot carry it out (status -1): the call is run once more interpreted there (Pipeline.failed_call). Never a
+    zero force."""
     assert abi.stage_address(raising_law)  # it compiles: numba compiles the raise
     system, modes, phase, x = prepare(_axis_scene("raising"))
-    system.evaluate(0.0, x, modes, phase)  # undeformed: a force
+    compiled, interpreted = (mode_runner(system, compiled=c)(modes, phase) for c in (True, False))
+    readable_evaluate(system, 0.0, x, modes, phase)  # undeformed: a force
+    assert np.all(np.isfinite(compiled.rhs(0.0, x.copy()))) and np.all(np.isfinite(interpreted.rhs(0.0, x.copy())))
     x[system.nv] -= 1e-4  # the mass moved down [m]: the law's stage compressed beyond its range
     with pytest.raises(ValueError, match="compression beyond its range"):
-        system.evaluate(0.0, x, modes, phase)
+        readable_evaluate(system, 0.0, x, modes, phase)
+    with pytest.raises(ValueError, match="compression beyond its range"):
+        interpreted.rhs(0.0, x.copy())
+    with pytest.raises(ValueError, match="compression beyond its range"):
+        compiled.rhs(0.0, x.copy())
 
 
 def _scaled_law(scale: float) -> type[StageLaw]:

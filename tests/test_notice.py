@@ -59,10 +59,10 @@ def test_every_numba_compile_of_the_package_is_a_block_and_others_are_not(watch,
     assert notice._watch.depth == 0
 
 
-def test_a_run_on_the_readable_model_names_what_it_compiles(watch, monkeypatch, capsys):
-    """Within ``about``, a compile of the package is announced as what the block says (a readable run compiles only
-    the arithmetic it shares with the compiled call), outside it as the default; ``simulate(compiled=False)`` runs
-    in such a block, the compiled path outside any."""
+def test_an_interpreted_run_names_what_it_compiles(watch, monkeypatch, capsys):
+    """Within ``about``, a compile of the package is announced as what the block says (an interpreted run compiles
+    only the leaves its Python twins call), outside it as the default; ``simulate(compiled=False)`` runs in such a
+    block, the compiled path outside any."""
     monkeypatch.setattr(notice, "NOTICE_AFTER", 0.0)
 
     def add_two(x):
@@ -81,4 +81,4 @@ def test_a_run_on_the_readable_model_names_what_it_compiles(watch, monkeypatch, 
     monkeypatch.setattr(notice, "about", lambda what: seen.append(what) or real(what))
     simulate("b1", {"duration": 0.01}, compiled=False)
     simulate("b1", {"duration": 0.01})
-    assert len(seen) == 1 and "readable model" in seen[0]
+    assert len(seen) == 1 and "the interpreted call runs compiled" in seen[0]

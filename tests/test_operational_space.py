@@ -122,10 +122,12 @@ def test_on_a_rigid_surface_at_rest_the_normal_force_is_the_set_point():
 
 @pytest.mark.parametrize("robot", ["panda", "ur5"])
 def test_the_compiled_right_hand_side_calls_the_same_law(robot):
-    """The writing scene's first mode runs on the one pipeline, and its call equals the readable System.evaluate's
-    (1e-10 relative; measured ≤ 4.8e-14, the Panda) along 20 ms of the run, no call handed to the readable model:
-    one law, two paths."""
+    """The writing scene's first mode runs on the one pipeline, and its call equals the readable model's
+    (dynamics.evaluate; 1e-10 relative; measured ≤ 4.8e-14, the Panda) along 20 ms of the run, every call answered
+    (no failed call): one law, two paths."""
     from scipy.integrate import solve_ivp
+
+    from contactdyn.model.dynamics import evaluate as readable_evaluate
 
     scene = load_scene("case2_writer_ur5", {"robot.urdf": robot, "robot.tip": TOOL_FRAMES[robot]})
     system, modes, phase, x0 = prepare(scene)
@@ -133,9 +135,9 @@ def test_the_compiled_right_hand_side_calls_the_same_law(robot):
     sol = solve_ivp(pipe.rhs, (0.0, 0.02), x0, method="DOP853", rtol=1e-8, atol=1e-10)
     assert len(sol.t) >= 3
     for t, x in zip(sol.t, sol.y.T, strict=True):
-        ref = system.evaluate(t, x, modes, phase).xdot
+        ref = readable_evaluate(system, t, x, modes, phase).xdot
         np.testing.assert_allclose(pipe.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
-    assert pipe.readable_calls == 0
+    assert pipe.failed_calls == 0
 
 
 def test_a_singular_task_is_a_clear_error():
@@ -147,8 +149,11 @@ def test_a_singular_task_is_a_clear_error():
 
 
 def test_the_compiled_call_declines_a_singular_task_and_the_law_raises_there():
-    """The writer's pipeline call at the straight-elbow posture (the task singular) declines (status 0), and the
-    mode's right-hand side raises the readable law's error instead of a torque through a near-singular Λ."""
+    """The writer's pipeline call at the straight-elbow posture (the task singular) has no answer (status 0), and the
+    mode's right-hand side raises the law's own error (its time, the singular task) instead of a torque through a
+    near-singular Λ, compiled or interpreted: no other model answers for it."""
+    from contactdyn.hybrid.pipeline_mode import mode_runner
+
     system, modes, phase, x0 = prepare(load_scene("case2_writer_ur5"))
     pipe = Pipeline(system, modes, phase)
     x = x0.copy()
@@ -158,8 +163,14 @@ def test_the_compiled_call_declines_a_singular_task_and_the_law_raises_there():
     assert p.events[-1] == 0.0
     call(0.1, x0.copy(), p.ints, p.reals, p.work, p.events)
     assert p.events[-1] == 1.0  # (at the scene's own posture it answers)
-    with pytest.raises(SimulationError, match=r"operational_space: the task .* is singular at this posture"):
+    singular = r"t = 0\.1 s: operational_space: the task \(position axes, force directions.*\) is singular at this"
+    with pytest.raises(SimulationError, match=singular):
         pipe.rhs(0.1, x)
+    interpreted = mode_runner(system, compiled=False)(modes, phase)
+    assert interpreted.interpreted
+    with pytest.raises(SimulationError, match=singular):
+        interpreted.rhs(0.1, x.copy())
+    assert np.all(np.isfinite(interpreted.rhs(0.1, x0.copy())))  # (at the scene's own posture it answers)
 
 
 def test_more_task_directions_than_joints_is_a_scene_error():

@@ -1,6 +1,6 @@
 """The output's batches (contactdyn.output.channels.sample_states): a compiled mode's samples over several runs of
-segments in one call are the runs' own, bit for bit, also where a call declines (then each run on its own, the rows
-after the declined one within its run on the readable model); Samples.scattered puts rows back in place."""
+segments in one call are the runs' own, bit for bit, also where a call has no answer (then each run on its own, the
+rows from that one on within its run NaN); Samples.scattered puts rows back in place."""
 
 from __future__ import annotations
 
@@ -46,9 +46,10 @@ def test_runs_in_one_call_are_each_runs_own():
     assert _bits(pm.samples(ts, X, runs=runs)) == _bits(alone)
 
 
-def test_a_declined_call_samples_each_run_on_its_own(monkeypatch):
-    """A call that declines at one state (here: made to, at ts[3]): the batch of runs gives what each run gave alone,
-    the rows of that run after it on the readable model, the other runs' on the compiled call."""
+def test_a_call_without_an_answer_samples_each_run_on_its_own(monkeypatch):
+    """A call with no answer at one state (here: made to, at ts[3]): the batch of runs gives what each run gave alone,
+    the rows of that run from it on NaN (one call without an answer counted), the other runs' on the compiled
+    call."""
     system, pm, ts, X = _mode()
     compiled = pipeline_mode.samples_at
 
@@ -60,10 +61,11 @@ def test_a_declined_call_samples_each_run_on_its_own(monkeypatch):
     monkeypatch.setattr(pipeline_mode, "samples_at", declining)
     runs = [2, 3, 2]
     alone = _run_by_run(system, pm, ts, X, runs)
-    readable = pm.singular
-    assert readable == 2  # rows 3 and 4 of the run [2, 5)
+    failed = pm.singular
+    assert failed == 1  # the run [2, 5) at row 3
+    assert np.isnan(alone.tau[3:5]).all() and np.isfinite(alone.tau[:3]).all() and np.isfinite(alone.tau[5:]).all()
     assert _bits(pm.samples(ts, X, runs=runs)) == _bits(alone)
-    assert pm.singular == 2 * readable
+    assert pm.singular == 2 * failed
 
 
 def test_scattered_puts_each_part_at_its_rows():
@@ -76,19 +78,23 @@ def test_scattered_puts_each_part_at_its_rows():
 
 def test_last_evaluation_solves_an_instant_once():
     """LastEvaluation: the same (t, x bit for bit, modes, phase object) again is the kept Evaluation; any other
-    argument (a -0.0 for a 0.0, another phase object) solves again, equal to System.evaluate's."""
+    argument (a -0.0 for a 0.0, another phase object) solves again, equal to the mode's call's evaluation."""
+    from contactdyn.hybrid.pipeline_mode import mode_runner
     from contactdyn.hybrid.transitions import LastEvaluation
 
     system, modes, phase, t, x0 = case("b1_sampled_joints")
     calls = []
-    evaluate = system.evaluate
+    runner = mode_runner(system)
 
     class Counting:
-        def evaluate(self, *args):
-            calls.append(args)
-            return evaluate(*args)
+        def __init__(self, mode):
+            self.mode = mode
 
-    last = LastEvaluation(Counting())
+        def evaluation(self, *args):
+            calls.append(args)
+            return self.mode.evaluation(*args)
+
+    last = LastEvaluation(system, lambda modes_, phase_: Counting(runner(modes_, phase_)))
     first = last(t, x0, modes, phase)
     assert last(t, x0.copy(), list(modes), phase) is first and len(calls) == 1
     zeroed = x0.copy()
@@ -96,4 +102,4 @@ def test_last_evaluation_solves_an_instant_once():
     last(t, zeroed, modes, phase)
     other = last(t, x0, modes, type(phase)(**vars(phase)))
     assert len(calls) == 3 - (not np.any(x0 == 0.0))
-    assert np.array_equal(other.xdot, evaluate(t, x0, modes, phase).xdot)
+    assert np.array_equal(other.xdot, runner(modes, phase).evaluation(t, x0).xdot)

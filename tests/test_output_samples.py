@@ -2,21 +2,21 @@
 compiled call) equals the readable model per sample.
 
 Each scene runs twice on the same integration: once with the pipeline's batched output, once with every output
-sample from ``System.evaluate(full=True)`` (:func:`~contactdyn.output.samples.evaluated_samples`). Every channel must
-agree to 1e-10 (relative to 1 + the channel's largest magnitude; measured ≤ 4.6e-15, case1_cart's τ).
+sample from the readable model's ``dynamics.evaluate(full=True)`` (``run_agreement.readable_samples``). Every
+channel must agree to 1e-10 (relative to 1 + the channel's largest magnitude; measured ≤ 4.6e-15, case1_cart's τ).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from run_agreement import readable_samples
 
 from contactdyn import Robot, parse_scene
 from contactdyn.hybrid.pipeline_mode import PipelineMode
 from contactdyn.model.contact import ContactMode
 from contactdyn.model.paths import PIPELINE
 from contactdyn.output.channels import _per_sample
-from contactdyn.output.samples import evaluated_samples
 from contactdyn.simulate import simulate
 
 #: scene -> a duration [s] that holds its phases' kinds (motor, elastic, force-reading, a carried reference)
@@ -24,8 +24,9 @@ SCENES = {"case1_cart": 1.1, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "
 
 
 def _readable(mode, ts, X, modes=None, runs=None):
-    """PipelineMode.samples by System.evaluate per sample (``runs``: its batches' runs, one sample at a time here)."""
-    return evaluated_samples(mode.system, ts, X, modes if modes is not None else mode.modes, mode.phase)
+    """PipelineMode.samples by the readable model per sample (``runs``: its batches' runs, one sample at a time
+    here)."""
+    return readable_samples(mode.system, ts, X, modes if modes is not None else mode.modes, mode.phase)
 
 
 #: a prismatic axis under a joint PD asking far more than its voltage limit gives: it clips, then settles

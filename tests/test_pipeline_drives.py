@@ -1,8 +1,8 @@
 """Drives and motors in the one pipeline (contactdyn/model/pipeline/drives.py): each drive's output (applied force,
 voltage, clip, power, dissipation) is the readable ``Drives.apply``'s, a kind enters by its address (a user's kind
 too), and a kind numba cannot compile is declined by name. The rates of the motor cases (case 1's cart, case 2's
-writer, case 3's elastic axis, the real cell's clipped motors) are checked against System.evaluate with every other
-case in test_pipeline_proto.py."""
+writer, case 3's elastic axis, the real cell's clipped motors) are checked against the readable model
+(dynamics.evaluate) with every other case in test_pipeline_proto.py."""
 
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from pipeline_proto import agreement, case, states  # noqa: E402
 from contactdyn import parse_scene  # noqa: E402
 from contactdyn.laws import DriveKind, Param, register_drive_kind  # noqa: E402
 from contactdyn.model.dynamics import drive_command  # noqa: E402
+from contactdyn.model.dynamics import evaluate as readable_evaluate  # noqa: E402
 from contactdyn.model.pipeline.pack import unsupported  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 from contactdyn.scene.scene_file import sims_dir  # noqa: E402
@@ -41,7 +42,7 @@ def test_each_drives_output_is_the_readable_ones(name):
     pipe = Pipeline(system, modes, phase)
     for x in states(x0, 3):
         pipe.rhs(t, x)
-        got, ev = pipe.values()["drives"], system.evaluate(t, x, modes, phase)
+        got, ev = pipe.values()["drives"], readable_evaluate(system, t, x, modes, phase)
         out = _readable_drives(system, ev, x)
         scale = 1.0 + np.abs(out.applied).max()
         np.testing.assert_allclose(got["applied"], out.applied, rtol=0, atol=RTOL * scale)
@@ -50,7 +51,7 @@ def test_each_drives_output_is_the_readable_ones(name):
         assert np.array_equal(got["clipped"], out.saturated)
         assert got["power"] == pytest.approx(out.power, abs=RTOL * (1.0 + abs(out.power)))
         assert got["dissipation"] == pytest.approx(out.dissipation, abs=RTOL * (1.0 + abs(out.dissipation)))
-    assert pipe.readable_calls == 0
+    assert pipe.failed_calls == 0
 
 
 @pytest.mark.parametrize("kind, values", [
@@ -87,7 +88,7 @@ def test_a_clipped_motor_delivers_the_force_of_its_limit():
     system, modes, phase, t, x0 = case("real_cell_clip")
     pipe = Pipeline(system, modes, phase)
     pipe.rhs(t, x0)
-    got, ev = pipe.values()["drives"], system.evaluate(t, x0, modes, phase)
+    got, ev = pipe.values()["drives"], readable_evaluate(system, t, x0, modes, phase)
     assert got["clipped"].tolist() == [False, True]
     s, qd = system.drives.specs[1], x0[system.nQ + 1]
     u = np.copysign(24.0, got["u"][1])
@@ -99,7 +100,7 @@ def test_a_clipped_motor_delivers_the_force_of_its_limit():
 
 def test_a_voltage_controllers_voltages_act_as_they_are():
     """Case 2's motors under open-loop voltages (30, −2) V, a 28 V limit: the shoulder's clips, the elbow's acts as
-    it is; the drives' outputs are Drives.apply's with its voltage mask, the rates System.evaluate's."""
+    it is; the drives' outputs are Drives.apply's with its voltage mask, the rates the readable model's."""
     from contactdyn.model.pipeline.drives import DI_BY_VOLTAGE, drive_table
 
     system, modes, phase, t, x0 = case("writer_motors_voltage")
@@ -108,7 +109,7 @@ def test_a_voltage_controllers_voltages_act_as_they_are():
     pipe = Pipeline(system, modes, phase)
     for x in states(x0, 2):
         xdot = pipe.rhs(t, x)
-        got, ev = pipe.values()["drives"], system.evaluate(t, x, modes, phase)
+        got, ev = pipe.values()["drives"], readable_evaluate(system, t, x, modes, phase)
         ref = system.drives.apply(np.array([30.0, -2.0]), x, system.nQ, np.zeros(system.nQ),
                                   voltage=system._joint_motors)
         assert got["u"].tolist() == [28.0, -2.0] and got["clipped"].tolist() == [True, False]
@@ -127,7 +128,7 @@ def test_the_rotors_reflect_on_the_mass_matrix():
     s, nv, nQ = system.drives.specs[0], system.nv, system.nQ
     assert s.reflected_inertia == pytest.approx(160.0 * 65.12 * 0.000452)
     np.testing.assert_allclose(system.rotor_inertias, [s.reflected_inertia] * nv)
-    ref = system.evaluate(t, x0, modes, phase).xdot
+    ref = readable_evaluate(system, t, x0, modes, phase).xdot
     assert np.abs(pipe.rhs(t, x0) - ref).max() <= RTOL * np.abs(ref).max()
     at = pipe.packed.ints[R_REFLECTED]
     pipe.packed.reals[at:at + nv] = 0.0  # the true system's reflection only (the controller's stays)
@@ -190,7 +191,7 @@ def test_a_users_kind_runs_by_its_address(fresh_user_imports):
     pipe = Pipeline(system, modes, phase)
     t = phase.t_start + 0.0123
     worst, _ = agreement(pipe, system, modes, phase, t, states(x0, 3))
-    assert worst <= RTOL and pipe.readable_calls == 0
+    assert worst <= RTOL and pipe.failed_calls == 0
     assert np.abs(pipe.values()["drives"]["applied"]).max() == pytest.approx(160.0 * 0.05)  # at its limit
 
 
@@ -204,4 +205,4 @@ def test_a_kind_numba_cannot_compile_is_a_declared_python_stage(fresh_user_impor
     assert pipe.python_stages[0].startswith("drive kind 'opaque_test' of q1 is a Python stage (numba cannot compile")
     assert "_python_helper" in pipe.python_stages[0] and len(pipe.python_stages) == 2  # q1 and q2
     worst, _ = agreement(pipe, system, modes, phase, phase.t_start + 0.0123, states(x0, 3))
-    assert worst <= RTOL and pipe.readable_calls == 0
+    assert worst <= RTOL and pipe.failed_calls == 0

@@ -1,7 +1,7 @@
 """The one pipeline runs every mode it packs (contactdyn.model.paths.LivePipelines): a user's laws by address.
 
-Each run is compared with the same run with the path switched off (``LivePipelines.use = False``: every mode on
-System.evaluate): outputs within 1e-9 relative, the same events at the same times, the paths table naming it.
+Each run is compared with the same run interpreted (``LivePipelines.use = False``: every mode on the same call run
+as its Python twins): outputs within 1e-9 relative, the same events at the same times, the paths table naming it.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from test_compiled_path import axis_scene  # noqa: E402
 
 from contactdyn import parse_scene, simulate  # noqa: E402
-from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines  # noqa: E402
+from contactdyn.model.paths import INTERPRETED, PIPELINE, LivePipelines  # noqa: E402
 
 CUBIC = Path(__file__).resolve().parent.parent / "examples" / "cubic_press.toml"
 #: a Hunt–Crossley stage soft enough in damping that the falling axis bounces off (a separation on the pipeline)
@@ -40,64 +40,63 @@ def cubic_scene():
 
 
 def both_ways(scene, monkeypatch):
-    """(the run with the one pipeline, the run without it)."""
+    """(the run with the one pipeline compiled, the same run interpreted)."""
     live = simulate(scene)
     monkeypatch.setattr(LivePipelines, "use", False)
-    readable = simulate(scene)
+    interpreted = simulate(scene)
     monkeypatch.setattr(LivePipelines, "use", True)
-    return live, readable
+    return live, interpreted
 
 
-def assert_same_run(live, readable, channels, event_atol: float = 1e-12) -> None:
+def assert_same_run(live, interpreted, channels, event_atol: float = 1e-12) -> None:
     for channel in channels:
-        scale = np.abs(readable[channel]).max()
-        assert np.abs(live[channel] - readable[channel]).max() <= 1e-9 * scale, channel
+        scale = np.abs(interpreted[channel]).max()
+        assert np.abs(live[channel] - interpreted[channel]).max() <= 1e-9 * scale, channel
     assert [(e["kind"], e.get("contact")) for e in live.events] == \
-        [(e["kind"], e.get("contact")) for e in readable.events]
-    np.testing.assert_allclose([e["t"] for e in live.events], [e["t"] for e in readable.events], rtol=0,
+        [(e["kind"], e.get("contact")) for e in interpreted.events]
+    np.testing.assert_allclose([e["t"] for e in live.events], [e["t"] for e in interpreted.events], rtol=0,
                                atol=event_atol)
 
 
-def test_the_cubic_stage_runs_on_the_pipeline_as_on_the_readable_model(monkeypatch):
-    live, readable = both_ways(cubic_scene(), monkeypatch)
+def test_the_cubic_stage_runs_on_the_pipeline_as_interpreted(monkeypatch):
+    live, interpreted = both_ways(cubic_scene(), monkeypatch)
     assert {label: (row["path"], row["why"]) for label, row in live.stats["paths"].items()} == \
         {"press: tip touching": (PIPELINE, "")}
-    assert [row["path"] for row in readable.stats["paths"].values()] == [READABLE]
-    assert live.stats["fallback_modes"] == {}
-    assert_same_run(live, readable, ("q", "v", "tau", "contact.tip.F_n", "stage.tip.n.env1.x"))
+    assert [row["path"] for row in interpreted.stats["paths"].values()] == [INTERPRETED]
+    assert_same_run(live, interpreted, ("q", "v", "tau", "contact.tip.F_n", "stage.tip.n.env1.x"))
     assert live.stats["rhs_evals"] > 100
 
 
 def test_a_hunt_crossley_bounce_runs_on_the_pipeline_and_separates_at_the_same_time(monkeypatch):
-    live, readable = both_ways(axis_scene(HUNT_CROSSLEY, duration=0.1), monkeypatch)
+    live, interpreted = both_ways(axis_scene(HUNT_CROSSLEY, duration=0.1), monkeypatch)
     assert [e["kind"] for e in live.events] == ["touch", "separate"]  # the separation: on the pipeline's mode
     assert live.stats["paths"]["main: tip touching"] == {"path": PIPELINE, "why": "", "segments": 1}
     assert live.stats["paths"]["main: tip free"]["path"] == PIPELINE
-    # Hunt–Crossley's force is 0 from x = 0 on: ``separate`` fires at the first step end there, and the pipeline
-    # takes compiled steps (hybrid.steps) where the readable model takes scipy's core: other step ends
-    # (5.8e-8 s apart here; with scipy's core on the pipeline too, the runs are bitwise the same)
-    assert_same_run(live, readable, ("q", "v", "contact.tip.F_n"), event_atol=1e-6)
+    # Hunt–Crossley's force is 0 from x = 0 on: ``separate`` fires at the first step end there; the interpreted run
+    # takes the same steps (hybrid.steps' twins), so the same step ends (measured bitwise the same here; the bound
+    # is the one the run on the readable model, with scipy's core steps, needed: 5.8e-8 s apart)
+    assert_same_run(live, interpreted, ("q", "v", "contact.tip.F_n"), event_atol=1e-6)
 
 
 def test_a_stuck_contact_runs_on_the_pipeline_its_slip_watch_reading_the_pipeline(monkeypatch):
     """A stuck contact's slip watch reads the pipeline's event values (its stick force, at every stage): the same run
-    as on the readable model."""
+    as interpreted."""
     doc = tomllib.loads(CUBIC.read_text())
     doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "mu_s": 0.9,
                                         "mu_k": 0.8}
     doc["duration"] = 0.05
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        live, readable = both_ways(parse_scene(doc, file=str(CUBIC)), monkeypatch)
+        live, interpreted = both_ways(parse_scene(doc, file=str(CUBIC)), monkeypatch)
     paths = {label: row["path"] for label, row in live.stats["paths"].items()}
     assert paths["press: tip stuck"] == PIPELINE, paths
-    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
-    assert_same_run(live, readable, ("q", "v", "tau", "contact.tip.F_n", "contact.tip.F_f"))
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}
+    assert_same_run(live, interpreted, ("q", "v", "tau", "contact.tip.F_n", "contact.tip.F_f"))
 
 
 def test_an_energy_audit_runs_on_the_pipeline_and_balances(monkeypatch):
     """B1 with the audit, joint and viscous friction, for 50 ms: every mode on the
-    pipeline, the audit's work and dissipation as on the readable model, the energy residual as small."""
+    pipeline, the audit's work and dissipation as in the interpreted run, the energy residual as small."""
     path = Path(__file__).resolve().parent.parent / "sims" / "b1.toml"
     doc = tomllib.loads(path.read_text())
     doc["duration"] = 0.05
@@ -107,9 +106,9 @@ def test_an_energy_audit_runs_on_the_pipeline_and_balances(monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         scene = parse_scene(doc, file=str(path))
-    live, readable = both_ways(scene, monkeypatch)
+    live, interpreted = both_ways(scene, monkeypatch)
     assert {row["path"] for row in live.stats["paths"].values()} == {PIPELINE}
-    assert_same_run(live, readable, ("q", "v", "tau", "contact.tip.F_n", "energy.work", "energy.dissipated"))
+    assert_same_run(live, interpreted, ("q", "v", "tau", "contact.tip.F_n", "energy.work", "energy.dissipated"))
     assert live["energy.dissipated"][-1] > 0.1  # [J] friction and damping took some
-    residual = [r.meta["checks"]["energy_residual"]["value"] for r in (live, readable)]
+    residual = [r.meta["checks"]["energy_residual"]["value"] for r in (live, interpreted)]
     assert residual[0] <= 1e-6 * live["energy.work"].max() and residual[0] == pytest.approx(residual[1], abs=1e-9)

@@ -1,7 +1,6 @@
 """The one pipeline as a complete path of the hybrid loop (contactdyn/hybrid/pipeline_mode.py): its output samples equal
-the readable model's at the same states, a run on it equals the run on the readable model (``LivePipelines.use`` off),
-and a pipeline segment evaluates the readable model nowhere but in its start
-check."""
+the readable model's at the same states, a run on it equals the same run interpreted (``LivePipelines.use`` off), a
+run evaluates the readable model nowhere, and a call with no answer gives NaN rates (no readable model behind it)."""
 
 from __future__ import annotations
 
@@ -17,14 +16,16 @@ import pytest
 BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
 sys.path.insert(0, str(BENCH))
 from pipeline_proto import CASES, case, states  # noqa: E402
+from run_agreement import readable_samples  # noqa: E402
 
+from contactdyn.errors import SimulationError  # noqa: E402
 from contactdyn.hybrid import loop  # noqa: E402
 from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
+from contactdyn.model import dynamics  # noqa: E402
 from contactdyn.model.dynamics import evaluate as readable_evaluate  # noqa: E402
-from contactdyn.model.paths import PIPELINE, READABLE, LivePipelines  # noqa: E402
+from contactdyn.model.paths import INTERPRETED, PIPELINE, LivePipelines  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
-from contactdyn.output.samples import evaluated_samples  # noqa: E402
 from contactdyn.scene.scene_file import load_scene  # noqa: E402
 from contactdyn.simulate import run_system  # noqa: E402
 
@@ -34,10 +35,10 @@ ROOT = BENCH.parent
 #: the samples' arrays of output.samples.Samples, per name (dicts by key)
 FIELDS = ("tau", "tau_cmd", "limit_torque", "tip", "x_d", "body_force", "F_n", "gap", "F_d", "F_f", "v_slip", "iface",
           "stages")
-#: the output samples' agreement with System.evaluate at the same states, relative to each array's largest
+#: the output samples' agreement with dynamics.evaluate at the same states, relative to each array's largest
 #: magnitude: the call's own (≤ 1e-12, tests/test_pipeline_proto.py); measured ≤ 4.8e-15 over the 24 cases (UR5)
 SAMPLES_RTOL = 1e-12
-RUN_RTOL = 1e-9  #: a run on the pipeline against the readable model's: each channel, relative to its largest value
+RUN_RTOL = 1e-9  #: a run on the pipeline against the interpreted run's: each channel, relative to its largest value
 #: the runs' tolerances: the two right-hand sides differ by rounding, which the step control amplifies up to a fraction
 #: of the tolerance (the rigid writer's v_slip at its own rtol: 4.3e-9 on this round's AMD EPYC, below 1e-9 on the
 #: machine CI ran it on before); at these, ≤ 1.6e-11 (measured on the EPYC)
@@ -74,7 +75,7 @@ def test_the_output_samples_are_the_readable_ones(name):
     pm = PipelineMode(Pipeline(system, modes, phase))
     X = np.array(states(x0, 4))
     ts = t + np.linspace(0.0, 0.05, len(X))
-    got, ref = _arrays(pm.samples(ts, X)), _arrays(evaluated_samples(system, ts, X, modes, phase))
+    got, ref = _arrays(pm.samples(ts, X)), _arrays(readable_samples(system, ts, X, modes, phase))
     worst, where = _worst(got, ref)
     assert worst <= SAMPLES_RTOL, where
     assert pm.singular == 0
@@ -91,10 +92,10 @@ SCENES = [("sims/b1.toml", 0.3), ("sims/case2_writer_rigid.toml", 1.5), ("benchm
 
 
 @pytest.mark.parametrize("scene,duration", SCENES)
-def test_a_run_on_the_pipeline_is_the_run_on_the_readable_model(scene, duration, monkeypatch):
+def test_a_run_on_the_pipeline_is_the_interpreted_run(scene, duration, monkeypatch):
     on, off = _run(scene, duration, True, monkeypatch), _run(scene, duration, False, monkeypatch)
     assert {row["path"] for row in on.stats["paths"].values()} == {PIPELINE}
-    assert {row["path"] for row in off.stats["paths"].values()} == {READABLE}
+    assert {row["path"] for row in off.stats["paths"].values()} == {INTERPRETED}
     assert set(on.channels) == set(off.channels)
     for key, ref in off.channels.items():
         ref, got = np.asarray(ref, float), np.asarray(on.channels[key], float)
@@ -105,15 +106,15 @@ def test_a_run_on_the_pipeline_is_the_run_on_the_readable_model(scene, duration,
 
 
 def test_a_pipeline_run_never_evaluates_the_readable_model(monkeypatch):
-    """Counted calls of System.evaluate: none while the segments integrate (their right-hand side, compiled steps,
-    event values), none in the output samples, none in the transitions (their decisions read the call that
-    integrates: PipelineMode.evaluation), none where a mode starts (no check against it: one source)."""
+    """Counted calls of dynamics.evaluate (the readable model): none while the segments integrate (their right-hand
+    side, compiled steps, event values), none in the output samples, none in the transitions (their decisions read
+    the call that integrates: PipelineMode.evaluation), none where a mode starts (no check against it: one source)."""
     calls = {"all": 0, "integrate": 0, "samples": 0}
-    evaluate, integrate, sample_states = System.evaluate, loop.integrate, loop.sample_states
+    evaluate, integrate, sample_states = dynamics.evaluate, loop.integrate, loop.sample_states
 
-    def counted_evaluate(self, *args, **kwargs):
+    def counted_evaluate(*args, **kwargs):
         calls["all"] += 1
-        return evaluate(self, *args, **kwargs)
+        return evaluate(*args, **kwargs)
 
     def inside(name, fn):
         def wrapped(*args, **kwargs):
@@ -124,7 +125,7 @@ def test_a_pipeline_run_never_evaluates_the_readable_model(monkeypatch):
                 calls[name] += calls["all"] - before
         return wrapped
 
-    monkeypatch.setattr(System, "evaluate", counted_evaluate)
+    monkeypatch.setattr(dynamics, "evaluate", counted_evaluate)
     monkeypatch.setattr(loop, "integrate", inside("integrate", integrate))
     monkeypatch.setattr(loop, "sample_states", inside("samples", sample_states))
     r = _run("benchmarks/hard/stickslip.toml", 1.0, True, monkeypatch)
@@ -206,13 +207,18 @@ def test_the_diagnostics_interpreted_are_the_compiled_ones():
 
 @pytest.mark.parametrize("name", ["writer_rigid_stick", "b1_limit", "writer5dof_tool_slide", "b1_joints_mixed",
                                   "b1_joints_limit"])
-def test_a_call_answered_by_the_readable_model_gives_its_event_values_in_the_calls_layout(name):
-    """PipelineMode._events_of (a call whose status is not 1: the readable model's values in the ring) lays the
-    Evaluation out as the call lays its events."""
+def test_a_call_with_no_answer_gives_nan_rates_and_no_evaluation(name):
+    """A call whose status is not 1 (its contact system not finite: velocities of 1e300 overflow it) is answered by
+    no other model: NaN rates (which the step control rejects), counted in ``failed_calls``, its status in the ring;
+    an instant's evaluation there raises. The same mode at a finite state answers again."""
     system, modes, phase, t, x0 = case(name)
     pm = PipelineMode(Pipeline(system, modes, phase))
-    x = states(x0, 2)[1]
-    pm.rhs(t, x)
-    got, ref = pm._events_of(system.evaluate(t, x, modes, phase), x), pm.values(t, x)
-    assert np.abs(got - ref).max() <= 1e-12 * np.abs(ref).max()
-    assert got[-1] == ref[-1] == 1.0
+    x = np.array(states(x0, 2)[1], float)
+    assert np.all(np.isfinite(pm.rhs(t, x))) and pm.pipe.failed_calls == 0
+    bad = x.copy()
+    bad[system.nQ:] = 1e300
+    assert np.all(np.isnan(pm.rhs(t, bad))) and pm.pipe.failed_calls == 1
+    assert pm.values(t, bad)[-1] != 1.0  # (the call's own status: no readable values put in its place)
+    with pytest.raises(SimulationError, match="no finite answer at this state"):
+        pm.evaluation(t, bad)
+    assert np.all(np.isfinite(pm.rhs(t, x))) and pm.values(t, x)[-1] == 1.0

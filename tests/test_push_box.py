@@ -16,7 +16,7 @@ import pytest
 
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.errors import SceneError
-from contactdyn.model.paths import PIPELINE
+from contactdyn.model.paths import INTERPRETED, PIPELINE
 from contactdyn.output.physics_checks import violations
 
 MU, G, M_BOX = 0.3, 9.81, 1.0  #: the scene's μ, gravity [m/s²] and the box's mass [kg]
@@ -163,16 +163,18 @@ def test_a_box_on_a_slippery_box_slides_off_at_the_stop_decelerating_at_mu_top_g
     np.testing.assert_allclose(r["contact.stack.F_f"][sliding, 0], -0.1 * M_BOX * G, rtol=1e-9)  # on the top
 
 
-def test_two_bodies_in_contact_run_the_same_on_the_readable_model(tmp_path):
-    """The slippery stack (impact, slides, sticks, body on body) on the compiled call and on the readable model,
+def test_two_bodies_in_contact_run_the_same_interpreted(tmp_path):
+    """The slippery stack (impact, slides, sticks, body on body) on the compiled call and interpreted,
     the whole run at rtol 1e-11: the same events, each channel within 1e-9 of its largest value (+1e-10)."""
     scene = _stacked(tmp_path, 0.1)
     scene = parse_scene({**scene.document, "solver": {**scene.document["solver"], "rtol": 1e-11, "atol": 1e-13}},
                         None, scene.file)
-    fast, readable = simulate(scene), simulate(scene, compiled=False)
-    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in readable.events]
-    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in readable.events], rtol=0, atol=1e-9)
-    for key, ref in readable.channels.items():
+    fast, interpreted = simulate(scene), simulate(scene, compiled=False)
+    assert {row["path"] for row in fast.stats["paths"].values()} == {PIPELINE}
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}
+    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in interpreted.events]
+    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in interpreted.events], rtol=0, atol=1e-9)
+    for key, ref in interpreted.channels.items():
         ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
         scale = float(np.nanmax(np.abs(ref))) if ref.size and not np.all(np.isnan(ref)) else 0.0
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9 * scale + 1e-10, err_msg=key)
@@ -208,18 +210,20 @@ def test_a_box_on_a_compliant_table_sinks_m_g_over_k_and_slides_on_the_chain_s_f
     ({"model": "c", "k": 2e5, "b": 400.0}, None),
     (None, {"model": "b", "k": 5e4, "b": 50.0, "m": 0.01}),  # the pad's mass between the tool and the box
 ], ids=["compliant_floor", "padded_tool"])
-def test_chains_on_a_body_s_contacts_run_the_same_on_the_readable_model(floor, push):
+def test_chains_on_a_body_s_contacts_run_the_same_interpreted(floor, push):
     """A chain whose tip is a body's point, and one whose anchor is on a body with two coordinates: the compiled
-    call and the readable model agree over the whole run (rtol 1e-12; events, every channel within 1e-9 of its
+    call and the interpreted one agree over the whole run (rtol 1e-12; events, every channel within 1e-9 of its
     largest value, plus 1e-12 (SI units), 1e-7 for forces and the chains' channels: the step control amplifies the
     two paths' rounding to a few rtol·|x| in the states (~1e-12 m), which the pad's 5e4 N/m makes ~5e-8 N and its
     2.2e3 rad/s ~2e-9 m/s)."""
     scene = _compliant(floor, push)
     scene = parse_scene({**scene.document, "solver": {**scene.document["solver"], "rtol": 1e-12, "atol": 1e-14}},
                         None, scene.file)
-    fast, readable = simulate(scene), simulate(scene, compiled=False)
-    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in readable.events]
-    for key, ref in readable.channels.items():
+    fast, interpreted = simulate(scene), simulate(scene, compiled=False)
+    assert {row["path"] for row in fast.stats["paths"].values()} == {PIPELINE}
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}
+    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in interpreted.events]
+    for key, ref in interpreted.channels.items():
         ref, got = np.asarray(ref, float), np.asarray(fast.channels[key], float)
         scale = float(np.nanmax(np.abs(ref))) if ref.size and not np.all(np.isnan(ref)) else 0.0
         stiff = key.startswith(("stage.", "mass.")) or key.endswith((".F_n", ".F_f", ".force")) or key == "tau"

@@ -1,6 +1,6 @@
 """A law numba cannot compile runs inside the compiled call as a declared Python stage (issue 29 item 2): a ctypes
 callback of its Python function where its cfunc's address would be (contactdyn.laws.abi), the mode on the compiled
-call, the law named in ``stats["paths"]``, its own exception surfacing as it does on the readable model."""
+call, the law named in ``stats["paths"]``, its own exception surfacing as it does on the interpreted run."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from contactdyn import parse_scene, simulate
 from contactdyn.laws import abi
 from contactdyn.laws.friction_laws import FRICTION_LAWS, FrictionLaw, Stribeck, register_friction_law
 from contactdyn.model import dynamics
-from contactdyn.model.paths import PIPELINE, READABLE, slower_paths
+from contactdyn.model.paths import INTERPRETED, PIPELINE, slower_paths
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.scene.scene_file import sims_dir
 from contactdyn.simulate import prepare
@@ -67,7 +67,6 @@ def test_an_uncompilable_stage_law_runs_in_the_compiled_call_as_the_linear_law(a
     assert abi.stage_address(affine_uncompilable) == 0  # (numba cannot compile it)
     mine, linear = simulate(_fall(affine_uncompilable.name)), simulate(_fall("linear"))
     assert {row["path"] for row in mine.stats["paths"].values()} == {PIPELINE}
-    assert mine.stats["fallback_modes"] == {}
     why = mine.stats["paths"]["main: tip touching"]["why"]
     assert why.startswith("stage law 'uncompilable_affine' of tip.n is a Python stage (numba cannot compile"), why
     assert "_SCALE" in why
@@ -83,7 +82,6 @@ def test_a_non_affine_python_stage_runs_on_the_compiled_call(uncompilable_law):
     the compiled call, declared, and the linear law's run to the solver's tolerance (measured 7e-11)."""
     mine, linear = simulate(_fall(uncompilable_law.name)), simulate(_fall("linear"))
     assert {row["path"] for row in mine.stats["paths"].values()} == {PIPELINE}
-    assert not mine.stats["fallback_modes"]
     assert slower_paths(mine.stats["paths"]) == [
         f"main: tip touching: compiled call ({mine.stats['paths']['main: tip touching']['why']})"]
     ref = np.asarray(linear["contact.tip.F_n"])
@@ -105,7 +103,7 @@ def test_a_python_stage_modes_rates_are_the_readable_models(uncompilable_law):
         want = dynamics.evaluate(system, 0.0, x.copy(), modes, phase).xdot
         got = pipe.rhs(0.0, x.copy())
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * (1.0 + np.abs(want).max()))
-    assert pipe.readable_calls == 0
+    assert pipe.failed_calls == 0
 
 
 @pytest.fixture
@@ -126,13 +124,13 @@ def raising_law(stage_law_registry):
 
 
 def test_a_python_stage_that_raises_surfaces_its_own_error(raising_law):
-    """The law's ValueError, as the readable model raises it (the same message: the same state), not a NaN, a
+    """The law's ValueError, as the interpreted run raises it (the same message: the same state), not a NaN, a
     printed traceback or a fallback."""
     with pytest.raises(ValueError, match="raising law: compression .* past its limit") as compiled:
         simulate(_fall(raising_law.name))
-    with pytest.raises(ValueError, match="raising law") as readable:
+    with pytest.raises(ValueError, match="raising law") as interpreted:
         simulate(_fall(raising_law.name), compiled=False)
-    assert str(compiled.value) == str(readable.value)
+    assert str(compiled.value) == str(interpreted.value)
     assert abi._raised == []  # re-raised once, not kept for a later call
 
 
@@ -145,7 +143,7 @@ def test_a_python_stages_error_is_raised_by_the_pipelines_own_rhs(raising_law):
     with pytest.raises(ValueError, match="past its limit"):
         pipe.rhs(0.0, x)
     x[0] = q0 + 1.05e-3  # compressed 0.05 mm: a force
-    assert np.all(np.isfinite(pipe.rhs(0.0, x))) and pipe.readable_calls == 0
+    assert np.all(np.isfinite(pipe.rhs(0.0, x))) and pipe.failed_calls == 0
 
 
 # ---- a friction law numba cannot compile -----------------------------------------------------------------------
@@ -181,8 +179,7 @@ def test_a_python_friction_law_runs_in_the_compiled_call(python_stribeck):
         mine = simulate(parse_scene(copy.deepcopy(_stribeck_b1("python_stribeck")), file=str(sims_dir() / "b1.toml")))
         builtin = simulate(parse_scene(copy.deepcopy(_stribeck_b1("stribeck")), file=str(sims_dir() / "b1.toml")))
     paths = mine.stats["paths"]
-    assert {row["path"] for row in paths.values()} == {PIPELINE} and READABLE not in str(paths)
-    assert mine.stats["fallback_modes"] == {}
+    assert {row["path"] for row in paths.values()} == {PIPELINE} and INTERPRETED not in str(paths)
     sliding = [row["why"] for label, row in paths.items() if "sliding" in label]
     assert sliding
     assert all(why.startswith("friction law 'python_stribeck' of tip is a Python stage (") for why in sliding)

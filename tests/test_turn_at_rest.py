@@ -13,9 +13,12 @@ BAND = 1e-9  #: [m/s] the stick band v_ε
 
 def _turn(slip: np.ndarray):
     """(modes, after, settle) after a turn event of a sliding contact whose slip velocity is ``slip`` [m/s]."""
-    system = SimpleNamespace(scene=None, slip_band=BAND, contacts=[SimpleNamespace(name="pencil")],
-                             evaluate=lambda t, x, modes, phase: SimpleNamespace(slip={"pencil": slip}))
-    transitions = Transitions(system, None, {}, [])  # the handler alone: handle() logs
+    system = SimpleNamespace(scene=None, slip_band=BAND, contacts=[SimpleNamespace(name="pencil")])
+
+    def runner(modes, phase):  # the mode's call, as the run's runner gives it: its evaluation at (t, x)
+        return SimpleNamespace(evaluation=lambda t, x: SimpleNamespace(slip={"pencil": slip}))
+
+    transitions = Transitions(system, None, {}, [], runner=runner)  # the handler alone: handle() logs
     modes = [ContactMode(touching=True, stuck=False, slip=(1.0, 0.0))]
     after = _After()
     event = SimpleNamespace(kind="turn", contact="pencil")

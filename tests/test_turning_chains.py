@@ -22,7 +22,8 @@ import pytest
 from test_lever import ARM, I_O, KP, M_BAR, M_TOOL, PIVOT_Z, D, G, L
 
 from contactdyn import load_scene, parse_scene, simulate
-from contactdyn.model.paths import PIPELINE, READABLE
+from contactdyn.hybrid.pipeline_mode import mode_runner
+from contactdyn.model.paths import INTERPRETED, PIPELINE
 from contactdyn.model.system import System
 
 MU, M_PART = 0.4, 0.2  #: the tilting tray's μ and part [kg]
@@ -70,10 +71,11 @@ def _carries_m_g_cos_theta(r, settled_samples: int) -> np.ndarray:
     return settled
 
 
-def _agree(readable, fast, keys) -> None:
-    """Each channel of ``keys`` of the compiled run ``fast`` within 1e-9 of its largest value on the readable run."""
+def _agree(interpreted, fast, keys) -> None:
+    """Each channel of ``keys`` of the compiled run ``fast`` within 1e-9 of its largest value on the interpreted
+    run."""
     for key in keys:
-        ref = np.asarray(readable[key], float)
+        ref = np.asarray(interpreted[key], float)
         np.testing.assert_allclose(fast[key], ref, rtol=0, atol=1e-9 * np.abs(ref).max(), err_msg=key)
 
 
@@ -97,11 +99,11 @@ def test_on_the_tilting_tray_the_part_slips_where_tan_theta_is_mu_and_the_energy
     _audit_closes(tray)
 
 
-def test_the_chain_on_the_tray_runs_compiled_and_the_readable_model_agrees(tray):
+def test_the_chain_on_the_tray_runs_compiled_and_the_interpreted_run_agrees(tray):
     assert {row["path"] for row in tray.stats["paths"].values()} == {PIPELINE}
-    readable = simulate(_tray(), compiled=False)
-    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
-    _agree(readable, tray, TRAY_CHANNELS)
+    interpreted = simulate(_tray(), compiled=False)
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}
+    _agree(interpreted, tray, TRAY_CHANNELS)
 
 
 def test_undamped_and_off_the_axis_the_part_rides_the_tray_and_the_energy_audit_closes():
@@ -164,7 +166,7 @@ def test_a_tool_pressed_into_a_kelvin_voigt_face_of_the_bar_holds_it_at_rest():
     system = System(parse_scene(doc, None, file))
     x, modes = system.initial_state()
     modes = [m.with_(touching=True) for m in modes]
-    ev = system.evaluate(0.0, x, modes, system.start_phase(0, 0.0, x, None))
+    ev = mode_runner(system)(modes, system.start_phase(0, 0.0, x, None)).evaluation(0.0, x)
     assert ev.normal_force["push"] == pytest.approx(F_n, rel=1e-9)
     np.testing.assert_allclose(ev.xdot[system.nQ:2 * system.nQ], 0.0, rtol=0, atol=1e-9)
     doc["duration"] = 0.3
@@ -243,15 +245,16 @@ def test_on_the_tilting_tray_a_model_b_chain_carries_m_g_cos_theta_and_the_audit
     _audit_closes(r)
 
 
-def test_a_riding_mass_runs_on_the_compiled_call_and_the_readable_model_agrees(riding):
+def test_a_riding_mass_runs_on_the_compiled_call_and_the_interpreted_run_agrees(riding):
     """The mass's coupling with the tray (contact.riding_point, one function for both paths) in the compiled call's M
     and f: the runs agree to 1e-9 of each channel's largest value."""
     assert {row["path"] for row in riding.stats["paths"].values()} == {PIPELINE}
-    readable = simulate(_tray_b(), compiled=False)
-    assert {row["path"] for row in readable.stats["paths"].values()} == {READABLE}
-    _agree(readable, riding, (*TRAY_CHANNELS, "v"))
-    assert [e["kind"] for e in riding.events] == [e["kind"] for e in readable.events]
-    np.testing.assert_allclose([e["t"] for e in riding.events], [e["t"] for e in readable.events], rtol=0, atol=1e-9)
+    interpreted = simulate(_tray_b(), compiled=False)
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}
+    _agree(interpreted, riding, (*TRAY_CHANNELS, "v"))
+    assert [e["kind"] for e in riding.events] == [e["kind"] for e in interpreted.events]
+    np.testing.assert_allclose([e["t"] for e in riding.events], [e["t"] for e in interpreted.events], rtol=0,
+                               atol=1e-9)
 
 
 def test_the_tool_strikes_a_mass_riding_the_bar_s_face_and_the_bar_feels_no_impulse():
@@ -299,10 +302,11 @@ def test_a_tangential_chain_holds_the_part_on_the_tilting_tray_m_g_sin_theta_ove
     _audit_closes(r)
 
 
-def test_the_tangential_chain_on_the_tray_runs_compiled_and_the_readable_model_agrees(held):
+def test_the_tangential_chain_on_the_tray_runs_compiled_and_the_interpreted_run_agrees(held):
     assert {row["path"] for row in held.stats["paths"].values()} == {PIPELINE}
-    readable = simulate(_tray_t(), compiled=False)
-    _agree(readable, held, ("contact.rest.F_n", "body.part.slide.x", "body.part.lift.x", "q"))
+    interpreted = simulate(_tray_t(), compiled=False)
+    assert {row["path"] for row in interpreted.stats["paths"].values()} == {INTERPRETED}
+    _agree(interpreted, held, ("contact.rest.F_n", "body.part.slide.x", "body.part.lift.x", "q"))
 
 
 def test_a_chain_with_a_mass_on_its_robot_side_rides_the_tray_too_and_the_audit_closes():

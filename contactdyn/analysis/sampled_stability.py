@@ -8,7 +8,7 @@ a slot of the state. About the contact phase's equilibrium (the continuous loop'
 linear time-invariant in the sample index, in three pieces, each read off the simulator's own functions (the
 scene run sampled) by central differences:
 
-- the plant with the command held, ẋ = A x + B u: ``System.evaluate`` of the sampled phase, whose command is
+- the plant with the command held, ẋ = A x + B u: the sampled phase's pipeline call, whose command is
   the held slots u of the state; A = ∂f/∂x, B = ∂f/∂u. Its states are the ones something depends on
   (accumulators, the held slots and the law's own states, constant between samples, drop out), as in
   :mod:`~contactdyn.analysis.stability`;
@@ -40,7 +40,7 @@ from scipy.linalg import expm
 
 from ..errors import SimulationError
 from ..laws.controllers.sampled import SampledController
-from ..model.dynamics import sample_input
+from ..model.dynamics import measures, sample_input
 from ..model.system import System
 from ..output.result import Result
 from ..scene.scene_file import Scene, parse_scene
@@ -229,7 +229,9 @@ class SampledLoop:
         """(τ, ż) of the sampled law on what it measures at (t_eq, x) (the held slots of x acting)."""
         loop = self.loop
         ctl = loop.phase.controller
-        inp = sample_input(loop.system, loop.t_eq, x, loop.modes, loop.phase)
+        mode, t, x = loop.mode, loop.t_eq, np.array(x, float)  # (what the loop measures: the mode's call)
+        measured = mode.measurement(t, x) if measures(loop.phase) else None
+        inp = sample_input(loop.system, t, x, loop.modes, loop.phase, 0.0, measured, mode.sample_terms)
         tau, zdot = ctl.inner.command(inp)
         return np.asarray(tau, float)[: ctl.nv], (np.zeros(0) if zdot is None else np.asarray(zdot, float))
 

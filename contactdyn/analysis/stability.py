@@ -2,7 +2,7 @@
 
 A scene's last phase (the contact phase: a force set-point held on a surface) is started with
 the tip on the surface at rest (:func:`contact_phase_scene`). At a time after every ramp has
-ended the right-hand side ẋ = f(x) of that mode and phase (``System.evaluate``, the same
+ended the right-hand side ẋ = f(x) of that mode and phase (its pipeline's call, the same
 function every run integrates) has an equilibrium x*: Newton's method on f finds it, and
 central finite differences give A = ∂f/∂x there. The poles are A's eigenvalues, with three
 kinds of state left out because they are not dynamics of the loop:
@@ -27,6 +27,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..hybrid.pipeline_mode import PipelineMode
+from ..model.pipeline.pipeline import Pipeline
 from ..scene.scene_file import Scene, load_scene, parse_scene
 from ..simulate import prepare, simulate
 
@@ -76,6 +78,7 @@ class ContactLoop:
         self.system, modes, self.phase, self.x0 = prepare(scene)
         self.modes = [replace(m, touching=True) for m in modes]  # the contact phase's mode, whatever t = 0 says
         self.t_eq = t_eq  #: [s] a time after every ramp of the phase
+        self._mode: PipelineMode | None = None  #: the mode's pipeline (packed at first use, again after set_gains)
         self.n_bond_rows = sum(1 for c, m in zip(self.system.contacts, self.modes, strict=True)
                                if m.touching and c.normal.chain.bonded_when_touching)
 
@@ -89,9 +92,18 @@ class ContactLoop:
         values = {k: (np.array([float(v)]) if isinstance(getattr(cfg, k), np.ndarray) else float(v))
                   for k, v in gains.items()}
         self.controller.config = replace(cfg, **values)
+        self._mode = None  # (the pipeline packs the gains)
+
+    @property
+    def mode(self) -> PipelineMode:
+        """The contact phase's mode on its pipeline (what a run integrates)."""
+        if self._mode is None:
+            self._mode = PipelineMode(Pipeline(self.system, self.modes, self.phase))
+        return self._mode
 
     def rate(self, x: np.ndarray, t: float | None = None) -> np.ndarray:
-        return self.system.evaluate(self.t_eq if t is None else t, x, self.modes, self.phase).xdot
+        """ẋ at x [SI] and t [s] (the equilibrium's time by default): the mode's pipeline call."""
+        return self.mode.rhs(self.t_eq if t is None else t, np.array(x, float))
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         n = len(x)

@@ -22,9 +22,8 @@ events whose functions jump through zero there. The storm guard
 (:class:`EventLog`): more than ``storm_count`` events within ``storm_window`` seconds, or
 more than ``max_events`` in the run, stop with a :class:`SimulationError` naming them.
 
-The event functions are written once (:func:`segment_events`) against a source of values: the one pipeline's
-(:class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`: its last calls', no second solve) or, when the mode is not
-compiled, :meth:`System.evaluate`'s through a small cache shared with the right-hand side.
+The event functions are written once (:func:`segment_events`) against the one pipeline's values
+(:class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`: its last calls', no second solve).
 """
 
 from __future__ import annotations
@@ -38,11 +37,11 @@ import numpy as np
 from ..errors import SimulationError
 from ..model.contact import ContactMode
 from ..model.dynamics import Evaluation
-from ..model.friction import cone_slack, slip_velocity
+from ..model.friction import cone_slack
 from ..model.phases import Phase
 from ..model.system import System
 
-__all__ = ["TOUCH_TOL", "terminal_event", "EvaluationCache", "SlipCache", "SlipWatch", "StepBudget", "StepCollapse",
+__all__ = ["TOUCH_TOL", "terminal_event", "SlipWatch", "StepBudget", "StepCollapse",
            "WorkWatch", "segment_events", "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
@@ -102,50 +101,6 @@ def start_storm_cause(events: list[dict], contact: str) -> str | None:
             "posture does not suit the contact (initial penetration, the tip on the surface while moving or "
             "pulling away, a posture near a singularity); check robot.tip0, robot.q0 / q_seed and the contact's "
             "point, and `contactdyn run --verbose` for the posture found")
-
-
-class EvaluationCache:
-    """The latest evaluations at (t, x), shared by the right-hand side and the event functions.
-
-    Four, like a compiled mode's ring: DOP853 evaluates the step's end state (FSAL), then three more
-    stages for its dense output, then the event functions at the step's end.
-    """
-
-    SIZE = 4
-
-    def __init__(self, system: System, modes: list[ContactMode], phase: Phase):
-        self.system, self.modes, self.phase = system, modes, phase
-        self.ring: list[tuple[tuple[float, bytes], Evaluation]] = []
-
-    def __call__(self, t: float, x: np.ndarray) -> Evaluation:
-        key = (t, x.tobytes())
-        for k, value in reversed(self.ring):
-            if k == key:
-                return value
-        value = self.system.evaluate(t, x, self.modes, self.phase)
-        self.ring.append((key, value))
-        if len(self.ring) > self.SIZE:
-            del self.ring[0]
-        return value
-
-
-class SlipCache:
-    """Slip velocities [m/s] of the sliding contacts at (t, x): kinematics only, no linear solve."""
-
-    def __init__(self, system: System, names: list[str]):
-        self.system = system
-        self.contacts = [c for c in system.contacts if c.name in names]
-        self.key: tuple[float, bytes] | None = None
-        self.value: dict[str, np.ndarray] = {}
-
-    def __call__(self, t: float, x: np.ndarray) -> dict[str, np.ndarray]:
-        key = (t, x.tobytes())
-        if key != self.key:
-            system, nQ, nv = self.system, self.system.nQ, self.system.nv
-            system.robot.update(x[:nv], x[nQ:nQ + nv])
-            self.value = {c.name: slip_velocity(system, c, system.kinematics(c, x)) for c in self.contacts}
-            self.key = key
-        return self.value
 
 
 def terminal_event(fn, kind: str, contact: str):
@@ -310,44 +265,6 @@ def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray, x
     return fired
 
 
-class _ReadableValues:
-    """What the event functions read, from :meth:`System.evaluate` (one evaluation per state, shared).
-
-    A compiled mode offers the same methods (:class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`); the
-    event functions are written once against either.
-    """
-
-    def __init__(self, system: System, modes: list[ContactMode], phase: Phase):
-        self.names = [c.name for c in system.contacts]
-        self.cache = EvaluationCache(system, modes, phase)
-        self.slips = SlipCache(system, [c.name for c, m in zip(system.contacts, modes, strict=True)
-                                        if m.touching and not m.stuck and c.friction is not None and len(c.tangents)])
-
-    def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
-        return self.cache(t, x).xdot
-
-    def gap(self, ci: int, t: float, x: np.ndarray) -> float:
-        return self.cache(t, x).gap[self.names[ci]]
-
-    def normal_force(self, ci: int, t: float, x: np.ndarray) -> float:
-        return self.cache(t, x).normal_force[self.names[ci]]
-
-    def slip(self, ci: int, t: float, x: np.ndarray) -> np.ndarray:
-        return self.slips(t, x)[self.names[ci]]
-
-    def cone_margin(self, ci: int, mu_s: float, t: float, x: np.ndarray) -> float:
-        ev = self.cache(t, x)
-        return mu_s * ev.normal_force[self.names[ci]] - float(np.linalg.norm(ev.friction[self.names[ci]]))
-
-    def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
-        """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate."""
-        return self.cache(t, x).limit_torque
-
-    def joint_hold(self, t: float, x: np.ndarray) -> dict[int, float]:
-        """Holding torques [N·m or N] of the joints stuck by dry friction, by joint coordinate."""
-        return self.cache(t, x).joint_hold
-
-
 def _along(v: np.ndarray, r: tuple[float, ...]) -> float:
     """v·r [m/s]: a slip velocity (1 or 2 tangent components) along the mode's direction r, in Python floats (an
     event's value at every step end: a NumPy product of two 2-vectors costs more than the rest of the event)."""
@@ -361,16 +278,15 @@ def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
     return v0 * r[0] + v1 * r[1] - 0.5 * math.sqrt(v0 * v0 + v1 * v1) + band
 
 
-def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray,
-                   runner=None, fun=None):
+def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray, runner,
+                   fun=None):
     """The event functions of one segment, and the right-hand side that feeds their stage watches.
 
-    They read the compiled mode ``runner``'s values when given (its last call's, no second solve: the one pipeline's
-    mode, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`), else :meth:`System.evaluate`'s
-    through one shared evaluation per state. ``fun``: the right-hand side to integrate when it is not the values'
-    own.
+    They read the mode ``runner``'s values (its last call's, no second solve: the one pipeline's mode,
+    :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`). ``fun``: the right-hand side to integrate when it is
+    not the runner's own.
     """
-    values = runner if runner is not None else _ReadableValues(system, modes, phase)
+    values = runner
     out: list = []
     watches: list[SlipWatch] = []
     for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):

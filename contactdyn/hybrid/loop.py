@@ -5,8 +5,8 @@ modes and the task phase are fixed, and instants at which they change. The loop:
 
 1. integrate the smooth phase from (t, x) with error control (``solve_ivp``, or the compiled
    DOP853 of :mod:`contactdyn.numerics.dop853`; the method from :mod:`contactdyn.numerics.integrators`) on the
-   mode's right-hand side — the one pipeline where it packs the mode (:mod:`contactdyn.hybrid.pipeline_mode`: one
-   compiled call, its own compiled steps), else :meth:`System.evaluate` — with the mode's events
+   mode's right-hand side — the one pipeline's (:mod:`contactdyn.hybrid.pipeline_mode`: one compiled call, its own
+   compiled steps; interpreted on a scene kind's first run) — with the mode's events
    (:mod:`contactdyn.hybrid.events`);
 2. at the first event, apply the transition (:mod:`contactdyn.hybrid.transitions`): an impact,
    a separation, a stick or a slip; or, at a phase's end, start the next phase; at a
@@ -43,7 +43,7 @@ from ..laws.trajectory import min_span
 from ..model.contact import ContactMode
 from ..model.dynamics import contact_condition
 from ..model.limits import rate_limit_report
-from ..model.paths import Declined, LivePipelines, PathLog
+from ..model.paths import LivePipelines, PathLog
 from ..model.phases import Phase
 from ..model.system import System
 from ..numerics.integrators import (
@@ -60,7 +60,7 @@ from ..numerics.integrators import (
     stability_bound,
 )
 from ..numerics.notice import compiling
-from ..numerics.twins import Twins, running
+from ..numerics.twins import running
 from ..output.channels import Held, Segment, output_grid, sample_states
 from ..output.physics_checks import StartAudit, run_checks, violations
 from ..output.result import Result
@@ -126,13 +126,9 @@ class HybridRun:
         #: a 2-D slide whose explicit steps collapsed: LAUNCH_METHOD for the rest of the mode when a stiff mode held
         #: them, "" when none did (no more checks in the mode); None: not checked
         self.resting: str | None = None
-        #: why a mode ran on System.evaluate, with counts: pack.unsupported's reason (``paths`` says which path each
-        #: mode took)
-        self.fallbacks: dict[str, int] = {}
-        #: the modes the compiled call runs (every one it packs; the others on the readable model); ``interpreted``:
-        #: the same call run as its twins (numerics.twins: a scene kind's first run); neither: the readable model only
-        self.pipelines = LivePipelines(system, PipelineMode, use=compiled or interpreted,
-                                       twins=Twins() if interpreted else None)
+        #: the modes' pipelines, compiled; ``interpreted`` (or not ``compiled``): the same call run as its twins
+        #: (numerics.twins: a scene kind's first run)
+        self.pipelines = LivePipelines(system, PipelineMode, use=compiled and not interpreted)
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
@@ -227,8 +223,7 @@ class HybridRun:
             fired = self.sampled.jumped(t_after, before, x, modes, phase, runner)
         else:
             self.stats["corners"] += 1
-            fired = fired_across(segment_events(self.system, modes, phase, t, x, runner if runner.ok else None)[0],
-                                 t, t_after, x)
+            fired = fired_across(segment_events(self.system, modes, phase, t, x, runner)[0], t, t_after, x)
         if fired:
             self._new_mode()
             if fired[0].kind not in RESUME_STEP:
@@ -242,15 +237,15 @@ class HybridRun:
         ``t_sample`` [s]: a sampled law's next sample instant before t_end; a method that carries the hold takes it
         and the later ones as step boundaries (held true), any other ends the segment there."""
         system = self.system
-        runner = _runner(self, modes, phase, start=True)  # the one pipeline's mode, or the readable model
-        fun = runner.rhs if runner.ok else system.rhs(modes, phase)
+        runner = _runner(self, modes, phase, start=True)  # the one pipeline's mode
+        fun = runner.rhs
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             held = t_sample is not None and carries_hold(method)
             end = t_sample if t_sample is not None and not held else t_end
             h0 = min(self.next_step, end - t) if self.next_step else None
             hold = self.sampled.hold(modes, phase, t_end, runner) if held else None
-            events, rhs = segment_events(system, modes, phase, t, x, runner if runner.ok else None)
+            events, rhs = segment_events(system, modes, phase, t, x, runner)
             self.starts.record(t, x, events)
             events += self._watches(modes, method) + self.chart_events
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
@@ -365,7 +360,7 @@ class HybridRun:
         self.stats["rhs_evals"] += sum(getattr(seg.sol, "late_calls", 0) for seg in self.segments)  # DOP853C's
         stats = dict(self.stats, wall_s=wall, real_time_factor=T / wall if wall > 0 else math.inf,
                      method=self.solver.method, rtol=self.solver.rtol, atol=self.solver.atol,
-                     compiled_modes=self.pipelines.count(), fallback_modes=dict(self.fallbacks),
+                     compiled_modes=self.pipelines.count(),
                      paths=self.paths.table(), limits=rate_stats)
         meta = {**system.robot.describe(), "posture": system.posture, "limit_warnings": rate_warnings,
                 "joint_friction": system.joint_friction.describe(),
@@ -377,22 +372,24 @@ class HybridRun:
 
 
 def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, start: bool = False):
-    """What runs (modes, phase) of ``run``: the one pipeline's mode where it packs the mode
-    (:class:`~contactdyn.model.paths.LivePipelines`), else the readable model
-    (:class:`~contactdyn.model.paths.Declined`, with the reason). ``start``: a segment starts there: the path is
-    recorded and a decline's reason counted."""
+    """What runs (modes, phase) of ``run``: the one pipeline's mode (:class:`~contactdyn.model.paths.LivePipelines`);
+    a mode it cannot pack stops the run with the reason. ``start``: a segment starts there: the path is recorded."""
     pipes = run.pipelines
-    pipe, why = None, pipes.declined(modes, phase)
-    if pipes.use and not why:
-        # (a notice's watch is a thread: only while the mode's pipeline is first built, once per mode)
-        with nullcontext() if pipes.built(modes, phase) else compiling("the one pipeline"):
-            pipe = pipes.mode(modes, phase)
-    mode = pipe or Declined(why)
+    why = pipes.declined(modes, phase)
+    if why:
+        raise SimulationError(f"{run.scene.name}: the model cannot run {_mode_words(run.system, modes, phase)}: {why}")
+    # (a notice's watch is a thread: only while the mode's pipeline is first built, once per mode)
+    with nullcontext() if pipes.built(modes, phase) or pipes.twins is not None else compiling("the one pipeline"):
+        mode = pipes.mode(modes, phase)
     if start:
         run.paths.record(run.system, modes, phase, mode)
-        if why:
-            run.fallbacks[why] = run.fallbacks.get(why, 0) + 1
     return mode
+
+
+def _mode_words(system: System, modes: list[ContactMode], phase: Phase) -> str:
+    """``phase 'press' with tip touching``: a mode in words, for an error."""
+    touching = [c.name for c, m in zip(system.contacts, modes, strict=True) if m.touching]
+    return f"phase {phase.spec.name!r}" + (f" with {', '.join(touching)} touching" if touching else "")
 
 
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:
@@ -401,7 +398,7 @@ def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -
     lam = np.zeros(0)
     if run.segments:
         seg = run.segments[-1]
-        lam = jacobian_eigenvalues(seg.runner.rhs if seg.runner.ok else run.system.rhs(seg.modes, seg.phase), t, x)
+        lam = jacobian_eigenvalues(seg.runner.rhs, t, x)
     stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
              f"{run.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
     advice = "a stiff scene runs with solver.method = \"Radau\" or \"auto\"" \

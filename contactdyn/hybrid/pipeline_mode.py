@@ -19,9 +19,11 @@ for the loop, its event functions (:func:`~contactdyn.hybrid.events.segment_even
 A pipeline given twins (:mod:`contactdyn.numerics.twins`, a scene kind's first run) runs all of these, its steps and
 samples too, as its twins (``pipe.of``): the same functions interpreted.
 
-A call whose status is not 1 (a KKT system with a non-finite entry, a law that gave no force) is answered by the
-readable model (:meth:`System.evaluate`), its values too; a singular KKT matrix is solved in the call by least squares
-(:func:`contactdyn.model.pipeline.kkt.solve_linear`, an evaluation's ``regular`` False); ``singular`` counts both.
+A call whose status is not 1 raises a law's own error there (a Python stage's, the controller's:
+:meth:`~contactdyn.model.pipeline.pipeline.Pipeline.failed_call`), else its rates are NaN (a KKT system that is not
+finite at an overflowed trial state: the step control rejects it); a singular KKT matrix is solved in the call by least
+squares (:func:`contactdyn.model.pipeline.kkt.solve_linear`, an evaluation's ``regular`` False); ``singular`` counts
+both.
 """
 
 from __future__ import annotations
@@ -31,9 +33,10 @@ from collections import deque
 
 import numpy as np
 
-from ..laws.abi import raise_python_stage_error
+from ..errors import SimulationError
 from ..model.chain_forces import pack as pack_chain
 from ..model.dynamics import Evaluation, Measurement, SampleTerms
+from ..model.paths import LivePipelines
 from ..model.pipeline.drives import DW_U, DW_W
 from ..model.pipeline.pack import (
     ANY_MOTOR,
@@ -64,15 +67,13 @@ from ..model.pipeline.pipeline import Pipeline, call, sample_terms, samples_at
 from ..output.samples import Samples
 from .steps import derivatives, stepper
 
-__all__ = ["PipelineMode"]
+__all__ = ["PipelineMode", "mode_runner"]
 
 _NO_CALL = (None, None, None)  #: a ring entry before any call
 
 
 class PipelineMode:
     """One (modes, phase) on the one pipeline, as the loop runs it (see the module docstring)."""
-
-    ok = True  #: runs on the pipeline (a Declined mode: False)
 
     def __init__(self, pipe: Pipeline):
         self.pipe, self.system, self.modes, self.phase = pipe, pipe.system, pipe.modes, pipe.phase
@@ -83,23 +84,19 @@ class PipelineMode:
         self.ring: deque[tuple] = deque([_NO_CALL] * 4, maxlen=4)  #: the last four calls' (t, x, events)
         p = pipe.packed
         ints, reals, work, events = p.ints, p.reals, p.work, p.events
-        ring, system, phase = self.ring, self.system, self.phase
+        ring = self.ring
 
         def rhs(t: float, x: np.ndarray) -> np.ndarray:
             xdot = call_(float(t), x, ints, reals, work, events)
             if events[-1] != 1.0:
-                raise_python_stage_error()  # a Python stage's own error
-                pipe.readable_calls += 1
-                ev = system.evaluate(t, x, self.modes, phase)
-                ring.append((t, x, self._events_of(ev, x)))
-                return ev.xdot
+                xdot = pipe.failed_call(t, x)
             ring.append((t, x, events.copy()))
             return xdot
 
         rhs.step = of(stepper)(p, ring)
         rhs.derivatives = of(derivatives)(p, rhs)
         self.rhs = rhs
-        self.nt = [len(c.tangents) if c.friction is not None else 0 for c in system.contacts]
+        self.nt = [len(c.tangents) if c.friction is not None else 0 for c in self.system.contacts]
         self._stages = self._stage_table()
         self._ifaces = self._interface_table()
         self._nodes = self._node_table()
@@ -111,9 +108,9 @@ class PipelineMode:
 
     @property
     def singular(self) -> int:
-        """Calls solved by least squares (a singular KKT matrix: ``Pipeline.least_squares``) or answered by the
-        readable model (a non-finite KKT system, a law that gave no force): ``Result.stats["singular_solves"]``."""
-        return self.pipe.least_squares + self.pipe.readable_calls
+        """Calls solved by least squares (a singular KKT matrix: ``Pipeline.least_squares``) or with no answer (a KKT
+        system that is not finite: ``Pipeline.failed_calls``): ``Result.stats["singular_solves"]``."""
+        return self.pipe.least_squares + self.pipe.failed_calls
 
     def use(self, modes) -> None:
         """Run with these modes from now on: a turn's new 2-D reference directions r, data of the same packed mode
@@ -169,39 +166,15 @@ class PipelineMode:
         ev, base = self.values(t, x), p.joint_event_starts()[1]
         return {i: float(ev[base + k]) for k, i in enumerate(p.held)}
 
-    def _events_of(self, ev, x: np.ndarray) -> np.ndarray:
-        """The event values of a readable Evaluation, in the call's layout (a call answered by the readable model)."""
-        out = np.zeros(self.pipe.packed.events.size)
-        for ci, c in enumerate(self.system.contacts):
-            at, nt = EV_W * ci, self.nt[ci]
-            out[at + EV_GAP], out[at + EV_FN] = ev.gap[c.name], ev.normal_force[c.name]
-            if nt:
-                out[at + EV_VT:at + EV_VT + nt] = ev.slip[c.name]
-                out[at + EV_FF:at + EV_FF + nt] = ev.friction.get(c.name, np.zeros(nt))
-        p = self.pipe.packed
-        at_limit, at_held, at_sliding = p.joint_event_starts()
-        for k, i in enumerate(p.limits):
-            out[at_limit + k] = ev.limit_torque[i]
-        for k, i in enumerate(p.held):
-            out[at_held + k] = ev.joint_hold[i]
-        nQ = self.system.nQ
-        for k, i in enumerate(p.sliding):
-            out[at_sliding + k] = x[nQ + i]
-        out[-1] = 1.0
-        return out
-
     # ---- an instant's evaluation -------------------------------------------------------------------
-    def evaluation(self, t: float, x: np.ndarray) -> Evaluation | None:
-        """What System.evaluate gives at (t [s], x), off one call with the diagnostics on (as an output sample's):
-        ẋ, λ, the event values by name, τ, the command, the tip, the stage states, ``regular`` (False: the KKT
-        matrix singular, solved by least squares); None where the call declines there (a non-finite KKT system, a
-        law that gave no force: the readable model answers)."""
+    def evaluation(self, t: float, x: np.ndarray) -> Evaluation:
+        """The model at (t [s], x), off one call with the diagnostics on (as an output sample's): ẋ, λ, the event
+        values by name, τ, the command, the tip, the stage states, ``regular`` (False: the KKT matrix singular,
+        solved by least squares). A call with no answer there raises (:meth:`_one_call`)."""
         p, system = self.pipe.packed, self.system
         X = np.ascontiguousarray(x, dtype=float)[None, :]
         least_squares_before = self.pipe.least_squares
         Xd, E, W = self._one_call(t, X)
-        if Xd is None:
-            return None
         S = Samples(1, system)
         self._read_out(S, E, W, X)
         e, at = E[0], self.pipe.of(diag_starts)(p.ints)
@@ -223,9 +196,9 @@ class PipelineMode:
 
     # ---- output samples ------------------------------------------------------------------------
     def samples(self, ts: np.ndarray, X: np.ndarray, modes=None, runs: list[int] | None = None) -> Samples:
-        """Diagnostics at the states X[k] (times ts[k]) in one compiled call (the readable model's from a state whose
-        call declines on). ``runs``: the rows' lengths of runs of segments, one batch; where a call declines each run
-        is sampled on its own (the rows after the declined one within its run on the readable model)."""
+        """Diagnostics at the states X[k] (times ts[k]) in one compiled call (NaN from a state with no answer on, a
+        law's own error raised there). ``runs``: the rows' lengths of runs of segments, one batch; where a call has no
+        answer each run is sampled on its own."""
         if modes is not None:
             self.use(modes)
         p, system = self.pipe.packed, self.system
@@ -238,31 +211,27 @@ class PipelineMode:
         S = Samples(len(ts), system)
         self._read_out(S, E[:done], W[:done], X[:done])
         if done < len(ts):
-            raise_python_stage_error()
-        for k in range(done, len(ts)):
-            self.pipe.readable_calls += 1
-            S.fill(k, system.evaluate(float(ts[k]), X[k], self.modes, self.phase, full=True))
+            self.pipe.failed_call(float(ts[done]), X[done])
+            S.fill_nan(done)
         return S
 
     def _one_call(self, t: float, X: np.ndarray) -> tuple:
-        """(ẋ, event values, work) of one call at (t [s], X[0]) with the diagnostics on, each with one row; (None,
-        None, None) where the call declines there (a Python stage's own error raised first; counted)."""
+        """(ẋ, event values, work) of one call at (t [s], X[0]) with the diagnostics on, each with one row. Where the
+        call has no answer, a law's own error is raised (:meth:`Pipeline.failed_call`), else that the model has
+        none there."""
         p = self.pipe.packed
         Xd, E, W, done = self.pipe.of(samples_at)(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
         if done == 0:
-            raise_python_stage_error()
-            self.pipe.readable_calls += 1
-            return None, None, None
+            self.pipe.failed_call(t, X[0])
+            raise SimulationError(f"t = {t:.6g} s: the model has no finite answer at this state (its contact "
+                                  "system is not finite there)")
         return Xd, E, W
 
-    def measurement(self, t: float, x: np.ndarray) -> Measurement | None:
+    def measurement(self, t: float, x: np.ndarray) -> Measurement:
         """What a sampled law measures at (t [s], x) (:class:`~contactdyn.model.dynamics.Measurement`), off one
-        compiled call with the diagnostics on (as an output sample's); None where the call declines there (the
-        readable model measures)."""
+        compiled call with the diagnostics on (as an output sample's)."""
         p, system = self.pipe.packed, self.system
         Xd, E, W = self._one_call(t, np.ascontiguousarray(x, dtype=float)[None, :])
-        if Xd is None:
-            return None
         e, w = E[0], W[0]
         at = self.pipe.of(diag_starts)(p.ints)[D_TC]
         i_b = self.phase.carrier[0] if self.phase.carrier is not None else -1
@@ -356,3 +325,18 @@ class PipelineMode:
         for label, state in self._stages:
             if state is not None:
                 S.stages[label][:n] = W[:, state:state + 3]
+
+
+def mode_runner(system, compiled: bool = True):
+    """runner(modes, phase) -> PipelineMode: the modes of ``system`` on their pipelines, one per structure and phase
+    (compiled; ``compiled=False``: interpreted), as a run's transitions and samples read the model: for the model at
+    an instant outside a run (``runner(modes, phase).evaluation(t, x)``)."""
+    pipes = LivePipelines(system, PipelineMode, use=compiled)
+
+    def runner(modes, phase) -> PipelineMode:
+        why = pipes.declined(modes, phase)
+        if why:
+            raise SimulationError(f"{system.scene.name}: the model cannot run this mode: {why}")
+        return pipes.mode(modes, phase)
+
+    return runner

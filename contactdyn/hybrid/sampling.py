@@ -39,7 +39,7 @@ class SampledPhases:
 
     def __init__(self, system, stats: dict, runner=None):
         self.system = system
-        #: runner(modes, phase): the run's mode runner (a PipelineMode, or a Declined: the readable model's)
+        #: runner(modes, phase): the run's mode runner (a PipelineMode)
         self.runner = runner
         self.stats = stats
         self.samplers: dict[int, Sampler] = {}
@@ -73,11 +73,11 @@ class SampledPhases:
 
     def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, runner=None) -> np.ndarray:
         """The sample at t [s] of the phase's law: the state with its new held command and states. ``runner``: the
-        mode's compiled call (a PipelineMode) measures the forces and gives the robot's terms, else (None, or a
-        Declined) the readable model."""
+        mode's call (a PipelineMode) measures the forces and gives the robot's terms (None: the readable model's,
+        the tests' reference)."""
         sampler = self.samplers[phase.index]
         ctl = phase.controller
-        compiled = runner is not None and runner.ok
+        compiled = runner is not None
         measured = runner.measurement(t, x) if compiled and measures(phase) else None
         inp = sampler.measure(sample_input(self.system, t, x, modes, phase, sampler.resolution, measured,
                                            runner.sample_terms if compiled else None))
@@ -107,7 +107,7 @@ class SampledPhases:
         jump), in list order; only a mode with a function of forces is checked (:data:`JUMPING`)."""
         if not self.jumps(modes, phase):
             return []  # (no separate, slip, release or joint_slip event in this mode: the others read the state alone)
-        events, _ = segment_events(self.system, modes, phase, t, before, runner if runner.ok else None)
+        events, _ = segment_events(self.system, modes, phase, t, before, runner)
         events = [e for e in events if e.kind in JUMPING]
         return fired_across(events, t, t, before, after) if events else []
 

@@ -44,6 +44,7 @@ from ..model.impact import impact, project_velocity
 from ..model.system import System
 from .charts import on_chart
 from .events import EventLog
+from .pipeline_mode import mode_runner
 
 __all__ = ["Transitions", "LastEvaluation", "model_at", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
 
@@ -71,15 +72,14 @@ class _After:
 
 class LastEvaluation:
     """The model's Evaluation at an event instant: off the call that integrates the mode (``runner(modes, phase)``:
-    the run's mode runner, :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`), else System.evaluate
-    (a mode on the readable model, a call that declines there). Its last (t, x, modes, phase) and result kept: asked
-    again at the same ones (the same t, x bit for bit, equal modes, the same phase object), the same Evaluation, not
-    a second solve. Where a decision leaves everything as it was tried (a stick decided at rest, then the next
-    consistency pass; a joint's stuck trial, then its stick; the last pass, then the joints' check) the evaluation
-    repeats exactly."""
+    the run's mode runner, :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`). Its last (t, x, modes,
+    phase) and result kept: asked again at the same ones (the same t, x bit for bit, equal modes, the same phase
+    object), the same Evaluation, not a second solve. Where a decision leaves everything as it was tried (a stick
+    decided at rest, then the next consistency pass; a joint's stuck trial, then its stick; the last pass, then the
+    joints' check) the evaluation repeats exactly."""
 
     def __init__(self, system: System, runner=None):
-        self.system, self.runner = system, runner
+        self.system, self.runner = system, runner or mode_runner(system)
         self.key: tuple | None = None  #: (t [s], x's bytes, modes, phase) of ``ev``
         self.ev = None
 
@@ -96,11 +96,8 @@ class LastEvaluation:
 
 def model_at(system: System, runner, t: float, x: np.ndarray, modes, phase):
     """The model's Evaluation at (t [s], x): off the mode's call (``runner(modes, phase)``, a PipelineMode:
-    its :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`), else (no runner, a Declined mode, a call
-    that declines there) System.evaluate."""
-    mode = runner(modes, phase) if runner is not None else None
-    ev = mode.evaluation(t, x) if mode is not None and mode.ok else None
-    return ev if ev is not None else system.evaluate(t, x, modes, phase)
+    its :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`, which raises where the call has no answer)."""
+    return runner(modes, phase).evaluation(t, x)
 
 
 class Transitions:

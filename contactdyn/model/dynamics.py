@@ -109,7 +109,7 @@ def _forces_and_rows(system, t: float, x: np.ndarray, modes: list[ContactMode], 
     (modes (a launch's directions found), f, ydot, rows, the Evaluation begun, the kinematics, pending friction)."""
     nQ, nv = system.nQ, system.nv
     if any(launching(m) for m in modes):
-        modes = launch_directions_at(system, t, x, modes, phase)
+        modes = launch_directions_at(system, t, x, modes, phase, evaluate)
     system.robot.update(x[:nv], x[nQ:nQ + nv])
     f = np.zeros(nQ)
     f[:nv] = -system.robot.h
@@ -301,7 +301,7 @@ def _contact_torque(system, t: float, x: np.ndarray, modes: list[ContactMode], p
     nQ, nv = system.nQ, system.nv
     robot = system.robot
     if any(launching(m) for m in modes):
-        modes = launch_directions_at(system, t, x, modes, phase)
+        modes = launch_directions_at(system, t, x, modes, phase, evaluate)
     robot.update(x[:nv], x[nQ:nQ + nv])
     f = np.zeros(nQ)
     rows = Rows()

@@ -153,9 +153,10 @@ def launch_directions(system, modes: list[ContactMode], slip_of, acceleration_of
     return out
 
 
-def launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase
+def launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, evaluate
                          ) -> list[ContactMode]:
-    """:func:`launch_directions` on the readable model: ``System.evaluate`` per trial direction."""
+    """:func:`launch_directions` on the readable model: ``evaluate(system, t, x, modes, phase)``
+    (``dynamics.evaluate``) per trial direction."""
     nQ, nv = system.nQ, system.nv
     contacts = system.contacts
 
@@ -164,7 +165,7 @@ def launch_directions_at(system, t: float, x: np.ndarray, modes: list[ContactMod
         return slip_velocity(system, contacts[i], system.kinematics(contacts[i], x))
 
     def acceleration_of(trial: list[ContactMode], i: int) -> np.ndarray:
-        return slip_acceleration(system, contacts[i], x, system.evaluate(t, x, trial, phase).xdot)
+        return slip_acceleration(system, contacts[i], x, evaluate(system, t, x, trial, phase).xdot)
 
     out = launch_directions(system, modes, slip_of, acceleration_of)
     system.robot.update(x[:nv], x[nQ:nQ + nv])

@@ -1,10 +1,10 @@
-"""Which path runs each contact mode of a run, and why a mode is not compiled.
+"""Which path runs each contact mode of a run: the one pipeline's call compiled or interpreted.
 
 Every mode runs on the one pipeline (:mod:`contactdyn.model.pipeline`: one compiled call per right-hand side, the
-laws by address) where :func:`~contactdyn.model.pipeline.pack.unsupported` accepts it (:class:`LivePipelines`, the
-path ``PIPELINE``); else on the readable model (:meth:`~contactdyn.model.system.System.evaluate`), with the reason:
-a part the pipeline does not pack. A mode is not checked against the readable model where it starts: the compiled
-call and the interpreted one run the same functions (``tests/test_both_ways.py`` holds every scene to that).
+laws by address; :class:`LivePipelines`, the path ``PIPELINE``). What it cannot pack
+(:func:`~contactdyn.model.pipeline.pack.unsupported`: nothing a scene reaches today) stops the run with the reason.
+The compiled call and the interpreted one run the same functions (``tests/test_both_ways.py`` holds every scene to
+that).
 A stage law, friction law, drive kind or user controller numba cannot compile does not keep its mode off the
 pipeline: it runs there as a declared Python stage (called back through ctypes, :mod:`contactdyn.laws.abi`), named
 in its row.
@@ -23,15 +23,15 @@ from collections.abc import Callable
 from contextlib import nullcontext
 
 from ..numerics.native_call import giving_handles
+from ..numerics.twins import Twins
 from .contact import structure
 from .pipeline.pack import unsupported
 from .pipeline.pipeline import Pipeline
 
-__all__ = ["PIPELINE", "INTERPRETED", "READABLE", "path_of", "PathLog", "slower_paths", "LivePipelines", "Declined"]
+__all__ = ["PIPELINE", "INTERPRETED", "path_of", "PathLog", "slower_paths", "LivePipelines"]
 
 PIPELINE = "compiled call"  #: the path of a mode on the one pipeline
 INTERPRETED = "interpreted call"  #: the path of a mode on the one pipeline run as its twins (numerics.twins)
-READABLE = "readable model"  #: the path of a mode on System.evaluate
 
 
 class LivePipelines:
@@ -39,20 +39,20 @@ class LivePipelines:
     :func:`~contactdyn.model.pipeline.pack.unsupported` accepts: one per modes' structure and phase (every turn of a
     2-D slide reuses it: the reference direction is data), kept wrapped by ``wrap`` (the loop's: its event values,
     compiled steps and output samples, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`). ``twins``
-    (:class:`~contactdyn.numerics.twins.Twins`): the pipelines run interpreted (the path ``INTERPRETED``)."""
+    (:class:`~contactdyn.numerics.twins.Twins`): the pipelines run interpreted (the path ``INTERPRETED``); so do they
+    where ``use`` is False (the class's: the tests' and benchmarks' switch)."""
 
-    use = True  #: False only for the benchmarks' and tests' before/after comparison: every mode on System.evaluate
+    use = True  #: False: every run's pipelines interpreted (the tests' and benchmarks' compiled-against-source switch)
 
     def __init__(self, system, wrap: Callable = lambda pipe: pipe, use: bool = True, twins=None) -> None:
+        if twins is None and not (use and type(self).use):
+            twins = Twins()
         self.system, self.wrap, self.twins = system, wrap, twins
-        self.use = use and type(self).use  #: this run's modes on the pipeline (``use``: False, a readable run)
         self.pipes: dict[tuple, object] = {}  #: (structure(modes), phase.key()) -> its pipeline (wrapped)
         self.declines: dict[tuple, str] = {}  #: the same keys -> pack.unsupported's reason ("": it packs them)
 
     def declined(self, modes, phase) -> str:
-        """Why the pipeline does not run (modes, phase) ("" when it does; ``use`` off: "")."""
-        if not self.use:
-            return ""
+        """Why the pipeline does not run (modes, phase) ("" when it does)."""
         key = (structure(modes), phase.key())
         if key not in self.declines:
             with giving_handles() if self.twins is not None else nullcontext():  # (interpreted: nothing compiled)
@@ -80,26 +80,10 @@ class LivePipelines:
         return function if self.twins is None else self.twins.of(function)
 
 
-class Declined:
-    """A mode on the readable model (System.evaluate), and why: the loop's stand-in for a compiled mode."""
-
-    ok = False  #: (a compiled mode's True)
-    singular = 0
-
-    def __init__(self, reason: str) -> None:
-        self.reason = reason
-
-    def use(self, modes) -> None:
-        """(A compiled mode's: run these modes.) The readable model takes the modes per call."""
-
-
 def path_of(mode) -> tuple[str, str]:
     """(path, why it is slower: "" when nothing makes it so) of a mode's runner: ``PIPELINE`` (one compiled call per
-    right-hand side; why: its declared Python stages, the laws numba cannot compile, called back from it),
-    ``INTERPRETED`` (the same call run as its twins) or ``READABLE`` (System.evaluate; why: the law or part that kept
-    it off the compiled call)."""
-    if not mode.ok:
-        return READABLE, mode.reason
+    right-hand side; why: its declared Python stages, the laws numba cannot compile, called back from it) or
+    ``INTERPRETED`` (the same call run as its twins)."""
     return (INTERPRETED if getattr(mode, "interpreted", False) else PIPELINE), mode.reason
 
 

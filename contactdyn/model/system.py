@@ -64,7 +64,7 @@ from .chain import NodeKind
 from .chain_forces import chain_sides
 from .constraints import mass_matrix as constraints_mass_matrix
 from .contact import Contact, ContactMode, Kinematics, riding_masses, riding_terms, turning_surface
-from .dynamics import Evaluation, evaluate
+from .dynamics import Evaluation
 from .friction import initial_slip, slip_acceleration, slip_velocity
 from .impact import Impact, impact, project_velocity
 from .joint_friction import JointFriction
@@ -328,20 +328,7 @@ class System:
         """Tangential tip–environment acceleration [m/s²] (:func:`contactdyn.model.friction.slip_acceleration`)."""
         return slip_acceleration(self, c, x, xdot)
 
-    # ---- the right-hand side, impacts, separation --------------------------------------------
-    def evaluate(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
-                 full: bool = False) -> Evaluation:
-        """The right-hand side and its diagnostics (:func:`contactdyn.model.dynamics.evaluate`)."""
-        return evaluate(self, t, x, modes, phase, full)
-
-    def rhs(self, modes: list[ContactMode], phase: Phase):
-        """The function solve_ivp integrates in one mode and phase."""
-
-        def f(t: float, x: np.ndarray) -> np.ndarray:
-            return evaluate(self, t, x, modes, phase).xdot
-
-        return f
-
+    # ---- impacts, separation ----------------------------------------------------------------------------
     def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact,
                limits: tuple = ()) -> tuple[np.ndarray, Impact]:
         """Velocity jump when ``contact`` touches, joints pressing on ``limits`` held

@@ -29,22 +29,22 @@ from ..numerics.dop853 import DenseSolution, dense_states
 from ..numerics.held_steps import PiecewiseDense
 from ..robot.free_chart import chart_a_angles
 from ..robot.urdf_model import FREE_COORDINATES
-from .samples import Samples, evaluated_samples
+from .samples import Samples
 
 __all__ = ["Segment", "Held", "output_grid", "sample_segments", "sample_states", "channels"]
 
 
 @dataclass
 class Segment:
-    """One smooth phase of a run: [t0, t1] [s], its modes and task phase, dense output, and what ran it (a compiled
-    mode, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`, or :class:`~contactdyn.model.paths.Declined`)."""
+    """One smooth phase of a run: [t0, t1] [s], its modes and task phase, dense output, and what ran it (its mode's
+    pipeline, :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`)."""
 
     t0: float
     t1: float
     modes: list[ContactMode]
     phase: Phase
     sol: Any
-    runner: Any  #: what ran it: the one pipeline's mode (PipelineMode) or the readable model (paths.Declined)
+    runner: Any  #: what ran it: the one pipeline's mode (PipelineMode)
 
 
 class Held:
@@ -90,22 +90,18 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
     for group in _mode_groups(segments, runs):  # the runs of one compiled mode, wherever they are: one batch
         seg = segments[group[0][0]]
         at = [np.arange(bounds[run[0]], bounds[run[-1] + 1]) for run in group]
-        derivatives = None
-        if seg.runner.ok:  # the interpolants' extra stages all at once
-            seg.runner.use(seg.modes)
-            derivatives = getattr(seg.runner.rhs, "derivatives", None)
+        seg.runner.use(seg.modes)  # the interpolants' extra stages all at once
+        derivatives = getattr(seg.runner.rhs, "derivatives", None)
         rest = group
-        if seg.runner.ok and seg.runner not in counted:  # one serves several modes (every turn): count it once,
+        if seg.runner not in counted:  # one serves several modes (every turn): count it once,
             _run_states(segments, group[0], bounds, grid, xs, derivatives)  # after its first run's states
             counted.append(seg.runner)
             stats["singular_solves"] += seg.runner.singular
             rest = group[1:]
         _run_states(segments, [i for run in rest for i in run], bounds, grid, xs, derivatives)
         at_all = np.concatenate(at)
-        if seg.runner.ok:  # it serves every turn: this group's r
-            parts.append(seg.runner.samples(grid[at_all], xs[at_all], seg.modes, runs=[len(a) for a in at]))
-        else:
-            parts.append(evaluated_samples(system, grid[at_all], xs[at_all], seg.modes, seg.phase))
+        # (it serves every turn: this group's r)
+        parts.append(seg.runner.samples(grid[at_all], xs[at_all], seg.modes, runs=[len(a) for a in at]))
         rows.append(at_all)
     samples = parts[0] if len(parts) == 1 else Samples.scattered(parts, rows, system)
     out = channels(system, grid, xs, samples, modes_of)
@@ -155,16 +151,14 @@ def _run_states(segments: list[Segment], run: list[int], bounds: list[int], grid
 
 
 def _mode_groups(segments: list[Segment], runs: list[list[int]]) -> list[list[list[int]]]:
-    """The runs grouped by compiled mode and modes (a readable one's alone), groups in order of first appearance: a
-    compiled mode's samples and interpolants are its call's per state, whatever else is in the batch."""
+    """The runs grouped by mode's pipeline and modes, groups in order of first appearance: a mode's samples and
+    interpolants are its call's per state, whatever else is in the batch."""
     groups: list[list[list[int]]] = []
     of_mode: dict[tuple, list[list[int]]] = {}  # (runner, modes): its group
     for run in runs:
         seg = segments[run[0]]
         key = (seg.runner, tuple(seg.modes))
-        if not seg.runner.ok:
-            groups.append([run])
-        elif key in of_mode:
+        if key in of_mode:
             of_mode[key].append(run)
         else:
             groups.append(of_mode.setdefault(key, [run]))

@@ -1,16 +1,15 @@
 """A run's diagnostics at its output samples, as arrays: :class:`Samples` (what the Result's channels are made of).
 
 The integrator needs only derivatives; a Result needs, at every output sample, the forces, torques, gaps, slip
-velocities and stage deformations. A mode on the one pipeline computes them for all samples of a segment in one
-compiled batch (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.samples`); a mode on the readable model fills
-them per sample from :class:`~contactdyn.model.dynamics.Evaluation` objects (:func:`evaluated_samples`).
+velocities and stage deformations. A mode's pipeline computes them for all samples of a segment in one
+compiled batch (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.samples`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["Samples", "evaluated_samples"]
+__all__ = ["Samples"]
 
 _ARRAYS = ("tau", "tau_cmd", "u", "limit_torque", "joint_friction", "tip", "x_d", "body_force")  #: per-sample arrays
 _DICTS = ("F_n", "gap", "F_d", "F_f", "v_slip", "iface", "stages")  #: per-sample arrays by name
@@ -64,39 +63,10 @@ class Samples:
                     whole[at] = getattr(part, name)[key]
         return out
 
-    def fill(self, k: int, ev) -> None:
-        """Row k from a full :class:`~contactdyn.model.dynamics.Evaluation`."""
-        self.tau[k] = ev.tau
-        self.tau_cmd[k] = ev.tau_cmd
-        self.u[k] = ev.u
-        for i, value in ev.limit_torque.items():
-            self.limit_torque[k, i] = value
-        if ev.joint_friction is not None:
-            self.joint_friction[k] = ev.joint_friction
-        self.tip[k] = ev.p_tip
-        if ev.x_d is not None and len(ev.x_d) == 3:
-            self.x_d[k] = ev.x_d
-            self.has_x_d = True
-        self.body_force[k] = ev.body_force
-        for key, value in ev.force_d.items():
-            self.F_d[key][k] = value
-            self.has_F_d[key] = True
-        for name in self.F_n:
-            self.F_n[name][k] = ev.normal_force[name]
-            self.gap[name][k] = ev.gap[name]
-            if name in ev.friction:
-                self.F_f[name][k] = ev.friction[name]
-            if name in ev.slip:
-                self.v_slip[name][k] = ev.slip[name]
-        for key in self.iface:
-            self.iface[key][k] = ev.interface.get(key, 0.0)
-        for label in self.stages:
-            self.stages[label][k] = ev.stages.get(label, (0.0, 0.0, 0.0))
-
-
-def evaluated_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> Samples:
-    """Samples at the states X[k] (times ts[k]), each sample by :meth:`System.evaluate`."""
-    S = Samples(len(ts), system)
-    for k, (t, x) in enumerate(zip(ts, X, strict=True)):
-        S.fill(k, system.evaluate(t, x, modes, phase, full=True))
-    return S
+    def fill_nan(self, first: int) -> None:
+        """Rows first … n − 1 NaN (states where the call had no answer)."""
+        for name in _ARRAYS:
+            getattr(self, name)[first:] = np.nan
+        for name in _DICTS:
+            for values in getattr(self, name).values():
+                values[first:] = np.nan

@@ -84,7 +84,7 @@ MEANINGS: dict[str, str] = {
     "body.<body>.urdf": "the body from a URDF whose one to three joints are prismatic and orthogonal: its masses, "
                         "axes and visuals (then no mass or axis; a path beside the scene or a name in urdf/); or "
                         "whose joints, revolute and prismatic, form a tree fixed in the world: an articulated body, "
-                        "its H_b and h_b its own (no servo or drive; the readable model runs it)",
+                        "its H_b and h_b its own (no servo or drive)",
     "body.<body>.free": "the URDF's root link moves freely (a floating joint from a world link, or none): six "
                         "coordinates x, y, z [m] of its frame, then ZYX Euler angles yaw, pitch, roll [rad] (a run "
                         "stops within 1e-6 of pitch = +-90 deg, their singularity); an articulated body",

@@ -170,6 +170,10 @@ class Controller:
         """Check the scene and resolve defaults (may set ``n_states``); raise SceneError on misuse."""
 
 
+    def failure(self, t: float) -> str:
+        """Why the law gave no finite command at t [s] (the compiled call found none there): its own words."""
+        return f"t = {t:.6g} s: {self.name}: the law gave no finite command at this state"
+
     def command(self, inp: ControlInput) -> tuple[np.ndarray, np.ndarray | None]:
         """Joint torques and the rates of the controller's states."""
         raise NotImplementedError

@@ -28,6 +28,7 @@ direction the arm cannot move (a task singularity) is a clear error.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -147,10 +148,14 @@ class OperationalSpace(Controller):
     def _guard(self, ratio: float, t: float) -> None:
         """Raise where the task is singular: its Hadamard ratio det(Λ⁻¹) / Π diag(Λ⁻¹) below SINGULAR (or nan)."""
         if not ratio >= SINGULAR:  # also NaN
-            what = "position axes, force directions" + (" and tool tilt" if self.config.tool_axis is not None else "")
-            raise SimulationError(
-                f"t = {t:.6g} s: operational_space: the task ({what}: {self._m} directions) is singular at this "
-                f"posture (Hadamard ratio of J_t H⁻¹ J_tᵀ {ratio:.3g} < {SINGULAR:g}): the arm cannot move the tip "
+            raise SimulationError(self.failure(t, ratio))
+
+    def failure(self, t: float, ratio: float = math.nan) -> str:
+        """The singular task's error at t [s] (the compiled law returns no command there: status 0)."""
+        what = "position axes, force directions" + (" and tool tilt" if self.config.tool_axis is not None else "")
+        below = f"{ratio:.3g} < {SINGULAR:g}" if math.isfinite(ratio) else f"below {SINGULAR:g}"
+        return (f"t = {t:.6g} s: operational_space: the task ({what}: {self._m} directions) is singular at this "
+                f"posture (Hadamard ratio of J_t H⁻¹ J_tᵀ {below}): the arm cannot move the tip "
                 "along one task direction independently of the others; move the task (robot.tip0) away from the "
                 "arm's singularities, drop the tool_axis, or use task_pd")
 

@@ -10,8 +10,8 @@ the very compiled functions their readable ``command`` calls (no copy of their a
 Each is a C function of the ABI's signature, compiled at its first use and cached (:func:`kind_address`), its
 constants the call's ``params``: the pipeline calls it by address as it calls a user's law, and folds it the same
 way (:mod:`.force_fold`); a scene that does not use it does not compile it. A singular operational task (the
-Hadamard ratio below ``SINGULAR``, or NaN) returns status 0: the readable model answers, where
-``OperationalSpace._guard`` raises its error.
+Hadamard ratio below ``SINGULAR``, or NaN) returns status 0: its command is not finite and the call raises the law's
+own error there (``OperationalSpace.failure``, :meth:`~contactdyn.model.pipeline.pipeline.Pipeline.failed_call`).
 
 Operational space's constants (:data:`O_AXES` …): k, a tool axis (1.0 / 0.0), axes (k × 3), force directions (ns × 3,
 the phase's set-points in its order, as the buffer's F_d: pack orders them by key), kp (k) [N/m], kd (k) [N·s/m],
@@ -76,7 +76,7 @@ def operational_on_buffer(buf, lay, c, tau, zdot):
     out, ratio = torque(inp.v, inp.H, inp.h, J_tip, drift_tip, inp.p_tip, inp.v_tip, inp.x_d, inp.v_d, inp.a_d,
                         inp.force_set, R_tip, axes, forced, kp, kd, tool_axis, target, c[o + 6], c[o + 7], c[o + 8],
                         c[o + 9])
-    if not ratio >= SINGULAR:  # (also NaN) the readable law raises its error there
+    if not ratio >= SINGULAR:  # (also NaN) the call raises the law's error there (Pipeline.failed_call)
         return 0
     for i in range(nv):
         tau[i] = out[i]

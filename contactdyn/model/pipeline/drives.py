@@ -94,7 +94,7 @@ def apply_drives(x, nQ, rows, dreals, cmd, sat, f, out):
     its row says so) added to f (and its motor's torque on its motor coordinate); outputs into ``out`` (DW_*).
     ``sat`` decides which voltages clip (``Drives.apply``'s ``sat_cmd``: the full command of a fold, while ``cmd``
     lacks the folded part; ``cmd`` itself otherwise). False where a kind's compiled law failed (a NaN voltage,
-    status 0): the readable model answers."""
+    status 0: Pipeline.failed_call)."""
     power = lost = 0.0
     o4 = np.empty(4)
     n = rows.shape[0]

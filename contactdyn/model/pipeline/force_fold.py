@@ -207,8 +207,8 @@ def _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq):
 def controller_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, events):
     """(τ [N·m or N], ż, B (nv, rows), D (states, rows), b (nv), d (states)) of the phase's controller of the ABI at
     (t, x) (the kinds compiled in are .actuation's stages): b and d per unit acceleration of a body carrying the
-    reference (zero without one); τ NaN where the law failed (the readable model then
-    answers and its error surfaces there)."""
+    reference (zero without one); τ NaN where the law failed (:meth:`Pipeline.failed_call` then raises the law's
+    error)."""
     nv, nr, nz = ints[NV], ints[N_ROWS], ints[N_Z]
     zdot = np.zeros(nz)
     fold = ints[READS_FORCES] != 0 and nr > 0

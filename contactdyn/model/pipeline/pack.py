@@ -22,7 +22,7 @@ its contact's row, a user controller's in the controller section, a drive kind's
 compiled call serves every law. The index constants below are the one place the layout is written; the call
 (:mod:`.pipeline`) reads nothing else.
 
-What the pipeline does not pack (:func:`unsupported` names it, and the mode runs on the readable model): a robot
+What the pipeline does not pack (:func:`unsupported` names it, and the run stops with it): a robot
 or articulated body ``rigid_body`` does not compute (none the robot loader accepts: every joint it takes is a one-DOF
 revolute or prismatic), an articulated body under another gravity than the robot's. A stage law, friction law,
 drive kind or user controller numba cannot compile is packed as a declared Python stage (:func:`python_stages` names
@@ -147,8 +147,8 @@ LI_JOINT, LI_SIDE, LI_W = 0, 1, 2  #: a pressing limit's ints (its value [rad or
 #: joint's holding torque [N·m or N], each sliding joint's speed [rad/s or m/s]; then the status
 EV_GAP, EV_FN, EV_VT, EV_FF, EV_W = 0, 1, 2, 4, 6
 #: status: 1 the call is complete (a singular KKT matrix too: solved by least squares, counted at
-#: work[ints[W_LEAST_SQUARES]]); 0 its KKT system has a non-finite entry, -1 a compiled law gave no force (the
-#: readable model answers)
+#: work[ints[W_LEAST_SQUARES]]); 0 its KKT system has a non-finite entry, -1 a compiled law gave no force
+#: (Pipeline.failed_call)
 TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
 #: the diagnostics section of ``work`` (from ``ints[W_DIAG]``; :func:`.pipeline.record`): its switch (the call writes
 #: the section when it is not 0), then per chain its interface force [N] (written always), then the drives' applied
@@ -203,7 +203,7 @@ class Packed:
 
 
 def unsupported(system, modes, phase) -> str:
-    """Why the compiled call cannot pack (modes, phase) ("" when it can): the mode then runs on the readable model."""
+    """Why the compiled call cannot pack (modes, phase) ("" when it can): the run then stops with it."""
     if reason := _bodies_unsupported(system, phase):
         return reason
     if system.robot.rigid_table is None:
@@ -233,11 +233,11 @@ def python_stages(system, modes, phase) -> list[str]:
 
 
 def _bodies_unsupported(system, phase) -> str:
-    """Why the articulated bodies keep the mode on the readable model ("" when their joints join the robot's in the
+    """Why the articulated bodies keep the mode off the pipeline ("" when their joints join the robot's in the
     rigid-body table: :func:`contactdyn.robot.rigid_body.forest_table`)."""
     for name, body in system.articulated.items():
         if any(robot.rigid_table is None for robot in body.robots):  # (a free body: both charts' models)
-            return f"body {name!r}: a joint rigid_body does not compute (the readable model computes its terms)"
+            return f"body {name!r}: a joint rigid_body does not compute"
         if not np.array_equal(body.robots[0].model.gravity.linear, system.robot.model.gravity.linear):
             return f"body {name!r}: its model's gravity is not the robot's (one universe row in the rigid-body table)"
     return ""

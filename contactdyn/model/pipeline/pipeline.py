@@ -12,12 +12,12 @@ so it does in a process where numba is on for a :class:`Pipeline` given ``twins`
 a scene kind's first run, :mod:`contactdyn.first_run`).
 :class:`Pipeline` packs a mode once and calls it; its ``events`` name the event values (gaps [m], normal forces
 [N], slip velocities [m/s], friction or stick forces [N], limit torques [N·m or N]). A singular KKT matrix
-(redundant rows, consistent or not) is solved in the call by the readable model's minimum-norm least squares
-(:func:`.kkt.solve_linear`), and counted (``Pipeline.least_squares``: ``Result.stats["singular_solves"]``); a call
-whose KKT system has a non-finite entry (status 0), or whose compiled law (a stage or friction law, a drive kind)
-gave no force (status -1), is answered by the readable model (:meth:`System.evaluate`), and counted; where a law
-run as a declared Python stage (one numba cannot compile, called back through ctypes: :mod:`contactdyn.laws.abi`)
-raised, its own exception is raised instead.
+(redundant rows, consistent or not) is solved in the call by the minimum-norm least squares
+(:func:`.kkt.solve_linear`), and counted (``Pipeline.least_squares``: ``Result.stats["singular_solves"]``). A call
+with no answer (:meth:`Pipeline.failed_call`) raises a law's own error where a law failed: a declared Python stage's
+(one numba cannot compile, called back through ctypes: :mod:`contactdyn.laws.abi`) exception, the controller's
+words where its command was not finite (an operational task singular there); else (a KKT system with a non-finite
+entry, status 0: an overflowed trial state) its rates are NaN, which the step control rejects, and it is counted.
 """
 
 from __future__ import annotations
@@ -27,10 +27,12 @@ from contextlib import nullcontext
 import numpy as np
 from numba import types
 
+from ...errors import SimulationError
 from ...laws.abi import raise_python_stage_error
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
 from ...numerics.native_call import address, call_at, declare, giving_handles
+from ...numerics.twins import Twins
 from ..contact import structure
 from .actuation import (
     carry,
@@ -226,7 +228,7 @@ def rates_at(ts, X, ints, reals, work, events):
 @njit(cache=True)
 def samples_at(ts, X, ints, reals, work, events):
     """(ẋ, event values, work) at each (ts[k], X[k]) with the diagnostics on (:func:`record`: the output
-    samples' way), and the number of states done before a call's status was not 1 (the rest: the readable model's)."""
+    samples' way), and the number of states done before a call's status was not 1."""
     n = ts.size
     Xd, E, W = np.empty(X.shape), np.zeros((n, events.size)), np.zeros((n, work.size))
     work[ints[W_DIAG]] = 1.0
@@ -332,7 +334,7 @@ class Pipeline:
             self.of(stage_addresses)(self.packed.ints)
             #: the laws run as declared Python stages (numba cannot compile them), with numba's reasons
             self.python_stages = [] if twins is not None else python_stages(system, modes, phase)
-        self.readable_calls = 0  #: calls answered by the readable model (a non-finite KKT system, a law that failed)
+        self.failed_calls = 0  #: calls with no answer (a KKT system that is not finite): NaN rates, steps rejected
         self._call = self.of(call)
 
     def of(self, function):
@@ -342,7 +344,7 @@ class Pipeline:
     @property
     def least_squares(self) -> int:
         """The calls whose KKT matrix was singular, solved in the call by the minimum-norm least squares (the
-        readable model's ``Evaluation.regular = False``; every call since the packing, compiled steps' too)."""
+        ``Evaluation.regular = False``; every call since the packing, compiled steps' too)."""
         return int(self.packed.work[self.packed.ints[W_LEAST_SQUARES]])
 
     def use(self, modes) -> None:
@@ -357,11 +359,35 @@ class Pipeline:
         """ẋ at (t [s], x)."""
         p = self.packed
         xdot = self._call(float(t), x, p.ints, p.reals, p.work, p.events)
-        if p.events[-1] != 1.0:
-            raise_python_stage_error()  # a Python stage's own error
-            self.readable_calls += 1
-            return self.system.evaluate(t, x, self.modes, self.phase).xdot
-        return xdot
+        return xdot if p.events[-1] == 1.0 else self.failed_call(t, x)
+
+    def failed_call(self, t: float, x: np.ndarray) -> np.ndarray:
+        """ẋ where the call at (t [s], x) gave no answer (its status not 1): a law's own error is raised there (a
+        Python stage's; a compiled law's, which its cfunc cannot carry out (status -1): the same call run once
+        interpreted at (t, x) raises it from the law's source; the controller's where its command was not finite,
+        :meth:`controller_failed`); else the contact system was not finite (an overflowed trial state): NaN rates,
+        which the step control rejects."""
+        raise_python_stage_error()
+        if self.packed.events[-1] < 0.0 and self.twins is None:
+            Pipeline(self.system, self.modes, self.phase, Twins()).rhs(t, np.array(x, float))
+        why = self.controller_failed(t, x)
+        if why:
+            raise SimulationError(why)
+        self.failed_calls += 1
+        return np.full(np.size(x), np.nan)
+
+    def controller_failed(self, t: float, x: np.ndarray) -> str:
+        """The phase's controller's own words where its command at (t [s], x) is not finite (the call with its
+        diagnostics on: an operational task singular there), else ""."""
+        p = self.packed
+        p.work[p.ints[W_DIAG]] = 1.0
+        try:
+            self._call(float(t), np.array(x, float), p.ints, p.reals, p.work, p.events)
+        finally:
+            p.work[p.ints[W_DIAG]] = 0.0
+        at = self.of(diag_starts)(p.ints)[D_CMD]
+        finite = bool(np.all(np.isfinite(p.work[at:at + self.system.nv])))
+        return "" if finite else self.phase.controller.failure(t)
 
     def values(self) -> dict[str, object]:
         """The last call's event values by name: per contact gap [m], F_n [N], v_t [m/s], F_f [N]; limit torques,
