@@ -1,15 +1,16 @@
-"""The one pipeline (contactdyn/model/pipeline/) against the readable model, per call; its cold compile.
+"""The one pipeline (contactdyn/model/pipeline/) compiled against the same call interpreted, per call; its cold compile.
 
     PYTHONPATH=. python3 benchmarks/pipeline_proto.py [CASE ...] [--calls 2000] [--repeats 7] [--compile]
         [--out FILE.json]
 
 Per mode (:func:`cases`: the sims, benchmarks/hard and examples scenes, in their first mode and in modes set by
 hand: touching, sticking, a joint on its limit, a later phase), the median time of one right-hand-side call [µs] of
-the pipeline (``Pipeline.rhs``) and of the readable model (``contactdyn.model.dynamics.evaluate``, the tests'
-reference), timed interleaved (every variant once per repeat, each a batch of ``--calls`` calls over 16 states near
-the mode's start), in one process, after an untimed warm-up. Also
+the pipeline compiled (``Pipeline.rhs``) and interpreted (the same call run as its Python source,
+``mode_runner(system, compiled=False)``: the tests' per-state reference, :func:`agreement`), timed interleaved (every
+variant once per repeat, each a batch of ``--calls`` calls over 16 states near the mode's start; the interpreted
+call a hundredth of them), in one process, after an untimed warm-up. Also
 per call inside one compiled loop (no Python between calls: the pipeline's ``rates_at``, as a compiled DOP853 step
-calls it), and the largest relative difference of ẋ against the readable model over the states. ``--compile``: the
+calls it), and the largest relative difference of ẋ against the interpreted call over the states. ``--compile``: the
 compile time of the pipeline's first call from a cold cache, in a child process with a fresh NUMBA_CACHE_DIR
 (import and ``prepare`` first, then the first call), and again warm (the same directory, a new process), on b1 and
 impedance_press.
@@ -35,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from timing import interleaved, write_report  # noqa: E402
 
 from contactdyn import parse_scene  # noqa: E402
-from contactdyn.model.dynamics import evaluate as readable_evaluate  # noqa: E402
+from contactdyn.hybrid.pipeline_mode import mode_runner  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -314,11 +315,21 @@ def states(x0: np.ndarray, count: int, seed: int = 7) -> list[np.ndarray]:
     return [x0.copy()] + [x0 + 1e-3 * (1.0 + np.abs(x0)) * rng.normal(size=x0.size) for _ in range(count - 1)]
 
 
+def interpreted(system, modes, phase):
+    """The mode on the same call interpreted (its Python source, the pipeline's twins): the reference a compiled call
+    is held to state by state (one interpreted runner per system, kept on it: run_agreement's)."""
+    runner = getattr(system, "_interpreted_runner", None)
+    if runner is None:
+        runner = system._interpreted_runner = mode_runner(system, compiled=False)
+    return runner(modes, phase)
+
+
 def agreement(pipeline, system, modes, phase, t: float, xs: list[np.ndarray]) -> tuple[float, int]:
-    """(largest ‖ẋ − ẋ_readable‖∞ / ‖ẋ_readable‖∞ over the states, how many agree bit for bit)."""
-    worst, bitwise = 0.0, 0
+    """(largest ‖ẋ − ẋ_interpreted‖∞ / ‖ẋ_interpreted‖∞ over the states, how many agree bit for bit): the compiled
+    call ``pipeline`` against the same call interpreted (:func:`interpreted`)."""
+    mode, worst, bitwise = interpreted(system, modes, phase), 0.0, 0
     for x in xs:
-        ref = readable_evaluate(system, t, x, modes, phase).xdot
+        ref = mode.rhs(t, np.array(x, float))
         got = pipeline.rhs(t, x)
         worst = max(worst, float(np.abs(got - ref).max() / np.abs(ref).max()))
         bitwise += int(np.array_equal(got, ref))
@@ -339,15 +350,15 @@ def _many(rates, ts: np.ndarray, X: np.ndarray):
 
 
 def measure(name: str, calls: int, repeats: int) -> dict:
-    """One case's row: per-call medians [µs] of the pipeline and the readable model's evaluate; the agreement."""
+    """One case's row: per-call medians [µs] of the pipeline compiled and interpreted; the agreement."""
     from contactdyn.model.pipeline.pipeline import Pipeline, rates_at
 
     system, modes, phase, t, x0 = case(name)
     xs = states(x0, 16)
     pipe = Pipeline(system, modes, phase)
     variants = {"pipeline": _batch(pipe.rhs, t, xs, calls)}
-    variants["evaluate"] = _batch(lambda t_, x: readable_evaluate(system, t_, x, modes, phase), t, xs,
-                                  max(calls // 10, 1))
+    slow = interpreted(system, modes, phase)
+    variants["interpreted"] = _batch(slow.rhs, t, xs, max(calls // 100, 1))
     # inside compiled code (no Python per call): the pipeline's rates_at
     ts, X = np.full(calls, t), np.array([xs[k % len(xs)] for k in range(calls)])
     pk = pipe.packed
@@ -357,9 +368,9 @@ def measure(name: str, calls: int, repeats: int) -> dict:
         run()  # untimed
     times = interleaved(variants, repeats)
     worst, bitwise = agreement(pipe, system, modes, phase, t, xs)
-    per = {"pipeline": calls, "evaluate": max(calls // 10, 1), "pipeline_compiled": calls}
+    per = {"pipeline": calls, "interpreted": max(calls // 100, 1), "pipeline_compiled": calls}
     us = {k: v.cpu / per[k] * 1e6 for k, v in times.items()}
-    return {"case": name, "pipeline_us": us["pipeline"], "evaluate_us": us["evaluate"],
+    return {"case": name, "pipeline_us": us["pipeline"], "interpreted_us": us["interpreted"],
             "pipeline_compiled_us": us["pipeline_compiled"], "max_rel_diff": worst,
             "bitwise_states": f"{bitwise}/{len(xs)}", "failed_calls": pipe.failed_calls}
 
@@ -406,7 +417,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         rows.append(measure(name, args.calls, args.repeats))
         r = rows[-1]
-        print(f"{name:22s} pipeline {r['pipeline_us']:6.2f} us  evaluate {r['evaluate_us']:6.1f} us  "
+        print(f"{name:22s} pipeline {r['pipeline_us']:6.2f} us  interpreted {r['interpreted_us']:8.1f} us  "
               f"compiled loop {r['pipeline_compiled_us']:5.2f} us  rel diff {r['max_rel_diff']:.1e}  "
               f"bitwise {r['bitwise_states']}  ({time.perf_counter() - t0:.0f} s)", flush=True)
     head = {"benchmark": "pipeline_proto", "calls": args.calls, "repeats": args.repeats}

@@ -1,12 +1,11 @@
-"""Test helpers that hold the compiled call to a reference: two whole runs of one scene (the compiled call's against
-the same call interpreted, its Python source) and the readable model's output samples (``dynamics.evaluate``, the
-tests' independent reference while it lasts)."""
+"""Test helpers that hold the compiled call to its own source: two whole runs of one scene (the compiled call's
+against the same call interpreted), and the model at an instant or at output samples on the interpreted call."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from contactdyn.model.dynamics import evaluate as readable_evaluate
+from contactdyn.hybrid.pipeline_mode import mode_runner
 from contactdyn.model.paths import INTERPRETED, PIPELINE
 from contactdyn.output.samples import Samples
 
@@ -29,32 +28,16 @@ def assert_runs_agree(fast, interpreted) -> None:
                                atol=EVENT_ATOL)
 
 
-def readable_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> Samples:
-    """The output samples at the states X[k] (times ts[k]) from the readable model, one evaluation each."""
-    S = Samples(len(ts), system)
-    for k, (t, x) in enumerate(zip(ts, X, strict=True)):
-        _fill(S, k, readable_evaluate(system, t, x, modes, phase, full=True))
-    return S
+def interpreted_evaluate(system, t: float, x: np.ndarray, modes, phase):
+    """The model at (t [s], x) on the same call interpreted (its Python source): the reference a compiled call is
+    held to state by state (one interpreted runner per system, kept on it)."""
+    runner = getattr(system, "_interpreted_runner", None)
+    if runner is None:
+        runner = system._interpreted_runner = mode_runner(system, compiled=False)
+    return runner(modes, phase).evaluation(t, np.array(x, float))
 
 
-def _fill(S: Samples, k: int, ev) -> None:
-    """Row k of S from a full readable Evaluation."""
-    S.tau[k], S.tau_cmd[k], S.u[k], S.tip[k], S.body_force[k] = ev.tau, ev.tau_cmd, ev.u, ev.p_tip, ev.body_force
-    for i, value in ev.limit_torque.items():
-        S.limit_torque[k, i] = value
-    if ev.joint_friction is not None:
-        S.joint_friction[k] = ev.joint_friction
-    if ev.x_d is not None and len(ev.x_d) == 3:
-        S.x_d[k], S.has_x_d = ev.x_d, True
-    for key, value in ev.force_d.items():
-        S.F_d[key][k], S.has_F_d[key] = value, True
-    for name in S.F_n:
-        S.F_n[name][k], S.gap[name][k] = ev.normal_force[name], ev.gap[name]
-        if name in ev.friction:
-            S.F_f[name][k] = ev.friction[name]
-        if name in ev.slip:
-            S.v_slip[name][k] = ev.slip[name]
-    for key in S.iface:
-        S.iface[key][k] = ev.interface.get(key, 0.0)
-    for label in S.stages:
-        S.stages[label][k] = ev.stages.get(label, (0.0, 0.0, 0.0))
+def interpreted_samples(system, ts: np.ndarray, X: np.ndarray, modes, phase) -> Samples:
+    """The output samples at the states X[k] (times ts[k]) on the same call interpreted."""
+    interpreted_evaluate(system, float(ts[0]), X[0], modes, phase)
+    return system._interpreted_runner(modes, phase).samples(np.asarray(ts, float), np.asarray(X, float), modes)

@@ -1,7 +1,8 @@
-"""The one pipeline's call (contactdyn.model.pipeline) at the states a run passes through equals the readable model's
-(dynamics.evaluate), on modes the per-call cases of tests/test_pipeline_proto.py do not hold: the hybrid law, a
-redundant arm's null-space damping, a clipping voltage, the writers' stick, launch and slide, a 1-D slide; and the
-packed reference and force set-points are the readable ones bitwise."""
+"""The one pipeline's compiled call (contactdyn.model.pipeline) at the states a run passes through equals the same
+call interpreted (run_agreement.interpreted_evaluate), on modes the per-call cases of tests/test_pipeline_proto.py do
+not hold: the hybrid law, a redundant arm's null-space damping, a clipping voltage, the writers' stick, launch and
+slide, a 1-D slide; and the packed reference and force set-points are the laws' own (Reference.at, Ramp.at)
+bitwise."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 from pipeline_proto import case  # noqa: E402
+from run_agreement import interpreted_evaluate  # noqa: E402
 from test_controllers import hybrid_doc  # noqa: E402
 from test_output_samples import pressing_writer  # noqa: E402
 
@@ -21,7 +23,6 @@ from contactdyn import Robot, parse_scene  # noqa: E402
 from contactdyn.hybrid.loop import HybridRun  # noqa: E402
 from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
 from contactdyn.laws.trajectory import Move, Ramp, Reference  # noqa: E402
-from contactdyn.model.dynamics import evaluate as readable_evaluate  # noqa: E402
 from contactdyn.model.phases import start_phase  # noqa: E402
 from contactdyn.model.pipeline.actuation import reference, set_points  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline, call  # noqa: E402
@@ -30,14 +31,14 @@ from contactdyn.scene.reader import read_toml  # noqa: E402
 from contactdyn.scene.scene_file import find_scene, load_scene  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
-#: a call against the readable model (dynamics.evaluate) at a run's states, relative to 1 + |ẋ|'s largest entry
-#: (the bound the deleted twin's tests held); measured ≤ 7.0e-13 over these scenes' states
+#: a compiled call against the interpreted call (interpreted_evaluate) at a run's states, relative to 1 + |ẋ|'s
+#: largest entry (the bound the deleted twin's tests held); measured 0 (bit for bit) over these scenes' states
 CALL_RTOL = 1e-10
 
 
-def assert_calls_are_the_readable_model(scene, per_segment: int = 6) -> tuple:
+def assert_calls_are_the_interpreted_call(scene, per_segment: int = 6) -> tuple:
     """Run ``scene``; at ``per_segment`` states along each segment (its dense output) the segment's pipeline call
-    answers (status 1: an answer, not NaN rates) and its ẋ is the readable model's (dynamics.evaluate). Every
+    answers (status 1: an answer, not NaN rates) and its ẋ is the interpreted call's (interpreted_evaluate). Every
     segment on the pipeline's compiled call. Returns (the system, the run's segments)."""
     system = System(scene)
     run = HybridRun(system)
@@ -51,7 +52,7 @@ def assert_calls_are_the_readable_model(scene, per_segment: int = 6) -> tuple:
             x = seg.sol(t)
             got = call(float(t), x.copy(), p.ints, p.reals, p.work, p.events)
             assert p.events[-1] == 1.0, (seg.modes, t)
-            ref = readable_evaluate(system, float(t), x, seg.modes, seg.phase).xdot
+            ref = interpreted_evaluate(system, float(t), x, seg.modes, seg.phase).xdot
             assert np.abs(got - ref).max() <= CALL_RTOL * (1.0 + np.abs(ref).max()), (seg.modes, t)
     return system, run.segments
 
@@ -60,17 +61,17 @@ def assert_calls_are_the_readable_model(scene, per_segment: int = 6) -> tuple:
 def test_the_hybrid_law_through_motors(cancel):
     """The hybrid law on the 2-DOF writer pressing case 2's (b) surface through DC motors: with cancel = "target"
     its tip force f_swap = (F − F*) n goes into τ by Jᵀ, with "measured" it does not."""
-    assert_calls_are_the_readable_model(parse_scene(hybrid_doc(cancel=cancel), {"duration": 0.3}))
+    assert_calls_are_the_interpreted_call(parse_scene(hybrid_doc(cancel=cancel), {"duration": 0.3}))
 
 
 @pytest.mark.parametrize("u_max", [None, 4.0])
 def test_a7_pressing_a_bonded_wall_through_motors_clipped_or_not(u_max):
     """A7 on the 2-DOF writer pressing a bonded wall (its measured force folded into the solve) under DC motors;
     with a 4 V limit the voltages clip at the start (the clip re-checked with the fold, in the call)."""
-    system, segments = assert_calls_are_the_readable_model(parse_scene(pressing_writer(u_max=u_max)))
+    system, segments = assert_calls_are_the_interpreted_call(parse_scene(pressing_writer(u_max=u_max)))
     if u_max is not None:
         seg = segments[0]
-        ev = readable_evaluate(system, seg.t0, seg.sol(seg.t0), seg.modes, seg.phase, full=True)
+        ev = interpreted_evaluate(system, seg.t0, seg.sol(seg.t0), seg.modes, seg.phase)
         assert np.abs(ev.u).max() == u_max  # [V] the clipping branch ran
 
 
@@ -86,13 +87,13 @@ def test_a7_on_a_redundant_arm():
                                                     "moves": []}}],
            "contact": {"c": {"point": p0.tolist(), "bonded": True,
                              "normal": {"direction": [-1, 0, 0], "model": "b", "k": 1e4, "b": 10.0, "m": 2.0}}}}
-    assert_calls_are_the_readable_model(parse_scene(doc))
+    assert_calls_are_the_interpreted_call(parse_scene(doc))
 
 
 @pytest.mark.parametrize("name", ["case2_writer5dof", "case2_writer_ur5"])
 def test_the_operational_law_on_the_writers_stuck_launching_and_sliding(name):
     """The operational_space law with the pencil stuck (press), launched from rest and sliding in 2-D (circle)."""
-    _, segments = assert_calls_are_the_readable_model(load_scene(name, {"duration": 1.6}))
+    _, segments = assert_calls_are_the_interpreted_call(load_scene(name, {"duration": 1.6}))
     kinds = {(m.stuck, m.from_rest) for seg in segments for m in seg.modes if m.touching}
     assert kinds == {(True, False), (False, True), (False, False)}  # stuck, launching, sliding
 
@@ -104,7 +105,7 @@ def test_the_operational_law_on_a_1d_slide():
     doc["duration"] = 1.0
     doc["contact"]["pencil"]["tangent"]["directions"] = [[1.0, 0.0, 0.0]]
     doc["phase"][1]["reference"]["moves"] = [{"kind": "trapezoid", "delta": [0.02, 0.0, 0.0], "duration": 0.4}]
-    _, segments = assert_calls_are_the_readable_model(parse_scene(doc))
+    _, segments = assert_calls_are_the_interpreted_call(parse_scene(doc))
     assert {m.stuck for seg in segments for m in seg.modes if m.touching} == {True, False}
 
 
@@ -140,10 +141,10 @@ def test_the_packed_set_points_are_ramp_at_bitwise():
 
 
 @pytest.mark.parametrize("scene", ["case3_a_position", "case3_b_force"])  # position_dynamic; force_dynamic, a row
-def test_a_force_reading_law_is_folded_into_the_call_as_in_the_readable_model(scene):
+def test_a_force_reading_law_is_folded_into_the_call_as_in_the_interpreted_call(scene):
     """The press phase's law reads the measured force (folded into the KKT solve): at states near the start, every
-    contact touching, the call is the readable model's (dynamics.evaluate) to 1e-12 of 1 + |ẋ| (measured
-    ≤ 1.4e-16), every call with an answer."""
+    contact touching, the compiled call is the interpreted call's (interpreted_evaluate) to 1e-12 of 1 + |ẋ| (measured
+    0: bit for bit), every call with an answer."""
     system, modes, phase, x0 = prepare(load_scene(scene))
     press = start_phase(system, 1, 0.0, x0, phase)
     assert press.controller.uses_forces
@@ -152,6 +153,6 @@ def test_a_force_reading_law_is_folded_into_the_call_as_in_the_readable_model(sc
     rng = np.random.default_rng(5)
     for k in range(3):
         t, x = 0.02 * k, x0 + 1e-3 * rng.normal(size=system.n)
-        ref = readable_evaluate(system, t, x, touching, press).xdot
+        ref = interpreted_evaluate(system, t, x, touching, press).xdot
         assert np.abs(pipe.rhs(t, x) - ref).max() <= 1e-12 * (1.0 + np.abs(ref).max())
     assert pipe.failed_calls == 0

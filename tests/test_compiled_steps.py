@@ -4,13 +4,13 @@ solve_ivp's DOP853 on the same right-hand side; the dense output's batched deriv
 
 import numpy as np
 import pytest
+from run_agreement import interpreted_evaluate
 from scipy.integrate import solve_ivp
 
 from contactdyn import parse_scene
 from contactdyn.hybrid import steps
 from contactdyn.hybrid.loop import HybridRun
 from contactdyn.hybrid.pipeline_mode import PipelineMode
-from contactdyn.model import dynamics
 from contactdyn.model.pipeline.pipeline import Pipeline, call
 from contactdyn.model.system import System
 from contactdyn.numerics import dop853
@@ -89,13 +89,14 @@ def _two_tables(shift: float):
 
 def test_redundant_rows_that_agree_are_solved_in_the_call():
     """Two tables at one height: the KKT matrix singular but its system consistent; the call solves it by the
-    minimum-norm least squares (status 1, counted: not regular), the readable model's forces and rates to rounding."""
+    minimum-norm least squares (status 1, counted: not regular), the interpreted call's forces and rates to
+    rounding."""
     system, modes, phase, x = _two_tables(0.0)
     pipe = Pipeline(system, modes, phase)
     p = pipe.packed
     got = call(0.0, x.copy(), p.ints, p.reals, p.work, p.events)
     assert p.events[-1] == 1.0 and pipe.least_squares == 1
-    ref = dynamics.evaluate(system, 0.0, x, modes, phase)
+    ref = interpreted_evaluate(system, 0.0, x, modes, phase)
     assert not ref.regular
     assert np.abs(got - ref.xdot).max() <= 1e-10 * (1.0 + np.abs(ref.xdot).max())
     assert ref.normal_force["a"] == pytest.approx(ref.normal_force["b"], rel=1e-9)  # the load split evenly
@@ -103,30 +104,30 @@ def test_redundant_rows_that_agree_are_solved_in_the_call():
 
 def test_rows_that_disagree_are_solved_in_the_call_by_least_squares():
     """cylindrical3 on two rigid tables, the second 1 mm below, both touching: their rows are the same and their
-    Baumgarte terms are not, so the KKT system has no solution. The call answers with the readable model's
-    minimum-norm least squares (status 1, not 0: not a call with no answer, failed_calls 0): ẋ and λ as
-    ``dynamics.evaluate``'s to 1e-9, ``regular`` False on both paths, the call counted."""
+    Baumgarte terms are not, so the KKT system has no solution. The call answers with the minimum-norm least squares
+    (status 1, not 0: not a call with no answer, failed_calls 0): ẋ and λ as the interpreted call's
+    (``interpreted_evaluate``) to 1e-9, ``regular`` False on both paths, the call counted."""
     system, modes, phase, x = _two_tables(-1e-3)
     pipe = Pipeline(system, modes, phase)
     p = pipe.packed
     for t, state in ((0.0, x), (0.05, x + 1e-3 * np.arange(x.size))):
         got = call(t, state.copy(), p.ints, p.reals, p.work, p.events)
-        ref = dynamics.evaluate(system, t, state, modes, phase)
+        ref = interpreted_evaluate(system, t, state, modes, phase)
         assert p.events[-1] == 1.0 and not ref.regular
         assert np.abs(got - ref.xdot).max() <= 1e-9 * np.abs(ref.xdot).max()
     assert pipe.least_squares == 2 and pipe.failed_calls == 0
     mode = PipelineMode(pipe)
     ev = mode.evaluation(0.0, x)
-    ref = dynamics.evaluate(system, 0.0, x, modes, phase)
+    ref = interpreted_evaluate(system, 0.0, x, modes, phase)
     assert not ev.regular and mode.singular == 3 and pipe.failed_calls == 0
     assert np.abs(ev.lam - ref.lam).max() <= 1e-9 * np.abs(ref.lam).max()  # (min-norm: λ unique too)
     assert ev.normal_force == pytest.approx(ref.normal_force, rel=1e-9)
 
 
 def test_a_run_on_rows_that_disagree_takes_every_step_in_the_call():
-    """The same two tables 1 mm apart through 0.3 s (every call singular; before, each attempt declined and each step
-    was the readable model's): every DOP853 attempt is taken by the compiled call, no call without an answer, and
-    the run is the readable model's (scipy's core on ``dynamics.evaluate``) within the tolerance."""
+    """The same two tables 1 mm apart through 0.3 s (every call singular): every DOP853 attempt is taken by the
+    compiled call, no call without an answer, and the run is the interpreted call's (scipy's core on
+    ``interpreted_evaluate``) within the tolerance."""
     system, modes, phase, x = _two_tables(-1e-3)
     mode = PipelineMode(Pipeline(system, modes, phase))
     fun = mode.rhs
@@ -135,10 +136,10 @@ def test_a_run_on_rows_that_disagree_takes_every_step_in_the_call():
     assert mode.pipe.failed_calls == 0 and mode.singular == got.nfev
     assert got.status == 0 and taken and all(taken)  # every attempt in the call
 
-    def readable(t, x_):
-        return dynamics.evaluate(system, t, x_, modes, phase).xdot
+    def interpreted(t, x_):
+        return interpreted_evaluate(system, t, x_, modes, phase).xdot
 
-    ref = dop853.solve(readable, span, x, rtol=rtol, atol=atol)
+    ref = dop853.solve(interpreted, span, x, rtol=rtol, atol=atol)
     assert got.naccept == ref.naccept > 3 and got.nreject == ref.nreject
     assert np.abs(got.y[:, -1] - x).max() > 0.1  # it moved
     assert np.all(np.abs(got.y[:, -1] - ref.y[:, -1]) <= 10.0 * (atol + rtol * np.abs(ref.y[:, -1])))

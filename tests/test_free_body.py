@@ -10,20 +10,20 @@ Near pitch ±90° (chart A's singularity) the angles switch to chart B (R = Rz R
 a switch keeps the pose and velocities, a landing after one closes its energy audit; bad inputs are one SceneError
 each. Every mode runs on the compiled call (:mod:`contactdyn.model.pipeline`) in either chart: the body's chart-B
 rows of the rigid-body table and its frames' chart-B placements are picked by the state's chart slot, the
-readable model's rates to rounding.
+interpreted call's rates to rounding.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from run_agreement import interpreted_evaluate
 from test_lever import FREE_FLYER
 
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.errors import SceneError
 from contactdyn.hybrid.loop import HybridRun
 from contactdyn.hybrid.pipeline_mode import PipelineMode
-from contactdyn.model import dynamics
 from contactdyn.model.paths import INTERPRETED, PIPELINE, LivePipelines
 from contactdyn.model.pipeline.pipeline import Pipeline, call
 from contactdyn.model.system import System
@@ -266,9 +266,9 @@ def test_a_box_landing_after_a_tumble_through_pitch_90_degrees_closes_its_energy
 
 
 @pytest.mark.parametrize("touching", [False, True])
-def test_the_compiled_call_gives_the_readable_model_s_rates_in_either_chart(touching):
+def test_the_compiled_call_gives_the_interpreted_call_s_rates_in_either_chart(touching):
     """The drop_box mode packed once, called at random poses and velocities in chart A and in chart B (the box's
-    rows of the rigid-body table and its corners' placements turned by free_chart.C): the readable model's ẋ to
+    rows of the rigid-body table and its corners' placements turned by free_chart.C): the interpreted call's ẋ to
     1e-12 relative; read in the other chart's table it would be far off."""
     system, modes, phase, x = prepare(load_scene("drop_box"))
     modes = [m.with_(touching=touching) for m in modes]
@@ -283,7 +283,7 @@ def test_the_compiled_call_gives_the_readable_model_s_rates_in_either_chart(touc
         for chart in (0, 1):
             y[body.chart_index] = chart
             got = call(0.0, y.copy(), p.ints, p.reals, p.work, p.events)
-            refs.append(dynamics.evaluate(system, 0.0, y, modes, phase).xdot)
+            refs.append(interpreted_evaluate(system, 0.0, y, modes, phase).xdot)
             assert p.events[-1] == 1.0
             assert np.abs(got - refs[-1]).max() <= 1e-12 * (1.0 + np.abs(refs[-1]).max())
         assert np.abs(refs[1] - refs[0]).max() > 1e-3  # (the charts' rates differ: both were checked)
@@ -398,10 +398,10 @@ def test_the_command_line_names_each_corner_s_share_of_the_one_impact(tmp_path, 
     assert all(f"on c{k} (touching with c1): FΔt = 0.350179 N·s, F_fΔt = [] N·s" in lines[k - 1] for k in (2, 3, 4))
 
 
-def test_resting_on_four_corners_the_call_solves_the_singular_system_as_the_readable_model():
+def test_resting_on_four_corners_the_call_solves_the_singular_system_as_the_interpreted_call():
     """At rest on its four corners (12 coordinates, the box's 6 held by 4 rows: the KKT matrix singular, its system
-    consistent): the call takes the readable model's minimum-norm least squares (status 1, counted, not regular),
-    ẋ and each corner's m g / 4 as ``dynamics.evaluate``'s; a whole resting run counts its calls in
+    consistent): the call takes the minimum-norm least squares (status 1, counted, not regular), ẋ and each
+    corner's m g / 4 as the interpreted call's (``interpreted_evaluate``); a whole resting run counts its calls in
     ``singular_solves`` and has no call without an answer (``failed_calls``)."""
     system, modes, phase, x = prepare(load_scene("drop_box"))
     modes = [m.with_(touching=True) for m in modes]
@@ -409,7 +409,7 @@ def test_resting_on_four_corners_the_call_solves_the_singular_system_as_the_read
     pipe = Pipeline(system, modes, phase)
     p = pipe.packed
     got = call(0.0, x.copy(), p.ints, p.reals, p.work, p.events)
-    ref = dynamics.evaluate(system, 0.0, x, modes, phase)
+    ref = interpreted_evaluate(system, 0.0, x, modes, phase)
     assert p.events[-1] == 1.0 and pipe.least_squares == 1 and not ref.regular
     assert np.abs(got - ref.xdot).max() <= 1e-9 * (1.0 + np.abs(ref.xdot).max())
     ev = PipelineMode(pipe).evaluation(0.0, x)

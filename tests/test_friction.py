@@ -12,12 +12,12 @@ import math
 
 import numpy as np
 import pytest
+from run_agreement import interpreted_evaluate
 
 import contactdyn
 from contactdyn import SceneError, parse_scene, simulate
 from contactdyn.hybrid.pipeline_mode import mode_runner
 from contactdyn.model.contact import ContactMode
-from contactdyn.model.dynamics import evaluate as readable_evaluate
 from contactdyn.model.system import System
 from contactdyn.robot.robot import Robot
 
@@ -437,9 +437,9 @@ def test_bad_friction_inputs_name_the_key():
     assert "task_force" in contactdyn.laws.controllers.CONTROLLERS
 
 
-def test_2d_coulomb_on_a_moving_body_compiled_equals_the_readable_model():
+def test_2d_coulomb_on_a_moving_body_compiled_equals_the_interpreted_call():
     """A compliant (chain) contact on a cart with 2-D friction: the compiled call's Coulomb force, its tip share
-    and its reaction on the cart's row equal the readable model's (``dynamics.evaluate``) at slips in several
+    and its reaction on the cart's row equal the interpreted call's (``interpreted_evaluate``) at slips in several
     directions, and the cart takes the reaction μ_k F_n d_x in closed form."""
     from contactdyn.model.pipeline.pipeline import Pipeline
 
@@ -459,7 +459,7 @@ def test_2d_coulomb_on_a_moving_body_compiled_equals_the_readable_model():
         x = x0.copy()
         x[2] = -W / 1e6  # [m] pressed in: the compliant ground bears the weight
         x[nQ:nQ + 2] = v
-        ref = readable_evaluate(system, 0.1, x, modes, phase).xdot
+        ref = interpreted_evaluate(system, 0.1, x, modes, phase).xdot
         got[tuple(v)] = out = plan.rhs(0.1, x.copy())
         assert np.abs(out - ref).max() <= 1e-10 * (1.0 + np.abs(ref).max())
     for v, xdot in got.items():  # the cart (5 kg, free along x) takes the reaction μ_k F_n d_x, F_n = W

@@ -88,7 +88,7 @@ def test_a_joint_loaded_below_its_limit_never_creeps(tmp_path):
     assert np.ptp(r["q"][:, 1]) > 1.0  # the elbow swings
     assert np.all(r["joint_stuck"][:, 1] == 0.0) and np.all(r["joint_friction"][:, 1] == 0.0)  # no friction there
     # the shoulder's holding torque = its whole load: the elbow's reaction and both masses' gravity (checked on the
-    # readable model at a few samples: λ₁ = −(f₁ − H₁₂ q̈₂) with q̈₁ = 0)
+    # robot's own H and h at a few samples: λ₁ = −(f₁ − H₁₂ q̈₂) with q̈₁ = 0)
     system = System(parse_scene(doc))
     for k in (0, 333, 999):
         system.robot.update(r["q"][k], r["v"][k])
@@ -167,15 +167,15 @@ def test_bad_joint_friction_names_the_key_and_the_file(tmp_path, joint, expected
     assert info.value.key == key and expected in info.value.expected and str(path) in str(info.value)
 
 
-def test_the_compiled_call_is_the_readable_model_in_every_joint_mode(tmp_path):
+def test_the_compiled_call_is_the_interpreted_call_in_every_joint_mode(tmp_path):
     """Damping on both joints, the shoulder stuck (a row) and the elbow sliding (−s τ_k): the compiled call's
-    right-hand side, its event values and its output samples equal the readable model's (dynamics.evaluate)."""
+    right-hand side, its event values and its output samples equal the interpreted call's (interpreted_evaluate,
+    interpreted_samples)."""
     from dataclasses import replace
 
-    from run_agreement import readable_samples
+    from run_agreement import interpreted_evaluate, interpreted_samples
 
     from contactdyn.hybrid.pipeline_mode import PipelineMode
-    from contactdyn.model.dynamics import evaluate as readable_evaluate
     from contactdyn.model.pipeline.pipeline import Pipeline
 
     doc = scene(arm(tmp_path, 2, damping=0.05), [0.4, 1.2], 1.0, {"kind": "joint_pd", "kp": [0.0], "kd": [0.0]},
@@ -190,10 +190,10 @@ def test_the_compiled_call_is_the_readable_model_in_every_joint_mode(tmp_path):
         X = x + 0.1 * rng.normal(size=(5, system.n))
         ts = np.linspace(0.1, 0.5, 5)
         for t, state in zip(ts, X, strict=True):
-            ev = readable_evaluate(system, t, state, modes, phase, full=True)
+            ev = interpreted_evaluate(system, t, state, modes, phase)
             np.testing.assert_allclose(plan.rhs(t, state.copy()), ev.xdot, rtol=1e-12, atol=1e-12)
             assert plan.joint_hold(t, state) == pytest.approx(ev.joint_hold, rel=1e-12)
-        fast, slow = plan.samples(ts, X), readable_samples(system, ts, X, modes, phase)
+        fast, slow = plan.samples(ts, X), interpreted_samples(system, ts, X, modes, phase)
         np.testing.assert_allclose(fast.joint_friction, slow.joint_friction, rtol=1e-12, atol=1e-12)
         stuck = [i for i, m in joint_modes if m == 0]
         sliding = [(i, m) for i, m in joint_modes if m != 0]

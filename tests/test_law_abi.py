@@ -13,14 +13,16 @@ from pathlib import Path
 import numba
 import numpy as np
 import pytest
+from run_agreement import interpreted_evaluate
 
 from contactdyn import parse_scene
-from contactdyn.hybrid.pipeline_mode import mode_runner
+from contactdyn.hybrid.pipeline_mode import PipelineMode, mode_runner
 from contactdyn.laws import abi
 from contactdyn.laws.friction_laws import FRICTION_LAWS, Coulomb, FrictionLaw, FrictionSpec, Stribeck
 from contactdyn.laws.stage_laws import STAGE_LAWS, HuntCrossley, Linear, StageLaw, register_stage_law
 from contactdyn.model import chain_forces as cf
-from contactdyn.model.dynamics import evaluate as readable_evaluate
+from contactdyn.model.pipeline.pack import CH_NS, CH_STAGES, I_CHAINS
+from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.simulate import prepare
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -138,14 +140,16 @@ def _axis_scene(law: str, extra: dict | None = None):
 
 
 def _evaluations(law: str, extra: dict | None = None, states: int = 3):
-    """(stages, xdot) of the readable model at the start and at states with the mass and the tip moved."""
+    """(stages, xdot) of the model on the compiled call (``PipelineMode.evaluation``; under NUMBA_DISABLE_JIT=1 the
+    same source interpreted) at the start and at states with the mass and the tip moved."""
     system, modes, phase, x = prepare(_axis_scene(law, extra))
+    mode = mode_runner(system)(modes, phase)
     out = []
     for i in range(states):
         xi = x.copy()
         xi[system.nv] += 1e-4 * i  # the mass [m]
         xi[system.nQ] += 0.05 * i  # the axis' speed [m/s]
-        ev = readable_evaluate(system, 0.0, xi, modes, phase, full=True)
+        ev = mode.evaluation(0.0, xi)
         out.append((dict(ev.stages), ev.xdot.copy()))
     return system, out
 
@@ -155,7 +159,8 @@ def test_a_law_numba_cannot_compile_is_declared_and_computed_in_python(uncompila
     assert uncompilable_law.compiled_reason.startswith("numba cannot compile")
     assert "_SCALE" in uncompilable_law.compiled_reason
     system, got = _evaluations("uncompilable")
-    arrays = next(iter(system.contacts[0].normal.arrays.values()))
+    c = system.contacts[0]
+    arrays = cf.pack(system, c, c.normal, True, False)  # (the chain's plan touching, as the call packs it)
     assert [k for k, _ in arrays.python_stages] == [0]  # the stage of that law, and only it, in Python
     _, want = _evaluations("linear")
     for (stages, xdot), (stages_lin, xdot_lin) in zip(got, want, strict=True):
@@ -164,15 +169,20 @@ def test_a_law_numba_cannot_compile_is_declared_and_computed_in_python(uncompila
 
 
 def test_the_chain_calls_each_law_through_the_address_in_its_arrays():
+    """The compiled call reads each stage's law from the chain's stage table packed into its ints: the two laws
+    swapped there, each stage computes with the other's law (and its parameters)."""
     system, modes, phase, x = prepare(_axis_scene("cubic", {"k3": 1e12}))
     x[system.nv], x[system.nQ] = x[system.nv] + 1e-4, 0.05  # the mass moved [m], the axis moving [m/s]
-    declared = readable_evaluate(system, 0.0, x, modes, phase, full=True).stages
-    (a,) = system.contacts[0].normal.arrays.values()
-    laws = a.stages[:, cf.S_LAW].copy()
+    mode = PipelineMode(Pipeline(system, modes, phase))
+    declared = mode.evaluation(0.0, x).stages
+    ints = mode.pipe.packed.ints
+    chain = ints[ints[I_CHAINS]:]  # (the one chain: the normal's)
+    stages = ints[chain[CH_STAGES]:chain[CH_STAGES] + 7 * chain[CH_NS]].reshape(chain[CH_NS], 7)  # (a view)
+    laws = stages[:, cf.S_LAW].copy()
     assert list(laws) == [abi.stage_address(Cubic), abi.stage_address(Linear)]
     law_columns = [cf.S_LAW, cf.S_PARAMS_AT, cf.S_N_PARAMS]  # a law's address and where its parameters are
-    a.stages[:, law_columns] = a.stages[::-1, law_columns].copy()  # the two laws swapped in the table
-    swapped = readable_evaluate(system, 0.0, x, modes, phase, full=True).stages
+    stages[:, law_columns] = stages[::-1, law_columns].copy()  # the two laws swapped in the table
+    swapped = mode.evaluation(0.0, x).stages
     (x0, xd0, F0), (x1, xd1, F1) = swapped["tip.n.env1"], swapped["tip.n.env2"]
     assert x0 * x1 != 0.0  # both stages deformed
     assert F0 == Linear.force(K, B, (), x0, xd0)  # stage 1's k and b under the linear law
@@ -218,8 +228,12 @@ def test_registered_laws_compile():
 def test_a_pickled_chain_packs_again_in_its_new_process():
     import pickle
 
+    from contactdyn.model.constraints import velocity_rows
+
     system, modes, phase, x = prepare(_axis_scene("hunt_crossley", {"exponent": 1.5}))
-    readable_evaluate(system, 0.0, x, modes, phase)
+    assert modes[0].touching  # (bonded)
+    system.robot.update(x[:system.nv], x[system.nQ:system.nQ + system.nv])
+    velocity_rows(system, x, modes)  # (the bond's row: the chain's forces, its arrays packed and kept)
     dc = system.contacts[0].normal
     assert dc.arrays  # packed, with the laws' addresses of this process
     assert pickle.loads(pickle.dumps(dc)).arrays == {}  # another process would pack with its own
@@ -242,17 +256,17 @@ def raising_law(stage_law_registry):
 
 
 def test_a_compiled_law_that_raises_raises_its_own_error_not_a_zero_force(raising_law):
-    """The readable model and the interpreted call raise the law's own error; so does the compiled call, whose cfunc
-    cannot carry it out (status -1): the call is run once more interpreted there (Pipeline.failed_call). Never a
-    zero force."""
+    """The interpreted call raises the law's own error (its evaluation and its right-hand side); so does the compiled
+    call, whose cfunc cannot carry it out (status -1): the call is run once more interpreted there
+    (Pipeline.failed_call). Never a zero force."""
     assert abi.stage_address(raising_law)  # it compiles: numba compiles the raise
     system, modes, phase, x = prepare(_axis_scene("raising"))
     compiled, interpreted = (mode_runner(system, compiled=c)(modes, phase) for c in (True, False))
-    readable_evaluate(system, 0.0, x, modes, phase)  # undeformed: a force
+    interpreted_evaluate(system, 0.0, x, modes, phase)  # undeformed: a force
     assert np.all(np.isfinite(compiled.rhs(0.0, x.copy()))) and np.all(np.isfinite(interpreted.rhs(0.0, x.copy())))
     x[system.nv] -= 1e-4  # the mass moved down [m]: the law's stage compressed beyond its range
     with pytest.raises(ValueError, match="compression beyond its range"):
-        readable_evaluate(system, 0.0, x, modes, phase)
+        interpreted_evaluate(system, 0.0, x, modes, phase)
     with pytest.raises(ValueError, match="compression beyond its range"):
         interpreted.rhs(0.0, x.copy())
     with pytest.raises(ValueError, match="compression beyond its range"):

@@ -5,7 +5,7 @@ at the arm a = 0.4 m, lifts it by sliding along it (Coulomb, μ = 0.3) and holds
 θ̈ = −m g d sin θ / I_O and its energy; the strike's plastic impulse from the angular momentum about the pivot;
 a static hold's normal force m g d sin θ / a; the energy audit closing; the rows by finite differences. The
 scene runs on the compiled call (the bar's joint appended to the tool's in the rigid-body table,
-``rigid_body.forest_table``), its right-hand side the readable model's to rounding (a free body's too:
+``rigid_body.forest_table``), its right-hand side the interpreted call's to rounding (a free body's too:
 tests/test_free_body.py). Unsupported inputs are one SceneError each.
 """
 
@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from run_agreement import interpreted_evaluate
 
 from contactdyn import load_scene, parse_scene, simulate
 from contactdyn.errors import SceneError
 from contactdyn.hybrid.pipeline_mode import mode_runner
-from contactdyn.model.dynamics import evaluate as readable_evaluate
 from contactdyn.model.paths import PIPELINE
 from contactdyn.model.pipeline.pack import unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
@@ -294,9 +294,9 @@ def test_with_2d_friction_along_the_bar_the_lever_moves_as_with_1d():
 
 @pytest.mark.parametrize("edits, stuck", [({}, False), ({}, True), (_hold(0.6, 1.5), True), (_bar_point(), False),
                                           (_bar_point(on_tool=True), False)])
-def test_the_compiled_call_gives_the_readable_model_s_rates(edits, stuck):
+def test_the_compiled_call_gives_the_interpreted_call_s_rates(edits, stuck):
     """At states off the start (the tool and the bar moved and moving), touching or not, sliding or stuck: the
-    compiled call's ẋ is the readable model's (``dynamics.evaluate``) to rounding (the bar's H_b, h_b, its frame
+    compiled call's ẋ is the interpreted call's (``interpreted_evaluate``) to rounding (the bar's H_b, h_b, its frame
     and its point from the rigid-body table)."""
     system = _system(**edits)
     x0, modes, phase, _ = _start(system, stuck)
@@ -310,6 +310,6 @@ def test_the_compiled_call_gives_the_readable_model_s_rates(edits, stuck):
             x = x0.copy()
             x[:nQ] += 0.02 * rng.standard_normal(nQ)
             x[nQ:2 * nQ] += 0.5 * rng.standard_normal(nQ)
-            want = readable_evaluate(system, 0.1, x, ms, phase).xdot
+            want = interpreted_evaluate(system, 0.1, x, ms, phase).xdot
             np.testing.assert_allclose(pipeline.rhs(0.1, x), want, rtol=0, atol=1e-12 * (1 + np.abs(want).max()))
             assert pipeline.failed_calls == 0

@@ -1,7 +1,7 @@
-"""Modes the compiled call used to decline, now packed (issue 29: the readable model's assembly must become
-deletable), each against the readable model's own assembly (``contactdyn.model.dynamics.evaluate``): ẋ at a few
-states of the mode, and a short whole run whose every mode takes the compiled call, its channels and events the
-interpreted run's (the same call run as its twins).
+"""Modes the compiled call used to decline, now packed (issue 29: the readable model's assembly had to become
+deletable), each against the interpreted call (the same call run as its twins, ``run_agreement.interpreted_evaluate``):
+ẋ at a few states of the mode, and a short whole run whose every mode takes the compiled call, its channels and
+events the interpreted run's.
 
 - A force-reading law with a turning surface: the lever's face (a surface on an articulated body's frame) and the
   tilting tray (a surface on a robot frame, a body's point on it), under examples/force_law.py's force PI law
@@ -13,7 +13,7 @@ interpreted run's (the same call run as its twins).
   of that coordinate, which the cart shares with the pendulum in H_b). A scene cannot name such a body yet
   (``reference.body``: a SceneError), so the tests set the phase's reference body on the parsed scene.
 - Two 2-D slides launching from rest at once: the UR5's pencil on the table and its wrist on a wall, the compiled
-  launch nesting the later contact's Newton inside each trial of the earlier one's, as the readable model does.
+  launch nesting the later contact's Newton inside each trial of the earlier one's (as the readable model did).
 """
 
 from __future__ import annotations
@@ -25,18 +25,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from run_agreement import assert_runs_agree
+from run_agreement import assert_runs_agree, interpreted_evaluate
 
 from contactdyn import parse_scene, simulate
-from contactdyn.hybrid.pipeline_mode import PipelineMode
-from contactdyn.model.dynamics import evaluate, measurement
-from contactdyn.model.friction import (
-    launch_directions,
-    launch_directions_at,
-    launching,
-    slip_acceleration,
-    slip_velocity,
-)
+from contactdyn.hybrid.pipeline_mode import PipelineMode, mode_runner
+from contactdyn.model.friction import launching
 from contactdyn.model.paths import LivePipelines
 from contactdyn.model.pipeline.pack import CARRIER, READS_FORCES, unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
@@ -100,8 +93,8 @@ def _states(x0: np.ndarray, count: int = 4) -> list[np.ndarray]:
 
 
 def _assert_rates_agree(pipe, system, modes, phase, t, xs) -> np.ndarray:
-    """The pipeline's ẋ is the readable model's at each state (RTOL per component); the readable ẋ's."""
-    refs = np.array([evaluate(system, t, x, modes, phase).xdot for x in xs])
+    """The pipeline's ẋ is the interpreted call's at each state (RTOL per component); the interpreted ẋ's."""
+    refs = np.array([interpreted_evaluate(system, t, x, modes, phase).xdot for x in xs])
     got = np.array([pipe.rhs(t, x.copy()) for x in xs])
     assert pipe.failed_calls == 0  # (every call answered: each ẋ is the pipeline's own)
     scale = 1.0 + np.abs(refs).max(axis=0)
@@ -120,8 +113,8 @@ def _both_ways(scene_of, monkeypatch):
 
 @pytest.mark.parametrize("scene_of", [lever_pi, tray_pi], ids=["lever_face", "tilting_tray"])
 @pytest.mark.parametrize("stuck", [False, True], ids=["sliding", "stuck"])
-def test_a_force_reading_law_with_a_turning_surface_runs_compiled_with_the_readable_rates(scene_of, stuck):
-    """ẋ the readable model's; and the fold is what makes it so: without B the rates are off (the turning
+def test_a_force_reading_law_with_a_turning_surface_runs_compiled_with_the_interpreted_rates(scene_of, stuck):
+    """ẋ the interpreted call's; and the fold is what makes it so: without B the rates are off (the turning
     contact's rows reach a body, so the law reads their force through τ_c)."""
     system, modes, phase, t, x0 = _touching(scene_of(), stuck)
     assert any(c.turning for c in system.contacts) and phase.controller.uses_forces
@@ -134,17 +127,18 @@ def test_a_force_reading_law_with_a_turning_surface_runs_compiled_with_the_reada
     assert float(np.abs(unfolded - refs).max()) > 1e-6 * float(np.abs(refs).max())
 
 
-def test_a_sampled_force_law_measures_a_turning_contact_on_the_compiled_call_as_the_readable_model():
+def test_a_sampled_force_law_measures_a_turning_contact_on_the_compiled_call_as_the_interpreted_call():
     """The lever under force PI sampled at 1 kHz: the measured forces and τ_c (the rows of the turning face reach
-    the bar) off the compiled call are the readable model's."""
+    the bar) off the compiled call are the interpreted call's."""
     scene = lever_pi()
     doc = dict(scene.document)
     doc["controller"] = {**doc["controller"], "sample_rate": 1000.0}
     system, modes, phase, t, x0 = _touching(_parse(doc, "sims/lever.toml"), stuck=False)
     assert unsupported(system, modes, phase) == ""
-    mode = PipelineMode(Pipeline(system, modes, phase))
+    mode, twin = PipelineMode(Pipeline(system, modes, phase)), mode_runner(system, compiled=False)(modes, phase)
+    assert twin.interpreted
     for x in _states(x0, 3):
-        got, ref = mode.measurement(t, x), measurement(system, t, x, modes, phase)
+        got, ref = mode.measurement(t, x), twin.measurement(t, x)
         scale = 1.0 + float(np.abs(ref.tau_contact).max())
         np.testing.assert_allclose(got.tau_contact, ref.tau_contact, rtol=0, atol=1e-12 * scale)
         for c in system.contacts:
@@ -203,9 +197,9 @@ def cart_carried(urdf: str, controller: dict, duration: float = 0.3):
 
 @pytest.mark.parametrize("controller", [OPERATIONAL, POSITION_DYNAMIC], ids=["operational_space", "A7"])
 @pytest.mark.parametrize("touching", [False, True], ids=["apart", "sliding"])
-def test_a_reference_carried_by_an_articulated_body_runs_compiled_with_the_readable_rates(cart_urdf, controller,
-                                                                                        touching):
-    """ẋ the readable model's; and the carrier is what makes it so: without it the rates are off."""
+def test_a_reference_carried_by_an_articulated_body_runs_compiled_with_the_interpreted_rates(cart_urdf, controller,
+                                                                                           touching):
+    """ẋ the interpreted call's; and the carrier is what makes it so: without it the rates are off."""
     system, modes, phase, x0 = prepare(cart_carried(cart_urdf, controller))
     modes = [m.with_(touching=touching) for m in modes]
     body = system.articulated["lever"]
@@ -261,27 +255,40 @@ def ur5_wall(mu_pencil: float = 0.4, mu_wall: float = 0.5, duration: float = 4.5
     return _parse(doc, UR5)
 
 
-def _in_order(system, t: float, x: np.ndarray, modes, phase) -> np.ndarray:
-    """ẋ with the directions found contact after contact, each Newton with the later contacts sliding along their
-    r (not launched inside its trials: the order the compiled call launched in before nesting)."""
-    nQ, nv = system.nQ, system.nv
-
-    def slip_of(i: int) -> np.ndarray:
-        system.robot.update(x[:nv], x[nQ:nQ + nv])
-        return slip_velocity(system, system.contacts[i], system.kinematics(system.contacts[i], x))
-
-    def acceleration_of(trial, i: int) -> np.ndarray:
-        flat = [m.with_(from_rest=False) for m in trial]
-        return slip_acceleration(system, system.contacts[i], x, evaluate(system, t, x, flat, phase).xdot)
-
-    return evaluate(system, t, x, launch_directions(system, modes, slip_of, acceleration_of), phase).xdot
+def _launched_along(system, x: np.ndarray, xdot: np.ndarray, i: int) -> np.ndarray:
+    """The direction contact i launched along at rest (x's velocities 0): where its tip accelerates,
+    d = a_t / |a_t| (a_t: the tangents' J Q̈; a converged Newton's d has a_t(d) ∥ d ahead)."""
+    nQ, nv, c = system.nQ, system.nv, system.contacts[i]
+    system.robot.update(x[:nv], x[nQ:nQ + nv])
+    kin = system.kinematics(c, x)
+    a_t = np.asarray(kin.tangents) @ (kin.J @ xdot[nQ:nQ + nv])
+    return a_t / np.linalg.norm(a_t)
 
 
-def test_two_slides_launching_at_once_run_compiled_with_the_readable_rates():
+def _sliding(system, modes, phase, t: float, x: np.ndarray, slips) -> np.ndarray:
+    """ẋ with every contact sliding along ``slips`` (from_rest False: no launch), on the compiled call."""
+    flat = [m.with_(slip=tuple(s), from_rest=False) for m, s in zip(modes, slips, strict=True)]
+    return Pipeline(system, flat, phase).rhs(t, x.copy())
+
+
+def _in_order(system, modes, phase, t: float, x: np.ndarray) -> np.ndarray:
+    """ẋ with the directions found contact after contact (the order the compiled call launched in before nesting):
+    the pencil's Newton with the wrist sliding along its r, then the wrist's with the pencil sliding along the
+    direction found (each a launch of one contact on the compiled call)."""
+    r_wall = modes[1].slip
+    first = [modes[0], modes[1].with_(from_rest=False)]
+    d_pencil = _launched_along(system, x, Pipeline(system, first, phase).rhs(t, x.copy()), 0)
+    second = [modes[0].with_(slip=tuple(d_pencil), from_rest=False), modes[1]]
+    assert np.abs(d_pencil - modes[0].slip).max() > 1e-3 and launching(second[1]) and r_wall == second[1].slip
+    return Pipeline(system, second, phase).rhs(t, x.copy())
+
+
+def test_two_slides_launching_at_once_run_compiled_with_the_interpreted_rates():
     """The pencil and the wrist on the wall, both sliding from rest (the robot at rest) along r = (1, 0) and
     (cos 60°, sin 60°): both Newtons converge off r at x0 (the pencil to (0.9996, 0.0281), the wrist to
-    (0.4373, 0.8993)). The call nests them as the readable model does (each trial of the pencil's launches the wrist
-    first): ẋ the readable model's at x0 and near it; launched in order instead, ẋ misses by ~1e-2 at x0."""
+    (0.4373, 0.8993): where each tip accelerates, and sliding along them gives the launched ẋ). The call nests them
+    (each trial of the pencil's launches the wrist first): ẋ the interpreted call's at x0 and near it; launched in
+    order instead, ẋ misses by ~1e-2 at x0."""
     system, modes, phase, x0 = prepare(ur5_wall())
     phase = system.start_phase(1, phase.t_start + 1.0, x0, phase)
     slips = ((1.0, 0.0), (0.5, float(np.sqrt(0.75))))
@@ -290,10 +297,13 @@ def test_two_slides_launching_at_once_run_compiled_with_the_readable_rates():
     t, xs = phase.t_start + 0.0123, _states(x0)
     for x in xs:
         x[system.nQ:2 * system.nQ] = 0.0  # at rest: both inside the stick band
-    found = launch_directions_at(system, t, xs[0], modes, phase, evaluate)
-    assert all(np.abs(np.subtract(f.slip, s)).max() > 1e-2 for f, s in zip(found, slips, strict=True))
     refs = _assert_rates_agree(Pipeline(system, modes, phase), system, modes, phase, t, xs)
-    in_order = _in_order(system, t, xs[0], modes, phase)
+    found = [_launched_along(system, xs[0], refs[0], i) for i in range(2)]
+    np.testing.assert_allclose(found, [[0.9996, 0.0281], [0.4373, 0.8993]], rtol=0, atol=1e-4)
+    assert all(np.abs(np.subtract(f, s)).max() > 1e-2 for f, s in zip(found, slips, strict=True))
+    along = _sliding(system, modes, phase, t, xs[0], found)
+    assert float((np.abs(along - refs[0]) / (1.0 + np.abs(refs).max(axis=0))).max()) <= 1e-9
+    in_order = _in_order(system, modes, phase, t, xs[0])
     assert float((np.abs(in_order - refs[0]) / (1.0 + np.abs(refs).max(axis=0))).max()) > 1e-4
 
 

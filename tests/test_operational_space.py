@@ -122,12 +122,11 @@ def test_on_a_rigid_surface_at_rest_the_normal_force_is_the_set_point():
 
 @pytest.mark.parametrize("robot", ["panda", "ur5"])
 def test_the_compiled_right_hand_side_calls_the_same_law(robot):
-    """The writing scene's first mode runs on the one pipeline, and its call equals the readable model's
-    (dynamics.evaluate; 1e-10 relative; measured ≤ 4.8e-14, the Panda) along 20 ms of the run, every call answered
+    """The writing scene's first mode runs on the one pipeline, and its compiled call equals the interpreted call's
+    (run_agreement.interpreted_evaluate; 1e-10 relative; measured 0) along 20 ms of the run, every call answered
     (no failed call): one law, two paths."""
+    from run_agreement import interpreted_evaluate
     from scipy.integrate import solve_ivp
-
-    from contactdyn.model.dynamics import evaluate as readable_evaluate
 
     scene = load_scene("case2_writer_ur5", {"robot.urdf": robot, "robot.tip": TOOL_FRAMES[robot]})
     system, modes, phase, x0 = prepare(scene)
@@ -135,7 +134,7 @@ def test_the_compiled_right_hand_side_calls_the_same_law(robot):
     sol = solve_ivp(pipe.rhs, (0.0, 0.02), x0, method="DOP853", rtol=1e-8, atol=1e-10)
     assert len(sol.t) >= 3
     for t, x in zip(sol.t, sol.y.T, strict=True):
-        ref = readable_evaluate(system, t, x, modes, phase).xdot
+        ref = interpreted_evaluate(system, t, x, modes, phase).xdot
         np.testing.assert_allclose(pipe.rhs(t, x), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
     assert pipe.failed_calls == 0
 
@@ -180,7 +179,7 @@ def test_more_task_directions_than_joints_is_a_scene_error():
 
 
 def test_the_compiled_law_is_the_module_formula():
-    """operational_law.torque (run by the readable law and the pipeline's call) against the formula in numpy:
+    """operational_law.torque (run by the law's command and the pipeline's call) against the formula in numpy:
     τ = J_tᵀ (Λ (a* − J̇_t q̇ + k_null J_t q̇) + f) − k_null H q̇ + h, on random inputs of a 7-joint arm, to 1e-10."""
     from contactdyn.laws.controllers import operational_law
 

@@ -1,16 +1,16 @@
 """The batched output of the one pipeline's modes (PipelineMode.samples: every output sample of a segment in one
-compiled call) equals the readable model per sample.
+compiled call) equals the same call interpreted.
 
-Each scene runs twice on the same integration: once with the pipeline's batched output, once with every output
-sample from the readable model's ``dynamics.evaluate(full=True)`` (``run_agreement.readable_samples``). Every
-channel must agree to 1e-10 (relative to 1 + the channel's largest magnitude; measured ≤ 4.6e-15, case1_cart's τ).
+Each scene runs twice on the same integration: once with the pipeline's compiled batched output, once with every
+output sample from the interpreted call (``run_agreement.interpreted_samples``). Every channel must agree to 1e-10
+(relative to 1 + the channel's largest magnitude).
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from run_agreement import readable_samples
+from run_agreement import interpreted_samples
 
 from contactdyn import Robot, parse_scene
 from contactdyn.hybrid.pipeline_mode import PipelineMode
@@ -23,10 +23,17 @@ from contactdyn.simulate import simulate
 SCENES = {"case1_cart": 1.1, "case2_writer_motors": 0.3, "case3_a_force": 0.3, "case3_b_force": 0.3, "b1": 0.3}
 
 
-def _readable(mode, ts, X, modes=None, runs=None):
-    """PipelineMode.samples by the readable model per sample (``runs``: its batches' runs, one sample at a time
-    here)."""
-    return readable_samples(mode.system, ts, X, modes if modes is not None else mode.modes, mode.phase)
+_SAMPLES = PipelineMode.samples  #: the method itself, before a test replaces it
+_BATCHES: list[int] = []  #: the batches sampled by the interpreted call in place of a compiled mode (their sizes)
+
+
+def _interpreted(mode, ts, X, modes=None, runs=None):
+    """PipelineMode.samples of a compiled mode by the same call interpreted (``runs``: its batches' runs, unused:
+    the interpreted call's samples take the whole batch); the interpreted runner's own samples as they are."""
+    if mode.interpreted:
+        return _SAMPLES(mode, ts, X, modes, runs)
+    _BATCHES.append(len(ts))
+    return interpreted_samples(mode.system, ts, X, modes if modes is not None else mode.modes, mode.phase)
 
 
 #: a prismatic axis under a joint PD asking far more than its voltage limit gives: it clips, then settles
@@ -44,8 +51,10 @@ def _clipping_axis(drive: dict) -> dict:
 def _assert_same_channels(scene, overrides, monkeypatch):
     fast = simulate(scene, overrides)
     assert {row["path"] for row in fast.stats["paths"].values()} == {PIPELINE}  # every sample batched
-    monkeypatch.setattr(PipelineMode, "samples", _readable)
+    monkeypatch.setattr(PipelineMode, "samples", _interpreted)
+    _BATCHES.clear()
     ref = simulate(scene, overrides)
+    assert sum(_BATCHES) == len(ref.channels["t"])  # every sample of the reference on the interpreted call
     assert fast.channels.keys() == ref.channels.keys()
     assert np.array_equal(fast.channels["t"], ref.channels["t"])
     for name, want in ref.channels.items():
@@ -57,7 +66,7 @@ def _assert_same_channels(scene, overrides, monkeypatch):
 
 
 @pytest.mark.parametrize("scene", SCENES)
-def test_batched_output_equals_evaluate(scene, monkeypatch):
+def test_batched_output_equals_the_interpreted_call(scene, monkeypatch):
     _assert_same_channels(scene, {"duration": SCENES[scene], "solver.output_rate": 500.0}, monkeypatch)
 
 

@@ -1,8 +1,9 @@
 """Drives and motors in the one pipeline (contactdyn/model/pipeline/drives.py): each drive's output (applied force,
-voltage, clip, power, dissipation) is the readable ``Drives.apply``'s, a kind enters by its address (a user's kind
-too), and a kind numba cannot compile is declined by name. The rates of the motor cases (case 1's cart, case 2's
-writer, case 3's elastic axis, the real cell's clipped motors) are checked against the readable model
-(dynamics.evaluate) with every other case in test_pipeline_proto.py."""
+voltage, clip, power, dissipation) is the interpreted call's and its kind's own law's (``DriveKind.force`` at the
+voltage the call gave), a kind enters by its address (a user's kind too), and a kind numba cannot compile is a
+declared Python stage, named. The rates of the motor cases (case 1's cart, case 2's writer, case 3's elastic axis,
+the real cell's clipped motors) are checked against the interpreted call (run_agreement.interpreted_evaluate) with
+every other case in test_pipeline_proto.py."""
 
 from __future__ import annotations
 
@@ -17,40 +18,60 @@ import pytest
 BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
 sys.path.insert(0, str(BENCH))
 from pipeline_proto import agreement, case, states  # noqa: E402
+from run_agreement import interpreted_evaluate  # noqa: E402
 
 from contactdyn import parse_scene  # noqa: E402
 from contactdyn.laws import DriveKind, Param, register_drive_kind  # noqa: E402
-from contactdyn.model.dynamics import drive_command  # noqa: E402
-from contactdyn.model.dynamics import evaluate as readable_evaluate  # noqa: E402
 from contactdyn.model.pipeline.pack import unsupported  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
+from contactdyn.numerics.twins import Twins  # noqa: E402
 from contactdyn.scene.scene_file import sims_dir  # noqa: E402
 from contactdyn.simulate import prepare  # noqa: E402
 
-RTOL = 1e-12  #: as test_pipeline_proto.py: the robot's terms and the LU differ from Pinocchio's and LAPACK's order
+RTOL = 1e-12  #: as test_pipeline_proto.py (compiled against interpreted: the same operations, rounding apart)
 
 
-def _readable_drives(system, ev, x):
-    """The readable DriveOutput at a solved evaluation: Drives.apply on the command the controller gave."""
-    return system.drives.apply(drive_command(system, ev.tau_cmd, x), x, system.nQ, np.zeros(system.nQ))
+def _kind_outputs(system, u, x):
+    """(applied [N·m or N], power, dissipation [W]) of each drive's own law (``DriveKind.force``, Python) at the
+    voltages ``u`` [V] and the state x: what the drives deliver at those voltages."""
+    drives, nQ = system.drives, system.nQ
+    applied, power, dissipation = [], 0.0, 0.0
+    for i, spec in enumerate(drives.specs):
+        q, qd = x[drives.coords[i]], x[nQ + drives.coords[i]]
+        m = drives.motor_coords[i]
+        theta, omega = (x[m], x[nQ + m]) if m >= 0 else (np.nan, np.nan)
+        F, _, P, D = spec.law.force(spec, u[i], q, qd, theta, omega)
+        applied.append(F)
+        power, dissipation = power + P, dissipation + D
+    return np.array(applied), power, dissipation
 
 
 @pytest.mark.parametrize("name", ["cart_motors", "writer_motors_write", "case3a_touch", "real_cell_clip"])
-def test_each_drives_output_is_the_readable_ones(name):
-    """Applied force per drive (joints, then the cart's wheel motor), voltage, clip, power and dissipation."""
+def test_each_drives_output_is_the_interpreted_ones(name):
+    """Applied force per drive (joints, then the cart's wheel motor), voltage, clip, power and dissipation: the
+    interpreted call's (the same call run as Python) and, at the voltages it gave, each kind's own law's."""
     system, modes, phase, t, x0 = case(name)
-    pipe = Pipeline(system, modes, phase)
+    pipe, twin = Pipeline(system, modes, phase), Pipeline(system, modes, phase, Twins())
+    assert all(spec.law.motorized and spec.law.has_voltage for spec in system.drives.specs)
+    clipped = 0
     for x in states(x0, 3):
         pipe.rhs(t, x)
-        got, ev = pipe.values()["drives"], readable_evaluate(system, t, x, modes, phase)
-        out = _readable_drives(system, ev, x)
-        scale = 1.0 + np.abs(out.applied).max()
-        np.testing.assert_allclose(got["applied"], out.applied, rtol=0, atol=RTOL * scale)
+        twin.rhs(t, x.copy())
+        got, ref = pipe.values()["drives"], twin.values()["drives"]
+        ev = interpreted_evaluate(system, t, x, modes, phase)
+        scale = 1.0 + np.abs(ref["applied"]).max()
+        np.testing.assert_allclose(got["applied"], ref["applied"], rtol=0, atol=RTOL * scale)
         np.testing.assert_allclose(got["applied"], np.concatenate((ev.tau, ev.body_force)), rtol=0, atol=RTOL * scale)
-        np.testing.assert_allclose(got["u"], out.u, rtol=0, atol=RTOL * (1.0 + np.nanmax(np.abs(out.u))))
-        assert np.array_equal(got["clipped"], out.saturated)
-        assert got["power"] == pytest.approx(out.power, abs=RTOL * (1.0 + abs(out.power)))
-        assert got["dissipation"] == pytest.approx(out.dissipation, abs=RTOL * (1.0 + abs(out.dissipation)))
+        np.testing.assert_allclose(got["u"], ref["u"], rtol=0, atol=RTOL * (1.0 + np.nanmax(np.abs(ref["u"]))))
+        assert np.array_equal(got["clipped"], ref["clipped"])
+        assert got["power"] == pytest.approx(ref["power"], abs=RTOL * (1.0 + abs(ref["power"])))
+        assert got["dissipation"] == pytest.approx(ref["dissipation"], abs=RTOL * (1.0 + abs(ref["dissipation"])))
+        applied, power, dissipation = _kind_outputs(system, got["u"], x)
+        np.testing.assert_allclose(got["applied"], applied, rtol=0, atol=RTOL * scale)
+        assert got["power"] == pytest.approx(power, abs=RTOL * (1.0 + abs(power)))
+        assert got["dissipation"] == pytest.approx(dissipation, abs=RTOL * (1.0 + abs(dissipation)))
+        clipped += int(got["clipped"].any())
+    assert clipped == (3 if name == "real_cell_clip" else 0)
     assert pipe.failed_calls == 0
 
 
@@ -88,7 +109,7 @@ def test_a_clipped_motor_delivers_the_force_of_its_limit():
     system, modes, phase, t, x0 = case("real_cell_clip")
     pipe = Pipeline(system, modes, phase)
     pipe.rhs(t, x0)
-    got, ev = pipe.values()["drives"], readable_evaluate(system, t, x0, modes, phase)
+    got, ev = pipe.values()["drives"], interpreted_evaluate(system, t, x0, modes, phase)
     assert got["clipped"].tolist() == [False, True]
     s, qd = system.drives.specs[1], x0[system.nQ + 1]
     u = np.copysign(24.0, got["u"][1])
@@ -100,7 +121,7 @@ def test_a_clipped_motor_delivers_the_force_of_its_limit():
 
 def test_a_voltage_controllers_voltages_act_as_they_are():
     """Case 2's motors under open-loop voltages (30, −2) V, a 28 V limit: the shoulder's clips, the elbow's acts as
-    it is; the drives' outputs are Drives.apply's with its voltage mask, the rates the readable model's."""
+    it is; each motor's torque is eq. 51 at its voltage (28 and −2 V), the rates the interpreted call's."""
     from contactdyn.model.pipeline.drives import DI_BY_VOLTAGE, drive_table
 
     system, modes, phase, t, x0 = case("writer_motors_voltage")
@@ -109,18 +130,17 @@ def test_a_voltage_controllers_voltages_act_as_they_are():
     pipe = Pipeline(system, modes, phase)
     for x in states(x0, 2):
         xdot = pipe.rhs(t, x)
-        got, ev = pipe.values()["drives"], readable_evaluate(system, t, x, modes, phase)
-        ref = system.drives.apply(np.array([30.0, -2.0]), x, system.nQ, np.zeros(system.nQ),
-                                  voltage=system._joint_motors)
+        got, ev = pipe.values()["drives"], interpreted_evaluate(system, t, x, modes, phase)
         assert got["u"].tolist() == [28.0, -2.0] and got["clipped"].tolist() == [True, False]
-        assert np.array_equal(got["clipped"], ref.saturated)
-        np.testing.assert_allclose(got["applied"], ref.applied, rtol=0, atol=RTOL * np.abs(ref.applied).max())
+        ref = [s.n_torque * s.C_M / s.R * (u - s.C_E * s.n_speed * x[system.nQ + i])  # eq. 51
+               for i, (s, u) in enumerate(zip(system.drives.specs, (28.0, -2.0), strict=True))]
+        np.testing.assert_allclose(got["applied"], ref, rtol=0, atol=RTOL * np.abs(ref).max())
         assert np.abs(xdot - ev.xdot).max() <= RTOL * np.abs(ev.xdot).max()
 
 
 def test_the_rotors_reflect_on_the_mass_matrix():
-    """Case 2's writer: its rotors, N N* J = 4.7 kg·m² per joint, are on M's diagonal (the readable rates); the packed
-    reflection zeroed, the pipeline's joint accelerations change by far more than the tolerance."""
+    """Case 2's writer: its rotors, N N* J = 4.7 kg·m² per joint, are on M's diagonal (the interpreted rates); the
+    packed reflection zeroed, the pipeline's joint accelerations change by far more than the tolerance."""
     from contactdyn.model.pipeline.pack import R_REFLECTED
 
     system, modes, phase, t, x0 = case("writer_motors_approach")
@@ -128,7 +148,7 @@ def test_the_rotors_reflect_on_the_mass_matrix():
     s, nv, nQ = system.drives.specs[0], system.nv, system.nQ
     assert s.reflected_inertia == pytest.approx(160.0 * 65.12 * 0.000452)
     np.testing.assert_allclose(system.rotor_inertias, [s.reflected_inertia] * nv)
-    ref = readable_evaluate(system, t, x0, modes, phase).xdot
+    ref = interpreted_evaluate(system, t, x0, modes, phase).xdot
     assert np.abs(pipe.rhs(t, x0) - ref).max() <= RTOL * np.abs(ref).max()
     at = pipe.packed.ints[R_REFLECTED]
     pipe.packed.reals[at:at + nv] = 0.0  # the true system's reflection only (the controller's stays)
@@ -197,7 +217,7 @@ def test_a_users_kind_runs_by_its_address(fresh_user_imports):
 
 def test_a_kind_numba_cannot_compile_is_a_declared_python_stage(fresh_user_imports):
     """Its force called back in Python from the compiled call (laws.drive_abi.python_drive_addresses), named with
-    numba's reason; the rates the readable model's."""
+    numba's reason; the rates the interpreted call's."""
     register_drive_kind(Opaque)
     system, modes, phase, x0 = _writer({"kind": "opaque_test", "J": 4.52e-4, "N": 160.0})
     assert unsupported(system, modes, phase) == ""

@@ -1,6 +1,6 @@
 """The one pipeline as a complete path of the hybrid loop (contactdyn/hybrid/pipeline_mode.py): its output samples equal
-the readable model's at the same states, a run on it equals the same run interpreted (``LivePipelines.use`` off), a
-run evaluates the readable model nowhere, and a call with no answer gives NaN rates (no readable model behind it)."""
+the interpreted call's at the same states, a run on it equals the same run interpreted (``LivePipelines.use`` off),
+there is no readable model left to evaluate, and a call with no answer gives NaN rates (no other model behind it)."""
 
 from __future__ import annotations
 
@@ -16,13 +16,11 @@ import pytest
 BENCH = Path(__file__).resolve().parent.parent / "benchmarks"
 sys.path.insert(0, str(BENCH))
 from pipeline_proto import CASES, case, states  # noqa: E402
-from run_agreement import readable_samples  # noqa: E402
+from run_agreement import interpreted_evaluate, interpreted_samples  # noqa: E402
 
 from contactdyn.errors import SimulationError  # noqa: E402
-from contactdyn.hybrid import loop  # noqa: E402
 from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
 from contactdyn.model import dynamics  # noqa: E402
-from contactdyn.model.dynamics import evaluate as readable_evaluate  # noqa: E402
 from contactdyn.model.paths import INTERPRETED, PIPELINE, LivePipelines  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
@@ -35,8 +33,8 @@ ROOT = BENCH.parent
 #: the samples' arrays of output.samples.Samples, per name (dicts by key)
 FIELDS = ("tau", "tau_cmd", "limit_torque", "tip", "x_d", "body_force", "F_n", "gap", "F_d", "F_f", "v_slip", "iface",
           "stages")
-#: the output samples' agreement with dynamics.evaluate at the same states, relative to each array's largest
-#: magnitude: the call's own (≤ 1e-12, tests/test_pipeline_proto.py); measured ≤ 4.8e-15 over the 24 cases (UR5)
+#: the output samples' agreement with the interpreted call's at the same states, relative to each array's largest
+#: magnitude: the call's own (≤ 1e-12, tests/test_pipeline_proto.py); measured 0 (bit for bit) over the cases
 SAMPLES_RTOL = 1e-12
 RUN_RTOL = 1e-9  #: a run on the pipeline against the interpreted run's: each channel, relative to its largest value
 #: the runs' tolerances: the two right-hand sides differ by rounding, which the step control amplifies up to a fraction
@@ -70,12 +68,12 @@ def _worst(got: dict, ref: dict) -> tuple[float, str]:
 
 
 @pytest.mark.parametrize("name", list(CASES))
-def test_the_output_samples_are_the_readable_ones(name):
+def test_the_output_samples_are_the_interpreted_ones(name):
     system, modes, phase, t, x0 = case(name)
     pm = PipelineMode(Pipeline(system, modes, phase))
     X = np.array(states(x0, 4))
     ts = t + np.linspace(0.0, 0.05, len(X))
-    got, ref = _arrays(pm.samples(ts, X)), _arrays(readable_samples(system, ts, X, modes, phase))
+    got, ref = _arrays(pm.samples(ts, X)), _arrays(interpreted_samples(system, ts, X, modes, phase))
     worst, where = _worst(got, ref)
     assert worst <= SAMPLES_RTOL, where
     assert pm.singular == 0
@@ -105,33 +103,14 @@ def test_a_run_on_the_pipeline_is_the_interpreted_run(scene, duration, monkeypat
     np.testing.assert_allclose([e["t"] for e in on.events], [e["t"] for e in off.events], rtol=0, atol=EVENT_ATOL)
 
 
-def test_a_pipeline_run_never_evaluates_the_readable_model(monkeypatch):
-    """Counted calls of dynamics.evaluate (the readable model): none while the segments integrate (their right-hand
-    side, compiled steps, event values), none in the output samples, none in the transitions (their decisions read
-    the call that integrates: PipelineMode.evaluation), none where a mode starts (no check against it: one source)."""
-    calls = {"all": 0, "integrate": 0, "samples": 0}
-    evaluate, integrate, sample_states = dynamics.evaluate, loop.integrate, loop.sample_states
-
-    def counted_evaluate(*args, **kwargs):
-        calls["all"] += 1
-        return evaluate(*args, **kwargs)
-
-    def inside(name, fn):
-        def wrapped(*args, **kwargs):
-            before = calls["all"]
-            try:
-                return fn(*args, **kwargs)
-            finally:
-                calls[name] += calls["all"] - before
-        return wrapped
-
-    monkeypatch.setattr(dynamics, "evaluate", counted_evaluate)
-    monkeypatch.setattr(loop, "integrate", inside("integrate", integrate))
-    monkeypatch.setattr(loop, "sample_states", inside("samples", sample_states))
+def test_a_pipeline_run_has_no_readable_model_to_evaluate(monkeypatch):
+    """The readable model (dynamics.evaluate) is gone: the segments integrate (their right-hand side, compiled steps,
+    event values), sample and decide their transitions (PipelineMode.evaluation) on the one call, compiled: one
+    source."""
+    assert not hasattr(dynamics, "evaluate"), "the readable model (dynamics.evaluate) is back"
     r = _run("benchmarks/hard/stickslip.toml", 1.0, True, monkeypatch)
     assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
     assert len(r.events) > 10 and r.stats["rhs_evals"] > 1000
-    assert calls == {"all": 0, "integrate": 0, "samples": 0}
 
 
 EVENT_FIELDS = ("normal_force", "gap", "friction", "slip", "limit_torque", "joint_hold", "force_d", "interface",
@@ -144,16 +123,16 @@ def _stacked(named: dict[str, list]) -> dict[str, np.ndarray]:
 
 
 @pytest.mark.parametrize("name", list(CASES))
-def test_an_instants_evaluation_off_the_call_is_the_readable_models(name):
-    """PipelineMode.evaluation (what the transitions decide on) against the readable model at the same states: ẋ,
+def test_an_instants_evaluation_off_the_call_is_the_interpreted_calls(name):
+    """PipelineMode.evaluation (what the transitions decide on) against the interpreted call's at the same states: ẋ,
     λ, the event values by name, τ, the command, the tip, the stage states, each to SAMPLES_RTOL of its largest
     magnitude over the states (the same names present on both; None on both or neither)."""
     system, modes, phase, t, x0 = case(name)
     pm = PipelineMode(Pipeline(system, modes, phase))
     got, ref = {}, {}
     for x in states(x0, 3):
-        mine, theirs = pm.evaluation(t, x), readable_evaluate(system, t, x, modes, phase, full=True)
-        assert mine.stages.keys() <= theirs.stages.keys()  # (a stage carrying no force: the readable model's zeros)
+        mine, theirs = pm.evaluation(t, x), interpreted_evaluate(system, t, x, modes, phase)
+        assert mine.stages.keys() == theirs.stages.keys()
         for f in ARRAY_FIELDS:
             a, b = getattr(mine, f), getattr(theirs, f)
             assert (a is None) == (b is None), f
@@ -218,7 +197,7 @@ def test_a_call_with_no_answer_gives_nan_rates_and_no_evaluation(name):
     bad = x.copy()
     bad[system.nQ:] = 1e300
     assert np.all(np.isnan(pm.rhs(t, bad))) and pm.pipe.failed_calls == 1
-    assert pm.values(t, bad)[-1] != 1.0  # (the call's own status: no readable values put in its place)
+    assert pm.values(t, bad)[-1] != 1.0  # (the call's own status: no other model's values put in its place)
     with pytest.raises(SimulationError, match="no finite answer at this state"):
         pm.evaluation(t, bad)
     assert np.all(np.isfinite(pm.rhs(t, x))) and pm.values(t, x)[-1] == 1.0

@@ -1,9 +1,9 @@
 """A user controller numba cannot compile runs inside the compiled call as a declared Python stage
 (``contactdyn.laws.controllers.abi.python_controller_address``): a ctypes callback rebuilds, from the call's buffer,
-the ControlInput the readable model gives (its dictionaries by key, the controller's own ``self``) and calls its
-``command``. Per case the pipeline's ẋ against the readable model's own assembly
-(``contactdyn.model.dynamics.evaluate``) at a few states; whole runs against the interpreted runs
-(``LivePipelines.use = False``); the controller's own exception; the ControlInput itself, field by field."""
+the ControlInput a controller is given (its dictionaries by key, the controller's own ``self``) and calls its
+``command``. Per case the compiled call's ẋ against the same call interpreted (``run_agreement.interpreted_evaluate``)
+at a few states; whole runs against the interpreted runs (``LivePipelines.use = False``); the controller's own
+exception; the ControlInput itself, field by field."""
 
 from __future__ import annotations
 
@@ -15,13 +15,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from run_agreement import assert_runs_agree
+from run_agreement import assert_runs_agree, interpreted_evaluate
 
 from contactdyn import parse_scene, simulate
 from contactdyn.laws import Controller, Param
 from contactdyn.laws.controllers import CONTROLLERS
 from contactdyn.laws.controllers import abi as controller_abi
-from contactdyn.model import dynamics
 from contactdyn.model.paths import LivePipelines
 from contactdyn.model.pipeline.pack import python_controller
 from contactdyn.model.pipeline.pipeline import Pipeline
@@ -126,7 +125,7 @@ def axis_scene(kind: str, duration: float = 0.05):
 def force_pi_press(duration: float = 0.5):
     """examples/force_pi_press.toml (a bonded model-b surface: its row folded, friction sliding) under DictForcePI,
     at the solver's rtol 1e-10 (at its 1e-8 the compiled twin, examples/force_law.py's ForcePI, was 6.3e-9 off
-    the readable model's run in 0.2 s, as this law is: the integration's, not the law's)."""
+    the since deleted readable model's run in 0.2 s, as this law is: the integration's, not the law's)."""
     path = "examples/force_pi_press.toml"
     doc = tomllib.loads((ROOT / path).read_text())
     doc["imports"], doc["duration"] = [], duration
@@ -172,16 +171,17 @@ CASES = ["fixture_free", "fixture_touching", "force_pi_press", "cart_push"]
 
 
 @pytest.mark.parametrize("name", CASES)
-def test_the_python_stage_rates_are_the_readable_models(name, uncompilable_controller):
-    """ẋ of the compiled call (the controller called back through ctypes) is dynamics.evaluate's at each state, every
-    call answered, the controller named as a Python stage with numba's reason."""
+def test_the_python_stage_rates_are_the_interpreted_calls(name, uncompilable_controller):
+    """ẋ of the compiled call (the controller called back through ctypes) is the interpreted call's
+    (interpreted_evaluate) at each state, every call answered, the controller named as a Python stage with numba's
+    reason."""
     system, modes, phase, t, x0 = _case(name)
     assert python_controller(phase.controller)
     pipe = Pipeline(system, modes, phase)
     assert pipe.python_stages == [f"controller {phase.controller.name!r} is a Python stage "
                                   f"({type(phase.controller).compiled_reason})"]
     xs = _states(x0)
-    refs = np.array([dynamics.evaluate(system, t, x, modes, phase).xdot for x in xs])
+    refs = np.array([interpreted_evaluate(system, t, x, modes, phase).xdot for x in xs])
     got = np.array([pipe.rhs(t, x.copy()) for x in xs])
     assert pipe.failed_calls == 0
     scale = 1.0 + np.abs(refs).max(axis=0)
@@ -192,19 +192,20 @@ def test_the_python_stage_rates_are_the_readable_models(name, uncompilable_contr
 
 def test_the_fold_is_what_makes_the_force_reading_stage_agree():
     """The force PI law's measured force is a bonded row's: without the fold (its B columns at unit forces, the
-    callback called once per row) the rates are off; with it they are the readable model's."""
+    callback called once per row) the rates are off; with it they are the interpreted call's."""
     system, modes, phase, t, x0 = _case("force_pi_press")
     pipe = Pipeline(system, modes, phase)
-    ref = dynamics.evaluate(system, t, x0, modes, phase).xdot
+    ref = interpreted_evaluate(system, t, x0, modes, phase).xdot
     assert np.abs(pipe.rhs(t, x0.copy()) - ref).max() <= RTOL * (1.0 + np.abs(ref).max())
     from contactdyn.model.pipeline.pack import READS_FORCES
     pipe.packed.ints[READS_FORCES] = 0  # no fold: τ at the forces before the solve
     assert np.abs(pipe.rhs(t, x0.copy()) - ref).max() > 1e-3 * (1.0 + np.abs(ref).max())
 
 
-def test_the_control_input_is_the_readable_models_field_by_field():
-    """The ControlInput the callback builds (its command sees it: recorded here) against the one the readable model
-    gives the same controller at the same state: every field, each dictionary's keys in order and values."""
+def test_the_control_input_is_the_interpreted_calls_field_by_field():
+    """The ControlInput the compiled call's callback builds (its command sees it: recorded here) against the one the
+    interpreted call gives the same controller at the same state: every field, each dictionary's keys in order and
+    values."""
     system, modes, phase, t, x0 = _case("cart_push")
     seen = []
     ctl = phase.controller
@@ -212,12 +213,12 @@ def test_the_control_input_is_the_readable_models_field_by_field():
     ctl.command = lambda inp: (seen.append(inp), original(ctl, inp))[1]
     Pipeline(system, modes, phase).rhs(t, x0.copy())
     n_fast = len(seen)
-    dynamics.evaluate(system, t, x0, modes, phase)
+    interpreted_evaluate(system, t, x0, modes, phase)
     del ctl.command
-    fast, readable = seen[0], seen[n_fast]  # (each path's first call: then the carried reference's probe)
+    fast, interpreted = seen[0], seen[n_fast]  # (each path's first call: then the carried reference's probe)
     assert n_fast > 1
     for name in (f.name for f in fields(fast)):
-        a, b = getattr(fast, name), getattr(readable, name)
+        a, b = getattr(fast, name), getattr(interpreted, name)
         if isinstance(b, dict):
             assert list(a) == list(b), name
             for key in b:
@@ -248,20 +249,20 @@ def test_a_run_with_a_python_stage_controller_is_the_interpreted_run(scene_of, m
     assert_runs_agree(fast, interpreted)
 
 
-def test_the_controllers_own_error_surfaces_as_on_the_readable_model(monkeypatch):
+def test_the_controllers_own_error_surfaces_as_on_the_interpreted_call(monkeypatch):
     """Its exception, raised inside the compiled call, is kept and re-raised after it: the same class and message
-    as the readable model's, not a NaN, a status or ctypes' printout, nor counted as a call with no answer; a run
+    as the interpreted call's, not a NaN, a status or ctypes' printout, nor counted as a call with no answer; a run
     raises it, compiled and interpreted."""
     system, modes, phase, x0 = prepare(axis_scene(Raising.name))
     pipe = Pipeline(system, modes, phase)
-    np.testing.assert_allclose(pipe.rhs(0.005, x0.copy()), dynamics.evaluate(system, 0.005, x0, modes, phase).xdot,
-                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(pipe.rhs(0.005, x0.copy()),
+                               interpreted_evaluate(system, 0.005, x0, modes, phase).xdot, rtol=1e-12, atol=1e-12)
     with pytest.raises(_ControllerFailed) as fast:
         pipe.rhs(0.02, x0.copy())
     assert pipe.failed_calls == 0
-    with pytest.raises(_ControllerFailed) as readable:
-        dynamics.evaluate(system, 0.02, x0, modes, phase)
-    assert str(fast.value) == str(readable.value) == "the controller gave up at t > 0.01 s (gain 1.0)"
+    with pytest.raises(_ControllerFailed) as interpreted:
+        interpreted_evaluate(system, 0.02, x0, modes, phase)
+    assert str(fast.value) == str(interpreted.value) == "the controller gave up at t > 0.01 s (gain 1.0)"
     with pytest.raises(_ControllerFailed, match="gave up"):
         simulate(axis_scene(Raising.name))
     monkeypatch.setattr(LivePipelines, "use", False)
@@ -269,19 +270,19 @@ def test_the_controllers_own_error_surfaces_as_on_the_readable_model(monkeypatch
         simulate(axis_scene(Raising.name))
 
 
-def test_a_wrong_number_of_torques_raises_the_readable_models_error(monkeypatch):
+def test_a_wrong_number_of_torques_raises_the_interpreted_calls_error(monkeypatch):
     """τ of the wrong length: numpy's broadcast error on either path."""
     monkeypatch.setattr(Raising, "command", lambda self, inp: (np.zeros(2), None))
     system, modes, phase, x0 = prepare(axis_scene(Raising.name))
     with pytest.raises(ValueError, match="could not broadcast") as fast:
         Pipeline(system, modes, phase).rhs(0.0, x0.copy())
-    with pytest.raises(ValueError, match="could not broadcast") as readable:
-        dynamics.evaluate(system, 0.0, x0, modes, phase)
-    assert str(fast.value) == str(readable.value)
+    with pytest.raises(ValueError, match="could not broadcast") as interpreted:
+        interpreted_evaluate(system, 0.0, x0, modes, phase)
+    assert str(fast.value) == str(interpreted.value)
 
 
 def test_the_python_stage_keys_rebuild_the_dictionaries():
-    """control_input on a buffer written by hand: the dictionaries by key in the readable model's order (forces:
+    """control_input on a buffer written by hand: the dictionaries by key in ControlInput's order (forces:
     the contacts, then the chains; surfaces: per contact then its chains), None where a field is empty."""
     nv = 2
     keys = controller_abi.InputKeys(("a", "a.t1", "b"), ("a", "b"), ("a.t1",), {"a.t1": np.ones(3)}, True)

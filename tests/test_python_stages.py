@@ -10,11 +10,11 @@ import warnings
 
 import numpy as np
 import pytest
+from run_agreement import interpreted_evaluate
 
 from contactdyn import parse_scene, simulate
 from contactdyn.laws import abi
 from contactdyn.laws.friction_laws import FRICTION_LAWS, FrictionLaw, Stribeck, register_friction_law
-from contactdyn.model import dynamics
 from contactdyn.model.paths import INTERPRETED, PIPELINE, slower_paths
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.scene.scene_file import sims_dir
@@ -88,9 +88,9 @@ def test_a_non_affine_python_stage_runs_on_the_compiled_call(uncompilable_law):
     np.testing.assert_allclose(mine["contact.tip.F_n"], ref, rtol=0, atol=1e-9 * np.abs(ref).max())
 
 
-def test_a_python_stage_modes_rates_are_the_readable_models(uncompilable_law):
+def test_a_python_stage_modes_rates_are_the_interpreted_calls(uncompilable_law):
     """ẋ of the packed mode with a Python stage (and the energy audit, which asks each stage's force at ẋ = 0)
-    equals contactdyn.model.dynamics.evaluate's at states around the start (to 1e-9; measured equal)."""
+    equals the interpreted call's (run_agreement.interpreted_evaluate) at states around the start (to 1e-9)."""
     system, modes, phase, x0 = prepare(_bonded(uncompilable_law.name))
     pipe = Pipeline(system, modes, phase)
     assert [row.split(" (")[0] for row in pipe.python_stages] == ["stage law 'uncompilable' of tip.n is a Python stage"]
@@ -100,7 +100,7 @@ def test_a_python_stage_modes_rates_are_the_readable_models(uncompilable_law):
         x[system.nv] += 1e-4 * i  # the mass [m]
         x[system.nQ] += 0.05 * i  # the axis' speed [m/s]
         x[:system.nQ] += 1e-5 * rng.normal(size=system.nQ) * (i > 0)
-        want = dynamics.evaluate(system, 0.0, x.copy(), modes, phase).xdot
+        want = interpreted_evaluate(system, 0.0, x.copy(), modes, phase).xdot
         got = pipe.rhs(0.0, x.copy())
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * (1.0 + np.abs(want).max()))
     assert pipe.failed_calls == 0

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from run_agreement import interpreted_evaluate
 
 from contactdyn import parse_scene, simulate
 from contactdyn.errors import SceneError
@@ -21,7 +22,6 @@ from contactdyn.hybrid.loop import HybridRun
 from contactdyn.laws.controllers import CONTROLLERS, Controller, register
 from contactdyn.laws.controllers.sampled import SampledController
 from contactdyn.laws.sensors import ForceSensor, SensorSpec
-from contactdyn.model.dynamics import evaluate as readable_evaluate
 from contactdyn.model.paths import PIPELINE
 from contactdyn.model.system import System
 from contactdyn.numerics.held_steps import PiecewiseDense
@@ -148,7 +148,7 @@ def test_the_held_command_is_the_continuous_law_at_the_sample():
         x = np.asarray(seg.sol(t0))
         xc = np.concatenate([x[:2 * run.system.nQ], x[2 * run.system.nQ + 2:]])  # without the held slots
         modes = seg.modes
-        ref = readable_evaluate(continuous, t0, xc, modes, phase).tau_cmd
+        ref = interpreted_evaluate(continuous, t0, xc, modes, phase).tau_cmd
         np.testing.assert_allclose(tau, ref, rtol=1e-13, atol=1e-12)
 
 
@@ -235,7 +235,7 @@ def test_a_sampled_run_converges_to_the_continuous_one_at_first_order():
     assert 3.0 <= e1 / e2 <= 5.0  # ∝ 1/rate: a ZOH's error is half a period's lag
 
 
-def test_a_sampled_mode_runs_on_the_compiled_call_and_agrees_with_the_readable_model():
+def test_a_sampled_mode_runs_on_the_compiled_call_and_agrees_with_the_interpreted_call():
     run, r = run_of(b1(sample_rate=RATE))
     assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
     plan, held_slots = compiled_mode(run)
@@ -243,7 +243,7 @@ def test_a_sampled_mode_runs_on_the_compiled_call_and_agrees_with_the_readable_m
     x = np.asarray(seg.sol(t0)).copy()
     for held in (x[held_slots], np.array([30.0, -12.0])):
         x[held_slots] = held
-        ref = readable_evaluate(run.system, t0 + 3e-4, x, seg.modes, seg.phase).xdot
+        ref = interpreted_evaluate(run.system, t0 + 3e-4, x, seg.modes, seg.phase).xdot
         np.testing.assert_allclose(plan.rhs(t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
 
 
@@ -257,7 +257,7 @@ def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
     t0, seg = starts(run)[7]
     x = np.asarray(seg.sol(t0)).copy()
     x[held_slots] = [3.0, -1.0]
-    ref = readable_evaluate(run.system, t0 + 3e-4, x, seg.modes, seg.phase).xdot
+    ref = interpreted_evaluate(run.system, t0 + 3e-4, x, seg.modes, seg.phase).xdot
     np.testing.assert_allclose(plan.rhs(t0 + 3e-4, x.copy()), ref, rtol=1e-10, atol=1e-10 * np.abs(ref).max())
     k = np.floor(r.t * RATE + 1e-9).astype(int)
     for j in range(20):  # the voltages follow the motors' speeds between samples, the command does not

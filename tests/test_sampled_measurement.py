@@ -1,11 +1,12 @@
-"""A sampled law's measurement off the compiled call (``PipelineMode.measurement``) against the readable model's
-(``dynamics.measurement``): the normal and interface forces [N], the contacts' generalized force on the joints
-[N·m or N] (the deformable and friction forces, plus the rows' λ whose columns reach beyond the robot) and a
-carrier's acceleration; and the whole input ``sample_input`` builds on either path (the robot's and the phase's
-terms too: ``PipelineMode.sample_terms``), at a few states of a touching mode.
+"""A sampled law's measurement off the compiled call (``PipelineMode.measurement``) against the interpreted call's
+(the same call run as Python, ``mode_runner(system, compiled=False)``): the normal and interface forces [N], the
+contacts' generalized force on the joints [N·m or N] (the deformable and friction forces, plus the rows' λ whose
+columns reach beyond the robot) and a carrier's acceleration; and the whole input ``sample_input`` builds from the
+compiled call's terms (``PipelineMode.sample_terms``) against the one it builds from Pinocchio's and the phase's own
+(the interpreted call's measurement), at a few states of a touching mode.
 
-Each quantity is held to 1e-12 relative to its largest magnitude over the states (at least 1): the two paths do the
-same arithmetic in another order (f holds −h before the contacts on the compiled call), rounding apart.
+Each quantity is held to 1e-12 relative to its largest magnitude over the states (at least 1): Pinocchio's terms are
+the same quantities computed in another order, rounding apart.
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ import numpy as np
 import pytest
 
 from contactdyn import parse_scene
-from contactdyn.hybrid.pipeline_mode import PipelineMode
+from contactdyn.hybrid.pipeline_mode import PipelineMode, mode_runner
 from contactdyn.hybrid.sampling import SampledPhases
-from contactdyn.model.dynamics import measurement, measures, sample_input
+from contactdyn.model.dynamics import measures, sample_input
 from contactdyn.model.pipeline.pack import unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.simulate import prepare
@@ -78,12 +79,13 @@ def _close(got: list, ref: list, what: str) -> None:
 
 
 @pytest.mark.parametrize("case", list(CASES))
-def test_the_compiled_calls_measurement_is_the_readable_models(case):
+def test_the_compiled_calls_measurement_is_the_interpreted_calls(case):
     system, modes, phase, x0 = _touching_mode(case)
-    mode = PipelineMode(Pipeline(system, modes, phase))
+    mode, twin = PipelineMode(Pipeline(system, modes, phase)), mode_runner(system, compiled=False)(modes, phase)
+    assert twin.interpreted and not mode.interpreted
     t = phase.t_start + 0.013
     got = [mode.measurement(t, x) for x in _states(x0)]
-    ref = [measurement(system, t, x, modes, phase) for x in _states(x0)]
+    ref = [twin.measurement(t, x) for x in _states(x0)]
     for c in system.contacts:
         _close([g.normal_force[c.name] for g in got], [r.normal_force[c.name] for r in ref], f"{c.name} F_n")
         assert any(abs(r.normal_force[c.name]) > 1.0 for r in ref)  # [N] the contact carries a force
@@ -102,8 +104,8 @@ FIELDS = ("q", "v", "H", "h", "gravity", "p_tip", "v_tip", "J", "drift", "R_tip"
 
 
 def _copied(inp):
-    """The input with its arrays copied (the readable model's H, h and Jacobians are Pinocchio's buffers, rewritten
-    at the next state)."""
+    """The input with its arrays copied (Pinocchio's H, h and Jacobians are its buffers, rewritten at the next
+    state)."""
     for name in FIELDS:
         if getattr(inp, name) is not None:
             setattr(inp, name, np.array(getattr(inp, name)))
@@ -112,16 +114,21 @@ def _copied(inp):
 
 @pytest.mark.parametrize("resolution", [0.0, 1e-4])  # [rad] exact joint positions, and encoders' counts
 @pytest.mark.parametrize("case", list(CASES))
-def test_the_input_a_sample_builds_on_the_compiled_call_is_the_readable_ones(case, resolution):
+def test_the_input_a_sample_builds_on_the_compiled_call_is_the_one_on_pinocchios_terms(case, resolution):
     """sample_input with the compiled call's measurement and terms (at the quantised joint positions) against
-    sample_input on the readable model: every field the law reads (the forces, τ_contact, the set-points, a_d with
-    the carrier's acceleration, H, h, g, the tip's kinematics)."""
+    sample_input on the interpreted call's measurement and Pinocchio's and the phase's own terms: every field the law
+    reads (the forces, τ_contact, the set-points, a_d with the carrier's acceleration, H, h, g, the tip's
+    kinematics). Without a measurement a law that measures is refused."""
     system, modes, phase, x0 = _touching_mode(case)
-    mode = PipelineMode(Pipeline(system, modes, phase))
+    mode, twin = PipelineMode(Pipeline(system, modes, phase)), mode_runner(system, compiled=False)(modes, phase)
     t = phase.t_start + 0.013
     got = [_copied(sample_input(system, t, x, modes, phase, resolution, mode.measurement(t, x), mode.sample_terms))
            for x in _states(x0)]
-    ref = [_copied(sample_input(system, t, x, modes, phase, resolution)) for x in _states(x0)]
+    ref = [_copied(sample_input(system, t, x, modes, phase, resolution, twin.measurement(t, x)))
+           for x in _states(x0)]
+    if measures(phase):
+        with pytest.raises(ValueError, match="pass its Measurement"):
+            sample_input(system, t, x0, modes, phase, resolution)
     for name in FIELDS:
         if getattr(ref[0], name) is None:
             assert all(getattr(g, name) is None for g in got), name
@@ -151,7 +158,7 @@ def test_a_sample_measures_on_the_runner_only_where_the_law_needs_a_solved_call(
         Runner.mode = PipelineMode(Pipeline(system, modes, phase))
         Runner.sample_terms = Runner.mode.sample_terms
         assert measures(phase) == bool(expected)
-        sampled = SampledPhases(system, {})
+        sampled = SampledPhases(system, {}, lambda modes_, phase_: Runner())  # (the run's runner: its first sample)
         x = sampled.start(0.0, x0, modes, phase, None)
         asked.clear()
         sampled.take(1e-3, x, modes, phase, Runner())
@@ -161,14 +168,14 @@ def test_a_sample_measures_on_the_runner_only_where_the_law_needs_a_solved_call(
 @pytest.mark.parametrize("case", ["force_law", "real_cell"])  # (without motors H is Pinocchio's too; with, h only)
 def test_a_sample_keeps_its_own_H_and_h_after_the_next_samples(case):
     """A delayed law computes on the input of d samples ago: its H and h are those of that sample's state, not
-    rewritten by the next sample's (the readable model's H and h are Pinocchio's buffers)."""
+    rewritten by the next sample's (Pinocchio's H and h are its buffers)."""
     system, modes, phase, x0 = _touching_mode(case)
     mode = PipelineMode(Pipeline(system, modes, phase))
     x1, x2 = _states(x0)[1:]
     for terms_at in (None, mode.sample_terms):
-        first = sample_input(system, 0.01, x1, modes, phase, 0.0, None, terms_at)
+        first = sample_input(system, 0.01, x1, modes, phase, 0.0, mode.measurement(0.01, x1), terms_at)
         H1, h1 = first.H.copy(), first.h.copy()
-        second = sample_input(system, 0.011, x2, modes, phase, 0.0, None, terms_at)
+        second = sample_input(system, 0.011, x2, modes, phase, 0.0, mode.measurement(0.011, x2), terms_at)
         assert np.abs(second.h - h1).max() > 1e-6 * np.abs(h1).max()  # (another state: another h)
         np.testing.assert_array_equal(first.H, H1)
         np.testing.assert_array_equal(first.h, h1)

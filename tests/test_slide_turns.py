@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 import pytest
+from run_agreement import interpreted_evaluate
 
 from contactdyn import parse_scene
 from contactdyn.model import paths
 from contactdyn.model.contact import ContactMode, structure
-from contactdyn.model.dynamics import evaluate as readable_evaluate
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.model.system import System
 from contactdyn.simulate import run_system
@@ -53,9 +53,10 @@ def test_every_turn_of_the_circle_runs_on_one_compiled_mode_and_gives_what_one_p
 
 
 @pytest.mark.parametrize("normal", [None, COMPLIANT], ids=["rigid", "compliant"])
-def test_a_mode_reused_after_a_turn_equals_the_readable_model_at_the_new_direction(normal):
+def test_a_mode_reused_after_a_turn_equals_the_interpreted_call_at_the_new_direction(normal):
     """Rigid ground: d enters the KKT matrix (the normal row's column tilt); compliant: the Coulomb force.
-    At rest and at a slip perpendicular to the new r (inside the stick band along it) the force follows r."""
+    At rest and at a slip perpendicular to the new r (inside the stick band along it) the force follows r: the
+    reused compiled mode's ẋ is the interpreted call's, packed at the new direction (interpreted_evaluate)."""
     system = System(parse_scene(circle(normal)))
     x0, _ = system.initial_state()
     phase = system.start_phase(0, 0.0, x0, None)
@@ -72,10 +73,10 @@ def test_a_mode_reused_after_a_turn_equals_the_readable_model_at_the_new_directi
         states.append(x)
     t = 0.37
     for x in states:
-        ref = readable_evaluate(system, t, x, after, phase).xdot
+        ref = interpreted_evaluate(system, t, x, after, phase).xdot
         got = plan.rhs(t, x.copy())
         assert np.abs(got - ref).max() <= 1e-10 * (1.0 + np.abs(ref).max())
-    old = readable_evaluate(system, t, states[0], before, phase).xdot  # the direction does matter there
+    old = interpreted_evaluate(system, t, states[0], before, phase).xdot  # the direction does matter there
     assert np.abs(old - plan.rhs(t, states[0].copy())).max() > 1e-3
 
 

@@ -208,18 +208,27 @@ def test_a_riding_mass_is_a_prismatic_joint_of_what_carries_the_surface(chain):
     else:
         normal = {"direction": n0.tolist()}
         tangent = {"model": "chain", "directions": [t0.tolist()], "environment": [{"k": K_T}, {"m": m}]}
-    system = System(_tray_b(point=p0.tolist(), normal=normal, tangent=tangent))
+    from contactdyn.model.pipeline.contacts import add_riding
+    from contactdyn.model.pipeline.pipeline import Pipeline
+    from contactdyn.model.pipeline.robot_terms import frame_terms, robot_terms
+    from contactdyn.simulate import prepare
+
+    system, modes, phase, x = prepare(_tray_b(point=p0.tolist(), normal=normal, tangent=tangent))
     (rm,) = system.riding
     np.testing.assert_array_equal(rm.direction, n0 if chain == "normal" else t0)
     nQ, i = system.nQ, rm.coord
-    x, _ = system.initial_state()
     x[0], x[nQ], x[i], x[nQ + i] = 0.3, 0.7, 0.04, -0.4  # [rad, rad/s, m, m/s]
     system.robot.update(x[:1], x[nQ:nQ + 1])
     system.update_bodies(x)
     M = system.mass_matrix()[np.ix_([0, i], [0, i])]
+    # the call's own: the rigid-body table's H (the tray), the mass riding it coupled in and its bias added to f
+    p = Pipeline(system, modes, phase).packed
+    H, _, _, Jw, W = robot_terms(x, p.ints, p.reals)
+    FJ, Fa, _, _, FR = frame_terms(x, p.ints, p.reals, W, Jw)
     f = np.zeros(nQ)
-    system.body_forces(x, f)
-    bias = -(f[[0, i]] + [system.robot.h[0], 0.0])  # the rider's part of the bias
+    M_call = add_riding(x, p.ints, p.reals, FJ, Fa, FR, H.copy(), f)[np.ix_([0, i], [0, i])]
+    M_call[1, 1] += m  # (m′'s own mass: M_rest's diagonal, packed apart)
+    bias = -f[[0, i]]  # the rider's part of the bias
     xml = (Path(__file__).parents[1] / "urdf" / "tilt_tray.urdf").read_text().replace("</robot>", "")
     model = pin.buildModelFromXML(xml + RIDER.format(p=p0.tolist(), n=rm.direction.tolist(), m=m))
     alone = pin.buildModelFromXML(xml + "</robot>")
@@ -229,6 +238,7 @@ def test_a_riding_mass_is_a_prismatic_joint_of_what_carries_the_surface(chain):
     expected_M = pin.crba(model, data, q)
     expected_M = np.triu(expected_M) + np.triu(expected_M, 1).T
     np.testing.assert_allclose(M, expected_M, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(M_call, expected_M, rtol=0, atol=1e-13)
     expected_bias = pin.rnea(model, data, q, v, np.zeros(2)) - [pin.rnea(alone, data_alone, q[:1], v[:1],
                                                                           np.zeros(1))[0], 0.0]
     np.testing.assert_allclose(bias, expected_bias, rtol=0, atol=1e-13)

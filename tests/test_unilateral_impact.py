@@ -52,7 +52,7 @@ def _struck(tmp_path, strike_x: float):
     system = System(_scene(tmp_path, strike_x))
     x, modes = system.initial_state()
     modes = [m.with_(touching=True) for m in modes]
-    x_after, imp = impact(system, 0.0, x, modes, system.contact("strike"))
+    x_after, imp = impact(system, 0.0, x, modes, next(c for c in system.contacts if c.name == "strike"))
     return system, x_after, imp
 
 

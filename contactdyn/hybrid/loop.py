@@ -40,8 +40,8 @@ import numpy as np
 
 from ..errors import SceneError, SimulationError, numerical_errors
 from ..laws.trajectory import min_span
+from ..model.constraints import kkt_condition
 from ..model.contact import ContactMode
-from ..model.dynamics import contact_condition
 from ..model.limits import rate_limit_report
 from ..model.paths import LivePipelines, PathLog
 from ..model.phases import Phase
@@ -417,7 +417,7 @@ def _diagnose(run: HybridRun, sol, modes: list[ContactMode], phase: Phase, fun, 
     if not np.all(np.isfinite(x)) or method in FIXED:  # RK4 states its own cause
         return ""
     with np.errstate(all="ignore"):
-        cond = contact_condition(run.system, t, x, modes, phase)
+        cond = kkt_condition(run.system, x, modes, phase)
     if cond > 1e12:
         return ("; the constraint rows of the touching contacts are linearly dependent (condition number "
                 f"of the contact system {cond:.2g}): a rigid or sticking contact at a singular pose of the "

@@ -73,8 +73,8 @@ class SampledPhases:
 
     def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, runner=None) -> np.ndarray:
         """The sample at t [s] of the phase's law: the state with its new held command and states. ``runner``: the
-        mode's call (a PipelineMode) measures the forces and gives the robot's terms (None: the readable model's,
-        the tests' reference)."""
+        mode's call (a PipelineMode) measures the forces and gives the robot's terms (None: Pinocchio's terms, and no
+        measurement: a law that measures a solved call needs the runner, ``dynamics.sample_input``)."""
         sampler = self.samplers[phase.index]
         ctl = phase.controller
         compiled = runner is not None

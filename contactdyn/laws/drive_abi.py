@@ -137,7 +137,7 @@ _callbacks: dict[DriveSpec, tuple[int, int, tuple]] = {}  #: spec -> (voltage, f
 
 def python_drive_addresses(spec: DriveSpec) -> tuple[int, int]:
     """(voltage, force) addresses of C functions (the ABI's signatures) calling the Python ``voltage`` and ``force``
-    of ``spec``'s kind with ``spec`` itself, as the readable model does (``Drives.apply``): the declared Python
+    of ``spec``'s kind with ``spec`` itself: the declared Python
     stage of a kind numba cannot compile (voltage 0 for a kind without one)."""
     if spec in _callbacks:
         return _callbacks[spec][:2]

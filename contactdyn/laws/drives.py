@@ -8,10 +8,10 @@ This module holds what every kind shares:
 - :class:`DriveSpec`: one coordinate's drive, its kind's parameters as attributes;
 - :func:`read_drive_table` and :class:`DriveTable`: a scene's ``robot.drive`` or
   ``body.<b>.drive`` table, read from the kinds' declarations (a value or one per joint);
-- :class:`Drives`: a system's drives. :meth:`Drives.apply` turns the commands into generalized
-  forces by each kind's law: a kind with a voltage inverts the commanded force to a voltage
-  (:meth:`~contactdyn.laws.drive_kinds.DriveKind.voltage`), the voltage is clipped to its limit
-  here, once for all kinds, and the kind's ``force`` gives the forces at the voltage that acts.
+- :class:`Drives`: a system's drives, their coordinates and inertias. The call turns the commands into generalized
+  forces by each kind's law (:mod:`contactdyn.model.pipeline.drives`): a kind with a voltage inverts the commanded
+  force to a voltage (:meth:`~contactdyn.laws.drive_kinds.DriveKind.voltage`), the voltage is clipped to its
+  limit there, once for all kinds, and the kind's ``force`` gives the forces at the voltage that acts.
   Kinds with a motor coordinate get its place in the state (after the system's other
   coordinates) and their motor's inertia on the mass matrix's diagonal; rigid motors reflect
   their rotor's inertia onto their coordinate.
@@ -19,7 +19,6 @@ This module holds what every kind shares:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,7 +28,7 @@ from ..scene.reader import Reader
 from .drive_kinds import DRIVE_KINDS, DriveKind
 from .params import Param, with_defaults
 
-__all__ = ["DRIVE_KINDS", "DriveSpec", "DriveTable", "read_drive_table", "Drives", "DriveOutput", "drive_channels"]
+__all__ = ["DRIVE_KINDS", "DriveSpec", "DriveTable", "read_drive_table", "Drives", "drive_channels"]
 
 
 def kind_of(name: str) -> type[DriveKind]:
@@ -168,17 +167,6 @@ def _read_value(r: Reader, p: Param, per_joint: bool) -> float | tuple[float, ..
     return r.float(p.name, lo=p.lo, hi=p.hi, lo_open=p.lo_open, unit=p.unit, meaning=p.meaning)
 
 
-@dataclass
-class DriveOutput:
-    """What the drives did at one evaluation."""
-
-    applied: np.ndarray  #: generalized force reaching each driven coordinate [N·m or N]
-    u: np.ndarray  #: voltage per drive [V] (NaN for ideal torque drives)
-    saturated: np.ndarray  #: bool per drive: the voltage was clipped
-    power: float  #: mechanical power the drives deliver [W] (motors: M θ̇ for elastic, applied·Q̇ rigid)
-    dissipation: float  #: tube damper power d φ̇² [W]
-
-
 class Drives:
     """The drives of a system's coordinates: ``coords[i]`` is driven by ``specs[i]``, by the law of its kind.
 
@@ -206,20 +194,10 @@ class Drives:
                                    for s, kind in zip(specs, kinds, strict=True)])
         #: rigid-model inertia the controller adds (every motor)
         self.model_reflected = np.array([s.reflected_inertia for s in specs])
-        #: where a commanded force lands and with what gain (folding of measured forces)
-        self.targets = np.where(self.motor_coords >= 0, self.motor_coords, self.coords)
+        #: the gain a commanded force lands with (folding of measured forces)
         self.gains = np.array([kind.command_gain(s) for s, kind in zip(specs, kinds, strict=True)])
         if not np.array_equal(self.coords, np.arange(len(specs))):
             raise ValueError("drives: coordinates must be the system's first ones, in order")
-        self._no_u, self._no_sat = np.full(len(specs), np.nan), np.zeros(len(specs), bool)  # shared, read-only
-        #: per drive, what apply needs: the kind's law (voltage, force), the spec, coordinates, the voltage and limit
-        self._laws = [(kind.voltage, kind.force, s, int(self.coords[i]), int(self.motor_coords[i]), kind.has_voltage,
-                       float(self.u_max[i])) for i, (s, kind) in enumerate(zip(specs, kinds, strict=True))]
-
-    def omega(self, i: int, x: np.ndarray, nQ: int) -> float:
-        """Motor speed θ̇ of drive i [rad/s]."""
-        s, m = self.specs[i], self.motor_coords[i]
-        return x[nQ + m] if m >= 0 else s.n_speed * x[nQ + self.coords[i]]
 
     def initial(self, x: np.ndarray, nQ: int) -> None:
         """Untwisted transmissions: θ = n_s Q, θ̇ = n_s Q̇ (n_s = N/r)."""
@@ -228,53 +206,6 @@ class Drives:
             if m >= 0:
                 x[m] = s.n_speed * x[self.coords[i]]
                 x[nQ + m] = s.n_speed * x[nQ + self.coords[i]]
-
-    def apply(self, cmd: np.ndarray, x: np.ndarray, nQ: int, f: np.ndarray, *, voltage: np.ndarray | None = None,
-              sat_cmd: np.ndarray | None = None, clip: bool = True) -> DriveOutput:
-        """Add the drives' generalized forces to ``f``; ``cmd`` holds a force per drive, or a voltage [V]
-        where the mask ``voltage`` is true.
-
-        ``sat_cmd`` (default ``cmd``) decides which voltages clip: the system passes the full
-        command there while ``cmd`` lacks the part it folds into its linear solve. ``clip=False``:
-        the law without the voltage limits.
-        """
-        n = len(self.specs)
-        if not self.any_motor:  # ideal sources only; the coordinates are 0 .. n−1 (joints, then bodies)
-            f[:n] += cmd
-            return DriveOutput(cmd, self._no_u, self._no_sat, float(cmd @ x[nQ:nQ + n]), 0.0)
-        applied = np.empty(n)
-        u = np.full(n, np.nan)
-        saturated = np.zeros(n, bool)
-        power = dissipation = 0.0
-        folded = sat_cmd is not None and sat_cmd is not cmd
-        # Python floats: the kinds' arithmetic is the same IEEE double arithmetic, without NumPy's per-scalar cost
-        xs, cmds = x.tolist(), cmd.tolist()
-        sats = sat_cmd.tolist() if folded else cmds
-        for i, (to_voltage, force, spec, c, m, has_voltage, u_max) in enumerate(self._laws):
-            qd = xs[nQ + c]
-            if m >= 0:
-                theta, omega = xs[m], xs[nQ + m]
-            else:
-                theta = omega = math.nan
-            if has_voltage:
-                by_voltage = voltage is not None and voltage[i]
-                ui = cmds[i] if by_voltage else to_voltage(spec, sats[i], qd, omega)
-                if clip and abs(ui) > u_max:
-                    saturated[i] = True
-                    ui = math.copysign(u_max, ui)
-                elif folded and not by_voltage:
-                    ui = to_voltage(spec, cmds[i], qd, omega)
-                u[i] = ui
-            else:
-                ui = cmds[i]
-            f_coord, f_motor, p, lost = force(spec, ui, xs[c], qd, theta, omega)
-            applied[i] = f_coord
-            f[c] += f_coord
-            if m >= 0:
-                f[m] += f_motor
-            power += p
-            dissipation += lost
-        return DriveOutput(applied, u, saturated, power, dissipation)
 
 
 def drive_channels(system, xs: np.ndarray, samples) -> dict[str, np.ndarray]:

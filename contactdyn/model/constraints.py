@@ -1,4 +1,5 @@
-"""The constraint system: active rows, the KKT assembly and its solve (acceleration and impulse level).
+"""The constraint system's rows at impulse level (impacts) and its matrix's condition; the acceleration level is the
+one pipeline's (:mod:`contactdyn.model.pipeline.kkt`).
 
 In every mode the unknowns — Q̈ [m/s², rad/s²] and the forces λ [N] of the active rows —
 come from one linear system
@@ -25,12 +26,9 @@ column, its γ and who owns it, ``meta = (owner, kind, index)``. The kinds in us
 - ``(joint, "joint", i)``: joint coordinate i stuck by its dry friction (force = the holding torque
   [N·m or N], :mod:`contactdyn.model.joint_friction`).
 
-A new kind of row (a bilateral bond, ...) is a new ``rows.add(...)`` in the
-evaluation plus a branch in :func:`record_row_forces` that says where its force goes.
-
-A controller that reads measured forces is affine in them, τ = τ₀ + B λ; its columns B
-fold into the matrix (:func:`solve_folded`), so the force it measures is the one the
-solve returns (see :mod:`contactdyn.laws.controllers.base`).
+The pipeline packs the same rows for the call (:mod:`contactdyn.model.pipeline.contacts`); here they are built
+for an impact's momentum law (:func:`velocity_rows`, :func:`impulse_solve`) and a failed integration's
+diagnosis (:func:`kkt_condition`).
 """
 
 from __future__ import annotations
@@ -38,13 +36,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SimulationError
-from ..laws.controllers import ControlInput, Controller
 from ..numerics.linalg import solve_vector
 from .chain_forces import chain_forces
 from .contact import Contact, Kinematics
 
-__all__ = ["Rows", "solve_linear", "contact_row", "kkt_solve", "force_columns", "solve_folded", "record_row_forces",
-           "velocity_rows", "impulse_solve"]
+__all__ = ["Rows", "solve_linear", "contact_row", "velocity_rows", "impulse_solve", "kkt_condition"]
+
 
 def solve_linear(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, bool]:
     """Solve A z = b; on a singular A fall back to the minimum-norm least-squares z."""
@@ -75,24 +72,6 @@ class Rows:
         return len(self.rows)
 
 
-def record_row_forces(system, ev, rows: Rows, lam: np.ndarray) -> None:
-    """Put each row's solved force where its kind says: normal force, stick friction or chain interface.
-
-    Kinds without a home here (none yet) keep their force in ``ev.lam`` beside ``ev.row_meta`` only.
-    """
-    for (name, kind, i), value in zip(rows.meta, lam, strict=True):
-        if kind == "n":
-            ev.normal_force[name] = float(value)
-        elif kind == "t":
-            ev.friction.setdefault(name, np.zeros(len(system.contact(name).tangents)))[i] = value
-        elif kind == "limit":
-            ev.limit_torque[i] = float(value)
-        elif kind == "joint":
-            ev.joint_hold[i] = float(value)
-        elif kind[:1] == "t" and kind[1:].isdigit():  # a tangential chain's bond ("t1", "t2")
-            ev.interface[f"{name}.{kind}"] = float(value)
-
-
 def contact_row(system, c: Contact, u: np.ndarray, kin: Kinematics) -> np.ndarray:
     """Generalized row [m/m or m/rad] of the relative tip–environment motion along the unit direction u."""
     row = np.zeros(system.nQ)
@@ -116,113 +95,6 @@ def mass_matrix(system) -> np.ndarray:
         M[np.ix_(c, c)] += rm.mass * (rm.J.T @ rm.J)
         M[c, i] = M[i, c] = rm.mass * (rm.J.T @ rm.n)
     return M
-
-
-def kkt_condition(system, rows: Rows) -> float:
-    """2-norm condition number of the contact system [[M, −Cᵀ], [G, 0]] at the robot's current state (1.0 without
-    rows): a rigid or sticking contact at a singular pose makes its rows linearly dependent."""
-    if not rows:
-        return 1.0
-    nQ, nr = system.nQ, len(rows)
-    A = np.zeros((nQ + nr, nQ + nr))
-    A[:nQ, :nQ] = mass_matrix(system)
-    A[:nQ, nQ:] = -np.array(rows.cols).T
-    A[nQ:, :nQ] = np.array(rows.rows)
-    return float(np.linalg.cond(A))
-
-
-def kkt_solve(system, f: np.ndarray, rows: Rows, fold: np.ndarray | None,
-           fold_q: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Q̈ and the row forces λ of [[M − fold_q, −Cᵀ − fold], [G, 0]] [Q̈; λ] = [f; −γ]."""
-    nQ, nv = system.nQ, system.nv
-    M = mass_matrix(system)
-    if rows or fold_q is not None or system.articulated or system.riding:  # (else M is H beside a diagonal)
-        nr = len(rows)
-        A = np.zeros((nQ + nr, nQ + nr))
-        A[:nQ, :nQ] = M if fold_q is None else M - fold_q
-        if nr:
-            A[:nQ, nQ:] = -np.array(rows.cols).T
-            if fold is not None:
-                A[:nQ, nQ:] -= fold
-            A[nQ:, :nQ] = np.array(rows.rows)
-        b = np.concatenate([f, -np.asarray(rows.gammas, float)])
-        z_all, regular = solve_linear(A, b)
-        return z_all[:nQ], z_all[nQ:], regular
-    qdd = np.empty(nQ)
-    qdd[:nv], regular = solve_linear(M[:nv, :nv], f[:nv])
-    qdd[nv:] = f[nv:] / system.M_rest if nQ > nv else f[nv:]
-    return qdd, np.empty(0), regular
-
-
-def force_columns(inp: ControlInput, ctl: Controller, tau: np.ndarray, zdot, meta: list, cols: list, nv: int):
-    """(B, D_z): how a force-reading controller's command τ and state rates ż change per unit force
-    of each row (meta[j], force column cols[j] on the coordinates), probed by calling the law:
-    +1 N on the contact's measured normal force for a normal row, the row's column on the joints'
-    measured contact torque where it reaches a coordinate beyond the robot (else the row acts on
-    the robot alone and stays out of the measurement)."""
-    nr = len(meta)
-    B = np.zeros((nv, nr))
-    Dz = np.zeros((len(zdot), nr)) if zdot is not None else None
-    if not ctl.uses_forces:
-        return B, Dz
-    for j, (name, kind, _) in enumerate(meta):
-        fed_back = bool(np.any(cols[j][nv:]))
-        if kind != "n" and not fed_back:
-            continue
-        forces = inp.forces if kind != "n" else {**inp.forces, name: inp.forces[name] + 1.0}
-        tau_c = inp.tau_contact + cols[j][:nv] if fed_back else inp.tau_contact
-        tau_j, zdot_j = ctl.command(inp.replaced(forces=forces, tau_contact=tau_c))
-        B[:, j] = tau_j - tau
-        if Dz is not None:
-            Dz[:, j] = zdot_j - zdot
-    return B, Dz
-
-
-def solve_folded(system, inp: ControlInput, ctl: Controller, cmd: np.ndarray, zdot, f: np.ndarray, rows: Rows,
-                 x: np.ndarray, vmask, carried=None):
-    """Solve with a force-reading controller whose measured forces include unknown row forces λ.
-
-    The controller is probed with a unit force on each row (its generalized column on the
-    joints, and +1 N on the contact's normal force for a normal row): B_j = τ(e_j) − τ₀.
-    B folds into the matrix for drives whose voltage does not clip; a clipped drive gives
-    a force independent of λ. The clipping pattern is re-checked with the solved λ.
-    A row whose force acts on the robot alone (rigid contact or stick on the fixed ground)
-    stays out of the measured joint force: cancelling it would leave it undetermined.
-
-    ``carried = (i_b, b, d)``: a reference carried by body coordinate i_b makes the command
-    affine in that body's acceleration too, τ += b Q̈_b, ż += d Q̈_b; b folds into the matrix's
-    column i_b the same way (the reference's acceleration is then exact, not lagged).
-    """
-    nQ, nv, drives = system.nQ, system.nv, system.drives
-    nr = len(rows)
-    B, Dz = force_columns(inp, ctl, cmd[:nv], zdot, rows.meta, rows.cols, nv)
-    sat_cmd = cmd
-    full = cmd.copy()
-    for _ in range(nv + 2):
-        fk = f.copy()
-        out = drives.apply(cmd, x, nQ, fk, voltage=vmask, sat_cmd=sat_cmd)
-        fold = np.zeros((nQ, nr))
-        fold_q = np.zeros((nQ, nQ)) if carried is not None else None
-        for i in range(nv):
-            if not out.saturated[i]:
-                fold[drives.targets[i]] += drives.gains[i] * B[i]
-                if carried is not None:
-                    fold_q[drives.targets[i], carried[0]] += drives.gains[i] * carried[1][i]
-        qdd, lam, regular = kkt_solve(system, fk, rows, fold, fold_q)
-        full = cmd.copy()
-        full[:nv] += B @ lam
-        if carried is not None:
-            full[:nv] += carried[1] * qdd[carried[0]]
-        check = drives.apply(full, x, nQ, np.zeros(nQ), voltage=vmask)
-        if np.array_equal(check.saturated, out.saturated):
-            break
-        sat_cmd = full
-    f[:] = fk
-    if Dz is not None:
-        zdot = zdot + Dz @ lam
-        if carried is not None and carried[2] is not None:
-            zdot = zdot + carried[2] * qdd[carried[0]]
-    return check, qdd, lam, regular, full, zdot
 
 
 def velocity_rows(system, x, modes, slides: dict[str, tuple[np.ndarray, float]] | None = None,
@@ -260,6 +132,25 @@ def velocity_rows(system, x, modes, slides: dict[str, tuple[np.ndarray, float]] 
     system.limits.add_rows(limits, x, system.nQ, rows, 0.0)
     system.joint_friction.add_rows(joint_modes, limits, x, system.nQ, rows, 0.0)
     return rows
+
+
+def kkt_condition(system, x: np.ndarray, modes, phase) -> float:
+    """2-norm condition number of the contact system [[M, −Gᵀ], [G, 0]] at x (1.0 without rows): the velocity rows
+    of the touching contacts, the joints on a limit and the stuck joints (:func:`velocity_rows`; a slide's tilt of
+    its normal column left out). A rigid or sticking contact at a singular pose makes its rows linearly dependent:
+    what a failed integration's message says (``hybrid.loop``)."""
+    nv, nQ = system.nv, system.nQ
+    system.robot.update(x[:nv], x[nQ:nQ + nv])
+    system.update_bodies(x)
+    rows = velocity_rows(system, x, modes, limits=phase.limits, joint_modes=phase.joint_modes)
+    if not rows:
+        return 1.0
+    nr = len(rows)
+    A = np.zeros((nQ + nr, nQ + nr))
+    A[:nQ, :nQ] = mass_matrix(system)
+    A[:nQ, nQ:] = -np.array(rows.cols).T
+    A[nQ:, :nQ] = np.array(rows.rows)
+    return float(np.linalg.cond(A))
 
 
 def impulse_solve(system, M: np.ndarray, rows: Rows, qd_minus: np.ndarray) -> tuple[np.ndarray, bool]:

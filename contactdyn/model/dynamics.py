@@ -1,26 +1,11 @@
-"""The readable right-hand side: everything the model computes at one (t, x) in one mode.
+"""What the model answers at one (t, x) in one mode, and what a sampled law measures there.
 
-In a smooth phase (modes and task phase fixed) the state x = [Q, Q̇, y]
-(:mod:`contactdyn.model.system`) moves by
-
-    d/dt [Q, Q̇, y] = [Q̇, Q̈, ẏ]
-
-with Q̈ and the active rows' forces λ from the constraint system
-(:mod:`contactdyn.model.constraints`): M Q̈ − Cᵀ λ = f, G Q̈ = −γ. One evaluation, in order:
-
-1. Pinocchio's terms at (q, q̇): H, h, the frames' positions, Jacobians and J̇q̇;
-2. per contact: its chains' stage forces and bond rows (:mod:`contactdyn.model.chain_forces`),
-   then friction (:mod:`contactdyn.model.friction`): stick rows, or the Coulomb force, or the
-   tilt of the normal column; a row per joint pressing on its limit (:mod:`contactdyn.model.limits`);
-   a row per stuck joint, the joints' damping and sliding friction (:mod:`contactdyn.model.joint_friction`);
-3. the phase's controller reads the state (and, if it asks, the measured forces) and
-   commands joint torques [N·m or N] or voltages [V] (:mod:`contactdyn.laws.controllers`);
-4. the drives turn the command into generalized forces (:mod:`contactdyn.laws.drives`);
-5. one solve gives Q̈ and λ (a force-reading controller folded in);
-6. the forces are recorded per contact, the impulse and energy states get their rates.
-
-The one pipeline (:mod:`contactdyn.model.pipeline`) is the same model over packed arrays, compiled for the
-integrator: the laws by address, the chains' and the dynamic laws' compiled functions shared with this module.
+The right-hand side itself is the one pipeline's call (:mod:`contactdyn.model.pipeline`: robot terms, contacts and
+their chains, friction, limit and stuck-joint rows, the controller, the drives, one KKT solve, the rates and the
+event values), compiled or interpreted. Its answers at an instant, read off one call with its diagnostics on
+(:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`, :meth:`~.measurement`, :meth:`~.sample_terms`),
+are the records here: :class:`Evaluation`, :class:`Measurement`, :class:`SampleTerms`. A sampled law's input at a
+sample instant is :func:`sample_input`, through the encoders' resolution.
 """
 
 from __future__ import annotations
@@ -31,15 +16,11 @@ import numpy as np
 
 from ..laws.controllers import ControlInput
 from ..laws.sensors import quantise
-from .chain_forces import chain_axis, chain_forces
-from .constraints import Rows, kkt_condition, kkt_solve, record_row_forces, solve_folded
-from .contact import Contact, ContactMode, Kinematics
-from .friction import friction_terms, launch_directions_at, launching
+from .contact import ContactMode
 from .phases import Phase, reference_at
 
-__all__ = ["Evaluation", "evaluate", "contact_condition", "carried_command", "command_of", "drive_command",
-           "set_force_inputs", "surface_keys", "surface_points", "carried_terms", "sample_input",
-           "Measurement", "SampleTerms", "measures", "measurement"]
+__all__ = ["Evaluation", "Measurement", "SampleTerms", "measures", "sample_input", "set_force_inputs", "surface_keys",
+           "surface_points"]
 
 
 @dataclass
@@ -69,104 +50,6 @@ class Evaluation:
     joint_friction: np.ndarray | None = None
     #: per chain ("contact.label"): its nodes' positions [m] (where damped ends start relaxing at a separation)
     node_positions: dict[str, np.ndarray] = field(default_factory=dict)
-
-
-def evaluate(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
-             full: bool = False) -> Evaluation:
-    """The right-hand side and its diagnostics at (t, x) in ``modes`` and ``phase`` (``full``: stage detail)."""
-    nQ, nv = system.nQ, system.nv
-    modes, f, ydot, rows, ev, kins, pending = _forces_and_rows(system, t, x, modes, phase, full)
-    jf = system.joint_friction
-    inp, ft, x_d, force_d = _control_input(system, t, x, modes, phase, f, kins, ev)
-    if jf.any:  # damping and sliding friction: after the controller read the contacts' torque f + h
-        joint_tau = jf.torques(phase.joint_modes, x, nQ, nv)
-        f[:nv] += joint_tau
-    out, qdd, lam, regular, cmd, zdot = _command_and_solve(system, inp, phase, x, x_d, f, rows)
-    if zdot is not None:
-        ydot[phase.z_slice] = zdot
-    if system.energy_slot >= 0:
-        ydot[system.energy_slot] = out.power
-        ydot[system.energy_slot + 1] += out.dissipation
-        if jf.any:
-            ydot[system.energy_slot + 1] += jf.dissipation(phase.joint_modes, x, nQ, nv)
-    xdot = np.concatenate([x[nQ:2 * nQ], qdd, ydot])
-    ev.xdot, ev.lam, ev.tau, ev.body_force, ev.p_tip, ev.x_d = xdot, lam, out.applied[:nv], out.applied[nv:], \
-        ft.position, x_d
-    ev.tau_cmd, ev.u = cmd[:nv], out.u
-    ev.force_d = {k: val[0] for k, val in force_d.items()}
-    ev.regular = regular
-    record_row_forces(system, ev, rows, lam)
-    if jf.any:
-        ev.joint_friction = joint_tau
-        for i, value in ev.joint_hold.items():
-            joint_tau[i] += value
-    _finish_friction(system, ev, pending, xdot, ydot)
-    return ev
-
-
-def _forces_and_rows(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, full: bool):
-    """The robot's terms at x, then every contact's forces and rows, the limits' and the stuck joints' rows:
-    (modes (a launch's directions found), f, ydot, rows, the Evaluation begun, the kinematics, pending friction)."""
-    nQ, nv = system.nQ, system.nv
-    if any(launching(m) for m in modes):
-        modes = launch_directions_at(system, t, x, modes, phase, evaluate)
-    system.robot.update(x[:nv], x[nQ:nQ + nv])
-    f = np.zeros(nQ)
-    f[:nv] = -system.robot.h
-    f[nv:] = system.weights  # the bodies' weights m g·axis [N]
-    system.body_forces(x, f)  # an articulated body's −h_b
-    ydot = np.zeros(system.ny)
-    rows = Rows()
-    ev = Evaluation(np.empty(0), np.empty(0), rows.meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),
-                    np.empty(0), None, {})
-    kins, pending = _contact_terms(system, x, modes, f, ydot, rows, ev, full)
-    system.limits.add_rows(phase.limits, x, nQ, rows, system.stabilization)  # joints pressing on a limit
-    if system.joint_friction.any:  # stuck joints' rows (contactdyn.model.joint_friction)
-        system.joint_friction.add_rows(phase.joint_modes, phase.limits, x, nQ, rows, system.stabilization)
-    return modes, f, ydot, rows, ev, kins, pending
-
-
-def contact_condition(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase) -> float:
-    """2-norm condition number of the contact system at (t [s], x) (:func:`~.constraints.kkt_condition`)."""
-    rows = _forces_and_rows(system, t, x, modes, phase, False)[3]
-    return kkt_condition(system, rows)
-
-
-def _contact_terms(system, x: np.ndarray, modes: list[ContactMode], f: np.ndarray, ydot: np.ndarray, rows: Rows,
-                   ev: Evaluation, full: bool) -> tuple[list[Kinematics], list]:
-    """Every contact's chain forces, rows and friction into f, ydot, rows and ev; (kinematics, pending friction)."""
-    nv = system.nv
-    kins: list[Kinematics] = []
-    pending: list[tuple[Contact, np.ndarray, float, np.ndarray]] = []
-    for c, mode in zip(system.contacts, modes, strict=True):
-        kin = system.kinematics(c, x)
-        kins.append(kin)
-        tip_force = np.zeros(3)
-        # normal
-        tip_F, row, gamma, F_n, gap = chain_forces(system, c, c.normal, mode.touching, 0.0, kin, x, f, ydot, ev,
-                                                   full, mode.relaxing)
-        tip_force += tip_F * kin.normal
-        ev.gap[c.name] = gap
-        # tangential chains (bonded while the normal touches)
-        for i, dc in enumerate(c.tangent_chains):
-            tF, trow, tgamma, tint, _ = chain_forces(system, c, dc, mode.touching, mode.offsets[i], kin, x, f, ydot,
-                                                     ev, full, mode.relaxing)
-            tip_force += tF * chain_axis(c, dc, kin)
-            ev.interface[f"{c.name}.{dc.label}"] = tint
-            if trow is not None:
-                rows.add(trow, tgamma, (c.name, dc.label, i))
-        # friction
-        col = row
-        if c.friction is not None and len(c.tangents):
-            col = friction_terms(system, c, mode, kin, row, F_n, f, ydot, ev, rows, pending)
-        if row is not None:
-            rows.add(row, gamma, (c.name, "n", 0), col)
-        ev.normal_force[c.name] = F_n
-        if np.any(tip_force):
-            f[:nv] += kin.J.T @ tip_force
-            for i, col in kin.columns:  # an articulated side's coordinates (the relative motion's columns)
-                f[i] += col @ tip_force
-    return kins, pending
 
 
 def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, f: np.ndarray,
@@ -236,14 +119,6 @@ def measures(phase: Phase) -> bool:
     return phase.controller.inner.uses_forces or phase.carrier is not None
 
 
-def measurement(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase) -> Measurement:
-    """The readable model's :class:`Measurement` at (t [s], x) of a sampled phase (:func:`measures`)."""
-    ev = evaluate(system, t, x, modes, phase)
-    tau_c = _contact_torque(system, t, x, modes, phase, ev) if phase.controller.inner.uses_forces else None
-    carrier_acc = float(ev.xdot[system.nQ + phase.carrier[0]]) if phase.carrier is not None else 0.0
-    return Measurement(ev.normal_force, ev.interface, tau_c, carrier_acc)
-
-
 def sample_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
                  resolution: float = 0.0, measured: Measurement | None = None, terms_at=None) -> ControlInput:
     """What a sampled phase's law (``phase.controller.inner``) measures at a sample instant (t [s], x).
@@ -252,16 +127,17 @@ def sample_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phas
     (a rigid contact's and a stick's too), and the contacts' generalized force on the joints as the continuous
     model gives it (deformable and friction forces, plus the rows that reach beyond the robot); a reference
     carried by a body gets the body's acceleration. No fold: the command is held, not a function of the forces.
-    ``measured``: those (:class:`Measurement`) from the compiled call; None: from the readable model.
-    ``terms_at(t, x)``: the robot's and the phase's terms there (:class:`SampleTerms`) from the compiled call;
-    None: Pinocchio's and the phase's own.
+    ``measured``: those (:class:`Measurement`) from the mode's call (required where the law measures forces or its
+    reference is carried). ``terms_at(t, x)``: the robot's and the phase's terms there (:class:`SampleTerms`) from
+    the mode's call; None: Pinocchio's and the phase's own.
     The kinematics are computed at the joint positions quantised to the encoders' ``resolution`` [rad or m]
     (0: exact). A law that reads no force sees none (as on the compiled path)."""
     nQ, nv = system.nQ, system.nv
     ctl = phase.controller
     law = ctl.inner
     if measured is None and measures(phase):
-        measured = measurement(system, t, x, modes, phase)
+        raise ValueError("sample_input: the phase's law measures a solved call: pass its Measurement "
+                         "(PipelineMode.measurement)")
     xq = x
     if resolution > 0.0:
         xq = x.copy()
@@ -293,28 +169,6 @@ class _NoForces:
 _NO_FORCES = _NoForces()
 
 
-def _contact_torque(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase,
-                    ev: Evaluation) -> np.ndarray:
-    """[N·m or N] the contacts' generalized force on the joints at a solved evaluation ``ev``, as the continuous
-    model measures it: the deformable and friction forces, plus the rows' forces λ that reach beyond the robot
-    (:func:`~contactdyn.model.constraints.force_columns`)."""
-    nQ, nv = system.nQ, system.nv
-    robot = system.robot
-    if any(launching(m) for m in modes):
-        modes = launch_directions_at(system, t, x, modes, phase, evaluate)
-    robot.update(x[:nv], x[nQ:nQ + nv])
-    f = np.zeros(nQ)
-    rows = Rows()
-    scratch = Evaluation(np.empty(0), np.empty(0), rows.meta, {}, {}, {}, {}, {}, {}, np.empty(0), np.empty(0),
-                         np.empty(0), None, {})
-    _contact_terms(system, x, modes, f, np.zeros(system.ny), rows, scratch, False)
-    tau = f[:nv].copy()
-    for col, lam in zip(rows.cols, ev.lam, strict=False):  # the contacts' rows come first in ev.lam
-        if np.any(col[nv:]):
-            tau += col[:nv] * lam
-    return tau
-
-
 def set_force_inputs(system, inp: ControlInput, x: np.ndarray, modes: list[ContactMode],
                      tau_contact: np.ndarray) -> None:
     """What a force-reading controller reads beyond the forces: the contacts' generalized force on the
@@ -341,63 +195,3 @@ def surface_points(system, x: np.ndarray, modes: list[ContactMode]) -> list[tupl
     return out
 
 
-def _command_and_solve(system, inp: ControlInput, phase: Phase, x: np.ndarray, x_d, f: np.ndarray, rows: Rows):
-    """The controller's command through the drives, then the solve: (drive output, Q̈, λ, regular, cmd, ż)."""
-    ctl = phase.controller
-    cmd, zdot, carried = command_of(system, inp, phase, x)
-    vmask = system._joint_motors if ctl.outputs == "voltage" else None
-    # drives, folded measured forces, solve
-    if (ctl.uses_forces and rows) or carried is not None:
-        return solve_folded(system, inp, ctl, cmd, zdot, f, rows, x, vmask, carried)
-    out = system.drives.apply(cmd, x, system.nQ, f, voltage=vmask)
-    qdd, lam, regular = kkt_solve(system, f, rows, None)
-    return out, qdd, lam, regular, cmd, zdot
-
-
-def _finish_friction(system, ev: Evaluation, pending: list, xdot: np.ndarray, ydot: np.ndarray) -> None:
-    """Sliding friction once the normal forces are known; the energy audit's friction power; impulse rates."""
-    nQ = system.nQ
-    for c, d, mu, visc in pending:
-        if c.name not in ev.friction:
-            ev.friction[c.name] = -mu * max(ev.normal_force[c.name], 0.0) * d + visc
-    if system.energy_slot >= 0:
-        for c, d, mu, _ in pending:
-            ydot[system.energy_slot + 1] += float(mu * max(ev.normal_force[c.name], 0.0) * (d @ ev.slip[c.name]))
-        xdot[2 * nQ + system.energy_slot + 1] = ydot[system.energy_slot + 1]
-    for name, slot in system.impulse_slots.items():
-        if name in ev.friction:
-            i0 = 2 * nQ + slot
-            xdot[i0] = ev.normal_force[name]
-            xdot[i0 + 1: i0 + 1 + len(ev.friction[name])] = ev.friction[name]
-
-
-def command_of(system, inp: ControlInput, phase: Phase, x: np.ndarray) -> tuple:
-    """(drive command, ż, carried reference) of the phase's controller at ``inp``: its τ through
-    :func:`drive_command`, and :func:`carried_command`."""
-    tau, zdot = phase.controller.command(inp)
-    return drive_command(system, tau, x), zdot, carried_command(inp, phase, tau, zdot)
-
-
-def carried_command(inp: ControlInput, phase: Phase, tau: np.ndarray, zdot) -> tuple | None:
-    """(i_b, ∂τ/∂Q̈_b, ∂ż/∂Q̈_b) of a reference carried by body coordinate i_b: the command's part
-    proportional to the body's acceleration, an unknown of the solve; None if there is none."""
-    if phase.carrier is None or inp.x_d is None:
-        return None
-    i_b, axis = phase.carrier
-    return carried_terms(i_b, *phase.controller.a_d_increment(inp, axis, tau, zdot), zdot)
-
-
-def carried_terms(i_b: int, dtau: np.ndarray, dzdot, zdot) -> tuple | None:
-    """(i_b, Δτ, Δż) of :func:`carried_command` from the command's increments per unit body acceleration;
-    None where τ does not depend on it."""
-    return (i_b, dtau, None if zdot is None else dzdot) if (dtau != 0.0).any() else None
-
-
-def drive_command(system, tau: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """The command per drive (joints, then bodies): the controller's τ [N·m or N; V], the bodies' servo forces [N]."""
-    nQ = system.nQ
-    cmd = np.zeros(len(system.drives.specs))
-    cmd[:system.nv] = tau
-    for idx, v_ref, gain in system.servo:
-        cmd[idx] = gain * (v_ref - x[nQ + idx])  # body coordinate idx = drive idx
-    return cmd

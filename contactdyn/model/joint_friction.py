@@ -206,11 +206,6 @@ class JointFriction:
         """Does a holding torque ``hold`` [N·m or N] exceed joint i's static limit (within ``alarm``, relative)?"""
         return abs(hold) > (1.0 - alarm) * self.static[i] if alarm else abs(hold) > self.static[i]
 
-    def dissipation(self, modes: tuple, x: np.ndarray, nQ: int, nv: int) -> float:
-        """[W] the power the joints' damping and sliding friction take: b q̇² + τ_k |q̇ᵢ| ≥ 0."""
-        v = x[nQ:nQ + nv]
-        return float(self.damping @ (v * v)) + sum(self.kinetic[i] * m * float(v[i]) for i, m in modes if m)
-
 
 def summary(joints: dict[str, dict]) -> str:
     """One line for ``contactdyn run`` from ``Result.meta["joint_friction"]`` ("" when no joint has any)."""

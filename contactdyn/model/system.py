@@ -65,7 +65,7 @@ from .chain_forces import chain_sides
 from .constraints import mass_matrix as constraints_mass_matrix
 from .contact import Contact, ContactMode, Kinematics, riding_masses, riding_terms, turning_surface
 from .dynamics import Evaluation
-from .friction import initial_slip, slip_acceleration, slip_velocity
+from .friction import initial_slip, slip_velocity
 from .impact import Impact, impact, project_velocity
 from .joint_friction import JointFriction
 from .limits import JointLimits
@@ -301,32 +301,14 @@ class System:
             body.update(x, self.nQ)
         _update_riding(self, x)
 
-    def body_forces(self, x: np.ndarray, f: np.ndarray) -> None:
-        """Add to f the articulated bodies' −h_b(q_b, q̇_b) [N·m or N]: Coriolis, centrifugal and gravity; and the
-        riding masses' −m Jᵀ a on their carriers and −m n·a on their ξ (a: the point's drift)."""
-        self.update_bodies(x)
-        for body in self.articulated.values():
-            f[body.first:body.first + body.nb] -= body.h
-        for rm in self.riding:
-            f[rm.carrier] -= rm.mass * (rm.J.T @ rm.drift)
-            f[rm.coord] -= rm.mass * float(rm.n @ rm.drift)
-
     def mass_matrix(self) -> np.ndarray:
         """M [kg, kg·m²] at the last ``robot.update`` (and ``update_bodies``), a copy of
         :func:`contactdyn.model.constraints.mass_matrix`'s."""
         return constraints_mass_matrix(self).copy()
 
-    def contact(self, name: str) -> Contact:
-        """The contact named ``name``."""
-        return next(c for c in self.contacts if c.name == name)
-
     def slip_velocity(self, c: Contact, kin: Kinematics, qd: np.ndarray | None = None) -> np.ndarray:
         """Tangential tip–environment velocity [m/s] (:func:`contactdyn.model.friction.slip_velocity`)."""
         return slip_velocity(self, c, kin, qd)
-
-    def slip_acceleration(self, c: Contact, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:
-        """Tangential tip–environment acceleration [m/s²] (:func:`contactdyn.model.friction.slip_acceleration`)."""
-        return slip_acceleration(self, c, x, xdot)
 
     # ---- impacts, separation ----------------------------------------------------------------------------
     def impact(self, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact,

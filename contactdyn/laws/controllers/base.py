@@ -178,13 +178,6 @@ class Controller:
         """Joint torques and the rates of the controller's states."""
         raise NotImplementedError
 
-    def a_d_increment(self, inp: ControlInput, axis: np.ndarray, tau: np.ndarray,
-                      zdot: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-        """(Δτ, Δż) of the command (τ, ż) at ``inp`` for one unit [m/s²] more of ẍ_d along ``axis``
-        (a reference carried by a body: the command's part proportional to the body's acceleration)."""
-        tau_b, zdot_b = self.command(inp.replaced(a_d=inp.a_d + axis))
-        return tau_b - tau, None if zdot is None else zdot_b - zdot
-
     @staticmethod
     def applies_force_setpoints(config: Any) -> bool:
         """Whether this controller, so configured, acts on a phase's ``[[phase.force]]`` set-points."""
