@@ -43,7 +43,7 @@ from ..laws.trajectory import min_span
 from ..model.constraints import kkt_condition
 from ..model.contact import ContactMode
 from ..model.limits import rate_limit_report
-from ..model.paths import LivePipelines, PathLog
+from ..model.paths import LivePipelines, PathLog, mode_label
 from ..model.phases import Phase
 from ..model.system import System
 from ..numerics.integrators import (
@@ -377,19 +377,14 @@ def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, start: bool 
     pipes = run.pipelines
     why = pipes.declined(modes, phase)
     if why:
-        raise SimulationError(f"{run.scene.name}: the model cannot run {_mode_words(run.system, modes, phase)}: {why}")
+        label = mode_label(run.system, modes, phase)
+        raise SimulationError(f"{run.scene.name}: the model cannot run phase {label}: {why}")
     # (a notice's watch is a thread: only while the mode's pipeline is first built, once per mode)
     with nullcontext() if pipes.built(modes, phase) or pipes.twins is not None else compiling("the one pipeline"):
         mode = pipes.mode(modes, phase)
     if start:
         run.paths.record(run.system, modes, phase, mode)
     return mode
-
-
-def _mode_words(system: System, modes: list[ContactMode], phase: Phase) -> str:
-    """``phase 'press' with tip touching``: a mode in words, for an error."""
-    touching = [c.name for c, m in zip(system.contacts, modes, strict=True) if m.touching]
-    return f"phase {phase.spec.name!r}" + (f" with {', '.join(touching)} touching" if touching else "")
 
 
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:

@@ -29,7 +29,6 @@ from ..model.dynamics import measures, sample_input
 from ..model.joint_friction import STUCK
 from ..model.phases import Phase
 from .events import JUMPING, SlipWatch, fired_across, segment_events
-from .transitions import model_at
 
 __all__ = ["SampledPhases", "Hold"]
 
@@ -68,7 +67,7 @@ class SampledPhases:
         self.samplers[phase.index] = Sampler(ctl, stream=phase.index)
         if previous is not None:  # what acts until this first sample: the previous phase's command
             x = x.copy()
-            x[self._slots(phase, ctl.held)] = model_at(self.system, self.runner, t, x, modes, previous).tau_cmd
+            x[self._slots(phase, ctl.held)] = self.runner(modes, previous).evaluation(t, x).tau_cmd
         return self.take(t, x, modes, phase, self.runner(modes, phase) if self.runner is not None else None)
 
     def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, runner=None) -> np.ndarray:

@@ -46,7 +46,7 @@ from .charts import on_chart
 from .events import EventLog
 from .pipeline_mode import mode_runner
 
-__all__ = ["Transitions", "LastEvaluation", "model_at", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
+__all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
 #: [m] another rigid contact within this gap, closing, at a touch touches with it (one impact holds both): the
@@ -91,13 +91,7 @@ class LastEvaluation:
         return self.ev
 
     def _evaluate(self, t: float, x: np.ndarray, modes, phase):
-        return model_at(self.system, self.runner, t, x, modes, phase)
-
-
-def model_at(system: System, runner, t: float, x: np.ndarray, modes, phase):
-    """The model's Evaluation at (t [s], x): off the mode's call (``runner(modes, phase)``, a PipelineMode:
-    its :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`, which raises where the call has no answer)."""
-    return runner(modes, phase).evaluation(t, x)
+        return self.runner(modes, phase).evaluation(t, x)  # (PipelineMode.evaluation raises where there is no answer)
 
 
 class Transitions:

@@ -154,15 +154,15 @@ def _stage_tables(nodes, stages, alias_of: dict[int, int]) -> tuple[np.ndarray, 
 
 
 def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offset: float, kin: Kinematics,
-                 x: np.ndarray, f: np.ndarray, ydot: np.ndarray, ev, full: bool, relaxing: bool = False):
+                 x: np.ndarray, f: np.ndarray, ydot: np.ndarray):
     """Apply a chain's stage forces; return (tip force along u [N], bond row or None, γ, interface F, gap).
 
     Adds the stages' forces on masses and the bodies' coordinates to ``f`` [N], junction rates and the
-    energy audit's damper power to ``ydot``; with ``full`` records every stage's (x, ẋ, F)
-    in ``ev.stages``. ``offset`` [m] shifts the anchor (tangential chains anchored at touch);
-    ``relaxing``: the damped surface ends relax after a separation (``ContactMode.relaxing``).
+    energy audit's damper power to ``ydot``. ``offset`` [m] shifts the anchor (tangential chains anchored at touch).
+    (The impulse level's rows, :func:`contactdyn.model.constraints.velocity_rows`; the call's chains are
+    :mod:`contactdyn.model.pipeline.contacts`'.)
     """
-    key = (touching, relaxing and not touching)
+    key = (touching, False)
     a = dc.arrays.get(key)
     if a is None:
         a = dc.arrays[key] = pack(system, c, dc, touching, key[1])
@@ -181,10 +181,6 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
                                                       kin.drift, float(offset), f, ydot, a.motion, a.stage_state)
         if not finite:  # a compiled law raised (its call gives NaN) or gave NaN
             _law_error(a, dc)
-    if ev is not None:
-        ev.node_positions[f"{c.name}.{dc.label}"] = a.motion[0].copy()
-    if full and ev is not None:
-        _name_stages(a, ev.stages)
     row = _bond_row(system, c, dc, kin, u) if a.bond else None
     return tip_F, row, gamma, interface_F, (0.0 if touching else gap)
 
@@ -230,16 +226,6 @@ def _python_forces(a: ChainArrays, energy: bool) -> None:
         st[k, F] = stage.force(xs, xd)
         if energy:
             st[k, F_ELASTIC] = stage.force(xs, 0.0)
-
-
-def _name_stages(a: ChainArrays, stages: dict) -> None:
-    """Every stage's (x [m], ẋ [m/s], F [N]) by label: the active ones', then zeros for the others."""
-    st = a.stage_state.tolist()
-    for k in a.active:
-        stages[a.labels[k]] = tuple(st[k][:3])
-    for label in a.labels:
-        if label not in stages:
-            stages[label] = (0.0, 0.0, 0.0)
 
 
 def _bond_row(system, c: Contact, dc: DirectionalChain, kin: Kinematics, u: np.ndarray) -> np.ndarray:

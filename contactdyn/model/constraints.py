@@ -112,7 +112,7 @@ def velocity_rows(system, x, modes, slides: dict[str, tuple[np.ndarray, float]] 
         if not mode.touching:
             continue
         kin = system.kinematics(c, x)
-        _, row, _, _, _ = chain_forces(system, c, c.normal, True, 0.0, kin, x, dummy_f, dummy_y, None, False)
+        _, row, _, _, _ = chain_forces(system, c, c.normal, True, 0.0, kin, x, dummy_f, dummy_y)
         if row is not None:
             col = row
             if slides and c.name in slides:
@@ -125,8 +125,7 @@ def velocity_rows(system, x, modes, slides: dict[str, tuple[np.ndarray, float]] 
                 r = contact_row(system, c, t_dir, kin)
                 rows.add(r, 0.0, (c.name, "t", i))
         for i, dc in enumerate(c.tangent_chains):
-            _, trow, _, _, _ = chain_forces(system, c, dc, True, mode.offsets[i], kin, x, dummy_f, dummy_y, None,
-                                            False)
+            _, trow, _, _, _ = chain_forces(system, c, dc, True, mode.offsets[i], kin, x, dummy_f, dummy_y)
             if trow is not None:
                 rows.add(trow, 0.0, (c.name, dc.label, i))
     system.limits.add_rows(limits, x, system.nQ, rows, 0.0)

@@ -54,9 +54,8 @@ import numpy as np
 from ..errors import SceneError
 from ..robot.robot import Robot
 
-__all__ = ["JointFriction", "JOINT_EVENTS", "STUCK", "STICK_TOL", "joint_friction_channels", "summary"]
+__all__ = ["JointFriction", "STUCK", "STICK_TOL", "joint_friction_channels", "summary"]
 
-JOINT_EVENTS = ("joint_slip", "joint_stick")
 STUCK = 0  #: a joint's friction mode while stuck (sliding: its sign s = ±1)
 #: [rad/s or m/s] a sliding joint's ``joint_stick`` fires when s q̇ᵢ falls this far below min(0, its start value)
 STICK_TOL = 1e-13

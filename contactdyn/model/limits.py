@@ -33,9 +33,8 @@ import numpy as np
 from ..robot.robot import Robot
 from .impact import limit_impact
 
-__all__ = ["JointLimits", "LIMIT_EVENTS", "limit_channels", "rate_limit_report"]
+__all__ = ["JointLimits", "limit_channels", "rate_limit_report"]
 
-LIMIT_EVENTS = ("limit", "release")
 TOUCH_TOL = 1e-13  #: [rad or m] a free joint's limit event fires this far past min(0, its start margin)
 RELEASE_TOL = 1e-9  #: [N·m or N] a pressing joint whose torque pulls by more than this is released at once
 

@@ -28,7 +28,7 @@ from .contact import structure
 from .pipeline.pack import unsupported
 from .pipeline.pipeline import Pipeline
 
-__all__ = ["PIPELINE", "INTERPRETED", "path_of", "PathLog", "slower_paths", "LivePipelines"]
+__all__ = ["PIPELINE", "INTERPRETED", "path_of", "mode_label", "PathLog", "slower_paths", "LivePipelines"]
 
 PIPELINE = "compiled call"  #: the path of a mode on the one pipeline
 INTERPRETED = "interpreted call"  #: the path of a mode on the one pipeline run as its twins (numerics.twins)
@@ -87,7 +87,7 @@ def path_of(mode) -> tuple[str, str]:
     return (INTERPRETED if getattr(mode, "interpreted", False) else PIPELINE), mode.reason
 
 
-def _mode_label(system, modes, phase) -> str:
+def mode_label(system, modes, phase) -> str:
     """``press: tip sliding, wall free``: the phase and what each contact does."""
     def state(c, m) -> str:
         if not m.touching:
@@ -107,7 +107,7 @@ class PathLog:
         self.rows: dict[str, dict] = {}
 
     def record(self, system, modes, phase, mode) -> None:
-        label = _mode_label(system, modes, phase)
+        label = mode_label(system, modes, phase)
         row = self.rows.get(label)
         if row is None:
             path, why = path_of(mode)

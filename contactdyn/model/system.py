@@ -120,7 +120,6 @@ class System:
         self._D = self.drives.reflected[:nv]  #: rotor inertias reflected on the joints (true system)
         #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (zero: no motor)
         self._D_ctl = np.diag(self.drives.model_reflected[:nv])
-        self._joint_motors = self.drives.has_voltage & (np.arange(len(self.drives.specs)) < nv)  #: voltage mask
         # ---- controllers, then the first-order slots after the junctions ----
         self.controllers = [_controller_of(p, nv) for p in scene.phases]
         for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
