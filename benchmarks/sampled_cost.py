@@ -22,6 +22,8 @@ per step: output and set-up included, so an upper estimate), ``take`` (the sampl
 the compiled call, the sensors, the law; timed around SampledPhases.take) and ``rest`` (what
 remains: the re-evaluation of f after the jump, the events across it, the pieces' bookkeeping and output).
 Every mode runs on the one pipeline's compiled call (the paths column says so).
+``floor``: the continuous run with ``solver.max_step`` = one period, timed with the others: the CPU a sampled run
+cannot go below while it takes at least one DOP853 step per period (its ratio to the continuous run, and its steps).
 ``--profile``: cProfile of the first scene's sampled run (the 25 costliest functions, cumulative).
 
 Writes benchmarks/out/sampled_cost.json and .csv.
@@ -79,8 +81,8 @@ def _difference(a, b) -> dict:
 
 
 def compare(name: str, rate: float, repeats: int) -> dict:
-    times = interleaved({"continuous": _call(name, {}), "sampled": _call(name, {"controller.sample_rate": rate})},
-                        repeats)
+    times = interleaved({"continuous": _call(name, {}), "sampled": _call(name, {"controller.sample_rate": rate}),
+                         "bounded": _call(name, {"solver.max_step": 1.0 / rate})}, repeats)
     row: dict = {"scene": name, "rate_hz": rate}
     for label, timing in times.items():
         r = timing.last
@@ -89,6 +91,7 @@ def compare(name: str, rate: float, repeats: int) -> dict:
                       "paths": sorted({p["path"] for p in r.stats["paths"].values()})}
     c, s = row["continuous"], row["sampled"]
     row["ratio"] = s["cpu_s"] / c["cpu_s"]
+    row["floor_ratio"] = row["bounded"]["cpu_s"] / c["cpu_s"]  # no sampling, steps of at most one period
     row["us_per_sample"] = (s["cpu_s"] - c["cpu_s"]) / max(s["samples"], 1) * 1e6
     per_step = c["cpu_s"] / max(c["steps"], 1)  # [s] the continuous run's CPU per step, all included
     n = max(s["samples"], 1)
@@ -120,7 +123,7 @@ def main() -> None:
     rows = []
     print(f"{'scene':16s} {'cont. CPU [s]':>13s} {'sampled [s]':>11s} {'ratio':>6s} {'steps c/s':>11s} "
           f"{'us/sample':>9s} {'(steps':>6s} {'take':>5s} {'rest)':>6s} {'calls/sample':>12s} {'tip diff [m]':>12s} "
-          f"{'F diff [N]':>10s}  sampled paths")
+          f"{'F diff [N]':>10s} {'floor':>6s} {'steps':>6s}  sampled paths")
     for name in args.scenes:
         simulate(FILES.get(name, name), {"controller.sample_rate": args.rate})  # (compiled and cached first)
         row = compare(name, args.rate, args.repeats)
@@ -129,17 +132,19 @@ def main() -> None:
         print(f"{name:16s} {c['cpu_s']:13.3f} {s['cpu_s']:11.3f} {row['ratio']:6.2f} "
               f"{c['steps']:5d}/{s['steps']:<5d} {row['us_per_sample']:9.0f} {part['steps']:6.0f} {part['take']:5.0f} "
               f"{part['rest']:6.0f} {row['rhs_per_sample']:12.1f} "
-              f"{row['difference']['tip_m']:12.3g} {row['difference']['force_N']:10.3g}  {', '.join(s['paths'])}")
+              f"{row['difference']['tip_m']:12.3g} {row['difference']['force_N']:10.3g} {row['floor_ratio']:6.2f} "
+              f"{row['bounded']['steps']:6d}  {', '.join(s['paths'])}")
     write_report(OUT / f"{stem}.json", {"rate_hz": args.rate, "repeats": args.repeats}, rows)
     with (OUT / f"{stem}.csv").open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["scene", "rate_hz", "cpu_continuous_s", "cpu_sampled_s", "ratio", "steps_continuous",
-                    "steps_sampled", "samples", "us_per_sample", "rhs_per_sample", "tip_diff_m", "force_diff_N"])
+                    "steps_sampled", "samples", "us_per_sample", "rhs_per_sample", "tip_diff_m", "force_diff_N",
+                    "floor_ratio", "steps_bounded"])
         for row in rows:
             c, s = row["continuous"], row["sampled"]
             w.writerow([row["scene"], row["rate_hz"], c["cpu_s"], s["cpu_s"], row["ratio"], c["steps"], s["steps"],
                         s["samples"], row["us_per_sample"], row["rhs_per_sample"], row["difference"]["tip_m"],
-                        row["difference"]["force_N"]])
+                        row["difference"]["force_N"], row["floor_ratio"], row["bounded"]["steps"]])
     if args.profile:
         profile(args.scenes[0], args.rate)
 

@@ -108,7 +108,9 @@ def built(scene: Scene) -> bool:
 
 
 def choose(scene: Scene, path: str) -> Choice:
-    """The run's path for ``path`` (one of :data:`PATHS`)."""
+    """The run's path for ``path`` (one of :data:`PATHS`; another is a SceneError naming ``--path``)."""
+    if path not in PATHS:
+        raise SceneError("--path", f"one of {', '.join(PATHS)}", path, scene.file)
     if path != "auto":
         return Choice(path)
     folder, name = _folder(), kind(scene)

@@ -51,6 +51,13 @@ def test_auto_is_interpreted_until_the_kind_is_built_then_compiled(markers):
     assert first_run.choose(load_scene("case1_cart"), "compiled").compiled
 
 
+def test_a_path_not_among_the_paths_is_one_message_naming_the_option():
+    scene = load_scene("b1")
+    with pytest.raises(SceneError, match=r"--path: expected one of auto, compiled, interpreted, found 'fast'") as err:
+        first_run.choose(scene, "fast")
+    assert scene.file in str(err.value)
+
+
 def test_a_scene_with_an_articulated_or_free_body_starts_a_build_as_any_other(markers):
     """A body with revolute joints (the lever) and a free body (drop_box, either chart) run on the compiled call,
     so their first runs start a build as any other scene's."""

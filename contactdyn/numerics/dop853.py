@@ -538,7 +538,7 @@ def solution_status(ierr: int, watch: _EventWatch, t_last: float) -> tuple[int, 
     if ierr == 2 and watch.hits and watch.terminal[watch.hits[-1][1]]:
         return 1, "A termination event occurred.", watch.hits[-1][0]
     if ierr < 0:
-        return -1, f"DOP853 (compiled): {_MESSAGES.get(ierr, f'error {ierr}')} at t = {t_last:.9g} s", t_last
+        return -1, f"DOP853C: {_MESSAGES.get(ierr, f'error {ierr}')} at t = {t_last:.9g} s", t_last
     return 0, "The solver successfully reached the end of the integration interval.", t_last
 
 
