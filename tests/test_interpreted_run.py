@@ -1,7 +1,7 @@
 """The compiled call run interpreted (contactdyn.numerics.twins, a scene kind's first run): its outputs are the
 compiled run's bit for bit, for B1 and for scenes with a user's stage law, controller and force-reading law;
 it compiles nothing but its leaves (numba's compile events), and there is no readable model left to call
-(``contactdyn.model.dynamics`` has no ``evaluate``)."""
+(``contactdyn.model.evaluation`` has no ``evaluate``)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from numba.core import event
 
-from contactdyn.model import dynamics
+from contactdyn.model import evaluation
 from contactdyn.model.paths import INTERPRETED, PIPELINE
 from contactdyn.numerics.twins import LEAVES, Twins
 from contactdyn.simulate import simulate
@@ -76,7 +76,7 @@ def test_the_interpreted_run_is_the_compiled_run(scene, overrides):
         interpreted = simulate(scene, overrides, interpreted=True)
     finally:
         event.unregister("numba:compile", seen)
-    assert not hasattr(dynamics, "evaluate"), "the readable model (dynamics.evaluate) is back"
+    assert not hasattr(evaluation, "evaluate"), "the readable model (evaluate) is back"
     assert all(module.startswith(OUTSIDE) for module in seen.modules), seen.modules
     _same(interpreted, compiled)
 

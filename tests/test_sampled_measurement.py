@@ -20,7 +20,7 @@ import pytest
 from contactdyn import parse_scene
 from contactdyn.hybrid.pipeline_mode import PipelineMode, mode_runner
 from contactdyn.hybrid.sampling import SampledPhases
-from contactdyn.model.dynamics import measures, sample_input
+from contactdyn.model.evaluation import measures, sample_input
 from contactdyn.model.pipeline.pack import unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.simulate import prepare

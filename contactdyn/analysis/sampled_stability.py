@@ -12,7 +12,7 @@ scene run sampled) by central differences:
   the held slots u of the state; A = ∂f/∂x, B = ∂f/∂u. Its states are the ones something depends on
   (accumulators, the held slots and the law's own states, constant between samples, drop out), as in
   :mod:`~contactdyn.analysis.stability`;
-- the law at a sample: what it measures at t_k (:func:`~contactdyn.model.dynamics.sample_input`, the one
+- the law at a sample: what it measures at t_k (:func:`~contactdyn.model.evaluation.sample_input`, the one
   the hybrid loop calls: the state, and the contact forces under the command held so far, u_{k−1}) through its
   own ``command``: (τ, ż) = G(m, z) with the measurement m = (x, u_prev); K = ∂τ/∂m, K_z = ∂τ/∂z and
   L = ∂ż/∂m, L_z = ∂ż/∂z. Its states advance once per sample, z_{k+1} = z_k + h ż (forward Euler, as
@@ -40,7 +40,7 @@ from scipy.linalg import expm
 
 from ..errors import SimulationError
 from ..laws.controllers.sampled import SampledController
-from ..model.dynamics import measures, sample_input
+from ..model.evaluation import measures, sample_input
 from ..model.system import System
 from ..output.result import Result
 from ..scene.scene_file import Scene, parse_scene

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import SimulationError
 from ..model.contact import ContactMode
-from ..model.dynamics import Evaluation
+from ..model.evaluation import Evaluation
 from ..model.friction import cone_slack
 from ..model.phases import Phase
 from ..model.system import System

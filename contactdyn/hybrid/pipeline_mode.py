@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import SimulationError
 from ..model.chain_forces import pack as pack_chain
-from ..model.dynamics import Evaluation, Measurement, SampleTerms
+from ..model.evaluation import Evaluation, Measurement, SampleTerms
 from ..model.paths import LivePipelines
 from ..model.pipeline.drives import DW_U, DW_W
 from ..model.pipeline.pack import (
@@ -228,7 +228,7 @@ class PipelineMode:
         return Xd, E, W
 
     def measurement(self, t: float, x: np.ndarray) -> Measurement:
-        """What a sampled law measures at (t [s], x) (:class:`~contactdyn.model.dynamics.Measurement`), off one
+        """What a sampled law measures at (t [s], x) (:class:`~contactdyn.model.evaluation.Measurement`), off one
         compiled call with the diagnostics on (as an output sample's)."""
         p, system = self.pipe.packed, self.system
         Xd, E, W = self._one_call(t, np.ascontiguousarray(x, dtype=float)[None, :])
@@ -241,7 +241,7 @@ class PipelineMode:
 
     def sample_terms(self, t: float, x: np.ndarray) -> SampleTerms:
         """What the sampled phase's law reads of the robot and the phase at (t [s], x) besides the forces
-        (:class:`~contactdyn.model.dynamics.SampleTerms`), by the call's own stages in one compiled call."""
+        (:class:`~contactdyn.model.evaluation.SampleTerms`), by the call's own stages in one compiled call."""
         p, phase = self.pipe.packed, self.phase
         H, h, g, J6, a6, p_tip, v_tip, R, x_d, v_d, a_d, F_d, rate = self.pipe.of(sample_terms)(
             float(t), x, p.ints, p.reals, int(phase.controller.inner.needs_gravity))

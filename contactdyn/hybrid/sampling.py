@@ -5,7 +5,7 @@ state between samples. With the compiled DOP853 the integrator takes the sample 
 step boundaries (:class:`Hold`, :mod:`contactdyn.numerics.held_steps`: no step straddles the hold's jump, one
 segment carries many samples); with any other method the loop (:mod:`contactdyn.hybrid.loop`) ends a segment at
 every t_k. Either way :meth:`SampledPhases.take` runs there: what the law
-measures at (t_k, x) (:func:`~contactdyn.model.dynamics.sample_input`, through the sensors; the forces, the
+measures at (t_k, x) (:func:`~contactdyn.model.evaluation.sample_input`, through the sensors; the forces, the
 contacts' torque on the joints and a carrier's acceleration off the compiled call where the mode runs on it,
 :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.measurement`), its command from
 the measurement of ``delay`` samples ago written into the held slots, its own states advanced by one period.
@@ -25,7 +25,7 @@ import numpy as np
 from ..laws.controllers.sampled import SampledController, Sampler
 from ..laws.trajectory import min_span
 from ..model.contact import ContactMode
-from ..model.dynamics import measures, sample_input
+from ..model.evaluation import measures, sample_input
 from ..model.joint_friction import STUCK
 from ..model.phases import Phase
 from .events import JUMPING, SlipWatch, fired_across, segment_events
@@ -73,7 +73,7 @@ class SampledPhases:
     def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, runner=None) -> np.ndarray:
         """The sample at t [s] of the phase's law: the state with its new held command and states. ``runner``: the
         mode's call (a PipelineMode) measures the forces and gives the robot's terms (None: Pinocchio's terms, and no
-        measurement: a law that measures a solved call needs the runner, ``dynamics.sample_input``)."""
+        measurement: a law that measures a solved call needs the runner, ``evaluation.sample_input``)."""
         sampler = self.samplers[phase.index]
         ctl = phase.controller
         compiled = runner is not None

@@ -24,7 +24,7 @@ state, once; :func:`chain_call` (numba) is one call over them: node motion, the 
 law called by its compiled address, :mod:`contactdyn.laws.abi`), the loads, the energy audit's damper
 power and the bond's γ. A stage whose law numba cannot compile is computed in Python between
 :func:`chain_motion` and :func:`chain_loads`, the two halves of the call. :func:`chain_forces` packs,
-calls and names the outputs for the readable right-hand side (:mod:`contactdyn.model.dynamics`); the one
+calls and names the outputs (an impact's bond rows, :mod:`contactdyn.model.constraints`); the one
 pipeline (:mod:`contactdyn.model.pipeline.contacts`) calls :func:`chain_call` over the same packed arrays: one
 description of the law. Under ``NUMBA_DISABLE_JIT=1`` the same functions run interpreted.
 """

@@ -7,7 +7,8 @@ and the state layout (below). The physics lives in modules named after
 the paper's concepts; the methods here are the entry points the hybrid loop and the tests
 call:
 
-- :meth:`System.evaluate` — the right-hand side in one mode (:mod:`contactdyn.model.dynamics`);
+- the right-hand side in one mode is the one pipeline's call (:mod:`contactdyn.model.pipeline`; its answers at an
+  instant: :mod:`contactdyn.model.evaluation`);
 - :meth:`System.impact` — the plastic impact map (:mod:`contactdyn.model.impact`);
 - :meth:`System.project_velocity` — velocities onto the active constraints (same module);
 - :meth:`System.start_phase` — a task phase at run time (:mod:`contactdyn.model.phases`);
@@ -64,7 +65,7 @@ from .chain import NodeKind
 from .chain_forces import chain_sides
 from .constraints import mass_matrix as constraints_mass_matrix
 from .contact import Contact, ContactMode, Kinematics, riding_masses, riding_terms, turning_surface
-from .dynamics import Evaluation
+from .evaluation import Evaluation
 from .friction import initial_slip, slip_velocity
 from .impact import Impact, impact, project_velocity
 from .joint_friction import JointFriction

@@ -96,6 +96,9 @@ class _Steps:
     coef: dict[int, np.ndarray] = field(default_factory=dict)  #: step -> interpolant coefficients (7, n)
     calls: int = 0  #: right-hand-side calls made for interpolants
     end_x: np.ndarray | None = None  #: the last step end's state as the FSAL call got it (None: not kept)
+    #: [s] per accepted step, the step its error proposes next (h min(MAX_FACTOR, SAFETY err^(−1/8)), before the
+    #: no-growth rule after a rejection), where the compiled steps took them (:func:`_stepped`): :func:`_proposal`'s
+    proposals: list[float] = field(default_factory=list)
 
     def y_old(self, i: int) -> np.ndarray:
         return self.y0 if i == 0 else self.blocks[i - 1][_Y_NEW]
@@ -485,6 +488,7 @@ def _stepped(step: Callable, fun: Callable, steps: _Steps, watch: _EventWatch, t
             if err < 1.0:
                 factor = MAX_FACTOR if err == 0.0 else min(MAX_FACTOR, SAFETY * err ** _EXPONENT)
                 h_abs = abs(h) * (min(1.0, factor) if rejected else factor)
+                steps.proposals.append(h * factor)
                 break
             h_abs = abs(h) * max(MIN_FACTOR, SAFETY * err ** _EXPONENT)
             rejected, nreject = True, nreject + 1

@@ -149,12 +149,15 @@ def _carried(piece: _Steps, h_start: float, rtol: float, atol: float) -> float:
     """[s] The step to go on with after a piece that ended at a sample instant: its last step was clipped to land
     there, so where that step's own error lets the step grow, the proposal it was clipped from (made after the step
     before, or the piece's first step ``h_start`` [s]), if larger; else the clipped step's own proposal."""
-    h_last = piece.t[-1] - piece.t[-2]
-    own = _proposal(piece, rtol, atol)
+    h_last, last = piece.t[-1] - piece.t[-2], len(piece.t) - 2
+
+    def proposal(i: int) -> float:  # (the compiled steps' own, else from the stages)
+        return piece.proposals[i] if len(piece.proposals) > last else _proposal(piece, rtol, atol, i)
+
+    own = proposal(last)
     if own < h_last:  # the clipped step's error already asks for a shorter one
         return own
-    before = h_start if len(piece.t) == 2 else _proposal(piece, rtol, atol, len(piece.t) - 3)
-    return max(own, before)
+    return max(own, h_start if last == 0 else proposal(last - 1))
 
 
 def _solution(pieces: list[_Steps], watch: _EventWatch, ierr: int, t_end: float, after: np.ndarray | None,

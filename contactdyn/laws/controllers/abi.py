@@ -103,7 +103,7 @@ LAYOUT = (
     ("touch", lambda nv, nz, ns, nr, nk: ns, 1),
     ("keys", lambda nv, nz, ns, nr, nk: KEY_W * nk, lambda nv: KEY_W),
 )
-#: per key of the readable ControlInput's dictionaries (per contact, then its tangential chains: dynamics.surface_keys)
+#: per key of the ControlInput's dictionaries (per contact, then its tangential chains: evaluation.surface_keys)
 #: in the "keys" field: the measured force [N], touching (1.0), the surface point [m] (3) and its velocity [m/s] (3)
 KEY_FORCE, KEY_TOUCH, KEY_P, KEY_V, KEY_W = 0, 1, 2, 5, 8
 FIELD = {name: k for k, (name, _, _) in enumerate(LAYOUT)}  #: a field's index in LAYOUT

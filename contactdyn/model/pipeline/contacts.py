@@ -1,7 +1,7 @@
 """The pipeline's contact stages over the packed arrays: chains, bond rows, friction rows, limit rows, and after the
 solve the contacts' forces.
 
-Per contact, in the readable model's order (:func:`contactdyn.model.dynamics._contact_terms`): its chains (the
+Per contact, in the order of ``System.contacts``: its chains (the
 normal, then the tangential ones) by :func:`contactdyn.model.chain_forces.chain_call` over the chain's packed plan
 (stage laws by address), each bonded chain's row G and γ; then friction
 (:func:`contactdyn.model.friction.friction_terms`): a stick row per tangent, or a slide's tilt of the normal

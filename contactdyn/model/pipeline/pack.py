@@ -67,7 +67,7 @@ from ...robot.rigid_body import forest_table
 from ..chain import NodeKind
 from ..chain_forces import S_LAW
 from ..chain_forces import pack as pack_chain
-from ..dynamics import surface_keys
+from ..evaluation import surface_keys
 from ..friction import launching
 from .control_laws import JOINT_DYNAMIC, kind_address
 from .drives import DW_W, drive_table, python_drives
@@ -100,7 +100,7 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "python_controller"
 #: their reals (RR_*)
 #: W_LEAST_SQUARES: the slot of ``work`` counting the calls whose KKT matrix was singular (solved by the minimum-norm
 #: least squares, :func:`.kkt.solve_linear`: the readable model's ``Evaluation.regular = False``) since the packing
-#: I_KEYS: per key of the readable ControlInput's dictionaries (``dynamics.surface_keys``: per contact, then its
+#: I_KEYS: per key of the readable ControlInput's dictionaries (``evaluation.surface_keys``: per contact, then its
 #: tangential chains) its contact and its chain (-1: the contact's normal); R_KEYS: per key the shift of its surface
 #: point from the contact's [m] (u·offset: a tangential chain's anchor). A declared Python stage's "keys" field
 #: (:func:`.force_fold.key_fields`)
@@ -154,7 +154,7 @@ TIP, ANCHOR, MASS = int(NodeKind.TIP), int(NodeKind.ANCHOR), int(NodeKind.MASS)
 #: the section when it is not 0), then per chain its interface force [N] (written always), then the drives' applied
 #: forces (N_DRIVES) [N·m or N], the controller's τ (NV), the tip's position (3) [m], x_d (REF_DIMS) [m], the force
 #: set-points (N_FORCES) [N], the rows' forces λ (N_ROWS) and the contacts' generalized force on the joints as a
-#: sampled law measures it (NV) [N·m or N] (``dynamics.measurement``)
+#: sampled law measures it (NV) [N·m or N] (``PipelineMode.measurement``)
 (D_TAU, D_CMD, D_TIP, D_XD, D_FD, D_LAM, D_TC, D_END) = range(8)
 
 
@@ -658,7 +658,7 @@ def _fold(b: _Builder, system, modes, phase, meta: list[tuple[str, str, int]]) -
     """I_FOLD: per set-point the contact whose normal force it reads (-1 for a tangential chain's), then per row the
     contact whose normal it is (-1: a stick, a tangential bond, a limit), then per set-point the chain whose
     interface force it reads (-1: a normal one) and its contact; R_FOLD: per set-point its surface point's shift
-    from the contact's [m] (``dynamics.surface_points``: a tangential chain's anchor u · offset)."""
+    from the contact's [m] (``evaluation.surface_points``: a tangential chain's anchor u · offset)."""
     names = [c.name for c in system.contacts]
     first = np.cumsum([0, *(len(c.chains) for c in system.contacts)])
     chain, owner, shift = [], [], []
@@ -674,7 +674,7 @@ def _fold(b: _Builder, system, modes, phase, meta: list[tuple[str, str, int]]) -
     b.real_section(R_FOLD, shift)
     keys = [(ci, int(first[ci]) + 1 + i if i >= 0 else -1, c.tangent_chains[i].u * modes[ci].offsets[i] if i >= 0
              else np.zeros(3)) for ci, c in enumerate(system.contacts) for i in range(-1, len(c.tangent_chains))]
-    b.int_section(I_KEYS, [v for ci, chain_at, _ in keys for v in (ci, chain_at)])  # (dynamics.surface_keys' order)
+    b.int_section(I_KEYS, [v for ci, chain_at, _ in keys for v in (ci, chain_at)])  # (evaluation.surface_keys' order)
     b.real_section(R_KEYS, [v for _, _, shift_k in keys for v in shift_k])
 
 

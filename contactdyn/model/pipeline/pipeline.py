@@ -192,7 +192,7 @@ def record(t, x, ints, reals, work, applied, tau, p_tip, lam, C, first_limit):
     tangential bonds' interface forces [N]), and the contacts' generalized force on the joints as a sampled law
     measures it [N·m or N]: the deformable and friction forces (written by the call after the contacts), plus the
     forces λ of the contacts' rows (before ``first_limit``) whose columns C reach beyond the robot
-    (``dynamics.measurement``). Each chain's interface force [N] is written by every call
+    (``PipelineMode.measurement``). Each chain's interface force [N] is written by every call
     (:func:`.contacts.contact_terms`), the stage states (x [m], ẋ [m/s], F [N]) are in ``work`` already."""
     at = diag_starts(ints)  # (put: no slice assignment, see numerics.linalg.put)
     put(work, at[D_TAU], applied)
@@ -247,7 +247,7 @@ def samples_at(ts, X, ints, reals, work, events):
 @njit(cache=True)
 def sample_terms(t, x, ints, reals, gravity):
     """What a sampled law reads of the robot and the phase at (t [s], x) besides the measured forces (the terms of
-    ``dynamics.sample_input``'s ControlInput), by the call's own stages: the law's H (rotors reflected) [kg·m²], h,
+    ``evaluation.sample_input``'s ControlInput), by the call's own stages: the law's H (rotors reflected) [kg·m²], h,
     g (empty unless ``gravity``) [N·m or N]; the tip frame's J (6, nv, linear rows first), J̇q̇ (6) [m/s², rad/s²],
     p [m], ṗ [m/s], R; the reference x_d, v_d, a_d (carried by its body, if one carries it); F_d [N] and Ḟ_d
     [N/s] per set-point."""

@@ -81,8 +81,7 @@ def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], ph
 
 @dataclass
 class Measurement:
-    """What a sampled law measures of a solved right-hand side at one (t, x), beyond the kinematics: from the readable
-    model (:func:`measurement`) or from the compiled call
+    """What a sampled law measures of a solved right-hand side at one (t, x), beyond the kinematics: off the mode's call
     (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.measurement`)."""
 
     normal_force: dict[str, float]  #: per contact [N], > 0 pressing
@@ -93,9 +92,9 @@ class Measurement:
 
 @dataclass
 class SampleTerms:
-    """What a sampled law reads of the robot and its phase at (t, x), besides the measured forces: from the readable
-    model (Pinocchio, the phase's reference) or from the compiled call
-    (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.sample_terms`)."""
+    """What a sampled law reads of the robot and its phase at (t, x), besides the measured forces: off the mode's call
+    (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.sample_terms`; :func:`sample_input` without a call: Pinocchio
+    and the phase's reference)."""
 
     H: np.ndarray  #: the law's inertia matrix, reflected rotors included [kg·m²]
     h: np.ndarray  #: Coriolis, centrifugal and uncompensated gravity [N·m or N]
