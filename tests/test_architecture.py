@@ -10,7 +10,7 @@ import pytest
 PKG = Path(__file__).resolve().parent.parent / "contactdyn"
 #: the model and the loop, one concept per module (docs/architecture.md's module map)
 CORE = [f"model/{m}" for m in ("chain", "contact", "phases", "chain_forces", "friction", "constraints",
-                               "impact", "dynamics", "system", "paths", "limits")] + \
+                               "impact", "evaluation", "system", "paths", "limits")] + \
     [f"model/pipeline/{m}" for m in ("pack", "pipeline", "robot_terms", "contacts", "kkt", "actuation",
                                      "force_fold", "control_laws", "drives", "launch", "energy", "joint_friction")] + \
     [f"hybrid/{m}" for m in ("events", "transitions", "loop", "pipeline_mode", "steps")] + \

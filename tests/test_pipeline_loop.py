@@ -20,7 +20,7 @@ from run_agreement import interpreted_evaluate, interpreted_samples  # noqa: E40
 
 from contactdyn.errors import SimulationError  # noqa: E402
 from contactdyn.hybrid.pipeline_mode import PipelineMode  # noqa: E402
-from contactdyn.model import dynamics  # noqa: E402
+from contactdyn.model import evaluation  # noqa: E402
 from contactdyn.model.paths import INTERPRETED, PIPELINE, LivePipelines  # noqa: E402
 from contactdyn.model.pipeline.pipeline import Pipeline  # noqa: E402
 from contactdyn.model.system import System  # noqa: E402
@@ -104,10 +104,10 @@ def test_a_run_on_the_pipeline_is_the_interpreted_run(scene, duration, monkeypat
 
 
 def test_a_pipeline_run_has_no_readable_model_to_evaluate(monkeypatch):
-    """The readable model (dynamics.evaluate) is gone: the segments integrate (their right-hand side, compiled steps,
+    """The readable model (evaluate) is gone: the segments integrate (their right-hand side, compiled steps,
     event values), sample and decide their transitions (PipelineMode.evaluation) on the one call, compiled: one
     source."""
-    assert not hasattr(dynamics, "evaluate"), "the readable model (dynamics.evaluate) is back"
+    assert not hasattr(evaluation, "evaluate"), "the readable model (evaluate) is back"
     r = _run("benchmarks/hard/stickslip.toml", 1.0, True, monkeypatch)
     assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
     assert len(r.events) > 10 and r.stats["rhs_evals"] > 1000
