@@ -148,7 +148,7 @@ class HybridRun:
         """Integrate the whole scene; numerical breakdowns become a SimulationError saying where."""
         gc.freeze()  # the ~1e5 objects made before (modules, compiled code) out of the collector's scans meanwhile
         try:
-            with running(self.pipelines.twins):  # (interpreted: the readable helpers the loop calls too, twins.current)
+            with running(self.pipelines.twins):  # (interpreted: the model's helpers the loop calls too, twins.current)
                 return self._run(wall0)
         except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
             raise SimulationError(_over_budget(self, *_spent_at(self), calls=True)) from None

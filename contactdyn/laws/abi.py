@@ -12,16 +12,15 @@ every law, built in or a user's, with no kernel per law. The families' C signatu
   μ [-] at slip speed |v_t| [m/s] from μ_s, μ_k [-] and the law's own parameters
   (``FrictionLaw.coefficient(mu_s, mu_k, p, speed)``).
 
-A law is compiled lazily, once per law class (:func:`stage_address`, :func:`friction_address`). A law numba
-cannot compile keeps the reason on the class (``law.compiled_reason``; "" when compiled) and address 0: the
-readable model computes it in Python. The compiled call runs it as a declared Python stage: a C function of the
-same signature made by ``ctypes`` around its Python function (:func:`python_stage_address`,
-:func:`python_friction_address`), its address where the cfunc's would be; the compiled code calls back into
-Python for that law only (it holds the GIL). A Python stage's exception is kept (:func:`python_stage_failed`),
-its call gives NaN (the call's status then -1), and :func:`raise_python_stage_error` re-raises it where the
-caller reads that status: the user sees the law's own error. The calls have a plain-Python twin: under
-``NUMBA_DISABLE_JIT=1`` nothing is compiled, an address is a handle of the law's Python function, and the same
-calling code runs interpreted.
+A law is compiled lazily, once per law class (:func:`stage_address`, :func:`friction_address`). A law numba cannot
+compile keeps the reason on the class (``law.compiled_reason``; "" when compiled) and address 0. The compiled call
+runs it as a declared Python stage: a C function of the same signature made by ``ctypes`` around its Python function
+(:func:`python_stage_address`, :func:`python_friction_address`), its address where the cfunc's would be; the
+compiled code calls back into Python for that law only (it holds the GIL). A Python stage's exception is kept
+(:func:`python_stage_failed`), its call gives NaN (the call's status then -1), and :func:`raise_python_stage_error`
+re-raises it where the caller reads that status: the user sees the law's own error. The calls have a plain-Python
+twin: under ``NUMBA_DISABLE_JIT=1`` nothing is compiled, an address is a handle of the law's Python function, and
+the same calling code runs interpreted.
 
 Caching: the compiled law is cached on disk by numba (``cache=True``). A cfunc made in a factory as a closure
 is not (numba keys a closure's cache on its pickled cells, and a dispatcher pickles with a new id in every
@@ -134,7 +133,7 @@ def raise_python_stage_error() -> None:
 
 def python_stage_address(law: type) -> int:
     """The address of a C function (``STAGE_SIGNATURE``) calling stage law ``law``'s Python ``force`` with p as a
-    tuple (as the readable model calls it): its declared Python stage. Interpreted, the law's handle."""
+    tuple (as ``ChainStage.force`` calls it): its declared Python stage. Interpreted, the law's handle."""
     address = stage_address(law)
     if address or law in _callbacks:
         return address or _callbacks[law][0]
@@ -151,7 +150,7 @@ def python_stage_address(law: type) -> int:
 
 def python_friction_address(spec) -> int:
     """The address of a C function (``FRICTION_SIGNATURE``) giving μ [-] of a contact's friction ``spec`` (a
-    FrictionSpec) by its Python ``spec.mu(speed)``, as the readable model does: its law's declared Python stage.
+    FrictionSpec) by its Python ``spec.mu(speed)``: its law's declared Python stage.
     Interpreted, a handle of the same function."""
     if (spec, handles()) in _callbacks:
         return _callbacks[spec, handles()][0]

@@ -381,7 +381,7 @@ def riding_point(J_o, J_w, a_o, alpha, R, w, d0, p0, xi, xi_dot):
     J̇q̇ = (a_o, α), rotation R, angular velocity ω = ``w`` [rad/s]; the line through p0 [m] along d0, both in the
     frame; the mass at ξ [m] on it, moving at ξ̇ [m/s]): n = R d0, r = R p0 + ξ n, J = J_o − [r]× J_ω (the point
     fixed in the frame at r), drift = a_o + α × r + ω × (ω × r) + 2 ξ̇ ω × n (its acceleration at Q̈ = 0, Coriolis'
-    term included); one source for the readable model and the compiled call."""
+    term included); one source for :func:`riding_terms` and the call's :func:`.pipeline.contacts.add_riding`."""
     n, r = np.zeros(3), np.zeros(3)
     for i in range(3):
         for j in range(3):

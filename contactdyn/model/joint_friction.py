@@ -158,7 +158,7 @@ class JointFriction:
     def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event, evaluate) -> tuple:
         """Apply a ``joint_slip`` or ``joint_stick`` event: (x, phase, info); ``info["kind"]`` renames the event
         where it is a false alarm (``joint_slip_check``) or a reversal (``joint_reverse``). ``evaluate(t, x, modes,
-        phase)``: System.evaluate's Evaluation (the transitions' ``LastEvaluation``)."""
+        phase)``: the mode's Evaluation there (the transitions' ``LastEvaluation``)."""
         i, nQ = event.index, system.nQ
         if event.kind == "joint_slip":  # slides from rest where the load pushes (−sign λ), unless a false alarm
             hold = evaluate(t, x, modes, phase).joint_hold.get(i, 0.0)

@@ -16,7 +16,7 @@ call:
 - the joints' damping and dry friction, a stuck joint a row (:attr:`System.joint_friction`,
   :mod:`contactdyn.model.joint_friction`);
 - the start posture solved from the task (:mod:`contactdyn.robot.posture`);
-- friction's slip velocity and acceleration (:mod:`contactdyn.model.friction`).
+- friction's slip velocity (:meth:`System.slip_velocity`, :mod:`contactdyn.model.friction`).
 
 The state layout: which part of the scene owns which slot of the state x
 (:func:`assign_chain_slots`, :func:`assign_first_order_slots`; :class:`System` keeps the sizes

@@ -13,7 +13,7 @@ the fallback raises LinAlgError; callers test.
 ~0.15 s to load per process, and a BLAS call ~0.1 µs, more than a loop over these 3–12-row arrays.
 :func:`put` copies a vector into a vector element by element (an array's slice assignment compiles numba's
 shape check and its message, ~1.5–2 s once per process). :func:`dot3` is a 3-vector's dot product that numpy
-and numba form alike (so the readable model's numbers do not move when a computation moves into numba).
+and numba form alike (so a computation gives the same numbers in Python and under numba).
 :func:`cross3` is numpy's ``np.cross`` of two 3-vectors (the same operations, bit for bit) without its ~8 µs of
 axis handling.
 """

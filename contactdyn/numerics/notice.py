@@ -101,8 +101,8 @@ def subject(default: str) -> str:
 
 @contextmanager
 def about(what: str) -> Iterator[None]:
-    """Within the block, the package's numba compiles are announced as ``what`` (a run on the readable model
-    compiles only the arithmetic it shares with the compiled call: it says so)."""
+    """Within the block, the package's numba compiles are announced as ``what`` (an interpreted run
+    compiles only the leaves it runs compiled: it says so)."""
     _SUBJECTS.append(what)
     try:
         yield

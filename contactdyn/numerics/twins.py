@@ -25,8 +25,8 @@ their order): a run on the twins gives the compiled run's outputs bit for bit (`
 Where it is used: :class:`contactdyn.model.pipeline.pipeline.Pipeline` (``twins=``: the mode packed with handles,
 its call and the loop's compiled steps and samples run as twins, :meth:`~.pipeline.Pipeline.of`).
 
-Outside the pipeline, the loop's Python calls a few numba functions of the readable model's (a transition's
-velocity projection calls the chains' ``chain_call``): such a call site asks :func:`current` for the function, its
+Outside the pipeline, the loop's Python calls a few numba functions of the model (a transition's velocity
+projection calls the chains' ``chain_call``): such a call site asks :func:`current` for the function, its
 twin while an interpreted run runs (:func:`running`, around ``HybridRun.run``), so a first run compiles none of it.
 
 Not twinned (run as they are, so they compile if they are numba functions): methods of classes, a function held in
@@ -155,7 +155,7 @@ def current(function):
 
 @contextlib.contextmanager
 def running(twins: Twins | None):
-    """An interpreted run with ``twins`` runs meanwhile (None: a compiled or readable one, nothing changes)."""
+    """An interpreted run with ``twins`` runs meanwhile (None: a compiled one, nothing changes)."""
     if twins is None:
         yield
         return

@@ -6,13 +6,12 @@ joint Jacobians (WORLD, 6 × nv) and its frame's joint placement, velocity and a
 do not read; for a tree of one-DOF revolute and prismatic joints (every URDF arm of ours and of
 example-robot-data's fixed-base arms) :func:`rigid_terms` computes the same in the one pipeline's call, with
 Pinocchio's algorithms and conventions (Featherstone's, in each joint's frame; H from the composite inertias
-about the world origin). From Python it writes them into Pinocchio's own arrays (M, nle, g, J and the
-joint's placement, velocity and acceleration: what a readable law and the frame calls read next); from a
-compiled caller (the one pipeline's :mod:`contactdyn.model.pipeline.robot_terms`) into its own arrays. Any other joint
+about the world origin). :func:`rigid_terms` writes them into the arrays it is given (M, nle, g, J and the
+joint's placement, velocity and acceleration); the one pipeline's :mod:`contactdyn.model.pipeline.robot_terms` runs
+the same algorithms into its own arrays. Any other joint
 (free-flyer, spherical, an unbounded revolute's (cos, sin)) leaves the terms to Pinocchio (:func:`rigid_table`
 returns None).
-Checked against Pinocchio to rounding in tests/test_rigid_body.py, and by every compiled mode against the readable
-model when built. Units: [m], [rad], [kg], SI throughout.
+Checked against Pinocchio to rounding in tests/test_rigid_body.py. Units: [m], [rad], [kg], SI throughout.
 """
 
 from __future__ import annotations

@@ -35,7 +35,7 @@ forces (``uses_forces``) is affine in them: the caller folds it by calling it ag
 What is not compiled (address 0, the reason in ``cls.compiled_reason``): a controller that has no declared
 parameters' config, or whose ``command`` numba cannot compile (a dict, a Python object, ``inp.forces``). The
 compiled call runs it as a declared Python stage (:func:`python_controller_address`): a ctypes callback of this
-signature rebuilds from the buffer the ControlInput the readable model gives (:func:`control_input`: the
+signature rebuilds a ControlInput from the buffer (:func:`control_input`: the
 dictionaries by key from the "keys" field and :class:`InputKeys`), calls the controller's own ``command`` (its real
 ``self``) and writes τ and ż; its exception is kept and re-raised after the call. A controller that outputs
 voltages (``outputs = "voltage"``) compiles as one of torques: ``tau`` then holds the joints' voltages [V], which the
@@ -297,16 +297,16 @@ class InputKeys:
     keys: tuple[str, ...]  #: the "keys" field's rows: per contact its name, then "<contact>.<label>" per chain
     contacts: tuple[str, ...]  #: the contacts' names (``forces`` lists them first, then the chains; ``touching``)
     set_points: tuple[str, ...]  #: ``force_d``'s keys: the phase's set-points in order
-    normals: dict = field(compare=False)  #: ``normals`` itself (the system's force directions, as the readable's)
-    uses_forces: bool = False  #: ``surfaces`` and ``touching`` filled (the readable's set_force_inputs)
+    normals: dict = field(compare=False)  #: ``normals`` itself (the system's force directions)
+    uses_forces: bool = False  #: ``surfaces`` and ``touching`` filled (as ``evaluation.set_force_inputs`` does)
 
 
 _OPTIONAL = ("gravity", "x_d", "v_d", "a_d", "R_tip", "J_ang", "drift_ang", "tau_contact")  #: None when empty
 
 
 def control_input(buf: np.ndarray, lay: np.ndarray, keys: InputKeys) -> ControlInput:
-    """The readable model's ControlInput (``dynamics._control_input``) of a buffer by its layout table: the same
-    fields, shapes, values and dictionaries (by ``keys``); arrays are views of ``buf``."""
+    """The ControlInput a buffer holds, by its layout table: its fields, shapes and values, and the dictionaries
+    (by ``keys``); arrays are views of ``buf``."""
     fields_at, (at_set, at_rate, at_keys, nk) = _input_plan(lay.tobytes())
     values = {name: None if shape is None else buf[a:b] if shape == () else buf[a:b].reshape(shape)
               for name, a, b, shape in fields_at}
@@ -352,8 +352,8 @@ _python_stages: dict[tuple, tuple] = {}
 
 def python_controller_address(ctl: Controller, keys: InputKeys) -> int:
     """The address of a C function (``CONTROLLER_SIGNATURE``) running controller ``ctl``'s own Python ``command``
-    (its real ``self``) on the ControlInput the readable model would give (:func:`control_input`): its declared
-    Python stage. τ and ż are written as the readable model writes them (a wrong shape raises there as here); an
+    (its real ``self``) on the ControlInput rebuilt from the buffer (:func:`control_input`): its declared
+    Python stage. τ and ż are written into the caller's arrays (a wrong shape raises); an
     exception is kept (``laws.abi.python_stage_failed``) and the status is 0, the caller re-raising it."""
     key = (id(ctl), id(keys.normals), keys)
     if key in _python_stages:

@@ -7,8 +7,8 @@ compiled in (``laws.controllers.task_pd_law.torque``, as ``TaskPD.command`` call
 command (the state's slots, ``SampledController.command``), a controller of the controller ABI called by its
 address (:mod:`contactdyn.laws.controllers.abi`: its inputs written into one buffer by the layout table packed with
 the mode), or constant voltages (``ConstantVoltage``: the drive table takes them). The drives turn the command, the
-joints' τ and the servo forces of the bodies, into generalized forces: ideal torque sources add it (``Drives.apply``
-without motors), motors by their kinds' laws (:mod:`.drives`).
+joints' τ and the servo forces of the bodies, into generalized forces: ideal torque sources add it as it is,
+motors by their kinds' laws (:mod:`.drives`).
 
 Under ``NUMBA_DISABLE_JIT=1`` a controller's "address" is a handle of its class (:data:`.pack.PYTHON_CONTROLLERS`)
 and :func:`command_by_address` runs its Python ``command`` on the same buffer: the same source, interpreted.
@@ -106,8 +106,7 @@ def reference(t, ints, reals):
 def carry(x, ints, reals, x_d, v_d):
     """A reference carried by a body (``[phase.reference] body``, ``model.phases.reference_at``): x_d += axis · Q_b
     [m], v_d += axis · Q̇_b [m/s] in place. Its acceleration axis · Q̈_b is an unknown of the solve, which the
-    readable model folds (``dynamics.carried_command``); so does the pipeline, for a law of the ABI
-    (:func:`.force_fold.controller_terms`: the law at a_d + axis)."""
+    pipeline folds for a law of the ABI (:func:`.force_fold.controller_terms`: the law at a_d + axis)."""
     i = ints[CARRIER]
     if i < 0 or x_d.size == 0:
         return
@@ -231,7 +230,7 @@ def open_loop_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C, 
 @njit(cache=True)
 def drive_command(x, ints, reals, tau):
     """The command per drive (joints, then bodies): the joints' τ [N·m or N; V], the bodies' servo forces
-    g (v_ref − v) [N] (``dynamics.drive_command``)."""
+    g (v_ref − v) [N]."""
     nQ = ints[NQ]
     cmd = np.zeros(ints[N_DRIVES])
     put(cmd, 0, tau)
@@ -245,7 +244,7 @@ def drive_command(x, ints, reals, tau):
 @njit(cache=True)
 def drives(x, ints, reals, work, cmd, sat, f):
     """The command per drive (:func:`drive_command`) through the drives into f: added as it is by ideal sources only
-    (Drives.apply without motors), else by each drive's law (:func:`.drives.apply_drives`, its outputs into
+    (no motor), else by each drive's law (:func:`.drives.apply_drives`, its outputs into
     ``work``; ``sat`` decides the clips): (ok, the forces applied on the drives' coordinates [N·m or N]); ok False
     where a kind's compiled law failed."""
     n = ints[N_DRIVES]

@@ -4,7 +4,7 @@ solve the contacts' forces.
 Per contact, in the order of ``System.contacts``: its chains (the
 normal, then the tangential ones) by :func:`contactdyn.model.chain_forces.chain_call` over the chain's packed plan
 (stage laws by address), each bonded chain's row G and γ; then friction
-(:func:`contactdyn.model.friction.friction_terms`): a stick row per tangent, or a slide's tilt of the normal
+(:func:`_friction`): a stick row per tangent, or a slide's tilt of the normal
 column −μ d·G_T (μ by the friction law's address, or the constant μ_k) or its known force −μ max(F, 0) d − c v_t
 on the coordinates; then the chains' tip force Jᵀ F [N].
 After the solve (:func:`finish`): normal forces, friction forces, the impulse states' rates, limit torques.
@@ -325,8 +325,8 @@ def contact_terms(x, ints, reals, work, FJ, Fa, Fp, Fv, FR, f, ydot, G, C, gamma
 @njit(cache=True)
 def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G, C, gamma, events, pending):
     """A friction contact's slip velocity along its tangents T (nt, 3), and its stick rows, or its slide (the tilt
-    of its normal column or its known force on the coordinates), as model.friction.friction_terms; False where its
-    law gave no μ (NaN: it raised)."""
+    of its normal column or its known force on the coordinates); False where its law gave no μ (NaN: it
+    raised)."""
     nQ, nt = ints[NQ], row[CI_NT]
     ev = events[EV_W * ci:EV_W * (ci + 1)]
     vt = np.zeros(nt)
@@ -382,7 +382,7 @@ def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G,
 
 @njit(cache=True)
 def _slip_direction(reals, cr, vt):
-    """model.friction.slip_direction: 2-D, the slip's own direction once ahead of the reference r by the stick band,
+    """A slide's direction d: 2-D, the slip's own direction once ahead of the reference r by the stick band,
     else r; 1-D, r (±1)."""
     d = cr[CR_R:CR_R + vt.size].copy()
     if vt.size == 2 and vt[0] * d[0] + vt[1] * d[1] > reals[RH_SLIP_BAND]:
@@ -434,8 +434,8 @@ def finish(ints, lam, xdot, events, pending, first_limit_row):
 def add_riding(x, ints, reals, FJ, Fa, FR, M, f):
     """M (nQ, nQ) with each chain mass riding a turning surface coupled to what carries it, m [J | n]ᵀ [J | n] beyond
     its own m (M_rest's diagonal), and its bias −m [J | n]ᵀ a in f (J, n, a: :func:`contactdyn.model.contact.
-    riding_point` at its carrying frame, over the table's NF columns; ``constraints.mass_matrix`` and
-    ``System.body_forces``); M itself (NF × NF) when no mass rides."""
+    riding_point` at its carrying frame, over the table's NF columns; M as
+    ``constraints.mass_matrix`` builds it); M itself (NF × NF) when no mass rides."""
     n_r = ints[N_RIDING]
     if n_r == 0:
         return M

@@ -3,8 +3,8 @@
 One row per drive (joints, then bodies; :class:`contactdyn.laws.drives.Drives`' order) in ``ints`` (DI_* below)
 and a block of ``reals`` per drive: its command gain (``DriveKind.command_gain``), its voltage limit [V] and its
 kind's values (``drive_abi.spec_values``: the declared parameters, then the transmission figures).
-:func:`drive_table` lays them out (Python, once per mode); :func:`apply_drives` runs them per call, as
-``Drives.apply`` does (with a fold, the clips decided at the full command: :func:`.force_fold.solve_through_drives`;
+:func:`drive_table` lays them out (Python, once per mode); :func:`apply_drives` runs them per call (with a
+fold, the clips decided at the full command: :func:`.force_fold.solve_through_drives`;
 :func:`fold_on_targets` folds through the unclipped drives' gains): a kind with a voltage inverts the command to
 a voltage (its ``voltage``, eq. 51 inverted), or takes the controller's voltage as it is; the voltage is clipped
 to ±u_max; the kind's ``force`` gives the force on the coordinate and the torque on its motor coordinate (an
@@ -92,8 +92,8 @@ def inertias(H, any_motor, reflected, nv):
 def apply_drives(x, nQ, rows, dreals, cmd, sat, f, out):
     """Each drive's generalized force at its command (cmd: a force per drive [N·m or N], or a voltage [V] where
     its row says so) added to f (and its motor's torque on its motor coordinate); outputs into ``out`` (DW_*).
-    ``sat`` decides which voltages clip (``Drives.apply``'s ``sat_cmd``: the full command of a fold, while ``cmd``
-    lacks the folded part; ``cmd`` itself otherwise). False where a kind's compiled law failed (a NaN voltage,
+    ``sat`` decides which voltages clip (the full command of a fold, while ``cmd`` lacks the folded part;
+    ``cmd`` itself otherwise). False where a kind's compiled law failed (a NaN voltage,
     status 0: Pipeline.failed_call)."""
     power = lost = 0.0
     o4 = np.empty(4)
@@ -139,7 +139,7 @@ def apply_drives(x, nQ, rows, dreals, cmd, sat, f, out):
 def fold_on_targets(rows, dreals, out, B, bq, fold, fold_q):
     """A force-reading law's τ = τ₀ + B λ (+ b Q̈_b, a carried reference) through the joints' drives whose voltage
     did not clip (``out``'s flags): gain_i B_i [and gain_i b_i] added on row i's target coordinate, its motor
-    coordinate if it owns one (``fold`` (nQ, rows), ``fold_q`` (nQ): ``constraints.solve_folded``). A clipped
+    coordinate if it owns one (``fold`` (nQ, rows), ``fold_q`` (nQ): :func:`.kkt.kkt_solve`'s). A clipped
     drive's force does not depend on λ."""
     for i in range(B.shape[0]):
         if out[DW_W * i + DW_CLIPPED] != 0.0:
@@ -153,7 +153,7 @@ def fold_on_targets(rows, dreals, out, B, bq, fold, fold_q):
 
 def drive_values(out: np.ndarray, n: int) -> dict[str, np.ndarray | float]:
     """The drives' outputs of the last call by name: applied [N·m or N], u [V] (NaN: none), clipped (bool) per
-    drive; power and dissipation [W] (as ``DriveOutput``)."""
+    drive; power and dissipation [W]."""
     table = out[:DW_W * n].reshape((n, DW_W))
     return {"applied": table[:, DW_APPLIED].copy(), "u": table[:, DW_U].copy(), "clipped": table[:, DW_CLIPPED] != 0,
             "power": float(out[DW_W * n]), "dissipation": float(out[DW_W * n + 1])}

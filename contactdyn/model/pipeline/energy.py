@@ -1,11 +1,11 @@
 """The energy audit's rates over the packed arrays (``solver.record_energy``, ``System.energy_slot``).
 
 Two states from the slot e of y (``System.energy_slot``): the drives' work, ẏ_e = the power they deliver [W] (ideal
-torque sources: Σ cmd_i q̇_i; with motors, each kind's own power as :func:`.drives.apply_drives` wrote it, as
-``Drives.apply``), and the energy dissipated, ẏ_{e+1} [W]: the motors' losses (a tube's damper), the chains'
-dampers (written by the chains, ``chain_forces``), the sliding contacts' viscous friction c |v_t|² and Coulomb
-friction μ max(F, 0) d · v_t (``friction_terms``, ``dynamics._finish_friction``), the joints' damping and sliding
-friction (``JointFriction.dissipation``).
+torque sources: Σ cmd_i q̇_i; with motors, each kind's own power as :func:`.drives.apply_drives` wrote it), and the
+energy dissipated, ẏ_{e+1} [W]: the motors' losses (a tube's damper), the chains' dampers (written by the chains,
+``chain_forces``), the sliding contacts' viscous friction c |v_t|² and Coulomb friction μ max(F, 0) d · v_t (μ and d
+as :func:`.contacts.contact_terms` kept them, F the solved normal force: :func:`.contacts.finish`), the joints'
+damping and sliding friction (:func:`.joint_friction.joint_dissipation`).
 """
 
 from __future__ import annotations

@@ -4,19 +4,19 @@ A controller of the ABI reads, beyond the state, the phase's set-points as array
 Ḟ_d [N/s], direction n, the measured force of each set-point's key [N]: a contact's normal force as the chains give
 it before the solve), and, when it reads forces (``uses_forces``), the contacts' generalized force on the joints
 τ_c = f + h [N·m or N], each set-point's surface point [m] and velocity [m/s] and whether its contact touches
-(``ControlInput.SET_POINT_ARRAYS``, the readable model's ``set_force_inputs``).
+(``ControlInput.SET_POINT_ARRAYS``).
 
 A force-reading law is affine in the row forces λ the solve returns: τ = τ₀ + B λ, ż = ż₀ + D λ. B and D are the
 law's own differences at unit forces, computed here by calling the same compiled command once more per row that
-reaches the law (:func:`contactdyn.model.constraints.force_columns`: +1 N on the measured normal force of a
+reaches the law (:func:`_fold_columns`: +1 N on the measured normal force of a
 contact's normal row, the row's force column on τ_c where it reaches a coordinate beyond the robot). The KKT solve
-folds B into its force columns through the drives (:func:`solve_through_drives`, as ``constraints.solve_folded``:
+folds B into its force columns through the drives (:func:`solve_through_drives`:
 gain_i B_i on each unclipped drive's target coordinate, the clips re-checked at the solved command, ≤ nv + 2
 passes), and :func:`fold_rates` adds D λ to ż after it.
 
 A reference carried by a body (``[phase.reference] body``) makes the command affine in the body's acceleration
 Q̈_b too (its a_d gains axis · Q̈_b): τ += b Q̈_b, ż += d Q̈_b, with (b, d) the law's difference at a_d + axis
-(``dynamics.carried_command``), folded into M's column of the body the same way.
+(:func:`_carried_column`), folded into M's column of the body the same way.
 """
 
 from __future__ import annotations
@@ -150,7 +150,7 @@ def _bump_key_force(ints, buf, lay, ci, by):
 
 @njit(cache=True, inline="always")
 def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
-    """B and D: the law's differences per unit force of each row that reaches it (constraints.force_columns)."""
+    """B and D: the law's differences per unit force of each row that reaches it."""
     nv, ns, nr = ints[NV], ints[N_FORCES], ints[N_ROWS]
     sp = ints[ints[I_FOLD]:ints[I_FOLD] + ns]
     row_contact = ints[ints[I_FOLD] + ns:ints[I_FOLD] + ns + nr]
@@ -187,7 +187,7 @@ def _fold_columns(ints, reals, buf, lay, tau, zdot, C, B, D):
 
 @njit(cache=True, inline="always")
 def _carried_column(ints, reals, buf, lay, tau, zdot, bq, dq):
-    """(b, d): the law's differences at one unit [m/s²] more of a_d along the carrier's axis (a_d_increment)."""
+    """(b, d): the law's differences at one unit [m/s²] more of a_d along the carrier's axis."""
     at, n = _at(lay, np.int64(F_AD))
     axis = reals[ints[R_CARRIER]:ints[R_CARRIER] + 3]
     a0 = buf[at:at + n].copy()
@@ -231,7 +231,7 @@ def controller_terms(t, x, ints, reals, work, H, h, g, FJ, Fa, Fp, Fv, FR, f, C,
 @njit(cache=True)
 def carried_coordinate(ints, bq):
     """The coordinate of the body carrying the reference where the command depends on its acceleration (b ≠ 0),
-    else -1 (``dynamics.carried_terms``: no carried term)."""
+    else -1 (no carried term)."""
     for i in range(bq.size if ints[CARRIER] >= 0 else 0):
         if bq[i] != 0.0:
             return ints[CARRIER]
@@ -242,7 +242,7 @@ def carried_coordinate(ints, bq):
 def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
     """(ok, the drives' applied forces [N·m or N], Q̈, λ, the solve's outcome): the command through the drives into f,
     then the KKT solve (:func:`.kkt.kkt_solve`; its outcome :func:`.kkt.solve_linear`'s). With a fold (B's columns, or a
-    carried column b ≠ 0) as ``constraints.solve_folded``: each pass applies τ₀ (the clips decided at the last full
+    carried column b ≠ 0): each pass applies τ₀ (the clips decided at the last full
     command), folds B and b through the unclipped drives (:func:`.drives.fold_on_targets`), solves, and re-applies the
     full command τ₀ + B λ + b Q̈_b, until the clips agree (≤ nv + 2 passes); τ becomes the full command, the drives'
     outputs in ``work`` are the full command's. ok False where a drive kind's law failed."""
@@ -250,7 +250,7 @@ def solve_through_drives(x, ints, reals, work, M, f, G, C, gamma, tau, B, bq):
     iq = carried_coordinate(ints, bq)
     folding = B.shape[1] > 0 or iq >= 0
     cmd = drive_command(x, ints, reals, tau)
-    if not folding:  # the command known before the solve: one pass (Drives.apply, then the solve)
+    if not folding:  # the command known before the solve: one pass (the drives, then the solve)
         ok, applied = drives(x, ints, reals, work, cmd, cmd, f)
         qdd, lam, outcome = kkt_solve(ints, reals, M, f, G, C, gamma, B, bq, np.int64(-1))  # (-1: compiled again)
         return ok, applied, qdd, lam, outcome

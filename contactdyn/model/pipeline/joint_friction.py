@@ -51,7 +51,7 @@ def joint_events(x, ints, lam, first_row, events, base):
 
 @njit(cache=True)
 def joint_dissipation(x, ints, reals):
-    """[W] b q̇² + Σ τ_k s q̇ᵢ ≥ 0 (JointFriction.dissipation: the power the joints' damping and sliding take)."""
+    """[W] b q̇² + Σ τ_k s q̇ᵢ ≥ 0 (the power the joints' damping and sliding take)."""
     if not ints[JOINT_FRICTION]:
         return 0.0
     nv, nQ, at = ints[NV], ints[NQ], ints[R_JOINTS]

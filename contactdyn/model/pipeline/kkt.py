@@ -3,12 +3,12 @@
 M is the robot's H [kg·m²] with the rotors reflected through rigid gears on its diagonal (``.drives.inertias``)
 and the diagonal inertias of the bodies, chain masses and motor coordinates [kg, kg·m²] (the packed ``M_rest``);
 G the rows, C their force columns (a slide's tilt), γ [m/s²] their velocity-product and Baumgarte terms
-(:mod:`contactdyn.model.constraints`' ``kkt_solve``); a force-reading controller's B (τ = τ₀ + B λ,
+(the rows: :mod:`contactdyn.model.constraints`); a force-reading controller's B (τ = τ₀ + B λ,
 :mod:`.force_fold`) folded through its drives into the force columns, a carried reference's column into M's. The solve
 is :func:`solve_linear`, ``constraints.solve_linear`` over arrays: ``numerics.linalg.lu_solve`` (partial pivoting)
-with the readable model's residual test, else (a singular matrix: redundant rows, consistent as two sticks holding
+with its residual test, else (a singular matrix: redundant rows, consistent as two sticks holding
 one body or not as two tables 1 mm apart) the same minimum-norm least squares (LAPACK's gelsd, rcond 1e-12), its
-outcome LEAST_SQUARES (the readable model's ``Evaluation.regular = False``). Only a KKT system with a non-finite
+outcome LEAST_SQUARES (an Evaluation's ``regular`` False). Only a KKT system with a non-finite
 entry (a law's nan or inf) is left unsolved (NOT_FINITE): the call declines (status 0).
 """
 
@@ -50,7 +50,7 @@ def kkt_solve(ints, reals, H, f, G, C, gamma, fold, fold_q, iq):
     surface, :func:`.contacts.add_riding`). ``fold`` (nQ, rows, or no columns): a force-reading controller's B through
     its drives (τ = τ₀ + B λ, :mod:`.force_fold`), subtracted from the force columns; ``fold_q`` (nQ): its part per unit
     acceleration of coordinate ``iq`` (a reference carried by that body; -1 none), subtracted from M's column iq
-    (``constraints.kkt_solve``'s M − fold_q)."""
+    (M − fold_q)."""
     nv, nQ, nr = ints[NV], ints[NQ], gamma.size
     m_rest = reals[ints[R_MREST]:ints[R_MREST] + nQ - nv]
     if nr == 0 and iq < 0 and H.shape[0] == nv:

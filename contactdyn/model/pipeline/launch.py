@@ -1,4 +1,4 @@
-"""2-D slides launching from rest over the packed arrays (:func:`contactdyn.model.friction.launch_directions`).
+"""2-D slides launching from rest over the packed arrays (which ones: :func:`contactdyn.model.friction.launching`).
 
 A touching 2-D slide started from rest, still inside the stick band (v_t · r ≤ v_ε), slides where it accelerates:
 d = (cos θ, sin θ) with a_t(d) ∥ d ahead, found by Newton on θ (at most 4 updates; the derivative by a 1e-7 rad
@@ -8,12 +8,11 @@ past the band keeps r (its own direction from there on, ``contacts._slip_directi
 relative motion's along the state's tangents (:func:`.contacts.tangential_motion`: on a turning surface they turn
 with it).
 
-Several contacts launching at once nest as on the readable model (``friction.launch_directions_at``: each trial of
-one evaluates the model, which launches the later ones first): level k's Newton reads, per trial, the pass in which
-every later level has found its direction for that trial. The levels' states are one stack (LV_* per launching
-contact); a pass's rates go to the deepest level first, and a level done (converged: its trial's pass is its
-result; or given up: one more round with r) hands the same rates up to the one before it. A level that aims a new
-trial starts the later levels again from their references.
+Several contacts launching at once nest (each trial of one runs the later ones' Newtons first): level k's Newton
+reads, per trial, the pass in which every later level has found its direction for that trial. The levels' states are
+one stack (LV_* per launching contact); a pass's rates go to the deepest level first, and a level done (converged:
+its trial's pass is its result; or given up: one more round with r) hands the same rates up to the one before it. A
+level that aims a new trial starts the later levels again from their references.
 
 The call drives it (:func:`contactdyn.model.pipeline.pipeline.call`, one loop over its body): :func:`launch_start`
 copies ``reals`` (the packed mode stays as packed) and aims every launching contact at its reference's angle,
@@ -148,7 +147,7 @@ def _past_band(x, ints, trial, level, j, FJ, Fa, Fp, Fv, FR):
 @njit(cache=True)
 def _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR):
     """(d × a_t, a_t · d) [m/s²] of launching contact j under its trial d: a_t = T (J Q̈ + J̇q̇ ± axis Q̈ of the
-    bodies' coordinates), the relative motion's along this state's tangents (friction.slip_acceleration)."""
+    bodies' coordinates), the relative motion's along this state's tangents."""
     nQ = ints[NQ]
     row = _contact(ints, j)
     cr = trial[row[CI_REALS]:]

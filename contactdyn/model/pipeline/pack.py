@@ -28,14 +28,14 @@ revolute or prismatic), an articulated body under another gravity than the robot
 drive kind or user controller numba cannot compile is packed as a declared Python stage (:func:`python_stages` names
 them): the address of a ctypes callback of its Python function where its cfunc's would be
 (:func:`contactdyn.laws.abi.python_stage_address`, :func:`contactdyn.laws.drive_abi.python_drive_addresses`,
-:func:`contactdyn.laws.controllers.abi.python_controller_address`: the controller's own ``command`` on the
-ControlInput the readable model gives, rebuilt from its buffer, whose "keys" field (I_KEYS) holds what the
+:func:`contactdyn.laws.controllers.abi.python_controller_address`: the controller's own ``command`` on a
+ControlInput rebuilt from its buffer, whose "keys" field (I_KEYS) holds what the
 dictionaries need). A
 chain's mass riding a turning surface is packed with its frame (``N_RIDING``): the call adds its coupling to M and
 its bias to f (:func:`.contacts.add_riding`). A force-reading law over a turning surface (a robot frame's or an
 articulated body's) folds as over a fixed one: the surface's rows are the state's (:func:`.contacts.turning_sides`),
 and those that reach a body's coordinates enter the measured τ_c the fold probes (:mod:`.force_fold`). Several 2-D
-slides launching from rest at once nest their Newtons as the readable model does (:mod:`.launch`).
+slides launching from rest at once nest their Newtons (:mod:`.launch`).
 An articulated body's joints are appended to the robot's in the rigid-body table
 (:func:`contactdyn.robot.rigid_body.forest_table`, ``NF`` its columns), a frame or a point of it a packed frame as a
 robot frame is; a free body's chart-B rows and frame placements are packed too (``N_CHARTS``), the call taking the
@@ -99,7 +99,7 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "python_controller"
 #: N_RIDING: the chain masses riding turning surfaces (``contact.RidingMass``), I_RIDING their ints (RI_*), R_RIDING
 #: their reals (RR_*)
 #: W_LEAST_SQUARES: the slot of ``work`` counting the calls whose KKT matrix was singular (solved by the minimum-norm
-#: least squares, :func:`.kkt.solve_linear`: the readable model's ``Evaluation.regular = False``) since the packing
+#: least squares, :func:`.kkt.solve_linear`: an Evaluation's ``regular`` False) since the packing
 #: I_KEYS: per key of the readable ControlInput's dictionaries (``evaluation.surface_keys``: per contact, then its
 #: tangential chains) its contact and its chain (-1: the contact's normal); R_KEYS: per key the shift of its surface
 #: point from the contact's [m] (u·offset: a tangential chain's anchor). A declared Python stage's "keys" field
@@ -422,7 +422,7 @@ def _placement(frame, point) -> list[float]:
 
 
 def _contacts(b: _Builder, system, modes, frames: list) -> list[tuple[str, str, int]]:
-    """The contacts' and chains' rows; the KKT rows' meta in the readable model's order (per contact: its tangential
+    """The contacts' and chains' rows; the KKT rows' meta, in order (per contact: its tangential
     chains' bonds, its stick rows, its normal row)."""
     h = b.ints
     h[N_CONTACTS] = len(system.contacts)
