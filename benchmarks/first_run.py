@@ -97,7 +97,7 @@ def _wait_for_build(cache: str) -> tuple[float, bool]:
 
 
 def scene_row(scene: str, work: str, compiled_first: bool) -> dict:
-    """The first run of one scene (empty cache, path ``auto``: the readable model, then the background build),
+    """The first run of one scene (empty cache, path ``auto``: the call interpreted, then the background build),
     a run while the build runs, the later run once it ended (the compiled call); ``compiled_first``: also the
     first run with ``--path compiled`` in another empty cache (compiling in the foreground)."""
     path = ROOT / "sims" / f"{scene}.toml"

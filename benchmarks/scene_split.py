@@ -13,8 +13,8 @@ Per scene, CPU medians over ``--repeats`` runs of ``simulate(load_scene(name))``
   the events' values at the step ends and their location (``dop853._EventWatch.stop``); stepping = the
   rest of the integration (the core's arithmetic, its callbacks, the restarts after a rejected step; the
   compiled steps' control); output = sampling the channels (``HybridRun._result``);
-  pipelines = a mode's pipeline where the run starts it (``LivePipelines.mode``: packed and checked against
-  the readable model the first time, looked up after); other = the rest (loading, transitions, segment set-up);
+  pipelines = a mode's pipeline where the run starts it (``LivePipelines.mode``: packed the first time,
+  looked up after); other = the rest (loading, transitions, segment set-up);
 - steps, rejected steps, runs of the compiled core (one per segment, one more per rejection, one
   more where the step after a retry would grow; 0 where a compiled mode takes every step in one compiled call,
   :mod:`contactdyn.hybrid.steps`, which does not run the core).

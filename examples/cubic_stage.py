@@ -5,8 +5,8 @@
 k [N/m] and b [N·s/m] are every stage's; k₃ [N/m³] is this law's own parameter, declared
 once below (unit, default, bounds, meaning): the scene reads and checks it from there, and
 ``contactdyn list keys`` documents it. A scene uses it with ``imports = ["cubic_stage"]``
-(this file beside the scene) and ``law = "cubic"`` on a stage. Not affine in x, so its
-touching modes run on the readable model: the run's stats say so, per mode.
+(this file beside the scene) and ``law = "cubic"`` on a stage. numba compiles it like a built-in law, so its
+touching modes run on the compiled call (the run's stats say so, per mode).
 """
 
 from contactdyn.laws import Param, StageLaw, register_stage_law
