@@ -76,10 +76,10 @@ class SampledPhases:
         measurement: a law that measures a solved call needs the runner, ``evaluation.sample_input``)."""
         sampler = self.samplers[phase.index]
         ctl = phase.controller
-        compiled = runner is not None
-        measured = runner.measurement(t, x) if compiled and measures(phase) else None
+        on_call = runner is not None  # (compiled or interpreted: the mode's one call)
+        measured = runner.measurement(t, x) if on_call and measures(phase) else None
         inp = sampler.measure(sample_input(self.system, t, x, modes, phase, sampler.resolution, measured,
-                                           runner.sample_terms if compiled else None))
+                                           runner.sample_terms if on_call else None))
         tau, z_law = sampler.update(inp, inp.z)
         x = x.copy()
         x[self._slots(phase, ctl.held)] = tau
