@@ -97,3 +97,23 @@ def test_a_jump_through_zero_stops_the_run_at_the_sample(c, fires_at):
     np.testing.assert_array_equal(sol.t_events[0], [t_k])
     np.testing.assert_allclose(sol.y[:, -1], [0.9, -1.35], rtol=1e-12)  # the state after the jump
     assert hold.taken == [t_k]
+
+
+def test_a_piece_carries_on_with_the_compiled_steps_own_proposals(monkeypatch):
+    """B1 sampled at 1 kHz: at every sample the held steps go on with the proposals the compiled steps recorded
+    (``_Steps.proposals``), one per accepted step; each is the step solve_ivp's control proposes from that step's
+    stages (``dop853._proposal``), to its error norm's rounding (a norm cancelling to ~1e-7: 1e-3 relative)."""
+    from contactdyn import simulate
+
+    checked, carried = [], held_steps._carried
+
+    def check(piece, h_start, rtol, atol):
+        assert len(piece.proposals) == len(piece.t) - 1
+        for i, got in enumerate(piece.proposals):
+            assert got == pytest.approx(dop853._proposal(piece, rtol, atol, i), rel=1e-3)
+        checked.append(len(piece.proposals))
+        return carried(piece, h_start, rtol, atol)
+
+    monkeypatch.setattr(held_steps, "_carried", check)
+    simulate("b1", {"controller.sample_rate": 1000.0, "duration": 0.05})
+    assert len(checked) >= 49 and sum(checked) >= len(checked)
