@@ -1,11 +1,13 @@
 """The compiled call's small linear algebra (contactdyn.numerics.linalg) against numpy and scipy, and the dynamic laws'
 stacked pseudo-inverse (laws.controllers.dynamic.pseudo_inverse) against the per-sample one."""
 
+import math
+
 import numba
 import numpy as np
 import pytest
 
-from contactdyn.numerics.linalg import cholesky, forward_solve, lu_solve, mtv, mv, pinv, put
+from contactdyn.numerics.linalg import cholesky, cross3, dot3, fma, forward_solve, lu_solve, mtv, mv, pinv, put
 
 
 @numba.njit
@@ -87,3 +89,41 @@ def test_stacked_pseudo_inverse_is_each_sample_s():
         got = pseudo_inverse(stack)
         assert np.array_equal(got, want)
         assert np.allclose(got, np.linalg.pinv(stack, rcond=1e-10), rtol=0, atol=1e-12)
+
+
+@numba.njit
+def _compiled_products(a, b):
+    return dot3(a, b), cross3(a, b)
+
+
+@numba.njit
+def _compiled_fma(a, b, c):
+    """llvm.fma(a, b, c) as dot3 forms its last term: fma(a₂b₂, fma(a₁b₁, a₀b₀)) with a₀b₀ = c, a₁b₁ = 0."""
+    return dot3(np.array([c, 0.0, a]), np.array([1.0, 0.0, b]))
+
+
+def test_dot3_and_cross3_are_the_same_numbers_in_python_and_compiled():
+    """An interpreted run's numbers are the compiled run's on every machine: dot3 forms a₀b₀ then one fused
+    multiply-add per term in both (numpy's ``a @ b`` would leave it to the machine's BLAS kernel), cross3 the same
+    products and differences. Random vectors and near-cancelling ones (a·b ≈ 0, where a rounding shows)."""
+    rng = np.random.default_rng(3)
+    for k in range(2000):
+        a, b = rng.normal(size=3) * 10.0 ** rng.integers(-8, 8), rng.normal(size=3)
+        if k % 2:  # b nearly orthogonal to a
+            b = np.cross(a, rng.normal(size=3)) + 1e-12 * rng.normal(size=3)
+        d, c = _compiled_products(a, b)
+        assert dot3(a, b) == d, (a.tolist(), b.tolist())
+        assert np.array_equal(cross3(a, b), c)
+
+
+def test_fma_rounds_once():
+    """fma(a, b, c) is a b + c rounded once: 0.1 · 10 − 1 is 2⁻⁵⁴ fused (the product's rounding error), 0 unfused;
+    and it equals the compiled llvm.fma on random and cancelling triples."""
+    assert fma(0.1, 10.0, -1.0) == 2.0 ** -54 and 0.1 * 10.0 - 1.0 == 0.0
+    assert fma(2.0, 3.0, 1.0) == 7.0 and fma(-0.0, 1.0, -0.0) == 0.0 and math.copysign(1.0, fma(-0.0, 1.0, -0.0)) < 0
+    assert math.isnan(fma(math.inf, 0.0, 1.0)) and fma(1e308, 10.0, 0.0) == math.inf
+    rng = np.random.default_rng(4)
+    for _ in range(2000):
+        a, b = rng.normal(size=2) * 10.0 ** rng.integers(-6, 6, size=2)
+        c = -a * b * (1.0 + 1e-15 * rng.normal()) if rng.random() < 0.5 else rng.normal()
+        assert fma(float(a), float(b), float(c)) == _compiled_fma(float(a), float(b), float(c))

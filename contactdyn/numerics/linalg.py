@@ -12,8 +12,8 @@ the fallback raises LinAlgError; callers test.
 :mod:`contactdyn.laws.controllers.operational_law`), written in loops: numba's LAPACK bindings cost
 ~0.15 s to load per process, and a BLAS call ~0.1 µs, more than a loop over these 3–12-row arrays.
 :func:`put` copies a vector into a vector element by element (an array's slice assignment compiles numba's
-shape check and its message, ~1.5–2 s once per process). :func:`dot3` is a 3-vector's dot product that numpy
-and numba form alike (so a computation gives the same numbers in Python and under numba).
+shape check and its message, ~1.5–2 s once per process). :func:`dot3` is a 3-vector's dot product formed alike in
+Python and compiled, on every machine (an interpreted run's numbers are the compiled run's).
 :func:`cross3` is numpy's ``np.cross`` of two 3-vectors (the same operations, bit for bit) without its ~8 µs of
 axis handling.
 """
@@ -21,6 +21,7 @@ axis handling.
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 from numba import types
@@ -29,7 +30,7 @@ from numba.extending import intrinsic, overload
 from .compile_cache import njit
 
 __all__ = ["solve_vector", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
-           "forward_solve", "contiguous", "dot3", "cross3", "put"]
+           "forward_solve", "contiguous", "dot3", "fma", "cross3", "put"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -47,8 +48,28 @@ def contiguous(a) -> np.ndarray:
 
 
 def dot3(a: np.ndarray, b: np.ndarray) -> float:
-    """a·b of two 3-vectors: numpy's ``a @ b`` in Python; compiled, the same order of operations."""
-    return float(a @ b)
+    """a·b of two 3-vectors: a₀b₀, then one fused multiply-add per term, in Python as compiled (not numpy's ``a @ b``:
+    which BLAS kernel forms it, with or without FMA, depends on the machine)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return fma(a2, b2, fma(a1, b1, a0 * b0))
+
+
+def fma(a: float, b: float, c: float) -> float:
+    """a b + c rounded once (IEEE 754's fused multiply-add, as ``llvm.fma`` compiled): exact in rationals, then
+    rounded (Python 3.13's ``math.fma`` where there is one)."""
+    if _MATH_FMA is not None:
+        return _MATH_FMA(a, b, c)
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
+        return a * b + c  # (inf and nan as the fused operation gives them)
+    try:
+        r = float(Fraction(a) * Fraction(b) + Fraction(c))
+    except OverflowError:
+        return a * b + c  # (± inf)
+    return r if r != 0.0 else a * b + c  # (an exact zero's sign as IEEE gives it)
+
+
+_MATH_FMA = getattr(math, "fma", None)
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -67,8 +88,7 @@ def _cross3_compiled(a, b):
 
 @overload(dot3)
 def _dot3_compiled(a, b):
-    """a₀b₀, then a fused multiply-add per term: OpenBLAS's ddot (numpy's ``@``) on a machine with FMA, so the
-    compiled product equals numpy's bit for bit there (elsewhere the two differ in the last bit)."""
+    """a₀b₀, then a fused multiply-add per term (:func:`dot3`'s, bit for bit)."""
     def impl(a, b):
         return _fma(a[2], b[2], _fma(a[1], b[1], a[0] * b[0]))
     return impl
