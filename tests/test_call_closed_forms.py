@@ -24,25 +24,29 @@ from contactdyn.hybrid.pipeline_mode import mode_runner
 from contactdyn.scene.scene_file import parse_scene, sims_dir
 from contactdyn.simulate import prepare
 
-KP, KD, KO, DO = 800.0, 40.0, 400.0, 40.0  #: [N/m, N·s/m, 1/s², 1/s] the writer's gains
-
 
 def _writer_doc() -> dict:
     with open(sims_dir() / "case2_writer_ur5.toml", "rb") as fh:
         return tomllib.load(fh)
 
 
+_LAW = _writer_doc()["controller"]
+KP, KD, KO, DO = (float(_LAW[k]) for k in ("kp", "kd", "ko", "do"))  #: [N/m, N·s/m, 1/s², 1/s] the writer's gains
+
+
 def _free_arm(compiled: bool):
-    """The UR5 writer's arm and law without its contact, holding a fixed point 5 cm above the paper."""
+    """The UR5 writer's arm and law without its contact, holding a fixed point x_d 5 cm above the paper: (system, x0,
+    the mode's call, x_d [m])."""
     doc = _writer_doc()
     tip0 = doc["robot"]["tip0"]
+    x_d = [tip0[0], tip0[1], 0.05]
     del doc["contact"]
     doc["controller"].pop("kd_normal")
     doc["controller"]["axes"] = np.eye(3).tolist()
-    doc["phase"] = [{"name": "hold", "reference": {"start": [tip0[0], tip0[1], 0.05]}}]
+    doc["phase"] = [{"name": "hold", "reference": {"start": x_d}}]
     doc["duration"] = 0.1
     system, modes, phase, x0 = prepare(parse_scene(doc))
-    return system, modes, phase, x0, mode_runner(system, compiled=compiled)(modes, phase)
+    return system, x0, mode_runner(system, compiled=compiled)(modes, phase), np.array(x_d)
 
 
 def _tip(robot, q, v):
@@ -64,11 +68,10 @@ def _tip(robot, q, v):
 
 @pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
 def test_free_space_the_call_is_aba_and_the_task_acceleration_is_the_law_s(compiled):
-    system, _, phase, x0, mode = _free_arm(compiled)
+    system, x0, mode, x_d = _free_arm(compiled)
     robot, nQ, nv = system.robot, system.nQ, system.nv
-    target = np.asarray(_writer_doc()["controller"]["tool_target"], float)
+    target = np.asarray(_LAW["tool_target"], float)
     target /= np.linalg.norm(target)
-    x_d = np.asarray(phase.reference.start if hasattr(phase.reference, "start") else mode.evaluation(0.0, x0).x_d)
     rng = np.random.default_rng(11)
     for _ in range(4):
         x = x0.copy()
@@ -86,11 +89,11 @@ def test_free_space_the_call_is_aba_and_the_task_acceleration_is_the_law_s(compi
         Jt = np.vstack((J[:3], E @ J[3:]))
         omega = J[3:] @ v
         a_star = np.concatenate((np.zeros(3), E @ (KO * np.cross(a, target) - DO * omega)))
-        f = np.concatenate((KP * (ev.x_d - p) - KD * pdot, np.zeros(2)))  # [N] the stiffness, directly
+        f = np.concatenate((KP * (x_d - p) - KD * pdot, np.zeros(2)))  # [N] the stiffness, directly
         task = Jt @ qdd + np.concatenate((drift[:3], E @ drift[3:]))
         expected = a_star + Jt @ np.linalg.solve(H, Jt.T) @ f
         np.testing.assert_allclose(task, expected, rtol=0, atol=1e-8 * max(1.0, np.abs(expected).max()))
-        np.testing.assert_allclose(ev.x_d, x_d, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(ev.x_d, x_d, rtol=0, atol=1e-15)  # [m] the reference the call read
 
 
 def _rigid_table(compiled: bool):
