@@ -123,7 +123,11 @@ def test_fma_rounds_once():
     assert fma(2.0, 3.0, 1.0) == 7.0 and fma(-0.0, 1.0, -0.0) == 0.0 and math.copysign(1.0, fma(-0.0, 1.0, -0.0)) < 0
     assert math.isnan(fma(math.inf, 0.0, 1.0)) and fma(1e308, 10.0, 0.0) == math.inf
     rng = np.random.default_rng(4)
-    for _ in range(2000):
-        a, b = rng.normal(size=2) * 10.0 ** rng.integers(-6, 6, size=2)
-        c = -a * b * (1.0 + 1e-15 * rng.normal()) if rng.random() < 0.5 else rng.normal()
-        assert fma(float(a), float(b), float(c)) == _compiled_fma(float(a), float(b), float(c))
+    for k in range(4000):  # (the last quarter at magnitudes where fma leaves Dekker's product for rationals)
+        scale = 10.0 ** rng.integers(-150, 150, size=2) if k < 3000 else 10.0 ** rng.choice([-300, -200, 200, 300], 2)
+        a, b = rng.normal(size=2) * scale
+        c = rng.normal() * 10.0 ** rng.integers(-20, 20)
+        if rng.random() < 0.5:  # c cancels a b to ~1e-15: the product's rounding error decides
+            c = -a * b * (1.0 + 1e-15 * rng.normal())
+        a, b, c = float(a), float(b), float(c)
+        assert fma(a, b, c) == _compiled_fma(a, b, c), (a, b, c)

@@ -56,20 +56,42 @@ def dot3(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def fma(a: float, b: float, c: float) -> float:
-    """a b + c rounded once (IEEE 754's fused multiply-add, as ``llvm.fma`` compiled): exact in rationals, then
-    rounded (Python 3.13's ``math.fma`` where there is one)."""
+    """a b + c rounded once (IEEE 754's fused multiply-add, as ``llvm.fma`` compiled; Python 3.13's ``math.fma``
+    where there is one). a b is split exactly into p + e (Dekker's product) and ``math.fsum`` rounds p + e + c
+    correctly; at magnitudes where the split is not exact, in rationals."""
     if _MATH_FMA is not None:
         return _MATH_FMA(a, b, c)
-    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
-        return a * b + c  # (inf and nan as the fused operation gives them)
-    try:
-        r = float(Fraction(a) * Fraction(b) + Fraction(c))
-    except OverflowError:
-        return a * b + c  # (± inf)
-    return r if r != 0.0 else a * b + c  # (an exact zero's sign as IEEE gives it)
+    p = a * b
+    if a == 0.0 or b == 0.0:
+        return p + c  # (exact: a zero product)
+    if _TINY < abs(a) < _HUGE and _TINY < abs(b) < _HUGE and _TINY < abs(p) < _HUGE and abs(c) < _HUGE:
+        r = math.fsum((p, _product_error(a, b, p), c))
+    elif math.isfinite(a) and math.isfinite(b) and math.isfinite(c):
+        exact = Fraction(a) * Fraction(b) + Fraction(c)
+        try:
+            r = float(exact)
+        except OverflowError:
+            return p + c  # (± inf)
+        if r == 0.0 and exact != 0:
+            return math.copysign(0.0, exact)  # (an underflow keeps the exact result's sign)
+    else:  # (inf and nan as the fused operation gives them: a finite product's overflow does not count)
+        return c if math.isfinite(a) and math.isfinite(b) else p + c
+    return r if r != 0.0 else p + c  # (an exact zero's sign as IEEE gives it)
+
+
+def _product_error(a: float, b: float, p: float) -> float:
+    """e = a b − p exactly, p = a b rounded (Veltkamp's split of each factor into 26 + 27 bits)."""
+    t = _SPLIT * a
+    a_hi = t - (t - a)
+    t = _SPLIT * b
+    b_hi = t - (t - b)
+    a_lo, b_lo = a - a_hi, b - b_hi
+    return ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
 
 
 _MATH_FMA = getattr(math, "fma", None)
+_SPLIT = 134217729.0  #: 2²⁷ + 1
+_TINY, _HUGE = 1e-280, 1e300  #: where the split and the product error are exact (no underflow, no overflow)
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
