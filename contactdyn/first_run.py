@@ -72,9 +72,13 @@ class Choice:
 
 def default_path(environ=os.environ) -> str:
     """``$CONTACTDYN_PATH`` if set (checked), else ``auto``."""
-    path = environ.get(ENV, "auto")
+    return _checked(environ.get(ENV, "auto"), ENV)
+
+
+def _checked(path: str, key: str, file: str | None = None) -> str:
+    """``path`` if it is one of :data:`PATHS`, else a SceneError naming ``key`` (the option or variable)."""
     if path not in PATHS:
-        raise SceneError(ENV, f"one of {', '.join(PATHS)}", path)
+        raise SceneError(key, f"one of {', '.join(PATHS)}", path, file)
     return path
 
 
@@ -109,9 +113,7 @@ def built(scene: Scene) -> bool:
 
 def choose(scene: Scene, path: str) -> Choice:
     """The run's path for ``path`` (one of :data:`PATHS`; another is a SceneError naming ``--path``)."""
-    if path not in PATHS:
-        raise SceneError("--path", f"one of {', '.join(PATHS)}", path, scene.file)
-    if path != "auto":
+    if _checked(path, "--path", scene.file) != "auto":
         return Choice(path)
     folder, name = _folder(), kind(scene)
     if (folder / f"{name}.built").is_file():

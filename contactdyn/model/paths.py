@@ -23,7 +23,7 @@ from collections.abc import Callable
 from contextlib import nullcontext
 
 from ..numerics.native_call import giving_handles
-from ..numerics.twins import Twins
+from ..numerics.twins import Twins, run_as
 from .contact import structure
 from .pipeline.pack import unsupported
 from .pipeline.pipeline import Pipeline
@@ -56,7 +56,7 @@ class LivePipelines:
         key = (structure(modes), phase.key())
         if key not in self.declines:
             with giving_handles() if self.twins is not None else nullcontext():  # (interpreted: nothing compiled)
-                self.declines[key] = self._of(unsupported)(self.system, modes, phase)
+                self.declines[key] = run_as(self.twins, unsupported)(self.system, modes, phase)
         return self.declines[key]
 
     def count(self) -> int:
@@ -75,9 +75,6 @@ class LivePipelines:
             pipe = self.pipes[key] = self.wrap(Pipeline(self.system, modes, phase, self.twins))
         pipe.use(modes)  # a turn's new reference direction r: data of the same packed mode
         return pipe
-
-    def _of(self, function):
-        return function if self.twins is None else self.twins.of(function)
 
 
 def path_of(mode) -> tuple[str, str]:

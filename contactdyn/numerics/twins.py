@@ -43,7 +43,7 @@ from collections.abc import Mapping
 
 from numba.core.dispatcher import Dispatcher
 
-__all__ = ["Twins", "LEAVES", "current", "running"]
+__all__ = ["Twins", "LEAVES", "run_as", "current", "running"]
 
 PACKAGE = "contactdyn."
 #: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms and the dense
@@ -145,6 +145,11 @@ class Twins:
 
 
 _RUNNING: list[Twins] = []  #: the twins of the interpreted run in progress (innermost last)
+
+
+def run_as(twins: Twins | None, function):
+    """``function`` (of the package) as a pipeline with ``twins`` runs it: itself (None: compiled), or its twin."""
+    return function if twins is None else twins.of(function)
 
 
 def current(function):

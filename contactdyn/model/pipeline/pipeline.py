@@ -32,7 +32,7 @@ from ...laws.abi import raise_python_stage_error
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
 from ...numerics.native_call import address, call_at, declare, giving_handles
-from ...numerics.twins import Twins
+from ...numerics.twins import Twins, run_as
 from ..contact import structure
 from .actuation import (
     carry,
@@ -339,7 +339,7 @@ class Pipeline:
 
     def of(self, function):
         """``function`` (of the package) as this pipeline runs it: itself, or interpreted its twin."""
-        return function if self.twins is None else self.twins.of(function)
+        return run_as(self.twins, function)
 
     @property
     def least_squares(self) -> int:
