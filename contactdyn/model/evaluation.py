@@ -52,33 +52,6 @@ class Evaluation:
     node_positions: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def _control_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, f: np.ndarray,
-                   kins: list, ev: Evaluation, ctl=None, z: np.ndarray | None = None, set_forces: bool = True):
-    """What the phase's controller (or ``ctl``, with states ``z``) reads: (ControlInput, tip frame terms, x_d,
-    force set-points)."""
-    nQ, nv = system.nQ, system.nv
-    q, v = x[:nv], x[nQ:nQ + nv]
-    robot = system.robot
-    tip = system.tip_fid
-    ft = next((k.frame for c, k in zip(system.contacts, kins, strict=True) if k is not None and c.fid == tip), None)
-    if ft is None:
-        ft = robot.frame_terms(system.tip_fid)
-    p_tip, v_tip, J, drift = ft.position, ft.velocity, ft.jacobian, ft.drift
-    x_d, v_d, a_d = reference_at(system, phase, t, x)
-    force_d = {name: ramp.at(t) for name, ramp in phase.forces.items()}
-    if ctl is None:
-        ctl = phase.controller
-        z = x[2 * nQ + phase.z_slice.start: 2 * nQ + phase.z_slice.stop]
-    inp = ControlInput(t, q, v, system.controller_inertia(robot.H), robot.h,
-                       robot.gravity_torque(q) if ctl.needs_gravity else None,
-                       p_tip, v_tip, J, drift, x_d, v_d, a_d, {**ev.normal_force, **ev.interface}, force_d,
-                       system.force_directions, z, R_tip=ft.rotation, J_ang=ft.angular_jacobian,
-                       drift_ang=ft.angular_drift)
-    if ctl.uses_forces and set_forces:
-        set_force_inputs(system, inp, x, modes, f[:nv] + robot.h)
-    return inp, ft, x_d, force_d
-
-
 @dataclass
 class Measurement:
     """What a sampled law measures of a solved right-hand side at one (t, x), beyond the kinematics: off the mode's call
@@ -143,21 +116,28 @@ def sample_input(system, t: float, x: np.ndarray, modes: list[ContactMode], phas
         xq[:nv] = quantise(x[:nv], resolution)
     z_law = x[2 * nQ + phase.z_slice.start + ctl.inner_states.start: 2 * nQ + phase.z_slice.stop].copy()
     forces = measured if law.uses_forces else _NO_FORCES
-    if terms_at is None:
-        system.robot.update(xq[:nv], xq[nQ:nQ + nv])
-        inp, _, _, _ = _control_input(system, t, xq, modes, phase, np.zeros(nQ), [None] * len(system.contacts),
-                                      forces, law, z_law, set_forces=False)
-        inp.H, inp.h = np.array(inp.H), np.array(inp.h)  # (Pinocchio's buffers: a delayed sample keeps its own)
-    else:
-        T = terms_at(t, xq)
-        inp = ControlInput(t, xq[:nv], xq[nQ:nQ + nv], T.H, T.h, T.gravity, T.p_tip, T.v_tip, T.J, T.drift, T.x_d,
-                           T.v_d, T.a_d, {**forces.normal_force, **forces.interface}, T.force_d,
-                           system.force_directions, z_law, R_tip=T.R_tip, J_ang=T.J_ang, drift_ang=T.drift_ang)
+    T = terms_at(t, xq) if terms_at is not None else _pinocchio_terms(system, t, xq, phase, law.needs_gravity)
+    inp = ControlInput(t, xq[:nv], xq[nQ:nQ + nv], T.H, T.h, T.gravity, T.p_tip, T.v_tip, T.J, T.drift, T.x_d, T.v_d,
+                       T.a_d, {**forces.normal_force, **forces.interface}, T.force_d, system.force_directions, z_law,
+                       R_tip=T.R_tip, J_ang=T.J_ang, drift_ang=T.drift_ang)
     if inp.a_d is not None and phase.carrier is not None:  # the carrier's acceleration, known after the solve
         inp.a_d = inp.a_d + phase.carrier[1] * measured.carrier_acc
     if law.uses_forces:
         set_force_inputs(system, inp, x, modes, measured.tau_contact)
     return inp
+
+
+def _pinocchio_terms(system, t: float, x: np.ndarray, phase: Phase, gravity: bool) -> SampleTerms:
+    """:class:`SampleTerms` at (t [s], x) from Pinocchio and the phase's own reference and set-points (no call)."""
+    nQ, nv = system.nQ, system.nv
+    robot = system.robot
+    robot.update(x[:nv], x[nQ:nQ + nv])
+    ft = robot.frame_terms(system.tip_fid)
+    x_d, v_d, a_d = reference_at(system, phase, t, x)
+    return SampleTerms(np.array(system.controller_inertia(robot.H)), np.array(robot.h),  # (copies of Pinocchio's)
+                       robot.gravity_torque(x[:nv]) if gravity else None, ft.position, ft.velocity, ft.jacobian,
+                       ft.drift, ft.rotation, ft.angular_jacobian, ft.angular_drift, x_d, v_d, a_d,
+                       {name: ramp.at(t) for name, ramp in phase.forces.items()})
 
 
 class _NoForces:
