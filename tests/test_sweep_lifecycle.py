@@ -139,3 +139,32 @@ def test_a_second_sweep_into_the_same_folder_is_refused(capsys, tmp_path):
     assert code == EXIT_USAGE
     assert "--out: expected a folder no other sweep is writing to" in err and f"process {os.getpid()}" in err
     assert tmp.read_bytes() == b"partial"  # not deleted
+
+
+def test_a_pool_broken_while_its_chunks_go_in_runs_the_rest_each_in_its_own_process(monkeypatch):
+    """A worker can die before the last chunk is submitted (a loaded machine: the pool's manager sees it first):
+    ``submit`` then raises BrokenProcessPool. The chunks it refused go to the isolated runs with the others whose
+    worker died; nothing is lost and nothing raises."""
+    from concurrent.futures import Future
+    from concurrent.futures.process import BrokenProcessPool
+
+    from contactdyn.sweep import execute
+
+    class Pool:  # the first chunk runs; the pool breaks before the second goes in
+        submitted = 0
+
+        def submit(self, fn, *args):
+            Pool.submitted += 1
+            if Pool.submitted > 1:
+                raise BrokenProcessPool("A child process terminated abruptly, the process pool is not usable anymore")
+            done = Future()
+            done.set_result(("pool", args[-1]))
+            return done
+
+        def shutdown(self, wait=True, cancel_futures=False):
+            pass
+
+    monkeypatch.setattr(execute, "process_pool", lambda n: Pool())
+    monkeypatch.setattr(execute, "run_isolated", lambda ctx, fn, args, runs, n: iter([("isolated", runs)]))
+    out = list(execute._execute_pool(("doc", "file", "dir"), [[1, 2], [3, 4], [5]], 2))
+    assert out == [("pool", [1, 2]), ("isolated", [3, 4, 5])]

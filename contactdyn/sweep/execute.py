@@ -146,7 +146,12 @@ def _execute_pool(args: tuple, chunks: list, n_workers: int):
     pool = process_pool(n_workers)
     broken: list = []
     try:
-        futures = {pool.submit(run_chunk, *args, c): c for c in chunks}
+        futures = {}
+        for c in chunks:
+            try:
+                futures[pool.submit(run_chunk, *args, c)] = c
+            except BrokenProcessPool:  # a worker died while the chunks went in: the rest go again as well
+                broken.extend(c)
         for fut in as_completed(futures):
             if isinstance(fut.exception(), BrokenProcessPool):  # a worker died: which run killed it is unknown
                 broken.extend(futures[fut])
