@@ -2,8 +2,10 @@
 NumPy's numbers bit for bit."""
 
 import numpy as np
+from scipy.integrate._ivp import dop853_coefficients as coef
 
-from contactdyn.numerics.dense_output import horner_at, horner_rows
+from contactdyn.hybrid.progress import Work
+from contactdyn.numerics.dense_output import coefficients, horner_at, horner_rows, stage_states
 from contactdyn.numerics.dop853 import dense_states, solve
 
 
@@ -31,6 +33,40 @@ def test_horner_kernels_are_numpys_bit_for_bit():
         assert same_bits(horner_at(C[0], float(s[0]), Y0[0]), numpy_horner(C[0], float(s[0])) + Y0[0])
         want = numpy_horner(C[which], s[:, None]) + Y0[which]
         assert same_bits(horner_rows(C, which, s, Y0), want)
+
+
+def test_interpolant_arithmetic_is_numpys_bit_for_bit():
+    """The compiled stage states and coefficients are the NumPy forms they replace (einsum over the stages, then
+    scipy's Dop853DenseOutput rows), bit for bit, on stages of mixed magnitudes. (From n = 2 states, as every run has:
+    for one state einsum sums its contiguous axis in another order.)"""
+    rng = np.random.default_rng(7)
+    A, D = coef.A, np.ascontiguousarray(coef.D)
+    for _ in range(400):
+        m, n = int(rng.integers(1, 6)), int(rng.integers(2, 40))
+        K = rng.standard_normal((m, 16, n)) * 10.0 ** rng.integers(-8, 8, size=(m, 16, 1))
+        Y0, y_new = rng.standard_normal((m, n)), rng.standard_normal((m, n))
+        h = rng.random(m) * 10.0 ** rng.integers(-6, 0)
+        for s in (13, 14, 15):
+            want = Y0 + h[:, None] * np.einsum("msn,s->mn", K[:, :s], A[s, :s])
+            assert same_bits(stage_states(K, s, A, Y0, h), want)
+        dy = y_new - Y0
+        want = np.concatenate([dy[:, None], (h[:, None] * K[:, 0] - dy)[:, None],
+                               (2.0 * dy - h[:, None] * (K[:, 12] + K[:, 0]))[:, None],
+                               h[:, None, None] * np.einsum("ds,msn->mdn", D, K)], axis=1)
+        assert same_bits(coefficients(K, Y0, y_new, h, D, 12), want)
+
+
+def test_a_counted_batch_counts_one_call_per_state():
+    """Work.wrap counts a right-hand side's ``derivatives`` (the dense output's batch) as one call per state."""
+    def fun(t, y):
+        return -y
+
+    fun.derivatives = lambda ts, Y: -Y
+    work = Work(limit=10)
+    counted = work.wrap(fun)
+    assert np.array_equal(counted.derivatives(np.zeros(4), np.ones((4, 2))), -np.ones((4, 2)))
+    counted(0.0, np.ones(2))
+    assert work.calls == 5
 
 
 def oscillator(t, y):

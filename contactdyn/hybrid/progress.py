@@ -85,7 +85,7 @@ class Work:
 
     def wrap(self, fun):
         """``fun`` counted; its compiled ``step`` (contactdyn.hybrid.steps), if any, counted as its STEP_STAGES
-        calls."""
+        calls, and its ``derivatives`` (a batch of calls) as one call per state."""
         def counted(t, y):
             self.calls += 1  # (count() inline: this wraps every right-hand-side call)
             if self.calls > self.limit:
@@ -99,4 +99,11 @@ class Work:
                 return step(*args, **kwargs)
 
             counted.step = counted_step
+        derivatives = getattr(fun, "derivatives", None)
+        if derivatives is not None:  # (a batch of calls: the dense output's extra stages)
+            def counted_derivatives(ts, Y):
+                self.count(len(ts))
+                return derivatives(ts, Y)
+
+            counted.derivatives = counted_derivatives
         return counted

@@ -6,6 +6,11 @@ In NumPy that is 14 array operations on an n-vector, ~8 µs for the 4–30 state
 location evaluates it ~7 times per located event and the output once per sample. Here the same operations, in
 the same order, on one element at a time (each a separate rounding, no fused multiply-add: numba does not
 contract them), so the numbers are NumPy's bit for bit (``tests/test_dense_output.py``), at ~0.8 µs a call.
+
+The interpolant's own arithmetic (its extra stages' states and the coefficients F from the 16 stages K) is
+compiled too (:func:`stage_states`, :func:`coefficients`): a sum over the stages in their order, as NumPy's
+``einsum`` forms it here for two or more states, and the same elementwise operations, bit for bit
+(``tests/test_dense_output.py``). In NumPy, array set-up was most of a located event's interpolant.
 """
 
 from __future__ import annotations
@@ -14,7 +19,7 @@ import numpy as np
 
 from .compile_cache import njit
 
-__all__ = ["horner_at", "horner_rows"]
+__all__ = ["horner_at", "horner_rows", "stage_states", "coefficients"]
 
 
 @njit(cache=True, inline="always")
@@ -49,3 +54,40 @@ def horner_rows(C, which, s, Y0):
         for i in range(n):
             out[k, i] = _horner(C[j], i, n_rows, sk, r) + Y0[j, i]
     return out
+
+
+@njit(cache=True)
+def stage_states(K, s, A, Y0, h):
+    """The states (m, n) of stage s of m steps: Y0[k] + h[k] Σ_{j<s} A[s, j] K[k, j] (the sum in stage order)."""
+    m, n = Y0.shape
+    out = np.empty((m, n))
+    for k in range(m):
+        for i in range(n):
+            acc = 0.0
+            for j in range(s):
+                acc += K[k, j, i] * A[s, j]
+            out[k, i] = Y0[k, i] + h[k] * acc
+    return out
+
+
+@njit(cache=True)
+def coefficients(K, Y0, y_new, h, D, last):
+    """The interpolants' coefficients (m, 3 + len(D), n) of m steps from their stages K (m, 16, n), states at the
+    start Y0 and end y_new (m, n), steps h [s] (m,); ``last``: K's row of f(t_new) (scipy's Dop853DenseOutput)."""
+    m, S, n = K.shape
+    d_rows = D.shape[0]
+    F = np.empty((m, 3 + d_rows, n))
+    for k in range(m):
+        hk = h[k]
+        for i in range(n):
+            dy = y_new[k, i] - Y0[k, i]
+            F[k, 0, i] = dy
+            F[k, 1, i] = hk * K[k, 0, i] - dy
+            F[k, 2, i] = 2.0 * dy - hk * (K[k, last, i] + K[k, 0, i])
+        for d in range(d_rows):
+            for i in range(n):
+                acc = 0.0
+                for j in range(S):
+                    acc += D[d, j] * K[k, j, i]
+                F[k, 3 + d, i] = hk * acc
+    return F
