@@ -85,13 +85,28 @@ class LastEvaluation:
 
     def __call__(self, t: float, x: np.ndarray, modes, phase):
         key = (t, x.tobytes(), tuple(modes), phase)
-        last = self.key
-        if last is None or last[3] is not phase or last[0] != t or last[1] != key[1] or last[2] != key[2]:
+        if not self._kept(key):
             self.key, self.ev = key, self._evaluate(t, x, modes, phase)
         return self.ev
 
+    def _kept(self, key: tuple) -> bool:
+        """Is the kept Evaluation at ``key`` (t, x's bytes, modes, phase: the same phase object)?"""
+        last = self.key
+        return last is not None and last[3] is key[3] and last[0] == key[0] and last[1] == key[1] \
+            and last[2] == key[2]
+
     def _evaluate(self, t: float, x: np.ndarray, modes, phase):
         return self.runner(modes, phase).evaluation(t, x)  # (PipelineMode.evaluation raises where there is no answer)
+
+    def joint_hold(self, t: float, x: np.ndarray, modes, phase) -> dict[int, float]:
+        """The stuck joints' holding torques [N·m or N] at (t [s], x), by joint: off one plain call of the mode (its
+        event values), not a whole Evaluation; where that call has no answer, the Evaluation's (which says why)."""
+        if self._kept((t, x.tobytes(), tuple(modes), phase)):
+            return self.ev.joint_hold
+        hold = self.runner(modes, phase).joint_hold(t, x)
+        if all(math.isfinite(v) for v in hold.values()):
+            return hold
+        return self(t, x, modes, phase).joint_hold
 
 
 class Transitions:
@@ -264,7 +279,8 @@ class Transitions:
 
     def _on_joint(self, t, x, modes, phase, event, after):
         """A stuck joint breaks away, or a sliding one comes to rest: sticks or reverses (model.joint_friction)."""
-        x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event, self.evaluate)
+        x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event,
+                                                                self.evaluate.joint_hold)
         self.log.events[-1].update(info)
         return x, phase, True
 

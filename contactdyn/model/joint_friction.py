@@ -155,20 +155,20 @@ class JointFriction:
         return out
 
     # ---- switching ------------------------------------------------------------------------------
-    def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event, evaluate) -> tuple:
+    def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event, holds) -> tuple:
         """Apply a ``joint_slip`` or ``joint_stick`` event: (x, phase, info); ``info["kind"]`` renames the event
-        where it is a false alarm (``joint_slip_check``) or a reversal (``joint_reverse``). ``evaluate(t, x, modes,
-        phase)``: the mode's Evaluation there (the transitions' ``LastEvaluation``)."""
+        where it is a false alarm (``joint_slip_check``) or a reversal (``joint_reverse``). ``holds(t, x, modes,
+        phase)``: the stuck joints' holding torques there, by joint (the transitions' ``LastEvaluation.joint_hold``)."""
         i, nQ = event.index, system.nQ
         if event.kind == "joint_slip":  # slides from rest where the load pushes (−sign λ), unless a false alarm
-            hold = evaluate(t, x, modes, phase).joint_hold.get(i, 0.0)
+            hold = holds(t, x, modes, phase).get(i, 0.0)
             if self.breaks_away(i, hold, SLIP_ALARM):
                 return x, self.with_mode(phase, i, -1 if hold > 0.0 else 1), {"torque": hold}
             return x, phase, {"torque": hold, "kind": "joint_slip_check"}
         x = x.copy()
         x[nQ + i] = 0.0  # at rest, exactly: stuck, or sliding back from rest
         trial = self.with_mode(phase, i, STUCK)
-        hold = evaluate(t, x, modes, trial).joint_hold.get(i, 0.0)
+        hold = holds(t, x, modes, trial).get(i, 0.0)
         if self.breaks_away(i, hold):
             return x, self.with_mode(phase, i, -1 if hold > 0.0 else 1), {"torque": hold, "kind": "joint_reverse"}
         return x, trial, {"torque": hold}
