@@ -186,3 +186,20 @@ def test_the_batched_derivatives_are_the_calls_bitwise(monkeypatch):
     monkeypatch.setattr(steps, "rates_at", lambda *a: (original(*a)[0], 3))
     batch = steps.derivatives(packed, lambda t_, x_: calls.append(t_) or fun(t_, x_))
     assert np.array_equal(batch(ts, X), want) and calls == list(ts[3:])
+
+
+def test_a_steps_interpolant_in_one_call_is_the_three_calls_bitwise(monkeypatch):
+    """A located event's step interpolant in one compiled call (steps.interpolant) is the one build_interpolants
+    forms by the right-hand side's three calls, to the bit, on the writer's slide steps; where a call of it declines
+    (made to here) the builder gives None and the step is built by those calls."""
+    mode, t, x = _sliding("case2_writer5dof", 2.0)
+    fun = mode.rhs
+    got = dop853.solve(fun, (t, t + 0.01), x, rtol=1e-7, atol=1e-9, step=fun.step)
+    st = got.sol.steps
+    assert len(st.t) > 3
+    for i in range(len(st.t) - 1):
+        one = fun.interpolant(st.t[i], st.t[i + 1] - st.t[i], st.y_old(i), st.f_old(i), st.blocks[i])
+        dop853.build_interpolants([(st, i)], None)  # by fun: three calls
+        assert one.shape == st.coef[i].shape and np.array_equal(one, st.coef[i])
+    monkeypatch.setattr(steps, "interpolant", lambda *a: (steps.DECLINED, None))
+    assert steps.interpolant_builder(mode.pipe.packed)(st.t[0], st.t[1] - st.t[0], st.y0, st.f0, st.blocks[0]) is None

@@ -65,7 +65,7 @@ from ..model.pipeline.pack import (
 )
 from ..model.pipeline.pipeline import Pipeline, call, sample_terms, samples_at
 from ..output.samples import Samples
-from .steps import derivatives, stepper
+from .steps import derivatives, interpolant_builder, stepper
 
 __all__ = ["PipelineMode", "mode_runner"]
 
@@ -95,6 +95,7 @@ class PipelineMode:
 
         rhs.step = of(stepper)(p, ring)
         rhs.derivatives = of(derivatives)(p, rhs)
+        rhs.interpolant = of(interpolant_builder)(p)
         self.rhs = rhs
         self.nt = [len(c.tangents) if c.friction is not None else 0 for c in self.system.contacts]
         self._stages = self._stage_table()

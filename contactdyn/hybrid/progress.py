@@ -20,6 +20,7 @@ import time
 __all__ = ["CALLS_PER_STEP", "Progress", "Work", "OverBudget"]
 
 STEP_STAGES = 12  #: right-hand-side calls of one compiled DOP853 step (its stages)
+INTERPOLANT_STAGES = 3  #: right-hand-side calls of one step's interpolant (DOP853's extra stages)
 SHOW_AFTER = 2.0  #: [s] of wall time before progress is shown
 REDRAW = 0.5  #: [s] between redraws of the bar on a terminal
 LINE_EVERY = 10.0  #: [s] between progress lines when stderr is not a terminal
@@ -85,7 +86,8 @@ class Work:
 
     def wrap(self, fun):
         """``fun`` counted; its compiled ``step`` (contactdyn.hybrid.steps), if any, counted as its STEP_STAGES
-        calls, and its ``derivatives`` (a batch of calls) as one call per state."""
+        calls, its ``derivatives`` (a batch of calls) as one call per state, its ``interpolant`` as
+        INTERPOLANT_STAGES."""
         def counted(t, y):
             self.calls += 1  # (count() inline: this wraps every right-hand-side call)
             if self.calls > self.limit:
@@ -106,4 +108,11 @@ class Work:
                 return derivatives(ts, Y)
 
             counted.derivatives = counted_derivatives
+        one = getattr(fun, "interpolant", None)
+        if one is not None:  # (a step's interpolant: its three extra stages)
+            def counted_interpolant(*args):
+                self.count(INTERPOLANT_STAGES)
+                return one(*args)
+
+            counted.interpolant = counted_interpolant
         return counted

@@ -18,13 +18,16 @@ from ..laws.abi import raise_python_stage_error
 from ..model.pipeline.pack import A_CALL, NX
 from ..model.pipeline.pipeline import rates_at
 from ..numerics.compile_cache import njit
+from ..numerics.dense_output import coefficients, stage_states
 from ..numerics.linalg import put
 from ..numerics.native_call import call_at
 
-__all__ = ["attempt", "stepper", "derivatives"]
+__all__ = ["attempt", "stepper", "derivatives", "interpolant", "interpolant_builder"]
 OK, DECLINED = 0, 1  #: :func:`attempt`'s status
 _A, _B, _C = np.ascontiguousarray(_coef.A[:12, :12]), _coef.B.copy(), _coef.C[:12].copy()
 _E = np.ascontiguousarray(np.vstack((_coef.E5, _coef.E3)))  #: the error estimators' weights on K's 13 rows
+#: the dense output's tableau: all 16 stages (A, C) and the interpolant's weights D
+_A16, _C16, _D16 = np.ascontiguousarray(_coef.A), _coef.C.copy(), np.ascontiguousarray(_coef.D)
 
 
 @njit(cache=True, inline="always")
@@ -95,6 +98,47 @@ def attempt(ints, reals, work, events, t, y, f, h, rtol, atol, A, B, C, E, y_new
         put(Ys[s], 0, ys)
         put(Es[s], 0, events)
     return OK, _error_norm(K, y, y_new, h, rtol, atol, E, block)
+
+
+@njit(cache=True)
+def interpolant(ints, reals, work, events, t, h, y, f, block, A, C, D):
+    """(status, F): the 7th-order interpolant's coefficients F (7, n) of the accepted step of h [s] from (t [s], y),
+    f = f(t, y), its stages in ``block`` (the scipy core's layout): DOP853's extra stages 14–16 through the packed
+    mode's call, then :func:`~contactdyn.numerics.dense_output.coefficients`, the numbers
+    :func:`~contactdyn.numerics.dop853.build_interpolants` forms by three calls. DECLINED where a call's status is not
+    1 (then the step's interpolant is built by those calls)."""
+    n = y.size
+    K = np.zeros((1, 16, n))
+    put(K[0, 0], 0, f)  # (put: no array assignment, see numerics.linalg.put)
+    for r in range(5):
+        put(K[0, 5 + r], 0, block[5 + r])  # stages 6–10
+    put(K[0, 10], 0, block[1])
+    put(K[0, 11], 0, block[2])
+    put(K[0, 12], 0, block[0])  # f(t + h)
+    Y0, y_new, hs = np.empty((1, n)), np.empty((1, n)), np.full(1, h)
+    put(Y0[0], 0, y)
+    put(y_new[0], 0, block[4])
+    for s in range(13, 16):
+        ys = stage_states(K, s, A, Y0, hs)
+        put(K[0, s], 0, call_at(ints[A_CALL], "pipeline.call", (t + C[s] * h, ys[0], ints, reals, work, events)))
+        if events[events.size - 1] != 1.0:
+            return DECLINED, np.empty((0, n))
+    return OK, coefficients(K, Y0, y_new, hs, D, 12)[0]
+
+
+def interpolant_builder(packed):
+    """one(t, h, y, f, block) -> F (7, n), or None where a call of it declines: a step's interpolant in one compiled
+    call (:func:`interpolant`) over a mode packed for the one pipeline (an event located in that step)."""
+    ints, reals, work, events = packed.ints, packed.reals, packed.work, packed.events
+
+    def one(t, h, y, f, block):
+        status, F = interpolant(ints, reals, work, events, t, h, y, f, block, _A16, _C16, _D16)
+        if status:
+            raise_python_stage_error()  # a Python stage's own error
+            return None
+        return F
+
+    return one
 
 
 def stepper(packed, ring, on_stage=None):

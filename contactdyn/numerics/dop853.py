@@ -108,12 +108,24 @@ class _Steps:
 
     def at(self, i: int, t: float, derivatives: Callable | None = None) -> np.ndarray:
         """The state at t [s] on step i's own interpolant (built if needed: by ``derivatives``, see
-        :func:`build_interpolants`, else by the run's own ``fun.derivatives`` where it has one), as solve_ivp's step
-        dense output."""
-        if i not in self.coef:
+        :func:`build_interpolants`; else by the run's own ``fun.interpolant``, one compiled call, or its
+        ``fun.derivatives`` where it has them), as solve_ivp's step dense output."""
+        if i not in self.coef and (derivatives is not None or not self._built_by_fun(i)):
             build_interpolants([(self, i)], derivatives or getattr(self.fun, "derivatives", None))
         t_old = self.t[i]
         return horner_at(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old), self.y_old(i))
+
+
+    def _built_by_fun(self, i: int) -> bool:
+        """Step i's interpolant by the run's ``fun.interpolant`` (F of :func:`build_interpolants`' numbers in one
+        compiled call: :func:`~contactdyn.hybrid.steps.interpolant`): False where it has none or declines."""
+        one = getattr(self.fun, "interpolant", None)
+        F = one(self.t[i], self.t[i + 1] - self.t[i], self.y_old(i), self.f_old(i), self.blocks[i]) if one else None
+        if F is None:
+            return False
+        self.coef[i] = F
+        self.calls += _coef.N_STAGES_EXTENDED - _N - 1
+        return True
 
 
 def build_interpolants(wanted: list[tuple[_Steps, int]], derivatives: Callable | None = None) -> None:
