@@ -4,7 +4,6 @@ NumPy's numbers bit for bit."""
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as coef
 
-from contactdyn.hybrid.progress import Work
 from contactdyn.numerics.dense_output import coefficients, horner_at, horner_rows, stage_states
 from contactdyn.numerics.dop853 import dense_states, solve
 
@@ -54,19 +53,6 @@ def test_interpolant_arithmetic_is_numpys_bit_for_bit():
                                (2.0 * dy - h[:, None] * (K[:, 12] + K[:, 0]))[:, None],
                                h[:, None, None] * np.einsum("ds,msn->mdn", D, K)], axis=1)
         assert same_bits(coefficients(K, Y0, y_new, h, D, 12), want)
-
-
-def test_a_counted_batch_counts_one_call_per_state():
-    """Work.wrap counts a right-hand side's ``derivatives`` (the dense output's batch) as one call per state."""
-    def fun(t, y):
-        return -y
-
-    fun.derivatives = lambda ts, Y: -Y
-    work = Work(limit=10)
-    counted = work.wrap(fun)
-    assert np.array_equal(counted.derivatives(np.zeros(4), np.ones((4, 2))), -np.ones((4, 2)))
-    counted(0.0, np.ones(2))
-    assert work.calls == 5
 
 
 def oscillator(t, y):

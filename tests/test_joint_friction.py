@@ -215,3 +215,30 @@ def test_a_storm_of_one_joints_events_is_said_to_be_that_joints_not_a_contacts()
     assert "joint q2" in said and "diverged" in said and "contact" not in said
     mixed = joint + [{"t": 0.2, "kind": "slip_check", "name": "tip"}]
     assert "the contact chatters" in _storm_cause(mixed)
+
+
+def test_the_stick_or_reverse_decision_reads_the_trials_holding_torque(tmp_path, monkeypatch):
+    """The decision's holding torque (LastEvaluation.joint_hold: one plain call of the stuck trial) is the whole
+    Evaluation's; where that call has no answer the Evaluation's is read, which says why."""
+    from dataclasses import replace
+
+    from contactdyn.errors import SimulationError
+    from contactdyn.hybrid.pipeline_mode import PipelineMode
+    from contactdyn.hybrid.transitions import LastEvaluation
+
+    doc = scene(arm(tmp_path, 2, damping=0.05), [0.4, 1.2], 1.0, {"kind": "joint_pd", "kp": [0.0], "kd": [0.0]},
+                joint={"j1": {"friction_static": 50.0, "friction_kinetic": 30.0}, "j2": {"friction": 0.5}})
+    system = System(parse_scene(doc))
+    x, modes = system.initial_state()
+    trial = replace(system.start_phase(0, 0.0, x, None), joint_modes=((0, 0), (1, 0)))
+    last = LastEvaluation(system)
+    x = x.copy()
+    x[system.nQ:system.nQ + 2] = 0.0
+    hold = last.joint_hold(0.2, x, modes, trial)
+    want = LastEvaluation(system)(0.2, x, modes, trial).joint_hold
+    assert set(hold) == {0, 1} and hold == want and abs(hold[0]) > 1.0  # gravity loads the shoulder
+    monkeypatch.setattr(PipelineMode, "values", lambda self, t, x_: np.full(4, np.nan))  # a call without an answer
+    monkeypatch.setattr(PipelineMode, "evaluation", lambda self, t, x_: (_ for _ in ()).throw(
+        SimulationError("no finite answer")))
+    with pytest.raises(SimulationError, match="no finite answer"):
+        LastEvaluation(system).joint_hold(0.3, x, modes, trial)

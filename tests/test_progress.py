@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 
+import numpy as np
 import pytest
 
 import contactdyn.hybrid.events
@@ -60,3 +61,20 @@ def test_a_scene_name_with_escape_codes_is_shown_escaped():
     shown.next = 0.0  # due now (no waiting for SHOW_AFTER)
     shown(1.0)
     assert "\x1b" not in stream.getvalue() and stream.getvalue().startswith("b1\\x1b[31mRED: t = 1 / 2 s (50 %")
+
+
+def test_a_right_hand_sides_batches_are_counted_as_their_calls():
+    """Work.wrap counts a right-hand side's ``derivatives`` (the dense output's batch) as one call per state and its
+    ``interpolant`` as its three stages, where it gives one (declined: the calls that build it instead count)."""
+    def fun(t, y):
+        return -y
+
+    fun.derivatives = lambda ts, Y: -Y
+    fun.interpolant = lambda t, h, y, f, block: None if h < 0.0 else np.zeros((7, len(y)))
+    work = progress.Work(limit=100)
+    counted = work.wrap(fun)
+    assert np.array_equal(counted.derivatives(np.zeros(4), np.ones((4, 2))), -np.ones((4, 2)))
+    counted(0.0, np.ones(2))
+    assert work.calls == 5
+    assert counted.interpolant(0.0, 0.1, np.ones(2), np.ones(2), None).shape == (7, 2) and work.calls == 8
+    assert counted.interpolant(0.0, -0.1, np.ones(2), np.ones(2), None) is None and work.calls == 8

@@ -5,12 +5,13 @@ for the loop, its event functions (:func:`~contactdyn.hybrid.events.segment_even
 (:func:`~contactdyn.output.channels.sample_states`):
 
 - ``rhs(t, x)`` is the pipeline's call; ``rhs.step`` a whole DOP853 step in one compiled call
-  (:func:`~contactdyn.hybrid.steps.attempt`) and ``rhs.derivatives`` the dense output's extra stages
-  in one (``rates_at``);
+  (:func:`~contactdyn.hybrid.steps.attempt`), ``rhs.derivatives`` the dense output's extra stages
+  in one (``rates_at``), and (compiled only) ``rhs.interpolant`` a located event's step interpolant in one
+  (:func:`~contactdyn.hybrid.steps.interpolant`);
 - the event functions read the event values of the call at that very state (a stuck contact's slip watch each
-  stage's, :meth:`watched_step`; the last four calls' in ``ring``: DOP853's FSAL call, its dense output's stages,
-  then the events at the step end): gaps [m], normal forces [N], slip velocities [m/s], stick forces [N], limit
-  torques [N·m or N];
+  stage's, :meth:`watched_step`; the last four calls' in ``ring``: a compiled step's FSAL call, with a slip watch
+  its stages' too, and the right-hand side's own calls; an interpolant's stages enter none): gaps [m], normal
+  forces [N], slip velocities [m/s], stick forces [N], limit torques [N·m or N];
 - :meth:`samples` runs the output samples in one compiled call with the call's diagnostics on (τ, the command,
   the tip, x_d, F_d, λ, the stage states: :func:`contactdyn.model.pipeline.pipeline.record`);
   :meth:`measurement` reads what a sampled law measures at a sample instant off one such call, and
@@ -95,7 +96,8 @@ class PipelineMode:
 
         rhs.step = of(stepper)(p, ring)
         rhs.derivatives = of(derivatives)(p, rhs)
-        rhs.interpolant = of(interpolant_builder)(p)
+        if not self.interpreted:  # (an interpreted mode's event steps: build_interpolants, NumPy, nothing compiled)
+            rhs.interpolant = interpolant_builder(p)
         self.rhs = rhs
         self.nt = [len(c.tangents) if c.friction is not None else 0 for c in self.system.contacts]
         self._stages = self._stage_table()

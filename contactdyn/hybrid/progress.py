@@ -111,8 +111,10 @@ class Work:
         one = getattr(fun, "interpolant", None)
         if one is not None:  # (a step's interpolant: its three extra stages)
             def counted_interpolant(*args):
-                self.count(INTERPOLANT_STAGES)
-                return one(*args)
+                F = one(*args)
+                if F is not None:  # (declined: the calls that build it instead are counted)
+                    self.count(INTERPOLANT_STAGES)
+                return F
 
             counted.interpolant = counted_interpolant
         return counted

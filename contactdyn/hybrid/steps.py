@@ -12,6 +12,7 @@ singular KKT matrix does not (the call solves it by least squares and counts it,
 from __future__ import annotations
 
 import numpy as np
+from numba import types
 from scipy.integrate._ivp import dop853_coefficients as _coef
 
 from ..laws.abi import raise_python_stage_error
@@ -23,7 +24,7 @@ from ..numerics.linalg import put
 from ..numerics.native_call import call_at
 
 __all__ = ["attempt", "stepper", "derivatives", "interpolant", "interpolant_builder"]
-OK, DECLINED = 0, 1  #: :func:`attempt`'s status
+OK, DECLINED = 0, 1  #: :func:`attempt`'s and :func:`interpolant`'s status
 _A, _B, _C = np.ascontiguousarray(_coef.A[:12, :12]), _coef.B.copy(), _coef.C[:12].copy()
 _E = np.ascontiguousarray(np.vstack((_coef.E5, _coef.E3)))  #: the error estimators' weights on K's 13 rows
 #: the dense output's tableau: all 16 stages (A, C) and the interpolant's weights D
@@ -106,7 +107,7 @@ def interpolant(ints, reals, work, events, t, h, y, f, block, A, C, D):
     f = f(t, y), its stages in ``block`` (the scipy core's layout): DOP853's extra stages 14–16 through the packed
     mode's call, then :func:`~contactdyn.numerics.dense_output.coefficients`, the numbers
     :func:`~contactdyn.numerics.dop853.build_interpolants` forms by three calls. DECLINED where a call's status is not
-    1 (then the step's interpolant is built by those calls)."""
+    1 (then ``build_interpolants`` builds it, by the mode's derivatives)."""
     n = y.size
     K = np.zeros((1, 16, n))
     put(K[0, 0], 0, f)  # (put: no array assignment, see numerics.linalg.put)
@@ -126,9 +127,18 @@ def interpolant(ints, reals, work, events, t, h, y, f, block, A, C, D):
     return OK, coefficients(K, Y0, y_new, hs, D, 12)[0]
 
 
+#: :func:`interpolant`'s argument types, compiled with a compiled mode (not at a run's first located event)
+_F1, _F2, _I1 = types.float64[::1], types.float64[:, ::1], types.int64[::1]
+INTERPOLANT_ARGS = (_I1, _F1, _F1, _F1, types.float64, types.float64, _F1, _F1, _F2, _F2, _F1, _F2)
+
+
 def interpolant_builder(packed):
     """one(t, h, y, f, block) -> F (7, n), or None where a call of it declines: a step's interpolant in one compiled
-    call (:func:`interpolant`) over a mode packed for the one pipeline (an event located in that step)."""
+    call (:func:`interpolant`) over a mode packed for the one pipeline (an event located in that step). Compiled
+    here, where the compiled call is (a background build compiles it with the scene's kind, not a later run at its
+    first event); an interpreted mode has none (its events' steps: ``build_interpolants`` by its derivatives)."""
+    if hasattr(interpolant, "compile"):  # (not under NUMBA_DISABLE_JIT)
+        interpolant.compile(INTERPOLANT_ARGS)
     ints, reals, work, events = packed.ints, packed.reals, packed.work, packed.events
 
     def one(t, h, y, f, block):

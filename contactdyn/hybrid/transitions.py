@@ -75,8 +75,9 @@ class LastEvaluation:
     the run's mode runner, :meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.evaluation`). Its last (t, x, modes,
     phase) and result kept: asked again at the same ones (the same t, x bit for bit, equal modes, the same phase
     object), the same Evaluation, not a second solve. Where a decision leaves everything as it was tried (a stick
-    decided at rest, then the next consistency pass; a joint's stuck trial, then its stick; the last pass, then the
-    joints' check) the evaluation repeats exactly."""
+    decided at rest, then the next consistency pass; the last pass, then the joints' check) the evaluation repeats
+    exactly. A joint's stick-or-reverse decision reads only its holding torque (:meth:`joint_hold`: one plain
+    call)."""
 
     def __init__(self, system: System, runner=None):
         self.system, self.runner = system, runner or mode_runner(system)
@@ -99,13 +100,14 @@ class LastEvaluation:
         return self.runner(modes, phase).evaluation(t, x)  # (PipelineMode.evaluation raises where there is no answer)
 
     def joint_hold(self, t: float, x: np.ndarray, modes, phase) -> dict[int, float]:
-        """The stuck joints' holding torques [N·m or N] at (t [s], x), by joint: off one plain call of the mode (its
-        event values), not a whole Evaluation; where that call has no answer, the Evaluation's (which says why)."""
+        """The stuck joints' holding torques [N·m or N] at (t [s], x), by joint: the kept Evaluation's where it is at
+        these, else off one plain call of the mode (its event values), not a whole Evaluation; where that call has no
+        answer (its status not 1), the Evaluation's, which says why."""
         if self._kept((t, x.tobytes(), tuple(modes), phase)):
             return self.ev.joint_hold
-        hold = self.runner(modes, phase).joint_hold(t, x)
-        if all(math.isfinite(v) for v in hold.values()):
-            return hold
+        mode = self.runner(modes, phase)
+        if mode.values(t, x)[-1] == 1.0:
+            return mode.joint_hold(t, x)
         return self(t, x, modes, phase).joint_hold
 
 
@@ -280,7 +282,7 @@ class Transitions:
     def _on_joint(self, t, x, modes, phase, event, after):
         """A stuck joint breaks away, or a sliding one comes to rest: sticks or reverses (model.joint_friction)."""
         x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event,
-                                                                self.evaluate.joint_hold)
+                                                           self.evaluate.joint_hold)
         self.log.events[-1].update(info)
         return x, phase, True
 

@@ -178,7 +178,8 @@ class JointFriction:
         """The first joint mode the state contradicts, as (kind, joint, x, phase) with it changed, else None (x: its
         stuck joints' velocities within ``STICK_TOL`` set to exactly 0): a sliding joint pressing on a limit is
         stuck (the limit holds it); a stuck joint that moves (an impact's velocity) slides along it; a stuck joint
-        whose holding torque exceeds τ_s slides where the load pushes. ``evaluate``: as :meth:`switch`'s."""
+        whose holding torque exceeds τ_s slides where the load pushes. ``evaluate(t, x, modes, phase)``: the mode's
+        Evaluation there (the transitions' ``LastEvaluation``)."""
         nQ = system.nQ
         pressing = {i for i, _ in phase.limits}
         for i, m in phase.joint_modes:

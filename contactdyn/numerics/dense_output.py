@@ -7,10 +7,11 @@ location evaluates it ~7 times per located event and the output once per sample.
 the same order, on one element at a time (each a separate rounding, no fused multiply-add: numba does not
 contract them), so the numbers are NumPy's bit for bit (``tests/test_dense_output.py``), at ~0.8 µs a call.
 
-The interpolant's own arithmetic (its extra stages' states and the coefficients F from the 16 stages K) is
-compiled too (:func:`stage_states`, :func:`coefficients`): a sum over the stages in their order, as NumPy's
-``einsum`` forms it here for two or more states, and the same elementwise operations, bit for bit
-(``tests/test_dense_output.py``). In NumPy, array set-up was most of a located event's interpolant.
+A compiled mode builds a located event's step interpolant in one call (:func:`contactdyn.hybrid.steps.interpolant`)
+by :func:`stage_states` and :func:`coefficients`: the numbers :func:`contactdyn.numerics.dop853.build_interpolants`
+forms in NumPy (``einsum`` sums over the stages in their order for two or more states; the same elementwise
+operations), bit for bit (``tests/test_dense_output.py``). ``build_interpolants`` stays NumPy: a first run, on the
+interpreted call, compiles neither.
 """
 
 from __future__ import annotations

@@ -53,7 +53,7 @@ from scipy.integrate._ivp.rk import MAX_FACTOR, MIN_FACTOR, SAFETY
 from scipy.optimize import brentq
 
 from ..errors import SceneError
-from .dense_output import coefficients, horner_at, horner_rows, stage_states
+from .dense_output import horner_at, horner_rows
 
 __all__ = ["solve", "DenseSolution", "Solution", "build_interpolants", "dense_states"]
 
@@ -76,7 +76,7 @@ _STAGES_6_10 = slice(5, 10)  # k6…k10 = stages 6…10
 #: stages have weight 0, tests/test_dop853.py)
 _ROW_STAGE = (0, 10, 11, None, None, 5, 6, 7, 8, 9)
 _ERR_ROWS = np.array([[0.0 if s is None else E[s] for s in _ROW_STAGE] for E in (_coef.E5, _coef.E3)])
-_A, _C, _D = _coef.A, _coef.C, np.ascontiguousarray(_coef.D)
+_A, _C, _D = _coef.A, _coef.C, _coef.D
 _N = _coef.N_STAGES  # 12
 _CORE = getattr(_dop, "dopri853", None)  #: scipy's C core (scipy 1.17; older scipy has an f2py one)
 _MESSAGES = {-1: "input is not consistent", -2: "larger nsteps is needed", -3: "step size becomes too small",
@@ -107,18 +107,19 @@ class _Steps:
         return self.f0 if i == 0 else self.blocks[i - 1][_F_NEW]
 
     def at(self, i: int, t: float, derivatives: Callable | None = None) -> np.ndarray:
-        """The state at t [s] on step i's own interpolant (built if needed: by ``derivatives``, see
-        :func:`build_interpolants`; else by the run's own ``fun.interpolant``, one compiled call, or its
-        ``fun.derivatives`` where it has them), as solve_ivp's step dense output."""
-        if i not in self.coef and (derivatives is not None or not self._built_by_fun(i)):
-            build_interpolants([(self, i)], derivatives or getattr(self.fun, "derivatives", None))
+        """The state at t [s] on step i's own interpolant, as solve_ivp's step dense output. Built if needed: by
+        ``derivatives`` (see :func:`build_interpolants`); else by the run's ``fun.interpolant`` (one compiled call),
+        else by its ``fun.derivatives``, else by ``fun``, one call per state (all the same numbers)."""
+        if i not in self.coef:
+            built = derivatives is None and self._built_by_fun(i)
+            if not built:
+                build_interpolants([(self, i)], derivatives or getattr(self.fun, "derivatives", None))
         t_old = self.t[i]
         return horner_at(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old), self.y_old(i))
 
-
     def _built_by_fun(self, i: int) -> bool:
-        """Step i's interpolant by the run's ``fun.interpolant`` (F of :func:`build_interpolants`' numbers in one
-        compiled call: :func:`~contactdyn.hybrid.steps.interpolant`): False where it has none or declines."""
+        """Step i's interpolant by the run's ``fun.interpolant`` (:func:`build_interpolants`' numbers in one compiled
+        call: :func:`~contactdyn.hybrid.steps.interpolant`, a compiled mode's): False where it has none or declines."""
         one = getattr(self.fun, "interpolant", None)
         F = one(self.t[i], self.t[i + 1] - self.t[i], self.y_old(i), self.f_old(i), self.blocks[i]) if one else None
         if F is None:
@@ -130,8 +131,7 @@ class _Steps:
 
 def build_interpolants(wanted: list[tuple[_Steps, int]], derivatives: Callable | None = None) -> None:
     """Interpolant coefficients of steps (steps, i) of one or several runs (DOP853's stages 14–16), in one batch:
-    each step's row is its own arithmetic (the batch's other rows do not change its numbers; the compiled
-    :func:`~.dense_output.stage_states` and :func:`~.dense_output.coefficients`).
+    each step's row is its own arithmetic (the batch's other rows do not change its numbers).
 
     ``derivatives(ts, Y) -> F``: the runs' right-hand side at all the steps' stage states at once, in place of one
     call per state (:func:`~contactdyn.hybrid.steps.derivatives` gives the calls' values bitwise); None: each run's
@@ -148,7 +148,7 @@ def build_interpolants(wanted: list[tuple[_Steps, int]], derivatives: Callable |
     K[:, 5:10] = B[:, _STAGES_6_10]
     K[:, 10], K[:, 11], K[:, _N] = B[:, _S11], B[:, _S12], B[:, _F_NEW]
     for s in range(_N + 1, _coef.N_STAGES_EXTENDED):
-        Ys = stage_states(K, s, _A, Y0, h)
+        Ys = Y0 + h[:, None] * np.einsum("msn,s->mn", K[:, :s], _A[s, :s])
         ts = t_old + _C[s] * h
         if derivatives is not None:
             K[:, s] = derivatives(ts, Ys)
@@ -157,7 +157,12 @@ def build_interpolants(wanted: list[tuple[_Steps, int]], derivatives: Callable |
                 K[k, s] = st.fun(float(ts[k]), Ys[k])
         for st, _ in wanted:
             st.calls += 1
-    F = coefficients(K, Y0, B[:, _Y_NEW], h, _D, _N)
+    dy = B[:, _Y_NEW] - Y0
+    F = np.empty((m, _coef.INTERPOLATOR_POWER, n))
+    F[:, 0] = dy
+    F[:, 1] = h[:, None] * K[:, 0] - dy
+    F[:, 2] = 2.0 * dy - h[:, None] * (K[:, _N] + K[:, 0])
+    F[:, 3:] = h[:, None, None] * np.einsum("ds,msn->mdn", _D, K)
     for k, (st, i) in enumerate(wanted):
         st.coef[i] = F[k]
 
@@ -180,8 +185,8 @@ class DenseSolution:
     def __call__(self, t, derivatives: Callable | None = None) -> np.ndarray:
         """The state at t [s] (shape (n,)) or at each time of an array (shape (n, len(t))).
 
-        ``derivatives``: see :func:`build_interpolants` (the interpolants this call builds; for output samples
-        only: the run's own event location and segment ends use the calls)."""
+        ``derivatives``: see :func:`build_interpolants` (the interpolants this call builds, for output samples; at
+        one time without it: :meth:`_Steps.at`'s)."""
         if np.ndim(t) == 0:
             return self.state(float(t), derivatives)
         (y,) = dense_states([(self, np.atleast_1d(np.asarray(t, float)))], derivatives)

@@ -12,9 +12,8 @@ shadow). So ``Twins().of(call)(...)`` runs ``call`` and everything it reaches as
 the real modules untouched (the compiled path in the same process is unaffected). Two exceptions:
 
 - the **leaves** (:data:`LEAVES`: the rigid-body algorithms of :mod:`contactdyn.robot.rigid_body` and the dense
-  linear algebra of :mod:`.linalg`, most of an interpreted call's time, and the dense output's arithmetic of
-  :mod:`.dense_output`; self-contained and the same for every scene) stay numba dispatchers: compiled once per
-  install (seconds, cached), called from the twins;
+  linear algebra of :mod:`.linalg`, most of an interpreted call's time, self-contained and the same for every
+  scene) stay numba dispatchers: compiled once per install (seconds, cached), called from the twins;
 - the **handle tables**: interpreted, a stage reached by address (:mod:`.native_call`, the laws' ABIs, the
   controllers) is a *handle* (the Python function's id, given by the address functions while
   :func:`.native_call.giving_handles` is on: the mode is packed that way), looked up in a table; in the shadows
@@ -47,13 +46,12 @@ from numba.core.dispatcher import Dispatcher
 __all__ = ["Twins", "LEAVES", "run_as", "current", "running"]
 
 PACKAGE = "contactdyn."
-#: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms, the dense
-#: linear algebra (numerics.linalg) and the dense output's arithmetic (numerics.dense_output)
+#: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms and the dense
+#: linear algebra (numerics.linalg)
 LEAVES = frozenset([*(f"contactdyn.robot.rigid_body.{n}" for n in
                       ("_kinematics", "_nonlinear", "_jacobians", "_inertia", "frame_motion_into")),
                     *(f"contactdyn.numerics.linalg.{n}" for n in
-                      ("mv", "mtv", "mm", "mtm", "lu_solve", "cholesky", "forward_solve", "pinv", "put")),
-                    *(f"contactdyn.numerics.dense_output.{n}" for n in ("stage_states", "coefficients"))])
+                      ("mv", "mtv", "mm", "mtm", "lu_solve", "cholesky", "forward_solve", "pinv", "put"))])
 #: module -> its tables handle -> Python function (or controller class) that must give twins
 HANDLE_TABLES = {
     "contactdyn.numerics.native_call": ("_HANDLES",),
