@@ -17,10 +17,11 @@ import math
 import sys
 import time
 
+from ..numerics.dop853 import INTERPOLANT_STAGES
+
 __all__ = ["CALLS_PER_STEP", "Progress", "Work", "OverBudget"]
 
 STEP_STAGES = 12  #: right-hand-side calls of one compiled DOP853 step (its stages)
-INTERPOLANT_STAGES = 3  #: right-hand-side calls of one step's interpolant (DOP853's extra stages)
 SHOW_AFTER = 2.0  #: [s] of wall time before progress is shown
 REDRAW = 0.5  #: [s] between redraws of the bar on a terminal
 LINE_EVERY = 10.0  #: [s] between progress lines when stderr is not a terminal

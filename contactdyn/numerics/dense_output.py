@@ -59,7 +59,8 @@ def horner_rows(C, which, s, Y0):
 
 @njit(cache=True)
 def stage_states(K, s, A, Y0, h):
-    """The states (m, n) of stage s of m steps: Y0[k] + h[k] Σ_{j<s} A[s, j] K[k, j] (the sum in stage order)."""
+    """The states (m, n) of stage s of m steps: Y0[k] + h[k] Σ_{j<s} A[s, j] K[k, j] (the sum in stage order; h [s]
+    the steps, K (m, 16, n) their stages, A the tableau)."""
     m, n = Y0.shape
     out = np.empty((m, n))
     for k in range(m):

@@ -78,6 +78,8 @@ _ROW_STAGE = (0, 10, 11, None, None, 5, 6, 7, 8, 9)
 _ERR_ROWS = np.array([[0.0 if s is None else E[s] for s in _ROW_STAGE] for E in (_coef.E5, _coef.E3)])
 _A, _C, _D = _coef.A, _coef.C, _coef.D
 _N = _coef.N_STAGES  # 12
+#: right-hand-side calls of one step's interpolant (DOP853's extra stages 14–16)
+INTERPOLANT_STAGES = _coef.N_STAGES_EXTENDED - _N - 1
 _CORE = getattr(_dop, "dopri853", None)  #: scipy's C core (scipy 1.17; older scipy has an f2py one)
 _MESSAGES = {-1: "input is not consistent", -2: "larger nsteps is needed", -3: "step size becomes too small",
              -4: "problem is probably stiff"}
@@ -125,7 +127,7 @@ class _Steps:
         if F is None:
             return False
         self.coef[i] = F
-        self.calls += _coef.N_STAGES_EXTENDED - _N - 1
+        self.calls += INTERPOLANT_STAGES
         return True
 
 

@@ -55,6 +55,11 @@ def dot3(a: np.ndarray, b: np.ndarray) -> float:
     return fma(a2, b2, fma(a1, b1, a0 * b0))
 
 
+_MATH_FMA = getattr(math, "fma", None)
+_SPLIT = 134217729.0  #: 2²⁷ + 1
+_TINY, _HUGE = 1e-280, 1e300  #: where the split and the product error are exact (no underflow, no overflow)
+
+
 def fma(a: float, b: float, c: float) -> float:
     """a b + c rounded once (IEEE 754's fused multiply-add, as ``llvm.fma`` compiled; Python 3.13's ``math.fma``
     where there is one). a b is split exactly into p + e (Dekker's product) and ``math.fsum`` rounds p + e + c
@@ -88,10 +93,6 @@ def _product_error(a: float, b: float, p: float) -> float:
     a_lo, b_lo = a - a_hi, b - b_hi
     return ((a_hi * b_hi - p) + a_hi * b_lo + a_lo * b_hi) + a_lo * b_lo
 
-
-_MATH_FMA = getattr(math, "fma", None)
-_SPLIT = 134217729.0  #: 2²⁷ + 1
-_TINY, _HUGE = 1e-280, 1e300  #: where the split and the product error are exact (no underflow, no overflow)
 
 
 def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -155,7 +155,7 @@ def run_as(twins: Twins | None, function):
 def current(function):
     """``function`` (of the package, called from Python outside the pipeline) as the run in progress runs it: its
     twin during an interpreted run (:func:`running`), else itself."""
-    return _RUNNING[-1].of(function) if _RUNNING else function
+    return run_as(_RUNNING[-1] if _RUNNING else None, function)
 
 
 @contextlib.contextmanager
