@@ -14,6 +14,15 @@ a few seconds once per install) give the compiled run's outputs bit for bit, ~20
   marks the kind built. One line says so after the run (and, while the leaves compile, the compile notice says
   that it compiles). A run the command takes on the compiled call (``--path compiled``) marks its kind too.
 
+While a first run compiles its leaves (the rigid-body algorithms and the dense algebra its twins call compiled,
+one by one as it first reaches them: most of its time), a machine with a second core compiles them from the other
+end: :func:`leaves_ahead` starts one helper (``python -m contactdyn.first_run --leaves FILE LOCK``; detached,
+silent, low priority) that records which leaves the scene reaches and with which argument types, on a millisecond
+of the scene with every leaf interpreted (:class:`~contactdyn.numerics.twins.RecordingTwins`), then compiles them
+last-reached first into the shared cache; the run loads each one the helper has cached by the time it reaches it.
+The two meet in the middle. The helper changes no result (it only fills the cache) and reports nothing: a leaf it
+cannot compile the run compiles, and says why.
+
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
 time, never correctness: a kind marked built whose code is not all cached compiles the rest in the
@@ -37,12 +46,15 @@ from typing import Any
 from .errors import SceneError
 from .scene.scene_file import Scene
 
-__all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "mark_built", "main"]
+__all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "leaves_ahead", "compile_backwards",
+           "mark_built", "main"]
 
 PATHS = ("auto", "compiled", "interpreted")  #: what ``--path`` takes
 ENV = "CONTACTDYN_PATH"  #: the environment variable that sets the default path (else ``auto``)
 BUILD_TIMEOUT = 1800.0  #: [s] a background build older than this is taken as dead (its lock is stale)
 BUILD_DURATION = 60.0  #: [s] simulated by a background build at most
+RECORD_DURATION = 1e-3  #: [s] simulated by the leaves' helper to learn which leaves the scene reaches
+LEAVES_LOCK = "leaves"  #: the helper's lock, beside the kinds' markers: one helper at a time
 
 
 class Choice:
@@ -185,14 +197,33 @@ def build_in_background(scene: Scene) -> bool:
     if not _buildable(scene):
         return False
     folder, name = _folder(), kind(scene)
-    if not _lock(folder, name):
+    return _lock(folder, name) and _start(scene, folder / name)
+
+
+def leaves_ahead(scene: Scene) -> bool:
+    """Before a first run of ``scene`` (interpreted): start the helper that compiles its leaves from the other end
+    (see the module; False: not started: one core only, one runs already, or the scene has no file)."""
+    if _cores() < 2 or not _buildable(scene):
         return False
-    lock = folder / f"{name}.building"
+    folder = _folder()
+    return _lock(folder, LEAVES_LOCK) and _start(scene, folder / LEAVES_LOCK, "--leaves")
+
+
+def _cores() -> int:
+    """The cores this process may run on."""
+    affinity = getattr(os, "sched_getaffinity", None)
+    return len(affinity(0)) if affinity is not None else (os.cpu_count() or 1)
+
+
+def _start(scene: Scene, marker: Path, *options: str) -> bool:
+    """Start ``python -m contactdyn.first_run [options] FILE MARKER`` detached, the scene's document on stdin; its
+    lock ``MARKER.building`` (taken) then holds its process id (False, the lock given back: it could not start)."""
+    lock = Path(f"{marker}.building")
     flags = getattr(subprocess, "DETACHED_PROCESS", 0) | getattr(subprocess, "CREATE_NEW_PROCESS_GROUP", 0)
     detached = {"start_new_session": True} if os.name == "posix" else {"creationflags": flags}  # (Windows)
     try:
-        child = subprocess.Popen([sys.executable, "-P", "-m", __name__, str(Path(scene.file).resolve()),
-                                  str(folder / name)], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+        child = subprocess.Popen([sys.executable, "-P", "-m", __name__, *options, str(Path(scene.file).resolve()),
+                                  str(marker)], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL, env=_child_environment(), **detached)
         lock.write_text(str(child.pid))
         with child.stdin:
@@ -229,19 +260,53 @@ def build(file: str, document: dict, marker: str) -> None:
     Path(f"{marker}.built").touch()
 
 
+def compile_leaves(file: str, document: dict) -> None:
+    """The helper of :func:`leaves_ahead`: the leaves the scene reaches, recorded on RECORD_DURATION of it
+    interpreted (no leaf compiled), compiled last-reached first (:func:`compile_backwards`)."""
+    import warnings
+
+    from .hybrid.loop import HybridRun
+    from .model.system import System
+    from .numerics.twins import RecordingTwins
+    from .scene.scene_file import parse_scene
+
+    recorder = RecordingTwins()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        system = System(parse_scene(document, {"duration": RECORD_DURATION}, file))
+        HybridRun(system, interpreted=True, twins=recorder).run(time.perf_counter())
+    compile_backwards(recorder.calls)
+
+
+def compile_backwards(calls: list[tuple[Any, tuple]]) -> None:
+    """Compile each (numba dispatcher, argument types) of ``calls``, the last first; one that does not compile (or
+    takes no new types) is left: the run that reaches it compiles it and says why."""
+    for leaf, types_ in reversed(calls):
+        try:
+            leaf.compile(types_)
+        except Exception:  # noqa: BLE001,S112 (nothing is lost: the run compiles it itself)
+            continue
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m contactdyn.first_run FILE MARKER`` (the scene's document on stdin): the background build. A build
-    that fails writes MARKER.failed (its error): later runs of the kind run interpreted and say why."""
-    file, marker = argv or sys.argv[1:3]
+    that fails writes MARKER.failed (its error): later runs of the kind run interpreted and say why.
+    ``python -m contactdyn.first_run --leaves FILE LOCK``: the leaves' helper (:func:`leaves_ahead`); it records
+    nothing of a failure (the run it helps reports its own)."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    helper = args[:1] == ["--leaves"]
+    file, marker = args[1:3] if helper else args[:2]
     try:
         os.nice(10)
     except (AttributeError, OSError):
         pass
     try:
-        build(file, json.loads(sys.stdin.read()), marker)
+        document = json.loads(sys.stdin.read())
+        compile_leaves(file, document) if helper else build(file, document, marker)
         return 0
     except Exception as exc:  # noqa: BLE001 (any failure of the build is recorded, none raised: nobody reads it)
-        Path(f"{marker}.failed").write_text(f"{type(exc).__name__}: {exc}\n")
+        if not helper:
+            Path(f"{marker}.failed").write_text(f"{type(exc).__name__}: {exc}\n")
         return 1
     finally:
         lock = Path(f"{marker}.building")

@@ -99,11 +99,13 @@ def test_the_build_is_started_detached_on_this_package_with_the_file_it_was_read
 
 
 def test_the_command_runs_interpreted_says_so_and_asks_for_one_build(markers, monkeypatch, capsys):
-    asked = []
+    asked, ahead = [], []
     monkeypatch.setattr(first_run, "build_in_background", lambda scene: asked.append(scene) or True)
+    monkeypatch.setattr(first_run, "leaves_ahead", lambda scene: ahead.append((scene, list(asked))) or True)
     code = main(["run", "b1", *FAST, "--path", "auto", "--json"])
     doc = json.loads(capsys.readouterr().out)
     assert code == EXIT_OK and len(asked) == 1 and asked[0].name == "b1"
+    assert [(scene.name, before) for scene, before in ahead] == [("b1", [])]  # the leaves' helper: before the run
     assert {row["path"] for row in doc["stats"]["paths"].values()} == {INTERPRETED}
     main(["run", "b1", *FAST, "--path", "auto"])
     assert "built in the background" in capsys.readouterr().err
@@ -198,3 +200,75 @@ def test_a_failure_on_the_compiled_call_is_diagnosed_in_one_line(capsys):
         err = capsys.readouterr().err
         assert code == 1 and err.count("\n") == 1 and "integration failed at t = 12.34" in err, (path, err[-300:])
         assert "Traceback" not in err and "fastest mode" in err
+
+
+def test_the_recorded_leaves_are_the_ones_the_interpreted_run_compiles_and_none_is_compiled_to_record_them():
+    """The leaves' helper's record (RecordingTwins): each leaf the scene reaches, once per argument types, as numba
+    types them where the interpreted run calls it compiled: the very signatures that run compiles (or loads)."""
+    from numba.core import event
+
+    from contactdyn.hybrid.loop import HybridRun
+    from contactdyn.model.system import System
+    from contactdyn.numerics.twins import LEAVES, RecordingTwins
+
+    scene = load_scene("case1_cart", {"duration": first_run.RECORD_DURATION})
+    recorder = RecordingTwins()
+    with event.install_recorder("numba:compile") as rec:
+        HybridRun(System(scene), interpreted=True, twins=recorder).run(0.0)
+    compiled = {getattr(e.data["dispatcher"], "py_func", None) for e in rec.buffer if e.data}
+    names = [f"{leaf.py_func.__module__}.{leaf.py_func.__qualname__}" for leaf, _ in recorder.calls]
+    assert set(names) <= LEAVES and len(set(map(repr, recorder.calls))) == len(recorder.calls)
+    assert {"contactdyn.robot.rigid_body._kinematics", "contactdyn.robot.rigid_body._jacobians",
+            "contactdyn.robot.rigid_body._inertia"} <= set(names)
+    assert not compiled & {leaf.py_func for leaf, _ in recorder.calls}  # recording compiled none of them
+    from contactdyn import simulate
+
+    simulate(scene, interpreted=True)
+    for leaf, types_ in recorder.calls:
+        assert types_ in leaf.signatures, (leaf.py_func.__qualname__, types_, leaf.signatures)
+
+
+def test_the_helper_compiles_the_last_reached_leaf_first_and_leaves_what_fails_to_the_run():
+    done = []
+
+    class Leaf:
+        def __init__(self, name, fails=False):
+            self.name, self.fails = name, fails
+
+        def compile(self, types_):
+            if self.fails:
+                raise RuntimeError("compilation disabled")  # (a leaf of fixed signatures, as numba says it)
+            done.append((self.name, types_))
+
+    first_run.compile_backwards([(Leaf("a"), (1,)), (Leaf("b", fails=True), (2,)), (Leaf("c"), (3,))])
+    assert done == [("c", (3,)), ("a", (1,))]
+
+
+def test_the_leaves_helper_needs_a_second_core_and_runs_one_at_a_time(markers, monkeypatch):
+    started = []
+    monkeypatch.setattr(first_run, "_start", lambda scene, marker, *options: started.append(options) or True)
+    scene = load_scene("b1")
+    monkeypatch.setattr(first_run, "_cores", lambda: 1)
+    assert not first_run.leaves_ahead(scene) and started == []
+    monkeypatch.setattr(first_run, "_cores", lambda: 2)
+    assert first_run.leaves_ahead(scene) and started == [("--leaves",)]
+    assert not first_run.leaves_ahead(scene) and len(started) == 1  # its lock is held
+    (markers / f"{first_run.LEAVES_LOCK}.building").unlink()
+    assert first_run.leaves_ahead(scene) and len(started) == 2
+
+
+def test_the_helper_fills_the_cache_and_records_no_failure(markers, monkeypatch):
+    compiled = []
+    monkeypatch.setattr(first_run, "compile_backwards", lambda calls: compiled.append(calls))
+    monkeypatch.setattr("os.nice", lambda n: 0)
+    scene = load_scene("b1")
+    markers.mkdir()
+    lock = markers / f"{first_run.LEAVES_LOCK}.building"
+    lock.touch()
+    monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps(scene.document)))
+    assert first_run.main(["--leaves", scene.file, str(markers / first_run.LEAVES_LOCK)]) == 0
+    assert len(compiled) == 1 and compiled[0] and not lock.exists()
+    lock.touch()
+    monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps({"duration": "not a number"})))
+    assert first_run.main(["--leaves", scene.file, str(markers / first_run.LEAVES_LOCK)]) == 1
+    assert list(markers.iterdir()) == []  # no marker of a failure: the run reports its own

@@ -100,7 +100,7 @@ class HybridRun:
     #: the benchmarks' before/after comparison (benchmarks/corners.py)
     at_corners = True
 
-    def __init__(self, system: System, compiled: bool = True, interpreted: bool = False):
+    def __init__(self, system: System, compiled: bool = True, interpreted: bool = False, twins=None):
         self.system = system
         self.scene = system.scene
         self.solver = system.scene.solver
@@ -127,8 +127,9 @@ class HybridRun:
         #: them, "" when none did (no more checks in the mode); None: not checked
         self.resting: str | None = None
         #: the modes' pipelines, compiled; ``interpreted`` (or not ``compiled``): the same call run as its twins
-        #: (numerics.twins: a scene kind's first run)
-        self.pipelines = LivePipelines(system, PipelineMode, use=compiled and not interpreted)
+        #: (numerics.twins: a scene kind's first run), ``twins`` if given (a numerics.twins.Twins)
+        self.pipelines = LivePipelines(system, PipelineMode, use=compiled and not interpreted and twins is None,
+                                       twins=twins)
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)

@@ -41,9 +41,10 @@ import sys
 import types
 from collections.abc import Mapping
 
+from numba import typeof
 from numba.core.dispatcher import Dispatcher
 
-__all__ = ["Twins", "LEAVES", "run_as", "current", "running"]
+__all__ = ["Twins", "RecordingTwins", "LEAVES", "run_as", "current", "running"]
 
 PACKAGE = "contactdyn."
 #: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms and the dense
@@ -142,6 +143,38 @@ class Twins:
             for name in HANDLE_TABLES.get(module, ()):
                 shadow[name] = _TwinMap(original[name], self)
         return shadow
+
+
+class RecordingTwins(Twins):
+    """The twins with the leaves interpreted too, each leaf's calls recorded: ``calls``, (the leaf, its argument
+    types) in the order a run first reaches them, what the same run on :class:`Twins` compiles (no leaf compiled
+    here). A first run's helper compiles them last-reached first, beside the run (:mod:`contactdyn.first_run`)."""
+
+    def __init__(self) -> None:
+        super().__init__(leaves=frozenset())
+        self.calls: list[tuple[Dispatcher, tuple]] = []
+
+    def of(self, value):
+        got = self.made.get(id(value))
+        if got is not None:
+            return got
+        twin = super().of(value)
+        if isinstance(value, Dispatcher) and f"{value.py_func.__module__}.{value.py_func.__qualname__}" in LEAVES:
+            twin = self.made[id(value)] = self._recorded(value, twin)
+        return twin
+
+    def _recorded(self, leaf: Dispatcher, twin):
+        """``twin`` (the leaf's Python twin) recording each new list of argument types the leaf is called with."""
+        seen: set[tuple] = set()
+
+        def recorded(*args):
+            types_ = tuple(typeof(a) for a in args)  # (numba's types of the arguments, as its dispatch types them)
+            if types_ not in seen:
+                seen.add(types_)
+                self.calls.append((leaf, types_))
+            return twin(*args)
+
+        return recorded
 
 
 _RUNNING: list[Twins] = []  #: the twins of the interpreted run in progress (innermost last)
