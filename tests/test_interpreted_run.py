@@ -93,3 +93,24 @@ def test_the_twins_are_the_package_functions_with_their_own_namespaces():
     assert "contactdyn.robot.rigid_body._kinematics" in LEAVES
     assert vars(pipeline)["robot_terms"] is robot_terms.robot_terms  # the module itself untouched
     assert twins.of(np.zeros) is np.zeros and twins.of(3) == 3
+
+
+def test_a_sampled_laws_command_runs_as_twins_in_an_interpreted_run(monkeypatch):
+    """The sampled real cell's law (hybrid: dynamic_law.force_targets, computed_torque.torque) computes its command in
+    Python at each sample: in an interpreted run it calls their twins (numerics.twins.current), so a first run does
+    not compile them; the outputs stay the compiled run's bit for bit. (Each is replaced by a fresh, never compiled
+    dispatcher of the same function: a call of it from Python would compile it, and give it a signature.)"""
+    import numba
+
+    from contactdyn.laws.controllers import computed_torque, dynamic_law
+
+    overrides = {"duration": 0.05}
+    compiled = simulate("force_loop_real_cell", overrides)
+    fresh = {}
+    for module, name in ((computed_torque, "torque"), (dynamic_law, "force_targets")):
+        fresh[name] = numba.njit(getattr(module, name).py_func)
+        monkeypatch.setattr(module, name, fresh[name])
+    interpreted = simulate("force_loop_real_cell", overrides, interpreted=True)
+    assert interpreted.stats["samples"] == compiled.stats["samples"] > 20
+    assert {name: f.signatures for name, f in fresh.items()} == {"torque": [], "force_targets": []}
+    _same(interpreted, compiled)

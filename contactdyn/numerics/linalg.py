@@ -197,8 +197,20 @@ def pinv(J):
     """J⁺ (c, r) of J (r, c) by a one-sided Jacobi SVD of its shorter side (:func:`_jacobi_pinv`; (Jᵀ)⁺ = (J⁺)ᵀ:
     a 3×2 Jacobian rotates one pair of columns per sweep rather than three)."""
     if J.shape[1] < J.shape[0]:
-        return np.ascontiguousarray(_jacobi_pinv(np.ascontiguousarray(J.T)).T)
+        return _transposed(_jacobi_pinv(_transposed(J)))
     return _jacobi_pinv(J)
+
+
+@njit(cache=True)
+def _transposed(M):
+    """Mᵀ, a new C-contiguous array (element by element: numba's ``ascontiguousarray`` of a transposed view and
+    its other array functions below cost a first run seconds of compiling; the numbers are the same)."""
+    r, c = M.shape
+    T = np.empty((c, r))
+    for i in range(r):
+        for j in range(c):
+            T[j, i] = M[i, j]
+    return T
 
 
 @njit(cache=True)
@@ -207,9 +219,14 @@ def _jacobi_pinv(J):
     plane rotations: Jᵀ V = [σ_k u_k], J⁺ = Σ_k u_k v_kᵀ / σ_k), singular values ≤ 1e-10 of the largest
     dropped (numpy.linalg.pinv's rcond); accurate to the precision of J, also near singular poses."""
     r, c = J.shape
-    A = np.ascontiguousarray(J.T)  # (c, r): its columns are rotated
-    V = np.eye(r)
-    floor = 1e-32 * (J * J).sum()  # a column this small (‖a‖ ≤ 1e-16 ‖J‖) is a dropped singular value: left
+    A = _transposed(J)  # (c, r): its columns are rotated
+    V = np.zeros((r, r))
+    square = 0.0  # ‖J‖² [J's unit²], summed in J's order (as numba's ``(J * J).sum()``)
+    for p in range(r):
+        V[p, p] = 1.0
+        for i in range(c):
+            square += J[p, i] * J[p, i]
+    floor = 1e-32 * square  # a column this small (‖a‖ ≤ 1e-16 ‖J‖) is a dropped singular value: left
     for _ in range(60):  # sweeps; converges quadratically (a few sweeps for r = 3)
         rotated = False
         for p in range(r - 1):
@@ -238,7 +255,7 @@ def _jacobi_pinv(J):
     for k in range(r):
         for i in range(c):
             sigma2[k] += A[i, k] * A[i, k]
-    top = math.sqrt(sigma2.max()) if r else 0.0
+    top = math.sqrt(_largest(sigma2)) if r else 0.0
     out = np.zeros((c, r))
     for k in range(r):
         if top > 0.0 and math.sqrt(sigma2[k]) > 1e-10 * top:
@@ -246,6 +263,18 @@ def _jacobi_pinv(J):
                 for j in range(r):
                     out[i, j] += A[i, k] * V[j, k] / sigma2[k]
     return out
+
+
+@njit(cache=True)
+def _largest(a):
+    """max(a) of a non-empty 1-D array; NaN if one is NaN (numba's ``a.max()``, without its array machinery)."""
+    top = a[0]
+    for k in range(1, a.size):
+        if math.isnan(top):
+            break
+        if math.isnan(a[k]) or a[k] > top:
+            top = a[k]
+    return top
 
 
 @njit(["void(float64[::1], int64, float64[::1])", "void(float64[::1], int64, float64[:])"], cache=True)

@@ -56,6 +56,7 @@ import numpy as np
 
 from ...errors import SceneError
 from ...numerics.linalg import contiguous as _c
+from ...numerics.twins import current
 from ..elements import Mass, Stage
 from . import computed_torque as compiled
 from . import dynamic_law
@@ -154,7 +155,7 @@ def pseudo_inverse(J: np.ndarray) -> np.ndarray:
     """J⁺ by linalg.pinv (a one-sided Jacobi SVD), singular values below 1e-10 of the largest
     dropped (numpy.linalg.pinv's rcond); one Jacobian (r, c) or a stack (N, r, c)."""
     J = _c(J)
-    return compiled.pinv_stack(J) if J.ndim == 3 else compiled.pinv(J)
+    return current(compiled).pinv_stack(J) if J.ndim == 3 else current(compiled).pinv(J)
 
 
 _NONE = np.empty(0)
@@ -260,7 +261,7 @@ class _ComputedTorque(Controller):
         if f_swap is None:
             f_swap = np.empty(a.shape[:-1] + (0,))
         args = (_c(H), rotor, _c(h), _c(tau_c), _c(J), Jp, _c(drift), _c(v), _c(a), _c(f_swap), k_null)
-        return compiled.torque_stack(*args) if stack else compiled.torque(*args)
+        return current(compiled).torque_stack(*args) if stack else current(compiled).torque(*args)
 
 
 # ---- A7 -----------------------------------------------------------------------------------------
@@ -326,8 +327,8 @@ class PositionDynamic(_ComputedTorque):
         if cfg.space == "task":
             return self.computed_torque(inp, *self.tip_targets(inp)[:2]), None
         ref = (_c(inp.x_d), _c(inp.v_d), _c(inp.a_d)) if inp.x_d is not None else (_NONE, _NONE, _NONE)
-        qdd = dynamic_law.joint_targets(_c(inp.q), _c(inp.v), *ref, *self.joint_gains)
-        return compiled.joint_torque(_c(inp.H), self._rotor, _c(inp.h), _c(inp.tau_contact), qdd), None
+        qdd = current(dynamic_law).joint_targets(_c(inp.q), _c(inp.v), *ref, *self.joint_gains)
+        return current(compiled).joint_torque(_c(inp.H), self._rotor, _c(inp.h), _c(inp.tau_contact), qdd), None
 
     def tip_targets(self, inp: ControlInput) -> tuple[np.ndarray, None, None]:
         """(a*, no force swap, no states): the desired tip acceleration [m/s²] of the task-space law
@@ -335,13 +336,14 @@ class PositionDynamic(_ComputedTorque):
         direction n (normal or tangent) the reference is F_d/k beyond the undeformed surface or tangential anchor,
         along −n; the surface's acceleration along n and F̈_d/k are left out (a_d's component along n is 0)."""
         kp, kv = self._gains3
+        targets = current(dynamic_law).position_targets
         if inp.x_d is None:
-            return dynamic_law.position_targets(_c(inp.p_tip), _c(inp.v_tip), _NONE, _NONE, _NONE, kp, kv, False,
-                                                *_NO_SET_POINTS), None, None
+            a = targets(_c(inp.p_tip), _c(inp.v_tip), _NONE, _NONE, _NONE, kp, kv, False, *_NO_SET_POINTS)
+            return a, None, None
         keys = [name for name in self.envs if inp.touching.get(name.partition(".")[0]) and name in inp.force_d]
         set_points = _set_point_arrays(inp, keys, [self.envs[k].k for k in keys]) if keys else _NO_SET_POINTS
-        return dynamic_law.position_targets(_c(inp.p_tip), _c(inp.v_tip), _c(inp.x_d), _c(inp.v_d), _c(inp.a_d), kp,
-                                            kv, bool(keys), *set_points), None, None
+        return targets(_c(inp.p_tip), _c(inp.v_tip), _c(inp.x_d), _c(inp.v_d), _c(inp.a_d), kp, kv, bool(keys),
+                       *set_points), None, None
 
 
 # ---- A10 and hybrid ---------------------------------------------------------------------------
@@ -433,7 +435,7 @@ class ForceDynamic(_ComputedTorque):
                 F[i] = inp.forces[name]
         ref = (_c(inp.x_d), _c(inp.v_d), _c(inp.a_d)) if self.tracks_position else (_NONE, _NONE, _NONE)
         kp, kv = self._gains3
-        a, f_swap, zdot = dynamic_law.force_targets(self.P, _c(inp.p_tip), _c(inp.v_tip), *ref, kp, kv,
+        a, f_swap, zdot = current(dynamic_law).force_targets(self.P, _c(inp.p_tip), _c(inp.v_tip), *ref, kp, kv,
                                                     float(cfg.kf), normals, touch, p_s, v_s, F_d, dF_d, F,
                                                     _c(inp.z), self._env, self.tracks_position)
         return a, (f_swap if cfg.cancel == "target" else None), zdot

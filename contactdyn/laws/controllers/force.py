@@ -18,6 +18,7 @@ import numpy as np
 
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import contiguous, mtv
+from ...numerics.twins import current
 from .base import FEEDFORWARD, ControlInput, Controller, register
 
 __all__ = ["TaskForce", "TaskForceConfig", "task_force", "task_force_torque"]
@@ -72,7 +73,7 @@ class TaskForce(Controller):
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         ff = inp.h if self.config.feedforward == "bias" else inp.gravity if self.config.feedforward == "gravity" \
             else None
-        return task_force_torque(float(inp.t), contiguous(inp.J), *self.constants,
+        return current(task_force_torque)(float(inp.t), contiguous(inp.J), *self.constants,
                                  _NONE if ff is None else contiguous(ff)), None
 
 

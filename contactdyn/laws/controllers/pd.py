@@ -29,6 +29,7 @@ import numpy as np
 
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import contiguous
+from ...numerics.twins import current
 from . import task_pd_law as law
 from .base import FEEDFORWARD, BindContext, ControlInput, Controller, register
 
@@ -158,7 +159,7 @@ class TaskPD(Controller):
         forced = np.array([inp.normals[k] for k in keys], dtype=float).reshape(-1, 3)
         orient = self.reads_orientation
         ff = _feedforward(inp, self.config.feedforward)
-        tau = law.torque(c(inp.v), c(inp.J), c(inp.J_ang) if orient else np.empty((0, self.nv)), c(inp.p_tip),
+        tau = current(law).torque(c(inp.v), c(inp.J), c(inp.J_ang) if orient else np.empty((0, self.nv)), c(inp.p_tip),
                          c(inp.v_tip), c(inp.x_d) if referenced else _NONE, c(inp.v_d) if referenced else _NONE,
                          set_points, c(inp.R_tip) if orient else _NO_ROTATION, axes, forced, kp, kd, tool_axis, target,
                          R_d, ko, do, kd_joint, kd_normal, _NONE if np.isscalar(ff) else c(ff))
@@ -206,7 +207,7 @@ class JointPD(Controller):
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         ff = _feedforward(inp, self.config.feedforward)
         ref = (contiguous(inp.x_d), contiguous(inp.v_d)) if inp.x_d is not None else (_NONE, _NONE)
-        return joint_pd_torque(contiguous(inp.q), contiguous(inp.v), *ref, *self.gains,
+        return current(joint_pd_torque)(contiguous(inp.q), contiguous(inp.v), *ref, *self.gains,
                                _NONE if np.isscalar(ff) else contiguous(ff)), None
 
 
