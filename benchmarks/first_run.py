@@ -9,7 +9,9 @@ the dense linear algebra; it starts the background build), one right after it (`
 so interpreted again, its leaves cached), then, once the build ended (``build``: seconds waited for it after the
 second run), a later one (the compiled call, its code loaded from the cache). ``--compiled-first``: also a first
 run with ``--path compiled`` in another empty folder (compiling in the foreground: what every first run cost
-before).
+before). ``--alone``: also, before it, a first run without the leaves' helper (``CONTACTDYN_LEAVES_AHEAD=0``: on a
+second core it compiles the first run's leaves from the other end, contactdyn.first_run) in another empty folder,
+its background build waited for: the helper's gain, timed beside the run with it.
 Each wall time [s] is measured around the whole process (interpreter start, imports,
 compilation or cache loading, the run), and so is its CPU time [s] (user + system: what the process
 itself spent, less inflated by other load on a shared machine). Also: ``contactdyn --help`` (the console script's call,
@@ -21,7 +23,7 @@ The processes run this checkout's package (``PYTHONPATH`` = the checkout). The 1
 average before each run is recorded: on a shared machine a load above the core count means the
 times are inflated.
 
-    python3 benchmarks/first_run.py [SCENE ...] [--help-repeats 5]
+    python3 benchmarks/first_run.py [SCENE ...] [--help-repeats 5] [--compiled-first] [--alone]
 
 Prints a table and writes benchmarks/out/first_run.json and benchmarks/out/first_run.csv.
 """
@@ -53,8 +55,11 @@ def default_scenes() -> list[str]:
     return ["b1"] + [n for n in names if n != "b1"]
 
 
-def _environment(cache: str | None) -> dict[str, str]:
+def _environment(cache: str | None, helper: bool = True) -> dict[str, str]:
     env = dict(os.environ)
+    env.pop("CONTACTDYN_LEAVES_AHEAD", None)
+    if not helper:
+        env["CONTACTDYN_LEAVES_AHEAD"] = "0"  # (contactdyn.first_run.HELPER_ENV: no leaves' helper)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     env.pop("NUMBA_CACHE_DIR", None)
     env.pop("CONTACTDYN_PATH", None)  # the command's default path: auto
@@ -69,11 +74,12 @@ def _children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def timed(args: list[str], cache: str | None, cwd: str) -> tuple[float, float, int, str]:
-    """(wall [s], CPU [s], exit code, stderr) of one ``python3 ARGS`` process (its stdout in ``timed.out``)."""
+def timed(args: list[str], cache: str | None, cwd: str, helper: bool = True) -> tuple[float, float, int, str]:
+    """(wall [s], CPU [s], exit code, stderr) of one ``python3 ARGS`` process (its stdout in ``timed.out``);
+    ``helper`` False: with the first run's leaves' helper turned off."""
     t0, c0 = time.perf_counter(), _children_cpu()
-    done = subprocess.run([sys.executable, *args], cwd=cwd, env=_environment(cache), capture_output=True, text=True,
-                          timeout=TIMEOUT)
+    done = subprocess.run([sys.executable, *args], cwd=cwd, env=_environment(cache, helper), capture_output=True,
+                          text=True, timeout=TIMEOUT)
     timed.out = done.stdout
     return time.perf_counter() - t0, _children_cpu() - c0, done.returncode, done.stderr
 
@@ -96,15 +102,21 @@ def _wait_for_build(cache: str) -> tuple[float, bool]:
     return time.perf_counter() - t0, bool(list(Path(cache).glob("*/kinds/*.built")))
 
 
-def scene_row(scene: str, work: str, compiled_first: bool) -> dict:
+def scene_row(scene: str, work: str, compiled_first: bool, alone: bool = False) -> dict:
     """The first run of one scene (empty cache, path ``auto``: the call interpreted, then the background build),
     a run while the build runs, the later run once it ended (the compiled call); ``compiled_first``: also the
-    first run with ``--path compiled`` in another empty cache (compiling in the foreground)."""
+    first run with ``--path compiled`` in another empty cache (compiling in the foreground); ``alone``: also,
+    before those, the first run without the leaves' helper in another empty cache (its build ended first)."""
     path = ROOT / "sims" / f"{scene}.toml"
     path = path if path.is_file() else ROOT / scene  # a scene name of sims/, or a path in the checkout
     target = str(path) if path.is_file() else scene
     args = ["-m", "contactdyn.cli", "run", target, "--json"]
     row: dict = {"scene": scene, "load_before": round(os.getloadavg()[0], 2)}
+    if alone:
+        with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
+            wall, cpu, rc0, _ = timed(args, cache, work, helper=False)
+            _wait_for_build(cache)  # (its background build: not beside the next first run)
+        row.update(alone_s=round(wall, 2), alone_cpu_s=round(cpu, 2), alone_exit_code=rc0)
     with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
         first, first_cpu, rc1, err1 = timed(args, cache, work)
         first_paths = _paths()
@@ -137,20 +149,24 @@ def main() -> None:
     p.add_argument("--help-repeats", type=int, default=5, help="processes timed for contactdyn --help")
     p.add_argument("--compiled-first", action="store_true",
                    help="also time a first run with --path compiled (compiling in the foreground)")
+    p.add_argument("--alone", action="store_true", help="also time a first run without the leaves' helper "
+                   "(CONTACTDYN_LEAVES_AHEAD=0), before the one with it")
     args = p.parse_args()
     scenes = args.scenes or default_scenes()
     rows = []
     with tempfile.TemporaryDirectory(prefix="first_run_work_") as work:
         helps = help_time(args.help_repeats, work)
         print(f"contactdyn --help: {helps['median_s']:.3f} s (median of {args.help_repeats})", flush=True)
-        heads = ("first [s]", "during [s]", "build [s]", "later [s]", "first CPU", "later CPU", "compiled 1st")
+        heads = ("first [s]", "during [s]", "build [s]", "later [s]", "first CPU", "later CPU", "compiled 1st",
+                 "alone [s]")
         print(f"{'scene':24s} " + " ".join(f"{h:>12s}" for h in heads) + "  built  load", flush=True)
         for scene in scenes:
-            row = scene_row(scene, work, args.compiled_first)
+            row = scene_row(scene, work, args.compiled_first, args.alone)
             rows.append(row)
             flag = "" if not any(row["exit_codes"]) else f"  exit codes {row['exit_codes']}: {row['stderr_first']}"
             print(f"{scene:24s} " + " ".join(f"{row.get(k, float('nan')):12.2f}" for k in (
-                "first_s", "during_s", "build_wait_s", "later_s", "first_cpu_s", "later_cpu_s", "compiled_first_s"))
+                "first_s", "during_s", "build_wait_s", "later_s", "first_cpu_s", "later_cpu_s", "compiled_first_s",
+                "alone_s"))
                 + f"  {str(row['built']):5s}  {row['load_before']:.2f}  {row['paths']}{flag}", flush=True)
     OUT.mkdir(parents=True, exist_ok=True)
     doc = {"help": helps, "scenes": rows, "cpus": os.cpu_count(), "python": platform.python_version(),
@@ -159,7 +175,8 @@ def main() -> None:
     (OUT / "first_run.json").write_text(json.dumps(doc, indent=1))
     with open(OUT / "first_run.csv", "w", newline="") as f:
         w = csv.DictWriter(f, ["scene", "first_s", "during_s", "build_wait_s", "built", "later_s", "first_cpu_s",
-                               "later_cpu_s", "compiled_first_s", "compiled_first_cpu_s", "notice", "load_before"],
+                               "later_cpu_s", "compiled_first_s", "compiled_first_cpu_s", "alone_s", "notice",
+                               "load_before"],
                            extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)

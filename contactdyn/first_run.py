@@ -21,7 +21,7 @@ silent, low priority) that records which leaves the scene reaches and with which
 of the scene with every leaf interpreted (:class:`~contactdyn.numerics.twins.RecordingTwins`), then compiles them
 last-reached first into the shared cache; the run loads each one the helper has cached by the time it reaches it.
 The two meet in the middle. The helper changes no result (it only fills the cache) and reports nothing: a leaf it
-cannot compile the run compiles, and says why.
+cannot compile the run compiles, and says why. ``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
 
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
@@ -55,6 +55,7 @@ BUILD_TIMEOUT = 1800.0  #: [s] a background build older than this is taken as de
 BUILD_DURATION = 60.0  #: [s] simulated by a background build at most
 RECORD_DURATION = 1e-3  #: [s] simulated by the leaves' helper to learn which leaves the scene reaches
 LEAVES_LOCK = "leaves"  #: the helper's lock, beside the kinds' markers: one helper at a time
+HELPER_ENV = "CONTACTDYN_LEAVES_AHEAD"  #: set to 0: no leaves' helper (a first run compiles its leaves alone)
 
 
 class Choice:
@@ -202,8 +203,9 @@ def build_in_background(scene: Scene) -> bool:
 
 def leaves_ahead(scene: Scene) -> bool:
     """Before a first run of ``scene`` (interpreted): start the helper that compiles its leaves from the other end
-    (see the module; False: not started: one core only, one runs already, or the scene has no file)."""
-    if _cores() < 2 or not _buildable(scene):
+    (see the module; False: not started: one core only, one runs already, the scene has no file, or
+    ``$CONTACTDYN_LEAVES_AHEAD`` is 0)."""
+    if os.environ.get(HELPER_ENV, "").strip() == "0" or _cores() < 2 or not _buildable(scene):
         return False
     folder = _folder()
     return _lock(folder, LEAVES_LOCK) and _start(scene, folder / LEAVES_LOCK, "--leaves")

@@ -254,6 +254,9 @@ def test_the_leaves_helper_needs_a_second_core_and_runs_one_at_a_time(markers, m
     assert first_run.leaves_ahead(scene) and started == [("--leaves",)]
     assert not first_run.leaves_ahead(scene) and len(started) == 1  # its lock is held
     (markers / f"{first_run.LEAVES_LOCK}.building").unlink()
+    monkeypatch.setenv(first_run.HELPER_ENV, "0")
+    assert not first_run.leaves_ahead(scene) and len(started) == 1  # turned off
+    monkeypatch.setenv(first_run.HELPER_ENV, "1")
     assert first_run.leaves_ahead(scene) and len(started) == 2
 
 
