@@ -153,6 +153,7 @@ class RecordingTwins(Twins):
     def __init__(self) -> None:
         super().__init__(leaves=frozenset())
         self.calls: list[tuple[Dispatcher, tuple]] = []
+        self.seen: dict[int, set[tuple]] = {}  #: id(leaf) -> the argument types recorded (one set per leaf)
 
     def of(self, value):
         got = self.made.get(id(value))
@@ -165,7 +166,7 @@ class RecordingTwins(Twins):
 
     def _recorded(self, leaf: Dispatcher, twin):
         """``twin`` (the leaf's Python twin) recording each new list of argument types the leaf is called with."""
-        seen: set[tuple] = set()
+        seen = self.seen.setdefault(id(leaf), set())  # (shared: a module's shadow may wrap its leaf twice)
 
         def recorded(*args):
             types_ = tuple(typeof(a) for a in args)  # (numba's types of the arguments, as its dispatch types them)
