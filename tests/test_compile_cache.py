@@ -143,3 +143,34 @@ def test_njit_called_on_a_function_with_options_gives_the_compiled_function():
     compiled = cc.njit(_twice, cache=False)
     assert isinstance(compiled, numba.core.registry.CPUDispatcher) and compiled(21) == 42
     assert cc.njit(cache=False)(_twice)(4) == 8  # the decorator form as before
+
+
+def _saves(folder: str, tag: str, n: int) -> None:
+    """(In a forked child) n cache entries of ``tag`` saved into one index, as numba saves a compiled function."""
+    from numba.core import caching
+
+    index = caching.IndexDataCacheFile(folder, "f", ("stamp", 1))
+    for i in range(n):
+        index.save((tag, i), (tag, i))
+    os._exit(0)
+
+
+def test_two_processes_saving_into_one_index_lose_and_mix_up_nothing(tmp_path, monkeypatch):
+    """numba's save reads the index, adds the entry and writes it back: two processes at once (a first run and its
+    leaves' helper) lost or swapped about a third of 300 entries without the lock; with it (compile_cache.locked_save)
+    every entry loads its own data."""
+    import multiprocessing
+
+    from numba.core import caching
+
+    monkeypatch.setattr(cc, "directory", lambda: tmp_path)
+    assert getattr(caching.IndexDataCacheFile.save, "holds_lock", False)
+    context = multiprocessing.get_context("fork")
+    writers = [context.Process(target=_saves, args=(str(tmp_path), tag, 150)) for tag in "ab"]
+    for w in writers:
+        w.start()
+    for w in writers:
+        w.join(60)
+    assert [w.exitcode for w in writers] == [0, 0]
+    index = caching.IndexDataCacheFile(str(tmp_path), "f", ("stamp", 1))
+    assert [(tag, i) for tag in "ab" for i in range(150) if index.load((tag, i)) != (tag, i)] == []

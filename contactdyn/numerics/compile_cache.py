@@ -14,6 +14,12 @@ The directory: ``$NUMBA_CACHE_DIR/KEY`` when the user set numba's NUMBA_CACHE_DI
 be written, ``<tempdir>/contactdyn-numba-<uid>/KEY``. Sibling keys unused for STALE_AFTER days are
 removed (a directory's mtime is refreshed by each process that uses it).
 
+numba saves a compiled function to its cache by reading the function's index, adding the entry and writing it
+back, with no lock: two processes saving two signatures of one function at once (a first run and its leaves'
+helper, a build and a run; :mod:`contactdyn.first_run`) could give both one data file, and a later load the
+other's code. In the package's directory each save holds an exclusive lock on its index (:func:`locked_save`,
+POSIX ``flock``; elsewhere as numba does it).
+
 Compiled modules decorate with :func:`njit` from here instead of numba's: numba's own ``njit``, with
 ``numba.config.CACHE_DIR`` (read when a cached function is decorated) pointed at the directory only
 while the function is decorated, so the user's own numba functions keep caching where they did. Every
@@ -35,12 +41,13 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numba
-from numba.core import event
+from numba.core import caching, event
 
 from .. import __version__
 from . import notice
 
-__all__ = ["njit", "cfunc", "directory", "cache_dir", "key", "compiled_modules", "CompileNotice", "PACKAGE"]
+__all__ = ["njit", "cfunc", "directory", "cache_dir", "key", "compiled_modules", "CompileNotice", "PACKAGE",
+           "locked_save"]
 
 PACKAGE = Path(__file__).resolve().parents[1]  #: the package's source folder (contactdyn/)
 HASH_CHARS = 12  #: [hex digits] of the source hash in KEY
@@ -168,3 +175,35 @@ class CompileNotice(event.Listener):
 
 
 event.register("numba:compile", CompileNotice())
+
+
+def locked_save(save: Callable) -> Callable:
+    """numba's ``IndexDataCacheFile.save`` holding an exclusive lock (``<index>.lock``, POSIX ``flock``) while it
+    reads, extends and writes the index and writes the data, where the index is in :func:`directory`; elsewhere, or
+    without ``fcntl`` (Windows) or a lock file, as it is."""
+    try:
+        import fcntl
+    except ImportError:  # (Windows)
+        return save
+
+    @functools.wraps(save)
+    def locked(self, key, data):
+        if not str(self._cache_path).startswith(str(directory())):
+            return save(self, key, data)
+        try:
+            lock = open(f"{self._index_path}.lock", "a")  # noqa: SIM115 (closed below, after the unlock)
+        except OSError:
+            return save(self, key, data)
+        with lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                return save(self, key, data)
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+
+    locked.holds_lock = True  # (wrapped once: a second flock of the same file in this process would wait forever)
+    return locked
+
+
+if not getattr(caching.IndexDataCacheFile.save, "holds_lock", False):
+    caching.IndexDataCacheFile.save = locked_save(caching.IndexDataCacheFile.save)
