@@ -93,7 +93,8 @@ def _paths() -> list[str]:
 
 
 def _wait_for_build(cache: str) -> tuple[float, bool]:
-    """([s] until the background build of ``contactdyn.first_run`` ended, whether it marked its kind built)."""
+    """([s] until the background build of ``contactdyn.first_run`` ended, and any leaves' helper, whether the build
+    marked its kind built)."""
     t0 = time.perf_counter()
     while time.perf_counter() - t0 < TIMEOUT:
         if not list(Path(cache).glob("*/kinds/*.building")):

@@ -16,10 +16,11 @@ a few seconds once per install) give the compiled run's outputs bit for bit, ~20
 
 While a first run compiles its leaves (the rigid-body algorithms and the dense algebra its twins call compiled,
 one by one as it first reaches them: most of its time), a machine with a second core compiles them from the other
-end: :func:`leaves_ahead` starts one helper (``python -m contactdyn.first_run --leaves FILE LOCK``; detached,
-silent, low priority) that records which leaves the scene reaches and with which argument types, on a millisecond
-of the scene with every leaf interpreted (:class:`~contactdyn.numerics.twins.RecordingTwins`), then compiles them
-last-reached first into the shared cache; the run loads each one the helper has cached by the time it reaches it.
+end: :func:`leaves_ahead` starts one helper (``python -m contactdyn.first_run --leaves FILE MARKER``; detached,
+silent, low priority) that records which leaves the scene reaches in its first millisecond, and with which argument
+types, with every leaf interpreted (:class:`~contactdyn.numerics.twins.RecordingTwins`; RECORD_LIMIT seconds at
+most), then compiles them last-reached first into the shared cache and marks the kind's leaves done
+(``<kind>.leaves``); the run loads each one the helper has cached by the time it reaches it.
 The two meet in the middle. The helper changes no result (it only fills the cache) and reports nothing: a leaf it
 cannot compile the run compiles, and says why. ``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
 
@@ -54,7 +55,9 @@ ENV = "CONTACTDYN_PATH"  #: the environment variable that sets the default path 
 BUILD_TIMEOUT = 1800.0  #: [s] a background build older than this is taken as dead (its lock is stale)
 BUILD_DURATION = 60.0  #: [s] simulated by a background build at most
 RECORD_DURATION = 1e-3  #: [s] simulated by the leaves' helper to learn which leaves the scene reaches
+RECORD_LIMIT = 5.0  #: [s] of wall time the helper records at most (then it compiles what it has)
 LEAVES_LOCK = "leaves"  #: the helper's lock, beside the kinds' markers: one helper at a time
+LEAVES_TIMEOUT = 300.0  #: [s] a helper older than this is taken as dead (its lock is stale)
 HELPER_ENV = "CONTACTDYN_LEAVES_AHEAD"  #: set to 0: no leaves' helper (a first run compiles its leaves alone)
 
 
@@ -155,16 +158,16 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def _stale(lock: Path) -> bool:
-    """Is the build that holds ``lock`` gone (its process ended without removing it, or it is BUILD_TIMEOUT old)?"""
+def _stale(lock: Path, timeout: float = BUILD_TIMEOUT) -> bool:
+    """Is the build that holds ``lock`` gone (its process ended without removing it, or it is ``timeout`` [s] old)?"""
     age = time.time() - lock.stat().st_mtime  # [s]
     text = lock.read_text().strip()
     if not text.isdigit():  # (its process not written yet: a build just starting)
-        return age > BUILD_TIMEOUT
-    return not _alive(int(text)) or age > BUILD_TIMEOUT
+        return age > timeout
+    return not _alive(int(text)) or age > timeout
 
 
-def _lock(folder: Path, name: str) -> bool:
+def _lock(folder: Path, name: str, timeout: float = BUILD_TIMEOUT) -> bool:
     """Take the kind's build lock (False: a build of it runs already, or the folder cannot be written)."""
     lock = folder / f"{name}.building"
     for _ in range(2):
@@ -174,7 +177,7 @@ def _lock(folder: Path, name: str) -> bool:
             return True
         except FileExistsError:
             try:
-                if not _stale(lock):
+                if not _stale(lock, timeout):
                     return False
                 lock.unlink()  # a build that died: take over
             except OSError:
@@ -203,12 +206,14 @@ def build_in_background(scene: Scene) -> bool:
 
 def leaves_ahead(scene: Scene) -> bool:
     """Before a first run of ``scene`` (interpreted): start the helper that compiles its leaves from the other end
-    (see the module; False: not started: one core only, one runs already, the scene has no file, or
-    ``$CONTACTDYN_LEAVES_AHEAD`` is 0)."""
+    (see the module; False: not started: one core only, one runs already, the scene has no file,
+    ``$CONTACTDYN_LEAVES_AHEAD`` is 0, or it would not help: the kind's build runs, or a helper did the kind)."""
     if os.environ.get(HELPER_ENV, "").strip() == "0" or _cores() < 2 or not _buildable(scene):
         return False
-    folder = _folder()
-    return _lock(folder, LEAVES_LOCK) and _start(scene, folder / LEAVES_LOCK, "--leaves")
+    folder, name = _folder(), kind(scene)
+    if (folder / f"{name}.building").exists() or (folder / f"{name}.leaves").exists():
+        return False
+    return _lock(folder, LEAVES_LOCK, LEAVES_TIMEOUT) and _start(scene, folder / LEAVES_LOCK, "--leaves")
 
 
 def _cores() -> int:
@@ -221,8 +226,9 @@ def _start(scene: Scene, marker: Path, *options: str) -> bool:
     """Start ``python -m contactdyn.first_run [options] FILE MARKER`` detached, the scene's document on stdin; its
     lock ``MARKER.building`` (taken) then holds its process id (False, the lock given back: it could not start)."""
     lock = Path(f"{marker}.building")
-    flags = getattr(subprocess, "DETACHED_PROCESS", 0) | getattr(subprocess, "CREATE_NEW_PROCESS_GROUP", 0)
-    detached = {"start_new_session": True} if os.name == "posix" else {"creationflags": flags}  # (Windows)
+    flags = (getattr(subprocess, "DETACHED_PROCESS", 0) | getattr(subprocess, "CREATE_NEW_PROCESS_GROUP", 0)
+             | getattr(subprocess, "BELOW_NORMAL_PRIORITY_CLASS", 0))  # (Windows: os.nice is POSIX's)
+    detached = {"start_new_session": True} if os.name == "posix" else {"creationflags": flags}
     try:
         child = subprocess.Popen([sys.executable, "-P", "-m", __name__, *options, str(Path(scene.file).resolve()),
                                   str(marker)], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
@@ -262,9 +268,10 @@ def build(file: str, document: dict, marker: str) -> None:
     Path(f"{marker}.built").touch()
 
 
-def compile_leaves(file: str, document: dict) -> None:
+def compile_leaves(file: str, document: dict, marker: str) -> None:
     """The helper of :func:`leaves_ahead`: the leaves the scene reaches, recorded on RECORD_DURATION of it
-    interpreted (no leaf compiled), compiled last-reached first (:func:`compile_backwards`)."""
+    interpreted (no leaf compiled; RECORD_LIMIT of wall time at most), compiled last-reached first
+    (:func:`compile_backwards`); then the kind's leaves marked done beside ``marker``."""
     import warnings
 
     from .hybrid.loop import HybridRun
@@ -272,12 +279,17 @@ def compile_leaves(file: str, document: dict) -> None:
     from .numerics.twins import RecordingTwins
     from .scene.scene_file import parse_scene
 
-    recorder = RecordingTwins()
+    done = Path(marker).with_name(f"{kind(parse_scene(document, None, file))}.leaves")
+    scene = parse_scene(document, {"duration": RECORD_DURATION}, file)
+    recorder = RecordingTwins(deadline=time.monotonic() + RECORD_LIMIT)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        system = System(parse_scene(document, {"duration": RECORD_DURATION}, file))
-        HybridRun(system, interpreted=True, twins=recorder).run(time.perf_counter())
+        try:
+            HybridRun(System(scene), interpreted=True, twins=recorder).run(time.perf_counter())
+        except RecordingTwins.Enough:  # (what it recorded so far: the leaves the run reaches first)
+            pass
     compile_backwards(recorder.calls)
+    done.touch()
 
 
 def compile_backwards(calls: list[tuple[Any, tuple]]) -> None:
@@ -293,8 +305,8 @@ def compile_backwards(calls: list[tuple[Any, tuple]]) -> None:
 def main(argv: list[str] | None = None) -> int:
     """``python -m contactdyn.first_run FILE MARKER`` (the scene's document on stdin): the background build. A build
     that fails writes MARKER.failed (its error): later runs of the kind run interpreted and say why.
-    ``python -m contactdyn.first_run --leaves FILE LOCK``: the leaves' helper (:func:`leaves_ahead`); it records
-    nothing of a failure (the run it helps reports its own)."""
+    ``python -m contactdyn.first_run --leaves FILE MARKER``: the leaves' helper (:func:`leaves_ahead`; its lock
+    MARKER.building); it records nothing of a failure (the run it helps reports its own)."""
     args = list(sys.argv[1:] if argv is None else argv)
     helper = args[:1] == ["--leaves"]
     file, marker = args[1:3] if helper else args[:2]
@@ -304,7 +316,7 @@ def main(argv: list[str] | None = None) -> int:
         pass
     try:
         document = json.loads(sys.stdin.read())
-        compile_leaves(file, document) if helper else build(file, document, marker)
+        compile_leaves(file, document, marker) if helper else build(file, document, marker)
         return 0
     except Exception as exc:  # noqa: BLE001 (any failure of the build is recorded, none raised: nobody reads it)
         if not helper:

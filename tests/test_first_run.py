@@ -99,13 +99,17 @@ def test_the_build_is_started_detached_on_this_package_with_the_file_it_was_read
 
 
 def test_the_command_runs_interpreted_says_so_and_asks_for_one_build(markers, monkeypatch, capsys):
-    asked, ahead = [], []
+    from contactdyn import cli
+
+    asked, order = [], []
     monkeypatch.setattr(first_run, "build_in_background", lambda scene: asked.append(scene) or True)
-    monkeypatch.setattr(first_run, "leaves_ahead", lambda scene: ahead.append((scene, list(asked))) or True)
+    monkeypatch.setattr(first_run, "leaves_ahead", lambda scene: order.append(("helper", scene.name)) or True)
+    run = cli._simulate_quietly
+    monkeypatch.setattr(cli, "_simulate_quietly", lambda *a, **k: order.append(("run", a[1].name)) or run(*a, **k))
     code = main(["run", "b1", *FAST, "--path", "auto", "--json"])
     doc = json.loads(capsys.readouterr().out)
     assert code == EXIT_OK and len(asked) == 1 and asked[0].name == "b1"
-    assert [(scene.name, before) for scene, before in ahead] == [("b1", [])]  # the leaves' helper: before the run
+    assert order == [("helper", "b1"), ("run", "b1")]  # the leaves' helper: started before the run
     assert {row["path"] for row in doc["stats"]["paths"].values()} == {INTERPRETED}
     main(["run", "b1", *FAST, "--path", "auto"])
     assert "built in the background" in capsys.readouterr().err
@@ -202,30 +206,44 @@ def test_a_failure_on_the_compiled_call_is_diagnosed_in_one_line(capsys):
         assert "Traceback" not in err and "fastest mode" in err
 
 
-def test_the_recorded_leaves_are_the_ones_the_interpreted_run_compiles_and_none_is_compiled_to_record_them():
+def test_the_recorded_leaves_are_the_ones_the_interpreted_run_compiles_and_none_is_compiled_to_record_them(
+        monkeypatch):
     """The leaves' helper's record (RecordingTwins): each leaf the scene reaches, once per argument types, as numba
-    types them where the interpreted run calls it compiled: the very signatures that run compiles (or loads)."""
-    from numba.core import event
+    types them where the interpreted run calls it compiled: the very signatures that run compiles (or loads). Each
+    leaf is replaced by a fresh dispatcher of its function (numba's cache shared with it): recording gives none a
+    signature; the interpreted run after it gives each exactly the recorded ones."""
+    import importlib
 
     from contactdyn.hybrid.loop import HybridRun
     from contactdyn.model.system import System
+    from contactdyn.numerics.compile_cache import njit
     from contactdyn.numerics.twins import LEAVES, RecordingTwins
 
+    fresh = {}
+    for name in LEAVES:
+        module, _, function = name.rpartition(".")
+        leaf = getattr(importlib.import_module(module), function)
+        if not leaf._can_compile:  # (fixed signatures: compiled at import)
+            continue
+        fresh[name] = njit(leaf.py_func, cache=True)
+        for held in [m for n, m in sys.modules.items() if n.startswith("contactdyn.")]:  # (every module's name of it)
+            for attribute, value in list(vars(held).items()):
+                if value is leaf:
+                    monkeypatch.setattr(held, attribute, fresh[name])
     scene = load_scene("case1_cart", {"duration": first_run.RECORD_DURATION})
     recorder = RecordingTwins()
-    with event.install_recorder("numba:compile") as rec:
-        HybridRun(System(scene), interpreted=True, twins=recorder).run(0.0)
-    compiled = {getattr(e.data["dispatcher"], "py_func", None) for e in rec.buffer if e.data}
+    HybridRun(System(scene), interpreted=True, twins=recorder).run(0.0)
+    assert {name: leaf.signatures for name, leaf in fresh.items() if leaf.signatures} == {}  # none compiled
     names = [f"{leaf.py_func.__module__}.{leaf.py_func.__qualname__}" for leaf, _ in recorder.calls]
-    assert set(names) <= LEAVES and len(set(map(repr, recorder.calls))) == len(recorder.calls)
     assert {"contactdyn.robot.rigid_body._kinematics", "contactdyn.robot.rigid_body._jacobians",
-            "contactdyn.robot.rigid_body._inertia"} <= set(names)
-    assert not compiled & {leaf.py_func for leaf, _ in recorder.calls}  # recording compiled none of them
+            "contactdyn.robot.rigid_body._inertia"} <= set(names) <= LEAVES
+    assert len(set(map(repr, recorder.calls))) == len(recorder.calls)  # once per leaf and types
     from contactdyn import simulate
 
     simulate(scene, interpreted=True)
-    for leaf, types_ in recorder.calls:
-        assert types_ in leaf.signatures, (leaf.py_func.__qualname__, types_, leaf.signatures)
+    recorded = {(name, types_) for name, (_, types_) in zip(names, recorder.calls, strict=True) if name in fresh}
+    compiled = {(name, tuple(types_)) for name, leaf in fresh.items() for types_ in leaf.signatures}
+    assert recorded == compiled
 
 
 def test_the_helper_compiles_the_last_reached_leaf_first_and_leaves_what_fails_to_the_run():
@@ -260,7 +278,7 @@ def test_the_leaves_helper_needs_a_second_core_and_runs_one_at_a_time(markers, m
     assert first_run.leaves_ahead(scene) and len(started) == 2
 
 
-def test_the_helper_fills_the_cache_and_records_no_failure(markers, monkeypatch):
+def test_the_helper_hands_its_record_to_compile_backwards_marks_the_kind_and_records_no_failure(markers, monkeypatch):
     compiled = []
     monkeypatch.setattr(first_run, "compile_backwards", lambda calls: compiled.append(calls))
     monkeypatch.setattr("os.nice", lambda n: 0)
@@ -271,7 +289,42 @@ def test_the_helper_fills_the_cache_and_records_no_failure(markers, monkeypatch)
     monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps(scene.document)))
     assert first_run.main(["--leaves", scene.file, str(markers / first_run.LEAVES_LOCK)]) == 0
     assert len(compiled) == 1 and compiled[0] and not lock.exists()
+    done = markers / f"{first_run.kind(scene)}.leaves"
+    assert [p.name for p in markers.iterdir()] == [done.name]
+    monkeypatch.setattr(first_run, "_cores", lambda: 2)
+    assert not first_run.leaves_ahead(scene)  # (a helper did this kind)
+    done.unlink()
     lock.touch()
-    monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps({"duration": "not a number"})))
+    monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps({})))  # (no scene: the helper fails)
     assert first_run.main(["--leaves", scene.file, str(markers / first_run.LEAVES_LOCK)]) == 1
     assert list(markers.iterdir()) == []  # no marker of a failure: the run reports its own
+
+
+def test_the_helper_is_started_detached_with_its_option_and_not_beside_the_kinds_build(markers, monkeypatch):
+    started = []
+
+    class Popen:
+        def __init__(self, argv, **options):
+            started.append(argv)
+            self.pid, self.stdin = os.getpid(), io.BytesIO()
+
+    monkeypatch.setattr(first_run.subprocess, "Popen", Popen)
+    monkeypatch.setattr(first_run, "_cores", lambda: 2)
+    scene = load_scene("b1")
+    assert first_run.build_in_background(scene) and not first_run.leaves_ahead(scene)  # (its build runs)
+    (markers / f"{first_run.kind(scene)}.building").unlink()
+    assert first_run.leaves_ahead(scene)
+    assert started[-1][1:] == ["-P", "-m", "contactdyn.first_run", "--leaves", str(Path(scene.file).resolve()),
+                               str(markers / first_run.LEAVES_LOCK)]
+    assert (markers / f"{first_run.LEAVES_LOCK}.building").read_text() == str(os.getpid())
+
+
+def test_the_recording_stops_at_its_deadline_keeping_what_it_has():
+    from contactdyn.hybrid.loop import HybridRun
+    from contactdyn.model.system import System
+    from contactdyn.numerics.twins import RecordingTwins
+
+    recorder = RecordingTwins(deadline=0.0)  # (already past)
+    with pytest.raises(RecordingTwins.Enough):
+        HybridRun(System(load_scene("b1", {"duration": 1e-3})), interpreted=True, twins=recorder).run(0.0)
+    assert recorder.calls == []

@@ -221,7 +221,8 @@ def _jacobi_pinv(J):
     r, c = J.shape
     A = _transposed(J)  # (c, r): its columns are rotated
     V = np.zeros((r, r))
-    square = 0.0  # ‖J‖² [J's unit²], summed in J's order (as numba's ``(J * J).sum()``)
+    square = 0.0  # ‖J‖² [J's unit²] summed row by row: numba's ``(J * J).sum()`` for a C-ordered or strided J (by
+    # columns for a Fortran-ordered one: there the threshold below may differ from it in the last bit)
     for p in range(r):
         V[p, p] = 1.0
         for i in range(c):

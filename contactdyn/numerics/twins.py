@@ -37,7 +37,9 @@ interpreted run compiles the leaves only (and the integrator's dense-output poly
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
+import time
 import types
 from collections.abc import Mapping
 
@@ -148,10 +150,15 @@ class Twins:
 class RecordingTwins(Twins):
     """The twins with the leaves interpreted too, each leaf's calls recorded: ``calls``, (the leaf, its argument
     types) in the order a run first reaches them, what the same run on :class:`Twins` compiles (no leaf compiled
-    here). A first run's helper compiles them last-reached first, beside the run (:mod:`contactdyn.first_run`)."""
+    here). A first run's helper compiles them last-reached first, beside the run (:mod:`contactdyn.first_run`).
+    ``deadline`` [s] (``time.monotonic``): a leaf called after it raises :class:`Enough` (the record so far kept)."""
 
-    def __init__(self) -> None:
+    class Enough(Exception):
+        """The recording ran past its deadline."""
+
+    def __init__(self, deadline: float = math.inf) -> None:
         super().__init__(leaves=frozenset())
+        self.deadline = deadline
         self.calls: list[tuple[Dispatcher, tuple]] = []
         self.seen: dict[int, set[tuple]] = {}  #: id(leaf) -> the argument types recorded (one set per leaf)
 
@@ -169,6 +176,8 @@ class RecordingTwins(Twins):
         seen = self.seen.setdefault(id(leaf), set())  # (shared: a module's shadow may wrap its leaf twice)
 
         def recorded(*args):
+            if time.monotonic() > self.deadline:
+                raise RecordingTwins.Enough
             types_ = tuple(typeof(a) for a in args)  # (numba's types of the arguments, as its dispatch types them)
             if types_ not in seen:
                 seen.add(types_)

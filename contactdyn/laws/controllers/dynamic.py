@@ -435,9 +435,9 @@ class ForceDynamic(_ComputedTorque):
                 F[i] = inp.forces[name]
         ref = (_c(inp.x_d), _c(inp.v_d), _c(inp.a_d)) if self.tracks_position else (_NONE, _NONE, _NONE)
         kp, kv = self._gains3
-        a, f_swap, zdot = current(dynamic_law).force_targets(self.P, _c(inp.p_tip), _c(inp.v_tip), *ref, kp, kv,
-                                                    float(cfg.kf), normals, touch, p_s, v_s, F_d, dF_d, F,
-                                                    _c(inp.z), self._env, self.tracks_position)
+        targets = current(dynamic_law).force_targets
+        a, f_swap, zdot = targets(self.P, _c(inp.p_tip), _c(inp.v_tip), *ref, kp, kv, float(cfg.kf), normals, touch,
+                                  p_s, v_s, F_d, dF_d, F, _c(inp.z), self._env, self.tracks_position)
         return a, (f_swap if cfg.cancel == "target" else None), zdot
 
 

@@ -73,8 +73,9 @@ class TaskForce(Controller):
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         ff = inp.h if self.config.feedforward == "bias" else inp.gravity if self.config.feedforward == "gravity" \
             else None
-        return current(task_force_torque)(float(inp.t), contiguous(inp.J), *self.constants,
-                                 _NONE if ff is None else contiguous(ff)), None
+        tau = current(task_force_torque)(float(inp.t), contiguous(inp.J), *self.constants,
+                                         _NONE if ff is None else contiguous(ff))
+        return tau, None
 
 
 _NONE = np.empty(0)

@@ -140,9 +140,9 @@ class OperationalSpace(Controller):
         (:mod:`contactdyn.model.pipeline.control_laws`) runs too; the readable ``command`` comes here."""
         c = contiguous
         x_d, v_d, a_d = (_NONE, _NONE, _NONE) if ref is None else (c(ref[0]), c(ref[1]), c(ref[2]))
-        tau, ratio = current(law).torque(v, c(H), h, c(J_tip), drift_tip, p_tip, v_tip, x_d, v_d, a_d,
-                                np.array(set_points, float), _NO_ROTATION if R_tip is None else c(R_tip),
-                                *self.constants)
+        torque = current(law).torque
+        tau, ratio = torque(v, c(H), h, c(J_tip), drift_tip, p_tip, v_tip, x_d, v_d, a_d, np.array(set_points, float),
+                            _NO_ROTATION if R_tip is None else c(R_tip), *self.constants)
         self._guard(ratio, t)
         return tau
 

@@ -159,10 +159,11 @@ class TaskPD(Controller):
         forced = np.array([inp.normals[k] for k in keys], dtype=float).reshape(-1, 3)
         orient = self.reads_orientation
         ff = _feedforward(inp, self.config.feedforward)
-        tau = current(law).torque(c(inp.v), c(inp.J), c(inp.J_ang) if orient else np.empty((0, self.nv)), c(inp.p_tip),
-                         c(inp.v_tip), c(inp.x_d) if referenced else _NONE, c(inp.v_d) if referenced else _NONE,
-                         set_points, c(inp.R_tip) if orient else _NO_ROTATION, axes, forced, kp, kd, tool_axis, target,
-                         R_d, ko, do, kd_joint, kd_normal, _NONE if np.isscalar(ff) else c(ff))
+        torque = current(law).torque
+        tau = torque(c(inp.v), c(inp.J), c(inp.J_ang) if orient else np.empty((0, self.nv)), c(inp.p_tip),
+                     c(inp.v_tip), c(inp.x_d) if referenced else _NONE, c(inp.v_d) if referenced else _NONE,
+                     set_points, c(inp.R_tip) if orient else _NO_ROTATION, axes, forced, kp, kd, tool_axis, target,
+                     R_d, ko, do, kd_joint, kd_normal, _NONE if np.isscalar(ff) else c(ff))
         return tau, None
 
 
@@ -207,8 +208,9 @@ class JointPD(Controller):
     def command(self, inp: ControlInput) -> tuple[np.ndarray, None]:
         ff = _feedforward(inp, self.config.feedforward)
         ref = (contiguous(inp.x_d), contiguous(inp.v_d)) if inp.x_d is not None else (_NONE, _NONE)
-        return current(joint_pd_torque)(contiguous(inp.q), contiguous(inp.v), *ref, *self.gains,
-                               _NONE if np.isscalar(ff) else contiguous(ff)), None
+        tau = current(joint_pd_torque)(contiguous(inp.q), contiguous(inp.v), *ref, *self.gains,
+                                       _NONE if np.isscalar(ff) else contiguous(ff))
+        return tau, None
 
 
 @njit(cache=True)
