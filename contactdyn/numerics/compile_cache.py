@@ -180,7 +180,7 @@ event.register("numba:compile", CompileNotice())
 def locked_save(save: Callable) -> Callable:
     """numba's ``IndexDataCacheFile.save`` holding an exclusive lock (``<index>.lock``, POSIX ``flock``) while it
     reads, extends and writes the index and writes the data, where the index is in :func:`directory`; elsewhere, or
-    without ``fcntl`` (Windows) or a lock file, as it is."""
+    without ``fcntl`` (Windows), a lock file or a file system that locks, as it is."""
     try:
         import fcntl
     except ImportError:  # (Windows)
@@ -195,7 +195,10 @@ def locked_save(save: Callable) -> Callable:
         except OSError:
             return save(self, key, data)
         with lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX)
+            except OSError:  # (a file system without locks: as numba does it)
+                return save(self, key, data)
             try:
                 return save(self, key, data)
             finally:
