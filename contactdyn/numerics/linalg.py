@@ -203,8 +203,9 @@ def pinv(J):
 
 @njit(cache=True)
 def _transposed(M):
-    """Mᵀ, a new C-contiguous array (element by element: numba's ``ascontiguousarray`` of a transposed view and
-    its other array functions below cost a first run seconds of compiling; the numbers are the same)."""
+    """Mᵀ, a new C-contiguous array, element by element. (numba's ``ascontiguousarray`` of ``M.T``, like its ``eye``,
+    ``sum`` and ``max`` that :func:`_jacobi_pinv` no longer calls, compiles an implementation of its own: seconds of
+    a cold first run. The numbers are the same.)"""
     r, c = M.shape
     T = np.empty((c, r))
     for i in range(r):
