@@ -59,6 +59,7 @@ RECORD_LIMIT = 5.0  #: [s] of wall time the helper records at most (then it comp
 LEAVES_LOCK = "leaves"  #: the helper's lock, beside the kinds' markers: one helper at a time
 LEAVES_TIMEOUT = 300.0  #: [s] a helper older than this is taken as dead (its lock is stale)
 HELPER_ENV = "CONTACTDYN_LEAVES_AHEAD"  #: set to 0: no leaves' helper (a first run compiles its leaves alone)
+CPU_QUOTA = Path("/sys/fs/cgroup/cpu.max")  #: a container's CPU quota (cgroup v2), where there is one
 
 
 class Choice:
@@ -217,9 +218,16 @@ def leaves_ahead(scene: Scene) -> bool:
 
 
 def _cores() -> int:
-    """The cores this process may run on."""
+    """The cores this process may run on: its affinity, at most a container's CPU quota (cgroup v2)."""
     affinity = getattr(os, "sched_getaffinity", None)
-    return len(affinity(0)) if affinity is not None else (os.cpu_count() or 1)
+    cores = len(affinity(0)) if affinity is not None else (os.cpu_count() or 1)
+    try:
+        quota, period = CPU_QUOTA.read_text().split()[:2]  # "max 100000" or "<quota> <period>" [µs]
+        if quota != "max":
+            cores = min(cores, max(1, int(quota) // int(period)))
+    except (OSError, ValueError):  # (no cgroup v2 here, or a line it cannot read)
+        pass
+    return cores
 
 
 def _start(scene: Scene, marker: Path, *options: str) -> bool:

@@ -328,3 +328,16 @@ def test_the_recording_stops_at_its_deadline_keeping_what_it_has():
     with pytest.raises(RecordingTwins.Enough):
         HybridRun(System(load_scene("b1", {"duration": 1e-3})), interpreted=True, twins=recorder).run(0.0)
     assert recorder.calls == []
+
+
+@pytest.mark.parametrize("quota, cores", [("100000 100000\n", 1), ("150000 100000\n", 1), ("200000 100000\n", 2),
+                                          ("max 100000\n", 2), ("nonsense\n", 2)])
+def test_a_containers_cpu_quota_counts_as_cores(tmp_path, monkeypatch, quota, cores):
+    """A container limited to one CPU's time (cgroup v2's cpu.max) gets no helper beside its run, whatever its
+    affinity shows."""
+    monkeypatch.setattr(first_run.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.setattr(first_run, "CPU_QUOTA", tmp_path / "cpu.max")
+    (tmp_path / "cpu.max").write_text(quota)
+    assert first_run._cores() == cores
+    (tmp_path / "cpu.max").unlink()
+    assert first_run._cores() == 2
