@@ -128,8 +128,7 @@ class HybridRun:
         self.resting: str | None = None
         #: the modes' pipelines, compiled; ``interpreted`` (or not ``compiled``): the same call run as its twins
         #: (numerics.twins: a scene kind's first run), ``twins`` if given (a numerics.twins.Twins)
-        self.pipelines = LivePipelines(system, PipelineMode, use=compiled and not interpreted and twins is None,
-                                       twins=twins)
+        self.pipelines = LivePipelines(system, PipelineMode, use=compiled and not interpreted, twins=twins)
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
         self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)

@@ -112,10 +112,8 @@ class _Steps:
         """The state at t [s] on step i's own interpolant, as solve_ivp's step dense output. Built if needed: by
         ``derivatives`` (see :func:`build_interpolants`); else by the run's ``fun.interpolant`` (one compiled call),
         else by its ``fun.derivatives``, else by ``fun``, one call per state (all the same numbers)."""
-        if i not in self.coef:
-            built = derivatives is None and self._built_by_fun(i)
-            if not built:
-                build_interpolants([(self, i)], derivatives or getattr(self.fun, "derivatives", None))
+        if i not in self.coef and (derivatives is not None or not self._built_by_fun(i)):
+            build_interpolants([(self, i)], derivatives or getattr(self.fun, "derivatives", None))
         t_old = self.t[i]
         return horner_at(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old), self.y_old(i))
 

@@ -112,15 +112,24 @@ class Twins:
         if not module.startswith(PACKAGE) or module not in sys.modules:
             return value
         if isinstance(value, Dispatcher) and f"{module}.{python.__qualname__}" in self.leaves:
-            twin = value  # a leaf: compiled
+            twin = self._leaf(value)
         elif python.__globals__ is not sys.modules[module].__dict__:  # (generated code: exec'd wrappers) as it is
             twin = python
         else:
-            twin = types.FunctionType(python.__code__, self._shadow(module), python.__name__, python.__defaults__,
-                                      python.__closure__)
-            twin.__kwdefaults__, twin.__qualname__ = python.__kwdefaults__, python.__qualname__
+            twin = self._interpreted(python)
         self.made[id(value)] = twin
         self.keep.append(value)  # (its id stays its own)
+        return twin
+
+    def _leaf(self, leaf: Dispatcher):
+        """What a leaf's callers call: the leaf itself, compiled."""
+        return leaf
+
+    def _interpreted(self, python: types.FunctionType) -> types.FunctionType:
+        """``python``'s code over its module's shadow: its twin."""
+        twin = types.FunctionType(python.__code__, self._shadow(python.__module__), python.__name__,
+                                  python.__defaults__, python.__closure__)
+        twin.__kwdefaults__, twin.__qualname__ = python.__kwdefaults__, python.__qualname__
         return twin
 
     def _module(self, module: types.ModuleType):
@@ -157,22 +166,14 @@ class RecordingTwins(Twins):
         """The recording ran past its deadline."""
 
     def __init__(self, deadline: float = math.inf) -> None:
-        super().__init__(leaves=frozenset())
+        super().__init__()
         self.deadline = deadline
         self.calls: list[tuple[Dispatcher, tuple]] = []
         self.seen: dict[int, set[tuple]] = {}  #: id(leaf) -> the argument types recorded (one set per leaf)
 
-    def of(self, value):
-        got = self.made.get(id(value))
-        if got is not None:
-            return got
-        twin = super().of(value)
-        if isinstance(value, Dispatcher) and f"{value.py_func.__module__}.{value.py_func.__qualname__}" in LEAVES:
-            twin = self.made[id(value)] = self._recorded(value, twin)
-        return twin
-
-    def _recorded(self, leaf: Dispatcher, twin):
-        """``twin`` (the leaf's Python twin) recording each new list of argument types the leaf is called with."""
+    def _leaf(self, leaf: Dispatcher):
+        """The leaf's Python twin, recording each new list of argument types the leaf is called with."""
+        twin = self._interpreted(leaf.py_func)
         seen = self.seen.setdefault(id(leaf), set())  # (shared: a module's shadow may wrap its leaf twice)
 
         def recorded(*args):
