@@ -287,7 +287,7 @@ def compile_leaves(file: str, document: dict, marker: str) -> None:
     from .numerics.twins import RecordingTwins
     from .scene.scene_file import parse_scene
 
-    done = Path(marker).with_name(f"{kind(parse_scene(document, None, file))}.leaves")
+    done = Path(marker).with_name(f"{kind(parse_scene(document, None, file))}.leaves")  # (the run's kind: no override)
     scene = parse_scene(document, {"duration": RECORD_DURATION}, file)
     recorder = RecordingTwins(deadline=time.monotonic() + RECORD_LIMIT)
     with warnings.catch_warnings():
