@@ -1,12 +1,13 @@
 """A sampled law's measurement off the compiled call (``PipelineMode.measurement``) against the interpreted call's
 (the same call run as Python, ``mode_runner(system, compiled=False)``): the normal and interface forces [N], the
 contacts' generalized force on the joints [N·m or N] (the deformable and friction forces, plus the rows' λ whose
-columns reach beyond the robot) and a carrier's acceleration; and the whole input ``sample_input`` builds from the
-compiled call's terms (``PipelineMode.sample_terms``) against the one it builds from Pinocchio's and the phase's own
-(the interpreted call's measurement), at a few states of a touching mode.
+columns reach beyond the robot) and a carrier's acceleration; and the command a sample computes on it (the law's own
+controller stage on the compiled call's reading, ``hybrid.sampled_law``) against the readable law's ``command`` on the
+input built here from Pinocchio's terms, the phase's own reference and set-points and the interpreted call's
+measurement, at a few states of a touching mode.
 
 Each quantity is held to 1e-12 relative to its largest magnitude over the states (at least 1): Pinocchio's terms are
-the same quantities computed in another order, rounding apart.
+the same quantities computed in another order, rounding apart (a command's too).
 """
 
 from __future__ import annotations
@@ -19,8 +20,12 @@ import pytest
 
 from contactdyn import parse_scene
 from contactdyn.hybrid.pipeline_mode import PipelineMode, mode_runner
+from contactdyn.hybrid.sampled_law import SampledLaw
 from contactdyn.hybrid.sampling import SampledPhases
-from contactdyn.model.evaluation import measures, sample_input
+from contactdyn.laws.controllers import ControlInput
+from contactdyn.laws.sensors import quantise
+from contactdyn.model.evaluation import measures, surface_keys
+from contactdyn.model.phases import reference_at
 from contactdyn.model.pipeline.pack import unsupported
 from contactdyn.model.pipeline.pipeline import Pipeline
 from contactdyn.simulate import prepare
@@ -99,48 +104,62 @@ def test_the_compiled_calls_measurement_is_the_interpreted_calls(case):
         assert any(abs(r.carrier_acc) > 0.1 for r in ref)  # [m/s²] it accelerates
 
 
-FIELDS = ("q", "v", "H", "h", "gravity", "p_tip", "v_tip", "J", "drift", "R_tip", "J_ang", "drift_ang", "x_d", "v_d",
-          "a_d", "z", "tau_contact")  #: the ControlInput's arrays
-
-
-def _copied(inp):
-    """The input with its arrays copied (Pinocchio's H, h and Jacobians are its buffers, rewritten at the next
-    state)."""
-    for name in FIELDS:
-        if getattr(inp, name) is not None:
-            setattr(inp, name, np.array(getattr(inp, name)))
+def _readable_input(system, t, x, modes, phase, resolution, measured) -> ControlInput:
+    """What the phase's law reads at (t [s], x), built the readable way: Pinocchio's terms at the joint positions
+    quantised to ``resolution`` [rad or m], the phase's own reference and set-points, the forces, τ_contact and a
+    carrier's acceleration of ``measured`` (a law that reads no force sees none), the surfaces by the contacts' own
+    ``surface`` and the chains' anchors."""
+    nQ, nv, law = system.nQ, system.nv, phase.controller.inner
+    xq = x.copy()
+    xq[:nv] = quantise(x[:nv], resolution) if resolution > 0.0 else x[:nv]
+    robot = system.robot
+    robot.update(xq[:nv], xq[nQ:nQ + nv])
+    ft = robot.frame_terms(system.tip_fid)
+    x_d, v_d, a_d = reference_at(system, phase, t, xq)
+    z = xq[2 * nQ + phase.z_slice.start + phase.controller.inner_states.start: 2 * nQ + phase.z_slice.stop]
+    forces = {**measured.normal_force, **measured.interface} if law.uses_forces else {}
+    inp = ControlInput(t, xq[:nv], xq[nQ:nQ + nv], np.array(system.controller_inertia(robot.H)), np.array(robot.h),
+                       robot.gravity_torque(xq[:nv]) if law.needs_gravity else None, ft.position, ft.velocity,
+                       np.array(ft.jacobian), ft.drift, x_d, v_d, a_d, forces,
+                       {name: ramp.at(t) for name, ramp in phase.forces.items()}, system.force_directions, z,
+                       R_tip=ft.rotation, J_ang=np.array(ft.angular_jacobian), drift_ang=ft.angular_drift)
+    if a_d is not None and phase.carrier is not None:
+        inp.a_d = a_d + phase.carrier[1] * measured.carrier_acc
+    if law.uses_forces:
+        inp.tau_contact = measured.tau_contact
+        points = []
+        for c, m in zip(system.contacts, modes, strict=True):
+            p_env, v_env = c.surface(xq, nQ)
+            points += [(p_env, v_env), *((p_env + dc.u * m.offsets[i], v_env) for i, dc in enumerate(c.tangent_chains))]
+        inp.surfaces = dict(zip(surface_keys(system), points, strict=True))
+        inp.touching = {c.name: m.touching for c, m in zip(system.contacts, modes, strict=True)}
     return inp
 
 
 @pytest.mark.parametrize("resolution", [0.0, 1e-4])  # [rad] exact joint positions, and encoders' counts
 @pytest.mark.parametrize("case", list(CASES))
-def test_the_input_a_sample_builds_on_the_compiled_call_is_the_one_on_pinocchios_terms(case, resolution):
-    """sample_input with the compiled call's measurement and terms (at the quantised joint positions) against
-    sample_input on the interpreted call's measurement and Pinocchio's and the phase's own terms: every field the law
-    reads (the forces, τ_contact, the set-points, a_d with the carrier's acceleration, H, h, g, the tip's
-    kinematics). Without a measurement a law that measures is refused."""
+def test_a_samples_command_on_the_laws_stage_is_the_readable_laws_on_pinocchios_terms(case, resolution):
+    """The command and rates a sample computes (the law's own controller stage on the compiled call's reading) against
+    the readable law's ``command`` on the input built from Pinocchio's terms and the interpreted call's measurement:
+    τ and ż to 1e-12 of their largest magnitudes. The reading has forces exactly where the law reads them."""
     system, modes, phase, x0 = _touching_mode(case)
     mode, twin = PipelineMode(Pipeline(system, modes, phase)), mode_runner(system, compiled=False)(modes, phase)
+    law = SampledLaw(mode)
     t = phase.t_start + 0.013
-    got = [_copied(sample_input(system, t, x, modes, phase, resolution, mode.measurement(t, x), mode.sample_terms))
-           for x in _states(x0)]
-    ref = [_copied(sample_input(system, t, x, modes, phase, resolution, twin.measurement(t, x)))
-           for x in _states(x0)]
-    if measures(phase):
-        with pytest.raises(ValueError, match="pass its Measurement"):
-            sample_input(system, t, x0, modes, phase, resolution)
-    for name in FIELDS:
-        if getattr(ref[0], name) is None:
-            assert all(getattr(g, name) is None for g in got), name
-            continue
-        _close([getattr(g, name) for g in got], [getattr(r, name) for r in ref], name)
-    for name in ("forces", "force_d"):
-        assert all(getattr(g, name).keys() == getattr(r, name).keys() for g, r in zip(got, ref, strict=True))
-        for key in getattr(ref[0], name):
-            _close([getattr(g, name)[key] for g in got], [getattr(r, name)[key] for r in ref], f"{name} {key}")
-    assert bool(ref[0].forces) == phase.controller.inner.uses_forces  # a law that reads no force sees none
-    assert (ref[0].gravity is not None) == phase.controller.inner.needs_gravity
-    assert resolution == 0.0 or np.any(ref[0].q != x0[:system.nv])  # (quantised)
+    got, ref = [], []
+    for x in _states(x0):
+        reading = law.reading(t, x, resolution)
+        assert bool(reading.forces) == phase.controller.inner.uses_forces
+        assert resolution == 0.0 or np.any(reading.x[:system.nv] != x[:system.nv])  # (quantised)
+        got.append(law.command(reading, x[law.states]))
+        measured = twin.measurement(t, x) if measures(phase) else None
+        tau, zdot = phase.controller.inner.command(_readable_input(system, t, x, modes, phase, resolution, measured))
+        ref.append((np.asarray(tau, float), np.zeros(0) if zdot is None else np.asarray(zdot, float)))
+    for k, what in enumerate(("tau", "zdot")):
+        scale = max(1.0, max(float(np.max(np.abs(r[k]), initial=0.0)) for r in ref))
+        for g, r in zip(got, ref, strict=True):
+            np.testing.assert_allclose(g[k], r[k], rtol=0.0, atol=RTOL * scale, err_msg=f"{case} {what}")
+    assert max(float(np.max(np.abs(r[0]))) for r in ref) > 1.0  # [N·m] the law commands something
 
 
 def test_a_sample_measures_on_the_runner_only_where_the_law_needs_a_solved_call():
@@ -148,34 +167,34 @@ def test_a_sample_measures_on_the_runner_only_where_the_law_needs_a_solved_call(
     reads none."""
     asked = []
 
-    class Runner:
+    class Counted(PipelineMode):
         def measurement(self, t, x):
             asked.append(t)
-            return self.mode.measurement(t, x)
+            return super().measurement(t, x)
 
     for case, expected in (("no_force_law", 0), ("force_law", 1)):
         system, modes, phase, x0 = _touching_mode(case)
-        Runner.mode = PipelineMode(Pipeline(system, modes, phase))
-        Runner.sample_terms = Runner.mode.sample_terms
+        mode = Counted(Pipeline(system, modes, phase))
         assert measures(phase) == bool(expected)
-        sampled = SampledPhases(system, {}, lambda modes_, phase_: Runner())  # (the run's runner: its first sample)
+        sampled = SampledPhases(system, {}, lambda modes_, phase_, mode=mode: mode)  # (the run's runner)
         x = sampled.start(0.0, x0, modes, phase, None)
         asked.clear()
-        sampled.take(1e-3, x, modes, phase, Runner())
+        sampled.take(1e-3, x, phase, mode)
         assert len(asked) == expected
 
 
-@pytest.mark.parametrize("case", ["force_law", "real_cell"])  # (without motors H is Pinocchio's too; with, h only)
-def test_a_sample_keeps_its_own_H_and_h_after_the_next_samples(case):
-    """A delayed law computes on the input of d samples ago: its H and h are those of that sample's state, not
-    rewritten by the next sample's (Pinocchio's H and h are its buffers)."""
+@pytest.mark.parametrize("case", ["force_law", "real_cell", "carrier_chains"])
+def test_a_delayed_reading_gives_its_own_command_after_the_next_samples(case):
+    """A delayed law computes on the reading of d samples ago: its command is the one that reading gave when it was
+    taken, bitwise, after later readings (other forces, another state) went through the same law."""
     system, modes, phase, x0 = _touching_mode(case)
-    mode = PipelineMode(Pipeline(system, modes, phase))
+    law = SampledLaw(PipelineMode(Pipeline(system, modes, phase)))
     x1, x2 = _states(x0)[1:]
-    for terms_at in (None, mode.sample_terms):
-        first = sample_input(system, 0.01, x1, modes, phase, 0.0, mode.measurement(0.01, x1), terms_at)
-        H1, h1 = first.H.copy(), first.h.copy()
-        second = sample_input(system, 0.011, x2, modes, phase, 0.0, mode.measurement(0.011, x2), terms_at)
-        assert np.abs(second.h - h1).max() > 1e-6 * np.abs(h1).max()  # (another state: another h)
-        np.testing.assert_array_equal(first.H, H1)
-        np.testing.assert_array_equal(first.h, h1)
+    first = law.reading(0.01, x1)
+    tau1, zdot1 = law.command(first, x1[law.states])
+    second = law.reading(0.011, x2)
+    tau2, _ = law.command(second, x2[law.states])
+    assert np.abs(tau2 - tau1).max() > 1e-6 * np.abs(tau1).max()  # (another state: another command)
+    again = law.command(first, x1[law.states])
+    np.testing.assert_array_equal(again[0], tau1)
+    np.testing.assert_array_equal(again[1], zdot1)

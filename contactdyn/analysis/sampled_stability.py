@@ -12,9 +12,9 @@ scene run sampled) by central differences:
   the held slots u of the state; A = ∂f/∂x, B = ∂f/∂u. Its states are the ones something depends on
   (accumulators, the held slots and the law's own states, constant between samples, drop out), as in
   :mod:`~contactdyn.analysis.stability`;
-- the law at a sample: what it measures at t_k (:func:`~contactdyn.model.evaluation.sample_input`, the one
-  the hybrid loop calls: the state, and the contact forces under the command held so far, u_{k−1}) through its
-  own ``command``: (τ, ż) = G(m, z) with the measurement m = (x, u_prev); K = ∂τ/∂m, K_z = ∂τ/∂z and
+- the law at a sample: what it measures at t_k (:class:`~contactdyn.hybrid.sampled_law.SampledLaw`, as the
+  hybrid loop takes a sample: the state, and the contact forces under the command held so far, u_{k−1}) through
+  its own controller stage: (τ, ż) = G(m, z) with the measurement m = (x, u_prev); K = ∂τ/∂m, K_z = ∂τ/∂z and
   L = ∂ż/∂m, L_z = ∂ż/∂z. Its states advance once per sample, z_{k+1} = z_k + h ż (forward Euler, as
   ``Sampler.update``); a state nothing reads (A10's integral under a massless nominal) is left out;
 - the exact zero-order-hold discretisation (:func:`zoh`): Φ = e^{Ah}, Γ = ∫₀ʰ e^{As} ds B from one
@@ -39,8 +39,8 @@ import numpy as np
 from scipy.linalg import expm
 
 from ..errors import SimulationError
+from ..hybrid.sampled_law import SampledLaw
 from ..laws.controllers.sampled import SampledController
-from ..model.evaluation import measures, sample_input
 from ..model.system import System
 from ..output.result import Result
 from ..scene.scene_file import Scene, parse_scene
@@ -182,6 +182,7 @@ class SampledLoop:
                              f"no encoder quantum): {sensor}")
         self.loop = ContactLoop(scene, t_eq)  #: the sampled phase (its state has the held command)
         self.continuous = ContactLoop(continuous_scene(scene), t_eq)  #: the same phase continuous
+        self._law: SampledLaw | None = None  #: the law at a sample on the loop's mode (hybrid.sampled_law)
         assert isinstance(self.loop.phase.controller, SampledController)
 
     def equilibrium(self, x_guess: np.ndarray | None = None):
@@ -228,12 +229,11 @@ class SampledLoop:
     def _command(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(τ, ż) of the sampled law on what it measures at (t_eq, x) (the held slots of x acting)."""
         loop = self.loop
-        ctl = loop.phase.controller
-        mode, t, x = loop.mode, loop.t_eq, np.array(x, float)  # (what the loop measures: the mode's call)
-        measured = mode.measurement(t, x) if measures(loop.phase) else None
-        inp = sample_input(loop.system, t, x, loop.modes, loop.phase, 0.0, measured, mode.sample_terms)
-        tau, zdot = ctl.inner.command(inp)
-        return np.asarray(tau, float)[: ctl.nv], (np.zeros(0) if zdot is None else np.asarray(zdot, float))
+        if self._law is None:  # (what the loop measures: the mode's call; the law's own stage on it)
+            self._law = SampledLaw(loop.mode)
+        x = np.array(x, float)
+        tau, zdot = self._law.command(self._law.reading(loop.t_eq, x), x[self._law.states])
+        return tau, zdot
 
     @staticmethod
     def _jacobian(fun, x: np.ndarray, columns: np.ndarray) -> np.ndarray:

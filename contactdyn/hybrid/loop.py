@@ -219,7 +219,7 @@ class HybridRun:
         which is handled as the event a step straddling the corner would have located)."""
         runner = _runner(self, modes, phase)
         if sample:
-            x, before = self.sampled.take(t_after, x, modes, phase, runner), x
+            x, before = self.sampled.take(t_after, x, phase, runner), x
             fired = self.sampled.jumped(t_after, before, x, modes, phase, runner)
         else:
             self.stats["corners"] += 1

@@ -14,8 +14,7 @@ for the loop, its event functions (:func:`~contactdyn.hybrid.events.segment_even
   forces [N], slip velocities [m/s], stick forces [N], limit torques [N·m or N];
 - :meth:`samples` runs the output samples in one compiled call with the call's diagnostics on (τ, the command,
   the tip, x_d, F_d, λ, the stage states: :func:`contactdyn.model.pipeline.pipeline.record`);
-  :meth:`measurement` reads what a sampled law measures at a sample instant off one such call, and
-  :meth:`sample_terms` what it reads of the robot and the phase there.
+  :meth:`measurement` reads what a sampled law measures at a sample instant off one such call.
 
 A pipeline given twins (:mod:`contactdyn.numerics.twins`, a scene kind's first run) runs all of these, its steps and
 samples too, as its twins (``pipe.of``): the same functions interpreted.
@@ -36,7 +35,7 @@ import numpy as np
 
 from ..errors import SimulationError
 from ..model.chain_forces import pack as pack_chain
-from ..model.evaluation import Evaluation, Measurement, SampleTerms
+from ..model.evaluation import Evaluation, Measurement
 from ..model.paths import LivePipelines
 from ..model.pipeline.drives import DW_U, DW_W
 from ..model.pipeline.pack import (
@@ -64,7 +63,7 @@ from ..model.pipeline.pack import (
     W_DRIVES,
     diag_starts,
 )
-from ..model.pipeline.pipeline import Pipeline, call, sample_terms, samples_at
+from ..model.pipeline.pipeline import Pipeline, call, samples_at
 from ..output.samples import Samples
 from .steps import derivatives, interpolant_builder, stepper
 
@@ -241,17 +240,6 @@ class PipelineMode:
         return Measurement({c.name: float(e[EV_W * ci + EV_FN]) for ci, c in enumerate(system.contacts)},
                            {key: float(w[k]) for key, k in self._ifaces}, w[at:at + system.nv].copy(),
                            float(Xd[0, system.nQ + i_b]) if i_b >= 0 else 0.0)
-
-    def sample_terms(self, t: float, x: np.ndarray) -> SampleTerms:
-        """What the sampled phase's law reads of the robot and the phase at (t [s], x) besides the forces
-        (:class:`~contactdyn.model.evaluation.SampleTerms`), by the call's own stages in one compiled call."""
-        p, phase = self.pipe.packed, self.phase
-        H, h, g, J6, a6, p_tip, v_tip, R, x_d, v_d, a_d, F_d, rate = self.pipe.of(sample_terms)(
-            float(t), x, p.ints, p.reals, int(phase.controller.inner.needs_gravity))
-        ref = phase.reference is not None
-        return SampleTerms(H, h, g if g.size else None, p_tip, v_tip, J6[:3], a6[:3], R, J6[3:], a6[3:],
-                           x_d if ref else None, v_d if ref else None, a_d if ref else None,
-                           {key: (float(F_d[j]), float(rate[j])) for j, key in enumerate(phase.forces)})
 
     def _interface_table(self) -> list[tuple[str, int]]:
         """Per tangential chain ("contact.t1") where its interface force is in ``work``: its bond's λ while bonded,

@@ -4,11 +4,12 @@ A phase whose controller is sampled (:mod:`contactdyn.laws.controllers.sampled`)
 state between samples. With the compiled DOP853 the integrator takes the sample instants t_k = k / rate [s] as
 step boundaries (:class:`Hold`, :mod:`contactdyn.numerics.held_steps`: no step straddles the hold's jump, one
 segment carries many samples); with any other method the loop (:mod:`contactdyn.hybrid.loop`) ends a segment at
-every t_k. Either way :meth:`SampledPhases.take` runs there: what the law
-measures at (t_k, x) (:func:`~contactdyn.model.evaluation.sample_input`, through the sensors; the forces, the
-contacts' torque on the joints and a carrier's acceleration off the compiled call where the mode runs on it,
-:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.measurement`), its command from
-the measurement of ``delay`` samples ago written into the held slots, its own states advanced by one period.
+every t_k. Either way :meth:`SampledPhases.take` runs there: what the law measures at (t_k, x) (a
+:class:`~contactdyn.hybrid.sampled_law.Reading`: the joint positions through the encoders, the forces through the
+sensors, the contacts' torque on the joints and a carrier's acceleration off the mode's compiled call,
+:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.measurement`), its command on the reading of ``delay`` samples
+ago (by the law's own controller stage: :class:`~contactdyn.hybrid.sampled_law.SampledLaw`) written into the held
+slots, its own states advanced by one period.
 The events that the command's jump fires (a contact force or a limit torque through zero, a stuck joint's
 holding torque past its static limit) are then handled as
 at a corner of the set-points (:func:`~contactdyn.hybrid.events.fired_across`). A sampled phase also samples at
@@ -25,23 +26,28 @@ import numpy as np
 from ..laws.controllers.sampled import SampledController, Sampler
 from ..laws.trajectory import min_span
 from ..model.contact import ContactMode
-from ..model.evaluation import measures, sample_input
 from ..model.joint_friction import STUCK
 from ..model.phases import Phase
 from .events import JUMPING, SlipWatch, fired_across, segment_events
+from .sampled_law import Reading, SampledLaw
 
 __all__ = ["SampledPhases", "Hold"]
+
+def _command(reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(τ, ż) of the law on ``reading``, on the mode it was measured in."""
+    return reading.law.command(reading, z)
 
 
 class SampledPhases:
     """One run's samplers, one per sampled phase (by phase index), and its sample count."""
 
-    def __init__(self, system, stats: dict, runner=None):
+    def __init__(self, system, stats: dict, runner):
         self.system = system
         #: runner(modes, phase): the run's mode runner (a PipelineMode)
         self.runner = runner
         self.stats = stats
         self.samplers: dict[int, Sampler] = {}
+        self.laws: dict[int, SampledLaw] = {}  #: per mode's runner (by id: they live as long as the run) its law
         #: steps of the segments since the last boundary that is not a sample instant: ``auto``'s step budget
         #: (hybrid.events.StepBudget) counts them, as if the samples did not end segments
         self.carried = 0
@@ -68,19 +74,19 @@ class SampledPhases:
         if previous is not None:  # what acts until this first sample: the previous phase's command
             x = x.copy()
             x[self._slots(phase, ctl.held)] = self.runner(modes, previous).evaluation(t, x).tau_cmd
-        return self.take(t, x, modes, phase, self.runner(modes, phase) if self.runner is not None else None)
+        return self.take(t, x, phase, self.runner(modes, phase))
 
-    def take(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, runner=None) -> np.ndarray:
+    def take(self, t: float, x: np.ndarray, phase: Phase, runner) -> np.ndarray:
         """The sample at t [s] of the phase's law: the state with its new held command and states. ``runner``: the
-        mode's call (a PipelineMode) measures the forces and gives the robot's terms (None: Pinocchio's terms, and no
-        measurement: a law that measures a solved call needs the runner, ``evaluation.sample_input``)."""
+        mode's call (a PipelineMode): what the law measures (the forces, a carrier's acceleration) and its command
+        (:class:`~contactdyn.hybrid.sampled_law.SampledLaw`)."""
         sampler = self.samplers[phase.index]
         ctl = phase.controller
-        on_call = runner is not None  # (compiled or interpreted: the mode's one call)
-        measured = runner.measurement(t, x) if on_call and measures(phase) else None
-        inp = sampler.measure(sample_input(self.system, t, x, modes, phase, sampler.resolution, measured,
-                                           runner.sample_terms if on_call else None))
-        tau, z_law = sampler.update(inp, inp.z)
+        law = self.laws.get(id(runner))
+        if law is None:
+            law = self.laws[id(runner)] = SampledLaw(runner)
+        reading = law.reading(t, x, sampler.resolution, sampler.sense)
+        tau, z_law = sampler.update(reading, x[self._slots(phase, ctl.inner_states)], _command)
         x = x.copy()
         x[self._slots(phase, ctl.held)] = tau
         x[self._slots(phase, ctl.inner_states)] = z_law
@@ -88,7 +94,7 @@ class SampledPhases:
         self.stats["samples"] += 1
         return x
 
-    def hold(self, modes: list[ContactMode], phase: Phase, stop: float, runner=None) -> Hold:
+    def hold(self, modes: list[ContactMode], phase: Phase, stop: float, runner) -> Hold:
         """The phase's samples before ``stop`` [s] as step boundaries of one integration (numerics.held_steps),
         measured on ``runner`` (:meth:`take`)."""
         return Hold(self, modes, phase, stop, runner)
@@ -121,7 +127,7 @@ class Hold:
     before a segment's stop [s] (one at the stop itself the loop takes, as at a corner), the jump of the held
     command there, and which events the jump can fire (:data:`~contactdyn.hybrid.events.JUMPING`)."""
 
-    def __init__(self, sampled: SampledPhases, modes: list[ContactMode], phase: Phase, stop: float, runner=None):
+    def __init__(self, sampled: SampledPhases, modes: list[ContactMode], phase: Phase, stop: float, runner):
         self.sampled, self.modes, self.phase, self.runner = sampled, modes, phase, runner
         self.sampler = sampled.samplers[phase.index]
         self.last = stop - min_span(stop)  #: [s] samples strictly before this
@@ -134,7 +140,7 @@ class Hold:
 
     def take(self, t: float, x: np.ndarray) -> np.ndarray:
         """The state after the sample at t [s] (:meth:`SampledPhases.take`)."""
-        return self.sampled.take(t, x, self.modes, self.phase, self.runner)
+        return self.sampled.take(t, x, self.phase, self.runner)
 
     def event_value(self, event):
         """The function whose fall through zero across a jump fires ``event`` (fired_across's), or None."""

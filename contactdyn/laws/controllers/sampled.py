@@ -75,7 +75,7 @@ class Sampler:
         s = controller.sampling
         self.rate, self.period, self.delay = s.rate, s.period, s.delay
         self.force_sensor = ForceSensor(s.sensor, s.period, stream)
-        self.line: deque[ControlInput] = deque(maxlen=s.delay + 1)  #: the latest delay + 1 measurements
+        self.line: deque = deque(maxlen=s.delay + 1)  #: the latest delay + 1 readings (hybrid.sampled_law)
         self.next_index = 0  #: k of the next sample instant k / rate on the grid
 
     @property
@@ -93,19 +93,18 @@ class Sampler:
         while self.next_index / self.rate <= t:  # (floor of a rounded product)
             self.next_index += 1
 
-    def measure(self, inp: ControlInput) -> ControlInput:
-        """The sensors' reading of the true input ``inp`` (joint positions already quantised by the caller)."""
-        forces = self.force_sensor.read(inp.forces)
-        return inp if forces is inp.forces else inp.replaced(forces=forces)
+    def sense(self, forces: dict[str, float]) -> dict[str, float]:
+        """The force sensor's readings [N] of the true ``forces`` [N] by key (contacts, tangential chains)."""
+        return self.force_sensor.read(forces)
 
-    def update(self, inp: ControlInput, z_law: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """At a sample: push the measured input, compute on the one of ``delay`` samples ago with the law's states
-        ``z_law`` as they are now; (the new held command, the law's new states)."""
+    def update(self, reading, z_law: np.ndarray, command) -> tuple[np.ndarray, np.ndarray]:
+        """At a sample: push ``reading`` (what was measured now), compute on the one of ``delay`` samples ago with the
+        law's states ``z_law`` as they are now (``command(reading, z) -> (τ, ż)``); (the new held command, the law's
+        new states)."""
         if not self.line:  # a phase's first sample: the line filled with it
-            self.line.extend([inp] * (self.delay + 1))
+            self.line.extend([reading] * (self.delay + 1))
         else:
-            self.line.append(inp)
-        seen = self.line[0].replaced(z=z_law)
-        tau, zdot = self.controller.inner.command(seen)
+            self.line.append(reading)
+        tau, zdot = command(self.line[0], z_law)
         z_new = z_law + self.period * zdot if zdot is not None and len(z_law) else z_law.copy()
         return np.asarray(tau, float), z_new

@@ -103,7 +103,7 @@ def _set_point_fields(t, x, ints, reals, work, h, f, events, buf, lay):
             buf[at_read + s] = events[EV_W * ci + EV_FN] if chain[s] < 0 else work[ints[W_DIAG] + 1 + chain[s]]
         row = cs[ci]
         cr = reals[row[CI_REALS]:]
-        if n_p:  # the undeformed surface's point and velocity (evaluation.surface_points)
+        if n_p:  # the undeformed surface's point and velocity (a chain's: its anchor)
             p_env, v_env = surface_point(x, ints, row, cr)
             for i in range(3):
                 buf[at_p + 3 * s + i] = p_env[i] + shift[s, i]
@@ -121,7 +121,7 @@ def key_fields(x, ints, reals, work, events, buf, lay):
     """A declared Python stage's "keys" field (empty for a compiled law): per key of the readable ControlInput's
     dictionaries (I_KEYS) its measured force before the solve [N] (the contact's normal force, or the tangential
     chain's interface force), whether its contact touches, its surface point [m] and velocity [m/s]
-    (``evaluation.surface_points``: a chain's anchor shifted by u·offset)."""
+    (a chain's: its anchor, the surface's point shifted by u·offset)."""
     at, n = _at(lay, np.int64(F_KEYS))
     nk = n // KEY_W
     keys, shift = section(ints, ints[I_KEYS], nk, 2), section(reals, ints[R_KEYS], nk, 3)

@@ -658,7 +658,7 @@ def _fold(b: _Builder, system, modes, phase, meta: list[tuple[str, str, int]]) -
     """I_FOLD: per set-point the contact whose normal force it reads (-1 for a tangential chain's), then per row the
     contact whose normal it is (-1: a stick, a tangential bond, a limit), then per set-point the chain whose
     interface force it reads (-1: a normal one) and its contact; R_FOLD: per set-point its surface point's shift
-    from the contact's [m] (``evaluation.surface_points``: a tangential chain's anchor u · offset)."""
+    from the contact's [m] (a tangential chain's anchor: u · offset, where it is undeformed since the latest touch)."""
     names = [c.name for c in system.contacts]
     first = np.cumsum([0, *(len(c.chains) for c in system.contacts)])
     chain, owner, shift = [], [], []

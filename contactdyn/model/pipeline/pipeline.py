@@ -86,7 +86,6 @@ from .pack import (
     N_LAUNCH,
     N_LIMITS,
     N_ROWS,
-    NEEDS_GRAVITY,
     NF,
     NQ,
     NV,
@@ -108,7 +107,7 @@ from .pack import (
 )
 from .robot_terms import frame_terms, robot_part, robot_terms
 
-__all__ = ["call", "rates_at", "samples_at", "sample_terms", "stage_addresses", "Pipeline"]
+__all__ = ["call", "rates_at", "samples_at", "law_at", "stage_addresses", "Pipeline"]
 
 
 @njit(cache=True)
@@ -245,23 +244,25 @@ def samples_at(ts, X, ints, reals, work, events):
 
 
 @njit(cache=True)
-def sample_terms(t, x, ints, reals, gravity):
-    """What a sampled law reads of the robot and the phase at (t [s], x) besides the measured forces (the terms of
-    ``evaluation.sample_input``'s ControlInput), by the call's own stages: the law's H (rotors reflected) [kg·m²], h,
-    g (empty unless ``gravity``) [N·m or N]; the tip frame's J (6, nv, linear rows first), J̇q̇ (6) [m/s², rad/s²],
-    p [m], ṗ [m/s], R; the reference x_d, v_d, a_d (carried by its body, if one carries it); F_d [N] and Ḟ_d
-    [N/s] per set-point."""
-    own = ints.copy()  # (g as the law asks: a sampled mode's call computes none)
-    own[NEEDS_GRAVITY] = gravity
+def law_at(t, x, ints, reals, work, events, tau_contact):
+    """A sampled law's command at a sample instant: (τ [N·m or N; V], ż, b, d) of the phase's controller stage (the
+    mode packed with the sampled law itself, as if continuous) at (t [s], x), on measured forces instead of the
+    fold: ``events`` holds each contact's measured normal force [N] (EV_FN), ``work`` each tangential chain's
+    interface force [N], ``tau_contact`` the contacts' generalized force on the joints [N·m or N] (empty: not
+    read). b and d per unit acceleration of a body carrying the reference (τ += b Q̈_b: what the law measures)."""
+    own = ints.copy()  # (measured, not folded: the command is held, not a function of the solve's forces)
+    own[READS_FORCES] = 0
     H, h, g, Jw, W = robot_terms(x, own, reals)
     _, Hc = inertias(H, ints[ANY_MOTOR], reals[ints[R_REFLECTED]:], ints[NV])
-    FJ, Fa, Fp, Fv, FR = frame_terms(x, ints, reals, W, Jw)
-    Hc, h, g, FJ = robot_part(own, Hc, h, g, FJ)  # the law sees the robot alone
-    fi = ints[TIP_FRAME]
-    x_d, v_d, a_d = reference(t, ints, reals)
-    carry(x, ints, reals, x_d, v_d)
-    F_d, _, rate = set_points(t, ints, reals)
-    return Hc, h, g, FJ[fi].copy(), Fa[fi].copy(), Fp[fi].copy(), Fv[fi].copy(), FR[fi].copy(), x_d, v_d, a_d, F_d, rate
+    FJ, Fa, Fp, Fv, FR = frame_terms(x, own, reals, W, Jw)
+    Hr, hr, gr, FJr = robot_part(own, Hc, h, g, FJ)
+    f = np.zeros(ints[NQ])
+    for i in range(tau_contact.size):  # (the stage reads τ_c as f + h: f holds −h and the contacts' forces)
+        f[i] = tau_contact[i] - hr[i]
+    C = np.zeros((0, ints[NQ]))
+    tau, zdot, _, _, bq, dq = call_at(own[A_CONTROLLER], "pipeline.controller",
+                                      (t, x, own, reals, work, Hr, hr, gr, FJr, Fa, Fp, Fv, FR, f, C, events))
+    return tau, zdot, bq, dq
 
 
 # ---- the stages reached by address (numerics.native_call): compiled on their own, for the modes that have them -----

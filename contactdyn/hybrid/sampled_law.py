@@ -1,0 +1,116 @@
+"""A sampled law's command at a sample instant, on the one pipeline's own controller stage.
+
+At a sample the law computes its command from what it measured (:mod:`contactdyn.hybrid.sampling`): the state with
+the joint positions as the encoders read them, the forces as the sensors read them (a :class:`Reading`).
+:class:`SampledLaw` packs the mode once more with the law itself in place of its held command, as a continuous run
+of that law packs it, and evaluates that pipeline's controller stage on the measured forces
+(:func:`~contactdyn.model.pipeline.pipeline.law_at`: one compiled call; no fold: the forces are measured, not solved
+with the command). So a law runs the same stage at a sample as in a continuous run: compiled where numba compiles it,
+its declared Python stage where not.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..errors import SimulationError
+from ..laws.abi import raise_python_stage_error
+from ..laws.sensors import quantise
+from ..model.evaluation import measures
+from ..model.pipeline.pack import EV_FN, EV_W, W_DIAG
+from ..model.pipeline.pipeline import Pipeline, law_at
+from ..numerics.twins import Twins
+
+__all__ = ["Reading", "SampledLaw"]
+
+_NOTHING = np.zeros(0)  #: a reading's generalized contact force where the law reads none
+
+
+@dataclass
+class Reading:
+    """What a sampled law measured at one sample instant: an entry of its delay line."""
+
+    t: float  #: [s] the sample instant
+    x: np.ndarray  #: the state there, its joint positions as the encoders read them
+    forces: dict[str, float]  #: [N] per contact and tangential chain ("contact.t1"), as the sensors read them
+    tau_contact: np.ndarray  #: [N·m or N] the contacts' generalized force on the joints (empty: not read)
+    carrier_acc: float  #: [m/s² or rad/s²] the acceleration of the body carrying the reference (0: none)
+    law: SampledLaw  #: the law on the mode measured in (its contacts' states: touching, the surfaces)
+
+
+class SampledLaw:
+    """A sampled phase's law on one mode (a :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode` of the phase): what
+    it measures there (:meth:`reading`) and its command on a :class:`Reading`."""
+
+    def __init__(self, mode):
+        system, phase = mode.system, mode.phase
+        ctl = phase.controller
+        start = phase.z_slice.start + ctl.inner_states.start  # the law's own states, after the held command
+        law_phase = replace(phase, controller=ctl.inner, z_slice=slice(start, phase.z_slice.stop))
+        self.pipe = Pipeline(system, mode.modes, law_phase, mode.pipe.twins)
+        self.mode, self.modes = mode, mode.modes  #: the mode measured on, and its modes as last used
+        self.controller = ctl.inner
+        nQ = system.nQ
+        self.states = slice(2 * nQ + start, 2 * nQ + phase.z_slice.stop)  #: the law's states in x
+        ints = self.pipe.packed.ints
+        #: per measured key: (True: ``events``' slot, False: ``work``'s) where the stage reads it
+        self.slots: dict[str, tuple[bool, int]] = {}
+        k = 0
+        for ci, c in enumerate(system.contacts):
+            self.slots[c.name] = (True, EV_W * ci + EV_FN)
+            for i, dc in enumerate(c.chains):
+                if i > 0:  # (each chain's interface force, pack's order: the normal chain first)
+                    self.slots[f"{c.name}.{dc.label}"] = (False, int(ints[W_DIAG]) + 1 + k)
+                k += 1
+
+    def reading(self, t: float, x: np.ndarray, resolution: float = 0.0, sense=None) -> Reading:
+        """What the law measures at (t [s], x) on its mode: the joint positions through encoders of ``resolution``
+        [rad or m] (0: exact), the forces through ``sense`` (a dict of forces [N] by key -> the sensor's readings;
+        None: exact), the contacts' generalized force on the joints and a carrier's acceleration off one call with the
+        diagnostics on (:meth:`~contactdyn.hybrid.pipeline_mode.PipelineMode.measurement`), where the law reads them."""
+        mode = self.mode
+        if mode.modes is not self.modes:  # (a turn's new 2-D reference directions: data of the same packed mode)
+            self.pipe.use(mode.modes)
+            self.modes = mode.modes
+        xq = np.array(x, float)
+        if resolution > 0.0:
+            nv = self.pipe.system.nv
+            xq[:nv] = quantise(xq[:nv], resolution)
+        if not measures(mode.phase):
+            return Reading(t, xq, {}, _NOTHING, 0.0, self)
+        m = mode.measurement(t, x)
+        if not self.controller.uses_forces:  # (a carried reference's acceleration alone)
+            return Reading(t, xq, {}, _NOTHING, m.carrier_acc, self)
+        forces = {**m.normal_force, **m.interface}
+        return Reading(t, xq, sense(forces) if sense is not None else forces, m.tau_contact, m.carrier_acc, self)
+
+    def command(self, reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(τ [N·m or N; V], ż) of the law on ``reading`` with its own states ``z`` as they are now."""
+        tau, zdot = self._stage(self.pipe, reading, z)
+        if not np.all(np.isfinite(tau)):
+            self._failed(reading, z)
+        return tau, zdot
+
+    def _stage(self, pipe: Pipeline, reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(τ, ż) of ``pipe``'s controller stage on ``reading`` (:func:`law_at`, as ``pipe`` runs it)."""
+        x = reading.x.copy()
+        x[self.states] = z
+        p = pipe.packed
+        for key, value in reading.forces.items():
+            in_events, k = self.slots[key]
+            (p.events if in_events else p.work)[k] = value
+        tau, zdot, bq, dq = pipe.of(law_at)(float(reading.t), x, p.ints, p.reals, p.work, p.events,
+                                            reading.tau_contact)
+        if reading.carrier_acc != 0.0:  # (the law is affine in its reference's acceleration: the fold's column)
+            tau, zdot = tau + bq * reading.carrier_acc, zdot + dq * reading.carrier_acc
+        return tau, zdot
+
+    def _failed(self, reading: Reading, z: np.ndarray) -> None:
+        """Raise the law's own error at ``reading``: a declared Python stage's, a compiled law's (the same stage run
+        interpreted raises it from the law's source), else the controller's words (its command not finite)."""
+        raise_python_stage_error()
+        if self.pipe.twins is None:
+            self._stage(Pipeline(self.pipe.system, self.pipe.modes, self.pipe.phase, Twins()), reading, z)
+        raise SimulationError(self.controller.failure(reading.t))
