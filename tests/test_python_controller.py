@@ -18,6 +18,7 @@ import pytest
 from run_agreement import assert_runs_agree, interpreted_evaluate
 
 from contactdyn import parse_scene, simulate
+from contactdyn.errors import SimulationError
 from contactdyn.laws import Controller, Param
 from contactdyn.laws.controllers import CONTROLLERS
 from contactdyn.laws.controllers import abi as controller_abi
@@ -113,13 +114,14 @@ def _parse(doc: dict, path: str):
         return parse_scene(doc, file=str(ROOT / path))
 
 
-def axis_scene(kind: str, duration: float = 0.05):
-    """The cylindrical robot's tip onto a chain surface (tests/test_compiled_path's), under controller ``kind``."""
+def axis_scene(kind: str, duration: float = 0.05, sample_rate: float | None = None):
+    """The cylindrical robot's tip onto a chain surface (tests/test_compiled_path's), under controller ``kind`` (run
+    at ``sample_rate`` [Hz], if given)."""
     return parse_scene({
         "duration": duration, "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "q0": [0.999], "v0": [0.5]},
         "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {"direction": [0, 0, 1], "model": "chain",
                                                                   "environment": [{"k": 5e4, "b": 1500.0}]}}},
-        "controller": {"kind": kind}})
+        "controller": {"kind": kind, **({"sample_rate": sample_rate} if sample_rate else {})}})
 
 
 def force_pi_press(duration: float = 0.5):
@@ -268,6 +270,21 @@ def test_the_controllers_own_error_surfaces_as_on_the_interpreted_call(monkeypat
     monkeypatch.setattr(LivePipelines, "use", False)
     with pytest.raises(_ControllerFailed, match="gave up"):
         simulate(axis_scene(Raising.name))
+
+
+def test_a_sampled_laws_own_error_surfaces_at_the_sample_where_it_fails(monkeypatch):
+    """A law run at samples (its own stage at each sample, hybrid.sampled_law) raises its own exception there,
+    compiled and interpreted; one that gives a non-finite command is named with the time of that sample."""
+    with pytest.raises(_ControllerFailed, match="gave up at t > 0.01 s"):
+        simulate(axis_scene(Raising.name, sample_rate=1000.0))
+    monkeypatch.setattr(LivePipelines, "use", False)
+    with pytest.raises(_ControllerFailed, match="gave up at t > 0.01 s"):
+        simulate(axis_scene(Raising.name, sample_rate=1000.0))
+    monkeypatch.setattr(LivePipelines, "use", True)
+    monkeypatch.setattr(Raising, "command", lambda self, inp: (np.full(len(inp.q), np.nan if inp.t > 0.01 else 0.0),
+                                                               None))
+    with pytest.raises(SimulationError, match=r"t = 0\.011 s: raising_ctl_test: the law gave no finite command"):
+        simulate(axis_scene(Raising.name, sample_rate=1000.0))
 
 
 def test_a_wrong_number_of_torques_raises_the_interpreted_calls_error(monkeypatch):

@@ -88,24 +88,24 @@ class SampledLaw:
 
     def command(self, reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(τ [N·m or N; V], ż) of the law on ``reading`` with its own states ``z`` as they are now."""
-        tau, zdot = self._stage(self.pipe, reading, z)
-        if not np.all(np.isfinite(tau)):
+        tau, zdot, finite = self._stage(self.pipe, reading, z)
+        if not finite:
             self._failed(reading, z)
         return tau, zdot
 
-    def _stage(self, pipe: Pipeline, reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(τ, ż) of ``pipe``'s controller stage on ``reading`` (:func:`law_at`, as ``pipe`` runs it)."""
+    def _stage(self, pipe: Pipeline, reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """(τ, ż, τ finite) of ``pipe``'s controller stage on ``reading`` (:func:`law_at`, as ``pipe`` runs it)."""
         x = reading.x.copy()
         x[self.states] = z
         p = pipe.packed
         for key, value in reading.forces.items():
             in_events, k = self.slots[key]
             (p.events if in_events else p.work)[k] = value
-        tau, zdot, bq, dq = pipe.of(law_at)(float(reading.t), x, p.ints, p.reals, p.work, p.events,
+        tau, zdot, bq, dq, finite = pipe.of(law_at)(float(reading.t), x, p.ints, p.reals, p.work, p.events,
                                             reading.tau_contact)
         if reading.carrier_acc != 0.0:  # (the law is affine in its reference's acceleration: the fold's column)
             tau, zdot = tau + bq * reading.carrier_acc, zdot + dq * reading.carrier_acc
-        return tau, zdot
+        return tau, zdot, finite
 
     def _failed(self, reading: Reading, z: np.ndarray) -> None:
         """Raise the law's own error at ``reading``: a declared Python stage's, a compiled law's (the same stage run

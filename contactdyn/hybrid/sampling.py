@@ -47,6 +47,8 @@ class SampledPhases:
         self.runner = runner
         self.stats = stats
         self.samplers: dict[int, Sampler] = {}
+        #: per sampled phase (by index) the slots of x of its held command and of its law's own states
+        self.slots: dict[int, tuple[slice, slice]] = {}
         self.laws: dict[int, SampledLaw] = {}  #: per mode's runner (by id: they live as long as the run) its law
         #: steps of the segments since the last boundary that is not a sample instant: ``auto``'s step budget
         #: (hybrid.events.StepBudget) counts them, as if the samples did not end segments
@@ -71,9 +73,10 @@ class SampledPhases:
         if not isinstance(ctl, SampledController):
             return x
         self.samplers[phase.index] = Sampler(ctl, stream=phase.index)
+        self.slots[phase.index] = self._slots(phase, ctl.held), self._slots(phase, ctl.inner_states)
         if previous is not None:  # what acts until this first sample: the previous phase's command
             x = x.copy()
-            x[self._slots(phase, ctl.held)] = self.runner(modes, previous).evaluation(t, x).tau_cmd
+            x[self.slots[phase.index][0]] = self.runner(modes, previous).evaluation(t, x).tau_cmd
         return self.take(t, x, phase, self.runner(modes, phase))
 
     def take(self, t: float, x: np.ndarray, phase: Phase, runner) -> np.ndarray:
@@ -81,15 +84,15 @@ class SampledPhases:
         mode's call (a PipelineMode): what the law measures (the forces, a carrier's acceleration) and its command
         (:class:`~contactdyn.hybrid.sampled_law.SampledLaw`)."""
         sampler = self.samplers[phase.index]
-        ctl = phase.controller
+        held, states = self.slots[phase.index]
         law = self.laws.get(id(runner))
         if law is None:
             law = self.laws[id(runner)] = SampledLaw(runner)
         reading = law.reading(t, x, sampler.resolution, sampler.sense)
-        tau, z_law = sampler.update(reading, x[self._slots(phase, ctl.inner_states)], _command)
+        tau, z_law = sampler.update(reading, x[states], _command)
         x = x.copy()
-        x[self._slots(phase, ctl.held)] = tau
-        x[self._slots(phase, ctl.inner_states)] = z_law
+        x[held] = tau
+        x[states] = z_law
         sampler.passed(t)
         self.stats["samples"] += 1
         return x

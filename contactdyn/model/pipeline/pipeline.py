@@ -249,7 +249,8 @@ def law_at(t, x, ints, reals, work, events, tau_contact):
     mode packed with the sampled law itself, as if continuous) at (t [s], x), on measured forces instead of the
     fold: ``events`` holds each contact's measured normal force [N] (EV_FN), ``work`` each tangential chain's
     interface force [N], ``tau_contact`` the contacts' generalized force on the joints [N·m or N] (empty: not
-    read). b and d per unit acceleration of a body carrying the reference (τ += b Q̈_b: what the law measures)."""
+    read). b and d per unit acceleration of a body carrying the reference (τ += b Q̈_b: what the law measures); and
+    whether τ is finite (not: the law failed there)."""
     own = ints.copy()  # (measured, not folded: the command is held, not a function of the solve's forces)
     own[READS_FORCES] = 0
     H, h, g, Jw, W = robot_terms(x, own, reals)
@@ -262,7 +263,10 @@ def law_at(t, x, ints, reals, work, events, tau_contact):
     C = np.zeros((0, ints[NQ]))
     tau, zdot, _, _, bq, dq = call_at(own[A_CONTROLLER], "pipeline.controller",
                                       (t, x, own, reals, work, Hr, hr, gr, FJr, Fa, Fp, Fv, FR, f, C, events))
-    return tau, zdot, bq, dq
+    finite = True
+    for v in tau:
+        finite = finite and np.isfinite(v)
+    return tau, zdot, bq, dq, finite
 
 
 # ---- the stages reached by address (numerics.native_call): compiled on their own, for the modes that have them -----
