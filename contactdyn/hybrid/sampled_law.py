@@ -49,7 +49,7 @@ class SampledLaw:
         ctl = phase.controller
         start = phase.z_slice.start + ctl.inner_states.start  # the law's own states, after the held command
         law_phase = replace(phase, controller=ctl.inner, z_slice=slice(start, phase.z_slice.stop))
-        self.pipe = Pipeline(system, mode.modes, law_phase, mode.pipe.twins)
+        self.pipe = Pipeline(system, mode.modes, law_phase, mode.pipe.twins, law_only=True)
         self.mode, self.modes = mode, mode.modes  #: the mode measured on, and its modes as last used
         self.controller = ctl.inner
         nQ = system.nQ
@@ -111,6 +111,7 @@ class SampledLaw:
         """Raise the law's own error at ``reading``: a declared Python stage's, a compiled law's (the same stage run
         interpreted raises it from the law's source), else the controller's words (its command not finite)."""
         raise_python_stage_error()
-        if self.pipe.twins is None:
-            self._stage(Pipeline(self.pipe.system, self.pipe.modes, self.pipe.phase, Twins()), reading, z)
+        pipe = self.pipe
+        if pipe.twins is None:
+            self._stage(Pipeline(pipe.system, pipe.modes, pipe.phase, Twins(), law_only=True), reading, z)
         raise SimulationError(self.controller.failure(reading.t))

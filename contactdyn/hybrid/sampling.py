@@ -33,6 +33,7 @@ from .sampled_law import Reading, SampledLaw
 
 __all__ = ["SampledPhases", "Hold"]
 
+
 def _command(reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(τ, ż) of the law on ``reading``, on the mode it was measured in."""
     return reading.law.command(reading, z)
@@ -49,7 +50,7 @@ class SampledPhases:
         self.samplers: dict[int, Sampler] = {}
         #: per sampled phase (by index) the slots of x of its held command and of its law's own states
         self.slots: dict[int, tuple[slice, slice]] = {}
-        self.laws: dict[int, SampledLaw] = {}  #: per mode's runner (by id: they live as long as the run) its law
+        self.laws: dict[object, SampledLaw] = {}  #: per mode's runner its sampled law
         #: steps of the segments since the last boundary that is not a sample instant: ``auto``'s step budget
         #: (hybrid.events.StepBudget) counts them, as if the samples did not end segments
         self.carried = 0
@@ -85,9 +86,9 @@ class SampledPhases:
         (:class:`~contactdyn.hybrid.sampled_law.SampledLaw`)."""
         sampler = self.samplers[phase.index]
         held, states = self.slots[phase.index]
-        law = self.laws.get(id(runner))
+        law = self.laws.get(runner)
         if law is None:
-            law = self.laws[id(runner)] = SampledLaw(runner)
+            law = self.laws[runner] = SampledLaw(runner)
         reading = law.reading(t, x, sampler.resolution, sampler.sense)
         tau, z_law = sampler.update(reading, x[states], _command)
         x = x.copy()

@@ -300,12 +300,15 @@ declare("pipeline.launch_settled", launch_settled, types.boolean(_F1, _I1, _F1, 
 declare("pipeline.energy", energy_rates, types.none(_F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2))
 
 
-def stage_addresses(ints: np.ndarray) -> None:
+def stage_addresses(ints: np.ndarray, law_only: bool = False) -> None:
     """The addresses of the call and of the stages the packed mode ``ints`` needs, into its A_* slots (each stage
-    compiled, or loaded from the cache, at its first use in the process)."""
-    ints[A_CALL] = address("pipeline.call")
+    compiled, or loaded from the cache, at its first use in the process). ``law_only``: the controller's stage alone
+    (a sampled law's pipeline: :func:`law_at` calls nothing else)."""
     kind = int(ints[CTL_KIND])
     ints[A_CONTROLLER] = _address_of("pipeline.controller", CONTROLLER_STAGES.get(kind, open_loop_terms), _CONTROLLER)
+    if law_only:
+        return
+    ints[A_CALL] = address("pipeline.call")
     folds = kind == CTL_ABI and (ints[READS_FORCES] != 0 or ints[CARRIER] >= 0)
     ints[A_SOLVE] = _address_of("pipeline.solve", solve_through_drives if folds else solve_direct, _SOLVE)
     if ints[N_LAUNCH]:
@@ -326,9 +329,10 @@ class Pipeline:
     """One mode packed and its call: ``rhs(t, x)`` the integrator's function, ``values()`` the last call's events.
     ``twins`` (:class:`~contactdyn.numerics.twins.Twins`): the call runs interpreted, as its twins (the mode packed
     with handles, nothing of it compiled but the twins' leaves); :meth:`of` gives a function of the package as this
-    pipeline runs it."""
+    pipeline runs it. ``law_only``: only the controller's stage gets an address (a sampled law's pipeline, which
+    runs :func:`law_at` alone: nothing else is compiled for it)."""
 
-    def __init__(self, system, modes, phase, twins=None):
+    def __init__(self, system, modes, phase, twins=None, law_only: bool = False):
         self.twins = twins
         self.system, self.modes, self.phase = system, list(modes), phase
         with giving_handles() if twins is not None else nullcontext():
@@ -336,7 +340,7 @@ class Pipeline:
             if reason:
                 raise ValueError(f"the compiled call does not run this mode: {reason}")
             self.packed = self.of(pack)(system, modes, phase)
-            self.of(stage_addresses)(self.packed.ints)
+            self.of(stage_addresses)(self.packed.ints, law_only)
             #: the laws run as declared Python stages (numba cannot compile them), with numba's reasons
             self.python_stages = [] if twins is not None else python_stages(system, modes, phase)
         self.failed_calls = 0  #: calls with no answer (a KKT system that is not finite): NaN rates, steps rejected
