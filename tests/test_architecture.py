@@ -13,7 +13,7 @@ CORE = [f"model/{m}" for m in ("chain", "contact", "phases", "chain_forces", "fr
                                "impact", "evaluation", "system", "paths", "limits")] + \
     [f"model/pipeline/{m}" for m in ("pack", "pipeline", "robot_terms", "contacts", "kkt", "actuation",
                                      "force_fold", "control_laws", "drives", "launch", "energy", "joint_friction")] + \
-    [f"hybrid/{m}" for m in ("events", "transitions", "loop", "pipeline_mode", "steps")] + \
+    [f"hybrid/{m}" for m in ("events", "transitions", "loop", "pipeline_mode", "steps", "sampling", "sampled_law")] + \
     ["output/samples", "output/channels", "output/physics_checks", "simulate", "numerics/integrators",
      "numerics/dop853", "laws/stage_laws", "laws/friction_laws"]
 MAX_CLASS, MAX_FUNCTION = 300, 80  #: [lines]
