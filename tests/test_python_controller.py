@@ -124,13 +124,16 @@ def axis_scene(kind: str, duration: float = 0.05, sample_rate: float | None = No
         "controller": {"kind": kind, **({"sample_rate": sample_rate} if sample_rate else {})}})
 
 
-def force_pi_press(duration: float = 0.5):
+def force_pi_press(duration: float = 0.5, sample_rate: float | None = None):
     """examples/force_pi_press.toml (a bonded model-b surface: its row folded, friction sliding) under DictForcePI,
     at the solver's rtol 1e-10 (at its 1e-8 the compiled twin, examples/force_law.py's ForcePI, was 6.3e-9 off
-    the since deleted readable model's run in 0.2 s, as this law is: the integration's, not the law's)."""
+    the since deleted readable model's run in 0.2 s, as this law is: the integration's, not the law's); run at
+    ``sample_rate`` [Hz], if given (its dictionaries then rebuilt from what a sample measured)."""
     path = "examples/force_pi_press.toml"
     doc = tomllib.loads((ROOT / path).read_text())
     doc["imports"], doc["duration"] = [], duration
+    if sample_rate:
+        doc["controller"]["sample_rate"] = sample_rate
     doc["solver"].update(rtol=1e-10, atol=1e-12)
     doc["controller"]["kind"] = DictForcePI.name
     return _parse(doc, path)
@@ -242,7 +245,8 @@ def _both_ways(scene_of, monkeypatch):
 
 
 @pytest.mark.parametrize("scene_of", [lambda: axis_scene("uncompilable_ctl"), lambda: force_pi_press(0.2),
-                                      lambda: cart_push(1.2)], ids=["fixture", "force_pi_press", "cart_push"])
+                                      lambda: force_pi_press(0.1, sample_rate=1000.0), lambda: cart_push(1.2)],
+                         ids=["fixture", "force_pi_press", "force_pi_press_sampled", "cart_push"])
 def test_a_run_with_a_python_stage_controller_is_the_interpreted_run(scene_of, monkeypatch, uncompilable_controller):
     """Every mode on the compiled call (the controller's named as a Python stage), the run the interpreted run's."""
     fast, interpreted = _both_ways(scene_of, monkeypatch)

@@ -227,8 +227,11 @@ def python_stages(system, modes, phase) -> list[str]:
             if not friction_address(law):
                 out.append(f"friction law {fr.law!r} of {c.name} is a Python stage ({law.compiled_reason})")
     ctl = phase.controller
-    if python_controller(ctl):
-        out.append(f"controller {ctl.name!r} is a Python stage ({type(ctl).compiled_reason})")
+    sampled = isinstance(ctl, SampledController)  # (its law runs at the samples: hybrid.sampled_law)
+    law = ctl.inner if sampled else ctl
+    if python_controller(law):
+        at_samples = "; at its samples" if sampled else ""
+        out.append(f"controller {law.name!r} is a Python stage ({type(law).compiled_reason}{at_samples})")
     return list(dict.fromkeys(out + python_drives(system)))
 
 
@@ -253,7 +256,8 @@ BY_ADDRESS = COMPILED_IN[1:5]  #: built-in laws of the controller ABI's shape, c
 def python_controller(ctl) -> bool:
     """Is the phase's controller a user's law numba cannot compile (its reason in ``compiled_reason``), run in the
     compiled call as a declared Python stage (:func:`contactdyn.laws.controllers.abi.python_controller_address`)?
-    (A sampled law's runs between samples in Python; the kinds compiled in and constant voltages are not the ABI's.)"""
+    (A sampled law's held command is read off the state: its law is asked at the samples, on a pipeline of its own,
+    hybrid.sampled_law; the kinds compiled in and constant voltages are not the ABI's.)"""
     return not isinstance(ctl, (SampledController, ConstantVoltage)) and ctl.name not in COMPILED_IN and \
         not _addressable(type(ctl))
 
