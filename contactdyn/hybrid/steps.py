@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 from numba import types
-from scipy.integrate._ivp import dop853_coefficients as _coef
 
 from ..laws.abi import raise_python_stage_error
 from ..model.pipeline.pack import A_CALL, NX
 from ..model.pipeline.pipeline import rates_at
+from ..numerics import dop853_tableau as _coef
 from ..numerics.compile_cache import njit
 from ..numerics.dense_output import coefficients, stage_states
 from ..numerics.linalg import put

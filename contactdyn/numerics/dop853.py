@@ -12,15 +12,15 @@ Dense output. scipy's C wrapper does not pass Hairer's ``CONT`` array to ``solou
 asking for it (``iout = 2``) crashes scipy 1.17 (the core advances its ``nfcn`` pointer
 instead of the count). The stages are still in the workspace the caller owns, laid out as
 Hairer documents (``WORK(21…)``: k1…k10, y1): at each accepted step ``solout`` copies
-them, and the 7th-order interpolant of a step (scipy's coefficient tables, three more
+them, and the 7th-order interpolant of a step (the tableau's, :mod:`.dop853_tableau`, three more
 right-hand-side calls) is built only when something needs it: an event's sign change in
 that step, or output samples falling in it, then for all those steps in one batch.
 
 Events follow ``solve_ivp``'s contract: ``g(t, y)`` at t0 and at every step end in
-increasing t; a sign change in the event's direction is located by ``brentq`` on the
-step's interpolant (xtol = rtol = 4 ε), and the earliest terminal root ends the run there.
-Step control is ``solve_ivp``'s, so both take the same steps. The first step is scipy's
-``select_initial_step`` (the core's own estimate uses other norms). After an accepted step
+increasing t; a sign change in the event's direction is located by Brent's method (:func:`brent_root`, scipy's
+``brentq``'s iterations) on the step's interpolant (xtol = rtol = 4 ε), and the earliest terminal root ends the run
+there. Step control is ``solve_ivp``'s, so both take the same steps. The first step is solve_ivp's estimate
+(:func:`_initial_step`, ``select_initial_step``'s arithmetic; the core's own uses other norms). After an accepted step
 the core's rule is solve_ivp's (h·min(MAX_FACTOR, SAFETY err^(−1/8)), no Lund stabilisation).
 After a rejection it is not: scipy's C core shrinks by a fixed factor (a slip in its translation
 of Hairer's code) where solve_ivp shrinks by max(MIN_FACTOR, SAFETY err^(−1/8)), and on B1 that
@@ -34,7 +34,9 @@ Compiled steps. A right-hand side whose whole step can be one compiled call brin
 :mod:`contactdyn.hybrid.steps`: the stages, y_new, the FSAL call and the error norm): then :func:`_stepped`
 takes the steps, with ``solve_ivp``'s RK step control written out (its loop, not the core's), the stages
 kept in the core's layout for the same dense output and events; a step the compiled call declines is taken
-by ``fun`` (:func:`_attempt`, ``solve_ivp``'s arithmetic). Verified in ``tests/test_compiled_steps.py``.
+by ``fun`` (:func:`_attempt`, ``solve_ivp``'s arithmetic). Verified in ``tests/test_compiled_steps.py``. Such a run
+never imports scipy.integrate or scipy.optimize (the core is imported at its first use: :func:`scipy_core`):
+``tests/test_scipy_free_start.py`` holds the tableau, the first step and the roots to scipy's bit for bit.
 """
 
 from __future__ import annotations
@@ -45,14 +47,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy
-from scipy.integrate import _dop
-from scipy.integrate._ivp import dop853_coefficients as _coef
-from scipy.integrate._ivp.common import select_initial_step
-from scipy.integrate._ivp.rk import MAX_FACTOR, MIN_FACTOR, SAFETY
-from scipy.optimize import brentq
 
 from ..errors import SceneError
+from . import dop853_tableau as _coef
 from .dense_output import horner_at, horner_rows
 
 __all__ = ["solve", "DenseSolution", "Solution", "build_interpolants", "dense_states"]
@@ -80,7 +77,9 @@ _A, _C, _D = _coef.A, _coef.C, _coef.D
 _N = _coef.N_STAGES  # 12
 #: right-hand-side calls of one step's interpolant (DOP853's extra stages 14–16)
 INTERPOLANT_STAGES = _coef.N_STAGES_EXTENDED - _N - 1
-_CORE = getattr(_dop, "dopri853", None)  #: scipy's C core (scipy 1.17; older scipy has an f2py one)
+#: solve_ivp's step control (scipy.integrate._ivp.rk's): a step grows by at most MAX_FACTOR, a rejected one shrinks
+#: by at least MIN_FACTOR, the error's proposal is damped by SAFETY
+SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 _MESSAGES = {-1: "input is not consistent", -2: "larger nsteps is needed", -3: "step size becomes too small",
              -4: "problem is probably stiff"}
 
@@ -283,7 +282,7 @@ class _EventWatch:
         step, t_old = len(steps.t) - 2, steps.t[-2]
         for i in fired:  # as solve_ivp: brentq on the step's own interpolant (a step shorter than t's
             # resolution, LSODA's where its steps collapse: at its end)
-            root = t if t == t_old else brentq(lambda s, e=self.events[i]: e(s, steps.at(step, s)), t_old, t,
+            root = t if t == t_old else brent_root(lambda s, e=self.events[i]: e(s, steps.at(step, s)), t_old, t,
                                                xtol=4 * _EPS, rtol=4 * _EPS)
             self.hits.append((root, i))
         self.hits.sort()
@@ -310,6 +309,7 @@ class _Core:
 
     def __init__(self, fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, events: _EventWatch,
                  rtol: float, atol: float, max_step: float):
+        self.core = scipy_core()
         n = len(y0)
         self.fun, self.n, self.watch = fun, n, events
         self.rtol, self.atol = rtol, atol
@@ -341,7 +341,7 @@ class _Core:
         t = steps.t[-1]
         # the extra-arguments tuple () given explicitly: scipy 1.17's wrapper leaves its optional
         # fcn_extra_args uninitialized when omitted and may append a stale tuple's items to every call
-        _, _, ierr = _CORE(self.f, t, steps.y_old(len(steps.t) - 1), t_end, self.rtol, self.atol, self.solout,
+        _, _, ierr = self.core(self.f, t, steps.y_old(len(steps.t) - 1), t_end, self.rtol, self.atol, self.solout,
                            1, self.work, self.iwork, MAX_STEPS, -1, ())
         if self.failure:
             raise self.failure[0]
@@ -422,7 +422,93 @@ def _first_step(fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, t_end:
     """solve_ivp's first step [s]: the given one (within max_step), else scipy's own estimate (one call)."""
     if first_step:
         return min(float(first_step), max_step)
-    return float(select_initial_step(fun, t0, y0, t_end, max_step, f0, 1.0, _ERROR_ORDER, rtol, atol))
+    return _initial_step(fun, t0, y0, f0, t_end, max_step, rtol, atol)
+
+
+def _rms(v: np.ndarray) -> float:
+    """The root mean square of v (solve_ivp's norm)."""
+    return np.linalg.norm(v) / v.size ** 0.5
+
+
+def _initial_step(fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, t_end: float, max_step: float,
+                  rtol: float, atol: float) -> float:
+    """[s] solve_ivp's estimate of the first step forwards from (t0, y0), f0 = f(t0, y0) (Hairer, Nørsett and
+    Wanner I, II.4; scipy's ``select_initial_step``, the same arithmetic: ``tests/test_dop853.py``): one call."""
+    if y0.size == 0:
+        return math.inf
+    span = abs(t_end - t0)
+    if span == 0.0:
+        return 0.0
+    scale = atol + np.abs(y0) * rtol
+    d0, d1 = _rms(y0 / scale), _rms(f0 / scale)
+    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+    h0 = min(h0, span)
+    f1 = fun(t0 + h0, y0 + h0 * f0)
+    d2 = _rms((f1 - f0) / scale) / h0
+    h1 = max(1e-6, h0 * 1e-3) if d1 <= 1e-15 and d2 <= 1e-15 else (0.01 / max(d1, d2)) ** (1 / (_ERROR_ORDER + 1))
+    return float(min(100 * h0, h1, span, max_step))
+
+
+def scipy_core():
+    """scipy's compiled DOP853 core (``scipy.integrate._dop.dopri853``, scipy 1.17), imported at its first use: a run
+    on the compiled steps (hybrid.steps) never imports scipy.integrate."""
+    from scipy.integrate import _dop  # (~0.5 s with scipy.optimize, which it imports)
+
+    core = getattr(_dop, "dopri853", None)  # (older scipy has an f2py one)
+    if core is None:
+        import scipy
+
+        raise SceneError("solver.method", "DOP853C: scipy's compiled DOP853 (scipy.integrate._dop.dopri853, "
+                         "as in scipy 1.17); or DOP853", f"scipy {scipy.__version__} without it")
+    return core
+
+
+def brent_root(f: Callable[[float], float], a: float, b: float, xtol: float, rtol: float, maxiter: int = 100) -> float:
+    """A root of f in [a, b] (f(a), f(b) of opposite signs) by Brent's method (Brent 1973, ch. 4): inverse quadratic
+    or secant steps where they stay well inside the bracket, else bisection, to |error| ≤ (xtol + rtol |x|) / 2.
+    The same iterations as scipy's ``brentq`` (its C loop), so the same root bit for bit (``tests/test_dop853.py``);
+    here without importing scipy.optimize. A NaN value or no convergence in ``maxiter`` raises, as brentq does."""
+    def value(x: float) -> float:
+        fx = float(f(x))
+        if math.isnan(fx):
+            raise ValueError(f"The function value at x={x:f} is NaN; solver cannot converge.")
+        return fx
+
+    xpre, xcur = float(a), float(b)
+    fpre, fcur = value(xpre), value(xcur)
+    if fpre == 0.0:
+        return xpre
+    if fcur == 0.0:
+        return xcur
+    if math.copysign(1.0, fpre) == math.copysign(1.0, fcur):
+        raise ValueError("f(a) and f(b) must have different signs")
+    xblk = fblk = spre = scur = 0.0
+    for _ in range(maxiter):
+        if fpre != 0.0 and fcur != 0.0 and math.copysign(1.0, fpre) != math.copysign(1.0, fcur):
+            xblk, fblk = xpre, fpre
+            spre = scur = xcur - xpre
+        if abs(fblk) < abs(fcur):
+            xpre, xcur, xblk = xcur, xblk, xcur
+            fpre, fcur, fblk = fcur, fblk, fcur
+        delta = (xtol + rtol * abs(xcur)) / 2
+        sbis = (xblk - xcur) / 2
+        if fcur == 0.0 or abs(sbis) < delta:
+            return xcur
+        if abs(spre) > delta and abs(fcur) < abs(fpre):
+            if xpre == xblk:  # secant
+                stry = -fcur * (xcur - xpre) / (fcur - fpre)
+            else:  # inverse quadratic
+                dpre = (fpre - fcur) / (xpre - xcur)
+                dblk = (fblk - fcur) / (xblk - xcur)
+                stry = -fcur * (fblk * dblk - fpre * dpre) / (dblk * dpre * (fblk - fpre))
+            bound = min(abs(spre), 3 * abs(sbis) - delta)
+            spre, scur = (scur, stry) if 2 * abs(stry) < bound else (sbis, sbis)
+        else:
+            spre = scur = sbis
+        xpre, fpre = xcur, fcur
+        xcur += scur if abs(scur) > delta else (delta if sbis > 0 else -delta)
+        fcur = value(xcur)
+    raise RuntimeError(f"Failed to converge after {maxiter} iterations.")
 
 
 def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, float], y0: np.ndarray, *,
@@ -436,9 +522,6 @@ def solve(fun: Callable[[float, np.ndarray], np.ndarray], t_span: tuple[float, f
     and the next step may not grow. ``step``: a compiled step attempt of ``fun``'s (hybrid.steps)
     that takes the steps in place of scipy's core, with the same step control.
     """
-    if _CORE is None:
-        raise SceneError("solver.method", "DOP853C: scipy's compiled DOP853 (scipy.integrate._dop.dopri853, "
-                         "as in scipy 1.17); or DOP853", f"scipy {scipy.__version__} without it")
     t0, t_end = float(t_span[0]), float(t_span[1])
     y0 = np.array(y0, float)
     f0 = np.asarray(fun(t0, y0), float)  # (first: the events' values at the start then read this call's)

@@ -6,7 +6,7 @@ at a fraction of its per-step cost. It alone takes a sampled controller's sample
 inside one run (``integrate``'s ``hold``, :mod:`contactdyn.numerics.held_steps`); the hybrid loop ends a
 segment at each for the other methods.
 
-``RK4`` is the classical fixed-step Runge–Kutta method (4 calls per step) with step
+``RK4`` is the classical fixed-step Runge–Kutta method (4 calls per step, :mod:`.rk4`) with step
 ``solver.max_step`` [s] (required), cubic Hermite dense output and scipy's event location:
 the like-for-like comparison with fixed-step simulators (MuJoCo's RK4, Drake's discrete
 plant). It has no error control: its error is whatever the step gives.
@@ -33,12 +33,11 @@ import math
 from collections.abc import Callable
 
 import numpy as np
-from scipy.integrate import DenseOutput, OdeSolver, solve_ivp
 
-from . import dop853, held_steps, lsoda
+from . import dop853, held_steps
 
 __all__ = ["METHODS", "IMPLICIT", "EXPLICIT", "FIXED", "AUTO_EXPLICIT", "stability_bound", "jacobian_eigenvalues",
-           "FiniteDifferenceJacobian", "RK4", "solver_class", "integrate", "carries_hold"]
+           "FiniteDifferenceJacobian", "integrate", "carries_hold"]
 
 #: ``auto``, explicit Runge–Kutta methods and the implicit ones for stiff scenes
 METHODS = ("auto", "DOP853", "DOP853C", "RK45", "RK23", "Radau", "BDF", "LSODA", "RK4")
@@ -51,7 +50,6 @@ IMPLICIT = ("Radau", "BDF", "LSODA")
 STABILITY_RADIUS = 6.0  #: DOP853's stability region reaches about |hλ| ≈ 6 along the negative real axis [-]
 STEP_BUDGET = 1000  #: DOP853 steps in a segment before ``auto`` checks for stiffness
 RK4_RADIUS = 2.78  #: RK4 is stable for real hλ in [-2.78, 0] [-]
-RK4_RECHECK_GROWTH = 1e3  #: the step is checked again once the state has grown this much since the last check
 RK4_GROWTH = 1.001  #: a decaying mode amplified by more than this per step is an instability [-]
 STABILITY_BAND = (0.5, 8.0)  #: h|λ| in this band: the step is stability-bound (measured 1.4–1.6 on stiff scenes)
 DECAY_SPAN = 20.0  #: a mode "decays within the span" when −Re λ · T is at least this [-]
@@ -110,26 +108,6 @@ def stability_bound(fun: Callable[[float, np.ndarray], np.ndarray], t: float, x:
     return bool(np.any(stiff)), float(size[stiff].max()) if np.any(stiff) else 0.0
 
 
-class _HermiteOutput(DenseOutput):
-    """Cubic Hermite interpolant of one step from the end values and slopes."""
-
-    def __init__(self, t_old: float, t: float, y_old: np.ndarray, f_old: np.ndarray, y: np.ndarray, f: np.ndarray):
-        super().__init__(t_old, t)
-        self.h = t - t_old
-        self.y_old, self.f_old, self.y, self.f = y_old, f_old, y, f
-
-    def _call_impl(self, t):
-        s = (np.asarray(t) - self.t_old) / self.h
-        h00 = (1 + 2 * s) * (1 - s) ** 2
-        h10 = s * (1 - s) ** 2
-        h01 = s * s * (3 - 2 * s)
-        h11 = s * s * (s - 1)
-        if np.ndim(s) == 0:
-            return h00 * self.y_old + h10 * self.h * self.f_old + h01 * self.y + h11 * self.h * self.f
-        return (np.outer(self.y_old, h00) + np.outer(self.h * self.f_old, h10) + np.outer(self.y, h01)
-                + np.outer(self.h * self.f, h11))
-
-
 def rk4_amplification(z: np.ndarray) -> np.ndarray:
     """|R(z)|: RK4's growth per step of a mode e^{λt} with z = hλ (R = 1 + z + z²/2 + z³/6 + z⁴/24)."""
     return np.abs(1 + z * (1 + z / 2 * (1 + z / 3 * (1 + z / 4))))
@@ -150,67 +128,9 @@ def fixed_step_instability(fun: Callable[[float, np.ndarray], np.ndarray], t: fl
             f"where it decays; take solver.max_step below {RK4_RADIUS / size:.2g} s or an adaptive method")
 
 
-class RK4(OdeSolver):
-    """Classical 4th-order Runge–Kutta with a fixed step ``max_step`` [s] (the last step is cut to t_bound).
-
-    Before its first step it checks the step against the system's modes at the start
-    (:func:`fixed_step_instability`) and stops with that reason rather than run a blow-up;
-    it checks again whenever the state has grown RK4_RECHECK_GROWTH-fold since the last
-    check, and a step that leaves the finite numbers stops it too.
-    """
-
-    def __init__(self, fun, t0, y0, t_bound, max_step=np.inf, vectorized=False, rtol=None, atol=None,
-                 first_step=None, **extraneous):
-        super().__init__(fun, t0, y0, t_bound, vectorized)
-        if not np.isfinite(max_step) or max_step <= 0.0:
-            raise ValueError("RK4 takes fixed steps of solver.max_step: give solver.max_step [s]")
-        self.h = float(max_step)
-        self.t0 = t0
-        self.k = 0  #: steps taken (t_k = t0 + k h, no accumulated rounding)
-        self.f = self.fun(self.t, self.y)
-        self.y_old = self.f_old = None
-        self.unstable = fixed_step_instability(self.fun, t0, np.asarray(y0, float), self.h)
-        self.checked_size = float(np.max(np.abs(y0), initial=0.0)) + 1.0  #: state size at the last check
-
-    def _step_impl(self):
-        t, y, f, h = self.t, self.y, self.f, self.h
-        if self.unstable:
-            return False, self.unstable
-        t_new = self.t0 + (self.k + 1) * h
-        if self.direction * (t_new - self.t_bound) > 0 or abs(t_new - self.t_bound) < 1e-12 * h:
-            t_new = self.t_bound
-        h = t_new - t
-        k2 = self.fun(t + 0.5 * h, y + 0.5 * h * f)
-        k3 = self.fun(t + 0.5 * h, y + 0.5 * h * k2)
-        k4 = self.fun(t + h, y + h * k3)
-        y_new = y + (h / 6.0) * (f + 2.0 * k2 + 2.0 * k3 + k4)
-        if not np.all(np.isfinite(y_new)):
-            return False, (f"the state left the finite numbers in the step from t = {t:.6g} s "
-                           f"(step {h:.3g} s): too large a step, or a scene that blows up")
-        size = float(np.max(np.abs(y_new), initial=0.0))
-        if size > RK4_RECHECK_GROWTH * self.checked_size:  # grown a lot: the step may have left the region
-            self.checked_size = size
-            self.unstable = fixed_step_instability(self.fun, t_new, y_new, h)
-            if self.unstable:
-                return False, f"at t = {t_new:.6g} s {self.unstable}"
-        self.y_old, self.f_old = y, f
-        self.t, self.y = t_new, y_new
-        self.f = self.fun(t_new, y_new)
-        self.k += 1
-        return True, None
-
-    def _dense_output_impl(self):
-        return _HermiteOutput(self.t_old, self.t, self.y_old, self.f_old, self.y, self.f)
-
-
 def carries_hold(method: str) -> bool:
     """Does the method take a sampled controller's sample instants as step boundaries (``integrate``'s hold)?"""
     return method in COMPILED
-
-
-def solver_class(method: str):
-    """What ``solve_ivp`` takes as ``method`` for a method name."""
-    return RK4 if method == "RK4" else method
 
 
 def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, rtol: float, atol: float,
@@ -227,8 +147,17 @@ def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, 
     if method in COMPILED:  # a compiled mode's right-hand side brings its compiled step (contactdyn.hybrid.steps)
         return dop853.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
                             first_step=first_step, step=getattr(fun, "step", None))
+    from scipy.integrate import solve_ivp  # (here: a run on the compiled DOP853 never imports scipy.integrate)
+
+    from . import lsoda
+
     if method == "LSODA" and jac is None and lsoda.available():  # solve_ivp's steps without its per-step Python
         return lsoda.solve(fun, t_span, y0, rtol=rtol, atol=atol, max_step=max_step, events=events,
                            first_step=first_step)
-    return solve_ivp(fun, t_span, y0, method=solver_class(method), rtol=rtol, atol=atol, max_step=max_step,
-                     events=events or None, dense_output=True, first_step=first_step, **({"jac": jac} if jac else {}))
+    options = {"jac": jac} if jac else {}
+    if method == "RK4":
+        from .rk4 import RK4
+
+        method, options = RK4, {"instability": fixed_step_instability}
+    return solve_ivp(fun, t_span, y0, method=method, rtol=rtol, atol=atol, max_step=max_step, events=events or None,
+                     dense_output=True, first_step=first_step, **options)
