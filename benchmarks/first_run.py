@@ -44,6 +44,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+from contactdyn.first_run import HELPER_ENV  # noqa: E402  (the leaves' helper's switch)
+
 OUT = Path(__file__).parent / "out"
 HELP = ["-c", "import sys; from contactdyn.cli import main; sys.exit(main())", "--help"]  # = the console script
 TIMEOUT = 1800.0  #: [s] one process at most
@@ -57,9 +60,9 @@ def default_scenes() -> list[str]:
 
 def _environment(cache: str | None, helper: bool = True) -> dict[str, str]:
     env = dict(os.environ)
-    env.pop("CONTACTDYN_LEAVES_AHEAD", None)
+    env.pop(HELPER_ENV, None)
     if not helper:
-        env["CONTACTDYN_LEAVES_AHEAD"] = "0"  # (contactdyn.first_run.HELPER_ENV: no leaves' helper)
+        env[HELPER_ENV] = "0"  # (no leaves' helper)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     env.pop("NUMBA_CACHE_DIR", None)
     env.pop("CONTACTDYN_PATH", None)  # the command's default path: auto

@@ -39,7 +39,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from ..errors import SimulationError
-from ..hybrid.sampled_law import SampledLaw
+from ..hybrid.sampled_law import SampledLaw, sampled_slots
 from ..laws.controllers.sampled import SampledController
 from ..model.system import System
 from ..output.result import Result
@@ -209,11 +209,7 @@ class SampledLoop:
         """The pieces about the continuous loop's equilibrium (the hold keeps it), Newton from ``x_guess``
         (the continuous scene's layout)."""
         lin, x = self.equilibrium(x_guess)
-        phase = self.loop.phase
-        ctl = phase.controller
-        z0 = 2 * self.loop.system.nQ + phase.z_slice.start
-        held = np.arange(z0 + ctl.held.start, z0 + ctl.held.stop)
-        zs = np.arange(z0 + ctl.inner_states.start, z0 + ctl.inner_states.stop)
+        held, zs = (np.arange(part.start, part.stop) for part in sampled_slots(self.loop.system, self.loop.phase))
         A_full = self._jacobian(lambda xv: self.loop.rate(xv), x, np.arange(len(x)))
         plant = np.setdiff1d(np.flatnonzero(np.any(A_full != 0.0, axis=0)), np.concatenate([held, zs]))
         A, B = A_full[np.ix_(plant, plant)], A_full[np.ix_(plant, held)]

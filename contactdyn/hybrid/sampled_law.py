@@ -23,9 +23,16 @@ from ..model.pipeline.pack import EV_FN, EV_W, W_DIAG
 from ..model.pipeline.pipeline import Pipeline, law_at
 from ..numerics.twins import Twins
 
-__all__ = ["Reading", "SampledLaw"]
+__all__ = ["Reading", "SampledLaw", "sampled_slots"]
 
 _NOTHING = np.zeros(0)  #: a reading's generalized contact force where the law reads none
+
+
+def sampled_slots(system, phase) -> tuple[slice, slice]:
+    """The slots of x of a sampled phase's held command and of its law's own states."""
+    ctl = phase.controller
+    z0 = 2 * system.nQ + phase.z_slice.start
+    return tuple(slice(z0 + part.start, z0 + part.stop) for part in (ctl.held, ctl.inner_states))
 
 
 @dataclass
@@ -46,14 +53,12 @@ class SampledLaw:
 
     def __init__(self, mode):
         system, phase = mode.system, mode.phase
-        ctl = phase.controller
-        start = phase.z_slice.start + ctl.inner_states.start  # the law's own states, after the held command
-        law_phase = replace(phase, controller=ctl.inner, z_slice=slice(start, phase.z_slice.stop))
+        self.states = sampled_slots(system, phase)[1]  #: the law's own states in x, after the held command
+        z_at = self.states.start - 2 * system.nQ
+        law_phase = replace(phase, controller=phase.controller.inner, z_slice=slice(z_at, phase.z_slice.stop))
         self.pipe = Pipeline(system, mode.modes, law_phase, mode.pipe.twins, law_only=True)
         self.mode, self.modes = mode, mode.modes  #: the mode measured on, and its modes as last used
-        self.controller = ctl.inner
-        nQ = system.nQ
-        self.states = slice(2 * nQ + start, 2 * nQ + phase.z_slice.stop)  #: the law's states in x
+        self.controller = phase.controller.inner
         ints = self.pipe.packed.ints
         #: per measured key: (True: ``events``' slot, False: ``work``'s) where the stage reads it
         self.slots: dict[str, tuple[bool, int]] = {}
@@ -78,11 +83,9 @@ class SampledLaw:
         if resolution > 0.0:
             nv = self.pipe.system.nv
             xq[:nv] = quantise(xq[:nv], resolution)
-        if not measures(mode.phase):
-            return Reading(t, xq, {}, _NOTHING, 0.0, self)
-        m = mode.measurement(t, x)
-        if not self.controller.uses_forces:  # (a carried reference's acceleration alone)
-            return Reading(t, xq, {}, _NOTHING, m.carrier_acc, self)
+        m = mode.measurement(t, x) if measures(mode.phase) else None
+        if m is None or not self.controller.uses_forces:  # (at most a carried reference's acceleration)
+            return Reading(t, xq, {}, _NOTHING, m.carrier_acc if m is not None else 0.0, self)
         forces = {**m.normal_force, **m.interface}
         return Reading(t, xq, sense(forces) if sense is not None else forces, m.tau_contact, m.carrier_acc, self)
 

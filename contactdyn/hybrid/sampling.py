@@ -29,7 +29,7 @@ from ..model.contact import ContactMode
 from ..model.joint_friction import STUCK
 from ..model.phases import Phase
 from .events import JUMPING, SlipWatch, fired_across, segment_events
-from .sampled_law import Reading, SampledLaw
+from .sampled_law import Reading, SampledLaw, sampled_slots
 
 __all__ = ["SampledPhases", "Hold"]
 
@@ -74,7 +74,7 @@ class SampledPhases:
         if not isinstance(ctl, SampledController):
             return x
         self.samplers[phase.index] = Sampler(ctl, stream=phase.index)
-        self.slots[phase.index] = self._slots(phase, ctl.held), self._slots(phase, ctl.inner_states)
+        self.slots[phase.index] = sampled_slots(self.system, phase)
         if previous is not None:  # what acts until this first sample: the previous phase's command
             x = x.copy()
             x[self.slots[phase.index][0]] = self.runner(modes, previous).evaluation(t, x).tau_cmd
@@ -119,11 +119,6 @@ class SampledPhases:
         events, _ = segment_events(self.system, modes, phase, t, before, runner)
         events = [e for e in events if e.kind in JUMPING]
         return fired_across(events, t, t, before, after) if events else []
-
-    def _slots(self, phase: Phase, part: slice) -> slice:
-        """The slots of x of ``part`` of the phase's controller states."""
-        z0 = 2 * self.system.nQ + phase.z_slice.start
-        return slice(z0 + part.start, z0 + part.stop)
 
 
 class Hold:

@@ -433,7 +433,8 @@ def _rms(v: np.ndarray) -> float:
 def _initial_step(fun: Callable, t0: float, y0: np.ndarray, f0: np.ndarray, t_end: float, max_step: float,
                   rtol: float, atol: float) -> float:
     """[s] solve_ivp's estimate of the first step forwards from (t0, y0), f0 = f(t0, y0) (Hairer, Nørsett and
-    Wanner I, II.4; scipy's ``select_initial_step``, the same arithmetic: ``tests/test_dop853.py``): one call."""
+    Wanner I, II.4): one call. scipy's ``select_initial_step``, the same arithmetic
+    (``tests/test_scipy_free_start.py``)."""
     if y0.size == 0:
         return math.inf
     span = abs(t_end - t0)
@@ -466,8 +467,9 @@ def scipy_core():
 def brent_root(f: Callable[[float], float], a: float, b: float, xtol: float, rtol: float, maxiter: int = 100) -> float:
     """A root of f in [a, b] (f(a), f(b) of opposite signs) by Brent's method (Brent 1973, ch. 4): inverse quadratic
     or secant steps where they stay well inside the bracket, else bisection, to |error| ≤ (xtol + rtol |x|) / 2.
-    The same iterations as scipy's ``brentq`` (its C loop), so the same root bit for bit (``tests/test_dop853.py``);
-    here without importing scipy.optimize. A NaN value or no convergence in ``maxiter`` raises, as brentq does."""
+    The same iterations as scipy's ``brentq`` (its C loop), so the same root bit for bit
+    (``tests/test_scipy_free_start.py``), here without importing scipy.optimize. A NaN value or no convergence in
+    ``maxiter`` raises, as brentq does."""
     def value(x: float) -> float:
         fx = float(f(x))
         if math.isnan(fx):
