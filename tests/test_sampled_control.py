@@ -328,18 +328,41 @@ def test_a_phase_begun_at_a_touch_samples_at_once_and_then_on_the_grid():
     assert r.stats["samples"] == n + 1  # the grid and the press law's first sample at the touch
 
 
-def test_autos_step_budget_runs_on_over_the_sample_instants():
-    """benchmarks/hard/fast_mass.toml: a 1 g mass on 1e5 N/m holds DOP853 at its stability bound; ``auto`` switches
-    to Radau after STEP_BUDGET such steps, which 1 ms segments never take one by one."""
+def test_auto_switches_to_radau_under_a_hold_only_where_the_period_spans_many_explicit_steps():
+    """benchmarks/hard/fast_mass.toml: a 1 g mass on 1e5 N/m holds DOP853 at its stability bound (~0.1 ms steps);
+    ``auto`` checks after STEP_BUDGET steps, counted over the sample instants. At 1 kHz a period spans a few such
+    steps: DOP853 goes on carrying the samples (Radau would end a segment at each, ~10× the run's cost before
+    HOLD_SWITCH). At 100 Hz it spans ~100: Radau, its segments ending at the samples."""
     from contactdyn.numerics.integrators import STEP_BUDGET
 
     scene = ROOT / "benchmarks" / "hard" / "fast_mass.toml"
-    r = simulate(str(scene), {"duration": 0.25, "controller.sample_rate": RATE})
-    by_method = r.stats["segments_by_method"]
-    assert r.stats.get("auto_switches") == 1 and by_method.get("Radau", 0) > 0
-    # the budget spent over the sample instants: the DOP853 segments carry them as step boundaries (a few segments,
-    # events between, for 250 samples), the Radau ones end at each
-    assert by_method["DOP853C"] < 10 and r.stats["samples"] == 250 and STEP_BUDGET < r.stats["steps"]
+    fast = simulate(str(scene), {"duration": 0.25, "controller.sample_rate": RATE})
+    assert fast.stats.get("auto_switches") is None and set(fast.stats["segments_by_method"]) == {"DOP853C"}
+    assert fast.stats["segments"] < 10 and fast.stats["samples"] == 250 and STEP_BUDGET < fast.stats["steps"]
+    slow = simulate(str(scene), {"duration": 0.25, "controller.sample_rate": 100.0})
+    assert slow.stats.get("auto_switches") == 1 and slow.stats["segments_by_method"].get("Radau", 0) > 0
+    assert slow.stats["samples"] == 25
+
+
+def test_autos_check_under_a_hold_compares_the_explicit_step_with_the_period():
+    """ẋ = −10⁴ x: a step of 0.1 ms (h|λ| = 1) is stability-bound; under a hold it goes to Radau only if the period
+    is at least HOLD_SWITCH such steps; the step taken under a hold is the longest of the last ones (a step clipped
+    to a sample instant is shorter)."""
+    from types import SimpleNamespace
+
+    from contactdyn.hybrid.loop import _explicit_step
+    from contactdyn.numerics.integrators import HOLD_SWITCH
+
+    def check(period):
+        run = SimpleNamespace(stats={"rhs_evals": 0}, auto_state=None, next_step=None)
+        HybridRun._auto_check(run, lambda t, x: -1e4 * x, 0.0, np.ones(1), 1e-4, 1.0, period)
+        return run.auto_state
+
+    assert check(None) == "Radau" and check(HOLD_SWITCH * 1e-4) == "Radau"
+    assert check(0.99 * HOLD_SWITCH * 1e-4) == "DOP853C"
+    sol = SimpleNamespace(t=np.array([0.0, 0.4e-3, 1e-3, 1.1e-3, 1.7e-3, 2e-3]))  # pieces of 1 ms, clipped steps
+    assert _explicit_step(sol, held=False) == pytest.approx(0.3e-3)
+    assert _explicit_step(sol, held=True) == pytest.approx(0.6e-3)
 
 
 # ---- with joint friction -------------------------------------------------------------------------------------

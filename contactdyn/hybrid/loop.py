@@ -50,6 +50,7 @@ from ..numerics.integrators import (
     AUTO_EXPLICIT,
     EXPLICIT,
     FIXED,
+    HOLD_SWITCH,
     IMPLICIT,
     STABILITY_RADIUS,
     STEP_BUDGET,
@@ -73,6 +74,8 @@ from .sampling import SampledPhases
 from .transitions import Transitions
 
 __all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
+
+HELD_STEPS_SEEN = 10  #: under a hold, ``auto``'s stiffness check takes the longest of the budget's last steps
 
 #: events after which the next segment starts with the step size the solver had reached (friction
 #: mode switches change the forces, not the time scales; an impact or a separation does, so they restart; a free
@@ -192,7 +195,8 @@ class HybridRun:
             elif sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
                 if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
-                    self._auto_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
+                    period = self.sampled.period(phase) if held else None
+                    self._auto_check(fun, t, x, _explicit_step(sol, held), t_end - t, period)
                     continue
                 if fired[0].kind == "work":
                     raise SimulationError(_over_budget(self, t, x))
@@ -272,10 +276,13 @@ class HybridRun:
         self.stats["segments"] += 1
         return sol, events, fun, held
 
-    def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
+    def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float, period: float | None = None) -> None:
         """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
-        stability-bound by a decaying mode, else DOP853 without a budget (see integrators)."""
+        stability-bound by a decaying mode, else DOP853 without a budget (see integrators). Under a sampled law's
+        hold (``period`` [s]: its sample period) only if h is below period / HOLD_SWITCH as well."""
         stiff, lam = stability_bound(fun, t, x, h, span)
+        if stiff and period is not None and period < HOLD_SWITCH * h:  # the samples bound the steps of either
+            stiff, lam = False, 0.0
         self.stats["rhs_evals"] += len(x) + 1
         self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
         self.auto_state = "Radau" if stiff else AUTO_EXPLICIT
@@ -435,6 +442,14 @@ def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
         last = run.segments[-1]
         return last.t1, np.asarray(last.sol(last.t1), float)
     return 0.0, run.start()[0]
+
+
+def _explicit_step(sol, held: bool) -> float:
+    """[s] The step the explicit method had reached where its budget ran out: its last step; under a hold the longest
+    of its last HELD_STEPS_SEEN steps (a step clipped to land on a sample instant is shorter than the method's own)."""
+    if not held:
+        return float(sol.t[-1] - sol.t[-2])
+    return float(np.max(np.diff(sol.t[-HELD_STEPS_SEEN - 1:])))
 
 
 def _reached(sol, h0: float | None, sample: bool) -> float | None:

@@ -67,6 +67,10 @@ class SampledPhases:
         sampler = self.samplers.get(phase.index) if self.any else None
         return sampler.next_time() if sampler is not None else math.inf
 
+    def period(self, phase: Phase) -> float:
+        """[s] The sample period of a sampled phase."""
+        return self.samplers[phase.index].period
+
     def start(self, t: float, x: np.ndarray, modes: list[ContactMode], phase: Phase, previous: Phase | None
               ) -> np.ndarray:
         """A phase starting at t [s]: if sampled, its sampler and its first sample; the state to go on with."""
