@@ -1,6 +1,6 @@
 """What a sampled controller costs: each scene continuous against its controller sampled at a rate (1 kHz).
 
-    PYTHONPATH=. python3 benchmarks/sampled_cost.py [--repeats 5] [--rate 1000] [--profile] [scene ...]
+    PYTHONPATH=. python3 benchmarks/sampled_cost.py [--repeats 5] [--rate 1000] [--method M] [--profile] [scene ...]
 
 Per scene (default: b1, case1_cart, case3_a_force), the continuous run and the same scene with
 ``controller.sample_rate`` set (every phase's controller sampled: a zero-order hold), interleaved repeat by repeat in
@@ -24,9 +24,12 @@ remains: the re-evaluation of f after the jump, the events across it, the pieces
 Every mode runs on the one pipeline's compiled call (the paths column says so).
 ``floor``: the continuous run with ``solver.max_step`` = one period, timed with the others: the CPU a sampled run
 cannot go below while it takes at least one DOP853 step per period (its ratio to the continuous run, and its steps).
+``--method M``: every run with ``solver.method`` = M (``auto``: the stiff scenes of benchmarks/hard, ``hard_stiff``
+and ``hard_fast_mass``, switch to Radau continuous; sampled, DOP853 carries the samples unless a period spans
+HOLD_SWITCH of its steps, contactdyn.numerics.integrators); the segments per method are in the JSON.
 ``--profile``: cProfile of the first scene's sampled run (the 25 costliest functions, cumulative).
 
-Writes benchmarks/out/sampled_cost.json and .csv.
+Writes benchmarks/out/sampled_cost.json and .csv (sampled_cost_<method>.* with ``--method``).
 """
 
 from __future__ import annotations
@@ -50,7 +53,8 @@ from contactdyn.hybrid.sampling import SampledPhases  # noqa: E402
 OUT = Path(__file__).parent / "out"
 HERE = Path(__file__).parent
 SCENES = ("b1", "case1_cart", "case3_a_force", "stiff_force")
-FILES = {"stiff_force": str(HERE / "stiff_force.toml")}  #: scenes of benchmarks/ by name
+FILES = {"stiff_force": str(HERE / "stiff_force.toml"), "hard_stiff": str(HERE / "hard" / "stiff.toml"),
+         "hard_fast_mass": str(HERE / "hard" / "fast_mass.toml")}  #: scenes of benchmarks/ by name
 _TAKEN = [0.0]  #: [s] CPU inside SampledPhases.take since the last reset
 
 
@@ -80,14 +84,17 @@ def _difference(a, b) -> dict:
             "force_N": max((float(abs(a[k] - b[k]).max()) for k in forces), default=0.0)}
 
 
-def compare(name: str, rate: float, repeats: int) -> dict:
-    times = interleaved({"continuous": _call(name, {}), "sampled": _call(name, {"controller.sample_rate": rate}),
-                         "bounded": _call(name, {"solver.max_step": 1.0 / rate})}, repeats)
+def compare(name: str, rate: float, repeats: int, base: dict | None = None) -> dict:
+    base = base or {}
+    times = interleaved({"continuous": _call(name, base),
+                         "sampled": _call(name, {**base, "controller.sample_rate": rate}),
+                         "bounded": _call(name, {**base, "solver.max_step": 1.0 / rate})}, repeats)
     row: dict = {"scene": name, "rate_hz": rate}
     for label, timing in times.items():
         r = timing.last
         row[label] = {"cpu_s": timing.cpu, "steps": r.stats["steps"], "rhs_evals": r.stats["rhs_evals"],
                       "segments": r.stats["segments"], "samples": r.stats.get("samples", 0),
+                      "segments_by_method": r.stats.get("segments_by_method", {}),
                       "paths": sorted({p["path"] for p in r.stats["paths"].values()})}
     c, s = row["continuous"], row["sampled"]
     row["ratio"] = s["cpu_s"] / c["cpu_s"]
@@ -116,17 +123,19 @@ def main() -> None:
     ap.add_argument("scenes", nargs="*", default=list(SCENES))
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--rate", type=float, default=1000.0, help="[Hz] the sample rate")
+    ap.add_argument("--method", help="solver.method for every run (default: each scene's)")
     ap.add_argument("--profile", action="store_true")
     args = ap.parse_args()
-    stem = "sampled_cost"
+    stem = f"sampled_cost_{args.method}" if args.method else "sampled_cost"
+    base = {"solver.method": args.method} if args.method else {}
     SampledPhases.take = _timed_take(SampledPhases.take)
     rows = []
     print(f"{'scene':16s} {'cont. CPU [s]':>13s} {'sampled [s]':>11s} {'ratio':>6s} {'steps c/s':>11s} "
           f"{'us/sample':>9s} {'(steps':>6s} {'take':>5s} {'rest)':>6s} {'calls/sample':>12s} {'tip diff [m]':>12s} "
           f"{'F diff [N]':>10s} {'floor':>6s} {'steps':>6s}  sampled paths")
     for name in args.scenes:
-        simulate(FILES.get(name, name), {"controller.sample_rate": args.rate})  # (compiled and cached first)
-        row = compare(name, args.rate, args.repeats)
+        simulate(FILES.get(name, name), {**base, "controller.sample_rate": args.rate})  # (compiled and cached first)
+        row = compare(name, args.rate, args.repeats, base)
         rows.append(row)
         c, s, part = row["continuous"], row["sampled"], row["per_sample_us"]
         print(f"{name:16s} {c['cpu_s']:13.3f} {s['cpu_s']:11.3f} {row['ratio']:6.2f} "
@@ -134,7 +143,7 @@ def main() -> None:
               f"{part['rest']:6.0f} {row['rhs_per_sample']:12.1f} "
               f"{row['difference']['tip_m']:12.3g} {row['difference']['force_N']:10.3g} {row['floor_ratio']:6.2f} "
               f"{row['bounded']['steps']:6d}  {', '.join(s['paths'])}")
-    write_report(OUT / f"{stem}.json", {"rate_hz": args.rate, "repeats": args.repeats}, rows)
+    write_report(OUT / f"{stem}.json", {"rate_hz": args.rate, "repeats": args.repeats, "method": args.method}, rows)
     with (OUT / f"{stem}.csv").open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["scene", "rate_hz", "cpu_continuous_s", "cpu_sampled_s", "ratio", "steps_continuous",

@@ -278,10 +278,12 @@ class HybridRun:
 
     def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float, period: float | None = None) -> None:
         """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
-        stability-bound by a decaying mode, else DOP853 without a budget (see integrators). Under a sampled law's
-        hold (``period`` [s]: its sample period) only if h is below period / HOLD_SWITCH as well."""
+        stability-bound by a decaying mode, else DOP853 without a budget (see integrators): not where h is the scene's
+        max_step, and under a sampled law's hold (``period`` [s]: its sample period) only if h is below
+        period / HOLD_SWITCH as well."""
         stiff, lam = stability_bound(fun, t, x, h, span)
-        if stiff and period is not None and period < HOLD_SWITCH * h:  # the samples bound the steps of either
+        bound = h >= (1.0 - 1e-9) * self.solver.max_step  # held at the scene's max_step, which bounds Radau's too
+        if stiff and (bound or period is not None and period < HOLD_SWITCH * h):  # (and the samples bound either's)
             stiff, lam = False, 0.0
         self.stats["rhs_evals"] += len(x) + 1
         self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
