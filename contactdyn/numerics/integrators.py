@@ -22,7 +22,10 @@ in ``STABILITY_BAND`` — the step is held at the edge of DOP853's stability reg
 by accuracy — the rest of the segment runs with Radau IIA (order 5, L-stable) and the same
 finite-difference Jacobian; else DOP853 goes on without a budget. A fast mode that does
 not decay (an undamped stiff contact ringing) must be resolved by either method, and
-DOP853's steps are cheaper. Measured (docs/performance.md): near-rigid contact 1e8 N/m, 2
+DOP853's steps are cheaper. A step held at the scene's ``max_step`` is not stability-bound (Radau's is bounded
+by it too); under a sampled law's hold the step judged is the longest of the budget's last ones (a step clipped to
+a sample instant is shorter), and Radau is taken only where a sample period spans ``HOLD_SWITCH`` of them (Radau
+ends a segment at every sample). Measured (docs/performance.md): near-rigid contact 1e8 N/m, 2
 s: DOP853 1.9 s, Radau 0.32 s; 1e-3 kg equivalent mass: 4.0 s against 0.75 s; on scenes
 without such modes ``auto`` is DOP853 and costs nothing more.
 """
