@@ -386,3 +386,21 @@ def test_a_stuck_joint_breaks_away_at_the_first_sample_whose_held_command_passes
     assert slips[0]["t"] == pytest.approx(0.026, abs=1e-12)
     stuck = result["joint_stuck"][:, 0]
     assert np.all(stuck[result.t < 0.026 - 1e-9] == 1.0) and np.all(stuck[result.t > 0.026 + 1e-9] == 0.0)
+
+
+def test_a_sampled_2d_launch_hands_over_to_the_scenes_method_once_its_direction_settles(monkeypatch):
+    """case2_writer5dof: the pencil slips from rest at ~0.715 s, its 2-D friction direction stiff near rest: LSODA
+    (LAUNCH_METHOD), which ends a segment at every sample and restarts there. Once period·|λ| ≤ LAUNCH_SETTLED for
+    every decaying mode the compiled DOP853 carries the samples for the rest of the mode; the run agrees with one kept
+    on LSODA to the integration's tolerance (rtol 1e-7 on ~6 N; measured 4e-8 N)."""
+    from contactdyn.hybrid import loop
+
+    over = {"controller.sample_rate": RATE, "duration": 0.8}
+    handed = simulate("case2_writer5dof", over)
+    monkeypatch.setattr(loop, "LAUNCH_SETTLED", 0.0)  # (never settled: LSODA for the whole mode)
+    kept = simulate("case2_writer5dof", over)
+    assert handed.stats["launches_handed_over"] == 1 and "launches_handed_over" not in kept.stats
+    assert handed.stats["segments_by_method"]["LSODA"] < 20 < kept.stats["segments_by_method"]["LSODA"]
+    assert handed.stats["samples"] == kept.stats["samples"] == 800
+    for key in ("contact.pencil.F_n", "tip"):
+        assert np.abs(handed[key] - kept[key]).max() < 1e-5
