@@ -346,8 +346,8 @@ def test_auto_switches_to_radau_under_a_hold_only_where_the_period_spans_many_ex
 
 def test_autos_check_under_a_hold_compares_the_explicit_step_with_the_period():
     """ẋ = −10⁴ x: a step of 0.1 ms (h|λ| = 1) is stability-bound, unless it is the scene's max_step; under a hold it
-    goes to Radau only if the period is at least HOLD_SWITCH such steps; the step taken under a hold is the longest
-    of the last ones (a step clipped to a sample instant is shorter)."""
+    goes to Radau (a collapsed 2-D slide to LSODA) only if the period is at least HOLD_SWITCH such steps; the step
+    taken under a hold is the longest of the last ones (a step clipped to a sample instant is shorter)."""
     from types import SimpleNamespace
 
     from contactdyn.hybrid.loop import _explicit_step
@@ -362,6 +362,14 @@ def test_autos_check_under_a_hold_compares_the_explicit_step_with_the_period():
     assert check(None) == "Radau" and check(HOLD_SWITCH * 1e-4) == "Radau" and check(None, 2e-4) == "Radau"
     assert check(0.99 * HOLD_SWITCH * 1e-4) == "DOP853C"
     assert check(None, 1e-4) == "DOP853C"  # the step is the scene's max_step: not held by stability
+
+    def collapse(period):  # a 2-D slide's collapsed steps: the same rule
+        run = SimpleNamespace(stats={"rhs_evals": 0}, resting=None, next_step=None,
+                              solver=SimpleNamespace(max_step=math.inf))
+        HybridRun._collapse_check(run, lambda t, x: -1e4 * x, 0.0, np.ones(1), 1e-4, 1.0, period)
+        return run.resting
+
+    assert collapse(None) == "LSODA" and collapse(0.99 * HOLD_SWITCH * 1e-4) == ""
     sol = SimpleNamespace(t=np.array([0.0, 0.4e-3, 1e-3, 1.1e-3, 1.7e-3, 2e-3]))  # pieces of 1 ms, clipped steps
     assert _explicit_step(sol, held=False) == pytest.approx(0.3e-3)
     assert _explicit_step(sol, held=True) == pytest.approx(0.6e-3)

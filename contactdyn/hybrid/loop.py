@@ -198,14 +198,14 @@ class HybridRun:
                 t, x, modes, phase = self._pass_corner(t, t if sample else corner.after, x, modes, phase, sample)
             elif sol.status == 1:
                 fired = [e for e, te in zip(events, sol.t_events, strict=True) if len(te)]
+                period = self.sampled.period(phase) if held else None
                 if fired[0].kind == "budget":  # auto: stiff, or just long? (same modes, same phase)
-                    period = self.sampled.period(phase) if held else None
                     self._auto_check(fun, t, x, _explicit_step(sol, held), t_end - t, period)
                     continue
                 if fired[0].kind == "work":
                     raise SimulationError(_over_budget(self, t, x))
                 if fired[0].kind == "collapse":  # a 2-D slide coming to rest? (same modes, same phase)
-                    self._collapse_check(fun, t, x, float(sol.t[-1] - sol.t[-2]), t_end - t)
+                    self._collapse_check(fun, t, x, _explicit_step(sol, held), t_end - t, period)
                     continue
                 self._new_mode()
                 if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
@@ -284,12 +284,10 @@ class HybridRun:
 
     def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float, period: float | None = None) -> None:
         """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
-        stability-bound by a decaying mode, else DOP853 without a budget (see integrators): not where h is the scene's
-        max_step, and under a sampled law's hold (``period`` [s]: its sample period) only if h is below
-        period / HOLD_SWITCH as well."""
+        stability-bound by a decaying mode (not :func:`_bound_elsewhere`), else DOP853 without a budget (see
+        integrators); ``period`` [s]: a sampled law's, where its hold's samples were step boundaries."""
         stiff, lam = stability_bound(fun, t, x, h, span)
-        bound = h >= (1.0 - 1e-9) * self.solver.max_step  # held at the scene's max_step, which bounds Radau's too
-        if stiff and (bound or period is not None and period < HOLD_SWITCH * h):  # (and the samples bound either's)
+        if stiff and _bound_elsewhere(h, period, self.solver.max_step):
             stiff, lam = False, 0.0
         self.stats["rhs_evals"] += len(x) + 1
         self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
@@ -314,10 +312,13 @@ class HybridRun:
             out.append(StepCollapse(COLLAPSE_RATIO, COLLAPSE_STEPS))
         return out
 
-    def _collapse_check(self, fun, t: float, x: np.ndarray, h: float, span: float) -> None:
+    def _collapse_check(self, fun, t: float, x: np.ndarray, h: float, span: float, period: float | None = None
+                        ) -> None:
         """A 2-D slide's explicit step collapsed to h [s] (events.StepCollapse): LAUNCH_METHOD for the rest of the
-        mode if a decaying mode held it at the method's stability bound, else the explicit method on, unwatched."""
+        mode if a decaying mode held it at the method's stability bound (not :func:`_bound_elsewhere`), else the
+        explicit method on, unwatched; ``period`` as :meth:`_auto_check`'s."""
         stiff, _ = stability_bound(fun, t, x, h, span)
+        stiff = stiff and not _bound_elsewhere(h, period, self.solver.max_step)
         self.stats["rhs_evals"] += len(x) + 1
         self.resting = LAUNCH_METHOD if stiff else ""
         if stiff:
@@ -465,6 +466,13 @@ def _launch_settled(run: HybridRun, fun, t: float, x: np.ndarray, period: float)
     if settled:
         run.stats["launches_handed_over"] = run.stats.get("launches_handed_over", 0) + 1
     return settled
+
+
+def _bound_elsewhere(h: float, period: float | None, max_step: float) -> bool:
+    """Is the explicit step h [s] held by something that bounds the stiff methods' steps too: the scene's max_step
+    [s], or under a sampled law's hold a sample period [s] shorter than HOLD_SWITCH steps (LAUNCH_METHOD and Radau
+    end a segment at every sample)? Then no switch pays."""
+    return h >= (1.0 - 1e-9) * max_step or (period is not None and period < HOLD_SWITCH * h)
 
 
 def _explicit_step(sol, held: bool) -> float:
