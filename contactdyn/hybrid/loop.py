@@ -75,7 +75,7 @@ from .transitions import Transitions
 
 __all__ = ["HybridRun", "RESUME_STEP", "LAUNCH_METHOD"]
 
-HELD_STEPS_SEEN = 10  #: under a hold, ``auto``'s stiffness check takes the longest of the budget's last steps
+HELD_STEPS_SEEN = 10  #: under a hold, the stiffness checks (auto's, a collapse's) take the longest of the last steps
 
 #: events after which the next segment starts with the step size the solver had reached (friction
 #: mode switches change the forces, not the time scales; an impact or a separation does, so they restart; a free
@@ -247,9 +247,9 @@ class HybridRun:
         system = self.system
         runner = _runner(self, modes, phase, start=True)  # the one pipeline's mode
         fun = runner.rhs
-        if t_sample is not None and not self.launched and _launching(modes):
-            self.launched = _launch_settled(self, fun, t, x, self.sampled.period(phase))
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
+        if t_sample is not None and not self.launched and scene_method not in IMPLICIT and _launching(modes):
+            self.launched = _launch_settled(self, fun, t, x, self.sampled.period(phase))
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             held = t_sample is not None and carries_hold(method)
             end = t_sample if t_sample is not None and not held else t_end
@@ -339,7 +339,8 @@ class HybridRun:
         again as a slide comes to rest (its last 50 ms took the 5-DOF writer's DOP853 7265 calls,
         LSODA 899). LSODA switches to BDF while that lasts; the segment ends at the next event.
         A slide coming to rest is seen by its explicit steps collapsing (``resting``,
-        :meth:`_collapse_check`).
+        :meth:`_collapse_check`). Under a sampled law's hold LSODA would end a segment at every sample: a launch goes
+        back to the scene's method once its direction has settled (``launched``, :func:`_launch_settled`).
         """
         if method not in IMPLICIT and _launching(modes) and not self.launched:
             return LAUNCH_METHOD
@@ -476,8 +477,9 @@ def _bound_elsewhere(h: float, period: float | None, max_step: float) -> bool:
 
 
 def _explicit_step(sol, held: bool) -> float:
-    """[s] The step the explicit method had reached where its budget ran out: its last step; under a hold the longest
-    of its last HELD_STEPS_SEEN steps (a step clipped to land on a sample instant is shorter than the method's own)."""
+    """[s] The step the explicit method had reached where its budget ran out or its steps collapsed: its last step;
+    under a hold the longest of its last HELD_STEPS_SEEN steps (a step clipped to a sample instant is shorter than the
+    method's own)."""
     if not held:
         return float(sol.t[-1] - sol.t[-2])
     return float(np.max(np.diff(sol.t[-HELD_STEPS_SEEN - 1:])))
