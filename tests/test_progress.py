@@ -17,18 +17,20 @@ from contactdyn import SimulationError, simulate
 def test_a_run_over_its_step_budget_stops_with_the_cause(monkeypatch):
     """B1 takes ~240 steps over 2 s; with a budget of 50 steps per simulated second (and no base) it stops at
     the 100th step, saying where, the budget and the fastest mode."""
-    monkeypatch.setattr(contactdyn.hybrid.loop, "step_budget", lambda solver, duration: 100)
+    monkeypatch.setattr(contactdyn.hybrid.loop, "step_budget", lambda solver, duration, rate=0.0: 100)
     with pytest.raises(SimulationError) as info:
         simulate("b1", {"solver.steps_per_second": 50.0})
     text = str(info.value)
     assert "after 100 integration steps, its budget" in text and "fastest mode |λ|" in text
-    assert "solver.steps_per_second" in text
+    assert "solver.steps_per_second" in text and "per sample" not in text
+    with pytest.raises(SimulationError, match="per simulated second \\+ 2 per sample of its 1000 Hz law"):
+        simulate("b1", {"solver.steps_per_second": 50.0, "controller.sample_rate": 1000.0})
 
 
 def test_steps_that_keep_failing_are_bounded_by_the_calls(monkeypatch):
     """The same budget counted in right-hand-side calls (rejected attempts too): B1 needs ~4200 calls; with a
     budget of 50 steps (1200 calls) it stops inside the integration, naming the calls."""
-    monkeypatch.setattr(contactdyn.hybrid.loop, "step_budget", lambda solver, duration: 50)
+    monkeypatch.setattr(contactdyn.hybrid.loop, "step_budget", lambda solver, duration, rate=0.0: 50)
     monkeypatch.setattr(contactdyn.hybrid.loop, "WorkWatch", lambda left, progress: progress_watch(10**9))
     with pytest.raises(SimulationError, match="right-hand-side calls \\(24 per budgeted step\\)"):
         simulate("b1")
@@ -43,6 +45,28 @@ def test_the_budget_is_the_base_plus_the_rate_times_the_duration():
 
     scene = load_scene("b1", {"solver.steps_per_second": 1000.0})
     assert budget.step_budget(scene.solver, scene.duration) == budget.STEPS_BASE + 2000
+    assert budget.sample_rate(scene) == 0.0
+
+
+def test_a_sampled_laws_samples_add_their_steps_to_the_budget(monkeypatch):
+    """Each sample instant is a step boundary: a 5 kHz law over 0.1 s takes 500 steps at least, beyond a continuous
+    budget of 100 steps per simulated second (no base: 10 steps); the budget adds STEPS_PER_SAMPLE per sample."""
+    from contactdyn.scene.scene_file import load_scene
+
+    scene = load_scene("b1", {"solver.steps_per_second": 1000.0, "controller.sample_rate": 5000.0})
+    assert budget.sample_rate(scene) == 5000.0
+    assert budget.step_budget(scene.solver, scene.duration, 5000.0) == budget.STEPS_BASE + 2000 + 2 * 5000 * 2
+    monkeypatch.setattr(budget, "STEPS_BASE", 0)
+    run = simulate("b1", {"solver.steps_per_second": 100.0, "controller.sample_rate": 5000.0, "duration": 0.1})
+    assert run.stats["samples"] == 500 and 500 <= run.stats["steps"] <= 10 + 2 * 500
+
+
+def test_a_sample_rate_beyond_the_runs_step_bound_is_named():
+    from contactdyn.errors import SceneError
+    from contactdyn.scene.scene_file import load_scene
+
+    with pytest.raises(SceneError, match="phase\\[0\\].controller.sample_rate: expected at most 1e\\+07 samples"):
+        load_scene("b1", {"controller.sample_rate": 1e6, "duration": 100.0})
 
 
 def test_progress_shows_after_a_while_as_lines_off_a_terminal(monkeypatch):

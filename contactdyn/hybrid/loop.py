@@ -65,7 +65,7 @@ from ..numerics.twins import running
 from ..output.channels import Held, Segment, output_grid, sample_states
 from ..output.physics_checks import StartAudit, run_checks, violations
 from ..output.result import Result
-from ..scene.budget import STEPS_BASE, step_budget
+from ..scene.budget import STEPS_BASE, STEPS_PER_SAMPLE, sample_rate, step_budget
 from .charts import chart_events
 from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
 from .pipeline_mode import PipelineMode
@@ -138,7 +138,8 @@ class HybridRun:
         self.pipelines = LivePipelines(system, PipelineMode, use=compiled and not interpreted, twins=twins)
         self.paths = PathLog()  #: which path each mode ran on, and why not a faster one (contactdyn.model.paths)
         self.starts = StartAudit()  #: the forces where each segment starts (contactdyn.output.physics_checks)
-        self.budget = step_budget(self.solver, self.scene.duration)  #: integration steps at most (progress.py)
+        #: integration steps at most (progress.py): a sampled law's samples add theirs
+        self.budget = step_budget(self.solver, self.scene.duration, sample_rate(self.scene))
         self.work = Work(CALLS_PER_STEP * self.budget)  #: right-hand-side calls at most, rejected steps' too
         self.progress: Progress | None = None  #: shows the simulated time of a long run (contactdyn run sets it)
 
@@ -418,9 +419,11 @@ def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -
         if run.solver.method not in IMPLICIT else "even the implicit method needs more: check the magnitudes"
     spent = f"{run.work.calls} right-hand-side calls ({CALLS_PER_STEP} per budgeted step)" if calls \
         else f"{run.budget} integration steps"
+    rate = sample_rate(run.scene)
+    samples = f" + {STEPS_PER_SAMPLE} per sample of its {rate:g} Hz law" if rate else ""
     return (f"{run.scene.name}: stopped at t = {t:.6g} s of {run.scene.duration:g} s after {spent}, "
             f"its budget ({STEPS_BASE} + solver.steps_per_second = "
-            f"{run.solver.steps_per_second:g} per simulated second){stiff}; {advice}, or raise "
+            f"{run.solver.steps_per_second:g} per simulated second{samples}){stiff}; {advice}, or raise "
             "solver.steps_per_second")
 
 

@@ -13,9 +13,12 @@ import math
 from ..errors import SceneError
 
 __all__ = ["MAX_DURATION", "MAX_SAMPLES", "MAX_STEPS", "MAX_MOVES", "MAX_PHASES", "MAX_RUN_MEMORY", "STEPS_BASE",
-           "check_budget", "available_memory", "step_budget"]
+           "STEPS_PER_SAMPLE", "check_budget", "available_memory", "step_budget", "sample_rate"]
 
 STEPS_BASE = 20_000  #: integration steps every run may take, besides solver.steps_per_second × duration
+#: integration steps a sampled law's sample adds to the budget: each sample instant is a step boundary, so a period
+#: takes a step at least, two where the step that reaches the instant is clipped (contactdyn.numerics.held_steps)
+STEPS_PER_SAMPLE = 2
 
 MAX_DURATION = 1e4  #: [s] simulated at most
 MAX_SAMPLES = 10**7  #: output samples (duration × output_rate) at most
@@ -44,6 +47,11 @@ def check_budget(scene) -> None:
         raise SceneError("solver.max_step", f"at most {MAX_STEPS:.0e} steps over the run (duration / max_step; "
                          f"this is {steps:.3g}): a larger step or a shorter run", solver.max_step, file)
     for i, phase in enumerate(scene.phases):
+        samples = scene.duration * (phase.sampling.rate if phase.sampling is not None else 0.0)
+        if samples > MAX_STEPS:
+            raise SceneError(f"phase[{i}].controller.sample_rate", f"at most {MAX_STEPS:.0e} samples over the run "
+                             f"(duration × sample_rate, each a step at least; this is {samples:.3g}): a lower rate or "
+                             "a shorter run", phase.sampling.rate, file)
         moves = len(phase.reference.moves) if phase.reference is not None else 0
         if moves > MAX_MOVES:
             raise SceneError(f"phase[{i}].reference.moves", f"at most {MAX_MOVES} moves", f"{moves} moves", file)
@@ -75,6 +83,12 @@ def available_memory() -> float:
     return free
 
 
-def step_budget(solver, duration: float) -> int:
-    """The run's integration steps at most: STEPS_BASE + solver.steps_per_second × duration [s]."""
-    return int(STEPS_BASE + solver.steps_per_second * duration)
+def step_budget(solver, duration: float, rate: float = 0.0) -> int:
+    """The run's integration steps at most: STEPS_BASE + (solver.steps_per_second + STEPS_PER_SAMPLE × rate) ×
+    duration [s]; ``rate`` [Hz]: the scene's highest sample rate (:func:`sample_rate`; 0: none sampled)."""
+    return int(STEPS_BASE + (solver.steps_per_second + STEPS_PER_SAMPLE * rate) * duration)
+
+
+def sample_rate(scene) -> float:
+    """[Hz] The highest sample rate of the scene's phases' controllers (0: all continuous)."""
+    return max((p.sampling.rate for p in scene.phases if p.sampling is not None), default=0.0)
