@@ -47,11 +47,11 @@ def check_budget(scene) -> None:
         raise SceneError("solver.max_step", f"at most {MAX_STEPS:.0e} steps over the run (duration / max_step; "
                          f"this is {steps:.3g}): a larger step or a shorter run", solver.max_step, file)
     for i, phase in enumerate(scene.phases):
-        samples = scene.duration * (phase.sampling.rate if phase.sampling is not None else 0.0)
-        if samples > MAX_STEPS:
+        instants = scene.duration * (phase.sampling.rate if phase.sampling is not None else 0.0)
+        if instants > MAX_STEPS:
             raise SceneError(f"phase[{i}].controller.sample_rate", f"at most {MAX_STEPS:.0e} samples over the run "
-                             f"(duration × sample_rate, each a step at least; this is {samples:.3g}): a lower rate or "
-                             "a shorter run", phase.sampling.rate, file)
+                             f"(duration × sample_rate, each a step at least; this is {instants:.3g}): a lower rate "
+                             "or a shorter run", phase.sampling.rate, file)
         moves = len(phase.reference.moves) if phase.reference is not None else 0
         if moves > MAX_MOVES:
             raise SceneError(f"phase[{i}].reference.moves", f"at most {MAX_MOVES} moves", f"{moves} moves", file)
