@@ -18,7 +18,7 @@ import tomllib
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from .budget import STEPS_BASE
+from .budget import STEPS_BASE, STEPS_PER_SAMPLE
 from .reader import MISSING, VARIANT_KEYS, KeyRead, recording
 
 __all__ = ["KeyDoc", "reference", "markdown", "text", "list_keys", "table_field_map", "write_generated",
@@ -232,7 +232,8 @@ MEANINGS: dict[str, str] = {
     "solver.record_energy": "integrate drive work and damper dissipation (energy.* channels)",
     "solver.max_events": "most events in a run before it stops (event storm guard)",
     "solver.steps_per_second": f"integration steps a run may take per simulated second, besides a base of "
-                               f"{STEPS_BASE:g} (beyond, it stops naming the cause)",
+                               f"{STEPS_BASE:g} and {STEPS_PER_SAMPLE} per sample of a sampled law (beyond, it stops "
+                               "naming the cause)",
     "solver.storm_window": "events closer than this count towards a storm",
     "solver.storm_count": "that many events inside the window stop the run",
     "solver.stabilization": "Baumgarte rate of bonds, rigid contacts and sticks (0: none)",
