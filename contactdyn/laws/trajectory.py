@@ -17,6 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..numerics.compile_cache import njit
+from ..numerics.twins import current
 
 __all__ = ["CIRCLE_W", "add_circle", "Corner", "Move", "Ramp", "Reference", "profile", "profile_corners",
            "merge_corners", "min_span", "move_rows", "move_table", "ramp_rows", "ramp_table", "RAMP_KINDS"]
@@ -44,7 +45,7 @@ def profile(kind: str, tau: float, accel_fraction: float = 0.1) -> tuple[float, 
     Every piece holds from its corner (:func:`profile_corners`) on: at a corner the profile
     takes its right-hand limit. (Computed by :func:`_profile`, which compiled time parts call too.)
     """
-    return _profile(_profile_code(kind), tau, accel_fraction)
+    return current(_profile)(_profile_code(kind), tau, accel_fraction)  # (an interpreted run: its twin)
 
 
 def _profile_code(kind: str) -> int:
@@ -213,8 +214,8 @@ class Move:
         """(len(ts), n): the move's displacement at each time of ``ts``, ``rows``' first row elementwise over them."""
         if self.kind == "circle":
             return np.array([self.circle_rows(t)[0] for t in ts]).reshape(len(ts), len(self.delta))
-        s = _profile_values(_profile_code(self.kind), (np.asarray(ts, float) - self.start) / self.duration,
-                            self.accel_fraction)
+        s = current(_profile_values)(_profile_code(self.kind), (np.asarray(ts, float) - self.start) / self.duration,
+                                     self.accel_fraction)
         return np.multiply.outer(s, self.delta)
 
     def corners(self) -> tuple[Corner, ...]:
