@@ -249,7 +249,7 @@ class HybridRun:
         runner = _runner(self, modes, phase, start=True)  # the one pipeline's mode
         fun = runner.rhs
         scene_method = self.solver.method if self.solver.method != "auto" else (self.auto_state or AUTO_EXPLICIT)
-        if t_sample is not None and not self.launched and scene_method not in IMPLICIT and _launching(modes):
+        if t_sample is not None and not self.launched and carries_hold(scene_method) and _launching(modes):
             self.launched = _launch_settled(self, fun, t, x, self.sampled.period(phase))
         for method in dict.fromkeys((self._method(modes, scene_method), scene_method)):
             held = t_sample is not None and carries_hold(method)
@@ -461,8 +461,9 @@ def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
 def _launch_settled(run: HybridRun, fun, t: float, x: np.ndarray, period: float) -> bool:
     """Under a sampled law's hold: has a 2-D slip launched from rest grown enough that its direction's relaxation
     (every decaying mode) is stable for explicit steps of one period [s], period·|λ| ≤ LAUNCH_SETTLED? Then the
-    scene's method carries the samples for the rest of the mode; LAUNCH_METHOD would end a segment at each sample
-    and restart there (case2_writer_ur5 at 1 kHz: 797 such segments, 9× its continuous run)."""
+    scene's method, one that carries the samples (DOP853C, ``auto`` on it), does so for the rest of the mode;
+    LAUNCH_METHOD would end a segment at each sample and restart there (case2_writer_ur5 at 1 kHz: 797 such
+    segments, 9× its continuous run). Another method ends a segment at each sample either way: it keeps LSODA."""
     lam = jacobian_eigenvalues(fun, t, x)
     run.stats["rhs_evals"] += len(x) + 1
     decaying = np.abs(lam[lam.real < 0.0])
