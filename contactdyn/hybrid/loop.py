@@ -285,12 +285,9 @@ class HybridRun:
 
     def _auto_check(self, fun, t: float, x: np.ndarray, h: float, span: float, period: float | None = None) -> None:
         """``auto`` after DOP853's step budget: Radau for the rest of the mode if the step h [s] was
-        stability-bound by a decaying mode (not :func:`_bound_elsewhere`), else DOP853 without a budget (see
+        stability-bound by a decaying mode (:func:`_held_by_stability`), else DOP853 without a budget (see
         integrators); ``period`` [s]: a sampled law's, where its hold's samples were step boundaries."""
-        stiff, lam = stability_bound(fun, t, x, h, span)
-        if stiff and _bound_elsewhere(h, period, self.solver.max_step):
-            stiff, lam = False, 0.0
-        self.stats["rhs_evals"] += len(x) + 1
+        stiff, lam = _held_by_stability(self, fun, t, x, h, span, period)
         self.stats["stiffness"] = max(self.stats.get("stiffness", 0.0), lam)
         self.auto_state = "Radau" if stiff else AUTO_EXPLICIT
         if stiff:
@@ -316,11 +313,9 @@ class HybridRun:
     def _collapse_check(self, fun, t: float, x: np.ndarray, h: float, span: float, period: float | None = None
                         ) -> None:
         """A 2-D slide's explicit step collapsed to h [s] (events.StepCollapse): LAUNCH_METHOD for the rest of the
-        mode if a decaying mode held it at the method's stability bound (not :func:`_bound_elsewhere`), else the
+        mode if a decaying mode held it at the method's stability bound (:func:`_held_by_stability`), else the
         explicit method on, unwatched; ``period`` as :meth:`_auto_check`'s."""
-        stiff, _ = stability_bound(fun, t, x, h, span)
-        stiff = stiff and not _bound_elsewhere(h, period, self.solver.max_step)
-        self.stats["rhs_evals"] += len(x) + 1
+        stiff, _ = _held_by_stability(self, fun, t, x, h, span, period)
         self.resting = LAUNCH_METHOD if stiff else ""
         if stiff:
             self.stats["resting_switches"] = self.stats.get("resting_switches", 0) + 1
@@ -419,11 +414,11 @@ def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -
         if run.solver.method not in IMPLICIT else "even the implicit method needs more: check the magnitudes"
     spent = f"{run.work.calls} right-hand-side calls ({CALLS_PER_STEP} per budgeted step)" if calls \
         else f"{run.budget} integration steps"
-    rate = sample_rate(run.scene)
-    samples = f" + {STEPS_PER_SAMPLE} per sample of its {rate:g} Hz law" if rate else ""
+    rate = sample_rate(run.scene)  # [Hz]
+    per_sample = f" + {STEPS_PER_SAMPLE} per sample of its {rate:g} Hz law" if rate else ""
     return (f"{run.scene.name}: stopped at t = {t:.6g} s of {run.scene.duration:g} s after {spent}, "
             f"its budget ({STEPS_BASE} + solver.steps_per_second = "
-            f"{run.solver.steps_per_second:g} per simulated second{samples}){stiff}; {advice}, or raise "
+            f"{run.solver.steps_per_second:g} per simulated second{per_sample}){stiff}; {advice}, or raise "
             "solver.steps_per_second")
 
 
@@ -473,11 +468,18 @@ def _launch_settled(run: HybridRun, fun, t: float, x: np.ndarray, period: float)
     return settled
 
 
-def _bound_elsewhere(h: float, period: float | None, max_step: float) -> bool:
-    """Is the explicit step h [s] held by something that bounds the stiff methods' steps too: the scene's max_step
-    [s], or under a sampled law's hold a sample period [s] shorter than HOLD_SWITCH steps (LAUNCH_METHOD and Radau
-    end a segment at every sample)? Then no switch pays."""
-    return h >= (1.0 - 1e-9) * max_step or (period is not None and period < HOLD_SWITCH * h)
+def _held_by_stability(run: HybridRun, fun, t: float, x: np.ndarray, h: float, span: float, period: float | None
+                       ) -> tuple[bool, float]:
+    """(is the explicit step h [s] held at its stability bound by a mode decaying within ``span`` [s], that mode's
+    |λ| [1/s] or 0) (:func:`~contactdyn.numerics.integrators.stability_bound`; its n + 1 calls counted), but not where
+    something bounds the stiff methods' steps too, so that no switch pays: the scene's max_step, or under a sampled
+    law's hold a ``period`` [s] shorter than HOLD_SWITCH such steps (LAUNCH_METHOD and Radau end a segment at every
+    sample)."""
+    stiff, lam = stability_bound(fun, t, x, h, span)
+    run.stats["rhs_evals"] += len(x) + 1
+    if h >= (1.0 - 1e-9) * run.solver.max_step or (period is not None and period < HOLD_SWITCH * h):
+        return False, 0.0
+    return stiff, lam
 
 
 def _explicit_step(sol, held: bool) -> float:

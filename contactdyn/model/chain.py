@@ -28,7 +28,6 @@ from enum import IntEnum
 from ..errors import SceneError
 from ..laws.elements import ChainSpec, Mass, Stage
 from ..laws.stage_laws import STAGE_LAWS, kelvin_voigt
-from ..numerics.twins import current
 
 __all__ = ["NodeKind", "ChainNode", "ChainStage", "Chain", "build_chain", "balanced"]
 
@@ -72,7 +71,7 @@ class ChainStage:
 
     def force(self, x: float, xdot: float) -> float:
         """Compressive force [N] at compression x [m] and rate ẋ [m/s] (the stage's law)."""
-        return current(self._law.force)(self.k, self.b, self.params, x, xdot)  # (an interpreted run: its twin)
+        return self._law.force(self.k, self.b, self.params, x, xdot)
 
     def potential(self, x: float) -> float | None:
         """Energy [J] stored at compression x [m], None if the law does not say (see StageLaw.potential)."""

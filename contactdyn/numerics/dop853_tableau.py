@@ -1,7 +1,7 @@
 """The DOP853 tableau: Dormand and Prince's 8(5,3) pair with its dense output of order 7 (Hairer, Nørsett and
 Wanner, "Solving Ordinary Differential Equations I", 2nd ed., II.10; the coefficients of Hairer's DOP853 code as
 scipy.integrate's ``dop853_coefficients`` holds them, BSD-licensed, the same numbers bit for bit:
-``tests/test_dop853_tableau.py``).
+``tests/test_scipy_free_start.py``).
 
 Held here so that a run on the compiled steps imports neither scipy.integrate nor scipy.optimize (~0.5 s of a later
 run's start): A (16, 16) the stages' matrix, lower triangular (rows 12–15: the dense output's extra stages), B (12)

@@ -56,9 +56,10 @@ RK4_RADIUS = 2.78  #: RK4 is stable for real hλ in [-2.78, 0] [-]
 RK4_GROWTH = 1.001  #: a decaying mode amplified by more than this per step is an instability [-]
 STABILITY_BAND = (0.5, 8.0)  #: h|λ| in this band: the step is stability-bound (measured 1.4–1.6 on stiff scenes)
 DECAY_SPAN = 20.0  #: a mode "decays within the span" when −Re λ · T is at least this [-]
-#: under a sampled law's hold ``auto`` takes Radau only for an explicit step below 1/HOLD_SWITCH of the sample period:
-#: Radau ends a segment at every sample, each costing ~45 compiled DOP853 steps (benchmarks/stiff_force.toml at
-#: 1 kHz: 8.2 ms a sample against 0.18 ms a step); with a step near the period either method takes a step or two
+#: [-] under a sampled law's hold ``auto`` takes Radau only for an explicit step below 1/HOLD_SWITCH of the sample
+#: period: Radau ends a segment at every sample, each costing ~45 compiled DOP853 steps
+#: (benchmarks/stiff_force.toml at 1 kHz: 8.2 ms a sample against 0.18 ms a step); with a step near the period
+#: either method takes a step or two
 HOLD_SWITCH = 40.0
 
 
