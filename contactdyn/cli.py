@@ -185,11 +185,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     for module in scene.imports:  # importing runs code: say what ran
         _out(args, f"imported {module} from {IMPORTED.get(module, '?')}")
-    from .first_run import build_in_background, choose, default_path, leaves_ahead, mark_built
+    from .first_run import build_in_background, choose, default_path, leaves_ahead, leaves_first, mark_built
 
     choice = choose(scene, args.path or default_path())
-    if choice.build:  # a first run: its leaves compiled from the other end meanwhile, on a second core
-        leaves_ahead(scene)
+    if choice.build and leaves_ahead(scene):  # a first run: its leaves compiled from both ends, on two cores
+        leaves_first(scene)
     result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled,
                                interpreted=choice.interpreted)
     if choice.compiled:

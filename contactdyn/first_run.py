@@ -21,8 +21,12 @@ silent, low priority) that records which leaves the scene reaches in its first m
 types, with every leaf interpreted (:class:`~contactdyn.numerics.twins.RecordingTwins`; RECORD_LIMIT seconds at
 most), then compiles them last-reached first into the shared cache and marks the kind's leaves done
 (``<kind>.leaves``); the run loads each one the helper has cached by the time it reaches it.
-The two meet in the middle. The helper changes no result (it only fills the cache) and reports nothing: a leaf it
-cannot compile the run compiles, and says why. ``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
+Where it started one, the run compiles its own leaves before it starts (:func:`leaves_first`): recorded the same way
+(RUN_RECORD_LIMIT at most), the first-reached first. Each leaf is compiled under a claim (:func:`compile_claimed`,
+an exclusive lock on its file in ``kinds/claims``): the helper skips one the run holds, the run waits for one the
+helper holds and then loads it. The two meet in the middle and compile no leaf twice. The helper changes no result
+(it only fills the cache) and reports nothing: a leaf it cannot compile the run compiles, and says why.
+``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
 
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
@@ -35,6 +39,7 @@ one to read or step through). ``Result.stats["paths"]`` names each mode's path.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -47,8 +52,8 @@ from typing import Any
 from .errors import SceneError
 from .scene.scene_file import Scene
 
-__all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "leaves_ahead", "compile_backwards",
-           "mark_built", "main"]
+__all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "leaves_ahead", "leaves_first",
+           "compile_claimed", "mark_built", "main"]
 
 PATHS = ("auto", "compiled", "interpreted")  #: what ``--path`` takes
 ENV = "CONTACTDYN_PATH"  #: the environment variable that sets the default path (else ``auto``)
@@ -56,6 +61,10 @@ BUILD_TIMEOUT = 1800.0  #: [s] a background build older than this is taken as de
 BUILD_DURATION = 60.0  #: [s] simulated by a background build at most
 RECORD_DURATION = 1e-3  #: [s] simulated by the leaves' helper to learn which leaves the scene reaches
 RECORD_LIMIT = 5.0  #: [s] of wall time the helper records at most (then it compiles what it has)
+RUN_RECORD_LIMIT = 1.0  #: [s] of wall time a first run records its own leaves at most (the rest compile as reached)
+CLAIMS = "claims"  #: the leaves' claims: a folder beside the kinds' markers, one lock file per leaf and argument types
+CLAIM_WAIT = 120.0  #: [s] a run waits at most for a leaf its helper compiles (then it compiles it itself)
+CLAIM_POLL = 0.02  #: [s] between a waiting run's looks at a claim
 LEAVES_LOCK = "leaves"  #: the helper's lock, beside the kinds' markers: one helper at a time
 LEAVES_TIMEOUT = 300.0  #: [s] a helper older than this is taken as dead (its lock is stale)
 HELPER_ENV = "CONTACTDYN_LEAVES_AHEAD"  #: set to 0: no leaves' helper (a first run compiles its leaves alone)
@@ -277,9 +286,30 @@ def build(file: str, document: dict, marker: str) -> None:
 
 
 def compile_leaves(file: str, document: dict, marker: str) -> None:
-    """The helper of :func:`leaves_ahead`: the leaves the scene reaches, recorded on RECORD_DURATION of it
-    interpreted (no leaf compiled; RECORD_LIMIT of wall time at most), compiled last-reached first
-    (:func:`compile_backwards`); then the kind's leaves marked done beside ``marker``."""
+    """The helper of :func:`leaves_ahead`: the leaves the scene reaches (:func:`record_leaves`, RECORD_LIMIT at most)
+    compiled last-reached first, claimed (:func:`compile_claimed`); then the kind's leaves marked done beside
+    ``marker``."""
+    from .scene.scene_file import parse_scene
+
+    done = Path(marker).with_name(f"{kind(parse_scene(document, None, file))}.leaves")  # (the run's kind: no override)
+    compile_claimed(record_leaves(file, document, RECORD_LIMIT), backwards=True)
+    done.touch()
+
+
+def leaves_first(scene: Scene) -> None:
+    """A first run's own leaves, before it starts, beside the helper :func:`leaves_ahead` started: recorded as the
+    helper records them (RUN_RECORD_LIMIT at most), compiled first-reached first, claimed (:func:`compile_claimed`).
+    A failure here is left to the run, which meets it again and reports it."""
+    try:
+        compile_claimed(record_leaves(scene.file, scene.document, RUN_RECORD_LIMIT))
+    except Exception:  # noqa: BLE001,S110 (the run reports its own error; a leaf not compiled here compiles there)
+        pass
+
+
+def record_leaves(file: str, document: dict, limit: float) -> list[tuple[Any, tuple]]:
+    """The leaves the scene (its document, read relative to ``file``) reaches, each (numba dispatcher, argument types)
+    in the order first reached: RECORD_DURATION of it interpreted with every leaf interpreted too (none compiled),
+    ``limit`` [s] of wall time at most (what it recorded by then)."""
     import warnings
 
     from .hybrid.loop import HybridRun
@@ -287,27 +317,67 @@ def compile_leaves(file: str, document: dict, marker: str) -> None:
     from .numerics.twins import RecordingTwins
     from .scene.scene_file import parse_scene
 
-    done = Path(marker).with_name(f"{kind(parse_scene(document, None, file))}.leaves")  # (the run's kind: no override)
     scene = parse_scene(document, {"duration": RECORD_DURATION}, file)
-    recorder = RecordingTwins(deadline=time.monotonic() + RECORD_LIMIT)
+    recorder = RecordingTwins(deadline=time.monotonic() + limit)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
             HybridRun(System(scene), interpreted=True, twins=recorder).run(time.perf_counter())
         except RecordingTwins.Enough:  # (what it recorded so far: the leaves the run reaches first)
             pass
-    compile_backwards(recorder.calls)
-    done.touch()
+    return recorder.calls
 
 
-def compile_backwards(calls: list[tuple[Any, tuple]]) -> None:
-    """Compile each (numba dispatcher, argument types) of ``calls``, the last first; one that does not compile (or
-    takes no new types) is left: the run that reaches it compiles it and says why."""
-    for leaf, types_ in reversed(calls):
-        try:
-            leaf.compile(types_)
-        except Exception:  # noqa: BLE001,S112 (nothing is lost: the run compiles it itself)
+def compile_claimed(calls: list[tuple[Any, tuple]], backwards: bool = False) -> None:
+    """Compile each (numba dispatcher, argument types) of ``calls`` in order (``backwards``: the last first, as the
+    helper does), each holding its claim (:func:`_claim`). One whose claim another process holds is skipped
+    (backwards) or, after the others, waited for and then loaded from the cache (forwards: the run's own leaves).
+    One that does not compile (or takes no new types) is left: the run that reaches it compiles it and says why."""
+    waiting = []
+    for leaf, types_ in reversed(calls) if backwards else calls:
+        claim = _claim(leaf, types_)
+        if claim is None:
+            waiting.append((leaf, types_))
             continue
+        with claim:
+            _compile(leaf, types_)
+    for leaf, types_ in [] if backwards else waiting:
+        with _claim(leaf, types_, wait=CLAIM_WAIT) or contextlib.nullcontext():  # (waited too long: compiled here)
+            _compile(leaf, types_)
+
+
+def _compile(leaf, types_: tuple) -> None:
+    """numba's ``leaf.compile(types_)`` (loaded from the cache where it is there); a failure left to the run."""
+    try:
+        leaf.compile(types_)
+    except Exception:  # noqa: BLE001,S110 (nothing is lost: the run compiles it itself)
+        pass
+
+
+def _claim(leaf, types_: tuple, wait: float = 0.0):
+    """The claim of compiling ``leaf`` for ``types_``: its lock file (``kinds/claims``) open and locked (``flock``,
+    exclusive; released when closed, or when its process ends), to use in a ``with``; None if another process holds
+    it after ``wait`` [s]. Where there are no claims (no ``fcntl``: Windows; a folder that cannot be written), a
+    claim that holds nothing: each process compiles what it reaches."""
+    try:
+        import fcntl
+
+        folder = _folder() / CLAIMS
+        folder.mkdir(parents=True, exist_ok=True)
+        name = hashlib.sha256(f"{leaf.py_func.__module__}.{leaf.py_func.__qualname__}{types_}".encode()).hexdigest()
+        handle = open(folder / f"{name[:16]}.lock", "w")  # noqa: SIM115 (closed by the caller's with)
+    except (ImportError, AttributeError, OSError):
+        return contextlib.nullcontext()
+    deadline = time.monotonic() + wait
+    while True:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return handle
+        except OSError:
+            if time.monotonic() >= deadline:
+                handle.close()
+                return None
+            time.sleep(CLAIM_POLL)
 
 
 def main(argv: list[str] | None = None) -> int:

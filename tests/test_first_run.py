@@ -4,12 +4,14 @@ the kind ignores values, not laws; one background build per kind; a failed build
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
 import re
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import pytest
@@ -246,20 +248,87 @@ def test_the_recorded_leaves_are_the_ones_the_interpreted_run_compiles_and_none_
     assert recorded == compiled
 
 
-def test_the_helper_compiles_the_last_reached_leaf_first_and_leaves_what_fails_to_the_run():
+class _Leaf:
+    """A leaf as compile_claimed sees it: ``compile(types)`` appends to ``done``; ``fails``: as numba says it of a leaf
+    of fixed signatures; ``then``: called after it compiles."""
+
+    def __init__(self, name, done, fails=False, then=None):
+        self.name, self.done, self.fails, self.then = name, done, fails, then
+        self.py_func = types.SimpleNamespace(__module__="tests.leaves", __qualname__=name)
+
+    def compile(self, types_):
+        if self.fails:
+            raise RuntimeError("compilation disabled")
+        self.done.append((self.name, types_))
+        if self.then is not None:
+            self.then()
+
+
+def _hold(leaf, types_):
+    """The claim of (leaf, types) held as another process would hold it (flock: one per open file)."""
+    claim = first_run._claim(leaf, types_)
+    assert claim is not None and not isinstance(claim, contextlib.nullcontext)
+    return claim
+
+
+def test_the_helper_compiles_the_last_reached_leaf_first_skips_one_claimed_and_leaves_what_fails(markers):
     done = []
-
-    class Leaf:
-        def __init__(self, name, fails=False):
-            self.name, self.fails = name, fails
-
-        def compile(self, types_):
-            if self.fails:
-                raise RuntimeError("compilation disabled")  # (a leaf of fixed signatures, as numba says it)
-            done.append((self.name, types_))
-
-    first_run.compile_backwards([(Leaf("a"), (1,)), (Leaf("b", fails=True), (2,)), (Leaf("c"), (3,))])
+    a, b, c, d = (_Leaf(n, done, fails=n == "b") for n in "abcd")
+    with _hold(d, (4,)):  # (the run compiles d)
+        first_run.compile_claimed([(a, (1,)), (b, (2,)), (c, (3,)), (d, (4,))], backwards=True)
     assert done == [("c", (3,)), ("a", (1,))]
+
+
+def test_the_run_compiles_its_leaves_first_reached_first_and_waits_for_one_the_helper_holds(markers):
+    """The helper holds b's claim until the run has compiled c: the run goes on to c, then waits for b and takes it
+    (numba loads it from the cache then). Its claims are released: the helper can take each after it."""
+    done = []
+    held = {}
+    a, c = _Leaf("a", done), _Leaf("c", done, then=lambda: held.pop("b").close())
+    b = _Leaf("b", done)
+    held["b"] = _hold(b, (2,))
+    first_run.compile_claimed([(a, (1,)), (b, (2,)), (c, (3,))])
+    assert done == [("a", (1,)), ("c", (3,)), ("b", (2,))] and held == {}
+    for leaf, types_ in ((a, (1,)), (b, (2,)), (c, (3,))):
+        with _hold(leaf, types_):
+            pass
+    assert len(list((markers / first_run.CLAIMS).iterdir())) == 3  # one claim per leaf and types
+
+
+def test_a_run_that_waited_too_long_for_a_claim_compiles_the_leaf_itself(markers, monkeypatch):
+    monkeypatch.setattr(first_run, "CLAIM_WAIT", 0.0)
+    done = []
+    b = _Leaf("b", done)
+    with _hold(b, (2,)):
+        first_run.compile_claimed([(b, (2,))])
+    assert done == [("b", (2,))]
+
+
+def test_the_command_compiles_the_runs_leaves_before_it_runs_only_beside_a_helper(markers, monkeypatch):
+    from contactdyn import cli
+
+    order = []
+    monkeypatch.setattr(first_run, "build_in_background", lambda scene: True)
+    monkeypatch.setattr(first_run, "leaves_first", lambda scene: order.append(("leaves", scene.name)))
+    run = cli._simulate_quietly
+    monkeypatch.setattr(cli, "_simulate_quietly", lambda *a, **k: order.append(("run", a[1].name)) or run(*a, **k))
+    for started in (True, False):
+        monkeypatch.setattr(first_run, "leaves_ahead", lambda scene, started=started: started)
+        assert main(["run", "b1", *FAST, "--path", "auto", "--quiet"]) == EXIT_OK
+    assert order == [("leaves", "b1"), ("run", "b1"), ("run", "b1")]
+
+
+def test_a_first_runs_own_record_is_the_helpers_and_it_hands_it_to_compile_claimed_forwards(monkeypatch):
+    got = []
+    monkeypatch.setattr(first_run, "compile_claimed", lambda calls, backwards=False: got.append((calls, backwards)))
+    scene = load_scene("case1_cart")
+    first_run.leaves_first(scene)
+    names = [leaf.py_func.__qualname__ for leaf, _ in got[0][0]]
+    assert len(got) == 1 and got[0][1] is False and {"_kinematics", "_inertia", "lu_solve"} <= set(names)
+    assert got[0][0] == first_run.record_leaves(scene.file, scene.document, first_run.RECORD_LIMIT)
+    monkeypatch.setattr(first_run, "record_leaves", lambda *a: 1 / 0)
+    first_run.leaves_first(scene)  # (a failure is left to the run)
+    assert len(got) == 1
 
 
 def test_the_leaves_helper_needs_a_second_core_and_runs_one_at_a_time(markers, monkeypatch):
@@ -278,9 +347,9 @@ def test_the_leaves_helper_needs_a_second_core_and_runs_one_at_a_time(markers, m
     assert first_run.leaves_ahead(scene) and len(started) == 2
 
 
-def test_the_helper_hands_its_record_to_compile_backwards_marks_the_kind_and_records_no_failure(markers, monkeypatch):
+def test_the_helper_hands_its_record_to_compile_claimed_marks_the_kind_and_records_no_failure(markers, monkeypatch):
     compiled = []
-    monkeypatch.setattr(first_run, "compile_backwards", lambda calls: compiled.append(calls))
+    monkeypatch.setattr(first_run, "compile_claimed", lambda calls, backwards: compiled.append((calls, backwards)))
     monkeypatch.setattr("os.nice", lambda n: 0)
     scene = load_scene("b1")
     markers.mkdir()
@@ -288,7 +357,7 @@ def test_the_helper_hands_its_record_to_compile_backwards_marks_the_kind_and_rec
     lock.touch()
     monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps(scene.document)))
     assert first_run.main(["--leaves", scene.file, str(markers / first_run.LEAVES_LOCK)]) == 0
-    assert len(compiled) == 1 and compiled[0] and not lock.exists()
+    assert len(compiled) == 1 and compiled[0][0] and compiled[0][1] is True and not lock.exists()
     done = markers / f"{first_run.kind(scene)}.leaves"
     assert [p.name for p in markers.iterdir()] == [done.name]
     monkeypatch.setattr(first_run, "_cores", lambda: 2)
