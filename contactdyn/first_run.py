@@ -17,7 +17,7 @@ a few seconds once per install) give the compiled run's outputs bit for bit, ~20
 While a first run compiles its leaves (the rigid-body algorithms and the dense algebra its twins call compiled,
 one by one as it first reaches them: most of its time), a machine with a second core compiles them from the other
 end: :func:`leaves_ahead` starts one helper (``python -m contactdyn.first_run --leaves FILE MARKER``; detached,
-silent, low priority) that records which leaves the scene reaches in its first millisecond, and with which argument
+silent) that records which leaves the scene reaches in its first millisecond, and with which argument
 types, with every leaf interpreted (:class:`~contactdyn.numerics.twins.RecordingTwins`; RECORD_LIMIT seconds at
 most), then compiles them last-reached first into the shared cache and marks the kind's leaves done
 (``<kind>.leaves``); the run loads each one the helper has cached by the time it reaches it.
@@ -243,8 +243,8 @@ def _start(scene: Scene, marker: Path, *options: str) -> bool:
     """Start ``python -m contactdyn.first_run [options] FILE MARKER`` detached, the scene's document on stdin; its
     lock ``MARKER.building`` (taken) then holds its process id (False, the lock given back: it could not start)."""
     lock = Path(f"{marker}.building")
-    flags = (getattr(subprocess, "DETACHED_PROCESS", 0) | getattr(subprocess, "CREATE_NEW_PROCESS_GROUP", 0)
-             | getattr(subprocess, "BELOW_NORMAL_PRIORITY_CLASS", 0))  # (Windows: os.nice is POSIX's)
+    low = 0 if "--leaves" in options else getattr(subprocess, "BELOW_NORMAL_PRIORITY_CLASS", 0)  # (as main's nice)
+    flags = getattr(subprocess, "DETACHED_PROCESS", 0) | getattr(subprocess, "CREATE_NEW_PROCESS_GROUP", 0) | low
     detached = {"start_new_session": True} if os.name == "posix" else {"creationflags": flags}
     try:
         child = subprocess.Popen([sys.executable, "-P", "-m", __name__, *options, str(Path(scene.file).resolve()),
@@ -389,7 +389,7 @@ def main(argv: list[str] | None = None) -> int:
     helper = args[:1] == ["--leaves"]
     file, marker = args[1:3] if helper else args[:2]
     try:
-        os.nice(10)
+        os.nice(0 if helper else 10)  # (the helper works for a run the user waits for, which may wait for its claims)
     except (AttributeError, OSError):
         pass
     try:
