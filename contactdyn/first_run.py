@@ -14,7 +14,7 @@ a few seconds once per install) give the compiled run's outputs bit for bit, ~20
   marks the kind built. One line says so after the run (and, while the leaves compile, the compile notice says
   that it compiles). A run the command takes on the compiled call (``--path compiled``) marks its kind too.
 
-While a first run compiles its leaves (the rigid-body algorithms and the dense algebra its twins call compiled,
+While a first run compiles its leaves (the rigid-body algorithms, dense algebra and step sums its twins call compiled,
 one by one as it first reaches them: most of its time), a machine with a second core compiles them from the other
 end: :func:`leaves_ahead` starts one helper (``python -m contactdyn.first_run --leaves FILE MARKER``; detached,
 silent) that records which leaves the scene reaches in its first millisecond, and with which argument

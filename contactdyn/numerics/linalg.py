@@ -29,7 +29,7 @@ from numba.extending import intrinsic, overload
 
 from .compile_cache import njit
 
-__all__ = ["solve_vector", "lu_solve", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
+__all__ = ["solve_vector", "lu_solve", "residual_ok", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
            "forward_solve", "contiguous", "dot3", "fma", "cross3", "put"]
 
 try:
@@ -156,6 +156,21 @@ def lu_solve(A, b):
             s -= LU[k, j] * z[j]
         z[k] = s / LU[k, k]
     return z
+
+
+@njit(cache=True)
+def residual_ok(A, z, b):
+    """z is finite and ‖A z − b‖ ≤ 1e-9 (1 + ‖b‖) (the KKT solve's test, contactdyn.model.pipeline.kkt)."""
+    r2 = b2 = 0.0
+    for i in range(b.size):
+        if not math.isfinite(z[i]):
+            return False
+        s = 0.0
+        for j in range(b.size):
+            s += A[i, j] * z[j]
+        r2 += (s - b[i]) ** 2
+        b2 += b[i] * b[i]
+    return math.sqrt(r2) <= 1e-9 * (1.0 + math.sqrt(b2))
 
 
 @njit(cache=True)

@@ -11,9 +11,10 @@ namespace, a copy in which every function of the package is again its twin (and 
 shadow). So ``Twins().of(call)(...)`` runs ``call`` and everything it reaches as plain Python, nothing compiled,
 the real modules untouched (the compiled path in the same process is unaffected). Two exceptions:
 
-- the **leaves** (:data:`LEAVES`: the rigid-body algorithms of :mod:`contactdyn.robot.rigid_body` and the dense
-  linear algebra of :mod:`.linalg`, most of an interpreted call's time, self-contained and the same for every
-  scene) stay numba dispatchers: compiled once per install (seconds, cached), called from the twins;
+- the **leaves** (:data:`LEAVES`: the rigid-body algorithms of :mod:`contactdyn.robot.rigid_body`, the dense
+  linear algebra of :mod:`.linalg` and DOP853's stage sums and error norm of :mod:`contactdyn.hybrid.steps`, most
+  of an interpreted call's time, self-contained and the same for every scene) stay numba dispatchers: compiled once
+  per install (seconds, cached), called from the twins;
 - the **handle tables**: interpreted, a stage reached by address (:mod:`.native_call`, the laws' ABIs, the
   controllers) is a *handle* (the Python function's id, given by the address functions while
   :func:`.native_call.giving_handles` is on: the mode is packed that way), looked up in a table; in the shadows
@@ -49,12 +50,15 @@ from numba.core.dispatcher import Dispatcher
 __all__ = ["Twins", "RecordingTwins", "LEAVES", "run_as", "current", "running"]
 
 PACKAGE = "contactdyn."
-#: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms and the dense
-#: linear algebra (numerics.linalg)
+#: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms, the dense
+#: linear algebra (numerics.linalg) and DOP853's stage sums and error norm (hybrid.steps: each loops over the state
+#: and the stages, per step)
 LEAVES = frozenset([*(f"contactdyn.robot.rigid_body.{n}" for n in
                       ("_kinematics", "_nonlinear", "_jacobians", "_inertia", "frame_motion_into")),
                     *(f"contactdyn.numerics.linalg.{n}" for n in
-                      ("mv", "mtv", "mm", "mtm", "lu_solve", "cholesky", "forward_solve", "pinv", "put"))])
+                      ("mv", "mtv", "mm", "mtm", "lu_solve", "residual_ok", "cholesky", "forward_solve", "pinv",
+                       "put")),
+                    *(f"contactdyn.hybrid.steps.{n}" for n in ("_stage_state", "_step_end", "_error_norm"))])
 #: module -> its tables handle -> Python function (or controller class) that must give twins
 HANDLE_TABLES = {
     "contactdyn.numerics.native_call": ("_HANDLES",),

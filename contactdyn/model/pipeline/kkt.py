@@ -19,27 +19,12 @@ import math
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import lu_solve, put
+from ...numerics.linalg import lu_solve, put, residual_ok
 from .pack import NQ, NV, R_MREST
 
-__all__ = ["kkt_solve", "solve_linear", "residual_ok", "least_squares", "NOT_FINITE", "REGULAR", "LEAST_SQUARES"]
+__all__ = ["kkt_solve", "solve_linear", "least_squares", "NOT_FINITE", "REGULAR", "LEAST_SQUARES"]
 
 NOT_FINITE, REGULAR, LEAST_SQUARES = 0, 1, 2  #: a solve's outcome: no solve (non-finite), LU, least squares
-
-
-@njit(cache=True)
-def residual_ok(A, z, b):
-    """z is finite and ‖A z − b‖ ≤ 1e-9 (1 + ‖b‖) (constraints.solve_linear's test)."""
-    r2 = b2 = 0.0
-    for i in range(b.size):
-        if not math.isfinite(z[i]):
-            return False
-        s = 0.0
-        for j in range(b.size):
-            s += A[i, j] * z[j]
-        r2 += (s - b[i]) ** 2
-        b2 += b[i] * b[i]
-    return math.sqrt(r2) <= 1e-9 * (1.0 + math.sqrt(b2))
 
 
 @njit(cache=True)
