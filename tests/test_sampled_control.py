@@ -412,3 +412,27 @@ def test_a_sampled_2d_launch_hands_over_to_the_scenes_method_once_its_direction_
     assert handed.stats["samples"] == kept.stats["samples"] == 800
     for key in ("contact.pencil.F_n", "tip"):
         assert np.abs(handed[key] - kept[key]).max() < 1e-5
+
+
+def test_rk4_checks_its_step_once_per_mode_not_at_each_samples_segment(monkeypatch):
+    """RK4 ends a segment at every sample; it checks its fixed step against the mode's eigenvalues (n + 1 calls and an
+    eigendecomposition) at a mode's first segment only, not at the later ones of the same mode. The outputs are those
+    of a run that checks at every segment, bit for bit."""
+    from contactdyn.hybrid import loop
+    from contactdyn.numerics import integrators
+
+    checks = []
+    check = integrators.fixed_step_instability
+    monkeypatch.setattr(integrators, "fixed_step_instability", lambda *a: checks.append(a[1]) or check(*a))
+    overrides = {"solver.method": "RK4", "solver.max_step": 2.5e-4, "controller.sample_rate": 1000.0,
+                 "duration": 0.1}
+    once = simulate("b1", overrides)
+    per_mode = len(checks)
+    assert once.stats["segments"] >= 100 and 1 <= per_mode <= 1 + once.stats["events"]
+    integrate = loop.integrate
+    monkeypatch.setattr(loop, "integrate", lambda *a, **k: integrate(*a, **{**k, "checked": False}))
+    every = simulate("b1", overrides)
+    assert len(checks) - per_mode == every.stats["segments"]
+    assert once.stats["rhs_evals"] < every.stats["rhs_evals"]
+    for name in ("contact.tip.F_n", "q"):
+        np.testing.assert_array_equal(once[name], every[name])

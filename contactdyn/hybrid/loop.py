@@ -133,6 +133,7 @@ class HybridRun:
         #: a 2-D slip launched from rest, sampled, whose direction relaxes slowly enough for explicit steps of one
         #: period (:func:`_launch_settled`): the scene's method for the rest of the mode
         self.launched = False
+        self.step_checked = False  #: RK4's step checked against the current mode (at its first segment's start)
         #: the modes' pipelines, compiled; ``interpreted`` (or not ``compiled``): the same call run as its twins
         #: (numerics.twins: a scene kind's first run), ``twins`` if given (a numerics.twins.Twins)
         self.pipelines = LivePipelines(system, PipelineMode, use=compiled and not interpreted, twins=twins)
@@ -266,8 +267,9 @@ class HybridRun:
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # a singular call: see PipelineMode
                 sol = integrate(self.work.wrap(rhs), (t, end), x, method, rtol=scale * self.solver.rtol,
                                 atol=scale * self.solver.atol, max_step=self._max_step(modes, method), events=events,
-                                first_step=h0, jac=jac, hold=hold)
+                                first_step=h0, jac=jac, hold=hold, checked=self.step_checked)
             self.stats["rhs_evals"] += sol.nfev + (jac.calls if jac else 0)
+            self.step_checked = self.step_checked or method in FIXED
             if sol.status >= 0 and np.all(np.isfinite(sol.y[:, -1])):
                 break  # else a failed launch or finishing method: retry with the scene's
             if finishing:
@@ -324,7 +326,7 @@ class HybridRun:
     def _new_mode(self) -> None:
         """Forget the method choices made for the mode that ends (auto's, a slide's coming to rest)."""
         self.auto_state = self.resting = None
-        self.launched = False
+        self.launched = self.step_checked = False
 
     def _method(self, modes: list[ContactMode], method: str) -> str:
         """The segment's method, but a stiff-capable one while a 2-D slip launches from rest or comes to rest.

@@ -142,11 +142,14 @@ def carries_hold(method: str) -> bool:
 
 
 def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, rtol: float, atol: float,
-              max_step: float = np.inf, events=None, first_step: float | None = None, jac=None, hold=None):
+              max_step: float = np.inf, events=None, first_step: float | None = None, jac=None, hold=None,
+              checked: bool = False):
     """One smooth segment by the named method, with dense output and events (``solve_ivp``'s result fields).
 
     ``hold``: a sampled controller's hold whose sample instants are step boundaries inside the run
-    (:mod:`contactdyn.numerics.held_steps`); the compiled DOP853 (``COMPILED``) only: ``carries_hold``."""
+    (:mod:`contactdyn.numerics.held_steps`); the compiled DOP853 (``COMPILED``) only: ``carries_hold``.
+    ``checked``: RK4's step was checked against this mode already (an earlier segment of it, ended by a sample or
+    a corner): no check at the segment's start (its check on the state's growth stays)."""
     if hold is not None:
         if method not in COMPILED:
             raise ValueError(f"{method} does not carry a hold: its segments end at the sample instants")
@@ -166,6 +169,6 @@ def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, 
     if method == "RK4":
         from .rk4 import RK4
 
-        method, options = RK4, {"instability": fixed_step_instability}
+        method, options = RK4, {"instability": fixed_step_instability, "check_start": not checked}
     return solve_ivp(fun, t_span, y0, method=method, rtol=rtol, atol=atol, max_step=max_step, events=events or None,
                      dense_output=True, first_step=first_step, **options)

@@ -39,14 +39,15 @@ class RK4(OdeSolver):
     """Classical 4th-order Runge–Kutta with a fixed step ``max_step`` [s] (the last step is cut to t_bound).
 
     Before its first step it checks the step against the system's modes at the start (``instability``, solve_ivp's
-    option: :func:`~contactdyn.numerics.integrators.fixed_step_instability`, as ``integrate`` passes it) and stops
-    with that reason rather than run a blow-up;
+    option: :func:`~contactdyn.numerics.integrators.fixed_step_instability`, as ``integrate`` passes it; not where
+    ``check_start`` is false: a later segment of a mode already checked) and stops with that reason rather than run
+    a blow-up;
     it checks again whenever the state has grown RK4_RECHECK_GROWTH-fold since the last
     check, and a step that leaves the finite numbers stops it too.
     """
 
     def __init__(self, fun, t0, y0, t_bound, max_step=np.inf, vectorized=False, rtol=None, atol=None,
-                 first_step=None, instability=None, **extraneous):
+                 first_step=None, instability=None, check_start=True, **extraneous):
         super().__init__(fun, t0, y0, t_bound, vectorized)
         if not np.isfinite(max_step) or max_step <= 0.0:
             raise ValueError("RK4 takes fixed steps of solver.max_step: give solver.max_step [s]")
@@ -57,7 +58,7 @@ class RK4(OdeSolver):
         self.y_old = self.f_old = None
         #: instability(fun, t, x, h) -> why the step h [s] cannot work from (t, x), or None (None: not checked)
         self.instability = instability if instability is not None else lambda fun, t, x, h: None
-        self.unstable = self.instability(self.fun, t0, np.asarray(y0, float), self.h)
+        self.unstable = self.instability(self.fun, t0, np.asarray(y0, float), self.h) if check_start else None
         self.checked_size = float(np.max(np.abs(y0), initial=0.0)) + 1.0  #: state size at the last check
 
     def _step_impl(self):
