@@ -20,13 +20,12 @@ end: :func:`leaves_ahead` starts one helper (``python -m contactdyn.first_run --
 silent) that records which leaves the scene reaches in its first millisecond, and with which argument
 types, with every leaf interpreted (:class:`~contactdyn.numerics.twins.RecordingTwins`; RECORD_LIMIT seconds at
 most), then compiles them last-reached first into the shared cache and marks the kind's leaves done
-(``<kind>.leaves``); the run loads each one the helper has cached by the time it reaches it.
-Where it started one, the run compiles its own leaves before it starts (:func:`leaves_first`): recorded the same way
-(RUN_RECORD_LIMIT at most), the first-reached first. Each leaf is compiled under a claim (:func:`compile_claimed`,
-an exclusive lock on its file in ``kinds/claims``): the helper skips one the run holds, the run waits for one the
-helper holds and then loads it. The two meet in the middle and compile no leaf twice. The helper changes no result
-(it only fills the cache) and reports nothing: a leaf it cannot compile the run compiles, and says why.
-``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
+(``<kind>.leaves``). Where it started one, the run compiles its own leaves before it starts (:func:`leaves_first`):
+recorded the same way (RUN_RECORD_LIMIT at most), the first-reached first. Each leaf is compiled under a claim
+(:func:`compile_claimed`, an exclusive lock on its file in ``kinds/claims``): the helper skips one the run holds,
+the run waits for one the helper holds and then loads it. The two meet in the middle and compile no leaf twice.
+The helper changes no result (it only fills the cache) and reports nothing: a leaf it cannot compile the run
+compiles, and says why. ``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
 
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
@@ -373,11 +372,14 @@ def _claim(leaf, types_: tuple, wait: float = 0.0):
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
             return handle
-        except OSError:
+        except BlockingIOError:  # (held by another process)
             if time.monotonic() >= deadline:
                 handle.close()
                 return None
             time.sleep(CLAIM_POLL)
+        except OSError:  # a file system that does not lock: no claims
+            handle.close()
+            return contextlib.nullcontext()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -410,3 +410,19 @@ def test_a_containers_cpu_quota_counts_as_cores(tmp_path, monkeypatch, quota, co
     assert first_run._cores() == cores
     (tmp_path / "cpu.max").unlink()
     assert first_run._cores() == 2
+
+
+def test_a_file_system_that_does_not_lock_gives_claims_that_hold_nothing(markers, monkeypatch):
+    """flock failing otherwise than "held" (ENOLCK on some network file systems): no claims, each process compiles
+    what it reaches, nobody waits."""
+    import fcntl
+
+    def no_locks(handle, operation):
+        raise OSError(37, "No locks available")
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    done = []
+    claim = first_run._claim(_Leaf("a", done), (1,), wait=60.0)
+    assert isinstance(claim, contextlib.nullcontext)
+    first_run.compile_claimed([(_Leaf("a", done), (1,))])
+    assert done == [("a", (1,))]
