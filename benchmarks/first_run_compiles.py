@@ -2,12 +2,13 @@
 
 For each scene, a fresh process runs ``contactdyn run SCENE --json`` with an empty compile cache (what a fresh
 install meets: contactdyn.first_run). A ``sitecustomize`` in a temporary folder on PYTHONPATH registers a listener
-for numba's ``numba:compile`` events in every process that imports numba (the run, its helper, the background build)
-and appends each outermost compile (start, end [s], process role, function) to a log. Printed per scene: the
-run's wall time [s], when the run's last leaf compile ended ("ready" [s] after the start), the compile seconds of
-the run and of the helper, and the functions both compiled (duplicates). The background build is killed when the
-run ends (it would run on). Steadier than the whole first run's wall time: what the leaves' split changes is when
-the run is ready, not how long its interpreted part takes.
+for numba's ``numba:compile`` events in every process that imports numba (the run, its helper, the background build:
+``python -m contactdyn.first_run`` has its module's path as ``sys.argv[0]``) and appends each outermost compile
+(start, end [s], process role, function) to a log. Printed per scene: the run's wall time [s], when the run's last
+leaf compile ended ("ready" [s] after the start), the compile seconds of the run and of the helper, and the
+functions both compiled (duplicates). The background build is killed when the run ends (it would run on). Steadier
+than the whole first run's wall time: what the leaves' split changes is when the run is ready, not how long its
+interpreted part takes.
 
     python3 benchmarks/first_run_compiles.py [SCENE ...] [--repeats 1]
 
@@ -33,7 +34,7 @@ import os, sys, time
 def _listen():
     from numba.core import event
     log, depth = open(os.environ["FIRST_RUN_COMPILES_LOG"], "a", buffering=1), [0]
-    role = "helper" if "--leaves" in sys.argv else ("build" if "contactdyn.first_run" in " ".join(sys.argv) else "run")
+    role = "helper" if "--leaves" in sys.argv else ("build" if sys.argv[0].endswith("first_run.py") else "run")
     class Listener(event.Listener):
         def on_start(self, e):
             depth[0] += 1

@@ -332,15 +332,17 @@ def compile_claimed(calls: list[tuple[Any, tuple]], backwards: bool = False) -> 
     helper does), each holding its claim (:func:`_claim`). One whose claim another process holds is skipped
     (backwards) or, after the others, waited for and then loaded from the cache (forwards: the run's own leaves).
     One that does not compile (or takes no new types) is left: the run that reaches it compiles it and says why."""
-    waiting = []
+    held_elsewhere = []
     for leaf, types_ in reversed(calls) if backwards else calls:
         claim = _claim(leaf, types_)
         if claim is None:
-            waiting.append((leaf, types_))
+            held_elsewhere.append((leaf, types_))
             continue
         with claim:
             _compile(leaf, types_)
-    for leaf, types_ in [] if backwards else waiting:
+    if backwards:  # (the helper: the run compiles those)
+        return
+    for leaf, types_ in held_elsewhere:
         with _claim(leaf, types_, wait=CLAIM_WAIT) or contextlib.nullcontext():  # (waited too long: compiled here)
             _compile(leaf, types_)
 

@@ -476,12 +476,11 @@ def _held_by_stability(run: HybridRun, fun, t: float, x: np.ndarray, h: float, s
     |λ| [1/s] or 0) (:func:`~contactdyn.numerics.integrators.stability_bound`; its n + 1 calls counted), but not where
     something bounds the stiff methods' steps too, so that no switch pays: the scene's max_step, or under a sampled
     law's hold a ``period`` [s] shorter than HOLD_SWITCH such steps (LAUNCH_METHOD and Radau end a segment at every
-    sample)."""
-    stiff, lam = stability_bound(fun, t, x, h, span)
-    run.stats["rhs_evals"] += len(x) + 1
+    sample: then not even its Jacobian is formed)."""
     if h >= (1.0 - 1e-9) * run.solver.max_step or (period is not None and period < HOLD_SWITCH * h):
         return False, 0.0
-    return stiff, lam
+    run.stats["rhs_evals"] += len(x) + 1
+    return stability_bound(fun, t, x, h, span)
 
 
 def _explicit_step(sol, held: bool) -> float:
