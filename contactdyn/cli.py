@@ -173,10 +173,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 # ---- run -------------------------------------------------------------------------------------
 def _cmd_run(args: argparse.Namespace) -> int:
-    from .model.paths import slower_paths
-    from .output.metrics import metrics
     from .scene.scene_file import load_scene, parse_override
-    from .simulate import simulate
 
     overrides = dict(parse_override(s) for s in args.set)
     scene = load_scene(args.scene, overrides)
@@ -188,7 +185,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from .first_run import build_in_background, choose, default_path, leaves_ahead, leaves_first, mark_built
 
     choice = choose(scene, args.path or default_path())
-    if choice.build and leaves_ahead(scene):  # a first run: its leaves compiled from both ends, on two cores
+    helped = choice.build and leaves_ahead(scene)  # a first run's helper, started before the simulator's imports
+    from .model.paths import slower_paths
+    from .output.metrics import metrics
+    from .simulate import simulate
+
+    if helped:  # a first run: its leaves compiled from both ends, on two cores
         leaves_first(scene)
     result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled,
                                interpreted=choice.interpreted)

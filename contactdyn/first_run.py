@@ -15,12 +15,13 @@ a few seconds once per install) give the compiled run's outputs bit for bit, ~20
   that it compiles). A run the command takes on the compiled call (``--path compiled``) marks its kind too.
 
 While a first run compiles its leaves (the rigid-body algorithms, dense algebra and step sums its twins call compiled,
-one by one as it first reaches them: most of its time), a machine with a second core compiles them from the other
-end: :func:`leaves_ahead` starts one helper (``python -m contactdyn.first_run --leaves FILE MARKER``; detached,
-silent) that records which leaves the scene reaches in its first millisecond, and with which argument
-types, with every leaf interpreted (:class:`~contactdyn.numerics.twins.RecordingTwins`; RECORD_LIMIT seconds at
-most), then compiles them last-reached first into the shared cache and marks the kind's leaves done
-(``<kind>.leaves``). Where it started one, the run compiles its own leaves before it starts (:func:`leaves_first`):
+one by one as it first reaches them: most of its time), a machine with a second core compiles them from the other end:
+:func:`leaves_ahead` starts one helper (``python -m contactdyn.first_run --leaves FILE MARKER``; detached, silent)
+that records which leaves the scene reaches in its first millisecond (and each later phase in its first, started
+there), and with which argument types, with every leaf interpreted
+(:class:`~contactdyn.numerics.twins.RecordingTwins`; RECORD_LIMIT seconds at most), then compiles them last-reached
+first into the shared cache and marks the kind's leaves done (``<kind>.leaves``). Where it started one, the run
+compiles its own leaves before it starts (:func:`leaves_first`):
 recorded the same way (RUN_RECORD_LIMIT at most), the first-reached first. Each leaf is compiled under a claim
 (:func:`compile_claimed`, an exclusive lock on its file in ``kinds/claims``): the helper skips one the run holds,
 the run waits for one the helper holds and then loads it. The two meet in the middle and compile no leaf twice.
@@ -308,23 +309,42 @@ def leaves_first(scene: Scene) -> None:
 def record_leaves(file: str, document: dict, limit: float) -> list[tuple[Any, tuple]]:
     """The leaves the scene (its document, read relative to ``file``) reaches, each (numba dispatcher, argument types)
     in the order first reached: RECORD_DURATION of it interpreted with every leaf interpreted too (none compiled),
-    ``limit`` [s] of wall time at most (what it recorded by then)."""
+    then as much of each later phase started from the scene's start (:func:`_phase_starts`: a law of a later phase
+    reaches its own leaves, ``pinv`` for one); ``limit`` [s] of wall time at most (what it recorded by then). A later
+    phase that cannot start there adds nothing (the run compiles what it reaches)."""
+    from .numerics.twins import RecordingTwins
+
+    recorder = RecordingTwins(deadline=time.monotonic() + limit)
+    for k, start in enumerate(_phase_starts(document)):
+        try:
+            _record(file, start, recorder)
+        except RecordingTwins.Enough:  # (what it recorded so far: the leaves the run reaches first)
+            break
+        except Exception:
+            if k == 0:
+                raise
+    return recorder.calls
+
+
+def _phase_starts(document: dict) -> list[dict]:
+    """The scene's document, then for each later ``[[phase]]`` a copy whose phases begin with it."""
+    phases = document.get("phase")
+    later = range(1, len(phases)) if isinstance(phases, list) else range(0)
+    return [document, *({**document, "phase": phases[k:]} for k in later)]
+
+
+def _record(file: str, document: dict, recorder) -> None:
+    """RECORD_DURATION of the scene of ``document`` run interpreted on ``recorder`` (RecordingTwins)."""
     import warnings
 
     from .hybrid.loop import HybridRun
     from .model.system import System
-    from .numerics.twins import RecordingTwins
     from .scene.scene_file import parse_scene
 
     scene = parse_scene(document, {"duration": RECORD_DURATION}, file)
-    recorder = RecordingTwins(deadline=time.monotonic() + limit)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        try:
-            HybridRun(System(scene), interpreted=True, twins=recorder).run(time.perf_counter())
-        except RecordingTwins.Enough:  # (what it recorded so far: the leaves the run reaches first)
-            pass
-    return recorder.calls
+        HybridRun(System(scene), interpreted=True, twins=recorder).run(time.perf_counter())
 
 
 def compile_claimed(calls: list[tuple[Any, tuple]], backwards: bool = False) -> None:

@@ -18,7 +18,7 @@ import pytest
 
 from contactdyn import first_run
 from contactdyn.cli import EXIT_OK, main
-from contactdyn.errors import SceneError
+from contactdyn.errors import SceneError, SimulationError
 from contactdyn.model.paths import INTERPRETED, PIPELINE
 from contactdyn.scene.scene_file import load_scene
 
@@ -329,6 +329,28 @@ def test_a_first_runs_own_record_is_the_helpers_and_it_hands_it_to_compile_claim
     monkeypatch.setattr(first_run, "record_leaves", lambda *a: 1 / 0)
     first_run.leaves_first(scene)  # (a failure is left to the run)
     assert len(got) == 1
+
+
+def test_the_record_reaches_the_leaves_of_a_later_phase_started_at_the_scenes_start(monkeypatch):
+    """case1_cart's push (its second phase) runs the dynamic position law, whose J⁺ (``pinv``) the approach never
+    calls: the record holds it, after the first phase's leaves; a phase that cannot start adds nothing."""
+    scene = load_scene("case1_cart")
+    starts = first_run._phase_starts(scene.document)
+    assert [[p["name"] for p in d["phase"]] for d in starts] == [["approach", "push"], ["push"]]
+    assert first_run._phase_starts(load_scene("b1").document) == [load_scene("b1").document]
+    names = [leaf.py_func.__qualname__ for leaf, _ in first_run.record_leaves(scene.file, scene.document, 60.0)]
+    approach = {**scene.document, "phase": scene.document["phase"][:1]}
+    first = [leaf.py_func.__qualname__ for leaf, _ in first_run.record_leaves(scene.file, approach, 60.0)]
+    assert "pinv" in names and "pinv" not in first and names[:len(first)] == first
+    record = first_run._record
+
+    def push_fails(file, document, recorder):
+        if document["phase"][0]["name"] == "push":
+            raise SimulationError("cannot start there")
+        record(file, document, recorder)
+
+    monkeypatch.setattr(first_run, "_record", push_fails)
+    assert [leaf.py_func.__qualname__ for leaf, _ in first_run.record_leaves(scene.file, scene.document, 60.0)] == first
 
 
 def test_the_leaves_helper_needs_a_second_core_and_runs_one_at_a_time(markers, monkeypatch):
