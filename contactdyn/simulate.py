@@ -29,6 +29,7 @@ from .model.contact import ContactMode
 from .model.phases import Phase
 from .model.system import System
 from .numerics import notice
+from .numerics.twins import running
 from .output.result import Result
 from .scene.scene_file import Scene, load_scene
 
@@ -50,8 +51,9 @@ def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None,
         scene = parse_scene(scene.document, overrides, scene.file)
     wall0 = time.perf_counter()
     system = System(scene)
-    notes = sanity_warnings(system)
     loop = HybridRun(system, compiled, interpreted)
+    with running(loop.pipelines.twins):  # (interpreted: the checks' calls of the model's numba functions too)
+        notes = sanity_warnings(system)
     if progress:
         loop.progress = Progress(scene.name, scene.duration)
     if interpreted or not compiled:

@@ -18,11 +18,11 @@ from contactdyn.numerics.twins import LEAVES, Twins
 from contactdyn.simulate import simulate
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-#: modules whose functions may compile in an interpreted run: the leaves' (and their callees'), and what the loop
-#: calls outside the pipeline (the dense output's interpolants, a law's cfunc at bind, the readable parts of a
-#: transition: the impact's projection)
+#: modules whose functions may compile in an interpreted run: the leaves' (and their callees'), and a law's cfunc at
+#: bind (the model's numba functions the loop and the checks call outside the pipeline run as twins: a turning
+#: surface's kinematics, an impact's chains)
 OUTSIDE = ("contactdyn.robot.rigid_body", "contactdyn.numerics.linalg", "contactdyn.numerics.dop853",
-           "contactdyn.numerics.dense_output", "contactdyn.laws.", "contactdyn.model.chain_forces")
+           "contactdyn.numerics.dense_output", "contactdyn.hybrid.steps", "contactdyn.laws.")
 
 
 class _Compiles(event.Listener):
@@ -63,6 +63,7 @@ def _same(interpreted, compiled) -> None:
 
 @pytest.mark.parametrize("scene, overrides", [
     ("b1", {"duration": 0.3}),
+    ("lever", {"duration": 0.1}),  # a surface turning with a body's frame, touched (an impact) at 68 ms, then a slip
     (EXAMPLES / "cubic_press.toml", {"duration": 0.1}),  # a user's stage law (examples/cubic_stage.py)
     (EXAMPLES / "impedance_press.toml", {"duration": 0.2}),  # a user's controller (examples/my_laws.py)
     (EXAMPLES / "force_pi_press.toml", {"duration": 0.2}),  # a user's force-reading law (examples/force_law.py)
@@ -113,4 +114,26 @@ def test_a_sampled_laws_command_runs_as_twins_in_an_interpreted_run(monkeypatch)
     interpreted = simulate("force_loop_real_cell", overrides, interpreted=True)
     assert interpreted.stats["samples"] == compiled.stats["samples"] > 20
     assert {name: f.signatures for name, f in fresh.items()} == {"torque": [], "force_targets": []}
+    _same(interpreted, compiled)
+
+
+def test_a_turning_surfaces_kinematics_and_an_impacts_chain_run_as_twins_in_an_interpreted_run(monkeypatch):
+    """The lever's surface turns with the bar's frame: the start's kinematics and the scene's checks (before the run)
+    call contact.turning_surface from Python, its touch's impact orients the chains (chain_forces.orient). In an
+    interpreted run each is its twin (numerics.twins.current), so a first run compiles neither (turning_surface
+    alone took a cold first run 2.5–3.5 s, in the run and in its helper). Each is replaced by a fresh, never compiled
+    dispatcher of the same function: a call of it from Python would compile it and give it a signature."""
+    import numba
+
+    from contactdyn.model import chain_forces, system
+
+    overrides = {"duration": 0.1}
+    compiled = simulate("lever", overrides)
+    fresh = {"turning_surface": numba.njit(system.turning_surface.py_func),
+             "orient": numba.njit(chain_forces.orient.py_func)}
+    monkeypatch.setattr(system, "turning_surface", fresh["turning_surface"])
+    monkeypatch.setattr(chain_forces, "orient", fresh["orient"])
+    interpreted = simulate("lever", overrides, interpreted=True)
+    assert [e["kind"] for e in interpreted.events] == ["touch", "slip"]
+    assert {name: f.signatures for name, f in fresh.items()} == {"turning_surface": [], "orient": []}
     _same(interpreted, compiled)

@@ -167,16 +167,16 @@ def chain_forces(system, c: Contact, dc: DirectionalChain, touching: bool, offse
     if a is None:
         a = dc.arrays[key] = pack(system, c, dc, touching, key[1])
     u, p_tip, v_tip, p_env, v_env = chain_sides(c, dc, kin)
-    if c.turning:
-        orient(a.plan, a.consts, u, c.touch_axes)
+    if c.turning:  # (each numba function here called as current() gives it: its twin in an interpreted run)
+        current(orient)(a.plan, a.consts, u, c.touch_axes)
     if a.python_stages:
-        chain_motion(a.plan, a.stages, a.coef, a.consts, x, p_tip, v_tip, p_env, v_env, float(offset), ydot, a.motion,
-                     a.stage_state)
+        current(chain_motion)(a.plan, a.stages, a.coef, a.consts, x, p_tip, v_tip, p_env, v_env, float(offset), ydot,
+                              a.motion, a.stage_state)
         _python_forces(a, system.energy_slot >= 0)
-        tip_F, gamma, interface_F, gap = chain_loads(a.plan, a.stages, a.consts, kin.drift, f, ydot, a.motion,
-                                                     a.stage_state)
+        tip_F, gamma, interface_F, gap = current(chain_loads)(a.plan, a.stages, a.consts, kin.drift, f, ydot,
+                                                              a.motion, a.stage_state)
     else:
-        call = current(chain_call)  # (its twin in an interpreted run: numerics.twins)
+        call = current(chain_call)
         tip_F, gamma, interface_F, gap, finite = call(a.plan, a.stages, a.coef, a.consts, x, p_tip, v_tip, p_env, v_env,
                                                       kin.drift, float(offset), f, ydot, a.motion, a.stage_state)
         if not finite:  # a compiled law raised (its call gives NaN) or gave NaN

@@ -57,6 +57,7 @@ from ..laws.controllers import CONTROLLERS
 from ..laws.controllers.base import BindContext, Controller
 from ..laws.controllers.sampled import SampledController
 from ..laws.drives import Drives
+from ..numerics.twins import current
 from ..robot.body import ArticulatedBody
 from ..robot.posture import start_posture
 from ..robot.robot import Robot
@@ -288,7 +289,7 @@ class System:
             return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, c.normal.u, c.tangents, columns)
         fs = self.robot.frame_terms(c.surface_fid)  # the surface turns with a robot frame
         spec = c.spec
-        J, drift, p_env, v_env, n, T = turning_surface(
+        J, drift, p_env, v_env, n, T = current(turning_surface)(  # (its twin in an interpreted run)
             p_tip, v_tip, J, drift, fs.position, fs.velocity, fs.jacobian, fs.drift, fs.rotation,
             fs.angular_jacobian @ x[self.nQ:self.nQ + self.nv], fs.angular_jacobian, fs.angular_drift, spec.point,
             spec.normal, spec.tangents)
@@ -385,7 +386,7 @@ def _on_body_frame(system: System, c: Contact, x: np.ndarray, p_tip, v_tip, J, d
     J_o = np.hstack([np.zeros((3, nv)), fs.jacobian])
     J_w = np.hstack([np.zeros((3, nv)), fs.angular_jacobian])
     spec = c.spec
-    J_rel, a_rel, p_env, v_env, n, T = turning_surface(
+    J_rel, a_rel, p_env, v_env, n, T = current(turning_surface)(
         p_tip, v_tip, J_ext, drift, fs.position, fs.velocity, J_o, fs.drift, fs.rotation, w, J_w, fs.angular_drift,
         spec.point, spec.normal, spec.tangents)
     columns = columns + tuple((i, J_rel[:, nv + k]) for k, i in enumerate(body.indices))

@@ -51,6 +51,7 @@ import numpy as np
 from ..errors import SceneError
 from . import dop853_tableau as _coef
 from .dense_output import horner_at, horner_rows
+from .twins import current
 
 __all__ = ["solve", "DenseSolution", "Solution", "build_interpolants", "dense_states"]
 
@@ -114,7 +115,7 @@ class _Steps:
         if i not in self.coef and (derivatives is not None or not self._built_by_fun(i)):
             build_interpolants([(self, i)], derivatives or getattr(self.fun, "derivatives", None))
         t_old = self.t[i]
-        return horner_at(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old), self.y_old(i))
+        return current(horner_at)(self.coef[i], (t - t_old) / (self.t[i + 1] - t_old), self.y_old(i))
 
     def _built_by_fun(self, i: int) -> bool:
         """Step i's interpolant by the run's ``fun.interpolant`` (:func:`build_interpolants`' numbers in one compiled
@@ -216,7 +217,8 @@ class DenseSolution:
         if where is None:
             return np.repeat(st.y0[None, :], len(tt), axis=0)
         steps, at, s = where
-        return horner_rows(np.array([st.coef[i] for i in steps]), at, s, np.array([st.y_old(i) for i in steps]))
+        C, Y0 = np.array([st.coef[i] for i in steps]), np.array([st.y_old(i) for i in steps])
+        return current(horner_rows)(C, at, s, Y0)  # (a leaf: a first run's record holds it)
 
 
 def dense_states(parts: list[tuple[DenseSolution, np.ndarray]], derivatives: Callable | None = None

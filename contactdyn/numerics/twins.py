@@ -12,9 +12,10 @@ shadow). So ``Twins().of(call)(...)`` runs ``call`` and everything it reaches as
 the real modules untouched (the compiled path in the same process is unaffected). Two exceptions:
 
 - the **leaves** (:data:`LEAVES`: the rigid-body algorithms of :mod:`contactdyn.robot.rigid_body`, the dense
-  linear algebra of :mod:`.linalg` and DOP853's stage sums and error norm of :mod:`contactdyn.hybrid.steps`, most
-  of an interpreted call's time, self-contained and the same for every scene) stay numba dispatchers: compiled once
-  per install (seconds, cached), called from the twins;
+  linear algebra of :mod:`.linalg`, DOP853's stage sums and error norm of :mod:`contactdyn.hybrid.steps` and its
+  interpolants' polynomials of :mod:`.dense_output`, most of an interpreted call's time, self-contained and the same
+  for every scene) stay numba dispatchers: compiled once per install (seconds, cached), called from the twins (the
+  polynomials from the dense output's Python, through :func:`current`);
 - the **handle tables**: interpreted, a stage reached by address (:mod:`.native_call`, the laws' ABIs, the
   controllers) is a *handle* (the Python function's id, given by the address functions while
   :func:`.native_call.giving_handles` is on: the mode is packed that way), looked up in a table; in the shadows
@@ -32,7 +33,7 @@ twin while an interpreted run runs (:func:`running`, around ``HybridRun.run``), 
 
 Not twinned (run as they are, so they compile if they are numba functions): methods of classes, a function held in
 a closure cell, a default argument or a container other than the handle tables below; the tests check that an
-interpreted run compiles the leaves only (and the integrator's dense-output polynomials).
+interpreted run compiles the leaves and what the loop calls outside the pipeline only.
 """
 
 from __future__ import annotations
@@ -51,14 +52,15 @@ __all__ = ["Twins", "RecordingTwins", "LEAVES", "run_as", "current", "running"]
 
 PACKAGE = "contactdyn."
 #: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms, the dense
-#: linear algebra (numerics.linalg) and DOP853's stage sums and error norm (hybrid.steps: each loops over the state
-#: and the stages, per step)
+#: linear algebra (numerics.linalg), DOP853's stage sums and error norm (hybrid.steps: each loops over the state
+#: and the stages, per step) and its interpolants' polynomials (numerics.dense_output, called through current())
 LEAVES = frozenset([*(f"contactdyn.robot.rigid_body.{n}" for n in
                       ("_kinematics", "_nonlinear", "_jacobians", "_inertia", "frame_motion_into")),
                     *(f"contactdyn.numerics.linalg.{n}" for n in
                       ("mv", "mtv", "mm", "mtm", "lu_solve", "residual_ok", "cholesky", "forward_solve", "pinv",
                        "put")),
-                    *(f"contactdyn.hybrid.steps.{n}" for n in ("_stage_state", "_step_end", "_error_norm"))])
+                    *(f"contactdyn.hybrid.steps.{n}" for n in ("_stage_state", "_step_end", "_error_norm")),
+                    *(f"contactdyn.numerics.dense_output.{n}" for n in ("horner_at", "horner_rows"))])
 #: module -> its tables handle -> Python function (or controller class) that must give twins
 HANDLE_TABLES = {
     "contactdyn.numerics.native_call": ("_HANDLES",),
