@@ -21,12 +21,11 @@ that records which leaves the scene reaches in its first millisecond (and each l
 there), and with which argument types, with every leaf interpreted
 (:class:`~contactdyn.numerics.twins.RecordingTwins`; RECORD_LIMIT seconds at most), then compiles them last-reached
 first into the shared cache and marks the kind's leaves done (``<kind>.leaves``). Where it started one, the run
-compiles its own leaves before it starts (:func:`leaves_first`):
-recorded the same way (RUN_RECORD_LIMIT at most), the first-reached first. Each leaf is compiled under a claim
-(:func:`compile_claimed`, an exclusive lock on its file in ``kinds/claims``): the helper skips one the run holds,
-the run waits for one the helper holds and then loads it. The two meet in the middle and compile no leaf twice.
-The helper changes no result (it only fills the cache) and reports nothing: a leaf it cannot compile the run
-compiles, and says why. ``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
+compiles its own leaves before it starts (:func:`leaves_first`): recorded the same way (RUN_RECORD_LIMIT at most), the
+first-reached first. Each leaf is compiled under a claim (:func:`compile_claimed`, an exclusive lock on its file in
+``kinds/claims``): the helper skips one the run holds, the run waits for one the helper holds and then loads it. The
+two meet in the middle and compile no leaf twice. The helper changes no result (it only fills the cache) and reports
+nothing: a leaf it cannot compile the run compiles, and says why. ``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
 
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
@@ -127,9 +126,10 @@ def kind(scene: Scene) -> str:
 
 def _folder() -> Path:
     """Where this build's markers live: ``kinds/`` in its compiled-code directory (numba imported here)."""
-    from .numerics.compile_cache import directory
+    from .numerics import compile_cache  # (not "from ... compile_cache import": this module compiles nothing, and
+    # its source is not in the cache's key, numerics.compile_cache.compiled_modules)
 
-    return directory() / "kinds"
+    return compile_cache.directory() / "kinds"
 
 
 def built(scene: Scene) -> bool:

@@ -33,7 +33,7 @@ twin while an interpreted run runs (:func:`running`, around ``HybridRun.run``), 
 
 Not twinned (run as they are, so they compile if they are numba functions): methods of classes, a function held in
 a closure cell, a default argument or a container other than the handle tables below; the tests check that an
-interpreted run compiles the leaves and what the loop calls outside the pipeline only.
+interpreted run compiles nothing but the leaves and a law's own compiled form where it is bound.
 """
 
 from __future__ import annotations
