@@ -316,6 +316,8 @@ def record_leaves(file: str, document: dict, limit: float) -> list[tuple[Any, tu
 
     recorder = RecordingTwins(deadline=time.monotonic() + limit)
     for k, start in enumerate(_phase_starts(document)):
+        if k and time.monotonic() > recorder.deadline:  # (a phase's start is checked here, its leaves as called)
+            break
         try:
             _record(file, start, recorder)
         except RecordingTwins.Enough:  # (what it recorded so far: the leaves the run reaches first)

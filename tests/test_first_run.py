@@ -351,6 +351,10 @@ def test_the_record_reaches_the_leaves_of_a_later_phase_started_at_the_scenes_st
 
     monkeypatch.setattr(first_run, "_record", push_fails)
     assert [leaf.py_func.__qualname__ for leaf, _ in first_run.record_leaves(scene.file, scene.document, 60.0)] == first
+    started = []
+    monkeypatch.setattr(first_run, "_record", lambda file, document, recorder: started.append(document["phase"][0]))
+    first_run.record_leaves(scene.file, scene.document, -1.0)  # past its deadline: no later phase is started
+    assert [p["name"] for p in started] == ["approach"]
 
 
 def test_the_leaves_helper_needs_a_second_core_and_runs_one_at_a_time(markers, monkeypatch):
