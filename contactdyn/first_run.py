@@ -336,17 +336,23 @@ def _phase_starts(document: dict) -> list[dict]:
 
 
 def _record(file: str, document: dict, recorder) -> None:
-    """RECORD_DURATION of the scene of ``document`` run interpreted on ``recorder`` (RecordingTwins)."""
+    """RECORD_DURATION of the scene of ``document`` run interpreted on ``recorder`` (RecordingTwins); then its last
+    segment's state at one time, as an event's location evaluates it (a millisecond without events does not)."""
     import warnings
 
     from .hybrid.loop import HybridRun
     from .model.system import System
+    from .numerics.twins import running
     from .scene.scene_file import parse_scene
 
     scene = parse_scene(document, {"duration": RECORD_DURATION}, file)
+    run = HybridRun(System(scene), interpreted=True, twins=recorder)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        HybridRun(System(scene), interpreted=True, twins=recorder).run(time.perf_counter())
+        run.run(time.perf_counter())
+    with running(recorder):
+        for last in run.segments[-1:]:
+            last.sol(0.5 * (last.t0 + last.t1))
 
 
 def compile_claimed(calls: list[tuple[Any, tuple]], backwards: bool = False) -> None:

@@ -325,6 +325,7 @@ def test_a_first_runs_own_record_is_the_helpers_and_it_hands_it_to_compile_claim
     first_run.leaves_first(scene)
     names = [leaf.py_func.__qualname__ for leaf, _ in got[0][0]]
     assert len(got) == 1 and got[0][1] is False and {"_kinematics", "_inertia", "lu_solve"} <= set(names)
+    assert names[-3:] == ["horner_rows", "horner_at", "pinv"]  # the output's and an event's interpolant, the push's
     assert got[0][0] == first_run.record_leaves(scene.file, scene.document, first_run.RECORD_LIMIT)
     monkeypatch.setattr(first_run, "record_leaves", lambda *a: 1 / 0)
     first_run.leaves_first(scene)  # (a failure is left to the run)
