@@ -336,8 +336,9 @@ def _phase_starts(document: dict) -> list[dict]:
 
 
 def _record(file: str, document: dict, recorder) -> None:
-    """RECORD_DURATION of the scene of ``document`` run interpreted on ``recorder`` (RecordingTwins); then its last
-    segment's state at one time, as an event's location evaluates it (a millisecond without events does not)."""
+    """RECORD_DURATION of the scene of ``document`` run interpreted on ``recorder`` (RecordingTwins); then the state
+    at one time inside its last segment of nonzero length, as an event's location evaluates it (a millisecond without
+    events does not)."""
     import warnings
 
     from .hybrid.loop import HybridRun
@@ -350,8 +351,9 @@ def _record(file: str, document: dict, recorder) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         run.run(time.perf_counter())
-    with running(recorder):
-        for last in run.segments[-1:]:
+    last = next((seg for seg in reversed(run.segments) if seg.t1 > seg.t0), None)  # (not a Held end: no interpolant)
+    if last is not None:
+        with running(recorder):
             last.sol(0.5 * (last.t0 + last.t1))
 
 
