@@ -126,10 +126,9 @@ def kind(scene: Scene) -> str:
 
 def _folder() -> Path:
     """Where this build's markers live: ``kinds/`` in its compiled-code directory (numba imported here)."""
-    from .numerics import compile_cache  # (not "from ... compile_cache import": this module compiles nothing, and
-    # its source is not in the cache's key, numerics.compile_cache.compiled_modules)
+    from .numerics.compile_cache import directory  # (a local import: not a compiled module's mark)
 
-    return compile_cache.directory() / "kinds"
+    return directory() / "kinds"
 
 
 def built(scene: Scene) -> bool:

@@ -36,10 +36,22 @@ def test_the_key_changes_with_a_compiled_module_and_the_version_only(tmp_path):
     assert cc.key(pkg, "9.9") != cc.key(pkg)
 
 
+def test_a_mention_or_a_local_import_does_not_make_a_module_compiled(tmp_path):
+    pkg = _package(tmp_path)
+    (pkg / "notes.py").write_text('"""Compiled modules say: from .compile_cache import njit."""\n'
+                                  "# from .compile_cache import njit (a comment)\n")
+    (pkg / "runner.py").write_text("def folder():\n    from .compile_cache import directory\n\n"
+                                   "    return directory()\n")
+    assert cc.compiled_modules(pkg) == [pkg / "kernel.py", pkg / "sub" / "law.py"]
+    (pkg / "runner.py").write_text("from .sub.compile_cache import directory\n")  # (top level: compiled)
+    assert cc.compiled_modules(pkg) == [pkg / "kernel.py", pkg / "runner.py", pkg / "sub" / "law.py"]
+
+
 def test_the_package_itself_has_its_compiled_modules_found():
     names = {p.relative_to(cc.PACKAGE).as_posix() for p in cc.compiled_modules()}
     assert {"numerics/linalg.py", "robot/rigid_body.py", "model/pipeline/pipeline.py", "hybrid/steps.py",
             "laws/controllers/computed_torque.py", "model/chain_forces.py"} <= names
+    assert "first_run.py" not in names  # (it reads the directory by a local import: it compiles nothing)
 
 
 def test_the_directory_is_under_numba_cache_dir_when_set(tmp_path, monkeypatch):

@@ -34,6 +34,7 @@ import contextlib
 import functools
 import hashlib
 import os
+import re
 import shutil
 import tempfile
 import time
@@ -53,12 +54,16 @@ PACKAGE = Path(__file__).resolve().parents[1]  #: the package's source folder (c
 HASH_CHARS = 12  #: [hex digits] of the source hash in KEY
 STALE_AFTER = 30.0  #: [days] a sibling key unused this long is removed
 clock = time.time  #: [s] since the epoch: the age of a key is measured against it (a test replaces it)
-_MARK = "compile_cache import "  #: an import from here makes a module a compiled one
+#: a compiled module's mark: a top-level import from here (a line of its own, unindented; not a mention in a comment or
+#: docstring, not a function's local import)
+_MARK = re.compile(r"^from \.+(?:\w+\.)*compile_cache import ", re.MULTILINE)
 
 
 def compiled_modules(package: Path = PACKAGE) -> list[Path]:
-    """The package's modules that compile functions (import :func:`njit` or :func:`cfunc` from here), sorted."""
-    return sorted(p for p in package.rglob("*.py") if p.name != "compile_cache.py" and _MARK in p.read_text("utf-8"))
+    """The package's modules that compile functions (import :func:`njit` or :func:`cfunc` from here at their top
+    level: :data:`_MARK`), sorted."""
+    return sorted(p for p in package.rglob("*.py")
+                  if p.name != "compile_cache.py" and _MARK.search(p.read_text("utf-8")))
 
 
 def key(package: Path = PACKAGE, version: str = __version__) -> str:
