@@ -19,6 +19,11 @@ itself spent, less inflated by other load on a shared machine). Also: ``contactd
 printed the compile notice (a stderr line containing "compiling"), and which path each run took (``paths``:
 the first and the later run's ``Result.stats["paths"]``, from ``--json``).
 
+The machine's speed at the time: ``ref [s]``, before each scene, the median wall time of REFERENCE_REPEATS
+processes running one fixed pure-Python workload (:data:`REFERENCE`; a first run is Python-bound: numba's compiler
+front end and the interpreted call). On a shared machine it moves with the load, and the first runs with it: read
+an absolute bound against it (``first_per_ref`` in the JSON and CSV: the first run in units of the reference).
+
 The processes run this checkout's package (``PYTHONPATH`` = the checkout). The 1-minute load
 average before each run is recorded: on a shared machine a load above the core count means the
 times are inflated.
@@ -50,6 +55,9 @@ from contactdyn.first_run import HELPER_ENV  # noqa: E402  (the leaves' helper's
 OUT = Path(__file__).parent / "out"
 HELP = ["-c", "import sys; from contactdyn.cli import main; sys.exit(main())", "--help"]  # = the console script
 TIMEOUT = 1800.0  #: [s] one process at most
+#: the reference workload: pure Python, no imports (its process's start is in its wall time, as a first run's is)
+REFERENCE = ["-c", "s = 0\nfor i in range(3_000_000):\n    s += i * i % 7\nprint(s)"]
+REFERENCE_REPEATS = 3  #: processes timed for ref [s] before each scene
 
 
 def default_scenes() -> list[str]:
@@ -106,6 +114,11 @@ def _wait_for_build(cache: str) -> tuple[float, bool]:
     return time.perf_counter() - t0, bool(list(Path(cache).glob("*/kinds/*.built")))
 
 
+def reference_time(work: str, repeats: int = REFERENCE_REPEATS) -> float:
+    """[s] The median wall time of ``repeats`` processes running :data:`REFERENCE` (the machine's speed now)."""
+    return statistics.median(timed(REFERENCE, None, work)[0] for _ in range(repeats))
+
+
 def scene_row(scene: str, work: str, compiled_first: bool, alone: bool = False) -> dict:
     """The first run of one scene (empty cache, path ``auto``: the call interpreted, then the background build),
     a run while the build runs, the later run once it ended (the compiled call); ``compiled_first``: also the
@@ -115,7 +128,7 @@ def scene_row(scene: str, work: str, compiled_first: bool, alone: bool = False) 
     path = path if path.is_file() else ROOT / scene  # a scene name of sims/, or a path in the checkout
     target = str(path) if path.is_file() else scene
     args = ["-m", "contactdyn.cli", "run", target, "--json"]
-    row: dict = {"scene": scene, "load_before": round(os.getloadavg()[0], 2)}
+    row: dict = {"scene": scene, "load_before": round(os.getloadavg()[0], 2), "ref_s": round(reference_time(work), 3)}
     if alone:
         with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
             wall, cpu, rc0, _ = timed(args, cache, work, helper=False)
@@ -131,7 +144,7 @@ def scene_row(scene: str, work: str, compiled_first: bool, alone: bool = False) 
     row.update(first_s=round(first, 2), first_cpu_s=round(first_cpu, 2), during_s=round(during, 2),
                build_wait_s=round(build_s, 1), built=marked, later_s=round(later, 2), later_cpu_s=round(later_cpu, 2),
                notice="compiling" in err1, exit_codes=[rc1, rc2, rc3], stderr_first=err1.strip()[-400:],
-               stderr_later=err3.strip()[-400:])
+               stderr_later=err3.strip()[-400:], first_per_ref=round(first / row["ref_s"], 2))
     if compiled_first:
         with tempfile.TemporaryDirectory(prefix="first_run_cache_") as cache:
             compiled, compiled_cpu, rc4, _ = timed([*args, "--path", "compiled"], cache, work)
@@ -162,7 +175,7 @@ def main() -> None:
         helps = help_time(args.help_repeats, work)
         print(f"contactdyn --help: {helps['median_s']:.3f} s (median of {args.help_repeats})", flush=True)
         heads = ("first [s]", "during [s]", "build [s]", "later [s]", "first CPU", "later CPU", "compiled 1st",
-                 "alone [s]")
+                 "alone [s]", "ref [s]")
         print(f"{'scene':24s} " + " ".join(f"{h:>12s}" for h in heads) + "  built  load", flush=True)
         for scene in scenes:
             row = scene_row(scene, work, args.compiled_first, args.alone)
@@ -170,7 +183,7 @@ def main() -> None:
             flag = "" if not any(row["exit_codes"]) else f"  exit codes {row['exit_codes']}: {row['stderr_first']}"
             print(f"{scene:24s} " + " ".join(f"{row.get(k, float('nan')):12.2f}" for k in (
                 "first_s", "during_s", "build_wait_s", "later_s", "first_cpu_s", "later_cpu_s", "compiled_first_s",
-                "alone_s"))
+                "alone_s", "ref_s"))
                 + f"  {str(row['built']):5s}  {row['load_before']:.2f}  {row['paths']}{flag}", flush=True)
     OUT.mkdir(parents=True, exist_ok=True)
     doc = {"help": helps, "scenes": rows, "cpus": os.cpu_count(), "python": platform.python_version(),
@@ -180,7 +193,7 @@ def main() -> None:
     with open(OUT / "first_run.csv", "w", newline="") as f:
         w = csv.DictWriter(f, ["scene", "first_s", "during_s", "build_wait_s", "built", "later_s", "first_cpu_s",
                                "later_cpu_s", "compiled_first_s", "compiled_first_cpu_s", "alone_s", "notice",
-                               "load_before"],
+                               "load_before", "ref_s", "first_per_ref"],
                            extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
