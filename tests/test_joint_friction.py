@@ -73,6 +73,39 @@ def test_a_growing_load_breaks_the_joint_away_at_the_static_limit(tmp_path):
     assert r.stats["compiled_modes"] >= 2
 
 
+@pytest.fixture
+def sine_torque():
+    """A controller ``sine_torque`` registered for the test: τ = A sin(π t) [N·m] on the one joint, of time alone."""
+    from contactdyn.laws.controllers.base import CONTROLLERS, Controller, register
+
+    class SineTorque(Controller):
+        name = "sine_torque"
+        amplitude = 2.1  #: [N·m]
+
+        def command(self, inp):
+            return np.full(1, self.amplitude * math.sin(math.pi * inp.t)), None
+
+    register(SineTorque)
+    yield SineTorque
+    CONTROLLERS.pop(SineTorque.name, None)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_held_state_does_not_hide_a_load_that_passes_the_static_limit(tmp_path, sine_torque, compiled):
+    """No gravity, the one joint stuck: the state does not move, so nothing in it asks the steps to stay short
+    (before its impulse state ∫τ_f dt: 7 steps in 1 s, the joint held at 2.1 N·m > τ_s, no event).
+    The load A sin(πt) passes τ_s = 2 N·m at t = asin(τ_s/A)/π: the joint breaks away there, never held beyond τ_s,
+    on both paths."""
+    tau_s, amplitude = 2.0, sine_torque.amplitude
+    doc = scene(arm(tmp_path), [0.0], 1.0, {"kind": "sine_torque"}, gravity=False, joint={"j1": {"friction": tau_s}})
+    r = simulate(parse_scene(doc), compiled=compiled)
+    slip = events(r, "joint_slip")[0]
+    assert slip["t"] == pytest.approx(math.asin(tau_s / amplitude) / math.pi, abs=EVENT_TOL)
+    stuck = r["joint_stuck"][:, 0] == 1.0
+    assert np.abs(r["joint_friction"][stuck, 0]).max() <= tau_s * (1.0 + 1e-12)
+    assert not any(e["kind"] == "joint_slip_check" for e in r.events)
+
+
 def test_a_joint_loaded_below_its_limit_never_creeps(tmp_path):
     """A double pendulum whose shoulder holds (τ_s above any load the swinging elbow gives it) for the whole run:
     the shoulder's velocity stays exactly 0 (no creep), its holding torque balances the load."""

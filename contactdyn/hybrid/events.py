@@ -41,7 +41,7 @@ from ..model.friction import cone_slack
 from ..model.phases import Phase
 from ..model.system import System
 
-__all__ = ["TOUCH_TOL", "terminal_event", "SlipWatch", "StepBudget", "StepCollapse",
+__all__ = ["TOUCH_TOL", "terminal_event", "StageWatch", "SlipWatch", "StepBudget", "StepCollapse",
            "WorkWatch", "segment_events", "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
@@ -111,36 +111,30 @@ def terminal_event(fn, kind: str, contact: str):
     return fn
 
 
-class SlipWatch:
-    """The ``slip`` event of a stuck contact, g = μ_s F − |F_f|, which also sees inside a step.
+class StageWatch:
+    """An event of a held constraint whose function ``value(t, x)`` reads its holding force, which also sees inside
+    a step: a stuck contact's ``slip`` (:class:`SlipWatch`), a stuck joint's ``joint_slip``.
 
-    ``solve_ivp`` tests events only at step ends, and a stuck robot's state may hardly move:
-    the friction a push needs can leave the cone and come back within one step unseen. The
-    right-hand side reports g at every Runge–Kutta stage (:meth:`sample`); if a stage inside
-    the step just taken saw g < 0 while the step end did not, the event reports a crossing,
-    and while ``solve_ivp`` locates it on the dense output, g is held negative from that
-    stage's time on, so the root found is the first crossing. A false alarm (a stage state
-    off the final solution) is caught by the handler, which keeps the stick.
+    ``solve_ivp`` tests events only at step ends, and a held state may hardly move (every joint stuck: not at all,
+    so the steps grow without bound): the load can reach the holding limit and fall back within one step unseen.
+    The right-hand side reports g at every Runge–Kutta stage (:meth:`sample`); if a stage inside the step just
+    taken saw g < 0 while the step end did not, the event reports a crossing, and while ``solve_ivp`` locates it on
+    the dense output, g is held negative from that stage's time on, so the root found is the first crossing. A false
+    alarm (a stage state off the final solution) is caught by the handler, which keeps the hold.
 
-    ``floor`` [N]: g where the segment starts if that is below 0 within the round-off slack of ``friction.in_cone``
-    (a stick decided at the cone's edge), else 0; the event is g − floor through zero, so such a stick slips as
-    soon as its load grows, never held outside the cone unseen (a grip opening with μ_s = μ_k: both pads at the
-    edge at once). A stick further outside is a wrong decision, left to the physics checks to report.
+    ``floor``: g where the segment starts if a hold was decided just outside its limit within round-off (else 0);
+    the event is g − floor through zero.
     """
 
     terminal = True
     direction = -1
 
-    def __init__(self, value, name: str, mu_s: float, floor: float = 0.0):
-        self.value, self.contact, self.mu_s = value, name, mu_s  # value(t, x): g at a state
+    def __init__(self, value, kind: str, name: str, floor: float = 0.0, index: int | None = None):
+        self.value, self.kind, self.contact, self.index = value, kind, name, index  # value(t, x): g at a state
         self.floor = floor
-        self.kind = "slip"
         self.t_end = -math.inf  #: last step end seen [s]
         self.latch = math.inf  #: from this time on g is held negative [s]
         self.outside: list[float] = []  #: times [s] of the stages since the last step end that saw g < 0
-
-    def g(self, ev: Evaluation) -> float:
-        return self.mu_s * ev.normal_force[self.contact] - float(np.linalg.norm(ev.friction[self.contact]))
 
     def sample(self, t: float, g: float) -> None:
         if g - self.floor < 0.0:
@@ -159,6 +153,23 @@ class SlipWatch:
                 return -1.0
             return g
         return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
+
+
+class SlipWatch(StageWatch):
+    """The ``slip`` event of a stuck contact, g = μ_s F − |F_f| [N] (:class:`StageWatch`).
+
+    ``floor`` [N]: g where the segment starts if that is below 0 within the round-off slack of ``friction.in_cone``
+    (a stick decided at the cone's edge), else 0; so such a stick slips as soon as its load grows, never held
+    outside the cone unseen (a grip opening with μ_s = μ_k: both pads at the edge at once). A stick further outside
+    is a wrong decision, left to the physics checks to report.
+    """
+
+    def __init__(self, value, name: str, mu_s: float, floor: float = 0.0):
+        super().__init__(value, "slip", name, floor)
+        self.mu_s = mu_s
+
+    def g(self, ev: Evaluation) -> float:
+        return self.mu_s * ev.normal_force[self.contact] - float(np.linalg.norm(ev.friction[self.contact]))
 
 
 class _StepCount:
@@ -288,7 +299,7 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     """
     values = runner
     out: list = []
-    watches: list[SlipWatch] = []
+    watches: list[StageWatch] = []
     for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
         name = c.name
         if not mode.touching:
@@ -314,8 +325,12 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
                                       name))
     out += system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # contactdyn.model.limits
-    if phase.joint_modes:  # contactdyn.model.joint_friction
-        out += system.joint_friction.events(phase.joint_modes, phase.limits, x0, system.nQ, values.joint_hold)
+    if phase.joint_modes:  # contactdyn.model.joint_friction: a stuck joint's break-away watched at every stage
+        for fn in system.joint_friction.events(phase.joint_modes, phase.limits, x0, system.nQ, values.joint_hold):
+            if fn.kind == "joint_slip":
+                fn = StageWatch(fn, fn.kind, fn.contact, index=fn.index)
+                watches.append(fn)
+            out.append(fn)
     fun = fun or values.rhs
     if not watches:
         return out, fun

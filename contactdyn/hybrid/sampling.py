@@ -28,7 +28,7 @@ from ..laws.trajectory import min_span
 from ..model.contact import ContactMode
 from ..model.joint_friction import STUCK
 from ..model.phases import Phase
-from .events import JUMPING, SlipWatch, fired_across, segment_events
+from .events import JUMPING, StageWatch, fired_across, segment_events
 from .sampled_law import Reading, SampledLaw, sampled_slots
 
 __all__ = ["SampledPhases", "Hold"]
@@ -149,4 +149,4 @@ class Hold:
         """The function whose fall through zero across a jump fires ``event`` (fired_across's), or None."""
         if not self.any_jumps or getattr(event, "kind", "") not in JUMPING:
             return None
-        return event.value if isinstance(event, SlipWatch) else event
+        return event.value if isinstance(event, StageWatch) else event

@@ -284,6 +284,9 @@ class Transitions:
         x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event,
                                                            self.evaluate.joint_hold)
         self.log.events[-1].update(info)
+        if event.kind == "joint_slip":  # (a stage watch's, events.StageWatch: seen inside a step, or a false alarm)
+            self.stats["slips_seen_inside_a_step"] += int(event.latch < math.inf)
+            self.stats["slip_false_alarms"] += int(info.get("kind") == "joint_slip_check")
         return x, phase, True
 
     #: event kind -> handler (see :meth:`handle`)

@@ -42,7 +42,9 @@ y holds first-order states, in this order:
    energy dissipated [J];
 4. per friction contact the impulses ∫F dt, ∫F_f dt [N·s] (normal, then one per tangent):
    a stuck robot's state may not move at all; their error control keeps the step size
-   following the contact forces the ``slip`` event watches (:mod:`contactdyn.hybrid.events`).
+   following the contact forces the ``slip`` event watches (:mod:`contactdyn.hybrid.events`);
+5. per joint with dry friction its friction impulse ∫τ_f dt [N·m·s or N·s] (the holding torque while stuck): for
+   the same reason, the ``joint_slip`` event's.
 
 The compiled right-hand side of a mode is the one pipeline (:mod:`contactdyn.model.pipeline`) over this system's
 tables; :mod:`contactdyn.model.paths` says which path each mode takes.
@@ -129,6 +131,8 @@ class System:
                                  f"phase[{i}].controller"))
         self.z_slices, self.energy_slot, self.impulse_slots, self.ny = assign_first_order_slots(
             n_first, [ctl.n_states for ctl in self.controllers], scene.solver.record_energy, self.contacts)
+        self.joint_impulse_slot = self.ny  #: y's slot of the first joint with dry friction's ∫τ_f dt (one per joint)
+        self.ny += len(self.joint_friction.dry)
         for body in (b for b in self.articulated.values() if b.free):  # a free body's chart: one slot
             body.chart_index, self.ny = 2 * self.nQ + self.ny, self.ny + 1
         self.n = 2 * self.nQ + self.ny

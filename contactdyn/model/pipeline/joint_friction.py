@@ -3,7 +3,8 @@
 Per joint its damping −b q̇ [N·m or N]; per joint with dry friction, in the phase's joint mode: stuck (a row
 eᵢ Q̈ + ω q̇ᵢ = 0 after the limits' rows, its force the holding torque; a joint pressing on a limit has none) or
 sliding with sign s (the known torque −s τ_k). The event values after the limits': the held joints' torques
-[N·m or N], then the sliding joints' speeds [rad/s or m/s]. The packed layout: ``pack._joint_friction``.
+[N·m or N], then the sliding joints' speeds [rad/s or m/s]; per such joint the rate of its impulse state ∫τ_f dt
+(the step follows the holding torque the ``joint_slip`` event watches). The packed layout: ``pack._joint_friction``.
 """
 
 from __future__ import annotations
@@ -40,13 +41,17 @@ def joint_torques(x, ints, reals, f):
 
 
 @njit(cache=True)
-def joint_events(x, ints, lam, first_row, events, base):
-    """From ``events[base]``: the held joints' holding torques λ [N·m or N], the sliding joints' speeds."""
-    nQ, n_held = ints[NQ], ints[N_HELD]
+def joint_events(x, ints, reals, lam, first_row, events, base, xdot):
+    """From ``events[base]``: the held joints' holding torques λ [N·m or N], the sliding joints' speeds; into
+    ``xdot`` the rates of their impulse states ∫τ_f dt: λ, −s τ_k (a joint on a limit: 0, set before)."""
+    nv, nQ, n_held, n_sliding = ints[NV], ints[NQ], ints[N_HELD], ints[N_SLIDING]
+    at, slots = ints[R_JOINTS] + nv, ints[I_JOINTS] + n_held + n_sliding
     for k in range(n_held):
         events[base + k] = lam[first_row + k]
-    for k in range(ints[N_SLIDING]):
+        xdot[ints[slots + k]] = lam[first_row + k]
+    for k in range(n_sliding):
         events[base + n_held + k] = x[nQ + ints[ints[I_JOINTS] + n_held + k]]
+        xdot[ints[slots + n_held + k]] = -reals[at + 2 * k] * reals[at + 2 * k + 1]
 
 
 @njit(cache=True)

@@ -520,12 +520,14 @@ def _chain(b: _Builder, system, c, m, dc, tangent: int, at: int, row: int) -> No
 
 def _joint_friction(b: _Builder, system, phase) -> tuple[list[int], list[int]]:
     """The joints' damping b (nv) [N·m·s/rad or N·s/m], the stuck joints that carry a row, the sliding ones with
-    (s, τ_k [N·m or N]) (model.joint_friction); (the held joints in their rows' order, the sliding ones)."""
+    (s, τ_k [N·m or N]) (model.joint_friction), then the same joints' impulse states (x's index of ∫τ_f dt); (the
+    held joints in their rows' order, the sliding ones)."""
     jf, h = system.joint_friction, b.ints
     held = jf.held(phase.joint_modes, phase.limits) if jf.any else []
     sliding = [(i, m) for i, m in phase.joint_modes if m != 0] if jf.any else []
     h[JOINT_FRICTION], h[N_HELD], h[N_SLIDING] = int(jf.any), len(held), len(sliding)
-    b.int_section(I_JOINTS, [*held, *(i for i, _ in sliding)])
+    slot = {i: 2 * system.nQ + system.joint_impulse_slot + k for k, i in enumerate(jf.dry)}  # (x's index of ∫τ_f dt)
+    b.int_section(I_JOINTS, [*held, *(i for i, _ in sliding), *(slot[i] for i in held), *(slot[i] for i, _ in sliding)])
     b.real_section(R_JOINTS, [*jf.damping, *(v for i, m in sliding for v in (m, jf.kinetic[i]))])
     return held, [i for i, _ in sliding]
 

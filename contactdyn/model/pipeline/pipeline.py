@@ -171,7 +171,7 @@ def call(t, x, ints, reals, work, events):
         finish(ints, lam, xdot, events, pending, first_limit)
         if ints[ENERGY] >= 0:
             call_at(ints[A_ENERGY], "pipeline.energy", (x, ints, reals, work, applied, xdot, events, pending))
-        joint_events(x, ints, lam, first_joint, events, EV_W * nc + ints[N_LIMITS])
+        joint_events(x, ints, reals, lam, first_joint, events, EV_W * nc + ints[N_LIMITS], xdot)
         if work[ints[W_DIAG]] != 0.0:  # an output sample's call (samples_at): the diagnostics too
             record(t, x, ints, reals, work, applied, tau, Fp[ints[TIP_FRAME]], lam, C, first_limit)
         events[events.size - 1] = 0.0 if outcome == NOT_FINITE else 1.0
