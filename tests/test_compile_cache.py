@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import importlib.util
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -34,6 +35,19 @@ def test_the_key_changes_with_a_compiled_module_and_the_version_only(tmp_path):
     (pkg / "sub" / "law.py").write_text(COMPILED.replace("from .", "from ..").replace("x + 1", "x + 2"))
     assert cc.key(pkg) != before
     assert cc.key(pkg, "9.9") != cc.key(pkg)
+
+
+def test_the_key_changes_with_the_package_s_place_and_a_compiled_module_s_time(tmp_path):
+    """numba keys its cache by a file's absolute path and time: another checkout or a reinstall has its own key."""
+    pkg = _package(tmp_path)
+    before = cc.key(pkg)
+    os.utime(pkg / "plain.py", ns=(1, 1))
+    assert cc.key(pkg) == before  # not compiled
+    os.utime(pkg / "kernel.py", ns=(1, 1))
+    assert cc.key(pkg) != before
+    copy = tmp_path / "elsewhere" / "pkg"
+    shutil.copytree(pkg, copy, copy_function=shutil.copy2)  # (the same sources and times, another place)
+    assert cc.key(copy) != cc.key(pkg)
 
 
 def test_a_mention_or_a_local_import_does_not_make_a_module_compiled(tmp_path):

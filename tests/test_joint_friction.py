@@ -200,6 +200,16 @@ def test_bad_joint_friction_names_the_key_and_the_file(tmp_path, joint, expected
     assert info.value.key == key and expected in info.value.expected and str(path) in str(info.value)
 
 
+def test_a_misspelt_joint_key_is_matched_to_every_key_the_table_knows(tmp_path):
+    """``friction`` and ``friction_kinetic`` are only looked for (read when present): the message still knows them."""
+    doc = scene(arm(tmp_path), [0.0], 0.1, joint={"j1": {"frction": 1.0}})
+    with pytest.raises(SceneError) as info:
+        parse_scene(doc)
+    message = str(info.value)
+    assert info.value.key == "robot.joint.j1.frction" and "did you mean 'friction'?" in message
+    assert "damping, friction, friction_kinetic, friction_static" in message
+
+
 def test_the_compiled_call_is_the_interpreted_call_in_every_joint_mode(tmp_path):
     """Damping on both joints, the shoulder stuck (a row) and the elbow sliding (−s τ_k): the compiled call's
     right-hand side, its event values and its output samples equal the interpreted call's (interpreted_evaluate,

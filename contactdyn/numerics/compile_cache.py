@@ -3,9 +3,10 @@
 numba's ``cache=True`` checks a cached function only against its own source file (mtime and size): a
 change to a compiled function it calls (in ``linalg.py``, say), or an upgrade that leaves a file's
 size and time alike, would load old machine code. Here the cache directory is keyed instead: KEY =
-``contactdyn-<version>-<hash>``, the hash being the first HASH_CHARS hex digits of SHA-256 over every
-compiled module's path and source (the modules that take :func:`njit` from here). An edit to any of
-them, or another version, starts a fresh directory; nothing ever needs deleting by hand. (numba also
+``contactdyn-<version>-<hash>``, the hash being the first HASH_CHARS hex digits of SHA-256 over the package's
+place and every compiled module's path, time and source (the modules that take :func:`njit` from here:
+:func:`key`). An edit to any of them, another place or another version starts a fresh directory; nothing ever
+needs deleting by hand. (numba also
 freezes the global constants a compiled function reads: they live in compiled modules, so the hash
 covers them; ``tests/test_compile_cache.py`` checks that no compiled function reads one from elsewhere.)
 
@@ -67,10 +68,16 @@ def compiled_modules(package: Path = PACKAGE) -> list[Path]:
 
 
 def key(package: Path = PACKAGE, version: str = __version__) -> str:
-    """``contactdyn-<version>-<hash of the compiled modules' paths and sources>``."""
-    digest = hashlib.sha256()
+    """``contactdyn-<version>-<hash of the package's place, its compiled modules' paths, times and sources>``.
+
+    numba keys each cached function by its source file's absolute path and time: another checkout, or a reinstall of
+    the same sources, finds none of this one's code. Their own key gives them their own directory, so a first run
+    there is a first run (``contactdyn.first_run``: its kinds' markers live beside the code), not a foreground
+    compile behind a marker that says "built"."""
+    digest = hashlib.sha256(str(package.resolve()).encode() + b"\0")
     for path in compiled_modules(package):
-        digest.update(path.relative_to(package).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+        digest.update(path.relative_to(package).as_posix().encode() + b"\0" + path.read_bytes() + b"\0"
+                      + str(path.stat().st_mtime_ns).encode() + b"\0")
     return f"contactdyn-{version}-{digest.hexdigest()[:HASH_CHARS]}"
 
 

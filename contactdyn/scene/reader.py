@@ -126,6 +126,7 @@ class Reader:
             raise SceneError(path or "<top>", "a table", data, file)
         self.data: dict[str, Any] = data
         self._used: set[str] = set()
+        self._asked: set[str] = set()  #: keys looked for (has): known here even when absent
         self.variant: tuple[str, ...] = ()  #: selectors read so far (documentation only, see recording())
 
     def _note(self, name: str, type_: str, default: Any, **details: Any) -> None:
@@ -145,6 +146,7 @@ class Reader:
 
     def has(self, name: str) -> bool:
         self._note(name, "has", None)
+        self._asked.add(name)
         return name in self.data
 
     def raw(self, name: str, default: Any = MISSING) -> Any:
@@ -262,11 +264,12 @@ class Reader:
         return arr
 
     def finish(self) -> None:
-        """Reject keys nobody read, suggesting the closest known one."""
+        """Reject keys nobody read, suggesting the closest known one (read, or looked for)."""
+        known = sorted(self._used | self._asked)
         for name in self.data:
             if name not in self._used:
-                close = close_matches(name, sorted(self._used), n=1)
-                raise UnknownKeyError(self.key(name), sorted(self._used), close[0] if close else None, self.file)
+                close = close_matches(name, known, n=1)
+                raise UnknownKeyError(self.key(name), known, close[0] if close else None, self.file)
 
 
 def _unit(unit: str) -> str:
