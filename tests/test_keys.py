@@ -113,7 +113,7 @@ def test_unknown_key_message_reads_as_one_sentence():
     with pytest.raises(SceneError) as info:
         parse_scene(doc, {"contact.tip.normal.kk": 1.0})
     assert str(info.value) == ("contact.tip.normal.kk: unknown key; did you mean 'k'? "
-                               "(known here: b, direction, k, law, m, model)")
+                               "(known here: b, direction, environment, k, law, m, model, robot)")  # (a chain's too)
 
 
 def test_list_keys_prints_the_reference(capsys):

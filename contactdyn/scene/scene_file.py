@@ -628,8 +628,7 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
         until = r.float("until", duration, lo=0.0, unit="s")
     merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
         else r.raw("controller")
-    where = r.key("controller") if "controller" in r.data else default_controller.path  # (errors name the file's key)
-    controller, sampling = read_controller(Reader(merged, where, r.file))
+    controller, sampling = read_controller(Reader(merged, r.key("controller"), r.file))
     reference = _read_reference(r.sub("reference"), bodies or {}) if r.has("reference") else None
     forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
     r.finish()
