@@ -212,3 +212,13 @@ def test_help_imports_no_simulator():
             "print(sorted(m for m in ('numba', 'numpy', 'pinocchio') if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.stdout.strip().splitlines()[-1] == "[]", done.stderr
+
+
+def test_python_dash_m_contactdyn_is_the_command():
+    import subprocess
+
+    from contactdyn import __version__
+
+    done = subprocess.run([sys.executable, "-m", "contactdyn", "--version"], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == EXIT_OK and __version__ in done.stdout + done.stderr

@@ -108,6 +108,18 @@ def test_a_table_error_names_its_fields():
     assert table_fields("solver") .startswith("method, rtol, atol")
 
 
+def test_a_misspelt_required_key_is_named_beside_the_missing_one():
+    doc = tomllib.loads((sims_dir() / "b1.toml").read_text())
+    doc["durration"] = doc.pop("duration")
+    with pytest.raises(SceneError) as info:
+        parse_scene(doc)
+    assert info.value.key == "duration" and "the table has 'durration': a misspelling?" in str(info.value)
+    del doc["durration"]  # missing, nothing close: no hint
+    with pytest.raises(SceneError) as info:
+        parse_scene(doc)
+    assert info.value.key == "duration" and "misspelling" not in str(info.value)
+
+
 def test_unknown_key_message_reads_as_one_sentence():
     doc = tomllib.loads((sims_dir() / "b1.toml").read_text())
     with pytest.raises(SceneError) as info:

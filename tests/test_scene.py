@@ -63,6 +63,14 @@ def test_unknown_scene_name_lists_close_matches():
         load_scene("b11")
 
 
+def test_a_scene_path_that_is_not_there_is_said_to_be_missing(tmp_path):
+    with pytest.raises(SceneError, match=r"no such file: '.*nothere\.toml'") as info:
+        load_scene(tmp_path / "nothere.toml")
+    assert "b1" not in str(info.value)  # (not the list of scene names: it was a path)
+    with pytest.raises(SceneError, match="a directory"):
+        load_scene(tmp_path)
+
+
 def test_unknown_robot_is_a_scene_error():
     with pytest.raises(SceneError, match="robot.*ur55.*did you mean"):
         System(load_scene("b1", {"robot.urdf": "ur55"}))

@@ -154,9 +154,16 @@ class Reader:
         self._used.add(name)
         if name not in self.data:
             if default is MISSING:
-                raise self.error(name, "a value (required key is missing)", "nothing")
+                raise self.error(name, "a value (required key is missing" + self._misspelt(name) + ")", "nothing")
             return default
         return self.data[name]
+
+    def _misspelt(self, name: str) -> str:
+        """``; the table has 'durration': a misspelling?`` where a key of the table nobody knows is close to
+        ``name`` (else "")."""
+        unknown = [k for k in self.data if k not in self._used and k not in self._asked]
+        close = close_matches(name, unknown, n=1)
+        return f"; the table has {close[0]!r}: a misspelling?" if close else ""
 
     def sub(self, name: str, default: Any = MISSING) -> Reader:
         self._note(name, "table", default)

@@ -230,10 +230,13 @@ def find_scene(name: str | Path) -> Path:
         for candidate in (folder / f"{name}.toml", folder / str(name)):
             if candidate.is_file():
                 return candidate
+    if path.suffix == ".toml" or len(path.parts) > 1:  # a path, not a name: say it is not there
+        what = "a directory" if path.is_dir() else "no such file"
+        raise SceneError("scene", f"a scene file (.toml) at {str(path.resolve())!r}", f"{what}: {str(name)!r}")
     known = sorted({p.stem for folder in scene_dirs() for p in folder.glob("*.toml")})
     close = close_matches(name, known)
     hint = f"; did you mean {', '.join(close)}?" if close else ""
-    raise SceneError("scene", f"a scene file or one of {known}{hint}", str(name))
+    raise SceneError("scene", f"a scene file or a scene's name ({', '.join(known)}){hint}", str(name))
 
 
 def urdf_beside_scene(source: str, file: str | None) -> str:

@@ -1,0 +1,7 @@
+"""``python -m contactdyn``: the ``contactdyn`` command (:func:`contactdyn.cli.main`)."""
+
+import sys
+
+from .cli import main
+
+sys.exit(main())
