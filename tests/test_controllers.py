@@ -251,27 +251,27 @@ def test_controller_configuration_errors_name_the_key():
     doc["phase"][0].pop("force")
     assert _error(doc).key == "phase[0].force"
     doc = axis_doc({"model": "a", "m": 10.0, "k_ext": 1e5, "k_int": 1e5}, force, bonded=False)
-    assert _error(doc).key == "phase[0].controller.nominal"  # (a) has no exact single-mass equivalent
+    assert _error(doc).key == "controller.nominal"  # (a) has no exact single-mass equivalent
     doc = axis_doc({"model": "b", "k": 1e5, "b": 0.5, "m": 10.0}, force, bonded=True, nominal={"k": 1e5})
     err = _error(doc)
-    assert err.key == "phase[0].controller.nominal.m" and "b > 0" in str(err)
+    assert err.key == "controller.nominal.m" and "b > 0" in str(err)
     doc = axis_doc({"model": "b", "k": 1e5, "b": 0.5, "m": 10.0}, force, bonded=True)
     doc["controller"]["kp"] = 10.0  # a pure force law has no position gains
-    assert _error(doc).key == "phase[0].controller.kp"
+    assert _error(doc).key == "controller.kp"
     bad_axes = hybrid_doc()
     bad_axes["controller"]["axes"] = [[1.0, 0.0, 0.1]]
     err = _error(bad_axes)
-    assert err.key == "phase[0].controller.axes" and "orthogonal" in str(err)
+    assert err.key == "controller.axes" and "orthogonal" in str(err)
     no_ref = hybrid_doc()
     no_ref["phase"][0].pop("reference")
     assert _error(no_ref).key == "phase[0].reference"
     gains = writer_doc({"kind": "position_dynamic", "space": "joint", "kp": [1.0, 2.0, 3.0]},
                        {"reference": {"space": "joint", "start": Q0.tolist(), "moves": []}})
-    assert _error(gains).key == "phase[0].controller.kp"
+    assert _error(gains).key == "controller.kp"
     task_gains = writer_doc({"kind": "position_dynamic", "space": "task", "kp": [1.0, 2.0]},
                             {"reference": {"start": tip0().tolist(), "moves": []}})
     err = _error(task_gains)  # (a SceneError naming the key, not numpy's broadcast error)
-    assert err.key == "phase[0].controller.kp" and "one gain or 3" in str(err)
+    assert err.key == "controller.kp" and "one gain or 3" in str(err)
     space = writer_doc({"kind": "position_dynamic", "space": "joint"},
                        {"reference": {"space": "task", "start": tip0().tolist(), "moves": []}})
     assert _error(space).key == "phase[0].reference.space"

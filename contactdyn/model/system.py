@@ -128,7 +128,7 @@ class System:
         self.controllers = [_controller_of(p, nv) for p in scene.phases]
         for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
             ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
-                                 f"phase[{i}].controller"))
+                                 p.controller_key))
         self.z_slices, self.energy_slot, self.impulse_slots, self.ny = assign_first_order_slots(
             n_first, [ctl.n_states for ctl in self.controllers], scene.solver.record_energy, self.contacts)
         self.joint_impulse_slot = self.ny  #: y's slot of the first joint with dry friction's ∫τ_f dt (one per joint)

@@ -49,7 +49,7 @@ def check_budget(scene) -> None:
     for i, phase in enumerate(scene.phases):
         instants = scene.duration * (phase.sampling.rate if phase.sampling is not None else 0.0)
         if instants > MAX_STEPS:
-            raise SceneError(f"phase[{i}].controller.sample_rate", f"at most {MAX_STEPS:.0e} samples over the run "
+            raise SceneError(f"{phase.controller_key}.sample_rate", f"at most {MAX_STEPS:.0e} samples over the run "
                              f"(duration × sample_rate, each a step at least; this is {instants:.3g}): a lower rate "
                              "or a shorter run", phase.sampling.rate, file)
         moves = len(phase.reference.moves) if phase.reference is not None else 0

@@ -168,6 +168,8 @@ class PhaseSpec:
     forces: tuple[ForceSpec, ...]
     #: the controller's sample rate, delay and sensors (contactdyn.laws.controllers.sampled.Sampling); None: continuous
     sampling: Any = None
+    #: the key path errors in its controller name: the phase's own table's, else the scene's ``controller``
+    controller_key: str = "controller"
 
 
 MAX_EVENTS = 1_000_000  #: solver.max_events at most (each event is kept in the run's log and JSON)
@@ -631,11 +633,12 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
         until = r.float("until", duration, lo=0.0, unit="s")
     merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
         else r.raw("controller")
-    controller, sampling = read_controller(Reader(merged, r.key("controller"), r.file))
+    where = r.key("controller") if "controller" in r.data else default_controller.path  # (the file's table)
+    controller, sampling = read_controller(Reader(merged, where, r.file))
     reference = _read_reference(r.sub("reference"), bodies or {}) if r.has("reference") else None
     forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
     r.finish()
-    return PhaseSpec(name, until, controller, reference, forces, sampling)
+    return PhaseSpec(name, until, controller, reference, forces, sampling, where)
 
 
 def _read_reference(r: Reader, bodies: dict[str, BodySpec]) -> ReferenceSpec:
