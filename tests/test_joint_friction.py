@@ -257,7 +257,9 @@ def test_a_storm_of_one_joints_events_is_said_to_be_that_joints_not_a_contacts()
     said = _storm_cause(joint)
     assert "joint q2" in said and "diverged" in said and "contact" not in said
     mixed = joint + [{"t": 0.2, "kind": "slip_check", "name": "tip"}]
-    assert "the contact chatters" in _storm_cause(mixed)
+    assert "the contact chatters" in _storm_cause(mixed) and "redundant" not in _storm_cause(mixed)
+    said = _storm_cause(mixed, singular=3)  # (all joints stuck, the tool stuck: the KKT system over-constrained)
+    assert "3 of the decisions met redundant holds" in said and 'robot.joint_friction = "ignore"' in said
 
 
 def test_the_stick_or_reverse_decision_reads_the_trials_holding_torque(tmp_path, monkeypatch):

@@ -234,6 +234,8 @@ def test_event_storm_at_the_start_names_the_posture():
     assert "contact 'pen' began at t = 0 s" in cause and "robot.tip0" in cause and "initial penetration" in cause
     late = [{"t": 0.5 + 1e-12 * k, "kind": "touch", "name": "pen"} for k in range(60)]
     assert start_storm_cause(late, "pen") is None
+    calm_then_storm = events[:3] + late  # (the run's first events at t = 0, its storm at 0.5 s: not the posture's)
+    assert start_storm_cause(calm_then_storm, "pen", since=late[0]["t"]) is None
 
 
 @pytest.mark.parametrize("max_events, storm_count", [(20, 1000), (10**6, 30)])

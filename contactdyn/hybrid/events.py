@@ -75,26 +75,35 @@ class EventLog:
             raise SimulationError(
                 f"{self.scene_name}: event storm: {self.recent.maxlen} events within "
                 f"{self.recent[-1] - self.recent[0]:.3g} s at t = {t:.9g} s (last: {kinds}); " +
-                (start_storm_cause(self.events, name) or _storm_cause(self.events[-self.recent.maxlen:])))
+                (start_storm_cause(self.events, name, since=self.recent[0]) or
+                 _storm_cause(self.events[-self.recent.maxlen:], self.stats["singular_solves"])))
 
 
-def _storm_cause(events: list[dict]) -> str:
-    """What a storm of these events says: a joint's stick and slip, or a contact's, chatter (or the state ran away)."""
+def _storm_cause(events: list[dict], singular: int = 0) -> str:
+    """What a storm of these events says: a joint's stick and slip, or a contact's, chatter (or the state ran away);
+    ``singular``: the transitions' calls so far whose holds were redundant (solved by least squares)."""
     joints = sorted({e["name"] for e in events if e["kind"].startswith("joint_")})
     if joints and len(joints) == len({e["name"] for e in events}):
         return (f"the stick and slip of joint {', '.join(joints)} chatter (its holding torque at its static limit), or "
                 "the run diverged before it (a loop its gains, rate or delay make unstable); see "
                 "solver.storm_count / storm_window")
-    return "the contact chatters (grazing or inconsistent stick/slip); see solver.storm_count / storm_window"
+    redundant = (f"; {singular} of the decisions met redundant holds (solved by least squares: stuck joints and a "
+                 "stuck contact holding the same motion leave the friction forces undetermined, "
+                 "contactdyn/model/joint_friction.py): is the joints' dry friction above what the controller's torques "
+                 "overcome? (robot.joint_friction = \"ignore\", or a lower [robot.joint.<joint>] friction)"
+                 ) if singular else ""
+    return "the contact chatters (grazing or inconsistent stick/slip)" + redundant + \
+        "; see solver.storm_count / storm_window"
 
 
 START_STORM = 1e-3  #: [s] a storm whose contact events began this early started with the run
 
 
-def start_storm_cause(events: list[dict], contact: str) -> str | None:
-    """The likely cause when the events flooding the run are on one contact since t ≈ 0, else None."""
+def start_storm_cause(events: list[dict], contact: str, since: float = 0.0) -> str | None:
+    """The likely cause when the events flooding the run (since ``since`` [s]: a storm's first) are on one contact
+    since t ≈ 0, else None."""
     on_contact = [e for e in events if e["kind"] != "phase"]
-    if not on_contact or on_contact[0]["t"] > START_STORM or \
+    if not on_contact or on_contact[0]["t"] > START_STORM or since > START_STORM or \
             sum(e["name"] == contact for e in on_contact) < 0.9 * len(on_contact):
         return None
     return (f"the events on contact {contact!r} began at t = {on_contact[0]['t']:.3g} s, with the run: the start "
