@@ -230,9 +230,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
             _out(args, f"  contact {name}: normal force peak {F.max():.4g} N, final {F[-1]:.4g} N")
         for imp in result.impacts:
             friction = ", ".join(f"{v:.6g}" for v in imp["friction_impulse"])
+            friction = f", F_fΔt = [{friction}] N·s, jammed = {imp['jammed']}" if friction else " (no friction)"
             together = f" (touching with {imp['with']})" if "with" in imp else ""
             _out(args, f"  impact t = {imp['t']:.6g} s on {imp['contact']}{together}: FΔt = {imp['normal_impulse']:.6g}"
-                       f" N·s, F_fΔt = [{friction}] N·s, jammed = {imp['jammed']}")
+                       f" N·s{friction}")
         for e in result.events:
             if e["kind"] in ("limit", "release"):
                 what = f"stops at its {e['side']} limit, impulse {e['impulse']:.6g} {e['impulse_unit']}" \

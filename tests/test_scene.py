@@ -71,6 +71,15 @@ def test_a_scene_path_that_is_not_there_is_said_to_be_missing(tmp_path):
         load_scene(tmp_path)
 
 
+def test_an_override_that_misspells_a_contact_is_named_not_added():
+    with pytest.raises(SceneError, match="did you mean 'tip'") as info:
+        load_scene("b1", {"contact.tipp.normal.k": 1e4})
+    assert info.value.key == "contact.tipp"
+    with pytest.raises(SceneError) as info:  # (a name nothing is close to: a new contact, read as any other)
+        load_scene("b1", {"contact.wall.normal.k": 1e4})
+    assert info.value.key == "contact.wall.normal.direction"
+
+
 def test_unknown_robot_is_a_scene_error():
     with pytest.raises(SceneError, match="robot.*ur55.*did you mean"):
         System(load_scene("b1", {"robot.urdf": "ur55"}))

@@ -268,6 +268,17 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, parsed
 
 
+NAMED_TABLES = ("contact", "body")  #: top-level tables of named tables: an override naming a new one adds it
+
+
+def _new_name(key: str, name: str, tables: dict, file: str | None) -> None:
+    """An override that would add the named table ``name`` where one of the scene's is that close: a typo, named."""
+    close = close_matches(name, list(tables), n=1)
+    if close:
+        raise SceneError(key, f"a name the scene has ({', '.join(tables)}): did you mean {close[0]!r}? (an override "
+                         f"that names a new one adds it)", name, file)
+
+
 def apply_overrides(document: dict[str, Any], overrides: dict[str, Any], file: str | None = None) -> dict[str, Any]:
     """A copy of ``document`` with each ``key.path`` set; array items as ``phase.1.until``."""
     doc = copy.deepcopy(document)
@@ -285,6 +296,8 @@ def apply_overrides(document: dict[str, Any], overrides: dict[str, Any], file: s
                     raise SceneError(here, f"an index < {len(node)}", part, file)
                 node = node[int(part)]
             elif isinstance(node, dict):
+                if i == 1 and parts[0] in NAMED_TABLES and part not in node:
+                    _new_name(here, part, node, file)
                 node = node.setdefault(part, {})
             else:
                 raise SceneError(here, "a table", node, file)
