@@ -293,13 +293,15 @@ def plot(points: list[WorkPoint], path: Path, title: str, others: list[tuple[str
     plt.close(fig)
 
 
-def write_report(name: str, ref: Reference, points: list[WorkPoint], build_ms: float, out: Path) -> dict[str, Any]:
-    """Write NAME.csv, NAME.json, NAME.md and NAME.png into ``out``; return the JSON document."""
+def write_report(name: str, ref: Reference, points: list[WorkPoint], build_ms: float, out: Path,
+                 changed: bool = False) -> dict[str, Any]:
+    """Write NAME.csv, NAME.json, NAME.md and NAME.png into ``out``; return the JSON document. ``changed``: the
+    scene was changed (overrides): no comparison with the other simulators, timed on the scene as it is."""
     out.mkdir(parents=True, exist_ok=True)
     peak = max(float(np.max(np.abs(ref.result[f"contact.{c}.F_n"]))) for c in ref.result.meta["contacts"]) \
         if ref.result.meta.get("contacts") else 0.0
     best = recommend(points, peak)
-    others = OTHER_SIMULATORS.get(name, [])
+    others = [] if changed else OTHER_SIMULATORS.get(name, [])
     comparison = compare_with_others(points, others) if others else []
     doc = {
         "scene": name, "build_ms": build_ms, "peak_force_N": peak,
@@ -310,6 +312,7 @@ def write_report(name: str, ref: Reference, points: list[WorkPoint], build_ms: f
         "recommended": best.label if best else None,
         "recommend_rule": f"cheapest setting with force error <= {RECOMMEND_RELATIVE:g} x peak force",
         "others": comparison,
+        "changed": changed,  #: overrides changed the scene: no comparison with the other simulators' timings
     }
     (out / f"{name}.json").write_text(json.dumps(doc, indent=1, default=float))
     with open(out / f"{name}.csv", "w") as fh:
@@ -399,7 +402,10 @@ def bench_command(args) -> int:
             print(f"  {p.label:24s} failed: {p.status[:200]}", flush=True)
 
     ref, points, build_ms = bench(args.scene, overrides, methods, rtols, steps, args.repeats, progress)
-    doc = write_report(name, ref, points, build_ms, out)
+    doc = write_report(name, ref, points, build_ms, out, changed=bool(overrides))
+    if overrides and OTHER_SIMULATORS.get(name):
+        print("  (no comparison with the other simulators: their timings are of the scene as it is, and --set "
+              "changed it)")
     print(f"reference: rtol {ref.rtol:g}, own error F_n {ref.force_error:.1e} N, tip {ref.position_error:.1e} m")
     if doc["recommended"]:
         print(f"recommended ({doc['recommend_rule']}): {doc['recommended']}")
