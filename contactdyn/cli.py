@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .errors import ContactdynError, RobotError, RunFileError, SceneError, is_plain_name
+from .errors import ContactdynError, RobotError, RunFileError, SceneError, close_matches, is_plain_name
 
 __all__ = ["main", "build_parser", "EXIT_OK", "EXIT_FAILED", "EXIT_USAGE", "EXIT_INTERRUPTED"]
 
@@ -278,6 +278,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise SceneError("--plot/--over", "both: --plot METRIC --over PARAMETER", args.plot or args.over)
     if args.over is not None and args.over not in sweep.parameter_keys():
         raise SceneError("--over", f"a swept parameter ({', '.join(sweep.parameter_keys()) or 'none'})", args.over)
+    if args.plot is not None:
+        _check_metric(args.plot, sweep)
     if args.workers is not None and args.workers < 0:
         raise SceneError("--workers", "an integer >= 0 (0: run in this process)", args.workers)
     if args.chunk is not None and args.chunk < 1:
@@ -303,6 +305,21 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         figure = plot_over(report.summary, args.plot, args.over, sweep.parameter_keys(), report.out)
         _out(args, f"  plot {figure}")
     return EXIT_FAILED if bad else EXIT_OK
+
+
+def _check_metric(name: str, sweep) -> None:
+    """``--plot``'s metric, checked before the sweep runs: one its runs give (output.metrics), for the contacts of
+    its scene and of its overrides."""
+    from .output.metrics import CONTACT_METRICS, RUN_METRICS
+
+    table = sweep.document.get("contact")
+    contacts = dict.fromkeys([*(table if isinstance(table, dict) else {}),
+                              *(k.split(".")[1] for k in [*sweep.fixed, *sweep.axes] if k.startswith("contact."))])
+    known = [*RUN_METRICS, *(f"contact.{c}.{m}" for c in contacts for m in CONTACT_METRICS)]
+    if name not in known:
+        close = close_matches(name, known, n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        raise SceneError("--plot", f"a metric of the sweep's runs ({hint}known: {', '.join(known)})", name)
 
 
 # ---- plot, view, bench: other modules, imported when used ---------------------------------------

@@ -155,8 +155,9 @@ def test_plot_and_over_are_checked(capsys, tmp_path):
     assert main([*base, "--plot", "contact.tip.F_peak"]) == EXIT_USAGE
     assert main([*base, "--plot", "contact.tip.F_peak", "--over", "duration"]) == EXIT_USAGE
     assert "a swept parameter (contact.tip.normal.k, controller.kp)" in capsys.readouterr().err
-    assert main([*base, "--plot", "nosuch", "--over", "controller.kp"]) == EXIT_USAGE
-    assert "a metric of the summary" in capsys.readouterr().err
+    assert main([*base, "--plot", "contact.tip.F_pk", "--over", "controller.kp"]) == EXIT_USAGE
+    assert "did you mean 'contact.tip.F_peak'?" in capsys.readouterr().err
+    assert not (tmp_path / "s").exists()  # (checked before any run: nothing was run or written)
 
 
 def test_simulation_failure_and_crash_do_not_stop_the_others(capsys, tmp_path, monkeypatch):
