@@ -118,6 +118,12 @@ def test_a_misspelt_required_key_is_named_beside_the_missing_one():
     with pytest.raises(SceneError) as info:
         parse_scene(doc)
     assert info.value.key == "duration" and "misspelling" not in str(info.value)
+    doc = tomllib.loads((sims_dir() / "b1.toml").read_text())
+    tangent = doc["contact"]["tip"]["tangent"]
+    tangent["muu"] = tangent.pop("mu")  # (a friction law's own required key)
+    with pytest.raises(SceneError) as info:
+        parse_scene(doc)
+    assert info.value.key == "contact.tip.tangent.mu" and "the table has 'muu': a misspelling?" in str(info.value)
 
 
 def test_unknown_key_message_reads_as_one_sentence():

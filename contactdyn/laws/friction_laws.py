@@ -127,7 +127,7 @@ class Coulomb(FrictionLaw):
         """``mu`` (μ_s = μ_k), or ``mu_s`` and ``mu_k`` (either defaults to ``mu``; μ_s to μ_k)."""
         got = {p.name: p.read(r) if r.has(p.name) else None for p in (MU, MU_K, MU_S)}
         if got["mu"] is None and got["mu_k"] is None:
-            raise r.error("mu", "a friction coefficient (mu, or mu_s and mu_k)", None)
+            raise r.missing("mu", "a friction coefficient (mu, or mu_s and mu_k)")
         mu_k = got["mu_k"] if got["mu_k"] is not None else got["mu"]
         mu_s = got["mu_s"] if got["mu_s"] is not None else (got["mu"] if got["mu"] is not None else mu_k)
         return cls._spec(r, mu_s, mu_k)

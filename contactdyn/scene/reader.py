@@ -154,16 +154,17 @@ class Reader:
         self._used.add(name)
         if name not in self.data:
             if default is MISSING:
-                raise self.error(name, "a value (required key is missing" + self._misspelt(name) + ")", "nothing")
+                raise self.missing(name, "a value (required key is missing)")
             return default
         return self.data[name]
 
-    def _misspelt(self, name: str) -> str:
-        """``; the table has 'durration': a misspelling?`` where a key of the table nobody knows is close to
-        ``name`` (else "")."""
+    def missing(self, name: str, expected: str) -> SceneError:
+        """The error of a required key that is missing, naming a key of the table nobody knows that is close to
+        ``name``: ``expected …, the table has 'durration': a misspelling?``."""
         unknown = [k for k in self.data if k not in self._used and k not in self._asked]
         close = close_matches(name, unknown, n=1)
-        return f"; the table has {close[0]!r}: a misspelling?" if close else ""
+        hint = f"; the table has {close[0]!r}: a misspelling?" if close else ""
+        return self.error(name, expected + hint, "nothing")
 
     def sub(self, name: str, default: Any = MISSING) -> Reader:
         self._note(name, "table", default)
