@@ -217,3 +217,38 @@ def test_a_run_records_the_limit_impact_with_the_contacts_friction_impulse():
     assert np.linalg.norm(imp["friction_impulse"]) == pytest.approx(MU_SLOPE * imp["normal_impulse"], rel=1e-12)
     after = r.t > hit["t"] + 1e-3
     np.testing.assert_allclose(r["q"][after, 1], 0.5, atol=1e-9)  # [m] held on its limit
+
+
+@pytest.fixture
+def brief_pull():
+    """A controller ``brief_pull`` registered for the test: τ = 1 − 1.002 sin(π (t − shift)) [N·m] from ``shift`` on
+    (1 N·m before): it presses on the upper limit but for 81 ms, when it pulls away."""
+    from contactdyn.laws.controllers.base import CONTROLLERS, Controller, register
+
+    class BriefPull(Controller):
+        name = "brief_pull"
+        shift = 0.0  #: [s]
+
+        def command(self, inp):
+            t = inp.t - self.shift
+            return np.full(1, 1.0 - 1.002 * math.sin(math.pi * t) if t > 0.0 else 1.0), None
+
+    register(BriefPull)
+    yield BriefPull
+    CONTROLLERS.pop(BriefPull.name, None)
+
+
+@pytest.mark.parametrize("shift", [0.11, 0.23])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_held_state_does_not_hide_a_brief_pull_off_the_limit(tmp_path, brief_pull, shift, compiled):
+    """No gravity, the joint pressing on its upper limit (nothing moves: the steps grow): a pull of 81 ms between two
+    step ends releases it at the closed-form instant (before: no release at these shifts, the joint held on its limit
+    by a limit torque that pulled), and it strikes the limit again."""
+    brief_pull.shift = shift
+    doc = pendulum(tmp_path).document
+    doc.update(duration=1.2, controller={"kind": "brief_pull"})
+    doc["robot"] = {**doc["robot"], "q0": [UPPER], "gravity": [0.0, 0.0, 0.0]}
+    r = simulate(parse_scene(doc), compiled=compiled)
+    kinds = [(e["kind"], e.get("side")) for e in r.events]
+    assert kinds == [("limit", "upper"), ("release", None), ("limit", "upper")], kinds
+    assert r.events[1]["t"] == pytest.approx(shift + math.asin(1.0 / 1.002) / math.pi, abs=1e-9)

@@ -122,7 +122,8 @@ def terminal_event(fn, kind: str, contact: str):
 
 class StageWatch:
     """An event of a held constraint whose function ``value(t, x)`` reads its holding force, which also sees inside
-    a step: a stuck contact's ``slip`` (:class:`SlipWatch`), a stuck joint's ``joint_slip``.
+    a step: a stuck contact's ``slip`` (:class:`SlipWatch`), a stuck joint's ``joint_slip``, a pressing joint's
+    ``release``.
 
     ``solve_ivp`` tests events only at step ends, and a held state may hardly move (every joint stuck: not at all,
     so the steps grow without bound): the load can reach the holding limit and fall back within one step unseen.
@@ -138,8 +139,9 @@ class StageWatch:
     terminal = True
     direction = -1
 
-    def __init__(self, value, kind: str, name: str, floor: float = 0.0, index: int | None = None):
+    def __init__(self, value, kind: str, name: str, floor: float = 0.0, index: int | None = None, side: int = 0):
         self.value, self.kind, self.contact, self.index = value, kind, name, index  # value(t, x): g at a state
+        self.side = side  #: a limit's side (+1 lower, −1 upper: ``release``)
         self.floor = floor
         self.t_end = -math.inf  #: last step end seen [s]
         self.latch = math.inf  #: from this time on g is held negative [s]
@@ -333,7 +335,11 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         if len(r) == 2:
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
                                       name))
-    out += system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # contactdyn.model.limits
+    for fn in system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None)):  # model.limits
+        if fn.kind == "release":  # a pressing joint's pull watched at every stage (its state may not move)
+            fn = StageWatch(fn, fn.kind, fn.contact, index=fn.index, side=fn.side)
+            watches.append(fn)
+        out.append(fn)
     if phase.joint_modes:  # contactdyn.model.joint_friction: a stuck joint's break-away watched at every stage
         for fn in system.joint_friction.events(phase.joint_modes, phase.limits, x0, system.nQ, values.joint_hold):
             if fn.kind == "joint_slip":

@@ -53,6 +53,9 @@ FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts s
 #: start's own touching test (contactdyn.model.system.System.initial_state)
 CO_TOUCH = 1e-12
 SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
+#: [N·m or N, relative above 1] a release seen inside a step is real if the located instant's pressing torque is at
+#: most this × (1 + itself) (else a false alarm: still pressing)
+RELEASE_ALARM = 1e-6
 #: [-] a turn located with |v_t| ≤ this × v_ε is taken for a slide coming to rest and decided at rest like a
 #: stop. Why: when a slide decelerates to rest, its ``turn`` and ``stop`` tie within a rounding (the 5-DOF
 #: writer's turn fires at |v_t| = 4.1 v_ε); refreshing r there keeps a slide of a few v_ε whose direction relaxes
@@ -228,7 +231,15 @@ class Transitions:
         return x, phase, True
 
     def _on_limit(self, t, x, modes, phase, event, after):
-        """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (model.limits)."""
+        """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (model.limits); a
+        release a stage saw that the located instant does not (still pressing) is a false alarm: it keeps pressing."""
+        if event.kind == "release" and getattr(event, "latch", math.inf) < math.inf:
+            self.stats["slips_seen_inside_a_step"] += 1
+            pressing = event.side * self.evaluate(t, x, modes, phase).limit_torque.get(event.index, 0.0)
+            if pressing > RELEASE_ALARM * (1.0 + abs(pressing)):
+                self.log.events[-1]["kind"] = "release_check"
+                self.stats["slip_false_alarms"] += 1
+                return x, phase, True
         x, phase, info, imp = self.system.limits.switch(self.system, t, x, modes, phase, event)
         self.log.events[-1].update(info)  # the joint, side, velocity before and impulse, with the event
         if imp is not None and imp.contact:  # a contact took part (its friction impulse too): recorded as at a touch
@@ -285,7 +296,7 @@ class Transitions:
                                                            self.evaluate.joint_hold)
         self.log.events[-1].update(info)
         if event.kind == "joint_slip":  # (a stage watch's, events.StageWatch: seen inside a step, or a false alarm)
-            self.stats["slips_seen_inside_a_step"] += int(event.latch < math.inf)
+            self.stats["slips_seen_inside_a_step"] += int(getattr(event, "latch", math.inf) < math.inf)
             self.stats["slip_false_alarms"] += int(info.get("kind") == "joint_slip_check")
         return x, phase, True
 
