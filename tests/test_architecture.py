@@ -102,8 +102,9 @@ def test_core_module_is_documented_and_small(module):
     assert _too_long(PKG / f"{module}.py") == []
 
 
-#: the modules at the package's top: the package, its errors, and the entry points (no mechanism)
-TOP_LEVEL = {"__init__", "errors", "simulate", "cli", "starter", "first_run"}
+#: the modules at the package's top: the package, its errors, and the entry points (no mechanism; ``__main__``:
+#: ``python -m contactdyn``)
+TOP_LEVEL = {"__init__", "__main__", "errors", "simulate", "cli", "starter", "first_run"}
 MAX_FOLDER = 12  #: modules in one concept folder, its __init__ not counted
 
 
@@ -138,6 +139,7 @@ LAYERS = [
     ["hybrid"],  # the loop: nothing below imports it
     ["simulate", "starter", "analysis"],
     ["cli", "first_run", "viewer", "sweep", "identify"],
+    ["__main__"],
 ]
 
 

@@ -114,6 +114,14 @@ class LastEvaluation:
         return self(t, x, modes, phase).joint_hold
 
 
+def _count_alarm(stats: dict, event, false_alarm: bool) -> bool:
+    """Count a stage watch's event (events.StageWatch) in the run's stats: seen inside a step, and a false alarm
+    (``false_alarm``, returned)."""
+    stats["slips_seen_inside_a_step"] += int(getattr(event, "latch", math.inf) < math.inf)
+    stats["slip_false_alarms"] += int(false_alarm)
+    return false_alarm
+
+
 class Transitions:
     """The mode decisions of one run: at events (:meth:`handle`) and at any instant (:meth:`consistent`)."""
 
@@ -231,14 +239,11 @@ class Transitions:
         return x, phase, True
 
     def _on_limit(self, t, x, modes, phase, event, after):
-        """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (model.limits); a
-        release a stage saw that the located instant does not (still pressing) is a false alarm: it keeps pressing."""
-        if event.kind == "release" and getattr(event, "latch", math.inf) < math.inf:
-            self.stats["slips_seen_inside_a_step"] += 1
+        """A joint reaches a position limit (plastic impact, then it presses) or stops pressing (model.limits)."""
+        if event.kind == "release" and getattr(event, "latch", math.inf) < math.inf:  # a stage's alarm: confirmed?
             pressing = event.side * self.evaluate(t, x, modes, phase).limit_torque.get(event.index, 0.0)
-            if pressing > RELEASE_ALARM * (1.0 + abs(pressing)):
-                self.log.events[-1]["kind"] = "release_check"
-                self.stats["slip_false_alarms"] += 1
+            if _count_alarm(self.stats, event, pressing > RELEASE_ALARM * (1.0 + abs(pressing))):
+                self.log.events[-1]["kind"] = "release_check"  # (still pressing there: it keeps pressing)
                 return x, phase, True
         x, phase, info, imp = self.system.limits.switch(self.system, t, x, modes, phase, event)
         self.log.events[-1].update(info)  # the joint, side, velocity before and impulse, with the event
@@ -295,9 +300,7 @@ class Transitions:
         x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event,
                                                            self.evaluate.joint_hold)
         self.log.events[-1].update(info)
-        if event.kind == "joint_slip":  # (a stage watch's, events.StageWatch: seen inside a step, or a false alarm)
-            self.stats["slips_seen_inside_a_step"] += int(getattr(event, "latch", math.inf) < math.inf)
-            self.stats["slip_false_alarms"] += int(info.get("kind") == "joint_slip_check")
+        _count_alarm(self.stats, event, info.get("kind") == "joint_slip_check")
         return x, phase, True
 
     #: event kind -> handler (see :meth:`handle`)
