@@ -61,6 +61,9 @@ def test_malformed_toml_names_the_file(tmp_path):
 def test_unknown_scene_name_lists_close_matches():
     with pytest.raises(SceneError, match="did you mean b1"):
         load_scene("b11")
+    with pytest.raises(SceneError) as info:  # (nothing close: where the names are, not a list cut mid-name)
+        load_scene("qq")
+    assert "`contactdyn list scenes`" in str(info.value) and " ... " not in str(info.value)
 
 
 def test_a_scene_path_that_is_not_there_is_said_to_be_missing(tmp_path):

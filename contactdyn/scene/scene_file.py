@@ -238,7 +238,8 @@ def find_scene(name: str | Path) -> Path:
     known = sorted({p.stem for folder in scene_dirs() for p in folder.glob("*.toml")})
     close = close_matches(name, known)
     hint = f"; did you mean {', '.join(close)}?" if close else ""
-    raise SceneError("scene", f"a scene file or a scene's name ({', '.join(known)}){hint}", str(name))
+    listed = ", ".join(known) if len(known) <= 12 else f"{len(known)} of them: `contactdyn list scenes`"
+    raise SceneError("scene", f"a scene file or a scene's name ({listed}){hint}", str(name))
 
 
 def urdf_beside_scene(source: str, file: str | None) -> str:
