@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-__all__ = ["ContactdynError", "RobotError", "RunFileError", "SceneError", "UnknownKeyError", "SimulationError",
-           "close_matches", "signal_name"]
+__all__ = ["ContactdynError", "RobotError", "FrameError", "RunFileError", "SceneError", "UnknownKeyError",
+           "SimulationError", "close_matches", "signal_name"]
 
 
 class ContactdynError(Exception):
@@ -12,6 +12,10 @@ class ContactdynError(Exception):
 
 class RobotError(ContactdynError):
     """A robot description (URDF, example-robot-data name, frame, joint) is unusable."""
+
+
+class FrameError(RobotError):
+    """A frame name the robot does not have (the message lists close ones)."""
 
 
 class SceneError(ContactdynError):

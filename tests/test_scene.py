@@ -84,8 +84,12 @@ def test_an_override_that_misspells_a_contact_is_named_not_added():
 
 
 def test_unknown_robot_is_a_scene_error():
-    with pytest.raises(SceneError, match="robot.*ur55.*did you mean"):
+    with pytest.raises(SceneError, match="robot.*ur55.*did you mean") as info:
         System(load_scene("b1", {"robot.urdf": "ur55"}))
+    assert info.value.key == "robot.urdf"
+    with pytest.raises(SceneError, match="no frame named 'tipp'") as info:
+        System(load_scene("b1", {"robot.tip": "tipp"}))
+    assert info.value.key == "robot.tip"
 
 
 def test_overrides_parse_toml_values_and_index_arrays():

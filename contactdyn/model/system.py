@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import RobotError, SceneError
+from ..errors import FrameError, RobotError, SceneError
 from ..laws.controllers import CONTROLLERS
 from ..laws.controllers.base import BindContext, Controller
 from ..laws.controllers.sampled import SampledController
@@ -92,8 +92,10 @@ class System:
             #: the joints' damping and dry friction (contactdyn.model.joint_friction)
             self.joint_friction = JointFriction(self.robot, rs, scene.file)
             self.tip_fid = self.robot.frame_id(rs.tip)
+        except FrameError as exc:  # (the robot's load finds its tip first)
+            raise SceneError("robot.tip", "a frame of the robot", exc, scene.file) from None
         except RobotError as exc:
-            raise SceneError("robot", "a loadable robot", exc, scene.file) from None
+            raise SceneError("robot.urdf", "a loadable robot", exc, scene.file) from None
         nv = self.nv = self.robot.nv
         # ---- generalized coordinates: robot, bodies, chain masses, motors (the state layout, below) ----
         self.body_names = list(scene.bodies)

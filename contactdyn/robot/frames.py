@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..errors import RobotError, close_matches
+from ..errors import FrameError, close_matches
 
 __all__ = ["FRAME_PREFERENCE", "find_frame", "chain_joints", "frame_tree"]
 
@@ -26,7 +26,7 @@ def find_frame(model: pin.Model, name: str, source: str) -> int:
         names = list(dict.fromkeys(f.name for f in model.frames))
         close = close_matches(name, names, n=5, cutoff=0.5)
         hint = f"; close matches: {', '.join(map(repr, close))}" if close else ""
-        raise RobotError(f"{source}: no frame named {name!r}{hint} (contactdyn list frames ROBOT shows them all)")
+        raise FrameError(f"{source}: no frame named {name!r}{hint} (contactdyn list frames ROBOT shows them all)")
     return matches[0]  # in FRAME_PREFERENCE's order
 
 
