@@ -28,7 +28,7 @@ import numpy as np
 
 from contactdyn import Robot, simulate
 from contactdyn.errors import ContactdynError, SceneError
-from contactdyn.robot.catalog import TOOL_FRAMES
+from contactdyn.robot.catalog import TOOL_FRAMES, URDF_JOINT_FRICTION
 from contactdyn.scene.scene_file import load_scene
 
 OUT = Path(__file__).parent / "out"
@@ -49,12 +49,9 @@ def _tilt(result, scene) -> float:
                                        -1, 1))) for q in result["q"])
 
 
-URDF_FRICTION = {"xarm7"}  #: arms whose URDF gives their joints dry friction: swapped without it
-
-
 def swap_row(robot: str, tip0: list[float] | None = None, save: Path | None = None) -> dict:
     overrides = {"robot.urdf": robot, "robot.tip": TOOL_FRAMES[robot]}
-    if robot in URDF_FRICTION:  # the robot swapped, not its joints' friction (tests/test_robot_swap.py says why)
+    if robot in URDF_JOINT_FRICTION:  # the robot swapped, not its joints' friction (tests/test_robot_swap.py says why)
         overrides["robot.joint_friction"] = "ignore"
     label = robot
     if tip0 is not None:

@@ -19,7 +19,7 @@ import pytest
 from contactdyn import Robot, simulate
 from contactdyn.cli import EXIT_OK, EXIT_USAGE, main
 from contactdyn.output.result import load_result
-from contactdyn.robot.catalog import TOOL_FRAMES
+from contactdyn.robot.catalog import TOOL_FRAMES, URDF_JOINT_FRICTION
 from contactdyn.scene.scene_file import sims_dir
 
 WRITER, UR5 = "case2_writer5dof", "case2_writer_ur5"
@@ -112,7 +112,6 @@ SWAP = ["panda", "ur3", "ur5", "ur10", "xarm7", "z1", "kinova", "talos_arm", "so
 #: arms that reach the writer's pencil pose (measured: benchmarks/robot_swap.py); the others must stop
 #: with exit 2 and the amount they miss by
 REACH = {"panda", "ur3", "ur5", "ur10", "xarm7", "kinova"}
-URDF_FRICTION = {"xarm7"}  #: reaching arms whose URDF gives their joints dry friction (run without it, see below)
 SHORT = 0.8  #: [s] simulated by default: the 0.5 s press and 0.3 s of drawing
 FULL = 4.5  #: [s] the scene's whole run (``pytest --slow``; table: benchmarks/robot_swap.py)
 
@@ -126,7 +125,7 @@ def test_swap_matrix_presses_and_draws_or_says_why_not(robot, duration, tmp_path
     # the matrix swaps the robot, not its joint friction: xarm7's URDF gives every joint 2-10 N·m·s/rad of damping and
     # 1 N·m of dry friction, and its 7 joints stuck at rest with the pencil's stick rows over-constrain the arm (a
     # statically indeterminate hold: singular solves, an event storm at 0.78 s; contactdyn.model.joint_friction)
-    friction = ["--set", "robot.joint_friction=ignore"] if robot in URDF_FRICTION else []
+    friction = ["--set", "robot.joint_friction=ignore"] if robot in URDF_JOINT_FRICTION else []
     code = main(["run", UR5, "--set", f"robot.urdf={robot}", "--set", f"robot.tip={TOOL_FRAMES[robot]}",
                  "--set", f"duration={duration}", "--set", "solver.output_rate=200", "--out", str(out), *friction])
     err = capsys.readouterr().err

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from ..errors import RobotError
 
-__all__ = ["SHORT_NAMES", "TOOL_FRAMES", "example_robot_data_share", "example_robots", "urdf_dir"]
+__all__ = ["SHORT_NAMES", "TOOL_FRAMES", "URDF_JOINT_FRICTION", "example_robot_data_share", "example_robots",
+           "urdf_dir"]
 
 #: short names of the usual robots -> URDF relative to example-robot-data's ``robots`` folder
 SHORT_NAMES: dict[str, str] = {
@@ -55,6 +56,9 @@ TOOL_FRAMES: dict[str, str] = {
     "talos_arm": "gripper_left_base_link",
     "so100": "gripper",
 }
+#: the usual arms whose URDF gives their joints dry friction (xarm7: 1 N·m on each): swapping the robot alone on a
+#: scene tuned without it means ``robot.joint_friction = "ignore"`` (tests/test_robot_swap.py says why)
+URDF_JOINT_FRICTION = frozenset({"xarm7"})
 
 
 def urdf_dir() -> Path:
