@@ -263,6 +263,9 @@ class StepCollapse(_StepCount):
 #: event kinds whose functions read forces (normal force, friction, limit torque): these jump where the
 #: set-points' acceleration or a force set-point jumps; touch, stop, reverse, turn and limit read the state
 JUMPING = ("separate", "slip", "release", "joint_slip")
+#: the joints' events of a hold (a pressing limit's ``release``, a stuck joint's ``joint_slip``) that read its
+#: torque: watched at every Runge–Kutta stage (:class:`StageWatch`), as a stuck contact's ``slip`` is
+STAGE_WATCHED = ("release", "joint_slip")
 
 
 def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray, x_after: np.ndarray | None = None
@@ -335,17 +338,14 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         if len(r) == 2:
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
                                       name))
-    for fn in system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None)):  # model.limits
-        if fn.kind == "release":  # a pressing joint's pull watched at every stage (its state may not move)
-            fn = StageWatch(fn, fn.kind, fn.contact, index=fn.index, side=fn.side)
+    joints = system.limits.events(phase.limits, x0, getattr(values, "limit_torque", None))  # model.limits
+    if phase.joint_modes:  # contactdyn.model.joint_friction
+        joints += system.joint_friction.events(phase.joint_modes, phase.limits, x0, system.nQ, values.joint_hold)
+    for fn in joints:
+        if fn.kind in STAGE_WATCHED:  # a held joint's state may not move: its pull watched at every stage
+            fn = StageWatch(fn, fn.kind, fn.contact, index=fn.index, side=getattr(fn, "side", 0))
             watches.append(fn)
         out.append(fn)
-    if phase.joint_modes:  # contactdyn.model.joint_friction: a stuck joint's break-away watched at every stage
-        for fn in system.joint_friction.events(phase.joint_modes, phase.limits, x0, system.nQ, values.joint_hold):
-            if fn.kind == "joint_slip":
-                fn = StageWatch(fn, fn.kind, fn.contact, index=fn.index)
-                watches.append(fn)
-            out.append(fn)
     fun = fun or values.rhs
     if not watches:
         return out, fun

@@ -82,6 +82,8 @@ class PipelineMode:
         call_ = of(call)
         self.reason = "; ".join(pipe.python_stages)  #: its declared Python stages ("": none)
         self.ring: deque[tuple] = deque([_NO_CALL] * 4, maxlen=4)  #: the last four calls' (t, x, events)
+        #: per joint_event_starts() section (the limits', the held joints'): [events it was read from, by joint]
+        self._by_joint: list[list] = [[None, {}], [None, {}]]
         p = pipe.packed
         ints, reals, work, events = p.ints, p.reals, p.work, p.events
         ring = self.ring
@@ -159,14 +161,20 @@ class PipelineMode:
 
     def limit_torque(self, t: float, x: np.ndarray) -> dict[int, float]:
         """Torques [N·m or N] of the joints pressing on a limit, by joint coordinate (the ``release`` event's)."""
-        ev, base = self.values(t, x), self.pipe.packed.joint_event_starts()[0]
-        return {i: float(ev[base + k]) for k, i in enumerate(self.pipe.packed.limits)}
+        return self._joint_torques(t, x, 0, self.pipe.packed.limits)
 
     def joint_hold(self, t: float, x: np.ndarray) -> dict[int, float]:
         """Holding torques [N·m or N] of the joints stuck by dry friction, by joint coordinate (after the limits')."""
-        p = self.pipe.packed
-        ev, base = self.values(t, x), p.joint_event_starts()[1]
-        return {i: float(ev[base + k]) for k, i in enumerate(p.held)}
+        return self._joint_torques(t, x, 1, self.pipe.packed.held)
+
+    def _joint_torques(self, t: float, x: np.ndarray, section: int, joints: list[int]) -> dict[int, float]:
+        """{joint: torque} of a section of the event values at (t, x), read once per call (each of its joints'
+        events asks at every stage: events.StageWatch)."""
+        ev, memo = self.values(t, x), self._by_joint[section]
+        if memo[0] is not ev:  # (each call's events are a copy of their own, in the ring)
+            base = self.pipe.packed.joint_event_starts()[section]
+            memo[:] = [ev, {i: float(ev[base + k]) for k, i in enumerate(joints)}]
+        return memo[1]
 
     # ---- an instant's evaluation -------------------------------------------------------------------
     def evaluation(self, t: float, x: np.ndarray) -> Evaluation:

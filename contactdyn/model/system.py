@@ -131,10 +131,11 @@ class System:
         for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
             ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
                                  p.controller_key))
-        self.z_slices, self.energy_slot, self.impulse_slots, self.ny = assign_first_order_slots(
-            n_first, [ctl.n_states for ctl in self.controllers], scene.solver.record_energy, self.contacts)
-        self.joint_impulse_slot = self.ny  #: y's slot of the first joint with dry friction's ∫τ_f dt (one per joint)
-        self.ny += len(self.joint_friction.dry)
+        #: impulse_slots: per friction contact y's slot of ∫F dt; joint_impulse_slot: the first joint with dry
+        #: friction's ∫τ_f dt (one per such joint, in JointFriction.dry's order)
+        self.z_slices, self.energy_slot, self.impulse_slots, self.joint_impulse_slot, self.ny = \
+            assign_first_order_slots(n_first, [ctl.n_states for ctl in self.controllers], scene.solver.record_energy,
+                                     self.contacts, len(self.joint_friction.dry))
         for body in (b for b in self.articulated.values() if b.free):  # a free body's chart: one slot
             body.chart_index, self.ny = 2 * self.nQ + self.ny, self.ny + 1
         self.n = 2 * self.nQ + self.ny
@@ -445,8 +446,10 @@ def assign_chain_slots(contacts: list[Contact], nv: int, diag: list[float]) -> t
 
 
 def assign_first_order_slots(n_first: int, controller_states: list[int], record_energy: bool,
-                             contacts: list[Contact]) -> tuple[list[slice], int, dict[str, int], int]:
-    """Slots of y after the junctions: (controller slices, energy slot or −1, impulse slots, ny)."""
+                             contacts: list[Contact], dry_joints: int = 0
+                             ) -> tuple[list[slice], int, dict[str, int], int, int]:
+    """Slots of y after the junctions: (controller slices, energy slot or −1, the friction contacts' impulse slots,
+    the first of the ``dry_joints`` joints' impulse slots, ny)."""
     z_slices = []
     for n_states in controller_states:
         z_slices.append(slice(n_first, n_first + n_states))
@@ -458,7 +461,7 @@ def assign_first_order_slots(n_first: int, controller_states: list[int], record_
         if c.friction is not None and len(c.tangents):
             impulse_slots[c.name] = n_first
             n_first += 1 + len(c.tangents)
-    return z_slices, energy_slot, impulse_slots, n_first
+    return z_slices, energy_slot, impulse_slots, n_first, n_first + dry_joints
 
 
 def _controller_of(spec, nv: int) -> Controller:
