@@ -403,7 +403,7 @@ def bench_command(args) -> int:
 
     ref, points, build_ms = bench(args.scene, overrides, methods, rtols, steps, args.repeats, progress)
     doc = write_report(name, ref, points, build_ms, out, changed=bool(overrides))
-    if overrides and OTHER_SIMULATORS.get(name):
+    if doc["changed"] and OTHER_SIMULATORS.get(name):
         print("  (no comparison with the other simulators: their timings are of the scene as it is, and --set "
               "changed it)")
     print(f"reference: rtol {ref.rtol:g}, own error F_n {ref.force_error:.1e} N, tip {ref.position_error:.1e} m")

@@ -6,9 +6,9 @@ size and time alike, would load old machine code. Here the cache directory is ke
 ``contactdyn-<version>-<hash>``, the hash being the first HASH_CHARS hex digits of SHA-256 over the package's
 place and every compiled module's path, time and source (the modules that take :func:`njit` from here:
 :func:`key`). An edit to any of them, another place or another version starts a fresh directory; nothing ever
-needs deleting by hand. (numba also
-freezes the global constants a compiled function reads: they live in compiled modules, so the hash
-covers them; ``tests/test_compile_cache.py`` checks that no compiled function reads one from elsewhere.)
+needs deleting by hand. (numba also freezes the global constants a compiled function reads: they live in compiled
+modules, so the hash covers them; ``tests/test_compile_cache.py`` checks that no compiled function reads one from
+elsewhere.)
 
 The directory: ``$NUMBA_CACHE_DIR/KEY`` when the user set numba's NUMBA_CACHE_DIR, else
 ``$XDG_CACHE_HOME/contactdyn/numba/KEY`` (``~/.cache/contactdyn/numba/KEY``), else, where that cannot

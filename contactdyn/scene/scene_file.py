@@ -223,6 +223,9 @@ def scene_dirs() -> list[Path]:
     return dirs + [d for d in (sims_dir(),) if not dirs or d.resolve() != local.resolve()]
 
 
+LISTED_SCENES = 12  #: an unknown scene name's error lists the scenes up to this many (else: where to list them)
+
+
 def find_scene(name: str | Path) -> Path:
     """A scene path, or a scene name (with or without ``.toml``) in :func:`scene_dirs`, the first found."""
     path = Path(name)
@@ -238,7 +241,7 @@ def find_scene(name: str | Path) -> Path:
     known = sorted({p.stem for folder in scene_dirs() for p in folder.glob("*.toml")})
     close = close_matches(name, known)
     hint = f"; did you mean {', '.join(close)}?" if close else ""
-    listed = ", ".join(known) if len(known) <= 12 else f"{len(known)} of them: `contactdyn list scenes`"
+    listed = ", ".join(known) if len(known) <= LISTED_SCENES else f"{len(known)} of them: `contactdyn list scenes`"
     raise SceneError("scene", f"a scene file or a scene's name ({listed}){hint}", str(name))
 
 
