@@ -170,6 +170,28 @@ def test_the_laws_own_states_advance_by_forward_euler_once_per_sample():
     np.testing.assert_allclose(z, expected, rtol=1e-14, atol=1e-17)
 
 
+def test_a_phase_begun_off_the_grid_integrates_its_laws_states_over_the_time_that_passed():
+    """The first hold of a phase begun between sample instants is shorter than the period: the law's states advance
+    by that hold, not by T (z = ∫ż dt at the samples, as the continuous law integrates it)."""
+    doc = b1(duration=0.02, kind="_test_integrator")
+    start = 0.0125  # [s] half a period off the 1 kHz grid
+    second = copy.deepcopy(doc["phase"][0])
+    doc["phase"][0]["until"] = start
+    second.update(name="sampled", controller={"sample_rate": RATE})
+    doc["phase"].append(second)
+    run, _ = run_of(doc)
+    s = run.system
+    z0 = 2 * s.nQ + s.z_slices[1].start
+    begun = [(t0, seg) for t0, seg in starts(run) if seg.phase.index == 1]
+    times = np.array([t0 for t0, _ in begun])
+    np.testing.assert_allclose(times, [start, *np.arange(13, 20) / RATE], rtol=0, atol=1e-15)
+    z = np.array([np.asarray(seg.sol(t0))[z0] for t0, seg in begun])  # τ_k = z_k
+    holds = np.diff(np.append(times, 0.02))[:-1]  # the first 0.5 ms, then T
+    expected = np.concatenate([[0.0], np.cumsum(holds * (2.0 - times[:-1]))])
+    np.testing.assert_allclose(z, expected, rtol=1e-13, atol=1e-17)
+    assert z[1] == pytest.approx(0.5e-3 * (2.0 - start), rel=1e-13)  # (T (2 − t_s): twice that)
+
+
 def test_held_voltages_run_through_the_motors_on_the_compiled_call():
     drive = {"kind": "dc_motor", "C_M": 0.05, "C_E": 0.05, "R": 1.0, "J": 1e-5, "N": 20.0}
     docs = [b1(kind="voltage", u=[1.0, -0.5], **rate) for rate in ({"sample_rate": RATE}, {})]

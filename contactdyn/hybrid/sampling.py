@@ -94,11 +94,10 @@ class SampledPhases:
         if law is None:
             law = self.laws[runner] = SampledLaw(runner)
         reading = law.reading(t, x, sampler.resolution, sampler.sense)
-        tau, z_law = sampler.update(reading, x[states], _command)
+        tau, z_law = sampler.update(t, reading, x[states], _command)
         x = x.copy()
         x[held] = tau
         x[states] = z_law
-        sampler.passed(t)
         self.stats["samples"] += 1
         return x
 

@@ -13,9 +13,10 @@ held command off the state, torques or voltages, through the drives where there 
 instant (a step boundary of the compiled DOP853,
 a segment boundary for other methods: :mod:`contactdyn.hybrid.sampling`) the new command is written into the
 state and the events its jump fires are checked. The law's own states (integrators) advance once per sample,
-by forward Euler over the period: z_{k+1} = z_k + T ż_k. A phase starts sampling at its start (the delay line
-filled with that first measurement; a new phase starts a new line and new sensor states) and then on the scene's
-grid k / rate.
+by forward Euler over the hold to the next sample: z_{k+1} = z_k + (t_{k+1} − t_k) ż_k. A phase starts sampling at
+its start (the delay line filled with that first measurement; a new phase starts a new line and new sensor states)
+and then on the scene's grid k / rate: a hold is the period T, the first one shorter where the phase starts off the
+grid (z then integrates ż over the time that passed, as the continuous law does).
 
 What the law computes on at t_k is the whole input it measured at t_{k−d} (time, state, references, forces),
 with its own states as they are at t_k: a delay of d samples shifts a law of the measured input alone by
@@ -97,14 +98,17 @@ class Sampler:
         """The force sensor's readings [N] of the true ``forces`` [N] by key (contacts, tangential chains)."""
         return self.force_sensor.read(forces)
 
-    def update(self, reading, z_law: np.ndarray, command) -> tuple[np.ndarray, np.ndarray]:
-        """At a sample: push ``reading`` (what was measured now), compute on the one of ``delay`` samples ago with the
-        law's states ``z_law`` as they are now (``command(reading, z) -> (τ, ż)``); (the new held command, the law's
-        new states)."""
+    def update(self, t: float, reading, z_law: np.ndarray, command) -> tuple[np.ndarray, np.ndarray]:
+        """At the sample at t [s]: push ``reading`` (what was measured now), compute on the one of ``delay`` samples ago
+        with the law's states ``z_law`` as they are now (``command(reading, z) -> (τ, ż)``); (the new held command,
+        the law's states at the next sample). The next sample on the grid comes after it (:meth:`passed`)."""
         if not self.line:  # a phase's first sample: the line filled with it
             self.line.extend([reading] * (self.delay + 1))
         else:
             self.line.append(reading)
         tau, zdot = command(self.line[0], z_law)
-        z_new = z_law + self.period * zdot if zdot is not None and len(z_law) else z_law.copy()
+        on_grid = t == self.next_time()
+        self.passed(t)
+        hold = self.period if on_grid else self.next_time() - t  # [s] shorter from a phase's start off the grid
+        z_new = z_law + hold * zdot if zdot is not None and len(z_law) else z_law.copy()
         return np.asarray(tau, float), z_new
