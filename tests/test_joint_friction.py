@@ -200,6 +200,20 @@ def test_bad_joint_friction_names_the_key_and_the_file(tmp_path, joint, expected
     assert info.value.key == key and expected in info.value.expected and str(path) in str(info.value)
 
 
+@pytest.mark.parametrize("damping, friction, attribute", [(0.0, -1.0, "friction"), (1e300, 0.0, "damping"),
+                                                          (0.0, 1e20, "friction")])
+def test_a_urdfs_bad_dynamics_names_the_joint_and_the_attribute(tmp_path, damping, friction, attribute):
+    """Negative or absurd <dynamics> values: our message naming the joint (not Pinocchio's min/max_dry_friction),
+    bounded as the scene's own joint keys are; also where the scene ignores the URDF's values."""
+    urdf = arm(tmp_path, damping=damping, friction=friction)
+    for ignore in ({}, {"joint_friction": "ignore"}):
+        with pytest.raises(SceneError) as info:
+            System(parse_scene(scene(urdf, [0.0], 0.1, **ignore)))
+        message = str(info.value)
+        assert info.value.key == "robot.urdf" and urdf in message
+        assert f"joint 'j1' <dynamics>: {attribute}=" in message and "expected a number >= 0 and <= 1e+12" in message
+
+
 def test_a_misspelt_joint_key_is_matched_to_every_key_the_table_knows(tmp_path):
     """``friction`` and ``friction_kinetic`` are only looked for (read when present): the message still knows them."""
     doc = scene(arm(tmp_path), [0.0], 0.1, joint={"j1": {"frction": 1.0}})

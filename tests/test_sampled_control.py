@@ -71,7 +71,17 @@ class _Ramp(Controller):
         return np.array([20.0 * inp.t, 0.0]), None
 
 
-LAWS = (_Clock, _Probe, _Integrator, _Ramp)
+class _Runaway(Controller):
+    """One state z whose rate overflows in the law's own arithmetic (ż = 1e308 · 10 = inf); τ = 0."""
+
+    name = "_test_runaway"
+    n_states = 1
+
+    def command(self, inp):
+        return np.zeros(2), np.array([1e308]) * 10.0
+
+
+LAWS = (_Clock, _Probe, _Integrator, _Ramp, _Runaway)
 
 
 @pytest.fixture(autouse=True)
@@ -300,12 +310,48 @@ def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
     ({"sample_rate": 1e3, "sensor": {"force_cutoff": 0.0}}, "controller.sensor.force_cutoff", "a number > 0"),
     ({"sample_rate": 1e3, "sensor": {"seed": -1}}, "controller.sensor.seed", "an integer >= 0"),
     ({"sample_rate": 1e3, "sensor": {"force_nois": 1.0}}, "controller.sensor.force_nois", "force_noise"),
+    ({"sample_rate": 5e-324}, "controller.sample_rate", "0 (continuous) or a rate >= 1e-06 Hz"),  # (1 / rate = inf)
+    ({"sample_rate": 10**400}, "controller.sample_rate", "a finite number"),  # (float() overflows)
+    ({"sample_rate": 1e3, "sensor": {"encoder_resolution": 1e-310}}, "controller.sensor.encoder_resolution",
+     "0 (exact) or a resolution >= 1e-12"),  # (q / resolution overflows)
 ])
 def test_bad_sampling_keys_are_named_with_the_file(tmp_path, controller, key, expected):
     with pytest.raises(SceneError) as err:
         parse_scene(b1(**controller), file=str(tmp_path / "s.toml"))
     message = str(err.value)
     assert key in message and expected in message and "s.toml" in message
+
+
+def test_a_whole_float_or_a_numpy_integer_is_a_delay_and_a_huge_integer_in_a_list_is_named():
+    """A sweep's --range point (2.0) and NumPy's integers read as integers; 10**400 in a vector is not an
+    OverflowError."""
+    for delay in (2.0, np.int64(2)):
+        assert parse_scene(b1(sample_rate=RATE, delay=delay)).phases[0].sampling.delay == 2
+    doc = b1()
+    doc["robot"]["q0"] = [10**400, 0.0]
+    with pytest.raises(SceneError, match="robot.q0: expected finite numbers"):
+        parse_scene(doc)
+
+
+def test_sampling_that_changes_nothing_is_warned_of():
+    """A force sensor on a law that reads no force; a period or a delay as long as the run."""
+    from contactdyn.scene.sanity import scene_warnings
+
+    def warned(doc):
+        return " | ".join(scene_warnings(parse_scene(doc)))
+
+    assert "reads no measured force" in warned(b1(sample_rate=RATE, sensor={"force_bias": 3.0}))
+    assert "its period (0.05 s) is as long as the run" in warned(b1(duration=0.02, sample_rate=20.0))
+    assert "controller.delay = 30 samples" in warned(b1(duration=0.02, sample_rate=RATE, delay=30))
+    assert "sample" not in warned(b1(duration=0.02, sample_rate=RATE, delay=3))
+
+
+def test_a_laws_states_that_overflow_at_a_sample_end_the_run_with_the_law_named():
+    """Held until the next sample, an infinite state would make every call between fail: the sample says so."""
+    from contactdyn.errors import SimulationError
+
+    with pytest.raises(SimulationError, match=r"t = 0 s: _test_runaway: the law's own states are not finite"):
+        simulate(parse_scene(b1(kind="_test_runaway", sample_rate=RATE)))
 
 
 def test_a_sample_rate_of_zero_turns_a_scenes_sampled_loop_off_by_one_override():

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["SensorSpec", "ForceSensor", "quantise", "read_sensor", "Sampling", "read_sampling", "MAX_SAMPLE_RATE",
-           "MAX_DELAY"]
+           "MIN_SAMPLE_RATE", "MIN_RESOLUTION", "MAX_DELAY"]
 
 
 @dataclass(frozen=True)
@@ -54,6 +54,9 @@ def read_sensor(r) -> SensorSpec:
         encoder_resolution=r.float("encoder_resolution", 0.0, lo=0.0, unit="rad or m"),
         seed=r.int("seed", 0, lo=0),
     )
+    if 0.0 < spec.encoder_resolution < MIN_RESOLUTION:  # (q / resolution would overflow)
+        raise r.error("encoder_resolution", f"0 (exact) or a resolution >= {MIN_RESOLUTION:g} [rad or m]",
+                      spec.encoder_resolution)
     r.finish()
     return spec
 
@@ -94,6 +97,8 @@ class ForceSensor:
 
 
 MAX_SAMPLE_RATE = 1e6  #: [Hz] sample_rate at most
+MIN_SAMPLE_RATE = 1e-6  #: [Hz] a positive sample_rate at least (a period of 11.6 days; 1 / 5e-324 is inf)
+MIN_RESOLUTION = 1e-12  #: [rad or m] a positive encoder_resolution at least
 MAX_DELAY = 10_000  #: [samples] delay at most
 
 
@@ -121,6 +126,8 @@ def read_sampling(r) -> Sampling | None:
     sensor = read_sensor(r.sub("sensor", {}))
     if rate == 0.0:
         return None
+    if rate is not None and rate < MIN_SAMPLE_RATE:
+        raise r.error("sample_rate", f"0 (continuous) or a rate >= {MIN_SAMPLE_RATE:g} Hz", rate)
     if rate is None:
         if delay:
             raise r.error("delay", "no delay for a continuous controller (a delay counts samples: set sample_rate)",

@@ -83,8 +83,8 @@ class JointFriction:
         for i, value in enumerate(np.concatenate([self.damping, self.static])):
             if not (math.isfinite(value) and value >= 0.0):
                 what = "damping" if i < nv else "friction"
-                raise SceneError("robot.urdf", f"a finite {what} >= 0 in joint {self.names[i % nv]!r}'s <dynamics>",
-                                 float(value), file)
+                raise SceneError("robot.urdf", f"a finite {what} >= 0 in the <dynamics> of joint "
+                                 f"{self.names[i % nv]!r}", float(value), file)
         for name, js in spec.joints.items():
             if name not in self.names:
                 raise SceneError(f"robot.joint.{name}", f"a table named after an active joint of the robot "

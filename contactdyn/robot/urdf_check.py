@@ -25,6 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..errors import RobotError, abbreviate, signal_name
+from ..scene.reader import MAX_MAGNITUDE
 
 __all__ = ["MAX_URDF_BYTES", "MAX_URDF_LINKS", "MAX_URDF_MOVING_JOINTS", "check_urdf_tree", "isolated_build"]
 
@@ -104,6 +105,9 @@ NUMERIC = {"origin": ("xyz", "rpy"), "mass": ("value",), "inertia": ("ixx", "ixy
            "safety_controller": ("soft_lower_limit", "soft_upper_limit", "k_position", "k_velocity")}
 
 
+DYNAMICS_MEANING = {"damping": "viscous damping [N·m·s/rad or N·s/m]", "friction": "dry friction [N·m or N]"}
+
+
 def _check_numbers(path: Path, element: ET.Element, where: str = "") -> None:
     """Every number the URDF states is finite; else a RobotError naming the element and the attribute."""
     for child in element:
@@ -119,6 +123,9 @@ def _check_numbers(path: Path, element: ET.Element, where: str = "") -> None:
                 values = [math.nan]
             if not values or not all(math.isfinite(v) for v in values):
                 raise RobotError(f"{path}: {here}: {attribute}={_q(text)}: expected finite numbers")
+            if child.tag == "dynamics" and not 0.0 <= values[0] <= MAX_MAGNITUDE:  # (Pinocchio's own words: jargon)
+                raise RobotError(f"{path}: {here}: {attribute}={_q(text)}: expected a number >= 0 and "
+                                 f"<= {MAX_MAGNITUDE:g} (the joint's {DYNAMICS_MEANING[attribute]})")
         _check_numbers(path, child, here)
 
 

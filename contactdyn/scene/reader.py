@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 import tomllib
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
@@ -202,6 +203,8 @@ class Reader:
             return None  # type: ignore[return-value]
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.error(name, f"a number{_unit(unit)}", value)
+        if isinstance(value, int) and abs(value) > _LARGEST_FLOAT:  # (float() would overflow)
+            raise self.error(name, f"a finite number{_unit(unit)}", value)
         value = float(value)
         unbounded = default is not MISSING and default == math.inf  # inf means "no bound" here
         if math.isnan(value) or (math.isinf(value) and not (unbounded and value > 0)):
@@ -219,6 +222,8 @@ class Reader:
             unit: str = "") -> int:
         self._note(name, "integer", default, unit=unit, lo=lo, hi=hi)
         value = self.raw(name, default)
+        if isinstance(value, np.integer) or (isinstance(value, float) and value.is_integer()):
+            value = int(value)  # (NumPy's integers; a whole float, e.g. a sweep's --range point)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, "an integer", value)
         if lo is not None and value < lo:
@@ -259,6 +264,8 @@ class Reader:
         if not ok or (size is not None and len(value) != size):
             what = f"a list of {size} numbers" if size is not None else "a list of numbers"
             raise self.error(name, what + _unit(unit), value)
+        if any(isinstance(x, int) and abs(x) > _LARGEST_FLOAT for x in value):  # (np.asarray would overflow)
+            raise self.error(name, "finite numbers" + _unit(unit), value)
         arr = np.asarray(value, dtype=float)
         if not np.all(np.isfinite(arr)):
             raise self.error(name, "finite numbers" + _unit(unit), value)
@@ -278,6 +285,9 @@ class Reader:
             if name not in self._used:
                 close = close_matches(name, known, n=1)
                 raise UnknownKeyError(self.key(name), known, close[0] if close else None, self.file)
+
+
+_LARGEST_FLOAT = int(sys.float_info.max)  #: an integer above this has no float (float() raises OverflowError)
 
 
 def _unit(unit: str) -> str:

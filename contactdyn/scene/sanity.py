@@ -55,7 +55,26 @@ def scene_warnings(scene: Scene) -> list[str]:
             out.append(f"contact.{c.name}.tangent: friction coefficient {max(f.mu_s, f.mu_k):g} > {MU_MAX:g} "
                        "(typical dry friction: 0.1-1); check mu, mu_s, mu_k")
     for i, phase in enumerate(scene.phases):
-        out += _force_warnings(scene, i, phase)
+        out += _force_warnings(scene, i, phase) + _sampling_warnings(scene, i, phase)
+    return out
+
+
+def _sampling_warnings(scene: Scene, i: int, phase) -> list[str]:
+    """A sampled controller's settings that change nothing: a force sensor on a law that reads no force, a period
+    or a delay as long as the run."""
+    s, where = phase.sampling, f"phase[{i}] ({phase.name})"
+    if s is None:
+        return []
+    out, kind, key = [], phase.controller.kind, phase.controller_key
+    if not s.sensor.exact_forces and not getattr(CONTROLLERS.get(kind), "uses_forces", True):
+        out.append(f"{where}: {key}.sensor sets a force noise, bias or filter, but the controller {kind!r} "
+                   "reads no measured force: the force sensor changes nothing")
+    if s.period >= scene.duration:
+        out.append(f"{where}: {key}.sample_rate = {s.rate:g} Hz: its period ({s.period:g} s) is as long as the "
+                   f"run ({scene.duration:g} s): the law samples once and holds that command")
+    elif s.delay * s.period >= scene.duration:
+        out.append(f"{where}: {key}.delay = {s.delay} samples ({s.delay * s.period:g} s) is as long as the run "
+                   f"({scene.duration:g} s): every command is computed on the first measurement")
     return out
 
 

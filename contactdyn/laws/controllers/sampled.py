@@ -30,6 +30,7 @@ from collections import deque
 
 import numpy as np
 
+from ...errors import SimulationError
 from ..sensors import ForceSensor, Sampling
 from .base import BindContext, ControlInput, Controller
 
@@ -111,4 +112,8 @@ class Sampler:
         self.passed(t)
         hold = self.period if on_grid else self.next_time() - t  # [s] shorter from a phase's start off the grid
         z_new = z_law + hold * zdot if zdot is not None and len(z_law) else z_law.copy()
+        if not np.all(np.isfinite(z_new)):  # (held until the next sample: every call there would fail)
+            raise SimulationError(f"t = {t:.6g} s: {self.controller.inner.name}: the law's own states are not finite "
+                                  f"after this sample (z = {np.asarray(z_law).tolist()}, ż = "
+                                  f"{np.asarray(zdot).tolist()}, over {hold:g} s)")
         return np.asarray(tau, float), z_new
