@@ -330,3 +330,20 @@ def test_ctrl_c_stops_pool_workers_without_tracebacks_and_resumes(capsys, tmp_pa
     assert "Traceback" not in err and "run the same command again to resume" in err
     assert main(args) == EXIT_OK
     assert len(_summary(out)) == 150 and (_summary(out).status == "ok").all()
+
+
+def test_a_failed_runs_line_names_only_the_keys_that_run_set(tmp_path):
+    """A sweep of a grid and [[run]] rows: a row's keys it does not set are empty cells in the summary (NaN), not
+    values of the run; the console line leaves them out."""
+    from contactdyn.sweep.report import failure_lines, failures
+
+    summary = tmp_path / "summary.parquet"
+    pd.DataFrame({"run_id": ["r0", "r1"], "status": ["ok", "failed"], "error": ["", "boom"],
+                  "controller.delay": [0, 2], "robot.joint.q2.damping": [float("nan"), 1e12]}).to_parquet(summary)
+    rows = failures(summary, ["controller.delay", "robot.joint.q2.damping", "controller.sensor.force_noise"])
+    assert [r["params"] for r in rows] == [{"controller.delay": 2, "robot.joint.q2.damping": 1e12}]
+    assert failure_lines(rows)[0] == "  failed r1 (controller.delay = 2, robot.joint.q2.damping = 1e+12):"
+    pd.DataFrame({"run_id": ["r2"], "status": ["failed"], "error": ["x"], "controller.delay": [1],
+                  "controller.sensor.force_noise": [float("nan")]}).to_parquet(summary)
+    assert failures(summary, ["controller.delay", "controller.sensor.force_noise"])[0]["params"] == \
+        {"controller.delay": 1}

@@ -27,7 +27,7 @@ def failures(summary: Path, keys: list[str]) -> list[dict[str, Any]]:
     frame = _read(summary)
     out = []
     for _, row in frame[frame.status != "ok"].iterrows():
-        params = {k: row[k] for k in keys if k in frame.columns}
+        params = {k: row[k] for k in keys if k in frame.columns and not _unset(row[k])}  # ([[run]] rows set some)
         out.append({"run_id": row.run_id, "status": row.status, "params": params, "error": str(row.error)})
     return out
 
@@ -44,6 +44,11 @@ def failure_lines(rows: list[dict[str, Any]]) -> list[str]:
         if len(text) > ERROR_LINES:
             lines.append(f"      ... ({len(text) - ERROR_LINES} more lines in runs/{r['run_id']}.failed.json)")
     return lines
+
+
+def _unset(v: Any) -> bool:
+    """A key the run does not set: the summary's empty cell (NaN, None)."""
+    return v is None or (isinstance(v, float) and math.isnan(v))
 
 
 def _value(v: Any) -> str:
