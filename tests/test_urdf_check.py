@@ -87,3 +87,24 @@ def test_a_crash_in_the_probe_is_an_error_and_this_process_lives(tmp_path):
         isolated_build(path, "crash-test", lambda: os.kill(os.getpid(), signal.SIGSEGV))
     isolated_build(path, "fine-test", lambda: None)  # a child that exits normally: no error
     isolated_build(path, "fine-test", lambda: os.kill(os.getpid(), signal.SIGSEGV))  # cached: not run again
+
+
+@pytest.mark.parametrize("extra, message", [
+    ('<dynamic damping="0.5"/>', "joint 'j1': unknown <dynamic> (did you mean 'dynamics'?)"),
+    ('<dynamics frcition="3"/>', "joint 'j1' <dynamics>: unknown attribute frcition= (did you mean 'friction'?)"),
+    ('<limit lowr="-1" upper="1" effort="1" velocity="1"/>', "unknown attribute lowr= (did you mean 'lower'?)"),
+])
+def test_a_misspelt_element_or_attribute_of_a_joint_is_named(tmp_path, extra, message):
+    """The URDF's parsers drop what they do not know without a word: a misspelt <dynamics> is friction lost."""
+    path = urdf(tmp_path, [("j1", "base", "a")], ["base", "a"])
+    path.write_text(path.read_text().replace("</joint>", f"{extra}</joint>"))
+    with pytest.raises(RobotError, match="did you mean") as info:
+        check_urdf_tree(path)
+    assert message in str(info.value) and str(path) in str(info.value)
+
+
+def test_an_unknown_element_or_attribute_far_from_any_known_name_passes(tmp_path):
+    """Extensions (a gear_velocity limit, a <transmission> or <gazebo> tag) are not misspellings."""
+    path = urdf(tmp_path, [("j1", "base", "a")], ["base", "a"])
+    path.write_text(path.read_text().replace('velocity="1"/>', 'velocity="1" gear_velocity="2"/><gazebo/>'))
+    check_urdf_tree(path)

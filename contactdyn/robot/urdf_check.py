@@ -24,7 +24,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from pathlib import Path
 
-from ..errors import RobotError, abbreviate, signal_name
+from ..errors import RobotError, abbreviate, close_matches, signal_name
 from ..scene.reader import MAX_MAGNITUDE
 
 __all__ = ["MAX_URDF_BYTES", "MAX_URDF_LINKS", "MAX_URDF_MOVING_JOINTS", "check_urdf_tree", "isolated_build"]
@@ -43,8 +43,9 @@ def check_urdf_tree(path: Path) -> ET.Element:
     """Parse ``path`` and check its joints form one tree; return the XML root.
 
     One root link, every joint's parent and child a defined link, no joint whose parent is
-    its child, no link the child of two joints, no cycle, unique link and joint names, and
-    every number finite (:data:`NUMERIC`: origins, masses, inertias, limits, shapes...).
+    its child, no link the child of two joints, no cycle, unique link and joint names,
+    every number finite (:data:`NUMERIC`: origins, masses, inertias, limits, shapes...), a
+    joint's <dynamics> in [0, MAX_MAGNITUDE], and no misspelt element or attribute (:data:`CHILDREN`).
     """
     size = path.stat().st_size
     if size > MAX_URDF_BYTES:
@@ -113,6 +114,7 @@ def _check_numbers(path: Path, element: ET.Element, where: str = "") -> None:
     for child in element:
         here = f"{child.tag} {_q(child.get('name'))}" if child.tag in ("link", "joint") and not where else \
             f"{where} <{child.tag}>".strip()
+        _check_spelling(path, element.tag, child, where, here)
         for attribute in NUMERIC.get(child.tag, ()):
             text = child.get(attribute)
             if text is None:
@@ -127,6 +129,24 @@ def _check_numbers(path: Path, element: ET.Element, where: str = "") -> None:
                 raise RobotError(f"{path}: {here}: {attribute}={_q(text)}: expected a number >= 0 and "
                                  f"<= {MAX_MAGNITUDE:g} (the joint's {DYNAMICS_MEANING[attribute]})")
         _check_numbers(path, child, here)
+
+
+#: the elements URDF's specification gives a joint and a link (a misspelling of one is dropped by the parsers)
+CHILDREN = {"joint": ("origin", "parent", "child", "axis", "calibration", "dynamics", "limit", "mimic",
+                      "safety_controller"), "link": ("inertial", "visual", "collision")}
+
+
+def _check_spelling(path: Path, parent: str, child: ET.Element, where: str, here: str) -> None:
+    """A joint's or link's element, or a numeric element's attribute, whose name is a misspelling of a known one (the
+    parsers drop it without a word: a joint's ``<dynamic>`` or ``frcition`` would silently give no friction)."""
+    unknown = [] if parent not in CHILDREN or child.tag in CHILDREN[parent] else [(child.tag, CHILDREN[parent])]
+    known = NUMERIC.get(child.tag, ())
+    unknown += [(a, known) for a in child.attrib if known and a not in known]
+    for name, choices in unknown:
+        close = close_matches(name, choices, n=1, cutoff=0.85)
+        if close:
+            what = f"{where}: unknown <{name}>" if name == child.tag else f"{here}: unknown attribute {name}="
+            raise RobotError(f"{path}: {what} (did you mean {close[0]!r}?): the URDF's parsers drop it without a word")
 
 
 def _link_ref(path: Path, joint: ET.Element, name: str | None, tag: str) -> str:
