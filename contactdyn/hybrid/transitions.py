@@ -53,8 +53,8 @@ FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts s
 #: start's own touching test (contactdyn.model.system.System.initial_state)
 CO_TOUCH = 1e-12
 SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
-#: [N·m or N, relative above 1] a release seen inside a step is real if the located instant's pressing torque is at
-#: most this × (1 + itself) (else a false alarm: still pressing)
+#: [-] a release seen inside a step is real if the located instant's pressing torque p [N·m or N] is at most
+#: this × (1 + |p|): relative, with 1 N·m or N as the scale's floor (else a false alarm: still pressing)
 RELEASE_ALARM = 1e-6
 #: [-] a turn located with |v_t| ≤ this × v_ε is taken for a slide coming to rest and decided at rest like a
 #: stop. Why: when a slide decelerates to rest, its ``turn`` and ``stop`` tie within a rounding (the 5-DOF

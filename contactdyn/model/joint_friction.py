@@ -44,7 +44,6 @@ and which joint breaks away first follows that choice, not a law (a complementar
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from itertools import groupby
 from typing import Any
@@ -79,12 +78,7 @@ class JointFriction:
         self.damping = robot.model.damping.copy() if from_urdf else np.zeros(nv)  #: b [N·m·s/rad or N·s/m]
         self.static = robot.model.friction.copy() if from_urdf else np.zeros(nv)  #: τ_s [N·m or N]
         self.kinetic = self.static.copy()  #: τ_k [N·m or N]
-        self.source = ["urdf"] * nv
-        for i, value in enumerate(np.concatenate([self.damping, self.static])):
-            if not (math.isfinite(value) and value >= 0.0):
-                what = "damping" if i < nv else "friction"
-                raise SceneError("robot.urdf", f"a finite {what} >= 0 in the <dynamics> of joint "
-                                 f"{self.names[i % nv]!r}", float(value), file)
+        self.source = ["urdf"] * nv  # (the URDF's values were checked as it loaded: robot.urdf_check)
         for name, js in spec.joints.items():
             if name not in self.names:
                 raise SceneError(f"robot.joint.{name}", f"a table named after an active joint of the robot "

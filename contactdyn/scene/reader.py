@@ -203,7 +203,7 @@ class Reader:
             return None  # type: ignore[return-value]
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.error(name, f"a number{_unit(unit)}", value)
-        if isinstance(value, int) and abs(value) > _LARGEST_FLOAT:  # (float() would overflow)
+        if _beyond_float(value):
             raise self.error(name, f"a finite number{_unit(unit)}", value)
         value = float(value)
         unbounded = default is not MISSING and default == math.inf  # inf means "no bound" here
@@ -264,7 +264,7 @@ class Reader:
         if not ok or (size is not None and len(value) != size):
             what = f"a list of {size} numbers" if size is not None else "a list of numbers"
             raise self.error(name, what + _unit(unit), value)
-        if any(isinstance(x, int) and abs(x) > _LARGEST_FLOAT for x in value):  # (np.asarray would overflow)
+        if any(_beyond_float(x) for x in value):
             raise self.error(name, "finite numbers" + _unit(unit), value)
         arr = np.asarray(value, dtype=float)
         if not np.all(np.isfinite(arr)):
@@ -287,7 +287,12 @@ class Reader:
                 raise UnknownKeyError(self.key(name), known, close[0] if close else None, self.file)
 
 
-_LARGEST_FLOAT = int(sys.float_info.max)  #: an integer above this has no float (float() raises OverflowError)
+_LARGEST_FLOAT = int(sys.float_info.max)
+
+
+def _beyond_float(value: Any) -> bool:
+    """An integer too large for a float (``float()`` and ``np.asarray`` raise OverflowError on it)."""
+    return isinstance(value, int) and abs(value) > _LARGEST_FLOAT
 
 
 def _unit(unit: str) -> str:
