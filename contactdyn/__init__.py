@@ -6,6 +6,7 @@ start without importing the simulator (Pinocchio, numba, scipy).
 
 from __future__ import annotations
 
+import os
 import sys
 import types
 from importlib import import_module
@@ -30,6 +31,9 @@ __all__ = [
     "Scene", "load_scene", "parse_scene", "simulate", "fit",
 ]
 __version__ = "0.1.0"
+# While it types a function numba formats a message for every overload it rules out, in colour where colorama is
+# installed (a terminal set up and reset per message): ~4 % of a first run's compile. Plain, unless the user set it.
+os.environ.setdefault("NUMBA_DISABLE_ERROR_MESSAGE_HIGHLIGHTING", "1")
 
 
 def __getattr__(name: str):

@@ -216,7 +216,7 @@ def pinv(J):
     return _jacobi_pinv(J)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)  # (only compiled code calls it: no CPython wrapper to build)
 def _transposed(M):
     """Mᵀ, a new C-contiguous array, element by element. (numba's ``ascontiguousarray`` of ``M.T``, like its ``eye``,
     ``sum`` and ``max`` that :func:`_jacobi_pinv` no longer calls, compiles an implementation of its own: seconds of
@@ -229,7 +229,7 @@ def _transposed(M):
     return T
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)
 def _jacobi_pinv(J):
     """J⁺ (c, r) of J (r, c), r ≤ c, by a one-sided Jacobi SVD of Jᵀ (its columns made orthogonal by
     plane rotations: Jᵀ V = [σ_k u_k], J⁺ = Σ_k u_k v_kᵀ / σ_k), singular values ≤ 1e-10 of the largest
@@ -282,7 +282,7 @@ def _jacobi_pinv(J):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)
 def _largest(a):
     """max(a) of a non-empty 1-D array; NaN if one is NaN (numba's ``a.max()``, without its array machinery)."""
     top = a[0]

@@ -12,6 +12,8 @@ the same algorithms into its own arrays. Any other joint
 (free-flyer, spherical, an unbounded revolute's (cos, sin)) leaves the terms to Pinocchio (:func:`rigid_table`
 returns None).
 Checked against Pinocchio to rounding in tests/test_rigid_body.py. Units: [m], [rad], [kg], SI throughout.
+The helpers only compiled code calls carry no CPython wrapper (``no_cpython_wrapper``: numba builds none, ~10 %
+of a first run's compile of the leaves, contactdyn.numerics.twins).
 """
 
 from __future__ import annotations
@@ -141,7 +143,7 @@ def _kinematics(q, v, table):
     return L, W
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)
 def _placement(table, j, qj, L):
     """L[j] = the joint's placement at q = 0 times its motion by qj [rad or m]."""
     ux, uy, uz = table[j, AXIS], table[j, AXIS + 1], table[j, AXIS + 2]
@@ -162,7 +164,7 @@ def _placement(table, j, qj, L):
         L[j, 9 + r] = table[j, PLACEMENT_P + r] + R0[3 * r] * d[0] + R0[3 * r + 1] * d[1] + R0[3 * r + 2] * d[2]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)
 def _act_inv(L, j, W, par, base):
     """W[j, base:base + 6] = liMi⁻¹ · W[par, base:base + 6] (a motion: linear Rᵀ(v − p × ω), angular Rᵀ ω)."""
     vx, vy, vz = W[par, base], W[par, base + 1], W[par, base + 2]
@@ -174,7 +176,7 @@ def _act_inv(L, j, W, par, base):
         W[j, base + 3 + r] = L[j, r] * wx + L[j, 3 + r] * wy + L[j, 6 + r] * wz
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)
 def _add_cross(W, j, sx, sy, sz, tx, ty, tz):
     """a and a_gf of joint j += v × (s, t), the motion cross product with the joint's own motion S q̇ = (s, t)."""
     vx, vy, vz, wx, wy, wz = W[j, 12], W[j, 13], W[j, 14], W[j, 15], W[j, 16], W[j, 17]
@@ -185,7 +187,7 @@ def _add_cross(W, j, sx, sy, sz, tx, ty, tz):
         W[j, 24 + i] += c[i]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)
 def _inertia_times(table, j, vx, vy, vz, wx, wy, wz):
     """The body's spatial inertia (its frame) times a motion (v, ω): (m (v − c × ω), I_c ω + c × that)."""
     m, c0, c1, c2 = table[j, MASS], table[j, LEVER], table[j, LEVER + 1], table[j, LEVER + 2]
@@ -196,7 +198,7 @@ def _inertia_times(table, j, vx, vy, vz, wx, wy, wz):
             I[6] * wx + I[7] * wy + I[8] * wz + c0 * hy - c1 * hx)
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)
 def _rnea_force(table, j, W):
     """W[j, 30:36] = I a_gf + v ×* (I v), the body's force of the RNEA at q̈ = 0 (gravity in a_gf)."""
     vx, vy, vz, wx, wy, wz = W[j, 12], W[j, 13], W[j, 14], W[j, 15], W[j, 16], W[j, 17]
@@ -295,7 +297,7 @@ def _inertia(table, W, J, M, g):
                 + J[5, iv] * G[5]
 
 
-@njit(cache=True)
+@njit(cache=True, no_cpython_wrapper=True)
 def _composite_times(C, j, vx, vy, vz, wx, wy, wz):
     """Composite inertia j (about the world origin) times a motion (v, ω) at the origin: (m v − mc × ω,
     mc × v + I_o ω)."""
