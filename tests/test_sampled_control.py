@@ -21,7 +21,7 @@ from contactdyn.errors import SceneError
 from contactdyn.hybrid.loop import HybridRun
 from contactdyn.laws.controllers import CONTROLLERS, Controller, register
 from contactdyn.laws.controllers.sampled import SampledController
-from contactdyn.laws.sensors import ForceSensor, SensorSpec
+from contactdyn.laws.sensors import HOLDS, ForceSensor, SensorSpec
 from contactdyn.model.paths import PIPELINE
 from contactdyn.model.system import System
 from contactdyn.numerics.held_steps import PiecewiseDense
@@ -213,6 +213,52 @@ def test_held_voltages_run_through_the_motors_on_the_compiled_call():
     np.testing.assert_allclose(sampled["q"], continuous["q"], rtol=0, atol=1e-7)  # a constant law: the same run
 
 
+MOTOR = {"kind": "dc_motor", "C_M": 0.05, "C_E": 0.04, "R": 1.5, "J": 1e-5, "N": 20.0, "N_star": 16.0}
+
+
+def test_a_voltage_hold_keeps_the_motors_voltages_that_the_command_asks_at_the_sample():
+    """hold = "voltage": u_k = R (τ_k / N*) / C_M + C_E N q̇(t_k) (eq. 51 inverted at the speed measured at the
+    sample), held until the next, so the motors' torque N* C_M (u_k − C_E N q̇) / R falls with their speed between
+    samples; hold = "command" holds the torque τ_k, the voltage following the speed."""
+    runs = {}
+    for hold in HOLDS:
+        doc = b1(kind="_test_clock", sample_rate=RATE, hold=hold)
+        doc["robot"]["drive"] = MOTOR
+        runs[hold] = simulate(parse_scene(doc))
+    m, r, c = MOTOR, runs["voltage"], runs["command"]
+    assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
+    np.testing.assert_array_equal(simulate(parse_scene(doc), interpreted=True)["u"], r["u"])  # (the same source)
+    k = np.floor(r.t * RATE + 1e-9).astype(int)
+    for j in range(20):
+        at = np.flatnonzero(k == j)
+        t_k = j / RATE
+        assert r.t[at[0]] == pytest.approx(t_k, abs=1e-15)
+        tau_k = np.array([math.sin(50.0 * t_k), math.cos(30.0 * t_k)])  # [N·m] the clock law's command
+        u_k = m["R"] * (tau_k / m["N_star"]) / m["C_M"] + m["C_E"] * (m["N"] * r["v"][at[0]])
+        np.testing.assert_allclose(r["u"][at], np.tile(u_k, (len(at), 1)), rtol=1e-13)
+        torque = m["N_star"] * m["C_M"] / m["R"] * (u_k - m["C_E"] * m["N"] * r["v"][at])  # [N·m] eq. 51
+        np.testing.assert_allclose(r["tau"][at], torque, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(c["tau"][at], np.tile(tau_k, (len(at), 1)), rtol=1e-13)
+        assert np.abs(np.diff(r["tau"][at], axis=0)).max() > 0.0 and np.abs(np.diff(c["u"][at], axis=0)).max() > 0.0
+
+
+def test_a_voltage_hold_is_dropped_with_the_rest_of_the_sampling_when_a_scene_is_made_continuous():
+    from contactdyn.analysis.sampled_stability import continuous_scene
+
+    doc = b1(sample_rate=RATE, hold="voltage")
+    doc["robot"]["drive"] = MOTOR
+    scene = continuous_scene(parse_scene(doc))
+    assert not {"sample_rate", "hold"} & set(scene.document["controller"])
+    assert not any(isinstance(c, SampledController) for c in System(scene).controllers)
+
+
+def test_a_voltage_hold_needs_a_motor_on_every_joint(tmp_path):
+    doc = b1(sample_rate=RATE, hold="voltage")
+    with pytest.raises(SceneError) as err:
+        System(parse_scene(doc, file=str(tmp_path / "s.toml")))
+    assert all(w in str(err.value) for w in ("controller.hold", "a motor on every joint", "dc_motor", "s.toml"))
+
+
 # ---- sensors -------------------------------------------------------------------------------
 def test_the_low_pass_step_response_is_the_closed_form_at_the_samples():
     fc, period, U = 30.0, 1e-3, 7.0
@@ -314,6 +360,8 @@ def test_a_held_command_through_dc_motors_runs_on_the_compiled_call():
     ({"sample_rate": 10**400}, "controller.sample_rate", "a finite number"),  # (float() overflows)
     ({"sample_rate": 1e3, "sensor": {"encoder_resolution": 1e-310}}, "controller.sensor.encoder_resolution",
      "0 (exact) or a resolution >= 1e-12"),  # (q / resolution overflows)
+    ({"hold": "voltage"}, "controller.hold", "set sample_rate"),
+    ({"sample_rate": 1e3, "hold": "current"}, "controller.hold", "voltage"),
 ])
 def test_bad_sampling_keys_are_named_with_the_file(tmp_path, controller, key, expected):
     with pytest.raises(SceneError) as err:

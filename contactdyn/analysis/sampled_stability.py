@@ -53,11 +53,12 @@ __all__ = ["SampledLinearization", "SampledLoop", "zoh", "closed_loop", "decay_r
 
 _FD_STEP = 1e-6  #: relative central-difference step (as stability.py's)
 FIXED_POINT_ITERATIONS = 20  #: Newton steps for the held command's fixed point (the map is near-affine: 2–3 do)
-_SAMPLING_KEYS = ("sample_rate", "delay", "sensor")
+_SAMPLING_KEYS = ("sample_rate", "delay", "sensor", "hold")
 
 
 def continuous_scene(scene: Scene) -> Scene:
-    """The scene with its controllers continuous (every table's ``sample_rate``, ``delay`` and ``sensor`` gone)."""
+    """The scene with its controllers continuous (every table's ``sample_rate``, ``delay``, ``sensor`` and ``hold``
+    gone)."""
     doc = copy.deepcopy(scene.document)
     for table in [doc.get("controller"), *(p.get("controller") for p in doc.get("phase", []))]:
         if isinstance(table, dict):

@@ -19,6 +19,7 @@ from ..errors import SimulationError
 from ..laws.abi import raise_python_stage_error
 from ..laws.sensors import quantise
 from ..model.evaluation import measures
+from ..model.pipeline.actuation import held_voltages
 from ..model.pipeline.pack import EV_FN, EV_W, W_DIAG
 from ..model.pipeline.pipeline import Pipeline, law_at
 from ..numerics.twins import Twins
@@ -59,6 +60,7 @@ class SampledLaw:
         self.pipe = Pipeline(system, mode.modes, law_phase, mode.pipe.twins, law_only=True)
         self.mode, self.modes = mode, mode.modes  #: the mode measured on, and its modes as last used
         self.controller = phase.controller.inner
+        self.holds_voltage = phase.controller.holds_voltage  #: the hold keeps the motors' voltages of τ
         ints = self.pipe.packed.ints
         #: per measured key: (True: ``events``' slot, False: ``work``'s) where the stage reads it
         self.slots: dict[str, tuple[bool, int]] = {}
@@ -90,10 +92,19 @@ class SampledLaw:
         return Reading(t, xq, sense(forces) if sense is not None else forces, m.tau_contact, m.carrier_acc, self)
 
     def command(self, reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(τ [N·m or N; V], ż) of the law on ``reading`` with its own states ``z`` as they are now."""
+        """(τ [N·m or N; V], ż) of the law on ``reading`` with its own states ``z`` as they are now; with ``hold =
+        "voltage"`` τ turned into the motors' voltages [V] at the measured speeds (:func:`held_voltages`)."""
         tau, zdot, finite = self._stage(self.pipe, reading, z)
         if not finite:
             self._failed(reading, z)
+        if self.holds_voltage:
+            p = self.pipe.packed
+            u = self.pipe.of(held_voltages)(reading.x, p.ints, p.reals, np.ascontiguousarray(tau, dtype=float))
+            if not np.isfinite(u).all():
+                raise_python_stage_error()  # a drive kind's declared Python stage's own error
+                raise SimulationError(f"t = {reading.t:.6g} s: a motor's voltage law gave no finite voltage for the "
+                                      f"held command τ = {np.asarray(tau).tolist()} (hold = \"voltage\")")
+            return u, zdot
         return tau, zdot
 
     def _stage(self, pipe: Pipeline, reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["SensorSpec", "ForceSensor", "quantise", "read_sensor", "Sampling", "read_sampling", "MAX_SAMPLE_RATE",
-           "MIN_SAMPLE_RATE", "MIN_RESOLUTION", "MAX_DELAY"]
+           "MIN_SAMPLE_RATE", "MIN_RESOLUTION", "MAX_DELAY", "HOLDS"]
 
 
 @dataclass(frozen=True)
@@ -100,6 +100,9 @@ MAX_SAMPLE_RATE = 1e6  #: [Hz] sample_rate at most
 MIN_SAMPLE_RATE = 1e-6  #: [Hz] a positive sample_rate at least (a period of 11.6 days; 1 / 5e-324 is inf)
 MIN_RESOLUTION = 1e-12  #: [rad or m] a positive encoder_resolution at least
 MAX_DELAY = 10_000  #: [samples] delay at most
+#: what the zero-order hold keeps between samples: the law's command as it gives it (torques, or a voltage law's
+#: voltages), or a torque law's command turned into its motors' voltages at the sample (a drive with no current loop)
+HOLDS = ("command", "voltage")
 
 
 @dataclass(frozen=True)
@@ -109,6 +112,7 @@ class Sampling:
     rate: float  #: [Hz] samples per second
     delay: int = 0  #: [samples] measurement delay
     sensor: SensorSpec = field(default_factory=SensorSpec)
+    hold: str = "command"  #: what the hold keeps (:data:`HOLDS`)
 
     @property
     def period(self) -> float:
@@ -117,11 +121,12 @@ class Sampling:
 
 
 def read_sampling(r) -> Sampling | None:
-    """``sample_rate``, ``delay`` and the ``sensor`` table of a controller table (``r``: its Reader), read before
-    the kind's own keys; None for a continuous controller. ``sample_rate = 0`` turns a scene's sampled loop off
+    """``sample_rate``, ``delay``, ``hold`` and the ``sensor`` table of a controller table (``r``: its Reader), read
+    before the kind's own keys; None for a continuous controller. ``sample_rate = 0`` turns a scene's sampled loop off
     (one override, ``--set controller.sample_rate=0``: its delay and sensors are still checked, and unused)."""
     rate = r.float("sample_rate", None, lo=0.0, hi=MAX_SAMPLE_RATE, unit="Hz")
     delay = r.int("delay", 0, lo=0, hi=MAX_DELAY, unit="samples")
+    hold = r.str("hold", HOLDS[0], choices=HOLDS)
     has_sensor = r.has("sensor")
     sensor = read_sensor(r.sub("sensor", {}))
     if rate == 0.0:
@@ -135,5 +140,8 @@ def read_sampling(r) -> Sampling | None:
         if has_sensor:
             raise r.error("sensor", "no sensor table for a continuous controller (sensors are read at the samples: "
                           "set sample_rate)", r.data["sensor"])
+        if r.has("hold"):
+            raise r.error("hold", "no hold for a continuous controller (it holds between samples: set sample_rate)",
+                          hold)
         return None
-    return Sampling(rate, delay, sensor)
+    return Sampling(rate, delay, sensor, hold)

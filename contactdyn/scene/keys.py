@@ -190,6 +190,9 @@ MEANINGS: dict[str, str] = {
                               "so --set controller.sample_rate=0 turns a scene's sampled loop off); the samples are at "
                               "k / rate from the scene start, and at a phase's start",
     "controller.delay": "the law computes on what it measured this many samples ago (needs sample_rate)",
+    "controller.hold": "what the zero-order hold keeps (needs sample_rate): \"command\", the law's torques (DC motors "
+                       "realise them as an ideal current loop would), or \"voltage\", the motors' voltages the command "
+                       "asks at the sample (a motor on every joint)",
     "controller.sensor": "what a sampled law measures (needs sample_rate): force noise, bias and low-pass, encoders",
     "controller.sensor.force_noise": "standard deviation of the Gaussian noise on every measured contact force",
     "controller.sensor.force_bias": "offset of every measured contact force",

@@ -8,15 +8,19 @@ and holds that command until the next sample (zero-order hold).
 
 The held command lives in the state: :class:`SampledController` wraps the law, and its states are
 [held command (nv), the law's own states]; all of them have ẏ = 0 between samples, and its command is the held
-slots. So the right-hand side between two samples is an ordinary smooth one (the one pipeline's call reads the
-held command off the state, torques or voltages, through the drives where there are motors), and at every sample
-instant (a step boundary of the compiled DOP853,
-a segment boundary for other methods: :mod:`contactdyn.hybrid.sampling`) the new command is written into the
-state and the events its jump fires are checked. The law's own states (integrators) advance once per sample,
-by forward Euler over the hold to the next sample: z_{k+1} = z_k + (t_{k+1} − t_k) ż_k. A phase starts sampling at
-its start (the delay line filled with that first measurement; a new phase starts a new line and new sensor states)
-and then on the scene's grid k / rate: a hold is the period T, the first one shorter where the phase starts off the
-grid (z then integrates ż over the time that passed, as the continuous law does).
+slots. What is held (``hold``): the law's command as it gives it (``"command"``: torques, which DC motors then
+realise between samples as an ideal current loop would, their voltage following the back-EMF), or, with a motor on
+every joint, the voltages a torque law's command asks of the motors at the sample (``"voltage"``: eq. 51 inverted at
+the measured speeds, as a drive without a current loop holds its PWM; between samples the motors' torque falls
+with their speed).
+So the right-hand side between two samples is an ordinary smooth one (the one pipeline's call reads the held command
+off the state, torques or voltages, through the drives where there are motors), and at every sample instant (a step
+boundary of the compiled DOP853, a segment boundary for other methods: :mod:`contactdyn.hybrid.sampling`) the new
+command is written into the state and the events its jump fires are checked. The law's own states (integrators)
+advance once per sample, by forward Euler over the hold to the next sample: z_{k+1} = z_k + (t_{k+1} − t_k) ż_k. A
+phase starts sampling at its start (the delay line filled with that first measurement; a new phase starts a new line
+and new sensor states) and then on the scene's grid k / rate: a hold is the period T, the first one shorter where
+the phase starts off the grid (z then integrates ż over the time that passed, as the continuous law does).
 
 What the law computes on at t_k is the whole input it measured at t_{k−d} (time, state, references, forces),
 with its own states as they are at t_k: a delay of d samples shifts a law of the measured input alone by
@@ -30,7 +34,8 @@ from collections import deque
 
 import numpy as np
 
-from ...errors import SimulationError
+from ...errors import SceneError, SimulationError
+from ..drive_kinds import DRIVE_KINDS
 from ..sensors import ForceSensor, Sampling
 from .base import BindContext, ControlInput, Controller
 
@@ -48,11 +53,21 @@ class SampledController(Controller):
     def __init__(self, inner: Controller, sampling: Sampling, nv: int):
         super().__init__(inner.config, nv)
         self.inner, self.sampling = inner, sampling
-        self.outputs = inner.outputs
+        self.outputs = "voltage" if sampling.hold == "voltage" else inner.outputs
+
+    @property
+    def holds_voltage(self) -> bool:
+        """Does the hold keep the motors' voltages of a torque law's command (``hold = "voltage"``)?"""
+        return self.sampling.hold == "voltage" and self.inner.outputs == "torque"
 
     def bind(self, context: BindContext) -> None:
         self.inner.bind(context)
         self.n_states = self.nv + self.inner.n_states
+        if self.sampling.hold == "voltage" and not context.motorized.all():
+            bare = [n for n, m in zip(context.joint_names, context.motorized, strict=True) if not m]
+            kinds = " or ".join(name for name, kind in DRIVE_KINDS.items() if kind.has_voltage)
+            raise SceneError(f"{context.key}.hold", f"hold = \"voltage\" only with a motor on every joint "
+                             f"(robot.drive.kind = {kinds})", f"no motor on {bare}", context.scene.file)
 
     @property
     def held(self) -> slice:

@@ -27,7 +27,7 @@ from ...laws.trajectory import CIRCLE_W, add_circle, move_rows, ramp_rows
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
 from .control_laws import PYTHON_KINDS, joint_pd_command, task_force_command
-from .drives import DI_W, DW_APPLIED, DW_W, apply_drives
+from .drives import DI_W, DW_APPLIED, DW_W, apply_drives, command_voltages
 from .pack import (
     ANY_MOTOR,
     CARRIER,
@@ -70,7 +70,7 @@ from .pack import (
 )
 
 __all__ = ["reference", "set_points", "task_pd_terms", "joint_pd_terms", "task_force_terms", "open_loop_terms",
-           "drive_command", "drives", "command_by_address", "abi_buffer",
+           "drive_command", "drives", "held_voltages", "command_by_address", "abi_buffer",
            "abi_call"]
 
 #: the controller ABI's fields (its LAYOUT's order)
@@ -239,6 +239,14 @@ def drive_command(x, ints, reals, tau):
         idx = ints[ints[I_SERVOS] + k]
         cmd[idx] = servo[2 * k + 1] * (servo[2 * k] - x[nQ + idx])
     return cmd
+
+
+@njit(cache=True)
+def held_voltages(x, ints, reals, tau):
+    """The voltages [V] a torque command tau [N·m or N] asks of the robot joints' motors at the state x
+    (:func:`.drives.command_voltages`): what a sampled torque law holds with ``hold = "voltage"``."""
+    rows = section(ints, ints[I_DRIVES], ints[N_DRIVES], DI_W)
+    return command_voltages(x, ints[NQ], rows, reals[ints[R_DRIVES]:], tau)
 
 
 @njit(cache=True)

@@ -33,8 +33,8 @@ from ...laws.drive_abi import (
 )
 from ...numerics.compile_cache import njit
 
-__all__ = ["drive_table", "python_drives", "apply_drives", "fold_on_targets", "inertias", "drive_values", "DI_W",
-           "DW_W"]
+__all__ = ["drive_table", "python_drives", "apply_drives", "command_voltages", "fold_on_targets", "inertias",
+           "drive_values", "DI_W", "DW_W"]
 
 #: a drive's ints: coordinate, motor coordinate (-1: none), its command is a voltage (the controller's), it takes
 #: a voltage, its kind's voltage and force addresses (force 0: an ideal source), the count and start of its values
@@ -133,6 +133,20 @@ def apply_drives(x, nQ, rows, dreals, cmd, sat, f, out):
         lost += o4[3]
     out[DW_W * n], out[DW_W * n + 1] = power, lost
     return True
+
+
+@njit(cache=True)
+def command_voltages(x, nQ, rows, dreals, tau):
+    """u [V] per robot joint: the voltage its drive's kind asks for the force command tau[i] [N·m or N] at the state
+    x (its voltage law, as :func:`apply_drives` turns a torque command into a voltage: eq. 51 inverted at the
+    joint's and the motor's speeds; rows 0..nv−1 are the robot's joints). NaN where a kind's law failed."""
+    u = np.empty(tau.size)
+    for i in range(tau.size):
+        m = rows[i, DI_MOTOR]
+        omega = x[nQ + m] if m >= 0 else math.nan
+        u[i] = call_drive_voltage(rows[i, DI_VOLTAGE], dreals, rows[i, DI_P], rows[i, DI_N_P], tau[i],
+                                  x[nQ + rows[i, DI_COORD]], omega)
+    return u
 
 
 @njit(cache=True)
