@@ -1,5 +1,6 @@
-"""sims/force_loop_real_cell.toml four ways: continuous, and sampled at 500 Hz with 2 samples of delay without the
-motors' voltage limit, with it but without joint friction, and as written (with both).
+"""sims/force_loop_real_cell.toml five ways: continuous, and sampled at 500 Hz with 2 samples of delay without the
+motors' voltage limit, with it but without joint friction, as written (with both), and as written with the motors'
+voltages held between samples instead of their torques.
 
 The scene is a planar 2R pressing 50 N on a compliant workpiece under A10 with integral action (K_F = 550/s), its
 joints with Coulomb friction (2 and 1 N·m) and driven by DC motors clipped at ±24 V (30 N·m at standstill), its
@@ -8,7 +9,9 @@ controller at 500 Hz with a 2-sample delay. This runs it
 - continuous: the scene with ``controller.sample_rate`` and ``controller.delay`` removed from its document;
 - sampled, no voltage limit, no joint friction: ``robot.drive.u_max`` removed and the joints' friction 0;
 - sampled, no joint friction: ``robot.joint.q1.friction = 0``, ``robot.joint.q2.friction = 0`` (overrides);
-- sampled, as written,
+- sampled, as written;
+- sampled, as written, ``controller.hold = "voltage"``: the voltages the command asks at each sample held (a drive
+  without a current loop), not the torques,
 
 with the output at 5 kHz (the same run: the output rate does not change the solution; the peaks of a ~60 Hz cycle
 need it), and prints per run the contact force's steady behaviour over the last ``WINDOWS`` seconds: its amplitude
@@ -71,11 +74,12 @@ def document(sampled: bool = True, voltage_limit: bool = True) -> dict:
 
 
 def runs(duration: float) -> dict:
-    """{label: (Result, CPU [s])} of the four runs."""
+    """{label: (Result, CPU [s])} of the five runs."""
     cases = {"continuous": (document(sampled=False), {}),
              "500 Hz, 2 samples, no voltage limit, no joint friction": (document(voltage_limit=False), NO_FRICTION),
              "500 Hz, 2 samples, no joint friction": (document(), NO_FRICTION),
-             "500 Hz, 2 samples (the scene)": (document(), {})}
+             "500 Hz, 2 samples (the scene)": (document(), {}),
+             "500 Hz, 2 samples, voltage held": (document(), {"controller.hold": "voltage"})}
     out = {}
     for label, (doc, over) in cases.items():
         doc["duration"] = duration
@@ -115,7 +119,7 @@ def steady(r) -> dict:
 
 def figure(results: dict) -> None:
     fig, axes = plt.subplots(2, 1, figsize=(9, 7))
-    colors = ["tab:blue", "tab:red", "tab:orange", "tab:green"]
+    colors = ["tab:blue", "tab:red", "tab:orange", "tab:green", "tab:purple"]
     for (label, (r, _)), c in zip(results.items(), colors, strict=True):
         f = r["contact.tip.F_n"]
         keep = np.cumsum(~np.isfinite(f) | (np.abs(f) > DIVERGED)) == 0  # up to the divergence
