@@ -19,8 +19,10 @@ from run_agreement import interpreted_evaluate
 from contactdyn import parse_scene, simulate
 from contactdyn.errors import SceneError
 from contactdyn.hybrid.loop import HybridRun
+from contactdyn.laws import DRIVE_KINDS, register_drive_kind
 from contactdyn.laws.controllers import CONTROLLERS, Controller, register
 from contactdyn.laws.controllers.sampled import SampledController
+from contactdyn.laws.drive_kinds import DcMotor
 from contactdyn.laws.sensors import HOLDS, ForceSensor, SensorSpec
 from contactdyn.model.paths import PIPELINE
 from contactdyn.model.system import System
@@ -250,6 +252,32 @@ def test_a_voltage_hold_is_dropped_with_the_rest_of_the_sampling_when_a_scene_is
     scene = continuous_scene(parse_scene(doc))
     assert not {"sample_rate", "hold"} & set(scene.document["controller"])
     assert not any(isinstance(c, SampledController) for c in System(scene).controllers)
+
+
+class _FussyMotor(DcMotor):
+    """A DC motor whose voltage law (Python only: it reads a dict) refuses a torque above a limit."""
+
+    name = "_test_fussy_motor"
+    meaning = "a DC motor refusing large torques (the test's)"
+    limit = {"tau": 0.05}  #: [N·m]
+
+    @staticmethod
+    def voltage(spec, tau, qd, omega):
+        if abs(tau) > _FussyMotor.limit["tau"]:
+            raise ValueError(f"no voltage for {tau:.3g} N·m")
+        return spec.R * (tau / spec.n_torque) / spec.C_M + spec.C_E * (spec.n_speed * qd)
+
+
+def test_a_voltage_laws_own_error_at_a_sample_ends_the_run_as_it_does_a_continuous_run():
+    register_drive_kind(_FussyMotor)
+    try:
+        for sampling in ({"sample_rate": RATE, "hold": "voltage"}, {}):
+            doc = b1(**sampling)
+            doc["robot"]["drive"] = {**MOTOR, "kind": "_test_fussy_motor"}
+            with pytest.raises(ValueError, match="no voltage for"):
+                simulate(parse_scene(doc))
+    finally:
+        DRIVE_KINDS.pop("_test_fussy_motor")
 
 
 def test_a_voltage_hold_needs_a_motor_on_every_joint(tmp_path):
