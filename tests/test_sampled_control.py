@@ -410,7 +410,8 @@ def test_a_whole_float_or_a_numpy_integer_is_a_delay_and_a_huge_integer_in_a_lis
 
 
 def test_sampling_that_changes_nothing_is_warned_of():
-    """A force sensor on a law that reads no force; a period or a delay as long as the run."""
+    """A force sensor on a law that reads no force; a voltage hold of a voltage law; a period or a delay as long as the
+    run."""
     from contactdyn.scene.sanity import scene_warnings
 
     def warned(doc):
@@ -420,6 +421,8 @@ def test_sampling_that_changes_nothing_is_warned_of():
     assert "its period (0.05 s) is as long as the run" in warned(b1(duration=0.02, sample_rate=20.0))
     assert "controller.delay = 30 samples" in warned(b1(duration=0.02, sample_rate=RATE, delay=30))
     assert "sample" not in warned(b1(duration=0.02, sample_rate=RATE, delay=3))
+    assert "gives voltages already" in warned(b1(kind="voltage", u=1.0, sample_rate=RATE, hold="voltage"))
+    assert "hold" not in warned(b1(sample_rate=RATE, hold="voltage"))
 
 
 def test_a_laws_states_that_overflow_at_a_sample_end_the_run_with_the_law_named():

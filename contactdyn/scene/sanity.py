@@ -60,8 +60,8 @@ def scene_warnings(scene: Scene) -> list[str]:
 
 
 def _sampling_warnings(scene: Scene, i: int, phase) -> list[str]:
-    """A sampled controller's settings that change nothing: a force sensor on a law that reads no force, a period
-    or a delay as long as the run."""
+    """A sampled controller's settings that change nothing: a force sensor on a law that reads no force, a voltage
+    hold of a law that gives voltages, a period or a delay as long as the run."""
     s, where = phase.sampling, f"phase[{i}] ({phase.name})"
     if s is None:
         return []
@@ -69,6 +69,9 @@ def _sampling_warnings(scene: Scene, i: int, phase) -> list[str]:
     if not s.sensor.exact_forces and not getattr(CONTROLLERS.get(kind), "uses_forces", True):
         out.append(f"{where}: {key}.sensor sets a force noise, bias or filter, but the controller {kind!r} "
                    "reads no measured force: the force sensor changes nothing")
+    if s.hold == "voltage" and getattr(CONTROLLERS.get(kind), "outputs", "torque") == "voltage":
+        out.append(f"{where}: {key}.hold = \"voltage\", but the controller {kind!r} gives voltages already: "
+                   "it holds them either way")
     if s.period >= scene.duration:
         out.append(f"{where}: {key}.sample_rate = {s.rate:g} Hz: its period ({s.period:g} s) is as long as the "
                    f"run ({scene.duration:g} s): the law samples once and holds that command")
