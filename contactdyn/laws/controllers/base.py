@@ -21,6 +21,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from ...errors import SceneError
+from ..drive_kinds import DRIVE_KINDS
 from ..params import Param
 from ..sensors import read_sampling
 
@@ -125,6 +127,15 @@ class BindContext:
     joint_names: list[str]
     motorized: np.ndarray  #: bool per joint: the joint's drive takes a voltage (a motor)
     key: str  #: key path of the controller table, for errors (e.g. "phase[1].controller")
+
+    def require_motors(self, key: str, what: str) -> None:
+        """A SceneError naming ``key`` unless every joint has a motor (a drive that takes a voltage): ``what`` needs
+        one on each."""
+        if not self.motorized.all():
+            bare = [n for n, m in zip(self.joint_names, self.motorized, strict=True) if not m]
+            kinds = " or ".join(name for name, kind in DRIVE_KINDS.items() if kind.has_voltage)
+            raise SceneError(key, f"{what} only with a motor on every joint (robot.drive.kind = {kinds})",
+                             f"no motor on {bare}", self.scene.file)
 
 
 @dataclass(frozen=True)

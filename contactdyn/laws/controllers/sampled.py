@@ -34,8 +34,7 @@ from collections import deque
 
 import numpy as np
 
-from ...errors import SceneError, SimulationError
-from ..drive_kinds import DRIVE_KINDS
+from ...errors import SimulationError
 from ..sensors import ForceSensor, Sampling
 from .base import BindContext, ControlInput, Controller
 
@@ -63,11 +62,8 @@ class SampledController(Controller):
     def bind(self, context: BindContext) -> None:
         self.inner.bind(context)
         self.n_states = self.nv + self.inner.n_states
-        if self.sampling.hold == "voltage" and not context.motorized.all():
-            bare = [n for n, m in zip(context.joint_names, context.motorized, strict=True) if not m]
-            kinds = " or ".join(name for name, kind in DRIVE_KINDS.items() if kind.has_voltage)
-            raise SceneError(f"{context.key}.hold", f"hold = \"voltage\" only with a motor on every joint "
-                             f"(robot.drive.kind = {kinds})", f"no motor on {bare}", context.scene.file)
+        if self.sampling.hold == "voltage":
+            context.require_motors(f"{context.key}.hold", 'hold = "voltage"')
 
     @property
     def held(self) -> slice:
@@ -127,7 +123,7 @@ class Sampler:
         self.passed(t)
         hold = self.period if on_grid else self.next_time() - t  # [s] shorter from a phase's start off the grid
         z_new = z_law + hold * zdot if zdot is not None and len(z_law) else z_law.copy()
-        if not np.all(np.isfinite(z_new)):  # (held until the next sample: every call there would fail)
+        if not np.isfinite(z_new).all():  # (held until the next sample: every call there would fail)
             raise SimulationError(f"t = {t:.6g} s: {self.controller.inner.name}: the law's own states are not finite "
                                   f"after this sample (z = {np.asarray(z_law).tolist()}, ż = "
                                   f"{np.asarray(zdot).tolist()}, over {hold:g} s)")

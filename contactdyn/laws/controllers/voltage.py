@@ -7,7 +7,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...errors import SceneError
-from ..drive_kinds import DRIVE_KINDS
 from .base import BindContext, ControlInput, Controller, register
 
 __all__ = ["ConstantVoltage"]
@@ -33,11 +32,7 @@ class ConstantVoltage(Controller):
         return ConstantVoltageConfig(u)
 
     def bind(self, context: BindContext) -> None:
-        if not context.motorized.all():
-            bare = [n for n, m in zip(context.joint_names, context.motorized, strict=True) if not m]
-            kinds = " or ".join(name for name, kind in DRIVE_KINDS.items() if kind.has_voltage)
-            raise SceneError(f"{context.key}.kind", "a voltage controller only with a motor on every joint "
-                             f"(robot.drive.kind = {kinds})", f"no motor on {bare}", context.scene.file)
+        context.require_motors(f"{context.key}.kind", "a voltage controller")
         if len(self.config.u) not in (1, self.nv):
             raise SceneError(f"{context.key}.u", f"one voltage or {self.nv} (one per joint)", self.config.u.tolist(),
                              context.scene.file)

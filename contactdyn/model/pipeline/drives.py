@@ -114,9 +114,8 @@ def apply_drives(x, nQ, rows, dreals, cmd, sat, f, out):
         if rows[i, DI_HAS_VOLTAGE]:
             us = ui
             if not rows[i, DI_BY_VOLTAGE]:
-                ui = call_drive_voltage(rows[i, DI_VOLTAGE], dreals, p_at, n_p, cmd[i], qd, omega)
-                us = ui if sat[i] == cmd[i] else call_drive_voltage(rows[i, DI_VOLTAGE], dreals, p_at, n_p, sat[i],
-                                                                    qd, omega)
+                ui = drive_voltage(x, nQ, rows, dreals, i, cmd[i])
+                us = ui if sat[i] == cmd[i] else drive_voltage(x, nQ, rows, dreals, i, sat[i])
                 if math.isnan(ui) or math.isnan(us):
                     return False
             u_max = dreals[p_at - 1]
@@ -135,17 +134,24 @@ def apply_drives(x, nQ, rows, dreals, cmd, sat, f, out):
     return True
 
 
+@njit(cache=True, inline="always")
+def drive_voltage(x, nQ, rows, dreals, i, command):
+    """u [V] that drive i's kind asks for the force ``command`` [N·m or N] at the state x (its voltage law: eq. 51
+    inverted at its coordinate's and its motor's speeds); NaN where the law failed."""
+    m = rows[i, DI_MOTOR]
+    omega = x[nQ + m] if m >= 0 else math.nan
+    return call_drive_voltage(rows[i, DI_VOLTAGE], dreals, rows[i, DI_P], rows[i, DI_N_P], command,
+                              x[nQ + rows[i, DI_COORD]], omega)
+
+
 @njit(cache=True)
 def command_voltages(x, nQ, rows, dreals, tau):
-    """u [V] per robot joint: the voltage its drive's kind asks for the force command tau[i] [N·m or N] at the state
-    x (its voltage law, as :func:`apply_drives` turns a torque command into a voltage: eq. 51 inverted at the
-    joint's and the motor's speeds; rows 0..nv−1 are the robot's joints). NaN where a kind's law failed."""
+    """u [V] per robot joint (rows 0..nv−1 are the robot's joints): the voltage its drive asks for the force command
+    tau[i] [N·m or N] at the state x (:func:`drive_voltage`, as :func:`apply_drives` turns a torque command into a
+    voltage). NaN where a kind's law failed."""
     u = np.empty(tau.size)
     for i in range(tau.size):
-        m = rows[i, DI_MOTOR]
-        omega = x[nQ + m] if m >= 0 else math.nan
-        u[i] = call_drive_voltage(rows[i, DI_VOLTAGE], dreals, rows[i, DI_P], rows[i, DI_N_P], tau[i],
-                                  x[nQ + rows[i, DI_COORD]], omega)
+        u[i] = drive_voltage(x, nQ, rows, dreals, i, tau[i])
     return u
 
 
