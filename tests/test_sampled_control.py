@@ -222,14 +222,14 @@ def test_a_voltage_hold_keeps_the_motors_voltages_that_the_command_asks_at_the_s
     """hold = "voltage": u_k = R (τ_k / N*) / C_M + C_E N q̇(t_k) (eq. 51 inverted at the speed measured at the
     sample), held until the next, so the motors' torque N* C_M (u_k − C_E N q̇) / R falls with their speed between
     samples; hold = "command" holds the torque τ_k, the voltage following the speed."""
-    runs = {}
-    for hold in HOLDS:
-        doc = b1(kind="_test_clock", sample_rate=RATE, hold=hold)
+    docs = {hold: b1(kind="_test_clock", sample_rate=RATE, hold=hold) for hold in HOLDS}
+    for doc in docs.values():
         doc["robot"]["drive"] = MOTOR
-        runs[hold] = simulate(parse_scene(doc))
+    runs = {hold: simulate(parse_scene(doc)) for hold, doc in docs.items()}
     m, r, c = MOTOR, runs["voltage"], runs["command"]
     assert {row["path"] for row in r.stats["paths"].values()} == {PIPELINE}
-    np.testing.assert_array_equal(simulate(parse_scene(doc), interpreted=True)["u"], r["u"])  # (the same source)
+    interpreted = simulate(parse_scene(docs["voltage"]), interpreted=True)
+    np.testing.assert_array_equal(interpreted["u"], r["u"])  # (the same source)
     k = np.floor(r.t * RATE + 1e-9).astype(int)
     for j in range(20):
         at = np.flatnonzero(k == j)
