@@ -182,7 +182,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     for module in scene.imports:  # importing runs code: say what ran
         _out(args, f"imported {module} from {IMPORTED.get(module, '?')}")
-    from .first_run import build_in_background, choose, default_path, leaves_ahead, leaves_first, mark_built
+    from .first_run import arrivals, build_in_background, choose, default_path, leaves_ahead, leaves_first, mark_built
 
     choice = choose(scene, args.path or default_path())
     helped = choice.build and leaves_ahead(scene)  # a first run's helper, started before the simulator's imports
@@ -192,8 +192,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     if helped:  # a first run: its leaves compiled from both ends, on two cores
         leaves_first(scene)
-    result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled,
-                               interpreted=choice.interpreted)
+    with arrivals(choice):  # (interpreted: the late leaves compiled by the helper meanwhile, once they arrive)
+        result = _simulate_quietly(simulate, scene, progress=not (args.quiet or args.json), compiled=choice.compiled,
+                                   interpreted=choice.interpreted)
     if choice.compiled:
         mark_built(scene)
     building = choice.build and build_in_background(scene)

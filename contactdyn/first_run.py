@@ -24,8 +24,12 @@ first into the shared cache and marks the kind's leaves done (``<kind>.leaves``)
 compiles its own leaves before it starts (:func:`leaves_first`): recorded the same way (RUN_RECORD_LIMIT at most), the
 first-reached first. Each leaf is compiled under a claim (:func:`compile_claimed`, an exclusive lock on its file in
 ``kinds/claims``): the helper skips one the run holds, the run waits for one the helper holds and then loads it. The
-two meet in the middle and compile no leaf twice. The helper changes no result (it only fills the cache) and reports
-nothing: a leaf it cannot compile the run compiles, and says why. ``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
+two meet in the middle and compile no leaf twice. Then the helper compiles the *late leaves* the scene reaches (a
+law's arithmetic, :data:`~contactdyn.numerics.twins.LATE_LEAVES`: seconds each, too slow to wait for), marking each
+arrived (``claims/<name>.arrived``); the run, on its twin meanwhile, loads it from the cache once it has arrived
+(:func:`arrived`, :func:`~contactdyn.numerics.twins.late_leaves`) and runs the rest of its calls faster. The helper
+changes no result (it only fills the cache) and reports nothing: a leaf it cannot compile the run compiles, and says
+why (a late leaf stays interpreted). ``CONTACTDYN_LEAVES_AHEAD=0`` turns it off.
 
 A scene's kind (:func:`kind`) is its document with every number blanked: the law names, controller
 kinds, robot and which keys are set decide what is compiled, the values do not. A wrong guess costs
@@ -52,7 +56,7 @@ from .errors import SceneError
 from .scene.scene_file import Scene
 
 __all__ = ["PATHS", "ENV", "Choice", "choose", "kind", "build_in_background", "leaves_ahead", "leaves_first",
-           "compile_claimed", "mark_built", "main"]
+           "compile_claimed", "arrived", "arrivals", "mark_built", "main"]
 
 PATHS = ("auto", "compiled", "interpreted")  #: what ``--path`` takes
 ENV = "CONTACTDYN_PATH"  #: the environment variable that sets the default path (else ``auto``)
@@ -72,10 +76,10 @@ CPU_QUOTA = Path("/sys/fs/cgroup/cpu.max")  #: a container's CPU quota (cgroup v
 
 class Choice:
     """A run's path (``compiled`` or ``interpreted``), ``build`` (the kind's background build is due
-    after the run), ``failed`` (the kind's build failed: its record)."""
+    after the run), ``failed`` (the kind's build failed: its record), ``auto`` (chosen for the path ``auto``)."""
 
-    def __init__(self, path: str, build: bool = False, failed: Path | None = None) -> None:
-        self.path, self.build, self.failed = path, build, failed
+    def __init__(self, path: str, build: bool = False, failed: Path | None = None, auto: bool = False) -> None:
+        self.path, self.build, self.failed, self.auto = path, build, failed, auto
 
     @property
     def compiled(self) -> bool:
@@ -142,11 +146,11 @@ def choose(scene: Scene, path: str) -> Choice:
         return Choice(path)
     folder, name = _folder(), kind(scene)
     if (folder / f"{name}.built").is_file():
-        return Choice("compiled")
+        return Choice("compiled", auto=True)
     failed = folder / f"{name}.failed"
     if failed.is_file():
-        return Choice("interpreted", failed=failed)
-    return Choice("interpreted", build=_buildable(scene))
+        return Choice("interpreted", failed=failed, auto=True)
+    return Choice("interpreted", build=_buildable(scene), auto=True)
 
 
 def _buildable(scene: Scene) -> bool:
@@ -291,8 +295,44 @@ def compile_leaves(file: str, document: dict, marker: str) -> None:
     from .scene.scene_file import parse_scene
 
     done = Path(marker).with_name(f"{kind(parse_scene(document, None, file))}.leaves")  # (the run's kind: no override)
-    compile_claimed(record_leaves(file, document, RECORD_LIMIT), backwards=True)
+    from .numerics.twins import LATE_LEAVES, name_of
+
+    calls = record_leaves(file, document, RECORD_LIMIT)
+    compile_claimed(_early(calls), backwards=True)
     done.touch()
+    for leaf, types_ in calls:  # the late leaves, first reached first: each marked arrived for the run
+        if name_of(leaf) in LATE_LEAVES:
+            with _claim(leaf, types_) or contextlib.nullcontext():
+                if _compile(leaf, types_):
+                    _arrival(leaf, types_).touch()
+
+
+def _early(calls: list[tuple[Any, tuple]]) -> list[tuple[Any, tuple]]:
+    """The leaves of a record, its late leaves left out (they arrive later: :func:`compile_leaves`)."""
+    from .numerics.twins import LATE_LEAVES, name_of
+
+    return [(leaf, types_) for leaf, types_ in calls if name_of(leaf) not in LATE_LEAVES]
+
+
+def arrived(leaf, types_: tuple) -> bool:
+    """Has the helper compiled the late leaf ``leaf`` for ``types_`` and cached it (:func:`compile_leaves`)?"""
+    try:
+        return _arrival(leaf, types_).is_file()
+    except OSError:
+        return False
+
+
+def arrivals(choice: Choice):
+    """Where a run's late leaves arrive from (a context): an interpreted run of the path ``auto`` loads each once a
+    helper has compiled it (:func:`arrived`); any other run as it is."""
+    from .numerics.twins import late_leaves
+
+    return late_leaves(arrived) if choice.interpreted and choice.auto else contextlib.nullcontext()
+
+
+def _arrival(leaf, types_: tuple) -> Path:
+    """The marker of a late leaf compiled for ``types_``: beside its claim."""
+    return _folder() / CLAIMS / f"{_claim_name(leaf, types_)}.arrived"
 
 
 def leaves_first(scene: Scene) -> None:
@@ -300,7 +340,7 @@ def leaves_first(scene: Scene) -> None:
     helper records them (RUN_RECORD_LIMIT at most), compiled first-reached first, claimed (:func:`compile_claimed`).
     A failure here is left to the run, which meets it again and reports it."""
     try:
-        compile_claimed(record_leaves(scene.file, scene.document, RUN_RECORD_LIMIT))
+        compile_claimed(_early(record_leaves(scene.file, scene.document, RUN_RECORD_LIMIT)))
     except Exception:  # noqa: BLE001,S110 (the run reports its own error; a leaf not compiled here compiles there)
         pass
 
@@ -376,12 +416,20 @@ def compile_claimed(calls: list[tuple[Any, tuple]], backwards: bool = False) -> 
             _compile(leaf, types_)
 
 
-def _compile(leaf, types_: tuple) -> None:
-    """numba's ``leaf.compile(types_)`` (loaded from the cache where it is there); a failure left to the run."""
+def _compile(leaf, types_: tuple) -> bool:
+    """numba's ``leaf.compile(types_)`` (loaded from the cache where it is there); False: it failed, left to the run."""
     try:
         leaf.compile(types_)
-    except Exception:  # noqa: BLE001,S110 (nothing is lost: the run compiles it itself)
-        pass
+        return True
+    except Exception:  # noqa: BLE001 (nothing is lost: the run compiles it itself)
+        return False
+
+
+def _claim_name(leaf, types_: tuple) -> str:
+    """The name of (``leaf``, ``types_``)'s claim and arrival: 16 hex digits of SHA-256 of both."""
+    from .numerics.twins import name_of
+
+    return hashlib.sha256(f"{name_of(leaf)}{types_}".encode()).hexdigest()[:16]
 
 
 def _claim(leaf, types_: tuple, wait: float = 0.0):
@@ -394,8 +442,7 @@ def _claim(leaf, types_: tuple, wait: float = 0.0):
 
         folder = _folder() / CLAIMS
         folder.mkdir(parents=True, exist_ok=True)
-        name = hashlib.sha256(f"{leaf.py_func.__module__}.{leaf.py_func.__qualname__}{types_}".encode()).hexdigest()
-        handle = open(folder / f"{name[:16]}.lock", "w")  # noqa: SIM115 (closed by the caller's with)
+        handle = open(folder / f"{_claim_name(leaf, types_)}.lock", "w")  # noqa: SIM115 (closed by the caller's with)
     except (ImportError, AttributeError, OSError):
         return contextlib.nullcontext()
     deadline = time.monotonic() + wait

@@ -456,3 +456,46 @@ def test_a_file_system_that_does_not_lock_gives_claims_that_hold_nothing(markers
     assert isinstance(claim, contextlib.nullcontext)
     first_run.compile_claimed([(_Leaf("a", done), (1,))])
     assert done == [("a", (1,))]
+
+
+def test_the_helper_compiles_the_late_leaves_after_the_others_and_marks_each_arrived(markers, monkeypatch):
+    """A record holding a late leaf: the helper's claimed compile gets the others (backwards), the kind is marked,
+    then the late leaf compiles and arrives (one that fails does not); the run's own record leaves it out."""
+    from contactdyn.numerics import twins
+
+    done = []
+    a, late, b, broken = _Leaf("a", done), _Leaf("late", done), _Leaf("b", done), _Leaf("broken", done, fails=True)
+    monkeypatch.setattr(twins, "LATE_LEAVES", twins.LATE_LEAVES | {"tests.leaves.late", "tests.leaves.broken"})
+    record = [(a, (1,)), (late, (2,)), (broken, (3,)), (b, (4,))]
+    monkeypatch.setattr(first_run, "record_leaves", lambda *args: list(record))
+    scene = load_scene("b1")
+    kind_done = markers / f"{first_run.kind(scene)}.leaves"
+    real = first_run.compile_claimed
+
+    def claimed(calls, backwards=False):
+        assert not kind_done.exists() and not first_run.arrived(late, (2,))  # (before the late ones)
+        real(calls, backwards)
+
+    monkeypatch.setattr(first_run, "compile_claimed", claimed)
+    first_run.compile_leaves(scene.file, scene.document, str(markers / first_run.LEAVES_LOCK))
+    assert done == [("b", (4,)), ("a", (1,)), ("late", (2,))] and kind_done.is_file()
+    assert first_run.arrived(late, (2,)) and not first_run.arrived(late, (5,)) and not first_run.arrived(broken, (3,))
+    got = []
+    monkeypatch.setattr(first_run, "compile_claimed", lambda calls, backwards=False: got.append(calls))
+    first_run.leaves_first(scene)
+    assert got == [[(a, (1,)), (b, (4,))]]
+
+
+def test_only_an_interpreted_run_of_the_path_auto_takes_late_leaves(markers):
+    from contactdyn.numerics import twins
+
+    scene = load_scene("b1")
+    taken = []
+    for path in ("auto", "interpreted", "compiled"):
+        choice = first_run.choose(scene, path)
+        with first_run.arrivals(choice):
+            taken.append(twins.Twins().arrived)
+    assert taken == [first_run.arrived, None, None] and twins.Twins().arrived is None
+    first_run.mark_built(scene)
+    with first_run.arrivals(first_run.choose(scene, "auto")):  # (built: compiled)
+        assert twins.Twins().arrived is None

@@ -137,3 +137,46 @@ def test_a_turning_surfaces_kinematics_and_an_impacts_chain_run_as_twins_in_an_i
     assert [e["kind"] for e in interpreted.events] == ["touch", "slip"]
     assert {name: f.signatures for name, f in fresh.items()} == {"turning_surface": [], "orient": []}
     _same(interpreted, compiled)
+
+
+def test_a_late_leaf_runs_as_its_twin_until_it_arrives_then_compiled_with_the_same_outputs(monkeypatch):
+    """The operational law's torque is a late leaf: without somewhere it arrives from, a plain twin; with one
+    (``late_leaves``: a first run's helper), the run looks at each call here (LOOK 0), says no three times, then
+    loads it and looks no more: every later call runs it compiled. The outputs are the compiled run's bit for bit."""
+    import types
+
+    from contactdyn.laws.controllers import operational_law
+    from contactdyn.numerics import twins as twins_module
+    from contactdyn.numerics.twins import LATE_LEAVES, late_leaves, name_of
+
+    leaf = operational_law.torque
+    assert name_of(leaf) in LATE_LEAVES
+    plain = Twins().of(leaf)
+    assert isinstance(plain, types.FunctionType) and plain.__code__ is leaf.py_func.__code__
+    monkeypatch.setattr(twins_module, "LOOK", 0.0)
+    overrides = {"duration": 0.02}
+    compiled = simulate("case2_writer5dof", overrides)
+    looks = []
+
+    def arrived(function, types_):
+        looks.append((function, types_))
+        return len(looks) > 3
+
+    with late_leaves(arrived):
+        interpreted = simulate("case2_writer5dof", overrides, interpreted=True)
+    assert len(looks) == 4 and all(function is leaf for function, _ in looks)
+    assert looks[-1][1] in [tuple(s) for s in leaf.signatures]  # (loaded: the compiled run's own signature)
+    assert interpreted.stats["rhs_evals"] > 20  # (most calls after the arrival)
+    _same(interpreted, compiled)
+
+
+def test_every_late_leaf_is_a_numba_function_of_the_package():
+    import importlib
+
+    from numba.core.dispatcher import Dispatcher
+
+    from contactdyn.numerics.twins import LATE_LEAVES
+
+    for name in LATE_LEAVES:
+        module, _, function = name.rpartition(".")
+        assert isinstance(getattr(importlib.import_module(module), function), Dispatcher), name

@@ -27,6 +27,11 @@ their order): a run on the twins gives the compiled run's outputs bit for bit (`
 Where it is used: :class:`contactdyn.model.pipeline.pipeline.Pipeline` (``twins=``: the mode packed with handles,
 its call and the loop's compiled steps and samples run as twins, :meth:`~.pipeline.Pipeline.of`).
 
+A **late leaf** (:data:`LATE_LEAVES`: a law's arithmetic, a large share of its call but seconds to compile) runs as
+its twin, unless the run has somewhere it *arrives* from (:func:`late_leaves`: a first run's helper compiles it on
+the other core while the run runs, :mod:`contactdyn.first_run`): then the run looks every :data:`LOOK` seconds
+whether it has arrived and from then on calls it compiled (the same arithmetic: the same outputs bit for bit).
+
 Outside the pipeline, the loop's Python calls a few numba functions of the model (a transition's velocity
 projection calls the chains' ``chain_call``): such a call site asks :func:`current` for the function, its
 twin while an interpreted run runs (:func:`running`, around ``HybridRun.run``), so a first run compiles none of it.
@@ -48,7 +53,8 @@ from collections.abc import Mapping
 from numba import typeof
 from numba.core.dispatcher import Dispatcher
 
-__all__ = ["Twins", "RecordingTwins", "LEAVES", "run_as", "current", "running"]
+__all__ = ["Twins", "RecordingTwins", "LEAVES", "LATE_LEAVES", "name_of", "late_leaves", "run_as", "current",
+           "running"]
 
 PACKAGE = "contactdyn."
 #: the functions left compiled (numba dispatchers called from the twins): the rigid-body algorithms, the dense
@@ -61,6 +67,9 @@ LEAVES = frozenset([*(f"contactdyn.robot.rigid_body.{n}" for n in
                        "put")),
                     *(f"contactdyn.hybrid.steps.{n}" for n in ("_stage_state", "_step_end", "_error_norm")),
                     *(f"contactdyn.numerics.dense_output.{n}" for n in ("horner_at", "horner_rows"))])
+#: the late leaves: twins until they arrive compiled (late_leaves), recorded as leaves (RecordingTwins)
+LATE_LEAVES = frozenset(["contactdyn.laws.controllers.operational_law.torque"])
+LOOK = 0.2  #: [s] of wall time between a late leaf's looks for its compiled form
 #: module -> its tables handle -> Python function (or controller class) that must give twins
 HANDLE_TABLES = {
     "contactdyn.numerics.native_call": ("_HANDLES",),
@@ -95,11 +104,45 @@ class _TwinMap(Mapping):
         return len(self._table)
 
 
+def name_of(function) -> str:
+    """A function's (or numba dispatcher's) qualified name: ``module.qualname``."""
+    python = getattr(function, "py_func", function)
+    return f"{python.__module__}.{python.__qualname__}"
+
+
+class _Late:
+    """A late leaf in a run it may arrive in: its twin until ``arrived(leaf, types)`` says it was compiled (and
+    cached), then the leaf itself, loaded (looked at every :data:`LOOK` s, the first time at its first call)."""
+
+    def __init__(self, leaf: Dispatcher, twin, arrived) -> None:
+        self.leaf, self.call, self.arrived = leaf, twin, arrived
+        self.look = time.monotonic()  #: [s] its next look (0: no more: it arrived, or cannot)
+
+    def __call__(self, *args):
+        if self.look and time.monotonic() >= self.look:
+            self._look(args)
+        return self.call(*args)
+
+    def _look(self, args) -> None:
+        types_ = tuple(typeof(a) for a in args)
+        if not self.arrived(self.leaf, types_):
+            self.look = time.monotonic() + LOOK
+            return
+        self.look = 0.0
+        try:
+            self.leaf.compile(types_)  # (loaded from the cache its helper filled)
+        except Exception:  # noqa: BLE001 (it stays interpreted: the same results)
+            return
+        self.call = self.leaf
+
+
 class Twins:
-    """The package's functions as interpreted twins, :data:`LEAVES` (or ``leaves``) compiled (see the module)."""
+    """The package's functions as interpreted twins, :data:`LEAVES` (or ``leaves``) compiled, :data:`LATE_LEAVES`
+    compiled once arrived where the run has somewhere they arrive from (:func:`late_leaves`; see the module)."""
 
     def __init__(self, leaves=LEAVES) -> None:
         self.leaves = frozenset(leaves)
+        self.arrived = _ARRIVALS[-1] if _ARRIVALS else None  #: (leaf, types) -> compiled elsewhere? (None: never)
         self.shadows: dict[str, dict] = {}  #: module name -> its shadow namespace
         self.made: dict[int, object] = {}  #: id(function) -> its twin (the functions kept alive in ``keep``)
         self.keep: list = []
@@ -119,6 +162,8 @@ class Twins:
             return value
         if isinstance(value, Dispatcher) and f"{module}.{python.__qualname__}" in self.leaves:
             twin = self._leaf(value)
+        elif isinstance(value, Dispatcher) and f"{module}.{python.__qualname__}" in LATE_LEAVES:
+            twin = self._late(value)
         elif python.__globals__ is not sys.modules[module].__dict__:  # (generated code: exec'd wrappers) as it is
             twin = python
         else:
@@ -130,6 +175,11 @@ class Twins:
     def _leaf(self, leaf: Dispatcher):
         """What a leaf's callers call: the leaf itself, compiled."""
         return leaf
+
+    def _late(self, leaf: Dispatcher):
+        """What a late leaf's callers call: its twin, compiled once it arrives (where it can)."""
+        twin = self._interpreted(leaf.py_func)
+        return twin if self.arrived is None else _Late(leaf, twin, self.arrived)
 
     def _interpreted(self, python: types.FunctionType) -> types.FunctionType:
         """``python``'s code over its module's shadow: its twin."""
@@ -192,6 +242,22 @@ class RecordingTwins(Twins):
             return twin(*args)
 
         return recorded
+
+    _late = _leaf  # (a late leaf recorded as a leaf: the helper compiles it after them)
+
+
+_ARRIVALS: list = []  #: where the late leaves of the twins made meanwhile arrive from (innermost last)
+
+
+@contextlib.contextmanager
+def late_leaves(arrived):
+    """Twins made meanwhile run a late leaf compiled once ``arrived(leaf, types)`` (numba's argument types) is True:
+    it was compiled and cached by another process (a first run's helper)."""
+    _ARRIVALS.append(arrived)
+    try:
+        yield
+    finally:
+        _ARRIVALS.pop()
 
 
 _RUNNING: list[Twins] = []  #: the twins of the interpreted run in progress (innermost last)
