@@ -7,7 +7,10 @@ Per repeat and scene, interleaved in one process: the hand-written closed-form B
 building, output), after one untimed run of the scene whose CPU time is reported apart
 (``first_run_cpu_s``: it also carries the process's one-time costs, e.g. loading the compiled
 kernels). CPU time per simulated second [ms/s], medians over the repeats, and the ratio scene /
-hand-written. With ``--baseline TREE`` the same runs alternate between child
+hand-written; also each repeat's own ratio (the two runs side by side), their median and range
+(``x_paired``, ``x_paired_min``, ``x_paired_max``): on this shared machine the hand-written run alone moves by
+up to 1.8× between repeats (34–63 ms/s in one process), so the range says how far one ratio can be trusted.
+With ``--baseline TREE`` the same runs alternate between child
 processes importing ``contactdyn`` from TREE and from this tree (:mod:`before_after`).
 Default scenes: those with motors (DC motors, elastic transmissions, force-reading laws).
 """
@@ -48,7 +51,10 @@ def measure(scenes: list[str], repeats: int) -> list[dict]:
         r = times["scene"].last
         c = times["scene"].cpu / float(r.t[-1] - r.t[0]) * 1e3
         h = times["hand"].cpu / b1_reference.T_END * 1e3
+        paired = sorted((sc / float(r.t[-1] - r.t[0])) / (hc / b1_reference.T_END)  # each repeat's own ratio
+                        for sc, hc in zip(times["scene"].cpu_s, times["hand"].cpu_s, strict=True))
         rows.append({"scene": name, "ms_per_s": c, "hand_written_ms_per_s": h, "x_hand_written": c / h,
+                     "x_paired": statistics.median(paired), "x_paired_min": paired[0], "x_paired_max": paired[-1],
                      "steps": r.stats.get("steps"), "rhs_evals": r.stats.get("rhs_evals"),
                      "first_run_cpu_s": first})
     return rows
