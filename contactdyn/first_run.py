@@ -291,7 +291,7 @@ def build(file: str, document: dict, marker: str) -> None:
 def compile_leaves(file: str, document: dict, marker: str) -> None:
     """The helper of :func:`leaves_ahead`: the leaves the scene reaches (:func:`record_leaves`, RECORD_LIMIT at most)
     compiled last-reached first, claimed (:func:`compile_claimed`); then the kind's leaves marked done beside
-    ``marker``."""
+    ``marker``; then its late leaves, first reached first, each marked arrived once compiled (:func:`arrived`)."""
     from .scene.scene_file import parse_scene
 
     done = Path(marker).with_name(f"{kind(parse_scene(document, None, file))}.leaves")  # (the run's kind: no override)

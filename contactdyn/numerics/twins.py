@@ -160,9 +160,10 @@ class Twins:
         module = python.__module__ or ""
         if not module.startswith(PACKAGE) or module not in sys.modules:
             return value
-        if isinstance(value, Dispatcher) and f"{module}.{python.__qualname__}" in self.leaves:
+        name = f"{module}.{python.__qualname__}" if isinstance(value, Dispatcher) else ""
+        if name in self.leaves:
             twin = self._leaf(value)
-        elif isinstance(value, Dispatcher) and f"{module}.{python.__qualname__}" in LATE_LEAVES:
+        elif name in LATE_LEAVES:
             twin = self._late(value)
         elif python.__globals__ is not sys.modules[module].__dict__:  # (generated code: exec'd wrappers) as it is
             twin = python
@@ -213,9 +214,9 @@ class Twins:
 
 
 class RecordingTwins(Twins):
-    """The twins with the leaves interpreted too, each leaf's calls recorded: ``calls``, (the leaf, its argument
-    types) in the order a run first reaches them, what the same run on :class:`Twins` compiles (no leaf compiled
-    here). A first run's helper compiles them last-reached first, beside the run (:mod:`contactdyn.first_run`).
+    """The twins with the leaves interpreted too, each leaf's calls recorded (a late leaf's too): ``calls``, (the leaf,
+    its argument types) in the order a run first reaches them, what the same run on :class:`Twins` compiles (no leaf
+    compiled here). A first run's helper compiles them last-reached first, beside the run (:mod:`contactdyn.first_run`).
     ``deadline`` [s] (``time.monotonic``): a leaf called after it raises :class:`Enough` (the record so far kept)."""
 
     class Enough(Exception):
