@@ -252,3 +252,28 @@ def test_a_held_state_does_not_hide_a_brief_pull_off_the_limit(tmp_path, brief_p
     kinds = [(e["kind"], e.get("side")) for e in r.events]
     assert kinds == [("limit", "upper"), ("release", None), ("limit", "upper")], kinds
     assert r.events[1]["t"] == pytest.approx(shift + math.asin(1.0 / 1.002) / math.pi, abs=1e-9)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_joint_with_dry_friction_leaves_its_limit_from_rest(tmp_path, brief_pull, compiled):
+    """The brief pull with dry friction on the joint (τ_s = 1e-3 N·m): at the release (the limit torque through zero)
+    the joint's friction holds it from rest, its velocity exactly 0, until the pull reaches τ_s, where it breaks away
+    (closed forms: 1 − 1.002 sin(π (t − shift)) = 0, then = −τ_s). Before, the limit row's drift (~1e-12 rad/s) made
+    it slip at the release and stick again 5e-10 s later."""
+    brief_pull.shift, tau_s = 0.11, 1e-3
+    doc = pendulum(tmp_path).document
+    doc.update(duration=0.62, controller={"kind": "brief_pull"})
+    doc["solver"] = {**doc["solver"], "output_rate": 5000.0}
+    doc["robot"] = {**doc["robot"], "q0": [UPPER], "gravity": [0.0, 0.0, 0.0], "joint": {"swing": {"friction": tau_s}}}
+    r = simulate(parse_scene(doc), compiled=compiled)
+    later = [(e["kind"], e["t"]) for e in r.events if e["t"] > 0.5]
+    assert [kind for kind, _ in later] == ["release", "joint_slip"], later
+    (_, release), (_, slip) = later
+    assert release == pytest.approx(0.11 + math.asin(1.0 / 1.002) / math.pi, abs=1e-9)
+    assert slip == pytest.approx(0.11 + math.asin((1.0 + tau_s) / 1.002) / math.pi, abs=1e-9)
+    held = (r.t > release) & (r.t < slip)
+    assert held.sum() > 20
+    assert np.all(r["v"][held, 0] == 0.0) and np.ptp(r["q"][held, 0]) == 0.0  # at rest, exactly
+    assert np.all(r["joint_stuck"][held, 0] == 1.0) and np.all(r["limit.side"][held, 0] == 0.0)
+    assert np.all(np.abs(r["joint_friction"][held, 0]) <= tau_s)  # the pull held within the static limit
+    assert r["v"][r.t > slip + 1e-3, 0].max() < 0.0  # then it slides off the upper limit

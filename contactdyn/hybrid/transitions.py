@@ -164,6 +164,7 @@ class Transitions:
         while phase.limits and (pulling := limits.pulling(phase, self.evaluate(t, x, modes, phase))):
             phase = replace(phase, limits=tuple(p for p in phase.limits if p != pulling[0]))
             self.log.log(t, "release", limits.by_index[pulling[0][0]].name)
+            x = self.system.joint_friction.left_limit(x, pulling[0][0], phase, self.system.nQ)  # (from rest)
             x, modes = self.consistent(t, x, modes, phase)
         return self.settle_joints(t, x, modes, phase)
 

@@ -34,7 +34,8 @@ impulse: the impact maps (:mod:`contactdyn.model.impact`) hold no stuck joint, a
 the impact sets moving slides from it on (above). (A row in the impact map would hold the joint
 with an unbounded impulse, as a locked joint.) A joint pressing on a position limit
 (:mod:`contactdyn.model.limits`) is held by the limit's row alone: its friction mode is stuck and
-its row is left out (the two would be one row twice); it comes back when the limit releases.
+its row is left out (the two would be one row twice); it comes back when the limit releases, the joint at rest
+(its velocity, the limit row's drift, set to 0: :meth:`JointFriction.left_limit`).
 
 Known limit: stuck joints and other rows (a stuck contact's, a bond's) can over-constrain the robot (all 7 joints
 of an arm at rest stuck while its tool sticks on a surface: 10 rows on 7 coordinates). The hold is then statically
@@ -109,6 +110,17 @@ class JointFriction:
         """The stuck joints that carry a row: not those pressing on a position limit (its row holds them)."""
         pressing = {i for i, _ in limits}
         return [i for i, m in modes if m == STUCK and i not in pressing]
+
+    @staticmethod
+    def left_limit(x: np.ndarray, i: int, phase: Any, nQ: int) -> np.ndarray:
+        """x as joint i leaves its position limit (a release): from rest where its dry friction holds it (mode stuck,
+        its row back), its velocity, the limit row's stabilization drift (~1e-12 rad/s), set to exactly 0; so its
+        friction decides from rest (stick, or slip where the load passes τ_s), not from the drift's sign."""
+        if (i, STUCK) not in phase.joint_modes or x[nQ + i] == 0.0:
+            return x
+        x = x.copy()
+        x[nQ + i] = 0.0
+        return x
 
     @staticmethod
     def with_mode(phase: Any, i: int, mode: int) -> Any:

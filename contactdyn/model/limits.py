@@ -106,9 +106,9 @@ class JointLimits:
         (:func:`~contactdyn.model.impact.limit_impact`); its contact is "" when no contact took part.
         """
         i = event.index
-        if event.kind == "release":
-            return x, replace(phase, limits=tuple(p for p in phase.limits if p[0] != i)), \
-                {"joint": event.contact}, None
+        if event.kind == "release":  # (it leaves from rest: JointFriction.left_limit)
+            phase = replace(phase, limits=tuple(p for p in phase.limits if p[0] != i))
+            return system.joint_friction.left_limit(x, i, phase, system.nQ), phase, {"joint": event.contact}, None
         phase = replace(phase, limits=(*phase.limits, (i, event.side)))
         v_before = float(x[system.nQ + i])
         x, imp, impulse = limit_impact(system, t, x, modes, phase.limits)
