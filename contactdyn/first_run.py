@@ -300,6 +300,8 @@ def compile_leaves(file: str, document: dict, marker: str) -> None:
     calls = record_leaves(file, document, RECORD_LIMIT)
     compile_claimed(_early(calls), backwards=True)
     done.touch()
+    with contextlib.suppress(AttributeError, OSError):
+        os.nice(10)  # (the late leaves only speed the run up: they wait where the run needs the core)
     for leaf, types_ in calls:  # the late leaves, first reached first: each marked arrived for the run
         if name_of(leaf) in LATE_LEAVES:
             with _claim(leaf, types_) or contextlib.nullcontext():

@@ -9,6 +9,7 @@ import io
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import types
@@ -221,7 +222,7 @@ def test_the_recorded_leaves_are_the_ones_the_interpreted_run_compiles_and_none_
     from contactdyn.hybrid.loop import HybridRun
     from contactdyn.model.system import System
     from contactdyn.numerics.compile_cache import njit
-    from contactdyn.numerics.twins import LEAVES, RecordingTwins
+    from contactdyn.numerics.twins import LATE_LEAVES, LEAVES, RecordingTwins
 
     fresh = {}
     for name in LEAVES:
@@ -240,7 +241,7 @@ def test_the_recorded_leaves_are_the_ones_the_interpreted_run_compiles_and_none_
     assert {name: leaf.signatures for name, leaf in fresh.items() if leaf.signatures} == {}  # none compiled
     names = [f"{leaf.py_func.__module__}.{leaf.py_func.__qualname__}" for leaf, _ in recorder.calls]
     assert {"contactdyn.robot.rigid_body._kinematics", "contactdyn.robot.rigid_body._jacobians",
-            "contactdyn.robot.rigid_body._inertia"} <= set(names) <= LEAVES
+            "contactdyn.robot.rigid_body._inertia"} <= set(names) <= LEAVES | LATE_LEAVES
     assert len(set(map(repr, recorder.calls))) == len(recorder.calls)  # once per leaf and types
     from contactdyn import simulate
 
@@ -329,7 +330,9 @@ def test_a_first_runs_own_record_is_the_helpers_and_it_hands_it_to_compile_claim
     names = [leaf.py_func.__qualname__ for leaf, _ in got[0][0]]
     assert len(got) == 1 and got[0][1] is False and {"_kinematics", "_inertia", "lu_solve"} <= set(names)
     assert names[-3:] == ["horner_rows", "horner_at", "pinv"]  # the output's and an event's interpolant, the push's
-    assert got[0][0] == first_run.record_leaves(scene.file, scene.document, 60.0)
+    record = first_run.record_leaves(scene.file, scene.document, 60.0)
+    assert got[0][0] == [call for call in record if call[0].py_func.__qualname__ not in ("robot_terms", "frame_terms")]
+    assert len(record) == len(got[0][0]) + 2  # (the late leaves, the helper's after: the robot's and frames' terms)
     monkeypatch.setattr(first_run, "record_leaves", lambda *a: 1 / 0)
     first_run.leaves_first(scene)  # (a failure is left to the run)
     assert len(got) == 1
@@ -378,8 +381,11 @@ def test_the_leaves_helper_needs_a_second_core_and_runs_one_at_a_time(markers, m
 
 
 def test_the_helper_hands_its_record_to_compile_claimed_marks_the_kind_and_records_no_failure(markers, monkeypatch):
-    compiled = []
+    from contactdyn.numerics.twins import LATE_LEAVES, name_of
+
+    compiled, late = [], []
     monkeypatch.setattr(first_run, "compile_claimed", lambda calls, backwards: compiled.append((calls, backwards)))
+    monkeypatch.setattr(first_run, "_compile", lambda leaf, types_: late.append(name_of(leaf)) or True)
     monkeypatch.setattr("os.nice", lambda n: 0)
     scene = load_scene("b1")
     markers.mkdir()
@@ -389,10 +395,13 @@ def test_the_helper_hands_its_record_to_compile_claimed_marks_the_kind_and_recor
     assert first_run.main(["--leaves", scene.file, str(markers / first_run.LEAVES_LOCK)]) == 0
     assert len(compiled) == 1 and compiled[0][0] and compiled[0][1] is True and not lock.exists()
     done = markers / f"{first_run.kind(scene)}.leaves"
-    assert [p.name for p in markers.iterdir()] == [done.name]
+    assert sorted(p.name for p in markers.iterdir()) == sorted([done.name, first_run.CLAIMS])
+    assert sorted(late) == sorted(LATE_LEAVES - {"contactdyn.laws.controllers.operational_law.torque"})  # b1's
+    assert len(list((markers / first_run.CLAIMS).glob("*.arrived"))) == len(late)
     monkeypatch.setattr(first_run, "_cores", lambda: 2)
     assert not first_run.leaves_ahead(scene)  # (a helper did this kind)
     done.unlink()
+    shutil.rmtree(markers / first_run.CLAIMS)
     lock.touch()
     monkeypatch.setattr("sys.stdin", io.StringIO(json.dumps({})))  # (no scene: the helper fails)
     assert first_run.main(["--leaves", scene.file, str(markers / first_run.LEAVES_LOCK)]) == 1
