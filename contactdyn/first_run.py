@@ -291,7 +291,8 @@ def build(file: str, document: dict, marker: str) -> None:
 def compile_leaves(file: str, document: dict, marker: str) -> None:
     """The helper of :func:`leaves_ahead`: the leaves the scene reaches (:func:`record_leaves`, RECORD_LIMIT at most)
     compiled last-reached first, claimed (:func:`compile_claimed`); then the kind's leaves marked done beside
-    ``marker``; then its late leaves, first reached first, each marked arrived once compiled (:func:`arrived`)."""
+    ``marker``; then its late leaves, in their order (the most worth first), each marked arrived once compiled
+    (:func:`arrived`)."""
     from .scene.scene_file import parse_scene
 
     done = Path(marker).with_name(f"{kind(parse_scene(document, None, file))}.leaves")  # (the run's kind: no override)
@@ -302,11 +303,12 @@ def compile_leaves(file: str, document: dict, marker: str) -> None:
     done.touch()
     with contextlib.suppress(AttributeError, OSError):
         os.nice(10)  # (the late leaves only speed the run up: they wait where the run needs the core)
-    for leaf, types_ in calls:  # the late leaves, first reached first: each marked arrived for the run
-        if name_of(leaf) in LATE_LEAVES:
-            with _claim(leaf, types_) or contextlib.nullcontext():
-                if _compile(leaf, types_):
-                    _arrival(leaf, types_).touch()
+    late = sorted((call for call in calls if name_of(call[0]) in LATE_LEAVES),
+                  key=lambda call: LATE_LEAVES.index(name_of(call[0])))  # (the most worth first)
+    for leaf, types_ in late:  # each marked arrived for the run
+        with _claim(leaf, types_) or contextlib.nullcontext():
+            if _compile(leaf, types_):
+                _arrival(leaf, types_).touch()
 
 
 def _early(calls: list[tuple[Any, tuple]]) -> list[tuple[Any, tuple]]:

@@ -241,7 +241,7 @@ def test_the_recorded_leaves_are_the_ones_the_interpreted_run_compiles_and_none_
     assert {name: leaf.signatures for name, leaf in fresh.items() if leaf.signatures} == {}  # none compiled
     names = [f"{leaf.py_func.__module__}.{leaf.py_func.__qualname__}" for leaf, _ in recorder.calls]
     assert {"contactdyn.robot.rigid_body._kinematics", "contactdyn.robot.rigid_body._jacobians",
-            "contactdyn.robot.rigid_body._inertia"} <= set(names) <= LEAVES | LATE_LEAVES
+            "contactdyn.robot.rigid_body._inertia"} <= set(names) <= LEAVES | set(LATE_LEAVES)
     assert len(set(map(repr, recorder.calls))) == len(recorder.calls)  # once per leaf and types
     from contactdyn import simulate
 
@@ -396,7 +396,7 @@ def test_the_helper_hands_its_record_to_compile_claimed_marks_the_kind_and_recor
     assert len(compiled) == 1 and compiled[0][0] and compiled[0][1] is True and not lock.exists()
     done = markers / f"{first_run.kind(scene)}.leaves"
     assert sorted(p.name for p in markers.iterdir()) == sorted([done.name, first_run.CLAIMS])
-    assert sorted(late) == sorted(LATE_LEAVES - {"contactdyn.laws.controllers.operational_law.torque"})  # b1's
+    assert late == list(LATE_LEAVES[1:])  # b1's: all but the operational law's, in their order
     assert len(list((markers / first_run.CLAIMS).glob("*.arrived"))) == len(late)
     monkeypatch.setattr(first_run, "_cores", lambda: 2)
     assert not first_run.leaves_ahead(scene)  # (a helper did this kind)
@@ -467,28 +467,33 @@ def test_a_file_system_that_does_not_lock_gives_claims_that_hold_nothing(markers
     assert done == [("a", (1,))]
 
 
-def test_the_helper_compiles_the_late_leaves_after_the_others_and_marks_each_arrived(markers, monkeypatch):
-    """A record holding a late leaf: the helper's claimed compile gets the others (backwards), the kind is marked,
-    then the late leaf compiles and arrives (one that fails does not); the run's own record leaves it out."""
+def test_the_helper_compiles_the_late_leaves_after_the_others_in_their_order_and_marks_each_arrived(markers,
+                                                                                                    monkeypatch):
+    """A record holding late leaves: the helper's claimed compile gets the others (backwards), the kind is marked,
+    then the late leaves compile in LATE_LEAVES' order (not the order reached) and arrive (one that fails does not);
+    the run's own record leaves them out."""
     from contactdyn.numerics import twins
 
     done = []
-    a, late, b, broken = _Leaf("a", done), _Leaf("late", done), _Leaf("b", done), _Leaf("broken", done, fails=True)
-    monkeypatch.setattr(twins, "LATE_LEAVES", twins.LATE_LEAVES | {"tests.leaves.late", "tests.leaves.broken"})
-    record = [(a, (1,)), (late, (2,)), (broken, (3,)), (b, (4,))]
+    a, b = _Leaf("a", done), _Leaf("b", done)
+    first, second, broken = _Leaf("first", done), _Leaf("second", done), _Leaf("broken", done, fails=True)
+    monkeypatch.setattr(twins, "LATE_LEAVES", (*twins.LATE_LEAVES, *(f"tests.leaves.{n}" for n in
+                                                                     ("first", "broken", "second"))))
+    record = [(a, (1,)), (second, (2,)), (broken, (3,)), (b, (4,)), (first, (5,))]
     monkeypatch.setattr(first_run, "record_leaves", lambda *args: list(record))
     scene = load_scene("b1")
     kind_done = markers / f"{first_run.kind(scene)}.leaves"
     real = first_run.compile_claimed
 
     def claimed(calls, backwards=False):
-        assert not kind_done.exists() and not first_run.arrived(late, (2,))  # (before the late ones)
+        assert not kind_done.exists() and not first_run.arrived(first, (5,))  # (before the late ones)
         real(calls, backwards)
 
     monkeypatch.setattr(first_run, "compile_claimed", claimed)
     first_run.compile_leaves(scene.file, scene.document, str(markers / first_run.LEAVES_LOCK))
-    assert done == [("b", (4,)), ("a", (1,)), ("late", (2,))] and kind_done.is_file()
-    assert first_run.arrived(late, (2,)) and not first_run.arrived(late, (5,)) and not first_run.arrived(broken, (3,))
+    assert done == [("b", (4,)), ("a", (1,)), ("first", (5,)), ("second", (2,))] and kind_done.is_file()
+    assert first_run.arrived(first, (5,)) and first_run.arrived(second, (2,)) and not first_run.arrived(first, (2,))
+    assert not first_run.arrived(broken, (3,))
     got = []
     monkeypatch.setattr(first_run, "compile_claimed", lambda calls, backwards=False: got.append(calls))
     first_run.leaves_first(scene)

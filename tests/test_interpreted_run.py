@@ -165,7 +165,7 @@ def test_a_late_leaf_runs_as_its_twin_until_it_arrives_then_compiled_with_the_sa
 
     with late_leaves(arrived):
         interpreted = simulate("case2_writer5dof", overrides, interpreted=True)
-    assert {name_of(leaf), "contactdyn.model.pipeline.robot_terms.robot_terms"} <= set(looks) <= LATE_LEAVES
+    assert {name_of(leaf), "contactdyn.model.pipeline.robot_terms.robot_terms"} <= set(looks) <= set(LATE_LEAVES)
     assert all(len(seen) == 4 for seen in looks.values()), {name: len(seen) for name, seen in looks.items()}
     assert looks[name_of(leaf)][-1] in [tuple(s) for s in leaf.signatures]  # (loaded: the compiled run's signature)
     assert interpreted.stats["rhs_evals"] > 20  # (most calls after the arrival)

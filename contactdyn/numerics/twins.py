@@ -67,13 +67,13 @@ LEAVES = frozenset([*(f"contactdyn.robot.rigid_body.{n}" for n in
                        "put")),
                     *(f"contactdyn.hybrid.steps.{n}" for n in ("_stage_state", "_step_end", "_error_norm")),
                     *(f"contactdyn.numerics.dense_output.{n}" for n in ("horner_at", "horner_rows"))])
-#: the late leaves: twins until they arrive compiled (late_leaves), recorded as leaves (RecordingTwins): the
-#: operational law's arithmetic (a quarter of the 5-DOF writer's call, 5 s to compile), the robot's terms and its
-#: frames', a bond's row (~8 % of the real cell's call, 4 s); not kkt_solve (its least squares: numba's LAPACK, not
-#: numpy's, and 9 s)
-LATE_LEAVES = frozenset(["contactdyn.laws.controllers.operational_law.torque",
-                         *(f"contactdyn.model.pipeline.robot_terms.{n}" for n in ("robot_terms", "frame_terms")),
-                         "contactdyn.model.pipeline.contacts._bond_row"])
+#: the late leaves, twins until they arrive compiled (late_leaves), recorded as leaves (RecordingTwins), in the order a
+#: helper compiles those a scene reaches (the most worth first): the operational law's arithmetic (a quarter of the
+#: 5-DOF writer's call, 5 s to compile), then the robot's terms, its frames' and a bond's row (~8 % of the real
+#: cell's call, 4 s); not kkt_solve (its least squares: numba's LAPACK, not numpy's, and 9 s)
+LATE_LEAVES = ("contactdyn.laws.controllers.operational_law.torque",
+               *(f"contactdyn.model.pipeline.robot_terms.{n}" for n in ("robot_terms", "frame_terms")),
+               "contactdyn.model.pipeline.contacts._bond_row")
 LOOK = 0.2  #: [s] of wall time between a late leaf's looks for its compiled form
 #: module -> its tables handle -> Python function (or controller class) that must give twins
 HANDLE_TABLES = {
