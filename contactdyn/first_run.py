@@ -293,11 +293,10 @@ def compile_leaves(file: str, document: dict, marker: str) -> None:
     compiled last-reached first, claimed (:func:`compile_claimed`); then the kind's leaves marked done beside
     ``marker``; then its late leaves, in their order (the most worth first), each marked arrived once compiled
     (:func:`arrived`)."""
+    from .numerics.twins import LATE_LEAVES, name_of
     from .scene.scene_file import parse_scene
 
     done = Path(marker).with_name(f"{kind(parse_scene(document, None, file))}.leaves")  # (the run's kind: no override)
-    from .numerics.twins import LATE_LEAVES, name_of
-
     calls = record_leaves(file, document, RECORD_LIMIT)
     compile_claimed(_early(calls), backwards=True)
     done.touch()

@@ -27,7 +27,7 @@ their order): a run on the twins gives the compiled run's outputs bit for bit (`
 Where it is used: :class:`contactdyn.model.pipeline.pipeline.Pipeline` (``twins=``: the mode packed with handles,
 its call and the loop's compiled steps and samples run as twins, :meth:`~.pipeline.Pipeline.of`).
 
-A **late leaf** (:data:`LATE_LEAVES`: a law's arithmetic, a large share of its call but seconds to compile) runs as
+A **late leaf** (:data:`LATE_LEAVES`: a law's arithmetic, the robot's terms: seconds to compile) runs as
 its twin, unless the run has somewhere it *arrives* from (:func:`late_leaves`: a first run's helper compiles it on
 the other core while the run runs, :mod:`contactdyn.first_run`): then the run looks every :data:`LOOK` seconds
 whether it has arrived and from then on calls it compiled (the same arithmetic: the same outputs bit for bit).
