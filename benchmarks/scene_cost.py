@@ -49,9 +49,10 @@ def measure(scenes: list[str], repeats: int) -> list[dict]:
         times = interleaved({"hand": b1_reference.run, "scene": lambda name=name: simulate(load_scene(name))},
                             repeats)
         r = times["scene"].last
-        c = times["scene"].cpu / float(r.t[-1] - r.t[0]) * 1e3
+        span = float(r.t[-1] - r.t[0])  # [s] simulated
+        c = times["scene"].cpu / span * 1e3
         h = times["hand"].cpu / b1_reference.T_END * 1e3
-        paired = sorted((sc / float(r.t[-1] - r.t[0])) / (hc / b1_reference.T_END)  # each repeat's own ratio
+        paired = sorted((sc / span) / (hc / b1_reference.T_END)  # each repeat's own ratio
                         for sc, hc in zip(times["scene"].cpu_s, times["hand"].cpu_s, strict=True))
         rows.append({"scene": name, "ms_per_s": c, "hand_written_ms_per_s": h, "x_hand_written": c / h,
                      "x_paired": statistics.median(paired), "x_paired_min": paired[0], "x_paired_max": paired[-1],

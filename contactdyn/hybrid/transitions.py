@@ -31,7 +31,6 @@ sticks if the friction needed to hold it is within μ_s F (its residual slip pro
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -162,9 +161,8 @@ class Transitions:
         friction modes the state contradicts (:meth:`settle_joints`)."""
         limits = self.system.limits
         while phase.limits and (pulling := limits.pulling(phase, self.evaluate(t, x, modes, phase))):
-            phase = replace(phase, limits=tuple(p for p in phase.limits if p != pulling[0]))
+            x, phase = limits.release(self.system, x, phase, pulling[0][0])
             self.log.log(t, "release", limits.by_index[pulling[0][0]].name)
-            x = self.system.joint_friction.left_limit(x, pulling[0][0], phase, self.system.nQ)  # (from rest)
             x, modes = self.consistent(t, x, modes, phase)
         return self.settle_joints(t, x, modes, phase)
 

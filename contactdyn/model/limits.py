@@ -98,6 +98,13 @@ class JointLimits:
             rows.add(row, 2.0 * omega * float(x[nQ + i]) + omega * omega * gap, (lim.name, "limit", i))
 
     # ---- switching -------------------------------------------------------------------------
+    @staticmethod
+    def release(system: Any, x: np.ndarray, phase: Any, i: int) -> tuple[np.ndarray, Any]:
+        """(x, phase) as joint i stops pressing on its limit: the limit out of the phase, the joint from rest where
+        its dry friction holds it (:meth:`~contactdyn.model.joint_friction.JointFriction.left_limit`)."""
+        phase = replace(phase, limits=tuple(p for p in phase.limits if p[0] != i))
+        return system.joint_friction.left_limit(x, i, phase, system.nQ), phase
+
     def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event) -> tuple:
         """Apply a ``limit`` (plastic impact, then pressing) or ``release`` event: (x, phase, info, impact).
 
@@ -106,9 +113,9 @@ class JointLimits:
         (:func:`~contactdyn.model.impact.limit_impact`); its contact is "" when no contact took part.
         """
         i = event.index
-        if event.kind == "release":  # (it leaves from rest: JointFriction.left_limit)
-            phase = replace(phase, limits=tuple(p for p in phase.limits if p[0] != i))
-            return system.joint_friction.left_limit(x, i, phase, system.nQ), phase, {"joint": event.contact}, None
+        if event.kind == "release":
+            x, phase = self.release(system, x, phase, i)
+            return x, phase, {"joint": event.contact}, None
         phase = replace(phase, limits=(*phase.limits, (i, event.side)))
         v_before = float(x[system.nQ + i])
         x, imp, impulse = limit_impact(system, t, x, modes, phase.limits)
