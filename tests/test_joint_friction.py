@@ -163,6 +163,82 @@ def test_pendulum_with_dry_joint_friction_stops_at_the_closed_form_angle(tmp_pat
     assert r["joint_friction"][-1, 0] == pytest.approx(MGL * math.sin(theta_stop), rel=1e-9)  # holds gravity
 
 
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_load_exactly_at_the_static_limit_holds(tmp_path, compiled):
+    """|m g l sin θ| = τ_s exactly (τ_k = τ_s / 2): the joint holds for the whole run, as |load| ≤ τ_s says (before:
+    its joint_slip value, exactly 0 at both ends of the first step, counted as a fall through zero and the joint swung
+    away); 1e-9 more load breaks it away at once."""
+    theta0 = 0.3
+    tau_s = MGL * math.sin(theta0)
+    for load, held in ((1.0, True), (1.0 + 1e-9, False)):
+        doc = scene(arm(tmp_path), [theta0], 0.3, joint={"j1": {"friction_static": tau_s / load,
+                                                                 "friction_kinetic": 0.5 * tau_s / load}})
+        r = simulate(parse_scene(doc), compiled=compiled)
+        if held:
+            assert not r.events and np.all(r["q"][:, 0] == theta0) and np.all(r["v"][:, 0] == 0.0)
+            np.testing.assert_allclose(r["joint_friction"][:, 0], tau_s, rtol=1e-12)  # the whole load held
+        else:
+            assert [(e["kind"], e["t"]) for e in r.events] == [("joint_slip", 0.0)] and r["q"][-1, 0] < theta0
+
+
+LIMITED = """<?xml version="1.0"?>
+<robot name="limited">
+  <link name="base"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="link1"/><axis xyz="0 1 0"/>
+    <limit lower="-1" upper="1" effort="0" velocity="0"/></joint>
+  <link name="link1"><inertial><origin xyz="0 0 -0.5"/><mass value="2"/>
+    <inertia ixx="0" iyy="0" izz="0" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="j2" type="revolute"><parent link="link1"/><child link="link2"/><axis xyz="0 1 0"/>
+    <origin xyz="0 0 -0.5"/><limit lower="-1" upper="1" effort="0" velocity="0"/></joint>
+  <link name="link2"><inertial><origin xyz="0 0 -0.5"/><mass value="2"/>
+    <inertia ixx="0" iyy="0" izz="0" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="tip_joint" type="fixed"><parent link="link2"/><child link="tip"/><origin xyz="0 0 -0.5"/></joint>
+  <link name="tip"/>
+</robot>
+"""
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_an_impact_that_reverses_a_sliding_joint_lets_it_slide_back(tmp_path, compiled):
+    """No gravity; the shoulder slides (+) with 0.5 N·m of dry friction, the elbow strikes its lower limit: the plastic
+    impact (the shoulder free in it: a bounded friction takes no impulse) reverses the shoulder, which slides back
+    (joint_reverse at the impact's instant) and keeps the kinetic energy the impact left it, less its friction's work:
+    the energy audit balances. Before, it kept its old slide's sign, its joint_stick fired 3e-14 s later and zeroed
+    ~2 rad/s: 4.4 J gone, the audit's residual 4.4 J."""
+    path = tmp_path / "limited.urdf"
+    path.write_text(LIMITED)
+    doc = scene(str(path), [0.0, -0.9], 0.05, {"kind": "joint_pd", "kp": [0.0, 0.0], "kd": [0.0, 0.0]},
+                gravity=False, v0=[0.3, -6.0], joint={"j1": {"friction": 0.5}})
+    doc["solver"]["record_energy"] = True
+    r = simulate(parse_scene(doc), compiled=compiled)
+    hit = r.events[0]
+    assert [(e["kind"], e["name"]) for e in r.events] == [("limit", "j2"), ("release", "j2"), ("joint_reverse", "j1")]
+    assert all(e["t"] == hit["t"] for e in r.events)
+    after = r.t > hit["t"]
+    assert np.all(r["v"][after, 0] < -1.0)  # [rad/s] the shoulder slides back the whole run
+    np.testing.assert_array_equal(r["joint_friction"][after, 0], 0.5)  # against its slide
+    audit = r.meta["checks"]["energy_residual"]
+    assert audit["value"] < audit["tol"]  # [J] what the impact and the friction took, and nothing more
+
+
+def test_a_stuck_joints_leftover_velocity_is_set_to_exactly_zero(tmp_path):
+    """A stuck joint whose velocity is within STICK_TOL (an impact's round-off) is at rest exactly after the joint
+    modes are settled (before: zeroed on a copy that was dropped)."""
+    from contactdyn.hybrid.loop import HybridRun
+
+    doc = scene(arm(tmp_path, 2), [0.4, 1.2], 0.2, {"kind": "joint_pd", "kp": [0.0, 0.0], "kd": [0.0, 0.0]},
+                joint={"j1": {"friction": 100.0}})
+    system = System(parse_scene(doc))
+    run = HybridRun(system)
+    x, modes = system.initial_state()
+    phase = system.start_phase(0, 0.0, x, None)
+    assert (0, 0) in phase.joint_modes  # the shoulder stuck
+    x = x.copy()
+    x[system.nQ] = 5e-14  # [rad/s] within STICK_TOL
+    x_after, _, phase_after = run.transitions.settle_joints(0.0, x, modes, phase)
+    assert x_after[system.nQ] == 0.0 and phase_after.joint_modes == phase.joint_modes and not run.events
+
+
 def test_damping_from_the_urdf_decays_a_free_swing(tmp_path):
     """The URDF's damping alone: a small free swing (θ0 = 1e-3 rad) is the damped oscillator of the linearized
     pendulum, θ = θ0 e^(−βt) (cos ω_d t + β/ω_d sin ω_d t) with β = b / (2 m l²), ω_d² = g/l − β² (the nonlinearity

@@ -171,11 +171,12 @@ class Transitions:
         limit or moving slips; :meth:`~contactdyn.model.joint_friction.JointFriction.contradicted`), the contact modes
         decided again after each. Returns (x, modes, phase)."""
         for _ in range(2 * len(phase.joint_modes) + 1):
-            change = self.system.joint_friction.contradicted(self.system, t, x, modes, phase, self.evaluate) \
-                if phase.joint_modes else None
-            if change is None:
+            if not phase.joint_modes:
                 return x, modes, phase
-            kind, joint, x, phase = change
+            kind, joint, x, phase = self.system.joint_friction.contradicted(self.system, t, x, modes, phase,
+                                                                            self.evaluate)
+            if not kind:
+                return x, modes, phase
             self.log.log(t, kind, joint)
             x, modes = self.consistent(t, x, modes, phase)
         raise SimulationError(f"{self.scene.name}: no consistent joint friction mode at t = {t:.9g} s "

@@ -59,6 +59,7 @@ __all__ = ["JointFriction", "STUCK", "STICK_TOL", "joint_friction_channels", "su
 STUCK = 0  #: a joint's friction mode while stuck (sliding: its sign s = ±1)
 #: [rad/s or m/s] a sliding joint's ``joint_stick`` fires when s q̇ᵢ falls this far below min(0, its start value)
 STICK_TOL = 1e-13
+_AT_LIMIT = 5e-324  #: [N·m or N] a joint_slip value of exactly 0 (|λ| = τ_s: held), kept above zero
 SLIP_ALARM = 1e-9  #: [-] a located ``joint_slip`` is real if |λ| ≥ (1 − this) τ_s there (else a false alarm)
 
 
@@ -150,9 +151,9 @@ class JointFriction:
         """Event functions of one segment: ``joint_slip`` of stuck joints (g = τ_s − |λᵢ|; ``torque(t, x)`` gives
         the holding torques {i: λᵢ}), ``joint_stick`` of sliding ones (g = s q̇ᵢ − min(s q̇ᵢ(t₀), 0) + STICK_TOL)."""
         out = []
-        for i in self.held(modes, limits):
-            out.append(_event(lambda t, x, i=i, ts=self.static[i]: ts - abs(torque(t, x)[i]), "joint_slip",
-                              self.names[i], i))
+        for i in self.held(modes, limits):  # (g exactly 0: held, |λ| = τ_s; only a fall below zero breaks away)
+            out.append(_event(lambda t, x, i=i, ts=self.static[i]: (ts - abs(torque(t, x)[i])) or _AT_LIMIT,
+                              "joint_slip", self.names[i], i))
         for i, m in modes:
             if m != STUCK:
                 floor = min(m * float(x0[nQ + i]), 0.0) - STICK_TOL
@@ -179,11 +180,11 @@ class JointFriction:
             return x, self.with_mode(phase, i, -1 if hold > 0.0 else 1), {"torque": hold, "kind": "joint_reverse"}
         return x, trial, {"torque": hold}
 
-    def contradicted(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, evaluate
-                     ) -> tuple | None:
-        """The first joint mode the state contradicts, as (kind, joint, x, phase) with it changed, else None (x: its
-        stuck joints' velocities within ``STICK_TOL`` set to exactly 0): a sliding joint pressing on a limit is
-        stuck (the limit holds it); a stuck joint that moves (an impact's velocity) slides along it; a stuck joint
+    def contradicted(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, evaluate) -> tuple:
+        """The first joint mode the state contradicts, as (kind, joint, x, phase) with it changed, else ("", "", x,
+        phase) (x: its stuck joints' velocities within ``STICK_TOL`` set to exactly 0): a sliding joint pressing on a
+        limit is stuck (the limit holds it); a sliding joint that moves against its slide (an impact reversed it)
+        slides along its velocity; a stuck joint that moves (an impact's velocity) slides along it; a stuck joint
         whose holding torque exceeds τ_s slides where the load pushes. ``evaluate(t, x, modes, phase)``: the mode's
         Evaluation there (the transitions' ``LastEvaluation``)."""
         nQ = system.nQ
@@ -191,6 +192,8 @@ class JointFriction:
         for i, m in phase.joint_modes:
             if m != STUCK and i in pressing:
                 return "joint_stick", self.names[i], x, self.with_mode(phase, i, STUCK)
+            if m != STUCK and m * float(x[nQ + i]) < -STICK_TOL:  # (its kinetic friction would push it along)
+                return "joint_reverse", self.names[i], x, self.with_mode(phase, i, -m)
         held = self.held(phase.joint_modes, phase.limits)
         for i in held:
             v = float(x[nQ + i])
@@ -200,13 +203,13 @@ class JointFriction:
                 x = x.copy()
                 x[nQ + i] = 0.0
         if not held:
-            return None
+            return "", "", x, phase
         ev = evaluate(t, x, modes, phase)
         for i in held:
             hold = ev.joint_hold[i]
             if self.breaks_away(i, hold):
                 return "joint_slip", self.names[i], x, self.with_mode(phase, i, -1 if hold > 0.0 else 1)
-        return None
+        return "", "", x, phase
 
     def breaks_away(self, i: int, hold: float, alarm: float = 0.0) -> bool:
         """Does a holding torque ``hold`` [N·m or N] exceed joint i's static limit (within ``alarm``, relative)?"""
