@@ -287,13 +287,62 @@ def test_a_voltage_hold_needs_a_motor_on_every_joint(tmp_path):
     assert all(w in str(err.value) for w in ("controller.hold", "a motor on every joint", "dc_motor", "s.toml"))
 
 
+@pytest.mark.parametrize("holds", [("command", "voltage"), ("voltage", "command")])
+def test_a_sampled_phase_starts_from_what_acts_in_the_units_it_holds(monkeypatch, holds):
+    """Case 1's cart (a DC motor on every joint), its second phase sampled from an instant off the grid: the held slots
+    its first sample measures with are what acts just before, in what the phase holds: the motors' voltages [V] for a
+    voltage hold after a torque law, the drives' torques for a torque hold after a voltage hold (before: the previous
+    law's command as it was, torques read as volts or volts as torques; on the real cell split in two phases, the
+    first measured force 59.0 N where 50.4 N acted)."""
+    from contactdyn.hybrid.sampling import SampledPhases
+
+    first: dict[int, tuple[float, np.ndarray]] = {}
+    take = SampledPhases.take
+
+    def spy(self, t, x, phase, runner):
+        if phase.index not in first:
+            first[phase.index] = (t, x[self.slots[phase.index][0]].copy())
+        return take(self, t, x, phase, runner)
+
+    monkeypatch.setattr(SampledPhases, "take", spy)
+    before, after = holds
+    ov = {"duration": 0.2016, "phase.0.until": 0.2015, "solver.output_rate": 2e5,
+          "phase.1.controller.sample_rate": 1000.0, "phase.1.controller.hold": after}
+    if before == "voltage":
+        ov.update({"phase.0.controller.sample_rate": 1000.0, "phase.0.controller.hold": "voltage"})
+    r = simulate("case1_cart", ov)
+    t1, held = first[1]
+    assert t1 == 0.2015
+    at = np.flatnonzero(r.t < t1)[-1]  # the output 5 µs before the phase's start: the phase before acts
+    acting = r["u"][at] if after == "voltage" else r["tau"][at]
+    np.testing.assert_allclose(held, acting, rtol=2e-3)  # (5 µs later)
+    assert not np.allclose(held, r["tau_cmd"][at], rtol=0.05)  # the command as it was, in the other units
+
+
 # ---- sensors -------------------------------------------------------------------------------
-def test_the_low_pass_step_response_is_the_closed_form_at_the_samples():
-    fc, period, U = 30.0, 1e-3, 7.0
+def test_the_low_pass_ramp_response_is_the_closed_form_at_the_samples():
+    """A force ramping at c [N/s] from 0: the filter's readings are the continuous low-pass's response c (t − τ (1 −
+    e^(−t/τ))) at the samples (exact for an input linear between them)."""
+    fc, period, c = 30.0, 1e-3, 7e3
+    tau = 1.0 / (2.0 * math.pi * fc)
     sensor = ForceSensor(SensorSpec(force_cutoff=fc), period)
-    readings = [sensor.read({"c": 0.0 if k == 0 else U})["c"] for k in range(60)]
-    closed = [0.0] + [U * (1.0 - math.exp(-2.0 * math.pi * fc * (k - 1) * period)) for k in range(1, 60)]
-    np.testing.assert_allclose(readings, closed, rtol=1e-13, atol=1e-13)
+    t = period * np.arange(60)
+    readings = [sensor.read({"c": c * tk})["c"] for tk in t]
+    np.testing.assert_allclose(readings, c * (t - tau * (1.0 - np.exp(-t / tau))), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("fc", [1e3, 1e5, 1.19e5, 1e9])
+def test_a_fast_low_pass_reads_the_force_with_no_lag(fc):
+    """As the cut-off grows the reading tends to the force at the sample (its lag τ on a ramp, ~1/(2π f_c)), smoothly
+    (before: a whole sample of lag, until exp(−2π f_c T) underflowed at 119 kHz and the lag vanished at once)."""
+    period, c = 1e-3, 1e3  # [s], [N/s]
+    tau = 1.0 / (2.0 * math.pi * fc)
+    sensor = ForceSensor(SensorSpec(force_cutoff=fc), period)
+    readings = np.array([sensor.read({"c": c * k * period})["c"] for k in range(8)])
+    lag = c * period * np.arange(8) - readings  # [N] behind the force
+    np.testing.assert_allclose(lag[1:], c * tau * (1.0 - np.exp(-period * np.arange(1, 8) / tau)), rtol=1e-9,
+                               atol=1e-12)
+    assert np.all(lag <= c * tau + 1e-12)  # [N] never more than the continuous filter's lag
 
 
 def test_noise_and_bias_are_the_seeded_draws():

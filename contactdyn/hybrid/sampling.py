@@ -34,6 +34,15 @@ from .sampled_law import Reading, SampledLaw, sampled_slots
 __all__ = ["SampledPhases", "Hold"]
 
 
+def _acting(ev, holds: str, gave: str, nv: int) -> np.ndarray:
+    """What acts at a sampled phase's start, in what its hold keeps (``holds``: its controller's outputs, "voltage"
+    or torques), from the Evaluation ``ev`` of the phase before (whose controller ``gave`` its outputs): its command
+    where the two agree, else the motors' voltages [V] or the drives' torques [N·m or N] that act there."""
+    if holds == gave:
+        return ev.tau_cmd
+    return ev.u[:nv] if holds == "voltage" else ev.tau[:nv]
+
+
 def _command(reading: Reading, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(τ, ż) of the law on ``reading``, on the mode it was measured in."""
     return reading.law.command(reading, z)
@@ -81,7 +90,8 @@ class SampledPhases:
         self.slots[phase.index] = sampled_slots(self.system, phase)
         if previous is not None:  # what acts until this first sample: the previous phase's command
             x = x.copy()
-            x[self.slots[phase.index][0]] = self.runner(modes, previous).evaluation(t, x).tau_cmd
+            x[self.slots[phase.index][0]] = _acting(self.runner(modes, previous).evaluation(t, x), ctl.outputs,
+                                                    previous.controller.outputs, self.system.nv)
         return self.take(t, x, phase, self.runner(modes, phase))
 
     def take(self, t: float, x: np.ndarray, phase: Phase, runner) -> np.ndarray:

@@ -7,12 +7,14 @@ T [s] through these models:
 - force/torque sensor, on every measured contact force (``ControlInput.forces``: each contact's normal force
   and tangential chain's force [N]): reading = F + bias + noise, noise ~ N(0, σ²) drawn from a
   ``numpy.random.Generator`` seeded by the scene (the same seed gives the same draws), then a first-order
-  low-pass y' = (u − y)/τ, τ = 1/(2π f_c), discretised exactly for an input held over each period:
+  low-pass y' = (u − y)/τ, τ = 1/(2π f_c), discretised exactly for an input that runs linearly from one reading to
+  the next (the force is continuous, and known at the samples):
 
-      y_k = a y_{k−1} + (1 − a) u_{k−1},  a = exp(−2π f_c T)
+      y_k = a y_{k−1} + (1 − a) u_{k−1} + b (u_k − u_{k−1}),  a = exp(−T/τ),  b = 1 − (τ/T)(1 − a)
 
-  (so a step u = U from y = 0 reads U (1 − aᵏ) at the k-th sample: the continuous filter's response). The
-  filter starts at the first reading (no start transient). The generalized contact force on the joints
+  (so a ramp u = c t from y = 0 reads c (t_k − τ (1 − exp(−t_k/τ))) at t_k: the continuous filter's response; as
+  f_c grows the reading tends to u_k, with no lag left). The filter starts at the first reading (no start
+  transient). The generalized contact force on the joints
   (``ControlInput.tau_contact``) is passed through unfiltered and without noise.
 - joint encoders, on the joint positions q [rad or m]: quantised to their resolution r, q = r·round(q/r)
   (the controller's kinematics — tip position, Jacobian, H — are then computed at the quantised q; joint
@@ -71,8 +73,10 @@ class ForceSensor:
 
     def __init__(self, spec: SensorSpec, period: float, stream: int = 0):
         self.spec = spec
-        #: the low-pass's factor a over one period T [s] (0: no filter)
-        self.a = math.exp(-2.0 * math.pi * spec.force_cutoff * period) if math.isfinite(spec.force_cutoff) else 0.0
+        self.filtered = math.isfinite(spec.force_cutoff)  #: a low-pass on the readings
+        tau_over_T = 1.0 / (2.0 * math.pi * spec.force_cutoff * period) if self.filtered else 0.0  # [-] τ / T
+        self.a = math.exp(-1.0 / tau_over_T) if self.filtered else 0.0  #: the low-pass's decay over one period T [s]
+        self.b = 1.0 - tau_over_T * (1.0 - self.a)  #: its weight on the last period's change of the reading
         self.rng = np.random.default_rng([spec.seed, stream])  #: one stream per phase, seeded by the scene
         self.state: dict[str, float] | None = None  #: filter output y_{k-1} [N] per force key
         self.last: dict[str, float] | None = None  #: raw reading u_{k-1} [N] per force key
@@ -85,13 +89,14 @@ class ForceSensor:
         noise = self.rng.normal(0.0, self.spec.force_noise, len(keys)) if self.spec.force_noise > 0.0 \
             else np.zeros(len(keys))
         raw = {k: forces[k] + self.spec.force_bias + float(n) for k, n in zip(keys, noise, strict=True)}
-        if self.a == 0.0:
+        if not self.filtered:
             return raw
         if self.state is None:  # the filter starts at the first reading
             self.state, self.last = dict(raw), dict(raw)
             return dict(raw)
-        a = self.a
-        self.state = {k: a * self.state.get(k, raw[k]) + (1.0 - a) * self.last.get(k, raw[k]) for k in keys}
+        a, b, last = self.a, self.b, self.last
+        self.state = {k: a * self.state.get(k, raw[k]) + (1.0 - a) * last.get(k, raw[k])
+                      + b * (raw[k] - last.get(k, raw[k])) for k in keys}
         self.last = raw
         return dict(self.state)
 
