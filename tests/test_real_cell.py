@@ -55,3 +55,15 @@ def test_the_sampled_loop_cycles_with_a_steady_amplitude_bounded_by_the_voltage_
     assert 0.1 < clipped < 0.6  # the shoulder's voltage clips in every cycle, not always
     assert not np.any(r["joint_stuck"][last] > 0.5)  # the joints slide through the cycle
     assert {p["path"] for p in r.stats["paths"].values()} == {PIPELINE}
+
+
+def test_a_slide_that_stops_and_slips_within_one_held_step_is_seen():
+    """The shoulder, sliding, comes to rest at 0.17033 s and slips again 0.8 ms later, both inside one 2 ms step
+    between samples: its joint_stick is watched at the step's stages (hybrid.events.StateWatch), so the default
+    DOP853C logs the events RK45 logs, at the same instants (before: neither, and the shoulder slid backwards for
+    0.8 ms with its friction pushing it on)."""
+    fast = simulate("force_loop_real_cell", {"duration": 0.175})
+    ref = simulate("force_loop_real_cell", {"duration": 0.175, "solver.method": "RK45"})
+    assert [(e["kind"], e["name"]) for e in fast.events] == [(e["kind"], e["name"]) for e in ref.events]
+    np.testing.assert_allclose([e["t"] for e in fast.events], [e["t"] for e in ref.events], rtol=0, atol=1e-8)
+    assert [e["kind"] for e in fast.events if e["t"] > 0.17] == ["joint_stick", "joint_slip"]

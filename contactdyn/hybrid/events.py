@@ -41,7 +41,7 @@ from ..model.friction import cone_slack
 from ..model.phases import Phase
 from ..model.system import System
 
-__all__ = ["TOUCH_TOL", "terminal_event", "StageWatch", "SlipWatch", "StepBudget", "StepCollapse",
+__all__ = ["TOUCH_TOL", "terminal_event", "StageWatch", "StateWatch", "SlipWatch", "StepBudget", "StepCollapse",
            "WorkWatch", "segment_events", "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
@@ -166,6 +166,21 @@ class StageWatch:
         return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
 
 
+class StateWatch(StageWatch):
+    """A :class:`StageWatch` of a function of the state alone, g = s x[k] − floor (``fn.state``: (k, s, floor); a
+    sliding joint's ``joint_stick``): a compiled step's stages are checked at once (:meth:`sample_all`)."""
+
+    def __init__(self, fn):
+        super().__init__(fn, fn.kind, fn.contact, index=fn.index)
+        self.column, self.sign, self.offset = fn.state
+
+    def sample_all(self, ts: np.ndarray, Ys: np.ndarray) -> None:
+        """The stages at times ts [s], states Ys (one per row): the first whose g < 0, if any."""
+        below = np.flatnonzero(self.sign * Ys[:, self.column] - self.offset < 0.0)  # (g's own arithmetic)
+        if below.size:
+            self.outside.append(float(ts[below[0]]))
+
+
 class SlipWatch(StageWatch):
     """The ``slip`` event of a stuck contact, g = μ_s F − |F_f| [N] (:class:`StageWatch`).
 
@@ -263,9 +278,11 @@ class StepCollapse(_StepCount):
 #: event kinds whose functions read forces (normal force, friction, limit torque): these jump where the
 #: set-points' acceleration or a force set-point jumps; touch, stop, reverse, turn and limit read the state
 JUMPING = ("separate", "slip", "release", "joint_slip")
-#: the joints' events of a hold (a pressing limit's ``release``, a stuck joint's ``joint_slip``) that read its
-#: torque: watched at every Runge–Kutta stage (:class:`StageWatch`), as a stuck contact's ``slip`` is
-STAGE_WATCHED = ("release", "joint_slip")
+#: the joints' events watched at every Runge–Kutta stage (:class:`StageWatch`), as a stuck contact's ``slip`` is:
+#: those of a hold that read its torque (a pressing limit's ``release``, a stuck joint's ``joint_slip``: a held
+#: state may not move), and a sliding joint's ``joint_stick`` (its velocity can dip through zero and back within one
+#: step, as a sampled law's 2 ms step lets it: the stop and the slip after it, unseen at the step ends)
+STAGE_WATCHED = ("release", "joint_slip", "joint_stick")
 
 
 def fired_across(events: list, t_before: float, t_after: float, x: np.ndarray, x_after: np.ndarray | None = None
@@ -342,17 +359,24 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     if phase.joint_modes:  # contactdyn.model.joint_friction
         joints += system.joint_friction.events(phase.joint_modes, phase.limits, x0, system.nQ, values.joint_hold)
     for fn in joints:
-        if fn.kind in STAGE_WATCHED:  # a held joint's state may not move: its pull watched at every stage
-            fn = StageWatch(fn, fn.kind, fn.contact, index=fn.index, side=getattr(fn, "side", 0))
+        if fn.kind in STAGE_WATCHED:  # watched at every stage (a held joint's state may not move; a slide may stop)
+            fn = StateWatch(fn) if hasattr(fn, "state") else \
+                StageWatch(fn, fn.kind, fn.contact, index=fn.index, side=getattr(fn, "side", 0))
             watches.append(fn)
         out.append(fn)
     fun = fun or values.rhs
     if not watches:
         return out, fun
+    on_calls = [w for w in watches if not isinstance(w, StateWatch)]  # (they read the call's values)
+    on_states = [w for w in watches if isinstance(w, StateWatch)]
 
-    def sample(t: float, x: np.ndarray) -> None:
-        for w in watches:
+    def sample(t: float, x: np.ndarray, watched=tuple(watches)) -> None:
+        for w in watched:
             w.sample(t, w.value(t, x))  # the same evaluation (runner: its last call): no second solve
+
+    def sample_states(ts: np.ndarray, Ys: np.ndarray) -> None:
+        for w in on_states:
+            w.sample_all(ts, Ys)
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         xd = fun(t, x)
@@ -360,5 +384,6 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         return xd
 
     if fun is getattr(values, "rhs", None) and hasattr(values, "watched_step"):  # the one pipeline's compiled steps,
-        rhs.step = values.watched_step(sample)  # each stage sampled
+        rhs.step = values.watched_step((lambda t, x: sample(t, x, on_calls)) if on_calls else None,  # each stage
+                                       sample_states if on_states else None)  # sampled
     return out, rhs

@@ -105,10 +105,11 @@ class PipelineMode:
         self._ifaces = self._interface_table()
         self._nodes = self._node_table()
 
-    def watched_step(self, on_stage):
+    def watched_step(self, on_stage, on_stages=None):
         """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
-        slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`)."""
-        return self.pipe.of(stepper)(self.pipe.packed, self.ring, on_stage)
+        slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`), and ``on_stages(ts, Ys)``
+        once per attempt with all its stages (a watch of the state alone); either may be None."""
+        return self.pipe.of(stepper)(self.pipe.packed, self.ring, on_stage, on_stages)
 
     @property
     def singular(self) -> int:

@@ -27,6 +27,7 @@ __all__ = ["attempt", "stepper", "derivatives", "interpolant", "interpolant_buil
 OK, DECLINED = 0, 1  #: :func:`attempt`'s and :func:`interpolant`'s status
 _A, _B, _C = np.ascontiguousarray(_coef.A[:12, :12]), _coef.B.copy(), _coef.C[:12].copy()
 _E = np.ascontiguousarray(np.vstack((_coef.E5, _coef.E3)))  #: the error estimators' weights on K's 13 rows
+_STAGE_C = np.append(_C[1:], 1.0)  #: [-] where in the step stages 1–11 and the end's call are
 #: the dense output's tableau: all 16 stages (A, C) and the interpolant's weights D
 _A16, _C16, _D16 = np.ascontiguousarray(_coef.A), _coef.C.copy(), np.ascontiguousarray(_coef.D)
 
@@ -151,13 +152,14 @@ def interpolant_builder(packed):
     return one
 
 
-def stepper(packed, ring, on_stage=None):
+def stepper(packed, ring, on_stage=None, on_stages=None):
     """step(t, y, f, h, rtol, atol) -> (error norm, y_new, block), or None where a call of the step declines (then
     the caller takes the step by the pipeline's Python right-hand side), over a mode packed for the one pipeline
     (:class:`~contactdyn.model.pipeline.pack.Packed`); each step's FSAL call's event values enter ``ring`` as
     (t, y_new, events) (the event functions read them). ``on_stage(t, y)``: called after an attempt per stage
     (t [s], its state) with that stage's event values the ring's latest (a stuck contact's slip watch sees every
-    stage, as it sees every call of the Python right-hand side)."""
+    stage, as it sees every call of the Python right-hand side); ``on_stages(ts, Ys)``: once per attempt with its
+    stages' times [s] and states (stages 1–11, then the end's)."""
     ints, reals, work, events = packed.ints, packed.reals, packed.work, packed.events
     Ys, Es = np.empty((13, packed.ints[NX])), np.empty((13, events.size))
 
@@ -168,6 +170,8 @@ def stepper(packed, ring, on_stage=None):
         if status:
             raise_python_stage_error()  # a Python stage's own error
             return None
+        if on_stages is not None:
+            on_stages(t + _STAGE_C * h, Ys[1:])
         if on_stage is not None:
             for s in range(1, 12):
                 ys = Ys[s]

@@ -300,7 +300,7 @@ class Transitions:
         x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event,
                                                            self.evaluate.joint_hold)
         self.log.events[-1].update(info)
-        _count_alarm(self.stats, event, info.get("kind") == "joint_slip_check")
+        _count_alarm(self.stats, event, info.get("kind") in ("joint_slip_check", "joint_stick_check"))
         return x, phase, True
 
     #: event kind -> handler (see :meth:`handle`)

@@ -45,6 +45,7 @@ and which joint breaks away first follows that choice, not a law (a complementar
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from itertools import groupby
 from typing import Any
@@ -157,14 +158,16 @@ class JointFriction:
         for i, m in modes:
             if m != STUCK:
                 floor = min(m * float(x0[nQ + i]), 0.0) - STICK_TOL
-                out.append(_event(lambda t, x, i=i, s=m, f=floor, k=nQ + i: s * x[k] - f, "joint_stick",
-                                  self.names[i], i))
+                fn = _event(lambda t, x, s=m, f=floor, k=nQ + i: s * x[k] - f, "joint_stick", self.names[i], i)
+                fn.state = (nQ + i, m, floor)  # (g = s x[k] − floor of the state alone: hybrid.events.StateWatch)
+                out.append(fn)
         return out
 
     # ---- switching ------------------------------------------------------------------------------
     def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event, holds) -> tuple:
         """Apply a ``joint_slip`` or ``joint_stick`` event: (x, phase, info); ``info["kind"]`` renames the event
-        where it is a false alarm (``joint_slip_check``) or a reversal (``joint_reverse``). ``holds(t, x, modes,
+        where it is a false alarm (``joint_slip_check``, ``joint_stick_check``: a stage's alarm the located instant
+        does not confirm) or a reversal (``joint_reverse``). ``holds(t, x, modes,
         phase)``: the stuck joints' holding torques there, by joint (the transitions' ``LastEvaluation.joint_hold``)."""
         i, nQ = event.index, system.nQ
         if event.kind == "joint_slip":  # slides from rest where the load pushes (−sign λ), unless a false alarm
@@ -172,6 +175,8 @@ class JointFriction:
             if self.breaks_away(i, hold, SLIP_ALARM):
                 return x, self.with_mode(phase, i, -1 if hold > 0.0 else 1), {"torque": hold}
             return x, phase, {"torque": hold, "kind": "joint_slip_check"}
+        if getattr(event, "latch", math.inf) < math.inf and dict(phase.joint_modes)[i] * x[nQ + i] > 0.0:
+            return x, phase, {"kind": "joint_stick_check"}  # a stage saw it stop, the located point still slides
         x = x.copy()
         x[nQ + i] = 0.0  # at rest, exactly: stuck, or sliding back from rest
         trial = self.with_mode(phase, i, STUCK)
