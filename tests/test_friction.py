@@ -383,6 +383,20 @@ def test_robot_impact_obeys_the_momentum_law():
 
 
 # ---- chatter at the edge of the cone ----------------------------------------------------------
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_load_exactly_at_the_cone_edge_holds(compiled):
+    """μ_s = 0.5 > μ_k: a push of exactly μ_s m g holds the mass at rest for the whole run, as |F_f| ≤ μ_s F says
+    (before: the slip watch's value, exactly 0 at both ends of the first step, counted as a fall and the mass slid
+    off at 0.196 m/s by 0.2 s); one part in 1e9 more breaks it away at once."""
+    for push, held in ((0.5 * W, True), (0.5 * W * (1.0 + 1e-9), False)):
+        doc = scene(mu_s=0.5, mu_k=0.4, duration=0.2, **{"controller.force": [push, 0.0, 0.0]})
+        r = simulate(parse_scene(doc), compiled=compiled)
+        if held:
+            assert [e["kind"] for e in r.events] == ["stick"] and np.all(r["v"][:, 0] == 0.0)
+        else:
+            assert [(e["kind"], e["t"]) for e in r.events] == [("slip", 0.0)] and r["v"][-1, 0] > 0.1  # (at once)
+
+
 def test_push_held_at_the_cone_edge_finishes_quietly():
     """μ_s = μ_k and a push that rises to exactly μ m g and stays: the marginal case.
 

@@ -41,8 +41,8 @@ from ..model.friction import cone_slack
 from ..model.phases import Phase
 from ..model.system import System
 
-__all__ = ["TOUCH_TOL", "terminal_event", "StageWatch", "StateWatch", "SlipWatch", "StepBudget", "StepCollapse",
-           "WorkWatch", "segment_events", "fired_across", "EventLog", "start_storm_cause"]
+__all__ = ["TOUCH_TOL", "AT_LIMIT", "terminal_event", "StageWatch", "StateWatch", "SlipWatch", "StepBudget",
+           "StepCollapse", "WorkWatch", "segment_events", "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
 #: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
@@ -120,6 +120,11 @@ def terminal_event(fn, kind: str, contact: str):
     return fn
 
 
+#: a hold's event value of exactly 0 (its load exactly at the limit: |F_f| = μ_s F, |λ| = τ_s, λ = 0), kept above
+#: zero: a value 0 at both ends of a step would count as a fall through zero, and the hold would break at the limit
+AT_LIMIT = 5e-324
+
+
 class StageWatch:
     """An event of a held constraint whose function ``value(t, x)`` reads its holding force, which also sees inside
     a step: a stuck contact's ``slip`` (:class:`SlipWatch`), a stuck joint's ``joint_slip``, a pressing joint's
@@ -152,7 +157,7 @@ class StageWatch:
             self.outside.append(t)
 
     def __call__(self, t: float, x: np.ndarray) -> float:
-        g = self.value(t, x) - self.floor
+        g = (self.value(t, x) - self.floor) or AT_LIMIT  # (exactly 0: at the limit, held; only a fall below breaks)
         if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
             t_old, self.t_end = self.t_end, t
             if not self.outside:

@@ -60,7 +60,6 @@ __all__ = ["JointFriction", "STUCK", "STICK_TOL", "joint_friction_channels", "su
 STUCK = 0  #: a joint's friction mode while stuck (sliding: its sign s = ±1)
 #: [rad/s or m/s] a sliding joint's ``joint_stick`` fires when s q̇ᵢ falls this far below min(0, its start value)
 STICK_TOL = 1e-13
-_AT_LIMIT = 5e-324  #: [N·m or N] a joint_slip value of exactly 0 (|λ| = τ_s: held), kept above zero
 SLIP_ALARM = 1e-9  #: [-] a located ``joint_slip`` is real if |λ| ≥ (1 − this) τ_s there (else a false alarm)
 
 
@@ -152,9 +151,9 @@ class JointFriction:
         """Event functions of one segment: ``joint_slip`` of stuck joints (g = τ_s − |λᵢ|; ``torque(t, x)`` gives
         the holding torques {i: λᵢ}), ``joint_stick`` of sliding ones (g = s q̇ᵢ − min(s q̇ᵢ(t₀), 0) + STICK_TOL)."""
         out = []
-        for i in self.held(modes, limits):  # (g exactly 0: held, |λ| = τ_s; only a fall below zero breaks away)
-            out.append(_event(lambda t, x, i=i, ts=self.static[i]: (ts - abs(torque(t, x)[i])) or _AT_LIMIT,
-                              "joint_slip", self.names[i], i))
+        for i in self.held(modes, limits):  # (watched at every stage: hybrid.events.StageWatch, which holds g = 0)
+            out.append(_event(lambda t, x, i=i, ts=self.static[i]: ts - abs(torque(t, x)[i]), "joint_slip",
+                              self.names[i], i))
         for i, m in modes:
             if m != STUCK:
                 floor = min(m * float(x0[nQ + i]), 0.0) - STICK_TOL
