@@ -397,6 +397,22 @@ def test_a_load_exactly_at_the_cone_edge_holds(compiled):
             assert [(e["kind"], e["t"]) for e in r.events] == [("slip", 0.0)] and r["v"][-1, 0] > 0.1  # (at once)
 
 
+@pytest.mark.parametrize("method", ["DOP853C", "RK45"])
+def test_a_resting_contact_pulled_off_for_a_while_separates(method):
+    """A mass at rest on a frictionless floor, lifted by W − A + 1 + A sin(2π t) [N] (A = 10 N): its normal force falls
+    below zero for 0.14 s from asin(0.9) / 2π = 0.17822 s. Nothing moves before, so the steps grow past the pull:
+    ``separate`` is watched at every stage (events.ValuesWatch) and located there, then the mass flies and lands
+    (before: no event, the floor held it down for the whole pull)."""
+    A = 10.0
+    doc = scene(duration=0.6, **{"controller.force": [0.0, 0.0, W - A + 1.0], "controller.amplitude": [0.0, 0.0, A],
+                                 "controller.frequency": 1.0})
+    del doc["contact"]["ground"]["tangent"]
+    r = simulate(parse_scene(doc), {"solver.method": method})
+    assert [e["kind"] for e in r.events if not e["kind"].endswith("_check")] == ["separate", "touch"]
+    assert r.events[0]["t"] == pytest.approx(math.asin(0.9) / (2.0 * math.pi), abs=1e-9)
+    assert r["q"][:, -1].max() > 5e-3  # [m] it flew
+
+
 def test_push_held_at_the_cone_edge_finishes_quietly():
     """μ_s = μ_k and a push that rises to exactly μ m g and stays: the marginal case.
 

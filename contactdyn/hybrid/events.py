@@ -39,10 +39,12 @@ from ..model.contact import ContactMode
 from ..model.evaluation import Evaluation
 from ..model.friction import cone_slack
 from ..model.phases import Phase
+from ..model.pipeline.pack import EV_FN, EV_W
 from ..model.system import System
 
-__all__ = ["TOUCH_TOL", "AT_LIMIT", "terminal_event", "StageWatch", "StateWatch", "SlipWatch", "StepBudget",
-           "StepCollapse", "WorkWatch", "segment_events", "fired_across", "EventLog", "start_storm_cause"]
+__all__ = ["TOUCH_TOL", "AT_LIMIT", "terminal_event", "StageWatch", "StateWatch", "ValuesWatch", "unconfirmed",
+           "SlipWatch", "StepBudget", "StepCollapse", "WorkWatch", "segment_events", "fired_across", "EventLog",
+           "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
 #: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
@@ -120,6 +122,7 @@ def terminal_event(fn, kind: str, contact: str):
     return fn
 
 
+ALARM_TOL = 1e-9  #: [N or m/s] a ValuesWatch's value at its located instant above which its stage's alarm is false
 #: a hold's event value of exactly 0 (its load exactly at the limit: |F_f| = μ_s F, |λ| = τ_s, λ = 0), kept above
 #: zero: a value 0 at both ends of a step would count as a fall through zero, and the hold would break at the limit
 AT_LIMIT = 5e-324
@@ -179,11 +182,37 @@ class StateWatch(StageWatch):
         super().__init__(fn, fn.kind, fn.contact, index=fn.index)
         self.column, self.sign, self.offset = fn.state
 
-    def sample_all(self, ts: np.ndarray, Ys: np.ndarray) -> None:
-        """The stages at times ts [s], states Ys (one per row): the first whose g < 0, if any."""
+    def sample_all(self, ts: np.ndarray, Ys: np.ndarray, Es: np.ndarray) -> None:
+        """The stages at times ts [s], states Ys and event values Es (one per row): the first whose g < 0, if any."""
         below = np.flatnonzero(self.sign * Ys[:, self.column] - self.offset < 0.0)  # (g's own arithmetic)
         if below.size:
             self.outside.append(float(ts[below[0]]))
+
+
+class ValuesWatch(StageWatch):
+    """A :class:`StageWatch` of a function of a call's event values, g = Σ_j w_j e[c_j] − offset (a touching
+    contact's ``separate``: its normal force): a compiled step's stages checked at once (:meth:`sample_all`, on their
+    calls' event values). A contact at rest does not move, so the steps grow, and its force can pull and push again
+    within one step: unseen at its ends. Its alarm is confirmed where it is located (:func:`unconfirmed`). (Not a
+    slide's ``stop`` and ``reverse``: their stages' slip velocities stray across the stick band so often that the
+    false alarms cost more than the dips they would find.)"""
+
+    def __init__(self, fn, columns: tuple[int, ...], weights: tuple[float, ...], offset: float):
+        super().__init__(fn, fn.kind, fn.contact)
+        self.columns, self.weights, self.offset = list(columns), np.asarray(weights, dtype=float), offset
+
+    def sample_all(self, ts: np.ndarray, Ys: np.ndarray, Es: np.ndarray) -> None:
+        below = np.flatnonzero(Es[:, self.columns] @ self.weights - self.offset < 0.0)
+        if below.size:
+            self.outside.append(float(ts[below[0]]))
+
+
+def unconfirmed(event, t: float, x: np.ndarray) -> bool:
+    """Is ``event`` a stage's alarm (a :class:`ValuesWatch` latched inside a step) whose own value at its located
+    instant (t [s], x) is still clearly above zero (by more than its offset, the stick band, or 1e-9 [N]; a root
+    found on the dense output sits at ~0): a stage state off the solution, not the event?"""
+    return isinstance(event, ValuesWatch) and event.latch < math.inf and \
+        event.value(t, x) > max(abs(event.offset), ALARM_TOL)
 
 
 class SlipWatch(StageWatch):
@@ -342,8 +371,10 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             floor = min(values.gap(ci, t0, x0), 0.0) - TOUCH_TOL  # [m] never zero at the start
             out.append(terminal_event(lambda t, x, i=ci, g0=floor: values.gap(i, t, x) - g0, "touch", name))
             continue
-        if not c.spec.bonded:
-            out.append(terminal_event(lambda t, x, i=ci: values.normal_force(i, t, x), "separate", name))
+        if not c.spec.bonded:  # (its force may pull and push again within one step: watched at every stage)
+            watches.append(ValuesWatch(terminal_event(lambda t, x, i=ci: values.normal_force(i, t, x), "separate",
+                                                      name), (EV_W * ci + EV_FN,), (1.0,), 0.0))
+            out.append(watches[-1])
         if c.friction is None or not len(c.tangents):
             continue
         fr, band = c.friction, system.slip_band
@@ -372,16 +403,17 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     fun = fun or values.rhs
     if not watches:
         return out, fun
-    on_calls = [w for w in watches if not isinstance(w, StateWatch)]  # (they read the call's values)
-    on_states = [w for w in watches if isinstance(w, StateWatch)]
+    at_once = (StateWatch, ValuesWatch)  # (all of a step's stages at once)
+    on_calls = [w for w in watches if not isinstance(w, at_once)]  # (they read the call's values, stage by stage)
+    on_states = [w for w in watches if isinstance(w, at_once)]
 
     def sample(t: float, x: np.ndarray, watched=tuple(watches)) -> None:
         for w in watched:
             w.sample(t, w.value(t, x))  # the same evaluation (runner: its last call): no second solve
 
-    def sample_states(ts: np.ndarray, Ys: np.ndarray) -> None:
+    def sample_states(ts: np.ndarray, Ys: np.ndarray, Es: np.ndarray) -> None:
         for w in on_states:
-            w.sample_all(ts, Ys)
+            w.sample_all(ts, Ys, Es)
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         xd = fun(t, x)

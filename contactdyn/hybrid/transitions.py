@@ -42,7 +42,7 @@ from ..model.friction import direction_of, in_cone, slip_velocity
 from ..model.impact import impact, project_velocity
 from ..model.system import System
 from .charts import on_chart
-from .events import EventLog
+from .events import EventLog, ValuesWatch, unconfirmed
 from .pipeline_mode import mode_runner
 
 __all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
@@ -121,6 +121,15 @@ def _count_alarm(stats: dict, event, false_alarm: bool) -> bool:
     return false_alarm
 
 
+def _false_alarm(stats: dict, log: EventLog, event, t: float, x: np.ndarray) -> bool:
+    """A :class:`~contactdyn.hybrid.events.ValuesWatch`'s alarm its located instant does not confirm
+    (:func:`~contactdyn.hybrid.events.unconfirmed`): counted, logged as ``<kind>_check``; True."""
+    if not isinstance(event, ValuesWatch) or not _count_alarm(stats, event, unconfirmed(event, t, x)):
+        return False
+    log.events[-1]["kind"] += "_check"
+    return True
+
+
 class Transitions:
     """The mode decisions of one run: at events (:meth:`handle`) and at any instant (:meth:`consistent`)."""
 
@@ -143,6 +152,8 @@ class Transitions:
         """
         modes = list(modes)
         self.log.log(t, event.kind, event.contact, check_storm=event.kind not in self.UNCOUNTED)
+        if _false_alarm(self.stats, self.log, event, t, x):  # (a stage's alarm not confirmed: the modes as before)
+            return self.release_pulling(t, x, modes, phase)
         after = _After()
         x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
         if settle:
