@@ -128,3 +128,56 @@ def test_a_saved_run_is_drawn_without_importing_its_modules(tmp_path, monkeypatc
     monkeypatch.chdir(tmp_path)
     assert main(["view", str(tmp_path / "r"), "--html", str(tmp_path / "r.html")]) == 0
     assert "my_laws" not in sys.modules
+
+
+def test_a_law_under_a_name_another_module_holds_is_refused():
+    """A scene names its law by name alone: a second module's law under a taken name (two users' files with the same
+    law name; a built-in's name) is refused, both files named (before: it replaced the first, and scenes that named
+    the first ran the second, silently: in a sweep over two law files, every later run). The same module registering
+    anew (its file imported again) replaces its own."""
+    from contactdyn.laws import register
+    from contactdyn.laws.controllers import Controller
+    from contactdyn.laws.stage_laws import STAGE_LAWS, StageLaw, register_stage_law
+
+    def law(module: str, base: type = Controller, name: str = "twice") -> type:
+        return type("Law", (base,), {"name": name, "__module__": module})
+
+    register(law("first_laws"))
+    with pytest.raises(ValueError, match=r"controller 'twice' of second_laws is already registered by first_laws: "
+                                         r"give it another name"):
+        register(law("second_laws"))
+    again = law("first_laws")
+    register(again)
+    assert CONTROLLERS["twice"] is again
+    with pytest.raises(ValueError, match=r"stage law 'linear' of my_stage_laws is already registered by "
+                                         r".*contactdyn/laws/stage_laws.py"):
+        register_stage_law(law("my_stage_laws", StageLaw, "linear"))
+    assert STAGE_LAWS["linear"].__module__ == "contactdyn.laws.stage_laws"
+
+
+def test_a_controller_that_returns_a_bare_torque_is_an_error_naming_it():
+    """A law's command returns (τ, ż): a bare τ of the two joints was taken apart as two numbers and the first applied
+    to both joints, silently (the run's torques wrong); now the run stops with the law's name and what it must
+    return, on the compiled path (the law a declared Python stage) and the interpreted one."""
+    from contactdyn.errors import SimulationError
+    from contactdyn.laws import register
+    from contactdyn.laws.controllers import Controller
+
+    class Bare(Controller):
+        name = "bare_torque"
+
+        def command(self, inp):
+            return inp.J.T @ np.array([0.0, -50.0, 0.0])
+
+    register(Bare)
+    doc = tomllib.loads(SCENE.read_text())
+    doc.pop("imports")
+    doc["controller"] = {"kind": "bare_torque"}
+    doc["duration"] = 0.01
+    for compiled in (True, False):
+        with pytest.raises(SimulationError, match=r"controller 'bare_torque': its command must return \(τ, ż\): τ 2 "
+                                                  r"numbers \[N·m, N or V\], ż 0 numbers or None; it returned "
+                                                  r"ndarray \(2,\)"):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                simulate(parse_scene(copy.deepcopy(doc), file=str(SCENE)), compiled=compiled)

@@ -60,7 +60,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, ClassVar
 
-from .params import Param
+from .params import Param, claim_name
 
 if TYPE_CHECKING:
     from .drives import DriveSpec
@@ -189,7 +189,7 @@ def register_drive_kind(cls: type[DriveKind]) -> type[DriveKind]:
             if other.name != cls.name and p.name in shared and _declared(p) != _declared(shared[p.name]):
                 raise ValueError(f"drive kind {cls.name!r}: parameter {p.name!r} is declared otherwise by kind "
                                  f"{other.name!r} ({shared[p.name]})")
-    DRIVE_KINDS[cls.name] = cls
+    claim_name(DRIVE_KINDS, cls, "drive kind")
     return cls
 
 

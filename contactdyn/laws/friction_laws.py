@@ -33,7 +33,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .params import Param, read_params
+from .params import Param, claim_name, read_params
 
 __all__ = ["FrictionLaw", "FrictionSpec", "FRICTION_LAWS", "register_friction_law", "Coulomb", "Stribeck",
            "MU", "MU_S", "MU_K", "VISCOUS"]
@@ -109,7 +109,7 @@ def register_friction_law(cls: type[FrictionLaw]) -> type[FrictionLaw]:
     """Make ``cls`` a law scenes can name (``tangent.law = cls.name``)."""
     if not cls.name or not cls.name.isidentifier():
         raise ValueError(f"a friction law's name must be an identifier, got {cls.name!r}")
-    FRICTION_LAWS[cls.name] = cls
+    claim_name(FRICTION_LAWS, cls, "friction law")
     return cls
 
 

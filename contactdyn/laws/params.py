@@ -12,6 +12,7 @@ law gets all of that by declaring its parameters the same way.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -67,4 +68,19 @@ def with_defaults(params: tuple[Param, ...], given: dict[str, float]) -> dict[st
         if values[p.name] is None:
             raise KeyError(p.name)
     return values
+
+
+def claim_name(registry: dict, cls: type, family: str) -> None:
+    """Register ``cls`` under its name in its family's ``registry`` (stage laws, friction laws, drive kinds,
+    controllers). A name is one law: a class of another module under a name already taken (a second user file with
+    the same law name, or one named as a built-in) is refused with both files named, since a scene names its law by
+    name alone and would silently run the other. The same module registering again (its file imported anew) replaces
+    its own."""
+    taken = registry.get(cls.name)
+    if taken is not None and taken.__module__ != cls.__module__:
+        def where(c: type) -> str:
+            return getattr(sys.modules.get(c.__module__), "__file__", None) or c.__module__
+        raise ValueError(f"{family} {cls.name!r} of {where(cls)} is already registered by {where(taken)}: "
+                         f"give it another name")
+    registry[cls.name] = cls
 

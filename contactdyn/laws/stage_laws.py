@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .params import Param
+from .params import Param, claim_name
 
 __all__ = ["StageLaw", "STAGE_LAWS", "register_stage_law", "kelvin_voigt", "Linear", "HuntCrossley"]
 
@@ -67,7 +67,7 @@ def register_stage_law(cls: type[StageLaw]) -> type[StageLaw]:
     names = [p.name for p in cls.params]
     if len(set(names)) != len(names) or {"k", "b", "law"} & set(names):
         raise ValueError(f"stage law {cls.name!r}: parameter names must be unique and not k, b or law: {names}")
-    STAGE_LAWS[cls.name] = cls
+    claim_name(STAGE_LAWS, cls, "stage law")
     return cls
 
 

@@ -57,6 +57,7 @@ import numpy as np
 from numba import carray, types
 from numba.extending import intrinsic, overload
 
+from ...errors import SimulationError
 from ...numerics.compile_cache import njit
 from ...numerics.native_call import handles
 from ..abi import _data_at, _indirect_call, compile_wrapper, python_stage_failed
@@ -64,7 +65,7 @@ from .base import ControlInput, Controller
 
 __all__ = ["CONTROLLER_SIGNATURE", "LAYOUT", "LAYOUT_SIZE", "NOT_IN_LAYOUT", "ControlArrays", "control_arrays",
            "layout_of", "put_field", "controller_address", "params_of", "buffer_of", "call_controller", "InputKeys",
-           "control_input", "python_controller_address", "PYTHON_STAGE_FIELDS", "KEY_W"]
+           "control_input", "python_controller_address", "PYTHON_STAGE_FIELDS", "KEY_W", "command_arrays"]
 
 _P = types.CPointer(types.float64)
 #: int64 command(double* buffer, int64* layout, double* params, int64 n_p, double* tau, double* zdot)
@@ -350,6 +351,22 @@ def _input_plan(layout: bytes) -> tuple:
     return tuple(out), (start["force_set"], start["force_rate"], start["keys"], n_keys)
 
 
+def command_arrays(name: str, result, nv: int, nz: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """(τ (nv), ż (nz) or None) of a controller's ``command`` result, checked: a pair (τ, ż) of those sizes, ż None
+    for a law without states. Anything else is the law's error, named (a bare τ of two joints would be taken apart
+    as two numbers and the first broadcast to both joints: the wrong torques, silently)."""
+    expected = f"(τ, ż): τ {nv} numbers [N·m, N or V], ż {nz} numbers or None"
+    if not isinstance(result, tuple) or len(result) != 2:
+        raise SimulationError(f"controller {name!r}: its command must return {expected}; it returned "
+                              f"{type(result).__name__} {np.shape(result)}")
+    tau = np.asarray(result[0], dtype=float)
+    rates = None if result[1] is None else np.asarray(result[1], dtype=float)
+    if tau.shape != (nv,) or (rates is not None and rates.shape != (nz,)):
+        raise SimulationError(f"controller {name!r}: its command must return {expected}; it returned τ of shape "
+                              f"{tau.shape} and ż of shape {None if rates is None else rates.shape}")
+    return tau, rates
+
+
 _CONTROLLER_CTYPE = ctypes.CFUNCTYPE(ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p,
                                      ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p)
 #: (id of the controller, id of its normals, its keys) -> (the controller, its keys, address, ctypes callback): kept
@@ -371,7 +388,7 @@ def python_controller_address(ctl: Controller, keys: InputKeys) -> int:
             lay = _c_array(layout, ctypes.c_int64, LAYOUT_SIZE)
             nv, nz = int(lay[0]), int(lay[1])
             buf = _c_array(buffer, ctypes.c_double, int(lay[LAYOUT_SIZE - 1])).copy()  # (the caller's is freed)
-            out, rates = ctl.command(control_input(buf, lay, keys))
+            out, rates = command_arrays(ctl.name, ctl.command(control_input(buf, lay, keys)), nv, nz)
             _c_array(tau, ctypes.c_double, nv)[:] = out
             if nz:
                 _c_array(zdot, ctypes.c_double, nz)[:] = 0.0 if rates is None else rates

@@ -23,7 +23,7 @@ import numpy as np
 
 from ...errors import SceneError
 from ..drive_kinds import DRIVE_KINDS
-from ..params import Param
+from ..params import Param, claim_name
 from ..sensors import read_sampling
 
 __all__ = ["ControlInput", "Controller", "BindContext", "CONTROLLERS", "register", "read_controller",
@@ -202,7 +202,7 @@ def register(cls: type) -> type:
     """Make ``cls`` a controller scenes can name (``kind = cls.name``)."""
     if not cls.name or not cls.name.isidentifier():
         raise ValueError(f"a controller's name must be an identifier, got {cls.name!r}")
-    CONTROLLERS[cls.name] = cls
+    claim_name(CONTROLLERS, cls, "controller")
     return cls
 
 

@@ -21,7 +21,15 @@ from collections import namedtuple
 import numpy as np
 from numba.extending import overload
 
-from ...laws.controllers.abi import FIELD, LAYOUT_HEAD, LAYOUT_SIZE, call_controller, control_arrays, put_field
+from ...laws.controllers.abi import (
+    FIELD,
+    LAYOUT_HEAD,
+    LAYOUT_SIZE,
+    call_controller,
+    command_arrays,
+    control_arrays,
+    put_field,
+)
 from ...laws.controllers.task_pd_law import torque
 from ...laws.trajectory import CIRCLE_W, add_circle, move_rows, ramp_rows
 from ...numerics.compile_cache import njit
@@ -278,8 +286,8 @@ def command_by_address(address, buffer, layout, params, tau, zdot) -> int:
     if cls is None:
         return call_controller(address, buffer, layout, params, tau, zdot)
     config = namedtuple("Config", [p.name for p in cls.params])(*params)
-    out, rates = cls.command(namedtuple("Self", ["config", "nv"])(config, int(layout[0])),
-                             control_arrays(buffer, layout))
+    out, rates = command_arrays(cls.name, cls.command(namedtuple("Self", ["config", "nv"])(config, int(layout[0])),
+                                                      control_arrays(buffer, layout)), int(layout[0]), int(layout[1]))
     tau[:] = out
     if rates is not None:
         zdot[:] = rates
