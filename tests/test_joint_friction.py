@@ -19,19 +19,21 @@ M, L, G = 2.0, 0.5, 9.81  #: point mass [kg] on a massless rod [m], gravity [m/s
 MGL = M * G * L  #: [N·m] the pendulum's largest gravity torque
 EVENT_TOL = 1e-9  #: [s] events located at rtol 1e-10, atol 1e-12
 
-LINK = """  <joint name="{name}" type="continuous"><parent link="{parent}"/><child link="{child}"/><axis xyz="0 1 0"/>
-    {origin}<dynamics damping="{damping}" friction="{friction}"/></joint>
+LINK = """  <joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/><axis xyz="0 1 0"/>
+    {origin}<dynamics damping="{damping}" friction="{friction}"/>{limit}</joint>
   <link name="{child}"><inertial><origin xyz="0 0 {z}"/><mass value="{m}"/>
     <inertia ixx="0" iyy="0" izz="0" ixy="0" ixz="0" iyz="0"/></inertial></link>
 """
 
 
-def arm(tmp_path, links: int = 1, damping: float = 0.0, friction: float = 0.0) -> str:
+def arm(tmp_path, links: int = 1, damping: float = 0.0, friction: float = 0.0, limits: float | None = None) -> str:
     """A planar chain of ``links`` point masses M on massless rods L (joints about y, θ = 0 hanging down) as a URDF
-    with the given <dynamics> on every joint; its path."""
-    body = "".join(LINK.format(name=f"j{k + 1}", parent="base" if k == 0 else f"link{k}", child=f"link{k + 1}",
-                               origin="" if k == 0 else f'<origin xyz="0 0 {-L}"/>', damping=damping,
-                               friction=friction, z=-L, m=M) for k in range(links))
+    with the given <dynamics> on every joint (and position limits ±``limits`` [rad]: revolute joints); its path."""
+    kind, limit = ("continuous", "") if limits is None else \
+        ("revolute", f'<limit lower="{-limits}" upper="{limits}" effort="0" velocity="0"/>')
+    body = "".join(LINK.format(name=f"j{k + 1}", kind=kind, parent="base" if k == 0 else f"link{k}",
+                               child=f"link{k + 1}", origin="" if k == 0 else f'<origin xyz="0 0 {-L}"/>',
+                               damping=damping, friction=friction, limit=limit, z=-L, m=M) for k in range(links))
     tip = f'  <joint name="tip_joint" type="fixed"><parent link="link{links}"/><child link="tip"/>' \
           f'<origin xyz="0 0 {-L}"/></joint>\n  <link name="tip"/>\n'
     path = tmp_path / f"arm{links}.urdf"
@@ -181,23 +183,6 @@ def test_a_load_exactly_at_the_static_limit_holds(tmp_path, compiled):
             assert [(e["kind"], e["t"]) for e in r.events] == [("joint_slip", 0.0)] and r["q"][-1, 0] < theta0
 
 
-LIMITED = """<?xml version="1.0"?>
-<robot name="limited">
-  <link name="base"/>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="link1"/><axis xyz="0 1 0"/>
-    <limit lower="-1" upper="1" effort="0" velocity="0"/></joint>
-  <link name="link1"><inertial><origin xyz="0 0 -0.5"/><mass value="2"/>
-    <inertia ixx="0" iyy="0" izz="0" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <joint name="j2" type="revolute"><parent link="link1"/><child link="link2"/><axis xyz="0 1 0"/>
-    <origin xyz="0 0 -0.5"/><limit lower="-1" upper="1" effort="0" velocity="0"/></joint>
-  <link name="link2"><inertial><origin xyz="0 0 -0.5"/><mass value="2"/>
-    <inertia ixx="0" iyy="0" izz="0" ixy="0" ixz="0" iyz="0"/></inertial></link>
-  <joint name="tip_joint" type="fixed"><parent link="link2"/><child link="tip"/><origin xyz="0 0 -0.5"/></joint>
-  <link name="tip"/>
-</robot>
-"""
-
-
 @pytest.mark.parametrize("compiled", [True, False])
 def test_an_impact_that_reverses_a_sliding_joint_lets_it_slide_back(tmp_path, compiled):
     """No gravity; the shoulder slides (+) with 0.5 N·m of dry friction, the elbow strikes its lower limit: the plastic
@@ -205,10 +190,9 @@ def test_an_impact_that_reverses_a_sliding_joint_lets_it_slide_back(tmp_path, co
     (joint_reverse at the impact's instant) and keeps the kinetic energy the impact left it, less its friction's work:
     the energy audit balances. Before, it kept its old slide's sign, its joint_stick fired 3e-14 s later and zeroed
     ~2 rad/s: 4.4 J gone, the audit's residual 4.4 J."""
-    path = tmp_path / "limited.urdf"
-    path.write_text(LIMITED)
-    doc = scene(str(path), [0.0, -0.9], 0.05, {"kind": "joint_pd", "kp": [0.0, 0.0], "kd": [0.0, 0.0]},
-                gravity=False, v0=[0.3, -6.0], joint={"j1": {"friction": 0.5}})
+    free = {"kind": "joint_pd", "kp": [0.0, 0.0], "kd": [0.0, 0.0]}
+    doc = scene(arm(tmp_path, 2, limits=1.0), [0.0, -0.9], 0.05, free, gravity=False, v0=[0.3, -6.0],
+                joint={"j1": {"friction": 0.5}})
     doc["solver"]["record_energy"] = True
     r = simulate(parse_scene(doc), compiled=compiled)
     hit = r.events[0]
