@@ -292,12 +292,14 @@ def test_a_sampled_laws_own_error_surfaces_at_the_sample_where_it_fails(monkeypa
 
 
 def test_a_wrong_number_of_torques_raises_the_interpreted_calls_error(monkeypatch):
-    """τ of the wrong length: numpy's broadcast error on either path."""
+    """τ of the wrong length: the law named, with what it must return and what it gave, on either path (before:
+    numpy's broadcast error)."""
     monkeypatch.setattr(Raising, "command", lambda self, inp: (np.zeros(2), None))
     system, modes, phase, x0 = prepare(axis_scene(Raising.name))
-    with pytest.raises(ValueError, match="could not broadcast") as fast:
+    said = r"controller 'raising_ctl_test': its command must return \(τ, ż\): τ 1 numbers .* τ of shape \(2,\)"
+    with pytest.raises(SimulationError, match=said) as fast:
         Pipeline(system, modes, phase).rhs(0.0, x0.copy())
-    with pytest.raises(ValueError, match="could not broadcast") as interpreted:
+    with pytest.raises(SimulationError, match=said) as interpreted:
         interpreted_evaluate(system, 0.0, x0, modes, phase)
     assert str(fast.value) == str(interpreted.value)
 

@@ -146,6 +146,7 @@ class StageWatch:
 
     terminal = True
     direction = -1
+    holds = True  #: a hold's event (slip, joint_slip, release): a value of exactly 0 is at its limit, held (AT_LIMIT)
 
     def __init__(self, value, kind: str, name: str, floor: float = 0.0, index: int | None = None, side: int = 0):
         self.value, self.kind, self.contact, self.index = value, kind, name, index  # value(t, x): g at a state
@@ -160,7 +161,9 @@ class StageWatch:
             self.outside.append(t)
 
     def __call__(self, t: float, x: np.ndarray) -> float:
-        g = (self.value(t, x) - self.floor) or AT_LIMIT  # (exactly 0: at the limit, held; only a fall below breaks)
+        g = self.value(t, x) - self.floor
+        if g == 0.0 and self.holds:  # (exactly at the limit: held; only a fall below zero breaks it)
+            g = AT_LIMIT
         if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
             t_old, self.t_end = self.t_end, t
             if not self.outside:
@@ -177,6 +180,8 @@ class StageWatch:
 class StateWatch(StageWatch):
     """A :class:`StageWatch` of a function of the state alone, g = s x[k] − floor (``fn.state``: (k, s, floor); a
     sliding joint's ``joint_stick``): a compiled step's stages are checked at once (:meth:`sample_all`)."""
+
+    holds = False  # (a slide's stop: reaching its floor fires)
 
     def __init__(self, fn):
         super().__init__(fn, fn.kind, fn.contact, index=fn.index)
@@ -196,6 +201,8 @@ class ValuesWatch(StageWatch):
     within one step: unseen at its ends. Its alarm is confirmed where it is located (:func:`unconfirmed`). (Not a
     slide's ``stop`` and ``reverse``: their stages' slip velocities stray across the stick band so often that the
     false alarms cost more than the dips they would find.)"""
+
+    holds = False  # (a contact's force reaching 0 lets it go: a compliant contact's at its surface)
 
     def __init__(self, fn, columns: tuple[int, ...], weights: tuple[float, ...], offset: float):
         super().__init__(fn, fn.kind, fn.contact)
