@@ -187,16 +187,17 @@ class StateWatch(StageWatch):
         super().__init__(fn, fn.kind, fn.contact, index=fn.index)
         self.column, self.sign, self.offset = fn.state
 
-    def sample_all(self, ts: np.ndarray, Ys: np.ndarray, Es: np.ndarray) -> None:
-        """The stages at times ts [s], states Ys and event values Es (one per row): the first whose g < 0, if any."""
-        below = np.flatnonzero(self.sign * Ys[:, self.column] - self.offset < 0.0)  # (g's own arithmetic)
-        if below.size:
-            self.outside.append(float(ts[below[0]]))
+    def sample_all(self, times, Ys: np.ndarray, Es: np.ndarray) -> None:
+        """The stages' states Ys and event values Es (one per row; ``times()`` their times [s]): the first whose
+        g < 0, if any (the extreme stage first: one reduction per step, the times only on an alarm)."""
+        v = Ys[:, self.column]
+        if self.sign * (v.min() if self.sign > 0 else v.max()) - self.offset < 0.0:  # (g's own arithmetic)
+            self.outside.append(float(times()[np.flatnonzero(self.sign * v - self.offset < 0.0)[0]]))
 
 
 class ValuesWatch(StageWatch):
-    """A :class:`StageWatch` of a function of a call's event values, g = Σ_j w_j e[c_j] − offset (a touching
-    contact's ``separate``: its normal force): a compiled step's stages checked at once (:meth:`sample_all`, on their
+    """A :class:`StageWatch` of one of a call's event values, g = e[column] − offset (a touching contact's
+    ``separate``: its normal force): a compiled step's stages checked at once (:meth:`sample_all`, on their
     calls' event values). A contact at rest does not move, so the steps grow, and its force can pull and push again
     within one step: unseen at its ends. Its alarm is confirmed where it is located (:func:`unconfirmed`). (Not a
     slide's ``stop`` and ``reverse``: their stages' slip velocities stray across the stick band so often that the
@@ -204,14 +205,14 @@ class ValuesWatch(StageWatch):
 
     holds = False  # (a contact's force reaching 0 lets it go: a compliant contact's at its surface)
 
-    def __init__(self, fn, columns: tuple[int, ...], weights: tuple[float, ...], offset: float):
+    def __init__(self, fn, column: int, offset: float):
         super().__init__(fn, fn.kind, fn.contact)
-        self.columns, self.weights, self.offset = list(columns), np.asarray(weights, dtype=float), offset
+        self.column, self.offset = column, offset
 
-    def sample_all(self, ts: np.ndarray, Ys: np.ndarray, Es: np.ndarray) -> None:
-        below = np.flatnonzero(Es[:, self.columns] @ self.weights - self.offset < 0.0)
-        if below.size:
-            self.outside.append(float(ts[below[0]]))
+    def sample_all(self, times, Ys: np.ndarray, Es: np.ndarray) -> None:
+        e = Es[:, self.column]
+        if e.min() - self.offset < 0.0:  # (the smallest stage first: one reduction per step)
+            self.outside.append(float(times()[np.flatnonzero(e - self.offset < 0.0)[0]]))
 
 
 def unconfirmed(event, t: float, x: np.ndarray) -> bool:
@@ -380,7 +381,7 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             continue
         if not c.spec.bonded:  # (its force may pull and push again within one step: watched at every stage)
             watches.append(ValuesWatch(terminal_event(lambda t, x, i=ci: values.normal_force(i, t, x), "separate",
-                                                      name), (EV_W * ci + EV_FN,), (1.0,), 0.0))
+                                                      name), EV_W * ci + EV_FN, 0.0))
             out.append(watches[-1])
         if c.friction is None or not len(c.tangents):
             continue
@@ -418,9 +419,9 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         for w in watched:
             w.sample(t, w.value(t, x))  # the same evaluation (runner: its last call): no second solve
 
-    def sample_states(ts: np.ndarray, Ys: np.ndarray, Es: np.ndarray) -> None:
+    def sample_states(times, Ys: np.ndarray, Es: np.ndarray) -> None:
         for w in on_states:
-            w.sample_all(ts, Ys, Es)
+            w.sample_all(times, Ys, Es)
 
     def rhs(t: float, x: np.ndarray) -> np.ndarray:
         xd = fun(t, x)
@@ -430,4 +431,7 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     if fun is getattr(values, "rhs", None) and hasattr(values, "watched_step"):  # the one pipeline's compiled steps,
         rhs.step = values.watched_step((lambda t, x: sample(t, x, on_calls)) if on_calls else None,  # each stage
                                        sample_states if on_states else None)  # sampled
+    for compiled in ("interpolant", "derivatives"):  # (the dense output's: its extra stages are watched by no one)
+        if hasattr(fun, compiled):
+            setattr(rhs, compiled, getattr(fun, compiled))
     return out, rhs

@@ -107,8 +107,9 @@ class PipelineMode:
 
     def watched_step(self, on_stage, on_stages=None):
         """``rhs.step`` that calls ``on_stage(t, x)`` at each stage of each attempt, its values the ring's latest (the
-        slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`), and ``on_stages(ts, Ys, Es)``
-        once per attempt with all its stages (the watches of the state or of event values); either may be None."""
+        slip watch of a stuck contact, :func:`~contactdyn.hybrid.events.segment_events`), and
+        ``on_stages(times, Ys, Es)`` once per attempt with all its stages (the watches of the state or of event
+        values); either may be None."""
         return self.pipe.of(stepper)(self.pipe.packed, self.ring, on_stage, on_stages)
 
     @property

@@ -158,8 +158,8 @@ def stepper(packed, ring, on_stage=None, on_stages=None):
     (:class:`~contactdyn.model.pipeline.pack.Packed`); each step's FSAL call's event values enter ``ring`` as
     (t, y_new, events) (the event functions read them). ``on_stage(t, y)``: called after an attempt per stage
     (t [s], its state) with that stage's event values the ring's latest (a stuck contact's slip watch sees every
-    stage, as it sees every call of the Python right-hand side); ``on_stages(ts, Ys, Es)``: once per attempt with its
-    stages' times [s], states and event values (stages 1–11, then the end's)."""
+    stage, as it sees every call of the Python right-hand side); ``on_stages(times, Ys, Es)``: once per attempt with
+    its stages' states and event values (stages 1–11, then the end's), ``times()`` their times [s]."""
     ints, reals, work, events = packed.ints, packed.reals, packed.work, packed.events
     Ys, Es = np.empty((13, packed.ints[NX])), np.empty((13, events.size))
 
@@ -171,7 +171,7 @@ def stepper(packed, ring, on_stage=None, on_stages=None):
             raise_python_stage_error()  # a Python stage's own error
             return None
         if on_stages is not None:
-            on_stages(t + _STAGE_C * h, Ys[1:], Es[1:])
+            on_stages(lambda: t + _STAGE_C * h, Ys[1:], Es[1:])
         if on_stage is not None:
             for s in range(1, 12):
                 ys = Ys[s]
