@@ -44,6 +44,7 @@ import numpy as np  # noqa: E402
 from llvmlite import ir  # noqa: E402
 from numba import types  # noqa: E402
 from numba.extending import intrinsic  # noqa: E402
+from rhs_cost import _mode_at, _scene_at  # noqa: E402
 from timing import write_report  # noqa: E402
 
 OUT = Path(__file__).parent / "out"
@@ -88,11 +89,15 @@ def _statement_ends(lines: list[str], start: int) -> int:
         i += 1
 
 
-def _block_ends(lines: list[str], start: int) -> int:
-    """The index of the last line of the block that the statement ending at lines[start] opens (an if)."""
-    indent = len(lines[start - 1 if start else 0]) - len(lines[start - 1 if start else 0].lstrip())
-    end = start
-    while end + 1 < len(lines) and len(lines[end + 1]) - len(lines[end + 1].lstrip()) > indent:
+def _indent(line: str) -> int:
+    return len(line) - len(line.lstrip())
+
+
+def _block_ends(lines: list[str], header: int, indent: int) -> int:
+    """The index of the last line of the block after lines[header] (an if's last line): the lines indented deeper
+    than ``indent``, the if's own."""
+    end = header
+    while end + 1 < len(lines) and _indent(lines[end + 1]) > indent:
         end += 1
     return end
 
@@ -112,10 +117,10 @@ def stamped_call(pipeline):
         found = k < len(STAGES) and STAGES[k][1] in line and not line.lstrip().startswith("#")
         end = _statement_ends(lines, i) if found else i
         if found and lines[end].rstrip().endswith(":"):  # (an if: the stamp after its block)
-            end = _block_ends(lines, end + 1)
+            end = _block_ends(lines, end, _indent(line))
         out.extend(lines[i:end + 1])
         if found:
-            out.append(f"{' ' * (len(line) - len(line.lstrip()))}_c = cycles(); acc[{k}] += _c - _c0; _c0 = _c")
+            out.append(f"{' ' * _indent(line)}_c = cycles(); acc[{k}] += _c - _c0; _c0 = _c")
             k += 1
         i = end + 1
     if k != len(STAGES):
@@ -154,19 +159,11 @@ class Tree:
         return importlib.import_module(f"{self.package}.{name}")
 
     def arguments(self, name: str) -> tuple:
-        """(t, x, ints, reals, work, events) of the mode a scene's run is in at T [s] (``SCENE@T``; else its first)."""
-        scene_name, _, at = name.partition("@")
+        """(t, x, ints, reals, work, events, n) of the mode a scene's run is in at T [s] (``SCENE@T``; else its
+        first: rhs_cost's ``_mode_at``, by this tree's package)."""
+        scene_name, at = _scene_at(name)
         scene = self._module("scene.scene_file").load_scene(scene_name)
-        if not at:
-            system, modes, phase, x = self._module("simulate").prepare(scene)
-            t = phase.t_start
-        else:
-            system = self._module("model.system").System(
-                self._module("scene.scene_file").load_scene(scene.file, {"duration": float(at)}))
-            run = self._module("hybrid.loop").HybridRun(system)
-            run.run(time.perf_counter())
-            seg = max((s for s in run.segments if s.t1 > s.t0), key=lambda s: s.t1)
-            modes, phase, t, x = list(seg.modes), seg.phase, seg.t1, seg.sol(seg.t1)
+        system, modes, phase, t, x = _mode_at(scene, at, self.package)
         p = self._module("hybrid.pipeline_mode").mode_runner(system)(modes, phase).pipe.packed
         return float(t), np.ascontiguousarray(x, dtype=float), p.ints, p.reals, p.work, p.events, system.n
 

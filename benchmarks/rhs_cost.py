@@ -22,6 +22,7 @@ export of ``main``; :mod:`before_after`) and from this tree, ``--repeats`` times
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import statistics
 import sys
@@ -37,7 +38,6 @@ import numpy as np  # noqa: E402
 
 from contactdyn.hybrid.pipeline_mode import mode_runner  # noqa: E402
 from contactdyn.scene.scene_file import Scene, load_scene  # noqa: E402
-from contactdyn.simulate import prepare  # noqa: E402
 
 BATCHES = 41  #: batches per measurement (median over batches)
 
@@ -55,16 +55,18 @@ def _batches(fn, states, calls: int, clock) -> list[float]:
     return out
 
 
-def _mode_at(scene: Scene, at: float | None):
-    """(system, modes, phase, t, x) of the mode the run is in at time ``at`` (None: the first, at its start)."""
-    if at is None:
-        system, modes, phase, x0 = prepare(scene)
-        return system, modes, phase, phase.t_start, x0
-    from contactdyn.hybrid.loop import HybridRun
-    from contactdyn.model.system import System
+def _mode_at(scene: Scene, at: float | None, package: str = "contactdyn"):
+    """(system, modes, phase, t, x) of the mode the run is in at time ``at`` (None: the first, at its start), by
+    ``package`` (another tree's imported under another name: benchmarks/call_cycles.py's baseline)."""
+    def of(module: str):
+        return importlib.import_module(f"{package}.{module}")
 
-    system = System(load_scene(scene.file, {"duration": at}) if scene.file else scene)
-    run = HybridRun(system)
+    if at is None:
+        system, modes, phase, x0 = of("simulate").prepare(scene)
+        return system, modes, phase, phase.t_start, x0
+    system = of("model.system").System(of("scene.scene_file").load_scene(scene.file, {"duration": at})
+                                       if scene.file else scene)
+    run = of("hybrid.loop").HybridRun(system)
     run.run(time.perf_counter())
     seg = max((s for s in run.segments if s.t1 > s.t0), key=lambda s: s.t1)  # the last segment of nonzero length
     return system, list(seg.modes), seg.phase, seg.t1, np.array(seg.sol(seg.t1), dtype=float)
