@@ -42,7 +42,7 @@ from ..model.phases import Phase
 from ..model.pipeline.pack import EV_FN, EV_W
 from ..model.system import System
 
-__all__ = ["TOUCH_TOL", "AT_LIMIT", "terminal_event", "StageWatch", "StateWatch", "ValuesWatch", "unconfirmed",
+__all__ = ["TOUCH_TOL", "AT_LIMIT", "terminal_event", "StageWatch", "StateWatch", "ValuesWatch", "AT_ONCE",
            "SlipWatch", "StepBudget", "StepCollapse", "WorkWatch", "segment_events", "fired_across", "EventLog",
            "start_storm_cause"]
 
@@ -122,7 +122,7 @@ def terminal_event(fn, kind: str, contact: str):
     return fn
 
 
-ALARM_TOL = 1e-9  #: [N or m/s] a ValuesWatch's value at its located instant above which its stage's alarm is false
+ALARM_TOL = 1e-9  #: [N] a ValuesWatch's value at its located instant above which its stage's alarm is false
 #: a hold's event value of exactly 0 (its load exactly at the limit: |F_f| = μ_s F, |λ| = τ_s, λ = 0), kept above
 #: zero: a value 0 at both ends of a step would count as a fall through zero, and the hold would break at the limit
 AT_LIMIT = 5e-324
@@ -179,7 +179,8 @@ class StageWatch:
 
 class StateWatch(StageWatch):
     """A :class:`StageWatch` of a function of the state alone, g = s x[k] − floor (``fn.state``: (k, s, floor); a
-    sliding joint's ``joint_stick``): a compiled step's stages are checked at once (:meth:`sample_all`)."""
+    sliding joint's ``joint_stick``): a compiled step's stages are checked at once (:meth:`sample_all`), its alarm
+    confirmed where it is located (:meth:`unconfirmed`)."""
 
     holds = False  # (a slide's stop: reaching its floor fires)
 
@@ -194,33 +195,39 @@ class StateWatch(StageWatch):
         if self.sign * (v.min() if self.sign > 0 else v.max()) - self.offset < 0.0:  # (g's own arithmetic)
             self.outside.append(float(times()[np.flatnonzero(self.sign * v - self.offset < 0.0)[0]]))
 
+    def unconfirmed(self, t: float, x: np.ndarray) -> bool:
+        """A stage's alarm (latched inside a step) whose located instant (t [s], x) still moves along the slide: a
+        stage state off the solution, not the stop."""
+        return self.latch < math.inf and self.sign * x[self.column] > 0.0
+
 
 class ValuesWatch(StageWatch):
-    """A :class:`StageWatch` of one of a call's event values, g = e[column] − offset (a touching contact's
+    """A :class:`StageWatch` of one of a call's event values, g = e[column] (a touching contact's
     ``separate``: its normal force): a compiled step's stages checked at once (:meth:`sample_all`, on their
     calls' event values). A contact at rest does not move, so the steps grow, and its force can pull and push again
-    within one step: unseen at its ends. Its alarm is confirmed where it is located (:func:`unconfirmed`). (Not a
+    within one step: unseen at its ends. Its alarm is confirmed where it is located (:meth:`unconfirmed`). (Not a
     slide's ``stop`` and ``reverse``: their stages' slip velocities stray across the stick band so often that the
     false alarms cost more than the dips they would find.)"""
 
     holds = False  # (a contact's force reaching 0 lets it go: a compliant contact's at its surface)
 
-    def __init__(self, fn, column: int, offset: float):
+    def __init__(self, fn, column: int):
         super().__init__(fn, fn.kind, fn.contact)
-        self.column, self.offset = column, offset
+        self.column = column
 
     def sample_all(self, times, Ys: np.ndarray, Es: np.ndarray) -> None:
         e = Es[:, self.column]
-        if e.min() - self.offset < 0.0:  # (the smallest stage first: one reduction per step)
-            self.outside.append(float(times()[np.flatnonzero(e - self.offset < 0.0)[0]]))
+        if e.min() < 0.0:  # (the smallest stage first: one reduction per step)
+            self.outside.append(float(times()[np.flatnonzero(e < 0.0)[0]]))
+
+    def unconfirmed(self, t: float, x: np.ndarray) -> bool:
+        """A stage's alarm (latched inside a step) whose own value at its located instant (t [s], x) is still
+        clearly above zero (by more than ALARM_TOL; a root found on the dense output sits at ~0): a stage state off
+        the solution, not the event."""
+        return self.latch < math.inf and self.value(t, x) > ALARM_TOL
 
 
-def unconfirmed(event, t: float, x: np.ndarray) -> bool:
-    """Is ``event`` a stage's alarm (a :class:`ValuesWatch` latched inside a step) whose own value at its located
-    instant (t [s], x) is still clearly above zero (by more than its offset, the stick band, or 1e-9 [N]; a root
-    found on the dense output sits at ~0): a stage state off the solution, not the event?"""
-    return isinstance(event, ValuesWatch) and event.latch < math.inf and \
-        event.value(t, x) > max(abs(event.offset), ALARM_TOL)
+AT_ONCE = (StateWatch, ValuesWatch)  #: the watches that see a compiled step's stages at once, and confirm an alarm
 
 
 class SlipWatch(StageWatch):
@@ -362,6 +369,14 @@ def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
     return v0 * r[0] + v1 * r[1] - 0.5 * math.sqrt(v0 * v0 + v1 * v1) + band
 
 
+def _sampler(watches: list[StageWatch]):
+    """sample(t, x): each watch's value at a stage (t [s], x), read off the runner's last call: no second solve."""
+    def sample(t: float, x: np.ndarray) -> None:
+        for w in watches:
+            w.sample(t, w.value(t, x))
+    return sample
+
+
 def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray, runner,
                    fun=None):
     """The event functions of one segment, and the right-hand side that feeds their stage watches.
@@ -381,7 +396,7 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             continue
         if not c.spec.bonded:  # (its force may pull and push again within one step: watched at every stage)
             watches.append(ValuesWatch(terminal_event(lambda t, x, i=ci: values.normal_force(i, t, x), "separate",
-                                                      name), EV_W * ci + EV_FN, 0.0))
+                                                      name), EV_W * ci + EV_FN))
             out.append(watches[-1])
         if c.friction is None or not len(c.tangents):
             continue
@@ -411,13 +426,9 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     fun = fun or values.rhs
     if not watches:
         return out, fun
-    at_once = (StateWatch, ValuesWatch)  # (all of a step's stages at once)
-    on_calls = [w for w in watches if not isinstance(w, at_once)]  # (they read the call's values, stage by stage)
-    on_states = [w for w in watches if isinstance(w, at_once)]
-
-    def sample(t: float, x: np.ndarray, watched=tuple(watches)) -> None:
-        for w in watched:
-            w.sample(t, w.value(t, x))  # the same evaluation (runner: its last call): no second solve
+    on_calls = [w for w in watches if not isinstance(w, AT_ONCE)]  # (they read the call's values, stage by stage)
+    on_states = [w for w in watches if isinstance(w, AT_ONCE)]
+    sample = _sampler(watches)
 
     def sample_states(times, Ys: np.ndarray, Es: np.ndarray) -> None:
         for w in on_states:
@@ -429,8 +440,8 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         return xd
 
     if fun is getattr(values, "rhs", None) and hasattr(values, "watched_step"):  # the one pipeline's compiled steps,
-        rhs.step = values.watched_step((lambda t, x: sample(t, x, on_calls)) if on_calls else None,  # each stage
-                                       sample_states if on_states else None)  # sampled
+        rhs.step = values.watched_step(_sampler(on_calls) if on_calls else None,  # each stage sampled
+                                       sample_states if on_states else None)
     for compiled in ("interpolant", "derivatives"):  # (the dense output's: its extra stages are watched by no one)
         if hasattr(fun, compiled):
             setattr(rhs, compiled, getattr(fun, compiled))

@@ -42,7 +42,7 @@ from ..model.friction import direction_of, in_cone, slip_velocity
 from ..model.impact import impact, project_velocity
 from ..model.system import System
 from .charts import on_chart
-from .events import EventLog, ValuesWatch, unconfirmed
+from .events import AT_ONCE, EventLog
 from .pipeline_mode import mode_runner
 
 __all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
@@ -122,9 +122,10 @@ def _count_alarm(stats: dict, event, false_alarm: bool) -> bool:
 
 
 def _false_alarm(stats: dict, log: EventLog, event, t: float, x: np.ndarray) -> bool:
-    """A :class:`~contactdyn.hybrid.events.ValuesWatch`'s alarm its located instant does not confirm
-    (:func:`~contactdyn.hybrid.events.unconfirmed`): counted, logged as ``<kind>_check``; True."""
-    if not isinstance(event, ValuesWatch) or not _count_alarm(stats, event, unconfirmed(event, t, x)):
+    """An alarm of a watch of a step's stages at once (:data:`~contactdyn.hybrid.events.AT_ONCE`: a contact's
+    ``separate``, a sliding joint's ``joint_stick``) that its located instant does not confirm (its
+    ``unconfirmed``): counted, logged as ``<kind>_check``; True."""
+    if not isinstance(event, AT_ONCE) or not _count_alarm(stats, event, event.unconfirmed(t, x)):
         return False
     log.events[-1]["kind"] += "_check"
     return True
@@ -146,13 +147,12 @@ class Transitions:
     def handle(self, t, x, modes, phase, event):
         """Apply a located event: (state, modes, phase) right after it.
 
-        The event's kind picks its handler (:attr:`HANDLERS`); a handler changes ``modes`` in
-        place and returns (x, phase, settle); with ``settle`` the modes are then made
-        consistent with the state (:meth:`consistent`). A new kind of event is a new handler.
-        """
+        The event's kind picks its handler (:attr:`HANDLERS`); a handler changes ``modes`` in place and returns (x,
+        phase, settle); with ``settle`` the modes are then made consistent with the state (:meth:`consistent`). A new
+        kind of event is a new handler. A stage's alarm not confirmed (:func:`_false_alarm`) changes nothing."""
         modes = list(modes)
         self.log.log(t, event.kind, event.contact, check_storm=event.kind not in self.UNCOUNTED)
-        if _false_alarm(self.stats, self.log, event, t, x):  # (a stage's alarm not confirmed: the modes as before)
+        if _false_alarm(self.stats, self.log, event, t, x):
             return self.release_pulling(t, x, modes, phase)
         after = _After()
         x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
@@ -311,7 +311,8 @@ class Transitions:
         x, phase, info = self.system.joint_friction.switch(self.system, t, x, modes, phase, event,
                                                            self.evaluate.joint_hold)
         self.log.events[-1].update(info)
-        _count_alarm(self.stats, event, info.get("kind") in ("joint_slip_check", "joint_stick_check"))
+        if event.kind == "joint_slip":  # (a joint_stick's alarm is counted where it is confirmed: _false_alarm)
+            _count_alarm(self.stats, event, info.get("kind") == "joint_slip_check")
         return x, phase, True
 
     #: event kind -> handler (see :meth:`handle`)

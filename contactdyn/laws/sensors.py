@@ -94,11 +94,12 @@ class ForceSensor:
         if self.state is None:  # the filter starts at the first reading
             self.state, self.last = dict(raw), dict(raw)
             return dict(raw)
-        a, b, last = self.a, self.b, self.last
-        self.state = {k: a * self.state.get(k, raw[k]) + (1.0 - a) * last.get(k, raw[k])
-                      + b * (raw[k] - last.get(k, raw[k])) for k in keys}
-        self.last = raw
-        return dict(self.state)
+        a, b, state = self.a, self.b, {}
+        for k in keys:  # (a key first read now starts from its reading: y = u_{k−1} = u_k)
+            y, u0 = self.state.get(k, raw[k]), self.last.get(k, raw[k])
+            state[k] = a * y + (1.0 - a) * u0 + b * (raw[k] - u0)
+        self.state, self.last = state, raw
+        return dict(state)
 
 
 MAX_SAMPLE_RATE = 1e6  #: [Hz] sample_rate at most

@@ -45,7 +45,6 @@ and which joint breaks away first follows that choice, not a law (a complementar
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from itertools import groupby
 from typing import Any
@@ -165,17 +164,16 @@ class JointFriction:
     # ---- switching ------------------------------------------------------------------------------
     def switch(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, event, holds) -> tuple:
         """Apply a ``joint_slip`` or ``joint_stick`` event: (x, phase, info); ``info["kind"]`` renames the event
-        where it is a false alarm (``joint_slip_check``, ``joint_stick_check``: a stage's alarm the located instant
-        does not confirm) or a reversal (``joint_reverse``). ``holds(t, x, modes,
-        phase)``: the stuck joints' holding torques there, by joint (the transitions' ``LastEvaluation.joint_hold``)."""
+        where it is a false alarm (``joint_slip_check``) or a reversal (``joint_reverse``); a ``joint_stick`` a stage
+        saw but its located instant does not confirm never reaches here (``hybrid.events.StateWatch.unconfirmed``).
+        ``holds(t, x, modes, phase)``: the stuck joints' holding torques there, by joint (the transitions'
+        ``LastEvaluation.joint_hold``)."""
         i, nQ = event.index, system.nQ
         if event.kind == "joint_slip":  # slides from rest where the load pushes (−sign λ), unless a false alarm
             hold = holds(t, x, modes, phase).get(i, 0.0)
             if self.breaks_away(i, hold, SLIP_ALARM):
                 return x, self.with_mode(phase, i, -1 if hold > 0.0 else 1), {"torque": hold}
             return x, phase, {"torque": hold, "kind": "joint_slip_check"}
-        if getattr(event, "latch", math.inf) < math.inf and dict(phase.joint_modes)[i] * x[nQ + i] > 0.0:
-            return x, phase, {"kind": "joint_stick_check"}  # a stage saw it stop, the located point still slides
         x = x.copy()
         x[nQ + i] = 0.0  # at rest, exactly: stuck, or sliding back from rest
         trial = self.with_mode(phase, i, STUCK)

@@ -286,8 +286,9 @@ def command_by_address(address, buffer, layout, params, tau, zdot) -> int:
     if cls is None:
         return call_controller(address, buffer, layout, params, tau, zdot)
     config = namedtuple("Config", [p.name for p in cls.params])(*params)
-    out, rates = command_arrays(cls.name, cls.command(namedtuple("Self", ["config", "nv"])(config, int(layout[0])),
-                                                      control_arrays(buffer, layout)), int(layout[0]), int(layout[1]))
+    nv, nz = int(layout[0]), int(layout[1])
+    out, rates = command_arrays(cls.name, cls.command(namedtuple("Self", ["config", "nv"])(config, nv),
+                                                      control_arrays(buffer, layout)), nv, nz)
     tau[:] = out
     if rates is not None:
         zdot[:] = rates
