@@ -6,11 +6,13 @@ on its dense output; each is terminal and fires when its function falls through 
 
 - ``touch``: a free contact's normal gap [m] reaches zero (then the impact map,
   :mod:`contactdyn.model.impact`). The function is gap − (min(0, gap at the segment start) −
-  ``TOUCH_TOL``): never zero at the start, so a re-touch right after a separation is seen;
+  ``TOUCH_TOL``): never zero at the start, so a re-touch right after a separation is seen; a gap that
+  dips below zero and back within one step is found on the step's dense output (:class:`DipWatch`);
 - ``separate``: a touching, unbonded contact's normal force F [N] reaches zero;
 - ``stop``: a sliding contact's slip velocity along its sliding reference r falls to the
   stick band, v_t·r = v_ε [m/s] (``solver.stick_velocity``);
-- ``reverse``: a slip from rest runs backwards past −v_ε (v_t·r = −v_ε);
+- ``reverse``: a slip from rest runs backwards past −v_ε (v_t·r = −v_ε); both also where the
+  speed dips through and back within one step (:class:`DipWatch`);
 - ``turn`` (2-D): the slip velocity turned 60° away from r, v_t·r − ½|v_t| + v_ε = 0
   (r is refreshed, no mode change; near rest it is decided as a stop, ``transitions.TURN_AT_REST``);
 - ``slip``: a sticking contact's friction reaches the cone, g = μ_s F − |F_f| = 0
@@ -39,12 +41,12 @@ from ..model.contact import ContactMode
 from ..model.evaluation import Evaluation
 from ..model.friction import cone_slack
 from ..model.phases import Phase
-from ..model.pipeline.pack import EV_FN, EV_W
+from ..model.pipeline.pack import EV_FN, EV_GAP, EV_VT, EV_W
 from ..model.system import System
 
 __all__ = ["TOUCH_TOL", "AT_LIMIT", "terminal_event", "StageWatch", "StateWatch", "ValuesWatch", "AT_ONCE",
-           "SlipWatch", "StepBudget", "StepCollapse", "WorkWatch", "segment_events", "fired_across", "EventLog",
-           "start_storm_cause"]
+           "DipWatch", "SlipWatch", "StepBudget", "StepCollapse", "WorkWatch", "segment_events", "fired_across",
+           "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
 #: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
@@ -205,9 +207,9 @@ class ValuesWatch(StageWatch):
     """A :class:`StageWatch` of one of a call's event values, g = e[column] (a touching contact's
     ``separate``: its normal force): a compiled step's stages checked at once (:meth:`sample_all`, on their
     calls' event values). A contact at rest does not move, so the steps grow, and its force can pull and push again
-    within one step: unseen at its ends. Its alarm is confirmed where it is located (:meth:`unconfirmed`). (Not a
-    slide's ``stop`` and ``reverse``: their stages' slip velocities stray across the stick band so often that the
-    false alarms cost more than the dips they would find.)"""
+    within one step: unseen at its ends. Its alarm is confirmed where it is located (:meth:`unconfirmed`). (A slide's
+    ``stop`` and ``reverse`` are not alarmed by their stages: their slip velocities stray across the stick band so often
+    that the false alarms cost more than the dips they would find; a :class:`DipWatch` searches the dense output.)"""
 
     holds = False  # (a contact's force reaching 0 lets it go: a compliant contact's at its surface)
 
@@ -228,6 +230,92 @@ class ValuesWatch(StageWatch):
 
 
 AT_ONCE = (StateWatch, ValuesWatch)  #: the watches that see a compiled step's stages at once, and confirm an alarm
+
+#: [-] a dip search samples a step's dense output at DIP_SAMPLES − 1 inner instants, then narrows on the lowest
+#: by golden sections, at most DIP_SECTIONS of them (the bracket 2/DIP_SAMPLES of the step, shrunk 0.618× each)
+DIP_SAMPLES, DIP_SECTIONS = 8, 40
+_GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
+
+
+class DipWatch:
+    """An event of the state's motion, g = value(t, x) − ``floor`` through zero, that also sees g dip below zero and
+    back within one step: a free contact's ``touch`` (its gap [m]), a slide's ``stop`` and ``reverse`` (its slip
+    velocity along its direction, less or plus the stick band [m/s]).
+
+    A tip that turns around just short of a surface, or just past it, has a positive gap at both ends of the step
+    that grazes it (a parabola, integrated exactly, lets the steps grow without bound: a 1 mm dip into a rigid floor
+    went unseen); a slide's speed can dip through zero and back the same way. The stages' values
+    (:meth:`sample`; :meth:`sample_all`, ``of_stages(Es)``: one min and max per attempt) say whether zero lies within
+    g's own variation over the step; if so, :meth:`dips` searches the step's dense output for g < 0
+    (:data:`DIP_SAMPLES` instants, then golden sections on the lowest). A dip found holds g negative from its instant
+    on, so the root located is the first crossing, on the dense output itself: never a false alarm. (Our steps only:
+    DOP853's and LSODA's, :class:`~contactdyn.numerics.dop853._EventWatch`; ``solve_ivp``'s see the step ends.)"""
+
+    terminal = True
+    direction = -1
+
+    def __init__(self, value, kind: str, name: str, floor: float, of_stages):
+        self.value, self.kind, self.contact, self.floor = value, kind, name, floor  # value(t, x): g + floor
+        self.of_stages = of_stages  #: Es -> value at each stage (its call's event values Es, one row per stage)
+        self.t_end, self.g_old, self.g_end = -math.inf, math.inf, math.inf  #: the last step end [s], g before, there
+        self.lo, self.hi = math.inf, -math.inf  #: the last attempt's stages' g: least, greatest
+        self.staged: list[tuple[float, float]] = []  #: (t [s], g) of stages one at a time (:meth:`sample`)
+        self.latch = math.inf  #: [s] from here on g is held negative (a dip found inside the last step)
+
+    def sample(self, t: float, value: float) -> None:
+        self.staged.append((t, value - self.floor))
+
+    def sample_all(self, times, Ys: np.ndarray, Es: np.ndarray) -> None:
+        e = self.of_stages(Es)
+        self.lo, self.hi = float(e.min()) - self.floor, float(e.max()) - self.floor
+
+    def __call__(self, t: float, x: np.ndarray) -> float:
+        g = self.value(t, x) - self.floor
+        if t > self.t_end:  # a new step end (they come in increasing t; root finding calls inside the last step)
+            self.t_end, self.latch = t, math.inf
+            self.g_old, self.g_end = self.g_end, g
+            return g
+        return min(g, -1e-300) if t >= self.latch else g
+
+    def dips(self, t_old: float, state_at) -> bool:
+        """Whether g dips below zero inside the step just ended, from t_old [s] to the last step end, on its dense
+        output ``state_at(t)``; if so g is held negative from the instant found (:attr:`latch`)."""
+        t, ends = self.t_end, (self.g_old, self.g_end)
+        staged = [g for ts, g in self.staged if t_old < ts < t]
+        self.staged.clear()
+        lo, hi = min(self.lo, *staged, *ends), max(self.hi, *staged, *ends)
+        self.lo, self.hi = math.inf, -math.inf
+        if not (0.0 < ends[0] < math.inf and ends[1] > 0.0 and lo < hi - lo):  # (zero beyond the step's reach)
+            return False
+        found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, t)
+        if found is not None:
+            self.latch = found
+        return found is not None
+
+
+def _dip(g, a: float, b: float) -> float | None:
+    """An instant in (a, b) [s] where g < 0 (g > 0 at both ends), or None: g at DIP_SAMPLES − 1 inner instants, then
+    golden sections of the bracket around the lowest."""
+    ts = [a + (b - a) * j / DIP_SAMPLES for j in range(DIP_SAMPLES + 1)]
+    gs = [math.inf] + [g(s) for s in ts[1:-1]] + [math.inf]
+    k = min(range(1, DIP_SAMPLES), key=gs.__getitem__)
+    if gs[k] < 0.0:
+        return ts[k]
+    lo, hi = ts[k - 1], ts[k + 1]
+    c, d = hi - _GOLDEN * (hi - lo), lo + _GOLDEN * (hi - lo)
+    gc, gd = g(c), g(d)
+    for _ in range(DIP_SECTIONS):
+        if min(gc, gd) < 0.0:
+            return c if gc < 0.0 else d
+        if gc < gd:
+            hi, d, gd = d, c, gc
+            c = hi - _GOLDEN * (hi - lo)
+            gc = g(c)
+        else:
+            lo, c, gc = c, d, gd
+            d = lo + _GOLDEN * (hi - lo)
+            gd = g(d)
+    return None
 
 
 class SlipWatch(StageWatch):
@@ -363,6 +451,12 @@ def _along(v: np.ndarray, r: tuple[float, ...]) -> float:
     return vs[0] * r[0] + vs[1] * r[1] if len(r) == 2 else vs[0] * r[0]
 
 
+def _stages_along(at: int, r: tuple[float, ...]):
+    """Es -> each stage's slip velocity along r [m/s] (its contact's columns of the event values from ``at``)."""
+    direction = np.array(r)
+    return lambda E: E[:, at:at + direction.size] @ direction
+
+
 def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
     """The ``turn`` function v·r − ½|v| + v_ε [m/s] of a 2-D slip velocity v (|v| = √(v·v))."""
     v0, v1 = v.tolist()
@@ -390,9 +484,11 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     watches: list[StageWatch] = []
     for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
         name = c.name
-        if not mode.touching:
+        if not mode.touching:  # (its gap may dip below the surface and back within one step: its stages watched)
             floor = min(values.gap(ci, t0, x0), 0.0) - TOUCH_TOL  # [m] never zero at the start
-            out.append(terminal_event(lambda t, x, i=ci, g0=floor: values.gap(i, t, x) - g0, "touch", name))
+            watches.append(DipWatch(lambda t, x, i=ci: values.gap(i, t, x), "touch", name, floor,
+                                    lambda E, col=EV_W * ci + EV_GAP: E[:, col]))
+            out.append(watches[-1])
             continue
         if not c.spec.bonded:  # (its force may pull and push again within one step: watched at every stage)
             watches.append(ValuesWatch(terminal_event(lambda t, x, i=ci: values.normal_force(i, t, x), "separate",
@@ -408,9 +504,10 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             out.append(watches[-1])
             continue
         r = tuple(float(c) for c in mode.slip)
-        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _along(values.slip(i, t, x), r) - b, "stop", name))
-        out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _along(values.slip(i, t, x), r) + b, "reverse",
-                                  name))
+        along = lambda t, x, i=ci, r=r: _along(values.slip(i, t, x), r)  # noqa: E731
+        for kind, floor in (("stop", band), ("reverse", -band)):  # (its speed may dip through the band and back)
+            watches.append(DipWatch(along, kind, name, floor, _stages_along(EV_W * ci + EV_VT, r)))
+            out.append(watches[-1])
         if len(r) == 2:
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
                                       name))
@@ -426,8 +523,8 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     fun = fun or values.rhs
     if not watches:
         return out, fun
-    on_calls = [w for w in watches if not isinstance(w, AT_ONCE)]  # (they read the call's values, stage by stage)
-    on_states = [w for w in watches if isinstance(w, AT_ONCE)]
+    on_states = [w for w in watches if hasattr(w, "sample_all")]  # (a compiled step's stages at once)
+    on_calls = [w for w in watches if not hasattr(w, "sample_all")]  # (they read the call's values, stage by stage)
     sample = _sampler(watches)
 
     def sample_states(times, Ys: np.ndarray, Es: np.ndarray) -> None:

@@ -268,11 +268,18 @@ class _EventWatch:
         self.direction = [float(getattr(e, "direction", 0.0)) for e in self.events]
         self.terminal = [bool(getattr(e, "terminal", False)) for e in self.events]
         self.falling = all(d < 0 for d in self.direction)  #: _active reduces to g_old ≥ 0 ≥ g_new
+        #: the events that also look inside a step, on its dense output (``dips(t_old, state_at)``: whether their
+        #: function falls below zero and back within it; they then hold it negative from there while it is located)
+        self.inside = [i for i, e in enumerate(self.events) if hasattr(e, "dips")]
         self.hits: list[tuple[float, int]] = []  #: (root [s], event), in time order
 
     def stop(self, steps: _Steps, t: float, x: np.ndarray) -> bool:
         """At the step end (t, x): record the roots in the step; True at a terminal one (hits ends with it)."""
         g_old, g_new = self.g, [float(e(t, x)) for e in self.events]
+        step, t_old = len(steps.t) - 2, steps.t[-2]
+        for i in self.inside:
+            if g_new[i] > 0.0 and self.events[i].dips(t_old, lambda s: steps.at(step, s)):
+                g_new[i] = -1.0
         self.g = g_new
         if self.falling:  # all events fall through zero (the hybrid loop's): one test per event
             fired = [i for i, (a, b) in enumerate(zip(g_old, g_new, strict=True)) if a >= 0.0 >= b]
@@ -281,7 +288,6 @@ class _EventWatch:
                      if _active(a, b, d)]
         if not fired:
             return False
-        step, t_old = len(steps.t) - 2, steps.t[-2]
         for i in fired:  # as solve_ivp: brentq on the step's own interpolant (a step shorter than t's
             # resolution, LSODA's where its steps collapse: at its end)
             root = t if t == t_old else brent_root(lambda s, e=self.events[i]: e(s, steps.at(step, s)), t_old, t,
