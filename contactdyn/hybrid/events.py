@@ -231,10 +231,10 @@ class ValuesWatch(StageWatch):
 
 AT_ONCE = (StateWatch, ValuesWatch)  #: the watches that see a compiled step's stages at once, and confirm an alarm
 
-#: [-] a dip search samples a step's dense output at DIP_SAMPLES − 1 inner instants, then narrows on the lowest
-#: by golden sections, at most DIP_SECTIONS of them (the bracket 2/DIP_SAMPLES of the step, shrunk 0.618× each)
-DIP_SAMPLES, DIP_SECTIONS = 8, 40
-_GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
+#: [-] a dip search samples a step's dense output at DIP_SAMPLES − 1 inner instants, then narrows on the lowest by
+#: successive parabolas, at most DIP_REFINE of them
+DIP_SAMPLES, DIP_REFINE = 8, 12
+DIP_MODEL = 0.1  #: [-] a parabola's minimum within this × its value of g at its vertex: g's minimum (no dip if > 0)
 
 
 class DipWatch:
@@ -247,7 +247,7 @@ class DipWatch:
     went unseen); a slide's speed can dip through zero and back the same way. The stages' values
     (:meth:`sample`; :meth:`sample_all`, ``of_stages(Es)``: one min and max per attempt) say whether zero lies within
     g's own variation over the step; if so, :meth:`dips` searches the step's dense output for g < 0
-    (:data:`DIP_SAMPLES` instants, then golden sections on the lowest). A dip found holds g negative from its instant
+    (:data:`DIP_SAMPLES` instants, then parabolas through the lowest). A dip found holds g negative from its instant
     on, so the root located is the first crossing, on the dense output itself: never a false alarm. (Our steps only:
     DOP853's and LSODA's, :class:`~contactdyn.numerics.dop853._EventWatch`; ``solve_ivp``'s see the step ends.)"""
 
@@ -287,34 +287,39 @@ class DipWatch:
         self.lo, self.hi = math.inf, -math.inf
         if not (0.0 < ends[0] < math.inf and ends[1] > 0.0 and lo < hi - lo):  # (zero beyond the step's reach)
             return False
-        found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, t)
+        found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, t, *ends)
         if found is not None:
             self.latch = found
         return found is not None
 
 
-def _dip(g, a: float, b: float) -> float | None:
-    """An instant in (a, b) [s] where g < 0 (g > 0 at both ends), or None: g at DIP_SAMPLES − 1 inner instants, then
-    golden sections of the bracket around the lowest."""
+def _dip(g, a: float, b: float, g_a: float, g_b: float) -> float | None:
+    """An instant in (a, b) [s] where g < 0 (g_a, g_b > 0 at the ends), or None: g at DIP_SAMPLES − 1 inner instants,
+    then successive parabolas through the lowest three (Brent's minimization without its golden fallback: a dip is
+    smooth), until g < 0, or until a parabola's minimum is where g is and above zero."""
     ts = [a + (b - a) * j / DIP_SAMPLES for j in range(DIP_SAMPLES + 1)]
-    gs = [math.inf] + [g(s) for s in ts[1:-1]] + [math.inf]
-    k = min(range(1, DIP_SAMPLES), key=gs.__getitem__)
+    gs = [g_a] + [g(s) for s in ts[1:-1]] + [g_b]
+    k = min(range(DIP_SAMPLES + 1), key=gs.__getitem__)
     if gs[k] < 0.0:
         return ts[k]
-    lo, hi = ts[k - 1], ts[k + 1]
-    c, d = hi - _GOLDEN * (hi - lo), lo + _GOLDEN * (hi - lo)
-    gc, gd = g(c), g(d)
-    for _ in range(DIP_SECTIONS):
-        if min(gc, gd) < 0.0:
-            return c if gc < 0.0 else d
-        if gc < gd:
-            hi, d, gd = d, c, gc
-            c = hi - _GOLDEN * (hi - lo)
-            gc = g(c)
-        else:
-            lo, c, gc = c, d, gd
-            d = lo + _GOLDEN * (hi - lo)
-            gd = g(d)
+    k = min(max(k, 1), DIP_SAMPLES - 1)
+    points = [(ts[k - 1], gs[k - 1]), (ts[k], gs[k]), (ts[k + 1], gs[k + 1])]
+    for _ in range(DIP_REFINE):
+        (t0, g0), (t1, g1), (t2, g2) = sorted(points)
+        slope = (g1 - g0) / (t1 - t0)  # the parabola g0 + slope (t − t0) + curve (t − t0)(t − t1) through the three
+        curve = ((g2 - g1) / (t2 - t1) - slope) / (t2 - t0)
+        if curve <= 0.0:  # (not convex: no minimum between them)
+            return None
+        tv = 0.5 * (t0 + t1) - 0.5 * slope / curve
+        if not t0 < tv < t2:
+            return None
+        gv = g(tv)
+        if gv < 0.0:
+            return tv
+        model = g0 + slope * (tv - t0) + curve * (tv - t0) * (tv - t1)
+        if abs(gv - model) <= DIP_MODEL * gv:  # (the parabola is g there: its minimum, above zero, is g's)
+            return None
+        points = sorted(points + [(tv, gv)], key=lambda p: p[1])[:3]
     return None
 
 
