@@ -45,8 +45,8 @@ from ..model.pipeline.pack import EV_FN, EV_GAP, EV_VT, EV_W
 from ..model.system import System
 
 __all__ = ["TOUCH_TOL", "AT_LIMIT", "terminal_event", "StageWatch", "StateWatch", "ValuesWatch", "AT_ONCE",
-           "DipWatch", "SlipWatch", "StepBudget", "StepCollapse", "WorkWatch", "segment_events", "fired_across",
-           "EventLog", "start_storm_cause"]
+           "StageSwing", "DipWatch", "SlipWatch", "StepBudget", "StepCollapse", "WorkWatch", "segment_events",
+           "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
 #: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
@@ -237,6 +237,35 @@ DIP_SAMPLES, DIP_REFINE = 8, 12
 DIP_MODEL = 0.1  #: [-] a parabola's minimum within this × its value of g at its vertex: g's minimum (no dip if > 0)
 
 
+class StageSwing:
+    """The stages' values of one function of the state, value(t, x), over each step: their least and greatest, which
+    the :class:`DipWatch` events sharing it read (a slide's ``stop`` and ``reverse`` share its speed's). A compiled
+    step gives them once per attempt (:meth:`sample_all`; ``of_stages(Es)``: each stage's value off its call's event
+    values Es, one row per stage), any other call one at a time (:meth:`sample`)."""
+
+    def __init__(self, value, of_stages):
+        self.value, self.of_stages = value, of_stages
+        self.lo, self.hi = math.inf, -math.inf  #: the last attempt's stages': least, greatest
+        self.staged: list[tuple[float, float]] = []  #: (t [s], value) of the stages one at a time
+        self.step: tuple[float, float, float, float] | None = None  #: (t_old, t, least, greatest) of the last step
+
+    def sample(self, t: float, value: float) -> None:
+        self.staged.append((t, value))
+
+    def sample_all(self, times, Ys: np.ndarray, Es: np.ndarray) -> None:
+        e = self.of_stages(Es)
+        self.lo, self.hi = float(e.min()), float(e.max())
+
+    def over(self, t_old: float, t: float) -> tuple[float, float]:
+        """(least, greatest) of the stages' values inside the step from t_old to t [s] (read once, at its end)."""
+        if self.step is None or self.step[:2] != (t_old, t):
+            values = [v for ts, v in self.staged if t_old < ts < t]
+            self.staged.clear()
+            self.step = (t_old, t, min([self.lo, *values]), max([self.hi, *values]))
+            self.lo, self.hi = math.inf, -math.inf
+        return self.step[2], self.step[3]
+
+
 class DipWatch:
     """An event of the state's motion, g = value(t, x) − ``floor`` through zero, that also sees g dip below zero and
     back within one step: a free contact's ``touch`` (its gap [m]), a slide's ``stop`` and ``reverse`` (its slip
@@ -244,30 +273,21 @@ class DipWatch:
 
     A tip that turns around just short of a surface, or just past it, has a positive gap at both ends of the step
     that grazes it (a parabola, integrated exactly, lets the steps grow without bound: a 1 mm dip into a rigid floor
-    went unseen); a slide's speed can dip through zero and back the same way. The stages' values
-    (:meth:`sample`; :meth:`sample_all`, ``of_stages(Es)``: one min and max per attempt) say whether zero lies within
-    g's own variation over the step; if so, :meth:`dips` searches the step's dense output for g < 0
-    (:data:`DIP_SAMPLES` instants, then parabolas through the lowest). A dip found holds g negative from its instant
-    on, so the root located is the first crossing, on the dense output itself: never a false alarm. (Our steps only:
-    DOP853's and LSODA's, :class:`~contactdyn.numerics.dop853._EventWatch`; ``solve_ivp``'s see the step ends.)"""
+    went unseen); a slide's speed can dip through zero and back the same way. The stages' values (its
+    :class:`StageSwing`) say whether zero lies within g's own swing over the step; if so, :meth:`dips` searches the
+    step's dense output for g < 0 (:data:`DIP_SAMPLES` instants, then parabolas through the lowest). A dip found holds
+    g negative from its instant on, so the root located is the first crossing, on the dense output itself: never a
+    false alarm. (Our steps only: DOP853's and LSODA's, :class:`~contactdyn.numerics.dop853._EventWatch`;
+    ``solve_ivp``'s see the step ends.)"""
 
     terminal = True
     direction = -1
 
-    def __init__(self, value, kind: str, name: str, floor: float, of_stages):
-        self.value, self.kind, self.contact, self.floor = value, kind, name, floor  # value(t, x): g + floor
-        self.of_stages = of_stages  #: Es -> value at each stage (its call's event values Es, one row per stage)
+    def __init__(self, swing: StageSwing, kind: str, name: str, floor: float):
+        self.swing, self.kind, self.contact, self.floor = swing, kind, name, floor
+        self.value = swing.value  #: value(t, x): g + floor
         self.t_end, self.g_old, self.g_end = -math.inf, math.inf, math.inf  #: the last step end [s], g before, there
-        self.lo, self.hi = math.inf, -math.inf  #: the last attempt's stages' g: least, greatest
-        self.staged: list[tuple[float, float]] = []  #: (t [s], g) of stages one at a time (:meth:`sample`)
         self.latch = math.inf  #: [s] from here on g is held negative (a dip found inside the last step)
-
-    def sample(self, t: float, value: float) -> None:
-        self.staged.append((t, value - self.floor))
-
-    def sample_all(self, times, Ys: np.ndarray, Es: np.ndarray) -> None:
-        e = self.of_stages(Es)
-        self.lo, self.hi = float(e.min()) - self.floor, float(e.max()) - self.floor
 
     def __call__(self, t: float, x: np.ndarray) -> float:
         g = self.value(t, x) - self.floor
@@ -280,14 +300,12 @@ class DipWatch:
     def dips(self, t_old: float, state_at) -> bool:
         """Whether g dips below zero inside the step just ended, from t_old [s] to the last step end, on its dense
         output ``state_at(t)``; if so g is held negative from the instant found (:attr:`latch`)."""
-        t, ends = self.t_end, (self.g_old, self.g_end)
-        staged = [g for ts, g in self.staged if t_old < ts < t]
-        self.staged.clear()
-        lo, hi = min(self.lo, *staged, *ends), max(self.hi, *staged, *ends)
-        self.lo, self.hi = math.inf, -math.inf
-        if not (0.0 < ends[0] < math.inf and ends[1] > 0.0 and lo < hi - lo):  # (zero beyond the step's reach)
+        g_old, g_end = self.g_old, self.g_end
+        lo, hi = self.swing.over(t_old, self.t_end)
+        lo, hi = min(lo - self.floor, g_old, g_end), max(hi - self.floor, g_old, g_end)
+        if not (0.0 < g_old < math.inf and g_end > 0.0 and lo < hi - lo):  # (zero beyond the step's reach)
             return False
-        found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, t, *ends)
+        found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, self.t_end, g_old, g_end)
         if found is not None:
             self.latch = found
         return found is not None
@@ -468,7 +486,7 @@ def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
     return v0 * r[0] + v1 * r[1] - 0.5 * math.sqrt(v0 * v0 + v1 * v1) + band
 
 
-def _sampler(watches: list[StageWatch]):
+def _sampler(watches: list[StageWatch | StageSwing]):
     """sample(t, x): each watch's value at a stage (t [s], x), read off the runner's last call: no second solve."""
     def sample(t: float, x: np.ndarray) -> None:
         for w in watches:
@@ -486,14 +504,14 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
     """
     values = runner
     out: list = []
-    watches: list[StageWatch] = []
+    watches: list[StageWatch | StageSwing] = []  # (what the stages feed)
     for ci, (c, mode) in enumerate(zip(system.contacts, modes, strict=True)):
         name = c.name
         if not mode.touching:  # (its gap may dip below the surface and back within one step: its stages watched)
             floor = min(values.gap(ci, t0, x0), 0.0) - TOUCH_TOL  # [m] never zero at the start
-            watches.append(DipWatch(lambda t, x, i=ci: values.gap(i, t, x), "touch", name, floor,
-                                    lambda E, col=EV_W * ci + EV_GAP: E[:, col]))
-            out.append(watches[-1])
+            watches.append(StageSwing(lambda t, x, i=ci: values.gap(i, t, x),
+                                      lambda E, col=EV_W * ci + EV_GAP: E[:, col]))
+            out.append(DipWatch(watches[-1], "touch", name, floor))
             continue
         if not c.spec.bonded:  # (its force may pull and push again within one step: watched at every stage)
             watches.append(ValuesWatch(terminal_event(lambda t, x, i=ci: values.normal_force(i, t, x), "separate",
@@ -509,10 +527,10 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
             out.append(watches[-1])
             continue
         r = tuple(float(c) for c in mode.slip)
-        along = lambda t, x, i=ci, r=r: _along(values.slip(i, t, x), r)  # noqa: E731
+        watches.append(StageSwing(lambda t, x, i=ci, r=r: _along(values.slip(i, t, x), r),
+                                  _stages_along(EV_W * ci + EV_VT, r)))
         for kind, floor in (("stop", band), ("reverse", -band)):  # (its speed may dip through the band and back)
-            watches.append(DipWatch(along, kind, name, floor, _stages_along(EV_W * ci + EV_VT, r)))
-            out.append(watches[-1])
+            out.append(DipWatch(watches[-1], kind, name, floor))
         if len(r) == 2:
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
                                       name))
