@@ -42,7 +42,7 @@ from ..model.friction import direction_of, in_cone, slip_velocity
 from ..model.impact import impact, project_velocity
 from ..model.system import System
 from .charts import on_chart
-from .events import AT_ONCE, EventLog
+from .events import AT_ONCE, DipWatch, EventLog
 from .pipeline_mode import mode_runner
 
 __all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
@@ -154,6 +154,7 @@ class Transitions:
         self.log.log(t, event.kind, event.contact, check_storm=event.kind not in self.UNCOUNTED)
         if _false_alarm(self.stats, self.log, event, t, x):
             return self.release_pulling(t, x, modes, phase)
+        self.stats["dips_seen_inside_a_step"] += int(isinstance(event, DipWatch) and event.latch < math.inf)
         after = _After()
         x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
         if settle:
