@@ -253,17 +253,21 @@ class StageSwing:
         self.staged.append((t, value))
 
     def sample_all(self, times, Ys: np.ndarray, Es: np.ndarray) -> None:
-        e = self.of_stages(Es)
-        self.lo, self.hi = float(e.min()), float(e.max())
+        values = self.of_stages(Es)  # (a list of floats: NumPy's reductions of 12 numbers cost ~3× more)
+        self.lo, self.hi = min(values), max(values)
 
     def over(self, t_old: float, t: float) -> tuple[float, float]:
         """(least, greatest) of the stages' values inside the step from t_old to t [s] (read once, at its end)."""
-        if self.step is None or self.step[:2] != (t_old, t):
+        step = self.step
+        if step is None or step[0] != t_old or step[1] != t:
+            lo, hi = self.lo, self.hi
             values = [v for ts, v in self.staged if t_old < ts < t]
+            if values:
+                lo, hi = min(lo, min(values)), max(hi, max(values))
             self.staged.clear()
-            self.step = (t_old, t, min([self.lo, *values]), max([self.hi, *values]))
+            self.step = step = (t_old, t, lo, hi)
             self.lo, self.hi = math.inf, -math.inf
-        return self.step[2], self.step[3]
+        return step[2], step[3]
 
 
 class DipWatch:
@@ -301,9 +305,11 @@ class DipWatch:
         """Whether g dips below zero inside the step just ended, from t_old [s] to the last step end, on its dense
         output ``state_at(t)``; if so g is held negative from the instant found (:attr:`latch`)."""
         g_old, g_end = self.g_old, self.g_end
+        if not (0.0 < g_old < math.inf and g_end > 0.0):
+            return False
         lo, hi = self.swing.over(t_old, self.t_end)
         lo, hi = min(lo - self.floor, g_old, g_end), max(hi - self.floor, g_old, g_end)
-        if not (0.0 < g_old < math.inf and g_end > 0.0 and lo < hi - lo):  # (zero beyond the step's reach)
+        if lo >= hi - lo:  # (zero beyond the step's reach)
             return False
         found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, self.t_end, g_old, g_end)
         if found is not None:
@@ -475,9 +481,10 @@ def _along(v: np.ndarray, r: tuple[float, ...]) -> float:
 
 
 def _stages_along(at: int, r: tuple[float, ...]):
-    """Es -> each stage's slip velocity along r [m/s] (its contact's columns of the event values from ``at``)."""
-    direction = np.array(r)
-    return lambda E: E[:, at:at + direction.size] @ direction
+    """Es -> each stage's slip velocity along r [m/s], a list (its contact's event values' columns from ``at``)."""
+    if len(r) == 1:
+        return lambda E: [v * r[0] for v in E[:, at].tolist()]
+    return lambda E: [a * r[0] + b * r[1] for a, b in E[:, at:at + 2].tolist()]
 
 
 def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
@@ -495,12 +502,14 @@ def _sampler(watches: list[StageWatch | StageSwing]):
 
 
 def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: float, x0: np.ndarray, runner,
-                   fun=None):
+                   fun=None, swings: bool = True):
     """The event functions of one segment, and the right-hand side that feeds their stage watches.
 
     They read the mode ``runner``'s values (its last call's, no second solve: the one pipeline's mode,
     :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`). ``fun``: the right-hand side to integrate when it is
-    not the runner's own.
+    not the runner's own. ``swings``: the :class:`StageSwing` s take the stages of calls made one at a time (DOP853's
+    stages interpreted; a compiled step gives them its stages anyway); not for a method whose calls are not stages
+    of its steps (LSODA: its :class:`DipWatch` es gate on the step ends alone).
     """
     values = runner
     out: list = []
@@ -510,7 +519,7 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         if not mode.touching:  # (its gap may dip below the surface and back within one step: its stages watched)
             floor = min(values.gap(ci, t0, x0), 0.0) - TOUCH_TOL  # [m] never zero at the start
             watches.append(StageSwing(lambda t, x, i=ci: values.gap(i, t, x),
-                                      lambda E, col=EV_W * ci + EV_GAP: E[:, col]))
+                                      lambda E, col=EV_W * ci + EV_GAP: E[:, col].tolist()))
             out.append(DipWatch(watches[-1], "touch", name, floor))
             continue
         if not c.spec.bonded:  # (its force may pull and push again within one step: watched at every stage)
@@ -548,7 +557,7 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         return out, fun
     on_states = [w for w in watches if hasattr(w, "sample_all")]  # (a compiled step's stages at once)
     on_calls = [w for w in watches if not hasattr(w, "sample_all")]  # (they read the call's values, stage by stage)
-    sample = _sampler(watches)
+    sample = _sampler(watches if swings else [w for w in watches if not isinstance(w, StageSwing)])
 
     def sample_states(times, Ys: np.ndarray, Es: np.ndarray) -> None:
         for w in on_states:

@@ -81,6 +81,7 @@ HELD_STEPS_SEEN = 10  #: under a hold, the stiffness checks (auto's, a collapse'
 #: mode switches change the forces, not the time scales; an impact or a separation does, so they restart; a free
 #: body's chart switch changes its coordinates only)
 RESUME_STEP = ("stop", "reverse", "slip", "turn", "joint_slip", "joint_stick", "chart")
+STAGED = ("DOP853", "DOP853C")  #: methods whose calls are the stages of their steps (events.DipWatch gates on them)
 LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest or comes to rest (see HybridRun._method)
 LAUNCH_SETTLED = 0.5 * STABILITY_RADIUS  #: [-] period·|λ| below which a sampled launch leaves LAUNCH_METHOD
 #: a 2-D slide's explicit steps shorter than COLLAPSE_RATIO × the segment's longest, COLLAPSE_STEPS of them, have
@@ -258,7 +259,7 @@ class HybridRun:
             end = t_sample if t_sample is not None and not held else t_end
             h0 = min(self.next_step, end - t) if self.next_step else None
             hold = self.sampled.hold(modes, phase, t_end, runner) if held else None
-            events, rhs = segment_events(system, modes, phase, t, x, runner)
+            events, rhs = segment_events(system, modes, phase, t, x, runner, swings=method in STAGED)
             self.starts.record(t, x, events)
             events += self._watches(modes, method) + self.chart_events
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None

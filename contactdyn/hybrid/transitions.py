@@ -147,9 +147,8 @@ class Transitions:
     def handle(self, t, x, modes, phase, event):
         """Apply a located event: (state, modes, phase) right after it.
 
-        The event's kind picks its handler (:attr:`HANDLERS`); a handler changes ``modes`` in place and returns (x,
-        phase, settle); with ``settle`` the modes are then made consistent with the state (:meth:`consistent`). A new
-        kind of event is a new handler. A stage's alarm not confirmed (:func:`_false_alarm`) changes nothing."""
+        The event's kind picks its handler (:attr:`HANDLERS`: a new kind, a new handler); it changes ``modes`` in place
+        and returns (x, phase, settle: then :meth:`consistent`). Unconfirmed alarms (:func:`_false_alarm`): no change"""
         modes = list(modes)
         self.log.log(t, event.kind, event.contact, check_storm=event.kind not in self.UNCOUNTED)
         if _false_alarm(self.stats, self.log, event, t, x):
