@@ -305,7 +305,7 @@ class DipWatch:
         """Whether g dips below zero inside the step just ended, from t_old [s] to the last step end, on its dense
         output ``state_at(t)``; if so g is held negative from the instant found (:attr:`latch`)."""
         g_old, g_end = self.g_old, self.g_end
-        if not (0.0 < g_old < math.inf and g_end > 0.0):
+        if not (0.0 < g_old < math.inf and g_end > 0.0 and t_old < self.t_end):  # (LSODA's steps may collapse)
             return False
         lo, hi = self.swing.over(t_old, self.t_end)
         lo, hi = min(lo - self.floor, g_old, g_end), max(hi - self.floor, g_old, g_end)
@@ -507,9 +507,9 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
 
     They read the mode ``runner``'s values (its last call's, no second solve: the one pipeline's mode,
     :class:`~contactdyn.hybrid.pipeline_mode.PipelineMode`). ``fun``: the right-hand side to integrate when it is
-    not the runner's own. ``swings``: the :class:`StageSwing` s take the stages of calls made one at a time (DOP853's
-    stages interpreted; a compiled step gives them its stages anyway); not for a method whose calls are not stages
-    of its steps (LSODA: its :class:`DipWatch` es gate on the step ends alone).
+    not the runner's own. ``swings``: whether each :class:`StageSwing` also takes the calls made one at a time (the
+    stages of DOP853 interpreted; a compiled step gives it its stages anyway); False for a method whose calls are not
+    the stages of its steps (LSODA: each :class:`DipWatch` then gates on the step ends alone).
     """
     values = runner
     out: list = []
