@@ -18,6 +18,7 @@ import pytest
 
 from contactdyn.analysis.workprecision import errors
 from contactdyn.errors import SimulationError
+from contactdyn.hybrid.loop import HybridRun
 from contactdyn.model.system import System
 from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import simulate
@@ -188,6 +189,21 @@ def test_singular_stop_slides_on_through_full_stretch_with_its_energy():
     power = 20.0 * vs ** 2 - res["contact.tip.F_f"][:, 0] * vs  # [W] kd = 20 N·s/m, friction
     lost = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(res.t))])
     assert np.abs(E + lost - E[0]).max() < 2e-5  # [J] measured 4.0e-6 (trapezoid at 0.1 ms); before: 10.24
+
+
+def test_a_rejected_stick_leaves_the_state_as_it_was():
+    """The tip starts on the floor with a residual slip of −v_ε/2 (inside the stick band: at rest); the PD's outward
+    pull, kp 0.15 m = 300 N, is beyond the cone's μ_s F = 33 N: the trial stick is rejected and the tip slides
+    outward from rest. The trial's projection (its residual slip set to 0) is not kept: x is the start's, bit for
+    bit."""
+    q2 = 0.822275724645
+    rate = 0.5e-9 / (0.3 * np.sin(q2 / 2))  # [rad/s] q̇2 of ẋ = −0.3 sin(q2 / 2) q̇2 = −v_ε/2 along the floor
+    run = HybridRun(System(load_scene(HARD / "singular.toml", {"robot.v0": [-rate / 2, rate]})))
+    x0, _ = run.system.initial_state()
+    x, modes, _ = run.start()
+    assert [e["kind"] for e in run.events] == ["slip"]
+    assert modes[0].slip == (1.0,) and modes[0].from_rest and not modes[0].stuck
+    assert np.array_equal(x, x0)  # before: q̇ projected to (−4e-25, 0) rad/s
 
 
 def test_mass_ratio_1e4():

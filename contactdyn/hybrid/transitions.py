@@ -25,9 +25,9 @@ At each event of :mod:`contactdyn.hybrid.events` (t fixed, x continuous unless a
 Then :meth:`Transitions.consistent` fixes whatever mode the state contradicts: a pulling
 contact (F < −``FORCE_TOL``) separates; a stick outside the cone slides; a slide at rest
 sticks if the friction needed to hold it is within μ_s F (its residual slip projected away,
-:func:`~contactdyn.model.impact.project_velocity`), else slides where that force pushes
-(:func:`_at_rest`). Where that projection is singular (it would stop a whole motion whose
-slip is small only because the contact's row is: an arm through full stretch,
+:func:`~contactdyn.model.impact.project_velocity`), else slides where that force pushes, its
+state as it was (:func:`_at_rest`). Where that projection is singular (it would stop a whole
+motion whose slip is small only because the contact's row is: an arm through full stretch,
 :func:`~contactdyn.model.impact.singular_stick`) the slide goes on where its slip goes.
 """
 
@@ -368,9 +368,9 @@ class Transitions:
         Pulling contacts separate; a stick whose friction is outside the cone
         |F_f| ≤ μ_s F slides (from rest, where −F_f points); a slide at rest (|v_t| within
         the stick band, or a contact in ``rest``: it just stopped) sticks if the friction
-        needed to hold it is within the cone, else slides where that force pushes; in both
-        cases its residual slip is projected away (:func:`_at_rest`; a singular stick row's
-        slide goes on where its slip goes). Contacts in ``released`` (they
+        needed to hold it is within the cone (its residual slip projected away), else slides
+        where that force pushes (:func:`_at_rest`, which tells a singular stick row's slide
+        on where its slip goes). Contacts in ``released`` (they
         broke away at a located ``slip`` event) are not stuck again at the same instant.
         Where no touching contact's mode is decided by its forces, nothing is solved.
         """
@@ -434,10 +434,10 @@ def _at_rest(system: System, evaluate, t: float, x: np.ndarray, modes, phase, i:
     Its stick is tried on x projected (:func:`~contactdyn.model.impact.project_velocity`: its residual slip set to
     exactly 0, what a stick row holds at velocity level): it sticks there if the friction that holds it is within
     μ_s F (a slide from rest, broken away and not launched yet, only strictly inside: friction.in_cone's hysteresis);
-    else it slides from rest where that force pushes, from x projected too. A projection at a singular stick row
-    (:func:`~contactdyn.model.impact.singular_stick`) would stop a motion the cone cannot: no stick is tried, the
-    slide goes on where its slip goes from the stop (its rate in ``modes``, along which it leaves the band:
-    :func:`~contactdyn.model.friction.slip_acceleration`), from x as it was."""
+    else it slides from rest where that force pushes, from x as it was (the projection was the trial's). A projection
+    at a singular stick row (:func:`~contactdyn.model.impact.singular_stick`) would stop a motion the cone cannot:
+    no stick is tried, the slide goes on where its slip goes from the stop (its rate in ``modes``, along which it
+    leaves the band: :func:`~contactdyn.model.friction.slip_acceleration`), from x as it was."""
     c, mode = system.contacts[i], modes[i]
     trial = list(modes)
     trial[i] = mode.with_(stuck=True)
@@ -451,7 +451,7 @@ def _at_rest(system: System, evaluate, t: float, x: np.ndarray, modes, phase, i:
     F_f = ev_stuck.friction[c.name]
     if in_cone(F_f, ev_stuck.normal_force[c.name], c.friction.mu_s, strictly=mode.from_rest):
         return x_stuck, trial[i], "stick"
-    return x_stuck, mode.with_(slip=direction_of(-F_f), from_rest=True), "slip"
+    return x, mode.with_(slip=direction_of(-F_f), from_rest=True), "slip"
 
 
 def _decided_by_forces(c) -> bool:
