@@ -18,6 +18,7 @@ import pytest
 
 from contactdyn.analysis.workprecision import errors
 from contactdyn.errors import SimulationError
+from contactdyn.hybrid.loop import HybridRun
 from contactdyn.model.system import System
 from contactdyn.scene.scene_file import load_scene
 from contactdyn.simulate import simulate
@@ -144,7 +145,9 @@ def test_stick_slip_cycles_stay_in_the_cone():
 
 
 def test_singular_pose_completes_or_says_why():
-    """At full stretch the tip's x row vanishes; a stick there needs rank-deficient rows."""
+    """At full stretch the tip's x row vanishes; a stick there needs rank-deficient rows. The arm swings through
+    it (elbow down to up), its tip lifts off the floor at 0.0756 s (the floor would have to pull) and lands again
+    at 0.2228 s, then slides back and forth through full stretch (a stop and a slip at each pass)."""
     try:
         res = _run("singular")
     except SimulationError as exc:
@@ -152,7 +155,55 @@ def test_singular_pose_completes_or_says_why():
         return
     assert _finite(res)
     assert res["tip"][:, 0].max() <= 0.6 + 1e-9  # never beyond the reach
-    assert np.all(np.abs(res["tip"][:, 1]) < 1e-6)  # held on the floor (Baumgarte-stabilized rows)
+    y, touching = res["tip"][:, 1], res["contact.tip.touching"] > 0
+    assert np.all(np.abs(y[touching]) < 1e-6) and np.all(y > -1e-6)  # on the floor (Baumgarte-stabilized rows)
+    assert touching.mean() > 0.5  # measured 0.85 of the samples
+
+
+def test_singular_stop_slides_on_through_full_stretch_with_its_energy():
+    """The arm swings through full stretch (q2 = 0) at q̇ = (10.52, −21.05) rad/s: on the floor it has one degree of
+    freedom, x = 0.6 cos(q2 / 2), and its slip ẋ = −0.3 sin(q2 / 2) q̇2 passes through 0 at t = 0.0644621 s because
+    its row J_x does, not because friction stopped it. The stop's trial stick would need the rows [J_y; J_x], nearly
+    out of rank: projecting away ≤ v_ε of slip would take the whole swing (10.24 J before the fix). It slides on,
+    reversed: q̇ continuous through the stop, the slip's rate there the kinematics' ẍ = −0.15 q̇2² (−66 m/s²), and
+    E = T + ½ kp (x_d − x)² + F_d y loses exactly what the damping kd ẋ² and the friction −F_f ẋ dissipate."""
+    scene = load_scene(HARD / "singular.toml", {"duration": 0.075, "solver.record_energy": True,
+                                                "solver.output_rate": 1e4})  # (it leaves the floor at 0.0756 s)
+    res = simulate(scene)
+    audit = res.meta["checks"]["energy_residual"]
+    assert audit["value"] <= audit["tol"] and not res.meta["check_warnings"]  # measured 1.5e-7 J (tol 1.4e-4 J)
+    (stop,) = [k for k, e in enumerate(res.events) if e["kind"] == "stop"]
+    t_s = res.events[stop]["t"]
+    assert t_s == pytest.approx(0.0644621, abs=1e-6)
+    assert [e["kind"] for e in res.events[stop:]] == ["stop", "slip"] and res.events[stop + 1]["t"] == t_s
+    k = int(np.searchsorted(res.t, t_s))  # the first sample after the stop
+    v, vs = res["v"], res["contact.tip.v_slip"][:, 0]
+    assert np.abs(v[k] - v[k - 1]).max() < 1e-3  # [rad/s] measured 2.3e-5 (0.1 ms apart); before: 21 (to rest)
+    assert vs[k - 1] > 0.0 > vs[k] and res["q"][k + 10, 1] < 0.0  # reversed: the elbow flips
+    rate = (vs[k] - vs[k - 1]) / (res.t[k] - res.t[k - 1])
+    assert rate == pytest.approx(-0.15 * v[k, 1] ** 2, rel=1e-5)  # [m/s²] measured −66.4436 (rel 5e-7)
+    robot = System(scene).robot
+    x, y = res["tip"][:, 0], res["tip"][:, 1]
+    E = np.array([robot.kinetic_energy(q, w) for q, w in zip(res["q"], v, strict=True)])
+    E += 0.5 * 2000.0 * (0.7 - x) ** 2 + 50.0 * y  # kp = 2000 N/m to x_d = 0.7 m; F_d = 50 N down
+    power = 20.0 * vs ** 2 - res["contact.tip.F_f"][:, 0] * vs  # [W] kd = 20 N·s/m, friction
+    lost = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(res.t))])
+    assert np.abs(E + lost - E[0]).max() < 2e-5  # [J] measured 4.0e-6 (trapezoid at 0.1 ms); before: 10.24
+
+
+def test_a_rejected_stick_leaves_the_state_as_it_was():
+    """The tip starts on the floor with a residual slip of −v_ε/2 (inside the stick band: at rest); the PD's outward
+    pull, kp 0.15 m = 300 N, is beyond the cone's μ_s F = 33 N: the trial stick is rejected and the tip slides
+    outward from rest. The trial's projection (its residual slip set to 0) is not kept: x is the start's, bit for
+    bit."""
+    q2 = 0.822275724645
+    rate = 0.5e-9 / (0.3 * np.sin(q2 / 2))  # [rad/s] q̇2 of ẋ = −0.3 sin(q2 / 2) q̇2 = −v_ε/2 along the floor
+    run = HybridRun(System(load_scene(HARD / "singular.toml", {"robot.v0": [-rate / 2, rate]})))
+    x0, _ = run.system.initial_state()
+    x, modes, _ = run.start()
+    assert [e["kind"] for e in run.events] == ["slip"]
+    assert modes[0].slip == (1.0,) and modes[0].from_rest and not modes[0].stuck
+    assert np.array_equal(x, x0)  # before: q̇ projected to (−4e-25, 0) rad/s
 
 
 def test_mass_ratio_1e4():

@@ -25,7 +25,10 @@ At each event of :mod:`contactdyn.hybrid.events` (t fixed, x continuous unless a
 Then :meth:`Transitions.consistent` fixes whatever mode the state contradicts: a pulling
 contact (F < −``FORCE_TOL``) separates; a stick outside the cone slides; a slide at rest
 sticks if the friction needed to hold it is within μ_s F (its residual slip projected away,
-:func:`~contactdyn.model.impact.project_velocity`), else slides where that force pushes.
+:func:`~contactdyn.model.impact.project_velocity`), else slides where that force pushes, its
+state as it was (:func:`_at_rest`). Where that projection is singular (it would stop a whole
+motion whose slip is small only because the contact's row is: an arm through full stretch,
+:func:`~contactdyn.model.impact.singular_stick`) the slide goes on where its slip goes.
 """
 
 from __future__ import annotations
@@ -38,8 +41,8 @@ import numpy as np
 from ..errors import SimulationError
 from ..model.chain import NodeKind
 from ..model.chain_forces import chain_sides
-from ..model.friction import direction_of, in_cone, slip_velocity
-from ..model.impact import impact, project_velocity
+from ..model.friction import direction_of, in_cone, slip_acceleration, slip_velocity
+from ..model.impact import impact, project_velocity, singular_stick
 from ..model.system import System
 from .charts import on_chart
 from .events import AT_ONCE, DipWatch, EventLog
@@ -365,8 +368,9 @@ class Transitions:
         Pulling contacts separate; a stick whose friction is outside the cone
         |F_f| ≤ μ_s F slides (from rest, where −F_f points); a slide at rest (|v_t| within
         the stick band, or a contact in ``rest``: it just stopped) sticks if the friction
-        needed to hold it is within the cone, else slides where that force pushes; in
-        both cases its residual slip is projected away. Contacts in ``released`` (they
+        needed to hold it is within the cone (its residual slip projected away), else slides
+        where that force pushes (:func:`_at_rest`, which tells a singular stick row's slide
+        on where its slip goes). Contacts in ``released`` (they
         broke away at a located ``slip`` event) are not stuck again at the same instant.
         Where no touching contact's mode is decided by its forces, nothing is solved.
         """
@@ -410,27 +414,44 @@ class Transitions:
                     if float(vt @ np.asarray(mode.slip)) < 0.5 * speed:  # moving, but not along r: refresh r
                         modes[i] = mode.with_(slip=direction_of(vt), from_rest=False)
                     continue
-                # at rest: stick if the cone can hold it, else slide where the holding force pushes; a slide from rest
-                # (it broke away, not launched yet) sticks again only strictly inside (friction.in_cone's hysteresis)
-                rest.discard(i)
-                trial = list(modes)
-                trial[i] = mode.with_(stuck=True)
-                x = project_velocity(system, x, trial, phase.limits, phase.joint_modes)
-                ev2 = self.evaluate(t, x, trial, phase)
-                F_f = ev2.friction[c.name]
-                if in_cone(F_f, ev2.normal_force[c.name], mu_s, strictly=mode.from_rest):
-                    modes[i] = trial[i]
-                    self.log.log(t, "stick", c.name)
-                else:
-                    modes[i] = mode.with_(slip=direction_of(-F_f), from_rest=True)
+                rest.discard(i)  # at rest: stick, or slide (_at_rest)
+                x, modes[i], kind = _at_rest(system, self.evaluate, t, x, modes, phase, i, ev)
+                if kind == "slip":
                     released.add(i)
-                    self.log.log(t, "slip", c.name)
+                self.log.log(t, kind, c.name)
                 changed = True
                 break
             if not changed:
                 return x, modes
         raise SimulationError(f"{self.scene.name}: no consistent contact mode at t = {t:.9g} s "
                               f"(modes tried: {modes})")
+
+
+def _at_rest(system: System, evaluate, t: float, x: np.ndarray, modes, phase, i: int, ev):
+    """Contact i's slide at rest at (t [s], x) (its slip within the stick band, or it just stopped; ``ev``: the
+    Evaluation there in ``modes``, ``evaluate``: the run's LastEvaluation): (x, its mode, "stick" or "slip").
+
+    Its stick is tried on x projected (:func:`~contactdyn.model.impact.project_velocity`: its residual slip set to
+    exactly 0, what a stick row holds at velocity level): it sticks there if the friction that holds it is within
+    μ_s F (a slide from rest, broken away and not launched yet, only strictly inside: friction.in_cone's hysteresis);
+    else it slides from rest where that force pushes, from x as it was (the projection was the trial's). A projection
+    at a singular stick row (:func:`~contactdyn.model.impact.singular_stick`) would stop a motion the cone cannot:
+    no stick is tried, the slide goes on where its slip goes from the stop (its rate in ``modes``, along which it
+    leaves the band: :func:`~contactdyn.model.friction.slip_acceleration`), from x as it was."""
+    c, mode = system.contacts[i], modes[i]
+    trial = list(modes)
+    trial[i] = mode.with_(stuck=True)
+    x_stuck = project_velocity(system, x, trial, phase.limits, phase.joint_modes)
+    if singular_stick(system, c, x, x_stuck):
+        nQ, nv = system.nQ, system.nv
+        system.robot.update(x[:nv], x[nQ:nQ + nv])
+        a_t = slip_acceleration(system, c, system.kinematics(c, x), ev.xdot[nQ:2 * nQ])
+        return x, mode.with_(slip=direction_of(a_t), from_rest=False), "slip"
+    ev_stuck = evaluate(t, x_stuck, trial, phase)
+    F_f = ev_stuck.friction[c.name]
+    if in_cone(F_f, ev_stuck.normal_force[c.name], c.friction.mu_s, strictly=mode.from_rest):
+        return x_stuck, trial[i], "stick"
+    return x, mode.with_(slip=direction_of(-F_f), from_rest=True), "slip"
 
 
 def _decided_by_forces(c) -> bool:

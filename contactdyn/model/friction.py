@@ -29,7 +29,7 @@ import numpy as np
 from .contact import Contact, ContactMode, Kinematics
 
 __all__ = ["CONE_TOL", "FORCE_ABS_TOL", "in_cone", "cone_slack", "direction_of", "initial_slip", "slip_velocity",
-           "launching"]
+           "slip_acceleration", "launching"]
 
 CONE_TOL = 1e-10  #: relative slack of the friction-cone tests |F_f| ≤ μ_s F (round-off of the solves)
 FORCE_ABS_TOL = 1e-12  #: [N] absolute slack of the same tests
@@ -71,6 +71,13 @@ def slip_velocity(system, c: Contact, kin: Kinematics, qd: np.ndarray | None = N
     v_touch, v_env = c.rates(qd)
     v_tip = kin.J @ qd[: system.nv] + kin.column_rates(qd)
     return kin.tangents @ ((v_tip if v_touch is None else v_tip + v_touch) - v_env)
+
+
+def slip_acceleration(system, c: Contact, kin: Kinematics, qdd: np.ndarray) -> np.ndarray:
+    """Rate of the slip velocity [m/s²] in tangent coordinates at Q̈ = qdd: T(J Q̈ + J̇q̇) with the bodies' parts,
+    what a stick row holds at 0 (its G_t Q̈ + γ_t). Where the slip goes once it leaves a stop: a slide through a pose
+    where its tangent row vanishes (an arm through full stretch) reverses by its kinematics (J̇q̇), not its friction."""
+    return slip_velocity(system, c, kin, qdd) + kin.tangents @ kin.drift
 
 
 def initial_slip(c: Contact, kin: Kinematics) -> tuple[float, ...]:

@@ -40,7 +40,9 @@ holds no impulse (its torque is bounded): it is not a row here (:mod:`contactdyn
 
 The energy lost [J] is ½ Q̇⁻ᵀ M Q̇⁻ − ½ Q̇⁺ᵀ M Q̇⁺ ≥ 0. :func:`project_velocity` is the same
 law without a new contact: the smallest kinetic-energy-norm change that keeps every
-active constraint (used when a slide stops inside the stick band).
+active constraint (used when a slide stops inside the stick band). Removing a residual slip
+≤ v_ε costs at most ½ m v_ε², m the stick row's effective mass; :func:`singular_stick` tells a
+projection that costs far more: a stick row (nearly) out of rank, where a tiny slip says nothing of rest.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ from .constraints import contact_row, impulse_solve, velocity_rows
 from .contact import Contact, ContactMode
 from .friction import direction_of, in_cone, slip_velocity
 
-__all__ = ["Impact", "impact", "limit_impact", "project_velocity"]
+__all__ = ["Impact", "impact", "limit_impact", "project_velocity", "singular_stick", "SINGULAR_STICK"]
 
 
 @dataclass
@@ -304,3 +306,30 @@ def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tu
     x_new = x.copy()
     x_new[nQ:2 * nQ] = z[:nQ]
     return x_new
+
+
+#: [-] a stick's velocity projection that removes more than this many times ½ m v_ε² of kinetic energy (m [kg]: the
+#: contact point's lightest effective mass, v_ε the stick band) is at a singular stick row (:func:`singular_stick`)
+SINGULAR_STICK = 1e6
+
+
+def singular_stick(system, c: Contact, x: np.ndarray, x_stuck: np.ndarray) -> bool:
+    """Is the projection ``x`` -> ``x_stuck`` (:func:`project_velocity` with contact c stuck, its slip ≤ v_ε at x) at
+    a singular stick row: does it remove more than ``SINGULAR_STICK`` × ½ m v_ε² of kinetic energy, m = 1/λ_max(J
+    M⁻¹ Jᵀ) [kg] the lightest effective mass of c's relative motion (J: its rows along the three axes)?
+
+    The projection is M-orthogonal: it removes ½ ΔQ̇ᵀ M ΔQ̇ = ½ m_t v_t², m_t the stick row's effective mass on the
+    motion the other rows allow. At a regular pose m_t is of the order of m (a box's mass; an arm's, scaled by its
+    leverage) and the loss ~1e-18 J per kg at the default v_ε. Where the row nearly vanishes on that motion (an arm's
+    tip through full stretch on a floor: its tangent row J_x ~ 0), m_t ~ 1/σ² and removing a slip of 1e-9 m/s stops
+    the whole arm: its slip is small because its row is, not because it came to rest."""
+    nQ, nv = system.nQ, system.nv
+    system.robot.update(x[:nv], x[nQ:nQ + nv])
+    kin = system.kinematics(c, x)
+    system.update_bodies(x)
+    M = system.mass_matrix()
+    dqd = x[nQ:2 * nQ] - x_stuck[nQ:2 * nQ]
+    removed = 0.5 * float(dqd @ M @ dqd)  # [J] (= ½ Q̇ᵀ M Q̇ − ½ Q̇⁺ᵀ M Q̇⁺, without their cancellation)
+    J = np.array([contact_row(system, c, u, kin) for u in np.eye(3)])
+    lightest = float(np.linalg.eigvalsh(J @ np.linalg.solve(M, J.T))[-1])  # [1/kg]
+    return removed * lightest > SINGULAR_STICK * 0.5 * system.slip_band ** 2
