@@ -505,7 +505,10 @@ def _new_parser(sub, fmt) -> None:
                                      "slides 10 cm. It runs as written; edit it from there.",
                          epilog="examples:\n  contactdyn new mine && contactdyn run mine\n"
                                 "  contactdyn new press_ur5 --robot ur5 --contact c --friction\n"
-                                "  contactdyn new cubic --imports cubic_stage --law cubic --friction-law stribeck")
+                                "  contactdyn new cubic --imports cubic_stage --law cubic --friction-law stribeck "
+                                "--out cubic.toml\n"
+                                "    (in the folder of your cubic_stage.py: the scene beside it; then "
+                                "contactdyn run cubic.toml)")
     new.add_argument("name", help="scene name (written to sims/NAME.toml in the working directory)")
     new.add_argument("--robot", default="writer2r", help="robot: a name in urdf/, of example-robot-data, or a path "
                                                         "(default writer2r)")

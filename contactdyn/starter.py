@@ -217,9 +217,10 @@ def _tangent(friction: bool, friction_law: str | None, t: np.ndarray) -> str:
 
 def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", friction: bool = False,
                   tip: str | None = None, law: str | None = None, friction_law: str | None = None,
-                  imports: tuple[str, ...] = ()) -> str:
+                  imports: tuple[str, ...] = (), run: str | None = None) -> str:
     """The TOML text of a starter scene (see the module docstring); ``law``, ``friction_law``: registered laws
-    (a user's from ``imports``, which the caller has imported), written with their declared parameters."""
+    (a user's from ``imports``, which the caller has imported), written with their declared parameters; ``run``:
+    what its comment says to run (default ``name``: a scene in sims/)."""
     from .robot.catalog import TOOL_FRAMES
 
     if contact not in CONTACT_MODELS:
@@ -243,7 +244,7 @@ def starter_scene(name: str, robot: str = "writer2r", contact: str = "b", fricti
     return _align(f"""\
 # {name}: a starter scene written by `contactdyn new` (robot {robot}, contact model {contact}).
 # The tip approaches a table, presses {PRESS:g} N on it, then slides {SLIDE * 100:g} cm while pressing.
-# Every key: docs/scenes.md or `contactdyn list keys`. Run: contactdyn run {name}
+# Every key: docs/scenes.md or `contactdyn list keys`. Run: contactdyn run {run or name}
 {first}name = {toml_value(name)}
 description = {toml_value(f"{robot} pressing {PRESS:g} N on a model ({contact}) table and sliding {SLIDE * 100:g} cm")}
 duration = 3.0                          # [s] simulated time
@@ -310,10 +311,10 @@ def new_command(args: argparse.Namespace) -> int:
         import_scene_modules(list(imports), str(out.resolve()))  # next to the scene to be, then sys.path
         for module in imports:
             print(f"imported {module} from {IMPORTED.get(module, '?')}")
+    run = args.name if not args.out else str(out)
     text = starter_scene(args.name, args.robot, args.contact, args.friction, args.tip, args.law,
-                         args.friction_law, imports)
+                         args.friction_law, imports, run)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, text)  # a full disk leaves no half-written scene
-    run = args.name if not args.out else str(out)
     print(f"wrote {out}; run it: contactdyn run {run}")
     return 0

@@ -18,6 +18,7 @@ from run_agreement import interpreted_evaluate
 from contactdyn import parse_scene
 from contactdyn.hybrid.pipeline_mode import PipelineMode, mode_runner
 from contactdyn.laws import abi
+from contactdyn.laws.failures import LawError
 from contactdyn.laws.friction_laws import FRICTION_LAWS, Coulomb, FrictionLaw, FrictionSpec, Stribeck
 from contactdyn.laws.stage_laws import STAGE_LAWS, HuntCrossley, Linear, StageLaw, register_stage_law
 from contactdyn.model import chain_forces as cf
@@ -269,8 +270,10 @@ def test_a_compiled_law_that_raises_raises_its_own_error_not_a_zero_force(raisin
         interpreted_evaluate(system, 0.0, x, modes, phase)
     with pytest.raises(ValueError, match="compression beyond its range"):
         interpreted.rhs(0.0, x.copy())
-    with pytest.raises(ValueError, match="compression beyond its range"):
-        compiled.rhs(0.0, x.copy())
+    with pytest.raises(LawError, match=r"t = 0 s: stage law 'raising' \(test_law_abi\.py, line \d+\) raised "
+                                       "ValueError: raising: compression beyond its range") as info:
+        compiled.rhs(0.0, x.copy())  # (the law's error, named: its exception chained)
+    assert type(info.value.__cause__) is ValueError
 
 
 def _scaled_law(scale: float) -> type[StageLaw]:

@@ -22,6 +22,7 @@ from contactdyn.errors import SimulationError
 from contactdyn.laws import Controller, Param
 from contactdyn.laws.controllers import CONTROLLERS
 from contactdyn.laws.controllers import abi as controller_abi
+from contactdyn.laws.failures import LawError
 from contactdyn.model.paths import LivePipelines
 from contactdyn.model.pipeline.pack import python_controller
 from contactdyn.model.pipeline.pipeline import Pipeline
@@ -256,38 +257,44 @@ def test_a_run_with_a_python_stage_controller_is_the_interpreted_run(scene_of, m
 
 
 def test_the_controllers_own_error_surfaces_as_on_the_interpreted_call(monkeypatch):
-    """Its exception, raised inside the compiled call, is kept and re-raised after it: the same class and message
-    as the interpreted call's, not a NaN, a status or ctypes' printout, nor counted as a call with no answer; a run
-    raises it, compiled and interpreted."""
+    """Its exception, raised inside the compiled call, is kept and raised after it as the law's error (LawError: the
+    law, its file and line, the time; the exception chained): the same as the interpreted call's, not a NaN, a status
+    or ctypes' printout, nor counted as a call with no answer; a run raises it, compiled and interpreted."""
     system, modes, phase, x0 = prepare(axis_scene(Raising.name))
     pipe = Pipeline(system, modes, phase)
     np.testing.assert_allclose(pipe.rhs(0.005, x0.copy()),
                                interpreted_evaluate(system, 0.005, x0, modes, phase).xdot, rtol=1e-12, atol=1e-12)
-    with pytest.raises(_ControllerFailed) as fast:
+    with pytest.raises(LawError) as fast:
         pipe.rhs(0.02, x0.copy())
     assert pipe.failed_calls == 0
-    with pytest.raises(_ControllerFailed) as interpreted:
+    with pytest.raises(LawError) as interpreted:
         interpreted_evaluate(system, 0.02, x0, modes, phase)
-    assert str(fast.value) == str(interpreted.value) == "the controller gave up at t > 0.01 s (gain 1.0)"
-    with pytest.raises(_ControllerFailed, match="gave up"):
+    line = Raising.command.__code__.co_firstlineno + 2
+    assert str(fast.value) == str(interpreted.value) == (
+        f"t = 0.02 s: controller 'raising_ctl_test' (test_python_controller.py, line {line}) raised _ControllerFailed: "
+        "the controller gave up at t > 0.01 s (gain 1.0)")
+    assert type(fast.value.__cause__) is _ControllerFailed
+    with pytest.raises(LawError, match="raised _ControllerFailed: the controller gave up"):
         simulate(axis_scene(Raising.name))
     monkeypatch.setattr(LivePipelines, "use", False)
-    with pytest.raises(_ControllerFailed, match="gave up"):
+    with pytest.raises(LawError, match="raised _ControllerFailed: the controller gave up"):
         simulate(axis_scene(Raising.name))
 
 
 def test_a_sampled_laws_own_error_surfaces_at_the_sample_where_it_fails(monkeypatch):
     """A law run at samples (its own stage at each sample, hybrid.sampled_law) raises its own exception there,
     compiled and interpreted; one that gives a non-finite command is named with the time of that sample."""
-    with pytest.raises(_ControllerFailed, match="gave up at t > 0.01 s"):
+    with pytest.raises(LawError, match=r"t = 0\.011 s: controller 'raising_ctl_test' .* gave up at t > 0.01 s"):
         simulate(axis_scene(Raising.name, sample_rate=1000.0))
     monkeypatch.setattr(LivePipelines, "use", False)
-    with pytest.raises(_ControllerFailed, match="gave up at t > 0.01 s"):
+    with pytest.raises(LawError, match=r"t = 0\.011 s: controller 'raising_ctl_test' .* gave up at t > 0.01 s"):
         simulate(axis_scene(Raising.name, sample_rate=1000.0))
     monkeypatch.setattr(LivePipelines, "use", True)
     monkeypatch.setattr(Raising, "command", lambda self, inp: (np.full(len(inp.q), np.nan if inp.t > 0.01 else 0.0),
                                                                None))
-    with pytest.raises(SimulationError, match=r"t = 0\.011 s: raising_ctl_test: the law gave no finite command"):
+    with pytest.raises(SimulationError, match=r"t = 0\.011 s: controller 'raising_ctl_test' "
+                                              r"\(test_python_controller\.py\) gave no finite command: τ = \[nan\] "
+                                              r"at q = \[\S+\], v = \[\S+\]"):
         simulate(axis_scene(Raising.name, sample_rate=1000.0))
 
 

@@ -14,6 +14,7 @@ from run_agreement import interpreted_evaluate
 
 from contactdyn import parse_scene, simulate
 from contactdyn.laws import abi
+from contactdyn.laws.failures import LawError
 from contactdyn.laws.friction_laws import FRICTION_LAWS, FrictionLaw, Stribeck, register_friction_law
 from contactdyn.model.paths import INTERPRETED, PIPELINE, slower_paths
 from contactdyn.model.pipeline.pipeline import Pipeline
@@ -124,13 +125,16 @@ def raising_law(stage_law_registry):
 
 
 def test_a_python_stage_that_raises_surfaces_its_own_error(raising_law):
-    """The law's ValueError, as the interpreted run raises it (the same message: the same state), not a NaN, a
-    printed traceback or a fallback."""
-    with pytest.raises(ValueError, match="raising law: compression .* past its limit") as compiled:
+    """The law's ValueError, as the interpreted run raises it (the same message: the same state and time), named
+    (LawError: the law, its file and line, the exception chained), not a NaN, a printed traceback or a fallback."""
+    said = r"t = \S+ s: stage law 'raising' \(test_python_stages\.py, line \d+\) raised ValueError: raising law: " \
+        r"compression .* past its limit"
+    with pytest.raises(LawError, match=said) as compiled:
         simulate(_fall(raising_law.name))
-    with pytest.raises(ValueError, match="raising law") as interpreted:
+    with pytest.raises(LawError, match=said) as interpreted:
         simulate(_fall(raising_law.name), compiled=False)
     assert str(compiled.value) == str(interpreted.value)
+    assert type(compiled.value.__cause__) is ValueError
     assert abi._raised == []  # re-raised once, not kept for a later call
 
 
@@ -140,7 +144,7 @@ def test_a_python_stages_error_is_raised_by_the_pipelines_own_rhs(raising_law):
     pipe = Pipeline(system, modes, phase)
     q0, x = x[0], x.copy()
     x[0] = q0 + 2e-3  # 1 mm past the surface: the stage compressed beyond the law's limit
-    with pytest.raises(ValueError, match="past its limit"):
+    with pytest.raises(LawError, match="past its limit"):
         pipe.rhs(0.0, x)
     x[0] = q0 + 1.05e-3  # compressed 0.05 mm: a force
     assert np.all(np.isfinite(pipe.rhs(0.0, x))) and pipe.failed_calls == 0

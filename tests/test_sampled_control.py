@@ -23,6 +23,7 @@ from contactdyn.laws import DRIVE_KINDS, register_drive_kind
 from contactdyn.laws.controllers import CONTROLLERS, Controller, register
 from contactdyn.laws.controllers.sampled import SampledController
 from contactdyn.laws.drive_kinds import DcMotor
+from contactdyn.laws.failures import LawError
 from contactdyn.laws.sensors import HOLDS, ForceSensor, SensorSpec
 from contactdyn.model.paths import PIPELINE
 from contactdyn.model.system import System
@@ -274,7 +275,8 @@ def test_a_voltage_laws_own_error_at_a_sample_ends_the_run_as_it_does_a_continuo
         for sampling in ({"sample_rate": RATE, "hold": "voltage"}, {}):
             doc = b1(**sampling)
             doc["robot"]["drive"] = {**MOTOR, "kind": "_test_fussy_motor"}
-            with pytest.raises(ValueError, match="no voltage for"):
+            with pytest.raises(LawError, match=r"drive kind '_test_fussy_motor' \(test_sampled_control\.py, line "
+                                               r"\d+\) raised ValueError: no voltage for"):
                 simulate(parse_scene(doc))
     finally:
         DRIVE_KINDS.pop("_test_fussy_motor")

@@ -115,3 +115,36 @@ def test_a_planar_arm_of_three_joints_gets_a_starter(tmp_path):
     arm = Robot.load(str(tmp_path / "planar3r.urdf"), tip="tip")
     q, n, t, quality = working_posture(arm, "tip")
     assert quality > 1e-2 and abs(n @ np.array([0, 1, 0])) < 1e-12 and abs(t @ np.array([0, 1, 0])) < 1e-12
+
+
+def test_the_help_example_with_imports_runs_as_printed(capsys, tmp_path):
+    """``contactdyn new --help``'s example with --imports, typed as printed in the folder of the law's module (by the
+    console script: that folder is not on sys.path), writes a scene whose printed run command finds the law (before:
+    the module was looked up beside sims/NAME.toml, and not found)."""
+    import os
+    import shlex
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    assert main(["new", "--help"]) == EXIT_OK
+    example = next(line.strip() for line in capsys.readouterr().out.splitlines() if "--imports" in line
+                   and line.strip().startswith("contactdyn new"))
+    (tmp_path / "cubic_stage.py").write_text((root / "examples" / "cubic_stage.py").read_text())
+    env = {**os.environ, "PYTHONPATH": str(root)}
+
+    def contactdyn(*args: str) -> subprocess.CompletedProcess:  # (-P: the working directory not on sys.path)
+        code = "import sys; from contactdyn.cli import main; sys.exit(main(sys.argv[1:]))"
+        return subprocess.run([sys.executable, "-P", "-c", code, *args], cwd=tmp_path, env=env, capture_output=True,
+                              text=True, timeout=300)
+
+    new = contactdyn(*shlex.split(example)[1:])
+    assert new.returncode == EXIT_OK, new.stderr
+    run = shlex.split(new.stdout.split("run it: ", 1)[1].strip())
+    load = "import sys; from contactdyn import load_scene; print(load_scene(sys.argv[1]).document['contact'])"
+    loaded = subprocess.run([sys.executable, "-P", "-c", load, run[2]], cwd=tmp_path, env=env, capture_output=True,
+                            text=True, timeout=300)
+    assert run[:2] == ["contactdyn", "run"] and loaded.returncode == 0, loaded.stderr
+    assert f"Run: contactdyn run {run[2]}\n" in (tmp_path / run[2]).read_text()  # (the scene's own comment too)
+    assert "'law': 'cubic'" in loaded.stdout

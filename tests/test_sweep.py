@@ -16,10 +16,12 @@ import pandas as pd
 import pytest
 
 import contactdyn
+import contactdyn.scene.user_laws as user_laws
 from contactdyn.cli import EXIT_FAILED, EXIT_OK, EXIT_USAGE, main
 from contactdyn.errors import SceneError, SimulationError
 from contactdyn.output.metrics import metrics
 from contactdyn.output.result import load_result
+from contactdyn.scene.scene_file import parse_scene
 from contactdyn.sweep import execute as sweep_exec
 from contactdyn.sweep import make_sweep, parse_grid, parse_range, run_id
 
@@ -93,6 +95,30 @@ def test_cases_cross_axes_and_explicit_runs(tmp_path):
     assert [c[0] for c in cases] == sorted(c[0] for c in cases)
     assert {c[1]["solver.method"] for c in cases} == {"RK45", "DOP853"}
     assert sw.parameter_keys() == ["controller.kp", "contact.tip.normal.k", "solver.method"]
+
+
+def test_a_relative_scene_path_is_stored_resolved_for_workers_elsewhere(tmp_path, monkeypatch):
+    """A worker (Dask's) runs in another working directory: the sweep keeps the scene's path resolved, so its
+    ``imports`` are found beside the scene there (before: the relative path, the module looked up from the
+    worker's directory and not found)."""
+    (tmp_path / "proj").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "proj" / "beside_sweep_scene.py").write_text("LOADED = True\n")
+    text = (ROOT / "sims" / "b1.toml").read_text()
+    (tmp_path / "proj" / "scene.toml").write_text(f'imports = ["beside_sweep_scene"]\n{text}')
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(tmp_path))])
+    monkeypatch.setattr(user_laws, "_state", {"allowed": True, "entry_points": True})
+    monkeypatch.setattr(user_laws, "IMPORTED", {})
+    sweep = make_sweep("proj/scene.toml", grids=["controller.kp=1000.0,2000.0"])
+    assert sweep.file == str(tmp_path / "proj" / "scene.toml")
+    monkeypatch.chdir(tmp_path / "elsewhere")  # a worker's directory
+    try:
+        for _, _, overrides in sweep.cases():
+            parse_scene(sweep.document, overrides, sweep.file)  # as run_chunk's worker does
+        assert sys.modules["beside_sweep_scene"].__file__ == str(tmp_path / "proj" / "beside_sweep_scene.py")
+    finally:
+        sys.modules.pop("beside_sweep_scene", None)
 
 
 @pytest.mark.parametrize("text, words", [

@@ -39,12 +39,14 @@ from typing import Any
 import numpy as np
 
 from ..errors import SceneError, SimulationError, numerical_errors
+from ..laws.failures import LawError, law_error
 from ..laws.trajectory import min_span
 from ..model.constraints import kkt_condition
 from ..model.contact import ContactMode
 from ..model.limits import rate_limit_report
 from ..model.paths import LivePipelines, PathLog, mode_label
 from ..model.phases import Phase
+from ..model.pipeline.pipeline import call_time
 from ..model.system import System
 from ..numerics.integrators import (
     AUTO_EXPLICIT,
@@ -161,13 +163,11 @@ class HybridRun:
         try:
             with running(self.pipelines.twins):  # (interpreted: the model's helpers the loop calls too, twins.current)
                 return self._run(wall0)
-        except OverBudget:  # (Work.count stopped counting: the report's own calls are free)
-            raise SimulationError(_over_budget(self, *_spent_at(self), calls=True)) from None
-        except (*numerical_errors(), ZeroDivisionError) as exc:
-            t = self.segments[-1].t1 if self.segments else 0.0
-            raise SimulationError(f"{self.scene.name}: numerical failure after t = {t:.9g} s "
-                                  f"({type(exc).__name__}: {exc}); check the scene's magnitudes "
-                                  "(initial velocities, gains, stiffness)") from None
+        except Exception as exc:  # a user's law that raised (where no failed call re-raised it), a blow-up, the budget
+            error = _failure(self, exc)
+            if error is exc:
+                raise
+            raise error from (exc if isinstance(error, LawError) else None)
         finally:
             gc.unfreeze()
 
@@ -403,6 +403,34 @@ def _runner(run: HybridRun, modes: list[ContactMode], phase: Phase, start: bool 
     if start:
         run.paths.record(run.system, modes, phase, mode)
     return mode
+
+
+def _failure(run: HybridRun, exc: Exception) -> Exception:
+    """What a run that raised ``exc`` reports: a user's law's own error (its LawError, at the time of the interpreted
+    call it raised in); the calls' budget spent (OverBudget) or a blow-up numpy noticed as a SimulationError saying
+    when; a SimulationError as it is, or as the LawError of a law that returned NaN or ±inf in the failing segment
+    (:func:`_non_finite`); else ``exc`` itself."""
+    error = law_error(exc, call_time(exc))
+    if error is not None or isinstance(exc, LawError):
+        return error or exc
+    t = run.segments[-1].t1 if run.segments else 0.0
+    if isinstance(exc, OverBudget):  # (Work.count stopped counting: the report's own calls are free)
+        exc = SimulationError(_over_budget(run, *_spent_at(run), calls=True))
+    elif isinstance(exc, (*numerical_errors(), ZeroDivisionError)):
+        exc = SimulationError(f"{run.scene.name}: numerical failure after t = {t:.9g} s ({type(exc).__name__}: "
+                              f"{exc}); check the scene's magnitudes (initial velocities, gains, stiffness)")
+    return (_non_finite(run, t, exc) or exc) if isinstance(exc, SimulationError) else exc
+
+
+def _non_finite(run: HybridRun, since: float, exc: SimulationError) -> LawError | None:
+    """The LawError of a law that returned NaN or ±inf in the latest call with no answer at or after ``since`` [s]
+    (the failing segment's start; its pipeline's ``non_finite``), with what the run then said (``exc``); None if no
+    law did."""
+    pipes = [m.pipe for m in run.pipelines.pipes.values() if getattr(m, "pipe", None) is not None]
+    pipes = [p for p in pipes if p.last_failed is not None and p.last_failed[0] >= since]
+    n = max(pipes, key=lambda p: p.last_failed[0]).non_finite() if pipes else None
+    return None if n is None else LawError(n.kind, n.name, n.file, f"{n.what}; the run then stopped: {exc}", n.line,
+                                           n.t)
 
 
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:

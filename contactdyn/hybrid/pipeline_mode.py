@@ -234,7 +234,7 @@ class PipelineMode:
         p = self.pipe.packed
         Xd, E, W, done = self.pipe.of(samples_at)(np.array([float(t)]), X, p.ints, p.reals, p.work, p.events)
         if done == 0:
-            self.pipe.failed_call(t, X[0])
+            self.pipe.failed_call(t, X[0], final=True)
             raise SimulationError(f"t = {t:.6g} s: the model has no finite answer at this state (its contact "
                                   "system is not finite there)")
         return Xd, E, W

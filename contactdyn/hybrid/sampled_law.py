@@ -17,10 +17,11 @@ import numpy as np
 
 from ..errors import SimulationError
 from ..laws.abi import raise_python_stage_error
+from ..laws.failures import naming_laws, no_command_error
 from ..laws.sensors import quantise
 from ..model.evaluation import measures
 from ..model.pipeline.actuation import held_voltages
-from ..model.pipeline.pack import EV_FN, EV_W, W_DIAG
+from ..model.pipeline.pack import EV_FN, EV_W, NQ, W_DIAG
 from ..model.pipeline.pipeline import Pipeline, law_at
 from ..numerics.twins import Twins
 
@@ -96,12 +97,12 @@ class SampledLaw:
         "voltage"`` τ turned into the motors' voltages [V] at the measured speeds (:func:`held_voltages`)."""
         tau, zdot, finite = self._stage(self.pipe, reading, z)
         if not finite:
-            self._failed(reading, z)
+            self._failed(reading, z, tau)
         if self.holds_voltage:
             p = self.pipe.packed
             u = self.pipe.of(held_voltages)(reading.x, p.ints, p.reals, np.ascontiguousarray(tau, dtype=float))
             if not np.isfinite(u).all():
-                raise_python_stage_error()  # a drive kind's declared Python stage's own error
+                raise_python_stage_error(reading.t)  # a drive kind's declared Python stage's own error
                 raise SimulationError(f"t = {reading.t:.6g} s: a motor's voltage law gave no finite voltage for the "
                                       f"held command τ = {np.asarray(tau).tolist()} (hold = \"voltage\")")
             return u, zdot
@@ -121,11 +122,15 @@ class SampledLaw:
             tau, zdot = tau + bq * reading.carrier_acc, zdot + dq * reading.carrier_acc
         return tau, zdot, finite
 
-    def _failed(self, reading: Reading, z: np.ndarray) -> None:
-        """Raise the law's own error at ``reading``: a declared Python stage's, a compiled law's (the same stage run
-        interpreted raises it from the law's source), else the controller's words (its command not finite)."""
-        raise_python_stage_error()
+    def _failed(self, reading: Reading, z: np.ndarray, tau: np.ndarray) -> None:
+        """Raise the law's own error at ``reading`` (a user's law's as its LawError): a declared Python stage's, a
+        compiled law's (the same stage run interpreted raises it from the law's source), else the controller's words
+        (its command τ not finite)."""
+        raise_python_stage_error(reading.t)
         pipe = self.pipe
         if pipe.twins is None:
-            self._stage(Pipeline(pipe.system, pipe.modes, pipe.phase, Twins(), law_only=True), reading, z)
-        raise SimulationError(self.controller.failure(reading.t))
+            with naming_laws(reading.t):
+                self._stage(Pipeline(pipe.system, pipe.modes, pipe.phase, Twins(), law_only=True), reading, z)
+            raise_python_stage_error(reading.t)  # (its law a Python stage there: its exception kept)
+        nv, nQ = pipe.system.nv, pipe.packed.ints[NQ]
+        raise no_command_error(self.controller, tau, reading.x[:nv], reading.x[nQ:nQ + nv], reading.t)

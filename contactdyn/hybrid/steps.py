@@ -5,8 +5,9 @@ scipy core's layout; :func:`contactdyn.numerics.dop853.solve` keeps ``solve_ivp`
 
 With the scipy core each stage crosses from the core into Python and from Python into the compiled call (~2 µs of a
 ~6 µs call); here a whole step is one crossing. A stage whose call declines (a KKT system with a non-finite entry, a
-law that gave no force) ends the attempt: the driver takes that step by the mode's Python right-hand side instead; a
-singular KKT matrix does not (the call solves it by least squares and counts it, ``Pipeline.least_squares``).
+law that gave no force or raised) ends the attempt: the driver takes that step by the mode's Python right-hand side
+instead (a law's error is raised there, at its own call's time); a singular KKT matrix does not (the call solves it
+by least squares and counts it, ``Pipeline.least_squares``).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numba import types
 
-from ..laws.abi import raise_python_stage_error
+from ..laws.abi import drop_python_stage_error
 from ..model.pipeline.pack import A_CALL, NX
 from ..model.pipeline.pipeline import rates_at
 from ..numerics import dop853_tableau as _coef
@@ -144,8 +145,8 @@ def interpolant_builder(packed):
 
     def one(t, h, y, f, block):
         status, F = interpolant(ints, reals, work, events, t, h, y, f, block, _A16, _C16, _D16)
-        if status:
-            raise_python_stage_error()  # a Python stage's own error
+        if status:  # (a Python stage's error: raised by the Python calls' repeat, at its call's time)
+            drop_python_stage_error()
             return None
         return F
 
@@ -167,8 +168,8 @@ def stepper(packed, ring, on_stage=None, on_stages=None):
         y_new, block = np.empty(y.size), np.empty((10, y.size))  # (block's row 3 is not read)
         status, err = attempt(ints, reals, work, events, t, y, f, h, rtol, atol, _A, _B, _C, _E, y_new, block,
                               Ys, Es)
-        if status:
-            raise_python_stage_error()  # a Python stage's own error
+        if status:  # (a Python stage's error: raised by the Python calls' repeat, at its call's time)
+            drop_python_stage_error()
             return None
         if on_stages is not None:
             on_stages(lambda: t + _STAGE_C * h, Ys[1:], Es[1:])

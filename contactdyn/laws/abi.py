@@ -18,9 +18,11 @@ runs it as a declared Python stage: a C function of the same signature made by `
 (:func:`python_stage_address`, :func:`python_friction_address`), its address where the cfunc's would be; the
 compiled code calls back into Python for that law only (it holds the GIL). A Python stage's exception is kept
 (:func:`python_stage_failed`), its call gives NaN (the call's status then -1), and :func:`raise_python_stage_error`
-re-raises it where the caller reads that status: the user sees the law's own error. The calls have a plain-Python
-twin: under ``NUMBA_DISABLE_JIT=1`` nothing is compiled, an address is a handle of the law's Python function, and
-the same calling code runs interpreted.
+raises it where the caller reads that status, as the law's :class:`~.failures.LawError` (its name, file and line, the
+exception chained): the user sees the law's own error. The calls have a plain-Python twin: under
+``NUMBA_DISABLE_JIT=1`` nothing is compiled, an address is a handle of the law's Python function, and the same
+calling code runs interpreted; :func:`checking_laws` checks the twins' results while a call with no answer runs
+again to name a law that returned NaN or ±inf (nothing is checked otherwise).
 
 Caching: the compiled law is cached on disk by numba (``cache=True``). A cfunc made in a factory as a closure
 is not (numba keys a closure's cache on its pickled cells, and a dispatcher pickles with a new id in every
@@ -37,6 +39,7 @@ import inspect
 import math
 import os
 import re
+from contextlib import contextmanager
 
 from llvmlite import ir
 from numba import carray, types
@@ -44,11 +47,12 @@ from numba.extending import intrinsic, overload
 
 from ..numerics.compile_cache import cfunc, njit
 from ..numerics.native_call import handles
-from .friction_laws import FrictionLaw
+from .failures import law_error
+from .friction_laws import FRICTION_LAWS, FrictionLaw
 
 __all__ = ["STAGE_SIGNATURE", "FRICTION_SIGNATURE", "stage_address", "friction_address", "call_stage",
            "call_friction", "compile_wrapper", "python_stage_address", "python_friction_address",
-           "python_stage_failed", "raise_python_stage_error"]
+           "python_stage_failed", "raise_python_stage_error", "drop_python_stage_error", "checking_laws"]
 
 _P = types.CPointer(types.float64)
 #: double force(double k, double b, double* p, int64 n_p, double x, double xdot)
@@ -69,6 +73,7 @@ _SIGNATURES = {"stage": STAGE_SIGNATURE, "friction": FRICTION_SIGNATURE}
 #: (law class, handles()) -> (address, its cfunc, kept alive while it is used, the compiled_reason)
 _compiled: dict[tuple, tuple[int, object, str]] = {}
 _python: dict[int, object] = {}  #: address -> the law's Python function (the calls' plain-Python twin)
+_laws: dict[int, tuple[str, type]] = {}  #: address -> (family, law class) of the functions in _python
 
 
 def stage_address(law: type) -> int:
@@ -100,7 +105,7 @@ def _address(law: type, family: str, fn) -> int:
     law.compiled_reason = reason
     _compiled[key] = (address, cfunc, reason)
     if address:
-        _python[address] = fn
+        _python[address], _laws[address] = fn, (family, law)
     return address
 
 
@@ -114,21 +119,33 @@ _FRICTION_CTYPE = ctypes.CFUNCTYPE(ctypes.c_double, ctypes.c_double, ctypes.c_do
 #: law class (stage) or FrictionSpec (friction) -> (address, its ctypes callback): kept alive for the process, as
 #: the cfuncs are (a packed mode holds the address only)
 _callbacks: dict[object, tuple[int, object]] = {}
-_raised: list[BaseException] = []  #: the exception a Python stage raised in a compiled call, until re-raised
+#: (the exception a Python stage raised in a compiled call, (kind, class) of the law it called), until re-raised
+_raised: list[tuple[BaseException, tuple | None]] = []
 
 
-def python_stage_failed(exc: BaseException) -> None:
-    """Keep ``exc`` (raised by a Python stage inside a compiled call) for :func:`raise_python_stage_error`."""
-    _raised.append(exc)
+def python_stage_failed(exc: BaseException, law: tuple[str, type] | None = None) -> None:
+    """Keep ``exc`` (raised by a Python stage inside a compiled call; ``law``: (its kind, its class), the law the
+    stage called) for :func:`raise_python_stage_error`."""
+    _raised.append((exc, law))
 
 
-def raise_python_stage_error() -> None:
-    """Re-raise the first exception a Python stage raised since the last such call (the caller read a status that
-    is not 1); nothing when none did."""
+def raise_python_stage_error(t: float | None = None) -> None:
+    """Raise the first exception a Python stage raised since the last such call (the caller read a status that is
+    not 1; t [s] the call's time, if one call's): a user's law's as its LawError, chained to it; nothing when none
+    did."""
     if _raised:
-        exc = _raised[0]
+        exc, law = _raised[0]
         _raised.clear()
-        raise exc
+        error = law_error(exc, t, law)
+        if error is None:
+            raise exc
+        raise error from exc
+
+
+def drop_python_stage_error() -> None:
+    """Forget the exceptions Python stages raised since the last such call (a compiled step that declines: the
+    Python right-hand side repeats its calls, and raises it at its own call's time)."""
+    _raised.clear()
 
 
 def python_stage_address(law: type) -> int:
@@ -142,7 +159,7 @@ def python_stage_address(law: type) -> int:
         try:
             return float(law.force(k, b, tuple(p[:n_p]), x, xdot))
         except BaseException as exc:  # (ctypes would print it and return 0)
-            python_stage_failed(exc)
+            python_stage_failed(exc, ("stage law", law))
             return math.nan
 
     return _keep(law, _STAGE_CTYPE(force))
@@ -159,16 +176,51 @@ def python_friction_address(spec) -> int:
         try:
             return float(spec.mu(speed))
         except BaseException as exc:
-            python_stage_failed(exc)
+            python_stage_failed(exc, ("friction law", FRICTION_LAWS.get(spec.law, FrictionLaw)))
             return math.nan
 
     if handles():  # the twin's call: (mu_s, mu_k, p[at:at + n_p], speed)
         def twin(mu_s, mu_k, p, speed):
             return float(spec.mu(speed))
-        _python[id(twin)] = twin
+        _python[id(twin)], _laws[id(twin)] = twin, ("friction", FRICTION_LAWS[spec.law])
         _callbacks[spec, True] = (id(twin), twin)
         return id(twin)
     return _keep((spec, False), _FRICTION_CTYPE(mu))
+
+
+@contextmanager
+def checking_laws():
+    """Inside: each law's plain-Python call (:func:`call_stage`'s and :func:`call_friction`'s twins) checked, the
+    first non-finite result kept in the list given, as (family, law class, the call's arguments, its result): the
+    laws of a call with no answer, run again interpreted (nothing is checked outside)."""
+    notes: list[tuple] = []
+    saved = dict(_python)
+    for address, fn in saved.items():
+        if address in _laws:
+            _python[address] = _checked(fn, *_laws[address], notes)
+    try:
+        yield notes
+    finally:
+        _python.update(saved)
+
+
+def _checked(fn, family: str, law: type, notes: list):
+    """``fn`` noting in ``notes`` its first non-finite result from finite arguments (with a copy of them)."""
+    def checked(*args):
+        value = fn(*args)
+        if not notes and _finite([value]) is False and _finite(args):
+            notes.append((family, law, tuple(list(map(float, a)) if hasattr(a, "__len__") else a for a in args),
+                          value))
+        return value
+    return checked
+
+
+def _finite(values) -> bool | None:
+    """Every number among ``values`` (numbers, or sequences of numbers) finite; None where one is not a number."""
+    try:
+        return all(math.isfinite(v) for a in values for v in (a if hasattr(a, "__len__") else (a,)))
+    except (TypeError, ValueError):  # (not a number: the call's own code says so)
+        return None
 
 
 def _keep(key, callback) -> int:

@@ -147,7 +147,7 @@ def python_drive_addresses(spec: DriveSpec) -> tuple[int, int]:
         try:
             return float(kind.voltage(spec, tau, qd, omega))
         except BaseException as exc:  # (ctypes would print it and return 0)
-            python_stage_failed(exc)
+            python_stage_failed(exc, ("drive kind", kind))
             return math.nan
 
     def force(p, n_p, command, q, qd, theta, omega, out):
@@ -155,7 +155,7 @@ def python_drive_addresses(spec: DriveSpec) -> tuple[int, int]:
             out[0], out[1], out[2], out[3] = kind.force(spec, command, q, qd, theta, omega)
             return 1
         except BaseException as exc:
-            python_stage_failed(exc)
+            python_stage_failed(exc, ("drive kind", kind))
             return 0
 
     kept = (_VOLTAGE_CTYPE(voltage), _FORCE_CTYPE(force))

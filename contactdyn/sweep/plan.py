@@ -188,7 +188,7 @@ def make_sweep(scene: str | Path | None, sets: Iterable[str] = (), grids: Iterab
             raise SceneError(option, f"each key once among --grid and --range ({key} is given twice)", key)
         seen.add(key)
     axes.update(dict(axis for axis, _ in given))
-    path = find_scene(scene)
+    path = find_scene(scene).resolve()  # the workers' working directory may differ (Dask): its imports, its URDF
     document = read_toml(path)
     return Sweep(document, str(path), fixed, axes, runs)
 

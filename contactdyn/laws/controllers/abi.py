@@ -394,7 +394,7 @@ def python_controller_address(ctl: Controller, keys: InputKeys) -> int:
                 _c_array(zdot, ctypes.c_double, nz)[:] = 0.0 if rates is None else rates
             return 1
         except BaseException as exc:  # (ctypes would print it and return 0)
-            python_stage_failed(exc)
+            python_stage_failed(exc, ("controller", type(ctl)))
             return 0
 
     callback = _CONTROLLER_CTYPE(command)

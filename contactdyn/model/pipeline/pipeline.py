@@ -14,21 +14,25 @@ a scene kind's first run, :mod:`contactdyn.first_run`).
 [N], slip velocities [m/s], friction or stick forces [N], limit torques [N·m or N]). A singular KKT matrix
 (redundant rows, consistent or not) is solved in the call by the minimum-norm least squares
 (:func:`.kkt.solve_linear`), and counted (``Pipeline.least_squares``: ``Result.stats["singular_solves"]``). A call
-with no answer (:meth:`Pipeline.failed_call`) raises a law's own error where a law failed: a declared Python stage's
-(one numba cannot compile, called back through ctypes: :mod:`contactdyn.laws.abi`) exception, the controller's
-words where its command was not finite (an operational task singular there); else (a KKT system with a non-finite
-entry, status 0: an overflowed trial state) its rates are NaN, which the step control rejects, and it is counted.
+with no answer (:meth:`Pipeline.failed_call`) raises a law's own error where a law failed, a user's law's as its
+:class:`~contactdyn.laws.failures.LawError` (its name, file and line): a declared Python stage's (one numba cannot
+compile, called back through ctypes: :mod:`contactdyn.laws.abi`) exception, a compiled law's (the call run again
+interpreted), the controller's words where its command was not finite (an operational task singular there); else (a
+KKT system with a non-finite entry, status 0: an overflowed trial state) its rates are NaN, which the step control
+rejects, and it is counted; a law that returned NaN or ±inf there is named (``Pipeline.non_finite``).
 """
 
 from __future__ import annotations
 
+import traceback
 from contextlib import nullcontext
 
 import numpy as np
 from numba import types
 
 from ...errors import SimulationError
-from ...laws.abi import raise_python_stage_error
+from ...laws.abi import checking_laws, raise_python_stage_error
+from ...laws.failures import LawError, is_users, naming_laws, no_command_error, non_finite_error
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
 from ...numerics.native_call import address, call_at, declare, giving_handles
@@ -107,7 +111,7 @@ from .pack import (
 )
 from .robot_terms import frame_terms, robot_part, robot_terms
 
-__all__ = ["call", "rates_at", "samples_at", "law_at", "stage_addresses", "Pipeline"]
+__all__ = ["call", "rates_at", "samples_at", "law_at", "stage_addresses", "call_time", "Pipeline"]
 
 
 @njit(cache=True)
@@ -325,6 +329,13 @@ def _address_of(name: str, function, signature) -> int:
     return address(own)
 
 
+def call_time(exc: BaseException) -> float | None:
+    """t [s] of the innermost :func:`call` in ``exc``'s traceback (an interpreted call, where a law raised), or None."""
+    code = getattr(call, "py_func", call).__code__
+    times = [frame.f_locals.get("t") for frame, _ in traceback.walk_tb(exc.__traceback__) if frame.f_code is code]
+    return float(times[-1]) if times and times[-1] is not None else None
+
+
 class Pipeline:
     """One mode packed and its call: ``rhs(t, x)`` the integrator's function, ``values()`` the last call's events.
     ``twins`` (:class:`~contactdyn.numerics.twins.Twins`): the call runs interpreted, as its twins (the mode packed
@@ -344,6 +355,10 @@ class Pipeline:
             #: the laws run as declared Python stages (numba cannot compile them), with numba's reasons
             self.python_stages = [] if twins is not None else python_stages(system, modes, phase)
         self.failed_calls = 0  #: calls with no answer (a KKT system that is not finite): NaN rates, steps rejected
+        #: (t [s], x) of the last call with no answer from a finite state in which a law gave NaN (status -1), or None:
+        #: a run that fails names the law there (:meth:`non_finite`)
+        self.last_failed: tuple[float, np.ndarray] | None = None
+        self._twin: Pipeline | None = None  #: this mode packed for the call interpreted (:meth:`_probe`), once made
         self._call = self.of(call)
 
     def of(self, function):
@@ -370,33 +385,61 @@ class Pipeline:
         xdot = self._call(float(t), x, p.ints, p.reals, p.work, p.events)
         return xdot if p.events[-1] == 1.0 else self.failed_call(t, x)
 
-    def failed_call(self, t: float, x: np.ndarray) -> np.ndarray:
-        """ẋ where the call at (t [s], x) gave no answer (its status not 1): a law's own error is raised there (a
-        Python stage's; a compiled law's, which its cfunc cannot carry out (status -1): the same call run once
-        interpreted at (t, x) raises it from the law's source; the controller's where its command was not finite,
-        :meth:`controller_failed`); else the contact system was not finite (an overflowed trial state): NaN rates,
-        which the step control rejects."""
-        raise_python_stage_error()
-        if self.packed.events[-1] < 0.0 and self.twins is None:
-            Pipeline(self.system, self.modes, self.phase, Twins()).rhs(t, np.array(x, float))
-        why = self.controller_failed(t, x)
-        if why:
-            raise SimulationError(why)
+    def failed_call(self, t: float, x: np.ndarray, final: bool = False) -> np.ndarray:
+        """ẋ where the call at (t [s], x) gave no answer (its status not 1). A law's own error is raised there (a
+        user's law's as its LawError): a Python stage's; a compiled law's, which its C function cannot carry out
+        (status -1; a user's controller with no finite command): the same call run once interpreted at (t, x) raises
+        it from the law's source (:meth:`_probe`); the controller's words where its command was not finite
+        (:meth:`controller_error`). Else the contact system was not finite (an overflowed trial state, a law's NaN):
+        NaN rates, which the step control rejects; a law that returned NaN or ±inf there is named where the caller
+        cannot go on (``final``), else the state is kept (``last_failed``: a run that fails names it)."""
+        raise_python_stage_error(t)
+        failed = self.controller_error(t, x)
+        status = self.packed.events[-1]
+        if status < 0.0 and np.all(np.isfinite(x)):
+            self.last_failed = (float(t), np.array(x, float))
+        users = failed is not None and is_users(type(self.phase.controller))
+        if (status < 0.0 or users) and self.twins is None or status < 0.0 and final:
+            found = self._probe(t, x, final)
+            if found is not None and failed is None:
+                raise found
+        if failed is not None:
+            raise failed
         self.failed_calls += 1
         return np.full(np.size(x), np.nan)
 
-    def controller_failed(self, t: float, x: np.ndarray) -> str:
+    def non_finite(self) -> LawError | None:
+        """The LawError of a law that returned NaN or ±inf in the last call with no answer from a finite state
+        (``last_failed``, run again interpreted: :meth:`_probe`), else None."""
+        return None if self.last_failed is None else self._probe(*self.last_failed, check=True)
+
+    def _probe(self, t: float, x: np.ndarray, check: bool = False) -> LawError | None:
+        """The call at (t [s], x) once more interpreted: a law's exception raised as its LawError; ``check``: the
+        laws' results checked, the LawError of the first law that returned NaN or ±inf from finite inputs (else
+        None)."""
+        if self._twin is None:
+            self._twin = Pipeline(self.system, self.modes, self.phase, Twins())
+        probe = self._twin
+        probe.use(self.modes)  # (a turn's reference directions)
+        p = probe.packed
+        with checking_laws() if check else nullcontext([]) as notes, naming_laws(t):
+            probe._call(float(t), np.array(x, float), p.ints, p.reals, p.work, p.events)
+        raise_python_stage_error(t)  # (its controller a Python stage there: its exception kept)
+        return non_finite_error(*notes[0], t) if notes else None
+
+    def controller_error(self, t: float, x: np.ndarray) -> SimulationError | None:
         """The phase's controller's own words where its command at (t [s], x) is not finite (the call with its
-        diagnostics on: an operational task singular there), else ""."""
+        diagnostics on: an operational task singular there; a user's law: its τ and the joints' q, v), else None."""
         p = self.packed
         p.work[p.ints[W_DIAG]] = 1.0
         try:
             self._call(float(t), np.array(x, float), p.ints, p.reals, p.work, p.events)
         finally:
             p.work[p.ints[W_DIAG]] = 0.0
-        at = self.of(diag_starts)(p.ints)[D_CMD]
-        finite = bool(np.all(np.isfinite(p.work[at:at + self.system.nv])))
-        return "" if finite else self.phase.controller.failure(t)
+        at, nv, nQ = self.of(diag_starts)(p.ints)[D_CMD], self.system.nv, p.ints[NQ]
+        tau = p.work[at:at + nv]
+        return None if np.all(np.isfinite(tau)) else no_command_error(self.phase.controller, tau, x[:nv],
+                                                                       x[nQ:nQ + nv], t)
 
     def values(self) -> dict[str, object]:
         """The last call's event values by name: per contact gap [m], F_n [N], v_t [m/s], F_f [N]; limit torques,

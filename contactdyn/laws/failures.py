@@ -1,0 +1,140 @@
+"""A researcher's law that fails inside a run: one error naming it (:class:`LawError`).
+
+A law of a scene's ``imports`` (a controller, a stage law, a friction law, a drive kind) runs inside the model's
+call: compiled (an exception cannot leave its C function: the call runs again interpreted, where the law raises it
+again: ``Pipeline.failed_call``), as a declared Python stage (its exception kept and re-raised after the call:
+:mod:`.abi`) or interpreted. Wherever the exception surfaces, :func:`law_error` finds the law in its traceback (the
+innermost frame of a registered law's own code, a law defined outside this package: the package's own laws raising
+is a bug of ours, left as it is) and gives a :class:`LawError`: the law's kind and name, its file and line (the
+traceback's innermost line in the law's file), the exception's type and message and the simulated time when known;
+the exception is its ``__cause__``. A law that returned NaN or ±inf is found by the call run again interpreted with
+its laws' results checked (:func:`.abi.checking_laws`) and named with what it returned and at what inputs
+(:func:`non_finite_error`).
+"""
+
+from __future__ import annotations
+
+import sys
+import traceback
+from contextlib import contextmanager
+from pathlib import Path
+
+from ..errors import ContactdynError, SimulationError
+
+__all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file"]
+
+PACKAGE = __name__.split(".")[0] + "."  #: "contactdyn.": the package's own laws are not a user's
+
+
+class LawError(SimulationError):
+    """A user's law failed in a run: ``t = 0.0202 s: controller 'myctl' (ctlmod.py, line 13) raised ValueError:
+    my controller gave up``. ``kind`` (controller, stage law, friction law, drive kind), ``name``, ``file`` (its
+    path), ``what`` it did, ``line`` (None: not known), ``t`` [s] (None: not known)."""
+
+    def __init__(self, kind: str, name: str, file: str, what: str, line: int | None = None, t: float | None = None):
+        self.kind, self.name, self.file, self.what, self.line, self.t = kind, name, file, what, line, t
+        when = f"t = {t:.6g} s: " if t is not None else ""
+        where = Path(file).name + (f", line {line}" if line else "")
+        super().__init__(f"{when}{kind} {name!r} ({where}) {what}")
+
+
+def is_users(cls: type) -> bool:
+    """A class defined outside this package (a researcher's law, or a test's)."""
+    module = getattr(cls, "__module__", None) or ""
+    return module != "builtins" and not module.startswith(PACKAGE)
+
+
+def law_file(cls: type) -> str:
+    """The file that defines law class ``cls`` (its module's name where it has none)."""
+    return getattr(sys.modules.get(cls.__module__), "__file__", None) or cls.__module__
+
+
+def law_error(exc: BaseException, t: float | None = None, law: tuple[str, type] | None = None) -> LawError | None:
+    """The LawError of ``exc`` where it was raised inside a user's law's code (its traceback says), at t [s], or in
+    calling ``law`` ((kind, class) of a user's law the caller called: a wrong signature, a result that does not
+    unpack); else None (the package's own errors, which say what failed, and an error not a law's: left as they
+    are)."""
+    if isinstance(exc, ContactdynError) or not isinstance(exc, Exception):
+        return None
+    codes = _law_codes()
+    frames = [(frame.f_code, line) for frame, line in traceback.walk_tb(exc.__traceback__)]
+    inner = [i for i, (code, _) in enumerate(frames) if code in codes]
+    what = f"raised {type(exc).__name__}" + (f": {exc}" if str(exc) else "")
+    if not inner:
+        return LawError(law[0], law[1].name, law_file(law[1]), what, None, t) if law and is_users(law[1]) else None
+    code = frames[inner[-1]][0]
+    kind, cls = codes[code]
+    line = [n for c, n in frames[inner[-1]:] if c.co_filename == code.co_filename][-1]  # (a helper in its file)
+    return LawError(kind, cls.name, code.co_filename, what, line, t)
+
+
+@contextmanager
+def naming_laws(t: float | None = None):
+    """Inside: an exception raised by a user's law leaves as its LawError (at t [s]), chained to it."""
+    try:
+        yield
+    except Exception as exc:
+        error = law_error(exc, t)
+        if error is None:
+            raise
+        raise error from exc
+
+
+def non_finite_error(family: str, law: type, args: tuple, value, t: float | None = None) -> LawError:
+    """The LawError of a law of ``family`` ("stage", "friction") that returned the non-finite ``value`` on
+    ``args`` (its Python call's: :func:`.abi.call_stage`'s, :func:`.abi.call_friction`'s)."""
+    if family == "stage":
+        k, b, p, x, xdot = args
+        what = (f"returned F = {value} N at x = {x:.6g} m, ẋ = {xdot:.6g} m/s (k = {k:.6g} N/m, b = {b:.6g} N·s/m"
+                f"{_params(law, p)})")
+        return LawError("stage law", law.name, law_file(law), what, None, t)
+    mu_s, mu_k, p, speed = args
+    what = f"returned μ = {value} at slip speed {speed:.6g} m/s (mu_s = {mu_s:.6g}, mu_k = {mu_k:.6g}{_params(law, p)})"
+    return LawError("friction law", law.name, law_file(law), what, None, t)
+
+
+def no_command_error(ctl, tau, q, v, t: float) -> SimulationError:
+    """The error of controller ``ctl`` whose command τ at t [s] is not finite: its own words (``failure``: the
+    package's laws', a user's law's own), else its LawError with τ [N·m, N or V] at the joints' q and v."""
+    from .controllers.base import Controller
+
+    if not is_users(type(ctl)) or type(ctl).failure is not Controller.failure:
+        return SimulationError(ctl.failure(t))
+    return LawError("controller", ctl.name, law_file(type(ctl)), f"gave no finite command: τ = {_listed(tau)} at "
+                    f"q = {_listed(q)}, v = {_listed(v)}", None, t)
+
+
+def _listed(values) -> str:
+    """Numbers as a short list: [0.1, nan]."""
+    return "[" + ", ".join(f"{float(v):.6g}" for v in values) + "]"
+
+
+def _params(law: type, p) -> str:
+    """", name = value" per declared parameter of ``law`` (its values ``p``)."""
+    return "".join(f", {param.name} = {float(v):.6g}" for param, v in zip(law.params, p, strict=False))
+
+
+def _law_codes() -> dict:
+    """code object -> (kind, law class) of every function of the registered users' laws (their own bases' too)."""
+    from .controllers.base import CONTROLLERS
+    from .drive_kinds import DRIVE_KINDS
+    from .friction_laws import FRICTION_LAWS
+    from .stage_laws import STAGE_LAWS
+
+    out: dict = {}
+    for kind, registry in (("controller", CONTROLLERS), ("stage law", STAGE_LAWS), ("friction law", FRICTION_LAWS),
+                           ("drive kind", DRIVE_KINDS)):
+        for cls in filter(is_users, registry.values()):
+            for base in filter(is_users, cls.__mro__):
+                for value in vars(base).values():
+                    code = _code(value)
+                    if code is not None:
+                        out.setdefault(code, (kind, cls))
+    return out
+
+
+def _code(value):
+    """The code object of a class attribute that is a function (a static or class method, a property's getter, a
+    numba dispatcher's Python function), else None."""
+    fn = value.fget if isinstance(value, property) else getattr(value, "__func__", value)
+    return getattr(getattr(fn, "py_func", fn), "__code__", None)

@@ -1,0 +1,249 @@
+"""A user's law that fails in a run gives one error naming it (contactdyn.laws.failures.LawError): its kind, name,
+file and line, its own exception (chained, for API users) or the non-finite value it returned and its inputs, and
+the simulated time; the command line prints it as one line (``--json``: its record), a sweep records it in the
+failed run's row. Compiled, as a declared Python stage (numba cannot compile it) and interpreted."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import sys
+import tomllib
+import warnings
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from contactdyn import parse_scene, simulate
+from contactdyn.cli import EXIT_FAILED, main
+from contactdyn.laws.failures import LawError
+from contactdyn.laws.friction_laws import FrictionLaw, register_friction_law
+from contactdyn.laws.stage_laws import StageLaw, register_stage_law
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: a user's impedance controller (examples/my_laws.py's) that fails past t = 0.02 s; {uncompilable}: a Python dict
+#: read in its command (numba cannot compile it: a declared Python stage)
+CONTROLLER = '''import math
+
+import numpy as np
+
+from contactdyn.laws import Controller, Param, register
+
+_GAIN = {{"k": 1.0}}
+
+
+@register
+class Failing(Controller):
+    name = "{name}"
+    needs_gravity = True
+    params = (Param("stiffness", "N/m", "K", 1000.0), Param("damping", "N·s/m", "D", 50.0))
+
+    def command(self, inp):
+        c = self.config
+        tau = inp.J.T @ (c.stiffness * (inp.x_d - inp.p_tip) - c.damping * inp.v_tip) + inp.gravity
+        if inp.t > 0.02:
+            {failure}
+        return {gain}tau, None
+'''
+RAISE = "raise ValueError('my controller gave up')"
+SCENE = '''imports = ["{module}"]
+name = "failing_press"
+duration = 0.05
+
+[solver]
+rtol = 1e-10
+atol = 1e-12
+output_rate = 500.0
+
+[robot]
+urdf = "planar2r_b1"
+tip = "tip"
+gravity = [0.0, 0.0, 0.0]
+q0 = [0.337307481430, -1.318116071653]
+
+[contact.tip]
+point = [0.0, -0.15, 0.0]
+normal.direction = [0.0, 1.0, 0.0]
+bonded = true
+normal.model = "b"
+normal.k = 1e5
+normal.b = 1.0
+normal.m = 10.0
+
+[controller]
+kind = "{name}"
+stiffness = 2000.0
+damping = 100.0
+
+[[phase]]
+name = "press"
+[phase.reference]
+start = [0.45, -0.17, 0.0]
+'''
+
+
+@pytest.fixture(autouse=True)
+def registries(monkeypatch):
+    """Each test's law modules imported afresh; the registries, the import record and sys.modules as they were."""
+    import contactdyn.scene.user_laws as user_laws
+    from contactdyn.laws.controllers import CONTROLLERS
+    from contactdyn.laws.drive_kinds import DRIVE_KINDS
+    from contactdyn.laws.friction_laws import FRICTION_LAWS
+    from contactdyn.laws.stage_laws import STAGE_LAWS
+
+    monkeypatch.setattr(user_laws, "_state", {"allowed": True, "entry_points": False})
+    monkeypatch.setattr(user_laws, "IMPORTED", {})
+    saved = [(registry, dict(registry)) for registry in (CONTROLLERS, STAGE_LAWS, FRICTION_LAWS, DRIVE_KINDS)]
+    modules = set(sys.modules)
+    yield
+    for registry, content in saved:
+        registry.clear()
+        registry.update(content)
+    for name in set(sys.modules) - modules:
+        if name.startswith("failing_"):
+            del sys.modules[name]
+
+
+def _controller_scene(folder: Path, module: str, failure: str = RAISE, compiles: bool = False) -> tuple[Path, int]:
+    """(the scene file, the line of the failure in the module) of a controller ``module`` in ``folder``."""
+    text = CONTROLLER.format(name=module, failure=failure, gain="" if compiles else '_GAIN["k"] * ')
+    (folder / f"{module}.py").write_text(text)
+    (folder / f"{module}.toml").write_text(SCENE.format(module=module, name=module))
+    return folder / f"{module}.toml", text.splitlines().index(f"            {failure}") + 1
+
+
+def _one_line(err: str) -> str:
+    lines = [line for line in err.splitlines() if line.startswith("contactdyn: error:")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+@pytest.mark.parametrize("compiles, path", [(False, "compiled"), (True, "compiled"), (False, "interpreted"),
+                                            (True, "interpreted")],
+                         ids=["python_stage", "compiled", "python_stage_interpreted", "interpreted"])
+def test_a_controllers_exception_is_one_line_naming_it(capsys, tmp_path, compiles, path):
+    """Before: a raw traceback (a Python stage, interpreted), or "the law gave no finite command at this state"
+    (compiled: its own message lost); --json printed nothing."""
+    module = f"failing_ctl_{int(compiles)}_{path}"
+    scene, line = _controller_scene(tmp_path, module, compiles=compiles)
+    assert main(["run", str(scene), "--path", path]) == EXIT_FAILED
+    said = _one_line(capsys.readouterr().err)
+    assert re.fullmatch(rf"contactdyn: error: t = 0\.020\d* s: controller '{module}' \({module}\.py, line {line}\) "
+                        r"raised ValueError: my controller gave up", said), said
+    assert main(["run", str(scene), "--path", path, "--json"]) == EXIT_FAILED
+    out, err = capsys.readouterr()
+    assert json.loads(out) == {"status": "failed", "error": said.removeprefix("contactdyn: error: "),
+                               "exit_code": EXIT_FAILED}
+
+
+def test_the_api_gets_the_law_error_with_the_exception_chained(tmp_path):
+    scene, line = _controller_scene(tmp_path, "failing_ctl_api", compiles=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(LawError) as info:
+            simulate(str(scene))
+    error = info.value
+    assert (error.kind, error.name, Path(error.file).name, error.line) == \
+        ("controller", "failing_ctl_api", "failing_ctl_api.py", line)
+    assert 0.02 < error.t < 0.021
+    assert isinstance(error.__cause__, ValueError) and str(error.__cause__) == "my controller gave up"
+
+
+def test_a_controller_called_with_the_wrong_signature_is_named(tmp_path):
+    """The error is raised calling the law (no frame of its code in the traceback): named by the law called."""
+    scene, _ = _controller_scene(tmp_path, "failing_ctl_signature")
+    path = tmp_path / "failing_ctl_signature.py"
+    path.write_text(path.read_text().replace("def command(self, inp):", "def command(self, inp, extra):"))
+    with pytest.raises(LawError, match=r"t = 0 s: controller 'failing_ctl_signature' \(failing_ctl_signature\.py\) "
+                                       r"raised TypeError: .*command\(\) missing 1 required positional argument"):
+        _quiet(str(scene))
+
+
+def test_a_sweep_records_the_laws_error_and_goes_on(capsys, tmp_path):
+    """Past t = 0.02 s the law raises: the 0.05 s run fails with the law's error in its row; the 0.015 s run is ok."""
+    scene, line = _controller_scene(tmp_path, "failing_ctl_sweep")
+    out = tmp_path / "sw"
+    assert main(["sweep", str(scene), "--grid", "duration=0.015,0.05", "--workers", "0", "--out", str(out),
+                 "--quiet"]) == EXIT_FAILED
+    rows = pd.read_parquet(out / "summary.parquet").set_index("duration")
+    assert rows.loc[0.015, "status"] == "ok" and rows.loc[0.05, "status"] == "failed"
+    assert re.fullmatch(rf"LawError: t = 0\.020\d* s: controller 'failing_ctl_sweep' \(failing_ctl_sweep\.py, line "
+                        rf"{line}\) raised ValueError: my controller gave up", rows.loc[0.05, "error"])
+
+
+# ---- a law that returns NaN: named, with what it returned and where (before: the step budget's advice about
+# stiffness, or "the model has no finite answer at this state") -----------------------------------------------
+class NanPast(StageLaw):
+    """F = k x + b ẋ up to 0.1 mm of compression, NaN past it (numba compiles it)."""
+
+    name = "nan_past_test"
+
+    @staticmethod
+    def force(k, b, p, x, xdot):
+        return k * x + b * xdot if x < 1e-4 else math.nan
+
+
+class NanWhenSliding(FrictionLaw):
+    """μ_k at rest, NaN while sliding faster than 1 cm/s."""
+
+    name = "nan_when_sliding_test"
+
+    @staticmethod
+    def coefficient(mu_s, mu_k, p, speed):
+        return mu_k if speed < 0.01 else math.nan
+
+
+def _quiet(scene, **options):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return simulate(scene, **options)
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
+def test_a_stage_law_that_returns_nan_is_named_with_its_inputs(compiled, monkeypatch):
+    """The cylindrical robot's axis falls onto a one-stage chain of the law: every step past 0.1 mm of compression
+    is rejected (NaN rates), the run stalls there until its step budget (500 steps here) is spent."""
+    import contactdyn.hybrid.loop as loop
+
+    monkeypatch.setattr(loop, "step_budget", lambda *args: 500)
+    register_stage_law(NanPast)
+    scene = parse_scene({
+        "duration": 0.05, "solver": {"rtol": 1e-10, "atol": 1e-13},
+        "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.999],
+                  "v0": [0.5]},
+        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {
+            "direction": [0, 0, 1], "model": "chain", "environment": [{"k": 5e4, "b": 1500.0, "law": NanPast.name}]}}},
+        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0}})
+    with pytest.raises(LawError) as info:
+        _quiet(scene, compiled=compiled, interpreted=not compiled)
+    said = str(info.value)
+    assert re.match(r"t = \S+ s: stage law 'nan_past_test' \(test_law_failures\.py\) returned F = nan N at "
+                    r"x = (\S+) m, ẋ = \S+ m/s \(k = 50000 N/m, b = 1500 N·s/m\)", said), said
+    assert float(re.search(r"x = (\S+) m", said).group(1)) >= 1e-4
+    assert re.search(r"; the run then stopped: \S+: stopped at t = \S+ s of 0.05 s after \d+ right-hand-side calls",
+                     said), said  # (what it said before, alone)
+
+
+def test_a_friction_law_that_returns_nan_is_named_with_its_inputs():
+    """B1's tip slides at 0.15 m/s from the start: the law's μ is NaN there (before: "t = 0 s: the model has no
+    finite answer at this state (its contact system is not finite there)")."""
+    register_friction_law(NanWhenSliding)
+    doc = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
+    doc["duration"] = 0.02
+    doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]],
+                                        "law": NanWhenSliding.name, "mu_s": 0.6, "mu_k": 0.4}
+    with pytest.raises(LawError) as info:
+        _quiet(parse_scene(doc))
+    assert re.fullmatch(r"t = 0 s: friction law 'nan_when_sliding_test' \(test_law_failures\.py\) returned μ = nan "
+                        r"at slip speed 0\.15\d* m/s \(mu_s = 0\.6, mu_k = 0\.4\)", str(info.value)), str(info.value)
+
+
+def test_a_controller_that_returns_nan_is_named_with_its_command(capsys, tmp_path):
+    scene, _ = _controller_scene(tmp_path, "failing_ctl_nan", "return tau * math.nan, None", compiles=True)
+    assert main(["run", str(scene)]) == EXIT_FAILED
+    said = _one_line(capsys.readouterr().err)
+    assert re.fullmatch(r"contactdyn: error: t = 0\.020\d* s: controller 'failing_ctl_nan' \(failing_ctl_nan\.py\) "
+                        r"gave no finite command: τ = \[nan, nan\] at q = \[\S+, \S+\], v = \[\S+, \S+\]", said), said
