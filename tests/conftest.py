@@ -44,21 +44,26 @@ def stage_law_registry():
 
 @pytest.fixture
 def fresh_user_imports(monkeypatch):
-    """A test that imports a user's law modules afresh (scene ``imports``): the import state, the law
-    registries and the key reference as they were, before and after it."""
+    """A test that imports a user's law modules afresh (scene ``imports``): the import state, the four law
+    registries, the key reference and those modules as they were, before and after it."""
     import contactdyn.scene.user_laws as user_laws
+    from contactdyn.laws.controllers import CONTROLLERS
     from contactdyn.laws.drive_kinds import DRIVE_KINDS
+    from contactdyn.laws.friction_laws import FRICTION_LAWS
     from contactdyn.laws.stage_laws import STAGE_LAWS
     from contactdyn.scene.keys import reference
 
     monkeypatch.setattr(user_laws, "_state", {"allowed": True, "entry_points": False})
     monkeypatch.setattr(user_laws, "IMPORTED", {})
-    saved = [(registry, dict(registry)) for registry in (STAGE_LAWS, DRIVE_KINDS)]
+    saved = [(registry, dict(registry)) for registry in (STAGE_LAWS, FRICTION_LAWS, DRIVE_KINDS, CONTROLLERS)]
+    modules = set(sys.modules)
     reference.cache_clear()
     yield
     for registry, content in saved:
         registry.clear()
         registry.update(content)
+    for name in set(user_laws.IMPORTED) - modules:  # (the test's own law modules: imported afresh by the next)
+        sys.modules.pop(name, None)
     reference.cache_clear()
 
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import sys
 import tomllib
 import warnings
 from pathlib import Path
@@ -21,6 +20,8 @@ from contactdyn.cli import EXIT_FAILED, main
 from contactdyn.laws.failures import LawError
 from contactdyn.laws.friction_laws import FrictionLaw, register_friction_law
 from contactdyn.laws.stage_laws import StageLaw, register_stage_law
+
+pytestmark = pytest.mark.usefixtures("fresh_user_imports")  # (each test's law modules imported afresh)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -83,28 +84,6 @@ name = "press"
 [phase.reference]
 start = [0.45, -0.17, 0.0]
 '''
-
-
-@pytest.fixture(autouse=True)
-def registries(monkeypatch):
-    """Each test's law modules imported afresh; the registries, the import record and sys.modules as they were."""
-    import contactdyn.scene.user_laws as user_laws
-    from contactdyn.laws.controllers import CONTROLLERS
-    from contactdyn.laws.drive_kinds import DRIVE_KINDS
-    from contactdyn.laws.friction_laws import FRICTION_LAWS
-    from contactdyn.laws.stage_laws import STAGE_LAWS
-
-    monkeypatch.setattr(user_laws, "_state", {"allowed": True, "entry_points": False})
-    monkeypatch.setattr(user_laws, "IMPORTED", {})
-    saved = [(registry, dict(registry)) for registry in (CONTROLLERS, STAGE_LAWS, FRICTION_LAWS, DRIVE_KINDS)]
-    modules = set(sys.modules)
-    yield
-    for registry, content in saved:
-        registry.clear()
-        registry.update(content)
-    for name in set(sys.modules) - modules:
-        if name.startswith("failing_"):
-            del sys.modules[name]
 
 
 def _controller_scene(folder: Path, module: str, failure: str = RAISE, compiles: bool = False) -> tuple[Path, int]:
