@@ -151,7 +151,7 @@ class Transitions:
         """Apply a located event: (state, modes, phase) right after it.
 
         The event's kind picks its handler (:attr:`HANDLERS`: a new kind, a new handler); it changes ``modes`` in place
-        and returns (x, phase, settle: then :meth:`consistent`). Unconfirmed alarms (:func:`_false_alarm`): no change"""
+        and returns (x, phase, settle: then :meth:`consistent`). An unconfirmed alarm (:func:`_false_alarm`): none."""
         modes = list(modes)
         self.log.log(t, event.kind, event.contact, check_storm=event.kind not in self.UNCOUNTED)
         if _false_alarm(self.stats, self.log, event, t, x):
@@ -442,10 +442,12 @@ def _at_rest(system: System, evaluate, t: float, x: np.ndarray, modes, phase, i:
     trial = list(modes)
     trial[i] = mode.with_(stuck=True)
     x_stuck = project_velocity(system, x, trial, phase.limits, phase.joint_modes)
-    if singular_stick(system, c, x, x_stuck):
-        nQ, nv = system.nQ, system.nv
-        system.robot.update(x[:nv], x[nQ:nQ + nv])
-        a_t = slip_acceleration(system, c, system.kinematics(c, x), ev.xdot[nQ:2 * nQ])
+    nQ, nv = system.nQ, system.nv
+    system.robot.update(x[:nv], x[nQ:nQ + nv])  # (x's kinematics, once: the singularity's test and the slip's rate)
+    system.update_bodies(x)
+    kin = system.kinematics(c, x)
+    if singular_stick(system, c, x, x_stuck, kin):
+        a_t = slip_acceleration(system, c, kin, ev.xdot[nQ:2 * nQ])
         return x, mode.with_(slip=direction_of(a_t), from_rest=False), "slip"
     ev_stuck = evaluate(t, x_stuck, trial, phase)
     F_f = ev_stuck.friction[c.name]

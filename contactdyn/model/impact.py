@@ -313,20 +313,18 @@ def project_velocity(system, x: np.ndarray, modes: list[ContactMode], limits: tu
 SINGULAR_STICK = 1e6
 
 
-def singular_stick(system, c: Contact, x: np.ndarray, x_stuck: np.ndarray) -> bool:
+def singular_stick(system, c: Contact, x: np.ndarray, x_stuck: np.ndarray, kin) -> bool:
     """Is the projection ``x`` -> ``x_stuck`` (:func:`project_velocity` with contact c stuck, its slip ≤ v_ε at x) at
     a singular stick row: does it remove more than ``SINGULAR_STICK`` × ½ m v_ε² of kinetic energy, m = 1/λ_max(J
-    M⁻¹ Jᵀ) [kg] the lightest effective mass of c's relative motion (J: its rows along the three axes)?
+    M⁻¹ Jᵀ) [kg] the lightest effective mass of c's relative motion (J: its rows along the three axes)? ``kin``: c's
+    kinematics at x, the robot and the bodies updated there (the caller's, which reads them too).
 
     The projection is M-orthogonal: it removes ½ ΔQ̇ᵀ M ΔQ̇ = ½ m_t v_t², m_t the stick row's effective mass on the
     motion the other rows allow. At a regular pose m_t is of the order of m (a box's mass; an arm's, scaled by its
     leverage) and the loss ~1e-18 J per kg at the default v_ε. Where the row nearly vanishes on that motion (an arm's
     tip through full stretch on a floor: its tangent row J_x ~ 0), m_t ~ 1/σ² and removing a slip of 1e-9 m/s stops
     the whole arm: its slip is small because its row is, not because it came to rest."""
-    nQ, nv = system.nQ, system.nv
-    system.robot.update(x[:nv], x[nQ:nQ + nv])
-    kin = system.kinematics(c, x)
-    system.update_bodies(x)
+    nQ = system.nQ
     M = system.mass_matrix()
     dqd = x[nQ:2 * nQ] - x_stuck[nQ:2 * nQ]
     removed = 0.5 * float(dqd @ M @ dqd)  # [J] (= ½ Q̇ᵀ M Q̇ − ½ Q̇⁺ᵀ M Q̇⁺, without their cancellation)
