@@ -399,7 +399,7 @@ class Pipeline:
         if status < 0.0 and np.all(np.isfinite(x)):
             self.last_failed = (float(t), np.array(x, float))
         users = failed is not None and is_users(type(self.phase.controller))
-        if (status < 0.0 or users) and self.twins is None or status < 0.0 and final:
+        if ((status < 0.0 or users) and self.twins is None) or (status < 0.0 and final):  # (run again interpreted)
             found = self._probe(t, x, final)
             if found is not None and failed is None:
                 raise found
