@@ -28,7 +28,9 @@ Caching: the compiled law is cached on disk by numba (``cache=True``). A cfunc m
 is not (numba keys a closure's cache on its pickled cells, and a dispatcher pickles with a new id in every
 process), so the wrapper is a closure-free function generated from source and attributed to the law's own
 file: numba caches it in the package's compiled-code directory (:mod:`contactdyn.numerics.compile_cache`, keyed
-by this module's source among others), and an edit of the law's file recompiles it.
+by this module's source among others), in a subdirectory keyed by the law's own file and the user's files it imports
+(:func:`~contactdyn.numerics.compile_cache.sources_key`): an edit of any of them recompiles it (numba alone checks
+the law's file only, and freezes a constant or a compiled helper imported from another).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from llvmlite import ir
 from numba import carray, types
 from numba.extending import intrinsic, overload
 
-from ..numerics.compile_cache import cfunc, njit
+from ..numerics.compile_cache import cfunc, njit, sources_key
 from ..numerics.native_call import handles
 from .failures import law_error
 from .friction_laws import FRICTION_LAWS, FrictionLaw
@@ -253,27 +255,30 @@ def compile_wrapper(fn, name: str, source: str, signature, namespace: dict) -> t
     digest = hashlib.sha256(f"{name}\0{source}".encode()).hexdigest()[:12]
     wrapper.__module__, wrapper.__qualname__ = fn.__module__, f"{fn.__qualname__}_{name}_{digest}"
     cacheable = os.path.isfile(path) and not fn.__closure__
+    under = sources_key(fn) if cacheable else None  # (keyed by the law's file and the user's files it imports)
     for cache in ((True, False) if cacheable else (False,)):
         try:
-            namespace["law"] = _jit(fn, cache)
-            return _cfunc(wrapper, signature, cache), ""
+            namespace["law"] = _jit(fn, cache, under)
+            return _cfunc(wrapper, signature, cache, under), ""
         except Exception as exc:  # numba's typing or lowering errors, and whatever the law's code raises in them
             reason = f"numba cannot compile {fn.__qualname__}: {_first_line(exc)}"
     return None, reason
 
 
-def _jit(fn, cache: bool):
-    """The law's function under numba, cached (compile_cache's directory) when it has a source file."""
+def _jit(fn, cache: bool, under: str | None):
+    """The law's function under numba, cached (compile_cache's directory, its subdirectory ``under``) when it has a
+    source file."""
     try:
-        return njit(cache=cache, boundscheck=True)(fn)
+        return njit(cache=cache, boundscheck=True, under=under)(fn)
     except RuntimeError:  # "no locator available": a law without a source file (exec'd, a notebook's cell)
         return njit(boundscheck=True)(fn)
 
 
-def _cfunc(wrapper, signature, cache: bool):
-    """The wrapper compiled to a C function of ``signature``, cached when the law has a source file."""
+def _cfunc(wrapper, signature, cache: bool, under: str | None):
+    """The wrapper compiled to a C function of ``signature``, cached (as :func:`_jit`) when the law has a source
+    file."""
     try:
-        return cfunc(signature, cache=cache)(wrapper)
+        return cfunc(signature, cache=cache, under=under)(wrapper)
     except RuntimeError as exc:
         if "locator" not in str(exc):
             raise

@@ -31,12 +31,16 @@ This module is imported only by compiled modules: ``contactdyn --help`` never im
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import functools
 import hashlib
+import importlib.util
 import os
 import re
 import shutil
+import sys
+import sysconfig
 import tempfile
 import time
 from collections.abc import Callable, Mapping
@@ -49,7 +53,7 @@ from .. import __version__
 from . import notice
 
 __all__ = ["njit", "cfunc", "directory", "cache_dir", "key", "compiled_modules", "CompileNotice", "PACKAGE",
-           "locked_save"]
+           "locked_save", "user_sources", "sources_key"]
 
 PACKAGE = Path(__file__).resolve().parents[1]  #: the package's source folder (contactdyn/)
 HASH_CHARS = 12  #: [hex digits] of the source hash in KEY
@@ -131,34 +135,107 @@ def directory() -> Path:
     return cache_dir(os.environ)
 
 
+#: where the standard library and installed packages live: a module there is not a user's own
+_INSTALLED = tuple({Path(p).resolve() for name, p in sysconfig.get_paths().items()
+                    if name in ("stdlib", "platstdlib", "purelib", "platlib")})
+
+
+def _user_file(module) -> Path | None:
+    """The source file of a user's own module (outside this package, the standard library and installed
+    packages), else None."""
+    file = getattr(module, "__file__", None)
+    if not file or not file.endswith(".py") or not os.path.isfile(file):
+        return None
+    path = Path(file).resolve()
+    if path.is_relative_to(PACKAGE) or any(path.is_relative_to(p) for p in _INSTALLED):
+        return None
+    return path
+
+
+def _imports(source: bytes, package: str | None) -> set[str]:
+    """The module names a module's source imports and their packages (``import a.b``: a.b and a; ``from .m import
+    x``: the resolved m, its packages, and m.x, which may be a module), wherever they stand in it."""
+    try:
+        tree = ast.parse(source)
+    except (SyntaxError, ValueError):
+        return set()
+    names: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            try:
+                base = importlib.util.resolve_name("." * node.level + (node.module or ""), package) \
+                    if node.level else node.module or ""
+            except (ImportError, ValueError):
+                continue
+            found = [f"{base}.{alias.name}" for alias in node.names]
+        else:
+            continue
+        for name in found:  # the name and its packages
+            parts = name.split(".")
+            names.update(".".join(parts[:i]) for i in range(1, len(parts) + 1))
+    return names
+
+
+def user_sources(function: Callable) -> dict[Path, bytes]:
+    """The sources a user's compiled function depends on: its module's file and, transitively, the file of every
+    user's own module those import (already imported: :data:`sys.modules`), path -> source.
+
+    numba keys a cached function by its own file alone and freezes the globals it reads: a constant or a compiled
+    helper imported from another of the user's files would stay as it was when cached."""
+    sources: dict[Path, bytes] = {}
+    todo = [sys.modules.get(getattr(function, "__module__", None) or "")]
+    while todo:
+        module = todo.pop()
+        path = _user_file(module)
+        if path is None or path in sources:
+            continue
+        sources[path] = path.read_bytes()
+        package = getattr(module, "__package__", None)
+        todo += [sys.modules[name] for name in sorted(_imports(sources[path], package)) if name in sys.modules]
+    return sources
+
+
+def sources_key(function: Callable) -> str:
+    """``user-<hash>``: a subdirectory of :func:`directory` for a user's compiled function, keyed by the sources it
+    depends on (:func:`user_sources`): an edit of any of them compiles it again."""
+    digest = hashlib.sha256()
+    for path, source in sorted(user_sources(function).items()):
+        digest.update(str(path).encode() + b"\0" + source + b"\0")
+    return f"user-{digest.hexdigest()[:HASH_CHARS]}"
+
+
 @contextlib.contextmanager
-def _cached_here(cache: bool):
-    """numba's cache directory set to :func:`directory` while a cached function is decorated (where numba
-    reads it), then the user's setting again."""
+def _cached_here(cache: bool, under: str | None = None):
+    """numba's cache directory set to :func:`directory` (its subdirectory ``under``) while a cached function is
+    decorated (where numba reads it), then the user's setting again."""
     if not cache:
         yield
         return
     saved = numba.config.CACHE_DIR
-    numba.config.CACHE_DIR = str(directory())
+    numba.config.CACHE_DIR = str(directory() / under if under else directory())
     try:
         yield
     finally:
         numba.config.CACHE_DIR = saved
 
 
-def cfunc(signature, **options) -> Callable:
-    """numba's ``cfunc(signature, **options)``; with ``cache=True`` its cache lives in :func:`directory`."""
+def cfunc(signature, under: str | None = None, **options) -> Callable:
+    """numba's ``cfunc(signature, **options)``; with ``cache=True`` its cache lives in :func:`directory` (its
+    subdirectory ``under``)."""
     def decorate(function: Callable) -> Callable:
-        with _cached_here(options.get("cache", False)):
+        with _cached_here(options.get("cache", False), under):
             return numba.cfunc(signature, **options)(function)
 
     return decorate
 
 
-def njit(*signatures, **options) -> Callable:
-    """numba's ``njit(*signatures, **options)``; with ``cache=True`` its cache lives in :func:`directory`."""
+def njit(*signatures, under: str | None = None, **options) -> Callable:
+    """numba's ``njit(*signatures, **options)``; with ``cache=True`` its cache lives in :func:`directory` (its
+    subdirectory ``under``)."""
     def decorate(function: Callable) -> Callable:
-        with _cached_here(options.get("cache", False)):
+        with _cached_here(options.get("cache", False), under):
             return numba.njit(*signatures, **options)(function)
 
     if len(signatures) == 1 and callable(signatures[0]):  # @njit, or njit(function, cache=True)
