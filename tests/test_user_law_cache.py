@@ -1,6 +1,8 @@
-"""A user's compiled law is cached keyed by every one of the user's files it depends on
-(contactdyn.numerics.compile_cache.sources_key): an edit of a file the law imports a constant or a compiled helper
-from compiles it again in the next process (numba alone checks the law's own file and would load the old code)."""
+"""A user's law as its files say now, after an edit: its compiled code is cached keyed by every one of the user's files
+it depends on (contactdyn.numerics.compile_cache.sources_key), so an edit of a file the law imports a constant or a
+compiled helper from compiles it again in the next process (numba alone checks the law's own file and would load the
+old code); and a process that reads the scene again (a notebook, a sweep's worker) imports the edited modules again
+(contactdyn.scene.user_laws)."""
 
 from __future__ import annotations
 
@@ -11,7 +13,12 @@ import sys
 import types
 from pathlib import Path
 
+import numpy as np
+
 import contactdyn.numerics.compile_cache as cc
+from contactdyn import parse_scene, simulate
+from contactdyn.laws.stage_laws import STAGE_LAWS
+from contactdyn.scene.user_laws import import_scene_modules
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -113,3 +120,47 @@ def test_a_function_of_the_package_or_an_installed_one_has_no_user_sources():
 
     assert cc.user_sources(Linear.force) == {}
     assert cc.user_sources(np.linalg.norm) == {}
+
+
+SCALED = '''
+from contactdyn.laws import StageLaw, register_stage_law
+from scaled_law_factor import S
+
+
+@register_stage_law
+class Scaled(StageLaw):
+    name = "scaled_for_reimport_test"
+
+    @staticmethod
+    def force(k, b, p, x, xdot):
+        return S * k * x + b * xdot
+'''
+
+
+def _press(folder: Path, law: str, k: float):
+    """examples/cubic_press.toml for 0.05 s with stage law ``law`` of stiffness k [N/m]."""
+    import tomllib
+
+    doc = tomllib.loads((ROOT / "examples" / "cubic_press.toml").read_text())
+    doc.update(imports=["scaled_law"], duration=0.05)
+    doc["contact"]["tip"]["normal"].update(law=law, k=k)
+    del doc["contact"]["tip"]["normal"]["k3"]
+    return simulate(parse_scene(doc, file=str(folder / "press.toml")))
+
+
+def test_a_process_that_reads_the_scene_again_runs_the_edited_law(tmp_path, fresh_user_imports):
+    (tmp_path / "scaled_law.py").write_text(SCALED)
+    (tmp_path / "scaled_law_factor.py").write_text("S = 1.0\n")
+    import_scene_modules(["scaled_law"], str(tmp_path / "press.toml"))
+    first = STAGE_LAWS["scaled_for_reimport_test"]
+    import_scene_modules(["scaled_law"], str(tmp_path / "press.toml"))
+    assert STAGE_LAWS["scaled_for_reimport_test"] is first  # nothing edited: not imported again
+    runs = {}
+    for factor in (1.0, 2.0):
+        (tmp_path / "scaled_law_factor.py").write_text(f"S = {factor}\n")  # (the law's own file unchanged)
+        runs[factor] = _press(tmp_path, "scaled_for_reimport_test", 1e5), _press(tmp_path, "linear", factor * 1e5)
+    for mine, twin in runs.values():  # the user's law S k x + b ẋ is the linear law of stiffness S k
+        F, F_twin = mine["contact.tip.F_n"], twin["contact.tip.F_n"]
+        assert np.abs(F - F_twin).max() <= 1e-9 * np.abs(F_twin).max()
+    assert np.abs(runs[2.0][0]["contact.tip.F_n"] - runs[1.0][0]["contact.tip.F_n"]).max() > 0.1  # [N] it moved (0.6 N)
+    assert STAGE_LAWS["scaled_for_reimport_test"] is not first

@@ -53,7 +53,7 @@ from .. import __version__
 from . import notice
 
 __all__ = ["njit", "cfunc", "directory", "cache_dir", "key", "compiled_modules", "CompileNotice", "PACKAGE",
-           "locked_save", "user_sources", "sources_key"]
+           "locked_save", "user_modules", "user_sources", "sources_key"]
 
 PACKAGE = Path(__file__).resolve().parents[1]  #: the package's source folder (contactdyn/)
 HASH_CHARS = 12  #: [hex digits] of the source hash in KEY
@@ -178,23 +178,35 @@ def _imports(source: bytes, package: str | None) -> set[str]:
     return names
 
 
+def user_modules(module) -> list:
+    """The user's own modules ``module`` depends on: itself and, transitively, the user's own modules it imports
+    (already imported: :data:`sys.modules`), each after those it imports (``module`` last; [] if it is not a user's
+    own)."""
+    order: list = []
+    seen: set[Path] = set()
+
+    def visit(m) -> None:
+        path = _user_file(m)
+        if path is None or path in seen:
+            return
+        seen.add(path)
+        for name in sorted(_imports(path.read_bytes(), getattr(m, "__package__", None))):
+            if name in sys.modules:
+                visit(sys.modules[name])
+        order.append(m)
+
+    visit(module)
+    return order
+
+
 def user_sources(function: Callable) -> dict[Path, bytes]:
-    """The sources a user's compiled function depends on: its module's file and, transitively, the file of every
-    user's own module those import (already imported: :data:`sys.modules`), path -> source.
+    """The sources a user's compiled function depends on, path -> source: the files of :func:`user_modules` of its
+    module.
 
     numba keys a cached function by its own file alone and freezes the globals it reads: a constant or a compiled
     helper imported from another of the user's files would stay as it was when cached."""
-    sources: dict[Path, bytes] = {}
-    todo = [sys.modules.get(getattr(function, "__module__", None) or "")]
-    while todo:
-        module = todo.pop()
-        path = _user_file(module)
-        if path is None or path in sources:
-            continue
-        sources[path] = path.read_bytes()
-        package = getattr(module, "__package__", None)
-        todo += [sys.modules[name] for name in sorted(_imports(sources[path], package)) if name in sys.modules]
-    return sources
+    modules = user_modules(sys.modules.get(getattr(function, "__module__", None) or ""))
+    return {path: path.read_bytes() for path in (_user_file(m) for m in modules)}
 
 
 def sources_key(function: Callable) -> str:

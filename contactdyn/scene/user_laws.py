@@ -15,6 +15,9 @@ module is imported (``@register`` of :mod:`contactdyn.laws.controllers`, ``@regi
 Importing runs code: ``contactdyn run`` prints each module it imported and from where
 (:data:`IMPORTED`), and ``--no-imports`` (:func:`refuse_imports`) makes a scene that names
 any an error (exit 2), for scenes received from others.
+
+A process that reads scenes again (a notebook, a sweep's worker) imports a module again where its file, or a
+file of the user's own that it imports, changed since: the scene runs the law as its file says now.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from __future__ import annotations
 import importlib
 import re
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import SceneError
@@ -30,6 +34,7 @@ __all__ = ["IMPORTED", "MODULE_NAME", "import_scene_modules", "load_entry_points
 
 MODULE_NAME = r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*"  #: a module name, no path
 IMPORTED: dict[str, str] = {}  #: module -> the file it came from, in the order imported (this process)
+_SOURCES: dict[str, dict[Path, bytes]] = {}  #: a scene's module -> the sources it depends on, as imported
 ENTRY_POINTS = "contactdyn.laws"  #: the entry-point group of installed law packages
 _state = {"allowed": True, "entry_points": False}
 
@@ -74,21 +79,60 @@ def import_scene_modules(names: object, file: str | None) -> list[str]:
     for name in names:
         if name in sys.modules:
             _same_module(name, folder, file)
+            _import_again_if_edited(name, file)
             _record(name, sys.modules[name])
             continue
-        added = folder is not None and folder not in sys.path
-        if added:
-            sys.path.insert(0, folder)
-        try:
+        with _on_path([folder]), _naming_failure(name, file):
             module = importlib.import_module(name)
-        except Exception as exc:  # noqa: BLE001 (the user's module failed: say which and why)
-            raise SceneError("imports", "importable modules (next to the scene file or on sys.path)",
-                             f"{name}: {type(exc).__name__}: {exc}", file) from None
-        finally:
-            if added:
-                sys.path.remove(folder)
+        _SOURCES[name] = _sources(module)
         _record(name, module)
     return list(names)
+
+
+@contextmanager
+def _on_path(folders: list[str | None]):
+    """Inside: ``folders`` (those not on it yet) first on ``sys.path``."""
+    added = [f for f in dict.fromkeys(folders) if f is not None and f not in sys.path]
+    sys.path[:0] = added
+    try:
+        yield
+    finally:
+        for f in added:
+            sys.path.remove(f)
+
+
+@contextmanager
+def _naming_failure(name: str, file: str | None):
+    """Inside: the user's module ``name`` failing to import is a SceneError saying which and why."""
+    try:
+        yield
+    except Exception as exc:  # noqa: BLE001 (the user's module failed: say which and why)
+        raise SceneError("imports", "importable modules (next to the scene file or on sys.path)",
+                         f"{name}: {type(exc).__name__}: {exc}", file) from None
+
+
+def _sources(module) -> dict[Path, bytes]:
+    """The sources of the user's own modules ``module`` depends on (itself and those it imports), path -> source."""
+    from ..numerics.compile_cache import user_modules  # (numba: not for a scene without imports)
+
+    return {Path(m.__file__): Path(m.__file__).read_bytes() for m in user_modules(module)}
+
+
+def _import_again_if_edited(name: str, file: str | None) -> None:
+    """A module imported earlier in this process (a notebook, a sweep's worker) whose file, or a file of the user's
+    it imports, changed since: imported again, each module after those it imports, so that its laws register
+    anew (the same module replaces its own: :func:`~contactdyn.laws.params.claim_name`)."""
+    from ..numerics.compile_cache import user_modules
+
+    module = sys.modules[name]
+    now = _sources(module)
+    if _SOURCES.setdefault(name, now) == now:
+        return
+    modules = user_modules(module)
+    with _on_path([str(Path(m.__file__).parent) for m in modules]), _naming_failure(name, file):
+        for m in modules:
+            importlib.reload(m)
+    _SOURCES[name] = _sources(sys.modules[name])
 
 
 def _same_module(name: str, folder: str | None, file: str | None) -> None:
