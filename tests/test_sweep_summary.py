@@ -145,3 +145,18 @@ def test_time_in_rewrites_stays_a_bounded_fraction(tmp_path, monkeypatch):
                                               per_row=per_row)
         assert fraction <= 1.0 / (1.0 + COST_FACTOR) + per_row / run_s, runs
         assert rewrites < runs / 32 / 10, runs
+
+
+def test_a_parameter_column_keeps_its_type_integers_as_integers(tmp_path):
+    """A delay of 2 samples is 2 in the summary, not 2.0; a column of ints and floats is floats."""
+    params = {"r0": {"controller.delay": 2, "controller.kp": 1, "name": "a"},
+              "r1": {"controller.delay": 0, "controller.kp": 2.5, "name": "b"},
+              "r2": {"controller.delay": 1, "controller.kp": 3, "name": "c"},
+              "r3": {"controller.kp": 4, "name": "d"}}  # (no delay set: missing)
+    rows = {i: {"run_id": i, "status": "ok", "error": "", "wall_s": 1.0} for i in params}
+    path = summary_mod.write_summary(tmp_path, rows, params, ["controller.delay", "controller.kp", "name"], True)
+    frame = pd.read_parquet(path)
+    assert str(frame["controller.delay"].dtype) == "Int64" and str(frame["controller.kp"].dtype) == "float64"
+    assert frame["controller.delay"].tolist()[:3] == [0, 1, 2] and frame["controller.delay"].isna().tolist()[3]
+    assert all(type(v) is int for v in frame["controller.delay"].dropna().tolist())
+    assert pd.read_csv(tmp_path / "summary.csv")["controller.delay"].tolist()[:3] == [0, 1, 2]

@@ -151,10 +151,14 @@ def _parameter_order(params: dict[str, Any], keys: list[str]) -> tuple:
 
 
 def _column(values: list[Any]) -> Any:
-    """A parameter column with one type: numbers, strings or booleans; anything else as JSON text."""
+    """A parameter column with one type: integers, numbers, strings or booleans; anything else as JSON text."""
     present = [v for v in values if v is not None]
     if present and all(isinstance(v, bool) for v in present):
         return [v for v in values]
+    if present and all(isinstance(v, int) and not isinstance(v, bool) for v in present):
+        import pandas as pd
+
+        return pd.array(values, dtype="Int64")  # integers stay integers (a sample count, a delay); None: <NA>
     if present and all(isinstance(v, int | float) and not isinstance(v, bool) for v in present):
         return np.array([math.nan if v is None else float(v) for v in values])
     if all(isinstance(v, str) for v in present):
