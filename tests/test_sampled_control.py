@@ -503,6 +503,25 @@ def test_a_phase_controller_table_merges_its_sampling_over_the_scenes():
     assert parse_scene(b1()).phases[0].sampling is None
 
 
+def test_a_phase_begun_just_before_an_instant_of_the_grid_samples_there_once():
+    """A phase begun 1e-13 s before t = 13 ms samples at its start and next at 14 ms: one sample, not two 1e-13 s
+    apart (before: both, and the second pushed the delay line once more); its first hold is that period."""
+    doc = b1(duration=0.02, kind="_test_integrator")
+    start = 0.013 - 1e-13  # [s]
+    second = copy.deepcopy(doc["phase"][0])
+    doc["phase"][0]["until"] = start
+    second.update(name="sampled", controller={"sample_rate": RATE, "delay": 1})
+    doc["phase"].append(second)
+    run, r = run_of(doc)
+    begun = [t0 for t0, seg in starts(run) if seg.phase.index == 1]
+    np.testing.assert_allclose(begun, [start, *np.arange(14, 20) / RATE], rtol=0, atol=1e-15)
+    assert r.stats["samples"] == 7
+    z0 = 2 * run.system.nQ + run.system.z_slices[1].start
+    first = next(seg for seg in run.segments if seg.phase.index == 1)
+    z1 = np.asarray(first.sol(0.014))[z0]  # the law's state after its first hold: ż = 2 − t over 14 ms − start
+    assert z1 == pytest.approx((0.014 - start) * (2.0 - start), rel=1e-12)
+
+
 def test_a_phase_begun_at_a_touch_samples_at_once_and_then_on_the_grid():
     from contactdyn.scene.scene_file import load_scene
 

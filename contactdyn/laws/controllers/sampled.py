@@ -80,6 +80,11 @@ class SampledController(Controller):
         return inp.z[: self.nv].copy(), np.zeros(self.n_states) if self.n_states else None
 
 
+#: [periods] a grid instant this close after a sample is that sample: a phase begun at a touch 1e-13 s before an
+#: instant of the grid takes one sample, not two 1e-13 s apart (which would shorten its delay line by one period)
+SAME_SAMPLE = 1e-9
+
+
 class Sampler:
     """One run of a sampled phase: the sample counter, the delay line and the sensors."""
 
@@ -101,9 +106,10 @@ class Sampler:
         return self.next_index / self.rate
 
     def passed(self, t: float) -> None:
-        """A sample taken at t [s]: the next on the grid comes after it."""
+        """A sample taken at t [s]: the next on the grid comes after it, and not within SAME_SAMPLE periods of it
+        (a phase begun just before an instant of the grid samples there, not twice)."""
         self.next_index = max(self.next_index, math.floor(t * self.rate) + 1)
-        while self.next_index / self.rate <= t:  # (floor of a rounded product)
+        while self.next_index / self.rate <= t + SAME_SAMPLE * self.period:  # (also: floor of a rounded product)
             self.next_index += 1
 
     def sense(self, forces: dict[str, float]) -> dict[str, float]:
