@@ -241,17 +241,40 @@ def brief_pull():
 @pytest.mark.parametrize("shift", [0.11, 0.23])
 @pytest.mark.parametrize("compiled", [True, False])
 def test_a_held_state_does_not_hide_a_brief_pull_off_the_limit(tmp_path, brief_pull, shift, compiled):
-    """No gravity, the joint pressing on its upper limit (nothing moves: the steps grow): a pull of 81 ms between two
-    step ends releases it at the closed-form instant (before: no release at these shifts, the joint held on its limit
-    by a limit torque that pulled), and it strikes the limit again."""
+    """No gravity, the joint pressing on its upper limit from the start (nothing moves: the steps grow to most of the
+    run, 14 of them): a pull of 81 ms between two stages releases it at the closed-form instant, found on the step's
+    dense output (before: no release, the joint held on its limit by a limit torque that pulled), and it strikes the
+    limit again."""
     brief_pull.shift = shift
     doc = pendulum(tmp_path).document
     doc.update(duration=1.2, controller={"kind": "brief_pull"})
     doc["robot"] = {**doc["robot"], "q0": [UPPER], "gravity": [0.0, 0.0, 0.0]}
     r = simulate(parse_scene(doc), compiled=compiled)
     kinds = [(e["kind"], e.get("side")) for e in r.events]
-    assert kinds == [("limit", "upper"), ("release", None), ("limit", "upper")], kinds
-    assert r.events[1]["t"] == pytest.approx(shift + math.asin(1.0 / 1.002) / math.pi, abs=1e-9)
+    assert kinds == [("release", None), ("limit", "upper")], kinds
+    assert r.events[0]["t"] == pytest.approx(shift + math.asin(1.0 / 1.002) / math.pi, abs=1e-9)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("friction", [0.0, 0.5])
+def test_a_joint_at_rest_on_its_limit_presses_from_the_start_with_no_impact(tmp_path, friction, compiled):
+    """A joint that starts at rest exactly on its limit, its load pushing into it (gravity, the pendulum at its lower
+    limit; a dry joint too): pressing from t = 0, no event, its velocity exactly 0 and its limit torque the gravity
+    torque m g l sin θ (before: a `limit` event and a plastic impact at ~3e-7 s after it moved 1e-13 rad past, and a
+    dry joint's `joint_slip` at 0). The same start pulled away from the limit (at the upper one, gravity pulls it
+    off) is free at once, with no event either."""
+    for q0, side in ((LOWER, 1.0), (UPPER, 0.0)):
+        doc = pendulum(tmp_path).document
+        doc.update(duration=0.3)
+        doc["robot"] = {**doc["robot"], "q0": [q0], "joint": {"swing": {"friction": friction}}}
+        r = simulate(parse_scene(doc), compiled=compiled)
+        if side:
+            assert r.events == [], r.events
+            assert np.all(r["limit.side"][:, 0] == side) and np.all(r["v"][:, 0] == 0.0)
+            np.testing.assert_allclose(r["limit.torque"][:, 0], M * G * L * math.sin(LOWER), rtol=1e-12)
+        else:  # (the upper limit: 3 rad, gravity swings it down; with friction it breaks away at once)
+            assert [e["kind"] for e in r.events if e["kind"] != "joint_slip" or e["t"] > 0.0] == [], r.events
+            assert np.all(r["limit.side"][:, 0] == 0.0) and r["q"][-1, 0] < UPPER - 0.01
 
 
 @pytest.mark.parametrize("compiled", [True, False])

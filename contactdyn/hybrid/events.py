@@ -142,6 +142,10 @@ class StageWatch:
     the dense output, g is held negative from that stage's time on, so the root found is the first crossing. A false
     alarm (a stage state off the final solution) is caught by the handler, which keeps the hold.
 
+    A load that passes the limit and falls back between two stages (a brief pull on a pressing limit, the steps of
+    a held state grown to most of a second) is found on the step's dense output, as a :class:`DipWatch` finds a dip:
+    where the stages' values say zero lies within g's swing over the step (:meth:`dips`).
+
     ``floor``: g where the segment starts if a hold was decided just outside its limit within round-off (else 0);
     the event is g − floor through zero.
     """
@@ -155,12 +159,18 @@ class StageWatch:
         self.side = side  #: a limit's side (+1 lower, −1 upper: ``release``)
         self.floor = floor
         self.t_end = -math.inf  #: last step end seen [s]
+        self.g_old = self.g_end = math.inf  #: g at the step end before the last one, and at the last
         self.latch = math.inf  #: from this time on g is held negative [s]
         self.outside: list[float] = []  #: times [s] of the stages since the last step end that saw g < 0
+        self.staged: list[tuple[float, float]] = []  #: (t [s], g) of the stages since the last step end
+        self.swing = (math.inf, -math.inf)  #: the least and greatest g of the last step's stages
+        self.dipped = False  #: found by :meth:`dips` (the run's ``dips_seen_inside_a_step``)
 
     def sample(self, t: float, g: float) -> None:
-        if g - self.floor < 0.0:
+        g -= self.floor
+        if g < 0.0:
             self.outside.append(t)
+        self.staged.append((t, g))
 
     def __call__(self, t: float, x: np.ndarray) -> float:
         g = self.value(t, x) - self.floor
@@ -168,6 +178,10 @@ class StageWatch:
             g = AT_LIMIT
         if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
             t_old, self.t_end = self.t_end, t
+            self.g_old, self.g_end = self.g_end, g
+            inside = [v for ts, v in self.staged if t_old < ts < t]
+            self.swing = (min(inside), max(inside)) if inside else (math.inf, -math.inf)
+            self.staged = [(ts, v) for ts, v in self.staged if ts > t]
             if not self.outside:
                 return g
             hidden = [ts for ts in self.outside if t_old < ts < t]
@@ -178,6 +192,21 @@ class StageWatch:
             return g
         return min(g, -1e-300) if t >= self.latch else g  # root finding inside the last step
 
+    def dips(self, t_old: float, state_at) -> bool:
+        """Whether g dips below zero inside the step just ended, from t_old [s] to the last step end, between its
+        stages, on its dense output ``state_at(t)`` (:class:`DipWatch`'s search); if so g is held negative from the
+        instant found (:attr:`latch`)."""
+        g_old, g_end = self.g_old, self.g_end
+        if not (0.0 < g_old < math.inf and g_end > 0.0 and t_old < self.t_end and self.latch == math.inf):
+            return False
+        lo, hi = min(self.swing[0], g_old, g_end), max(self.swing[1], g_old, g_end)
+        if lo >= hi - lo:  # (zero beyond the step's reach)
+            return False
+        found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, self.t_end, g_old, g_end)
+        if found is not None:
+            self.latch, self.dipped = found, True
+        return found is not None
+
 
 class StateWatch(StageWatch):
     """A :class:`StageWatch` of a function of the state alone, g = s x[k] − floor (``fn.state``: (k, s, floor); a
@@ -185,6 +214,7 @@ class StateWatch(StageWatch):
     confirmed where it is located (:meth:`unconfirmed`)."""
 
     holds = False  # (a slide's stop: reaching its floor fires)
+    dips = None  # (its stages' alarm, confirmed where located)
 
     def __init__(self, fn):
         super().__init__(fn, fn.kind, fn.contact, index=fn.index)
@@ -212,6 +242,7 @@ class ValuesWatch(StageWatch):
     that the false alarms cost more than the dips they would find; a :class:`DipWatch` searches the dense output.)"""
 
     holds = False  # (a contact's force reaching 0 lets it go: a compliant contact's at its surface)
+    dips = None  # (its stages' alarm, confirmed where located)
 
     def __init__(self, fn, column: int):
         super().__init__(fn, fn.kind, fn.contact)
@@ -292,6 +323,7 @@ class DipWatch:
         self.value = swing.value  #: value(t, x): g + floor
         self.t_end, self.g_old, self.g_end = -math.inf, math.inf, math.inf  #: the last step end [s], g before, there
         self.latch = math.inf  #: [s] from here on g is held negative (a dip found inside the last step)
+        self.dipped = False  #: a dip was found (the run's ``dips_seen_inside_a_step``)
 
     def __call__(self, t: float, x: np.ndarray) -> float:
         g = self.value(t, x) - self.floor
@@ -313,7 +345,7 @@ class DipWatch:
             return False
         found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, self.t_end, g_old, g_end)
         if found is not None:
-            self.latch = found
+            self.latch, self.dipped = found, True
         return found is not None
 
 

@@ -120,7 +120,7 @@ class HybridRun:
                              "no max_step", self.scene.file)
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "corners": 0, "singular_solves": 0,
                       "slips_seen_inside_a_step": 0, "slip_false_alarms": 0,  # (slip, joint_slip, release)
-                      "dips_seen_inside_a_step": 0}  # (touch, stop, reverse: events.DipWatch)
+                      "dips_seen_inside_a_step": 0}  # (events.DipWatch, a hold's StageWatch)
         self.log = EventLog(self.scene.name, self.solver, self.stats)
         self.events = self.log.events
 
@@ -152,9 +152,9 @@ class HybridRun:
         """Initial state, consistent modes and the first phase at t = 0."""
         x, modes = self.system.initial_state()
         phase = self.system.start_phase(0, 0.0, x, None)
+        phase = replace(phase, limits=self.system.limits.resting(x, self.system.nQ))  # (pressing, unless they pull)
         x = self.sampled.start(0.0, x, modes, phase, None)  # a sampled law's first sample
-        x, modes = self.transitions.consistent(0.0, x, modes, phase)
-        return self.transitions.settle_joints(0.0, x, modes, phase)
+        return self.transitions.start(0.0, x, modes, phase)
 
     # ---- main loop -------------------------------------------------------------------
     def run(self, wall0: float) -> Result:

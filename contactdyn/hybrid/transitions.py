@@ -45,7 +45,7 @@ from ..model.friction import direction_of, in_cone, slip_acceleration, slip_velo
 from ..model.impact import impact, project_velocity, singular_stick
 from ..model.system import System
 from .charts import on_chart
-from .events import AT_ONCE, DipWatch, EventLog
+from .events import AT_ONCE, EventLog
 from .pipeline_mode import mode_runner
 
 __all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
@@ -156,7 +156,7 @@ class Transitions:
         self.log.log(t, event.kind, event.contact, check_storm=event.kind not in self.UNCOUNTED)
         if _false_alarm(self.stats, self.log, event, t, x):
             return self.release_pulling(t, x, modes, phase)
-        self.stats["dips_seen_inside_a_step"] += int(isinstance(event, DipWatch) and event.latch < math.inf)
+        self.stats["dips_seen_inside_a_step"] += int(getattr(event, "dipped", False))
         after = _After()
         x, phase, settle = self.HANDLERS[event.kind](self, t, x, modes, phase, event, after)
         if settle:
@@ -169,6 +169,19 @@ class Transitions:
         are released. Returns (x, modes, phase)."""
         x, modes = self.consistent(t, x.copy(), list(modes), phase, rest, released)
         return self.release_pulling(t, x, modes, phase)
+
+    def start(self, t, x, modes, phase):
+        """The modes at a run's start: :meth:`consistent`, the joints at rest on a limit pressing on it
+        (``phase.limits``: :meth:`~contactdyn.model.limits.JointLimits.resting`) but those whose torque pulls, let go
+        with no event (they never pressed), then :meth:`settle_joints`. Returns (x, modes, phase)."""
+        limits = self.system.limits
+        for _ in range(len(phase.limits) + 1):
+            x, modes = self.consistent(t, x, modes, phase)
+            pulling = limits.pulling(phase, self.evaluate(t, x, modes, phase)) if phase.limits else []
+            if not pulling:
+                break
+            x, phase = limits.release(self.system, x, phase, pulling[0][0])  # (not logged)
+        return self.settle_joints(t, x, modes, phase)
 
     def release_pulling(self, t, x, modes, phase):
         """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event; then the joint

@@ -86,6 +86,18 @@ class JointLimits:
                               side))
         return out
 
+    def resting(self, x: np.ndarray, nQ: int) -> tuple[tuple[int, int], ...]:
+        """(index, side) of the joints at rest on a limit in x (within TOUCH_TOL of it, q̇ᵢ = 0): a run starts them
+        pressing on it, with no impact (those whose torque pulls are let go: ``Transitions.start``)."""
+        out = []
+        for lim in self.limits:
+            q, v = float(x[lim.index]), float(x[nQ + lim.index])
+            if v == 0.0 and abs(q - lim.lower) <= TOUCH_TOL:
+                out.append((lim.index, 1))
+            elif v == 0.0 and abs(lim.upper - q) <= TOUCH_TOL:
+                out.append((lim.index, -1))
+        return tuple(out)
+
     # ---- constraint rows -----------------------------------------------------------------
     def add_rows(self, pressing, x: np.ndarray, nQ: int, rows, omega: float) -> None:
         """A row per pressing joint into ``rows`` (contactdyn.model.constraints.Rows): eᵢ Q̈ + γ = 0 with

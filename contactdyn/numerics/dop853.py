@@ -270,7 +270,7 @@ class _EventWatch:
         self.falling = all(d < 0 for d in self.direction)  #: _active reduces to g_old ≥ 0 ≥ g_new
         #: the events that also look inside a step, on its dense output (``dips(t_old, state_at)``: whether their
         #: function falls below zero and back within it; they then hold it negative from there while it is located)
-        self.inside = [i for i, e in enumerate(self.events) if hasattr(e, "dips")]
+        self.inside = [i for i, e in enumerate(self.events) if getattr(e, "dips", None) is not None]
         self.hits: list[tuple[float, int]] = []  #: (root [s], event), in time order
 
     def stop(self, steps: _Steps, t: float, x: np.ndarray) -> bool:
