@@ -397,6 +397,20 @@ def test_a_load_exactly_at_the_cone_edge_holds(compiled):
             assert [(e["kind"], e["t"]) for e in r.events] == [("slip", 0.0)] and r["v"][-1, 0] > 0.1  # (at once)
 
 
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_push_past_the_cone_for_4_ms_between_two_stages_breaks_the_stick(compiled):
+    """A mass stuck on the ground (nothing moves: its steps grow to ~0.1 s) pushed by F0 + A sin(π t), whose peak at
+    0.5 s passes μ_s m g by 2e-5 of it for ~4 ms, between two stages of one step: found on the step's dense output
+    (StageWatch.dips), it slips at the closed form's instant, asin((μ_s W − F0)/A)/π (before: stuck throughout)."""
+    A = 10.0  # [N]
+    F0 = 0.5 * W * (1.0 + 2e-5) - A  # [N]
+    doc = scene(mu_s=0.5, mu_k=0.4, duration=1.0, **{"controller.force": [F0, 0.0, 0.0],
+                                                      "controller.amplitude": [A, 0.0, 0.0], "controller.frequency": 0.5})
+    r = simulate(parse_scene(doc), compiled=compiled)
+    assert [e["kind"] for e in r.events][:2] == ["stick", "slip"] and r.stats["dips_seen_inside_a_step"] == 1
+    assert r.events[1]["t"] == pytest.approx(math.asin((0.5 * W - F0) / A) / math.pi, abs=1e-9)
+
+
 @pytest.mark.parametrize("method", ["DOP853C", "RK45"])
 def test_a_resting_contact_pulled_off_for_a_while_separates(method):
     """A mass at rest on a frictionless floor, lifted by W − A + 1 + A sin(2π t) [N] (A = 10 N): its normal force falls
