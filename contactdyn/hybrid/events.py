@@ -162,15 +162,18 @@ class StageWatch:
         self.g_old = self.g_end = math.inf  #: g at the step end before the last one, and at the last
         self.latch = math.inf  #: from this time on g is held negative [s]
         self.outside: list[float] = []  #: times [s] of the stages since the last step end that saw g < 0
-        self.staged: list[tuple[float, float]] = []  #: (t [s], g) of the stages since the last step end
-        self.swing = (math.inf, -math.inf)  #: the least and greatest g of the last step's stages
+        self.lo, self.hi = math.inf, -math.inf  #: the least and greatest g of the stages since the last step end
+        self.swing = (math.inf, -math.inf)  #: theirs over the last step (its attempts': a gate, not an alarm)
         self.dipped = False  #: found by :meth:`dips` (the run's ``dips_seen_inside_a_step``)
 
     def sample(self, t: float, g: float) -> None:
         g -= self.floor
         if g < 0.0:
             self.outside.append(t)
-        self.staged.append((t, g))
+        if g < self.lo:
+            self.lo = g
+        if g > self.hi:
+            self.hi = g
 
     def __call__(self, t: float, x: np.ndarray) -> float:
         g = self.value(t, x) - self.floor
@@ -179,9 +182,7 @@ class StageWatch:
         if t > self.t_end:  # a new step end (solve_ivp calls events at step ends in increasing t)
             t_old, self.t_end = self.t_end, t
             self.g_old, self.g_end = self.g_end, g
-            inside = [v for ts, v in self.staged if t_old < ts < t]
-            self.swing = (min(inside), max(inside)) if inside else (math.inf, -math.inf)
-            self.staged = [(ts, v) for ts, v in self.staged if ts > t]
+            self.swing, self.lo, self.hi = (self.lo, self.hi), math.inf, -math.inf
             if not self.outside:
                 return g
             hidden = [ts for ts in self.outside if t_old < ts < t]

@@ -83,7 +83,9 @@ HELD_STEPS_SEEN = 10  #: under a hold, the stiffness checks (auto's, a collapse'
 #: mode switches change the forces, not the time scales; an impact or a separation does, so they restart; a free
 #: body's chart switch changes its coordinates only)
 RESUME_STEP = ("stop", "reverse", "slip", "turn", "joint_slip", "joint_stick", "chart")
-STAGED = ("DOP853", "DOP853C")  #: methods whose calls are the stages of their steps (events.DipWatch gates on them)
+#: methods whose calls fall inside their steps (the stages; Radau's and BDF's Newton iterates): events.DipWatch gates
+#: its search on them; LSODA's are not kept per step (its DipWatch gates on the step's ends alone)
+STAGED = ("DOP853", "DOP853C", "RK45", "RK23", "RK4", "Radau", "BDF")
 LAUNCH_METHOD = "LSODA"  #: for segments where a 2-D slip starts from rest or comes to rest (see HybridRun._method)
 LAUNCH_SETTLED = 0.5 * STABILITY_RADIUS  #: [-] period·|λ| below which a sampled launch leaves LAUNCH_METHOD
 #: a 2-D slide's explicit steps shorter than COLLAPSE_RATIO × the segment's longest, COLLAPSE_STEPS of them, have

@@ -170,5 +170,48 @@ def integrate(fun, t_span: tuple[float, float], y0: np.ndarray, method: str, *, 
         from .rk4 import RK4
 
         method, options = RK4, {"instability": fixed_step_instability, "check_start": not checked}
+    method, events = _searching_steps(method, events or [])
     return solve_ivp(fun, t_span, y0, method=method, rtol=rtol, atol=atol, max_step=max_step, events=events or None,
                      dense_output=True, first_step=first_step, **options)
+
+
+def _searching_steps(method, events: list):
+    """``solve_ivp``'s method and events such that an event that also looks inside a step (``dips(t_old, state_at)``,
+    :class:`~contactdyn.hybrid.events.DipWatch`) searches each step on its dense output, as our DOP853 and LSODA
+    have it do (:class:`~contactdyn.numerics.dop853._EventWatch`): the method's class records the dense output it
+    gives ``solve_ivp`` after each step, and the event reports a fall through zero where a dip was found."""
+    if not any(getattr(e, "dips", None) is not None for e in events):
+        return method, events
+    if isinstance(method, str):
+        import scipy.integrate
+
+        method = getattr(scipy.integrate, method)
+    last: dict = {}
+
+    class Recorded(method):
+        def dense_output(self):
+            last["step"] = dense = super().dense_output()
+            return dense
+
+    return Recorded, [_Searching(e, last) if getattr(e, "dips", None) is not None else e for e in events]
+
+
+class _Searching:
+    """An event with ``dips`` under ``solve_ivp``: at each new step end, where its value is positive, also searched
+    inside the step just taken, on its dense output (``last["step"]``); a dip found reads as −1 there, and the event
+    holds its value negative from the dip on while ``solve_ivp`` locates the root."""
+
+    def __init__(self, event, last: dict):
+        self.event, self.last = event, last
+        self.terminal, self.direction = event.terminal, event.direction
+        self.t_end = -math.inf  #: [s] the last step end
+
+    def __call__(self, t: float, y: np.ndarray) -> float:
+        g = self.event(t, y)
+        if t <= self.t_end:  # (a root being located inside the last step)
+            return g
+        self.t_end = t
+        step = self.last.get("step")
+        if g > 0.0 and step is not None and step.t_max == t and self.event.dips(step.t_min, step):
+            return -1.0
+        return g
