@@ -313,8 +313,8 @@ class DipWatch:
     :class:`StageSwing`) say whether zero lies within g's own swing over the step; if so, :meth:`dips` searches the
     step's dense output for g < 0 (:data:`DIP_SAMPLES` instants, then parabolas through the lowest). A dip found holds
     g negative from its instant on, so the root located is the first crossing, on the dense output itself: never a
-    false alarm. (Our steps only: DOP853's and LSODA's, :class:`~contactdyn.numerics.dop853._EventWatch`;
-    ``solve_ivp``'s see the step ends.)"""
+    false alarm. (Every method's steps: our DOP853's and LSODA's, :class:`~contactdyn.numerics.dop853._EventWatch`;
+    ``solve_ivp``'s, :func:`~contactdyn.numerics.integrators.integrate`.)"""
 
     terminal = True
     direction = -1
