@@ -171,16 +171,12 @@ class Transitions:
         return self.release_pulling(t, x, modes, phase)
 
     def start(self, t, x, modes, phase):
-        """The modes at a run's start: :meth:`consistent`, the joints at rest on a limit pressing on it
-        (``phase.limits``: :meth:`~contactdyn.model.limits.JointLimits.resting`) but those whose torque pulls, let go
-        with no event (they never pressed), then :meth:`settle_joints`. Returns (x, modes, phase)."""
-        limits = self.system.limits
-        for _ in range(len(phase.limits) + 1):
+        """(x, modes, phase) at a run's start: :meth:`consistent`, the joints at rest on a limit (``phase.limits``)
+        pressing but those whose torque pulls, let go with no event (they never pressed); :meth:`settle_joints`."""
+        x, modes = self.consistent(t, x, modes, phase)
+        while phase.limits and (pulling := self.system.limits.pulling(phase, self.evaluate(t, x, modes, phase))):
+            x, phase = self.system.limits.release(self.system, x, phase, pulling[0][0])  # (not logged)
             x, modes = self.consistent(t, x, modes, phase)
-            pulling = limits.pulling(phase, self.evaluate(t, x, modes, phase)) if phase.limits else []
-            if not pulling:
-                break
-            x, phase = limits.release(self.system, x, phase, pulling[0][0])  # (not logged)
         return self.settle_joints(t, x, modes, phase)
 
     def release_pulling(self, t, x, modes, phase):
