@@ -297,3 +297,39 @@ def test_a_controller_that_returns_nan_is_named_with_its_command(capsys, tmp_pat
     said = _one_line(capsys.readouterr().err)
     assert re.fullmatch(r"contactdyn: error: t = 0\.020\d* s: controller 'failing_ctl_nan' \(failing_ctl_nan\.py\) "
                         r"gave no finite command: τ = \[nan, nan\] at q = \[\S+, \S+\], v = \[\S+, \S+\]", said), said
+
+
+@pytest.mark.parametrize("path", ["compiled", "interpreted"])
+def test_a_stage_law_with_a_wrong_signature_is_named(capsys, tmp_path, path):
+    """force(k, b, p, x): the call raises TypeError before the law's code runs (no frame of it in the traceback).
+    Before, interpreted: the raw TypeError's traceback (compiled, numba cannot compile it: a Python stage, named)."""
+    module = f"wrong_cubic_{path}"
+    scene = _cubic_press(tmp_path, module, "k, b, p, x", "return k * x + p[0] * x**3")
+    assert main(["run", str(scene), "--path", path]) == EXIT_FAILED
+    said = _one_line(capsys.readouterr().err)
+    assert re.fullmatch(rf"contactdyn: error: t = 0 s: stage law '{module}' \({module}\.py\) raised TypeError: "
+                        r"\S*force\(\) takes 4 positional arguments but 5 were given", said), said
+
+
+class WrongSignature(FrictionLaw):
+    """μ_k, but its coefficient takes no slip speed."""
+
+    name = "wrong_signature_test"
+
+    @staticmethod
+    def coefficient(mu_s, mu_k, p):
+        return mu_k
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
+def test_a_friction_law_with_a_wrong_signature_is_named(compiled):
+    register_friction_law(WrongSignature)
+    doc = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
+    doc["duration"] = 0.02
+    doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]],
+                                        "law": WrongSignature.name, "mu_s": 0.6, "mu_k": 0.4}
+    with pytest.raises(LawError) as info:
+        _quiet(parse_scene(doc), compiled=compiled, interpreted=not compiled)
+    assert re.fullmatch(r"t = 0 s: friction law 'wrong_signature_test' \(test_law_failures\.py\) raised TypeError: "
+                        r"\S*coefficient\(\) takes 3 positional arguments but 4 were given", str(info.value)), \
+        str(info.value)

@@ -5,7 +5,8 @@ call: compiled (an exception cannot leave its C function: the call runs again in
 again: ``Pipeline.failed_call``), as a declared Python stage (its exception kept and re-raised after the call:
 :mod:`.abi`) or interpreted. Wherever the exception surfaces, :func:`law_error` finds the law in its traceback (the
 innermost frame of a registered law's own code, a law defined outside this package: the package's own laws raising
-is a bug of ours, left as it is) and gives a :class:`LawError`: the law's kind and name, its file and line (the
+is a bug of ours, left as it is; else the law the package's call of it was calling, :func:`raised_calling`: a wrong
+signature) and gives a :class:`LawError`: the law's kind and name, its file and line (the
 traceback's innermost line in the law's file), the exception's type and message and the simulated time when known;
 the exception is its ``__cause__``. A law that returned NaN or ±inf is found by the call run again interpreted with
 its laws' results checked (:func:`.abi.checking_laws`) and named with what it returned and at what inputs
@@ -21,9 +22,11 @@ from pathlib import Path
 
 from ..errors import ContactdynError, SimulationError
 
-__all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file"]
+__all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file",
+           "raised_calling"]
 
 PACKAGE = __name__.split(".")[0] + "."  #: "contactdyn.": the package's own laws are not a user's
+_CALLING = "_contactdyn_calling"  #: an exception's attribute: (kind, class) of the law whose call raised it
 
 
 class LawError(SimulationError):
@@ -49,13 +52,22 @@ def law_file(cls: type) -> str:
     return getattr(sys.modules.get(cls.__module__), "__file__", None) or cls.__module__
 
 
+def raised_calling(exc: BaseException, law: tuple[str, type] | None) -> None:
+    """Mark ``exc`` as raised where the package called ``law`` ((kind, class); None: nothing to mark), for
+    :func:`law_error`: the law it names where no frame of a law's code is in the traceback (a wrong signature). The
+    innermost call's mark stays."""
+    if law is not None and not hasattr(exc, _CALLING):
+        setattr(exc, _CALLING, law)
+
+
 def law_error(exc: BaseException, t: float | None = None, law: tuple[str, type] | None = None) -> LawError | None:
     """The LawError of ``exc`` where it was raised inside a user's law's code (its traceback says), at t [s], or in
     calling ``law`` ((kind, class) of a user's law the caller called: a wrong signature, a result that does not
-    unpack); else None (the package's own errors, which say what failed, and an error not a law's: left as they
-    are)."""
+    unpack; else the law ``exc`` was marked raised calling, :func:`raised_calling`); else None (the package's own
+    errors, which say what failed, and an error not a law's: left as they are)."""
     if isinstance(exc, ContactdynError) or not isinstance(exc, Exception):
         return None
+    law = law or getattr(exc, _CALLING, None)
     codes = _law_codes()
     frames = [(frame.f_code, line) for frame, line in traceback.walk_tb(exc.__traceback__)]
     inner = [i for i, (code, _) in enumerate(frames) if code in codes]
