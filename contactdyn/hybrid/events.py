@@ -447,7 +447,7 @@ class LawStall(_StepCount):
     ``last_failed``, new since the step end before: the NaN rates that rejected the longer attempts). A step control
     that keeps meeting NaN there shrinks the step towards t's resolution and crawls on (a stage law NaN past some
     compression: 1e-15 s steps, until the run's budget); the hybrid loop then asks whether a law returned NaN or ±inf
-    there (:meth:`~contactdyn.hybrid.loop.HybridRun._stall_check`). A trial state that overflows a law at a step too
+    there (:func:`contactdyn.hybrid.loop._stall_check`). A trial state that overflows a law at a step too
     long is rejected and a step a few times shorter passes: that shrinks by far less than ``ratio``."""
 
     kind = "stall"

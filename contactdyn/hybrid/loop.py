@@ -25,7 +25,7 @@ a friction event the next segment (or a corner) starts with the step size the so
 reached. An integration failure reports what the state says: a singular contact system or
 stiffness. Steps that shrink a billion-fold against calls with no answer (a law's NaN next to the state they crawl
 towards) have the call's laws checked, and a law that returned NaN or ±inf there stops the run at once, named
-(:class:`~contactdyn.hybrid.events.LawStall`, :meth:`HybridRun._stall_check`).
+(:class:`~contactdyn.hybrid.events.LawStall`, :func:`_stall_check`).
 """
 
 from __future__ import annotations
@@ -145,7 +145,7 @@ class HybridRun:
         self.launched = False
         self.step_checked = False  #: RK4's step checked against the current mode (at its first segment's start)
         #: the steps stalled against calls with no answer in the current mode, and no law's NaN was to blame
-        #: (:meth:`_stall_check`): not watched again in the mode
+        #: (:func:`_stall_check`): not watched again in the mode
         self.stall_checked = False
         #: the modes' pipelines, compiled; ``interpreted`` (or not ``compiled``): the same call run as its twins
         #: (numerics.twins: a scene kind's first run), ``twins`` if given (a numerics.twins.Twins)
@@ -221,7 +221,7 @@ class HybridRun:
                     self._collapse_check(fun, t, x, _explicit_step(sol, held), t_end - t, period)
                     continue
                 if fired[0].kind == "stall":  # a law's NaN holding the steps back? (same modes, same phase)
-                    self._stall_check(fired[0])
+                    _stall_check(self, fired[0])
                     continue
                 self._new_mode()
                 if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
@@ -327,18 +327,6 @@ class HybridRun:
         if pipe is not None and not self.stall_checked:
             out.append(LawStall(pipe, STALL_RATIO, STALL_STEPS))
         return out
-
-    def _stall_check(self, stall: LawStall) -> None:
-        """The steps shrank against calls with no answer (events.LawStall): the LawError of a law that returned NaN
-        or ±inf in the last of them (``Pipeline.non_finite``: the call run again interpreted, its laws' results
-        checked) is raised; else (no law's: a contact system not finite there) the run goes on as before from the
-        step it had reached, the mode no longer watched."""
-        error = stall.pipe.non_finite()
-        if error is not None:
-            raise LawError(error.kind, error.name, error.file, f"{error.what}; the run stalled there: its steps shrank "
-                           f"from {stall.longest:.3g} s to {stall.short:.3g} s against it", error.line, error.t)
-        self.stall_checked = True
-        self.next_step = stall.short
 
     def _collapse_check(self, fun, t: float, x: np.ndarray, h: float, span: float, period: float | None = None
                         ) -> None:
@@ -510,6 +498,19 @@ def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
         last = run.segments[-1]
         return last.t1, np.asarray(last.sol(last.t1), float)
     return 0.0, run.start()[0]
+
+
+def _stall_check(run: HybridRun, stall: LawStall) -> None:
+    """The steps shrank against calls with no answer (events.LawStall): the LawError of a law that returned NaN or
+    ±inf in the last of them (``Pipeline.non_finite``: the call run again interpreted, its laws' results checked) is
+    raised; else (no law's: a contact system not finite there) the run goes on as before from the step it had
+    reached, the mode no longer watched."""
+    error = stall.pipe.non_finite()
+    if error is not None:
+        raise LawError(error.kind, error.name, error.file, f"{error.what}; the run stalled there: its steps shrank "
+                       f"from {stall.longest:.3g} s to {stall.short:.3g} s against it", error.line, error.t)
+    run.stall_checked = True
+    run.next_step = stall.short
 
 
 def _launch_settled(run: HybridRun, fun, t: float, x: np.ndarray, period: float) -> bool:
