@@ -17,8 +17,10 @@ import pytest
 
 from contactdyn import parse_scene, simulate
 from contactdyn.cli import EXIT_FAILED, main
+from contactdyn.laws.drive_kinds import DriveKind, register_drive_kind
 from contactdyn.laws.failures import LawError
 from contactdyn.laws.friction_laws import FrictionLaw, register_friction_law
+from contactdyn.laws.params import Param
 from contactdyn.laws.stage_laws import StageLaw, register_stage_law
 
 pytestmark = pytest.mark.usefixtures("fresh_user_imports")  # (each test's law modules imported afresh)
@@ -333,3 +335,55 @@ def test_a_friction_law_with_a_wrong_signature_is_named(compiled):
     assert re.fullmatch(r"t = 0 s: friction law 'wrong_signature_test' \(test_law_failures\.py\) raised TypeError: "
                         r"\S*coefficient\(\) takes 3 positional arguments but 4 were given", str(info.value)), \
         str(info.value)
+
+
+class NanForce(DriveKind):
+    """A torque source behind a law (motorized, no gear): the force its command, NaN past ``tau_nan``."""
+
+    name = "nan_force_test"
+    params = (Param("tau_nan", "N·m", "the command past which the force is NaN", 1e3, lo=0.0),)
+    motorized = True
+
+    @staticmethod
+    def force(spec, command, q, qd, theta, omega):
+        force = command if abs(command) < spec.tau_nan else math.nan
+        return force, 0.0, force * qd, 0.0
+
+
+class NanVoltage(NanForce):
+    """The same by a voltage (1 V per N·m), NaN past ``tau_nan``."""
+
+    name = "nan_voltage_test"
+    has_voltage = True
+
+    @staticmethod
+    def voltage(spec, tau, qd, omega):
+        return tau if abs(tau) < spec.tau_nan else math.nan
+
+    @staticmethod
+    def force(spec, command, q, qd, theta, omega):
+        return command, 0.0, command * qd, 0.0
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
+@pytest.mark.parametrize("kind, said", [
+    (NanForce, r"returned force = nan N·m or N at command = (\S+) N·m or N, q = \S+, q̇ = \S+"),
+    (NanVoltage, r"returned u = nan V for τ = (\S+) N·m or N at q̇ = \S+")], ids=["force", "voltage"])
+def test_a_drive_kind_that_returns_nan_is_named_with_its_inputs(monkeypatch, kind, said, compiled):
+    """B1's shoulder asks 51.5 N·m at t = 0.0386 s (49.5 to 51.9 N·m over its first 0.05 s) of a drive kind whose law
+    is NaN past it (before: "b1: integration failed at t = 0.0385546558 s (DOP853C): DOP853C: step size becomes too
+    small", the kind not named)."""
+    import contactdyn.hybrid.loop as loop
+
+    monkeypatch.setattr(loop, "step_budget", lambda *args: 2000)
+    register_drive_kind(kind)
+    doc = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
+    doc["duration"] = 0.05
+    doc["robot"]["drive"] = {"kind": kind.name, "tau_nan": 51.5}
+    with pytest.raises(LawError) as info:
+        _quiet(parse_scene(doc), compiled=compiled, interpreted=not compiled)
+    error = str(info.value)
+    assert re.fullmatch(rf"t = 0\.03\d* s: drive kind '{kind.name}' \(test_law_failures\.py\) {said} "
+                        r"\(tau_nan = 51\.5\); the run stalled there: its steps shrank from \S+ s to \S+ s against it",
+                        error), error
+    assert abs(float(re.search(said, error).group(1))) >= 51.5

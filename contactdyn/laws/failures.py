@@ -93,16 +93,46 @@ def naming_laws(t: float | None = None):
 
 
 def non_finite_error(family: str, law: type, args: tuple, value, t: float | None = None) -> LawError:
-    """The LawError of a law of ``family`` ("stage", "friction") that returned the non-finite ``value`` on
-    ``args`` (its Python call's: :func:`.abi.call_stage`'s, :func:`.abi.call_friction`'s)."""
-    if family == "stage":
-        k, b, p, x, xdot = args
-        what = (f"returned F = {value} N at x = {x:.6g} m, ẋ = {xdot:.6g} m/s (k = {k:.6g} N/m, b = {b:.6g} N·s/m"
-                f"{_params(law, p)})")
-        return LawError("stage law", law.name, law_file(law), what, None, t)
+    """The LawError of a law of ``family`` ("stage", "friction"; a drive kind's "drive voltage", "drive force") that
+    returned the non-finite ``value`` on ``args`` (its Python call's: :func:`.abi.call_stage`'s,
+    :func:`.abi.call_friction`'s; a drive kind's with its spec's values first, :func:`.drive_abi.checking_drives`)."""
+    kind, what = _NON_FINITE[family]
+    return LawError(kind, law.name, law_file(law), what(law, args, value), None, t)
+
+
+def _stage_returned(law: type, args: tuple, value) -> str:
+    k, b, p, x, xdot = args
+    return (f"returned F = {value} N at x = {x:.6g} m, ẋ = {xdot:.6g} m/s (k = {k:.6g} N/m, b = {b:.6g} N·s/m"
+            f"{_params(law, p)})")
+
+
+def _friction_returned(law: type, args: tuple, value) -> str:
     mu_s, mu_k, p, speed = args
-    what = f"returned μ = {value} at slip speed {speed:.6g} m/s (mu_s = {mu_s:.6g}, mu_k = {mu_k:.6g}{_params(law, p)})"
-    return LawError("friction law", law.name, law_file(law), what, None, t)
+    return f"returned μ = {value} at slip speed {speed:.6g} m/s (mu_s = {mu_s:.6g}, mu_k = {mu_k:.6g}{_params(law, p)})"
+
+
+def _voltage_returned(kind: type, args: tuple, value) -> str:
+    """u [V] for τ [N·m or N] at the coordinate's q̇ (and the motor's ω [rad/s], a kind with a motor coordinate)."""
+    p, tau, qd, omega = args
+    motor = f", ω = {omega:.6g} rad/s" if kind.motor_coordinate else ""
+    return f"returned u = {value} V for τ = {tau:.6g} N·m or N at q̇ = {qd:.6g}{motor}{_drive_params(kind, p)}"
+
+
+def _force_returned(kind: type, args: tuple, value) -> str:
+    """The force on the coordinate (and the motor's torque [N·m], θ [rad], ω [rad/s] with a motor coordinate) at the
+    command (a voltage [V] or a force [N·m or N]) and the coordinate's q, q̇."""
+    p, command, q, qd, theta, omega = args
+    unit = "V" if kind.has_voltage else "N·m or N"
+    returned, at = f"force = {value[0]} N·m or N", f"command = {command:.6g} {unit}, q = {q:.6g}, q̇ = {qd:.6g}"
+    if kind.motor_coordinate:
+        returned += f", motor torque = {value[1]} N·m"
+        at += f", θ = {theta:.6g} rad, ω = {omega:.6g} rad/s"
+    return f"returned {returned} at {at}{_drive_params(kind, p)}"
+
+
+#: family -> (the kind a LawError names, what the law did: (law, args, value) -> words)
+_NON_FINITE = {"stage": ("stage law", _stage_returned), "friction": ("friction law", _friction_returned),
+               "drive voltage": ("drive kind", _voltage_returned), "drive force": ("drive kind", _force_returned)}
 
 
 def no_command_error(ctl, tau, q, v, t: float) -> SimulationError:
@@ -124,6 +154,12 @@ def _listed(values) -> str:
 def _params(law: type, p) -> str:
     """", name = value" per declared parameter of ``law`` (its values ``p``)."""
     return "".join(f", {param.name} = {float(v):.6g}" for param, v in zip(law.params, p, strict=False))
+
+
+def _drive_params(kind: type, p) -> str:
+    """" (name = value, ...)" of a drive kind's declared parameters (its spec's values ``p``, first), or ""."""
+    listed = _params(kind, p)[2:]
+    return f" ({listed})" if listed else ""
 
 
 def _law_codes() -> dict:
