@@ -17,8 +17,10 @@ import pytest
 
 from contactdyn import parse_scene, simulate
 from contactdyn.cli import EXIT_FAILED, main
+from contactdyn.laws.drive_kinds import DriveKind, register_drive_kind
 from contactdyn.laws.failures import LawError
 from contactdyn.laws.friction_laws import FrictionLaw, register_friction_law
+from contactdyn.laws.params import Param
 from contactdyn.laws.stage_laws import StageLaw, register_stage_law
 
 pytestmark = pytest.mark.usefixtures("fresh_user_imports")  # (each test's law modules imported afresh)
@@ -184,7 +186,8 @@ def _quiet(scene, **options):
 @pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
 def test_a_stage_law_that_returns_nan_is_named_with_its_inputs(compiled, monkeypatch):
     """The cylindrical robot's axis falls onto a one-stage chain of the law: every step past 0.1 mm of compression
-    is rejected (NaN rates), the run stalls there until its step budget (500 steps here) is spent."""
+    is rejected (NaN rates), the steps shrink against it: named once they are 1e-9 of the segment's longest (before:
+    once the run's step budget was spent, bounded to 500 steps here, as it still is)."""
     import contactdyn.hybrid.loop as loop
 
     monkeypatch.setattr(loop, "step_budget", lambda *args: 500)
@@ -202,8 +205,78 @@ def test_a_stage_law_that_returns_nan_is_named_with_its_inputs(compiled, monkeyp
     assert re.match(r"t = \S+ s: stage law 'nan_past_test' \(test_law_failures\.py\) returned F = nan N at "
                     r"x = (\S+) m, ẋ = \S+ m/s \(k = 50000 N/m, b = 1500 N·s/m\)", said), said
     assert float(re.search(r"x = (\S+) m", said).group(1)) >= 1e-4
-    assert re.search(r"; the run then stopped: \S+: stopped at t = \S+ s of 0.05 s after \d+ right-hand-side calls",
-                     said), said  # (what it said before, alone)
+    assert re.search(r"; the run stalled there: its steps shrank from \S+ s to \S+ s against it$", said), said
+
+
+#: a user's cubic stage law (examples/cubic_stage.py's) that fails on the cubic press (examples/cubic_press.toml,
+#: which settles at 0.4 mm of compression): {failure}
+CUBIC = '''import math
+
+from contactdyn.laws import Param, StageLaw, register_stage_law
+
+
+@register_stage_law
+class Cubic(StageLaw):
+    name = "{name}"
+    params = (Param("k3", "N/m^3", "cubic stiffness of the cubic law F = k x + k3 x^3 + b x'", 0.0, lo=0.0,
+                    example=1e9),)
+
+    @staticmethod
+    def force({signature}):
+        {body}
+'''
+STALLS = ("k, b, p, x, xdot", "return k * x + p[0] * x**3 + b * xdot if x < 2e-4 else math.nan")  #: NaN past 0.2 mm
+
+
+def _cubic_press(folder: Path, module: str, signature: str, body: str) -> Path:
+    """The cubic press (examples/cubic_press.toml) on stage law ``module`` in ``folder``, of that signature and body."""
+    (folder / f"{module}.py").write_text(CUBIC.format(name=module, signature=signature, body=body))
+    text = (ROOT / "examples" / "cubic_press.toml").read_text()
+    text = text.replace('imports = ["cubic_stage"]', f'imports = ["{module}"]').replace('law = "cubic"',
+                                                                                      f'law = "{module}"')
+    (folder / f"{module}.toml").write_text(text)
+    return folder / f"{module}.toml"
+
+
+def test_a_stage_law_that_stalls_the_run_is_named_at_once(capsys, tmp_path):
+    """The stalled cubic press: past 0.2 mm the law's NaN rejects every longer step, the steps shrink to 1e-15 s at
+    t = 0.0487 s (before: on until the run's step budget, 720001 right-hand-side calls, ~40 s, then named)."""
+    scene = _cubic_press(tmp_path, "stalled_cubic", *STALLS)
+    assert main(["run", str(scene), "--path", "compiled"]) == EXIT_FAILED
+    said = _one_line(capsys.readouterr().err)
+    assert re.fullmatch(r"contactdyn: error: t = 0\.0487\d* s: stage law 'stalled_cubic' \(stalled_cubic\.py\) "
+                        r"returned F = nan N at x = 0\.0002 m, ẋ = \S+ m/s \(k = 100000 N/m, b = 300 N·s/m, "
+                        r"k3 = 1e\+09\); the run stalled there: its steps shrank from \S+ s to \S+ s against it",
+                        said), said
+
+
+class InfPastRate(StageLaw):
+    """F = k x + b ẋ, +inf past 2 m/s of stage rate: the stage's rate stays below 0.5 m/s, a trial state of a step
+    too long for its stiff relaxation (k / b = 3333 1/s) goes past (numba compiles it)."""
+
+    name = "inf_past_rate_test"
+
+    @staticmethod
+    def force(k, b, p, x, xdot):
+        return k * x + b * xdot if abs(xdot) < 2.0 else math.inf
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
+def test_a_law_overflowing_at_trial_states_only_lets_the_run_go_on(compiled):
+    """The trial states of the steps too long overflow the law, their steps are rejected, shorter ones pass: the run
+    ends, as before."""
+    register_stage_law(InfPastRate)
+    scene = parse_scene({
+        "duration": 0.05, "solver": {"rtol": 1e-6, "atol": 1e-9},
+        "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.999],
+                  "v0": [0.5]},
+        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {
+            "direction": [0, 0, 1], "model": "chain", "environment": [{"k": 5e6, "b": 1500.0,
+                                                                       "law": InfPastRate.name}]}}},
+        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0}})
+    r = _quiet(scene, compiled=compiled, interpreted=not compiled)
+    assert r.stats["singular_solves"] > 0  # (the calls with no answer: the trial states past 2 m/s)
+    assert r["t"][-1] == pytest.approx(0.05)
 
 
 def test_a_friction_law_that_returns_nan_is_named_with_its_inputs():
@@ -226,3 +299,91 @@ def test_a_controller_that_returns_nan_is_named_with_its_command(capsys, tmp_pat
     said = _one_line(capsys.readouterr().err)
     assert re.fullmatch(r"contactdyn: error: t = 0\.020\d* s: controller 'failing_ctl_nan' \(failing_ctl_nan\.py\) "
                         r"gave no finite command: τ = \[nan, nan\] at q = \[\S+, \S+\], v = \[\S+, \S+\]", said), said
+
+
+@pytest.mark.parametrize("path", ["compiled", "interpreted"])
+def test_a_stage_law_with_a_wrong_signature_is_named(capsys, tmp_path, path):
+    """force(k, b, p, x): the call raises TypeError before the law's code runs (no frame of it in the traceback).
+    Before, interpreted: the raw TypeError's traceback (compiled, numba cannot compile it: a Python stage, named)."""
+    module = f"wrong_cubic_{path}"
+    scene = _cubic_press(tmp_path, module, "k, b, p, x", "return k * x + p[0] * x**3")
+    assert main(["run", str(scene), "--path", path]) == EXIT_FAILED
+    said = _one_line(capsys.readouterr().err)
+    assert re.fullmatch(rf"contactdyn: error: t = 0 s: stage law '{module}' \({module}\.py\) raised TypeError: "
+                        r"\S*force\(\) takes 4 positional arguments but 5 were given", said), said
+
+
+class WrongSignature(FrictionLaw):
+    """μ_k, but its coefficient takes no slip speed."""
+
+    name = "wrong_signature_test"
+
+    @staticmethod
+    def coefficient(mu_s, mu_k, p):
+        return mu_k
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
+def test_a_friction_law_with_a_wrong_signature_is_named(compiled):
+    register_friction_law(WrongSignature)
+    doc = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
+    doc["duration"] = 0.02
+    doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]],
+                                        "law": WrongSignature.name, "mu_s": 0.6, "mu_k": 0.4}
+    with pytest.raises(LawError) as info:
+        _quiet(parse_scene(doc), compiled=compiled, interpreted=not compiled)
+    assert re.fullmatch(r"t = 0 s: friction law 'wrong_signature_test' \(test_law_failures\.py\) raised TypeError: "
+                        r"\S*coefficient\(\) takes 3 positional arguments but 4 were given", str(info.value)), \
+        str(info.value)
+
+
+class NanForce(DriveKind):
+    """A torque source behind a law (motorized, no gear): the force its command, NaN past ``tau_nan``."""
+
+    name = "nan_force_test"
+    params = (Param("tau_nan", "N·m", "the command past which the force is NaN", 1e3, lo=0.0),)
+    motorized = True
+
+    @staticmethod
+    def force(spec, command, q, qd, theta, omega):
+        force = command if abs(command) < spec.tau_nan else math.nan
+        return force, 0.0, force * qd, 0.0
+
+
+class NanVoltage(NanForce):
+    """The same by a voltage (1 V per N·m), NaN past ``tau_nan``."""
+
+    name = "nan_voltage_test"
+    has_voltage = True
+
+    @staticmethod
+    def voltage(spec, tau, qd, omega):
+        return tau if abs(tau) < spec.tau_nan else math.nan
+
+    @staticmethod
+    def force(spec, command, q, qd, theta, omega):
+        return command, 0.0, command * qd, 0.0
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
+@pytest.mark.parametrize("kind, said", [
+    (NanForce, r"returned force = nan N·m or N at command = (\S+) N·m or N, q = \S+, q̇ = \S+"),
+    (NanVoltage, r"returned u = nan V for τ = (\S+) N·m or N at q̇ = \S+")], ids=["force", "voltage"])
+def test_a_drive_kind_that_returns_nan_is_named_with_its_inputs(monkeypatch, kind, said, compiled):
+    """B1's shoulder asks 51.5 N·m at t = 0.0386 s (49.5 to 51.9 N·m over its first 0.05 s) of a drive kind whose law
+    is NaN past it (before: "b1: integration failed at t = 0.0385546558 s (DOP853C): DOP853C: step size becomes too
+    small", the kind not named)."""
+    import contactdyn.hybrid.loop as loop
+
+    monkeypatch.setattr(loop, "step_budget", lambda *args: 2000)
+    register_drive_kind(kind)
+    doc = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
+    doc["duration"] = 0.05
+    doc["robot"]["drive"] = {"kind": kind.name, "tau_nan": 51.5}
+    with pytest.raises(LawError) as info:
+        _quiet(parse_scene(doc), compiled=compiled, interpreted=not compiled)
+    error = str(info.value)
+    assert re.fullmatch(rf"t = 0\.03\d* s: drive kind '{kind.name}' \(test_law_failures\.py\) {said} "
+                        r"\(tau_nan = 51\.5\); the run stalled there: its steps shrank from \S+ s to \S+ s against it",
+                        error), error
+    assert abs(float(re.search(said, error).group(1))) >= 51.5

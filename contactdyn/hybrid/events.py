@@ -45,8 +45,8 @@ from ..model.pipeline.pack import EV_FN, EV_GAP, EV_VT, EV_W
 from ..model.system import System
 
 __all__ = ["TOUCH_TOL", "AT_LIMIT", "terminal_event", "StageWatch", "StateWatch", "ValuesWatch", "AT_ONCE",
-           "StageSwing", "DipWatch", "SlipWatch", "StepBudget", "StepCollapse", "WorkWatch", "segment_events",
-           "fired_across", "EventLog", "start_storm_cause"]
+           "StageSwing", "DipWatch", "SlipWatch", "StepBudget", "StepCollapse", "LawStall", "WorkWatch",
+           "segment_events", "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
 #: start). Right after a separation the gap starts at 0 (± rounding): an event function that is
@@ -469,6 +469,33 @@ class StepCollapse(_StepCount):
 
     def counts(self, h: float) -> bool:
         short = h < self.ratio * self.longest
+        if math.isfinite(h):
+            self.longest = max(self.longest, h)
+        return short
+
+
+class LawStall(_StepCount):
+    """A law's NaN holding the steps back: a terminal event at the end of the ``count``-th step shorter than
+    ``ratio`` times the segment's longest that follows a call with no answer from a finite state (``pipe``'s
+    ``last_failed``, new since the step end before: the NaN rates that rejected the longer attempts). A step control
+    that keeps meeting NaN there shrinks the step towards t's resolution and crawls on (a stage law NaN past some
+    compression: 1e-15 s steps, until the run's budget); the hybrid loop then asks whether a law returned NaN or ±inf
+    there (:func:`contactdyn.hybrid.loop._stall_check`). A trial state that overflows a law at a step too
+    long is rejected and a step a few times shorter passes: that shrinks by far less than ``ratio``."""
+
+    kind = "stall"
+
+    def __init__(self, pipe, ratio: float, count: int):
+        super().__init__(count)
+        self.pipe, self.ratio = pipe, ratio
+        self.longest = self.short = 0.0  #: [s] the segment's longest step, the last short step
+        self.seen = pipe.last_failed
+
+    def counts(self, h: float) -> bool:
+        failed, self.seen = self.pipe.last_failed is not self.seen, self.pipe.last_failed
+        short = failed and h < self.ratio * self.longest
+        if short:
+            self.short = h
         if math.isfinite(h):
             self.longest = max(self.longest, h)
         return short

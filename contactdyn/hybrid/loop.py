@@ -23,7 +23,9 @@ for an explicit method) until the next event; while damped chain ends relax afte
 separation an explicit method's step is at most their time constant (``RELAX_STEP``). After
 a friction event the next segment (or a corner) starts with the step size the solver had
 reached. An integration failure reports what the state says: a singular contact system or
-stiffness.
+stiffness. Steps that shrink a billion-fold against calls with no answer (a law's NaN next to the state they crawl
+towards) have the call's laws checked, and a law that returned NaN or ±inf there stops the run at once, named
+(:class:`~contactdyn.hybrid.events.LawStall`, :func:`_stall_check`).
 """
 
 from __future__ import annotations
@@ -69,7 +71,7 @@ from ..output.physics_checks import StartAudit, run_checks, violations
 from ..output.result import Result
 from ..scene.budget import STEPS_BASE, STEPS_PER_SAMPLE, sample_rate, step_budget
 from .charts import chart_events
-from .events import EventLog, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
+from .events import EventLog, LawStall, StepBudget, StepCollapse, WorkWatch, fired_across, segment_events
 from .pipeline_mode import PipelineMode
 from .progress import CALLS_PER_STEP, OverBudget, Progress, Work
 from .sampling import SampledPhases
@@ -100,6 +102,10 @@ RESTING_TOL = 0.1
 #: b / k: the relaxation is then resolved, and so are the gap and the re-touch located on it (at 1e-2 s
 #: steps, 10 time constants, case 1's re-touch came out 1e-8 s late at rtol 3e-11)
 RELAX_STEP = 1.0
+#: a step shorter than STALL_RATIO × the segment's longest after a call with no answer, STALL_STEPS of them, has the
+#: call's laws checked (events.LawStall): a law's NaN next to the state the steps crawl towards. A trial state that
+#: overflows a law at a step too long is rejected, and a step a few times shorter passes: nowhere near 1e-9
+STALL_RATIO, STALL_STEPS = 1e-9, 3
 
 
 class HybridRun:
@@ -140,6 +146,9 @@ class HybridRun:
         #: period (:func:`_launch_settled`): the scene's method for the rest of the mode
         self.launched = False
         self.step_checked = False  #: RK4's step checked against the current mode (at its first segment's start)
+        #: the steps stalled against calls with no answer in the current mode, and no law's NaN was to blame
+        #: (:func:`_stall_check`): not watched again in the mode
+        self.stall_checked = False
         #: the modes' pipelines, compiled; ``interpreted`` (or not ``compiled``): the same call run as its twins
         #: (numerics.twins: a scene kind's first run), ``twins`` if given (a numerics.twins.Twins)
         self.pipelines = LivePipelines(system, PipelineMode, use=compiled and not interpreted, twins=twins)
@@ -213,6 +222,9 @@ class HybridRun:
                 if fired[0].kind == "collapse":  # a 2-D slide coming to rest? (same modes, same phase)
                     self._collapse_check(fun, t, x, _explicit_step(sol, held), t_end - t, period)
                     continue
+                if fired[0].kind == "stall":  # a law's NaN holding the steps back? (same modes, same phase)
+                    _stall_check(self, fired[0])
+                    continue
                 self._new_mode()
                 if fired[0].kind in RESUME_STEP and len(sol.t) > 2:  # the step size the solver had reached
                     self.next_step = float(sol.t[-2] - sol.t[-3])
@@ -263,7 +275,7 @@ class HybridRun:
             hold = self.sampled.hold(modes, phase, t_end, runner) if held else None
             events, rhs = segment_events(system, modes, phase, t, x, runner, swings=method in STAGED)
             self.starts.record(t, x, events)
-            events += self._watches(modes, method) + self.chart_events
+            events += self._watches(modes, method, getattr(runner, "pipe", None)) + self.chart_events
             jac = FiniteDifferenceJacobian(fun) if method in ("Radau", "BDF") else None
             # LSODA finishing a slide that comes to rest (HybridRun._collapse_check): at RESTING_TOL × the tolerances
             finishing = method == self.resting and method != scene_method and not _launching(modes)
@@ -301,9 +313,9 @@ class HybridRun:
         else:
             self.next_step = h
 
-    def _watches(self, modes: list[ContactMode], method: str) -> list:
+    def _watches(self, modes: list[ContactMode], method: str, pipe=None) -> list:
         """The segment's watches: the run's work budget (and progress), ``auto``'s step budget, a 2-D slide's
-        collapse watch."""
+        collapse watch, the stall watch of the mode's pipeline ``pipe`` (events.LawStall)."""
         left = self.budget - self.stats["steps"]
         if left <= 0:  # spent at a segment's end (an event there): stop before the next
             last = self.segments[-1]
@@ -314,6 +326,8 @@ class HybridRun:
         if self.resting is None and method in EXPLICIT and method not in FIXED and _sliding_2d(modes) \
                 and not _launching(modes):
             out.append(StepCollapse(COLLAPSE_RATIO, COLLAPSE_STEPS))
+        if pipe is not None and not self.stall_checked:
+            out.append(LawStall(pipe, STALL_RATIO, STALL_STEPS))
         return out
 
     def _collapse_check(self, fun, t: float, x: np.ndarray, h: float, span: float, period: float | None = None
@@ -328,9 +342,10 @@ class HybridRun:
         self.next_step = h
 
     def _new_mode(self) -> None:
-        """Forget the method choices made for the mode that ends (auto's, a slide's coming to rest)."""
+        """Forget the method choices made for the mode that ends (auto's, a slide's coming to rest) and its stall
+        check's verdict."""
         self.auto_state = self.resting = None
-        self.launched = self.step_checked = False
+        self.launched = self.step_checked = self.stall_checked = False
 
     def _method(self, modes: list[ContactMode], method: str) -> str:
         """The segment's method, but a stiff-capable one while a 2-D slip launches from rest or comes to rest.
@@ -485,6 +500,19 @@ def _spent_at(run: HybridRun) -> tuple[float, np.ndarray]:
         last = run.segments[-1]
         return last.t1, np.asarray(last.sol(last.t1), float)
     return 0.0, run.start()[0]
+
+
+def _stall_check(run: HybridRun, stall: LawStall) -> None:
+    """The steps shrank against calls with no answer (events.LawStall): the LawError of a law that returned NaN or
+    ±inf in the last of them (``Pipeline.non_finite``: the call run again interpreted, its laws' results checked) is
+    raised; else (no law's: a contact system not finite there) the run goes on as before from the step it had
+    reached, the mode no longer watched."""
+    error = stall.pipe.non_finite()
+    if error is not None:
+        raise LawError(error.kind, error.name, error.file, f"{error.what}; the run stalled there: its steps shrank "
+                       f"from {stall.longest:.3g} s to {stall.short:.3g} s against it", error.line, error.t)
+    run.stall_checked = True
+    run.next_step = stall.short
 
 
 def _launch_settled(run: HybridRun, fun, t: float, x: np.ndarray, period: float) -> bool:

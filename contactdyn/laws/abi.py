@@ -49,7 +49,7 @@ from numba.extending import intrinsic, overload
 
 from ..numerics.compile_cache import cfunc, njit, sources_key
 from ..numerics.native_call import handles
-from .failures import law_error
+from .failures import law_error, raised_calling
 from .friction_laws import FRICTION_LAWS, FrictionLaw
 
 __all__ = ["STAGE_SIGNATURE", "FRICTION_SIGNATURE", "stage_address", "friction_address", "call_stage",
@@ -76,6 +76,7 @@ _SIGNATURES = {"stage": STAGE_SIGNATURE, "friction": FRICTION_SIGNATURE}
 _compiled: dict[tuple, tuple[int, object, str]] = {}
 _python: dict[int, object] = {}  #: address -> the law's Python function (the calls' plain-Python twin)
 _laws: dict[int, tuple[str, type]] = {}  #: address -> (family, law class) of the functions in _python
+_KINDS = {"stage": "stage law", "friction": "friction law"}  #: family -> the kind a LawError names
 
 
 def stage_address(law: type) -> int:
@@ -295,13 +296,29 @@ def _first_line(exc: Exception) -> str:
 # ---- the calls: Python twins, and their compiled form by overload ----------------------------------------------
 
 def call_stage(address: int, k: float, b: float, p, at: int, n_p: int, x: float, xdot: float) -> float:
-    """F [N] of the stage law at ``address`` with parameters p[at:at + n_p], at compression x [m], rate ẋ [m/s]."""
-    return _python[address](k, b, p[at:at + n_p], x, xdot)
+    """F [N] of the stage law at ``address`` with parameters p[at:at + n_p], at compression x [m], rate ẋ [m/s]
+    (interpreted: what it raises marked as the law's, :func:`~.failures.raised_calling`)."""
+    try:
+        return _python[address](k, b, p[at:at + n_p], x, xdot)
+    except Exception as exc:
+        _raised_calling(exc, address)
+        raise
 
 
 def call_friction(address: int, mu_s: float, mu_k: float, p, at: int, n_p: int, speed: float) -> float:
-    """μ [-] of the friction law at ``address`` with parameters p[at:at + n_p] at slip speed [m/s]."""
-    return _python[address](mu_s, mu_k, p[at:at + n_p], speed)
+    """μ [-] of the friction law at ``address`` with parameters p[at:at + n_p] at slip speed [m/s] (interpreted: what
+    it raises marked as the law's)."""
+    try:
+        return _python[address](mu_s, mu_k, p[at:at + n_p], speed)
+    except Exception as exc:
+        _raised_calling(exc, address)
+        raise
+
+
+def _raised_calling(exc: Exception, address: int) -> None:
+    """``exc``, raised calling the law at ``address``, marked as its (a wrong signature names it)."""
+    family, law = _laws.get(address, (None, None))
+    raised_calling(exc, (_KINDS[family], law) if law is not None else None)
 
 
 @overload(call_stage)

@@ -23,8 +23,10 @@ kept and re-raised after the call, :func:`contactdyn.laws.abi.raise_python_stage
 
 Under ``NUMBA_DISABLE_JIT=1`` nothing is compiled: an address is a handle of the kind's Python function and the
 same calling code runs interpreted (:func:`call_drive_voltage`, :func:`call_drive_force`; from Python with numba
-on, they call the compiled functions). Caching: the wrappers are generated closure-free and attributed to the
-kind's own file (:func:`contactdyn.laws.abi.compile_wrapper`).
+on, they call the compiled functions; what the kind raises there is marked as its, a wrong signature named);
+:func:`checking_drives` checks their results while a call with no answer runs again, to name a kind that returned
+NaN or ±inf (as :func:`contactdyn.laws.abi.checking_laws` does the stage and friction laws). Caching: the wrappers
+are generated closure-free and attributed to the kind's own file (:func:`contactdyn.laws.abi.compile_wrapper`).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from __future__ import annotations
 import ctypes
 import math
 from collections import namedtuple
+from contextlib import contextmanager
 
 from numba import carray, types
 from numba.extending import intrinsic, overload, register_jitable
@@ -41,9 +44,10 @@ from ..numerics.native_call import handles
 from . import drive_kinds
 from .abi import _data_at, _indirect_call, compile_wrapper, python_stage_failed
 from .drives import DriveSpec
+from .failures import raised_calling
 
 __all__ = ["VOLTAGE_SIGNATURE", "FORCE_SIGNATURE", "drive_addresses", "python_drive_addresses", "spec_values",
-           "call_drive_voltage", "call_drive_force"]
+           "call_drive_voltage", "call_drive_force", "checking_drives"]
 
 # the built-in kinds' shared helper (the output lever), compiled inline where a kind's law calls it
 register_jitable(drive_kinds._lever)
@@ -82,7 +86,9 @@ _SIGNATURES = {"voltage": VOLTAGE_SIGNATURE, "force": FORCE_SIGNATURE}
 
 #: (kind, handles()) -> (voltage address, force address, kept alive, compiled_reason)
 _compiled: dict[tuple, tuple[int, int, tuple, str]] = {}
-_python: dict[int, tuple] = {}  #: handle -> (the kind's Python function, its Spec), the calls' plain-Python twin
+#: handle -> (the kind's Python function, its Spec, the kind, its family "voltage" or "force"): the calls'
+#: plain-Python twin
+_python: dict[int, tuple] = {}
 
 
 def spec_fields(kind: type) -> list[str]:
@@ -107,7 +113,7 @@ def drive_addresses(kind: type) -> tuple[int, int]:
     found, kept, reason = {}, [], ""
     for family, fn in families:
         if key[1]:  # nothing compiles: a handle of the Python function
-            holder = (fn, spec)
+            holder = (fn, spec, kind, family)
             kept.append(holder)
             found[family] = id(holder)
             _python[id(holder)] = holder
@@ -171,8 +177,13 @@ def call_drive_voltage(address: int, p, at: int, n_p: int, tau: float, qd: float
     interpreted, a handle's Python function; from Python with numba on, the compiled function."""
     if address not in _python:
         return _voltage_compiled(address, p, at, n_p, tau, qd, omega)
-    fn, spec = _python[address]
-    return fn(spec(*p[at:at + n_p]), tau, qd, omega)
+    fn, spec, kind, _ = _python[address]
+    values = spec(*p[at:at + n_p])
+    try:
+        return fn(values, tau, qd, omega)
+    except Exception as exc:
+        raised_calling(exc, ("drive kind", kind))
+        raise
 
 
 def call_drive_force(address: int, p, at: int, n_p: int, command: float, q: float, qd: float, theta: float,
@@ -181,9 +192,53 @@ def call_drive_force(address: int, p, at: int, n_p: int, command: float, q: floa
     dissipation) with the drive's values p[at:at + n_p]; interpreted, a handle's Python function."""
     if address not in _python:
         return _force_compiled(address, p, at, n_p, command, q, qd, theta, omega, out)
-    fn, spec = _python[address]
-    out[:4] = fn(spec(*p[at:at + n_p]), command, q, qd, theta, omega)
+    fn, spec, kind, _ = _python[address]
+    values = spec(*p[at:at + n_p])
+    try:
+        out[:4] = fn(values, command, q, qd, theta, omega)
+    except Exception as exc:
+        raised_calling(exc, ("drive kind", kind))
+        raise
     return 1
+
+
+@contextmanager
+def checking_drives(notes: list):
+    """Inside: each drive kind's plain-Python call (:func:`call_drive_voltage`'s, :func:`call_drive_force`'s twins)
+    checked, the first non-finite result from finite inputs noted in ``notes`` as (family "drive voltage" or "drive
+    force", the kind, (the spec's values, the call's arguments), its result): the drives of a call with no answer, run
+    again interpreted (nothing is checked outside)."""
+    saved = dict(_python)
+    for handle, (fn, spec, kind, family) in saved.items():
+        _python[handle] = (_checked(fn, kind, family, notes), spec, kind, family)
+    try:
+        yield notes
+    finally:
+        _python.update(saved)
+
+
+def _checked(fn, kind: type, family: str, notes: list):
+    """The kind's ``fn`` noting in ``notes`` its first result that is not finite from finite inputs. Those a kind
+    without a motor coordinate does not have are NaN (θ, ω) and its motor torque is not read: neither is checked."""
+    motor = kind.motor_coordinate
+    motor_inputs = 1 if family == "voltage" else 2  #: the last arguments: ω (voltage), θ and ω (force)
+
+    def checked(spec, *args):
+        value = fn(spec, *args)
+        inputs = args if motor else args[:-motor_inputs]
+        outputs = (value,) if family == "voltage" else tuple(value[:2 if motor else 1])
+        if not notes and _all_finite(inputs) and not _all_finite(outputs):
+            notes.append((f"drive {family}", kind, (tuple(spec), *args), outputs if family == "force" else value))
+        return value
+    return checked
+
+
+def _all_finite(values) -> bool:
+    """Every one of ``values`` a finite number (a value that is not a number: False)."""
+    try:
+        return all(math.isfinite(v) for v in values)
+    except (TypeError, ValueError):
+        return False
 
 
 @njit(cache=True)

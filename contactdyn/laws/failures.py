@@ -5,7 +5,8 @@ call: compiled (an exception cannot leave its C function: the call runs again in
 again: ``Pipeline.failed_call``), as a declared Python stage (its exception kept and re-raised after the call:
 :mod:`.abi`) or interpreted. Wherever the exception surfaces, :func:`law_error` finds the law in its traceback (the
 innermost frame of a registered law's own code, a law defined outside this package: the package's own laws raising
-is a bug of ours, left as it is) and gives a :class:`LawError`: the law's kind and name, its file and line (the
+is a bug of ours, left as it is; else the law the package's call of it was calling, :func:`raised_calling`: a wrong
+signature) and gives a :class:`LawError`: the law's kind and name, its file and line (the
 traceback's innermost line in the law's file), the exception's type and message and the simulated time when known;
 the exception is its ``__cause__``. A law that returned NaN or ±inf is found by the call run again interpreted with
 its laws' results checked (:func:`.abi.checking_laws`) and named with what it returned and at what inputs
@@ -21,9 +22,11 @@ from pathlib import Path
 
 from ..errors import ContactdynError, SimulationError
 
-__all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file"]
+__all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file",
+           "raised_calling"]
 
 PACKAGE = __name__.split(".")[0] + "."  #: "contactdyn.": the package's own laws are not a user's
+_CALLING = "_contactdyn_calling"  #: an exception's attribute: (kind, class) of the law whose call raised it
 
 
 class LawError(SimulationError):
@@ -49,13 +52,22 @@ def law_file(cls: type) -> str:
     return getattr(sys.modules.get(cls.__module__), "__file__", None) or cls.__module__
 
 
+def raised_calling(exc: BaseException, law: tuple[str, type] | None) -> None:
+    """Mark ``exc`` as raised where the package called ``law`` ((kind, class); None: nothing to mark), for
+    :func:`law_error`: the law it names where no frame of a law's code is in the traceback (a wrong signature). The
+    innermost call's mark stays."""
+    if law is not None and not hasattr(exc, _CALLING):
+        setattr(exc, _CALLING, law)
+
+
 def law_error(exc: BaseException, t: float | None = None, law: tuple[str, type] | None = None) -> LawError | None:
     """The LawError of ``exc`` where it was raised inside a user's law's code (its traceback says), at t [s], or in
     calling ``law`` ((kind, class) of a user's law the caller called: a wrong signature, a result that does not
-    unpack); else None (the package's own errors, which say what failed, and an error not a law's: left as they
-    are)."""
+    unpack; else the law ``exc`` was marked raised calling, :func:`raised_calling`); else None (the package's own
+    errors, which say what failed, and an error not a law's: left as they are)."""
     if isinstance(exc, ContactdynError) or not isinstance(exc, Exception):
         return None
+    law = law or getattr(exc, _CALLING, None)
     codes = _law_codes()
     frames = [(frame.f_code, line) for frame, line in traceback.walk_tb(exc.__traceback__)]
     inner = [i for i, (code, _) in enumerate(frames) if code in codes]
@@ -81,16 +93,46 @@ def naming_laws(t: float | None = None):
 
 
 def non_finite_error(family: str, law: type, args: tuple, value, t: float | None = None) -> LawError:
-    """The LawError of a law of ``family`` ("stage", "friction") that returned the non-finite ``value`` on
-    ``args`` (its Python call's: :func:`.abi.call_stage`'s, :func:`.abi.call_friction`'s)."""
-    if family == "stage":
-        k, b, p, x, xdot = args
-        what = (f"returned F = {value} N at x = {x:.6g} m, ẋ = {xdot:.6g} m/s (k = {k:.6g} N/m, b = {b:.6g} N·s/m"
-                f"{_params(law, p)})")
-        return LawError("stage law", law.name, law_file(law), what, None, t)
+    """The LawError of a law of ``family`` ("stage", "friction"; a drive kind's "drive voltage", "drive force") that
+    returned the non-finite ``value`` on ``args`` (its Python call's: :func:`.abi.call_stage`'s,
+    :func:`.abi.call_friction`'s; a drive kind's with its spec's values first, :func:`.drive_abi.checking_drives`)."""
+    kind, what = _NON_FINITE[family]
+    return LawError(kind, law.name, law_file(law), what(law, args, value), None, t)
+
+
+def _stage_returned(law: type, args: tuple, value) -> str:
+    k, b, p, x, xdot = args
+    return (f"returned F = {value} N at x = {x:.6g} m, ẋ = {xdot:.6g} m/s (k = {k:.6g} N/m, b = {b:.6g} N·s/m"
+            f"{_params(law, p)})")
+
+
+def _friction_returned(law: type, args: tuple, value) -> str:
     mu_s, mu_k, p, speed = args
-    what = f"returned μ = {value} at slip speed {speed:.6g} m/s (mu_s = {mu_s:.6g}, mu_k = {mu_k:.6g}{_params(law, p)})"
-    return LawError("friction law", law.name, law_file(law), what, None, t)
+    return f"returned μ = {value} at slip speed {speed:.6g} m/s (mu_s = {mu_s:.6g}, mu_k = {mu_k:.6g}{_params(law, p)})"
+
+
+def _voltage_returned(kind: type, args: tuple, value) -> str:
+    """u [V] for τ [N·m or N] at the coordinate's q̇ (and the motor's ω [rad/s], a kind with a motor coordinate)."""
+    p, tau, qd, omega = args
+    motor = f", ω = {omega:.6g} rad/s" if kind.motor_coordinate else ""
+    return f"returned u = {value} V for τ = {tau:.6g} N·m or N at q̇ = {qd:.6g}{motor}{_drive_params(kind, p)}"
+
+
+def _force_returned(kind: type, args: tuple, value) -> str:
+    """The force on the coordinate (and the motor's torque [N·m], θ [rad], ω [rad/s] with a motor coordinate) at the
+    command (a voltage [V] or a force [N·m or N]) and the coordinate's q, q̇."""
+    p, command, q, qd, theta, omega = args
+    unit = "V" if kind.has_voltage else "N·m or N"
+    returned, at = f"force = {value[0]} N·m or N", f"command = {command:.6g} {unit}, q = {q:.6g}, q̇ = {qd:.6g}"
+    if kind.motor_coordinate:
+        returned += f", motor torque = {value[1]} N·m"
+        at += f", θ = {theta:.6g} rad, ω = {omega:.6g} rad/s"
+    return f"returned {returned} at {at}{_drive_params(kind, p)}"
+
+
+#: family -> (the kind a LawError names, what the law did: (law, args, value) -> words)
+_NON_FINITE = {"stage": ("stage law", _stage_returned), "friction": ("friction law", _friction_returned),
+               "drive voltage": ("drive kind", _voltage_returned), "drive force": ("drive kind", _force_returned)}
 
 
 def no_command_error(ctl, tau, q, v, t: float) -> SimulationError:
@@ -112,6 +154,12 @@ def _listed(values) -> str:
 def _params(law: type, p) -> str:
     """", name = value" per declared parameter of ``law`` (its values ``p``)."""
     return "".join(f", {param.name} = {float(v):.6g}" for param, v in zip(law.params, p, strict=False))
+
+
+def _drive_params(kind: type, p) -> str:
+    """" (name = value, ...)" of a drive kind's declared parameters (its spec's values ``p``, first), or ""."""
+    listed = _params(kind, p)[2:]
+    return f" ({listed})" if listed else ""
 
 
 def _law_codes() -> dict:

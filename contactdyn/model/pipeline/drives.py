@@ -93,8 +93,9 @@ def apply_drives(x, nQ, rows, dreals, cmd, sat, f, out):
     """Each drive's generalized force at its command (cmd: a force per drive [N·m or N], or a voltage [V] where
     its row says so) added to f (and its motor's torque on its motor coordinate); outputs into ``out`` (DW_*).
     ``sat`` decides which voltages clip (the full command of a fold, while ``cmd`` lacks the folded part;
-    ``cmd`` itself otherwise). False where a kind's compiled law failed (a NaN voltage,
-    status 0: Pipeline.failed_call)."""
+    ``cmd`` itself otherwise). False where a kind's compiled law failed or returned a force that is not finite (a
+    NaN voltage, status 0, a NaN force on the coordinate or on its motor coordinate: the call's status then -1,
+    Pipeline.failed_call names the kind)."""
     power = lost = 0.0
     o4 = np.empty(4)
     n = rows.shape[0]
@@ -123,6 +124,8 @@ def apply_drives(x, nQ, rows, dreals, cmd, sat, f, out):
                 out[at + DW_CLIPPED] = 1.0
                 ui = math.copysign(u_max, us)
         if call_drive_force(rows[i, DI_FORCE], dreals, p_at, n_p, ui, x[c], qd, theta, omega, o4) != 1:
+            return False
+        if not (math.isfinite(o4[0]) and (m < 0 or math.isfinite(o4[1]))):  # (a kind's NaN [N·m or N]: named)
             return False
         f[c] += o4[0]
         if m >= 0:

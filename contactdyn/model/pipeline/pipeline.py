@@ -25,13 +25,14 @@ rejects, and it is counted; a law that returned NaN or ±inf there is named (``P
 from __future__ import annotations
 
 import traceback
-from contextlib import nullcontext
+from contextlib import contextmanager, nullcontext
 
 import numpy as np
 from numba import types
 
 from ...errors import SimulationError
 from ...laws.abi import checking_laws, raise_python_stage_error
+from ...laws.drive_abi import checking_drives
 from ...laws.failures import LawError, is_users, naming_laws, no_command_error, non_finite_error
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
@@ -415,14 +416,14 @@ class Pipeline:
 
     def _probe(self, t: float, x: np.ndarray, check: bool = False) -> LawError | None:
         """The call at (t [s], x) once more interpreted: a law's exception raised as its LawError; ``check``: the
-        laws' results checked, the LawError of the first law that returned NaN or ±inf from finite inputs (else
-        None)."""
+        laws' and drive kinds' results checked, the LawError of the first that returned NaN or ±inf from finite
+        inputs (else None)."""
         if self._twin is None:
             self._twin = Pipeline(self.system, self.modes, self.phase, Twins())
         probe = self._twin
         probe.use(self.modes)  # (a turn's reference directions)
         p = probe.packed
-        with checking_laws() if check else nullcontext([]) as notes, naming_laws(t):
+        with _checking(check) as notes, naming_laws(t):
             probe._call(float(t), np.array(x, float), p.ints, p.reals, p.work, p.events)
         raise_python_stage_error(t)  # (its controller a Python stage there: its exception kept)
         return non_finite_error(*notes[0], t) if notes else None
@@ -457,3 +458,15 @@ class Pipeline:
         if p.ints[ANY_MOTOR]:
             out["drives"] = drive_values(p.work[p.ints[W_DRIVES]:], p.ints[N_DRIVES])
         return out
+
+
+@contextmanager
+def _checking(check: bool):
+    """Inside: (``check``) the stage and friction laws' and the drive kinds' plain-Python calls checked, the first
+    non-finite result from finite inputs noted in the list given (:func:`~contactdyn.laws.abi.checking_laws`,
+    :func:`~contactdyn.laws.drive_abi.checking_drives`); else nothing checked, the list empty."""
+    if not check:
+        yield []
+        return
+    with checking_laws() as notes, checking_drives(notes):
+        yield notes
