@@ -404,8 +404,8 @@ def test_a_push_past_the_cone_for_4_ms_between_two_stages_breaks_the_stick(compi
     (StageWatch.dips), it slips at the closed form's instant, asin((μ_s W − F0)/A)/π (before: stuck throughout)."""
     A = 10.0  # [N]
     F0 = 0.5 * W * (1.0 + 2e-5) - A  # [N]
-    doc = scene(mu_s=0.5, mu_k=0.4, duration=1.0, **{"controller.force": [F0, 0.0, 0.0],
-                                                      "controller.amplitude": [A, 0.0, 0.0], "controller.frequency": 0.5})
+    push = {"controller.force": [F0, 0.0, 0.0], "controller.amplitude": [A, 0.0, 0.0], "controller.frequency": 0.5}
+    doc = scene(mu_s=0.5, mu_k=0.4, duration=1.0, **push)
     r = simulate(parse_scene(doc), compiled=compiled)
     assert [e["kind"] for e in r.events][:2] == ["stick", "slip"] and r.stats["dips_seen_inside_a_step"] == 1
     assert r.events[1]["t"] == pytest.approx(math.asin((0.5 * W - F0) / A) / math.pi, abs=1e-9)
