@@ -250,6 +250,24 @@ def test_a_stage_law_that_stalls_the_run_is_named_at_once(capsys, tmp_path):
                         said), said
 
 
+def test_a_crawl_with_its_law_unchecked_stops_where_it_crawled_and_blames_no_controller(monkeypatch, tmp_path):
+    """The stalled cubic press with its stall watch off (events.LawStall) and a budget of 300 steps: the calls' budget
+    is spent at t = 0.0487 s, where the run crawled (before: "stopped at t = 0 s", the compiled steps recording no
+    state, and the report's own look at the modes there, at a state the law fails at, blamed the controller: "the
+    law gave no finite command")."""
+    import contactdyn.hybrid.loop as loop
+
+    monkeypatch.setattr(loop, "STALL_STEPS", 10**9)
+    monkeypatch.setattr(loop, "step_budget", lambda *args: 300)
+    scene = _cubic_press(tmp_path, "crawling_cubic", *STALLS)
+    with pytest.raises(LawError) as caught:
+        _quiet(str(scene))
+    said = str(caught.value)
+    assert re.search(r"; the run then stopped: \S+: stopped at t = 0\.0487\d* s of 0\.5 s after \d+ right-hand-side "
+                     r"calls", said), said
+    assert "no finite command" not in said
+
+
 class InfPastRate(StageLaw):
     """F = k x + b ẋ, +inf past 2 m/s of stage rate: the stage's rate stays below 0.5 m/s, a trial state of a step
     too long for its stiff relaxation (k / b = 3333 1/s) goes past (numba compiles it)."""

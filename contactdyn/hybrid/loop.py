@@ -454,9 +454,14 @@ def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -
     """Why a run that reached its step budget (``calls``: its right-hand-side calls' budget) stops: where, and
     the fastest mode if that says why."""
     lam = np.zeros(0)
-    if run.segments:
-        seg = run.segments[-1]
-        lam = jacobian_eigenvalues(seg.runner.rhs, t, x)
+    if run.segments and np.all(np.isfinite(x)):
+        try:
+            with np.errstate(all="ignore"):
+                lam = jacobian_eigenvalues(run.segments[-1].runner.rhs, t, x)
+        except LawError:  # (a user's law failing there: the cause)
+            raise
+        except (SimulationError, np.linalg.LinAlgError):  # (a call with no answer there: no mode to name)
+            lam = np.zeros(0)
     stiff = (f"; its fastest mode |λ| = {float(np.abs(lam).max()):.3g} 1/s (solver.stabilization = "
              f"{run.solver.stabilization:g} 1/s, the contacts' stiffness and damping set it)") if len(lam) else ""
     advice = "a stiff scene runs with solver.method = \"Radau\" or \"auto\"" \

@@ -97,9 +97,9 @@ class Work:
 
         step = getattr(fun, "step", None)
         if step is not None:
-            def counted_step(*args, **kwargs):
-                self.count(STEP_STAGES)
-                return step(*args, **kwargs)
+            def counted_step(t, y, *args):  # (the step's start: where a spent budget says it stopped)
+                self.count(STEP_STAGES, t, y)
+                return step(t, y, *args)
 
             counted.step = counted_step
         derivatives = getattr(fun, "derivatives", None)
