@@ -45,7 +45,7 @@ from ..model.pipeline.pack import EV_FN, EV_GAP, EV_VT, EV_W
 from ..model.system import System
 
 __all__ = ["TOUCH_TOL", "AT_LIMIT", "terminal_event", "StageWatch", "StateWatch", "ValuesWatch", "AT_ONCE",
-           "StageSwing", "DipWatch", "SlipWatch", "StepBudget", "StepCollapse", "LawStall", "WorkWatch",
+           "StageSwing", "DipSearch", "DipWatch", "SlipWatch", "StepBudget", "StepCollapse", "LawStall", "WorkWatch",
            "segment_events", "fired_across", "EventLog", "start_storm_cause"]
 
 #: [m] a free contact touches when its gap falls TOUCH_TOL below min(0, its gap at the segment
@@ -130,7 +130,28 @@ ALARM_TOL = 1e-9  #: [N] a ValuesWatch's value at its located instant above whic
 AT_LIMIT = 5e-324
 
 
-class StageWatch:
+class DipSearch:
+    """A watch's search of the step just ended for a dip of its g = value(t, x) − floor below zero and back, on the
+    step's dense output (:class:`DipWatch`, a hold's :class:`StageWatch`). The watch keeps ``g_old``, ``g_end`` (g at
+    the step's two ends), ``t_end`` [s], ``latch`` [s] and ``dipped``."""
+
+    def could_dip(self, t_old: float) -> bool:
+        """g positive at both ends of a step from t_old [s] (LSODA's steps may collapse: none then)."""
+        return 0.0 < self.g_old < math.inf and self.g_end > 0.0 and t_old < self.t_end
+
+    def search(self, t_old: float, state_at, lo: float, hi: float) -> bool:
+        """Where zero lies within g's swing over the step (``lo``, ``hi``: the least and greatest g its stages saw,
+        and its ends), g searched for a dip (:func:`_dip`); one found is :attr:`latch`. Whether one was."""
+        lo, hi = min(lo, self.g_old, self.g_end), max(hi, self.g_old, self.g_end)
+        if lo >= hi - lo:  # (zero beyond the step's reach)
+            return False
+        found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, self.t_end, self.g_old, self.g_end)
+        if found is not None:
+            self.latch, self.dipped = found, True
+        return found is not None
+
+
+class StageWatch(DipSearch):
     """An event of a held constraint whose function ``value(t, x)`` reads its holding force, which also sees inside
     a step: a stuck contact's ``slip`` (:class:`SlipWatch`), a stuck joint's ``joint_slip``, a pressing joint's
     ``release``.
@@ -195,18 +216,11 @@ class StageWatch:
 
     def dips(self, t_old: float, state_at) -> bool:
         """Whether g dips below zero inside the step just ended, from t_old [s] to the last step end, between its
-        stages, on its dense output ``state_at(t)`` (:class:`DipWatch`'s search); if so g is held negative from the
-        instant found (:attr:`latch`)."""
-        g_old, g_end = self.g_old, self.g_end
-        if not (0.0 < g_old < math.inf and g_end > 0.0 and t_old < self.t_end and self.latch == math.inf):
+        stages, on its dense output ``state_at(t)`` (:class:`DipSearch`); if so g is held negative from the instant
+        found (:attr:`latch`)."""
+        if self.latch < math.inf or not self.could_dip(t_old):
             return False
-        lo, hi = min(self.swing[0], g_old, g_end), max(self.swing[1], g_old, g_end)
-        if lo >= hi - lo:  # (zero beyond the step's reach)
-            return False
-        found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, self.t_end, g_old, g_end)
-        if found is not None:
-            self.latch, self.dipped = found, True
-        return found is not None
+        return self.search(t_old, state_at, *self.swing)
 
 
 class StateWatch(StageWatch):
@@ -302,7 +316,7 @@ class StageSwing:
         return step[2], step[3]
 
 
-class DipWatch:
+class DipWatch(DipSearch):
     """An event of the state's motion, g = value(t, x) − ``floor`` through zero, that also sees g dip below zero and
     back within one step: a free contact's ``touch`` (its gap [m]), a slide's ``stop`` and ``reverse`` (its slip
     velocity along its direction, less or plus the stick band [m/s]).
@@ -336,18 +350,11 @@ class DipWatch:
 
     def dips(self, t_old: float, state_at) -> bool:
         """Whether g dips below zero inside the step just ended, from t_old [s] to the last step end, on its dense
-        output ``state_at(t)``; if so g is held negative from the instant found (:attr:`latch`)."""
-        g_old, g_end = self.g_old, self.g_end
-        if not (0.0 < g_old < math.inf and g_end > 0.0 and t_old < self.t_end):  # (LSODA's steps may collapse)
+        output ``state_at(t)`` (:class:`DipSearch`); if so g is held negative from the instant found (:attr:`latch`)."""
+        if not self.could_dip(t_old):
             return False
         lo, hi = self.swing.over(t_old, self.t_end)
-        lo, hi = min(lo - self.floor, g_old, g_end), max(hi - self.floor, g_old, g_end)
-        if lo >= hi - lo:  # (zero beyond the step's reach)
-            return False
-        found = _dip(lambda s: self.value(s, state_at(s)) - self.floor, t_old, self.t_end, g_old, g_end)
-        if found is not None:
-            self.latch, self.dipped = found, True
-        return found is not None
+        return self.search(t_old, state_at, lo - self.floor, hi - self.floor)
 
 
 def _dip(g, a: float, b: float, g_a: float, g_b: float) -> float | None:
