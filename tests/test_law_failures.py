@@ -183,6 +183,18 @@ def _quiet(scene, **options):
         return simulate(scene, **options)
 
 
+def _axis_on_chain(law: str, k: float, rtol: float, atol: float):
+    """The cylindrical robot's axis at 0.5 m/s onto a one-stage chain (k [N/m], b = 1500 N·s/m) of stage law ``law``,
+    for 0.05 s, no gains."""
+    return parse_scene({
+        "duration": 0.05, "solver": {"rtol": rtol, "atol": atol},
+        "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.999],
+                  "v0": [0.5]},
+        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {
+            "direction": [0, 0, 1], "model": "chain", "environment": [{"k": k, "b": 1500.0, "law": law}]}}},
+        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0}})
+
+
 @pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
 def test_a_stage_law_that_returns_nan_is_named_with_its_inputs(compiled, monkeypatch):
     """The cylindrical robot's axis falls onto a one-stage chain of the law: every step past 0.1 mm of compression
@@ -192,13 +204,7 @@ def test_a_stage_law_that_returns_nan_is_named_with_its_inputs(compiled, monkeyp
 
     monkeypatch.setattr(loop, "step_budget", lambda *args: 500)
     register_stage_law(NanPast)
-    scene = parse_scene({
-        "duration": 0.05, "solver": {"rtol": 1e-10, "atol": 1e-13},
-        "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.999],
-                  "v0": [0.5]},
-        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {
-            "direction": [0, 0, 1], "model": "chain", "environment": [{"k": 5e4, "b": 1500.0, "law": NanPast.name}]}}},
-        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0}})
+    scene = _axis_on_chain(NanPast.name, 5e4, 1e-10, 1e-13)
     with pytest.raises(LawError) as info:
         _quiet(scene, compiled=compiled, interpreted=not compiled)
     said = str(info.value)
@@ -284,14 +290,7 @@ def test_a_law_overflowing_at_trial_states_only_lets_the_run_go_on(compiled):
     """The trial states of the steps too long overflow the law, their steps are rejected, shorter ones pass: the run
     ends, as before."""
     register_stage_law(InfPastRate)
-    scene = parse_scene({
-        "duration": 0.05, "solver": {"rtol": 1e-6, "atol": 1e-9},
-        "robot": {"urdf": "cylindrical3", "active_joints": ["q3"], "gravity": [0.0, 0.0, 0.0], "q0": [0.999],
-                  "v0": [0.5]},
-        "contact": {"tip": {"point": [1.0, 0.0, 0.2], "normal": {
-            "direction": [0, 0, 1], "model": "chain", "environment": [{"k": 5e6, "b": 1500.0,
-                                                                       "law": InfPastRate.name}]}}},
-        "controller": {"kind": "task_pd", "kp": 0.0, "kd": 0.0}})
+    scene = _axis_on_chain(InfPastRate.name, 5e6, 1e-6, 1e-9)
     r = _quiet(scene, compiled=compiled, interpreted=not compiled)
     assert r.stats["singular_solves"] > 0  # (the calls with no answer: the trial states past 2 m/s)
     assert r["t"][-1] == pytest.approx(0.05)
