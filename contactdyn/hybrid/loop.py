@@ -446,8 +446,7 @@ def _non_finite(run: HybridRun, since: float, exc: SimulationError) -> LawError 
     pipes = [m.pipe for m in run.pipelines.pipes.values() if getattr(m, "pipe", None) is not None]
     pipes = [p for p in pipes if p.last_failed is not None and p.last_failed[0] >= since]
     n = max(pipes, key=lambda p: p.last_failed[0]).non_finite() if pipes else None
-    return None if n is None else LawError(n.kind, n.name, n.file, f"{n.what}; the run then stopped: {exc}", n.line,
-                                           n.t)
+    return None if n is None else n.adding(f"the run then stopped: {exc}")
 
 
 def _over_budget(run: HybridRun, t: float, x: np.ndarray, calls: bool = False) -> str:
@@ -514,8 +513,8 @@ def _stall_check(run: HybridRun, stall: LawStall) -> None:
     reached, the mode no longer watched."""
     error = stall.pipe.non_finite()
     if error is not None:
-        raise LawError(error.kind, error.name, error.file, f"{error.what}; the run stalled there: its steps shrank "
-                       f"from {stall.longest:.3g} s to {stall.short:.3g} s against it", error.line, error.t)
+        raise error.adding(f"the run stalled there: its steps shrank from {stall.longest:.3g} s to {stall.short:.3g} s "
+                           "against it")
     run.stall_checked = True
     run.next_step = stall.short
 

@@ -174,18 +174,17 @@ class Transitions:
         """(x, modes, phase) at a run's start: :meth:`consistent`, the joints at rest on a limit (``phase.limits``)
         pressing but those whose torque pulls, let go with no event (they never pressed); :meth:`settle_joints`."""
         x, modes = self.consistent(t, x, modes, phase)
-        while phase.limits and (pulling := self.system.limits.pulling(phase, self.evaluate(t, x, modes, phase))):
-            x, phase = self.system.limits.release(self.system, x, phase, pulling[0][0])  # (not logged)
-            x, modes = self.consistent(t, x, modes, phase)
-        return self.settle_joints(t, x, modes, phase)
+        return self.release_pulling(t, x, modes, phase, logged=False)
 
-    def release_pulling(self, t, x, modes, phase):
-        """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event; then the joint
-        friction modes the state contradicts (:meth:`settle_joints`)."""
+    def release_pulling(self, t, x, modes, phase, logged: bool = True):
+        """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event (``logged``: as a
+        ``release``; at the start they never pressed); then the joint friction modes the state contradicts
+        (:meth:`settle_joints`)."""
         limits = self.system.limits
         while phase.limits and (pulling := limits.pulling(phase, self.evaluate(t, x, modes, phase))):
             x, phase = limits.release(self.system, x, phase, pulling[0][0])
-            self.log.log(t, "release", limits.by_index[pulling[0][0]].name)
+            if logged:
+                self.log.log(t, "release", limits.by_index[pulling[0][0]].name)
             x, modes = self.consistent(t, x, modes, phase)
         return self.settle_joints(t, x, modes, phase)
 

@@ -42,7 +42,7 @@ from numba.extending import intrinsic, overload, register_jitable
 from ..numerics.compile_cache import njit
 from ..numerics.native_call import handles
 from . import drive_kinds
-from .abi import _data_at, _indirect_call, compile_wrapper, python_stage_failed
+from .abi import _data_at, _finite, _indirect_call, compile_wrapper, python_stage_failed
 from .drives import DriveSpec
 from .failures import raised_calling
 
@@ -227,18 +227,10 @@ def _checked(fn, kind: type, family: str, notes: list):
         value = fn(spec, *args)
         inputs = args if motor else args[:-motor_inputs]
         outputs = (value,) if family == "voltage" else tuple(value[:2 if motor else 1])
-        if not notes and _all_finite(inputs) and not _all_finite(outputs):
+        if not notes and _finite(inputs) and not _finite(outputs):  # (None: not a number)
             notes.append((f"drive {family}", kind, (tuple(spec), *args), outputs if family == "force" else value))
         return value
     return checked
-
-
-def _all_finite(values) -> bool:
-    """Every one of ``values`` a finite number (a value that is not a number: False)."""
-    try:
-        return all(math.isfinite(v) for v in values)
-    except (TypeError, ValueError):
-        return False
 
 
 @njit(cache=True)

@@ -40,6 +40,10 @@ class LawError(SimulationError):
         where = Path(file).name + (f", line {line}" if line else "")
         super().__init__(f"{when}{kind} {name!r} ({where}) {what}")
 
+    def adding(self, words: str) -> LawError:
+        """The same error with ``words`` after what the law did (what the run then did)."""
+        return LawError(self.kind, self.name, self.file, f"{self.what}; {words}", self.line, self.t)
+
 
 def is_users(cls: type) -> bool:
     """A class defined outside this package (a researcher's law, or a test's)."""
