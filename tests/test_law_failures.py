@@ -296,14 +296,20 @@ def test_a_law_overflowing_at_trial_states_only_lets_the_run_go_on(compiled):
     assert r["t"][-1] == pytest.approx(0.05)
 
 
+def _b1_sliding_on(law: str) -> dict:
+    """B1 (sims/b1.toml) for 0.02 s, its tip sliding on friction law ``law`` (mu_s 0.6, mu_k 0.4)."""
+    doc = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
+    doc["duration"] = 0.02
+    doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]], "law": law,
+                                        "mu_s": 0.6, "mu_k": 0.4}
+    return doc
+
+
 def test_a_friction_law_that_returns_nan_is_named_with_its_inputs():
     """B1's tip slides at 0.15 m/s from the start: the law's μ is NaN there (before: "t = 0 s: the model has no
     finite answer at this state (its contact system is not finite there)")."""
     register_friction_law(NanWhenSliding)
-    doc = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
-    doc["duration"] = 0.02
-    doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]],
-                                        "law": NanWhenSliding.name, "mu_s": 0.6, "mu_k": 0.4}
+    doc = _b1_sliding_on(NanWhenSliding.name)
     with pytest.raises(LawError) as info:
         _quiet(parse_scene(doc))
     assert re.fullmatch(r"t = 0 s: friction law 'nan_when_sliding_test' \(test_law_failures\.py\) returned μ = nan "
@@ -343,10 +349,7 @@ class WrongSignature(FrictionLaw):
 @pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "interpreted"])
 def test_a_friction_law_with_a_wrong_signature_is_named(compiled):
     register_friction_law(WrongSignature)
-    doc = tomllib.loads((ROOT / "sims" / "b1.toml").read_text())
-    doc["duration"] = 0.02
-    doc["contact"]["tip"]["tangent"] = {"model": "friction", "directions": [[1.0, 0.0, 0.0]],
-                                        "law": WrongSignature.name, "mu_s": 0.6, "mu_k": 0.4}
+    doc = _b1_sliding_on(WrongSignature.name)
     with pytest.raises(LawError) as info:
         _quiet(parse_scene(doc), compiled=compiled, interpreted=not compiled)
     assert re.fullmatch(r"t = 0 s: friction law 'wrong_signature_test' \(test_law_failures\.py\) raised TypeError: "
