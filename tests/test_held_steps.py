@@ -71,6 +71,18 @@ def test_equals_segments_ending_at_each_sample():
     assert np.all(np.isfinite(held.sol(grid)))
 
 
+def test_the_dense_output_at_many_times_in_any_order_is_each_times_own():
+    """Many times at once (the output's way: each piece's interpolants in one batch), shuffled, jumps included:
+    bit for bit the state at each time alone (the piece a jump starts owns its instant: the state after it)."""
+    sol = _solve(_Hold(c=3.0, last=1.0))
+    tt = np.concatenate([np.linspace(0.0, 1.0, 57), T * np.arange(1, 10)])
+    np.random.default_rng(7).shuffle(tt)
+    together = sol.sol(tt)
+    alone = np.column_stack([sol.sol(float(t)) for t in tt])
+    np.testing.assert_array_equal(together, alone)
+    assert sol.sol(np.empty(0)).shape == (2, 0)
+
+
 def test_the_jump_consults_only_the_events_the_hold_names():
     def watch(t, y):  # a step watch: called at the start and at each step end, never at a jump
         watch.calls += 1

@@ -228,7 +228,22 @@ def dense_states(parts: list[tuple[DenseSolution, np.ndarray]], derivatives: Cal
     where = [dense.locate(tt) for dense, tt in parts]
     build_interpolants([(dense.steps, i) for (dense, _), w in zip(parts, where, strict=True) if w is not None
                         for i in w[0] if i not in dense.steps.coef], derivatives)
-    return [dense.states(tt, w) for (dense, tt), w in zip(parts, where, strict=True)]
+    located = [(dense.steps, w) for (dense, _), w in zip(parts, where, strict=True) if w is not None]
+    if len(located) < 2:
+        return [dense.states(tt, w) for (dense, tt), w in zip(parts, where, strict=True)]
+    states = iter(_states_at_once(located))  # (a piecewise run's many pieces: one compiled call, not one each)
+    return [next(states) if w is not None else dense.states(tt, w) for (dense, tt), w in zip(parts, where, strict=True)]
+
+
+def _states_at_once(located: list[tuple[_Steps, tuple]]) -> list[np.ndarray]:
+    """:meth:`DenseSolution.states` of several runs' located times ((steps, where) per run) in one compiled call:
+    each row is its own arithmetic, so the numbers are the same as one call per run."""
+    C = np.array([st.coef[i] for st, (steps, _, _) in located for i in steps])
+    Y0 = np.array([st.y_old(i) for st, (steps, _, _) in located for i in steps])
+    firsts = np.cumsum([0] + [len(steps) for _, (steps, _, _) in located[:-1]])  # each run's first row in C
+    at = np.concatenate([w[1] + first for (_, w), first in zip(located, firsts, strict=True)])
+    rows = current(horner_rows)(C, at, np.concatenate([w[2] for _, w in located]), Y0)
+    return np.split(rows, np.cumsum([len(w[1]) for _, w in located[:-1]]))
 
 
 @dataclass

@@ -129,7 +129,7 @@ class Sampler:
         self.passed(t)
         hold = self.period if on_grid else self.next_time() - t  # [s] shorter from a phase's start off the grid
         z_new = z_law + hold * zdot if zdot is not None and len(z_law) else z_law.copy()
-        if not np.isfinite(z_new).all():  # (held until the next sample: every call there would fail)
+        if not all(map(math.isfinite, z_new.tolist())):  # (held until the next sample: every call there would fail)
             raise SimulationError(f"t = {t:.6g} s: {self.controller.inner.name}: the law's own states are not finite "
                                   f"after this sample (z = {np.asarray(z_law).tolist()}, ż = "
                                   f"{np.asarray(zdot).tolist()}, over {hold:g} s)")
