@@ -2,7 +2,7 @@
 
     PYTHONPATH=. python3 benchmarks/sampled_cost.py [--repeats 5] [--rate 1000] [--method M] [--profile] [scene ...]
 
-Per scene (default: b1, case1_cart, case3_a_force), the continuous run and the same scene with
+Per scene (default: b1, case1_cart, case3_a_force, stiff_force), the continuous run and the same scene with
 ``controller.sample_rate`` set (every phase's controller sampled: a zero-order hold), interleaved repeat by repeat in
 this process; cost = the median process CPU time around ``simulate`` (loading and output included; CPU because the
 machine is shared), and the ratio sampled / continuous. Also: steps, right-hand-side calls, segments, samples, the

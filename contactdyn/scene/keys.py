@@ -252,6 +252,7 @@ for _k in list(MEANINGS):  # chain elements serve every chain
 #: and types of keys read raw
 OVERRIDES: dict[str, dict[str, str]] = {
     "name": {"default": "the file's name"},
+    "imports": {"type": "list of strings"},
     "robot.active_joints": {"type": "list of strings", "default": "all joints"},
     "robot.q0": {"type": "list of numbers", "default": "neutral"},
     "robot.v0": {"default": "zero"},
