@@ -142,7 +142,8 @@ T_SLOPE = np.array([[math.cos(SLOPE), 0.0, -math.sin(SLOPE)], [0.0, 1.0, 0.0]]) 
 MU_SLOPE = 0.3
 
 
-def slope_scene(v_tip: np.ndarray, duration: float = 0.2, mu: float = MU_SLOPE, **solver):
+def slope_scene(v_tip: np.ndarray, duration: float = 0.2, mu: float = MU_SLOPE, normal=N_SLOPE, tangents=T_SLOPE,
+                bonded: bool = True, **solver):
     """cylindrical3 (base turn, radial slide q2 in [-0.5, 0.5] m, lift) at q = (0.3 rad, 0.5 m, 1 m): its radial
     slide on its upper limit, its tip sliding at v_tip [m/s] on a rigid 30° slope with μ (2-D)."""
     robot = Robot.load("cylindrical3")
@@ -151,8 +152,8 @@ def slope_scene(v_tip: np.ndarray, duration: float = 0.2, mu: float = MU_SLOPE, 
     doc = {"duration": duration, "solver": {"rtol": 1e-10, "atol": 1e-12, **solver},
            "robot": {"urdf": "cylindrical3", "q0": q0.tolist(), "v0": np.linalg.solve(J, v_tip).tolist()},
            "contact": {"slope": {"point": robot.frame_position(q0, "tip").tolist(),
-                                 "normal": {"direction": N_SLOPE.tolist()}, "bonded": True,
-                                 "tangent": {"model": "friction", "directions": T_SLOPE.tolist(), "mu": mu}}},
+                                 "normal": {"direction": normal.tolist()}, "bonded": bonded,
+                                 "tangent": {"model": "friction", "directions": tangents.tolist(), "mu": mu}}},
            "controller": {"kind": "joint_pd", "kp": 0.0, "kd": 0.0}}
     return parse_scene(doc), robot, q0, J
 
@@ -204,6 +205,29 @@ def test_a_limit_impact_holds_a_sticking_contact_only_inside_its_cone():
     assert imp.contact == "slope" and not imp.jammed and imp.normal_impulse > 0.0
     assert np.linalg.norm(imp.friction_impulse) == pytest.approx(5.0 * imp.normal_impulse, rel=1e-12)
     assert abs(imp.v_after[1]) < 1e-12 and abs(N_SLOPE @ J @ imp.v_after) < 1e-12  # stopped, still on the plane
+
+
+#: a slope leaning the other way, and up it (outward) and sideways: stopping the radial slide lifts the tip off it
+N_AWAY = np.array([-math.sin(SLOPE), 0.0, math.cos(SLOPE)])
+T_AWAY = np.array([[math.cos(SLOPE), 0.0, math.sin(SLOPE)], [0.0, 1.0, 0.0]])
+
+
+@pytest.mark.parametrize("sideways", [0.5, 0.0])  # [m/s]
+def test_a_limit_impact_lets_go_of_its_contact_where_holding_it_would_pull(sideways):
+    """The radial slide hits its upper limit while the tip slides up a slope leaning away (not bonded): the stop lifts
+    the tip off it, so the contact takes no impulse and lets go, and the limit alone stops the slide: M ΔQ̇ = e₂ Λ,
+    Λ = −q̇₂⁻ / (M⁻¹)₂₂. Before, a limit impact's own contact was never let go: it pulled the tip onto the slope
+    (Λ_n = −36 N·s at 0.5 m/s sideways) and its friction impulse, −μ Λ_n d, pushed the tip along its slip."""
+    scene, robot, q, J = slope_scene(T_AWAY[0] + sideways * T_AWAY[1], normal=N_AWAY, tangents=T_AWAY, bonded=False)
+    system = System(scene)
+    x, modes = system.initial_state()
+    assert modes[0].touching and not modes[0].stuck
+    x_after, imp, limit = limit_impact(system, 0.0, x, modes, ((1, -1),))
+    M_inv = np.linalg.inv(robot.mass_matrix(q))
+    assert imp.separated == ("slope",) and imp.normal_impulse == 0.0 and not np.any(imp.friction_impulse)
+    assert limit == pytest.approx(-imp.v_before[1] / M_inv[1, 1], rel=1e-12) and limit < -10.0
+    np.testing.assert_allclose(imp.v_after, imp.v_before + M_inv[:, 1] * limit, rtol=0, atol=1e-12)
+    assert abs(imp.v_after[1]) < 1e-12 and N_AWAY @ J @ imp.v_after > 0.1  # [m/s] stopped; off the slope
 
 
 def test_a_run_records_the_limit_impact_with_the_contacts_friction_impulse():

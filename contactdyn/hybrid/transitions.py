@@ -292,6 +292,8 @@ class Transitions:
         for name in imp.jammed_too:  # it slid into the impact, which stopped its slip
             j = self._index(name)
             modes[j] = modes[j].with_(stuck=True)
+        if imp.contact in imp.separated:  # (a limit's impact let its own contact go: no slide or stick to decide)
+            return
         i = self._index(imp.contact)
         c = system.contacts[i]
         if imp.jammed:

@@ -18,7 +18,8 @@ with every bond, stick and the new contact held at velocity level (Λ the impuls
 The impact is unilateral: every other touching contact with a normal row (rigid, or a bonded chain's) holds
 only while its normal impulse pushes, Λ_n ≥ 0; one that would pull lets go (``Impact.separated``: its gap opens
 from the impact on), and one let go whose normal velocity after it would approach is held again, one at a time
-(an active set: the plastic impact of several unilateral contacts, Λ_n ≥ 0, v_n⁺ ≥ 0, Λ_n v_n⁺ = 0).
+(an active set: the plastic impact of several unilateral contacts, Λ_n ≥ 0, v_n⁺ ≥ 0, Λ_n v_n⁺ = 0). At a joint's
+limit the impact's own contact is one of them too (it is not arriving: a tray that stops under a part lets it fly).
 
 Every other touching contact with friction takes its friction impulse by the same law:
 
@@ -137,9 +138,11 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
         return z[:nQ], P_n, P_t
 
     released: dict[str, tuple[float, ...]] = {}
+    arriving = contact if not limits else None  #: the contact whose touch the impact is: never let go
     for _ in range(4 * len(system.contacts) + 4):
-        qd_plus, P_n, P_t, d, jammed = _own_contact(system, contact, kin, vt_minus, solve)
-        j = _unilateral_change(system, kins, modes, held, contact, impulses, qd_plus)
+        own_held = contact is not None and held[own].touching  # (at a limit it may be let go: then no own branch)
+        qd_plus, P_n, P_t, d, jammed = _own_contact(system, contact if own_held else None, kin, vt_minus, solve)
+        j = _unilateral_change(system, kins, modes, held, arriving, impulses, qd_plus)
         if j is not None:  # let go a pulling contact, or hold again one let go that would approach
             held[j] = modes[j] if not held[j].touching else held[j].separated()
             continue
@@ -158,17 +161,25 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     else:
         raise SimulationError(f"impact at t = {t:.9g} s: no set of the touching contacts holds with pushing "
                               "impulses only (the active set cycles)")
-    separated = tuple(c.name for c, m, h in zip(system.contacts, modes, held, strict=True)
-                      if m.touching and not h.touching)
-    jammed_too = tuple(system.contacts[j].name for j in others if held[j].stuck and not modes[j].stuck)
-    slid = {system.contacts[j].name: (-mu * impulses.get((system.contacts[j].name, "n", 0), 0.0) * d).tolist()
-            for j, (d, mu) in others.items() if held[j].touching and not held[j].stuck}
+    separated, jammed_too, slid = _outcome(system, modes, held, others, impulses)
     x_new = x.copy()
     x_new[nQ:2 * nQ] = qd_plus
     energy_loss = 0.5 * float(qd_minus @ M @ qd_minus - qd_plus @ M @ qd_plus)
     vt_plus = slip_velocity(system, contact, kin, qd_plus) if k else np.zeros(0)
     return x_new, Impact(t, name, P_n, P_t, jammed, energy_loss, qd_minus, qd_plus, vt_minus, vt_plus, d,
                          dict(impulses), released, separated, jammed_too, slid)
+
+
+def _outcome(system, modes, held, others, impulses) -> tuple[tuple, tuple, dict]:
+    """(separated, jammed_too, slid) of a solved impact (``held``: its modes; ``others``: index -> (d, μ_k) of the
+    contacts sliding into it besides its own): the contacts it let go, the others that jammed, and the friction
+    impulses −μ_k FΔt d [N·s] of the others that slid through it, by name."""
+    separated = tuple(c.name for c, m, h in zip(system.contacts, modes, held, strict=True)
+                      if m.touching and not h.touching)
+    jammed_too = tuple(system.contacts[j].name for j in others if held[j].stuck and not modes[j].stuck)
+    slid = {system.contacts[j].name: (-mu * impulses.get((system.contacts[j].name, "n", 0), 0.0) * d).tolist()
+            for j, (d, mu) in others.items() if held[j].touching and not held[j].stuck}
+    return separated, jammed_too, slid
 
 
 def _sliding_into(system, kins, modes, contact, qd_minus) -> dict[int, tuple[np.ndarray, float]]:
