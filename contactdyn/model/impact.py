@@ -286,7 +286,8 @@ def limit_impact(system, t: float, x: np.ndarray, modes: list[ContactMode], limi
     impact's contact is the first touching one with a normal row (rigid or bonded: its normal
     impulse is finite), a sliding one with friction first: it takes its friction impulse by the
     same sliding/jamming branch (the other sliding contacts too, see :func:`impact`); a sticking one
-    holds through its stick rows. Without one, the contact is "".
+    holds through its stick rows. It lets go where holding it would pull, as the others do (``Impact.separated``
+    names it). Without one, the contact is "".
     """
     rowed = [(c, m) for c, m in zip(system.contacts, modes, strict=True)
              if m.touching and c.normal.chain.bonded_when_touching]
