@@ -88,3 +88,25 @@ def test_a_slide_whose_speed_dips_through_zero_within_one_step_stops(eps, compil
     assert len(stops) == 1 and 0.74 < stops[0] <= 0.75
     assert len(slips) == 1 and slips[0] == pytest.approx(t_slip, abs=1e-7)
     assert res["v"][-1, 0] == pytest.approx(A_PUSH / (M * W_PUSH) * math.sqrt(1.0 - c * c), rel=1e-6)
+
+
+OMEGA, HEIGHT = 10.0, 0.5  #: [rad/s] the tray's free turn, [m] the part above its axis
+THETA0 = -math.pi / 2 + 0.01  #: [rad] the tray's start: its plane 5 mm below the part, turning away from it
+
+
+@pytest.mark.parametrize("compiled, method", [(True, "DOP853C"), (False, "DOP853C"), (True, "DOP853"),
+                                              (True, "RK45")])
+def test_a_plane_turning_past_a_point_touches_it_the_first_time(compiled, method):
+    """sims/tilt_tray.toml's tray turning freely at ω (no gravity, no law) past its part at rest HEIGHT above the
+    axis: the gap is HEIGHT cos θ, so the plane reaches the part at θ = π/2, t* = (π/2 − θ0)/ω. θ is linear in t, so
+    DOP853's steps grow to ~1 s, ~10 rad: the gap falls through zero three times in the step, and the touch is the
+    first fall (DipWatch.first_fall). Before, Brent's method found the third, at 9.41/ω, with the part 0.5 m inside the
+    plane for 0.6 s; with the joint's limit at 3 rad the limit came first and the touch was never seen."""
+    res = simulate("tilt_tray", {"robot.gravity": [0.0, 0.0, 0.0], "robot.q0": [THETA0], "robot.v0": [OMEGA],
+                                 "controller.kp": 0.0, "controller.kd": 0.0, "controller.feedforward": "none",
+                                 "body.part.position0": [0.0, HEIGHT], "phase": [{"name": "turn"}],
+                                 "duration": 12.0 / OMEGA, "solver.method": method, "solver.output_rate": 100.0},
+                   compiled=compiled)
+    assert res.events[0]["kind"] == "touch"
+    assert res.events[0]["t"] == pytest.approx((math.pi / 2 - THETA0) / OMEGA, abs=1e-9)
+    assert res["contact.rest.gap"].min() > -1e-9  # [m]

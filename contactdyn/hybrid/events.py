@@ -281,6 +281,10 @@ AT_ONCE = (StateWatch, ValuesWatch)  #: the watches that see a compiled step's s
 #: successive parabolas, at most DIP_REFINE of them
 DIP_SAMPLES, DIP_REFINE = 8, 12
 DIP_MODEL = 0.1  #: [-] a parabola's minimum within this × its value of g at its vertex: g's minimum (no dip if > 0)
+#: [-] a step's fall through zero whose stages' values reach beyond its ends' by more than this × g_old − g_end is
+#: searched for an earlier fall (DipWatch.first_fall): g may have swung through zero more than once (a search that
+#: finds one fall only changes no root: g stays negative after it)
+WIDE_SWING = 0.01
 
 
 class StageSwing:
@@ -355,6 +359,23 @@ class DipWatch(DipSearch):
             return False
         lo, hi = self.swing.over(t_old, self.t_end)
         return self.search(t_old, state_at, lo - self.floor, hi - self.floor)
+
+    def first_fall(self, t_old: float, state_at) -> None:
+        """At a step from t_old [s] whose ends fall through zero (g_old > 0 ≥ g_end) but whose stages swung wider than
+        its ends (:data:`WIDE_SWING`: g may have fallen through zero before and come back, a plane turning past a point
+        far from its axis), g at DIP_SAMPLES − 1 inner instants of the dense output ``state_at(t)``: the first where
+        g ≤ 0 is :attr:`latch`, so the root located is the first fall, not a later one."""
+        if not (0.0 < self.g_old < math.inf and self.g_end <= 0.0 and t_old < self.t_end):
+            return
+        lo, hi = self.swing.over(t_old, self.t_end)
+        wide = WIDE_SWING * (self.g_old - self.g_end)
+        if hi - self.floor <= self.g_old + wide and lo - self.floor >= self.g_end - wide:
+            return
+        for j in range(1, DIP_SAMPLES):
+            s = t_old + (self.t_end - t_old) * j / DIP_SAMPLES
+            if self.value(s, state_at(s)) - self.floor <= 0.0:
+                self.latch = s
+                return
 
 
 def _dip(g, a: float, b: float, g_a: float, g_b: float) -> float | None:

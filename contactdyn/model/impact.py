@@ -91,15 +91,16 @@ IMPULSE_TOL = 1e-12
 
 
 def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: Contact | None,
-           limits: tuple = ()) -> tuple[np.ndarray, Impact]:
+           limits: tuple = (), arriving: bool = True) -> tuple[np.ndarray, Impact]:
     """Velocity jump when ``contact`` touches (its mode already says touching), or when a joint
     reaches its position limit (its row the last of ``limits``; ``contact``: the sliding contact
     whose friction takes part, :func:`limit_impact`, or None).
 
     Momentum law over Δt → 0 (eqs 27–31, 35–38): M(Q̇⁺ − Q̇⁻) = Cᵀ Λ with every bond,
-    stick, limit and the new contact holding at velocity level, G Q̇⁺ = 0. With friction the
-    tip first slides in its pre-impact slip direction d (friction impulse −μ_k FΔt d,
-    the normal column tilted as in eq. 27). If the tangential velocity after the
+    stick, limit and the new contact holding at velocity level, G Q̇⁺ = 0 (``arriving``: ``contact`` is the one
+    whose touch the impact is, never let go; False at a limit's impact, :func:`limit_impact`, whose contact lets go
+    where holding it would pull). With friction the tip first slides in its pre-impact slip direction d
+    (friction impulse −μ_k FΔt d, the normal column tilted as in eq. 27). If the tangential velocity after the
     impact points against d the assumption is wrong and the impact jams (eqs 30–31):
     zero tangential velocity, friction impulse F_fΔt an unknown. A tip that arrives
     without slip (|v_t| within the stick band) is tried jammed first; if holding it
@@ -138,11 +139,11 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
         return z[:nQ], P_n, P_t
 
     released: dict[str, tuple[float, ...]] = {}
-    arriving = contact if not limits else None  #: the contact whose touch the impact is: never let go
+    touched = contact if arriving else None  #: the contact whose touch the impact is: never let go
     for _ in range(4 * len(system.contacts) + 4):
         own_held = contact is not None and held[own].touching  # (at a limit it may be let go: then no own branch)
         qd_plus, P_n, P_t, d, jammed = _own_contact(system, contact if own_held else None, kin, vt_minus, solve)
-        j = _unilateral_change(system, kins, modes, held, arriving, impulses, qd_plus)
+        j = _unilateral_change(system, kins, modes, held, touched, impulses, qd_plus)
         if j is not None:  # let go a pulling contact, or hold again one let go that would approach
             held[j] = modes[j] if not held[j].touching else held[j].separated()
             continue
@@ -293,7 +294,7 @@ def limit_impact(system, t: float, x: np.ndarray, modes: list[ContactMode], limi
              if m.touching and c.normal.chain.bonded_when_touching]
     sliding = [c for c, m in rowed if not m.stuck and c.friction is not None and len(c.tangents)]
     contact = sliding[0] if sliding else rowed[0][0] if rowed else None
-    x_new, imp = impact(system, t, x, modes, contact, limits)
+    x_new, imp = impact(system, t, x, modes, contact, limits, arriving=False)
     i = limits[-1][0]
     return x_new, imp, imp.row_impulses[(system.limits.by_index[i].name, "limit", i)]
 

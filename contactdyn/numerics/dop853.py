@@ -295,6 +295,8 @@ class _EventWatch:
         for i in self.inside:
             if g_new[i] > 0.0 and self.events[i].dips(t_old, lambda s: steps.at(step, s)):
                 g_new[i] = -1.0
+            elif g_new[i] <= 0.0 < g_old[i] and hasattr(self.events[i], "first_fall"):  # (the first of several)
+                self.events[i].first_fall(t_old, lambda s: steps.at(step, s))
         self.g = g_new
         if self.falling:  # all events fall through zero (the hybrid loop's): one test per event
             fired = [i for i, (a, b) in enumerate(zip(g_old, g_new, strict=True)) if a >= 0.0 >= b]

@@ -212,6 +212,10 @@ class _Searching:
             return g
         self.t_end = t
         step = self.last.get("step")
-        if g > 0.0 and step is not None and step.t_max == t and self.event.dips(step.t_min, step):
+        if step is None or step.t_max != t:
+            return g
+        if g > 0.0 and self.event.dips(step.t_min, step):
             return -1.0
+        if g <= 0.0 and hasattr(self.event, "first_fall"):  # (a fall: the first of several, if its stages swung)
+            self.event.first_fall(step.t_min, step)
         return g
