@@ -126,9 +126,9 @@ def _fma(typingctx, a, b, c):
 
 
 @njit(cache=True)
-def lu_solve(A, b):
+def lu_solve(A, b, tiny=0.0):
     """z of A z = b by Gaussian elimination with partial pivoting (LAPACK's dgetf2 order); A, b unchanged;
-    a zero pivot (singular A) gives nan."""
+    a pivot of magnitude at most ``tiny`` (0: a zero pivot; singular A) gives nan."""
     n = b.size
     LU = A.copy()
     z = b.copy()
@@ -137,7 +137,7 @@ def lu_solve(A, b):
         for i in range(k + 1, n):
             if abs(LU[i, k]) > abs(LU[p, k]):
                 p = i
-        if LU[p, k] == 0.0:
+        if abs(LU[p, k]) <= tiny:
             return np.full(n, np.nan)
         if p != k:
             for j in range(n):

@@ -25,6 +25,11 @@ from .pack import NQ, NV, R_MREST
 __all__ = ["kkt_solve", "solve_linear", "least_squares", "NOT_FINITE", "REGULAR", "LEAST_SQUARES"]
 
 NOT_FINITE, REGULAR, LEAST_SQUARES = 0, 1, 2  #: a solve's outcome: no solve (non-finite), LU, least squares
+#: [-] an LU pivot at most this × the largest |entry| of A is zero: A is singular (redundant rows: stuck joints and a
+#: stuck contact holding the same motion), solved by least squares. Rounding leaves such a pivot ~1e-15 of it, and
+#: LU's answer then passes the residual test with a null-space part that flips between calls (the holds' share of
+#: the force), which the step control cannot follow; a regular KKT matrix's smallest pivot is ~1e-2 of it.
+SINGULAR_PIVOT = 1e-12
 
 
 @njit(cache=True)
@@ -74,12 +79,22 @@ def solve_linear(A, b):
     """(z, outcome) of A z = b as ``constraints.solve_linear``: LU's z where it passes the residual test (REGULAR),
     else the minimum-norm least squares (LEAST_SQUARES: A singular, the system consistent or not); LU's z where an
     entry of A or b is not finite (NOT_FINITE: no least squares, the call declines)."""
-    z = lu_solve(A, b)
+    z = lu_solve(A, b, SINGULAR_PIVOT * largest(A))
     if residual_ok(A, z, b):
         return z, REGULAR
     if not finite(A, b):
         return z, NOT_FINITE
     return least_squares(A, b), LEAST_SQUARES
+
+
+@njit(cache=True)
+def largest(A):
+    """The largest |entry| of A."""
+    m = 0.0
+    for i in range(A.shape[0]):
+        for j in range(A.shape[1]):
+            m = max(m, abs(A[i, j]))
+    return m
 
 
 @njit(cache=True)
