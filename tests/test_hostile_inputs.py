@@ -456,8 +456,55 @@ def round2_cases(tmp: Path) -> list[Case]:
     ]
 
 
+# ---- round 3: sampled control, joint damping and friction, drives, users' laws ----------------------
+ELASTIC = 'robot.drive={kind="elastic", c=1e4, R=10.24, C_M=0.16, J=2e-5, N=100.0}'
+ROUND3_SETS: list[tuple[str | list[str], int, str]] = [  # on b1: (--set values, exit code, a piece of stderr)
+    ("controller.sample_rate=-1", 2, "controller.sample_rate: expected a number >= 0 [Hz], found -1.0"),
+    ("controller.sample_rate=nan", 2, "controller.sample_rate: expected a finite number [Hz]"),
+    ("controller.sample_rate=1e308", 2, "controller.sample_rate: expected a number <= 1e+06 [Hz]"),
+    ("controller.sample_rate=1e-7", 2, "expected 0 (continuous) or a rate >= 1e-06 Hz"),
+    ("controller.delay=-1", 2, "controller.delay: expected an integer >= 0 [samples], found -1"),
+    ("controller.delay=1.5", 2, "controller.delay: expected an integer, found 1.5"),
+    ("controller.delay=3", 2, "controller.delay: expected no delay for a continuous controller"),
+    (["controller.sample_rate=500", "controller.delay=100000"], 2, "controller.delay: expected an integer <= 10000"),
+    (["controller.sample_rate=500", 'controller.hold="volts"'], 2, "controller.hold: expected one of"),
+    (["controller.sample_rate=500", 'controller.hold="voltage"'], 2,
+     "controller.hold: expected hold = \"voltage\" only with a motor on every joint"),
+    (["controller.sample_rate=500", "controller.sensor.seed=-1"], 2, "sensor.seed: expected an integer >= 0"),
+    (["controller.sample_rate=500", "controller.sensor.seed=1.5"], 2, "controller.sensor.seed: expected an integer"),
+    (["controller.sample_rate=500", "controller.sensor.force_cutoff=0"], 2, "force_cutoff: expected a number > 0"),
+    (["controller.sample_rate=500", "controller.sensor.encoder_resolution=1e-13"], 2, "a resolution >= 1e-12"),
+    (["controller.sample_rate=500", "controller.sensor.noise=1"], 2, "did you mean 'force_noise'"),
+    ("robot.joint.q1.friction=-1", 2, "robot.joint.q1.friction: expected a number >= 0 [N·m or N], found -1.0"),
+    ("robot.joint.q1.damping=nan", 2, "robot.joint.q1.damping: expected a finite number"),
+    ("robot.joint.q3.friction=1", 2, "robot.joint.q3: expected a table named after an active joint of the robot"),
+    ("robot.joint.q1={friction_static=1, friction_kinetic=2}", 2, "expected a kinetic friction <= friction_static"),
+    ("robot.joint.q1={friction_kinetic=1}", 2, "robot.joint.q1.friction_static: expected a static limit"),
+    ('robot.drive={kind="dc_motor", R=0.0, C_M=0.16}', 2, "robot.drive.R: expected a number > 0 [Ω], found 0.0"),
+    ('robot.drive={kind="dc_motor", R=1.0, C_M=0.16, J=0.0, u_max=[1.0, 2.0, 3.0]}', 2,
+     "robot.drive.u_max: expected one value or 2 (one per joint ['q1', 'q2'])"),
+    (ELASTIC.replace("J=2e-5", "J=0.0"), 2, "robot.drive: expected parameters that give the drive of joint 'q1' "
+     "(kind 'elastic') a finite torsional frequency (its motor coordinate needs a motor inertia > 0), found "
+     "'natural_frequency = x / 0 at R = 10.24"),
+    (ELASTIC.replace("J=2e-5", "J=[2e-5, 0.0]"), 2, "the drive of joint 'q2' (kind 'elastic') a finite torsional"),
+    (ELASTIC.replace("N=100.0", "N=1e-300"), 2, "a finite inertia on the motor shaft, found 'motor_inertia = x / 0"),
+    ('robot.drive={kind="dc_motor", R=10.24, C_M=0.16, J=2e-5, N=100.0, wheel_radius=1e-300}', 2,
+     "a finite reflected rotor inertia, found 'reflected_inertia = inf at R = 10.24"),
+]
+
+
+def round3_cases(tmp: Path) -> list[Case]:
+    cases = []
+    for i, (sets, code, piece) in enumerate(ROUND3_SETS):
+        sets = [sets] if isinstance(sets, str) else sets
+        argv = ["run", "b1", *FAST, *[a for text in sets for a in ("--set", text)]]
+        cases.append((f"r3/{i:02d} {' '.join(sets)[:60]}", argv, code, piece))
+    return cases
+
+
 BUILDERS = {"scenes": scene_cases, "overrides": lambda _: override_cases(), "urdfs": urdf_cases,
-            "run_files": run_file_cases, "round2": round2_cases}
+            "run_files": run_file_cases, "round2": round2_cases,
+            "round3": round3_cases}
 
 
 def test_corpus_has_at_least_100_cases(tmp_path):
@@ -469,7 +516,7 @@ def test_corpus_has_at_least_100_cases(tmp_path):
 
 
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2"])
+@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2", "round3"])
 def test_hostile_inputs(tmp_path, kind):
     check(BUILDERS[kind](tmp_path), tmp_path)
 

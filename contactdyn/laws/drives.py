@@ -19,6 +19,7 @@ This module holds what every kind shares:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,7 +29,7 @@ from ..scene.reader import Reader
 from .drive_kinds import DRIVE_KINDS, DriveKind
 from .params import Param, with_defaults
 
-__all__ = ["DRIVE_KINDS", "DriveSpec", "DriveTable", "read_drive_table", "Drives", "drive_channels"]
+__all__ = ["DRIVE_KINDS", "DriveSpec", "DriveTable", "DriveFigureError", "read_drive_table", "Drives", "drive_channels"]
 
 
 def kind_of(name: str) -> type[DriveKind]:
@@ -72,7 +73,7 @@ class DriveSpec:
         for name, value in full.items():
             put(self, name, value)
         for name in self.DERIVED:
-            put(self, name, getattr(law, name)(self))
+            put(self, name, _figure(law, name, self))
 
     @property
     def law(self) -> type[DriveKind]:
@@ -95,6 +96,37 @@ class DriveSpec:
     def __repr__(self) -> str:
         values = ", ".join(f"{p.name}={getattr(self, p.name)!r}" for p in self.law.params)
         return f"DriveSpec({self.kind!r}{', ' if values else ''}{values})"
+
+
+#: what each transmission figure is (the error of parameters that give none)
+FIGURES = {"n_speed": "speed ratio θ̇/Q̇", "n_torque": "torque ratio (generalized force per motor torque)",
+           "motor_inertia": "inertia on the motor shaft", "reflected_inertia": "reflected rotor inertia",
+           "natural_frequency": "torsional frequency (its motor coordinate needs a motor inertia > 0)"}
+
+
+class DriveFigureError(ValueError):
+    """Parameters that give a drive no finite transmission figure (a division by 0, an overflow)."""
+
+    def __init__(self, spec: DriveSpec, figure: str, value: float | str):
+        self.figure, self.value = figure, value
+        self.values = {p.name: getattr(spec, p.name) for p in spec.law.params}
+        params = ", ".join(f"{k} = {v:g}" for k, v in self.values.items())
+        self.found = f"{figure} = {value if isinstance(value, str) else f'{value:g}'} at {params}"
+        super().__init__(f"drive kind {spec.kind!r}: expected parameters that give a finite {FIGURES[figure]}, "
+                         f"found {self.found}")
+
+
+def _figure(law: type[DriveKind], name: str, spec: DriveSpec) -> float:
+    """One transmission figure of ``spec`` (:data:`DriveSpec.DERIVED`); DriveFigureError where its parameters give
+    none: ``wheel_radius = 1e-300`` (an inertia of inf), an elastic motor without inertia (a frequency of 1/0)."""
+    try:
+        value = float(getattr(law, name)(spec))
+    except ArithmeticError as exc:
+        raise DriveFigureError(spec, name, "x / 0" if isinstance(exc, ZeroDivisionError) else "an overflow") from None
+    rigid = name == "natural_frequency" and not law.motor_coordinate and value == math.inf  # (inf: no torsion)
+    if not (math.isfinite(value) or rigid):
+        raise DriveFigureError(spec, name, value)
+    return value
 
 
 @dataclass(frozen=True)
@@ -121,7 +153,12 @@ class DriveTable:
             kind = pick("kind", self.kind, i)
             given = {p.name: pick(p.name, self.values[p.name], i) for p in DRIVE_KINDS[kind].params
                      if p.name in self.values}
-            specs.append(DriveSpec(kind, **given))
+            try:
+                specs.append(DriveSpec(kind, **given))
+            except DriveFigureError as exc:
+                joint = f" of joint {names[i]!r}" if n > 1 or isinstance(self.kind, tuple) else ""
+                raise SceneError(self.path, f"parameters that give the drive{joint} (kind {kind!r}) a finite "
+                                 f"{FIGURES[exc.figure]}", exc.found, self.file) from None
         return specs
 
 
