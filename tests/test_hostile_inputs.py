@@ -493,12 +493,57 @@ ROUND3_SETS: list[tuple[str | list[str], int, str]] = [  # on b1: (--set values,
 ]
 
 
+#: a user's controller module: (the class's lines, the scene's controller kind, exit code, a piece of stderr); each
+#: module is imported once in the batch's process, under a name of its own
+LAW = ("from contactdyn.laws import Controller, Param, register\nimport numpy as np\n\n\n"
+       "@register\nclass C(Controller):\n")
+COMMAND = "    def command(self, inp):\n        return np.zeros(2), None\n"
+ROUND3_LAWS: dict[str, tuple[str, str, int, str]] = {
+    "param_named_delay": ('    name = "with_delay"\n    params = (Param("delay", "s", "my delay", 0.5),)\n' + COMMAND,
+                          "with_delay", 2, "ValueError: controller 'with_delay': parameter names must be unique and "
+                          "none of ('kind', 'sample_rate', 'delay', 'hold', 'sensor')"),
+    "param_twice": ('    name = "twice"\n    params = (Param("a", "-", "a", 1.0), Param("a", "-", "b", 2.0))\n'
+                    + COMMAND, "twice", 2, "controller 'twice': parameter names must be unique"),
+    "params_not_a_tuple": ('    name = "params_text"\n    params = "gain"\n' + COMMAND, "params_text", 2,
+                           "controller 'params_text': params must be a tuple of Param, got 'gain'"),
+    "outputs_typo": ('    name = "volts"\n    outputs = "voltages"\n' + COMMAND, "volts", 2,
+                     "controller 'volts': outputs must be one of ('torque', 'voltage'), got 'voltages'"),
+    "n_states_negative": ('    name = "negative_states"\n    n_states = -1\n' + COMMAND, "negative_states", 2,
+                          "controller 'negative_states': n_states must be an integer >= 0, got -1"),
+    "n_states_text": ('    name = "text_states"\n    n_states = "1"\n' + COMMAND, "text_states", 2,
+                      "n_states must be an integer >= 0, got '1'"),
+    "bind_sets_n_states": ('    name = "bound_states"\n    def bind(self, context):\n        self.n_states = 1.5\n'
+                           + COMMAND, "bound_states", 1, "controller 'bound_states' (law_bind_sets_n_states.py) set "
+                           "n_states = 1.5: expected an integer >= 0"),
+    "bind_raises": ('    name = "bind_raises"\n    def bind(self, context):\n        raise ValueError("no bind")\n'
+                    + COMMAND, "bind_raises", 1, "controller 'bind_raises' (law_bind_raises.py, line 9) raised "
+                    "ValueError: no bind"),
+    "init_raises": ('    name = "init_raises"\n    def __init__(self, config, nv):\n        raise RuntimeError("no")\n'
+                    + COMMAND, "init_raises", 1, "controller 'init_raises' (law_init_raises.py, line 9) raised "
+                    "RuntimeError: no"),
+    "read_raises": ('    name = "read_raises"\n    @classmethod\n    def read(cls, r):\n        raise KeyError("x")\n'
+                    + COMMAND, "read_raises", 1, "controller 'read_raises' (law_read_raises.py, line 10) raised "
+                    "KeyError: 'x'"),
+    "read_returns_none": ('    name = "read_none"\n    @classmethod\n    def read(cls, r):\n        return None\n'
+                          + COMMAND, "read_none", 1, "controller 'read_none' (law_read_returns_none.py) read returned "
+                          "NoneType: expected a config with the kind of its controller"),
+    "exits": ("    name = 'exits'\n" + COMMAND + "\n\nimport sys\nsys.exit(3)\n", "exits", 2,
+              "found 'law_exits: SystemExit: 3'"),
+}
+
+
 def round3_cases(tmp: Path) -> list[Case]:
     cases = []
     for i, (sets, code, piece) in enumerate(ROUND3_SETS):
         sets = [sets] if isinstance(sets, str) else sets
         argv = ["run", "b1", *FAST, *[a for text in sets for a in ("--set", text)]]
         cases.append((f"r3/{i:02d} {' '.join(sets)[:60]}", argv, code, piece))
+    controller = B1[B1.index("[controller]"):B1.index("[[phase]]")]
+    for name, (body, kind, code, piece) in ROUND3_LAWS.items():
+        (tmp / f"law_{name}.py").write_text(LAW + body)
+        scene = tmp / f"law_{name}.toml"
+        scene.write_text(f'imports = ["law_{name}"]\n' + B1.replace(controller, f'[controller]\nkind = "{kind}"\n\n'))
+        cases.append((f"r3/law/{name}", ["run", str(scene), *FAST], code, piece))
     return cases
 
 

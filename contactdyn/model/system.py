@@ -59,6 +59,7 @@ from ..laws.controllers import CONTROLLERS
 from ..laws.controllers.base import BindContext, Controller
 from ..laws.controllers.sampled import SampledController
 from ..laws.drives import Drives
+from ..laws.failures import counted_states, naming_laws
 from ..numerics.twins import current
 from ..robot.body import ArticulatedBody
 from ..robot.posture import start_posture
@@ -127,10 +128,12 @@ class System:
         #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (zero: no motor)
         self._D_ctl = np.diag(self.drives.model_reflected[:nv])
         # ---- controllers, then the first-order slots after the junctions ----
-        self.controllers = [_controller_of(p, nv) for p in scene.phases]
-        for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
-            ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
-                                 p.controller_key))
+        with naming_laws():  # (a user's law raising as it is built or bound: its LawError)
+            self.controllers = [_controller_of(p, nv) for p in scene.phases]
+            for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
+                ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
+                                     p.controller_key))
+                counted_states(ctl)
         #: impulse_slots: per friction contact y's slot of ∫F dt; joint_impulse_slot: the first joint with dry
         #: friction's ∫τ_f dt (one per such joint, in JointFriction.dry's order)
         self.z_slices, self.energy_slot, self.impulse_slots, self.joint_impulse_slot, self.ny = \

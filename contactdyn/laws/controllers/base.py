@@ -27,9 +27,12 @@ from ..params import Param, claim_name
 from ..sensors import read_sampling
 
 __all__ = ["ControlInput", "Controller", "BindContext", "CONTROLLERS", "register", "read_controller",
-           "FEEDFORWARD", "DeclaredConfig"]
+           "FEEDFORWARD", "DeclaredConfig", "TABLE_KEYS", "OUTPUTS", "is_count"]
 
 FEEDFORWARD = ("none", "gravity", "bias")
+#: the keys of every controller table besides its kind's own (read_controller; laws.sensors.read_sampling)
+TABLE_KEYS = ("kind", "sample_rate", "delay", "hold", "sensor")
+OUTPUTS = ("torque", "voltage")  #: what a controller's command gives (``Controller.outputs``)
 
 
 @dataclass
@@ -199,11 +202,32 @@ CONTROLLERS: dict[str, type] = {}
 
 
 def register(cls: type) -> type:
-    """Make ``cls`` a controller scenes can name (``kind = cls.name``)."""
+    """Make ``cls`` a controller scenes can name (``kind = cls.name``): a :class:`Controller` whose declared
+    parameters are a tuple of :class:`Param` named each once and none like a key of every controller table
+    (:data:`TABLE_KEYS`: the table would give one value to both), its ``outputs`` one of :data:`OUTPUTS` (a typo
+    would run it as a torque law) and its ``n_states`` a count."""
+    if not isinstance(cls, type) or not issubclass(cls, Controller):
+        raise ValueError(f"a controller must subclass contactdyn.laws.Controller, got {cls!r}")
     if not cls.name or not cls.name.isidentifier():
         raise ValueError(f"a controller's name must be an identifier, got {cls.name!r}")
+    params = cls.params
+    if not isinstance(params, tuple | list) or not all(isinstance(p, Param) for p in params):
+        raise ValueError(f"controller {cls.name!r}: params must be a tuple of Param, got {params!r}")
+    names = [p.name for p in params]
+    if len(set(names)) != len(names) or set(TABLE_KEYS) & set(names):
+        raise ValueError(f"controller {cls.name!r}: parameter names must be unique and none of {TABLE_KEYS} (every "
+                         f"controller table's own keys): {names}")
+    if cls.outputs not in OUTPUTS:
+        raise ValueError(f"controller {cls.name!r}: outputs must be one of {OUTPUTS}, got {cls.outputs!r}")
+    if not is_count(cls.n_states):
+        raise ValueError(f"controller {cls.name!r}: n_states must be an integer >= 0, got {cls.n_states!r}")
     claim_name(CONTROLLERS, cls, "controller")
     return cls
+
+
+def is_count(n: object) -> bool:
+    """An integer >= 0 (a count of states), not a bool."""
+    return isinstance(n, int | np.integer) and not isinstance(n, bool) and n >= 0
 
 
 def read_controller(reader) -> tuple[Any, Any]:
