@@ -500,8 +500,8 @@ LAW = ("from contactdyn.laws import Controller, Param, register\nimport numpy as
 COMMAND = "    def command(self, inp):\n        return np.zeros(2), None\n"
 ROUND3_LAWS: dict[str, tuple[str, str, int, str]] = {
     "param_named_delay": ('    name = "with_delay"\n    params = (Param("delay", "s", "my delay", 0.5),)\n' + COMMAND,
-                          "with_delay", 2, "ValueError: controller 'with_delay': parameter names must be unique and "
-                          "none of ('kind', 'sample_rate', 'delay', 'hold', 'sensor')"),
+                          "with_delay", 2, "ValueError: controller 'with_delay': parameter 'delay' is named like a key "
+                          "of the table it is read from (the table would give one value to both)"),
     "param_twice": ('    name = "twice"\n    params = (Param("a", "-", "a", 1.0), Param("a", "-", "b", 2.0))\n'
                     + COMMAND, "twice", 2, "controller 'twice': parameter names must be unique"),
     "params_not_a_tuple": ('    name = "params_text"\n    params = "gain"\n' + COMMAND, "params_text", 2,
@@ -531,6 +531,28 @@ ROUND3_LAWS: dict[str, tuple[str, str, int, str]] = {
               "found 'law_exits: SystemExit: 3'"),
 }
 
+#: a user's stage or friction law module that its register refuses at import: (its source, a piece of stderr)
+STAGE = "from contactdyn.laws import Param, StageLaw, register_stage_law\n\n\n@register_stage_law\nclass L(StageLaw):\n"
+FRICTION = "from contactdyn.laws import FrictionLaw, Param, register_friction_law\n\n\n@register_friction_law\nclass F"
+ROUND3_IMPORTS: dict[str, tuple[str, str]] = {
+    "stage_param_m": (STAGE + '    name = "with_m"\n    params = (Param("m", "kg", "a mass", 1.0),)\n',
+                      "stage law 'with_m': parameter 'm' is named like a key of the table it is read from"),
+    "stage_param_model": (STAGE + '    name = "with_model"\n    params = (Param("model", "-", "x", 1.0),)\n',
+                          "stage law 'with_model': parameter 'model' is named like a key"),
+    "stage_params_text": (STAGE + '    name = "params_text"\n    params = "k3"\n',
+                          "stage law 'params_text': params must be a tuple of Param, got 'k3'"),
+    "stage_no_stage_law": (STAGE.replace("(StageLaw)", "") + '    name = "plain"\n',
+                           "a stage law must subclass contactdyn.laws.StageLaw"),
+    "friction_param_mu_k": (FRICTION + '(FrictionLaw):\n    name = "with_mu_k"\n'
+                            '    params = (Param("mu_k", "-", "x", 0.3),)\n',
+                            "friction law 'with_mu_k': parameter 'mu_k' is named like a key"),
+    "friction_params_twice": (FRICTION + '(FrictionLaw):\n    name = "twice_f"\n'
+                              '    params = (Param("a", "-", "a", 1.0), Param("a", "-", "b", 1.0))\n',
+                              "friction law 'twice_f': parameter names must be unique"),
+    "friction_no_friction_law": (FRICTION + ':\n    name = "plain_f"\n',
+                                 "a friction law must subclass contactdyn.laws.FrictionLaw"),
+}
+
 
 def round3_cases(tmp: Path) -> list[Case]:
     cases = []
@@ -544,6 +566,10 @@ def round3_cases(tmp: Path) -> list[Case]:
         scene = tmp / f"law_{name}.toml"
         scene.write_text(f'imports = ["law_{name}"]\n' + B1.replace(controller, f'[controller]\nkind = "{kind}"\n\n'))
         cases.append((f"r3/law/{name}", ["run", str(scene), *FAST], code, piece))
+    for name, (source, piece) in ROUND3_IMPORTS.items():
+        (tmp / f"law_{name}.py").write_text(source)
+        (tmp / f"law_{name}.toml").write_text(f'imports = ["law_{name}"]\n' + B1)
+        cases.append((f"r3/import/{name}", ["run", str(tmp / f"law_{name}.toml"), *FAST], 2, piece))
     return cases
 
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from ..scene.reader import Reader
 
-__all__ = ["Param", "read_params", "with_defaults"]
+__all__ = ["Param", "read_params", "with_defaults", "claim_name", "check_declaration"]
 
 
 @dataclass(frozen=True)
@@ -84,3 +84,24 @@ def claim_name(registry: dict, cls: type, family: str) -> None:
                          f"give it another name")
     registry[cls.name] = cls
 
+
+
+def check_declaration(cls: object, family: str, base: type, reserved: tuple[str, ...]) -> None:
+    """A law's class as its family's register takes it (``family``: "controller", "stage law", ...): a subclass of
+    ``base`` named by an identifier, its ``params`` a tuple of :class:`Param` named each once and none of
+    ``reserved`` (the keys of the tables the law is read from: the table would give one value to both, or read the
+    key as the wrong type); else a ValueError naming it."""
+    if not isinstance(cls, type) or not issubclass(cls, base):
+        raise ValueError(f"a {family} must subclass contactdyn.laws.{base.__name__}, got {cls!r}")
+    if not isinstance(cls.name, str) or not cls.name.isidentifier():
+        raise ValueError(f"a {family}'s name must be an identifier, got {cls.name!r}")
+    params = cls.params
+    if not isinstance(params, tuple | list) or not all(isinstance(p, Param) for p in params):
+        raise ValueError(f"{family} {cls.name!r}: params must be a tuple of Param, got {params!r}")
+    names = [p.name for p in params]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{family} {cls.name!r}: parameter names must be unique, got {names}")
+    clash = [n for n in names if n in reserved]
+    if clash:
+        raise ValueError(f"{family} {cls.name!r}: parameter {clash[0]!r} is named like a key of the table it is read "
+                         f"from (the table would give one value to both): give it another name")

@@ -23,7 +23,7 @@ import numpy as np
 
 from ...errors import SceneError
 from ..drive_kinds import DRIVE_KINDS
-from ..params import Param, claim_name
+from ..params import Param, check_declaration, claim_name
 from ..sensors import read_sampling
 
 __all__ = ["ControlInput", "Controller", "BindContext", "CONTROLLERS", "register", "read_controller",
@@ -206,17 +206,7 @@ def register(cls: type) -> type:
     parameters are a tuple of :class:`Param` named each once and none like a key of every controller table
     (:data:`TABLE_KEYS`: the table would give one value to both), its ``outputs`` one of :data:`OUTPUTS` (a typo
     would run it as a torque law) and its ``n_states`` a count."""
-    if not isinstance(cls, type) or not issubclass(cls, Controller):
-        raise ValueError(f"a controller must subclass contactdyn.laws.Controller, got {cls!r}")
-    if not cls.name or not cls.name.isidentifier():
-        raise ValueError(f"a controller's name must be an identifier, got {cls.name!r}")
-    params = cls.params
-    if not isinstance(params, tuple | list) or not all(isinstance(p, Param) for p in params):
-        raise ValueError(f"controller {cls.name!r}: params must be a tuple of Param, got {params!r}")
-    names = [p.name for p in params]
-    if len(set(names)) != len(names) or set(TABLE_KEYS) & set(names):
-        raise ValueError(f"controller {cls.name!r}: parameter names must be unique and none of {TABLE_KEYS} (every "
-                         f"controller table's own keys): {names}")
+    check_declaration(cls, "controller", Controller, TABLE_KEYS)
     if cls.outputs not in OUTPUTS:
         raise ValueError(f"controller {cls.name!r}: outputs must be one of {OUTPUTS}, got {cls.outputs!r}")
     if not is_count(cls.n_states):
