@@ -549,6 +549,13 @@ ROUND3_IMPORTS: dict[str, tuple[str, str]] = {
     "friction_params_twice": (FRICTION + '(FrictionLaw):\n    name = "twice_f"\n'
                               '    params = (Param("a", "-", "a", 1.0), Param("a", "-", "b", 1.0))\n',
                               "friction law 'twice_f': parameter names must be unique"),
+    "stage_bounds_crossed": (STAGE + '    name = "crossed"\n    params = (Param("q", "-", "x", lo=5.0, hi=2.0),)\n',
+                             "stage law 'crossed': parameter 'q' has lo = 5 > hi = 2: no value is in its bounds"),
+    "stage_default_nan": (STAGE + '    name = "nan_default"\n    params = (Param("q", "-", "x", float("nan")),)\n',
+                          "stage law 'nan_default': parameter 'q' has default nan outside its bounds [0, inf)"),
+    "controller_default_below_lo": (LAW + '    name = "negative_gain"\n    params = (Param("gain", "-", "g", -1.0),)\n'
+                                    + COMMAND, "controller 'negative_gain': parameter 'gain' has default -1 outside "
+                                    "its bounds [0, inf) (lo = 0 unless declared)"),
     "friction_no_friction_law": (FRICTION + ':\n    name = "plain_f"\n',
                                  "a friction law must subclass contactdyn.laws.FrictionLaw"),
 }

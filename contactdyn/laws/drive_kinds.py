@@ -175,7 +175,7 @@ def register_drive_kind(cls: type[DriveKind]) -> type[DriveKind]:
 
     A parameter another kind declares too must be declared the same (one drive table may mix kinds); a kind that is
     not motorized is an ideal source and keeps the base law; a voltage or a motor coordinate needs a motor."""
-    check_declaration(cls, "drive kind", DriveKind, _SPEC_NAMES)
+    check_declaration(cls, "drive kind", DriveKind, _SPEC_NAMES, read_defaults=False)
     if (cls.has_voltage or cls.motor_coordinate or cls.force is not DriveKind.force) and not cls.motorized:
         raise ValueError(f"drive kind {cls.name!r}: a voltage, a motor coordinate or a law of its own needs "
                          "motorized = True (a kind that is not motorized is an ideal source)")
