@@ -196,7 +196,7 @@ def read_drive_table(r: Reader, per_joint: bool) -> DriveTable:
 
 def _read_value(r: Reader, p: Param, per_joint: bool) -> float | tuple[float, ...]:
     """One declared parameter's value from a drive table: a number, or one per joint (``per_joint``), in bounds."""
-    if isinstance(r.raw(p.name), list) and per_joint:
+    if isinstance(r.raw(p.name), list | tuple | np.ndarray) and per_joint:  # (tuple, array: the Python API's)
         arr = r.vector(p.name, unit=p.unit)
         for x in arr:
             Reader({p.name: float(x)}, r.path, r.file).float(p.name, lo=p.lo, hi=p.hi, lo_open=p.lo_open, unit=p.unit)

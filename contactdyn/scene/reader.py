@@ -201,7 +201,7 @@ class Reader:
         value = self.raw(name, default)
         if value is None and default is None:
             return None  # type: ignore[return-value]
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if not _is_number(value):
             raise self.error(name, f"a number{_unit(unit)}", value)
         if _beyond_float(value):
             raise self.error(name, f"a finite number{_unit(unit)}", value)
@@ -258,9 +258,7 @@ class Reader:
                unit_norm: bool = False) -> np.ndarray:
         self._note(name, "direction" if unit_norm else "list", default, unit=unit, size=size)
         value = self.raw(name, default)
-        ok = isinstance(value, list | tuple | np.ndarray) and all(
-            isinstance(x, int | float) and not isinstance(x, bool) for x in value
-        )
+        ok = isinstance(value, list | tuple | np.ndarray) and all(_is_number(x) for x in value)
         if not ok or (size is not None and len(value) != size):
             what = f"a list of {size} numbers" if size is not None else "a list of numbers"
             raise self.error(name, what + _unit(unit), value)
@@ -288,6 +286,11 @@ class Reader:
 
 
 _LARGEST_FLOAT = int(sys.float_info.max)
+
+
+def _is_number(value: Any) -> bool:
+    """A real number: Python's int or float, or NumPy's (np.float32, np.int64 from a user's array); not a bool."""
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
 
 
 def _beyond_float(value: Any) -> bool:

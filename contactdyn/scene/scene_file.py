@@ -285,8 +285,13 @@ def _new_name(key: str, name: str, tables: dict, file: str | None) -> None:
 
 def apply_overrides(document: dict[str, Any], overrides: dict[str, Any], file: str | None = None) -> dict[str, Any]:
     """A copy of ``document`` with each ``key.path`` set; array items as ``phase.1.until``."""
+    if not isinstance(overrides, dict):
+        raise SceneError("<overrides>", 'a dict of key paths and values, like {"controller.kp": 500.0}',
+                         overrides, file)
     doc = copy.deepcopy(document)
     for key, value in overrides.items():
+        if not isinstance(key, str):
+            raise SceneError("<overrides>", 'key paths as strings, like "controller.kp"', key, file)
         indexed = re.search(r"\[(\d+)\]", key)
         if indexed:  # phase[1].until: the array's item is a path part of its own
             raise SceneError(key, f"an array item as a path part of its own, e.g. "
