@@ -221,15 +221,15 @@ class Reader:
     def int(self, name: str, default: Any = MISSING, *, lo: int | None = None, hi: int | None = None,
             unit: str = "") -> int:
         self._note(name, "integer", default, unit=unit, lo=lo, hi=hi)
-        value = self.raw(name, default)
+        given = value = self.raw(name, default)  # (a message shows what was given: 1e+308, not its 309 digits)
         if isinstance(value, np.integer) or (isinstance(value, float) and value.is_integer()):
             value = int(value)  # (NumPy's integers; a whole float, e.g. a sweep's --range point)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, "an integer", value)
         if lo is not None and value < lo:
-            raise self.error(name, f"an integer >= {lo}{_unit(unit)}", value)
+            raise self.error(name, f"an integer >= {lo}{_unit(unit)}", given)
         if hi is not None and value > hi:
-            raise self.error(name, f"an integer <= {hi}{_unit(unit)}", value)
+            raise self.error(name, f"an integer <= {hi}{_unit(unit)}", given)
         return value
 
     def bool(self, name: str, default: Any = MISSING) -> bool:
