@@ -578,6 +578,18 @@ def round3_cases(tmp: Path) -> list[Case]:
         scene = tmp / f"law_{name}.toml"
         scene.write_text(f'imports = ["law_{name}"]\n' + B1.replace(controller, f'[controller]\nkind = "{kind}"\n\n'))
         cases.append((f"r3/law/{name}", ["run", str(scene), *FAST], code, piece))
+    good = (ROOT / "urdf" / "planar2r_b1.urdf").read_text()
+    urdfs = {  # a joint's friction given twice, or as two numbers: the parsers kept the first, or said it in jargon
+        "two_dynamics": (good.replace(LIMIT, LIMIT + '<dynamics friction="0.5"/><dynamics friction="5"/>', 1),
+                         "joint 'q1': <dynamics> 2 times: expected it once (the URDF's parsers read the first"),
+        "two_masses": (good.replace('<mass value="3.0"/>', '<mass value="3.0"/><mass value="30.0"/>', 1),
+                       "link 'link1' <inertial>: <mass> 2 times: expected it once"),
+        "damping_two_numbers": (good.replace(LIMIT, LIMIT + '<dynamics damping="1 2"/>', 1),
+                                "joint 'q1' <dynamics>: damping='1 2': expected one number"),
+    }
+    for name, (text, piece) in urdfs.items():
+        (tmp / f"{name}.urdf").write_text(text)
+        cases.append((f"r3/urdf/{name}", ["run", "b1", *FAST, "--set", f'robot.urdf="{tmp / name}.urdf"'], 2, piece))
     for name, (source, piece) in ROUND3_IMPORTS.items():
         (tmp / f"law_{name}.py").write_text(source)
         (tmp / f"law_{name}.toml").write_text(f'imports = ["law_{name}"]\n' + B1)
