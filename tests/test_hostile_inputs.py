@@ -492,9 +492,10 @@ ROUND3_SETS: list[tuple[str | list[str], int, str]] = [  # on b1: (--set values,
      "(kind 'elastic') a finite torsional frequency (its motor coordinate needs a motor inertia > 0), found "
      "'natural_frequency = x / 0 at R = 10.24"),
     (ELASTIC.replace("J=2e-5", "J=[2e-5, 0.0]"), 2, "the drive of joint 'q2' (kind 'elastic') a finite torsional"),
-    (ELASTIC.replace("N=100.0", "N=1e-300"), 2, "a finite inertia on the motor shaft, found 'motor_inertia = x / 0"),
+    (ELASTIC.replace("N=100.0", "N=1e-300"), 2,
+     "a finite inertia >= 0 on the motor shaft, found 'motor_inertia = x / 0"),
     ('robot.drive={kind="dc_motor", R=10.24, C_M=0.16, J=2e-5, N=100.0, wheel_radius=1e-300}', 2,
-     "a finite reflected rotor inertia, found 'reflected_inertia = inf at R = 10.24"),
+     "a finite reflected rotor inertia >= 0, found 'reflected_inertia = inf at R = 10.24"),
 ]
 
 
@@ -565,6 +566,23 @@ ROUND3_IMPORTS: dict[str, tuple[str, str]] = {
                                  "a friction law must subclass contactdyn.laws.FrictionLaw"),
 }
 
+#: a user's drive kind whose transmission figures are no numbers: (its class's lines, exit code, a piece of stderr)
+KIND = ("from contactdyn.laws import DriveKind, Param, register_drive_kind\n\n\n@register_drive_kind\n"
+        "class K(DriveKind):\n    motorized = True\n    params = (Param('g', '-', 'gain', 1.0),)\n")
+ROUND3_KINDS: dict[str, tuple[str, int, str]] = {
+    "speed_raises": ("    @staticmethod\n    def n_speed(spec):\n        raise ValueError('no speed')\n", 1,
+                     "drive kind 'speed_raises' (kind_speed_raises.py, line 11) raised ValueError: no speed; in its "
+                     "n_speed"),
+    "speed_text": ("    @staticmethod\n    def n_speed(spec):\n        return 'x'\n", 1,
+                   "drive kind 'speed_text' (kind_speed_text.py) returned 'x' as its n_speed: expected a number"),
+    "negative_inertia": ("    @staticmethod\n    def motor_inertia(spec):\n        return -1.0\n", 2,
+                         "robot.drive: expected parameters that give the drive of joint 'q1' (kind 'negative_inertia') "
+                         "a finite inertia >= 0 on the motor shaft, found 'motor_inertia = -1 at g = 1'"),
+    "negative_limit": ("    has_voltage = True\n    @staticmethod\n    def voltage_limit(spec):\n"
+                       "        return -5.0\n", 2,
+                       "(kind 'negative_limit') a voltage limit > 0 (inf: none), found 'voltage_limit = -5 at g = 1'"),
+}
+
 
 def round3_cases(tmp: Path) -> list[Case]:
     cases = []
@@ -578,6 +596,11 @@ def round3_cases(tmp: Path) -> list[Case]:
         scene = tmp / f"law_{name}.toml"
         scene.write_text(f'imports = ["law_{name}"]\n' + B1.replace(controller, f'[controller]\nkind = "{kind}"\n\n'))
         cases.append((f"r3/law/{name}", ["run", str(scene), *FAST], code, piece))
+    for name, (body, code, piece) in ROUND3_KINDS.items():
+        (tmp / f"kind_{name}.py").write_text(KIND + f"    name = {name!r}\n" + body)
+        scene = tmp / f"kind_{name}.toml"
+        scene.write_text(f'imports = ["kind_{name}"]\n' + B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
+        cases.append((f"r3/kind/{name}", ["run", str(scene), *FAST], code, piece))
     good = (ROOT / "urdf" / "planar2r_b1.urdf").read_text()
     urdfs = {  # a joint's friction given twice, or as two numbers: the parsers kept the first, or said it in jargon
         "two_dynamics": (good.replace(LIMIT, LIMIT + '<dynamics friction="0.5"/><dynamics friction="5"/>', 1),

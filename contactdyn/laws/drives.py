@@ -27,6 +27,7 @@ import numpy as np
 from ..errors import SceneError
 from ..scene.reader import Reader
 from .drive_kinds import DRIVE_KINDS, DriveKind
+from .failures import LawError, law_error, law_file
 from .params import Param, with_defaults
 
 __all__ = ["DRIVE_KINDS", "DriveSpec", "DriveTable", "DriveFigureError", "read_drive_table", "Drives", "drive_channels"]
@@ -74,6 +75,8 @@ class DriveSpec:
             put(self, name, value)
         for name in self.DERIVED:
             put(self, name, _figure(law, name, self))
+        if law.has_voltage:
+            _figure(law, "voltage_limit", self)  # (checked: > 0, inf for none)
 
     @property
     def law(self) -> type[DriveKind]:
@@ -98,33 +101,47 @@ class DriveSpec:
         return f"DriveSpec({self.kind!r}{', ' if values else ''}{values})"
 
 
-#: what each transmission figure is (the error of parameters that give none)
-FIGURES = {"n_speed": "speed ratio θ̇/Q̇", "n_torque": "torque ratio (generalized force per motor torque)",
-           "motor_inertia": "inertia on the motor shaft", "reflected_inertia": "reflected rotor inertia",
-           "natural_frequency": "torsional frequency (its motor coordinate needs a motor inertia > 0)"}
+#: what each transmission figure must be (the error of parameters that give none)
+FIGURES = {"n_speed": "finite speed ratio θ̇/Q̇", "n_torque": "finite torque ratio (generalized force per motor torque)",
+           "motor_inertia": "finite inertia >= 0 on the motor shaft",
+           "reflected_inertia": "finite reflected rotor inertia >= 0",
+           "natural_frequency": "finite torsional frequency (its motor coordinate needs a motor inertia > 0)",
+           "voltage_limit": "voltage limit > 0 (inf: none)"}
+NON_NEGATIVE = ("motor_inertia", "reflected_inertia", "natural_frequency", "voltage_limit")  #: (of FIGURES)
 
 
 class DriveFigureError(ValueError):
-    """Parameters that give a drive no finite transmission figure (a division by 0, an overflow)."""
+    """Parameters that give a drive no valid transmission figure (a division by 0, an overflow, a negative inertia)."""
 
     def __init__(self, spec: DriveSpec, figure: str, value: float | str):
         self.figure, self.value = figure, value
         self.values = {p.name: getattr(spec, p.name) for p in spec.law.params}
         params = ", ".join(f"{k} = {v:g}" for k, v in self.values.items())
         self.found = f"{figure} = {value if isinstance(value, str) else f'{value:g}'} at {params}"
-        super().__init__(f"drive kind {spec.kind!r}: expected parameters that give a finite {FIGURES[figure]}, "
+        super().__init__(f"drive kind {spec.kind!r}: expected parameters that give a {FIGURES[figure]}, "
                          f"found {self.found}")
 
 
 def _figure(law: type[DriveKind], name: str, spec: DriveSpec) -> float:
-    """One transmission figure of ``spec`` (:data:`DriveSpec.DERIVED`); DriveFigureError where its parameters give
-    none: ``wheel_radius = 1e-300`` (an inertia of inf), an elastic motor without inertia (a frequency of 1/0)."""
+    """One transmission figure of ``spec`` (:data:`DriveSpec.DERIVED`, or its ``voltage_limit``); DriveFigureError
+    where its parameters give none (:data:`FIGURES`): ``wheel_radius = 1e-300`` (an inertia of inf), an elastic motor
+    without inertia (a frequency of 1/0); a user's kind raising, or returning no number: its LawError."""
     try:
-        value = float(getattr(law, name)(spec))
+        raw = getattr(law, name)(spec)
     except ArithmeticError as exc:
         raise DriveFigureError(spec, name, "x / 0" if isinstance(exc, ZeroDivisionError) else "an overflow") from None
-    rigid = name == "natural_frequency" and not law.motor_coordinate and value == math.inf  # (inf: no torsion)
-    if not (math.isfinite(value) or rigid):
+    except Exception as exc:
+        error = law_error(exc, None, ("drive kind", law))
+        if error is None:
+            raise
+        raise error.adding(f"in its {name}") from exc
+    if isinstance(raw, bool) or not isinstance(raw, int | float | np.integer | np.floating):
+        raise LawError("drive kind", law.name, law_file(law), f"returned {raw!r} as its {name}: expected a number")
+    value = float(raw)
+    unbounded = value == math.inf and (name == "voltage_limit" or (name == "natural_frequency"
+                                                                   and not law.motor_coordinate))
+    if not (math.isfinite(value) or unbounded) or (name in NON_NEGATIVE and value < 0.0) or \
+            (name == "voltage_limit" and value == 0.0):
         raise DriveFigureError(spec, name, value)
     return value
 
@@ -157,7 +174,7 @@ class DriveTable:
                 specs.append(DriveSpec(kind, **given))
             except DriveFigureError as exc:
                 joint = f" of joint {names[i]!r}" if n > 1 or isinstance(self.kind, tuple) else ""
-                raise SceneError(self.path, f"parameters that give the drive{joint} (kind {kind!r}) a finite "
+                raise SceneError(self.path, f"parameters that give the drive{joint} (kind {kind!r}) a "
                                  f"{FIGURES[exc.figure]}", exc.found, self.file) from None
         return specs
 
