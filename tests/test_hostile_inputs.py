@@ -515,12 +515,14 @@ ROUND3_LAWS: dict[str, tuple[str, str, int, str]] = {
     "outputs_typo": ('    name = "volts"\n    outputs = "voltages"\n' + COMMAND, "volts", 2,
                      "controller 'volts': outputs must be one of ('torque', 'voltage'), got 'voltages'"),
     "n_states_negative": ('    name = "negative_states"\n    n_states = -1\n' + COMMAND, "negative_states", 2,
-                          "controller 'negative_states': n_states must be an integer >= 0, got -1"),
+                          "controller 'negative_states': n_states must be an integer in [0, 10000], got -1"),
     "n_states_text": ('    name = "text_states"\n    n_states = "1"\n' + COMMAND, "text_states", 2,
-                      "n_states must be an integer >= 0, got '1'"),
+                      "n_states must be an integer in [0, 10000], got '1'"),
+    "n_states_huge": ('    name = "huge_states"\n    n_states = 10**9\n' + COMMAND, "huge_states", 2,
+                      "n_states must be an integer in [0, 10000], got 1000000000"),
     "bind_sets_n_states": ('    name = "bound_states"\n    def bind(self, context):\n        self.n_states = 1.5\n'
                            + COMMAND, "bound_states", 1, "controller 'bound_states' (law_bind_sets_n_states.py) set "
-                           "n_states = 1.5: expected an integer >= 0"),
+                           "n_states = 1.5: expected an integer in [0, 10000]"),
     "bind_raises": ('    name = "bind_raises"\n    def bind(self, context):\n        raise ValueError("no bind")\n'
                     + COMMAND, "bind_raises", 1, "controller 'bind_raises' (law_bind_raises.py, line 9) raised "
                     "ValueError: no bind"),

@@ -151,12 +151,12 @@ def no_command_error(ctl, tau, q, v, t: float) -> SimulationError:
 
 
 def counted_states(ctl) -> int:
-    """``ctl.n_states`` as its class or its bind set it: a LawError unless an integer >= 0."""
-    from .controllers.base import is_count
+    """``ctl.n_states`` as its class or its bind set it: a LawError unless an integer in [0, MAX_STATES]."""
+    from .controllers.base import MAX_STATES, is_count
 
     if not is_count(ctl.n_states):
         raise LawError("controller", ctl.name, law_file(type(ctl)), f"set n_states = {ctl.n_states!r}: expected an "
-                       "integer >= 0 (the count of its own states)")
+                       f"integer in [0, {MAX_STATES}] (the count of its own states)")
     return int(ctl.n_states)
 
 

@@ -27,12 +27,13 @@ from ..params import Param, check_declaration, claim_name
 from ..sensors import read_sampling
 
 __all__ = ["ControlInput", "Controller", "BindContext", "CONTROLLERS", "register", "read_controller",
-           "FEEDFORWARD", "DeclaredConfig", "TABLE_KEYS", "OUTPUTS", "is_count"]
+           "FEEDFORWARD", "DeclaredConfig", "TABLE_KEYS", "OUTPUTS", "MAX_STATES", "is_count"]
 
 FEEDFORWARD = ("none", "gravity", "bias")
 #: the keys of every controller table besides its kind's own (read_controller; laws.sensors.read_sampling)
 TABLE_KEYS = ("kind", "sample_rate", "delay", "hold", "sensor")
 OUTPUTS = ("torque", "voltage")  #: what a controller's command gives (``Controller.outputs``)
+MAX_STATES = 10_000  #: a controller's own states at most (each is integrated and stored with every output sample)
 
 
 @dataclass
@@ -210,14 +211,15 @@ def register(cls: type) -> type:
     if cls.outputs not in OUTPUTS:
         raise ValueError(f"controller {cls.name!r}: outputs must be one of {OUTPUTS}, got {cls.outputs!r}")
     if not is_count(cls.n_states):
-        raise ValueError(f"controller {cls.name!r}: n_states must be an integer >= 0, got {cls.n_states!r}")
+        raise ValueError(f"controller {cls.name!r}: n_states must be an integer in [0, {MAX_STATES}], got "
+                         f"{cls.n_states!r}")
     claim_name(CONTROLLERS, cls, "controller")
     return cls
 
 
 def is_count(n: object) -> bool:
-    """An integer >= 0 (a count of states), not a bool."""
-    return isinstance(n, int | np.integer) and not isinstance(n, bool) and n >= 0
+    """A count of a controller's states: an integer in [0, MAX_STATES], not a bool."""
+    return isinstance(n, int | np.integer) and not isinstance(n, bool) and 0 <= n <= MAX_STATES
 
 
 def read_controller(reader) -> tuple[Any, Any]:
