@@ -485,6 +485,12 @@ ROUND3_SETS: list[tuple[str | list[str], int, str]] = [  # on b1: (--set values,
     ("robot.joint.q3.friction=1", 2, "robot.joint.q3: expected a table named after an active joint of the robot"),
     ("robot.joint.q1={friction_static=1, friction_kinetic=2}", 2, "expected a kinetic friction <= friction_static"),
     ("robot.joint.q1={friction_kinetic=1}", 2, "robot.joint.q1.friction_static: expected a static limit"),
+    ('robot.active_joints=["q9"]', 2, "robot.active_joints: expected joints of the robot (each active or locked, not "
+     "both), found "),
+    ("robot.locked={q9=0.0}", 2, "robot.locked.q9: expected joints of the robot"),
+    (['robot.active_joints=["q1"]', "robot.locked={q1=0.0}"], 2, "robot.active_joints: expected joints of the robot "
+     "(each active or locked, not both), found"),
+    ("robot.active_joints=[]", 2, "robot.active_joints: expected a list of joint names (at least one"),
     ('robot.drive={kind="dc_motor", R=0.0, C_M=0.16}', 2, "robot.drive.R: expected a number > 0 [Ω], found 0.0"),
     ('robot.drive={kind="dc_motor", R=1.0, C_M=0.16, J=0.0, u_max=[1.0, 2.0, 3.0]}', 2,
      "robot.drive.u_max: expected one value or 2 (one per joint ['q1', 'q2'])"),

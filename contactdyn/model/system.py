@@ -95,8 +95,9 @@ class System:
             self.tip_fid = self.robot.frame_id(rs.tip)
         except FrameError as exc:  # (the robot's load finds its tip first)
             raise SceneError("robot.tip", "a frame of the robot", exc, scene.file) from None
-        except RobotError as exc:
-            raise SceneError("robot.urdf", "a loadable robot", exc, scene.file) from None
+        except RobotError as exc:  # (a joint name of active_joints or locked: that key)
+            expected = "joints of the robot (each active or locked, not both)" if exc.key else "a loadable robot"
+            raise SceneError(exc.key or "robot.urdf", expected, exc, scene.file) from None
         nv = self.nv = self.robot.nv
         # ---- generalized coordinates: robot, bodies, chain masses, motors (the state layout, below) ----
         self.body_names = list(scene.bodies)

@@ -378,8 +378,10 @@ def _check_phase_order(top: Reader, phases: tuple[PhaseSpec, ...]) -> None:
 
 def _read_robot(r: Reader) -> RobotSpec:
     active = r.raw("active_joints", None)
-    if active is not None and (not isinstance(active, list) or not all(isinstance(a, str) for a in active)):
-        raise r.error("active_joints", "a list of joint names", active)
+    if active is not None and (not isinstance(active, list) or not active or not all(isinstance(a, str)
+                                                                                   for a in active)):
+        raise r.error("active_joints", "a list of joint names (at least one; leave the key out for the tip's chain)",
+                      active)
     locked_r = r.sub("locked", {})
     locked = {k: locked_r.float(k, unit="rad or m") for k in locked_r.data}
     q0 = r.vector("q0", None) if r.has("q0") else None
