@@ -609,6 +609,11 @@ def round3_cases(tmp: Path) -> list[Case]:
         scene = tmp / f"kind_{name}.toml"
         scene.write_text(f'imports = ["kind_{name}"]\n' + B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
         cases.append((f"r3/kind/{name}", ["run", str(scene), *FAST], code, piece))
+    for key in ("controller.delay", "controller.sensor.seed"):  # a count to fit: every run but the start failed
+        argv = ["fit", "force_loop_real_cell", "--data", str(tmp / "log.csv"), "--params", key, "--set",
+                "controller.sensor.seed=3", "--workers", "0"]
+        cases.append((f"r3/fit/{key}", argv, 2, f"{key}: expected a key the scene reads as a real number (the fit "
+                      "moves it continuously; this one is a count: run a sweep over its values instead), found "))
     good = (ROOT / "urdf" / "planar2r_b1.urdf").read_text()
     urdfs = {  # a joint's friction given twice, or as two numbers: the parsers kept the first, or said it in jargon
         "two_dynamics": (good.replace(LIMIT, LIMIT + '<dynamics friction="0.5"/><dynamics friction="5"/>', 1),
