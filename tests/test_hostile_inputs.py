@@ -526,6 +526,8 @@ ROUND3_LAWS: dict[str, tuple[str, str, int, str]] = {
                       "n_states must be an integer in [0, 10000], got '1'"),
     "n_states_huge": ('    name = "huge_states"\n    n_states = 10**9\n' + COMMAND, "huge_states", 2,
                       "n_states must be an integer in [0, 10000], got 1000000000"),
+    "gives_voltages": ('    name = "my_volts"\n    outputs = "voltage"\n' + COMMAND, "my_volts", 2, "controller.kind: "
+                       "expected a controller that gives voltages ('my_volts') only with a motor on every joint"),
     "bind_sets_n_states": ('    name = "bound_states"\n    def bind(self, context):\n        self.n_states = 1.5\n'
                            + COMMAND, "bound_states", 1, "controller 'bound_states' (law_bind_sets_n_states.py) set "
                            "n_states = 1.5: expected an integer in [0, 10000]"),

@@ -129,12 +129,7 @@ class System:
         #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (zero: no motor)
         self._D_ctl = np.diag(self.drives.model_reflected[:nv])
         # ---- controllers, then the first-order slots after the junctions ----
-        with naming_laws():  # (a user's law raising as it is built or bound: its LawError)
-            self.controllers = [_controller_of(p, nv) for p in scene.phases]
-            for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
-                ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
-                                     p.controller_key))
-                counted_states(ctl)
+        self.controllers = _bound_controllers(scene, list(self.robot.joint_names), self.drives.has_voltage[:nv], nv)
         #: impulse_slots: per friction contact y's slot of ∫F dt; joint_impulse_slot: the first joint with dry
         #: friction's ∫τ_f dt (one per such joint, in JointFriction.dry's order)
         self.z_slices, self.energy_slot, self.impulse_slots, self.joint_impulse_slot, self.ny = \
@@ -466,6 +461,23 @@ def assign_first_order_slots(n_first: int, controller_states: list[int], record_
             impulse_slots[c.name] = n_first
             n_first += 1 + len(c.tangents)
     return z_slices, energy_slot, impulse_slots, n_first, n_first + dry_joints
+
+
+def _bound_controllers(scene: Scene, joint_names: list[str], motorized: np.ndarray, nv: int) -> list[Controller]:
+    """The phases' controllers, built and bound: a user's law raising there is its LawError, its n_states is checked,
+    and a law that gives voltages needs a motor on every joint (else its voltages would act as torques)."""
+    controllers = []
+    with naming_laws():
+        for i, p in enumerate(scene.phases):
+            ctl = _controller_of(p, nv)
+            context = BindContext(scene, p, i, joint_names, motorized.copy(), p.controller_key)
+            ctl.bind(context)
+            counted_states(ctl)
+            law = ctl.inner if isinstance(ctl, SampledController) else ctl
+            if law.outputs == "voltage":
+                context.require_motors(f"{p.controller_key}.kind", f"a controller that gives voltages ({law.name!r})")
+            controllers.append(ctl)
+    return controllers
 
 
 def _controller_of(spec, nv: int) -> Controller:
