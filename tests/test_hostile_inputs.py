@@ -611,6 +611,18 @@ def round3_cases(tmp: Path) -> list[Case]:
         scene = tmp / f"kind_{name}.toml"
         scene.write_text(f'imports = ["kind_{name}"]\n' + B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
         cases.append((f"r3/kind/{name}", ["run", str(scene), *FAST], code, piece))
+    (tmp / "law_reads_some.py").write_text(LAW + '    name = "reads_some"\n'
+                                           '    params = (Param("gain", "-", "g", 0.5),)\n'
+                                           "    @classmethod\n    def read(cls, r):\n"
+                                           "        if r.float('gain', 0.5) > 1.0:\n"
+                                           "            raise ValueError('gain too large')\n"
+                                           "        return super().read(r)\n" + COMMAND)
+    (tmp / "law_reads_some.toml").write_text('imports = ["law_reads_some"]\n' + B1.replace(
+        controller, '[controller]\nkind = "reads_some"\n\n'))
+    cases.append(("r3/sweep/a_law_reading_one_value_fails_that_run", [
+        "sweep", str(tmp / "law_reads_some.toml"), *FAST, "--grid", "controller.gain=0.5,2.0", "--workers", "0",
+        "--out", str(tmp / "sweep_reads_some")], 1, "LawError: controller 'reads_some' (law_reads_some.py, line 12) "
+        "raised ValueError: gain too large"))
     for key in ("controller.delay", "controller.sensor.seed"):  # a count to fit: every run but the start failed
         argv = ["fit", "force_loop_real_cell", "--data", str(tmp / "log.csv"), "--params", key, "--set",
                 "controller.sensor.seed=3", "--workers", "0"]
