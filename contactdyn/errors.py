@@ -11,7 +11,10 @@ class ContactdynError(Exception):
 
 
 class RobotError(ContactdynError):
-    """A robot description (URDF, example-robot-data name, frame, joint) is unusable."""
+    """A robot description (URDF, example-robot-data name, frame, joint) is unusable; ``key``: the scene key it is
+    about where that is not the robot's source (a joint name of ``robot.active_joints`` or ``robot.locked``)."""
+
+    key: str | None = None
 
 
 class FrameError(RobotError):

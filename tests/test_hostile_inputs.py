@@ -456,8 +456,200 @@ def round2_cases(tmp: Path) -> list[Case]:
     ]
 
 
+# ---- round 3: sampled control, joint damping and friction, drives, users' laws ----------------------
+ELASTIC = 'robot.drive={kind="elastic", c=1e4, R=10.24, C_M=0.16, J=2e-5, N=100.0}'
+ROUND3_SETS: list[tuple[str | list[str], int, str]] = [  # on b1: (--set values, exit code, a piece of stderr)
+    ("controller.sample_rate=-1", 2, "controller.sample_rate: expected a number >= 0 [Hz], found -1.0"),
+    ("controller.sample_rate=nan", 2, "controller.sample_rate: expected a finite number [Hz]"),
+    ("controller.sample_rate=1e308", 2, "controller.sample_rate: expected a number <= 1e+06 [Hz]"),
+    ("controller.sample_rate=1e-7", 2, "expected 0 (continuous) or a rate >= 1e-06 Hz"),
+    ("controller.delay=-1", 2, "controller.delay: expected an integer >= 0 [samples], found -1"),
+    ("controller.delay=1.5", 2, "controller.delay: expected an integer, found 1.5"),
+    ("controller.delay=3", 2, "controller.delay: expected no delay for a continuous controller"),
+    (["controller.sample_rate=500", "controller.delay=100000"], 2, "controller.delay: expected an integer <= 10000"),
+    (["controller.sample_rate=500", "controller.delay=1e308"], 2,
+     "controller.delay: expected an integer <= 10000 [samples], found 1e+308\n"),
+    (["controller.sample_rate=500", 'controller.hold="volts"'], 2, "controller.hold: expected one of"),
+    (["controller.sample_rate=500", 'controller.hold="voltage"'], 2,
+     "controller.hold: expected hold = \"voltage\" only with a motor on every joint"),
+    (["controller.sample_rate=500", "controller.sensor.seed=-1"], 2, "sensor.seed: expected an integer >= 0"),
+    (["controller.sample_rate=500", "controller.sensor.seed=1.5"], 2, "controller.sensor.seed: expected an integer"),
+    (["controller.sample_rate=500", "controller.sensor.force_cutoff=0"], 2, "force_cutoff: expected a number > 0"),
+    (["controller.sample_rate=500", "controller.sensor.encoder_resolution=1e-13"], 2, "a resolution >= 1e-12"),
+    (["controller.sample_rate=500", "controller.sensor.force_cutoff=5e-324"], 2,
+     "controller.sensor.force_cutoff: expected a cut-off >= 1e-06 Hz (or none: no filter), found 5e-324"),
+    (["controller.sample_rate=500", "controller.sensor.force_cutoff=1e-310"], 2, "a cut-off >= 1e-06 Hz"),
+    (["controller.sample_rate=500", "controller.sensor.noise=1"], 2, "did you mean 'force_noise'"),
+    ("robot.joint.q1.friction=-1", 2, "robot.joint.q1.friction: expected a number >= 0 [N·m or N], found -1.0"),
+    ("robot.joint.q1.damping=nan", 2, "robot.joint.q1.damping: expected a finite number"),
+    ("robot.joint.q3.friction=1", 2, "robot.joint.q3: expected a table named after an active joint of the robot"),
+    ("robot.joint.q1={friction_static=1, friction_kinetic=2}", 2, "expected a kinetic friction <= friction_static"),
+    ("robot.joint.q1={friction_kinetic=1}", 2, "robot.joint.q1.friction_static: expected a static limit"),
+    ('robot.active_joints=["q9"]', 2, "robot.active_joints: expected joints of the robot (each active or locked, not "
+     "both), found "),
+    ("robot.locked={q9=0.0}", 2, "robot.locked.q9: expected joints of the robot"),
+    (['robot.active_joints=["q1"]', "robot.locked={q1=0.0}"], 2, "robot.active_joints: expected joints of the robot "
+     "(each active or locked, not both), found"),
+    ("robot.active_joints=[]", 2, "robot.active_joints: expected a list of joint names (at least one"),
+    ('robot.drive={kind="dc_motor", R=0.0, C_M=0.16}', 2, "robot.drive.R: expected a number > 0 [Ω], found 0.0"),
+    ('robot.drive={kind="dc_motor", R=1.0, C_M=0.16, J=0.0, u_max=[1.0, 2.0, 3.0]}', 2,
+     "robot.drive.u_max: expected one value or 2 (one per joint ['q1', 'q2'])"),
+    (ELASTIC.replace("J=2e-5", "J=0.0"), 2, "robot.drive: expected parameters that give the drive of joint 'q1' "
+     "(kind 'elastic') a finite torsional frequency (its motor coordinate needs a motor inertia > 0), found "
+     "'natural_frequency = x / 0 at R = 10.24"),
+    (ELASTIC.replace("J=2e-5", "J=[2e-5, 0.0]"), 2, "the drive of joint 'q2' (kind 'elastic') a finite torsional"),
+    (ELASTIC.replace("N=100.0", "N=1e-300"), 2,
+     "a finite inertia >= 0 on the motor shaft, found 'motor_inertia = x / 0"),
+    ('robot.drive={kind="dc_motor", R=10.24, C_M=0.16, J=2e-5, N=100.0, wheel_radius=1e-300}', 2,
+     "a finite reflected rotor inertia >= 0, found 'reflected_inertia = inf at R = 10.24"),
+]
+
+
+#: a user's controller module: (the class's lines, the scene's controller kind, exit code, a piece of stderr); each
+#: module is imported once in the batch's process, under a name of its own
+LAW = ("from contactdyn.laws import Controller, Param, register\nimport numpy as np\n\n\n"
+       "@register\nclass C(Controller):\n")
+COMMAND = "    def command(self, inp):\n        return np.zeros(2), None\n"
+ROUND3_LAWS: dict[str, tuple[str, str, int, str]] = {
+    "param_named_delay": ('    name = "with_delay"\n    params = (Param("delay", "s", "my delay", 0.5),)\n' + COMMAND,
+                          "with_delay", 2, "ValueError: controller 'with_delay': parameter 'delay' is named like a key "
+                          "of the table it is read from (the table would give one value to both)"),
+    "param_twice": ('    name = "twice"\n    params = (Param("a", "-", "a", 1.0), Param("a", "-", "b", 2.0))\n'
+                    + COMMAND, "twice", 2, "controller 'twice': parameter names must be unique"),
+    "params_not_a_tuple": ('    name = "params_text"\n    params = "gain"\n' + COMMAND, "params_text", 2,
+                           "controller 'params_text': params must be a tuple of Param, got 'gain'"),
+    "outputs_typo": ('    name = "volts"\n    outputs = "voltages"\n' + COMMAND, "volts", 2,
+                     "controller 'volts': outputs must be one of ('torque', 'voltage'), got 'voltages'"),
+    "n_states_negative": ('    name = "negative_states"\n    n_states = -1\n' + COMMAND, "negative_states", 2,
+                          "controller 'negative_states': n_states must be an integer in [0, 10000], got -1"),
+    "n_states_text": ('    name = "text_states"\n    n_states = "1"\n' + COMMAND, "text_states", 2,
+                      "n_states must be an integer in [0, 10000], got '1'"),
+    "n_states_huge": ('    name = "huge_states"\n    n_states = 10**9\n' + COMMAND, "huge_states", 2,
+                      "n_states must be an integer in [0, 10000], got 1000000000"),
+    "gives_voltages": ('    name = "my_volts"\n    outputs = "voltage"\n' + COMMAND, "my_volts", 2, "controller.kind: "
+                       "expected a controller that gives voltages ('my_volts') only with a motor on every joint"),
+    "bind_sets_n_states": ('    name = "bound_states"\n    def bind(self, context):\n        self.n_states = 1.5\n'
+                           + COMMAND, "bound_states", 1, "controller 'bound_states' (law_bind_sets_n_states.py) set "
+                           "n_states = 1.5: expected an integer in [0, 10000]"),
+    "bind_raises": ('    name = "bind_raises"\n    def bind(self, context):\n        raise ValueError("no bind")\n'
+                    + COMMAND, "bind_raises", 1, "controller 'bind_raises' (law_bind_raises.py, line 9) raised "
+                    "ValueError: no bind"),
+    "init_raises": ('    name = "init_raises"\n    def __init__(self, config, nv):\n        raise RuntimeError("no")\n'
+                    + COMMAND, "init_raises", 1, "controller 'init_raises' (law_init_raises.py, line 9) raised "
+                    "RuntimeError: no"),
+    "read_raises": ('    name = "read_raises"\n    @classmethod\n    def read(cls, r):\n        raise KeyError("x")\n'
+                    + COMMAND, "read_raises", 1, "controller 'read_raises' (law_read_raises.py, line 10) raised "
+                    "KeyError: 'x'"),
+    "read_returns_none": ('    name = "read_none"\n    @classmethod\n    def read(cls, r):\n        return None\n'
+                          + COMMAND, "read_none", 1, "controller 'read_none' (law_read_returns_none.py) read returned "
+                          "NoneType: expected a config with the kind of its controller"),
+    "exits": ("    name = 'exits'\n" + COMMAND + "\n\nimport sys\nsys.exit(3)\n", "exits", 2,
+              "found 'law_exits: SystemExit: 3'"),
+}
+
+#: a user's stage or friction law module that its register refuses at import: (its source, a piece of stderr)
+STAGE = "from contactdyn.laws import Param, StageLaw, register_stage_law\n\n\n@register_stage_law\nclass L(StageLaw):\n"
+FRICTION = "from contactdyn.laws import FrictionLaw, Param, register_friction_law\n\n\n@register_friction_law\nclass F"
+ROUND3_IMPORTS: dict[str, tuple[str, str]] = {
+    "stage_param_m": (STAGE + '    name = "with_m"\n    params = (Param("m", "kg", "a mass", 1.0),)\n',
+                      "stage law 'with_m': parameter 'm' is named like a key of the table it is read from"),
+    "stage_param_model": (STAGE + '    name = "with_model"\n    params = (Param("model", "-", "x", 1.0),)\n',
+                          "stage law 'with_model': parameter 'model' is named like a key"),
+    "stage_params_text": (STAGE + '    name = "params_text"\n    params = "k3"\n',
+                          "stage law 'params_text': params must be a tuple of Param, got 'k3'"),
+    "stage_no_stage_law": (STAGE.replace("(StageLaw)", "") + '    name = "plain"\n',
+                           "a stage law must subclass contactdyn.laws.StageLaw"),
+    "friction_param_mu_k": (FRICTION + '(FrictionLaw):\n    name = "with_mu_k"\n'
+                            '    params = (Param("mu_k", "-", "x", 0.3),)\n',
+                            "friction law 'with_mu_k': parameter 'mu_k' is named like a key"),
+    "friction_params_twice": (FRICTION + '(FrictionLaw):\n    name = "twice_f"\n'
+                              '    params = (Param("a", "-", "a", 1.0), Param("a", "-", "b", 1.0))\n',
+                              "friction law 'twice_f': parameter names must be unique"),
+    "stage_bounds_crossed": (STAGE + '    name = "crossed"\n    params = (Param("q", "-", "x", lo=5.0, hi=2.0),)\n',
+                             "stage law 'crossed': parameter 'q' has lo = 5 > hi = 2: no value is in its bounds"),
+    "stage_default_nan": (STAGE + '    name = "nan_default"\n    params = (Param("q", "-", "x", float("nan")),)\n',
+                          "stage law 'nan_default': parameter 'q' has default nan outside its bounds [0, inf)"),
+    "controller_default_below_lo": (LAW + '    name = "negative_gain"\n    params = (Param("gain", "-", "g", -1.0),)\n'
+                                    + COMMAND, "controller 'negative_gain': parameter 'gain' has default -1 outside "
+                                    "its bounds [0, inf) (lo = 0 unless declared)"),
+    "friction_no_friction_law": (FRICTION + ':\n    name = "plain_f"\n',
+                                 "a friction law must subclass contactdyn.laws.FrictionLaw"),
+}
+
+#: a user's drive kind whose transmission figures are no numbers: (its class's lines, exit code, a piece of stderr)
+KIND = ("from contactdyn.laws import DriveKind, Param, register_drive_kind\n\n\n@register_drive_kind\n"
+        "class K(DriveKind):\n    motorized = True\n    params = (Param('g', '-', 'gain', 1.0),)\n")
+ROUND3_KINDS: dict[str, tuple[str, int, str]] = {
+    "speed_raises": ("    @staticmethod\n    def n_speed(spec):\n        raise ValueError('no speed')\n", 1,
+                     "drive kind 'speed_raises' (kind_speed_raises.py, line 11) raised ValueError: no speed; in its "
+                     "n_speed"),
+    "speed_text": ("    @staticmethod\n    def n_speed(spec):\n        return 'x'\n", 1,
+                   "drive kind 'speed_text' (kind_speed_text.py) returned 'x' as its n_speed: expected a number"),
+    "negative_inertia": ("    @staticmethod\n    def motor_inertia(spec):\n        return -1.0\n", 2,
+                         "robot.drive: expected parameters that give the drive of joint 'q1' (kind 'negative_inertia') "
+                         "a finite inertia >= 0 on the motor shaft, found 'motor_inertia = -1 at g = 1'"),
+    "negative_limit": ("    has_voltage = True\n    @staticmethod\n    def voltage_limit(spec):\n"
+                       "        return -5.0\n", 2,
+                       "(kind 'negative_limit') a voltage limit > 0 (inf: none), found 'voltage_limit = -5 at g = 1'"),
+}
+
+
+def round3_cases(tmp: Path) -> list[Case]:
+    cases = []
+    for i, (sets, code, piece) in enumerate(ROUND3_SETS):
+        sets = [sets] if isinstance(sets, str) else sets
+        argv = ["run", "b1", *FAST, *[a for text in sets for a in ("--set", text)]]
+        cases.append((f"r3/{i:02d} {' '.join(sets)[:60]}", argv, code, piece))
+    controller = B1[B1.index("[controller]"):B1.index("[[phase]]")]
+    for name, (body, kind, code, piece) in ROUND3_LAWS.items():
+        (tmp / f"law_{name}.py").write_text(LAW + body)
+        scene = tmp / f"law_{name}.toml"
+        scene.write_text(f'imports = ["law_{name}"]\n' + B1.replace(controller, f'[controller]\nkind = "{kind}"\n\n'))
+        cases.append((f"r3/law/{name}", ["run", str(scene), *FAST], code, piece))
+    for name, (body, code, piece) in ROUND3_KINDS.items():
+        (tmp / f"kind_{name}.py").write_text(KIND + f"    name = {name!r}\n" + body)
+        scene = tmp / f"kind_{name}.toml"
+        scene.write_text(f'imports = ["kind_{name}"]\n' + B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
+        cases.append((f"r3/kind/{name}", ["run", str(scene), *FAST], code, piece))
+    (tmp / "law_reads_some.py").write_text(LAW + '    name = "reads_some"\n'
+                                           '    params = (Param("gain", "-", "g", 0.5),)\n'
+                                           "    @classmethod\n    def read(cls, r):\n"
+                                           "        if r.float('gain', 0.5) > 1.0:\n"
+                                           "            raise ValueError('gain too large')\n"
+                                           "        return super().read(r)\n" + COMMAND)
+    (tmp / "law_reads_some.toml").write_text('imports = ["law_reads_some"]\n' + B1.replace(
+        controller, '[controller]\nkind = "reads_some"\n\n'))
+    cases.append(("r3/sweep/a_law_reading_one_value_fails_that_run", [
+        "sweep", str(tmp / "law_reads_some.toml"), *FAST, "--grid", "controller.gain=0.5,2.0", "--workers", "0",
+        "--out", str(tmp / "sweep_reads_some")], 1, "LawError: controller 'reads_some' (law_reads_some.py, line 12) "
+        "raised ValueError: gain too large"))
+    for key in ("controller.delay", "controller.sensor.seed"):  # a count to fit: every run but the start failed
+        argv = ["fit", "force_loop_real_cell", "--data", str(tmp / "log.csv"), "--params", key, "--set",
+                "controller.sensor.seed=3", "--workers", "0"]
+        cases.append((f"r3/fit/{key}", argv, 2, f"{key}: expected a key the scene reads as a real number (the fit "
+                      "moves it continuously; this one is a count: run a sweep over its values instead), found "))
+    good = (ROOT / "urdf" / "planar2r_b1.urdf").read_text()
+    urdfs = {  # a joint's friction given twice, or as two numbers: the parsers kept the first, or said it in jargon
+        "two_dynamics": (good.replace(LIMIT, LIMIT + '<dynamics friction="0.5"/><dynamics friction="5"/>', 1),
+                         "joint 'q1': <dynamics> 2 times: expected it once (the URDF's parsers read the first"),
+        "two_masses": (good.replace('<mass value="3.0"/>', '<mass value="3.0"/><mass value="30.0"/>', 1),
+                       "link 'link1' <inertial>: <mass> 2 times: expected it once"),
+        "damping_two_numbers": (good.replace(LIMIT, LIMIT + '<dynamics damping="1 2"/>', 1),
+                                "joint 'q1' <dynamics>: damping='1 2': expected one number"),
+    }
+    for name, (text, piece) in urdfs.items():
+        (tmp / f"{name}.urdf").write_text(text)
+        cases.append((f"r3/urdf/{name}", ["run", "b1", *FAST, "--set", f'robot.urdf="{tmp / name}.urdf"'], 2, piece))
+    for name, (source, piece) in ROUND3_IMPORTS.items():
+        (tmp / f"law_{name}.py").write_text(source)
+        (tmp / f"law_{name}.toml").write_text(f'imports = ["law_{name}"]\n' + B1)
+        cases.append((f"r3/import/{name}", ["run", str(tmp / f"law_{name}.toml"), *FAST], 2, piece))
+    return cases
+
+
 BUILDERS = {"scenes": scene_cases, "overrides": lambda _: override_cases(), "urdfs": urdf_cases,
-            "run_files": run_file_cases, "round2": round2_cases}
+            "run_files": run_file_cases, "round2": round2_cases,
+            "round3": round3_cases}
 
 
 def test_corpus_has_at_least_100_cases(tmp_path):
@@ -469,7 +661,7 @@ def test_corpus_has_at_least_100_cases(tmp_path):
 
 
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2"])
+@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2", "round3"])
 def test_hostile_inputs(tmp_path, kind):
     check(BUILDERS[kind](tmp_path), tmp_path)
 

@@ -8,9 +8,11 @@ examples per property; parse_scene does not load the robot, so each costs ~1 ms.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import tomllib
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -158,3 +160,25 @@ def test_mutated_object_scenes_validate_build_or_raise_the_packages_errors(name)
             pass
 
     check()
+
+
+@pytest.mark.parametrize("overrides", [{5: 1.0}, [("duration", 1.0)], "duration=1.0"])
+def test_overrides_that_are_no_dict_of_key_paths_raise_scene_error(overrides):
+    """The Python API's overrides: a dict keyed by key paths (a key 5 was a TypeError from inside ``re``)."""
+    with pytest.raises(SceneError, match="<overrides>: expected"):
+        parse_scene(BASE, overrides, file=FILE)
+
+
+@pytest.mark.parametrize("key, value", [("controller.kp", np.float32(500.0)), ("controller.kp", np.int64(500)),
+                                        ("robot.q0", np.array([0.5, -1.25], dtype=np.float32)),
+                                        ("robot.drive", {"kind": "dc_motor", "R": np.array([1.0, 2.0]), "C_M": 0.5,
+                                                         "J": np.float32(0.25)})])
+def test_numpy_numbers_read_as_the_numbers_they_are(key, value):
+    """A NumPy number from a user's script is a number (it was 'expected a number, found np.float32(500.0)'), and
+    reads as the same float as Python's."""
+    plain = {k: v.tolist() if hasattr(v, "tolist") else v for k, v in value.items()} if isinstance(value, dict) \
+        else value.tolist()
+    def read(v):  # (the scene as read: its raw document keeps what was given)
+        return repr(dataclasses.replace(parse_scene(BASE, {key: v}, file=FILE), document={}))
+
+    assert read(value) == read(plain)

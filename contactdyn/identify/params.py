@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import ContactdynError, SceneError
 
 __all__ = ["Parameter", "parse_params", "document_value", "DEFAULT_LOG_SPAN"]
 
@@ -89,6 +89,9 @@ def _parameter(item: str, document: dict[str, Any], file: str | None) -> Paramet
                          "no such key", file) from None
     if isinstance(start, bool) or not isinstance(start, int | float) or not math.isfinite(start):
         raise SceneError(key, "a number in the scene to fit", start, file)
+    if isinstance(start, int) and _read_as_integer(document, key, start, file):
+        raise SceneError(key, "a key the scene reads as a real number (the fit moves it continuously; this one is a "
+                         "count: run a sweep over its values instead)", start, file)
     start = float(start)
     if sep:
         low, high = _bounds(key, bounds, file)
@@ -99,6 +102,19 @@ def _parameter(item: str, document: dict[str, Any], file: str | None) -> Paramet
     if not low <= start <= high:
         raise SceneError(key, f"a starting value within its bounds [{low:g}, {high:g}]", start, file)
     return Parameter(key, start, low, high, log)
+
+
+def _read_as_integer(document: dict[str, Any], key: str, start: int, file: str | None) -> bool:
+    """Whether the scene reads ``key`` as an integer (``controller.delay``, a seed): is start + 0.5 refused as one?"""
+    from ..scene.scene_file import parse_scene
+
+    try:
+        parse_scene(document, {key: start + 0.5}, file)
+    except SceneError as exc:
+        return exc.key == key and exc.expected.startswith("an integer")
+    except ContactdynError:  # (another of the scene's checks: not this key's type)
+        return False
+    return False
 
 
 def _bounds(key: str, text: str, file: str | None) -> tuple[float, float]:

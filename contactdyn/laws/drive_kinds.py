@@ -60,7 +60,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, ClassVar
 
-from .params import Param, claim_name
+from .params import Param, check_declaration, claim_name
 
 if TYPE_CHECKING:
     from .drives import DriveSpec
@@ -175,11 +175,7 @@ def register_drive_kind(cls: type[DriveKind]) -> type[DriveKind]:
 
     A parameter another kind declares too must be declared the same (one drive table may mix kinds); a kind that is
     not motorized is an ideal source and keeps the base law; a voltage or a motor coordinate needs a motor."""
-    if not cls.name or not cls.name.isidentifier():
-        raise ValueError(f"a drive kind's name must be an identifier, got {cls.name!r}")
-    names = [p.name for p in cls.params]
-    if len(set(names)) != len(names) or set(_SPEC_NAMES) & set(names):
-        raise ValueError(f"drive kind {cls.name!r}: parameter names must be unique and none of {_SPEC_NAMES}: {names}")
+    check_declaration(cls, "drive kind", DriveKind, _SPEC_NAMES, read_defaults=False)
     if (cls.has_voltage or cls.motor_coordinate or cls.force is not DriveKind.force) and not cls.motorized:
         raise ValueError(f"drive kind {cls.name!r}: a voltage, a motor coordinate or a law of its own needs "
                          "motorized = True (a kind that is not motorized is an ideal source)")

@@ -19,6 +19,7 @@ This module holds what every kind shares:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -26,9 +27,10 @@ import numpy as np
 from ..errors import SceneError
 from ..scene.reader import Reader
 from .drive_kinds import DRIVE_KINDS, DriveKind
+from .failures import LawError, law_error, law_file
 from .params import Param, with_defaults
 
-__all__ = ["DRIVE_KINDS", "DriveSpec", "DriveTable", "read_drive_table", "Drives", "drive_channels"]
+__all__ = ["DRIVE_KINDS", "DriveSpec", "DriveTable", "DriveFigureError", "read_drive_table", "Drives", "drive_channels"]
 
 
 def kind_of(name: str) -> type[DriveKind]:
@@ -72,7 +74,9 @@ class DriveSpec:
         for name, value in full.items():
             put(self, name, value)
         for name in self.DERIVED:
-            put(self, name, getattr(law, name)(self))
+            put(self, name, _figure(law, name, self))
+        if law.has_voltage:
+            _figure(law, "voltage_limit", self)  # (checked: > 0, inf for none)
 
     @property
     def law(self) -> type[DriveKind]:
@@ -95,6 +99,51 @@ class DriveSpec:
     def __repr__(self) -> str:
         values = ", ".join(f"{p.name}={getattr(self, p.name)!r}" for p in self.law.params)
         return f"DriveSpec({self.kind!r}{', ' if values else ''}{values})"
+
+
+#: what each transmission figure must be (the error of parameters that give none)
+FIGURES = {"n_speed": "finite speed ratio θ̇/Q̇", "n_torque": "finite torque ratio (generalized force per motor torque)",
+           "motor_inertia": "finite inertia >= 0 on the motor shaft",
+           "reflected_inertia": "finite reflected rotor inertia >= 0",
+           "natural_frequency": "finite torsional frequency (its motor coordinate needs a motor inertia > 0)",
+           "voltage_limit": "voltage limit > 0 (inf: none)"}
+NON_NEGATIVE = ("motor_inertia", "reflected_inertia", "natural_frequency", "voltage_limit")  #: (of FIGURES)
+
+
+class DriveFigureError(ValueError):
+    """Parameters that give a drive no valid transmission figure (a division by 0, an overflow, a negative inertia)."""
+
+    def __init__(self, spec: DriveSpec, figure: str, value: float | str):
+        self.figure, self.value = figure, value
+        self.values = {p.name: getattr(spec, p.name) for p in spec.law.params}
+        params = ", ".join(f"{k} = {v:g}" for k, v in self.values.items())
+        self.found = f"{figure} = {value if isinstance(value, str) else f'{value:g}'} at {params}"
+        super().__init__(f"drive kind {spec.kind!r}: expected parameters that give a {FIGURES[figure]}, "
+                         f"found {self.found}")
+
+
+def _figure(law: type[DriveKind], name: str, spec: DriveSpec) -> float:
+    """One transmission figure of ``spec`` (:data:`DriveSpec.DERIVED`, or its ``voltage_limit``); DriveFigureError
+    where its parameters give none (:data:`FIGURES`): ``wheel_radius = 1e-300`` (an inertia of inf), an elastic motor
+    without inertia (a frequency of 1/0); a user's kind raising, or returning no number: its LawError."""
+    try:
+        raw = getattr(law, name)(spec)
+    except ArithmeticError as exc:
+        raise DriveFigureError(spec, name, "x / 0" if isinstance(exc, ZeroDivisionError) else "an overflow") from None
+    except Exception as exc:
+        error = law_error(exc, None, ("drive kind", law))
+        if error is None:
+            raise
+        raise error.adding(f"in its {name}") from exc
+    if isinstance(raw, bool) or not isinstance(raw, int | float | np.integer | np.floating):
+        raise LawError("drive kind", law.name, law_file(law), f"returned {raw!r} as its {name}: expected a number")
+    value = float(raw)
+    unbounded = value == math.inf and (name == "voltage_limit" or (name == "natural_frequency"
+                                                                   and not law.motor_coordinate))
+    if not (math.isfinite(value) or unbounded) or (name in NON_NEGATIVE and value < 0.0) or \
+            (name == "voltage_limit" and value == 0.0):
+        raise DriveFigureError(spec, name, value)
+    return value
 
 
 @dataclass(frozen=True)
@@ -121,7 +170,12 @@ class DriveTable:
             kind = pick("kind", self.kind, i)
             given = {p.name: pick(p.name, self.values[p.name], i) for p in DRIVE_KINDS[kind].params
                      if p.name in self.values}
-            specs.append(DriveSpec(kind, **given))
+            try:
+                specs.append(DriveSpec(kind, **given))
+            except DriveFigureError as exc:
+                joint = f" of joint {names[i]!r}" if n > 1 or isinstance(self.kind, tuple) else ""
+                raise SceneError(self.path, f"parameters that give the drive{joint} (kind {kind!r}) a "
+                                 f"{FIGURES[exc.figure]}", exc.found, self.file) from None
         return specs
 
 
@@ -159,7 +213,7 @@ def read_drive_table(r: Reader, per_joint: bool) -> DriveTable:
 
 def _read_value(r: Reader, p: Param, per_joint: bool) -> float | tuple[float, ...]:
     """One declared parameter's value from a drive table: a number, or one per joint (``per_joint``), in bounds."""
-    if isinstance(r.raw(p.name), list) and per_joint:
+    if isinstance(r.raw(p.name), list | tuple | np.ndarray) and per_joint:  # (tuple, array: the Python API's)
         arr = r.vector(p.name, unit=p.unit)
         for x in arr:
             Reader({p.name: float(x)}, r.path, r.file).float(p.name, lo=p.lo, hi=p.hi, lo_open=p.lo_open, unit=p.unit)

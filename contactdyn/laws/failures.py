@@ -23,7 +23,7 @@ from pathlib import Path
 from ..errors import ContactdynError, SimulationError
 
 __all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file",
-           "raised_calling"]
+           "raised_calling", "counted_states", "checked_config"]
 
 PACKAGE = __name__.split(".")[0] + "."  #: "contactdyn.": the package's own laws are not a user's
 _CALLING = "_contactdyn_calling"  #: an exception's attribute: (kind, class) of the law whose call raised it
@@ -148,6 +148,27 @@ def no_command_error(ctl, tau, q, v, t: float) -> SimulationError:
         return SimulationError(ctl.failure(t))
     return LawError("controller", ctl.name, law_file(type(ctl)), f"gave no finite command: τ = {_listed(tau)} at "
                     f"q = {_listed(q)}, v = {_listed(v)}", None, t)
+
+
+def counted_states(ctl) -> int:
+    """``ctl.n_states`` as its class or its bind set it: a LawError unless an integer in [0, MAX_STATES]."""
+    from .controllers.base import MAX_STATES, is_count
+
+    if not is_count(ctl.n_states):
+        raise LawError("controller", ctl.name, law_file(type(ctl)), f"set n_states = {ctl.n_states!r}: expected an "
+                       f"integer in [0, {MAX_STATES}] (the count of its own states)")
+    return int(ctl.n_states)
+
+
+def checked_config(kind: str, config):
+    """``config``, what controller ``kind``'s ``read`` returned: a LawError unless it has a registered kind (the
+    system builds the controller of ``config.kind``)."""
+    from .controllers.base import CONTROLLERS
+
+    if not isinstance(getattr(config, "kind", None), str) or config.kind not in CONTROLLERS:
+        raise LawError("controller", kind, law_file(CONTROLLERS[kind]), f"read returned {type(config).__name__}: "
+                       "expected a config with the kind of its controller (Controller.read gives a DeclaredConfig)")
+    return config
 
 
 def _listed(values) -> str:

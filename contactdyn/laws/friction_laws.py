@@ -33,7 +33,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .params import Param, claim_name, read_params
+from .params import Param, check_declaration, claim_name, read_params
 
 __all__ = ["FrictionLaw", "FrictionSpec", "FRICTION_LAWS", "register_friction_law", "Coulomb", "Stribeck",
            "MU", "MU_S", "MU_K", "VISCOUS"]
@@ -103,12 +103,13 @@ class FrictionLaw:
 
 
 FRICTION_LAWS: dict[str, type[FrictionLaw]] = {}  #: name -> law, the ``tangent.law`` values a scene accepts
+#: the keys of a contact's tangent table, which no law parameter may take
+TABLE_KEYS = ("model", "directions", "law", "mu", "mu_s", "mu_k", "viscous", "environment", "robot")
 
 
 def register_friction_law(cls: type[FrictionLaw]) -> type[FrictionLaw]:
     """Make ``cls`` a law scenes can name (``tangent.law = cls.name``)."""
-    if not cls.name or not cls.name.isidentifier():
-        raise ValueError(f"a friction law's name must be an identifier, got {cls.name!r}")
+    check_declaration(cls, "friction law", FrictionLaw, TABLE_KEYS)
     claim_name(FRICTION_LAWS, cls, "friction law")
     return cls
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from ..scene.reader import Reader
 
-__all__ = ["Param", "read_params", "with_defaults"]
+__all__ = ["Param", "read_params", "with_defaults", "claim_name", "check_declaration"]
 
 
 @dataclass(frozen=True)
@@ -84,3 +84,48 @@ def claim_name(registry: dict, cls: type, family: str) -> None:
                          f"give it another name")
     registry[cls.name] = cls
 
+
+
+def check_declaration(cls: object, family: str, base: type, reserved: tuple[str, ...], read_defaults: bool = True
+                      ) -> None:
+    """A law's class as its family's register takes it (``family``: "controller", "stage law", ...): a subclass of
+    ``base`` named by an identifier, its ``params`` a tuple of :class:`Param` named each once and none of
+    ``reserved`` (the keys of the tables the law is read from: the table would give one value to both, or read the
+    key as the wrong type), each with bounds that hold a value and its example in them, and its default too where the
+    reader checks the defaults (``read_defaults``; a drive kind's default may be a value a scene cannot write: 0, no
+    wheel); else a ValueError naming it."""
+    if not isinstance(cls, type) or not issubclass(cls, base):
+        raise ValueError(f"a {family} must subclass contactdyn.laws.{base.__name__}, got {cls!r}")
+    if not isinstance(cls.name, str) or not cls.name.isidentifier():
+        raise ValueError(f"a {family}'s name must be an identifier, got {cls.name!r}")
+    params = cls.params
+    if not isinstance(params, tuple | list) or not all(isinstance(p, Param) for p in params):
+        raise ValueError(f"{family} {cls.name!r}: params must be a tuple of Param, got {params!r}")
+    names = [p.name for p in params]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{family} {cls.name!r}: parameter names must be unique, got {names}")
+    clash = [n for n in names if n in reserved]
+    if clash:
+        raise ValueError(f"{family} {cls.name!r}: parameter {clash[0]!r} is named like a key of the table it is read "
+                         f"from (the table would give one value to both): give it another name")
+    for p in params:
+        problem = _bounds_problem(p, read_defaults)
+        if problem:
+            raise ValueError(f"{family} {cls.name!r}: parameter {p.name!r} {problem}")
+
+
+def _bounds_problem(p: Param, read_default: bool) -> str:
+    """What is wrong with a parameter's bounds, default (``read_default``: the reader checks it) or example (a scene
+    that leaves it out would fail on a key it never wrote; ``contactdyn new`` would write a value its reader
+    refuses), or ""."""
+    if p.hi is not None and not p.lo <= p.hi:
+        return f"has lo = {p.lo:g} > hi = {p.hi:g}: no value is in its bounds"
+    for what, value in (("default", p.default if read_default else None), ("example", p.example)):
+        if value is None:
+            continue
+        inside = value > p.lo if p.lo_open else value >= p.lo
+        if math.isnan(value) or not inside or (p.hi is not None and value > p.hi):
+            bounds = f"{'(' if p.lo_open else '['}{p.lo:g}, {'inf)' if p.hi is None else f'{p.hi:g}]'}"
+            return (f"has {what} {value:g} outside its bounds {bounds} (lo = 0 unless declared): declare lo and hi "
+                    f"around it")
+    return ""

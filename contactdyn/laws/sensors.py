@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["SensorSpec", "ForceSensor", "quantise", "read_sensor", "Sampling", "read_sampling", "MAX_SAMPLE_RATE",
-           "MIN_SAMPLE_RATE", "MIN_RESOLUTION", "MAX_DELAY", "HOLDS"]
+           "MIN_SAMPLE_RATE", "MIN_RESOLUTION", "MIN_CUTOFF", "MAX_DELAY", "HOLDS"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,8 @@ def read_sensor(r) -> SensorSpec:
     if 0.0 < spec.encoder_resolution < MIN_RESOLUTION:  # (q / resolution would overflow)
         raise r.error("encoder_resolution", f"0 (exact) or a resolution >= {MIN_RESOLUTION:g} [rad or m]",
                       spec.encoder_resolution)
+    if spec.force_cutoff < MIN_CUTOFF:  # (τ/T = 1/(2π f_c T) would overflow: a filter of NaN readings)
+        raise r.error("force_cutoff", f"a cut-off >= {MIN_CUTOFF:g} Hz (or none: no filter)", spec.force_cutoff)
     r.finish()
     return spec
 
@@ -105,6 +107,7 @@ class ForceSensor:
 MAX_SAMPLE_RATE = 1e6  #: [Hz] sample_rate at most
 MIN_SAMPLE_RATE = 1e-6  #: [Hz] a positive sample_rate at least (a period of 11.6 days; 1 / 5e-324 is inf)
 MIN_RESOLUTION = 1e-12  #: [rad or m] a positive encoder_resolution at least
+MIN_CUTOFF = 1e-6  #: [Hz] force_cutoff at least (with a period >= 1 / MAX_SAMPLE_RATE: τ/T <= 1.6e11, finite)
 MAX_DELAY = 10_000  #: [samples] delay at most
 #: what the zero-order hold keeps between samples: the law's command as it gives it (torques, or a voltage law's
 #: voltages), or a torque law's command turned into its motors' voltages at the sample (a drive with no current loop)

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .params import Param, claim_name
+from .params import Param, check_declaration, claim_name
 
 __all__ = ["StageLaw", "STAGE_LAWS", "register_stage_law", "kelvin_voigt", "Linear", "HuntCrossley"]
 
@@ -58,15 +58,15 @@ class StageLaw:
 
 
 STAGE_LAWS: dict[str, type[StageLaw]] = {}  #: name -> law, the ``law`` values a scene accepts
+#: the keys of the tables a stage is read from (a contact's normal or tangent table, a chain's element), which no law
+#: parameter may take
+TABLE_KEYS = ("k", "b", "law", "m", "model", "direction", "directions", "k_int", "b_int", "k_ext", "b_ext",
+              "environment", "robot", "mu", "mu_s", "mu_k", "viscous")
 
 
 def register_stage_law(cls: type[StageLaw]) -> type[StageLaw]:
     """Make ``cls`` a law scenes can name (``law = cls.name``)."""
-    if not cls.name or not cls.name.isidentifier():
-        raise ValueError(f"a stage law's name must be an identifier, got {cls.name!r}")
-    names = [p.name for p in cls.params]
-    if len(set(names)) != len(names) or {"k", "b", "law"} & set(names):
-        raise ValueError(f"stage law {cls.name!r}: parameter names must be unique and not k, b or law: {names}")
+    check_declaration(cls, "stage law", StageLaw, TABLE_KEYS)
     claim_name(STAGE_LAWS, cls, "stage law")
     return cls
 

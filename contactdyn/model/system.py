@@ -59,6 +59,7 @@ from ..laws.controllers import CONTROLLERS
 from ..laws.controllers.base import BindContext, Controller
 from ..laws.controllers.sampled import SampledController
 from ..laws.drives import Drives
+from ..laws.failures import counted_states, naming_laws
 from ..numerics.twins import current
 from ..robot.body import ArticulatedBody
 from ..robot.posture import start_posture
@@ -94,8 +95,9 @@ class System:
             self.tip_fid = self.robot.frame_id(rs.tip)
         except FrameError as exc:  # (the robot's load finds its tip first)
             raise SceneError("robot.tip", "a frame of the robot", exc, scene.file) from None
-        except RobotError as exc:
-            raise SceneError("robot.urdf", "a loadable robot", exc, scene.file) from None
+        except RobotError as exc:  # (a joint name of active_joints or locked: that key)
+            expected = "joints of the robot (each active or locked, not both)" if exc.key else "a loadable robot"
+            raise SceneError(exc.key or "robot.urdf", expected, exc, scene.file) from None
         nv = self.nv = self.robot.nv
         # ---- generalized coordinates: robot, bodies, chain masses, motors (the state layout, below) ----
         self.body_names = list(scene.bodies)
@@ -127,10 +129,7 @@ class System:
         #: [kg·m²] (nv, nv) the rotors reflected on the joints in the controller's rigid model (zero: no motor)
         self._D_ctl = np.diag(self.drives.model_reflected[:nv])
         # ---- controllers, then the first-order slots after the junctions ----
-        self.controllers = [_controller_of(p, nv) for p in scene.phases]
-        for i, (p, ctl) in enumerate(zip(scene.phases, self.controllers, strict=True)):
-            ctl.bind(BindContext(scene, p, i, list(self.robot.joint_names), self.drives.has_voltage[:nv].copy(),
-                                 p.controller_key))
+        self.controllers = _bound_controllers(scene, list(self.robot.joint_names), self.drives.has_voltage[:nv], nv)
         #: impulse_slots: per friction contact y's slot of ∫F dt; joint_impulse_slot: the first joint with dry
         #: friction's ∫τ_f dt (one per such joint, in JointFriction.dry's order)
         self.z_slices, self.energy_slot, self.impulse_slots, self.joint_impulse_slot, self.ny = \
@@ -462,6 +461,23 @@ def assign_first_order_slots(n_first: int, controller_states: list[int], record_
             impulse_slots[c.name] = n_first
             n_first += 1 + len(c.tangents)
     return z_slices, energy_slot, impulse_slots, n_first, n_first + dry_joints
+
+
+def _bound_controllers(scene: Scene, joint_names: list[str], motorized: np.ndarray, nv: int) -> list[Controller]:
+    """The phases' controllers, built and bound: a user's law raising there is its LawError, its n_states is checked,
+    and a law that gives voltages needs a motor on every joint (else its voltages would act as torques)."""
+    controllers = []
+    with naming_laws():
+        for i, p in enumerate(scene.phases):
+            ctl = _controller_of(p, nv)
+            context = BindContext(scene, p, i, joint_names, motorized.copy(), p.controller_key)
+            ctl.bind(context)
+            counted_states(ctl)
+            law = ctl.inner if isinstance(ctl, SampledController) else ctl
+            if law.outputs == "voltage":
+                context.require_motors(f"{p.controller_key}.kind", f"a controller that gives voltages ({law.name!r})")
+            controllers.append(ctl)
+    return controllers
 
 
 def _controller_of(spec, nv: int) -> Controller:

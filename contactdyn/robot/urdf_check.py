@@ -44,8 +44,9 @@ def check_urdf_tree(path: Path) -> ET.Element:
 
     One root link, every joint's parent and child a defined link, no joint whose parent is
     its child, no link the child of two joints, no cycle, unique link and joint names,
-    every number finite (:data:`NUMERIC`: origins, masses, inertias, limits, shapes...), a
-    joint's <dynamics> in [0, MAX_MAGNITUDE], and no misspelt element or attribute (:data:`CHILDREN`).
+    every number finite (:data:`NUMERIC`: origins, masses, inertias, limits, shapes...; one where the attribute holds
+    one), a joint's <dynamics> in [0, MAX_MAGNITUDE], no misspelt element or attribute (:data:`CHILDREN`) and no
+    element given twice where URDF has it once (:data:`ONCE`).
     """
     size = path.stat().st_size
     if size > MAX_URDF_BYTES:
@@ -125,10 +126,29 @@ def _check_numbers(path: Path, element: ET.Element, where: str = "") -> None:
                 values = [math.nan]
             if not values or not all(math.isfinite(v) for v in values):
                 raise RobotError(f"{path}: {here}: {attribute}={_q(text)}: expected finite numbers")
+            if len(values) != 1 and (child.tag, attribute) not in VECTORS:
+                raise RobotError(f"{path}: {here}: {attribute}={_q(text)}: expected one number")
             if child.tag == "dynamics" and not 0.0 <= values[0] <= MAX_MAGNITUDE:  # (Pinocchio's own words: jargon)
                 raise RobotError(f"{path}: {here}: {attribute}={_q(text)}: expected a number >= 0 and "
                                  f"<= {MAX_MAGNITUDE:g} (the joint's {DYNAMICS_MEANING[attribute]})")
         _check_numbers(path, child, here)
+        _check_once(path, child, here)
+
+
+#: the numeric attributes that hold several numbers (every other one holds one)
+VECTORS = {("origin", "xyz"), ("origin", "rpy"), ("axis", "xyz"), ("box", "size"), ("mesh", "scale"), ("color", "rgba")}
+#: the elements URDF's specification gives a joint, a link or an inertial once at most (the parsers read the first and
+#: drop the others without a word: a second <dynamics> or <mass> would silently not count)
+ONCE = {"joint": ("origin", "parent", "child", "axis", "calibration", "dynamics", "limit", "mimic",
+                  "safety_controller"), "link": ("inertial",), "inertial": ("origin", "mass", "inertia")}
+
+
+def _check_once(path: Path, element: ET.Element, here: str) -> None:
+    tags = [c.tag for c in element if c.tag in ONCE.get(element.tag, ())]
+    twice = next((t for t in tags if tags.count(t) > 1), None)
+    if twice:
+        raise RobotError(f"{path}: {here}: <{twice}> {tags.count(twice)} times: expected it once (the URDF's parsers "
+                         "read the first and drop the others without a word)")
 
 
 #: the elements URDF's specification gives a joint and a link (a misspelling of one is dropped by the parsers)

@@ -201,7 +201,7 @@ class Reader:
         value = self.raw(name, default)
         if value is None and default is None:
             return None  # type: ignore[return-value]
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if not _is_number(value):
             raise self.error(name, f"a number{_unit(unit)}", value)
         if _beyond_float(value):
             raise self.error(name, f"a finite number{_unit(unit)}", value)
@@ -221,15 +221,15 @@ class Reader:
     def int(self, name: str, default: Any = MISSING, *, lo: int | None = None, hi: int | None = None,
             unit: str = "") -> int:
         self._note(name, "integer", default, unit=unit, lo=lo, hi=hi)
-        value = self.raw(name, default)
+        given = value = self.raw(name, default)  # (a message shows what was given: 1e+308, not its 309 digits)
         if isinstance(value, np.integer) or (isinstance(value, float) and value.is_integer()):
             value = int(value)  # (NumPy's integers; a whole float, e.g. a sweep's --range point)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.error(name, "an integer", value)
         if lo is not None and value < lo:
-            raise self.error(name, f"an integer >= {lo}{_unit(unit)}", value)
+            raise self.error(name, f"an integer >= {lo}{_unit(unit)}", given)
         if hi is not None and value > hi:
-            raise self.error(name, f"an integer <= {hi}{_unit(unit)}", value)
+            raise self.error(name, f"an integer <= {hi}{_unit(unit)}", given)
         return value
 
     def bool(self, name: str, default: Any = MISSING) -> bool:
@@ -258,9 +258,7 @@ class Reader:
                unit_norm: bool = False) -> np.ndarray:
         self._note(name, "direction" if unit_norm else "list", default, unit=unit, size=size)
         value = self.raw(name, default)
-        ok = isinstance(value, list | tuple | np.ndarray) and all(
-            isinstance(x, int | float) and not isinstance(x, bool) for x in value
-        )
+        ok = isinstance(value, list | tuple | np.ndarray) and all(_is_number(x) for x in value)
         if not ok or (size is not None and len(value) != size):
             what = f"a list of {size} numbers" if size is not None else "a list of numbers"
             raise self.error(name, what + _unit(unit), value)
@@ -288,6 +286,11 @@ class Reader:
 
 
 _LARGEST_FLOAT = int(sys.float_info.max)
+
+
+def _is_number(value: Any) -> bool:
+    """A real number: Python's int or float, or NumPy's (np.float32, np.int64 from a user's array); not a bool."""
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
 
 
 def _beyond_float(value: Any) -> bool:

@@ -285,8 +285,13 @@ def _new_name(key: str, name: str, tables: dict, file: str | None) -> None:
 
 def apply_overrides(document: dict[str, Any], overrides: dict[str, Any], file: str | None = None) -> dict[str, Any]:
     """A copy of ``document`` with each ``key.path`` set; array items as ``phase.1.until``."""
+    if not isinstance(overrides, dict):
+        raise SceneError("<overrides>", 'a dict of key paths and values, like {"controller.kp": 500.0}',
+                         overrides, file)
     doc = copy.deepcopy(document)
     for key, value in overrides.items():
+        if not isinstance(key, str):
+            raise SceneError("<overrides>", 'key paths as strings, like "controller.kp"', key, file)
         indexed = re.search(r"\[(\d+)\]", key)
         if indexed:  # phase[1].until: the array's item is a path part of its own
             raise SceneError(key, f"an array item as a path part of its own, e.g. "
@@ -373,8 +378,10 @@ def _check_phase_order(top: Reader, phases: tuple[PhaseSpec, ...]) -> None:
 
 def _read_robot(r: Reader) -> RobotSpec:
     active = r.raw("active_joints", None)
-    if active is not None and (not isinstance(active, list) or not all(isinstance(a, str) for a in active)):
-        raise r.error("active_joints", "a list of joint names", active)
+    if active is not None and (not isinstance(active, list) or not active or not all(isinstance(a, str)
+                                                                                   for a in active)):
+        raise r.error("active_joints", "a list of joint names (at least one; leave the key out for the tip's chain)",
+                      active)
     locked_r = r.sub("locked", {})
     locked = {k: locked_r.float(k, unit="rad or m") for k in locked_r.data}
     q0 = r.vector("q0", None) if r.has("q0") else None
@@ -638,6 +645,7 @@ def _read_solver(r: Reader) -> SolverSpec:
 def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, ContactSpec], duration: float,
                 bodies: dict[str, BodySpec] | None = None) -> PhaseSpec:
     from ..laws.controllers import read_controller
+    from ..laws.failures import checked_config, naming_laws
 
     name = r.str("name", "main")
     until_raw = r.raw("until", duration)
@@ -651,7 +659,9 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
     merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
         else r.raw("controller")
     where = r.key("controller") if "controller" in r.data else default_controller.path  # (the file's table)
-    controller, sampling = read_controller(Reader(merged, where, r.file))
+    with naming_laws():  # (a user's read raising: its LawError)
+        controller, sampling = read_controller(Reader(merged, where, r.file))
+    controller = checked_config(merged.get("kind", "task_pd"), controller)
     reference = _read_reference(r.sub("reference"), bodies or {}) if r.has("reference") else None
     forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
     r.finish()

@@ -106,7 +106,7 @@ def _naming_failure(name: str, file: str | None):
     """Inside: the user's module ``name`` failing to import is a SceneError saying which and why."""
     try:
         yield
-    except Exception as exc:  # noqa: BLE001 (the user's module failed: say which and why)
+    except (Exception, SystemExit) as exc:  # noqa: BLE001 (the user's module failed, or exited: say which and why)
         raise SceneError("imports", "importable modules (next to the scene file or on sys.path)",
                          f"{name}: {type(exc).__name__}: {exc}", file) from None
 

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SceneError
+from ..laws.failures import LawError
 from ..scene.reader import Reader, read_toml
 from ..scene.scene_file import find_scene, parse_override, parse_scene
 
@@ -198,7 +199,8 @@ def check_sweep(sweep: Sweep) -> None:
 
     Every case is validated as the run would validate it; the first invalid one is named by
     its varied values (``contact.tip.normal.b = -1``), then the scene's own message. A robot
-    that cannot be found is bad input too.
+    that cannot be found is bad input too. A user's law raising as it reads a case is left to that run (recorded as
+    failed, the sweep goes on).
     """
     from ..robot.robot import resolve_robot_path
 
@@ -211,6 +213,8 @@ def check_sweep(sweep: Sweep) -> None:
                 raise
             values = ", ".join(f"{k} = {_canonical(v)}" for k, v in params.items())
             raise SceneError(f"sweep value {values}: {exc.key}", exc.expected, exc.found, exc.file) from None
+        except LawError:  # (a user's law failing to read its values: that run's failure, recorded when it runs)
+            continue
         first = first or scene
     if first is not None:
         resolve_robot_path(first.robot.source)

@@ -23,13 +23,17 @@ import numpy as np
 
 from ...errors import SceneError
 from ..drive_kinds import DRIVE_KINDS
-from ..params import Param, claim_name
+from ..params import Param, check_declaration, claim_name
 from ..sensors import read_sampling
 
 __all__ = ["ControlInput", "Controller", "BindContext", "CONTROLLERS", "register", "read_controller",
-           "FEEDFORWARD", "DeclaredConfig"]
+           "FEEDFORWARD", "DeclaredConfig", "TABLE_KEYS", "OUTPUTS", "MAX_STATES", "is_count"]
 
 FEEDFORWARD = ("none", "gravity", "bias")
+#: the keys of every controller table besides its kind's own (read_controller; laws.sensors.read_sampling)
+TABLE_KEYS = ("kind", "sample_rate", "delay", "hold", "sensor")
+OUTPUTS = ("torque", "voltage")  #: what a controller's command gives (``Controller.outputs``)
+MAX_STATES = 10_000  #: a controller's own states at most (each is integrated and stored with every output sample)
 
 
 @dataclass
@@ -199,11 +203,23 @@ CONTROLLERS: dict[str, type] = {}
 
 
 def register(cls: type) -> type:
-    """Make ``cls`` a controller scenes can name (``kind = cls.name``)."""
-    if not cls.name or not cls.name.isidentifier():
-        raise ValueError(f"a controller's name must be an identifier, got {cls.name!r}")
+    """Make ``cls`` a controller scenes can name (``kind = cls.name``): a :class:`Controller` whose declared
+    parameters are a tuple of :class:`Param` named each once and none like a key of every controller table
+    (:data:`TABLE_KEYS`: the table would give one value to both), its ``outputs`` one of :data:`OUTPUTS` (a typo
+    would run it as a torque law) and its ``n_states`` a count."""
+    check_declaration(cls, "controller", Controller, TABLE_KEYS)
+    if cls.outputs not in OUTPUTS:
+        raise ValueError(f"controller {cls.name!r}: outputs must be one of {OUTPUTS}, got {cls.outputs!r}")
+    if not is_count(cls.n_states):
+        raise ValueError(f"controller {cls.name!r}: n_states must be an integer in [0, {MAX_STATES}], got "
+                         f"{cls.n_states!r}")
     claim_name(CONTROLLERS, cls, "controller")
     return cls
+
+
+def is_count(n: object) -> bool:
+    """A count of a controller's states: an integer in [0, MAX_STATES], not a bool."""
+    return isinstance(n, int | np.integer) and not isinstance(n, bool) and 0 <= n <= MAX_STATES
 
 
 def read_controller(reader) -> tuple[Any, Any]:

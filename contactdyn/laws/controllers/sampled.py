@@ -35,6 +35,7 @@ from collections import deque
 import numpy as np
 
 from ...errors import SimulationError
+from ..failures import counted_states
 from ..sensors import ForceSensor, Sampling
 from .base import BindContext, ControlInput, Controller
 
@@ -61,7 +62,7 @@ class SampledController(Controller):
 
     def bind(self, context: BindContext) -> None:
         self.inner.bind(context)
-        self.n_states = self.nv + self.inner.n_states
+        self.n_states = self.nv + counted_states(self.inner)
         if self.sampling.hold == "voltage":
             context.require_motors(f"{context.key}.hold", 'hold = "voltage"')
 
