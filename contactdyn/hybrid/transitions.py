@@ -292,13 +292,11 @@ class Transitions:
         for name in imp.jammed_too:  # it slid into the impact, which stopped its slip
             j = self._index(name)
             modes[j] = modes[j].with_(stuck=True)
-        if imp.contact in imp.separated:  # (a limit's impact let its own contact go: no slide or stick to decide)
-            return
         i = self._index(imp.contact)
         c = system.contacts[i]
         if imp.jammed:
             modes[i] = modes[i].with_(stuck=True)
-        elif c.friction is not None and len(c.tangents):
+        elif c.friction is not None and len(c.tangents) and imp.contact not in imp.separated:  # (a limit's let go)
             moving = np.linalg.norm(imp.slip_after) > system.slip_band
             slip = imp.slip_after if moving else imp.direction
             if modes[i].stuck:  # a stick the impact could not hold (a limit's impact): it slides from here
