@@ -254,14 +254,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _simulate_quietly(simulate, scene, progress: bool = True, compiled: bool = True, interpreted: bool = False):
     """Simulate without Python's own warning lines (the command prints the sanity and check warnings itself)."""
-    import warnings
+    from .simulate import without_warning_lines
 
-    from .output.physics_checks import PhysicsWarning
-    from .scene.sanity import SanityWarning
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", SanityWarning)
-        warnings.simplefilter("ignore", PhysicsWarning)
+    with without_warning_lines():
         return simulate(scene, progress=progress, compiled=compiled, interpreted=interpreted)
 
 

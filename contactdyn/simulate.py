@@ -17,7 +17,8 @@ Where the pieces are (see ``docs/architecture.md`` for the module map):
 from __future__ import annotations
 
 import time
-from contextlib import nullcontext
+import warnings
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -30,10 +31,23 @@ from .model.phases import Phase
 from .model.system import System
 from .numerics import notice
 from .numerics.twins import running
+from .output.physics_checks import PhysicsWarning
 from .output.result import Result
+from .scene.sanity import SanityWarning
 from .scene.scene_file import Scene, load_scene
 
-__all__ = ["simulate", "run_system", "prepare"]
+__all__ = ["simulate", "run_system", "prepare", "without_warning_lines"]
+
+
+@contextmanager
+def without_warning_lines():
+    """Inside, Python prints none of the sanity and physics checks' warnings: a run keeps them in ``Result.meta``
+    (``warnings``, ``check_warnings``), which the command line prints in its own words, a sweep's runs save, and a
+    fit reads (a run that fails its checks is no evidence)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SanityWarning)
+        warnings.simplefilter("ignore", PhysicsWarning)
+        yield
 
 
 def simulate(scene: Scene | str | Path, overrides: dict[str, Any] | None = None, *, progress: bool = False,

@@ -384,3 +384,23 @@ def test_a_failed_runs_line_names_only_the_keys_that_run_set(tmp_path):
                   "controller.sensor.force_noise": [float("nan")]}).to_parquet(summary)
     assert failures(summary, ["controller.delay", "controller.sensor.force_noise"])[0]["params"] == \
         {"controller.delay": 1}
+
+
+def test_a_runs_warnings_are_in_its_saved_result_not_lines_on_the_console(tmp_path):
+    """benchmarks/stiff_force.toml aliases at its output rate (a sanity warning). Its sweep's runs keep that warning in
+    their saved results; Python prints no warning line for it (before: one per run, with the worker's source line,
+    even with --quiet)."""
+    import warnings
+
+    from contactdyn.output.physics_checks import PhysicsWarning
+    from contactdyn.scene.sanity import SanityWarning
+
+    out = tmp_path / "s"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main(["sweep", str(ROOT / "benchmarks" / "stiff_force.toml"), *FAST, "--grid",
+                     "controller.kp=1000.0,2000.0", "--out", str(out), "--workers", "0", "--quiet"])
+    assert code == EXIT_OK
+    assert not [w for w in caught if issubclass(w.category, SanityWarning | PhysicsWarning)]
+    for rid in _summary(out).run_id:
+        assert any("aliases" in w for w in load_result(out / "runs" / rid).meta["warnings"])

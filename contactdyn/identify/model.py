@@ -47,11 +47,12 @@ def predict(document: dict[str, Any], file: str | None, overrides: dict[str, Any
     Runs in a pool worker: only plain data goes in and out.
     """
     from ..scene.scene_file import parse_scene
-    from ..simulate import simulate
+    from ..simulate import simulate, without_warning_lines
     from ..sweep import NUMERICAL
 
     try:
-        result = simulate(parse_scene(document, overrides, file))
+        with without_warning_lines():  # (a run whose checks fail is refused below, in its own words)
+            result = simulate(parse_scene(document, overrides, file))
     except (ContactdynError, *NUMERICAL) as exc:
         return f"{type(exc).__name__}: {exc}"
     if result.meta.get("check_warnings"):  # a run that breaks its own physics is no evidence

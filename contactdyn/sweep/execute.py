@@ -38,11 +38,12 @@ def run_chunk(document: dict[str, Any], file: str | None, runs_dir: str, tasks: 
 
 def _run_one(document: dict[str, Any], file: str | None, runs_dir: Path, rid: str, overrides: dict[str, Any]
              ) -> dict[str, Any]:
-    from ..simulate import simulate
+    from ..simulate import simulate, without_warning_lines
 
     wall0 = time.perf_counter()
     try:
-        result = simulate(parse_scene(document, overrides, file))
+        with without_warning_lines():  # (each run's warnings are in its saved result, not lines on the console)
+            result = simulate(parse_scene(document, overrides, file))
     except (ContactdynError, *NUMERICAL) as exc:
         status, error = "failed", f"{type(exc).__name__}: {exc}"
     except Exception as exc:  # noqa: BLE001 (a bug or an uncaught blow-up: recorded, the sweep goes on)
