@@ -402,5 +402,17 @@ def test_a_runs_warnings_are_in_its_saved_result_not_lines_on_the_console(tmp_pa
                      "controller.kp=1000.0,2000.0", "--out", str(out), "--workers", "0", "--quiet"])
     assert code == EXIT_OK
     assert not [w for w in caught if issubclass(w.category, SanityWarning | PhysicsWarning)]
-    for rid in _summary(out).run_id:
-        assert any("aliases" in w for w in load_result(out / "runs" / rid).meta["warnings"])
+    summary = _summary(out)
+    for rid, count in zip(summary.run_id, summary.warnings, strict=True):
+        warned = load_result(out / "runs" / rid).meta["warnings"]
+        assert any("aliases" in w for w in warned) and count == len(warned)
+
+
+def test_a_sweep_says_at_its_end_how_many_runs_gave_warnings(tmp_path, capsys):
+    """Without --quiet, one line at the end counts the runs whose results hold warnings (b1's hold none)."""
+    main(["sweep", str(ROOT / "benchmarks" / "stiff_force.toml"), *FAST, "--grid", "controller.kp=1000.0,2000.0",
+          "--out", str(tmp_path / "s"), "--workers", "0"])
+    assert "contactdyn: warning: 2 of 2 runs gave sanity or physics-check warnings" in capsys.readouterr().err
+    main(["sweep", "b1", *FAST, "--grid", "controller.kp=1000.0,2000.0", "--out", str(tmp_path / "b"),
+          "--workers", "0"])
+    assert "gave sanity" not in capsys.readouterr().err

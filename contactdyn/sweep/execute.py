@@ -62,10 +62,11 @@ class SweepReport:
     counts: dict[str, int]  #: runs per status
     wall_s: float  #: [s] wall time of this call
     summary: Path
+    warned: int = 0  #: finished runs whose results hold sanity or check warnings (the summary's ``warnings``)
 
     def as_dict(self) -> dict[str, Any]:
         return {"out": str(self.out), "total": self.total, "skipped": self.skipped, "counts": self.counts,
-                "wall_s": self.wall_s, "summary": str(self.summary)}
+                "wall_s": self.wall_s, "summary": str(self.summary), "warned": self.warned}
 
 
 def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, scheduler: str | None = None,
@@ -108,7 +109,13 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
             if summary.pending:  # however the sweep ends (a SIGKILL aside: the next sweep merges the parts)
                 summary.rewrite()
     counts = {s: sum(r["status"] == s for r in rows.values()) for s in STATUSES}
-    return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary.path)
+    warned = sum(_warned(r.get("warnings")) for r in rows.values())
+    return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary.path, warned)
+
+
+def _warned(count) -> bool:
+    """A summary row's ``warnings`` count is above 0 (absent or NaN: a failed run, or a summary of before it)."""
+    return count is not None and count == count and count > 0
 
 
 def _finished_rows(out: Path, runs_dir: Path, cases: list, retry_failed: bool) -> dict[str, dict[str, Any]]:
