@@ -294,7 +294,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                    f" ({report.skipped} already done) in {report.wall_s:.2f} s; summary {report.summary}")
         if report.warned and not args.quiet:
             print(f"contactdyn: warning: {report.warned} of {report.total} runs gave sanity or physics-check "
-                  "warnings: the summary's warnings column counts them, each run's result holds them", file=sys.stderr)
+                  "warnings: the summary's warnings and check_violations count them, each run's result holds them",
+                  file=sys.stderr)
     from .sweep.report import failure_lines, failures, plot_over
 
     if bad and not args.json:

@@ -62,7 +62,9 @@ class SweepReport:
     counts: dict[str, int]  #: runs per status
     wall_s: float  #: [s] wall time of this call
     summary: Path
-    warned: int = 0  #: finished runs whose results hold sanity or check warnings (the summary's ``warnings``)
+    #: finished runs whose results hold sanity, outcome or check warnings (the summary's metrics ``warnings`` and
+    #: ``check_violations``)
+    warned: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         return {"out": str(self.out), "total": self.total, "skipped": self.skipped, "counts": self.counts,
@@ -109,13 +111,16 @@ def run_sweep(sweep: Sweep, out: str | Path, *, workers: int | None = None, sche
             if summary.pending:  # however the sweep ends (a SIGKILL aside: the next sweep merges the parts)
                 summary.rewrite()
     counts = {s: sum(r["status"] == s for r in rows.values()) for s in STATUSES}
-    warned = sum(_warned(r.get("warnings")) for r in rows.values())
+    warned = sum(_positive(r.get("warnings")) or _positive(r.get("check_violations")) for r in rows.values())
     return SweepReport(out, len(cases), skipped, counts, time.perf_counter() - wall0, summary.path, warned)
 
 
-def _warned(count) -> bool:
-    """A summary row's ``warnings`` count is above 0 (absent or NaN: a failed run, or a summary of before it)."""
-    return count is not None and count == count and count > 0
+def _positive(count) -> bool:
+    """A summary row's count above 0 (None, NaN or pandas' NA: a failed run's, which has none)."""
+    try:
+        return bool(count > 0)
+    except TypeError:
+        return False
 
 
 def _finished_rows(out: Path, runs_dir: Path, cases: list, retry_failed: bool) -> dict[str, dict[str, Any]]:

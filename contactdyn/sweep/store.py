@@ -21,16 +21,14 @@ STATUSES = ("ok", "failed", "crashed")
 
 
 def result_row(rid: str, result) -> dict[str, Any]:
-    """Summary row of a finished run: status ``failed`` if its channels hold non-finite values; ``warnings``: how
-    many sanity and check warnings its result holds (``Result.meta``: they are not printed as the runs go)."""
+    """Summary row of a finished run: status ``failed`` if its channels hold non-finite values."""
     from ..output.metrics import metrics
 
     bad = sorted(k for k, v in result.channels.items()
                  if not k.endswith((".F_d", "tip_ref")) and not np.all(np.isfinite(v)))
     error = f"non-finite values in {', '.join(bad)}" if bad else ""
-    warned = len(result.meta.get("warnings", [])) + len(result.meta.get("check_warnings", []))
     return {"run_id": rid, "status": "failed" if bad else "ok", "error": error,
-            "wall_s": float(result.stats.get("wall_s", math.nan)), **metrics(result), "warnings": warned}
+            "wall_s": float(result.stats.get("wall_s", math.nan)), **metrics(result)}
 
 
 def record_failure(runs_dir: Path, rid: str, overrides: dict[str, Any], status: str, error: str, wall_s: float
