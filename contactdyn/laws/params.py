@@ -85,7 +85,6 @@ def claim_name(registry: dict, cls: type, family: str) -> None:
     registry[cls.name] = cls
 
 
-
 def check_declaration(cls: object, family: str, base: type, reserved: tuple[str, ...], read_defaults: bool = True
                       ) -> None:
     """A law's class as its family's register takes it (``family``: "controller", "stage law", ...): a subclass of

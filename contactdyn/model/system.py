@@ -472,8 +472,8 @@ def _bound_controllers(scene: Scene, joint_names: list[str], motorized: np.ndarr
             ctl = _controller_of(p, nv)
             context = BindContext(scene, p, i, joint_names, motorized.copy(), p.controller_key)
             ctl.bind(context)
-            counted_states(ctl)
             law = ctl.inner if isinstance(ctl, SampledController) else ctl
+            counted_states(law)  # (a sampled one's: its law's, named; the hold adds nv slots of its own)
             if law.outputs == "voltage":
                 context.require_motors(f"{p.controller_key}.kind", f"a controller that gives voltages ({law.name!r})")
             controllers.append(ctl)

@@ -226,8 +226,11 @@ def read_controller(reader) -> tuple[Any, Any]:
     """Validate a controller table into (its kind's config, its sampling or None): the sampling keys
     (``sample_rate``, ``delay``, ``sensor``: :func:`~contactdyn.laws.sensors.read_sampling`) are read
     first, for every kind, then the kind's ``read`` does its own keys."""
+    from ..failures import checked_config, naming_laws
+
     kind = reader.str("kind", "task_pd", choices=sorted(CONTROLLERS))
     sampling = read_sampling(reader)
-    config = CONTROLLERS[kind].read(reader)
+    with naming_laws():  # (a user's read raising: its LawError)
+        config = checked_config(kind, CONTROLLERS[kind].read(reader))
     reader.finish()
     return config, sampling
