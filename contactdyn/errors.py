@@ -14,7 +14,9 @@ class RobotError(ContactdynError):
     """A robot description (URDF, example-robot-data name, frame, joint) is unusable; ``key``: the scene key it is
     about where that is not the robot's source (a joint name of ``robot.active_joints`` or ``robot.locked``)."""
 
-    key: str | None = None
+    def __init__(self, message: str, key: str | None = None):
+        super().__init__(message)
+        self.key = key
 
 
 class FrameError(RobotError):

@@ -137,7 +137,11 @@ class DipSearch:
 
     def could_dip(self, t_old: float) -> bool:
         """g positive at both ends of a step from t_old [s] (LSODA's steps may collapse: none then)."""
-        return 0.0 < self.g_old < math.inf and self.g_end > 0.0 and t_old < self.t_end
+        return self.spans(t_old) and self.g_end > 0.0
+
+    def spans(self, t_old: float) -> bool:
+        """A step from t_old [s] that began with g positive (and finite: not the segment's first call)."""
+        return 0.0 < self.g_old < math.inf and t_old < self.t_end
 
     def search(self, t_old: float, state_at, lo: float, hi: float) -> bool:
         """Where zero lies within g's swing over the step (``lo``, ``hi``: the least and greatest g its stages saw,
@@ -365,7 +369,7 @@ class DipWatch(DipSearch):
         its ends (:data:`WIDE_SWING`: g may have fallen through zero before and come back, a plane turning past a point
         far from its axis), g at DIP_SAMPLES − 1 inner instants of the dense output ``state_at(t)``: the first where
         g ≤ 0 is :attr:`latch`, so the root located is the first fall, not a later one."""
-        if not (0.0 < self.g_old < math.inf and self.g_end <= 0.0 and t_old < self.t_end):
+        if not self.spans(t_old) or self.g_end > 0.0:
             return
         lo, hi = self.swing.over(t_old, self.t_end)
         wide = WIDE_SWING * (self.g_old - self.g_end)

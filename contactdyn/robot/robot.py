@@ -90,21 +90,15 @@ def _active_names(urdf: UrdfModel, tip: str | None, active_joints: list[str] | N
     for key, given in (("robot.locked", list(locked)), ("robot.active_joints", list(active_joints or []))):
         for name in given:
             if name not in names:
-                raise _about(RobotError(f"{path}: no joint named {name!r}{_suggest(name, names)}; joints: {names}"),
-                             f"{key}.{name}" if key == "robot.locked" else key)
+                raise RobotError(f"{path}: no joint named {name!r}{_suggest(name, names)}; joints: {names}",
+                                 f"{key}.{name}" if key == "robot.locked" else key)
     if active_joints is not None:
         both = sorted(set(active_joints) & set(locked))
         if both:
-            raise _about(RobotError(f"{path}: joint(s) {both} are both active and locked"), "robot.active_joints")
+            raise RobotError(f"{path}: joint(s) {both} are both active and locked", "robot.active_joints")
         return [n for n in names if n in active_joints]
     chain = chain_joints(full, find_frame(full, tip, str(path))) if tip is not None else names
     return [n for n in names if n in chain and n not in locked]
-
-
-def _about(error: RobotError, key: str) -> RobotError:
-    """``error``, about the scene key ``key`` (the scene's error names it, not the robot's source)."""
-    error.key = key
-    return error
 
 
 def _build_visual(path, model: pin.Model, xml: str) -> pin.GeometryModel:
