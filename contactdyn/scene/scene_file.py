@@ -644,7 +644,8 @@ def _read_solver(r: Reader) -> SolverSpec:
 
 def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, ContactSpec], duration: float,
                 bodies: dict[str, BodySpec] | None = None) -> PhaseSpec:
-    from ..laws.controllers import read_controller
+    from ..laws.controllers.base import DEFAULT_KIND, read_controller
+    from ..laws.failures import checked_config, naming_laws  # (the laws' layer cannot import them: a cycle)
 
     name = r.str("name", "main")
     until_raw = r.raw("until", duration)
@@ -658,7 +659,9 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
     merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
         else r.raw("controller")
     where = r.key("controller") if "controller" in r.data else default_controller.path  # (the file's table)
-    controller, sampling = read_controller(Reader(merged, where, r.file))
+    with naming_laws():  # (a user's read raising: its LawError)
+        controller, sampling = read_controller(Reader(merged, where, r.file))
+    controller = checked_config(merged.get("kind", DEFAULT_KIND), controller)
     reference = _read_reference(r.sub("reference"), bodies or {}) if r.has("reference") else None
     forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
     r.finish()

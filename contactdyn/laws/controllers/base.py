@@ -27,9 +27,11 @@ from ..params import Param, check_declaration, claim_name
 from ..sensors import read_sampling
 
 __all__ = ["ControlInput", "Controller", "BindContext", "CONTROLLERS", "register", "read_controller",
-           "FEEDFORWARD", "DeclaredConfig", "TABLE_KEYS", "OUTPUTS", "MAX_STATES", "is_count"]
+           "FEEDFORWARD", "DeclaredConfig", "TABLE_KEYS", "OUTPUTS", "MAX_STATES", "is_count",
+           "DEFAULT_KIND"]
 
 FEEDFORWARD = ("none", "gravity", "bias")
+DEFAULT_KIND = "task_pd"  #: a controller table's kind where it names none
 #: the keys of every controller table besides its kind's own (read_controller; laws.sensors.read_sampling)
 TABLE_KEYS = ("kind", "sample_rate", "delay", "hold", "sensor")
 OUTPUTS = ("torque", "voltage")  #: what a controller's command gives (``Controller.outputs``)
@@ -226,11 +228,8 @@ def read_controller(reader) -> tuple[Any, Any]:
     """Validate a controller table into (its kind's config, its sampling or None): the sampling keys
     (``sample_rate``, ``delay``, ``sensor``: :func:`~contactdyn.laws.sensors.read_sampling`) are read
     first, for every kind, then the kind's ``read`` does its own keys."""
-    from ..failures import checked_config, naming_laws
-
-    kind = reader.str("kind", "task_pd", choices=sorted(CONTROLLERS))
+    kind = reader.str("kind", DEFAULT_KIND, choices=sorted(CONTROLLERS))
     sampling = read_sampling(reader)
-    with naming_laws():  # (a user's read raising: its LawError)
-        config = checked_config(kind, CONTROLLERS[kind].read(reader))
+    config = CONTROLLERS[kind].read(reader)
     reader.finish()
     return config, sampling
