@@ -128,7 +128,8 @@ class HybridRun:
                              "no max_step", self.scene.file)
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "corners": 0, "singular_solves": 0,
                       "slips_seen_inside_a_step": 0, "slip_false_alarms": 0,  # (slip, joint_slip, release)
-                      "dips_seen_inside_a_step": 0}  # (events.DipWatch, a hold's StageWatch)
+                      "dips_seen_inside_a_step": 0,  # (events.DipWatch, a hold's StageWatch)
+                      "decided_together": 0}  # (hybrid.at_rest)
         self.log = EventLog(self.scene.name, self.solver, self.stats)
         self.events = self.log.events
 

@@ -44,6 +44,7 @@ from ..model.chain_forces import chain_sides
 from ..model.friction import direction_of, in_cone, slip_acceleration, slip_velocity
 from ..model.impact import impact, project_velocity, singular_stick
 from ..model.system import System
+from .at_rest import settle_together
 from .charts import on_chart
 from .events import AT_ONCE, EventLog
 from .pipeline_mode import mode_runner
@@ -164,11 +165,11 @@ class Transitions:
         return self.release_pulling(t, x, modes, phase)
 
     def settle(self, t, x, modes, phase, rest=frozenset(), released=frozenset()):
-        """Decide the modes at an instant: after an event (``rest``, ``released``: see :meth:`consistent`) or
-        where the law changed but no event fired (a phase start): :meth:`consistent`, then the limits that pull
-        are released. Returns (x, modes, phase)."""
+        """Decide the modes at an instant: after an event (``rest``, ``released``: see :meth:`consistent`) or where the
+        law changed but no event fired (a phase start): :meth:`consistent`, the limits that pull released, then the
+        items at rest checked together (:func:`~.at_rest.settle_together`). Returns (x, modes, phase)."""
         x, modes = self.consistent(t, x.copy(), list(modes), phase, rest, released)
-        return self.release_pulling(t, x, modes, phase)
+        return settle_together(self, t, *self.release_pulling(t, x, modes, phase))
 
     def start(self, t, x, modes, phase):
         """(x, modes, phase) at a run's start: :meth:`consistent`, the joints at rest on a limit (``phase.limits``)

@@ -1,0 +1,176 @@
+"""Contacts and joints at rest decided together: one consistent mode for all the dry friction at an instant.
+
+The transitions decide each dry-friction item on its own, the others' modes fixed: a contact at rest sticks if its
+holding force is within the cone, else slides where that force pushes (:func:`~.transitions._at_rest`); a joint at
+rest sticks if its holding torque is within τ_s, else slides where the load pushes
+(:meth:`~contactdyn.model.joint_friction.JointFriction.switch`). Where a contact and a joint hold the same motion,
+each decision changes the other's load, and the pair can be left in a mode the next instant contradicts: a joint
+set sliding from rest while the contact it pushed against is stuck, which the contact's slip then decelerates back
+through zero (``joint_stick``), whose decision makes the contact stick again, and so on: an event storm at one
+instant (``benchmarks/hard/stickslip.toml`` with dry friction on q2).
+
+:func:`consistent_at_rest` checks the mode the transitions left where a joint with dry friction is among two or more
+items at rest (stuck, within the stick band, or decided at this instant). Every item at rest must be *consistent*:
+
+- a stuck contact's friction within its cone, |F_f| ≤ μ_s F_n; a stuck joint's holding torque |λᵢ| ≤ τ_s;
+- a contact sliding from rest along d accelerates along it, d · ȧ_t ≥ 0 (ȧ_t: its slip's rate); a joint sliding
+  from rest with sign s, s q̈ᵢ ≥ 0 (Coulomb's: a slide from rest goes where it accelerates against τ_k).
+
+Where one is not, it searches the items' modes (each: stuck, or sliding either way from rest, a contact first where
+its holding force pushes) for a consistent one, fewest slides first (the mode that holds most), and takes the first
+it finds. Where none is, the transitions' mode stays (the storm guard stops a run that then chatters). A mode the
+transitions leave consistent is kept as it is (a run whose decisions are never contradicted is unchanged).
+"""
+
+from __future__ import annotations
+
+from itertools import combinations, product
+
+import numpy as np
+
+from ..model.friction import direction_of, in_cone, slip_acceleration
+from ..model.impact import project_velocity
+from ..model.joint_friction import STUCK
+
+__all__ = ["settle_together", "consistent_at_rest", "MAX_ITEMS", "ACCEL_TOL"]
+
+MAX_ITEMS = 8  #: items at rest (contacts and joints) searched together at most (3^8 trials at worst)
+#: [-] a slide from rest is consistent where its acceleration along its slide is ≥ −ACCEL_TOL × (1 + |its
+#: acceleration|) [m/s² or rad/s²]: the solve's rounding
+ACCEL_TOL = 1e-9
+
+
+def _contacts_at_rest(system, ev, modes, decided) -> list[int]:
+    """The touching contacts with friction that are stuck, slide within the stick band, or were decided at this
+    instant (by name in ``decided``: a stick just released slides from rest with its residual slip)."""
+    out = []
+    for i, (c, m) in enumerate(zip(system.contacts, modes, strict=True)):
+        if not m.touching or c.friction is None or not len(c.tangents):
+            continue
+        if m.stuck or c.name in decided or float(np.linalg.norm(ev.slip[c.name])) <= system.slip_band:
+            out.append(i)
+    return out
+
+
+def _joints_at_rest(system, x, phase, decided) -> list[int]:
+    """The joints with dry friction off their limits that are stuck, slide within the stick band (|q̇ᵢ| ≤
+    ``solver.stick_velocity``, read in rad/s or m/s), or were decided at this instant (by name in ``decided``: a
+    velocity another item's stick left them, its projection's)."""
+    pressing = {i for i, _ in phase.limits}
+    nQ, names = system.nQ, system.joint_friction.names
+    return [i for i, m in phase.joint_modes if i not in pressing and
+            (m == STUCK or names[i] in decided or abs(float(x[nQ + i])) <= system.slip_band)]
+
+
+def _consistent(system, ev, x, modes, phase, contacts, joints) -> bool:
+    """Is every item at rest consistent in the Evaluation ``ev`` (the module docstring)?"""
+    nQ = system.nQ
+    qdd = ev.xdot[nQ:2 * nQ]
+    jf = system.joint_friction
+    for i in contacts:
+        c, m = system.contacts[i], modes[i]
+        if m.stuck:
+            if not in_cone(ev.friction[c.name], ev.normal_force[c.name], c.friction.mu_s):
+                return False
+            continue
+        kin = system.kinematics(c, x)
+        a_t = slip_acceleration(system, c, kin, qdd)
+        if float(np.asarray(m.slip) @ a_t) < -ACCEL_TOL * (1.0 + float(np.linalg.norm(a_t))):
+            return False
+    for i, m in phase.joint_modes:
+        if i not in joints:
+            continue
+        if m == STUCK:
+            if jf.breaks_away(i, ev.joint_hold.get(i, 0.0)):
+                return False
+        elif m * float(qdd[i]) < -ACCEL_TOL * (1.0 + abs(float(qdd[i]))):
+            return False
+    return True
+
+
+def _trial(system, x, modes, phase, contacts, joints, choice):
+    """(x, modes, phase) of one choice per item: None (stuck) or a slide (a contact's direction, a joint's sign),
+    the stuck ones' velocities projected onto their rows and the joints at rest set to exactly 0."""
+    modes = list(modes)
+    jf = system.joint_friction
+    for i, pick in zip(contacts, choice[:len(contacts)], strict=True):
+        modes[i] = modes[i].with_(stuck=True) if pick is None else \
+            modes[i].with_(stuck=False, slip=pick, from_rest=True)
+    for i, pick in zip(joints, choice[len(contacts):], strict=True):
+        phase = jf.with_mode(phase, i, STUCK if pick is None else pick)
+    x = x.copy()
+    nQ = system.nQ
+    for i in joints:
+        x[nQ + i] = 0.0
+    if any(p is None for p in choice):
+        x = project_velocity(system, x, modes, phase.limits, phase.joint_modes)
+    return x, modes, phase
+
+
+def _options(system, ev, modes, contacts, joints) -> list[list]:
+    """Per item its modes to try: stuck, then a slide where its holding force pushes, then the other way."""
+    out = []
+    for i in contacts:
+        c, m = system.contacts[i], modes[i]
+        push = direction_of(-np.asarray(ev.friction[c.name])) if m.stuck else tuple(m.slip)
+        out.append([None, push, tuple(-v for v in push)])
+    return out + [[None, 1, -1] for _ in joints]
+
+
+def consistent_at_rest(system, evaluate, t: float, x: np.ndarray, modes, phase, decided=frozenset()):
+    """(x, modes, phase, changed): the transitions' mode at (t [s], x) if every item at rest is consistent there
+    (or fewer than two items are at rest, or no joint), else the first consistent mode of the search (the module
+    docstring). ``evaluate(t, x, modes, phase)``: the run's LastEvaluation; ``decided``: the names of the items the
+    transitions decided at t (at rest, whatever their residual speed)."""
+    ev = evaluate(t, x, modes, phase)
+    contacts = _contacts_at_rest(system, ev, modes, decided)
+    joints = _joints_at_rest(system, x, phase, decided)
+    if not joints or len(contacts) + len(joints) < 2 or len(contacts) + len(joints) > MAX_ITEMS:
+        return x, modes, phase, False
+    nQ, nv = system.nQ, system.nv
+    system.robot.update(x[:nv], x[nQ:nQ + nv])
+    system.update_bodies(x)
+    if _consistent(system, ev, x, modes, phase, contacts, joints):
+        return x, modes, phase, False
+    options = _options(system, ev, modes, contacts, joints)
+    n = len(options)
+    for slides in range(n + 1):
+        for sliding in combinations(range(n), slides):
+            picks = [opts[1:] if k in sliding else opts[:1] for k, opts in enumerate(options)]
+            for choice in product(*picks):
+                xt, mt, pt = _trial(system, x, modes, phase, contacts, joints, list(choice))
+                system.robot.update(xt[:nv], xt[nQ:nQ + nv])
+                system.update_bodies(xt)
+                if _consistent(system, evaluate(t, xt, mt, pt), xt, mt, pt, contacts, joints):
+                    return xt, mt, pt, True
+    return x, modes, phase, False
+
+
+def _decided_at(events: list[dict], t: float) -> set[str]:
+    """The names of the items (contacts, joints) the events logged at t [s] name: those decided at this instant."""
+    names = set()
+    for e in reversed(events):
+        if e["t"] != t:
+            break
+        names.add(e["name"])
+    return names
+
+
+def settle_together(transitions, t: float, x: np.ndarray, modes, phase):
+    """(x, modes, phase) after :func:`consistent_at_rest` on the transitions' mode at t [s]: a mode it changes is
+    logged per item (``stick``/``slip``, ``joint_stick``/``joint_slip``/``joint_reverse``) and counted
+    (``Result.stats["decided_together"]``)."""
+    system, log = transitions.system, transitions.log
+    x_new, modes_new, phase_new, changed = consistent_at_rest(system, transitions.evaluate, t, x, modes, phase,
+                                                              _decided_at(log.events, t))
+    if not changed:
+        return x, modes, phase
+    transitions.stats["decided_together"] += 1
+    for c, before, after in zip(system.contacts, modes, modes_new, strict=True):
+        if before != after:
+            log.log(t, "stick" if after.stuck else "slip", c.name)
+    for (i, before), (_, after) in zip(phase.joint_modes, phase_new.joint_modes, strict=True):
+        if before != after:
+            kind = "joint_stick" if after == STUCK else "joint_slip" if before == STUCK else "joint_reverse"
+            log.log(t, kind, system.joint_friction.names[i])
+    return x_new, modes_new, phase_new
