@@ -18,8 +18,10 @@ items at rest (stuck, within the stick band, or decided at this instant). Every 
 
 Where one is not, it searches the items' modes (each: stuck, or sliding either way from rest, a contact first where
 its holding force pushes) for a consistent one, fewest slides first (the mode that holds most), and takes the first
-it finds. Where none is, the transitions' mode stays (the storm guard stops a run that then chatters). A mode the
-transitions leave consistent is kept as it is (a run whose decisions are never contradicted is unchanged).
+it finds; a stick it tries must be inside its cone or τ_s by the cone tests' slack (at the very edge its slip event
+would fire at once, the hysteresis of :func:`~contactdyn.model.friction.in_cone`). Where none is, the transitions'
+mode stays (the storm guard stops a run that then chatters). A mode the transitions leave consistent is kept as it
+is (a run whose decisions are never contradicted is unchanged).
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from itertools import combinations, product
 
 import numpy as np
 
-from ..model.friction import direction_of, in_cone, slip_acceleration
+from ..model.friction import CONE_TOL, FORCE_ABS_TOL, direction_of, in_cone, slip_acceleration
 from ..model.impact import project_velocity
 from ..model.joint_friction import STUCK
 
@@ -62,15 +64,17 @@ def _joints_at_rest(system, x, phase, decided) -> list[int]:
             (m == STUCK or names[i] in decided or abs(float(x[nQ + i])) <= system.slip_band)]
 
 
-def _consistent(system, ev, x, modes, phase, contacts, joints) -> bool:
-    """Is every item at rest consistent in the Evaluation ``ev`` (the module docstring)?"""
+def _consistent(system, ev, x, modes, phase, contacts, joints, strictly: bool = False) -> bool:
+    """Is every item at rest consistent in the Evaluation ``ev`` (the module docstring)? ``strictly``: a stuck item
+    inside its limit by the cone tests' slack (a trial's stick: at the limit itself its slip event would fire at
+    once)."""
     nQ = system.nQ
     qdd = ev.xdot[nQ:2 * nQ]
     jf = system.joint_friction
     for i in contacts:
         c, m = system.contacts[i], modes[i]
         if m.stuck:
-            if not in_cone(ev.friction[c.name], ev.normal_force[c.name], c.friction.mu_s):
+            if not in_cone(ev.friction[c.name], ev.normal_force[c.name], c.friction.mu_s, strictly):
                 return False
             continue
         kin = system.kinematics(c, x)
@@ -81,7 +85,8 @@ def _consistent(system, ev, x, modes, phase, contacts, joints) -> bool:
         if i not in joints:
             continue
         if m == STUCK:
-            if jf.breaks_away(i, ev.joint_hold.get(i, 0.0)):
+            limit = jf.static[i] * (1.0 - CONE_TOL) - FORCE_ABS_TOL if strictly else jf.static[i]
+            if abs(ev.joint_hold.get(i, 0.0)) > limit:
                 return False
         elif m * float(qdd[i]) < -ACCEL_TOL * (1.0 + abs(float(qdd[i]))):
             return False
@@ -141,7 +146,7 @@ def consistent_at_rest(system, evaluate, t: float, x: np.ndarray, modes, phase, 
                 xt, mt, pt = _trial(system, x, modes, phase, contacts, joints, list(choice))
                 system.robot.update(xt[:nv], xt[nQ:nQ + nv])
                 system.update_bodies(xt)
-                if _consistent(system, evaluate(t, xt, mt, pt), xt, mt, pt, contacts, joints):
+                if _consistent(system, evaluate(t, xt, mt, pt), xt, mt, pt, contacts, joints, strictly=True):
                     return xt, mt, pt, True
     return x, modes, phase, False
 
