@@ -313,3 +313,23 @@ def test_the_compiled_call_gives_the_interpreted_call_s_rates(edits, stuck):
             want = interpreted_evaluate(system, 0.1, x, ms, phase).xdot
             np.testing.assert_allclose(pipeline.rhs(0.1, x), want, rtol=0, atol=1e-12 * (1 + np.abs(want).max()))
             assert pipeline.failed_calls == 0
+
+
+def test_a_hold_at_mu_1e_3_creeps_in_the_stick_band_instead_of_stopping_at_once():
+    """At μ = 1e-3 the hold's slide decays toward its balance (the PD spring's pull equal to μ_k F, its damper
+    slowing the slip): at the band's edge (|v_t| = v_ε) it stops, the stick it is tried at needs more than μ_s F (the
+    damping of v_ε still pulls), so it slides from rest from the state as it was, still at the edge and slowing. Its
+    stop, armed there, fired at once: 50 stop/slip decisions at t = 1.3139 s (an event storm). A slide from rest
+    stops only once it has left the band (events.stop_armed): the run ends, one stop/slip there, and the slide
+    creeps within the band with kinetic friction, |F_f| = μ_k F, never reversing past −v_ε."""
+    mu = 1e-3
+    r = simulate("lever", {"contact.push.tangent.mu_s": mu, "contact.push.tangent.mu_k": mu})
+    assert r.t[-1] == pytest.approx(1.5)
+    last = [e for e in r.events if e["t"] > 1.3]
+    assert [e["kind"] for e in last] == ["stop", "slip"] and last[0]["t"] == last[1]["t"]
+    on, band = r["contact.push.touching"] > 0, 1e-9  # (solver.stick_velocity's default)
+    F_n, F_f = r["contact.push.F_n"][on], r["contact.push.F_f"][on, 0]
+    assert not r["contact.push.stuck"][on].any()
+    np.testing.assert_allclose(np.abs(F_f), mu * F_n, rtol=1e-12, atol=0)  # Coulomb's kinetic law, sliding
+    creep = r["contact.push.v_slip"][r.t > last[0]["t"]]
+    assert np.all(np.abs(creep) <= band)  # within the band: no stop (left it never), no reverse (−v_ε)

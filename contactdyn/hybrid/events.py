@@ -341,19 +341,27 @@ class DipWatch(DipSearch):
     terminal = True
     direction = -1
 
-    def __init__(self, swing: StageSwing, kind: str, name: str, floor: float):
+    def __init__(self, swing: StageSwing, kind: str, name: str, floor: float, armed: bool = True):
         self.swing, self.kind, self.contact, self.floor = swing, kind, name, floor
         self.value = swing.value  #: value(t, x): g + floor
         self.t_end, self.g_old, self.g_end = -math.inf, math.inf, math.inf  #: the last step end [s], g before, there
         self.latch = math.inf  #: [s] from here on g is held negative (a dip found inside the last step)
         self.dipped = False  #: a dip was found (the run's ``dips_seen_inside_a_step``)
+        #: False: g is held negative until a step end after the segment's start sees g > 0 (a slide from rest that
+        #: starts at its band's edge stops only once it has left the band: :func:`stop_armed`)
+        self.armed = armed
 
     def __call__(self, t: float, x: np.ndarray) -> float:
         g = self.value(t, x) - self.floor
         if t > self.t_end:  # a new step end (they come in increasing t; root finding calls inside the last step)
+            if not self.armed:
+                self.armed = g > 0.0 and self.t_end > -math.inf  # (never at the segment's start)
+                g = g if self.armed else min(g, -1e-300)
             self.t_end, self.latch = t, math.inf
             self.g_old, self.g_end = self.g_end, g
             return g
+        if not self.armed:
+            return min(g, -1e-300)
         return min(g, -1e-300) if t >= self.latch else g
 
     def dips(self, t_old: float, state_at) -> bool:
@@ -579,6 +587,23 @@ def _stages_along(at: int, r: tuple[float, ...]):
     return lambda E: [a * r[0] + b * r[1] for a, b in E[:, at:at + 2].tolist()]
 
 
+#: [-] a slide from rest whose slip along r starts within this × v_ε above the stick band v_ε is at the band's edge
+#: (:func:`stop_armed`): the root of a located ``stop`` sits there, within the root finder's rounding
+BAND_EDGE = 1e-6
+
+
+def stop_armed(mode: ContactMode, v0: float, band: float) -> bool:
+    """Is a slide's ``stop`` armed from its segment's start, its slip along r there v0 [m/s] (``band``: v_ε)? Not
+    for a slide from rest that starts inside its stick band or at its edge (v0 ≤ v_ε (1 + BAND_EDGE)): it stops only
+    once it has left the band (a step end with v·r > v_ε). Why: a stop decided at rest whose stick the cone cannot
+    hold slides from rest where the holding force pushes, from the state as it was, its slip still at the band's edge
+    (:func:`~contactdyn.hybrid.transitions._at_rest`); where a damping law slows that slip (the slide creeps toward
+    its balance |F_f| = μ_k F below v_ε: the lever's hold at μ = 1e-3) a stop armed there fires at once and the same
+    decision repeats at the same instant (an event storm). Inside the band a slide from rest could not stop before it
+    left the band anyway (its stop falls through zero only from above): there this changes nothing."""
+    return not mode.from_rest or v0 > band * (1.0 + BAND_EDGE)
+
+
 def _turn_margin(v: np.ndarray, r: tuple[float, float], band: float) -> float:
     """The ``turn`` function v·r − ½|v| + v_ε [m/s] of a 2-D slip velocity v (|v| = √(v·v))."""
     v0, v1 = v.tolist()
@@ -630,8 +655,9 @@ def segment_events(system: System, modes: list[ContactMode], phase: Phase, t0: f
         r = tuple(float(c) for c in mode.slip)
         watches.append(StageSwing(lambda t, x, i=ci, r=r: _along(values.slip(i, t, x), r),
                                   _stages_along(EV_W * ci + EV_VT, r)))
+        armed = stop_armed(mode, _along(values.slip(ci, t0, x0), r), band)
         for kind, floor in (("stop", band), ("reverse", -band)):  # (its speed may dip through the band and back)
-            out.append(DipWatch(watches[-1], kind, name, floor))
+            out.append(DipWatch(watches[-1], kind, name, floor, armed=armed or kind == "reverse"))
         if len(r) == 2:
             out.append(terminal_event(lambda t, x, i=ci, r=r, b=band: _turn_margin(values.slip(i, t, x), r, b), "turn",
                                       name))
