@@ -23,7 +23,7 @@ from pathlib import Path
 from ..errors import ContactdynError, SimulationError
 
 __all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file",
-           "raised_calling", "counted_states", "checked_config"]
+           "raised_calling", "counted_states", "checked_config", "negative_friction_error", "kinetic_coefficient"]
 
 PACKAGE = __name__.split(".")[0] + "."  #: "contactdyn.": the package's own laws are not a user's
 _CALLING = "_contactdyn_calling"  #: an exception's attribute: (kind, class) of the law whose call raised it
@@ -102,6 +102,29 @@ def non_finite_error(family: str, law: type, args: tuple, value, t: float | None
     :func:`.abi.call_friction`'s; a drive kind's with its spec's values first, :func:`.drive_abi.checking_drives`)."""
     kind, what = _NON_FINITE[family]
     return LawError(kind, law.name, law_file(law), what(law, args, value), None, t)
+
+
+def negative_friction_error(spec, contact: str, speed: float, value: float, t: float | None = None) -> LawError:
+    """The LawError of the friction law of contact ``contact`` (its ``spec``, a FrictionSpec) that returned the
+    coefficient ``value`` < 0 at slip speed ``speed`` [m/s]: a negative μ pushes a slide along (the run stops at the
+    first call that gets one, compiled or interpreted: :meth:`~contactdyn.model.pipeline.pipeline.Pipeline.failed_call`;
+    an impact's, :func:`kinetic_coefficient`)."""
+    from .friction_laws import FRICTION_LAWS
+
+    law = FRICTION_LAWS[spec.law]
+    what = _friction_returned(law, (spec.mu_s, spec.mu_k, spec.params, speed), value)
+    return LawError("friction law", law.name, law_file(law), f"{what} on contact {contact!r}: expected a coefficient "
+                    ">= 0 (friction opposes the slip)", None, t)
+
+
+def kinetic_coefficient(spec, contact: str, speed: float, t: float | None = None) -> float:
+    """μ [-] of contact ``contact``'s friction ``spec`` (a FrictionSpec) at slip speed ``speed`` [m/s] at t [s]; its
+    law returning μ < 0 is its LawError (:func:`negative_friction_error`)."""
+    with naming_laws(t):
+        mu = float(spec.mu(speed))
+    if mu < 0.0:
+        raise negative_friction_error(spec, contact, speed, mu, t)
+    return mu
 
 
 def _stage_returned(law: type, args: tuple, value) -> str:
