@@ -23,7 +23,8 @@ from pathlib import Path
 from ..errors import ContactdynError, SimulationError
 
 __all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file",
-           "raised_calling", "counted_states", "checked_config", "negative_friction_error", "kinetic_coefficient"]
+           "raised_calling", "counted_states", "checked_config", "negative_friction_error", "kinetic_coefficient",
+           "checked_flags"]
 
 PACKAGE = __name__.split(".")[0] + "."  #: "contactdyn.": the package's own laws are not a user's
 _CALLING = "_contactdyn_calling"  #: an exception's attribute: (kind, class) of the law whose call raised it
@@ -181,6 +182,19 @@ def counted_states(ctl) -> int:
         raise LawError("controller", ctl.name, law_file(type(ctl)), f"set n_states = {ctl.n_states!r}: expected an "
                        f"integer in [0, {MAX_STATES}] (the count of its own states)")
     return int(ctl.n_states)
+
+
+def checked_flags(ctl) -> None:
+    """``ctl``'s flags (``uses_forces``, ``needs_gravity``, ``reads_orientation``) as its class or its bind set them: a
+    LawError unless each is True or False (its class's are checked where it registers: laws.params)."""
+    from .controllers.base import Controller
+    from .params import flags
+
+    for flag in flags(Controller):
+        value = getattr(ctl, flag)
+        if not isinstance(value, bool):
+            raise LawError("controller", ctl.name, law_file(type(ctl)), f"set {flag} = {value!r}: expected True or "
+                           "False")
 
 
 def checked_config(kind: str, config):
