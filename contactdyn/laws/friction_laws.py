@@ -112,8 +112,7 @@ def register_friction_law(cls: type[FrictionLaw]) -> type[FrictionLaw]:
     check_declaration(cls, "friction law", FrictionLaw, TABLE_KEYS)
     problem = _not_constant(cls) if cls.constant else ""
     if problem:
-        raise ValueError(f"friction law {cls.name!r}: declared constant = True (mu(v) = mu_k at every slip speed: the "
-                         f"model reads mu_k, not the law), but {problem}: declare constant = False")
+        raise ValueError(f"friction law {cls.name!r}: constant = True, but {problem}: declare constant = False")
     claim_name(FRICTION_LAWS, cls, "friction law")
     return cls
 
@@ -122,8 +121,8 @@ _TRIED_MU, _TRIED_SPEEDS = (0.8, 0.5), (0.0, 1e-4, 0.01, 0.1, 1.0, 10.0)  #: (μ
 
 
 def _not_constant(cls: type[FrictionLaw]) -> str:
-    """Where a constant law's coefficient is not μ_k at its parameters' sample values (:meth:`Param.sample`), or ""
-    (also where a call raises: what cannot be tried is not refused)."""
+    """Where a constant law's coefficient is not μ_k (the model then reads μ_k, not the law) at its parameters'
+    sample values (:meth:`Param.sample`), or "" (also where a call raises: what cannot be tried is not refused)."""
     spec = FrictionSpec(*_TRIED_MU, 0.0, cls.name, tuple(p.sample() for p in cls.params))
     try:
         tried = [(v, float(cls.kinetic(spec, v))) for v in _TRIED_SPEEDS]
@@ -132,8 +131,7 @@ def _not_constant(cls: type[FrictionLaw]) -> str:
     for speed, mu in tried:
         if not abs(mu - spec.mu_k) <= 1e-12:
             at = "".join(f", {q.name} = {v:g}" for q, v in zip(cls.params, spec.params, strict=True))
-            return f"its coefficient gives mu = {mu:g} at slip speed {speed:g} m/s (mu_s = {spec.mu_s:g}, mu_k = " \
-                   f"{spec.mu_k:g}{at})"
+            return f"its mu at slip speed {speed:g} m/s is {mu:g}, not mu_k = {spec.mu_k:g} (mu_s = {spec.mu_s:g}{at})"
     return ""
 
 

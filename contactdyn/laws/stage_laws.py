@@ -69,8 +69,7 @@ def register_stage_law(cls: type[StageLaw]) -> type[StageLaw]:
     check_declaration(cls, "stage law", StageLaw, TABLE_KEYS)
     problem = _not_affine(cls) if cls.affine else ""
     if problem:
-        raise ValueError(f"stage law {cls.name!r}: declared affine = True (F = K x + B ẋ, (K, B) = coefficients(k, b, "
-                         f"p)), but {problem}: declare affine = False (an affine law may sit at a massless junction)")
+        raise ValueError(f"stage law {cls.name!r}: affine = True, but {problem}: declare affine = False")
     claim_name(STAGE_LAWS, cls, "stage law")
     return cls
 
@@ -82,8 +81,9 @@ _TRIED_KB, _TRIED_AT = (1000.0, 10.0), ((-0.01, 0.0), (0.0, -0.3), (0.002, 0.0),
 
 
 def _not_affine(cls: type[StageLaw]) -> str:
-    """Where an affine law's ``force`` is not K x + B ẋ at its parameters' sample values (:meth:`Param.sample`), or
-    "" (also where a call raises: what cannot be tried is not refused; the run names the law if it raises there)."""
+    """Where an affine law's ``force`` is not K x + B ẋ, (K, B) = ``coefficients(k, b, p)``, at its parameters' sample
+    values (:meth:`Param.sample`), or "" (also where a call raises: what cannot be tried is not refused; the run names
+    the law if it raises there). Short: the import's error quotes it (scene.user_laws)."""
     k, b = _TRIED_KB
     p = tuple(param.sample() for param in cls.params)
     try:
@@ -94,8 +94,8 @@ def _not_affine(cls: type[StageLaw]) -> str:
     for x, xdot, F in tried:
         if not abs(F - (K * x + B * xdot)) <= 1e-9 * (abs(K * x) + abs(B * xdot)) + 1e-12:
             at = "".join(f", {q.name} = {v:g}" for q, v in zip(cls.params, p, strict=True))
-            return (f"its force gives F = {F:g} N at x = {x:g} m, ẋ = {xdot:g} m/s where K x + B ẋ = "
-                    f"{K * x + B * xdot:g} N (k = {k:g} N/m, b = {b:g} N·s/m{at}; K = {K:g}, B = {B:g})")
+            return (f"its force at x = {x:g} m, ẋ = {xdot:g} m/s is {F:g} N, not K x + B ẋ = {K * x + B * xdot:g} N "
+                    f"(k = {k:g}, b = {b:g}{at})")
     return ""
 
 
