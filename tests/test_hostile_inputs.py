@@ -647,9 +647,99 @@ def round3_cases(tmp: Path) -> list[Case]:
     return cases
 
 
+# ---- round 4: laws' flags, a friction law's negative coefficient, a phase that changes its controller's kind ----
+#: a user's law module whose flag its register refuses at import: (its source, a piece of stderr)
+ROUND4_FLAGS: dict[str, tuple[str, str]] = {
+    "stage_affine_text": (STAGE + '    name = "affine_text"\n    affine = "yes"\n',
+                          "stage law 'affine_text': affine must be True or False, got 'yes'"),
+    "stage_affine_not": (STAGE + '    name = "affine_not"\n    affine = True\n    @staticmethod\n'
+                         '    def force(k, b, p, x, xdot):\n        return max(k * x + b * xdot, 0.0)\n',
+                         "stage law 'affine_not': affine = True, but its force at x = -0.01 m, ẋ = 0 m/s is 0 N, "
+                         "not K x + B ẋ = -10 N (k = 1000, b = 10): declare affine = False"),
+    "scaled": (
+        STAGE + '    name = "affine_double"\n    affine = True\n    params = (Param("g", "-", "gain", 2.0),)\n'
+        '    @staticmethod\n    def force(k, b, p, x, xdot):\n        return p[0] * k * x + b * xdot\n',
+        "stage law 'affine_double': affine = True, but its force at x = -0.01 m, ẋ = 0 m/s is -20 N, not K x + B ẋ "
+        "= -10 N (k = 1000, b = 10, g = 2): declare affine = False"),
+    "friction_constant_number": (FRICTION + '(FrictionLaw):\n    name = "constant_one"\n    constant = 1\n',
+                                 "friction law 'constant_one': constant must be True or False, got 1"),
+    "friction_constant_not": (FRICTION + '(FrictionLaw):\n    name = "constant_not"\n    constant = True\n'
+                              '    params = (Param("w", "s/m", "fall", 1.0),)\n    @staticmethod\n'
+                              '    def coefficient(mu_s, mu_k, p, speed):\n'
+                              '        return mu_k + (mu_s - mu_k) / (1.0 + p[0] * speed)\n',
+                              "friction law 'constant_not': constant = True, but its mu at slip speed 0 m/s is 0.8, "
+                              "not mu_k = 0.5 (mu_s = 0.8, w = 1): declare constant = False"),
+    "controller_uses_forces_text": (LAW + '    name = "forces_text"\n    uses_forces = "False"\n' + COMMAND,
+                                    "controller 'forces_text': uses_forces must be True or False, got 'False'"),
+    "controller_needs_gravity_none": (LAW + '    name = "gravity_none"\n    needs_gravity = None\n' + COMMAND,
+                                      "controller 'gravity_none': needs_gravity must be True or False, got None"),
+    "controller_reads_orientation_int": (LAW + '    name = "orientation_int"\n    reads_orientation = 0\n' + COMMAND,
+                                         "controller 'orientation_int': reads_orientation must be True or False"),
+    "kind_motorized_text": (KIND.replace("motorized = True", 'motorized = "True"') + "    name = 'motorized_text'\n",
+                            "drive kind 'motorized_text': motorized must be True or False, got 'True'"),
+    "kind_has_voltage_int": (KIND + "    name = 'voltage_int'\n    has_voltage = 1\n",
+                             "drive kind 'voltage_int': has_voltage must be True or False, got 1"),
+}
+
+#: a user's friction law on B1's sliding tip: (its class's body, how it gives μ, a piece of stderr)
+NEGATIVE = ("from contactdyn.laws import FrictionLaw, register_friction_law\n\n\n@register_friction_law\n"
+            "class Negative(FrictionLaw):\n    name = {name!r}\n\n")
+ROUND4_FRICTION: dict[str, tuple[str, str]] = {
+    "coefficient_negative": ("    @staticmethod\n    def coefficient(mu_s, mu_k, p, speed):\n"
+                             "        return mu_k - 10.0 + 0.0 * speed\n", "returned μ = -9.6"),
+    "kinetic_negative": ("    @classmethod\n    def kinetic(cls, spec, speed):\n"
+                         "        return spec.mu_k - 10.0 + 0.0 * speed\n", "returned μ = -9.6"),
+    "coefficient_minus_inf": ("    @staticmethod\n    def coefficient(mu_s, mu_k, p, speed):\n"
+                              "        return mu_k - 1e308 * 10.0 if speed > 0.0 else mu_k\n", "returned μ = -inf"),
+}
+
+
+def round4_cases(tmp: Path) -> list[Case]:
+    cases = []
+    for name, (source, piece) in ROUND4_FLAGS.items():
+        (tmp / f"law4_{name}.py").write_text(source)
+        (tmp / f"law4_{name}.toml").write_text(f'imports = ["law4_{name}"]\n' + B1)
+        cases.append((f"r4/flag/{name}", ["run", str(tmp / f"law4_{name}.toml"), *FAST], 2, piece))
+    (tmp / "law4_bind_flag.py").write_text(LAW + '    name = "bind_flag"\n    def bind(self, context):\n'
+                                           '        self.uses_forces = "yes"\n' + COMMAND)
+    controller = B1[B1.index("[controller]"):B1.index("[[phase]]")]
+    (tmp / "law4_bind_flag.toml").write_text('imports = ["law4_bind_flag"]\n' + B1.replace(
+        controller, '[controller]\nkind = "bind_flag"\n\n'))
+    cases.append(("r4/flag/bind_sets_uses_forces", ["run", str(tmp / "law4_bind_flag.toml"), *FAST], 1,
+                  "controller 'bind_flag' (law4_bind_flag.py) set uses_forces = 'yes': expected True or False"))
+    tip = 'tangent.law = "{name}"\ntangent.mu_s = 0.6\ntangent.mu_k = 0.4'
+    for name, (body, piece) in ROUND4_FRICTION.items():
+        (tmp / f"mu4_{name}.py").write_text(NEGATIVE.format(name=f"mu4_{name}") + body)
+        scene = tmp / f"mu4_{name}.toml"
+        scene.write_text(f'imports = ["mu4_{name}"]\n' + B1.replace("tangent.mu = 0.4", tip.format(name=f"mu4_{name}")))
+        for path in ("compiled", "interpreted"):
+            said = (f"contactdyn: error: t = 0 s: friction law 'mu4_{name}' (mu4_{name}.py) {piece} at slip speed 0.15 "
+                    "m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': expected a coefficient >= 0 (friction opposes the "
+                    "slip)\n")
+            cases.append((f"r4/friction/{name}/{path}", ["run", str(scene), *FAST, "--path", path], 1, said))
+    joint = ('[phase.controller]\nkind = "joint_pd"\nkp = {kp}\nkd = 10.0\n[phase.reference]\nspace = "joint"\n'
+             'start = [0.3, -1.3]\n')
+    phase = B1[B1.index("[[phase]]"):]
+    for name, text, code, piece in [  # B1's [controller] is a task PD with kp [N/m], kd and axes
+        ("joint_pd_phase_runs", joint.format(kp=100.0), 0, ""),
+        ("joint_pd_phase_own_key", joint.format(kp=-1.0), 2,
+         "phase[0].controller.kp: expected a number >= 0 [N·m/rad], found -1.0\n"),
+    ]:
+        (tmp / f"phase4_{name}.toml").write_text(B1.replace(phase, '[[phase]]\nname = "joint"\n' + text))
+        cases.append((f"r4/phase/{name}", ["run", str(tmp / f"phase4_{name}.toml"), *FAST, "--out",
+                                           str(tmp / name)], code, piece))
+    same = B1.replace("kp = 2000.0", "kp = -2000.0").replace('[[phase]]\nname = "slide"',
+                                                             '[[phase]]\nname = "slide"\ncontroller.kd = 50.0')
+    (tmp / "phase4_inherited_key.toml").write_text(same)
+    cases.append(("r4/phase/inherited_key_named_where_written", ["run", str(tmp / "phase4_inherited_key.toml"),
+                                                                 *FAST], 2,
+                  "controller.kp (inherited by phase[0].controller): expected a number >= 0 [N/m], found -2000.0\n"))
+    return cases
+
+
 BUILDERS = {"scenes": scene_cases, "overrides": lambda _: override_cases(), "urdfs": urdf_cases,
             "run_files": run_file_cases, "round2": round2_cases,
-            "round3": round3_cases}
+            "round3": round3_cases, "round4": round4_cases}
 
 
 def test_corpus_has_at_least_100_cases(tmp_path):
@@ -661,7 +751,7 @@ def test_corpus_has_at_least_100_cases(tmp_path):
 
 
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2", "round3"])
+@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2", "round3", "round4"])
 def test_hostile_inputs(tmp_path, kind):
     check(BUILDERS[kind](tmp_path), tmp_path)
 

@@ -23,7 +23,8 @@ from pathlib import Path
 from ..errors import ContactdynError, SimulationError
 
 __all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file",
-           "raised_calling", "counted_states", "checked_config"]
+           "raised_calling", "counted_states", "checked_config", "negative_friction_error", "kinetic_coefficient",
+           "checked_flags"]
 
 PACKAGE = __name__.split(".")[0] + "."  #: "contactdyn.": the package's own laws are not a user's
 _CALLING = "_contactdyn_calling"  #: an exception's attribute: (kind, class) of the law whose call raised it
@@ -104,6 +105,29 @@ def non_finite_error(family: str, law: type, args: tuple, value, t: float | None
     return LawError(kind, law.name, law_file(law), what(law, args, value), None, t)
 
 
+def negative_friction_error(spec, contact: str, speed: float, value: float, t: float | None = None) -> LawError:
+    """The LawError of the friction law of contact ``contact`` (its ``spec``, a FrictionSpec) that returned the
+    coefficient ``value`` < 0 at slip speed ``speed`` [m/s]: a negative μ pushes a slide along (the run stops at the
+    first call that gets one, compiled or interpreted: :meth:`~contactdyn.model.pipeline.pipeline.Pipeline.failed_call`;
+    an impact's, :func:`kinetic_coefficient`)."""
+    from .friction_laws import FRICTION_LAWS
+
+    law = FRICTION_LAWS[spec.law]
+    what = _friction_returned(law, (spec.mu_s, spec.mu_k, spec.params, speed), value)
+    return LawError("friction law", law.name, law_file(law), f"{what} on contact {contact!r}: expected a coefficient "
+                    ">= 0 (friction opposes the slip)", None, t)
+
+
+def kinetic_coefficient(spec, contact: str, speed: float, t: float | None = None) -> float:
+    """μ [-] of contact ``contact``'s friction ``spec`` (a FrictionSpec) at slip speed ``speed`` [m/s] at t [s]; its
+    law returning μ < 0 is its LawError (:func:`negative_friction_error`)."""
+    with naming_laws(t):
+        mu = float(spec.mu(speed))
+    if mu < 0.0:
+        raise negative_friction_error(spec, contact, speed, mu, t)
+    return mu
+
+
 def _stage_returned(law: type, args: tuple, value) -> str:
     k, b, p, x, xdot = args
     return (f"returned F = {value} N at x = {x:.6g} m, ẋ = {xdot:.6g} m/s (k = {k:.6g} N/m, b = {b:.6g} N·s/m"
@@ -158,6 +182,19 @@ def counted_states(ctl) -> int:
         raise LawError("controller", ctl.name, law_file(type(ctl)), f"set n_states = {ctl.n_states!r}: expected an "
                        f"integer in [0, {MAX_STATES}] (the count of its own states)")
     return int(ctl.n_states)
+
+
+def checked_flags(ctl) -> None:
+    """``ctl``'s flags (``uses_forces``, ``needs_gravity``, ``reads_orientation``) as its class or its bind set them: a
+    LawError unless each is True or False (its class's are checked where it registers: laws.params)."""
+    from .controllers.base import Controller
+    from .params import flags
+
+    for flag in flags(Controller):
+        value = getattr(ctl, flag)
+        if not isinstance(value, bool):
+            raise LawError("controller", ctl.name, law_file(type(ctl)), f"set {flag} = {value!r}: expected True or "
+                           "False")
 
 
 def checked_config(kind: str, config):

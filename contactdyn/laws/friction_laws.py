@@ -110,8 +110,29 @@ TABLE_KEYS = ("model", "directions", "law", "mu", "mu_s", "mu_k", "viscous", "en
 def register_friction_law(cls: type[FrictionLaw]) -> type[FrictionLaw]:
     """Make ``cls`` a law scenes can name (``tangent.law = cls.name``)."""
     check_declaration(cls, "friction law", FrictionLaw, TABLE_KEYS)
+    problem = _not_constant(cls) if cls.constant else ""
+    if problem:
+        raise ValueError(f"friction law {cls.name!r}: constant = True, but {problem}: declare constant = False")
     claim_name(FRICTION_LAWS, cls, "friction law")
     return cls
+
+
+_TRIED_MU, _TRIED_SPEEDS = (0.8, 0.5), (0.0, 1e-4, 0.01, 0.1, 1.0, 10.0)  #: (μ_s, μ_k), slip speeds [m/s] tried
+
+
+def _not_constant(cls: type[FrictionLaw]) -> str:
+    """Where a constant law's coefficient is not μ_k (the model then reads μ_k, not the law) at its parameters'
+    sample values (:meth:`Param.sample`), or "" (also where a call raises: what cannot be tried is not refused)."""
+    spec = FrictionSpec(*_TRIED_MU, 0.0, cls.name, tuple(p.sample() for p in cls.params))
+    try:
+        tried = [(v, float(cls.kinetic(spec, v))) for v in _TRIED_SPEEDS]
+    except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
+        return ""
+    for speed, mu in tried:
+        if not abs(mu - spec.mu_k) <= 1e-12:
+            at = "".join(f", {q.name} = {v:g}" for q, v in zip(cls.params, spec.params, strict=True))
+            return f"its mu at slip speed {speed:g} m/s is {mu:g}, not mu_k = {spec.mu_k:g} (mu_s = {spec.mu_s:g}{at})"
+    return ""
 
 
 @register_friction_law

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from ..scene.reader import Reader
 
-__all__ = ["Param", "read_params", "with_defaults", "claim_name", "check_declaration"]
+__all__ = ["Param", "read_params", "with_defaults", "claim_name", "check_declaration", "flags"]
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,8 @@ def check_declaration(cls: object, family: str, base: type, reserved: tuple[str,
     ``reserved`` (the keys of the tables the law is read from: the table would give one value to both, or read the
     key as the wrong type), each with bounds that hold a value and its example in them, and its default too where the
     reader checks the defaults (``read_defaults``; a drive kind's default may be a value a scene cannot write: 0, no
-    wheel); else a ValueError naming it."""
+    wheel), and its flags (``base``'s bool attributes: ``affine``, ``constant``, ``uses_forces``, ...) a bool each;
+    else a ValueError naming it."""
     if not isinstance(cls, type) or not issubclass(cls, base):
         raise ValueError(f"a {family} must subclass contactdyn.laws.{base.__name__}, got {cls!r}")
     if not isinstance(cls.name, str) or not cls.name.isidentifier():
@@ -111,6 +112,16 @@ def check_declaration(cls: object, family: str, base: type, reserved: tuple[str,
         problem = _bounds_problem(p, read_defaults)
         if problem:
             raise ValueError(f"{family} {cls.name!r}: parameter {p.name!r} {problem}")
+    for flag in flags(base):
+        value = getattr(cls, flag)
+        if not isinstance(value, bool):  # (a flag's truth decides the physics: "no" would read as True)
+            raise ValueError(f"{family} {cls.name!r}: {flag} must be True or False, got {value!r}")
+
+
+def flags(base: type) -> list[str]:
+    """The flags a family's ``base`` declares (its class attributes that are a bool: ``affine``, ``constant``,
+    ``uses_forces``, ``motorized``, ...)."""
+    return [name for k in reversed(base.__mro__) for name, value in vars(k).items() if isinstance(value, bool)]
 
 
 def _bounds_problem(p: Param, read_default: bool) -> str:

@@ -67,8 +67,36 @@ TABLE_KEYS = ("k", "b", "law", "m", "model", "direction", "directions", "k_int",
 def register_stage_law(cls: type[StageLaw]) -> type[StageLaw]:
     """Make ``cls`` a law scenes can name (``law = cls.name``)."""
     check_declaration(cls, "stage law", StageLaw, TABLE_KEYS)
+    problem = _not_affine(cls) if cls.affine else ""
+    if problem:
+        raise ValueError(f"stage law {cls.name!r}: affine = True, but {problem}: declare affine = False")
     claim_name(STAGE_LAWS, cls, "stage law")
     return cls
+
+
+#: (k [N/m], b [N·s/m]) and the (x [m], ẋ [m/s]) at which an affine declaration is tried (both signs: a junction's
+#: stage is stretched too)
+_TRIED_KB, _TRIED_AT = (1000.0, 10.0), ((-0.01, 0.0), (0.0, -0.3), (0.002, 0.0), (0.0, 0.2), (0.05, -0.3),
+                                        (-0.02, 0.4))
+
+
+def _not_affine(cls: type[StageLaw]) -> str:
+    """Where an affine law's ``force`` is not K x + B ẋ, (K, B) = ``coefficients(k, b, p)``, at its parameters' sample
+    values (:meth:`Param.sample`), or "" (also where a call raises: what cannot be tried is not refused; the run names
+    the law if it raises there). Short: the import's error quotes it (scene.user_laws)."""
+    k, b = _TRIED_KB
+    p = tuple(param.sample() for param in cls.params)
+    try:
+        K, B = map(float, cls.coefficients(k, b, p))
+        tried = [(x, xdot, float(cls.force(k, b, p, x, xdot))) for x, xdot in _TRIED_AT]
+    except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
+        return ""
+    for x, xdot, F in tried:
+        if not abs(F - (K * x + B * xdot)) <= 1e-9 * (abs(K * x) + abs(B * xdot)) + 1e-12:
+            at = "".join(f", {q.name} = {v:g}" for q, v in zip(cls.params, p, strict=True))
+            return (f"its force at x = {x:g} m, ẋ = {xdot:g} m/s is {F:g} N, not K x + B ẋ = {K * x + B * xdot:g} N "
+                    f"(k = {k:g}, b = {b:g}{at})")
+    return ""
 
 
 def kelvin_voigt(law: str, k: float, b: float, p: tuple[float, ...]) -> tuple[float, float] | None:

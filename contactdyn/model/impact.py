@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import SimulationError
+from ..laws.failures import kinetic_coefficient
 from .constraints import contact_row, impulse_solve, velocity_rows
 from .contact import Contact, ContactMode
 from .friction import direction_of, in_cone, slip_velocity
@@ -123,7 +124,7 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     own = system.contacts.index(contact) if contact is not None else -1
     if k and modes[own].stuck:  # the impact's own stick: tried jammed, like a contact at rest
         held[own] = modes[own].with_(stuck=False)
-    others = _sliding_into(system, kins, modes, contact, qd_minus)  #: index -> (d, μ_k) of the others sliding
+    others = _sliding_into(system, kins, modes, contact, qd_minus, t)  #: index -> (d, μ_k) of the others sliding
     impulses: dict = {}
 
     def solve(slide=None, jam=False):  # slide: (d, μ) of the impact's own contact
@@ -142,7 +143,7 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
     touched = contact if arriving else None  #: the contact whose touch the impact is: never let go
     for _ in range(4 * len(system.contacts) + 4):
         own_held = contact is not None and held[own].touching  # (at a limit it may be let go: then no own branch)
-        qd_plus, P_n, P_t, d, jammed = _own_contact(system, contact if own_held else None, kin, vt_minus, solve)
+        qd_plus, P_n, P_t, d, jammed = _own_contact(system, contact if own_held else None, kin, vt_minus, solve, t)
         j = _unilateral_change(system, kins, modes, held, touched, impulses, qd_plus)
         if j is not None:  # let go a pulling contact, or hold again one let go that would approach
             held[j] = modes[j] if not held[j].touching else held[j].separated()
@@ -157,7 +158,7 @@ def impact(system, t: float, x: np.ndarray, modes: list[ContactMode], contact: C
         for j, push in outside:  # slide from rest where the impulse pushed, with the kinetic friction at rest
             c = system.contacts[j]
             held[j] = held[j].with_(stuck=False, slip=direction_of(push), from_rest=True)
-            others[j] = (np.array(held[j].slip), float(c.friction.mu(0.0)))
+            others[j] = (np.array(held[j].slip), kinetic_coefficient(c.friction, c.name, 0.0, t))
             released[c.name] = held[j].slip
     else:
         raise SimulationError(f"impact at t = {t:.9g} s: no set of the touching contacts holds with pushing "
@@ -183,10 +184,10 @@ def _outcome(system, modes, held, others, impulses) -> tuple[tuple, tuple, dict]
     return separated, jammed_too, slid
 
 
-def _sliding_into(system, kins, modes, contact, qd_minus) -> dict[int, tuple[np.ndarray, float]]:
+def _sliding_into(system, kins, modes, contact, qd_minus, t: float) -> dict[int, tuple[np.ndarray, float]]:
     """Index -> (d, μ_k) of every touching contact other than ``contact`` that slides into the impact with a normal
     row and friction: d its slip direction before it (tangent coordinates), μ_k at that slip speed; one within the
-    stick band slides on untilted (its direction is not defined)."""
+    stick band slides on untilted (its direction is not defined). A law's μ < 0 is its LawError at t [s]."""
     out = {}
     for j, (c, m) in enumerate(zip(system.contacts, modes, strict=True)):
         if (c is contact or not m.touching or m.stuck or c.friction is None or not len(c.tangents)
@@ -195,7 +196,7 @@ def _sliding_into(system, kins, modes, contact, qd_minus) -> dict[int, tuple[np.
         vt = slip_velocity(system, c, kins[j], qd_minus)
         speed = float(np.linalg.norm(vt))
         if speed > system.slip_band:
-            out[j] = (vt / speed, float(c.friction.mu(speed)))
+            out[j] = (vt / speed, kinetic_coefficient(c.friction, c.name, speed, t))
     return out
 
 
@@ -239,8 +240,9 @@ def _unilateral_change(system, kins, modes, held, contact, impulses, qd_plus) ->
     return found
 
 
-def _own_contact(system, contact, kin, vt_minus, solve):
-    """The impact's own contact: (Q̇⁺, P_n, P_t, d, jammed) by the sliding or jamming branch (see impact)."""
+def _own_contact(system, contact, kin, vt_minus, solve, t: float):
+    """The impact's own contact: (Q̇⁺, P_n, P_t, d, jammed) by the sliding or jamming branch (see impact); a law's μ < 0
+    is its LawError at t [s]."""
     fr, k = (contact.friction, len(contact.tangents)) if contact is not None else (None, 0)
     d = np.zeros(k)
     if fr is None or not k:
@@ -250,7 +252,7 @@ def _own_contact(system, contact, kin, vt_minus, solve):
     jammed = True
     if speed > system.slip_band:
         d = vt_minus / speed
-        mu = float(fr.mu(speed))  # the kinetic coefficient at the slip speed before the impact
+        mu = kinetic_coefficient(fr, contact.name, speed, t)  # the kinetic coefficient at the slip speed before
         qd_plus, P_n, _ = solve(slide=(d, mu))
         P_t = -mu * P_n * d
         jammed = float(slip_velocity(system, contact, kin, qd_plus) @ d) < 0.0
@@ -258,7 +260,7 @@ def _own_contact(system, contact, kin, vt_minus, solve):
         qd_plus, P_n, P_t = solve(jam=True)
         if not in_cone(P_t, P_n, fr.mu_s):  # holding needs more than the cone gives: slide where the impulse pushes
             d = -P_t / float(np.linalg.norm(P_t))
-            mu = float(fr.mu(0.0))  # sliding from rest
+            mu = kinetic_coefficient(fr, contact.name, 0.0, t)  # sliding from rest
             qd_plus, P_n, _ = solve(slide=(d, mu))
             P_t = -mu * P_n * d
             jammed = False

@@ -59,7 +59,7 @@ from ..laws.controllers import CONTROLLERS
 from ..laws.controllers.base import BindContext, Controller
 from ..laws.controllers.sampled import SampledController
 from ..laws.drives import Drives
-from ..laws.failures import counted_states, naming_laws
+from ..laws.failures import checked_flags, counted_states, naming_laws
 from ..numerics.twins import current
 from ..robot.body import ArticulatedBody
 from ..robot.posture import start_posture
@@ -464,8 +464,8 @@ def assign_first_order_slots(n_first: int, controller_states: list[int], record_
 
 
 def _bound_controllers(scene: Scene, joint_names: list[str], motorized: np.ndarray, nv: int) -> list[Controller]:
-    """The phases' controllers, built and bound: a user's law raising there is its LawError, its n_states is checked,
-    and a law that gives voltages needs a motor on every joint (else its voltages would act as torques)."""
+    """The phases' controllers, built and bound: a user's law raising there is its LawError, its n_states and flags
+    are checked, and a law that gives voltages needs a motor on every joint (else its voltages would act as torques)."""
     controllers = []
     with naming_laws():
         for i, p in enumerate(scene.phases):
@@ -474,6 +474,7 @@ def _bound_controllers(scene: Scene, joint_names: list[str], motorized: np.ndarr
             ctl.bind(context)
             law = ctl.inner if isinstance(ctl, SampledController) else ctl
             counted_states(law)  # (a sampled one's: its law's, named; the hold adds nv slots of its own)
+            checked_flags(law)
             if law.outputs == "voltage":
                 context.require_motors(f"{p.controller_key}.kind", f"a controller that gives voltages ({law.name!r})")
             controllers.append(ctl)

@@ -43,7 +43,8 @@ MEANINGS: dict[str, str] = {
     "body": "active environment bodies (carts; bodies on up to three orthogonal slides), one table per body: "
             "[body.<name>]",
     "contact": "contact interfaces, one table per contact: [contact.<name>]",
-    "controller": "the controller of every phase; a phase's own [phase.controller] table overrides its keys",
+    "controller": "the controller of every phase; a phase's own [phase.controller] table overrides its keys (one "
+                  "that names another kind takes only sample_rate, delay, hold and sensor from it)",
     "phase": "task phases, in order ([[phase]]); none: one phase 'main' over the whole run",
     "solver": "integrator settings",
     # robot
@@ -464,8 +465,11 @@ def markdown() -> str:
              "Generated from the scene reader by `python -m contactdyn.scene.keys` (a test checks it is "
              "current); `contactdyn list keys [PREFIX]` prints the same. `<contact>`, `<body>`: a name of your "
              "choosing; `[]`: every item of an array of tables (`[[phase]]`, `[[phase.force]]`). The controller's "
-             "keys go in `[controller]` (every phase) or `[phase.controller]` (that phase). \"when\": the key is "
-             "read only under that `kind` or `model` of its table. Units are SI.", ""]
+             "keys go in `[controller]` (every phase) or `[phase.controller]` (that phase: its keys over "
+             "`[controller]`'s; a phase whose table names another `kind` takes only the sampling keys `sample_rate`, "
+             "`delay`, `hold` and `sensor` from `[controller]`, not the other kind's parameters, and an error in a key "
+             "it took is named where the file has it, `controller.kp (inherited by phase[1].controller)`). "
+             "\"when\": the key is read only under that `kind` or `model` of its table. Units are SI.", ""]
     section = None
     for d in reference():
         if _section(d.key) != section:

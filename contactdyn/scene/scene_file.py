@@ -14,6 +14,7 @@ import copy
 import math
 import re
 import tomllib
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -656,16 +657,45 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
         until: float | str = until_raw
     else:
         until = r.float("until", duration, lo=0.0, unit="s")
-    merged = {**default_controller.data, **r.raw("controller", {})} if isinstance(r.data.get("controller", {}), dict) \
-        else r.raw("controller")
+    merged, inherited = _phase_controller(r.raw("controller", {}), default_controller.data, DEFAULT_KIND)
     where = r.key("controller") if "controller" in r.data else default_controller.path  # (the file's table)
-    with naming_laws():  # (a user's read raising: its LawError)
-        controller, sampling = read_controller(Reader(merged, where, r.file))
+    with naming_laws(), _named_where_written(inherited, where, default_controller.path):  # (a user's read raising:
+        controller, sampling = read_controller(Reader(merged, where, r.file))  # its LawError)
     controller = checked_config(merged.get("kind", DEFAULT_KIND), controller)
     reference = _read_reference(r.sub("reference"), bodies or {}) if r.has("reference") else None
     forces = tuple(_read_force(f, contacts) for f in r.tables("force"))
     r.finish()
     return PhaseSpec(name, until, controller, reference, forces, sampling, where)
+
+
+def _phase_controller(own: object, top: dict, default_kind: str) -> tuple[object, set[str]]:
+    """A phase's controller table (``own``, its ``[phase.controller]``) over the scene's (``top``, ``[controller]``)
+    and the keys it takes from the scene's. A phase that names another kind than the scene's takes only the keys of
+    every controller table (``sample_rate``, ``delay``, ``hold``, ``sensor``: the sampling), not the other kind's
+    parameters (a task PD's ``axes`` are no joint PD's; its ``kp`` is in N/m, not N·m/rad)."""
+    if not isinstance(own, dict):
+        return own, set()  # (the reader says it is no table)
+    from ..laws.controllers.base import TABLE_KEYS
+
+    other = "kind" in own and own["kind"] != top.get("kind", default_kind)
+    inherited = {k for k in top if k not in own and (not other or k in TABLE_KEYS)}
+    return {**{k: top[k] for k in inherited}, **own}, inherited
+
+
+@contextmanager
+def _named_where_written(inherited: set[str], where: str, top: str):
+    """Inside: an error in a key the phase's controller table (at ``where``) took from the scene's (at ``top``) names
+    the key where the file has it, ``controller.kp (inherited by phase[1].controller)``."""
+    try:
+        yield
+    except SceneError as exc:
+        name = exc.key[len(where) + 1:].split(".")[0].split("[")[0] if exc.key.startswith(where + ".") else None
+        if name not in inherited or where == top:
+            raise
+        key = f"{top}.{exc.key[len(where) + 1:]} (inherited by {where})"
+        exc.args = (exc.args[0].replace(exc.key, key, 1),)
+        exc.key = key
+        raise
 
 
 def _read_reference(r: Reader, bodies: dict[str, BodySpec]) -> ReferenceSpec:

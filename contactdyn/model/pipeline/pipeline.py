@@ -24,6 +24,7 @@ rejects, and it is counted; a law that returned NaN or ±inf there is named (``P
 
 from __future__ import annotations
 
+import math
 import traceback
 from contextlib import contextmanager, nullcontext
 
@@ -33,7 +34,7 @@ from numba import types
 from ...errors import SimulationError
 from ...laws.abi import checking_laws, raise_python_stage_error
 from ...laws.drive_abi import checking_drives
-from ...laws.failures import LawError, is_users, naming_laws, no_command_error, non_finite_error
+from ...laws.failures import LawError, is_users, kinetic_coefficient, naming_laws, no_command_error, non_finite_error
 from ...numerics.compile_cache import njit
 from ...numerics.linalg import put
 from ...numerics.native_call import address, call_at, declare, giving_handles
@@ -112,7 +113,7 @@ from .pack import (
 )
 from .robot_terms import frame_terms, robot_part, robot_terms
 
-__all__ = ["call", "rates_at", "samples_at", "law_at", "stage_addresses", "call_time", "Pipeline"]
+__all__ = ["call", "rates_at", "samples_at", "law_at", "stage_addresses", "call_time", "negative_friction", "Pipeline"]
 
 
 @njit(cache=True)
@@ -337,6 +338,18 @@ def call_time(exc: BaseException) -> float | None:
     return float(times[-1]) if times and times[-1] is not None else None
 
 
+def negative_friction(system, modes, events, t: float) -> None:
+    """The LawError of a sliding contact's friction law that gives μ < 0 at the slip speed the call with no answer at
+    t [s] wrote into ``events`` (its :func:`.contacts._friction` stops there, compiled or interpreted: the law is
+    called again in Python); nothing where none does."""
+    for ci, (c, m) in enumerate(zip(system.contacts, modes, strict=True)):
+        fr, nt = c.friction, len(c.tangents)
+        if fr is None or fr.constant or not nt or not m.touching or m.stuck:
+            continue
+        at = EV_W * ci + EV_VT
+        kinetic_coefficient(fr, c.name, math.sqrt(sum(float(v) * float(v) for v in events[at:at + nt])), t)
+
+
 class Pipeline:
     """One mode packed and its call: ``rhs(t, x)`` the integrator's function, ``values()`` the last call's events.
     ``twins`` (:class:`~contactdyn.numerics.twins.Twins`): the call runs interpreted, as its twins (the mode packed
@@ -388,15 +401,18 @@ class Pipeline:
 
     def failed_call(self, t: float, x: np.ndarray, final: bool = False) -> np.ndarray:
         """ẋ where the call at (t [s], x) gave no answer (its status not 1). A law's own error is raised there (a
-        user's law's as its LawError): a Python stage's; a compiled law's, which its C function cannot carry out
-        (status -1; a user's controller with no finite command): the same call run once interpreted at (t, x) raises
-        it from the law's source (:meth:`_probe`); the controller's words where its command was not finite
-        (:meth:`controller_error`). Else the contact system was not finite (an overflowed trial state, a law's NaN):
-        NaN rates, which the step control rejects; a law that returned NaN or ±inf there is named where the caller
-        cannot go on (``final``), else the state is kept (``last_failed``: a run that fails names it)."""
+        user's law's as its LawError): a Python stage's; a friction law's μ < 0 (:func:`negative_friction`); a
+        compiled law's, which its C function cannot carry out (status -1; a user's controller with no finite
+        command): the same call run once interpreted at (t, x) raises it from the law's source (:meth:`_probe`); the
+        controller's words where its command was not finite (:meth:`controller_error`). Else the contact system was
+        not finite (an overflowed trial state, a law's NaN): NaN rates, which the step control rejects; a law that
+        returned NaN or ±inf there is named where the caller cannot go on (``final``), else the state is kept
+        (``last_failed``: a run that fails names it)."""
         raise_python_stage_error(t)
-        failed = self.controller_error(t, x)
         status = self.packed.events[-1]
+        if status < 0.0:  # (a friction law's μ < 0 stopped the call: .contacts._friction)
+            negative_friction(self.system, self.modes, self.packed.events, t)
+        failed = self.controller_error(t, x)
         if status < 0.0 and np.all(np.isfinite(x)):
             self.last_failed = (float(t), np.array(x, float))
         users = failed is not None and is_users(type(self.phase.controller))
