@@ -34,9 +34,12 @@ from ..model.friction import CONE_TOL, FORCE_ABS_TOL, direction_of, in_cone, sli
 from ..model.impact import project_velocity
 from ..model.joint_friction import STUCK
 
-__all__ = ["settle_together", "consistent_at_rest", "MAX_ITEMS", "ACCEL_TOL"]
+__all__ = ["settle_together", "consistent_at_rest", "MAX_ITEMS", "MAX_TRIALS", "ACCEL_TOL"]
 
-MAX_ITEMS = 8  #: items at rest (contacts and joints) searched together at most (3^8 trials at worst)
+MAX_ITEMS = 8  #: items at rest (contacts and joints) searched together at most
+#: modes tried at most per search, fewest slides first (each a solve, and a mode packed where it is new: ~ms): all
+#: 3^n of up to 3 items, the sticks and single slides of up to 8
+MAX_TRIALS = 27
 #: [-] a slide from rest is consistent where its acceleration along its slide is ≥ −ACCEL_TOL × (1 + |its
 #: acceleration|) [m/s² or rad/s²]: the solve's rounding
 ACCEL_TOL = 1e-9
@@ -137,18 +140,26 @@ def consistent_at_rest(system, evaluate, t: float, x: np.ndarray, modes, phase, 
     system.update_bodies(x)
     if _consistent(system, ev, x, modes, phase, contacts, joints):
         return x, modes, phase, False
-    options = _options(system, ev, modes, contacts, joints)
-    n = len(options)
+    for choice in _choices(_options(system, ev, modes, contacts, joints)):
+        xt, mt, pt = _trial(system, x, modes, phase, contacts, joints, choice)
+        system.robot.update(xt[:nv], xt[nQ:nQ + nv])
+        system.update_bodies(xt)
+        if _consistent(system, evaluate(t, xt, mt, pt), xt, mt, pt, contacts, joints, strictly=True):
+            return xt, mt, pt, True
+    return x, modes, phase, False
+
+
+def _choices(options: list[list]):
+    """The items' modes to try (one pick per item of its ``options``), fewest slides first, MAX_TRIALS at most."""
+    n, tried = len(options), 0
     for slides in range(n + 1):
         for sliding in combinations(range(n), slides):
             picks = [opts[1:] if k in sliding else opts[:1] for k, opts in enumerate(options)]
             for choice in product(*picks):
-                xt, mt, pt = _trial(system, x, modes, phase, contacts, joints, list(choice))
-                system.robot.update(xt[:nv], xt[nQ:nQ + nv])
-                system.update_bodies(xt)
-                if _consistent(system, evaluate(t, xt, mt, pt), xt, mt, pt, contacts, joints, strictly=True):
-                    return xt, mt, pt, True
-    return x, modes, phase, False
+                if tried == MAX_TRIALS:
+                    return
+                tried += 1
+                yield list(choice)
 
 
 def _decided_at(events: list[dict], t: float) -> set[str]:
