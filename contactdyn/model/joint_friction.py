@@ -27,7 +27,9 @@ and the events (located by the integrator, logged with the joint's name):
 
 Where the modes are decided at an instant (a run's or a phase's start, after any event:
 :meth:`~contactdyn.hybrid.transitions.Transitions.settle`), a stuck joint whose holding torque
-exceeds τ_s slips, and a stuck joint that moves (an impact gave it a velocity) slides along it.
+exceeds τ_s slips, and a stuck joint that moves (an impact gave it a velocity) slides along it. Joints and contacts
+at rest together are then checked together, each stick within its limit and each slide from rest accelerating along
+it, and searched for a mode that is where one is not (:mod:`contactdyn.hybrid.at_rest`).
 
 Impacts: a dry friction torque is bounded (|τ| ≤ τ_s), so over an impact (Δt → 0) it takes no
 impulse: the impact maps (:mod:`contactdyn.model.impact`) hold no stuck joint, and a stuck joint
