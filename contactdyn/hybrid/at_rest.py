@@ -9,8 +9,9 @@ set sliding from rest while the contact it pushed against is stuck, which the co
 through zero (``joint_stick``), whose decision makes the contact stick again, and so on: an event storm at one
 instant (``benchmarks/hard/stickslip.toml`` with dry friction on q2).
 
-:func:`consistent_at_rest` checks the mode the transitions left where a joint with dry friction is among two or more
-items at rest (stuck, within the stick band, or decided at this instant). Every item at rest must be *consistent*:
+:func:`consistent_at_rest` checks the mode the transitions left where a joint with dry friction is at rest: stuck,
+within the stick band, or so slow against its acceleration that it would reverse within ``solver.storm_window`` (a
+residual speed another item's stick left it). Every item at rest, joint or contact, must be *consistent*:
 
 - a stuck contact's friction within its cone, |F_f| ≤ μ_s F_n; a stuck joint's holding torque |λᵢ| ≤ τ_s;
 - a contact sliding from rest along d accelerates along it, d · ȧ_t ≥ 0 (ȧ_t: its slip's rate); a joint sliding
@@ -45,26 +46,38 @@ MAX_TRIALS = 27
 ACCEL_TOL = 1e-9
 
 
-def _contacts_at_rest(system, ev, modes, decided) -> list[int]:
-    """The touching contacts with friction that are stuck, slide within the stick band, or were decided at this
-    instant (by name in ``decided``: a stick just released slides from rest with its residual slip)."""
-    out = []
+def _resting(v: float, a: float, band: float, window: float) -> bool:
+    """Is an item moving at v [m/s or rad/s] with acceleration a at rest at this instant: within the stick band, or so
+    slow against its acceleration that it would reverse within the storm window (a residual speed another item's stick
+    left it, the projection's)?"""
+    return abs(v) <= band or (v * a < 0.0 and abs(v) <= abs(a) * window)
+
+
+def _contacts_at_rest(system, ev, x, modes) -> list[int]:
+    """The touching contacts with friction that are stuck or at rest (:func:`_resting`, along their slide)."""
+    out, nQ, window = [], system.nQ, system.scene.solver.storm_window
     for i, (c, m) in enumerate(zip(system.contacts, modes, strict=True)):
         if not m.touching or c.friction is None or not len(c.tangents):
             continue
-        if m.stuck or c.name in decided or float(np.linalg.norm(ev.slip[c.name])) <= system.slip_band:
-            out.append(i)
+        if not m.stuck:
+            d = np.asarray(m.slip)
+            v_t = np.asarray(ev.slip[c.name])
+            a_t = slip_acceleration(system, c, system.kinematics(c, x), ev.xdot[nQ:2 * nQ])
+            speed = float(np.linalg.norm(v_t))
+            if speed > system.slip_band and not (len(d) == 1 and _resting(float(d @ v_t), float(d @ a_t),
+                                                                            system.slip_band, window)):
+                continue
+        out.append(i)
     return out
 
 
-def _joints_at_rest(system, x, phase, decided) -> list[int]:
-    """The joints with dry friction off their limits that are stuck, slide within the stick band (|q̇ᵢ| ≤
-    ``solver.stick_velocity``, read in rad/s or m/s), or were decided at this instant (by name in ``decided``: a
-    velocity another item's stick left them, its projection's)."""
+def _joints_at_rest(system, x, ev, phase) -> list[int]:
+    """The joints with dry friction off their limits that are stuck or at rest (:func:`_resting`; |q̇ᵢ| read in rad/s
+    or m/s against ``solver.stick_velocity``)."""
     pressing = {i for i, _ in phase.limits}
-    nQ, names = system.nQ, system.joint_friction.names
+    nQ, band, window = system.nQ, system.slip_band, system.scene.solver.storm_window
     return [i for i, m in phase.joint_modes if i not in pressing and
-            (m == STUCK or names[i] in decided or abs(float(x[nQ + i])) <= system.slip_band)]
+            (m == STUCK or _resting(float(x[nQ + i]), float(ev.xdot[nQ + i]), band, window))]
 
 
 def _consistent(system, ev, x, modes, phase, contacts, joints, strictly: bool = False) -> bool:
@@ -125,19 +138,18 @@ def _options(system, ev, modes, contacts, joints) -> list[list]:
     return out + [[None, 1, -1] for _ in joints]
 
 
-def consistent_at_rest(system, evaluate, t: float, x: np.ndarray, modes, phase, decided=frozenset()):
+def consistent_at_rest(system, evaluate, t: float, x: np.ndarray, modes, phase):
     """(x, modes, phase, changed): the transitions' mode at (t [s], x) if every item at rest is consistent there
-    (or fewer than two items are at rest, or no joint), else the first consistent mode of the search (the module
-    docstring). ``evaluate(t, x, modes, phase)``: the run's LastEvaluation; ``decided``: the names of the items the
-    transitions decided at t (at rest, whatever their residual speed)."""
+    (or no joint is at rest), else the first consistent mode of the search (the module
+    docstring). ``evaluate(t, x, modes, phase)``: the run's LastEvaluation."""
     ev = evaluate(t, x, modes, phase)
-    contacts = _contacts_at_rest(system, ev, modes, decided)
-    joints = _joints_at_rest(system, x, phase, decided)
-    if not joints or len(contacts) + len(joints) < 2 or len(contacts) + len(joints) > MAX_ITEMS:
-        return x, modes, phase, False
     nQ, nv = system.nQ, system.nv
     system.robot.update(x[:nv], x[nQ:nQ + nv])
     system.update_bodies(x)
+    joints = _joints_at_rest(system, x, ev, phase)
+    contacts = _contacts_at_rest(system, ev, x, modes) if joints else []
+    if not joints or len(contacts) + len(joints) > MAX_ITEMS:
+        return x, modes, phase, False
     if _consistent(system, ev, x, modes, phase, contacts, joints):
         return x, modes, phase, False
     for choice in _choices(_options(system, ev, modes, contacts, joints)):
@@ -162,23 +174,12 @@ def _choices(options: list[list]):
                 yield list(choice)
 
 
-def _decided_at(events: list[dict], t: float) -> set[str]:
-    """The names of the items (contacts, joints) the events logged at t [s] name: those decided at this instant."""
-    names = set()
-    for e in reversed(events):
-        if e["t"] != t:
-            break
-        names.add(e["name"])
-    return names
-
-
 def settle_together(transitions, t: float, x: np.ndarray, modes, phase):
     """(x, modes, phase) after :func:`consistent_at_rest` on the transitions' mode at t [s]: a mode it changes is
     logged per item (``stick``/``slip``, ``joint_stick``/``joint_slip``/``joint_reverse``) and counted
     (``Result.stats["decided_together"]``)."""
     system, log = transitions.system, transitions.log
-    x_new, modes_new, phase_new, changed = consistent_at_rest(system, transitions.evaluate, t, x, modes, phase,
-                                                              _decided_at(log.events, t))
+    x_new, modes_new, phase_new, changed = consistent_at_rest(system, transitions.evaluate, t, x, modes, phase)
     if not changed:
         return x, modes, phase
     transitions.stats["decided_together"] += 1
