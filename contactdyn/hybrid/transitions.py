@@ -173,9 +173,10 @@ class Transitions:
 
     def start(self, t, x, modes, phase):
         """(x, modes, phase) at a run's start: :meth:`consistent`, the joints at rest on a limit (``phase.limits``)
-        pressing but those whose torque pulls, let go with no event (they never pressed); :meth:`settle_joints`."""
+        pressing but those whose torque pulls, let go with no event (they never pressed); :meth:`settle_joints`; the
+        items at rest checked together (:func:`~.at_rest.settle_together`)."""
         x, modes = self.consistent(t, x, modes, phase)
-        return self.release_pulling(t, x, modes, phase, logged=False)
+        return settle_together(self, t, *self.release_pulling(t, x, modes, phase, logged=False))
 
     def release_pulling(self, t, x, modes, phase, logged: bool = True):
         """Release, one at a time, the joints whose limit torque pulls (λ·side < 0) after an event (``logged``: as a
