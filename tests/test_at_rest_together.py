@@ -60,27 +60,27 @@ def test_the_search_runs_only_where_the_one_at_a_time_mode_is_contradicted(monke
     seen = []
     search = at_rest.consistent_at_rest
 
-    def spy(system, evaluate, t, x, modes, phase):
-        out = search(system, evaluate, t, x, modes, phase)
+    def spy(system, runner, t, x, modes, phase):
+        out = search(system, runner, t, x, modes, phase)
         if out[3]:
-            seen.append((system, evaluate, t, (x, modes, phase), out[:3]))
+            seen.append((system, runner, t, (x, modes, phase), out[:3]))
         return out
 
     monkeypatch.setattr(at_rest, "consistent_at_rest", spy)
     _run("stickslip, 0.5 N·m on q2")
     assert seen
-    for system, evaluate, t, before, after in seen:
+    for system, runner, t, before, after in seen:
         for (x, modes, phase), expected in ((before, False), (after, True)):
-            ev = evaluate(t, x, modes, phase)
             nQ = system.nQ
             system.robot.update(x[:system.nv], x[nQ:nQ + system.nv])
             system.update_bodies(x)
-            joints = at_rest._joints_at_rest(system, x, ev, phase)
-            contacts = at_rest._contacts_at_rest(system, ev, x, modes)
+            probe = at_rest._Probe(runner(modes, phase), t, x)
+            joints = at_rest._joints_at_rest(system, probe, phase)
+            contacts = at_rest._contacts_at_rest(system, probe, modes)
             assert joints
-            assert at_rest._consistent(system, ev, x, modes, phase, contacts, joints) is expected
+            assert at_rest._consistent(system, probe, modes, phase, contacts, joints) is expected
         x, modes, phase = after
-        ev = evaluate(t, x, modes, phase)
+        probe = at_rest._Probe(runner(modes, phase), t, x)
         for i, m in phase.joint_modes:  # a slide from rest leaves rest along its slide
             if m != 0:
-                assert m * ev.xdot[system.nQ + i] > 0.0
+                assert m * probe.xdot[system.nQ + i] > 0.0

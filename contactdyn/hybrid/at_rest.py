@@ -46,6 +46,27 @@ MAX_TRIALS = 27
 ACCEL_TOL = 1e-9
 
 
+class _Probe:
+    """What the checks read of a mode at (t [s], x): one plain call of its compiled call (ẋ and the event values: the
+    stuck contacts' friction, the normal forces, the slips, the stuck joints' holding torques), not an Evaluation."""
+
+    def __init__(self, mode, t: float, x: np.ndarray):
+        self.mode, self.t, self.x = mode, t, x
+        self.xdot = mode.rhs(t, x)
+
+    def hold(self, i: int) -> float:
+        return self.mode.joint_hold(self.t, self.x).get(i, 0.0)
+
+    def friction(self, ci: int) -> np.ndarray:
+        return self.mode.stick_force(ci, self.t, self.x)
+
+    def normal(self, ci: int) -> float:
+        return self.mode.normal_force(ci, self.t, self.x)
+
+    def slip(self, ci: int) -> np.ndarray:
+        return self.mode.slip(ci, self.t, self.x)
+
+
 def _resting(v: float, a: float, band: float, window: float) -> bool:
     """Is an item moving at v [m/s or rad/s] with acceleration a at rest at this instant: within the stick band, or so
     slow against its acceleration that it would reverse within the storm window (a residual speed another item's stick
@@ -53,16 +74,15 @@ def _resting(v: float, a: float, band: float, window: float) -> bool:
     return abs(v) <= band or (v * a < 0.0 and abs(v) <= abs(a) * window)
 
 
-def _contacts_at_rest(system, ev, x, modes) -> list[int]:
+def _contacts_at_rest(system, probe: _Probe, modes) -> list[int]:
     """The touching contacts with friction that are stuck or at rest (:func:`_resting`, along their slide)."""
     out, nQ, window = [], system.nQ, system.scene.solver.storm_window
     for i, (c, m) in enumerate(zip(system.contacts, modes, strict=True)):
         if not m.touching or c.friction is None or not len(c.tangents):
             continue
         if not m.stuck:
-            d = np.asarray(m.slip)
-            v_t = np.asarray(ev.slip[c.name])
-            a_t = slip_acceleration(system, c, system.kinematics(c, x), ev.xdot[nQ:2 * nQ])
+            d, v_t = np.asarray(m.slip), probe.slip(i)
+            a_t = slip_acceleration(system, c, system.kinematics(c, probe.x), probe.xdot[nQ:2 * nQ])
             speed = float(np.linalg.norm(v_t))
             if speed > system.slip_band and not (len(d) == 1 and _resting(float(d @ v_t), float(d @ a_t),
                                                                             system.slip_band, window)):
@@ -71,30 +91,30 @@ def _contacts_at_rest(system, ev, x, modes) -> list[int]:
     return out
 
 
-def _joints_at_rest(system, x, ev, phase) -> list[int]:
+def _joints_at_rest(system, probe: _Probe, phase) -> list[int]:
     """The joints with dry friction off their limits that are stuck or at rest (:func:`_resting`; |q̇ᵢ| read in rad/s
     or m/s against ``solver.stick_velocity``)."""
     pressing = {i for i, _ in phase.limits}
     nQ, band, window = system.nQ, system.slip_band, system.scene.solver.storm_window
+    x, xdot = probe.x, probe.xdot
     return [i for i, m in phase.joint_modes if i not in pressing and
-            (m == STUCK or _resting(float(x[nQ + i]), float(ev.xdot[nQ + i]), band, window))]
+            (m == STUCK or _resting(float(x[nQ + i]), float(xdot[nQ + i]), band, window))]
 
 
-def _consistent(system, ev, x, modes, phase, contacts, joints, strictly: bool = False) -> bool:
-    """Is every item at rest consistent in the Evaluation ``ev`` (the module docstring)? ``strictly``: a stuck item
+def _consistent(system, probe: _Probe, modes, phase, contacts, joints, strictly: bool = False) -> bool:
+    """Is every item at rest consistent where ``probe`` was taken (the module docstring)? ``strictly``: a stuck item
     inside its limit by the cone tests' slack (a trial's stick: at the limit itself its slip event would fire at
     once)."""
     nQ = system.nQ
-    qdd = ev.xdot[nQ:2 * nQ]
+    qdd = probe.xdot[nQ:2 * nQ]
     jf = system.joint_friction
     for i in contacts:
         c, m = system.contacts[i], modes[i]
         if m.stuck:
-            if not in_cone(ev.friction[c.name], ev.normal_force[c.name], c.friction.mu_s, strictly):
+            if not in_cone(probe.friction(i), probe.normal(i), c.friction.mu_s, strictly):
                 return False
             continue
-        kin = system.kinematics(c, x)
-        a_t = slip_acceleration(system, c, kin, qdd)
+        a_t = slip_acceleration(system, c, system.kinematics(c, probe.x), qdd)
         if float(np.asarray(m.slip) @ a_t) < -ACCEL_TOL * (1.0 + float(np.linalg.norm(a_t))):
             return False
     for i, m in phase.joint_modes:
@@ -102,7 +122,7 @@ def _consistent(system, ev, x, modes, phase, contacts, joints, strictly: bool = 
             continue
         if m == STUCK:
             limit = jf.static[i] * (1.0 - CONE_TOL) - FORCE_ABS_TOL if strictly else jf.static[i]
-            if abs(ev.joint_hold.get(i, 0.0)) > limit:
+            if abs(probe.hold(i)) > limit:
                 return False
         elif m * float(qdd[i]) < -ACCEL_TOL * (1.0 + abs(float(qdd[i]))):
             return False
@@ -128,37 +148,43 @@ def _trial(system, x, modes, phase, contacts, joints, choice):
     return x, modes, phase
 
 
-def _options(system, ev, modes, contacts, joints) -> list[list]:
+def _options(probe: _Probe, modes, contacts, joints) -> list[list]:
     """Per item its modes to try: stuck, then a slide where its holding force pushes, then the other way."""
     out = []
     for i in contacts:
-        c, m = system.contacts[i], modes[i]
-        push = direction_of(-np.asarray(ev.friction[c.name])) if m.stuck else tuple(m.slip)
+        push = direction_of(-probe.friction(i)) if modes[i].stuck else tuple(modes[i].slip)
         out.append([None, push, tuple(-v for v in push)])
     return out + [[None, 1, -1] for _ in joints]
 
 
-def consistent_at_rest(system, evaluate, t: float, x: np.ndarray, modes, phase):
+def consistent_at_rest(system, runner, t: float, x: np.ndarray, modes, phase):
     """(x, modes, phase, changed): the transitions' mode at (t [s], x) if every item at rest is consistent there
-    (or no joint is at rest), else the first consistent mode of the search (the module
-    docstring). ``evaluate(t, x, modes, phase)``: the run's LastEvaluation."""
-    ev = evaluate(t, x, modes, phase)
-    nQ, nv = system.nQ, system.nv
-    system.robot.update(x[:nv], x[nQ:nQ + nv])
-    system.update_bodies(x)
-    joints = _joints_at_rest(system, x, ev, phase)
-    contacts = _contacts_at_rest(system, ev, x, modes) if joints else []
-    if not joints or len(contacts) + len(joints) > MAX_ITEMS:
+    (or no joint is at rest), else the first consistent mode of the search (the module docstring).
+    ``runner(modes, phase)``: the run's mode (a PipelineMode: its plain call, :class:`_Probe`)."""
+    probe = _Probe(runner(modes, phase), t, x)
+    joints = _joints_at_rest(system, probe, phase)
+    if not joints:
         return x, modes, phase, False
-    if _consistent(system, ev, x, modes, phase, contacts, joints):
+    frictional = any(m.touching and c.friction is not None and len(c.tangents)
+                     for c, m in zip(system.contacts, modes, strict=True))
+    _kinematics(system, x, frictional)
+    contacts = _contacts_at_rest(system, probe, modes) if frictional else []
+    if len(contacts) + len(joints) > MAX_ITEMS or _consistent(system, probe, modes, phase, contacts, joints):
         return x, modes, phase, False
-    for choice in _choices(_options(system, ev, modes, contacts, joints)):
+    for choice in _choices(_options(probe, modes, contacts, joints)):
         xt, mt, pt = _trial(system, x, modes, phase, contacts, joints, choice)
-        system.robot.update(xt[:nv], xt[nQ:nQ + nv])
-        system.update_bodies(xt)
-        if _consistent(system, evaluate(t, xt, mt, pt), xt, mt, pt, contacts, joints, strictly=True):
+        _kinematics(system, xt, frictional)
+        if _consistent(system, _Probe(runner(mt, pt), t, xt), mt, pt, contacts, joints, strictly=True):
             return xt, mt, pt, True
     return x, modes, phase, False
+
+
+def _kinematics(system, x: np.ndarray, needed: bool) -> None:
+    """The robot's and bodies' kinematics at x, where ``needed`` (a touching contact with friction: its slip's rate)."""
+    if needed:
+        nQ, nv = system.nQ, system.nv
+        system.robot.update(x[:nv], x[nQ:nQ + nv])
+        system.update_bodies(x)
 
 
 def _choices(options: list[list]):
@@ -179,7 +205,7 @@ def settle_together(transitions, t: float, x: np.ndarray, modes, phase):
     logged per item (``stick``/``slip``, ``joint_stick``/``joint_slip``/``joint_reverse``) and counted
     (``Result.stats["decided_together"]``)."""
     system, log = transitions.system, transitions.log
-    x_new, modes_new, phase_new, changed = consistent_at_rest(system, transitions.evaluate, t, x, modes, phase)
+    x_new, modes_new, phase_new, changed = consistent_at_rest(system, transitions.evaluate.mode, t, x, modes, phase)
     if not changed:
         return x, modes, phase
     transitions.stats["decided_together"] += 1
