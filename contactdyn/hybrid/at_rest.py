@@ -161,6 +161,8 @@ def consistent_at_rest(system, runner, t: float, x: np.ndarray, modes, phase):
     """(x, modes, phase, changed): the transitions' mode at (t [s], x) if every item at rest is consistent there
     (or no joint is at rest), else the first consistent mode of the search (the module docstring).
     ``runner(modes, phase)``: the run's mode (a PipelineMode: its plain call, :class:`_Probe`)."""
+    if not phase.joint_modes:  # (no joint with dry friction: nothing to check, no call)
+        return x, modes, phase, False
     probe = _Probe(runner(modes, phase), t, x)
     joints = _joints_at_rest(system, probe, phase)
     if not joints:
@@ -205,7 +207,7 @@ def settle_together(transitions, t: float, x: np.ndarray, modes, phase):
     logged per item (``stick``/``slip``, ``joint_stick``/``joint_slip``/``joint_reverse``) and counted
     (``Result.stats["decided_together"]``)."""
     system, log = transitions.system, transitions.log
-    x_new, modes_new, phase_new, changed = consistent_at_rest(system, transitions.evaluate.mode, t, x, modes, phase)
+    x_new, modes_new, phase_new, changed = consistent_at_rest(system, transitions.evaluate.runner, t, x, modes, phase)
     if not changed:
         return x, modes, phase
     transitions.stats["decided_together"] += 1

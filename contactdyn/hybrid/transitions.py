@@ -89,18 +89,6 @@ class LastEvaluation:
         self.system, self.runner = system, runner or mode_runner(system)
         self.key: tuple | None = None  #: (t [s], x's bytes, modes, phase) of ``ev``
         self.ev = None
-        self._mode: tuple = ((), None, None)  #: (modes, phase, its runner) last asked for (:meth:`mode`)
-
-    def mode(self, modes, phase):
-        """``runner(modes, phase)``: the last one's again where asked at equal modes and the same phase object, set to
-        these modes (a runner of the same structure may have been set to others since: ``PipelineMode.use``)."""
-        last_modes, last_phase, mode = self._mode
-        if last_phase is not phase or last_modes != tuple(modes):
-            mode = self.runner(modes, phase)
-            self._mode = (tuple(modes), phase, mode)
-        else:
-            mode.use(modes)
-        return mode
 
     def __call__(self, t: float, x: np.ndarray, modes, phase):
         key = (t, x.tobytes(), tuple(modes), phase)
@@ -115,7 +103,7 @@ class LastEvaluation:
             and last[2] == key[2]
 
     def _evaluate(self, t: float, x: np.ndarray, modes, phase):
-        return self.mode(modes, phase).evaluation(t, x)  # (PipelineMode.evaluation raises where there is no answer)
+        return self.runner(modes, phase).evaluation(t, x)  # (PipelineMode.evaluation raises where there is no answer)
 
     def joint_hold(self, t: float, x: np.ndarray, modes, phase) -> dict[int, float]:
         """The stuck joints' holding torques [N·m or N] at (t [s], x), by joint: the kept Evaluation's where it is at
@@ -123,7 +111,7 @@ class LastEvaluation:
         answer (its status not 1), the Evaluation's, which says why."""
         if self._kept((t, x.tobytes(), tuple(modes), phase)):
             return self.ev.joint_hold
-        mode = self.mode(modes, phase)
+        mode = self.runner(modes, phase)
         if mode.values(t, x)[-1] == 1.0:
             return mode.joint_hold(t, x)
         return self(t, x, modes, phase).joint_hold
