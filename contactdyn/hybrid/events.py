@@ -356,13 +356,15 @@ class DipWatch(DipSearch):
         if t > self.t_end:  # a new step end (they come in increasing t; root finding calls inside the last step)
             if not self.armed:
                 self.armed = g > 0.0 and self.t_end > -math.inf  # (never at the segment's start)
-                g = g if self.armed else min(g, -1e-300)
             self.t_end, self.latch = t, math.inf
+            g = self._held(t, g)
             self.g_old, self.g_end = self.g_end, g
             return g
-        if not self.armed:
-            return min(g, -1e-300)
-        return min(g, -1e-300) if t >= self.latch else g
+        return self._held(t, g)
+
+    def _held(self, t: float, g: float) -> float:
+        """g, held negative while the stop is not armed or from the latch on."""
+        return min(g, -1e-300) if not self.armed or t >= self.latch else g
 
     def dips(self, t_old: float, state_at) -> bool:
         """Whether g dips below zero inside the step just ended, from t_old [s] to the last step end, on its dense
