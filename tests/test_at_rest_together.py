@@ -78,7 +78,7 @@ def test_the_search_runs_only_where_the_one_at_a_time_mode_is_contradicted(monke
             system.update_bodies(x)
             probe = at_rest._Probe(runner(modes, phase), t, x)
             joints = at_rest._joints_at_rest(system, probe, phase)
-            contacts = at_rest._contacts_at_rest(system, probe, modes)
+            contacts = at_rest._contacts_at_rest(system, probe, modes, at_rest._touching_with_friction(system, modes))
             assert joints
             assert at_rest._consistent(system, probe, modes, phase, contacts, joints) is expected
         x, modes, phase = after

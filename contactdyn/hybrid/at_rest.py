@@ -53,17 +53,29 @@ class _Probe:
     def __init__(self, mode, t: float, x: np.ndarray):
         self.mode, self.t, self.x = mode, t, x
         self.xdot = mode.rhs(t, x)
+        self._rates: dict[int, np.ndarray] = {}
+
+    def slip_rate(self, system, ci: int) -> np.ndarray:
+        """Contact ci's slip acceleration ȧ_t [m/s²] in tangent coordinates (the robot's kinematics at x)."""
+        if ci not in self._rates:
+            c, nQ = system.contacts[ci], system.nQ
+            self._rates[ci] = slip_acceleration(system, c, system.kinematics(c, self.x), self.xdot[nQ:2 * nQ])
+        return self._rates[ci]
 
     def hold(self, i: int) -> float:
+        """Stuck joint i's holding torque [N·m or N]."""
         return self.mode.joint_hold(self.t, self.x).get(i, 0.0)
 
     def friction(self, ci: int) -> np.ndarray:
+        """Stuck contact ci's friction force [N] in tangent coordinates."""
         return self.mode.stick_force(ci, self.t, self.x)
 
     def normal(self, ci: int) -> float:
+        """Contact ci's normal force [N], > 0 pressing."""
         return self.mode.normal_force(ci, self.t, self.x)
 
     def slip(self, ci: int) -> np.ndarray:
+        """Contact ci's slip velocity [m/s] in tangent coordinates."""
         return self.mode.slip(ci, self.t, self.x)
 
 
@@ -74,18 +86,20 @@ def _resting(v: float, a: float, band: float, window: float) -> bool:
     return abs(v) <= band or (v * a < 0.0 and abs(v) <= abs(a) * window)
 
 
-def _contacts_at_rest(system, probe: _Probe, modes) -> list[int]:
-    """The touching contacts with friction that are stuck or at rest (:func:`_resting`, along their slide)."""
-    out, nQ, window = [], system.nQ, system.scene.solver.storm_window
-    for i, (c, m) in enumerate(zip(system.contacts, modes, strict=True)):
-        if not m.touching or c.friction is None or not len(c.tangents):
-            continue
-        if not m.stuck:
-            d, v_t = np.asarray(m.slip), probe.slip(i)
-            a_t = slip_acceleration(system, c, system.kinematics(c, probe.x), probe.xdot[nQ:2 * nQ])
-            speed = float(np.linalg.norm(v_t))
-            if speed > system.slip_band and not (len(d) == 1 and _resting(float(d @ v_t), float(d @ a_t),
-                                                                            system.slip_band, window)):
+def _touching_with_friction(system, modes) -> list[int]:
+    """The touching contacts with friction along their tangents."""
+    return [i for i, (c, m) in enumerate(zip(system.contacts, modes, strict=True))
+            if m.touching and c.friction is not None and len(c.tangents)]
+
+
+def _contacts_at_rest(system, probe: _Probe, modes, touching: list[int]) -> list[int]:
+    """The contacts of ``touching`` (with friction) that are stuck or at rest (:func:`_resting`, along their slide)."""
+    out, window = [], system.scene.solver.storm_window
+    for i in touching:
+        d, v_t = np.asarray(modes[i].slip), probe.slip(i)
+        if not modes[i].stuck and float(np.linalg.norm(v_t)) > system.slip_band:  # (a 1-D slide: slowing at once?)
+            if len(d) > 1 or not _resting(float(d @ v_t), float(d @ probe.slip_rate(system, i)), system.slip_band,
+                                          window):
                 continue
         out.append(i)
     return out
@@ -114,7 +128,7 @@ def _consistent(system, probe: _Probe, modes, phase, contacts, joints, strictly:
             if not in_cone(probe.friction(i), probe.normal(i), c.friction.mu_s, strictly):
                 return False
             continue
-        a_t = slip_acceleration(system, c, system.kinematics(c, probe.x), qdd)
+        a_t = probe.slip_rate(system, i)
         if float(np.asarray(m.slip) @ a_t) < -ACCEL_TOL * (1.0 + float(np.linalg.norm(a_t))):
             return False
     for i, m in phase.joint_modes:
@@ -167,15 +181,14 @@ def consistent_at_rest(system, runner, t: float, x: np.ndarray, modes, phase):
     joints = _joints_at_rest(system, probe, phase)
     if not joints:
         return x, modes, phase, False
-    frictional = any(m.touching and c.friction is not None and len(c.tangents)
-                     for c, m in zip(system.contacts, modes, strict=True))
-    _kinematics(system, x, frictional)
-    contacts = _contacts_at_rest(system, probe, modes) if frictional else []
+    touching = _touching_with_friction(system, modes)
+    _kinematics(system, x, bool(touching))
+    contacts = _contacts_at_rest(system, probe, modes, touching)
     if len(contacts) + len(joints) > MAX_ITEMS or _consistent(system, probe, modes, phase, contacts, joints):
         return x, modes, phase, False
     for choice in _choices(_options(probe, modes, contacts, joints)):
         xt, mt, pt = _trial(system, x, modes, phase, contacts, joints, choice)
-        _kinematics(system, xt, frictional)
+        _kinematics(system, xt, bool(touching))
         if _consistent(system, _Probe(runner(mt, pt), t, xt), mt, pt, contacts, joints, strictly=True):
             return xt, mt, pt, True
     return x, modes, phase, False
