@@ -188,13 +188,12 @@ def checked_flags(ctl) -> None:
     """``ctl``'s flags (``uses_forces``, ``needs_gravity``, ``reads_orientation``) as its class or its bind set them: a
     LawError unless each is True or False (its class's are checked where it registers: laws.params)."""
     from .controllers.base import Controller
-    from .params import flags
+    from .params import non_bool_flag
 
-    for flag in flags(Controller):
-        value = getattr(ctl, flag)
-        if not isinstance(value, bool):
-            raise LawError("controller", ctl.name, law_file(type(ctl)), f"set {flag} = {value!r}: expected True or "
-                           "False")
+    wrong = non_bool_flag(ctl, Controller)
+    if wrong:
+        raise LawError("controller", ctl.name, law_file(type(ctl)), f"set {wrong[0]} = {wrong[1]!r}: expected True or "
+                       "False")
 
 
 def checked_config(kind: str, config):

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from ..scene.reader import Reader
 
-__all__ = ["Param", "read_params", "with_defaults", "claim_name", "check_declaration", "flags"]
+__all__ = ["Param", "read_params", "with_defaults", "claim_name", "check_declaration", "non_bool_flag"]
 
 
 @dataclass(frozen=True)
@@ -112,16 +112,20 @@ def check_declaration(cls: object, family: str, base: type, reserved: tuple[str,
         problem = _bounds_problem(p, read_defaults)
         if problem:
             raise ValueError(f"{family} {cls.name!r}: parameter {p.name!r} {problem}")
-    for flag in flags(base):
-        value = getattr(cls, flag)
-        if not isinstance(value, bool):  # (a flag's truth decides the physics: "no" would read as True)
-            raise ValueError(f"{family} {cls.name!r}: {flag} must be True or False, got {value!r}")
+    wrong = non_bool_flag(cls, base)
+    if wrong:  # (a flag's truth decides the physics: "no" would read as True)
+        raise ValueError(f"{family} {cls.name!r}: {wrong[0]} must be True or False, got {wrong[1]!r}")
 
 
-def flags(base: type) -> list[str]:
-    """The flags a family's ``base`` declares (its class attributes that are a bool: ``affine``, ``constant``,
-    ``uses_forces``, ``motorized``, ...)."""
-    return [name for k in reversed(base.__mro__) for name, value in vars(k).items() if isinstance(value, bool)]
+def non_bool_flag(law: object, base: type) -> tuple[str, object] | None:
+    """(name, value) of the first flag a family's ``base`` declares (its class attributes that are a bool:
+    ``affine``, ``constant``, ``uses_forces``, ``motorized``, ...) that ``law`` (a law's class, or a bound law) holds
+    as something other than True or False; None where each is a bool."""
+    for name in [name for k in reversed(base.__mro__) for name, value in vars(k).items() if isinstance(value, bool)]:
+        value = getattr(law, name)
+        if not isinstance(value, bool):
+            return name, value
+    return None
 
 
 def _bounds_problem(p: Param, read_default: bool) -> str:
