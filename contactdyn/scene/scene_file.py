@@ -657,7 +657,7 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
         until: float | str = until_raw
     else:
         until = r.float("until", duration, lo=0.0, unit="s")
-    merged, inherited = _phase_controller(r.raw("controller", {}), default_controller.data, DEFAULT_KIND)
+    merged, inherited = _phase_controller(r.raw("controller", {}), default_controller.data)
     where = r.key("controller") if "controller" in r.data else default_controller.path  # (the file's table)
     with naming_laws(), _named_where_written(inherited, where, default_controller.path):  # (a user's read raising:
         controller, sampling = read_controller(Reader(merged, where, r.file))  # its LawError)
@@ -668,16 +668,16 @@ def _read_phase(r: Reader, default_controller: Reader, contacts: dict[str, Conta
     return PhaseSpec(name, until, controller, reference, forces, sampling, where)
 
 
-def _phase_controller(own: object, top: dict, default_kind: str) -> tuple[object, set[str]]:
+def _phase_controller(own: object, top: dict) -> tuple[object, set[str]]:
     """A phase's controller table (``own``, its ``[phase.controller]``) over the scene's (``top``, ``[controller]``)
     and the keys it takes from the scene's. A phase that names another kind than the scene's takes only the keys of
     every controller table (``sample_rate``, ``delay``, ``hold``, ``sensor``: the sampling), not the other kind's
     parameters (a task PD's ``axes`` are no joint PD's; its ``kp`` is in N/m, not N·m/rad)."""
+    from ..laws.controllers.base import DEFAULT_KIND, TABLE_KEYS  # (as _read_phase's)
+
     if not isinstance(own, dict):
         return own, set()  # (the reader says it is no table)
-    from ..laws.controllers.base import TABLE_KEYS
-
-    other = "kind" in own and own["kind"] != top.get("kind", default_kind)
+    other = "kind" in own and own["kind"] != top.get("kind", DEFAULT_KIND)
     inherited = {k for k in top if k not in own and (not other or k in TABLE_KEYS)}
     return {**{k: top[k] for k in inherited}, **own}, inherited
 
