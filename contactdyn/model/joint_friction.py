@@ -39,10 +39,14 @@ with an unbounded impulse, as a locked joint.) A joint pressing on a position li
 its row is left out (the two would be one row twice); it comes back when the limit releases, the joint at rest
 (its velocity, the limit row's drift, set to 0: :meth:`JointFriction.left_limit`).
 
-Known limit: stuck joints and other rows (a stuck contact's, a bond's) can over-constrain the robot (all 7 joints
-of an arm at rest stuck while its tool sticks on a surface: 10 rows on 7 coordinates). The hold is then statically
-indeterminate: the solve falls back to the least-squares (minimum-norm) forces (``Result.stats["singular_solves"]``),
-and which joint breaks away first follows that choice, not a law (a complementarity formulation would decide it).
+Redundant holds: stuck joints and other rows (a stuck contact's, a bond's) can over-constrain the robot (both joints
+of a planar arm stuck while its tip sticks: 3 rows on 2 coordinates). The hold is then statically indeterminate: the
+solve takes the least-squares (minimum-norm) forces (``Result.stats["singular_solves"]``), and where these leave a
+hold outside its limit while one direction of splits that move nothing exists, the call takes the split nearest them
+with every hold inside (:func:`contactdyn.model.pipeline.kkt.coulomb_split`): the hold breaks only where no split
+is left, as Coulomb's. Known limit: where the splits span more than one direction (all 7 joints of an arm stuck while
+its tool sticks: 10 rows on 7 coordinates), the least-norm forces stay, and which joint breaks away first follows
+that choice, not a law.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ from numba.extending import intrinsic, overload
 from .compile_cache import njit
 
 __all__ = ["solve_vector", "lu_solve", "residual_ok", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
-           "forward_solve", "contiguous", "dot3", "fma", "cross3", "put"]
+           "forward_solve", "contiguous", "dot3", "fma", "cross3", "put", "null_direction"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -280,6 +280,52 @@ def _jacobi_pinv(J):
                 for j in range(r):
                     out[i, j] += A[i, k] * V[j, k] / sigma2[k]
     return out
+
+
+@njit(cache=True)
+def null_direction(A, tol):
+    """The unit x with A x = 0 where A (m × n) leaves exactly one such direction, else an empty array: Gaussian
+    elimination with full pivoting (a pivot at most ``tol`` × A's largest |entry| is zero), then back substitution
+    with the free column's x = 1. (Loops, not LAPACK's SVD: numba compiles its binding for ~10 s.)"""
+    m, n = A.shape
+    R, cols = A.copy(), np.arange(n)
+    big = 0.0
+    for i in range(m):
+        for j in range(n):
+            big = max(big, abs(R[i, j]))
+    rank = 0
+    for k in range(min(m, n)):
+        p, pi, pj = 0.0, k, k
+        for i in range(k, m):
+            for j in range(k, n):
+                if abs(R[i, j]) > p:
+                    p, pi, pj = abs(R[i, j]), i, j
+        if p <= tol * big:
+            break
+        for j in range(n):  # rows k and pi
+            R[k, j], R[pi, j] = R[pi, j], R[k, j]
+        for i in range(m):  # columns k and pj
+            R[i, k], R[i, pj] = R[i, pj], R[i, k]
+        cols[k], cols[pj] = cols[pj], cols[k]
+        for i in range(k + 1, m):
+            f = R[i, k] / R[k, k]
+            for j in range(k, n):
+                R[i, j] -= f * R[k, j]
+        rank += 1
+    if n - rank != 1:
+        return np.empty(0)
+    y = np.zeros(n)
+    y[rank] = 1.0
+    for i in range(rank - 1, -1, -1):
+        acc = R[i, rank]
+        for j in range(i + 1, rank):
+            acc += R[i, j] * y[j]
+        y[i] = -acc / R[i, i]
+    norm = math.sqrt(np.sum(y * y))
+    x = np.empty(n)
+    for j in range(n):
+        x[cols[j]] = y[j] / norm
+    return x
 
 
 @njit(cache=True, no_cpython_wrapper=True)

@@ -10,6 +10,11 @@ with its residual test, else (a singular matrix: redundant rows, consistent as t
 one body or not as two tables 1 mm apart) the same minimum-norm least squares (LAPACK's gelsd, rcond 1e-12), its
 outcome LEAST_SQUARES (an Evaluation's ``regular`` False). Only a KKT system with a non-finite
 entry (a law's nan or inf) is left unsolved (NOT_FINITE): the call declines (status 0).
+
+Redundant holds (stuck joints and a stuck contact holding the same motion) are statically indeterminate: their forces
+can change by a split that moves nothing (n with Cᵀ n = 0). The least norm picks one split, blind to the holds'
+limits; :func:`coulomb_split` then picks, where the least norm leaves a hold outside its limit, the split nearest to
+it with every hold inside (Coulomb's: a hold breaks only when no split keeps it), as far as one such direction goes.
 """
 
 from __future__ import annotations
@@ -19,10 +24,36 @@ import math
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import lu_solve, put, residual_ok
-from .pack import NQ, NV, R_MREST
+from ...numerics.linalg import lu_solve, null_direction, put, residual_ok
+from .pack import (
+    CI_BONDED,
+    CI_FRICTION,
+    CI_NORMAL_ROW,
+    CI_NT,
+    CI_REALS,
+    CI_STICK_ROW,
+    CI_W,
+    CR_MU_S,
+    EV_FN,
+    EV_W,
+    FRICTION_STICK,
+    I_CONTACTS,
+    I_LIMITS,
+    LI_SIDE,
+    LI_W,
+    N_CONTACTS,
+    N_HELD,
+    N_LIMITS,
+    N_SLIDING,
+    NQ,
+    NV,
+    R_JOINTS,
+    R_MREST,
+    section,
+)
 
-__all__ = ["kkt_solve", "solve_linear", "least_squares", "NOT_FINITE", "REGULAR", "LEAST_SQUARES"]
+__all__ = ["kkt_solve", "solve_linear", "least_squares", "coulomb_split", "hold_interval", "NOT_FINITE", "REGULAR",
+           "LEAST_SQUARES"]
 
 NOT_FINITE, REGULAR, LEAST_SQUARES = 0, 1, 2  #: a solve's outcome: no solve (non-finite), LU, least squares
 #: [-] an LU pivot at most this × the largest |entry| of A is zero: A is singular (redundant rows: stuck joints and a
@@ -30,6 +61,13 @@ NOT_FINITE, REGULAR, LEAST_SQUARES = 0, 1, 2  #: a solve's outcome: no solve (no
 #: LU's answer then passes the residual test with a null-space part that flips between calls (the holds' share of
 #: the force), which the step control cannot follow; a regular KKT matrix's smallest pivot is ~1e-2 of it.
 SINGULAR_PIVOT = 1e-12
+#: [-] an elimination pivot of Cᵀ (the rows' force columns) at most this × its largest |entry| is zero: a split that
+#: moves nothing
+NULL_RANK = 1e-10
+#: [-] a split is chosen this far inside each limit (× μ_s F_n, × τ_s, × the largest |λ| for a pressing force): at its
+#: binding limit the event value keeps its sign, not a rounding's
+SPLIT_MARGIN = 1e-9
+_NEGLIGIBLE = 1e-12  #: [-] a unit split's share of a row below this is none (its bound would be rounding's)
 
 
 @njit(cache=True)
@@ -115,3 +153,112 @@ def least_squares(A, b):
     dropped: ``constraints.solve_linear``'s fallback): redundant rows that agree solved exactly, rows that disagree
     (the same row, other γ) in the least-squares sense."""
     return np.linalg.lstsq(A, b, 1e-12)[0]
+
+
+@njit(cache=True)
+def coulomb_split(ints, reals, events, C, lam, first_limit, first_joint):
+    """λ [N, N·m] of a singular solve (the least norm's) with its redundant holds split by their limits: where λ leaves
+    a hold outside its limit (a stuck contact's force outside μ_s F_n, a held joint's torque past τ_s, an unbonded
+    normal row's or a pressing limit's force pulling) and the rows' forces have exactly one split that moves nothing
+    (n: Cᵀ n = 0, so the generalized force and the motion are unchanged), λ + s n with the s nearest 0 that puts every
+    hold inside its limit (by SPLIT_MARGIN). Where no s is (the hold breaks), the s between the two limits that met as
+    the last split went (lo > hi: each out by as much), so that the event values pass zero where the split ends, both
+    its holds' together. λ itself where it is inside already, and where the splits that move nothing span more than
+    one direction."""
+    n = null_direction(C.T.copy(), NULL_RANK) if C.shape[0] > 1 else np.empty(0)  # (Cᵀ n = 0)
+    if n.size == 0:
+        return lam
+    bounds = np.array([-np.inf, np.inf])  # [lo, hi] of s
+    if _hold_limits(ints, reals, events, lam, n, first_limit, first_joint, bounds):
+        return lam
+    lo, hi = bounds[0], bounds[1]
+    if lo <= hi:
+        s = min(max(0.0, lo), hi)
+    elif math.isfinite(lo) and math.isfinite(hi):  # past the last split: the two limits that met there, equally out
+        s = 0.5 * (lo + hi)
+    else:
+        return lam
+    out = np.empty(lam.size)
+    for r in range(lam.size):
+        out[r] = lam[r] + s * n[r]
+    return out
+
+
+@njit(cache=True)
+def _hold_limits(ints, reals, events, lam, n, first_limit, first_joint, bounds):
+    """Whether λ keeps every hold inside its limit; ``bounds`` ([lo, hi]) narrowed to the s with λ + s n inside
+    every one by SPLIT_MARGIN (the holds: :func:`coulomb_split`'s)."""
+    inside = True
+    pull = SPLIT_MARGIN * np.max(np.abs(lam))  # [N or N·m] a pressing force's least, at a split
+    cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
+    for ci in range(cs.shape[0]):
+        row = cs[ci]
+        rn = row[CI_NORMAL_ROW]
+        c, d = (lam[rn], _share(n[rn])) if rn >= 0 else (events[EV_W * ci + EV_FN], 0.0)  # F_n(s) = c + s d [N]
+        if rn >= 0 and not row[CI_BONDED]:
+            inside = inside and c >= 0.0
+            _at_least(c - pull, d, bounds)
+        if row[CI_FRICTION] == FRICTION_STICK:
+            mu, st, nt = reals[row[CI_REALS] + CR_MU_S], row[CI_STICK_ROW], row[CI_NT]
+            a, b = lam[st:st + nt], np.empty(nt)
+            for i in range(nt):
+                b[i] = _share(n[st + i])
+            inside = inside and mu * c >= np.sqrt(np.sum(a * a))
+            hold_interval(mu * (1.0 - SPLIT_MARGIN), c, d, a, b, bounds)
+    lims = section(ints, ints[I_LIMITS], ints[N_LIMITS], LI_W)
+    for k in range(lims.shape[0]):
+        side = lims[k, LI_SIDE]
+        inside = inside and side * lam[first_limit + k] >= 0.0
+        _at_least(side * lam[first_limit + k] - pull, side * _share(n[first_limit + k]), bounds)
+    static = ints[R_JOINTS] + ints[NV] + 2 * ints[N_SLIDING]  # (pack._joint_friction: the held joints' τ_s)
+    for k in range(ints[N_HELD]):
+        tau_s, held, b = reals[static + k], lam[first_joint + k], _share(n[first_joint + k])
+        inside = inside and abs(held) <= tau_s
+        _at_least(tau_s * (1.0 - SPLIT_MARGIN) - held, -b, bounds)
+        _at_least(tau_s * (1.0 - SPLIT_MARGIN) + held, b, bounds)
+    return inside
+
+
+@njit(cache=True, inline="always")
+def _share(v):
+    """A unit split's share of a row, 0 below _NEGLIGIBLE."""
+    return v if abs(v) > _NEGLIGIBLE else 0.0
+
+
+@njit(cache=True, inline="always")
+def _at_least(a, b, bounds):
+    """``bounds`` ([lo, hi]) narrowed to the s with a + s b ≥ 0."""
+    if b > 0.0:
+        bounds[0] = max(bounds[0], -a / b)
+    elif b < 0.0:
+        bounds[1] = min(bounds[1], -a / b)
+    elif a < 0.0:
+        bounds[0], bounds[1] = np.inf, -np.inf
+
+
+@njit(cache=True)
+def hold_interval(mu, c, d, a, b, bounds):
+    """``bounds`` ([lo, hi]) narrowed to the s with ‖a + s b‖ ≤ μ (c + s d): a stick's force inside its cone along a
+    line of splits (a, b: the tangential force [N] and its share; c, d: the normal force's [N]). The cone is convex, so
+    the s form one interval: where q(s) = μ²(c + s d)² − ‖a + s b‖² ≥ 0 on the cone's upper half (c + s d ≥ 0)."""
+    _at_least(c, d, bounds)
+    qa = mu * mu * d * d - np.sum(b * b)
+    qb = 2.0 * (mu * mu * c * d - np.sum(a * b))
+    qc = mu * mu * c * c - np.sum(a * a)
+    if abs(qa) <= 1e-14 * (mu * mu * d * d + np.sum(b * b)):  # (q linear in s)
+        _at_least(qc, qb, bounds)
+        return
+    disc = qb * qb - 4.0 * qa * qc
+    if disc < 0.0:
+        if qa < 0.0:  # (q < 0 everywhere: no s)
+            bounds[0], bounds[1] = np.inf, -np.inf
+        return
+    root = -0.5 * (qb + math.copysign(math.sqrt(disc), qb))
+    r1, r2 = root / qa, (qc / root if root != 0.0 else root / qa)
+    r1, r2 = min(r1, r2), max(r1, r2)
+    if qa < 0.0:  # q ≥ 0 between the roots
+        bounds[0], bounds[1] = max(bounds[0], r1), min(bounds[1], r2)
+    elif d > 0.0:  # q ≥ 0 outside them; the upper half is the ray the normal force grows along
+        bounds[0] = max(bounds[0], r2)
+    else:
+        bounds[1] = min(bounds[1], r1)

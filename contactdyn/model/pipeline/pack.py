@@ -129,9 +129,9 @@ RR_MASS, RR_DIR, RR_POINT, RR_W = 0, 1, 4, 7
 #: a contact's ints (frame: its packed frame, the zero frame after them for a body's point; coords: where its
 #: bodies' coordinates are in ints, [n touching side, n surface side, their indices]; friction: FRICTION_* below;
 #: rows: -1 none; law: the friction law's address, 0 constant μ_k; surface: the packed frame carrying the surface,
-#: -1 for the ground or a body)
+#: -1 for the ground or a body; bonded: 1 where the contact never separates)
 (CI_FRAME, CI_COORDS, CI_TOUCHING, CI_FRICTION, CI_NT, CI_LAW, CI_N_FP, CI_FP_AT, CI_NORMAL, CI_FIRST_T, CI_N_T,
- CI_NORMAL_ROW, CI_STICK_ROW, CI_IMPULSE, CI_REALS, CI_SURFACE, CI_W) = range(17)
+ CI_NORMAL_ROW, CI_STICK_ROW, CI_IMPULSE, CI_REALS, CI_SURFACE, CI_BONDED, CI_W) = range(18)
 FRICTION_NONE, FRICTION_STICK, FRICTION_SLIDE, FRICTION_APART = 0, 1, 2, 3
 #: a contact's reals: surface point [m], a touching body's point [m] (else 0), tangents (2 rows of 3), slip
 #: reference r, μ_s, μ_k, viscous [N·s/m], the normal, then its bodies' coordinates' unit axes (3 each, as in
@@ -473,7 +473,7 @@ def _contacts(b: _Builder, system, modes, frames: list) -> list[tuple[str, str, 
         h[contact_at + CI_W * ci:contact_at + CI_W * (ci + 1)] = [
             frame, coords_at, int(m.touching), friction, nt, law, len(fr.params) if nt else 0, fp_at,
             first, first + 1, len(c.tangent_chains), normal_row, stick_row, system.impulse_slots.get(c.name, -1),
-            reals_at, frames.index(surface) if surface is not None else -1]
+            reals_at, frames.index(surface) if surface is not None else -1, int(c.spec.bonded)]
     return meta
 
 
@@ -520,15 +520,16 @@ def _chain(b: _Builder, system, c, m, dc, tangent: int, at: int, row: int) -> No
 
 def _joint_friction(b: _Builder, system, phase) -> tuple[list[int], list[int]]:
     """The joints' damping b (nv) [N·m·s/rad or N·s/m], the stuck joints that carry a row, the sliding ones with
-    (s, τ_k [N·m or N]) (model.joint_friction), then the same joints' impulse states (x's index of ∫τ_f dt); (the
-    held joints in their rows' order, the sliding ones)."""
+    (s, τ_k [N·m or N]) (model.joint_friction), then the same joints' impulse states (x's index of ∫τ_f dt), then the
+    held joints' static limits τ_s [N·m or N]; (the held joints in their rows' order, the sliding ones)."""
     jf, h = system.joint_friction, b.ints
     held = jf.held(phase.joint_modes, phase.limits) if jf.any else []
     sliding = [(i, m) for i, m in phase.joint_modes if m != 0] if jf.any else []
     h[JOINT_FRICTION], h[N_HELD], h[N_SLIDING] = int(jf.any), len(held), len(sliding)
     slot = {i: 2 * system.nQ + system.joint_impulse_slot + k for k, i in enumerate(jf.dry)}  # (x's index of ∫τ_f dt)
     b.int_section(I_JOINTS, [*held, *(i for i, _ in sliding), *(slot[i] for i in held), *(slot[i] for i, _ in sliding)])
-    b.real_section(R_JOINTS, [*jf.damping, *(v for i, m in sliding for v in (m, jf.kinetic[i]))])
+    b.real_section(R_JOINTS, [*jf.damping, *(v for i, m in sliding for v in (m, jf.kinetic[i])),
+                              *(jf.static[i] for i in held)])
     return held, [i for i, _ in sliding]
 
 

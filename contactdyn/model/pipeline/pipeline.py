@@ -56,7 +56,7 @@ from .drives import drive_values, inertias
 from .energy import energy_rates
 from .force_fold import carried_coordinate, controller_terms, fold_rates, solve_through_drives
 from .joint_friction import joint_events, joint_rows, joint_torques
-from .kkt import LEAST_SQUARES, NOT_FINITE, kkt_solve
+from .kkt import LEAST_SQUARES, NOT_FINITE, coulomb_split, kkt_solve
 from .launch import ST_DONE, ST_HEAD, launch_settled, launch_start, launch_took
 from .pack import (
     A_CALL,
@@ -169,6 +169,8 @@ def call(t, x, ints, reals, work, events):
         if not ok:
             events[events.size - 1] = -1.0
             return xdot
+        if outcome == LEAST_SQUARES and not ints[READS_FORCES]:  # (redundant holds: split by their limits)
+            lam = coulomb_split(ints, reals, events, C, lam, first_limit, first_joint)
         fold_rates(ints, lam, zdot, D, ydot, dq, qdd, carried_coordinate(ints, bq))
         for i in range(nQ):
             xdot[i] = x[nQ + i]
