@@ -75,7 +75,7 @@ def test_the_hold_breaks_where_no_split_is_left(run):
         lam = np.array([run["contact.tip.F_f"][i, 0], *run["joint_friction"][i]])
         n = _split(run["q"][i])
         bounds = np.array([-np.inf, np.inf])
-        hold_interval(MU_S, run["contact.tip.F_n"][i], 0.0, lam[:1], n[:1], bounds)
+        hold_interval(MU_S, run["contact.tip.F_n"][i], 0.0, lam[0], 0.0, n[0], 0.0, bounds)
         for j in (1, 2):  # |τ_j + s n_j| ≤ τ_s
             ends = sorted(((TAU_S - lam[j]) / n[j], (-TAU_S - lam[j]) / n[j]))
             bounds = np.array([max(bounds[0], ends[0]), min(bounds[1], ends[1])])
@@ -94,7 +94,7 @@ def test_hold_interval_is_the_set_of_splits_inside_the_cone(seed):
     mu, c, d = rng.uniform(0.1, 1.0), rng.uniform(-5.0, 20.0), rng.normal()
     a, b = rng.normal(0.0, 5.0, 2), rng.normal(0.0, 1.0, 2)
     bounds = np.array([-np.inf, np.inf])
-    hold_interval(mu, c, d, a, b, bounds)
+    hold_interval(mu, c, d, a[0], a[1], b[0], b[1], bounds)
     s = np.linspace(-200.0, 200.0, 400_001)
     inside = np.linalg.norm(a[None, :] + s[:, None] * b[None, :], axis=1) <= mu * (c + s * d)
     if not inside.any():

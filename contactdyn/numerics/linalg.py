@@ -288,7 +288,9 @@ def null_direction(A, tol):
     elimination with full pivoting (a pivot at most ``tol`` × A's largest |entry| is zero), then back substitution
     with the free column's x = 1. (Loops, not LAPACK's SVD: numba compiles its binding for ~10 s.)"""
     m, n = A.shape
-    R, cols = A.copy(), np.arange(n)
+    R, cols = A.copy(), np.empty(n, dtype=np.int64)
+    for j in range(n):
+        cols[j] = j
     big = 0.0
     for i in range(m):
         for j in range(n):
@@ -321,7 +323,10 @@ def null_direction(A, tol):
         for j in range(i + 1, rank):
             acc += R[i, j] * y[j]
         y[i] = -acc / R[i, i]
-    norm = math.sqrt(np.sum(y * y))
+    norm = 0.0
+    for j in range(n):
+        norm += y[j] * y[j]
+    norm = math.sqrt(norm)
     x = np.empty(n)
     for j in range(n):
         x[cols[j]] = y[j] / norm

@@ -188,8 +188,10 @@ def coulomb_split(ints, reals, events, C, lam, first_limit, first_joint):
 def _hold_limits(ints, reals, events, lam, n, first_limit, first_joint, bounds):
     """Whether λ keeps every hold inside its limit; ``bounds`` ([lo, hi]) narrowed to the s with λ + s n inside
     every one by SPLIT_MARGIN (the holds: :func:`coulomb_split`'s)."""
-    inside = True
-    pull = SPLIT_MARGIN * np.max(np.abs(lam))  # [N or N·m] a pressing force's least, at a split
+    inside, largest = True, 0.0
+    for v in lam:
+        largest = max(largest, abs(v))
+    pull = SPLIT_MARGIN * largest  # [N or N·m] a pressing force's least, at a split
     cs = section(ints, ints[I_CONTACTS], ints[N_CONTACTS], CI_W)
     for ci in range(cs.shape[0]):
         row = cs[ci]
@@ -199,12 +201,11 @@ def _hold_limits(ints, reals, events, lam, n, first_limit, first_joint, bounds):
             inside = inside and c >= 0.0
             _at_least(c - pull, d, bounds)
         if row[CI_FRICTION] == FRICTION_STICK:
-            mu, st, nt = reals[row[CI_REALS] + CR_MU_S], row[CI_STICK_ROW], row[CI_NT]
-            a, b = lam[st:st + nt], np.empty(nt)
-            for i in range(nt):
-                b[i] = _share(n[st + i])
-            inside = inside and mu * c >= np.sqrt(np.sum(a * a))
-            hold_interval(mu * (1.0 - SPLIT_MARGIN), c, d, a, b, bounds)
+            mu, st = reals[row[CI_REALS] + CR_MU_S], row[CI_STICK_ROW]
+            a0, b0 = lam[st], _share(n[st])
+            a1, b1 = (lam[st + 1], _share(n[st + 1])) if row[CI_NT] > 1 else (0.0, 0.0)
+            inside = inside and mu * c >= math.sqrt(a0 * a0 + a1 * a1)
+            hold_interval(mu * (1.0 - SPLIT_MARGIN), c, d, a0, a1, b0, b1, bounds)
     lims = section(ints, ints[I_LIMITS], ints[N_LIMITS], LI_W)
     for k in range(lims.shape[0]):
         side = lims[k, LI_SIDE]
@@ -219,13 +220,13 @@ def _hold_limits(ints, reals, events, lam, n, first_limit, first_joint, bounds):
     return inside
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _share(v):
     """A unit split's share of a row, 0 below _NEGLIGIBLE."""
     return v if abs(v) > _NEGLIGIBLE else 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _at_least(a, b, bounds):
     """``bounds`` ([lo, hi]) narrowed to the s with a + s b ≥ 0."""
     if b > 0.0:
@@ -237,15 +238,17 @@ def _at_least(a, b, bounds):
 
 
 @njit(cache=True)
-def hold_interval(mu, c, d, a, b, bounds):
+def hold_interval(mu, c, d, a0, a1, b0, b1, bounds):
     """``bounds`` ([lo, hi]) narrowed to the s with ‖a + s b‖ ≤ μ (c + s d): a stick's force inside its cone along a
-    line of splits (a, b: the tangential force [N] and its share; c, d: the normal force's [N]). The cone is convex, so
-    the s form one interval: where q(s) = μ²(c + s d)² − ‖a + s b‖² ≥ 0 on the cone's upper half (c + s d ≥ 0)."""
+    line of splits (a = (a0, a1), b = (b0, b1): the tangential force [N] and its share, a1 = b1 = 0 for one
+    tangent; c, d: the normal force's [N]). The cone is convex, so the s form one interval: where
+    q(s) = μ²(c + s d)² − ‖a + s b‖² ≥ 0 on the cone's upper half (c + s d ≥ 0)."""
     _at_least(c, d, bounds)
-    qa = mu * mu * d * d - np.sum(b * b)
-    qb = 2.0 * (mu * mu * c * d - np.sum(a * b))
-    qc = mu * mu * c * c - np.sum(a * a)
-    if abs(qa) <= 1e-14 * (mu * mu * d * d + np.sum(b * b)):  # (q linear in s)
+    bb = b0 * b0 + b1 * b1
+    qa = mu * mu * d * d - bb
+    qb = 2.0 * (mu * mu * c * d - (a0 * b0 + a1 * b1))
+    qc = mu * mu * c * c - (a0 * a0 + a1 * a1)
+    if abs(qa) <= 1e-14 * (mu * mu * d * d + bb):  # (q linear in s)
         _at_least(qc, qb, bounds)
         return
     disc = qb * qb - 4.0 * qa * qc

@@ -83,7 +83,7 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "python_controller"
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
  N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, A_CALL, A_CONTROLLER, A_SOLVE,
  A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, NF, N_CHARTS, I_CHARTS, R_FRAMES_B,
- N_RIDING, I_RIDING, R_RIDING, W_LEAST_SQUARES, I_KEYS, R_KEYS, HEADER) = range(82)
+ N_RIDING, I_RIDING, R_RIDING, W_LEAST_SQUARES, I_KEYS, R_KEYS, A_SPLIT, HEADER) = range(83)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
 #: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
@@ -91,7 +91,7 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "python_controller"
 #: R_FOLD: per set-point the shift of its surface point from the contact's [m] (a tangential chain's anchor, u·offset)
 #: A_*: the addresses of the call and of its stages compiled on their own (:func:`.pipeline.stage_addresses`, filled
 #: by ``Pipeline``): the call itself, the controller's kind, the solve (direct or through a fold), a launch's start
-#: and Newton, the energy audit (0 where the mode has none)
+#: and Newton, the energy audit, the split of redundant holds (A_SPLIT; 0 where the mode has none)
 #: NF: the rigid-body table's columns (the robot's nv, then through the last articulated body's coordinates: H, h
 #: and the frames' J span Q[:NF]; :func:`contactdyn.robot.rigid_body.forest_table`)
 #: N_CHARTS: the free bodies (two charts each, :mod:`contactdyn.robot.free_chart`), I_CHARTS their rows (CHT_*

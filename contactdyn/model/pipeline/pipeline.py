@@ -66,6 +66,7 @@ from .pack import (
     A_LAUNCH_SETTLED,
     A_LAUNCH_START,
     A_SOLVE,
+    A_SPLIT,
     ANY_MOTOR,
     CARRIER,
     CTL_ABI,
@@ -169,8 +170,8 @@ def call(t, x, ints, reals, work, events):
         if not ok:
             events[events.size - 1] = -1.0
             return xdot
-        if outcome == LEAST_SQUARES and not ints[READS_FORCES]:  # (redundant holds: split by their limits)
-            lam = coulomb_split(ints, reals, events, C, lam, first_limit, first_joint)
+        if outcome == LEAST_SQUARES and ints[A_SPLIT]:  # (redundant holds: split by their limits)
+            lam = call_at(ints[A_SPLIT], "pipeline.split", (ints, reals, events, C, lam, first_limit, first_joint))
         fold_rates(ints, lam, zdot, D, ydot, dq, qdd, carried_coordinate(ints, bq))
         for i in range(nQ):
             xdot[i] = x[nQ + i]
@@ -306,6 +307,7 @@ declare("pipeline.launch_start", launch_start, types.Tuple((_F1, _F1))(_I1, _F1)
 declare("pipeline.launch_took", launch_took, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F2, _F3, _F1))
 declare("pipeline.launch_settled", launch_settled, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F2, _F3))
 declare("pipeline.energy", energy_rates, types.none(_F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2))
+declare("pipeline.split", coulomb_split, _F1(_I1, _F1, _F1, _F2, _F1, types.int64, types.int64))
 
 
 def stage_addresses(ints: np.ndarray, law_only: bool = False) -> None:
@@ -324,6 +326,8 @@ def stage_addresses(ints: np.ndarray, law_only: bool = False) -> None:
         ints[A_LAUNCH_SETTLED] = address("pipeline.launch_settled")
     if ints[ENERGY] >= 0:
         ints[A_ENERGY] = address("pipeline.energy")
+    if ints[N_ROWS] > 1 and not ints[READS_FORCES]:  # (a fold's τ reads λ: its split would move the robot)
+        ints[A_SPLIT] = address("pipeline.split")
 
 
 def _address_of(name: str, function, signature) -> int:
