@@ -544,7 +544,7 @@ ROUND3_LAWS: dict[str, tuple[str, str, int, str]] = {
                           + COMMAND, "read_none", 1, "controller 'read_none' (law_read_returns_none.py) read returned "
                           "NoneType: expected a config with the kind of its controller"),
     "exits": ("    name = 'exits'\n" + COMMAND + "\n\nimport sys\nsys.exit(3)\n", "exits", 2,
-              "found 'law_exits: SystemExit: 3'"),
+              "found law_exits: SystemExit: 3 (law_exits.py, line 13)\n"),
 }
 
 #: a user's stage or friction law module that its register refuses at import: (its source, a piece of stderr)
@@ -737,9 +737,42 @@ def round4_cases(tmp: Path) -> list[Case]:
     return cases
 
 
+# ---- round 5: a law module's whole error at import, a friction law's non-finite μ, declared affinities --------
+LONG = ("the table of gains must have as many rows as the robot has joints; got 3 rows for 2 joints (rows: kp = "
+        "[100.0, 200.0, 300.0], kd = [1.0, 2.0, 3.0]); check the file gains.csv next to this scene, whose header "
+        "says 'kp,kd' and whose last line ends the table")
+#: a user's law module that fails at import: (its source, a piece of stderr: the exception's whole first line and
+#: where the user's code raised it)
+ROUND5_IMPORTS: dict[str, tuple[str, str]] = {
+    "long_message": (f"def helper():\n    raise ValueError({LONG!r})\n\n\nhelper()\n",
+                     f"found law5_long_message: ValueError: {LONG} (law5_long_message.py, line 2)\n"),
+    "first_line_only": ("raise RuntimeError('the first line says it all\\nand the second is left out')\n",
+                        "found law5_first_line_only: RuntimeError: the first line says it all (law5_first_line_only.py"
+                        ", line 1)\n"),
+    "syntax": ("x = 1\ndef broken(:\n", "found law5_syntax: SyntaxError: invalid syntax (law5_syntax.py, line 2)\n"),
+    "exits": ("import sys\n\nsys.exit(3)\n", "found law5_exits: SystemExit: 3 (law5_exits.py, line 3)\n"),
+    "refused_at_register": (
+        STAGE + '    name = "affine_many"\n    affine = True\n    params = (' + ", ".join(
+            f'Param("gain_{i}", "-", "a gain", 1.5)' for i in range(8)) + ',)\n    @staticmethod\n'
+        '    def force(k, b, p, x, xdot):\n        return 2.0 * k * x + b * xdot\n',
+        "stage law 'affine_many': affine = True, but its force at x = -0.01 m, ẋ = 0 m/s is -20 N, not K x + B ẋ = "
+        "-10 N (k = 1000, b = 10, " + ", ".join(f"gain_{i} = 1.5" for i in range(8)) + "): declare affine = False "
+        "(law5_refused_at_register.py, line 4)\n"),
+}
+
+
+def round5_cases(tmp: Path) -> list[Case]:
+    cases = []
+    for name, (source, piece) in ROUND5_IMPORTS.items():
+        (tmp / f"law5_{name}.py").write_text(source)
+        (tmp / f"law5_{name}.toml").write_text(f'imports = ["law5_{name}"]\n' + B1)
+        cases.append((f"r5/import/{name}", ["run", str(tmp / f"law5_{name}.toml"), *FAST], 2, piece))
+    return cases
+
+
 BUILDERS = {"scenes": scene_cases, "overrides": lambda _: override_cases(), "urdfs": urdf_cases,
             "run_files": run_file_cases, "round2": round2_cases,
-            "round3": round3_cases, "round4": round4_cases}
+            "round3": round3_cases, "round4": round4_cases, "round5": round5_cases}
 
 
 def test_corpus_has_at_least_100_cases(tmp_path):
@@ -751,7 +784,7 @@ def test_corpus_has_at_least_100_cases(tmp_path):
 
 
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2", "round3", "round4"])
+@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2", "round3", "round4", "round5"])
 def test_hostile_inputs(tmp_path, kind):
     check(BUILDERS[kind](tmp_path), tmp_path)
 
