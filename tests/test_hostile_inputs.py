@@ -681,6 +681,7 @@ ROUND4_FLAGS: dict[str, tuple[str, str]] = {
                              "drive kind 'voltage_int': has_voltage must be True or False, got 1"),
 }
 
+FRICTION_EXPECTED = "expected a finite coefficient >= 0 (friction opposes the slip)"
 #: a user's friction law on B1's sliding tip: (its class's body, how it gives μ, a piece of stderr)
 NEGATIVE = ("from contactdyn.laws import FrictionLaw, register_friction_law\n\n\n@register_friction_law\n"
             "class Negative(FrictionLaw):\n    name = {name!r}\n\n")
@@ -714,8 +715,7 @@ def round4_cases(tmp: Path) -> list[Case]:
         scene.write_text(f'imports = ["mu4_{name}"]\n' + B1.replace("tangent.mu = 0.4", tip.format(name=f"mu4_{name}")))
         for path in ("compiled", "interpreted"):
             said = (f"contactdyn: error: t = 0 s: friction law 'mu4_{name}' (mu4_{name}.py) {piece} at slip speed 0.15 "
-                    "m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': expected a coefficient >= 0 (friction opposes the "
-                    "slip)\n")
+                    f"m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': {FRICTION_EXPECTED}\n")
             cases.append((f"r4/friction/{name}/{path}", ["run", str(scene), *FAST, "--path", path], 1, said))
     joint = ('[phase.controller]\nkind = "joint_pd"\nkp = {kp}\nkd = 10.0\n[phase.reference]\nspace = "joint"\n'
              'start = [0.3, -1.3]\n')
@@ -761,12 +761,35 @@ ROUND5_IMPORTS: dict[str, tuple[str, str]] = {
 }
 
 
+#: a user's friction law on B1's sliding tip whose μ is not finite: (its class's body, how it gives μ); it stops the
+#: run where a negative μ does, named with the contact (round 4's cases)
+ROUND5_FRICTION: dict[str, tuple[str, str]] = {
+    "coefficient_nan": ("    @staticmethod\n    def coefficient(mu_s, mu_k, p, speed):\n"
+                        "        return mu_k + np.nan * speed\n", "returned μ = nan"),
+    "coefficient_plus_inf": ("    @staticmethod\n    def coefficient(mu_s, mu_k, p, speed):\n"
+                             "        return mu_k + np.inf if speed > 0.0 else mu_k\n", "returned μ = inf"),
+    "kinetic_nan": ("    @classmethod\n    def kinetic(cls, spec, speed):\n        return spec.mu_k + np.nan * speed\n",
+                    "returned μ = nan"),
+    "kinetic_plus_inf": ("    @classmethod\n    def kinetic(cls, spec, speed):\n"
+                         "        return spec.mu_k + np.inf * speed\n", "returned μ = inf"),
+}
+
+
 def round5_cases(tmp: Path) -> list[Case]:
     cases = []
     for name, (source, piece) in ROUND5_IMPORTS.items():
         (tmp / f"law5_{name}.py").write_text(source)
         (tmp / f"law5_{name}.toml").write_text(f'imports = ["law5_{name}"]\n' + B1)
         cases.append((f"r5/import/{name}", ["run", str(tmp / f"law5_{name}.toml"), *FAST], 2, piece))
+    tip = 'tangent.law = "{name}"\ntangent.mu_s = 0.6\ntangent.mu_k = 0.4'
+    for name, (body, piece) in ROUND5_FRICTION.items():
+        (tmp / f"mu5_{name}.py").write_text("import numpy as np\n" + NEGATIVE.format(name=f"mu5_{name}") + body)
+        scene = tmp / f"mu5_{name}.toml"
+        scene.write_text(f'imports = ["mu5_{name}"]\n' + B1.replace("tangent.mu = 0.4", tip.format(name=f"mu5_{name}")))
+        for path in ("compiled", "interpreted"):
+            said = (f"contactdyn: error: t = 0 s: friction law 'mu5_{name}' (mu5_{name}.py) {piece} at slip speed 0.15 "
+                    f"m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': {FRICTION_EXPECTED}\n")
+            cases.append((f"r5/friction/{name}/{path}", ["run", str(scene), *FAST, "--path", path], 1, said))
     return cases
 
 

@@ -15,6 +15,7 @@ its laws' results checked (:func:`.abi.checking_laws`) and named with what it re
 
 from __future__ import annotations
 
+import math
 import sys
 import traceback
 from contextlib import contextmanager
@@ -23,7 +24,7 @@ from pathlib import Path
 from ..errors import ContactdynError, SimulationError
 
 __all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file",
-           "raised_calling", "counted_states", "checked_config", "negative_friction_error", "kinetic_coefficient",
+           "raised_calling", "counted_states", "checked_config", "unusable_friction_error", "kinetic_coefficient",
            "checked_flags"]
 
 PACKAGE = __name__.split(".")[0] + "."  #: "contactdyn.": the package's own laws are not a user's
@@ -105,26 +106,27 @@ def non_finite_error(family: str, law: type, args: tuple, value, t: float | None
     return LawError(kind, law.name, law_file(law), what(law, args, value), None, t)
 
 
-def negative_friction_error(spec, contact: str, speed: float, value: float, t: float | None = None) -> LawError:
+def unusable_friction_error(spec, contact: str, speed: float, value: float, t: float | None = None) -> LawError:
     """The LawError of the friction law of contact ``contact`` (its ``spec``, a FrictionSpec) that returned the
-    coefficient ``value`` < 0 at slip speed ``speed`` [m/s]: a negative μ pushes a slide along (the run stops at the
-    first call that gets one, compiled or interpreted: :meth:`~contactdyn.model.pipeline.pipeline.Pipeline.failed_call`;
-    an impact's, :func:`kinetic_coefficient`)."""
+    coefficient ``value`` [-] at slip speed ``speed`` [m/s], negative (it pushes a slide along), NaN or ±inf (the
+    run stops at the first call that gets one, compiled or interpreted:
+    :meth:`~contactdyn.model.pipeline.pipeline.Pipeline.failed_call`; an impact's, :func:`kinetic_coefficient`)."""
     from .friction_laws import FRICTION_LAWS
 
     law = FRICTION_LAWS[spec.law]
     what = _friction_returned(law, (spec.mu_s, spec.mu_k, spec.params, speed), value)
-    return LawError("friction law", law.name, law_file(law), f"{what} on contact {contact!r}: expected a coefficient "
-                    ">= 0 (friction opposes the slip)", None, t)
+    return LawError("friction law", law.name, law_file(law), f"{what} on contact {contact!r}: expected a finite "
+                    "coefficient >= 0 (friction opposes the slip)", None, t)
 
 
 def kinetic_coefficient(spec, contact: str, speed: float, t: float | None = None) -> float:
     """μ [-] of contact ``contact``'s friction ``spec`` (a FrictionSpec) at slip speed ``speed`` [m/s] at t [s]; its
-    law returning μ < 0 is its LawError (:func:`negative_friction_error`)."""
+    law returning μ < 0, NaN or ±inf at a finite speed is its LawError (:func:`unusable_friction_error`; at a speed
+    that is not finite, an overflowed trial state's, μ is given as it is: the step is rejected)."""
     with naming_laws(t):
         mu = float(spec.mu(speed))
-    if mu < 0.0:
-        raise negative_friction_error(spec, contact, speed, mu, t)
+    if not (math.isfinite(mu) and mu >= 0.0) and math.isfinite(speed):
+        raise unusable_friction_error(spec, contact, speed, mu, t)
     return mu
 
 
