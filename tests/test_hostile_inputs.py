@@ -774,6 +774,22 @@ ROUND5_FRICTION: dict[str, tuple[str, str]] = {
                          "        return spec.mu_k + np.inf * speed\n", "returned μ = inf"),
 }
 
+#: a user's drive kind with a voltage (B1's joints): (its voltage's body, exit code, a piece of stderr); its force takes
+#: the voltage as it is
+VOLTS = ("    has_voltage = True\n    @staticmethod\n    def force(spec, command, q, qd, theta, omega):\n"
+         "        return command, 0.0, command * qd, 0.0\n    @staticmethod\n    def voltage(spec, tau, qd, omega):\n")
+ROUND5_KINDS: dict[str, tuple[str, int, str]] = {
+    "voltage_squared": ("        return spec.g * tau * abs(tau) + qd\n", 1,
+                        "contactdyn: error: drive kind 'voltage_squared' (kind5_voltage_squared.py) gives u = -6.25 V "
+                        "at τ = -2.5 N·m or N, q̇ = 0 (g = 1), not u(0) + τ (u(1) − u(0)) = -2.5 V: expected a voltage "
+                        "affine in τ (has_voltage: the solve folds a force-reading controller's command through it)\n"),
+    "voltage_clipped": ("        return max(min(spec.g * tau, 20.0), -20.0) + 0.1 * qd\n", 1,
+                        "gives u = 20 V at τ = 40 N·m or N, q̇ = 0 (g = 1), not u(0) + τ (u(1) − u(0)) = 40 V"),
+    "voltage_affine_runs": ("        return 2.0 * spec.g * tau - 0.5 * qd\n", 0, ""),
+    "voltage_raising_past_a_limit_runs": ("        if abs(tau) > 1e6:\n            raise ValueError('too much')\n"
+                                          "        return spec.g * tau\n", 0, ""),
+}
+
 
 def round5_cases(tmp: Path) -> list[Case]:
     cases = []
@@ -790,6 +806,11 @@ def round5_cases(tmp: Path) -> list[Case]:
             said = (f"contactdyn: error: t = 0 s: friction law 'mu5_{name}' (mu5_{name}.py) {piece} at slip speed 0.15 "
                     f"m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': {FRICTION_EXPECTED}\n")
             cases.append((f"r5/friction/{name}/{path}", ["run", str(scene), *FAST, "--path", path], 1, said))
+    for name, (body, code, piece) in ROUND5_KINDS.items():
+        (tmp / f"kind5_{name}.py").write_text(KIND + f"    name = {name!r}\n" + VOLTS + body)
+        scene = tmp / f"kind5_{name}.toml"
+        scene.write_text(f'imports = ["kind5_{name}"]\n' + B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
+        cases.append((f"r5/kind/{name}", ["run", str(scene), *FAST, "--out", str(tmp / name)], code, piece))
     return cases
 
 
