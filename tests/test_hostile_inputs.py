@@ -790,6 +790,27 @@ ROUND5_KINDS: dict[str, tuple[str, int, str]] = {
                                           "        return spec.g * tau\n", 0, ""),
 }
 
+#: a user's controller on B1 that declares uses_forces (its contact 'tip', 2 joints): (its command's body, exit code, a
+#: piece of stderr); F is the measured force on 'tip' [N], tc the generalized contact force [N·m]
+ROUND5_FORCES: dict[str, tuple[str, int, str]] = {
+    "forces_clipped": ("        return np.full(2, max(F, 0.0)), None\n", 1,
+                       "contactdyn: error: controller 'forces_clipped' (ctl5_forces_clipped.py) declares uses_forces = "
+                       "True, but its command at forces['tip'] = -2.5 N gives τ = [0, 0], not τ₀ + B F = [-2.5, -2.5] "
+                       "(τ₀, B: its command at forces 0 and its differences at 1): expected a command affine in the "
+                       "forces it reads (the solve folds them in)\n"),
+    "forces_squared": ("        return np.array([F * F, 0.0]), None\n", 1,
+                       "its command at forces['tip'] = -2.5 N gives τ = [6.25, 0], not τ₀ + B F = [-2.5, 0]"),
+    "tau_contact_clipped": ("        return np.clip(tc, -1.0, 1.0), None\n", 1,
+                            "its command at tau_contact[0] = -2.5 N·m or N gives τ = [-1, 0], not τ₀ + B F = "
+                            "[-2.5, 0]"),
+    "forces_times_tau_contact": ("        return np.array([F * tc[1], 0.0]), None\n", 1,
+                                 "its command at forces['tip'] = -2.5 N, tau_contact = [40, -2.5] N·m or N (all at "
+                                 "once) gives τ = [6.25, 0], not τ₀ + B F = [0, 0]"),
+    "state_rate_squared": ("        return np.zeros(2), np.array([F * F])\n", 1,
+                           "its command at forces['tip'] = -2.5 N gives ż = [6.25], not ż₀ + D F = [-2.5]"),
+    "affine_runs": ("        return 0.01 * tc + np.full(2, 0.001 * F - 0.5), None\n", 0, ""),
+}
+
 
 def round5_cases(tmp: Path) -> list[Case]:
     cases = []
@@ -811,6 +832,15 @@ def round5_cases(tmp: Path) -> list[Case]:
         scene = tmp / f"kind5_{name}.toml"
         scene.write_text(f'imports = ["kind5_{name}"]\n' + B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
         cases.append((f"r5/kind/{name}", ["run", str(scene), *FAST, "--out", str(tmp / name)], code, piece))
+    controller = B1[B1.index("[controller]"):B1.index("[[phase]]")]
+    for name, (body, code, piece) in ROUND5_FORCES.items():
+        states = "    n_states = 1\n" if name.startswith("state") else ""
+        (tmp / f"ctl5_{name}.py").write_text(LAW + f"    name = {name!r}\n    uses_forces = True\n{states}"
+                                             "    def command(self, inp):\n"
+                                             "        F, tc = inp.forces['tip'], inp.tau_contact\n" + body)
+        scene = tmp / f"ctl5_{name}.toml"
+        scene.write_text(f'imports = ["ctl5_{name}"]\n' + B1.replace(controller, f'[controller]\nkind = "{name}"\n\n'))
+        cases.append((f"r5/uses_forces/{name}", ["run", str(scene), *FAST, "--out", str(tmp / name)], code, piece))
     return cases
 
 
