@@ -210,12 +210,13 @@ def checked_affine_in_forces(ctl, inp) -> None:
     ``tau_contact`` [N·m or N] per joint) moved alone, then at all moved at once, is τ₀ + B F, τ₀ its command at
     ``inp`` and B its differences at +1 (the fold's columns: the solve folds the forces in by them); else a LawError
     naming where. What cannot be tried is not refused (the command raises or gives no finite numbers there)."""
-    keys = [("forces", key) for key in inp.forces] + [("tau_contact", i) for i in range(np.size(inp.tau_contact))]
+    n_tau = 0 if inp.tau_contact is None else len(inp.tau_contact)
+    keys = [("forces", key) for key in inp.forces] + [("tau_contact", i) for i in range(n_tau)]
 
     def command(moved: dict) -> np.ndarray:
         forces = {key: inp.forces[key] + moved.get(("forces", key), 0.0) for key in inp.forces}
         tau_c = None if inp.tau_contact is None else inp.tau_contact + [moved.get(("tau_contact", i), 0.0)
-                                                                         for i in range(len(inp.tau_contact))]
+                                                                         for i in range(n_tau)]
         tau, rates = ctl.command(inp.replaced(forces=forces, tau_contact=tau_c))
         return np.concatenate([np.asarray(tau, float).ravel(), np.asarray(() if rates is None else rates, float)])
 
@@ -227,16 +228,18 @@ def checked_affine_in_forces(ctl, inp) -> None:
         got = [(moved, command(moved)) for moved in tries]
     except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
         return
+    if any(y.shape != base.shape for y in (*B.values(), *(y for _, y in got))):
+        return  # (a command whose size changes: the run's own check names it)
     for moved, y in got:
         affine = base + sum(a * B[key] for key, a in moved.items())
         scale = np.abs(base) + sum(np.abs(a * B[key]) for key, a in moved.items())
         wrong = np.flatnonzero(~(np.abs(y - affine) <= 1e-9 * scale + 1e-12))
         if np.all(np.isfinite(y)) and np.all(np.isfinite(affine)) and wrong.size:
-            raise LawError("controller", ctl.name, law_file(type(ctl)), _not_affine(ctl.nv, moved, y, affine,
-                                                                                    wrong[0]))
+            said = _not_affine_in_forces(ctl.nv, moved, y, affine, wrong[0])
+            raise LawError("controller", ctl.name, law_file(type(ctl)), said)
 
 
-def _not_affine(nv: int, moved: dict, y: np.ndarray, affine: np.ndarray, first: int) -> str:
+def _not_affine_in_forces(nv: int, moved: dict, y: np.ndarray, affine: np.ndarray, first: int) -> str:
     """What a force-reading law did where its command (τ, then ż: ``y``) is not ``affine`` at the forces ``moved``
     ((field, key) -> its value [N, or N·m or N]; ``first``: the first entry that differs)."""
     forces = [f"forces[{key!r}] = {a:g} N" for (field, key), a in moved.items() if field == "forces"]
@@ -246,10 +249,10 @@ def _not_affine(nv: int, moved: dict, y: np.ndarray, affine: np.ndarray, first: 
     elif tau_c:
         forces.append(f"tau_contact = {_listed(tau_c)} N·m or N")
     at = ", ".join(forces) + (" (all at once)" if len(moved) > 1 else "")
-    part, name, base = (slice(0, nv), "τ", "τ₀ + B F") if first < nv else (slice(nv, None), "ż", "ż₀ + D F")
-    return (f"declares uses_forces = True, but its command at {at} gives {name} = {_listed(y[part])}, not {base} = "
-            f"{_listed(affine[part])} (τ₀, B: its command at forces 0 and its differences at 1): expected a command "
-            "affine in the forces it reads (the solve folds them in)")
+    part, name, zero, column = (slice(0, nv), "τ", "τ₀", "B") if first < nv else (slice(nv, None), "ż", "ż₀", "D")
+    return (f"declares uses_forces = True, but its command at {at} gives {name} = {_listed(y[part])}, not {zero} + "
+            f"{column} F = {_listed(affine[part])} ({zero}, {column}: its command at forces 0 and its differences at "
+            "1): expected a command affine in the forces it reads (the solve folds them in)")
 
 
 def checked_config(kind: str, config):

@@ -60,7 +60,7 @@ def load_entry_points() -> None:
             module = importlib.import_module(ep.module)
         except Exception as exc:  # noqa: BLE001 (a broken package of laws names itself, it does not crash us)
             raise SceneError(f"entry point {ep.name}", f"an importable module of laws ({ENTRY_POINTS})",
-                             import_failure(ep.value, exc)) from None
+                             _import_failure(ep.value, exc)) from None
         _record(ep.module, module)
 
 
@@ -111,10 +111,10 @@ def _naming_failure(name: str, file: str | None):
         yield
     except (Exception, SystemExit) as exc:  # noqa: BLE001 (the user's module failed, or exited: say which and why)
         raise SceneError("imports", "importable modules (next to the scene file or on sys.path)",
-                         import_failure(name, exc), file) from None
+                         _import_failure(name, exc), file) from None
 
 
-def import_failure(name: str, exc: BaseException) -> ContactdynError:
+def _import_failure(name: str, exc: BaseException) -> ContactdynError:
     """What module ``name`` raised while it imported, as the error quotes it whole: ``my_laws: ValueError: <its
     message's first line> (my_laws.py, line 12)``, the file and line of the user's code that raised it (a syntax
     error's own; none where no frame is the user's: a module not found)."""
