@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 __all__ = ["ContactdynError", "RobotError", "FrameError", "RunFileError", "SceneError", "UnknownKeyError",
-           "SimulationError", "close_matches", "signal_name"]
+           "SimulationError", "close_matches", "signal_name", "first_line"]
 
 
 class ContactdynError(Exception):
@@ -46,6 +46,16 @@ def abbreviate(value: object, limit: int = 200) -> str:
     if len(text) <= limit:
         return text
     return f"{text[:limit - 40]} ... {text[-20:]} ({len(text)} characters)"
+
+
+def first_line(text: str, limit: int = 500) -> str:
+    """The first line of ``text`` that is not blank, without terminal colours: whole up to ``limit`` characters (a
+    message quoted from someone's exception; a longer line keeps its head and says its length), "" for none."""
+    import re
+
+    lines = [line.strip() for line in re.sub(r"\x1b\[[0-9;]*m", "", text).splitlines() if line.strip()]
+    line = lines[0] if lines else ""
+    return line if len(line) <= limit else f"{line[:limit - 40]} ... ({len(line)} characters)"
 
 
 def close_matches(name: str, choices, n: int = 3, cutoff: float = 0.6) -> list[str]:

@@ -275,3 +275,26 @@ def test_controller_configuration_errors_name_the_key():
     space = writer_doc({"kind": "position_dynamic", "space": "joint"},
                        {"reference": {"space": "task", "start": tip0().tolist(), "moves": []}})
     assert _error(space).key == "phase[0].reference.space"
+
+
+@pytest.mark.parametrize("scene", ["b1_force_loop", "case1_cart", "case3_a_force", "case3_a_position",
+                                   "force_loop_real_cell"])
+def test_the_built_in_force_reading_laws_are_affine_in_the_forces_they_read(scene):
+    """position_dynamic, force_dynamic and hybrid declare uses_forces: at each phase's sample input their command is
+    finite and passes the check that refuses a user's law not affine in the forces it reads (the system runs it on the
+    users' laws; the package's are affine by their construction)."""
+    from contactdyn.laws.controllers.sampled import SampledController
+    from contactdyn.laws.failures import checked_affine_in_forces
+    from contactdyn.model.evaluation import sample_input
+    from contactdyn.scene.scene_file import load_scene
+
+    system = System(load_scene(scene))
+    tried = []
+    for spec, ctl in zip(system.scene.phases, system.controllers, strict=True):
+        law = ctl.inner if isinstance(ctl, SampledController) else ctl
+        if law.uses_forces:
+            inp = sample_input(system, spec, law)
+            assert np.all(np.isfinite(law.command(inp)[0])), law.name
+            checked_affine_in_forces(law, inp)
+            tried.append(law.name)
+    assert tried

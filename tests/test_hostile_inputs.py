@@ -544,7 +544,7 @@ ROUND3_LAWS: dict[str, tuple[str, str, int, str]] = {
                           + COMMAND, "read_none", 1, "controller 'read_none' (law_read_returns_none.py) read returned "
                           "NoneType: expected a config with the kind of its controller"),
     "exits": ("    name = 'exits'\n" + COMMAND + "\n\nimport sys\nsys.exit(3)\n", "exits", 2,
-              "found 'law_exits: SystemExit: 3'"),
+              "found law_exits: SystemExit: 3 (law_exits.py, line 13)\n"),
 }
 
 #: a user's stage or friction law module that its register refuses at import: (its source, a piece of stderr)
@@ -681,6 +681,7 @@ ROUND4_FLAGS: dict[str, tuple[str, str]] = {
                              "drive kind 'voltage_int': has_voltage must be True or False, got 1"),
 }
 
+FRICTION_EXPECTED = "expected a finite coefficient >= 0 (friction opposes the slip)"
 #: a user's friction law on B1's sliding tip: (its class's body, how it gives μ, a piece of stderr)
 NEGATIVE = ("from contactdyn.laws import FrictionLaw, register_friction_law\n\n\n@register_friction_law\n"
             "class Negative(FrictionLaw):\n    name = {name!r}\n\n")
@@ -714,8 +715,7 @@ def round4_cases(tmp: Path) -> list[Case]:
         scene.write_text(f'imports = ["mu4_{name}"]\n' + B1.replace("tangent.mu = 0.4", tip.format(name=f"mu4_{name}")))
         for path in ("compiled", "interpreted"):
             said = (f"contactdyn: error: t = 0 s: friction law 'mu4_{name}' (mu4_{name}.py) {piece} at slip speed 0.15 "
-                    "m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': expected a coefficient >= 0 (friction opposes the "
-                    "slip)\n")
+                    f"m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': {FRICTION_EXPECTED}\n")
             cases.append((f"r4/friction/{name}/{path}", ["run", str(scene), *FAST, "--path", path], 1, said))
     joint = ('[phase.controller]\nkind = "joint_pd"\nkp = {kp}\nkd = 10.0\n[phase.reference]\nspace = "joint"\n'
              'start = [0.3, -1.3]\n')
@@ -737,9 +737,116 @@ def round4_cases(tmp: Path) -> list[Case]:
     return cases
 
 
+# ---- round 5: a law module's whole error at import, a friction law's non-finite μ, declared affinities --------
+LONG = ("the table of gains must have as many rows as the robot has joints; got 3 rows for 2 joints (rows: kp = "
+        "[100.0, 200.0, 300.0], kd = [1.0, 2.0, 3.0]); check the file gains.csv next to this scene, whose header "
+        "says 'kp,kd' and whose last line ends the table")
+#: a user's law module that fails at import: (its source, a piece of stderr: the exception's whole first line and
+#: where the user's code raised it)
+ROUND5_IMPORTS: dict[str, tuple[str, str]] = {
+    "long_message": (f"def helper():\n    raise ValueError({LONG!r})\n\n\nhelper()\n",
+                     f"found law5_long_message: ValueError: {LONG} (law5_long_message.py, line 2)\n"),
+    "first_line_only": ("raise RuntimeError('the first line says it all\\nand the second is left out')\n",
+                        "found law5_first_line_only: RuntimeError: the first line says it all (law5_first_line_only.py"
+                        ", line 1)\n"),
+    "syntax": ("x = 1\ndef broken(:\n", "found law5_syntax: SyntaxError: invalid syntax (law5_syntax.py, line 2)\n"),
+    "exits": ("import sys\n\nsys.exit(3)\n", "found law5_exits: SystemExit: 3 (law5_exits.py, line 3)\n"),
+    "refused_at_register": (
+        STAGE + '    name = "affine_many"\n    affine = True\n    params = (' + ", ".join(
+            f'Param("gain_{i}", "-", "a gain", 1.5)' for i in range(8)) + ',)\n    @staticmethod\n'
+        '    def force(k, b, p, x, xdot):\n        return 2.0 * k * x + b * xdot\n',
+        "stage law 'affine_many': affine = True, but its force at x = -0.01 m, ẋ = 0 m/s is -20 N, not K x + B ẋ = "
+        "-10 N (k = 1000, b = 10, " + ", ".join(f"gain_{i} = 1.5" for i in range(8)) + "): declare affine = False "
+        "(law5_refused_at_register.py, line 4)\n"),
+}
+
+
+#: a user's friction law on B1's sliding tip whose μ is not finite: (its class's body, how it gives μ); it stops the
+#: run where a negative μ does, named with the contact (round 4's cases)
+ROUND5_FRICTION: dict[str, tuple[str, str]] = {
+    "coefficient_nan": ("    @staticmethod\n    def coefficient(mu_s, mu_k, p, speed):\n"
+                        "        return mu_k + np.nan * speed\n", "returned μ = nan"),
+    "coefficient_plus_inf": ("    @staticmethod\n    def coefficient(mu_s, mu_k, p, speed):\n"
+                             "        return mu_k + np.inf if speed > 0.0 else mu_k\n", "returned μ = inf"),
+    "kinetic_nan": ("    @classmethod\n    def kinetic(cls, spec, speed):\n        return spec.mu_k + np.nan * speed\n",
+                    "returned μ = nan"),
+    "kinetic_plus_inf": ("    @classmethod\n    def kinetic(cls, spec, speed):\n"
+                         "        return spec.mu_k + np.inf * speed\n", "returned μ = inf"),
+}
+
+#: a user's drive kind with a voltage (B1's joints): (its voltage's body, exit code, a piece of stderr); its force takes
+#: the voltage as it is
+VOLTS = ("    has_voltage = True\n    @staticmethod\n    def force(spec, command, q, qd, theta, omega):\n"
+         "        return command, 0.0, command * qd, 0.0\n    @staticmethod\n    def voltage(spec, tau, qd, omega):\n")
+ROUND5_KINDS: dict[str, tuple[str, int, str]] = {
+    "voltage_squared": ("        return spec.g * tau * abs(tau) + qd\n", 1,
+                        "contactdyn: error: drive kind 'voltage_squared' (kind5_voltage_squared.py) gives u = -6.25 V "
+                        "at τ = -2.5 N·m or N, q̇ = 0 (g = 1), not u(0) + τ (u(1) − u(0)) = -2.5 V: expected a voltage "
+                        "affine in τ (has_voltage: the solve folds a force-reading controller's command through it)\n"),
+    "voltage_clipped": ("        return max(min(spec.g * tau, 20.0), -20.0) + 0.1 * qd\n", 1,
+                        "gives u = 20 V at τ = 40 N·m or N, q̇ = 0 (g = 1), not u(0) + τ (u(1) − u(0)) = 40 V"),
+    "voltage_affine_runs": ("        return 2.0 * spec.g * tau - 0.5 * qd\n", 0, ""),
+    "voltage_raising_past_a_limit_runs": ("        if abs(tau) > 1e6:\n            raise ValueError('too much')\n"
+                                          "        return spec.g * tau\n", 0, ""),
+}
+
+#: a user's controller on B1 that declares uses_forces (its contact 'tip', 2 joints): (its command's body, exit code, a
+#: piece of stderr); F is the measured force on 'tip' [N], tc the generalized contact force [N·m]
+ROUND5_FORCES: dict[str, tuple[str, int, str]] = {
+    "forces_clipped": ("        return np.full(2, max(F, 0.0)), None\n", 1,
+                       "contactdyn: error: controller 'forces_clipped' (ctl5_forces_clipped.py) declares uses_forces = "
+                       "True, but its command at forces['tip'] = -2.5 N gives τ = [0, 0], not τ₀ + B F = [-2.5, -2.5] "
+                       "(τ₀, B: its command at forces 0 and its differences at 1): expected a command affine in the "
+                       "forces it reads (the solve folds them in)\n"),
+    "forces_squared": ("        return np.array([F * F, 0.0]), None\n", 1,
+                       "its command at forces['tip'] = -2.5 N gives τ = [6.25, 0], not τ₀ + B F = [-2.5, 0]"),
+    "tau_contact_clipped": ("        return np.clip(tc, -1.0, 1.0), None\n", 1,
+                            "its command at tau_contact[0] = -2.5 N·m or N gives τ = [-1, 0], not τ₀ + B F = "
+                            "[-2.5, 0]"),
+    "forces_times_tau_contact": ("        return np.array([F * tc[1], 0.0]), None\n", 1,
+                                 "its command at forces['tip'] = -2.5 N, tau_contact = [40, -2.5] N·m or N (all at "
+                                 "once) gives τ = [6.25, 0], not τ₀ + B F = [0, 0]"),
+    "state_rate_squared": ("        return np.zeros(2), np.array([F * F])\n", 1,
+                           "its command at forces['tip'] = -2.5 N gives ż = [6.25], not ż₀ + D F = [-2.5]"),
+    "affine_runs": ("        return 0.01 * tc + np.full(2, 0.001 * F - 0.5), None\n", 0, ""),
+}
+
+
+def round5_cases(tmp: Path) -> list[Case]:
+    cases = []
+    for name, (source, piece) in ROUND5_IMPORTS.items():
+        (tmp / f"law5_{name}.py").write_text(source)
+        (tmp / f"law5_{name}.toml").write_text(f'imports = ["law5_{name}"]\n' + B1)
+        cases.append((f"r5/import/{name}", ["run", str(tmp / f"law5_{name}.toml"), *FAST], 2, piece))
+    tip = 'tangent.law = "{name}"\ntangent.mu_s = 0.6\ntangent.mu_k = 0.4'
+    for name, (body, piece) in ROUND5_FRICTION.items():
+        (tmp / f"mu5_{name}.py").write_text("import numpy as np\n" + NEGATIVE.format(name=f"mu5_{name}") + body)
+        scene = tmp / f"mu5_{name}.toml"
+        scene.write_text(f'imports = ["mu5_{name}"]\n' + B1.replace("tangent.mu = 0.4", tip.format(name=f"mu5_{name}")))
+        for path in ("compiled", "interpreted"):
+            said = (f"contactdyn: error: t = 0 s: friction law 'mu5_{name}' (mu5_{name}.py) {piece} at slip speed 0.15 "
+                    f"m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': {FRICTION_EXPECTED}\n")
+            cases.append((f"r5/friction/{name}/{path}", ["run", str(scene), *FAST, "--path", path], 1, said))
+    for name, (body, code, piece) in ROUND5_KINDS.items():
+        (tmp / f"kind5_{name}.py").write_text(KIND + f"    name = {name!r}\n" + VOLTS + body)
+        scene = tmp / f"kind5_{name}.toml"
+        scene.write_text(f'imports = ["kind5_{name}"]\n' + B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
+        cases.append((f"r5/kind/{name}", ["run", str(scene), *FAST, "--out", str(tmp / name)], code, piece))
+    controller = B1[B1.index("[controller]"):B1.index("[[phase]]")]
+    for name, (body, code, piece) in ROUND5_FORCES.items():
+        states = "    n_states = 1\n" if name.startswith("state") else ""
+        (tmp / f"ctl5_{name}.py").write_text(LAW + f"    name = {name!r}\n    uses_forces = True\n{states}"
+                                             "    def command(self, inp):\n"
+                                             "        F, tc = inp.forces['tip'], inp.tau_contact\n" + body)
+        scene = tmp / f"ctl5_{name}.toml"
+        scene.write_text(f'imports = ["ctl5_{name}"]\n' + B1.replace(controller, f'[controller]\nkind = "{name}"\n\n'))
+        cases.append((f"r5/uses_forces/{name}", ["run", str(scene), *FAST, "--out", str(tmp / name)], code, piece))
+    return cases
+
+
 BUILDERS = {"scenes": scene_cases, "overrides": lambda _: override_cases(), "urdfs": urdf_cases,
             "run_files": run_file_cases, "round2": round2_cases,
-            "round3": round3_cases, "round4": round4_cases}
+            "round3": round3_cases, "round4": round4_cases, "round5": round5_cases}
 
 
 def test_corpus_has_at_least_100_cases(tmp_path):
@@ -751,7 +858,7 @@ def test_corpus_has_at_least_100_cases(tmp_path):
 
 
 @pytest.mark.timeout(600)
-@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2", "round3", "round4"])
+@pytest.mark.parametrize("kind", ["scenes", "overrides", "urdfs", "run_files", "round2", "round3", "round4", "round5"])
 def test_hostile_inputs(tmp_path, kind):
     check(BUILDERS[kind](tmp_path), tmp_path)
 

@@ -18,8 +18,8 @@ import pytest
 from contactdyn import parse_scene, simulate
 from contactdyn.cli import EXIT_FAILED, main
 from contactdyn.laws.drive_kinds import DriveKind, register_drive_kind
-from contactdyn.laws.failures import LawError
-from contactdyn.laws.friction_laws import FrictionLaw, register_friction_law
+from contactdyn.laws.failures import LawError, kinetic_coefficient
+from contactdyn.laws.friction_laws import FrictionLaw, FrictionSpec, register_friction_law
 from contactdyn.laws.params import Param
 from contactdyn.laws.stage_laws import StageLaw, register_stage_law
 
@@ -306,14 +306,28 @@ def _b1_sliding_on(law: str) -> dict:
 
 
 def test_a_friction_law_that_returns_nan_is_named_with_its_inputs():
-    """B1's tip slides at 0.15 m/s from the start: the law's μ is NaN there (before: "t = 0 s: the model has no
-    finite answer at this state (its contact system is not finite there)")."""
+    """B1's tip slides at 0.15 m/s from the start: the law's μ is NaN there, which stops the run at that call as a
+    negative μ does, named with its contact (before: "t = 0 s: the model has no finite answer at this state (its
+    contact system is not finite there)"; then the law without its contact, once the run failed)."""
     register_friction_law(NanWhenSliding)
     doc = _b1_sliding_on(NanWhenSliding.name)
     with pytest.raises(LawError) as info:
         _quiet(parse_scene(doc))
     assert re.fullmatch(r"t = 0 s: friction law 'nan_when_sliding_test' \(test_law_failures\.py\) returned μ = nan "
-                        r"at slip speed 0\.15\d* m/s \(mu_s = 0\.6, mu_k = 0\.4\)", str(info.value)), str(info.value)
+                        r"at slip speed 0\.15\d* m/s \(mu_s = 0\.6, mu_k = 0\.4\) on contact 'tip': expected a finite "
+                        r"coefficient >= 0 \(friction opposes the slip\)", str(info.value)), str(info.value)
+
+
+def test_a_non_finite_coefficient_is_refused_where_an_impact_reads_it_too():
+    """kinetic_coefficient, the one check of a law's μ (the call's stop and an impact's), refuses NaN and ±inf as it
+    refuses μ < 0, at a finite slip speed; at a speed that is not finite (an overflowed trial state) μ is given."""
+    register_friction_law(NanWhenSliding)
+    spec = FrictionSpec(0.6, 0.4, 0.0, NanWhenSliding.name, ())
+    with pytest.raises(LawError, match=r"^t = 0\.3 s: friction law 'nan_when_sliding_test' .* returned μ = nan at slip "
+                       r"speed 0\.15 m/s .* on contact 'tip': expected a finite coefficient >= 0"):
+        kinetic_coefficient(spec, "tip", 0.15, 0.3)
+    assert kinetic_coefficient(spec, "tip", 0.0, 0.3) == 0.4
+    assert math.isnan(kinetic_coefficient(spec, "tip", math.inf, 0.3))
 
 
 def test_a_controller_that_returns_nan_is_named_with_its_command(capsys, tmp_path):

@@ -40,13 +40,13 @@ import hashlib
 import inspect
 import math
 import os
-import re
 from contextlib import contextmanager
 
 from llvmlite import ir
 from numba import carray, types
 from numba.extending import intrinsic, overload
 
+from ..errors import first_line
 from ..numerics.compile_cache import cfunc, njit, sources_key
 from ..numerics.native_call import handles
 from .failures import law_error, raised_calling
@@ -287,10 +287,11 @@ def _cfunc(wrapper, signature, cache: bool, under: str | None):
 
 
 def _first_line(exc: Exception) -> str:
-    """The informative line of a numba error (its first line names the pipeline step only; no terminal colours)."""
-    lines = [line.strip() for line in re.sub(r"\x1b\[[0-9;]*m", "", str(exc)).splitlines() if line.strip()]
-    lines = [line for line in lines if not line.startswith("Failed in ")] or lines or [type(exc).__name__]
-    return lines[0][:200]
+    """The informative line of a numba error, whole (its first line names the pipeline step only:
+    :func:`~contactdyn.errors.first_line` of the lines after it)."""
+    lines = str(exc).splitlines()
+    told = [line for line in lines if line.strip() and not first_line(line).startswith("Failed in ")]
+    return first_line("\n".join(told or lines)) or type(exc).__name__
 
 
 # ---- the calls: Python twins, and their compiled form by overload ----------------------------------------------

@@ -66,7 +66,7 @@ if TYPE_CHECKING:
     from .drives import DriveSpec
 
 __all__ = ["DriveKind", "DRIVE_KINDS", "register_drive_kind", "Torque", "DcMotor", "Elastic", "MOTOR_PARAMS",
-           "TORQUE_RATIO", "TUBE_PARAMS"]
+           "TORQUE_RATIO", "TUBE_PARAMS", "not_affine_in_tau"]
 
 #: the motor of eq. 51 behind a gear (dc_motor and elastic)
 MOTOR_PARAMS = (
@@ -145,7 +145,8 @@ class DriveKind:
     @staticmethod
     def voltage(spec: DriveSpec, tau: float, qd: float, omega: float) -> float:
         """The voltage [V] that asks for the generalized force ``tau`` [N·m or N] at coordinate speed ``qd`` and motor
-        speed ``omega`` [rad/s] (kinds with a voltage; affine in ``tau``)."""
+        speed ``omega`` [rad/s] (kinds with a voltage; affine in ``tau``: checked for each drive,
+        :func:`not_affine_in_tau`)."""
         raise NotImplementedError(f"drive kind {spec.kind!r} has no voltage")
 
     @staticmethod
@@ -187,6 +188,35 @@ def register_drive_kind(cls: type[DriveKind]) -> type[DriveKind]:
                                  f"{other.name!r} ({shared[p.name]})")
     claim_name(DRIVE_KINDS, cls, "drive kind")
     return cls
+
+
+#: (q̇ [rad/s or m/s], ω [rad/s]) and the forces τ [N·m or N] at which a voltage's affinity in τ is tried (ω: a kind
+#: with a motor coordinate's; NaN for another, as the call gives it)
+_TRIED_SPEEDS, _TRIED_TAU = ((0.0, 0.0), (0.7, -40.0)), (-2.5, 0.3, 40.0)
+
+
+def not_affine_in_tau(cls: type[DriveKind], spec: DriveSpec) -> str:
+    """Where kind ``cls``'s voltage u(τ) [V] at the drive ``spec``'s values is not u(0) + τ (u(1) − u(0)) (τ [N·m or
+    N]), at the speeds tried, or "" (also where a call raises or gives no finite number: what cannot be tried is not
+    refused; the run names the kind if it fails there). The solve folds a force-reading controller's command through
+    the voltage by its slope (``command_gain``)."""
+    for qd, omega in _TRIED_SPEEDS:
+        omega = omega if cls.motor_coordinate else math.nan
+        try:
+            u0, u1, *tried = (float(cls.voltage(spec, tau, qd, omega)) for tau in (0.0, 1.0, *_TRIED_TAU))
+        except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
+            return ""
+        if not all(map(math.isfinite, (u0, u1, *tried))):
+            return ""
+        for tau, u in zip(_TRIED_TAU, tried, strict=True):
+            affine = u0 + tau * (u1 - u0)
+            if not abs(u - affine) <= 1e-9 * (abs(u0) + abs(tau * (u1 - u0))) + 1e-12:
+                motor = f", ω = {omega:g} rad/s" if cls.motor_coordinate else ""
+                at = ", ".join(f"{p.name} = {getattr(spec, p.name):g}" for p in cls.params)
+                return (f"gives u = {u:g} V at τ = {tau:g} N·m or N, q̇ = {qd:g}{motor}{f' ({at})' if at else ''}, "
+                        f"not u(0) + τ (u(1) − u(0)) = {affine:g} V: expected a voltage affine in τ (has_voltage: the "
+                        "solve folds a force-reading controller's command through it)")
+    return ""
 
 
 def _declared(p: Param) -> tuple:

@@ -15,16 +15,19 @@ its laws' results checked (:func:`.abi.checking_laws`) and named with what it re
 
 from __future__ import annotations
 
+import math
 import sys
 import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import ContactdynError, SimulationError
 
 __all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file",
-           "raised_calling", "counted_states", "checked_config", "negative_friction_error", "kinetic_coefficient",
-           "checked_flags"]
+           "raised_calling", "counted_states", "checked_config", "unusable_friction_error", "kinetic_coefficient",
+           "checked_flags", "checked_affine_in_forces"]
 
 PACKAGE = __name__.split(".")[0] + "."  #: "contactdyn.": the package's own laws are not a user's
 _CALLING = "_contactdyn_calling"  #: an exception's attribute: (kind, class) of the law whose call raised it
@@ -105,26 +108,27 @@ def non_finite_error(family: str, law: type, args: tuple, value, t: float | None
     return LawError(kind, law.name, law_file(law), what(law, args, value), None, t)
 
 
-def negative_friction_error(spec, contact: str, speed: float, value: float, t: float | None = None) -> LawError:
+def unusable_friction_error(spec, contact: str, speed: float, value: float, t: float | None = None) -> LawError:
     """The LawError of the friction law of contact ``contact`` (its ``spec``, a FrictionSpec) that returned the
-    coefficient ``value`` < 0 at slip speed ``speed`` [m/s]: a negative μ pushes a slide along (the run stops at the
-    first call that gets one, compiled or interpreted: :meth:`~contactdyn.model.pipeline.pipeline.Pipeline.failed_call`;
-    an impact's, :func:`kinetic_coefficient`)."""
+    coefficient ``value`` [-] at slip speed ``speed`` [m/s], negative (it pushes a slide along), NaN or ±inf (the
+    run stops at the first call that gets one, compiled or interpreted:
+    :meth:`~contactdyn.model.pipeline.pipeline.Pipeline.failed_call`; an impact's, :func:`kinetic_coefficient`)."""
     from .friction_laws import FRICTION_LAWS
 
     law = FRICTION_LAWS[spec.law]
     what = _friction_returned(law, (spec.mu_s, spec.mu_k, spec.params, speed), value)
-    return LawError("friction law", law.name, law_file(law), f"{what} on contact {contact!r}: expected a coefficient "
-                    ">= 0 (friction opposes the slip)", None, t)
+    return LawError("friction law", law.name, law_file(law), f"{what} on contact {contact!r}: expected a finite "
+                    "coefficient >= 0 (friction opposes the slip)", None, t)
 
 
 def kinetic_coefficient(spec, contact: str, speed: float, t: float | None = None) -> float:
     """μ [-] of contact ``contact``'s friction ``spec`` (a FrictionSpec) at slip speed ``speed`` [m/s] at t [s]; its
-    law returning μ < 0 is its LawError (:func:`negative_friction_error`)."""
+    law returning μ < 0, NaN or ±inf at a finite speed is its LawError (:func:`unusable_friction_error`; at a speed
+    that is not finite, an overflowed trial state's, μ is given as it is: the step is rejected)."""
     with naming_laws(t):
         mu = float(spec.mu(speed))
-    if mu < 0.0:
-        raise negative_friction_error(spec, contact, speed, mu, t)
+    if not (math.isfinite(mu) and mu >= 0.0) and math.isfinite(speed):
+        raise unusable_friction_error(spec, contact, speed, mu, t)
     return mu
 
 
@@ -194,6 +198,61 @@ def checked_flags(ctl) -> None:
     if wrong:
         raise LawError("controller", ctl.name, law_file(type(ctl)), f"set {wrong[0]} = {wrong[1]!r}: expected True or "
                        "False")
+
+
+#: the measured forces [N] (each alone, then all at once, in turn) at which a force-reading law's affinity is tried
+_TRIED_FORCES = (-2.5, 40.0)
+
+
+def checked_affine_in_forces(ctl, inp) -> None:
+    """``ctl`` (a bound controller that declares ``uses_forces``) affine in the forces it reads at ``inp`` (a
+    ControlInput of its phase): its command (τ [N·m, N or V] and ż) at each measured force (``forces`` [N] per key,
+    ``tau_contact`` [N·m or N] per joint) moved alone, then at all moved at once, is τ₀ + B F, τ₀ its command at
+    ``inp`` and B its differences at +1 (the fold's columns: the solve folds the forces in by them); else a LawError
+    naming where. What cannot be tried is not refused (the command raises or gives no finite numbers there)."""
+    n_tau = 0 if inp.tau_contact is None else len(inp.tau_contact)
+    keys = [("forces", key) for key in inp.forces] + [("tau_contact", i) for i in range(n_tau)]
+
+    def command(moved: dict) -> np.ndarray:
+        forces = {key: inp.forces[key] + moved.get(("forces", key), 0.0) for key in inp.forces}
+        tau_c = None if inp.tau_contact is None else inp.tau_contact + [moved.get(("tau_contact", i), 0.0)
+                                                                         for i in range(n_tau)]
+        tau, rates = ctl.command(inp.replaced(forces=forces, tau_contact=tau_c))
+        return np.concatenate([np.asarray(tau, float).ravel(), np.asarray(() if rates is None else rates, float)])
+
+    together = {key: _TRIED_FORCES[k % len(_TRIED_FORCES)] for k, key in enumerate(keys)}
+    tries = [{key: a} for key in keys for a in _TRIED_FORCES] + ([together] if len(keys) > 1 else [])
+    try:
+        base = command({})
+        B = {key: command({key: 1.0}) - base for key in keys}
+        got = [(moved, command(moved)) for moved in tries]
+    except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
+        return
+    if any(y.shape != base.shape for y in (*B.values(), *(y for _, y in got))):
+        return  # (a command whose size changes: the run's own check names it)
+    for moved, y in got:
+        affine = base + sum(a * B[key] for key, a in moved.items())
+        scale = np.abs(base) + sum(np.abs(a * B[key]) for key, a in moved.items())
+        wrong = np.flatnonzero(~(np.abs(y - affine) <= 1e-9 * scale + 1e-12))
+        if np.all(np.isfinite(y)) and np.all(np.isfinite(affine)) and wrong.size:
+            said = _not_affine_in_forces(ctl.nv, moved, y, affine, wrong[0])
+            raise LawError("controller", ctl.name, law_file(type(ctl)), said)
+
+
+def _not_affine_in_forces(nv: int, moved: dict, y: np.ndarray, affine: np.ndarray, first: int) -> str:
+    """What a force-reading law did where its command (τ, then ż: ``y``) is not ``affine`` at the forces ``moved``
+    ((field, key) -> its value [N, or N·m or N]; ``first``: the first entry that differs)."""
+    forces = [f"forces[{key!r}] = {a:g} N" for (field, key), a in moved.items() if field == "forces"]
+    tau_c = [a for (field, _), a in moved.items() if field == "tau_contact"]
+    if len(moved) == 1 and tau_c:
+        forces = [f"tau_contact[{next(iter(moved))[1]}] = {tau_c[0]:g} N·m or N"]
+    elif tau_c:
+        forces.append(f"tau_contact = {_listed(tau_c)} N·m or N")
+    at = ", ".join(forces) + (" (all at once)" if len(moved) > 1 else "")
+    part, name, zero, column = (slice(0, nv), "τ", "τ₀", "B") if first < nv else (slice(nv, None), "ż", "ż₀", "D")
+    return (f"declares uses_forces = True, but its command at {at} gives {name} = {_listed(y[part])}, not {zero} + "
+            f"{column} F = {_listed(affine[part])} ({zero}, {column}: its command at forces 0 and its differences at "
+            "1): expected a command affine in the forces it reads (the solve folds them in)")
 
 
 def checked_config(kind: str, config):

@@ -14,9 +14,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..laws.controllers.base import ControlInput
 from .phases import Phase
 
-__all__ = ["Evaluation", "Measurement", "measures", "surface_keys"]
+__all__ = ["Evaluation", "Measurement", "measures", "surface_keys", "sample_input"]
 
 
 @dataclass
@@ -69,3 +70,27 @@ def surface_keys(system) -> list[str]:
     """The keys of a readable ControlInput's dictionaries of forces and surfaces (a declared Python stage's, rebuilt
     from its buffer's "keys" field): per contact its name, then "<contact>.<label>" per tangential chain."""
     return [key for c in system.contacts for key in (c.name, *(f"{c.name}.{dc.label}" for dc in c.tangent_chains))]
+
+
+def sample_input(system, spec, ctl) -> ControlInput:
+    """A ControlInput of phase ``spec``'s bound controller ``ctl`` before any run, where its declared properties are
+    tried (:func:`~contactdyn.laws.failures.checked_affine_in_forces`): the robot at rest at its ``q0`` (else at 0), the
+    reference at its start (else where the robot is) at rest, the set-points 0, every contact touching at the tip with
+    its measured forces 0 [N], τ_c = 0 [N·m or N], the states 0."""
+    robot, nv, fid = system.robot, system.nv, system.tip_fid
+    q0 = system.scene.robot.q0
+    q, v = (np.array(q0, float) if q0 is not None and len(q0) == nv else np.zeros(nv)), np.zeros(nv)
+    J6, drift6, tip = robot.frame_jacobian(q, fid), robot.frame_drift(q, v, fid), robot.frame_placement(q, fid)
+    ref = spec.reference
+    x_d = None if ref is None else np.array(ref.start if ref.start is not None else
+                                            tip.translation if ref.space == "task" else q, float)
+    rest = None if x_d is None else np.zeros_like(x_d)
+    keys = surface_keys(system)
+    return ControlInput(0.0, q, v, system.controller_inertia(robot.mass_matrix(q)), robot.bias(q, v),
+                        robot.gravity_torque(q) if ctl.needs_gravity else None, tip.translation.copy(), np.zeros(3),
+                        J6[:3], drift6[:3], x_d, rest, None if rest is None else rest.copy(),
+                        forces=dict.fromkeys(keys, 0.0), force_d={f.key: (0.0, 0.0) for f in spec.forces},
+                        normals=system.force_directions, z=np.zeros(ctl.n_states), R_tip=tip.rotation.copy(),
+                        J_ang=J6[3:], drift_ang=drift6[3:], tau_contact=np.zeros(nv),
+                        surfaces={key: (tip.translation.copy(), np.zeros(3)) for key in keys},
+                        touching={c.name: True for c in system.contacts})

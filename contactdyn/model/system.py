@@ -59,7 +59,7 @@ from ..laws.controllers import CONTROLLERS
 from ..laws.controllers.base import BindContext, Controller
 from ..laws.controllers.sampled import SampledController
 from ..laws.drives import Drives
-from ..laws.failures import checked_flags, counted_states, naming_laws
+from ..laws.failures import checked_affine_in_forces, checked_flags, counted_states, is_users, naming_laws
 from ..numerics.twins import current
 from ..robot.body import ArticulatedBody
 from ..robot.posture import start_posture
@@ -69,7 +69,7 @@ from .chain import NodeKind
 from .chain_forces import chain_sides
 from .constraints import mass_matrix as constraints_mass_matrix
 from .contact import Contact, ContactMode, Kinematics, riding_masses, riding_terms, turning_surface
-from .evaluation import Evaluation
+from .evaluation import Evaluation, sample_input
 from .friction import initial_slip, slip_velocity
 from .impact import Impact, impact, project_velocity
 from .joint_friction import JointFriction
@@ -149,6 +149,7 @@ class System:
         self.force_directions = {c.name: c.normal.u for c in self.contacts}
         self.force_directions.update({f"{c.name}.t{i + 1}": t for c in self.contacts for i, t in enumerate(c.tangents)})
         self.slip_band = scene.solver.stick_velocity  #: [m/s] stick/slip guard band (see contactdyn.model.friction)
+        _force_readers_checked(self)
 
     def _contact_of(self, spec) -> Contact:
         """A contact: its touching side a robot frame or a body's point (``frame_point``), its surface the ground,
@@ -479,6 +480,16 @@ def _bound_controllers(scene: Scene, joint_names: list[str], motorized: np.ndarr
                 context.require_motors(f"{p.controller_key}.kind", f"a controller that gives voltages ({law.name!r})")
             controllers.append(ctl)
     return controllers
+
+
+def _force_readers_checked(system: System) -> None:
+    """Each phase's law of a user that reads forces (``uses_forces``) checked affine in them at a ControlInput of its
+    phase (:func:`~contactdyn.laws.failures.checked_affine_in_forces` at :func:`.evaluation.sample_input`): the solve
+    folds them in. The package's own force-reading laws are affine by their construction (tested)."""
+    for spec, ctl in zip(system.scene.phases, system.controllers, strict=True):
+        law = ctl.inner if isinstance(ctl, SampledController) else ctl
+        if law.uses_forces and is_users(type(law)):
+            checked_affine_in_forces(law, sample_input(system, spec, law))
 
 
 def _controller_of(spec, nv: int) -> Controller:

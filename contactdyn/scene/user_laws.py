@@ -23,12 +23,15 @@ file of the user's own that it imports, changed since: the scene runs the law as
 from __future__ import annotations
 
 import importlib
+import os
 import re
 import sys
+import sysconfig
+import traceback
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..errors import SceneError
+from ..errors import ContactdynError, SceneError, first_line
 
 __all__ = ["IMPORTED", "MODULE_NAME", "import_scene_modules", "load_entry_points", "refuse_imports"]
 
@@ -57,7 +60,7 @@ def load_entry_points() -> None:
             module = importlib.import_module(ep.module)
         except Exception as exc:  # noqa: BLE001 (a broken package of laws names itself, it does not crash us)
             raise SceneError(f"entry point {ep.name}", f"an importable module of laws ({ENTRY_POINTS})",
-                             f"{ep.value}: {type(exc).__name__}: {exc}") from None
+                             _import_failure(ep.value, exc)) from None
         _record(ep.module, module)
 
 
@@ -108,7 +111,29 @@ def _naming_failure(name: str, file: str | None):
         yield
     except (Exception, SystemExit) as exc:  # noqa: BLE001 (the user's module failed, or exited: say which and why)
         raise SceneError("imports", "importable modules (next to the scene file or on sys.path)",
-                         f"{name}: {type(exc).__name__}: {exc}", file) from None
+                         _import_failure(name, exc), file) from None
+
+
+def _import_failure(name: str, exc: BaseException) -> ContactdynError:
+    """What module ``name`` raised while it imported, as the error quotes it whole: ``my_laws: ValueError: <its
+    message's first line> (my_laws.py, line 12)``, the file and line of the user's code that raised it (a syntax
+    error's own; none where no frame is the user's: a module not found)."""
+    message = first_line(exc.msg if isinstance(exc, SyntaxError) else str(exc))
+    where = _raised_at(exc)
+    return ContactdynError(f"{name}: {type(exc).__name__}" + (f": {message}" if message else "") +
+                           (f" ({where})" if where else ""))
+
+
+def _raised_at(exc: BaseException) -> str:
+    """``file.py, line N`` where the user's code raised ``exc``: a syntax error's place, else the innermost frame of a
+    file that is neither this package's nor Python's nor an installed package's (importlib's, numpy's); "" for none."""
+    if isinstance(exc, SyntaxError):
+        return f"{Path(exc.filename).name}, line {exc.lineno}" if exc.filename and exc.lineno else ""
+    ours = tuple(str(Path(p)) + os.sep for p in {Path(__file__).resolve().parents[1], *map(sysconfig.get_path, (
+        "stdlib", "platstdlib", "purelib", "platlib"))})
+    theirs = [(frame.f_code.co_filename, line) for frame, line in traceback.walk_tb(exc.__traceback__)
+              if not frame.f_code.co_filename.startswith(("<", *ours))]
+    return f"{Path(theirs[-1][0]).name}, line {theirs[-1][1]}" if theirs else ""
 
 
 def _sources(module) -> dict[Path, bytes]:

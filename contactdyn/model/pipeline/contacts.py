@@ -353,7 +353,7 @@ def _friction(x, ints, reals, ci, row, cr, J, drift, v_tip, v_env, T, F_n, f, G,
     speed = math.sqrt(vt[0] * vt[0] + vt[1] * vt[1]) if nt == 2 else math.sqrt(vt[0] * vt[0])
     mu = cr[CR_MU_K] if row[CI_LAW] == 0 else \
         call_friction(row[CI_LAW], cr[CR_MU_S], cr[CR_MU_K], reals, row[CI_FP_AT], row[CI_N_FP], speed)
-    if not (math.isfinite(mu) and mu >= 0.0):  # (μ < 0: the law's error, which Pipeline.failed_call names)
+    if not (math.isfinite(mu) and mu >= 0.0):  # (the law's error, which Pipeline.failed_call names)
         return False
     visc = -cr[CR_VISCOUS] * vt
     p = pending[ci]

@@ -114,7 +114,7 @@ from .pack import (
 )
 from .robot_terms import frame_terms, robot_part, robot_terms
 
-__all__ = ["call", "rates_at", "samples_at", "law_at", "stage_addresses", "call_time", "negative_friction", "Pipeline"]
+__all__ = ["call", "rates_at", "samples_at", "law_at", "stage_addresses", "call_time", "unusable_friction", "Pipeline"]
 
 
 @njit(cache=True)
@@ -344,10 +344,10 @@ def call_time(exc: BaseException) -> float | None:
     return float(times[-1]) if times and times[-1] is not None else None
 
 
-def negative_friction(system, modes, events, t: float) -> None:
-    """The LawError of a sliding contact's friction law that gives μ < 0 at the slip speed the call with no answer at
-    t [s] wrote into ``events`` (its :func:`.contacts._friction` stops there, compiled or interpreted: the law is
-    called again in Python); nothing where none does."""
+def unusable_friction(system, modes, events, t: float) -> None:
+    """The LawError of a sliding contact's friction law that gives μ < 0, NaN or ±inf at the slip speed the call with
+    no answer at t [s] wrote into ``events`` (its :func:`.contacts._friction` stops there, compiled or interpreted: the
+    law is called again in Python, :func:`~contactdyn.laws.failures.kinetic_coefficient`); nothing where none does."""
     for ci, (c, m) in enumerate(zip(system.contacts, modes, strict=True)):
         fr, nt = c.friction, len(c.tangents)
         if fr is None or fr.constant or not nt or not m.touching or m.stuck:
@@ -406,18 +406,18 @@ class Pipeline:
         return xdot if p.events[-1] == 1.0 else self.failed_call(t, x)
 
     def failed_call(self, t: float, x: np.ndarray, final: bool = False) -> np.ndarray:
-        """ẋ where the call at (t [s], x) gave no answer (its status not 1). A law's own error is raised there (a
-        user's law's as its LawError): a Python stage's; a friction law's μ < 0 (:func:`negative_friction`); a
-        compiled law's, which its C function cannot carry out (status -1; a user's controller with no finite
-        command): the same call run once interpreted at (t, x) raises it from the law's source (:meth:`_probe`); the
-        controller's words where its command was not finite (:meth:`controller_error`). Else the contact system was
-        not finite (an overflowed trial state, a law's NaN): NaN rates, which the step control rejects; a law that
-        returned NaN or ±inf there is named where the caller cannot go on (``final``), else the state is kept
-        (``last_failed``: a run that fails names it)."""
+        """ẋ where the call at (t [s], x) gave no answer (its status not 1). A law's own error is raised there (a user's
+        law's as its LawError): a Python stage's; a friction law's μ < 0, NaN or ±inf (:func:`unusable_friction`); a
+        compiled law's, which its C function cannot carry out (status -1; a user's controller with no finite command):
+        the same call run once interpreted at (t, x) raises it from the law's source (:meth:`_probe`); the controller's
+        words where its command was not finite (:meth:`controller_error`). Else the contact system was not finite (an
+        overflowed trial state, a law's NaN): NaN rates, which the step control rejects; a law that returned NaN or ±inf
+        there is named where the caller cannot go on (``final``), else the state is kept (``last_failed``: a run that
+        fails names it)."""
         raise_python_stage_error(t)
         status = self.packed.events[-1]
-        if status < 0.0:  # (a friction law's μ < 0 stopped the call: .contacts._friction)
-            negative_friction(self.system, self.modes, self.packed.events, t)
+        if status < 0.0:  # (a friction law's μ < 0, NaN or ±inf stopped the call: .contacts._friction)
+            unusable_friction(self.system, self.modes, self.packed.events, t)
         failed = self.controller_error(t, x)
         if status < 0.0 and np.all(np.isfinite(x)):
             self.last_failed = (float(t), np.array(x, float))
