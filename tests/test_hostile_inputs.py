@@ -602,14 +602,11 @@ def round3_cases(tmp: Path) -> list[Case]:
         cases.append((f"r3/{i:02d} {' '.join(sets)[:60]}", argv, code, piece))
     controller = B1[B1.index("[controller]"):B1.index("[[phase]]")]
     for name, (body, kind, code, piece) in ROUND3_LAWS.items():
-        (tmp / f"law_{name}.py").write_text(LAW + body)
-        scene = tmp / f"law_{name}.toml"
-        scene.write_text(f'imports = ["law_{name}"]\n' + B1.replace(controller, f'[controller]\nkind = "{kind}"\n\n'))
+        scene = _law_scene(tmp, f"law_{name}", LAW + body, B1.replace(controller, f'[controller]\nkind = "{kind}"\n\n'))
         cases.append((f"r3/law/{name}", ["run", str(scene), *FAST], code, piece))
     for name, (body, code, piece) in ROUND3_KINDS.items():
-        (tmp / f"kind_{name}.py").write_text(KIND + f"    name = {name!r}\n" + body)
-        scene = tmp / f"kind_{name}.toml"
-        scene.write_text(f'imports = ["kind_{name}"]\n' + B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
+        scene = _law_scene(tmp, f"kind_{name}", KIND + f"    name = {name!r}\n" + body,
+                           B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
         cases.append((f"r3/kind/{name}", ["run", str(scene), *FAST], code, piece))
     (tmp / "law_reads_some.py").write_text(LAW + '    name = "reads_some"\n'
                                            '    params = (Param("gain", "-", "g", 0.5),)\n'
@@ -641,9 +638,32 @@ def round3_cases(tmp: Path) -> list[Case]:
         (tmp / f"{name}.urdf").write_text(text)
         cases.append((f"r3/urdf/{name}", ["run", "b1", *FAST, "--set", f'robot.urdf="{tmp / name}.urdf"'], 2, piece))
     for name, (source, piece) in ROUND3_IMPORTS.items():
-        (tmp / f"law_{name}.py").write_text(source)
-        (tmp / f"law_{name}.toml").write_text(f'imports = ["law_{name}"]\n' + B1)
-        cases.append((f"r3/import/{name}", ["run", str(tmp / f"law_{name}.toml"), *FAST], 2, piece))
+        cases.append((f"r3/import/{name}", ["run", str(_law_scene(tmp, f"law_{name}", source, B1)), *FAST], 2, piece))
+    return cases
+
+
+def _law_scene(tmp: Path, stem: str, source: str, scene: str) -> Path:
+    """The scene file ``stem``.toml (``scene``'s text) importing the law module ``stem``.py (``source``), both
+    written in ``tmp``."""
+    (tmp / f"{stem}.py").write_text(source)
+    path = tmp / f"{stem}.toml"
+    path.write_text(f'imports = ["{stem}"]\n' + scene)
+    return path
+
+
+def _friction_cases(tmp: Path, tag: str, laws: dict, header: str = "") -> list[Case]:
+    """Round ``tag``'s friction laws (name -> (its coefficient's body, what its error says)) on b1's tip, each run
+    compiled and interpreted: each must stop at once naming the law and the contact."""
+    tip = 'tangent.law = "{name}"\ntangent.mu_s = 0.6\ntangent.mu_k = 0.4'
+    cases = []
+    for name, (body, piece) in laws.items():
+        stem = f"mu{tag}_{name}"
+        scene = _law_scene(tmp, stem, header + NEGATIVE.format(name=stem) + body,
+                           B1.replace("tangent.mu = 0.4", tip.format(name=stem)))
+        for path in ("compiled", "interpreted"):
+            said = (f"contactdyn: error: t = 0 s: friction law '{stem}' ({stem}.py) {piece} at slip speed 0.15 "
+                    f"m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': {FRICTION_EXPECTED}\n")
+            cases.append((f"r{tag}/friction/{name}/{path}", ["run", str(scene), *FAST, "--path", path], 1, said))
     return cases
 
 
@@ -698,9 +718,7 @@ ROUND4_FRICTION: dict[str, tuple[str, str]] = {
 def round4_cases(tmp: Path) -> list[Case]:
     cases = []
     for name, (source, piece) in ROUND4_FLAGS.items():
-        (tmp / f"law4_{name}.py").write_text(source)
-        (tmp / f"law4_{name}.toml").write_text(f'imports = ["law4_{name}"]\n' + B1)
-        cases.append((f"r4/flag/{name}", ["run", str(tmp / f"law4_{name}.toml"), *FAST], 2, piece))
+        cases.append((f"r4/flag/{name}", ["run", str(_law_scene(tmp, f"law4_{name}", source, B1)), *FAST], 2, piece))
     (tmp / "law4_bind_flag.py").write_text(LAW + '    name = "bind_flag"\n    def bind(self, context):\n'
                                            '        self.uses_forces = "yes"\n' + COMMAND)
     controller = B1[B1.index("[controller]"):B1.index("[[phase]]")]
@@ -708,15 +726,7 @@ def round4_cases(tmp: Path) -> list[Case]:
         controller, '[controller]\nkind = "bind_flag"\n\n'))
     cases.append(("r4/flag/bind_sets_uses_forces", ["run", str(tmp / "law4_bind_flag.toml"), *FAST], 1,
                   "controller 'bind_flag' (law4_bind_flag.py) set uses_forces = 'yes': expected True or False"))
-    tip = 'tangent.law = "{name}"\ntangent.mu_s = 0.6\ntangent.mu_k = 0.4'
-    for name, (body, piece) in ROUND4_FRICTION.items():
-        (tmp / f"mu4_{name}.py").write_text(NEGATIVE.format(name=f"mu4_{name}") + body)
-        scene = tmp / f"mu4_{name}.toml"
-        scene.write_text(f'imports = ["mu4_{name}"]\n' + B1.replace("tangent.mu = 0.4", tip.format(name=f"mu4_{name}")))
-        for path in ("compiled", "interpreted"):
-            said = (f"contactdyn: error: t = 0 s: friction law 'mu4_{name}' (mu4_{name}.py) {piece} at slip speed 0.15 "
-                    f"m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': {FRICTION_EXPECTED}\n")
-            cases.append((f"r4/friction/{name}/{path}", ["run", str(scene), *FAST, "--path", path], 1, said))
+    cases += _friction_cases(tmp, "4", ROUND4_FRICTION)
     joint = ('[phase.controller]\nkind = "joint_pd"\nkp = {kp}\nkd = 10.0\n[phase.reference]\nspace = "joint"\n'
              'start = [0.3, -1.3]\n')
     phase = B1[B1.index("[[phase]]"):]
@@ -815,31 +825,19 @@ ROUND5_FORCES: dict[str, tuple[str, int, str]] = {
 def round5_cases(tmp: Path) -> list[Case]:
     cases = []
     for name, (source, piece) in ROUND5_IMPORTS.items():
-        (tmp / f"law5_{name}.py").write_text(source)
-        (tmp / f"law5_{name}.toml").write_text(f'imports = ["law5_{name}"]\n' + B1)
-        cases.append((f"r5/import/{name}", ["run", str(tmp / f"law5_{name}.toml"), *FAST], 2, piece))
-    tip = 'tangent.law = "{name}"\ntangent.mu_s = 0.6\ntangent.mu_k = 0.4'
-    for name, (body, piece) in ROUND5_FRICTION.items():
-        (tmp / f"mu5_{name}.py").write_text("import numpy as np\n" + NEGATIVE.format(name=f"mu5_{name}") + body)
-        scene = tmp / f"mu5_{name}.toml"
-        scene.write_text(f'imports = ["mu5_{name}"]\n' + B1.replace("tangent.mu = 0.4", tip.format(name=f"mu5_{name}")))
-        for path in ("compiled", "interpreted"):
-            said = (f"contactdyn: error: t = 0 s: friction law 'mu5_{name}' (mu5_{name}.py) {piece} at slip speed 0.15 "
-                    f"m/s (mu_s = 0.6, mu_k = 0.4) on contact 'tip': {FRICTION_EXPECTED}\n")
-            cases.append((f"r5/friction/{name}/{path}", ["run", str(scene), *FAST, "--path", path], 1, said))
+        cases.append((f"r5/import/{name}", ["run", str(_law_scene(tmp, f"law5_{name}", source, B1)), *FAST], 2, piece))
+    cases += _friction_cases(tmp, "5", ROUND5_FRICTION, header="import numpy as np\n")
     for name, (body, code, piece) in ROUND5_KINDS.items():
-        (tmp / f"kind5_{name}.py").write_text(KIND + f"    name = {name!r}\n" + VOLTS + body)
-        scene = tmp / f"kind5_{name}.toml"
-        scene.write_text(f'imports = ["kind5_{name}"]\n' + B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
+        scene = _law_scene(tmp, f"kind5_{name}", KIND + f"    name = {name!r}\n" + VOLTS + body,
+                           B1.replace("[robot]", f'[robot]\ndrive.kind = "{name}"'))
         cases.append((f"r5/kind/{name}", ["run", str(scene), *FAST, "--out", str(tmp / name)], code, piece))
     controller = B1[B1.index("[controller]"):B1.index("[[phase]]")]
     for name, (body, code, piece) in ROUND5_FORCES.items():
         states = "    n_states = 1\n" if name.startswith("state") else ""
-        (tmp / f"ctl5_{name}.py").write_text(LAW + f"    name = {name!r}\n    uses_forces = True\n{states}"
-                                             "    def command(self, inp):\n"
-                                             "        F, tc = inp.forces['tip'], inp.tau_contact\n" + body)
-        scene = tmp / f"ctl5_{name}.toml"
-        scene.write_text(f'imports = ["ctl5_{name}"]\n' + B1.replace(controller, f'[controller]\nkind = "{name}"\n\n'))
+        source = (LAW + f"    name = {name!r}\n    uses_forces = True\n{states}    def command(self, inp):\n"
+                  "        F, tc = inp.forces['tip'], inp.tau_contact\n" + body)
+        scene = _law_scene(tmp, f"ctl5_{name}", source,
+                           B1.replace(controller, f'[controller]\nkind = "{name}"\n\n'))
         cases.append((f"r5/uses_forces/{name}", ["run", str(scene), *FAST, "--out", str(tmp / name)], code, piece))
     return cases
 
