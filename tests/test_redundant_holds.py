@@ -48,10 +48,18 @@ def _split(q: np.ndarray) -> np.ndarray:
 def test_a_redundant_hold_keeps_every_force_inside_its_limit(run):
     held = _held(run)
     assert held.sum() > 100  # [samples at 1 kHz] the arm is held for 0.16 s
+    assert 0 < run.stats["holds_split"] <= run.stats["singular_solves"]
     F_f, F_n = np.abs(run["contact.tip.F_f"][held, 0]), run["contact.tip.F_n"][held]
     assert np.all(F_f <= MU_S * F_n)
     assert np.all(np.abs(run["joint_friction"][held]) <= TAU_S)
     assert np.abs(run["v"][held]).max() < 1e-9  # [rad/s] held: at rest
+
+
+def test_redundant_holds_inside_their_limits_keep_the_least_norm_split():
+    """The pinch: two pads stuck on one part are redundant rows, solved by least squares at every call; the least-norm
+    split (m g / 2 per pad) is inside both cones, so no call splits it."""
+    r = simulate("pinch_hold", {"duration": 0.5})
+    assert r.stats["singular_solves"] > 0 and r.stats["holds_split"] == 0
 
 
 def test_the_least_norm_split_of_the_same_hold_is_outside_a_limit(run):

@@ -127,6 +127,7 @@ class HybridRun:
             raise SceneError("solver.max_step", f"the step [s] of the fixed-step method {self.solver.method}",
                              "no max_step", self.scene.file)
         self.stats = {"steps": 0, "rhs_evals": 0, "events": 0, "segments": 0, "corners": 0, "singular_solves": 0,
+                      "holds_split": 0,  # (of the singular solves: model.pipeline.kkt.coulomb_split)
                       "slips_seen_inside_a_step": 0, "slip_false_alarms": 0,  # (slip, joint_slip, release)
                       "dips_seen_inside_a_step": 0,  # (events.DipWatch, a hold's StageWatch)
                       "decided_together": 0}  # (hybrid.at_rest)

@@ -118,6 +118,12 @@ class PipelineMode:
         system that is not finite: ``Pipeline.failed_calls``): ``Result.stats["singular_solves"]``."""
         return self.pipe.least_squares + self.pipe.failed_calls
 
+    @property
+    def holds_split(self) -> int:
+        """Of the calls solved by least squares, those whose redundant holds were split by their limits
+        (``Pipeline.holds_split``): ``Result.stats["holds_split"]``."""
+        return self.pipe.holds_split
+
     def use(self, modes) -> None:
         """Run with these modes from now on: a turn's new 2-D reference directions r, data of the same packed mode
         (the last calls' event values were for the old r: forgotten)."""

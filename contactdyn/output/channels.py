@@ -97,6 +97,7 @@ def sample_states(system: System, segments: list[Segment], grid: np.ndarray, sta
             _run_states(segments, group[0], bounds, grid, xs, derivatives)  # after its first run's states
             counted.append(seg.runner)
             stats["singular_solves"] += seg.runner.singular
+            stats["holds_split"] += seg.runner.holds_split
             rest = group[1:]
         _run_states(segments, [i for run in rest for i in run], bounds, grid, xs, derivatives)
         at_all = np.concatenate(at)

@@ -164,24 +164,24 @@ def coulomb_split(ints, reals, events, C, lam, first_limit, first_joint):
     hold inside its limit (by SPLIT_MARGIN). Where no s is (the hold breaks), the s between the two limits that met as
     the last split went (lo > hi: each out by as much), so that the event values pass zero where the split ends, both
     its holds' together. λ itself where it is inside already, and where the splits that move nothing span more than
-    one direction."""
+    one direction. Also whether λ was split."""
     n = null_direction(C.T.copy(), NULL_RANK) if C.shape[0] > 1 else np.empty(0)  # (Cᵀ n = 0)
     if n.size == 0:
-        return lam
+        return lam, False
     bounds = np.array([-np.inf, np.inf])  # [lo, hi] of s
     if _hold_limits(ints, reals, events, lam, n, first_limit, first_joint, bounds):
-        return lam
+        return lam, False
     lo, hi = bounds[0], bounds[1]
     if lo <= hi:
         s = min(max(0.0, lo), hi)
     elif math.isfinite(lo) and math.isfinite(hi):  # past the last split: the two limits that met there, equally out
         s = 0.5 * (lo + hi)
     else:
-        return lam
+        return lam, False
     out = np.empty(lam.size)
     for r in range(lam.size):
         out[r] = lam[r] + s * n[r]
-    return out
+    return out, True
 
 
 @njit(cache=True)

@@ -83,7 +83,7 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "python_controller"
  W_DIAG, JOINT_FRICTION, N_HELD, N_SLIDING, I_JOINTS, R_JOINTS, X_HELD, CARRIER, R_CARRIER, R_CIRCLES,
  N_LAUNCH, I_LAUNCH, ENERGY, N_Z, Z_AT, READS_FORCES, I_FOLD, R_FOLD, A_CALL, A_CONTROLLER, A_SOLVE,
  A_LAUNCH_START, A_LAUNCH, A_LAUNCH_SETTLED, A_ENERGY, R_WEIGHTS, NF, N_CHARTS, I_CHARTS, R_FRAMES_B,
- N_RIDING, I_RIDING, R_RIDING, W_LEAST_SQUARES, I_KEYS, R_KEYS, A_SPLIT, HEADER) = range(83)
+ N_RIDING, I_RIDING, R_RIDING, W_LEAST_SQUARES, I_KEYS, R_KEYS, A_SPLIT, W_SPLITS, HEADER) = range(84)
 #: the controller's states (N_Z of them from y's slot Z_AT), whether it reads measured forces (folded), and where
 #: I_FOLD's section starts: per set-point the contact whose normal force it reads (-1: a tangential chain's), then
 #: per KKT row the contact whose normal it is (-1: another kind of row), as the fold probes them, then per set-point
@@ -99,7 +99,8 @@ __all__ = ["Packed", "pack", "unsupported", "python_stages", "python_controller"
 #: N_RIDING: the chain masses riding turning surfaces (``contact.RidingMass``), I_RIDING their ints (RI_*), R_RIDING
 #: their reals (RR_*)
 #: W_LEAST_SQUARES: the slot of ``work`` counting the calls whose KKT matrix was singular (solved by the minimum-norm
-#: least squares, :func:`.kkt.solve_linear`: an Evaluation's ``regular`` False) since the packing
+#: least squares, :func:`.kkt.solve_linear`: an Evaluation's ``regular`` False) since the packing; W_SPLITS: the slot
+#: counting those whose redundant holds were split by their limits (:func:`.kkt.coulomb_split`)
 #: I_KEYS: per key of the readable ControlInput's dictionaries (``evaluation.surface_keys``: per contact, then its
 #: tangential chains) its contact and its chain (-1: the contact's normal); R_KEYS: per key the shift of its surface
 #: point from the contact's [m] (u·offset: a tangential chain's anchor). A declared Python stage's "keys" field
@@ -339,8 +340,8 @@ def pack(system, modes, phase) -> Packed:
     _controller(b, system, phase)
     _drives(b, system, phase)
     _fold(b, system, modes, phase, meta)
-    h[W_LEAST_SQUARES] = b.work  # (one slot: the count)
-    h[W_DIAG] = b.work = b.work + 1
+    h[W_LEAST_SQUARES], h[W_SPLITS] = b.work, b.work + 1  # (one slot each: the counts)
+    h[W_DIAG] = b.work = b.work + 2
     b.work = int(diag_starts(np.array(h, dtype=np.int64))[D_END])
     h[W_SIZE] = b.work
     n_events = EV_W * len(system.contacts) + len(phase.limits) + len(held) + len(sliding) + 1

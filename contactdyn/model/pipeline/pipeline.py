@@ -106,6 +106,7 @@ from .pack import (
     W_DIAG,
     W_DRIVES,
     W_LEAST_SQUARES,
+    W_SPLITS,
     diag_starts,
     pack,
     python_stages,
@@ -170,8 +171,10 @@ def call(t, x, ints, reals, work, events):
         if not ok:
             events[events.size - 1] = -1.0
             return xdot
+        split = False
         if outcome == LEAST_SQUARES and ints[A_SPLIT]:  # (redundant holds: split by their limits)
-            lam = call_at(ints[A_SPLIT], "pipeline.split", (ints, reals, events, C, lam, first_limit, first_joint))
+            lam, split = call_at(ints[A_SPLIT], "pipeline.split", (ints, reals, events, C, lam, first_limit,
+                                                                   first_joint))
         fold_rates(ints, lam, zdot, D, ydot, dq, qdd, carried_coordinate(ints, bq))
         for i in range(nQ):
             xdot[i] = x[nQ + i]
@@ -188,6 +191,7 @@ def call(t, x, ints, reals, work, events):
                                                      (x, ints, state, reals, FJ, Fa, Fp, Fv, FR, xdot)):
             if outcome == LEAST_SQUARES:  # (the result's pass only: a launch's trials are not counted)
                 work[ints[W_LEAST_SQUARES]] += 1.0
+                work[ints[W_SPLITS]] += 1.0 if split else 0.0
             return xdot
 
 
@@ -307,7 +311,8 @@ declare("pipeline.launch_start", launch_start, types.Tuple((_F1, _F1))(_I1, _F1)
 declare("pipeline.launch_took", launch_took, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F2, _F3, _F1))
 declare("pipeline.launch_settled", launch_settled, types.boolean(_F1, _I1, _F1, _F1, _F3, _F2, _F2, _F2, _F3))
 declare("pipeline.energy", energy_rates, types.none(_F1, _I1, _F1, _F1, _F1, _F1, _F1, _F2))
-declare("pipeline.split", coulomb_split, _F1(_I1, _F1, _F1, _F2, _F1, types.int64, types.int64))
+declare("pipeline.split", coulomb_split, types.Tuple((_F1, types.boolean))(_I1, _F1, _F1, _F2, _F1, types.int64,
+                                                                             types.int64))
 
 
 def stage_addresses(ints: np.ndarray, law_only: bool = False) -> None:
@@ -390,6 +395,11 @@ class Pipeline:
         """The calls whose KKT matrix was singular, solved in the call by the minimum-norm least squares (the
         ``Evaluation.regular = False``; every call since the packing, compiled steps' too)."""
         return int(self.packed.work[self.packed.ints[W_LEAST_SQUARES]])
+
+    @property
+    def holds_split(self) -> int:
+        """Of those, the calls whose redundant holds were split by their limits (:func:`.kkt.coulomb_split`)."""
+        return int(self.packed.work[self.packed.ints[W_SPLITS]])
 
     def use(self, modes) -> None:
         """Run with these modes from now on: the same :func:`~contactdyn.model.contact.structure`, their own 2-D
