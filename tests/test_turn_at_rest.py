@@ -61,17 +61,30 @@ def test_a_turn_of_a_real_slide_refreshes_its_direction(monkeypatch):
     assert modes[0].slip == pytest.approx((0.6, 0.8), abs=1e-15)
 
 
+UR5 = "sims/case2_writer_ur5.toml"
+#: every UR5 joint with 3 N·m of dry friction: more than the writer's controller overcomes for long
+DRY_UR5 = {f"robot.joint.{j}.friction": 3.0 for j in ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint",
+                                                       "wrist_1_joint", "wrist_2_joint", "wrist_3_joint")}
+
+
 def test_a_launch_that_turns_near_rest_while_its_slip_grows_runs_on():
-    """The UR5 writer with 3 N·m of dry friction on every joint: at t = 1.00494 s the shoulder pan joint breaks away
-    with every other joint stuck, and the pencil (F_n ≈ 0: the cone a point) slides from rest along −F_f of its stick
-    trial, (−0.96, −0.30): a split of redundant holds, square to the one direction the pan moves the tip in,
-    (−0.30, 0.96), where its slip grows. Its turn at |v_t| = 2 v_ε is not a slide coming to rest: decided at rest it
-    gave the same direction again, and the turn fired again (an event storm at t = 1.00497 s)."""
-    name = "sims/case2_writer_ur5.toml"
-    joints = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint",
-              "wrist_3_joint")
-    overrides = {f"robot.joint.{j}.friction": 3.0 for j in joints}
-    result = simulate(name, {**overrides, "duration": 1.005})
+    """At t = 1.00494 s the shoulder pan joint breaks away with every other joint stuck, and the pencil (F_n ≈ 0: the
+    cone a point) slides from rest along −F_f of its stick trial, (−0.96, −0.30): a split of redundant holds, square
+    to the one direction the pan moves the tip in, (−0.30, 0.96), where its slip grows. Its turn at |v_t| = 2 v_ε is
+    not a slide coming to rest: decided at rest it gave the same direction again, and the turn fired again (an event
+    storm at t = 1.00497 s)."""
+    result = simulate(UR5, {**DRY_UR5, "duration": 1.005})
     turns = [e for e in result.events if e["kind"] == "turn"]
     assert len(turns) == 1 and turns[0]["t"] == pytest.approx(1.004969, abs=1e-6)
+    assert result.meta["check_warnings"] == []
+
+
+def test_a_launch_off_the_only_way_the_tip_can_move_settles_along_it():
+    """At t = 1.62745 s the elbow breaks away with the pencil at its cone's edge, every other joint stuck: the pencil
+    slides from rest along −F_f of a redundant stick trial, 7° off the one direction the elbow moves the tip in. From
+    there the launch's Newton converges only linearly (the load just past the cone: φ ~ δ³) and gave up after its 4
+    updates, the friction along r, not against the slip, until the slip left the band; LSODA then crawled at 6 ns
+    steps to the step budget (stopped at 1.628 s). The last trial along a_t settles it at once."""
+    result = simulate(UR5, {**DRY_UR5, "duration": 1.63})
+    assert result.stats["steps"] < 1000  # (the whole 4.5 s run takes ~800)
     assert result.meta["check_warnings"] == []
