@@ -14,7 +14,7 @@ on its dense output; each is terminal and fires when its function falls through 
 - ``reverse``: a slip from rest runs backwards past −v_ε (v_t·r = −v_ε); both also where the
   speed dips through and back within one step (:class:`DipWatch`);
 - ``turn`` (2-D): the slip velocity turned 60° away from r, v_t·r − ½|v_t| + v_ε = 0
-  (r is refreshed, no mode change; near rest it is decided as a stop, ``transitions.TURN_AT_REST``);
+  (r is refreshed, no mode change; near rest and slowing it is decided as a stop, ``transitions.TURN_AT_REST``);
 - ``slip``: a sticking contact's friction reaches the cone, g = μ_s F − |F_f| = 0
   (:class:`SlipWatch`, which also sees inside a step).
 

@@ -10,7 +10,7 @@ At each event of :mod:`contactdyn.hybrid.events` (t fixed, x continuous unless a
 - ``separate``: the contact lets go; damped surface ends relax from where they are;
 - ``stop`` / ``reverse``: the slide has come to rest (|v_t| ≤ v_ε): decided at rest (below);
 - ``turn``: the 2-D reference direction r is refreshed to the slip's own (no mode change), unless
-  the slip is within ``TURN_AT_REST`` stick bands of rest: then it is a ``stop``;
+  the slip is within ``TURN_AT_REST`` stick bands of rest and in the band or slowing: then it is a ``stop``;
 - ``slip``: the stick's friction reached the cone |F_f| = μ_s F: it slides from rest where
   the holding force pushes (−F_f); a stage-only crossing not confirmed at the located point
   is a false alarm (``slip_check``), still stuck;
@@ -59,12 +59,12 @@ SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F th
 #: [-] a release seen inside a step is real if the located instant's pressing torque p [N·m or N] is at most
 #: this × (1 + |p|): relative, with 1 N·m or N as the scale's floor (else a false alarm: still pressing)
 RELEASE_ALARM = 1e-6
-#: [-] a turn located with |v_t| ≤ this × v_ε is taken for a slide coming to rest and decided at rest like a
-#: stop. Why: when a slide decelerates to rest, its ``turn`` and ``stop`` tie within a rounding (the 5-DOF
-#: writer's turn fires at |v_t| = 4.1 v_ε); refreshing r there keeps a slide of a few v_ε whose direction relaxes
-#: at a rate ∝ 1/|v_t| (stiff: 10x the steps). 10 leaves that case a margin of ~2.4. Cost: a slide slower than
-#: 10 v_ε that really turns loses its residual slip (≤ 10 v_ε) to the decision at rest and, if the cone cannot
-#: hold it, restarts where the holding force pushes, not along its own slip.
+#: [-] a turn located with |v_t| ≤ this × v_ε, its slip in the band or slowing (:func:`_coming_to_rest`), is taken for
+#: a slide coming to rest and decided at rest like a stop. Why: when a slide decelerates to rest, its ``turn`` and
+#: ``stop`` tie within a rounding (the 5-DOF writer's turn fires at |v_t| = 4.1 v_ε); refreshing r there keeps a
+#: slide of a few v_ε whose direction relaxes at a rate ∝ 1/|v_t| (stiff: 10x the steps). 10 leaves that case a
+#: margin of ~2.4. Cost: a slowing slide slower than 10 v_ε that really turns loses its residual slip (≤ 10 v_ε) to
+#: the decision at rest and, if the cone cannot hold it, restarts where the holding force pushes, not along its slip.
 TURN_AT_REST = 10.0
 
 
@@ -240,12 +240,12 @@ class Transitions:
         return x, phase, True
 
     def _on_turn(self, t, x, modes, phase, event, after):
-        """2-D: the slip turned 60° from the reference; refresh it (no mode change)."""
+        """2-D: the slip turned 60° from the reference: refreshed (no mode change), or a stop (_coming_to_rest)."""
         i = self._index(event.contact)
-        slip = self.evaluate(t, x, modes, phase).slip[event.contact]  # [m/s]
-        if float(np.linalg.norm(slip)) <= TURN_AT_REST * self.system.slip_band:
+        ev = self.evaluate(t, x, modes, phase)
+        if _coming_to_rest(self.system, self.system.contacts[i], x, ev):
             return self._on_stop(t, x, modes, phase, event, after)
-        modes[i] = modes[i].with_(slip=direction_of(slip), from_rest=False)
+        modes[i] = modes[i].with_(slip=direction_of(ev.slip[event.contact]), from_rest=False)
         return x, phase, False
 
     def _on_slip(self, t, x, modes, phase, event, after):
@@ -437,6 +437,31 @@ class Transitions:
                               f"(modes tried: {modes})")
 
 
+def _coming_to_rest(system: System, c, x: np.ndarray, ev) -> bool:
+    """Is contact c's 2-D slide, whose slip turned at x (``ev``: the Evaluation there), a slide coming to rest, to be
+    decided at rest like a stop? Its slip v_t [m/s] within TURN_AT_REST stick bands of rest and either inside the band
+    or slowing, v_t · ȧ_t ≤ 0 (ȧ_t: its rate [m/s²]). A slip that grows is leaving rest, not coming
+    to it: its direction is its own (a slide from rest along −F_f of a stick trial whose holding force a split of
+    redundant holds set, square to the only way the joints that slide move the tip: decided at rest, the same
+    direction again, and its turn again at the same instant)."""
+    slip = ev.slip[c.name]
+    speed = float(np.linalg.norm(slip))
+    if speed > TURN_AT_REST * system.slip_band:
+        return False
+    if speed <= system.slip_band:
+        return True
+    kin, nQ = _kinematics_at(system, c, x), system.nQ
+    return float(slip @ slip_acceleration(system, c, kin, ev.xdot[nQ:2 * nQ])) <= 0.0
+
+
+def _kinematics_at(system: System, c, x: np.ndarray):
+    """Contact c's kinematics at x, the robot's and bodies' updated there (what its slip's rate reads too)."""
+    nQ, nv = system.nQ, system.nv
+    system.robot.update(x[:nv], x[nQ:nQ + nv])
+    system.update_bodies(x)
+    return system.kinematics(c, x)
+
+
 def _at_rest(system: System, evaluate, t: float, x: np.ndarray, modes, phase, i: int, ev):
     """Contact i's slide at rest at (t [s], x) (its slip within the stick band, or it just stopped; ``ev``: the
     Evaluation there in ``modes``, ``evaluate``: the run's LastEvaluation): (x, its mode, "stick" or "slip").
@@ -452,10 +477,8 @@ def _at_rest(system: System, evaluate, t: float, x: np.ndarray, modes, phase, i:
     trial = list(modes)
     trial[i] = mode.with_(stuck=True)
     x_stuck = project_velocity(system, x, trial, phase.limits, phase.joint_modes)
-    nQ, nv = system.nQ, system.nv
-    system.robot.update(x[:nv], x[nQ:nQ + nv])  # (x's kinematics, once: the singularity's test and the slip's rate)
-    system.update_bodies(x)
-    kin = system.kinematics(c, x)
+    nQ = system.nQ
+    kin = _kinematics_at(system, c, x)  # (once: the singularity's test and the slip's rate)
     if singular_stick(system, c, x, x_stuck, kin):
         a_t = slip_acceleration(system, c, kin, ev.xdot[nQ:2 * nQ])
         return x, mode.with_(slip=direction_of(a_t), from_rest=False), "slip"

@@ -1,12 +1,12 @@
 """2-D slides launching from rest over the packed arrays (which ones: :func:`contactdyn.model.friction.launching`).
 
-A touching 2-D slide started from rest, still inside the stick band (v_t · r ≤ v_ε), slides where it accelerates:
-d = (cos θ, sin θ) with a_t(d) ∥ d ahead, found by Newton on θ (at most 4 updates; the derivative by a 1e-7 rad
-difference; the reference r where it does not converge), each trial the whole call with that contact's direction
-set to d (its normal column re-tilted, or its known friction force re-aimed, and the KKT re-solved). A slide already
-past the band keeps r (its own direction from there on, ``contacts._slip_direction``). Slip and acceleration are the
-relative motion's along the state's tangents (:func:`.contacts.tangential_motion`: on a turning surface they turn
-with it).
+A touching 2-D slide started from rest, still inside the stick band (v_t · r ≤ v_ε), slides where it accelerates: d =
+(cos θ, sin θ) with a_t(d) ∥ d ahead, found by Newton on θ (at most 4 updates; the derivative by a 1e-7 rad difference;
+where it does not converge, one last trial along a_t, then the reference r), each trial the whole call with that
+contact's direction set to d (its normal column re-tilted, or its known friction force re-aimed, and the KKT re-solved).
+A slide already past the band keeps r (its own direction from there on, ``contacts._slip_direction``). Slip and
+acceleration are the relative motion's along the state's tangents (:func:`.contacts.tangential_motion`: on a turning
+surface they turn with it).
 
 Several contacts launching at once nest (each trial of one runs the later ones' Newtons first): level k's Newton
 reads, per trial, the pass in which every later level has found its direction for that trial. The levels' states are
@@ -168,8 +168,8 @@ def _cross(x, ints, trial, j, xdot, FJ, Fa, Fp, Fv, FR):
 def launch_took(x, ints, state, trial, FJ, Fa, Fp, Fv, FR, xdot):
     """A pass's rates ``xdot`` and frames, read level by level from the deepest: a level done with them (its trial's
     d where φ ≈ 0 ahead; given up or past the band: r) hands them up, a level that needs another trial aims it (the
-    next θ or θ + h; r where dφ/dθ ≥ 0 or after MAX_UPDATES), begins the later levels again and asks for a pass
-    (False). True when level 0 is done: this pass is the result."""
+    next θ or θ + h; where dφ/dθ ≥ 0 or after MAX_UPDATES one along a_t, :func:`_try_along`, then r), begins the later
+    levels again and asks for a pass (False). True when level 0 is done: this pass is the result."""
     for j in range(ints[N_LAUNCH] - 1, -1, -1):
         level = _level(state, j)
         if level[LV_STEP] == DONE_R or level[LV_STEP] == PAST:
@@ -178,21 +178,41 @@ def launch_took(x, ints, state, trial, FJ, Fa, Fp, Fv, FR, xdot):
         if level[LV_STEP] != AT_H:
             if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):  # the trial's d stays
                 continue
-            level[LV_PHI], level[LV_AHEAD], level[LV_STEP] = phi, ahead, AT_H
-            _aim(ints, trial, j, level[LV_THETA] + H)
-            _restart(ints, trial, state, j + 1)
-            return False
-        dphi = (phi - level[LV_PHI]) / H
-        if dphi < 0.0:
-            level[LV_THETA] -= min(max(level[LV_PHI] / dphi, -0.5), 0.5)
-            level[LV_UPDATES] += 1
-            if level[LV_UPDATES] < MAX_UPDATES:
-                level[LV_STEP] = AT
-                _aim(ints, trial, j, level[LV_THETA])
+            if level[LV_UPDATES] <= MAX_UPDATES:
+                level[LV_PHI], level[LV_AHEAD], level[LV_STEP] = phi, ahead, AT_H
+                _aim(ints, trial, j, level[LV_THETA] + H)
                 _restart(ints, trial, state, j + 1)
+                return False
+        else:
+            dphi, along = (phi - level[LV_PHI]) / H, level[LV_THETA] + H + math.atan2(phi, ahead)  # (a_t's angle)
+            if dphi < 0.0:
+                level[LV_THETA] -= min(max(level[LV_PHI] / dphi, -0.5), 0.5)
+                level[LV_UPDATES] += 1
+                if level[LV_UPDATES] < MAX_UPDATES:
+                    level[LV_STEP] = AT
+                    _aim(ints, trial, j, level[LV_THETA])
+                    _restart(ints, trial, state, j + 1)
+                    return False
+            if _try_along(ints, trial, state, level, j, along):
                 return False
         level[LV_STEP] = DONE_R  # no convergence: the reference r, the later levels found again under it
         _aim_r(ints, trial, level, j)
         _restart(ints, trial, state, j + 1)
         return False
+    return True
+
+
+@njit(cache=True)
+def _try_along(ints, trial, state, level, j, along):
+    """Newton given up: one last trial along a_t of the trial at θ + h (``along``: a_t's angle [rad]), where the slip
+    goes under it: where the joints let the contact move along one direction only (the others stuck), a_t points along
+    it whatever d is, and there d = a_t settles at once, where Newton from a reference off it converges only linearly
+    at the cone's edge (φ ~ δ³). True if aimed; False if tried already (then r)."""
+    if level[LV_UPDATES] > MAX_UPDATES:
+        return False
+    level[LV_UPDATES] = MAX_UPDATES + 1
+    level[LV_THETA] = along
+    level[LV_STEP] = AT
+    _aim(ints, trial, j, along)
+    _restart(ints, trial, state, j + 1)
     return True
