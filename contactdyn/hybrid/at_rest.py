@@ -182,24 +182,18 @@ def consistent_at_rest(system, runner, t: float, x: np.ndarray, modes, phase):
     if not joints:
         return x, modes, phase, False
     touching = _touching_with_friction(system, modes)
-    _kinematics(system, x, bool(touching))
+    if touching:  # (their slips' rates read the robot's kinematics)
+        system.update_at(x)
     contacts = _contacts_at_rest(system, probe, modes, touching)
     if len(contacts) + len(joints) > MAX_ITEMS or _consistent(system, probe, modes, phase, contacts, joints):
         return x, modes, phase, False
     for choice in _choices(_options(probe, modes, contacts, joints)):
         xt, mt, pt = _trial(system, x, modes, phase, contacts, joints, choice)
-        _kinematics(system, xt, bool(touching))
+        if touching:
+            system.update_at(xt)
         if _consistent(system, _Probe(runner(mt, pt), t, xt), mt, pt, contacts, joints, strictly=True):
             return xt, mt, pt, True
     return x, modes, phase, False
-
-
-def _kinematics(system, x: np.ndarray, needed: bool) -> None:
-    """The robot's and bodies' kinematics at x, where ``needed`` (a touching contact with friction: its slip's rate)."""
-    if needed:
-        nQ, nv = system.nQ, system.nv
-        system.robot.update(x[:nv], x[nQ:nQ + nv])
-        system.update_bodies(x)
 
 
 def _choices(options: list[list]):

@@ -456,9 +456,7 @@ def _coming_to_rest(system: System, c, x: np.ndarray, ev) -> bool:
 
 def _kinematics_at(system: System, c, x: np.ndarray):
     """Contact c's kinematics at x, the robot's and bodies' updated there (what its slip's rate reads too)."""
-    nQ, nv = system.nQ, system.nv
-    system.robot.update(x[:nv], x[nQ:nQ + nv])
-    system.update_bodies(x)
+    system.update_at(x)
     return system.kinematics(c, x)
 
 

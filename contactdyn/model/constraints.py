@@ -138,13 +138,11 @@ def kkt_condition(system, x: np.ndarray, modes, phase) -> float:
     of the touching contacts, the joints on a limit and the stuck joints (:func:`velocity_rows`; a slide's tilt of
     its normal column left out). A rigid or sticking contact at a singular pose makes its rows linearly dependent:
     what a failed integration's message says (``hybrid.loop``)."""
-    nv, nQ = system.nv, system.nQ
-    system.robot.update(x[:nv], x[nQ:nQ + nv])
-    system.update_bodies(x)
+    system.update_at(x)
     rows = velocity_rows(system, x, modes, limits=phase.limits, joint_modes=phase.joint_modes)
     if not rows:
         return 1.0
-    nr = len(rows)
+    nQ, nr = system.nQ, len(rows)
     A = np.zeros((nQ + nr, nQ + nr))
     A[:nQ, :nQ] = mass_matrix(system)
     A[:nQ, nQ:] = -np.array(rows.cols).T

@@ -302,6 +302,12 @@ class System:
             spec.normal, spec.tangents)
         return Kinematics(p_tip, v_tip, J, drift, p_env, v_env, ft, n, T, columns)
 
+    def update_at(self, x: np.ndarray) -> None:
+        """The robot's terms at x's (q [rad or m], q̇) and the articulated bodies' and riding masses' (what
+        :meth:`kinematics` and :meth:`mass_matrix` read)."""
+        self.robot.update(x[:self.nv], x[self.nQ:self.nQ + self.nv])
+        self.update_bodies(x)
+
     def update_bodies(self, x: np.ndarray) -> None:
         """The articulated bodies' terms at x (H_b, h_b, their frames; each skipped when its state is unchanged) and
         the riding masses' (after ``robot.update`` at x)."""
