@@ -165,12 +165,14 @@ def coulomb_split(ints, reals, events, C, lam, first_limit, first_joint):
     the last split went (lo > hi: each out by as much), so that the event values pass zero where the split ends, both
     its holds' together. λ itself where it is inside already, and where the splits that move nothing span more than
     one direction. Also whether λ was split."""
-    n = null_direction(C.T.copy(), NULL_RANK) if C.shape[0] > 1 else np.empty(0)  # (Cᵀ n = 0)
+    bounds = np.array([-np.inf, np.inf])  # [lo, hi] of s
+    if _hold_limits(ints, reals, events, lam, np.zeros(lam.size), first_limit, first_joint, bounds):
+        return lam, False  # (inside: no split sought; along a zero split the bounds say nothing)
+    n = null_direction(C.T.copy(), NULL_RANK)  # (Cᵀ n = 0)
     if n.size == 0:
         return lam, False
-    bounds = np.array([-np.inf, np.inf])  # [lo, hi] of s
-    if _hold_limits(ints, reals, events, lam, n, first_limit, first_joint, bounds):
-        return lam, False
+    bounds[0], bounds[1] = -np.inf, np.inf
+    _hold_limits(ints, reals, events, lam, n, first_limit, first_joint, bounds)
     lo, hi = bounds[0], bounds[1]
     if lo <= hi:
         s = min(max(0.0, lo), hi)

@@ -191,7 +191,8 @@ def call(t, x, ints, reals, work, events):
                                                      (x, ints, state, reals, FJ, Fa, Fp, Fv, FR, xdot)):
             if outcome == LEAST_SQUARES:  # (the result's pass only: a launch's trials are not counted)
                 work[ints[W_LEAST_SQUARES]] += 1.0
-                work[ints[W_SPLITS]] += 1.0 if split else 0.0
+                if split:
+                    work[ints[W_SPLITS]] += 1.0
             return xdot
 
 
