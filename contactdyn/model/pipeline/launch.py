@@ -54,6 +54,7 @@ LV_STEP, LV_UPDATES, LV_THETA, LV_PHI, LV_AHEAD, LV_R, LV_W = 0, 1, 2, 3, 4, 5, 
 FIRST, AT, AT_H, DONE_R, PAST = 0, 1, 2, 3, 4
 H = 1e-7  #: [rad] the difference of the derivative dφ/dθ
 MAX_UPDATES = 4
+ALONG_TRIED = MAX_UPDATES + 1  #: a level's LV_UPDATES once its last trial along a_t is aimed (:func:`_try_along`)
 
 
 @njit(cache=True)
@@ -178,7 +179,7 @@ def launch_took(x, ints, state, trial, FJ, Fa, Fp, Fv, FR, xdot):
         if level[LV_STEP] != AT_H:
             if ahead >= 0.0 and abs(phi) <= 1e-9 * (abs(ahead) + abs(phi)):  # the trial's d stays
                 continue
-            if level[LV_UPDATES] <= MAX_UPDATES:
+            if level[LV_UPDATES] < ALONG_TRIED:
                 level[LV_PHI], level[LV_AHEAD], level[LV_STEP] = phi, ahead, AT_H
                 _aim(ints, trial, j, level[LV_THETA] + H)
                 _restart(ints, trial, state, j + 1)
@@ -208,9 +209,9 @@ def _try_along(ints, trial, state, level, j, along):
     goes under it: where the joints let the contact move along one direction only (the others stuck), a_t points along
     it whatever d is, and there d = a_t settles at once, where Newton from a reference off it converges only linearly
     at the cone's edge (φ ~ δ³). True if aimed; False if tried already (then r)."""
-    if level[LV_UPDATES] > MAX_UPDATES:
+    if level[LV_UPDATES] == ALONG_TRIED:
         return False
-    level[LV_UPDATES] = MAX_UPDATES + 1
+    level[LV_UPDATES] = ALONG_TRIED
     level[LV_THETA] = along
     level[LV_STEP] = AT
     _aim(ints, trial, j, along)
