@@ -60,7 +60,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, ClassVar
 
-from .params import Param, check_declaration, claim_name
+from .params import Param, check_declaration, claim_name, departs
 
 if TYPE_CHECKING:
     from .drives import DriveSpec
@@ -210,7 +210,7 @@ def not_affine_in_tau(cls: type[DriveKind], spec: DriveSpec) -> str:
             return ""
         for tau, u in zip(_TRIED_TAU, tried, strict=True):
             affine = u0 + tau * (u1 - u0)
-            if not abs(u - affine) <= 1e-9 * (abs(u0) + abs(tau * (u1 - u0))) + 1e-12:
+            if departs(u, affine, abs(u0) + abs(tau * (u1 - u0))):
                 motor = f", ω = {omega:g} rad/s" if cls.motor_coordinate else ""
                 at = ", ".join(f"{p.name} = {getattr(spec, p.name):g}" for p in cls.params)
                 return (f"gives u = {u:g} V at τ = {tau:g} N·m or N, q̇ = {qd:g}{motor}{f' ({at})' if at else ''}, "

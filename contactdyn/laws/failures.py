@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ContactdynError, SimulationError
+from .params import departs
 
 __all__ = ["LawError", "law_error", "naming_laws", "non_finite_error", "no_command_error", "is_users", "law_file",
            "raised_calling", "counted_states", "checked_config", "unusable_friction_error", "kinetic_coefficient",
@@ -233,8 +234,8 @@ def checked_affine_in_forces(ctl, inp) -> None:
     for moved, y in got:
         affine = base + sum(a * B[key] for key, a in moved.items())
         scale = np.abs(base) + sum(np.abs(a * B[key]) for key, a in moved.items())
-        wrong = np.flatnonzero(~(np.abs(y - affine) <= 1e-9 * scale + 1e-12))
-        if np.all(np.isfinite(y)) and np.all(np.isfinite(affine)) and wrong.size:
+        wrong = [i for i in range(y.size) if departs(y[i], affine[i], scale[i])]
+        if np.all(np.isfinite(y)) and np.all(np.isfinite(affine)) and wrong:
             said = _not_affine_in_forces(ctl.nv, moved, y, affine, wrong[0])
             raise LawError("controller", ctl.name, law_file(type(ctl)), said)
 

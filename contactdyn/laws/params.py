@@ -19,7 +19,11 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from ..scene.reader import Reader
 
-__all__ = ["Param", "read_params", "with_defaults", "claim_name", "check_declaration", "non_bool_flag"]
+__all__ = ["Param", "read_params", "with_defaults", "claim_name", "check_declaration", "non_bool_flag", "departs"]
+
+#: a value departs from the affine form a law declares where it differs by more than AFFINE_RTOL × the form's terms'
+#: sizes + AFFINE_ATOL (in the value's unit): rounding, not a law's curvature
+AFFINE_RTOL, AFFINE_ATOL = 1e-9, 1e-12
 
 
 @dataclass(frozen=True)
@@ -115,6 +119,13 @@ def check_declaration(cls: object, family: str, base: type, reserved: tuple[str,
     wrong = non_bool_flag(cls, base)
     if wrong:  # (a flag's truth decides the physics: "no" would read as True)
         raise ValueError(f"{family} {cls.name!r}: {wrong[0]} must be True or False, got {wrong[1]!r}")
+
+
+def departs(value: float, affine: float, scale: float) -> bool:
+    """Does ``value`` depart from ``affine``, the affine form a law declares, beyond rounding: by more than
+    AFFINE_RTOL × ``scale`` (the sizes of the form's terms) + AFFINE_ATOL? A NaN departs. (A stage law's ``affine``, a
+    drive kind's voltage, a force-reading controller's command are checked by it.)"""
+    return not abs(value - affine) <= AFFINE_RTOL * scale + AFFINE_ATOL
 
 
 def non_bool_flag(law: object, base: type) -> tuple[str, object] | None:

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from .params import Param, check_declaration, claim_name
+from .params import Param, check_declaration, claim_name, departs
 
 __all__ = ["StageLaw", "STAGE_LAWS", "register_stage_law", "kelvin_voigt", "Linear", "HuntCrossley"]
 
@@ -92,7 +92,7 @@ def _not_affine(cls: type[StageLaw]) -> str:
     except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
         return ""
     for x, xdot, F in tried:
-        if not abs(F - (K * x + B * xdot)) <= 1e-9 * (abs(K * x) + abs(B * xdot)) + 1e-12:
+        if departs(F, K * x + B * xdot, abs(K * x) + abs(B * xdot)):
             at = "".join(f", {q.name} = {v:g}" for q, v in zip(cls.params, p, strict=True))
             return (f"its force at x = {x:g} m, ẋ = {xdot:g} m/s is {F:g} N, not K x + B ẋ = {K * x + B * xdot:g} N "
                     f"(k = {k:g}, b = {b:g}{at})")
