@@ -5,13 +5,15 @@
 Each scene of ``sims/`` and ``benchmarks/hard/`` (or those named) runs, at its own settings otherwise, under
 :data:`VARIANTS`: ``f0.5``, 0.5 N·m (or N) of dry friction on every joint (static = kinetic); ``f2/1@500``, 2 static
 and 1 kinetic on every joint with the controller sampled at 500 Hz. These are conditions the scenes were not written
-for: a contact and joints at rest together, redundant holds (every joint of an arm stuck while its tool sticks),
-stick-slip of light wrist joints. Per run: ``ok`` (it reached its end), or the first line of its error; the steps,
+for: a contact and joints at rest together, redundant holds (every joint of an arm stuck while its tool sticks: split
+by the holds' limits, contactdyn.model.pipeline.kkt.coulomb_split), stick-slip of light wrist joints. Per run:
+``ok`` (it reached its end), or the first line of its error; the steps,
 events, ``decided_together`` (contacts and joints decided together at rest: contactdyn.hybrid.at_rest),
 ``singular_solves`` (calls whose holds were redundant), the number of physics-check warnings, and the wall time [s].
 A scene whose own joint table already sets ``friction`` cannot take ``friction_static``: "not applicable".
 
-Writes benchmarks/out/joint_friction_variants.json and .csv.
+Writes benchmarks/out/joint_friction_variants.json and .csv; with scenes named, joint_friction_variants_some.json
+and .csv (the committed table stays the whole set's).
 """
 
 from __future__ import annotations
@@ -87,8 +89,9 @@ def main() -> None:
     clean = sum(r["outcome"] == "ok" and r["check_warnings"] == 0 for r in ran)
     print(f"{clean} of {len(ran)} runs reached their end with clean checks")
     OUT.mkdir(exist_ok=True)
-    (OUT / "joint_friction_variants.json").write_text(json.dumps(rows, indent=1))
-    with open(OUT / "joint_friction_variants.csv", "w", newline="") as f:
+    stem = "joint_friction_variants_some" if args.scenes else "joint_friction_variants"
+    (OUT / f"{stem}.json").write_text(json.dumps(rows, indent=1))
+    with open(OUT / f"{stem}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
