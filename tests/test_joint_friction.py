@@ -361,3 +361,43 @@ def test_the_stick_or_reverse_decision_reads_the_trials_holding_torque(tmp_path,
         SimulationError("no finite answer")))
     with pytest.raises(SimulationError, match="no finite answer"):
         LastEvaluation(system).joint_hold(0.3, x, modes, trial)
+
+
+def _stuck_shoulder(tmp_path, v: float):
+    """A 2-link arm hanging at rest off the vertical, its shoulder held by 100 N·m of dry friction (gravity loads it by
+    less), the elbow free, both at rest but the shoulder at q̇₁ = v [rad/s] (an impact's residual speed): its run, x,
+    modes, phase, and q̈₁ [rad/s²] if it slid along v (M q̈ = −g − s τ_k e₁ at rest, from the robot's M and g)."""
+    from contactdyn.hybrid.loop import HybridRun
+
+    doc = scene(arm(tmp_path, 2), [0.4, 1.2], 0.2, {"kind": "joint_pd", "kp": [0.0, 0.0], "kd": [0.0, 0.0]},
+                joint={"j1": {"friction": 100.0}})
+    system = System(parse_scene(doc))
+    x, modes = system.initial_state()
+    phase = system.start_phase(0, 0.0, x, None)
+    assert (0, 0) in phase.joint_modes  # the shoulder stuck
+    q = x[:2]
+    a = np.linalg.solve(system.robot.mass_matrix(q), -system.robot.gravity_torque(q) - np.sign(v) * np.array([100, 0]))
+    x = x.copy()
+    x[system.nQ] = v
+    return HybridRun(system), x, modes, phase, float(a[0])
+
+
+@pytest.mark.parametrize("share, held", [(0.81, True), (1.21, False)])
+def test_a_stuck_joint_holds_an_impacts_residual_speed_whose_slide_the_integration_cannot_resolve(tmp_path, share,
+                                                                                                  held):
+    """A stuck joint an impact sets moving at v slides (its friction takes no impulse), unless it would stop within a
+    travel v²/(2|q̈|) ≤ atol: then it holds, its residual speed projected away by an impulse on its own row (the free
+    elbow's momentum kept). Below and above the closed form's threshold v* = √(2|q̈| atol)."""
+    a = _stuck_shoulder(tmp_path, 1.0)[-1]
+    v = math.sqrt(share * 2.0 * abs(a) * 1e-12)  # [rad/s] the travel is share × atol
+    run, x, modes, phase, _ = _stuck_shoulder(tmp_path, v)
+    system, nQ = run.system, run.system.nQ
+    x_after, _, phase_after = run.transitions.settle_joints(0.0, x, modes, phase)
+    if not held:
+        assert [(e["kind"], e["name"]) for e in run.events] == [("joint_slip", "j1")]
+        assert (0, 1) in phase_after.joint_modes and x_after[nQ] == v
+        return
+    assert not run.events and phase_after.joint_modes == phase.joint_modes and x_after[nQ] == 0.0
+    M = system.robot.mass_matrix(x[:2])
+    impulse = M @ (x_after[nQ:nQ + 2] - x[nQ:nQ + 2])  # [N·m·s] on the shoulder's row alone
+    assert impulse[0] * v < 0.0 and abs(impulse[1]) <= 1e-12 * abs(impulse[0])

@@ -34,10 +34,16 @@ it, and searched for a mode that is where one is not (:mod:`contactdyn.hybrid.at
 Impacts: a dry friction torque is bounded (|τ| ≤ τ_s), so over an impact (Δt → 0) it takes no
 impulse: the impact maps (:mod:`contactdyn.model.impact`) hold no stuck joint, and a stuck joint
 the impact sets moving slides from it on (above). (A row in the impact map would hold the joint
-with an unbounded impulse, as a locked joint.) A joint pressing on a position limit
-(:mod:`contactdyn.model.limits`) is held by the limit's row alone: its friction mode is stuck and
-its row is left out (the two would be one row twice); it comes back when the limit releases, the joint at rest
-(its velocity, the limit row's drift, set to 0: :meth:`JointFriction.left_limit`).
+with an unbounded impulse, as a locked joint.) Unless that slide is below the integration's resolution: where its
+friction would stop it within a travel of ``solver.atol`` [rad or m] (:meth:`JointFriction.unresolved_slide`), the
+joint holds, its residual speed projected away (:func:`~contactdyn.model.impact.project_velocity`). Why: a light
+joint's slide of ~1e-14 rad can pull the contact that just touched off its surface; it sticks 1e-8 s later and the
+tip falls back, and the touch, slip, separation and stick repeat every 0.3 µs (the 5-DOF writer with 1.5/0.5 N·m
+per joint: 10,000 events by 3.995 s), the chatter whose mean is the held joint on a touching contact.
+
+A joint pressing on a position limit (:mod:`contactdyn.model.limits`) is held by the limit's row alone: its friction
+mode is stuck and its row is left out (the two would be one row twice); it comes back when the limit releases, the
+joint at rest (its velocity, the limit row's drift, set to 0: :meth:`JointFriction.left_limit`).
 
 Redundant holds: stuck joints and other rows (a stuck contact's, a bond's) can over-constrain the robot (both joints
 of a planar arm stuck while its tip sticks: 3 rows on 2 coordinates). The hold is then statically indeterminate: the
@@ -59,6 +65,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..robot.robot import Robot
+from .impact import project_velocity
 
 __all__ = ["JointFriction", "STUCK", "STICK_TOL", "joint_friction_channels", "summary"]
 
@@ -192,7 +199,8 @@ class JointFriction:
         """The first joint mode the state contradicts, as (kind, joint, x, phase) with it changed, else ("", "", x,
         phase) (x: its stuck joints' velocities within ``STICK_TOL`` set to exactly 0): a sliding joint pressing on a
         limit is stuck (the limit holds it); a sliding joint that moves against its slide (an impact reversed it)
-        slides along its velocity; a stuck joint that moves (an impact's velocity) slides along it; a stuck joint
+        slides along its velocity; a stuck joint that moves (an impact's velocity) slides along it, or holds where that
+        slide is unresolved (:meth:`unresolved_slide`: the residual speeds projected away); a stuck joint
         whose holding torque exceeds τ_s slides where the load pushes. ``evaluate(t, x, modes, phase)``: the mode's
         Evaluation there (the transitions' ``LastEvaluation``)."""
         nQ = system.nQ
@@ -203,21 +211,36 @@ class JointFriction:
             if m != STUCK and m * float(x[nQ + i]) < -STICK_TOL:  # (its kinetic friction would push it along)
                 return "joint_reverse", self.names[i], x, self.with_mode(phase, i, -m)
         held = self.held(phase.joint_modes, phase.limits)
+        residual = False
         for i in held:
             v = float(x[nQ + i])
-            if abs(v) > STICK_TOL:
+            if abs(v) > STICK_TOL and not self.unresolved_slide(system, t, x, modes, phase, i, evaluate):
                 return "joint_slip", self.names[i], x, self.with_mode(phase, i, 1 if v > 0.0 else -1)
-            if v != 0.0:
+            if abs(v) > STICK_TOL:
+                residual = True
+            elif v != 0.0:
                 x = x.copy()
                 x[nQ + i] = 0.0
         if not held:
             return "", "", x, phase
+        if residual:  # (held with their residual speeds projected away; the others' rows kept)
+            x = project_velocity(system, x, modes, phase.limits, phase.joint_modes)
+            x[[nQ + i for i in held]] = 0.0
         ev = evaluate(t, x, modes, phase)
         for i in held:
             hold = ev.joint_hold[i]
             if self.breaks_away(i, hold):
                 return "joint_slip", self.names[i], x, self.with_mode(phase, i, -1 if hold > 0.0 else 1)
         return "", "", x, phase
+
+    def unresolved_slide(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, i: int,
+                         evaluate) -> bool:
+        """Would stuck joint i, moving at q̇ᵢ (an impact's residual speed), stop by its friction within a travel
+        v²/(2|q̈ᵢ|) ≤ ``solver.atol`` [rad or m] if it slid: a slide below the integration's resolution, which it holds
+        instead (the module docstring's "Impacts")? q̈ᵢ: its acceleration sliding along q̇ᵢ, the others as they are."""
+        v = float(x[system.nQ + i])
+        a = float(evaluate(t, x, modes, self.with_mode(phase, i, 1 if v > 0.0 else -1)).xdot[system.nQ + i])
+        return v * a < 0.0 and v * v <= 2.0 * abs(a) * system.scene.solver.atol
 
     def breaks_away(self, i: int, hold: float, alarm: float = 0.0) -> bool:
         """Does a holding torque ``hold`` [N·m or N] exceed joint i's static limit (within ``alarm``, relative)?"""
