@@ -1,10 +1,12 @@
 """Every scene with dry friction on every joint: does it run to its end, with clean physics checks?
 
-    PYTHONPATH=. python3 benchmarks/joint_friction_variants.py [--jobs 1] [scene ...]
+    PYTHONPATH=. python3 benchmarks/joint_friction_variants.py [--jobs 1] [--variants NAME ...] [scene ...]
 
 Each scene of ``sims/`` and ``benchmarks/hard/`` (or those named) runs, at its own settings otherwise, under
 :data:`VARIANTS`: ``f0.5``, 0.5 N·m (or N) of dry friction on every joint (static = kinetic); ``f2/1@500``, 2 static
-and 1 kinetic on every joint with the controller sampled at 500 Hz. These are conditions the scenes were not written
+and 1 kinetic on every joint with the controller sampled at 500 Hz; ``f1.5/0.5``, 1.5 static and 0.5 kinetic,
+continuous (light wrist joints that stick and slip as a touch's impact moves them: contactdyn.model.joint_friction's
+"Impacts"). These are conditions the scenes were not written
 for: a contact and joints at rest together, redundant holds (every joint of an arm stuck while its tool sticks: split
 by the holds' limits, contactdyn.model.pipeline.kkt.coulomb_split), stick-slip of light wrist joints. Per run:
 ``ok`` (it reached its end), or the first line of its error; the steps,
@@ -12,8 +14,8 @@ events, ``decided_together`` (contacts and joints decided together at rest: cont
 ``singular_solves`` (calls whose holds were redundant), the number of physics-check warnings, and the wall time [s].
 A scene whose own joint table already sets ``friction`` cannot take ``friction_static``: "not applicable".
 
-Writes benchmarks/out/joint_friction_variants.json and .csv; with scenes named, joint_friction_variants_some.json
-and .csv (the committed table stays the whole set's).
+Writes benchmarks/out/joint_friction_variants.json and .csv; with scenes or variants named,
+joint_friction_variants_some.json and .csv (the committed table stays the whole set's).
 """
 
 from __future__ import annotations
@@ -39,6 +41,8 @@ VARIANTS = {
     "f2/1@500": lambda joints: {**{f"robot.joint.{j}.friction_static": 2.0 for j in joints},
                                 **{f"robot.joint.{j}.friction_kinetic": 1.0 for j in joints},
                                 "controller.sample_rate": 500.0},
+    "f1.5/0.5": lambda joints: {**{f"robot.joint.{j}.friction_static": 1.5 for j in joints},
+                                **{f"robot.joint.{j}.friction_kinetic": 0.5 for j in joints}},
 }
 
 
@@ -76,8 +80,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenes", nargs="*", help="scene files (default: sims/ and benchmarks/hard/)")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
     args = ap.parse_args()
-    jobs = [(s, v) for s in (args.scenes or scenes()) for v in VARIANTS]
+    jobs = [(s, v) for s in (args.scenes or scenes()) for v in args.variants]
     rows = []
     with Pool(args.jobs, maxtasksperchild=1) as pool:
         for row in pool.imap(one, jobs):
@@ -89,7 +94,8 @@ def main() -> None:
     clean = sum(r["outcome"] == "ok" and r["check_warnings"] == 0 for r in ran)
     print(f"{clean} of {len(ran)} runs reached their end with clean checks")
     OUT.mkdir(exist_ok=True)
-    stem = "joint_friction_variants_some" if args.scenes else "joint_friction_variants"
+    whole = not args.scenes and args.variants == list(VARIANTS)
+    stem = "joint_friction_variants" if whole else "joint_friction_variants_some"
     (OUT / f"{stem}.json").write_text(json.dumps(rows, indent=1))
     with open(OUT / f"{stem}.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
