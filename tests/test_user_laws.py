@@ -8,6 +8,7 @@ processes, against its built-in twin, and refused by --no-imports.
 from __future__ import annotations
 
 import copy
+import os
 import sys
 import tomllib
 import warnings
@@ -181,3 +182,24 @@ def test_a_controller_that_returns_a_bare_torque_is_an_error_naming_it():
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 simulate(parse_scene(copy.deepcopy(doc), file=str(SCENE)), compiled=compiled)
+
+
+def test_a_broken_installed_package_of_laws_names_its_own_file_and_line(monkeypatch, tmp_path):
+    """An entry point's package that raises while it imports, installed (its files among the installed packages',
+    which are not the user's code): the error names the package's file and line, from the package on (before: no
+    file and line, every frame being an installed package's)."""
+    package = tmp_path / "broken_laws"
+    package.mkdir()
+    (package / "__init__.py").write_text("from . import friction\n")
+    (package / "friction.py").write_text("MU = 0.3\n\nraise ValueError('mu table missing')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    not_users = user_laws._not_users()
+    monkeypatch.setattr(user_laws, "_not_users", lambda: (*not_users, str(tmp_path) + os.sep))  # (as site-packages)
+    point = EntryPoint(name="broken", value="broken_laws", group="contactdyn.laws")
+    monkeypatch.setattr("importlib.metadata.entry_points", lambda group=None: [point] if group == "contactdyn.laws"
+                        else [])
+    with pytest.raises(SceneError) as info:
+        user_laws.load_entry_points()
+    message = str(info.value)
+    assert "entry point broken" in message and "ValueError: mu table missing" in message
+    assert "(broken_laws/friction.py, line 3)" in message

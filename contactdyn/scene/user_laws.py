@@ -119,21 +119,38 @@ def _import_failure(name: str, exc: BaseException) -> ContactdynError:
     message's first line> (my_laws.py, line 12)``, the file and line of the user's code that raised it (a syntax
     error's own; none where no frame is the user's: a module not found)."""
     message = first_line(exc.msg if isinstance(exc, SyntaxError) else str(exc))
-    where = _raised_at(exc)
+    where = _raised_at(exc, name.split(":")[0].split(".")[0])
     return ContactdynError(f"{name}: {type(exc).__name__}" + (f": {message}" if message else "") +
                            (f" ({where})" if where else ""))
 
 
-def _raised_at(exc: BaseException) -> str:
+def _raised_at(exc: BaseException, top: str = "") -> str:
     """``file.py, line N`` where the user's code raised ``exc``: a syntax error's place, else the innermost frame of a
-    file that is neither this package's nor Python's nor an installed package's (importlib's, numpy's); "" for none."""
+    file that is neither this package's nor Python's nor an installed package's (importlib's, numpy's); where there is
+    none, the innermost of the installed package ``top`` being imported (a package of laws an entry point names:
+    ``top/file.py, line N``); "" for none."""
     if isinstance(exc, SyntaxError):
         return f"{Path(exc.filename).name}, line {exc.lineno}" if exc.filename and exc.lineno else ""
-    ours = tuple(str(Path(p)) + os.sep for p in {Path(__file__).resolve().parents[1], *map(sysconfig.get_path, (
+    frames = [(frame.f_code.co_filename, line) for frame, line in traceback.walk_tb(exc.__traceback__)]
+    theirs = [(f, line) for f, line in frames if not f.startswith(("<", *_not_users()))]
+    if theirs:
+        return f"{Path(theirs[-1][0]).name}, line {theirs[-1][1]}"
+    own = [(inside, line) for f, line in frames if (inside := _in_package(Path(f), top))]
+    return f"{own[-1][0]}, line {own[-1][1]}" if own else ""
+
+
+def _in_package(path: Path, top: str) -> str:
+    """``path`` from its package ``top`` on (``top/sub/file.py``; a module ``top.py``: its name); "" if not in it."""
+    parts = path.parts
+    if top and top in parts[:-1]:
+        return "/".join(parts[len(parts) - 1 - parts[::-1].index(top):])
+    return path.name if top and path.stem == top else ""
+
+
+def _not_users() -> tuple[str, ...]:
+    """The folders whose files are not the user's code: this package's, Python's, the installed packages'."""
+    return tuple(str(Path(p)) + os.sep for p in {Path(__file__).resolve().parents[1], *map(sysconfig.get_path, (
         "stdlib", "platstdlib", "purelib", "platlib"))})
-    theirs = [(frame.f_code.co_filename, line) for frame, line in traceback.walk_tb(exc.__traceback__)
-              if not frame.f_code.co_filename.startswith(("<", *ours))]
-    return f"{Path(theirs[-1][0]).name}, line {theirs[-1][1]}" if theirs else ""
 
 
 def _sources(module) -> dict[Path, bytes]:
