@@ -17,6 +17,7 @@ from contactdyn import parse_scene, simulate
 from contactdyn.errors import SceneError
 from contactdyn.laws import DRIVE_KINDS, DriveKind, Param, register_drive_kind
 from contactdyn.laws.drives import DriveSpec
+from contactdyn.laws.failures import LawError
 from contactdyn.model.paths import PIPELINE
 from contactdyn.model.system import System
 from contactdyn.scene.keys import markdown, reference
@@ -179,6 +180,11 @@ def test_a_kind_is_checked_when_it_registers():
         register_drive_kind(Gain)
     Gain.motorized = True
     register_drive_kind(Gain)
+    assert DriveSpec("gain", gain=1.0).gain == 1.0  # (its slope is the default command_gain, 1)
+    with pytest.raises(LawError, match="gives 2 of force on its coordinate per unit force command .* not its "
+                                       "command_gain 1: declare command_gain"):
+        DriveSpec("gain", gain=2.0)  # (a force-reading controller's fold would take half its force)
+    Gain.command_gain = staticmethod(lambda spec: spec.gain)
     assert DriveSpec("gain", gain=2.0).gain == 2.0
     with pytest.raises(TypeError, match="no parameter"):
         DriveSpec("gain", R=1.0)

@@ -795,7 +795,13 @@ ROUND5_KINDS: dict[str, tuple[str, int, str]] = {
                         "affine in τ (has_voltage: the solve folds a force-reading controller's command through it)\n"),
     "voltage_clipped": ("        return max(min(spec.g * tau, 20.0), -20.0) + 0.1 * qd\n", 1,
                         "gives u = 20 V at τ = 40 N·m or N, q̇ = 0 (g = 1), not u(0) + τ (u(1) − u(0)) = 40 V"),
-    "voltage_affine_runs": ("        return 2.0 * spec.g * tau - 0.5 * qd\n", 0, ""),
+    "voltage_affine_runs": ("        return spec.g * tau - 0.5 * qd\n", 0, ""),
+    "voltage_slope_undeclared": (
+        "        return 2.0 * spec.g * tau - 0.5 * qd\n", 1,
+        "contactdyn: error: drive kind 'voltage_slope_undeclared' (kind5_voltage_slope_undeclared.py) gives 2 of force "
+        "on its coordinate per unit force command (at rest, τ = ±0.001 N·m or N through its voltage), not its "
+        "command_gain 1: declare command_gain as its law's slope (the solve folds a force-reading controller's command "
+        "by it)\n"),
     "voltage_raising_past_a_limit_runs": ("        if abs(tau) > 1e6:\n            raise ValueError('too much')\n"
                                           "        return spec.g * tau\n", 0, ""),
 }

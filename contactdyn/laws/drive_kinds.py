@@ -66,7 +66,7 @@ if TYPE_CHECKING:
     from .drives import DriveSpec
 
 __all__ = ["DriveKind", "DRIVE_KINDS", "register_drive_kind", "Torque", "DcMotor", "Elastic", "MOTOR_PARAMS",
-           "TORQUE_RATIO", "TUBE_PARAMS", "not_affine_in_tau"]
+           "TORQUE_RATIO", "TUBE_PARAMS", "not_affine_in_tau", "gain_disagrees"]
 
 #: the motor of eq. 51 behind a gear (dc_motor and elastic)
 MOTOR_PARAMS = (
@@ -133,7 +133,8 @@ class DriveKind:
     @staticmethod
     def command_gain(spec: DriveSpec) -> float:
         """Force on the drive's target coordinate (its motor coordinate if it owns one) per unit force command, below
-        the voltage limit [1, or 1/n_t on a motor]: where a force-reading controller's command is folded."""
+        the voltage limit [1, or 1/n_t on a motor]: where a force-reading controller's command is folded (checked
+        against the kind's law at each drive's values: :func:`gain_disagrees`)."""
         return 1.0
 
     @staticmethod
@@ -217,6 +218,37 @@ def not_affine_in_tau(cls: type[DriveKind], spec: DriveSpec) -> str:
                         f"not u(0) + τ (u(1) − u(0)) = {affine:g} V: expected a voltage affine in τ (has_voltage: the "
                         "solve folds a force-reading controller's command through it)")
     return ""
+
+
+#: [N·m or N] the commands ±this, at rest, whose forces give a drive's slope (gain_disagrees)
+_TRIED_STEP = 1e-3
+
+
+def gain_disagrees(cls: type[DriveKind], spec: DriveSpec) -> str:
+    """Where kind ``cls``'s own law, at rest and the drive ``spec``'s values, gives a force on its target coordinate
+    (its motor coordinate if it owns one) per unit force command other than its ``command_gain``, what it gives, or
+    "" (also where a call raises or gives no finite number: the run names the kind if it fails there). The command
+    goes through its voltage where it has one. The solve folds a force-reading controller's command by that gain."""
+    omega = 0.0 if cls.motor_coordinate else math.nan
+    target = 1 if cls.motor_coordinate else 0
+
+    def force(tau: float) -> float:
+        command = cls.voltage(spec, tau, 0.0, omega) if cls.has_voltage else tau
+        return float(cls.force(spec, command, 0.0, 0.0, omega, omega)[target])
+
+    try:
+        lo, hi, gain = force(-_TRIED_STEP), force(_TRIED_STEP), float(cls.command_gain(spec))
+    except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
+        return ""
+    if not all(map(math.isfinite, (lo, hi, gain))):
+        return ""
+    slope = (hi - lo) / (2.0 * _TRIED_STEP)
+    if not departs(slope, gain, abs(gain) + (abs(hi) + abs(lo)) / (2.0 * _TRIED_STEP)):
+        return ""
+    on = "motor coordinate" if cls.motor_coordinate else "coordinate"
+    return (f"gives {slope:g} of force on its {on} per unit force command (at rest, τ = ±{_TRIED_STEP:g} N·m or N"
+            f"{' through its voltage' if cls.has_voltage else ''}), not its command_gain {gain:g}: declare "
+            "command_gain as its law's slope (the solve folds a force-reading controller's command by it)")
 
 
 def _declared(p: Param) -> tuple:

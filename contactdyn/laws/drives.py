@@ -26,7 +26,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..scene.reader import Reader
-from .drive_kinds import DRIVE_KINDS, DriveKind, not_affine_in_tau
+from .drive_kinds import DRIVE_KINDS, DriveKind, gain_disagrees, not_affine_in_tau
 from .failures import LawError, law_error, law_file
 from .params import Param, with_defaults
 
@@ -77,9 +77,10 @@ class DriveSpec:
             put(self, name, _figure(law, name, self))
         if law.has_voltage:
             _figure(law, "voltage_limit", self)  # (checked: > 0, inf for none)
-            problem = not_affine_in_tau(law, self)
-            if problem:  # (the kind's law fails its declaration: its LawError)
-                raise LawError("drive kind", law.name, law_file(law), problem)
+        problem = (not_affine_in_tau(law, self) if law.has_voltage else "") or \
+            (gain_disagrees(law, self) if law.motorized else "")
+        if problem:  # (the kind's law fails its declaration: its LawError)
+            raise LawError("drive kind", law.name, law_file(law), problem)
 
     @property
     def law(self) -> type[DriveKind]:
