@@ -825,6 +825,8 @@ ROUND5_FORCES: dict[str, tuple[str, int, str]] = {
     "state_rate_squared": ("        return np.zeros(2), np.array([F * F])\n", 1,
                            "its command at forces['tip'] = -2.5 N gives ż = [6.25], not ż₀ + D F = [-2.5]"),
     "affine_runs": ("        return 0.01 * tc + np.full(2, 0.001 * F - 0.5), None\n", 0, ""),
+    "clipped_in_motion": ("        return np.clip(np.full(2, F) + 100.0 * inp.v, -50.0, 50.0), None\n", 1,
+                          "its command at forces['tip'] = -2.5 N gives τ = [47.5, 47.5], not τ₀ + B F = [50, 50]"),
 }
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from ..laws.controllers.base import ControlInput
 from .phases import Phase
 
-__all__ = ["Evaluation", "Measurement", "measures", "surface_keys", "sample_input"]
+__all__ = ["Evaluation", "Measurement", "measures", "surface_keys", "sample_input", "sample_inputs"]
 
 
 @dataclass
@@ -94,3 +94,20 @@ def sample_input(system, spec, ctl) -> ControlInput:
                         J_ang=J6[3:], drift_ang=drift6[3:], tau_contact=np.zeros(nv),
                         surfaces={key: (tip.translation.copy(), np.zeros(3)) for key in keys},
                         touching={c.name: True for c in system.contacts})
+
+
+#: what :func:`sample_inputs` moves: the joints' speed [rad/s or m/s], the set-points [N], the law's states
+MOVING_SPEED, MOVING_SET_POINT, MOVING_STATE = 0.5, 10.0, 0.1
+
+
+def sample_inputs(system, spec, ctl) -> list[ControlInput]:
+    """:func:`sample_input`, and the same robot moving (every joint at MOVING_SPEED, h at that speed), its set-points
+    at MOVING_SET_POINT and its states at MOVING_STATE: a law affine in the forces at rest but not in motion (its
+    command clipped where a speed term adds to it) is tried there too."""
+    rest = sample_input(system, spec, ctl)
+    v = np.full(system.nv, MOVING_SPEED)
+    drift6 = system.robot.frame_drift(rest.q, v, system.tip_fid)
+    moving = rest.replaced(v=v, h=system.robot.bias(rest.q, v), v_tip=rest.J @ v, drift=drift6[:3],
+                           drift_ang=drift6[3:], z=np.full(ctl.n_states, MOVING_STATE),
+                           force_d={key: (MOVING_SET_POINT, 0.0) for key in rest.force_d})
+    return [rest, moving]

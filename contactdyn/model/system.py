@@ -69,7 +69,7 @@ from .chain import NodeKind
 from .chain_forces import chain_sides
 from .constraints import mass_matrix as constraints_mass_matrix
 from .contact import Contact, ContactMode, Kinematics, riding_masses, riding_terms, turning_surface
-from .evaluation import Evaluation, sample_input
+from .evaluation import Evaluation, sample_inputs
 from .friction import initial_slip, slip_velocity
 from .impact import Impact, impact, project_velocity
 from .joint_friction import JointFriction
@@ -489,13 +489,15 @@ def _bound_controllers(scene: Scene, joint_names: list[str], motorized: np.ndarr
 
 
 def _force_readers_checked(system: System) -> None:
-    """Each phase's law of a user that reads forces (``uses_forces``) checked affine in them at a ControlInput of its
-    phase (:func:`~contactdyn.laws.failures.checked_affine_in_forces` at :func:`.evaluation.sample_input`): the solve
+    """Each phase's law of a user that reads forces (``uses_forces``) checked affine in them at ControlInputs of its
+    phase (:func:`~contactdyn.laws.failures.checked_affine_in_forces` at :func:`.evaluation.sample_inputs`: at rest and
+    moving): the solve
     folds them in. The package's own force-reading laws are affine by their construction (tested)."""
     for spec, ctl in zip(system.scene.phases, system.controllers, strict=True):
         law = ctl.inner if isinstance(ctl, SampledController) else ctl
         if law.uses_forces and is_users(type(law)):
-            checked_affine_in_forces(law, sample_input(system, spec, law))
+            for inp in sample_inputs(system, spec, law):
+                checked_affine_in_forces(law, inp)
 
 
 def _controller_of(spec, nv: int) -> Controller:
