@@ -236,9 +236,9 @@ class JointFriction:
     def unresolved_slide(self, system: Any, t: float, x: np.ndarray, modes: list, phase: Any, i: int,
                          evaluate) -> bool:
         """Would stuck joint i, moving at q̇ᵢ (a residual speed: an impact's, or another item's projection's), stop by
-        its friction within a travel
-        v²/(2|q̈ᵢ|) ≤ ``solver.atol`` [rad or m] if it slid: a slide below the integration's resolution, which it holds
-        instead (the module docstring's "Impacts")? q̈ᵢ: its acceleration sliding along q̇ᵢ, the others as they are."""
+        its friction within a travel v²/(2|q̈ᵢ|) ≤ ``solver.atol`` [rad or m] if it slid: a slide below the
+        integration's resolution, which it holds instead (the module docstring's "Impacts")? q̈ᵢ: its acceleration
+        sliding along q̇ᵢ, the others as they are."""
         v = float(x[system.nQ + i])
         a = float(evaluate(t, x, modes, self.with_mode(phase, i, 1 if v > 0.0 else -1)).xdot[system.nQ + i])
         return v * a < 0.0 and v * v <= 2.0 * abs(a) * system.scene.solver.atol
