@@ -27,17 +27,20 @@ def test_step_collapse_fires_at_the_end_of_the_counted_short_step():
 def test_the_writers_slide_to_rest_finishes_on_lsoda_with_dop853s_result(monkeypatch):
     """The 5-DOF writer's circle ends at 4.5 s and the pencil's slide comes to rest (|v_t| falls to the stick band
     at 4.49996 s): its direction relaxes at a rate ∝ 1/|v_t| and DOP853's steps collapse. After COLLAPSE_STEPS
-    short steps the stiffness check sends the rest of that mode to LSODA at RESTING_TOL × the tolerances: a tenth
-    to a fifth fewer calls, the same events, and the run equals DOP853's alone within its own error against the
-    rtol 1e-11 reference (6e-6 N, 3.4e-10 m; benchmarks/scenes.py): up to 1e-7 N, 2e-10 m, 6.3e-10 rad measured."""
+    short steps the stiffness check sends the rest of that mode to LSODA at RESTING_TOL × the tolerances: fewer
+    calls (6–19 % fewer measured: the size moves with the runs' last bits), the same events, and the run equals
+    DOP853's alone within its own error against the rtol 1e-11 reference (6e-6 N, 3.4e-10 m; benchmarks/scenes.py):
+    up to 1e-7 N, 2e-10 m, 6.3e-10 rad measured."""
     switched = simulate("case2_writer5dof")
     monkeypatch.setattr(hybrid, "COLLAPSE_STEPS", 10**9)  # no collapse is ever seen: DOP853 to the end
     explicit = simulate("case2_writer5dof")
     assert switched.stats["resting_switches"] == 1 and "resting_switches" not in explicit.stats
     assert switched.stats["segments_by_method"]["LSODA"] == explicit.stats["segments_by_method"]["LSODA"] + 1
     # measured 21311 against 23873; the ratio moves with the last bit of the start: 0.81-0.89 over 1-ulp changes of
-    # robot.tip0 on the code before the transitions read the compiled call, 0.81-0.89 after (a fifth to a tenth saved)
-    assert switched.stats["rhs_evals"] < 0.92 * explicit.stats["rhs_evals"]
+    # robot.tip0 on the code before the transitions read the compiled call, 0.81-0.89 after (a fifth to a tenth
+    # saved). On another machine (another CPU: the last bits differ) the same code measured 21320 against 22706: 0.94.
+    # What holds on both is that the switch saves calls; how many is a benchmark's figure, not this test's.
+    assert switched.stats["rhs_evals"] < explicit.stats["rhs_evals"]
     kinds = [(e["kind"], e["name"]) for e in explicit.events]
     assert _slide_ends_as_one(switched.events) == _slide_ends_as_one(explicit.events)
     assert ("stick", "pencil") == kinds[-2] and kinds[-3] in (("stop", "pencil"), ("turn", "pencil"))
