@@ -491,8 +491,8 @@ def _bound_controllers(scene: Scene, joint_names: list[str], motorized: np.ndarr
 def _force_readers_checked(system: System) -> None:
     """Each phase's law of a user that reads forces (``uses_forces``) checked affine in them at ControlInputs of its
     phase (:func:`~contactdyn.laws.failures.checked_affine_in_forces` at :func:`.evaluation.sample_inputs`: at rest and
-    moving): the solve
-    folds them in. The package's own force-reading laws are affine by their construction (tested)."""
+    moving): the solve folds them in. The package's own force-reading laws are affine by their construction
+    (tested)."""
     for spec, ctl in zip(system.scene.phases, system.controllers, strict=True):
         law = ctl.inner if isinstance(ctl, SampledController) else ctl
         if law.uses_forces and is_users(type(law)):

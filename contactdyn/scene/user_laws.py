@@ -117,7 +117,8 @@ def _naming_failure(name: str, file: str | None):
 def _import_failure(name: str, exc: BaseException) -> ContactdynError:
     """What module ``name`` raised while it imported, as the error quotes it whole: ``my_laws: ValueError: <its
     message's first line> (my_laws.py, line 12)``, the file and line of the user's code that raised it (a syntax
-    error's own; none where no frame is the user's: a module not found)."""
+    error's own; an installed package of laws: its own file from the package on; none where no frame is either: a
+    module not found)."""
     message = first_line(exc.msg if isinstance(exc, SyntaxError) else str(exc))
     where = _raised_at(exc, name.split(":")[0].split(".")[0])
     return ContactdynError(f"{name}: {type(exc).__name__}" + (f": {message}" if message else "") +
