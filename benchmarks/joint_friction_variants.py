@@ -6,10 +6,11 @@ Each scene of ``sims/`` and ``benchmarks/hard/`` (or those named) runs, at its o
 :data:`VARIANTS`: ``f0.5``, 0.5 N·m (or N) of dry friction on every joint (static = kinetic); ``f2/1@500``, 2 static
 and 1 kinetic on every joint with the controller sampled at 500 Hz; ``f1.5/0.5``, 1.5 static and 0.5 kinetic,
 continuous (light wrist joints that stick and slip as a touch's impact moves them: contactdyn.model.joint_friction's
-"Impacts"). These are conditions the scenes were not written
-for: a contact and joints at rest together, redundant holds (every joint of an arm stuck while its tool sticks: split
-by the holds' limits, contactdyn.model.pipeline.kkt.coulomb_split), stick-slip of light wrist joints. Per run:
-``ok`` (it reached its end), or the first line of its error; the steps,
+"Impacts"); ``f0.05`` and ``f4``, the extremes (0.05 and 4 N·m or N, static = kinetic): where holds sit near their
+limits for long and redundant holds are near-singular, the false alarms and storms this table keeps visible. These
+are conditions the scenes were not written for: a contact and joints at rest together, redundant holds (every joint of
+an arm stuck while its tool sticks: split by the holds' limits, contactdyn.model.pipeline.kkt.coulomb_split),
+stick-slip of light wrist joints. Per run: ``ok`` (it reached its end), or the first line of its error; the steps,
 events, ``decided_together`` (contacts and joints decided together at rest: contactdyn.hybrid.at_rest),
 ``singular_solves`` (calls whose holds were redundant), the number of physics-check warnings, and the wall time [s].
 A scene whose own joint table already sets ``friction`` cannot take ``friction_static``: "not applicable".
@@ -43,6 +44,8 @@ VARIANTS = {
                                 "controller.sample_rate": 500.0},
     "f1.5/0.5": lambda joints: {**{f"robot.joint.{j}.friction_static": 1.5 for j in joints},
                                 **{f"robot.joint.{j}.friction_kinetic": 0.5 for j in joints}},
+    "f0.05": lambda joints: {f"robot.joint.{j}.friction": 0.05 for j in joints},
+    "f4": lambda joints: {f"robot.joint.{j}.friction": 4.0 for j in joints},
 }
 
 
