@@ -194,8 +194,8 @@ def launch_took(x, ints, state, trial, FJ, Fa, Fp, Fv, FR, xdot):
                     _aim(ints, trial, j, level[LV_THETA])
                     _restart(ints, trial, state, j + 1)
                     return False
-            if _try_along(ints, trial, state, level, j, along):
-                return False
+            _try_along(ints, trial, state, level, j, along)  # (once: after it no θ + h is aimed)
+            return False
         level[LV_STEP] = DONE_R  # no convergence: the reference r, the later levels found again under it
         _aim_r(ints, trial, level, j)
         _restart(ints, trial, state, j + 1)
@@ -208,9 +208,8 @@ def _try_along(ints, trial, state, level, j, along):
     """Newton given up: one last trial along a_t of the trial at θ + h (``along``: a_t's angle [rad]), where the slip
     goes under it: where the joints let the contact move along one direction only (the others stuck), a_t points along
     it whatever d is, and there d = a_t settles at once, where Newton from a reference off it converges only linearly
-    at the cone's edge (φ ~ δ³). True if aimed; False if tried already (then r)."""
-    if level[LV_UPDATES] == ALONG_TRIED:
-        return False
+    at the cone's edge (φ ~ δ³). Once per launch: with LV_UPDATES = ALONG_TRIED no θ + h is aimed again, so a trial
+    along a_t that does not settle ends at r (:func:`launch_took`)."""
     level[LV_UPDATES] = ALONG_TRIED
     level[LV_THETA] = along
     level[LV_STEP] = AT
