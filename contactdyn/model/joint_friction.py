@@ -214,9 +214,9 @@ class JointFriction:
         residual = False
         for i in held:
             v = float(x[nQ + i])
-            if abs(v) > STICK_TOL and not self.unresolved_slide(system, t, x, modes, phase, i, evaluate):
-                return "joint_slip", self.names[i], x, self.with_mode(phase, i, 1 if v > 0.0 else -1)
             if abs(v) > STICK_TOL:
+                if not self.unresolved_slide(system, t, x, modes, phase, i, evaluate):
+                    return "joint_slip", self.names[i], x, self.with_mode(phase, i, 1 if v > 0.0 else -1)
                 residual = True
             elif v != 0.0:
                 x = x.copy()
