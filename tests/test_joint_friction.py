@@ -208,15 +208,8 @@ def test_an_impact_that_reverses_a_sliding_joint_lets_it_slide_back(tmp_path, co
 def test_a_stuck_joints_leftover_velocity_is_set_to_exactly_zero(tmp_path):
     """A stuck joint whose velocity is within STICK_TOL (an impact's round-off) is at rest exactly after the joint
     modes are settled (before: zeroed on a copy that was dropped)."""
-    from contactdyn.hybrid.loop import HybridRun
-
-    doc = scene(arm(tmp_path, 2), [0.4, 1.2], 0.2, {"kind": "joint_pd", "kp": [0.0, 0.0], "kd": [0.0, 0.0]},
-                joint={"j1": {"friction": 100.0}})
-    system = System(parse_scene(doc))
-    run = HybridRun(system)
-    x, modes = system.initial_state()
-    phase = system.start_phase(0, 0.0, x, None)
-    assert (0, 0) in phase.joint_modes  # the shoulder stuck
+    run, x, modes, phase, _ = _stuck_shoulder(tmp_path)
+    system = run.system
     x = x.copy()
     x[system.nQ] = 5e-14  # [rad/s] within STICK_TOL
     x_after, _, phase_after = run.transitions.settle_joints(0.0, x, modes, phase)
@@ -363,10 +356,10 @@ def test_the_stick_or_reverse_decision_reads_the_trials_holding_torque(tmp_path,
         LastEvaluation(system).joint_hold(0.3, x, modes, trial)
 
 
-def _stuck_shoulder(tmp_path, v: float):
+def _stuck_shoulder(tmp_path):
     """A 2-link arm hanging at rest off the vertical, its shoulder held by 100 N·m of dry friction (gravity loads it by
-    less), the elbow free, both at rest but the shoulder at q̇₁ = v [rad/s] (an impact's residual speed): its run, x,
-    modes, phase, and q̈₁ [rad/s²] if it slid along v (M q̈ = −g − s τ_k e₁ at rest, from the robot's M and g)."""
+    less), the elbow free: its run, x, modes, phase, and q̈₁ [rad/s²] if the shoulder slid forwards from there
+    (M q̈ = −g − τ_k e₁ at rest, from the robot's M and g)."""
     from contactdyn.hybrid.loop import HybridRun
 
     doc = scene(arm(tmp_path, 2), [0.4, 1.2], 0.2, {"kind": "joint_pd", "kp": [0.0, 0.0], "kd": [0.0, 0.0]},
@@ -376,9 +369,7 @@ def _stuck_shoulder(tmp_path, v: float):
     phase = system.start_phase(0, 0.0, x, None)
     assert (0, 0) in phase.joint_modes  # the shoulder stuck
     q = x[:2]
-    a = np.linalg.solve(system.robot.mass_matrix(q), -system.robot.gravity_torque(q) - np.sign(v) * np.array([100, 0]))
-    x = x.copy()
-    x[system.nQ] = v
+    a = np.linalg.solve(system.robot.mass_matrix(q), -system.robot.gravity_torque(q) - np.array([100, 0]))
     return HybridRun(system), x, modes, phase, float(a[0])
 
 
@@ -388,10 +379,11 @@ def test_a_stuck_joint_holds_an_impacts_residual_speed_whose_slide_the_integrati
     """A stuck joint an impact sets moving at v slides (its friction takes no impulse), unless it would stop within a
     travel v²/(2|q̈|) ≤ atol: then it holds, its residual speed projected away by an impulse on its own row (the free
     elbow's momentum kept). Below and above the closed form's threshold v* = √(2|q̈| atol)."""
-    a = _stuck_shoulder(tmp_path, 1.0)[-1]
-    v = math.sqrt(share * 2.0 * abs(a) * 1e-12)  # [rad/s] the travel is share × atol
-    run, x, modes, phase, _ = _stuck_shoulder(tmp_path, v)
+    run, x, modes, phase, a = _stuck_shoulder(tmp_path)
+    v = math.sqrt(share * 2.0 * abs(a) * 1e-12)  # [rad/s] the shoulder's residual speed: the travel is share × atol
     system, nQ = run.system, run.system.nQ
+    x = x.copy()
+    x[nQ] = v
     x_after, _, phase_after = run.transitions.settle_joints(0.0, x, modes, phase)
     if not held:
         assert [(e["kind"], e["name"]) for e in run.events] == [("joint_slip", "j1")]
