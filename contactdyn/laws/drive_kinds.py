@@ -203,12 +203,10 @@ def not_affine_in_tau(cls: type[DriveKind], spec: DriveSpec) -> str:
     the voltage by its slope (``command_gain``)."""
     for qd, omega in _TRIED_SPEEDS:
         omega = omega if cls.motor_coordinate else math.nan
-        try:
-            u0, u1, *tried = (float(cls.voltage(spec, tau, qd, omega)) for tau in (0.0, 1.0, *_TRIED_TAU))
-        except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
+        got = _tried(lambda qd=qd, w=omega: (cls.voltage(spec, tau, qd, w) for tau in (0.0, 1.0, *_TRIED_TAU)))
+        if got is None:
             return ""
-        if not all(map(math.isfinite, (u0, u1, *tried))):
-            return ""
+        u0, u1, *tried = got
         for tau, u in zip(_TRIED_TAU, tried, strict=True):
             affine = u0 + tau * (u1 - u0)
             if departs(u, affine, abs(u0) + abs(tau * (u1 - u0))):
@@ -232,16 +230,14 @@ def gain_disagrees(cls: type[DriveKind], spec: DriveSpec) -> str:
     omega = 0.0 if cls.motor_coordinate else math.nan
     target = 1 if cls.motor_coordinate else 0
 
-    def force(tau: float) -> float:
+    def force(tau: float) -> float:  # [N·m or N] on the target at the force command tau, at rest
         command = cls.voltage(spec, tau, 0.0, omega) if cls.has_voltage else tau
-        return float(cls.force(spec, command, 0.0, 0.0, omega, omega)[target])
+        return cls.force(spec, command, 0.0, 0.0, omega, omega)[target]
 
-    try:
-        lo, hi, gain = force(-_TRIED_STEP), force(_TRIED_STEP), float(cls.command_gain(spec))
-    except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
+    got = _tried(lambda: (force(-_TRIED_STEP), force(_TRIED_STEP), cls.command_gain(spec)))
+    if got is None:
         return ""
-    if not all(map(math.isfinite, (lo, hi, gain))):
-        return ""
+    lo, hi, gain = got
     slope = (hi - lo) / (2.0 * _TRIED_STEP)
     if not departs(slope, gain, abs(gain) + (abs(hi) + abs(lo)) / (2.0 * _TRIED_STEP)):
         return ""
@@ -249,6 +245,16 @@ def gain_disagrees(cls: type[DriveKind], spec: DriveSpec) -> str:
     return (f"gives {slope:g} of force on its {on} per unit force command (at rest, τ = ±{_TRIED_STEP:g} N·m or N"
             f"{' through its voltage' if cls.has_voltage else ''}), not its command_gain {gain:g}: declare "
             "command_gain as its law's slope (the solve folds a force-reading controller's command by it)")
+
+
+def _tried(values) -> list[float] | None:
+    """The numbers a kind's law gives (``values()``: its calls), or None where a call raises or one is not finite: what
+    cannot be tried is not refused (the run names the kind if it fails there)."""
+    try:
+        out = [float(v) for v in values()]
+    except Exception:  # noqa: BLE001 (a user's law: whatever it raises, the check gives up)
+        return None
+    return out if all(map(math.isfinite, out)) else None
 
 
 def _declared(p: Param) -> tuple:
