@@ -5,6 +5,7 @@ sticks again at rest; the closed forms of a ramp, a hold and a pendulum."""
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -393,3 +394,35 @@ def test_a_stuck_joint_holds_an_impacts_residual_speed_whose_slide_the_integrati
     M = system.robot.mass_matrix(x[:2])
     impulse = M @ (x_after[nQ:nQ + 2] - x[nQ:nQ + 2])  # [N·m·s] on the shoulder's row alone
     assert impulse[0] * v < 0.0 and abs(impulse[1]) <= 1e-12 * abs(impulse[0])
+
+
+def test_a_hold_whose_rounding_exceeds_a_tight_band_still_breaks_away_where_it_reaches_its_limit():
+    """Case 3's axis at 0.05 N of friction: its holding force is a difference of ~1e2 N terms through a 1e5 N/m
+    surface and a 6e5 N/m drive, so it moves in steps of ~1.7e-10 N (3e-9 τ_s). Each located slip is within
+    SLIP_ALARM of τ_s (a band of 1e-9 τ_s took every one as a false alarm, 10,000 of them at one instant), and stick
+    and slip alternate to the run's end."""
+    from contactdyn.model.joint_friction import SLIP_ALARM
+
+    r = simulate("sims/case3_b_force.toml", {"robot.joint.q3.friction": 0.05})
+    assert r.t[-1] == pytest.approx(5.0)
+    held = [e for e in r.events if e["kind"] in ("joint_stick", "joint_slip") and e["t"] > 2.0]
+    assert len(held) >= 10 and r.stats["slip_false_alarms"] == 0
+    assert all(a["kind"] != b["kind"] for a, b in pairwise(held))  # (alternate)
+    for e in held:
+        if e["kind"] == "joint_slip":
+            assert abs(e["torque"]) == pytest.approx(0.05, rel=SLIP_ALARM)
+        else:
+            assert abs(e["torque"]) < 0.05
+
+
+def test_a_joint_that_breaks_away_where_static_equals_kinetic_is_not_stuck_again_at_once():
+    """B1 on a 1e8 N/m surface with 4 N·m on both joints (static = kinetic): q1's load rises through 4 N·m at
+    ~7e3 N·m/s, its hold rounded to ~1.6e-9 N·m. At the slip its slide from rest decelerates by that rounding alone;
+    the decision at rest reads the joint's acceleration against the largest of the call (the solve's normwise
+    rounding), not against its own ~0: it slides on (before, it stuck again and slipped 50 times at one instant)."""
+    r = simulate("benchmarks/hard/stiff.toml", {"robot.joint.q1.friction": 4.0, "robot.joint.q2.friction": 4.0})
+    assert r.t[-1] == pytest.approx(2.0)
+    q1 = [e for e in r.events if e["name"] == "q1" and e["kind"] in ("joint_stick", "joint_slip")]
+    slips = [e for e in q1 if e["kind"] == "joint_slip"]
+    assert len(slips) >= 2 and all(abs(e["torque"]) == pytest.approx(4.0, rel=1e-6) for e in slips)
+    assert all(b["t"] > a["t"] for a, b in pairwise(q1))  # (no stick at a slip's own instant)

@@ -42,7 +42,8 @@ MAX_ITEMS = 8  #: items at rest (contacts and joints) searched together at most
 #: 3^n of up to 3 items, the sticks and single slides of up to 8
 MAX_TRIALS = 27
 #: [-] a slide from rest is consistent where its acceleration along its slide is ≥ −ACCEL_TOL × (1 + |its
-#: acceleration|) [m/s² or rad/s²]: the solve's rounding
+#: acceleration|) [m/s² or rad/s²], a joint's ≥ −ACCEL_TOL × (1 + the call's largest |q̈|): the solve's rounding, which
+#: is normwise (a joint that slips where τ_s = τ_k starts at q̈ ≈ 0, off by the rounding of the others')
 ACCEL_TOL = 1e-9
 
 
@@ -138,7 +139,7 @@ def _consistent(system, probe: _Probe, modes, phase, contacts, joints, strictly:
             limit = jf.static[i] * (1.0 - CONE_TOL) - FORCE_ABS_TOL if strictly else jf.static[i]
             if abs(probe.hold(i)) > limit:
                 return False
-        elif m * float(qdd[i]) < -ACCEL_TOL * (1.0 + abs(float(qdd[i]))):
+        elif m * float(qdd[i]) < -ACCEL_TOL * (1.0 + float(np.max(np.abs(qdd)))):
             return False
     return True
 
