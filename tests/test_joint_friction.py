@@ -426,3 +426,16 @@ def test_a_joint_that_breaks_away_where_static_equals_kinetic_is_not_stuck_again
     slips = [e for e in q1 if e["kind"] == "joint_slip"]
     assert len(slips) >= 2 and all(abs(e["torque"]) == pytest.approx(4.0, rel=1e-6) for e in slips)
     assert all(b["t"] > a["t"] for a, b in pairwise(q1))  # (no stick at a slip's own instant)
+
+
+def test_a_2d_slide_at_its_stop_band_is_decided_at_rest_after_a_holds_check_located_there():
+    """The 5-DOF writer with 4 N·m on every joint: the pencil's slide comes to rest with v̂ 35° from its reference r,
+    and at v_t · r = v_ε its force turns from v̂ to r, which moves the stuck joints' holds by ~2 N·m. The holds'
+    checks located there (false alarms: the located holds are inside τ_s) left the slide on its stop, and the next
+    step's checks fired first again, 50 times at one instant. The decision after the check stops the slide there."""
+    r = simulate("sims/case2_writer5dof.toml", {f"robot.joint.q{k}.friction": 4.0 for k in range(1, 6)})
+    assert r.t[-1] == pytest.approx(4.5)
+    checks = [e["t"] for e in r.events if e["kind"] == "joint_slip_check"]
+    assert max(checks.count(t) for t in checks) <= 2  # (a check, not a storm, at any one instant)
+    stuck = [e for e in r.events if e["kind"] == "stick" and e["name"] == "pencil"]
+    assert any(e["t"] in checks for e in stuck)  # (decided at rest where a check was located)

@@ -46,7 +46,7 @@ from ..model.impact import impact, project_velocity, singular_stick
 from ..model.system import System
 from .at_rest import settle_together
 from .charts import on_chart
-from .events import AT_ONCE, EventLog
+from .events import AT_ONCE, BAND_EDGE, EventLog
 from .pipeline_mode import mode_runner
 
 __all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
@@ -420,7 +420,7 @@ class Transitions:
                     continue
                 vt = ev.slip[c.name]
                 speed = float(np.linalg.norm(vt))
-                if i not in rest and speed > system.slip_band:
+                if i not in rest and speed > system.slip_band and not _at_stop(mode, vt, system.slip_band):
                     if float(vt @ np.asarray(mode.slip)) < 0.5 * speed:  # moving, but not along r: refresh r
                         modes[i] = mode.with_(slip=direction_of(vt), from_rest=False)
                     continue
@@ -435,6 +435,14 @@ class Transitions:
                 return x, modes
         raise SimulationError(f"{self.scene.name}: no consistent contact mode at t = {t:.9g} s "
                               f"(modes tried: {modes})")
+
+
+def _at_stop(mode, vt: np.ndarray, band: float) -> bool:
+    """Is a slide (not from rest) at its ``stop``, its speed along r within BAND_EDGE of the stick band v_ε [m/s]? A
+    2-D slide's force turns from v̂ to r there (``contacts._slip_direction``), which moves every hold it loads: an
+    event located there for a hold (the 5-DOF writer at 4 N·m per joint, a joint's check) leaves the slide on its
+    stop, where its own event would fire at once, and a hold's check first, by a rounding, at every restart."""
+    return not mode.from_rest and float(vt @ np.asarray(mode.slip)) <= band * (1.0 + BAND_EDGE)
 
 
 def _coming_to_rest(system: System, c, x: np.ndarray, ev) -> bool:
