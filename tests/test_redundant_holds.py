@@ -20,7 +20,7 @@ import pytest
 
 from contactdyn import simulate
 from contactdyn.model.pipeline.kkt import hold_interval
-from contactdyn.numerics.linalg import null_direction
+from contactdyn.numerics.linalg import null_basis, null_direction
 
 SCENE = Path(__file__).resolve().parent.parent / "benchmarks" / "hard" / "stickslip.toml"
 L1 = L2 = 0.3  #: [m] the arm's links (urdf planar2r_b1)
@@ -129,3 +129,40 @@ def test_null_direction_is_the_one_direction_a_matrix_maps_to_zero(seed):
             assert np.linalg.norm(A @ x) < 1e-9 * max(1.0, np.abs(A).max())
         else:
             assert x.size == 0
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_null_basis_spans_what_a_matrix_maps_to_zero(seed):
+    """numerics.linalg.null_basis against the rank: n − rank orthonormal rows x with A x = 0 (A of random rank, up to
+    7 × 7); with one, the row is null_direction's."""
+    rng = np.random.default_rng(seed)
+    for _ in range(20):
+        m, n = rng.integers(1, 8, size=2)
+        k = rng.integers(0, min(m, n) + 1)
+        A = rng.normal(size=(m, k)) @ rng.normal(size=(k, n)) if k else np.zeros((m, n))
+        X = null_basis(A, 1e-10)
+        assert X.shape == (n - np.linalg.matrix_rank(A), n)
+        np.testing.assert_allclose(X @ X.T, np.eye(X.shape[0]), atol=1e-12)
+        assert np.linalg.norm(A @ X.T) < 1e-9 * max(1.0, np.abs(A).max())
+        if X.shape[0] == 1:
+            assert np.array_equal(X[0], null_direction(A, 1e-10))
+
+
+
+def test_holds_whose_splits_span_two_directions_are_split_by_their_limits():
+    """The rigid writer (a planar 2R, its pencil bonded to a rigid paper) with 1.5 static and 0.5 kinetic N·m on both
+    joints: the pencil's stick and both stuck joints are 3 holding rows beside the bond's on 2 joints, their splits two
+    directions. The least-norm forces left the pencil's friction outside its cone at 0.998 s, and from 1.016 s q1's
+    slide reversed 809 times, each reversal's least-norm hold past τ_s. Split along each direction in turn, the holds
+    stay inside their limits (the reported forces, one such split, keep every stuck joint within τ_s and the stuck
+    pencil inside its cone) and q1 reverses 3 times in all."""
+    joints = ("q1", "q2")
+    r = simulate("case2_writer_rigid", {**{f"robot.joint.{j}.friction_static": 1.5 for j in joints},
+                                        **{f"robot.joint.{j}.friction_kinetic": 0.5 for j in joints}})
+    assert r.stats["holds_split"] > 0
+    assert len([e for e in r.events if e["kind"] == "joint_reverse"]) < 10  # (3: the slides' own, not a chatter)
+    stuck = r["joint_stuck"] > 0.5
+    assert stuck.any() and np.abs(r["joint_friction"][stuck]).max() <= 1.5
+    held = r["contact.tip.stuck"] > 0.5
+    cone = 0.4 * r["contact.tip.F_n"][held] * (1.0 + 1e-9)  # [N] μ_s F_n (its tests' slack)
+    assert held.any() and np.all(np.abs(r["contact.tip.F_f"][held]).max(axis=1) <= cone)

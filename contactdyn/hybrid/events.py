@@ -92,8 +92,8 @@ def _storm_cause(events: list[dict], singular: int = 0) -> str:
                 "the run diverged before it (a loop its gains, rate or delay make unstable); see "
                 "solver.storm_count / storm_window")
     redundant = (f"; {singular} of the decisions met redundant holds (stuck joints and a stuck contact holding the "
-                 "same motion leave their forces undetermined; they are split by the holds' limits only where the "
-                 "splits span one direction, else by least squares, contactdyn/model/joint_friction.py): is the "
+                 "same motion leave their forces undetermined; they are split by the holds' limits, "
+                 "contactdyn/model/joint_friction.py): is the "
                  "joints' dry friction above what the controller's torques overcome? (robot.joint_friction = "
                  "\"ignore\", or a lower [robot.joint.<joint>] friction)") if singular else ""
     return "the contact chatters (grazing or inconsistent stick/slip)" + redundant + \

@@ -48,11 +48,11 @@ joint at rest (its velocity, the limit row's drift, set to 0: :meth:`JointFricti
 Redundant holds: stuck joints and other rows (a stuck contact's, a bond's) can over-constrain the robot (both joints
 of a planar arm stuck while its tip sticks: 3 rows on 2 coordinates). The hold is then statically indeterminate: the
 solve takes the least-squares (minimum-norm) forces (``Result.stats["singular_solves"]``), and where these leave a
-hold outside its limit while one direction of splits that move nothing exists, the call takes the split nearest them
-with every hold inside (:func:`contactdyn.model.pipeline.kkt.coulomb_split`): the hold breaks only where no split
-is left, as Coulomb's. Known limit: where the splits span more than one direction (all 7 joints of an arm stuck while
-its tool sticks: 10 rows on 7 coordinates), the least-norm forces stay, and which joint breaks away first follows
-that choice, not a law.
+hold outside its limit while splits that move nothing exist, the call takes a split with every hold inside
+(:func:`contactdyn.model.pipeline.kkt.coulomb_split`): the hold breaks only where no split is left, as Coulomb's.
+Along one direction of splits it is the split nearest the least-norm forces; where they span more (all 7 joints of an
+arm stuck while its tool sticks: 10 rows on 7 coordinates) the rule is taken along each direction in turn, for a few
+rounds: it finds a split inside where those rounds reach one, not always the nearest.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ from numba.extending import intrinsic, overload
 from .compile_cache import njit
 
 __all__ = ["solve_vector", "lu_solve", "residual_ok", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
-           "forward_solve", "contiguous", "dot3", "fma", "cross3", "put", "null_direction"]
+           "forward_solve", "contiguous", "dot3", "fma", "cross3", "put", "null_direction", "null_basis"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -284,9 +284,18 @@ def _jacobi_pinv(J):
 
 @njit(cache=True)
 def null_direction(A, tol):
-    """The unit x with A x = 0 where A (m × n) leaves exactly one such direction, else an empty array: Gaussian
-    elimination with full pivoting (a pivot at most ``tol`` × A's largest |entry| is zero), then back substitution
-    with the free column's x = 1. (Loops, not LAPACK's SVD: numba compiles its binding for ~10 s.)"""
+    """The unit x with A x = 0 where A (m × n) leaves exactly one such direction, else an empty array
+    (:func:`null_basis`'s one row)."""
+    basis = null_basis(A, tol)
+    return basis[0] if basis.shape[0] == 1 else np.empty(0)
+
+
+@njit(cache=True)
+def null_basis(A, tol):
+    """An orthonormal basis of A's null space (m × n): (k, n), k = n − rank, its rows x with A x = 0. Gaussian
+    elimination with full pivoting (a pivot at most ``tol`` × A's largest |entry| is zero), then per free column
+    back substitution with that column's x = 1 and the other free ones 0, then Gram–Schmidt (one direction: only
+    scaled to unit length). (Loops, not LAPACK's SVD: numba compiles its binding for ~10 s.)"""
     m, n = A.shape
     R, cols = A.copy(), np.empty(n, dtype=np.int64)
     for j in range(n):
@@ -314,23 +323,32 @@ def null_direction(A, tol):
             for j in range(k, n):
                 R[i, j] -= f * R[k, j]
         rank += 1
-    if n - rank != 1:
-        return np.empty(0)
-    y = np.zeros(n)
-    y[rank] = 1.0
-    for i in range(rank - 1, -1, -1):
-        acc = R[i, rank]
-        for j in range(i + 1, rank):
-            acc += R[i, j] * y[j]
-        y[i] = -acc / R[i, i]
-    norm = 0.0
-    for j in range(n):
-        norm += y[j] * y[j]
-    norm = math.sqrt(norm)
-    x = np.empty(n)
-    for j in range(n):
-        x[cols[j]] = y[j] / norm
-    return x
+    Y = np.zeros((n - rank, n))
+    for free in range(n - rank):
+        y = Y[free]
+        y[rank + free] = 1.0
+        for i in range(rank - 1, -1, -1):
+            acc = R[i, rank + free]
+            for j in range(i + 1, rank):
+                acc += R[i, j] * y[j]
+            y[i] = -acc / R[i, i]
+        for prior in range(free):  # (Gram–Schmidt against the rows before)
+            dot = 0.0
+            for j in range(n):
+                dot += Y[prior, j] * y[j]
+            for j in range(n):
+                y[j] -= dot * Y[prior, j]
+        norm = 0.0
+        for j in range(n):
+            norm += y[j] * y[j]
+        norm = math.sqrt(norm)
+        for j in range(n):
+            y[j] = y[j] / norm
+    X = np.empty((n - rank, n))
+    for free in range(n - rank):
+        for j in range(n):
+            X[free, cols[j]] = Y[free, j]
+    return X
 
 
 @njit(cache=True, no_cpython_wrapper=True)

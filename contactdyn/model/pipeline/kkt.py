@@ -14,7 +14,8 @@ entry (a law's nan or inf) is left unsolved (NOT_FINITE): the call declines (sta
 Redundant holds (stuck joints and a stuck contact holding the same motion) are statically indeterminate: their forces
 can change by a split that moves nothing (n with Cᵀ n = 0). The least norm picks one split, blind to the holds'
 limits; :func:`coulomb_split` then picks, where the least norm leaves a hold outside its limit, the split nearest to
-it with every hold inside (Coulomb's: a hold breaks only when no split keeps it), as far as one such direction goes.
+it with every hold inside (Coulomb's: a hold breaks only when no split keeps it): along one such direction, the
+nearest; along several, that rule along each in turn.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import math
 import numpy as np
 
 from ...numerics.compile_cache import njit
-from ...numerics.linalg import lu_solve, null_direction, put, residual_ok
+from ...numerics.linalg import lu_solve, null_basis, put, residual_ok
 from .pack import (
     CI_BONDED,
     CI_FRICTION,
@@ -68,6 +69,7 @@ NULL_RANK = 1e-10
 #: binding limit the event value keeps its sign, not a rounding's
 SPLIT_MARGIN = 1e-9
 _NEGLIGIBLE = 1e-12  #: [-] a unit split's share of a row below this is none (its bound would be rounding's)
+SPLIT_PASSES = 8  #: rounds over the split directions at most, where the splits span more than one (coulomb_split)
 
 
 @njit(cache=True)
@@ -159,31 +161,50 @@ def least_squares(A, b):
 def coulomb_split(ints, reals, events, C, lam, first_limit, first_joint):
     """λ [N, N·m] of a singular solve (the least norm's) with its redundant holds split by their limits: where λ leaves
     a hold outside its limit (a stuck contact's force outside μ_s F_n, a held joint's torque past τ_s, an unbonded
-    normal row's or a pressing limit's force pulling) and the rows' forces have exactly one split that moves nothing
-    (n: Cᵀ n = 0, so the generalized force and the motion are unchanged), λ + s n with the s nearest 0 that puts every
-    hold inside its limit (by SPLIT_MARGIN). Where no s is (the hold breaks), the s between the two limits that met as
-    the last split went (lo > hi: each out by as much), so that the event values pass zero where the split ends, both
-    its holds' together. λ itself where it is inside already, and where the splits that move nothing span more than
-    one direction. Also whether λ was split."""
+    normal row's or a pressing limit's force pulling), a split that moves nothing (n: Cᵀ n = 0, so the generalized
+    force and the motion are unchanged) that puts every hold inside its limit (by SPLIT_MARGIN). With one such
+    direction, λ + s n with the s nearest 0 that does; where no s does (the hold breaks), the s between the two
+    limits that met as the last split went (lo > hi: each out by as much), so that the event values pass zero where
+    the split ends, both its holds' together. With k > 1 (an orthonormal basis n_1 … n_k), that rule along each n_i in
+    turn, from the forces the last one left, for at most SPLIT_PASSES rounds or until every hold is inside. λ itself
+    where it is inside already. Also whether λ was split."""
+    if _inside(ints, reals, events, lam, first_limit, first_joint):
+        return lam, False  # (no split sought)
+    basis = null_basis(C.T.copy(), NULL_RANK)  # (Cᵀ n = 0)
+    out, split = lam, False
+    for _ in range(1 if basis.shape[0] == 1 else SPLIT_PASSES):
+        for i in range(basis.shape[0]):
+            n = basis[i]
+            s, found = _split_along(ints, reals, events, out, n, first_limit, first_joint)
+            if found:
+                moved = np.empty(lam.size)
+                for r in range(lam.size):
+                    moved[r] = out[r] + s * n[r]
+                out, split = moved, True
+        if basis.shape[0] < 2 or _inside(ints, reals, events, out, first_limit, first_joint):
+            break
+    return out, split
+
+
+@njit(cache=True)
+def _inside(ints, reals, events, lam, first_limit, first_joint):
+    """Does λ keep every hold inside its limit?"""
+    return _hold_limits(ints, reals, events, lam, np.zeros(lam.size), first_limit, first_joint,
+                        np.array([-np.inf, np.inf]))
+
+
+@njit(cache=True)
+def _split_along(ints, reals, events, lam, n, first_limit, first_joint):
+    """(s, found): :func:`coulomb_split`'s rule along the one direction n from λ: the s nearest 0 that puts every hold
+    inside its limit, else the s between the two limits that met; found False where neither is (no bound)."""
     bounds = np.array([-np.inf, np.inf])  # [lo, hi] of s
-    if _hold_limits(ints, reals, events, lam, np.zeros(lam.size), first_limit, first_joint, bounds):
-        return lam, False  # (inside: no split sought; along a zero split the bounds say nothing)
-    n = null_direction(C.T.copy(), NULL_RANK)  # (Cᵀ n = 0)
-    if n.size == 0:
-        return lam, False
-    bounds[0], bounds[1] = -np.inf, np.inf
     _hold_limits(ints, reals, events, lam, n, first_limit, first_joint, bounds)
     lo, hi = bounds[0], bounds[1]
     if lo <= hi:
-        s = min(max(0.0, lo), hi)
-    elif math.isfinite(lo) and math.isfinite(hi):  # past the last split: the two limits that met there, equally out
-        s = 0.5 * (lo + hi)
-    else:
-        return lam, False
-    out = np.empty(lam.size)
-    for r in range(lam.size):
-        out[r] = lam[r] + s * n[r]
-    return out, True
+        return min(max(0.0, lo), hi), True
+    if math.isfinite(lo) and math.isfinite(hi):  # past the last split: the two limits that met there, equally out
+        return 0.5 * (lo + hi), True
+    return 0.0, False
 
 
 @njit(cache=True)
