@@ -90,3 +90,19 @@ def test_a_compiled_mode_refuses_modes_of_another_structure():
     assert structure([ContactMode(touching=True, stuck=True, slip=(1.0, 0.0))]) != structure(sliding)
     with pytest.raises(ValueError, match="its own structure"):
         plan.use([ContactMode(touching=True, stuck=True, slip=(1.0, 0.0))])
+
+
+def test_a_slide_is_at_its_stop_only_moving_along_r_at_the_bands_edge():
+    """transitions._at_stop: a slide (not from rest) whose speed along r is within BAND_EDGE of the stick band v_ε
+    and which moves along r (v·r ≥ ½|v|) is at its stop; one that moves across r (a turn: its speed along r ~0 while
+    |v| is large), one still above the edge, and a slide from rest are not."""
+    from contactdyn.hybrid.events import BAND_EDGE
+    from contactdyn.hybrid.transitions import _at_stop
+
+    band, r = 1e-9, (0.6, 0.8)
+    mode = ContactMode(touching=True, slip=r)
+    at_edge = band * (1.0 + 0.5 * BAND_EDGE) * np.array([0.6, 0.8]) + 0.4 * band * np.array([0.8, -0.6])
+    assert _at_stop(mode, at_edge, band)
+    assert not _at_stop(mode, at_edge * (1.0 + 2.0 * BAND_EDGE), band)  # (above the edge: its stop is ahead)
+    assert not _at_stop(mode, np.array([0.8, -0.6]), band)  # (1 m/s across r: a turn, not a stop)
+    assert not _at_stop(ContactMode(touching=True, slip=r, from_rest=True), at_edge, band)

@@ -122,6 +122,7 @@ def _consistent(system, probe: _Probe, modes, phase, contacts, joints, strictly:
     once)."""
     nQ = system.nQ
     qdd = probe.xdot[nQ:2 * nQ]
+    rounding = ACCEL_TOL * (1.0 + float(np.max(np.abs(qdd))))  # [rad/s² or m/s²] a joint's slide's, normwise
     jf = system.joint_friction
     for i in contacts:
         c, m = system.contacts[i], modes[i]
@@ -139,7 +140,7 @@ def _consistent(system, probe: _Probe, modes, phase, contacts, joints, strictly:
             limit = jf.static[i] * (1.0 - CONE_TOL) - FORCE_ABS_TOL if strictly else jf.static[i]
             if abs(probe.hold(i)) > limit:
                 return False
-        elif m * float(qdd[i]) < -ACCEL_TOL * (1.0 + float(np.max(np.abs(qdd)))):
+        elif m * float(qdd[i]) < -rounding:
             return False
     return True
 

@@ -438,11 +438,13 @@ class Transitions:
 
 
 def _at_stop(mode, vt: np.ndarray, band: float) -> bool:
-    """Is a slide (not from rest) at its ``stop``, its speed along r within BAND_EDGE of the stick band v_ε [m/s]? A
-    2-D slide's force turns from v̂ to r there (``contacts._slip_direction``), which moves every hold it loads: an
-    event located there for a hold (the 5-DOF writer at 4 N·m per joint, a joint's check) leaves the slide on its
-    stop, where its own event would fire at once, and a hold's check first, by a rounding, at every restart."""
-    return not mode.from_rest and float(vt @ np.asarray(mode.slip)) <= band * (1.0 + BAND_EDGE)
+    """Is a slide (not from rest) at its ``stop``: moving along r (v_t·r ≥ ½|v_t|, as the turn's test) with its speed
+    along r within BAND_EDGE of the stick band v_ε [m/s]? A 2-D slide's force turns from v̂ to r there
+    (``contacts._slip_direction``), which moves every hold it loads: an event located there for a hold (the 5-DOF writer
+    at 4 N·m per joint, a joint's check) leaves the slide on its stop, where its own event would fire at once, and a
+    hold's check first, by a rounding, at every restart."""
+    along = float(vt @ np.asarray(mode.slip))
+    return not mode.from_rest and 0.5 * float(np.linalg.norm(vt)) <= along <= band * (1.0 + BAND_EDGE)
 
 
 def _coming_to_rest(system: System, c, x: np.ndarray, ev) -> bool:
