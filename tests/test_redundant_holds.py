@@ -114,15 +114,20 @@ def test_hold_interval_is_the_set_of_splits_inside_the_cone(seed):
 
 
 
-@pytest.mark.parametrize("seed", range(10))
-def test_null_direction_is_the_one_direction_a_matrix_maps_to_zero(seed):
-    """numerics.linalg.null_direction against the rank: a unit x with A x = 0 exactly where A's null space is one
-    direction, else none (A of random rank, up to 7 × 7)."""
+def _random_rank(seed: int):
+    """20 matrices A (m × n, up to 7 × 7) of random rank, and their n."""
     rng = np.random.default_rng(seed)
     for _ in range(20):
         m, n = rng.integers(1, 8, size=2)
         k = rng.integers(0, min(m, n) + 1)
-        A = rng.normal(size=(m, k)) @ rng.normal(size=(k, n)) if k else np.zeros((m, n))
+        yield (rng.normal(size=(m, k)) @ rng.normal(size=(k, n)) if k else np.zeros((m, n))), n
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_null_direction_is_the_one_direction_a_matrix_maps_to_zero(seed):
+    """numerics.linalg.null_direction against the rank: a unit x with A x = 0 exactly where A's null space is one
+    direction, else none."""
+    for A, n in _random_rank(seed):
         x = null_direction(A, 1e-10)
         if n - np.linalg.matrix_rank(A) == 1:
             assert x.size == n and np.linalg.norm(x) == pytest.approx(1.0)
@@ -133,13 +138,9 @@ def test_null_direction_is_the_one_direction_a_matrix_maps_to_zero(seed):
 
 @pytest.mark.parametrize("seed", range(10))
 def test_null_basis_spans_what_a_matrix_maps_to_zero(seed):
-    """numerics.linalg.null_basis against the rank: n − rank orthonormal rows x with A x = 0 (A of random rank, up to
-    7 × 7); with one, the row is null_direction's."""
-    rng = np.random.default_rng(seed)
-    for _ in range(20):
-        m, n = rng.integers(1, 8, size=2)
-        k = rng.integers(0, min(m, n) + 1)
-        A = rng.normal(size=(m, k)) @ rng.normal(size=(k, n)) if k else np.zeros((m, n))
+    """numerics.linalg.null_basis against the rank: n − rank orthonormal rows x with A x = 0; with one, the row is
+    null_direction's."""
+    for A, n in _random_rank(seed):
         X = null_basis(A, 1e-10)
         assert X.shape == (n - np.linalg.matrix_rank(A), n)
         np.testing.assert_allclose(X @ X.T, np.eye(X.shape[0]), atol=1e-12)
