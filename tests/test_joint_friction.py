@@ -439,3 +439,18 @@ def test_a_2d_slide_at_its_stop_band_is_decided_at_rest_after_a_holds_check_loca
     assert max(checks.count(t) for t in checks) <= 2  # (a check, not a storm, at any one instant)
     stuck = [e for e in r.events if e["kind"] == "stick" and e["name"] == "pencil"]
     assert any(e["t"] in checks for e in stuck)  # (decided at rest where a check was located)
+
+
+def test_a_run_whose_last_check_lands_a_few_roundings_before_its_end_ends_there():
+    """The UR5 writer with 1 N·m on every joint: a joint's check (a false alarm) is located 3.6e-15 s before the run's
+    4.5 s, 8 roundings of t. The segment left to integrate is shorter than the integrators' floor, and its first
+    step's stages saw the same alarm again: 50 checks at one instant. A segment that would end within min_span of its
+    start at the run's end is not integrated: the run ends there, its output to 4.5 s."""
+    from contactdyn.laws.trajectory import min_span
+
+    joints = simulate("case2_writer_ur5", {"duration": 1e-3}).meta["joints"]
+    r = simulate("case2_writer_ur5", {f"robot.joint.{j}.friction": 1.0 for j in joints})
+    assert r.t[-1] == 4.5 and np.all(np.isfinite(r["q"][-1]))
+    last = r.events[-1]
+    assert 0.0 < 4.5 - last["t"] <= min_span(4.5)
+    assert sum(e["t"] == last["t"] for e in r.events) < 5  # (not a storm at that instant)

@@ -191,7 +191,10 @@ class HybridRun:
         while t < T:
             until = phase.spec.until
             t_end = min(T, until) if isinstance(until, float) else T
-            if t_end <= t:
+            if t_end - t <= min_span(t):  # (at it already: an event landed within a few roundings of it)
+                if t_end == T:
+                    break
+                t = max(t, t_end)
                 self._new_mode()
                 x, modes, phase = self._next_phase(phase, t, x, modes)
                 continue
