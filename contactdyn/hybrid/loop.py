@@ -188,13 +188,10 @@ class HybridRun:
         T = self.scene.duration
         x, modes, phase = self.start()
         t = 0.0
-        while t < T:
+        while T - t > min_span(t):  # (an event located within a few roundings of the end: the run ends there)
             until = phase.spec.until
             t_end = min(T, until) if isinstance(until, float) else T
-            if t_end - t <= min_span(t):  # (at it already: an event landed within a few roundings of it)
-                if t_end == T:
-                    break
-                t = max(t, t_end)
+            if t_end - t <= min_span(t):  # (at the phase's end already, or past it)
                 self._new_mode()
                 x, modes, phase = self._next_phase(phase, t, x, modes)
                 continue
