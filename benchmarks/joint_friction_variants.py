@@ -7,7 +7,9 @@ Each scene of ``sims/`` and ``benchmarks/hard/`` (or those named) runs, at its o
 and 1 kinetic on every joint with the controller sampled at 500 Hz; ``f1.5/0.5``, 1.5 static and 0.5 kinetic,
 continuous (light wrist joints that stick and slip as a touch's impact moves them: contactdyn.model.joint_friction's
 "Impacts"); ``f0.05`` and ``f4``, the extremes (0.05 and 4 N·m or N, static = kinetic): where holds sit near their
-limits for long and redundant holds are near-singular, the false alarms and storms this table keeps visible. These
+limits for long and redundant holds are near-singular, the false alarms and storms this table keeps visible;
+``f0.2``, ``f1`` and ``f2.5`` between them (static = kinetic: a sweep of these found the UR5 writer's storm at its
+run's last instant, hybrid.loop's ``min_span`` end). These
 are conditions the scenes were not written for: a contact and joints at rest together, redundant holds (every joint of
 an arm stuck while its tool sticks: split by the holds' limits, contactdyn.model.pipeline.kkt.coulomb_split),
 stick-slip of light wrist joints. Per run: ``ok`` (it reached its end), or the first line of its error; the steps,
@@ -46,6 +48,8 @@ VARIANTS = {
                                 **{f"robot.joint.{j}.friction_kinetic": 0.5 for j in joints}},
     "f0.05": lambda joints: {f"robot.joint.{j}.friction": 0.05 for j in joints},
     "f4": lambda joints: {f"robot.joint.{j}.friction": 4.0 for j in joints},
+    **{f"f{tau:g}": (lambda joints, tau=tau: {f"robot.joint.{j}.friction": tau for j in joints})
+       for tau in (0.2, 1.0, 2.5)},
 }
 
 
