@@ -20,7 +20,7 @@ import pytest
 
 from contactdyn import simulate
 from contactdyn.model.pipeline.kkt import hold_interval
-from contactdyn.numerics.linalg import null_basis, null_direction
+from contactdyn.numerics.linalg import null_basis
 
 SCENE = Path(__file__).resolve().parent.parent / "benchmarks" / "hard" / "stickslip.toml"
 L1 = L2 = 0.3  #: [m] the arm's links (urdf planar2r_b1)
@@ -113,41 +113,19 @@ def test_hold_interval_is_the_set_of_splits_inside_the_cone(seed):
     assert bounds[1] == pytest.approx(hi, abs=2e-3) if hi < 200.0 else bounds[1] > 199.0
 
 
-
-def _random_rank(seed: int):
-    """20 matrices A (m × n, up to 7 × 7) of random rank, and their n."""
+@pytest.mark.parametrize("seed", range(10))
+def test_null_basis_spans_what_a_matrix_maps_to_zero(seed):
+    """numerics.linalg.null_basis against the rank: n − rank orthonormal rows x with A x = 0 (A of random rank, up to
+    7 × 7, or zero)."""
     rng = np.random.default_rng(seed)
     for _ in range(20):
         m, n = rng.integers(1, 8, size=2)
         k = rng.integers(0, min(m, n) + 1)
-        yield (rng.normal(size=(m, k)) @ rng.normal(size=(k, n)) if k else np.zeros((m, n))), n
-
-
-@pytest.mark.parametrize("seed", range(10))
-def test_null_direction_is_the_one_direction_a_matrix_maps_to_zero(seed):
-    """numerics.linalg.null_direction against the rank: a unit x with A x = 0 exactly where A's null space is one
-    direction, else none."""
-    for A, n in _random_rank(seed):
-        x = null_direction(A, 1e-10)
-        if n - np.linalg.matrix_rank(A) == 1:
-            assert x.size == n and np.linalg.norm(x) == pytest.approx(1.0)
-            assert np.linalg.norm(A @ x) < 1e-9 * max(1.0, np.abs(A).max())
-        else:
-            assert x.size == 0
-
-
-@pytest.mark.parametrize("seed", range(10))
-def test_null_basis_spans_what_a_matrix_maps_to_zero(seed):
-    """numerics.linalg.null_basis against the rank: n − rank orthonormal rows x with A x = 0; with one, the row is
-    null_direction's."""
-    for A, n in _random_rank(seed):
+        A = rng.normal(size=(m, k)) @ rng.normal(size=(k, n)) if k else np.zeros((m, n))
         X = null_basis(A, 1e-10)
         assert X.shape == (n - np.linalg.matrix_rank(A), n)
         np.testing.assert_allclose(X @ X.T, np.eye(X.shape[0]), atol=1e-12)
         assert np.linalg.norm(A @ X.T) < 1e-9 * max(1.0, np.abs(A).max())
-        if X.shape[0] == 1:
-            assert np.array_equal(X[0], null_direction(A, 1e-10))
-
 
 
 def test_holds_whose_splits_span_two_directions_are_split_by_their_limits():

@@ -30,7 +30,7 @@ from numba.extending import intrinsic, overload
 from .compile_cache import njit
 
 __all__ = ["solve_vector", "lu_solve", "residual_ok", "pinv", "mv", "mtv", "mm", "mtm", "cholesky",
-           "forward_solve", "contiguous", "dot3", "fma", "cross3", "put", "null_direction", "null_basis"]
+           "forward_solve", "contiguous", "dot3", "fma", "cross3", "put", "null_basis"]
 
 try:
     from numpy.linalg import _umath_linalg
@@ -280,14 +280,6 @@ def _jacobi_pinv(J):
                 for j in range(r):
                     out[i, j] += A[i, k] * V[j, k] / sigma2[k]
     return out
-
-
-@njit(cache=True)
-def null_direction(A, tol):
-    """The unit x with A x = 0 where A (m × n) leaves exactly one such direction, else an empty array
-    (:func:`null_basis`'s one row)."""
-    basis = null_basis(A, tol)
-    return basis[0] if basis.shape[0] == 1 else np.empty(0)
 
 
 @njit(cache=True)

@@ -172,17 +172,13 @@ def coulomb_split(ints, reals, events, C, lam, first_limit, first_joint):
         return lam, False  # (no split sought)
     basis = null_basis(C.T.copy(), NULL_RANK)  # (Cᵀ n = 0)
     out, split = lam, False
-    for _ in range(1 if basis.shape[0] == 1 else SPLIT_PASSES):
-        for i in range(basis.shape[0]):
-            n = basis[i]
+    for _ in range(SPLIT_PASSES):
+        for n in basis:
             s, found = _split_along(ints, reals, events, out, n, first_limit, first_joint)
             if found:
-                moved = np.empty(lam.size)
-                for r in range(lam.size):
-                    moved[r] = out[r] + s * n[r]
-                out, split = moved, True
+                out, split = out + s * n, True
         if basis.shape[0] < 2 or _inside(ints, reals, events, out, first_limit, first_joint):
-            break
+            break  # (one direction: one pass is the rule)
     return out, split
 
 
