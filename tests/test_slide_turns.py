@@ -101,8 +101,12 @@ def test_a_slide_is_at_its_stop_only_moving_along_r_at_the_bands_edge():
 
     band, r = 1e-9, (0.6, 0.8)
     mode = ContactMode(touching=True, slip=r)
+
+    def at_stop(m, vt):
+        return _at_stop(m, float(vt @ np.asarray(r)), float(np.linalg.norm(vt)), band)
+
     at_edge = band * (1.0 + 0.5 * BAND_EDGE) * np.array([0.6, 0.8]) + 0.4 * band * np.array([0.8, -0.6])
-    assert _at_stop(mode, at_edge, band)
-    assert not _at_stop(mode, at_edge * (1.0 + 2.0 * BAND_EDGE), band)  # (above the edge: its stop is ahead)
-    assert not _at_stop(mode, np.array([0.8, -0.6]), band)  # (1 m/s across r: a turn, not a stop)
-    assert not _at_stop(ContactMode(touching=True, slip=r, from_rest=True), at_edge, band)
+    assert at_stop(mode, at_edge)
+    assert not at_stop(mode, at_edge * (1.0 + 2.0 * BAND_EDGE))  # (above the edge: its stop is ahead)
+    assert not at_stop(mode, np.array([0.8, -0.6]))  # (1 m/s across r: a turn, not a stop)
+    assert not at_stop(ContactMode(touching=True, slip=r, from_rest=True), at_edge)

@@ -41,7 +41,7 @@ import numpy as np
 from ..errors import SimulationError
 from ..model.chain import NodeKind
 from ..model.chain_forces import chain_sides
-from ..model.friction import direction_of, in_cone, slip_acceleration, slip_velocity
+from ..model.friction import SLIP_ALARM, direction_of, in_cone, slip_acceleration, slip_velocity
 from ..model.impact import impact, project_velocity, singular_stick
 from ..model.system import System
 from .at_rest import settle_together
@@ -49,13 +49,12 @@ from .charts import on_chart
 from .events import AT_ONCE, BAND_EDGE, EventLog
 from .pipeline_mode import mode_runner
 
-__all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "SLIP_ALARM", "TURN_AT_REST"]
+__all__ = ["Transitions", "LastEvaluation", "FORCE_TOL", "TURN_AT_REST"]
 
 FORCE_TOL = 1e-9  #: [N] slack of the normal-force sign test (pulling contacts separate)
 #: [m] another rigid contact within this gap, closing, at a touch touches with it (one impact holds both): the
 #: start's own touching test (contactdyn.model.system.System.initial_state)
 CO_TOUCH = 1e-12
-SLIP_ALARM = 1e-6  #: a located slip is real if |F_f| ≥ (1 − this) μ_s F there (else a false alarm)
 #: [-] a release seen inside a step is real if the located instant's pressing torque p [N·m or N] is at most
 #: this × (1 + |p|): relative, with 1 N·m or N as the scale's floor (else a false alarm: still pressing)
 RELEASE_ALARM = 1e-6
@@ -419,9 +418,9 @@ class Transitions:
                 if i in released:
                     continue
                 vt = ev.slip[c.name]
-                speed = float(np.linalg.norm(vt))
-                if i not in rest and speed > system.slip_band and not _at_stop(mode, vt, system.slip_band):
-                    if float(vt @ np.asarray(mode.slip)) < 0.5 * speed:  # moving, but not along r: refresh r
+                speed, along = float(np.linalg.norm(vt)), float(vt @ np.asarray(mode.slip))  # [m/s]: |v_t|, v_t·r
+                if i not in rest and speed > system.slip_band and not _at_stop(mode, along, speed, system.slip_band):
+                    if along < 0.5 * speed:  # moving, but not along r: refresh r
                         modes[i] = mode.with_(slip=direction_of(vt), from_rest=False)
                     continue
                 rest.discard(i)  # at rest: stick, or slide (_at_rest)
@@ -437,14 +436,13 @@ class Transitions:
                               f"(modes tried: {modes})")
 
 
-def _at_stop(mode, vt: np.ndarray, band: float) -> bool:
-    """Is a slide (not from rest) at its ``stop``: moving along r (v_t·r ≥ ½|v_t|, as the turn's test) with its speed
-    along r within BAND_EDGE of the stick band v_ε [m/s]? A 2-D slide's force turns from v̂ to r there
-    (``contacts._slip_direction``), which moves every hold it loads: an event located there for a hold (the 5-DOF writer
-    at 4 N·m per joint, a joint's check) leaves the slide on its stop, where its own event would fire at once, and a
-    hold's check first, by a rounding, at every restart."""
-    along = float(vt @ np.asarray(mode.slip))
-    return not mode.from_rest and 0.5 * float(np.linalg.norm(vt)) <= along <= band * (1.0 + BAND_EDGE)
+def _at_stop(mode, along: float, speed: float, band: float) -> bool:
+    """Is a slide (not from rest) at its ``stop``: moving along r (its speed along r, ``along`` = v_t·r [m/s], at least
+    half its ``speed`` |v_t|, as the turn's test) with ``along`` within BAND_EDGE of the stick band v_ε [m/s]? A 2-D
+    slide's force turns from v̂ to r there (``contacts._slip_direction``), which moves every hold it loads: an event
+    located there for a hold (the 5-DOF writer at 4 N·m per joint, a joint's check) leaves the slide on its stop,
+    where its own event would fire at once, and a hold's check first, by a rounding, at every restart."""
+    return not mode.from_rest and 0.5 * speed <= along <= band * (1.0 + BAND_EDGE)
 
 
 def _coming_to_rest(system: System, c, x: np.ndarray, ev) -> bool:

@@ -28,11 +28,17 @@ import numpy as np
 
 from .contact import Contact, ContactMode, Kinematics
 
-__all__ = ["CONE_TOL", "FORCE_ABS_TOL", "in_cone", "cone_slack", "direction_of", "initial_slip", "slip_velocity",
-           "slip_acceleration", "launching"]
+__all__ = ["CONE_TOL", "FORCE_ABS_TOL", "SLIP_ALARM", "in_cone", "cone_slack", "direction_of", "initial_slip",
+           "slip_velocity", "slip_acceleration", "launching"]
 
 CONE_TOL = 1e-10  #: relative slack of the friction-cone tests |F_f| ≤ μ_s F (round-off of the solves)
 FORCE_ABS_TOL = 1e-12  #: [N] absolute slack of the same tests
+#: [-] a located slip of a hold is real if the hold is within this of its limit there, else a false alarm: a stuck
+#: contact's |F_f| ≥ (1 − this) μ_s F (hybrid.transitions), a stuck joint's |λ| ≥ (1 − this) τ_s
+#: (model.joint_friction). A hold is a difference of the call's largest forces: through stiff springs it moves in steps
+#: of ~1e-9 of its limit (case 3's axis at 0.05 N: 3e-9), so a tighter band takes the crossing's own located instant
+#: for a false alarm, again and again at one instant.
+SLIP_ALARM = 1e-6
 
 
 def in_cone(F_f: np.ndarray, F_n: float, mu_s: float, strictly: bool = False) -> bool:

@@ -65,6 +65,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..robot.robot import Robot
+from .friction import SLIP_ALARM
 from .impact import project_velocity
 
 __all__ = ["JointFriction", "STUCK", "STICK_TOL", "joint_friction_channels", "summary"]
@@ -72,11 +73,6 @@ __all__ = ["JointFriction", "STUCK", "STICK_TOL", "joint_friction_channels", "su
 STUCK = 0  #: a joint's friction mode while stuck (sliding: its sign s = ±1)
 #: [rad/s or m/s] a sliding joint's ``joint_stick`` fires when s q̇ᵢ falls this far below min(0, its start value)
 STICK_TOL = 1e-13
-#: [-] a located ``joint_slip`` is real if |λ| ≥ (1 − this) τ_s there (else a false alarm). A hold is a difference of
-#: the call's largest forces: through stiff springs it moves in steps of ~1e-9 of τ_s (case 3's axis at 0.05 N: 3e-9),
-#: so a tighter band takes the crossing's own located instant for a false alarm, again and again at one instant.
-#: The contacts' band is the same (``hybrid.transitions.SLIP_ALARM``).
-SLIP_ALARM = 1e-6
 
 
 def _event(fn, kind: str, joint: str, index: int):
